@@ -1,0 +1,37 @@
+"""Games: batched numpy cores, their PettingZoo views, renderers and the scripted players' rules.
+
+Importing this package registers the built-in games.
+"""
+
+from __future__ import annotations
+
+from . import pong, pong_env
+from .registry import BotSpec, EnvSpec, UnknownEnvError, env_names, get_env, random_rule, register
+
+
+def _pong_renderer():
+    from .pong_render import PongRenderer
+
+    return PongRenderer()
+
+
+register(
+    EnvSpec(
+        name="pong",
+        description="Two-paddle Pong, first to 21 (seed 000), egocentric coordinate observations",
+        agents=pong_env.AGENTS,
+        make_config=pong.make_config,
+        make_core=pong.PongCore,
+        make_parallel=pong_env.PongParallelEnv,
+        observation_space=pong_env.observation_space,
+        action_space=pong_env.action_space,
+        make_renderer=_pong_renderer,
+        bots={
+            "random": BotSpec("random", "uniformly random stay/up/down", random_rule(pong_env.action_space(None))),
+            "cpu": BotSpec("cpu", "seed 000's ball tracker: moves toward the ball's height",
+                           lambda obs, rng: pong.cpu_rule(obs)),
+        },
+    )
+)
+
+__all__ = ["BotSpec", "EnvSpec", "UnknownEnvError", "env_names", "get_env", "register"]

@@ -1,0 +1,448 @@
+"""Two-paddle Pong as a batched numpy core (seed 000's game, re-implemented).
+
+Court 800x400, paddles 10x70 at 20 px from each wall, ball radius 10, paddle speed 8, serve speed 10.
+Every serve starts from the centre toward a random point of a random paddle, with both paddles re-placed at
+random. A point counts only if the scorer touched the ball in that rally (otherwise the ball is re-served).
+First to ``points_to_win`` (21) wins.
+
+Two rule sets:
+
+``rules="classic"`` (default)
+    Skill decides points. The bounce angle off a paddle depends on where the ball meets it (up to
+    ``max_bounce_deg`` from the horizontal), each hit speeds the ball up by ``speedup`` px/step up to
+    ``max_speed``, collisions are swept (a fast ball cannot tunnel through a paddle), the ball reflects off the
+    top and bottom walls, and paddles clamp at the walls.
+``rules="seed"``
+    Seed 000's physics exactly as printed: a paddle hit only flips the horizontal velocity (so a
+    ball-tracking paddle never misses and two trackers rally forever), a wall hit flips the vertical velocity
+    without moving the ball, a paddle move that would leave the court is refused. Kept for comparison.
+
+Under both rules a rally longer than ``max_rally_steps`` ends the game as truncated (the point is not scored)
+and a game longer than ``max_steps`` is truncated too, so no game can run forever.
+
+Randomness is counter-based: each game has a 64-bit key (its seed) and every serve draws from
+``hash(key, serve_number, draw)``. A game therefore plays the same whether it runs alone or inside a batch of
+thousands, and ``reset(seed=...)`` makes it reproducible without any global random state.
+
+Seats: 0 is the left paddle, 1 the right. Actions per seat: 0 stay, 1 up, 2 down.
+Observations are egocentric: each seat sees the court from its own side (x mirrored for the right seat), so a
+policy trained on one side plays either side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from typing import Any, Literal
+
+import numpy as np
+
+WIDTH, HEIGHT = 800, 400
+PADDLE_W, PADDLE_H = 10, 70
+PADDLE_X = 20  # gap between a wall and its paddle
+BALL_R = 10
+PADDLE_SPEED = 8
+SERVE_SPEED = 10.0
+
+LEFT_FACE = PADDLE_X + PADDLE_W  # 30: the face of the left paddle
+RIGHT_FACE = WIDTH - PADDLE_X - PADDLE_W  # 770
+PADDLE_Y_MAX = HEIGHT - PADDLE_H  # 330
+
+STAY, UP, DOWN = 0, 1, 2
+ACTION_NAMES = ("stay", "up", "down")
+N_FEATURES = 6  # ball x, ball y, own paddle y, opponent paddle y, ball vx, ball vy
+FEATURE_NAMES = ("ball_x", "ball_y", "own_y", "opp_y", "ball_vx", "ball_vy")
+
+_MOVE = np.array([0.0, -PADDLE_SPEED, PADDLE_SPEED])
+
+# Raw frame rows kept in the history ring (world coordinates, float32).
+_F_BX, _F_BY, _F_VX, _F_VY, _F_P0, _F_P1 = range(6)
+
+
+@dataclass(frozen=True)
+class PongConfig:
+    """Rules and observation options of one Pong game (the defaults are the game `marl` trains on)."""
+
+    rules: Literal["classic", "seed"] = "classic"
+    points_to_win: int = 21
+    frame_stack: int = 8  # observation frames (seed 000 trains with 8)
+    obs_mode: Literal["coords", "rgb"] = "coords"
+    r_for_hit: float = 0.0  # seed 000's optional shaping reward for touching the ball
+    max_bounce_deg: float = 60.0  # classic: steepest angle a ball leaves a paddle at (from the horizontal)
+    max_deflect_deg: float = 45.0  # classic: turn given by a hit at the very edge of a paddle
+    speedup: float = 0.5  # classic: px/step added to the ball speed by each paddle hit
+    max_speed: float = 16.0  # classic: speed cap (px/step)
+    max_rally_steps: int = 3000  # 0 = no cap
+    max_steps: int = 100_000  # 0 = no cap
+
+    def __post_init__(self) -> None:
+        if self.rules not in ("classic", "seed"):
+            raise ValueError(f"pong rules must be 'classic' or 'seed', not {self.rules!r}")
+        if self.obs_mode not in ("coords", "rgb"):
+            raise ValueError(f"pong obs_mode must be 'coords' or 'rgb', not {self.obs_mode!r}")
+        if self.points_to_win < 1:
+            raise ValueError(f"points_to_win must be at least 1, not {self.points_to_win}")
+        if self.frame_stack < 1:
+            raise ValueError(f"frame_stack must be at least 1, not {self.frame_stack}")
+        if not SERVE_SPEED <= self.max_speed <= 2 * (BALL_R + PADDLE_W) + SERVE_SPEED:
+            raise ValueError(f"max_speed must lie in [{SERVE_SPEED}, 40], not {self.max_speed}")
+        if not 0.0 <= self.max_bounce_deg < 80.0:
+            raise ValueError(f"max_bounce_deg must lie in [0, 80), not {self.max_bounce_deg}")
+        if self.speedup < 0 or self.max_rally_steps < 0 or self.max_steps < 0:
+            raise ValueError("speedup, max_rally_steps and max_steps must not be negative")
+
+    @property
+    def velocity_scale(self) -> float:
+        """Largest velocity component: observations divide velocities by it."""
+        return SERVE_SPEED if self.rules == "seed" else self.max_speed
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def make_config(**options: Any) -> PongConfig:
+    """A config from keyword options, with a clear error for an unknown option."""
+    known = set(PongConfig.__dataclass_fields__)
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(f"unknown pong option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    return replace(PongConfig(), **options)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Counter-based randomness: SplitMix64 over uint64 arrays (wrapping arithmetic is what we want here).
+_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_DRAWS_PER_SERVE = 4  # left paddle y, right paddle y, side, target point on the paddle
+
+
+def _splitmix(x: np.ndarray) -> np.ndarray:
+    with np.errstate(over="ignore"):
+        z = x + _GOLDEN
+        z = (z ^ (z >> np.uint64(30))) * _M1
+        z = (z ^ (z >> np.uint64(27))) * _M2
+        return z ^ (z >> np.uint64(31))
+
+
+def game_key(seed: int | np.ndarray) -> np.ndarray:
+    """The 64-bit key of a game from its seed (any integer; negative seeds wrap)."""
+    s = np.asarray(seed, dtype=np.int64).astype(np.uint64)
+    return _splitmix(s)
+
+
+def _uniform(keys: np.ndarray, serves: np.ndarray, draw: int) -> np.ndarray:
+    """Uniform [0, 1) draw number ``draw`` of serve number ``serves`` of the games with ``keys``."""
+    with np.errstate(over="ignore"):
+        counter = serves.astype(np.uint64) * np.uint64(_DRAWS_PER_SERVE) + np.uint64(draw)
+        bits = _splitmix(keys ^ _splitmix(counter))
+    return (bits >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+
+
+# --------------------------------------------------------------------------------------------------------------
+class PongCore:
+    """N Pong games stepped at once. Seats are the leading axis: ``actions[seat, game]``.
+
+    The core never resets a game by itself: a finished game (terminated or truncated) keeps its final score
+    until :meth:`reset` is called for it. Observations are built on demand by :meth:`observe` from a ring of
+    raw frames, so stepping stays cheap when nobody looks.
+    """
+
+    n_seats = 2
+
+    def __init__(self, n_games: int, config: PongConfig | None = None) -> None:
+        if n_games < 1:
+            raise ValueError(f"n_games must be at least 1, not {n_games}")
+        self.n = n_games
+        self.config = config or PongConfig()
+        self._seed_rules = self.config.rules == "seed"
+        self._max_angle = float(np.radians(self.config.max_bounce_deg))
+        self._max_deflect = float(np.radians(self.config.max_deflect_deg))
+        n = n_games
+        self.bx = np.zeros(n)
+        self.by = np.zeros(n)
+        self.vx = np.zeros(n)
+        self.vy = np.zeros(n)
+        self.paddle = np.zeros((2, n))  # top edge y of each seat's paddle
+        self.score = np.zeros((2, n), dtype=np.int64)
+        self.touched = np.zeros((2, n), dtype=bool)
+        self.rally_steps = np.zeros(n, dtype=np.int64)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.serves = np.zeros(n, dtype=np.int64)
+        self.key = np.zeros(n, dtype=np.uint64)
+        self.hits = np.zeros((2, n), dtype=np.int64)  # paddle touches per seat (for stats and shaping)
+        self.terminated = np.zeros(n, dtype=bool)
+        self.truncated = np.zeros(n, dtype=bool)
+        k = self.config.frame_stack
+        self._frames = np.zeros((k, 6, n), dtype=np.float32)  # ring of raw frames, oldest at _head + 1
+        self._head = 0
+        self.reset(np.arange(n), np.arange(n))
+
+    # ----------------------------------------------------------------------------------------------------
+    def reset(self, games: np.ndarray | list[int], seeds: np.ndarray | list[int]) -> None:
+        """Start new games in the slots ``games`` with the given seeds."""
+        g = np.asarray(games, dtype=np.int64)
+        if g.size == 0:
+            return
+        self.key[g] = game_key(np.asarray(seeds, dtype=np.int64))
+        self.score[:, g] = 0
+        self.hits[:, g] = 0
+        self.steps[g] = 0
+        self.serves[g] = 0
+        self.terminated[g] = False
+        self.truncated[g] = False
+        self._serve(g)
+        # A fresh game's history is its first frame repeated (as the seed's frame stack does).
+        frame = self._frame_of(g)
+        self._frames[:, :, g] = frame[None]
+
+    def _serve(self, g: np.ndarray) -> None:
+        """Ball to the centre, paddles re-placed at random, serve toward a random point of a random paddle."""
+        serves = self.serves[g]
+        key = self.key[g]
+        p0 = np.floor(_uniform(key, serves, 0) * (PADDLE_Y_MAX + 1))
+        p1 = np.floor(_uniform(key, serves, 1) * (PADDLE_Y_MAX + 1))
+        to_left = _uniform(key, serves, 2) < 0.5
+        target_y = np.where(to_left, p0, p1) + _uniform(key, serves, 3) * PADDLE_H
+        target_x = np.where(to_left, PADDLE_X + PADDLE_W // 2, WIDTH - PADDLE_X - PADDLE_W // 2)
+        dx = target_x - WIDTH // 2
+        dy = target_y - HEIGHT // 2
+        norm = np.sqrt(dx * dx + dy * dy)
+        self.paddle[0, g] = p0
+        self.paddle[1, g] = p1
+        self.bx[g] = WIDTH // 2
+        self.by[g] = HEIGHT // 2
+        self.vx[g] = SERVE_SPEED * dx / norm
+        self.vy[g] = SERVE_SPEED * dy / norm
+        self.touched[:, g] = False
+        self.rally_steps[g] = 0
+        self.serves[g] = serves + 1
+
+    # ----------------------------------------------------------------------------------------------------
+    def step(self, actions: np.ndarray) -> np.ndarray:
+        """Advance every game one step. ``actions`` is ``(2, n)`` ints in {0, 1, 2}.
+
+        Returns the rewards ``(2, n)`` float32 (+1/-1 per point, zero-sum, plus ``r_for_hit`` per touch).
+        ``self.terminated`` / ``self.truncated`` tell which games ended on this step.
+        """
+        cfg = self.config
+        a = np.asarray(actions)
+        if a.shape != (2, self.n):
+            raise ValueError(f"actions must have shape (2, {self.n}), got {a.shape}")
+        move = _MOVE.take(a)
+        paddle = self.paddle
+        if self._seed_rules:
+            moved = paddle + move
+            np.copyto(paddle, moved, where=(moved >= 0) & (moved <= PADDLE_Y_MAX))
+        else:
+            paddle += move
+            np.clip(paddle, 0.0, PADDLE_Y_MAX, out=paddle)
+
+        bx, by, vx, vy = self.bx, self.by, self.vx, self.vy
+        bx += vx
+        by += vy
+        rewards = np.zeros((2, self.n), dtype=np.float32)
+        if self._seed_rules:
+            self._seed_collisions(rewards)
+        else:
+            self._classic_collisions(rewards)
+
+        self.terminated[:] = False
+        self.truncated[:] = False
+        out_left = bx < 0
+        out_right = bx > WIDTH
+        if out_left.any() or out_right.any():
+            self._points(out_left, out_right, rewards)
+
+        self.rally_steps += 1
+        self.steps += 1
+        if cfg.max_rally_steps:
+            self.truncated |= self.rally_steps >= cfg.max_rally_steps
+        if cfg.max_steps:
+            self.truncated |= self.steps >= cfg.max_steps
+        self.truncated &= ~self.terminated
+        self._record_frame()
+        return rewards
+
+    def _seed_collisions(self, rewards: np.ndarray) -> None:
+        bx, by, vx, vy = self.bx, self.by, self.vx, self.vy
+        wall = (by - BALL_R <= 0) | (by + BALL_R >= HEIGHT)
+        np.negative(vy, out=vy, where=wall)
+        # The seed tests the ball's edge strictly inside the paddle's x-range and its centre strictly inside the
+        # paddle's y-range, with no regard to the direction of travel.
+        left_edge = bx - BALL_R
+        hit0 = (left_edge > PADDLE_X) & (left_edge < LEFT_FACE)
+        hit0 &= (by > self.paddle[0]) & (by < self.paddle[0] + PADDLE_H)
+        np.negative(vx, out=vx, where=hit0)
+        right_edge = bx + BALL_R
+        hit1 = (right_edge > RIGHT_FACE) & (right_edge < WIDTH - PADDLE_X)
+        hit1 &= (by > self.paddle[1]) & (by < self.paddle[1] + PADDLE_H)
+        np.negative(vx, out=vx, where=hit1)
+        self._touch(hit0, hit1, rewards)
+
+    def _classic_collisions(self, rewards: np.ndarray) -> None:
+        bx, by, vx, vy = self.bx, self.by, self.vx, self.vy
+        top = by < BALL_R
+        if top.any():
+            by[top] = 2 * BALL_R - by[top]
+            vy[top] = np.abs(vy[top])
+        bottom = by > HEIGHT - BALL_R
+        if bottom.any():
+            by[bottom] = 2 * (HEIGHT - BALL_R) - by[bottom]
+            vy[bottom] = -np.abs(vy[bottom])
+        # Swept test: the ball's leading edge crossed a paddle face on this step, moving toward it.
+        near_left = bx < LEFT_FACE + BALL_R
+        near_right = bx > RIGHT_FACE - BALL_R
+        hit0 = hit1 = None
+        if near_left.any():
+            g = np.flatnonzero(near_left & (vx < 0) & (bx - vx >= LEFT_FACE + BALL_R))
+            g = g[self._overlaps(g, 0)]
+            if g.size:
+                bx[g] = 2 * (LEFT_FACE + BALL_R) - bx[g]
+                self._deflect(g, 0)
+                hit0 = np.zeros(self.n, dtype=bool)
+                hit0[g] = True
+        if near_right.any():
+            g = np.flatnonzero(near_right & (vx > 0) & (bx - vx <= RIGHT_FACE - BALL_R))
+            g = g[self._overlaps(g, 1)]
+            if g.size:
+                bx[g] = 2 * (RIGHT_FACE - BALL_R) - bx[g]
+                self._deflect(g, 1)
+                hit1 = np.zeros(self.n, dtype=bool)
+                hit1[g] = True
+        if hit0 is not None or hit1 is not None:
+            none = np.zeros(self.n, dtype=bool)
+            self._touch(none if hit0 is None else hit0, none if hit1 is None else hit1, rewards)
+
+    def _overlaps(self, g: np.ndarray, seat: int) -> np.ndarray:
+        """Whether the ball (centre within a radius of the paddle's span) meets seat's paddle in games g."""
+        top = self.paddle[seat, g]
+        y = self.by[g]
+        return (y >= top - BALL_R) & (y <= top + PADDLE_H + BALL_R)
+
+    def _deflect(self, g: np.ndarray, seat: int) -> None:
+        """Classic deflection: the ball reflects, and where it meets the paddle turns it by up to
+        ``max_deflect_deg`` (edge hits steepen, centre hits keep the angle), clamped to ``max_bounce_deg``;
+        each hit speeds the ball up by ``speedup``, capped at ``max_speed``."""
+        cfg = self.config
+        centre = self.paddle[seat, g] + PADDLE_H / 2
+        offset = np.clip((self.by[g] - centre) / (PADDLE_H / 2 + BALL_R), -1.0, 1.0)
+        vx, vy = self.vx[g], self.vy[g]
+        speed = np.minimum(np.hypot(vx, vy) + cfg.speedup, cfg.max_speed)
+        angle = np.arctan2(vy, np.abs(vx)) + offset * self._max_deflect
+        np.clip(angle, -self._max_angle, self._max_angle, out=angle)
+        self.vx[g] = speed * np.cos(angle) * (1.0 if seat == 0 else -1.0)
+        self.vy[g] = speed * np.sin(angle)
+
+    def _touch(self, hit0: np.ndarray, hit1: np.ndarray, rewards: np.ndarray) -> None:
+        self.touched[0] |= hit0
+        self.touched[1] |= hit1
+        self.hits[0] += hit0
+        self.hits[1] += hit1
+        if self.config.r_for_hit:
+            rewards[0] += hit0 * np.float32(self.config.r_for_hit)
+            rewards[1] += hit1 * np.float32(self.config.r_for_hit)
+
+    def _points(self, out_left: np.ndarray, out_right: np.ndarray, rewards: np.ndarray) -> None:
+        """Ball left the court: the side that touched it in this rally scores; then a new serve."""
+        right_scores = out_left & self.touched[1]
+        left_scores = out_right & self.touched[0]
+        self.score[1] += right_scores
+        self.score[0] += left_scores
+        scorer = right_scores | left_scores
+        # Sign of the point from the left seat's view; the seed overwrites any hit reward on a point.
+        sign = left_scores.astype(np.float32) - right_scores.astype(np.float32)
+        rewards[0] = np.where(scorer, sign, rewards[0])
+        rewards[1] = np.where(scorer, -sign, rewards[1])
+        self.terminated |= (self.score >= self.config.points_to_win).any(axis=0)
+        self._serve(np.flatnonzero(out_left | out_right))
+
+    # ----------------------------------------------------------------------------------------------------
+    def _frame_of(self, g: np.ndarray | slice) -> np.ndarray:
+        return np.stack([self.bx[g], self.by[g], self.vx[g], self.vy[g], self.paddle[0, g], self.paddle[1, g]])
+
+    def _record_frame(self) -> None:
+        self._head = (self._head + 1) % self.config.frame_stack
+        f = self._frames[self._head]
+        f[_F_BX] = self.bx
+        f[_F_BY] = self.by
+        f[_F_VX] = self.vx
+        f[_F_VY] = self.vy
+        f[_F_P0] = self.paddle[0]
+        f[_F_P1] = self.paddle[1]
+
+    def observe(self) -> np.ndarray:
+        """Egocentric stacked observations ``(2, n, k, 6)`` float32 in [-1, 1], oldest frame first.
+
+        Per frame: ball x, ball y, own paddle y, opponent paddle y, ball vx, ball vy; the right seat sees x and
+        vx mirrored, so both seats see themselves on the left.
+        """
+        k = self.config.frame_stack
+        order = (np.arange(1, k + 1) + self._head) % k
+        frames = self._frames[order]  # (k, 6, n)
+        return frames_to_obs(frames, self.config.velocity_scale)
+
+    # ----------------------------------------------------------------------------------------------------
+    def outcome(self) -> np.ndarray:
+        """Points per seat for finished games: 1 win, 0.5 draw, 0 loss (by score), shape (2, n)."""
+        diff = np.sign(self.score[0] - self.score[1]).astype(np.float64)
+        left = 0.5 + 0.5 * diff
+        return np.stack([left, 1.0 - left])
+
+    _STATE_FIELDS = ("bx", "by", "vx", "vy", "paddle", "score", "touched", "rally_steps", "steps", "serves",
+                     "key", "hits", "terminated", "truncated")
+
+    def get_state(self, games: np.ndarray | list[int] | None = None) -> dict[str, Any]:
+        """An exact copy of the state of some games (all by default), history included."""
+        g = slice(None) if games is None else np.asarray(games, dtype=np.int64)
+        state = {name: getattr(self, name)[..., g].copy() for name in self._STATE_FIELDS}
+        k = self.config.frame_stack
+        order = (np.arange(1, k + 1) + self._head) % k
+        state["frames"] = self._frames[order][..., g].copy()
+        return state
+
+    def set_state(self, state: dict[str, Any], games: np.ndarray | list[int] | None = None) -> None:
+        """Restore what :meth:`get_state` returned (into the same or other game slots)."""
+        g = slice(None) if games is None else np.asarray(games, dtype=np.int64)
+        for name in self._STATE_FIELDS:
+            getattr(self, name)[..., g] = state[name]
+        k = self.config.frame_stack
+        order = (np.arange(1, k + 1) + self._head) % k
+        frames = np.asarray(state["frames"], dtype=np.float32)
+        if frames.shape[0] != k:
+            raise ValueError(f"state has {frames.shape[0]} frames, this core stacks {k}")
+        for i, slot in enumerate(order):
+            self._frames[slot][:, g] = frames[i]
+
+
+def frames_to_obs(frames: np.ndarray, vscale: float) -> np.ndarray:
+    """Raw frames ``(k, 6, n)`` in world units to egocentric observations ``(2, n, k, 6)``."""
+    k, _, n = frames.shape
+    obs = np.empty((2, n, k, N_FEATURES), dtype=np.float32)
+    bx = frames[:, _F_BX].T * np.float32(1 / (WIDTH / 2)) - 1  # (n, k)
+    by = frames[:, _F_BY].T * np.float32(1 / (HEIGHT / 2)) - 1
+    vx = frames[:, _F_VX].T * np.float32(1 / vscale)
+    vy = frames[:, _F_VY].T * np.float32(1 / vscale)
+    p0 = frames[:, _F_P0].T * np.float32(2 / PADDLE_Y_MAX) - 1
+    p1 = frames[:, _F_P1].T * np.float32(2 / PADDLE_Y_MAX) - 1
+    obs[0, :, :, 0] = bx
+    obs[1, :, :, 0] = -bx
+    obs[:, :, :, 1] = by
+    obs[0, :, :, 2] = p0
+    obs[0, :, :, 3] = p1
+    obs[1, :, :, 2] = p1
+    obs[1, :, :, 3] = p0
+    obs[0, :, :, 4] = vx
+    obs[1, :, :, 4] = -vx
+    obs[:, :, :, 5] = vy
+    np.clip(obs, -1.0, 1.0, out=obs)
+    return obs
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Scripted players' rules. They see only the observation (flattened or not) of their own seat.
+def cpu_rule(obs: np.ndarray) -> np.ndarray:
+    """Seed 000's ball tracker: move (at paddle speed 8) toward the ball's height, from the latest frame."""
+    last = np.asarray(obs, dtype=np.float32).reshape(len(obs), -1)[:, -N_FEATURES:]
+    ball_y = (last[:, 1] + 1) * (HEIGHT / 2)
+    centre = (last[:, 2] + 1) * (PADDLE_Y_MAX / 2) + PADDLE_H // 2
+    return np.where(centre < ball_y - 1e-3, DOWN, np.where(centre > ball_y + 1e-3, UP, STAY)).astype(np.int64)

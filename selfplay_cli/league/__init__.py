@@ -1,0 +1,1 @@
+"""League training utilities: opponent pools, match scheduling and rating/evaluation statistics."""

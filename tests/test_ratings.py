@@ -1,0 +1,436 @@
+"""Tests for selfplay_cli.league.ratings: Elo arithmetic, match statistics, GSPRT and Bradley-Terry fits."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from statistics import NormalDist
+
+import numpy as np
+import pytest
+
+from selfplay_cli.league.ratings import (
+    FLAG_DISCONNECTED,
+    FLAG_PERFECT,
+    FLAG_UNRATED,
+    FLAG_ZERO,
+    MAX_ELO,
+    SPRT,
+    bootstrap_ci,
+    elo_to_score,
+    elo_update,
+    fit_bradley_terry,
+    match_stats,
+    normal_quantile,
+    rank_by_ci,
+    score_to_elo,
+    sprt_bounds,
+    sprt_llr,
+)
+
+Z95 = 1.959963984540054  # Phi^{-1}(0.975)
+
+
+def _games(*blocks: tuple[int, int, int, int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Expand (i, j, wins_i, losses_i, draws) blocks into per-game arrays (a, b, score_a)."""
+    a: list[int] = []
+    b: list[int] = []
+    s: list[float] = []
+    for i, j, wins, losses, draws in blocks:
+        for score, count in ((1.0, wins), (0.0, losses), (0.5, draws)):
+            a += [i] * count
+            b += [j] * count
+            s += [score] * count
+    return np.array(a), np.array(b), np.array(s)
+
+
+def _expected(d: np.ndarray) -> np.ndarray:
+    return 1.0 / (1.0 + 10.0 ** (-d / 400.0))
+
+
+# ------------------------------------------------------------------------------------------------
+# Elo arithmetic
+# ------------------------------------------------------------------------------------------------
+
+
+def test_score_elo_conversions() -> None:
+    # 400 log10(0.75 / 0.25) = 400 log10(3) = 190.849
+    assert score_to_elo(0.75) == pytest.approx(190.85, abs=0.005)
+    assert score_to_elo(0.5) == 0.0
+    # 1 / (1 + 10^(-1/4)) = 0.640065
+    assert elo_to_score(100.0) == pytest.approx(0.6401, abs=5e-5)
+    assert elo_to_score(-100.0) == pytest.approx(1.0 - 0.640065, abs=1e-6)
+    for d in (-700.0, -35.5, 0.0, 12.0, 900.0):
+        assert score_to_elo(elo_to_score(d)) == pytest.approx(d, abs=1e-9)
+    # clipped, finite at 0 and 1; no overflow for absurd differences
+    assert score_to_elo(1.0) == pytest.approx(MAX_ELO)
+    assert score_to_elo(0.0) == pytest.approx(-MAX_ELO)
+    assert elo_to_score(1e6) == 1.0 and elo_to_score(-1e6) == 0.0
+
+
+def test_normal_quantile_matches_stdlib() -> None:
+    nd = NormalDist()
+    for p in (1e-300, 1e-50, 1e-12, 1e-6, 0.001, 0.02425, 0.025, 0.1, 0.3, 0.5, 0.7, 0.975, 0.999, 1 - 1e-12):
+        assert normal_quantile(p) == pytest.approx(nd.inv_cdf(p), abs=1e-9)
+    assert normal_quantile(0.975) == pytest.approx(Z95, abs=1e-12)
+    with pytest.raises(ValueError):
+        normal_quantile(0.0)
+
+
+def test_online_elo_update() -> None:
+    # Equal players: E = 1/2, delta = 16 (1 - 1/2) = +8
+    assert elo_update(1500.0, 1500.0, 1.0) == pytest.approx((1508.0, 1492.0))
+    assert elo_update(1500.0, 1500.0, 0.5) == pytest.approx((1500.0, 1500.0))
+    # A 100 Elo stronger, loses with K=32: delta = 32 (0 - 0.640065) = -20.482
+    ra, rb = elo_update(1600.0, 1500.0, 0.0, k=32.0)
+    assert ra == pytest.approx(1600.0 - 20.482, abs=1e-3)
+    assert ra + rb == pytest.approx(3100.0)  # zero-sum
+
+
+# ------------------------------------------------------------------------------------------------
+# Match statistics
+# ------------------------------------------------------------------------------------------------
+
+
+def test_match_stats_trinomial_interval_by_hand() -> None:
+    # W=60, D=20, L=20: s = 0.7
+    # var per game = [60 (0.3)^2 + 20 (0.2)^2 + 20 (0.7)^2] / 100 = (5.4 + 0.8 + 9.8) / 100 = 0.16
+    # se = sqrt(0.16 / 100) = 0.04; score CI = 0.7 -+ 1.96 * 0.04 = [0.62160, 0.77840]
+    # Elo: 400 log10(0.7/0.3) = 147.19; 400 log10(0.6216/0.3784) = 86.23; 400 log10(0.7784/0.2216) = 218.25
+    st = match_stats(60, 20, 20)
+    assert st.games == 100 and st.score == pytest.approx(0.7)
+    assert st.elo == pytest.approx(147.19, abs=0.01)
+    lo_s, hi_s = 0.7 - Z95 * 0.04, 0.7 + Z95 * 0.04
+    assert st.elo_low == pytest.approx(400 * math.log10(lo_s / (1 - lo_s)), abs=1e-9)
+    assert st.elo_high == pytest.approx(400 * math.log10(hi_s / (1 - hi_s)), abs=1e-9)
+    assert st.elo_low == pytest.approx(86.23, abs=0.01) and st.elo_high == pytest.approx(218.25, abs=0.01)
+    assert not st.bounded and not st.used_pentanomial
+    # LOS with W=60, L=20: 0.5 (1 + erf(40 / sqrt(160)))
+    assert st.los == pytest.approx(0.5 * (1 + math.erf(40 / math.sqrt(160))))
+
+
+def test_match_stats_pentanomial_interval_by_hand() -> None:
+    # 50 pairs (LL, LD, WL+DD, WD, WW) = (5, 10, 20, 10, 5), pair-mean scores (0, .25, .5, .75, 1): mu = 0.5
+    # var_pair = [5 * .25 + 10 * .0625 + 0 + 10 * .0625 + 5 * .25] / 50 = 3.75 / 50 = 0.075
+    # se = sqrt(0.075 / 50) = 0.038730; CI = 0.5 -+ 0.075910 -> Elo -+ 400 log10(0.575910/0.424090) = -+53.16
+    # The same 100 games as W/D/L = 35/30/35 give the wider trinomial se = sqrt(0.175/100) = 0.041833.
+    st = match_stats(35, 30, 35, pentanomial=(5, 10, 20, 10, 5))
+    half = Z95 * math.sqrt(0.075 / 50)
+    expected_hi = 400 * math.log10((0.5 + half) / (0.5 - half))
+    assert st.used_pentanomial
+    assert st.elo == pytest.approx(0.0, abs=1e-12)
+    assert st.elo_high == pytest.approx(expected_hi, abs=1e-9)
+    assert st.elo_high == pytest.approx(53.16, abs=0.01)
+    assert st.elo_low == pytest.approx(-expected_hi, abs=1e-9)
+    tri = match_stats(35, 30, 35)
+    assert tri.elo_high > st.elo_high  # pairs remove the opening correlation -> narrower interval
+
+
+def test_los_value() -> None:
+    st = match_stats(10, 7, 5)
+    assert st.los == pytest.approx(0.5 * (1 + math.erf(5 / math.sqrt(30))))
+    assert st.los == pytest.approx(0.9016, abs=1e-4)
+    assert match_stats(3, 4, 3).los == 0.5
+    assert match_stats(0, 5, 0).los == 0.5
+
+
+def test_match_stats_extreme_scores_are_finite_and_flagged() -> None:
+    win = match_stats(10, 0, 0)
+    assert win.bounded and win.score == 1.0
+    # one virtual draw: (10 + 1/2) / 11 -> 400 log10(21) = 528.9
+    assert win.elo == pytest.approx(400 * math.log10(21), abs=1e-9)
+    assert win.elo_high == MAX_ELO and math.isfinite(win.elo_low) and win.elo_low < win.elo
+    loss = match_stats(0, 0, 7, pentanomial=(3, 1, 0, 0, 0))
+    assert loss.bounded and loss.elo_low == -MAX_ELO and math.isfinite(loss.elo_high)
+    assert loss.elo == pytest.approx(-400 * math.log10(15), abs=1e-9)  # (0.5 / 8) -> odds 1/15
+    empty = match_stats(0, 0, 0)
+    assert empty.games == 0 and empty.elo == 0.0 and empty.los == 0.5
+    assert (empty.elo_low, empty.elo_high) == (-MAX_ELO, MAX_ELO)
+    for st in (win, loss, empty):
+        assert all(math.isfinite(x) for x in (st.elo, st.elo_low, st.elo_high, st.los))
+
+
+# ------------------------------------------------------------------------------------------------
+# SPRT
+# ------------------------------------------------------------------------------------------------
+
+
+def test_sprt_bounds() -> None:
+    lo, hi = sprt_bounds(0.05, 0.05)
+    assert lo == pytest.approx(-2.944, abs=5e-4) and hi == pytest.approx(2.944, abs=5e-4)
+    assert hi == pytest.approx(math.log(19.0))
+
+
+def _penta(ll: int, ld: int, wl: int, dd: int, wd: int, ww: int) -> list[int]:
+    """fastchess ``Stats(ll, ld, wl, dd, wd, ww)`` -> our ascending pentanomial (LL, LD, WL+DD, WD, WW)."""
+    return [ll, ld, wl + dd, wd, ww]
+
+
+def _tri(wins: int, losses: int, draws: int) -> list[int]:
+    """fastchess ``Stats(wins, losses, draws)`` -> our trinomial (losses, draws, wins)."""
+    return [losses, draws, wins]
+
+
+# Published vectors from fastchess, app/tests/sprt_test.cpp (github.com/Disservin/fastchess), whose
+# ``Stats`` constructors are Stats(wins, losses, draws) and Stats(ll, ld, wl, dd, wd, ww)
+# (app/src/matchmaking/stats.hpp); all with alpha = beta = 0.05.
+FASTCHESS_CASES = [
+    # (name, counts, elo0, elo1, elo_model, published LLR)
+    ("logistic pentanomial 1", _penta(223, 9863, 20279, 1000, 10037, 246), 0.5, 2.5, "logistic", -3.07),
+    ("logistic pentanomial 2", _penta(871, 26175, 55003, 980, 26678, 821), 0.0, 2.0, "logistic", -4.98),
+    ("logistic trinomial 1", _tri(21404, 21184, 40708), 0.5, 2.5, "logistic", -1.57),
+    ("logistic trinomial 2", _tri(57433, 57030, 106593), 0.0, 2.0, "logistic", -2.59),
+    ("normalized pentanomial 1", _penta(365, 16618, 36029, 200, 16974, 390), 0.0, 2.0, "normalized", 2.25),
+    ("normalized pentanomial 2", _penta(127, 4883, 10311, 401, 5150, 104), -1.75, 0.25, "normalized", 3.01),
+    ("normalized trinomial 1", _tri(36433, 36027, 68692), 0.0, 2.0, "normalized", 0.92),
+    ("normalized trinomial 2", _tri(10871, 10650, 20431), -1.75, 0.25, "normalized", 2.30),
+]
+
+
+@pytest.mark.parametrize(("name", "counts", "elo0", "elo1", "model", "published"), FASTCHESS_CASES)
+def test_sprt_llr_reproduces_fastchess(
+    name: str, counts: list[int], elo0: float, elo1: float, model: str, published: float
+) -> None:
+    llr = sprt_llr(counts, elo0, elo1, elo_model=model)  # type: ignore[arg-type]
+    assert abs(llr - published) <= 0.005, name  # equal to 2 decimals
+
+
+def test_sprt_llr_reproduces_openbench_and_fastchess_console_output() -> None:
+    # OpenBench (ob.expositor.dev/test/299, quoted in github.com/cosmobobak/viridithas PR #371):
+    #   LLR +2.95 (-2.94, +2.94) for [0.00, 3.00]; PENTA +2: 1573, +1: 45113, 0: 95783, -1: 44719, -2: 1260
+    #   That instance tests in normalized Elo.
+    ob = [1260, 44719, 95783, 45113, 1573]
+    assert round(sprt_llr(ob, 0.0, 3.0, elo_model="normalized"), 2) == 2.95
+    # fastchess console output (default normalized model):
+    #   "Ptnml(0-2): [0, 0, 2, 0, 37] ... LLR: 2.96 (100.6%) (-2.94, 2.94) [0.00, 20.00]"
+    # This also exercises the regularisation of empty bins (three zero counts).
+    assert round(sprt_llr([0, 0, 2, 0, 37], 0.0, 20.0, elo_model="normalized"), 2) == 2.96
+
+
+def test_sprt_llr_edge_cases() -> None:
+    assert sprt_llr([0, 0, 0, 0, 0], 0.0, 5.0) == 0.0
+    assert sprt_llr([0, 0, 0], 0.0, 5.0, model="trinomial") == 0.0
+    # Empty bins are regularised: finite results, sign in the right direction.
+    assert 0.0 < sprt_llr([0, 0, 0, 0, 30], 0.0, 20.0) < math.inf
+    assert sprt_llr([30, 0, 0, 0, 0], 0.0, 20.0) < 0.0
+    # Data exactly at H0 -> H0 is the unconstrained MLE, so the generalised LLR is <= 0.
+    assert sprt_llr([100, 200, 100], 0.0, 5.0, model="trinomial") < 0.0
+    # Hypotheses far on the wrong side of the data: still finite (normal-approximation fallback).
+    assert sprt_llr([549, 54, 33, 1, 0], 500.0, 1500.0, elo_model="normalized") < 0.0
+    with pytest.raises(ValueError):
+        sprt_llr([1, 2, 3, 4], 0.0, 5.0)
+    with pytest.raises(ValueError):
+        sprt_llr([1, 2, 3], 0.0, 5.0, model="pentanomial")
+
+
+def test_sprt_decide() -> None:
+    test = SPRT(elo0=0.0, elo1=5.0)
+    assert test.lower == pytest.approx(-2.944, abs=5e-4)
+    assert test.decide(3.0) == "H1"
+    assert test.decide(-3.0) == "H0"
+    assert test.decide(0.1) is None
+    llr = test.llr(_penta(223, 9863, 20279, 1000, 10037, 246))
+    assert llr == pytest.approx(sprt_llr(_penta(223, 9863, 20279, 1000, 10037, 246), 0.0, 5.0))
+    with pytest.raises(ValueError):
+        SPRT(elo0=5.0, elo1=0.0)
+
+
+# ------------------------------------------------------------------------------------------------
+# Bradley-Terry
+# ------------------------------------------------------------------------------------------------
+
+
+def test_bt_two_players_seven_of_ten() -> None:
+    a, b, s = _games((0, 1, 7, 3, 0))
+    fit = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0)
+    # E(d) = 0.7 -> d = 400 log10(7/3) = 147.19
+    assert fit.ratings[0] == pytest.approx(400 * math.log10(7 / 3), abs=1e-6)
+    assert fit.ratings[0] == pytest.approx(147.2, abs=0.05)
+    assert fit.flags == [None, None] and fit.converged
+    assert list(fit.wins) == [7, 3] and list(fit.losses) == [3, 7] and list(fit.games) == [10, 10]
+
+
+def test_bt_draws_count_half() -> None:
+    # 6 wins, 2 draws, 2 losses = 7 points of 10, the same likelihood as 7 wins / 3 losses.
+    a, b, s = _games((0, 1, 6, 2, 2))
+    fit = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0)
+    assert fit.ratings[0] == pytest.approx(400 * math.log10(7 / 3), abs=1e-6)
+    assert fit.draws[0] == 2 and fit.score[0] == pytest.approx(0.7)
+    # Draws given from B's side count the same.
+    a2, b2, s2 = _games((1, 0, 2, 6, 2))
+    fit2 = fit_bradley_terry(a2, b2, s2, 2, anchor=1, anchor_rating=0.0)
+    assert fit2.ratings[0] == pytest.approx(fit.ratings[0], abs=1e-9)
+
+
+def test_bt_three_player_round_robin_by_hand() -> None:
+    # 15 games per pair, A-B 10:5 (odds 2), B-C 10:5 (odds 2), A-C 12:3 (odds 4 = 2 * 2).
+    # The pairwise odds are consistent, so E(r_i - r_j) = s_ij holds for every pair and each score
+    # equation sum_j n_ij (s_ij - E(r_i - r_j)) = 0 term by term: r_A - r_B = r_B - r_C = 400 log10 2.
+    a, b, s = _games((0, 1, 10, 5, 0), (1, 2, 10, 5, 0), (0, 2, 12, 3, 0))
+    fit = fit_bradley_terry(a, b, s, 3, anchor=1, anchor_rating=1500.0)
+    step = 400 * math.log10(2)  # 120.41
+    assert fit.ratings == pytest.approx([1500 + step, 1500.0, 1500 - step], abs=1e-6)
+    # An inconsistent round robin with draws: check the score equations and an independent solver.
+    a, b, s = _games((0, 1, 6, 3, 3), (1, 2, 4, 4, 2), (2, 0, 5, 2, 1))
+    fit = fit_bradley_terry(a, b, s, 3, anchor=0, anchor_rating=0.0)
+    points = np.zeros((3, 3))
+    games = np.zeros((3, 3))
+    np.add.at(points, (a, b), s)
+    np.add.at(points, (b, a), 1 - s)
+    np.add.at(games, (a, b), 1)
+    np.add.at(games, (b, a), 1)
+    residual = (points - games * _expected(fit.ratings[:, None] - fit.ratings[None, :])).sum(axis=1)
+    assert np.abs(residual).max() < 1e-6
+    assert fit.ratings == pytest.approx(_mm_reference(points, games, anchor=0), abs=0.5)
+
+
+def _mm_reference(points: np.ndarray, games: np.ndarray, anchor: int, sweeps: int = 20000) -> np.ndarray:
+    """Independent check: Hunter's (2004) MM iteration gamma_i <- W_i / sum_j n_ij / (gamma_i + gamma_j)."""
+    n = points.shape[0]
+    gamma = np.ones(n)
+    wins = points.sum(axis=1)
+    for _ in range(sweeps):
+        for i in range(n):
+            denom = sum(games[i, j] / (gamma[i] + gamma[j]) for j in range(n) if j != i)
+            gamma[i] = wins[i] / denom
+        gamma /= gamma[anchor]
+    return 400 * np.log10(gamma)
+
+
+def test_bt_matches_mm_on_random_population() -> None:
+    rng = np.random.default_rng(3)
+    n, g = 6, 600
+    true = rng.normal(0, 150, n)
+    a = rng.integers(0, n, g)
+    b = (a + rng.integers(1, n, g)) % n
+    p = _expected(true[a] - true[b])
+    u = rng.random(g)
+    s = np.where(u < p - 0.1, 1.0, np.where(u < p + 0.1, 0.5, 0.0))
+    fit = fit_bradley_terry(a, b, s, n, anchor=2, anchor_rating=1000.0)
+    points = np.zeros((n, n))
+    games = np.zeros((n, n))
+    np.add.at(points, (a, b), s)
+    np.add.at(points, (b, a), 1 - s)
+    np.add.at(games, (a, b), 1)
+    np.add.at(games, (b, a), 1)
+    ref = 1000.0 + _mm_reference(points, games, anchor=2, sweeps=3000)
+    assert np.abs(fit.ratings - ref).max() < 0.5
+    residual = (points - games * _expected(fit.ratings[:, None] - fit.ratings[None, :])).sum(axis=1)
+    assert np.abs(residual).max() < 1e-6
+    assert all(f is None for f in fit.flags) and fit.converged
+
+
+def test_bt_anchor_shifts_everything() -> None:
+    a, b, s = _games((0, 1, 6, 3, 3), (1, 2, 4, 4, 2), (2, 0, 5, 2, 1), (3, 1, 2, 2, 2))
+    f0 = fit_bradley_terry(a, b, s, 4, anchor=0, anchor_rating=1000.0)
+    f2 = fit_bradley_terry(a, b, s, 4, anchor=2, anchor_rating=1234.0)
+    assert f0.ratings[0] == 1000.0 and f2.ratings[2] == 1234.0
+    diff = f2.ratings - f0.ratings
+    assert diff == pytest.approx(np.full(4, diff[0]), abs=1e-6)
+
+
+def test_bt_unbounded_players_get_finite_flagged_ratings() -> None:
+    a, b, s = _games(
+        (0, 1, 10, 5, 0), (1, 2, 10, 5, 0), (0, 2, 12, 3, 0),  # A, B, C: the well-posed core
+        (3, 0, 2, 0, 0),  # D won both games against A: perfect score
+        (4, 2, 0, 3, 0),  # E lost all 3 games against C: zero score
+        (5, 6, 3, 1, 0),  # F, G only played each other: not connected to the anchor
+    )  # H (7) never played
+    fit = fit_bradley_terry(a, b, s, 8, anchor=1, anchor_rating=1500.0)
+    assert np.all(np.isfinite(fit.ratings))
+    assert fit.flags == [None, None, None, FLAG_PERFECT, FLAG_ZERO, FLAG_DISCONNECTED, FLAG_DISCONNECTED,
+                         FLAG_UNRATED]
+    step = 400 * math.log10(2)
+    assert fit.ratings[:3] == pytest.approx([1500 + step, 1500.0, 1500 - step], abs=1e-6)  # core is exact
+    # Bound = performance with one virtual draw: D scores (2 + 1/2) / 3 = 5/6 against A -> A + 400 log10 5.
+    assert fit.ratings[3] == pytest.approx(fit.ratings[0] + 400 * math.log10(5), abs=1e-6)
+    # E scores (0 + 1/2) / 4 = 1/8 against C -> C - 400 log10 7.
+    assert fit.ratings[4] == pytest.approx(fit.ratings[2] - 400 * math.log10(7), abs=1e-6)
+    # F, G: exact relative fit (3/4 -> 400 log10 3 apart), centred on the anchor rating.
+    assert fit.ratings[5] - fit.ratings[6] == pytest.approx(400 * math.log10(3), abs=1e-6)
+    assert (fit.ratings[5] + fit.ratings[6]) / 2 == pytest.approx(1500.0)
+    assert fit.ratings[7] == 1500.0 and fit.games[7] == 0 and fit.score[7] == 0.5
+    # A group beating everybody outside it (neither member has a literal 100 % score) is "perfect".
+    a2, b2, s2 = _games((0, 1, 3, 2, 0), (2, 0, 2, 0, 0), (3, 2, 1, 0, 0), (2, 3, 1, 0, 0))
+    fit2 = fit_bradley_terry(a2, b2, s2, 4, anchor=0, anchor_rating=0.0)
+    assert fit2.flags == [None, None, FLAG_PERFECT, FLAG_PERFECT]
+    assert np.all(np.isfinite(fit2.ratings)) and fit2.ratings[2] > 0 and fit2.ratings[3] > 0
+
+
+def test_bt_perfect_anchor_and_no_games() -> None:
+    a, b, s = _games((0, 1, 4, 0, 0), (0, 2, 3, 0, 0))  # the anchor won everything
+    fit = fit_bradley_terry(a, b, s, 3, anchor=0, anchor_rating=1000.0)
+    assert fit.ratings[0] == 1000.0 and fit.flags == [None, FLAG_ZERO, FLAG_ZERO]
+    assert fit.ratings[1] == pytest.approx(1000.0 - 400 * math.log10(9), abs=1e-6)  # 0.5 / 5 = 1/10
+    empty = fit_bradley_terry(np.array([], int), np.array([], int), np.array([]), 3)
+    assert empty.flags == [FLAG_UNRATED] * 3 and np.all(empty.ratings == 1000.0)
+
+
+def test_bt_prior_games_and_weights() -> None:
+    a, b, s = _games((0, 1, 7, 3, 0))
+    ml = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0)
+    shrunk = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0, prior_games=2.0)
+    # two virtual draws per player, each spread over the single opponent: 4 virtual games A-B
+    # -> A scores (7 + 2) / 14 -> 400 log10(9 / 5)
+    assert shrunk.ratings[0] == pytest.approx(400 * math.log10(9 / 5), abs=1e-6)
+    assert 0 < shrunk.ratings[0] < ml.ratings[0]
+    # weights multiply games: weight 2 on every game changes nothing, weight 0 drops a game
+    w2 = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0, weights=np.full(10, 2.0))
+    assert w2.ratings[0] == pytest.approx(ml.ratings[0], abs=1e-6) and w2.games[0] == 20
+    w0 = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0, weights=np.r_[np.ones(7), np.zeros(3)])
+    assert w0.flags[0] == FLAG_PERFECT and np.isfinite(w0.ratings[0])
+
+
+def test_bt_validation() -> None:
+    with pytest.raises(ValueError):
+        fit_bradley_terry(np.array([0]), np.array([0]), np.array([1.0]), 2)
+    with pytest.raises(ValueError):
+        fit_bradley_terry(np.array([0]), np.array([2]), np.array([1.0]), 2)
+    with pytest.raises(ValueError):
+        fit_bradley_terry(np.array([0]), np.array([1]), np.array([1.5]), 2)
+
+
+def _population(n_games: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    true = np.array([1000.0, 1100.0, 900.0, 1250.0, 800.0])
+    a = rng.integers(0, 5, n_games)
+    b = (a + rng.integers(1, 5, n_games)) % 5
+    s = (rng.random(n_games) < _expected(true[a] - true[b])).astype(float)
+    return a, b, s, true
+
+
+def test_bootstrap_ci_contains_estimate_and_narrows() -> None:
+    a, b, s, true = _population(4000, seed=7)
+    fit = fit_bradley_terry(a, b, s, 6, anchor=0, anchor_rating=1000.0)  # player 5 never plays
+    low, high = bootstrap_ci(a, b, s, 6, anchor=0, anchor_rating=1000.0, n_boot=100, seed=1)
+    assert np.all(np.isfinite(low)) and np.all(np.isfinite(high))
+    assert np.all(low <= fit.ratings) and np.all(fit.ratings <= high)
+    assert low[0] == high[0] == 1000.0  # the anchor is fixed
+    assert np.all((low[1:5] <= true[1:5]) & (true[1:5] <= high[1:5]))
+    assert (low[5], high[5]) == (1000.0 - MAX_ELO, 1000.0 + MAX_ELO)  # unrated: finite, very wide
+    a_s, b_s, s_s, _ = _population(400, seed=7)
+    low_s, high_s = bootstrap_ci(a_s, b_s, s_s, 5, anchor=0, anchor_rating=1000.0, n_boot=100, seed=1)
+    width_small, width_large = high_s[1:] - low_s[1:], high[1:5] - low[1:5]
+    assert np.all(width_large < width_small)  # 10x the games: about sqrt(10) narrower
+    assert np.mean(width_small / width_large) == pytest.approx(math.sqrt(10), rel=0.35)
+
+
+def test_bootstrap_ci_flagged_player_is_finite() -> None:
+    a, b, s = _games((0, 1, 10, 5, 5), (2, 0, 4, 0, 0), (1, 3, 6, 0, 0))
+    low, high = bootstrap_ci(a, b, s, 4, anchor=0, anchor_rating=0.0, n_boot=60, seed=2)
+    assert np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(low <= high)
+
+
+def test_rank_by_ci_hand_example() -> None:
+    ratings = np.array([1200.0, 1150.0, 1000.0, 990.0])
+    low = np.array([1150.0, 1100.0, 950.0, 800.0])
+    high = np.array([1250.0, 1200.0, 1050.0, 1180.0])
+    # 0: nobody's low > 1250 -> 1; 1: nobody's low > 1200 -> 1;
+    # 2: low_0 = 1150 and low_1 = 1100 exceed 1050 -> 3; 3: no low exceeds 1180 -> 1
+    assert rank_by_ci(ratings, low, high).tolist() == [1, 1, 3, 1]
+
+
+def test_league_ratings_does_not_import_torch() -> None:
+    code = "import sys, selfplay_cli.league.ratings; sys.exit('torch' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
