@@ -54,8 +54,9 @@ FEATURE_NAMES = ("ball_x", "ball_y", "own_y", "opp_y", "ball_vx", "ball_vy")
 
 _MOVE = np.array([0.0, -PADDLE_SPEED, PADDLE_SPEED])
 
-# Raw frame rows kept in the history ring (world coordinates, float32).
-_F_BX, _F_BY, _F_VX, _F_VY, _F_P0, _F_P1 = range(6)
+# The right seat's view of a frame from the left seat's: mirror x and vx, swap own and opponent paddles.
+_MIRROR_PERM = np.array([0, 1, 3, 2, 4, 5])
+_MIRROR_SIGN = np.array([-1, 1, 1, 1, -1, 1], dtype=np.float32)
 
 
 @dataclass(frozen=True)
@@ -173,8 +174,11 @@ class PongCore:
         self.terminated = np.zeros(n, dtype=bool)
         self.truncated = np.zeros(n, dtype=bool)
         k = self.config.frame_stack
-        self._frames = np.zeros((k, 6, n), dtype=np.float32)  # ring of raw frames, oldest at _head + 1
+        # Ring of the last k frames as the left seat observes them, (n, k, 6); the newest at _head.
+        self._frames = np.zeros((n, k, N_FEATURES), dtype=np.float32)
         self._head = 0
+        vs = 1.0 / self.config.velocity_scale
+        self._scale = np.array([2 / WIDTH, 2 / HEIGHT, 2 / PADDLE_Y_MAX, 2 / PADDLE_Y_MAX, vs, vs])
         self.reset(np.arange(n), np.arange(n))
 
     # ----------------------------------------------------------------------------------------------------
@@ -192,8 +196,7 @@ class PongCore:
         self.truncated[g] = False
         self._serve(g)
         # A fresh game's history is its first frame repeated (as the seed's frame stack does).
-        frame = self._frame_of(g)
-        self._frames[:, :, g] = frame[None]
+        self._frames[g] = self._frame_of(g)[:, None, :]
 
     def _serve(self, g: np.ndarray) -> None:
         """Ball to the centre, paddles re-placed at random, serve toward a random point of a random paddle."""
@@ -358,28 +361,40 @@ class PongCore:
 
     # ----------------------------------------------------------------------------------------------------
     def _frame_of(self, g: np.ndarray | slice) -> np.ndarray:
-        return np.stack([self.bx[g], self.by[g], self.vx[g], self.vy[g], self.paddle[0, g], self.paddle[1, g]])
+        """The left seat's normalised view of the current frame of games g, (len(g), 6)."""
+        f = np.stack([self.bx[g], self.by[g], self.paddle[0, g], self.paddle[1, g], self.vx[g], self.vy[g]], axis=-1)
+        f *= self._scale
+        f[:, :4] -= 1.0
+        return f.astype(np.float32)
 
     def _record_frame(self) -> None:
         self._head = (self._head + 1) % self.config.frame_stack
-        f = self._frames[self._head]
-        f[_F_BX] = self.bx
-        f[_F_BY] = self.by
-        f[_F_VX] = self.vx
-        f[_F_VY] = self.vy
-        f[_F_P0] = self.paddle[0]
-        f[_F_P1] = self.paddle[1]
+        f = self._frames[:, self._head]
+        s = self._scale
+        np.multiply(self.bx, s[0], out=f[:, 0], casting="same_kind")
+        np.multiply(self.by, s[1], out=f[:, 1], casting="same_kind")
+        np.multiply(self.paddle[0], s[2], out=f[:, 2], casting="same_kind")
+        np.multiply(self.paddle[1], s[3], out=f[:, 3], casting="same_kind")
+        np.multiply(self.vx, s[4], out=f[:, 4], casting="same_kind")
+        np.multiply(self.vy, s[5], out=f[:, 5], casting="same_kind")
+        f[:, :4] -= 1.0
+
+    def _order(self) -> np.ndarray:
+        k = self.config.frame_stack
+        return (np.arange(1, k + 1) + self._head) % k
 
     def observe(self) -> np.ndarray:
         """Egocentric stacked observations ``(2, n, k, 6)`` float32 in [-1, 1], oldest frame first.
 
-        Per frame: ball x, ball y, own paddle y, opponent paddle y, ball vx, ball vy; the right seat sees x and
-        vx mirrored, so both seats see themselves on the left.
+        Per frame: ball x, ball y, own paddle y, opponent paddle y, ball vx, ball vy, positions scaled from the
+        court to [-1, 1] and velocities divided by the largest possible component. The right seat sees x and vx
+        mirrored and the paddles swapped, so both seats see themselves on the left.
         """
-        k = self.config.frame_stack
-        order = (np.arange(1, k + 1) + self._head) % k
-        frames = self._frames[order]  # (k, 6, n)
-        return frames_to_obs(frames, self.config.velocity_scale)
+        obs = np.empty((2, self.n, self.config.frame_stack, N_FEATURES), dtype=np.float32)
+        np.take(self._frames, self._order(), axis=1, out=obs[0])
+        np.take(obs[0], _MIRROR_PERM, axis=2, out=obs[1])
+        obs[1] *= _MIRROR_SIGN
+        return obs
 
     # ----------------------------------------------------------------------------------------------------
     def outcome(self) -> np.ndarray:
@@ -395,9 +410,7 @@ class PongCore:
         """An exact copy of the state of some games (all by default), history included."""
         g = slice(None) if games is None else np.asarray(games, dtype=np.int64)
         state = {name: getattr(self, name)[..., g].copy() for name in self._STATE_FIELDS}
-        k = self.config.frame_stack
-        order = (np.arange(1, k + 1) + self._head) % k
-        state["frames"] = self._frames[order][..., g].copy()
+        state["frames"] = self._frames[g][:, self._order()]  # the left seat's view, oldest first
         return state
 
     def set_state(self, state: dict[str, Any], games: np.ndarray | list[int] | None = None) -> None:
@@ -405,37 +418,11 @@ class PongCore:
         g = slice(None) if games is None else np.asarray(games, dtype=np.int64)
         for name in self._STATE_FIELDS:
             getattr(self, name)[..., g] = state[name]
-        k = self.config.frame_stack
-        order = (np.arange(1, k + 1) + self._head) % k
         frames = np.asarray(state["frames"], dtype=np.float32)
-        if frames.shape[0] != k:
-            raise ValueError(f"state has {frames.shape[0]} frames, this core stacks {k}")
-        for i, slot in enumerate(order):
-            self._frames[slot][:, g] = frames[i]
-
-
-def frames_to_obs(frames: np.ndarray, vscale: float) -> np.ndarray:
-    """Raw frames ``(k, 6, n)`` in world units to egocentric observations ``(2, n, k, 6)``."""
-    k, _, n = frames.shape
-    obs = np.empty((2, n, k, N_FEATURES), dtype=np.float32)
-    bx = frames[:, _F_BX].T * np.float32(1 / (WIDTH / 2)) - 1  # (n, k)
-    by = frames[:, _F_BY].T * np.float32(1 / (HEIGHT / 2)) - 1
-    vx = frames[:, _F_VX].T * np.float32(1 / vscale)
-    vy = frames[:, _F_VY].T * np.float32(1 / vscale)
-    p0 = frames[:, _F_P0].T * np.float32(2 / PADDLE_Y_MAX) - 1
-    p1 = frames[:, _F_P1].T * np.float32(2 / PADDLE_Y_MAX) - 1
-    obs[0, :, :, 0] = bx
-    obs[1, :, :, 0] = -bx
-    obs[:, :, :, 1] = by
-    obs[0, :, :, 2] = p0
-    obs[0, :, :, 3] = p1
-    obs[1, :, :, 2] = p1
-    obs[1, :, :, 3] = p0
-    obs[0, :, :, 4] = vx
-    obs[1, :, :, 4] = -vx
-    obs[:, :, :, 5] = vy
-    np.clip(obs, -1.0, 1.0, out=obs)
-    return obs
+        if frames.shape[1] != self.config.frame_stack:
+            raise ValueError(f"state has {frames.shape[1]} frames, this core stacks {self.config.frame_stack}")
+        rows = np.arange(self.n)[g]
+        self._frames[rows[:, None], self._order()[None, :]] = frames
 
 
 # --------------------------------------------------------------------------------------------------------------

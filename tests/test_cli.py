@@ -1,0 +1,75 @@
+"""The command line as a user meets it: help, version, envs, errors, and README staying true."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from selfplay_cli import __version__
+from selfplay_cli.cli import app
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def marl(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "selfplay_cli", *args], capture_output=True, text=True,
+                          timeout=120, env={"COLUMNS": "160", "PATH": "/usr/bin:/bin", "TERM": "dumb"})
+
+
+def registered_commands() -> set[str]:
+    names = {c.name for c in app.registered_commands}
+    names |= {g.name for g in app.registered_groups}
+    return names
+
+
+def test_version_and_help_list_every_command_with_a_description():
+    out = marl("--version")
+    assert out.returncode == 0 and out.stdout.strip() == f"marl {__version__}"
+    out = marl("--help")
+    assert out.returncode == 0
+    for name in registered_commands():
+        line = next(ln for ln in out.stdout.splitlines() if re.search(rf"\b{name}\b", ln))
+        assert len(line.split(name, 1)[1].strip(" │")) > 10, f"{name} has no description"
+
+
+def test_envs_json_is_json_alone_on_stdout():
+    out = marl("envs", "--json")
+    assert out.returncode == 0, out.stderr
+    rows = json.loads(out.stdout)
+    pong = next(r for r in rows if r["name"] == "pong")
+    assert pong["agents"] == ["left", "right"]
+    assert pong["observation_space"] == "Box(-1, 1, (8, 6), float32)"
+    assert pong["action_space"] == "Discrete(3)"
+    assert set(pong["bots"]) == {"cpu", "random"}
+    assert out.stderr == ""
+
+
+def test_envs_table_is_plain_when_not_a_tty():
+    out = marl("envs")
+    assert out.returncode == 0
+    assert "pong" in out.stdout and "cpu" in out.stdout
+    assert "\x1b[" not in out.stdout, "no colour codes in piped output"
+
+
+def test_unknown_command_and_bad_flag_fail_without_traceback():
+    for args in (["frobnicate"], ["envs", "--no-such-flag"]):
+        out = marl(*args)
+        assert out.returncode != 0
+        assert "Traceback" not in out.stderr + out.stdout
+
+
+def test_readme_documents_exactly_the_registered_commands():
+    readme = (ROOT / "README.md").read_text()
+    documented = set(re.findall(r"^### `marl (\w+)", readme, flags=re.M))
+    assert documented == registered_commands()
+
+
+def test_ci_runs_the_readme_install_and_test_commands():
+    ci = (ROOT / ".ci" / "run").read_text()
+    assert "ci:install" in ci and "ci:test" in ci and "rm -rf .venv" in ci
+    readme = (ROOT / "README.md").read_text()
+    assert re.search(r"<!-- ci:install -->\n```sh\npython3 -m venv \.venv && .*pip install", readme)
+    assert re.search(r"<!-- ci:test -->\n```sh\n\.venv/bin/pytest", readme)
