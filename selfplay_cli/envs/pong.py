@@ -118,11 +118,14 @@ _DRAWS_PER_SERVE = 4  # left paddle y, right paddle y, side, target point on the
 
 
 def _splitmix(x: np.ndarray) -> np.ndarray:
-    with np.errstate(over="ignore"):
-        z = x + _GOLDEN
-        z = (z ^ (z >> np.uint64(30))) * _M1
-        z = (z ^ (z >> np.uint64(27))) * _M2
-        return z ^ (z >> np.uint64(31))
+    """SplitMix64's finaliser (uint64 array arithmetic wraps silently, which is what the hash wants)."""
+    z = np.asarray(x, dtype=np.uint64) + _GOLDEN
+    z ^= z >> np.uint64(30)
+    z *= _M1
+    z ^= z >> np.uint64(27)
+    z *= _M2
+    z ^= z >> np.uint64(31)
+    return z
 
 
 def game_key(seed: int | np.ndarray) -> np.ndarray:
@@ -131,11 +134,11 @@ def game_key(seed: int | np.ndarray) -> np.ndarray:
     return _splitmix(s)
 
 
-def _uniform(keys: np.ndarray, serves: np.ndarray, draw: int) -> np.ndarray:
-    """Uniform [0, 1) draw number ``draw`` of serve number ``serves`` of the games with ``keys``."""
-    with np.errstate(over="ignore"):
-        counter = serves.astype(np.uint64) * np.uint64(_DRAWS_PER_SERVE) + np.uint64(draw)
-        bits = _splitmix(keys ^ _splitmix(counter))
+def _serve_draws(keys: np.ndarray, serves: np.ndarray) -> np.ndarray:
+    """The uniform [0, 1) draws of serve number ``serves`` of the games with ``keys``: ``(4, len(keys))``."""
+    draw = np.arange(_DRAWS_PER_SERVE, dtype=np.uint64)[:, None]
+    counter = serves.astype(np.uint64) * np.uint64(_DRAWS_PER_SERVE) + draw
+    bits = _splitmix(keys ^ _splitmix(counter))
     return (bits >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
 
 
@@ -159,11 +162,11 @@ class PongCore:
         self._max_angle = float(np.radians(self.config.max_bounce_deg))
         self._max_deflect = float(np.radians(self.config.max_deflect_deg))
         n = n_games
-        self.bx = np.zeros(n)
-        self.by = np.zeros(n)
-        self.vx = np.zeros(n)
-        self.vy = np.zeros(n)
-        self.paddle = np.zeros((2, n))  # top edge y of each seat's paddle
+        # Ball and paddles in one array, rows in observation order, so a frame is recorded in two operations.
+        self._s = np.zeros((6, n))
+        self.bx, self.by = self._s[0], self._s[1]
+        self.paddle = self._s[2:4]  # top edge y of each seat's paddle
+        self.vx, self.vy = self._s[4], self._s[5]
         self.score = np.zeros((2, n), dtype=np.int64)
         self.touched = np.zeros((2, n), dtype=bool)
         self.rally_steps = np.zeros(n, dtype=np.int64)
@@ -179,6 +182,9 @@ class PongCore:
         self._head = 0
         vs = 1.0 / self.config.velocity_scale
         self._scale = np.array([2 / WIDTH, 2 / HEIGHT, 2 / PADDLE_Y_MAX, 2 / PADDLE_Y_MAX, vs, vs])
+        self._offset = np.array([1.0, 1.0, 1.0, 1.0, 0.0, 0.0], dtype=np.float32)
+        self._frame_buf = np.empty((6, n), dtype=np.float32)
+        self._orders = [(np.arange(1, k + 1) + h) % k for h in range(k)]
         self.reset(np.arange(n), np.arange(n))
 
     # ----------------------------------------------------------------------------------------------------
@@ -201,11 +207,11 @@ class PongCore:
     def _serve(self, g: np.ndarray) -> None:
         """Ball to the centre, paddles re-placed at random, serve toward a random point of a random paddle."""
         serves = self.serves[g]
-        key = self.key[g]
-        p0 = np.floor(_uniform(key, serves, 0) * (PADDLE_Y_MAX + 1))
-        p1 = np.floor(_uniform(key, serves, 1) * (PADDLE_Y_MAX + 1))
-        to_left = _uniform(key, serves, 2) < 0.5
-        target_y = np.where(to_left, p0, p1) + _uniform(key, serves, 3) * PADDLE_H
+        u = _serve_draws(self.key[g], serves)
+        p0 = np.floor(u[0] * (PADDLE_Y_MAX + 1))
+        p1 = np.floor(u[1] * (PADDLE_Y_MAX + 1))
+        to_left = u[2] < 0.5
+        target_y = np.where(to_left, p0, p1) + u[3] * PADDLE_H
         target_x = np.where(to_left, PADDLE_X + PADDLE_W // 2, WIDTH - PADDLE_X - PADDLE_W // 2)
         dx = target_x - WIDTH // 2
         dy = target_y - HEIGHT // 2
@@ -239,34 +245,32 @@ class PongCore:
         else:
             paddle += move
             np.clip(paddle, 0.0, PADDLE_Y_MAX, out=paddle)
+        self.bx += self.vx
+        self.by += self.vy
 
-        bx, by, vx, vy = self.bx, self.by, self.vx, self.vy
-        bx += vx
-        by += vy
         rewards = np.zeros((2, self.n), dtype=np.float32)
+        self.terminated.fill(False)
         if self._seed_rules:
-            self._seed_collisions(rewards)
+            self._seed_events(rewards)
         else:
-            self._classic_collisions(rewards)
-
-        self.terminated[:] = False
-        self.truncated[:] = False
-        out_left = bx < 0
-        out_right = bx > WIDTH
-        if out_left.any() or out_right.any():
-            self._points(out_left, out_right, rewards)
+            # Walls, paddles and points happen only near the court's edges: handle just those games.
+            bx, by = self.bx, self.by
+            rare = (bx < LEFT_FACE + BALL_R) | (bx > RIGHT_FACE - BALL_R) | (by < BALL_R) | (by > HEIGHT - BALL_R)
+            if rare.any():
+                self._classic_events(np.flatnonzero(rare), rewards)
 
         self.rally_steps += 1
         self.steps += 1
         if cfg.max_rally_steps:
-            self.truncated |= self.rally_steps >= cfg.max_rally_steps
+            np.greater_equal(self.rally_steps, cfg.max_rally_steps, out=self.truncated)
+        else:
+            self.truncated.fill(False)
         if cfg.max_steps:
             self.truncated |= self.steps >= cfg.max_steps
-        self.truncated &= ~self.terminated
         self._record_frame()
         return rewards
 
-    def _seed_collisions(self, rewards: np.ndarray) -> None:
+    def _seed_events(self, rewards: np.ndarray) -> None:
         bx, by, vx, vy = self.bx, self.by, self.vx, self.vy
         wall = (by - BALL_R <= 0) | (by + BALL_R >= HEIGHT)
         np.negative(vy, out=vy, where=wall)
@@ -280,41 +284,42 @@ class PongCore:
         hit1 = (right_edge > RIGHT_FACE) & (right_edge < WIDTH - PADDLE_X)
         hit1 &= (by > self.paddle[1]) & (by < self.paddle[1] + PADDLE_H)
         np.negative(vx, out=vx, where=hit1)
-        self._touch(hit0, hit1, rewards)
+        self._touch(np.flatnonzero(hit0), 0, rewards)
+        self._touch(np.flatnonzero(hit1), 1, rewards)
+        out = (bx < 0) | (bx > WIDTH)
+        if out.any():
+            self._points(np.flatnonzero(out), rewards)
 
-    def _classic_collisions(self, rewards: np.ndarray) -> None:
+    def _classic_events(self, g: np.ndarray, rewards: np.ndarray) -> None:
+        """Walls, swept paddle hits and points for the games ``g`` whose ball is near an edge."""
         bx, by, vx, vy = self.bx, self.by, self.vx, self.vy
-        top = by < BALL_R
-        if top.any():
+        y = by[g]
+        top = g[y < BALL_R]
+        if top.size:
             by[top] = 2 * BALL_R - by[top]
             vy[top] = np.abs(vy[top])
-        bottom = by > HEIGHT - BALL_R
-        if bottom.any():
+        bottom = g[y > HEIGHT - BALL_R]
+        if bottom.size:
             by[bottom] = 2 * (HEIGHT - BALL_R) - by[bottom]
             vy[bottom] = -np.abs(vy[bottom])
         # Swept test: the ball's leading edge crossed a paddle face on this step, moving toward it.
-        near_left = bx < LEFT_FACE + BALL_R
-        near_right = bx > RIGHT_FACE - BALL_R
-        hit0 = hit1 = None
-        if near_left.any():
-            g = np.flatnonzero(near_left & (vx < 0) & (bx - vx >= LEFT_FACE + BALL_R))
-            g = g[self._overlaps(g, 0)]
-            if g.size:
-                bx[g] = 2 * (LEFT_FACE + BALL_R) - bx[g]
-                self._deflect(g, 0)
-                hit0 = np.zeros(self.n, dtype=bool)
-                hit0[g] = True
-        if near_right.any():
-            g = np.flatnonzero(near_right & (vx > 0) & (bx - vx <= RIGHT_FACE - BALL_R))
-            g = g[self._overlaps(g, 1)]
-            if g.size:
-                bx[g] = 2 * (RIGHT_FACE - BALL_R) - bx[g]
-                self._deflect(g, 1)
-                hit1 = np.zeros(self.n, dtype=bool)
-                hit1[g] = True
-        if hit0 is not None or hit1 is not None:
-            none = np.zeros(self.n, dtype=bool)
-            self._touch(none if hit0 is None else hit0, none if hit1 is None else hit1, rewards)
+        x, v = bx[g], vx[g]
+        left = g[(x < LEFT_FACE + BALL_R) & (v < 0) & (x - v >= LEFT_FACE + BALL_R)]
+        left = left[self._overlaps(left, 0)]
+        if left.size:
+            bx[left] = 2 * (LEFT_FACE + BALL_R) - bx[left]
+            self._deflect(left, 0)
+            self._touch(left, 0, rewards)
+        right = g[(x > RIGHT_FACE - BALL_R) & (v > 0) & (x - v <= RIGHT_FACE - BALL_R)]
+        right = right[self._overlaps(right, 1)]
+        if right.size:
+            bx[right] = 2 * (RIGHT_FACE - BALL_R) - bx[right]
+            self._deflect(right, 1)
+            self._touch(right, 1, rewards)
+        x = bx[g]
+        out = g[(x < 0) | (x > WIDTH)]
+        if out.size:
+            self._points(out, rewards)
 
     def _overlaps(self, g: np.ndarray, seat: int) -> np.ndarray:
         """Whether the ball (centre within a radius of the paddle's span) meets seat's paddle in games g."""
@@ -336,52 +341,42 @@ class PongCore:
         self.vx[g] = speed * np.cos(angle) * (1.0 if seat == 0 else -1.0)
         self.vy[g] = speed * np.sin(angle)
 
-    def _touch(self, hit0: np.ndarray, hit1: np.ndarray, rewards: np.ndarray) -> None:
-        self.touched[0] |= hit0
-        self.touched[1] |= hit1
-        self.hits[0] += hit0
-        self.hits[1] += hit1
-        if self.config.r_for_hit:
-            rewards[0] += hit0 * np.float32(self.config.r_for_hit)
-            rewards[1] += hit1 * np.float32(self.config.r_for_hit)
+    def _touch(self, g: np.ndarray, seat: int, rewards: np.ndarray) -> None:
+        if g.size:
+            self.touched[seat, g] = True
+            self.hits[seat, g] += 1
+            if self.config.r_for_hit:
+                rewards[seat, g] += np.float32(self.config.r_for_hit)
 
-    def _points(self, out_left: np.ndarray, out_right: np.ndarray, rewards: np.ndarray) -> None:
-        """Ball left the court: the side that touched it in this rally scores; then a new serve."""
-        right_scores = out_left & self.touched[1]
-        left_scores = out_right & self.touched[0]
-        self.score[1] += right_scores
-        self.score[0] += left_scores
-        scorer = right_scores | left_scores
-        # Sign of the point from the left seat's view; the seed overwrites any hit reward on a point.
-        sign = left_scores.astype(np.float32) - right_scores.astype(np.float32)
-        rewards[0] = np.where(scorer, sign, rewards[0])
-        rewards[1] = np.where(scorer, -sign, rewards[1])
-        self.terminated |= (self.score >= self.config.points_to_win).any(axis=0)
-        self._serve(np.flatnonzero(out_left | out_right))
+    def _points(self, g: np.ndarray, rewards: np.ndarray) -> None:
+        """The ball left the court in games g: the side that touched it in this rally scores; then a new serve.
+
+        On a point the seed overwrites any hit reward of the step with +1/-1; without one, rewards stay.
+        """
+        out_left = self.bx[g] < 0
+        right_scores = g[out_left & self.touched[1, g]]
+        left_scores = g[~out_left & self.touched[0, g]]
+        self.score[1, right_scores] += 1
+        self.score[0, left_scores] += 1
+        rewards[:, right_scores] = ((-1.0,), (1.0,))
+        rewards[:, left_scores] = ((1.0,), (-1.0,))
+        self.terminated[g] = (self.score[:, g] >= self.config.points_to_win).any(axis=0)
+        self._serve(g)
 
     # ----------------------------------------------------------------------------------------------------
     def _frame_of(self, g: np.ndarray | slice) -> np.ndarray:
         """The left seat's normalised view of the current frame of games g, (len(g), 6)."""
-        f = np.stack([self.bx[g], self.by[g], self.paddle[0, g], self.paddle[1, g], self.vx[g], self.vy[g]], axis=-1)
-        f *= self._scale
-        f[:, :4] -= 1.0
-        return f.astype(np.float32)
+        return (self._s[:, g].T * self._scale).astype(np.float32) - self._offset
 
     def _record_frame(self) -> None:
         self._head = (self._head + 1) % self.config.frame_stack
-        f = self._frames[:, self._head]
-        s = self._scale
-        np.multiply(self.bx, s[0], out=f[:, 0], casting="same_kind")
-        np.multiply(self.by, s[1], out=f[:, 1], casting="same_kind")
-        np.multiply(self.paddle[0], s[2], out=f[:, 2], casting="same_kind")
-        np.multiply(self.paddle[1], s[3], out=f[:, 3], casting="same_kind")
-        np.multiply(self.vx, s[4], out=f[:, 4], casting="same_kind")
-        np.multiply(self.vy, s[5], out=f[:, 5], casting="same_kind")
-        f[:, :4] -= 1.0
+        buf = self._frame_buf  # computed contiguously, then one transposed copy into the ring
+        np.multiply(self._s, self._scale[:, None], out=buf, casting="same_kind")
+        buf -= self._offset[:, None]
+        self._frames[:, self._head] = buf.T
 
     def _order(self) -> np.ndarray:
-        k = self.config.frame_stack
-        return (np.arange(1, k + 1) + self._head) % k
+        return self._orders[self._head]
 
     def observe(self) -> np.ndarray:
         """Egocentric stacked observations ``(2, n, k, 6)`` float32 in [-1, 1], oldest frame first.
