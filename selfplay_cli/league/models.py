@@ -1,0 +1,208 @@
+"""ORM schema of the league ledger (SQLAlchemy 2.0 typed declarative mappings).
+
+Tables
+------
+* ``meta(key, value)``: ``schema_version`` and other bookkeeping strings.
+* ``runs``: one row per training run (globally unique name).
+* ``players``: scripted bots (``kind = "bot"``, no run) and policy snapshots (``kind = "snapshot"``).
+  ``(env, run_id, name)`` is unique; because SQL treats NULLs as distinct, a second, partial unique
+  index ``(env, name) WHERE run_id IS NULL`` makes bot names (and run-less snapshot names) unique per
+  env. The player row also carries the *online* Elo (``elo``, ``games``), a cache that
+  :meth:`selfplay_cli.league.store.League.recompute_online_elo` can always rebuild from the ledger.
+  Snapshots are never deleted, only marked ``removed`` (the ledger keeps referencing them).
+* ``tags(env, tag) -> player_id``: human names for players, unique per env.
+* ``matches``: one row per match / tournament / gate / training / eval session that produced games.
+* ``games`` + ``game_seats``: the append-only ledger. A game has ``n_seats`` seat rows holding the
+  player, its raw score and its points (1 win, 0.5 draw, 0 loss).
+
+All timestamps are stored as naive UTC and returned as timezone-aware UTC datetimes.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime, timezone
+from typing import Any
+
+from sqlalchemy import (
+    JSON,
+    BigInteger,
+    Boolean,
+    DateTime,
+    Dialect,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    LargeBinary,
+    String,
+    Text,
+    UniqueConstraint,
+    text,
+)
+from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
+from sqlalchemy.types import TypeDecorator
+
+__all__ = ["Base", "Game", "GameSeat", "Match", "Meta", "Player", "Run", "Tag", "UTCDateTime", "utcnow"]
+
+
+def utcnow() -> datetime:
+    """The current time as a timezone-aware UTC datetime."""
+    return datetime.now(timezone.utc)
+
+
+class UTCDateTime(TypeDecorator[datetime]):
+    """A DateTime stored as naive UTC and always read back as an aware UTC datetime.
+
+    SQLite has no time zones; storing naive UTC everywhere keeps every backend consistent.
+    Naive datetimes given to the database are taken to be UTC already.
+    """
+
+    impl = DateTime
+    cache_ok = True
+
+    def process_bind_param(self, value: datetime | None, dialect: Dialect) -> datetime | None:
+        """Convert an aware datetime to naive UTC before it is stored."""
+        if value is None or value.tzinfo is None:
+            return value
+        return value.astimezone(timezone.utc).replace(tzinfo=None)
+
+    def process_result_value(self, value: datetime | None, dialect: Dialect) -> datetime | None:
+        """Attach the UTC time zone to a stored (naive UTC) datetime."""
+        if value is None:
+            return None
+        if value.tzinfo is None:
+            return value.replace(tzinfo=timezone.utc)
+        return value.astimezone(timezone.utc)
+
+
+class Base(DeclarativeBase):
+    """Declarative base of the league schema."""
+
+    type_annotation_map = {dict[str, Any]: JSON, datetime: UTCDateTime}
+
+
+class Meta(Base):
+    """Key/value bookkeeping (``schema_version``)."""
+
+    __tablename__ = "meta"
+
+    key: Mapped[str] = mapped_column(String(64), primary_key=True)
+    value: Mapped[str] = mapped_column(Text)
+
+
+class Run(Base):
+    """A training run."""
+
+    __tablename__ = "runs"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200), unique=True)
+    env: Mapped[str] = mapped_column(String(100), index=True)
+    algo: Mapped[str | None] = mapped_column(String(100))
+    config: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    status: Mapped[str] = mapped_column(String(32))
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
+
+
+class Player(Base):
+    """A scripted bot or a policy snapshot, with its online Elo."""
+
+    __tablename__ = "players"
+    __table_args__ = (
+        UniqueConstraint("env", "run_id", "name", name="uq_players_env_run_name"),
+        Index("ix_players_env_kind", "env", "kind"),
+        Index("ix_players_env_name", "env", "name"),
+    )
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    env: Mapped[str] = mapped_column(String(100))
+    kind: Mapped[str] = mapped_column(String(16))
+    name: Mapped[str] = mapped_column(String(200))
+    run_id: Mapped[int | None] = mapped_column(ForeignKey("runs.id"), index=True)
+    step: Mapped[int] = mapped_column(BigInteger, default=0)
+    episode: Mapped[int] = mapped_column(BigInteger, default=0)
+    algo: Mapped[str | None] = mapped_column(String(100))
+    path: Mapped[str | None] = mapped_column(Text)
+    sha256: Mapped[str | None] = mapped_column(String(64))
+    parent_id: Mapped[int | None] = mapped_column(ForeignKey("players.id"))
+    elo: Mapped[float] = mapped_column(Float, default=1000.0)
+    games: Mapped[int] = mapped_column(Integer, default=0)
+    removed: Mapped[bool] = mapped_column(Boolean, default=False)
+    removed_at: Mapped[datetime | None] = mapped_column()
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    meta: Mapped[dict[str, Any]] = mapped_column(default=dict)
+
+    run: Mapped[Run | None] = relationship(lazy="joined")
+    tags: Mapped[list[Tag]] = relationship(back_populates="player", lazy="selectin", order_by="Tag.tag")
+
+
+# Bots (and run-less snapshots) have run_id NULL, which the unique constraint above does not cover:
+# a partial unique index makes their names unique per env. Only emitted where partial indexes exist
+# (elsewhere it would become a plain unique (env, name) index and forbid ep90 in two runs); the
+# store checks the rule itself before every insert in any case.
+Index(
+    "uq_players_env_name_no_run",
+    Player.env,
+    Player.name,
+    unique=True,
+    sqlite_where=text("run_id IS NULL"),
+    postgresql_where=text("run_id IS NULL"),
+).ddl_if(dialect=("sqlite", "postgresql"))
+
+
+class Tag(Base):
+    """A tag naming a player, unique per env."""
+
+    __tablename__ = "tags"
+    __table_args__ = (UniqueConstraint("env", "tag", name="uq_tags_env_tag"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    env: Mapped[str] = mapped_column(String(100))
+    tag: Mapped[str] = mapped_column(String(200))
+    player_id: Mapped[int] = mapped_column(ForeignKey("players.id", ondelete="CASCADE"), index=True)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+    player: Mapped[Player] = relationship(back_populates="tags")
+
+
+class Match(Base):
+    """A session that produced games (a match, tournament, gate, training run or evaluation)."""
+
+    __tablename__ = "matches"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    env: Mapped[str] = mapped_column(String(100), index=True)
+    kind: Mapped[str] = mapped_column(String(32))
+    params: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Game(Base):
+    """One game of the ledger; its players and results are in :class:`GameSeat`."""
+
+    __tablename__ = "games"
+    __table_args__ = (Index("ix_games_env_id", "env", "id"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    match_id: Mapped[int] = mapped_column(ForeignKey("matches.id"), index=True)
+    env: Mapped[str] = mapped_column(String(100))
+    n_seats: Mapped[int] = mapped_column(Integer)
+    seed: Mapped[int] = mapped_column(BigInteger)
+    length: Mapped[int] = mapped_column(Integer)
+    truncated: Mapped[bool] = mapped_column(Boolean, default=False)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    actions: Mapped[bytes | None] = mapped_column(LargeBinary)
+
+
+class GameSeat(Base):
+    """The player in one seat of a game, with its raw score and points (1 / 0.5 / 0)."""
+
+    __tablename__ = "game_seats"
+    __table_args__ = (Index("ix_game_seats_player_game", "player_id", "game_id"),)
+
+    game_id: Mapped[int] = mapped_column(ForeignKey("games.id", ondelete="CASCADE"), primary_key=True)
+    seat: Mapped[int] = mapped_column(Integer, primary_key=True)
+    player_id: Mapped[int] = mapped_column(ForeignKey("players.id"))
+    score: Mapped[float] = mapped_column(Float)
+    points: Mapped[float] = mapped_column(Float)
