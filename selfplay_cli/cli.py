@@ -8,7 +8,12 @@ from typing import Annotated
 import typer
 
 from . import __version__
+from .commands import checkpoint as checkpoint_cmd
+from .commands import elo as elo_cmd
 from .commands import envs as envs_cmd
+from .commands import league as league_cmd
+from .commands import match as match_cmd
+from .envs import UnknownEnvError
 from .errors import MarlError
 
 app = typer.Typer(
@@ -36,6 +41,10 @@ def _root(
 
 
 app.command("envs", help="List the registered games: agents, spaces, scripted players.")(envs_cmd.envs)
+app.add_typer(checkpoint_cmd.app, name="checkpoint", help="List, inspect, tag, remove, export and import snapshots.")
+app.command("match", help="Play rated games between two policies (Elo difference, CI, LOS, SPRT).")(match_cmd.match)
+app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence intervals; gate a model on its strength.")
+app.add_typer(league_cmd.app, name="league", help="The league ladder and tournaments.")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -45,6 +54,9 @@ def main(argv: list[str] | None = None) -> int:
     except MarlError as e:
         sys.stderr.write(f"marl: error: {e}\n")
         return e.exit_code
+    except UnknownEnvError as e:  # the envs room raises its own error (it imports nothing from the project)
+        sys.stderr.write(f"marl: error: {e}\n")
+        return MarlError.exit_code
     except SystemExit as e:
         return int(e.code or 0) if not isinstance(e.code, str) else 1
     return 0

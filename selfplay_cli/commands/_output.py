@@ -9,6 +9,8 @@ from typing import Any
 from rich.console import Console
 
 console = Console(highlight=False, soft_wrap=True)
+if not console.is_terminal:  # piped output: plain, and wide enough that tables are never cut to "…"
+    console = Console(highlight=False, soft_wrap=True, width=max(console.width, 200))
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
 
 

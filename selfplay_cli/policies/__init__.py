@@ -4,3 +4,35 @@ from .base import Policy
 from .bots import ScriptedPolicy, bot_names
 
 __all__ = ["Policy", "ScriptedPolicy", "bot_names"]
+
+# Network policies and snapshot files need torch, which is slow to import: load them on first use.
+_LAZY = {
+    "Arch": "network",
+    "MLPNet": "network",
+    "NetworkPolicy": "network",
+    "build_network": "network",
+    "resolve_device": "network",
+    "FORMAT": "snapshot",
+    "FORMAT_VERSION": "snapshot",
+    "SnapshotError": "snapshot",
+    "SnapshotMeta": "snapshot",
+    "export_snapshot": "snapshot",
+    "file_sha256": "snapshot",
+    "import_check": "snapshot",
+    "load_policy": "snapshot",
+    "load_snapshot": "snapshot",
+    "read_meta": "snapshot",
+    "save_snapshot": "snapshot",
+    "weights_sha256": "snapshot",
+}
+__all__ += list(_LAZY)
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,10 +1,13 @@
-"""Benchmark of the Bradley-Terry rating fit and its bootstrap (selfplay_cli.league.ratings).
+"""Benchmarks of the league: the Bradley-Terry rating fit, its bootstrap, and `marl match` throughput.
 
 Generates 200 players with known ratings and 100,000 random games between them (logistic Elo model
 with draws), then times ``fit_bradley_terry`` (best of 3) and ``bootstrap_ci`` with 200 resamples,
 and reports the error against the true ratings. Targets: fit < 0.3 s, bootstrap(200) < 30 s.
+Then runs the real ``marl match`` (a subprocess, wall clock including start-up) between two network snapshots
+(64x64 MLPs) in pong over ``--match-games`` games in a scratch league. Target: 1,000 games in under 60 s.
 
-Run with ``python benchmarks/ratings_fit.py`` (optional: ``--players``, ``--games``, ``--boot``, ``--seed``).
+Run with ``python benchmarks/ratings.py`` (optional: ``--players``, ``--games``, ``--boot``, ``--seed``,
+``--match-games``).
 If scipy happens to be installed, the ML solution is also cross-checked against a generic
 optimiser (scipy is not a dependency of the project; the check is skipped without it).
 """
@@ -12,7 +15,13 @@ optimiser (scipy is not a dependency of the project; the check is skipped withou
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -20,6 +29,7 @@ from selfplay_cli.league.ratings import NAT_TO_ELO, bootstrap_ci, fit_bradley_te
 
 FIT_TARGET_S = 0.3
 BOOT_TARGET_S = 30.0
+MATCH_TARGET_S = 60.0  # for 1,000 games
 
 
 def simulate(
@@ -69,12 +79,32 @@ def scipy_check(a: np.ndarray, b: np.ndarray, s: np.ndarray, n: int, ratings: np
     return float(np.max(np.abs(theirs - ratings)))
 
 
+def match_throughput(n_games: int) -> tuple[float, dict]:
+    """Wall time of `marl match A B --games n` between two untrained 64x64 network snapshots in pong."""
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+
+    with tempfile.TemporaryDirectory() as tmp:
+        env = dict(os.environ, MARL_HOME=str(Path(tmp) / "league"))
+        marl = [sys.executable, "-m", "selfplay_cli"]
+        for i in (1, 2):
+            f = Path(tmp) / f"net{i}.safetensors"
+            save_snapshot(f, build_network((8, 6), 3, Arch(), seed=i),
+                          SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, run="bench", name=f"net{i}"))
+            subprocess.run([*marl, "checkpoint", "import", str(f)], env=env, check=True, capture_output=True)
+        t0 = time.perf_counter()
+        out = subprocess.run([*marl, "match", "bench/net1", "bench/net2", "--games", str(n_games), "--json"],
+                             env=env, check=True, capture_output=True, text=True)
+        return time.perf_counter() - t0, json.loads(out.stdout)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--players", type=int, default=200)
     parser.add_argument("--games", type=int, default=100_000)
     parser.add_argument("--boot", type=int, default=200)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--match-games", type=int, default=1000)
     args = parser.parse_args()
 
     a, b, s, true = simulate(args.players, args.games, args.seed)
@@ -105,7 +135,13 @@ def main() -> None:
     else:
         print(f"scipy L-BFGS cross-check: max |difference| {diff:.2e} Elo")
 
-    ok = fit_s < FIT_TARGET_S and boot_s < BOOT_TARGET_S
+    wall, rep = match_throughput(args.match_games)
+    points = rep["points_for"] + rep["points_against"]
+    print(f"marl match (two 64x64 network snapshots, pong): {rep['games']} games in {wall:.1f} s wall "
+          f"({rep['games_per_second']:.1f} games/s while playing, {points} points) "
+          f"(target: 1,000 games < {MATCH_TARGET_S:.0f} s)")
+    match_ok = wall * 1000 / max(rep["games"], 1) < MATCH_TARGET_S
+    ok = fit_s < FIT_TARGET_S and boot_s < BOOT_TARGET_S and match_ok
     print("targets met" if ok else "TARGETS MISSED")
 
 

@@ -1,0 +1,169 @@
+"""`marl checkpoint list|show|tag|rm|export|import`: the snapshots of the league."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from ..errors import MarlError
+from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league
+from ._output import console, print_json
+
+app = typer.Typer(help="List, inspect, tag, remove, export and import snapshots.", no_args_is_help=True)
+NameArg = Annotated[str, typer.Argument(help="ep90, run/ep90, a tag, latest, best or an id.")]
+
+
+def _row_json(p) -> dict:
+    return {"id": p.id, "policy": p.full_name, "kind": p.kind, "env": p.env, "run": p.run, "name": p.name,
+            "step": p.step, "episode": p.episode, "algo": p.algo, "tags": list(p.tags), "elo_online": round(p.elo, 1),
+            "games": p.games, "path": p.path, "sha256": p.sha256, "parent_id": p.parent_id, "removed": p.removed,
+            "created": p.created_at.isoformat()}
+
+
+def _snapshot_path(league, p) -> Path:
+    path = Path(p.path)
+    return path if path.is_absolute() or league.home is None else league.home / path
+
+
+@app.command("list")
+def list_cmd(
+    env: EnvOpt = None,
+    run: Annotated[str | None, typer.Option("--run", help="Only this run's snapshots.")] = None,
+    bots: Annotated[bool, typer.Option("--bots", help="Also list the scripted players.")] = False,
+    include_removed: Annotated[bool, typer.Option("--all", help="Also list removed snapshots.")] = False,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """The snapshots in the league, oldest first."""
+    league = open_league(home, db)
+    try:
+        rows = league.players(env=check_env(env), kind=None if bots else "snapshot", include_removed=include_removed)
+    finally:
+        league.close()
+    if run is not None:
+        rows = [p for p in rows if p.run == run]
+    if json_out:
+        print_json([_row_json(p) for p in rows])
+        return
+    table = Table(title="snapshots" if not bots else "players")
+    for col in ("id", "policy", "env", "kind", "step", "episode", "algo", "tags", "online Elo", "games", "created"):
+        table.add_column(col)
+    for p in rows:
+        table.add_row(str(p.id), p.full_name + (" (removed)" if p.removed else ""), p.env, p.kind, f"{p.step:,}",
+                      str(p.episode), p.algo or "", ", ".join(p.tags), f"{p.elo:.0f}", str(p.games),
+                      p.created_at.strftime("%Y-%m-%d %H:%M"))
+    console.print(table)
+
+
+@app.command("show")
+def show(name: NameArg, env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None, json_out: JsonOpt = False) -> None:
+    """Everything about one snapshot: league record, lineage and the file's metadata."""
+    from ..league.names import resolve
+    from ..policies.snapshot import read_meta
+
+    league = open_league(home, db)
+    try:
+        p = resolve(league, name, check_env(env), include_removed=True)
+        data = _row_json(p)
+        lineage, parent = [], p.parent_id
+        while parent is not None and len(lineage) < 50:
+            q = league.get_player(parent)
+            lineage.append(q.full_name)
+            parent = q.parent_id
+        data["lineage"] = lineage
+        if not p.is_bot and not p.removed:
+            data["file"] = read_meta(_snapshot_path(league, p)).to_dict()
+    finally:
+        league.close()
+    if json_out:
+        print_json(data)
+        return
+    for key, value in data.items():
+        if key == "file":
+            for k, v in value.items():
+                console.print(f"  file.{k}: {v}")
+        else:
+            console.print(f"{key}: {value}")
+
+
+@app.command("tag")
+def tag(name: NameArg, tag_name: Annotated[str, typer.Argument(metavar="TAG", help="The tag to give it.")],
+        env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
+    """Give a snapshot a name of your own (moves the tag if another snapshot had it)."""
+    from ..league.names import resolve
+
+    league = open_league(home, db)
+    try:
+        p = resolve(league, name, check_env(env))
+        league.tag(p.id, tag_name)
+    finally:
+        league.close()
+    console.print(f"tagged {p.full_name} as {tag_name}")
+
+
+@app.command("rm")
+def rm(name: NameArg, env: EnvOpt = None,
+       keep_file: Annotated[bool, typer.Option("--keep-file", help="Keep the snapshot file on disk.")] = False,
+       home: HomeOpt = None, db: DbOpt = None) -> None:
+    """Remove a snapshot from the pool; its games stay in the ledger and keep counting in the ratings."""
+    from ..league.names import resolve
+
+    league = open_league(home, db)
+    try:
+        p = resolve(league, name, check_env(env))
+        if p.is_bot:
+            raise MarlError(f"{p.full_name} is a scripted player; only snapshots can be removed")
+        removed = league.remove_snapshot(p.id)
+        path = _snapshot_path(league, removed)
+    finally:
+        league.close()
+    if not keep_file and path.exists():
+        path.unlink()
+    console.print(f"removed {p.full_name} ({p.games} games stay in the ledger)")
+
+
+@app.command("export")
+def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination file (.safetensors).")],
+           env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
+    """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
+    from ..league.names import resolve
+    from ..policies.snapshot import export_snapshot
+
+    league = open_league(home, db)
+    try:
+        p = resolve(league, name, check_env(env))
+        if p.is_bot:
+            raise MarlError(f"{p.full_name} is a scripted player: there is no file to export")
+        export_snapshot(_snapshot_path(league, p), out)
+    finally:
+        league.close()
+    console.print(f"exported {p.full_name} to {out}")
+
+
+@app.command("import")
+def import_cmd(
+    file: Annotated[Path, typer.Argument(help="A snapshot file written by `marl train` or `marl checkpoint export`.")],
+    run: Annotated[str | None, typer.Option("--run", help="Run to file it under (default: its own run, or "
+                                            "'imported').")] = None,
+    name: Annotated[str | None, typer.Option("--name", help="Name in the run (default: its own name).")] = None,
+    env: EnvOpt = None,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Register a snapshot file in the league, checking its game, its spaces and its weights' checksum."""
+    from ..rated.snapshots import import_snapshot
+
+    league = open_league(home, db)
+    try:
+        p = import_snapshot(league, file, run=run, name=name, env=check_env(env))
+    finally:
+        league.close()
+    if json_out:
+        print_json(_row_json(p))
+    else:
+        console.print(f"imported {file} as {p.full_name} (id {p.id}, {p.env})")

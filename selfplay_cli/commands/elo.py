@@ -1,0 +1,107 @@
+"""`marl elo fit` and `marl elo gate`: ratings from the ledger (or a CSV) and a CI gate on strength."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import MarlError
+from ..rated.gate import gate_check
+from ._common import DbOpt, DeviceOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, resolve_players
+from ._output import console, print_json
+from .ladder_view import render_ladder
+
+app = typer.Typer(help="Fit ratings with confidence intervals; gate a model on its strength.", no_args_is_help=True)
+
+BootstrapOpt = Annotated[int, typer.Option("--bootstrap", help="Bootstrap resamples for the intervals (0: normal "
+                                           "approximation).")]
+AnchorOpt = Annotated[str | None, typer.Option("--anchor", help="NAME=RATING fixing one player's rating "
+                                               "(default: the random bot at 1000).")]
+
+
+def parse_anchor(anchor: str | None) -> tuple[str | None, float]:
+    if anchor is None:
+        return None, 1000.0
+    name, sep, rating = anchor.rpartition("=")
+    try:
+        if not sep or not name:
+            raise ValueError
+        return name, float(rating)
+    except ValueError:
+        raise MarlError(f"--anchor must look like NAME=RATING (e.g. random=1000), not {anchor!r}") from None
+
+
+def check_bootstrap(n: int) -> int:
+    if n < 0 or 0 < n < 20:
+        raise MarlError(f"--bootstrap must be 0 or at least 20, not {n}")
+    return n
+
+
+@app.command("fit")
+def fit(
+    env: EnvOpt = None,
+    anchor: AnchorOpt = None,
+    bootstrap: BootstrapOpt = 200,
+    confidence: Annotated[float, typer.Option("--confidence", help="Level of the intervals.")] = 0.95,
+    results: Annotated[Path | None, typer.Option("--results", help="Rate the games of a CSV file "
+                                                 "(player_a,player_b,result) instead of the league.")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Bootstrap seed.")] = 0,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Bradley-Terry maximum-likelihood ratings over the whole ledger (draw = half a point), 400 Elo scale."""
+    from ..league.ladder import fit_csv, ladder
+
+    name, rating = parse_anchor(anchor)
+    check_bootstrap(bootstrap)
+    if results is not None:
+        rows = fit_csv(results, anchor=name, anchor_rating=rating, bootstrap=bootstrap, confidence=confidence,
+                       seed=seed)
+        title = f"ratings of {results}"
+    else:
+        league = open_league(home, db)
+        try:
+            rows = ladder(league, check_env(env), anchor=name, anchor_rating=rating, bootstrap=bootstrap,
+                          confidence=confidence, seed=seed)
+        finally:
+            league.close()
+        title = "ratings fitted over the ledger"
+    render_ladder(rows, title, json_out=json_out)
+
+
+@app.command("gate")
+def gate(
+    candidate: Annotated[str, typer.Argument(help="The policy that must be stronger.")],
+    vs: Annotated[str, typer.Option("--vs", help="The baseline policy.")],
+    min_diff: Annotated[float, typer.Option("--min-diff", help="Required Elo(CAND) - Elo(BASE) lower bound.")] = 0.0,
+    env: EnvOpt = None,
+    games: Annotated[int, typer.Option("--games", "-n", help="Head-to-head games to base the verdict on; stored "
+                                       "ones are reused, the rest are played and stored.")] = 400,
+    confidence: Annotated[float, typer.Option("--confidence", help="One-sided level of the lower bound.")] = 0.95,
+    parallel: Annotated[int, typer.Option("--parallel", help="Games played at once.")] = 1024,
+    device: DeviceOpt = "auto",
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Exit 0 when the lower confidence bound of Elo(CAND) - Elo(BASE) is at least --min-diff, 1 otherwise."""
+    if games < 2:
+        raise MarlError(f"--games must be at least 2, not {games}")
+    if not 0.5 < confidence < 1:
+        raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
+    league = open_league(home, db)
+    try:
+        cand, base = resolve_players(league, [candidate, vs], env)
+        verdict = gate_check(league, cand, base, min_diff=min_diff, games=games, confidence=confidence,
+                             parallel=parallel, device=device)
+    finally:
+        league.close()
+    if json_out:
+        print_json(verdict.to_json())
+    else:
+        word = "[bold green]PASS[/]" if verdict.passed else "[bold red]FAIL[/]"
+        console.print(f"{word}: {verdict.reason}")
+    raise typer.Exit(0 if verdict.passed else 1)

@@ -1,0 +1,99 @@
+"""`marl match A B`: rated games between two policies, with an optional sequential test."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+
+from ..rated.match import MatchReport, SPRTSettings, load_player, run_match, sprt_exit_code
+from ._common import (
+    DbOpt,
+    DeviceOpt,
+    EnvOpt,
+    HomeOpt,
+    JsonOpt,
+    open_league,
+    progress_bar,
+    progress_enabled,
+    resolve_players,
+)
+from ._output import console, print_json
+
+
+def render_report(r: MatchReport) -> None:
+    s = r.stats
+    console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {r.games} games ({r.games // 2} pairs), "
+                  f"{r.games_per_second:,.1f} games/s")
+    console.print(f"  {r.a}: {r.wins} W  {r.draws} D  {r.losses} L   score {100 * s.score:.1f}%   "
+                  f"points {r.points_for}-{r.points_against}")
+    bound = " (bound: no game lost or none won)" if s.bounded else ""
+    console.print(f"  Elo difference {s.elo:+.1f}  [{100 * s.confidence:g}% CI {s.elo_low:+.1f}, {s.elo_high:+.1f}]"
+                  f"{bound}   LOS {100 * s.los:.1f}%")
+    console.print(f"  pairs (LL LD WL+DD WD WW): {' '.join(map(str, r.pentanomial))}"
+                  + (f"   truncated games: {r.truncated}" if r.truncated else ""))
+    if r.sprt:
+        t = r.sprt
+        verdict = {"H1": "H1 accepted", "H0": "H0 accepted"}.get(t["decision"], "undecided (--max-games reached)")
+        console.print(f"  SPRT [{t['elo0']:g}, {t['elo1']:g}] alpha={t['alpha']:g} beta={t['beta']:g}: "
+                      f"LLR {t['llr']:.2f} ({t['lower']:.2f}, {t['upper']:.2f}) -> {verdict}")
+    if r.match_id is not None:
+        console.print(f"  stored as match #{r.match_id}")
+
+
+def match(
+    a: Annotated[str, typer.Argument(help="First policy: ep90, run/ep90, a tag, latest, best, an id or a bot.")],
+    b: Annotated[str, typer.Argument(help="Second policy (same forms).")],
+    games: Annotated[int, typer.Option("--games", "-n", help="Games to play (whole pairs: each seed in both seat "
+                                       "orders).")] = 200,
+    env: EnvOpt = None,
+    seed: Annotated[int, typer.Option("--seed", help="First game seed; pair i uses seed + i.")] = 0,
+    parallel: Annotated[int, typer.Option("--parallel", help="Games played at once in the batched core.")] = 1024,
+    store: Annotated[bool, typer.Option("--store/--no-store", help="Record the games in the ledger.")] = True,
+    sprt: Annotated[bool, typer.Option("--sprt", help="Sequential test: stop once H0 (elo0) or H1 (elo1) wins.")]
+    = False,
+    elo0: Annotated[float, typer.Option("--elo0", help="SPRT H0: Elo(A) - Elo(B) = elo0.")] = 0.0,
+    elo1: Annotated[float, typer.Option("--elo1", help="SPRT H1: Elo(A) - Elo(B) = elo1.")] = 10.0,
+    alpha: Annotated[float, typer.Option("--alpha", help="SPRT false-positive rate.")] = 0.05,
+    beta: Annotated[float, typer.Option("--beta", help="SPRT false-negative rate.")] = 0.05,
+    max_games: Annotated[int | None, typer.Option("--max-games", help="SPRT game budget (default --games).")]
+    = None,
+    confidence: Annotated[float, typer.Option("--confidence", help="Level of the Elo interval.")] = 0.95,
+    k: Annotated[float, typer.Option("--k", help="K factor of the online Elo updated after each stored game.")]
+    = 16.0,
+    device: DeviceOpt = "auto",
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Play rated games between two policies: W/D/L, Elo difference with its interval, LOS, optional SPRT.
+
+    Exit code: 0, or with --sprt: 0 when H1 is accepted, 1 when H0 is, 3 when --max-games ends it undecided.
+    """
+    from ..errors import MarlError
+
+    if parallel < 2:
+        raise MarlError(f"--parallel must be at least 2, not {parallel}")
+    if not 0.5 < confidence < 1:
+        raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
+    settings = SPRTSettings(elo0, elo1, alpha, beta) if sprt else None
+    budget = (max_games or games) if sprt else games
+    league = open_league(home, db)
+    league.elo_k = k
+    try:
+        row_a, row_b = resolve_players(league, [a, b], env)
+        pa = load_player(league, row_a, device=device)
+        pb = load_player(league, row_b, device=device, seed=1)
+        with progress_bar(f"{pa.id} vs {pb.id}", budget + budget % 2, "games", progress_enabled(quiet)) as tick:
+            report = run_match(pa, pb, games=budget, first_seed=seed, parallel=parallel,
+                               league=league if store else None, player_ids={pa.id: row_a.id, pb.id: row_b.id},
+                               sprt=settings, confidence=confidence, on_games=tick)
+    finally:
+        league.close()
+    if json_out:
+        print_json(report.to_json())
+    else:
+        render_report(report)
+    if settings is not None:
+        raise typer.Exit(sprt_exit_code(report))

@@ -1,0 +1,66 @@
+"""The strength gate: is Elo(candidate) - Elo(baseline) at least D, with confidence?"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from ..league.ratings import MatchStats, match_stats
+from ..league.store import League, PlayerRow
+from .match import load_player, run_match
+
+
+@dataclass(frozen=True)
+class GateVerdict:
+    candidate: str
+    baseline: str
+    min_diff: float
+    confidence: float
+    stats: MatchStats  # two-sided interval at level 2 * confidence - 1: its low end is the one-sided bound
+    stored_games: int
+    played_games: int
+    passed: bool
+
+    @property
+    def reason(self) -> str:
+        s = self.stats
+        cmp = ">=" if self.passed else "<"
+        return (f"Elo({self.candidate}) - Elo({self.baseline}) = {s.elo:+.1f}, {100 * self.confidence:g}% lower "
+                f"bound {s.elo_low:+.1f} {cmp} {self.min_diff:+g} over {s.games} games "
+                f"({s.wins} W {s.draws} D {s.losses} L; {self.stored_games} stored, {self.played_games} played)")
+
+    def to_json(self) -> dict[str, Any]:
+        s = self.stats
+        return {"candidate": self.candidate, "baseline": self.baseline, "passed": self.passed,
+                "min_diff": self.min_diff, "confidence": self.confidence, "elo": round(s.elo, 1),
+                "lower_bound": round(s.elo_low, 1), "games": s.games, "wins": s.wins, "draws": s.draws,
+                "losses": s.losses, "stored_games": self.stored_games, "played_games": self.played_games,
+                "reason": self.reason}
+
+
+def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: float, games: int,
+               confidence: float = 0.95, parallel: int = 1024, device: str = "cpu") -> GateVerdict:
+    """Reuse the stored head-to-head games, play (and store) the missing ones, then test the lower bound."""
+    from ..league.ladder import head_to_head
+
+    if cand.id == base.id:
+        from ..errors import MarlError
+
+        raise MarlError(f"the candidate and the baseline are the same player ({cand.full_name})")
+    h2h = head_to_head(league, cand.id, base.id)
+    stored = h2h["wins"] + h2h["draws"] + h2h["losses"]
+    wins, draws, losses = h2h["wins"], h2h["draws"], h2h["losses"]
+    penta = list(h2h["pentanomial"])
+    played = 0
+    if stored < games:
+        pa = load_player(league, cand, device=device)
+        pb = load_player(league, base, device=device, seed=1)
+        report = run_match(pa, pb, games=games - stored, first_seed=1_000_003 * (1 + stored), parallel=parallel,
+                           league=league, player_ids={pa.id: cand.id, pb.id: base.id}, kind="gate")
+        played = report.games
+        wins, draws, losses = wins + report.wins, draws + report.draws, losses + report.losses
+        penta = [x + y for x, y in zip(penta, report.pentanomial, strict=True)]
+    stats = match_stats(wins, draws, losses, pentanomial=tuple(penta) if sum(penta) else None,
+                        confidence=2 * confidence - 1)
+    return GateVerdict(cand.full_name, base.full_name, min_diff, confidence, stats, stored, played,
+                       passed=stats.elo_low >= min_diff)

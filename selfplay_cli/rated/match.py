@@ -1,0 +1,229 @@
+"""Rated play: league players become policies, play paired games in the batched runner, and land in the ledger.
+
+A match between A and B plays game pairs: each seed once with A on the left and once with A on the right, so
+the serve luck and the seat cancel out within a pair. Results are stored chunk by chunk, each chunk in one
+transaction, so a match killed midway leaves whole, consistent games in the ledger.
+
+With an SPRT the match checks the log-likelihood ratio after every pair (pentanomial GSPRT, as fishtest and
+fastchess do) and stops at the first pair where it crosses a bound; games played beyond that pair in the last
+batch are discarded, so the test is exactly sequential.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..arena import Game, GameResult, play
+from ..envs import get_env
+from ..errors import MarlError
+from ..league.ratings import SPRT, MatchStats, match_stats
+from ..league.store import GameRecord, League, PlayerRow
+from ..policies import Policy, ScriptedPolicy
+
+
+def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: bool = True, seed: int = 0) -> Policy:
+    """The policy a league player stands for: a scripted bot, or a network loaded from its snapshot file."""
+    if row.is_bot:
+        return ScriptedPolicy(row.env, row.name, seed=seed)
+    from ..policies.snapshot import load_policy  # torch is imported only when a network is needed
+
+    _inference_threads(device)
+    if row.removed:
+        raise MarlError(f"{row.full_name} was removed from the league; its games stay in the ledger")
+    if not row.path:
+        raise MarlError(f"{row.full_name} has no snapshot file")
+    path = Path(row.path)
+    if not path.is_absolute() and league.home is not None:
+        path = league.home / path
+    return load_policy(path, id=row.full_name, device=device, greedy=greedy, expect_env=row.env)
+
+
+def _inference_threads(device: str) -> None:
+    """Small networks evaluated in batches run fastest on one CPU thread: torch's default of one thread per
+    core costs more in synchronisation than it gains (measured 55 ms vs 0.8 ms per 1000-observation batch)."""
+    import torch
+
+    if device in ("cpu", "auto") and not torch.cuda.is_available():
+        torch.set_num_threads(1)
+
+
+def env_options_of(*policies: Policy) -> dict[str, Any]:
+    """The game options the players were trained with (frame stack, rules...); they must agree."""
+    found: dict[str, Any] | None = None
+    owner = ""
+    for p in policies:
+        opts = getattr(getattr(p, "meta", None), "env_options", None)
+        if opts is None:
+            continue
+        if found is not None and opts != found:
+            raise MarlError(f"{owner} and {p.id} were made for different game options ({found} vs {opts})")
+        found, owner = dict(opts), p.id
+    return found or {}
+
+
+def pentanomial(pair_points: np.ndarray) -> tuple[int, int, int, int, int]:
+    """Counts of game pairs by A's points in the pair: (0, 0.5, 1, 1.5, 2) -> (LL, LD, WL+DD, WD, WW)."""
+    idx = np.rint(np.asarray(pair_points, dtype=np.float64) * 2).astype(np.int64)
+    counts = np.bincount(idx, minlength=5)[:5]
+    return tuple(int(c) for c in counts)  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class SPRTSettings:
+    elo0: float = 0.0
+    elo1: float = 10.0
+    alpha: float = 0.05
+    beta: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not self.elo0 < self.elo1:
+            raise MarlError(f"--elo0 ({self.elo0}) must be below --elo1 ({self.elo1})")
+        if not (0 < self.alpha < 0.5 and 0 < self.beta < 0.5):
+            raise MarlError("--alpha and --beta must lie in (0, 0.5)")
+
+
+@dataclass
+class MatchReport:
+    env: str
+    a: str
+    b: str
+    games: int
+    wins: int
+    draws: int
+    losses: int
+    points_for: int  # raw points scored by A over all games
+    points_against: int
+    pentanomial: tuple[int, int, int, int, int]
+    stats: MatchStats
+    seconds: float
+    match_id: int | None
+    first_seed: int
+    sprt: dict[str, Any] | None = None
+    truncated: int = 0
+    results: list[GameResult] = field(default_factory=list, repr=False)
+
+    @property
+    def games_per_second(self) -> float:
+        return self.games / self.seconds if self.seconds > 0 else float("inf")
+
+    def to_json(self) -> dict[str, Any]:
+        s = self.stats
+        return {
+            "env": self.env, "a": self.a, "b": self.b, "games": self.games,
+            "wins": self.wins, "draws": self.draws, "losses": self.losses,
+            "score": round(s.score, 4), "points_for": self.points_for, "points_against": self.points_against,
+            "elo": round(s.elo, 1), "elo_low": round(s.elo_low, 1), "elo_high": round(s.elo_high, 1),
+            "confidence": s.confidence, "bounded": s.bounded, "los": round(s.los, 4),
+            "pentanomial": list(self.pentanomial), "truncated_games": self.truncated,
+            "seconds": round(self.seconds, 3), "games_per_second": round(self.games_per_second, 1),
+            "match_id": self.match_id, "first_seed": self.first_seed, "sprt": self.sprt,
+        }
+
+
+def _record(league: League, match_id: int, ids: dict[str, int], results: list[GameResult]) -> None:
+    league.record_games(match_id, [
+        GameRecord(env=r.env, players=tuple(ids[p] for p in r.players), seed=r.seed, scores=r.scores,
+                   outcome=r.outcome, length=r.length, truncated=r.truncated)
+        for r in results
+    ])
+
+
+def run_match(
+    a: Policy,
+    b: Policy,
+    *,
+    games: int,
+    first_seed: int = 0,
+    parallel: int = 1024,
+    league: League | None = None,
+    player_ids: dict[str, int] | None = None,
+    kind: str = "match",
+    sprt: SPRTSettings | None = None,
+    confidence: float = 0.95,
+    on_games: Callable[[int], None] | None = None,
+) -> MatchReport:
+    """Play up to ``games`` games (rounded up to whole pairs) between ``a`` and ``b`` and report from A's view.
+
+    With ``league`` (and ``player_ids`` mapping policy ids to player ids) every chunk of games is stored as it
+    finishes. With ``sprt`` the match stops at the first pair whose LLR crosses a bound.
+    """
+    if a.env != b.env:
+        raise MarlError(f"{a.id} plays {a.env} but {b.id} plays {b.env}")
+    if a.id == b.id:
+        raise MarlError(f"a match needs two different players, got {a.id} twice")
+    if games < 1:
+        raise MarlError(f"--games must be at least 1, not {games}")
+    spec = get_env(a.env)
+    options = env_options_of(a, b)
+    n_pairs = (games + 1) // 2
+    chunk_pairs = max(1, parallel // 2)
+    if sprt is not None:
+        chunk_pairs = max(1, min(chunk_pairs, 64))  # smaller batches waste fewer games past the decision
+        test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta)
+    match_id = None
+    if league is not None:
+        if player_ids is None:
+            raise ValueError("player_ids are needed to store games")
+        params = {"a": a.id, "b": b.id, "games": games, "first_seed": first_seed, "env_options": options}
+        if sprt is not None:
+            params["sprt"] = asdict(sprt)
+        match_id = league.create_match(spec.name, kind, params)
+
+    kept: list[GameResult] = []
+    pair_points: list[float] = []
+    decision: str | None = None
+    llr = 0.0
+    start = time.perf_counter()
+    pair = 0
+    while pair < n_pairs and decision is None:
+        take = min(chunk_pairs, n_pairs - pair)
+        schedule = []
+        for p in range(pair, pair + take):
+            schedule += [Game(first_seed + p, (0, 1)), Game(first_seed + p, (1, 0))]
+        results = play(spec, [a, b], schedule, parallel=parallel, env_options=options,
+                       on_result=(lambda r: on_games(1)) if on_games else None)
+        new: list[GameResult] = []
+        for i in range(take):
+            g1, g2 = results[2 * i], results[2 * i + 1]
+            new += [g1, g2]
+            pair_points.append(g1.points_of(a.id) + g2.points_of(a.id))
+            if sprt is not None:
+                llr = test.llr(pentanomial(np.array(pair_points)))
+                decision = test.decide(llr)
+                if decision is not None:
+                    break
+        if league is not None and new:
+            _record(league, match_id, player_ids, new)  # type: ignore[arg-type]
+        kept += new
+        pair += take
+    seconds = time.perf_counter() - start
+
+    pts = np.array([r.points_of(a.id) for r in kept])
+    wins, draws, losses = int((pts == 1).sum()), int((pts == 0.5).sum()), int((pts == 0).sum())
+    penta = pentanomial(np.array(pair_points))
+    report = MatchReport(
+        env=spec.name, a=a.id, b=b.id, games=len(kept), wins=wins, draws=draws, losses=losses,
+        points_for=sum(r.scores[r.players.index(a.id)] for r in kept),
+        points_against=sum(r.scores[r.players.index(b.id)] for r in kept),
+        pentanomial=penta, stats=match_stats(wins, draws, losses, pentanomial=penta, confidence=confidence),
+        seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
+        results=kept,
+    )
+    if sprt is not None:
+        report.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
+                       "llr": round(llr, 4), "lower": round(test.lower, 4), "upper": round(test.upper, 4),
+                       "decision": decision, "pairs": len(pair_points)}
+    return report
+
+
+def sprt_exit_code(report: MatchReport) -> int:
+    """0 when H1 is accepted, 1 when H0 is, 3 when the game budget ran out first."""
+    assert report.sprt is not None
+    return {"H1": 0, "H0": 1}.get(report.sprt["decision"], 3)
+

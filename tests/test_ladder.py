@@ -1,0 +1,488 @@
+"""Tests for selfplay_cli.league.ladder (ladders, results CSV, tournament plans, head-to-head) and
+selfplay_cli.league.names (name resolution)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from selfplay_cli.errors import MarlError
+from selfplay_cli.league.ladder import (
+    LadderRow,
+    PairPlan,
+    fit_csv,
+    fit_table,
+    head_to_head,
+    ladder,
+    plan_tournament,
+    read_results_csv,
+)
+from selfplay_cli.league.names import resolve, resolve_many
+from selfplay_cli.league.ratings import (
+    FLAG_PERFECT,
+    NAT_TO_ELO,
+    elo_to_score,
+    fit_bradley_terry,
+    match_stats,
+    normal_quantile,
+    sprt_llr,
+)
+from selfplay_cli.league.store import GameRecord, League, LeagueError, PlayerRow
+
+ENV = "pong"
+JSON_KEYS = ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
+             "score", "step", "flag", "anchor"]
+D_7_OF_10 = 400.0 * math.log10(7.0 / 3.0)  # +147.2: the ML Elo difference of a 7/10 score
+
+
+# --------------------------------------------------------------------------------------------------
+# helpers
+# --------------------------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def league(tmp_path: Path) -> League:
+    lg = League(f"sqlite:///{tmp_path}/league.db")
+    yield lg
+    lg.close()
+
+
+def _game(a: int, b: int, score_a: float, seed: int = 0, env: str = ENV) -> GameRecord:
+    scores = {1.0: (21.0, 10.0), 0.5: (15.0, 15.0), 0.0: (10.0, 21.0)}[score_a]
+    return GameRecord(env=env, players=(a, b), seed=seed, scores=scores, outcome=(score_a, 1.0 - score_a),
+                      length=100, truncated=False)
+
+
+def _snap(lg: League, run: str | None, name: str, env: str = ENV, step: int = 0) -> PlayerRow:
+    return lg.add_snapshot(env=env, run=run, name=name, path=f"/snaps/{run}/{name}.pt", sha256="0" * 64, step=step)
+
+
+def _record(lg: League, results: list[tuple[int, int, float]], env: str = ENV) -> None:
+    """Record games ``(a, b, score_a)`` alternating the seat order of each game."""
+    m = lg.create_match(env, "match")
+    games = []
+    for k, (a, b, s) in enumerate(results):
+        games.append(_game(a, b, s, k, env) if k % 2 == 0 else _game(b, a, 1.0 - s, k, env))
+    lg.record_games(m, games)
+
+
+def _results(a: int, b: int, wins: int, draws: int, losses: int) -> list[tuple[int, int, float]]:
+    return [(a, b, 1.0)] * wins + [(a, b, 0.5)] * draws + [(a, b, 0.0)] * losses
+
+
+def _csv(tmp_path: Path, lines: list[str], name: str = "results.csv") -> Path:
+    p = tmp_path / name
+    p.write_text("\n".join(lines) + "\n")
+    return p
+
+
+def _csv_games(tmp_path: Path, records: list[tuple[str, str, int, int, int]]) -> Path:
+    lines = ["player_a,player_b,result"]
+    for a, b, w, d, lo in records:
+        lines += [f"{a},{b},1"] * w + [f"{a},{b},0.5"] * d + [f"{a},{b},0"] * lo
+    return _csv(tmp_path, lines)
+
+
+def _by_name(rows: list[LadderRow]) -> dict[str, LadderRow]:
+    return {r.policy: r for r in rows}
+
+
+def _one_line(exc: pytest.ExceptionInfo[BaseException]) -> str:
+    msg = str(exc.value)
+    assert msg and "\n" not in msg and isinstance(exc.value, MarlError), msg
+    return msg
+
+
+# --------------------------------------------------------------------------------------------------
+# fit_table / fit_csv: ratings checked by hand
+# --------------------------------------------------------------------------------------------------
+
+
+def test_two_players_closed_form(tmp_path: Path) -> None:
+    path = _csv_games(tmp_path, [("alice", "bob", 7, 0, 3)])
+    rows = fit_csv(path, bootstrap=0)
+    assert [r.policy for r in rows] == ["alice", "bob"]
+    a, b = rows
+    assert a.anchor and not b.anchor and a.kind == b.kind == "player"  # default anchor: first player
+    assert a.elo == pytest.approx(1000.0) and b.elo == pytest.approx(1000.0 - D_7_OF_10, abs=0.01)
+    assert abs(D_7_OF_10 - 147.2) < 0.05
+    assert (a.games, a.wins, a.draws, a.losses, a.score) == (10, 7, 0, 3, 0.7)
+    assert (b.wins, b.losses, b.score) == (3, 7, pytest.approx(0.3))
+    # Normal approximation: Fisher information n p (1 - p) in nats^-2.
+    se = NAT_TO_ELO / math.sqrt(10 * 0.7 * 0.3)
+    z = normal_quantile(0.975)
+    assert b.ci_low == pytest.approx(b.elo - z * se, abs=1e-6) and b.ci_high == pytest.approx(b.elo + z * se, abs=1e-6)
+    assert a.ci_low == a.ci_high == 1000.0  # the anchor is fixed
+    # Another anchor and rating: only the gauge moves.
+    rows = fit_csv(path, anchor="bob", anchor_rating=1500.0, bootstrap=50)
+    assert _by_name(rows)["alice"].elo == pytest.approx(1500.0 + D_7_OF_10, abs=0.01)
+    assert _by_name(rows)["bob"].elo == 1500.0 and _by_name(rows)["bob"].anchor
+
+
+def test_chain_and_cycle_solve_the_score_equations(tmp_path: Path) -> None:
+    # Chain a > b > c, each 7/10: the score equations decouple, a - b = b - c = 147.2.
+    rows = _by_name(fit_csv(_csv_games(tmp_path, [("c", "b", 3, 0, 7), ("a", "b", 7, 0, 3)]), bootstrap=0))
+    assert rows["c"].anchor and rows["c"].elo == 1000.0
+    assert rows["b"].elo == pytest.approx(1000.0 + D_7_OF_10, abs=0.01)
+    assert rows["a"].elo == pytest.approx(1000.0 + 2 * D_7_OF_10, abs=0.01)
+
+    # A cycle with draws: check sum_j n_ij E(r_i - r_j) = points_i for every player.
+    records = [("x", "y", 5, 2, 1), ("y", "z", 3, 3, 2), ("z", "x", 2, 1, 4), ("w", "x", 1, 1, 2)]
+    path = _csv_games(tmp_path, records)
+    rows = _by_name(fit_csv(path, anchor="y", bootstrap=0))
+    assert rows["y"].elo == 1000.0 and all(r.flag is None for r in rows.values())
+    expected = dict.fromkeys(rows, 0.0)
+    points = dict.fromkeys(rows, 0.0)
+    for a, b, w, d, lo in records:
+        n = w + d + lo
+        e = elo_to_score(rows[a].elo - rows[b].elo)
+        expected[a] += n * e
+        expected[b] += n * (1.0 - e)
+        points[a] += w + 0.5 * d
+        points[b] += lo + 0.5 * d
+    for name in rows:
+        assert expected[name] == pytest.approx(points[name], abs=1e-3), name
+        assert rows[name].score == pytest.approx(points[name] / rows[name].games)
+    # Order: by rank, then Elo.
+    ordered = fit_csv(path, anchor="y", bootstrap=0)
+    assert [(r.rank, -r.elo) for r in ordered] == sorted((r.rank, -r.elo) for r in ordered)
+
+
+def test_rank_by_ci_separated_and_overlapping(tmp_path: Path) -> None:
+    for boot in (0, 100):
+        far = fit_csv(_csv_games(tmp_path, [("strong", "weak", 90, 0, 10)]), bootstrap=boot)
+        assert [(r.policy, r.rank) for r in far] == [("strong", 1), ("weak", 2)]
+        assert far[1].ci_high < far[0].ci_low
+        close = fit_csv(_csv_games(tmp_path, [("p", "q", 11, 0, 9)]), bootstrap=boot)
+        assert [r.rank for r in close] == [1, 1]
+        assert close[0].elo > close[1].elo  # ties in rank are ordered by Elo
+        q = close[1]
+        assert q.ci_low < q.elo < q.ci_high and q.ci_high > 1000.0
+
+
+def test_bootstrap_is_seeded(tmp_path: Path) -> None:
+    path = _csv_games(tmp_path, [("a", "b", 6, 2, 4), ("b", "c", 5, 1, 3), ("a", "c", 4, 0, 2)])
+    one = fit_csv(path, bootstrap=60, seed=3)
+    assert one == fit_csv(path, bootstrap=60, seed=3)
+    assert [r.ci_low for r in one] != [r.ci_low for r in fit_csv(path, bootstrap=60, seed=4)]
+
+
+def test_json_keys_and_no_nan_with_perfect_player(tmp_path: Path) -> None:
+    path = _csv_games(tmp_path, [("ref", "mid", 3, 2, 3), ("ace", "ref", 5, 0, 0), ("ace", "mid", 4, 0, 0)])
+    for boot in (0, 40):
+        rows = fit_csv(path, bootstrap=boot)
+        ace = _by_name(rows)["ace"]
+        assert ace.flag == FLAG_PERFECT and ace.rank == 1 and rows[0] is ace
+        for r in rows:
+            d = r.to_json()
+            assert list(d) == JSON_KEYS
+            text = json.dumps(d, allow_nan=False)  # raises on NaN / inf
+            assert json.loads(text) == d
+            assert all(math.isfinite(d[k]) for k in ("elo", "ci_low", "ci_high", "score"))
+            assert d["elo"] == round(r.elo, 1) and d["score"] == round(r.score, 4)
+        assert _by_name(rows)["ref"].to_json()["anchor"] is True
+        assert ace.to_json()["flag"] == "perfect" and ace.to_json()["step"] is None
+
+
+def test_fit_table_generic_and_errors() -> None:
+    names = ["a", "b", "c"]
+    a, b, s = np.array([0, 1, 0]), np.array([1, 2, 2]), np.array([1.0, 0.5, 0.0])
+    rows = fit_table(names, a, b, s, anchor="b", bootstrap=0, kinds={"a": "bot", "b": "snapshot"},
+                     steps={"b": 500}, player_ids={"a": 1, "b": 2})
+    by = _by_name(rows)
+    assert by["a"].kind == "bot" and by["a"].player_id == 1 and by["a"].step is None
+    assert by["b"].kind == "snapshot" and by["b"].step == 500 and by["c"].kind == "player"
+    fit = fit_bradley_terry(a, b, s, 3, anchor=1)
+    for i, n in enumerate(names):
+        assert by[n].elo == pytest.approx(fit.ratings[i])
+        assert by[n].flag == fit.flags[i]
+    with pytest.raises(LeagueError) as exc:
+        fit_table(names, a, b, s, anchor="zed")
+    msg = _one_line(exc)
+    assert "zed" in msg and "a, b, c" in msg
+    with pytest.raises(LeagueError):
+        fit_table(names, a[:0], b[:0], s[:0], anchor="a")
+    with pytest.raises(LeagueError):
+        fit_table(names, a, b, s, anchor="a", confidence=1.5)
+
+
+# --------------------------------------------------------------------------------------------------
+# Results CSV parsing
+# --------------------------------------------------------------------------------------------------
+
+
+def test_read_results_csv(tmp_path: Path) -> None:
+    path = _csv(tmp_path, ["# a comment", " player_a , player_b , result ", "", "x,y,1", "y, z ,0.5",
+                           "# another", "z,x,0", '"w",x,1.0', "x,w,0.0", "w,y,1/2"])
+    names, a, b, s = read_results_csv(path)
+    assert names == ["x", "y", "z", "w"]
+    assert a.tolist() == [0, 1, 2, 3, 0, 3] and b.tolist() == [1, 2, 0, 0, 3, 1]
+    assert s.tolist() == [1.0, 0.5, 0.0, 1.0, 0.0, 0.5]
+    assert a.dtype == np.int64 and s.dtype == np.float64
+
+
+@pytest.mark.parametrize(
+    ("lines", "line", "words"),
+    [
+        (["player_a,player_b,score", "x,y,1"], 1, "header"),
+        (["player_a,player_b,result", "x,y,1", "x,y", "x,y,0"], 3, "3 fields"),
+        (["player_a,player_b,result", "x,y,1", "y,x,0", "x,y,2"], 4, "bad result"),
+        (["player_a,player_b,result", "x,y,1", "y,x,0", "x,y,win"], 4, "bad result"),
+        (["player_a,player_b,result", "x,,1"], 2, "empty"),
+        (["player_a,player_b,result", "x,y,1", "x,x,1"], 3, "itself"),
+        (["# comment", "", "a,b,c"], 3, "header"),
+        (["player_a,player_b,result", "x,y,1,extra"], 2, "3 fields"),
+    ],
+)
+def test_csv_errors_name_the_line(tmp_path: Path, lines: list[str], line: int, words: str) -> None:
+    path = _csv(tmp_path, lines)
+    with pytest.raises(LeagueError) as exc:
+        read_results_csv(path)
+    msg = _one_line(exc)
+    assert msg.startswith(f"{path}:{line}: ") and words in msg
+
+
+def test_csv_empty_or_missing(tmp_path: Path) -> None:
+    for lines in ([], ["# nothing"], ["player_a,player_b,result"], ["player_a,player_b,result", "", "# x"]):
+        path = _csv(tmp_path, lines)
+        with pytest.raises(LeagueError) as exc:
+            fit_csv(path)
+        assert str(path) in _one_line(exc)
+    with pytest.raises(LeagueError) as exc:
+        read_results_csv(tmp_path / "nope.csv")
+    assert "nope.csv" in _one_line(exc)
+
+
+# --------------------------------------------------------------------------------------------------
+# The ladder of a league
+# --------------------------------------------------------------------------------------------------
+
+
+def _population(lg: League) -> dict[str, PlayerRow]:
+    lg.ensure_bots(ENV, ["random", "cpu"])
+    lg.create_run("r1", ENV, {})
+    lg.create_run("r2", ENV, {})
+    bots = {p.name: p for p in lg.players(ENV, kind="bot")}
+    return {
+        "random": bots["random"],
+        "cpu": bots["cpu"],
+        "ep10": _snap(lg, "r1", "ep10", step=1000),
+        "ep90": _snap(lg, "r1", "ep90", step=9000),
+        "r2ep90": _snap(lg, "r2", "ep90", step=9000),
+    }
+
+
+def test_ladder_from_the_ledger(league: League) -> None:
+    p = _population(league)
+    rnd, cpu, e10, e90, r2 = (p[k].id for k in ("random", "cpu", "ep10", "ep90", "r2ep90"))
+    _record(league, _results(cpu, rnd, 7, 0, 3) + _results(e10, cpu, 7, 0, 3) + _results(e90, e10, 6, 2, 2)
+            + _results(r2, e90, 3, 2, 5) + _results(r2, rnd, 8, 1, 1))
+    rows = ladder(league, bootstrap=0)  # the only env
+    assert rows == ladder(league, env=ENV, bootstrap=0)
+    by = _by_name(rows)
+    assert set(by) == {"random", "cpu", "r1/ep10", "r1/ep90", "r2/ep90"}  # no "r1/ep..." without games
+    assert by["random"].anchor and by["random"].elo == 1000.0 and by["random"].kind == "bot"
+    assert by["r1/ep90"].kind == "snapshot" and by["r1/ep90"].step == 9000 and by["r1/ep90"].player_id == e90
+    assert by["cpu"].step is None
+    # Same numbers as a direct fit of the ledger.
+    table = league.games(env=ENV)
+    ids, a, b = table.indexed()
+    fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=int(np.flatnonzero(ids == rnd)[0]))
+    for pid, r in zip(ids.tolist(), fit.ratings.tolist(), strict=True):
+        assert next(x for x in rows if x.player_id == pid).elo == pytest.approx(r)
+    assert [(r.rank, -r.elo) for r in rows] == sorted((r.rank, -r.elo) for r in rows)
+    assert by["r1/ep90"].elo > by["r1/ep10"].elo > by["cpu"].elo > by["random"].elo
+    # Named anchor, through name resolution.
+    other = _by_name(ladder(league, anchor="r1/ep10", anchor_rating=1200.0, bootstrap=0))
+    assert other["r1/ep10"].elo == 1200.0 and other["r1/ep10"].anchor
+    assert other["random"].elo == pytest.approx(by["random"].elo + 1200.0 - by["r1/ep10"].elo)
+    with pytest.raises(LeagueError):
+        ladder(league, anchor="nobody", bootstrap=0)
+    # Bootstrap intervals contain the estimates; anchor interval is a point.
+    boot = _by_name(ladder(league, bootstrap=30))
+    assert all(r.ci_low <= r.elo <= r.ci_high for r in boot.values())
+    assert boot["random"].ci_low == boot["random"].ci_high == 1000.0
+
+
+def test_ladder_removed_snapshots_still_count(league: League) -> None:
+    p = _population(league)
+    rnd, cpu, e10 = p["random"].id, p["cpu"].id, p["ep10"].id
+    _record(league, _results(cpu, rnd, 6, 0, 4) + _results(e10, cpu, 5, 0, 5) + _results(e10, rnd, 2, 0, 8))
+    before = _by_name(ladder(league, bootstrap=0))
+    league.remove_snapshot(e10)
+    after = _by_name(ladder(league, bootstrap=0))
+    assert set(after) == {"random", "cpu"}
+    assert after["cpu"].elo == pytest.approx(before["cpu"].elo)  # e10's games are still in the fit
+    shown = _by_name(ladder(league, bootstrap=0, include_removed=True))
+    assert set(shown) == {"random", "cpu", "r1/ep10"} and shown == before
+
+
+def test_ladder_env_choice_and_default_anchor(league: League) -> None:
+    assert ladder(league, env=ENV) == []
+    with pytest.raises(LeagueError):
+        ladder(league)  # no games at all
+    # No random bot: the first bot with games anchors; no bots at all: the most active player.
+    league.ensure_bots(ENV, ["cpu"])
+    cpu = league.players(ENV, kind="bot")[0]
+    s1, s2 = _snap(league, None, "a"), _snap(league, None, "b")
+    _snap(league, None, "c")  # no games
+    _record(league, _results(s1.id, cpu.id, 3, 0, 1) + _results(s1.id, s2.id, 2, 0, 2))
+    assert _by_name(ladder(league, bootstrap=0))["cpu"].anchor
+    lander = "lander"
+    t1, t2 = _snap(league, None, "t1", env=lander), _snap(league, None, "t2", env=lander)
+    _snap(league, None, "t3", env=lander)
+    _record(league, _results(t1.id, t2.id, 2, 1, 1), env=lander)
+    with pytest.raises(LeagueError) as exc:
+        ladder(league)
+    assert "several envs in the league (pong, lander): pass --env" in _one_line(exc)
+    rows = ladder(league, env=lander, bootstrap=0)
+    assert {r.policy for r in rows} == {"t1", "t2"}  # t3 has no games
+    assert _by_name(rows)["t1"].anchor  # tie on games: lowest id
+    assert not any(r.policy == "c" for r in ladder(league, env=ENV, bootstrap=0))
+
+
+# --------------------------------------------------------------------------------------------------
+# names.resolve
+# --------------------------------------------------------------------------------------------------
+
+
+def test_resolve_names(league: League) -> None:
+    p = _population(league)
+    rnd, cpu, e10, e90, r2 = (p[k].id for k in ("random", "cpu", "ep10", "ep90", "r2ep90"))
+    league.tag(e10, "champ")
+    _record(league, _results(cpu, rnd, 6, 0, 4) + _results(e10, cpu, 8, 0, 2) + _results(e90, e10, 3, 0, 7)
+            + _results(r2, rnd, 7, 1, 2))
+    assert resolve(league, "ep10").id == e10
+    assert resolve(league, "r1/ep90").id == e90
+    assert resolve(league, "r2/ep90", env=ENV).id == r2
+    assert resolve(league, "champ").id == e10
+    assert resolve(league, str(e90)).id == e90 and resolve(league, f"#{e90}").id == e90
+    assert resolve(league, "random").id == rnd and resolve(league, " cpu ").id == cpu
+    assert resolve(league, "latest").id == r2 and resolve(league, "latest", env=ENV).id == r2
+    assert resolve(league, "best", env=ENV).id == e10  # r1/ep10 beats cpu 8-2, r1/ep90 only 7-3
+    assert [x.id for x in resolve_many(league, ["best", "ep10", "random", "best"], ENV)] == [e10, e10, rnd, e10]
+    # A custom ladder function decides "best".
+    fake = [LadderRow("cpu", cpu, "bot", None, 3000.0, 2900.0, 3100.0, 1, 1, 0, 0, 1.0, 1, None, False)]
+    assert resolve(league, "best", ladder_fn=lambda lg, env: fake).id == cpu
+
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, "ep90")
+    assert _one_line(exc) == "'ep90' is ambiguous: r1/ep90, r2/ep90 — use run/name or an id"
+
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, "ep91", env=ENV)
+    msg = _one_line(exc)
+    assert msg.startswith("no policy named 'ep91' in pong; known: ")
+    known = msg.split("known: ", 1)[1].split(", ")
+    assert known[0] in ("ep90", "ep10") and "random" in known and "r1/ep90" in known and len(known) <= 11
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, "nothing")
+    assert "in the league; known:" in _one_line(exc)
+    for bad in ("r3/ep90", "r1/ep11", "999", "#999", ""):
+        with pytest.raises(LeagueError):
+            resolve(league, bad)
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, str(e10), env="lander")
+    assert "belongs to env pong" in _one_line(exc)
+
+    # Removed snapshots: named -> error saying so; the other ep90 becomes unambiguous; ids need include_removed.
+    league.remove_snapshot(r2)
+    assert resolve(league, "ep90").id == e90
+    assert resolve(league, "latest").id == e90
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, "r2/ep90")
+    assert "removed" in _one_line(exc) and "r2/ep90" in str(exc.value)
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, str(r2))
+    assert "removed" in _one_line(exc)
+    assert resolve(league, str(r2), include_removed=True).removed
+    assert resolve(league, "r2/ep90", include_removed=True).id == r2
+    assert resolve(league, "best").id == e10
+
+
+def test_resolve_tag_and_bot_ambiguous_across_envs(league: League) -> None:
+    league.ensure_bots(ENV, ["cpu"])
+    league.create_run("r3", "lander", {})
+    snap = _snap(league, "r3", "x", env="lander")
+    league.tag(snap.id, "cpu")  # allowed: lander has no cpu bot
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, "cpu")
+    assert _one_line(exc) == "'cpu' is ambiguous: cpu, r3/x — use run/name or an id"
+    assert resolve(league, "cpu", env=ENV).kind == "bot"
+    assert resolve(league, "cpu", env="lander").id == snap.id
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, "latest", env=ENV)
+    assert "no snapshot" in _one_line(exc)
+    with pytest.raises(LeagueError) as exc:
+        resolve(league, "best", env=ENV)
+    assert "no rated policy" in _one_line(exc)
+
+
+# --------------------------------------------------------------------------------------------------
+# Tournament plans and head-to-head
+# --------------------------------------------------------------------------------------------------
+
+
+def test_plan_tournament_counts_existing_games(league: League) -> None:
+    league.ensure_bots(ENV, ["random", "cpu"])
+    bots = {p.name: p.id for p in league.players(ENV, kind="bot")}
+    p1, p2, p3, p4 = bots["random"], bots["cpu"], _snap(league, None, "a").id, _snap(league, None, "b").id
+    m = league.create_match(ENV, "tournament")
+    league.record_games(m, [_game(p1, p2, 1.0), _game(p1, p2, 0.0), _game(p2, p1, 0.5)]  # 3 games, both orders
+                        + [_game(p3, p1, 1.0, seed=s) for s in range(5)]
+                        + [_game(p4, p2, 1.0)] * 2)  # p4 is not in the tournament
+    plan = plan_tournament(league, ENV, [p1, p2, p3], games_per_pair=4)
+    assert plan == [PairPlan(p1, p2, 3, 1), PairPlan(p2, p3, 0, 4)]  # p1-p3 already has 5
+    assert plan_tournament(league, ENV, [p1, p2, p3], games_per_pair=2) == [PairPlan(p2, p3, 0, 2)]
+    # Gauntlet: every player against vs only.
+    plan = plan_tournament(league, ENV, [p1, p2, p4], games_per_pair=4, vs=p3)
+    assert plan == [PairPlan(p2, p3, 0, 4), PairPlan(p4, p3, 0, 4)]
+    assert plan_tournament(league, ENV, [p1, p3], games_per_pair=6, vs=p2) == [PairPlan(p1, p2, 3, 3),
+                                                                               PairPlan(p3, p2, 0, 6)]
+    with pytest.raises(LeagueError):
+        plan_tournament(league, ENV, [p1], games_per_pair=2)
+    with pytest.raises(LeagueError):
+        plan_tournament(league, "lander", [p1, p2], games_per_pair=2)
+    with pytest.raises(LeagueError):
+        plan_tournament(league, ENV, [p1, 999], games_per_pair=2)
+
+
+def test_head_to_head_pentanomial(league: League) -> None:
+    league.ensure_bots(ENV, ["random", "cpu"])
+    bots = {p.name: p.id for p in league.players(ENV, kind="bot")}
+    a, b, c = bots["cpu"], bots["random"], _snap(league, None, "other").id
+
+    def pair(seed: int, first: float, second: float) -> list[GameRecord]:
+        """Two games of one seed: a in seat 0 scoring ``first``, then a in seat 1 scoring ``second``."""
+        return [_game(a, b, first, seed), _game(b, a, 1.0 - second, seed)]
+
+    m1, m2 = league.create_match(ENV, "match"), league.create_match(ENV, "match")
+    games = (pair(1, 1.0, 1.0)  # WW
+             + pair(2, 1.0, 0.0)  # WL
+             + pair(3, 0.5, 0.5)  # DD
+             + pair(4, 0.0, 0.5)  # LD
+             + pair(5, 0.0, 0.0)  # LL
+             + pair(8, 1.0, 0.5)  # WD
+             + [_game(a, b, 1.0, 6)]  # unpaired: no reversed game
+             + [_game(a, b, 1.0, 7), _game(a, b, 0.5, 7)]  # same seed, same seat order: unpaired
+             + [_game(a, c, 1.0, 9), _game(c, a, 1.0, 9)])  # another opponent: ignored
+    league.record_games(m1, games)
+    league.record_games(m2, [_game(b, a, 1.0, 1)])  # seed 1 again, but another match: unpaired
+    h = head_to_head(league, a, b)
+    assert h["pentanomial"] == [1, 1, 2, 1, 1]  # LL, LD, WL+DD, WD, WW
+    assert h["pairs"] == 6 and h["unpaired"] == 4 and h["games"] == 16
+    assert (h["wins"], h["draws"], h["losses"]) == (6, 5, 5)
+    assert h["score"] == pytest.approx(8.5 / 16.0)
+    assert (h["wins"], h["draws"], h["losses"]) == league.pair_counts(a, b)
+    mirror = head_to_head(league, b, a)
+    assert mirror["pentanomial"] == h["pentanomial"][::-1]
+    assert (mirror["wins"], mirror["losses"]) == (h["losses"], h["wins"])
+    # Feeds the statistics helpers.
+    assert match_stats(h["wins"], h["draws"], h["losses"], pentanomial=tuple(h["pentanomial"])).used_pentanomial
+    assert math.isfinite(sprt_llr(h["pentanomial"], 0.0, 10.0))
+    with pytest.raises(LeagueError):
+        head_to_head(league, a, a)

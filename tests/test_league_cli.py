@@ -1,0 +1,243 @@
+"""The league from the command line: checkpoints, matches, SPRT, ratings, the ladder, tournaments and the gate."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from selfplay_cli.cli import main
+from selfplay_cli.league.store import League
+from selfplay_cli.policies.network import Arch, build_network
+from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+
+
+def make_snapshot(path: Path, name: str, seed: int, run: str = "r1", obs_shape=(8, 6)) -> Path:
+    arch = Arch(hidden=(32, 32))
+    net = build_network(obs_shape, 3, arch, seed=seed)
+    save_snapshot(path, net, SnapshotMeta(env="pong", obs_shape=obs_shape, n_actions=3, arch=arch, run=run,
+                                          name=name, algo="ppo", step=1000 * seed, episode=10 * seed))
+    return path
+
+
+def run(capsys, *args: str) -> tuple[int, str, str]:
+    code = main(list(args))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def run_json(capsys, *args: str):
+    code, out, err = run(capsys, *args, "--json")
+    return code, json.loads(out)
+
+
+@pytest.fixture
+def home(tmp_path, monkeypatch):
+    h = tmp_path / "league"
+    monkeypatch.setenv("MARL_HOME", str(h))
+    monkeypatch.delenv("MARL_DB", raising=False)
+    return h
+
+
+# ---------------------------------------------------------------------------------------------------------------
+def test_checkpoint_import_list_show_tag_export_rm_round_trip(home, tmp_path, capsys):
+    f1 = make_snapshot(tmp_path / "a.safetensors", "ep10", seed=1)
+    f2 = make_snapshot(tmp_path / "b.safetensors", "ep20", seed=2)
+    assert run(capsys, "checkpoint", "import", str(f1))[0] == 0
+    code, row = run_json(capsys, "checkpoint", "import", str(f2))
+    assert code == 0 and row["policy"] == "r1/ep20" and row["env"] == "pong"
+    assert (home / "snapshots" / "r1" / "ep20.safetensors").exists()
+
+    code, out, err = run(capsys, "checkpoint", "import", str(f2))
+    assert code != 0 and "already in the league as r1/ep20" in err and err.count("\n") == 1
+
+    code, rows = run_json(capsys, "checkpoint", "list")
+    assert [r["policy"] for r in rows] == ["r1/ep10", "r1/ep20"]
+    assert run(capsys, "checkpoint", "tag", "ep20", "champion")[0] == 0
+    code, shown = run_json(capsys, "checkpoint", "show", "champion")
+    assert shown["policy"] == "r1/ep20" and shown["tags"] == ["champion"]
+    assert shown["file"]["arch"]["hidden"] == [32, 32] and shown["file"]["obs_shape"] == [8, 6]
+    code, latest = run_json(capsys, "checkpoint", "show", "latest")
+    assert latest["policy"] == "r1/ep20"
+
+    out_file = tmp_path / "exported.safetensors"
+    assert run(capsys, "checkpoint", "export", "r1/ep10", str(out_file))[0] == 0
+    other = tmp_path / "other_home"
+    code, row = run_json(capsys, "checkpoint", "import", str(out_file), "--run", "friend", "--home", str(other))
+    assert code == 0 and row["policy"] == "friend/ep10"
+
+    # rm keeps the games in the ledger
+    assert run(capsys, "match", "ep10", "cpu", "--games", "4", "--quiet")[0] == 0
+    code, out, err = run(capsys, "checkpoint", "rm", "ep10")
+    assert code == 0 and "4 games stay in the ledger" in out
+    assert not (home / "snapshots" / "r1" / "ep10.safetensors").exists()
+    with League.open(home) as league:
+        assert league.count_games("pong") == 4
+    code, rows = run_json(capsys, "checkpoint", "list")
+    assert [r["policy"] for r in rows] == ["r1/ep20"]
+
+
+def test_name_errors_list_candidates_and_corrupt_files_are_refused(home, tmp_path, capsys):
+    make_snapshot(tmp_path / "a.safetensors", "ep10", seed=1)
+    make_snapshot(tmp_path / "b.safetensors", "ep10", seed=2, run="r2")
+    run(capsys, "checkpoint", "import", str(tmp_path / "a.safetensors"))
+    run(capsys, "checkpoint", "import", str(tmp_path / "b.safetensors"))
+    code, out, err = run(capsys, "checkpoint", "show", "ep10")
+    assert code == 2 and "ambiguous" in err and "r1/ep10" in err and "r2/ep10" in err
+    code, out, err = run(capsys, "match", "ep99", "cpu")
+    assert code == 2 and "no policy named 'ep99'" in err and "r1/ep10" in err
+
+    bad = tmp_path / "corrupt.safetensors"
+    data = bytearray((tmp_path / "a.safetensors").read_bytes())
+    data[-10] ^= 0xFF
+    bad.write_bytes(bytes(data))
+    code, out, err = run(capsys, "checkpoint", "import", str(bad))
+    assert code == 2 and str(bad) in err and "checksum" in err and err.count("\n") == 1
+    wrong = make_snapshot(tmp_path / "wrong.safetensors", "ep5", seed=3, obs_shape=(4, 6))
+    code, out, err = run(capsys, "checkpoint", "import", str(wrong))
+    assert code == 2 and str(wrong) in err
+
+
+def test_match_plays_pairs_stores_games_and_reports(home, capsys):
+    code, rep = run_json(capsys, "match", "cpu", "random", "--env", "pong", "--games", "20", "--seed", "5")
+    assert code == 0
+    assert rep["games"] == 20 and rep["wins"] == 20 and rep["losses"] == 0
+    assert rep["pentanomial"] == [0, 0, 0, 0, 10]
+    assert rep["elo_low"] > 400 and rep["los"] > 0.999 and rep["match_id"] == 1
+    with League.open(home) as league:
+        table = league.games("pong")
+        assert len(table) == 20
+        assert sorted(table.seed.tolist()) == sorted([5 + i // 2 for i in range(20)])
+        cpu = league.find_players("cpu", "pong")[0]
+        assert (table.player_a == cpu.id).sum() == 10, "each seed once in each seat order"
+    code, rep = run_json(capsys, "match", "cpu", "random", "--games", "6", "--no-store")
+    with League.open(home) as league:
+        assert league.count_games("pong") == 20 and rep["match_id"] is None
+
+
+def test_sprt_exit_codes(home, capsys):
+    code, rep = run_json(capsys, "match", "cpu", "random", "--sprt", "--elo0", "0", "--elo1", "100",
+                         "--max-games", "400", "--no-store")
+    assert code == 0 and rep["sprt"]["decision"] == "H1" and rep["sprt"]["llr"] >= rep["sprt"]["upper"]
+    assert rep["games"] < 400, "stops as soon as the LLR crosses a bound"
+    code, rep = run_json(capsys, "match", "random", "cpu", "--sprt", "--elo0", "0", "--elo1", "100",
+                         "--max-games", "400", "--no-store")
+    assert code == 1 and rep["sprt"]["decision"] == "H0"
+    code, rep = run_json(capsys, "match", "cpu", "random", "--sprt", "--elo0", "2000", "--elo1", "2010",
+                         "--max-games", "4", "--no-store")
+    assert code == 3 and rep["sprt"]["decision"] is None and rep["games"] == 4
+
+
+def test_elo_fit_on_a_results_file_matches_hand_computed_ratings(tmp_path, capsys):
+    f = tmp_path / "results.csv"
+    f.write_text("player_a,player_b,result\n" + "a,b,1\n" * 7 + "a,b,0\n" * 3)
+    code, rows = run_json(capsys, "elo", "fit", "--results", str(f), "--anchor", "b=1000", "--bootstrap", "0")
+    assert code == 0
+    by = {r["policy"]: r for r in rows}
+    assert by["a"]["elo"] == pytest.approx(1000 + 400 * __import__("math").log10(7 / 3), abs=0.1)  # 1147.2
+    assert list(rows[0])[:10] == ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses",
+                                  "rank"]
+    bad = tmp_path / "bad.csv"
+    bad.write_text("player_a,player_b,result\na,b,1\na,b,2\n")
+    code, out, err = run(capsys, "elo", "fit", "--results", str(bad))
+    assert code == 2 and f"{bad}:3:" in err and err.count("\n") == 1
+
+
+def test_ladder_gate_and_tournament(home, tmp_path, capsys):
+    run(capsys, "checkpoint", "import", str(make_snapshot(tmp_path / "a.safetensors", "ep10", seed=1)))
+    code, rows = run_json(capsys, "league", "tournament", "cpu", "random", "ep10", "--games-per-pair", "10",
+                          "--bootstrap", "50")
+    assert code == 0
+    with League.open(home) as league:
+        assert league.count_games("pong") == 30
+    assert rows[0]["policy"] == "cpu" and rows[0]["rank"] == 1
+    assert {r["policy"] for r in rows} == {"cpu", "random", "r1/ep10"}
+    assert all(r["games"] == 20 for r in rows)
+    # A second run finds nothing missing and plays nothing.
+    run_json(capsys, "league", "tournament", "cpu", "random", "ep10", "--games-per-pair", "10")
+    with League.open(home) as league:
+        assert league.count_games("pong") == 30
+
+    code, ladder = run_json(capsys, "league", "ladder", "--bootstrap", "50")
+    assert code == 0 and [r["policy"] for r in ladder][0] == "cpu"
+    anchor = next(r for r in ladder if r["anchor"])
+    assert anchor["policy"] == "random" and anchor["elo"] == 1000.0
+    code, out, err = run(capsys, "league", "ladder", "--csv", "--bootstrap", "0")
+    assert out.splitlines()[0].startswith("policy,kind,elo,ci_low,ci_high,games,wins,draws,losses,rank")
+
+    code, verdict = run_json(capsys, "elo", "gate", "cpu", "--vs", "random", "--min-diff", "200", "--games", "10")
+    assert code == 0 and verdict["passed"] and verdict["played_games"] == 0 and verdict["stored_games"] == 10
+    code, verdict = run_json(capsys, "elo", "gate", "random", "--vs", "cpu", "--min-diff", "0", "--games", "16")
+    assert code == 1 and not verdict["passed"] and verdict["played_games"] == 6
+
+
+def test_bad_option_values_give_one_line_errors(home, capsys):
+    for args, needle in (
+        (["match", "cpu", "random", "--env", "chess"], "unknown env 'chess'"),
+        (["match", "cpu", "random", "--games", "0"], "--games"),
+        (["match", "cpu", "random", "--sprt", "--elo0", "5", "--elo1", "1"], "--elo0"),
+        (["elo", "fit", "--anchor", "random"], "--anchor"),
+        (["elo", "fit", "--results", "/no/such/file.csv"], "file.csv"),
+        (["match", "cpu", "cpu"], "two different players"),
+    ):
+        code, out, err = run(capsys, *args)
+        assert code == 2, args
+        assert needle in err and err.count("\n") == 1 and "Traceback" not in err, (args, err)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Several processes, and a process killed midway
+def marl_proc(home: Path, *args: str) -> subprocess.Popen:
+    env = dict(os.environ, MARL_HOME=str(home))
+    return subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+
+
+def test_two_match_processes_share_one_sqlite_league(home):
+    procs = [marl_proc(home, "match", "cpu", "random", "--env", "pong", "--games", "200", "--parallel", "16",
+                       "--seed", str(1000 * i), "--json") for i in range(2)]
+    outs = [p.communicate(timeout=300) for p in procs]
+    for p, (out, err) in zip(procs, outs, strict=True):
+        assert p.returncode == 0, err
+        assert "locked" not in err
+        assert json.loads(out)["games"] == 200
+    with League.open(home) as league:
+        assert league.count_games("pong") == 400
+        assert len({m for m in league.games("pong").match_id.tolist()}) == 2
+
+
+def test_a_match_killed_midway_leaves_a_consistent_ledger(home):
+    p = marl_proc(home, "match", "cpu", "random", "--env", "pong", "--games", "100000", "--parallel", "32")
+    db = home / "league.db"
+    deadline = time.time() + 120
+    stored = 0
+    while time.time() < deadline and stored < 64:
+        time.sleep(0.2)
+        if db.exists():
+            with sqlite3.connect(db) as con:
+                try:
+                    stored = con.execute("select count(*) from games").fetchone()[0]
+                except sqlite3.OperationalError:
+                    stored = 0
+    p.send_signal(signal.SIGKILL)
+    p.wait(timeout=30)
+    assert stored >= 64
+    with sqlite3.connect(db) as con:
+        assert con.execute("pragma integrity_check").fetchone()[0] == "ok"
+        games = con.execute("select count(*) from games").fetchone()[0]
+        seats = con.execute("select count(*) from game_seats").fetchone()[0]
+    assert games % 32 == 0, "only whole chunks of games are stored"
+    assert seats == 2 * games
+    with League.open(home) as league:
+        table = league.games("pong")
+        assert len(table) == games
+        before = {p.name: p.elo for p in league.players("pong")}
+        league.recompute_online_elo("pong")
+        assert {p.name: p.elo for p in league.players("pong")} == pytest.approx(before)
