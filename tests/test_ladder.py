@@ -486,3 +486,21 @@ def test_head_to_head_pentanomial(league: League) -> None:
     assert math.isfinite(sprt_llr(h["pentanomial"], 0.0, 10.0))
     with pytest.raises(LeagueError):
         head_to_head(league, a, a)
+
+
+def test_flagged_players_have_open_intervals_whatever_the_interval_method(tmp_path):
+    """A perfect score has no upper limit and an unconnected player no limit at all, bootstrap or not."""
+    from selfplay_cli.league.ladder import fit_table
+
+    # c beats a and b every time; a and b never met: a is the anchor, c is perfect, b is disconnected from a.
+    names = ["a", "b", "c"]
+    a = np.array([2] * 10 + [2] * 10)
+    b = np.array([0] * 10 + [1] * 10)
+    s = np.ones(20)
+    for boot in (0, 50):
+        rows = {r.policy: r for r in fit_table(names, a, b, s, anchor="a", bootstrap=boot)}
+        assert rows["c"].flag == "perfect" and rows["c"].ci_high - rows["c"].elo >= 2000, boot
+        assert rows["b"].flag is not None
+        assert rows["b"].ci_low < 0 and rows["b"].ci_high > 2000, boot
+        assert rows["a"].ci_low == rows["a"].ci_high == 1000.0
+        assert rows["b"].rank == 1, "b cannot be told apart from anyone"

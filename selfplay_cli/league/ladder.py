@@ -180,16 +180,22 @@ def _normal_ci(
         se[idx] = np.minimum(sub, MAX_ELO)
     z = normal_quantile(0.5 + 0.5 * confidence)
     low, high = ratings - z * se, ratings + z * se
+    return low, high
+
+
+def _open_flagged_sides(ratings: np.ndarray, flags: list[str | None], low: np.ndarray, high: np.ndarray,
+                        anchor: int) -> None:
+    """Intervals of players without a maximum-likelihood rating are open on the unknown side (whatever
+    interval method was used): a perfect score has no upper limit, a zero score no lower one, and a player not
+    connected to the anchor neither. The open side is drawn at +-MAX_ELO from the bound. The anchor's rating
+    is fixed by definition, so its interval stays a point."""
     for i, flag in enumerate(flags):
         if i == anchor:
             continue
-        if flag == FLAG_PERFECT:
-            high[i] = ratings[i] + MAX_ELO
-        elif flag == FLAG_ZERO:
-            low[i] = ratings[i] - MAX_ELO
-        elif flag in (FLAG_DISCONNECTED, FLAG_UNRATED):
-            low[i], high[i] = ratings[i] - MAX_ELO, ratings[i] + MAX_ELO
-    return low, high
+        if flag in (FLAG_PERFECT, FLAG_DISCONNECTED, FLAG_UNRATED):
+            high[i] = max(high[i], ratings[i] + MAX_ELO)
+        if flag in (FLAG_ZERO, FLAG_DISCONNECTED, FLAG_UNRATED):
+            low[i] = min(low[i], ratings[i] - MAX_ELO)
 
 
 def _sort_rows(rows: list[LadderRow]) -> list[LadderRow]:
@@ -258,6 +264,7 @@ def fit_table(
     ratings = np.asarray(fit.ratings, dtype=np.float64)
     low = np.minimum(np.asarray(low, dtype=np.float64), ratings)
     high = np.maximum(np.asarray(high, dtype=np.float64), ratings)
+    _open_flagged_sides(ratings, list(fit.flags), low, high, k)
     if not (np.all(np.isfinite(ratings)) and np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
         raise AssertionError("rating fit produced a non-finite value")  # pragma: no cover
     ranks = rank_by_ci(ratings, low, high)
