@@ -1,0 +1,508 @@
+"""Opponent matchmaking for self-play training: self / latest / uniform / PFSP over a snapshot pool, plus bots.
+
+The training loop asks a :class:`Matchmaker` for the opponents of a batch of new games of one learner, and
+reports finished games back to a :class:`WinRates` book, which PFSP reads. Everything here works on plain
+data (integer player ids and results), so it is testable without a database; :func:`load_win_rates` is
+the one bridge to a :class:`~selfplay_cli.league.store.League`.
+
+Opponent distribution
+---------------------
+For a learner, :meth:`Matchmaker.probabilities` builds the distribution in three layers:
+
+1. **Bots** first: scripted bot ``b`` is the opponent with probability ``bots[b]`` (config, summing to
+   ``B <= 1``). The remaining mass is ``R = 1 - B``.
+2. **Self** (ML-Agents ``play_against_latest_model_ratio``): the opponent is :data:`LATEST_LEARNER`
+   (the learner itself / its current partner; the loop decides which) with probability
+   ``R * latest_ratio``. In mode ``self``, or while the pool is empty (no snapshot yet), it gets all of ``R``.
+3. **Pool**: the remaining ``R * (1 - latest_ratio)`` goes to the last ``window`` snapshots of the pool
+   (ML-Agents ``window``; the pool is given oldest first):
+
+   * ``latest``: all of it to the newest snapshot;
+   * ``uniform``: split equally (ML-Agents self-play is exactly ``uniform`` + ``latest_ratio``);
+   * ``pfsp``: AlphaStar prioritized fictitious self-play, candidate ``B`` weighted by ``f(P[learner beats B])``
+     with ``f_hard(x) = (1 - x)**2`` (focus on the opponents the learner loses to) or
+     ``f_var(x) = x * (1 - x)`` (focus on opponents of the learner's level), weights normalised.
+
+   PFSP has **no epsilon floor** (as in AlphaStar): with the default ``prior > 0`` every win rate lies
+   strictly inside (0, 1), so every candidate already has a positive weight. Only with ``prior = 0`` can a
+   weight be exactly 0 (a candidate never beaten / always beaten); such a candidate is then never drawn,
+   and if *every* weight is 0 the pool share is split uniformly instead.
+
+Ids with probability 0 are left out of the returned dict; the ids that remain sum to 1.
+
+Win rates
+---------
+:class:`WinRates` keeps, per ``(learner, opponent)`` pair, an exponentially decayed record. A game with
+the learner's points ``score`` (1 win, 0.5 draw, 0 loss) does::
+
+    wins  = decay * wins  + score
+    games = decay * games + 1
+
+(the decay, default 0.99, is applied once per game *against that opponent*, not per wall-clock step), and::
+
+    P[learner beats opponent] = (wins + 0.5 * prior) / (games + prior)
+
+i.e. a prior of ``prior`` (default 1) pseudo-games at 50 %. An unseen pair has ``P = 0.5``. Games with
+the opponent :data:`LATEST_LEARNER` or the learner itself are ignored (they carry no PFSP information).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from selfplay_cli.errors import MarlError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from selfplay_cli.league.store import League
+
+__all__ = [
+    "LATEST_LEARNER",
+    "MODES",
+    "PFSP_WEIGHTINGS",
+    "Matchmaker",
+    "MatchmakerConfig",
+    "WinRates",
+    "f_hard",
+    "f_var",
+    "load_win_rates",
+    "parse_bots",
+]
+
+LATEST_LEARNER = -1
+"""Sentinel opponent id: the learner itself / its current partner (never a player id of the league)."""
+
+MODES = ("self", "latest", "uniform", "pfsp")
+"""Opponent selection modes of :class:`MatchmakerConfig`."""
+
+_SUM_TOL = 1e-9
+_STATE_VERSION = 1
+
+
+def f_hard(x: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """AlphaStar ``f_hard(x) = (1 - x)**2``: weight opponents the learner loses to."""
+    x = np.asarray(x, dtype=np.float64)
+    return (1.0 - x) ** 2
+
+
+def f_var(x: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """AlphaStar ``f_var(x) = x * (1 - x)``: weight opponents of about the learner's level."""
+    x = np.asarray(x, dtype=np.float64)
+    return x * (1.0 - x)
+
+
+PFSP_WEIGHTINGS: dict[str, Callable[[npt.ArrayLike], npt.NDArray[np.float64]]] = {"hard": f_hard, "var": f_var}
+"""PFSP weighting functions by ``--pfsp`` name."""
+
+
+def _is_number(v: object) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+
+
+def _check_bots(bots: Mapping[str, float]) -> dict[str, float]:
+    """Validate a bot mix and return it as a plain ``{name: float}`` dict."""
+    if not isinstance(bots, Mapping):
+        raise MarlError(f"bots must map bot names to probabilities, got {type(bots).__name__}")
+    out: dict[str, float] = {}
+    for name, p in bots.items():
+        if not isinstance(name, str) or not name.strip() or name != name.strip():
+            raise MarlError(f"invalid bot name {name!r}")
+        if not _is_number(p) or not math.isfinite(float(p)):
+            raise MarlError(f"bot {name!r}: probability must be a number, got {p!r}")
+        if float(p) < 0.0:
+            raise MarlError(f"bot {name!r}: probability must be >= 0, got {float(p):g}")
+        out[name] = float(p)
+    total = sum(out.values())
+    if total > 1.0 + _SUM_TOL:
+        raise MarlError(f"bot probabilities sum to {total:g}, more than 1")
+    return out
+
+
+def parse_bots(text: str) -> dict[str, float]:
+    """Parse a ``--bots`` value such as ``"cpu=0.1,random=0.05"`` into ``{"cpu": 0.1, "random": 0.05}``.
+
+    Whitespace around names and numbers is ignored; an empty (or blank) string means no bots.
+
+    Raises:
+        MarlError: an item without ``=``, an empty name, a value that is not a number, a repeated name,
+            a negative probability, or probabilities summing to more than 1.
+    """
+    out: dict[str, float] = {}
+    if text is None or not text.strip():
+        return out
+    for raw in text.split(","):
+        item = raw.strip()
+        if not item:
+            raise MarlError(f"invalid --bots {text!r}: empty item (expected name=prob,name=prob)")
+        name, sep, value = item.partition("=")
+        name, value = name.strip(), value.strip()
+        if not sep or not name:
+            raise MarlError(f"invalid --bots item {item!r}: expected name=probability")
+        try:
+            p = float(value)
+        except ValueError:
+            raise MarlError(f"invalid --bots item {item!r}: {value!r} is not a number") from None
+        if name in out:
+            raise MarlError(f"invalid --bots {text!r}: bot {name!r} given twice")
+        out[name] = p
+    return _check_bots(out)
+
+
+@dataclass(frozen=True)
+class MatchmakerConfig:
+    """How a learner's opponents are chosen (see the module docstring for the exact distribution).
+
+    Attributes:
+        mode: ``self`` | ``latest`` | ``uniform`` | ``pfsp``.
+        window: how many of the newest pool snapshots are candidates (ML-Agents ``window``, >= 1).
+        latest_ratio: probability (after bots) of playing :data:`LATEST_LEARNER` (ML-Agents
+            ``play_against_latest_model_ratio``), in [0, 1].
+        bots: bot name -> probability of facing that bot, taken before anything else; sum <= 1.
+        pfsp: PFSP weighting, ``hard`` (``(1-x)**2``) or ``var`` (``x*(1-x)``).
+        decay: per-game decay of the win-rate book, in (0, 1].
+        prior: weight (in games) of the 50 % prior of the win-rate book, >= 0.
+    """
+
+    mode: str = "pfsp"
+    window: int = 10
+    latest_ratio: float = 0.5
+    bots: dict[str, float] = field(default_factory=dict)
+    pfsp: str = "hard"
+    decay: float = 0.99
+    prior: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise MarlError(f"unknown matchmaking mode {self.mode!r} (expected one of {', '.join(MODES)})")
+        if self.pfsp not in PFSP_WEIGHTINGS:
+            raise MarlError(f"unknown PFSP weighting {self.pfsp!r} (expected one of {', '.join(PFSP_WEIGHTINGS)})")
+        if not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool) or self.window < 1:
+            raise MarlError(f"window must be a whole number >= 1, got {self.window!r}")
+        if not _is_number(self.latest_ratio) or not (0.0 <= float(self.latest_ratio) <= 1.0):
+            raise MarlError(f"latest ratio must lie in [0, 1], got {self.latest_ratio!r}")
+        if not _is_number(self.decay) or not (0.0 < float(self.decay) <= 1.0):
+            raise MarlError(f"win-rate decay must lie in (0, 1], got {self.decay!r}")
+        if not _is_number(self.prior) or not math.isfinite(float(self.prior)) or float(self.prior) < 0.0:
+            raise MarlError(f"win-rate prior must be a number >= 0, got {self.prior!r}")
+        object.__setattr__(self, "window", int(self.window))
+        object.__setattr__(self, "latest_ratio", float(self.latest_ratio))
+        object.__setattr__(self, "decay", float(self.decay))
+        object.__setattr__(self, "prior", float(self.prior))
+        object.__setattr__(self, "bots", _check_bots(self.bots))
+
+    def new_win_rates(self) -> WinRates:
+        """An empty win-rate book with this config's decay and prior."""
+        return WinRates(decay=self.decay, prior=self.prior)
+
+
+# --------------------------------------------------------------------------------------------------
+# Win rates
+# --------------------------------------------------------------------------------------------------
+
+
+class WinRates:
+    """Exponentially decayed win rates per ``(learner, opponent)`` pair (see the module docstring).
+
+    Attributes:
+        decay: factor applied to a pair's record before each new game of that pair, in (0, 1].
+        prior: weight in games of the 50 % prior, >= 0.
+    """
+
+    def __init__(self, decay: float = 0.99, prior: float = 1.0) -> None:
+        if not (0.0 < float(decay) <= 1.0):
+            raise ValueError(f"decay must lie in (0, 1], got {decay}")
+        if not (math.isfinite(float(prior)) and float(prior) >= 0.0):
+            raise ValueError(f"prior must be >= 0, got {prior}")
+        self.decay = float(decay)
+        self.prior = float(prior)
+        self._book: dict[tuple[int, int], tuple[float, float]] = {}
+
+    def __len__(self) -> int:
+        return len(self._book)
+
+    def __repr__(self) -> str:
+        return f"WinRates(decay={self.decay}, prior={self.prior}, pairs={len(self._book)})"
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, WinRates):
+            return NotImplemented
+        return (self.decay, self.prior, self._book) == (other.decay, other.prior, other._book)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable
+
+    @staticmethod
+    def _check_score(score: float) -> float:
+        s = float(score)
+        if not (0.0 <= s <= 1.0):
+            raise ValueError(f"score must lie in [0, 1] (1 win, 0.5 draw, 0 loss), got {score}")
+        return s
+
+    def update(self, learner: int, opponent: int, score: float) -> None:
+        """Record one game: ``wins = decay*wins + score``, ``games = decay*games + 1`` for this pair.
+
+        ``score`` is the learner's points (1 / 0.5 / 0). Games against :data:`LATEST_LEARNER` or the learner
+        itself are ignored.
+        """
+        s = self._check_score(score)
+        learner, opponent = int(learner), int(opponent)
+        if opponent in (LATEST_LEARNER, learner):
+            return
+        w, g = self._book.get((learner, opponent), (0.0, 0.0))
+        self._book[(learner, opponent)] = (self.decay * w + s, self.decay * g + 1.0)
+
+    def update_many(self, learner: int, opponents: npt.ArrayLike, scores: npt.ArrayLike) -> None:
+        """Record several games of one learner, in array order (same result as calling :meth:`update` in order)."""
+        opp = np.asarray(opponents, dtype=np.int64).ravel()
+        sc = np.asarray(scores, dtype=np.float64).ravel()
+        if opp.shape != sc.shape:
+            raise ValueError(f"opponents and scores differ in length ({opp.size} vs {sc.size})")
+        self._apply(np.full(opp.shape, int(learner), dtype=np.int64), opp, sc)
+
+    def _apply(self, learners: npt.NDArray[np.int64], opponents: npt.NDArray[np.int64],
+               scores: npt.NDArray[np.float64]) -> None:
+        """Vectorised in-order updates: per pair with ``m`` new games, the ``i``-th of them followed by ``k_i``
+        later ones contributes ``decay**k_i``, and the old record is multiplied by ``decay**m``."""
+        if scores.size and (np.any(~(scores >= 0.0)) or np.any(~(scores <= 1.0))):
+            raise ValueError("scores must lie in [0, 1] (1 win, 0.5 draw, 0 loss)")
+        keep = (opponents != LATEST_LEARNER) & (opponents != learners)
+        learners, opponents, scores = learners[keep], opponents[keep], scores[keep]
+        if scores.size == 0:
+            return
+        pairs, inv = np.unique(np.stack([learners, opponents], axis=1), axis=0, return_inverse=True)
+        inv = inv.ravel()
+        counts = np.bincount(inv, minlength=len(pairs))
+        order = np.argsort(inv, kind="stable")
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        pos = np.empty(inv.size, dtype=np.int64)
+        pos[order] = np.arange(inv.size) - np.repeat(starts, counts)  # index of each game within its pair
+        later = counts[inv] - 1 - pos  # games of the same pair after this one
+        w = self.decay ** later.astype(np.float64)
+        add_wins = np.bincount(inv, weights=w * scores, minlength=len(pairs))
+        add_games = np.bincount(inv, weights=w, minlength=len(pairs))
+        scale = self.decay ** counts.astype(np.float64)
+        for j, (a, b) in enumerate(pairs.tolist()):
+            old_w, old_g = self._book.get((a, b), (0.0, 0.0))
+            self._book[(a, b)] = (float(scale[j] * old_w + add_wins[j]), float(scale[j] * old_g + add_games[j]))
+
+    def record(self, learner: int, opponent: int) -> tuple[float, float]:
+        """The decayed ``(wins, games)`` of a pair (``(0, 0)`` if unseen)."""
+        return self._book.get((int(learner), int(opponent)), (0.0, 0.0))
+
+    def p_win(self, learner: int, opponent: int) -> float:
+        """``(wins + 0.5*prior) / (games + prior)``; 0.5 for an unseen pair."""
+        w, g = self.record(learner, opponent)
+        if g + self.prior <= 0.0:
+            return 0.5
+        return (w + 0.5 * self.prior) / (g + self.prior)
+
+    def p_win_many(self, learner: int, opponents: Iterable[int]) -> npt.NDArray[np.float64]:
+        """:meth:`p_win` for each opponent."""
+        return np.array([self.p_win(learner, o) for o in opponents], dtype=np.float64)
+
+    def pairs(self) -> list[tuple[int, int]]:
+        """The ``(learner, opponent)`` pairs with a record, sorted."""
+        return sorted(self._book)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable state: ``{"decay", "prior", "pairs": [[learner, opponent, wins, games], ...]}``."""
+        return {
+            "decay": self.decay,
+            "prior": self.prior,
+            "pairs": [[a, b, self._book[(a, b)][0], self._book[(a, b)][1]] for a, b in sorted(self._book)],
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> WinRates:
+        """Inverse of :meth:`to_dict`. Raises MarlError on a malformed state (e.g. a corrupt resume file)."""
+        try:
+            rates = cls(decay=float(data["decay"]), prior=float(data["prior"]))
+            for a, b, w, g in data["pairs"]:
+                w, g = float(w), float(g)
+                if not (math.isfinite(w) and math.isfinite(g) and 0.0 <= w <= g + 1e-9):
+                    raise ValueError(f"bad record {w}/{g}")
+                rates._book[(int(a), int(b))] = (w, g)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise MarlError(f"malformed win-rate state: {exc}") from None
+        return rates
+
+    @classmethod
+    def from_ledger(cls, table_like: Any, learner_ids: Iterable[int], decay: float = 0.99,
+                    prior: float = 1.0) -> WinRates:
+        """Replay 2-seat games in order (e.g. a :class:`~selfplay_cli.league.store.GameTable`).
+
+        ``table_like`` needs the arrays ``player_a``, ``player_b`` and ``score_a`` (seat 0's points), in
+        game order. Every game whose seat-0 player is a learner updates ``(player_a, player_b)`` with
+        ``score_a``; every game whose seat-1 player is a learner updates ``(player_b, player_a)`` with
+        ``1 - score_a`` (both, if both are learners). The result equals calling :meth:`update` game by game.
+        """
+        rates = cls(decay=decay, prior=prior)
+        pa = np.asarray(table_like.player_a, dtype=np.int64).ravel()
+        pb = np.asarray(table_like.player_b, dtype=np.int64).ravel()
+        sa = np.asarray(table_like.score_a, dtype=np.float64).ravel()
+        if not (pa.shape == pb.shape == sa.shape):
+            raise ValueError("player_a, player_b and score_a must have the same length")
+        learners = np.fromiter((int(x) for x in learner_ids), dtype=np.int64)
+        in_a, in_b = np.isin(pa, learners), np.isin(pb, learners)
+        # Interleave the two perspectives of each game in game order (the pairs differ, so the order
+        # between the two views of one game does not matter).
+        idx = np.concatenate([np.flatnonzero(in_a), np.flatnonzero(in_b)])
+        me = np.concatenate([pa[in_a], pb[in_b]])
+        opp = np.concatenate([pb[in_a], pa[in_b]])
+        sc = np.concatenate([sa[in_a], 1.0 - sa[in_b]])
+        order = np.argsort(idx, kind="stable")
+        rates._apply(me[order], opp[order], sc[order])
+        return rates
+
+
+def load_win_rates(league: League, env: str, learner_ids: Iterable[int], decay: float = 0.99,
+                   prior: float = 1.0) -> WinRates:
+    """The win-rate book of ``learner_ids`` replayed from the league ledger of ``env`` (for a resumed run).
+
+    Uses :meth:`League.games` (2-seat games between different players, in game-id order) restricted to games
+    in which a learner sat, then :meth:`WinRates.from_ledger`.
+    """
+    ids = [int(x) for x in learner_ids]
+    table = league.games(env, players=ids, any_seat=True)
+    return WinRates.from_ledger(table, ids, decay=decay, prior=prior)
+
+
+# --------------------------------------------------------------------------------------------------
+# Matchmaker
+# --------------------------------------------------------------------------------------------------
+
+
+class Matchmaker:
+    """Draws opponents for learners from bots, :data:`LATEST_LEARNER` and the snapshot pool.
+
+    Args:
+        config: the selection rules.
+        rng: the generator every draw uses (its state is part of :meth:`state_dict`).
+        bot_ids: bot name -> player id, for at least every bot of ``config.bots``.
+
+    Raises:
+        MarlError: a bot of the config has no id (unknown bot for this env).
+    """
+
+    def __init__(self, config: MatchmakerConfig, rng: np.random.Generator, bot_ids: Mapping[str, int]) -> None:
+        self.config = config
+        self.rng = rng
+        self.bot_ids = {str(k): int(v) for k, v in bot_ids.items()}
+        missing = [b for b in config.bots if b not in self.bot_ids]
+        if missing:
+            known = ", ".join(sorted(self.bot_ids)) or "none"
+            raise MarlError(f"unknown bot {missing[0]!r} (known bots: {known})")
+        for name, pid in self.bot_ids.items():
+            if pid == LATEST_LEARNER:
+                raise ValueError(f"bot {name!r} has the reserved id {LATEST_LEARNER}")
+        self._weight_fn = PFSP_WEIGHTINGS[config.pfsp]
+        self._pool: tuple[int, ...] = ()
+
+    # ------------------------------------------------------------------ pool
+
+    def set_pool(self, snapshot_ids: Sequence[int]) -> None:
+        """Set the snapshot pool, oldest first; the candidates are the last ``window`` of them.
+
+        Raises ValueError for a repeated id or the reserved id :data:`LATEST_LEARNER`.
+        """
+        self._pool = self._check_pool(snapshot_ids)
+
+    @staticmethod
+    def _check_pool(snapshot_ids: Iterable[int]) -> tuple[int, ...]:
+        pool = tuple(int(x) for x in snapshot_ids)
+        if len(set(pool)) != len(pool):
+            raise ValueError("set_pool: snapshot ids must be distinct")
+        if LATEST_LEARNER in pool:
+            raise ValueError(f"set_pool: {LATEST_LEARNER} is reserved for LATEST_LEARNER")
+        return pool
+
+    @property
+    def pool(self) -> tuple[int, ...]:
+        """The whole pool, oldest first."""
+        return self._pool
+
+    @property
+    def candidates(self) -> tuple[int, ...]:
+        """The last ``window`` snapshots of the pool, oldest first."""
+        return self._pool[-self.config.window:]
+
+    # ------------------------------------------------------------------ distribution
+
+    def pool_weights(self, learner: int, rates: WinRates) -> dict[int, float]:
+        """The mode's distribution over :attr:`candidates` alone (sums to 1; empty for an empty pool / ``self``)."""
+        cand = self.candidates
+        mode = self.config.mode
+        if not cand or mode == "self":
+            return {}
+        if mode == "latest":
+            return {cand[-1]: 1.0}
+        if mode == "uniform":
+            return {c: 1.0 / len(cand) for c in cand}
+        w = self._weight_fn(rates.p_win_many(learner, cand))
+        total = float(w.sum())
+        if not total > 0.0:  # only possible with prior = 0: every candidate always won / lost
+            return {c: 1.0 / len(cand) for c in cand}
+        return {c: float(x) / total for c, x in zip(cand, w, strict=True)}
+
+    def probabilities(self, learner: int, rates: WinRates) -> dict[int, float]:
+        """Opponent id (bots, :data:`LATEST_LEARNER`, snapshots) -> probability, summing to 1.
+
+        Ids with probability 0 are omitted. Order: bots (config order), LATEST_LEARNER, candidates.
+        """
+        cfg = self.config
+        out: dict[int, float] = {}
+
+        def add(pid: int, p: float) -> None:
+            if p > 0.0:
+                out[pid] = out.get(pid, 0.0) + p
+
+        for name, p in cfg.bots.items():
+            add(self.bot_ids[name], p)
+        rest = max(0.0, 1.0 - sum(cfg.bots.values()))
+        pool = self.pool_weights(learner, rates)
+        if not pool:
+            add(LATEST_LEARNER, rest)
+            return out
+        add(LATEST_LEARNER, rest * cfg.latest_ratio)
+        share = rest * (1.0 - cfg.latest_ratio)
+        for pid, p in pool.items():
+            add(pid, share * p)
+        return out
+
+    def sample(self, learner: int, n: int, rates: WinRates) -> npt.NDArray[np.int64]:
+        """``n`` opponent ids drawn i.i.d. from :meth:`probabilities` (int64 array)."""
+        n = int(n)
+        if n < 0:
+            raise ValueError(f"sample: n must be >= 0, got {n}")
+        probs = self.probabilities(learner, rates)
+        ids = np.fromiter(probs.keys(), dtype=np.int64, count=len(probs))
+        cdf = np.cumsum(np.fromiter(probs.values(), dtype=np.float64, count=len(probs)))
+        cdf /= cdf[-1]
+        cdf[-1] = 1.0
+        u = self.rng.random(n)
+        return ids[np.searchsorted(cdf, u, side="right")]
+
+    # ------------------------------------------------------------------ resume
+
+    def state_dict(self) -> dict[str, Any]:
+        """JSON-serialisable state: the generator state and the pool (the config is not included)."""
+        return {"version": _STATE_VERSION, "rng": self.rng.bit_generator.state, "pool": list(self._pool)}
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`state_dict`; later draws repeat those after the save. MarlError if malformed."""
+        try:
+            if int(state.get("version", 0)) != _STATE_VERSION:
+                raise ValueError(f"unsupported version {state.get('version')!r}")
+            rng_state = dict(state["rng"])
+            want = type(self.rng.bit_generator).__name__
+            if rng_state.get("bit_generator") != want:
+                raise ValueError(f"generator {rng_state.get('bit_generator')!r} is not {want!r}")
+            pool = self._check_pool(state["pool"])
+            self.rng.bit_generator.state = rng_state
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise MarlError(f"malformed matchmaker state: {exc}") from None
+        self._pool = pool
