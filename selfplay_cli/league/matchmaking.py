@@ -43,7 +43,8 @@ the learner's points ``score`` (1 win, 0.5 draw, 0 loss) does::
     P[learner beats opponent] = (wins + 0.5 * prior) / (games + prior)
 
 i.e. a prior of ``prior`` (default 1) pseudo-games at 50 %. An unseen pair has ``P = 0.5``. Games with
-the opponent :data:`LATEST_LEARNER` or the learner itself are ignored (they carry no PFSP information).
+the opponent :data:`LATEST_LEARNER` are ignored (they carry no PFSP information). Learner ids are opaque
+keys: they may be player ids or learner indices (a learner key equal to a snapshot id is not special).
 """
 
 from __future__ import annotations
@@ -245,12 +246,11 @@ class WinRates:
     def update(self, learner: int, opponent: int, score: float) -> None:
         """Record one game: ``wins = decay*wins + score``, ``games = decay*games + 1`` for this pair.
 
-        ``score`` is the learner's points (1 / 0.5 / 0). Games against :data:`LATEST_LEARNER` or the learner
-        itself are ignored.
+        ``score`` is the learner's points (1 / 0.5 / 0). Games against :data:`LATEST_LEARNER` are ignored.
         """
         s = self._check_score(score)
         learner, opponent = int(learner), int(opponent)
-        if opponent in (LATEST_LEARNER, learner):
+        if opponent == LATEST_LEARNER:
             return
         w, g = self._book.get((learner, opponent), (0.0, 0.0))
         self._book[(learner, opponent)] = (self.decay * w + s, self.decay * g + 1.0)
@@ -269,7 +269,7 @@ class WinRates:
         later ones contributes ``decay**k_i``, and the old record is multiplied by ``decay**m``."""
         if scores.size and (np.any(~(scores >= 0.0)) or np.any(~(scores <= 1.0))):
             raise ValueError("scores must lie in [0, 1] (1 win, 0.5 draw, 0 loss)")
-        keep = (opponents != LATEST_LEARNER) & (opponents != learners)
+        keep = opponents != LATEST_LEARNER
         learners, opponents, scores = learners[keep], opponents[keep], scores[keep]
         if scores.size == 0:
             return
