@@ -1,0 +1,1 @@
+"""Learners: each one file that reads top to bottom (PPO, DQN)."""
