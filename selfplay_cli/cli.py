@@ -13,6 +13,7 @@ from .commands import elo as elo_cmd
 from .commands import envs as envs_cmd
 from .commands import league as league_cmd
 from .commands import match as match_cmd
+from .commands import train as train_cmd
 from .envs import UnknownEnvError
 from .errors import MarlError
 
@@ -41,6 +42,7 @@ def _root(
 
 
 app.command("envs", help="List the registered games: agents, spaces, scripted players.")(envs_cmd.envs)
+app.command("train", help="Train agents by self-play into the league (PPO).")(train_cmd.train)
 app.add_typer(checkpoint_cmd.app, name="checkpoint", help="List, inspect, tag, remove, export and import snapshots.")
 app.command("match", help="Play rated games between two policies (Elo difference, CI, LOS, SPRT).")(match_cmd.match)
 app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence intervals; gate a model on its strength.")

@@ -189,16 +189,23 @@ def test_first_to_21_ends_the_game_and_points_to_win_is_configurable():
     assert c3.terminated[0] and c3.outcome()[:, 0].tolist() == [0.0, 1.0]
 
 
-def test_rally_cap_truncates_the_game_without_scoring():
-    c = core1(max_rally_steps=50)
-    place(c, 400, 200, 0.0, 0.0)  # a ball that never reaches anybody
-    c.vx[0] = 1e-9
+def test_rally_cap_ends_the_point_as_a_draw_and_max_steps_truncates_the_game():
+    c = core1(max_rally_steps=50, max_steps=120)
+    c.score[:, 0] = (3, 1)
+    place(c, 400, 200, 1e-9, 0.0)  # a ball that never reaches anybody
+    serves = c.serves[0]
     for _ in range(49):
         c.step(act())
-        assert not c.truncated[0]
-    c.step(act())
-    assert c.truncated[0] and not c.terminated[0] and c.score[:, 0].tolist() == [0, 0]
-    assert c.outcome()[:, 0].tolist() == [0.5, 0.5], "a truncated level game is a draw"
+    assert c.serves[0] == serves and c.drawn_rallies[0] == 0
+    r = c.step(act())
+    assert c.serves[0] == serves + 1 and c.drawn_rallies[0] == 1, "re-served"
+    assert r[:, 0].tolist() == [0.0, 0.0] and c.score[:, 0].tolist() == [3, 1], "nobody scores"
+    assert not c.truncated[0] and not c.terminated[0], "the game goes on"
+    place(c, 400, 200, 1e-9, 0.0)
+    while not c.truncated[0]:
+        c.step(act())
+    assert c.steps[0] == 120 and not c.terminated[0]
+    assert c.outcome()[:, 0].tolist() == [1.0, 0.0], "a truncated game goes to the leader"
 
 
 def test_hit_reward_shaping_and_zero_sum_points():

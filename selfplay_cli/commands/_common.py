@@ -49,6 +49,30 @@ def check_env(env: str | None) -> str | None:
     return env
 
 
+def parse_env_options(env: str, items: list[str] | None) -> dict:
+    """``KEY=VALUE`` game options (ints, floats, true/false or text), checked by the game's own config."""
+    options: dict = {}
+    for item in items or []:
+        key, sep, raw = item.partition("=")
+        if not sep or not key.strip():
+            raise MarlError(f"--env-option must look like KEY=VALUE, not {item!r}")
+        value: object = raw.strip()
+        for cast in (int, float):
+            try:
+                value = cast(raw)
+                break
+            except ValueError:
+                continue
+        if raw.strip().lower() in ("true", "false"):
+            value = raw.strip().lower() == "true"
+        options[key.strip()] = value
+    try:
+        get_env(env).config(**options)
+    except (TypeError, ValueError) as e:
+        raise MarlError(f"{env}: {e}") from None
+    return options
+
+
 def resolve_players(league: League, names: list[str], env: str | None) -> list[PlayerRow]:
     """Resolve names to players. Snapshots imply their game; bot names need the game from them or --env."""
     from ..league.names import resolve

@@ -17,8 +17,9 @@ Two rule sets:
     ball-tracking paddle never misses and two trackers rally forever), a wall hit flips the vertical velocity
     without moving the ball, a paddle move that would leave the court is refused. Kept for comparison.
 
-Under both rules a rally longer than ``max_rally_steps`` ends the game as truncated (the point is not scored)
-and a game longer than ``max_steps`` is truncated too, so no game can run forever.
+Under both rules a rally longer than ``max_rally_steps`` ends the point as a draw: nobody scores and the ball is
+re-served (so leading and then rallying forever earns nothing). A game longer than ``max_steps`` is truncated
+and decided by the score at that moment, so no game can run forever.
 
 Randomness is counter-based: each game has a 64-bit key (its seed) and every serve draws from
 ``hash(key, serve_number, draw)``. A game therefore plays the same whether it runs alone or inside a batch of
@@ -174,6 +175,7 @@ class PongCore:
         self.serves = np.zeros(n, dtype=np.int64)
         self.key = np.zeros(n, dtype=np.uint64)
         self.hits = np.zeros((2, n), dtype=np.int64)  # paddle touches per seat (for stats and shaping)
+        self.drawn_rallies = np.zeros(n, dtype=np.int64)  # rallies ended by the rally cap
         self.terminated = np.zeros(n, dtype=bool)
         self.truncated = np.zeros(n, dtype=bool)
         k = self.config.frame_stack
@@ -196,6 +198,7 @@ class PongCore:
         self.key[g] = game_key(np.asarray(seeds, dtype=np.int64))
         self.score[:, g] = 0
         self.hits[:, g] = 0
+        self.drawn_rallies[g] = 0
         self.steps[g] = 0
         self.serves[g] = 0
         self.terminated[g] = False
@@ -262,11 +265,16 @@ class PongCore:
         self.rally_steps += 1
         self.steps += 1
         if cfg.max_rally_steps:
-            np.greater_equal(self.rally_steps, cfg.max_rally_steps, out=self.truncated)
+            capped = self.rally_steps >= cfg.max_rally_steps
+            if capped.any():  # the point ends as a draw: no score, a new serve
+                g = np.flatnonzero(capped)
+                self.drawn_rallies[g] += 1
+                self._serve(g)
+        if cfg.max_steps:
+            np.greater_equal(self.steps, cfg.max_steps, out=self.truncated)
+            self.truncated &= ~self.terminated
         else:
             self.truncated.fill(False)
-        if cfg.max_steps:
-            self.truncated |= self.steps >= cfg.max_steps
         self._record_frame()
         return rewards
 
@@ -399,7 +407,7 @@ class PongCore:
         return np.stack([left, 1.0 - left])
 
     _STATE_FIELDS = ("bx", "by", "vx", "vy", "paddle", "score", "touched", "rally_steps", "steps", "serves",
-                     "key", "hits", "terminated", "truncated")
+                     "key", "hits", "drawn_rallies", "terminated", "truncated")
 
     def get_state(self, games: np.ndarray | list[int] | None = None) -> dict[str, Any]:
         """An exact copy of the state of some games (all by default), history included."""

@@ -1,0 +1,106 @@
+"""`marl train ENV`: self-play training into the league."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import typer
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from ..errors import MarlError
+from ._common import DbOpt, DeviceOpt, HomeOpt, JsonOpt, open_league, parse_env_options, progress_enabled
+from ._output import console, err_console, print_json
+
+
+def train(
+    env: Annotated[str, typer.Argument(help="The game to train on (see `marl envs`).")],
+    agents: Annotated[int, typer.Option("--agents", help="Learning agents: 2 trains both pong paddles (seed 000); 1 "
+                                        "trains one learner against opponents from the league.")] = 2,
+    algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo.")] = "ppo",
+    sharing: Annotated[str, typer.Option("--sharing", help="nops: one network per learner; fups: one shared "
+                                         "network.")] = "nops",
+    steps: Annotated[int, typer.Option("--steps", help="Budget in game steps.")] = 2_000_000,
+    minutes: Annotated[float | None, typer.Option("--minutes", help="Budget in minutes of wall clock instead "
+                                                  "(fractions allowed).")] = None,
+    run: Annotated[str | None, typer.Option("--run", help="Run name (default: <env>-<n>).")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of networks, games and opponent choice.")] = 0,
+    games: Annotated[int, typer.Option("--games", help="Games played at once.")] = 128,
+    snapshot_every: Annotated[int, typer.Option("--snapshot-every", help="Episodes (finished games) between "
+                                                "snapshots, named epN (0: by steps only).")] = 128,
+    snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", help="Game steps between snapshots (0: by "
+                                                "episodes only).")] = 0,
+    opponents: Annotated[str, typer.Option("--opponents", help="With --agents 1: self | latest | uniform | pfsp "
+                                           "(opponents from the run's snapshots).")] = "pfsp",
+    window: Annotated[int, typer.Option("--window", help="Opponents are drawn from the last WINDOW snapshots "
+                                        "(ML-Agents' window, default 10).")] = 10,
+    latest_ratio: Annotated[float, typer.Option("--latest-ratio", help="Share of games against the current "
+                                                "learner itself (ML-Agents' play_against_latest_model_ratio).")]
+    = 0.5,
+    bots: Annotated[str, typer.Option("--bots", help="Mix in scripted players, e.g. cpu=0.1,random=0.05.")] = "",
+    lr: Annotated[float, typer.Option("--lr", help="Learning rate.")] = 2e-3,
+    env_option: Annotated[list[str] | None, typer.Option("--env-option", help="Game option KEY=VALUE, repeatable "
+                                                         "(e.g. points_to_win=5).")] = None,
+    device: DeviceOpt = "auto",
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Train agents by self-play; every snapshot joins the league and is rated against the scripted players."""
+    from ..algos.ppo import PPOConfig
+    from ..envs import get_env
+    from ..league.matchmaking import MatchmakerConfig, parse_bots
+    from ..train.loop import TrainConfig, Trainer, save_run_config
+
+    spec = get_env(env)
+    env_options = parse_env_options(spec.name, env_option)
+    league = open_league(home, db)
+    try:
+        if run is None:
+            taken = {r.name for r in league.list_runs()}
+            run = next(f"{env}-{i}" for i in range(1, 10_000) if f"{env}-{i}" not in taken)
+        elif league.get_run(run) is not None:
+            raise MarlError(f"a run named '{run}' already exists: choose another --run")
+        try:
+            ppo = PPOConfig(lr=lr)
+        except ValueError as e:
+            raise MarlError(str(e)) from None
+        cfg = TrainConfig(env=spec.name, agents=agents, algo=algo, sharing=sharing, steps=steps, minutes=minutes,
+                          run=run, seed=seed, device=device, games=games, snapshot_every=snapshot_every,
+                          snapshot_steps=snapshot_steps,
+                          opponents=MatchmakerConfig(mode=opponents, window=window, latest_ratio=latest_ratio,
+                                                     bots=parse_bots(bots)),
+                          env_options=env_options, ppo=ppo)
+        league.create_run(run, spec.name, cfg.to_dict(), algo=algo)
+        save_run_config(league, cfg)
+        show = progress_enabled(quiet or json_out)
+        total = 1000
+        with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[info]}"),
+                      TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), console=err_console,
+                      disable=not show, transient=True) as bar:
+            task = bar.add_task(f"train {run}", total=total, info="")
+
+            def on_progress(p: dict) -> None:
+                rate = p["steps"] / max(bar.tasks[0].elapsed or 1e-9, 1e-9)
+                ev = "  ".join(f"vs {k} {100 * v:.0f}%" for k, v in p["eval"].items())
+                bar.update(task, completed=int(total * min(p["progress"], 1.0)),
+                           info=f"{p['steps']:,} steps  {rate:,.0f}/s  {p['episodes']:,} episodes  "
+                                f"elo {p['elo']:.0f}  {ev}")
+
+            trainer = Trainer(league, cfg, on_progress=on_progress)
+            report = trainer.train()
+        league.set_run_status(run, "finished")
+    finally:
+        league.close()
+    data = {"run": report.run, "steps": report.steps, "episodes": report.episodes,
+            "seconds": round(report.seconds, 1), "steps_per_second": round(report.steps_per_second),
+            "snapshots": report.snapshots, "final_eval_score": report.last_eval}
+    if json_out:
+        print_json(data)
+        return
+    console.print(f"run {report.run}: {report.steps:,} game steps in {report.seconds:.0f} s "
+                  f"({report.steps_per_second:,.0f}/s), {report.episodes:,} episodes, "
+                  f"{len(report.snapshots)} snapshots (latest {report.snapshots[-1]})")
+    if report.last_eval:
+        console.print("  latest snapshot scores " + ", ".join(f"{100 * v:.0f}% vs {k}"
+                                                                for k, v in report.last_eval.items()))

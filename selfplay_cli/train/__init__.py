@@ -1,0 +1,1 @@
+"""Training: learners, self-play games and the league in one loop."""

@@ -1,0 +1,294 @@
+"""The training loop: learners play endless batched games, snapshot into the league, and rate as they go.
+
+One loop for every algorithm: it steps the shared :class:`SelfPlayGames`, gives each learner its slots, runs the
+learner's update when its rollout is due, and every ``snapshot_every`` finished games (episodes) it
+
+1. saves each learner as a snapshot file and registers it in the league (``epN``; ``epN-left``/``epN-right`` when
+   each seat has its own network), with its parent (the learner's previous snapshot);
+2. plays rated evaluation games of the new snapshot against the scripted players and stores them;
+3. refreshes the matchmaker's pool (the run's snapshots).
+
+Training games are written to the ledger in batches, under the learner's latest snapshot (the learner has moved on
+a little since, as in ML-Agents' self-play; the evaluation games rate the snapshots exactly).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..algos.ppo import PPOConfig, PPOLearner
+from ..arena import GameResult
+from ..arena.selfplay import OPPONENT, SelfPlayGames, seat_layout
+from ..envs import get_env
+from ..errors import MarlError
+from ..league.matchmaking import LATEST_LEARNER, Matchmaker, MatchmakerConfig, WinRates
+from ..league.store import GameRecord, League
+from ..policies import Policy, ScriptedPolicy
+from ..policies.network import resolve_device
+from ..policies.snapshot import SnapshotMeta, save_snapshot
+from ..rated.match import load_player, run_match
+from ..rated.snapshots import snapshot_relpath
+
+
+@dataclass
+class TrainConfig:
+    """Everything a run is made of; saved with the run so it can be resumed and reproduced."""
+
+    env: str = "pong"
+    agents: int = 2
+    algo: str = "ppo"
+    sharing: str = "nops"
+    steps: int = 2_000_000  # game steps (one step of one game, all seats acting)
+    minutes: float | None = None  # wall-clock budget instead of steps
+    run: str = ""
+    seed: int = 0
+    device: str = "auto"
+    games: int = 128  # games played at once
+    snapshot_every: int = 128  # episodes (finished games) between snapshots; 0: by steps only
+    snapshot_steps: int = 0  # game steps between snapshots; 0: by episodes only
+    eval_games: int = 32  # games against each scripted player after every snapshot
+    opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
+    env_options: dict[str, Any] = field(default_factory=dict)
+    ppo: PPOConfig = field(default_factory=PPOConfig)
+
+    def __post_init__(self) -> None:
+        if self.steps < 1 and self.minutes is None:
+            raise MarlError(f"--steps must be positive, not {self.steps}")
+        if self.minutes is not None and self.minutes <= 0:
+            raise MarlError(f"--minutes must be positive, not {self.minutes}")
+        if self.games < 2:
+            raise MarlError(f"--games must be at least 2, not {self.games}")
+        if self.snapshot_every < 0 or self.snapshot_steps < 0 or not (self.snapshot_every or self.snapshot_steps):
+            raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
+        if self.algo != "ppo":
+            raise MarlError(f"unknown --algo '{self.algo}'; available: ppo")
+        n_seats = len(get_env(self.env).agents)
+        if not 1 <= self.agents <= n_seats:
+            raise MarlError(f"{self.env} has {n_seats} seats: --agents must be between 1 and {n_seats}")
+        if self.sharing not in ("nops", "fups"):
+            raise MarlError(f"--sharing must be nops or fups, not '{self.sharing}'")
+        if self.sharing == "fups" and self.agents == 1:
+            raise MarlError("--sharing fups shares one network between several learners: it needs --agents 2 or more")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["ppo"] = self.ppo.to_dict()
+        d["opponents"] = asdict(self.opponents)
+        return d
+
+
+@dataclass
+class TrainReport:
+    run: str
+    steps: int
+    episodes: int
+    seconds: float
+    snapshots: list[str]
+    last_eval: dict[str, float]
+
+    @property
+    def steps_per_second(self) -> float:
+        return self.steps / self.seconds if self.seconds > 0 else 0.0
+
+
+def _learner_names(spec_agents: tuple[str, ...], cfg: TrainConfig) -> list[str]:
+    if cfg.sharing == "nops" and cfg.agents > 1:
+        return list(spec_agents[: cfg.agents])
+    return ["learner"]
+
+
+class Trainer:
+    """Runs one training run against one league (see the module docstring)."""
+
+    def __init__(self, league: League, cfg: TrainConfig,
+                 on_progress: Callable[[dict[str, Any]], None] | None = None) -> None:
+        self.league, self.cfg = league, cfg
+        self.on_progress = on_progress
+        self.spec = spec = get_env(cfg.env)
+        self.device = resolve_device(cfg.device)
+        if self.device.type == "cpu":
+            torch.set_num_threads(1)  # small networks: one thread is fastest, the other core runs the games
+        if league.home is None:
+            raise MarlError("training needs a league home for its snapshot files: pass --home")
+        self.run_dir = league.home / "runs" / cfg.run
+        game_cfg = spec.config(**cfg.env_options)
+        self.obs_shape = tuple(spec.observation_space(game_cfg).shape)
+        self.n_actions = int(spec.action_space(game_cfg).n)
+        league.ensure_bots(spec.name, spec.bots)
+        self.bot_ids = {p.name: p.id for p in league.players(env=spec.name, kind="bot")}
+
+        layout = seat_layout(len(spec.agents), cfg.games, cfg.agents, cfg.sharing)
+        self.names = _learner_names(spec.agents, cfg)
+        torch.manual_seed(cfg.seed)
+        self.learners = [
+            PPOLearner(self.obs_shape, self.n_actions, int((layout == i).sum()), cfg.ppo, seed=cfg.seed + i,
+                       device=self.device)
+            for i in range(len(self.names))
+        ]
+        self.latest: list[int] = [0] * len(self.learners)  # player id of each learner's latest snapshot
+        self.snapshots: list[str] = []
+        self._snapshot_episode = self._snapshot_step = -1
+        self.episodes_suffix = 0
+        self.matchmaker = Matchmaker(cfg.opponents, np.random.default_rng(cfg.seed), self.bot_ids)
+        self.rates = WinRates(decay=cfg.opponents.decay, prior=cfg.opponents.prior)
+        self._policies: dict[int, Policy] = {}
+        learner_ids = [f"{cfg.run}/{n}" for n in self.names]
+        # The 'self' opponent: the first learner's live network, sampling (one object, so games share a batch).
+        self.live = self.learners[0].policy(learner_ids[0], spec.name, greedy=False)
+        self.games = SelfPlayGames(spec, cfg.games, layout, learner_ids,
+                                   choose_opponents=self._choose if (layout == OPPONENT).any() else None,
+                                   env_options=cfg.env_options, first_seed=cfg.seed * 1_000_003)
+        self.match_id = league.create_match(spec.name, "training", {"run": cfg.run})
+        self.steps = 0
+        self.episodes = 0
+        self.last_eval: dict[str, float] = {}
+
+    # -- opponents -------------------------------------------------------------------------------------------
+    def _opponent_policy(self, pid: int) -> Policy:
+        if pid == LATEST_LEARNER:
+            return self.live
+        if pid not in self._policies:
+            self._policies[pid] = load_player(self.league, self.league.get_player(pid), device=str(self.device),
+                                              greedy=False, seed=pid)
+        return self._policies[pid]
+
+    def _choose(self, n: int) -> list[Policy]:
+        ids = self.matchmaker.sample(0, n, self.rates)
+        return [self._opponent_policy(int(i)) for i in ids]
+
+    # -- snapshots -------------------------------------------------------------------------------------------
+    def _name(self, episode: int, i: int) -> str:
+        base = f"ep{episode}" + (f".{self.episodes_suffix}" if self.episodes_suffix else "")
+        return base if len(self.names) == 1 else f"{base}-{self.names[i]}"
+
+    def snapshot(self) -> None:
+        cfg = self.cfg
+        if self.snapshots and self._snapshot_step == self.steps:
+            return  # nothing played since the last snapshot
+        if self.snapshots and self._snapshot_episode == self.episodes:
+            self.episodes_suffix += 1  # several snapshots within one episode count: epN.1, epN.2, ...
+        else:
+            self.episodes_suffix = 0
+        self._snapshot_episode, self._snapshot_step = self.episodes, self.steps
+        for i, learner in enumerate(self.learners):
+            name = self._name(self.episodes, i)
+            rel = snapshot_relpath(cfg.run, name)
+            parent = self.league.get_player(self.latest[i]).full_name if self.latest[i] else None
+            meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options, obs_shape=self.obs_shape,
+                                n_actions=self.n_actions, arch=cfg.ppo.arch, algo=cfg.algo, step=self.steps,
+                                episode=self.episodes, run=cfg.run, name=name, parent=parent,
+                                seat=self.names[i] if len(self.names) > 1 else None,
+                                extra={"learner": self.names[i]})
+            meta = save_snapshot(self.league.home / rel, learner.net, meta)  # type: ignore[operator]
+            row = self.league.add_snapshot(env=self.spec.name, run=cfg.run, name=name, path=rel,
+                                           sha256=meta.weights_sha256,
+                                           step=self.steps, episode=self.episodes, algo=cfg.algo,
+                                           parent_id=self.latest[i] or None,
+                                           meta={"weights_sha256": meta.weights_sha256, "learner": self.names[i]})
+            self.latest[i] = row.id
+            self.snapshots.append(row.full_name)
+        pool = [p.id for p in self.league.players(env=self.spec.name, kind="snapshot") if p.run == cfg.run]
+        self.matchmaker.set_pool(pool)
+        self.evaluate()
+
+    def evaluate(self) -> None:
+        """Rated games of learner 0's newest snapshot against every scripted player, stored as 'eval'."""
+        if self.cfg.eval_games < 2:
+            return
+        row = self.league.get_player(self.latest[0])
+        me = load_player(self.league, row, device=str(self.device))
+        for bot, bot_id in self.bot_ids.items():
+            opp = ScriptedPolicy(self.spec.name, bot, seed=self.episodes)
+            rep = run_match(me, opp, games=self.cfg.eval_games, first_seed=10_000_000 + self.episodes,
+                            league=self.league, player_ids={me.id: row.id, opp.id: bot_id}, kind="eval")
+            self.last_eval[bot] = rep.stats.score
+
+    # -- the ledger ------------------------------------------------------------------------------------------
+    def _record(self, finished: list[GameResult]) -> None:
+        learner_player = {lid: self.latest[i] for i, lid in enumerate(self.games.learner_ids)}
+        records = []
+        for r in finished:
+            ids = []
+            for p in r.players:
+                if p in learner_player:
+                    ids.append(learner_player[p])
+                else:
+                    pol = next((q for q in self._policies.items() if q[1].id == p), None)
+                    ids.append(pol[0] if pol else self.bot_ids.get(p, 0))
+            if 0 in ids or len(set(ids)) < len(ids):
+                continue  # the learner against itself (or its live copy) carries no rating information
+            records.append(GameRecord(env=r.env, players=tuple(ids), seed=r.seed, scores=r.scores,
+                                      outcome=r.outcome, length=r.length, truncated=r.truncated))
+            if len(self.names) == 1 and self.games.learner_ids[0] in r.players:
+                seat = r.players.index(self.games.learner_ids[0])
+                self.rates.update(0, ids[1 - seat], r.outcome[seat])
+        if records:
+            self.league.record_games(self.match_id, records)
+
+    # -- the loop --------------------------------------------------------------------------------------------
+    def train(self) -> TrainReport:
+        cfg = self.cfg
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        start = time.perf_counter()
+        deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
+        if not self.snapshots:
+            self.snapshot()  # ep0: every learner has an identity in the league from the start
+        next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
+        next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
+        obs = self.games.observe()
+        pending: list[GameResult] = []
+        with open(self.run_dir / "metrics.jsonl", "a", buffering=1) as metrics:
+            while True:
+                elapsed = time.perf_counter() - start
+                progress = elapsed / (deadline - start) if deadline else self.steps / cfg.steps
+                if progress >= 1.0:
+                    break
+                actions = [learner.act(o) for learner, o in zip(self.learners, obs, strict=True)]
+                rewards, dones, finished = self.games.step(actions)
+                obs = self.games.observe()
+                self.steps += cfg.games
+                self.episodes += len(finished)
+                pending += finished
+                due = [learner.record(r, d) for learner, r, d in zip(self.learners, rewards, dones, strict=True)]
+                if all(due):
+                    stats = [learner.update(o, progress) for learner, o in zip(self.learners, obs, strict=True)]
+                    self._record(pending)
+                    pending = []
+                    line = {"step": self.steps, "episodes": self.episodes, "seconds": round(elapsed, 2),
+                            "steps_per_second": round(self.steps / max(elapsed, 1e-9)),
+                            **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()},
+                            **{f"eval/{k}": round(v, 4) for k, v in self.last_eval.items()}}
+                    metrics.write(json.dumps(line) + "\n")
+                    if self.on_progress:
+                        self.on_progress({"steps": self.steps, "episodes": self.episodes, "progress": progress,
+                                          "eval": dict(self.last_eval),
+                                          "elo": self.league.get_player(self.latest[0]).elo})
+                    if (next_episodes is not None and self.episodes >= next_episodes) or (
+                            next_steps is not None and self.steps >= next_steps):
+                        self.snapshot()
+                        next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
+                        next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
+            self._record(pending)
+            self.snapshot()
+        return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - start, self.snapshots,
+                           dict(self.last_eval))
+
+
+def save_run_config(league: League, cfg: TrainConfig) -> Path:
+    """The resolved configuration, next to the run's metrics (written atomically)."""
+    run_dir = league.home / "runs" / cfg.run  # type: ignore[operator]
+    run_dir.mkdir(parents=True, exist_ok=True)
+    path = run_dir / "config.json"
+    tmp = path.with_name(f"config.json.tmp-{os.getpid()}")
+    tmp.write_text(json.dumps(cfg.to_dict(), indent=2))
+    os.replace(tmp, path)
+    return path

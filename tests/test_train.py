@@ -1,0 +1,110 @@
+"""`marl train`: snapshots in the league with names and lineage, the ledger gets the games, clear errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from selfplay_cli.algos.ppo import PPOConfig
+from selfplay_cli.cli import main
+from selfplay_cli.league.matchmaking import MatchmakerConfig
+from selfplay_cli.league.store import League
+from selfplay_cli.policies.snapshot import load_policy
+from selfplay_cli.train.loop import TrainConfig, Trainer
+
+
+def tiny(**kw) -> TrainConfig:
+    base = dict(env="pong", steps=12_288, games=16, snapshot_every=16, eval_games=4, run="t",
+                env_options={"points_to_win": 1}, ppo=PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1))
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
+    league = League.open(tmp_path / "league")
+    cfg = tiny(agents=2, sharing="nops")
+    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    report = Trainer(league, cfg).train()
+    assert report.steps >= 12_288 and report.episodes > 16
+    snaps = [p for p in league.players("pong", kind="snapshot")]
+    names = [p.name for p in snaps]
+    assert names[:2] == ["ep0-left", "ep0-right"]
+    assert all(n.startswith("ep") and n.endswith(("-left", "-right")) for n in names)
+    assert len(names) == len(set(names)) >= 4
+    by_id = {p.id: p for p in snaps}
+    for seat in ("left", "right"):
+        chain = [p for p in snaps if p.name.endswith(seat)]
+        assert chain[0].parent_id is None
+        for prev, cur in zip(chain, chain[1:], strict=False):
+            assert cur.parent_id == prev.id and by_id[cur.parent_id].name.endswith(seat)
+            assert cur.episode >= prev.episode and cur.step > prev.step
+    # every snapshot file loads (checksum verified) and plays
+    last = snaps[-1]
+    policy = load_policy(league.home / last.path, expect_env="pong")
+    assert policy.meta.seat == "right" and policy.meta.env_options == {"points_to_win": 1}
+    # the ledger has the evaluation games against both scripted players, and training games between the learners
+    table = league.games("pong")
+    bots = {p.id for p in league.players("pong", kind="bot")}
+    involved = set(table.player_a.tolist()) | set(table.player_b.tolist())
+    assert bots <= involved
+    both_learners = [(a, b) for a, b in zip(table.player_a.tolist(), table.player_b.tolist(), strict=True)
+                     if a not in bots and b not in bots]
+    assert both_learners, "training games are rated too"
+    lines = (league.home / "runs" / "t" / "metrics.jsonl").read_text().splitlines()
+    assert len(lines) >= 3 and "left/entropy" in json.loads(lines[-1])
+    league.close()
+
+
+def test_one_learner_meets_league_opponents_and_bots(tmp_path):
+    league = League.open(tmp_path / "league")
+    cfg = tiny(agents=1, opponents=MatchmakerConfig(mode="pfsp", bots={"cpu": 0.5}, latest_ratio=0.2))
+    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    Trainer(league, cfg).train()
+    snaps = league.players("pong", kind="snapshot")
+    assert [p.name for p in snaps][0] == "ep0" and all("-" not in p.name for p in snaps)
+    matches = {}
+    with league.session() as s:
+        from selfplay_cli.league.models import Match
+
+        for m in s.query(Match).all():
+            matches[m.id] = m.kind
+    table = league.games("pong")
+    cpu = league.find_players("cpu", "pong")[0].id
+    training = [i for i, m in enumerate(table.match_id.tolist()) if matches[m] == "training"]
+    assert any(cpu in (table.player_a[i], table.player_b[i]) for i in training), "games vs cpu from the mix"
+    league.close()
+
+
+def run(capsys, *args):
+    code = main(list(args))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_train_command_runs_and_reports(tmp_path, capsys):
+    code, out, err = run(capsys, "train", "pong", "--agents", "2", "--steps", "4096", "--games", "16",
+                         "--env-option", "points_to_win=1", "--snapshot-every", "32", "--home",
+                         str(tmp_path / "h"), "--json")
+    assert code == 0, err
+    data = json.loads(out)
+    assert data["run"] == "pong-1" and data["steps"] >= 4096 and data["snapshots"][:2] == ["pong-1/ep0-left",
+                                                                                           "pong-1/ep0-right"]
+    config = json.loads((tmp_path / "h" / "runs" / "pong-1" / "config.json").read_text())
+    assert config["agents"] == 2 and config["env_options"] == {"points_to_win": 1}
+    with League.open(tmp_path / "h") as league:
+        assert league.get_run("pong-1").status == "finished"
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["train", "chess"], "unknown env 'chess'"),
+    (["train", "pong", "--steps", "-5"], "--steps"),
+    (["train", "pong", "--agents", "1", "--sharing", "fups"], "--sharing fups"),
+    (["train", "pong", "--agents", "3"], "--agents"),
+    (["train", "pong", "--algo", "sac"], "--algo"),
+    (["train", "pong", "--env-option", "points=3"], "unknown pong option"),
+    (["train", "pong", "--bots", "cpu=2"], "bot probabilities"),
+])
+def test_bad_train_options_are_one_line_errors(tmp_path, capsys, args, needle):
+    code, out, err = run(capsys, *args, "--home", str(tmp_path / "h"))
+    assert code == 2 and needle in err and err.count("\n") == 1, err
