@@ -108,3 +108,61 @@ def test_train_command_runs_and_reports(tmp_path, capsys):
 def test_bad_train_options_are_one_line_errors(tmp_path, capsys, args, needle):
     code, out, err = run(capsys, *args, "--home", str(tmp_path / "h"))
     assert code == 2 and needle in err and err.count("\n") == 1, err
+
+
+def test_a_run_killed_with_sigkill_resumes_from_its_last_snapshot(tmp_path, capsys):
+    import os
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    home = tmp_path / "h"
+    args = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-every",
+            "16", "--steps", "60000", "--eval-games", "0", "--run", "r", "--home", str(home), "--quiet"]
+    proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, env=dict(os.environ))
+    db = home / "league.db"
+    snapshots = 0
+    deadline = time.time() + 120
+    while time.time() < deadline and snapshots < 6:
+        time.sleep(0.2)
+        if db.exists():
+            try:
+                with sqlite3.connect(db) as con:
+                    snapshots = con.execute("select count(*) from players where kind='snapshot'").fetchone()[0]
+            except sqlite3.OperationalError:
+                pass
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    assert snapshots >= 6, proc.stderr.read().decode()
+    with League.open(home) as league:
+        assert league.get_run("r").status == "running", "killed, not finished"
+        before = [p.name for p in league.players("pong", kind="snapshot")]
+
+    code = main(["train", "--resume", "r", "--home", str(home), "--json"])
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    report = json.loads(out.out)
+    assert report["steps"] >= 60_000
+    with League.open(home) as league:
+        assert league.get_run("r").status == "finished"
+        snaps = league.players("pong", kind="snapshot")
+        names = [p.name for p in snaps]
+        assert names[: len(before)] == before and len(names) == len(set(names)) > len(before)
+        for seat in ("left", "right"):
+            chain = [p for p in snaps if p.name.endswith(seat)]
+            assert all(cur.parent_id == prev.id for prev, cur in zip(chain, chain[1:], strict=False)), seat
+            assert all(cur.step > prev.step for prev, cur in zip(chain, chain[1:], strict=False)), seat
+    with sqlite3.connect(db) as con:
+        assert con.execute("pragma integrity_check").fetchone()[0] == "ok"
+        games, seats = con.execute("select count(*), (select count(*) from game_seats) from games").fetchone()
+        assert seats == 2 * games
+
+
+def test_resume_errors_are_one_line(tmp_path, capsys):
+    code, out, err = run(capsys, "train", "--resume", "nope", "--home", str(tmp_path / "h"))
+    assert code == 2 and "no run named 'nope'" in err
+    code, out, err = run(capsys, "train", "--home", str(tmp_path / "h"))
+    assert code == 2 and "marl train pong" in err

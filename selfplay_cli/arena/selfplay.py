@@ -108,6 +108,12 @@ class SelfPlayGames:
                     self.policies.append(p)
                 self.opponent_of[g] = index[id(p)]
 
+    def restart_all(self) -> None:
+        """Abandon the games in progress and start fresh ones (from ``next_seed``), e.g. after a resume."""
+        self.games_started -= self.n
+        self._start(np.arange(self.n))
+        self._obs = None
+
     def observe(self) -> list[np.ndarray]:
         """Each learner's observations, ``(len(slots), *obs_shape)`` in its fixed slot order."""
         obs = self.core.observe()

@@ -37,6 +37,7 @@ DbOpt = Annotated[
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON alone on stdout.")]
 EnvOpt = Annotated[str | None, typer.Option("--env", help="Game, where the policies do not imply it.")]
 DeviceOpt = Annotated[str, typer.Option("--device", help="Where networks run: auto, cpu or cuda.")]
+QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
 
 def open_league(home: Path | None, db: str | None) -> League:

@@ -13,6 +13,7 @@ from ._common import (
     EnvOpt,
     HomeOpt,
     JsonOpt,
+    QuietOpt,
     open_league,
     progress_bar,
     progress_enabled,
@@ -62,7 +63,7 @@ def match(
     k: Annotated[float, typer.Option("--k", help="K factor of the online Elo updated after each stored game.")]
     = 16.0,
     device: DeviceOpt = "auto",
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    quiet: QuietOpt = False,
     home: HomeOpt = None,
     db: DbOpt = None,
     json_out: JsonOpt = False,

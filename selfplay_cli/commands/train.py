@@ -8,12 +8,12 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from ..errors import MarlError
-from ._common import DbOpt, DeviceOpt, HomeOpt, JsonOpt, open_league, parse_env_options, progress_enabled
+from ._common import DbOpt, DeviceOpt, HomeOpt, JsonOpt, QuietOpt, open_league, parse_env_options, progress_enabled
 from ._output import console, err_console, print_json
 
 
 def train(
-    env: Annotated[str, typer.Argument(help="The game to train on (see `marl envs`).")],
+    env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
     agents: Annotated[int, typer.Option("--agents", help="Learning agents: 2 trains both pong paddles (seed 000); 1 "
                                         "trains one learner against opponents from the league.")] = 2,
     algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo.")] = "ppo",
@@ -29,6 +29,8 @@ def train(
                                                 "snapshots, named epN (0: by steps only).")] = 128,
     snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", help="Game steps between snapshots (0: by "
                                                 "episodes only).")] = 0,
+    eval_games: Annotated[int, typer.Option("--eval-games", help="Rated games against each scripted player after "
+                                            "every snapshot (0: none).")] = 32,
     opponents: Annotated[str, typer.Option("--opponents", help="With --agents 1: self | latest | uniform | pfsp "
                                            "(opponents from the run's snapshots).")] = "pfsp",
     window: Annotated[int, typer.Option("--window", help="Opponents are drawn from the last WINDOW snapshots "
@@ -40,8 +42,10 @@ def train(
     lr: Annotated[float, typer.Option("--lr", help="Learning rate.")] = 2e-3,
     env_option: Annotated[list[str] | None, typer.Option("--env-option", help="Game option KEY=VALUE, repeatable "
                                                          "(e.g. points_to_win=5).")] = None,
+    resume: Annotated[str | None, typer.Option("--resume", help="Continue a run that was stopped or killed, from "
+                                               "its last snapshot (its saved configuration applies).")] = None,
     device: DeviceOpt = "auto",
-    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    quiet: QuietOpt = False,
     home: HomeOpt = None,
     db: DbOpt = None,
     json_out: JsonOpt = False,
@@ -52,33 +56,45 @@ def train(
     from ..league.matchmaking import MatchmakerConfig, parse_bots
     from ..train.loop import TrainConfig, Trainer, save_run_config
 
-    spec = get_env(env)
-    env_options = parse_env_options(spec.name, env_option)
     league = open_league(home, db)
     try:
-        if run is None:
-            taken = {r.name for r in league.list_runs()}
-            run = next(f"{env}-{i}" for i in range(1, 10_000) if f"{env}-{i}" not in taken)
-        elif league.get_run(run) is not None:
-            raise MarlError(f"a run named '{run}' already exists: choose another --run")
-        try:
-            ppo = PPOConfig(lr=lr)
-        except ValueError as e:
-            raise MarlError(str(e)) from None
-        cfg = TrainConfig(env=spec.name, agents=agents, algo=algo, sharing=sharing, steps=steps, minutes=minutes,
-                          run=run, seed=seed, device=device, games=games, snapshot_every=snapshot_every,
-                          snapshot_steps=snapshot_steps,
-                          opponents=MatchmakerConfig(mode=opponents, window=window, latest_ratio=latest_ratio,
-                                                     bots=parse_bots(bots)),
-                          env_options=env_options, ppo=ppo)
-        league.create_run(run, spec.name, cfg.to_dict(), algo=algo)
-        save_run_config(league, cfg)
+        if resume is not None:
+            old = league.get_run(resume)
+            if old is None:
+                raise MarlError(f"no run named '{resume}' to resume")
+            if env is not None and env != old.env:
+                raise MarlError(f"run '{resume}' trains {old.env}, not {env}")
+            cfg = TrainConfig.from_dict(old.config)
+            if device != "auto":
+                cfg.device = device
+        else:
+            if env is None:
+                raise MarlError("name the game to train on (e.g. marl train pong), or --resume RUN")
+            spec = get_env(env)
+            if run is None:
+                taken = {r.name for r in league.list_runs()}
+                run = next(f"{env}-{i}" for i in range(1, 10_000) if f"{env}-{i}" not in taken)
+            elif league.get_run(run) is not None:
+                raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
+            try:
+                ppo = PPOConfig(lr=lr)
+            except ValueError as e:
+                raise MarlError(str(e)) from None
+            cfg = TrainConfig(env=spec.name, agents=agents, algo=algo, sharing=sharing, steps=steps, minutes=minutes,
+                              run=run, seed=seed, device=device, games=games, snapshot_every=snapshot_every,
+                              snapshot_steps=snapshot_steps, eval_games=eval_games,
+                              env_options=parse_env_options(spec.name, env_option),
+                              opponents=MatchmakerConfig(mode=opponents, window=window, latest_ratio=latest_ratio,
+                                                         bots=parse_bots(bots)),
+                              ppo=ppo)
+            league.create_run(run, spec.name, cfg.to_dict(), algo=algo)
+            save_run_config(league, cfg)
         show = progress_enabled(quiet or json_out)
         total = 1000
         with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[info]}"),
                       TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), console=err_console,
                       disable=not show, transient=True) as bar:
-            task = bar.add_task(f"train {run}", total=total, info="")
+            task = bar.add_task(f"train {cfg.run}", total=total, info="")
 
             def on_progress(p: dict) -> None:
                 rate = p["steps"] / max(bar.tasks[0].elapsed or 1e-9, 1e-9)
@@ -88,8 +104,13 @@ def train(
                                 f"elo {p['elo']:.0f}  {ev}")
 
             trainer = Trainer(league, cfg, on_progress=on_progress)
+            if resume is not None:
+                note = trainer.restore()
+                league.set_run_status(cfg.run, "running")
+                if not json_out:
+                    err_console.print(note)
             report = trainer.train()
-        league.set_run_status(run, "finished")
+        league.set_run_status(cfg.run, "finished")
     finally:
         league.close()
     data = {"run": report.run, "steps": report.steps, "episodes": report.episodes,

@@ -50,6 +50,7 @@ from selfplay_cli.league.ratings import (
     fit_bradley_terry,
     normal_quantile,
     rank_by_ci,
+    reachable,
 )
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 
@@ -141,18 +142,6 @@ class LadderRow:
 # --------------------------------------------------------------------------------------------------
 
 
-def _component(adj: npt.NDArray[np.bool_], start: int) -> npt.NDArray[np.bool_]:
-    """Players connected to ``start`` through ``adj`` (symmetric), breadth-first."""
-    seen = np.zeros(adj.shape[0], dtype=bool)
-    seen[start] = True
-    frontier = seen.copy()
-    while frontier.any():
-        nxt = adj[frontier].any(axis=0) & ~seen
-        seen |= nxt
-        frontier = nxt
-    return seen
-
-
 def _normal_ci(
     ratings: npt.NDArray[np.float64], flags: list[str | None], a: npt.NDArray[np.int64], b: npt.NDArray[np.int64],
     n_players: int, anchor: int, confidence: float,
@@ -163,7 +152,7 @@ def _normal_ci(
     nmat = nmat + nmat.T
     se = np.full(n_players, MAX_ELO)
     se[anchor] = 0.0
-    idx = np.flatnonzero(_component(nmat > 0, anchor) & (np.arange(n_players) != anchor))
+    idx = np.flatnonzero(reachable(nmat > 0, anchor) & (np.arange(n_players) != anchor))
     if idx.size:
         theta = (ratings - ratings[anchor]) / NAT_TO_ELO
         p = 0.5 * (1.0 + np.tanh(0.5 * (theta[:, None] - theta[None, :])))

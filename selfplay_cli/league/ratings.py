@@ -748,8 +748,9 @@ def _newton(w: FloatArray, n: FloatArray, theta: FloatArray, free: npt.NDArray[n
     return theta, max_iter, False
 
 
-def _reach(adj: npt.NDArray[np.bool_], start: int) -> npt.NDArray[np.bool_]:
-    """Players reachable from ``start`` along directed edges ``adj[i, j]`` (breadth-first, vectorised)."""
+def reachable(adj: npt.NDArray[np.bool_], start: int) -> npt.NDArray[np.bool_]:
+    """Players reachable from ``start`` along edges ``adj[i, j]`` (breadth-first, vectorised); with a symmetric
+    ``adj`` this is ``start``'s connected component."""
     seen = np.zeros(adj.shape[0], dtype=bool)
     seen[start] = True
     frontier = seen.copy()
@@ -783,13 +784,13 @@ def _fit_matrices(
     iterations, converged = 0, True
     unassigned = has_games.copy()
     while unassigned.any():
-        comp = _reach(played, int(np.flatnonzero(unassigned)[0]))
+        comp = reachable(played, int(np.flatnonzero(unassigned)[0]))
         unassigned &= ~comp
         members = np.flatnonzero(comp)
         with_anchor = bool(comp[anchor])
         root = anchor if with_anchor else int(members[np.argmax(games[members])])
-        fwd = _reach(scored, root)  # players the root's group (transitively) scored against
-        bwd = _reach(scored.T, root)  # players that (transitively) scored against the root
+        fwd = reachable(scored, root)  # players the root's group (transitively) scored against
+        bwd = reachable(scored.T, root)  # players that (transitively) scored against the root
         main = fwd & bwd  # strongly connected component of the root: ML exists there (Hunter 2004)
         for i in members:
             if not with_anchor:

@@ -67,6 +67,8 @@ class TrainConfig:
             raise MarlError(f"--minutes must be positive, not {self.minutes}")
         if self.games < 2:
             raise MarlError(f"--games must be at least 2, not {self.games}")
+        if self.eval_games < 0 or self.eval_games == 1:
+            raise MarlError(f"--eval-games must be 0 or at least 2, not {self.eval_games}")
         if self.snapshot_every < 0 or self.snapshot_steps < 0 or not (self.snapshot_every or self.snapshot_steps):
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
         if self.algo != "ppo":
@@ -84,6 +86,14 @@ class TrainConfig:
         d["ppo"] = self.ppo.to_dict()
         d["opponents"] = asdict(self.opponents)
         return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
+        """The configuration a run was saved with (``to_dict``), e.g. to resume it."""
+        d = dict(d)
+        d["ppo"] = PPOConfig(**d["ppo"])
+        d["opponents"] = MatchmakerConfig(**d["opponents"])
+        return cls(**d)
 
 
 @dataclass
@@ -150,6 +160,8 @@ class Trainer:
         self.match_id = league.create_match(spec.name, "training", {"run": cfg.run})
         self.steps = 0
         self.episodes = 0
+        self.elapsed = 0.0  # seconds trained before this process (resumed runs)
+        self.resumes = 0
         self.last_eval: dict[str, float] = {}
 
     # -- opponents -------------------------------------------------------------------------------------------
@@ -198,11 +210,12 @@ class Trainer:
             self.snapshots.append(row.full_name)
         pool = [p.id for p in self.league.players(env=self.spec.name, kind="snapshot") if p.run == cfg.run]
         self.matchmaker.set_pool(pool)
+        self.save_state()
         self.evaluate()
 
     def evaluate(self) -> None:
         """Rated games of learner 0's newest snapshot against every scripted player, stored as 'eval'."""
-        if self.cfg.eval_games < 2:
+        if not self.cfg.eval_games:
             return
         row = self.league.get_player(self.latest[0])
         me = load_player(self.league, row, device=str(self.device))
@@ -211,6 +224,74 @@ class Trainer:
             rep = run_match(me, opp, games=self.cfg.eval_games, first_seed=10_000_000 + self.episodes,
                             league=self.league, player_ids={me.id: row.id, opp.id: bot_id}, kind="eval")
             self.last_eval[bot] = rep.stats.score
+
+    # -- resuming -------------------------------------------------------------------------------------------
+    @property
+    def state_path(self) -> Path:
+        return self.run_dir / "state.pt"
+
+    def save_state(self) -> None:
+        """Everything to continue exactly from the latest snapshot, written atomically after its rows."""
+        state = {
+            "version": 1,
+            "learners": [learner.state_dict() for learner in self.learners],
+            "latest": list(self.latest), "snapshots": list(self.snapshots), "steps": self.steps,
+            "episodes": self.episodes, "episodes_suffix": self.episodes_suffix,
+            "snapshot_episode": self._snapshot_episode, "snapshot_step": self._snapshot_step,
+            "next_seed": self.games.next_seed, "elapsed": self.elapsed, "resumes": self.resumes,
+            "matchmaker": json.dumps(self.matchmaker.state_dict()), "rates": json.dumps(self.rates.to_dict()),
+        }
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        tmp = self.state_path.with_name(f"state.pt.tmp-{os.getpid()}")
+        with open(tmp, "wb") as f:
+            torch.save(state, f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, self.state_path)
+
+    def restore(self) -> str:
+        """Continue a killed run from its latest snapshot; returns a line saying from where.
+
+        The league is the authority: if the run was killed after its newest snapshot was registered but before the
+        state file caught up, the weights come from that snapshot's file (the optimiser state from the state file
+        is then one snapshot older), so no snapshot name is ever written twice.
+        """
+        from ..policies.snapshot import load_snapshot
+
+        if not self.state_path.exists():
+            raise MarlError(f"run '{self.cfg.run}' has no resume state ({self.state_path})")
+        try:
+            state = torch.load(self.state_path, map_location=self.device, weights_only=True)
+        except Exception as e:  # a torn or foreign file: say which, never a traceback
+            raise MarlError(f"{self.state_path}: cannot read the resume state ({e})") from None
+        for learner, ls in zip(self.learners, state["learners"], strict=True):
+            learner.load_state_dict(ls)
+        self.latest, self.snapshots = list(state["latest"]), list(state["snapshots"])
+        self.steps, self.episodes = int(state["steps"]), int(state["episodes"])
+        self.episodes_suffix = int(state["episodes_suffix"])
+        self._snapshot_episode, self._snapshot_step = int(state["snapshot_episode"]), int(state["snapshot_step"])
+        self.elapsed = float(state["elapsed"])
+        self.matchmaker.load_state_dict(json.loads(state["matchmaker"]))
+        self.rates = WinRates.from_dict(json.loads(state["rates"]))
+        note = f"resumed {self.cfg.run} at step {self.steps:,} (snapshot {self.snapshots[-1]})"
+        newer = [p for p in self.league.players(env=self.spec.name, kind="snapshot")
+                 if p.run == self.cfg.run and p.id > max(self.latest)]
+        if newer:  # killed between the snapshot rows and the state file: adopt the registered snapshot
+            for i, name in enumerate(self.names):
+                mine = [p for p in newer if p.meta.get("learner") == name]
+                if mine:
+                    p = mine[-1]
+                    tensors, _ = load_snapshot(self.league.home / p.path, expect_env=self.spec.name)  # type: ignore[operator]
+                    self.learners[i].net.load_state_dict(tensors)
+                    self.latest[i] = p.id
+                    self.snapshots.append(p.full_name)
+                    self.steps, self.episodes = max(self.steps, p.step), max(self.episodes, p.episode)
+            self._snapshot_episode, self._snapshot_step = self.episodes, self.steps
+            note += f"; adopted {', '.join(p.full_name for p in newer)} registered after the state was saved"
+        self.resumes = int(state["resumes"]) + 1
+        self.games.next_seed = int(state["next_seed"]) + (self.resumes << 40)  # a seed range of its own
+        self.games.restart_all()
+        return note
 
     # -- the ledger ------------------------------------------------------------------------------------------
     def _record(self, finished: list[GameResult]) -> None:
@@ -238,7 +319,7 @@ class Trainer:
     def train(self) -> TrainReport:
         cfg = self.cfg
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        start = time.perf_counter()
+        start = time.perf_counter() - self.elapsed
         deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
         if not self.snapshots:
             self.snapshot()  # ep0: every learner has an identity in the league from the start
@@ -248,7 +329,7 @@ class Trainer:
         pending: list[GameResult] = []
         with open(self.run_dir / "metrics.jsonl", "a", buffering=1) as metrics:
             while True:
-                elapsed = time.perf_counter() - start
+                elapsed = self.elapsed = time.perf_counter() - start
                 progress = elapsed / (deadline - start) if deadline else self.steps / cfg.steps
                 if progress >= 1.0:
                     break
