@@ -166,3 +166,23 @@ def test_resume_errors_are_one_line(tmp_path, capsys):
     assert code == 2 and "no run named 'nope'" in err
     code, out, err = run(capsys, "train", "--home", str(tmp_path / "h"))
     assert code == 2 and "marl train pong" in err
+
+
+def test_dqn_and_the_seed000_preset_train_through_the_same_loop(tmp_path, capsys):
+    home = str(tmp_path / "h")
+    code, out, err = run(capsys, "train", "pong", "--agents", "1", "--algo", "dqn", "--steps", "6000", "--games", "16",
+                         "--env-option", "points_to_win=1", "--eval-games", "4", "--home", home, "--json")
+    assert code == 0, err
+    assert json.loads(out)["snapshots"][0] == "pong-1/ep0"
+    code, out, err = run(capsys, "train", "pong", "--preset", "seed000", "--steps", "2000", "--games", "8",
+                         "--env-option", "points_to_win=1", "--eval-games", "0", "--home", home, "--json")
+    assert code == 0, err
+    snap = json.loads(out)["snapshots"][-1]
+    with League.open(home) as league:
+        run_cfg = league.get_run("pong-2").config
+        assert run_cfg["algo"] == "dqn" and run_cfg["dqn"]["lr"] == 1e-3 and run_cfg["dqn"]["batch_size"] == 64
+        row = [p for p in league.players("pong", kind="snapshot") if p.full_name == snap][0]
+        policy = load_policy(league.home / row.path)
+    assert policy.meta.algo == "dqn" and list(policy.meta.arch.hidden) == [512, 512, 256, 128, 64]
+    code, out, err = run(capsys, "train", "pong", "--preset", "seed001", "--home", home)
+    assert code == 2 and "--preset" in err

@@ -217,7 +217,8 @@ class DQNLearner:
         return epsilon_at(self.cfg, self.transitions)
 
     def _flat(self, obs: np.ndarray) -> np.ndarray:
-        return np.ascontiguousarray(obs, dtype=np.float32).reshape(len(obs), self.obs_dim)
+        """Our own flat float32 copy (the n-step window keeps it, so the caller may reuse its array)."""
+        return np.array(obs, dtype=np.float32, order="C").reshape(len(obs), self.obs_dim)
 
     def _push(self, next_obs: np.ndarray) -> None:
         """Close the step in flight with the observations that followed it; store the transitions it completes.

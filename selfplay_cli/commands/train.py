@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Annotated
 
 import typer
@@ -16,7 +17,9 @@ def train(
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
     agents: Annotated[int, typer.Option("--agents", help="Learning agents: 2 trains both pong paddles (seed 000); 1 "
                                         "trains one learner against opponents from the league.")] = 2,
-    algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo.")] = "ppo",
+    algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo or dqn.")] = "ppo",
+    preset: Annotated[str | None, typer.Option("--preset", help="seed000: seed 000's DQN set-up (network sizes, "
+                                               "learning rate, batch, buffer, target period, epsilon).")] = None,
     sharing: Annotated[str, typer.Option("--sharing", help="nops: one network per learner; fups: one shared "
                                          "network.")] = "nops",
     steps: Annotated[int, typer.Option("--steps", help="Budget in game steps.")] = 2_000_000,
@@ -39,7 +42,8 @@ def train(
                                                 "learner itself (ML-Agents' play_against_latest_model_ratio).")]
     = 0.5,
     bots: Annotated[str, typer.Option("--bots", help="Mix in scripted players, e.g. cpu=0.1,random=0.05.")] = "",
-    lr: Annotated[float, typer.Option("--lr", help="Learning rate.")] = 2e-3,
+    lr: Annotated[float | None, typer.Option("--lr", help="Learning rate (default: the algorithm's own, PPO 2e-3, "
+                                             "DQN 2.5e-4).")] = None,
     env_option: Annotated[list[str] | None, typer.Option("--env-option", help="Game option KEY=VALUE, repeatable "
                                                          "(e.g. points_to_win=5).")] = None,
     resume: Annotated[str | None, typer.Option("--resume", help="Continue a run that was stopped or killed, from "
@@ -51,6 +55,7 @@ def train(
     json_out: JsonOpt = False,
 ) -> None:
     """Train agents by self-play; every snapshot joins the league and is rated against the scripted players."""
+    from ..algos.dqn import DQNConfig, seed000_config
     from ..algos.ppo import PPOConfig
     from ..envs import get_env
     from ..league.matchmaking import MatchmakerConfig, parse_bots
@@ -76,8 +81,15 @@ def train(
                 run = next(f"{env}-{i}" for i in range(1, 10_000) if f"{env}-{i}" not in taken)
             elif league.get_run(run) is not None:
                 raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
+            if preset not in (None, "seed000"):
+                raise MarlError(f"unknown --preset '{preset}'; available: seed000")
+            if preset == "seed000":
+                algo = "dqn"
             try:
-                ppo = PPOConfig(lr=lr)
+                ppo = PPOConfig() if lr is None else PPOConfig(lr=lr)
+                dqn = seed000_config() if preset == "seed000" else DQNConfig()
+                if lr is not None:
+                    dqn = dataclasses.replace(dqn, lr=lr)
             except ValueError as e:
                 raise MarlError(str(e)) from None
             cfg = TrainConfig(env=spec.name, agents=agents, algo=algo, sharing=sharing, steps=steps, minutes=minutes,
@@ -86,7 +98,7 @@ def train(
                               env_options=parse_env_options(spec.name, env_option),
                               opponents=MatchmakerConfig(mode=opponents, window=window, latest_ratio=latest_ratio,
                                                          bots=parse_bots(bots)),
-                              ppo=ppo)
+                              ppo=ppo, dqn=dqn)
             league.create_run(run, spec.name, cfg.to_dict(), algo=algo)
             save_run_config(league, cfg)
         show = progress_enabled(quiet or json_out)

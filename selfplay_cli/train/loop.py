@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..algos.dqn import DQNConfig, DQNLearner
 from ..algos.ppo import PPOConfig, PPOLearner
 from ..arena import GameResult
 from ..arena.selfplay import OPPONENT, SelfPlayGames, seat_layout
@@ -37,6 +38,8 @@ from ..policies.network import resolve_device
 from ..policies.snapshot import SnapshotMeta, save_snapshot
 from ..rated.match import load_player, run_match
 from ..rated.snapshots import snapshot_relpath
+
+ALGOS = ("ppo", "dqn")
 
 
 @dataclass
@@ -59,6 +62,7 @@ class TrainConfig:
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
     ppo: PPOConfig = field(default_factory=PPOConfig)
+    dqn: DQNConfig = field(default_factory=DQNConfig)
 
     def __post_init__(self) -> None:
         if self.steps < 1 and self.minutes is None:
@@ -71,8 +75,8 @@ class TrainConfig:
             raise MarlError(f"--eval-games must be 0 or at least 2, not {self.eval_games}")
         if self.snapshot_every < 0 or self.snapshot_steps < 0 or not (self.snapshot_every or self.snapshot_steps):
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
-        if self.algo != "ppo":
-            raise MarlError(f"unknown --algo '{self.algo}'; available: ppo")
+        if self.algo not in ALGOS:
+            raise MarlError(f"unknown --algo '{self.algo}'; available: {', '.join(ALGOS)}")
         n_seats = len(get_env(self.env).agents)
         if not 1 <= self.agents <= n_seats:
             raise MarlError(f"{self.env} has {n_seats} seats: --agents must be between 1 and {n_seats}")
@@ -84,6 +88,7 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["ppo"] = self.ppo.to_dict()
+        d["dqn"] = self.dqn.to_dict()
         d["opponents"] = asdict(self.opponents)
         return d
 
@@ -92,6 +97,7 @@ class TrainConfig:
         """The configuration a run was saved with (``to_dict``), e.g. to resume it."""
         d = dict(d)
         d["ppo"] = PPOConfig(**d["ppo"])
+        d["dqn"] = DQNConfig(**d["dqn"])
         d["opponents"] = MatchmakerConfig(**d["opponents"])
         return cls(**d)
 
@@ -139,9 +145,11 @@ class Trainer:
         layout = seat_layout(len(spec.agents), cfg.games, cfg.agents, cfg.sharing)
         self.names = _learner_names(spec.agents, cfg)
         torch.manual_seed(cfg.seed)
-        self.learners = [
-            PPOLearner(self.obs_shape, self.n_actions, int((layout == i).sum()), cfg.ppo, seed=cfg.seed + i,
-                       device=self.device)
+        learner_cls, algo_cfg = (PPOLearner, cfg.ppo) if cfg.algo == "ppo" else (DQNLearner, cfg.dqn)
+        self.arch = algo_cfg.arch
+        self.learners: list[Any] = [
+            learner_cls(self.obs_shape, self.n_actions, int((layout == i).sum()), algo_cfg, seed=cfg.seed + i,
+                        device=self.device)
             for i in range(len(self.names))
         ]
         self.latest: list[int] = [0] * len(self.learners)  # player id of each learner's latest snapshot
@@ -153,7 +161,7 @@ class Trainer:
         self._policies: dict[int, Policy] = {}
         learner_ids = [f"{cfg.run}/{n}" for n in self.names]
         # The 'self' opponent: the first learner's live network, sampling (one object, so games share a batch).
-        self.live = self.learners[0].policy(learner_ids[0], spec.name, greedy=False)
+        self.live = self.learners[0].policy(learner_ids[0], spec.name, greedy=cfg.algo == "dqn")
         self.games = SelfPlayGames(spec, cfg.games, layout, learner_ids,
                                    choose_opponents=self._choose if (layout == OPPONENT).any() else None,
                                    env_options=cfg.env_options, first_seed=cfg.seed * 1_000_003)
@@ -196,7 +204,7 @@ class Trainer:
             rel = snapshot_relpath(cfg.run, name)
             parent = self.league.get_player(self.latest[i]).full_name if self.latest[i] else None
             meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options, obs_shape=self.obs_shape,
-                                n_actions=self.n_actions, arch=cfg.ppo.arch, algo=cfg.algo, step=self.steps,
+                                n_actions=self.n_actions, arch=self.arch, algo=cfg.algo, step=self.steps,
                                 episode=self.episodes, run=cfg.run, name=name, parent=parent,
                                 seat=self.names[i] if len(self.names) > 1 else None,
                                 extra={"learner": self.names[i]})
