@@ -10,8 +10,6 @@ import pytest
 import torch
 
 from selfplay_cli.algos.dqn import DQNConfig, DQNLearner, ReplayBuffer, epsilon_at, seed000_config
-from selfplay_cli.arena.selfplay import SelfPlayGames, seat_layout
-from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.policies.network import Arch
 
 
@@ -245,28 +243,14 @@ def test_state_round_trip_resumes_identically():
     assert not b.record(np.zeros(8), np.zeros(8))  # and updates wait until it holds learning_starts again
 
 
-def test_dqn_learns_to_beat_random_at_pong(one_thread):
+def test_dqn_learns_to_beat_random_at_pong(one_thread, learn_against_random):
     """A real learning assertion: from an even game to a clear win against the random player."""
-    n, budget = 64, 160_000
-    rnd = ScriptedPolicy("pong", "random", seed=1)
-    games = SelfPlayGames("pong", n, seat_layout(2, n, 1, "nops"), ["me"], choose_opponents=lambda k: [rnd] * k,
-                          env_options={"points_to_win": 1})
     cfg = DQNConfig(lr=1e-3, batch_size=128, replay_ratio=0.0625, target_period=100, n_step=5,
                     learning_starts=20_000, eps_decay_steps=50_000)
-    learner = DQNLearner((8, 6), 3, n, cfg, seed=0)
-    results = []
-    steps = 0
+    learner = DQNLearner((8, 6), 3, 64, cfg, seed=0)
     start = time.perf_counter()
-    (obs,) = games.observe()
-    while steps < budget:
-        rewards, dones, fin = games.step([learner.act(obs)])
-        results += [r.points_of("me") for r in fin]
-        (obs,) = games.observe()
-        if learner.record(rewards[0], dones[0]):
-            learner.update(obs, progress=steps / budget)
-        steps += n
-    first, last = np.mean(results[:300]), np.mean(results[-300:])
-    print(f"DQN win rate vs random: first 300 games {first:.2f}, last 300 {last:.2f} ({len(results)} games, "
+    first, last, n_games = learn_against_random(learner, n_games=64, budget=160_000)
+    print(f"DQN win rate vs random: first 300 games {first:.2f}, last 300 {last:.2f} ({n_games} games, "
           f"{learner.grad_steps} updates, {time.perf_counter() - start:.1f} s)")
     assert first < 0.65, first
     assert last > 0.75, (first, last)

@@ -80,25 +80,11 @@ def test_learner_state_round_trip_resumes_identically():
     assert b.updates == 1
 
 
-def test_ppo_learns_to_beat_random_at_pong():
+def test_ppo_learns_to_beat_random_at_pong(learn_against_random):
     """A real learning assertion: from an even game to a clear win against the random player."""
     torch.manual_seed(0)
-    n, budget = 128, 400_000
-    rnd = ScriptedPolicy("pong", "random", seed=1)
-    games = SelfPlayGames("pong", n, seat_layout(2, n, 1, "nops"), ["me"], choose_opponents=lambda k: [rnd] * k,
-                          env_options={"points_to_win": 1})
-    learner = PPOLearner((8, 6), 3, n, PPOConfig(rollout_steps=64, lr=2e-3), seed=0)
-    results = []
-    steps = 0
-    (obs,) = games.observe()
-    while steps < budget:
-        rewards, dones, fin = games.step([learner.act(obs)])
-        results += [r.points_of("me") for r in fin]
-        (obs,) = games.observe()
-        if learner.record(rewards[0], dones[0]):
-            learner.update(obs, progress=steps / budget)
-        steps += n
-    first, last = np.mean(results[:300]), np.mean(results[-300:])
+    learner = PPOLearner((8, 6), 3, 128, PPOConfig(rollout_steps=64, lr=2e-3), seed=0)
+    first, last, _ = learn_against_random(learner, n_games=128, budget=400_000)
     print(f"win rate vs random: first 300 games {first:.2f}, last 300 {last:.2f}")
     assert first < 0.65, first
     assert last > 0.8, (first, last)
