@@ -186,3 +186,27 @@ def test_dqn_and_the_seed000_preset_train_through_the_same_loop(tmp_path, capsys
     assert policy.meta.algo == "dqn" and list(policy.meta.arch.hidden) == [512, 512, 256, 128, 64]
     code, out, err = run(capsys, "train", "pong", "--preset", "seed001", "--home", home)
     assert code == 2 and "--preset" in err
+
+
+def test_config_file_sets_every_section_and_typed_options_win(tmp_path, capsys):
+    cfg_file = tmp_path / "run.toml"
+    cfg_file.write_text('agents = 1\nsteps = 3000\ngames = 16\neval_games = 0\nsnapshot_every = 50\n'
+                        '[ppo]\nlr = 0.001\nrollout_steps = 16\n[opponents]\nmode = "uniform"\nbots = { cpu = 0.25 }\n'
+                        '[env_options]\npoints_to_win = 1\n')
+    home = tmp_path / "h"
+    code, out, err = run(capsys, "train", "pong", "--config", str(cfg_file), "--games", "8", "--home", str(home),
+                         "--json")
+    assert code == 0, err
+    saved = json.loads((home / "runs" / "pong-1" / "config.json").read_text())
+    assert saved["agents"] == 1 and saved["steps"] == 3000 and saved["games"] == 8, "typed --games beats the file"
+    assert saved["ppo"]["lr"] == 0.001 and saved["ppo"]["rollout_steps"] == 16 and saved["ppo"]["gamma"] == 0.99
+    assert saved["opponents"]["mode"] == "uniform" and saved["opponents"]["bots"] == {"cpu": 0.25}
+    assert saved["env_options"] == {"points_to_win": 1}
+    for text, needle in (("agnts = 2\n", "unknown training setting(s) agnts"),
+                         ("[ppo]\nlearning_rate = 2\n", "unknown [ppo] setting(s) learning_rate"),
+                         ("agents = \n", "not valid TOML"),
+                         ("[env_options]\nspeed = 3\n", "unknown pong option")):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        code, out, err = run(capsys, "train", "pong", "--config", str(bad), "--home", str(home))
+        assert code == 2 and needle in err and err.count("\n") == 1, (text, err)

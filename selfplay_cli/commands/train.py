@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-import dataclasses
-from typing import Annotated
+import sys
+from pathlib import Path
+from typing import Annotated, Any
 
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
@@ -13,8 +14,36 @@ from ._common import DbOpt, DeviceOpt, HomeOpt, JsonOpt, QuietOpt, open_league, 
 from ._output import console, err_console, print_json
 
 
+def read_toml(path: Path) -> dict[str, Any]:
+    """A --config file; a missing or malformed one is a one-line error naming it."""
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as e:
+        raise MarlError(f"{path}: cannot read ({e.strerror or e})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise MarlError(f"{path}: not valid TOML ({e})") from None
+
+
+def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:
+    """Merge a config file into the settings: sections ([ppo], ...) key by key, everything else replaced."""
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(settings.get(key), dict):
+            settings[key] = {**settings[key], **value}
+        else:
+            settings[key] = value
+
+
 def train(
+    ctx: typer.Context,
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
+    config: Annotated[Path | None, typer.Option("--config", help="TOML file of settings (top-level options, "
+                                                "[ppo], [dqn], [opponents], [env_options]); options typed on the "
+                                                "command line win over it.")] = None,
     agents: Annotated[int, typer.Option("--agents", help="Learning agents: 2 trains both pong paddles (seed 000); 1 "
                                         "trains one learner against opponents from the league.")] = 2,
     algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo or dqn.")] = "ppo",
@@ -55,10 +84,9 @@ def train(
     json_out: JsonOpt = False,
 ) -> None:
     """Train agents by self-play; every snapshot joins the league and is rated against the scripted players."""
-    from ..algos.dqn import DQNConfig, seed000_config
-    from ..algos.ppo import PPOConfig
+    from ..algos.dqn import seed000_config
     from ..envs import get_env
-    from ..league.matchmaking import MatchmakerConfig, parse_bots
+    from ..league.matchmaking import parse_bots
     from ..train.loop import TrainConfig, Trainer, save_run_config
 
     league = open_league(home, db)
@@ -83,22 +111,33 @@ def train(
                 raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
             if preset not in (None, "seed000"):
                 raise MarlError(f"unknown --preset '{preset}'; available: seed000")
+            typed = {name for name in ctx.params  # options the user typed (not defaults), which beat --config
+                     if getattr(ctx.get_parameter_source(name), "name", "") in ("COMMANDLINE", "ENVIRONMENT")}
+            settings = TrainConfig(env=spec.name, run=run).to_dict()  # the defaults
             if preset == "seed000":
-                algo = "dqn"
+                settings["algo"] = "dqn"
+                settings["dqn"] = seed000_config().to_dict()
+            if config is not None:
+                merge_settings(settings, read_toml(config))
+            flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
+                     "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
+                     "snapshot_steps": snapshot_steps, "eval_games": eval_games}
+            settings.update({k: v for k, v in flags.items() if k in typed})
+            matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
+                           "latest_ratio": ("latest_ratio", latest_ratio)}
+            settings["opponents"].update({key: value for flag, (key, value) in matchmaking.items() if flag in typed})
+            if "bots" in typed:
+                settings["opponents"]["bots"] = parse_bots(bots)
+            if "lr" in typed:
+                settings["ppo"]["lr"] = settings["dqn"]["lr"] = lr
+            settings["env_options"] = {**settings["env_options"], **parse_env_options(spec.name, env_option)}
             try:
-                ppo = PPOConfig() if lr is None else PPOConfig(lr=lr)
-                dqn = seed000_config() if preset == "seed000" else DQNConfig()
-                if lr is not None:
-                    dqn = dataclasses.replace(dqn, lr=lr)
-            except ValueError as e:
-                raise MarlError(str(e)) from None
-            cfg = TrainConfig(env=spec.name, agents=agents, algo=algo, sharing=sharing, steps=steps, minutes=minutes,
-                              run=run, seed=seed, device=device, games=games, snapshot_every=snapshot_every,
-                              snapshot_steps=snapshot_steps, eval_games=eval_games,
-                              env_options=parse_env_options(spec.name, env_option),
-                              opponents=MatchmakerConfig(mode=opponents, window=window, latest_ratio=latest_ratio,
-                                                         bots=parse_bots(bots)),
-                              ppo=ppo, dqn=dqn)
+                spec.config(**settings["env_options"])
+            except (TypeError, ValueError) as e:
+                raise MarlError(f"[env_options]: {e}") from None
+            settings["env"], settings["run"] = spec.name, run
+            cfg = TrainConfig.from_dict(settings)
+            algo = cfg.algo
             league.create_run(run, spec.name, cfg.to_dict(), algo=algo)
             save_run_config(league, cfg)
         show = progress_enabled(quiet or json_out)

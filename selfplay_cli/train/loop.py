@@ -18,7 +18,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -94,11 +94,25 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
-        """The configuration a run was saved with (``to_dict``), e.g. to resume it."""
+        """A configuration from ``to_dict``'s layout (a saved run, or a --config file merged over the defaults).
+        Unknown keys are refused by name, so a typo in a config file is an error, not a silent default."""
         d = dict(d)
-        d["ppo"] = PPOConfig(**d["ppo"])
-        d["dqn"] = DQNConfig(**d["dqn"])
-        d["opponents"] = MatchmakerConfig(**d["opponents"])
+        sections = {"ppo": PPOConfig, "dqn": DQNConfig, "opponents": MatchmakerConfig}
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise MarlError(f"unknown training setting(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+        for key, section in sections.items():
+            if key in d and not isinstance(d[key], section):
+                values = dict(d[key])
+                allowed = {f.name for f in fields(section)}
+                bad = sorted(set(values) - allowed)
+                if bad:
+                    raise MarlError(f"unknown [{key}] setting(s) {', '.join(bad)}; known: {', '.join(sorted(allowed))}")
+                try:
+                    d[key] = section(**values)
+                except (TypeError, ValueError) as e:
+                    raise MarlError(f"[{key}]: {e}") from None
         return cls(**d)
 
 
