@@ -14,7 +14,7 @@ def _learn_against_random(learner, n_games: int, budget: int) -> tuple[float, fl
     player; returns its win rate over the first and the last 300 games, and the number of games."""
     rnd = ScriptedPolicy("pong", "random", seed=1)
     games = SelfPlayGames("pong", n_games, seat_layout(2, n_games, 1, "nops"), ["me"],
-                          choose_opponents=lambda k: [rnd] * k, env_options={"points_to_win": 1})
+                          choose_opponents=lambda slots: [rnd] * len(slots), env_options={"points_to_win": 1})
     results: list[float] = []
     steps = 0
     (obs,) = games.observe()

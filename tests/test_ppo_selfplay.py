@@ -24,7 +24,8 @@ def test_seat_layouts_for_agents_and_sharing():
 def test_selfplay_games_restart_with_fresh_seeds_and_report_results():
     cpu, rnd = ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "random", seed=3)
     n = 8
-    games = SelfPlayGames("pong", n, seat_layout(2, n, 1, "nops"), ["me"], choose_opponents=lambda k: [rnd] * k,
+    games = SelfPlayGames("pong", n, seat_layout(2, n, 1, "nops"), ["me"],
+                          choose_opponents=lambda slots: [rnd] * len(slots),
                           env_options={"points_to_win": 2}, first_seed=100)
     finished = []
     for _ in range(3000):

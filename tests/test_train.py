@@ -210,3 +210,18 @@ def test_config_file_sets_every_section_and_typed_options_win(tmp_path, capsys):
         bad.write_text(text)
         code, out, err = run(capsys, "train", "pong", "--config", str(bad), "--home", str(home))
         assert code == 2 and needle in err and err.count("\n") == 1, (text, err)
+
+
+def test_swap_every_keeps_each_slot_on_its_opponent_until_the_swap(tmp_path):
+    """ML-Agents' swap_steps: with --swap-every a game slot replays the opponent it drew until the next swap."""
+    league = League.open(tmp_path / "league")
+    cfg = tiny(agents=1, steps=4096, eval_games=0, swap_every=10**9,
+               opponents=MatchmakerConfig(mode="self", latest_ratio=0.0, bots={"cpu": 0.5, "random": 0.5}))
+    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    trainer = Trainer(league, cfg)
+    first = [trainer.games.policies[k].id for k in trainer.games.opponent_of.tolist()]
+    assert set(first) == {"cpu", "random"}, "both bots drawn across the slots"
+    trainer.train()
+    after = [trainer.games.policies[k].id for k in trainer.games.opponent_of.tolist()]
+    assert trainer.episodes > cfg.games and after == first, "no swap within the budget: every slot kept its draw"
+    league.close()

@@ -50,9 +50,9 @@ def seat_layout(n_seats: int, n_games: int, agents: int, sharing: str) -> np.nda
 class SelfPlayGames:
     """Endless batched games where learners drive fixed slots and opponents the rest.
 
-    ``learner_ids`` names each learner in game results (e.g. ``"run/left"``); ``choose_opponents(n)`` returns
-    ``n`` policies for games starting now (one opponent seat per game is filled per policy; games with several
-    opponent seats use the same policy on all of them). Seeds of successive games are ``first_seed``,
+    ``learner_ids`` names each learner in game results (e.g. ``"run/left"``); ``choose_opponents(slots)``
+    returns one policy for each game slot starting a game now (a game with several opponent seats uses that
+    policy on all of them). Seeds of successive games are ``first_seed``,
     ``first_seed + 1``, ... in the order games start, so a run is reproducible.
     """
 
@@ -62,7 +62,7 @@ class SelfPlayGames:
         n_games: int,
         layout: np.ndarray,
         learner_ids: Sequence[str],
-        choose_opponents: Callable[[int], Sequence[Policy]] | None = None,
+        choose_opponents: Callable[[np.ndarray], Sequence[Policy]] | None = None,
         env_options: dict[str, Any] | None = None,
         first_seed: int = 0,
     ) -> None:
@@ -98,7 +98,7 @@ class SelfPlayGames:
         self.seeds[games] = seeds
         self.core.reset(games, seeds)
         if self.needs_opponents:
-            chosen = list(self.choose_opponents(games.size))  # type: ignore[misc]
+            chosen = list(self.choose_opponents(games))  # type: ignore[misc]
             if len(chosen) != games.size:
                 raise ValueError("choose_opponents returned the wrong number of policies")
             index = {id(p): i for i, p in enumerate(self.policies)}

@@ -58,6 +58,7 @@ class TrainConfig:
     games: int = 128  # games played at once
     snapshot_every: int = 128  # episodes (finished games) between snapshots; 0: by steps only
     snapshot_steps: int = 0  # game steps between snapshots; 0: by episodes only
+    swap_every: int = 0  # game steps a game slot keeps its drawn opponent (ML-Agents' swap_steps); 0: every game
     eval_games: int = 32  # games against each scripted player after every snapshot
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
@@ -71,6 +72,8 @@ class TrainConfig:
             raise MarlError(f"--minutes must be positive, not {self.minutes}")
         if self.games < 2:
             raise MarlError(f"--games must be at least 2, not {self.games}")
+        if self.swap_every < 0:
+            raise MarlError(f"--swap-every must not be negative, not {self.swap_every}")
         if self.eval_games < 0 or self.eval_games == 1:
             raise MarlError(f"--eval-games must be 0 or at least 2, not {self.eval_games}")
         if self.snapshot_every < 0 or self.snapshot_steps < 0 or not (self.snapshot_every or self.snapshot_steps):
@@ -173,6 +176,9 @@ class Trainer:
         self.matchmaker = Matchmaker(cfg.opponents, np.random.default_rng(cfg.seed), self.bot_ids)
         self.rates = WinRates(decay=cfg.opponents.decay, prior=cfg.opponents.prior)
         self._policies: dict[int, Policy] = {}
+        self._assigned: np.ndarray | None = None  # opponent id per game slot, with --swap-every
+        self._next_swap = 0
+        self.steps = 0
         learner_ids = [f"{cfg.run}/{n}" for n in self.names]
         # The 'self' opponent: the first learner's live network, sampling (one object, so games share a batch).
         self.live = self.learners[0].policy(learner_ids[0], spec.name, greedy=cfg.algo == "dqn")
@@ -180,7 +186,6 @@ class Trainer:
                                    choose_opponents=self._choose if (layout == OPPONENT).any() else None,
                                    env_options=cfg.env_options, first_seed=cfg.seed * 1_000_003)
         self.match_id = league.create_match(spec.name, "training", {"run": cfg.run})
-        self.steps = 0
         self.episodes = 0
         self.elapsed = 0.0  # seconds trained before this process (resumed runs)
         self.resumes = 0
@@ -195,8 +200,17 @@ class Trainer:
                                               greedy=False, seed=pid)
         return self._policies[pid]
 
-    def _choose(self, n: int) -> list[Policy]:
-        ids = self.matchmaker.sample(0, n, self.rates)
+    def _choose(self, slots: np.ndarray) -> list[Policy]:
+        """Opponents for the games starting in ``slots``: drawn afresh for every game, or with --swap-every kept per
+        slot until the next swap (ML-Agents' swap_steps, counted in game steps)."""
+        if not self.cfg.swap_every:
+            ids = self.matchmaker.sample(0, len(slots), self.rates)
+        else:
+            due = self.steps >= self._next_swap
+            if due or self._assigned is None:
+                self._assigned = self.matchmaker.sample(0, self.cfg.games, self.rates)
+                self._next_swap = self.steps + self.cfg.swap_every
+            ids = self._assigned[slots]
         return [self._opponent_policy(int(i)) for i in ids]
 
     # -- snapshots -------------------------------------------------------------------------------------------
