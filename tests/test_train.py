@@ -225,3 +225,37 @@ def test_swap_every_keeps_each_slot_on_its_opponent_until_the_swap(tmp_path):
     after = [trainer.games.policies[k].id for k in trainer.games.opponent_of.tolist()]
     assert trainer.episodes > cfg.games and after == first, "no swap within the budget: every slot kept its draw"
     league.close()
+
+
+def test_tensorboard_gets_the_metrics_or_a_clear_install_hint(tmp_path, capsys, monkeypatch):
+    import sys
+    import types
+
+    home = str(tmp_path / "h")
+    args = ["train", "pong", "--agents", "2", "--steps", "4096", "--games", "16", "--env-option", "points_to_win=1",
+            "--eval-games", "0", "--tensorboard", "--home", home]
+    monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", None)  # not installed
+    code, out, err = run(capsys, *args)
+    assert code == 2 and "pip install tensorboard" in err and err.count("\n") == 1
+    with League.open(home) as league:
+        assert league.list_runs() == [], "refused before the run was created"
+
+    written = []
+
+    class Writer:
+        def __init__(self, log_dir):
+            written.append(("dir", log_dir))
+
+        def add_scalar(self, tag, value, global_step):
+            written.append((tag, value, global_step))
+
+        def close(self):
+            written.append(("closed",))
+
+    monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", types.SimpleNamespace(SummaryWriter=Writer))
+    code, out, err = run(capsys, *args, "--json")
+    assert code == 0, err
+    assert written[0] == ("dir", str(tmp_path / "h" / "runs" / "pong-1" / "tensorboard"))
+    tags = {w[0] for w in written[1:-1]}
+    assert {"left/policy_loss", "right/entropy", "steps_per_second", "episodes"} <= tags
+    assert written[-1] == ("closed",)

@@ -63,6 +63,9 @@ def train(
                                                 "episodes only).")] = 0,
     swap_every: Annotated[int, typer.Option("--swap-every", help="Game steps a game slot keeps the opponent it drew "
                                             "(ML-Agents' swap_steps); 0: a new draw for every game.")] = 0,
+    tensorboard: Annotated[bool, typer.Option("--tensorboard", help="Also write the metrics for TensorBoard "
+                                              "(<home>/runs/<run>/tensorboard; needs the tensorboard package).")]
+    = False,
     eval_games: Annotated[int, typer.Option("--eval-games", help="Rated games against each scripted player after "
                                             "every snapshot (0: none).")] = 32,
     opponents: Annotated[str, typer.Option("--opponents", help="With --agents 1: self | latest | uniform | pfsp "
@@ -123,7 +126,8 @@ def train(
                 merge_settings(settings, read_toml(config))
             flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
                      "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
-                     "snapshot_steps": snapshot_steps, "eval_games": eval_games, "swap_every": swap_every}
+                     "snapshot_steps": snapshot_steps, "eval_games": eval_games, "swap_every": swap_every,
+                     "tensorboard": tensorboard}
             settings.update({k: v for k, v in flags.items() if k in typed})
             matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
                            "latest_ratio": ("latest_ratio", latest_ratio)}

@@ -58,6 +58,7 @@ class TrainConfig:
     games: int = 128  # games played at once
     snapshot_every: int = 128  # episodes (finished games) between snapshots; 0: by steps only
     snapshot_steps: int = 0  # game steps between snapshots; 0: by episodes only
+    tensorboard: bool = False  # also write the metrics for TensorBoard (runs/<run>/tensorboard)
     swap_every: int = 0  # game steps a game slot keeps its drawn opponent (ML-Agents' swap_steps); 0: every game
     eval_games: int = 32  # games against each scripted player after every snapshot
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
@@ -72,6 +73,8 @@ class TrainConfig:
             raise MarlError(f"--minutes must be positive, not {self.minutes}")
         if self.games < 2:
             raise MarlError(f"--games must be at least 2, not {self.games}")
+        if self.tensorboard:
+            tensorboard_writer(None)  # fails now, with the install hint, rather than after the run is created
         if self.swap_every < 0:
             raise MarlError(f"--swap-every must not be negative, not {self.swap_every}")
         if self.eval_games < 0 or self.eval_games == 1:
@@ -363,6 +366,7 @@ class Trainer:
         next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
         obs = self.games.observe()
         pending: list[GameResult] = []
+        board = tensorboard_writer(self.run_dir / "tensorboard") if cfg.tensorboard else None
         with open(self.run_dir / "metrics.jsonl", "a", buffering=1) as metrics:
             while True:
                 elapsed = self.elapsed = time.perf_counter() - start
@@ -385,6 +389,10 @@ class Trainer:
                             **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()},
                             **{f"eval/{k}": round(v, 4) for k, v in self.last_eval.items()}}
                     metrics.write(json.dumps(line) + "\n")
+                    if board is not None:
+                        for key, value in line.items():
+                            if key != "step":
+                                board.add_scalar(key, value, global_step=self.steps)
                     if self.on_progress:
                         self.on_progress({"steps": self.steps, "episodes": self.episodes, "progress": progress,
                                           "eval": dict(self.last_eval),
@@ -396,8 +404,20 @@ class Trainer:
                         next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
             self._record(pending)
             self.snapshot()
+        if board is not None:
+            board.close()
         return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - start, self.snapshots,
                            dict(self.last_eval))
+
+
+def tensorboard_writer(log_dir: Path | None) -> Any:
+    """A TensorBoard SummaryWriter (torch's) for ``log_dir``, or a one-line error when the tensorboard package is
+    missing; with ``log_dir=None`` only the check."""
+    try:
+        from torch.utils.tensorboard import SummaryWriter
+    except ImportError:
+        raise MarlError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
+    return None if log_dir is None else SummaryWriter(log_dir=str(log_dir))
 
 
 def save_run_config(league: League, cfg: TrainConfig) -> Path:
