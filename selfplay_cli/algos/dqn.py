@@ -49,6 +49,7 @@ import torch
 from torch import nn
 
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
+from . import adam
 
 EPS_SCHEDULES = ("linear", "exponential")
 LOSSES = ("huber", "mse")
@@ -176,14 +177,6 @@ class ReplayBuffer:
                 "next_obs": self.next_obs[idx], "dones": self.dones[idx]}
 
 
-def _adam(params: list[nn.Parameter], lr: float) -> torch.optim.Adam:
-    """Adam, fused where torch supports it (CPU since torch 2.4): ~30% faster updates of a small network."""
-    try:
-        return torch.optim.Adam(params, lr=lr, fused=True)
-    except (RuntimeError, TypeError, ValueError):
-        return torch.optim.Adam(params, lr=lr)
-
-
 class DQNLearner:
     """An online Q-network, its target copy, its optimiser and its replay buffer over ``n_slots`` slots."""
 
@@ -197,7 +190,7 @@ class DQNLearner:
         self.obs_dim = int(np.prod(self.obs_shape))
         self.net: MLPNet = build_network(self.obs_shape, n_actions, cfg.arch, seed=seed).to(self.device)
         self.target: MLPNet = copy.deepcopy(self.net).requires_grad_(False)
-        self.opt = _adam(list(self.net.parameters()), cfg.lr)
+        self.opt = adam(list(self.net.parameters()), cfg.lr)
         self.rng = np.random.default_rng(seed)  # exploration and replay sampling
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_dim)
         self.transitions = 0  # collected so far (drives epsilon)

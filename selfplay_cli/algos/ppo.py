@@ -22,6 +22,7 @@ import torch
 from torch import nn
 
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
+from . import adam
 
 
 @dataclass
@@ -66,7 +67,7 @@ class PPOLearner:
         self.n_actions = n_actions
         self.n_slots = n_slots
         self.net: MLPNet = build_network(self.obs_shape, n_actions, cfg.arch, seed=seed).to(self.device)
-        self.opt = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, eps=1e-5)
+        self.opt = adam(self.net.parameters(), lr=cfg.lr, eps=1e-5)
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
         t, b, d = cfg.rollout_steps, n_slots, int(np.prod(self.obs_shape))
         self.obs = torch.zeros((t, b, d), device=self.device)
