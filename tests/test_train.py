@@ -259,3 +259,24 @@ def test_tensorboard_gets_the_metrics_or_a_clear_install_hint(tmp_path, capsys, 
     tags = {w[0] for w in written[1:-1]}
     assert {"left/policy_loss", "right/entropy", "steps_per_second", "episodes"} <= tags
     assert written[-1] == ("closed",)
+
+
+def test_resume_refuses_a_run_another_live_process_is_training(tmp_path, capsys):
+    import subprocess
+    import sys
+
+    home = tmp_path / "h"
+    code, out, err = run(capsys, "train", "pong", "--agents", "2", "--steps", "2048", "--games", "16", "--env-option",
+                         "points_to_win=1", "--eval-games", "0", "--run", "r", "--home", str(home))
+    assert code == 0, err
+    assert not (home / "runs" / "r" / "lock").exists(), "a finished run releases its lock"
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (home / "runs" / "r" / "lock").write_text(str(sleeper.pid))  # as if that process were training it
+        code, out, err = run(capsys, "train", "--resume", "r", "--home", str(home))
+        assert code == 2 and f"being trained by process {sleeper.pid}" in err
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+    code, out, err = run(capsys, "train", "--resume", "r", "--home", str(home), "--json")  # a dead pid: taken over
+    assert code == 0, err

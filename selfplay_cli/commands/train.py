@@ -166,7 +166,13 @@ def train(
                 league.set_run_status(cfg.run, "running")
                 if not json_out:
                     err_console.print(note)
-            report = trainer.train()
+            try:
+                report = trainer.train()
+            except KeyboardInterrupt:
+                league.set_run_status(cfg.run, "stopped")
+                err_console.print(f"stopped {cfg.run} at step {trainer.steps:,}; continue it with: "
+                                  f"marl train --resume {cfg.run}")
+                raise typer.Exit(130) from None
         league.set_run_status(cfg.run, "finished")
     finally:
         league.close()

@@ -264,6 +264,25 @@ class Trainer:
                             league=self.league, player_ids={me.id: row.id, opp.id: bot_id}, kind="eval")
             self.last_eval[bot] = rep.stats.score
 
+    # -- one process per run ---------------------------------------------------------------------------------
+    def _lock(self) -> None:
+        """Claim the run for this process (``runs/<run>/lock`` holds its pid); refuse while another live process
+        holds it. A run killed with SIGKILL leaves a stale lock whose pid is gone, which is taken over."""
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        lock = self.run_dir / "lock"
+        try:
+            pid = int(lock.read_text().strip())
+        except (OSError, ValueError):
+            pid = None
+        if pid is not None and pid != os.getpid() and _alive(pid):
+            raise MarlError(f"run '{self.cfg.run}' is being trained by process {pid}; stop it before resuming")
+        tmp = lock.with_name(f"lock.tmp-{os.getpid()}")
+        tmp.write_text(str(os.getpid()))
+        os.replace(tmp, lock)
+
+    def _unlock(self) -> None:
+        (self.run_dir / "lock").unlink(missing_ok=True)
+
     # -- resuming -------------------------------------------------------------------------------------------
     @property
     def state_path(self) -> Path:
@@ -297,6 +316,7 @@ class Trainer:
         """
         from ..policies.snapshot import load_snapshot
 
+        self._lock()  # before reading anything: a live process still training this run keeps it
         if not self.state_path.exists():
             raise MarlError(f"run '{self.cfg.run}' has no resume state ({self.state_path})")
         try:
@@ -356,8 +376,15 @@ class Trainer:
 
     # -- the loop --------------------------------------------------------------------------------------------
     def train(self) -> TrainReport:
+        """Train until the budget is spent (holding the run's lock), then take a final snapshot."""
+        self._lock()
+        try:
+            return self._train()
+        finally:
+            self._unlock()
+
+    def _train(self) -> TrainReport:
         cfg = self.cfg
-        self.run_dir.mkdir(parents=True, exist_ok=True)
         start = time.perf_counter() - self.elapsed
         deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
         if not self.snapshots:
@@ -408,6 +435,16 @@ class Trainer:
             board.close()
         return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - start, self.snapshots,
                            dict(self.last_eval))
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def tensorboard_writer(log_dir: Path | None) -> Any:
