@@ -280,3 +280,29 @@ def test_resume_refuses_a_run_another_live_process_is_training(tmp_path, capsys)
         sleeper.wait()
     code, out, err = run(capsys, "train", "--resume", "r", "--home", str(home), "--json")  # a dead pid: taken over
     assert code == 0, err
+
+
+def test_run_status_after_a_refused_device_an_interrupt_and_a_crash(tmp_path, capsys, monkeypatch):
+    home = str(tmp_path / "h")
+    code, out, err = run(capsys, "train", "pong", "--device", "tpu", "--home", home)
+    assert code == 2 and "unknown device 'tpu'" in err
+    with League.open(home) as league:
+        assert league.list_runs() == [], "refused before the run was created"
+
+    def interrupted(self):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Trainer, "train", interrupted)
+    args = ["train", "pong", "--games", "8", "--eval-games", "0", "--home", home]
+    code, out, err = run(capsys, *args, "--run", "a")
+    assert code == 130 and "marl train --resume a" in err and "Traceback" not in err
+
+    def crashed(self):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(Trainer, "train", crashed)
+    with pytest.raises(RuntimeError):
+        main([*args, "--run", "b"])
+    with League.open(home) as league:
+        assert league.get_run("a").status == "interrupted"
+        assert league.get_run("b").status == "failed"

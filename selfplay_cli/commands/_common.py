@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -126,8 +125,3 @@ def progress_bar(description: str, total: int, unit: str, enabled: bool) -> Iter
     with Progress(*columns, console=err_console, transient=True) as prog:
         task = prog.add_task(description, total=total)
         yield lambda n=1: prog.advance(task, n)
-
-
-def fail(message: str, code: int = 2) -> typer.Exit:
-    sys.stderr.write(f"marl: error: {message}\n")
-    return typer.Exit(code)

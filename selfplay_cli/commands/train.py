@@ -160,19 +160,27 @@ def train(
                            info=f"{p['steps']:,} steps  {rate:,.0f}/s  {p['episodes']:,} episodes  "
                                 f"elo {p['elo']:.0f}  {ev}")
 
-            trainer = Trainer(league, cfg, on_progress=on_progress)
-            if resume is not None:
-                note = trainer.restore()
-                league.set_run_status(cfg.run, "running")
-                if not json_out:
-                    err_console.print(note)
+            trainer = None
             try:
+                trainer = Trainer(league, cfg, on_progress=on_progress)
+                if resume is not None:
+                    note = trainer.restore()
+                    league.set_run_status(cfg.run, "running")
+                    if not json_out:
+                        err_console.print(note)
                 report = trainer.train()
             except KeyboardInterrupt:
-                league.set_run_status(cfg.run, "stopped")
-                err_console.print(f"stopped {cfg.run} at step {trainer.steps:,}; continue it with: "
-                                  f"marl train --resume {cfg.run}")
+                league.set_run_status(cfg.run, "interrupted")
+                at = f" at step {trainer.steps:,}" if trainer is not None else ""
+                err_console.print(f"interrupted {cfg.run}{at}; continue it with: marl train --resume {cfg.run}")
                 raise typer.Exit(130) from None
+            except MarlError:
+                if resume is None:  # a refused resume (e.g. another process trains it) leaves the run as it is
+                    league.set_run_status(cfg.run, "failed")
+                raise
+            except Exception:
+                league.set_run_status(cfg.run, "failed")
+                raise
         league.set_run_status(cfg.run, "finished")
     finally:
         league.close()

@@ -1,9 +1,9 @@
 """Players: the one ``Policy`` interface, scripted bots as policies, network policies and snapshot files."""
 
 from .base import Policy
-from .bots import ScriptedPolicy, bot_names
+from .bots import ScriptedPolicy
 
-__all__ = ["Policy", "ScriptedPolicy", "bot_names"]
+__all__ = ["Policy", "ScriptedPolicy"]
 
 # Network policies and snapshot files need torch, which is slow to import: load them on first use.
 _LAZY = {

@@ -22,7 +22,3 @@ class ScriptedPolicy(Policy):
 
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         return np.asarray(self.bot.rule(obs, self.rng), dtype=np.int64)
-
-
-def bot_names(env: str) -> list[str]:
-    return sorted(get_env(env).bots)

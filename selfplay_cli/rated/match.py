@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ..arena import Game, GameResult, play
+from ..arena import GameResult, paired_schedule, play
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.ratings import SPRT, MatchStats, match_stats
@@ -183,9 +183,7 @@ def run_match(
     pair = 0
     while pair < n_pairs and decision is None:
         take = min(chunk_pairs, n_pairs - pair)
-        schedule = []
-        for p in range(pair, pair + take):
-            schedule += [Game(first_seed + p, (0, 1)), Game(first_seed + p, (1, 0))]
+        schedule = paired_schedule(2 * take, first_seed=first_seed + pair)
         results = play(spec, [a, b], schedule, parallel=parallel, env_options=options,
                        on_result=(lambda r: on_games(1)) if on_games else None)
         new: list[GameResult] = []

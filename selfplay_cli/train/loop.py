@@ -73,6 +73,7 @@ class TrainConfig:
             raise MarlError(f"--minutes must be positive, not {self.minutes}")
         if self.games < 2:
             raise MarlError(f"--games must be at least 2, not {self.games}")
+        resolve_device(self.device)  # an unknown or unavailable device fails before anything is written
         if self.tensorboard:
             tensorboard_writer(None)  # fails now, with the install hint, rather than after the run is created
         if self.swap_every < 0:
@@ -179,6 +180,7 @@ class Trainer:
         self.matchmaker = Matchmaker(cfg.opponents, np.random.default_rng(cfg.seed), self.bot_ids)
         self.rates = WinRates(decay=cfg.opponents.decay, prior=cfg.opponents.prior)
         self._policies: dict[int, Policy] = {}
+        self._player_of: dict[str, int] = dict(self.bot_ids)  # policy id in game results -> league player id
         self._assigned: np.ndarray | None = None  # opponent id per game slot, with --swap-every
         self._next_swap = 0
         self.steps = 0
@@ -201,6 +203,7 @@ class Trainer:
         if pid not in self._policies:
             self._policies[pid] = load_player(self.league, self.league.get_player(pid), device=str(self.device),
                                               greedy=False, seed=pid)
+            self._player_of[self._policies[pid].id] = pid
         return self._policies[pid]
 
     def _choose(self, slots: np.ndarray) -> list[Policy]:
@@ -359,11 +362,7 @@ class Trainer:
         for r in finished:
             ids = []
             for p in r.players:
-                if p in learner_player:
-                    ids.append(learner_player[p])
-                else:
-                    pol = next((q for q in self._policies.items() if q[1].id == p), None)
-                    ids.append(pol[0] if pol else self.bot_ids.get(p, 0))
+                ids.append(learner_player[p] if p in learner_player else self._player_of.get(p, 0))
             if 0 in ids or len(set(ids)) < len(ids):
                 continue  # the learner against itself (or its live copy) carries no rating information
             records.append(GameRecord(env=r.env, players=tuple(ids), seed=r.seed, scores=r.scores,
