@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -28,14 +29,16 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--games", type=int, default=200)
     p.add_argument("--keep", type=Path, help="league home to keep (default: a temporary directory)")
+    p.add_argument("--train-args", default="", help="extra `marl train` options, e.g. \"--seed 1 --config x.toml\"")
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         home = args.keep or Path(tmp) / "league"
         t0 = time.perf_counter()
-        report = json.loads(marl(home, "train", "pong", "--agents", "2", "--json"))
+        report = json.loads(marl(home, "train", "pong", "--agents", "2", *shlex.split(args.train_args), "--json"))
         wall = time.perf_counter() - t0
-        print(f"marl train pong --agents 2: {report['steps']:,} game steps, {report['episodes']} episodes, "
-              f"{wall:.0f} s wall ({report['steps_per_second']:,} game steps/s incl. evaluation games)")
+        print(f"marl train pong --agents 2 {args.train_args}: {report['steps']:,} game steps, "
+              f"{report['episodes']} episodes, {wall:.0f} s wall ({report['steps_per_second']:,} game steps/s "
+              "incl. evaluation games)")
         finals = [s for s in report["snapshots"] if s.split("/")[1].split("-")[0] ==
                   report["snapshots"][-1].split("/")[1].split("-")[0]]
         best = {}

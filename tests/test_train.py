@@ -215,7 +215,7 @@ def test_config_file_sets_every_section_and_typed_options_win(tmp_path, capsys):
 def test_swap_every_keeps_each_slot_on_its_opponent_until_the_swap(tmp_path):
     """ML-Agents' swap_steps: with --swap-every a game slot replays the opponent it drew until the next swap."""
     league = League.open(tmp_path / "league")
-    cfg = tiny(agents=1, steps=4096, eval_games=0, swap_every=10**9,
+    cfg = tiny(agents=1, steps=8192, eval_games=0, swap_every=10**9,
                opponents=MatchmakerConfig(mode="self", latest_ratio=0.0, bots={"cpu": 0.5, "random": 0.5}))
     league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     trainer = Trainer(league, cfg)

@@ -49,7 +49,7 @@ import torch
 from torch import nn
 
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
-from . import adam
+from . import FlatAdam, flatten
 
 EPS_SCHEDULES = ("linear", "exponential")
 LOSSES = ("huber", "mse")
@@ -190,7 +190,8 @@ class DQNLearner:
         self.obs_dim = int(np.prod(self.obs_shape))
         self.net: MLPNet = build_network(self.obs_shape, n_actions, cfg.arch, seed=seed).to(self.device)
         self.target: MLPNet = copy.deepcopy(self.net).requires_grad_(False)
-        self.opt = adam(list(self.net.parameters()), cfg.lr)
+        self.opt = FlatAdam(self.net.parameters(), cfg.lr, max_grad_norm=cfg.max_grad_norm)
+        self.target_flat = flatten(self.target.parameters())  # the target update is one operation on it
         self.rng = np.random.default_rng(seed)  # exploration and replay sampling
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_dim)
         self.transitions = 0  # collected so far (drives epsilon)
@@ -266,11 +267,14 @@ class DQNLearner:
 
     # -- learning -------------------------------------------------------------------------------------------
     @torch.no_grad()
-    def td_target(self, rewards: torch.Tensor, dones: torch.Tensor, next_obs: torch.Tensor) -> torch.Tensor:
-        """y = r + gamma^n * (1 - done) * Q_target(s', a'), a' the online argmax (double) or the target's (plain)."""
+    def td_target(self, rewards: torch.Tensor, dones: torch.Tensor, next_obs: torch.Tensor,
+                  q_next_online: torch.Tensor | None = None) -> torch.Tensor:
+        """y = r + gamma^n * (1 - done) * Q_target(s', a'), a' the online argmax (double) or the target's (plain).
+        ``q_next_online``: the online network's Q(s', .) when the caller already has it."""
         q_next_target, _ = self.target(next_obs)
         if self.cfg.double_dqn:
-            q_next_online, _ = self.net(next_obs)
+            if q_next_online is None:
+                q_next_online, _ = self.net(next_obs)
             best = q_next_online.argmax(dim=1, keepdim=True)
             q_next = q_next_target.gather(1, best).squeeze(1)
         else:
@@ -278,13 +282,10 @@ class DQNLearner:
         return rewards + self.cfg.gamma ** self.cfg.n_step * (1.0 - dones) * q_next
 
     def _sync_target(self) -> None:
-        tau = self.cfg.tau
-        with torch.no_grad():
-            for t, p in zip(self.target.parameters(), self.net.parameters(), strict=True):
-                if tau >= 1.0:
-                    t.copy_(p)
-                else:
-                    t.lerp_(p, tau)
+        if self.cfg.tau >= 1.0:
+            self.target_flat.copy_(self.opt.flat)
+        else:
+            self.target_flat.lerp_(self.opt.flat, self.cfg.tau)
 
     def update(self, next_obs: np.ndarray, progress: float = 0.0) -> dict[str, float]:
         """Make the gradient updates due (none before the buffer holds ``learning_starts`` transitions).
@@ -302,16 +303,17 @@ class DQNLearner:
             obs, actions, rewards, next_o, dones = (torch.from_numpy(batches[key]).to(self.device) for key in
                                                     ("obs", "actions", "rewards", "next_obs", "dones"))
             loss_fn = nn.functional.smooth_l1_loss if cfg.loss == "huber" else nn.functional.mse_loss
+            b = cfg.batch_size
+            both = torch.cat((obs, next_o), dim=1) if cfg.double_dqn else obs  # one online pass for s and s'
             for i in range(k):
-                y = self.td_target(rewards[i], dones[i], next_o[i])
-                q_all, _ = self.net(obs[i])
+                q_both, _ = self.net(both[i])
+                q_all = q_both[:b]
+                y = self.td_target(rewards[i], dones[i], next_o[i], q_both[b:].detach() if cfg.double_dqn else None)
                 q = q_all.gather(1, actions[i, :, None]).squeeze(1)
                 loss = loss_fn(q, y)
-                self.opt.zero_grad(set_to_none=True)
+                self.opt.zero_grad()
                 loss.backward()
-                if cfg.max_grad_norm > 0:
-                    nn.utils.clip_grad_norm_(self.net.parameters(), cfg.max_grad_norm)
-                self.opt.step()
+                self.opt.step()  # clips the gradient norm to max_grad_norm first (0: no clipping)
                 self.grad_steps += 1
                 if self.grad_steps % cfg.target_period == 0:
                     self._sync_target()
@@ -320,7 +322,7 @@ class DQNLearner:
             self.updates += 1
         return {"loss": float(loss_sum) / k if k else float("nan"), "q_mean": float(q_sum) / k if k else float("nan"),
                 "epsilon": self.epsilon, "buffer_size": float(len(self.buffer)), "grad_steps": float(k),
-                "lr": float(self.opt.param_groups[0]["lr"])}
+                "lr": self.opt.lr}
 
     # -- playing and saving ---------------------------------------------------------------------------------
     def policy(self, id: str, env: str, greedy: bool = True) -> NetworkPolicy:
@@ -337,10 +339,7 @@ class DQNLearner:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.net.load_state_dict(state["net"])
         self.target.load_state_dict(state["target"])
-        fused = [g.get("fused") for g in self.opt.param_groups]
         self.opt.load_state_dict(state["opt"])
-        for g, f in zip(self.opt.param_groups, fused, strict=True):  # as this torch supports, not as saved
-            g["fused"] = f
         self.rng.bit_generator.state = state["rng"]
         self.transitions = int(state["transitions"])
         self.grad_steps = int(state["grad_steps"])

@@ -19,10 +19,9 @@ from typing import Any
 
 import numpy as np
 import torch
-from torch import nn
 
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
-from . import adam
+from . import FlatAdam
 
 
 @dataclass
@@ -39,7 +38,7 @@ class PPOConfig:
     ent_coef: float = 0.01  # entropy bonus
     vf_coef: float = 0.5  # value loss weight
     max_grad_norm: float = 0.5  # gradient clipping
-    arch: Arch = field(default_factory=lambda: Arch(hidden=(64, 64), activation="tanh", value_head=True))
+    arch: Arch = field(default_factory=lambda: Arch(hidden=(64, 64), activation="relu", value_head=True))
 
     def __post_init__(self) -> None:
         if isinstance(self.arch, dict):
@@ -67,7 +66,7 @@ class PPOLearner:
         self.n_actions = n_actions
         self.n_slots = n_slots
         self.net: MLPNet = build_network(self.obs_shape, n_actions, cfg.arch, seed=seed).to(self.device)
-        self.opt = adam(self.net.parameters(), lr=cfg.lr, eps=1e-5)
+        self.opt = FlatAdam(self.net.parameters(), lr=cfg.lr, eps=1e-5, max_grad_norm=cfg.max_grad_norm)
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
         t, b, d = cfg.rollout_steps, n_slots, int(np.prod(self.obs_shape))
         self.obs = torch.zeros((t, b, d), device=self.device)
@@ -85,16 +84,21 @@ class PPOLearner:
 
     @torch.no_grad()
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """Sample actions for this step's observations and remember what the update needs."""
-        x = self._tensor(obs)
+        """Sample actions for this step's observations and remember what the update needs.
+
+        Sampling is the inverse-CDF draw ``a = #{k : cdf_k <= u}`` with one uniform ``u`` per slot from the
+        learner's generator (multinomial does the same draw several times slower on small batches)."""
+        x = self.obs[self.t]
+        x.copy_(self._tensor(obs))
         logits, value = self.net(x)
-        probs = torch.softmax(logits, dim=-1)
-        action = torch.multinomial(probs, 1, generator=self.gen).squeeze(1)
-        self.obs[self.t] = x
+        logp_all = torch.log_softmax(logits, dim=-1)
+        u = torch.rand((x.shape[0], 1), generator=self.gen, device=self.device)
+        cdf = logp_all.exp().cumsum_(dim=1)
+        action = (cdf <= u).sum(dim=1).clamp_(max=self.n_actions - 1)
         self.actions[self.t] = action
-        self.logprobs[self.t] = torch.log(probs.gather(1, action[:, None]).squeeze(1) + 1e-12)
+        torch.gather(logp_all, 1, action[:, None], out=self.logprobs[self.t, :, None])
         self.values[self.t] = value
-        return action.cpu().numpy()
+        return action.numpy() if self.device.type == "cpu" else action.cpu().numpy()
 
     def record(self, rewards: np.ndarray, dones: np.ndarray) -> bool:
         """Store this step's outcome; True when the rollout is full and :meth:`update` is due."""
@@ -126,46 +130,44 @@ class PPOLearner:
         if self.t != cfg.rollout_steps:
             raise RuntimeError("update() before the rollout is full")
         if cfg.anneal_lr:
-            self.opt.param_groups[0]["lr"] = cfg.lr * max(0.0, 1.0 - progress)
+            self.opt.lr = cfg.lr * max(0.0, 1.0 - progress)
         adv, returns = self._advantages(next_obs)
         b_obs = self.obs.reshape(-1, self.obs.shape[-1])
         b_act, b_logp = self.actions.reshape(-1), self.logprobs.reshape(-1)
         b_adv, b_ret, b_val = adv.reshape(-1), returns.reshape(-1), self.values.reshape(-1)
         n = b_obs.shape[0]
         mb = max(1, n // cfg.minibatches)
-        stats = {"policy_loss": 0.0, "value_loss": 0.0, "entropy": 0.0, "approx_kl": 0.0, "clip_frac": 0.0}
+        stats = torch.zeros(5, device=self.device)  # policy loss, value loss, entropy, approx KL, clip fraction
         count = 0
         for _ in range(cfg.update_epochs):
             order = torch.randperm(n, generator=self.gen, device=self.device)
             for start in range(0, n, mb):
                 idx = order[start:start + mb]
-                logits, value = self.net(b_obs[idx])
+                logits, value = self.net(b_obs.index_select(0, idx))
                 logp_all = torch.log_softmax(logits, dim=-1)
-                logp = logp_all.gather(1, b_act[idx, None]).squeeze(1)
+                logp = logp_all.gather(1, b_act.index_select(0, idx)[:, None]).squeeze(1)
                 entropy = -(logp_all.exp() * logp_all).sum(-1).mean()
-                ratio = (logp - b_logp[idx]).exp()
-                a = b_adv[idx]
+                log_ratio = logp - b_logp.index_select(0, idx)
+                ratio = log_ratio.exp()
+                a = b_adv.index_select(0, idx)
                 if cfg.norm_adv and a.numel() > 1:
                     a = (a - a.mean()) / (a.std() + 1e-8)
                 pg_loss = torch.max(-a * ratio, -a * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
-                v_loss = 0.5 * ((value - b_ret[idx]) ** 2).mean()
+                v_loss = 0.5 * (value - b_ret.index_select(0, idx)).square().mean()
                 loss = pg_loss + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
-                self.opt.zero_grad(set_to_none=True)
+                self.opt.zero_grad()
                 loss.backward()
-                nn.utils.clip_grad_norm_(self.net.parameters(), cfg.max_grad_norm)
-                self.opt.step()
+                self.opt.step()  # clips the gradient norm to max_grad_norm first
                 with torch.no_grad():
-                    stats["policy_loss"] += float(pg_loss)
-                    stats["value_loss"] += float(v_loss)
-                    stats["entropy"] += float(entropy)
-                    stats["approx_kl"] += float(((ratio - 1) - (logp - b_logp[idx])).mean())
-                    stats["clip_frac"] += float(((ratio - 1).abs() > cfg.clip_coef).float().mean())
+                    stats += torch.stack((pg_loss, v_loss, entropy, (ratio - 1 - log_ratio).mean(),
+                                          ((ratio - 1).abs() > cfg.clip_coef).float().mean()))
                 count += 1
         self.t = 0
         self.updates += 1
-        out = {k: v / count for k, v in stats.items()}
+        names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac")
+        out = {k: float(v) / count for k, v in zip(names, stats.tolist(), strict=True)}
         out["explained_variance"] = float(1 - torch.var(b_ret - b_val) / (torch.var(b_ret) + 1e-8))
-        out["lr"] = float(self.opt.param_groups[0]["lr"])
+        out["lr"] = self.opt.lr
         return out
 
     # -- playing and saving ---------------------------------------------------------------------------------

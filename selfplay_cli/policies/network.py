@@ -14,12 +14,14 @@ from typing import Any
 import numpy as np
 import torch
 from torch import nn
+from torch.nn import functional as F
 
 from ..errors import MarlError
 from .base import Policy
 
 KINDS = ("mlp",)
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
+ACTIVATION_FNS = {"tanh": torch.tanh, "relu": torch.relu}
 
 
 class SnapshotError(MarlError):
@@ -132,6 +134,8 @@ class MLPNet(nn.Module):
             layers.append(ACTIVATIONS[arch.activation]())
             width = h
         self.trunk = nn.Sequential(*layers)
+        self._linears = [m for m in layers if isinstance(m, nn.Linear)]
+        self._activation = ACTIVATION_FNS[arch.activation]
         self.action_head = _layer(width, self.n_actions, 0.01, generator)
         self.value_head = _layer(width, 1, 1.0, generator) if arch.value_head else None
         self.state_value = _layer(width, 1, 1.0, generator) if arch.dueling else None
@@ -142,7 +146,9 @@ class MLPNet(nn.Module):
         x = x.reshape(x.shape[0], -1)
         if x.shape[1] != self.obs_dim:
             raise ValueError(f"observations have {x.shape[1]} features per row; this network takes {self.obs_dim}")
-        z = self.trunk(x)
+        z = x
+        for layer in self._linears:  # the trunk without nn.Module call overhead (it dominates small batches)
+            z = self._activation(F.linear(z, layer.weight, layer.bias))
         out = self.action_head(z)
         if self.state_value is not None:
             out = self.state_value(z) + out - out.mean(dim=1, keepdim=True)

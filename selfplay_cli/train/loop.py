@@ -38,8 +38,10 @@ from ..policies.network import resolve_device
 from ..policies.snapshot import SnapshotMeta, save_snapshot
 from ..rated.match import load_player, run_match
 from ..rated.snapshots import snapshot_relpath
+from .team import LearnerTeam
 
 ALGOS = ("ppo", "dqn")
+STATE_VERSION = 2  # 2: flat-buffer optimiser state (FlatAdam)
 
 
 @dataclass
@@ -294,7 +296,7 @@ class Trainer:
     def save_state(self) -> None:
         """Everything to continue exactly from the latest snapshot, written atomically after its rows."""
         state = {
-            "version": 1,
+            "version": STATE_VERSION,
             "learners": [learner.state_dict() for learner in self.learners],
             "latest": list(self.latest), "snapshots": list(self.snapshots), "steps": self.steps,
             "episodes": self.episodes, "episodes_suffix": self.episodes_suffix,
@@ -326,8 +328,13 @@ class Trainer:
             state = torch.load(self.state_path, map_location=self.device, weights_only=True)
         except Exception as e:  # a torn or foreign file: say which, never a traceback
             raise MarlError(f"{self.state_path}: cannot read the resume state ({e})") from None
-        for learner, ls in zip(self.learners, state["learners"], strict=True):
-            learner.load_state_dict(ls)
+        if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
+            raise MarlError(f"{self.state_path}: resume state written by another marl version; start a new run")
+        try:
+            for learner, ls in zip(self.learners, state["learners"], strict=True):
+                learner.load_state_dict(ls)
+        except (KeyError, ValueError, RuntimeError) as e:
+            raise MarlError(f"{self.state_path}: cannot resume from this state ({e})") from None
         self.latest, self.snapshots = list(state["latest"]), list(state["snapshots"])
         self.steps, self.episodes = int(state["steps"]), int(state["episodes"])
         self.episodes_suffix = int(state["episodes_suffix"])
@@ -378,7 +385,8 @@ class Trainer:
         """Train until the budget is spent (holding the run's lock), then take a final snapshot."""
         self._lock()
         try:
-            return self._train()
+            with LearnerTeam(self.learners) as self.team:
+                return self._train()
         finally:
             self._unlock()
 
@@ -399,15 +407,13 @@ class Trainer:
                 progress = elapsed / (deadline - start) if deadline else self.steps / cfg.steps
                 if progress >= 1.0:
                     break
-                actions = [learner.act(o) for learner, o in zip(self.learners, obs, strict=True)]
-                rewards, dones, finished = self.games.step(actions)
+                rewards, dones, finished = self.games.step(self.team.act(obs))
                 obs = self.games.observe()
                 self.steps += cfg.games
                 self.episodes += len(finished)
                 pending += finished
-                due = [learner.record(r, d) for learner, r, d in zip(self.learners, rewards, dones, strict=True)]
-                if all(due):
-                    stats = [learner.update(o, progress) for learner, o in zip(self.learners, obs, strict=True)]
+                if self.team.record(rewards, dones):
+                    stats = self.team.update(obs, progress)
                     self._record(pending)
                     pending = []
                     line = {"step": self.steps, "episodes": self.episodes, "seconds": round(elapsed, 2),
