@@ -15,6 +15,9 @@ def test_seat_layouts_for_agents_and_sharing():
     assert seat_layout(2, 4, 2, "nops").tolist() == [[0, 0, 0, 0], [1, 1, 1, 1]]
     assert seat_layout(2, 4, 2, "fups").tolist() == [[0, 0, 0, 0], [0, 0, 0, 0]]
     assert seat_layout(2, 4, 1, "nops").tolist() == [[0, OPPONENT, 0, OPPONENT], [OPPONENT, 0, OPPONENT, 0]]
+    assert seat_layout(2, 6, 2, "nops", league_games=0.5).tolist() == [[0, OPPONENT, 0, 0, 0, 0],
+                                                                       [OPPONENT, 1, OPPONENT, 1, 1, 1]]
+    assert seat_layout(2, 4, 2, "fups", league_games=0.5).tolist() == [[0, OPPONENT, 0, 0], [OPPONENT, 0, 0, 0]]
     with pytest.raises(ValueError):
         seat_layout(2, 4, 3, "nops")
     with pytest.raises(ValueError):

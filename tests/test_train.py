@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from selfplay_cli.algos.ppo import PPOConfig
+from selfplay_cli.arena.selfplay import OPPONENT
 from selfplay_cli.cli import main
 from selfplay_cli.league.matchmaking import MatchmakerConfig
 from selfplay_cli.league.store import League
@@ -76,6 +78,39 @@ def test_one_learner_meets_league_opponents_and_bots(tmp_path):
     league.close()
 
 
+def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats(tmp_path):
+    """--league-games with --agents 2: that share of games seats one learner (on its own side) against an opponent
+    drawn for *that* learner; the rest are learner against learner. The ledger and PFSP's win rates get them."""
+    league = League.open(tmp_path / "league")
+    cfg = tiny(agents=2, sharing="nops", league_games=0.5, steps=8192,
+               opponents=MatchmakerConfig(mode="pfsp", bots={"cpu": 1.0}))
+    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    trainer = Trainer(league, cfg)
+    layout = trainer.games.layout
+    assert (layout == OPPONENT).sum() == cfg.games // 2, "half the games have one opponent seat"
+    league_games = np.flatnonzero((layout == OPPONENT).any(axis=0))
+    for g in league_games.tolist():  # the left learner plays left, the right learner right, taking turns
+        learner = int(layout.max(axis=0)[g])
+        assert layout[learner, g] == learner and layout[1 - learner, g] == OPPONENT
+    assert sorted(set(layout.max(axis=0)[league_games].tolist())) == [0, 1]
+    trainer.train()
+    cpu = league.find_players("cpu", "pong")[0].id
+    with league.session() as s:
+        from selfplay_cli.league.models import Match
+
+        training = {m.id for m in s.query(Match).all() if m.kind == "training"}
+    snaps = {p.id: p for p in league.players("pong", kind="snapshot")}
+    table = league.games("pong")
+    seen = set()
+    for m, a, b in zip(table.match_id.tolist(), table.player_a.tolist(), table.player_b.tolist(), strict=True):
+        if m in training and cpu in (a, b):
+            seat = 0 if b == cpu else 1
+            seen.add((seat, snaps[a if seat == 0 else b].meta["learner"]))
+    assert seen == {(0, "left"), (1, "right")}, seen  # each learner met cpu, always on its own side
+    assert {pair[0] for pair in trainer.rates.to_dict()["pairs"]} == {0, 1}, "win rates per learner (PFSP)"
+    league.close()
+
+
 def run(capsys, *args):
     code = main(list(args))
     out = capsys.readouterr()
@@ -104,6 +139,8 @@ def test_train_command_runs_and_reports(tmp_path, capsys):
     (["train", "pong", "--algo", "sac"], "--algo"),
     (["train", "pong", "--env-option", "points=3"], "unknown pong option"),
     (["train", "pong", "--bots", "cpu=2"], "bot probabilities"),
+    (["train", "pong", "--league-games", "1.5"], "--league-games"),
+    (["train", "pong", "--agents", "1", "--league-games", "0.3"], "--league-games is for --agents 2"),
 ])
 def test_bad_train_options_are_one_line_errors(tmp_path, capsys, args, needle):
     code, out, err = run(capsys, *args, "--home", str(tmp_path / "h"))

@@ -12,7 +12,9 @@ Seat layouts for two-seat games, by ``--agents`` and ``--sharing``:
 * two learners, one network each (seed 000's set-up): learner 0 on the left of every game, learner 1 on the right;
 * one shared network for both seats: learner 0 on both seats of every game;
 * one learner against the league: learner 0 on the left of even games and the right of odd ones (it plays both
-  sides, which egocentric observations allow), opponents on the other seat.
+  sides, which egocentric observations allow), opponents on the other seat;
+* every seat a learner, with ``league_games`` > 0: that share of the games seats one learner (on its own seat,
+  the learners taking turns game by game) against an opponent from the league; the other games are as above.
 """
 
 from __future__ import annotations
@@ -29,8 +31,10 @@ from .runner import GameResult
 OPPONENT = -1
 
 
-def seat_layout(n_seats: int, n_games: int, agents: int, sharing: str) -> np.ndarray:
+def seat_layout(n_seats: int, n_games: int, agents: int, sharing: str, league_games: float = 0.0) -> np.ndarray:
     """The learner index of every (seat, game) slot, -1 for opponent seats (see the module docstring)."""
+    if not 0.0 <= league_games <= 1.0:
+        raise ValueError(f"league_games must lie in [0, 1], not {league_games}")
     if sharing not in ("nops", "fups"):
         raise ValueError(f"sharing must be 'nops' or 'fups', not {sharing!r}")
     if not 1 <= agents <= n_seats:
@@ -39,6 +43,10 @@ def seat_layout(n_seats: int, n_games: int, agents: int, sharing: str) -> np.nda
     if agents == n_seats:
         for seat in range(n_seats):
             layout[seat] = 0 if sharing == "fups" else seat
+        k = round(league_games * n_games)  # the first k games: one learner against the league
+        seat_of = np.arange(k) % n_seats
+        layout[:, :k] = OPPONENT
+        layout[seat_of, np.arange(k)] = 0 if sharing == "fups" else seat_of
     elif agents == 1:
         layout[np.arange(n_games) % n_seats, np.arange(n_games)] = 0
     else:

@@ -51,7 +51,7 @@ def train(
                                                "learning rate, batch, buffer, target period, epsilon).")] = None,
     sharing: Annotated[str, typer.Option("--sharing", help="nops: one network per learner; fups: one shared "
                                          "network.")] = "nops",
-    steps: Annotated[int, typer.Option("--steps", help="Budget in game steps.")] = 2_000_000,
+    steps: Annotated[int, typer.Option("--steps", help="Budget in game steps.")] = 6_000_000,
     minutes: Annotated[float | None, typer.Option("--minutes", help="Budget in minutes of wall clock instead "
                                                   "(fractions allowed).")] = None,
     run: Annotated[str | None, typer.Option("--run", help="Run name (default: <env>-<n>).")] = None,
@@ -66,14 +66,19 @@ def train(
     tensorboard: Annotated[bool, typer.Option("--tensorboard", help="Also write the metrics for TensorBoard "
                                               "(<home>/runs/<run>/tensorboard; needs the tensorboard package).")]
     = False,
+    league_games: Annotated[float, typer.Option("--league-games", help="With every seat learning (--agents 2): "
+                                                "share of games in which a learner meets an opponent from the league "
+                                                "(drawn by --opponents/--bots) instead of the other learner; 0 keeps "
+                                                "seed 000's set-up.")] = 0.0,
     eval_games: Annotated[int, typer.Option("--eval-games", help="Rated games against each scripted player after "
                                             "every snapshot (0: none).")] = 32,
-    opponents: Annotated[str, typer.Option("--opponents", help="With --agents 1: self | latest | uniform | pfsp "
-                                           "(opponents from the run's snapshots).")] = "pfsp",
+    opponents: Annotated[str, typer.Option("--opponents", help="League opponents (--agents 1, or --league-games): "
+                                           "self | latest | uniform | pfsp, from the run's snapshots.")] = "pfsp",
     window: Annotated[int, typer.Option("--window", help="Opponents are drawn from the last WINDOW snapshots "
                                         "(ML-Agents' window, default 10).")] = 10,
-    latest_ratio: Annotated[float, typer.Option("--latest-ratio", help="Share of games against the current "
-                                                "learner itself (ML-Agents' play_against_latest_model_ratio).")]
+    latest_ratio: Annotated[float, typer.Option("--latest-ratio", help="Share of league games against the "
+                                                "current learner (two learners: the other one); ML-Agents' "
+                                                "play_against_latest_model_ratio.")]
     = 0.5,
     bots: Annotated[str, typer.Option("--bots", help="Mix in scripted players, e.g. cpu=0.1,random=0.05.")] = "",
     lr: Annotated[float | None, typer.Option("--lr", help="Learning rate (default: the algorithm's own, PPO 2e-3, "
@@ -127,7 +132,7 @@ def train(
             flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
                      "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
                      "snapshot_steps": snapshot_steps, "eval_games": eval_games, "swap_every": swap_every,
-                     "tensorboard": tensorboard}
+                     "tensorboard": tensorboard, "league_games": league_games}
             settings.update({k: v for k, v in flags.items() if k in typed})
             matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
                            "latest_ratio": ("latest_ratio", latest_ratio)}

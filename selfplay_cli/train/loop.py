@@ -52,7 +52,7 @@ class TrainConfig:
     agents: int = 2
     algo: str = "ppo"
     sharing: str = "nops"
-    steps: int = 2_000_000  # game steps (one step of one game, all seats acting)
+    steps: int = 6_000_000  # game steps (one step of one game, all seats acting)
     minutes: float | None = None  # wall-clock budget instead of steps
     run: str = ""
     seed: int = 0
@@ -62,6 +62,7 @@ class TrainConfig:
     snapshot_steps: int = 0  # game steps between snapshots; 0: by episodes only
     tensorboard: bool = False  # also write the metrics for TensorBoard (runs/<run>/tensorboard)
     swap_every: int = 0  # game steps a game slot keeps its drawn opponent (ML-Agents' swap_steps); 0: every game
+    league_games: float = 0.0  # all seats learning: share of games one learner plays a league opponent instead
     eval_games: int = 32  # games against each scripted player after every snapshot
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
@@ -91,6 +92,11 @@ class TrainConfig:
             raise MarlError(f"{self.env} has {n_seats} seats: --agents must be between 1 and {n_seats}")
         if self.sharing not in ("nops", "fups"):
             raise MarlError(f"--sharing must be nops or fups, not '{self.sharing}'")
+        if not 0.0 <= self.league_games <= 1.0:
+            raise MarlError(f"--league-games must lie between 0 and 1, not {self.league_games}")
+        if self.league_games and self.agents < n_seats:
+            raise MarlError(f"--league-games is for --agents {n_seats} (with fewer learners every game is already "
+                            "against the league)")
         if self.sharing == "fups" and self.agents == 1:
             raise MarlError("--sharing fups shares one network between several learners: it needs --agents 2 or more")
 
@@ -165,7 +171,8 @@ class Trainer:
         league.ensure_bots(spec.name, spec.bots)
         self.bot_ids = {p.name: p.id for p in league.players(env=spec.name, kind="bot")}
 
-        layout = seat_layout(len(spec.agents), cfg.games, cfg.agents, cfg.sharing)
+        layout = seat_layout(len(spec.agents), cfg.games, cfg.agents, cfg.sharing, cfg.league_games)
+        self.learner_of_game = layout.max(axis=0)  # the learner in each game (opponent slots: the one it faces)
         self.names = _learner_names(spec.agents, cfg)
         torch.manual_seed(cfg.seed)
         learner_cls, algo_cfg = (PPOLearner, cfg.ppo) if cfg.algo == "ppo" else (DQNLearner, cfg.dqn)
@@ -187,8 +194,10 @@ class Trainer:
         self._next_swap = 0
         self.steps = 0
         learner_ids = [f"{cfg.run}/{n}" for n in self.names]
-        # The 'self' opponent: the first learner's live network, sampling (one object, so games share a batch).
-        self.live = self.learners[0].policy(learner_ids[0], spec.name, greedy=cfg.algo == "dqn")
+        # The 'latest' opponent of learner i: the next learner's live network (with one learner, itself), sampling;
+        # one object per learner, so the games it plays share a batch.
+        self.live = [learner.policy(lid, spec.name, greedy=cfg.algo == "dqn")
+                     for learner, lid in zip(self.learners, learner_ids, strict=True)]
         self.games = SelfPlayGames(spec, cfg.games, layout, learner_ids,
                                    choose_opponents=self._choose if (layout == OPPONENT).any() else None,
                                    env_options=cfg.env_options, first_seed=cfg.seed * 1_000_003)
@@ -199,27 +208,36 @@ class Trainer:
         self.last_eval: dict[str, float] = {}
 
     # -- opponents -------------------------------------------------------------------------------------------
-    def _opponent_policy(self, pid: int) -> Policy:
-        if pid == LATEST_LEARNER:
-            return self.live
+    def _opponent_policy(self, pid: int, learner: int) -> Policy:
+        if pid == LATEST_LEARNER:  # the other learner as it is now (ML-Agents' "latest model"; one learner: itself)
+            return self.live[(learner + 1) % len(self.live)]
         if pid not in self._policies:
             self._policies[pid] = load_player(self.league, self.league.get_player(pid), device=str(self.device),
                                               greedy=False, seed=pid)
             self._player_of[self._policies[pid].id] = pid
         return self._policies[pid]
 
+    def _draw(self, games: np.ndarray) -> np.ndarray:
+        """Opponent ids for ``games``, each drawn by the matchmaker for the learner that plays that game."""
+        ids = np.empty(len(games), dtype=np.int64)
+        learners = self.learner_of_game[games]
+        for i in np.unique(learners).tolist():
+            mine = learners == i
+            ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates)
+        return ids
+
     def _choose(self, slots: np.ndarray) -> list[Policy]:
         """Opponents for the games starting in ``slots``: drawn afresh for every game, or with --swap-every kept per
         slot until the next swap (ML-Agents' swap_steps, counted in game steps)."""
         if not self.cfg.swap_every:
-            ids = self.matchmaker.sample(0, len(slots), self.rates)
+            ids = self._draw(slots)
         else:
             due = self.steps >= self._next_swap
             if due or self._assigned is None:
-                self._assigned = self.matchmaker.sample(0, self.cfg.games, self.rates)
+                self._assigned = self._draw(np.arange(self.cfg.games))
                 self._next_swap = self.steps + self.cfg.swap_every
             ids = self._assigned[slots]
-        return [self._opponent_policy(int(i)) for i in ids]
+        return [self._opponent_policy(int(i), int(self.learner_of_game[g])) for i, g in zip(ids, slots, strict=True)]
 
     # -- snapshots -------------------------------------------------------------------------------------------
     def _name(self, episode: int, i: int) -> str:
@@ -374,9 +392,10 @@ class Trainer:
                 continue  # the learner against itself (or its live copy) carries no rating information
             records.append(GameRecord(env=r.env, players=tuple(ids), seed=r.seed, scores=r.scores,
                                       outcome=r.outcome, length=r.length, truncated=r.truncated))
-            if len(self.names) == 1 and self.games.learner_ids[0] in r.players:
-                seat = r.players.index(self.games.learner_ids[0])
-                self.rates.update(0, ids[1 - seat], r.outcome[seat])
+            learners = [self.games.learner_ids.index(p) for p in r.players if p in self.games.learner_ids]
+            if len(learners) == 1:  # a learner against the league: its win rate against that opponent (PFSP)
+                seat = r.players.index(self.games.learner_ids[learners[0]])
+                self.rates.update(learners[0], ids[1 - seat], r.outcome[seat])
         if records:
             self.league.record_games(self.match_id, records)
 
