@@ -1,7 +1,8 @@
 """The batched game runner: plays N games between policies in one batched core.
 
 Training rollouts, evaluation matches and recordings all go through here, so a match, a training episode and a
-video of it are the same game.
+video of it are the same game. On request it also returns each game's actions (what a replay needs, see
+:mod:`selfplay_cli.arena.replay`) and shows every state a game passes through to a hook (what a recording needs).
 """
 
 from __future__ import annotations
@@ -13,7 +14,14 @@ from typing import Any
 import numpy as np
 
 from ..envs import EnvSpec, get_env
+from ..envs.registry import BatchedCore
 from ..policies import Policy
+from .replay import action_dtype, encode_actions
+
+FrameHook = Callable[[BatchedCore, int, int, bool], None]
+"""``on_frame(core, slot, game_index, ended)``: see :func:`play`."""
+StopRule = Callable[[BatchedCore], np.ndarray]
+"""``stop_when(core) -> (n,) bool``: games to end now, as truncated (see :func:`play`)."""
 
 
 @dataclass(frozen=True)
@@ -36,6 +44,7 @@ class GameResult:
     length: int
     truncated: bool
     index: int  # position of the game in the schedule
+    actions: bytes | None = None  # encoded (steps, seats) actions, when play() was asked to record them
 
     def points_of(self, player: str) -> float:
         return sum(o for p, o in zip(self.players, self.outcome, strict=True) if p == player)
@@ -52,6 +61,46 @@ def paired_schedule(n_games: int, first_seed: int = 0, n_policies: int = 2) -> l
     return games
 
 
+class _ActionLog:
+    """Every step's actions of every slot, kept from the first step of the oldest running game on.
+
+    Steps are appended to a step-major block (one contiguous row per step, a few kilobytes); every ``BLOCK`` steps
+    the block is transposed once to slot-major, so a finished game's actions are a few contiguous pieces to join
+    rather than a gather across the whole log (which cost a match a fifth of its speed). Blocks that no running
+    game reaches back to are dropped, so the log's size follows the longest game, not the schedule.
+    """
+
+    BLOCK = 256
+
+    def __init__(self, n_seats: int, n_slots: int, dtype: np.dtype) -> None:
+        self.block = np.zeros((self.BLOCK, n_seats, n_slots), dtype=dtype)  # the current block, step-major
+        self.filled = 0
+        self.blocks: list[tuple[int, np.ndarray]] = []  # (first step, (slots, seats, BLOCK) slot-major)
+        self.now = 0  # steps appended so far
+        self.start = np.zeros(n_slots, dtype=np.int64)  # step number at which each slot's game began
+
+    def begin(self, slots: np.ndarray) -> None:
+        self.start[slots] = self.now
+
+    def append(self, actions: np.ndarray, active: np.ndarray) -> None:
+        self.block[self.filled] = actions
+        self.filled += 1
+        self.now += 1
+        if self.filled == self.BLOCK:
+            self.blocks.append((self.now - self.BLOCK, np.ascontiguousarray(self.block.transpose(2, 1, 0))))
+            self.filled = 0
+            oldest = int(self.start[active].min()) if active.any() else self.now
+            self.blocks = [(first, b) for first, b in self.blocks if first + self.BLOCK > oldest]
+
+    def take(self, slot: int) -> np.ndarray:
+        """The ``(steps, seats)`` actions of the game that just ended in ``slot``."""
+        begin = int(self.start[slot])
+        parts = [b[slot, :, max(begin - first, 0):] for first, b in self.blocks if first + self.BLOCK > begin]
+        tail = self.now - self.filled  # step number of the current block's first row
+        parts.append(self.block[max(begin - tail, 0) : self.filled, :, slot].T)
+        return np.concatenate(parts, axis=1).T
+
+
 def play(
     env: str | EnvSpec,
     policies: Sequence[Policy],
@@ -60,11 +109,20 @@ def play(
     env_options: dict[str, Any] | None = None,
     on_result: Callable[[GameResult], None] | None = None,
     on_step: Callable[[int], None] | None = None,
+    record_actions: bool = False,
+    on_frame: FrameHook | None = None,
+    stop_when: StopRule | None = None,
 ) -> list[GameResult]:
     """Play ``games`` with up to ``parallel`` of them at once; returns results in schedule order.
 
     Each step, every policy acts once on the batch of all (game, seat) positions it holds. ``on_result`` is
     called as each game ends (e.g. to store it at once); ``on_step`` with the number of game steps just played.
+
+    ``record_actions`` puts each game's encoded actions in its result (for the ledger, so the game can be
+    replayed exactly). ``on_frame(core, slot, game_index, ended)`` is called when a game starts and after each of
+    its steps, before its slot is reused, so it sees every state the game passes through (a recording renders
+    them); ``ended`` is True on a game's last call. ``stop_when(core)`` ends the games it marks after a step, as
+    truncated and decided by the score at that moment (a length cap that needs no game option).
     """
     spec = get_env(env) if isinstance(env, str) else env
     if not games:
@@ -77,6 +135,10 @@ def play(
     seats = np.zeros((len(spec.agents), n), dtype=np.int64)  # policy index per (seat, slot)
     game_of = np.full(n, -1, dtype=np.int64)  # schedule index per slot, -1 when idle
     next_game = 0
+    log = None
+    if record_actions:
+        space = spec.action_space(spec.config(**(env_options or {})))
+        log = _ActionLog(len(spec.agents), n, action_dtype(getattr(space, "n", None)))
 
     def start(slots: np.ndarray) -> None:
         nonlocal next_game
@@ -88,6 +150,11 @@ def play(
             seats[:, take] = np.array([g.seats for g in chosen]).T
             core.reset(take, [g.seed for g in chosen])
             next_game += take.size
+            if log is not None:
+                log.begin(take)
+            if on_frame is not None:
+                for slot in take.tolist():
+                    on_frame(core, slot, int(game_of[slot]), False)
 
     start(np.arange(n))
     results: list[GameResult | None] = [None] * len(games)
@@ -101,9 +168,20 @@ def play(
             if where.any():
                 actions[where] = policy.act(obs[where])
         core.step(actions)
+        if log is not None:
+            log.append(actions, active)
         if on_step is not None:
             on_step(int(active.sum()))
-        ended = np.flatnonzero((core.terminated | core.truncated) & active)
+        done = core.terminated | core.truncated
+        stopped = None
+        if stop_when is not None:
+            stopped = np.asarray(stop_when(core), dtype=bool) & ~done
+            done = done | stopped
+        done &= active
+        if on_frame is not None:
+            for slot in np.flatnonzero(active).tolist():
+                on_frame(core, slot, int(game_of[slot]), bool(done[slot]))
+        ended = np.flatnonzero(done)
         if ended.size:
             outcome = core.outcome()
             for slot in ended:
@@ -116,8 +194,9 @@ def play(
                     scores=tuple(int(x) for x in core.score[:, slot]),
                     outcome=tuple(float(x) for x in outcome[:, slot]),
                     length=int(core.steps[slot]),
-                    truncated=bool(core.truncated[slot]),
+                    truncated=bool(core.truncated[slot] or (stopped is not None and stopped[slot])),
                     index=gi,
+                    actions=encode_actions(log.take(slot)) if log is not None else None,
                 )
                 results[gi] = r
                 if on_result is not None:

@@ -39,7 +39,10 @@ def render_report(r: MatchReport) -> None:
         console.print(f"  SPRT [{t['elo0']:g}, {t['elo1']:g}] alpha={t['alpha']:g} beta={t['beta']:g}: "
                       f"LLR {t['llr']:.2f} ({t['lower']:.2f}, {t['upper']:.2f}) -> {verdict}")
     if r.match_id is not None:
-        console.print(f"  stored as match #{r.match_id}")
+        ids = r.game_ids
+        games = (f", games #{ids[0]}-#{ids[-1]} (marl record --game ID replays one)"
+                 if ids and ids[-1] - ids[0] + 1 == len(ids) else "")
+        console.print(f"  stored as match #{r.match_id}{games}")
 
 
 def match(

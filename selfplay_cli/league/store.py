@@ -58,6 +58,7 @@ __all__ = [
     "RUN_STATUSES",
     "SCHEMA_VERSION",
     "GameRecord",
+    "GameRow",
     "GameTable",
     "League",
     "LeagueError",
@@ -165,6 +166,30 @@ class GameRecord:
     length: int
     truncated: bool
     actions: bytes | None = None
+
+
+@dataclass(frozen=True)
+class GameRow:
+    """One stored game with everything needed to replay it: :meth:`League.game`.
+
+    ``players`` are player ids per seat; ``match_params`` are the parameters of the match that played it (for
+    rated matches, ``env_options``: the game options it was played under); ``actions`` the encoded action record,
+    None for games stored without one (training games).
+    """
+
+    id: int
+    match_id: int
+    match_kind: str
+    match_params: dict[str, Any]
+    env: str
+    seed: int
+    length: int
+    truncated: bool
+    players: tuple[int, ...]
+    scores: tuple[float, ...]
+    outcome: tuple[float, ...]
+    actions: bytes | None
+    created_at: datetime
 
 
 @dataclass(frozen=True)
@@ -876,6 +901,25 @@ class League:
             in_a, in_b = np.isin(table.player_a, pop), np.isin(table.player_b, pop)
             table = table.select(in_a | in_b if any_seat else in_a & in_b)
         return table
+
+    def game(self, game_id: int) -> GameRow:
+        """The stored game ``game_id`` with its seats, its match and its actions. Raises LeagueError if unknown."""
+
+        def work(s: Session) -> GameRow:
+            g = s.get(Game, int(game_id))
+            if g is None:
+                raise LeagueError(f"no game with id {game_id} in the ledger")
+            match = s.get(Match, g.match_id)
+            seats = s.execute(select(GameSeat).where(GameSeat.game_id == g.id).order_by(GameSeat.seat)).scalars().all()
+            return GameRow(
+                id=g.id, match_id=g.match_id, match_kind=match.kind if match else "", env=g.env,
+                match_params=dict(match.params or {}) if match else {}, seed=int(g.seed), length=int(g.length),
+                truncated=bool(g.truncated), players=tuple(int(x.player_id) for x in seats),
+                scores=tuple(float(x.score) for x in seats), outcome=tuple(float(x.points) for x in seats),
+                actions=g.actions, created_at=g.created_at,
+            )
+
+        return self._read(work)
 
     def count_games(self, env: str | None = None) -> int:
         """Number of games in the ledger (any number of seats)."""

@@ -107,6 +107,7 @@ class MatchReport:
     sprt: dict[str, Any] | None = None
     truncated: int = 0
     results: list[GameResult] = field(default_factory=list, repr=False)
+    game_ids: list[int] = field(default_factory=list, repr=False)  # ledger ids of the stored games, in order
 
     @property
     def games_per_second(self) -> float:
@@ -123,13 +124,15 @@ class MatchReport:
             "pentanomial": list(self.pentanomial), "truncated_games": self.truncated,
             "seconds": round(self.seconds, 3), "games_per_second": round(self.games_per_second, 1),
             "match_id": self.match_id, "first_seed": self.first_seed, "sprt": self.sprt,
+            "game_ids": self.game_ids,
         }
 
 
-def _record(league: League, match_id: int, ids: dict[str, int], results: list[GameResult]) -> None:
-    league.record_games(match_id, [
+def _record(league: League, match_id: int, ids: dict[str, int], results: list[GameResult]) -> list[int]:
+    """Store a chunk of games, with their actions so that `marl record --game ID` can replay any of them."""
+    return league.record_games(match_id, [
         GameRecord(env=r.env, players=tuple(ids[p] for p in r.players), seed=r.seed, scores=r.scores,
-                   outcome=r.outcome, length=r.length, truncated=r.truncated)
+                   outcome=r.outcome, length=r.length, truncated=r.truncated, actions=r.actions)
         for r in results
     ])
 
@@ -176,6 +179,7 @@ def run_match(
         match_id = league.create_match(spec.name, kind, params)
 
     kept: list[GameResult] = []
+    game_ids: list[int] = []
     pair_points: list[float] = []
     decision: str | None = None
     llr = 0.0
@@ -185,7 +189,7 @@ def run_match(
         take = min(chunk_pairs, n_pairs - pair)
         schedule = paired_schedule(2 * take, first_seed=first_seed + pair)
         results = play(spec, [a, b], schedule, parallel=parallel, env_options=options,
-                       on_result=(lambda r: on_games(1)) if on_games else None)
+                       on_result=(lambda r: on_games(1)) if on_games else None, record_actions=league is not None)
         new: list[GameResult] = []
         for i in range(take):
             g1, g2 = results[2 * i], results[2 * i + 1]
@@ -197,7 +201,7 @@ def run_match(
                 if decision is not None:
                     break
         if league is not None and new:
-            _record(league, match_id, player_ids, new)  # type: ignore[arg-type]
+            game_ids += _record(league, match_id, player_ids, new)  # type: ignore[arg-type]
         kept += new
         pair += take
     seconds = time.perf_counter() - start
@@ -211,7 +215,7 @@ def run_match(
         points_against=sum(r.scores[r.players.index(b.id)] for r in kept),
         pentanomial=penta, stats=match_stats(wins, draws, losses, pentanomial=penta, confidence=confidence),
         seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
-        results=kept,
+        results=kept, game_ids=game_ids,
     )
     if sprt is not None:
         report.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
