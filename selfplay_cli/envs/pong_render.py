@@ -1,4 +1,14 @@
-"""Offscreen pygame renderer for Pong (no window, no display, no audio)."""
+"""Offscreen pygame renderer for Pong (no window, no display, no audio).
+
+Recording renders every step of a game, so a frame must cost well under a millisecond. Three choices make it so:
+
+* the surface is 24-bit with its channel masks set so that its memory *is* a row-major ``(height, width, 3)`` RGB
+  array: a frame leaves the surface as one contiguous copy, where ``surfarray.pixels3d(...).transpose(1, 0, 2)``
+  costs a strided transpose (measured: 0.04 ms against 3 ms per 800x400 frame);
+* the court is two fills and the net twenty small ones (44 us; blitting a prerendered 24-bit court costs 130 us);
+* text is rendered opaque on the court's black and converted to the surface's format once per distinct string
+  (scores, names), so blitting it is a row copy (1 us) rather than alpha blending (13 us).
+"""
 
 from __future__ import annotations
 
@@ -14,13 +24,15 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 WHITE = (255, 255, 255)
 GREY = (90, 90, 90)
 BLACK = (0, 0, 0)
+_TEXT_CACHE_SIZE = 256
 
 
 class PongRenderer:
     """Draws one game of a :class:`PongCore` into an RGB array ``(400, 800, 3)`` uint8.
 
-    Only pygame's font module is initialised (``pygame.init()`` would also start audio, which prints ALSA
-    errors on machines without sound). The surface is reused between frames.
+    ``labels`` are the players' names (left, right), shown under their paddles; ``caption`` a line of text at the
+    bottom centre (the recorder puts the step there). Only pygame's font module is initialised: ``pygame.init()``
+    would also start audio, which prints ALSA errors on machines without sound. Each call returns a new array.
     """
 
     def __init__(self) -> None:
@@ -28,30 +40,62 @@ class PongRenderer:
 
         pygame.font.init()
         self._pg = pygame
-        self.surface = pygame.Surface((WIDTH, HEIGHT))
+        self.size = (WIDTH, HEIGHT)
+        self.surface = self._rgb_surface()
+        self._direct = self._memory_is_rgb()
+        self._net = [(WIDTH // 2 - 1, y + 5, 2, 10) for y in range(0, HEIGHT, 20)]
         self.score_font = pygame.font.Font(None, 56)
         self.label_font = pygame.font.Font(None, 24)
+        self._texts: dict[tuple[int, str], object] = {}
 
-    def draw(self, core: PongCore, game: int = 0, labels: tuple[str, str] | None = None,
+    def _rgb_surface(self):
+        """A 24-bit surface whose bytes are R, G, B per pixel, rows top to bottom (on little-endian machines)."""
+        return self._pg.Surface((WIDTH, HEIGHT), 0, 24, (0x0000FF, 0x00FF00, 0xFF0000, 0))
+
+    def _memory_is_rgb(self) -> bool:
+        """Whether the surface's memory reads as RGB; if not (another byte order), frames take the slower copy."""
+        self.surface.fill((1, 2, 3))
+        return bool((self._view_copy()[0, 0] == (1, 2, 3)).all())
+
+    def _view_copy(self) -> np.ndarray:
+        """A copy of the surface's pixels; the buffer (which locks the surface) is released on return."""
+        rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(HEIGHT, self.surface.get_pitch())
+        return rows[:, : WIDTH * 3].reshape(HEIGHT, WIDTH, 3).copy()
+
+    def _text(self, font, text: str, colour: tuple[int, int, int], cache: bool = True):
+        """``text`` rendered once and kept (scores and names recur every frame; a caption that changes each
+        frame, like the step, is rendered without evicting them)."""
+        key = (id(font), text)
+        img = self._texts.get(key)
+        if img is None:
+            img = font.render(text, True, colour, BLACK)
+            if cache:
+                img = img.convert(self.surface)
+                if len(self._texts) >= _TEXT_CACHE_SIZE:
+                    self._texts.clear()
+                self._texts[key] = img
+        return img
+
+    def draw(self, core: PongCore, game: int = 0, labels: tuple[str, ...] | None = None,
              caption: str | None = None) -> np.ndarray:
         pg, surf = self._pg, self.surface
         surf.fill(BLACK)
-        for y in range(0, HEIGHT, 20):  # the net
-            pg.draw.rect(surf, GREY, (WIDTH // 2 - 1, y + 5, 2, 10))
-        pg.draw.rect(surf, WHITE, (PADDLE_X, round(core.paddle[0, game]), PADDLE_W, PADDLE_H))
-        pg.draw.rect(surf, WHITE, (WIDTH - PADDLE_X - PADDLE_W, round(core.paddle[1, game]), PADDLE_W, PADDLE_H))
+        for rect in self._net:
+            surf.fill(GREY, rect)
+        surf.fill(WHITE, (PADDLE_X, round(core.paddle[0, game]), PADDLE_W, PADDLE_H))
+        surf.fill(WHITE, (WIDTH - PADDLE_X - PADDLE_W, round(core.paddle[1, game]), PADDLE_W, PADDLE_H))
         pg.draw.circle(surf, WHITE, (round(core.bx[game]), round(core.by[game])), BALL_R)
-        left, right = int(core.score[0, game]), int(core.score[1, game])
-        for text, cx in ((str(left), WIDTH // 2 - 60), (str(right), WIDTH // 2 + 60)):
-            img = self.score_font.render(text, True, WHITE)
+        for seat, cx in ((0, WIDTH // 2 - 60), (1, WIDTH // 2 + 60)):
+            img = self._text(self.score_font, str(int(core.score[seat, game])), WHITE)
             surf.blit(img, (cx - img.get_width() // 2, 12))
         if labels:
-            a = self.label_font.render(labels[0], True, GREY)
-            b = self.label_font.render(labels[1], True, GREY)
+            a = self._text(self.label_font, labels[0], GREY)
+            b = self._text(self.label_font, labels[-1], GREY)
             surf.blit(a, (45, HEIGHT - 26))
             surf.blit(b, (WIDTH - 45 - b.get_width(), HEIGHT - 26))
         if caption:
-            c = self.label_font.render(caption, True, GREY)
+            c = self._text(self.label_font, caption, GREY, cache=False)
             surf.blit(c, (WIDTH // 2 - c.get_width() // 2, HEIGHT - 26))
-        # surfarray is (width, height, 3); frames are (height, width, 3)
-        return np.ascontiguousarray(pg.surfarray.pixels3d(surf).transpose(1, 0, 2))
+        if self._direct:
+            return self._view_copy()
+        return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(HEIGHT, WIDTH, 3).copy()
