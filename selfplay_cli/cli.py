@@ -13,6 +13,7 @@ from .commands import elo as elo_cmd
 from .commands import envs as envs_cmd
 from .commands import league as league_cmd
 from .commands import match as match_cmd
+from .commands import record as record_cmd
 from .commands import train as train_cmd
 from .envs import UnknownEnvError
 from .errors import MarlError
@@ -47,6 +48,7 @@ app.add_typer(checkpoint_cmd.app, name="checkpoint", help="List, inspect, tag, r
 app.command("match", help="Play rated games between two policies (Elo difference, CI, LOS, SPRT).")(match_cmd.match)
 app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence intervals; gate a model on its strength.")
 app.add_typer(league_cmd.app, name="league", help="The league ladder and tournaments.")
+app.command("record", help="Record games as mp4/gif videos, or replay a stored game exactly.")(record_cmd.record)
 
 
 def main(argv: list[str] | None = None) -> int:

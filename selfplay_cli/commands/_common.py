@@ -115,8 +115,10 @@ def progress_enabled(quiet: bool = False) -> bool:
 
 
 @contextmanager
-def progress_bar(description: str, total: int, unit: str, enabled: bool) -> Iterator[Callable[..., None]]:
-    """A rich progress bar on stderr (rate and ETA) when it is a terminal; a no-op otherwise."""
+def progress_bar(description: str, total: int | None, unit: str, enabled: bool) -> Iterator[Callable[..., None]]:
+    """A rich progress bar on stderr (rate and ETA) when it is a terminal; a no-op otherwise.
+
+    ``total`` None (work of unknown size, e.g. a game to 21) shows a pulsing bar with the count and the rate."""
     if not enabled:
         yield lambda n=1: None
         return

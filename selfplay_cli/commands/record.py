@@ -1,0 +1,207 @@
+"""`marl record`: games as videos, new ones (--ckpt) or stored ones replayed exactly (--game)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import typer
+
+from ..errors import MarlError
+from ._common import DbOpt, DeviceOpt, EnvOpt, HomeOpt, JsonOpt, QuietOpt, open_league, progress_bar, progress_enabled
+from ._output import console, err_console, print_json
+
+if TYPE_CHECKING:
+    from ..record import Recording, VideoSettings
+
+Tick = Callable[[int], None]
+
+
+@dataclass
+class _Job:
+    """The videos to make: their paths, how to make video i, and how many frames it will have (if known)."""
+
+    paths: list[Path]
+    run: Callable[[int, Path, VideoSettings, Tick], Recording]
+    frames: Callable[[int, VideoSettings], int | None]
+    extra: dict[str, Any] = field(default_factory=dict)  # added to every video's JSON
+
+
+def _format_of(fmt: str | None, out: Path | None) -> str:
+    """--format, else the suffix of a file given to --out, else mp4; a clash between them is an error."""
+    from ..record import FORMATS
+
+    suffix = out.suffix.lower().lstrip(".") if out is not None and not _is_dir(out) else ""
+    if suffix and suffix not in FORMATS:
+        raise MarlError(f"--out {out}: the file must end in .mp4 or .gif")
+    if fmt is not None:
+        fmt = fmt.lower()
+        if fmt not in FORMATS:
+            raise MarlError(f"--format must be one of {', '.join(FORMATS)}, not {fmt!r}")
+        if suffix and suffix != fmt:
+            raise MarlError(f"--out {out} is a .{suffix} file but --format is {fmt}")
+        return fmt
+    return suffix or "mp4"
+
+
+def _is_dir(out: Path) -> bool:
+    """--out is a folder when it is one already, or when it has no suffix (a file needs .mp4 or .gif)."""
+    return out.is_dir() or not out.suffix
+
+
+def _targets(out: Path | None, home: Path | None, stems: list[str], fmt: str) -> list[Path]:
+    """One file per game: under <home>/videos by default, under --out if it is a folder, or --out itself."""
+    if out is None or _is_dir(out):
+        folder = out if out is not None else (home or Path("league")) / "videos"
+        return [folder / f"{stem}.{fmt}" for stem in stems]
+    if len(stems) > 1:
+        raise MarlError(f"--out {out} names one file but {len(stems)} games were asked for: give --out a folder, "
+                        "or leave it out for one file per game under <home>/videos")
+    return [out]
+
+
+def _line(rec: Recording) -> str:
+    r = rec.result
+    score = "-".join(str(s) for s in r.scores)
+    stopped = " (stopped)" if r.truncated else ""
+    return (f"{rec.path}  {' vs '.join(r.players)} {score}{stopped}, {r.length:,} steps, {rec.frames:,} frames "
+            f"in {rec.seconds:.1f} s")
+
+
+def record(
+    ckpt: Annotated[str | None, typer.Option("--ckpt", help="Policy to record: ep90, run/ep90, a tag, latest, best, "
+                                             "an id or a bot. A run with one network per seat: ep90 is the team "
+                                             "(ep90-left vs ep90-right).")] = None,
+    vs: Annotated[str | None, typer.Option("--vs", help="Opponent (same forms). Default: the snapshot's teammates "
+                                           "from the same episode, else cpu.")] = None,
+    game_id: Annotated[int | None, typer.Option("--game", help="Re-render game ID of the ledger exactly as it was "
+                                                "played (rated games: marl match, tournaments, gates, training "
+                                                "evaluations).")] = None,
+    env: EnvOpt = None,
+    games: Annotated[int, typer.Option("--games", "-n", help="Games to record, one file each; game i uses seed "
+                                       "--seed + i.")] = 1,
+    max_steps: Annotated[int | None, typer.Option("--max-steps", help="Stop each game after N steps.")] = None,
+    max_rallies: Annotated[int | None, typer.Option("--max-rallies", help="Stop each game after N rallies (serves "
+                                                    "played out: a point, a re-serve or a drawn rally).")] = None,
+    seed: Annotated[int, typer.Option("--seed", help="Seed of the first game.")] = 0,
+    fps: Annotated[int | None, typer.Option("--fps", help="Frames per second; one frame per game step, so 60 is "
+                                            "real time. Default 60 (mp4), 50 (gif).")] = None,
+    size: Annotated[str | None, typer.Option("--size", help="WIDTHxHEIGHT of the video, even numbers. Default: the "
+                                             "game's own (pong 800x400).")] = None,
+    fmt: Annotated[str | None, typer.Option("--format", help="mp4 (H.264, plays in browsers) or gif. Default: from "
+                                            "--out, else mp4.")] = None,
+    hold: Annotated[float, typer.Option("--hold", help="Seconds the final frame stays on screen.")] = 1.0,
+    out: Annotated[Path | None, typer.Option("--out", "-o", help="A .mp4/.gif file (one game), or a folder for "
+                                             "one file per game. Default <home>/videos/<run>-<name>-vs-<opponent>"
+                                             "-s<seed>.mp4.")] = None,
+    device: DeviceOpt = "auto",
+    quiet: QuietOpt = False,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Record games as mp4 (or gif): each frame shows the score, both players' names and the step."""
+    from ..record import VideoSettings, check_writable, parse_size
+
+    if (ckpt is None) == (game_id is None):
+        raise MarlError("say what to record: --ckpt POLICY (new games) or --game ID (a stored game)")
+    if game_id is not None:
+        given = [flag for flag, value in (("--vs", vs), ("--env", env), ("--max-steps", max_steps),
+                                          ("--max-rallies", max_rallies)) if value is not None]
+        given += ["--games"] * (games != 1) + ["--seed"] * (seed != 0)
+        if given:
+            verb = "does" if len(given) == 1 else "do"
+            raise MarlError(f"--game replays a stored game as it was played: {', '.join(given)} {verb} not apply")
+    if games < 1:
+        raise MarlError(f"--games must be at least 1, not {games}")
+    fmt = _format_of(fmt, out)
+    if fps is None:
+        fps = 50 if fmt == "gif" else 60
+    settings = VideoSettings(fps=fps, size=parse_size(size), fmt=fmt, hold=hold)
+
+    league = open_league(home, db)
+    try:
+        if game_id is not None:
+            job = _replay_job(league, game_id, out, fmt)
+        else:
+            job = _play_job(league, ckpt, vs, env, games, seed, max_steps, max_rallies, device, out, fmt)  # type: ignore[arg-type]
+    finally:
+        league.close()
+    for path in job.paths:
+        check_writable(path)
+
+    done: list[dict[str, Any]] = []
+    show = progress_enabled(quiet)
+    try:
+        for i, path in enumerate(job.paths):
+            with progress_bar(path.name, job.frames(i, settings), "frames", show) as tick:
+                rec = job.run(i, path, settings, tick)
+            done.append({**rec.to_json(), **job.extra})
+            if not json_out:
+                console.print(_line(rec), markup=False)
+    except KeyboardInterrupt:
+        err_console.print(f"interrupted: {len(done)} of {len(job.paths)} videos written, no partial file left")
+        raise typer.Exit(130) from None
+    if json_out:
+        print_json(done)
+
+
+def _replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> _Job:
+    """What replaying one stored game needs, read from the ledger (no network is loaded: the actions suffice)."""
+    from ..envs import get_env
+    from ..rated.lineup import safe_filename
+    from ..record import record_replay, renderer_of
+
+    row = league.game(game_id)
+    if row.actions is None:
+        raise MarlError(f"game {row.id} ({row.match_kind} #{row.match_id}) was stored without its actions, so it "
+                        "cannot be replayed exactly; rated games (marl match, tournaments, gates, evaluations) keep "
+                        "theirs")
+    spec = get_env(row.env)
+    renderer_of(spec)  # no renderer: say so before anything else
+    names = [league.get_player(pid).full_name for pid in row.players]
+    stem = safe_filename(f"game{row.id}-{'-vs-'.join(names)}-s{row.seed}")
+    env_options = dict(row.match_params.get("env_options") or {})
+
+    def run(i: int, path: Path, settings: VideoSettings, tick: Tick) -> Recording:
+        return record_replay(spec, names, row.seed, row.actions, path, settings, length=row.length,
+                             scores=row.scores, env_options=env_options, on_frame=tick)
+
+    return _Job(_targets(out, league.home, [stem], fmt), run, lambda i, s: row.length + 1 + s.hold_frames,
+                {"game_id": row.id, "match_id": row.match_id})
+
+
+def _play_job(league: Any, ckpt: str, vs: str | None, env: str | None, games: int, seed: int,
+              max_steps: int | None, max_rallies: int | None, device: str, out: Path | None,
+              fmt: str) -> _Job:
+    """Seat the players, load their networks once, and play game i with seed ``seed + i``."""
+    from ..arena import Game
+    from ..envs import get_env
+    from ..policies import ScriptedPolicy
+    from ..rated.lineup import lineup
+    from ..rated.match import env_options_of, load_player
+    from ..record import record_game, renderer_of, stop_rule
+
+    lu = lineup(league, ckpt, vs, env)
+    spec = get_env(lu.env)
+    renderer = renderer_of(spec)
+    networks = {p.id: load_player(league, p, device=device) for p in lu.players if not p.is_bot}
+    env_options = env_options_of(*networks.values())
+    stop = stop_rule(spec, env_options, max_steps, max_rallies)
+    seats = tuple(range(len(lu.players)))
+
+    def policies(game_seed: int) -> list[Any]:
+        # bots draw from generators seeded by the game, so a game looks the same whatever was recorded before it
+        return [networks[p.id] if not p.is_bot else ScriptedPolicy(p.env, p.name, seed=game_seed * len(seats) + s)
+                for s, p in enumerate(lu.players)]
+
+    def run(i: int, path: Path, settings: VideoSettings, tick: Tick) -> Recording:
+        return record_game(spec, policies(seed + i), Game(seed + i, seats), path, settings, env_options=env_options,
+                           labels=lu.names, stop_when=stop, on_frame=tick, renderer=renderer)
+
+    def frames(i: int, settings: VideoSettings) -> int | None:
+        return max_steps + 1 + settings.hold_frames if max_steps is not None else None
+
+    return _Job(_targets(out, league.home, [lu.file_stem(seed + i) for i in range(games)], fmt), run, frames)

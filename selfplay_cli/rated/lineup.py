@@ -1,0 +1,143 @@
+"""Who plays which seat when a user names one policy (``marl record --ckpt ep90 [--vs POLICY]``).
+
+A run that trains one network per seat files its snapshots as ``epN-<seat>`` (``ep90-left``, ``ep90-right``), the
+seat's learner in the snapshot's league metadata. So a name can mean a *team*:
+
+* ``ep90`` (or ``run/ep90``), when no single snapshot has that name but ``ep90-<seat>`` exists for every seat in
+  one run, is that team, each on its own seat: seed 000's left ep90 against right ep90;
+* ``ep90-left`` alone plays its own seat; without ``--vs`` its teammates from the same snapshot take the other
+  seats, so naming either half of a team records the same game;
+* any other player (a one-network snapshot, a tag, ``latest``, a bot) takes the first seat and, without ``--vs``,
+  meets the game's ``cpu`` player (or its first scripted player) in the others.
+
+``--vs`` names the opponent the same way; a team given to ``--vs`` contributes its players for the other seats.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from ..envs import env_names, get_env
+from ..errors import MarlError
+from ..league.names import resolve
+from ..league.store import League, LeagueError, PlayerRow
+
+DEFAULT_OPPONENT = "cpu"
+
+
+@dataclass(frozen=True)
+class Lineup:
+    """One league player per seat, in seat order, and ``focus``: the seat of the player the user named."""
+
+    env: str
+    players: tuple[PlayerRow, ...]
+    focus: int
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.full_name for p in self.players)
+
+    def file_stem(self, seed: int) -> str:
+        """``<run>-<name>-vs-<opponent>-s<seed>``; an opponent from the same run goes by its bare name."""
+        me = self.players[self.focus]
+        others = [p for i, p in enumerate(self.players) if i != self.focus]
+        them = "-".join(p.name if p.run is not None and p.run == me.run else p.full_name for p in others)
+        return safe_filename(f"{me.full_name}-vs-{them}-s{seed}")
+
+
+def safe_filename(text: str) -> str:
+    """A name made of letters, digits and ``._-`` (``/`` of ``run/name`` becomes ``-``)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text.replace("/", "-")).strip("._") or "video"
+
+
+def seat_of(row: PlayerRow, agents: tuple[str, ...]) -> int | None:
+    """The seat a per-seat learner's snapshot was trained on: its league metadata, else its ``-<seat>`` suffix."""
+    learner = row.meta.get("learner")
+    if learner in agents:
+        return agents.index(learner)
+    for i, agent in enumerate(agents):
+        if row.name.endswith(f"-{agent}"):
+            return i
+    return None
+
+
+def _snapshots(league: League, name: str, env: str) -> list[PlayerRow]:
+    return [p for p in league.find_players(name, env=env) if p.kind == "snapshot" and p.run is not None]
+
+
+def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | None:
+    """The snapshots ``<name>-<seat>`` for every seat of the game, all from one run, in seat order; None if there
+    are none. Raises LeagueError if several runs have such a team (``run/name`` chooses)."""
+    teams: dict[tuple[str, str], list[PlayerRow]] = {}
+    for e in [env] if env else env_names():
+        agents = get_env(e).agents
+        by_run: dict[str, list[PlayerRow | None]] = {}
+        for seat, agent in enumerate(agents):
+            for p in _snapshots(league, f"{name}-{agent}", e):
+                by_run.setdefault(p.run, [None] * len(agents))[seat] = p  # type: ignore[index]
+        for run, members in by_run.items():
+            if all(m is not None for m in members):
+                teams[(e, run)] = members  # type: ignore[assignment]
+    if len(teams) > 1:
+        listed = ", ".join(f"{run}/{name}" for _, run in sorted(teams))
+        raise LeagueError(f"'{name}' is a team in several runs: {listed} — use run/name")
+    return next(iter(teams.values()), None)
+
+
+def teammates(league: League, row: PlayerRow, agents: tuple[str, ...]) -> list[PlayerRow] | None:
+    """The whole team (seat order) of a per-seat learner's snapshot, from its run and name; None if it has none."""
+    seat = seat_of(row, agents)
+    suffix = f"-{agents[seat]}" if seat is not None else ""
+    if seat is None or row.run is None or not row.name.endswith(suffix):
+        return None
+    base = row.name[: -len(suffix)]
+    team = find_team(league, f"{row.run}/{base}", row.env)
+    return team if team is not None and row.id in {p.id for p in team} else None
+
+
+def _player_or_team(league: League, name: str, env: str | None) -> PlayerRow | list[PlayerRow]:
+    """A single player if ``name`` resolves to one, else the team it names; the resolver's error otherwise."""
+    try:
+        return resolve(league, name, env)
+    except LeagueError:
+        team = find_team(league, name, env)
+        if team is None:
+            raise  # the resolver's own message: unknown (with candidates), ambiguous or removed
+        return team
+
+
+def _bots_ready(league: League, env: str | None) -> None:
+    """Scripted players are league players once a game has used them: make sure they exist for ``env``."""
+    for e in [env] if env else env_names():
+        league.ensure_bots(e, get_env(e).bots)
+
+
+def lineup(league: League, ckpt: str, vs: str | None = None, env: str | None = None) -> Lineup:
+    """Seat the player (or team) ``ckpt`` names, against ``vs`` or its teammates or the default opponent."""
+    if env is not None:
+        get_env(env)
+    _bots_ready(league, env)
+    me = _player_or_team(league, ckpt, env)
+    if isinstance(me, list):
+        if vs is not None:
+            names = " or ".join(p.full_name for p in me)
+            raise MarlError(f"'{ckpt}' is a team of {len(me)} snapshots, one per seat: to play one of them against "
+                            f"--vs {vs}, name it ({names})")
+        return Lineup(me[0].env, tuple(me), focus=0)
+    spec = get_env(me.env)
+    agents = spec.agents
+    seat = seat_of(me, agents)
+    focus = seat if seat is not None else 0
+    if vs is None:
+        team = teammates(league, me, agents)
+        if team is not None:
+            return Lineup(me.env, tuple(team), focus=focus)
+        bots = list(spec.bots)
+        if not bots:
+            raise MarlError(f"{spec.name} has no scripted player to face {me.full_name}: pass --vs")
+        vs = DEFAULT_OPPONENT if DEFAULT_OPPONENT in bots else bots[0]
+    them = _player_or_team(league, vs, me.env)
+    players = list(them) if isinstance(them, list) else [them] * len(agents)
+    players[focus] = me
+    return Lineup(me.env, tuple(players), focus=focus)

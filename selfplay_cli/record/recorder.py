@@ -1,0 +1,184 @@
+"""A game to a video: the arena plays it, the env's renderer draws each state, the writer encodes it.
+
+The game is played by the same runner as every match (:func:`selfplay_cli.arena.play`), one game at a time, with
+a hook that renders every state it passes through and streams the frame to the encoder at once: one frame for the
+serve, one per step, then the final frame held for ``hold`` seconds so the result can be read. Nothing is kept
+but the latest frame, so memory does not grow with the game's length.
+
+A replay (``marl record --game ID``) is the same game with the stored actions standing in for the players; it
+must end with the stored score after the stored number of steps, or the video is thrown away.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from ..arena import Game, GameResult, play
+from ..arena.replay import ReplayError, decode_actions, replay_policies
+from ..envs import EnvSpec, get_env
+from ..envs.registry import BatchedCore
+from ..errors import MarlError
+from .video import VideoWriter, check_format
+
+if TYPE_CHECKING:
+    from ..policies import Policy
+
+
+@dataclass(frozen=True)
+class VideoSettings:
+    """How a game becomes a file: ``fps`` frames per second (one frame per game step, so 60 plays Pong at the
+    speed it was designed for), ``size`` (width, height) or None for the renderer's own, ``fmt`` mp4 or gif, and
+    ``hold`` seconds of the final frame at the end."""
+
+    fps: int = 60
+    size: tuple[int, int] | None = None
+    fmt: str = "mp4"
+    hold: float = 1.0
+
+    def __post_init__(self) -> None:
+        check_format(self.fmt, self.fps)
+        if not 0 <= self.hold <= 60:
+            raise MarlError(f"--hold must lie between 0 and 60 seconds, not {self.hold:g}")
+
+    @property
+    def hold_frames(self) -> int:
+        return round(self.hold * self.fps)
+
+
+@dataclass(frozen=True)
+class Recording:
+    """A finished video: where it is, the game it shows and how long rendering and encoding took."""
+
+    path: Path
+    result: GameResult
+    frames: int
+    seconds: float
+    settings: VideoSettings
+    size: tuple[int, int]  # width, height of the file's frames
+
+    def to_json(self) -> dict[str, Any]:
+        r = self.result
+        return {
+            "path": str(self.path), "env": r.env, "seed": r.seed, "players": list(r.players),
+            "scores": list(r.scores), "outcome": list(r.outcome), "length": r.length, "truncated": r.truncated,
+            "frames": self.frames, "fps": self.settings.fps, "size": f"{self.size[0]}x{self.size[1]}",
+            "format": self.settings.fmt, "seconds": round(self.seconds, 3),
+            "frames_per_second": round(self.frames / self.seconds, 1) if self.seconds > 0 else None,
+        }
+
+
+def stop_rule(spec: EnvSpec, env_options: dict[str, Any], max_steps: int | None = None,
+              max_rallies: int | None = None) -> Callable[[BatchedCore], np.ndarray] | None:
+    """The runner's ``stop_when`` for a recording cut short after ``max_steps`` steps or ``max_rallies`` rallies
+    (serves played out, whether they ended in a point, a re-serve or the rally cap; only cores that count serves)."""
+    if max_steps is not None and max_rallies is not None:
+        raise MarlError("--max-steps and --max-rallies exclude each other")
+    if max_steps is not None:
+        if max_steps < 1:
+            raise MarlError(f"--max-steps must be at least 1, not {max_steps}")
+        return lambda core: core.steps >= max_steps
+    if max_rallies is not None:
+        if max_rallies < 1:
+            raise MarlError(f"--max-rallies must be at least 1, not {max_rallies}")
+        if not hasattr(spec.core(1, **env_options), "serves"):
+            raise MarlError(f"{spec.name} has no rallies to count: use --max-steps")
+        return lambda core: core.serves - 1 >= max_rallies  # the first serve opens rally 1
+    return None
+
+
+def renderer_of(spec: EnvSpec) -> Any:
+    if spec.make_renderer is None:
+        raise MarlError(f"{spec.name} has no renderer, so its games cannot be recorded")
+    return spec.make_renderer()
+
+
+def record_game(
+    env: str | EnvSpec,
+    policies: Sequence[Policy],
+    game: Game,
+    path: str | Path,
+    settings: VideoSettings | None = None,
+    *,
+    env_options: dict[str, Any] | None = None,
+    labels: Sequence[str] | None = None,
+    stop_when: Callable[[BatchedCore], np.ndarray] | None = None,
+    check: Callable[[GameResult], None] | None = None,
+    on_frame: Callable[[int], None] | None = None,
+    renderer: Any = None,
+) -> Recording:
+    """Play ``game`` between ``policies`` and write it to ``path``; returns what was written.
+
+    ``labels`` are the names shown per seat (default: the policies' ids by seat). ``check(result)`` may raise to
+    reject the game before the file takes its name (replays use it). ``on_frame(n)`` is told of every ``n``
+    frames written (a progress bar). ``renderer`` reuses one renderer across games.
+    """
+    spec = get_env(env) if isinstance(env, str) else env
+    settings = settings or VideoSettings()
+    renderer = renderer if renderer is not None else renderer_of(spec)
+    names = tuple(labels) if labels is not None else tuple(policies[s].id for s in game.seats)
+    start = time.perf_counter()
+    with VideoWriter(path, fps=settings.fps, size=settings.size, fmt=settings.fmt) as writer:
+        last: list[np.ndarray] = []  # the latest frame only
+
+        def draw(core: BatchedCore, slot: int, index: int, ended: bool) -> None:
+            step = int(core.steps[slot])
+            # the last frame says whether the game was over (won) or cut short (step cap, --max-steps)
+            tail = "" if not ended else " · final" if core.terminated[slot] else " · stopped"
+            frame = renderer.draw(core, slot, names, f"step {step}{tail}")
+            writer.write(frame)
+            if on_frame is not None:
+                on_frame(1)
+            if ended:
+                last[:] = [frame]
+
+        (result,) = play(spec, policies, [game], parallel=1, env_options=env_options, on_frame=draw,
+                         stop_when=stop_when)
+        for _ in range(settings.hold_frames):
+            writer.write(last[0])
+        if on_frame is not None and settings.hold_frames:
+            on_frame(settings.hold_frames)
+        if check is not None:
+            check(result)
+    height, width = writer.frame_shape[:2]  # type: ignore[index]
+    return Recording(path=Path(path), result=result, frames=writer.frames, seconds=time.perf_counter() - start,
+                     settings=settings, size=settings.size or (width, height))
+
+
+def record_replay(
+    env: str | EnvSpec,
+    players: Sequence[str],
+    seed: int,
+    actions: bytes,
+    path: str | Path,
+    settings: VideoSettings | None = None,
+    *,
+    length: int,
+    scores: Sequence[float],
+    env_options: dict[str, Any] | None = None,
+    on_frame: Callable[[int], None] | None = None,
+) -> Recording:
+    """Re-render a stored game from its seed and encoded actions, exactly as it was played.
+
+    ``players`` are the names per seat; ``length`` and ``scores`` are what the ledger says the game came to: a
+    replay that ends otherwise (other game options, another version of the game's rules) raises
+    :class:`~selfplay_cli.arena.replay.ReplayError` and leaves no file.
+    """
+    spec = get_env(env) if isinstance(env, str) else env
+    moves = decode_actions(actions, len(spec.agents), length)
+    policies = replay_policies(tuple(players), spec.name, moves)
+    want = tuple(int(round(s)) for s in scores)
+
+    def check(result: GameResult) -> None:
+        if result.length != length or result.scores != want:
+            raise ReplayError(f"the replay ended {'-'.join(map(str, result.scores))} after {result.length} steps, "
+                              f"the ledger says {'-'.join(map(str, want))} after {length}: the game no longer plays "
+                              "as it was recorded (changed rules or game options?)")
+
+    return record_game(spec, policies, Game(seed, tuple(range(len(players)))), path, settings,
+                       env_options=env_options, labels=players, check=check, on_frame=on_frame)

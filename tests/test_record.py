@@ -1,0 +1,266 @@
+"""`marl record`: videos that decode as asked, exact replays of stored games, clear errors, flat memory."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tracemalloc
+from pathlib import Path
+
+import imageio.v2 as iio2
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from selfplay_cli.arena import Game, paired_schedule, play
+from selfplay_cli.arena.replay import ReplayError, decode_actions, encode_actions, replay_policies
+from selfplay_cli.cli import main
+from selfplay_cli.envs import get_env
+from selfplay_cli.errors import MarlError
+from selfplay_cli.league.store import GameRecord, League
+from selfplay_cli.policies import ScriptedPolicy
+from selfplay_cli.policies.network import Arch, build_network
+from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+from selfplay_cli.rated.lineup import lineup
+from selfplay_cli.record import VideoSettings, record_game, stop_rule
+
+
+def make_snapshot(path: Path, run: str, name: str, seed: int, env_options: dict | None = None) -> Path:
+    arch = Arch(hidden=(16, 16))
+    net = build_network((8, 6), 3, arch, seed=seed)
+    save_snapshot(path, net, SnapshotMeta(env="pong", env_options=env_options or {}, obs_shape=(8, 6), n_actions=3,
+                                          arch=arch, run=run, name=name, algo="ppo", step=100 * seed, episode=seed))
+    return path
+
+
+@pytest.fixture(scope="module")
+def home(tmp_path_factory) -> Path:
+    """A league with a one-network snapshot r1/ep10 (games to 2 points, so whole games are short) and a
+    two-learner run r2 (ep5-left, ep5-right), imported as any user would."""
+    h = tmp_path_factory.mktemp("record") / "league"
+    files = tmp_path_factory.mktemp("files")
+    snaps = [make_snapshot(files / "a.safetensors", "r1", "ep10", 1, {"points_to_win": 2}),
+             make_snapshot(files / "l.safetensors", "r2", "ep5-left", 2),
+             make_snapshot(files / "r.safetensors", "r2", "ep5-right", 3)]
+    for f in snaps:
+        assert main(["checkpoint", "import", str(f), "--home", str(h)]) == 0
+    return h
+
+
+def run(capsys, home: Path, *args: str) -> tuple[int, str, str]:
+    code = main(["record", *args, "--home", str(home)])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def run_json(capsys, home: Path, *args: str) -> list[dict]:
+    code, out, err = run(capsys, home, *args, "--json")
+    assert code == 0, err
+    return json.loads(out)
+
+
+def mp4_frames(path: Path) -> tuple[np.ndarray, dict]:
+    reader = iio2.get_reader(path)
+    try:
+        return np.stack([f for f in reader.iter_data()]), reader.get_meta_data()
+    finally:
+        reader.close()
+
+
+def differs(a: np.ndarray, b: np.ndarray) -> bool:
+    return int(np.abs(a.astype(np.int16) - b).max()) > 40  # well above H.264's rounding
+
+
+# ---------------------------------------------------------------------------------------------------------------
+def test_mp4_decodes_with_the_frame_count_size_and_fps_asked_for(home, tmp_path, capsys):
+    out = tmp_path / "clip.mp4"
+    (rec,) = run_json(capsys, home, "--ckpt", "ep10", "--max-steps", "40", "--size", "160x80", "--fps", "30",
+                      "--hold", "0.5", "--out", str(out))
+    assert rec["path"] == str(out) and rec["players"] == ["r1/ep10", "cpu"]
+    assert rec["length"] == 40 and rec["truncated"] and rec["frames"] == 41 + 15  # serve, 40 steps, 0.5 s held
+    frames, meta = mp4_frames(out)
+    assert frames.shape == (56, 80, 160, 3)
+    assert meta["fps"] == 30 and meta["codec"] == "h264" and meta["pix_fmt"].startswith("yuv420p")
+    assert all(differs(frames[i], frames[i + 1]) for i in range(40)), "the ball moves every step"
+    held = frames[40:]
+    assert max(np.abs(f.astype(np.int16) - held[0]).max() for f in held) <= 2, "the final frame is held"
+    assert not list(tmp_path.glob(".*")), "no temporary file left beside the video"
+
+
+def test_same_seed_same_frames_and_another_seed_another_game(home, tmp_path, capsys):
+    args = ("--ckpt", "ep10", "--vs", "random", "--max-steps", "30", "--size", "96x48", "--hold", "0")
+    run_json(capsys, home, *args, "--seed", "3", "--out", str(tmp_path / "a.mp4"))
+    run_json(capsys, home, *args, "--seed", "3", "--out", str(tmp_path / "b.mp4"))
+    run_json(capsys, home, *args, "--seed", "4", "--out", str(tmp_path / "c.mp4"))
+    a, b, c = (mp4_frames(tmp_path / f"{x}.mp4")[0] for x in "abc")
+    assert a.shape == (31, 48, 96, 3) and np.array_equal(a, b)
+    assert any(differs(x, y) for x, y in zip(a, c, strict=True))
+
+
+def test_game_id_replays_the_stored_game_exactly(home, tmp_path, capsys):
+    code = main(["match", "ep10", "cpu", "--games", "2", "--home", str(home), "--json", "--quiet"])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0 and len(report["game_ids"]) == 2
+    gid = report["game_ids"][1]
+    with League.open(home) as league:
+        stored = league.game(gid)
+    assert stored.actions is not None and stored.match_params["env_options"] == {"points_to_win": 2}
+    (rec,) = run_json(capsys, home, "--game", str(gid), "--size", "96x48", "--hold", "0")
+    assert rec["game_id"] == gid and rec["seed"] == stored.seed
+    assert rec["scores"] == [int(s) for s in stored.scores] and max(rec["scores"]) == 2
+    assert rec["length"] == stored.length and not rec["truncated"]
+    assert rec["players"] == ["cpu", "r1/ep10"], "seat order as played: the second game of a pair swaps seats"
+    path = Path(rec["path"])
+    assert path == home / "videos" / f"game{gid}-cpu-vs-r1-ep10-s{stored.seed}.mp4"
+    assert len(mp4_frames(path)[0]) == stored.length + 1
+
+
+def test_gif_streams_too(home, tmp_path, capsys):
+    out = tmp_path / "clip.gif"
+    (rec,) = run_json(capsys, home, "--ckpt", "ep10", "--max-steps", "20", "--size", "120x60", "--fps", "25",
+                      "--hold", "0.2", "--out", str(out))
+    assert rec["format"] == "gif" and rec["frames"] == 21 + 5
+    frames = iio.imread(out, index=None)
+    assert frames.shape[:3] == (26, 60, 120)
+    assert iio.immeta(out)["duration"] == 40  # ms per frame at 25 fps
+    assert differs(frames[0], frames[10])
+
+
+def test_a_two_learner_snapshot_faces_its_partner_by_default(home, capsys):
+    recs = run_json(capsys, home, "--ckpt", "ep5", "--max-steps", "5", "--games", "2", "--size", "64x32", "-q")
+    assert [r["players"] for r in recs] == [["r2/ep5-left", "r2/ep5-right"]] * 2
+    assert [Path(r["path"]).name for r in recs] == [f"r2-ep5-left-vs-ep5-right-s{i}.mp4" for i in (0, 1)]
+    assert all((home / "videos" / Path(r["path"]).name).exists() for r in recs)
+    (rec,) = run_json(capsys, home, "--ckpt", "r2/ep5-right", "--max-rallies", "1", "--size", "64x32", "--hold", "0")
+    assert rec["players"] == ["r2/ep5-left", "r2/ep5-right"], "either half of a team records the team, seats kept"
+    assert rec["length"] < 1000
+
+
+def test_lineup_seats_teams_singles_and_opponents(tmp_path):
+    with League.open(tmp_path / "lg") as league:
+        league.create_run("t", "pong", {})
+        for seat in ("left", "right"):  # as `marl train --agents 2` files them
+            league.add_snapshot(env="pong", run="t", name=f"ep90-{seat}", path="x", sha256="0",
+                                meta={"learner": seat})
+        league.add_snapshot(env="pong", run="t", name="solo", path="x", sha256="0", meta={"learner": "learner"})
+        names = lambda lu: [p.full_name for p in lu.players]  # noqa: E731
+        assert names(lineup(league, "ep90")) == ["t/ep90-left", "t/ep90-right"]
+        assert lineup(league, "t/ep90-right").focus == 1
+        assert names(lineup(league, "t/ep90-right", vs="cpu")) == ["cpu", "t/ep90-right"]
+        assert names(lineup(league, "solo")) == ["t/solo", "cpu"]
+        assert names(lineup(league, "solo", vs="ep90")) == ["t/solo", "t/ep90-right"]
+        assert lineup(league, "ep90").file_stem(7) == "t-ep90-left-vs-ep90-right-s7"
+        with pytest.raises(MarlError, match="team of 2 snapshots"):
+            lineup(league, "ep90", vs="cpu")
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--ckpt", "nope"], "no policy named 'nope'"),
+    (["--ckpt", "ep10", "--size", "800x401"], "--size 800x401: width and height must be even"),
+    (["--ckpt", "ep10", "--size", "big"], "--size must look like WIDTHxHEIGHT"),
+    (["--ckpt", "ep10", "--out", "{blocker}/clip.mp4"], "is a file, not a folder"),
+    (["--ckpt", "ep10", "--fps", "0"], "--fps must lie between 1 and 240"),
+    (["--ckpt", "ep10", "--games", "0"], "--games must be at least 1"),
+    (["--ckpt", "ep10", "--fps", "60", "--out", "{tmp}/v.gif"], "at most 50 frames per second"),
+    (["--game", "99999"], "no game with id 99999"),
+    ([], "--ckpt POLICY"),
+])
+def test_mistakes_are_one_clear_line_and_leave_no_file(home, tmp_path, capsys, args, says):
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file where a folder should be")
+    before = sorted((home / "videos").glob("*")) if (home / "videos").exists() else []
+    args = [a.format(blocker=blocker, tmp=tmp_path) for a in args]
+    code, out, err = run(capsys, home, *args, *([] if "--out" in args else ["--out", str(tmp_path / "v.mp4")]))
+    assert code == 2 and out == ""
+    assert err.startswith("marl: error: ") and says in err and err.count("\n") == 1, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blocker"]
+    assert (sorted((home / "videos").glob("*")) if (home / "videos").exists() else []) == before
+
+
+def test_games_without_actions_or_that_no_longer_replay_are_refused(home, tmp_path, capsys):
+    assert main(["match", "ep10", "random", "--games", "2", "--home", str(home), "--quiet"]) == 0
+    capsys.readouterr()
+    with League.open(home) as league:
+        played = league.game(league.games().game_id[-1])
+        training = league.create_match("pong", "training", {"run": "r1"})
+        tampered = decode_actions(played.actions, 2).copy()
+        tampered[:, 0] = (tampered[:, 0] + 1) % 3  # seat 0 never moves as it did
+        bare, wrong = league.record_games(training, [
+            GameRecord("pong", played.players, played.seed, played.scores, played.outcome, played.length, False),
+            GameRecord("pong", played.players, played.seed, played.scores, played.outcome, played.length, False,
+                       actions=encode_actions(tampered)),
+        ])
+    code, _, err = run(capsys, home, "--game", str(bare))
+    assert code == 2 and "stored without its actions" in err and err.count("\n") == 1
+    out = tmp_path / "wrong.mp4"
+    code, _, err = run(capsys, home, "--game", str(wrong), "--size", "64x32", "--out", str(out))
+    assert code == 2 and "no longer plays as it was recorded" in err and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == [], "the rejected replay left no file, partial or whole"
+
+
+def test_nothing_but_the_tool_reaches_the_terminal(home, tmp_path):
+    """pygame's audio start-up (ALSA errors) and its banner, ffmpeg's chatter: none of it may show."""
+    env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "TERM": "dumb", "HOME": str(tmp_path)}
+    out = tmp_path / "quiet.mp4"
+    proc = subprocess.run([sys.executable, "-m", "selfplay_cli", "record", "--ckpt", "ep10", "--max-steps", "10",
+                           "--size", "64x32", "--out", str(out), "--home", str(home)],
+                          capture_output=True, text=True, timeout=120, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr == ""
+    assert proc.stdout.startswith(str(out)) and out.exists()
+
+
+# ---------------------------------------------------------------------------------------------------------------
+def test_memory_does_not_grow_with_the_length_of_the_game(tmp_path):
+    spec = get_env("pong")
+    players = [ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "random", seed=1)]
+    settings = VideoSettings(size=(64, 32), hold=0)
+
+    def peak(steps: int) -> int:
+        tracemalloc.start()
+        try:
+            rec = record_game(spec, players, Game(0, (0, 1)), tmp_path / f"{steps}.mp4", settings,
+                              stop_when=stop_rule(spec, {}, max_steps=steps))
+            assert rec.frames == steps + 1
+            return tracemalloc.get_traced_memory()[1]
+        finally:
+            tracemalloc.stop()
+
+    short, long = peak(60), peak(360)
+    frame = 400 * 800 * 3
+    assert long - short < frame, f"300 more frames cost {(long - short) / 1e6:.1f} MB of peak memory"
+
+
+def test_the_runner_returns_actions_that_replay_every_game_exactly():
+    """Games of a batch that reuses its slots (12 games on 3 slots), each replayed alone from its actions."""
+    cpu, rnd = ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "random", seed=5)
+    options = {"points_to_win": 2}
+    results = play("pong", [cpu, rnd], paired_schedule(12), parallel=3, env_options=options, record_actions=True)
+    for r in results:
+        actions = decode_actions(r.actions, 2, r.length)
+        (again,) = play("pong", replay_policies(r.players, "pong", actions), [Game(r.seed, (0, 1))], parallel=1,
+                        env_options=options)
+        assert (again.scores, again.length, again.players) == (r.scores, r.length, r.players)
+    assert play("pong", [cpu, rnd], paired_schedule(2), env_options=options)[0].actions is None
+    short = replay_policies(("cpu", "random"), "pong", decode_actions(results[0].actions, 2)[:10])
+    with pytest.raises(ReplayError, match="ran out after 10 steps"):
+        play("pong", short, [Game(results[0].seed, (0, 1))], parallel=1, env_options=options)
+    with pytest.raises(MarlError, match="unknown format"):
+        decode_actions(b"not actions", 2)
+
+
+@pytest.mark.parametrize("top", [0, 2, 3, 15, 255, 256, 70_000])
+def test_actions_round_trip_in_as_few_bits_as_they_need(top):
+    rng = np.random.default_rng(top)
+    for steps, seats in ((0, 2), (1, 1), (4_501, 2), (33, 3)):
+        actions = rng.integers(0, top + 1, (steps, seats))
+        assert np.array_equal(decode_actions(encode_actions(actions), seats, steps), actions)
+
+
+def test_pong_actions_pack_four_to_a_byte_and_their_length_is_checked():
+    pong_game = np.random.default_rng(0).integers(0, 3, (4_000, 2))
+    assert len(encode_actions(pong_game)) < 4_000 * 2 / 4 + 64, "even random actions take 2 bits each"
+    with pytest.raises(MarlError, match="cover 4000 steps, the game lasted 10"):
+        decode_actions(encode_actions(pong_game), 2, 10)
