@@ -31,7 +31,7 @@ def steps_per_second(algo: str, steps: int, games: int) -> tuple[float, int]:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--steps", type=int, default=1_000_000, help="game steps per algorithm (DQN: a fifth of it)")
-    p.add_argument("--games", type=int, default=128, help="games at once (the `marl train` default is 128)")
+    p.add_argument("--games", type=int, default=256, help="games at once (the `marl train` default)")
     args = p.parse_args()
     print(f"{os.cpu_count()} cores; two learners, {args.games} games at once, no evaluation games")
     ok = True

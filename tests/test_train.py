@@ -111,6 +111,29 @@ def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats
     league.close()
 
 
+def test_training_games_keep_their_actions_and_replay_exactly(tmp_path, capsys):
+    """Training games go to the ledger with their actions and game options, so `marl record --game ID` re-renders a
+    game two learners played exactly as it went (score and length checked by the replay itself)."""
+    home = tmp_path / "h"
+    code, out, err = run(capsys, "train", "pong", "--agents", "2", "--steps", "6144", "--games", "16", "--env-option",
+                         "points_to_win=1", "--eval-games", "0", "--snapshot-every", "8", "--home", str(home))
+    assert code == 0, err
+    with League.open(home) as league:
+        with league.session() as s:
+            from selfplay_cli.league.models import Game, Match
+
+            training = s.query(Game).join(Match, Game.match_id == Match.id).filter(Match.kind == "training").all()
+            assert training and all(g.actions for g in training)
+            gid = training[-1].id
+        stored = league.game(gid)
+    assert stored.match_params["env_options"] == {"points_to_win": 1}
+    code, out, err = run(capsys, "record", "--game", str(gid), "--size", "96x48", "--hold", "0", "--home", str(home),
+                         "--json")
+    assert code == 0, err
+    (rec,) = json.loads(out)
+    assert rec["scores"] == [int(x) for x in stored.scores] and rec["length"] == stored.length
+
+
 def run(capsys, *args):
     code = main(list(args))
     out = capsys.readouterr()

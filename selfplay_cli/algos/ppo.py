@@ -75,6 +75,9 @@ class PPOLearner:
         self.values = torch.zeros((t, b), device=self.device)
         self.rewards = torch.zeros((t, b), device=self.device)
         self.dones = torch.zeros((t, b), device=self.device)  # the game ended after this step
+        # On the CPU, numpy views of the buffers: a step's arrays go in with one numpy copy, no tensor made.
+        self._np = ({"obs": self.obs.numpy(), "rewards": self.rewards.numpy(), "dones": self.dones.numpy()}
+                    if self.device.type == "cpu" else None)
         self.t = 0
         self.updates = 0
 
@@ -82,14 +85,17 @@ class PPOLearner:
     def _tensor(self, obs: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(np.asarray(obs, dtype=np.float32), device=self.device).reshape(len(obs), -1)
 
-    @torch.no_grad()
+    @torch.inference_mode()
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Sample actions for this step's observations and remember what the update needs.
 
         Sampling is the inverse-CDF draw ``a = #{k : cdf_k <= u}`` with one uniform ``u`` per slot from the
         learner's generator (multinomial does the same draw several times slower on small batches)."""
         x = self.obs[self.t]
-        x.copy_(self._tensor(obs))
+        if self._np is not None:
+            self._np["obs"][self.t] = obs.reshape(len(obs), -1)
+        else:
+            x.copy_(self._tensor(obs))
         logits, value = self.net(x)
         logp_all = torch.log_softmax(logits, dim=-1)
         u = torch.rand((x.shape[0], 1), generator=self.gen, device=self.device)
@@ -102,8 +108,12 @@ class PPOLearner:
 
     def record(self, rewards: np.ndarray, dones: np.ndarray) -> bool:
         """Store this step's outcome; True when the rollout is full and :meth:`update` is due."""
-        self.rewards[self.t] = torch.as_tensor(rewards, dtype=torch.float32, device=self.device)
-        self.dones[self.t] = torch.as_tensor(dones, dtype=torch.float32, device=self.device)
+        if self._np is not None:
+            self._np["rewards"][self.t] = rewards
+            self._np["dones"][self.t] = dones
+        else:
+            self.rewards[self.t] = torch.as_tensor(rewards, dtype=torch.float32, device=self.device)
+            self.dones[self.t] = torch.as_tensor(dones, dtype=torch.float32, device=self.device)
         self.t += 1
         return self.t == self.cfg.rollout_steps
 

@@ -61,7 +61,7 @@ def paired_schedule(n_games: int, first_seed: int = 0, n_policies: int = 2) -> l
     return games
 
 
-class _ActionLog:
+class ActionLog:
     """Every step's actions of every slot, kept from the first step of the oldest running game on.
 
     Steps are appended to a step-major block (one contiguous row per step, a few kilobytes); every ``BLOCK`` steps
@@ -138,7 +138,7 @@ def play(
     log = None
     if record_actions:
         space = spec.action_space(spec.config(**(env_options or {})))
-        log = _ActionLog(len(spec.agents), n, action_dtype(getattr(space, "n", None)))
+        log = ActionLog(len(spec.agents), n, action_dtype(getattr(space, "n", None)))
 
     def start(slots: np.ndarray) -> None:
         nonlocal next_game

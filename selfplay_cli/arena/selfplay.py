@@ -26,7 +26,8 @@ import numpy as np
 
 from ..envs import EnvSpec, get_env
 from ..policies import Policy
-from .runner import GameResult
+from .replay import action_dtype, encode_actions
+from .runner import ActionLog, GameResult
 
 OPPONENT = -1
 
@@ -97,6 +98,10 @@ class SelfPlayGames:
         self.next_seed = first_seed
         self.seeds = np.zeros(n_games, dtype=np.int64)
         self.games_started = 0
+        # Every game's actions, so the ledger can replay training games too (`marl record --game ID`).
+        space = self.spec.action_space(self.spec.config(**(env_options or {})))
+        self._log = ActionLog(len(self.spec.agents), n_games, action_dtype(getattr(space, "n", None)))
+        self._all_active = np.ones(n_games, dtype=bool)
         self._start(np.arange(n_games))
 
     def _start(self, games: np.ndarray) -> None:
@@ -105,6 +110,7 @@ class SelfPlayGames:
         self.games_started += games.size
         self.seeds[games] = seeds
         self.core.reset(games, seeds)
+        self._log.begin(games)
         if self.needs_opponents:
             chosen = list(self.choose_opponents(games))  # type: ignore[misc]
             if len(chosen) != games.size:
@@ -139,6 +145,7 @@ class SelfPlayGames:
         if self.needs_opponents:
             self._opponents_act(all_actions)
         rewards = self.core.step(all_actions.reshape(n_seats, self.n))
+        self._log.append(all_actions.reshape(n_seats, self.n), self._all_active)
         self._obs = None
         done_games = self.core.terminated | self.core.truncated
         flat_rewards = rewards.ravel()
@@ -155,7 +162,7 @@ class SelfPlayGames:
                     env=self.spec.name, players=players, seed=int(self.seeds[g]),
                     scores=tuple(int(x) for x in self.core.score[:, g]),
                     outcome=tuple(float(x) for x in outcome[:, g]), length=int(self.core.steps[g]),
-                    truncated=bool(self.core.truncated[g]), index=g))
+                    truncated=bool(self.core.truncated[g]), index=g, actions=encode_actions(self._log.take(g))))
             self._start(ended)
         return out_r, out_d, finished
 

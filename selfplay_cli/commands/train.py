@@ -56,7 +56,7 @@ def train(
                                                   "(fractions allowed).")] = None,
     run: Annotated[str | None, typer.Option("--run", help="Run name (default: <env>-<n>).")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of networks, games and opponent choice.")] = 0,
-    games: Annotated[int, typer.Option("--games", help="Games played at once.")] = 128,
+    games: Annotated[int, typer.Option("--games", help="Games played at once.")] = 256,
     snapshot_every: Annotated[int, typer.Option("--snapshot-every", help="Episodes (finished games) between "
                                                 "snapshots, named epN (0: by steps only).")] = 128,
     snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", help="Game steps between snapshots (0: by "

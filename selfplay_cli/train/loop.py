@@ -57,7 +57,7 @@ class TrainConfig:
     run: str = ""
     seed: int = 0
     device: str = "auto"
-    games: int = 128  # games played at once
+    games: int = 256  # games played at once (measured: 256 trains ~1.4x faster than 128 on 2 cores)
     snapshot_every: int = 128  # episodes (finished games) between snapshots; 0: by steps only
     snapshot_steps: int = 0  # game steps between snapshots; 0: by episodes only
     tensorboard: bool = False  # also write the metrics for TensorBoard (runs/<run>/tensorboard)
@@ -201,7 +201,7 @@ class Trainer:
         self.games = SelfPlayGames(spec, cfg.games, layout, learner_ids,
                                    choose_opponents=self._choose if (layout == OPPONENT).any() else None,
                                    env_options=cfg.env_options, first_seed=cfg.seed * 1_000_003)
-        self.match_id = league.create_match(spec.name, "training", {"run": cfg.run})
+        self.match_id = league.create_match(spec.name, "training", {"run": cfg.run, "env_options": cfg.env_options})
         self.episodes = 0
         self.elapsed = 0.0  # seconds trained before this process (resumed runs)
         self.resumes = 0
@@ -391,7 +391,7 @@ class Trainer:
             if 0 in ids or len(set(ids)) < len(ids):
                 continue  # the learner against itself (or its live copy) carries no rating information
             records.append(GameRecord(env=r.env, players=tuple(ids), seed=r.seed, scores=r.scores,
-                                      outcome=r.outcome, length=r.length, truncated=r.truncated))
+                                      outcome=r.outcome, length=r.length, truncated=r.truncated, actions=r.actions))
             learners = [self.games.learner_ids.index(p) for p in r.players if p in self.games.learner_ids]
             if len(learners) == 1:  # a learner against the league: its win rate against that opponent (PFSP)
                 seat = r.players.index(self.games.learner_ids[learners[0]])
