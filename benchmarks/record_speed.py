@@ -134,7 +134,8 @@ def main() -> None:
         best = pipeline(args.frames, folder)[0]
     print(f"load average now {os.getloadavg()[0]:.2f}")
     verdict = "PASS" if max(fps, best) >= 300 else "FAIL"
-    print(f"target: >= 300 frames/s rendered and encoded at 800x400: {max(fps, best):.0f} -> {verdict}")
+    print(f"target: >= 300 frames/s rendered and encoded at 800x400: best of two pipeline runs ({fps:.0f}, "
+          f"{best:.0f}) {max(fps, best):.0f} -> {verdict}")
 
 
 if __name__ == "__main__":
