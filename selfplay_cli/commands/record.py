@@ -157,8 +157,7 @@ def _replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> _Job:
     row = league.game(game_id)
     if row.actions is None:
         raise MarlError(f"game {row.id} ({row.match_kind} #{row.match_id}) was stored without its actions, so it "
-                        "cannot be replayed exactly; rated games (marl match, tournaments, gates, evaluations) keep "
-                        "theirs")
+                        "cannot be replayed exactly (games stored by an older marl have none)")
     spec = get_env(row.env)
     renderer_of(spec)  # no renderer: say so before anything else
     names = [league.get_player(pid).full_name for pid in row.players]

@@ -173,8 +173,8 @@ class GameRow:
     """One stored game with everything needed to replay it: :meth:`League.game`.
 
     ``players`` are player ids per seat; ``match_params`` are the parameters of the match that played it (for
-    rated matches, ``env_options``: the game options it was played under); ``actions`` the encoded action record,
-    None for games stored without one (training games).
+    rated and training matches, ``env_options``: the game options it was played under); ``actions`` the encoded
+    action record, None for games stored without one (by an older marl).
     """
 
     id: int
