@@ -134,6 +134,21 @@ def test_training_games_keep_their_actions_and_replay_exactly(tmp_path, capsys):
     assert rec["scores"] == [int(x) for x in stored.scores] and rec["length"] == stored.length
 
 
+def test_snapshots_by_steps_when_games_are_long(tmp_path):
+    """--snapshot-steps: a snapshot every N game steps even when no game ends (good players rally long); names stay
+    unique (epN.1, epN.2 within one episode count) and each has the previous one as its parent."""
+    league = League.open(tmp_path / "league")
+    cfg = tiny(agents=1, snapshot_every=10**6, snapshot_steps=4096, steps=12_288, eval_games=0,
+               env_options={"points_to_win": 21})
+    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    Trainer(league, cfg).train()
+    snaps = sorted(league.players("pong", kind="snapshot"), key=lambda p: p.id)
+    assert [p.step for p in snaps] == [0, 4096, 8192, 12_288]
+    assert len({p.name for p in snaps}) == 4 and snaps[0].name == "ep0"
+    assert [p.parent_id for p in snaps] == [None] + [p.id for p in snaps[:-1]]
+    league.close()
+
+
 def run(capsys, *args):
     code = main(list(args))
     out = capsys.readouterr()

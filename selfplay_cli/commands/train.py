@@ -59,8 +59,8 @@ def train(
     games: Annotated[int, typer.Option("--games", help="Games played at once.")] = 256,
     snapshot_every: Annotated[int, typer.Option("--snapshot-every", help="Episodes (finished games) between "
                                                 "snapshots, named epN (0: by steps only).")] = 128,
-    snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", help="Game steps between snapshots (0: by "
-                                                "episodes only).")] = 0,
+    snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", help="Game steps between snapshots, whichever "
+                                                "of the two comes first (0: by episodes only).")] = 1_000_000,
     swap_every: Annotated[int, typer.Option("--swap-every", help="Game steps a game slot keeps the opponent it drew "
                                             "(ML-Agents' swap_steps); 0: a new draw for every game.")] = 0,
     tensorboard: Annotated[bool, typer.Option("--tensorboard", help="Also write the metrics for TensorBoard "

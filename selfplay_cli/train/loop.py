@@ -59,7 +59,7 @@ class TrainConfig:
     device: str = "auto"
     games: int = 256  # games played at once (measured: 256 trains ~1.4x faster than 128 on 2 cores)
     snapshot_every: int = 128  # episodes (finished games) between snapshots; 0: by steps only
-    snapshot_steps: int = 0  # game steps between snapshots; 0: by episodes only
+    snapshot_steps: int = 1_000_000  # game steps between snapshots (whichever comes first); 0: by episodes only
     tensorboard: bool = False  # also write the metrics for TensorBoard (runs/<run>/tensorboard)
     swap_every: int = 0  # game steps a game slot keeps its drawn opponent (ML-Agents' swap_steps); 0: every game
     league_games: float = 0.0  # all seats learning: share of games one learner plays a league opponent instead
