@@ -149,6 +149,26 @@ def test_snapshots_by_steps_when_games_are_long(tmp_path):
     league.close()
 
 
+def test_a_run_repeats_exactly_with_learners_updating_in_threads(tmp_path, monkeypatch):
+    """Two learners update side by side in threads; each draws only from its own generator, so the same seed gives
+    bit-identical snapshots, and the same as updating one after the other."""
+    import selfplay_cli.train.loop as loop
+    from selfplay_cli.train.team import LearnerTeam
+
+    def weights(home, threads):
+        monkeypatch.setattr(loop, "LearnerTeam", lambda learners: LearnerTeam(learners, threads=threads))
+        league = League.open(home)
+        cfg = tiny(agents=2, sharing="nops", steps=4096, eval_games=0)
+        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        Trainer(league, cfg).train()
+        out = {p.name: p.sha256 for p in league.players("pong", kind="snapshot")}
+        league.close()
+        return out
+
+    threaded = weights(tmp_path / "a", True)
+    assert len(threaded) >= 4 and threaded == weights(tmp_path / "b", True) == weights(tmp_path / "c", False)
+
+
 def run(capsys, *args):
     code = main(list(args))
     out = capsys.readouterr()
