@@ -12,35 +12,26 @@ run is as reproducible with threads as without.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 import torch
 
-T = TypeVar("T")
 
-
-def _single_torch_thread(_: Any = None) -> None:
+def _single_torch_thread() -> None:
     torch.set_num_threads(1)
 
 
 class LearnerTeam:
-    """Runs ``act``/``record``/``update`` of every learner, in parallel threads when there are several."""
+    """Every learner's ``act``, ``record`` and ``update``; the updates in parallel threads when there are several."""
 
     def __init__(self, learners: Sequence[Any], threads: bool = True) -> None:
         self.learners = list(learners)
         use = threads and len(self.learners) > 1
         self._pool = (ThreadPoolExecutor(len(self.learners), thread_name_prefix="learner",
                                          initializer=_single_torch_thread) if use else None)
-
-    def _each(self, fn: Callable[..., T], *per_learner: Sequence[Any], **common: Any) -> list[T]:
-        if self._pool is None:
-            return [fn(learner, *args, **common) for learner, *args in zip(self.learners, *per_learner, strict=True)]
-        futures = [self._pool.submit(fn, learner, *args, **common)
-                   for learner, *args in zip(self.learners, *per_learner, strict=True)]
-        return [f.result() for f in futures]
 
     def act(self, obs: Sequence[np.ndarray]) -> list[np.ndarray]:
         """Each learner's actions for its observations, one after the other (measured: threads make acting slower)."""
@@ -53,7 +44,11 @@ class LearnerTeam:
 
     def update(self, obs: Sequence[np.ndarray], progress: float) -> list[dict[str, float]]:
         """Every learner's update, side by side; returns their statistics in learner order."""
-        return self._each(lambda learner, o, progress: learner.update(o, progress), obs, progress=progress)
+        pairs = list(zip(self.learners, obs, strict=True))
+        if self._pool is None:
+            return [learner.update(o, progress) for learner, o in pairs]
+        futures = [self._pool.submit(learner.update, o, progress) for learner, o in pairs]
+        return [f.result() for f in futures]
 
     def close(self) -> None:
         if self._pool is not None:
