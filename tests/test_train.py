@@ -169,6 +169,22 @@ def test_a_run_repeats_exactly_with_learners_updating_in_threads(tmp_path, monke
     assert len(threaded) >= 4 and threaded == weights(tmp_path / "b", True) == weights(tmp_path / "c", False)
 
 
+def test_train_flag_defaults_are_the_config_defaults():
+    """The command spells its defaults out (so `marl train --help` needs no torch import); they must be TrainConfig's,
+    or `--help` would show one budget and a run use another."""
+    import inspect
+
+    from selfplay_cli.commands.train import train
+
+    cfg, mm = TrainConfig(), MatchmakerConfig()
+    params = inspect.signature(train).parameters
+    flags = {"agents": cfg.agents, "algo": cfg.algo, "sharing": cfg.sharing, "steps": cfg.steps, "seed": cfg.seed,
+             "games": cfg.games, "snapshot_every": cfg.snapshot_every, "snapshot_steps": cfg.snapshot_steps,
+             "swap_every": cfg.swap_every, "league_games": cfg.league_games, "eval_games": cfg.eval_games,
+             "opponents": mm.mode, "window": mm.window, "latest_ratio": mm.latest_ratio, "device": cfg.device}
+    assert {k: params[k].default for k in flags} == flags
+
+
 def run(capsys, *args):
     code = main(list(args))
     out = capsys.readouterr()

@@ -79,17 +79,25 @@ class ActionLog:
         self.now = 0  # steps appended so far
         self.start = np.zeros(n_slots, dtype=np.int64)  # step number at which each slot's game began
 
+    @classmethod
+    def for_env(cls, spec: EnvSpec, n_slots: int, env_options: dict[str, Any] | None = None) -> ActionLog:
+        """A log for ``n_slots`` games of ``spec``, in the narrowest integer type that holds its actions."""
+        space = spec.action_space(spec.config(**(env_options or {})))
+        return cls(len(spec.agents), n_slots, action_dtype(getattr(space, "n", None)))
+
     def begin(self, slots: np.ndarray) -> None:
         self.start[slots] = self.now
 
-    def append(self, actions: np.ndarray, active: np.ndarray) -> None:
+    def append(self, actions: np.ndarray, active: np.ndarray | None = None) -> None:
+        """One step's ``(seats, slots)`` actions; ``active`` marks the slots with a game running (default: all)."""
         self.block[self.filled] = actions
         self.filled += 1
         self.now += 1
         if self.filled == self.BLOCK:
             self.blocks.append((self.now - self.BLOCK, np.ascontiguousarray(self.block.transpose(2, 1, 0))))
             self.filled = 0
-            oldest = int(self.start[active].min()) if active.any() else self.now
+            running = self.start if active is None else self.start[active]
+            oldest = int(running.min()) if running.size else self.now
             self.blocks = [(first, b) for first, b in self.blocks if first + self.BLOCK > oldest]
 
     def take(self, slot: int) -> np.ndarray:
@@ -135,10 +143,7 @@ def play(
     seats = np.zeros((len(spec.agents), n), dtype=np.int64)  # policy index per (seat, slot)
     game_of = np.full(n, -1, dtype=np.int64)  # schedule index per slot, -1 when idle
     next_game = 0
-    log = None
-    if record_actions:
-        space = spec.action_space(spec.config(**(env_options or {})))
-        log = ActionLog(len(spec.agents), n, action_dtype(getattr(space, "n", None)))
+    log = ActionLog.for_env(spec, n, env_options) if record_actions else None
 
     def start(slots: np.ndarray) -> None:
         nonlocal next_game

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..envs import EnvSpec, get_env
 from ..policies import Policy
-from .replay import action_dtype, encode_actions
+from .replay import encode_actions
 from .runner import ActionLog, GameResult
 
 OPPONENT = -1
@@ -99,9 +99,7 @@ class SelfPlayGames:
         self.seeds = np.zeros(n_games, dtype=np.int64)
         self.games_started = 0
         # Every game's actions, so the ledger can replay training games too (`marl record --game ID`).
-        space = self.spec.action_space(self.spec.config(**(env_options or {})))
-        self._log = ActionLog(len(self.spec.agents), n_games, action_dtype(getattr(space, "n", None)))
-        self._all_active = np.ones(n_games, dtype=bool)
+        self._log = ActionLog.for_env(self.spec, n_games, env_options)
         self._start(np.arange(n_games))
 
     def _start(self, games: np.ndarray) -> None:
@@ -145,7 +143,7 @@ class SelfPlayGames:
         if self.needs_opponents:
             self._opponents_act(all_actions)
         rewards = self.core.step(all_actions.reshape(n_seats, self.n))
-        self._log.append(all_actions.reshape(n_seats, self.n), self._all_active)
+        self._log.append(all_actions.reshape(n_seats, self.n))  # every slot always has a game running
         self._obs = None
         done_games = self.core.terminated | self.core.truncated
         flat_rewards = rewards.ravel()

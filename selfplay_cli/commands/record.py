@@ -77,8 +77,8 @@ def record(
     vs: Annotated[str | None, typer.Option("--vs", help="Opponent (same forms). Default: the snapshot's teammates "
                                            "from the same episode, else cpu.")] = None,
     game_id: Annotated[int | None, typer.Option("--game", help="Re-render game ID of the ledger exactly as it was "
-                                                "played (rated games: marl match, tournaments, gates, training "
-                                                "evaluations).")] = None,
+                                                "played (the games of marl match, tournaments, gates and "
+                                                "training).")] = None,
     env: EnvOpt = None,
     games: Annotated[int, typer.Option("--games", "-n", help="Games to record, one file each; game i uses seed "
                                        "--seed + i.")] = 1,
