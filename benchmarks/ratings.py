@@ -25,7 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from selfplay_cli.league.ratings import NAT_TO_ELO, bootstrap_ci, fit_bradley_terry
+from selfplay_cli.stats.bradley_terry import bootstrap_ci, fit_bradley_terry
+from selfplay_cli.stats.elo import NAT_TO_ELO
 
 FIT_TARGET_S = 0.3
 BOOT_TARGET_S = 30.0

@@ -22,16 +22,11 @@ from selfplay_cli.league.ladder import (
     read_results_csv,
 )
 from selfplay_cli.league.names import resolve, resolve_many
-from selfplay_cli.league.ratings import (
-    FLAG_PERFECT,
-    NAT_TO_ELO,
-    elo_to_score,
-    fit_bradley_terry,
-    match_stats,
-    normal_quantile,
-    sprt_llr,
-)
 from selfplay_cli.league.store import GameRecord, League, LeagueError, PlayerRow
+from selfplay_cli.stats.bradley_terry import FLAG_PERFECT, fit_bradley_terry
+from selfplay_cli.stats.elo import NAT_TO_ELO, elo_to_score, normal_quantile
+from selfplay_cli.stats.match import match_stats
+from selfplay_cli.stats.sprt import sprt_llr
 
 ENV = "pong"
 JSON_KEYS = ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",

@@ -1,4 +1,4 @@
-"""Tests for selfplay_cli.league.ratings: Elo arithmetic, match statistics, GSPRT and Bradley-Terry fits."""
+"""Tests for selfplay_cli.stats: Elo arithmetic, match statistics, GSPRT and Bradley-Terry fits."""
 
 from __future__ import annotations
 
@@ -10,24 +10,18 @@ from statistics import NormalDist
 import numpy as np
 import pytest
 
-from selfplay_cli.league.ratings import (
+from selfplay_cli.stats.bradley_terry import (
     FLAG_DISCONNECTED,
     FLAG_PERFECT,
     FLAG_UNRATED,
     FLAG_ZERO,
-    MAX_ELO,
-    SPRT,
     bootstrap_ci,
-    elo_to_score,
-    elo_update,
     fit_bradley_terry,
-    match_stats,
-    normal_quantile,
     rank_by_ci,
-    score_to_elo,
-    sprt_bounds,
-    sprt_llr,
 )
+from selfplay_cli.stats.elo import MAX_ELO, elo_to_score, elo_update, normal_quantile, score_to_elo
+from selfplay_cli.stats.match import match_stats
+from selfplay_cli.stats.sprt import SPRT, sprt_bounds, sprt_llr
 
 Z95 = 1.959963984540054  # Phi^{-1}(0.975)
 
@@ -431,6 +425,7 @@ def test_rank_by_ci_hand_example() -> None:
     assert rank_by_ci(ratings, low, high).tolist() == [1, 1, 3, 1]
 
 
-def test_league_ratings_does_not_import_torch() -> None:
-    code = "import sys, selfplay_cli.league.ratings; sys.exit('torch' in sys.modules)"
+def test_stats_does_not_import_torch() -> None:
+    code = ("import sys, selfplay_cli.stats.elo, selfplay_cli.stats.match, selfplay_cli.stats.sprt, "
+            "selfplay_cli.stats.bradley_terry; sys.exit('torch' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0

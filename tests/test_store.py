@@ -22,7 +22,6 @@ from sqlalchemy.exc import OperationalError
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league import store
 from selfplay_cli.league.models import Player
-from selfplay_cli.league.ratings import elo_update
 from selfplay_cli.league.store import (
     SCHEMA_VERSION,
     GameRecord,
@@ -30,6 +29,7 @@ from selfplay_cli.league.store import (
     LeagueError,
     PlayerRow,
 )
+from selfplay_cli.stats.elo import elo_update
 
 ENV = "pong"
 

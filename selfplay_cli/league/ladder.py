@@ -4,8 +4,8 @@ Nothing here is stored: every ladder is refitted from the games (:func:`ladder` 
 ledger, :func:`fit_csv` from a ``player_a,player_b,result`` file), so it always agrees with the ledger.
 
 * :func:`fit_table` is the generic core: maximum-likelihood Bradley-Terry ratings anchored at one player
-  (:func:`~selfplay_cli.league.ratings.fit_bradley_terry`), a confidence interval per player and
-  Chatbot-Arena ranks (:func:`~selfplay_cli.league.ratings.rank_by_ci`: ``1 + #players whose lower bound
+  (:func:`~selfplay_cli.stats.bradley_terry.fit_bradley_terry`), a confidence interval per player and
+  Chatbot-Arena ranks (:func:`~selfplay_cli.stats.bradley_terry.rank_by_ci`: ``1 + #players whose lower bound
   is above my upper bound``, so overlapping players share a rank).
 * :func:`ladder` fits the 2-seat games of one env of the league.
 * :func:`read_results_csv` / :func:`fit_csv` rate an external results file.
@@ -14,7 +14,7 @@ ledger, :func:`fit_csv` from a ``player_a,player_b,result`` file), so it always 
 
 Confidence intervals
 --------------------
-``bootstrap > 0``: the percentile bootstrap of :func:`~selfplay_cli.league.ratings.bootstrap_ci` (games
+``bootstrap > 0``: the percentile bootstrap of :func:`~selfplay_cli.stats.bradley_terry.bootstrap_ci` (games
 resampled with replacement, ``bootstrap`` replicates, seeded). ``bootstrap == 0``: a normal approximation
 from the observed Fisher information, i.e. the negative Hessian of the Bradley-Terry log-likelihood at the
 fit. In natural-log units it is the weighted graph Laplacian ``L_ii = sum_j c_ij, L_ij = -c_ij`` with
@@ -39,20 +39,18 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from selfplay_cli.league.ratings import (
+from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.stats.bradley_terry import (
     FLAG_DISCONNECTED,
     FLAG_PERFECT,
     FLAG_UNRATED,
     FLAG_ZERO,
-    MAX_ELO,
-    NAT_TO_ELO,
     bootstrap_ci,
     fit_bradley_terry,
-    normal_quantile,
     rank_by_ci,
     reachable,
 )
-from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.stats.elo import MAX_ELO, NAT_TO_ELO, normal_quantile
 
 __all__ = [
     "CSV_HEADER",
@@ -519,7 +517,7 @@ def head_to_head(league: League, a_id: int, b_id: int) -> dict[str, Any]:
     games), ``pentanomial`` and ``pairs``, ``unpaired``. Game pairs: within one match, games with the same
     seed, one with A in seat 0 and one with A in seat 1 (matched in game-id order). A pair's score is A's
     points in both games; ``pentanomial`` counts pairs scoring ``0, 0.5, 1, 1.5, 2``, i.e.
-    ``[LL, LD, WL+DD, WD, WW]`` as :func:`~selfplay_cli.league.ratings.sprt_llr` expects. Unpaired games
+    ``[LL, LD, WL+DD, WD, WW]`` as :func:`~selfplay_cli.stats.sprt.sprt_llr` expects. Unpaired games
     count in W/D/L only.
     """
     a_id, b_id = int(a_id), int(b_id)

@@ -22,8 +22,8 @@ import difflib
 from collections.abc import Callable, Iterable
 
 from selfplay_cli.league import ladder as _ladder
-from selfplay_cli.league.ratings import FLAG_DISCONNECTED, FLAG_UNRATED
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.stats.bradley_terry import FLAG_DISCONNECTED, FLAG_UNRATED
 
 __all__ = ["MAX_CANDIDATES", "LadderFn", "resolve", "resolve_many"]
 

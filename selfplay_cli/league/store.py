@@ -46,7 +46,7 @@ from sqlalchemy.orm import Session, aliased, raiseload, sessionmaker
 
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.models import Base, Game, GameSeat, Match, Meta, Player, Run, Tag, utcnow
-from selfplay_cli.league.ratings import elo_update
+from selfplay_cli.stats.elo import elo_update
 
 __all__ = [
     "DEFAULT_ELO",
@@ -219,7 +219,7 @@ class GameTable:
     def indexed(
         self, ids: Sequence[int] | npt.ArrayLike | None = None
     ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-        """Map player ids to indices ``0..n-1`` for :func:`~selfplay_cli.league.ratings.fit_bradley_terry`.
+        """Map player ids to indices ``0..n-1`` for :func:`~selfplay_cli.stats.bradley_terry.fit_bradley_terry`.
 
         Args:
             ids: the population (default :meth:`player_ids`); every player in the table must be in it.
@@ -803,7 +803,7 @@ class League:
         """Append a batch of games to the ledger in ONE transaction and update the online Elo.
 
         The online Elo of the two players of every 2-seat game between different players is updated
-        with :func:`~selfplay_cli.league.ratings.elo_update` (K = :attr:`elo_k`) in game order; every
+        with :func:`~selfplay_cli.stats.elo.elo_update` (K = :attr:`elo_k`) in game order; every
         player's ``games`` counter counts each game it sat in once. Games with more seats are stored
         but leave the Elo alone. Either the whole batch is stored or nothing is.
 

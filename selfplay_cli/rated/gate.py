@@ -5,8 +5,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from ..league.ratings import MatchStats, match_stats
 from ..league.store import League, PlayerRow
+from ..stats.match import MatchStats, match_stats
 from .match import load_player, run_match
 
 

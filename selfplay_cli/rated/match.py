@@ -22,9 +22,10 @@ import numpy as np
 from ..arena import GameResult, paired_schedule, play
 from ..envs import get_env
 from ..errors import MarlError
-from ..league.ratings import SPRT, MatchStats, match_stats
 from ..league.store import GameRecord, League, PlayerRow
 from ..policies import Policy, ScriptedPolicy
+from ..stats.match import MatchStats, match_stats
+from ..stats.sprt import SPRT
 
 
 def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: bool = True, seed: int = 0) -> Policy:

@@ -1,0 +1,464 @@
+"""Bradley-Terry (Elo) ratings of a whole population from its games: maximum likelihood or MAP with virtual
+draws (BayesElo's prior), Hunter's (2004) existence condition handled explicitly, percentile-bootstrap
+intervals and Chatbot-Arena style ranks.
+
+numpy and the standard library only.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from .elo import MAX_ELO, NAT_TO_ELO
+
+__all__ = ["BOUND_PRIOR_GAMES", "FLAG_DISCONNECTED", "FLAG_PERFECT", "FLAG_UNRATED", "FLAG_ZERO", "BTFit",
+           "bootstrap_ci", "fit_bradley_terry", "rank_by_ci", "reachable"]
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+BOUND_PRIOR_GAMES: float = 1.0
+"""Weight, in games, of the virtual draw that turns an infinite ML rating into a finite bound."""
+
+FLAG_PERFECT = "perfect"
+FLAG_ZERO = "zero"
+FLAG_DISCONNECTED = "disconnected"
+FLAG_UNRATED = "unrated"
+
+
+
+@dataclass
+class BTFit:
+    """Result of :func:`fit_bradley_terry`.
+
+    Attributes:
+        ratings: (n_players,) Elo ratings, always finite; ``ratings[anchor] == anchor_rating`` if the
+            anchor played.
+        flags: per player ``None`` (a true ML estimate) or one of ``"perfect"``, ``"zero"``,
+            ``"disconnected"``, ``"unrated"`` (see :func:`fit_bradley_terry`).
+        games, wins, draws, losses: per-player (weighted) counts; int64 unless non-integer weights
+            were given, then float64.
+        score: per-player mean points per game (0.5 for players without games).
+        iterations: total Newton iterations over all sub-problems.
+        converged: True if every Newton solve reached the tolerance.
+        anchor, anchor_rating: the gauge used.
+    """
+
+    ratings: FloatArray
+    flags: list[str | None]
+    games: npt.NDArray[np.int64] | FloatArray
+    wins: npt.NDArray[np.int64] | FloatArray
+    draws: npt.NDArray[np.int64] | FloatArray
+    losses: npt.NDArray[np.int64] | FloatArray
+    score: FloatArray
+    iterations: int
+    converged: bool
+    anchor: int = 0
+    anchor_rating: float = 1000.0
+
+
+def _sigmoid(x: FloatArray) -> FloatArray:
+    return 0.5 * (1.0 + np.tanh(0.5 * x))
+
+
+def _loglik(w: FloatArray, theta: FloatArray) -> float:
+    """``sum_ij W_ij log sigmoid(theta_i - theta_j)``: the Bradley-Terry log-likelihood (points as wins)."""
+    d = theta[:, None] - theta[None, :]
+    return -float(np.sum(w * np.logaddexp(0.0, -d)))
+
+
+def _pcg(mat: FloatArray, rhs: FloatArray, rtol: float = 1e-12) -> FloatArray:
+    """Solve ``mat x = rhs`` (symmetric positive (semi)definite) by Jacobi-preconditioned conjugate gradients.
+
+    Used instead of a LAPACK factorisation because it needs only matrix-vector products: on small
+    matrices a multi-threaded BLAS factorisation can be dominated by thread wake-up latency on a busy
+    machine, while CG on a diagonally dominant graph Laplacian converges in a few dozen products.
+    Stops when ``|r| <= rtol |rhs|`` or after ``4 * size + 50`` iterations.
+    """
+    diag = np.diag(mat).copy()
+    inv_d = np.divide(1.0, diag, out=np.zeros_like(diag), where=diag > 0)
+    x = np.zeros_like(rhs)
+    r = rhs.copy()
+    z = inv_d * r
+    p = z.copy()
+    rz = float(r @ z)
+    stop = rtol * float(np.linalg.norm(rhs))
+    for _ in range(4 * rhs.size + 50):
+        if float(np.linalg.norm(r)) <= stop or rz <= 0.0:
+            break
+        q = mat @ p
+        pq = float(p @ q)
+        if pq <= 0.0:
+            break
+        alpha = rz / pq
+        x += alpha * p
+        r -= alpha * q
+        z = inv_d * r
+        rz_new = float(r @ z)
+        p = z + (rz_new / rz) * p
+        rz = rz_new
+    return x
+
+
+def _newton(w: FloatArray, n: FloatArray, theta: FloatArray, free: npt.NDArray[np.bool_],
+            tol_nat: float, max_iter: int) -> tuple[FloatArray, int, bool]:
+    """Maximise the BT log-likelihood over ``theta[free]`` (the other entries stay fixed).
+
+    ``w[i, j]``: points i scored against j, ``n[i, j] = n[j, i]``: games between them (both may include
+    virtual games). Gradient ``g_i = sum_j (w_ij - n_ij p_ij)`` with ``p_ij = sigmoid(theta_i - theta_j)``;
+    the negative Hessian is the weighted graph Laplacian ``L_ii = sum_j c_ij``, ``L_ij = -c_ij``,
+    ``c_ij = n_ij p_ij (1 - p_ij)``, restricted to the free rows/columns (positive definite when every
+    free player is linked to a fixed one). Newton step ``L delta = g``, capped at 5 nats
+    (~870 Elo) per player and backtracked until the (concave) log-likelihood does not decrease.
+    Stops when the largest accepted step is below ``tol_nat``.
+    """
+    theta = theta.copy()
+    idx = np.flatnonzero(free)
+    if idx.size == 0:
+        return theta, 0, True
+    sub = np.ix_(idx, idx)
+    for it in range(1, max_iter + 1):
+        d = theta[:, None] - theta[None, :]
+        p = _sigmoid(d)
+        grad = np.sum(w - n * p, axis=1)[idx]
+        c = n * p * (1.0 - p)
+        lap = -c[sub]
+        lap[np.diag_indices_from(lap)] += c[idx].sum(axis=1)
+        step = _pcg(lap, grad)
+        big = float(np.max(np.abs(step)))
+        if big > 5.0:
+            step *= 5.0 / big
+        ll0 = _loglik(w, theta)
+        t = 1.0
+        while True:
+            trial = theta.copy()
+            trial[idx] += t * step
+            ll1 = _loglik(w, trial)
+            if ll1 >= ll0 - 1e-12 * (1.0 + abs(ll0)) or t < 1e-6:
+                break
+            t *= 0.5
+        theta = trial
+        if t * float(np.max(np.abs(step))) < tol_nat:
+            return theta, it, True
+    return theta, max_iter, False
+
+
+def reachable(adj: npt.NDArray[np.bool_], start: int) -> npt.NDArray[np.bool_]:
+    """Players reachable from ``start`` along edges ``adj[i, j]`` (breadth-first, vectorised); with a symmetric
+    ``adj`` this is ``start``'s connected component."""
+    seen = np.zeros(adj.shape[0], dtype=bool)
+    seen[start] = True
+    frontier = seen.copy()
+    while frontier.any():
+        nxt = adj[frontier].any(axis=0) & ~seen
+        seen |= nxt
+        frontier = nxt
+    return seen
+
+
+def _fit_matrices(
+    w: FloatArray, n: FloatArray, anchor: int, anchor_rating: float, prior_games: float,
+    init: FloatArray | None, tol: float, max_iter: int,
+) -> tuple[FloatArray, list[str | None], int, bool]:
+    """Core of :func:`fit_bradley_terry` on the aggregated pair matrices (see its docstring)."""
+    n_players = w.shape[0]
+    games = n.sum(axis=1)
+    has_games = games > 0
+    played = n > 0
+    scored = w > 0
+    ratings = np.full(n_players, float(anchor_rating))
+    flags: list[str | None] = [None if g else FLAG_UNRATED for g in has_games]
+    tol_nat = tol / NAT_TO_ELO
+    # Heuristic start: logit of each player's score with one virtual draw.
+    points = w.sum(axis=1)
+    heuristic = np.log((points + 0.5) / (games - points + 0.5))
+    if init is None:
+        start_theta = heuristic
+    else:
+        start_theta = np.where(np.isfinite(init), (init - anchor_rating) / NAT_TO_ELO, heuristic)
+    iterations, converged = 0, True
+    unassigned = has_games.copy()
+    while unassigned.any():
+        comp = reachable(played, int(np.flatnonzero(unassigned)[0]))
+        unassigned &= ~comp
+        members = np.flatnonzero(comp)
+        with_anchor = bool(comp[anchor])
+        root = anchor if with_anchor else int(members[np.argmax(games[members])])
+        fwd = reachable(scored, root)  # players the root's group (transitively) scored against
+        bwd = reachable(scored.T, root)  # players that (transitively) scored against the root
+        main = fwd & bwd  # strongly connected component of the root: ML exists there (Hunter 2004)
+        for i in members:
+            if not with_anchor:
+                flags[i] = FLAG_DISCONNECTED
+            elif main[i]:
+                continue
+            elif bwd[i] and not fwd[i]:  # scored against the anchor's group, never conceded to it
+                flags[i] = FLAG_PERFECT
+            elif fwd[i] and not bwd[i]:
+                flags[i] = FLAG_ZERO
+            else:
+                flags[i] = FLAG_DISCONNECTED
+        r = int(np.searchsorted(members, root))
+        wc, nc = w[np.ix_(members, members)], n[np.ix_(members, members)]
+        main_c = main[members]
+        theta = start_theta[members] - start_theta[root]
+        theta[r] = 0.0
+        # Virtual draws: prior_games for everybody, at least BOUND_PRIOR_GAMES for players outside
+        # the root's strongly connected component; spread over each player's opponents pro rata.
+        g = np.where(main_c, prior_games, max(prior_games, BOUND_PRIOR_GAMES))
+        v = (g / games[members])[:, None] * nc
+        v = v + v.T
+        wv, nv = wc + 0.5 * v, nc + v
+        if prior_games > 0.0:
+            free = np.ones(members.size, dtype=bool)
+            free[r] = False
+            theta, its, ok = _newton(wv, nv, theta, free, tol_nat, max_iter)
+            iterations, converged = iterations + its, converged and ok
+        else:
+            mi = np.flatnonzero(main_c)
+            free_m = np.ones(mi.size, dtype=bool)
+            free_m[int(np.flatnonzero(mi == r)[0])] = False
+            sub = np.ix_(mi, mi)
+            th_m, its, ok = _newton(wc[sub], nc[sub], theta[mi], free_m, tol_nat, max_iter)
+            iterations, converged = iterations + its, converged and ok
+            if not main_c.all():
+                # Start the bounded players from their heuristic, shifted like the main group moved.
+                theta[~main_c] += float(np.mean(th_m - theta[mi]))
+                theta[mi] = th_m
+                theta, its, ok = _newton(wv, nv, theta, ~main_c, tol_nat, max_iter)
+                iterations, converged = iterations + its, converged and ok
+            else:
+                theta[mi] = th_m
+        if with_anchor:
+            ratings[members] = anchor_rating + (theta - theta[r]) * NAT_TO_ELO
+        else:
+            ratings[members] = anchor_rating + (theta - theta.mean()) * NAT_TO_ELO
+    return ratings, flags, iterations, converged
+
+
+def _validate_games(
+    a: npt.ArrayLike, b: npt.ArrayLike, score_a: npt.ArrayLike, n_players: int, anchor: int,
+    weights: npt.ArrayLike | None,
+) -> tuple[IntArray, IntArray, FloatArray, FloatArray | None]:
+    ai = np.asarray(a).astype(np.int64, copy=False).ravel()
+    bi = np.asarray(b).astype(np.int64, copy=False).ravel()
+    sc = np.asarray(score_a, dtype=np.float64).ravel()
+    if not (ai.size == bi.size == sc.size):
+        raise ValueError("a, b and score_a must have the same length")
+    if n_players <= 0:
+        raise ValueError("n_players must be positive")
+    if not 0 <= anchor < n_players:
+        raise ValueError(f"anchor {anchor} is not a player index in [0, {n_players})")
+    if ai.size and (min(ai.min(), bi.min()) < 0 or max(ai.max(), bi.max()) >= n_players):
+        raise ValueError("player indices must lie in [0, n_players)")
+    if np.any(ai == bi):
+        raise ValueError("a player cannot play against itself (a == b)")
+    if not np.all((sc >= 0.0) & (sc <= 1.0)):
+        raise ValueError("score_a must lie in [0, 1] (1 win, 0.5 draw, 0 loss)")
+    wt = None
+    if weights is not None:
+        wt = np.asarray(weights, dtype=np.float64).ravel()
+        if wt.size != ai.size or not np.all(np.isfinite(wt)) or np.any(wt < 0):
+            raise ValueError("weights must be finite, non-negative and one per game")
+    return ai, bi, sc, wt
+
+
+def _pair_matrices(ai: IntArray, bi: IntArray, sc: FloatArray, wt: FloatArray | None,
+                   n_players: int) -> tuple[FloatArray, FloatArray]:
+    """Aggregate games: ``W[i, j]`` = points i scored against j, ``N[i, j] = N[j, i]`` = games i-j."""
+    m = n_players * n_players
+    code = ai * n_players + bi
+    g = np.ones_like(sc) if wt is None else wt
+    pts_a = np.bincount(code, weights=g * sc, minlength=m).reshape(n_players, n_players)
+    pts_b = np.bincount(code, weights=g * (1.0 - sc), minlength=m).reshape(n_players, n_players)
+    cnt = np.bincount(code, weights=g, minlength=m).reshape(n_players, n_players)
+    return pts_a + pts_b.T, cnt + cnt.T
+
+
+def fit_bradley_terry(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    score_a: npt.ArrayLike,
+    n_players: int,
+    anchor: int = 0,
+    anchor_rating: float = 1000.0,
+    weights: npt.ArrayLike | None = None,
+    prior_games: float = 0.0,
+    *,
+    init: npt.ArrayLike | None = None,
+    tol: float = 1e-6,
+    max_iter: int = 100,
+) -> BTFit:
+    """Maximum-likelihood Bradley-Terry (Elo) ratings of a population from a list of games.
+
+    Model: game ``k`` between ``a[k]`` and ``b[k]`` gives A ``score_a[k]`` points (1 win, 1/2 draw,
+    0 loss) and B ``1 - score_a[k]``, with ``P(a beats b) = E(r_a - r_b) = 1 / (1 + 10**(-(r_a - r_b)/400))``.
+    Draws count as half a win for each side (the usual Elo / Chatbot-Arena convention), so with
+    ``W_ij`` = (weighted) points i scored against j and ``N_ij = N_ji`` the (weighted) games between
+    them, the log-likelihood is ``sum_{i,j} W_ij log E(r_i - r_j)`` and the ML ratings solve the score
+    equations
+
+        sum_j N_ij (W_ij / N_ij - E(r_i - r_j)) = 0     for every player i except the anchor,
+
+    with ``r_anchor = anchor_rating`` fixing the additive gauge. The games are first aggregated into
+    the n x n matrices ``W, N`` (one ``bincount``), then solved by Newton's method with the n x n
+    Hessian (the likelihood is concave, so Newton with backtracking converges; typically 5-8
+    iterations) to ``tol`` Elo (largest update). ``weights`` multiplies each game (bootstrap counts);
+    ``init`` (Elo, n_players) warm-starts the solver.
+
+    Existence (Hunter 2004): the ML ratings are finite iff the directed graph "i scored something
+    against j" is strongly connected. This function therefore
+
+    1. fits the strongly connected component of the anchor ("main") exactly, using the games within
+       it (these are the exact ML ratings of those players: in the full likelihood all other players
+       drift to +-infinity and their games against main contribute nothing);
+    2. gives every other player in the anchor's connected component a finite *bound*: the ML rating
+       with main held fixed after adding, for each such player i, ``BOUND_PRIOR_GAMES`` (= 1) virtual
+       draw spread over i's opponents in proportion to the games played against them. For a single
+       player with ``P`` points in ``n`` games against fixed opponents this is the rating at which its
+       expected score against its actual schedule equals ``(P + 1/2) / (n + 1)``, e.g. 2/2 wins against
+       one opponent gives ``E(d) = 5/6``, ``d = 400 log10 5 = +279.6``. These players are flagged
+
+       * ``"perfect"``: the ML rating is +infinity: the player belongs to a group that scored 100 %
+         against every opponent outside the group (most often: the player won every game);
+       * ``"zero"``: the mirror image, ML rating -infinity (most often: a 0 % score);
+       * ``"disconnected"``: neither (its group both beat and lost to groups the anchor cannot be
+         compared with), so its offset to the anchor is undetermined;
+
+    3. connected components that do not contain the anchor are fitted the same way around their own
+       most active player, then shifted so that the component's mean rating is ``anchor_rating``; all
+       their players are flagged ``"disconnected"`` (their ratings are not comparable to the anchor's);
+    4. players without any (non-zero-weight) game get ``anchor_rating`` and the flag ``"unrated"``.
+
+    ``prior_games > 0`` turns this into a MAP fit: every player gets ``prior_games`` virtual draws (at
+    least ``BOUND_PRIOR_GAMES`` for flagged players) spread over its opponents, and each connected
+    component is fitted in one piece. Ratings are always finite, never NaN.
+
+    Args:
+        a, b: int arrays of player indices (``0 <= a, b < n_players``, ``a != b``).
+        score_a: A's points per game in [0, 1] (W/D/L counts treat > 1/2 as a win, < 1/2 a loss).
+        n_players: population size.
+        anchor, anchor_rating: the player whose rating is fixed, and its value.
+        weights: optional non-negative weight per game.
+        prior_games: virtual draws per player (0 = pure maximum likelihood).
+        init: optional warm start (Elo ratings, e.g. a previous fit's ``ratings``).
+        tol: convergence tolerance on the ratings, in Elo.
+        max_iter: Newton iteration cap per sub-problem.
+    """
+    ai, bi, sc, wt = _validate_games(a, b, score_a, n_players, anchor, weights)
+    if prior_games < 0:
+        raise ValueError("prior_games must be non-negative")
+    w, nmat = _pair_matrices(ai, bi, sc, wt, n_players)
+    init_arr = None if init is None else np.asarray(init, dtype=np.float64).ravel()
+    if init_arr is not None and init_arr.size != n_players:
+        raise ValueError("init must have one rating per player")
+    ratings, flags, iterations, converged = _fit_matrices(
+        w, nmat, anchor, float(anchor_rating), float(prior_games), init_arr, tol, max_iter
+    )
+    g = np.ones_like(sc) if wt is None else wt
+    win, draw, loss = g * (sc > 0.5), g * (sc == 0.5), g * (sc < 0.5)
+
+    def per_player(x_a: FloatArray, x_b: FloatArray) -> FloatArray:
+        return np.bincount(ai, x_a, minlength=n_players) + np.bincount(bi, x_b, minlength=n_players)
+
+    games = per_player(g, g)
+    wins, draws, losses = per_player(win, loss), per_player(draw, draw), per_player(loss, win)
+    points = per_player(g * sc, g * (1.0 - sc))
+    score = np.divide(points, games, out=np.full(n_players, 0.5), where=games > 0)
+    integral = wt is None or bool(np.all(wt == np.round(wt)))
+    conv = (lambda x: np.rint(x).astype(np.int64)) if integral else (lambda x: x)
+    return BTFit(
+        ratings=ratings, flags=flags, games=conv(games), wins=conv(wins), draws=conv(draws),
+        losses=conv(losses), score=score, iterations=iterations, converged=converged, anchor=int(anchor),
+        anchor_rating=float(anchor_rating),
+    )
+
+
+def bootstrap_ci(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    score_a: npt.ArrayLike,
+    n_players: int,
+    anchor: int = 0,
+    anchor_rating: float = 1000.0,
+    n_boot: int = 200,
+    confidence: float = 0.95,
+    seed: int = 0,
+    prior_games: float = 0.0,
+) -> tuple[FloatArray, FloatArray]:
+    """Percentile bootstrap confidence intervals of the :func:`fit_bradley_terry` ratings.
+
+    Each replicate resamples the ``G`` games with replacement, i.e. draws multinomial counts
+    ``Mult(G; 1/G, ..., 1/G)`` per game. Games with identical ``(a, b, score_a)`` are interchangeable,
+    so the counts are drawn per distinct game type (``Mult(G; c_t / G)`` for a type seen ``c_t`` times,
+    the same distribution, fewer categories) and the replicate is refitted from the re-weighted pair
+    matrices, warm-started from the full-data fit. The interval is
+    ``[q_{(1-c)/2}, q_{(1+c)/2}]`` of the replicate ratings, widened if necessary to contain the
+    full-data rating.
+
+    Flagged players get the quantiles of their (finite) bounded ratings; replicates in which a player
+    drew no game are ignored for that player; a player with no game at all gets
+    ``anchor_rating -+ MAX_ELO``. The anchor's interval is the single point ``anchor_rating``.
+
+    Returns:
+        ``(low, high)``, two float arrays of shape (n_players,), finite.
+    """
+    ai, bi, sc, _ = _validate_games(a, b, score_a, n_players, anchor, None)
+    if n_boot < 1:
+        raise ValueError("n_boot must be at least 1")
+    if not 0.0 < confidence < 1.0:
+        raise ValueError("confidence must be in (0, 1)")
+    full = fit_bradley_terry(ai, bi, sc, n_players, anchor, anchor_rating, prior_games=prior_games)
+    point = full.ratings
+    low = point - MAX_ELO
+    high = point + MAX_ELO
+    n_games = ai.size
+    if n_games == 0:
+        return low, high
+    # Distinct game types and their multiplicities.
+    keys = np.stack([ai, bi, np.rint(sc * 1e9).astype(np.int64)], axis=1)
+    uniq, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    first = np.zeros(uniq.shape[0], dtype=np.int64)
+    first[inverse] = np.arange(n_games)
+    t_a, t_b, t_s = ai[first], bi[first], sc[first]
+    rng = np.random.default_rng(seed)
+    probs = counts / n_games
+    boot = np.empty((n_boot, n_players))
+    for k in range(n_boot):
+        wt = rng.multinomial(n_games, probs).astype(np.float64)
+        w, nmat = _pair_matrices(t_a, t_b, t_s, wt, n_players)
+        r, _, _, _ = _fit_matrices(w, nmat, anchor, float(anchor_rating), float(prior_games), point,
+                                   1e-6, 100)
+        r[nmat.sum(axis=1) == 0] = np.nan  # no game in this replicate: no information
+        boot[k] = r
+    seen = np.any(np.isfinite(boot), axis=0)
+    if seen.any():
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            q = np.nanquantile(boot[:, seen], [(1.0 - confidence) / 2.0, (1.0 + confidence) / 2.0], axis=0)
+        low[seen], high[seen] = q[0], q[1]
+    low = np.minimum(low, point)
+    high = np.maximum(high, point)
+    return low, high
+
+
+def rank_by_ci(ratings: npt.ArrayLike, low: npt.ArrayLike, high: npt.ArrayLike) -> IntArray:
+    """Chatbot-Arena rank: ``rank_i = 1 + #{j : low_j > high_i}``.
+
+    A player is outranked only by players whose whole interval lies above its own, so players with
+    overlapping intervals share ranks (ties are allowed and ranks need not be consecutive).
+    ``ratings`` is only used to check the shapes (the rank depends on the intervals alone).
+    """
+    r = np.asarray(ratings, dtype=np.float64).ravel()
+    lo = np.asarray(low, dtype=np.float64).ravel()
+    hi = np.asarray(high, dtype=np.float64).ravel()
+    if not (r.size == lo.size == hi.size):
+        raise ValueError("rank_by_ci: ratings, low and high must have the same length")
+    sorted_low = np.sort(lo)
+    above = lo.size - np.searchsorted(sorted_low, hi, side="right")
+    return (1 + above).astype(np.int64)

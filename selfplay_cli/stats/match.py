@@ -1,0 +1,155 @@
+"""Head-to-head statistics of one match-up: score, Elo difference, confidence interval and likelihood of
+superiority, with the per-game (trinomial) or per-game-pair (pentanomial) variance as fastchess reports it.
+
+numpy and the standard library only.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .elo import MAX_ELO, SCORE_CLIP, normal_quantile, score_to_elo
+
+__all__ = ["MatchStats", "match_stats"]
+
+
+@dataclass(frozen=True)
+class MatchStats:
+    """Summary of a head-to-head between A and B, from A's point of view.
+
+    Attributes:
+        games: ``wins + draws + losses``.
+        wins, draws, losses: A's results.
+        score: A's mean points per game ``(W + D/2) / games`` (0.5 if there were no games).
+        elo: estimated Elo difference A - B, ``score_to_elo(score)``; if ``bounded`` it is
+            ``score_to_elo((W + D/2 + 1/2) / (games + 1))`` (one virtual draw added), see
+            :func:`match_stats`.
+        elo_low, elo_high: confidence interval of the Elo difference (always finite, within
+            ``+-MAX_ELO``).
+        los: likelihood of superiority ``P(A stronger than B)`` in [0, 1].
+        bounded: True when the score is 0 or 1 (or there are no games), i.e. the maximum-likelihood
+            Elo is infinite and ``elo`` / the interval are finite bounds, not an estimate.
+        confidence: the two-sided confidence level of the interval.
+        used_pentanomial: True when the interval used the game-pair (pentanomial) variance.
+    """
+
+    games: int
+    wins: int
+    draws: int
+    losses: int
+    score: float
+    elo: float
+    elo_low: float
+    elo_high: float
+    los: float
+    bounded: bool
+    confidence: float = 0.95
+    used_pentanomial: bool = False
+
+
+def _likelihood_of_superiority(wins: float, losses: float) -> float:
+    """LOS = P(A stronger) ~= Phi((W - L) / sqrt(W + L)) = (1 + erf((W - L) / sqrt(2 (W + L)))) / 2.
+
+    Normal approximation of the binomial test on the decisive games only (draws carry no information
+    about who is stronger); 0.5 when there are no decisive games.
+    """
+    decisive = wins + losses
+    if decisive <= 0:
+        return 0.5
+    return 0.5 * (1.0 + math.erf((wins - losses) / math.sqrt(2.0 * decisive)))
+
+
+def match_stats(
+    wins: int,
+    draws: int,
+    losses: int,
+    pentanomial: tuple[int, int, int, int, int] | None = None,
+    confidence: float = 0.95,
+) -> MatchStats:
+    """Score, Elo, confidence interval and LOS of one match-up (A vs B, A's point of view).
+
+    Score: ``s = (W + D/2) / n`` with ``n = W + D + L``.
+
+    Standard error of ``s``:
+
+    * trinomial (no pentanomial given), games independent:
+      ``var_g = [W (1-s)^2 + D (1/2-s)^2 + L s^2] / n`` per game, ``se = sqrt(var_g / n)``;
+    * pentanomial, games played in colour-reversed pairs (as fastchess reports it): the counts
+      ``(LL, LD, WL+DD, WD, WW)`` of the ``m`` pairs have pair-mean scores ``a = (0, 1/4, 1/2, 3/4, 1)``;
+      ``mu = sum p_k a_k``, ``var_p = sum p_k (a_k - mu)^2`` with ``p_k = count_k / m`` and
+      ``se = sqrt(var_p / m)``. This accounts for the correlation of the two games of a pair (the
+      opening), which the trinomial variance ignores. The score itself still comes from W/D/L;
+      the pentanomial only supplies the variance.
+
+    Interval: the normal score interval ``s -+ z se`` with ``z = Phi^{-1}((1 + confidence) / 2)``
+    (:func:`normal_quantile`), each endpoint clipped to ``[SCORE_CLIP, 1 - SCORE_CLIP]`` and mapped
+    through :func:`score_to_elo` (endpoint transformation, not the delta method - this is what
+    fastchess does, and it keeps the asymmetry of the logistic curve).
+
+    0 % / 100 % scores (``bounded=True``): the ML Elo is infinite, so one virtual draw is added
+    (``s' = (W + D/2 + 1/2) / (n + 1)``, trinomial variance of the record ``(W, D + 1, L)``); ``elo``
+    and the interval are computed from ``s'`` and the interval endpoint on the open side is the
+    clip, ``+-MAX_ELO``. With no games at all: ``score = 0.5``, ``elo = 0``, interval
+    ``[-MAX_ELO, +MAX_ELO]``, ``bounded=True``.
+
+    LOS: ``(1 + erf((W - L) / sqrt(2 (W + L)))) / 2`` (0.5 if ``W + L = 0``), always from W/L.
+
+    Raises:
+        ValueError: negative counts, a pentanomial that is not 5 non-negative counts, or
+            ``confidence`` outside (0, 1).
+    """
+    w, d, lo = int(wins), int(draws), int(losses)
+    if min(w, d, lo) < 0:
+        raise ValueError("match_stats: counts must be non-negative")
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"match_stats: confidence must be in (0, 1), got {confidence}")
+    penta: tuple[int, ...] | None = None
+    if pentanomial is not None:
+        penta = tuple(int(c) for c in pentanomial)
+        if len(penta) != 5 or min(penta) < 0:
+            raise ValueError("match_stats: pentanomial must be 5 pair counts (LL, LD, WL+DD, WD, WW) >= 0")
+    n = w + d + lo
+    z = normal_quantile(0.5 + 0.5 * confidence)
+    los = _likelihood_of_superiority(w, lo)
+    if n == 0:
+        return MatchStats(0, 0, 0, 0, 0.5, 0.0, -MAX_ELO, MAX_ELO, 0.5, True, confidence, False)
+
+    score = (w + 0.5 * d) / n
+    bounded = w + 0.5 * d <= 0.0 or lo + 0.5 * d <= 0.0  # score exactly 0 or 1
+    use_penta = False
+    if bounded:
+        n_eff, w_eff, d_eff, l_eff = n + 1, w, d + 1, lo
+        s_est = (w_eff + 0.5 * d_eff) / n_eff
+        var_g = (w_eff * (1 - s_est) ** 2 + d_eff * (0.5 - s_est) ** 2 + l_eff * s_est**2) / n_eff
+        se = math.sqrt(var_g / n_eff)
+    else:
+        s_est = score
+        pairs = sum(penta) if penta is not None else 0
+        if penta is not None and pairs > 0:
+            a = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+            p = np.asarray(penta, dtype=float) / pairs
+            mu = float(p @ a)
+            var_p = float(p @ (a - mu) ** 2)
+            se = math.sqrt(var_p / pairs)
+            use_penta = True
+        else:
+            var_g = (w * (1 - score) ** 2 + d * (0.5 - score) ** 2 + lo * score**2) / n
+            se = math.sqrt(var_g / n)
+    lo_s = min(max(s_est - z * se, SCORE_CLIP), 1.0 - SCORE_CLIP)
+    hi_s = min(max(s_est + z * se, SCORE_CLIP), 1.0 - SCORE_CLIP)
+    elo = score_to_elo(s_est)
+    elo_low, elo_high = score_to_elo(lo_s), score_to_elo(hi_s)
+    if bounded:  # the open side of a 0 % / 100 % result is unbounded: report the clip.
+        if score >= 1.0:
+            elo_high = MAX_ELO
+        else:
+            elo_low = -MAX_ELO
+    return MatchStats(
+        games=n, wins=w, draws=d, losses=lo, score=score, elo=elo, elo_low=min(elo_low, elo),
+        elo_high=max(elo_high, elo), los=los, bounded=bounded, confidence=confidence,
+        used_pentanomial=use_penta,
+    )
+
