@@ -126,3 +126,9 @@ def tournament(
     finally:
         league.close()
     render_ladder(rows, f"{env} ladder after the tournament", json_out=json_out)
+
+
+from .league_views import matrix_cmd, plot_cmd  # noqa: E402  (views of the league: commands/league_views.py)
+
+app.command("plot")(plot_cmd)
+app.command("matrix")(matrix_cmd)

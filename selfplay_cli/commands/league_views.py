@@ -1,0 +1,113 @@
+"""`marl league plot` and `marl league matrix`: views of the league drawn by :mod:`selfplay_cli.report`."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import MarlError
+from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, progress_enabled
+from ._output import console, err_console, print_json
+
+RunOpt = Annotated[str | None, typer.Option("--run", help="Training run (default: the newest run of the env).")]
+OutOpt = Annotated[Path | None, typer.Option("--out", help="Write a PNG image to this .png file.")]
+
+
+@contextmanager
+def _working(message: str) -> Iterator[None]:
+    """A spinner on stderr while ratings are fitted, on a terminal only."""
+    if progress_enabled():
+        with err_console.status(message):
+            yield
+    else:
+        yield
+
+
+def _width() -> int:
+    return min(console.width, 120) if console.is_terminal else 80
+
+
+def plot_cmd(
+    env: EnvOpt = None,
+    run: RunOpt = None,
+    out: OutOpt = None,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Each learner's fitted Elo with its 95% interval against training steps, and the scripted players as
+    levels. Draws in the terminal, or writes a PNG with --out."""
+    from ..report.plots import run_curves, save_run_png
+    from ..report.png import check_png_path
+    from ..report.terminal import curves_chart, curves_summary
+
+    env = check_env(env)
+    if out is not None:
+        out = check_png_path(out)
+    league = open_league(home, db)
+    try:
+        if run is None:
+            runs = league.list_runs(env)
+            if not runs:
+                raise MarlError(f"no training runs{f' of {env}' if env else ''} in the league yet (marl train ...)")
+            run = runs[-1].name
+        else:
+            info = league.get_run(run)
+            if info is not None and env is not None and info.env != env:
+                raise MarlError(f"run '{run}' trains {info.env}, not {env}")
+        with _working("fitting ratings"):
+            curves = run_curves(league, run)
+    finally:
+        league.close()
+    written = save_run_png(curves, out) if out is not None else None
+    if json_out:
+        print_json({**curves.to_json(), "png": None if written is None else str(written)})
+        return
+    if written is not None:
+        console.print(f"wrote {written}", markup=False)
+        return
+    unicode = console.is_terminal
+    console.print(curves_chart(curves, width=_width(), unicode=unicode))
+    console.print(curves_summary(curves))
+
+
+def matrix_cmd(
+    env: EnvOpt = None,
+    top: Annotated[int, typer.Option("--top", help="Players in the matrix: the N best by fitted Elo.")] = 10,
+    run: Annotated[str | None, typer.Option("--run", help="Only this run's snapshots and the scripted players.")]
+    = None,
+    min_games: Annotated[int, typer.Option("--min-games", help="Games a pair needs to count as measured.")] = 10,
+    out: OutOpt = None,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """Score matrix of the best players (row player's score against the column player, with game counts), the
+    Nash equilibrium mixture of that meta-game and its statistically significant 3-cycles; pairs with too few
+    games come with the command that plays them."""
+    from ..report.matrix import build_matrix, write_matrix_png
+    from ..report.png import check_png_path
+    from ..report.terminal import matrix_summary, matrix_table
+
+    env = check_env(env)
+    if out is not None:
+        out = check_png_path(out)
+    league = open_league(home, db)
+    try:
+        with _working("fitting ratings"):
+            report = build_matrix(league, env, top=top, run=run, min_games=min_games)
+    finally:
+        league.close()
+    written = write_matrix_png(report, out) if out is not None else None
+    if json_out:
+        print_json({**report.to_json(home), "png": None if written is None else str(written)})
+        return
+    unicode = console.is_terminal
+    console.print(matrix_table(report, unicode=unicode))
+    console.print(matrix_summary(report, home=home, unicode=unicode))
+    if written is not None:
+        console.print(f"wrote {written}", markup=False)
