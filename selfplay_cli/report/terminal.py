@@ -182,7 +182,7 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
         if all(ch == " " for ch in under[max(start - 1, 0):start + len(s) + 1]):
             under[start:start + len(s)] = list(s)
     text.append(" " * (left - 1) + corner + "".join(axis) + "\n")
-    text.append(" " * left + "".join(under).rstrip() + "   steps\n")
+    text.append("steps".ljust(left) + "".join(under).rstrip() + "\n")
     legend = Text(" " * left)
     for k, curve in enumerate(curves.curves):
         color = _COLORS[k % len(_COLORS)]
@@ -199,22 +199,22 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
 
 def curves_summary(curves: RunCurves) -> Text:
     """Per learner: how many snapshots are rated, the latest and the best with their intervals; the scripted
-    players' ratings; the anchor."""
+    players' ratings; the anchor. Short lines (names and numbers only), so it reads at 80 columns."""
     out = Text()
     for curve in curves.curves:
         last = curve.points[-1]
         best = max(curve.points, key=lambda p: (p.elo, p.step))
-        out.append(f"{curve.learner}: {len(curve.points)} rated snapshot{'s' if len(curve.points) != 1 else ''}; ",
-                   style="bold")
-        out.append(f"latest {last.policy} ({format_steps(last.step)} steps) {_elo(last.elo, last.ci_low, last.ci_high)}"
-                   f"{_flag(last.flag)}")
+        count = len(curve.points)
+        out.append(f"{curve.learner}: {count} rated snapshot{'s' if count != 1 else ''}\n", style="bold")
+        out.append(f"  latest {last.policy} ({format_steps(last.step)} steps): "
+                   f"{_elo(last.elo, last.ci_low, last.ci_high)}{_flag(last.flag)}\n")
         if best is not last:
-            out.append(f"; best {best.policy} ({format_steps(best.step)}) {_elo(best.elo, best.ci_low, best.ci_high)}"
-                       f"{_flag(best.flag)}")
-        out.append("\n")
+            out.append(f"  best   {best.policy} ({format_steps(best.step)} steps): "
+                       f"{_elo(best.elo, best.ci_low, best.ci_high)}{_flag(best.flag)}\n")
     if curves.bots:
-        out.append("scripted: " + ", ".join(f"{b.name} {_elo(b.elo, b.ci_low, b.ci_high)}" for b in curves.bots))
-        out.append("\n")
+        out.append("scripted players\n", style="bold")
+        for b in curves.bots:
+            out.append(f"  {b.name}: {_elo(b.elo, b.ci_low, b.ci_high)}\n")
     if curves.anchor:
         out.append(f"(ratings relative to {curves.anchor[0]} = {curves.anchor[1]:.0f})", style="dim")
     return out
