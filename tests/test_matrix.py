@@ -20,6 +20,7 @@ from selfplay_cli.stats.cycles import edge_tests, holm_reject, sign_test_pvalue,
 from selfplay_cli.stats.nash import measured_subgame, solve_zero_sum, symmetric_nash
 
 ENV = "pong"
+ABC_ROTATIONS = (["a", "b", "c"], ["b", "c", "a"], ["c", "a", "b"])  # a beats b beats c beats a
 
 # rock, paper, scissors: payoff = score - 0.5 of the row player
 RPS = np.array([[0.0, -0.5, 0.5], [0.5, 0.0, -0.5], [-0.5, 0.5, 0.0]])
@@ -183,7 +184,7 @@ def test_significant_cycle_found_and_insignificant_one_not(league: League) -> No
     assert rep.edges.tests == 12
     assert len(rep.cycles) == 1
     cyc = [names[i] for i in rep.cycles[0].players]
-    assert cyc == ["a", "b", "c"] or sorted(cyc) == ["a", "b", "c"]
+    assert cyc in ABC_ROTATIONS
     # the order is the direction of the cycle: each beats the next
     for x, y in zip(cyc, cyc[1:] + cyc[:1], strict=True):
         assert rep.scores[names.index(x), names.index(y)] == 1.0
@@ -276,13 +277,17 @@ def test_cli_matrix_table_json_and_png(home: Path, capsys, tmp_path: Path) -> No
     assert "Every pair has at least 10 games" not in out  # a-d and so on never played
     assert "marl league tournament" in out and "--games-per-pair 10" in out
 
-    code, out, err = run(capsys, "league", "matrix", "--top", "3", "--json")
+    code, out, err = run(capsys, "league", "matrix", "--json")
     assert code == 0, err
     data = json.loads(out, parse_constant=lambda c: pytest.fail(f"non-finite {c} in JSON"))
-    assert [p["policy"] for p in data["players"]] == sorted(p["policy"] for p in data["players"])  # equal Elo: by name
-    assert data["cycles"] == [{"players": ["a", "b", "c"], "p_values": [pytest.approx(2.0**-20, rel=1e-2)] * 3}]
-    assert data["command"] is None and data["png"] is None
-    assert {m["policy"] for m in data["nash"]["mixture"]} == {"a", "b", "c"}
+    elos = [p["elo"] for p in data["players"]]
+    assert elos == sorted(elos, reverse=True) and len(elos) == 6
+    assert len(data["cycles"]) == 1 and data["cycles"][0]["players"] in ABC_ROTATIONS
+    assert data["cycles"][0]["p_values"] == [pytest.approx(2.0**-20, rel=1e-2)] * 3
+    assert data["cycle_test"]["tests"] == 12 and data["cycle_test"]["alpha"] == 0.05
+    assert len(data["under_measured"]) == 15 - 6 and data["png"] is None
+    assert data["command"].startswith("marl league tournament ")
+    assert sum(m["weight"] for m in data["nash"]["mixture"]) == pytest.approx(1.0, abs=1e-5)
 
     png = tmp_path / "m.png"
     code, out, err = run(capsys, "league", "matrix", "--out", str(png), "--json")
