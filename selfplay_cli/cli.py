@@ -43,7 +43,8 @@ def _root(
 
 
 app.command("envs", help="List the registered games: agents, spaces, scripted players.")(envs_cmd.envs)
-app.command("train", help="Train agents by self-play into the league (PPO).")(train_cmd.train)
+app.command("train", help="Train agents by self-play (PPO or DQN); every snapshot joins the league, rated.")(
+    train_cmd.train)
 app.add_typer(checkpoint_cmd.app, name="checkpoint", help="List, inspect, tag, remove, export and import snapshots.")
 app.command("match", help="Play rated games between two policies (Elo difference, CI, LOS, SPRT).")(match_cmd.match)
 app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence intervals; gate a model on its strength.")

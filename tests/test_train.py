@@ -45,14 +45,19 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     last = snaps[-1]
     policy = load_policy(league.home / last.path, expect_env="pong")
     assert policy.meta.seat == "right" and policy.meta.env_options == {"points_to_win": 1}
-    # the ledger has the evaluation games against both scripted players, and training games between the learners
-    table = league.games("pong")
+    # the ledger keeps the training games between the learners, but rates only games the snapshots played themselves
+    everything, rated = league.games("pong", rated=False), league.games("pong")
+    assert len(everything) > len(rated) > 0
+    with league.session() as s:
+        from selfplay_cli.league.models import Match
+
+        kinds = {m.id: m.kind for m in s.query(Match).all()}
+    assert {kinds[m] for m in rated.match_id.tolist()} == {"eval"}
+    assert "training" in {kinds[m] for m in everything.match_id.tolist()}
     bots = {p.id for p in league.players("pong", kind="bot")}
-    involved = set(table.player_a.tolist()) | set(table.player_b.tolist())
-    assert bots <= involved
-    both_learners = [(a, b) for a, b in zip(table.player_a.tolist(), table.player_b.tolist(), strict=True)
-                     if a not in bots and b not in bots]
-    assert both_learners, "training games are rated too"
+    for snap in snaps:  # every snapshot of both learners was rated against both scripted players
+        for bot in bots:
+            assert league.games("pong", players=[snap.id, bot]).game_id.size >= 2, (snap.name, bot)
     lines = (league.home / "runs" / "t" / "metrics.jsonl").read_text().splitlines()
     assert len(lines) >= 3 and "left/entropy" in json.loads(lines[-1])
     league.close()
@@ -71,7 +76,7 @@ def test_one_learner_meets_league_opponents_and_bots(tmp_path):
 
         for m in s.query(Match).all():
             matches[m.id] = m.kind
-    table = league.games("pong")
+    table = league.games("pong", rated=False)
     cpu = league.find_players("cpu", "pong")[0].id
     training = [i for i, m in enumerate(table.match_id.tolist()) if matches[m] == "training"]
     assert any(cpu in (table.player_a[i], table.player_b[i]) for i in training), "games vs cpu from the mix"
@@ -100,7 +105,7 @@ def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats
 
         training = {m.id for m in s.query(Match).all() if m.kind == "training"}
     snaps = {p.id: p for p in league.players("pong", kind="snapshot")}
-    table = league.games("pong")
+    table = league.games("pong", rated=False)
     seen = set()
     for m, a, b in zip(table.match_id.tolist(), table.player_a.tolist(), table.player_b.tolist(), strict=True):
         if m in training and cpu in (a, b):
@@ -181,6 +186,7 @@ def test_train_flag_defaults_are_the_config_defaults():
     flags = {"agents": cfg.agents, "algo": cfg.algo, "sharing": cfg.sharing, "steps": cfg.steps, "seed": cfg.seed,
              "games": cfg.games, "snapshot_every": cfg.snapshot_every, "snapshot_steps": cfg.snapshot_steps,
              "swap_every": cfg.swap_every, "league_games": cfg.league_games, "eval_games": cfg.eval_games,
+             "eval_older": cfg.eval_older,
              "opponents": mm.mode, "window": mm.window, "latest_ratio": mm.latest_ratio, "device": cfg.device}
     assert {k: params[k].default for k in flags} == flags
 

@@ -120,8 +120,14 @@ def play(
     record_actions: bool = False,
     on_frame: FrameHook | None = None,
     stop_when: StopRule | None = None,
+    slots: int | None = None,
 ) -> list[GameResult]:
     """Play ``games`` with up to ``parallel`` of them at once; returns results in schedule order.
+
+    ``games`` may grow while it is played: games that ``on_result`` appends to the list are played too, in the
+    same batch (a sequential evaluation decides from finished games whether more are needed, without waiting for
+    the slowest game of a round); ``slots`` (at most ``parallel``) sets how many games run at once when the
+    schedule is expected to grow past its first length.
 
     Each step, every policy acts once on the batch of all (game, seat) positions it holds. ``on_result`` is
     called as each game ends (e.g. to store it at once); ``on_step`` with the number of game steps just played.
@@ -135,10 +141,15 @@ def play(
     spec = get_env(env) if isinstance(env, str) else env
     if not games:
         return []
-    for g in games:
+
+    def check(g: Game) -> Game:
         if len(g.seats) != len(spec.agents) or not all(0 <= s < len(policies) for s in g.seats):
             raise ValueError(f"game {g} does not seat {len(spec.agents)} of the {len(policies)} policies")
-    n = min(parallel, len(games))
+        return g
+
+    for g in games:
+        check(g)
+    n = min(parallel, max(len(games), slots or 0))
     core = spec.core(n, **(env_options or {}))
     seats = np.zeros((len(spec.agents), n), dtype=np.int64)  # policy index per (seat, slot)
     game_of = np.full(n, -1, dtype=np.int64)  # schedule index per slot, -1 when idle
@@ -150,7 +161,7 @@ def play(
         take = slots[: max(0, len(games) - next_game)]
         game_of[slots] = -1
         if take.size:
-            chosen = games[next_game : next_game + take.size]
+            chosen = [check(g) for g in games[next_game : next_game + take.size]]
             game_of[take] = np.arange(next_game, next_game + take.size)
             seats[:, take] = np.array([g.seats for g in chosen]).T
             core.reset(take, [g.seed for g in chosen])
@@ -162,7 +173,7 @@ def play(
                     on_frame(core, slot, int(game_of[slot]), False)
 
     start(np.arange(n))
-    results: list[GameResult | None] = [None] * len(games)
+    results: dict[int, GameResult] = {}
     actions = np.zeros((len(spec.agents), n), dtype=np.int64)
     while (game_of >= 0).any():
         obs = core.observe()
@@ -206,5 +217,7 @@ def play(
                 results[gi] = r
                 if on_result is not None:
                     on_result(r)
-            start(ended)
-    return [r for r in results if r is not None]
+            game_of[ended] = -1
+            if next_game < len(games):  # into every free slot, including ones idle before the schedule grew
+                start(np.flatnonzero(game_of < 0))
+    return [results[i] for i in sorted(results)]

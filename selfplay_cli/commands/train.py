@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import sys
+import time
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ..errors import MarlError
 from ._common import DbOpt, DeviceOpt, HomeOpt, JsonOpt, QuietOpt, open_league, parse_env_options, progress_enabled
@@ -70,8 +71,12 @@ def train(
                                                 "share of games in which a learner meets an opponent from the league "
                                                 "(drawn by --opponents/--bots) instead of the other learner; 0 keeps "
                                                 "seed 000's set-up.")] = 0.0,
-    eval_games: Annotated[int, typer.Option("--eval-games", help="Rated games against each scripted player after "
-                                            "every snapshot (0: none).")] = 32,
+    eval_games: Annotated[int, typer.Option("--eval-games", help="Games a new snapshot plays against each opponent "
+                                            "of its gauntlet (its predecessor, the other learners, the run's best, "
+                                            "older snapshots, the scripted players), in seat-swapped pairs; 2 where "
+                                            "its predecessor's result was already clear. 0: no rating games.")] = 8,
+    eval_older: Annotated[int, typer.Option("--eval-older", help="Older snapshots of the run in each gauntlet, "
+                                            "besides the predecessor and the best.")] = 2,
     opponents: Annotated[str, typer.Option("--opponents", help="League opponents (--agents 1, or --league-games): "
                                            "self | latest | uniform | pfsp, from the run's snapshots.")] = "pfsp",
     window: Annotated[int, typer.Option("--window", help="Opponents are drawn from the last WINDOW snapshots "
@@ -93,7 +98,7 @@ def train(
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Train agents by self-play; every snapshot joins the league and is rated against the scripted players."""
+    """Train agents by self-play; every snapshot joins the league and is rated in a gauntlet."""
     from ..algos.dqn import seed000_config
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
@@ -131,7 +136,8 @@ def train(
                 merge_settings(settings, read_toml(config))
             flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
                      "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
-                     "snapshot_steps": snapshot_steps, "eval_games": eval_games, "swap_every": swap_every,
+                     "snapshot_steps": snapshot_steps, "eval_games": eval_games, "eval_older": eval_older,
+                     "swap_every": swap_every,
                      "tensorboard": tensorboard, "league_games": league_games}
             settings.update({k: v for k, v in flags.items() if k in typed})
             matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
@@ -151,23 +157,11 @@ def train(
             algo = cfg.algo
             league.create_run(run, spec.name, cfg.to_dict(), algo=algo)
             save_run_config(league, cfg)
-        show = progress_enabled(quiet or json_out)
-        total = 1000
-        with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[info]}"),
-                      TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), console=err_console,
-                      disable=not show, transient=True) as bar:
-            task = bar.add_task(f"train {cfg.run}", total=total, info="")
-
-            def on_progress(p: dict) -> None:
-                rate = p["steps"] / max(bar.tasks[0].elapsed or 1e-9, 1e-9)
-                ev = "  ".join(f"vs {k} {100 * v:.0f}%" for k, v in p["eval"].items())
-                bar.update(task, completed=int(total * min(p["progress"], 1.0)),
-                           info=f"{p['steps']:,} steps  {rate:,.0f}/s  {p['episodes']:,} episodes  "
-                                f"elo {p['elo']:.0f}  {ev}")
-
+        reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
+        with reporter:
             trainer = None
             try:
-                trainer = Trainer(league, cfg, on_progress=on_progress)
+                trainer = Trainer(league, cfg, on_progress=reporter.update)
                 if resume is not None:
                     note = trainer.restore()
                     league.set_run_status(cfg.run, "running")
@@ -189,15 +183,93 @@ def train(
         league.set_run_status(cfg.run, "finished")
     finally:
         league.close()
+    finals = [r.to_json() for r in report.finals]
     data = {"run": report.run, "steps": report.steps, "episodes": report.episodes,
-            "seconds": round(report.seconds, 1), "steps_per_second": round(report.steps_per_second),
-            "snapshots": report.snapshots, "final_eval_score": report.last_eval}
+            "seconds": round(report.seconds, 1), "eval_seconds": round(report.eval_seconds, 1),
+            "steps_per_second": round(report.steps_per_second), "snapshots": report.snapshots, "final": finals}
     if json_out:
         print_json(data)
         return
     console.print(f"run {report.run}: {report.steps:,} game steps in {report.seconds:.0f} s "
-                  f"({report.steps_per_second:,.0f}/s), {report.episodes:,} episodes, "
-                  f"{len(report.snapshots)} snapshots (latest {report.snapshots[-1]})")
-    if report.last_eval:
-        console.print("  latest snapshot scores " + ", ".join(f"{100 * v:.0f}% vs {k}"
-                                                                for k, v in report.last_eval.items()))
+                  f"({report.seconds - report.eval_seconds:.0f} s training, {report.eval_seconds:.0f} s rating games), "
+                  f"{report.episodes:,} episodes, {len(report.snapshots)} snapshots")
+    for rec in report.finals:
+        console.print("  " + describe_record(rec))
+    console.print(f"  all snapshots: marl league ladder --run {report.run}")
+
+
+def describe_record(rec: Any) -> str:
+    """``pong-1/ep37-left: Elo 2301 [2220, 2388]; vs random 100% (8 games), vs cpu 94% (16 games)``: every figure
+    measured on that snapshot (its stored games and its fitted rating)."""
+    parts = [f"Elo {rec.elo:.0f} [{rec.ci_low:.0f}, {rec.ci_high:.0f}]"] if rec.elo is not None else []
+    vs = ", ".join(f"vs {bot} {100 * rec.score(wdl):.0f}% ({sum(wdl)} games)" for bot, wdl in rec.vs.items())
+    if vs:
+        parts.append(vs)
+    return f"{rec.name}: " + ("; ".join(parts) if parts else "not rated (--eval-games 0)")
+
+
+def _clock(seconds: float) -> str:
+    s = int(max(seconds, 0) + 0.5)
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+class TrainProgress:
+    """What a run shows while it trains: a rich progress bar on a terminal (phase, steps, steps/s, ETA from the
+    steps left), and one plain line per snapshot on stderr (also without a terminal, e.g. in CI logs)."""
+
+    def __init__(self, cfg: Any, bar: bool, lines: bool) -> None:
+        self.cfg = cfg
+        self.lines = lines
+        self.start = time.perf_counter()
+        self.remaining: float | None = None
+        self.rate = 0.0
+        self.progress = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[info]}"),
+                                 TimeElapsedColumn(), TextColumn("{task.fields[eta]}"), console=err_console,
+                                 disable=not bar, transient=False)
+        self.task = self.progress.add_task(f"train {cfg.run}", total=1000, info="", eta="")
+
+    def __enter__(self) -> TrainProgress:
+        self.progress.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.progress.__exit__(*exc)
+
+    def _fraction(self, steps: int) -> float:
+        if self.cfg.minutes is not None:
+            return min((time.perf_counter() - self.start) / (self.cfg.minutes * 60), 1.0)
+        return min(steps / self.cfg.steps, 1.0)
+
+    def _eta(self) -> str:
+        return "" if self.remaining is None else f"ETA {_clock(self.remaining)}"
+
+    def update(self, event: dict[str, Any]) -> None:
+        kind = event["event"]
+        steps = event["steps"]
+        if kind == "training":
+            self.rate, self.remaining = event["steps_per_second"], event["remaining"]
+            self.progress.update(self.task, description=f"train {self.cfg.run}",
+                                 completed=int(1000 * self._fraction(steps)), eta=self._eta(),
+                                 info=f"{steps:,} steps  {self.rate:,.0f}/s  {event['episodes']:,} games")
+        elif kind == "evaluating":
+            names = ", ".join(n.split("/", 1)[-1] for n in event["snapshots"])
+            self.progress.update(self.task, description=f"rating {names}", eta=self._eta(),
+                                 info=f"{event['games']} games played")
+        elif kind == "snapshot" and self.lines:
+            self._line(event)
+
+    def _line(self, event: dict[str, Any]) -> None:
+        """One plain line per snapshot: steps, steps/s, games, the new snapshots' scores, elapsed, remaining."""
+        steps = event["steps"]
+        recs = "; ".join(
+            r.name.split("/", 1)[-1] + " " + (" ".join(f"{bot} {100 * r.score(wdl):.0f}%/{sum(wdl)}"
+                                                      for bot, wdl in r.vs.items()) or "unrated")
+            for r in event["records"])
+        elapsed = time.perf_counter() - self.start
+        left = "" if self.remaining is None or steps >= self.cfg.steps else f", ~{_clock(self.remaining)} left"
+        line = (f"{self.cfg.run}: step {steps:,}/{self.cfg.steps:,} ({100 * self._fraction(steps):.0f}%), "
+                f"{self.rate:,.0f} steps/s, {event['episodes']:,} games; {recs}; {_clock(elapsed)} elapsed{left}")
+        if self.progress.disable:
+            err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+        else:
+            self.progress.console.print(line, markup=False, highlight=False)

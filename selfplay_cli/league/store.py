@@ -865,11 +865,16 @@ class League:
         return self._unit(work)
 
     def games(self, env: str | None = None, players: Iterable[int] | None = None,
-              any_seat: bool = False) -> GameTable:
+              any_seat: bool = False, rated: bool = True) -> GameTable:
         """The two-player games of the ledger (of ``env``) as numpy arrays, in id order.
 
         ``players`` restricts the table to games between those players (both seats in the set), or,
         with ``any_seat=True``, to games in which at least one of them played.
+
+        ``rated`` (the default) leaves out the games of training matches: there a learner that kept learning after
+        its latest snapshot played under that snapshot's name, so they measure no fixed player. Every rating is
+        fitted from the others (matches, tournaments, gates and the evaluation games after each snapshot);
+        ``rated=False`` includes the training games too.
         """
 
         def work(s: Session) -> list[Any]:
@@ -884,6 +889,8 @@ class League:
             )
             if env is not None:
                 q = q.where(Game.env == env)
+            if rated:
+                q = q.join(Match, Match.id == Game.match_id).where(Match.kind != "training")
             return list(s.execute(q).all())
 
         rows = self._read(work)

@@ -28,8 +28,18 @@ from ..stats.match import MatchStats, match_stats
 from ..stats.sprt import SPRT
 
 
-def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: bool = True, seed: int = 0) -> Policy:
-    """The policy a league player stands for: a scripted bot, or a network loaded from its snapshot file."""
+def plays_greedy(row: PlayerRow) -> bool:
+    """How a snapshot plays, in every game it is rated by: as its algorithm trained it. A DQN snapshot takes the
+    action of highest value; a policy-gradient snapshot (PPO) samples from its policy, which is what PPO optimises
+    (its argmax is another, untrained player, and against a deterministic opponent it can loop in endless rallies).
+    """
+    return row.algo == "dqn"
+
+
+def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: bool | None = None,
+                seed: int = 0) -> Policy:
+    """The policy a league player stands for: a scripted bot, or a network loaded from its snapshot file, playing
+    as :func:`plays_greedy` says unless ``greedy`` is given; ``seed`` seeds its sampling."""
     if row.is_bot:
         return ScriptedPolicy(row.env, row.name, seed=seed)
     from ..policies.snapshot import load_policy  # torch is imported only when a network is needed
@@ -42,7 +52,8 @@ def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: boo
     path = Path(row.path)
     if not path.is_absolute() and league.home is not None:
         path = league.home / path
-    return load_policy(path, id=row.full_name, device=device, greedy=greedy, expect_env=row.env)
+    return load_policy(path, id=row.full_name, device=device, greedy=plays_greedy(row) if greedy is None else greedy,
+                       expect_env=row.env, seed=seed)
 
 
 def _inference_threads(device: str) -> None:

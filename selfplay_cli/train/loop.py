@@ -1,15 +1,18 @@
 """The training loop: learners play endless batched games, snapshot into the league, and rate as they go.
 
 One loop for every algorithm: it steps the shared :class:`SelfPlayGames`, gives each learner its slots, runs the
-learner's update when its rollout is due, and every ``snapshot_every`` finished games (episodes) it
+learner's update when its rollout is due, and every ``snapshot_every`` finished games (episodes) or
+``snapshot_steps`` game steps it
 
 1. saves each learner as a snapshot file and registers it in the league (``epN``; ``epN-left``/``epN-right`` when
    each seat has its own network), with its parent (the learner's previous snapshot);
-2. plays rated evaluation games of the new snapshot against the scripted players and stores them;
+2. rates every new snapshot in a gauntlet (:mod:`selfplay_cli.rated.gauntlet`): its predecessor, the other
+   learners' new snapshots, the run's best, older snapshots and the scripted players, in seat-swapped pairs;
 3. refreshes the matchmaker's pool (the run's snapshots).
 
-Training games are written to the ledger in batches, under the learner's latest snapshot (the learner has moved on
-a little since, as in ML-Agents' self-play; the evaluation games rate the snapshots exactly).
+Training games go to the ledger in batches (so ``marl record --game`` can replay them), filed under the learner's
+latest snapshot; the learner has moved on since, so they are kept out of every fitted rating (only the online
+Elo, a live view, counts them). The ratings come from the gauntlet games, which the snapshots themselves played.
 """
 
 from __future__ import annotations
@@ -32,11 +35,12 @@ from ..arena.selfplay import OPPONENT, SelfPlayGames, seat_layout
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, MatchmakerConfig, WinRates
-from ..league.store import GameRecord, League
-from ..policies import Policy, ScriptedPolicy
+from ..league.store import GameRecord, League, PlayerRow
+from ..policies import Policy
 from ..policies.network import resolve_device
 from ..policies.snapshot import SnapshotMeta, save_snapshot
-from ..rated.match import load_player, run_match
+from ..rated.gauntlet import GauntletConfig, choose_opponents, play_gauntlet
+from ..rated.match import load_player
 from ..rated.snapshots import snapshot_relpath
 from .team import LearnerTeam
 
@@ -63,7 +67,8 @@ class TrainConfig:
     tensorboard: bool = False  # also write the metrics for TensorBoard (runs/<run>/tensorboard)
     swap_every: int = 0  # game steps a game slot keeps its drawn opponent (ML-Agents' swap_steps); 0: every game
     league_games: float = 0.0  # all seats learning: share of games one learner plays a league opponent instead
-    eval_games: int = 32  # games against each scripted player after every snapshot
+    eval_games: int = 8  # games a new snapshot plays against each gauntlet opponent (2 where already clear)
+    eval_older: int = 2  # older snapshots of the run in each gauntlet, besides the predecessor and the best
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
     ppo: PPOConfig = field(default_factory=PPOConfig)
@@ -81,8 +86,11 @@ class TrainConfig:
             tensorboard_writer(None)  # fails now, with the install hint, rather than after the run is created
         if self.swap_every < 0:
             raise MarlError(f"--swap-every must not be negative, not {self.swap_every}")
-        if self.eval_games < 0 or self.eval_games == 1:
-            raise MarlError(f"--eval-games must be 0 or at least 2, not {self.eval_games}")
+        if self.eval_games < 0 or self.eval_games % 2:
+            raise MarlError(f"--eval-games must be 0 (no rating games) or an even number (games are played in "
+                            f"seat-swapped pairs), not {self.eval_games}")
+        if self.eval_older < 0:
+            raise MarlError(f"--eval-older must not be negative, not {self.eval_older}")
         if self.snapshot_every < 0 or self.snapshot_steps < 0 or not (self.snapshot_every or self.snapshot_steps):
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
         if self.algo not in ALGOS:
@@ -131,14 +139,43 @@ class TrainConfig:
         return cls(**d)
 
 
+@dataclass(frozen=True)
+class SnapshotRecord:
+    """What the ledger says of one snapshot right after its gauntlet: its record against each scripted player
+    (``{bot: (wins, draws, losses)}``, every stored game between the two) and its fitted rating with the interval,
+    None when evaluation is off."""
+
+    name: str
+    learner: str
+    step: int
+    vs: dict[str, tuple[int, int, int]]
+    elo: float | None = None
+    ci_low: float | None = None
+    ci_high: float | None = None
+
+    @staticmethod
+    def score(wdl: tuple[int, int, int]) -> float:
+        w, d, lo = wdl
+        return (w + 0.5 * d) / max(w + d + lo, 1)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"snapshot": self.name, "learner": self.learner, "step": self.step,
+                "elo": None if self.elo is None else round(self.elo, 1),
+                "ci_low": None if self.ci_low is None else round(self.ci_low, 1),
+                "ci_high": None if self.ci_high is None else round(self.ci_high, 1),
+                "vs": {bot: {"score": round(self.score(wdl), 4), "games": sum(wdl), "wins": wdl[0], "draws": wdl[1],
+                             "losses": wdl[2]} for bot, wdl in self.vs.items()}}
+
+
 @dataclass
 class TrainReport:
     run: str
     steps: int
     episodes: int
-    seconds: float
+    seconds: float  # wall time of this process's part of the run, evaluation included
+    eval_seconds: float  # of which the gauntlets took this long
     snapshots: list[str]
-    last_eval: dict[str, float]
+    finals: list[SnapshotRecord]  # each learner's final snapshot, as the ledger rates it
 
     @property
     def steps_per_second(self) -> float:
@@ -205,7 +242,10 @@ class Trainer:
         self.episodes = 0
         self.elapsed = 0.0  # seconds trained before this process (resumed runs)
         self.resumes = 0
-        self.last_eval: dict[str, float] = {}
+        self.evaluated: list[int] = []  # the snapshot ids whose gauntlet has been played
+        self.eval_seconds = 0.0  # wall time of the gauntlets in this process
+        self.eval_events = 0  # gauntlets played in this process
+        self.records: list[SnapshotRecord] = []  # the newest snapshots as the ledger rates them
 
     # -- opponents -------------------------------------------------------------------------------------------
     def _opponent_policy(self, pid: int, learner: int) -> Policy:
@@ -245,6 +285,7 @@ class Trainer:
         return base if len(self.names) == 1 else f"{base}-{self.names[i]}"
 
     def snapshot(self) -> None:
+        """Save and register every learner's snapshot (one unit: files, rows, then the run state), then rate them."""
         cfg = self.cfg
         if self.snapshots and self._snapshot_step == self.steps:
             return  # nothing played since the last snapshot
@@ -274,18 +315,68 @@ class Trainer:
         self.matchmaker.set_pool(pool)
         self.save_state()
         self.evaluate()
+        self.save_state()  # the same weights, now with the gauntlet marked as played
 
     def evaluate(self) -> None:
-        """Rated games of learner 0's newest snapshot against every scripted player, stored as 'eval'."""
-        if not self.cfg.eval_games:
-            return
-        row = self.league.get_player(self.latest[0])
-        me = load_player(self.league, row, device=str(self.device))
-        for bot, bot_id in self.bot_ids.items():
-            opp = ScriptedPolicy(self.spec.name, bot, seed=self.episodes)
-            rep = run_match(me, opp, games=self.cfg.eval_games, first_seed=10_000_000 + self.episodes,
-                            league=self.league, player_ids={me.id: row.id, opp.id: bot_id}, kind="eval")
-            self.last_eval[bot] = rep.stats.score
+        """The gauntlet of the learners' newest snapshots (:mod:`selfplay_cli.rated.gauntlet`), stored as 'eval',
+        then each snapshot's record as the ledger has it (``self.records``), reported to ``on_progress``."""
+        new = [self.league.get_player(pid) for pid in self.latest]
+        if self.cfg.eval_games and self.evaluated != self.latest:
+            t0 = time.perf_counter()
+            best = self._best_snapshot(exclude={p.id for p in new})
+            matchups = choose_opponents(self.league, new, older=self.cfg.eval_older, best=best)
+            names = [p.full_name for p in new]
+            done = 0
+
+            def tick(n: int) -> None:
+                nonlocal done
+                done += n
+                if self.on_progress:
+                    self.on_progress({"event": "evaluating", "snapshots": names, "games": done, "steps": self.steps,
+                                      "episodes": self.episodes})
+
+            tick(0)
+            n = self.cfg.eval_games // 2
+            gauntlet = GauntletConfig(pairs=n, clear_pairs=1, max_pairs=n, older=self.cfg.eval_older)
+            play_gauntlet(self.league, matchups, first_seed=10_000_000 + 10_000 * len(self.snapshots), config=gauntlet,
+                          device=str(self.device), on_games=tick)
+            self.evaluated = list(self.latest)
+            self.eval_seconds += time.perf_counter() - t0
+            self.eval_events += 1
+        self.records = self._records(new)
+        if self.on_progress:
+            self.on_progress({"event": "snapshot", "records": self.records, "steps": self.steps,
+                              "episodes": self.episodes})
+
+    def _best_snapshot(self, exclude: set[int]) -> PlayerRow | None:
+        """The run's highest-rated snapshot by the ladder fitted now, among those not in ``exclude``."""
+        from ..league.ladder import ladder
+
+        rows = [r for r in ladder(self.league, self.spec.name, bootstrap=0)
+                if r.kind == "snapshot" and r.player_id not in exclude and r.policy.startswith(f"{self.cfg.run}/")]
+        if not rows:
+            return None
+        top = max(rows, key=lambda r: (r.elo, -(r.player_id or 0)))
+        return self.league.get_player(int(top.player_id))  # type: ignore[arg-type]
+
+    def _records(self, new: list[PlayerRow]) -> list[SnapshotRecord]:
+        """Each new snapshot's record against the scripted players and its fitted rating, from the ledger."""
+        from ..league.ladder import head_to_head, ladder
+
+        rated = {}
+        if self.cfg.eval_games:
+            rated = {r.player_id: r for r in ladder(self.league, self.spec.name, bootstrap=0)}
+        out = []
+        for p in new:
+            vs = {}
+            for bot, bot_id in self.bot_ids.items():
+                h = head_to_head(self.league, p.id, bot_id)
+                if h["games"]:
+                    vs[bot] = (h["wins"], h["draws"], h["losses"])
+            r = rated.get(p.id)
+            out.append(SnapshotRecord(p.full_name, p.meta.get("learner", ""), p.step, vs,
+                                      r.elo if r else None, r.ci_low if r else None, r.ci_high if r else None))
+        return out
 
     # -- one process per run ---------------------------------------------------------------------------------
     def _lock(self) -> None:
@@ -321,6 +412,7 @@ class Trainer:
             "snapshot_episode": self._snapshot_episode, "snapshot_step": self._snapshot_step,
             "next_seed": self.games.next_seed, "elapsed": self.elapsed, "resumes": self.resumes,
             "matchmaker": json.dumps(self.matchmaker.state_dict()), "rates": json.dumps(self.rates.to_dict()),
+            "evaluated": list(self.evaluated),
         }
         self.run_dir.mkdir(parents=True, exist_ok=True)
         tmp = self.state_path.with_name(f"state.pt.tmp-{os.getpid()}")
@@ -360,6 +452,7 @@ class Trainer:
         self.elapsed = float(state["elapsed"])
         self.matchmaker.load_state_dict(json.loads(state["matchmaker"]))
         self.rates = WinRates.from_dict(json.loads(state["rates"]))
+        self.evaluated = [int(x) for x in state.get("evaluated", self.latest)]
         note = f"resumed {self.cfg.run} at step {self.steps:,} (snapshot {self.snapshots[-1]})"
         newer = [p for p in self.league.players(env=self.spec.name, kind="snapshot")
                  if p.run == self.cfg.run and p.id > max(self.latest)]
@@ -411,10 +504,14 @@ class Trainer:
 
     def _train(self) -> TrainReport:
         cfg = self.cfg
-        start = time.perf_counter() - self.elapsed
+        t0 = time.perf_counter()
+        start = t0 - self.elapsed
         deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
+        steps0, eval0 = self.steps, self.eval_seconds
         if not self.snapshots:
             self.snapshot()  # ep0: every learner has an identity in the league from the start
+        elif self.evaluated != self.latest:
+            self.evaluate()  # killed before (or during) the gauntlet of its newest snapshots
         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
         next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
         obs = self.games.observe()
@@ -437,17 +534,21 @@ class Trainer:
                     pending = []
                     line = {"step": self.steps, "episodes": self.episodes, "seconds": round(elapsed, 2),
                             "steps_per_second": round(self.steps / max(elapsed, 1e-9)),
-                            **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()},
-                            **{f"eval/{k}": round(v, 4) for k, v in self.last_eval.items()}}
+                            **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()}}
+                    for rec in self.records:
+                        line.update({f"eval/{rec.learner}/{bot}": round(rec.score(wdl), 4)
+                                     for bot, wdl in rec.vs.items()})
                     metrics.write(json.dumps(line) + "\n")
                     if board is not None:
                         for key, value in line.items():
                             if key != "step":
                                 board.add_scalar(key, value, global_step=self.steps)
                     if self.on_progress:
-                        self.on_progress({"steps": self.steps, "episodes": self.episodes, "progress": progress,
-                                          "eval": dict(self.last_eval),
-                                          "elo": self.league.get_player(self.latest[0]).elo})
+                        train_s = time.perf_counter() - t0 - (self.eval_seconds - eval0)
+                        rate = (self.steps - steps0) / max(train_s, 1e-9)
+                        self.on_progress({"event": "training", "steps": self.steps, "episodes": self.episodes,
+                                          "progress": progress, "steps_per_second": rate,
+                                          "remaining": self._remaining(rate, deadline)})
                     if (next_episodes is not None and self.episodes >= next_episodes) or (
                             next_steps is not None and self.steps >= next_steps):
                         self.snapshot()
@@ -457,8 +558,18 @@ class Trainer:
             self.snapshot()
         if board is not None:
             board.close()
-        return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - start, self.snapshots,
-                           dict(self.last_eval))
+        return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - t0,
+                           self.eval_seconds - eval0, self.snapshots, list(self.records))
+
+    def _remaining(self, rate: float, deadline: float | None) -> float:
+        """Seconds left: training at the measured rate for the steps left, plus a gauntlet (at the mean time one
+        took so far) for every snapshot still to come; with --minutes, the time to the deadline."""
+        if deadline is not None:
+            return max(deadline - time.perf_counter(), 0.0)
+        left = max(self.cfg.steps - self.steps, 0)
+        events = 1 + (left // self.cfg.snapshot_steps if self.cfg.snapshot_steps else 0)
+        per_event = self.eval_seconds / max(self.eval_events, 1)
+        return left / max(rate, 1e-9) + events * per_event
 
 
 def _alive(pid: int) -> bool:

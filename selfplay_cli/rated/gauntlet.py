@@ -1,0 +1,249 @@
+"""The gauntlet every new snapshot of a training run plays, so that every snapshot is rated, and rated well.
+
+When a run takes its snapshots (one per learner), each new snapshot meets
+
+* its own predecessor (the learner's previous snapshot): did this learner improve?
+* the other learners' new snapshots (taken at the same moment): the two paddles against each other;
+* the run's best snapshot so far (by fitted rating), a few older snapshots spread over the run: progress
+  against the whole history, and the links that let the ladder separate players that never met;
+* every scripted player of the game: fixed anchors.
+
+Every matchup is played in seat-swapped pairs on shared seeds (each seed once with either player on each seat), so
+the serve luck and the seat cancel within a pair and the pentanomial statistics apply. All matchups of one
+snapshot moment are played together, in one batched call of the runner.
+
+Cheap where the result is clear: a matchup whose result is already clear from history (the new snapshot's lineage,
+its predecessor and theirs, met the same opponent at least ``2 * pairs`` times and won or lost clearly, by the rule
+below) plays
+``clear_pairs`` pairs, and more only if they go against that history; any other matchup plays ``pairs`` pairs. When
+all of a matchup's games are in it goes on (doubling its pairs, up to ``max_pairs``) only while its result is still
+open, i.e. while ``|W - L| < z * sqrt(W + L)`` with ``z`` the one-sided normal quantile of ``clear`` (0.95: 4-0 is
+clear, 3-1 is not). The extra pairs join the running batch as
+soon as their matchup asks for them, so a short matchup never waits for the longest game of the batch. Every game is
+stored in the ledger as its batch of the matchup completes (kind ``eval``, one match per matchup, one transaction
+per batch).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..arena import Game, GameResult, play
+from ..envs import get_env
+from ..errors import MarlError
+from ..league.store import GameRecord, League, PlayerRow
+from ..policies import Policy
+from ..stats.elo import normal_quantile
+from .match import env_options_of, load_player
+
+
+@dataclass(frozen=True)
+class GauntletConfig:
+    """How much a new snapshot plays (the defaults keep evaluation well below the training time)."""
+
+    pairs: int = 4  # seat-swapped pairs of a matchup at first
+    clear_pairs: int = 1  # ... of a matchup whose result is clear from the predecessor's games
+    max_pairs: int = 4  # pairs a matchup may reach while its result is open (= pairs: never more)
+    older: int = 2  # older snapshots of the run besides the predecessor and the best
+    clear: float = 0.95  # a matchup is settled once the likelihood of superiority leaves [1 - clear, clear]
+    parallel: int = 1024  # games at once
+
+    def __post_init__(self) -> None:
+        if not 1 <= self.clear_pairs <= self.pairs <= self.max_pairs:
+            raise MarlError(f"gauntlet pairs must satisfy 1 <= clear_pairs <= pairs <= max_pairs, not "
+                            f"{self.clear_pairs} / {self.pairs} / {self.max_pairs}")
+        if self.older < 0:
+            raise MarlError(f"older snapshots must not be negative, not {self.older}")
+        if not 0.5 < self.clear < 1.0:
+            raise MarlError(f"clear must lie in (0.5, 1), not {self.clear}")
+
+
+@dataclass
+class Matchup:
+    """Two players of a gauntlet and what they scored: ``a`` is a new snapshot (the focus), ``b`` its opponent."""
+
+    a: PlayerRow
+    b: PlayerRow
+    first_seed: int
+    wins: int = 0
+    draws: int = 0
+    losses: int = 0
+    pairs: int = 0
+    expect: float | None = None  # the predecessor's clear score against the same opponent, if there is one
+    match_id: int | None = None
+    game_ids: list[int] = field(default_factory=list)
+
+    @property
+    def games(self) -> int:
+        return self.wins + self.draws + self.losses
+
+    @property
+    def score(self) -> float:
+        return (self.wins + 0.5 * self.draws) / self.games if self.games else 0.5
+
+    def open(self, z: float, max_pairs: int) -> bool:
+        """True while more pairs would tell more: below ``max_pairs`` and the result not yet clear, where a result
+        that goes the way of a clear history (the predecessor's) counts as clear."""
+        if self.pairs >= max_pairs:
+            return False
+        if self.expect is not None and (self.score - 0.5) * (self.expect - 0.5) > 0:
+            return False
+        return not clear(self.wins, self.losses, z)
+
+
+def clear(wins: int, losses: int, z: float) -> bool:
+    """A result is clear once the decisive games lean one way by ``z`` standard deviations: ``|W - L| >= z sqrt(W + L)``
+    (the likelihood of superiority beyond ``Phi(z)``)."""
+    decisive = wins + losses
+    return decisive > 0 and abs(wins - losses) >= z * math.sqrt(decisive)
+
+
+def _clear_history(league: League, m: Matchup, z: float, enough: int) -> float | None:
+    """The score against the same opponent of the new snapshot's lineage (its predecessor, then theirs, as far back
+    as it takes to count ``enough`` games), if that record is clear; else None."""
+    from ..league.ladder import head_to_head
+
+    wins = draws = losses = 0
+    pid = m.a.parent_id
+    while pid is not None and pid != m.b.id and wins + draws + losses < enough:
+        h = head_to_head(league, pid, m.b.id)
+        wins, draws, losses = wins + h["wins"], draws + h["draws"], losses + h["losses"]
+        pid = league.get_player(pid).parent_id
+    games = wins + draws + losses
+    if games < enough or not clear(wins, losses, z):
+        return None
+    return (wins + 0.5 * draws) / games
+
+
+def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2,
+                     best: PlayerRow | None = None) -> list[tuple[PlayerRow, PlayerRow]]:
+    """The matchups of a snapshot moment: ``(new snapshot, opponent)``, each unordered pair once.
+
+    ``new`` are the snapshots just taken (one per learner, all of one run and game); ``best`` the run's best
+    snapshot before them (by fitted rating), if known. Older snapshots are chosen evenly spread over the run's
+    history (oldest first), skipping the ones already met.
+    """
+    if not new:
+        return []
+    env, run = new[0].env, new[0].run
+    new_ids = {p.id for p in new}
+    history = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id not in new_ids]
+    by_id = {p.id: p for p in history}
+    bots = league.players(env=env, kind="bot")
+    pairs: list[tuple[PlayerRow, PlayerRow]] = []
+    seen: set[frozenset[int]] = set()
+
+    def add(a: PlayerRow, b: PlayerRow | None) -> None:
+        if b is None or a.id == b.id or frozenset((a.id, b.id)) in seen:
+            return
+        seen.add(frozenset((a.id, b.id)))
+        pairs.append((a, b))
+
+    for s in new:
+        chosen: list[PlayerRow | None] = [by_id.get(s.parent_id) if s.parent_id is not None else None]
+        chosen += [o for o in new if o.id != s.id]
+        chosen.append(best if best is not None and best.id in by_id else None)
+        taken = {c.id for c in chosen if c is not None}
+        rest = [p for p in history if p.id not in taken]
+        if older and rest:
+            picks = np.unique(np.linspace(0, len(rest) - 1, num=min(older, len(rest))).round().astype(int))
+            chosen += [rest[i] for i in picks.tolist()]
+        chosen += bots
+        for opp in chosen:
+            add(s, opp)
+    return pairs
+
+
+def play_gauntlet(
+    league: League,
+    pairs: Sequence[tuple[PlayerRow, PlayerRow]],
+    *,
+    first_seed: int,
+    config: GauntletConfig | None = None,
+    device: str = "cpu",
+    policies: dict[int, Policy] | None = None,
+    on_games: Callable[[int], None] | None = None,
+) -> list[Matchup]:
+    """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
+
+    ``policies`` may hold already loaded players by player id (scripted players are loaded afresh otherwise);
+    seeds start at ``first_seed``, a disjoint range per matchup. ``on_games(n)`` is told of finished games.
+    """
+    cfg = config or GauntletConfig()
+    if not pairs:
+        return []
+    env = pairs[0][0].env
+    spec = get_env(env)
+    loaded: dict[int, Policy] = dict(policies or {})
+    for a, b in pairs:
+        for row in (a, b):
+            if row.env != env:
+                raise MarlError(f"a gauntlet plays one game: {row.full_name} plays {row.env}, not {env}")
+            if row.id not in loaded:
+                loaded[row.id] = load_player(league, row, device=device, seed=row.id)
+    ids = list(loaded)
+    index = {pid: i for i, pid in enumerate(ids)}
+    roster = [loaded[pid] for pid in ids]
+    options = env_options_of(*roster)
+    span = cfg.max_pairs  # seeds reserved per matchup: one per pair
+    matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
+    z = normal_quantile(cfg.clear)
+    schedule: list[Game] = []
+    owner: list[tuple[int, int]] = []  # per game: its matchup's index and the seat of the matchup's `a`
+    in_flight = dict.fromkeys(range(len(matchups)), 0)  # games scheduled but not finished, per matchup
+    pending: dict[int, list[GameResult]] = {k: [] for k in range(len(matchups))}
+
+    def schedule_pairs(k: int, n: int) -> None:
+        m = matchups[k]
+        ia, ib = index[m.a.id], index[m.b.id]
+        for p in range(m.pairs, m.pairs + n):
+            schedule.extend((Game(m.first_seed + p, (ia, ib)), Game(m.first_seed + p, (ib, ia))))
+            owner.extend(((k, 0), (k, 1)))
+        m.pairs += n
+        in_flight[k] += 2 * n
+
+    def finished(r: GameResult) -> None:
+        k, seat = owner[r.index]
+        m = matchups[k]
+        points = r.outcome[seat]
+        m.wins += points > 0.5
+        m.draws += points == 0.5
+        m.losses += points < 0.5
+        pending[k].append(r)
+        in_flight[k] -= 1
+        if on_games:
+            on_games(1)
+        if in_flight[k] == 0:  # every game scheduled so far is in: store them, then go on only if still open
+            _store(league, m, pending[k], loaded, options)
+            pending[k] = []
+            if m.open(z, cfg.max_pairs):
+                schedule_pairs(k, min(2 * m.pairs, cfg.max_pairs) - m.pairs)
+
+    for k, m in enumerate(matchups):
+        m.expect = _clear_history(league, m, z, 2 * cfg.pairs)
+        schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
+    most = 2 * cfg.max_pairs * len(matchups)
+    play(spec, roster, schedule, parallel=cfg.parallel, env_options=options, record_actions=True,
+         on_result=finished, slots=min(cfg.parallel, most))
+    return matchups
+
+
+def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[int, Policy],
+           options: dict) -> None:
+    """One transaction per matchup and round; the matchup's match row is opened with its first games."""
+    if not results:
+        return
+    pa, pb = loaded[m.a.id], loaded[m.b.id]
+    if m.match_id is None:
+        m.match_id = league.create_match(m.a.env, "eval", {
+            "a": pa.id, "b": pb.id, "first_seed": m.first_seed, "env_options": options, "gauntlet": True})
+    player = {pa.id: m.a.id, pb.id: m.b.id}
+    m.game_ids += league.record_games(m.match_id, [
+        GameRecord(env=r.env, players=tuple(player[p] for p in r.players), seed=r.seed, scores=r.scores,
+                   outcome=r.outcome, length=r.length, truncated=r.truncated, actions=r.actions)
+        for r in results
+    ])
