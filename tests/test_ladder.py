@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -20,17 +21,18 @@ from selfplay_cli.league.ladder import (
     ladder,
     plan_tournament,
     read_results_csv,
+    select_rows,
 )
 from selfplay_cli.league.names import resolve, resolve_many
 from selfplay_cli.league.store import GameRecord, League, LeagueError, PlayerRow
-from selfplay_cli.stats.bradley_terry import FLAG_PERFECT, fit_bradley_terry
+from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, fit_bradley_terry
 from selfplay_cli.stats.elo import NAT_TO_ELO, elo_to_score, normal_quantile
 from selfplay_cli.stats.match import match_stats
 from selfplay_cli.stats.sprt import sprt_llr
 
 ENV = "pong"
 JSON_KEYS = ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
-             "score", "step", "flag", "anchor"]
+             "score", "step", "flag", "anchor", "run", "best", "vs"]
 D_7_OF_10 = 400.0 * math.log10(7.0 / 3.0)  # +147.2: the ML Elo difference of a 7/10 score
 
 
@@ -99,7 +101,7 @@ def _one_line(exc: pytest.ExceptionInfo[BaseException]) -> str:
 
 def test_two_players_closed_form(tmp_path: Path) -> None:
     path = _csv_games(tmp_path, [("alice", "bob", 7, 0, 3)])
-    rows = fit_csv(path, bootstrap=0)
+    rows = fit_csv(path, bootstrap=0, prior=0)
     assert [r.policy for r in rows] == ["alice", "bob"]
     a, b = rows
     assert a.anchor and not b.anchor and a.kind == b.kind == "player"  # default anchor: first player
@@ -113,14 +115,20 @@ def test_two_players_closed_form(tmp_path: Path) -> None:
     assert b.ci_low == pytest.approx(b.elo - z * se, abs=1e-6) and b.ci_high == pytest.approx(b.elo + z * se, abs=1e-6)
     assert a.ci_low == a.ci_high == 1000.0  # the anchor is fixed
     # Another anchor and rating: only the gauge moves.
-    rows = fit_csv(path, anchor="bob", anchor_rating=1500.0, bootstrap=50)
+    rows = fit_csv(path, anchor="bob", anchor_rating=1500.0, bootstrap=50, prior=0)
     assert _by_name(rows)["alice"].elo == pytest.approx(1500.0 + D_7_OF_10, abs=0.01)
     assert _by_name(rows)["bob"].elo == 1500.0 and _by_name(rows)["bob"].anchor
+    # The default prior, BayesElo's 2 virtual draws between the two: alice scores (7 + 1) / 12 = 2/3 -> 400 log10 2.
+    a, b = fit_csv(path, bootstrap=0)
+    assert b.elo == pytest.approx(1000.0 - 400 * math.log10(2), abs=1e-6) and a.anchor
+    se = NAT_TO_ELO / math.sqrt(12 * (2 / 3) * (1 / 3))  # the virtual draws count in the curvature too
+    assert b.ci_high == pytest.approx(b.elo + z * se, abs=1e-6)
+    assert (b.wins, b.draws, b.losses) == (3, 0, 7)  # the record shows real games only
 
 
 def test_chain_and_cycle_solve_the_score_equations(tmp_path: Path) -> None:
     # Chain a > b > c, each 7/10: the score equations decouple, a - b = b - c = 147.2.
-    rows = _by_name(fit_csv(_csv_games(tmp_path, [("c", "b", 3, 0, 7), ("a", "b", 7, 0, 3)]), bootstrap=0))
+    rows = _by_name(fit_csv(_csv_games(tmp_path, [("c", "b", 3, 0, 7), ("a", "b", 7, 0, 3)]), bootstrap=0, prior=0))
     assert rows["c"].anchor and rows["c"].elo == 1000.0
     assert rows["b"].elo == pytest.approx(1000.0 + D_7_OF_10, abs=0.01)
     assert rows["a"].elo == pytest.approx(1000.0 + 2 * D_7_OF_10, abs=0.01)
@@ -128,7 +136,7 @@ def test_chain_and_cycle_solve_the_score_equations(tmp_path: Path) -> None:
     # A cycle with draws: check sum_j n_ij E(r_i - r_j) = points_i for every player.
     records = [("x", "y", 5, 2, 1), ("y", "z", 3, 3, 2), ("z", "x", 2, 1, 4), ("w", "x", 1, 1, 2)]
     path = _csv_games(tmp_path, records)
-    rows = _by_name(fit_csv(path, anchor="y", bootstrap=0))
+    rows = _by_name(fit_csv(path, anchor="y", bootstrap=0, prior=0))
     assert rows["y"].elo == 1000.0 and all(r.flag is None for r in rows.values())
     expected = dict.fromkeys(rows, 0.0)
     points = dict.fromkeys(rows, 0.0)
@@ -168,10 +176,10 @@ def test_bootstrap_is_seeded(tmp_path: Path) -> None:
 
 def test_json_keys_and_no_nan_with_perfect_player(tmp_path: Path) -> None:
     path = _csv_games(tmp_path, [("ref", "mid", 3, 2, 3), ("ace", "ref", 5, 0, 0), ("ace", "mid", 4, 0, 0)])
-    for boot in (0, 40):
-        rows = fit_csv(path, bootstrap=boot)
+    for boot, prior in ((0, 0.0), (40, 0.0), (0, 2.0), (40, 2.0)):
+        rows = fit_csv(path, bootstrap=boot, prior=prior)
         ace = _by_name(rows)["ace"]
-        assert ace.flag == FLAG_PERFECT and ace.rank == 1 and rows[0] is ace
+        assert ace.flag == (FLAG_PERFECT if prior == 0 else None) and ace.rank == 1 and rows[0] is ace
         for r in rows:
             d = r.to_json()
             assert list(d) == JSON_KEYS
@@ -180,7 +188,8 @@ def test_json_keys_and_no_nan_with_perfect_player(tmp_path: Path) -> None:
             assert all(math.isfinite(d[k]) for k in ("elo", "ci_low", "ci_high", "score"))
             assert d["elo"] == round(r.elo, 1) and d["score"] == round(r.score, 4)
         assert _by_name(rows)["ref"].to_json()["anchor"] is True
-        assert ace.to_json()["flag"] == "perfect" and ace.to_json()["step"] is None
+        assert ace.to_json()["flag"] == ace.flag and ace.to_json()["step"] is None
+        assert ace.to_json()["vs"] == {} and ace.to_json()["run"] is None and ace.to_json()["best"] is False
 
 
 def test_fit_table_generic_and_errors() -> None:
@@ -191,7 +200,7 @@ def test_fit_table_generic_and_errors() -> None:
     by = _by_name(rows)
     assert by["a"].kind == "bot" and by["a"].player_id == 1 and by["a"].step is None
     assert by["b"].kind == "snapshot" and by["b"].step == 500 and by["c"].kind == "player"
-    fit = fit_bradley_terry(a, b, s, 3, anchor=1)
+    fit = fit_bradley_terry(a, b, s, 3, anchor=1, prior_games=DEFAULT_PRIOR)
     for i, n in enumerate(names):
         assert by[n].elo == pytest.approx(fit.ratings[i])
         assert by[n].flag == fit.flags[i]
@@ -286,17 +295,27 @@ def test_ladder_from_the_ledger(league: League) -> None:
     # Same numbers as a direct fit of the ledger.
     table = league.games(env=ENV)
     ids, a, b = table.indexed()
-    fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=int(np.flatnonzero(ids == rnd)[0]))
+    k = int(np.flatnonzero(ids == rnd)[0])
+    fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k, prior_games=DEFAULT_PRIOR)
     for pid, r in zip(ids.tolist(), fit.ratings.tolist(), strict=True):
         assert next(x for x in rows if x.player_id == pid).elo == pytest.approx(r)
+    # --prior 0: exactly the maximum-likelihood fit.
+    ml = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k)
+    ml_rows = ladder(league, bootstrap=0, prior=0)
+    for pid, r in zip(ids.tolist(), ml.ratings.tolist(), strict=True):
+        assert next(x for x in ml_rows if x.player_id == pid).elo == r
     assert [(r.rank, -r.elo) for r in rows] == sorted((r.rank, -r.elo) for r in rows)
     assert by["r1/ep90"].elo > by["r1/ep10"].elo > by["cpu"].elo > by["random"].elo
-    # Named anchor, through name resolution.
+    # Another anchor: a full name, an id or a player row (what names.resolve gives the commands).
     other = _by_name(ladder(league, anchor="r1/ep10", anchor_rating=1200.0, bootstrap=0))
     assert other["r1/ep10"].elo == 1200.0 and other["r1/ep10"].anchor
     assert other["random"].elo == pytest.approx(by["random"].elo + 1200.0 - by["r1/ep10"].elo)
-    with pytest.raises(LeagueError):
+    assert _by_name(ladder(league, anchor=e10, anchor_rating=1200.0, bootstrap=0)) == other
+    assert _by_name(ladder(league, anchor=f"#{e10}", anchor_rating=1200.0, bootstrap=0)) == other
+    assert _by_name(ladder(league, anchor=resolve(league, "ep10"), anchor_rating=1200.0, bootstrap=0)) == other
+    with pytest.raises(LeagueError) as exc:
         ladder(league, anchor="nobody", bootstrap=0)
+    assert "anchor 'nobody' has no games in pong" in _one_line(exc)
     # Bootstrap intervals contain the estimates; anchor interval is a point.
     boot = _by_name(ladder(league, bootstrap=30))
     assert all(r.ci_low <= r.elo <= r.ci_high for r in boot.values())
@@ -313,7 +332,10 @@ def test_ladder_removed_snapshots_still_count(league: League) -> None:
     assert set(after) == {"random", "cpu"}
     assert after["cpu"].elo == pytest.approx(before["cpu"].elo)  # e10's games are still in the fit
     shown = _by_name(ladder(league, bootstrap=0, include_removed=True))
-    assert set(shown) == {"random", "cpu", "r1/ep10"} and shown == before
+    assert set(shown) == {"random", "cpu", "r1/ep10"}
+    assert before["r1/ep10"].best and not shown["r1/ep10"].best  # a removed snapshot is nobody's best
+    unmarked = {k: replace(r, best=False) for k, r in shown.items()}
+    assert unmarked == {k: replace(r, best=False) for k, r in before.items()}
 
 
 def test_ladder_env_choice_and_default_anchor(league: League) -> None:
@@ -484,18 +506,123 @@ def test_head_to_head_pentanomial(league: League) -> None:
 
 
 def test_flagged_players_have_open_intervals_whatever_the_interval_method(tmp_path):
-    """A perfect score has no upper limit and an unconnected player no limit at all, bootstrap or not."""
-    from selfplay_cli.league.ladder import fit_table
-
+    """Maximum likelihood: a perfect score has no upper limit and an unconnected player no limit at all."""
     # c beats a and b every time; a and b never met: a is the anchor, c is perfect, b is disconnected from a.
     names = ["a", "b", "c"]
     a = np.array([2] * 10 + [2] * 10)
     b = np.array([0] * 10 + [1] * 10)
     s = np.ones(20)
     for boot in (0, 50):
-        rows = {r.policy: r for r in fit_table(names, a, b, s, anchor="a", bootstrap=boot)}
+        rows = {r.policy: r for r in fit_table(names, a, b, s, anchor="a", bootstrap=boot, prior=0)}
         assert rows["c"].flag == "perfect" and rows["c"].ci_high - rows["c"].elo >= 2000, boot
         assert rows["b"].flag is not None
         assert rows["b"].ci_low < 0 and rows["b"].ci_high > 2000, boot
         assert rows["a"].ci_low == rows["a"].ci_high == 1000.0
         assert rows["b"].rank == 1, "b cannot be told apart from anyone"
+
+
+def test_prior_makes_the_same_ledger_finite_and_honest(tmp_path):
+    """The same ledger under the default prior: c's MAP is finite and unflagged; b, linked to a only through c,
+    gets a prior-determined rating (a and b have the same record, so the same rating) and a wide interval."""
+    names = ["a", "b", "c"]
+    a = np.array([2] * 20)
+    b = np.array([0] * 10 + [1] * 10)
+    s = np.ones(20)
+    for boot in (0, 50):
+        rows = {r.policy: r for r in fit_table(names, a, b, s, anchor="a", bootstrap=boot)}
+        assert [rows[n].flag for n in names] == [None, None, None]
+        assert rows["b"].elo == pytest.approx(1000.0, abs=1e-6)  # symmetric with the anchor
+        assert rows["c"].elo > 1000.0 + 300
+        assert rows["c"].ci_low > 1000.0 and rows["c"].rank == 1  # c beat both 10-0: above them beyond doubt
+        assert rows["a"].rank == rows["b"].rank == 2
+        # b's interval carries two links (b-c and c-a), so it is wider than c's (one link)
+        assert rows["b"].ci_high - rows["b"].ci_low > rows["c"].ci_high - rows["c"].ci_low > 400
+
+
+def test_perfectly_separated_ledger_under_the_prior(league: League) -> None:
+    """cpu beats random, ep90 beats cpu and random, ep10 loses to everybody but random: all 100 %, 16 games a
+    pair. Prior 0: perfect / zero flags and shared ranks; the default prior: finite, unflagged, distinct ratings
+    in the order of the results and ranks that separate each step of the chain."""
+    p = _population(league)
+    rnd, cpu, e10, e90 = (p[k].id for k in ("random", "cpu", "ep10", "ep90"))
+    chain = [e90, cpu, e10, rnd]  # strongest first: each beats every later one, every game
+    results = []
+    for i, x in enumerate(chain):
+        for y in chain[i + 1:]:
+            results += _results(x, y, 16, 0, 0)
+    _record(league, results)
+    ml = _by_name(ladder(league, bootstrap=0, prior=0))
+    assert ml["r1/ep90"].flag == FLAG_PERFECT and ml["random"].flag is None  # the anchor's group: random alone
+    assert ml["cpu"].flag == FLAG_PERFECT and ml["r1/ep10"].flag == FLAG_PERFECT
+    for boot in (0, 60):
+        rows = ladder(league, bootstrap=boot)
+        assert [r.policy for r in rows] == ["r1/ep90", "cpu", "r1/ep10", "random"]
+        assert all(r.flag is None for r in rows)
+        elos = [r.elo for r in rows]
+        assert all(math.isfinite(e) for e in elos) and elos == sorted(elos, reverse=True) and len(set(elos)) == 4
+        assert [r.rank for r in rows] == [1, 2, 3, 4], [(r.policy, r.elo, r.ci_low, r.ci_high) for r in rows]
+        for r in rows:
+            assert r.ci_low <= r.elo <= r.ci_high
+            if not r.anchor:
+                assert r.ci_high - r.ci_low > 300  # never a made-up precision for all-wins records
+
+
+# --------------------------------------------------------------------------------------------------
+# run, best, scripted-player records, row selection
+# --------------------------------------------------------------------------------------------------
+
+
+def test_ladder_rows_carry_run_best_and_bot_records(league: League) -> None:
+    p = _population(league)
+    rnd, cpu, e10, e90, r2 = (p[k].id for k in ("random", "cpu", "ep10", "ep90", "r2ep90"))
+    _record(league, _results(cpu, rnd, 7, 0, 3) + _results(e10, cpu, 6, 2, 2) + _results(e90, e10, 6, 2, 2)
+            + _results(e90, cpu, 5, 1, 2) + _results(r2, e90, 3, 2, 5) + _results(r2, rnd, 8, 1, 1))
+    rows = ladder(league, bootstrap=0)
+    by = _by_name(rows)
+    assert by["r1/ep10"].run == by["r1/ep90"].run == "r1" and by["r2/ep90"].run == "r2" and by["cpu"].run is None
+    # Best of each run: the higher-rated snapshot of r1, the only one of r2; never a bot.
+    assert by["r1/ep90"].elo > by["r1/ep10"].elo
+    assert {r.policy for r in rows if r.best} == {"r1/ep90", "r2/ep90"}
+    # Records against the bots, counted from the ledger by hand.
+    vs = {name: {v.bot: (v.games, v.points) for v in by[name].vs} for name in by}
+    assert [v.bot for v in by["cpu"].vs] == ["random", "cpu"]  # the env's bots, in league order
+    assert vs["r1/ep10"] == {"random": (0, 0.0), "cpu": (10, 7.0)}  # 6 wins + 2 draws
+    assert vs["r1/ep90"]["cpu"] == (8, 5.5) and vs["r2/ep90"]["random"] == (10, 8.5)
+    assert vs["cpu"] == {"random": (10, 7.0), "cpu": (0, 0.0)}
+    assert vs["random"]["cpu"] == (10, 3.0)
+    d = by["r1/ep10"].to_json()
+    assert list(d) == JSON_KEYS
+    assert d["vs"] == {"random": {"score": None, "games": 0}, "cpu": {"score": 0.7, "games": 10}}
+    assert d["run"] == "r1" and d["best"] is False and by["r1/ep90"].to_json()["best"] is True
+    json.dumps([r.to_json() for r in rows], allow_nan=False)
+
+
+def test_select_rows_keeps_ranks(league: League) -> None:
+    p = _population(league)
+    rnd, cpu, e10, e90, r2 = (p[k].id for k in ("random", "cpu", "ep10", "ep90", "r2ep90"))
+    _record(league, _results(cpu, rnd, 9, 0, 1) + _results(e10, cpu, 9, 0, 1) + _results(e90, e10, 8, 0, 2)
+            + _results(r2, e90, 9, 0, 1) + _results(r2, rnd, 10, 0, 0))
+    rows = ladder(league, bootstrap=0)
+    ranks = {r.policy: r.rank for r in rows}
+    only_r1 = select_rows(rows, run="r1")
+    assert [r.policy for r in only_r1] == [r.policy for r in rows if r.policy.startswith("r1/") or r.kind == "bot"]
+    assert {r.policy for r in only_r1} == {"r1/ep10", "r1/ep90", "cpu", "random"}
+    assert all(r.rank == ranks[r.policy] for r in only_r1)
+    assert any(r.rank > 1 for r in only_r1) and min(r.rank for r in only_r1) >= 1
+    assert select_rows(rows, top=2) == rows[:2]
+    assert select_rows(rows, run="r1", top=1) == only_r1[:1]
+    assert select_rows(rows, run="nope") == [r for r in rows if r.kind == "bot"]
+    assert select_rows(rows) == rows
+    with pytest.raises(LeagueError):
+        select_rows(rows, top=0)
+
+
+def test_removed_snapshots_leave_the_ranks(tmp_path: Path) -> None:
+    """fit_table's hidden players are fitted but neither shown nor counted in anybody's rank."""
+    path = _csv_games(tmp_path, [("top", "mid", 40, 0, 0), ("mid", "low", 40, 0, 0), ("top", "low", 40, 0, 0)])
+    names, a, b, s = read_results_csv(path)
+    full = _by_name(fit_table(names, a, b, s, anchor="low", bootstrap=0))
+    assert [full[n].rank for n in ("top", "mid", "low")] == [1, 2, 3]
+    part = _by_name(fit_table(names, a, b, s, anchor="low", bootstrap=0, hidden={"top"}))
+    assert set(part) == {"mid", "low"} and part["mid"].rank == 1 and part["low"].rank == 2
+    assert part["mid"].elo == full["mid"].elo  # top's games still count in the fit

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import sqlite3
@@ -138,10 +139,16 @@ def test_sprt_exit_codes(home, capsys):
 def test_elo_fit_on_a_results_file_matches_hand_computed_ratings(tmp_path, capsys):
     f = tmp_path / "results.csv"
     f.write_text("player_a,player_b,result\n" + "a,b,1\n" * 7 + "a,b,0\n" * 3)
-    code, rows = run_json(capsys, "elo", "fit", "--results", str(f), "--anchor", "b=1000", "--bootstrap", "0")
+    # --prior 0: the maximum-likelihood fit, E(d) = 7/10.
+    code, rows = run_json(capsys, "elo", "fit", "--results", str(f), "--anchor", "b=1000", "--bootstrap", "0",
+                          "--prior", "0")
     assert code == 0
     by = {r["policy"]: r for r in rows}
-    assert by["a"]["elo"] == pytest.approx(1000 + 400 * __import__("math").log10(7 / 3), abs=0.1)  # 1147.2
+    assert by["a"]["elo"] == pytest.approx(1000 + 400 * math.log10(7 / 3), abs=0.1)  # 1147.2
+    # Default: BayesElo's prior, 2 virtual draws between the two: E(d) = (7 + 1) / 12 = 2/3.
+    code, rows = run_json(capsys, "elo", "fit", "--results", str(f), "--anchor", "b=1000", "--bootstrap", "0")
+    assert code == 0 and {r["policy"]: r for r in rows}["a"]["elo"] == pytest.approx(1000 + 400 * math.log10(2),
+                                                                                      abs=0.1)  # 1120.4
     assert list(rows[0])[:10] == ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses",
                                   "rank"]
     bad = tmp_path / "bad.csv"
@@ -176,6 +183,137 @@ def test_ladder_gate_and_tournament(home, tmp_path, capsys):
     assert code == 0 and verdict["passed"] and verdict["played_games"] == 0 and verdict["stored_games"] == 10
     code, verdict = run_json(capsys, "elo", "gate", "random", "--vs", "cpu", "--min-diff", "0", "--games", "16")
     assert code == 1 and not verdict["passed"] and verdict["played_games"] == 6
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The ladder answers at a glance: prior, --run, --top, best marker, records against the bots, help
+
+
+def seed_ladder(home: Path) -> dict[str, int]:
+    """A league with two runs and the pong bots; games written straight to the ledger (results chosen by hand).
+
+    Returns the player ids by name."""
+    from selfplay_cli.league.store import GameRecord
+
+    with League.open(home) as lg:
+        lg.ensure_bots("pong", ["random", "cpu"])
+        for run in ("r1", "r2"):
+            lg.create_run(run, "pong", {})
+        bots = {p.name: p.id for p in lg.players("pong", kind="bot")}
+        ids = dict(bots)
+        for run, name, step in (("r1", "ep1", 1000), ("r1", "ep2", 2000), ("r2", "ep1", 1000)):
+            p = lg.add_snapshot(env="pong", run=run, name=name, path=f"/x/{run}/{name}.safetensors",
+                                sha256="0" * 64, step=step)
+            ids[f"{run}/{name}"] = p.id
+        plan = [("cpu", "random", 14, 2), ("r1/ep1", "random", 16, 0), ("r1/ep1", "cpu", 10, 6),
+                ("r1/ep2", "cpu", 14, 2), ("r1/ep2", "r1/ep1", 12, 4), ("r2/ep1", "random", 16, 0)]
+        match = lg.create_match("pong", "match")
+        games = []
+        k = 0
+        for x, y, wins, losses in plan:
+            for score in [1.0] * wins + [0.0] * losses:
+                a, b, sa = (ids[x], ids[y], score) if k % 2 == 0 else (ids[y], ids[x], 1.0 - score)
+                games.append(GameRecord(env="pong", players=(a, b), seed=k, scores=(sa * 21, (1 - sa) * 21),
+                                        outcome=(sa, 1.0 - sa), length=100, truncated=False))
+                k += 1
+        lg.record_games(match, games)
+    return ids
+
+
+def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
+    seed_ladder(home)
+    code, rows = run_json(capsys, "league", "ladder", "--bootstrap", "0")
+    assert code == 0
+    assert list(rows[0]) == ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses",
+                             "rank", "score", "step", "flag", "anchor", "run", "best", "vs"]
+    by = {r["policy"]: r for r in rows}
+    assert set(by) == {"random", "cpu", "r1/ep1", "r1/ep2", "r2/ep1"}
+    # The prior: r2/ep1 won all its 16 games: finite and unflagged.
+    assert all(r["flag"] is None for r in rows) and by["r2/ep1"]["elo"] > by["random"]["elo"]
+    # Best snapshot of each run: r1/ep2 (beat r1/ep1 12-4), r2/ep1 (alone); bots never.
+    assert by["r1/ep2"]["elo"] > by["r1/ep1"]["elo"]
+    assert {r["policy"] for r in rows if r["best"]} == {"r1/ep2", "r2/ep1"}
+    # Records against the scripted players, as recorded.
+    assert by["r1/ep1"]["vs"] == {"random": {"score": 1.0, "games": 16}, "cpu": {"score": 0.625, "games": 16}}
+    assert by["r1/ep2"]["vs"] == {"random": {"score": None, "games": 0}, "cpu": {"score": 0.875, "games": 16}}
+    assert by["cpu"]["vs"]["random"] == {"score": 0.875, "games": 16} and by["cpu"]["vs"]["cpu"]["games"] == 0
+    assert by["r1/ep1"]["run"] == "r1" and by["cpu"]["run"] is None
+    ranks = {r["policy"]: r["rank"] for r in rows}
+
+    # --run: that run's snapshots plus the bots, ranks of the whole ladder; --top: the first rows.
+    code, only = run_json(capsys, "league", "ladder", "--bootstrap", "0", "--run", "r1")
+    assert code == 0 and [r["policy"] for r in only] == [r["policy"] for r in rows if r["policy"] != "r2/ep1"]
+    assert all(r["rank"] == ranks[r["policy"]] for r in only)
+    code, top = run_json(capsys, "league", "ladder", "--bootstrap", "0", "--top", "2")
+    assert code == 0 and top == rows[:2]
+    code, both = run_json(capsys, "league", "ladder", "--bootstrap", "0", "--run", "r1", "--top", "1")
+    assert code == 0 and both == only[:1]
+
+    # --prior 0: the exact maximum-likelihood fit: perfect scores are flagged bounds again.
+    code, ml = run_json(capsys, "league", "ladder", "--bootstrap", "0", "--prior", "0")
+    ml_by = {r["policy"]: r for r in ml}
+    assert ml_by["r2/ep1"]["flag"] == "perfect" and ml_by["cpu"]["flag"] is None
+    from selfplay_cli.stats.bradley_terry import fit_bradley_terry
+
+    with League.open(home) as league:
+        table = league.games("pong")
+        ids, a, b = table.indexed()
+        name_of = {p.id: p.full_name for p in league.players("pong")}
+    anchor = [name_of[int(i)] for i in ids].index("random")
+    exact = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=anchor, anchor_rating=1000.0)
+    for i, pid in enumerate(ids.tolist()):
+        assert ml_by[name_of[pid]]["elo"] == round(float(exact.ratings[i]), 1)
+
+    # The table: best marked, one column per bot with score and games, blank when none.
+    code, out, err = run(capsys, "league", "ladder", "--bootstrap", "0")
+    assert code == 0 and err == ""
+    assert "r1/ep2 (best)" in out and "r2/ep1 (best)" in out and "r1/ep1 (best)" not in out
+    assert "vs random" in out and "vs cpu" in out and "100% of 16" in out and "88% of 16" in out
+    assert "random (anchor)" in out and "prior of 2 virtual draws" in out
+    line = next(x for x in out.splitlines() if "r1/ep2 (best)" in x)
+    assert "% of" in line and line.count("% of") == 1  # no games against random: that cell is blank
+    code, out, err = run(capsys, "league", "ladder", "--bootstrap", "0", "--csv")
+    header = out.splitlines()[0].split(",")
+    assert header[:10] == ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank"]
+    assert header[-4:] == ["vs_random_score", "vs_random_games", "vs_cpu_score", "vs_cpu_games"]
+
+    # The anchor is any name marl understands, resolved by names.resolve.
+    code, rows2 = run_json(capsys, "league", "ladder", "--bootstrap", "0", "--anchor", "best=1500")
+    best_anchor = next(r for r in rows2 if r["anchor"])
+    assert best_anchor["elo"] == 1500.0 and best_anchor["policy"] == max(rows, key=lambda r: r["elo"])["policy"]
+
+
+def test_ladder_option_errors_are_one_line(home, capsys):
+    seed_ladder(home)
+    with League.open(home) as lg:
+        lg.create_run("r9", "lander", {})
+    for args, needle in (
+        (["league", "ladder", "--run", "nope"], "no run named 'nope'"),
+        (["league", "ladder", "--run", "r9", "--env", "pong"], "run 'r9' plays lander, not pong"),
+        (["league", "ladder", "--top", "0"], "--top must be at least 1"),
+        (["league", "ladder", "--prior", "-1"], "--prior must be"),
+        (["league", "ladder", "--prior", "nan"], "--prior must be"),
+        (["elo", "fit", "--prior", "-0.5"], "--prior must be"),
+        (["league", "ladder", "--anchor", "nobody=1000"], "no policy named 'nobody'"),
+    ):
+        code, out, err = run(capsys, *args)
+        assert code == 2, (args, out, err)
+        assert needle in err and err.startswith("marl: error: ") and err.count("\n") == 1, (args, err)
+
+
+def test_ladder_and_fit_help_explain_without_losing_brackets(capsys):
+    code, out, err = run(capsys, "league", "ladder", "--help")
+    assert code == 0
+    text = " ".join(out.split())
+    for words in ("--prior 0 gives the plain maximum-likelihood fit", "default 2, BayesElo's default",
+                  "Rank: 1 + the number of players stronger beyond doubt", "the ranks stay those of the whole ladder",
+                  "perfect or zero, only with --prior 0", "disconnected: no chain of games", "unrated: no games",
+                  "(best) in bold for the best snapshot of each run", "vs BOT", "[default: 2.0]", "--run", "--top"):
+        assert words in text, words
+    assert "[]" not in out and "[ ]" not in out
+    code, out, err = run(capsys, "elo", "fit", "--help")
+    text = " ".join(out.split())
+    assert code == 0 and "--prior" in text and "[default: 2.0]" in text and "[]" not in out
 
 
 def test_bad_option_values_give_one_line_errors(home, capsys):

@@ -11,13 +11,19 @@ import numpy as np
 import pytest
 
 from selfplay_cli.stats.bradley_terry import (
+    DEFAULT_PRIOR,
     FLAG_DISCONNECTED,
     FLAG_PERFECT,
     FLAG_UNRATED,
     FLAG_ZERO,
     bootstrap_ci,
+    bootstrap_intervals,
     fit_bradley_terry,
+    laplace_ci,
+    laplace_intervals,
+    prior_draws,
     rank_by_ci,
+    rank_pairwise,
 )
 from selfplay_cli.stats.elo import MAX_ELO, elo_to_score, elo_update, normal_quantile, score_to_elo
 from selfplay_cli.stats.match import match_stats
@@ -365,15 +371,148 @@ def test_bt_prior_games_and_weights() -> None:
     a, b, s = _games((0, 1, 7, 3, 0))
     ml = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0)
     shrunk = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0, prior_games=2.0)
-    # two virtual draws per player, each spread over the single opponent: 4 virtual games A-B
-    # -> A scores (7 + 2) / 14 -> 400 log10(9 / 5)
-    assert shrunk.ratings[0] == pytest.approx(400 * math.log10(9 / 5), abs=1e-6)
+    # BayesElo: prior 2 between two players that only met each other = 2 virtual draws A-B
+    # -> A scores (7 + 1) / 12 = 2/3 -> 400 log10 2
+    assert shrunk.ratings[0] == pytest.approx(400 * math.log10(2), abs=1e-6)
     assert 0 < shrunk.ratings[0] < ml.ratings[0]
     # weights multiply games: weight 2 on every game changes nothing, weight 0 drops a game
     w2 = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0, weights=np.full(10, 2.0))
     assert w2.ratings[0] == pytest.approx(ml.ratings[0], abs=1e-6) and w2.games[0] == 20
     w0 = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0, weights=np.r_[np.ones(7), np.zeros(3)])
     assert w0.flags[0] == FLAG_PERFECT and np.isfinite(w0.ratings[0])
+
+
+def test_prior_draws_follow_bayeselo_add_prior() -> None:
+    """BayesElo's CCondensedResults::AddPrior: player i adds prior * 0.25 * N_ij / N_i to each of the four draw
+    counters of each opponent j (d_ij, d_ji on both sides), i.e. (prior / 2) N_ij / N_i draws of the pair."""
+    assert DEFAULT_PRIOR == 2.0  # BayesElo's default: Prior(2.0) in CEloRatingCUI.cpp
+    # A(0)-B(1) 10 games, A-C(2) 30 games, B-C none: N_A = 40, N_B = 10, N_C = 30.
+    n = np.array([[0.0, 10.0, 30.0], [10.0, 0.0, 0.0], [30.0, 0.0, 0.0]])
+    v = prior_draws(n, 2.0)
+    assert v[0, 1] == v[1, 0] == pytest.approx(10 / 40 + 10 / 10)  # 1.25
+    assert v[0, 2] == v[2, 0] == pytest.approx(30 / 40 + 30 / 30)  # 1.75
+    assert v[1, 2] == v[2, 1] == 0.0 and np.all(np.diag(v) == 0.0)
+    # Every player spreads prior / 2 = 1 draw over its opponents: half the row sums of the unsymmetrised part.
+    assert prior_draws(n, 4.0) == pytest.approx(2 * v)
+    assert np.all(prior_draws(n, 0.0) == 0.0)
+    with pytest.raises(ValueError):
+        prior_draws(n, -1.0)
+
+
+def test_prior_zero_is_exactly_maximum_likelihood() -> None:
+    a, b, s = _games((0, 1, 6, 3, 3), (1, 2, 4, 4, 2), (2, 0, 5, 2, 1), (3, 1, 2, 0, 0), (4, 2, 0, 3, 0))
+    ml = fit_bradley_terry(a, b, s, 6, anchor=0, anchor_rating=1000.0)
+    zero = fit_bradley_terry(a, b, s, 6, anchor=0, anchor_rating=1000.0, prior_games=0.0)
+    assert np.array_equal(zero.ratings, ml.ratings) and zero.flags == ml.flags
+    assert ml.flags[3] == FLAG_PERFECT and ml.flags[4] == FLAG_ZERO and ml.flags[5] == FLAG_UNRATED
+    # The ML score equations hold on the well-posed core (players 0, 1, 2 and their games among themselves).
+    core = (a < 3) & (b < 3)
+    points, games = np.zeros((3, 3)), np.zeros((3, 3))
+    np.add.at(points, (a[core], b[core]), s[core])
+    np.add.at(points, (b[core], a[core]), 1 - s[core])
+    np.add.at(games, (a[core], b[core]), 1)
+    np.add.at(games, (b[core], a[core]), 1)
+    r = ml.ratings[:3]
+    residual = (points - games * _expected(r[:, None] - r[None, :])).sum(axis=1)
+    assert np.abs(residual).max() < 1e-6
+
+
+def test_map_of_a_perfect_score_by_hand() -> None:
+    """X wins 10-0 against the anchor A. Prior 2: 2 virtual draws between them, so X has 10 + 1 points of 12 and
+    the MAP solves E(d) = 11/12: d = 400 log10 11 = +416.6. Maximum likelihood: d = +inf (flagged bound)."""
+    a, b, s = _games((0, 1, 10, 0, 0))
+    fit = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=1000.0, prior_games=2.0)
+    assert fit.ratings[0] == pytest.approx(1000.0 + 400 * math.log10(11), abs=1e-6)  # 1416.55
+    assert fit.ratings[0] == pytest.approx(1416.557, abs=1e-3)
+    assert fit.flags == [None, None] and fit.converged
+    assert fit_bradley_terry(a, b, s, 2, anchor=1, prior_games=0.0).flags == [FLAG_PERFECT, None]
+    # Laplace: the log-posterior 11 log p + 1 log(1 - p) has curvature 12 p (1 - p) = 12 * 11/12 * 1/12 = 11/12
+    # nats^-2 at the MAP, so se = sqrt(12 / 11) nats = 181.4 Elo.
+    se = math.sqrt(12 / 11) * 400 / math.log(10)
+    assert se == pytest.approx(181.44, abs=0.01)
+    low, high = laplace_ci(a, b, 2, fit.ratings, anchor=1, confidence=0.95, prior_games=2.0)
+    assert low[0] == pytest.approx(fit.ratings[0] - Z95 * se, abs=1e-6)  # 1060.9
+    assert high[0] == pytest.approx(fit.ratings[0] + Z95 * se, abs=1e-6)  # 1772.2
+    assert low[1] == high[1] == 1000.0
+
+
+def test_bootstrap_of_a_perfect_score_is_never_narrower_than_laplace() -> None:
+    """Every replicate of a 10-0 record is 10-0: the percentile interval alone would be one point."""
+    a, b, s = _games((0, 1, 10, 0, 0))
+    point = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=1000.0, prior_games=2.0).ratings
+    # Without the floor: the bare replicates all give the same rating (what the floor is there for).
+    bare_low, bare_high = bootstrap_ci(a, b, s, 2, anchor=1, n_boot=50, seed=3, prior_games=0.0)
+    assert bare_high[0] - bare_low[0] == pytest.approx(0.0, abs=1e-6)
+    low, high = bootstrap_ci(a, b, s, 2, anchor=1, anchor_rating=1000.0, n_boot=50, seed=3, prior_games=2.0)
+    lap_low, lap_high = laplace_ci(a, b, 2, point, anchor=1, prior_games=2.0)
+    assert low[0] == pytest.approx(lap_low[0], abs=1e-6) and high[0] == pytest.approx(lap_high[0], abs=1e-6)
+    assert high[0] - low[0] == pytest.approx(2 * Z95 * math.sqrt(12 / 11) * 400 / math.log(10), abs=1e-6)
+    # With informative data too the reported interval contains the Laplace one (and the estimate).
+    a2, b2, s2 = _games((0, 1, 14, 6, 0))
+    p2 = fit_bradley_terry(a2, b2, s2, 2, anchor=1, prior_games=2.0).ratings
+    lo2, hi2 = bootstrap_ci(a2, b2, s2, 2, anchor=1, n_boot=200, seed=1, prior_games=2.0)
+    llo2, lhi2 = laplace_ci(a2, b2, 2, p2, anchor=1, prior_games=2.0)
+    assert lo2[0] <= llo2[0] and hi2[0] >= lhi2[0]
+    assert lo2[0] < p2[0] < hi2[0]
+
+
+def test_perfectly_separated_chain_is_finite_ordered_and_ranked_under_the_prior() -> None:
+    """A beats B beats C, every game, 20 games a pair: ML ratings are infinite; the MAP is finite, unflagged and
+    solves the score equations with the virtual draws added; the ranks separate all three."""
+    a, b, s = _games((0, 1, 20, 0, 0), (1, 2, 20, 0, 0), (0, 2, 20, 0, 0))
+    ml = fit_bradley_terry(a, b, s, 3, anchor=2, anchor_rating=1000.0)
+    assert ml.flags == [FLAG_PERFECT, FLAG_PERFECT, None]
+    fit = fit_bradley_terry(a, b, s, 3, anchor=2, anchor_rating=1000.0, prior_games=2.0)
+    assert fit.flags == [None, None, None] and np.all(np.isfinite(fit.ratings))
+    assert fit.ratings[0] > fit.ratings[1] > fit.ratings[2] == 1000.0
+    games = np.array([[0, 20, 20], [20, 0, 20], [20, 20, 0]], dtype=float)
+    points = np.array([[0, 20, 20], [0, 0, 20], [0, 0, 0]], dtype=float)
+    v = prior_draws(games, 2.0)  # 1 virtual draw a pair: (2/2) * 20 * (1/40 + 1/40)
+    assert v[0, 1] == pytest.approx(1.0)
+    r = fit.ratings
+    residual = (points + v / 2 - (games + v) * _expected(r[:, None] - r[None, :])).sum(axis=1)
+    assert np.abs(residual).max() < 1e-6
+    for low, high, sd in (laplace_intervals(a, b, 3, r, 2, 0.95, 2.0),
+                          bootstrap_intervals(a, b, s, 3, 2, 1000.0, 100, 0.95, 0, 2.0)):
+        assert np.all(low <= r) and np.all(r <= high) and low[2] == high[2] == 1000.0
+        assert rank_pairwise(r, low, high, sd, 0.95).tolist() == [1, 2, 3]
+    # By whole intervals alone A and B overlap (both carry the uncertainty of their link to C).
+    low, high, _ = laplace_intervals(a, b, 3, r, 2, 0.95, 2.0)
+    assert rank_by_ci(r, low, high).tolist() == [1, 1, 3]
+
+
+def test_rank_pairwise_hand_example() -> None:
+    r = np.array([1300.0, 1200.0, 1000.0])
+    low = np.array([1000.0, 900.0, 1000.0])
+    high = np.array([1600.0, 1500.0, 1000.0])
+    z = normal_quantile(0.975)
+    # Differences: 0-1 = 100 with sd 40 (100 - 1.96 * 40 = 21.6 > 0: 0 is above 1); 0-2 and 1-2 with sd 150:
+    # 300 - 294 > 0 (0 above 2), 200 - 294 < 0, but low_1 = 900 is not above high_2 = 1000 either.
+    sd = np.array([[0.0, 40.0, 150.0], [40.0, 0.0, 150.0], [150.0, 150.0, 0.0]])
+    assert 100 - z * 40 > 0 and 300 - z * 150 > 0 and 200 - z * 150 < 0
+    assert rank_pairwise(r, low, high, sd, 0.95).tolist() == [1, 2, 2]
+    # Player 1 not comparable (a flagged bound): only whole intervals count for it; low_0 = 1000 < high_1.
+    assert rank_pairwise(r, low, high, sd, 0.95, comparable=[True, False, True]).tolist() == [1, 1, 2]
+    # Whole intervals above always count, however uncertain the differences: low_1 = 1050 > high_2 = 1000.
+    vague = np.full((3, 3), 1e4) * (1 - np.eye(3))
+    assert rank_pairwise(r, low, high, vague, 0.95).tolist() == [1, 1, 1]
+    assert rank_pairwise(r, np.array([1000.0, 1050.0, 1000.0]), high, vague, 0.95).tolist() == [1, 1, 2]
+    with pytest.raises(ValueError):
+        rank_pairwise(r, low, high, sd[:2, :2])
+
+
+def test_laplace_ci_without_prior_is_the_wald_interval() -> None:
+    a, b, s = _games((0, 1, 7, 3, 0))
+    fit = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0)
+    low, high = laplace_ci(a, b, 2, fit.ratings, anchor=1)
+    se = 400 / math.log(10) / math.sqrt(10 * 0.7 * 0.3)
+    assert low[0] == pytest.approx(fit.ratings[0] - Z95 * se, abs=1e-6)
+    assert high[0] == pytest.approx(fit.ratings[0] + Z95 * se, abs=1e-6)
+    # With the prior the curvature includes the virtual draws: (10 + 2) p (1 - p) at p = 2/3.
+    pf = fit_bradley_terry(a, b, s, 2, anchor=1, anchor_rating=0.0, prior_games=2.0)
+    low, high = laplace_ci(a, b, 2, pf.ratings, anchor=1, prior_games=2.0)
+    se_p = 400 / math.log(10) / math.sqrt(12 * (2 / 3) * (1 / 3))
+    assert high[0] - pf.ratings[0] == pytest.approx(Z95 * se_p, abs=1e-6)
 
 
 def test_bt_validation() -> None:

@@ -9,9 +9,10 @@ import typer
 
 from ..errors import MarlError
 from ..rated.gate import gate_check
+from ..stats.bradley_terry import DEFAULT_PRIOR
 from ._common import DbOpt, DeviceOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, resolve_players
 from ._output import console, print_json
-from .ladder_view import render_ladder
+from .ladder_view import prior_caption, render_ladder
 
 app = typer.Typer(help="Fit ratings with confidence intervals; gate a model on its strength.", no_args_is_help=True)
 
@@ -19,6 +20,26 @@ BootstrapOpt = Annotated[int, typer.Option("--bootstrap", help="Bootstrap resamp
                                            "approximation).")]
 AnchorOpt = Annotated[str | None, typer.Option("--anchor", help="NAME=RATING fixing one player's rating "
                                                "(default: the random bot at 1000).")]
+PriorOpt = Annotated[float, typer.Option(
+    "--prior", help="BayesElo's prior: N virtual draws spread over the games of each player, so that a perfect "
+    "score gets a finite rating (MAP). The default 2 is BayesElo's. 0 gives the plain maximum-likelihood fit.")]
+
+
+def check_prior(prior: float) -> float:
+    if not prior >= 0 or prior == float("inf"):
+        raise MarlError(f"--prior must be a number of virtual draws >= 0, not {prior}")
+    return float(prior)
+
+
+def resolve_anchor(league, name: str | None, env: str | None):
+    """The anchor a user named (any name ``marl`` understands: id, run/name, tag, bot, latest, best), in the env
+    the ladder will use; None for the default anchor."""
+    if name is None:
+        return None
+    from ..league.ladder import pick_env
+    from ..league.names import resolve
+
+    return resolve(league, name, pick_env(league, env))
 
 
 def parse_anchor(anchor: str | None) -> tuple[str | None, float]:
@@ -48,28 +69,32 @@ def fit(
     results: Annotated[Path | None, typer.Option("--results", help="Rate the games of a CSV file "
                                                  "(player_a,player_b,result) instead of the league.")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Bootstrap seed.")] = 0,
+    prior: PriorOpt = DEFAULT_PRIOR,
     home: HomeOpt = None,
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Bradley-Terry maximum-likelihood ratings over the whole ledger (draw = half a point), 400 Elo scale."""
+    """Bradley-Terry ratings over the whole ledger (draw = half a point), 400 Elo scale: MAP under BayesElo's
+    prior of 2 virtual draws by default (--prior 0: maximum likelihood), with confidence intervals and ranks."""
     from ..league.ladder import fit_csv, ladder
 
     name, rating = parse_anchor(anchor)
     check_bootstrap(bootstrap)
+    prior = check_prior(prior)
     if results is not None:
         rows = fit_csv(results, anchor=name, anchor_rating=rating, bootstrap=bootstrap, confidence=confidence,
-                       seed=seed)
+                       seed=seed, prior=prior)
         title = f"ratings of {results}"
     else:
         league = open_league(home, db)
         try:
-            rows = ladder(league, check_env(env), anchor=name, anchor_rating=rating, bootstrap=bootstrap,
-                          confidence=confidence, seed=seed)
+            env = check_env(env)
+            rows = ladder(league, env, anchor=resolve_anchor(league, name, env), anchor_rating=rating,
+                          bootstrap=bootstrap, confidence=confidence, seed=seed, prior=prior)
         finally:
             league.close()
         title = "ratings fitted over the ledger"
-    render_ladder(rows, title, json_out=json_out)
+    render_ladder(rows, title, json_out=json_out, confidence=confidence, caption=prior_caption(prior))
 
 
 @app.command("gate")

@@ -1,10 +1,12 @@
-"""Rendering of ladder rows (shared by `marl league ladder` and `marl elo fit`)."""
+"""Rendering of ladder rows (shared by `marl league ladder`, `marl league tournament` and `marl elo fit`)."""
 
 from __future__ import annotations
 
 import csv
 import sys
+from typing import Any
 
+from rich.markup import escape
 from rich.table import Table
 
 from ._output import console, print_json
@@ -14,34 +16,63 @@ def _fmt_elo(x: float) -> str:
     return f"{x:.1f}"
 
 
+def prior_caption(prior: float) -> str:
+    """One line saying how the ratings were fitted and how ranks are counted."""
+    how = ("maximum likelihood (--prior 0)" if prior == 0 else
+           f"MAP with a prior of {prior:g} virtual draws (BayesElo's; --prior 0 for maximum likelihood)")
+    return f"Elo: {how}. rank: 1 + players stronger beyond doubt. (best): best snapshot of its run."
+
+
+def _csv_record(d: dict[str, Any]) -> dict[str, Any]:
+    """A row's JSON with ``vs`` flattened into ``vs_<bot>_score`` / ``vs_<bot>_games`` columns."""
+    out = {k: v for k, v in d.items() if k != "vs"}
+    for bot, rec in d.get("vs", {}).items():
+        out[f"vs_{bot}_score"] = "" if rec["score"] is None else rec["score"]
+        out[f"vs_{bot}_games"] = rec["games"]
+    return out
+
+
 def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool = False,
-                  online: dict[str, float] | None = None) -> None:
+                  online: dict[int, float] | None = None, confidence: float = 0.95,
+                  caption: str | None = None) -> None:
+    """Print ladder rows: JSON alone (``--json``), CSV (``--csv``) or a rich table.
+
+    ``online``: the online Elo by player id (an extra column). The table marks the anchor and the best snapshot
+    of each run (bold, ``(best)``), shows a flag next to the Elo, and one ``vs BOT`` column per scripted player
+    (score and games, blank without games).
+    """
     if json_out:
         print_json([r.to_json() for r in rows])
         return
     if csv_out:
         w = csv.writer(sys.stdout)
-        keys = list(rows[0].to_json()) if rows else ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins",
-                                                      "draws", "losses", "rank"]
+        records = [_csv_record(r.to_json()) for r in rows]
+        keys = list(records[0]) if records else ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins",
+                                                  "draws", "losses", "rank"]
         w.writerow(keys)
-        for r in rows:
-            d = r.to_json()
-            w.writerow([d[k] for k in keys])
+        for d in records:
+            w.writerow([d.get(k, "") for k in keys])
         return
-    table = Table(title=title)
+    table = Table(title=title, caption=caption)
     for col, just in (("rank", "right"), ("policy", "left"), ("kind", "left"), ("step", "right"),
-                      ("Elo", "right"), ("95% interval", "center"), ("games", "right"), ("W-D-L", "center"),
-                      ("score", "right")):
+                      ("Elo", "right"), (f"{100 * confidence:g}% interval", "center"), ("games", "right"),
+                      ("W-D-L", "center"), ("score", "right")):
         table.add_column(col, justify=just)
     if online:
         table.add_column("online", justify="right")
+    bots = [v.bot for v in rows[0].vs] if rows else []
+    for bot in bots:
+        table.add_column(f"vs {escape(bot)}", justify="right")
     for r in rows:
         note = f" ({r.flag})" if r.flag else ""
-        anchor = " (anchor)" if r.anchor else ""
-        cells = [str(r.rank), r.policy + anchor, r.kind, "" if r.step is None else f"{r.step:,}",
+        marks = (" (anchor)" if r.anchor else "") + (" (best)" if r.best else "")
+        cells = [str(r.rank), escape(r.policy) + marks, r.kind, "" if r.step is None else f"{r.step:,}",
                  _fmt_elo(r.elo) + note, f"{_fmt_elo(r.ci_low)} .. {_fmt_elo(r.ci_high)}", str(r.games),
                  f"{r.wins}-{r.draws}-{r.losses}", f"{100 * r.score:.1f}%"]
         if online:
-            cells.append(f"{online.get(r.policy, float('nan')):.0f}")
-        table.add_row(*cells)
+            value = online.get(r.player_id) if r.player_id is not None else None
+            cells.append("" if value is None else f"{value:.0f}")
+        for rec in r.vs:
+            cells.append("" if rec.score is None else f"{100 * rec.score:.0f}% of {rec.games}")
+        table.add_row(*cells, style="bold" if r.best else None)
     console.print(table)

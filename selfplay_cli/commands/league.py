@@ -7,6 +7,7 @@ from typing import Annotated
 import typer
 
 from ..errors import MarlError
+from ..stats.bradley_terry import DEFAULT_PRIOR
 from ._common import (
     DbOpt,
     DeviceOpt,
@@ -21,16 +22,41 @@ from ._common import (
     resolve_players,
 )
 from ._output import console
-from .elo import AnchorOpt, BootstrapOpt, check_bootstrap, parse_anchor
-from .ladder_view import render_ladder
+from .elo import AnchorOpt, BootstrapOpt, PriorOpt, check_bootstrap, check_prior, parse_anchor, resolve_anchor
+from .ladder_view import prior_caption, render_ladder
 
 app = typer.Typer(help="The ladder of the league and round-robin / gauntlet tournaments.", no_args_is_help=True)
 
 
-@app.command("ladder")
+LADDER_HELP = "\n\n".join((
+    "The ladder of one game: every player's Elo, fitted from all its stored rated games.",
+    "Columns: rank; policy, marked (anchor) for the player whose rating is fixed (--anchor, default the random bot "
+    "at 1000) and (best) in bold for the best snapshot of each run (its highest Elo); kind (bot or snapshot); "
+    "training step; Elo, the Bradley-Terry fit (a draw is half a point); its confidence interval (--confidence, "
+    "--bootstrap), relative to the anchor; games and W-D-L; score (points per game); online Elo (the live estimate "
+    "updated after every game); vs BOT, one column per scripted player of the game: the score against it and the "
+    "number of games (blank when none).",
+    "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
+    "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
+    "--prior 0 gives the plain maximum-likelihood fit.",
+    "Rank: 1 + the number of players stronger beyond doubt, those whose rating minus this one's has its whole "
+    "confidence interval above zero (or whose whole interval lies above this one's). Comparing two players "
+    "directly keeps out the uncertainty they share through the anchor. Players that cannot be told apart share a "
+    "rank. --run and --top only choose the rows shown: the ranks stay those of the whole ladder.",
+    "Flags next to the Elo: perfect or zero, only with --prior 0: the maximum-likelihood rating is infinite (all "
+    "games won or lost against the rest), the Elo shown is a bound and the interval is open on that side; "
+    "disconnected: no chain of games links the player to the anchor, so its offset is unknown; unrated: no games.",
+))
+
+
+@app.command("ladder", help=LADDER_HELP)
 def ladder_cmd(
     env: EnvOpt = None,
+    run: Annotated[str | None, typer.Option("--run", help="Show only this run's snapshots, plus the scripted "
+                                            "players for reference (ranks unchanged).")] = None,
+    top: Annotated[int | None, typer.Option("--top", help="Show only the first N rows (ranks unchanged).")] = None,
     anchor: AnchorOpt = None,
+    prior: PriorOpt = DEFAULT_PRIOR,
     bootstrap: BootstrapOpt = 200,
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the intervals.")] = 0.95,
     include_removed: Annotated[bool, typer.Option("--all", help="Also list removed snapshots.")] = False,
@@ -39,21 +65,37 @@ def ladder_cmd(
     json_out: JsonOpt = False,
     csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
 ) -> None:
-    """Rank, policy, kind, step, Elo with its interval, games, W-D-L and score. A player's rank counts only the
-    players whose whole interval lies above its own."""
-    from ..league.ladder import ladder
+    from ..league.ladder import ladder, select_rows
 
     if json_out and csv_out:
         raise MarlError("--json and --csv exclude each other")
+    if top is not None and top < 1:
+        raise MarlError(f"--top must be at least 1, not {top}")
     name, rating = parse_anchor(anchor)
+    prior = check_prior(prior)
     league = open_league(home, db)
     try:
-        rows = ladder(league, check_env(env), anchor=name, anchor_rating=rating, bootstrap=check_bootstrap(bootstrap),
-                      confidence=confidence, include_removed=include_removed)
-        online = {p.full_name: p.elo for p in league.players(env=env, include_removed=include_removed)}
+        env = check_env(env)
+        if run is not None:
+            r = league.get_run(run)
+            if r is None:
+                known = ", ".join(x.name for x in league.list_runs()[:10])
+                raise MarlError(f"no run named '{run}'" + (f"; runs: {known}" if known else ""))
+            if env is not None and r.env != env:
+                raise MarlError(f"run '{run}' plays {r.env}, not {env}")
+            env = r.env
+        rows = ladder(league, env, anchor=resolve_anchor(league, name, env), anchor_rating=rating,
+                      bootstrap=check_bootstrap(bootstrap), confidence=confidence, include_removed=include_removed,
+                      prior=prior)
+        online = {p.id: p.elo for p in league.players(include_removed=True)}
     finally:
         league.close()
-    render_ladder(rows, "league ladder", json_out=json_out, csv_out=csv_out, online=online)
+    shown = select_rows(rows, run=run, top=top)
+    title = "league ladder" + (f": run {run}" if run else "")
+    render_ladder(shown, title, json_out=json_out, csv_out=csv_out, online=online, confidence=confidence,
+                  caption=prior_caption(prior))
+    if run is not None and not json_out and not csv_out and not any(r.run == run for r in rows):
+        console.print(f"run {run} has no snapshot with rated games yet")
 
 
 @app.command("tournament")
@@ -125,7 +167,7 @@ def tournament(
         rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap))
     finally:
         league.close()
-    render_ladder(rows, f"{env} ladder after the tournament", json_out=json_out)
+    render_ladder(rows, f"{env} ladder after the tournament", json_out=json_out, caption=prior_caption(DEFAULT_PRIOR))
 
 
 from .league_views import matrix_cmd, plot_cmd  # noqa: E402  (views of the league: commands/league_views.py)

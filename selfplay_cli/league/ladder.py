@@ -3,28 +3,59 @@
 Nothing here is stored: every ladder is refitted from the games (:func:`ladder` from the league's
 ledger, :func:`fit_csv` from a ``player_a,player_b,result`` file), so it always agrees with the ledger.
 
-* :func:`fit_table` is the generic core: maximum-likelihood Bradley-Terry ratings anchored at one player
-  (:func:`~selfplay_cli.stats.bradley_terry.fit_bradley_terry`), a confidence interval per player and
-  Chatbot-Arena ranks (:func:`~selfplay_cli.stats.bradley_terry.rank_by_ci`: ``1 + #players whose lower bound
-  is above my upper bound``, so overlapping players share a rank).
-* :func:`ladder` fits the 2-seat games of one env of the league.
+* :func:`fit_table` is the generic core: Bradley-Terry ratings anchored at one player
+  (:func:`~selfplay_cli.stats.bradley_terry.fit_bradley_terry`), MAP under BayesElo's prior of
+  ``prior`` virtual draws (default :data:`~selfplay_cli.stats.bradley_terry.DEFAULT_PRIOR` = 2, as BayesElo;
+  ``prior=0`` is the plain maximum-likelihood fit), a confidence interval per player and ranks.
+* :func:`ladder` fits the 2-seat games of one env of the league, and adds what the league knows: each
+  snapshot's run, the best snapshot of each run, and every player's record against the env's scripted players.
+* :func:`select_rows` keeps one run's snapshots (plus the scripted players) and / or the first rows,
+  without changing any rank.
 * :func:`read_results_csv` / :func:`fit_csv` rate an external results file.
 * :func:`plan_tournament` says how many games each pair of a round robin / gauntlet still needs.
 * :func:`head_to_head` gives W/D/L and pentanomial (game-pair) counts of two players.
 
+The prior
+---------
+See :mod:`selfplay_cli.stats.bradley_terry`: ``V_ij = (prior / 2) N_ij (1/N_i + 1/N_j)`` virtual draws are added
+between every pair that played (BayesElo's ``AddPrior``), so a perfectly separated ledger (A always beats B, B
+always beats C) still has finite MAP ratings, ordered as the results say. The flags ``perfect`` / ``zero`` mean
+"the maximum-likelihood rating is infinite" and only appear with ``prior=0`` (where the rating shown is a
+bound); ``disconnected`` (no chain of games to the anchor: the offset is unknown) and ``unrated`` (no games)
+appear either way.
+
 Confidence intervals
 --------------------
-``bootstrap > 0``: the percentile bootstrap of :func:`~selfplay_cli.stats.bradley_terry.bootstrap_ci` (games
-resampled with replacement, ``bootstrap`` replicates, seeded). ``bootstrap == 0``: a normal approximation
-from the observed Fisher information, i.e. the negative Hessian of the Bradley-Terry log-likelihood at the
-fit. In natural-log units it is the weighted graph Laplacian ``L_ii = sum_j c_ij, L_ij = -c_ij`` with
-``c_ij = N_ij p_ij (1 - p_ij)``; with the anchor's row and column removed (the anchor is fixed) it is
-invertible on the anchor's connected component, and ``se_i = sqrt((L^-1)_ii) * 400 / ln 10`` Elo, interval
-``r_i -+ z se_i`` with ``z = Phi^-1((1 + confidence) / 2)``. Either way the intervals are relative to the
-anchor (whose interval is the single point ``anchor_rating``). Flagged players get an open side instead: a
-``perfect`` player's upper end and a ``zero`` player's lower end are ``rating +- MAX_ELO``; disconnected and
-unrated players get ``rating -+ MAX_ELO`` on both sides (normal approximation); standard errors are capped at
-``MAX_ELO``. Every number in a :class:`LadderRow` is finite.
+``bootstrap > 0``: the percentile bootstrap of :func:`~selfplay_cli.stats.bradley_terry.bootstrap_intervals`
+(games resampled with replacement, ``bootstrap`` replicates, seeded, the prior's virtual draws added to every
+replicate). ``bootstrap == 0``: the Laplace (normal) approximation
+(:func:`~selfplay_cli.stats.bradley_terry.laplace_intervals`): the negative Hessian of the log-posterior at the
+fit (with ``prior=0``: the observed Fisher information) is the weighted graph Laplacian
+``L_ii = sum_j c_ij, L_ij = -c_ij`` with ``c_ij = (N_ij + V_ij) p_ij (1 - p_ij)``; with the anchor's row and column
+removed it is invertible on the anchor's connected component, and ``se_i = sqrt((L^-1)_ii) * 400 / ln 10`` Elo,
+interval ``r_i -+ z se_i`` with ``z = Phi^-1((1 + confidence) / 2)``.
+
+Under a prior a percentile bootstrap alone would be dishonest for separated data: a player that won all its
+games wins all its games in every replicate, every replicate gives the same MAP and the interval would have
+zero width, a precision nobody measured. So under a prior the bootstrap interval is widened to contain the
+Laplace interval at the MAP: never narrower than the curvature of the log-posterior (the prior's virtual draws
+included) allows. Either way the intervals are relative to the anchor (whose interval is the single point
+``anchor_rating``). Without a prior, flagged players get an open side instead: a ``perfect`` player's upper end
+and a ``zero`` player's lower end are ``rating +- MAX_ELO``; disconnected and unrated players get
+``rating -+ MAX_ELO`` on both sides; standard errors are capped at ``MAX_ELO``. Every number in a
+:class:`LadderRow` is finite.
+
+Ranks
+-----
+:func:`~selfplay_cli.stats.bradley_terry.rank_pairwise`: ``rank = 1 + the number of players stronger beyond
+doubt``, i.e. players j for which the confidence interval of the difference ``r_j - r_i`` lies wholly above 0
+(from the same bootstrap replicates or Laplace covariance as the intervals, floored by the Laplace one under a
+prior), or whose whole interval lies above this player's. Players that cannot be told apart share a rank and
+ranks need not be consecutive. The difference is used, and not just the two intervals, because every interval
+is relative to the anchor: snapshots far above the anchor share the uncertainty of their link to it, so their
+intervals are wide and overlap even when their difference is measured precisely (a simulated 9-snapshot run
+put all nine at rank 1 by overlapping intervals, and separated them into 5 rank groups by differences).
+Players without an estimate (a flag) are compared by their whole intervals only.
 """
 
 from __future__ import annotations
@@ -32,6 +63,7 @@ from __future__ import annotations
 import csv
 import math
 from collections import defaultdict
+from collections.abc import Collection
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -41,39 +73,58 @@ import numpy.typing as npt
 
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.stats.bradley_terry import (
+    DEFAULT_PRIOR,
     FLAG_DISCONNECTED,
     FLAG_PERFECT,
     FLAG_UNRATED,
     FLAG_ZERO,
-    bootstrap_ci,
+    bootstrap_intervals,
     fit_bradley_terry,
-    rank_by_ci,
-    reachable,
+    laplace_intervals,
+    rank_pairwise,
 )
-from selfplay_cli.stats.elo import MAX_ELO, NAT_TO_ELO, normal_quantile
+from selfplay_cli.stats.elo import MAX_ELO
 
 __all__ = [
     "CSV_HEADER",
+    "DEFAULT_PRIOR",
+    "BotRecord",
     "LadderRow",
     "PairPlan",
     "fit_csv",
     "fit_table",
     "head_to_head",
     "ladder",
+    "pick_env",
     "plan_tournament",
     "read_results_csv",
+    "select_rows",
 ]
 
 CSV_HEADER = ("player_a", "player_b", "result")
 """The header a results CSV must have (whitespace around the names tolerated)."""
 
 _JSON_KEYS = ("policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
-              "score", "step", "flag", "anchor")
+              "score", "step", "flag", "anchor", "run", "best", "vs")
 
 
 # --------------------------------------------------------------------------------------------------
 # Rows
 # --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class BotRecord:
+    """A player's record against one scripted player: ``games`` played and ``points`` scored (draw = 1/2)."""
+
+    bot: str
+    games: int
+    points: float
+
+    @property
+    def score(self) -> float | None:
+        """Mean points per game, None without games."""
+        return self.points / self.games if self.games else None
 
 
 @dataclass(frozen=True)
@@ -85,13 +136,18 @@ class LadderRow:
         player_id: league player id (None for CSV players).
         kind: ``"bot"``, ``"snapshot"`` or ``"player"`` (CSV).
         step: training step of a snapshot (None for bots / CSV players).
-        elo: fitted Bradley-Terry rating (finite; a bound for flagged players).
+        elo: fitted Bradley-Terry rating (finite; MAP under a prior, a bound for ML-flagged players).
         ci_low, ci_high: confidence interval of the rating, relative to the anchor.
         games, wins, draws, losses: the player's record in the fitted games.
         score: mean points per game.
-        rank: Chatbot-Arena rank, ``1 + #players whose ci_low > this ci_high``.
-        flag: None, or the fit's flag: ``perfect``, ``zero``, ``disconnected``, ``unrated``.
+        rank: ``1 + #players stronger beyond doubt`` (see the module docstring).
+        flag: None, or the fit's flag: ``perfect``, ``zero`` (prior 0 only), ``disconnected``, ``unrated``.
         anchor: True for the anchor player.
+        run: the snapshot's run (None for bots, run-less snapshots and CSV players).
+        best: True for the best snapshot of its run (highest rating among the run's live snapshots that are
+            comparable with the anchor).
+        vs: the record against each scripted player of the env, in the league's bot order (empty for CSV
+            ladders); a bot's own entry has no games.
     """
 
     policy: str
@@ -109,10 +165,14 @@ class LadderRow:
     rank: int
     flag: str | None
     anchor: bool
+    run: str | None = None
+    best: bool = False
+    vs: tuple[BotRecord, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict: ``policy, kind, elo, ci_low, ci_high, games, wins, draws, losses, rank`` then
-        ``score, step, flag, anchor`` (Elo values rounded to 0.1, the score to 1e-4; never NaN / inf)."""
+        ``score, step, flag, anchor, run, best, vs`` (Elo values rounded to 0.1, scores to 1e-4; never NaN /
+        inf). ``vs`` maps each scripted player to ``{"score": s, "games": n}`` (``score`` null without games)."""
         for value in (self.elo, self.ci_low, self.ci_high, self.score):
             assert math.isfinite(value), f"non-finite value in ladder row {self.policy}: {value}"
         out: dict[str, Any] = {
@@ -130,6 +190,10 @@ class LadderRow:
             "step": None if self.step is None else int(self.step),
             "flag": self.flag,
             "anchor": bool(self.anchor),
+            "run": self.run,
+            "best": bool(self.best),
+            "vs": {v.bot: {"score": None if v.score is None else round(float(v.score), 4), "games": int(v.games)}
+                   for v in self.vs},
         }
         assert tuple(out) == _JSON_KEYS
         return out
@@ -140,42 +204,12 @@ class LadderRow:
 # --------------------------------------------------------------------------------------------------
 
 
-def _normal_ci(
-    ratings: npt.NDArray[np.float64], flags: list[str | None], a: npt.NDArray[np.int64], b: npt.NDArray[np.int64],
-    n_players: int, anchor: int, confidence: float,
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Normal-approximation intervals from the observed Fisher information (see the module docstring)."""
-    nmat = np.zeros((n_players, n_players))
-    np.add.at(nmat, (a, b), 1.0)
-    nmat = nmat + nmat.T
-    se = np.full(n_players, MAX_ELO)
-    se[anchor] = 0.0
-    idx = np.flatnonzero(reachable(nmat > 0, anchor) & (np.arange(n_players) != anchor))
-    if idx.size:
-        theta = (ratings - ratings[anchor]) / NAT_TO_ELO
-        p = 0.5 * (1.0 + np.tanh(0.5 * (theta[:, None] - theta[None, :])))
-        c = nmat * p * (1.0 - p)
-        lap = -c[np.ix_(idx, idx)]
-        lap[np.diag_indices_from(lap)] += c[idx].sum(axis=1)
-        try:
-            cov = np.linalg.inv(lap)
-        except np.linalg.LinAlgError:
-            cov = np.linalg.pinv(lap)
-        var = np.diag(cov)
-        sub = np.sqrt(np.where(np.isfinite(var) & (var > 0.0), var, 0.0)) * NAT_TO_ELO
-        sub[~np.isfinite(var) | (var < 0.0)] = MAX_ELO
-        se[idx] = np.minimum(sub, MAX_ELO)
-    z = normal_quantile(0.5 + 0.5 * confidence)
-    low, high = ratings - z * se, ratings + z * se
-    return low, high
-
-
 def _open_flagged_sides(ratings: np.ndarray, flags: list[str | None], low: np.ndarray, high: np.ndarray,
                         anchor: int) -> None:
-    """Intervals of players without a maximum-likelihood rating are open on the unknown side (whatever
-    interval method was used): a perfect score has no upper limit, a zero score no lower one, and a player not
-    connected to the anchor neither. The open side is drawn at +-MAX_ELO from the bound. The anchor's rating
-    is fixed by definition, so its interval stays a point."""
+    """Intervals of players without an estimate are open on the unknown side (whatever interval method was
+    used): a perfect score has no upper limit under maximum likelihood, a zero score no lower one, and a player
+    not connected to the anchor neither. The open side is drawn at +-MAX_ELO from the rating. The anchor's
+    rating is fixed by definition, so its interval stays a point."""
     for i, flag in enumerate(flags):
         if i == anchor:
             continue
@@ -189,12 +223,15 @@ def _sort_rows(rows: list[LadderRow]) -> list[LadderRow]:
     return sorted(rows, key=lambda r: (r.rank, -r.elo, r.policy))
 
 
-def _rerank(rows: list[LadderRow]) -> list[LadderRow]:
-    """Recompute the CI ranks among ``rows`` only (after some rows were hidden) and sort."""
-    if not rows:
-        return []
-    ranks = rank_by_ci([r.elo for r in rows], [r.ci_low for r in rows], [r.ci_high for r in rows])
-    return _sort_rows([replace(r, rank=int(k)) for r, k in zip(rows, ranks, strict=True)])
+def check_prior(prior: float) -> float:
+    """``prior`` as a float; LeagueError unless it is a finite number >= 0."""
+    try:
+        value = float(prior)
+    except (TypeError, ValueError):
+        raise LeagueError(f"the prior must be a number of virtual draws >= 0, not {prior!r}") from None
+    if not math.isfinite(value) or value < 0:
+        raise LeagueError(f"the prior must be a number of virtual draws >= 0, not {prior}")
+    return value
 
 
 def fit_table(
@@ -210,17 +247,22 @@ def fit_table(
     kinds: dict[str, str] | None = None,
     steps: dict[str, int] | None = None,
     player_ids: dict[str, int] | None = None,
+    *,
+    prior: float = DEFAULT_PRIOR,
+    hidden: Collection[str] = (),
 ) -> list[LadderRow]:
     """Fit a ladder from games given as index arrays into ``names``.
 
-    Bradley-Terry maximum likelihood anchored at ``anchor`` (its rating is ``anchor_rating``), intervals by
-    a ``bootstrap``-replicate percentile bootstrap (``bootstrap=0``: normal approximation from the Fisher
-    information, see the module docstring), ranks by :func:`rank_by_ci`. One row per name (players without
-    games are flagged ``unrated``), sorted by ``(rank, -elo, name)``. ``kinds`` / ``steps`` / ``player_ids``
-    (keyed by name) fill the corresponding columns (default kind ``"player"``).
+    Bradley-Terry MAP ratings under BayesElo's prior of ``prior`` virtual draws (``prior=0``: maximum
+    likelihood) anchored at ``anchor`` (its rating is ``anchor_rating``), intervals by a ``bootstrap``-replicate
+    percentile bootstrap (``bootstrap=0``: Laplace / normal approximation), ranks by
+    :func:`~selfplay_cli.stats.bradley_terry.rank_pairwise` (see the module docstring). One row per name (players
+    without games are flagged ``unrated``), sorted by ``(rank, -elo, name)``. ``kinds`` / ``steps`` /
+    ``player_ids`` (keyed by name) fill the corresponding columns (default kind ``"player"``). Players in
+    ``hidden`` are fitted (their games count) but get no row and take no part in the ranks.
 
     Raises:
-        LeagueError: anchor not among the names, no games, bad indices or options.
+        LeagueError: anchor not among the names (or hidden), no games, bad indices or options.
     """
     names = [str(n) for n in names]
     if len(set(names)) != len(names):
@@ -232,6 +274,7 @@ def fit_table(
         raise LeagueError(f"bootstrap must be >= 0, got {bootstrap}")
     if not 0.0 < confidence < 1.0:
         raise LeagueError(f"confidence must be between 0 and 1, got {confidence}")
+    prior = check_prior(prior)
     ai = np.asarray(a, dtype=np.int64).ravel()
     bi = np.asarray(b, dtype=np.int64).ravel()
     sc = np.asarray(score_a, dtype=np.float64).ravel()
@@ -240,12 +283,13 @@ def fit_table(
     n = len(names)
     k = names.index(anchor)
     try:
-        fit = fit_bradley_terry(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating)
+        fit = fit_bradley_terry(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating, prior_games=prior)
         if bootstrap > 0:
-            low, high = bootstrap_ci(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating, n_boot=bootstrap,
-                                     confidence=confidence, seed=seed)
+            low, high, diff_sd = bootstrap_intervals(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating,
+                                                     n_boot=bootstrap, confidence=confidence, seed=seed,
+                                                     prior_games=prior)
         else:
-            low, high = _normal_ci(fit.ratings, fit.flags, ai, bi, n, k, confidence)
+            low, high, diff_sd = laplace_intervals(ai, bi, n, fit.ratings, k, confidence, prior)
     except ValueError as exc:
         raise LeagueError(f"cannot fit ratings: {exc}") from exc
     ratings = np.asarray(fit.ratings, dtype=np.float64)
@@ -254,7 +298,10 @@ def fit_table(
     _open_flagged_sides(ratings, list(fit.flags), low, high, k)
     if not (np.all(np.isfinite(ratings)) and np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
         raise AssertionError("rating fit produced a non-finite value")  # pragma: no cover
-    ranks = rank_by_ci(ratings, low, high)
+    shown = np.array([name not in hidden for name in names])
+    ranks = np.zeros(n, dtype=np.int64)
+    ranks[shown] = rank_pairwise(ratings[shown], low[shown], high[shown], diff_sd[np.ix_(shown, shown)],
+                                 confidence, [f is None for f, s in zip(fit.flags, shown, strict=True) if s])
     kinds, steps, player_ids = kinds or {}, steps or {}, player_ids or {}
     rows = [
         LadderRow(
@@ -264,6 +311,7 @@ def fit_table(
             rank=int(ranks[i]), flag=fit.flags[i], anchor=i == k,
         )
         for i, name in enumerate(names)
+        if shown[i]
     ]
     return _sort_rows(rows)
 
@@ -287,7 +335,8 @@ def _envs_in_order(league: League) -> list[str]:
     return list(envs)
 
 
-def _pick_env(league: League, env: str | None) -> str:
+def pick_env(league: League, env: str | None) -> str:
+    """``env``, or the ledger's only env when None (LeagueError when it has none or several)."""
     if env is not None:
         return env
     envs = _envs_in_order(league)
@@ -310,26 +359,93 @@ def _default_anchor(population: list[PlayerRow], games: dict[int, int]) -> Playe
     return max(live, key=lambda p: (games[p.id], -p.id))
 
 
+def _find_anchor(population: list[PlayerRow], anchor: PlayerRow | int | str, env: str) -> PlayerRow:
+    """The anchor among the players with games: a player row, an id (``17``, ``"#17"``) or a full name."""
+    if isinstance(anchor, PlayerRow):
+        pid: int | None = anchor.id
+        label = anchor.full_name
+    elif isinstance(anchor, int | np.integer):
+        pid, label = int(anchor), f"#{int(anchor)}"
+    else:
+        label = str(anchor).strip()
+        digits = label[1:] if label.startswith("#") else label
+        pid = int(digits) if digits.isdigit() else None
+        if pid is None:
+            named = [p for p in population if p.full_name == label]
+            if named:
+                return named[0]
+    for p in population:
+        if p.id == pid:
+            return p
+    shown = ", ".join(p.full_name for p in population[:12]) + (", ..." if len(population) > 12 else "")
+    raise LeagueError(f"anchor '{label}' has no games in {env}; players with games: {shown}")
+
+
+def _bot_records(ids: npt.NDArray[np.int64], a: npt.NDArray[np.int64], b: npt.NDArray[np.int64],
+                 score_a: npt.NDArray[np.float64], bots: list[PlayerRow]) -> dict[int, tuple[BotRecord, ...]]:
+    """Every player's games and points against each bot (draw = 1/2), keyed by player id."""
+    n = ids.size
+    games = np.zeros((n, n))
+    points = np.zeros((n, n))
+    np.add.at(games, (a, b), 1.0)
+    np.add.at(games, (b, a), 1.0)
+    np.add.at(points, (a, b), score_a)
+    np.add.at(points, (b, a), 1.0 - score_a)
+    index = {int(pid): i for i, pid in enumerate(ids.tolist())}
+    out = {}
+    for pid, i in index.items():
+        recs = []
+        for bot in bots:
+            j = index.get(bot.id)
+            g = 0 if j is None else int(round(games[i, j]))
+            recs.append(BotRecord(bot=bot.name, games=g, points=0.0 if j is None else float(points[i, j])))
+        out[pid] = tuple(recs)
+    return out
+
+
+def _mark_best(rows: list[LadderRow], removed: set[int]) -> list[LadderRow]:
+    """``best=True`` on each run's highest-rated live snapshot; players comparable with the anchor first (a
+    ``disconnected`` or ``unrated`` rating only counts when no snapshot of the run has a comparable one)."""
+    by_run: dict[str, list[LadderRow]] = defaultdict(list)
+    for r in rows:
+        if r.kind == "snapshot" and r.run is not None and r.player_id not in removed:
+            by_run[r.run].append(r)
+    best_ids = set()
+    for members in by_run.values():
+        comparable = [r for r in members if r.flag not in (FLAG_DISCONNECTED, FLAG_UNRATED)] or members
+        best_ids.add(max(comparable, key=lambda r: (r.elo, -(r.player_id or 0))).player_id)
+    return [replace(r, best=True) if r.player_id in best_ids else r for r in rows]
+
+
 def ladder(
     league: League,
     env: str | None = None,
-    anchor: str | None = None,
+    anchor: PlayerRow | int | str | None = None,
     anchor_rating: float = 1000.0,
     bootstrap: int = 200,
     confidence: float = 0.95,
     seed: int = 0,
     include_removed: bool = False,
+    *,
+    prior: float = DEFAULT_PRIOR,
 ) -> list[LadderRow]:
     """The ladder of ``env``: a :func:`fit_table` over all 2-seat games of that env in the ledger.
 
     ``env=None`` uses the ledger's only env (LeagueError if it has several, or no games at all); an env
-    without games gives an empty list. Only players with games appear. The default anchor is the env's
-    ``random`` bot if it played, else the first bot (lowest id) that played, else the (non-removed) player
-    with the most games; ``anchor`` may name any player (resolved with :func:`names.resolve`) that has games
-    in the env. Removed snapshots are fitted (their games count) but left out of the result unless
-    ``include_removed``; ranks are then recomputed among the rows shown.
+    without games gives an empty list. Only players with games appear. ``prior``: BayesElo's prior in virtual
+    draws (default :data:`DEFAULT_PRIOR` = 2, BayesElo's default; 0 = maximum likelihood).
+
+    The default anchor is the env's ``random`` bot if it played, else the first bot (lowest id) that played,
+    else the (non-removed) player with the most games. ``anchor`` may be a player row (e.g. from
+    :func:`selfplay_cli.league.names.resolve`, which understands every name a user types), a player id
+    (``17`` or ``"#17"``) or a full name as shown in the ladder (``"r1/ep90"``, ``"cpu"``); the anchor must
+    have games in the env. Removed snapshots are fitted (their games count) but left out of the rows and the
+    ranks unless ``include_removed``.
+
+    Each row also carries its ``run``, ``best`` (the best snapshot of its run) and ``vs`` (its record
+    against each scripted player of the env: ``league.players(env=env, kind="bot")``).
     """
-    env = _pick_env(league, env)
+    env = pick_env(league, env)
     table = league.games(env=env)
     if len(table) == 0:
         return []
@@ -338,14 +454,11 @@ def ladder(
     population = [known[int(i)] if int(i) in known else league.get_player(int(i)) for i in ids.tolist()]
     games = dict(zip(ids.tolist(), (np.bincount(a, minlength=ids.size) + np.bincount(b, minlength=ids.size))
                      .tolist(), strict=True))
-    if anchor is None:
-        anchor_player = _default_anchor(population, games)
-    else:
-        from selfplay_cli.league.names import resolve
-
-        anchor_player = resolve(league, anchor, env)
-        if anchor_player.id not in games:
-            raise LeagueError(f"anchor '{anchor}' ({anchor_player.full_name}) has no games in {env}")
+    anchor_player = _default_anchor(population, games) if anchor is None else _find_anchor(population, anchor, env)
+    removed = {p.id for p in population if p.removed}
+    hidden = set() if include_removed else {p.full_name for p in population if p.removed}
+    if anchor_player.full_name in hidden:
+        hidden.discard(anchor_player.full_name)  # an explicitly chosen removed anchor stays visible
     names = [p.full_name for p in population]
     rows = fit_table(
         names, a, b, table.score_a, anchor=anchor_player.full_name, anchor_rating=anchor_rating,
@@ -353,11 +466,27 @@ def ladder(
         kinds={p.full_name: p.kind for p in population},
         steps={p.full_name: p.step for p in population if not p.is_bot},
         player_ids={p.full_name: p.id for p in population},
+        prior=prior, hidden=hidden,
     )
-    removed = {p.id for p in population if p.removed}
-    if include_removed or not removed:
-        return rows
-    return _rerank([r for r in rows if r.player_id not in removed])
+    bots = league.players(env=env, kind="bot", include_removed=True)
+    records = _bot_records(ids, a, b, table.score_a, bots)
+    run_of = {p.id: p.run for p in population if not p.is_bot}
+    rows = [replace(r, run=run_of.get(r.player_id), vs=records.get(r.player_id, ())) for r in rows]  # type: ignore[arg-type]
+    return _mark_best(rows, removed)
+
+
+def select_rows(rows: list[LadderRow], run: str | None = None, top: int | None = None) -> list[LadderRow]:
+    """The rows to show: with ``run``, that run's snapshots plus the scripted players (for reference); with
+    ``top``, the first ``top`` of those. Order and ranks are kept: a rank is always the one in the whole ladder.
+
+    Raises:
+        LeagueError: ``top < 1``.
+    """
+    if top is not None and top < 1:
+        raise LeagueError(f"--top must be at least 1, not {top}")
+    if run is not None:
+        rows = [r for r in rows if r.run == run or r.kind == "bot"]
+    return rows if top is None else rows[:top]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -443,14 +572,17 @@ def fit_csv(
     bootstrap: int = 200,
     confidence: float = 0.95,
     seed: int = 0,
+    *,
+    prior: float = DEFAULT_PRIOR,
 ) -> list[LadderRow]:
     """Ladder of a results CSV (:func:`read_results_csv`); the default anchor is the file's first player.
 
-    Rows have kind ``"player"`` and no id / step.
+    ``prior``: BayesElo's prior in virtual draws (0 = maximum likelihood). Rows have kind ``"player"`` and no
+    id / step / run / bot records.
     """
     names, a, b, s = read_results_csv(path)
     return fit_table(names, a, b, s, anchor=names[0] if anchor is None else anchor, anchor_rating=anchor_rating,
-                     bootstrap=bootstrap, confidence=confidence, seed=seed)
+                     bootstrap=bootstrap, confidence=confidence, seed=seed, prior=prior)
 
 
 # --------------------------------------------------------------------------------------------------

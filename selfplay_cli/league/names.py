@@ -6,14 +6,17 @@ Resolution order (the first rule that applies decides):
 1. an integer id, ``"17"`` or ``"#17"``;
 2. ``latest``: the most recently added non-removed snapshot of the env;
 3. ``best``: the highest fitted rating of the env among non-removed snapshots and bots
-   (``ladder(league, env, bootstrap=0)``; players whose rating is not comparable to the anchor's, i.e.
-   flagged ``disconnected``, are only considered if nobody else is rated);
+   (``ladder(league, env, bootstrap=0)``, the ladder's default prior; players whose rating is not comparable
+   to the anchor's, i.e. flagged ``disconnected``, are only considered if nobody else is rated);
 4. ``run/name``;
 5. a tag, a bot name or a bare snapshot name (``ep90``) - all matches together; more than one distinct
    player is an ambiguity error.
 
 Removed snapshots are not resolved unless ``include_removed=True`` (for ``marl show``); naming one gives
 an error saying it was removed.
+
+Imports go one way: this module uses :mod:`selfplay_cli.league.ladder` (for ``best``); the ladder never resolves
+names itself (its ``anchor`` is a player row, an id or a full name; commands resolve what users type here first).
 """
 
 from __future__ import annotations
@@ -21,13 +24,13 @@ from __future__ import annotations
 import difflib
 from collections.abc import Callable, Iterable
 
-from selfplay_cli.league import ladder as _ladder
+from selfplay_cli.league.ladder import LadderRow, ladder
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.stats.bradley_terry import FLAG_DISCONNECTED, FLAG_UNRATED
 
 __all__ = ["MAX_CANDIDATES", "LadderFn", "resolve", "resolve_many"]
 
-LadderFn = Callable[[League, "str | None"], "list[_ladder.LadderRow]"]
+LadderFn = Callable[[League, "str | None"], "list[LadderRow]"]
 """``ladder_fn(league, env) -> rows``: how ``best`` gets its ratings (default: a bootstrap-free ladder)."""
 
 MAX_CANDIDATES = 10
@@ -38,8 +41,8 @@ def _where(env: str | None) -> str:
     return env or "the league"
 
 
-def _default_ladder(league: League, env: str | None) -> list[_ladder.LadderRow]:
-    return _ladder.ladder(league, env, bootstrap=0)
+def _default_ladder(league: League, env: str | None) -> list[LadderRow]:
+    return ladder(league, env, bootstrap=0)
 
 
 def _label(players: list[PlayerRow]) -> str:
@@ -148,9 +151,9 @@ def resolve_many(
 ) -> list[PlayerRow]:
     """:func:`resolve` each name in order (the ladder behind ``best`` is fitted at most once)."""
     base = ladder_fn or _default_ladder
-    cache: dict[str | None, list[_ladder.LadderRow]] = {}
+    cache: dict[str | None, list[LadderRow]] = {}
 
-    def cached(lg: League, e: str | None) -> list[_ladder.LadderRow]:
+    def cached(lg: League, e: str | None) -> list[LadderRow]:
         if e not in cache:
             cache[e] = base(lg, e)
         return cache[e]

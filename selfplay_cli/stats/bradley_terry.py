@@ -1,6 +1,46 @@
-"""Bradley-Terry (Elo) ratings of a whole population from its games: maximum likelihood or MAP with virtual
-draws (BayesElo's prior), Hunter's (2004) existence condition handled explicitly, percentile-bootstrap
-intervals and Chatbot-Arena style ranks.
+"""Bradley-Terry (Elo) ratings of a whole population from its games: maximum likelihood, or MAP under
+BayesElo's prior of virtual draws; Hunter's (2004) existence condition handled explicitly; intervals
+(percentile bootstrap, Laplace / normal approximation) and Chatbot-Arena style ranks.
+
+The prior (BayesElo's)
+----------------------
+Rémi Coulom's BayesElo regularises the Bradley-Terry likelihood with *virtual draws*. Its source
+(``CCondensedResults::AddPrior`` in ``CCondensedResults.cpp``; the default ``Prior(2.0)`` in
+``CEloRatingCUI.cpp``, help text "prior [x] ... get[set] prior (= number of virtual draws)"; read in
+github.com/ddugovic/BayesianElo, an import of http://remi-coulom.fr/Bayesian-Elo/) adds, for every player
+``i`` and every opponent ``j`` of ``i``, ``prior * 0.25 * N_ij / N_i`` draws to each of the four
+(colour, side) draw counters of the pair, i.e. ``(prior / 2) * N_ij / N_i`` virtual draws between ``i``
+and ``j``, where ``N_ij`` is the number of real games between them and ``N_i`` all of ``i``'s games. Both
+players of a pair do this, so the pair receives
+
+    V_ij = (prior / 2) * N_ij * (1 / N_i + 1 / N_j)
+
+virtual draws. Two players that only met each other get ``prior`` virtual draws between them; in general
+every player spreads ``prior / 2`` draws over its opponents pro rata and receives a share of each opponent's.
+:func:`prior_draws` computes ``V``; :data:`DEFAULT_PRIOR` is BayesElo's default, 2. A virtual draw counts as
+half a point to each side, like a real draw here (BayesElo itself models draws with its own ``eloDraw``
+parameter; with the half-point convention used here a draw is half a win and half a loss). Because the
+virtual draws sit on the edges of the game graph, the posterior has a finite maximum (the MAP ratings)
+for every player connected to the anchor by a chain of games, whatever the results: a perfect or zero
+score gives a finite, data-and-prior-determined rating, not a bound. ``prior_games=0`` is the pure
+maximum-likelihood fit, with Hunter's existence condition handled as :func:`fit_bradley_terry` describes.
+
+Intervals
+---------
+:func:`laplace_ci`: the Laplace (normal) approximation of the log-posterior at the fit: its negative Hessian
+is the weighted graph Laplacian of ``c_ij = (N_ij + V_ij) p_ij (1 - p_ij)`` (the virtual draws included),
+with the anchor's row and column removed; ``se_i = sqrt((L^-1)_ii)`` nats. With ``prior_games=0`` it is the
+usual Wald interval from the observed Fisher information.
+
+:func:`bootstrap_ci`: the percentile bootstrap; every replicate resamples the real games and adds the prior's
+virtual draws afresh (the prior is part of the model, not data). A percentile bootstrap alone is dishonest
+under the prior when the data are separated: a player that won every game wins every game of every
+replicate, all replicates give the same MAP and the percentile interval has zero width, a precision the
+data never showed. So with a prior the reported interval is the union of the percentile interval and the
+Laplace interval at the full-data MAP: never narrower than the curvature of the log-posterior says. (The
+Laplace interval is symmetric while the posterior of a perfect score is skewed towards higher ratings; it
+is a floor on the width, not an exact posterior interval.) Without a prior the bootstrap is reported as is
+and the unbounded side of flagged players is opened by the caller.
 
 numpy and the standard library only.
 """
@@ -13,16 +53,22 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from .elo import MAX_ELO, NAT_TO_ELO
+from .elo import MAX_ELO, NAT_TO_ELO, normal_quantile
 
-__all__ = ["BOUND_PRIOR_GAMES", "FLAG_DISCONNECTED", "FLAG_PERFECT", "FLAG_UNRATED", "FLAG_ZERO", "BTFit",
-           "bootstrap_ci", "fit_bradley_terry", "rank_by_ci", "reachable"]
+__all__ = ["BOUND_PRIOR_GAMES", "DEFAULT_PRIOR", "FLAG_DISCONNECTED", "FLAG_PERFECT", "FLAG_UNRATED", "FLAG_ZERO",
+           "BTFit", "bootstrap_ci", "bootstrap_intervals", "fit_bradley_terry", "laplace_ci", "laplace_intervals",
+           "prior_draws", "rank_by_ci", "rank_pairwise", "reachable"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
+DEFAULT_PRIOR: float = 2.0
+"""BayesElo's default prior (``Prior(2.0)`` in its ``CEloRatingCUI.cpp``): the number of virtual draws, see
+:func:`prior_draws`. Two players that only met each other get 2 virtual draws between them."""
+
 BOUND_PRIOR_GAMES: float = 1.0
-"""Weight, in games, of the virtual draw that turns an infinite ML rating into a finite bound."""
+"""Maximum likelihood only (``prior_games=0``): weight, in games, of the virtual draw that turns an infinite ML
+rating into a finite, flagged bound."""
 
 FLAG_PERFECT = "perfect"
 FLAG_ZERO = "zero"
@@ -160,6 +206,19 @@ def reachable(adj: npt.NDArray[np.bool_], start: int) -> npt.NDArray[np.bool_]:
     return seen
 
 
+def prior_draws(n: FloatArray, prior_games: float) -> FloatArray:
+    """BayesElo's virtual draws on the game graph: ``V_ij = (prior / 2) * N_ij * (1 / N_i + 1 / N_j)``.
+
+    ``n[i, j] = n[j, i]``: (weighted) games between i and j; ``N_i`` = row sums. Zero where no game was played,
+    and all zero for ``prior_games == 0``. See the module docstring for the source of the definition.
+    """
+    if prior_games < 0:
+        raise ValueError("prior_games must be non-negative")
+    games = n.sum(axis=1)
+    share = np.divide(n, games[:, None], out=np.zeros_like(n), where=games[:, None] > 0)
+    return 0.5 * prior_games * (share + share.T)
+
+
 def _fit_matrices(
     w: FloatArray, n: FloatArray, anchor: int, anchor_rating: float, prior_games: float,
     init: FloatArray | None, tol: float, max_iter: int,
@@ -188,37 +247,37 @@ def _fit_matrices(
         members = np.flatnonzero(comp)
         with_anchor = bool(comp[anchor])
         root = anchor if with_anchor else int(members[np.argmax(games[members])])
-        fwd = reachable(scored, root)  # players the root's group (transitively) scored against
-        bwd = reachable(scored.T, root)  # players that (transitively) scored against the root
-        main = fwd & bwd  # strongly connected component of the root: ML exists there (Hunter 2004)
-        for i in members:
-            if not with_anchor:
-                flags[i] = FLAG_DISCONNECTED
-            elif main[i]:
-                continue
-            elif bwd[i] and not fwd[i]:  # scored against the anchor's group, never conceded to it
-                flags[i] = FLAG_PERFECT
-            elif fwd[i] and not bwd[i]:
-                flags[i] = FLAG_ZERO
-            else:
-                flags[i] = FLAG_DISCONNECTED
         r = int(np.searchsorted(members, root))
         wc, nc = w[np.ix_(members, members)], n[np.ix_(members, members)]
-        main_c = main[members]
         theta = start_theta[members] - start_theta[root]
         theta[r] = 0.0
-        # Virtual draws: prior_games for everybody, at least BOUND_PRIOR_GAMES for players outside
-        # the root's strongly connected component; spread over each player's opponents pro rata.
-        g = np.where(main_c, prior_games, max(prior_games, BOUND_PRIOR_GAMES))
-        v = (g / games[members])[:, None] * nc
-        v = v + v.T
-        wv, nv = wc + 0.5 * v, nc + v
         if prior_games > 0.0:
+            # MAP: the virtual draws link every pair that met, so the posterior has a finite maximum on the
+            # whole component; only its offset to another component stays undetermined.
+            if not with_anchor:
+                for i in members:
+                    flags[i] = FLAG_DISCONNECTED
+            v = prior_draws(nc, prior_games)
             free = np.ones(members.size, dtype=bool)
             free[r] = False
-            theta, its, ok = _newton(wv, nv, theta, free, tol_nat, max_iter)
+            theta, its, ok = _newton(wc + 0.5 * v, nc + v, theta, free, tol_nat, max_iter)
             iterations, converged = iterations + its, converged and ok
         else:
+            fwd = reachable(scored, root)  # players the root's group (transitively) scored against
+            bwd = reachable(scored.T, root)  # players that (transitively) scored against the root
+            main = fwd & bwd  # strongly connected component of the root: ML exists there (Hunter 2004)
+            for i in members:
+                if not with_anchor:
+                    flags[i] = FLAG_DISCONNECTED
+                elif main[i]:
+                    continue
+                elif bwd[i] and not fwd[i]:  # scored against the anchor's group, never conceded to it
+                    flags[i] = FLAG_PERFECT
+                elif fwd[i] and not bwd[i]:
+                    flags[i] = FLAG_ZERO
+                else:
+                    flags[i] = FLAG_DISCONNECTED
+            main_c = main[members]
             mi = np.flatnonzero(main_c)
             free_m = np.ones(mi.size, dtype=bool)
             free_m[int(np.flatnonzero(mi == r)[0])] = False
@@ -226,10 +285,15 @@ def _fit_matrices(
             th_m, its, ok = _newton(wc[sub], nc[sub], theta[mi], free_m, tol_nat, max_iter)
             iterations, converged = iterations + its, converged and ok
             if not main_c.all():
+                # Bounds: BOUND_PRIOR_GAMES virtual draws for each player outside the root's strongly connected
+                # component, spread over its opponents pro rata (symmetrised); main stays fixed.
+                g = np.where(main_c, 0.0, BOUND_PRIOR_GAMES)
+                v = (g / games[members])[:, None] * nc
+                v = v + v.T
                 # Start the bounded players from their heuristic, shifted like the main group moved.
                 theta[~main_c] += float(np.mean(th_m - theta[mi]))
                 theta[mi] = th_m
-                theta, its, ok = _newton(wv, nv, theta, ~main_c, tol_nat, max_iter)
+                theta, its, ok = _newton(wc + 0.5 * v, nc + v, theta, ~main_c, tol_nat, max_iter)
                 iterations, converged = iterations + its, converged and ok
             else:
                 theta[mi] = th_m
@@ -293,7 +357,7 @@ def fit_bradley_terry(
     tol: float = 1e-6,
     max_iter: int = 100,
 ) -> BTFit:
-    """Maximum-likelihood Bradley-Terry (Elo) ratings of a population from a list of games.
+    """Maximum-likelihood (``prior_games=0``) or MAP Bradley-Terry (Elo) ratings of a population from its games.
 
     Model: game ``k`` between ``a[k]`` and ``b[k]`` gives A ``score_a[k]`` points (1 win, 1/2 draw,
     0 loss) and B ``1 - score_a[k]``, with ``P(a beats b) = E(r_a - r_b) = 1 / (1 + 10**(-(r_a - r_b)/400))``.
@@ -334,9 +398,12 @@ def fit_bradley_terry(
        their players are flagged ``"disconnected"`` (their ratings are not comparable to the anchor's);
     4. players without any (non-zero-weight) game get ``anchor_rating`` and the flag ``"unrated"``.
 
-    ``prior_games > 0`` turns this into a MAP fit: every player gets ``prior_games`` virtual draws (at
-    least ``BOUND_PRIOR_GAMES`` for flagged players) spread over its opponents, and each connected
-    component is fitted in one piece. Ratings are always finite, never NaN.
+    ``prior_games > 0`` turns this into a MAP fit under BayesElo's prior: ``V = prior_draws(N, prior_games)``
+    virtual draws are added to the games (module docstring) and each connected component is fitted in one
+    piece, by the same Newton iteration. The MAP is finite for every player with games, so nobody is flagged
+    ``"perfect"`` or ``"zero"``: those flags say that the *maximum-likelihood* rating is infinite, which is
+    not the estimate reported under a prior. ``"disconnected"`` (a component without the anchor) and
+    ``"unrated"`` keep their meaning. Ratings are always finite, never NaN.
 
     Args:
         a, b: int arrays of player indices (``0 <= a, b < n_players``, ``a != b``).
@@ -344,7 +411,8 @@ def fit_bradley_terry(
         n_players: population size.
         anchor, anchor_rating: the player whose rating is fixed, and its value.
         weights: optional non-negative weight per game.
-        prior_games: virtual draws per player (0 = pure maximum likelihood).
+        prior_games: BayesElo's prior, in virtual draws (:func:`prior_draws`; 0 = pure maximum likelihood;
+            the ladder's default is :data:`DEFAULT_PRIOR`).
         init: optional warm start (Elo ratings, e.g. a previous fit's ``ratings``).
         tol: convergence tolerance on the ratings, in Elo.
         max_iter: Newton iteration cap per sub-problem.
@@ -378,7 +446,92 @@ def fit_bradley_terry(
     )
 
 
-def bootstrap_ci(
+def _difference_sd(cov: FloatArray) -> FloatArray:
+    """``sd(r_i - r_j) = sqrt(cov_ii + cov_jj - 2 cov_ij)`` for every pair (clipped at 0 before the root)."""
+    d = np.diag(cov)
+    return np.sqrt(np.maximum(d[:, None] + d[None, :] - 2.0 * cov, 0.0))
+
+
+def laplace_intervals(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    n_players: int,
+    ratings: npt.ArrayLike,
+    anchor: int = 0,
+    confidence: float = 0.95,
+    prior_games: float = 0.0,
+    weights: npt.ArrayLike | None = None,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`laplace_ci` and, third, the ``(n, n)`` standard deviations of the rating differences ``r_i - r_j``
+    (Elo) from the same covariance ``L^-1`` (so the uncertainty two players share through the anchor cancels).
+    Players outside the anchor's component have ``MAX_ELO`` there."""
+    ai, bi, _, wt = _validate_games(a, b, np.zeros(np.asarray(a).size), n_players, anchor, weights)
+    if not 0.0 < confidence < 1.0:
+        raise ValueError("confidence must be in (0, 1)")
+    r = np.asarray(ratings, dtype=np.float64).ravel()
+    if r.size != n_players or not np.all(np.isfinite(r)):
+        raise ValueError("ratings must be finite, one per player")
+    _, n = _pair_matrices(ai, bi, np.zeros(ai.size), wt, n_players)
+    nn = n + prior_draws(n, float(prior_games))
+    cov = np.diag(np.full(n_players, MAX_ELO**2))
+    cov[anchor, anchor] = 0.0
+    idx = np.flatnonzero(reachable(nn > 0, anchor) & (np.arange(n_players) != anchor))
+    if idx.size:
+        theta = (r - r[anchor]) / NAT_TO_ELO
+        p = _sigmoid(theta[:, None] - theta[None, :])
+        c = nn * p * (1.0 - p)
+        lap = -c[np.ix_(idx, idx)]
+        lap[np.diag_indices_from(lap)] += c[idx].sum(axis=1)
+        try:
+            sub = np.linalg.inv(lap)
+        except np.linalg.LinAlgError:
+            sub = np.linalg.pinv(lap)
+        sub = sub * NAT_TO_ELO**2
+        if not np.all(np.isfinite(sub)):  # pragma: no cover - L is positive definite on the component
+            sub = np.diag(np.full(idx.size, MAX_ELO**2))
+        cov[np.ix_(idx, idx)] = sub
+    var = np.diag(cov)
+    se = np.minimum(np.sqrt(np.where(var > 0.0, var, 0.0)), MAX_ELO)
+    diff = np.minimum(_difference_sd(cov), MAX_ELO)
+    outside = np.ones(n_players, dtype=bool)
+    outside[idx] = False
+    outside[anchor] = False
+    diff[outside, :] = MAX_ELO
+    diff[:, outside] = MAX_ELO
+    np.fill_diagonal(diff, 0.0)
+    z = normal_quantile(0.5 + 0.5 * confidence)
+    return r - z * se, r + z * se, diff
+
+
+def laplace_ci(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    n_players: int,
+    ratings: npt.ArrayLike,
+    anchor: int = 0,
+    confidence: float = 0.95,
+    prior_games: float = 0.0,
+    weights: npt.ArrayLike | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Laplace (normal) intervals ``ratings -+ z se`` from the curvature of the log-posterior at ``ratings``.
+
+    The negative Hessian of the Bradley-Terry log-likelihood plus BayesElo's virtual draws, in nats, is the
+    weighted graph Laplacian ``L_ii = sum_j c_ij``, ``L_ij = -c_ij`` with ``c_ij = (N_ij + V_ij) p_ij (1 - p_ij)``,
+    ``V = prior_draws(N, prior_games)``, ``p_ij = E(r_i - r_j)``; it does not depend on the results, only on
+    who played whom and on the ratings. With the anchor's row and column removed (the anchor is fixed) it is
+    invertible on the anchor's connected component, and ``se_i = sqrt((L^-1)_ii) * 400 / ln 10`` Elo, capped
+    at ``MAX_ELO``; ``z = Phi^-1((1 + confidence) / 2)``. Players outside the anchor's component (or without
+    games) get ``se = MAX_ELO``; the anchor's interval is the point ``ratings[anchor]``. With
+    ``prior_games=0`` this is the Wald interval from the observed Fisher information.
+
+    Returns:
+        ``(low, high)``, two finite float arrays of shape (n_players,).
+    """
+    low, high, _ = laplace_intervals(a, b, n_players, ratings, anchor, confidence, prior_games, weights)
+    return low, high
+
+
+def bootstrap_intervals(
     a: npt.ArrayLike,
     b: npt.ArrayLike,
     score_a: npt.ArrayLike,
@@ -389,24 +542,11 @@ def bootstrap_ci(
     confidence: float = 0.95,
     seed: int = 0,
     prior_games: float = 0.0,
-) -> tuple[FloatArray, FloatArray]:
-    """Percentile bootstrap confidence intervals of the :func:`fit_bradley_terry` ratings.
-
-    Each replicate resamples the ``G`` games with replacement, i.e. draws multinomial counts
-    ``Mult(G; 1/G, ..., 1/G)`` per game. Games with identical ``(a, b, score_a)`` are interchangeable,
-    so the counts are drawn per distinct game type (``Mult(G; c_t / G)`` for a type seen ``c_t`` times,
-    the same distribution, fewer categories) and the replicate is refitted from the re-weighted pair
-    matrices, warm-started from the full-data fit. The interval is
-    ``[q_{(1-c)/2}, q_{(1+c)/2}]`` of the replicate ratings, widened if necessary to contain the
-    full-data rating.
-
-    Flagged players get the quantiles of their (finite) bounded ratings; replicates in which a player
-    drew no game are ignored for that player; a player with no game at all gets
-    ``anchor_rating -+ MAX_ELO``. The anchor's interval is the single point ``anchor_rating``.
-
-    Returns:
-        ``(low, high)``, two float arrays of shape (n_players,), finite.
-    """
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`bootstrap_ci` and, third, the ``(n, n)`` standard deviations of the rating differences
+    ``r_i - r_j`` (Elo) over the replicates (pairwise-complete covariance of the replicate ratings); with a
+    prior, never below the :func:`laplace_intervals` ones at the full-data MAP. Players without games:
+    ``MAX_ELO``."""
     ai, bi, sc, _ = _validate_games(a, b, score_a, n_players, anchor, None)
     if n_boot < 1:
         raise ValueError("n_boot must be at least 1")
@@ -416,9 +556,11 @@ def bootstrap_ci(
     point = full.ratings
     low = point - MAX_ELO
     high = point + MAX_ELO
+    diff = np.full((n_players, n_players), MAX_ELO)
+    np.fill_diagonal(diff, 0.0)
     n_games = ai.size
     if n_games == 0:
-        return low, high
+        return low, high, diff
     # Distinct game types and their multiplicities.
     keys = np.stack([ai, bi, np.rint(sc * 1e9).astype(np.int64)], axis=1)
     uniq, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
@@ -442,8 +584,62 @@ def bootstrap_ci(
             warnings.simplefilter("ignore", RuntimeWarning)
             q = np.nanquantile(boot[:, seen], [(1.0 - confidence) / 2.0, (1.0 + confidence) / 2.0], axis=0)
         low[seen], high[seen] = q[0], q[1]
+        # Pairwise-complete covariance of the replicates (a player absent from a replicate is left out of it).
+        present = np.isfinite(boot)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            centred = np.where(present, boot - np.nanmean(np.where(present, boot, np.nan), axis=0), 0.0)
+        pairs = present.T.astype(np.float64) @ present.astype(np.float64)
+        cov = np.divide(centred.T @ centred, pairs - 1.0, out=np.zeros((n_players, n_players)), where=pairs > 1.0)
+        sd = _difference_sd(cov)
+        both = pairs > 1.0
+        diff = np.where(both, np.minimum(sd, MAX_ELO), MAX_ELO)
+        np.fill_diagonal(diff, 0.0)
     low = np.minimum(low, point)
     high = np.maximum(high, point)
+    if prior_games > 0.0:
+        lap_low, lap_high, lap_diff = laplace_intervals(ai, bi, n_players, point, anchor, confidence, prior_games)
+        low, high = np.minimum(low, lap_low), np.maximum(high, lap_high)
+        diff = np.maximum(diff, lap_diff)
+    return low, high, diff
+
+
+def bootstrap_ci(
+    a: npt.ArrayLike,
+    b: npt.ArrayLike,
+    score_a: npt.ArrayLike,
+    n_players: int,
+    anchor: int = 0,
+    anchor_rating: float = 1000.0,
+    n_boot: int = 200,
+    confidence: float = 0.95,
+    seed: int = 0,
+    prior_games: float = 0.0,
+) -> tuple[FloatArray, FloatArray]:
+    """Percentile bootstrap confidence intervals of the :func:`fit_bradley_terry` ratings.
+
+    Each replicate resamples the ``G`` games with replacement, i.e. draws multinomial counts
+    ``Mult(G; 1/G, ..., 1/G)`` per game. Games with identical ``(a, b, score_a)`` are interchangeable,
+    so the counts are drawn per distinct game type (``Mult(G; c_t / G)`` for a type seen ``c_t`` times,
+    the same distribution, fewer categories) and the replicate is refitted from the re-weighted pair
+    matrices, warm-started from the full-data fit; under a prior the replicate gets its own virtual draws
+    (:func:`prior_draws` of its re-weighted games). The interval is ``[q_{(1-c)/2}, q_{(1+c)/2}]`` of the
+    replicate ratings, widened if necessary to contain the full-data rating.
+
+    With ``prior_games > 0`` the interval is also widened to contain the :func:`laplace_ci` interval at the
+    full-data MAP, so that separated data (every replicate of a perfect score is the same perfect score, and
+    the percentile interval collapses to a point) never give an interval narrower than the posterior's
+    curvature. Without a prior, flagged players get the quantiles of their (finite) bounded ratings (callers
+    open the unbounded side).
+
+    Replicates in which a player drew no game are ignored for that player; a player with no game at all gets
+    ``anchor_rating -+ MAX_ELO``. The anchor's interval is the single point ``anchor_rating``.
+
+    Returns:
+        ``(low, high)``, two float arrays of shape (n_players,), finite.
+    """
+    low, high, _ = bootstrap_intervals(a, b, score_a, n_players, anchor, anchor_rating, n_boot, confidence, seed,
+                                       prior_games)
     return low, high
 
 
@@ -462,3 +658,36 @@ def rank_by_ci(ratings: npt.ArrayLike, low: npt.ArrayLike, high: npt.ArrayLike) 
     sorted_low = np.sort(lo)
     above = lo.size - np.searchsorted(sorted_low, hi, side="right")
     return (1 + above).astype(np.int64)
+
+
+def rank_pairwise(
+    ratings: npt.ArrayLike,
+    low: npt.ArrayLike,
+    high: npt.ArrayLike,
+    diff_sd: npt.ArrayLike,
+    confidence: float = 0.95,
+    comparable: npt.ArrayLike | None = None,
+) -> IntArray:
+    """Rank = 1 + the number of players that are stronger beyond doubt.
+
+    Player j counts above player i when the confidence interval of the difference ``r_j - r_i``,
+    ``(r_j - r_i) -+ z * diff_sd[j, i]`` with ``z = Phi^-1((1 + confidence) / 2)``, lies wholly above 0 (both
+    players ``comparable``: they have an estimate, not a flagged bound), or when j's whole interval lies above
+    i's (``low_j > high_i``, the :func:`rank_by_ci` rule, which needs no comparability). Comparing the two
+    players directly leaves out the uncertainty they share through the anchor: two players far from the
+    anchor can have wide, overlapping intervals and still a well-measured difference. Ties are allowed and
+    ranks need not be consecutive.
+    """
+    r = np.asarray(ratings, dtype=np.float64).ravel()
+    lo = np.asarray(low, dtype=np.float64).ravel()
+    hi = np.asarray(high, dtype=np.float64).ravel()
+    sd = np.asarray(diff_sd, dtype=np.float64)
+    n = r.size
+    if not (lo.size == hi.size == n) or sd.shape != (n, n):
+        raise ValueError("rank_pairwise: ratings, low, high (n,) and diff_sd (n, n) must match")
+    comp = np.ones(n, dtype=bool) if comparable is None else np.asarray(comparable, dtype=bool).ravel()
+    z = normal_quantile(0.5 + 0.5 * confidence)
+    above = (r[:, None] - r[None, :] - z * sd > 0.0) & comp[:, None] & comp[None, :]  # above[j, i]
+    above |= lo[:, None] > hi[None, :]
+    np.fill_diagonal(above, False)
+    return (1 + above.sum(axis=0)).astype(np.int64)
