@@ -471,7 +471,8 @@ def ladder(
     bots = league.players(env=env, kind="bot", include_removed=True)
     records = _bot_records(ids, a, b, table.score_a, bots)
     run_of = {p.id: p.run for p in population if not p.is_bot}
-    rows = [replace(r, run=run_of.get(r.player_id), vs=records.get(r.player_id, ())) for r in rows]  # type: ignore[arg-type]
+    rows = [replace(r, run=run_of.get(int(r.player_id)), vs=records.get(int(r.player_id), ()))
+            if r.player_id is not None else r for r in rows]
     return _mark_best(rows, removed)
 
 
