@@ -77,6 +77,9 @@ def train(
                                             "its predecessor's result was already clear. 0: no rating games.")] = 8,
     eval_older: Annotated[int, typer.Option("--eval-older", help="Older snapshots of the run in each gauntlet, "
                                             "besides the predecessor and the best.")] = 2,
+    eval_inline: Annotated[bool, typer.Option("--eval-inline", help="Play the rating games in the training process, "
+                                              "training paused (default: a worker process beside training).")]
+    = False,
     opponents: Annotated[str, typer.Option("--opponents", help="League opponents (--agents 1, or --league-games): "
                                            "self | latest | uniform | pfsp, from the run's snapshots.")] = "pfsp",
     window: Annotated[int, typer.Option("--window", help="Opponents are drawn from the last WINDOW snapshots "
@@ -137,6 +140,7 @@ def train(
             flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
                      "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
                      "snapshot_steps": snapshot_steps, "eval_games": eval_games, "eval_older": eval_older,
+                     "eval_inline": eval_inline,
                      "swap_every": swap_every,
                      "tensorboard": tensorboard, "league_games": league_games}
             settings.update({k: v for k, v in flags.items() if k in typed})
@@ -185,14 +189,16 @@ def train(
         league.close()
     finals = [r.to_json() for r in report.finals]
     data = {"run": report.run, "steps": report.steps, "episodes": report.episodes,
-            "seconds": round(report.seconds, 1), "eval_seconds": round(report.eval_seconds, 1),
+            "seconds": round(report.seconds, 1), "rating_games": report.eval_games,
+            "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
             "steps_per_second": round(report.steps_per_second), "snapshots": report.snapshots, "final": finals}
     if json_out:
         print_json(data)
         return
-    console.print(f"run {report.run}: {report.steps:,} game steps in {report.seconds:.0f} s "
-                  f"({report.seconds - report.eval_seconds:.0f} s training, {report.eval_seconds:.0f} s rating games), "
-                  f"{report.episodes:,} episodes, {len(report.snapshots)} snapshots")
+    where = "inline" if cfg.eval_inline else "beside training"
+    console.print(f"run {report.run}: {report.steps:,} game steps in {report.seconds:.0f} s, {report.episodes:,} "
+                  f"episodes, {len(report.snapshots)} snapshots; {report.eval_games:,} rating games ({where}: "
+                  f"{report.eval_seconds:.0f} s, {report.wait_seconds:.0f} s of it waited for at the end)")
     for rec in report.finals:
         console.print("  " + describe_record(rec))
     console.print(f"  all snapshots: marl league ladder --run {report.run}")

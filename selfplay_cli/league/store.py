@@ -909,6 +909,17 @@ class League:
             table = table.select(in_a | in_b if any_seat else in_a & in_b)
         return table
 
+    def match_info(self, match_id: int) -> tuple[str, dict[str, Any]]:
+        """The kind and parameters of a match. Raises LeagueError if unknown."""
+
+        def work(s: Session) -> tuple[str, dict[str, Any]]:
+            m = s.get(Match, int(match_id))
+            if m is None:
+                raise LeagueError(f"no match with id {match_id}")
+            return m.kind, dict(m.params or {})
+
+        return self._read(work)
+
     def game(self, game_id: int) -> GameRow:
         """The stored game ``game_id`` with its seats, its match and its actions. Raises LeagueError if unknown."""
 

@@ -247,3 +247,39 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
                    outcome=r.outcome, length=r.length, truncated=r.truncated, actions=r.actions)
         for r in results
     ])
+
+
+def best_snapshot(league: League, run: str, env: str, exclude: set[int]) -> PlayerRow | None:
+    """The run's highest-rated snapshot by the ladder fitted now, among those not in ``exclude``."""
+    from ..league.ladder import ladder
+
+    rows = [r for r in ladder(league, env, bootstrap=0)
+            if r.kind == "snapshot" and r.player_id not in exclude and r.policy.startswith(f"{run}/")]
+    if not rows:
+        return None
+    top = max(rows, key=lambda r: (r.elo, -(r.player_id or 0)))
+    return league.get_player(int(top.player_id))  # type: ignore[arg-type]
+
+
+def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: int, config: GauntletConfig,
+                   device: str = "cpu", on_games: Callable[[int], None] | None = None) -> list[Matchup]:
+    """The whole gauntlet of one snapshot moment: the run's best so far, the opponents, the games.
+
+    Idempotent: a matchup that already has gauntlet games in the ledger (a gauntlet cut short by a kill, then run
+    again on resume) is not played again, so asking twice never doubles a snapshot's games.
+    """
+    new = [league.get_player(int(i)) for i in snapshot_ids]
+    if not new:
+        return []
+    best = best_snapshot(league, new[0].run or "", new[0].env, exclude={p.id for p in new})
+    pairs = [(a, b) for a, b in choose_opponents(league, new, older=config.older, best=best)
+             if not _gauntlet_games(league, a, b)]
+    return play_gauntlet(league, pairs, first_seed=first_seed, config=config, device=device, on_games=on_games)
+
+
+def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow) -> bool:
+    """Whether the ledger holds gauntlet games between ``a`` and ``b`` already."""
+    table = league.games(a.env, players=[a.id, b.id])
+    if not len(table):
+        return False
+    return any(league.match_info(int(m))[1].get("gauntlet") for m in np.unique(table.match_id).tolist())

@@ -39,9 +39,9 @@ from ..league.store import GameRecord, League, PlayerRow
 from ..policies import Policy
 from ..policies.network import resolve_device
 from ..policies.snapshot import SnapshotMeta, save_snapshot
-from ..rated.gauntlet import GauntletConfig, choose_opponents, play_gauntlet
 from ..rated.match import load_player
 from ..rated.snapshots import snapshot_relpath
+from .evaluator import Evaluator, GauntletJob, JobDone
 from .team import LearnerTeam
 
 ALGOS = ("ppo", "dqn")
@@ -69,6 +69,7 @@ class TrainConfig:
     league_games: float = 0.0  # all seats learning: share of games one learner plays a league opponent instead
     eval_games: int = 8  # games a new snapshot plays against each gauntlet opponent (2 where already clear)
     eval_older: int = 2  # older snapshots of the run in each gauntlet, besides the predecessor and the best
+    eval_inline: bool = False  # play the gauntlets in the training process instead of a worker beside it
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
     ppo: PPOConfig = field(default_factory=PPOConfig)
@@ -172,8 +173,10 @@ class TrainReport:
     run: str
     steps: int
     episodes: int
-    seconds: float  # wall time of this process's part of the run, evaluation included
-    eval_seconds: float  # of which the gauntlets took this long
+    seconds: float  # wall time of this process's part of the run, rating games included
+    eval_seconds: float  # time the gauntlets took (beside training, unless inline)
+    wait_seconds: float  # time spent after training waiting for the last gauntlets
+    eval_games: int  # games the gauntlets played
     snapshots: list[str]
     finals: list[SnapshotRecord]  # each learner's final snapshot, as the ledger rates it
 
@@ -242,9 +245,11 @@ class Trainer:
         self.episodes = 0
         self.elapsed = 0.0  # seconds trained before this process (resumed runs)
         self.resumes = 0
-        self.evaluated: list[int] = []  # the snapshot ids whose gauntlet has been played
-        self.eval_seconds = 0.0  # wall time of the gauntlets in this process
-        self.eval_events = 0  # gauntlets played in this process
+        self.jobs: list[GauntletJob] = []  # gauntlets submitted and not known to be done
+        self.evaluator: Evaluator | None = None  # set while training
+        self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
+        self.eval_games = 0  # games they played
+        self.eval_events = 0  # gauntlets finished in this process
         self.records: list[SnapshotRecord] = []  # the newest snapshots as the ledger rates them
 
     # -- opponents -------------------------------------------------------------------------------------------
@@ -313,51 +318,25 @@ class Trainer:
             self.snapshots.append(row.full_name)
         pool = [p.id for p in self.league.players(env=self.spec.name, kind="snapshot") if p.run == cfg.run]
         self.matchmaker.set_pool(pool)
+        if self.cfg.eval_games:
+            self.jobs.append(GauntletJob(tuple(self.latest), 10_000_000 + 10_000 * len(self.snapshots),
+                                         self.cfg.eval_games, self.cfg.eval_older))
         self.save_state()
-        self.evaluate()
-        self.save_state()  # the same weights, now with the gauntlet marked as played
+        if self.cfg.eval_games:
+            self.evaluator.submit(self.jobs[-1])
+        self._collect(self.evaluator.poll())
 
-    def evaluate(self) -> None:
-        """The gauntlet of the learners' newest snapshots (:mod:`selfplay_cli.rated.gauntlet`), stored as 'eval',
-        then each snapshot's record as the ledger has it (``self.records``), reported to ``on_progress``."""
-        new = [self.league.get_player(pid) for pid in self.latest]
-        if self.cfg.eval_games and self.evaluated != self.latest:
-            t0 = time.perf_counter()
-            best = self._best_snapshot(exclude={p.id for p in new})
-            matchups = choose_opponents(self.league, new, older=self.cfg.eval_older, best=best)
-            names = [p.full_name for p in new]
-            done = 0
-
-            def tick(n: int) -> None:
-                nonlocal done
-                done += n
-                if self.on_progress:
-                    self.on_progress({"event": "evaluating", "snapshots": names, "games": done, "steps": self.steps,
-                                      "episodes": self.episodes})
-
-            tick(0)
-            n = self.cfg.eval_games // 2
-            gauntlet = GauntletConfig(pairs=n, clear_pairs=1, max_pairs=n, older=self.cfg.eval_older)
-            play_gauntlet(self.league, matchups, first_seed=10_000_000 + 10_000 * len(self.snapshots), config=gauntlet,
-                          device=str(self.device), on_games=tick)
-            self.evaluated = list(self.latest)
-            self.eval_seconds += time.perf_counter() - t0
+    def _collect(self, done: list[JobDone]) -> None:
+        """Take note of finished gauntlets: each snapshot's record as the ledger has it now, to ``on_progress``."""
+        for d in done:
+            self.jobs = [j for j in self.jobs if j != d.job]
+            self.eval_seconds += d.seconds
+            self.eval_games += d.games
             self.eval_events += 1
-        self.records = self._records(new)
-        if self.on_progress:
-            self.on_progress({"event": "snapshot", "records": self.records, "steps": self.steps,
-                              "episodes": self.episodes})
-
-    def _best_snapshot(self, exclude: set[int]) -> PlayerRow | None:
-        """The run's highest-rated snapshot by the ladder fitted now, among those not in ``exclude``."""
-        from ..league.ladder import ladder
-
-        rows = [r for r in ladder(self.league, self.spec.name, bootstrap=0)
-                if r.kind == "snapshot" and r.player_id not in exclude and r.policy.startswith(f"{self.cfg.run}/")]
-        if not rows:
-            return None
-        top = max(rows, key=lambda r: (r.elo, -(r.player_id or 0)))
-        return self.league.get_player(int(top.player_id))  # type: ignore[arg-type]
+            self.records = self._records([self.league.get_player(i) for i in d.job.snapshot_ids])
+            if self.on_progress:
+                self.on_progress({"event": "snapshot", "records": self.records, "steps": self.steps,
+                                  "episodes": self.episodes})
 
     def _records(self, new: list[PlayerRow]) -> list[SnapshotRecord]:
         """Each new snapshot's record against the scripted players and its fitted rating, from the ledger."""
@@ -412,7 +391,7 @@ class Trainer:
             "snapshot_episode": self._snapshot_episode, "snapshot_step": self._snapshot_step,
             "next_seed": self.games.next_seed, "elapsed": self.elapsed, "resumes": self.resumes,
             "matchmaker": json.dumps(self.matchmaker.state_dict()), "rates": json.dumps(self.rates.to_dict()),
-            "evaluated": list(self.evaluated),
+            "jobs": [[list(j.snapshot_ids), j.first_seed, j.games, j.older] for j in self.jobs],
         }
         self.run_dir.mkdir(parents=True, exist_ok=True)
         tmp = self.state_path.with_name(f"state.pt.tmp-{os.getpid()}")
@@ -452,7 +431,8 @@ class Trainer:
         self.elapsed = float(state["elapsed"])
         self.matchmaker.load_state_dict(json.loads(state["matchmaker"]))
         self.rates = WinRates.from_dict(json.loads(state["rates"]))
-        self.evaluated = [int(x) for x in state.get("evaluated", self.latest)]
+        self.jobs = [GauntletJob(tuple(int(i) for i in ids), int(seed), int(games), int(older))
+                     for ids, seed, games, older in state.get("jobs", [])]
         note = f"resumed {self.cfg.run} at step {self.steps:,} (snapshot {self.snapshots[-1]})"
         newer = [p for p in self.league.players(env=self.spec.name, kind="snapshot")
                  if p.run == self.cfg.run and p.id > max(self.latest)]
@@ -468,6 +448,9 @@ class Trainer:
                     self.steps, self.episodes = max(self.steps, p.step), max(self.episodes, p.episode)
             self._snapshot_episode, self._snapshot_step = self.episodes, self.steps
             note += f"; adopted {', '.join(p.full_name for p in newer)} registered after the state was saved"
+        if newer and self.cfg.eval_games:  # their gauntlet was never asked for
+            self.jobs.append(GauntletJob(tuple(p.id for p in newer), 10_000_000 + 10_000 * len(self.snapshots),
+                                         self.cfg.eval_games, self.cfg.eval_older))
         self.resumes = int(state["resumes"]) + 1
         self.games.next_seed = int(state["next_seed"]) + (self.resumes << 40)  # a seed range of its own
         self.games.restart_all()
@@ -497,9 +480,12 @@ class Trainer:
         """Train until the budget is spent (holding the run's lock), then take a final snapshot."""
         self._lock()
         try:
-            with LearnerTeam(self.learners) as self.team:
+            background = bool(self.cfg.eval_games) and not self.cfg.eval_inline
+            with LearnerTeam(self.learners) as self.team, \
+                    Evaluator(self.league, str(self.device), background=background) as self.evaluator:
                 return self._train()
         finally:
+            self.evaluator = None
             self._unlock()
 
     def _train(self) -> TrainReport:
@@ -507,11 +493,11 @@ class Trainer:
         t0 = time.perf_counter()
         start = t0 - self.elapsed
         deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
-        steps0, eval0 = self.steps, self.eval_seconds
+        steps0 = self.steps
+        for job in self.jobs:  # gauntlets a killed run had asked for (a finished one is not played again)
+            self.evaluator.submit(job)  # type: ignore[union-attr]
         if not self.snapshots:
             self.snapshot()  # ep0: every learner has an identity in the league from the start
-        elif self.evaluated != self.latest:
-            self.evaluate()  # killed before (or during) the gauntlet of its newest snapshots
         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
         next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
         obs = self.games.observe()
@@ -543,8 +529,9 @@ class Trainer:
                         for key, value in line.items():
                             if key != "step":
                                 board.add_scalar(key, value, global_step=self.steps)
+                    self._collect(self.evaluator.poll())  # type: ignore[union-attr]
                     if self.on_progress:
-                        train_s = time.perf_counter() - t0 - (self.eval_seconds - eval0)
+                        train_s = time.perf_counter() - t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0)
                         rate = (self.steps - steps0) / max(train_s, 1e-9)
                         self.on_progress({"event": "training", "steps": self.steps, "episodes": self.episodes,
                                           "progress": progress, "steps_per_second": rate,
@@ -558,17 +545,29 @@ class Trainer:
             self.snapshot()
         if board is not None:
             board.close()
-        return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - t0,
-                           self.eval_seconds - eval0, self.snapshots, list(self.records))
+        t1 = time.perf_counter()
+        self._collect(self.evaluator.wait(on_wait=self._waiting))  # type: ignore[union-attr]
+        waited = time.perf_counter() - t1
+        if not self.records:  # no rating games: name the final snapshots all the same
+            self.records = self._records([self.league.get_player(i) for i in self.latest])
+        return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - t0, self.eval_seconds,
+                           waited, self.eval_games, self.snapshots, list(self.records))
+
+    def _waiting(self) -> None:
+        if self.on_progress:
+            self.on_progress({"event": "evaluating", "snapshots": [self.league.get_player(i).full_name
+                                                                   for j in self.jobs for i in j.snapshot_ids],
+                              "games": self.evaluator.games_played, "steps": self.steps,  # type: ignore[union-attr]
+                              "episodes": self.episodes})
 
     def _remaining(self, rate: float, deadline: float | None) -> float:
-        """Seconds left: training at the measured rate for the steps left, plus a gauntlet (at the mean time one
-        took so far) for every snapshot still to come; with --minutes, the time to the deadline."""
+        """Seconds left: training at the measured rate for the steps left, then the final gauntlet (at the mean time
+        one took so far); inline, a gauntlet for every snapshot still to come. With --minutes: to the deadline."""
         if deadline is not None:
             return max(deadline - time.perf_counter(), 0.0)
         left = max(self.cfg.steps - self.steps, 0)
-        events = 1 + (left // self.cfg.snapshot_steps if self.cfg.snapshot_steps else 0)
         per_event = self.eval_seconds / max(self.eval_events, 1)
+        events = 1 + (left // self.cfg.snapshot_steps if self.cfg.snapshot_steps and self.cfg.eval_inline else 0)
         return left / max(rate, 1e-9) + events * per_event
 
 

@@ -1,0 +1,176 @@
+"""Rating games beside training: the gauntlet of each snapshot moment, played while the learners train on.
+
+Training keeps the main process busy (acting and stepping the games on one core, the learners' updates on both);
+the gauntlets (:func:`selfplay_cli.rated.gauntlet.rate_snapshots`) are played by one worker process of their own,
+in the order the snapshots were taken, so the run does not stop for them and their results do not depend on
+timing: the worker plays job after job, and each job picks the run's best from the games of the jobs before it,
+exactly as an inline evaluation would. The worker writes the ledger itself (SQLite in WAL mode takes both writers);
+the trainer only learns which jobs are done, and waits for the last one before it reports.
+
+``background=False`` plays each gauntlet in the calling process instead, when it is submitted (the same games).
+
+The worker leaves when told to, when a job fails (the failure comes back as the job's error) or when the training
+process is gone (killed with SIGKILL: it checks its parent every second).
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import queue
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..errors import MarlError
+
+
+@dataclass(frozen=True)
+class GauntletJob:
+    """The snapshots of one moment to rate, and how."""
+
+    snapshot_ids: tuple[int, ...]
+    first_seed: int
+    games: int  # games per opponent (seat-swapped pairs)
+    older: int
+
+
+@dataclass(frozen=True)
+class JobDone:
+    """A finished job: how long it took and how many games it played, or why it failed."""
+
+    job: GauntletJob
+    seconds: float
+    games: int
+    error: str | None = None
+
+
+def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) -> JobDone:
+    """Play one gauntlet in this process."""
+    from ..rated.gauntlet import GauntletConfig, rate_snapshots
+
+    t0 = time.perf_counter()
+    n = job.games // 2
+    cfg = GauntletConfig(pairs=n, clear_pairs=1, max_pairs=n, older=job.older)
+    matchups = rate_snapshots(league, job.snapshot_ids, first_seed=job.first_seed, config=cfg, device=device,
+                              on_games=on_games)
+    return JobDone(job, time.perf_counter() - t0, sum(m.games for m in matchups))
+
+
+def _worker(url: str, home: str | None, device: str, jobs: Any, done: Any, parent: int) -> None:
+    """The worker process: jobs in order until told to stop (None), a job fails, or the parent is gone."""
+    import signal
+
+    import torch
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the trainer's to handle; it stops the worker
+
+    from ..league.store import League
+
+    torch.set_num_threads(1)
+    league = League(url, home=home)
+    try:
+        while True:
+            try:
+                job = jobs.get(timeout=1.0)
+            except queue.Empty:
+                if os.getppid() != parent:
+                    return  # the trainer was killed: nobody waits for these games
+                continue
+            if job is None:
+                return
+            try:
+                done.put(run_job(league, job, device, on_games=lambda n: done.put(("games", n))))
+            except Exception as e:  # reported to the trainer, which raises it there as one line
+                done.put(JobDone(job, 0.0, 0, error=f"{type(e).__name__}: {e}" if not isinstance(e, MarlError)
+                                 else str(e)))
+                return
+    finally:
+        league.close()
+
+
+class Evaluator:
+    """Gauntlet jobs, played in a worker process (``background``) or inline; see the module docstring."""
+
+    def __init__(self, league: Any, device: str, background: bool = True) -> None:
+        self.league, self.device, self.background = league, device, background
+        self.pending: list[GauntletJob] = []
+        self.games_played = 0  # games the worker reported since the last poll
+        self._done: list[JobDone] = []
+        self._proc: Any = None
+        if background:
+            ctx = mp.get_context("spawn")  # no fork: the trainer holds threads, a database engine and torch state
+            self._jobs, self._results = ctx.Queue(), ctx.Queue()
+            home = None if league.home is None else str(Path(league.home))
+            self._proc = ctx.Process(target=_worker, name="marl-rating",
+                                     args=(league.url.render_as_string(hide_password=False), home, device,
+                                           self._jobs, self._results, os.getpid()), daemon=True)
+            self._proc.start()
+
+    def submit(self, job: GauntletJob) -> None:
+        self.pending.append(job)
+        if self.background:
+            self._jobs.put(job)
+        else:
+            self._done.append(run_job(self.league, job, self.device, on_games=self._count))
+
+    def _count(self, n: int) -> None:
+        self.games_played += n
+
+    def poll(self) -> list[JobDone]:
+        """The jobs finished since the last call (never blocks). A failed job raises its error."""
+        if self.background:
+            while True:
+                try:
+                    item = self._results.get_nowait()
+                except queue.Empty:
+                    break
+                self._take(item)
+        return self._finish()
+
+    def wait(self, on_wait: Any = None) -> list[JobDone]:
+        """Block until every submitted job is done; ``on_wait()`` is called about every second meanwhile."""
+        if self.background:
+            while len(self._done) < len(self.pending):
+                try:
+                    self._take(self._results.get(timeout=1.0))
+                except queue.Empty:
+                    if not self._proc.is_alive():
+                        raise MarlError("the rating worker process ended unexpectedly") from None
+                if on_wait is not None:
+                    on_wait()
+        return self._finish()
+
+    def _take(self, item: Any) -> None:
+        if isinstance(item, tuple):
+            self.games_played += int(item[1])
+        else:
+            self._done.append(item)
+
+    def _finish(self) -> list[JobDone]:
+        out, self._done = self._done, []
+        for d in out:
+            if d.error is not None:
+                raise MarlError(f"rating games failed: {d.error}")
+            self.pending.remove(d.job)
+        return out
+
+    def close(self) -> None:
+        """Stop the worker (a job in progress is abandoned; its finished matchups are in the ledger)."""
+        if self._proc is not None:
+            if self._proc.is_alive():
+                self._jobs.put(None)
+                self._proc.join(timeout=5)
+            if self._proc.is_alive():
+                self._proc.terminate()
+                self._proc.join(timeout=5)
+            self._jobs.close()
+            self._results.close()
+            self._proc = None
+
+    def __enter__(self) -> Evaluator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
