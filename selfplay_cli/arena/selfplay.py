@@ -32,6 +32,13 @@ from .runner import ActionLog, GameResult
 OPPONENT = -1
 
 
+def _as_slice(index: np.ndarray) -> np.ndarray | slice:
+    """``index`` as the equal slice when it is a run of consecutive integers (indexing with it gives a view)."""
+    if index.size and index[-1] - index[0] + 1 == index.size and (np.diff(index) == 1).all():
+        return slice(int(index[0]), int(index[-1]) + 1)
+    return index
+
+
 def seat_layout(n_seats: int, n_games: int, agents: int, sharing: str, league_games: float = 0.0) -> np.ndarray:
     """The learner index of every (seat, game) slot, -1 for opponent seats (see the module docstring)."""
     if not 0.0 <= league_games <= 1.0:
@@ -89,8 +96,10 @@ class SelfPlayGames:
         if self.needs_opponents and choose_opponents is None:
             raise ValueError("opponent seats need a choose_opponents callback")
         self.choose_opponents = choose_opponents
-        # Slots of each learner, in a fixed order: flat indices into (seat, game).
+        # Slots of each learner, in a fixed order: flat indices into (seat, game); as a slice where they are a run of
+        # consecutive slots (one learner per seat), so its observations and rewards are views, not gathered copies.
         self.slots = [np.flatnonzero(self.layout.ravel() == i) for i in range(self.n_learners)]
+        self._index = [_as_slice(s) for s in self.slots]
         self.opponent_slots = np.flatnonzero(self.layout.ravel() == OPPONENT)
         self.policies: list[Policy] = []  # distinct opponent policies seen so far
         self.opponent_of = np.full(n_games, -1, dtype=np.int64)  # index into self.policies per game
@@ -131,14 +140,14 @@ class SelfPlayGames:
         obs = self.core.observe()
         flat = obs.reshape(-1, *obs.shape[2:])
         self._obs = flat
-        return [flat[s] for s in self.slots]
+        return [flat[s] for s in self._index]
 
     def step(self, actions: Sequence[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray], list[GameResult]]:
         """Apply each learner's actions (opponents act by themselves); returns per learner the rewards and
         dones of its slots, and the games that ended on this step (already restarted)."""
         n_seats = len(self.spec.agents)
         all_actions = np.zeros(n_seats * self.n, dtype=np.int64)
-        for s, a in zip(self.slots, actions, strict=True):
+        for s, a in zip(self._index, actions, strict=True):
             all_actions[s] = a
         if self.needs_opponents:
             self._opponents_act(all_actions)
@@ -148,8 +157,8 @@ class SelfPlayGames:
         done_games = self.core.terminated | self.core.truncated
         flat_rewards = rewards.ravel()
         flat_done = np.tile(done_games, n_seats)
-        out_r = [flat_rewards[s] for s in self.slots]
-        out_d = [flat_done[s] for s in self.slots]
+        out_r = [flat_rewards[s] for s in self._index]
+        out_d = [flat_done[s] for s in self._index]
         finished: list[GameResult] = []
         ended = np.flatnonzero(done_games)
         if ended.size:

@@ -60,6 +60,11 @@ _MIRROR_PERM = np.array([0, 1, 3, 2, 4, 5])
 _MIRROR_SIGN = np.array([-1, 1, 1, 1, -1, 1], dtype=np.float32)
 
 
+def _mirror(frames: np.ndarray) -> np.ndarray:
+    """The right seat's view of frames ``(..., 6)`` seen from the left."""
+    return frames[..., _MIRROR_PERM] * _MIRROR_SIGN
+
+
 @dataclass(frozen=True)
 class PongConfig:
     """Rules and observation options of one Pong game (the defaults are the game `marl` trains on)."""
@@ -179,14 +184,15 @@ class PongCore:
         self.terminated = np.zeros(n, dtype=bool)
         self.truncated = np.zeros(n, dtype=bool)
         k = self.config.frame_stack
-        # Ring of the last k frames as the left seat observes them, (n, k, 6); the newest at _head.
-        self._frames = np.zeros((n, k, N_FEATURES), dtype=np.float32)
+        # The last k frames as each seat observes them, in a ring kept twice over: ring frame i sits at positions i and
+        # i + k of (seat, game, 2k, 6), so the k newest, oldest first, are always positions head + 1 .. head + k and
+        # an observation is one copy of a slice. The newest frame is at head (and head + k).
+        self._ring = np.zeros((2, n, 2 * k, N_FEATURES), dtype=np.float32)
         self._head = 0
         vs = 1.0 / self.config.velocity_scale
         self._scale = np.array([2 / WIDTH, 2 / HEIGHT, 2 / PADDLE_Y_MAX, 2 / PADDLE_Y_MAX, vs, vs])
         self._offset = np.array([1.0, 1.0, 1.0, 1.0, 0.0, 0.0], dtype=np.float32)
-        self._frame_buf = np.empty((6, n), dtype=np.float32)
-        self._orders = [(np.arange(1, k + 1) + h) % k for h in range(k)]
+        self._frame_buf = np.empty((2, N_FEATURES, n), dtype=np.float32)  # this step's frame of each seat
         self.reset(np.arange(n), np.arange(n))
 
     # ----------------------------------------------------------------------------------------------------
@@ -205,7 +211,9 @@ class PongCore:
         self.truncated[g] = False
         self._serve(g)
         # A fresh game's history is its first frame repeated (as the seed's frame stack does).
-        self._frames[g] = self._frame_of(g)[:, None, :]
+        left = self._frame_of(g)
+        self._ring[0, g] = left[:, None, :]
+        self._ring[1, g] = _mirror(left)[:, None, :]
 
     def _serve(self, g: np.ndarray) -> None:
         """Ball to the centre, paddles re-placed at random, serve toward a random point of a random paddle."""
@@ -377,14 +385,18 @@ class PongCore:
         return (self._s[:, g].T * self._scale).astype(np.float32) - self._offset
 
     def _record_frame(self) -> None:
-        self._head = (self._head + 1) % self.config.frame_stack
-        buf = self._frame_buf  # computed contiguously, then one transposed copy into the ring
-        np.multiply(self._s, self._scale[:, None], out=buf, casting="same_kind")
-        buf -= self._offset[:, None]
-        self._frames[:, self._head] = buf.T
+        k = self.config.frame_stack
+        self._head = (self._head + 1) % k
+        buf = self._frame_buf  # both seats' frames computed contiguously, then one copy into both ring positions
+        np.multiply(self._s, self._scale[:, None], out=buf[0], casting="same_kind")
+        buf[0] -= self._offset[:, None]
+        np.take(buf[0], _MIRROR_PERM, axis=0, out=buf[1])
+        buf[1] *= _MIRROR_SIGN[:, None]
+        self._ring[:, :, self._head :: k] = buf.transpose(0, 2, 1)[:, :, None, :]
 
-    def _order(self) -> np.ndarray:
-        return self._orders[self._head]
+    def _window(self) -> slice:
+        """The ring positions of the k newest frames, oldest first."""
+        return slice(self._head + 1, self._head + 1 + self.config.frame_stack)
 
     def observe(self) -> np.ndarray:
         """Egocentric stacked observations ``(2, n, k, 6)`` float32 in [-1, 1], oldest frame first.
@@ -393,11 +405,7 @@ class PongCore:
         court to [-1, 1] and velocities divided by the largest possible component. The right seat sees x and vx
         mirrored and the paddles swapped, so both seats see themselves on the left.
         """
-        obs = np.empty((2, self.n, self.config.frame_stack, N_FEATURES), dtype=np.float32)
-        np.take(self._frames, self._order(), axis=1, out=obs[0])
-        np.take(obs[0], _MIRROR_PERM, axis=2, out=obs[1])
-        obs[1] *= _MIRROR_SIGN
-        return obs
+        return self._ring[:, :, self._window()].copy()
 
     # ----------------------------------------------------------------------------------------------------
     def outcome(self) -> np.ndarray:
@@ -413,7 +421,7 @@ class PongCore:
         """An exact copy of the state of some games (all by default), history included."""
         g = slice(None) if games is None else np.asarray(games, dtype=np.int64)
         state = {name: getattr(self, name)[..., g].copy() for name in self._STATE_FIELDS}
-        state["frames"] = self._frames[g][:, self._order()]  # the left seat's view, oldest first
+        state["frames"] = np.array(self._ring[0][g, self._window()])  # the left seat's view, oldest first
         return state
 
     def set_state(self, state: dict[str, Any], games: np.ndarray | list[int] | None = None) -> None:
@@ -425,7 +433,10 @@ class PongCore:
         if frames.shape[1] != self.config.frame_stack:
             raise ValueError(f"state has {frames.shape[1]} frames, this core stacks {self.config.frame_stack}")
         rows = np.arange(self.n)[g]
-        self._frames[rows[:, None], self._order()[None, :]] = frames
+        k = self.config.frame_stack
+        ring = frames[:, (np.arange(2 * k) - self._head - 1) % k]  # ring position p holds window frame p - head - 1
+        self._ring[0, rows] = ring
+        self._ring[1, rows] = _mirror(ring)
 
 
 # --------------------------------------------------------------------------------------------------------------

@@ -21,7 +21,7 @@ from .base import Policy
 
 KINDS = ("mlp",)
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
-ACTIVATION_FNS = {"tanh": torch.tanh, "relu": torch.relu}
+ACTIVATION_FNS = {"tanh": torch.tanh_, "relu": torch.relu_}  # in place, on each layer's fresh output
 
 
 class SnapshotError(MarlError):
@@ -146,13 +146,19 @@ class MLPNet(nn.Module):
         x = x.reshape(x.shape[0], -1)
         if x.shape[1] != self.obs_dim:
             raise ValueError(f"observations have {x.shape[1]} features per row; this network takes {self.obs_dim}")
+        # Layers without nn.Module call overhead (it dominates small batches), each activation in place on its layer's
+        # output (autograd saves tanh's and relu's output, not their input, so this is the same computation with one
+        # activation-sized tensor less per layer to allocate and fill).
         z = x
-        for layer in self._linears:  # the trunk without nn.Module call overhead (it dominates small batches)
+        for layer in self._linears:
             z = self._activation(F.linear(z, layer.weight, layer.bias))
-        out = self.action_head(z)
+        head = self.action_head
+        out = F.linear(z, head.weight, head.bias)
         if self.state_value is not None:
-            out = self.state_value(z) + out - out.mean(dim=1, keepdim=True)
-        value = self.value_head(z).squeeze(-1) if self.value_head is not None else None
+            out = F.linear(z, self.state_value.weight, self.state_value.bias) + out - out.mean(dim=1, keepdim=True)
+        value = None
+        if self.value_head is not None:
+            value = F.linear(z, self.value_head.weight, self.value_head.bias).squeeze(-1)
         return out, value
 
 

@@ -8,10 +8,17 @@ thread: a forward pass over one step's slots is too short to win back a thread h
 
 Learner i always gets observation list i and returns action array i, and draws only from its own generator, so a
 run is as reproducible with threads as without.
+
+An update allocates and frees the same few megabytes of activations and gradients every minibatch. glibc's malloc
+hands freed blocks of that size back to the kernel (and trims its heaps), so each minibatch page-faulted its memory
+in again: ~20,000 faults per update of two learners, with both threads queueing on the kernel's lock of the
+address space. A team therefore asks malloc to keep freed memory for reuse (:func:`keep_freed_memory`); measured
+on 2 cores, the two updates side by side went from ~0.28 s to ~0.15 s, the time of one update alone.
 """
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
@@ -24,11 +31,26 @@ def _single_torch_thread() -> None:
     torch.set_num_threads(1)
 
 
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # mallopt parameters (glibc's malloc.h)
+
+
+def keep_freed_memory() -> bool:
+    """Have glibc's malloc keep freed blocks of up to 32 MB in the heap (not ``munmap`` them) and trim a heap only
+    when 64 MB lie free at its top (process-wide; the memory stays the process's peak). Speed only: where there is
+    no glibc (macOS, musl) it does nothing. Returns whether malloc took the settings."""
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, 32 << 20)) & bool(mallopt(_M_TRIM_THRESHOLD, 64 << 20))
+
+
 class LearnerTeam:
     """Every learner's ``act``, ``record`` and ``update``; the updates in parallel threads when there are several."""
 
     def __init__(self, learners: Sequence[Any], threads: bool = True) -> None:
         self.learners = list(learners)
+        keep_freed_memory()
         use = threads and len(self.learners) > 1
         self._pool = (ThreadPoolExecutor(len(self.learners), thread_name_prefix="learner",
                                          initializer=_single_torch_thread) if use else None)
