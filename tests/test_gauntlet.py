@@ -190,6 +190,11 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
             row = rows[f["snapshot"]]
             assert (f["elo"], f["ci_low"], f["ci_high"]) == (round(row.elo, 1), round(row.ci_low, 1),
                                                               round(row.ci_high, 1))
+    # the run's rating curves were drawn into its folder, as `marl league plot` draws them
+    import matplotlib.image
+
+    png = home / "runs" / "pong-1" / "ratings.png"
+    assert data["plot"] == str(png) and matplotlib.image.imread(png).shape[2] in (3, 4)
     # the same run as text: the summary names each learner's final snapshot with its measured figures
     code, out, err = run(capsys, *args[:-2], "--home", str(tmp_path / "h2"))
     assert code == 0, err

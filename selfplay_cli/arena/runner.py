@@ -50,6 +50,17 @@ class GameResult:
         return sum(o for p, o in zip(self.players, self.outcome, strict=True) if p == player)
 
 
+def _acting_groups(policies: Sequence[Policy]) -> list[tuple[list[int], Any]]:
+    """How the policies act each step: network policies of one architecture together in one
+    :class:`~selfplay_cli.policies.bank.NetworkBank` (one batched forward for all of them), any other alone."""
+    if not any(getattr(p, "kind", "") == "snapshot" for p in policies):
+        return [([i], None) for i in range(len(policies))]
+    from ..policies.bank import NetworkBank, bank_groups  # torch, only when networks play
+
+    return [(members, NetworkBank([policies[i] for i in members]) if len(members) > 1 else None)  # type: ignore[misc]
+            for members in bank_groups(policies)]
+
+
 def paired_schedule(n_games: int, first_seed: int = 0, n_policies: int = 2) -> list[Game]:
     """Game pairs: each seed is played once with policy 0 on seat 0 and once with the seats swapped."""
     if n_policies != 2:
@@ -175,14 +186,26 @@ def play(
     start(np.arange(n))
     results: dict[int, GameResult] = {}
     actions = np.zeros((len(spec.agents), n), dtype=np.int64)
+    flat_actions = actions.reshape(-1)
+    groups = _acting_groups(policies)
+    wanted = np.arange(len(policies) + 1)
     while (game_of >= 0).any():
         obs = core.observe()
+        flat_obs = obs.reshape(-1, *obs.shape[2:])
         active = game_of >= 0
         actions.fill(0)
-        for p, policy in enumerate(policies):
-            where = (seats == p) & active
-            if where.any():
-                actions[where] = policy.act(obs[where])
+        # Every (seat, slot) position by the policy that holds it, in position order: one sort, no mask per policy.
+        owner = np.where(active[None, :], seats, -1).ravel()
+        order = np.argsort(owner, kind="stable")
+        bounds = np.searchsorted(owner[order], wanted)
+        for members, bank in groups:
+            where = [order[bounds[m] : bounds[m + 1]] for m in members]
+            if bank is None:
+                if where[0].size:
+                    flat_actions[where[0]] = policies[members[0]].act(flat_obs[where[0]])
+            elif any(w.size for w in where):
+                for w, a in zip(where, bank.act([flat_obs[w] for w in where]), strict=True):
+                    flat_actions[w] = a
         core.step(actions)
         if log is not None:
             log.append(actions, active)

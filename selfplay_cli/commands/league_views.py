@@ -80,7 +80,8 @@ def matrix_cmd(
     top: Annotated[int, typer.Option("--top", help="Players in the matrix: the N best by fitted Elo.")] = 10,
     run: Annotated[str | None, typer.Option("--run", help="Only this run's snapshots and the scripted players.")]
     = None,
-    min_games: Annotated[int, typer.Option("--min-games", help="Games a pair needs to count as measured.")] = 10,
+    min_games: Annotated[int, typer.Option("--min-games", help="Games a pair needs to count as measured (a training "
+                                           "run's rating games give 8 per pair).")] = 8,
     out: OutOpt = None,
     home: HomeOpt = None,
     db: DbOpt = None,

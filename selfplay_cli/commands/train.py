@@ -191,7 +191,8 @@ def train(
     data = {"run": report.run, "steps": report.steps, "episodes": report.episodes,
             "seconds": round(report.seconds, 1), "rating_games": report.eval_games,
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
-            "steps_per_second": round(report.steps_per_second), "snapshots": report.snapshots, "final": finals}
+            "steps_per_second": round(report.steps_per_second), "snapshots": report.snapshots, "final": finals,
+            "plot": str(report.plot) if isinstance(report.plot, Path) else None}
     if json_out:
         print_json(data)
         return
@@ -200,8 +201,10 @@ def train(
                   f"episodes, {len(report.snapshots)} snapshots; {report.eval_games:,} rating games ({where}: "
                   f"{report.eval_seconds:.0f} s, {report.wait_seconds:.0f} s of it waited for at the end)")
     for rec in report.finals:
-        console.print("  " + describe_record(rec))
-    console.print(f"  all snapshots: marl league ladder --run {report.run}")
+        console.print("  " + describe_record(rec), markup=False)
+    console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
+    if report.plot is not None:
+        console.print(f"  rating curves: {report.plot}", markup=False)
 
 
 def describe_record(rec: Any) -> str:

@@ -47,7 +47,8 @@ class GauntletConfig:
 
     pairs: int = 4  # seat-swapped pairs of a matchup at first
     clear_pairs: int = 1  # ... of a matchup whose result is clear from the predecessor's games
-    max_pairs: int = 4  # pairs a matchup may reach while its result is open (= pairs: never more)
+    max_pairs: int = 4  # pairs a matchup may reach while its result is open (= pairs: never more, no waiting on
+    # a matchup's first games; with long games each such wait costs a whole game's length)
     older: int = 2  # older snapshots of the run besides the predecessor and the best
     clear: float = 0.95  # a matchup is settled once the likelihood of superiority leaves [1 - clear, clear]
     parallel: int = 1024  # games at once
@@ -220,7 +221,7 @@ def play_gauntlet(
         if in_flight[k] == 0:  # every game scheduled so far is in: store them, then go on only if still open
             _store(league, m, pending[k], loaded, options)
             pending[k] = []
-            if m.open(z, cfg.max_pairs):
+            if cfg.max_pairs > cfg.pairs and m.open(z, cfg.max_pairs):
                 schedule_pairs(k, min(2 * m.pairs, cfg.max_pairs) - m.pairs)
 
     for k, m in enumerate(matchups):

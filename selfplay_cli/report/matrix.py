@@ -206,7 +206,7 @@ def build_matrix(
     env: str | None = None,
     top: int = 10,
     run: str | None = None,
-    min_games: int = 10,
+    min_games: int = 8,
     alpha: float = DEFAULT_ALPHA,
 ) -> MatrixReport:
     """The score matrix of the ``top`` best-rated players of ``env`` (default: the ledger's only env).

@@ -179,6 +179,7 @@ class TrainReport:
     eval_games: int  # games the gauntlets played
     snapshots: list[str]
     finals: list[SnapshotRecord]  # each learner's final snapshot, as the ledger rates it
+    plot: Path | str | None = None  # the rating curves' PNG, or why there is none
 
     @property
     def steps_per_second(self) -> float:
@@ -550,8 +551,21 @@ class Trainer:
         waited = time.perf_counter() - t1
         if not self.records:  # no rating games: name the final snapshots all the same
             self.records = self._records([self.league.get_player(i) for i in self.latest])
+        plot = self._plot()
         return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - t0, self.eval_seconds,
-                           waited, self.eval_games, self.snapshots, list(self.records))
+                           waited, self.eval_games, self.snapshots, list(self.records), plot)
+
+    def _plot(self) -> Path | str | None:
+        """The run's rating curves as ``runs/<run>/ratings.png`` (as ``marl league plot --run`` draws them); None
+        without rating games. A plot that cannot be written does not fail a finished run: the reason is returned."""
+        from ..report.plots import write_run_plot
+
+        if not self.cfg.eval_games:
+            return None
+        try:
+            return write_run_plot(self.league, self.cfg.run, self.run_dir / "ratings.png")
+        except (MarlError, OSError) as e:
+            return f"no plot written ({e})"
 
     def _waiting(self) -> None:
         if self.on_progress:
