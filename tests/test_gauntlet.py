@@ -165,8 +165,8 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     code, out, err = run(capsys, *args, "--json")
     assert code == 0, err
     data = json.loads(out)
-    lines = [ln for ln in err.splitlines() if ln.startswith("pong-1: step ")]
-    assert len(lines) == 3 and "ep0-left random" in lines[0] and "elapsed" in lines[-1], err
+    lines = [ln for ln in err.splitlines() if ln.startswith("pong-1: ") and " rated " in ln]
+    assert len(lines) == 3 and "rated ep0-left (step 0): random " in lines[0] and "elapsed" in lines[-1], err
     with League.open(home) as league:
         snaps = league.players("pong", kind="snapshot")
         bots = {p.name: p.id for p in league.players("pong", kind="bot")}
@@ -201,3 +201,27 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     left, right = (ln.strip() for ln in out.splitlines() if ln.strip().startswith("pong-1/ep"))
     assert left.startswith(finals[0]["snapshot"] + ": Elo ") and right.startswith(finals[1]["snapshot"] + ": Elo ")
     assert "vs random" in left and "vs cpu" in right and "games)" in right
+
+
+def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monkeypatch):
+    """The predecessor lost 0-8 to random; the new snapshot (cpu standing in) wins its first pair, against that
+    history: the matchup goes on to the full number of pairs, in the same call of the runner."""
+    import selfplay_cli.rated.gauntlet as gauntlet_mod
+
+    league = League.open(tmp_path / "league")
+    league.ensure_bots("pong", ["random", "cpu"])
+    old, new = snapshot_rows(league, "r", 2, learners=("left",))
+    rnd = league.find_players("random", "pong")[0]
+    mid = league.create_match("pong", "eval")
+    league.record_games(mid, [GameRecord("pong", (rnd.id, old.id), seed=i, scores=(1, 0), outcome=(1.0, 0.0),
+                                         length=10, truncated=False) for i in range(8)])
+
+    def fake_load(lg, row, device="cpu", greedy=None, seed=0):
+        p = ScriptedPolicy("pong", "cpu" if row.id == new.id else row.name, seed=seed)
+        p.id = row.full_name
+        return p
+
+    monkeypatch.setattr(gauntlet_mod, "load_player", fake_load)
+    (m,) = play_gauntlet(league, [(new, rnd)], first_seed=0, config=GauntletConfig(pairs=3, clear_pairs=1, max_pairs=3))
+    assert m.expect == 0.0 and m.pairs == 3 and m.wins == 6, (m.pairs, m.wins)
+    league.close()

@@ -268,16 +268,18 @@ class TrainProgress:
             self._line(event)
 
     def _line(self, event: dict[str, Any]) -> None:
-        """One plain line per snapshot: steps, steps/s, games, the new snapshots' scores, elapsed, remaining."""
+        """One plain line per rated snapshot moment: where training stands (steps, steps/s, games finished), the
+        new snapshots' measured scores against the scripted players, elapsed and remaining time."""
         steps = event["steps"]
         recs = "; ".join(
-            r.name.split("/", 1)[-1] + " " + (" ".join(f"{bot} {100 * r.score(wdl):.0f}%/{sum(wdl)}"
-                                                      for bot, wdl in r.vs.items()) or "unrated")
+            f"{r.name.split('/', 1)[-1]} (step {r.step:,}): "
+            + (", ".join(f"{bot} {100 * r.score(wdl):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()) or "unrated")
             for r in event["records"])
         elapsed = time.perf_counter() - self.start
         left = "" if self.remaining is None or steps >= self.cfg.steps else f", ~{_clock(self.remaining)} left"
-        line = (f"{self.cfg.run}: step {steps:,}/{self.cfg.steps:,} ({100 * self._fraction(steps):.0f}%), "
-                f"{self.rate:,.0f} steps/s, {event['episodes']:,} games; {recs}; {_clock(elapsed)} elapsed{left}")
+        line = (f"{self.cfg.run}: {100 * self._fraction(steps):.0f}% ({steps:,} of {self.cfg.steps:,} steps, "
+                f"{self.rate:,.0f}/s, {event['episodes']:,} games finished); rated {recs}; "
+                f"{_clock(elapsed)} elapsed{left}")
         if self.progress.disable:
             err_console.print(line, markup=False, highlight=False, soft_wrap=True)
         else:

@@ -14,14 +14,14 @@ snapshot moment are played together, in one batched call of the runner.
 
 Cheap where the result is clear: a matchup whose result is already clear from history (the new snapshot's lineage,
 its predecessor and theirs, met the same opponent at least ``2 * pairs`` times and won or lost clearly, by the rule
-below) plays
-``clear_pairs`` pairs, and more only if they go against that history; any other matchup plays ``pairs`` pairs. When
-all of a matchup's games are in it goes on (doubling its pairs, up to ``max_pairs``) only while its result is still
-open, i.e. while ``|W - L| < z * sqrt(W + L)`` with ``z`` the one-sided normal quantile of ``clear`` (0.95: 4-0 is
-clear, 3-1 is not). The extra pairs join the running batch as
-soon as their matchup asks for them, so a short matchup never waits for the longest game of the batch. Every game is
-stored in the ledger as its batch of the matchup completes (kind ``eval``, one match per matchup, one transaction
-per batch).
+below) plays ``clear_pairs`` pairs, and ``pairs`` after all if they go against that history (the snapshot has
+changed: where games are worth playing); any other matchup plays ``pairs`` pairs. With ``max_pairs`` above ``pairs``,
+a matchup whose games are all in goes on (doubling its pairs, up to ``max_pairs``) while its result is still open,
+i.e. while ``|W - L| < z * sqrt(W + L)`` with ``z`` the one-sided normal quantile of ``clear`` (0.95: 4-0 is clear,
+3-1 is not). Each such wait for a matchup's games costs up to a game's length, so the training loop leaves it off.
+The extra pairs join the running batch as soon as their matchup asks for them, so a short matchup never waits for
+the longest game of the batch. Every game is stored in the ledger as its batch of the matchup completes (kind
+``eval``, one match per matchup, one transaction per batch).
 """
 
 from __future__ import annotations
@@ -86,14 +86,18 @@ class Matchup:
     def score(self) -> float:
         return (self.wins + 0.5 * self.draws) / self.games if self.games else 0.5
 
-    def open(self, z: float, max_pairs: int) -> bool:
-        """True while more pairs would tell more: below ``max_pairs`` and the result not yet clear, where a result
-        that goes the way of a clear history (the predecessor's) counts as clear."""
-        if self.pairs >= max_pairs:
-            return False
-        if self.expect is not None and (self.score - 0.5) * (self.expect - 0.5) > 0:
-            return False
-        return not clear(self.wins, self.losses, z)
+    def more(self, z: float, pairs: int, max_pairs: int) -> int:
+        """Pairs to add now that every game so far is in (0: settled).
+
+        A matchup started small on a clear history goes on to ``pairs`` at once when its games go against that
+        history (the snapshot changed: exactly where games are worth playing), and stops when they agree. Any other
+        matchup doubles its pairs up to ``max_pairs`` while its result is open."""
+        if self.expect is not None:
+            agrees = (self.score - 0.5) * (self.expect - 0.5) > 0
+            return 0 if agrees else max(pairs - self.pairs, 0)
+        if self.pairs >= max_pairs or clear(self.wins, self.losses, z):
+            return 0
+        return min(2 * self.pairs, max_pairs) - self.pairs
 
 
 def clear(wins: int, losses: int, z: float) -> bool:
@@ -221,8 +225,9 @@ def play_gauntlet(
         if in_flight[k] == 0:  # every game scheduled so far is in: store them, then go on only if still open
             _store(league, m, pending[k], loaded, options)
             pending[k] = []
-            if cfg.max_pairs > cfg.pairs and m.open(z, cfg.max_pairs):
-                schedule_pairs(k, min(2 * m.pairs, cfg.max_pairs) - m.pairs)
+            extra = m.more(z, cfg.pairs, cfg.max_pairs)
+            if extra:
+                schedule_pairs(k, extra)
 
     for k, m in enumerate(matchups):
         m.expect = _clear_history(league, m, z, 2 * cfg.pairs)

@@ -34,6 +34,7 @@ class GauntletJob:
     first_seed: int
     games: int  # games per opponent (seat-swapped pairs)
     older: int
+    full: bool = False  # every opponent gets ``games``, even where the lineage's result is already clear
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,7 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
 
     t0 = time.perf_counter()
     n = job.games // 2
-    cfg = GauntletConfig(pairs=n, clear_pairs=1, max_pairs=n, older=job.older)
+    cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n, older=job.older)
     matchups = rate_snapshots(league, job.snapshot_ids, first_seed=job.first_seed, config=cfg, device=device,
                               on_games=on_games)
     return JobDone(job, time.perf_counter() - t0, sum(m.games for m in matchups))

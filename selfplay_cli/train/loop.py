@@ -290,8 +290,9 @@ class Trainer:
         base = f"ep{episode}" + (f".{self.episodes_suffix}" if self.episodes_suffix else "")
         return base if len(self.names) == 1 else f"{base}-{self.names[i]}"
 
-    def snapshot(self) -> None:
-        """Save and register every learner's snapshot (one unit: files, rows, then the run state), then rate them."""
+    def snapshot(self, final: bool = False) -> None:
+        """Save and register every learner's snapshot (one unit: files, rows, then the run state), then rate them
+        (the final ones against every opponent in full: the run's answer rests on them)."""
         cfg = self.cfg
         if self.snapshots and self._snapshot_step == self.steps:
             return  # nothing played since the last snapshot
@@ -321,7 +322,7 @@ class Trainer:
         self.matchmaker.set_pool(pool)
         if self.cfg.eval_games:
             self.jobs.append(GauntletJob(tuple(self.latest), 10_000_000 + 10_000 * len(self.snapshots),
-                                         self.cfg.eval_games, self.cfg.eval_older))
+                                         self.cfg.eval_games, self.cfg.eval_older, full=final))
         self.save_state()
         if self.cfg.eval_games:
             self.evaluator.submit(self.jobs[-1])
@@ -392,7 +393,7 @@ class Trainer:
             "snapshot_episode": self._snapshot_episode, "snapshot_step": self._snapshot_step,
             "next_seed": self.games.next_seed, "elapsed": self.elapsed, "resumes": self.resumes,
             "matchmaker": json.dumps(self.matchmaker.state_dict()), "rates": json.dumps(self.rates.to_dict()),
-            "jobs": [[list(j.snapshot_ids), j.first_seed, j.games, j.older] for j in self.jobs],
+            "jobs": [[list(j.snapshot_ids), j.first_seed, j.games, j.older, j.full] for j in self.jobs],
         }
         self.run_dir.mkdir(parents=True, exist_ok=True)
         tmp = self.state_path.with_name(f"state.pt.tmp-{os.getpid()}")
@@ -432,8 +433,8 @@ class Trainer:
         self.elapsed = float(state["elapsed"])
         self.matchmaker.load_state_dict(json.loads(state["matchmaker"]))
         self.rates = WinRates.from_dict(json.loads(state["rates"]))
-        self.jobs = [GauntletJob(tuple(int(i) for i in ids), int(seed), int(games), int(older))
-                     for ids, seed, games, older in state.get("jobs", [])]
+        self.jobs = [GauntletJob(tuple(int(i) for i in ids), int(seed), int(games), int(older), bool(full))
+                     for ids, seed, games, older, full in state.get("jobs", [])]
         note = f"resumed {self.cfg.run} at step {self.steps:,} (snapshot {self.snapshots[-1]})"
         newer = [p for p in self.league.players(env=self.spec.name, kind="snapshot")
                  if p.run == self.cfg.run and p.id > max(self.latest)]
@@ -543,7 +544,7 @@ class Trainer:
                         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
                         next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
             self._record(pending)
-            self.snapshot()
+            self.snapshot(final=True)
         if board is not None:
             board.close()
         t1 = time.perf_counter()
