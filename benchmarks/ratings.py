@@ -25,8 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from selfplay_cli.stats.bradley_terry import bootstrap_ci, fit_bradley_terry
+from selfplay_cli.stats.bradley_terry import fit_bradley_terry
 from selfplay_cli.stats.elo import NAT_TO_ELO
+from selfplay_cli.stats.intervals import bootstrap_ci
 
 FIT_TARGET_S = 0.3
 BOOT_TARGET_S = 30.0

@@ -10,7 +10,8 @@ import numpy as np
 
 from selfplay_cli.arena import Game, play
 from selfplay_cli.cli import main
-from selfplay_cli.league.ladder import head_to_head, ladder
+from selfplay_cli.league.ladder import ladder
+from selfplay_cli.league.pairs import head_to_head
 from selfplay_cli.league.store import GameRecord, League
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.rated.gauntlet import GauntletConfig, choose_opponents, clear, play_gauntlet

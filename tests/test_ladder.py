@@ -12,18 +12,10 @@ import numpy as np
 import pytest
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.ladder import (
-    LadderRow,
-    PairPlan,
-    fit_csv,
-    fit_table,
-    head_to_head,
-    ladder,
-    plan_tournament,
-    read_results_csv,
-    select_rows,
-)
+from selfplay_cli.league.ladder import LadderRow, fit_table, ladder, select_rows
 from selfplay_cli.league.names import resolve, resolve_many
+from selfplay_cli.league.pairs import PairPlan, head_to_head, plan_tournament
+from selfplay_cli.league.results_csv import fit_csv, read_results_csv
 from selfplay_cli.league.store import GameRecord, League, LeagueError, PlayerRow
 from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, fit_bradley_terry
 from selfplay_cli.stats.elo import NAT_TO_ELO, elo_to_score, normal_quantile

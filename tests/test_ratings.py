@@ -16,16 +16,18 @@ from selfplay_cli.stats.bradley_terry import (
     FLAG_PERFECT,
     FLAG_UNRATED,
     FLAG_ZERO,
+    fit_bradley_terry,
+    prior_draws,
+)
+from selfplay_cli.stats.elo import MAX_ELO, elo_to_score, elo_update, normal_quantile, score_to_elo
+from selfplay_cli.stats.intervals import (
     bootstrap_ci,
     bootstrap_intervals,
-    fit_bradley_terry,
     laplace_ci,
     laplace_intervals,
-    prior_draws,
     rank_by_ci,
     rank_pairwise,
 )
-from selfplay_cli.stats.elo import MAX_ELO, elo_to_score, elo_update, normal_quantile, score_to_elo
 from selfplay_cli.stats.match import match_stats
 from selfplay_cli.stats.sprt import SPRT, sprt_bounds, sprt_llr
 
@@ -566,5 +568,5 @@ def test_rank_by_ci_hand_example() -> None:
 
 def test_stats_does_not_import_torch() -> None:
     code = ("import sys, selfplay_cli.stats.elo, selfplay_cli.stats.match, selfplay_cli.stats.sprt, "
-            "selfplay_cli.stats.bradley_terry; sys.exit('torch' in sys.modules)")
+            "selfplay_cli.stats.bradley_terry, selfplay_cli.stats.intervals; sys.exit('torch' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0

@@ -76,7 +76,8 @@ def fit(
 ) -> None:
     """Bradley-Terry ratings over the whole ledger (draw = half a point), 400 Elo scale: MAP under BayesElo's
     prior of 2 virtual draws by default (--prior 0: maximum likelihood), with confidence intervals and ranks."""
-    from ..league.ladder import fit_csv, ladder
+    from ..league.ladder import ladder
+    from ..league.results_csv import fit_csv
 
     name, rating = parse_anchor(anchor)
     check_bootstrap(bootstrap)

@@ -119,7 +119,8 @@ def tournament(
 ) -> None:
     """Round robin (or gauntlet with --vs) over chosen policies, playing only the games still missing, then
     refit and print the ladder."""
-    from ..league.ladder import ladder, plan_tournament
+    from ..league.ladder import ladder
+    from ..league.pairs import plan_tournament
     from ..rated.match import load_player, run_match
 
     if games_per_pair < 2:

@@ -1,7 +1,7 @@
-"""Ladders: Bradley-Terry ratings of a whole population, derived from the game ledger or a results CSV.
+"""Ladders: Bradley-Terry ratings of a whole population, derived from the game ledger (or, through
+:mod:`selfplay_cli.league.results_csv`, from a results file).
 
-Nothing here is stored: every ladder is refitted from the games (:func:`ladder` from the league's
-ledger, :func:`fit_csv` from a ``player_a,player_b,result`` file), so it always agrees with the ledger.
+Nothing here is stored: every ladder is refitted from the games, so it always agrees with the ledger.
 
 * :func:`fit_table` is the generic core: Bradley-Terry ratings anchored at one player
   (:func:`~selfplay_cli.stats.bradley_terry.fit_bradley_terry`), MAP under BayesElo's prior of
@@ -11,9 +11,8 @@ ledger, :func:`fit_csv` from a ``player_a,player_b,result`` file), so it always 
   snapshot's run, the best snapshot of each run, and every player's record against the env's scripted players.
 * :func:`select_rows` keeps one run's snapshots (plus the scripted players) and / or the first rows,
   without changing any rank.
-* :func:`read_results_csv` / :func:`fit_csv` rate an external results file.
-* :func:`plan_tournament` says how many games each pair of a round robin / gauntlet still needs.
-* :func:`head_to_head` gives W/D/L and pentanomial (game-pair) counts of two players.
+
+Two players' record and the games a tournament still needs are in :mod:`selfplay_cli.league.pairs`.
 
 The prior
 ---------
@@ -26,10 +25,10 @@ appear either way.
 
 Confidence intervals
 --------------------
-``bootstrap > 0``: the percentile bootstrap of :func:`~selfplay_cli.stats.bradley_terry.bootstrap_intervals`
+``bootstrap > 0``: the percentile bootstrap of :func:`~selfplay_cli.stats.intervals.bootstrap_intervals`
 (games resampled with replacement, ``bootstrap`` replicates, seeded, the prior's virtual draws added to every
 replicate). ``bootstrap == 0``: the Laplace (normal) approximation
-(:func:`~selfplay_cli.stats.bradley_terry.laplace_intervals`): the negative Hessian of the log-posterior at the
+(:func:`~selfplay_cli.stats.intervals.laplace_intervals`): the negative Hessian of the log-posterior at the
 fit (with ``prior=0``: the observed Fisher information) is the weighted graph Laplacian
 ``L_ii = sum_j c_ij, L_ij = -c_ij`` with ``c_ij = (N_ij + V_ij) p_ij (1 - p_ij)``; with the anchor's row and column
 removed it is invertible on the anchor's connected component, and ``se_i = sqrt((L^-1)_ii) * 400 / ln 10`` Elo,
@@ -47,7 +46,7 @@ and a ``zero`` player's lower end are ``rating +- MAX_ELO``; disconnected and un
 
 Ranks
 -----
-:func:`~selfplay_cli.stats.bradley_terry.rank_pairwise`: ``rank = 1 + the number of players stronger beyond
+:func:`~selfplay_cli.stats.intervals.rank_pairwise`: ``rank = 1 + the number of players stronger beyond
 doubt``, i.e. players j for which the confidence interval of the difference ``r_j - r_i`` lies wholly above 0
 (from the same bootstrap replicates or Laplace covariance as the intervals, floored by the Laplace one under a
 prior), or whose whole interval lies above this player's. Players that cannot be told apart share a rank and
@@ -60,12 +59,10 @@ Players without an estimate (a flag) are compared by their whole intervals only.
 
 from __future__ import annotations
 
-import csv
 import math
 from collections import defaultdict
 from collections.abc import Collection
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -78,31 +75,20 @@ from selfplay_cli.stats.bradley_terry import (
     FLAG_PERFECT,
     FLAG_UNRATED,
     FLAG_ZERO,
-    bootstrap_intervals,
     fit_bradley_terry,
-    laplace_intervals,
-    rank_pairwise,
 )
 from selfplay_cli.stats.elo import MAX_ELO
+from selfplay_cli.stats.intervals import bootstrap_intervals, laplace_intervals, rank_pairwise
 
 __all__ = [
-    "CSV_HEADER",
     "DEFAULT_PRIOR",
     "BotRecord",
     "LadderRow",
-    "PairPlan",
-    "fit_csv",
     "fit_table",
-    "head_to_head",
     "ladder",
     "pick_env",
-    "plan_tournament",
-    "read_results_csv",
     "select_rows",
 ]
-
-CSV_HEADER = ("player_a", "player_b", "result")
-"""The header a results CSV must have (whitespace around the names tolerated)."""
 
 _JSON_KEYS = ("policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
               "score", "step", "flag", "anchor", "run", "best", "vs")
@@ -256,7 +242,7 @@ def fit_table(
     Bradley-Terry MAP ratings under BayesElo's prior of ``prior`` virtual draws (``prior=0``: maximum
     likelihood) anchored at ``anchor`` (its rating is ``anchor_rating``), intervals by a ``bootstrap``-replicate
     percentile bootstrap (``bootstrap=0``: Laplace / normal approximation), ranks by
-    :func:`~selfplay_cli.stats.bradley_terry.rank_pairwise` (see the module docstring). One row per name (players
+    :func:`~selfplay_cli.stats.intervals.rank_pairwise` (see the module docstring). One row per name (players
     without games are flagged ``unrated``), sorted by ``(rank, -elo, name)``. ``kinds`` / ``steps`` /
     ``player_ids`` (keyed by name) fill the corresponding columns (default kind ``"player"``). Players in
     ``hidden`` are fitted (their games count) but get no row and take no part in the ranks.
@@ -488,200 +474,3 @@ def select_rows(rows: list[LadderRow], run: str | None = None, top: int | None =
     if run is not None:
         rows = [r for r in rows if r.run == run or r.kind == "bot"]
     return rows if top is None else rows[:top]
-
-
-# --------------------------------------------------------------------------------------------------
-# Results CSV
-# --------------------------------------------------------------------------------------------------
-
-
-def _parse_result(text: str) -> float | None:
-    t = text.strip()
-    if t == "1/2":
-        return 0.5
-    try:
-        v = float(t)
-    except ValueError:
-        return None
-    return v if v in (0.0, 0.5, 1.0) else None
-
-
-def read_results_csv(path: str | Path) -> tuple[list[str], np.ndarray, np.ndarray, np.ndarray]:
-    """Read a results file ``player_a,player_b,result`` (result: A's points, ``1``, ``0.5`` or ``0``).
-
-    The first non-blank, non-comment line must be exactly the header (spaces around names tolerated);
-    blank lines and lines starting with ``#`` are skipped; fields may be quoted (CSV rules).
-
-    Returns:
-        ``(names, a, b, score_a)``: names in order of first appearance, the index arrays of each game's
-        players and A's points.
-
-    Raises:
-        LeagueError: ``"<path>:<line>: <problem>"`` for a bad header, a wrong number of fields, an empty
-            name, a player against itself or a bad result; also for an unreadable or empty file.
-    """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except OSError as exc:
-        raise LeagueError(f"cannot read {path}: {exc.strerror or exc}") from exc
-    except UnicodeDecodeError as exc:
-        raise LeagueError(f"cannot read {path}: not UTF-8 text") from exc
-    index: dict[str, int] = {}
-    a: list[int] = []
-    b: list[int] = []
-    s: list[float] = []
-    header_seen = False
-    for lineno, line in enumerate(text.splitlines(), 1):
-        stripped = line.strip()
-        if not stripped or stripped.startswith("#"):
-            continue
-        try:
-            fields = [f.strip() for f in next(csv.reader([stripped], skipinitialspace=True))]
-        except csv.Error as exc:
-            raise LeagueError(f"{path}:{lineno}: malformed CSV line ({exc})") from exc
-        if not header_seen:
-            if tuple(fields) != CSV_HEADER:
-                raise LeagueError(f"{path}:{lineno}: bad header {stripped!r}: expected {','.join(CSV_HEADER)}")
-            header_seen = True
-            continue
-        if len(fields) != 3:
-            raise LeagueError(f"{path}:{lineno}: expected 3 fields (player_a,player_b,result), got {len(fields)}")
-        pa, pb, res = fields
-        if not pa or not pb:
-            raise LeagueError(f"{path}:{lineno}: empty player name")
-        if pa == pb:
-            raise LeagueError(f"{path}:{lineno}: '{pa}' cannot play against itself")
-        value = _parse_result(res)
-        if value is None:
-            raise LeagueError(f"{path}:{lineno}: bad result {res!r}: expected 1, 0.5 or 0 (player_a's points)")
-        a.append(index.setdefault(pa, len(index)))
-        b.append(index.setdefault(pb, len(index)))
-        s.append(value)
-    if not header_seen:
-        raise LeagueError(f"{path}: empty file (expected the header {','.join(CSV_HEADER)} and one game a line)")
-    if not a:
-        raise LeagueError(f"{path}: no games after the header")
-    return (list(index), np.asarray(a, dtype=np.int64), np.asarray(b, dtype=np.int64),
-            np.asarray(s, dtype=np.float64))
-
-
-def fit_csv(
-    path: str | Path,
-    anchor: str | None = None,
-    anchor_rating: float = 1000.0,
-    bootstrap: int = 200,
-    confidence: float = 0.95,
-    seed: int = 0,
-    *,
-    prior: float = DEFAULT_PRIOR,
-) -> list[LadderRow]:
-    """Ladder of a results CSV (:func:`read_results_csv`); the default anchor is the file's first player.
-
-    ``prior``: BayesElo's prior in virtual draws (0 = maximum likelihood). Rows have kind ``"player"`` and no
-    id / step / run / bot records.
-    """
-    names, a, b, s = read_results_csv(path)
-    return fit_table(names, a, b, s, anchor=names[0] if anchor is None else anchor, anchor_rating=anchor_rating,
-                     bootstrap=bootstrap, confidence=confidence, seed=seed, prior=prior)
-
-
-# --------------------------------------------------------------------------------------------------
-# Tournament planning and head-to-head
-# --------------------------------------------------------------------------------------------------
-
-
-@dataclass
-class PairPlan:
-    """One pair of a tournament: games already in the ledger (either seat order) and games still missing."""
-
-    a_id: int
-    b_id: int
-    existing: int
-    missing: int
-
-
-def plan_tournament(
-    league: League, env: str, player_ids: list[int], games_per_pair: int, vs: int | None = None
-) -> list[PairPlan]:
-    """Games still needed so that every pair has ``games_per_pair`` games in ``env``.
-
-    Pairs: every unordered pair of ``player_ids`` (round robin, in list order), or with ``vs`` each player
-    against ``vs`` only (gauntlet; ``a_id`` is the player, ``b_id`` is ``vs``). Existing games of a pair
-    count in both seat orders. Pairs with nothing missing are left out.
-
-    Raises:
-        LeagueError: unknown player or one of another env, fewer than two players, negative games_per_pair.
-    """
-    if games_per_pair < 0:
-        raise LeagueError(f"games per pair must be >= 0, got {games_per_pair}")
-    ids = list(dict.fromkeys(int(p) for p in player_ids))
-    check = ids + ([int(vs)] if vs is not None and int(vs) not in ids else [])
-    for pid in check:
-        p = league.get_player(pid)
-        if p.env != env:
-            raise LeagueError(f"player {pid} ({p.full_name}) belongs to env {p.env}, not {env}")
-    if vs is not None:
-        vs = int(vs)
-        pairs = [(p, vs) for p in ids if p != vs]
-        if not pairs:
-            raise LeagueError("a gauntlet needs at least one player besides the opponent")
-    else:
-        if len(ids) < 2:
-            raise LeagueError("a round robin needs at least two players")
-        pairs = [(ids[i], ids[j]) for i in range(len(ids)) for j in range(i + 1, len(ids))]
-    table = league.games(env=env, players=check)
-    counts: dict[tuple[int, int], int] = defaultdict(int)
-    for x, y in zip(table.player_a.tolist(), table.player_b.tolist(), strict=True):
-        counts[(min(x, y), max(x, y))] += 1
-    plan = []
-    for x, y in pairs:
-        have = counts.get((min(x, y), max(x, y)), 0)
-        missing = max(games_per_pair - have, 0)
-        if missing > 0:
-            plan.append(PairPlan(a_id=x, b_id=y, existing=have, missing=missing))
-    return plan
-
-
-def head_to_head(league: League, a_id: int, b_id: int) -> dict[str, Any]:
-    """Record of player ``a_id`` against ``b_id`` over all stored 2-seat games.
-
-    Returns a dict with ``a_id, b_id, games, wins, draws, losses, score`` (A's mean points, 0.5 without
-    games), ``pentanomial`` and ``pairs``, ``unpaired``. Game pairs: within one match, games with the same
-    seed, one with A in seat 0 and one with A in seat 1 (matched in game-id order). A pair's score is A's
-    points in both games; ``pentanomial`` counts pairs scoring ``0, 0.5, 1, 1.5, 2``, i.e.
-    ``[LL, LD, WL+DD, WD, WW]`` as :func:`~selfplay_cli.stats.sprt.sprt_llr` expects. Unpaired games
-    count in W/D/L only.
-    """
-    a_id, b_id = int(a_id), int(b_id)
-    if a_id == b_id:
-        raise LeagueError(f"player {a_id} cannot be paired with itself")
-    league.get_player(a_id)
-    league.get_player(b_id)
-    table = league.games(players=[a_id, b_id])
-    seat0 = table.player_a == a_id
-    pts = np.where(seat0, table.score_a, 1.0 - table.score_a)
-    wins, draws, losses = int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))
-    groups: dict[tuple[int, int], tuple[list[float], list[float]]] = defaultdict(lambda: ([], []))
-    for m, sd, first, p in zip(table.match_id.tolist(), table.seed.tolist(), seat0.tolist(), pts.tolist(),
-                               strict=True):
-        groups[(m, sd)][0 if first else 1].append(p)
-    penta = [0, 0, 0, 0, 0]
-    pairs = 0
-    for as_first, as_second in groups.values():
-        for p1, p2 in zip(as_first, as_second, strict=False):
-            penta[min(max(int(round(2 * (p1 + p2))), 0), 4)] += 1
-            pairs += 1
-    n = len(table)
-    return {
-        "a_id": a_id,
-        "b_id": b_id,
-        "games": n,
-        "wins": wins,
-        "draws": draws,
-        "losses": losses,
-        "score": float(pts.mean()) if n else 0.5,
-        "pentanomial": penta,
-        "pairs": pairs,
-        "unpaired": n - 2 * pairs,
-    }

@@ -41,7 +41,7 @@ class GateVerdict:
 def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: float, games: int,
                confidence: float = 0.95, parallel: int = 1024, device: str = "cpu") -> GateVerdict:
     """Reuse the stored head-to-head games, play (and store) the missing ones, then test the lower bound."""
-    from ..league.ladder import head_to_head
+    from ..league.pairs import head_to_head
 
     if cand.id == base.id:
         from ..errors import MarlError

@@ -110,7 +110,7 @@ def clear(wins: int, losses: int, z: float) -> bool:
 def _clear_history(league: League, m: Matchup, z: float, enough: int) -> float | None:
     """The score against the same opponent of the new snapshot's lineage (its predecessor, then theirs, as far back
     as it takes to count ``enough`` games), if that record is clear; else None."""
-    from ..league.ladder import head_to_head
+    from ..league.pairs import head_to_head
 
     wins = draws = losses = 0
     pid = m.a.parent_id

@@ -157,7 +157,7 @@ def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64
 
     Returns ``(games, wins, draws, losses, unit_wins)``, each ``n x n`` from the row player's side. Units: within
     one match, games of the same seed with the seats swapped are paired in game-id order (as
-    :func:`~selfplay_cli.league.ladder.head_to_head` pairs them); a pair is won by the player with more than half of
+    :func:`~selfplay_cli.league.pairs.head_to_head` pairs them); a pair is won by the player with more than half of
     its two games' points, level pairs count for no one; a game without a partner is a unit of its own.
     """
     n = len(ids)

@@ -1,3 +1,4 @@
-"""Rating maths, numpy only (no torch, no database): Elo arithmetic (:mod:`.elo`), head-to-head statistics
-(:mod:`.match`), the GSPRT (:mod:`.sprt`), Bradley-Terry fits with priors, bootstrap intervals and ranks
-(:mod:`.bradley_terry`)."""
+"""Rating maths, numpy and scipy only (no torch, no database): Elo arithmetic (:mod:`.elo`), head-to-head
+statistics (:mod:`.match`), the GSPRT (:mod:`.sprt`), Bradley-Terry fits under BayesElo's prior
+(:mod:`.bradley_terry`), their intervals and ranks (:mod:`.intervals`), the Nash equilibrium of a meta-game
+(:mod:`.nash`) and significant 3-cycles (:mod:`.cycles`)."""

@@ -342,7 +342,8 @@ class Trainer:
 
     def _records(self, new: list[PlayerRow]) -> list[SnapshotRecord]:
         """Each new snapshot's record against the scripted players and its fitted rating, from the ledger."""
-        from ..league.ladder import head_to_head, ladder
+        from ..league.ladder import ladder
+        from ..league.pairs import head_to_head
 
         rated = {}
         if self.cfg.eval_games:
