@@ -105,7 +105,8 @@ def train(
     from ..algos.dqn import seed000_config
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
-    from ..train.loop import TrainConfig, Trainer, save_run_config
+    from ..train.config import TrainConfig, save_run_config
+    from ..train.loop import Trainer
 
     league = open_league(home, db)
     try:
