@@ -167,7 +167,7 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     assert code == 0, err
     data = json.loads(out)
     lines = [ln for ln in err.splitlines() if ln.startswith("pong-1: ") and " rated " in ln]
-    assert len(lines) == 3 and "rated ep0-left (step 0): random " in lines[0] and "elapsed" in lines[-1], err
+    assert len(lines) == 3 and "rated s0-left (step 0): random " in lines[0] and "elapsed" in lines[-1], err
     with League.open(home) as league:
         snaps = league.players("pong", kind="snapshot")
         bots = {p.name: p.id for p in league.players("pong", kind="bot")}
@@ -199,7 +199,7 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     # the same run as text: the summary names each learner's final snapshot with its measured figures
     code, out, err = run(capsys, *args[:-2], "--home", str(tmp_path / "h2"))
     assert code == 0, err
-    left, right = (ln.strip() for ln in out.splitlines() if ln.strip().startswith("pong-1/ep"))
+    left, right = (ln.strip() for ln in out.splitlines() if ln.strip().startswith("pong-1/s"))
     assert left.startswith(finals[0]["snapshot"] + ": Elo ") and right.startswith(finals[1]["snapshot"] + ": Elo ")
     assert "vs random" in left and "vs cpu" in right and "games)" in right
 

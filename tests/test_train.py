@@ -32,8 +32,8 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     assert report.steps >= 12_288 and report.episodes > 16
     snaps = [p for p in league.players("pong", kind="snapshot")]
     names = [p.name for p in snaps]
-    assert names[:2] == ["ep0-left", "ep0-right"]
-    assert all(n.startswith("ep") and n.endswith(("-left", "-right")) for n in names)
+    assert names[:2] == ["s0-left", "s0-right"]
+    assert all(n.startswith(("ep", "s")) and n.endswith(("-left", "-right")) for n in names)
     assert len(names) == len(set(names)) >= 4
     by_id = {p.id: p for p in snaps}
     for seat in ("left", "right"):
@@ -70,7 +70,7 @@ def test_one_learner_meets_league_opponents_and_bots(tmp_path):
     league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     Trainer(league, cfg).train()
     snaps = league.players("pong", kind="snapshot")
-    assert [p.name for p in snaps][0] == "ep0" and all("-" not in p.name for p in snaps)
+    assert [p.name for p in snaps][0] == "s0" and all("-" not in p.name for p in snaps)
     matches = {}
     with league.session() as s:
         from selfplay_cli.league.models import Match
@@ -141,8 +141,8 @@ def test_training_games_keep_their_actions_and_replay_exactly(tmp_path, capsys):
 
 
 def test_snapshots_by_steps_when_games_are_long(tmp_path):
-    """--snapshot-steps: a snapshot every N game steps even when no game ends (good players rally long); names stay
-    unique (epN.1, epN.2 within one episode count) and each has the previous one as its parent."""
+    """--snapshot-steps: a snapshot every N game steps even when no game ends (good players rally long), named by
+    the step of the schedule it stands for (the final one by the budget), each with the previous one as parent."""
     league = League.open(tmp_path / "league")
     cfg = tiny(agents=1, snapshot_every=10**6, snapshot_steps=4096, steps=12_288, eval_games=0,
                env_options={"points_to_win": 21})
@@ -150,7 +150,7 @@ def test_snapshots_by_steps_when_games_are_long(tmp_path):
     Trainer(league, cfg).train()
     snaps = sorted(league.players("pong", kind="snapshot"), key=lambda p: p.id)
     assert [p.step for p in snaps] == [0, 4096, 8192, 12_288]
-    assert len({p.name for p in snaps}) == 4 and snaps[0].name == "ep0"
+    assert [p.name for p in snaps] == ["s0", "s4.1k", "s8.19k", "s12.3k"]
     assert [p.parent_id for p in snaps] == [None] + [p.id for p in snaps[:-1]]
     league.close()
 
@@ -204,8 +204,8 @@ def test_train_command_runs_and_reports(tmp_path, capsys):
                          str(tmp_path / "h"), "--json")
     assert code == 0, err
     data = json.loads(out)
-    assert data["run"] == "pong-1" and data["steps"] >= 4096 and data["snapshots"][:2] == ["pong-1/ep0-left",
-                                                                                           "pong-1/ep0-right"]
+    assert data["run"] == "pong-1" and data["steps"] >= 4096 and data["snapshots"][:2] == ["pong-1/s0-left",
+                                                                                           "pong-1/s0-right"]
     config = json.loads((tmp_path / "h" / "runs" / "pong-1" / "config.json").read_text())
     assert config["agents"] == 2 and config["env_options"] == {"points_to_win": 1}
     with League.open(tmp_path / "h") as league:
@@ -291,7 +291,7 @@ def test_dqn_and_the_seed000_preset_train_through_the_same_loop(tmp_path, capsys
     code, out, err = run(capsys, "train", "pong", "--agents", "1", "--algo", "dqn", "--steps", "6000", "--games", "16",
                          "--env-option", "points_to_win=1", "--eval-games", "4", "--home", home, "--json")
     assert code == 0, err
-    assert json.loads(out)["snapshots"][0] == "pong-1/ep0"
+    assert json.loads(out)["snapshots"][0] == "pong-1/s0"
     code, out, err = run(capsys, "train", "pong", "--preset", "seed000", "--steps", "2000", "--games", "8",
                          "--env-option", "points_to_win=1", "--eval-games", "0", "--home", home, "--json")
     assert code == 0, err

@@ -58,10 +58,12 @@ def train(
     run: Annotated[str | None, typer.Option("--run", help="Run name (default: <env>-<n>).")] = None,
     seed: Annotated[int, typer.Option("--seed", help="Seed of networks, games and opponent choice.")] = 0,
     games: Annotated[int, typer.Option("--games", help="Games played at once.")] = 256,
-    snapshot_every: Annotated[int, typer.Option("--snapshot-every", help="Episodes (finished games) between "
-                                                "snapshots, named epN (0: by steps only).")] = 128,
-    snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", help="Game steps between snapshots, whichever "
-                                                "of the two comes first (0: by episodes only).")] = 1_000_000,
+    snapshot_every: Annotated[int, typer.Option("--snapshot-every", help="Also a snapshot every N episodes "
+                                                "(finished games), named epN as seed 000 did (0: by steps only).")]
+    = 0,
+    snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", help="Game steps between snapshots, named by "
+                                                "the step they stand for: s0, s1M, s2M, ... and the final one by the "
+                                                "budget (s6M).")] = 1_000_000,
     swap_every: Annotated[int, typer.Option("--swap-every", help="Game steps a game slot keeps the opponent it drew "
                                             "(ML-Agents' swap_steps); 0: a new draw for every game.")] = 0,
     tensorboard: Annotated[bool, typer.Option("--tensorboard", help="Also write the metrics for TensorBoard "

@@ -33,7 +33,7 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"
     games: int = 256  # games played at once (measured: 256 trains ~1.4x faster than 128 on 2 cores)
-    snapshot_every: int = 128  # episodes (finished games) between snapshots; 0: by steps only
+    snapshot_every: int = 0  # episodes (finished games) between snapshots, named epN; 0: by steps only
     snapshot_steps: int = 1_000_000  # game steps between snapshots (whichever comes first); 0: by episodes only
     tensorboard: bool = False  # also write the metrics for TensorBoard (runs/<run>/tensorboard)
     swap_every: int = 0  # game steps a game slot keeps its drawn opponent (ML-Agents' swap_steps); 0: every game

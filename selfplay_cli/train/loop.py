@@ -94,6 +94,16 @@ class TrainReport:
         return self.steps / self.seconds if self.seconds > 0 else 0.0
 
 
+def step_label(steps: int) -> str:
+    """A step count as a short name, to three significant figures: ``0``, ``500``, ``250k``, ``1M``, ``1.5M``,
+    ``4.92M``."""
+    rounded = float(f"{int(steps):.3g}")
+    for scale, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if rounded >= scale:
+            return f"{rounded / scale:g}{unit}"
+    return f"{rounded:g}"
+
+
 def _learner_names(spec_agents: tuple[str, ...], cfg: TrainConfig) -> list[str]:
     if cfg.sharing == "nops" and cfg.agents > 1:
         return list(spec_agents[: cfg.agents])
@@ -134,7 +144,6 @@ class Trainer:
         self.latest: list[int] = [0] * len(self.learners)  # player id of each learner's latest snapshot
         self.snapshots: list[str] = []
         self._snapshot_episode = self._snapshot_step = -1
-        self.episodes_suffix = 0
         self.matchmaker = Matchmaker(cfg.opponents, np.random.default_rng(cfg.seed), self.bot_ids)
         self.rates = WinRates(decay=cfg.opponents.decay, prior=cfg.opponents.prior)
         self._policies: dict[int, Policy] = {}
@@ -194,23 +203,36 @@ class Trainer:
         return [self._opponent_policy(int(i), int(self.learner_of_game[g])) for i, g in zip(ids, slots, strict=True)]
 
     # -- snapshots -------------------------------------------------------------------------------------------
-    def _name(self, episode: int, i: int) -> str:
-        base = f"ep{episode}" + (f".{self.episodes_suffix}" if self.episodes_suffix else "")
-        return base if len(self.names) == 1 else f"{base}-{self.names[i]}"
+    def _base_name(self, trigger: str) -> str:
+        """The name of this snapshot moment (``-<learner>`` is added per learner): by the training step it stands
+        for (``s0``, ``s1M``, ``s2M``, ... ``s6M``: every ``--snapshot-steps``, named by the schedule, and the final
+        one by the budget), or, taken every ``--snapshot-every`` episodes, by the episodes finished (``ep90``, as
+        seed 000 named its checkpoints)."""
+        cfg = self.cfg
+        if trigger == "episodes":
+            base = f"ep{self.episodes}"
+        elif trigger == "steps":
+            base = "s" + step_label(self.steps // cfg.snapshot_steps * cfg.snapshot_steps)
+        elif trigger == "final" and cfg.minutes is None:
+            base = "s" + step_label(cfg.steps)
+        else:  # the start, or the end of a budget in minutes
+            base = "s" + step_label(self.steps)
+        first = base if len(self.names) == 1 else f"{base}-{self.names[0]}"
+        if f"{cfg.run}/{first}" in self.snapshots:  # two moments that round to one label: the exact count decides
+            base = f"s{self.steps}" if not base.startswith("ep") else f"{base}.{self.steps}"
+        return base
 
-    def snapshot(self, final: bool = False) -> None:
+    def snapshot(self, trigger: str = "steps") -> None:
         """Save and register every learner's snapshot (one unit: files, rows, then the run state), then rate them
-        (the final ones against every opponent in full: the run's answer rests on them)."""
+        (the final ones against every opponent in full: the run's answer rests on them). ``trigger``: ``start``,
+        ``steps``, ``episodes`` or ``final``, which names the moment (:meth:`_base_name`)."""
         cfg = self.cfg
         if self.snapshots and self._snapshot_step == self.steps:
             return  # nothing played since the last snapshot
-        if self.snapshots and self._snapshot_episode == self.episodes:
-            self.episodes_suffix += 1  # several snapshots within one episode count: epN.1, epN.2, ...
-        else:
-            self.episodes_suffix = 0
         self._snapshot_episode, self._snapshot_step = self.episodes, self.steps
+        base = self._base_name(trigger)
         for i, learner in enumerate(self.learners):
-            name = self._name(self.episodes, i)
+            name = base if len(self.names) == 1 else f"{base}-{self.names[i]}"
             rel = snapshot_relpath(cfg.run, name)
             parent = self.league.get_player(self.latest[i]).full_name if self.latest[i] else None
             meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options, obs_shape=self.obs_shape,
@@ -230,7 +252,7 @@ class Trainer:
         self.matchmaker.set_pool(pool)
         if self.cfg.eval_games:
             self.jobs.append(GauntletJob(tuple(self.latest), 10_000_000 + 10_000 * len(self.snapshots),
-                                         self.cfg.eval_games, self.cfg.eval_older, full=final))
+                                         self.cfg.eval_games, self.cfg.eval_older, full=trigger == "final"))
         self.save_state()
         if self.cfg.eval_games:
             self.evaluator.submit(self.jobs[-1])
@@ -298,7 +320,7 @@ class Trainer:
             "version": STATE_VERSION,
             "learners": [learner.state_dict() for learner in self.learners],
             "latest": list(self.latest), "snapshots": list(self.snapshots), "steps": self.steps,
-            "episodes": self.episodes, "episodes_suffix": self.episodes_suffix,
+            "episodes": self.episodes,
             "snapshot_episode": self._snapshot_episode, "snapshot_step": self._snapshot_step,
             "next_seed": self.games.next_seed, "elapsed": self.elapsed, "resumes": self.resumes,
             "matchmaker": json.dumps(self.matchmaker.state_dict()), "rates": json.dumps(self.rates.to_dict()),
@@ -337,7 +359,6 @@ class Trainer:
             raise MarlError(f"{self.state_path}: cannot resume from this state ({e})") from None
         self.latest, self.snapshots = list(state["latest"]), list(state["snapshots"])
         self.steps, self.episodes = int(state["steps"]), int(state["episodes"])
-        self.episodes_suffix = int(state["episodes_suffix"])
         self._snapshot_episode, self._snapshot_step = int(state["snapshot_episode"]), int(state["snapshot_step"])
         self.elapsed = float(state["elapsed"])
         self.matchmaker.load_state_dict(json.loads(state["matchmaker"]))
@@ -408,9 +429,9 @@ class Trainer:
         for job in self.jobs:  # gauntlets a killed run had asked for (a finished one is not played again)
             self.evaluator.submit(job)  # type: ignore[union-attr]
         if not self.snapshots:
-            self.snapshot()  # ep0: every learner has an identity in the league from the start
+            self.snapshot("start")  # s0: every learner has an identity in the league from the start
         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
-        next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
+        next_steps = (self.steps // cfg.snapshot_steps + 1) * cfg.snapshot_steps if cfg.snapshot_steps else None
         obs = self.games.observe()
         pending: list[GameResult] = []
         board = tensorboard_writer(self.run_dir / "tensorboard") if cfg.tensorboard else None
@@ -447,13 +468,15 @@ class Trainer:
                         self.on_progress({"event": "training", "steps": self.steps, "episodes": self.episodes,
                                           "progress": progress, "steps_per_second": rate,
                                           "remaining": self._remaining(rate, deadline)})
-                    if (next_episodes is not None and self.episodes >= next_episodes) or (
-                            next_steps is not None and self.steps >= next_steps):
-                        self.snapshot()
+                    spent = (time.perf_counter() >= deadline) if deadline else self.steps >= cfg.steps
+                    by_steps = next_steps is not None and self.steps >= next_steps
+                    if not spent and (by_steps or (next_episodes is not None and self.episodes >= next_episodes)):
+                        self.snapshot("steps" if by_steps else "episodes")  # (the budget's end takes the final)
                         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
-                        next_steps = self.steps + cfg.snapshot_steps if cfg.snapshot_steps else None
+                        if cfg.snapshot_steps:
+                            next_steps = (self.steps // cfg.snapshot_steps + 1) * cfg.snapshot_steps
             self._record(pending)
-            self.snapshot(final=True)
+            self.snapshot("final")
         if board is not None:
             board.close()
         t1 = time.perf_counter()
