@@ -605,11 +605,20 @@ class League:
                      episode: int = 0, algo: str | None = None, parent_id: int | None = None,
                      meta: dict[str, Any] | None = None) -> PlayerRow:
         """Register a policy snapshot. Raises LeagueError if ``(env, run, name)`` exists or run/parent is unknown."""
-        _check_name("env", env)
-        _check_name("snapshot name", name)
-        where = f"{run}/{name}" if run else name
+        return self.add_snapshots([dict(env=env, run=run, name=name, path=path, sha256=sha256, step=step,
+                                        episode=episode, algo=algo, parent_id=parent_id, meta=meta)])[0]
 
-        def work(s: Session) -> PlayerRow:
+    def add_snapshots(self, items: Sequence[dict[str, Any]]) -> list[PlayerRow]:
+        """Register several snapshots (the keyword arguments of :meth:`add_snapshot`, one dict each) in ONE
+        transaction: all of them or none (a training run's snapshots of one moment are one unit)."""
+        for item in items:
+            _check_name("env", item["env"])
+            _check_name("snapshot name", item["name"])
+
+        def insert(s: Session, env: str, run: str | None, name: str, path: str, sha256: str, step: int = 0,
+                   episode: int = 0, algo: str | None = None, parent_id: int | None = None,
+                   meta: dict[str, Any] | None = None) -> Player:
+            where = f"{run}/{name}" if run else name
             run_row: Run | None = None
             if run is not None:
                 run_row = s.execute(select(Run).where(Run.name == run)).scalar_one_or_none()
@@ -630,13 +639,19 @@ class League:
                        elo=DEFAULT_ELO, games=0, removed=False)
             s.add(p)
             s.flush()
-            s.refresh(p, ["tags"])
-            return _player_row(p)
+            return p
+
+        def work(s: Session) -> list[PlayerRow]:
+            players = [insert(s, **item) for item in items]
+            for p in players:
+                s.refresh(p, ["tags"])
+            return [_player_row(p) for p in players]
 
         try:
             return self._unit(work)
         except IntegrityError as exc:
-            raise LeagueError(f"snapshot {where!r} already exists in env {env!r}") from exc
+            names = ", ".join(f"{i['run']}/{i['name']}" if i["run"] else i["name"] for i in items)
+            raise LeagueError(f"snapshot {names} already exists") from exc
 
     def get_player(self, player_id: int) -> PlayerRow:
         """The player with this id (removed ones included). Raises LeagueError if there is none."""
