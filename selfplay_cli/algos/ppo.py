@@ -90,21 +90,23 @@ class PPOLearner:
         """Sample actions for this step's observations and remember what the update needs.
 
         Sampling is the inverse-CDF draw ``a = #{k : cdf_k <= u}`` with one uniform ``u`` per slot from the
-        learner's generator (multinomial does the same draw several times slower on small batches)."""
-        x = self.obs[self.t]
+        learner's generator (multinomial does the same draw several times slower on small batches); the count is a
+        binary search in each row's cdf, written straight into the rollout buffer."""
+        t = self.t
+        x = self.obs[t]
         if self._np is not None:
-            self._np["obs"][self.t] = obs.reshape(len(obs), -1)
+            self._np["obs"][t] = obs.reshape(len(obs), -1)
         else:
             x.copy_(self._tensor(obs))
         logits, value = self.net(x)
         logp_all = torch.log_softmax(logits, dim=-1)
         u = torch.rand((x.shape[0], 1), generator=self.gen, device=self.device)
         cdf = logp_all.exp().cumsum_(dim=1)
-        action = (cdf <= u).sum(dim=1).clamp_(max=self.n_actions - 1)
-        self.actions[self.t] = action
-        torch.gather(logp_all, 1, action[:, None], out=self.logprobs[self.t, :, None])
-        self.values[self.t] = value
-        return action.numpy() if self.device.type == "cpu" else action.cpu().numpy()
+        action = self.actions[t, :, None]
+        torch.searchsorted(cdf, u, right=True, out=action).clamp_(max=self.n_actions - 1)
+        torch.gather(logp_all, 1, action, out=self.logprobs[t, :, None])
+        self.values[t] = value
+        return self.actions[t].numpy().copy() if self.device.type == "cpu" else self.actions[t].cpu().numpy()
 
     def record(self, rewards: np.ndarray, dones: np.ndarray) -> bool:
         """Store this step's outcome; True when the rollout is full and :meth:`update` is due."""
