@@ -167,7 +167,7 @@ def test_a_run_repeats_exactly_with_learners_updating_in_threads(tmp_path, monke
         cfg = tiny(agents=2, sharing="nops", steps=4096, eval_games=0)
         league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
         Trainer(league, cfg).train()
-        out = {p.name: p.sha256 for p in league.players("pong", kind="snapshot")}
+        out = {p.name: p.meta["weights_sha256"] for p in league.players("pong", kind="snapshot")}
         league.close()
         return out
 
@@ -422,5 +422,5 @@ def test_run_status_after_a_refused_device_an_interrupt_and_a_crash(tmp_path, ca
     with pytest.raises(RuntimeError):
         main([*args, "--run", "b"])
     with League.open(home) as league:
-        assert league.get_run("a").status == "interrupted"
+        assert league.get_run("a").status == "stopped"
         assert league.get_run("b").status == "failed"

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -165,21 +168,23 @@ def train(
             league.create_run(run, spec.name, cfg.to_dict(), algo=algo)
             save_run_config(league, cfg)
         reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
-        with reporter:
+        with reporter, stop_on_sigterm():
             trainer = None
             try:
                 trainer = Trainer(league, cfg, on_progress=reporter.update)
                 if resume is not None:
                     note = trainer.restore()
                     league.set_run_status(cfg.run, "running")
-                    if not json_out:
-                        err_console.print(note)
+                    if not quiet:  # stderr: --json keeps stdout for the JSON alone
+                        err_console.print(note, markup=False)
                 report = trainer.train()
-            except KeyboardInterrupt:
-                league.set_run_status(cfg.run, "interrupted")
+            except (KeyboardInterrupt, Terminated) as stop:
+                league.set_run_status(cfg.run, "stopped")
                 at = f" at step {trainer.steps:,}" if trainer is not None else ""
-                err_console.print(f"interrupted {cfg.run}{at}; continue it with: marl train --resume {cfg.run}")
-                raise typer.Exit(130) from None
+                why = "SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C"
+                err_console.print(f"stopped {cfg.run}{at} ({why}); its last snapshot is kept: continue it with: "
+                                  f"marl train --resume {cfg.run}", markup=False)
+                raise typer.Exit(143 if isinstance(stop, Terminated) else 130) from None
             except MarlError:
                 if resume is None:  # a refused resume (e.g. another process trains it) leaves the run as it is
                     league.set_run_status(cfg.run, "failed")
@@ -208,6 +213,28 @@ def train(
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
     if report.plot is not None:
         console.print(f"  rating curves: {report.plot}", markup=False)
+
+
+class Terminated(Exception):  # noqa: N818 (it is how the run learns of SIGTERM, not an error)
+    """SIGTERM arrived: the run stops as it does on Ctrl-C."""
+
+
+@contextmanager
+def stop_on_sigterm() -> Iterator[None]:
+    """While training, SIGTERM (a CI job cancelled, ``kill``, a container stopped) raises :class:`Terminated` in the
+    main thread, so the run ends cleanly: the rating worker stopped, the status set, the resume hint printed."""
+    def handler(signum: int, frame: Any) -> None:
+        raise Terminated()
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (e.g. called from a test harness thread): leave SIGTERM alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def describe_record(rec: Any) -> str:

@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,7 +47,7 @@ from .config import TrainConfig, tensorboard_writer
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .team import LearnerTeam
 
-STATE_VERSION = 2  # 2: flat-buffer optimiser state (FlatAdam)
+STATE_VERSION = 3  # 2: flat-buffer optimiser state (FlatAdam); 3: snapshots by name, pending gauntlets
 
 
 @dataclass(frozen=True)
@@ -163,7 +165,8 @@ class Trainer:
         self.episodes = 0
         self.elapsed = 0.0  # seconds trained before this process (resumed runs)
         self.resumes = 0
-        self.jobs: list[GauntletJob] = []  # gauntlets submitted and not known to be done
+        self.jobs: list[tuple[tuple[str, ...], int, bool]] = []  # gauntlets asked for, not known to be done:
+        # (snapshot names, first seed, full)
         self.evaluator: Evaluator | None = None  # set while training
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
         self.eval_games = 0  # games they played
@@ -223,16 +226,31 @@ class Trainer:
         return base
 
     def snapshot(self, trigger: str = "steps") -> None:
-        """Save and register every learner's snapshot (one unit: files, rows, then the run state), then rate them
-        (the final ones against every opponent in full: the run's answer rests on them). ``trigger``: ``start``,
-        ``steps``, ``episodes`` or ``final``, which names the moment (:meth:`_base_name`)."""
+        """Save and register every learner's snapshot, then rate them (the final ones against every opponent in full:
+        the run's answer rests on them). ``trigger``: ``start``, ``steps``, ``episodes`` or ``final``, which names
+        the moment (:meth:`_base_name`).
+
+        One moment is one unit, whatever instant a kill comes at: the files are written first (each to a temporary
+        name, then renamed), then the run state as it will be once they are registered (``state.pt.pending``),
+        then all the rows in one transaction, which is the moment the snapshots exist; then the pending state
+        becomes ``state.pt``. Killed before the transaction, the moment never happened (:meth:`restore` removes its
+        files and pending state); killed after it, the pending state is the moment's, complete.
+        """
         cfg = self.cfg
         if self.snapshots and self._snapshot_step == self.steps:
             return  # nothing played since the last snapshot
-        self._snapshot_episode, self._snapshot_step = self.episodes, self.steps
+        with _signals_held():  # Ctrl-C or SIGTERM now would cut the moment: they wait until it is whole
+            self._write_moment(trigger)
+        if cfg.eval_games:
+            self.evaluator.submit(self._job(self.jobs[-1]))  # type: ignore[union-attr]
+        self._collect(self.evaluator.poll())  # type: ignore[union-attr]
+
+    def _write_moment(self, trigger: str) -> None:
+        cfg = self.cfg
         base = self._base_name(trigger)
-        for i, learner in enumerate(self.learners):
-            name = base if len(self.names) == 1 else f"{base}-{self.names[i]}"
+        names = [base if len(self.names) == 1 else f"{base}-{n}" for n in self.names]
+        rows = []
+        for i, (learner, name) in enumerate(zip(self.learners, names, strict=True)):
             rel = snapshot_relpath(cfg.run, name)
             parent = self.league.get_player(self.latest[i]).full_name if self.latest[i] else None
             meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options, obs_shape=self.obs_shape,
@@ -241,27 +259,45 @@ class Trainer:
                                 seat=self.names[i] if len(self.names) > 1 else None,
                                 extra={"learner": self.names[i]})
             meta = save_snapshot(self.league.home / rel, learner.net, meta)  # type: ignore[operator]
-            row = self.league.add_snapshot(env=self.spec.name, run=cfg.run, name=name, path=rel,
-                                           sha256=meta.weights_sha256,
-                                           step=self.steps, episode=self.episodes, algo=cfg.algo,
-                                           parent_id=self.latest[i] or None,
-                                           meta={"weights_sha256": meta.weights_sha256, "learner": self.names[i]})
-            self.latest[i] = row.id
-            self.snapshots.append(row.full_name)
-        pool = [p.id for p in self.league.players(env=self.spec.name, kind="snapshot") if p.run == cfg.run]
-        self.matchmaker.set_pool(pool)
-        if self.cfg.eval_games:
-            self.jobs.append(GauntletJob(tuple(self.latest), 10_000_000 + 10_000 * len(self.snapshots),
-                                         self.cfg.eval_games, self.cfg.eval_older, full=trigger == "final"))
-        self.save_state()
-        if self.cfg.eval_games:
-            self.evaluator.submit(self.jobs[-1])
-        self._collect(self.evaluator.poll())
+            rows.append(dict(env=self.spec.name, run=cfg.run, name=name, path=rel, sha256=meta.weights_sha256,
+                             step=self.steps, episode=self.episodes, algo=cfg.algo, parent_id=self.latest[i] or None,
+                             meta={"weights_sha256": meta.weights_sha256, "learner": self.names[i]}))
+        full = [f"{cfg.run}/{n}" for n in names]
+        jobs = list(self.jobs)
+        if cfg.eval_games:
+            jobs.append((tuple(full), 10_000_000 + 10_000 * len(self.snapshots), trigger == "final"))
+        self._write_state(self.pending_path, latest=full, snapshots=self.snapshots + full, jobs=jobs,
+                          snapshot_step=self.steps, snapshot_episode=self.episodes)
+        registered = self.league.add_snapshots(rows)  # the moment exists from here on
+        os.replace(self.pending_path, self.state_path)
+        self._snapshot_episode, self._snapshot_step = self.episodes, self.steps
+        self.latest = [r.id for r in registered]
+        self.snapshots += full
+        self.jobs = jobs
+        self.matchmaker.set_pool(self._pool())
+
+    def _pool(self) -> list[int]:
+        """The run's snapshots, oldest first: the matchmaker's pool."""
+        return [p.id for p in self.league.players(env=self.spec.name, kind="snapshot") if p.run == self.cfg.run]
+
+    def _job(self, job: tuple[tuple[str, ...], int, bool]) -> GauntletJob:
+        """The gauntlet of a moment's snapshots (by name: the run state names them before they have ids)."""
+        names, first_seed, full = job
+        ids = tuple(self._player_id(n) for n in names)
+        return GauntletJob(ids, first_seed, self.cfg.eval_games, self.cfg.eval_older, full=full)
+
+    def _player_id(self, full_name: str) -> int:
+        run, _, name = full_name.partition("/")
+        found = [p for p in self.league.find_players(full_name, env=self.spec.name) if p.run == run and p.name == name]
+        if not found:
+            raise MarlError(f"run '{self.cfg.run}': snapshot {full_name} of its resume state is not in the league")
+        return found[0].id
 
     def _collect(self, done: list[JobDone]) -> None:
         """Take note of finished gauntlets: each snapshot's record as the ledger has it now, to ``on_progress``."""
         for d in done:
-            self.jobs = [j for j in self.jobs if j != d.job]
+            names = tuple(self.league.get_player(i).full_name for i in d.job.snapshot_ids)
+            self.jobs = [j for j in self.jobs if j[0] != names]
             self.eval_seconds += d.seconds
             self.eval_games += d.games
             self.eval_events += 1
@@ -314,79 +350,109 @@ class Trainer:
     def state_path(self) -> Path:
         return self.run_dir / "state.pt"
 
-    def save_state(self) -> None:
-        """Everything to continue exactly from the latest snapshot, written atomically after its rows."""
+    @property
+    def pending_path(self) -> Path:
+        return self.run_dir / "state.pt.pending"
+
+    def _write_state(self, path: Path, *, latest: list[str], snapshots: list[str],
+                     jobs: list[tuple[tuple[str, ...], int, bool]], snapshot_step: int, snapshot_episode: int) -> None:
+        """Everything to continue exactly from a snapshot moment, written to a temporary name, flushed to disk and
+        renamed to ``path``. Snapshots are named, not numbered: the state of a moment is written before its rows
+        (and their ids) exist."""
         state = {
             "version": STATE_VERSION,
             "learners": [learner.state_dict() for learner in self.learners],
-            "latest": list(self.latest), "snapshots": list(self.snapshots), "steps": self.steps,
-            "episodes": self.episodes,
-            "snapshot_episode": self._snapshot_episode, "snapshot_step": self._snapshot_step,
+            "latest": latest, "snapshots": snapshots, "steps": self.steps, "episodes": self.episodes,
+            "snapshot_episode": snapshot_episode, "snapshot_step": snapshot_step,
             "next_seed": self.games.next_seed, "elapsed": self.elapsed, "resumes": self.resumes,
             "matchmaker": json.dumps(self.matchmaker.state_dict()), "rates": json.dumps(self.rates.to_dict()),
-            "jobs": [[list(j.snapshot_ids), j.first_seed, j.games, j.older, j.full] for j in self.jobs],
+            "jobs": [[list(names), seed, full] for names, seed, full in jobs],
         }
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        tmp = self.state_path.with_name(f"state.pt.tmp-{os.getpid()}")
+        tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
         with open(tmp, "wb") as f:
             torch.save(state, f)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, self.state_path)
+        os.replace(tmp, path)
+
+    def _read_state(self, path: Path) -> dict[str, Any]:
+        try:
+            state = torch.load(path, map_location=self.device, weights_only=True)
+        except Exception as e:  # a torn or foreign file: say which, never a traceback
+            raise MarlError(f"{path}: cannot read the resume state ({e})") from None
+        if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
+            raise MarlError(f"{path}: resume state written by another marl version; start a new run")
+        return state
 
     def restore(self) -> str:
-        """Continue a killed run from its latest snapshot; returns a line saying from where.
+        """Continue a stopped or killed run from its latest snapshot moment; returns a line saying from where.
 
-        The league is the authority: if the run was killed after its newest snapshot was registered but before the
-        state file caught up, the weights come from that snapshot's file (the optimiser state from the state file
-        is then one snapshot older), so no snapshot name is ever written twice.
+        The league is the authority (see :meth:`snapshot`): a pending state whose snapshots are registered is the
+        newest moment's (the run was killed between the rows and the rename); one whose snapshots are not is a
+        moment that never happened, and goes, with the files written for it. Files under the run's snapshot folder
+        that no row names (a moment cut short, a temporary file of a killed process) go too.
         """
-        from ..policies.snapshot import load_snapshot
-
         self._lock()  # before reading anything: a live process still training this run keeps it
+        notes = []
+        for torn in self.run_dir.glob("*.tmp-*"):  # half-written by a killed process (the lock is ours now)
+            torn.unlink()
+        if self.pending_path.exists():
+            pending = self._read_state(self.pending_path)
+            if all(self._registered(n) for n in pending["latest"]):
+                os.replace(self.pending_path, self.state_path)
+                notes.append(f"the snapshots {', '.join(pending['latest'])} were registered as it was killed")
+            else:
+                self.pending_path.unlink()
         if not self.state_path.exists():
-            raise MarlError(f"run '{self.cfg.run}' has no resume state ({self.state_path})")
-        try:
-            state = torch.load(self.state_path, map_location=self.device, weights_only=True)
-        except Exception as e:  # a torn or foreign file: say which, never a traceback
-            raise MarlError(f"{self.state_path}: cannot read the resume state ({e})") from None
-        if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
-            raise MarlError(f"{self.state_path}: resume state written by another marl version; start a new run")
+            if self._pool():
+                raise MarlError(f"run '{self.cfg.run}' has snapshots but no resume state ({self.state_path})")
+            self._remove_strays()  # killed before its first snapshot: nothing to continue, start it again
+            return f"restarted {self.cfg.run} from the beginning (it was stopped before its first snapshot)"
+        state = self._read_state(self.state_path)
         try:
             for learner, ls in zip(self.learners, state["learners"], strict=True):
                 learner.load_state_dict(ls)
         except (KeyError, ValueError, RuntimeError) as e:
             raise MarlError(f"{self.state_path}: cannot resume from this state ({e})") from None
-        self.latest, self.snapshots = list(state["latest"]), list(state["snapshots"])
+        self.snapshots = list(state["snapshots"])
+        self.latest = [self._player_id(n) for n in state["latest"]]
         self.steps, self.episodes = int(state["steps"]), int(state["episodes"])
         self._snapshot_episode, self._snapshot_step = int(state["snapshot_episode"]), int(state["snapshot_step"])
         self.elapsed = float(state["elapsed"])
         self.matchmaker.load_state_dict(json.loads(state["matchmaker"]))
+        self.matchmaker.set_pool(self._pool())
         self.rates = WinRates.from_dict(json.loads(state["rates"]))
-        self.jobs = [GauntletJob(tuple(int(i) for i in ids), int(seed), int(games), int(older), bool(full))
-                     for ids, seed, games, older, full in state.get("jobs", [])]
-        note = f"resumed {self.cfg.run} at step {self.steps:,} (snapshot {self.snapshots[-1]})"
-        newer = [p for p in self.league.players(env=self.spec.name, kind="snapshot")
-                 if p.run == self.cfg.run and p.id > max(self.latest)]
-        if newer:  # killed between the snapshot rows and the state file: adopt the registered snapshot
-            for i, name in enumerate(self.names):
-                mine = [p for p in newer if p.meta.get("learner") == name]
-                if mine:
-                    p = mine[-1]
-                    tensors, _ = load_snapshot(self.league.home / p.path, expect_env=self.spec.name)  # type: ignore[operator]
-                    self.learners[i].net.load_state_dict(tensors)
-                    self.latest[i] = p.id
-                    self.snapshots.append(p.full_name)
-                    self.steps, self.episodes = max(self.steps, p.step), max(self.episodes, p.episode)
-            self._snapshot_episode, self._snapshot_step = self.episodes, self.steps
-            note += f"; adopted {', '.join(p.full_name for p in newer)} registered after the state was saved"
-        if newer and self.cfg.eval_games:  # their gauntlet was never asked for
-            self.jobs.append(GauntletJob(tuple(p.id for p in newer), 10_000_000 + 10_000 * len(self.snapshots),
-                                         self.cfg.eval_games, self.cfg.eval_older))
+        self.jobs = [(tuple(names), int(seed), bool(full)) for names, seed, full in state["jobs"]]
+        removed = self._remove_strays()
+        if removed:
+            notes.append(f"removed {removed} file(s) of a snapshot moment that never completed")
         self.resumes = int(state["resumes"]) + 1
         self.games.next_seed = int(state["next_seed"]) + (self.resumes << 40)  # a seed range of its own
         self.games.restart_all()
-        return note
+        return f"resumed {self.cfg.run} at step {self.steps:,} (snapshot {self.snapshots[-1]})" + "".join(
+            f"; {n}" for n in notes)
+
+    def _registered(self, full_name: str) -> bool:
+        try:
+            self._player_id(full_name)
+        except MarlError:
+            return False
+        return True
+
+    def _remove_strays(self) -> int:
+        """Remove the files under ``snapshots/<run>/`` that no row of the league names."""
+        folder = self.league.home / snapshot_relpath(self.cfg.run, "x").rsplit("/", 1)[0]  # type: ignore[operator]
+        if not folder.is_dir():
+            return 0
+        rows = self.league.players(env=self.spec.name, kind="snapshot", include_removed=True)
+        known = {Path(p.path).name for p in rows if p.run == self.cfg.run and p.path}
+        removed = 0
+        for f in folder.iterdir():
+            if f.is_file() and f.name not in known:
+                f.unlink()
+                removed += 1
+        return removed
 
     # -- the ledger ------------------------------------------------------------------------------------------
     def _record(self, finished: list[GameResult]) -> None:
@@ -427,7 +493,7 @@ class Trainer:
         deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
         steps0 = self.steps
         for job in self.jobs:  # gauntlets a killed run had asked for (a finished one is not played again)
-            self.evaluator.submit(job)  # type: ignore[union-attr]
+            self.evaluator.submit(self._job(job))  # type: ignore[union-attr]
         if not self.snapshots:
             self.snapshot("start")  # s0: every learner has an identity in the league from the start
         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
@@ -502,8 +568,7 @@ class Trainer:
 
     def _waiting(self) -> None:
         if self.on_progress:
-            self.on_progress({"event": "evaluating", "snapshots": [self.league.get_player(i).full_name
-                                                                   for j in self.jobs for i in j.snapshot_ids],
+            self.on_progress({"event": "evaluating", "snapshots": [n for j in self.jobs for n in j[0]],
                               "games": self.evaluator.games_played, "steps": self.steps,  # type: ignore[union-attr]
                               "episodes": self.episodes})
 
@@ -516,6 +581,22 @@ class Trainer:
         per_event = self.eval_seconds / max(self.eval_events, 1)
         events = 1 + (left // self.cfg.snapshot_steps if self.cfg.snapshot_steps and self.cfg.eval_inline else 0)
         return left / max(rate, 1e-9) + events * per_event
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM are held (delivered when the block ends) where the platform allows it: a snapshot moment
+    is never cut by Ctrl-C or a polite kill. SIGKILL cannot be held; :meth:`Trainer.restore` deals with it."""
+    held = {signal.SIGINT, signal.SIGTERM}
+    try:
+        old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    except (AttributeError, ValueError, OSError):  # no POSIX signal masks here: nothing to hold
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def _alive(pid: int) -> bool:

@@ -1,0 +1,146 @@
+"""A killed run loses nothing: `marl train` killed with SIGKILL at each step of writing a snapshot moment (after
+its first file, after its pending state, during that state file, after its rows) resumes to completion, and every
+row of the league then names a file whose weights are the row's; SIGTERM stops a run as cleanly as Ctrl-C."""
+
+from __future__ import annotations
+
+import hashlib
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from selfplay_cli.cli import main
+from selfplay_cli.league.store import League
+from selfplay_cli.policies.snapshot import load_snapshot, weights_sha256
+
+pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="SIGKILL")
+
+ARGS = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
+        "2048", "--steps", "8192", "--eval-games", "0", "--run", "r", "--quiet"]
+
+# Runs `marl train` in a child whose chosen function kills the process (SIGKILL, no clean-up of any kind) the
+# second time a snapshot moment reaches that point: the first moment (s0) is complete, the second is cut.
+KILLER = textwrap.dedent("""
+    import os, signal, sys
+    import torch
+    import selfplay_cli.train.loop as loop
+    from selfplay_cli.league.store import League
+    from selfplay_cli.cli import main
+
+    point, home = sys.argv[1], sys.argv[2]
+    calls = {}
+
+    def die_on(what, count):
+        calls[what] = calls.get(what, 0) + 1
+        if calls[what] == count:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+    if point == "after-first-file":
+        real = loop.save_snapshot
+        def save(*a, **k):
+            out = real(*a, **k)
+            die_on("file", 3)  # moment 1 wrote s0-left, s0-right; moment 2's first file is the third
+            return out
+        loop.save_snapshot = save
+    elif point in ("after-pending-state", "during-state-file"):
+        real_save = torch.save
+        def save(obj, f, *a, **k):
+            calls["state"] = calls.get("state", 0) + 1
+            if calls["state"] == 2 and point == "during-state-file":
+                f.write(b"half a state file")
+                f.flush()
+                os.kill(os.getpid(), signal.SIGKILL)
+            out = real_save(obj, f, *a, **k)
+            return out
+        torch.save = save
+        if point == "after-pending-state":
+            real_add = League.add_snapshots
+            def add(self, items):
+                die_on("rows", 2)  # moment 2's state is pending, its rows not yet written
+                return real_add(self, items)
+            League.add_snapshots = add
+    elif point == "after-rows":
+        real_add = League.add_snapshots
+        def add(self, items):
+            out = real_add(self, items)
+            die_on("rows", 2)  # moment 2's rows are committed, its pending state not yet renamed
+            return out
+        League.add_snapshots = add
+    sys.exit(main(sys.argv[3:] + ["--home", home]))
+""")
+
+
+def check_league(home: Path) -> list:
+    """Every row names a file holding exactly its weights; nothing else is left in the run's folder."""
+    with League.open(home) as league:
+        snaps = league.players("pong", kind="snapshot")
+        for p in snaps:
+            tensors, meta = load_snapshot(home / p.path, expect_env="pong")
+            assert weights_sha256(tensors) == p.meta["weights_sha256"] == meta.weights_sha256, p.name
+            assert p.sha256 in (meta.weights_sha256, hashlib.sha256((home / p.path).read_bytes()).hexdigest())
+            assert meta.name == p.name and meta.step == p.step
+        files = sorted(f.name for f in (home / "snapshots" / "r").iterdir())
+        assert files == sorted(Path(p.path).name for p in snaps), files
+        run_dir = home / "runs" / "r"
+        assert not list(run_dir.glob("*.tmp-*")) and not (run_dir / "state.pt.pending").exists()
+        return snaps
+
+
+@pytest.mark.parametrize("point", ["after-first-file", "after-pending-state", "during-state-file", "after-rows"])
+def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path, capsys, point):
+    home = tmp_path / "h"
+    child = subprocess.run([sys.executable, "-c", KILLER, point, str(home), *ARGS], capture_output=True, text=True,
+                           timeout=300)
+    assert child.returncode == -signal.SIGKILL, (child.returncode, child.stderr[-2000:])
+    with League.open(home) as league:
+        before = {p.name: p.sha256 for p in league.players("pong", kind="snapshot")}
+        assert league.get_run("r").status == "running"
+    committed = point == "after-rows"
+    assert sorted(before) == (["s0-left", "s0-right", "s2.05k-left", "s2.05k-right"] if committed
+                              else ["s0-left", "s0-right"])
+
+    code = main(["train", "--resume", "r", "--home", str(home), "--json"])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    snaps = check_league(home)
+    names = [p.name for p in snaps]
+    assert names == ["s0-left", "s0-right", "s2.05k-left", "s2.05k-right", "s4.1k-left", "s4.1k-right",
+                     "s6.14k-left", "s6.14k-right", "s8.19k-left", "s8.19k-right"]
+    assert all(before[n] == next(p.sha256 for p in snaps if p.name == n) for n in before), "registered files kept"
+    for learner in ("left", "right"):
+        chain = [p for p in snaps if p.name.endswith(learner)]
+        assert [p.parent_id for p in chain] == [None] + [p.id for p in chain[:-1]]
+        assert [p.step for p in chain] == sorted(p.step for p in chain)
+    if committed:
+        assert "registered as it was killed" in err
+    with League.open(home) as league:
+        assert league.get_run("r").status == "finished"
+
+
+def test_sigterm_stops_a_run_cleanly_and_it_resumes(tmp_path, capsys):
+    home = tmp_path / "h"
+    args = [*ARGS[:ARGS.index("--steps")], "--steps", "100000", *ARGS[ARGS.index("--steps") + 2:]]
+    proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args, "--home", str(home)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    state = home / "runs" / "r" / "state.pt"
+    deadline = time.time() + 120
+    while time.time() < deadline and not state.exists():
+        time.sleep(0.1)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, (proc.returncode, err[-2000:])
+    assert "stopped r at step" in err and "marl train --resume r" in err and "Traceback" not in err
+    with League.open(home) as league:
+        assert league.get_run("r").status == "stopped"
+    check_league(home)
+    code = main(["train", "--resume", "r", "--home", str(home), "--json"])
+    assert code == 0, capsys.readouterr().err
+    check_league(home)
+    with League.open(home) as league:
+        assert league.get_run("r").status == "finished"
