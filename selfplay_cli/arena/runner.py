@@ -189,17 +189,23 @@ def play(
     flat_actions = actions.reshape(-1)
     groups = _acting_groups(policies)
     wanted = np.arange(len(policies) + 1)
-    while (game_of >= 0).any():
-        obs = core.observe()
-        flat_obs = obs.reshape(-1, *obs.shape[2:])
+
+    def positions() -> tuple[np.ndarray, list[list[np.ndarray]]]:
+        """Which slots have a game, and every (seat, slot) position by the policy that holds it, in position order
+        (one sort, no mask per policy); they change only when games end or start."""
         active = game_of >= 0
-        actions.fill(0)
-        # Every (seat, slot) position by the policy that holds it, in position order: one sort, no mask per policy.
         owner = np.where(active[None, :], seats, -1).ravel()
         order = np.argsort(owner, kind="stable")
         bounds = np.searchsorted(owner[order], wanted)
-        for members, bank in groups:
-            where = [order[bounds[m] : bounds[m + 1]] for m in members]
+        return active, [[order[bounds[m] : bounds[m + 1]] for m in members] for members, _ in groups]
+
+    active, held = positions()
+    playing = int(active.sum())
+    while playing:
+        obs = core.observe()
+        flat_obs = obs.reshape(-1, *obs.shape[2:])
+        actions.fill(0)
+        for (members, bank), where in zip(groups, held, strict=True):
             if bank is None:
                 if where[0].size:
                     flat_actions[where[0]] = policies[members[0]].act(flat_obs[where[0]])
@@ -210,7 +216,7 @@ def play(
         if log is not None:
             log.append(actions, active)
         if on_step is not None:
-            on_step(int(active.sum()))
+            on_step(playing)
         done = core.terminated | core.truncated
         stopped = None
         if stop_when is not None:
@@ -243,4 +249,6 @@ def play(
             game_of[ended] = -1
             if next_game < len(games):  # into every free slot, including ones idle before the schedule grew
                 start(np.flatnonzero(game_of < 0))
+            active, held = positions()
+            playing = int(active.sum())
     return [results[i] for i in sorted(results)]

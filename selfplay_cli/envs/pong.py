@@ -56,10 +56,17 @@ N_FEATURES = 6  # ball x, ball y, own paddle y, opponent paddle y, ball vx, ball
 FEATURE_NAMES = ("ball_x", "ball_y", "own_y", "opp_y", "ball_vx", "ball_vy")
 
 _MOVE = np.array([0.0, -PADDLE_SPEED, PADDLE_SPEED])
+_CENTRE = np.array([[WIDTH // 2], [HEIGHT // 2]], dtype=np.float64)  # where every serve starts, (x, y)
 
 # The right seat's view of a frame from the left seat's: mirror x and vx, swap own and opponent paddles.
 _MIRROR_PERM = np.array([0, 1, 3, 2, 4, 5])
 _MIRROR_SIGN = np.array([-1, 1, 1, 1, -1, 1], dtype=np.float32)
+
+
+def _clip(x: np.ndarray, bound: float) -> None:
+    """``x`` clamped to [-bound, bound] in place (what np.clip does, without its wrapper's cost)."""
+    np.maximum(x, -bound, out=x)
+    np.minimum(x, bound, out=x)
 
 
 def _mirror(frames: np.ndarray) -> np.ndarray:
@@ -123,6 +130,7 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
 _DRAWS_PER_SERVE = 4  # left paddle y, right paddle y, side, target point on the paddle
+_DRAW = np.arange(_DRAWS_PER_SERVE, dtype=np.uint64)[:, None]
 
 
 def _splitmix(x: np.ndarray) -> np.ndarray:
@@ -144,8 +152,7 @@ def game_key(seed: int | np.ndarray) -> np.ndarray:
 
 def _serve_draws(keys: np.ndarray, serves: np.ndarray) -> np.ndarray:
     """The uniform [0, 1) draws of serve number ``serves`` of the games with ``keys``: ``(4, len(keys))``."""
-    draw = np.arange(_DRAWS_PER_SERVE, dtype=np.uint64)[:, None]
-    counter = serves.astype(np.uint64) * np.uint64(_DRAWS_PER_SERVE) + draw
+    counter = serves.astype(np.uint64) * np.uint64(_DRAWS_PER_SERVE) + _DRAW
     bits = _splitmix(keys ^ _splitmix(counter))
     return (bits >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
 
@@ -175,6 +182,7 @@ class PongCore:
         self.bx, self.by = self._s[0], self._s[1]
         self.paddle = self._s[2:4]  # top edge y of each seat's paddle
         self.vx, self.vy = self._s[4], self._s[5]
+        self._pos, self._vel = self._s[0:2], self._s[4:6]  # the ball's (x, y) and (vx, vy)
         self.score = np.zeros((2, n), dtype=np.int64)
         self.touched = np.zeros((2, n), dtype=bool)
         self.rally_steps = np.zeros(n, dtype=np.int64)
@@ -221,18 +229,15 @@ class PongCore:
         """Ball to the centre, paddles re-placed at random, serve toward a random point of a random paddle."""
         serves = self.serves[g]
         u = _serve_draws(self.key[g], serves)
-        p0 = np.floor(u[0] * (PADDLE_Y_MAX + 1))
-        p1 = np.floor(u[1] * (PADDLE_Y_MAX + 1))
+        paddles = np.floor(u[:2] * (PADDLE_Y_MAX + 1))  # each paddle's top edge
         to_left = u[2] < 0.5
-        target_y = np.where(to_left, p0, p1) + u[3] * PADDLE_H
-        target_x = np.where(to_left, PADDLE_X + PADDLE_W // 2, WIDTH - PADDLE_X - PADDLE_W // 2)
-        dx = target_x - WIDTH // 2
+        target_y = np.where(to_left, paddles[0], paddles[1]) + u[3] * PADDLE_H
+        # From the centre to the target paddle's centre line in x, to target_y in y.
+        dx = np.where(to_left, PADDLE_X + PADDLE_W // 2 - WIDTH // 2, WIDTH - PADDLE_X - PADDLE_W // 2 - WIDTH // 2)
         dy = target_y - HEIGHT // 2
         norm = np.sqrt(dx * dx + dy * dy)
-        self.paddle[0, g] = p0
-        self.paddle[1, g] = p1
-        self.bx[g] = WIDTH // 2
-        self.by[g] = HEIGHT // 2
+        self.paddle[:, g] = paddles
+        self._pos[:, g] = _CENTRE
         self.vx[g] = SERVE_SPEED * dx / norm
         self.vy[g] = SERVE_SPEED * dy / norm
         self.touched[:, g] = False
@@ -257,9 +262,9 @@ class PongCore:
             np.copyto(paddle, moved, where=(moved >= 0) & (moved <= PADDLE_Y_MAX))
         else:
             paddle += move
-            np.clip(paddle, 0.0, PADDLE_Y_MAX, out=paddle)
-        self.bx += self.vx
-        self.by += self.vy
+            np.maximum(paddle, 0.0, out=paddle)  # clamped at the walls (np.clip's wrapper costs more than both)
+            np.minimum(paddle, PADDLE_Y_MAX, out=paddle)
+        self._pos += self._vel
 
         rewards = np.zeros((2, self.n), dtype=np.float32)
         self.terminated.fill(False)
@@ -274,12 +279,10 @@ class PongCore:
 
         self.rally_steps += 1
         self.steps += 1
-        if cfg.max_rally_steps:
-            capped = self.rally_steps >= cfg.max_rally_steps
-            if capped.any():  # the point ends as a draw: no score, a new serve
-                g = np.flatnonzero(capped)
-                self.drawn_rallies[g] += 1
-                self._serve(g)
+        if cfg.max_rally_steps and self.rally_steps.max() >= cfg.max_rally_steps:
+            g = np.flatnonzero(self.rally_steps >= cfg.max_rally_steps)  # the point ends as a draw: a new serve
+            self.drawn_rallies[g] += 1
+            self._serve(g)
         if cfg.max_steps:
             np.greater_equal(self.steps, cfg.max_steps, out=self.truncated)
             self.truncated &= ~self.terminated
@@ -351,12 +354,14 @@ class PongCore:
         each hit speeds the ball up by ``speedup``, capped at ``max_speed``."""
         cfg = self.config
         centre = self.paddle[seat, g] + PADDLE_H / 2
-        offset = np.clip((self.by[g] - centre) / (PADDLE_H / 2 + BALL_R), -1.0, 1.0)
+        offset = (self.by[g] - centre) / (PADDLE_H / 2 + BALL_R)
+        _clip(offset, 1.0)
         vx, vy = self.vx[g], self.vy[g]
         speed = np.minimum(np.hypot(vx, vy) + cfg.speedup, cfg.max_speed)
         angle = np.arctan2(vy, np.abs(vx)) + offset * self._max_deflect
-        np.clip(angle, -self._max_angle, self._max_angle, out=angle)
-        self.vx[g] = speed * np.cos(angle) * (1.0 if seat == 0 else -1.0)
+        _clip(angle, self._max_angle)
+        away = speed * np.cos(angle)
+        self.vx[g] = away if seat == 0 else np.negative(away, out=away)
         self.vy[g] = speed * np.sin(angle)
 
     def _touch(self, g: np.ndarray, seat: int, rewards: np.ndarray) -> None:
@@ -378,7 +383,8 @@ class PongCore:
         self.score[0, left_scores] += 1
         rewards[:, right_scores] = ((-1.0,), (1.0,))
         rewards[:, left_scores] = ((1.0,), (-1.0,))
-        self.terminated[g] = (self.score[:, g] >= self.config.points_to_win).any(axis=0)
+        score = self.score[:, g]
+        self.terminated[g] = np.maximum(score[0], score[1]) >= self.config.points_to_win
         self._serve(g)
 
     # ----------------------------------------------------------------------------------------------------
