@@ -323,34 +323,34 @@ class PongCore:
         if bottom.size:
             by[bottom] = 2 * (HEIGHT - BALL_R) - by[bottom]
             vy[bottom] = -np.abs(vy[bottom])
-        # Swept test: the ball's leading edge crossed a paddle face on this step, moving toward it.
+        # Swept test: the ball's leading edge crossed a paddle face on this step, moving toward it (the left face
+        # moving left, the right face moving right: a game meets at most one), and the paddle is there.
         x, v = bx[g], vx[g]
-        left = g[(x < LEFT_FACE + BALL_R) & (v < 0) & (x - v >= LEFT_FACE + BALL_R)]
-        left = left[self._overlaps(left, 0)]
-        if left.size:
-            bx[left] = 2 * (LEFT_FACE + BALL_R) - bx[left]
-            self._deflect(left, 0)
-            self._touch(left, 0, rewards)
-        right = g[(x > RIGHT_FACE - BALL_R) & (v > 0) & (x - v <= RIGHT_FACE - BALL_R)]
-        right = right[self._overlaps(right, 1)]
-        if right.size:
-            bx[right] = 2 * (RIGHT_FACE - BALL_R) - bx[right]
-            self._deflect(right, 1)
-            self._touch(right, 1, rewards)
+        before = x - v
+        left = (x < LEFT_FACE + BALL_R) & (v < 0) & (before >= LEFT_FACE + BALL_R)
+        right = (x > RIGHT_FACE - BALL_R) & (v > 0) & (before <= RIGHT_FACE - BALL_R)
+        crossed = left | right
+        hit, seat = g[crossed], right[crossed].view(np.int8)  # seat 0: the left paddle, 1: the right one
+        met = self._overlaps(hit, seat)
+        hit, seat = hit[met], seat[met]
+        if hit.size:
+            bx[hit] = np.where(seat, 2 * (RIGHT_FACE - BALL_R), 2 * (LEFT_FACE + BALL_R)) - bx[hit]
+            self._deflect(hit, seat)
+            self._touch(hit, seat, rewards)
         x = bx[g]
         out = g[(x < 0) | (x > WIDTH)]
         if out.size:
             self._points(out, rewards)
 
-    def _overlaps(self, g: np.ndarray, seat: int) -> np.ndarray:
+    def _overlaps(self, g: np.ndarray, seat: np.ndarray) -> np.ndarray:
         """Whether the ball (centre within a radius of the paddle's span) meets seat's paddle in games g."""
         top = self.paddle[seat, g]
         y = self.by[g]
         return (y >= top - BALL_R) & (y <= top + PADDLE_H + BALL_R)
 
-    def _deflect(self, g: np.ndarray, seat: int) -> None:
-        """Classic deflection: the ball reflects, and where it meets the paddle turns it by up to
-        ``max_deflect_deg`` (edge hits steepen, centre hits keep the angle), clamped to ``max_bounce_deg``;
+    def _deflect(self, g: np.ndarray, seat: np.ndarray) -> None:
+        """Classic deflection off seat's paddle in games g: the ball reflects, and where it meets the paddle turns it
+        by up to ``max_deflect_deg`` (edge hits steepen, centre hits keep the angle), clamped to ``max_bounce_deg``;
         each hit speeds the ball up by ``speedup``, capped at ``max_speed``."""
         cfg = self.config
         centre = self.paddle[seat, g] + PADDLE_H / 2
@@ -361,10 +361,10 @@ class PongCore:
         angle = np.arctan2(vy, np.abs(vx)) + offset * self._max_deflect
         _clip(angle, self._max_angle)
         away = speed * np.cos(angle)
-        self.vx[g] = away if seat == 0 else np.negative(away, out=away)
+        self.vx[g] = np.negative(away, out=away, where=seat == 1)  # off the right paddle, away is to the left
         self.vy[g] = speed * np.sin(angle)
 
-    def _touch(self, g: np.ndarray, seat: int, rewards: np.ndarray) -> None:
+    def _touch(self, g: np.ndarray, seat: int | np.ndarray, rewards: np.ndarray) -> None:
         if g.size:
             self.touched[seat, g] = True
             self.hits[seat, g] += 1
