@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -39,8 +40,44 @@ DeviceOpt = Annotated[str, typer.Option("--device", help="Where networks run: au
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
 
-def open_league(home: Path | None, db: str | None) -> League:
-    return League.open(home=home, url=db)
+READING_COMMANDS = frozenset({"league ladder", "league matrix", "league plot", "checkpoint list", "checkpoint show",
+                              "checkpoint export", "elo fit"})
+"""Commands that only read the league: they open it read-only (a read-only league can be listed, and reading
+never creates a league where there was none)."""
+
+
+def _running_command() -> str:
+    """The verb being run, e.g. ``league ladder`` (empty outside a click context)."""
+    try:  # typer >= 0.22 carries its own copy of click; older ones use click itself
+        from typer._click.globals import get_current_context
+    except ImportError:
+        try:
+            from click import get_current_context
+        except ImportError:
+            return ""
+    ctx = get_current_context(silent=True)
+    names = []
+    while ctx is not None and ctx.parent is not None:  # the root's name is the program's ("python -m ...")
+        names.append(ctx.info_name or "")
+        ctx = ctx.parent
+    return " ".join(reversed(names))
+
+
+def open_league(home: Path | None, db: str | None, readonly: bool | None = None) -> League:
+    """The league of ``home`` / ``db``. ``readonly`` (default: whether the running command is one of
+    :data:`READING_COMMANDS`) opens an existing league for reading and creates nothing; otherwise the league is
+    created if new, and the temporary files that killed processes left in its folders are removed first (one line
+    on stderr says which)."""
+    from ..files import describe_removed, sweep_home
+
+    if readonly is None:
+        readonly = _running_command() in READING_COMMANDS
+    league = League.open(home=home, url=db, readonly=readonly)
+    if not readonly and league.home is not None:
+        removed = sweep_home(league.home)
+        if removed:
+            err_console.print(describe_removed(removed, league.home), markup=False)
+    return league
 
 
 def check_env(env: str | None) -> str | None:
@@ -49,27 +86,49 @@ def check_env(env: str | None) -> str | None:
     return env
 
 
+def _guess(raw: str) -> object:
+    """A value of an option whose type the game does not declare: a whole number, a number, true/false or text."""
+    text = raw.strip()
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    for cast in (int, float):
+        try:
+            value = cast(text)
+        except ValueError:
+            continue
+        if isinstance(value, float) and not math.isfinite(value):
+            raise MarlError(f"--env-option takes finite numbers only, not {text!r}")
+        return value
+    return text
+
+
 def parse_env_options(env: str, items: list[str] | None) -> dict:
-    """``KEY=VALUE`` game options (ints, floats, true/false or text), checked by the game's own config."""
+    """``KEY=VALUE`` game options, each read as the type the game's config declares for it (a whole number, a
+    number, true/false, one of a few words), then checked by the game's own config (ranges, unknown options)."""
+    from ..typecheck import field_types, from_text
+
+    spec = get_env(env)
+    types = field_types(type(spec.config()))
+    defaults = spec.config()
     options: dict = {}
     for item in items or []:
         key, sep, raw = item.partition("=")
-        if not sep or not key.strip():
-            raise MarlError(f"--env-option must look like KEY=VALUE, not {item!r}")
-        value: object = raw.strip()
-        for cast in (int, float):
-            try:
-                value = cast(raw)
-                break
-            except ValueError:
-                continue
-        if raw.strip().lower() in ("true", "false"):
-            value = raw.strip().lower() == "true"
-        options[key.strip()] = value
+        key = key.strip()
+        if not sep or not key:
+            raise MarlError(f"--env-option must look like KEY=VALUE (e.g. points_to_win=5), not {item!r}")
+        if key not in types:
+            options[key] = _guess(raw)
+            continue
+        try:
+            options[key] = from_text(raw, types[key])
+        except ValueError as e:
+            default = getattr(defaults, key, None)
+            example = f" (e.g. {key}={default}, its default)" if default is not None else ""
+            raise MarlError(f"--env-option {item}: {env}'s {key} wants {e}, not {raw.strip()!r}{example}") from None
     try:
-        get_env(env).config(**options)
+        spec.config(**options)
     except (TypeError, ValueError) as e:
-        raise MarlError(f"{env}: {e}") from None
+        raise MarlError(f"--env-option: {env}: {e}") from None
     return options
 
 

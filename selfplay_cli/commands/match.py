@@ -6,7 +6,7 @@ from typing import Annotated
 
 import typer
 
-from ..rated.match import MatchReport, SPRTSettings, load_player, run_match, sprt_exit_code
+from ..rated.match import MatchInterrupted, MatchReport, SPRTSettings, load_player, run_match, sprt_exit_code
 from ._common import (
     DbOpt,
     DeviceOpt,
@@ -19,7 +19,7 @@ from ._common import (
     progress_enabled,
     resolve_players,
 )
-from ._output import console, print_json
+from ._output import console, err_console, print_json
 
 
 def render_report(r: MatchReport) -> None:
@@ -43,6 +43,17 @@ def render_report(r: MatchReport) -> None:
         games = (f", games #{ids[0]}-#{ids[-1]} (marl record --game ID replays one)"
                  if ids and ids[-1] - ids[0] + 1 == len(ids) else "")
         console.print(f"  stored as match #{r.match_id}{games}")
+
+
+def interrupted(r: MatchReport, stored: bool) -> None:
+    """Ctrl-C: one line on stderr saying what was kept."""
+    if not stored:
+        err_console.print(f"interrupted after {r.games} games (--no-store: none stored)", markup=False)
+    elif r.match_id is None:
+        err_console.print("interrupted before a pair of games finished: no game stored", markup=False)
+    else:
+        err_console.print(f"interrupted: {r.games} games stored as match #{r.match_id} (whole pairs: {r.wins} W "
+                          f"{r.draws} D {r.losses} L for {r.a}); they count in the ratings", markup=False)
 
 
 def match(
@@ -89,10 +100,14 @@ def match(
         row_a, row_b = resolve_players(league, [a, b], env)
         pa = load_player(league, row_a, device=device)
         pb = load_player(league, row_b, device=device, seed=1)
-        with progress_bar(f"{pa.id} vs {pb.id}", budget + budget % 2, "games", progress_enabled(quiet)) as tick:
-            report = run_match(pa, pb, games=budget, first_seed=seed, parallel=parallel,
-                               league=league if store else None, player_ids={pa.id: row_a.id, pb.id: row_b.id},
-                               sprt=settings, confidence=confidence, on_games=tick)
+        try:
+            with progress_bar(f"{pa.id} vs {pb.id}", budget + budget % 2, "games", progress_enabled(quiet)) as tick:
+                report = run_match(pa, pb, games=budget, first_seed=seed, parallel=parallel,
+                                   league=league if store else None, player_ids={pa.id: row_a.id, pb.id: row_b.id},
+                                   sprt=settings, confidence=confidence, on_games=tick)
+        except MatchInterrupted as stop:
+            interrupted(stop.report, stored=store)
+            raise typer.Exit(130) from None
     finally:
         league.close()
     if json_out:

@@ -9,9 +9,12 @@ Tables
   index ``(env, name) WHERE run_id IS NULL`` makes bot names (and run-less snapshot names) unique per
   env. The player row also carries the *online* Elo (``elo``, ``games``), a cache that
   :meth:`selfplay_cli.league.store.League.recompute_online_elo` can always rebuild from the ledger.
-  Snapshots are never deleted, only marked ``removed`` (the ledger keeps referencing them).
+  Snapshots are never deleted, only marked ``removed`` (the ledger keeps referencing them). A snapshot's
+  ``sha256`` is its file's: the row and the file are checked against each other on every load.
 * ``tags(env, tag) -> player_id``: human names for players, unique per env.
-* ``matches``: one row per match / tournament / gate / training / eval session that produced games.
+* ``matches``: one row per match / tournament / gate / training / eval session that produced games; its
+  ``params`` say how it was played (and, for rated matches, ``status``: ``running``, ``finished`` or
+  ``interrupted`` with the number of ``games_stored``).
 * ``games`` + ``game_seats``: the append-only ledger. A game has ``n_seats`` seat rows holding the
   player, its raw score and its points (1 win, 0.5 draw, 0 loss).
 
@@ -125,6 +128,11 @@ class Player(Base):
     algo: Mapped[str | None] = mapped_column(String(100))
     path: Mapped[str | None] = mapped_column(Text)
     sha256: Mapped[str | None] = mapped_column(String(64))
+    """The sha256 of the snapshot's whole file (header with its metadata, and the weights): the file a player
+    stands for. Every load of the player checks its file against it (``rated.snapshots.check_file``), so a file
+    replaced or edited after registration is refused. Leagues written before marl settled this hold the weights'
+    checksum (``meta["weights_sha256"]``) here for trained snapshots; those rows are checked by that checksum and the
+    file's run, name and step instead. None for bots."""
     parent_id: Mapped[int | None] = mapped_column(ForeignKey("players.id"))
     elo: Mapped[float] = mapped_column(Float, default=1000.0)
     games: Mapped[int] = mapped_column(Integer, default=0)

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import os
 import random
+import re
 import sqlite3
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -43,8 +44,10 @@ from sqlalchemy import Connection, Engine, and_, case, create_engine, event, fun
 from sqlalchemy.engine import URL, make_url
 from sqlalchemy.exc import ArgumentError, DBAPIError, IntegrityError, NoSuchModuleError, OperationalError
 from sqlalchemy.orm import Session, aliased, raiseload, sessionmaker
+from sqlalchemy.pool import StaticPool
 
 from selfplay_cli.errors import MarlError
+from selfplay_cli.files import file_sha256
 from selfplay_cli.league.models import Base, Game, GameSeat, Match, Meta, Player, Run, Tag, utcnow
 from selfplay_cli.stats.elo import elo_update
 
@@ -259,15 +262,35 @@ _GAME_TABLE_FIELDS = ("game_id", "match_id", "player_a", "player_b", "score_a", 
 # --------------------------------------------------------------------------------------------------
 
 
-def _check_name(what: str, value: str) -> str:
-    """Validate a run / snapshot / bot / tag / env name and return it."""
-    if not isinstance(value, str) or not value or value != value.strip():
-        raise LeagueError(f"invalid {what} {value!r}: must be non-empty without surrounding spaces")
-    if "/" in value or any(ch in value for ch in "\n\r\t"):
-        raise LeagueError(f"invalid {what} {value!r}: must not contain '/' or control characters")
+NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*")
+"""What a run, snapshot, tag, bot or env name may be: ASCII letters, digits and ``. _ + -``, starting with a letter or
+digit (so never ``.``, ``..``, a hidden file or something that reads as an option). A name becomes a folder or file
+name under the league home and is printed on terminals, so nothing else gets in: no ``/``, no spaces, no control
+characters (escape sequences)."""
+
+
+def shown(value: object, limit: int = 60) -> str:
+    """``value`` for an error message: quoted, control characters escaped (never raw on a terminal), cut short."""
+    text = value if isinstance(value, str) else str(value)
+    cut = text[:limit]
+    return repr(cut)[:-1] + ("..." + repr(cut)[-1] if len(text) > limit else repr(cut)[-1])
+
+
+def check_name(what: str, value: object) -> str:
+    """Validate a run / snapshot / bot / tag / env name (:data:`NAME_PATTERN`, at most 200 characters) and return
+    it; a :class:`LeagueError` saying what is allowed otherwise. The one place names are checked: the store calls it
+    before every insert, and code that builds paths from names calls it before creating anything."""
+    if not isinstance(value, str) or not value:
+        raise LeagueError(f"invalid {what} {shown(value)}: a name must not be empty")
     if len(value) > _MAX_NAME:
-        raise LeagueError(f"invalid {what}: longer than {_MAX_NAME} characters")
+        raise LeagueError(f"invalid {what} {shown(value)}: longer than {_MAX_NAME} characters")
+    if not NAME_PATTERN.fullmatch(value):
+        raise LeagueError(f"invalid {what} {shown(value)}: use letters, digits and . _ + - "
+                          "(starting with a letter or digit)")
     return value
+
+
+_check_name = check_name
 
 
 def _is_locked(exc: BaseException) -> bool:
@@ -320,19 +343,26 @@ class League:
     """
 
     def __init__(self, url: str | URL, *, home: str | Path | None = None, elo_k: float = 16.0,
-                 busy_timeout: float = 30.0) -> None:
-        """Open (creating if new) the league at ``url``.
+                 busy_timeout: float = 30.0, readonly: bool = False) -> None:
+        """Open (creating if new) the league at ``url``; with ``readonly`` open an existing one for reading only.
+
+        A read-only league creates nothing (no folder, no database, no tables) and writes nothing: every method
+        that would write raises :class:`LeagueError`. On SQLite it opens the file read-write but with
+        ``query_only`` (so that, as the last connection, it tidies WAL files away like any other), falls back to
+        ``mode=ro`` where the file or its folder cannot be written, and to ``immutable=1`` on read-only media where
+        SQLite cannot even make its shared-memory file (no writer can be at work there then).
 
         Raises:
             LeagueError: invalid URL, missing driver, unreadable or foreign database, schema version
-                this code cannot handle.
+                this code cannot handle; read-only: no database there.
         """
         try:
             self.url: URL = make_url(url)
         except ArgumentError as exc:
-            raise LeagueError(f"invalid database URL {str(url)!r}") from exc
+            raise LeagueError(f"invalid database URL {shown(str(url))}") from exc
         self.db_path: Path | None = _sqlite_file(self.url)
         self.is_sqlite = self.url.get_backend_name() == "sqlite"
+        self.readonly = bool(readonly)
         if home is not None:
             self.home: Path | None = Path(home).expanduser().resolve()
         else:
@@ -341,10 +371,43 @@ class League:
         self.busy_timeout = float(busy_timeout)
         self.lock_retries = 0
         self._where = str(self.db_path) if self.db_path is not None else self.url.render_as_string(True)
-        if self.db_path is not None:
-            self.db_path.parent.mkdir(parents=True, exist_ok=True)
+        if self.readonly and self.db_path is not None and not self.db_path.is_file():
+            raise LeagueError(f"no league database at {self._where} (nothing trained or imported there yet)")
+        self._empty = False
+        if self.db_path is not None and not self.readonly:
+            try:
+                self.db_path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise LeagueError(f"cannot create {self.db_path.parent}: {exc.strerror or exc}") from exc
+        modes = ["rw", "ro", "ro&immutable=1"] if self.readonly and self.db_path is not None else [None]
+        for i, mode in enumerate(modes):
+            try:
+                self._connect(mode)
+                return
+            except LeagueError:
+                self.engine.dispose()
+                raise
+            except DBAPIError as exc:
+                self.engine.dispose()
+                reason = str(exc.orig).splitlines()[0] if exc.orig is not None else type(exc).__name__
+                if i + 1 < len(modes) and ("unable to open" in reason or "readonly" in reason):
+                    continue  # read-only file, folder or medium: the next, more restricted way to read it
+                raise LeagueError(f"cannot open league database {self._where}: {reason}") from exc
+
+    def _connect(self, mode: str | None) -> None:
+        """Make the engine (a read-only SQLite file through a ``file:`` URI with ``mode``) and check the schema."""
+        engine_url = self.url
+        if mode is not None:
+            assert self.db_path is not None
+            uri = f"{self.db_path.resolve().as_uri()}?mode={mode}"
+            engine_url = URL.create("sqlite", database=uri, query={"uri": "true"})
+        self._empty = self.readonly and self.is_sqlite and self.db_path is None and self.url.database == ":memory:"
         try:
-            self.engine: Engine = create_engine(self.url)
+            if self._empty:  # an empty league to read: one connection (every thread sees the same tables)
+                self.engine: Engine = create_engine(engine_url, poolclass=StaticPool,
+                                                    connect_args={"check_same_thread": False})
+            else:
+                self.engine = create_engine(engine_url)
         except (NoSuchModuleError, ImportError) as exc:
             raise LeagueError(f"cannot use database {self._where}: no driver ({exc})") from exc
         if self.is_sqlite:
@@ -352,39 +415,55 @@ class League:
         self._sessions = sessionmaker(self.engine, expire_on_commit=False)
         self._read_sessions = sessionmaker(self.engine.execution_options(marl_readonly=True),
                                            expire_on_commit=False)
-        try:
-            self._init_schema()
-        except LeagueError:
-            self.engine.dispose()
-            raise
-        except DBAPIError as exc:
-            self.engine.dispose()
-            reason = str(exc.orig).splitlines()[0] if exc.orig is not None else type(exc).__name__
-            raise LeagueError(f"cannot open league database {self._where}: {reason}") from exc
+        self._init_schema()
 
     @classmethod
-    def open(cls, home: str | Path | None = None, url: str | None = None, **kwargs: Any) -> League:
+    def open(cls, home: str | Path | None = None, url: str | None = None, *, readonly: bool = False,
+             **kwargs: Any) -> League:
         """Open the league of ``home`` (default ``$MARL_HOME`` or ``./league``).
 
         ``url`` (default ``$MARL_DB``) wins over the home's ``league.db``; without it the home directory is
         created and ``sqlite:///<home>/league.db`` is used. ``home`` is kept either way (snapshot files).
+        ``readonly`` opens the league for reading and creates nothing, not even the home: where there is no league
+        yet, it reads an empty one (held in memory).
         """
         home_path = Path(home if home is not None else os.environ.get("MARL_HOME") or DEFAULT_HOME)
         home_path = home_path.expanduser().resolve()
         url = url or os.environ.get("MARL_DB") or None
         if url is None:
-            try:
-                home_path.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise LeagueError(f"cannot create league home {home_path}: {exc.strerror or exc}") from exc
+            if readonly:
+                if not (home_path / DB_FILENAME).exists():  # nothing there yet: read an empty league, create nothing
+                    return cls(URL.create("sqlite", database=":memory:"), home=home_path, readonly=True, **kwargs)
+            else:
+                try:
+                    home_path.mkdir(parents=True, exist_ok=True)
+                except OSError as exc:
+                    raise LeagueError(f"cannot create league home {home_path}: {exc.strerror or exc}") from exc
             # A URL object, not a string: a path with '?', '#' or '%' in it must not be re-parsed.
-            return cls(URL.create("sqlite", database=str(home_path / DB_FILENAME)), home=home_path, **kwargs)
-        return cls(url, home=home_path, **kwargs)
+            return cls(URL.create("sqlite", database=str(home_path / DB_FILENAME)), home=home_path,
+                       readonly=readonly, **kwargs)
+        return cls(url, home=home_path, readonly=readonly, **kwargs)
+
+    def home_path(self, *parts: str) -> Path:
+        """``<home>/<parts...>``, checked to stay inside the home: every part a plain name (no separator, not
+        ``.`` or ``..``), and below the top folder (``snapshots``, ``runs``, ``videos``; it may itself be a symlink to
+        another disk) the resolved path, symlinks followed, still inside it. A :class:`LeagueError` otherwise.
+        Nothing is created."""
+        if self.home is None:
+            raise LeagueError("this league has no home directory for its files: pass --home")
+        for part in parts:
+            if not isinstance(part, str) or part in ("", ".", "..") or any(c in part for c in "/\\\0"):
+                raise LeagueError(f"{shown(part)} is not a plain file or folder name")
+        path = self.home.joinpath(*parts)
+        if len(parts) > 1 and not path.resolve().is_relative_to((self.home / parts[0]).resolve()):
+            raise LeagueError(f"{path} leads outside the league home {self.home} (through a symlink)")
+        return path
 
     # ---------------------------------------------------------------- engine, sessions, schema
 
     def _install_sqlite_listeners(self) -> None:
         busy_ms = int(self.busy_timeout * 1000)
+        readonly_league = self.readonly
 
         @event.listens_for(self.engine, "connect")
         def _on_connect(dbapi_conn: sqlite3.Connection, _record: Any) -> None:
@@ -393,6 +472,10 @@ class League:
             cur = dbapi_conn.cursor()
             try:
                 cur.execute(f"PRAGMA busy_timeout = {busy_ms}")
+                if readonly_league:
+                    if not self._empty:  # (the empty league in memory gets its tables first; _unit refuses writes)
+                        cur.execute("PRAGMA query_only = ON")
+                    return
                 cur.execute("PRAGMA foreign_keys = ON")
                 for attempt in range(_LOCK_RETRIES):  # switching to WAL needs a moment of exclusivity
                     try:
@@ -408,7 +491,7 @@ class League:
 
         @event.listens_for(self.engine, "begin")
         def _on_begin(conn: Connection) -> None:
-            readonly = conn.get_execution_options().get("marl_readonly", False)
+            readonly = readonly_league or conn.get_execution_options().get("marl_readonly", False)
             conn.exec_driver_sql("BEGIN" if readonly else "BEGIN IMMEDIATE")
 
     def _init_schema(self) -> None:
@@ -419,6 +502,8 @@ class League:
             if "meta" not in tables:
                 if tables & {"players", "games", "runs"} or (tables and self.db_path is not None):
                     raise LeagueError(f"{self._where} is not a marl league database (no meta table)")
+                if self.readonly and not self._empty:
+                    raise LeagueError(f"{self._where} holds no league yet (no tables)")
                 Base.metadata.create_all(conn)
                 conn.execute(Meta.__table__.insert().values(key="schema_version", value=str(SCHEMA_VERSION)))
                 conn.execute(Meta.__table__.insert().values(key="created_at", value=utcnow().isoformat()))
@@ -452,6 +537,11 @@ class League:
                 f"{SCHEMA_VERSION} of this marl: upgrade marl"
             )
         missing = [v for v in range(stored, SCHEMA_VERSION) if v not in MIGRATIONS]
+        if self.readonly and not missing:
+            raise LeagueError(
+                f"league database {self._where} has schema version {stored} and needs upgrading to version "
+                f"{SCHEMA_VERSION}, which a command that only reads does not do: run one that writes first"
+            )
         if missing:
             raise LeagueError(
                 f"league database {self._where} has schema version {stored}, this marl needs version "
@@ -497,7 +587,11 @@ class League:
         time.sleep(min(0.05 * 2**attempt, 2.0) * (0.5 + random.random()))
 
     def _unit(self, fn: Callable[[Session], T], readonly: bool = False) -> T:
-        """Run ``fn`` in one transaction, retrying the whole unit a few times if SQLite reports a lock."""
+        """Run ``fn`` in one transaction, retrying the whole unit a few times if SQLite reports a lock.
+
+        A write unit of a read-only league is refused before anything starts."""
+        if self.readonly and not readonly:
+            raise LeagueError(f"league {self.home or self._where} is open read-only: this needs a command that writes")
         for attempt in range(_LOCK_RETRIES + 1):
             try:
                 with self.session(readonly=readonly) as s:
@@ -601,19 +695,35 @@ class League:
         except IntegrityError:  # another process added the same bots first (non-SQLite backends)
             self._unit(work)
 
-    def add_snapshot(self, *, env: str, run: str | None, name: str, path: str, sha256: str, step: int = 0,
-                     episode: int = 0, algo: str | None = None, parent_id: int | None = None,
-                     meta: dict[str, Any] | None = None) -> PlayerRow:
-        """Register a policy snapshot. Raises LeagueError if ``(env, run, name)`` exists or run/parent is unknown."""
-        return self.add_snapshots([dict(env=env, run=run, name=name, path=path, sha256=sha256, step=step,
-                                        episode=episode, algo=algo, parent_id=parent_id, meta=meta)])[0]
+    def add_snapshot(self, *, env: str, run: str | None, name: str, path: str, sha256: str | None = None,
+                     step: int = 0, episode: int = 0, algo: str | None = None, parent_id: int | None = None,
+                     meta: dict[str, Any] | None = None, run_config: dict[str, Any] | None = None) -> PlayerRow:
+        """Register a policy snapshot. Raises LeagueError if ``(env, run, name)`` exists or run/parent is unknown.
 
-    def add_snapshots(self, items: Sequence[dict[str, Any]]) -> list[PlayerRow]:
+        ``path`` is the file, relative to the home (or absolute); ``sha256`` the sha256 of the whole file (see
+        :attr:`Player.sha256 <selfplay_cli.league.models.Player.sha256>`). With the file in place the store hashes it
+        itself: ``sha256`` may be left out, and one given must be the file's or, as callers passed before it meant
+        the file, the weights' checksum of ``meta["weights_sha256"]`` (the file's hash is stored then). Without the
+        file (kept elsewhere) the given ``sha256`` is stored as it is.
+
+        ``run_config``: a ``run`` that does not exist yet is created with it (status ``finished``), in the same
+        transaction as the snapshot (an import that fails leaves no empty run behind).
+        """
+        return self.add_snapshots([dict(env=env, run=run, name=name, path=path, sha256=sha256, step=step,
+                                        episode=episode, algo=algo, parent_id=parent_id, meta=meta)],
+                                  run_config=run_config)[0]
+
+    def add_snapshots(self, items: Sequence[dict[str, Any]], run_config: dict[str, Any] | None = None
+                      ) -> list[PlayerRow]:
         """Register several snapshots (the keyword arguments of :meth:`add_snapshot`, one dict each) in ONE
-        transaction: all of them or none (a training run's snapshots of one moment are one unit)."""
+        transaction: all of them or none (a training run's snapshots of one moment are one unit). ``run_config``
+        as in :meth:`add_snapshot`."""
         for item in items:
             _check_name("env", item["env"])
             _check_name("snapshot name", item["name"])
+            if item.get("run") is not None:
+                _check_name("run name", item["run"])
+        items = [{**item, "sha256": self._file_hash(item)} for item in items]
 
         def insert(s: Session, env: str, run: str | None, name: str, path: str, sha256: str, step: int = 0,
                    episode: int = 0, algo: str | None = None, parent_id: int | None = None,
@@ -622,6 +732,10 @@ class League:
             run_row: Run | None = None
             if run is not None:
                 run_row = s.execute(select(Run).where(Run.name == run)).scalar_one_or_none()
+                if run_row is None and run_config is not None:
+                    run_row = Run(name=run, env=env, algo=algo, config=dict(run_config), status="finished")
+                    s.add(run_row)
+                    s.flush()
                 if run_row is None:
                     raise LeagueError(f"no run named {run!r}")
                 if run_row.env != env:
@@ -652,6 +766,29 @@ class League:
         except IntegrityError as exc:
             names = ", ".join(f"{i['run']}/{i['name']}" if i["run"] else i["name"] for i in items)
             raise LeagueError(f"snapshot {names} already exists") from exc
+
+    def _file_hash(self, item: dict[str, Any]) -> str:
+        """The sha256 a snapshot row gets: its file's (see :meth:`add_snapshot`)."""
+        given, where = item.get("sha256"), item["path"]
+        file = Path(where)
+        if not file.is_absolute():
+            if self.home is None:
+                file = None  # type: ignore[assignment]
+            else:
+                file = self.home_path(*Path(where).parts)
+        if file is not None and file.is_file():
+            try:
+                actual = file_sha256(file)
+            except OSError as exc:
+                raise LeagueError(f"{file}: cannot read ({exc.strerror or exc})") from exc
+            legacy = (item.get("meta") or {}).get("weights_sha256")
+            if given is not None and given != actual and given != legacy:
+                raise LeagueError(f"{file}: the file's sha256 is not the {given[:12]}... given for it (changed while "
+                                  "it was being registered?)")
+            return actual
+        if not given:
+            raise LeagueError(f"no snapshot file at {file or where} to register")
+        return str(given)
 
     def get_player(self, player_id: int) -> PlayerRow:
         """The player with this id (removed ones included). Raises LeagueError if there is none."""
@@ -831,53 +968,77 @@ class League:
         games = list(games)
         if not games:
             return []
-        pids: set[int] = set()
-        for i, g in enumerate(games):
-            n = len(g.players)
-            if n < 1 or len(g.scores) != n or len(g.outcome) != n:
-                raise LeagueError(f"game {i}: players, scores and outcome must have one entry per seat")
-            if any(not (0.0 <= float(o) <= 1.0) or math.isnan(float(o)) for o in g.outcome):
-                raise LeagueError(f"game {i}: outcome points must lie in [0, 1], got {g.outcome}")
-            if n == 2 and abs(float(g.outcome[0]) + float(g.outcome[1]) - 1.0) > 1e-9:
-                raise LeagueError(f"game {i}: two-player outcome must sum to 1, got {g.outcome}")
-            pids.update(int(p) for p in g.players)
+        pids = _check_games(games)
 
         def work(s: Session) -> list[int]:
             match = s.get(Match, int(match_id))
             if match is None:
                 raise LeagueError(f"no match with id {match_id}")
-            q = select(Player).where(Player.id.in_(pids)).options(raiseload("*")).with_for_update()
-            rows = s.execute(q).scalars().all()
-            players = {p.id: p for p in rows}
-            for i, g in enumerate(games):
-                if g.env != match.env:
-                    raise LeagueError(f"game {i}: env {g.env!r} differs from match {match.id}'s env {match.env!r}")
-                for pid in g.players:
-                    p = players.get(int(pid))
-                    if p is None:
-                        raise LeagueError(f"game {i}: no player with id {pid}")
-                    if p.env != g.env:
-                        raise LeagueError(f"game {i}: player {p.id} ({p.name}) belongs to env {p.env!r}")
-            now = utcnow()
-            game_rows = [
-                {"match_id": match.id, "env": g.env, "n_seats": len(g.players), "seed": int(g.seed),
-                 "length": int(g.length), "truncated": bool(g.truncated), "created_at": now, "actions": g.actions}
-                for g in games
-            ]
-            ids = list(s.scalars(Game.__table__.insert().returning(Game.__table__.c.id, sort_by_parameter_order=True),
-                                 game_rows))
-            seat_rows = [
-                {"game_id": gid, "seat": k, "player_id": int(pid), "score": float(g.scores[k]),
-                 "points": float(g.outcome[k])}
-                for gid, g in zip(ids, games, strict=True)
-                for k, pid in enumerate(g.players)
-            ]
-            s.execute(GameSeat.__table__.insert(), seat_rows)
-            for g in games:
-                _apply_game(players, [int(p) for p in g.players], float(g.outcome[0]), self.elo_k)
-            return ids
+            return self._insert_games(s, match, games, pids)
 
         return self._unit(work)
+
+    def create_match_with_games(self, env: str, kind: str, params: dict[str, Any] | None,
+                                games: Sequence[GameRecord]) -> tuple[int, list[int]]:
+        """Open a match record and store its first games in ONE transaction (a match row never exists without
+        games, whatever instant the process is killed at). Returns the match id and the game ids."""
+        _check_name("env", env)
+        if kind not in MATCH_KINDS:
+            raise LeagueError(f"unknown match kind {kind!r} (expected one of {', '.join(MATCH_KINDS)})")
+        games = list(games)
+        pids = _check_games(games)
+
+        def work(s: Session) -> tuple[int, list[int]]:
+            m = Match(env=env, kind=kind, params=dict(params or {}))
+            s.add(m)
+            s.flush()
+            return m.id, self._insert_games(s, m, games, pids) if games else []
+
+        return self._unit(work)
+
+    def update_match(self, match_id: int, **params: Any) -> None:
+        """Merge ``params`` into a match's parameters (e.g. ``status="interrupted"``). LeagueError if unknown."""
+
+        def work(s: Session) -> None:
+            m = s.get(Match, int(match_id))
+            if m is None:
+                raise LeagueError(f"no match with id {match_id}")
+            m.params = {**dict(m.params or {}), **params}
+
+        self._unit(work)
+
+    def _insert_games(self, s: Session, match: Match, games: list[GameRecord], pids: set[int]) -> list[int]:
+        """Store checked ``games`` of ``match`` inside the session's transaction; the online Elo goes with them."""
+        q = select(Player).where(Player.id.in_(pids)).options(raiseload("*")).with_for_update()
+        rows = s.execute(q).scalars().all()
+        players = {p.id: p for p in rows}
+        for i, g in enumerate(games):
+            if g.env != match.env:
+                raise LeagueError(f"game {i}: env {g.env!r} differs from match {match.id}'s env {match.env!r}")
+            for pid in g.players:
+                p = players.get(int(pid))
+                if p is None:
+                    raise LeagueError(f"game {i}: no player with id {pid}")
+                if p.env != g.env:
+                    raise LeagueError(f"game {i}: player {p.id} ({p.name}) belongs to env {p.env!r}")
+        now = utcnow()
+        game_rows = [
+            {"match_id": match.id, "env": g.env, "n_seats": len(g.players), "seed": int(g.seed),
+             "length": int(g.length), "truncated": bool(g.truncated), "created_at": now, "actions": g.actions}
+            for g in games
+        ]
+        ids = list(s.scalars(Game.__table__.insert().returning(Game.__table__.c.id, sort_by_parameter_order=True),
+                             game_rows))
+        seat_rows = [
+            {"game_id": gid, "seat": k, "player_id": int(pid), "score": float(g.scores[k]),
+             "points": float(g.outcome[k])}
+            for gid, g in zip(ids, games, strict=True)
+            for k, pid in enumerate(g.players)
+        ]
+        s.execute(GameSeat.__table__.insert(), seat_rows)
+        for g in games:
+            _apply_game(players, [int(p) for p in g.players], float(g.outcome[0]), self.elo_k)
+        return ids
 
     def games(self, env: str | None = None, players: Iterable[int] | None = None,
               any_seat: bool = False, rated: bool = True) -> GameTable:
@@ -1024,6 +1185,21 @@ class League:
                 _apply_game(players, seats, score0, self.elo_k)
 
         self._unit(work)
+
+
+def _check_games(games: list[GameRecord]) -> set[int]:
+    """The ids of the players of ``games``, each game checked for shape and result (LeagueError if malformed)."""
+    pids: set[int] = set()
+    for i, g in enumerate(games):
+        n = len(g.players)
+        if n < 1 or len(g.scores) != n or len(g.outcome) != n:
+            raise LeagueError(f"game {i}: players, scores and outcome must have one entry per seat")
+        if any(not (0.0 <= float(o) <= 1.0) or math.isnan(float(o)) for o in g.outcome):
+            raise LeagueError(f"game {i}: outcome points must lie in [0, 1], got {g.outcome}")
+        if n == 2 and abs(float(g.outcome[0]) + float(g.outcome[1]) - 1.0) > 1e-9:
+            raise LeagueError(f"game {i}: two-player outcome must sum to 1, got {g.outcome}")
+        pids.update(int(p) for p in g.players)
+    return pids
 
 
 def _apply_game(players: dict[int, Player], seats: list[int], score0: float, k: float) -> None:

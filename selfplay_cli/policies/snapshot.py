@@ -5,8 +5,12 @@ A snapshot is a ``*.safetensors`` file. Its header's ``__metadata__`` (a str -> 
 its options, observation shape, action count, network arch, algorithm, training counters, lineage). The
 weights are checksummed (:func:`weights_sha256`) on save and verified on every load.
 
-Loading never unpickles anything: the header is parsed as JSON and the tensors are read with ``safetensors``
-(no ``torch.load``). Every problem with a file is a :class:`SnapshotError` whose message starts with the path.
+Loading never unpickles anything: the header is parsed as JSON and the tensors are read from the validated byte
+ranges it declares (no ``torch.load``). A file is a hostile input until proven otherwise (models contributed to a CI
+gate are imported this way): its size, its header, the tensors it declares against the network its metadata
+describes and :data:`LIMITS` are all checked before anything is built or allocated (:func:`read_snapshot`). Every
+problem with a file is a :class:`SnapshotError` whose message starts with the path and prints no control
+characters.
 """
 
 from __future__ import annotations
@@ -14,36 +18,59 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import os
+import re
 import struct
+import unicodedata
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import torch
-from safetensors.torch import load_file
 from safetensors.torch import save as st_save
 
+from .. import files
 from ..envs import UnknownEnvError, get_env
-from .network import Arch, MLPNet, NetworkPolicy, SnapshotError, build_network
+from .network import Arch, NetworkPolicy, SnapshotError, build_network
 
 FORMAT = "marl-snapshot"
 FORMAT_VERSION = 1
 SUFFIX = ".safetensors"
-_MAX_HEADER = 100 * 1024 * 1024  # safetensors' own limit
+
+# Limits of what marl reads (and writes): far above any network it trains (seed 000's 512-512-256-128-64 MLP has
+# ~0.5 M parameters; an MLP over pong's RGB frames with 64 units ~61 M), far below what would hurt a machine.
+MAX_HEADER = 4 * 1024 * 1024  # bytes of JSON header (marl's are a few kilobytes)
+MAX_LAYERS = 64  # hidden layers
+MAX_WIDTH = 65_536  # units in a hidden layer
+MAX_OBS_DIMS = 8  # axes of an observation
+MAX_OBS_SIZE = 1 << 24  # numbers in an observation
+MAX_ACTIONS = 65_536
+MAX_PARAMS = 100_000_000  # parameters of a network (400 MB of float32)
+MAX_FILE_BYTES = 8 + MAX_HEADER + 4 * MAX_PARAMS
+LIMITS = {"header_bytes": MAX_HEADER, "hidden_layers": MAX_LAYERS, "layer_width": MAX_WIDTH,
+          "observation_axes": MAX_OBS_DIMS, "observation_size": MAX_OBS_SIZE, "actions": MAX_ACTIONS,
+          "parameters": MAX_PARAMS, "file_bytes": MAX_FILE_BYTES}
+_HEX64 = re.compile(r"[0-9a-f]{64}")
 
 __all__ = [
     "FORMAT",
     "FORMAT_VERSION",
+    "LIMITS",
+    "Snapshot",
     "SnapshotError",
     "SnapshotMeta",
+    "expected_tensors",
     "export_snapshot",
     "file_sha256",
     "import_check",
     "load_policy",
     "load_snapshot",
+    "policy_of",
     "read_meta",
+    "read_snapshot",
     "save_snapshot",
     "weights_sha256",
 ]
@@ -150,16 +177,81 @@ def weights_sha256(tensors: dict[str, torch.Tensor]) -> str:
 
 def file_sha256(path: str | os.PathLike[str]) -> str:
     """sha256 of the whole file, streamed."""
-    h = hashlib.sha256()
     try:
-        with open(path, "rb") as f:
-            while chunk := f.read(1 << 20):
-                h.update(chunk)
+        return files.file_sha256(path)
     except FileNotFoundError:
         raise SnapshotError(f"{path}: no such file") from None
     except OSError as e:
         raise SnapshotError(f"{path}: cannot read ({e.strerror or e})") from None
-    return h.hexdigest()
+
+
+# --------------------------------------------------------------------------------------------------------------
+# The tensors a network has, worked out from its description alone
+
+
+def expected_tensors(obs_shape: tuple[int, ...], n_actions: int, arch: Arch) -> dict[str, tuple[int, ...]]:
+    """Name -> shape of every tensor of the network ``arch`` describes (as :class:`MLPNet` names them), computed
+    without building anything, after checking the description against :data:`LIMITS` (:class:`SnapshotError`)."""
+    if not 1 <= len(obs_shape) <= MAX_OBS_DIMS or any(not 1 <= d <= MAX_OBS_SIZE for d in obs_shape):
+        raise SnapshotError(f"observation shape {list(obs_shape)[:MAX_OBS_DIMS + 1]} is out of bounds (1 to "
+                            f"{MAX_OBS_DIMS} sizes of 1 to {MAX_OBS_SIZE:,})")
+    obs_dim = math.prod(obs_shape)
+    if obs_dim > MAX_OBS_SIZE:
+        raise SnapshotError(f"observations of {obs_dim:,} numbers are more than marl plays ({MAX_OBS_SIZE:,})")
+    if not 1 <= n_actions <= MAX_ACTIONS:
+        raise SnapshotError(f"{n_actions} actions is out of bounds (1 to {MAX_ACTIONS:,})")
+    if len(arch.hidden) > MAX_LAYERS:
+        raise SnapshotError(f"{len(arch.hidden)} hidden layers is more than marl builds ({MAX_LAYERS})")
+    if any(h > MAX_WIDTH for h in arch.hidden):
+        raise SnapshotError(f"hidden layer sizes {list(arch.hidden)} exceed {MAX_WIDTH:,}")
+    shapes: dict[str, tuple[int, ...]] = {}
+    width = obs_dim
+    for i, h in enumerate(arch.hidden):
+        shapes[f"trunk.{2 * i}.weight"], shapes[f"trunk.{2 * i}.bias"] = (h, width), (h,)
+        width = h
+    shapes["action_head.weight"], shapes["action_head.bias"] = (n_actions, width), (n_actions,)
+    if arch.value_head:
+        shapes["value_head.weight"], shapes["value_head.bias"] = (1, width), (1,)
+    if arch.dueling:
+        shapes["state_value.weight"], shapes["state_value.bias"] = (1, width), (1,)
+    params = sum(math.prod(s) for s in shapes.values())
+    if params > MAX_PARAMS:
+        raise SnapshotError(f"a {arch.describe()} network has {params:,} parameters, more than marl loads "
+                            f"({MAX_PARAMS:,})")
+    return shapes
+
+
+def _fit_problems(found: dict[str, tuple[int, ...]], expected: dict[str, tuple[int, ...]]) -> list[str]:
+    problems = []
+    missing = sorted(set(expected) - set(found))
+    unexpected = sorted(set(found) - set(expected))
+    if missing:
+        problems.append(f"missing {', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''}")
+    if unexpected:
+        shown = ", ".join(_printable(n, 40) for n in unexpected[:4])
+        problems.append(f"unexpected {shown}{' ...' if len(unexpected) > 4 else ''}")
+    for k in sorted(set(expected) & set(found)):
+        if tuple(found[k]) != tuple(expected[k]):
+            problems.append(f"{k} is {list(found[k])}, expected {list(expected[k])}")
+    return problems
+
+
+def _check_fits(path: Any, found: dict[str, tuple[int, ...]], meta: SnapshotMeta) -> None:
+    """Refuse tensors (name -> shape) that are not exactly those of the network ``meta`` describes."""
+    try:
+        expected = expected_tensors(meta.obs_shape, meta.n_actions, meta.arch)
+    except SnapshotError as e:
+        raise SnapshotError(f"{path}: {e}") from None
+    problems = _fit_problems(found, expected)
+    if problems:
+        raise SnapshotError(f"{path}: weights do not fit the {meta.arch.describe()} network ({'; '.join(problems)})")
+
+
+def _printable(text: str, limit: int = 60) -> str:
+    """``text`` safe to print on a terminal: control and format characters escaped, cut short."""
+    cut = text[:limit]
+    out = "".join(c if c.isprintable() else repr(c)[1:-1] for c in cut)
+    return out + ("..." if len(text) > limit else "")
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -172,36 +264,9 @@ def _state_dict(net_or_state_dict: torch.nn.Module | dict[str, torch.Tensor]) ->
     return {str(k): v.detach().to("cpu").contiguous().clone() for k, v in sd.items()}
 
 
-def _fit_problems(tensors: dict[str, torch.Tensor], net: MLPNet) -> list[str]:
-    expected = net.state_dict()
-    problems = []
-    missing = sorted(set(expected) - set(tensors))
-    unexpected = sorted(set(tensors) - set(expected))
-    if missing:
-        problems.append(f"missing {', '.join(missing[:4])}{' ...' if len(missing) > 4 else ''}")
-    if unexpected:
-        problems.append(f"unexpected {', '.join(unexpected[:4])}{' ...' if len(unexpected) > 4 else ''}")
-    for k in sorted(set(expected) & set(tensors)):
-        if tuple(tensors[k].shape) != tuple(expected[k].shape):
-            problems.append(f"{k} is {list(tensors[k].shape)}, expected {list(expected[k].shape)}")
-    return problems
-
-
-def _check_fits(path: Any, tensors: dict[str, torch.Tensor], meta: SnapshotMeta) -> MLPNet:
-    """The network ``meta`` describes, with ``tensors`` checked to fit it exactly (not loaded)."""
-    try:
-        net = build_network(meta.obs_shape, meta.n_actions, meta.arch, seed=0)
-    except SnapshotError as e:
-        raise SnapshotError(f"{path}: {e}") from None
-    problems = _fit_problems(tensors, net)
-    if problems:
-        raise SnapshotError(f"{path}: weights do not fit the {meta.arch.describe()} network ({'; '.join(problems)})")
-    return net
-
-
 def _atomic_write(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".tmp-{os.getpid()}")
+    tmp = files.temp_path(path)
     try:
         with open(tmp, "wb") as f:
             f.write(data)
@@ -230,86 +295,174 @@ def save_snapshot(
 ) -> SnapshotMeta:
     """Write weights + ``meta`` to ``path`` atomically (temp file, fsync, rename); parent dirs are created.
 
-    The weights must fit the network ``meta`` describes (checked, so a saved file always loads). Returns
-    ``meta`` with ``weights_sha256`` filled in.
+    The weights must fit the network ``meta`` describes, in float32 and within :data:`LIMITS` (checked, so a saved
+    file always loads). Returns ``meta`` with ``weights_sha256`` filled in.
     """
     path = Path(path)
     tensors = _state_dict(net_or_state_dict)
-    _check_fits(path, tensors, meta)
+    odd = sorted(k for k, v in tensors.items() if v.dtype != torch.float32)
+    if odd:
+        raise SnapshotError(f"{path}: weights must be float32 ({', '.join(odd[:4])} are not)")
+    _check_fits(path, {k: tuple(v.shape) for k, v in tensors.items()}, meta)
     meta = dataclasses.replace(meta, weights_sha256=weights_sha256(tensors))
     try:
         meta_json = json.dumps(meta.to_dict(), sort_keys=True)
     except (TypeError, ValueError) as e:
         raise SnapshotError(f"{path}: metadata is not JSON-serialisable ({e})") from None
     header = {"format": FORMAT, "format_version": str(FORMAT_VERSION), "marl": meta_json}
+    data = st_save(tensors, metadata=header)
+    if len(data) > MAX_FILE_BYTES or struct.unpack("<Q", data[:8])[0] > MAX_HEADER:
+        raise SnapshotError(f"{path}: snapshot would be bigger than marl reads (metadata too large?)")
     try:
-        _atomic_write(path, st_save(tensors, metadata=header))
+        _atomic_write(path, data)
     except OSError as e:
         raise SnapshotError(f"{path}: cannot write ({e.strerror or e})") from None
     return meta
 
 
 # --------------------------------------------------------------------------------------------------------------
-# Reading
+# Reading. Everything about a file is checked before anything is built from it: its size, its header (bounded,
+# plain JSON), the tensors it declares against the network its metadata describes (names, dtypes, shapes, byte
+# ranges, limits), the game, and only then are the weights read, checksummed and loaded.
 
 
-def _read_header(path: Any) -> dict[str, Any]:
-    """The safetensors header, checked for shape and for the file holding exactly the data it describes."""
+def _parse_header(path: Any, prefix: bytes, raw: bytes, size: int) -> tuple[dict[str, Any], int]:
+    """The safetensors header from its 8-byte length ``prefix`` and its bytes; returns it with the data start."""
+    (n,) = struct.unpack("<Q", prefix)
+    try:
+        header = json.loads(raw.decode("utf-8"))
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        raise SnapshotError(f"{path}: not a marl snapshot (bad header)") from None
+    if not isinstance(header, dict):
+        raise SnapshotError(f"{path}: not a marl snapshot (bad header)")
+    spans = []
+    for name, info in header.items():
+        if name == "__metadata__":
+            if not isinstance(info, dict) or not all(isinstance(v, str) for v in info.values()):
+                raise SnapshotError(f"{path}: not a marl snapshot (bad header metadata)")
+            continue
+        shown = _printable(name, 40)
+        if not isinstance(info, dict):
+            raise SnapshotError(f"{path}: not a marl snapshot (bad header entry for {shown!r})")
+        offsets, shape, dtype = info.get("data_offsets"), info.get("shape"), info.get("dtype")
+        if not (isinstance(offsets, list) and len(offsets) == 2 and all(_is_int(o) and o >= 0 for o in offsets)
+                and offsets[0] <= offsets[1]):
+            raise SnapshotError(f"{path}: not a marl snapshot (bad header entry for {shown!r})")
+        if not (isinstance(shape, list) and len(shape) <= 8 and all(_is_int(d) and 0 <= d < 2**40 for d in shape)):
+            raise SnapshotError(f"{path}: not a marl snapshot (bad shape for {shown!r})")
+        if not isinstance(dtype, str):
+            raise SnapshotError(f"{path}: not a marl snapshot (bad dtype for {shown!r})")
+        spans.append((offsets[0], offsets[1], name))
+    end = 0
+    for begin, stop, name in sorted(spans):
+        if begin != end:
+            raise SnapshotError(f"{path}: not a marl snapshot (tensor data of {_printable(name, 40)!r} "
+                                f"{'overlaps another' if begin < end else 'leaves a gap'})")
+        end = stop
+    data_len = size - 8 - n
+    if data_len < end:
+        raise SnapshotError(f"{path}: truncated snapshot ({data_len} of {end} data bytes present)")
+    if data_len > end:
+        raise SnapshotError(f"{path}: unexpected data after the weights ({data_len - end} bytes; file corrupt?)")
+    return header, 8 + n
+
+
+def _is_int(x: Any) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def _open_checked(path: Any) -> tuple[Any, int]:
     p = Path(path)
     if not p.exists():
         raise SnapshotError(f"{path}: no such snapshot file")
     if not p.is_file():
         raise SnapshotError(f"{path}: not a file")
     try:
-        size = p.stat().st_size
-        with open(p, "rb") as f:
-            prefix = f.read(8)
-            if len(prefix) < 8:
-                raise SnapshotError(f"{path}: not a marl snapshot (file too short: {size} bytes)")
-            (n,) = struct.unpack("<Q", prefix)
-            if n == 0 or n > _MAX_HEADER:
-                raise SnapshotError(f"{path}: not a marl snapshot (bad header)")
-            if n > size - 8:
-                first = f.read(1)
-                why = "header cut short: truncated?" if first == b"{" else "bad header"
-                raise SnapshotError(f"{path}: not a marl snapshot ({why})")
+        f = open(p, "rb")  # noqa: SIM115 - closed by the callers
+        size = os.fstat(f.fileno()).st_size
+    except OSError as e:
+        raise SnapshotError(f"{path}: cannot read ({e.strerror or e})") from None
+    if size > MAX_FILE_BYTES:
+        f.close()
+        raise SnapshotError(f"{path}: {size:,} bytes is bigger than any snapshot marl reads ({MAX_FILE_BYTES:,})")
+    return f, size
+
+
+def _header_length(path: Any, f: Any, size: int) -> tuple[bytes, int]:
+    prefix = f.read(8)
+    if len(prefix) < 8:
+        raise SnapshotError(f"{path}: not a marl snapshot (file too short: {size} bytes)")
+    (n,) = struct.unpack("<Q", prefix)
+    if n == 0 or n > size - 8:
+        first = f.read(1)
+        why = "header cut short: truncated?" if n and first == b"{" else "bad header"
+        raise SnapshotError(f"{path}: not a marl snapshot ({why})")
+    if n > MAX_HEADER:
+        raise SnapshotError(f"{path}: not a marl snapshot (a {n:,}-byte header; marl's are a few kilobytes, at most "
+                            f"{MAX_HEADER:,})")
+    return prefix, n
+
+
+def _read_header(path: Any) -> dict[str, Any]:
+    """The safetensors header alone, checked for shape and for the file holding exactly the data it describes."""
+    f, size = _open_checked(path)
+    try:
+        with f:
+            prefix, n = _header_length(path, f, size)
             raw = f.read(n)
     except OSError as e:
         raise SnapshotError(f"{path}: cannot read ({e.strerror or e})") from None
+    return _parse_header(path, prefix, raw, size)[0]
+
+
+def _read_whole(path: Any) -> tuple[bytearray, dict[str, Any], int]:
+    """The whole file (bounded by :data:`MAX_FILE_BYTES`), its checked header and where its data starts."""
+    f, size = _open_checked(path)
     try:
-        header = json.loads(raw.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise SnapshotError(f"{path}: not a marl snapshot (bad header)") from None
-    if not isinstance(header, dict):
-        raise SnapshotError(f"{path}: not a marl snapshot (bad header)")
-    end = 0
-    for name, info in header.items():
-        if name == "__metadata__":
-            continue
-        offsets = info.get("data_offsets") if isinstance(info, dict) else None
-        if not (isinstance(offsets, list) and len(offsets) == 2 and all(isinstance(o, int) for o in offsets)):
-            raise SnapshotError(f"{path}: not a marl snapshot (bad header entry for {name!r})")
-        end = max(end, offsets[1])
-    data_len = size - 8 - n
-    if data_len < end:
-        raise SnapshotError(f"{path}: truncated snapshot ({data_len} of {end} data bytes present)")
-    if data_len > end:
-        raise SnapshotError(f"{path}: unexpected data after the weights ({data_len - end} bytes; file corrupt?)")
-    return header
+        with f:
+            prefix, n = _header_length(path, f, size)
+            data = bytearray(size)
+            data[:8] = prefix
+            view = memoryview(data)
+            got = 8
+            while got < size:
+                k = f.readinto(view[got:])
+                if not k:
+                    break
+                got += k
+    except OSError as e:
+        raise SnapshotError(f"{path}: cannot read ({e.strerror or e})") from None
+    if got != size:
+        raise SnapshotError(f"{path}: the file changed while it was read")
+    header, start = _parse_header(path, prefix, bytes(view[8:8 + n]), size)
+    return data, header, start
 
 
-def read_meta(path: str | os.PathLike[str]) -> SnapshotMeta:
-    """The snapshot's metadata from its header only (cheap: the weights are neither read nor verified)."""
-    header = _read_header(path)
+def _has_controls(value: Any, depth: int = 0) -> bool:
+    """True if a string anywhere in the JSON ``value`` (keys too) holds control or format characters."""
+    if depth > 32:
+        return True
+    if isinstance(value, str):
+        return any(unicodedata.category(c) in ("Cc", "Cf") for c in value)
+    if isinstance(value, dict):
+        return any(_has_controls(k, depth + 1) or _has_controls(v, depth + 1) for k, v in value.items())
+    if isinstance(value, list):
+        return any(_has_controls(v, depth + 1) for v in value)
+    return False
+
+
+def _meta_of(path: Any, header: dict[str, Any]) -> SnapshotMeta:
     md = header.get("__metadata__")
     if not isinstance(md, dict) or "format" not in md:
         raise SnapshotError(f"{path}: not a marl snapshot (a safetensors file without marl metadata)")
     if md.get("format") != FORMAT:
-        raise SnapshotError(f"{path}: not a marl snapshot (format {md.get('format')!r}, expected {FORMAT!r})")
+        raise SnapshotError(f"{path}: not a marl snapshot (format {_printable(str(md.get('format')))!r}, "
+                            f"expected {FORMAT!r})")
     try:
         version = int(md.get("format_version", ""))
     except (TypeError, ValueError):
-        raise SnapshotError(f"{path}: not a marl snapshot (bad format version {md.get('format_version')!r})") from None
+        raise SnapshotError(f"{path}: not a marl snapshot (bad format version "
+                            f"{_printable(str(md.get('format_version')))!r})") from None
     if version > FORMAT_VERSION:
         raise SnapshotError(
             f"{path}: snapshot format version {version} is newer than this marl reads ({FORMAT_VERSION}); "
@@ -321,11 +474,37 @@ def read_meta(path: str | os.PathLike[str]) -> SnapshotMeta:
     if not isinstance(raw, str):
         raise SnapshotError(f"{path}: not a marl snapshot (no 'marl' metadata)")
     try:
-        return SnapshotMeta.from_dict(json.loads(raw))
-    except json.JSONDecodeError:
+        data = json.loads(raw)
+    except (ValueError, RecursionError):
         raise SnapshotError(f"{path}: bad snapshot metadata (not JSON)") from None
+    if _has_controls(data):
+        raise SnapshotError(f"{path}: bad snapshot metadata (control characters in its text)")
+    try:
+        meta = SnapshotMeta.from_dict(data)
     except (ValueError, TypeError, SnapshotError) as e:
-        raise SnapshotError(f"{path}: bad snapshot metadata ({e})") from None
+        raise SnapshotError(f"{path}: bad snapshot metadata ({_printable(str(e), 200)})") from None
+    if meta.weights_sha256 and not _HEX64.fullmatch(meta.weights_sha256):
+        raise SnapshotError(f"{path}: bad snapshot metadata (weights_sha256 is not a sha256)")
+    return meta
+
+
+def read_meta(path: str | os.PathLike[str]) -> SnapshotMeta:
+    """The snapshot's metadata from its header only (cheap: the weights are neither read nor verified)."""
+    return _meta_of(path, _read_header(path))
+
+
+def _check_layout(path: Any, header: dict[str, Any], meta: SnapshotMeta) -> None:
+    """The tensors the header declares must be exactly those of the network ``meta`` describes: names, float32,
+    shapes and byte sizes, within :data:`LIMITS`. Nothing is allocated: a file describing a giant network is
+    refused here, from its few kilobytes of header."""
+    declared = {k: v for k, v in header.items() if k != "__metadata__"}
+    _check_fits(path, {k: tuple(v["shape"]) for k, v in declared.items()}, meta)
+    for name, info in declared.items():
+        if info["dtype"] != "F32":
+            raise SnapshotError(f"{path}: {name} is {_printable(info['dtype'], 10)}, snapshots hold float32 (F32)")
+        begin, end = info["data_offsets"]
+        if end - begin != 4 * math.prod(info["shape"]):
+            raise SnapshotError(f"{path}: {name} declares {list(info['shape'])} but holds {end - begin} bytes")
 
 
 def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
@@ -340,7 +519,7 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
         obs_space = spec.observation_space(cfg)
         act_space = spec.action_space(cfg)
     except (ValueError, TypeError) as e:
-        raise SnapshotError(f"{path}: bad {meta.env} options in snapshot ({e})") from None
+        raise SnapshotError(f"{path}: bad {meta.env} options in snapshot ({_printable(str(e), 200)})") from None
     if tuple(obs_space.shape or ()) != meta.obs_shape:
         raise SnapshotError(
             f"{path}: snapshot observations are {list(meta.obs_shape)} but {meta.env} with these options "
@@ -352,23 +531,65 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
         raise SnapshotError(f"{path}: snapshot has {meta.n_actions} actions but {meta.env} has {n}")
 
 
+@dataclass(frozen=True)
+class Snapshot:
+    """A snapshot file read and fully validated: its weights (CPU float32 tensors), its metadata, and the sha256
+    of the whole file as it was read (the league's rows name their file by it)."""
+
+    tensors: dict[str, torch.Tensor]
+    meta: SnapshotMeta
+    sha256: str
+
+
+def read_snapshot(path: str | os.PathLike[str], expect_env: str | None = None) -> Snapshot:
+    """Read one snapshot file, checking everything before building anything from it: the file's size, its header,
+    format and version, metadata, the declared tensors against the network the metadata describes (names, dtypes,
+    shapes, byte ranges, :data:`LIMITS`), the game (and ``expect_env``) and its spaces, then the weights' checksum.
+    The file is read once: the weights, the checksum and the file's hash all come from the same bytes."""
+    data, header, start = _read_whole(path)
+    meta = _meta_of(path, header)
+    _check_layout(path, header, meta)
+    _check_env(path, meta, expect_env)
+    if not meta.weights_sha256:
+        raise SnapshotError(f"{path}: snapshot has no weights checksum")
+    tensors = {}
+    for name, info in header.items():
+        if name == "__metadata__":
+            continue
+        begin, end = info["data_offsets"]
+        count = (end - begin) // 4
+        array = np.frombuffer(data, dtype="<f4", count=count, offset=start + begin).astype(np.float32)
+        tensors[name] = torch.from_numpy(array).reshape(tuple(info["shape"]))
+    if weights_sha256(tensors) != meta.weights_sha256:
+        raise SnapshotError(f"{path}: weights do not match their checksum (file corrupt?)")
+    return Snapshot(tensors=tensors, meta=meta, sha256=hashlib.sha256(data).hexdigest())
+
+
 def load_snapshot(
     path: str | os.PathLike[str], expect_env: str | None = None
 ) -> tuple[dict[str, torch.Tensor], SnapshotMeta]:
-    """Weights (CPU tensors) and metadata, fully validated: header, format and version, env (and
-    ``expect_env``), observation/action shapes against the env's spaces, and the weights' checksum."""
-    meta = read_meta(path)
-    _check_env(path, meta, expect_env)
+    """Weights (CPU tensors) and metadata, fully validated (:func:`read_snapshot`)."""
+    snap = read_snapshot(path, expect_env=expect_env)
+    return snap.tensors, snap.meta
+
+
+def policy_of(
+    snap: Snapshot,
+    path: str | os.PathLike[str],
+    id: str | None = None,
+    device: str | torch.device = "cpu",
+    greedy: bool = True,
+    seed: int = 0,
+) -> NetworkPolicy:
+    """A playable policy from a snapshot :func:`read_snapshot` read from ``path`` (weights loaded strictly)."""
+    meta = snap.meta
+    net = build_network(meta.obs_shape, meta.n_actions, meta.arch, seed=0)  # the shapes were checked to fit
     try:
-        tensors = load_file(os.fspath(path), device="cpu")
-    except Exception as e:  # safetensors raises its own error types; any failure here means a bad file
-        msg = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise SnapshotError(f"{path}: cannot read the weights ({msg})") from None
-    if not meta.weights_sha256:
-        raise SnapshotError(f"{path}: snapshot has no weights checksum")
-    if weights_sha256(tensors) != meta.weights_sha256:
-        raise SnapshotError(f"{path}: weights do not match their checksum (file corrupt?)")
-    return tensors, meta
+        net.load_state_dict(snap.tensors, strict=True)
+    except RuntimeError as e:
+        raise SnapshotError(f"{path}: weights do not fit the network ({str(e).splitlines()[0]})") from None
+    return NetworkPolicy(net, id if id is not None else meta.id, meta.env, device=device, greedy=greedy,
+                         seed=seed, meta=meta)
 
 
 def load_policy(
@@ -379,18 +600,12 @@ def load_policy(
     expect_env: str | None = None,
     seed: int = 0,
 ) -> NetworkPolicy:
-    """A playable policy from a snapshot file (validated like :func:`load_snapshot`, weights loaded strictly).
+    """A playable policy from a snapshot file (validated like :func:`read_snapshot`, weights loaded strictly).
 
     ``id`` defaults to ``run/name`` (``name`` for a run-less snapshot). The policy's ``meta`` is the file's.
     """
-    tensors, meta = load_snapshot(path, expect_env=expect_env)
-    net = _check_fits(path, tensors, meta)
-    try:
-        net.load_state_dict(tensors, strict=True)
-    except RuntimeError as e:
-        raise SnapshotError(f"{path}: weights do not fit the network ({str(e).splitlines()[0]})") from None
-    return NetworkPolicy(net, id if id is not None else meta.id, meta.env, device=device, greedy=greedy,
-                         seed=seed, meta=meta)
+    return policy_of(read_snapshot(path, expect_env=expect_env), path, id=id, device=device, greedy=greedy,
+                     seed=seed)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -416,8 +631,7 @@ def export_snapshot(src: str | os.PathLike[str], dst: str | os.PathLike[str], **
 
 
 def import_check(path: str | os.PathLike[str], env: str | None = None) -> SnapshotMeta:
-    """Full validation of a snapshot file someone handed over: header, env and shapes, checksum, and that the
-    weights fit the network the metadata describes. Returns its metadata."""
-    tensors, meta = load_snapshot(path, expect_env=env)
-    _check_fits(path, tensors, meta)
-    return meta
+    """Full validation of a snapshot file someone handed over (:func:`read_snapshot`: header, metadata, the
+    weights against the network the metadata describes, game and spaces, checksum). Returns its metadata.
+    Nothing is built: a crafted file is refused from its header, within a few kilobytes of memory."""
+    return read_snapshot(path, expect_env=env).meta

@@ -1,51 +1,149 @@
-"""Snapshot files entering the league: copied under the home, checked, registered."""
+"""Snapshot files and their league rows: where a snapshot's file lives, importing one, and checking that a file is
+the one its row registered.
+
+A row's ``sha256`` is the sha256 of its whole file (:attr:`selfplay_cli.league.models.Player.sha256`), and every
+load of a league player checks it (:func:`check_file`), so a file copied over another, or edited, never plays under
+the row's name.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import os
-import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import MarlError
-from ..league.store import League, PlayerRow
+from ..files import temp_path
+from ..league.store import League, LeagueError, PlayerRow, check_name
+
+if TYPE_CHECKING:
+    from ..policies.snapshot import Snapshot
+
+SNAPSHOTS = "snapshots"
 
 
 def snapshot_relpath(run: str, name: str) -> str:
-    return f"snapshots/{run}/{name}.safetensors"
+    """``snapshots/<run>/<name>.safetensors``, the file of a snapshot relative to the league home; ``run`` and
+    ``name`` are checked to be league names first (so the path is always a plain one under the home)."""
+    check_name("run name", run)
+    check_name("snapshot name", name)
+    return f"{SNAPSHOTS}/{run}/{name}.safetensors"
+
+
+def snapshot_file(league: League, row: PlayerRow) -> Path:
+    """The file of a snapshot row: its relative path under the home (checked to stay there), or its absolute
+    path."""
+    if not row.path:
+        raise MarlError(f"{row.full_name} has no snapshot file")
+    path = Path(row.path)
+    if path.is_absolute():
+        return path
+    if league.home is None:
+        raise MarlError(f"{row.full_name}: the league has no home directory for its file {row.path}: pass --home")
+    try:
+        return league.home_path(*path.parts)
+    except LeagueError as e:
+        raise MarlError(f"{row.full_name}: its file {row.path!r} is not under the league home ({e})") from None
+
+
+def check_file(row: PlayerRow, snap: Snapshot, path: Path) -> None:
+    """Refuse a snapshot file that is not the one ``row`` registered (:class:`SnapshotError` naming the file).
+
+    The file's sha256 must be the row's. A row written before ``sha256`` meant the whole file holds the weights'
+    checksum instead (trained snapshots of older leagues): then the weights (already verified against that checksum)
+    and the file's own run, name and step must be the row's.
+    """
+    from ..policies.snapshot import SnapshotError
+
+    if row.sha256 and snap.sha256 == row.sha256:
+        return
+    meta = snap.meta
+    if (row.sha256 and row.sha256 == meta.weights_sha256 and meta.run == row.run and meta.name == row.name
+            and meta.step == row.step):
+        return
+    is_of = f"{meta.id} at step {meta.step:,}" if meta.name else "another snapshot"
+    raise SnapshotError(
+        f"{path}: this file is not the snapshot {row.full_name} the league registered (sha256 {snap.sha256[:12]}, "
+        f"registered {str(row.sha256 or '')[:12] or 'none'}; the file holds {is_of}): it was replaced or changed "
+        "since; put the original back, or import this file under a name of its own with marl checkpoint import"
+    )
 
 
 def import_snapshot(league: League, file: Path, run: str | None = None, name: str | None = None,
                     env: str | None = None) -> PlayerRow:
-    """Validate ``file`` (format, game, spaces, weights checksum), copy it into the league home atomically and
-    register it. The same weights already in the league are refused."""
-    from ..policies.snapshot import file_sha256, import_check
+    """Validate ``file`` (format, game, spaces, weights against the network it describes, checksum), copy it into
+    the league home atomically and register it (with its run, if new, in the same transaction). The same weights
+    already in the league are refused.
+
+    Names are checked before anything is created, so a refused import writes nothing anywhere: no folder, no file,
+    no row.
+    """
+    from ..policies.snapshot import read_snapshot
 
     file = Path(file)
-    meta = import_check(file, env=env)
+    if league.home is None:
+        raise MarlError("this league has no home directory for snapshot files: pass --home")
+    snap = read_snapshot(file, expect_env=env)
+    meta = snap.meta
     run = run or meta.run or "imported"
     name = name or meta.name
+    rel = snapshot_relpath(run, name)  # refuses names that are not league names (/, .., control characters)
+    dest = league.home_path(*Path(rel).parts)  # and a run folder that is a symlink leading out of the home
     for p in league.players(env=meta.env, kind="snapshot"):
         if p.meta.get("weights_sha256") == meta.weights_sha256:
             raise MarlError(f"{file}: these weights are already in the league as {p.full_name}")
     existing = league.get_run(run)
-    if existing is None:
-        league.create_run(run, meta.env, {"imported_from": str(file)}, algo=meta.algo, status="finished")
-    elif existing.env != meta.env:
+    if existing is not None and existing.env != meta.env:
         raise MarlError(f"{file}: run '{run}' plays {existing.env}, the snapshot plays {meta.env}")
-    if league.home is None:
-        raise MarlError("this league has no home directory for snapshot files: pass --home")
-    rel = snapshot_relpath(run, name)
-    dest = league.home / rel
     if dest.exists():
         raise MarlError(f"{dest} already exists: choose another --name")
-    dest.parent.mkdir(parents=True, exist_ok=True)
-    tmp = dest.with_name(dest.name + f".tmp-{os.getpid()}")
-    shutil.copyfile(file, tmp)
-    os.replace(tmp, dest)
+    if league.readonly:
+        raise MarlError(f"league {league.home} is open read-only: cannot import into it")
+    data = _file_bytes(file, snap.sha256)  # the bytes that were checked (the file may have changed since)
+    made = [d for d in (dest.parent.parent, dest.parent) if not d.exists()]
+    tmp = temp_path(dest)
     try:
-        return league.add_snapshot(env=meta.env, run=run, name=name, path=rel, sha256=file_sha256(dest),
-                                   step=meta.step, episode=meta.episode, algo=meta.algo,
-                                   meta={"weights_sha256": meta.weights_sha256, "imported_from": str(file)})
-    except Exception:
-        dest.unlink(missing_ok=True)
+        dest.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, dest)
+    except BaseException as e:
+        tmp.unlink(missing_ok=True)
+        _remove_empty(made)
+        if isinstance(e, OSError):
+            raise MarlError(f"cannot write {dest}: {e.strerror or e}") from None
         raise
+    try:
+        return league.add_snapshot(env=meta.env, run=run, name=name, path=rel, sha256=snap.sha256,
+                                   step=meta.step, episode=meta.episode, algo=meta.algo,
+                                   meta={"weights_sha256": meta.weights_sha256, "imported_from": str(file)},
+                                   run_config={"imported_from": str(file)})
+    except BaseException:
+        dest.unlink(missing_ok=True)
+        _remove_empty(made)
+        raise
+
+
+def _file_bytes(file: Path, sha256: str) -> bytes:
+    """The file's bytes, refused unless they are the ones that were validated (hash ``sha256``)."""
+    import hashlib
+
+    from ..policies.snapshot import SnapshotError
+
+    try:
+        data = file.read_bytes()
+    except OSError as e:
+        raise SnapshotError(f"{file}: cannot read ({e.strerror or e})") from None
+    if hashlib.sha256(data).hexdigest() != sha256:
+        raise SnapshotError(f"{file}: the file changed while it was being imported")
+    return data
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders an import created, innermost first, if they are still empty."""
+    for d in reversed(folders):
+        with contextlib.suppress(OSError):
+            d.rmdir()

@@ -13,8 +13,10 @@ so a failed encode would pass silently; here ffmpeg's messages go to a temporary
   and keeps exact colours. GIF delays are whole hundredths of a second and browsers slow anything under 2/100 s
   down to 1/10 s, so GIFs are limited to 50 fps.
 
-The file is written under a temporary name beside the destination and renamed when ffmpeg has finished, so the
-destination never holds half a video: an error, a failed check or Ctrl-C remove the temporary file.
+The file is written under a temporary name beside the destination (``.<name>.<pid>.part``) and renamed when ffmpeg
+has finished, so the destination never holds half a video: an error, a failed check or Ctrl-C remove the temporary
+file. A process killed outright (SIGKILL) cannot; the next video written into that folder removes what it left
+(:func:`sweep_leftovers`, whose process is gone) and says so.
 """
 
 from __future__ import annotations
@@ -23,12 +25,14 @@ import contextlib
 import os
 import re
 import subprocess
+import sys
 import tempfile
 from pathlib import Path
 from types import TracebackType
 
 import numpy as np
 
+from .. import files
 from ..errors import MarlError
 
 FORMATS = ("mp4", "gif")
@@ -73,12 +77,24 @@ def check_writable(path: Path) -> None:
     blocker = next((p for p in path.parents if p.exists()), None)
     if blocker is not None and not blocker.is_dir():
         raise MarlError(f"cannot write {path}: {blocker} is a file, not a folder")
+    probe = path.parent / f".{path.name}.{os.getpid()}.check"  # a name files.sweep knows, should we be killed here
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.", suffix=".check"):
+        probe.unlink(missing_ok=True)
+        with open(probe, "xb"):
             pass
+        probe.unlink()
     except OSError as e:
         raise MarlError(f"cannot write {path}: {e.strerror or e}") from None
+
+
+def sweep_leftovers(folder: Path) -> list[Path]:
+    """Remove the hidden partial videos (``.<name>.<pid>.part``) and probes that killed processes left in
+    ``folder``, saying so in one line on stderr; returns them."""
+    removed = files.sweep(folder)
+    if removed:
+        sys.stderr.write(files.describe_removed(removed) + "\n")
+    return removed
 
 
 def _ffmpeg() -> str:
@@ -106,6 +122,7 @@ class VideoWriter:
         self.frames = 0
         self.frame_shape: tuple[int, ...] | None = None
         check_writable(self.path)
+        sweep_leftovers(self.path.parent)
         self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.part")
         self._proc: subprocess.Popen | None = None
         self._log = None

@@ -1,0 +1,135 @@
+"""Temporary files and what killed processes leave of them.
+
+Every file marl writes goes to a temporary name beside its destination and is renamed into place when complete,
+so a destination never holds half a file. The temporary names carry the writer's process id:
+
+* ``<name>.tmp-<pid>`` (snapshots, run state, configuration, locks), from :func:`temp_path`;
+* ``.<name>.<pid>.part`` (videos, which ffmpeg writes) and ``.<name>.<pid>.check`` (the probe that a folder is
+  writable), hidden.
+
+A process killed with SIGKILL (or a power cut) leaves its temporary file behind. :func:`sweep` removes, from one
+folder, the temporary files whose process is gone; commands that write into a folder sweep it when they start.
+A process id names a process of this machine: a league home is written by the processes of one machine (another
+machine sharing the folder would see our live processes as gone).
+
+Nothing here imports from the rest of marl, so every room can use it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import re
+from collections.abc import Iterable
+from pathlib import Path
+
+__all__ = ["STALE_PATTERNS", "describe_removed", "file_sha256", "pid_alive", "sweep", "sweep_home", "temp_path"]
+
+STALE_PATTERNS = (
+    re.compile(r"^.+\.tmp-(?P<pid>\d{1,10})$"),
+    re.compile(r"^\..+\.(?P<pid>\d{1,10})\.(?:part|check)$"),
+)
+"""Names of marl's temporary files; the group ``pid`` is the process that writes it."""
+
+HOME_FOLDERS = ("snapshots", "runs")
+"""Folders of a league home whose subfolders (one per run) hold files written through temporary names."""
+
+
+def temp_path(path: str | os.PathLike[str]) -> Path:
+    """The temporary name beside ``path`` that this process writes before renaming: ``<name>.tmp-<pid>``."""
+    p = Path(path)
+    return p.with_name(f"{p.name}.tmp-{os.getpid()}")
+
+
+def file_sha256(path: str | os.PathLike[str]) -> str:
+    """sha256 of a whole file, streamed (``OSError`` if it cannot be read)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 20):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def pid_alive(pid: int) -> bool:
+    """True if a process with this id exists on this machine (ours or another user's)."""
+    if pid <= 0:
+        return False
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # it exists, it is someone else's
+        return True
+    except OSError:
+        return True  # cannot tell: keep the file
+    return True
+
+
+def _stale_pid(name: str) -> int | None:
+    for pattern in STALE_PATTERNS:
+        m = pattern.match(name)
+        if m:
+            return int(m.group("pid"))
+    return None
+
+
+def sweep(folder: str | os.PathLike[str]) -> list[Path]:
+    """Remove the temporary files in ``folder`` (not below it) left by processes that are gone; returns them.
+
+    Only regular files with marl's temporary names are touched (never a folder, never a symlink's target); a file
+    whose process is still running is being written and stays. Errors (a read-only folder, a file gone meanwhile)
+    are skipped: sweeping is housekeeping and never fails a command.
+    """
+    removed: list[Path] = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for entry in entries:
+        pid = _stale_pid(entry.name)
+        if pid is None or pid_alive(pid):
+            continue
+        try:
+            if not entry.is_file(follow_symlinks=False):
+                continue
+            os.unlink(entry.path)
+        except OSError:
+            continue
+        removed.append(Path(entry.path))
+    return removed
+
+
+def _subfolders(folder: Path) -> Iterable[Path]:
+    try:
+        return [Path(e.path) for e in os.scandir(folder) if e.is_dir(follow_symlinks=False)]
+    except OSError:
+        return []
+
+
+def sweep_home(home: str | os.PathLike[str]) -> list[Path]:
+    """:func:`sweep` every folder of a league home that marl writes files into: the home itself,
+    ``snapshots/<run>/``, ``runs/<run>/`` and ``videos/``."""
+    home = Path(home)
+    removed = sweep(home) + sweep(home / "videos")
+    for top in HOME_FOLDERS:
+        for sub in _subfolders(home / top):
+            removed += sweep(sub)
+    return removed
+
+
+def describe_removed(removed: list[Path], home: str | os.PathLike[str] | None = None) -> str:
+    """One line naming what :func:`sweep` removed (the first few files, relative to ``home`` when under it)."""
+
+    def rel(p: Path) -> str:
+        if home is not None:
+            try:
+                return str(p.relative_to(home))
+            except ValueError:
+                pass
+        return str(p)
+
+    shown = ", ".join(rel(p) for p in removed[:3]) + (f" and {len(removed) - 3} more" if len(removed) > 3 else "")
+    noun = "file" if len(removed) == 1 else "files"
+    return f"removed {len(removed)} temporary {noun} left by killed processes: {shown}"
