@@ -376,6 +376,36 @@ def test_frame_stack_holds_the_last_k_frames_oldest_first():
     assert c.observe()[0, 0, :, 0] == pytest.approx(xs[-4:])
 
 
+def test_frame_stack_over_many_steps_with_restarts_and_moved_games():
+    """However often the frame ring has gone round, each game observes its own last k frames (a restarted game its
+    first frame k times), the right seat the mirror image of them; a game moved by get_state/set_state into a core
+    whose ring stands elsewhere observes exactly the same frames there."""
+    k, n = 5, 7
+    c = PongCore(n, PongConfig(frame_stack=k))
+    rng = np.random.default_rng(3)
+    history = [[c.observe()[0, g, -1].copy()] * k for g in range(n)]
+    for t in range(4 * k + 3):
+        c.step(rng.integers(0, 3, (2, n)))
+        restart = np.flatnonzero(rng.random(n) < 0.15)
+        c.reset(restart, restart + 100 * t)
+        newest = c.observe()[0, :, -1]
+        for g in range(n):
+            history[g] = [newest[g].copy()] * k if g in restart else history[g][1:] + [newest[g].copy()]
+        obs = c.observe()
+        for g in range(n):
+            assert np.array_equal(obs[0, g], np.stack(history[g]))
+        mirrored = obs[0][..., [0, 1, 3, 2, 4, 5]] * np.array([-1, 1, 1, 1, -1, 1], dtype=np.float32)
+        assert np.array_equal(obs[1], mirrored)
+    other = PongCore(n, PongConfig(frame_stack=k))
+    other.step(act(n=n))  # its ring stands one frame further on
+    other.set_state(c.get_state([1, 4]), [5, 0])
+    assert np.array_equal(other.observe()[:, [5, 0]], c.observe()[:, [1, 4]])
+    actions = rng.integers(0, 3, (2, n))
+    c.step(actions)
+    other.step(actions[:, [4, 1, 2, 3, 4, 1, 6]])  # slot 5 plays on as game 1, slot 0 as game 4
+    assert np.array_equal(other.observe()[:, [5, 0]], c.observe()[:, [1, 4]])
+
+
 def test_mirror_symmetry_right_seat_sees_the_mirrored_game_as_the_left_seat():
     n = 256
     rng = np.random.default_rng(1)
