@@ -448,14 +448,6 @@ def test_readonly_league_can_be_listed(tmp_path, args):
     json.loads(p.stdout)
 
 
-def test_writing_to_a_readonly_league_is_one_line(tmp_path):
-    home = tmp_path / "league"
-    make_league(home).close()
-    p = _read_only_mount(home, [sys.executable, "-m", "selfplay_cli", "checkpoint", "tag", "r/s0-left", "champ",
-                                "--home", str(home)])
-    assert p.returncode != 0 and p.stderr.startswith("marl: error: ") and p.stderr.count("\n") == 1, p.stderr
-
-
 def _dead_pid() -> int:
     p = subprocess.Popen([sys.executable, "-c", "pass"])
     p.wait()
@@ -543,3 +535,55 @@ def test_interrupted_match_stores_whole_pairs_and_says_so(tmp_path):
     assert params["status"] == "interrupted" and params["games_stored"] == games
     assert err.strip() == err.strip().splitlines()[-1] and f"interrupted: {games} games stored as match #{match_id}" \
         in err, err
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# I/O failures of the league's own files: one line naming the path, exit 4, nothing half-written
+
+
+def _limited(limit: int) -> dict:
+    import resource
+
+    def preexec() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return {"preexec_fn": preexec}
+
+
+def test_import_under_a_file_size_limit_leaves_nothing(tmp_path):
+    home = tmp_path / "league"
+    make_league(home).close()
+    src = tmp_path / "big.safetensors"
+    arch = Arch(hidden=(256, 256))
+    save_snapshot(src, build_network((8, 6), 3, arch, seed=5), meta_of("big", run="contrib", arch=arch))
+    assert src.stat().st_size > 300_000
+    before = tree(home)
+    p = cli("checkpoint", "import", str(src), "--home", str(home), **_limited(200_000))
+    assert p.returncode == 4, p.stderr
+    assert p.stderr.startswith("marl: ") and "cannot write " in p.stderr and p.stderr.count("\n") == 1, p.stderr
+    assert "big.safetensors" in p.stderr and "File too large" in p.stderr
+    assert tree(home) == before
+
+
+def test_full_database_is_one_line_and_the_ledger_keeps_whole_batches(tmp_path):
+    home = tmp_path / "league"
+    make_league(home).close()
+    size = max(p.stat().st_size for p in home.rglob("*") if p.is_file())
+    p = cli("match", "cpu", "random", "--games", "2000", "--parallel", "32", "--home", str(home), "-q",
+            **_limited(size + 128 * 1024))
+    assert p.returncode == 4, p.stderr
+    assert p.stderr.count("\n") == 1 and "league.db" in p.stderr and "Traceback" not in p.stderr, p.stderr
+    con = sqlite3.connect(home / "league.db")
+    assert con.execute("pragma integrity_check").fetchone() == ("ok",)
+    games, seats = con.execute("select count(*), (select count(*) from game_seats) from games").fetchone()
+    assert seats == 2 * games and (games - 8) % 32 == 0, games  # make_league's 8, then whole chunks of 16 pairs
+    statuses = [json.loads(r)["status"] for (r,) in con.execute("select params from matches where id > 1")]
+    assert statuses in ([], ["failed"]), statuses
+
+
+def test_writing_to_a_readonly_league_is_an_io_error(tmp_path):
+    home = tmp_path / "league"
+    make_league(home).close()
+    p = _read_only_mount(home, [sys.executable, "-m", "selfplay_cli", "checkpoint", "tag", "r/s0-left", "champ",
+                                "--home", str(home)])
+    assert p.returncode == 4 and "league.db" in p.stderr and p.stderr.count("\n") == 1, p.stderr

@@ -13,8 +13,8 @@ Tables
   ``sha256`` is its file's: the row and the file are checked against each other on every load.
 * ``tags(env, tag) -> player_id``: human names for players, unique per env.
 * ``matches``: one row per match / tournament / gate / training / eval session that produced games; its
-  ``params`` say how it was played (and, for rated matches, ``status``: ``running``, ``finished`` or
-  ``interrupted`` with the number of ``games_stored``).
+  ``params`` say how it was played (and, for rated matches, ``status``: ``running``, ``finished``,
+  ``interrupted`` or ``failed``, with the number of ``games_stored``).
 * ``games`` + ``game_seats``: the append-only ledger. A game has ``n_seats`` seat rows holding the
   player, its raw score and its points (1 win, 0.5 draw, 0 loss).
 

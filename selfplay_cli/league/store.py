@@ -65,6 +65,7 @@ __all__ = [
     "GameTable",
     "League",
     "LeagueError",
+    "LeagueIOError",
     "PlayerRow",
     "RunRow",
 ]
@@ -93,6 +94,17 @@ T = TypeVar("T")
 
 class LeagueError(MarlError):
     """A user-facing league problem (unknown or duplicate name, bad database, version mismatch)."""
+
+
+class LeagueIOError(LeagueError):
+    """The league's database could not be read or written for a reason outside marl (disk full, I/O error, file size
+    limit, read-only file system, permissions); the message names the database and the cause."""
+
+    exit_code = 4  # selfplay_cli.errors.EXIT_IO
+
+
+_IO_REASONS = ("disk i/o error", "database or disk is full", "readonly database", "unable to open database file",
+               "read-only file system", "permission denied", "file too large", "no space left")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -378,7 +390,7 @@ class League:
             try:
                 self.db_path.parent.mkdir(parents=True, exist_ok=True)
             except OSError as exc:
-                raise LeagueError(f"cannot create {self.db_path.parent}: {exc.strerror or exc}") from exc
+                raise LeagueIOError(f"cannot create {self.db_path.parent}: {exc.strerror or exc}") from exc
         modes = ["rw", "ro", "ro&immutable=1"] if self.readonly and self.db_path is not None else [None]
         for i, mode in enumerate(modes):
             try:
@@ -392,7 +404,8 @@ class League:
                 reason = str(exc.orig).splitlines()[0] if exc.orig is not None else type(exc).__name__
                 if i + 1 < len(modes) and ("unable to open" in reason or "readonly" in reason):
                     continue  # read-only file, folder or medium: the next, more restricted way to read it
-                raise LeagueError(f"cannot open league database {self._where}: {reason}") from exc
+                error = LeagueIOError if any(w in reason.lower() for w in _IO_REASONS) else LeagueError
+                raise error(f"cannot open league database {self._where}: {reason}") from exc
 
     def _connect(self, mode: str | None) -> None:
         """Make the engine (a read-only SQLite file through a ``file:`` URI with ``mode``) and check the schema."""
@@ -438,7 +451,7 @@ class League:
                 try:
                     home_path.mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
-                    raise LeagueError(f"cannot create league home {home_path}: {exc.strerror or exc}") from exc
+                    raise LeagueIOError(f"cannot create league home {home_path}: {exc.strerror or exc}") from exc
             # A URL object, not a string: a path with '?', '#' or '%' in it must not be re-parsed.
             return cls(URL.create("sqlite", database=str(home_path / DB_FILENAME)), home=home_path,
                        readonly=readonly, **kwargs)
@@ -598,13 +611,25 @@ class League:
                     return fn(s)
             except OperationalError as exc:
                 if not (self.is_sqlite and _is_locked(exc)):
-                    raise
+                    raise self._io_error(exc) from exc
                 if attempt == _LOCK_RETRIES:
                     raise LeagueError(
                         f"league database {self._where} stayed locked by another process; try again"
                     ) from exc
                 self._backoff(attempt)
         raise AssertionError("unreachable")  # pragma: no cover
+
+    def _io_error(self, exc: OperationalError) -> Exception:
+        """The error to raise for a database failure: one naming the database and the cause where the cause is
+        outside marl (disk full, I/O error, read-only, cannot open; :class:`LeagueIOError`), a corrupt file
+        (:class:`LeagueError`), else the error itself."""
+        reason = str(exc.orig).splitlines()[0] if exc.orig is not None else str(exc)
+        low = reason.lower()
+        if any(w in low for w in _IO_REASONS):
+            return LeagueIOError(f"league database {self._where}: {reason}")
+        if "malformed" in low or "not a database" in low:
+            return LeagueError(f"league database {self._where} is damaged ({reason})")
+        return exc
 
     def _read(self, fn: Callable[[Session], T]) -> T:
         return self._unit(fn, readonly=True)

@@ -520,6 +520,9 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
         act_space = spec.action_space(cfg)
     except (ValueError, TypeError) as e:
         raise SnapshotError(f"{path}: bad {meta.env} options in snapshot ({_printable(str(e), 200)})") from None
+    except MemoryError:  # an option that sizes the game (the game should bound it; this is the last line)
+        raise SnapshotError(f"{path}: the {meta.env} options in the snapshot ask for more memory than there is "
+                            f"({_printable(json.dumps(meta.env_options), 120)})") from None
     if tuple(obs_space.shape or ()) != meta.obs_shape:
         raise SnapshotError(
             f"{path}: snapshot observations are {list(meta.obs_shape)} but {meta.env} with these options "

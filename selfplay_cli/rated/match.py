@@ -11,6 +11,7 @@ batch are discarded, so the test is exactly sequential.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -179,8 +180,8 @@ def run_match(
 
     With ``league`` (and ``player_ids`` mapping policy ids to player ids) every chunk of games is stored as it
     finishes, each chunk in one transaction; the match row is created with the first chunk (so it never exists
-    without games) and its ``params`` say ``status``: ``running``, then ``finished``, or ``interrupted`` with
-    ``games_stored``. With ``sprt`` the match stops at the first pair whose LLR crosses a bound.
+    without games) and its ``params`` say ``status``: ``running``, then ``finished``, ``interrupted`` or ``failed``,
+    with ``games_stored``. With ``sprt`` the match stops at the first pair whose LLR crosses a bound.
 
     Ctrl-C raises :class:`MatchInterrupted` after storing the whole pairs already finished (of the chunk in play
     too: a half pair would leave its seed's seat luck uncancelled, and is dropped).
@@ -272,6 +273,11 @@ def run_match(
                          confidence, game_ids)
         report.interrupted = True
         raise MatchInterrupted(report) from None
+    except BaseException:
+        if match_id is not None:  # say so on the row, if the database still takes it (a full disk may not)
+            with contextlib.suppress(Exception):
+                league.update_match(match_id, status="failed", games_stored=len(game_ids))  # type: ignore[union-attr]
+        raise
     if match_id is not None:
         league.update_match(match_id, status="finished", games_stored=len(game_ids))  # type: ignore[union-attr]
     report = _report(spec.name, a, b, kept, pair_points, time.perf_counter() - start, match_id, first_seed,

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import MarlError
 from ..files import temp_path
-from ..league.store import League, LeagueError, PlayerRow, check_name
+from ..league.store import League, LeagueError, LeagueIOError, PlayerRow, check_name
 
 if TYPE_CHECKING:
     from ..policies.snapshot import Snapshot
@@ -114,7 +114,7 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
         tmp.unlink(missing_ok=True)
         _remove_empty(made)
         if isinstance(e, OSError):
-            raise MarlError(f"cannot write {dest}: {e.strerror or e}") from None
+            raise LeagueIOError(f"cannot write {dest}: {e.strerror or e}") from None
         raise
     try:
         return league.add_snapshot(env=meta.env, run=run, name=name, path=rel, sha256=snap.sha256,

@@ -1,0 +1,539 @@
+"""The fault matrix of issue 12: inject faults into real `marl` processes and print what survived, one line each.
+
+Each fault runs in a scratch league (a temporary folder) through the command line (``python -m selfplay_cli``, in
+subprocesses, with resource limits where the fault is one) and is judged by what it left behind: exit code and
+message, the files under (and outside) the league home, the ledger's rows and their integrity. A line starts with
+``held`` when everything that must survive did, ``FAILED`` otherwise.
+
+Faults covered here: a crafted snapshot (huge arch; huge game option), a snapshot file swapped under its row, names
+that try to leave the home (``--run ..``, ``--name ../..``, a symlinked run folder), control characters in names, a
+read-only league (a read-only bind mount in a private mount namespace as root, permissions otherwise), reading a
+league that is not there, a full disk (a 1 MB tmpfs as root, and a file size limit anywhere), 4 concurrent
+writers storing games, leftovers of killed processes, and an interrupted match. More faults (kill points of
+`marl train`) can be added with :func:`fault`.
+
+Run with ``python benchmarks/fault_matrix.py`` (``--only NAME`` runs the faults whose name contains NAME).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import resource
+import shutil
+import signal
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+FAULTS: list[tuple[str, Callable[[Path], tuple[bool, str]]]] = []
+
+
+def fault(name: str) -> Callable:
+    """Register ``fn(scratch) -> (held, what happened)`` as a row of the matrix."""
+
+    def register(fn: Callable[[Path], tuple[bool, str]]) -> Callable[[Path], tuple[bool, str]]:
+        FAULTS.append((name, fn))
+        return fn
+
+    return register
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Helpers
+
+
+class Run:
+    """One finished `marl` process: exit code, stdout, stderr, seconds, peak resident memory (MB)."""
+
+    def __init__(self, code: int, out: str, err: str, seconds: float, rss_mb: float) -> None:
+        self.code, self.out, self.err, self.seconds, self.rss_mb = code, out, err, seconds, rss_mb
+
+    @property
+    def line(self) -> str:
+        """The last line of stderr, shortened, control characters shown escaped."""
+        lines = [ln for ln in self.err.splitlines() if ln.strip()]
+        text = lines[-1] if lines else ""
+        text = text.encode("unicode_escape").decode() if not text.isprintable() else text
+        return text if len(text) <= 150 else text[:147] + "..."
+
+    @property
+    def one_line(self) -> bool:
+        """A clean refusal: exactly one line on stderr, no traceback, no raw escape character."""
+        return self.err.count("\n") == 1 and "Traceback" not in self.err and "\x1b" not in self.err
+
+
+def _env() -> dict[str, str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env.pop("MARL_HOME", None)
+    env.pop("MARL_DB", None)
+    return env
+
+
+def marl(*args: str, limits: dict[int, int] | None = None, prefix: list[str] | None = None,
+         timeout: float = 600, signal_after: tuple[Callable[[], bool], int] | None = None) -> Run:
+    """Run ``marl *args`` (optionally under resource ``limits`` or after a ``prefix`` command such as unshare), wait
+    for it and measure it. ``signal_after=(ready, sig)`` sends ``sig`` once ``ready()`` is true."""
+
+    def preexec() -> None:
+        for which, value in (limits or {}).items():
+            resource.setrlimit(which, (value, value))
+
+    cmd = [*(prefix or []), sys.executable, "-m", "selfplay_cli", *args]
+    with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
+        t = time.perf_counter()
+        p = subprocess.Popen(cmd, stdout=out, stderr=err, env=_env(), preexec_fn=preexec if limits else None)
+        if signal_after is not None:
+            ready, sig = signal_after
+            deadline = time.time() + timeout
+            while p.poll() is None and not ready() and time.time() < deadline:
+                time.sleep(0.1)
+            if p.poll() is None:
+                p.send_signal(sig)
+        _, status, usage = os.wait4(p.pid, 0)
+        p.returncode = os.waitstatus_to_exitcode(status)
+        seconds = time.perf_counter() - t
+        out.seek(0)
+        err.seek(0)
+        return Run(p.returncode, out.read(), err.read(), seconds, usage.ru_maxrss / 1024)
+
+
+def tree(root: Path) -> dict[str, str]:
+    """Every path under ``root`` with its content hash (folders: ``dir``)."""
+    out = {}
+    for p in sorted(root.rglob("*")):
+        if p.is_symlink():
+            out[str(p.relative_to(root))] = "link"
+        elif p.is_dir():
+            out[str(p.relative_to(root))] = "dir"
+        else:
+            out[str(p.relative_to(root))] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return out
+
+
+def db(home: Path, sql: str) -> list[tuple]:
+    with sqlite3.connect(f"file:{home / 'league.db'}?mode=ro", uri=True) as con:
+        return con.execute(sql).fetchall()
+
+
+def integrity(home: Path) -> str:
+    return db(home, "pragma integrity_check")[0][0]
+
+
+def make_league(home: Path, names: tuple[str, ...] = ("s0-left", "s1M-left"), games: bool = True) -> None:
+    """A league with run ``r`` and a small snapshot per name, registered as training registers them."""
+    from selfplay_cli.league.store import GameRecord, League
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+    from selfplay_cli.rated.snapshots import snapshot_relpath
+
+    league = League.open(home)
+    league.create_run("r", "pong", {})
+    rows = []
+    for i, name in enumerate(names):
+        rel = snapshot_relpath("r", name)
+        meta = save_snapshot(home / rel, build_network((8, 6), 3, Arch(hidden=(64, 64)), seed=i),
+                             SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=Arch(hidden=(64, 64)),
+                                          algo="ppo", run="r", name=name, step=1_000_000 * i))
+        rows.append(dict(env="pong", run="r", name=name, path=rel, sha256=meta.weights_sha256, step=meta.step,
+                         algo="ppo", meta={"weights_sha256": meta.weights_sha256}))
+    snaps = league.add_snapshots(rows)
+    league.ensure_bots("pong", ["cpu", "random"])
+    if games:
+        cpu = next(p for p in league.players(kind="bot") if p.name == "cpu")
+        league.create_match_with_games("pong", "match", {}, [
+            GameRecord(env="pong", players=(p.id, cpu.id), seed=k, scores=(0, 21), outcome=(0.0, 1.0), length=900,
+                       truncated=False) for p in snaps for k in range(4)])
+    league.close()
+
+
+def crafted_snapshot(path: Path, **changes) -> Path:
+    """A small snapshot file, checksum consistent, whose metadata is changed by ``changes`` (arch=..., ...)."""
+    from safetensors.torch import save_file
+
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot import FORMAT, SnapshotMeta, weights_sha256
+
+    tensors = build_network((8, 6), 3, Arch(hidden=(64, 64)), seed=0).state_dict()
+    meta = SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=Arch(hidden=(64, 64)), algo="ppo",
+                        run="contrib", name="evil").to_dict() | {"weights_sha256": weights_sha256(tensors)}
+    for key, value in changes.items():
+        if isinstance(value, dict) and isinstance(meta.get(key), dict):
+            meta[key] = {**meta[key], **value}
+        else:
+            meta[key] = value
+    save_file(tensors, str(path), metadata={"format": FORMAT, "format_version": "1", "marl": json.dumps(meta)})
+    return path
+
+
+def plain_snapshot(path: Path, seed: int = 7, name: str = "c", run: str = "contrib") -> Path:
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+
+    save_snapshot(path, build_network((8, 6), 3, Arch(hidden=(64, 64)), seed=seed),
+                  SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=Arch(hidden=(64, 64)), algo="ppo",
+                               run=run, name=name))
+    return path
+
+
+def can_mount() -> bool:
+    if os.geteuid() != 0 or not shutil.which("unshare"):
+        return False
+    return subprocess.run(["unshare", "-m", "true"], capture_output=True).returncode == 0
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# 2. Crafted snapshot files
+
+BOUNDED = textwrap.dedent("""
+    import json, resource, sys, time
+    from pathlib import Path
+    from selfplay_cli.errors import MarlError
+    from selfplay_cli.league.store import League
+    from selfplay_cli.rated.snapshots import import_snapshot
+    import selfplay_cli.policies.snapshot
+
+    league = League.open(sys.argv[2])
+    vm = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize:")) * 1024
+    resource.setrlimit(resource.RLIMIT_AS, (vm + 200 * 2**20, resource.getrlimit(resource.RLIMIT_AS)[1]))
+    t = time.perf_counter()
+    try:
+        import_snapshot(league, Path(sys.argv[1]))
+        out = {"error": None}
+    except MarlError as e:
+        out = {"error": str(e)}
+    except BaseException as e:
+        out = {"error": f"{type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}", "crash": True}
+    out["seconds"] = time.perf_counter() - t
+    print(json.dumps(out))
+""")
+
+
+def _bounded_import(scratch: Path, file: Path) -> tuple[bool, str]:
+    """Import ``file`` in a process allowed 200 MB more address space than it has after start-up."""
+    p = subprocess.run([sys.executable, "-c", BOUNDED, str(file), str(scratch / "league")], capture_output=True,
+                       text=True, env=_env(), timeout=600)
+    if p.returncode != 0 or not p.stdout.strip():
+        last = (p.stderr.strip().splitlines() or [f"exit {p.returncode}"])[-1]
+        return False, f"the process died ({last[:120]})"
+    out = json.loads(p.stdout)
+    held = bool(out["error"]) and not out.get("crash") and out["seconds"] < 1.0
+    msg = out["error"] or "accepted"
+    msg = msg.replace(str(file), file.name)
+    verdict = "CRASHED" if out.get("crash") else "refused" if out["error"] else "ACCEPTED"
+    return held, f"{verdict} in {out['seconds']:.3f} s within +200 MB: {msg[:110]}"
+
+
+@fault("crafted snapshot: arch.hidden = [1e8, 1e8]")
+def crafted_huge_arch(scratch: Path) -> tuple[bool, str]:
+    file = crafted_snapshot(scratch / "evil.safetensors", arch={"hidden": [100_000_000, 100_000_000]})
+    held, what = _bounded_import(scratch, file)
+    return held, f"{file.stat().st_size // 1024} KB file {what}"
+
+
+@fault("crafted snapshot: arch.hidden = [30000, 30000]")
+def crafted_big_arch(scratch: Path) -> tuple[bool, str]:
+    return _bounded_import(scratch, crafted_snapshot(scratch / "evil.safetensors", arch={"hidden": [30_000, 30_000]}))
+
+
+@fault("crafted snapshot: tensor declared [1e5, 1e5] over 12 KB of bytes")
+def crafted_shape(scratch: Path) -> tuple[bool, str]:
+    file = crafted_snapshot(scratch / "evil.safetensors")
+    raw = file.read_bytes()
+    n = int.from_bytes(raw[:8], "little")
+    header = json.loads(raw[8:8 + n])
+    header["trunk.0.weight"]["shape"] = [100_000, 100_000]
+    body = json.dumps(header).encode()
+    file.write_bytes(len(body).to_bytes(8, "little") + body + raw[8 + n:])
+    return _bounded_import(scratch, file)
+
+
+@fault("crafted snapshot: game option frame_stack = 1e8")
+def crafted_option(scratch: Path) -> tuple[bool, str]:
+    held, what = _bounded_import(scratch, crafted_snapshot(scratch / "evil.safetensors",
+                                                           env_options={"frame_stack": 100_000_000}))
+    if "more memory than there is" in what:  # refused only because the allocation failed under the limit
+        return False, what + " (the game builds its spaces first: pong must bound frame_stack)"
+    return held, what
+
+
+@fault("crafted snapshot: escape sequence in its name")
+def crafted_name(scratch: Path) -> tuple[bool, str]:
+    file = crafted_snapshot(scratch / "evil.safetensors", name="\x1b]0;pwned\x07\x1b[2J")
+    r = marl("checkpoint", "import", str(file), "--home", str(scratch / "league"))
+    held = r.code == 2 and r.one_line and not list((scratch / "league").rglob("*.safetensors"))
+    return held, f"exit {r.code}, {'one clean line' if r.one_line else 'NOT one clean line'}: {r.line[:110]}"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# 3. A file swapped under its row
+
+
+@fault("swapped snapshot file (s0-left copied over s1M-left), then marl match")
+def swapped(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home)
+    shutil.copyfile(home / "snapshots/r/s0-left.safetensors", home / "snapshots/r/s1M-left.safetensors")
+    games = db(home, "select count(*) from games")[0][0]
+    r = marl("match", "r/s1M-left", "cpu", "--games", "4", "--home", str(home), "-q")
+    after = db(home, "select count(*) from games")[0][0]
+    held = r.code == 2 and r.one_line and after == games and "s1M-left.safetensors" in r.err
+    return held, f"exit {r.code}, {after - games} games stored: {r.line.replace(str(home) + '/', '')[:120]}"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# 5. Names that try to leave the league
+
+
+def _nothing_written(scratch: Path, action: Callable[[], Run]) -> tuple[bool, Run, str]:
+    before = tree(scratch)
+    r = action()
+    after = tree(scratch)
+    changed = sorted(set(before.items()) ^ set(after.items()))
+    return not changed, r, (f"{len(changed)} paths changed: {changed[0][0]}" if changed else "nothing written")
+
+
+@fault("traversal: marl checkpoint import x --name ../../../../<scratch>/escape/y")
+def traversal_import(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "a" / "b" / "league"
+    make_league(home)
+    src = plain_snapshot(scratch / "x.safetensors")
+    ok, r, what = _nothing_written(scratch, lambda: marl("checkpoint", "import", str(src), "--name",
+                                                         "../../../../escape/y", "--home", str(home)))
+    runs = [n for (n,) in db(home, "select name from runs")]
+    held = ok and r.code == 2 and r.one_line and runs == ["r"] and not (scratch / "escape").exists()
+    return held, f"exit {r.code}, {what}, runs {runs}: {r.line[:90]}"
+
+
+@fault("traversal: marl train pong --run ..")
+def traversal_train(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home)
+    ok, r, what = _nothing_written(scratch, lambda: marl(
+        "train", "pong", "--agents", "2", "--steps", "20000", "--games", "16", "--env-option", "points_to_win=1",
+        "--snapshot-steps", "5000", "--eval-games", "0", "--run", "..", "--home", str(home), "-q"))
+    runs = [n for (n,) in db(home, "select name from runs")]
+    return ok and r.code == 2 and r.one_line and runs == ["r"], f"exit {r.code}, {what}, runs {runs}: {r.line[:80]}"
+
+
+@fault("traversal: run folder symlinked out of the home, then import into it")
+def traversal_symlink(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home)
+    (scratch / "outside").mkdir()
+    (home / "snapshots" / "trap").symlink_to(scratch / "outside")
+    src = plain_snapshot(scratch / "x.safetensors")
+    r = marl("checkpoint", "import", str(src), "--run", "trap", "--home", str(home))
+    left = list((scratch / "outside").iterdir())
+    return r.code == 2 and r.one_line and not left, f"exit {r.code}, {len(left)} files outside: {r.line[-90:]}"
+
+
+@fault("control characters: --name and a tag with escape sequences")
+def control_chars(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home)
+    src = plain_snapshot(scratch / "x.safetensors")
+    a = marl("checkpoint", "import", str(src), "--name", "\x1b[31mred\x1b[0m", "--home", str(home))
+    b = marl("checkpoint", "tag", "r/s0-left", "\x1b]0;title\x07", "--home", str(home))
+    held = a.code == b.code == 2 and a.one_line and b.one_line
+    return held, f"exits {a.code}, {b.code}, no raw escape printed: {b.line[:100]}"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# 6. Read-only leagues, missing leagues, full disks, concurrent writers, leftovers, interruptions
+
+RO_SCRIPT = 'mount --bind "$1" "$1" && mount -o remount,ro,bind "$1" "$1" && shift && exec "$@"'
+
+
+@fault("read-only league: ladder, checkpoint list (and a write)")
+def read_only(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home)
+    if can_mount():
+        how, prefix = "read-only bind mount", ["unshare", "-m", "sh", "-c", RO_SCRIPT, "sh", str(home)]
+    else:
+        how, prefix = "permissions a-w", None
+        for p in [home, *home.rglob("*")]:
+            p.chmod(p.stat().st_mode & ~0o222)
+    try:
+        ladder = marl("league", "ladder", "--home", str(home), "--json", prefix=prefix)
+        listing = marl("checkpoint", "list", "--home", str(home), "--json", prefix=prefix)
+        write = marl("checkpoint", "tag", "r/s0-left", "champ", "--home", str(home), prefix=prefix)
+    finally:
+        for p in [home, *home.rglob("*")]:
+            p.chmod(p.stat().st_mode | 0o200)
+    held = ladder.code == 0 and listing.code == 0 and "s0-left" in listing.out and write.code != 0 and write.one_line
+    return held, (f"{how}: ladder exit {ladder.code}, list exit {listing.code} ({listing.out.count('s0-left')} "
+                  f"snapshot found); a write: exit {write.code}, {write.line[-70:]}")
+
+
+@fault("reading a league that is not there: ladder, checkpoint list --home new")
+def missing_league(scratch: Path) -> tuple[bool, str]:
+    new = scratch / "new"
+    a = marl("league", "ladder", "--home", str(new))
+    b = marl("checkpoint", "list", "--home", str(new))
+    made = "CREATED" if new.exists() else "nothing created"
+    return not new.exists(), f"exits {a.code}, {b.code}; {made} at {new.name}"
+
+
+def _ledger_state(home: Path) -> str:
+    games = db(home, "select count(*) from games")[0][0]
+    seats = db(home, "select count(*) from game_seats")[0][0]
+    matches = db(home, "select count(*) from matches")[0][0]
+    empty = db(home, "select count(*) from matches where id not in (select match_id from games)")[0][0]
+    return f"{games} games ({seats} seats), {matches} matches ({empty} empty), integrity {integrity(home)}"
+
+
+@fault("full disk: 1 MB tmpfs under marl match (root) / file size limit 256 KB")
+def full_disk(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home, games=False)
+    size = max(p.stat().st_size for p in home.rglob("*") if p.is_file())
+    if can_mount():
+        # a private mount namespace: a 1 MB tmpfs holding a copy of the league; checked from inside it
+        check = scratch / "check.py"
+        check.write_text(textwrap.dedent("""
+            import sqlite3, sys
+            con = sqlite3.connect("file:" + sys.argv[1] + "/league.db?mode=ro", uri=True)
+            q = lambda s: con.execute(s).fetchall()[0][0]
+            print(q("select count(*) from games"), q("select count(*) from game_seats"),
+                  q("select count(*) from matches where id not in (select match_id from games)"),
+                  q("pragma integrity_check"))
+        """))
+        mnt = scratch / "mnt"
+        mnt.mkdir()
+        script = (f'mount -t tmpfs -o size=1m tmpfs "{mnt}" && cp -a "{home}" "{mnt}/league" && '
+                  f'"{sys.executable}" -m selfplay_cli match cpu random --games 4000 --parallel 256 -q '
+                  f'--home "{mnt}/league" 2>"{scratch}/err.txt"; echo "exit $?"; '
+                  f'"{sys.executable}" "{check}" "{mnt}/league"')
+        p = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, env=_env(),
+                           timeout=900)
+        lines = p.stdout.strip().splitlines()
+        err = (scratch / "err.txt").read_text()
+        one = err.count("\n") == 1 and "Traceback" not in err
+        code = int(lines[0].split()[1]) if lines else -1
+        games, seats, empty, ok = lines[1].split() if len(lines) > 1 else ("?", "?", "?", "?")
+        held = code not in (0, 1, 5) and one and ok == "ok" and empty == "0" and seats == str(2 * int(games))
+        tmpfs = f"tmpfs: exit {code}, {'one line' if one else 'NOT one line'}, {games} whole games kept, integrity {ok}"
+    else:
+        held, tmpfs = True, "tmpfs: skipped (needs root and unshare)"
+    limit = size + 256 * 1024
+    r = marl("match", "cpu", "random", "--games", "4000", "--parallel", "32", "--home", str(home), "-q",
+             limits={resource.RLIMIT_FSIZE: limit})
+    state = _ledger_state(home)
+    fsize_held = r.code not in (0, 1, 5) and r.one_line and "integrity ok" in state and "(0 empty)" in state
+    return held and fsize_held, f"{tmpfs}; RLIMIT_FSIZE: exit {r.code}, {r.line[-60:]}; {state}"
+
+
+@fault("4 concurrent writers storing games (marl match x4, one league)")
+def concurrent(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home, games=False)
+    pairs = [("cpu", "random"), ("r/s0-left", "cpu"), ("r/s1M-left", "random"), ("r/s0-left", "r/s1M-left")]
+    procs = [subprocess.Popen([sys.executable, "-m", "selfplay_cli", "match", a, b, "--games", "64", "--parallel",
+                               "64", "--seed", str(i), "--home", str(home), "-q", "--json"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+             for i, (a, b) in enumerate(pairs)]
+    results = [p.communicate(timeout=900) for p in procs]
+    codes = [p.returncode for p in procs]
+    claimed = sum(json.loads(out)["games"] for (out, _), code in zip(results, codes, strict=True) if code == 0)
+    games = db(home, "select count(*) from games")[0][0]
+    finished = db(home, "select count(*) from matches where json_extract(params, '$.status') = 'finished'")[0][0]
+    held = codes == [0] * 4 and games == claimed == 256 and finished == 4 and integrity(home) == "ok"
+    return held, f"exits {codes}, {games} games stored of {claimed} reported, {finished} matches finished, " \
+                  f"integrity {integrity(home)}"
+
+
+@fault("leftovers: *.tmp-PID snapshots, state and hidden .part video of dead processes")
+def leftovers(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home)
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = [home / f"snapshots/r/s2M-left.safetensors.tmp-{dead.pid}", home / f"runs/r/state.pt.tmp-{dead.pid}",
+             home / f"videos/.r-s0-left-vs-cpu-s0.mp4.{dead.pid}.part"]
+    live = home / f"snapshots/r/s3M-left.safetensors.tmp-{os.getpid()}"
+    for p in [*stale, live]:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_bytes(b"\0" * 100)
+    reading = marl("league", "ladder", "--home", str(home))
+    kept_by_reading = all(p.exists() for p in stale)
+    r = marl("checkpoint", "tag", "r/s0-left", "champ", "--home", str(home))
+    gone = [p for p in stale if not p.exists()]
+    held = reading.code == 0 and kept_by_reading and len(gone) == 3 and live.exists() and r.code == 0
+    line = next((ln for ln in r.err.splitlines() if "removed" in ln), "no line")
+    return held, f"{len(gone)} of 3 removed by the next write (live writer's kept, reading touched none): {line[:80]}"
+
+
+@fault("killed recording (SIGKILL) leaves .part; the next recording removes it")
+def killed_recording(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    args = ["record", "--ckpt", "cpu", "--vs", "random", "--home", str(home), "-q"]
+
+    def started() -> bool:
+        return bool(list((home / "videos").glob(".*.part"))) if (home / "videos").exists() else False
+
+    marl(*args, "--max-steps", "100000", signal_after=(started, signal.SIGKILL), timeout=120)
+    parts = list((home / "videos").glob(".*.part"))
+    time.sleep(1.0)  # its ffmpeg (a session of its own) finishes the .part and exits
+    r = marl(*args, "--max-steps", "30")
+    left = [p for p in parts if p.exists()]
+    held = bool(parts) and not left and r.code == 0 and "removed" in r.err
+    return held, f"{len(parts)} .part left by the kill, {len(left)} after the next recording: {r.line[:80]}"
+
+
+@fault("interrupted marl match (SIGINT after the first stored games)")
+def interrupted(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    make_league(home, games=False)
+
+    def stored() -> bool:
+        try:
+            return db(home, "select count(*) from games")[0][0] > 0
+        except sqlite3.Error:
+            return False
+
+    r = marl("match", "cpu", "random", "--games", "100000", "--parallel", "16", "--home", str(home), "-q",
+             signal_after=(stored, signal.SIGINT), timeout=300)
+    rows = db(home, "select id, params from matches")
+    games = db(home, "select count(*) from games")[0][0]
+    params = json.loads(rows[0][1]) if rows else {}
+    held = (r.code == 130 and len(rows) == 1 and params.get("status") == "interrupted"
+            and params.get("games_stored") == games and games % 2 == 0 and f"{games} games stored" in r.err)
+    return held, f"exit {r.code}, match row status {params.get('status')!r} with {games} games: {r.line[:80]}"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--only", default="", help="Run the faults whose name contains this text.")
+    args = parser.parse_args()
+    failed = 0
+    for name, fn in FAULTS:
+        if args.only not in name:
+            continue
+        with tempfile.TemporaryDirectory(prefix="marl-fault-") as tmp:
+            t = time.perf_counter()
+            try:
+                held, what = fn(Path(tmp))
+            except Exception as e:  # the matrix itself must get to the end
+                held, what = False, f"the fault run broke: {type(e).__name__}: {e}"
+            failed += not held
+            print(f"{'held  ' if held else 'FAILED'} {name}: {what} [{time.perf_counter() - t:.0f} s]", flush=True)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
