@@ -1,7 +1,47 @@
-"""User-facing errors: the CLI prints these as one line on stderr and exits non-zero, never a traceback."""
+"""User-facing errors and the exit codes of `marl` (README: "Exit codes").
+
+The CLI prints an error as one line on stderr and exits with a code a script or CI job can act on:
+
+====  ==========================================================================================
+code  meaning
+====  ==========================================================================================
+0     success; ``elo gate`` passed; ``match --sprt`` accepted H1
+1     ``elo gate`` failed; ``match --sprt`` accepted H0 (a verdict, not an error)
+2     user error: a bad option or value, an unknown name, a bad or missing file given by the user
+3     ``match --sprt`` ended undecided (``--max-games`` reached)
+4     I/O error: disk full, permission denied, read-only file system, file size limit (path and cause)
+5     internal error: a bug in marl (the traceback is written to a file whose path the line gives)
+130   interrupted (Ctrl-C)
+====  ==========================================================================================
+"""
+
+EXIT_OK = 0
+EXIT_FAIL = 1
+EXIT_USAGE = 2
+EXIT_UNDECIDED = 3
+EXIT_IO = 4
+EXIT_INTERNAL = 5
+EXIT_INTERRUPTED = 130
+
+EXIT_CODES: dict[int, str] = {
+    EXIT_OK: "success; elo gate passed; match --sprt accepted H1",
+    EXIT_FAIL: "elo gate failed; match --sprt accepted H0",
+    EXIT_USAGE: "user error: bad option or value, unknown name, bad file",
+    EXIT_UNDECIDED: "match --sprt undecided (--max-games reached)",
+    EXIT_IO: "I/O error: disk full, permission denied, read-only, file size limit",
+    EXIT_INTERNAL: "internal error (a bug): the traceback is written to a file",
+    EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
+}
 
 
 class MarlError(Exception):
     """A mistake the user can fix (unknown env, missing checkpoint, bad option value, corrupt file)."""
 
-    exit_code = 2
+    exit_code = EXIT_USAGE
+
+
+class MarlIOError(MarlError):
+    """Reading or writing a file failed for a reason outside marl (disk full, permissions, read-only, size limit);
+    the message names the path and the cause."""
+
+    exit_code = EXIT_IO

@@ -419,8 +419,8 @@ def test_run_status_after_a_refused_device_an_interrupt_and_a_crash(tmp_path, ca
         raise RuntimeError("boom")
 
     monkeypatch.setattr(Trainer, "train", crashed)
-    with pytest.raises(RuntimeError):
-        main([*args, "--run", "b"])
+    code, out, err = run(capsys, *args, "--run", "b")  # a crash: one line saying it is a bug, exit 5
+    assert code == 5 and "internal error" in err and "RuntimeError: boom" in err and err.count("\n") == 1
     with League.open(home) as league:
         assert league.get_run("a").status == "stopped"
         assert league.get_run("b").status == "failed"

@@ -6,7 +6,7 @@ import math
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.progress import (
@@ -23,7 +23,7 @@ from rich.text import Text
 
 from ..envs import env_names, get_env
 from ..errors import MarlError
-from ..league.store import League, PlayerRow
+from ..league.store import League
 from ._output import err_console
 
 HomeOpt = Annotated[
@@ -38,6 +38,13 @@ JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON alone on stdou
 EnvOpt = Annotated[str | None, typer.Option("--env", help="Game, where the policies do not imply it.")]
 DeviceOpt = Annotated[str, typer.Option("--device", help="Where networks run: auto, cpu or cuda.")]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
+
+MAX_GAMES = 10_000_000
+"""The most games one command plays (10 million: days of play; a larger number is a typo)."""
+MAX_PARALLEL = 65_536
+"""The most games played at once in the batched core."""
+MAX_SEED = 2**32 - 1
+"""Seeds are 32-bit: 0 to 4,294,967,295."""
 
 
 READING_COMMANDS = frozenset({"league ladder", "league matrix", "league plot", "checkpoint list", "checkpoint show",
@@ -132,16 +139,20 @@ def parse_env_options(env: str, items: list[str] | None) -> dict:
     return options
 
 
-def resolve_players(league: League, names: list[str], env: str | None) -> list[PlayerRow]:
-    """Resolve names to players. Snapshots imply their game; bot names need the game from them or --env."""
-    from ..league.names import resolve
+def resolve_players(league: League, names: list[str], env: str | None, teams: bool = False) -> list:
+    """Resolve names to players (:mod:`selfplay_cli.league.names`). Snapshots imply their game; bot names need the
+    game from them or --env. With ``teams`` a name may also stand for a team of per-seat snapshots (``s6M``:
+    ``s6M-left`` and ``s6M-right``), returned as a :class:`~selfplay_cli.league.names.Team`; without, such a
+    name is refused in one line that names the members."""
+    from ..league.names import resolve, resolve_or_team
 
+    find = resolve_or_team if teams else resolve
     env = check_env(env)
-    rows: dict[int, PlayerRow] = {}
+    rows: dict[int, Any] = {}
     pending = []
     for i, name in enumerate(names):
         try:
-            rows[i] = resolve(league, name, env)
+            rows[i] = find(league, name, env)
         except MarlError:
             pending.append(i)
     if pending:
@@ -153,7 +164,7 @@ def resolve_players(league: League, names: list[str], env: str | None) -> list[P
         if env is not None:
             league.ensure_bots(env, get_env(env).bots)
         for i in pending:
-            rows[i] = resolve(league, names[i], env)  # raises the precise error (unknown, ambiguous, ...)
+            rows[i] = find(league, names[i], env)  # raises the precise error (unknown, ambiguous, team...)
     return [rows[i] for i in range(len(names))]
 
 

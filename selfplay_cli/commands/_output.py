@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import sys
 from typing import Any
 
@@ -14,7 +15,18 @@ if not console.is_terminal:  # piped output: plain, and wide enough that tables 
 err_console = Console(stderr=True, highlight=False, soft_wrap=True)
 
 
+def finite(data: Any) -> Any:
+    """``data`` with every NaN or infinity replaced by None: JSON has no such numbers (``NaN`` is not JSON)."""
+    if isinstance(data, float):
+        return data if math.isfinite(data) else None
+    if isinstance(data, dict):
+        return {k: finite(v) for k, v in data.items()}
+    if isinstance(data, (list, tuple)):
+        return [finite(v) for v in data]
+    return data
+
+
 def print_json(data: Any) -> None:
-    """Print JSON alone on stdout (no rich markup, no colour)."""
-    sys.stdout.write(json.dumps(data, indent=2, default=str) + "\n")
+    """Print JSON alone on stdout (no rich markup, no colour); a NaN or infinity anywhere becomes null."""
+    sys.stdout.write(json.dumps(finite(data), indent=2, default=str, allow_nan=False) + "\n")
     sys.stdout.flush()

@@ -12,8 +12,10 @@ from ..errors import MarlError
 from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league
 from ._output import console, print_json
 
-app = typer.Typer(help="List, inspect, tag, remove, export and import snapshots.", no_args_is_help=True)
-NameArg = Annotated[str, typer.Argument(help="ep90, run/ep90, a tag, latest, best or an id.")]
+app = typer.Typer(help="List, inspect, tag, remove, export and import snapshots.", no_args_is_help=True,
+                  rich_markup_mode=None)
+NameArg = Annotated[str, typer.Argument(metavar="NAME", help="A snapshot: s6M-left, pong-1/s6M-left, a tag, latest, "
+                                        "best or an id.")]
 
 
 def _row_json(p) -> dict:
@@ -59,35 +61,58 @@ def list_cmd(
     console.print(table)
 
 
-@app.command("show")
-def show(name: NameArg, env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None, json_out: JsonOpt = False) -> None:
-    """Everything about one snapshot: league record, lineage and the file's metadata."""
-    from ..league.names import resolve
+def _details(league, p) -> dict:
+    """A player's league record, its lineage (parent, grandparent, ...) and its file's metadata."""
     from ..policies.snapshot import read_meta
 
-    league = open_league(home, db)
-    try:
-        p = resolve(league, name, check_env(env), include_removed=True)
-        data = _row_json(p)
-        lineage, parent = [], p.parent_id
-        while parent is not None and len(lineage) < 50:
-            q = league.get_player(parent)
-            lineage.append(q.full_name)
-            parent = q.parent_id
-        data["lineage"] = lineage
-        if not p.is_bot and not p.removed:
-            data["file"] = read_meta(_snapshot_path(league, p)).to_dict()
-    finally:
-        league.close()
-    if json_out:
-        print_json(data)
-        return
+    data = _row_json(p)
+    lineage, parent = [], p.parent_id
+    while parent is not None and len(lineage) < 50:
+        q = league.get_player(parent)
+        lineage.append(q.full_name)
+        parent = q.parent_id
+    data["lineage"] = lineage
+    if not p.is_bot and not p.removed:
+        data["file"] = read_meta(_snapshot_path(league, p)).to_dict()
+    return data
+
+
+def _print_details(data: dict) -> None:
     for key, value in data.items():
         if key == "file":
             for k, v in value.items():
-                console.print(f"  file.{k}: {v}")
+                console.print(f"  file.{k}: {v}", markup=False)
         else:
-            console.print(f"{key}: {value}")
+            console.print(f"{key}: {value}", markup=False)
+
+
+@app.command("show")
+def show(
+    name: Annotated[str, typer.Argument(metavar="NAME", help="A snapshot (s6M-left, pong-1/s6M-left, a tag, latest, "
+                                        "best, an id) or a team of per-seat snapshots (s6M: each member).")],
+    env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None, json_out: JsonOpt = False,
+) -> None:
+    """Everything about one snapshot: league record, lineage and the file's metadata. A team name (s6M) shows each
+    of its members (s6M-left, s6M-right)."""
+    from ..league.names import Team, resolve_or_team
+
+    league = open_league(home, db)
+    try:
+        found = resolve_or_team(league, name, check_env(env), include_removed=True)
+        members = found.members if isinstance(found, Team) else (found,)
+        details = [_details(league, p) for p in members]
+    finally:
+        league.close()
+    if json_out:
+        print_json(details[0] if not isinstance(found, Team) else {"team": found.full_name, "members": details})
+        return
+    if isinstance(found, Team):
+        console.print(f"team {found.full_name}: {len(members)} snapshots, one per seat ({found.describe()})",
+                      markup=False)
+    for i, data in enumerate(details):
+        if i or isinstance(found, Team):
+            console.print()
+        _print_details(data)
 
 
 @app.command("tag")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -10,16 +11,29 @@ import typer
 from ..errors import MarlError
 from ..rated.gate import gate_check
 from ..stats.bradley_terry import DEFAULT_PRIOR
-from ._common import DbOpt, DeviceOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, resolve_players
+from ._common import (
+    MAX_GAMES,
+    MAX_PARALLEL,
+    MAX_SEED,
+    DbOpt,
+    DeviceOpt,
+    EnvOpt,
+    HomeOpt,
+    JsonOpt,
+    check_env,
+    open_league,
+    resolve_players,
+)
 from ._output import console, print_json
 from .ladder_view import prior_caption, render_ladder
 
-app = typer.Typer(help="Fit ratings with confidence intervals; gate a model on its strength.", no_args_is_help=True)
+app = typer.Typer(help="Fit ratings with confidence intervals; gate a model on its strength.", no_args_is_help=True,
+                  rich_markup_mode=None)
 
-BootstrapOpt = Annotated[int, typer.Option("--bootstrap", help="Bootstrap resamples for the intervals (0: normal "
-                                           "approximation).")]
-AnchorOpt = Annotated[str | None, typer.Option("--anchor", help="NAME=RATING fixing one player's rating "
-                                               "(default: the random bot at 1000).")]
+BootstrapOpt = Annotated[int, typer.Option("--bootstrap", max=100_000, help="Bootstrap resamples for the "
+                                           "intervals: 0 (the normal approximation) or at least 20.")]
+AnchorOpt = Annotated[str | None, typer.Option("--anchor", metavar="NAME=RATING", help="Fix one player's rating, "
+                                               "e.g. cpu=1200 (default: the random bot at 1000).")]
 PriorOpt = Annotated[float, typer.Option(
     "--prior", help="BayesElo's prior: N virtual draws spread over the games of each player, so that a perfect "
     "score gets a finite rating (MAP). The default 2 is BayesElo's. 0 gives the plain maximum-likelihood fit.")]
@@ -49,9 +63,12 @@ def parse_anchor(anchor: str | None) -> tuple[str | None, float]:
     try:
         if not sep or not name:
             raise ValueError
-        return name, float(rating)
+        value = float(rating)
     except ValueError:
         raise MarlError(f"--anchor must look like NAME=RATING (e.g. random=1000), not {anchor!r}") from None
+    if not math.isfinite(value) or abs(value) > 1e6:
+        raise MarlError(f"--anchor {anchor}: the rating must be a finite number of Elo points (e.g. {name}=1000)")
+    return name, value
 
 
 def check_bootstrap(n: int) -> int:
@@ -68,7 +85,7 @@ def fit(
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the intervals.")] = 0.95,
     results: Annotated[Path | None, typer.Option("--results", help="Rate the games of a CSV file "
                                                  "(player_a,player_b,result) instead of the league.")] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Bootstrap seed.")] = 0,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Bootstrap seed.")] = 0,
     prior: PriorOpt = DEFAULT_PRIOR,
     home: HomeOpt = None,
     db: DbOpt = None,
@@ -100,22 +117,26 @@ def fit(
 
 @app.command("gate")
 def gate(
-    candidate: Annotated[str, typer.Argument(help="The policy that must be stronger.")],
-    vs: Annotated[str, typer.Option("--vs", help="The baseline policy.")],
-    min_diff: Annotated[float, typer.Option("--min-diff", help="Required Elo(CAND) - Elo(BASE) lower bound.")] = 0.0,
+    candidate: Annotated[str, typer.Argument(metavar="CANDIDATE", help="The policy that must be stronger: a snapshot "
+                                             "(s6M-left, ci/candidate), a tag, latest, best or an id.")],
+    vs: Annotated[str, typer.Option("--vs", metavar="BASELINE", help="The baseline policy it must beat (same forms, "
+                                    "or a scripted player such as cpu).")],
+    min_diff: Annotated[float, typer.Option("--min-diff", min=-4000.0, max=4000.0, help="Required lower bound of "
+                                            "Elo(CANDIDATE) - Elo(BASELINE).")] = 0.0,
     env: EnvOpt = None,
-    games: Annotated[int, typer.Option("--games", "-n", help="Head-to-head games to base the verdict on; stored "
-                                       "ones are reused, the rest are played and stored.")] = 400,
+    games: Annotated[int, typer.Option("--games", "-n", min=2, max=MAX_GAMES, help="Head-to-head games to base the "
+                                       "verdict on; stored ones are reused, the rest are played and stored.")] = 400,
     confidence: Annotated[float, typer.Option("--confidence", help="One-sided level of the lower bound.")] = 0.95,
-    parallel: Annotated[int, typer.Option("--parallel", help="Games played at once.")] = 1024,
+    parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once.")]
+    = 1024,
     device: DeviceOpt = "auto",
     home: HomeOpt = None,
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Exit 0 when the lower confidence bound of Elo(CAND) - Elo(BASE) is at least --min-diff, 1 otherwise."""
-    if games < 2:
-        raise MarlError(f"--games must be at least 2, not {games}")
+    """Is CANDIDATE at least --min-diff Elo stronger than BASELINE? Exit 0 (PASS) when the lower confidence bound
+    of Elo(CANDIDATE) - Elo(BASELINE) is at least --min-diff, 1 (FAIL) otherwise; 2 for a mistake in the command,
+    4 for an I/O error, 5 for an internal error, so that CI can tell a failed model from a broken run."""
     if not 0.5 < confidence < 1:
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
     league = open_league(home, db)

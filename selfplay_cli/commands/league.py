@@ -9,6 +9,9 @@ import typer
 from ..errors import MarlError
 from ..stats.bradley_terry import DEFAULT_PRIOR
 from ._common import (
+    MAX_GAMES,
+    MAX_PARALLEL,
+    MAX_SEED,
     DbOpt,
     DeviceOpt,
     EnvOpt,
@@ -25,7 +28,8 @@ from ._output import console
 from .elo import AnchorOpt, BootstrapOpt, PriorOpt, check_bootstrap, check_prior, parse_anchor, resolve_anchor
 from .ladder_view import prior_caption, render_ladder
 
-app = typer.Typer(help="The ladder of the league and round-robin / gauntlet tournaments.", no_args_is_help=True)
+app = typer.Typer(help="The league: ladder, tournaments, score matrix, rating plots.", no_args_is_help=True,
+                  rich_markup_mode=None)
 
 
 LADDER_HELP = "\n\n".join((
@@ -54,7 +58,8 @@ def ladder_cmd(
     env: EnvOpt = None,
     run: Annotated[str | None, typer.Option("--run", help="Show only this run's snapshots, plus the scripted "
                                             "players for reference (ranks unchanged).")] = None,
-    top: Annotated[int | None, typer.Option("--top", help="Show only the first N rows (ranks unchanged).")] = None,
+    top: Annotated[int | None, typer.Option("--top", min=1, max=1_000_000, help="Show only the first N rows (ranks "
+                                            "unchanged).")] = None,
     anchor: AnchorOpt = None,
     prior: PriorOpt = DEFAULT_PRIOR,
     bootstrap: BootstrapOpt = 200,
@@ -100,16 +105,18 @@ def ladder_cmd(
 
 @app.command("tournament")
 def tournament(
-    players: Annotated[list[str] | None, typer.Argument(help="Policies to include (names, tags, ids, bots).")]
-    = None,
+    players: Annotated[list[str] | None, typer.Argument(metavar="PLAYERS", help="Policies to include (snapshots, "
+                                                        "tags, ids, scripted players).")] = None,
     env: EnvOpt = None,
     run: Annotated[str | None, typer.Option("--run", help="Include every snapshot of this run.")] = None,
-    top: Annotated[int | None, typer.Option("--top", help="Include the top K of the current ladder.")] = None,
+    top: Annotated[int | None, typer.Option("--top", max=10_000, help="Include the top K of the current ladder.")]
+    = None,
     vs: Annotated[str | None, typer.Option("--vs", help="Gauntlet: every player meets only this one.")] = None,
-    games_per_pair: Annotated[int, typer.Option("--games-per-pair", help="Games each pair must have in the "
-                                                "ledger; only the missing ones are played.")] = 100,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the first new game.")] = 0,
-    parallel: Annotated[int, typer.Option("--parallel", help="Games played at once.")] = 1024,
+    games_per_pair: Annotated[int, typer.Option("--games-per-pair", min=2, max=MAX_GAMES, help="Games each pair must "
+                                                "have in the ledger; only the missing ones are played.")] = 100,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the first new game.")] = 0,
+    parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once.")]
+    = 1024,
     bootstrap: BootstrapOpt = 200,
     device: DeviceOpt = "auto",
     quiet: QuietOpt = False,

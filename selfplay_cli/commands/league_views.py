@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 
 from ..errors import MarlError
-from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, progress_enabled
+from ._common import MAX_GAMES, DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, progress_enabled
 from ._output import console, err_console, print_json
 
 RunOpt = Annotated[str | None, typer.Option("--run", help="Training run (default: the newest run of the env).")]
@@ -77,11 +77,12 @@ def plot_cmd(
 
 def matrix_cmd(
     env: EnvOpt = None,
-    top: Annotated[int, typer.Option("--top", help="Players in the matrix: the N best by fitted Elo.")] = 10,
+    top: Annotated[int, typer.Option("--top", min=2, max=100, help="Players in the matrix: the N best by fitted "
+                                     "Elo.")] = 10,
     run: Annotated[str | None, typer.Option("--run", help="Only this run's snapshots and the scripted players.")]
     = None,
-    min_games: Annotated[int, typer.Option("--min-games", help="Games a pair needs to count as measured (a training "
-                                           "run's rating games give 8 per pair).")] = 8,
+    min_games: Annotated[int, typer.Option("--min-games", min=1, max=MAX_GAMES, help="Games a pair needs to count "
+                                           "as measured (a training run's rating games give 8 per pair).")] = 8,
     out: OutOpt = None,
     home: HomeOpt = None,
     db: DbOpt = None,

@@ -6,8 +6,14 @@ from typing import Annotated
 
 import typer
 
+from ..errors import MarlError
+from ..league.names import Team
+from ..league.store import PlayerRow
 from ..rated.match import MatchInterrupted, MatchReport, SPRTSettings, load_player, run_match, sprt_exit_code
 from ._common import (
+    MAX_GAMES,
+    MAX_PARALLEL,
+    MAX_SEED,
     DbOpt,
     DeviceOpt,
     EnvOpt,
@@ -57,13 +63,17 @@ def interrupted(r: MatchReport, stored: bool) -> None:
 
 
 def match(
-    a: Annotated[str, typer.Argument(help="First policy: ep90, run/ep90, a tag, latest, best, an id or a bot.")],
+    a: Annotated[str, typer.Argument(help="First policy: a snapshot (s6M-left, pong-1/s6M-left), a team of "
+                                     "per-seat snapshots (s6M: each member plays B in turn), a tag, latest, best, an "
+                                     "id or a scripted player (cpu, random).")],
     b: Annotated[str, typer.Argument(help="Second policy (same forms).")],
-    games: Annotated[int, typer.Option("--games", "-n", help="Games to play (whole pairs: each seed in both seat "
-                                       "orders).")] = 200,
+    games: Annotated[int, typer.Option("--games", "-n", min=1, max=MAX_GAMES, help="Games to play (whole pairs: "
+                                       "each seed in both seat orders).")] = 200,
     env: EnvOpt = None,
-    seed: Annotated[int, typer.Option("--seed", help="First game seed; pair i uses seed + i.")] = 0,
-    parallel: Annotated[int, typer.Option("--parallel", help="Games played at once in the batched core.")] = 1024,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="First game seed; pair i uses seed + i.")]
+    = 0,
+    parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once in the "
+                                          "batched core.")] = 1024,
     store: Annotated[bool, typer.Option("--store/--no-store", help="Record the games in the ledger.")] = True,
     sprt: Annotated[bool, typer.Option("--sprt", help="Sequential test: stop once H0 (elo0) or H1 (elo1) wins.")]
     = False,
@@ -71,11 +81,11 @@ def match(
     elo1: Annotated[float, typer.Option("--elo1", help="SPRT H1: Elo(A) - Elo(B) = elo1.")] = 10.0,
     alpha: Annotated[float, typer.Option("--alpha", help="SPRT false-positive rate.")] = 0.05,
     beta: Annotated[float, typer.Option("--beta", help="SPRT false-negative rate.")] = 0.05,
-    max_games: Annotated[int | None, typer.Option("--max-games", help="SPRT game budget (default --games).")]
-    = None,
+    max_games: Annotated[int | None, typer.Option("--max-games", min=1, max=MAX_GAMES, help="SPRT game budget "
+                                                  "(default --games).")] = None,
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the Elo interval.")] = 0.95,
-    k: Annotated[float, typer.Option("--k", help="K factor of the online Elo updated after each stored game.")]
-    = 16.0,
+    k: Annotated[float, typer.Option("--k", min=0.0, max=1000.0, help="K factor of the online Elo updated after "
+                                     "each stored game (0: no update).")] = 16.0,
     device: DeviceOpt = "auto",
     quiet: QuietOpt = False,
     home: HomeOpt = None,
@@ -84,35 +94,68 @@ def match(
 ) -> None:
     """Play rated games between two policies: W/D/L, Elo difference with its interval, LOS, optional SPRT.
 
+    A team name (s6M: the snapshots s6M-left and s6M-right of one moment of a run) plays each of its members
+    against the other policy, one match after the other.
+
     Exit code: 0, or with --sprt: 0 when H1 is accepted, 1 when H0 is, 3 when --max-games ends it undecided.
     """
-    from ..errors import MarlError
-
-    if parallel < 2:
-        raise MarlError(f"--parallel must be at least 2, not {parallel}")
     if not 0.5 < confidence < 1:
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
     settings = SPRTSettings(elo0, elo1, alpha, beta) if sprt else None
     budget = (max_games or games) if sprt else games
     league = open_league(home, db)
     league.elo_k = k
+    reports: list[MatchReport] = []
     try:
-        row_a, row_b = resolve_players(league, [a, b], env)
-        pa = load_player(league, row_a, device=device)
-        pb = load_player(league, row_b, device=device, seed=1)
-        try:
-            with progress_bar(f"{pa.id} vs {pb.id}", budget + budget % 2, "games", progress_enabled(quiet)) as tick:
-                report = run_match(pa, pb, games=budget, first_seed=seed, parallel=parallel,
-                                   league=league if store else None, player_ids={pa.id: row_a.id, pb.id: row_b.id},
-                                   sprt=settings, confidence=confidence, on_games=tick)
-        except MatchInterrupted as stop:
-            interrupted(stop.report, stored=store)
-            raise typer.Exit(130) from None
+        side_a, side_b = resolve_players(league, [a, b], env, teams=True)
+        pairs = pairings(a, side_a, b, side_b, sprt=sprt)
+        for row_a, row_b in pairs:
+            pa = load_player(league, row_a, device=device)
+            pb = load_player(league, row_b, device=device, seed=1)
+            try:
+                with progress_bar(f"{pa.id} vs {pb.id}", budget + budget % 2, "games",
+                                  progress_enabled(quiet)) as tick:
+                    reports.append(run_match(pa, pb, games=budget, first_seed=seed, parallel=parallel,
+                                             league=league if store else None,
+                                             player_ids={pa.id: row_a.id, pb.id: row_b.id}, sprt=settings,
+                                             confidence=confidence, on_games=tick))
+            except MatchInterrupted as stop:
+                interrupted(stop.report, stored=store)
+                raise typer.Exit(130) from None
+            if not json_out:
+                render_report(reports[-1])
     finally:
         league.close()
+    team = next((side.full_name for side in (side_a, side_b) if isinstance(side, Team)), None)
     if json_out:
-        print_json(report.to_json())
-    else:
-        render_report(report)
+        print_json(reports[0].to_json() if team is None else {"team": team, "matches": [r.to_json() for r in reports]})
     if settings is not None:
-        raise typer.Exit(sprt_exit_code(report))
+        raise typer.Exit(sprt_exit_code(reports[0]))
+
+
+def pairings(a: str, side_a: PlayerRow | Team, b: str, side_b: PlayerRow | Team,
+             sprt: bool = False) -> list[tuple[PlayerRow, PlayerRow]]:
+    """The matches ``marl match A B`` plays: one, or one per member when one side names a team. Refused in one line:
+    the same player twice (``latest best`` when the newest snapshot is also the best), two teams, a team under
+    ``--sprt`` (one test, one verdict)."""
+    if isinstance(side_a, Team) and isinstance(side_b, Team):
+        raise MarlError(f"'{a}' and '{b}' are both teams: match one member of each, e.g. marl match "
+                        f"{side_a.members[0].full_name} {side_b.members[0].full_name}")
+    team = side_a if isinstance(side_a, Team) else side_b if isinstance(side_b, Team) else None
+    if team is not None and sprt:
+        name = a if team is side_a else b
+        raise MarlError(f"--sprt tests one pair of policies, and '{name}' is a team ({team.describe()}): name one "
+                        "member")
+    if team is None:
+        pairs = [(side_a, side_b)]
+    elif team is side_a:
+        pairs = [(m, side_b) for m in team.members]
+    else:
+        pairs = [(side_a, m) for m in team.members]
+    for x, y in pairs:  # type: ignore[misc]
+        if x.id == y.id:
+            said = f"'{a}' and '{b}' are the same player, {x.full_name}" if a != b else f"'{a}' on both sides"
+            other = "cpu" if not x.is_bot or x.name != "cpu" else "random"
+            raise MarlError(f"{said}: a match needs two different players (e.g. marl match {x.full_name} {other}; "
+                            "marl checkpoint list shows the snapshots)")
+    return pairs  # type: ignore[return-value]

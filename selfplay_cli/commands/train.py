@@ -14,7 +14,18 @@ import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ..errors import MarlError
-from ._common import DbOpt, DeviceOpt, HomeOpt, JsonOpt, QuietOpt, open_league, parse_env_options, progress_enabled
+from ._common import (
+    MAX_PARALLEL,
+    MAX_SEED,
+    DbOpt,
+    DeviceOpt,
+    HomeOpt,
+    JsonOpt,
+    QuietOpt,
+    open_league,
+    parse_env_options,
+    progress_enabled,
+)
 from ._output import console, err_console, print_json
 
 
@@ -45,61 +56,66 @@ def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:
 def train(
     ctx: typer.Context,
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
-    config: Annotated[Path | None, typer.Option("--config", help="TOML file of settings (top-level options, "
-                                                "[ppo], [dqn], [opponents], [env_options]); options typed on the "
-                                                "command line win over it.")] = None,
-    agents: Annotated[int, typer.Option("--agents", help="Learning agents: 2 trains both pong paddles (seed 000); 1 "
-                                        "trains one learner against opponents from the league.")] = 2,
+    config: Annotated[Path | None, typer.Option("--config", metavar="FILE", help="TOML file of settings (top-level "
+                                                "options, [ppo], [dqn], [opponents], [env_options]); options typed "
+                                                "on the command line win over it.")] = None,
+    agents: Annotated[int, typer.Option("--agents", min=1, max=64, help="Learning agents: 2 trains both pong paddles "
+                                        "(seed 000); 1 trains one learner against opponents from the league.")] = 2,
     algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo or dqn.")] = "ppo",
     preset: Annotated[str | None, typer.Option("--preset", help="seed000: seed 000's DQN set-up (network sizes, "
                                                "learning rate, batch, buffer, target period, epsilon).")] = None,
     sharing: Annotated[str, typer.Option("--sharing", help="nops: one network per learner; fups: one shared "
                                          "network.")] = "nops",
-    steps: Annotated[int, typer.Option("--steps", help="Budget in game steps.")] = 6_000_000,
-    minutes: Annotated[float | None, typer.Option("--minutes", help="Budget in minutes of wall clock instead "
-                                                  "(fractions allowed).")] = None,
-    run: Annotated[str | None, typer.Option("--run", help="Run name (default: <env>-<n>).")] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of networks, games and opponent choice.")] = 0,
-    games: Annotated[int, typer.Option("--games", help="Games played at once.")] = 256,
-    snapshot_every: Annotated[int, typer.Option("--snapshot-every", help="Also a snapshot every N episodes "
+    steps: Annotated[int, typer.Option("--steps", min=1, max=10**12, help="Budget in game steps.")] = 6_000_000,
+    minutes: Annotated[float | None, typer.Option("--minutes", max=10**6, help="Budget in minutes of wall clock "
+                                                  "instead (fractions allowed).")] = None,
+    run: Annotated[str | None, typer.Option("--run", metavar="NAME", help="Run name (default: <env>-<n>).")] = None,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of networks, games and opponent "
+                                      "choice.")] = 0,
+    games: Annotated[int, typer.Option("--games", min=2, max=MAX_PARALLEL, help="Games played at once.")] = 256,
+    snapshot_every: Annotated[int, typer.Option("--snapshot-every", min=0, help="Also a snapshot every N episodes "
                                                 "(finished games), named epN as seed 000 did (0: by steps only).")]
     = 0,
-    snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", help="Game steps between snapshots, named by "
-                                                "the step they stand for: s0, s1M, s2M, ... and the final one by the "
-                                                "budget (s6M).")] = 1_000_000,
-    swap_every: Annotated[int, typer.Option("--swap-every", help="Game steps a game slot keeps the opponent it drew "
-                                            "(ML-Agents' swap_steps); 0: a new draw for every game.")] = 0,
+    snapshot_steps: Annotated[int, typer.Option("--snapshot-steps", min=0, help="Game steps between snapshots, "
+                                                "named by the step they stand for: s0, s1M, s2M, ... and the final "
+                                                "one by the budget (s6M).")] = 1_000_000,
+    swap_every: Annotated[int, typer.Option("--swap-every", min=0, help="Game steps a game slot keeps the opponent "
+                                            "it drew (ML-Agents' swap_steps); 0: a new draw for every game.")] = 0,
     tensorboard: Annotated[bool, typer.Option("--tensorboard", help="Also write the metrics for TensorBoard "
-                                              "(<home>/runs/<run>/tensorboard; needs the tensorboard package).")]
-    = False,
+                                              "(<home>/runs/<run>/tensorboard; needs the tensorboard package: pip "
+                                              "install -e \".[tensorboard]\").")] = False,
     league_games: Annotated[float, typer.Option("--league-games", help="With every seat learning (--agents 2): "
                                                 "share of games in which a learner meets an opponent from the league "
                                                 "(drawn by --opponents/--bots) instead of the other learner; 0 keeps "
                                                 "seed 000's set-up.")] = 0.0,
-    eval_games: Annotated[int, typer.Option("--eval-games", help="Games a new snapshot plays against each opponent "
-                                            "of its gauntlet (its predecessor, the other learners, the run's best, "
-                                            "older snapshots, the scripted players), in seat-swapped pairs; 2 where "
-                                            "its predecessor's result was already clear. 0: no rating games.")] = 8,
-    eval_older: Annotated[int, typer.Option("--eval-older", help="Older snapshots of the run in each gauntlet, "
-                                            "besides the predecessor and the best.")] = 2,
+    eval_games: Annotated[int, typer.Option("--eval-games", min=0, max=10_000, help="Games a new snapshot plays "
+                                            "against each opponent of its gauntlet (its predecessor, the other "
+                                            "learners, the run's best, older snapshots, the scripted players), in "
+                                            "seat-swapped pairs; 2 where its predecessor's result was already "
+                                            "clear. 0: no rating games.")] = 8,
+    eval_older: Annotated[int, typer.Option("--eval-older", min=0, max=1_000, help="Older snapshots of the run in "
+                                            "each gauntlet, besides the predecessor and the best.")] = 2,
     eval_inline: Annotated[bool, typer.Option("--eval-inline", help="Play the rating games in the training process, "
                                               "training paused (default: a worker process beside training).")]
     = False,
     opponents: Annotated[str, typer.Option("--opponents", help="League opponents (--agents 1, or --league-games): "
                                            "self | latest | uniform | pfsp, from the run's snapshots.")] = "pfsp",
-    window: Annotated[int, typer.Option("--window", help="Opponents are drawn from the last WINDOW snapshots "
-                                        "(ML-Agents' window, default 10).")] = 10,
+    window: Annotated[int, typer.Option("--window", min=1, max=100_000, help="Opponents are drawn from the last N "
+                                        "snapshots (ML-Agents' window).")] = 10,
     latest_ratio: Annotated[float, typer.Option("--latest-ratio", help="Share of league games against the "
                                                 "current learner (two learners: the other one); ML-Agents' "
                                                 "play_against_latest_model_ratio.")]
     = 0.5,
-    bots: Annotated[str, typer.Option("--bots", help="Mix in scripted players, e.g. cpu=0.1,random=0.05.")] = "",
+    bots: Annotated[str, typer.Option("--bots", metavar="BOT=P,...", help="Mix in scripted players with these "
+                                      "probabilities, e.g. cpu=0.1,random=0.05.")] = "",
     lr: Annotated[float | None, typer.Option("--lr", help="Learning rate (default: the algorithm's own, PPO 2e-3, "
                                              "DQN 2.5e-4).")] = None,
-    env_option: Annotated[list[str] | None, typer.Option("--env-option", help="Game option KEY=VALUE, repeatable "
-                                                         "(e.g. points_to_win=5).")] = None,
-    resume: Annotated[str | None, typer.Option("--resume", help="Continue a run that was stopped or killed, from "
-                                               "its last snapshot (its saved configuration applies).")] = None,
+    env_option: Annotated[list[str] | None, typer.Option("--env-option", metavar="KEY=VALUE", help="Game option, "
+                                                         "repeatable (e.g. points_to_win=5; marl envs --json lists "
+                                                         "the games).")] = None,
+    resume: Annotated[str | None, typer.Option("--resume", metavar="RUN", help="Continue a run that was stopped or "
+                                               "killed, from its last snapshot (its saved configuration applies).")]
+    = None,
     device: DeviceOpt = "auto",
     quiet: QuietOpt = False,
     home: HomeOpt = None,

@@ -9,8 +9,13 @@ Resolution order (the first rule that applies decides):
    (``ladder(league, env, bootstrap=0)``, the ladder's default prior; players whose rating is not comparable
    to the anchor's, i.e. flagged ``disconnected``, are only considered if nobody else is rated);
 4. ``run/name``;
-5. a tag, a bot name or a bare snapshot name (``ep90``) - all matches together; more than one distinct
+5. a tag, a bot name or a bare snapshot name (``s6M-left``) - all matches together; more than one distinct
    player is an ambiguity error.
+
+A **team** is the snapshots of one moment of a run that trained one network per seat: ``s6M-left`` and
+``s6M-right`` are the team ``s6M`` (or ``pong-1/s6M``). :func:`resolve_or_team` returns it where a team makes
+sense (``marl record`` seats it, ``marl match`` plays each member, ``marl checkpoint show`` shows each member);
+:func:`resolve`, which answers with one player, refuses a team name in one line that names its members.
 
 Removed snapshots are not resolved unless ``include_removed=True`` (for ``marl show``); naming one gives
 an error saying it was removed.
@@ -23,18 +28,97 @@ from __future__ import annotations
 
 import difflib
 from collections.abc import Callable, Iterable
+from dataclasses import dataclass
 
+from selfplay_cli.envs import env_names, get_env
 from selfplay_cli.league.ladder import LadderRow, ladder
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.stats.bradley_terry import FLAG_DISCONNECTED, FLAG_UNRATED
 
-__all__ = ["MAX_CANDIDATES", "LadderFn", "resolve", "resolve_many"]
+__all__ = ["MAX_CANDIDATES", "LadderFn", "Team", "find_team", "resolve", "resolve_many", "resolve_or_team",
+           "seat_of", "teammates"]
 
 LadderFn = Callable[[League, "str | None"], "list[LadderRow]"]
 """``ladder_fn(league, env) -> rows``: how ``best`` gets its ratings (default: a bootstrap-free ladder)."""
 
-MAX_CANDIDATES = 10
-"""How many known names an "unknown name" error lists."""
+MAX_CANDIDATES = 5
+"""How many of the closest names, and then of the newest snapshots, an "unknown name" error lists."""
+
+MAX_ID = 2**63 - 1
+"""The largest id a player can have (a 64-bit database integer)."""
+
+
+@dataclass(frozen=True)
+class Team:
+    """The snapshots ``<name>-<seat>`` of one run, one per seat of the game, in seat order."""
+
+    name: str  # run/name, e.g. pong-1/s6M
+    members: tuple[PlayerRow, ...]
+
+    @property
+    def env(self) -> str:
+        return self.members[0].env
+
+    @property
+    def full_name(self) -> str:
+        return self.name
+
+    def describe(self) -> str:
+        """``pong-1/s6M-left, pong-1/s6M-right``."""
+        return ", ".join(p.full_name for p in self.members)
+
+
+def seat_of(row: PlayerRow, agents: tuple[str, ...]) -> int | None:
+    """The seat a per-seat learner's snapshot was trained on: its league metadata, else its ``-<seat>`` suffix."""
+    learner = row.meta.get("learner")
+    if learner in agents:
+        return agents.index(learner)
+    for i, agent in enumerate(agents):
+        if row.name.endswith(f"-{agent}"):
+            return i
+    return None
+
+
+def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | None:
+    """The snapshots ``<name>-<seat>`` for every seat of the game, all from one run, in seat order; None if there
+    are none. Raises LeagueError if several runs have such a team (``run/name`` chooses)."""
+    teams: dict[tuple[str, str], list[PlayerRow]] = {}
+    for e in [env] if env else env_names():
+        agents = get_env(e).agents
+        if len(agents) < 2:
+            continue
+        by_run: dict[str, list[PlayerRow | None]] = {}
+        for seat, agent in enumerate(agents):
+            for p in league.find_players(f"{name}-{agent}", env=e):
+                if p.kind != "snapshot" or p.run is None or ("/" in name and p.full_name != f"{name}-{agent}"):
+                    continue
+                by_run.setdefault(p.run, [None] * len(agents))[seat] = p
+        for run, members in by_run.items():
+            if all(m is not None for m in members):
+                teams[(e, run)] = members  # type: ignore[assignment]
+    if len(teams) > 1:
+        listed = ", ".join(f"{run}/{name}" for _, run in sorted(teams))
+        raise LeagueError(f"'{name}' is a team in several runs: {listed}; use run/name")
+    return next(iter(teams.values()), None)
+
+
+def teammates(league: League, row: PlayerRow, agents: tuple[str, ...]) -> list[PlayerRow] | None:
+    """The whole team (seat order) of a per-seat learner's snapshot, from its run and name; None if it has none."""
+    seat = seat_of(row, agents)
+    suffix = f"-{agents[seat]}" if seat is not None else ""
+    if seat is None or row.run is None or not row.name.endswith(suffix):
+        return None
+    base = row.name[: -len(suffix)]
+    team = find_team(league, f"{row.run}/{base}", row.env)
+    return team if team is not None and row.id in {p.id for p in team} else None
+
+
+def _team(league: League, text: str, env: str | None) -> Team | None:
+    members = find_team(league, text, env)
+    if members is None:
+        return None
+    base = text.rsplit("/", 1)[-1]
+    return Team(f"{members[0].run}/{base}", tuple(members))
 
 
 def _where(env: str | None) -> str:
@@ -54,24 +138,42 @@ def _label(players: list[PlayerRow]) -> str:
     return ", ".join(dict.fromkeys(out))
 
 
-def _known_names(league: League, env: str | None) -> list[str]:
-    """Names a user could type in ``env``: full names of live players, bare snapshot names and tags."""
-    names: list[str] = []
-    for p in league.players(env=env):
-        names.append(p.full_name)
-        names.extend(p.tags)
-    for p in league.players(env=env, kind="snapshot"):
-        names.append(p.name)
-    names.extend(["latest", "best"])
-    return list(dict.fromkeys(names))
+def _team_names(players: list[PlayerRow]) -> list[str]:
+    """``s6M`` and ``pong-1/s6M`` for every team among ``players`` (per-seat snapshots of one moment)."""
+    out: list[str] = []
+    for p in players:
+        if p.kind != "snapshot" or p.run is None:
+            continue
+        agents = get_env(p.env).agents if p.env in env_names() else ()
+        seat = seat_of(p, agents) if len(agents) > 1 else None
+        if seat is not None and p.name.endswith(f"-{agents[seat]}"):
+            base = p.name[: -len(agents[seat]) - 1]
+            out += [base, f"{p.run}/{base}"]
+    return out
 
 
 def _unknown(league: League, name: str, env: str | None) -> LeagueError:
-    pool = _known_names(league, env)
+    """An unknown name: the closest names first, then the newest snapshots, then what else can be typed."""
+    players = league.players(env=env)
+    snapshots = sorted((p for p in players if p.kind == "snapshot"), key=lambda p: -p.id)
+    pool = [p.full_name for p in players] + [t for p in players for t in p.tags]
+    pool += [p.name for p in snapshots] + _team_names(snapshots) + ["latest", "best"]
+    pool = list(dict.fromkeys(pool))
     close = difflib.get_close_matches(name, pool, n=MAX_CANDIDATES, cutoff=0.5)
-    ordered = list(dict.fromkeys(close + pool))
-    shown = ", ".join(ordered[:MAX_CANDIDATES]) + (", ..." if len(ordered) > MAX_CANDIDATES else "")
-    return LeagueError(f"no policy named '{name}' in {_where(env)}; known: {shown}")
+    if not close:  # a different case, or a prefix: s6m, pong-1/s6
+        folded = name.casefold()
+        close = [n for n in pool if n.casefold() == folded or n.casefold().startswith(folded)][:MAX_CANDIDATES]
+    newest = [p.full_name for p in snapshots if p.full_name not in close][:MAX_CANDIDATES]
+    bots = [p.name for p in players if p.kind == "bot"]
+    parts = [f"no policy named '{name}' in {_where(env)}"]
+    if close:
+        parts.append(f"closest: {', '.join(close)}")
+    if newest:
+        more = len(snapshots) - len(newest) - sum(1 for p in snapshots if p.full_name in close)
+        parts.append(f"newest: {', '.join(newest)}" + (f" (and {more} older: marl checkpoint list)" if more > 0
+                                                          else ""))
+    parts.append(", ".join(["latest", "best", *bots]) + " or an id also work")
+    return LeagueError("; ".join(parts))
 
 
 def _removed(name: str, players: list[PlayerRow]) -> LeagueError:
@@ -81,6 +183,8 @@ def _removed(name: str, players: list[PlayerRow]) -> LeagueError:
 
 def _by_id(league: League, name: str, pid: int, env: str | None, include_removed: bool) -> PlayerRow:
     try:
+        if pid > MAX_ID:
+            raise LeagueError(str(pid))
         p = league.get_player(pid)
     except LeagueError:
         raise LeagueError(f"no player with id {pid} in {_where(env)}") from None
@@ -119,7 +223,7 @@ def resolve(
     if not text:
         raise LeagueError("empty policy name")
     digits = text[1:] if text.startswith("#") else text
-    if digits.isdigit():
+    if digits.isascii() and digits.isdigit():
         return _by_id(league, text, int(digits), env, include_removed)
     if text == "latest":
         p = league.latest(env=env)
@@ -139,7 +243,29 @@ def resolve(
         raise LeagueError(f"'{text}' is ambiguous: {_label(live)} — use run/name or an id")
     if found:
         raise _removed(text, found)
+    team = _team(league, text, env)
+    if team is not None:
+        raise LeagueError(f"'{text}' names a team of {len(team.members)} snapshots, one per seat ({team.describe()})"
+                          f": name one of them, e.g. {team.members[0].full_name}")
     raise _unknown(league, text, env)
+
+
+def resolve_or_team(
+    league: League,
+    name: str,
+    env: str | None = None,
+    ladder_fn: LadderFn | None = None,
+    include_removed: bool = False,
+) -> PlayerRow | Team:
+    """What ``name`` means where a team makes sense: the one player :func:`resolve` finds, else the team of
+    per-seat snapshots it names (``s6M``, ``pong-1/s6M``); the resolver's error otherwise."""
+    try:
+        return resolve(league, name, env, ladder_fn=ladder_fn, include_removed=include_removed)
+    except LeagueError:
+        team = _team(league, str(name).strip(), env)
+        if team is None:
+            raise
+        return team
 
 
 def resolve_many(

@@ -20,8 +20,10 @@ from dataclasses import dataclass
 
 from ..envs import env_names, get_env
 from ..errors import MarlError
-from ..league.names import resolve
-from ..league.store import League, LeagueError, PlayerRow
+from ..league.names import Team, find_team, resolve_or_team, seat_of, teammates
+from ..league.store import League, PlayerRow
+
+__all__ = ["DEFAULT_OPPONENT", "Lineup", "find_team", "lineup", "safe_filename", "seat_of", "teammates"]
 
 DEFAULT_OPPONENT = "cpu"
 
@@ -51,60 +53,10 @@ def safe_filename(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9._-]+", "_", text.replace("/", "-")).strip("._") or "video"
 
 
-def seat_of(row: PlayerRow, agents: tuple[str, ...]) -> int | None:
-    """The seat a per-seat learner's snapshot was trained on: its league metadata, else its ``-<seat>`` suffix."""
-    learner = row.meta.get("learner")
-    if learner in agents:
-        return agents.index(learner)
-    for i, agent in enumerate(agents):
-        if row.name.endswith(f"-{agent}"):
-            return i
-    return None
-
-
-def _snapshots(league: League, name: str, env: str) -> list[PlayerRow]:
-    return [p for p in league.find_players(name, env=env) if p.kind == "snapshot" and p.run is not None]
-
-
-def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | None:
-    """The snapshots ``<name>-<seat>`` for every seat of the game, all from one run, in seat order; None if there
-    are none. Raises LeagueError if several runs have such a team (``run/name`` chooses)."""
-    teams: dict[tuple[str, str], list[PlayerRow]] = {}
-    for e in [env] if env else env_names():
-        agents = get_env(e).agents
-        by_run: dict[str, list[PlayerRow | None]] = {}
-        for seat, agent in enumerate(agents):
-            for p in _snapshots(league, f"{name}-{agent}", e):
-                by_run.setdefault(p.run, [None] * len(agents))[seat] = p  # type: ignore[index]
-        for run, members in by_run.items():
-            if all(m is not None for m in members):
-                teams[(e, run)] = members  # type: ignore[assignment]
-    if len(teams) > 1:
-        listed = ", ".join(f"{run}/{name}" for _, run in sorted(teams))
-        raise LeagueError(f"'{name}' is a team in several runs: {listed} — use run/name")
-    return next(iter(teams.values()), None)
-
-
-def teammates(league: League, row: PlayerRow, agents: tuple[str, ...]) -> list[PlayerRow] | None:
-    """The whole team (seat order) of a per-seat learner's snapshot, from its run and name; None if it has none."""
-    seat = seat_of(row, agents)
-    suffix = f"-{agents[seat]}" if seat is not None else ""
-    if seat is None or row.run is None or not row.name.endswith(suffix):
-        return None
-    base = row.name[: -len(suffix)]
-    team = find_team(league, f"{row.run}/{base}", row.env)
-    return team if team is not None and row.id in {p.id for p in team} else None
-
-
 def _player_or_team(league: League, name: str, env: str | None) -> PlayerRow | list[PlayerRow]:
     """A single player if ``name`` resolves to one, else the team it names; the resolver's error otherwise."""
-    try:
-        return resolve(league, name, env)
-    except LeagueError:
-        team = find_team(league, name, env)
-        if team is None:
-            raise  # the resolver's own message: unknown (with candidates), ambiguous or removed
-        return team
+    found = resolve_or_team(league, name, env)
+    return list(found.members) if isinstance(found, Team) else found
 
 
 def _bots_ready(league: League, env: str | None) -> None:

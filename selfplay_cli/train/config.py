@@ -90,20 +90,37 @@ class TrainConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:
         """A configuration from ``to_dict``'s layout (a saved run, or a --config file merged over the defaults).
-        Unknown keys are refused by name, so a typo in a config file is an error, not a silent default."""
+        Unknown keys are refused by name, so a typo in a config file is an error, not a silent default; every value
+        must have its setting's type (``steps = "many"`` or ``[ppo] lr = "fast"`` is one line naming the setting
+        and the type it wants; a whole float such as ``steps = 5e6`` is taken as the whole number)."""
+        from ..typecheck import check_fields, field_types
+
         d = dict(d)
         sections = {"ppo": PPOConfig, "dqn": DQNConfig, "opponents": MatchmakerConfig}
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
             raise MarlError(f"unknown training setting(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+        plain = check_fields(cls, {k: v for k, v in d.items() if k not in sections and k != "env_options"},
+                             where="setting ")
+        d.update(plain)
+        if "seed" in d and not 0 <= d["seed"] < 2**32:
+            raise MarlError(f"--seed must lie between 0 and {2**32 - 1}, not {d['seed']}")
+        if "env_options" in d:
+            if not isinstance(d["env_options"], dict):
+                raise MarlError(f"[env_options] must be a table of game options, not {d['env_options']!r}")
+            game = get_env(str(d.get("env", cls.env)))
+            d["env_options"] = check_fields(type(game.config()), d["env_options"], where="[env_options] ")
         for key, section in sections.items():
             if key in d and not isinstance(d[key], section):
+                if not isinstance(d[key], dict):
+                    raise MarlError(f"[{key}] must be a table of settings, not {d[key]!r}")
                 values = dict(d[key])
-                allowed = {f.name for f in fields(section)}
+                allowed = set(field_types(section)) or {f.name for f in fields(section)}
                 bad = sorted(set(values) - allowed)
                 if bad:
                     raise MarlError(f"unknown [{key}] setting(s) {', '.join(bad)}; known: {', '.join(sorted(allowed))}")
+                values = check_fields(section, values, where=f"[{key}] ")
                 try:
                     d[key] = section(**values)
                 except (TypeError, ValueError) as e:
@@ -117,7 +134,8 @@ def tensorboard_writer(log_dir: Path | None) -> Any:
     try:
         from torch.utils.tensorboard import SummaryWriter
     except ImportError:
-        raise MarlError("--tensorboard needs the tensorboard package: pip install tensorboard") from None
+        raise MarlError('--tensorboard needs the tensorboard package: pip install -e ".[tensorboard]" (or pip '
+                        "install tensorboard)") from None
     return None if log_dir is None else SummaryWriter(log_dir=str(log_dir))
 
 
