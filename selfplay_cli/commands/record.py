@@ -10,7 +10,18 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 
 from ..errors import MarlError
-from ._common import DbOpt, DeviceOpt, EnvOpt, HomeOpt, JsonOpt, QuietOpt, open_league, progress_bar, progress_enabled
+from ._common import (
+    MAX_SEED,
+    DbOpt,
+    DeviceOpt,
+    EnvOpt,
+    HomeOpt,
+    JsonOpt,
+    QuietOpt,
+    open_league,
+    progress_bar,
+    progress_enabled,
+)
 from ._output import console, err_console, print_json
 
 if TYPE_CHECKING:
@@ -62,37 +73,84 @@ def _targets(out: Path | None, home: Path | None, stems: list[str], fmt: str) ->
     return [out]
 
 
-def _line(rec: Recording) -> str:
+DEFAULT_SECONDS = 60
+"""Without a limit of their own, recordings stop after this many seconds of play (3,600 steps at 60 fps): a
+length a person watches. A pong game between trained players runs to its 5-minute time limit."""
+
+
+def _clock(seconds: float) -> str:
+    s = int(round(seconds))
+    return f"{s // 60}:{s % 60:02d}"
+
+
+def _line(rec: Recording, default_cap: bool) -> str:
+    """``<path>  A vs B 3-1 (stopped at 1:00 by --seconds 60 ...), 3,600 steps, 1:01 of video, rendered in 8.4 s``."""
+    from ..record.recorder import ENDED_STOPPED, ENDED_TIME_LIMIT
+
     r = rec.result
     score = "-".join(str(s) for s in r.scores)
-    stopped = " (stopped)" if r.truncated else ""
-    return (f"{rec.path}  {' vs '.join(r.players)} {score}{stopped}, {r.length:,} steps, {rec.frames:,} frames "
-            f"in {rec.seconds:.1f} s")
+    play = r.length / rec.settings.fps
+    if rec.ended == ENDED_STOPPED:
+        how = f" (stopped at {_clock(play)} by {rec.stopped_by}"
+        how += "; the default cap: --seconds 0 records the whole game)" if default_cap else ")"
+    elif rec.ended == ENDED_TIME_LIMIT:
+        how = f" (the game's time limit: {r.length:,} steps, decided by the score)"
+    else:
+        how = ""
+    return (f"{rec.path}  {' vs '.join(r.players)} {score}{how}, {r.length:,} steps, {_clock(rec.video_seconds)} of "
+            f"video ({rec.frames:,} frames at {rec.settings.fps} fps), rendered in {rec.seconds:.1f} s")
+
+
+def _limits(seconds: float | None, max_steps: int | None, max_rallies: int | None,
+            fps: int) -> tuple[int | None, int | None, str | None, bool]:
+    """(max steps, max rallies, the label of the limit, whether it is the default cap) from the options: at most one
+    of --seconds, --max-steps, --max-rallies; none given means --seconds 60."""
+    given = [flag for flag, value in (("--seconds", seconds), ("--max-steps", max_steps),
+                                      ("--max-rallies", max_rallies)) if value is not None]
+    if len(given) > 1:
+        raise MarlError(f"{' and '.join(given)} exclude each other: give one limit")
+    if max_steps is not None:
+        return max_steps, None, f"--max-steps {max_steps}", False
+    if max_rallies is not None:
+        return None, max_rallies, f"--max-rallies {max_rallies}", False
+    default = seconds is None
+    seconds = DEFAULT_SECONDS if seconds is None else seconds
+    if seconds == 0:
+        return None, None, None, False
+    return max(1, round(seconds * fps)), None, f"--seconds {seconds:g}", default
 
 
 def record(
-    ckpt: Annotated[str | None, typer.Option("--ckpt", help="Policy to record: ep90, run/ep90, a tag, latest, best, "
-                                             "an id or a bot. A run with one network per seat: ep90 is the team "
-                                             "(ep90-left vs ep90-right).")] = None,
-    vs: Annotated[str | None, typer.Option("--vs", help="Opponent (same forms). Default: the snapshot's teammates "
-                                           "from the same episode, else cpu.")] = None,
-    game_id: Annotated[int | None, typer.Option("--game", help="Re-render game ID of the ledger exactly as it was "
-                                                "played (the games of marl match, tournaments, gates and "
-                                                "training).")] = None,
+    ckpt: Annotated[str | None, typer.Option("--ckpt", metavar="POLICY", help="Policy to record: a snapshot "
+                                             "(s6M-left, pong-1/s6M-left), a tag, latest, best, an id or a scripted "
+                                             "player. A run with one network per seat: s6M is the team (s6M-left vs "
+                                             "s6M-right).")] = None,
+    vs: Annotated[str | None, typer.Option("--vs", metavar="POLICY", help="Opponent (same forms). Default: the "
+                                           "snapshot's teammates from the same moment, else cpu.")] = None,
+    game_id: Annotated[int | None, typer.Option("--game", metavar="ID", min=1, help="Re-render game ID of the "
+                                                "ledger exactly as it was played (the games of marl match, "
+                                                "tournaments, gates and training).")] = None,
     env: EnvOpt = None,
-    games: Annotated[int, typer.Option("--games", "-n", help="Games to record, one file each; game i uses seed "
-                                       "--seed + i.")] = 1,
-    max_steps: Annotated[int | None, typer.Option("--max-steps", help="Stop each game after N steps.")] = None,
-    max_rallies: Annotated[int | None, typer.Option("--max-rallies", help="Stop each game after N rallies (serves "
-                                                    "played out: a point, a re-serve or a drawn rally).")] = None,
-    seed: Annotated[int, typer.Option("--seed", help="Seed of the first game.")] = 0,
-    fps: Annotated[int | None, typer.Option("--fps", help="Frames per second; one frame per game step, so 60 is "
-                                            "real time. Default 60 (mp4), 50 (gif).")] = None,
-    size: Annotated[str | None, typer.Option("--size", help="WIDTHxHEIGHT of the video, even numbers. Default: the "
-                                             "game's own (pong 800x400).")] = None,
-    fmt: Annotated[str | None, typer.Option("--format", help="mp4 (H.264, plays in browsers) or gif. Default: from "
-                                            "--out, else mp4.")] = None,
-    hold: Annotated[float, typer.Option("--hold", help="Seconds the final frame stays on screen.")] = 1.0,
+    games: Annotated[int, typer.Option("--games", "-n", min=1, max=1_000, help="Games to record, one file each; "
+                                       "game i uses seed --seed + i.")] = 1,
+    seconds: Annotated[float | None, typer.Option("--seconds", min=0.0, max=86_400.0, help="Stop each game after S "
+                                                  "seconds of video (S x fps game steps). Default 60 when no other "
+                                                  "limit is given; 0 records the whole game (it ends by its own "
+                                                  "rules: pong's time limit is 5 minutes).")] = None,
+    max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=10_000_000, help="Stop each game after "
+                                                  "N steps instead.")] = None,
+    max_rallies: Annotated[int | None, typer.Option("--max-rallies", min=1, max=100_000, help="Stop each game after "
+                                                    "N rallies instead (serves played out: a point, a re-serve or a "
+                                                    "drawn rally).")] = None,
+    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the first game.")] = 0,
+    fps: Annotated[int | None, typer.Option("--fps", help="Frames per second; one frame per game "
+                                            "step, so 60 is real time. Default 60 (mp4), 50 (gif).")] = None,
+    size: Annotated[str | None, typer.Option("--size", metavar="WxH", help="WIDTHxHEIGHT of the video, even "
+                                             "numbers. Default: the game's own (pong 800x400).")] = None,
+    fmt: Annotated[str | None, typer.Option("--format", metavar="mp4|gif", help="mp4 (H.264, plays in browsers) or "
+                                            "gif. Default: from --out, else mp4.")] = None,
+    hold: Annotated[float, typer.Option("--hold", min=0.0, max=60.0, help="Seconds the final frame stays on "
+                                        "screen.")] = 1.0,
     out: Annotated[Path | None, typer.Option("--out", "-o", help="A .mp4/.gif file (one game), or a folder for "
                                              "one file per game. Default <home>/videos/<run>-<name>-vs-<opponent>"
                                              "-s<seed>.mp4.")] = None,
@@ -102,31 +160,35 @@ def record(
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Record games as mp4 (or gif): each frame shows the score, both players' names and the step."""
+    """Record games as mp4 (or gif): each frame shows the score, both players' names and the step.
+
+    A game plays until it is won, until its own time limit, or until the recording's limit: by default 60 seconds
+    of video (--seconds 0 for the whole game; --max-steps or --max-rallies instead). The last frame and the printed
+    line say which ended it."""
     from ..record import VideoSettings, check_writable, parse_size
 
     if (ckpt is None) == (game_id is None):
         raise MarlError("say what to record: --ckpt POLICY (new games) or --game ID (a stored game)")
     if game_id is not None:
         given = [flag for flag, value in (("--vs", vs), ("--env", env), ("--max-steps", max_steps),
-                                          ("--max-rallies", max_rallies)) if value is not None]
+                                          ("--max-rallies", max_rallies), ("--seconds", seconds)) if value is not None]
         given += ["--games"] * (games != 1) + ["--seed"] * (seed != 0)
         if given:
             verb = "does" if len(given) == 1 else "do"
             raise MarlError(f"--game replays a stored game as it was played: {', '.join(given)} {verb} not apply")
-    if games < 1:
-        raise MarlError(f"--games must be at least 1, not {games}")
     fmt = _format_of(fmt, out)
     if fps is None:
         fps = 50 if fmt == "gif" else 60
     settings = VideoSettings(fps=fps, size=parse_size(size), fmt=fmt, hold=hold)
+    max_steps, max_rallies, stop_label, default_cap = _limits(seconds, max_steps, max_rallies, fps)
 
     league = open_league(home, db)
     try:
         if game_id is not None:
             job = _replay_job(league, game_id, out, fmt)
         else:
-            job = _play_job(league, ckpt, vs, env, games, seed, max_steps, max_rallies, device, out, fmt)  # type: ignore[arg-type]
+            job = _play_job(league, ckpt, vs, env, games, seed, max_steps, max_rallies, device, out, fmt,  # type: ignore[arg-type]
+                            stop_label)
     finally:
         league.close()
     for path in job.paths:
@@ -140,7 +202,7 @@ def record(
                 rec = job.run(i, path, settings, tick)
             done.append({**rec.to_json(), **job.extra})
             if not json_out:
-                console.print(_line(rec), markup=False)
+                console.print(_line(rec, default_cap), markup=False)
     except KeyboardInterrupt:
         err_console.print(f"interrupted: {len(done)} of {len(job.paths)} videos written, no partial file left")
         raise typer.Exit(130) from None
@@ -174,7 +236,7 @@ def _replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> _Job:
 
 def _play_job(league: Any, ckpt: str, vs: str | None, env: str | None, games: int, seed: int,
               max_steps: int | None, max_rallies: int | None, device: str, out: Path | None,
-              fmt: str) -> _Job:
+              fmt: str, stop_label: str | None = None) -> _Job:
     """Seat the players, load their networks once, and play game i with seed ``seed + i``."""
     from ..arena import Game
     from ..envs import get_env
@@ -198,9 +260,13 @@ def _play_job(league: Any, ckpt: str, vs: str | None, env: str | None, games: in
 
     def run(i: int, path: Path, settings: VideoSettings, tick: Tick) -> Recording:
         return record_game(spec, policies(seed + i), Game(seed + i, seats), path, settings, env_options=env_options,
-                           labels=lu.names, stop_when=stop, on_frame=tick, renderer=renderer)
+                           labels=lu.names, stop_when=stop, on_frame=tick, renderer=renderer, stop_label=stop_label)
+
+    limit = getattr(spec.config(**env_options), "max_steps", None) or None  # the game's own time limit, if any
 
     def frames(i: int, settings: VideoSettings) -> int | None:
-        return max_steps + 1 + settings.hold_frames if max_steps is not None else None
+        """At most this many frames (the bar's total): the serve, one per step up to the nearer limit, the hold."""
+        caps = [c for c in (max_steps, limit) if c is not None]
+        return min(caps) + 1 + settings.hold_frames if caps else None
 
     return _Job(_targets(out, league.home, [lu.file_stem(seed + i) for i in range(games)], fmt), run, frames)

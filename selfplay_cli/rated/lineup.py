@@ -1,11 +1,12 @@
-"""Who plays which seat when a user names one policy (``marl record --ckpt ep90 [--vs POLICY]``).
+"""Who plays which seat when a user names one policy (``marl record --ckpt s6M [--vs POLICY]``).
 
-A run that trains one network per seat files its snapshots as ``epN-<seat>`` (``ep90-left``, ``ep90-right``), the
-seat's learner in the snapshot's league metadata. So a name can mean a *team*:
+A run that trains one network per seat files its snapshots as ``<name>-<seat>`` (``s6M-left``, ``s6M-right``),
+the seat's learner in the snapshot's league metadata. So a name can mean a *team* (see
+:mod:`selfplay_cli.league.names`, where names are resolved the same way for every command):
 
-* ``ep90`` (or ``run/ep90``), when no single snapshot has that name but ``ep90-<seat>`` exists for every seat in
-  one run, is that team, each on its own seat: seed 000's left ep90 against right ep90;
-* ``ep90-left`` alone plays its own seat; without ``--vs`` its teammates from the same snapshot take the other
+* ``s6M`` (or ``run/s6M``), when no single snapshot has that name but ``s6M-<seat>`` exists for every seat in
+  one run, is that team, each on its own seat: left s6M against right s6M;
+* ``s6M-left`` alone plays its own seat; without ``--vs`` its teammates from the same snapshot take the other
   seats, so naming either half of a team records the same game;
 * any other player (a one-network snapshot, a tag, ``latest``, a bot) takes the first seat and, without ``--vs``,
   meets the game's ``cpu`` player (or its first scripted player) in the others.

@@ -51,9 +51,17 @@ class VideoSettings:
         return round(self.hold * self.fps)
 
 
+ENDED_RESULT = "result"  # the game was won (or drawn) by its rules
+ENDED_TIME_LIMIT = "time limit"  # the game's own time limit ended it (pong: max_steps), the score decided
+ENDED_STOPPED = "stopped"  # a limit of the recording (--seconds, --max-steps, --max-rallies) cut it short
+
+
 @dataclass(frozen=True)
 class Recording:
-    """A finished video: where it is, the game it shows and how long rendering and encoding took."""
+    """A finished video: where it is, the game it shows and how long rendering and encoding took.
+
+    ``ended`` says how the game ended: :data:`ENDED_RESULT`, :data:`ENDED_TIME_LIMIT` (the game's own rule) or
+    :data:`ENDED_STOPPED` (cut by the recording's limit, named in ``stopped_by``, e.g. ``--seconds 60``)."""
 
     path: Path
     result: GameResult
@@ -61,14 +69,22 @@ class Recording:
     seconds: float
     settings: VideoSettings
     size: tuple[int, int]  # width, height of the file's frames
+    ended: str = ENDED_RESULT
+    stopped_by: str | None = None
+
+    @property
+    def video_seconds(self) -> float:
+        """How long the video plays: its frames at its frame rate (the held final frame included)."""
+        return self.frames / self.settings.fps
 
     def to_json(self) -> dict[str, Any]:
         r = self.result
         return {
             "path": str(self.path), "env": r.env, "seed": r.seed, "players": list(r.players),
             "scores": list(r.scores), "outcome": list(r.outcome), "length": r.length, "truncated": r.truncated,
-            "frames": self.frames, "fps": self.settings.fps, "size": f"{self.size[0]}x{self.size[1]}",
-            "format": self.settings.fmt, "seconds": round(self.seconds, 3),
+            "ended": self.ended, "stopped_by": self.stopped_by,
+            "frames": self.frames, "fps": self.settings.fps, "video_seconds": round(self.video_seconds, 2),
+            "size": f"{self.size[0]}x{self.size[1]}", "format": self.settings.fmt, "seconds": round(self.seconds, 3),
             "frames_per_second": round(self.frames / self.seconds, 1) if self.seconds > 0 else None,
         }
 
@@ -111,12 +127,15 @@ def record_game(
     check: Callable[[GameResult], None] | None = None,
     on_frame: Callable[[int], None] | None = None,
     renderer: Any = None,
+    stop_label: str | None = None,
 ) -> Recording:
     """Play ``game`` between ``policies`` and write it to ``path``; returns what was written.
 
     ``labels`` are the names shown per seat (default: the policies' ids by seat). ``check(result)`` may raise to
     reject the game before the file takes its name (replays use it). ``on_frame(n)`` is told of every ``n``
-    frames written (a progress bar). ``renderer`` reuses one renderer across games.
+    frames written (a progress bar). ``renderer`` reuses one renderer across games. ``stop_label`` names the limit
+    behind ``stop_when`` (e.g. ``--seconds 60``): the last frame of a game it cut says ``stopped (--seconds 60)``,
+    of a game its own time limit ended ``time limit``, of a game won ``final``.
     """
     spec = get_env(env) if isinstance(env, str) else env
     settings = settings or VideoSettings()
@@ -125,11 +144,19 @@ def record_game(
     start = time.perf_counter()
     with VideoWriter(path, fps=settings.fps, size=settings.size, fmt=settings.fmt) as writer:
         last: list[np.ndarray] = []  # the latest frame only
+        ending = [ENDED_RESULT]
 
         def draw(core: BatchedCore, slot: int, index: int, ended: bool) -> None:
             step = int(core.steps[slot])
-            # the last frame says whether the game was over (won) or cut short (step cap, --max-steps)
-            tail = "" if not ended else " · final" if core.terminated[slot] else " · stopped"
+            tail = ""
+            if ended:  # the last frame says how the game ended: won, its own time limit, or cut by the recording
+                if core.terminated[slot]:
+                    tail = " · final"
+                elif core.truncated[slot]:
+                    ending[0], tail = ENDED_TIME_LIMIT, " · time limit"
+                else:
+                    ending[0] = ENDED_STOPPED
+                    tail = f" · stopped ({stop_label})" if stop_label else " · stopped"
             frame = renderer.draw(core, slot, names, f"step {step}{tail}")
             writer.write(frame)
             if on_frame is not None:
@@ -147,7 +174,8 @@ def record_game(
             check(result)
     height, width = writer.frame_shape[:2]  # type: ignore[index]
     return Recording(path=Path(path), result=result, frames=writer.frames, seconds=time.perf_counter() - start,
-                     settings=settings, size=settings.size or (width, height))
+                     settings=settings, size=settings.size or (width, height), ended=ending[0],
+                     stopped_by=stop_label if ending[0] == ENDED_STOPPED else None)
 
 
 def record_replay(
