@@ -124,7 +124,7 @@ def record(
     ckpt: Annotated[str | None, typer.Option("--ckpt", metavar="POLICY", help="Policy to record: a snapshot "
                                              "(s6M-left, pong-1/s6M-left), a tag, latest, best, an id or a scripted "
                                              "player. A run with one network per seat: s6M is the team (s6M-left vs "
-                                             "s6M-right).")] = None,
+                                             "s6M-right); with --vs, one video per member.")] = None,
     vs: Annotated[str | None, typer.Option("--vs", metavar="POLICY", help="Opponent (same forms). Default: the "
                                            "snapshot's teammates from the same moment, else cpu.")] = None,
     game_id: Annotated[int | None, typer.Option("--game", metavar="ID", min=1, help="Re-render game ID of the "
@@ -241,26 +241,28 @@ def _play_job(league: Any, ckpt: str, vs: str | None, env: str | None, games: in
     from ..arena import Game
     from ..envs import get_env
     from ..policies import ScriptedPolicy
-    from ..rated.lineup import lineup
+    from ..rated.lineup import lineups
     from ..rated.match import env_options_of, load_player
     from ..record import record_game, renderer_of, stop_rule
 
-    lu = lineup(league, ckpt, vs, env)
-    spec = get_env(lu.env)
+    ups = lineups(league, ckpt, vs, env)  # one, or one per member of a team recorded against --vs
+    spec = get_env(ups[0].env)
     renderer = renderer_of(spec)
-    networks = {p.id: load_player(league, p, device=device) for p in lu.players if not p.is_bot}
+    networks = {p.id: load_player(league, p, device=device) for lu in ups for p in lu.players if not p.is_bot}
     env_options = env_options_of(*networks.values())
     stop = stop_rule(spec, env_options, max_steps, max_rallies)
-    seats = tuple(range(len(lu.players)))
+    seats = tuple(range(len(ups[0].players)))
 
-    def policies(game_seed: int) -> list[Any]:
+    def policies(lu: Any, game_seed: int) -> list[Any]:
         # bots draw from generators seeded by the game, so a game looks the same whatever was recorded before it
         return [networks[p.id] if not p.is_bot else ScriptedPolicy(p.env, p.name, seed=game_seed * len(seats) + s)
                 for s, p in enumerate(lu.players)]
 
     def run(i: int, path: Path, settings: VideoSettings, tick: Tick) -> Recording:
-        return record_game(spec, policies(seed + i), Game(seed + i, seats), path, settings, env_options=env_options,
-                           labels=lu.names, stop_when=stop, on_frame=tick, renderer=renderer, stop_label=stop_label)
+        lu, game_seed = ups[i // games], seed + i % games
+        return record_game(spec, policies(lu, game_seed), Game(game_seed, seats), path, settings,
+                           env_options=env_options, labels=lu.names, stop_when=stop, on_frame=tick, renderer=renderer,
+                           stop_label=stop_label)
 
     limit = getattr(spec.config(**env_options), "max_steps", None) or None  # the game's own time limit, if any
 
@@ -269,4 +271,5 @@ def _play_job(league: Any, ckpt: str, vs: str | None, env: str | None, games: in
         caps = [c for c in (max_steps, limit) if c is not None]
         return min(caps) + 1 + settings.hold_frames if caps else None
 
-    return _Job(_targets(out, league.home, [lu.file_stem(seed + i) for i in range(games)], fmt), run, frames)
+    stems = [lu.file_stem(seed + i) for lu in ups for i in range(games)]
+    return _Job(_targets(out, league.home, stems, fmt), run, frames)

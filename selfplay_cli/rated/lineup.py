@@ -11,7 +11,9 @@ the seat's learner in the snapshot's league metadata. So a name can mean a *team
 * any other player (a one-network snapshot, a tag, ``latest``, a bot) takes the first seat and, without ``--vs``,
   meets the game's ``cpu`` player (or its first scripted player) in the others.
 
-``--vs`` names the opponent the same way; a team given to ``--vs`` contributes its players for the other seats.
+``--vs`` names the opponent the same way; a team given to ``--vs`` contributes its players for the other seats. A
+team given to ``--ckpt`` with ``--vs`` records each member against it (:func:`lineups`), as ``marl match`` plays
+each member.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from ..errors import MarlError
 from ..league.names import Team, find_team, resolve_or_team, seat_of, teammates
 from ..league.store import League, PlayerRow
 
-__all__ = ["DEFAULT_OPPONENT", "Lineup", "find_team", "lineup", "safe_filename", "seat_of", "teammates"]
+__all__ = ["DEFAULT_OPPONENT", "Lineup", "find_team", "lineup", "lineups", "safe_filename", "seat_of", "teammates"]
 
 DEFAULT_OPPONENT = "cpu"
 
@@ -78,6 +80,25 @@ def lineup(league: League, ckpt: str, vs: str | None = None, env: str | None = N
             raise MarlError(f"'{ckpt}' is a team of {len(me)} snapshots, one per seat: to play one of them against "
                             f"--vs {vs}, name it ({names})")
         return Lineup(me[0].env, tuple(me), focus=0)
+    return _seat(league, me, vs)
+
+
+def lineups(league: League, ckpt: str, vs: str | None = None, env: str | None = None) -> list[Lineup]:
+    """The games ``marl record --ckpt CKPT [--vs VS]`` records: one lineup, or, for a team with ``--vs``, one per
+    member, each on its own seat against ``vs`` (as ``marl match TEAM VS`` plays each member)."""
+    if vs is None:
+        return [lineup(league, ckpt, vs, env)]
+    if env is not None:
+        get_env(env)
+    _bots_ready(league, env)
+    me = _player_or_team(league, ckpt, env)
+    if isinstance(me, list):
+        return [_seat(league, member, vs) for member in me]
+    return [_seat(league, me, vs)]
+
+
+def _seat(league: League, me: PlayerRow, vs: str | None) -> Lineup:
+    """``me`` on its own seat (a per-seat learner's, else the first), against ``vs``, its teammates or cpu."""
     spec = get_env(me.env)
     agents = spec.agents
     seat = seat_of(me, agents)
