@@ -373,8 +373,12 @@ def read_only(scratch: Path) -> tuple[bool, str]:
         for p in [home, *home.rglob("*")]:
             p.chmod(p.stat().st_mode | 0o200)
     held = ladder.code == 0 and listing.code == 0 and "s0-left" in listing.out and write.code != 0 and write.one_line
-    return held, (f"{how}: ladder exit {ladder.code}, list exit {listing.code} ({listing.out.count('s0-left')} "
-                  f"snapshot found); a write: exit {write.code}, {write.line[-70:]}")
+    try:
+        listed = len(json.loads(listing.out))
+    except ValueError:
+        listed = 0
+    return held, (f"{how}: ladder exit {ladder.code}, list exit {listing.code} ({listed} snapshots listed); a write: "
+                  f"exit {write.code}, {write.line[-70:]}")
 
 
 @fault("reading a league that is not there: ladder, checkpoint list --home new")

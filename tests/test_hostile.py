@@ -331,6 +331,27 @@ def test_good_names_pass(name):
     assert check_name("run name", name) == name
 
 
+def test_runs_of_older_leagues_with_looser_names_keep_working(tmp_path):
+    """An older marl allowed spaces and accents in run names: such a run still takes new snapshots (a resumed run),
+    while a new run must be a league name in full."""
+    home = tmp_path / "league"
+    make_league(home).close()
+    db = sqlite3.connect(home / "league.db")
+    db.execute("insert into runs (name, env, config, status, created_at, updated_at) values "
+               "('my run', 'pong', '{}', 'killed', '2024-01-01', '2024-01-01')")
+    db.commit()
+    db.close()
+    with League.open(home) as league:
+        rel = snapshot_relpath("my run", "s1M")
+        save_snapshot(home / rel, build_network((8, 6), 3, Arch(hidden=(16,)), seed=4), meta_of("s1M", run="my run"))
+        assert league.add_snapshot(env="pong", run="my run", name="s1M", path=rel).full_name == "my run/s1M"
+        with pytest.raises(LeagueError, match="invalid run name"):
+            league.create_run("my other run", "pong", {})
+        for bad in ("..", "a/b", "x\x1b[0m"):
+            with pytest.raises(LeagueError):
+                snapshot_relpath(bad, "s1M")
+
+
 def test_traversal_in_import_name_writes_nothing_anywhere(tmp_path, capsys):
     home = tmp_path / "home"
     make_league(home).close()

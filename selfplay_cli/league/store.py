@@ -68,6 +68,8 @@ __all__ = [
     "LeagueIOError",
     "PlayerRow",
     "RunRow",
+    "check_existing_name",
+    "check_name",
 ]
 
 SCHEMA_VERSION = 1
@@ -303,6 +305,16 @@ def check_name(what: str, value: object) -> str:
 
 
 _check_name = check_name
+
+
+def check_existing_name(what: str, value: object) -> str:
+    """The looser check for a name already in a league (a run an older marl created, which :func:`check_name`
+    might refuse for a space or an accent): still a plain folder name, never ``.``/``..``, no separator, nothing
+    unprintable. New names always go through :func:`check_name`."""
+    if (not isinstance(value, str) or not value or len(value) > _MAX_NAME or value in (".", "..")
+            or any(c in value for c in "/\\") or not value.isprintable()):
+        raise LeagueError(f"invalid {what} {shown(value)}: not a plain name")
+    return value
 
 
 def _is_locked(exc: BaseException) -> bool:
@@ -746,8 +758,8 @@ class League:
         for item in items:
             _check_name("env", item["env"])
             _check_name("snapshot name", item["name"])
-            if item.get("run") is not None:
-                _check_name("run name", item["run"])
+            if item.get("run") is not None:  # a new run is checked like any new name; an existing one stays usable
+                (check_name if run_config is not None else check_existing_name)("run name", item["run"])
         items = [{**item, "sha256": self._file_hash(item)} for item in items]
 
         def insert(s: Session, env: str, run: str | None, name: str, path: str, sha256: str, step: int = 0,

@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 from ..errors import MarlError
 from ..files import temp_path
-from ..league.store import League, LeagueError, LeagueIOError, PlayerRow, check_name
+from ..league.store import League, LeagueError, LeagueIOError, PlayerRow, check_existing_name, check_name
 
 if TYPE_CHECKING:
     from ..policies.snapshot import Snapshot
@@ -24,9 +24,10 @@ SNAPSHOTS = "snapshots"
 
 
 def snapshot_relpath(run: str, name: str) -> str:
-    """``snapshots/<run>/<name>.safetensors``, the file of a snapshot relative to the league home; ``run`` and
-    ``name`` are checked to be league names first (so the path is always a plain one under the home)."""
-    check_name("run name", run)
+    """``snapshots/<run>/<name>.safetensors``, the file of a snapshot relative to the league home; ``name`` is
+    checked to be a league name and ``run`` a plain folder name first (a run of an older league may hold a space,
+    a new run is checked in full when it is created), so the path is always a plain one under the home."""
+    check_existing_name("run name", run)
     check_name("snapshot name", name)
     return f"{SNAPSHOTS}/{run}/{name}.safetensors"
 
@@ -88,6 +89,8 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
     meta = snap.meta
     run = run or meta.run or "imported"
     name = name or meta.name
+    if league.get_run(run) is None:
+        check_name("run name", run)  # a new run: a league name in full
     rel = snapshot_relpath(run, name)  # refuses names that are not league names (/, .., control characters)
     dest = league.home_path(*Path(rel).parts)  # and a run folder that is a symlink leading out of the home
     for p in league.players(env=meta.env, kind="snapshot"):
