@@ -623,7 +623,10 @@ class League:
                     return fn(s)
             except OperationalError as exc:
                 if not (self.is_sqlite and _is_locked(exc)):
-                    raise self._io_error(exc) from exc
+                    error = self._io_error(exc)
+                    if error is exc:
+                        raise
+                    raise error from exc
                 if attempt == _LOCK_RETRIES:
                     raise LeagueError(
                         f"league database {self._where} stayed locked by another process; try again"
