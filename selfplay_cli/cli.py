@@ -321,9 +321,15 @@ def _bad_value(e: click_exc.BadParameter, args: list[str]) -> str | None:
     if message.startswith("must be "):
         return f"{name} {message}"
     low, high = getattr(p, "min", None), getattr(p, "max", None)
+    value = _given(args, [*p.opts, *getattr(p, "secondary_opts", [])])
+    try:
+        nonfinite = value is not None and not math.isfinite(float(value))
+    except ValueError:
+        nonfinite = False
+    if nonfinite:  # NaN fails every comparison: say what is wrong with it, not which bound it "broke"
+        return f"{name} must be a finite number, not {value}"
     for words, wanted in _WANTS:
         if words in message:
-            value = _given(args, [*p.opts, *getattr(p, "secondary_opts", [])])
             what = wanted.format(min=f"{low:,}" if isinstance(low, int) else low,
                                  max=f"{high:,}" if isinstance(high, int) else high)
             return f"{name} must be {what}" + (f", not {value}" if value is not None else "")
