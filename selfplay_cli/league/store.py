@@ -46,7 +46,7 @@ from sqlalchemy.exc import ArgumentError, DBAPIError, IntegrityError, NoSuchModu
 from sqlalchemy.orm import Session, aliased, raiseload, sessionmaker
 from sqlalchemy.pool import StaticPool
 
-from selfplay_cli.errors import MarlError
+from selfplay_cli.errors import EXIT_IO, MarlError, MarlIOError
 from selfplay_cli.files import file_sha256
 from selfplay_cli.league.models import Base, Game, GameSeat, Match, Meta, Player, Run, Tag, utcnow
 from selfplay_cli.stats.elo import elo_update
@@ -98,11 +98,11 @@ class LeagueError(MarlError):
     """A user-facing league problem (unknown or duplicate name, bad database, version mismatch)."""
 
 
-class LeagueIOError(LeagueError):
-    """The league's database could not be read or written for a reason outside marl (disk full, I/O error, file size
-    limit, read-only file system, permissions); the message names the database and the cause."""
+class LeagueIOError(LeagueError, MarlIOError):
+    """The league's database or files could not be read or written for a reason outside marl (disk full, I/O error,
+    file size limit, read-only file system, permissions); the message names the path and the cause."""
 
-    exit_code = 4  # selfplay_cli.errors.EXIT_IO
+    exit_code = EXIT_IO
 
 
 _IO_REASONS = ("disk i/o error", "database or disk is full", "readonly database", "unable to open database file",
