@@ -126,9 +126,13 @@ def train(
     from ..algos.dqn import seed000_config
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
+    from ..league.store import check_name
     from ..train.config import TrainConfig, save_run_config
     from ..train.loop import Trainer
 
+    for what, name in (("run name", run), ("run name", resume)):
+        if name is not None:
+            check_name(what, name)  # before anything exists: a refused name leaves no league behind
     league = open_league(home, db)
     try:
         if resume is not None:

@@ -585,18 +585,33 @@ class Trainer:
 
 @contextmanager
 def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM are held (delivered when the block ends) where the platform allows it: a snapshot moment
-    is never cut by Ctrl-C or a polite kill. SIGKILL cannot be held; :meth:`Trainer.restore` deals with it."""
-    held = {signal.SIGINT, signal.SIGTERM}
+    """SIGINT and SIGTERM wait until the block is done, then act as they would have: a snapshot moment is never cut
+    by Ctrl-C or a polite kill. (A signal mask would not do: the process has other threads, and a signal delivered
+    to one of them still runs Python's handler in this one.) SIGKILL cannot wait; :meth:`Trainer.restore` deals
+    with it. Outside the main thread signals cannot be handled here, and the block runs as it is."""
+    caught: list[int] = []
+
+    def hold(signum: int, frame: Any) -> None:
+        caught.append(signum)
+
     try:
-        old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
-    except (AttributeError, ValueError, OSError):  # no POSIX signal masks here: nothing to hold
+        previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, signal.SIGTERM)}
+    except ValueError:  # not the main thread
         yield
         return
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    for sig in dict.fromkeys(caught):
+        handler = previous[sig]
+        if callable(handler):
+            handler(sig, None)
+        elif sig == signal.SIGINT and handler != signal.SIG_IGN:
+            raise KeyboardInterrupt
+        elif handler == signal.SIG_DFL:
+            signal.raise_signal(sig)
 
 
 def _alive(pid: int) -> bool:
