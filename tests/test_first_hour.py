@@ -401,3 +401,12 @@ def test_readme_documents_the_exit_codes():
     readme = (ROOT / "README.md").read_text()
     table = dict(re.findall(r"^\| (\d+) \| ([^|]+) \|$", readme, flags=re.M))
     assert set(map(int, table)) == set(EXIT_CODES)
+
+
+def test_options_that_a_resumed_run_would_ignore_are_refused(home, capsys):
+    code, out, err = run(capsys, "train", "pong", "--steps", "512", "--games", "4", "--eval-games", "0",
+                         "--env-option", "points_to_win=1", "--run", "r", "-q")
+    assert code == 0, err
+    one_line_error(*run(capsys, "train", "--resume", "r", "--minutes", "0.1", "--games", "8"),
+                   "--resume continues run 'r' under the configuration it was started with: --games, --minutes "
+                   "cannot change it")

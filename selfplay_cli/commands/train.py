@@ -53,6 +53,10 @@ def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:
             settings[key] = value
 
 
+RESUME_OPTIONS = frozenset({"resume", "env", "device", "quiet", "json_out", "home", "db"})
+"""What may be typed with --resume: a resumed run keeps the configuration it was started with."""
+
+
 def train(
     ctx: typer.Context,
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
@@ -135,7 +139,14 @@ def train(
             check_name(what, name)  # before anything exists: a refused name leaves no league behind
     league = open_league(home, db)
     try:
+        typed = {name for name in ctx.params  # options the user typed (not defaults)
+                 if getattr(ctx.get_parameter_source(name), "name", "") in ("COMMANDLINE", "ENVIRONMENT")}
         if resume is not None:
+            ignored = sorted(typed - RESUME_OPTIONS)
+            if ignored:
+                flags = ", ".join("--" + name.replace("_", "-") for name in ignored)
+                raise MarlError(f"--resume continues run '{resume}' under the configuration it was started with: "
+                                f"{flags} cannot change it (only --device, --quiet, --json, --home, --db apply)")
             old = league.get_run(resume)
             if old is None:
                 raise MarlError(f"no run named '{resume}' to resume")
@@ -155,8 +166,6 @@ def train(
                 raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
             if preset not in (None, "seed000"):
                 raise MarlError(f"unknown --preset '{preset}'; available: seed000")
-            typed = {name for name in ctx.params  # options the user typed (not defaults), which beat --config
-                     if getattr(ctx.get_parameter_source(name), "name", "") in ("COMMANDLINE", "ENVIRONMENT")}
             settings = TrainConfig(env=spec.name, run=run).to_dict()  # the defaults
             if preset == "seed000":
                 settings["algo"] = "dqn"
