@@ -385,12 +385,13 @@ def test_resolve_names(league: League) -> None:
     with pytest.raises(LeagueError) as exc:
         resolve(league, "ep91", env=ENV)
     msg = _one_line(exc)
-    assert msg.startswith("no policy named 'ep91' in pong; known: ")
-    known = msg.split("known: ", 1)[1].split(", ")
-    assert known[0] in ("ep90", "ep10") and "random" in known and "r1/ep90" in known and len(known) <= 11
+    assert msg.startswith("no policy named 'ep91' in pong; closest: ")  # closest first, then the newest
+    closest = msg.split("closest: ", 1)[1].split(";")[0].split(", ")
+    assert closest[0] in ("ep90", "ep10") and "r1/ep90" in closest and len(closest) <= 5
+    assert "random" in msg and "..." not in msg
     with pytest.raises(LeagueError) as exc:
         resolve(league, "nothing")
-    assert "in the league; known:" in _one_line(exc)
+    assert "in the league; " in _one_line(exc) and "newest: r2/ep90" in _one_line(exc)
     for bad in ("r3/ep90", "r1/ep11", "999", "#999", ""):
         with pytest.raises(LeagueError):
             resolve(league, bad)
