@@ -126,13 +126,14 @@ class PPOLearner:
         delta_t = r_t + gamma * (1 - done_t) * V(s_{t+1}) - V(s_t)."""
         cfg = self.cfg
         _, next_value = self.net(self._tensor(next_obs))
+        next_values = torch.cat((self.values[1:], next_value[None]))  # V(s_{t+1}) for every t
+        live = 1.0 - self.dones
+        deltas = self.rewards + cfg.gamma * next_values * live - self.values  # all steps at once; only A is a recursion
+        carry = cfg.gamma * cfg.gae_lambda * live
         adv = torch.zeros_like(self.rewards)
         last = torch.zeros(self.n_slots, device=self.device)
         for t in reversed(range(cfg.rollout_steps)):
-            nv = next_value if t == cfg.rollout_steps - 1 else self.values[t + 1]
-            live = 1.0 - self.dones[t]
-            delta = self.rewards[t] + cfg.gamma * nv * live - self.values[t]
-            last = delta + cfg.gamma * cfg.gae_lambda * live * last
+            last = deltas[t] + carry[t] * last
             adv[t] = last
         return adv, adv + self.values
 
