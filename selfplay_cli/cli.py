@@ -46,7 +46,7 @@ app = typer.Typer(
     epilog="Exit codes: 0 success (gate passed, SPRT accepted H1); 1 gate failed or SPRT accepted H0; 2 a mistake "
     "in the command (bad option or value, unknown name, bad file); 3 SPRT undecided; 4 I/O error (disk full, "
     "permission denied, read-only, file size limit); 5 internal error (a bug: the traceback goes to a file); "
-    "130 interrupted.",
+    "130 interrupted; 143 stopped by SIGTERM.",
 )
 
 
@@ -229,17 +229,26 @@ def _path_in_frames(exc: BaseException) -> str | None:
     return None
 
 
-def io_failure(exc: BaseException) -> str | None:
-    """One line for an exception that is an I/O failure (naming the path and the cause, and what to do); None
-    for anything else."""
+_NOT_FOUND = ("ENOENT", "ENOTDIR", "EISDIR", "ENAMETOOLONG")  # a path that is not what it should be: a user error
+
+
+def io_failure(exc: BaseException) -> tuple[int, str] | None:
+    """(exit code, one line) for an exception that is an I/O or resource failure, naming the path and the cause
+    and what to do: 4 (disk full, permissions, read-only, size limit, out of memory), or 2 for a path that does not
+    exist or is not what it should be. None for anything else."""
     import errno as errno_mod
 
+    for e in _chain(exc):
+        if isinstance(e, MemoryError) or "can't allocate memory" in str(e).lower():
+            return EXIT_IO, ("out of memory: use fewer games at once (--games, --parallel) or a smaller network "
+                             f"({type(e).__name__}: {_one_line(str(e))[:120]})")
     for e in _chain(exc):
         if isinstance(e, OSError) and e.errno is not None:
             code = errno_mod.errorcode.get(e.errno, "")
             where = e.filename or _path_in_frames(exc) or "a file"
             hint = _IO_HINTS.get(code, "")
-            return f"{where}: {e.strerror or e} ({code or e.errno})" + (f"; {hint}" if hint else "")
+            line = f"{where}: {e.strerror or e} ({code or e.errno})" + (f"; {hint}" if hint else "")
+            return (EXIT_USAGE if code in _NOT_FOUND else EXIT_IO), line
     for e in _chain(exc):
         text = str(e).lower()
         code = next((c for words, c in _IO_WORDS.items() if words in text), None)
@@ -249,7 +258,7 @@ def io_failure(exc: BaseException) -> str | None:
         cause = str(getattr(e, "orig", None) or e).splitlines()[0].strip()
         if len(cause) > 160:
             cause = cause[:157] + "..."
-        return f"{where}: {cause}; {_IO_HINTS[code]}"
+        return EXIT_IO, f"{where}: {cause}; {_IO_HINTS[code]}"
     return None
 
 
@@ -390,8 +399,9 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as e:
         io = io_failure(e)
         if io is not None:
-            _err(f"marl: I/O error: {_one_line(io)}")
-            return EXIT_IO
+            code, line = io
+            _err(f"marl: {'I/O error' if code == EXIT_IO else 'error'}: {_one_line(line)}")
+            return code
         path = _crash_report(e, args)
         where = f"the traceback is in {path}" if path else "the traceback could not be written"
         _err(f"marl: internal error (a bug in marl, please report it): {type(e).__name__}: "

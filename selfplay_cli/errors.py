@@ -12,6 +12,7 @@ code  meaning
 4     I/O error: disk full, permission denied, read-only file system, file size limit (path and cause)
 5     internal error: a bug in marl (the traceback is written to a file whose path the line gives)
 130   interrupted (Ctrl-C)
+143   stopped by SIGTERM (``marl train``: the run is kept and can be resumed)
 ====  ==========================================================================================
 """
 
@@ -22,6 +23,7 @@ EXIT_UNDECIDED = 3
 EXIT_IO = 4
 EXIT_INTERNAL = 5
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
 
 EXIT_CODES: dict[int, str] = {
     EXIT_OK: "success; elo gate passed; match --sprt accepted H1",
@@ -31,6 +33,7 @@ EXIT_CODES: dict[int, str] = {
     EXIT_IO: "I/O error: disk full, permission denied, read-only, file size limit",
     EXIT_INTERNAL: "internal error (a bug): the traceback is written to a file",
     EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
+    EXIT_TERMINATED: "stopped by SIGTERM (marl train: the run can be resumed)",
 }
 
 
