@@ -9,7 +9,8 @@ code  meaning
 1     ``elo gate`` failed; ``match --sprt`` accepted H0 (a verdict, not an error)
 2     user error: a bad option or value, an unknown name, a bad or missing file given by the user
 3     ``match --sprt`` ended undecided (``--max-games`` reached)
-4     I/O error: disk full, permission denied, read-only file system, file size limit (path and cause)
+4     I/O or resource error: disk full, permission denied, read-only, file size limit (path and cause), out of
+      memory
 5     internal error: a bug in marl (the traceback is written to a file whose path the line gives)
 130   interrupted (Ctrl-C)
 143   stopped by SIGTERM (``marl train``: the run is kept and can be resumed)
@@ -30,7 +31,7 @@ EXIT_CODES: dict[int, str] = {
     EXIT_FAIL: "elo gate failed; match --sprt accepted H0",
     EXIT_USAGE: "user error: bad option or value, unknown name, bad file",
     EXIT_UNDECIDED: "match --sprt undecided (--max-games reached)",
-    EXIT_IO: "I/O error: disk full, permission denied, read-only, file size limit",
+    EXIT_IO: "I/O or resource error: disk full, permission denied, read-only, file size limit, out of memory",
     EXIT_INTERNAL: "internal error (a bug): the traceback is written to a file",
     EXIT_INTERRUPTED: "interrupted (Ctrl-C)",
     EXIT_TERMINATED: "stopped by SIGTERM (marl train: the run can be resumed)",

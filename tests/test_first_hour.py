@@ -352,6 +352,19 @@ def test_an_io_error_is_one_line_naming_the_path_and_cause(capsys, monkeypatch):
     monkeypatch.setattr(envs_cmd, "env_rows", torch_save)
     one_line_error(*run(capsys, "envs"), "/data/league/runs/r/state.pt", EXIT_IO)
 
+    def gone(*a, **k):  # a path that is not there is a mistake to fix, not a broken disk
+        raise FileNotFoundError(errno.ENOENT, "No such file or directory", "/no/such/file")
+
+    monkeypatch.setattr(envs_cmd, "env_rows", gone)
+    one_line_error(*run(capsys, "envs"), "marl: error: /no/such/file: No such file or directory", EXIT_USAGE)
+
+    def huge(*a, **k):
+        raise RuntimeError("[enforce fail at alloc_cpu.cpp:127] DefaultCPUAllocator: can't allocate memory: you tried "
+                           "to allocate 125829120000 bytes")
+
+    monkeypatch.setattr(envs_cmd, "env_rows", huge)
+    one_line_error(*run(capsys, "envs"), "out of memory: use fewer games at once", EXIT_IO)
+
 
 def test_a_full_disk_is_an_io_error(home, capsys):
     """A file size limit stands in for a full disk: the database cannot grow past it."""
