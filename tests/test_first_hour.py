@@ -128,7 +128,8 @@ def test_config_help_keeps_its_bracketed_sections(capsys, monkeypatch):
 def test_the_root_help_gives_the_exit_codes(capsys):
     code, out, err = run(capsys, "--help")
     text = squash(out)
-    for code_, meaning in ((3, "SPRT undecided"), (4, "I/O error"), (5, "internal error"), (130, "interrupted")):
+    for code_, meaning in ((3, "SPRT undecided"), (4, "I/O or resource error"), (5, "internal error"),
+                           (130, "interrupted"), (143, "stopped by SIGTERM")):
         assert f"{code_} {meaning}" in text
 
 
