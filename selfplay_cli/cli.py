@@ -65,14 +65,15 @@ def _root(
     """Self-play league training and Elo evaluation of multi-agent RL policies."""
 
 
-app.command("envs", help="List the registered games: agents, spaces, scripted players.")(envs_cmd.envs)
-app.command("train", help="Train agents by self-play (PPO or DQN); every snapshot joins the league, rated.")(
-    train_cmd.train)
+# Each command's help is its docstring: the first paragraph is its line in `marl --help`, the rest (what a team
+# name does, how long a recording is, exit codes) shows in `marl COMMAND --help`.
+app.command("envs")(envs_cmd.envs)
+app.command("train")(train_cmd.train)
 app.add_typer(checkpoint_cmd.app, name="checkpoint", help="List, inspect, tag, remove, export and import snapshots.")
-app.command("match", help="Play rated games between two policies (Elo difference, CI, LOS, SPRT).")(match_cmd.match)
+app.command("match")(match_cmd.match)
 app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence intervals; gate a model on its strength.")
 app.add_typer(league_cmd.app, name="league", help="The league: ladder, tournaments, score matrix, rating plots.")
-app.command("record", help="Record games as mp4/gif videos, or replay a stored game exactly.")(record_cmd.record)
+app.command("record")(record_cmd.record)
 
 
 # ---------------------------------------------------------------------------------------------------------------

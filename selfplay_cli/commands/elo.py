@@ -134,9 +134,12 @@ def gate(
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Is CANDIDATE at least --min-diff Elo stronger than BASELINE? Exit 0 (PASS) when the lower confidence bound
-    of Elo(CANDIDATE) - Elo(BASELINE) is at least --min-diff, 1 (FAIL) otherwise; 2 for a mistake in the command,
-    4 for an I/O error, 5 for an internal error, so that CI can tell a failed model from a broken run."""
+    """Is CANDIDATE at least --min-diff Elo stronger than BASELINE? A verdict from their head-to-head games.
+
+    Stored games are reused and the missing ones played (and stored). Exit 0 (PASS) when the one-sided lower
+    confidence bound of Elo(CANDIDATE) - Elo(BASELINE) is at least --min-diff, 1 (FAIL) otherwise; 2 for a
+    mistake in the command, 4 for an I/O error, 5 for an internal error, so that CI can tell a failed model from a
+    broken run."""
     if not 0.5 < confidence < 1:
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
     league = open_league(home, db)

@@ -133,10 +133,10 @@ def record(
     env: EnvOpt = None,
     games: Annotated[int, typer.Option("--games", "-n", min=1, max=1_000, help="Games to record, one file each; "
                                        "game i uses seed --seed + i.")] = 1,
-    seconds: Annotated[float | None, typer.Option("--seconds", min=0.0, max=86_400.0, help="Stop each game after S "
-                                                  "seconds of video (S x fps game steps). Default 60 when no other "
-                                                  "limit is given; 0 records the whole game (it ends by its own "
-                                                  "rules: pong's time limit is 5 minutes).")] = None,
+    seconds: Annotated[float | None, typer.Option("--seconds", metavar="S", min=0.0, max=86_400.0, help="Stop each "
+                                                  "game after S seconds of video (S x fps game steps). Default 60 "
+                                                  "when no other limit is given; 0 records the whole game (it ends by "
+                                                  "its own rules: pong's time limit is 5 minutes).")] = None,
     max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=10_000_000, help="Stop each game after "
                                                   "N steps instead.")] = None,
     max_rallies: Annotated[int | None, typer.Option("--max-rallies", min=1, max=100_000, help="Stop each game after "
@@ -160,7 +160,8 @@ def record(
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Record games as mp4 (or gif): each frame shows the score, both players' names and the step.
+    """Record games as mp4/gif videos (score, players' names and step on every frame), or replay a stored game
+    exactly.
 
     A game plays until it is won, until its own time limit, or until the recording's limit: by default 60 seconds
     of video (--seconds 0 for the whole game; --max-steps or --max-rallies instead). The last frame and the printed

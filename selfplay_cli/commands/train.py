@@ -126,7 +126,7 @@ def train(
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Train agents by self-play; every snapshot joins the league and is rated in a gauntlet."""
+    """Train agents by self-play (PPO or DQN); every snapshot joins the league and is rated in a gauntlet."""
     from ..algos.dqn import seed000_config
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
