@@ -252,6 +252,10 @@ def test_a_team_name_means_its_members_in_every_command(team_home, tmp_path, cap
     assert code == 0, err
     assert [r["players"] for r in json.loads(out)] == [[members[0], "cpu"], ["cpu", members[1]]]
 
+    code, out, err = run(capsys, "league", "tournament", "s6M", "cpu", "--games-per-pair", "2", "--json", "-q")
+    assert code == 0, err
+    assert set(members) <= {row["policy"] for row in json.loads(out) if row["games"]}
+
     # one verdict, one policy: the gate, tags, exports refuse a team in one line that names its members
     for args in (["elo", "gate", "s6M", "--vs", "cpu"], ["elo", "gate", "cpu", "--vs", "r2/s6M"],
                  ["checkpoint", "tag", "s6M", "champ"], ["checkpoint", "export", "s6M", str(tmp_path / "x.st")],

@@ -106,7 +106,8 @@ def ladder_cmd(
 @app.command("tournament")
 def tournament(
     players: Annotated[list[str] | None, typer.Argument(metavar="PLAYERS", help="Policies to include (snapshots, "
-                                                        "tags, ids, scripted players).")] = None,
+                                                        "teams of per-seat snapshots such as s6M: each member, tags, "
+                                                        "ids, scripted players).")] = None,
     env: EnvOpt = None,
     run: Annotated[str | None, typer.Option("--run", help="Include every snapshot of this run.")] = None,
     top: Annotated[int | None, typer.Option("--top", max=10_000, help="Include the top K of the current ladder.")]
@@ -127,6 +128,7 @@ def tournament(
     """Round robin (or gauntlet with --vs) over chosen policies, playing only the games still missing, then
     refit and print the ladder."""
     from ..league.ladder import ladder
+    from ..league.names import Team
     from ..league.pairs import plan_tournament
     from ..rated.match import load_player, run_match
 
@@ -134,7 +136,8 @@ def tournament(
         raise MarlError(f"--games-per-pair must be at least 2, not {games_per_pair}")
     league = open_league(home, db)
     try:
-        chosen = resolve_players(league, list(players or []), check_env(env)) if players else []
+        found = resolve_players(league, list(players or []), check_env(env), teams=True) if players else []
+        chosen = [m for f in found for m in (f.members if isinstance(f, Team) else (f,))]  # a team: its members
         env = env or (chosen[0].env if chosen else None)
         if run is not None:
             r = league.get_run(run)
