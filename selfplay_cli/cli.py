@@ -263,24 +263,25 @@ def io_failure(exc: BaseException) -> tuple[int, str] | None:
     return None
 
 
+def _remember_database(context: Any) -> None:
+    """SQLAlchemy's ``handle_error`` hook: note the database an error came from (by the error's id)."""
+    url = context.engine.url if context.engine is not None else None
+    if url is not None:
+        where = url.database if url.get_backend_name() == "sqlite" and url.database else url.render_as_string()
+        for e in (context.sqlalchemy_exception, context.original_exception):
+            if e is not None:
+                _DB_URLS[id(e)] = where
+
+
 def _watch_databases() -> None:
-    """Remember which database an SQLAlchemy error came from, so an I/O error can name it."""
+    """Remember which database an SQLAlchemy error came from, so an I/O error can name it (once per process)."""
     try:
         from sqlalchemy import event
         from sqlalchemy.engine import Engine
     except ImportError:  # pragma: no cover
         return
-
-    def remember(context: Any) -> None:
-        url = context.engine.url if context.engine is not None else None
-        if url is not None:
-            where = url.database if url.get_backend_name() == "sqlite" and url.database else url.render_as_string()
-            for e in (context.sqlalchemy_exception, context.original_exception):
-                if e is not None:
-                    _DB_URLS[id(e)] = where
-
-    if not event.contains(Engine, "handle_error", remember):
-        event.listen(Engine, "handle_error", remember)
+    if not event.contains(Engine, "handle_error", _remember_database):
+        event.listen(Engine, "handle_error", _remember_database)
 
 
 def _crash_report(exc: BaseException, argv: list[str]) -> str | None:
