@@ -387,8 +387,12 @@ def test_a_full_disk_is_an_io_error(home, capsys):
     assert str(home / "league.db") in proc.stderr and "Traceback" not in proc.stderr
 
 
-def test_a_crash_is_one_line_saying_it_is_a_bug_with_the_traceback_in_a_file(capsys, monkeypatch):
+def test_a_crash_is_one_line_saying_it_is_a_bug_with_the_traceback_in_a_file(capsys, monkeypatch, tmp_path):
+    import tempfile
+
     from selfplay_cli.commands import envs as envs_cmd
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
 
     def bug(*a, **k):
         return {}["no such key"]
@@ -397,11 +401,9 @@ def test_a_crash_is_one_line_saying_it_is_a_bug_with_the_traceback_in_a_file(cap
     code, out, err = run(capsys, "envs")
     one_line_error(code, out, err, "internal error (a bug in marl, please report it): KeyError", EXIT_INTERNAL)
     path = Path(re.search(r"the traceback is in (\S+)", err).group(1))
-    try:
-        report = path.read_text()
-        assert "Traceback" in report and "command: marl envs" in report and "no such key" in report
-    finally:
-        path.unlink()
+    assert path.parent == tmp_path
+    report = path.read_text()
+    assert "Traceback" in report and "command: marl envs" in report and "no such key" in report
 
 
 def test_an_interrupt_exits_130(capsys, monkeypatch):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import tempfile
 
 import numpy as np
 import pytest
@@ -419,8 +420,10 @@ def test_run_status_after_a_refused_device_an_interrupt_and_a_crash(tmp_path, ca
         raise RuntimeError("boom")
 
     monkeypatch.setattr(Trainer, "train", crashed)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))  # where the crash report goes
     code, out, err = run(capsys, *args, "--run", "b")  # a crash: one line saying it is a bug, exit 5
     assert code == 5 and "internal error" in err and "RuntimeError: boom" in err and err.count("\n") == 1
+    assert len(list(tmp_path.glob("marl-crash-*.txt"))) == 1
     with League.open(home) as league:
         assert league.get_run("a").status == "stopped"
         assert league.get_run("b").status == "failed"
