@@ -47,38 +47,14 @@ MAX_SEED = 2**32 - 1
 """Seeds are 32-bit: 0 to 4,294,967,295."""
 
 
-READING_COMMANDS = frozenset({"league ladder", "league matrix", "league plot", "checkpoint list", "checkpoint show",
-                              "checkpoint export", "elo fit"})
-"""Commands that only read the league: they open it read-only (a read-only league can be listed, and reading
-never creates a league where there was none)."""
-
-
-def _running_command() -> str:
-    """The verb being run, e.g. ``league ladder`` (empty outside a click context)."""
-    try:  # typer >= 0.22 carries its own copy of click; older ones use click itself
-        from typer._click.globals import get_current_context
-    except ImportError:
-        try:
-            from click import get_current_context
-        except ImportError:
-            return ""
-    ctx = get_current_context(silent=True)
-    names = []
-    while ctx is not None and ctx.parent is not None:  # the root's name is the program's ("python -m ...")
-        names.append(ctx.info_name or "")
-        ctx = ctx.parent
-    return " ".join(reversed(names))
-
-
-def open_league(home: Path | None, db: str | None, readonly: bool | None = None) -> League:
-    """The league of ``home`` / ``db``. ``readonly`` (default: whether the running command is one of
-    :data:`READING_COMMANDS`) opens an existing league for reading and creates nothing; otherwise the league is
-    created if new, and the temporary files that killed processes left in its folders are removed first (one line
-    on stderr says which)."""
+def open_league(home: Path | None, db: str | None, readonly: bool = False) -> League:
+    """The league of ``home`` / ``db``. ``readonly`` (the commands that only read: ladder, matrix, plot, checkpoint
+    list / show / export, elo fit) opens an existing league for reading and creates nothing, so a read-only league
+    can be listed and reading never creates a league where there was none; otherwise the league is created if new,
+    and the temporary files that killed processes left in its folders are removed first (one line on stderr says
+    which)."""
     from ..files import describe_removed, sweep_home
 
-    if readonly is None:
-        readonly = _running_command() in READING_COMMANDS
     league = League.open(home=home, url=db, readonly=readonly)
     if not readonly and league.home is not None:
         removed = sweep_home(league.home)

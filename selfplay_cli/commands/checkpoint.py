@@ -41,7 +41,7 @@ def list_cmd(
     json_out: JsonOpt = False,
 ) -> None:
     """The snapshots in the league, oldest first."""
-    league = open_league(home, db)
+    league = open_league(home, db, readonly=True)
     try:
         rows = league.players(env=check_env(env), kind=None if bots else "snapshot", include_removed=include_removed)
     finally:
@@ -96,7 +96,7 @@ def show(
     of its members (s6M-left, s6M-right)."""
     from ..league.names import Team, resolve_or_team
 
-    league = open_league(home, db)
+    league = open_league(home, db, readonly=True)
     try:
         found = resolve_or_team(league, name, check_env(env), include_removed=True)
         members = found.members if isinstance(found, Team) else (found,)
@@ -127,7 +127,7 @@ def tag(name: NameArg, tag_name: Annotated[str, typer.Argument(metavar="TAG", he
         league.tag(p.id, tag_name)
     finally:
         league.close()
-    console.print(f"tagged {p.full_name} as {tag_name}")
+    console.print(f"tagged {p.full_name} as {tag_name}", markup=False)
 
 
 @app.command("rm")
@@ -148,7 +148,7 @@ def rm(name: NameArg, env: EnvOpt = None,
         league.close()
     if not keep_file and path.exists():
         path.unlink()
-    console.print(f"removed {p.full_name} ({p.games} games stay in the ledger)")
+    console.print(f"removed {p.full_name} ({p.games} games stay in the ledger)", markup=False)
 
 
 @app.command("export")
@@ -156,17 +156,20 @@ def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination 
            env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
     """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
     from ..league.names import resolve
-    from ..policies.snapshot import export_snapshot
+    from ..policies.snapshot import export_snapshot, read_snapshot
+    from ..rated.snapshots import check_file
 
-    league = open_league(home, db)
+    league = open_league(home, db, readonly=True)
     try:
         p = resolve(league, name, check_env(env))
         if p.is_bot:
             raise MarlError(f"{p.full_name} is a scripted player: there is no file to export")
-        export_snapshot(_snapshot_path(league, p), out)
+        path = _snapshot_path(league, p)
+        check_file(p, read_snapshot(path, expect_env=p.env), path)  # never export a file that is not the row's
+        export_snapshot(path, out)
     finally:
         league.close()
-    console.print(f"exported {p.full_name} to {out}")
+    console.print(f"exported {p.full_name} to {out}", markup=False)
 
 
 @app.command("import")
@@ -191,4 +194,4 @@ def import_cmd(
     if json_out:
         print_json(_row_json(p))
     else:
-        console.print(f"imported {file} as {p.full_name} (id {p.id}, {p.env})")
+        console.print(f"imported {file} as {p.full_name} (id {p.id}, {p.env})", markup=False)

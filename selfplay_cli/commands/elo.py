@@ -104,7 +104,7 @@ def fit(
                        seed=seed, prior=prior)
         title = f"ratings of {results}"
     else:
-        league = open_league(home, db)
+        league = open_league(home, db, readonly=True)
         try:
             env = check_env(env)
             rows = ladder(league, env, anchor=resolve_anchor(league, name, env), anchor_rating=rating,

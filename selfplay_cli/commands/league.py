@@ -78,7 +78,7 @@ def ladder_cmd(
         raise MarlError(f"--top must be at least 1, not {top}")
     name, rating = parse_anchor(anchor)
     prior = check_prior(prior)
-    league = open_league(home, db)
+    league = open_league(home, db, readonly=True)
     try:
         env = check_env(env)
         if run is not None:

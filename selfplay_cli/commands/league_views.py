@@ -48,7 +48,7 @@ def plot_cmd(
     env = check_env(env)
     if out is not None:
         out = check_png_path(out)
-    league = open_league(home, db)
+    league = open_league(home, db, readonly=True)
     try:
         if run is None:
             runs = league.list_runs(env)
@@ -98,7 +98,7 @@ def matrix_cmd(
     env = check_env(env)
     if out is not None:
         out = check_png_path(out)
-    league = open_league(home, db)
+    league = open_league(home, db, readonly=True)
     try:
         with _working("fitting ratings"):
             report = build_matrix(league, env, top=top, run=run, min_games=min_games)

@@ -13,7 +13,7 @@ from typing import Annotated, Any
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
-from ..errors import MarlError
+from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError
 from ._common import (
     MAX_PARALLEL,
     MAX_SEED,
@@ -137,10 +137,43 @@ def train(
     for what, name in (("run name", run), ("run name", resume)):
         if name is not None:
             check_name(what, name)  # before anything exists: a refused name leaves no league behind
+    typed = {name for name in ctx.params  # options the user typed (not defaults)
+             if getattr(ctx.get_parameter_source(name), "name", "") in ("COMMANDLINE", "ENVIRONMENT")}
+    settings: dict[str, Any] = {}
+    if resume is None:  # the whole configuration is checked before the league is opened (or created)
+        if env is None:
+            raise MarlError("name the game to train on (e.g. marl train pong), or --resume RUN")
+        spec = get_env(env)
+        if preset not in (None, "seed000"):
+            raise MarlError(f"unknown --preset '{preset}'; available: seed000")
+        settings = TrainConfig(env=spec.name, run="new").to_dict()  # the defaults
+        if preset == "seed000":
+            settings["algo"] = "dqn"
+            settings["dqn"] = seed000_config().to_dict()
+        if config is not None:
+            merge_settings(settings, read_toml(config))
+        flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
+                 "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
+                 "snapshot_steps": snapshot_steps, "eval_games": eval_games, "eval_older": eval_older,
+                 "eval_inline": eval_inline, "swap_every": swap_every, "tensorboard": tensorboard,
+                 "league_games": league_games}
+        settings.update({k: v for k, v in flags.items() if k in typed})
+        matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
+                       "latest_ratio": ("latest_ratio", latest_ratio)}
+        settings["opponents"].update({key: value for flag, (key, value) in matchmaking.items() if flag in typed})
+        if "bots" in typed:
+            settings["opponents"]["bots"] = parse_bots(bots)
+        if "lr" in typed:
+            settings["ppo"]["lr"] = settings["dqn"]["lr"] = lr
+        settings["env_options"] = {**settings["env_options"], **parse_env_options(spec.name, env_option)}
+        try:
+            spec.config(**settings["env_options"])
+        except (TypeError, ValueError) as e:
+            raise MarlError(f"[env_options]: {e}") from None
+        settings["env"] = spec.name
+        TrainConfig.from_dict(settings)  # every setting checked: an error here leaves nothing behind
     league = open_league(home, db)
     try:
-        typed = {name for name in ctx.params  # options the user typed (not defaults)
-                 if getattr(ctx.get_parameter_source(name), "name", "") in ("COMMANDLINE", "ENVIRONMENT")}
         if resume is not None:
             ignored = sorted(typed - RESUME_OPTIONS)
             if ignored:
@@ -156,45 +189,14 @@ def train(
             if device != "auto":
                 cfg.device = device
         else:
-            if env is None:
-                raise MarlError("name the game to train on (e.g. marl train pong), or --resume RUN")
-            spec = get_env(env)
             if run is None:
                 taken = {r.name for r in league.list_runs()}
                 run = next(f"{env}-{i}" for i in range(1, 10_000) if f"{env}-{i}" not in taken)
             elif league.get_run(run) is not None:
                 raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
-            if preset not in (None, "seed000"):
-                raise MarlError(f"unknown --preset '{preset}'; available: seed000")
-            settings = TrainConfig(env=spec.name, run=run).to_dict()  # the defaults
-            if preset == "seed000":
-                settings["algo"] = "dqn"
-                settings["dqn"] = seed000_config().to_dict()
-            if config is not None:
-                merge_settings(settings, read_toml(config))
-            flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
-                     "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
-                     "snapshot_steps": snapshot_steps, "eval_games": eval_games, "eval_older": eval_older,
-                     "eval_inline": eval_inline,
-                     "swap_every": swap_every,
-                     "tensorboard": tensorboard, "league_games": league_games}
-            settings.update({k: v for k, v in flags.items() if k in typed})
-            matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
-                           "latest_ratio": ("latest_ratio", latest_ratio)}
-            settings["opponents"].update({key: value for flag, (key, value) in matchmaking.items() if flag in typed})
-            if "bots" in typed:
-                settings["opponents"]["bots"] = parse_bots(bots)
-            if "lr" in typed:
-                settings["ppo"]["lr"] = settings["dqn"]["lr"] = lr
-            settings["env_options"] = {**settings["env_options"], **parse_env_options(spec.name, env_option)}
-            try:
-                spec.config(**settings["env_options"])
-            except (TypeError, ValueError) as e:
-                raise MarlError(f"[env_options]: {e}") from None
-            settings["env"], settings["run"] = spec.name, run
+            settings["run"] = run
             cfg = TrainConfig.from_dict(settings)
-            algo = cfg.algo
-            league.create_run(run, spec.name, cfg.to_dict(), algo=algo)
+            league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
             save_run_config(league, cfg)
         reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
         with reporter, stop_on_sigterm():
@@ -213,7 +215,7 @@ def train(
                 why = "SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C"
                 err_console.print(f"stopped {cfg.run}{at} ({why}); its last snapshot is kept: continue it with: "
                                   f"marl train --resume {cfg.run}", markup=False)
-                raise typer.Exit(143 if isinstance(stop, Terminated) else 130) from None
+                raise typer.Exit(EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED) from None
             except MarlError:
                 if resume is None:  # a refused resume (e.g. another process trains it) leaves the run as it is
                     league.set_run_status(cfg.run, "failed")
@@ -335,10 +337,12 @@ class TrainProgress:
             + (", ".join(f"{bot} {100 * r.score(wdl):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()) or "unrated")
             for r in event["records"])
         elapsed = time.perf_counter() - self.start
-        left = "" if self.remaining is None or steps >= self.cfg.steps else f", ~{_clock(self.remaining)} left"
-        line = (f"{self.cfg.run}: {100 * self._fraction(steps):.0f}% ({steps:,} of {self.cfg.steps:,} steps, "
-                f"{self.rate:,.0f}/s, {event['episodes']:,} games finished); rated {recs}; "
-                f"{_clock(elapsed)} elapsed{left}")
+        done = self._fraction(steps) >= 1.0
+        left = "" if self.remaining is None or done else f", ~{_clock(self.remaining)} left"
+        budget = (f"{steps:,} steps" if self.cfg.minutes is not None
+                  else f"{steps:,} of {self.cfg.steps:,} steps")  # with --minutes, time is the budget
+        line = (f"{self.cfg.run}: {100 * self._fraction(steps):.0f}% ({budget}, {self.rate:,.0f}/s, "
+                f"{event['episodes']:,} games finished); rated {recs}; {_clock(elapsed)} elapsed{left}")
         if self.progress.disable:
             err_console.print(line, markup=False, highlight=False, soft_wrap=True)
         else:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -79,6 +80,13 @@ class TrainConfig:
                             "against the league)")
         if self.sharing == "fups" and self.agents == 1:
             raise MarlError("--sharing fups shares one network between several learners: it needs --agents 2 or more")
+        spec = get_env(self.env)
+        try:
+            obs_shape = tuple(spec.observation_space(spec.config(**self.env_options)).shape)
+        except (TypeError, ValueError):
+            return  # a bad game option: the caller checks the options and says so
+        learners = 1 if self.sharing == "fups" else self.agents
+        _check_memory(self, obs_shape, [self.games * n_seats // learners] * learners)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -126,6 +134,26 @@ class TrainConfig:
                 except (TypeError, ValueError) as e:
                     raise MarlError(f"[{key}]: {e}") from None
         return cls(**d)
+
+
+def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]) -> None:
+    """Refuse, before anything is built, a run whose learners' buffers of observations would not fit in this
+    machine's memory (e.g. pong's 400x800 RGB frames in 256 games: ~125 GB of PPO rollout)."""
+    per_obs = 4 * math.prod(obs_shape)  # float32
+    if cfg.algo == "ppo":
+        need = sum(per_obs * cfg.ppo.rollout_steps * n for n in slots)
+        what = f"PPO's rollouts ({cfg.ppo.rollout_steps} steps of {sum(slots):,} seats)"
+    else:
+        need = len(slots) * 2 * per_obs * cfg.dqn.buffer_size
+        what = f"DQN's replay buffers ({cfg.dqn.buffer_size:,} transitions each)"
+    try:
+        have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return
+    if need > 0.8 * have:
+        raise MarlError(f"{what} of {'x'.join(map(str, obs_shape))} observations would take {need / 2**30:,.1f} GB; "
+                        f"this machine has {have / 2**30:,.1f} GB: use fewer --games, a shorter rollout or buffer, or "
+                        "smaller observations")
 
 
 def tensorboard_writer(log_dir: Path | None) -> Any:
