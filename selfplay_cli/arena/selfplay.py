@@ -33,8 +33,9 @@ OPPONENT = -1
 
 
 def _as_slice(index: np.ndarray) -> np.ndarray | slice:
-    """``index`` as the equal slice when it is a run of consecutive integers (indexing with it gives a view)."""
-    if index.size and index[-1] - index[0] + 1 == index.size and (np.diff(index) == 1).all():
+    """Increasing ``index`` as the equal slice when it is a run of consecutive integers (indexing with a slice gives a
+    view, with an index array a copy)."""
+    if index.size and index[-1] - index[0] + 1 == index.size:
         return slice(int(index[0]), int(index[-1]) + 1)
     return index
 
