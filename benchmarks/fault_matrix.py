@@ -518,6 +518,40 @@ def interrupted(scratch: Path) -> tuple[bool, str]:
     return held, f"exit {r.code}, match row status {params.get('status')!r} with {games} games: {r.line[:80]}"
 
 
+def _kill_then_resume(scratch: Path, point: str) -> tuple[bool, str]:
+    """SIGKILL `marl train` at ``point`` of its second snapshot moment (tests/kill_points.py), resume it to the end,
+    then check every row against its file and that nothing else is left."""
+    from selfplay_cli.league.store import League
+    from selfplay_cli.policies.snapshot import load_snapshot, weights_sha256
+
+    home = scratch / "league"
+    args = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
+            "2048", "--steps", "8192", "--eval-games", "0", "--run", "r", "--quiet"]
+    killed = subprocess.run([sys.executable, str(ROOT / "tests" / "kill_points.py"), point, str(home), *args],
+                            capture_output=True, text=True, env=_env(), timeout=600)
+    before = db(home, "select name from players where kind = 'snapshot' order by id")
+    r = marl("train", "--resume", "r", "--home", str(home), "--quiet")
+    with League.open(home, readonly=True) as league:
+        snaps = league.players("pong", kind="snapshot")
+        status = league.get_run("r").status
+        good = 0
+        for s in snaps:
+            tensors, meta = load_snapshot(home / s.path, expect_env="pong")
+            good += weights_sha256(tensors) == s.meta.get("weights_sha256") and meta.name == s.name
+    files = sorted(f.name for f in (home / "snapshots" / "r").iterdir())
+    strays = len(files) - len(snaps) + len(list((home / "runs" / "r").glob("*.tmp-*")))
+    strays += (home / "runs" / "r" / "state.pt.pending").exists()
+    held = (killed.returncode == -signal.SIGKILL and r.code == 0 and status == "finished" and good == len(snaps) == 10
+            and strays == 0)
+    return held, (f"killed with {len(before)} snapshot rows; resumed: exit {r.code}, {status}, {len(snaps)} snapshots, "
+                  f"{good} rows match their files, {strays} stray files")
+
+
+for _point in ("after-first-file", "after-pending-state", "during-state-file", "after-rows"):
+    fault(f"marl train killed (SIGKILL) {_point.replace('-', ' ')} of a snapshot moment, then --resume")(
+        lambda scratch, point=_point: _kill_then_resume(scratch, point))
+
+
 # ---------------------------------------------------------------------------------------------------------------
 
 

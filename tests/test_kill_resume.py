@@ -8,7 +8,6 @@ import hashlib
 import signal
 import subprocess
 import sys
-import textwrap
 import time
 from pathlib import Path
 
@@ -23,56 +22,7 @@ pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="SIGKILL")
 ARGS = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
         "2048", "--steps", "8192", "--eval-games", "0", "--run", "r", "--quiet"]
 
-# Runs `marl train` in a child whose chosen function kills the process (SIGKILL, no clean-up of any kind) the
-# second time a snapshot moment reaches that point: the first moment (s0) is complete, the second is cut.
-KILLER = textwrap.dedent("""
-    import os, signal, sys
-    import torch
-    import selfplay_cli.train.loop as loop
-    from selfplay_cli.league.store import League
-    from selfplay_cli.cli import main
-
-    point, home = sys.argv[1], sys.argv[2]
-    calls = {}
-
-    def die_on(what, count):
-        calls[what] = calls.get(what, 0) + 1
-        if calls[what] == count:
-            os.kill(os.getpid(), signal.SIGKILL)
-
-    if point == "after-first-file":
-        real = loop.save_snapshot
-        def save(*a, **k):
-            out = real(*a, **k)
-            die_on("file", 3)  # moment 1 wrote s0-left, s0-right; moment 2's first file is the third
-            return out
-        loop.save_snapshot = save
-    elif point in ("after-pending-state", "during-state-file"):
-        real_save = torch.save
-        def save(obj, f, *a, **k):
-            calls["state"] = calls.get("state", 0) + 1
-            if calls["state"] == 2 and point == "during-state-file":
-                f.write(b"half a state file")
-                f.flush()
-                os.kill(os.getpid(), signal.SIGKILL)
-            out = real_save(obj, f, *a, **k)
-            return out
-        torch.save = save
-        if point == "after-pending-state":
-            real_add = League.add_snapshots
-            def add(self, items):
-                die_on("rows", 2)  # moment 2's state is pending, its rows not yet written
-                return real_add(self, items)
-            League.add_snapshots = add
-    elif point == "after-rows":
-        real_add = League.add_snapshots
-        def add(self, items):
-            out = real_add(self, items)
-            die_on("rows", 2)  # moment 2's rows are committed, its pending state not yet renamed
-            return out
-        League.add_snapshots = add
-    sys.exit(main(sys.argv[3:] + ["--home", home]))
-""")
+KILL_POINTS = Path(__file__).with_name("kill_points.py")
 
 
 def check_league(home: Path) -> list:
@@ -94,8 +44,8 @@ def check_league(home: Path) -> list:
 @pytest.mark.parametrize("point", ["after-first-file", "after-pending-state", "during-state-file", "after-rows"])
 def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path, capsys, point):
     home = tmp_path / "h"
-    child = subprocess.run([sys.executable, "-c", KILLER, point, str(home), *ARGS], capture_output=True, text=True,
-                           timeout=300)
+    child = subprocess.run([sys.executable, str(KILL_POINTS), point, str(home), *ARGS], capture_output=True,
+                           text=True, timeout=300)
     assert child.returncode == -signal.SIGKILL, (child.returncode, child.stderr[-2000:])
     with League.open(home) as league:
         before = {p.name: p.sha256 for p in league.players("pong", kind="snapshot")}
