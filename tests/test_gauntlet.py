@@ -226,3 +226,19 @@ def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monk
     (m,) = play_gauntlet(league, [(new, rnd)], first_seed=0, config=GauntletConfig(pairs=3, clear_pairs=1, max_pairs=3))
     assert m.expect == 0.0 and m.pairs == 3 and m.wins == 6, (m.pairs, m.wins)
     league.close()
+
+
+def test_a_failing_gauntlet_in_the_worker_comes_back_as_one_error(tmp_path):
+    """The rating worker reports a job's failure (here: a snapshot id the league does not have) instead of dying
+    silently, and the trainer raises it as one line."""
+    import pytest
+
+    from selfplay_cli.errors import MarlError
+    from selfplay_cli.train.evaluator import Evaluator, GauntletJob
+
+    league = League.open(tmp_path / "league")
+    with Evaluator(league, "cpu", background=True) as ev:
+        ev.submit(GauntletJob((424242,), 0, 4, 2))
+        with pytest.raises(MarlError, match="rating games failed: .*424242"):
+            ev.wait()
+    league.close()

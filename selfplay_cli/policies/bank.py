@@ -6,7 +6,9 @@ few dozen rows). A :class:`NetworkBank` stacks the networks' layers into ``(P, i
 layer once for all of them with ``torch.baddbmm``, on a ``(P, M, in)`` batch padded to the largest player's rows.
 
 Sampling draws one uniform per row from the bank's own generator (inverse CDF of the softmax); greedy players take
-the argmax. A match between the same players with the same schedule therefore replays the same actions.
+the argmax. A match between the same players with the same schedule therefore replays the same actions. A bank
+computes tanh as ``2 sigmoid(2x) - 1`` (faster here): its scores equal a network's own to float rounding, not bit
+for bit.
 """
 
 from __future__ import annotations
@@ -15,9 +17,17 @@ from collections.abc import Sequence
 
 import numpy as np
 import torch
-from torch.nn import functional as F
 
 from .network import MLPNet, NetworkPolicy
+
+
+def _tanh(x: torch.Tensor) -> torch.Tensor:
+    """tanh(x) = 2 sigmoid(2x) - 1: the same function (to float rounding), ~2.5x faster than this torch build's
+    tanh on these CPUs (measured: 130 vs 345 us for 2 x 1000 x 64)."""
+    return torch.sigmoid(x.mul_(2.0)).mul_(2.0).sub_(1.0)
+
+
+_FAST = {"tanh": _tanh, "relu": torch.relu_}
 
 
 def bank_key(policy: object) -> tuple | None:
@@ -46,18 +56,21 @@ class NetworkBank:
         nets: list[MLPNet] = [p.net for p in members]
         self.device = members[0].device
         self.n_actions = nets[0].n_actions
-        self.activation = nets[0]._activation
+        self.activation = _FAST.get(nets[0].arch.activation, nets[0]._activation)
         with torch.no_grad():
             self.layers = [(torch.stack([n._linears[k].weight.T for n in nets]).contiguous(),
                             torch.stack([n._linears[k].bias for n in nets]).unsqueeze(1).contiguous())
                            for k in range(len(nets[0]._linears))]
-            self.head = (torch.stack([n.action_head.weight.T for n in nets]).contiguous(),
-                         torch.stack([n.action_head.bias for n in nets]).unsqueeze(1).contiguous())
+            # The heads are applied as (P, A, H) @ (P, H, M): with A = 3 outputs, the (M, H) @ (H, A) way round is
+            # ~6x slower in torch's batched matmul. The action scores come out as (P, A, M).
+            self.head = (torch.stack([n.action_head.weight for n in nets]).contiguous(),
+                         torch.stack([n.action_head.bias for n in nets]).unsqueeze(2).contiguous())
             self.state_value = None
             if nets[0].state_value is not None:
-                self.state_value = (torch.stack([n.state_value.weight.T for n in nets]).contiguous(),  # type: ignore[union-attr]
-                                    torch.stack([n.state_value.bias for n in nets]).unsqueeze(1).contiguous())  # type: ignore[union-attr]
+                self.state_value = (torch.stack([n.state_value.weight for n in nets]).contiguous(),  # type: ignore[union-attr]
+                                    torch.stack([n.state_value.bias for n in nets]).unsqueeze(2).contiguous())  # type: ignore[union-attr]
         self.greedy = torch.tensor([p.greedy for p in members], device=self.device)[:, None]
+        self.any_greedy = bool(self.greedy.any())
         self.any_sampling = not bool(self.greedy.all())
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(int(seed) ^ (sum(int(p.seed) * 1_000_003 ** k for k, p in enumerate(members))
@@ -71,23 +84,25 @@ class NetworkBank:
         most = max(rows)
         if most == 0:
             return [np.zeros(0, dtype=np.int64) for _ in obs]
-        x = np.zeros((len(obs), most, self.obs_dim), dtype=np.float32)
+        x = np.empty((len(obs), most, self.obs_dim), dtype=np.float32)
         for k, o in enumerate(obs):
             if rows[k]:
                 x[k, : rows[k]] = o.reshape(rows[k], -1)
+            x[k, rows[k]:] = 0.0  # padding (never garbage: no NaN or denormal slows the arithmetic down)
         z = torch.from_numpy(x)
         if self.device.type != "cpu":
             z = z.to(self.device)
         for w, b in self.layers:
             z = self.activation(torch.baddbmm(b, z, w))
-        out = torch.baddbmm(self.head[1], z, self.head[0])
+        zt = z.transpose(1, 2)
+        out = torch.baddbmm(self.head[1], self.head[0], zt)  # (P, A, M)
         if self.state_value is not None:
-            out = torch.baddbmm(self.state_value[1], z, self.state_value[0]) + out - out.mean(dim=2, keepdim=True)
-        actions = out.argmax(dim=2)
-        if self.any_sampling:
-            cdf = F.softmax(out, dim=2).cumsum_(dim=2)
-            u = torch.rand((len(obs), most, 1), generator=self.generator, device=self.device)
-            sampled = (cdf <= u).sum(dim=2).clamp_(max=self.n_actions - 1)
-            actions = torch.where(self.greedy, actions, sampled)
+            out = torch.baddbmm(self.state_value[1], self.state_value[0], zt) + out - out.mean(dim=1, keepdim=True)
+        actions = out.argmax(dim=1) if self.any_greedy else None
+        if self.any_sampling:  # inverse CDF of the softmax, unnormalised: a = #{k : cumsum(e)_k <= u * sum(e)}
+            e = (out - out.amax(dim=1, keepdim=True)).exp_().cumsum_(dim=1)
+            u = torch.rand((len(obs), 1, most), generator=self.generator, device=self.device)
+            sampled = (e <= u * e[:, -1:, :]).sum(dim=1).clamp_(max=self.n_actions - 1)
+            actions = sampled if actions is None else torch.where(self.greedy, actions, sampled)
         a = actions.cpu().numpy() if self.device.type != "cpu" else actions.numpy()
-        return [a[k, : rows[k]].astype(np.int64) for k in range(len(obs))]
+        return [a[k, : rows[k]] for k in range(len(obs))]

@@ -138,7 +138,11 @@ class Evaluator:
                     self._take(self._results.get(timeout=1.0))
                 except queue.Empty:
                     if not self._proc.is_alive():
-                        raise MarlError("the rating worker process ended unexpectedly") from None
+                        try:  # it may have said why just before it left
+                            self._take(self._results.get(timeout=2.0))
+                        except queue.Empty:
+                            raise MarlError(f"the rating worker process ended unexpectedly (exit code "
+                                            f"{self._proc.exitcode})") from None
                 if on_wait is not None:
                     on_wait()
         return self._finish()
