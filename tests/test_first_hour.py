@@ -185,7 +185,7 @@ def write(tmp_path: Path, text: str) -> str:
     (["train", "pong", "--config", "{tmp}/lr.toml"], "[ppo] lr wants a number, not 'fast'"),
     (["train", "pong", "--config", "{tmp}/seed.toml"], "--seed must lie between 0 and 4294967295, not -1"),
     (["train", "pong", "--config", "{tmp}/hidden.toml"], "[ppo] arch.hidden wants a list of whole numbers"),
-    (["train", "pong", "--config", "{tmp}/points.toml"], "[env_options] points_to_win wants a whole number"),
+    (["train", "pong", "--config", "{tmp}/points.toml"], "points_to_win wants a whole number"),
     (["train", "pong", "--config", "{tmp}/bool.toml"], "setting eval_inline wants true or false, not 1"),
 ])
 def test_bad_values_are_one_line_with_exit_code_2(args, needle, home, tmp_path, capsys):

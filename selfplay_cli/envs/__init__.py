@@ -21,7 +21,7 @@ register(
         description="Two-paddle Pong, first to 21 (seed 000), egocentric coordinate observations",
         agents=pong_env.AGENTS,
         make_config=pong.make_config,
-        make_core=pong.PongCore,
+        make_core=pong.make_batched_core,
         make_parallel=pong_env.PongParallelEnv,
         observation_space=pong_env.observation_space,
         action_space=pong_env.action_space,

@@ -34,7 +34,7 @@ policy trained on one side plays either side.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -49,6 +49,8 @@ SERVE_SPEED = 10.0
 LEFT_FACE = PADDLE_X + PADDLE_W  # 30: the face of the left paddle
 RIGHT_FACE = WIDTH - PADDLE_X - PADDLE_W  # 770
 PADDLE_Y_MAX = HEIGHT - PADDLE_H  # 330
+
+MAX_FRAME_STACK = 1024  # stacked frames an observation may hold (a crafted file must not ask for gigabytes)
 
 STAY, UP, DOWN = 0, 1, 2
 ACTION_NAMES = ("stay", "up", "down")
@@ -91,14 +93,21 @@ class PongConfig:
     max_steps: int = 18_000  # a game's time limit: 5 minutes at 60 frames a second (0 = no cap)
 
     def __post_init__(self) -> None:
+        for f in fields(self):  # the declared types, from Python too (a float where a count goes is refused)
+            value, kind = getattr(self, f.name), {"int": int, "float": float}.get(str(f.type))
+            if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
+                raise ValueError(f"pong option {f.name} wants a whole number, not {value!r}")
+            if kind is float and (isinstance(value, bool) or not isinstance(value, (int, float)) or value != value
+                                  or value in (float("inf"), float("-inf"))):
+                raise ValueError(f"pong option {f.name} wants a finite number, not {value!r}")
         if self.rules not in ("classic", "seed"):
             raise ValueError(f"pong rules must be 'classic' or 'seed', not {self.rules!r}")
         if self.obs_mode not in ("coords", "rgb"):
             raise ValueError(f"pong obs_mode must be 'coords' or 'rgb', not {self.obs_mode!r}")
         if self.points_to_win < 1:
             raise ValueError(f"points_to_win must be at least 1, not {self.points_to_win}")
-        if self.frame_stack < 1:
-            raise ValueError(f"frame_stack must be at least 1, not {self.frame_stack}")
+        if not 1 <= self.frame_stack <= MAX_FRAME_STACK:
+            raise ValueError(f"frame_stack must lie between 1 and {MAX_FRAME_STACK}, not {self.frame_stack}")
         if not SERVE_SPEED <= self.max_speed <= 2 * (BALL_R + PADDLE_W) + SERVE_SPEED:
             raise ValueError(f"max_speed must lie in [{SERVE_SPEED}, 40], not {self.max_speed}")
         if not 0.0 <= self.max_bounce_deg < 80.0:
@@ -113,6 +122,15 @@ class PongConfig:
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+def make_batched_core(n_games: int, config: PongConfig) -> PongCore:
+    """The batched core for training and matches, which observe coordinates: ``obs_mode=rgb`` frames come from the
+    PettingZoo view (one game at a time, rendered), and are refused here."""
+    if config.obs_mode != "coords":
+        raise ValueError("obs_mode=rgb is for pong's PettingZoo view (one rendered game at a time, make_parallel); "
+                         "training and matches play the batched core, which observes coordinates")
+    return PongCore(n_games, config)
 
 
 def make_config(**options: Any) -> PongConfig:

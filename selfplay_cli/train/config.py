@@ -82,9 +82,11 @@ class TrainConfig:
             raise MarlError("--sharing fups shares one network between several learners: it needs --agents 2 or more")
         spec = get_env(self.env)
         try:
-            obs_shape = tuple(spec.observation_space(spec.config(**self.env_options)).shape)
-        except (TypeError, ValueError):
-            return  # a bad game option: the caller checks the options and says so
+            game = spec.config(**self.env_options)
+            spec.make_core(1, game)  # options the game takes but cannot train with (pong's rgb frames) fail here
+        except (TypeError, ValueError) as e:
+            raise MarlError(f"[env_options]: {e}") from None
+        obs_shape = tuple(spec.observation_space(game).shape)
         learners = 1 if self.sharing == "fups" else self.agents
         _check_memory(self, obs_shape, [self.games * n_seats // learners] * learners)
 
