@@ -1,55 +1,88 @@
-"""`marl envs`: the registered games, their seats, spaces and scripted players."""
+"""`marl envs`: the registered games, their seats, kind, turns, spaces and scripted players."""
 
 from __future__ import annotations
 
 from typing import Annotated, Any
 
 import typer
-from gymnasium import spaces
 from rich.table import Table
 
-from ..envs import env_names, get_env
+from ..envs import describe_space, env_names, get_env
+from ..envs.loading import plugin_errors
 from ._output import console, print_json
 
-
-def describe_space(space: spaces.Space) -> str:
-    if isinstance(space, spaces.Discrete):
-        return f"Discrete({space.n})"
-    if isinstance(space, spaces.Box):
-        lo, hi = space.low.min(), space.high.max()
-        return f"Box({lo:g}, {hi:g}, {space.shape}, {space.dtype})"
-    return str(space)
+__all__ = ["describe_space", "env_row", "env_rows", "envs"]
 
 
-def env_rows() -> list[dict[str, Any]]:
-    rows = []
-    for name in env_names():
-        spec = get_env(name)
-        cfg = spec.config()
-        rows.append({
-            "name": name,
-            "description": spec.description,
-            "agents": list(spec.agents),
-            "observation_space": describe_space(spec.observation_space(cfg)),
-            "action_space": describe_space(spec.action_space(cfg)),
-            "bots": {b.name: b.description for b in spec.bots.values()},
-            "renderer": spec.make_renderer is not None,
-        })
+def env_row(name: str) -> dict[str, Any]:
+    """What `marl envs` shows of one game (an EnvError if it cannot be loaded)."""
+    spec = get_env(name)
+    cfg = spec.config()
+    seats = spec.seat_spaces(cfg)
+    return {
+        "name": name,
+        "description": spec.description,
+        "agents": list(spec.agents),
+        "kind": spec.kind,
+        "turns": spec.turns,
+        "sides": [list(side) for side in spec.side_seats()] if spec.kind == "two-sides" else None,
+        "tie_tolerance": spec.tie_tolerance if spec.kind == "cooperative" else None,
+        "max_steps": spec.max_steps(cfg),
+        "seats": [{"agent": agent, **seat.to_json()} for agent, seat in zip(spec.agents, seats, strict=True)],
+        # one seat's spaces (the first), as before per-seat spaces existed
+        "observation_space": describe_space(seats[0].observation),
+        "action_space": describe_space(seats[0].action),
+        "bots": {b.name: b.description for b in spec.bots.values()},
+        "renderer": spec.make_renderer is not None,
+    }
+
+
+def env_rows(names: list[str] | None = None) -> list[dict[str, Any]]:
+    """The registered games, then ``names`` (games of your own, ``module:factory``) not among them; an installed
+    package's game that fails to load is a row with its ``error``."""
+    rows, failed = [], plugin_errors()
+    registered = env_names()
+    for name in sorted(set(registered) | set(failed)):
+        if name in failed:
+            rows.append({"name": name, "error": str(failed[name])})
+        else:
+            rows.append(env_row(name))
+    for name in names or []:
+        if name not in registered and name not in failed and all(r["name"] != name for r in rows):
+            rows.append(env_row(name))
     return rows
 
 
+def _per_seat(row: dict[str, Any], key: str) -> str:
+    texts = [s[key] + (" masked" if key == "action" and s["mask"] else "") for s in row["seats"]]
+    if len(set(texts)) == 1:
+        return texts[0]
+    return "\n".join(f"{s['agent']}: {t}" for s, t in zip(row["seats"], texts, strict=True))
+
+
 def envs(
+    games: Annotated[list[str] | None, typer.Argument(
+        help="Also show these games of your own: module:factory (e.g. mypkg.mygame:env) or a module with env() "
+             "or parallel_env().", show_default=False)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print JSON alone on stdout.")] = False,
 ) -> None:
-    """List the registered games with their agents, spaces and scripted players."""
-    rows = env_rows()
+    """List the registered games (and any GAMES named) with their agents, kind, turns, per-seat spaces and
+    scripted players.
+
+    Games come from marl itself, from installed packages (entry-point group selfplay_cli.envs) and, named on the
+    command line, from your own PettingZoo environments: `marl envs mypkg.mygame:env`.
+    """
+    rows = env_rows(games)
     if json_out:
         print_json(rows)
         return
     table = Table(title="registered games")
-    for col in ("env", "agents", "observation (one seat)", "action", "scripted players"):
+    for col in ("env", "agents", "kind", "turns", "observation (per seat)", "action (per seat)", "scripted players"):
         table.add_column(col)
     for r in rows:
-        table.add_row(r["name"], ", ".join(r["agents"]), r["observation_space"], r["action_space"],
-                      ", ".join(r["bots"]))
+        if "error" in r:
+            table.add_row(r["name"], "", "", "", f"cannot be loaded: {r['error']}", "", "")
+            continue
+        table.add_row(r["name"], ", ".join(r["agents"]), r["kind"], r["turns"], _per_seat(r, "observation"),
+                      _per_seat(r, "action"), ", ".join(r["bots"]))
     console.print(table)

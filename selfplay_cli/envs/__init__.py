@@ -1,12 +1,31 @@
-"""Games: batched numpy cores, their PettingZoo views, renderers and the scripted players' rules.
+"""Games: batched numpy cores, their PettingZoo views, the PettingZoo adapter for users' games, renderers, the
+scripted players' rules, and the registry with the game contract.
 
-Importing this package registers the built-in games.
+Importing this package registers the built-in games. ``get_env(name)`` also finds games of installed packages
+(entry-point group ``selfplay_cli.envs``) and a user's PettingZoo game named ``module:factory`` or ``module``.
 """
 
 from __future__ import annotations
 
 from . import pong, pong_env
-from .registry import BotSpec, EnvSpec, UnknownEnvError, env_names, get_env, random_rule, register
+from .registry import (
+    KINDS,
+    TURNS,
+    BatchedCore,
+    BotSpec,
+    EnvError,
+    EnvSpec,
+    IllegalActionError,
+    SeatSpace,
+    UnknownEnvError,
+    check_spaces,
+    describe_space,
+    env_names,
+    get_env,
+    random_bot,
+    random_rule,
+    register,
+)
 
 
 def _pong_renderer():
@@ -34,4 +53,6 @@ register(
     )
 )
 
-__all__ = ["BotSpec", "EnvSpec", "UnknownEnvError", "env_names", "get_env", "register"]
+__all__ = ["KINDS", "TURNS", "BatchedCore", "BotSpec", "EnvError", "EnvSpec", "IllegalActionError", "SeatSpace",
+           "UnknownEnvError", "check_spaces", "describe_space", "env_names", "get_env", "random_bot", "random_rule",
+           "register"]

@@ -201,7 +201,7 @@ class PongCore:
         self.paddle = self._s[2:4]  # top edge y of each seat's paddle
         self.vx, self.vy = self._s[4], self._s[5]
         self._pos, self._vel = self._s[0:2], self._s[4:6]  # the ball's (x, y) and (vx, vy)
-        self.score = np.zeros((2, n), dtype=np.int64)
+        self.score = np.zeros((2, n))  # points per seat (float, as the game contract has scores)
         self.touched = np.zeros((2, n), dtype=bool)
         self.rally_steps = np.zeros(n, dtype=np.int64)
         self.steps = np.zeros(n, dtype=np.int64)
@@ -432,6 +432,14 @@ class PongCore:
         mirrored and the paddles swapped, so both seats see themselves on the left.
         """
         return self._ring[:, :, self._window()].copy()
+
+    def action_masks(self) -> list[None]:
+        """Pong has no action masks: every action is legal for both seats."""
+        return [None, None]
+
+    def to_act(self) -> np.ndarray:
+        """Both seats act at every step of every game: ``(2, n)`` all True."""
+        return np.ones((2, self.n), dtype=bool)
 
     # ----------------------------------------------------------------------------------------------------
     def outcome(self) -> np.ndarray:

@@ -1,7 +1,9 @@
-"""The PettingZoo ``ParallelEnv`` view of Pong: one game of the batched core."""
+"""The PettingZoo ``ParallelEnv`` view of Pong: one game, played by :class:`~selfplay_cli.envs.pong_scalar.ScalarPong`
+(the batched core's rules in plain Python floats, bit for bit the same game: ~10x faster than a batch of one)."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -9,6 +11,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from .pong import HEIGHT, N_FEATURES, WIDTH, PongConfig, PongCore, make_config
+from .pong_scalar import ScalarPong
 
 AGENTS = ("left", "right")
 
@@ -28,7 +31,7 @@ class PongParallelEnv(ParallelEnv):
 
     ``reset(seed=s)`` makes the game reproducible; later resets without a seed draw fresh game seeds from a
     generator seeded by ``s``. Rewards are +1/-1 per point (plus ``r_for_hit`` per touch). Infos carry the
-    score, the seat's touches and the game's seed.
+    score, the seat's touches and the game's seed. The game is the batched core's game ``game_seed``, step for step.
     """
 
     metadata = {"name": "marl_pong_v0", "render_modes": ["rgb_array"], "render_fps": 60,
@@ -41,7 +44,8 @@ class PongParallelEnv(ParallelEnv):
         self.render_mode = render_mode
         self.possible_agents = list(AGENTS)
         self.agents: list[str] = []
-        self.core = PongCore(1, self.config)
+        self.game = ScalarPong(self.config)
+        self._rgb = self.config.obs_mode == "rgb"
         self._obs_space = observation_space(self.config)
         self._act_space = action_space(self.config)
         self._seeds = np.random.default_rng()
@@ -60,52 +64,68 @@ class PongParallelEnv(ParallelEnv):
             self.game_seed = int(seed)
         else:
             self.game_seed = int(self._seeds.integers(2**62))
-        self.core.reset([0], [self.game_seed])
-        self.agents = list(self.possible_agents)
+        self.game.reset(self.game_seed)
+        self.agents = ["left", "right"]
         return self._observations(), self._infos()
 
     def step(self, actions: dict[str, Any]):
         if not self.agents:
             raise RuntimeError("step() called on a finished game: call reset() first")
-        a = np.array([[int(actions.get(agent, 0))] for agent in self.possible_agents], dtype=np.int64)
-        if not ((a >= 0) & (a < 3)).all():
+        a0, a1 = int(actions.get("left", 0)), int(actions.get("right", 0))
+        if not (0 <= a0 < 3 and 0 <= a1 < 3):
             raise ValueError(f"pong actions are 0 (stay), 1 (up), 2 (down); got {actions}")
-        rewards = self.core.step(a)
-        obs = self._observations()
-        term, trunc = bool(self.core.terminated[0]), bool(self.core.truncated[0])
-        agents = self.agents
+        game = self.game
+        r0, r1 = game.step(a0, a1)
+        if self._rgb:
+            obs = self._observations()
+        else:
+            both = game.observe()
+            obs = {"left": both[0], "right": both[1]}
+        done, cut = game.terminated, game.truncated
+        seed = self.game_seed
         out = (
             obs,
-            {ag: float(rewards[i, 0]) for i, ag in enumerate(agents)},
-            dict.fromkeys(agents, term),
-            dict.fromkeys(agents, trunc),
-            self._infos(),
+            {"left": r0, "right": r1},
+            {"left": done, "right": done},
+            {"left": cut, "right": cut},
+            {"left": {"score": (int(game.s0), int(game.s1)), "touches": game.hits0, "seed": seed},
+             "right": {"score": (int(game.s1), int(game.s0)), "touches": game.hits1, "seed": seed}},
         )
-        if term or trunc:
+        if done or cut:
             self.agents = []
         return out
 
     def _observations(self) -> dict[str, np.ndarray]:
-        if self.config.obs_mode == "rgb":
+        if self._rgb:
             frame = self.render_frame()
             return {"left": frame, "right": np.ascontiguousarray(frame[:, ::-1])}
-        obs = self.core.observe()
-        return {ag: obs[i, 0] for i, ag in enumerate(self.possible_agents)}
+        both = self.game.observe()
+        return {"left": both[0], "right": both[1]}
 
     def _infos(self) -> dict[str, dict]:
-        c = self.core
-        return {
-            ag: {"score": (int(c.score[i, 0]), int(c.score[1 - i, 0])), "touches": int(c.hits[i, 0]),
-                 "seed": self.game_seed}
-            for i, ag in enumerate(self.possible_agents)
-        }
+        g = self.game
+        return {"left": {"score": (int(g.s0), int(g.s1)), "touches": g.hits0, "seed": self.game_seed},
+                "right": {"score": (int(g.s1), int(g.s0)), "touches": g.hits1, "seed": self.game_seed}}
+
+    @property
+    def core(self) -> PongCore:
+        """A one-game batched core holding this game's exact state (a copy: stepping it does not move this game)."""
+        core = PongCore(1, self.config)
+        core.set_state(self.game.get_state())
+        return core
+
+    def _scene(self) -> SimpleNamespace:
+        """What the renderer reads of a core, for this one game."""
+        g = self.game
+        return SimpleNamespace(paddle=np.array([[g.p0], [g.p1]]), bx=np.array([g.bx]), by=np.array([g.by]),
+                               score=np.array([[g.s0], [g.s1]]))
 
     def render_frame(self) -> np.ndarray:
         if self._renderer is None:
             from .pong_render import PongRenderer
 
             self._renderer = PongRenderer()
-        return self._renderer.draw(self.core, 0)
+        return self._renderer.draw(self._scene(), 0)
 
     def render(self) -> np.ndarray | None:
         if self.render_mode == "rgb_array":
@@ -114,14 +134,14 @@ class PongParallelEnv(ParallelEnv):
 
     def state(self) -> np.ndarray:
         """The global state: the left seat's latest observation frame (world-complete)."""
-        return self.core.observe()[0, 0, -1].copy()
+        return self.game.latest()
 
     def get_state(self) -> dict[str, Any]:
         """Exact state of the game (physics, score, RNG counters and observation history)."""
-        return {"core": self.core.get_state(), "agents": list(self.agents), "game_seed": self.game_seed}
+        return {"core": self.game.get_state(), "agents": list(self.agents), "game_seed": self.game_seed}
 
     def set_state(self, state: dict[str, Any]) -> None:
-        self.core.set_state(state["core"])
+        self.game.set_state(state["core"])
         self.agents = list(state["agents"])
         self.game_seed = state["game_seed"]
 

@@ -1,7 +1,16 @@
-"""The game registry: one :class:`EnvSpec` per game, everything the rest of `marl` needs to know about it."""
+"""The game registry and the game contract: one :class:`EnvSpec` per game, everything the rest of `marl` needs to
+know about it, and the :class:`BatchedCore` protocol every game is played through.
+
+A game declares, once: its seats (``agents``), each seat's spaces (:meth:`EnvSpec.seat_spaces`), whether seats
+act together or in turns (``turns``) and what a result is (``kind``, ``sides``, ``tie_tolerance``). Names are
+found in this order: the registered games (pong, and games that installed packages register under the entry-point
+group ``selfplay_cli.envs``), then a user's PettingZoo game named ``module:factory`` or ``module`` (see
+:mod:`selfplay_cli.envs.loading`).
+"""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
@@ -9,53 +18,77 @@ from typing import Any, Protocol
 import numpy as np
 from gymnasium import spaces
 
+TURNS = ("simultaneous", "sequential")
+KINDS = ("two-sides", "cooperative", "free-for-all")
+
 
 class BatchedCore(Protocol):
-    """What the arena and the learners use: N games stepped at once, seats on the leading axis."""
+    """What the arena and the learners use: N games stepped at once, seats on the leading axis.
+
+    A core never resets a game by itself: a finished game keeps its final score until :meth:`reset` is called for
+    it. ``terminated`` / ``truncated`` say which games ended on the last step.
+    """
 
     n: int
     n_seats: int
     terminated: np.ndarray  # (n,) bool, set by the last step
     truncated: np.ndarray  # (n,) bool
-    score: np.ndarray  # (n_seats, n)
+    score: np.ndarray  # (n_seats, n) float: each seat's score so far (points, summed rewards)
     steps: np.ndarray  # (n,) steps played in each game
 
     def reset(self, games: Any, seeds: Any) -> None: ...
-    def step(self, actions: np.ndarray) -> np.ndarray: ...
-    def observe(self) -> np.ndarray: ...
-    def outcome(self) -> np.ndarray: ...
+
+    def step(self, actions: Any) -> np.ndarray:
+        """``actions[seat]``: ``(n,)`` ints (Discrete), ``(n, k)`` ints (MultiDiscrete) or ``(n, d)`` float32
+        (Box); entries of seats not acting are ignored. Returns the rewards ``(n_seats, n)`` float32. Raises
+        :class:`IllegalActionError` for an action the seat's mask forbids."""
+        ...
+
+    def observe(self) -> Any:
+        """``obs[seat]`` is ``(n, *observation.shape)`` float32: one array ``(n_seats, n, ...)`` when every seat has
+        the same shape, else a list."""
+        ...
+
+    def action_masks(self) -> list[np.ndarray | None]:
+        """Per seat: ``(n, n_actions)`` bool (a Discrete seat with masks) or None."""
+        ...
+
+    def to_act(self) -> np.ndarray:
+        """``(n_seats, n)`` bool: the seats that act on the next step."""
+        ...
 
 
-BotRule = Callable[[np.ndarray, np.random.Generator], np.ndarray]
+BotRule = Callable[..., np.ndarray]
 
 
 @dataclass(frozen=True)
 class BotSpec:
-    """A scripted player: a rule from a batch of one seat's observations (and a generator) to actions."""
+    """A scripted player: a rule from a batch of one seat's observations (and a generator) to actions.
+
+    With ``uses_mask`` the rule also takes the seat's action masks (``rule(obs, rng, mask)``, mask None when the
+    seat has none); without, ``rule(obs, rng)``."""
 
     name: str
     description: str
     rule: BotRule
+    uses_mask: bool = False
 
 
 @dataclass(frozen=True)
-class EnvSpec:
-    name: str
-    description: str
-    agents: tuple[str, ...]
-    make_config: Callable[..., Any]
-    make_core: Callable[[int, Any], BatchedCore]
-    make_parallel: Callable[..., Any]
-    observation_space: Callable[[Any], spaces.Space]
-    action_space: Callable[[Any], spaces.Space]
-    make_renderer: Callable[[], Any] | None = None
-    bots: dict[str, BotSpec] = field(default_factory=dict)
+class SeatSpace:
+    """What one seat's policy sees and does.
 
-    def config(self, **options: Any) -> Any:
-        return self.make_config(**options)
+    ``observation``: the Box a policy reads (float32 arrays of its shape; for a Dict observation space, its
+    ``observation`` part). ``action``: Discrete (actions ``0 .. n-1``), MultiDiscrete or Box. ``mask``: whether
+    the seat has action masks (Discrete only)."""
 
-    def core(self, n_games: int, **options: Any) -> BatchedCore:
-        return self.make_core(n_games, self.make_config(**options))
+    observation: spaces.Box
+    action: spaces.Space
+    mask: bool = False
+
+    def to_json(self) -> dict[str, Any]:
+        return {"observation": describe_space(self.observation), "action": describe_space(self.action),
+                "mask": self.mask}
 
 
 class UnknownEnvError(KeyError):
@@ -68,6 +101,239 @@ class UnknownEnvError(KeyError):
         return f"unknown env '{self.name}'; registered: {', '.join(self.known)}"
 
 
+class EnvError(UnknownEnvError):
+    """A game that cannot be loaded or does not keep the contract: one line that names the game and says why.
+
+    A subclass of :class:`UnknownEnvError`, so everything that refuses an unknown game (the CLI: exit code 2)
+    refuses this one the same way."""
+
+    def __init__(self, name: str, message: str) -> None:
+        super().__init__(name, [])
+        self.message = message
+
+    def __str__(self) -> str:
+        return self.message
+
+
+class IllegalActionError(ValueError):
+    """A core was given an action that the seat's mask forbids (or that is outside its action space)."""
+
+    def __init__(self, seat: int, game: int, action: Any, reason: str = "forbidden by its action mask") -> None:
+        self.seat, self.game, self.action = int(seat), int(game), action
+        super().__init__(f"illegal action {action!r} for seat {seat} in game slot {game}: {reason}")
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Spaces
+def describe_space(space: spaces.Space) -> str:
+    """A short text for a space: ``Discrete(3)``, ``Box(-1, 1, (8, 6), float32)``, ``MultiDiscrete([3 3])``."""
+    if isinstance(space, spaces.Discrete):
+        return f"Discrete({space.n})" if int(space.start) == 0 else f"Discrete({space.n}, start={space.start})"
+    if isinstance(space, spaces.Box):
+        lo, hi = space.low.min(), space.high.max()
+        return f"Box({lo:g}, {hi:g}, {space.shape}, {space.dtype})"
+    if isinstance(space, spaces.MultiDiscrete):
+        return f"MultiDiscrete({space.nvec.tolist()})"
+    if isinstance(space, spaces.Dict):
+        return "Dict(" + ", ".join(f"{k}: {describe_space(v)}" for k, v in space.spaces.items()) + ")"
+    return str(space)
+
+
+class SpaceError(ValueError):
+    """An unsupported space (the message says which and why; the caller adds the game and the seat)."""
+
+
+def _check_action(space: spaces.Space) -> spaces.Space:
+    if isinstance(space, spaces.Discrete):
+        if int(space.n) < 1:
+            raise SpaceError(f"action space {describe_space(space)} has no actions")
+        return space
+    if isinstance(space, spaces.MultiDiscrete):
+        if space.nvec.ndim != 1 or space.nvec.size == 0:
+            raise SpaceError(f"action space {describe_space(space)}: MultiDiscrete actions must be one flat vector")
+        if (space.nvec < 1).any():
+            raise SpaceError(f"action space {describe_space(space)} has a dimension without actions")
+        return space
+    if isinstance(space, spaces.Box):
+        if not np.issubdtype(space.dtype, np.floating):
+            raise SpaceError(f"action space {describe_space(space)}: Box actions must be floating point")
+        if not (np.isfinite(space.low).all() and np.isfinite(space.high).all()):
+            raise SpaceError(f"action space {describe_space(space)}: Box actions need finite bounds (a policy "
+                             "samples within them)")
+        if space.shape == () or math.prod(space.shape) == 0:
+            raise SpaceError(f"action space {describe_space(space)}: Box actions need at least one dimension")
+        return space
+    raise SpaceError(f"action space {describe_space(space)} ({type(space).__name__}) is not supported: marl plays "
+                     "Discrete, MultiDiscrete and Box actions")
+
+
+def _check_observation(space: spaces.Space) -> spaces.Box:
+    if not isinstance(space, spaces.Box):
+        raise SpaceError(f"observation space {describe_space(space)} ({type(space).__name__}) is not supported: "
+                         "marl reads Box observations, or a Dict of 'observation' (a Box) and 'action_mask'")
+    if space.shape is None or math.prod(space.shape) == 0:
+        raise SpaceError(f"observation space {describe_space(space)} is empty")
+    return space
+
+
+def seat_space_of(observation: spaces.Space, action: spaces.Space) -> SeatSpace:
+    """The :class:`SeatSpace` of a seat with these gymnasium spaces, or :class:`SpaceError` saying why not.
+
+    A Dict observation space must hold ``observation`` (a Box) and may hold ``action_mask`` (MultiBinary(n) or a
+    Box of n zeros and ones, for a Discrete(n) action space), nothing else. The observation a policy reads is a
+    float32 Box with the same bounds and shape."""
+    mask = False
+    if isinstance(observation, spaces.Dict):
+        keys = set(observation.spaces)
+        if "observation" not in keys:
+            raise SpaceError(f"observation space {describe_space(observation)}: a Dict needs an 'observation' entry "
+                             "(and may have an 'action_mask')")
+        extra = sorted(keys - {"observation", "action_mask"})
+        if extra:
+            raise SpaceError(f"observation space {describe_space(observation)}: a Dict may hold only 'observation' "
+                             f"and 'action_mask', not {', '.join(map(repr, extra))}")
+        if "action_mask" in keys:
+            m = observation.spaces["action_mask"]
+            if not isinstance(action, spaces.Discrete):
+                raise SpaceError(f"an action_mask needs a Discrete action space, not {describe_space(action)}")
+            size = (int(m.n) if isinstance(m, spaces.MultiBinary) and np.ndim(m.n) == 0
+                    else (m.shape[0] if isinstance(m, spaces.Box) and len(m.shape) == 1 else None))
+            if size != int(action.n):
+                raise SpaceError(f"action_mask {describe_space(m)} must be MultiBinary({action.n}) or a Box of "
+                                 f"shape ({action.n},), one entry per action of {describe_space(action)}")
+            mask = True
+        observation = observation.spaces["observation"]
+    box = _check_observation(observation)
+    _check_action(action)
+    if isinstance(action, spaces.Discrete) and int(action.start) != 0:  # policies play 0 .. n-1
+        action = spaces.Discrete(int(action.n))
+    elif isinstance(action, spaces.MultiDiscrete) and np.any(action.start != 0):
+        action = spaces.MultiDiscrete(action.nvec)
+    if box.dtype != np.float32:
+        box = spaces.Box(box.low.astype(np.float32), box.high.astype(np.float32), dtype=np.float32)
+    return SeatSpace(box, action, mask)
+
+
+def check_seat_space(seat: SeatSpace) -> None:
+    """Raise :class:`SpaceError` if a declared seat does not keep the contract."""
+    _check_observation(seat.observation)
+    _check_action(seat.action)
+    if seat.mask and not isinstance(seat.action, spaces.Discrete):
+        raise SpaceError(f"action masks need a Discrete action space, not {describe_space(seat.action)}")
+
+
+# --------------------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class EnvSpec:
+    """A game: its seats, spaces, turns and kind, and how to make its batched core.
+
+    ``turns``: ``"simultaneous"`` (all seats act at every step) or ``"sequential"`` (some act at each step: the
+    core's ``to_act()`` says which). ``kind``: what a result is: ``"two-sides"`` (zero-sum, win/draw/loss by the
+    sides' total score; ``sides`` lists the seats of each side, default seat i is side i for 2 seats),
+    ``"cooperative"`` (all seats one team; two policies compared by team return on the same seeds, a difference
+    within ``tie_tolerance`` a draw) or ``"free-for-all"`` (pairwise results from the final order of scores).
+
+    ``make_parallel(**options)`` makes the game's PettingZoo env (a ParallelEnv for pong). ``make_seat_spaces``
+    gives each seat's :class:`SeatSpace` for a config; without it every seat has ``observation_space(cfg)`` and
+    ``action_space(cfg)`` and no masks. ``time_limit(cfg)``: the most steps a game lasts (None: no declared
+    limit); by default the config's ``max_steps`` if it has one.
+    """
+
+    name: str
+    description: str
+    agents: tuple[str, ...]
+    make_config: Callable[..., Any]
+    make_core: Callable[[int, Any], BatchedCore]
+    make_parallel: Callable[..., Any]
+    observation_space: Callable[[Any], spaces.Space]
+    action_space: Callable[[Any], spaces.Space]
+    make_renderer: Callable[[], Any] | None = None
+    bots: dict[str, BotSpec] = field(default_factory=dict)
+    turns: str = "simultaneous"
+    kind: str = "two-sides"
+    sides: tuple[tuple[int, ...], ...] | None = None
+    tie_tolerance: float = 0.0
+    make_seat_spaces: Callable[[Any], tuple[SeatSpace, ...]] | None = None
+    time_limit: Callable[[Any], int | None] | None = None
+
+    def __post_init__(self) -> None:
+        n = len(self.agents)
+        if n < 1:
+            raise ValueError(f"game {self.name!r} has no seats")
+        if len(set(self.agents)) != n:
+            raise ValueError(f"game {self.name!r} names a seat twice: {list(self.agents)}")
+        if self.turns not in TURNS:
+            raise ValueError(f"game {self.name!r}: turns must be one of {', '.join(TURNS)}, not {self.turns!r}")
+        if self.kind not in KINDS:
+            raise ValueError(f"game {self.name!r}: kind must be one of {', '.join(KINDS)}, not {self.kind!r}")
+        if not (isinstance(self.tie_tolerance, (int, float)) and math.isfinite(self.tie_tolerance)
+                and self.tie_tolerance >= 0):
+            raise ValueError(f"game {self.name!r}: tie_tolerance must be a finite number >= 0, "
+                             f"not {self.tie_tolerance!r}")
+        if self.sides is not None:
+            if self.kind != "two-sides":
+                raise ValueError(f"game {self.name!r}: sides are for two-sides games, not {self.kind}")
+            seats = [s for side in self.sides for s in side]
+            if len(self.sides) != 2 or any(not side for side in self.sides) or sorted(seats) != list(range(n)):
+                raise ValueError(f"game {self.name!r}: sides must split the seats 0..{n - 1} into two non-empty "
+                                 f"sides, not {self.sides!r}")
+        elif self.kind == "two-sides" and n != 2:
+            raise ValueError(f"game {self.name!r} has {n} seats: a two-sides game with other than 2 seats must "
+                             "declare its sides")
+
+    def config(self, **options: Any) -> Any:
+        return self.make_config(**options)
+
+    def core(self, n_games: int, **options: Any) -> BatchedCore:
+        return self.make_core(n_games, self.make_config(**options))
+
+    @property
+    def n_seats(self) -> int:
+        return len(self.agents)
+
+    def side_seats(self) -> tuple[tuple[int, ...], ...]:
+        """The seats of each side: ``sides`` or seat i alone for two-sides games, one team of all seats for
+        cooperative games, every seat alone for free-for-all."""
+        if self.sides is not None:
+            return self.sides
+        if self.kind == "cooperative":
+            return (tuple(range(self.n_seats)),)
+        return tuple((s,) for s in range(self.n_seats))
+
+    def seat_spaces(self, cfg: Any = None) -> tuple[SeatSpace, ...]:
+        """One :class:`SeatSpace` per seat for the config ``cfg`` (default options when None), checked: an
+        unsupported space is an :class:`EnvError` naming the game, the seat and why."""
+        cfg = self.make_config() if cfg is None else cfg
+        if self.make_seat_spaces is not None:
+            seats = tuple(self.make_seat_spaces(cfg))
+        else:
+            obs, act = self.observation_space(cfg), self.action_space(cfg)
+            seats = tuple(SeatSpace(obs, act, False) for _ in self.agents)
+        if len(seats) != self.n_seats:
+            raise EnvError(self.name, f"game {self.name!r} declares {self.n_seats} seats but {len(seats)} seat "
+                                      "spaces")
+        for agent, seat in zip(self.agents, seats, strict=True):
+            try:
+                check_seat_space(seat)
+            except SpaceError as e:
+                raise EnvError(self.name, f"game {self.name!r}, seat {agent!r}: {e}") from None
+        return seats
+
+    def max_steps(self, cfg: Any = None) -> int | None:
+        """The most steps one game of this config lasts, if the game declares it."""
+        cfg = self.make_config() if cfg is None else cfg
+        if self.time_limit is not None:
+            return self.time_limit(cfg)
+        limit = getattr(cfg, "max_steps", None)
+        return int(limit) if isinstance(limit, (int, np.integer)) and limit > 0 else None
+
+
+def check_spaces(spec: EnvSpec, cfg: Any = None) -> tuple[SeatSpace, ...]:
+    """``spec.seat_spaces(cfg)``: each seat's spaces, or an :class:`EnvError` naming the seat and why."""
+    return spec.seat_spaces(cfg)
+
+
+# --------------------------------------------------------------------------------------------------------------
 _REGISTRY: dict[str, EnvSpec] = {}
 
 
@@ -79,23 +345,66 @@ def register(spec: EnvSpec) -> EnvSpec:
 
 
 def get_env(name: str) -> EnvSpec:
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        raise UnknownEnvError(name, sorted(_REGISTRY)) from None
+    """The game called ``name``: a registered one (built in, or from an installed package's entry point), or a
+    user's PettingZoo game ``module:factory`` / ``module`` (loaded once, then kept)."""
+    spec = _REGISTRY.get(name)
+    if spec is not None:
+        return spec
+    from . import loading
+
+    found = loading.find(name)
+    if found is not None:
+        return found
+    raise UnknownEnvError(name, env_names())
 
 
 def env_names() -> list[str]:
-    return sorted(_REGISTRY)
+    """The registered games: built in, and those of installed packages (entry-point group ``selfplay_cli.envs``)
+    that load."""
+    from . import loading
+
+    return sorted(set(_REGISTRY) | set(loading.plugin_names()))
 
 
 def random_rule(action_space: spaces.Space) -> BotRule:
-    """Uniformly random actions for a discrete action space."""
-    if not isinstance(action_space, spaces.Discrete):
-        raise TypeError("the random bot needs a Discrete action space")
-    n = int(action_space.n)
+    """Uniformly random actions for any supported action space: Discrete (uniform over the actions the mask
+    allows, when given one), MultiDiscrete (each dimension uniform) and Box (uniform within its bounds).
 
-    def rule(obs: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        return rng.integers(0, n, size=len(obs))
+    The rule is ``rule(obs, rng, mask=None)``; without a mask a Discrete rule draws ``rng.integers(0, n)``."""
+    if isinstance(action_space, spaces.Discrete):
+        n = int(action_space.n)
 
-    return rule
+        def discrete(obs: np.ndarray, rng: np.random.Generator, mask: np.ndarray | None = None) -> np.ndarray:
+            if mask is None:
+                return rng.integers(0, n, size=len(obs))
+            allowed = np.asarray(mask, dtype=bool).reshape(len(obs), n)
+            counts = allowed.sum(axis=1)
+            if (counts == 0).any():
+                raise ValueError("the random player was given a mask that allows no action")
+            # The k-th allowed action, k uniform in [0, count): one draw per row.
+            k = np.floor(rng.random(len(obs)) * counts).astype(np.int64)
+            return (np.cumsum(allowed, axis=1) > k[:, None]).argmax(axis=1).astype(np.int64)
+
+        return discrete
+    if isinstance(action_space, spaces.MultiDiscrete):
+        nvec = action_space.nvec.astype(np.int64)
+
+        def multi(obs: np.ndarray, rng: np.random.Generator, mask: np.ndarray | None = None) -> np.ndarray:
+            return rng.integers(0, nvec, size=(len(obs), len(nvec)))
+
+        return multi
+    if isinstance(action_space, spaces.Box):
+        _check_action(action_space)
+        low, high = action_space.low.astype(np.float32), action_space.high.astype(np.float32)
+
+        def box(obs: np.ndarray, rng: np.random.Generator, mask: np.ndarray | None = None) -> np.ndarray:
+            u = rng.random((len(obs), *low.shape), dtype=np.float32)
+            return np.clip(low + u * (high - low), low, high)
+
+        return box
+    raise TypeError(f"the random player has no rule for action space {describe_space(action_space)}")
+
+
+def random_bot(action_space: spaces.Space, description: str = "uniformly random legal actions") -> BotSpec:
+    """The ``random`` scripted player of a game with this action space (mask-aware)."""
+    return BotSpec("random", description, random_rule(action_space), uses_mask=True)

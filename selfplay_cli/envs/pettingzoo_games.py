@@ -1,0 +1,564 @@
+"""Any PettingZoo game as a `marl` game: an :class:`EnvSpec` probed from one instance, and a batched core of N
+copies that the arena plays exactly as it plays pong (no second game loop).
+
+``adapt(name, factory)`` calls ``factory(**options)`` once and reads the game's declaration from it:
+
+- seats: ``possible_agents`` (names, in order); per seat the observation space (a Box, or a Dict of
+  ``observation`` and ``action_mask``) and the action space (Discrete, MultiDiscrete, Box);
+- turns: a ``ParallelEnv`` is simultaneous, an ``AECEnv`` sequential (its ``agent_selection`` acts);
+- kind: ``env.metadata["marl_kind"]`` (``"two-sides"``, ``"cooperative"`` or ``"free-for-all"``); by default a
+  game of 2 seats is two-sides, of one seat cooperative, of more free-for-all (cooperative games must say so).
+  ``metadata["marl_sides"]`` (the seats, by index or agent name, of each of the two sides) and
+  ``metadata["marl_tie_tolerance"]`` complete it;
+- time limit: ``metadata["marl_max_steps"]``, else the env's ``max_cycles`` (times the seats for an AEC game, a
+  core step being one agent's move), else none;
+- recording: when ``metadata["render_modes"]`` lists ``"rgb_array"``, every copy is made with
+  ``render_mode="rgb_array"`` (PettingZoo draws such frames only when ``render()`` is called) and the game's own
+  ``render()`` makes the video's frames.
+
+The core (:class:`PettingZooCore`) steps N copies: ``reset(games, seeds)`` resets copies with ``reset(seed=...)``;
+``step(actions)`` gives every acting agent its seat's action; ``score`` is each seat's summed rewards; a game is
+over when every agent is done (``terminated``, or ``truncated`` when any agent was cut by truncation); agents that
+leave early no longer act. In an AEC game a seat's observation is refreshed when it is its turn (and when it
+leaves the game); the action masks of seats that do not act are all True (their actions are ignored).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import inspect
+import math
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import AECEnv, ParallelEnv
+
+from .registry import KINDS, EnvError, EnvSpec, IllegalActionError, SeatSpace, SpaceError, random_bot, seat_space_of
+
+__all__ = ["Layout", "PettingZooConfig", "PettingZooCore", "PettingZooRenderer", "adapt", "probe"]
+
+
+class Layout:
+    """What one instance of a game declares (for given options): the API, the seats and their spaces."""
+
+    def __init__(self, name: str, make: Callable[[], Any], api: str, agents: tuple[str, ...],
+                 obs_spaces: tuple[spaces.Space, ...], act_spaces: tuple[spaces.Space, ...],
+                 seats: tuple[SeatSpace, ...], metadata: Mapping[str, Any], max_steps: int | None,
+                 renders: bool) -> None:
+        self.name, self.make, self.api, self.agents = name, make, api, agents
+        self.obs_spaces, self.act_spaces, self.seats = obs_spaces, act_spaces, seats
+        self.metadata, self.max_steps, self.renders = metadata, max_steps, renders
+
+
+class PettingZooConfig:
+    """The options a game is made with (passed to its factory as keyword arguments) and what they make."""
+
+    __slots__ = ("options", "layout")
+
+    def __init__(self, options: Mapping[str, Any], layout: Layout) -> None:
+        self.options = dict(options)
+        self.layout = layout
+
+    @property
+    def max_steps(self) -> int | None:
+        return self.layout.max_steps
+
+    def as_dict(self) -> dict[str, Any]:
+        return dict(self.options)
+
+    def __repr__(self) -> str:
+        return f"PettingZooConfig({self.layout.name}, {self.options})"
+
+
+# --------------------------------------------------------------------------------------------------------------
+def _takes_render_mode(factory: Callable[..., Any]) -> bool:
+    try:
+        params = inspect.signature(factory).parameters.values()
+    except (TypeError, ValueError):
+        return False
+    return any(p.name == "render_mode" or p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
+
+
+def _make(name: str, factory: Callable[..., Any], options: Mapping[str, Any], render_mode: str | None) -> Any:
+    kwargs = dict(options)
+    if render_mode is not None:
+        kwargs["render_mode"] = render_mode
+    try:
+        return factory(**kwargs)
+    except TypeError as e:
+        if options:  # most often an option the factory does not take: a mistake in the command
+            raise ValueError(f"{name} does not take the options {', '.join(sorted(options))}: {e}") from None
+        raise EnvError(name, f"game {name!r}: calling its factory failed: TypeError: {e}") from None
+    except (ValueError, AssertionError) as e:
+        if options:
+            raise ValueError(f"{name} refused the options {dict(options)}: {type(e).__name__}: {e}") from None
+        raise EnvError(name, f"game {name!r}: calling its factory failed: {type(e).__name__}: {e}") from None
+    except Exception as e:  # the user's code failed: say where, in one line
+        raise EnvError(name, f"game {name!r}: calling its factory failed: {type(e).__name__}: {e}") from None
+
+
+def _api_of(name: str, env: Any) -> str:
+    if isinstance(env, ParallelEnv):
+        return "parallel"
+    if isinstance(env, AECEnv):
+        return "aec"
+    raise EnvError(name, f"game {name!r}: its factory returned a {type(env).__module__}.{type(env).__qualname__}, "
+                         "not a PettingZoo env (an AECEnv or a ParallelEnv)")
+
+
+def _spaces_of(name: str, env: Any, agents: tuple[str, ...]) -> tuple[tuple[spaces.Space, ...], ...]:
+    try:
+        obs = tuple(env.observation_space(a) for a in agents)
+        act = tuple(env.action_space(a) for a in agents)
+    except Exception as e:
+        raise EnvError(name, f"game {name!r}: reading its spaces failed: {type(e).__name__}: {e}") from None
+    return obs, act
+
+
+def _max_steps(name: str, env: Any, api: str, n_agents: int, metadata: Mapping[str, Any]) -> int | None:
+    limit = metadata.get("marl_max_steps")
+    if limit is None:
+        cycles = getattr(env, "max_cycles", None)
+        if cycles is None:
+            cycles = getattr(getattr(env, "unwrapped", None), "max_cycles", None)
+        if isinstance(cycles, (int, np.integer)) and not isinstance(cycles, bool) and cycles > 0:
+            return int(cycles) * (n_agents if api == "aec" else 1)
+        return None
+    if isinstance(limit, bool) or not isinstance(limit, (int, np.integer)) or limit < 1:
+        raise EnvError(name, f"game {name!r}: metadata marl_max_steps must be a whole number >= 1, not {limit!r}")
+    return int(limit)
+
+
+def probe(name: str, factory: Callable[..., Any], options: Mapping[str, Any] | None = None) -> Layout:
+    """Make one instance with ``options`` and read its declaration; an :class:`EnvError` (or a ValueError for
+    options the factory refuses) saying why the game cannot be played."""
+    options = dict(options or {})
+    env = _make(name, factory, options, None)
+    try:
+        api = _api_of(name, env)
+        try:
+            agents = tuple(env.possible_agents)
+        except Exception as e:
+            raise EnvError(name, f"game {name!r} has no possible_agents: {type(e).__name__}: {e}") from None
+        if not agents:
+            raise EnvError(name, f"game {name!r} has no agents (possible_agents is empty)")
+        if not all(isinstance(a, str) and a for a in agents) or len(set(agents)) != len(agents):
+            raise EnvError(name, f"game {name!r}: its agents must be distinct non-empty names (text), not "
+                                 f"{list(agents)!r}")
+        obs, act = _spaces_of(name, env, agents)
+        seats = []
+        for agent, o, a in zip(agents, obs, act, strict=True):
+            try:
+                seats.append(seat_space_of(o, a))
+            except SpaceError as e:
+                raise EnvError(name, f"game {name!r}, seat {agent!r}: {e}") from None
+        metadata = dict(getattr(env, "metadata", None) or {})
+        renders = "rgb_array" in (metadata.get("render_modes") or ())
+        render_mode = "rgb_array" if renders and _takes_render_mode(factory) else None
+        renders = renders and render_mode is not None
+        max_steps = _max_steps(name, env, api, len(agents), metadata)
+    finally:
+        _close(env)
+
+    def make() -> Any:
+        return _make(name, factory, options, render_mode)
+
+    return Layout(name, make, api, agents, obs, act, tuple(seats), metadata, max_steps, renders)
+
+
+def _close(env: Any) -> None:
+    with contextlib.suppress(Exception):  # closing is a courtesy; a game that fails at it has nothing to lose
+        env.close()
+
+
+def _option_key(options: Mapping[str, Any]) -> Any:
+    try:
+        key = tuple(sorted(options.items()))
+        hash(key)
+        return key
+    except TypeError:
+        return repr(sorted(options.items(), key=lambda kv: kv[0]))
+
+
+def _kind_of(name: str, layout: Layout) -> tuple[str, tuple[tuple[int, ...], ...] | None, float]:
+    md, agents = layout.metadata, layout.agents
+    kind = md.get("marl_kind")
+    if kind is None:
+        kind = "two-sides" if len(agents) == 2 else ("cooperative" if len(agents) == 1 else "free-for-all")
+    if kind not in KINDS:
+        raise EnvError(name, f"game {name!r}: metadata marl_kind must be one of {', '.join(KINDS)}, not {kind!r}")
+    sides = md.get("marl_sides")
+    if sides is not None:
+        try:
+            sides = tuple(tuple(agents.index(s) if isinstance(s, str) else int(s) for s in side) for side in sides)
+        except (TypeError, ValueError):
+            raise EnvError(name, f"game {name!r}: metadata marl_sides must list the seats (indices or agent "
+                                 f"names) of each side, not {md.get('marl_sides')!r}") from None
+    elif kind == "two-sides" and len(agents) != 2:
+        raise EnvError(name, f"game {name!r} has {len(agents)} agents: a two-sides game of other than 2 agents "
+                             "must declare metadata marl_sides (the agents of each side)")
+    tol = md.get("marl_tie_tolerance", 0.0)
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol) or tol < 0:
+        raise EnvError(name, f"game {name!r}: metadata marl_tie_tolerance must be a number >= 0, not {tol!r}")
+    return kind, sides, float(tol)
+
+
+def adapt(name: str, factory: Callable[..., Any], description: str | None = None) -> EnvSpec:
+    """The :class:`EnvSpec` of the PettingZoo game that ``factory(**options)`` makes, probed with no options."""
+    if not callable(factory):
+        raise EnvError(name, f"game {name!r}: {factory!r} is not callable (marl needs a function that returns a "
+                             "PettingZoo env)")
+    default = probe(name, factory)
+    layouts: dict[Any, Layout] = {(): default}
+
+    def make_config(**options: Any) -> PettingZooConfig:
+        key = _option_key(options)
+        layout = layouts.get(key)
+        if layout is None:
+            layout = probe(name, factory, options)
+            if layout.agents != default.agents or layout.api != default.api:
+                raise ValueError(f"{name} with options {options} has agents {list(layout.agents)} ({layout.api}), "
+                                 f"not {list(default.agents)} ({default.api}): options that change a game's seats "
+                                 "are not supported (register each seating as its own game)")
+            if len(layouts) < 64:
+                layouts[key] = layout
+        return PettingZooConfig(options, layout)
+
+    kind, sides, tol = _kind_of(name, default)
+    first = default.seats[0].action
+    same = all(s.action == first for s in default.seats)
+    bots = {"random": random_bot(first)} if same else {}
+    text = description or default.metadata.get("marl_description") or (
+        f"PettingZoo {'AEC' if default.api == 'aec' else 'parallel'} game "
+        f"{default.metadata.get('name') or getattr(factory, '__qualname__', name)}")
+    try:
+        return EnvSpec(
+            name=name,
+            description=str(text),
+            agents=default.agents,
+            make_config=make_config,
+            make_core=PettingZooCore,
+            make_parallel=lambda **options: factory(**options),
+            observation_space=lambda cfg: cfg.layout.seats[0].observation,
+            action_space=lambda cfg: cfg.layout.seats[0].action,
+            make_renderer=PettingZooRenderer if default.renders else None,
+            bots=bots,
+            turns="sequential" if default.api == "aec" else "simultaneous",
+            kind=kind,
+            sides=sides,
+            tie_tolerance=tol,
+            make_seat_spaces=lambda cfg: cfg.layout.seats,
+            time_limit=lambda cfg: cfg.layout.max_steps,
+        )
+    except ValueError as e:
+        raise EnvError(name, str(e)) from None
+
+
+# --------------------------------------------------------------------------------------------------------------
+class PettingZooRenderer:
+    """Frames of a PettingZoo game: the copy's own ``render()`` (``rgb_array``), as the recorder asks for them."""
+
+    def draw(self, core: PettingZooCore, game: int = 0, labels: Any = None, caption: Any = None) -> np.ndarray:
+        return core.render(game)
+
+
+class _Seat:
+    """How one seat's actions reach its agent: converted per step from the policy's array to what the env takes."""
+
+    def __init__(self, raw: spaces.Space, seat: SeatSpace) -> None:
+        self.space = seat.action
+        self.mask = seat.mask
+        self.shape = seat.observation.shape
+        if isinstance(raw, spaces.Discrete):
+            self.kind, self.n, self.start = "discrete", int(raw.n), int(raw.start)
+        elif isinstance(raw, spaces.MultiDiscrete):
+            self.kind, self.nvec, self.start_vec = "multi", raw.nvec.astype(np.int64), raw.start.astype(np.int64)
+        else:
+            self.kind, self.dtype, self.box = "box", raw.dtype, raw.shape
+
+    def convert(self, a: Any, n: int, acting: np.ndarray, seat: int) -> list[Any]:
+        """Per game, what the env is given; an :class:`IllegalActionError` for an action outside the space."""
+        if self.kind == "discrete":
+            arr = np.asarray(a)
+            if arr.shape != (n,):
+                raise ValueError(f"seat {seat}: Discrete actions must have shape ({n},), got {arr.shape}")
+            arr = arr.astype(np.int64, copy=False)
+            bad = ((arr < 0) | (arr >= self.n)) & acting
+            if bad.any():
+                g = int(np.flatnonzero(bad)[0])
+                raise IllegalActionError(seat, g, int(arr[g]), f"outside Discrete({self.n})")
+            return (arr + self.start).tolist() if self.start else arr.tolist()
+        if self.kind == "multi":
+            arr = np.asarray(a)
+            if arr.shape != (n, len(self.nvec)):
+                raise ValueError(f"seat {seat}: MultiDiscrete actions must have shape ({n}, {len(self.nvec)}), "
+                                 f"got {arr.shape}")
+            arr = arr.astype(np.int64)
+            bad = ((arr < 0) | (arr >= self.nvec)).any(axis=1) & acting
+            if bad.any():
+                g = int(np.flatnonzero(bad)[0])
+                raise IllegalActionError(seat, g, arr[g].tolist(), f"outside MultiDiscrete({self.nvec.tolist()})")
+            return list(arr + self.start_vec)
+        arr = np.asarray(a, dtype=self.dtype)
+        if arr.shape != (n, *self.box):
+            raise ValueError(f"seat {seat}: Box actions must have shape ({n}, {', '.join(map(str, self.box))}), got "
+                             f"{arr.shape}")
+        return list(arr.copy())
+
+
+class PettingZooCore:
+    """N copies of a PettingZoo game stepped as one batched core (see the module's docstring for the rules)."""
+
+    def __init__(self, n_games: int, config: PettingZooConfig) -> None:
+        if n_games < 1:
+            raise ValueError(f"n_games must be at least 1, not {n_games}")
+        layout = config.layout
+        self.config, self.layout, self.n = config, layout, n_games
+        self.agents = layout.agents
+        self.n_seats = S = len(layout.agents)
+        self._seat_of = {a: i for i, a in enumerate(layout.agents)}
+        self._aec = layout.api == "aec"
+        self._seats = [_Seat(raw, seat) for raw, seat in zip(layout.act_spaces, layout.seats, strict=True)]
+        self._masked = any(s.mask for s in self._seats)
+        self._dict_obs = [isinstance(o, spaces.Dict) for o in layout.obs_spaces]
+        shapes = {s.observation.shape for s in layout.seats}
+        self._stacked = len(shapes) == 1
+        self.envs: list[Any] = []
+        for i in range(n_games):
+            env = layout.make()
+            self._check_copy(i, env)
+            self.envs.append(env)
+        n = n_games
+        self.terminated = np.zeros(n, dtype=bool)
+        self.truncated = np.zeros(n, dtype=bool)
+        self.score = np.zeros((S, n))
+        self.steps = np.zeros(n, dtype=np.int64)
+        self._zero_obs = [np.zeros(s.observation.shape, dtype=np.float32) for s in layout.seats]
+        self._obs: list[list[Any]] = [[z] * n for z in self._zero_obs]
+        self._mask: list[list[Any]] = [[None] * n for _ in range(S)]
+        self._live = np.zeros((S, n), dtype=bool)  # agents still in each game
+        self._live_agents: list[list[tuple[int, str]]] = [[] for _ in range(n)]
+        self._turn = np.full(n, -1, dtype=np.int64)  # AEC: the seat whose turn it is, -1 when over
+        self._running = np.zeros(n, dtype=bool)
+        self._cut = np.zeros(n, dtype=bool)  # an agent of the game left by truncation
+        self.reset(np.arange(n), np.arange(n))
+
+    def _check_copy(self, i: int, env: Any) -> None:
+        name, lay = self.layout.name, self.layout
+        api = _api_of(name, env)
+        if api != lay.api or tuple(env.possible_agents) != lay.agents:
+            raise EnvError(name, f"game {name!r}: copy {i} is a {api} env with agents {list(env.possible_agents)}, "
+                                 f"the first was a {lay.api} env with {list(lay.agents)}: marl needs every copy "
+                                 "of a game to be alike")
+        obs, act = _spaces_of(name, env, lay.agents)
+        for agent, o, a, o0, a0 in zip(lay.agents, obs, act, lay.obs_spaces, lay.act_spaces, strict=True):
+            for what, got, first in (("observation", o, o0), ("action", a, a0)):
+                if got is not first and got != first:
+                    raise EnvError(name, f"game {name!r}: copy {i} has {what} space {got} for seat {agent!r}, the "
+                                         f"first copy {first}: marl needs every copy of a game to have the same "
+                                         "spaces")
+
+    # ----------------------------------------------------------------------------------------------------
+    def _store(self, seat: int, g: int, o: Any) -> None:
+        if self._dict_obs[seat]:
+            self._mask[seat][g] = o.get("action_mask")
+            o = o["observation"]
+        self._obs[seat][g] = o
+
+    def reset(self, games: Any, seeds: Any) -> None:
+        """Start new games in the slots ``games``, copy g with ``reset(seed=seeds[i])``."""
+        g_list = np.asarray(games, dtype=np.int64).reshape(-1).tolist()
+        s_list = np.asarray(seeds).reshape(-1).tolist()
+        if len(g_list) != len(s_list):
+            raise ValueError(f"reset got {len(g_list)} games but {len(s_list)} seeds")
+        for g, seed in zip(g_list, s_list, strict=True):
+            env = self.envs[g]
+            self.score[:, g] = 0.0
+            self.steps[g] = 0
+            self.terminated[g] = self.truncated[g] = self._cut[g] = False
+            for s in range(self.n_seats):
+                self._obs[s][g] = self._zero_obs[s]
+                self._mask[s][g] = None
+            if self._aec:
+                env.reset(seed=int(seed))
+                for agent in env.agents:
+                    s = self._seat_of[agent]
+                    self._store(s, g, env.observe(agent))
+                self._running[g] = True
+                self._settle(g)
+            else:
+                obs, _ = env.reset(seed=int(seed))
+                live = [(self._seat_of[a], a) for a in env.agents]
+                for s, agent in live:
+                    self._store(s, g, obs[agent])
+                self._live_agents[g] = live
+                self._live[:, g] = False
+                for s, _ in live:
+                    self._live[s, g] = True
+                self._running[g] = bool(live)
+
+    def _settle(self, g: int) -> None:
+        """AEC: step the agents that are done out of the game (PettingZoo's ``step(None)``), keeping their final
+        observation, until a live agent has the turn or nobody is left."""
+        env, seat_of = self.envs[g], self._seat_of
+        while env.agents:
+            agent = env.agent_selection
+            term, trunc = env.terminations.get(agent, False), env.truncations.get(agent, False)
+            s = seat_of[agent]
+            if not (term or trunc):
+                self._store(s, g, env.observe(agent))
+                self._turn[g] = s
+                return
+            self._store(s, g, env.observe(agent))
+            if trunc and not term:
+                self._cut[g] = True
+            env.step(None)
+        self._turn[g] = -1
+        if self._running[g]:
+            self._running[g] = False
+            self.truncated[g] = bool(self._cut[g])
+            self.terminated[g] = not self._cut[g]
+
+    # ----------------------------------------------------------------------------------------------------
+    def to_act(self) -> np.ndarray:
+        """``(n_seats, n)`` bool: the seats that act on the next step."""
+        if self._aec:
+            acting = np.zeros((self.n_seats, self.n), dtype=bool)
+            g = np.flatnonzero(self._turn >= 0)
+            acting[self._turn[g], g] = True
+            return acting
+        return self._live & self._running
+
+    def observe(self) -> Any:
+        """Per seat ``(n, *shape)`` float32: one array ``(n_seats, n, ...)`` if all seats have one shape, else a
+        list."""
+        n = self.n
+        if self._stacked:
+            out = np.empty((self.n_seats, n, *self._zero_obs[0].shape), dtype=np.float32)
+            for s in range(self.n_seats):
+                self._stack(s, out[s])
+            return out
+        outs = []
+        for s in range(self.n_seats):
+            buf = np.empty((n, *self._zero_obs[s].shape), dtype=np.float32)
+            self._stack(s, buf)
+            outs.append(buf)
+        return outs
+
+    def _stack(self, s: int, out: np.ndarray) -> None:
+        try:
+            np.stack(self._obs[s], out=out, casting="unsafe")
+        except ValueError:
+            for g, o in enumerate(self._obs[s]):
+                got = np.shape(o)
+                if got != out.shape[1:]:
+                    raise EnvError(self.layout.name, f"game {self.layout.name!r}: seat {self.agents[s]!r} observed "
+                                                     f"shape {got} in game slot {g}, its space declares "
+                                                     f"{out.shape[1:]}") from None
+            raise
+
+    def action_masks(self) -> list[np.ndarray | None]:
+        """Per seat ``(n, n_actions)`` bool for seats with masks (all True where the seat does not act), else
+        None."""
+        out: list[np.ndarray | None] = []
+        acting = self.to_act() if self._masked else None
+        for s, seat in enumerate(self._seats):
+            if not seat.mask:
+                out.append(None)
+                continue
+            m = np.ones((self.n, seat.space.n), dtype=bool)
+            for g in np.flatnonzero(acting[s]).tolist():
+                got = self._mask[s][g]
+                if got is not None:
+                    m[g] = got
+            out.append(m)
+        return out
+
+    # ----------------------------------------------------------------------------------------------------
+    def _check_masks(self, cols: list[list[Any]], acting: np.ndarray) -> None:
+        for s, seat in enumerate(self._seats):
+            if not seat.mask:
+                continue
+            masks, col, start = self._mask[s], cols[s], seat.start
+            for g in np.flatnonzero(acting[s]).tolist():
+                m = masks[g]
+                if m is not None and not m[col[g] - start]:
+                    raise IllegalActionError(s, g, col[g] - start)
+
+    def step(self, actions: Any) -> np.ndarray:
+        """Advance every running game one step; returns the rewards ``(n_seats, n)`` float32."""
+        S, n = self.n_seats, self.n
+        if len(actions) != S:
+            raise ValueError(f"actions must have one entry per seat ({S}), got {len(actions)}")
+        acting = self.to_act()
+        cols = [seat.convert(actions[s], n, acting[s], s) for s, seat in enumerate(self._seats)]
+        if self._masked:
+            self._check_masks(cols, acting)
+        rewards = np.zeros((S, n), dtype=np.float32)
+        self.terminated.fill(False)
+        self.truncated.fill(False)
+        running = np.flatnonzero(self._running)
+        if self._aec:
+            self._step_aec(running.tolist(), cols, rewards)
+        else:
+            self._step_parallel(running.tolist(), cols, rewards)
+        self.steps[running] += 1
+        self.score += rewards
+        return rewards
+
+    def _step_parallel(self, games: list[int], cols: list[list[Any]], rewards: np.ndarray) -> None:
+        seat_of, envs = self._seat_of, self.envs
+        for g in games:
+            live = self._live_agents[g]
+            obs, rew, term, trunc, _ = envs[g].step({agent: cols[s][g] for s, agent in live})
+            for agent, r in rew.items():
+                if r:
+                    s = seat_of.get(agent)
+                    if s is not None:
+                        rewards[s, g] = r
+            for s, agent in live:
+                o = obs.get(agent)
+                if o is not None:
+                    self._store(s, g, o)
+            gone = [(s, a) for s, a in live if term.get(a) or trunc.get(a)]
+            if gone:
+                for s, a in gone:
+                    self._live[s, g] = False
+                    if trunc.get(a) and not term.get(a):
+                        self._cut[g] = True
+                live = self._live_agents[g] = [x for x in live if x not in gone]
+            if not live or not envs[g].agents:
+                self._live[:, g] = False
+                self._live_agents[g] = []
+                self._running[g] = False
+                self.truncated[g] = bool(self._cut[g])
+                self.terminated[g] = not self._cut[g]
+
+    def _step_aec(self, games: list[int], cols: list[list[Any]], rewards: np.ndarray) -> None:
+        seat_of, envs, turn = self._seat_of, self.envs, self._turn
+        for g in games:
+            env = envs[g]
+            env.step(cols[turn[g]][g])
+            for agent, r in env.rewards.items():
+                if r:
+                    rewards[seat_of[agent], g] += r
+            self._settle(g)
+
+    # ----------------------------------------------------------------------------------------------------
+    def render(self, game: int = 0) -> np.ndarray:
+        """The frame of copy ``game`` as its own ``render()`` draws it: ``(height, width, 3)`` uint8."""
+        name = self.layout.name
+        if not self.layout.renders:
+            raise EnvError(name, f"game {name!r} cannot be recorded: its metadata render_modes has no 'rgb_array'")
+        frame = self.envs[game].render()
+        arr = np.asarray(frame) if frame is not None else None
+        if arr is None or arr.ndim != 3 or arr.shape[2] != 3:
+            got = "None" if arr is None else f"an array of shape {arr.shape}"
+            raise EnvError(name, f"game {name!r}: render() returned {got}, not an RGB frame (height, width, 3)")
+        return arr if arr.dtype == np.uint8 else np.clip(arr, 0, 255).astype(np.uint8)
+
+    def close(self) -> None:
+        for env in self.envs:
+            _close(env)

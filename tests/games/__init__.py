@@ -1,0 +1,5 @@
+"""Games written for the test suite, each a small PettingZoo env that marl plays through its adapter.
+
+- ``tests.games.tictactoe:env``: turn-based (AEC), 2 seats, two sides, Discrete(9) with action masks.
+- ``tests.games.rendezvous:parallel_env``: simultaneous (parallel), 3 seats, cooperative, Box(-1, 1, (2,)) actions.
+"""
