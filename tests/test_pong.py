@@ -50,6 +50,80 @@ def test_parallel_api_and_seed_tests_pass():
     parallel_api_test(PongParallelEnv(rules="seed", points_to_win=3), num_cycles=500)
 
 
+@pytest.mark.parametrize("options, tracker, min_games", [
+    ({}, 0.5, 0),
+    ({"rules": "seed", "r_for_hit": 0.1, "points_to_win": 3}, 0.5, 0),
+    ({"points_to_win": 2, "max_steps": 400, "frame_stack": 3, "r_for_hit": 0.3, "max_rally_steps": 90}, 0.3, 10),
+    ({"max_speed": 40, "speedup": 3.0, "points_to_win": 3, "max_bounce_deg": 75.0}, 0.9, 3),
+])
+def test_pettingzoo_view_is_the_batched_cores_game_step_for_step(options, tracker, min_games):
+    """The view plays one game in plain Python floats (pong_scalar.py); the core's game of the same seed, given the
+    same actions, must give bit for bit the same observations, rewards, scores and endings, game after game (a
+    reset without a seed draws the next game's seed from the first seed's generator)."""
+    env = PongParallelEnv(**options)
+    core = PongCore(1, PongConfig(**options))
+    obs, infos = env.reset(seed=77)
+    core.reset([0], [env.game_seed])
+    rng = np.random.default_rng(len(options))
+    o = core.observe()
+    games, events = 0, {"points": 0, "hits": 0}
+    for t in range(6000):
+        assert np.array_equal(o[0, 0], obs["left"]) and np.array_equal(o[1, 0], obs["right"]), t
+        a = rng.integers(0, 3, 2)
+        if rng.random() < tracker:
+            a = np.array([cpu_rule(o[0])[0], cpu_rule(o[1])[0]])
+        obs, rew, term, trunc, infos = env.step({"left": int(a[0]), "right": int(a[1])})
+        hits = core.hits.sum()
+        r = core.step(a[:, None])
+        o = core.observe()
+        assert (rew["left"], rew["right"]) == (float(r[0, 0]), float(r[1, 0])), t
+        assert term["left"] == bool(core.terminated[0]) and trunc["right"] == bool(core.truncated[0]), t
+        assert infos["left"]["score"] == (int(core.score[0, 0]), int(core.score[1, 0])), t
+        assert infos["right"]["touches"] == int(core.hits[1, 0])
+        events["points"] += abs(rew["left"]) == 1
+        events["hits"] += core.hits.sum() > hits
+        if not env.agents:
+            games += 1
+            obs, _ = env.reset()
+            core.reset([0], [env.game_seed])
+            o = core.observe()
+    assert np.array_equal(o[0, 0], obs["left"])
+    assert events["hits"] >= 20 and events["points"] + games >= 1 and games >= min_games, (games, events)
+
+
+def test_game_states_move_between_the_view_and_the_core():
+    core = PongCore(3)
+    core.reset([0, 1, 2], [5, 6, 7])
+    rng = np.random.default_rng(4)
+    for _ in range(150):
+        core.step(rng.integers(0, 3, (2, 3)))
+    env = PongParallelEnv()
+    env.reset(seed=0)
+    env.set_state({"core": core.get_state([1]), "agents": ["left", "right"], "game_seed": 6})
+    for _ in range(600):
+        a = rng.integers(0, 3, 2)
+        obs, rew, *_ = env.step({"left": int(a[0]), "right": int(a[1])})
+        r = core.step(np.array([[0, a[0], 0], [0, a[1], 0]]))
+        assert np.array_equal(obs["right"], core.observe()[1, 1]) and rew["left"] == r[0, 1]
+    other = PongCore(1)
+    other.set_state(env.get_state()["core"])
+    assert np.array_equal(other.observe()[:, 0], core.observe()[:, 1])
+    assert np.array_equal(env.core.observe(), other.observe()), "env.core: a core holding the view's game"
+
+
+def test_pong_keeps_the_game_contract():
+    spec = get_env("pong")
+    assert (spec.turns, spec.kind, spec.side_seats(), spec.max_steps()) == ("simultaneous", "two-sides",
+                                                                            ((0,), (1,)), 18_000)
+    seats = spec.seat_spaces()
+    assert [(s.observation.shape, s.action.n, s.mask) for s in seats] == [((8, 6), 3, False)] * 2
+    core = spec.core(4)
+    assert core.score.dtype == np.float64 and core.action_masks() == [None, None]
+    assert core.to_act().shape == (2, 4) and core.to_act().all()
+    core.step([np.zeros(4, dtype=np.int64), np.ones(4, dtype=np.int64)])  # a list per seat works too
+    assert core.paddle.shape == (2, 4)
+
+
 def test_pixel_observations_are_mirrored_frames():
     env = PongParallelEnv(obs_mode="rgb")
     parallel_api_test(env, num_cycles=20)

@@ -19,8 +19,9 @@ copies that the arena plays exactly as it plays pong (no second game loop).
 The core (:class:`PettingZooCore`) steps N copies: ``reset(games, seeds)`` resets copies with ``reset(seed=...)``;
 ``step(actions)`` gives every acting agent its seat's action; ``score`` is each seat's summed rewards; a game is
 over when every agent is done (``terminated``, or ``truncated`` when any agent was cut by truncation); agents that
-leave early no longer act. In an AEC game a seat's observation is refreshed when it is its turn (and when it
-leaves the game); the action masks of seats that do not act are all True (their actions are ignored).
+leave early no longer act. In an AEC game a seat's observation is refreshed when its turn comes and when it
+leaves the game (zeros before its first turn). The action masks of seats that do not act are all True (their
+actions are ignored).
 """
 
 from __future__ import annotations
@@ -340,7 +341,9 @@ class PettingZooCore:
         self._mask: list[list[Any]] = [[None] * n for _ in range(S)]
         self._live = np.zeros((S, n), dtype=bool)  # agents still in each game
         self._live_agents: list[list[tuple[int, str]]] = [[] for _ in range(n)]
-        self._turn = np.full(n, -1, dtype=np.int64)  # AEC: the seat whose turn it is, -1 when over
+        self._turn = [-1] * n  # AEC: the seat whose turn it is in each game, -1 when it is over
+        self._acting: np.ndarray | None = None  # to_act() until the next step or reset
+        self._ones = [np.ones(seat.action.n, dtype=bool) if seat.mask else None for seat in layout.seats]
         self._running = np.zeros(n, dtype=bool)
         self._cut = np.zeros(n, dtype=bool)  # an agent of the game left by truncation
         self.reset(np.arange(n), np.arange(n))
@@ -373,6 +376,7 @@ class PettingZooCore:
         s_list = np.asarray(seeds).reshape(-1).tolist()
         if len(g_list) != len(s_list):
             raise ValueError(f"reset got {len(g_list)} games but {len(s_list)} seeds")
+        self._acting = None
         for g, seed in zip(g_list, s_list, strict=True):
             env = self.envs[g]
             self.score[:, g] = 0.0
@@ -381,11 +385,8 @@ class PettingZooCore:
             for s in range(self.n_seats):
                 self._obs[s][g] = self._zero_obs[s]
                 self._mask[s][g] = None
-            if self._aec:
+            if self._aec:  # each seat observes when its turn comes (zeros until then)
                 env.reset(seed=int(seed))
-                for agent in env.agents:
-                    s = self._seat_of[agent]
-                    self._store(s, g, env.observe(agent))
                 self._running[g] = True
                 self._settle(g)
             else:
@@ -424,12 +425,16 @@ class PettingZooCore:
     # ----------------------------------------------------------------------------------------------------
     def to_act(self) -> np.ndarray:
         """``(n_seats, n)`` bool: the seats that act on the next step."""
-        if self._aec:
-            acting = np.zeros((self.n_seats, self.n), dtype=bool)
-            g = np.flatnonzero(self._turn >= 0)
-            acting[self._turn[g], g] = True
-            return acting
-        return self._live & self._running
+        if self._acting is None:
+            if self._aec:
+                acting = np.zeros((self.n_seats, self.n), dtype=bool)
+                turn = np.array(self._turn)
+                g = np.flatnonzero(turn >= 0)
+                acting[turn[g], g] = True
+            else:
+                acting = self._live & self._running
+            self._acting = acting
+        return self._acting.copy()
 
     def observe(self) -> Any:
         """Per seat ``(n, *shape)`` float32: one array ``(n_seats, n, ...)`` if all seats have one shape, else a
@@ -463,29 +468,35 @@ class PettingZooCore:
         """Per seat ``(n, n_actions)`` bool for seats with masks (all True where the seat does not act), else
         None."""
         out: list[np.ndarray | None] = []
-        acting = self.to_act() if self._masked else None
+        acting = self.to_act().tolist() if self._masked else None
         for s, seat in enumerate(self._seats):
             if not seat.mask:
                 out.append(None)
                 continue
-            m = np.ones((self.n, seat.space.n), dtype=bool)
-            for g in np.flatnonzero(acting[s]).tolist():
-                got = self._mask[s][g]
-                if got is not None:
-                    m[g] = got
+            ones, masks = self._ones[s], self._mask[s]
+            rows = [ones] * self.n
+            for g, a in enumerate(acting[s]):
+                if a and masks[g] is not None:
+                    rows[g] = masks[g]
+            m = np.empty((self.n, seat.space.n), dtype=bool)
+            try:
+                np.stack(rows, out=m, casting="unsafe")
+            except ValueError:
+                raise EnvError(self.layout.name, f"game {self.layout.name!r}: seat {self.agents[s]!r} gave an "
+                                                 f"action_mask of another shape than ({seat.space.n},)") from None
             out.append(m)
         return out
 
-    # ----------------------------------------------------------------------------------------------------
     def _check_masks(self, cols: list[list[Any]], acting: np.ndarray) -> None:
         for s, seat in enumerate(self._seats):
             if not seat.mask:
                 continue
             masks, col, start = self._mask[s], cols[s], seat.start
-            for g in np.flatnonzero(acting[s]).tolist():
-                m = masks[g]
-                if m is not None and not m[col[g] - start]:
-                    raise IllegalActionError(s, g, col[g] - start)
+            for g, a in enumerate(acting[s].tolist()):
+                if a:
+                    m = masks[g]
+                    if m is not None and not m[col[g] - start]:
+                        raise IllegalActionError(s, g, col[g] - start)
 
     def step(self, actions: Any) -> np.ndarray:
         """Advance every running game one step; returns the rewards ``(n_seats, n)`` float32."""
@@ -497,6 +508,7 @@ class PettingZooCore:
         if self._masked:
             self._check_masks(cols, acting)
         rewards = np.zeros((S, n), dtype=np.float32)
+        self._acting = None
         self.terminated.fill(False)
         self.truncated.fill(False)
         running = np.flatnonzero(self._running)
@@ -509,10 +521,14 @@ class PettingZooCore:
         return rewards
 
     def _step_parallel(self, games: list[int], cols: list[list[Any]], rewards: np.ndarray) -> None:
-        seat_of, envs = self._seat_of, self.envs
-        for g in games:
-            live = self._live_agents[g]
-            obs, rew, term, trunc, _ = envs[g].step({agent: cols[s][g] for s, agent in live})
+        seat_of, envs, live_agents, obs_of = self._seat_of, self.envs, self._live_agents, self._obs
+        plain = not any(self._dict_obs)
+        for g in games:  # the hot loop: plain loops, no comprehensions (each would build a function in 3.11)
+            live = live_agents[g]
+            act = {}
+            for s, agent in live:
+                act[agent] = cols[s][g]
+            obs, rew, term, trunc, _ = envs[g].step(act)
             for agent, r in rew.items():
                 if r:
                     s = seat_of.get(agent)
@@ -521,20 +537,35 @@ class PettingZooCore:
             for s, agent in live:
                 o = obs.get(agent)
                 if o is not None:
-                    self._store(s, g, o)
-            gone = [(s, a) for s, a in live if term.get(a) or trunc.get(a)]
-            if gone:
-                for s, a in gone:
-                    self._live[s, g] = False
-                    if trunc.get(a) and not term.get(a):
-                        self._cut[g] = True
-                live = self._live_agents[g] = [x for x in live if x not in gone]
-            if not live or not envs[g].agents:
-                self._live[:, g] = False
-                self._live_agents[g] = []
-                self._running[g] = False
-                self.truncated[g] = bool(self._cut[g])
-                self.terminated[g] = not self._cut[g]
+                    if plain:
+                        obs_of[s][g] = o
+                    else:
+                        self._store(s, g, o)
+            if True in term.values() or True in trunc.values():
+                self._leave(g, live, term, trunc)
+            elif not envs[g].agents:
+                self._over(g)
+
+    def _leave(self, g: int, live: list[tuple[int, str]], term: Mapping[str, Any], trunc: Mapping[str, Any]) -> None:
+        """Agents of game g that are done leave it; the game is over when none is left."""
+        stay = []
+        for s, a in live:
+            if term.get(a) or trunc.get(a):
+                self._live[s, g] = False
+                if trunc.get(a) and not term.get(a):
+                    self._cut[g] = True
+            else:
+                stay.append((s, a))
+        self._live_agents[g] = stay
+        if not stay or not self.envs[g].agents:
+            self._over(g)
+
+    def _over(self, g: int) -> None:
+        self._live[:, g] = False
+        self._live_agents[g] = []
+        self._running[g] = False
+        self.truncated[g] = bool(self._cut[g])
+        self.terminated[g] = not self._cut[g]
 
     def _step_aec(self, games: list[int], cols: list[list[Any]], rewards: np.ndarray) -> None:
         seat_of, envs, turn = self._seat_of, self.envs, self._turn
