@@ -129,7 +129,7 @@ def describe_space(space: spaces.Space) -> str:
     """A short text for a space: ``Discrete(3)``, ``Box(-1, 1, (8, 6), float32)``, ``MultiDiscrete([3 3])``."""
     if isinstance(space, spaces.Discrete):
         return f"Discrete({space.n})" if int(space.start) == 0 else f"Discrete({space.n}, start={space.start})"
-    if isinstance(space, spaces.Box):
+    if isinstance(space, spaces.Box) and space.low.size:
         lo, hi = space.low.min(), space.high.max()
         return f"Box({lo:g}, {hi:g}, {space.shape}, {space.dtype})"
     if isinstance(space, spaces.MultiDiscrete):
