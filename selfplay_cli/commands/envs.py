@@ -62,8 +62,8 @@ def _per_seat(row: dict[str, Any], key: str) -> str:
 
 def envs(
     games: Annotated[list[str] | None, typer.Argument(
-        help="Also show these games of your own: module:factory (e.g. mypkg.mygame:env) or a module with env() "
-             "or parallel_env().", show_default=False)] = None,
+        help="Also show these games of your own: module:factory (e.g. mypkg.mygame:env) or a module with a function "
+             "env or parallel_env.", show_default=False)] = None,
     json_out: Annotated[bool, typer.Option("--json", help="Print JSON alone on stdout.")] = False,
 ) -> None:
     """List the registered games (and any GAMES named) with their agents, kind, turns, per-seat spaces and
