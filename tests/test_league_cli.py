@@ -64,7 +64,7 @@ def test_checkpoint_import_list_show_tag_export_rm_round_trip(home, tmp_path, ca
     assert run(capsys, "checkpoint", "tag", "ep20", "champion")[0] == 0
     code, shown = run_json(capsys, "checkpoint", "show", "champion")
     assert shown["policy"] == "r1/ep20" and shown["tags"] == ["champion"]
-    assert shown["file"]["arch"]["hidden"] == [32, 32] and shown["file"]["obs_shape"] == [8, 6]
+    assert shown["file"]["arch"]["hidden"] == [32, 32] and shown["file"]["obs_space"]["shape"] == [8, 6]
     code, latest = run_json(capsys, "checkpoint", "show", "latest")
     assert latest["policy"] == "r1/ep20"
 

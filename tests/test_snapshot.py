@@ -257,8 +257,12 @@ def test_bad_marl_json_refused(saved):
         read_meta(path)
     assert str(path) in str(e.value)
     d = meta.to_dict()
-    del d["n_actions"]
-    _rewrite_header(path, tensors, format=FORMAT, format_version="1", marl=json.dumps(d))
+    del d["act_space"]
+    _rewrite_header(path, tensors, format=FORMAT, format_version="2", marl=json.dumps(d))
+    with pytest.raises(SnapshotError, match="act_space"):
+        read_meta(path)
+    legacy = {k: v for k, v in d.items() if k != "obs_space"} | {"obs_shape": [8, 6]}  # version 1 without n_actions
+    _rewrite_header(path, tensors, format=FORMAT, format_version="1", marl=json.dumps(legacy))
     with pytest.raises(SnapshotError, match="n_actions"):
         read_meta(path)
 

@@ -23,14 +23,25 @@ transitions uniformly and minimises ``loss(Q(s, a), y)`` (Huber or MSE) with, fo
     y = R + gamma^n * (1 - done) * Q_target(s', argmax_a' Q(s', a'))     (double DQN)
     y = R + gamma^n * (1 - done) * max_a' Q_target(s', a')               (plain DQN, seed 000)
 Every ``target_period`` updates the target moves to ``tau * online + (1 - tau) * target`` (tau = 1: a copy).
-A game that ends (won, lost or truncated) is a done: the value after it is not bootstrapped, and an n-step
-return stops at it (the learner sees only dones, so a truncation counts as an end, as in PPO).
+A game that ends (won or lost) is a done: the value after it is not bootstrapped, and an n-step return stops at
+it. A game cut short by a time limit (``truncated``, with its final observation) ends the return there too but
+bootstraps from the final observation: s' is that observation and the discount gamma^k, k the steps up to it
+(``bootstrap_truncated``; off, a truncation counts as an end).
+
+Actions. DQN plays Discrete actions only (any other action space is refused, naming it: use PPO). With action
+masks, exploration is uniform over the allowed actions, the greedy action the best allowed one, and the target's
+max (or argmax) runs over the actions allowed in s': each transition keeps the mask of its s'.
+
+Turns. In a turn-based game (``acting``) a transition runs from one of the seat's decisions to its next (or to the
+end of the game), its reward the sum of the rewards in between; n-step returns chain n such decisions. A decision
+waits in the learner until the seat's next one or the end of its game.
 
 Auto-reset. The games restart a finished game at once, so the observation that follows a done is the *next*
 game's first, and that is what lands in ``next_obs`` of a transition whose steps include a done. It is
 harmless: with done = 1 the target ignores ``next_obs``. Transitions are completed lazily: ``act(obs)``
 remembers (obs, actions), ``record`` stashes (rewards, dones), and the next observation (given to ``update`` or
-the next ``act``) closes them and pushes the whole batch of slots into the ring buffer in one vectorised write.
+the next ``act``; with masks only the next ``act``, which brings the mask of s') closes them and pushes the whole
+batch of slots into the ring buffer in one vectorised write.
 
 Resume. :meth:`DQNLearner.state_dict` holds the online and target networks, the optimiser, the random generator
 and the counters, but not the replay buffer (up to ~40 MB per learner; most DQN implementations do the same).
@@ -48,8 +59,12 @@ import numpy as np
 import torch
 from torch import nn
 
+from ..errors import MarlError
+from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
-from . import FlatAdam, flatten
+from ..policies.spaces import describe_space, uniform_allowed
+from .base import Seat, action_head, as_bool, fix_mask, learner_args
+from .optim import FlatAdam, flatten
 
 EPS_SCHEDULES = ("linear", "exponential")
 LOSSES = ("huber", "mse")
@@ -74,6 +89,7 @@ class DQNConfig:
     double_dqn: bool = True  # choose the next action with the online net, value it with the target net
     loss: str = "huber"  # "huber" (smooth L1) or "mse" (seed 000)
     max_grad_norm: float = 10.0  # gradient clipping; 0 turns it off
+    bootstrap_truncated: bool = True  # a game cut short bootstraps from its final observation (False: an end)
     arch: Arch = field(default_factory=lambda: Arch(hidden=(64, 64), activation="relu", value_head=False))
 
     def __post_init__(self) -> None:
@@ -128,7 +144,9 @@ def epsilon_at(cfg: DQNConfig, transitions: int) -> float:
 
 
 class ReplayBuffer:
-    """A ring of preallocated numpy arrays: obs and next_obs (float32, flattened), actions, rewards, dones.
+    """A ring of preallocated numpy arrays: obs and next_obs (float32, flattened), actions, rewards, dones, the
+    discount of each transition's bootstrap (gamma^steps to s'; 1 when not given) and, once a transition comes
+    with one, the action mask of its s' (True everywhere for transitions without).
 
     ``add`` writes a whole batch of slots at once; once full, each write overwrites the oldest entries, so the
     buffer always holds the newest ``capacity`` transitions. ``sample`` draws uniformly (with replacement)
@@ -142,6 +160,8 @@ class ReplayBuffer:
         self.actions = np.zeros(capacity, dtype=np.int64)
         self.rewards = np.zeros(capacity, dtype=np.float32)
         self.dones = np.zeros(capacity, dtype=np.float32)
+        self.discounts = np.ones(capacity, dtype=np.float32)
+        self.next_masks: np.ndarray | None = None  # (capacity, n_actions) bool, made by the first masked add
         self.pos = 0  # next entry to write
         self.size = 0  # filled entries
 
@@ -149,11 +169,15 @@ class ReplayBuffer:
         return self.size
 
     def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray, next_obs: np.ndarray,
-            dones: np.ndarray) -> None:
+            dones: np.ndarray, discounts: np.ndarray | float = 1.0, next_masks: np.ndarray | None = None) -> None:
         n = len(actions)
+        discounts = np.broadcast_to(np.asarray(discounts, dtype=np.float32), (n,))
+        if next_masks is not None and self.next_masks is None:
+            self.next_masks = np.ones((self.capacity, next_masks.shape[1]), dtype=bool)
         if n > self.capacity:  # only the newest fit
-            obs, actions, rewards, next_obs, dones = (x[n - self.capacity:] for x in
-                                                      (obs, actions, rewards, next_obs, dones))
+            obs, actions, rewards, next_obs, dones, discounts = (x[n - self.capacity:] for x in
+                                                                 (obs, actions, rewards, next_obs, dones, discounts))
+            next_masks = None if next_masks is None else next_masks[n - self.capacity:]
             n = self.capacity
         end = self.pos + n
         if end <= self.capacity:  # one contiguous write (the common case)
@@ -165,6 +189,9 @@ class ReplayBuffer:
         self.actions[at] = actions
         self.rewards[at] = rewards
         self.dones[at] = dones
+        self.discounts[at] = discounts
+        if self.next_masks is not None:
+            self.next_masks[at] = True if next_masks is None else next_masks
         self.pos = end % self.capacity
         self.size = min(self.size + n, self.capacity)
 
@@ -173,22 +200,39 @@ class ReplayBuffer:
         if self.size == 0:
             raise RuntimeError("cannot sample from an empty replay buffer")
         idx = rng.integers(0, self.size, size=size)
-        return {"obs": self.obs[idx], "actions": self.actions[idx], "rewards": self.rewards[idx],
-                "next_obs": self.next_obs[idx], "dones": self.dones[idx]}
+        out = {"obs": self.obs[idx], "actions": self.actions[idx], "rewards": self.rewards[idx],
+               "next_obs": self.next_obs[idx], "dones": self.dones[idx], "discounts": self.discounts[idx]}
+        if self.next_masks is not None:
+            out["next_masks"] = self.next_masks[idx]
+        return out
 
 
 class DQNLearner:
-    """An online Q-network, its target copy, its optimiser and its replay buffer over ``n_slots`` slots."""
+    """An online Q-network, its target copy, its optimiser and its replay buffer over ``n_slots`` slots.
 
-    def __init__(self, obs_shape: tuple[int, ...], n_actions: int, n_slots: int, config: DQNConfig | None = None,
-                 seed: int = 0, device: str | torch.device = "cpu") -> None:
-        self.cfg = cfg = config or DQNConfig()
+    Built as ``DQNLearner(seat, n_slots, config, seed=0, device="cpu")`` from the seat's spaces (Discrete actions
+    only: anything else is a :class:`~selfplay_cli.errors.MarlError` naming the space); the older form
+    ``DQNLearner(obs_shape, n_actions, n_slots, config, ...)`` still works.
+    """
+
+    name = "dqn"
+    config_class = DQNConfig
+
+    def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
+                 device: str | torch.device = "cpu") -> None:
+        self.seat: Seat
+        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, legacy, DQNConfig)
+        self.cfg = cfg
+        self.head = action_head("DQN", self.seat.action)
+        if self.head.kind != "discrete":
+            raise MarlError(f"DQN learns Discrete actions only; this game's seat acts in "
+                            f"{describe_space(self.seat.action)}: use --algo ppo")
         self.device = torch.device(device)
-        self.obs_shape = tuple(obs_shape)
-        self.n_actions = n_actions
+        self.obs_shape = tuple(self.seat.observation.shape)
+        self.n_actions = n_actions = self.head.nvec[0]
         self.n_slots = n_slots
         self.obs_dim = int(np.prod(self.obs_shape))
-        self.net: MLPNet = build_network(self.obs_shape, n_actions, cfg.arch, seed=seed).to(self.device)
+        self.net: MLPNet = build_network(self.seat.observation, self.seat.action, cfg.arch, seed=seed).to(self.device)
         self.target: MLPNet = copy.deepcopy(self.net).requires_grad_(False)
         self.opt = FlatAdam(self.net.parameters(), cfg.lr, max_grad_norm=cfg.max_grad_norm)
         self.target_flat = flatten(self.target.parameters())  # the target update is one operation on it
@@ -198,12 +242,19 @@ class DQNLearner:
         self.grad_steps = 0  # gradient updates so far (drives the target updates)
         self.updates = 0  # update() calls that made at least one gradient update
         self.credit = 0.0  # gradient updates due but not yet made (replay_ratio per transition)
-        # The step in flight: obs and actions from act(), rewards and dones from record().
+        self.n_discount = np.float32(cfg.gamma ** cfg.n_step)  # an n-step transition's bootstrap discount
+        # The step in flight: obs, actions and mask from act(), rewards, dones and truncations from record().
         self._obs: np.ndarray | None = None
         self._actions: np.ndarray | None = None
+        self._mask: np.ndarray | None = None
         self._rewards: np.ndarray | None = None
         self._dones: np.ndarray | None = None
-        self._window: list[tuple[np.ndarray, ...]] = []  # the last n_step - 1 completed steps (n-step returns)
+        self._trunc: tuple[np.ndarray, np.ndarray | None, np.ndarray | None] | None = None  # (cut, final obs, mask)
+        self._masked = False  # masks were given: transitions close at the next act(), which brings s' mask
+        self._window: list[tuple[Any, ...]] = []  # the last n_step - 1 completed steps (n-step returns)
+        self._turns: dict[str, np.ndarray] | None = None  # turn-based games: decisions in flight (see _turn_step)
+        self._held: dict[str, Any] | None = None  # turns: decisions ended by a truncation, awaiting final_obs
+        del n_actions
 
     # -- acting ---------------------------------------------------------------------------------------------
     @property
@@ -214,69 +265,248 @@ class DQNLearner:
         """Our own flat float32 copy (the n-step window keeps it, so the caller may reuse its array)."""
         return np.array(obs, dtype=np.float32, order="C").reshape(len(obs), self.obs_dim)
 
-    def _push(self, next_obs: np.ndarray) -> None:
+    def _final_missing(self) -> bool:
+        return (self._trunc is not None and self._trunc[1] is None) or self._held is not None
+
+    def _push(self, next_obs: np.ndarray, next_mask: np.ndarray | None = None) -> None:
         """Close the step in flight with the observations that followed it; store the transitions it completes.
 
         With ``n_step`` > 1 the last n steps of every slot wait in a window; the oldest becomes the transition
-        (s_t, a_t, R, s_{t+n}, done) with R = r_t + gamma r_{t+1} + ... cut after the first done in the window.
+        (s_t, a_t, R, s_{t+n}, done) with R = r_t + gamma r_{t+1} + ... cut after the first done in the window
+        (where that done is a truncation, s' is the game's final observation, done 0, the discount gamma^k).
         """
-        if self._obs is None or self._rewards is None:
+        if self._obs is None or self._rewards is None or self._turns is not None:
             return
-        self._window.append((self._obs, self._actions, self._rewards, self._dones))
-        self._obs = self._actions = self._rewards = self._dones = None
+        self._window.append((self._obs, self._actions, self._rewards, self._dones, self._trunc))
+        self._obs = self._actions = self._rewards = self._dones = self._trunc = None
         if len(self._window) < self.cfg.n_step:
             return
-        obs, actions, ret, done = self._window.pop(0)
-        ret, done = ret.copy(), done.copy()
+        obs, actions, ret, done0, trunc = self._window.pop(0)
+        ret, done = ret.copy(), done0.copy()
         discount = 1.0
-        for _, _, r, d in self._window:  # later steps count until the slot's game ends
+        for _, _, r, d, _ in self._window:  # later steps count until the slot's game ends
             discount *= self.cfg.gamma
             ret += discount * (1.0 - done) * r
             np.maximum(done, d, out=done)
-        self.buffer.add(obs, actions, ret, next_obs, done)
+        discounts = np.full(len(ret), self.n_discount, dtype=np.float32)
+        if trunc is not None or any(w[4] is not None for w in self._window):
+            next_obs, next_mask = next_obs.copy(), None if next_mask is None else next_mask.copy()
+            ended = np.zeros(len(ret), dtype=bool)
+            for k, (_, _, _, d, cut) in enumerate([(obs, actions, ret, done0, trunc), *self._window]):
+                if cut is not None:
+                    first = cut[0] & ~ended  # the slot's game ends here, cut short: bootstrap from its end
+                    if first.any():
+                        done[first] = 0.0
+                        next_obs[first] = cut[1][first]  # type: ignore[index]
+                        discounts[first] = self.cfg.gamma ** (k + 1)
+                        if cut[2] is not None:
+                            next_mask = np.ones_like(cut[2]) if next_mask is None else next_mask
+                            next_mask[first] = cut[2][first]
+                ended |= d > 0
+        self.buffer.add(obs, actions, ret, next_obs, done, discounts, next_mask)
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        """Epsilon-greedy actions for this step's observations (which also complete the previous step)."""
+    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Epsilon-greedy actions for this step's observations (which also complete the previous step): with a
+        mask, exploration is uniform over the allowed actions and the greedy action the best allowed one."""
+        if self._final_missing():
+            raise ValueError("games were truncated on the last recorded step: pass their final observations "
+                             "(final_obs) to record() or update()")
         x = self._flat(obs)
-        self._push(x)
+        m = fix_mask(mask, self.head, len(x))
+        if m is not None:
+            self._masked = True
+        elif self._masked:
+            m = np.ones((len(x), self.n_actions), dtype=bool)
+        self._push(x, m)
         n = len(x)
         eps = self.epsilon
         explore = self.rng.random(n) < eps
-        actions = self.rng.integers(0, self.n_actions, size=n)
+        if m is None:
+            actions = self.rng.integers(0, self.n_actions, size=n)
+        else:
+            actions = uniform_allowed(m, self.rng.random(n))
         if not explore.all():
             q, _ = self.net(torch.from_numpy(x).to(self.device))
+            if m is not None:
+                q = q.masked_fill(~torch.from_numpy(m).to(self.device), MASKED)
             greedy = q.argmax(dim=1).cpu().numpy()
             actions = np.where(explore, actions, greedy)
-        if self._obs is not None:  # an earlier step left without record() is dropped, and breaks the window
+        if self._obs is not None and self._turns is None:  # an earlier step left without record() is dropped
             self._window.clear()
-        self._obs, self._actions = x, actions
+        self._obs, self._actions, self._mask = x, actions, m
         return actions
 
-    def record(self, rewards: np.ndarray, dones: np.ndarray) -> bool:
-        """Stash this step's outcome; True when gradient updates are due (call :meth:`update`)."""
+    def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,
+               acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,
+               final_mask: np.ndarray | None = None) -> bool:
+        """Stash this step's outcome; True when gradient updates are due (call :meth:`update`).
+
+        ``truncated`` (a subset of ``dones``): games cut short, bootstrapped from ``final_obs`` (given here or to
+        the :meth:`update` that follows) and ``final_mask`` (the mask there; all allowed if not given);
+        ``acting``: the slots whose seat acted on this step (None: all)."""
         if self._obs is None:
             raise RuntimeError("record() without act()")
-        self._rewards = np.asarray(rewards, dtype=np.float32).reshape(-1)
-        self._dones = np.asarray(dones, dtype=np.float32).reshape(-1)
-        n = len(self._rewards)
-        self.transitions += n
-        if len(self.buffer) + n >= self.cfg.learning_starts:  # counting the step being recorded
-            self.credit += self.cfg.replay_ratio * n
+        if self._final_missing():
+            raise ValueError("games were truncated on the last recorded step: pass their final observations "
+                             "(final_obs) to record() or update()")
+        rewards = np.asarray(rewards, dtype=np.float32).reshape(-1)
+        dones = np.asarray(dones, dtype=np.float32).reshape(-1)
+        n = len(rewards)
+        cut = None
+        if truncated is not None and self.cfg.bootstrap_truncated:
+            cut = as_bool(truncated, n, "truncated")
+            if not cut.any():
+                cut = None
+            elif not (dones[cut] > 0).all():
+                raise ValueError("a truncated game must also be done (dones marks every game that ended)")
+        acts = None if acting is None else as_bool(acting, n, "acting")
+        if acts is not None and self._turns is None:  # a turn-based game: decision to decision from the start
+            self._start_turns()
+        if self._turns is not None:
+            taken = int(acts.sum()) if acts is not None else n
+            self._turn_step(rewards, dones, cut, acts if acts is not None else np.ones(n, dtype=bool),
+                            final_obs, final_mask)
+        else:
+            taken = n
+            self._rewards, self._dones = rewards, dones
+            if cut is not None:
+                self._trunc = (cut, None, None)
+                if final_obs is not None:
+                    self._give_final(final_obs, final_mask)
+        self.transitions += taken
+        if len(self.buffer) + taken >= self.cfg.learning_starts:  # counting the step being recorded
+            self.credit += self.cfg.replay_ratio * taken
         return self.credit >= 1.0
+
+    def _give_final(self, final_obs: np.ndarray, final_mask: np.ndarray | None) -> None:
+        """The final observations (and masks) of the games truncated on the last recorded step."""
+        final = self._flat(final_obs)
+        fmask = None if final_mask is None else fix_mask(final_mask, self.head, len(final))
+        if self._held is not None:
+            self._release(final, fmask)
+        elif self._trunc is not None:
+            self._trunc = (self._trunc[0], final, fmask)
+
+    # -- turn-based games -----------------------------------------------------------------------------------
+    def _start_turns(self) -> None:
+        """From now on, transitions run from decision to decision (on the first step that says who acted)."""
+        b, d, k = self.n_slots, self.obs_dim, self.cfg.n_step - 1
+        self._window.clear()
+        self._turns = {"obs": np.zeros((b, d), np.float32), "act": np.zeros(b, np.int64),
+                       "rew": np.zeros(b, np.float32), "valid": np.zeros(b, bool),
+                       "ring_obs": np.zeros((k, b, d), np.float32), "ring_act": np.zeros((k, b), np.int64),
+                       "ring_rew": np.zeros((k, b), np.float32), "count": np.zeros(b, np.int64)}
+
+    def _turn_step(self, rewards: np.ndarray, dones: np.ndarray, cut: np.ndarray | None, acts: np.ndarray,
+                   final_obs: np.ndarray | None, final_mask: np.ndarray | None) -> None:
+        """One step of a turn-based game: decisions completed by this step's decisions, new decisions, rewards
+        credited to each slot's decision in flight, and decisions ended with their game."""
+        p = self._turns
+        assert p is not None and self._obs is not None and self._actions is not None
+        close = np.flatnonzero(acts & p["valid"])
+        if close.size:  # the seat decides again: its previous decision's s' is this observation
+            self._emit(close, p["obs"][close], p["act"][close], p["rew"][close], self._obs[close],
+                       None if self._mask is None else self._mask[close], np.zeros(close.size, np.float32),
+                       ended=False)
+        p["obs"][acts], p["act"][acts], p["rew"][acts] = self._obs[acts], self._actions[acts], 0.0
+        p["valid"] |= acts
+        p["rew"] += np.where(p["valid"], rewards, 0.0).astype(np.float32)
+        end = np.flatnonzero((dones > 0) & p["valid"])
+        p["valid"][dones > 0] = False
+        if end.size:
+            boot = np.zeros(end.size, bool) if cut is None else cut[end]
+            self._held = {"rows": end, "obs": p["obs"][end].copy(), "act": p["act"][end].copy(),
+                          "rew": p["rew"][end].copy(), "boot": boot}
+            if not boot.any():
+                self._release(None, None)
+            elif final_obs is not None:
+                self._give_final(final_obs, final_mask)
+
+    def _release(self, final: np.ndarray | None, fmask: np.ndarray | None) -> None:
+        """Store the decisions that ended with their game (bootstrapped from the final observation if cut short)."""
+        h = self._held
+        assert h is not None
+        rows, boot = h["rows"], h["boot"]
+        next_obs = h["obs"].copy()  # never read where the game ended for good (done = 1)
+        next_mask = None
+        if final is not None:
+            next_obs[boot] = final[rows][boot]
+            if fmask is not None:
+                next_mask = np.ones((rows.size, self.n_actions), dtype=bool)
+                next_mask[boot] = fmask[rows][boot]
+        if next_mask is None and self._masked:
+            next_mask = np.ones((rows.size, self.n_actions), dtype=bool)
+        self._held = None
+        self._emit(rows, h["obs"], h["act"], h["rew"], next_obs, next_mask, (~boot).astype(np.float32), ended=True)
+
+    def _emit(self, rows: np.ndarray, obs: np.ndarray, act: np.ndarray, rew: np.ndarray, next_obs: np.ndarray,
+              next_mask: np.ndarray | None, done: np.ndarray, ended: bool) -> None:
+        """Decision-to-decision transitions of ``rows`` into each slot's n-step chain: a chain of n decisions
+        gives its oldest one's n-step transition; a game's end gives every decision in its chain its return up to
+        the end (discount gamma^k, k the decisions from it to the end)."""
+        p = self._turns
+        assert p is not None
+        g, k_max = self.cfg.gamma, self.cfg.n_step - 1
+        count = p["count"][rows]
+        m = rows.size
+        # Each row's chain: ring entries 0 .. count-1, then this decision at position count.
+        seq_obs = np.zeros((k_max + 1, m, self.obs_dim), np.float32)
+        seq_act = np.zeros((k_max + 1, m), np.int64)
+        seq_rew = np.zeros((k_max + 1, m), np.float32)
+        cols = np.arange(m)
+        for j in range(k_max):
+            seq_obs[j], seq_act[j], seq_rew[j] = p["ring_obs"][j, rows], p["ring_act"][j, rows], p["ring_rew"][j, rows]
+        seq_obs[count, cols], seq_act[count, cols], seq_rew[count, cols] = obs, act, rew
+        ret = np.zeros((k_max + 2, m), np.float32)  # ret[j]: the return from position j to the chain's end
+        for j in reversed(range(k_max + 1)):
+            ret[j] = np.where(j <= count, seq_rew[j] + g * ret[j + 1], 0.0)
+        full = count == k_max
+        out: list[tuple[np.ndarray, ...]] = []
+        for j in range(k_max + 1):
+            take = (j <= count) if ended else (full & (j == 0))
+            if not take.any():
+                continue
+            steps = count[take] - j + 1
+            nm = None if next_mask is None else next_mask[take]
+            out.append((seq_obs[j, take], seq_act[j, take], ret[j, take], next_obs[take], done[take],
+                        (g ** steps).astype(np.float32), nm))
+        for o, a, r, s2, d, disc, nm in out:
+            self.buffer.add(o, a, r, s2, d, disc, nm)
+        if ended:
+            p["count"][rows] = 0
+            return
+        keep = rows[full]  # the chain moves on by one: entries 1 .. k_max
+        if keep.size:
+            f = np.flatnonzero(full)
+            for j in range(k_max):
+                p["ring_obs"][j, keep], p["ring_act"][j, keep] = seq_obs[j + 1, f], seq_act[j + 1, f]
+                p["ring_rew"][j, keep] = seq_rew[j + 1, f]
+        grow = ~full
+        if grow.any():
+            r_g, c_g = rows[grow], count[grow]
+            p["ring_obs"][c_g, r_g], p["ring_act"][c_g, r_g], p["ring_rew"][c_g, r_g] = obs[grow], act[grow], rew[grow]
+            p["count"][r_g] = c_g + 1
 
     # -- learning -------------------------------------------------------------------------------------------
     @torch.no_grad()
-    def td_target(self, rewards: torch.Tensor, dones: torch.Tensor, next_obs: torch.Tensor) -> torch.Tensor:
-        """y = r + gamma^n * (1 - done) * Q_target(s', a'), a' the online argmax (double) or the target's (plain)."""
+    def td_target(self, rewards: torch.Tensor, dones: torch.Tensor, next_obs: torch.Tensor,
+                  discounts: torch.Tensor | None = None, next_masks: torch.Tensor | None = None) -> torch.Tensor:
+        """y = r + discount * (1 - done) * Q_target(s', a'), a' the online argmax (double) or the target's (plain)
+        over the actions ``next_masks`` allows in s'; ``discounts`` default to gamma^n."""
         q_next_target, _ = self.target(next_obs)
         if self.cfg.double_dqn:
             q_next_online, _ = self.net(next_obs)
+            if next_masks is not None:
+                q_next_online = q_next_online.masked_fill(~next_masks, MASKED)
             best = q_next_online.argmax(dim=1, keepdim=True)
             q_next = q_next_target.gather(1, best).squeeze(1)
         else:
+            if next_masks is not None:
+                q_next_target = q_next_target.masked_fill(~next_masks, MASKED)
             q_next = q_next_target.max(dim=1).values
-        return rewards + self.cfg.gamma ** self.cfg.n_step * (1.0 - dones) * q_next
+        discount = self.cfg.gamma ** self.cfg.n_step if discounts is None else discounts
+        return rewards + discount * (1.0 - dones) * q_next
 
     def _sync_target(self) -> None:
         if self.cfg.tau >= 1.0:
@@ -284,24 +514,37 @@ class DQNLearner:
         else:
             self.target_flat.lerp_(self.opt.flat, self.cfg.tau)
 
-    def update(self, next_obs: np.ndarray, progress: float = 0.0) -> dict[str, float]:
+    def update(self, next_obs: np.ndarray, progress: float = 0.0,
+               final_obs: np.ndarray | None = None) -> dict[str, float]:
         """Make the gradient updates due (none before the buffer holds ``learning_starts`` transitions).
 
         ``next_obs`` (the observations after the recorded step) completes the step in flight so the updates
-        see it; ``progress`` is accepted for the trainer's sake and unused (epsilon follows transitions).
+        see it (with masks, the next ``act`` does, as it brings s' mask); ``final_obs``: the final observations of
+        games truncated on the last recorded step, if not given to :meth:`record`; ``progress`` is accepted for
+        the trainer's sake and unused (epsilon follows transitions).
         """
         cfg = self.cfg
-        self._push(self._flat(next_obs))
+        if final_obs is not None and self._final_missing():
+            self._give_final(final_obs, None)
+        if self._final_missing():
+            raise ValueError("games were truncated on the last recorded step: pass their final observations "
+                             "(final_obs) to record() or update()")
+        if not self._masked:
+            self._push(self._flat(next_obs))
         k = int(self.credit) if len(self.buffer) >= max(1, cfg.learning_starts) else 0
         self.credit -= k
         loss_sum, q_sum = torch.zeros((), device=self.device), torch.zeros((), device=self.device)
         if k:
             batches = self.buffer.sample(self.rng, (k, cfg.batch_size))  # all k batches in one draw
-            obs, actions, rewards, next_o, dones = (torch.from_numpy(batches[key]).to(self.device) for key in
-                                                    ("obs", "actions", "rewards", "next_obs", "dones"))
+            obs, actions, rewards, next_o, dones, discounts = (
+                torch.from_numpy(batches[key]).to(self.device)
+                for key in ("obs", "actions", "rewards", "next_obs", "dones", "discounts"))
+            masks = batches.get("next_masks")
+            next_masks = None if masks is None else torch.from_numpy(masks).to(self.device)
             loss_fn = nn.functional.smooth_l1_loss if cfg.loss == "huber" else nn.functional.mse_loss
             for i in range(k):
-                y = self.td_target(rewards[i], dones[i], next_o[i])
+                y = self.td_target(rewards[i], dones[i], next_o[i], discounts[i],
+                                   None if next_masks is None else next_masks[i])
                 q_all, _ = self.net(obs[i])
                 q = q_all.gather(1, actions[i, :, None]).squeeze(1)
                 loss = loss_fn(q, y)
@@ -339,5 +582,8 @@ class DQNLearner:
         self.grad_steps = int(state["grad_steps"])
         self.updates = int(state["updates"])
         self.credit = float(state["credit"])
-        self._obs = self._actions = self._rewards = self._dones = None
+        self._obs = self._actions = self._mask = self._rewards = self._dones = self._trunc = None
         self._window.clear()
+        self._held = None
+        if self._turns is not None:
+            self._start_turns()

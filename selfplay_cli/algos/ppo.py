@@ -2,14 +2,33 @@
 
 Reads top to bottom as CleanRL's ppo.py does: the hyperparameters with their meaning, the rollout buffer, the
 advantage estimate, the update. The learner does not own the games: the trainer steps the shared
-:class:`~selfplay_cli.arena.selfplay.SelfPlayGames` and hands each learner its slots' observations, rewards and
-dones, so two learners (one network per paddle) and one shared network use the same code.
+:class:`~selfplay_cli.arena.selfplay.SelfPlayGames` and hands each learner its slots' observations (and action
+masks), rewards and dones (see :mod:`selfplay_cli.algos.base`), so two learners (one network per paddle) and one
+shared network use the same code.
 
 Per update: ``rollout_steps`` steps of every slot are collected with the current policy (sampling), advantages
 come from GAE(lambda) over the rollout, and ``update_epochs`` passes of ``minibatches`` minibatches optimise
     L = -min(r A, clip(r, 1 - eps, 1 + eps) A) + vf_coef * (V - R)^2 / 2 - ent_coef * H
-with r the probability ratio of the new to the old policy. A game that ends (won, lost or truncated) is a
-done: the value after it is not bootstrapped.
+with r the probability ratio of the new to the old policy.
+
+Action spaces (the policy's distribution; :mod:`selfplay_cli.policies.heads`):
+* Discrete: a categorical over the logits; masked actions get a logit of -1e9 (probability exactly 0), when acting
+  and in the update (the rollout keeps each step's mask), so a masked action is never sampled nor learned towards.
+* MultiDiscrete: a categorical per dimension; log-probabilities and entropies are summed over the dimensions.
+* Box: a Gaussian, the network's outputs as means and a learned state-independent log-std; log-probabilities and
+  the entropy summed over dimensions. The rollout keeps the sampled action, the game gets it clipped to the bounds.
+
+Ends of games. A game that ends (won or lost) is a done: the value after it is not bootstrapped. A game cut short
+by a time limit (``truncated``) is a done too, but its last step bootstraps from the value of its final
+observation: delta = r + gamma * V(final obs) - V(s) (``bootstrap_truncated``); the advantage recursion stops there
+all the same.
+
+Turns. In a turn-based game a seat acts only on some steps (``acting``). Steps where it did not act are no
+decisions: GAE runs over the seat's own decisions, each one's reward being the rewards from its step up to the
+seat's next decision (or the game's end), and only decisions enter the loss. A decision whose continuation is not
+known when the rollout ends (the seat's last, with its game still running) is not learned from yet: it bootstraps
+the decisions before it, then is carried over to the next update as its first row, where the rest of its rewards
+arrive (its recorded log-probability is the behaviour policy's; its value is recomputed by the updated network).
 """
 
 from __future__ import annotations
@@ -20,8 +39,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
-from . import FlatAdam
+from .base import Seat, action_head, as_bool, fix_mask, learner_args, values_of
+from .optim import FlatAdam
 
 
 @dataclass
@@ -38,6 +59,7 @@ class PPOConfig:
     ent_coef: float = 0.01  # entropy bonus
     vf_coef: float = 0.5  # value loss weight
     max_grad_norm: float = 0.5  # gradient clipping
+    bootstrap_truncated: bool = True  # a game cut short bootstraps from V(final obs) (False: counts as its end)
     arch: Arch = field(default_factory=lambda: Arch(hidden=(64, 64), activation="relu", value_head=True))
 
     def __post_init__(self) -> None:
@@ -56,25 +78,46 @@ class PPOConfig:
 
 
 class PPOLearner:
-    """One network, its optimiser and its rollout buffer over ``n_slots`` slots of the games."""
+    """One network, its optimiser and its rollout buffer over ``n_slots`` slots of the games.
 
-    def __init__(self, obs_shape: tuple[int, ...], n_actions: int, n_slots: int, config: PPOConfig | None = None,
-                 seed: int = 0, device: str | torch.device = "cpu") -> None:
-        self.cfg = cfg = config or PPOConfig()
+    Built as ``PPOLearner(seat, n_slots, config, seed=0, device="cpu")`` from the seat's spaces (a
+    :class:`~selfplay_cli.envs.SeatSpace` or :class:`~selfplay_cli.algos.base.Seat`); the older form
+    ``PPOLearner(obs_shape, n_actions, n_slots, config, ...)`` builds a Discrete(n_actions) learner.
+    """
+
+    name = "ppo"
+    config_class = PPOConfig
+
+    def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
+                 device: str | torch.device = "cpu") -> None:
+        self.seat: Seat
+        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, legacy, PPOConfig)
+        self.cfg = cfg
         self.device = torch.device(device)
-        self.obs_shape = tuple(obs_shape)
-        self.n_actions = n_actions
+        self.head = action_head("PPO", self.seat.action)
+        self.obs_shape = tuple(self.seat.observation.shape)
+        self.n_actions = self.head.outputs
         self.n_slots = n_slots
-        self.net: MLPNet = build_network(self.obs_shape, n_actions, cfg.arch, seed=seed).to(self.device)
+        self.net: MLPNet = build_network(self.seat.observation, self.seat.action, cfg.arch, seed=seed).to(self.device)
         self.opt = FlatAdam(self.net.parameters(), lr=cfg.lr, eps=1e-5, max_grad_norm=cfg.max_grad_norm)
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
+        self.math = HeadMath(self.head, self.device)
         t, b, d = cfg.rollout_steps, n_slots, int(np.prod(self.obs_shape))
         self.obs = torch.zeros((t, b, d), device=self.device)
-        self.actions = torch.zeros((t, b), dtype=torch.long, device=self.device)
+        if self.head.kind == "box":  # the sampled (unclipped) actions, flat
+            self.actions = torch.zeros((t, b, self.head.outputs), device=self.device)
+        else:
+            self.actions = torch.zeros((t, b, *self.head.action_shape), dtype=torch.long, device=self.device)
         self.logprobs = torch.zeros((t, b), device=self.device)
         self.values = torch.zeros((t, b), device=self.device)
         self.rewards = torch.zeros((t, b), device=self.device)
         self.dones = torch.zeros((t, b), device=self.device)  # the game ended after this step
+        # Made when first needed, so a game without masks, time limits or turns pays nothing for them:
+        self.masks: torch.Tensor | None = None  # (t, b, width) bool: the allowed actions at each step
+        self.trunc_values: torch.Tensor | None = None  # (t, b): V(final obs) where a game was truncated, else 0
+        self.acting: torch.Tensor | None = None  # (t, b) bool: the seat acted (turn-based games)
+        self.carry: dict[str, torch.Tensor] | None = None  # turn-based: each slot's decision carried over
+        self._final_due: tuple[int, np.ndarray] | None = None  # truncated rows of the last step awaiting final_obs
         # On the CPU, numpy views of the buffers: a step's arrays go in with one numpy copy, no tensor made.
         self._np = ({"obs": self.obs.numpy(), "rewards": self.rewards.numpy(), "dones": self.dones.numpy()}
                     if self.device.type == "cpu" else None)
@@ -86,12 +129,14 @@ class PPOLearner:
         return torch.as_tensor(np.asarray(obs, dtype=np.float32), device=self.device).reshape(len(obs), -1)
 
     @torch.inference_mode()
-    def act(self, obs: np.ndarray) -> np.ndarray:
-        """Sample actions for this step's observations and remember what the update needs.
+    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Sample actions for this step's observations (never an action ``mask`` forbids) and remember what the
+        update needs.
 
-        Sampling is the inverse-CDF draw ``a = #{k : cdf_k <= u}`` with one uniform ``u`` per slot from the
+        Discrete sampling is the inverse-CDF draw ``a = #{k : cdf_k <= u}`` with one uniform ``u`` per slot from the
         learner's generator (multinomial does the same draw several times slower on small batches); the count is a
         binary search in each row's cdf, written straight into the rollout buffer."""
+        self._check_final_given()
         t = self.t
         x = self.obs[t]
         if self._np is not None:
@@ -99,36 +144,97 @@ class PPOLearner:
         else:
             x.copy_(self._tensor(obs))
         logits, value = self.net(x)
-        logp_all = torch.log_softmax(logits, dim=-1)
-        u = torch.rand((x.shape[0], 1), generator=self.gen, device=self.device)
-        cdf = logp_all.exp().cumsum_(dim=1)
-        action = self.actions[t, :, None]
-        torch.searchsorted(cdf, u, right=True, out=action).clamp_(max=self.n_actions - 1)
-        torch.gather(logp_all, 1, action, out=self.logprobs[t, :, None])
+        if self.head.kind == "discrete" and mask is None and self.masks is None:
+            logp_all = torch.log_softmax(logits, dim=-1)
+            u = torch.rand((x.shape[0], 1), generator=self.gen, device=self.device)
+            cdf = logp_all.exp().cumsum_(dim=1)
+            action = self.actions[t, :, None]
+            torch.searchsorted(cdf, u, right=True, out=action).clamp_(max=self.n_actions - 1)
+            torch.gather(logp_all, 1, action, out=self.logprobs[t, :, None])
+            self.values[t] = value
+            return self.actions[t].numpy().copy() if self.device.type == "cpu" else self.actions[t].cpu().numpy()
+        m = self._store_mask(t, mask)
+        stored, played = self.math.sample(logits, m, self.gen, greedy=False, log_std=self.net.log_std, fill=MASKED)
+        logp, _ = self.math.log_prob_entropy(logits, stored, m, self.net.log_std)
+        self.actions[t] = stored
+        self.logprobs[t] = logp
         self.values[t] = value
-        return self.actions[t].numpy().copy() if self.device.type == "cpu" else self.actions[t].cpu().numpy()
+        return to_numpy_actions(self.head, played)
 
-    def record(self, rewards: np.ndarray, dones: np.ndarray) -> bool:
-        """Store this step's outcome; True when the rollout is full and :meth:`update` is due."""
+    def _store_mask(self, t: int, mask: np.ndarray | None) -> torch.Tensor | None:
+        m = fix_mask(mask, self.head, self.n_slots)
+        if m is None and self.masks is None:
+            return None
+        if self.masks is None:
+            self.masks = torch.ones((self.cfg.rollout_steps, self.n_slots, self.head.mask_width), dtype=torch.bool,
+                                    device=self.device)
+        if m is None:
+            self.masks[t] = True
+        else:
+            self.masks[t] = torch.as_tensor(m, device=self.device)
+        return self.masks[t]
+
+    def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,
+               acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,
+               final_mask: np.ndarray | None = None) -> bool:
+        """Store this step's outcome; True when the rollout is full and :meth:`update` is due.
+
+        ``truncated`` (a subset of ``dones``): games cut short, whose ``final_obs`` rows (given here or to the
+        :meth:`update` that follows this step) bootstrap the return; ``acting``: the slots whose seat acted on
+        this step (None: all). ``final_mask`` is accepted for the interface's sake (values need no mask)."""
+        self._check_final_given()
         if self._np is not None:
             self._np["rewards"][self.t] = rewards
             self._np["dones"][self.t] = dones
         else:
             self.rewards[self.t] = torch.as_tensor(rewards, dtype=torch.float32, device=self.device)
             self.dones[self.t] = torch.as_tensor(dones, dtype=torch.float32, device=self.device)
+        if truncated is not None and self.cfg.bootstrap_truncated:
+            cut = as_bool(truncated, self.n_slots, "truncated")
+            if cut.any():
+                if not np.asarray(dones, dtype=bool).reshape(-1)[cut].all():
+                    raise ValueError("a truncated game must also be done (dones marks every game that ended)")
+                if self.trunc_values is None:
+                    self.trunc_values = torch.zeros_like(self.values)
+                self._final_due = (self.t, np.flatnonzero(cut))
+                if final_obs is not None:
+                    self._bootstrap(final_obs)
+        if acting is not None:
+            acts = as_bool(acting, self.n_slots, "acting")
+            if self.acting is None and not acts.all():
+                self.acting = torch.ones((self.cfg.rollout_steps, self.n_slots), dtype=torch.bool, device=self.device)
+            if self.acting is not None:
+                self.acting[self.t] = torch.as_tensor(acts, device=self.device)
         self.t += 1
         return self.t == self.cfg.rollout_steps
+
+    def _bootstrap(self, final_obs: np.ndarray) -> None:
+        """V(final obs) of the games truncated on the last recorded step, into ``trunc_values``."""
+        assert self._final_due is not None and self.trunc_values is not None
+        t, rows = self._final_due
+        final = np.asarray(final_obs, dtype=np.float32)
+        if len(final) != self.n_slots:
+            raise ValueError(f"final_obs has {len(final)} rows for {self.n_slots} slots")
+        self.trunc_values[t, torch.as_tensor(rows, device=self.device)] = values_of(self.net, final[rows], self.device)
+        self._final_due = None
+
+    def _check_final_given(self) -> None:
+        if self._final_due is not None:
+            raise ValueError("games were truncated on the last recorded step: pass their final observations "
+                             "(final_obs) to record() or update()")
 
     # -- learning -------------------------------------------------------------------------------------------
     @torch.no_grad()
     def _advantages(self, next_obs: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         """GAE(lambda): A_t = delta_t + gamma * lambda * (1 - done_t) * A_{t+1},
-        delta_t = r_t + gamma * (1 - done_t) * V(s_{t+1}) - V(s_t)."""
+        delta_t = r_t + gamma * (1 - done_t) * V(s_{t+1}) + gamma * trunc_t * V(final_t) - V(s_t)."""
         cfg = self.cfg
         _, next_value = self.net(self._tensor(next_obs))
         next_values = torch.cat((self.values[1:], next_value[None]))  # V(s_{t+1}) for every t
         live = 1.0 - self.dones
         deltas = self.rewards + cfg.gamma * next_values * live - self.values  # all steps at once; only A is a recursion
+        if self.trunc_values is not None:  # games cut short: bootstrap from their final observation's value
+            deltas += cfg.gamma * self.trunc_values
         carry = cfg.gamma * cfg.gae_lambda * live
         adv = torch.zeros_like(self.rewards)
         last = torch.zeros(self.n_slots, device=self.device)
@@ -137,29 +243,126 @@ class PPOLearner:
             adv[t] = last
         return adv, adv + self.values
 
-    def update(self, next_obs: np.ndarray, progress: float = 0.0) -> dict[str, float]:
-        """One PPO update on the full rollout; ``progress`` in [0, 1] anneals the learning rate."""
+    def _turn_advantages(self, rewards: np.ndarray, dones: np.ndarray, boot: np.ndarray, acting: np.ndarray,
+                         values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """GAE over each slot's own decisions (turn-based games; rows ``(K, slots)``, row 0 the carried decision).
+
+        Scanning backwards, the rewards of steps where the seat did not act are summed into its previous
+        decision's reward, up to the seat's next decision or the end of the game (a done at a step where it did
+        not act ends the decision before it; the steps after belong to the next game). ``boot`` is V(final obs)
+        where a game was truncated (0 otherwise). A decision with a next decision bootstraps from its value and
+        chains its advantage; one whose game ended stops there; one with neither (the seat's last, its game still
+        running) is carried over. Returns the advantages, the rows to learn from, the row carried (one per slot
+        at most) and each carried decision's reward so far."""
+        g, lam = self.cfg.gamma, self.cfg.gae_lambda
+        k_rows, b = rewards.shape
+        adv = np.zeros((k_rows, b), dtype=np.float32)
+        learn = np.zeros((k_rows, b), dtype=bool)
+        carried = np.zeros((k_rows, b), dtype=bool)
+        carry_reward = np.zeros(b, dtype=np.float32)
+        follow_r = np.zeros(b, dtype=np.float32)  # rewards after the current row, up to the next decision
+        follow = np.full(b, 2)  # what follows: 0 a decision, 1 the end of the game, 2 nothing known yet
+        follow_boot = np.zeros(b, dtype=np.float32)
+        next_v = np.zeros(b, dtype=np.float32)
+        next_a = np.zeros(b, dtype=np.float32)
+        for k in reversed(range(k_rows)):
+            a, d, r = acting[k], dones[k], rewards[k]
+            idle_end = ~a & d
+            follow_r = np.where(idle_end, r, np.where(~a, follow_r + r, follow_r))
+            follow = np.where(idle_end, 1, follow)
+            follow_boot = np.where(idle_end, boot[k], follow_boot)
+            reward = np.where(d, r, r + follow_r)
+            kind = np.where(d, 1, follow)
+            bootstrap = np.where(d, boot[k], follow_boot)
+            delta = reward + g * np.where(kind == 0, next_v, bootstrap) - values[k]
+            a_k = delta + np.where(kind == 0, g * lam * next_a, 0.0)
+            is_learn, is_carry = a & (kind != 2), a & (kind == 2)
+            adv[k] = np.where(is_learn, a_k, 0.0)
+            learn[k], carried[k] = is_learn, is_carry
+            carry_reward = np.where(is_carry, reward, carry_reward)
+            next_v = np.where(a, values[k], next_v)
+            next_a = np.where(is_learn, a_k, np.where(is_carry, 0.0, next_a))
+            follow_r = np.where(a, 0.0, follow_r)
+            follow = np.where(a, 0, follow)
+            follow_boot = np.where(a, 0.0, follow_boot)
+        return adv, learn, carried, carry_reward
+
+    def _turn_batch(self) -> dict[str, Any]:
+        """The rollout with the carried decisions as row 0, reduced to the decisions to learn from (turns)."""
+        t, b = self.cfg.rollout_steps, self.n_slots
+        c = self.carry
+        if c is None:
+            zeros = torch.zeros((1, b), device=self.device)
+            c = {"obs": self.obs[:1] * 0, "actions": self.actions[:1] * 0, "logprobs": zeros, "values": zeros,
+                 "reward": zeros[0], "valid": torch.zeros(b, dtype=torch.bool, device=self.device),
+                 "masks": None if self.masks is None else torch.ones_like(self.masks[:1])}
+        ext = {"obs": torch.cat((c["obs"], self.obs)), "actions": torch.cat((c["actions"], self.actions)),
+               "logprobs": torch.cat((c["logprobs"], self.logprobs)), "values": torch.cat((c["values"], self.values))}
+        if self.masks is not None:
+            cm = c["masks"] if c["masks"] is not None else torch.ones_like(self.masks[:1])
+            ext["masks"] = torch.cat((cm, self.masks))
+        rewards = torch.cat((c["reward"][None], self.rewards)).cpu().numpy()
+        dones = torch.cat((torch.zeros((1, b), device=self.device), self.dones)).cpu().numpy() > 0
+        boot = np.zeros((t + 1, b), dtype=np.float32)
+        if self.trunc_values is not None:
+            boot[1:] = self.trunc_values.cpu().numpy()
+        acting = np.concatenate((c["valid"].cpu().numpy()[None], self.acting.cpu().numpy()))  # type: ignore[union-attr]
+        values = ext["values"].cpu().numpy()
+        adv, learn, carried, carry_reward = self._turn_advantages(rewards, dones, boot, acting, values)
+        idx = torch.as_tensor(np.flatnonzero(learn.reshape(-1)), device=self.device)
+        flat = {k: v.reshape(-1, *v.shape[2:]).index_select(0, idx) for k, v in ext.items()}
+        adv_t = torch.as_tensor(adv.reshape(-1), device=self.device).index_select(0, idx)
+        flat["adv"], flat["returns"] = adv_t, adv_t + flat["values"]
+        flat["next_carry"] = (ext, carried, carry_reward)
+        return flat
+
+    def _set_carry(self, ext: dict[str, torch.Tensor], carried: np.ndarray, carry_reward: np.ndarray) -> None:
+        """Keep each slot's carried decision (after the update: its value from the updated network)."""
+        rows = torch.as_tensor(carried.argmax(axis=0), device=self.device)
+        cols = torch.arange(self.n_slots, device=self.device)
+        c = {k: v[rows, cols][None].clone() for k, v in ext.items()}
+        c["reward"] = torch.as_tensor(carry_reward, device=self.device)
+        c["valid"] = torch.as_tensor(carried.any(axis=0), device=self.device)
+        c["values"] = values_of(self.net, c["obs"][0], self.device)[None]
+        c.setdefault("masks", None)  # type: ignore[arg-type]
+        self.carry = c
+
+    def update(self, next_obs: np.ndarray, progress: float = 0.0,
+               final_obs: np.ndarray | None = None) -> dict[str, float]:
+        """One PPO update on the full rollout; ``progress`` in [0, 1] anneals the learning rate. ``final_obs``: the
+        final observations of games truncated on the last recorded step, if not given to :meth:`record`."""
         cfg = self.cfg
+        if self._final_due is not None and final_obs is not None:
+            self._bootstrap(final_obs)
+        self._check_final_given()
         if self.t != cfg.rollout_steps:
             raise RuntimeError("update() before the rollout is full")
         if cfg.anneal_lr:
             self.opt.lr = cfg.lr * max(0.0, 1.0 - progress)
-        adv, returns = self._advantages(next_obs)
-        b_obs = self.obs.reshape(-1, self.obs.shape[-1])
-        b_act, b_logp = self.actions.reshape(-1), self.logprobs.reshape(-1)
-        b_adv, b_ret, b_val = adv.reshape(-1), returns.reshape(-1), self.values.reshape(-1)
+        turns = None
+        if self.acting is None:
+            adv, returns = self._advantages(next_obs)
+            b_obs = self.obs.reshape(-1, self.obs.shape[-1])
+            b_act, b_logp = self.actions.reshape(-1, *self.actions.shape[2:]), self.logprobs.reshape(-1)
+            b_adv, b_ret, b_val = adv.reshape(-1), returns.reshape(-1), self.values.reshape(-1)
+            b_mask = None if self.masks is None else self.masks.reshape(-1, self.masks.shape[-1])
+        else:
+            batch = self._turn_batch()
+            b_obs, b_act, b_logp, b_val = batch["obs"], batch["actions"], batch["logprobs"], batch["values"]
+            b_adv, b_ret, b_mask = batch["adv"], batch["returns"], batch.get("masks")
+            turns = batch["next_carry"]
         n = b_obs.shape[0]
         mb = max(1, n // cfg.minibatches)
         stats = torch.zeros(5, device=self.device)  # policy loss, value loss, entropy, approx KL, clip fraction
         count = 0
-        for _ in range(cfg.update_epochs):
+        for _ in range(cfg.update_epochs if n else 0):
             order = torch.randperm(n, generator=self.gen, device=self.device)
             for start in range(0, n, mb):
                 idx = order[start:start + mb]
-                logits, value = self.net(b_obs.index_select(0, idx))
-                logp_all = torch.log_softmax(logits, dim=-1)
-                logp = logp_all.gather(1, b_act.index_select(0, idx)[:, None]).squeeze(1)
-                entropy = -(logp_all.exp() * logp_all).sum(-1).mean()
+                out, value = self.net(b_obs.index_select(0, idx))
+                m = None if b_mask is None else b_mask.index_select(0, idx)
+                logp, ent = self.math.log_prob_entropy(out, b_act.index_select(0, idx), m, self.net.log_std)
+                entropy = ent.mean()
                 log_ratio = logp - b_logp.index_select(0, idx)
                 ratio = log_ratio.exp()
                 a = b_adv.index_select(0, idx)
@@ -175,12 +378,20 @@ class PPOLearner:
                     stats += torch.stack((pg_loss, v_loss, entropy, (ratio - 1 - log_ratio).mean(),
                                           ((ratio - 1).abs() > cfg.clip_coef).float().mean()))
                 count += 1
+        if turns is not None:
+            self._set_carry(*turns)
+        if self.trunc_values is not None:
+            self.trunc_values.zero_()
         self.t = 0
         self.updates += 1
         names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac")
-        out = {k: float(v) / count for k, v in zip(names, stats.tolist(), strict=True)}
-        out["explained_variance"] = float(1 - torch.var(b_ret - b_val) / (torch.var(b_ret) + 1e-8))
+        out = {k: float(v) / max(count, 1) for k, v in zip(names, stats.tolist(), strict=True)}
+        out["explained_variance"] = float(1 - torch.var(b_ret - b_val) / (torch.var(b_ret) + 1e-8)) if n > 1 else 0.0
         out["lr"] = self.opt.lr
+        if turns is not None:
+            out["decisions"] = float(n)  # the decisions learned from (turn-based games)
+        if self.head.kind == "box":
+            out["std"] = float(self.net.log_std.detach().exp().mean())  # type: ignore[union-attr]
         return out
 
     # -- playing and saving ---------------------------------------------------------------------------------
@@ -189,7 +400,8 @@ class PPOLearner:
         return NetworkPolicy(self.net, id, env, device=self.device, greedy=greedy)
 
     def state_dict(self) -> dict[str, Any]:
-        """Everything needed to resume: weights, optimiser, sampling generator, update count."""
+        """Everything needed to resume: weights, optimiser, sampling generator, update count. (Not a turn-based
+        game's carried decisions: a resumed run starts its games afresh.)"""
         return {"net": self.net.state_dict(), "opt": self.opt.state_dict(), "gen": self.gen.get_state(),
                 "updates": self.updates}
 
@@ -198,3 +410,5 @@ class PPOLearner:
         self.opt.load_state_dict(state["opt"])
         self.gen.set_state(state["gen"])
         self.updates = int(state["updates"])
+        self.carry = None
+        self._final_due = None

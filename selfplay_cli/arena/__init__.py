@@ -1,5 +1,6 @@
 """The batched game runner shared by matches, training evaluation and recording."""
 
-from .runner import Game, GameResult, paired_schedule, play
+from ..results import GameResult
+from .runner import Game, paired_schedule, play
 
 __all__ = ["Game", "GameResult", "paired_schedule", "play"]

@@ -3,10 +3,15 @@
 Training rollouts, evaluation matches and recordings all go through here, so a match, a training episode and a
 video of it are the same game. On request it also returns each game's actions (what a replay needs, see
 :mod:`selfplay_cli.arena.replay`) and shows every state a game passes through to a hook (what a recording needs).
+
+Any game plays here: any number of seats, each with its own observation and action space (Discrete, MultiDiscrete
+or Box), action masks (given to the policies), seats acting together or in turns (only the seats the core says act
+are asked), and results by the game's kind (:class:`~selfplay_cli.results.Rules`).
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -14,9 +19,14 @@ from typing import Any
 import numpy as np
 
 from ..envs import EnvSpec, get_env
-from ..envs.registry import BatchedCore
+from ..envs.registry import BatchedCore, IllegalActionError
+from ..errors import MarlError
 from ..policies import Policy
-from .replay import action_dtype, encode_actions
+from ..results import GameResult, Rules
+from .replay import ActionLog, SeatActions, encode_actions
+
+__all__ = ["ActionLog", "FrameHook", "Game", "GameResult", "IllegalActionError", "StopRule", "encode_actions",
+           "paired_schedule", "play"]
 
 FrameHook = Callable[[BatchedCore, int, int, bool], None]
 """``on_frame(core, slot, game_index, ended)``: see :func:`play`."""
@@ -32,24 +42,6 @@ class Game:
     seats: tuple[int, ...]
 
 
-@dataclass(frozen=True)
-class GameResult:
-    """What a finished game leaves in the ledger. ``outcome`` is points per seat: 1 win, 0.5 draw, 0 loss."""
-
-    env: str
-    players: tuple[str, ...]
-    seed: int
-    scores: tuple[int, ...]
-    outcome: tuple[float, ...]
-    length: int
-    truncated: bool
-    index: int  # position of the game in the schedule
-    actions: bytes | None = None  # encoded (steps, seats) actions, when play() was asked to record them
-
-    def points_of(self, player: str) -> float:
-        return sum(o for p, o in zip(self.players, self.outcome, strict=True) if p == player)
-
-
 def _acting_groups(policies: Sequence[Policy]) -> list[tuple[list[int], Any]]:
     """How the policies act each step: network policies of one architecture together in one
     :class:`~selfplay_cli.policies.bank.NetworkBank` (one batched forward for all of them), any other alone."""
@@ -62,7 +54,8 @@ def _acting_groups(policies: Sequence[Policy]) -> list[tuple[list[int], Any]]:
 
 
 def paired_schedule(n_games: int, first_seed: int = 0, n_policies: int = 2) -> list[Game]:
-    """Game pairs: each seed is played once with policy 0 on seat 0 and once with the seats swapped."""
+    """Game pairs of a two-seat game: each seed is played once with policy 0 on seat 0 and once with the seats
+    swapped (for any game, :func:`selfplay_cli.arena.schedule.rounds`)."""
     if n_policies != 2:
         raise ValueError("paired schedules are for two policies")
     games = []
@@ -72,52 +65,38 @@ def paired_schedule(n_games: int, first_seed: int = 0, n_policies: int = 2) -> l
     return games
 
 
-class ActionLog:
-    """Every step's actions of every slot, kept from the first step of the oldest running game on.
+@dataclass
+class _SeatGroup:
+    """Seats that share one observation shape, one action space and masks (all of Pong's seats): their
+    observations, masks and actions are stacked, so a policy acts once on all the positions it holds in them."""
 
-    Steps are appended to a step-major block (one contiguous row per step, a few kilobytes); every ``BLOCK`` steps
-    the block is transposed once to slot-major, so a finished game's actions are a few contiguous pieces to join
-    rather than a gather across the whole log (which cost a match a fifth of its speed). Blocks that no running
-    game reaches back to are dropped, so the log's size follows the longest game, not the schedule.
-    """
+    seats: list[int]
+    obs_shape: tuple[int, ...]
+    action: SeatActions
+    masked: bool
+    actions: np.ndarray  # (len(seats), n, *action shape), the seat's dtype
+    flat_actions: np.ndarray  # (len(seats) * n, *action shape), a view of ``actions``
 
-    BLOCK = 256
 
-    def __init__(self, n_seats: int, n_slots: int, dtype: np.dtype) -> None:
-        self.block = np.zeros((self.BLOCK, n_seats, n_slots), dtype=dtype)  # the current block, step-major
-        self.filled = 0
-        self.blocks: list[tuple[int, np.ndarray]] = []  # (first step, (slots, seats, BLOCK) slot-major)
-        self.now = 0  # steps appended so far
-        self.start = np.zeros(n_slots, dtype=np.int64)  # step number at which each slot's game began
+def _seat_groups(spec: EnvSpec, cfg: Any, n: int) -> list[_SeatGroup]:
+    declared = [(tuple(s.observation.shape), SeatActions.of(s.action), bool(s.mask)) for s in spec.seat_spaces(cfg)]
+    by_key: dict[tuple, list[int]] = {}
+    for seat, (shape, action, masked) in enumerate(declared):
+        by_key.setdefault((shape, action.kind, action.shape, masked), []).append(seat)
+    groups = []
+    for seats in by_key.values():
+        shape, action, masked = declared[seats[0]]
+        buf = np.zeros((len(seats), n, *action.shape), dtype=action.dtype)
+        groups.append(_SeatGroup(seats, shape, action, masked, buf, buf.reshape(len(seats) * n, *action.shape)))
+    return groups
 
-    @classmethod
-    def for_env(cls, spec: EnvSpec, n_slots: int, env_options: dict[str, Any] | None = None) -> ActionLog:
-        """A log for ``n_slots`` games of ``spec``, in the narrowest integer type that holds its actions."""
-        space = spec.action_space(spec.config(**(env_options or {})))
-        return cls(len(spec.agents), n_slots, action_dtype(getattr(space, "n", None)))
 
-    def begin(self, slots: np.ndarray) -> None:
-        self.start[slots] = self.now
-
-    def append(self, actions: np.ndarray, active: np.ndarray | None = None) -> None:
-        """One step's ``(seats, slots)`` actions; ``active`` marks the slots with a game running (default: all)."""
-        self.block[self.filled] = actions
-        self.filled += 1
-        self.now += 1
-        if self.filled == self.BLOCK:
-            self.blocks.append((self.now - self.BLOCK, np.ascontiguousarray(self.block.transpose(2, 1, 0))))
-            self.filled = 0
-            running = self.start if active is None else self.start[active]
-            oldest = int(running.min()) if running.size else self.now
-            self.blocks = [(first, b) for first, b in self.blocks if first + self.BLOCK > oldest]
-
-    def take(self, slot: int) -> np.ndarray:
-        """The ``(steps, seats)`` actions of the game that just ended in ``slot``."""
-        begin = int(self.start[slot])
-        parts = [b[slot, :, max(begin - first, 0):] for first, b in self.blocks if first + self.BLOCK > begin]
-        tail = self.now - self.filled  # step number of the current block's first row
-        parts.append(self.block[max(begin - tail, 0) : self.filled, :, slot].T)
-        return np.concatenate(parts, axis=1).T
+def _takes_masks(bank: Any) -> bool:
+    """Whether a network bank's ``act`` takes the members' masks as well as their observations."""
+    try:
+        return len(inspect.signature(bank.act).parameters) >= 2
+    except (TypeError, ValueError):
+        return False
 
 
 def play(
@@ -140,32 +119,52 @@ def play(
     the slowest game of a round); ``slots`` (at most ``parallel``) sets how many games run at once when the
     schedule is expected to grow past its first length.
 
-    Each step, every policy acts once on the batch of all (game, seat) positions it holds. ``on_result`` is
-    called as each game ends (e.g. to store it at once); ``on_step`` with the number of game steps just played.
+    Each step, every policy acts once on the batch of all (game, seat) positions it holds among the seats that act
+    now (the core's ``to_act()``; every seat of a running game where the core does not say), given those positions'
+    action masks where the game has them (``policy.act(obs, mask)``); the actions go to the core as one array per
+    seat of the seat's dtype (int64 for Discrete and MultiDiscrete, float32 for Box), and what a seat that does not
+    act is given is ignored. An action the mask forbids, if the core reports one, is a :class:`MarlError` naming
+    the policy and the action. Results are computed from the cores' ``score`` by the game's
+    :class:`~selfplay_cli.results.Rules`. ``on_result`` is called as each game ends (e.g. to store it at once);
+    ``on_step`` with the number of games that played the step just played.
 
     ``record_actions`` puts each game's encoded actions in its result (for the ledger, so the game can be
     replayed exactly). ``on_frame(core, slot, game_index, ended)`` is called when a game starts and after each of
     its steps, before its slot is reused, so it sees every state the game passes through (a recording renders
     them); ``ended`` is True on a game's last call. ``stop_when(core)`` ends the games it marks after a step, as
-    truncated and decided by the score at that moment (a length cap that needs no game option).
+    truncated and decided by the score at that moment (a length cap that needs no game option). A policy with an
+    ``after_step()`` method is told of every step (a replay finds each step's action by it).
     """
     spec = get_env(env) if isinstance(env, str) else env
     if not games:
         return []
+    n_seats = len(spec.agents)
+    rules = Rules.of(spec)
 
     def check(g: Game) -> Game:
-        if len(g.seats) != len(spec.agents) or not all(0 <= s < len(policies) for s in g.seats):
-            raise ValueError(f"game {g} does not seat {len(spec.agents)} of the {len(policies)} policies")
+        if len(g.seats) != n_seats or not all(0 <= s < len(policies) for s in g.seats):
+            raise ValueError(f"game {g} does not seat {n_seats} of the {len(policies)} policies")
         return g
 
     for g in games:
         check(g)
     n = min(parallel, max(len(games), slots or 0))
-    core = spec.core(n, **(env_options or {}))
-    seats = np.zeros((len(spec.agents), n), dtype=np.int64)  # policy index per (seat, slot)
+    options = env_options or {}
+    core = spec.core(n, **options)
+    seat_groups = _seat_groups(spec, spec.config(**options), n)
+    whole = len(seat_groups) == 1  # one group of every seat, in order (Pong): its buffer is the step's actions
+    step_actions: Any = seat_groups[0].actions if whole else [None] * n_seats
+    if not whole:
+        for sg in seat_groups:
+            for k, seat in enumerate(sg.seats):
+                step_actions[seat] = sg.actions[k]
+    masked = any(sg.masked for sg in seat_groups)
+    to_act = getattr(core, "to_act", None)
+    seats = np.zeros((n_seats, n), dtype=np.int64)  # policy index per (seat, slot)
     game_of = np.full(n, -1, dtype=np.int64)  # schedule index per slot, -1 when idle
     next_game = 0
-    log = ActionLog.for_env(spec, n, env_options) if record_actions else None
+    log = ActionLog.for_env(spec, n, options) if record_actions else None
+    hooks = [p.after_step for p in policies if callable(getattr(p, "after_step", None))]  # type: ignore[attr-defined]
 
     def start(slots: np.ndarray) -> None:
         nonlocal next_game
@@ -185,36 +184,62 @@ def play(
 
     start(np.arange(n))
     results: dict[int, GameResult] = {}
-    actions = np.zeros((len(spec.agents), n), dtype=np.int64)
-    flat_actions = actions.reshape(-1)
     groups = _acting_groups(policies)
+    with_masks = [bank is not None and _takes_masks(bank) for _, bank in groups]
     wanted = np.arange(len(policies) + 1)
 
-    def positions() -> tuple[np.ndarray, list[list[np.ndarray]]]:
-        """Which slots have a game, and every (seat, slot) position by the policy that holds it, in position order
-        (one sort, no mask per policy); they change only when games end or start."""
+    def positions(acting: np.ndarray | None) -> tuple[np.ndarray, list[list[list[np.ndarray]]]]:
+        """Which slots have a game, and, per seat group, every (seat, slot) position that acts by the policy that
+        holds it, in position order (one sort, no mask per policy); they change only when games end or start, or
+        when the seats to act change."""
         active = game_of >= 0
-        owner = np.where(active[None, :], seats, -1).ravel()
-        order = np.argsort(owner, kind="stable")
-        bounds = np.searchsorted(owner[order], wanted)
-        return active, [[order[bounds[m] : bounds[m + 1]] for m in members] for members, _ in groups]
+        live = active[None, :] if acting is None else active[None, :] & acting
+        held = []
+        for sg in seat_groups:
+            own = seats if whole else seats[sg.seats]
+            owner = np.where(live if whole else live[sg.seats] if live.shape[0] > 1 else live, own, -1).ravel()
+            order = np.argsort(owner, kind="stable")
+            bounds = np.searchsorted(owner[order], wanted)
+            held.append([[order[bounds[m] : bounds[m + 1]] for m in members] for members, _ in groups])
+        return active, held
 
-    active, held = positions()
+    acting = np.asarray(to_act(), dtype=bool) if to_act is not None else None
+    active, held = positions(acting)
     playing = int(active.sum())
     while playing:
         obs = core.observe()
-        flat_obs = obs.reshape(-1, *obs.shape[2:])
-        actions.fill(0)
-        for (members, bank), where in zip(groups, held, strict=True):
-            if bank is None:
-                if where[0].size:
-                    flat_actions[where[0]] = policies[members[0]].act(flat_obs[where[0]])
-            elif any(w.size for w in where):
-                for w, a in zip(where, bank.act([flat_obs[w] for w in where]), strict=True):
-                    flat_actions[w] = a
-        core.step(actions)
+        masks = core.action_masks() if masked else None  # type: ignore[attr-defined]
+        for sg, where_g in zip(seat_groups, held, strict=True):
+            if whole and isinstance(obs, np.ndarray):
+                flat_obs = obs.reshape(-1, *obs.shape[2:])
+            else:
+                flat_obs = np.stack([np.asarray(obs[s]) for s in sg.seats]).reshape(-1, *sg.obs_shape)
+            flat_mask = None
+            if sg.masked and masks is not None:
+                flat_mask = np.concatenate([np.ones((n, 1), dtype=bool) if masks[s] is None else np.asarray(masks[s])
+                                            for s in sg.seats])
+            sg.actions.fill(0)
+            flat_actions = sg.flat_actions
+            for (members, bank), where, takes_masks in zip(groups, where_g, with_masks, strict=True):
+                if bank is None or (flat_mask is not None and not takes_masks):
+                    for m, w in zip(members, where, strict=True):
+                        if w.size:
+                            p = policies[m]
+                            flat_actions[w] = p.act(flat_obs[w]) if flat_mask is None else p.act(flat_obs[w],
+                                                                                                flat_mask[w])
+                elif any(w.size for w in where):
+                    acts = (bank.act([flat_obs[w] for w in where]) if flat_mask is None
+                            else bank.act([flat_obs[w] for w in where], [flat_mask[w] for w in where]))
+                    for w, a in zip(where, acts, strict=True):
+                        flat_actions[w] = a
+        try:
+            core.step(step_actions)
+        except IllegalActionError as e:
+            raise _illegal(e, spec, policies, seats, game_of, games) from None
         if log is not None:
-            log.append(actions, active)
+            log.append(step_actions, active)
+        for hook in hooks:
+            hook()
         if on_step is not None:
             on_step(playing)
         done = core.terminated | core.truncated
@@ -227,17 +252,19 @@ def play(
             for slot in np.flatnonzero(active).tolist():
                 on_frame(core, slot, int(game_of[slot]), bool(done[slot]))
         ended = np.flatnonzero(done)
+        changed = False
         if ended.size:
-            outcome = core.outcome()
-            for slot in ended:
+            scores = np.asarray(core.score[:, ended], dtype=np.float64)
+            outcome = rules.outcome(scores)
+            for k, slot in enumerate(ended.tolist()):
                 gi = int(game_of[slot])
                 g = games[gi]
                 r = GameResult(
                     env=spec.name,
                     players=tuple(policies[s].id for s in g.seats),
                     seed=g.seed,
-                    scores=tuple(int(x) for x in core.score[:, slot]),
-                    outcome=tuple(float(x) for x in outcome[:, slot]),
+                    scores=tuple(float(x) for x in scores[:, k]),
+                    outcome=tuple(float(x) for x in outcome[:, k]),
                     length=int(core.steps[slot]),
                     truncated=bool(core.truncated[slot] or (stopped is not None and stopped[slot])),
                     index=gi,
@@ -249,6 +276,27 @@ def play(
             game_of[ended] = -1
             if next_game < len(games):  # into every free slot, including ones idle before the schedule grew
                 start(np.flatnonzero(game_of < 0))
-            active, held = positions()
+            changed = True
+        if to_act is not None:
+            now = np.asarray(to_act(), dtype=bool)
+            if changed or not np.array_equal(now, acting):
+                acting, changed = now, True
+        if changed:
+            active, held = positions(acting)
             playing = int(active.sum())
     return [results[i] for i in sorted(results)]
+
+
+def _illegal(e: Exception, spec: EnvSpec, policies: Sequence[Policy], seats: np.ndarray, game_of: np.ndarray,
+             games: Sequence[Game]) -> MarlError:
+    """One line for an action a game's mask forbids: which policy played it, where, and what it was."""
+    seat = int(getattr(e, "seat", e.args[0] if e.args else 0))
+    slot = int(getattr(e, "game", e.args[1] if len(e.args) > 1 else 0))
+    action = getattr(e, "action", e.args[2] if len(e.args) > 2 else "?")
+    action = np.asarray(action).tolist()
+    who = policies[int(seats[seat, slot])].id if 0 <= seat < seats.shape[0] and 0 <= slot < seats.shape[1] else "?"
+    gi = int(game_of[slot]) if 0 <= slot < game_of.size else -1
+    where = f"game of seed {games[gi].seed}" if gi >= 0 else "a game"
+    agent = spec.agents[seat] if 0 <= seat < len(spec.agents) else seat
+    return MarlError(f"{who} played action {action} on seat {agent} of {spec.name} ({where}), which the game's action "
+                     f"mask forbids: a policy must keep to the mask (a bug in {who})")

@@ -7,8 +7,10 @@ Nothing here is stored: every ladder is refitted from the games, so it always ag
   (:func:`~selfplay_cli.stats.bradley_terry.fit_bradley_terry`), MAP under BayesElo's prior of
   ``prior`` virtual draws (default :data:`~selfplay_cli.stats.bradley_terry.DEFAULT_PRIOR` = 2, as BayesElo;
   ``prior=0`` is the plain maximum-likelihood fit), a confidence interval per player and ranks.
-* :func:`ladder` fits the 2-seat games of one env of the league, and adds what the league knows: each
-  snapshot's run, the best snapshot of each run, and every player's record against the env's scripted players.
+* :func:`ladder` fits the pairwise results of one env of the league (:meth:`~selfplay_cli.league.store.League.games`:
+  a two-sides game, a cooperative comparison of two episodes on one seed, each two players of a free-for-all game),
+  and adds what the league knows: each snapshot's run, the best snapshot of each run, every player's record against
+  the env's scripted players, and in cooperative games its mean team return.
 * :func:`select_rows` keeps one run's snapshots (plus the scripted players) and / or the first rows,
   without changing any rank.
 
@@ -134,6 +136,7 @@ class LadderRow:
             comparable with the anchor).
         vs: the record against each scripted player of the env, in the league's bot order (empty for CSV
             ladders); a bot's own entry has no games.
+        mean_return: the player's mean team return over its cooperative episodes (None in other games).
     """
 
     policy: str
@@ -154,11 +157,13 @@ class LadderRow:
     run: str | None = None
     best: bool = False
     vs: tuple[BotRecord, ...] = ()
+    mean_return: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict: ``policy, kind, elo, ci_low, ci_high, games, wins, draws, losses, rank`` then
         ``score, step, flag, anchor, run, best, vs`` (Elo values rounded to 0.1, scores to 1e-4; never NaN /
-        inf). ``vs`` maps each scripted player to ``{"score": s, "games": n}`` (``score`` null without games)."""
+        inf), and ``mean_return`` last for a player of a cooperative game. ``vs`` maps each scripted player to
+        ``{"score": s, "games": n}`` (``score`` null without games)."""
         for value in (self.elo, self.ci_low, self.ci_high, self.score):
             assert math.isfinite(value), f"non-finite value in ladder row {self.policy}: {value}"
         out: dict[str, Any] = {
@@ -182,6 +187,9 @@ class LadderRow:
                    for v in self.vs},
         }
         assert tuple(out) == _JSON_KEYS
+        if self.mean_return is not None:
+            assert math.isfinite(self.mean_return), f"non-finite mean return in ladder row {self.policy}"
+            out["mean_return"] = round(float(self.mean_return), 4)
         return out
 
 
@@ -308,7 +316,7 @@ def fit_table(
 
 
 def _envs_in_order(league: League) -> list[str]:
-    """Envs that have 2-seat games in the ledger, in order of their first game."""
+    """Envs that have rated results in the ledger, in order of their first one."""
     table = league.games()
     if len(table) == 0:
         return []
@@ -415,7 +423,7 @@ def ladder(
     *,
     prior: float = DEFAULT_PRIOR,
 ) -> list[LadderRow]:
-    """The ladder of ``env``: a :func:`fit_table` over all 2-seat games of that env in the ledger.
+    """The ladder of ``env``: a :func:`fit_table` over all pairwise results of that env in the ledger.
 
     ``env=None`` uses the ledger's only env (LeagueError if it has several, or no games at all); an env
     without games gives an empty list. Only players with games appear. ``prior``: BayesElo's prior in virtual
@@ -429,7 +437,8 @@ def ladder(
     ranks unless ``include_removed``.
 
     Each row also carries its ``run``, ``best`` (the best snapshot of its run) and ``vs`` (its record
-    against each scripted player of the env: ``league.players(env=env, kind="bot")``).
+    against each scripted player of the env: ``league.players(env=env, kind="bot")``) and, in a cooperative game,
+    ``mean_return`` (its mean team return over its episodes).
     """
     env = pick_env(league, env)
     table = league.games(env=env)
@@ -457,7 +466,9 @@ def ladder(
     bots = league.players(env=env, kind="bot", include_removed=True)
     records = _bot_records(ids, a, b, table.score_a, bots)
     run_of = {p.id: p.run for p in population if not p.is_bot}
-    rows = [replace(r, run=run_of.get(int(r.player_id)), vs=records.get(int(r.player_id), ()))
+    returns = league.mean_returns(env)
+    rows = [replace(r, run=run_of.get(int(r.player_id)), vs=records.get(int(r.player_id), ()),
+                    mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
             if r.player_id is not None else r for r in rows]
     return _mark_best(rows, removed)
 

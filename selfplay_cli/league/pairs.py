@@ -1,4 +1,9 @@
-"""Two players at a time: their record from the ledger (with game pairs), and the games a tournament still needs."""
+"""Two players at a time: their record from the ledger (with game pairs), and the games a tournament still needs.
+
+Both read the ledger's pairwise results (:meth:`~selfplay_cli.league.store.League.games`), so they work for every
+kind of game: a two-sides game is one result, a cooperative comparison (two episodes on one seed) one, a
+free-for-all game one per two players in it.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from selfplay_cli.league.store import League, LeagueError
+from selfplay_cli.league.store import KIND_CODES, League, LeagueError
+from selfplay_cli.results import TWO_SIDES
 
 __all__ = ["PairPlan", "head_to_head", "plan_tournament"]
 
@@ -30,7 +36,8 @@ def plan_tournament(
 
     Pairs: every unordered pair of ``player_ids`` (round robin, in list order), or with ``vs`` each player
     against ``vs`` only (gauntlet; ``a_id`` is the player, ``b_id`` is ``vs``). Existing games of a pair
-    count in both seat orders. Pairs with nothing missing are left out.
+    count in both seat orders (a cooperative comparison as its two episodes). Pairs with nothing missing are left
+    out.
 
     Raises:
         LeagueError: unknown player or one of another env, fewer than two players, negative games_per_pair.
@@ -54,8 +61,9 @@ def plan_tournament(
         pairs = [(ids[i], ids[j]) for i in range(len(ids)) for j in range(i + 1, len(ids))]
     table = league.games(env=env, players=check)
     counts: dict[tuple[int, int], int] = defaultdict(int)
-    for x, y in zip(table.player_a.tolist(), table.player_b.tolist(), strict=True):
-        counts[(min(x, y), max(x, y))] += 1
+    weight = np.where(table.kind == KIND_CODES["cooperative"], 2, 1).tolist()  # a comparison: two episodes
+    for x, y, w in zip(table.player_a.tolist(), table.player_b.tolist(), weight, strict=True):
+        counts[(min(x, y), max(x, y))] += w
     plan = []
     for x, y in pairs:
         have = counts.get((min(x, y), max(x, y)), 0)
@@ -66,14 +74,16 @@ def plan_tournament(
 
 
 def head_to_head(league: League, a_id: int, b_id: int) -> dict[str, Any]:
-    """Record of player ``a_id`` against ``b_id`` over all stored 2-seat games.
+    """Record of player ``a_id`` against ``b_id`` over their stored pairwise results (training games
+    left out, as in every rating).
 
-    Returns a dict with ``a_id, b_id, games, wins, draws, losses, score`` (A's mean points, 0.5 without
-    games), ``pentanomial`` and ``pairs``, ``unpaired``. Game pairs: within one match, games with the same
-    seed, one with A in seat 0 and one with A in seat 1 (matched in game-id order). A pair's score is A's
-    points in both games; ``pentanomial`` counts pairs scoring ``0, 0.5, 1, 1.5, 2``, i.e.
-    ``[LL, LD, WL+DD, WD, WW]`` as :func:`~selfplay_cli.stats.sprt.sprt_llr` expects. Unpaired games
-    count in W/D/L only.
+    Returns a dict with ``a_id, b_id, games, results, wins, draws, losses, score`` (A's mean points, 0.5 without
+    results), ``pentanomial`` and ``pairs``, ``unpaired``. ``games`` counts the ledger's games (a cooperative
+    comparison is two episodes), ``results`` the pairwise results W + D + L. Game pairs (two-sides games only):
+    within one match, games with the same seed, one with A on the first side and one with A on the second (matched
+    in game-id order). A pair's score is A's points in both games; ``pentanomial`` counts pairs scoring ``0, 0.5,
+    1, 1.5, 2``, i.e. ``[LL, LD, WL+DD, WD, WW]`` as :func:`~selfplay_cli.stats.sprt.sprt_llr` expects. Results
+    outside pairs (cooperative comparisons, free-for-all results, unpaired games) count in W/D/L only.
     """
     a_id, b_id = int(a_id), int(b_id)
     if a_id == b_id:
@@ -81,13 +91,15 @@ def head_to_head(league: League, a_id: int, b_id: int) -> dict[str, Any]:
     league.get_player(a_id)
     league.get_player(b_id)
     table = league.games(players=[a_id, b_id])
-    seat0 = table.player_a == a_id
-    pts = np.where(seat0, table.score_a, 1.0 - table.score_a)
+    first_side = table.player_a == a_id
+    pts = np.where(first_side, table.score_a, 1.0 - table.score_a)
     wins, draws, losses = int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))
     groups: dict[tuple[int, int], tuple[list[float], list[float]]] = defaultdict(lambda: ([], []))
-    for m, sd, first, p in zip(table.match_id.tolist(), table.seed.tolist(), seat0.tolist(), pts.tolist(),
-                               strict=True):
-        groups[(m, sd)][0 if first else 1].append(p)
+    two_sides = table.kind == KIND_CODES[TWO_SIDES]
+    for m, sd, first, p, paired in zip(table.match_id.tolist(), table.seed.tolist(), first_side.tolist(),
+                                       pts.tolist(), two_sides.tolist(), strict=True):
+        if paired:
+            groups[(m, sd)][0 if first else 1].append(p)
     penta = [0, 0, 0, 0, 0]
     pairs = 0
     for as_first, as_second in groups.values():
@@ -98,7 +110,8 @@ def head_to_head(league: League, a_id: int, b_id: int) -> dict[str, Any]:
     return {
         "a_id": a_id,
         "b_id": b_id,
-        "games": n,
+        "games": table.games_played(),
+        "results": n,
         "wins": wins,
         "draws": draws,
         "losses": losses,

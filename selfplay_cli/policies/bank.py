@@ -5,10 +5,13 @@ of torch's per-call overhead every step (tens of microseconds each, more than th
 few dozen rows). A :class:`NetworkBank` stacks the networks' layers into ``(P, in, out)`` tensors and runs each
 layer once for all of them with ``torch.baddbmm``, on a ``(P, M, in)`` batch padded to the largest player's rows.
 
-Sampling draws one uniform per row from the bank's own generator (inverse CDF of the softmax); greedy players take
-the argmax. A match between the same players with the same schedule therefore replays the same actions. A bank
-computes tanh as ``2 sigmoid(2x) - 1`` (faster here): its scores equal a network's own to float rounding, not bit
-for bit.
+Sampling draws one uniform per row (and dimension) from the bank's own generator (inverse CDF of the softmax);
+greedy players take the argmax. Masked actions are never chosen (their logits are -inf, so their share of the CDF
+is empty). A MultiDiscrete head is handled as its dimensions' logits laid out side by side in one padded tensor; a
+Box head gives each member's Gaussian means, played as they are (greedy) or as ``mean + std * eps`` with one
+standard normal per row and dimension, clipped to the bounds. A match between the same players with the same
+schedule therefore replays the same actions. A bank computes tanh as ``2 sigmoid(2x) - 1`` (faster here): its
+scores equal a network's own to float rounding, not bit for bit.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from .heads import HeadMath, to_numpy_actions
 from .network import MLPNet, NetworkPolicy
 
 
@@ -31,11 +35,12 @@ _FAST = {"tanh": _tanh, "relu": torch.relu_}
 
 
 def bank_key(policy: object) -> tuple | None:
-    """Policies with the same key can act in one bank: network policies of one architecture on one device."""
+    """Policies with the same key can act in one bank: network policies of one architecture and one action head
+    (kind, sizes and bounds) on one device."""
     if not isinstance(policy, NetworkPolicy):
         return None
     net = policy.net
-    return (str(policy.device), net.obs_dim, net.n_actions, net.arch.hidden, net.arch.activation, net.arch.dueling)
+    return (str(policy.device), net.obs_dim, net.head, net.arch.hidden, net.arch.activation, net.arch.dueling)
 
 
 def bank_groups(policies: Sequence[object]) -> list[list[int]]:
@@ -56,6 +61,8 @@ class NetworkBank:
         nets: list[MLPNet] = [p.net for p in members]
         self.device = members[0].device
         self.n_actions = nets[0].n_actions
+        self.head = nets[0].head
+        self.math = HeadMath(self.head, self.device)
         self.activation = _FAST.get(nets[0].arch.activation, nets[0]._activation)
         with torch.no_grad():
             self.layers = [(torch.stack([n._linears[k].weight.T for n in nets]).contiguous(),
@@ -63,8 +70,11 @@ class NetworkBank:
                            for k in range(len(nets[0]._linears))]
             # The heads are applied as (P, A, H) @ (P, H, M): with A = 3 outputs, the (M, H) @ (H, A) way round is
             # ~6x slower in torch's batched matmul. The action scores come out as (P, A, M).
-            self.head = (torch.stack([n.action_head.weight for n in nets]).contiguous(),
-                         torch.stack([n.action_head.bias for n in nets]).unsqueeze(2).contiguous())
+            self.out_w = torch.stack([n.action_head.weight for n in nets]).contiguous()
+            self.out_b = torch.stack([n.action_head.bias for n in nets]).unsqueeze(2).contiguous()
+            self.std = None
+            if self.head.kind == "box":  # (P, d, 1): each member's standard deviations
+                self.std = torch.stack([n.log_std for n in nets]).exp().unsqueeze(2).contiguous()  # type: ignore[misc]
             self.state_value = None
             if nets[0].state_value is not None:
                 self.state_value = (torch.stack([n.state_value.weight for n in nets]).contiguous(),  # type: ignore[union-attr]
@@ -77,32 +87,92 @@ class NetworkBank:
                                                 & 0x7FFF_FFFF_FFFF))
         self.obs_dim = nets[0].obs_dim
 
+    def _masks(self, masks: Sequence[np.ndarray | None] | None, rows: list[int], most: int) -> torch.Tensor | None:
+        """The members' masks as one ``(P, A, M)`` bool tensor (padding and members without a mask: all allowed)."""
+        if masks is None or all(m is None for m in masks):
+            return None
+        if self.head.kind == "box":
+            raise ValueError("Box actions take no action mask")
+        width = self.head.mask_width
+        out = np.ones((len(rows), most, width), dtype=bool)
+        for k, m in enumerate(masks):
+            if m is not None and rows[k]:
+                m = self.head.check_mask(m, rows[k])
+                out[k, : rows[k]] = m
+        if self.head.kind == "discrete" and not out.any(axis=2).all():
+            raise ValueError("the action mask allows no action in some rows")
+        t = torch.from_numpy(out)
+        if self.device.type != "cpu":
+            t = t.to(self.device)
+        return t.transpose(1, 2)
+
     @torch.inference_mode()
-    def act(self, obs: Sequence[np.ndarray]) -> list[np.ndarray]:
-        """Actions of every member for its own observations (``obs[k]``: member k's rows, any count, maybe 0)."""
+    def act(self, obs: Sequence[np.ndarray], masks: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray]:
+        """Actions of every member for its own observations (``obs[k]``: member k's rows, any count, maybe 0) and,
+        optionally, its action masks (``masks[k]``: ``(rows, n_actions)`` bool, or None)."""
         rows = [len(o) for o in obs]
         most = max(rows)
         if most == 0:
-            return [np.zeros(0, dtype=np.int64) for _ in obs]
+            shape = self.head.action_shape
+            dtype = np.float32 if self.head.kind == "box" else np.int64
+            return [np.zeros((0, *shape), dtype=dtype) for _ in obs]
         x = np.empty((len(obs), most, self.obs_dim), dtype=np.float32)
         for k, o in enumerate(obs):
             if rows[k]:
                 x[k, : rows[k]] = o.reshape(rows[k], -1)
             x[k, rows[k]:] = 0.0  # padding (never garbage: no NaN or denormal slows the arithmetic down)
+        mask = self._masks(masks, rows, most)
         z = torch.from_numpy(x)
         if self.device.type != "cpu":
             z = z.to(self.device)
         for w, b in self.layers:
             z = self.activation(torch.baddbmm(b, z, w))
         zt = z.transpose(1, 2)
-        out = torch.baddbmm(self.head[1], self.head[0], zt)  # (P, A, M)
+        out = torch.baddbmm(self.out_b, self.out_w, zt)  # (P, A, M)
         if self.state_value is not None:
             out = torch.baddbmm(self.state_value[1], self.state_value[0], zt) + out - out.mean(dim=1, keepdim=True)
+        if self.head.kind == "discrete":
+            a = self._categorical(out if mask is None else out.masked_fill(~mask, float("-inf")), len(obs), most)
+        elif self.head.kind == "multidiscrete":
+            a = self._multi(out, mask, len(obs), most)
+        else:
+            a = self._gaussian(out, len(obs), most)
+        return [to_numpy_actions(self.head, a[k, : rows[k]]) for k in range(len(obs))]
+
+    def _categorical(self, out: torch.Tensor, p: int, most: int) -> torch.Tensor:
+        """Discrete: ``out`` (P, A, M) -> actions (P, M)."""
         actions = out.argmax(dim=1) if self.any_greedy else None
         if self.any_sampling:  # inverse CDF of the softmax, unnormalised: a = #{k : cumsum(e)_k <= u * sum(e)}
             e = (out - out.amax(dim=1, keepdim=True)).exp_().cumsum_(dim=1)
-            u = torch.rand((len(obs), 1, most), generator=self.generator, device=self.device)
+            u = torch.rand((p, 1, most), generator=self.generator, device=self.device)
             sampled = (e <= u * e[:, -1:, :]).sum(dim=1).clamp_(max=self.n_actions - 1)
             actions = sampled if actions is None else torch.where(self.greedy, actions, sampled)
-        a = actions.cpu().numpy() if self.device.type != "cpu" else actions.numpy()
-        return [a[k, : rows[k]] for k in range(len(obs))]
+        return actions  # type: ignore[return-value]
+
+    def _multi(self, out: torch.Tensor, mask: torch.Tensor | None, p: int, most: int) -> torch.Tensor:
+        """MultiDiscrete: ``out`` (P, A, M) -> actions (P, M, k), each dimension as a Discrete head."""
+        flat = out.transpose(1, 2).reshape(p * most, -1)
+        m = None if mask is None else mask.transpose(1, 2).reshape(p * most, -1)
+        logits = self.math.padded(flat, m, float("-inf"))  # (P*M, k, W)
+        if not bool(torch.isfinite(logits.amax(dim=2)).all()):
+            raise ValueError("the action mask allows no action in some rows")
+        k, w = logits.shape[1], logits.shape[2]
+        cat = logits.reshape(p, most * k, w).transpose(1, 2)  # (P, W, M*k): the Discrete layout
+        greedy = self.greedy
+        actions = cat.argmax(dim=1) if self.any_greedy else None
+        if self.any_sampling:
+            e = (cat - cat.amax(dim=1, keepdim=True)).exp_().cumsum_(dim=1)
+            u = torch.rand((p, 1, most * k), generator=self.generator, device=self.device)
+            sampled = (e <= u * e[:, -1:, :]).sum(dim=1).clamp_(max=w - 1)
+            actions = sampled if actions is None else torch.where(greedy, actions, sampled)
+        return actions.reshape(p, most, k)  # type: ignore[union-attr]
+
+    def _gaussian(self, out: torch.Tensor, p: int, most: int) -> torch.Tensor:
+        """Box: the means ``out`` (P, d, M) -> clipped actions (P, M, d)."""
+        a = out
+        if self.any_sampling:
+            eps = torch.randn(out.shape, generator=self.generator, device=self.device)
+            sampled = out + self.std * eps
+            a = sampled if not self.any_greedy else torch.where(self.greedy[:, :, None], out, sampled)
+        a = a.transpose(1, 2)
+        return torch.maximum(torch.minimum(a, self.math.high), self.math.low)

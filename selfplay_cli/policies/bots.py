@@ -1,24 +1,120 @@
-"""Scripted players as policies: fixed anchors of the league."""
+"""Scripted players as policies: fixed anchors of the league.
+
+A scripted player is the game's registered rule (given the seat's action masks when it declares ``uses_mask``).
+``random`` is defined for every game and every action space, whether or not the game registers it: a game that
+does not is played by :class:`RandomPolicy`: uniform over the allowed actions of a Discrete space (under the mask),
+per dimension for MultiDiscrete, uniform in a bounded Box.
+"""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from gymnasium import spaces
 
 from ..envs import get_env
+from ..errors import MarlError
 from .base import Policy
+from .spaces import ActionHead, SpaceError, describe_space, seat_spaces_of, uniform_allowed
+
+RANDOM = "random"
+
+
+def bot_names(spec: Any) -> list[str]:
+    """The scripted players of a game: the ones it registers, and ``random``, which every game has."""
+    return sorted(set(spec.bots) | {RANDOM})
+
+
+class RandomPolicy(Policy):
+    """Uniformly random actions in ``act_space`` (see the module docstring); mask-aware for categorical actions.
+
+    Without a mask a Discrete seat draws ``rng.integers(0, n, size=batch)``, exactly as the registered ``random``
+    rule of pong always has, so games against it replay unchanged."""
+
+    kind = "bot"
+
+    def __init__(self, act_space: spaces.Space, id: str = RANDOM, env: str = "", seed: int = 0,
+                 obs_space: spaces.Space | None = None) -> None:
+        super().__init__(id, env, obs_space=obs_space, act_space=act_space)
+        try:
+            self.head = ActionHead.of(act_space)
+        except SpaceError as e:
+            raise MarlError(f"the random player cannot play {env or 'this game'}: {e}") from None
+        self.rng = np.random.default_rng(seed)
+        if self.head.kind == "box":
+            self.low = np.asarray(act_space.low, dtype=np.float64)
+            self.high = np.asarray(act_space.high, dtype=np.float64)
+
+    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        b = len(obs)
+        head = self.head
+        m = head.check_mask(mask, b)
+        if head.kind == "discrete":
+            if m is None:
+                return np.asarray(self.rng.integers(0, head.nvec[0], size=b), dtype=np.int64)
+            return uniform_allowed(m, self.rng.random(b))
+        if head.kind == "multidiscrete":
+            nvec = np.asarray(head.nvec)
+            if m is None:
+                return self.rng.integers(0, nvec, size=(b, len(nvec))).astype(np.int64)
+            out = np.empty((b, len(nvec)), dtype=np.int64)
+            u = self.rng.random((b, len(nvec)))
+            offset = 0
+            for j, n in enumerate(head.nvec):
+                out[:, j] = uniform_allowed(m[:, offset:offset + n], u[:, j])
+                offset += n
+            return out
+        a = self.rng.uniform(self.low, self.high, size=(b, *head.shape))
+        return np.clip(a, self.low, self.high).astype(np.float32)
 
 
 class ScriptedPolicy(Policy):
+    """A game's scripted player ``name`` (``random`` for any game: :class:`RandomPolicy` unless the game registers
+    its own).
+
+    ``env_options`` configure the game (the seat's spaces depend on them); ``seat`` picks the seat whose action
+    space ``random`` plays, needed only when a game's seats act differently. A rule that returns an action its mask
+    forbids is a clear error naming the player."""
+
     kind = "bot"
 
-    def __init__(self, env: str, name: str, seed: int = 0) -> None:
+    def __init__(self, env: str, name: str, seed: int = 0, env_options: dict[str, Any] | None = None,
+                 seat: int | None = None) -> None:
         spec = get_env(env)
-        if name not in spec.bots:
-            known = ", ".join(sorted(spec.bots)) or "none"
+        if name not in spec.bots and name != RANDOM:
+            known = ", ".join(bot_names(spec))
             raise KeyError(f"{env} has no scripted player '{name}'; it has: {known}")
-        super().__init__(name, env)
-        self.bot = spec.bots[name]
+        seats = seat_spaces_of(spec, spec.config(**(env_options or {})))
+        if seat is not None:
+            obs_space, act_space, _ = seats[seat]
+        else:
+            obs_space, act_space, _ = seats[0]
+            kinds = {describe_space(a) for _, a, _ in seats}
+            if name == RANDOM and len(kinds) > 1:
+                raise MarlError(f"{env}'s seats act differently ({', '.join(sorted(kinds))}): the random player "
+                                "needs its seat")
+        super().__init__(name, env, obs_space=obs_space, act_space=act_space)
         self.rng = np.random.default_rng(seed)
+        self.bot = spec.bots.get(name)
+        self._random = None
+        if self.bot is None:  # random, which the game does not register
+            self._random = RandomPolicy(act_space, name, env, seed=seed, obs_space=obs_space)
+            self._random.rng = self.rng
+        self._uses_mask = bool(getattr(self.bot, "uses_mask", False))
 
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        return np.asarray(self.bot.rule(obs, self.rng), dtype=np.int64)
+        if self._random is not None:
+            return self._random.act(obs, mask)
+        if self._uses_mask:
+            actions = self.bot.rule(obs, self.rng, mask)  # type: ignore[union-attr]
+        else:
+            actions = self.bot.rule(obs, self.rng)  # type: ignore[union-attr]
+        if isinstance(self.act_space, spaces.Box):
+            return np.asarray(actions, dtype=np.float32)
+        actions = np.asarray(actions, dtype=np.int64)
+        if mask is not None and isinstance(self.act_space, spaces.Discrete):
+            m = np.asarray(mask, dtype=bool)
+            if not m[np.arange(len(actions)), actions].all():
+                raise MarlError(f"scripted player {self.id} of {self.env} chose an action its mask forbids")
+        return actions

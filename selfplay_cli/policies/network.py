@@ -1,8 +1,11 @@
 """Neural policies: the network architecture record, the MLP itself and the policy that plays with it.
 
-The MLP serves both learners: its action head gives PPO's logits or DQN's Q-values (same shape), and an
-optional value head gives PPO's critic. Everything here is plain torch; nothing is set globally (threads,
-seeds, default dtype): callers that care about throughput may call ``torch.set_num_threads`` themselves.
+The MLP serves both learners: its action head gives PPO's logits or DQN's Q-values, and an optional value head
+gives PPO's critic. The action head is the one its seat's action space calls for (:class:`ActionHead`): ``n``
+logits for ``Discrete(n)``, ``sum(nvec)`` logits (one block per dimension) for ``MultiDiscrete(nvec)``, and for a
+``Box`` the means of a Gaussian with a learned state-independent ``log_std`` parameter. Everything here is plain
+torch; nothing is set globally (threads, seeds, default dtype): callers that care about throughput may call
+``torch.set_num_threads`` themselves.
 """
 
 from __future__ import annotations
@@ -13,11 +16,14 @@ from typing import Any
 
 import numpy as np
 import torch
+from gymnasium import spaces
 from torch import nn
 from torch.nn import functional as F
 
 from ..errors import MarlError
 from .base import Policy
+from .heads import HeadMath, to_numpy_actions
+from .spaces import ActionHead, SpaceError, box_of_shape
 
 KINDS = ("mlp",)
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
@@ -114,19 +120,30 @@ class MLPNet(nn.Module):
     """Flattened observation -> trunk (Linear + activation per hidden width) -> heads.
 
     ``forward(x)`` takes ``(batch, *obs_shape)`` (or already flat ``(batch, obs_dim)``) and returns
-    ``(action_out, value)``: ``action_out`` is ``(batch, n_actions)`` logits (PPO) or Q-values (DQN);
-    ``value`` is ``(batch,)`` or ``None`` without a value head.
+    ``(action_out, value)``: ``action_out`` is ``(batch, head.outputs)``: logits (PPO; per dimension, side by side,
+    for MultiDiscrete), Q-values (DQN) or Gaussian means (Box); ``value`` is ``(batch,)`` or ``None`` without a
+    value head. ``obs_space`` and ``act_space`` are the seat's spaces (gymnasium).
 
-    Parameter names (the snapshot's tensor names): ``trunk.{2i}.weight/bias``, ``action_head.*``,
-    ``value_head.*`` and, for a dueling arch, ``state_value.*``.
+    Parameter names (the snapshot's tensor names): ``trunk.{2i}.weight/bias``, ``action_head.*``, ``log_std``
+    (Box actions), ``value_head.*`` and, for a dueling arch, ``state_value.*``.
     """
 
-    def __init__(self, obs_dim: int, n_actions: int, arch: Arch, generator: torch.Generator | None = None) -> None:
+    def __init__(self, obs_dim: int, action: int | spaces.Space | ActionHead, arch: Arch,
+                 generator: torch.Generator | None = None, obs_space: spaces.Box | None = None) -> None:
         super().__init__()
-        if int(obs_dim) < 1 or int(n_actions) < 1:
-            raise SnapshotError(f"a network needs obs_dim >= 1 and n_actions >= 1, got {obs_dim} and {n_actions}")
+        try:
+            head = action if isinstance(action, ActionHead) else ActionHead.of(action)
+        except SpaceError as e:
+            raise SnapshotError(str(e)) from None
+        if int(obs_dim) < 1:
+            raise SnapshotError(f"a network needs obs_dim >= 1 and n_actions >= 1, got {obs_dim} and {head.outputs}")
+        if arch.dueling and head.kind != "discrete":
+            raise SnapshotError(f"a dueling head is for Discrete actions (Q-values), not {head.describe()}")
         self.obs_dim = int(obs_dim)
-        self.n_actions = int(n_actions)
+        self.head = head
+        self.n_actions = head.outputs  # the action head's width (the action count of a Discrete space)
+        self.obs_space = obs_space if obs_space is not None else box_of_shape((self.obs_dim,))
+        self.act_space = action if isinstance(action, spaces.Space) else _space_of(head)
         self.arch = arch
         hidden_gain = math.sqrt(2.0)
         layers: list[nn.Module] = []
@@ -139,6 +156,7 @@ class MLPNet(nn.Module):
         self._linears = [m for m in layers if isinstance(m, nn.Linear)]
         self._activation = ACTIVATION_FNS[arch.activation]
         self.action_head = _layer(width, self.n_actions, 0.01, generator)
+        self.log_std = nn.Parameter(torch.zeros(self.n_actions)) if head.kind == "box" else None
         self.value_head = _layer(width, 1, 1.0, generator) if arch.value_head else None
         self.state_value = _layer(width, 1, 1.0, generator) if arch.dueling else None
 
@@ -164,17 +182,37 @@ class MLPNet(nn.Module):
         return out, value
 
 
-def build_network(obs_shape: tuple[int, ...], n_actions: int, arch: Arch, seed: int | None = None) -> MLPNet:
-    """A freshly initialised network for an env's observation shape and action count.
+def _space_of(head: ActionHead) -> spaces.Space:
+    if head.kind == "discrete":
+        return spaces.Discrete(head.nvec[0])
+    if head.kind == "multidiscrete":
+        return spaces.MultiDiscrete(np.array(head.nvec, dtype=np.int64))
+    return spaces.Box(np.array(head.low, np.float32).reshape(head.shape),
+                      np.array(head.high, np.float32).reshape(head.shape), dtype=np.float32)
+
+
+def build_network(obs: tuple[int, ...] | spaces.Box, action: int | spaces.Space | ActionHead, arch: Arch,
+                  seed: int | None = None) -> MLPNet:
+    """A freshly initialised network for a seat's observations (a Box, or just its shape) and actions (a space, or
+    an int ``n`` for ``Discrete(n)``).
 
     With ``seed`` the init is reproducible and the global torch RNG is left alone; without it the global RNG
     is used. The network is built on the CPU (move it with ``.to(device)``).
     """
-    shape = tuple(int(d) for d in obs_shape)
+    obs_space = obs if isinstance(obs, spaces.Box) else None
+    raw = obs.shape if isinstance(obs, spaces.Box) else obs
+    try:
+        shape = tuple(int(d) for d in raw)
+    except (TypeError, ValueError):
+        raise SnapshotError(f"bad observation shape {raw!r}") from None
     if not shape or any(d < 1 for d in shape):
-        raise SnapshotError(f"bad observation shape {obs_shape!r}")
+        raise SnapshotError(f"bad observation shape {raw!r}")
+    if obs_space is None:
+        obs_space = box_of_shape(shape)
     generator = torch.Generator().manual_seed(int(seed)) if seed is not None else None
-    return MLPNet(math.prod(shape), int(n_actions), arch, generator=generator)
+    if isinstance(action, (int, np.integer)) and not isinstance(action, bool):
+        action = int(action)
+    return MLPNet(math.prod(shape), action, arch, generator=generator, obs_space=obs_space)
 
 
 def resolve_device(name: str | torch.device = "cpu") -> torch.device:
@@ -197,14 +235,16 @@ def resolve_device(name: str | torch.device = "cpu") -> torch.device:
 
 
 class NetworkPolicy(Policy):
-    """A network playing one seat: greedy (argmax of the action head) or sampling from ``softmax(logits)``.
+    """A network playing one seat: greedy (the best action: argmax of the logits or Q-values, a Gaussian's mean
+    clipped to the bounds) or sampling from its distribution (softmax of the logits, per dimension for
+    MultiDiscrete; ``clip(mean + std * eps)`` for Box actions). Masked actions are never chosen.
 
     ``act`` runs under ``torch.inference_mode`` and converts observations with ``torch.from_numpy`` (a copy is
     made only when the array is not already a writable float32 array). Sampling uses the policy's own
     ``torch.Generator`` seeded with ``seed``, so a seeded policy replays the same actions for the same
     observations. For large batches on the CPU, callers may tune ``torch.set_num_threads``; nothing global
     is set here. ``meta`` is the :class:`~selfplay_cli.policies.snapshot.SnapshotMeta` it was loaded from,
-    if any.
+    if any; ``obs_space`` and ``act_space`` are the network's.
     """
 
     kind = "snapshot"
@@ -219,12 +259,14 @@ class NetworkPolicy(Policy):
         seed: int = 0,
         meta: Any = None,
     ) -> None:
-        super().__init__(id, env)
+        super().__init__(id, env, obs_space=net.obs_space, act_space=net.act_space)
         self.device = resolve_device(device)
         self.net = net.to(self.device).eval()
+        self.head = net.head
         self.greedy = bool(greedy)
         self.meta = meta
         self.generator = torch.Generator(device=self.device)
+        self._math: HeadMath | None = None
         self.reseed(seed)
 
     @property
@@ -243,21 +285,42 @@ class NetworkPolicy(Policy):
         t = torch.from_numpy(a)
         return t if self.device.type == "cpu" else t.to(self.device, non_blocking=True)
 
+    def _mask(self, mask: np.ndarray | None, rows: int) -> torch.Tensor | None:
+        m = self.head.check_mask(mask, rows)
+        if m is None:
+            return None
+        if self.head.kind == "discrete":
+            if not bool(m.any(axis=1).all()):
+                raise ValueError("the action mask allows no action in some rows")
+        else:
+            index, valid = self.math.index.cpu().numpy(), self.math.valid.cpu().numpy()
+            if not bool((m[:, index] & valid).any(axis=2).all()):
+                raise ValueError("the action mask allows no action in some rows")
+        return self._tensor(m, np.bool_)
+
+    @property
+    def math(self) -> HeadMath:
+        if self._math is None:
+            self._math = HeadMath(self.head, self.device)
+        return self._math
+
     @torch.inference_mode()
     def action_scores(self, obs: np.ndarray, mask: np.ndarray | None = None) -> torch.Tensor:
-        """The action head's ``(batch, n_actions)`` output, with disallowed actions set to ``-inf``."""
+        """The action head's ``(batch, outputs)`` output, with disallowed actions set to ``-inf`` (Discrete and
+        MultiDiscrete heads; a Box head's outputs are its means)."""
         scores, _ = self.net(self._tensor(obs, np.float32))
-        if mask is not None:
-            m = self._tensor(mask, np.bool_)
-            if m.shape != scores.shape:
-                raise ValueError(f"mask has shape {tuple(m.shape)}; expected {tuple(scores.shape)}")
-            if not bool(m.any(dim=1).all()):
-                raise ValueError("the action mask allows no action in some rows")
+        m = self._mask(mask, scores.shape[0])
+        if m is not None:
             scores = scores.masked_fill(~m, float("-inf"))
         return scores
 
     @torch.inference_mode()
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        if self.head.kind != "discrete":
+            out, _ = self.net(self._tensor(obs, np.float32))
+            _, played = self.math.sample(out, self._mask(mask, out.shape[0]), self.generator, self.greedy,
+                                         log_std=self.net.log_std)
+            return to_numpy_actions(self.head, played)
         scores = self.action_scores(obs, mask)
         if self.greedy:
             actions = scores.argmax(dim=1)

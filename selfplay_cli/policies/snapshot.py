@@ -1,9 +1,13 @@
 """Snapshot files: a policy's weights plus everything needed to rebuild and identify it, in one file.
 
 A snapshot is a ``*.safetensors`` file. Its header's ``__metadata__`` (a str -> str map) holds
-``format = "marl-snapshot"``, ``format_version = "1"`` and ``marl``: the JSON of :class:`SnapshotMeta` (env and
-its options, observation shape, action count, network arch, algorithm, training counters, lineage). The
+``format = "marl-snapshot"``, ``format_version = "2"`` and ``marl``: the JSON of :class:`SnapshotMeta` (env and
+its options, the seat's observation and action spaces, network arch, algorithm, training counters, lineage). The
 weights are checksummed (:func:`weights_sha256`) on save and verified on every load.
+
+Format versions: 2 records the spaces (``obs_space``, ``act_space``: JSON of
+:func:`~selfplay_cli.policies.spaces.space_to_dict`); 1 (files written before) recorded ``obs_shape`` and
+``n_actions``, and still loads, as an unbounded float32 Box and ``Discrete(n_actions)``.
 
 Loading never unpickles anything: the header is parsed as JSON and the tensors are read from the validated byte
 ranges it declares (no ``torch.load``). A file is a hostile input until proven otherwise (models contributed to a CI
@@ -30,14 +34,16 @@ from typing import Any
 
 import numpy as np
 import torch
+from gymnasium import spaces
 from safetensors.torch import save as st_save
 
 from .. import files
 from ..envs import UnknownEnvError, get_env
 from .network import Arch, NetworkPolicy, SnapshotError, build_network
+from .spaces import ActionHead, SpaceError, canonical_space, seat_spaces_of, space_from_dict
 
 FORMAT = "marl-snapshot"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 SUFFIX = ".safetensors"
 
 # Limits of what marl reads (and writes): far above any network it trains (seed 000's 512-512-256-128-64 MLP has
@@ -47,7 +53,7 @@ MAX_LAYERS = 64  # hidden layers
 MAX_WIDTH = 65_536  # units in a hidden layer
 MAX_OBS_DIMS = 8  # axes of an observation
 MAX_OBS_SIZE = 1 << 24  # numbers in an observation
-MAX_ACTIONS = 65_536
+MAX_ACTIONS = 65_536  # outputs of an action head (actions of a Discrete space, sum(nvec), a Box's numbers)
 MAX_PARAMS = 100_000_000  # parameters of a network (400 MB of float32)
 MAX_FILE_BYTES = 8 + MAX_HEADER + 4 * MAX_PARAMS
 LIMITS = {"header_bytes": MAX_HEADER, "hidden_layers": MAX_LAYERS, "layer_width": MAX_WIDTH,
@@ -80,11 +86,24 @@ def utc_now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="seconds")
 
 
+def _check_obs_shape(shape: tuple[int, ...]) -> None:
+    if not 1 <= len(shape) <= MAX_OBS_DIMS or any(not 1 <= d <= MAX_OBS_SIZE for d in shape):
+        raise SnapshotError(f"observation shape {list(shape)[:MAX_OBS_DIMS + 1]} is out of bounds (1 to "
+                            f"{MAX_OBS_DIMS} sizes of 1 to {MAX_OBS_SIZE:,})")
+    if math.prod(shape) > MAX_OBS_SIZE:
+        raise SnapshotError(f"observations of {math.prod(shape):,} numbers are more than marl plays "
+                            f"({MAX_OBS_SIZE:,})")
+
+
 @dataclass(frozen=True, kw_only=True)
 class SnapshotMeta:
-    """What a snapshot is: the game it plays, the network's shape and where it came from.
+    """What a snapshot is: the game it plays, the seat's spaces, the network's shape and where it came from.
 
-    Keyword-only. ``parent`` is the snapshot it was trained from (``"run/ep80"``); ``seat`` names the seat
+    Keyword-only. ``obs_space`` and ``act_space`` are the seat's observation Box and action space (gymnasium spaces
+    or their JSON; kept as the canonical JSON); code written before spaces were recorded may give ``obs_shape`` and
+    ``n_actions`` instead (an unbounded float32 Box, ``Discrete(n_actions)``). Either way both are filled in:
+    ``obs_shape`` is the observation's shape, ``n_actions`` the action count of a Discrete space (None for other
+    action spaces). ``parent`` is the snapshot it was trained from (``"run/ep80"``); ``seat`` names the seat
     of a per-seat learner (``"left"``), ``None`` when one network plays every seat; ``created`` is ISO UTC;
     ``weights_sha256`` is filled by :func:`save_snapshot`; ``extra`` is free-form JSON (hyperparameters...).
     ``env_options`` and ``extra`` go through JSON, so tuples in them come back as lists.
@@ -92,8 +111,8 @@ class SnapshotMeta:
 
     env: str
     env_options: dict[str, Any] = field(default_factory=dict)
-    obs_shape: tuple[int, ...]
-    n_actions: int
+    obs_space: Any = None
+    act_space: Any = None
     arch: Arch = field(default_factory=Arch)
     algo: str = ""
     step: int = 0
@@ -105,37 +124,83 @@ class SnapshotMeta:
     seat: str | None = None
     weights_sha256: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    obs_shape: tuple[int, ...] | None = None
+    n_actions: int | None = None
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "obs_shape", tuple(int(d) for d in self.obs_shape))
-        object.__setattr__(self, "n_actions", int(self.n_actions))
-        object.__setattr__(self, "env_options", dict(self.env_options or {}))
-        object.__setattr__(self, "extra", dict(self.extra or {}))
+        set_ = object.__setattr__
+        if self.obs_space is None:
+            if self.obs_shape is None:
+                raise ValueError("a snapshot needs its observation space (obs_space, or obs_shape)")
+            shape = tuple(int(d) for d in self.obs_shape)
+            _check_obs_shape(shape)
+            set_(self, "obs_space", {"kind": "box", "shape": list(shape), "dtype": "float32", "low": None,
+                                     "high": None})
+        if self.act_space is None:
+            if self.n_actions is None:
+                raise ValueError("a snapshot needs its action space (act_space, or n_actions)")
+            set_(self, "act_space", {"kind": "discrete", "n": int(self.n_actions)})
+        try:
+            obs = canonical_space(self.obs_space, limit=MAX_OBS_SIZE)
+            act = canonical_space(self.act_space, limit=MAX_ACTIONS)
+        except SpaceError as e:
+            raise ValueError(str(e)) from None
+        if obs["kind"] != "box":
+            raise ValueError(f"the observation space must be a Box, not {obs['kind']}")
+        shape = tuple(obs["shape"])
+        _check_obs_shape(shape)
+        n = act["n"] if act["kind"] == "discrete" else None
+        if self.obs_shape is not None and tuple(int(d) for d in self.obs_shape) != shape:
+            raise ValueError(f"obs_shape {list(self.obs_shape)} is not the observation space's {list(shape)}")
+        if self.n_actions is not None and self.n_actions != n:
+            raise ValueError(f"n_actions {self.n_actions} does not match the action space ({act['kind']})")
+        set_(self, "obs_space", obs)
+        set_(self, "act_space", act)
+        set_(self, "obs_shape", shape)
+        set_(self, "n_actions", n)
+        set_(self, "env_options", dict(self.env_options or {}))
+        set_(self, "extra", dict(self.extra or {}))
         if isinstance(self.arch, dict):
-            object.__setattr__(self, "arch", Arch.from_dict(self.arch))
+            set_(self, "arch", Arch.from_dict(self.arch))
 
     @property
     def id(self) -> str:
         """The player id: ``run/name``, or ``name`` for a run-less snapshot."""
         return f"{self.run}/{self.name}" if self.run else self.name
 
+    @property
+    def head(self) -> ActionHead:
+        """The action head the snapshot's action space calls for."""
+        return ActionHead.of(space_from_dict(self.act_space, limit=MAX_ACTIONS))
+
+    def spaces(self) -> tuple[spaces.Box, spaces.Space]:
+        """The observation Box and the action space, as gymnasium spaces."""
+        return space_from_dict(self.obs_space, limit=MAX_OBS_SIZE), space_from_dict(self.act_space, limit=MAX_ACTIONS)
+
     def to_dict(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-        d["obs_shape"] = list(self.obs_shape)
+        del d["obs_shape"], d["n_actions"]  # derived from the spaces
         d["arch"] = self.arch.to_dict()
         return d
 
     @classmethod
     def from_dict(cls, data: Any) -> SnapshotMeta:
-        """Inverse of :meth:`to_dict`. Unknown keys are ignored (informational additions); missing required
-        keys or wrongly typed values raise ``ValueError`` (or :class:`SnapshotError` for a bad arch)."""
+        """Inverse of :meth:`to_dict`, and reads the metadata of version 1 files (``obs_shape`` and ``n_actions``
+        instead of the spaces). Unknown keys are ignored (informational additions); missing required keys or
+        wrongly typed values raise ``ValueError`` (or :class:`SnapshotError` for a bad arch)."""
         if not isinstance(data, dict):
             raise ValueError(f"metadata must be an object, not {type(data).__name__}")
-        missing = [k for k in ("env", "obs_shape", "n_actions", "name") if k not in data]
+        spaced = "obs_space" in data or "act_space" in data
+        required = ("env", "obs_space", "act_space", "name") if spaced else ("env", "obs_shape", "n_actions", "name")
+        missing = [k for k in required if k not in data]
         if missing:
             raise ValueError(f"missing field(s) {', '.join(missing)}")
         names = {f.name for f in dataclasses.fields(cls)}
         kw = {k: v for k, v in data.items() if k in names}
+        if spaced:  # obs_shape and n_actions beside the spaces (not written since) must agree with them
+            for key in ("obs_space", "act_space"):
+                if not isinstance(kw[key], dict):
+                    raise ValueError(f"field {key!r} must be an object")
         for key in ("env", "name", "algo", "created", "weights_sha256"):
             if key in kw and not isinstance(kw[key], str):
                 raise ValueError(f"field {key!r} must be a string")
@@ -148,9 +213,14 @@ class SnapshotMeta:
         for key in ("n_actions", "step", "episode"):
             if key in kw and (not isinstance(kw[key], int) or isinstance(kw[key], bool)):
                 raise ValueError(f"field {key!r} must be an integer")
-        shape = kw["obs_shape"]
-        if not isinstance(shape, list) or not all(isinstance(d, int) and not isinstance(d, bool) for d in shape):
-            raise ValueError("field 'obs_shape' must be a list of integers")
+        if "obs_shape" in kw:
+            shape = kw["obs_shape"]
+            if not isinstance(shape, list) or not all(isinstance(d, int) and not isinstance(d, bool) for d in shape):
+                raise ValueError("field 'obs_shape' must be a list of integers")
+            if len(shape) > MAX_OBS_DIMS:
+                raise ValueError(f"observations of {len(shape):,} axes are more than marl plays ({MAX_OBS_DIMS})")
+        if "n_actions" in kw and not 1 <= kw["n_actions"] <= MAX_ACTIONS:
+            raise ValueError(f"{kw['n_actions']} actions is out of bounds (1 to {MAX_ACTIONS:,})")
         kw["arch"] = Arch.from_dict(kw.get("arch", {}))
         return cls(**kw)
 
@@ -189,17 +259,23 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
 # The tensors a network has, worked out from its description alone
 
 
-def expected_tensors(obs_shape: tuple[int, ...], n_actions: int, arch: Arch) -> dict[str, tuple[int, ...]]:
-    """Name -> shape of every tensor of the network ``arch`` describes (as :class:`MLPNet` names them), computed
-    without building anything, after checking the description against :data:`LIMITS` (:class:`SnapshotError`)."""
-    if not 1 <= len(obs_shape) <= MAX_OBS_DIMS or any(not 1 <= d <= MAX_OBS_SIZE for d in obs_shape):
-        raise SnapshotError(f"observation shape {list(obs_shape)[:MAX_OBS_DIMS + 1]} is out of bounds (1 to "
-                            f"{MAX_OBS_DIMS} sizes of 1 to {MAX_OBS_SIZE:,})")
+def expected_tensors(obs_shape: tuple[int, ...], action: int | spaces.Space | ActionHead,
+                     arch: Arch) -> dict[str, tuple[int, ...]]:
+    """Name -> shape of every tensor of the network ``arch`` describes for observations of ``obs_shape`` and the
+    action space ``action`` (an int n: ``Discrete(n)``), as :class:`MLPNet` names them, computed without building
+    anything, after checking the description against :data:`LIMITS` (:class:`SnapshotError`)."""
+    _check_obs_shape(tuple(obs_shape))
     obs_dim = math.prod(obs_shape)
-    if obs_dim > MAX_OBS_SIZE:
-        raise SnapshotError(f"observations of {obs_dim:,} numbers are more than marl plays ({MAX_OBS_SIZE:,})")
-    if not 1 <= n_actions <= MAX_ACTIONS:
-        raise SnapshotError(f"{n_actions} actions is out of bounds (1 to {MAX_ACTIONS:,})")
+    if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and not 1 <= action <= MAX_ACTIONS:
+        raise SnapshotError(f"{action} actions is out of bounds (1 to {MAX_ACTIONS:,})")
+    try:
+        head = action if isinstance(action, ActionHead) else ActionHead.of(action)
+    except SpaceError as e:
+        raise SnapshotError(str(e)) from None
+    if not 1 <= head.outputs <= MAX_ACTIONS:
+        raise SnapshotError(f"an action head of {head.outputs:,} outputs is out of bounds (1 to {MAX_ACTIONS:,})")
+    if arch.dueling and head.kind != "discrete":
+        raise SnapshotError(f"a dueling head is for Discrete actions (Q-values), not {head.describe()}")
     if len(arch.hidden) > MAX_LAYERS:
         raise SnapshotError(f"{len(arch.hidden)} hidden layers is more than marl builds ({MAX_LAYERS})")
     if any(h > MAX_WIDTH for h in arch.hidden):
@@ -209,7 +285,10 @@ def expected_tensors(obs_shape: tuple[int, ...], n_actions: int, arch: Arch) -> 
     for i, h in enumerate(arch.hidden):
         shapes[f"trunk.{2 * i}.weight"], shapes[f"trunk.{2 * i}.bias"] = (h, width), (h,)
         width = h
-    shapes["action_head.weight"], shapes["action_head.bias"] = (n_actions, width), (n_actions,)
+    n = head.outputs
+    shapes["action_head.weight"], shapes["action_head.bias"] = (n, width), (n,)
+    if head.kind == "box":
+        shapes["log_std"] = (n,)
     if arch.value_head:
         shapes["value_head.weight"], shapes["value_head.bias"] = (1, width), (1,)
     if arch.dueling:
@@ -239,8 +318,8 @@ def _fit_problems(found: dict[str, tuple[int, ...]], expected: dict[str, tuple[i
 def _check_fits(path: Any, found: dict[str, tuple[int, ...]], meta: SnapshotMeta) -> None:
     """Refuse tensors (name -> shape) that are not exactly those of the network ``meta`` describes."""
     try:
-        expected = expected_tensors(meta.obs_shape, meta.n_actions, meta.arch)
-    except SnapshotError as e:
+        expected = expected_tensors(meta.obs_shape, meta.head, meta.arch)  # type: ignore[arg-type]
+    except (SnapshotError, SpaceError) as e:
         raise SnapshotError(f"{path}: {e}") from None
     problems = _fit_problems(found, expected)
     if problems:
@@ -479,9 +558,12 @@ def _meta_of(path: Any, header: dict[str, Any]) -> SnapshotMeta:
         raise SnapshotError(f"{path}: bad snapshot metadata (not JSON)") from None
     if _has_controls(data):
         raise SnapshotError(f"{path}: bad snapshot metadata (control characters in its text)")
+    if version >= 2 and isinstance(data, dict) and not {"obs_space", "act_space"} <= set(data):
+        raise SnapshotError(f"{path}: bad snapshot metadata (a version {version} file without obs_space and "
+                            "act_space)")
     try:
         meta = SnapshotMeta.from_dict(data)
-    except (ValueError, TypeError, SnapshotError) as e:
+    except (ValueError, TypeError, SnapshotError, SpaceError) as e:
         raise SnapshotError(f"{path}: bad snapshot metadata ({_printable(str(e), 200)})") from None
     if meta.weights_sha256 and not _HEX64.fullmatch(meta.weights_sha256):
         raise SnapshotError(f"{path}: bad snapshot metadata (weights_sha256 is not a sha256)")
@@ -508,6 +590,8 @@ def _check_layout(path: Any, header: dict[str, Any], meta: SnapshotMeta) -> None
 
 
 def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
+    """The game must exist, take the snapshot's options, and have a seat with the snapshot's spaces (the seat the
+    snapshot names, when it names one of the game's): the observation's shape and the action space exactly."""
     if expect_env is not None and meta.env != expect_env:
         raise SnapshotError(f"{path}: snapshot plays {meta.env!r}, not {expect_env!r}")
     try:
@@ -516,22 +600,32 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
         raise SnapshotError(f"{path}: snapshot plays an {e}") from None
     try:
         cfg = spec.config(**meta.env_options)
-        obs_space = spec.observation_space(cfg)
-        act_space = spec.action_space(cfg)
-    except (ValueError, TypeError) as e:
+        seats = seat_spaces_of(spec, cfg)
+    except (ValueError, TypeError, UnknownEnvError) as e:
         raise SnapshotError(f"{path}: bad {meta.env} options in snapshot ({_printable(str(e), 200)})") from None
     except MemoryError:  # an option that sizes the game (the game should bound it; this is the last line)
         raise SnapshotError(f"{path}: the {meta.env} options in the snapshot ask for more memory than there is "
                             f"({_printable(json.dumps(meta.env_options), 120)})") from None
-    if tuple(obs_space.shape or ()) != meta.obs_shape:
-        raise SnapshotError(
-            f"{path}: snapshot observations are {list(meta.obs_shape)} but {meta.env} with these options "
-            f"observes {list(obs_space.shape or ())}"
-        )
-    n = getattr(act_space, "n", None)  # a Discrete space; anything else cannot match
-    n = int(n) if n is not None else None
-    if n != meta.n_actions:
-        raise SnapshotError(f"{path}: snapshot has {meta.n_actions} actions but {meta.env} has {n}")
+    if meta.seat in spec.agents:
+        seats = [seats[spec.agents.index(meta.seat)]]
+    shapes = [tuple(obs.shape or ()) for obs, _, _ in seats]
+    if meta.obs_shape not in shapes:
+        observes = " or ".join(sorted({str(list(s)) for s in shapes}))
+        raise SnapshotError(f"{path}: snapshot observations are {list(meta.obs_shape or ())} but {meta.env} with "
+                            f"these options observes {observes}")
+    head = meta.head
+    heads = []
+    for _obs, act, _ in seats:
+        try:
+            heads.append(ActionHead.of(act))
+        except SpaceError:
+            continue
+    if head not in heads:
+        if head.kind == "discrete" and all(h.kind == "discrete" for h in heads) and heads:
+            raise SnapshotError(f"{path}: snapshot has {head.nvec[0]} actions but {meta.env} has "
+                                f"{' or '.join(sorted({str(h.nvec[0]) for h in heads}))}")
+        acts = " or ".join(sorted({h.describe() for h in heads})) or "actions marl cannot play"
+        raise SnapshotError(f"{path}: snapshot acts in {head.describe()} but {meta.env} acts in {acts}")
 
 
 @dataclass(frozen=True)
@@ -586,7 +680,8 @@ def policy_of(
 ) -> NetworkPolicy:
     """A playable policy from a snapshot :func:`read_snapshot` read from ``path`` (weights loaded strictly)."""
     meta = snap.meta
-    net = build_network(meta.obs_shape, meta.n_actions, meta.arch, seed=0)  # the shapes were checked to fit
+    obs_space, act_space = meta.spaces()
+    net = build_network(obs_space, act_space, meta.arch, seed=0)  # the shapes were checked to fit
     try:
         net.load_state_dict(snap.tensors, strict=True)
     except RuntimeError as e:

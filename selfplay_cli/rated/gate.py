@@ -40,7 +40,10 @@ class GateVerdict:
 
 def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: float, games: int,
                confidence: float = 0.95, parallel: int = 1024, device: str = "cpu") -> GateVerdict:
-    """Reuse the stored head-to-head games, play (and store) the missing ones, then test the lower bound."""
+    """Reuse the stored head-to-head games, play (and store) the missing ones, then test the lower bound.
+
+    The bound comes from the pairwise results of the game's kind (:func:`~selfplay_cli.league.pairs.head_to_head`):
+    its variance from the game pairs of a two-sides game (pentanomial), from the results themselves otherwise."""
     from ..league.pairs import head_to_head
 
     if cand.id == base.id:
@@ -48,7 +51,7 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
 
         raise MarlError(f"the candidate and the baseline are the same player ({cand.full_name})")
     h2h = head_to_head(league, cand.id, base.id)
-    stored = h2h["wins"] + h2h["draws"] + h2h["losses"]
+    stored = h2h["games"]  # ledger games (a cooperative comparison is two episodes)
     wins, draws, losses = h2h["wins"], h2h["draws"], h2h["losses"]
     penta = list(h2h["pentanomial"])
     played = 0

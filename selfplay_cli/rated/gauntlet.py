@@ -8,9 +8,11 @@ When a run takes its snapshots (one per learner), each new snapshot meets
   against the whole history, and the links that let the ladder separate players that never met;
 * every scripted player of the game: fixed anchors.
 
-Every matchup is played in seat-swapped pairs on shared seeds (each seed once with either player on each seat), so
-the serve luck and the seat cancel within a pair and the pentanomial statistics apply. All matchups of one
-snapshot moment are played together, in one batched call of the runner.
+Every matchup is played in rounds on shared seeds, as its game's kind asks (:mod:`selfplay_cli.arena.schedule`):
+seat-swapped pairs of a two-sides game (each seed once with either player on each side, so the serve luck and the
+seat cancel within a pair), one episode of each player on each seed of a cooperative game (compared by team
+return), every rotation of the seating of a free-for-all game. A "pair" below is one such round. All matchups of
+one snapshot moment are played together, in one batched call of the runner.
 
 Cheap where the result is clear: a matchup whose result is already clear from history (the new snapshot's lineage,
 its predecessor and theirs, met the same opponent at least ``2 * pairs`` times and won or lost clearly, by the rule
@@ -32,11 +34,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..arena import Game, GameResult, play
+from ..arena import Game, play
+from ..arena.schedule import round_of, round_size
 from ..envs import get_env
 from ..errors import MarlError
-from ..league.store import GameRecord, League, PlayerRow
+from ..league.store import League, PlayerRow
 from ..policies import Policy
+from ..results import GameResult, Rules, points_between
 from ..stats.elo import normal_quantile
 from .match import env_options_of, load_player
 
@@ -45,7 +49,7 @@ from .match import env_options_of, load_player
 class GauntletConfig:
     """How much a new snapshot plays (the defaults keep evaluation well below the training time)."""
 
-    pairs: int = 4  # seat-swapped pairs of a matchup at first
+    pairs: int = 4  # rounds (seat-swapped pairs of a two-sides game) of a matchup at first
     clear_pairs: int = 1  # ... of a matchup whose result is clear from the predecessor's games
     max_pairs: int = 4  # pairs a matchup may reach while its result is open (= pairs: never more, no waiting on
     # a matchup's first games; with long games each such wait costs a whole game's length)
@@ -194,30 +198,39 @@ def play_gauntlet(
     index = {pid: i for i, pid in enumerate(ids)}
     roster = [loaded[pid] for pid in ids]
     options = env_options_of(*roster)
-    span = cfg.max_pairs  # seeds reserved per matchup: one per pair
+    rules = Rules.of(spec)
+    per = round_size(rules, 2)
+    span = cfg.max_pairs  # seeds reserved per matchup: one per round
     matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
     z = normal_quantile(cfg.clear)
     schedule: list[Game] = []
-    owner: list[tuple[int, int]] = []  # per game: its matchup's index and the seat of the matchup's `a`
+    owner: list[tuple[int, int]] = []  # per game: its matchup's index and its round
     in_flight = dict.fromkeys(range(len(matchups)), 0)  # games scheduled but not finished, per matchup
     pending: dict[int, list[GameResult]] = {k: [] for k in range(len(matchups))}
+    rounds: dict[tuple[int, int], list[GameResult]] = {}  # the finished games of rounds still incomplete
 
     def schedule_pairs(k: int, n: int) -> None:
         m = matchups[k]
         ia, ib = index[m.a.id], index[m.b.id]
         for p in range(m.pairs, m.pairs + n):
-            schedule.extend((Game(m.first_seed + p, (ia, ib)), Game(m.first_seed + p, (ib, ia))))
-            owner.extend(((k, 0), (k, 1)))
+            games = round_of(rules, (ia, ib), m.first_seed + p)
+            schedule.extend(games)
+            owner.extend((k, p) for _ in games)
         m.pairs += n
-        in_flight[k] += 2 * n
+        in_flight[k] += per * n
 
     def finished(r: GameResult) -> None:
-        k, seat = owner[r.index]
+        k, p = owner[r.index]
         m = matchups[k]
-        points = r.outcome[seat]
-        m.wins += points > 0.5
-        m.draws += points == 0.5
-        m.losses += points < 0.5
+        got = rounds.setdefault((k, p), [])
+        got.append(r)
+        if len(got) == per:  # a whole round: its results between the two
+            del rounds[(k, p)]
+            got.sort(key=lambda g: g.index)
+            for points in points_between(rules, got, loaded[m.a.id].id, loaded[m.b.id].id):
+                m.wins += points > 0.5
+                m.draws += points == 0.5
+                m.losses += points < 0.5
         pending[k].append(r)
         in_flight[k] -= 1
         if on_games:
@@ -248,11 +261,7 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
         m.match_id = league.create_match(m.a.env, "eval", {
             "a": pa.id, "b": pb.id, "first_seed": m.first_seed, "env_options": options, "gauntlet": True})
     player = {pa.id: m.a.id, pb.id: m.b.id}
-    m.game_ids += league.record_games(m.match_id, [
-        GameRecord(env=r.env, players=tuple(player[p] for p in r.players), seed=r.seed, scores=r.scores,
-                   outcome=r.outcome, length=r.length, truncated=r.truncated, actions=r.actions)
-        for r in results
-    ])
+    m.game_ids += league.record_games(m.match_id, [r.with_players(player) for r in results])
 
 
 def best_snapshot(league: League, run: str, env: str, exclude: set[int]) -> PlayerRow | None:

@@ -9,7 +9,13 @@ the seat's learner in the snapshot's league metadata. So a name can mean a *team
 * ``s6M-left`` alone plays its own seat; without ``--vs`` its teammates from the same snapshot take the other
   seats, so naming either half of a team records the same game;
 * any other player (a one-network snapshot, a tag, ``latest``, a bot) takes the first seat and, without ``--vs``,
-  meets the game's ``cpu`` player (or its first scripted player) in the others.
+  meets the game's default opponent (:func:`default_opponent`: its first scripted player that is not ``random``)
+  in the others.
+
+How many seats a player fills follows the game's kind: in a two-sides game a player fills every seat of its side
+(the opponent the other side's); in a cooperative game a player named alone flies every seat (there is no opponent
+to name), and with ``--vs`` the opponent fills the seats but the player's own; in a free-for-all game the player
+takes its seat and the opponent every other.
 
 ``--vs`` names the opponent the same way; a team given to ``--vs`` contributes its players for the other seats. A
 team given to ``--ckpt`` with ``--vs`` records each member against it (:func:`lineups`), as ``marl match`` plays
@@ -21,14 +27,20 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from ..envs import env_names, get_env
+from ..envs import EnvSpec, env_names, get_env
 from ..errors import MarlError
 from ..league.names import Team, find_team, resolve_or_team, seat_of, teammates
 from ..league.store import League, PlayerRow
+from ..results import COOPERATIVE, TWO_SIDES, Rules
 
-__all__ = ["DEFAULT_OPPONENT", "Lineup", "find_team", "lineup", "lineups", "safe_filename", "seat_of", "teammates"]
+__all__ = ["Lineup", "default_opponent", "find_team", "lineup", "lineups", "safe_filename", "seat_of", "teammates"]
 
-DEFAULT_OPPONENT = "cpu"
+
+def default_opponent(spec: EnvSpec) -> str | None:
+    """The scripted player a policy meets when the user names none: the game's first that is not ``random`` (the
+    stronger anchor), else ``random``; None for a game without scripted players."""
+    bots = list(spec.bots)
+    return next((b for b in bots if b != "random"), bots[0] if bots else None)
 
 
 @dataclass(frozen=True)
@@ -98,8 +110,10 @@ def lineups(league: League, ckpt: str, vs: str | None = None, env: str | None = 
 
 
 def _seat(league: League, me: PlayerRow, vs: str | None) -> Lineup:
-    """``me`` on its own seat (a per-seat learner's, else the first), against ``vs``, its teammates or cpu."""
+    """``me`` on its own seat (a per-seat learner's, else the first) and the seats the game's kind gives it, against
+    ``vs``, its teammates or the default opponent (see the module docstring)."""
     spec = get_env(me.env)
+    rules = Rules.of(spec)
     agents = spec.agents
     seat = seat_of(me, agents)
     focus = seat if seat is not None else 0
@@ -107,11 +121,17 @@ def _seat(league: League, me: PlayerRow, vs: str | None) -> Lineup:
         team = teammates(league, me, agents)
         if team is not None:
             return Lineup(me.env, tuple(team), focus=focus)
-        bots = list(spec.bots)
-        if not bots:
+        if rules.kind == COOPERATIVE:
+            return Lineup(me.env, (me,) * len(agents), focus=focus)
+        vs = default_opponent(spec)
+        if vs is None:
             raise MarlError(f"{spec.name} has no scripted player to face {me.full_name}: pass --vs")
-        vs = DEFAULT_OPPONENT if DEFAULT_OPPONENT in bots else bots[0]
     them = _player_or_team(league, vs, me.env)
     players = list(them) if isinstance(them, list) else [them] * len(agents)
-    players[focus] = me
+    mine = [focus]
+    if rules.kind == TWO_SIDES and not isinstance(them, list):
+        assert rules.sides is not None
+        mine = list(next(side for side in rules.sides if focus in side))
+    for s in mine:
+        players[s] = me
     return Lineup(me.env, tuple(players), focus=focus)

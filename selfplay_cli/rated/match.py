@@ -1,12 +1,20 @@
-"""Rated play: league players become policies, play paired games in the batched runner, and land in the ledger.
+"""Rated play: league players become policies, play fair rounds in the batched runner, and land in the ledger.
 
-A match between A and B plays game pairs: each seed once with A on the left and once with A on the right, so
-the serve luck and the seat cancel out within a pair. Results are stored chunk by chunk, each chunk in one
-transaction, so a match killed midway leaves whole, consistent games in the ledger.
+A match between A and B plays *rounds* on shared seeds, as the game's kind asks (:mod:`selfplay_cli.arena.schedule`):
 
-With an SPRT the match checks the log-likelihood ratio after every pair (pentanomial GSPRT, as fishtest and
-fastchess do) and stops at the first pair where it crosses a bound; games played beyond that pair in the last
-batch are discarded, so the test is exactly sequential.
+* two-sides: game pairs, each seed once with A on the first side and once on the second, so the serve luck and the
+  seat cancel out within a pair; statistics and the SPRT count pairs (pentanomial);
+* cooperative: each seed once flown by A on every seat and once by B, the higher team return winning (within the
+  game's tie tolerance: a draw); one comparison per seed, and the SPRT counts comparisons (trinomial);
+* free-for-all: every rotation of the seating on each seed; one result per game from the final order of A's and B's
+  scores, the SPRT counting results (trinomial) after each whole round.
+
+Results are stored chunk by chunk, each chunk in one transaction, so a match killed midway leaves whole rounds,
+consistent games, in the ledger.
+
+With an SPRT the match checks the log-likelihood ratio after every round (the GSPRT of fishtest and fastchess) and
+stops at the first round where it crosses a bound; games played beyond that round in the last batch are discarded,
+so the test is exactly sequential.
 """
 
 from __future__ import annotations
@@ -19,11 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from ..arena import GameResult, paired_schedule, play
+from ..arena import play
+from ..arena.schedule import round_size, rounds
 from ..envs import get_env
 from ..errors import MarlError
-from ..league.store import GameRecord, League, PlayerRow
+from ..league.store import League, PlayerRow
 from ..policies import Policy, ScriptedPolicy
+from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, points_between
 from ..stats.match import MatchStats, match_stats
 from ..stats.sprt import SPRT
 
@@ -104,18 +114,23 @@ class SPRTSettings:
             raise MarlError("--alpha and --beta must lie in (0, 0.5)")
 
 
+def _number(x: float) -> int | float:
+    """A total of scores as it reads best: a whole number as an int (Pong's points), else rounded to 1e-4."""
+    return int(x) if float(x).is_integer() else round(float(x), 4)
+
+
 @dataclass
 class MatchReport:
     env: str
     a: str
     b: str
-    games: int
-    wins: int
+    games: int  # games played (a cooperative comparison is two of them)
+    wins: int  # A's results against B: per game (two-sides, free-for-all) or per comparison (cooperative)
     draws: int
     losses: int
-    points_for: int  # raw points scored by A over all games
-    points_against: int
-    pentanomial: tuple[int, int, int, int, int]
+    points_for: int | float  # A's scores summed over all games (its sides' points, its team returns, its seats')
+    points_against: int | float
+    pentanomial: tuple[int, int, int, int, int]  # game pairs of a two-sides game (zeros for the other kinds)
     stats: MatchStats
     seconds: float
     match_id: int | None
@@ -124,15 +139,24 @@ class MatchReport:
     truncated: int = 0
     results: list[GameResult] = field(default_factory=list, repr=False)
     game_ids: list[int] = field(default_factory=list, repr=False)  # ledger ids of the stored games, in order
-    interrupted: bool = False  # stopped by Ctrl-C: the whole pairs finished by then
+    interrupted: bool = False  # stopped by Ctrl-C: the whole rounds finished by then
+    kind: str = TWO_SIDES  # the game's kind
 
     @property
     def games_per_second(self) -> float:
         return self.games / self.seconds if self.seconds > 0 else float("inf")
 
+    @property
+    def mean_returns(self) -> tuple[float, float] | None:
+        """A's and B's mean team return per episode (cooperative games), else None."""
+        if self.kind != COOPERATIVE or not self.results:
+            return None
+        per = max(self.games // 2, 1)
+        return float(self.points_for) / per, float(self.points_against) / per
+
     def to_json(self) -> dict[str, Any]:
         s = self.stats
-        return {
+        out = {
             "env": self.env, "a": self.a, "b": self.b, "games": self.games,
             "wins": self.wins, "draws": self.draws, "losses": self.losses,
             "score": round(s.score, 4), "points_for": self.points_for, "points_against": self.points_against,
@@ -141,19 +165,15 @@ class MatchReport:
             "pentanomial": list(self.pentanomial), "truncated_games": self.truncated,
             "seconds": round(self.seconds, 3), "games_per_second": round(self.games_per_second, 1),
             "match_id": self.match_id, "first_seed": self.first_seed, "sprt": self.sprt,
-            "game_ids": self.game_ids, "interrupted": self.interrupted,
+            "game_ids": self.game_ids, "interrupted": self.interrupted, "kind": self.kind,
         }
-
-
-def _records(ids: dict[str, int], results: list[GameResult]) -> list[GameRecord]:
-    """Games as the ledger stores them, with their actions so that `marl record --game ID` can replay any of them."""
-    return [GameRecord(env=r.env, players=tuple(ids[p] for p in r.players), seed=r.seed, scores=r.scores,
-                       outcome=r.outcome, length=r.length, truncated=r.truncated, actions=r.actions)
-            for r in results]
+        if self.mean_returns is not None:
+            out["mean_return"] = {"a": round(self.mean_returns[0], 4), "b": round(self.mean_returns[1], 4)}
+        return out
 
 
 class MatchInterrupted(KeyboardInterrupt):
-    """Ctrl-C during :func:`run_match`. The whole pairs finished by then are stored (their match row says
+    """Ctrl-C during :func:`run_match`. The whole rounds finished by then are stored (their match row says
     ``status: interrupted`` and how many games it holds); ``report`` describes them. A ``KeyboardInterrupt``, so
     code that does not know it stops as before."""
 
@@ -176,15 +196,17 @@ def run_match(
     confidence: float = 0.95,
     on_games: Callable[[int], None] | None = None,
 ) -> MatchReport:
-    """Play up to ``games`` games (rounded up to whole pairs) between ``a`` and ``b`` and report from A's view.
+    """Play up to ``games`` games (rounded up to whole rounds, see the module docstring) between ``a`` and ``b`` and
+    report from A's view.
 
     With ``league`` (and ``player_ids`` mapping policy ids to player ids) every chunk of games is stored as it
     finishes, each chunk in one transaction; the match row is created with the first chunk (so it never exists
     without games) and its ``params`` say ``status``: ``running``, then ``finished``, ``interrupted`` or ``failed``,
-    with ``games_stored``. With ``sprt`` the match stops at the first pair whose LLR crosses a bound.
+    with ``games_stored``. With ``sprt`` the match stops at the first round whose LLR crosses a bound.
 
-    Ctrl-C raises :class:`MatchInterrupted` after storing the whole pairs already finished (of the chunk in play
-    too: a half pair would leave its seed's seat luck uncancelled, and is dropped).
+    Ctrl-C raises :class:`MatchInterrupted` after storing the whole rounds already finished (of the chunk in play
+    too: half a pair would leave its seed's seat luck uncancelled, half a comparison compares nothing; they are
+    dropped).
     """
     if a.env != b.env:
         raise MarlError(f"{a.id} plays {a.env} but {b.id} plays {b.env}")
@@ -195,12 +217,14 @@ def run_match(
     if league is not None and player_ids is None:
         raise ValueError("player_ids are needed to store games")
     spec = get_env(a.env)
+    rules = Rules.of(spec)
     options = env_options_of(a, b)
-    n_pairs = (games + 1) // 2
-    chunk_pairs = max(1, parallel // 2)
+    per = round_size(rules, 2)
+    n_rounds = -(-games // per)
+    chunk_rounds = max(1, parallel // per)
     test = None
     if sprt is not None:
-        chunk_pairs = max(1, min(chunk_pairs, 64))  # smaller batches waste fewer games past the decision
+        chunk_rounds = max(1, min(chunk_rounds, 64))  # smaller batches waste fewer games past the decision
         test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta)
     params: dict[str, Any] = {"a": a.id, "b": b.id, "games": games, "first_seed": first_seed, "env_options": options,
                               "status": "running"}
@@ -210,23 +234,23 @@ def run_match(
     match_id: int | None = None
     kept: list[GameResult] = []
     game_ids: list[int] = []
-    pair_points: list[float] = []
+    round_points: list[list[float]] = []  # A's points in each round's results against B
     decision: str | None = None
     llr = 0.0
 
     def take(finished: list[GameResult]) -> list[GameResult]:
-        """The whole pairs among ``finished`` (results of one chunk), in order, up to an SPRT decision."""
+        """The whole rounds among ``finished`` (results of one chunk), in order, up to an SPRT decision."""
         nonlocal decision, llr
         by_index = {r.index: r for r in finished}
         new: list[GameResult] = []
-        for i in sorted({r.index // 2 for r in finished}):
-            g1, g2 = by_index.get(2 * i), by_index.get(2 * i + 1)
-            if g1 is None or g2 is None:
+        for i in sorted({r.index // per for r in finished}):
+            got = [by_index.get(per * i + k) for k in range(per)]
+            if any(g is None for g in got):
                 continue
-            new += [g1, g2]
-            pair_points.append(g1.points_of(a.id) + g2.points_of(a.id))
+            new += got  # type: ignore[arg-type]
+            round_points.append(points_between(rules, got, a.id, b.id))  # type: ignore[arg-type]
             if test is not None:
-                llr = test.llr(pentanomial(np.array(pair_points)))
+                llr = test.llr(*_counts(rules, round_points))
                 decision = test.decide(llr)
                 if decision is not None:
                     break
@@ -236,7 +260,7 @@ def run_match(
         nonlocal match_id
         if league is None or not new:
             return
-        records = _records(player_ids, new)  # type: ignore[arg-type]
+        records = [r.with_players(player_ids) for r in new]  # type: ignore[arg-type]
         if match_id is None:
             match_id, ids = league.create_match_with_games(spec.name, kind, params, records)
         else:
@@ -249,12 +273,17 @@ def run_match(
             on_games(1)
 
     start = time.perf_counter()
-    pair = 0
+    done = 0
     in_play: list[GameResult] = []
+
+    def report() -> MatchReport:
+        return _report(spec.name, rules, a, b, kept, round_points, time.perf_counter() - start, match_id, first_seed,
+                       confidence, game_ids)
+
     try:
-        while pair < n_pairs and decision is None:
-            n = min(chunk_pairs, n_pairs - pair)
-            schedule = paired_schedule(2 * n, first_seed=first_seed + pair)
+        while done < n_rounds and decision is None:
+            n = min(chunk_rounds, n_rounds - done)
+            schedule = rounds(rules, (0, 1), n, first_seed=first_seed + done)
             in_play = []
             play(spec, [a, b], schedule, parallel=parallel, env_options=options, on_result=on_result,
                  record_actions=league is not None)
@@ -262,17 +291,16 @@ def run_match(
             in_play = []
             store(new)
             kept += new
-            pair += n
+            done += n
     except KeyboardInterrupt:
         new = take(in_play)
         store(new)
         kept += new
         if match_id is not None:
             league.update_match(match_id, status="interrupted", games_stored=len(game_ids))  # type: ignore[union-attr]
-        report = _report(spec.name, a, b, kept, pair_points, time.perf_counter() - start, match_id, first_seed,
-                         confidence, game_ids)
-        report.interrupted = True
-        raise MatchInterrupted(report) from None
+        interrupted = report()
+        interrupted.interrupted = True
+        raise MatchInterrupted(interrupted) from None
     except BaseException:
         if match_id is not None:  # say so on the row, if the database still takes it (a full disk may not)
             with contextlib.suppress(Exception):
@@ -280,28 +308,41 @@ def run_match(
         raise
     if match_id is not None:
         league.update_match(match_id, status="finished", games_stored=len(game_ids))  # type: ignore[union-attr]
-    report = _report(spec.name, a, b, kept, pair_points, time.perf_counter() - start, match_id, first_seed,
-                     confidence, game_ids)
+    out = report()
     if sprt is not None:
         assert test is not None
-        report.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
-                       "llr": round(llr, 4), "lower": round(test.lower, 4), "upper": round(test.upper, 4),
-                       "decision": decision, "pairs": len(pair_points)}
-    return report
+        out.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
+                    "llr": round(llr, 4), "lower": round(test.lower, 4), "upper": round(test.upper, 4),
+                    "decision": decision, "pairs": len(round_points)}
+        if rules.kind != TWO_SIDES:
+            out.sprt["model"] = "trinomial"
+    return out
 
 
-def _report(env: str, a: Policy, b: Policy, kept: list[GameResult], pair_points: list[float], seconds: float,
-            match_id: int | None, first_seed: int, confidence: float, game_ids: list[int]) -> MatchReport:
-    pts = np.array([r.points_of(a.id) for r in kept])
-    wins, draws, losses = int((pts == 1).sum()), int((pts == 0.5).sum()), int((pts == 0).sum())
-    penta = pentanomial(np.array(pair_points))
+def _counts(rules: Rules, round_points: list[list[float]]) -> tuple[list[int], str]:
+    """What the SPRT counts: game pairs by A's points (pentanomial) in a two-sides game, else A's results
+    (trinomial: losses, draws, wins)."""
+    if rules.kind == TWO_SIDES:
+        return list(pentanomial(np.array([sum(p) for p in round_points]))), "pentanomial"
+    pts = np.array([x for p in round_points for x in p])
+    return [int((pts < 0.5).sum()), int((pts == 0.5).sum()), int((pts > 0.5).sum())], "trinomial"
+
+
+def _report(env: str, rules: Rules, a: Policy, b: Policy, kept: list[GameResult], round_points: list[list[float]],
+            seconds: float, match_id: int | None, first_seed: int, confidence: float,
+            game_ids: list[int]) -> MatchReport:
+    pts = np.array([x for p in round_points for x in p])
+    wins, draws, losses = int((pts > 0.5).sum()), int((pts == 0.5).sum()), int((pts < 0.5).sum())
+    paired = rules.kind == TWO_SIDES
+    penta = pentanomial(np.array([sum(p) for p in round_points])) if paired else (0, 0, 0, 0, 0)
     return MatchReport(
         env=env, a=a.id, b=b.id, games=len(kept), wins=wins, draws=draws, losses=losses,
-        points_for=sum(r.scores[r.players.index(a.id)] for r in kept),
-        points_against=sum(r.scores[r.players.index(b.id)] for r in kept),
-        pentanomial=penta, stats=match_stats(wins, draws, losses, pentanomial=penta, confidence=confidence),
+        points_for=_number(sum(r.score_of(a.id) for r in kept)),
+        points_against=_number(sum(r.score_of(b.id) for r in kept)),
+        pentanomial=penta, stats=match_stats(wins, draws, losses, pentanomial=penta if paired else None,
+                                             confidence=confidence),
         seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
-        results=kept, game_ids=game_ids,
+        results=kept, game_ids=game_ids, kind=rules.kind,
     )
 
 

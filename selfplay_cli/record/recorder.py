@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..arena import Game, GameResult, play
-from ..arena.replay import ReplayError, decode_actions, replay_policies
+from ..arena.replay import check_replay, decode_actions, replay_policies
 from ..envs import EnvSpec, get_env
 from ..envs.registry import BatchedCore
 from ..errors import MarlError
@@ -81,7 +81,8 @@ class Recording:
         r = self.result
         return {
             "path": str(self.path), "env": r.env, "seed": r.seed, "players": list(r.players),
-            "scores": list(r.scores), "outcome": list(r.outcome), "length": r.length, "truncated": r.truncated,
+            "scores": [int(x) if float(x).is_integer() else x for x in r.scores], "outcome": list(r.outcome),
+            "length": r.length, "truncated": r.truncated,
             "ended": self.ended, "stopped_by": self.stopped_by,
             "frames": self.frames, "fps": self.settings.fps, "video_seconds": round(self.video_seconds, 2),
             "size": f"{self.size[0]}x{self.size[1]}", "format": self.settings.fmt, "seconds": round(self.seconds, 3),
@@ -200,13 +201,9 @@ def record_replay(
     spec = get_env(env) if isinstance(env, str) else env
     moves = decode_actions(actions, len(spec.agents), length)
     policies = replay_policies(tuple(players), spec.name, moves)
-    want = tuple(int(round(s)) for s in scores)
 
     def check(result: GameResult) -> None:
-        if result.length != length or result.scores != want:
-            raise ReplayError(f"the replay ended {'-'.join(map(str, result.scores))} after {result.length} steps, "
-                              f"the ledger says {'-'.join(map(str, want))} after {length}: the game no longer plays "
-                              "as it was recorded (changed rules or game options?)")
+        check_replay(result, length, scores)
 
     return record_game(spec, policies, Game(seed, tuple(range(len(players)))), path, settings,
                        env_options=env_options, labels=players, check=check, on_frame=on_frame)

@@ -158,7 +158,8 @@ def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64
     Returns ``(games, wins, draws, losses, unit_wins)``, each ``n x n`` from the row player's side. Units: within
     one match, games of the same seed with the seats swapped are paired in game-id order (as
     :func:`~selfplay_cli.league.pairs.head_to_head` pairs them); a pair is won by the player with more than half of
-    its two games' points, level pairs count for no one; a game without a partner is a unit of its own.
+    its two games' points, level pairs count for no one; a game without a partner is a unit of its own, and so is every
+    result of a cooperative or free-for-all game (they come in no seat-swapped pairs).
     """
     n = len(ids)
     index = {int(pid): k for k, pid in enumerate(ids)}
@@ -168,8 +169,10 @@ def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64
     units = np.zeros((n, n), dtype=np.int64)
     # (match, seed, lo, hi) -> lo's points in the games with lo on seat 0, and with lo on seat 1
     groups: dict[tuple[int, int, int, int], tuple[list[float], list[float]]] = {}
-    for m, sd, pa, pb, sa in zip(table.match_id.tolist(), table.seed.tolist(), table.player_a.tolist(),
-                                 table.player_b.tolist(), table.score_a.tolist(), strict=True):
+    single: list[tuple[int, int, float]] = []  # results that pair with none (cooperative, free-for-all): units
+    for m, sd, pa, pb, sa, kind in zip(table.match_id.tolist(), table.seed.tolist(), table.player_a.tolist(),
+                                       table.player_b.tolist(), table.score_a.tolist(), table.kind.tolist(),
+                                       strict=True):
         i, j = index.get(pa), index.get(pb)
         if i is None or j is None or i == j:
             continue
@@ -184,6 +187,9 @@ def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64
             draws[j, i] += 1
         lo, hi = min(i, j), max(i, j)
         pts = sa if i == lo else 1.0 - sa
+        if kind != 0:
+            single.append((lo, hi, pts))
+            continue
         groups.setdefault((m, sd, lo, hi), ([], []))[0 if i == lo else 1].append(pts)
     for (_m, _sd, lo, hi), (first, second) in groups.items():
         k = min(len(first), len(second))
@@ -197,6 +203,11 @@ def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64
                 units[lo, hi] += 1
             elif p < 0.5:
                 units[hi, lo] += 1
+    for lo, hi, p in single:
+        if p > 0.5:
+            units[lo, hi] += 1
+        elif p < 0.5:
+            units[hi, lo] += 1
     losses = wins.T.copy()
     return games, wins, draws, losses, units
 

@@ -1,0 +1,141 @@
+"""The learner interface every algorithm implements, and what a learner is built from.
+
+A learner drives some slots of the batched self-play games as a vectorised environment. Each step the trainer
+calls, with one row per slot of the learner::
+
+    actions = learner.act(obs, mask)                 # mask: (slots, n) bool or None
+    ...the games step...
+    if learner.record(rewards, dones, truncated=truncated, acting=acting, final_obs=final_obs):
+        stats = learner.update(next_obs, progress)
+
+* ``dones``: the slot's game ended on this step (won, lost or cut short); the games restart it at once, so
+  ``next_obs`` of such a slot is the next game's first observation.
+* ``truncated``: the game was cut short (a time limit): a subset of ``dones``. Its final observation
+  (``final_obs``, rows read only where ``truncated``; ``final_mask`` likewise for a learner that needs it) is
+  valued to bootstrap the return instead of counting the cut as the end of the game.
+* ``acting``: the slots whose seat acted on this step (turn-based games). A step where the seat did not act
+  carries no decision: it is skipped, and its reward is credited to the seat's previous decision. None: all acted.
+
+Every optional argument left out gives the behaviour learners had before it existed (no truncation bootstrap,
+every slot acting). Algorithms are registered by name in :data:`selfplay_cli.algos.LEARNERS`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+import torch
+from gymnasium import spaces
+
+from ..errors import MarlError
+from ..policies.network import MLPNet, NetworkPolicy
+from ..policies.spaces import ActionHead, SpaceError, box_of_shape
+
+
+@dataclass(frozen=True)
+class Seat:
+    """What a learner is built from: a seat's observation Box, its action space and whether it has action masks
+    (the fields of :class:`selfplay_cli.envs.SeatSpace`, which any learner also takes)."""
+
+    observation: spaces.Box
+    action: spaces.Space
+    mask: bool = False
+
+
+@runtime_checkable
+class Learner(Protocol):
+    """One algorithm's learner (see the module docstring for the calls and their arguments)."""
+
+    name: ClassVar[str]  # the registry name, e.g. "ppo"
+    config_class: ClassVar[type]  # its hyperparameter dataclass
+    net: MLPNet  # the network it trains (saved as snapshots)
+    n_slots: int
+
+    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray: ...
+
+    def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,
+               acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,
+               final_mask: np.ndarray | None = None) -> bool: ...
+
+    def update(self, next_obs: np.ndarray, progress: float = 0.0,
+               final_obs: np.ndarray | None = None) -> dict[str, float]: ...
+
+    def policy(self, id: str, env: str, greedy: bool = ...) -> NetworkPolicy: ...
+
+    def state_dict(self) -> dict[str, Any]: ...
+
+    def load_state_dict(self, state: dict[str, Any]) -> None: ...
+
+
+def learner_args(seat: Any, n_slots: Any, config: Any, legacy: Sequence[Any],
+                 config_class: type) -> tuple[Seat, int, Any]:
+    """The (seat, slots, config) a learner is built from, given either ``(seat, n_slots, config)`` (a
+    :class:`Seat` or any object with ``observation`` and ``action``) or the older
+    ``(obs_shape, n_actions_or_action_space, n_slots, config)``."""
+    if hasattr(seat, "observation") and hasattr(seat, "action"):
+        if legacy:
+            raise TypeError("a learner takes (seat, n_slots, config) and keyword-only seed and device")
+        obs, act, mask = seat.observation, seat.action, bool(getattr(seat, "mask", False))
+    else:  # (obs_shape, n_actions or action space, n_slots, config)
+        if len(legacy) > 1:
+            raise TypeError("a learner takes (obs_shape, action_space, n_slots, config) and keyword-only seed "
+                            "and device")
+        obs = seat if isinstance(seat, spaces.Box) else box_of_shape(tuple(seat))
+        act = spaces.Discrete(int(n_slots)) if isinstance(n_slots, (int, np.integer)) else n_slots
+        n_slots, config = config, (legacy[0] if legacy else None)
+        mask = False
+    if not isinstance(n_slots, (int, np.integer)) or isinstance(n_slots, bool) or n_slots < 1:
+        raise ValueError(f"a learner needs at least one slot, not {n_slots!r}")
+    if config is None:
+        config = config_class()
+    elif not isinstance(config, config_class):
+        raise TypeError(f"expected a {config_class.__name__}, not {type(config).__name__}")
+    return Seat(obs, act, mask), int(n_slots), config
+
+
+def action_head(algo: str, space: spaces.Space) -> ActionHead:
+    """The head for a seat's actions, or one clear :class:`MarlError` naming the algorithm and the space."""
+    try:
+        return ActionHead.of(space)
+    except SpaceError as e:
+        raise MarlError(f"{algo} cannot learn this seat's actions: {e}") from None
+
+
+def as_bool(values: Any, n: int, what: str) -> np.ndarray:
+    a = np.asarray(values).reshape(-1)
+    if a.shape != (n,):
+        raise ValueError(f"{what} has {a.size} entries for {n} slots")
+    return a.astype(bool, copy=False)
+
+
+def fix_mask(mask: np.ndarray | None, head: ActionHead, n: int) -> np.ndarray | None:
+    """A learner's mask as a ``(n, width)`` bool array; rows that allow nothing (a seat that does not act on this
+    step) allow everything instead, so sampling stays defined (such a step is never learned from)."""
+    if mask is None:
+        return None
+    m = head.check_mask(mask, n)
+    if head.kind == "discrete":
+        empty = ~m.any(axis=1)
+        if empty.any():
+            m = m.copy()
+            m[empty] = True
+        return m
+    offset, out = 0, None
+    for size in head.nvec:
+        empty = ~m[:, offset:offset + size].any(axis=1)
+        if empty.any():
+            out = m.copy() if out is None else out
+            out[empty, offset:offset + size] = True
+        offset += size
+    return m if out is None else out
+
+
+def values_of(net: MLPNet, obs: np.ndarray, device: torch.device) -> torch.Tensor:
+    """V(obs) from the network's value head, without gradients."""
+    with torch.no_grad():
+        _, value = net(torch.as_tensor(np.asarray(obs, dtype=np.float32), device=device).reshape(len(obs), -1))
+    assert value is not None
+    return value
