@@ -1,33 +1,43 @@
 """Self-play rollouts: N games in one batched core that never stop, some seats driven by learners.
 
 This is the training side of the arena. Each (seat, game) slot is either a learner's (learner index >= 0, fixed
-for the whole run) or an opponent's (-1), filled at every game start by ``choose_opponents`` (the matchmaker:
-a pool snapshot, a scripted bot, or a frozen copy of a learner). A learner sees only its own slots, in a fixed
-order, as a vectorised environment: ``observe()`` -> observations, ``step(actions)`` -> rewards and dones.
-A finished game restarts at once with a fresh seed (auto-reset: the observation after a done is the new game's
-first) and comes back as a :class:`GameResult`, so the ledger gets every training game.
+for the whole run) or an opponent's (-1), filled at every game start by ``choose_opponents`` (the matchmaker draws
+for every opponent slot on its own: a pool snapshot, a scripted bot, or a live learner). A learner sees only its own
+slots, in a fixed order, as a vectorised environment: ``observe()`` -> observations (and ``masks()``, ``acting()``),
+``step(actions)`` -> rewards, dones and what a truncated game's learner needs to bootstrap. A finished game restarts
+at once with a fresh seed (auto-reset: the observation after a done is the new game's first) and comes back as a
+:class:`GameResult`, so the ledger gets every training game.
 
-Seat layouts for two-seat games, by ``--agents`` and ``--sharing``:
+Which learner holds which seat (:func:`plan_seats`), by the game's kind, ``--agents`` and ``--sharing``:
 
-* two learners, one network each (seed 000's set-up): learner 0 on the left of every game, learner 1 on the right;
-* one shared network for both seats: learner 0 on both seats of every game;
-* one learner against the league: learner 0 on the left of even games and the right of odd ones (it plays both
-  sides, which egocentric observations allow), opponents on the other seat;
-* every seat a learner, with ``league_games`` > 0: that share of the games seats one learner (on its own seat,
-  the learners taking turns game by game) against an opponent from the league; the other games are as above.
+* **two sides** (pong, tic-tac-toe, a 2v2 game): with two learners each holds one side (all its seats); with one
+  learner it holds one side, alternating game by game, against opponents from the league on the other;
+* **cooperative**: every seat is a learner's, seat s going to learner ``s % agents`` (``--agents 1``: one network
+  flies every seat; ``--agents N`` for N seats: one network per seat);
+* **free-for-all**: with one learner per seat every seat is a learner's; with fewer, learners take the first seats,
+  rotating with the game, and opponents the rest;
+* ``--sharing fups`` makes every learner one network (parameter sharing); ``--seats`` states the mapping outright
+  (a learner number or ``-`` for an opponent, per seat);
+* with every seat a learner's, ``league_games`` > 0 gives that share of the games to one learner (on its own
+  seats, the learners taking turns game by game) against opponents from the league.
+
+An opponent slot's "latest" opponent is the live network of the learner that holds that seat when every seat is a
+learner's (the learner itself where it would hold it): self-play against the current policies.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from ..envs import EnvSpec, get_env
+from ..envs import EnvSpec, SeatSpace, get_env
+from ..errors import MarlError
 from ..policies import Policy
-from .replay import encode_actions
-from .runner import ActionLog, GameResult
+from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules
+from .replay import ActionLog, SeatActions, encode_actions
 
 OPPONENT = -1
 
@@ -40,37 +50,154 @@ def _as_slice(index: np.ndarray) -> np.ndarray | slice:
     return index
 
 
-def seat_layout(n_seats: int, n_games: int, agents: int, sharing: str, league_games: float = 0.0) -> np.ndarray:
-    """The learner index of every (seat, game) slot, -1 for opponent seats (see the module docstring)."""
+@dataclass(frozen=True)
+class SeatPlan:
+    """Who holds each seat: ``home[s]`` the learner of seat s when every seat is a learner's (-1: an opponent's
+    even then), ``rotate`` whether learners move round the seats game by game (fewer learners than seats),
+    ``sides``: with one learner in a two-sides game, the seats it takes (one side, alternating game by game)."""
+
+    home: tuple[int, ...]
+    rotate: bool = False
+    sides: tuple[tuple[int, ...], ...] | None = None
+
+    @property
+    def n_learners(self) -> int:
+        return max(self.home) + 1 if max(self.home) >= 0 else 0
+
+
+def parse_seats(text: str, n_seats: int) -> tuple[int, ...]:
+    """``--seats`` as a learner index per seat: ``"1,2"`` / ``"1,1,-"``: learners numbered from 1, ``-`` an
+    opponent's seat."""
+    parts = [p.strip() for p in str(text).split(",")]
+    if len(parts) != n_seats:
+        raise MarlError(f"--seats must name one learner (1, 2, ...) or '-' (an opponent) for each of the game's "
+                        f"{n_seats} seats, not {text!r}")
+    out = []
+    for p in parts:
+        if p in ("-", "x", "opponent"):
+            out.append(OPPONENT)
+        elif p.isdigit() and int(p) >= 1:
+            out.append(int(p) - 1)
+        else:
+            raise MarlError(f"--seats: {p!r} is neither a learner number (1, 2, ...) nor '-' (an opponent's seat)")
+    used = sorted({s for s in out if s >= 0})
+    if not used:
+        raise MarlError(f"--seats {text!r} gives no seat to a learner")
+    if used != list(range(len(used))):
+        raise MarlError(f"--seats {text!r}: learners must be numbered 1 to {len(used)} without gaps")
+    return tuple(out)
+
+
+def plan_seats(spec: EnvSpec, agents: int, sharing: str = "nops", seats: Sequence[int] | None = None) -> SeatPlan:
+    """Which learner holds which seat (see the module docstring); a :class:`MarlError` for a mapping the game
+    cannot take."""
+    if sharing not in ("nops", "fups"):
+        raise MarlError(f"--sharing must be nops or fups, not '{sharing}'")
+    n = spec.n_seats
+    if seats is not None:
+        home = tuple(int(s) for s in seats)
+        if len(home) != n:
+            raise MarlError(f"--seats names {len(home)} seats; {spec.name} has {n} ({', '.join(spec.agents)})")
+        if sharing == "fups":
+            home = tuple(0 if s >= 0 else OPPONENT for s in home)
+        return SeatPlan(home)
+    if not 1 <= agents <= n:
+        raise MarlError(f"{spec.name} has {n} seat{'s' * (n != 1)}: --agents must be between 1 and {n}, not {agents}")
+    sides = spec.side_seats() if spec.kind == TWO_SIDES else None
+    if spec.kind == TWO_SIDES and n > 2 and agents not in (1, 2, n):
+        raise MarlError(f"{spec.name} is two sides of {n} seats: --agents 1 (one side against the league), 2 (one "
+                        f"learner per side) or {n} (one per seat); or say which learner holds each seat with --seats")
+    if spec.kind == TWO_SIDES and sides is not None and agents <= 2:
+        if agents == 1:  # one side a game, against the league
+            return SeatPlan(tuple(0 for _ in range(n)), sides=sides)
+        home = tuple(next(i for i, side in enumerate(sides) if s in side) for s in range(n))
+        return SeatPlan(_shared(home, sharing))
+    if spec.kind == COOPERATIVE:
+        return SeatPlan(_shared(tuple(s % agents for s in range(n)), sharing))
+    if agents == n:
+        return SeatPlan(_shared(tuple(range(n)), sharing))
+    return SeatPlan(_shared(tuple(s % agents for s in range(n)), sharing), rotate=True)
+
+
+def _shared(home: tuple[int, ...], sharing: str) -> tuple[int, ...]:
+    return tuple(0 if s >= 0 else s for s in home) if sharing == "fups" else home
+
+
+def plan_layout(plan: SeatPlan, n_games: int, agents: int, league_games: float = 0.0) -> np.ndarray:
+    """The learner index of every (seat, game) slot, -1 for opponent slots, for ``n_games`` games."""
     if not 0.0 <= league_games <= 1.0:
         raise ValueError(f"league_games must lie in [0, 1], not {league_games}")
+    home = np.asarray(plan.home, dtype=np.int64)
+    n = home.size
+    games = np.arange(n_games)
+    layout = np.full((n, n_games), OPPONENT, dtype=np.int64)
+    if plan.sides is not None:  # one learner, one side a game, alternating
+        for g in range(n_games):
+            layout[list(plan.sides[g % 2]), g] = 0
+        return layout
+    if plan.rotate:  # fewer learners than seats: learner k on seat (g + k) % n of game g
+        for k in range(min(agents, n)):
+            layout[(games + k) % n, games] = home[k]
+        return layout
+    layout[:] = home[:, None]
+    k = round(league_games * n_games)  # the first k games: one learner against the league, on its own seats
+    if k:
+        learners = sorted({int(h) for h in home if h >= 0})
+        seat_of = np.array([[s for s in range(n) if home[s] == i] for i in learners], dtype=object)
+        layout[:, :k] = OPPONENT
+        for g in range(k):
+            if len(learners) == 1 and home.size > 1 and all(h == learners[0] for h in home):
+                layout[g % n, g] = learners[0]  # one network on every seat: it takes one seat a game
+            else:
+                i = g % len(learners)
+                layout[list(seat_of[i]), g] = learners[i]
+    return layout
+
+
+def seat_layout(n_seats: int, n_games: int, agents: int, sharing: str, league_games: float = 0.0) -> np.ndarray:
+    """The layout of a game of ``n_seats`` seats each for itself (two seats: pong's), by ``--agents`` and
+    ``--sharing`` (see the module docstring)."""
     if sharing not in ("nops", "fups"):
         raise ValueError(f"sharing must be 'nops' or 'fups', not {sharing!r}")
     if not 1 <= agents <= n_seats:
         raise ValueError(f"this game has {n_seats} seats: --agents must be between 1 and {n_seats}, not {agents}")
-    layout = np.full((n_seats, n_games), OPPONENT, dtype=np.int64)
-    if agents == n_seats:
-        for seat in range(n_seats):
-            layout[seat] = 0 if sharing == "fups" else seat
-        k = round(league_games * n_games)  # the first k games: one learner against the league
-        seat_of = np.arange(k) % n_seats
-        layout[:, :k] = OPPONENT
-        layout[seat_of, np.arange(k)] = 0 if sharing == "fups" else seat_of
-    elif agents == 1:
+    if agents == 1 and n_seats > 1:
+        layout = np.full((n_seats, n_games), OPPONENT, dtype=np.int64)
         layout[np.arange(n_games) % n_seats, np.arange(n_games)] = 0
-    else:
-        for seat in range(agents):  # learners on the first seats, rotating with the game index
-            layout[(np.arange(n_games) + seat) % n_seats, np.arange(n_games)] = 0 if sharing == "fups" else seat
-    return layout
+        return layout
+    home = _shared(tuple(range(n_seats)) if agents == n_seats else tuple(s % agents for s in range(n_seats)), sharing)
+    return plan_layout(SeatPlan(home, rotate=agents < n_seats), n_games, agents, league_games)
+
+
+def learner_spaces(spec: EnvSpec, seat_spaces: Sequence[SeatSpace], layout: np.ndarray) -> list[SeatSpace]:
+    """Each learner's :class:`SeatSpace`: the seats a learner holds must share one (a network reads one observation
+    shape and plays one action space); a :class:`MarlError` naming the seats otherwise."""
+    out = []
+    for i in range(int(layout.max()) + 1):
+        held = sorted({int(s) for s in np.nonzero(layout == i)[0]})
+        first = seat_spaces[held[0]]
+        for s in held[1:]:
+            other = seat_spaces[s]
+            if (other.observation.shape != first.observation.shape or other.action != first.action
+                    or other.mask != first.mask):
+                raise MarlError(f"{spec.name}: seats {spec.agents[held[0]]} and {spec.agents[s]} have different "
+                                "spaces, so one network cannot play both; give them separate learners "
+                                "(--sharing nops, or --seats)")
+        out.append(first)
+    return out
 
 
 class SelfPlayGames:
     """Endless batched games where learners drive fixed slots and opponents the rest.
 
-    ``learner_ids`` names each learner in game results (e.g. ``"run/left"``); ``choose_opponents(slots)``
-    returns one policy for each game slot starting a game now (a game with several opponent seats uses that
-    policy on all of them). Seeds of successive games are ``first_seed``,
-    ``first_seed + 1``, ... in the order games start, so a run is reproducible.
+    ``learner_ids`` names each learner in game results (e.g. ``"run/left"``); ``choose_opponents(slots)`` returns
+    one policy for each opponent slot of the games starting now (``slots``: flat ``seat * n_games + game``
+    indices, game by game). Seeds of successive games are ``first_seed``, ``first_seed + 1``, ... in the order games
+    start, so a run is reproducible.
+
+    Each step: ``observe()`` (and, where the game has them, ``masks()``; in turn-based games ``acting()``) for each
+    learner's slots, then ``step(actions)``. Opponents act by themselves, given their masks, and only the seats that
+    act are asked.
     """
 
     def __init__(
@@ -83,35 +210,57 @@ class SelfPlayGames:
         env_options: dict[str, Any] | None = None,
         first_seed: int = 0,
     ) -> None:
-        self.spec = get_env(env) if isinstance(env, str) else env
-        self.core = self.spec.core(n_games, **(env_options or {}))
+        self.spec = spec = get_env(env) if isinstance(env, str) else env
+        options = env_options or {}
+        self.core = spec.core(n_games, **options)
         self.n = n_games
+        self.n_seats = n_seats = spec.n_seats
+        self.rules = Rules.of(spec)
         self.layout = np.asarray(layout, dtype=np.int64)
-        if self.layout.shape != (len(self.spec.agents), n_games):
-            raise ValueError(f"layout must have shape ({len(self.spec.agents)}, {n_games})")
+        if self.layout.shape != (n_seats, n_games):
+            raise ValueError(f"layout must have shape ({n_seats}, {n_games})")
         self.learner_ids = list(learner_ids)
         self.n_learners = int(self.layout.max()) + 1
         if len(self.learner_ids) != self.n_learners:
             raise ValueError(f"{self.n_learners} learners in the layout but {len(self.learner_ids)} ids")
+        self.seat_spaces = spec.seat_spaces(spec.config(**options))
+        self.spaces = learner_spaces(spec, self.seat_spaces, self.layout)
         self.needs_opponents = bool((self.layout == OPPONENT).any())
         if self.needs_opponents and choose_opponents is None:
             raise ValueError("opponent seats need a choose_opponents callback")
         self.choose_opponents = choose_opponents
-        # Slots of each learner, in a fixed order: flat indices into (seat, game); as a slice where they are a run of
-        # consecutive slots (one learner per seat), so its observations and rewards are views, not gathered copies.
+        # One array for every seat's observations and actions where all seats are alike (pong): learners' slots are
+        # then flat indices into (seat, game), as slices where consecutive (views, not copies).
+        first = self.seat_spaces[0]
+        self.uniform = all(s.observation.shape == first.observation.shape and s.action == first.action
+                           and s.mask == first.mask for s in self.seat_spaces)
+        self.masked = any(s.mask for s in self.seat_spaces)
+        self.sequential = spec.turns == "sequential"
+        self.acts = [SeatActions.of(s.action) for s in self.seat_spaces]
         self.slots = [np.flatnonzero(self.layout.ravel() == i) for i in range(self.n_learners)]
         self._index = [_as_slice(s) for s in self.slots]
         self.opponent_slots = np.flatnonzero(self.layout.ravel() == OPPONENT)
         self.policies: list[Policy] = []  # distinct opponent policies seen so far
-        self.opponent_of = np.full(n_games, -1, dtype=np.int64)  # index into self.policies per game
-        self._obs: np.ndarray | None = None
+        self.opponent_of = np.full(n_seats * n_games, -1, dtype=np.int64)  # index into self.policies per slot
+        if self.uniform:
+            self._actions: Any = np.zeros((n_seats * n_games, *self.acts[0].shape), dtype=self.acts[0].dtype)
+        else:
+            self._actions = [np.zeros((n_games, *a.shape), dtype=a.dtype) for a in self.acts]
+        self._flat: np.ndarray | None = None  # this step's observations, flat (uniform games)
+        self._seat_obs: Any = None  # this step's observations, per seat
+        self._masks: Any = None
+        self._acting: np.ndarray | None = None
+        self.truncated: list[np.ndarray] | None = None  # set by step(): per learner, its slots' games cut short
+        self.final_obs: list[np.ndarray] | None = None  # ... and their final observations (before the restart)
+        self.final_masks: list[np.ndarray | None] | None = None
         self.next_seed = first_seed
         self.seeds = np.zeros(n_games, dtype=np.int64)
         self.games_started = 0
         # Every game's actions, so the ledger can replay training games too (`marl record --game ID`).
-        self._log = ActionLog.for_env(self.spec, n_games, env_options)
+        self._log = ActionLog.for_env(spec, n_games, options)
         self._start(np.arange(n_games))
 
+    # -- games ---------------------------------------------------------------------------------------------------
     def _start(self, games: np.ndarray) -> None:
         seeds = np.arange(self.next_seed, self.next_seed + games.size)
         self.next_seed += games.size
@@ -120,71 +269,170 @@ class SelfPlayGames:
         self.core.reset(games, seeds)
         self._log.begin(games)
         if self.needs_opponents:
-            chosen = list(self.choose_opponents(games))  # type: ignore[misc]
-            if len(chosen) != games.size:
-                raise ValueError("choose_opponents returned the wrong number of policies")
-            index = {id(p): i for i, p in enumerate(self.policies)}
-            for g, p in zip(games.tolist(), chosen, strict=True):
-                if id(p) not in index:
-                    index[id(p)] = len(self.policies)
-                    self.policies.append(p)
-                self.opponent_of[g] = index[id(p)]
+            is_opp = self.layout[:, games] == OPPONENT  # (seats, games)
+            seat_idx, game_idx = np.nonzero(is_opp.T)[::-1]  # game by game, seats in order
+            slots = seat_idx * self.n + games[game_idx]
+            if slots.size:
+                chosen = list(self.choose_opponents(slots))  # type: ignore[misc]
+                if len(chosen) != slots.size:
+                    raise ValueError("choose_opponents returned the wrong number of policies")
+                index = {id(p): i for i, p in enumerate(self.policies)}
+                for slot, p in zip(slots.tolist(), chosen, strict=True):
+                    if id(p) not in index:
+                        index[id(p)] = len(self.policies)
+                        self.policies.append(p)
+                    self.opponent_of[slot] = index[id(p)]
+        self._stale()
+
+    def _stale(self) -> None:
+        self._flat = self._seat_obs = self._masks = self._acting = None
 
     def restart_all(self) -> None:
         """Abandon the games in progress and start fresh ones (from ``next_seed``), e.g. after a resume."""
         self.games_started -= self.n
         self._start(np.arange(self.n))
-        self._obs = None
+
+    # -- what the learners see -------------------------------------------------------------------------------------
+    def _read(self) -> None:
+        if self._seat_obs is None:
+            obs = self.core.observe()
+            self._seat_obs = obs
+            if self.uniform and isinstance(obs, np.ndarray):
+                self._flat = obs.reshape(-1, *obs.shape[2:])
+            elif self.uniform:
+                self._flat = np.concatenate([np.asarray(obs[s]) for s in range(self.n_seats)])
+
+    def _gather(self, per_seat: Sequence[Any], flat: np.ndarray | None, i: int, width: tuple[int, ...]) -> np.ndarray:
+        """Learner ``i``'s rows of a per-seat quantity (observations, masks), in its slot order."""
+        if flat is not None:
+            return flat[self._index[i]]
+        slots = self.slots[i]
+        seats, games = slots // self.n, slots % self.n
+        out = np.empty((slots.size, *width), dtype=np.asarray(per_seat[int(seats[0])]).dtype)
+        for s in np.unique(seats).tolist():
+            rows = seats == s
+            out[rows] = np.asarray(per_seat[s])[games[rows]]
+        return out
 
     def observe(self) -> list[np.ndarray]:
         """Each learner's observations, ``(len(slots), *obs_shape)`` in its fixed slot order."""
-        obs = self.core.observe()
-        flat = obs.reshape(-1, *obs.shape[2:])
-        self._obs = flat
+        self._read()
+        return [self._gather(self._seat_obs, self._flat, i, tuple(self.spaces[i].observation.shape))
+                for i in range(self.n_learners)]
+
+    def _all_masks(self) -> Any:
+        if self._masks is None:
+            masks = self.core.action_masks()  # type: ignore[attr-defined]
+            width = [int(s.action.n) if s.mask else 0 for s in self.seat_spaces]  # type: ignore[attr-defined]
+            self._masks = [np.ones((self.n, w or 1), dtype=bool) if m is None else np.asarray(m, dtype=bool)
+                           for m, w in zip(masks, width, strict=True)]
+        return self._masks
+
+    def masks(self) -> list[np.ndarray | None]:
+        """Each learner's action masks, ``(len(slots), n_actions)`` bool (None for a learner without masks)."""
+        if not self.masked:
+            return [None] * self.n_learners
+        masks = self._all_masks()
+        flat = np.concatenate(masks) if self.uniform else None
+        return [self._gather(masks, flat, i, (int(self.spaces[i].action.n),)) if self.spaces[i].mask else None
+                for i in range(self.n_learners)]
+
+    def _to_act(self) -> np.ndarray:
+        if self._acting is None:
+            self._acting = np.asarray(self.core.to_act(), dtype=bool).reshape(-1)  # type: ignore[attr-defined]
+        return self._acting
+
+    def acting(self) -> list[np.ndarray | None]:
+        """In turn-based games, each learner's slots whose seat acts on this step (None for simultaneous games)."""
+        if not self.sequential:
+            return [None] * self.n_learners
+        flat = self._to_act()
         return [flat[s] for s in self._index]
 
+    # -- a step ---------------------------------------------------------------------------------------------------
     def step(self, actions: Sequence[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray], list[GameResult]]:
-        """Apply each learner's actions (opponents act by themselves); returns per learner the rewards and
-        dones of its slots, and the games that ended on this step (already restarted)."""
-        n_seats = len(self.spec.agents)
-        all_actions = np.zeros(n_seats * self.n, dtype=np.int64)
-        for s, a in zip(self._index, actions, strict=True):
-            all_actions[s] = a
-        if self.needs_opponents:
-            self._opponents_act(all_actions)
-        rewards = self.core.step(all_actions.reshape(n_seats, self.n))
-        self._log.append(all_actions.reshape(n_seats, self.n))  # every slot always has a game running
-        self._obs = None
+        """Apply each learner's actions (opponents act by themselves); returns per learner the rewards and dones of
+        its slots, and the games that ended on this step (already restarted). Games cut short on this step are
+        :attr:`truncated` (per learner), their final observations :attr:`final_obs` (and :attr:`final_masks`)."""
+        n, n_seats = self.n, self.n_seats
+        if self.uniform:
+            flat_actions = self._actions
+            for s, a in zip(self._index, actions, strict=True):
+                flat_actions[s] = a
+            if self.needs_opponents:
+                self._opponents_act(flat_actions)
+            step_actions = flat_actions.reshape(n_seats, n, *flat_actions.shape[1:])
+        else:
+            for i, a in enumerate(actions):
+                slots = self.slots[i]
+                a = np.asarray(a)
+                for s in np.unique(slots // n).tolist():
+                    rows = slots // n == s
+                    self._actions[s][slots[rows] % n] = a[rows]
+            if self.needs_opponents:
+                self._opponents_act(None)
+            step_actions = self._actions
+        rewards = np.asarray(self.core.step(step_actions), dtype=np.float32)
+        self._log.append(step_actions)  # every slot always has a game running
+        self._stale()
         done_games = self.core.terminated | self.core.truncated
-        flat_rewards = rewards.ravel()
+        flat_rewards = rewards.reshape(-1)
         flat_done = np.tile(done_games, n_seats)
         out_r = [flat_rewards[s] for s in self._index]
         out_d = [flat_done[s] for s in self._index]
+        self.truncated = self.final_obs = self.final_masks = None
         finished: list[GameResult] = []
         ended = np.flatnonzero(done_games)
         if ended.size:
-            outcome = self.core.outcome()
-            for g in ended.tolist():
+            cut = self.core.truncated
+            if cut.any():  # what a learner bootstraps a cut game from: its final observation, before the restart
+                flat_cut = np.tile(cut, n_seats)
+                self.truncated = [flat_cut[s] for s in self._index]
+                self.final_obs = self.observe()
+                self.final_masks = self.masks()
+            scores = np.asarray(self.core.score[:, ended], dtype=np.float64)
+            outcome = self.rules.outcome(scores)
+            for k, g in enumerate(ended.tolist()):
                 players = tuple(self._player_id(seat, g) for seat in range(n_seats))
                 finished.append(GameResult(
                     env=self.spec.name, players=players, seed=int(self.seeds[g]),
-                    scores=tuple(int(x) for x in self.core.score[:, g]),
-                    outcome=tuple(float(x) for x in outcome[:, g]), length=int(self.core.steps[g]),
-                    truncated=bool(self.core.truncated[g]), index=g, actions=encode_actions(self._log.take(g))))
+                    scores=tuple(float(x) for x in scores[:, k]), outcome=tuple(float(x) for x in outcome[:, k]),
+                    length=int(self.core.steps[g]), truncated=bool(cut[g]), index=g,
+                    actions=encode_actions(self._log.take(g))))
             self._start(ended)
         return out_r, out_d, finished
 
     def _player_id(self, seat: int, game: int) -> str:
         who = self.layout[seat, game]
         if who == OPPONENT:
-            return self.policies[self.opponent_of[game]].id
+            return self.policies[self.opponent_of[seat * self.n + game]].id
         return self.learner_ids[who]
 
-    def _opponents_act(self, all_actions: np.ndarray) -> None:
-        if self._obs is None:
-            self.observe()
+    def _opponents_act(self, flat_actions: np.ndarray | None) -> None:
+        """The opponents' actions for this step, into the flat action array (uniform games) or the per-seat ones;
+        in turn-based games only opponents whose seat acts are asked."""
+        self._read()
         slots = self.opponent_slots
-        which = self.opponent_of[slots % self.n]
+        if self.sequential:
+            slots = slots[self._to_act()[slots]]
+        if not slots.size:
+            return
+        masks = self._all_masks() if self.masked else None
+        flat_masks = np.concatenate(masks) if masks is not None and flat_actions is not None else None
+        which = self.opponent_of[slots]
         for k in np.unique(which).tolist():
             idx = slots[which == k]
-            all_actions[idx] = self.policies[k].act(self._obs[idx])  # type: ignore[index]
+            if flat_actions is not None:
+                obs = self._flat[idx]  # type: ignore[index]
+                mask = None if flat_masks is None else flat_masks[idx]
+                flat_actions[idx] = self._act(self.policies[k], obs, mask)
+                continue
+            for s in np.unique(idx // self.n).tolist():
+                rows = idx[idx // self.n == s] % self.n
+                obs = np.asarray(self._seat_obs[s])[rows]
+                mask = None if masks is None or not self.seat_spaces[s].mask else masks[s][rows]
+                self._actions[s][rows] = self._act(self.policies[k], obs, mask)
+
+    @staticmethod
+    def _act(policy: Policy, obs: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+        return policy.act(obs) if mask is None else policy.act(obs, mask)

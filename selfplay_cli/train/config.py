@@ -9,15 +9,15 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from ..algos.dqn import DQNConfig
-from ..algos.ppo import PPOConfig
+from ..algos import LEARNERS, DQNConfig, PPOConfig
+from ..arena.selfplay import OPPONENT, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
 from ..policies.network import resolve_device
 
-ALGOS = ("ppo", "dqn")
+ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 
 
 @dataclass
@@ -28,6 +28,7 @@ class TrainConfig:
     agents: int = 2
     algo: str = "ppo"
     sharing: str = "nops"
+    seats: str = ""  # which learner holds each seat, e.g. "1,2" or "1,1,-" (- an opponent); "": by the game's kind
     steps: int = 6_000_000  # game steps (one step of one game, all seats acting)
     minutes: float | None = None  # wall-clock budget instead of steps
     run: str = ""
@@ -68,27 +69,34 @@ class TrainConfig:
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
         if self.algo not in ALGOS:
             raise MarlError(f"unknown --algo '{self.algo}'; available: {', '.join(ALGOS)}")
-        n_seats = len(get_env(self.env).agents)
-        if not 1 <= self.agents <= n_seats:
-            raise MarlError(f"{self.env} has {n_seats} seats: --agents must be between 1 and {n_seats}")
+        spec = get_env(self.env)
+        n_seats = spec.n_seats
         if self.sharing not in ("nops", "fups"):
             raise MarlError(f"--sharing must be nops or fups, not '{self.sharing}'")
         if not 0.0 <= self.league_games <= 1.0:
             raise MarlError(f"--league-games must lie between 0 and 1, not {self.league_games}")
-        if self.league_games and self.agents < n_seats:
-            raise MarlError(f"--league-games is for --agents {n_seats} (with fewer learners every game is already "
-                            "against the league)")
-        if self.sharing == "fups" and self.agents == 1:
+        plan = self.seat_plan()
+        if self.league_games and (plan.rotate or plan.sides is not None or OPPONENT in plan.home):
+            raise MarlError(f"--league-games is for --agents {n_seats} (learners on every seat); with fewer learners "
+                            "every game is already against the league")
+        if self.sharing == "fups" and self.agents == 1 and not self.seats:
             raise MarlError("--sharing fups shares one network between several learners: it needs --agents 2 or more")
-        spec = get_env(self.env)
         try:
             game = spec.config(**self.env_options)
             spec.make_core(1, game)  # options the game takes but cannot train with (pong's rgb frames) fail here
+            seat_spaces = spec.seat_spaces(game)
         except (TypeError, ValueError) as e:
             raise MarlError(f"[env_options]: {e}") from None
-        obs_shape = tuple(spec.observation_space(game).shape)
-        learners = 1 if self.sharing == "fups" else self.agents
-        _check_memory(self, obs_shape, [self.games * n_seats // learners] * learners)
+        layout = plan_layout(plan, self.games, self.agents, self.league_games)
+        spaces = learner_spaces(spec, seat_spaces, layout)
+        _check_memory(self, tuple(spaces[0].observation.shape),
+                      [int((layout == i).sum()) for i in range(len(spaces))])
+
+    def seat_plan(self) -> SeatPlan:
+        """Which learner holds which seat of the game (``--agents``, ``--sharing``, ``--seats``)."""
+        spec = get_env(self.env)
+        seats = parse_seats(self.seats, spec.n_seats) if self.seats else None
+        return plan_seats(spec, self.agents, self.sharing, seats)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)

@@ -30,19 +30,18 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..algos.dqn import DQNLearner
-from ..algos.ppo import PPOLearner
-from ..arena import GameResult
-from ..arena.selfplay import OPPONENT, SelfPlayGames, seat_layout
+from ..algos import get_learner
+from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_spaces, plan_layout
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
-from ..league.store import GameRecord, League, PlayerRow
+from ..league.store import League, PlayerRow
 from ..policies import Policy
 from ..policies.network import resolve_device
 from ..policies.snapshot import SnapshotMeta, save_snapshot
 from ..rated.match import load_player
 from ..rated.snapshots import snapshot_relpath
+from ..results import GameResult
 from .config import TrainConfig, tensorboard_writer
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .team import LearnerTeam
@@ -106,10 +105,13 @@ def step_label(steps: int) -> str:
     return f"{rounded:g}"
 
 
-def _learner_names(spec_agents: tuple[str, ...], cfg: TrainConfig) -> list[str]:
-    if cfg.sharing == "nops" and cfg.agents > 1:
-        return list(spec_agents[: cfg.agents])
-    return ["learner"]
+def _learner_names(agents: tuple[str, ...], home: tuple[int, ...], sharing: str) -> list[str]:
+    """Each learner's name: with one network per learner, the seat (agent) it holds first (``left``, ``right``);
+    with one network for all, ``learner``."""
+    n = max(home) + 1
+    if sharing == "fups" or n == 1:
+        return ["learner"]
+    return [agents[home.index(i)] for i in range(n)]
 
 
 class Trainer:
@@ -127,20 +129,20 @@ class Trainer:
             raise MarlError("training needs a league home for its snapshot files: pass --home")
         self.run_dir = league.home / "runs" / cfg.run
         game_cfg = spec.config(**cfg.env_options)
-        self.obs_shape = tuple(spec.observation_space(game_cfg).shape)
-        self.n_actions = int(spec.action_space(game_cfg).n)
         league.ensure_bots(spec.name, spec.bots)
         self.bot_ids = {p.name: p.id for p in league.players(env=spec.name, kind="bot")}
 
-        layout = seat_layout(len(spec.agents), cfg.games, cfg.agents, cfg.sharing, cfg.league_games)
+        plan = cfg.seat_plan()
+        layout = plan_layout(plan, cfg.games, cfg.agents, cfg.league_games)
+        self.home = plan.home  # the learner of each seat when learners hold every seat (its 'latest' opponent)
         self.learner_of_game = layout.max(axis=0)  # the learner in each game (opponent slots: the one it faces)
-        self.names = _learner_names(spec.agents, cfg)
+        self.names = _learner_names(spec.agents, plan.home, cfg.sharing)
+        self.spaces = learner_spaces(spec, spec.seat_spaces(game_cfg), layout)
         torch.manual_seed(cfg.seed)
-        learner_cls, algo_cfg = (PPOLearner, cfg.ppo) if cfg.algo == "ppo" else (DQNLearner, cfg.dqn)
+        learner_cls, algo_cfg = get_learner(cfg.algo), getattr(cfg, cfg.algo)
         self.arch = algo_cfg.arch
         self.learners: list[Any] = [
-            learner_cls(self.obs_shape, self.n_actions, int((layout == i).sum()), algo_cfg, seed=cfg.seed + i,
-                        device=self.device)
+            learner_cls(self.spaces[i], int((layout == i).sum()), algo_cfg, seed=cfg.seed + i, device=self.device)
             for i in range(len(self.names))
         ]
         self.latest: list[int] = [0] * len(self.learners)  # player id of each learner's latest snapshot
@@ -174,36 +176,42 @@ class Trainer:
         self.records: list[SnapshotRecord] = []  # the newest snapshots as the ledger rates them
 
     # -- opponents -------------------------------------------------------------------------------------------
-    def _opponent_policy(self, pid: int, learner: int) -> Policy:
-        if pid == LATEST_LEARNER:  # the other learner as it is now (ML-Agents' "latest model"; one learner: itself)
-            return self.live[(learner + 1) % len(self.live)]
+    def _opponent_policy(self, pid: int, seat: int, learner: int) -> Policy:
+        if pid == LATEST_LEARNER:  # ML-Agents' "latest model": the learner that holds this seat when learners hold
+            home = self.home[seat]  # every seat, as it is now (pong: the other learner; one learner: itself)
+            return self.live[home if home >= 0 else learner]
         if pid not in self._policies:
             self._policies[pid] = load_player(self.league, self.league.get_player(pid), device=str(self.device),
                                               greedy=False, seed=pid)
             self._player_of[self._policies[pid].id] = pid
         return self._policies[pid]
 
-    def _draw(self, games: np.ndarray) -> np.ndarray:
-        """Opponent ids for ``games``, each drawn by the matchmaker for the learner that plays that game."""
-        ids = np.empty(len(games), dtype=np.int64)
-        learners = self.learner_of_game[games]
+    def _draw(self, slots: np.ndarray) -> np.ndarray:
+        """Opponent ids for the opponent ``slots`` (flat ``seat * games + game``), each drawn by the matchmaker for
+        the learner that plays that game."""
+        ids = np.empty(len(slots), dtype=np.int64)
+        learners = self.learner_of_game[slots % self.cfg.games]
         for i in np.unique(learners).tolist():
             mine = learners == i
             ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates)
         return ids
 
     def _choose(self, slots: np.ndarray) -> list[Policy]:
-        """Opponents for the games starting in ``slots``: drawn afresh for every game, or with --swap-every kept per
-        slot until the next swap (ML-Agents' swap_steps, counted in game steps)."""
+        """Opponents for the opponent ``slots`` of the games starting now, one each: drawn afresh for every game, or
+        with --swap-every kept per slot until the next swap (ML-Agents' swap_steps, counted in game steps)."""
         if not self.cfg.swap_every:
             ids = self._draw(slots)
         else:
             due = self.steps >= self._next_swap
             if due or self._assigned is None:
-                self._assigned = self._draw(np.arange(self.cfg.games))
+                every = self.games.opponent_slots if hasattr(self, "games") else slots
+                self._assigned = np.zeros(len(self.spec.agents) * self.cfg.games, dtype=np.int64)
+                self._assigned[every] = self._draw(every)
                 self._next_swap = self.steps + self.cfg.swap_every
             ids = self._assigned[slots]
-        return [self._opponent_policy(int(i), int(self.learner_of_game[g])) for i, g in zip(ids, slots, strict=True)]
+        n = self.cfg.games
+        return [self._opponent_policy(int(i), int(slot) // n, int(self.learner_of_game[slot % n]))
+                for i, slot in zip(ids, slots, strict=True)]
 
     # -- snapshots -------------------------------------------------------------------------------------------
     def _base_name(self, trigger: str) -> str:
@@ -253,8 +261,9 @@ class Trainer:
         for i, (learner, name) in enumerate(zip(self.learners, names, strict=True)):
             rel = snapshot_relpath(cfg.run, name)
             parent = self.league.get_player(self.latest[i]).full_name if self.latest[i] else None
-            meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options, obs_shape=self.obs_shape,
-                                n_actions=self.n_actions, arch=self.arch, algo=cfg.algo, step=self.steps,
+            meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options,
+                                obs_space=self.spaces[i].observation, act_space=self.spaces[i].action, arch=self.arch,
+                                algo=cfg.algo, step=self.steps,
                                 episode=self.episodes, run=cfg.run, name=name, parent=parent,
                                 seat=self.names[i] if len(self.names) > 1 else None,
                                 extra={"learner": self.names[i]})
@@ -459,17 +468,17 @@ class Trainer:
         learner_player = {lid: self.latest[i] for i, lid in enumerate(self.games.learner_ids)}
         records = []
         for r in finished:
-            ids = []
-            for p in r.players:
-                ids.append(learner_player[p] if p in learner_player else self._player_of.get(p, 0))
-            if 0 in ids or len(set(ids)) < len(ids):
-                continue  # the learner against itself (or its live copy) carries no rating information
-            records.append(GameRecord(env=r.env, players=tuple(ids), seed=r.seed, scores=r.scores,
-                                      outcome=r.outcome, length=r.length, truncated=r.truncated, actions=r.actions))
-            learners = [self.games.learner_ids.index(p) for p in r.players if p in self.games.learner_ids]
-            if len(learners) == 1:  # a learner against the league: its win rate against that opponent (PFSP)
-                seat = r.players.index(self.games.learner_ids[learners[0]])
-                self.rates.update(learners[0], ids[1 - seat], r.outcome[seat])
+            ids = [learner_player[p] if p in learner_player else self._player_of.get(p, 0) for p in r.players]
+            if 0 in ids or len(set(ids)) < 2:
+                continue  # the learners among themselves (or a live copy) carry no rating information
+            records.append(r.with_players(dict(zip(r.players, ids, strict=True))))
+            learners = {self.games.learner_ids.index(p) for p in r.players if p in self.games.learner_ids}
+            if len(learners) == 1:  # a learner against the league: its win rate against each opponent (PFSP)
+                (i,) = learners
+                mine = self.games.learner_ids[i]
+                points = r.points_of(mine)
+                for opponent in dict.fromkeys(q for p, q in zip(r.players, ids, strict=True) if p != mine):
+                    self.rates.update(i, opponent, points)
         if records:
             self.league.record_games(self.match_id, records)
 
@@ -507,12 +516,14 @@ class Trainer:
                 progress = elapsed / (deadline - start) if deadline else self.steps / cfg.steps
                 if progress >= 1.0:
                     break
-                rewards, dones, finished = self.games.step(self.team.act(obs))
-                obs = self.games.observe()
+                games = self.games
+                acting = games.acting() if games.sequential else None
+                rewards, dones, finished = games.step(self.team.act(obs, games.masks() if games.masked else None))
+                obs = games.observe()
                 self.steps += cfg.games
                 self.episodes += len(finished)
                 pending += finished
-                if self.team.record(rewards, dones):
+                if self.team.record(rewards, dones, games.truncated, acting, games.final_obs, games.final_masks):
                     stats = self.team.update(obs, progress)
                     self._record(pending)
                     pending = []

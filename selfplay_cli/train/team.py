@@ -55,13 +55,29 @@ class LearnerTeam:
         self._pool = (ThreadPoolExecutor(len(self.learners), thread_name_prefix="learner",
                                          initializer=_single_torch_thread) if use else None)
 
-    def act(self, obs: Sequence[np.ndarray]) -> list[np.ndarray]:
-        """Each learner's actions for its observations, one after the other (measured: threads make acting slower)."""
-        return [learner.act(o) for learner, o in zip(self.learners, obs, strict=True)]
+    def act(self, obs: Sequence[np.ndarray], masks: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray]:
+        """Each learner's actions for its observations (and action masks, where the game has them), one after the
+        other (measured: threads make acting slower)."""
+        if masks is None:
+            return [learner.act(o) for learner, o in zip(self.learners, obs, strict=True)]
+        return [learner.act(o, m) for learner, o, m in zip(self.learners, obs, masks, strict=True)]
 
-    def record(self, rewards: Sequence[np.ndarray], dones: Sequence[np.ndarray]) -> bool:
-        """Store each learner's outcome; True when every learner's update is due (they run in lockstep)."""
-        due = [learner.record(r, d) for learner, r, d in zip(self.learners, rewards, dones, strict=True)]
+    def record(self, rewards: Sequence[np.ndarray], dones: Sequence[np.ndarray],
+               truncated: Sequence[np.ndarray] | None = None, acting: Sequence[np.ndarray | None] | None = None,
+               final_obs: Sequence[np.ndarray] | None = None,
+               final_masks: Sequence[np.ndarray | None] | None = None) -> bool:
+        """Store each learner's outcome; True when every learner's update is due (they run in lockstep).
+        ``truncated`` and ``final_obs`` (games cut short on this step, and their final observations, per learner),
+        ``acting`` (turn-based games: the slots that acted) as the learner interface takes them."""
+        due = []
+        for i, (learner, r, d) in enumerate(zip(self.learners, rewards, dones, strict=True)):
+            extra: dict[str, Any] = {}
+            if truncated is not None:
+                extra.update(truncated=truncated[i], final_obs=final_obs[i] if final_obs is not None else None,
+                             final_mask=final_masks[i] if final_masks is not None else None)
+            if acting is not None and acting[i] is not None:
+                extra["acting"] = acting[i]
+            due.append(learner.record(r, d, **extra))
         return all(due)
 
     def update(self, obs: Sequence[np.ndarray], progress: float) -> list[dict[str, float]]:
