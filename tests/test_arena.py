@@ -12,6 +12,7 @@ from selfplay_cli.arena.replay import ActionLog, SeatActions, decode_actions, en
 from selfplay_cli.arena.schedule import round_size, rounds
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
+from selfplay_cli.policies import Policy
 from selfplay_cli.results import Rules, compare, pairwise, points_between
 
 
@@ -151,3 +152,25 @@ def test_schedules_by_kind():
     assert [g.seats for g in rounds(ffa, (0, 1, 2), 1)] == [(0, 1, 2), (1, 2, 0), (2, 0, 1)]
     assert (round_size(two, 2), round_size(coop, 2), round_size(ffa, 2)) == (2, 2, 3)
     assert [g.seats for g in rounds(Rules(), (0, 1), 2)] == [(0, 1), (1, 0), (0, 1), (1, 0)], "pong's pairs"
+
+
+class _Lowest(Policy):
+    """The lowest action its mask allows."""
+
+    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        assert mask is not None
+        return mask.argmax(axis=1)
+
+
+def test_a_game_stopped_early_gets_legal_filler_actions_while_the_others_play_on():
+    """A game the runner stops (stop_when) goes on inside the core until its slot is reused; the seat whose turn it
+    is there must be given an action its mask allows, or a masked game refuses the whole step. Here X takes square
+    0 in every game, game 0 is stopped, and O's turn in it would get square 0 again without the filler."""
+    spec = get_env("tests.games.tictactoe:env")
+    players = [_Lowest("a", spec.name), _Lowest("b", spec.name)]
+    games = [Game(seed, (0, 1)) for seed in range(4)]
+    results = play(spec, players, games, parallel=4,
+                   stop_when=lambda core: (np.arange(core.n) == 0) & (core.steps >= 1))
+    assert [r.length for r in results] == [1, 7, 7, 7]  # X takes 0, 2, 4, 6 along the top row and the diagonal
+    assert results[0].truncated and not any(r.truncated for r in results[1:])
+    assert [r.outcome for r in results[1:]] == [(1.0, 0.0)] * 3

@@ -218,8 +218,11 @@ def play(
             if sg.masked and masks is not None:
                 flat_mask = np.concatenate([np.ones((n, 1), dtype=bool) if masks[s] is None else np.asarray(masks[s])
                                             for s in sg.seats])
-            sg.actions.fill(0)
             flat_actions = sg.flat_actions
+            if flat_mask is not None:  # slots nobody plays (a game stopped early, an idle slot) get a legal filler
+                flat_actions[:] = flat_mask.argmax(axis=1)
+            else:
+                sg.actions.fill(0)
             for (members, bank), where, takes_masks in zip(groups, where_g, with_masks, strict=True):
                 if bank is None or (flat_mask is not None and not takes_masks):
                     for m, w in zip(members, where, strict=True):

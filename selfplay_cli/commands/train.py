@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import signal
 import sys
 import time
@@ -53,6 +54,12 @@ def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:
             settings[key] = value
 
 
+def run_stem(env: str) -> str:
+    """A default run name's stem from a game's name: ``pong``; ``tictactoe`` for ``mypkg.tictactoe:env``."""
+    stem = re.sub(r"[^A-Za-z0-9_-]+", "-", env.split(":")[0].rsplit(".", 1)[-1]).strip("-")
+    return stem or "run"
+
+
 RESUME_OPTIONS = frozenset({"resume", "env", "device", "quiet", "json_out", "home", "db"})
 """What may be typed with --resume: a resumed run keeps the configuration it was started with."""
 
@@ -63,9 +70,15 @@ def train(
     config: Annotated[Path | None, typer.Option("--config", metavar="FILE", help="TOML file of settings (top-level "
                                                 "options, [ppo], [dqn], [opponents], [env_options]); options typed "
                                                 "on the command line win over it.")] = None,
-    agents: Annotated[int, typer.Option("--agents", min=1, max=64, help="Learning agents: 2 trains both pong paddles "
-                                        "(seed 000); 1 trains one learner against opponents from the league.")] = 2,
-    algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo or dqn.")] = "ppo",
+    agents: Annotated[int, typer.Option("--agents", min=1, max=64, help="Learning agents. Two sides: 2 is one learner "
+                                        "per side (both pong paddles, seed 000), 1 one learner against opponents "
+                                        "from the league; cooperative: seat s is learner s mod N; free-for-all: one "
+                                        "per seat, or fewer against the league.")] = 2,
+    seats: Annotated[str | None, typer.Option("--seats", metavar="L,L,...", help="Which learner holds each seat, "
+                                              "in the game's seat order: 1,2 or 1,1,- (- an opponent from the "
+                                              "league); overrides --agents.")] = None,
+    algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo (any action space) or dqn (Discrete "
+                                      "actions).")] = "ppo",
     preset: Annotated[str | None, typer.Option("--preset", help="seed000: seed 000's DQN set-up (network sizes, "
                                                "learning rate, batch, buffer, target period, epsilon).")] = None,
     sharing: Annotated[str, typer.Option("--sharing", help="nops: one network per learner; fups: one shared "
@@ -156,7 +169,7 @@ def train(
                  "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
                  "snapshot_steps": snapshot_steps, "eval_games": eval_games, "eval_older": eval_older,
                  "eval_inline": eval_inline, "swap_every": swap_every, "tensorboard": tensorboard,
-                 "league_games": league_games}
+                 "league_games": league_games, "seats": seats}
         settings.update({k: v for k, v in flags.items() if k in typed})
         matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
                        "latest_ratio": ("latest_ratio", latest_ratio)}
@@ -191,7 +204,8 @@ def train(
         else:
             if run is None:
                 taken = {r.name for r in league.list_runs()}
-                run = next(f"{env}-{i}" for i in range(1, 10_000) if f"{env}-{i}" not in taken)
+                stem = run_stem(settings["env"])
+                run = next(f"{stem}-{i}" for i in range(1, 10_000) if f"{stem}-{i}" not in taken)
             elif league.get_run(run) is not None:
                 raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
             settings["run"] = run

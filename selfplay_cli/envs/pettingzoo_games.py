@@ -429,7 +429,7 @@ class PettingZooCore:
             if self._aec:
                 acting = np.zeros((self.n_seats, self.n), dtype=bool)
                 turn = np.array(self._turn)
-                g = np.flatnonzero(turn >= 0)
+                g = np.flatnonzero((turn >= 0) & self._running)  # a finished game's seats wait for its reset
                 acting[turn[g], g] = True
             else:
                 acting = self._live & self._running
