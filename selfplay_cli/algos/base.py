@@ -54,6 +54,12 @@ class Learner(Protocol):
     net: MLPNet  # the network it trains (saved as snapshots)
     n_slots: int
 
+    @staticmethod
+    def check_seat(seat: Any) -> ActionHead:
+        """The head for a seat's actions, or one clear error if the algorithm cannot learn them (checked before a
+        run is created)."""
+        ...
+
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray: ...
 
     def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,

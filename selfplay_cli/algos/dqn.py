@@ -62,7 +62,7 @@ from torch import nn
 from ..errors import MarlError
 from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
-from ..policies.spaces import describe_space, uniform_allowed
+from ..policies.spaces import ActionHead, describe_space, uniform_allowed
 from .base import Seat, action_head, as_bool, fix_mask, learner_args
 from .optim import FlatAdam, flatten
 
@@ -218,15 +218,21 @@ class DQNLearner:
     name = "dqn"
     config_class = DQNConfig
 
+    @staticmethod
+    def check_seat(seat: Any) -> ActionHead:
+        """The head for the seat's actions, or one clear :class:`MarlError` (DQN plays Discrete actions only)."""
+        head = action_head("DQN", seat.action)
+        if head.kind != "discrete":
+            raise MarlError(f"DQN learns Discrete actions only; this game's seat acts in "
+                            f"{describe_space(seat.action)}: use --algo ppo")
+        return head
+
     def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:
         self.seat: Seat
         self.seat, n_slots, cfg = learner_args(seat, n_slots, config, legacy, DQNConfig)
         self.cfg = cfg
-        self.head = action_head("DQN", self.seat.action)
-        if self.head.kind != "discrete":
-            raise MarlError(f"DQN learns Discrete actions only; this game's seat acts in "
-                            f"{describe_space(self.seat.action)}: use --algo ppo")
+        self.head = self.check_seat(self.seat)
         self.device = torch.device(device)
         self.obs_shape = tuple(self.seat.observation.shape)
         self.n_actions = n_actions = self.head.nvec[0]

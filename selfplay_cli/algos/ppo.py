@@ -41,6 +41,7 @@ import torch
 
 from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
+from ..policies.spaces import ActionHead
 from .base import Seat, action_head, as_bool, fix_mask, learner_args, values_of
 from .optim import FlatAdam
 
@@ -88,13 +89,18 @@ class PPOLearner:
     name = "ppo"
     config_class = PPOConfig
 
+    @staticmethod
+    def check_seat(seat: Any) -> ActionHead:
+        """The head for the seat's actions, or one clear :class:`MarlError` (an action space PPO cannot learn)."""
+        return action_head("PPO", seat.action)
+
     def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:
         self.seat: Seat
         self.seat, n_slots, cfg = learner_args(seat, n_slots, config, legacy, PPOConfig)
         self.cfg = cfg
         self.device = torch.device(device)
-        self.head = action_head("PPO", self.seat.action)
+        self.head = self.check_seat(self.seat)
         self.obs_shape = tuple(self.seat.observation.shape)
         self.n_actions = self.head.outputs
         self.n_slots = n_slots

@@ -83,12 +83,25 @@ def _clock(seconds: float) -> str:
     return f"{s // 60}:{s % 60:02d}"
 
 
+def score_text(env: str, scores: tuple[float, ...]) -> str:
+    """A game's score for people: ``3-1`` (two seats), ``team return -34.9`` (cooperative), ``scores 2, -1, 0``."""
+    from ..envs import get_env
+    from ..results import COOPERATIVE, format_score
+
+    if get_env(env).kind == COOPERATIVE:
+        return f"team return {sum(scores):.1f}"
+    shown = [format_score(round(s, 2)) for s in scores]
+    if len(scores) == 2 and min(scores) >= 0:
+        return "-".join(shown)
+    return "scores " + ", ".join(shown)
+
+
 def _line(rec: Recording, default_cap: bool) -> str:
     """``<path>  A vs B 3-1 (stopped at 1:00 by --seconds 60 ...), 3,600 steps, 1:01 of video, rendered in 8.4 s``."""
     from ..record.recorder import ENDED_STOPPED, ENDED_TIME_LIMIT
 
     r = rec.result
-    score = "-".join(str(s) for s in r.scores)
+    score = score_text(r.env, r.scores)
     play = r.length / rec.settings.fps
     if rec.ended == ENDED_STOPPED:
         how = f" (stopped at {_clock(play)} by {rec.stopped_by}"

@@ -89,6 +89,8 @@ class TrainConfig:
             raise MarlError(f"[env_options]: {e}") from None
         layout = plan_layout(plan, self.games, self.agents, self.league_games)
         spaces = learner_spaces(spec, seat_spaces, layout)
+        for space in spaces:
+            LEARNERS[self.algo].check_seat(space)  # e.g. DQN and Box actions: refused before anything is written
         _check_memory(self, tuple(spaces[0].observation.shape),
                       [int((layout == i).sum()) for i in range(len(spaces))])
 
