@@ -264,3 +264,18 @@ def test_pong_actions_pack_four_to_a_byte_and_their_length_is_checked():
     assert len(encode_actions(pong_game)) < 4_000 * 2 / 4 + 64, "even random actions take 2 bits each"
     with pytest.raises(MarlError, match="cover 4000 steps, the game lasted 10"):
         decode_actions(encode_actions(pong_game), 2, 10)
+
+
+def test_frames_of_odd_size_make_an_mp4_one_pixel_larger(tmp_path):
+    """A game's own render() may draw any size (connect four: 891 x 774); yuv420p needs even sides, so the frame is
+    padded by one black row or column rather than failing the recording."""
+    from selfplay_cli.record.video import VideoWriter
+
+    path = tmp_path / "odd.mp4"
+    frame = np.full((35, 51, 3), 200, dtype=np.uint8)
+    with VideoWriter(path, fps=10) as video:
+        for _ in range(5):
+            video.write(frame)
+    frames = np.stack(list(iio.imiter(path)))
+    assert frames.shape == (5, 36, 52, 3)
+    assert abs(int(frames[:, :35, :51].mean()) - 200) <= 3 and frames[:, 35:, :].max() < 20

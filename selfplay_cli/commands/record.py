@@ -157,7 +157,8 @@ def record(
                                                     "drawn rally).")] = None,
     seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the first game.")] = 0,
     fps: Annotated[int | None, typer.Option("--fps", help="Frames per second; one frame per game "
-                                            "step, so 60 is real time. Default 60 (mp4), 50 (gif).")] = None,
+                                            "step, so 60 is real time. Default: the game's own pace if it states "
+                                            "one (a PettingZoo game's render_fps), else 60 (mp4), 50 (gif).")] = None,
     size: Annotated[str | None, typer.Option("--size", metavar="WxH", help="WIDTHxHEIGHT of the video, even "
                                              "numbers. Default: the game's own (pong 800x400).")] = None,
     fmt: Annotated[str | None, typer.Option("--format", metavar="mp4|gif", help="mp4 (H.264, plays in browsers) or "
@@ -191,13 +192,12 @@ def record(
             verb = "does" if len(given) == 1 else "do"
             raise MarlError(f"--game replays a stored game as it was played: {', '.join(given)} {verb} not apply")
     fmt = _format_of(fmt, out)
-    if fps is None:
-        fps = 50 if fmt == "gif" else 60
-    settings = VideoSettings(fps=fps, size=parse_size(size), fmt=fmt, hold=hold)
-    max_steps, max_rallies, stop_label, default_cap = _limits(seconds, max_steps, max_rallies, fps)
-
     league = open_league(home, db)
     try:
+        if fps is None:  # the game's own pace (a board game: a move or two a second), else one frame per step
+            fps = _game_fps(league, game_id, ckpt, vs, env) or (50 if fmt == "gif" else 60)
+        settings = VideoSettings(fps=fps, size=parse_size(size), fmt=fmt, hold=hold)
+        max_steps, max_rallies, stop_label, default_cap = _limits(seconds, max_steps, max_rallies, fps)
         if game_id is not None:
             job = _replay_job(league, game_id, out, fmt)
         else:
@@ -222,6 +222,15 @@ def record(
         raise typer.Exit(130) from None
     if json_out:
         print_json(done)
+
+
+def _game_fps(league: Any, game_id: int | None, ckpt: str | None, vs: str | None, env: str | None) -> int | None:
+    """The frame rate the game asks recordings to play at (``render_fps``), if it says."""
+    from ..envs import get_env
+    from ..rated.lineup import lineups
+
+    name = league.game(game_id).env if game_id is not None else lineups(league, ckpt, vs, env)[0].env
+    return get_env(name).render_fps
 
 
 def _replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> _Job:

@@ -14,7 +14,7 @@ copies that the arena plays exactly as it plays pong (no second game loop).
   core step being one agent's move), else none;
 - recording: when ``metadata["render_modes"]`` lists ``"rgb_array"``, every copy is made with
   ``render_mode="rgb_array"`` (PettingZoo draws such frames only when ``render()`` is called) and the game's own
-  ``render()`` makes the video's frames.
+  ``render()`` makes the video's frames, at ``metadata["render_fps"]`` frames a second by default.
 
 The core (:class:`PettingZooCore`) steps N copies: ``reset(games, seeds)`` resets copies with ``reset(seed=...)``;
 ``step(actions)`` gives every acting agent its seat's action; ``score`` is each seat's summed rewards; a game is
@@ -228,6 +228,8 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
         return PettingZooConfig(options, layout)
 
     kind, sides, tol = _kind_of(name, default)
+    fps = default.metadata.get("render_fps")
+    fps = int(fps) if isinstance(fps, (int, float)) and not isinstance(fps, bool) and 1 <= fps <= 240 else None
     first = default.seats[0].action
     same = all(s.action == first for s in default.seats)
     bots = {"random": random_bot(first)} if same else {}
@@ -252,6 +254,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
             tie_tolerance=tol,
             make_seat_spaces=lambda cfg: cfg.layout.seats,
             time_limit=lambda cfg: cfg.layout.max_steps,
+            render_fps=fps if default.renders else None,
         )
     except ValueError as e:
         raise EnvError(name, str(e)) from None

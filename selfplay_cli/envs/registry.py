@@ -236,7 +236,8 @@ class EnvSpec:
     ``make_parallel(**options)`` makes the game's PettingZoo env (a ParallelEnv for pong). ``make_seat_spaces``
     gives each seat's :class:`SeatSpace` for a config; without it every seat has ``observation_space(cfg)`` and
     ``action_space(cfg)`` and no masks. ``time_limit(cfg)``: the most steps a game lasts (None: no declared
-    limit); by default the config's ``max_steps`` if it has one.
+    limit); by default the config's ``max_steps`` if it has one. ``render_fps``: a recording's default frame rate
+    (a board game's moves at 2 a second; None: 60, one frame per step).
     """
 
     name: str
@@ -255,6 +256,7 @@ class EnvSpec:
     tie_tolerance: float = 0.0
     make_seat_spaces: Callable[[Any], tuple[SeatSpace, ...]] | None = None
     time_limit: Callable[[Any], int | None] | None = None
+    render_fps: int | None = None  # frames per second a recording of it plays at by default (None: one per step at 60)
 
     def __post_init__(self) -> None:
         n = len(self.agents)

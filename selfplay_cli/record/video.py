@@ -142,6 +142,8 @@ class VideoWriter:
             palette = "split[a][b];[a]palettegen=stats_mode=single[p];[b][p]paletteuse=new=1"
             cmd += ["-vf", f"{scale},{palette}" if scale else palette, "-loop", "0", "-f", "gif"]
         else:
+            if not scale and (width % 2 or height % 2):  # yuv420p wants even sides: one black row or column more
+                scale = "pad=ceil(iw/2)*2:ceil(ih/2)*2"
             if scale:
                 cmd += ["-vf", scale]
             # Without a resize, the only scaling is halving the colour planes for yuv420p; sampling them instead of
