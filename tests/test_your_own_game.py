@@ -178,3 +178,24 @@ def test_default_seat_mappings_by_kind():
     assert parse_seats("1,-", 2) == (0, OPPONENT)
     with pytest.raises(MarlError):
         parse_seats("0,1", 2)  # learners are numbered from 1
+
+
+def test_new_match_seeds_give_new_games_of_a_deterministic_board_game(home, capsys):
+    """Tic-tac-toe ignores its seed: only the players' sampling makes games differ, so it is seeded by the match's
+    seed (and the player): the same seed replays the same games, another seed plays others."""
+    from selfplay_cli.league.store import League
+
+    run_json(capsys, "train", TICTACTOE, "--steps", "3000", "--snapshot-steps", "3000", "--games", "8",
+             "--eval-games", "0", "--run", "d", "--sharing", "fups")
+
+    def games(seed: str) -> list[bytes]:
+        ids = run_json(capsys, "match", "d/s3k", "random", "--games", "20", "--seed", seed)["game_ids"]
+        league = League.open(home=home)
+        try:
+            return [league.game(i).actions for i in ids]
+        finally:
+            league.close()
+
+    first, again, other = games("7"), games("7"), games("8")
+    assert first == again
+    assert sum(a != b for a, b in zip(first, other, strict=True)) >= 10

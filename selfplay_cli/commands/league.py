@@ -130,7 +130,7 @@ def tournament(
     from ..league.ladder import ladder
     from ..league.names import Team
     from ..league.pairs import plan_tournament
-    from ..rated.match import load_player, run_match
+    from ..rated.match import load_player, mix_seed, run_match
 
     if games_per_pair < 2:
         raise MarlError(f"--games-per-pair must be at least 2, not {games_per_pair}")
@@ -168,7 +168,7 @@ def tournament(
                 rows_ = [league.get_player(p.a_id), league.get_player(p.b_id)]
                 for row in rows_:
                     if row.id not in policies:
-                        policies[row.id] = load_player(league, row, device=device, seed=row.id)
+                        policies[row.id] = load_player(league, row, device=device, seed=mix_seed(seed, row.id))
                 pa, pb = policies[p.a_id], policies[p.b_id]
                 run_match(pa, pb, games=p.missing, first_seed=next_seed, parallel=parallel, league=league,
                           player_ids={pa.id: p.a_id, pb.id: p.b_id}, kind="tournament", on_games=tick)

@@ -9,7 +9,15 @@ import typer
 from ..errors import MarlError
 from ..league.names import Team
 from ..league.store import PlayerRow
-from ..rated.match import MatchInterrupted, MatchReport, SPRTSettings, load_player, run_match, sprt_exit_code
+from ..rated.match import (
+    MatchInterrupted,
+    MatchReport,
+    SPRTSettings,
+    load_player,
+    mix_seed,
+    run_match,
+    sprt_exit_code,
+)
 from ._common import (
     MAX_GAMES,
     MAX_PARALLEL,
@@ -28,12 +36,21 @@ from ._common import (
 from ._output import console, err_console, print_json
 
 
+def _points(mine: float, theirs: float) -> str:
+    """``points 63-41`` (pong's points); ``return +12 against -12`` where scores can be negative (summed rewards)."""
+    from ..results import format_score
+
+    if mine >= 0 and theirs >= 0:
+        return f"points {format_score(mine)}-{format_score(theirs)}"
+    return f"return {'+' * (mine > 0)}{format_score(mine)} against {'+' * (theirs > 0)}{format_score(theirs)}"
+
+
 def render_report(r: MatchReport) -> None:
     s = r.stats
     console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {r.games} games ({r.games // 2} pairs), "
                   f"{r.games_per_second:,.1f} games/s")
     console.print(f"  {r.a}: {r.wins} W  {r.draws} D  {r.losses} L   score {100 * s.score:.1f}%   "
-                  f"points {r.points_for}-{r.points_against}")
+                  f"{_points(r.points_for, r.points_against)}")
     bound = " (bound: no game lost or none won)" if s.bounded else ""
     console.print(f"  Elo difference {s.elo:+.1f}  [{100 * s.confidence:g}% CI {s.elo_low:+.1f}, {s.elo_high:+.1f}]"
                   f"{bound}   LOS {100 * s.los:.1f}%")
@@ -110,8 +127,8 @@ def match(
         side_a, side_b = resolve_players(league, [a, b], env, teams=True)
         pairs = pairings(a, side_a, b, side_b, sprt=sprt)
         for row_a, row_b in pairs:
-            pa = load_player(league, row_a, device=device)
-            pb = load_player(league, row_b, device=device, seed=1)
+            pa = load_player(league, row_a, device=device, seed=mix_seed(seed, 0))
+            pb = load_player(league, row_b, device=device, seed=mix_seed(seed, 1))
             try:
                 with progress_bar(f"{pa.id} vs {pb.id}", budget + budget % 2, "games",
                                   progress_enabled(quiet)) as tick:

@@ -7,7 +7,7 @@ from typing import Any
 
 from ..league.store import League, PlayerRow
 from ..stats.match import MatchStats, match_stats
-from .match import load_player, run_match
+from .match import load_player, mix_seed, run_match
 
 
 @dataclass(frozen=True)
@@ -56,9 +56,10 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
     penta = list(h2h["pentanomial"])
     played = 0
     if stored < games:
-        pa = load_player(league, cand, device=device)
-        pb = load_player(league, base, device=device, seed=1)
-        report = run_match(pa, pb, games=games - stored, first_seed=1_000_003 * (1 + stored), parallel=parallel,
+        first = 1_000_003 * (1 + stored)
+        pa = load_player(league, cand, device=device, seed=mix_seed(first, 0))
+        pb = load_player(league, base, device=device, seed=mix_seed(first, 1))
+        report = run_match(pa, pb, games=games - stored, first_seed=first, parallel=parallel,
                            league=league, player_ids={pa.id: cand.id, pb.id: base.id}, kind="gate")
         played = report.games
         wins, draws, losses = wins + report.wins, draws + report.draws, losses + report.losses

@@ -42,7 +42,7 @@ from ..league.store import League, PlayerRow
 from ..policies import Policy
 from ..results import GameResult, Rules, points_between
 from ..stats.elo import normal_quantile
-from .match import env_options_of, load_player
+from .match import env_options_of, load_player, mix_seed
 
 
 @dataclass(frozen=True)
@@ -193,7 +193,7 @@ def play_gauntlet(
             if row.env != env:
                 raise MarlError(f"a gauntlet plays one game: {row.full_name} plays {row.env}, not {env}")
             if row.id not in loaded:
-                loaded[row.id] = load_player(league, row, device=device, seed=row.id)
+                loaded[row.id] = load_player(league, row, device=device, seed=mix_seed(first_seed, row.id))
     ids = list(loaded)
     index = {pid: i for i, pid in enumerate(ids)}
     roster = [loaded[pid] for pid in ids]

@@ -46,6 +46,13 @@ def plays_greedy(row: PlayerRow) -> bool:
     return row.algo == "dqn"
 
 
+def mix_seed(*parts: int) -> int:
+    """A policy's sampling seed from the seeds of what it plays (a match's first seed, a player id): policies that
+    sample (PPO snapshots, random) play different moves in every match, so a deterministic game (a board game) does
+    not repeat the same games under new seeds and count them twice as evidence."""
+    return int(np.random.SeedSequence([int(p) for p in parts]).generate_state(1, np.uint64)[0] >> 1)
+
+
 def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: bool | None = None,
                 seed: int = 0) -> Policy:
     """The policy a league player stands for: a scripted bot, or a network loaded from its snapshot file, playing
