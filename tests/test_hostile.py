@@ -21,7 +21,7 @@ from safetensors.torch import save_file
 
 from selfplay_cli.cli import main
 from selfplay_cli.files import sweep, sweep_home
-from selfplay_cli.league.store import GameRecord, League, LeagueError, check_name
+from selfplay_cli.league.store import League, LeagueError, check_name
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot import (
     FORMAT,
@@ -36,6 +36,7 @@ from selfplay_cli.policies.snapshot import (
 )
 from selfplay_cli.rated.match import load_player
 from selfplay_cli.rated.snapshots import snapshot_relpath
+from selfplay_cli.results import GameResult
 
 ROOT = Path(__file__).resolve().parents[1]
 MB = 1 << 20
@@ -88,7 +89,7 @@ def make_league(home: Path, names=("s0-left", "s1M-left")) -> League:
     snaps = league.add_snapshots(rows)
     league.ensure_bots("pong", ["cpu", "random"])
     cpu = next(p for p in league.players(kind="bot") if p.name == "cpu")
-    games = [GameRecord(env="pong", players=(p.id, cpu.id)[::1 - 2 * (k % 2)], seed=k, scores=(1, 0),
+    games = [GameResult(env="pong", players=(p.id, cpu.id)[::1 - 2 * (k % 2)], seed=k, scores=(1, 0),
                         outcome=(1.0, 0.0), length=10, truncated=False) for p in snaps for k in range(4)]
     league.create_match_with_games("pong", "match", {}, games)
     return league

@@ -16,7 +16,8 @@ from selfplay_cli.league.ladder import LadderRow, fit_table, ladder, select_rows
 from selfplay_cli.league.names import resolve, resolve_many
 from selfplay_cli.league.pairs import PairPlan, head_to_head, plan_tournament
 from selfplay_cli.league.results_csv import fit_csv, read_results_csv
-from selfplay_cli.league.store import GameRecord, League, LeagueError, PlayerRow
+from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.results import GameResult
 from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, fit_bradley_terry
 from selfplay_cli.stats.elo import NAT_TO_ELO, elo_to_score, normal_quantile
 from selfplay_cli.stats.match import match_stats
@@ -40,9 +41,9 @@ def league(tmp_path: Path) -> League:
     lg.close()
 
 
-def _game(a: int, b: int, score_a: float, seed: int = 0, env: str = ENV) -> GameRecord:
+def _game(a: int, b: int, score_a: float, seed: int = 0, env: str = ENV) -> GameResult:
     scores = {1.0: (21.0, 10.0), 0.5: (15.0, 15.0), 0.0: (10.0, 21.0)}[score_a]
-    return GameRecord(env=env, players=(a, b), seed=seed, scores=scores, outcome=(score_a, 1.0 - score_a),
+    return GameResult(env=env, players=(a, b), seed=seed, scores=scores, outcome=(score_a, 1.0 - score_a),
                       length=100, truncated=False)
 
 
@@ -466,7 +467,7 @@ def test_head_to_head_pentanomial(league: League) -> None:
     bots = {p.name: p.id for p in league.players(ENV, kind="bot")}
     a, b, c = bots["cpu"], bots["random"], _snap(league, None, "other").id
 
-    def pair(seed: int, first: float, second: float) -> list[GameRecord]:
+    def pair(seed: int, first: float, second: float) -> list[GameResult]:
         """Two games of one seed: a in seat 0 scoring ``first``, then a in seat 1 scoring ``second``."""
         return [_game(a, b, first, seed), _game(b, a, 1.0 - second, seed)]
 

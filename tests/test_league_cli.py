@@ -193,7 +193,7 @@ def seed_ladder(home: Path) -> dict[str, int]:
     """A league with two runs and the pong bots; games written straight to the ledger (results chosen by hand).
 
     Returns the player ids by name."""
-    from selfplay_cli.league.store import GameRecord
+    from selfplay_cli.results import GameResult
 
     with League.open(home) as lg:
         lg.ensure_bots("pong", ["random", "cpu"])
@@ -213,7 +213,7 @@ def seed_ladder(home: Path) -> dict[str, int]:
         for x, y, wins, losses in plan:
             for score in [1.0] * wins + [0.0] * losses:
                 a, b, sa = (ids[x], ids[y], score) if k % 2 == 0 else (ids[y], ids[x], 1.0 - score)
-                games.append(GameRecord(env="pong", players=(a, b), seed=k, scores=(sa * 21, (1 - sa) * 21),
+                games.append(GameResult(env="pong", players=(a, b), seed=k, scores=(sa * 21, (1 - sa) * 21),
                                         outcome=(sa, 1.0 - sa), length=100, truncated=False))
                 k += 1
         lg.record_games(match, games)

@@ -330,7 +330,8 @@ def test_winrates_dict_round_trip() -> None:
 
 
 def test_load_win_rates_from_league(tmp_path: Path) -> None:
-    from selfplay_cli.league.store import GameRecord, League
+    from selfplay_cli.league.store import League
+    from selfplay_cli.results import GameResult
 
     lg = League.open(home=tmp_path / "league")
     try:
@@ -343,7 +344,7 @@ def test_load_win_rates_from_league(tmp_path: Path) -> None:
         games = [(learner, snaps[0], 1.0), (snaps[1], learner, 1.0), (learner, cpu, 0.5), (snaps[0], snaps[1], 0.0),
                  (learner, snaps[0], 0.0)]
         match = lg.create_match("pong", "training")
-        lg.record_games(match, [GameRecord(env="pong", players=(a, b), seed=i, scores=(s, 1 - s), outcome=(s, 1 - s),
+        lg.record_games(match, [GameResult(env="pong", players=(a, b), seed=i, scores=(s, 1 - s), outcome=(s, 1 - s),
                                            length=10, truncated=False) for i, (a, b, s) in enumerate(games)])
         got = load_win_rates(lg, "pong", [learner])
     finally:

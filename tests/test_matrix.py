@@ -13,9 +13,10 @@ import pytest
 
 from selfplay_cli.cli import main
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.store import GameRecord, League, PlayerRow
+from selfplay_cli.league.store import League, PlayerRow
 from selfplay_cli.report.matrix import build_matrix, pair_records, write_matrix_png
 from selfplay_cli.report.terminal import matrix_summary, matrix_table
+from selfplay_cli.results import GameResult
 from selfplay_cli.stats.cycles import edge_tests, holm_reject, sign_test_pvalue, three_cycles
 from selfplay_cli.stats.nash import measured_subgame, solve_zero_sum, symmetric_nash
 
@@ -135,8 +136,8 @@ def _snap(lg: League, name: str, run: str | None = None, step: int = 0) -> Playe
     return lg.add_snapshot(env=ENV, run=run, name=name, path=f"/snaps/{name}.safetensors", sha256="0" * 64, step=step)
 
 
-def _game(a: int, b: int, score_a: float, seed: int) -> GameRecord:
-    return GameRecord(env=ENV, players=(a, b), seed=seed, scores=(21.0 * score_a, 21.0 * (1 - score_a)),
+def _game(a: int, b: int, score_a: float, seed: int) -> GameResult:
+    return GameResult(env=ENV, players=(a, b), seed=seed, scores=(21.0 * score_a, 21.0 * (1 - score_a)),
                       outcome=(score_a, 1.0 - score_a), length=100, truncated=False)
 
 

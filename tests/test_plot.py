@@ -10,16 +10,17 @@ import pytest
 from selfplay_cli.cli import main
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.ladder import ladder
-from selfplay_cli.league.store import GameRecord, League, PlayerRow
+from selfplay_cli.league.store import League, PlayerRow
 from selfplay_cli.report.plots import format_steps, run_curves, write_run_plot
 from selfplay_cli.report.terminal import curves_chart, curves_summary, nice_ticks
+from selfplay_cli.results import GameResult
 
 ENV = "pong"
 BRAILLE = range(0x2800, 0x2900)
 
 
-def _game(a: int, b: int, score_a: float, seed: int) -> GameRecord:
-    return GameRecord(env=ENV, players=(a, b), seed=seed, scores=(21.0 * score_a, 21.0 * (1 - score_a)),
+def _game(a: int, b: int, score_a: float, seed: int) -> GameResult:
+    return GameResult(env=ENV, players=(a, b), seed=seed, scores=(21.0 * score_a, 21.0 * (1 - score_a)),
                       outcome=(score_a, 1.0 - score_a), length=100, truncated=False)
 
 

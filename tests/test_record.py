@@ -19,12 +19,13 @@ from selfplay_cli.arena.replay import ReplayError, decode_actions, encode_action
 from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.store import GameRecord, League
+from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
 from selfplay_cli.rated.lineup import lineup
 from selfplay_cli.record import VideoSettings, record_game, stop_rule
+from selfplay_cli.results import GameResult
 
 
 def make_snapshot(path: Path, run: str, name: str, seed: int, env_options: dict | None = None) -> Path:
@@ -188,8 +189,8 @@ def test_games_without_actions_or_that_no_longer_replay_are_refused(home, tmp_pa
         tampered = decode_actions(played.actions, 2).copy()
         tampered[:, 0] = (tampered[:, 0] + 1) % 3  # seat 0 never moves as it did
         bare, wrong = league.record_games(training, [
-            GameRecord("pong", played.players, played.seed, played.scores, played.outcome, played.length, False),
-            GameRecord("pong", played.players, played.seed, played.scores, played.outcome, played.length, False,
+            GameResult("pong", played.players, played.seed, played.scores, played.outcome, played.length, False),
+            GameResult("pong", played.players, played.seed, played.scores, played.outcome, played.length, False,
                        actions=encode_actions(tampered)),
         ])
     code, _, err = run(capsys, home, "--game", str(bare))

@@ -24,7 +24,7 @@ from selfplay_cli.league import store
 from selfplay_cli.league.models import Player
 from selfplay_cli.league.store import (
     SCHEMA_VERSION,
-    GameRecord,
+    GameResult,
     League,
     LeagueError,
     PlayerRow,
@@ -48,9 +48,9 @@ def _one_line(exc: pytest.ExceptionInfo[BaseException]) -> str:
     return msg
 
 
-def _game(a: int, b: int, score_a: float, seed: int = 0, env: str = ENV, actions: bytes | None = None) -> GameRecord:
+def _game(a: int, b: int, score_a: float, seed: int = 0, env: str = ENV, actions: bytes | None = None) -> GameResult:
     scores = {1.0: (21, 10), 0.5: (15, 15), 0.0: (10, 21)}[score_a]
-    return GameRecord(env=env, players=(a, b), seed=seed, scores=scores, outcome=(score_a, 1.0 - score_a),
+    return GameResult(env=env, players=(a, b), seed=seed, scores=scores, outcome=(score_a, 1.0 - score_a),
                       length=100 + seed, truncated=score_a == 0.5, actions=actions)
 
 
@@ -341,8 +341,8 @@ def test_record_games_is_atomic_and_validated(league: League) -> None:
         [_game(a, b, 1.0), _game(a, 999, 1.0)],  # unknown player in the last game
         [_game(a, b, 1.0), _game(a, c, 1.0)],  # player of another env
         [_game(a, b, 1.0, env="other_env")],  # env differs from the match
-        [GameRecord(ENV, (a, b), 0, (1, 0), (1.0, 1.0), 5, False)],  # outcome does not sum to 1
-        [GameRecord(ENV, (a, b), 0, (1,), (1.0, 0.0), 5, False)],  # scores per seat missing
+        [GameResult(ENV, (a, b), 0, (1, 0), (1.0, 1.0), 5, False)],  # outcome does not sum to 1
+        [GameResult(ENV, (a, b), 0, (1,), (1.0, 0.0), 5, False)],  # scores per seat missing
     ]
     for batch in bad_batches:
         with pytest.raises(LeagueError) as exc:
@@ -362,11 +362,11 @@ def test_games_table(league: League) -> None:
     a, b, c, z = (p.id for p in league.players())
     m = league.create_match(ENV, "match")
     ids = league.record_games(m, [_game(a, b, 1.0, 7, actions=b"\x01\x02"), _game(c, a, 0.5, 8), _game(b, c, 0.0, 9)])
-    three_seats = GameRecord(ENV, (a, b, c), 10, (3, 2, 1), (1.0, 0.0, 0.0), 50, False)
+    three_seats = GameResult(ENV, (a, b, c), 10, (3, 2, 1), (1.0, 0.0, 0.0), 50, False)
     self_play = _game(a, a, 1.0, 11)
     extra = league.record_games(m, [three_seats, self_play])
     m2 = league.create_match("other_env", "eval")
-    league.record_games(m2, [GameRecord("other_env", (z,), 1, (5,), (1.0,), 10, False)])
+    league.record_games(m2, [GameResult("other_env", (z,), 1, (5,), (1.0,), 10, False)])
     assert league.count_games() == 6 and league.count_games(ENV) == 5
 
     t = league.games(env=ENV)

@@ -58,7 +58,6 @@ __all__ = [
     "RESERVED_NAMES",
     "RUN_STATUSES",
     "SCHEMA_VERSION",
-    "GameRecord",
     "GameResult",
     "GameRow",
     "GameTable",
@@ -78,7 +77,3 @@ __all__ = [
 class League(Ledger, Roster, Database):
     """The league database: players, runs, matches and the game ledger (see the module docstring)."""
 
-
-GameRecord = GameResult
-"""The ledger's old name for :class:`~selfplay_cli.results.GameResult`, the one game record; kept only until the code
-outside the league's rooms that still says ``GameRecord`` (training, benchmarks, some tests) says ``GameResult``."""

@@ -268,7 +268,7 @@ class Trainer:
                                 seat=self.names[i] if len(self.names) > 1 else None,
                                 extra={"learner": self.names[i]})
             meta = save_snapshot(self.league.home / rel, learner.net, meta)  # type: ignore[operator]
-            rows.append(dict(env=self.spec.name, run=cfg.run, name=name, path=rel, sha256=meta.weights_sha256,
+            rows.append(dict(env=self.spec.name, run=cfg.run, name=name, path=rel,  # the store hashes the file
                              step=self.steps, episode=self.episodes, algo=cfg.algo, parent_id=self.latest[i] or None,
                              meta={"weights_sha256": meta.weights_sha256, "learner": self.names[i]}))
         full = [f"{cfg.run}/{n}" for n in names]
