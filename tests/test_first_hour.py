@@ -202,7 +202,7 @@ def test_bad_values_are_one_line_with_exit_code_2(args, needle, home, tmp_path, 
 def test_a_whole_float_in_a_config_is_the_whole_number(home, tmp_path, capsys):
     from selfplay_cli.train.config import TrainConfig
 
-    cfg = TrainConfig.from_dict({**TrainConfig(run="x").to_dict(), "steps": 5e6})
+    cfg = TrainConfig.from_dict({**TrainConfig(env="pong", run="x").to_dict(), "steps": 5e6})
     assert cfg.steps == 5_000_000 and isinstance(cfg.steps, int)
 
 

@@ -183,7 +183,7 @@ def test_train_flag_defaults_are_the_config_defaults():
 
     from selfplay_cli.commands.train import train
 
-    cfg, mm = TrainConfig(), MatchmakerConfig()
+    cfg, mm = TrainConfig(env="pong"), MatchmakerConfig()
     params = inspect.signature(train).parameters
     flags = {"agents": cfg.agents, "algo": cfg.algo, "sharing": cfg.sharing, "steps": cfg.steps, "seed": cfg.seed,
              "games": cfg.games, "snapshot_every": cfg.snapshot_every, "snapshot_steps": cfg.snapshot_steps,

@@ -24,7 +24,7 @@ ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 class TrainConfig:
     """Everything a run is made of; saved with the run so it can be resumed and reproduced."""
 
-    env: str = "pong"
+    env: str  # the game (a registered name, or a module:factory of your own)
     agents: int = 2
     algo: str = "ppo"
     sharing: str = "nops"
@@ -126,10 +126,12 @@ class TrainConfig:
         d.update(plain)
         if "seed" in d and not 0 <= d["seed"] < 2**32:
             raise MarlError(f"--seed must lie between 0 and {2**32 - 1}, not {d['seed']}")
+        if "env" not in d:
+            raise MarlError("the settings do not name the game (env = \"pong\", or a module:factory of your own)")
         if "env_options" in d:
             if not isinstance(d["env_options"], dict):
                 raise MarlError(f"[env_options] must be a table of game options, not {d['env_options']!r}")
-            game = get_env(str(d.get("env", cls.env)))
+            game = get_env(str(d["env"]))
             d["env_options"] = check_fields(type(game.config()), d["env_options"], where="[env_options] ")
         for key, section in sections.items():
             if key in d and not isinstance(d[key], section):
