@@ -6,7 +6,7 @@ the league and the `random` player, then plays the final snapshot 200 fresh game
 moves first in half) against `random`, and prints the run's time, steps/s, the score with W/D/L, and the ladder.
 Target (issue 13): the final snapshot scores at least 90% against random over 200 games.
 
-Run from the repository's root: python benchmarks/board_game_skill.py [--seeds 0 1 2] [--steps 3000000]
+Run from the repository's root: python benchmarks/board_game_skill.py [--seeds 0 1 2] [--steps 5000000]
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def one_seed(home: Path, seed: int, steps: int, games: int) -> float:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
-    p.add_argument("--steps", type=int, default=3_000_000)
+    p.add_argument("--steps", type=int, default=5_000_000)
     p.add_argument("--games", type=int, default=200)
     p.add_argument("--keep", type=Path, help="folder to keep the league in (default: a temporary one)")
     args = p.parse_args()

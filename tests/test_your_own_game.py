@@ -199,3 +199,61 @@ def test_new_match_seeds_give_new_games_of_a_deterministic_board_game(home, caps
     first, again, other = games("7"), games("7"), games("8")
     assert first == again
     assert sum(a != b for a, b in zip(first, other, strict=True)) >= 10
+
+
+class Race(ParallelEnv):
+    """Three runners for themselves (free-for-all by default: more than two agents): each step a runner that
+    sprints (action 1) gains a point; five steps."""
+
+    metadata = {"name": "race_v0"}
+
+    def __init__(self, **options) -> None:
+        self.possible_agents = ["r0", "r1", "r2"]
+        self.agents = list(self.possible_agents)
+
+    def observation_space(self, agent):
+        return spaces.Box(0, 1, (1,), np.float32)
+
+    def action_space(self, agent):
+        return spaces.Discrete(2)
+
+    def reset(self, seed=None, options=None):
+        self.agents, self.t = list(self.possible_agents), 0
+        return {a: np.zeros(1, np.float32) for a in self.agents}, {a: {} for a in self.agents}
+
+    def step(self, actions):
+        self.t += 1
+        obs = {a: np.full(1, self.t / 5, np.float32) for a in self.agents}
+        rew = {a: float(actions[a]) for a in self.agents}
+        done = {a: self.t >= 5 for a in self.agents}
+        if self.t >= 5:
+            self.agents = []
+        return obs, rew, done, {a: False for a in done}, {a: {} for a in done}
+
+
+def race(**options):
+    return Race(**options)
+
+
+def test_every_opponent_seat_draws_its_own_opponent(home, capsys):
+    """One learner in a three-seat free-for-all: it takes a seat in turn, and each of the two other seats of a game
+    is drawn on its own by the matchmaker (here: random half the time, else the league's snapshots or the learner
+    itself), so games with two different opponents exist; free-for-all results are pairwise."""
+    from selfplay_cli.league.store import League
+
+    report = run_json(capsys, "train", "tests.test_your_own_game:race", "--agents", "1", "--bots", "random=0.5",
+                      "--steps", "2000", "--snapshot-steps", "1000", "--games", "16", "--eval-games", "2",
+                      "--run", "ffa")
+    assert [f["snapshot"] for f in report["final"]] == ["ffa/s2k"]
+    league = League.open(home=home)
+    try:
+        seen = 0
+        for gid in range(1, league.count_games() + 1):
+            g = league.game(gid)
+            if g.match_kind == "training":  # the learner and two opponents: random, or a snapshot, or itself
+                seen += [league.get_player(p).name for p in g.players].count("random") == 1
+        # with one opponent a game, both opponent seats would be random or neither
+        assert seen > 0, "two opponent seats of one game drawn apart"
+        assert league.games(env="tests.test_your_own_game:race").games_played() > 0  # pairwise rated results
+    finally:
+        league.close()
