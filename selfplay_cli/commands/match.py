@@ -46,16 +46,26 @@ def _points(mine: float, theirs: float) -> str:
 
 
 def render_report(r: MatchReport) -> None:
+    from ..results import COOPERATIVE
+
     s = r.stats
-    console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {r.games} games ({r.games // 2} pairs), "
-                  f"{r.games_per_second:,.1f} games/s")
-    console.print(f"  {r.a}: {r.wins} W  {r.draws} D  {r.losses} L   score {100 * s.score:.1f}%   "
-                  f"{_points(r.points_for, r.points_against)}")
+    coop = r.kind == COOPERATIVE
+    unit = f"{r.games // 2} comparisons: each flies the same seeds" if coop else f"{r.games // 2} pairs"
+    console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {r.games} games ({unit}), {r.games_per_second:,.1f} games/s")
+    if coop:  # a result is one comparison of team returns on one seed; the returns per game read best as means
+        half = max(r.games // 2, 1)
+        shown = f"mean team return {r.points_for / half:.2f} against {r.points_against / half:.2f}"
+    else:
+        shown = _points(r.points_for, r.points_against)
+    console.print(f"  {r.a}: {r.wins} W  {r.draws} D  {r.losses} L   score {100 * s.score:.1f}%   {shown}")
     bound = " (bound: no game lost or none won)" if s.bounded else ""
     console.print(f"  Elo difference {s.elo:+.1f}  [{100 * s.confidence:g}% CI {s.elo_low:+.1f}, {s.elo_high:+.1f}]"
                   f"{bound}   LOS {100 * s.los:.1f}%")
-    console.print(f"  pairs (LL LD WL+DD WD WW): {' '.join(map(str, r.pentanomial))}"
-                  + (f"   truncated games: {r.truncated}" if r.truncated else ""))
+    if sum(r.pentanomial):  # game pairs: two-sides games only
+        console.print(f"  pairs (LL LD WL+DD WD WW): {' '.join(map(str, r.pentanomial))}"
+                      + (f"   truncated games: {r.truncated}" if r.truncated else ""))
+    elif r.truncated:
+        console.print(f"  truncated games: {r.truncated} (cut by the game's time limit, decided by the score)")
     if r.sprt:
         t = r.sprt
         verdict = {"H1": "H1 accepted", "H0": "H0 accepted"}.get(t["decision"], "undecided (--max-games reached)")
