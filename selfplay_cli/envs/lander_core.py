@@ -1,0 +1,426 @@
+"""The lander game's batched core: N games, one Box2D world each, stepped in one process.
+
+Everything that is not a call into Box2D is done once per step for all landers of all games with numpy (actions to
+engine powers, dispersion to impulses, positions to observations and rewards, endings); what is left in Python is
+one loop over the landers that fire (one impulse call each), one ``Step`` per running world and one loop reading
+each flying lander's position, velocity, angle, spin and sleep. The arithmetic is gymnasium's, operation for
+operation, so a one-lander game is gymnasium's ``LunarLander-v3`` game for the same seed.
+
+Layout: seats (landers) lead, games follow: a lander is ``(seat, game)``, flat index ``k = seat * n + game``.
+Randomness: each game has its own ``numpy.random.Generator`` seeded by the game's seed (as gymnasium seeds its
+own), so a game plays the same alone or in a batch. Draws per game, in gymnasium's order: the terrain (12), each
+lander's initial force (2 each), the wind's phases (2, with wind), then at every step 2 dispersion values per
+lander (drawn for every lander, flying or not).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import Box2D
+import numpy as np
+from Box2D.b2 import edgeShape, fixtureDef, polygonShape, revoluteJointDef
+
+from .lander import (
+    CHUNKS,
+    CRASHED,
+    FLYING,
+    FPS,
+    HELIPAD_Y,
+    INITIAL_RANDOM,
+    LANDED,
+    LANDER_POLY,
+    LEG_AWAY,
+    LEG_DOWN,
+    LEG_H,
+    LEG_SPRING_TORQUE,
+    LEG_W,
+    MAIN_ENGINE_POWER,
+    MAIN_ENGINE_Y_LOCATION,
+    N_FEATURES,
+    OBS_HIGH,
+    OBS_LOW,
+    OUT,
+    SCALE,
+    SIDE_ENGINE_AWAY,
+    SIDE_ENGINE_HEIGHT,
+    SIDE_ENGINE_POWER,
+    VIEWPORT_H,
+    VIEWPORT_W,
+    H,
+    LanderConfig,
+    W,
+)
+
+# Collision categories: the moon is Box2D's default 0x0001; landers collide with the moon and each other
+BODY_BITS, LEG_BITS = 0x0010, 0x0020
+_COLLIDE = 0x0001 | BODY_BITS | LEG_BITS
+_TIME_STEP, _VEL_ITERS, _POS_ITERS = 1.0 / FPS, 6 * 30, 2 * 30
+
+# gymnasium's observation constants, kept as its expressions evaluate them
+_X_HALF = VIEWPORT_W / SCALE / 2
+_Y_ZERO = HELIPAD_Y + LEG_DOWN / SCALE
+_Y_HALF = VIEWPORT_H / SCALE / 2
+_MAIN_Y = MAIN_ENGINE_Y_LOCATION / SCALE
+_LOW64, _HIGH64 = OBS_LOW.astype(np.float64), OBS_HIGH.astype(np.float64)
+_LOW64[6:] = 0.0  # +0.0: a leg off the ground reads 0, not -0
+_POLY = [(x / SCALE, y / SCALE) for x, y in LANDER_POLY]
+
+
+def seed_generator(seed: int) -> np.random.Generator:
+    """A game's generator: ``default_rng(seed)`` (gymnasium's seeding); a negative seed wraps to 64 bits."""
+    return np.random.default_rng(int(seed) % (1 << 64))
+
+
+class _Contacts(Box2D.b2ContactListener):
+    """Box2D's contact callbacks for one world, written into the core's arrays.
+
+    A body's ``userData`` is ``3 * k + part`` (part 0 the lander body, 1 and 2 its legs) for lander ``k``, None for
+    the moon. A lander body touching anything crashes it; a leg touching the moon counts as a ground contact (a
+    count, so a leg on two terrain edges at once stays in contact until it leaves both; with ``flag``, gymnasium's
+    flag, set by any contact beginning and cleared by any ending)."""
+
+    def __init__(self, crashed: np.ndarray, legs: np.ndarray, flag: bool = False) -> None:
+        super().__init__()
+        self.crashed, self.legs, self.flag = crashed, legs, flag
+
+    def _touch(self, code: Any, other: Any, delta: int) -> None:
+        k, part = divmod(code, 3)
+        if part == 0:
+            if delta > 0:
+                self.crashed[k] = True
+        elif other is None:
+            if self.flag:
+                self.legs[k, part - 1] = delta > 0
+            else:
+                self.legs[k, part - 1] += delta
+
+    def BeginContact(self, contact: Any) -> None:  # noqa: N802 (Box2D's name)
+        a, b = contact.fixtureA.body.userData, contact.fixtureB.body.userData
+        if a is not None:
+            self._touch(a, b, 1)
+        if b is not None:
+            self._touch(b, a, 1)
+
+    def EndContact(self, contact: Any) -> None:  # noqa: N802
+        a, b = contact.fixtureA.body.userData, contact.fixtureB.body.userData
+        if a is not None and b is None:
+            self._touch(a, b, -1)
+        elif b is not None and a is None:
+            self._touch(b, a, -1)
+
+
+class LanderWorld:
+    """One game's Box2D world: the moon, the landers (body, two legs each) and the game's generator."""
+
+    def __init__(self, cfg: LanderConfig, seed: int, ks: list[int], crashed: np.ndarray, legs: np.ndarray) -> None:
+        self.rng = rng = seed_generator(seed)
+        self.world = world = Box2D.b2World(gravity=(0, cfg.gravity))
+        self.listener = _Contacts(crashed, legs, cfg.gym_leg_contact)
+        world.contactListener = self.listener
+        # The moon: gymnasium's terrain
+        height = rng.uniform(0, H / 2, size=(CHUNKS + 1,))
+        chunk_x = [W / (CHUNKS - 1) * i for i in range(CHUNKS)]
+        self.helipad_x1, self.helipad_x2 = chunk_x[CHUNKS // 2 - 1], chunk_x[CHUNKS // 2 + 1]
+        self.helipad_y = HELIPAD_Y
+        height[CHUNKS // 2 - 2 : CHUNKS // 2 + 3] = HELIPAD_Y
+        smooth_y = [0.33 * (height[i - 1] + height[i + 0] + height[i + 1]) for i in range(CHUNKS)]
+        self.moon = world.CreateStaticBody(shapes=edgeShape(vertices=[(0, 0), (W, 0)]))
+        self.terrain = [(chunk_x[i], smooth_y[i]) for i in range(CHUNKS)]
+        for i in range(CHUNKS - 1):
+            self.moon.CreateEdgeFixture(vertices=[self.terrain[i], self.terrain[i + 1]], density=0, friction=0.1)
+        # The landers, spread across the top; each pushed by its own random force
+        n = len(ks)
+        self.bodies, self.legs = [], []
+        starts = [((i + 1) / (n + 1) * W, VIEWPORT_H / SCALE) for i in range(n)]
+        for (x, y), k in zip(starts, ks, strict=True):
+            body = world.CreateDynamicBody(
+                position=(x, y), angle=0.0,
+                fixtures=fixtureDef(shape=polygonShape(vertices=_POLY), density=5.0, friction=0.1,
+                                    categoryBits=BODY_BITS, maskBits=_COLLIDE, restitution=0.0))
+            body.userData = 3 * k
+            body.ApplyForceToCenter((rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM),
+                                     rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM)), True)
+            self.bodies.append(body)
+        if cfg.enable_wind:  # gymnasium's wind phases; each lander keeps its own count of windy steps
+            wind_idx, torque_idx = int(rng.integers(-9999, 9999)), int(rng.integers(-9999, 9999))
+            self.wind_idx, self.torque_idx = [wind_idx] * n, [torque_idx] * n
+        for body, k, (x, y) in zip(self.bodies, ks, starts, strict=True):
+            pair = []
+            for j, i in enumerate((-1, +1)):
+                leg = world.CreateDynamicBody(
+                    position=(x - i * LEG_AWAY / SCALE, y), angle=i * 0.05,
+                    fixtures=fixtureDef(shape=polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE)), density=1.0,
+                                        restitution=0.0, categoryBits=LEG_BITS, maskBits=_COLLIDE))
+                leg.userData = 3 * k + 1 + j
+                rjd = revoluteJointDef(bodyA=body, bodyB=leg, localAnchorA=(0, 0),
+                                       localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE), enableMotor=True,
+                                       enableLimit=True, maxMotorTorque=LEG_SPRING_TORQUE, motorSpeed=+0.3 * i)
+                rjd.lowerAngle, rjd.upperAngle = (0.9 - 0.5, 0.9) if i == -1 else (-0.9, -0.9 + 0.5)
+                world.CreateJoint(rjd)
+                pair.append(leg)
+            self.legs.append(pair)
+
+    def retire(self, i: int, lost: bool) -> None:
+        """Lander i has crashed (a wreck that falls to the moon, touching no lander again) or is lost (out of
+        bounds: it leaves the world)."""
+        for part in (self.bodies[i], *self.legs[i]):
+            if lost:
+                part.active = False
+            else:
+                fixture = part.fixtures[0]
+                f = fixture.filterData
+                f.maskBits = 0x0001
+                fixture.filterData = f
+
+    def close(self) -> None:
+        self.world.contactListener = None  # nothing calls back into the core while the world is torn down
+
+
+class LanderCore:
+    """N lander games stepped at once (the :class:`~selfplay_cli.envs.registry.BatchedCore` protocol).
+
+    ``actions[seat]``: ``(n,)`` ints in 0..3, or ``(n, 2)`` floats with ``continuous``. A lander that has ended
+    and every lander of a finished game are ignored. ``result`` ``(n_seats, n)`` says how each lander ended
+    (:data:`~selfplay_cli.envs.lander.FLYING`, ``LANDED``, ``CRASHED``, ``OUT``). The core never resets a game by
+    itself: a finished game stands still, keeping its score, until :meth:`reset`.
+    """
+
+    def __init__(self, n_games: int, config: LanderConfig | None = None) -> None:
+        if n_games < 1:
+            raise ValueError(f"n_games must be at least 1, not {n_games}")
+        self.config = cfg = config or LanderConfig()
+        self.n = n = int(n_games)
+        self.n_seats = L = cfg.landers
+        self.continuous = cfg.continuous
+        self.terminated = np.zeros(n, dtype=bool)
+        self.truncated = np.zeros(n, dtype=bool)
+        self.over = np.zeros(n, dtype=bool)  # finished games (stand still until reset)
+        self.score = np.zeros((L, n))
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.alive = np.zeros((L, n), dtype=bool)  # landers still in play
+        self.result = np.zeros((L, n), dtype=np.int8)
+        self.state = np.zeros((L, n, N_FEATURES))  # gymnasium's state (float64, unclipped)
+        self._shaping = np.zeros((L, n))
+        self._pos = np.zeros((2, L, n))  # Box2D's position and angle of each lander after the last step
+        self._angle = np.zeros((L, n))
+        self._crashed = np.zeros(L * n, dtype=bool)  # written by the contact listeners
+        self._legs = np.zeros((L * n, 2), dtype=np.int32)
+        self._disp = np.zeros((n, L, 2))  # this step's uniform draws, per game in draw order
+        self.main_power = np.zeros((L, n))  # the engines' powers of the last step (for the renderer)
+        self.side_power = np.zeros((L, n))
+        self.side_dir = np.zeros((L, n))
+        self.worlds: list[LanderWorld | None] = [None] * n
+        self._bodies: list[Any] = [None] * (L * n)
+        self._zero = np.zeros((L, n))
+        self.reset(np.arange(n), np.arange(n))
+
+    # ----------------------------------------------------------------------------------------------------
+    def reset(self, games: Any, seeds: Any) -> None:
+        """New games in the slots ``games`` with the given seeds (each with gymnasium's opening no-op step)."""
+        g = np.asarray(games, dtype=np.int64).reshape(-1)
+        s = np.asarray(seeds, dtype=np.int64).reshape(-1)
+        if g.size == 0:
+            return
+        if g.size != s.size:
+            raise ValueError(f"{g.size} games but {s.size} seeds")
+        n, L = self.n, self.n_seats
+        for game, seed in zip(g.tolist(), s.tolist(), strict=True):
+            ks = [seat * n + game for seat in range(L)]
+            self._crashed[ks] = False
+            self._legs[ks] = 0
+            old = self.worlds[game]
+            if old is not None:
+                old.close()
+            w = LanderWorld(self.config, seed, ks, self._crashed, self._legs)
+            self.worlds[game] = w
+            for seat, body in enumerate(w.bodies):
+                self._bodies[seat * n + game] = body
+                x, y = body.position
+                self._pos[0, seat, game], self._pos[1, seat, game] = x, y
+                self._angle[seat, game] = body.angle
+        self.score[:, g] = 0.0
+        self.steps[g] = 0
+        self.terminated[g] = self.truncated[g] = self.over[g] = False
+        self.result[:, g] = FLYING
+        live = np.zeros((L, n), dtype=bool)
+        live[:, g] = True
+        self.alive[:, g] = True
+        self._advance(live, g.tolist(), self._zero, self._zero, self._zero, first=True)
+
+    # ----------------------------------------------------------------------------------------------------
+    def _powers(self, actions: Any, live: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The main engine's power, the side engine's power and its direction per lander, ``(L, n)`` each."""
+        L, n = self.n_seats, self.n
+        if self.continuous:
+            a = np.asarray(actions, dtype=np.float64)
+            if a.shape != (L, n, 2):
+                a = a.reshape(L, n, 2)
+            bad = ~np.isfinite(a).all(axis=2) & live
+            if bad.any():
+                seat, game = np.argwhere(bad)[0]
+                from .registry import IllegalActionError
+
+                raise IllegalActionError(seat, game, a[seat, game].tolist(), "not a finite number")
+            a = np.clip(a, -1.0, 1.0)
+            m, lat = a[..., 0], a[..., 1]
+            main = np.where(m > 0.0, (np.clip(m, 0.0, 1.0) + 1.0) * 0.5, 0.0)
+            absl = np.abs(lat)
+            side = np.where(absl > 0.5, np.clip(absl, 0.5, 1.0), 0.0)
+            direction = np.sign(lat)
+        else:
+            a = np.asarray(actions)
+            if a.shape != (L, n):
+                a = a.reshape(L, n)
+            bad = ((a < 0) | (a > 3) | (a != np.floor(a))) & live
+            if bad.any():
+                seat, game = np.argwhere(bad)[0]
+                from .registry import IllegalActionError
+
+                raise IllegalActionError(seat, game, a[seat, game].item(), "outside Discrete(4)")
+            main = (a == 2).astype(np.float64)
+            side = ((a == 1) | (a == 3)).astype(np.float64)
+            direction = a - 2.0
+        scale = self.config.engine_scale
+        if scale != 1.0:
+            main, side = main * scale, side * scale
+        return main * live, side * live, direction
+
+    def step(self, actions: Any) -> np.ndarray:
+        """One step of every running game; the rewards ``(n_seats, n)`` float32 (0 for landers not in play)."""
+        running = ~self.over
+        live = self.alive & running
+        main, side, direction = self._powers(actions, live)
+        games = np.flatnonzero(running).tolist()
+        reward = self._advance(live, games, main, side, direction)
+        self.score += reward
+        self.steps[running] += 1
+        ended = running & ~self.alive.any(axis=0)
+        self.terminated[:] = ended
+        np.greater_equal(self.steps, self.config.max_steps, out=self.truncated)
+        self.truncated &= running & ~ended
+        self.over |= self.terminated | self.truncated
+        return reward.astype(np.float32)
+
+    def _advance(self, live: np.ndarray, games: list[int], main: np.ndarray, side: np.ndarray,
+                 direction: np.ndarray, first: bool = False) -> np.ndarray:
+        """Fire the engines of the ``live`` landers, step the worlds ``games``, read the landers back, and score
+        them (gymnasium's step, for all at once). Returns the rewards ``(L, n)`` (zero where not live)."""
+        cfg, n, bodies, worlds = self.config, self.n, self._bodies, self.worlds
+        disp = self._disp
+        for g in games:  # 2 draws per lander, in lander order: gymnasium's two per step for one lander
+            worlds[g].rng.random(out=disp[g])
+        d = (disp * 2.0 - 1.0) / SCALE
+        d0, d1 = d[..., 0].T, d[..., 1].T  # (L, n)
+        tip0, tip1 = np.sin(self._angle), np.cos(self._angle)
+        side0, side1 = -tip1, tip0
+        x, y = self._pos
+        fire = np.flatnonzero(main.ravel())
+        if fire.size:  # main engine: gymnasium's impulse, 4 px below the centre, +-2 for randomness
+            t = _MAIN_Y + 2 * d0
+            ox = tip0 * t + side0 * d1
+            oy = -tip1 * t - side1 * d1
+            args = np.stack([-ox * MAIN_ENGINE_POWER * main, -oy * MAIN_ENGINE_POWER * main, x + ox, y + oy])
+            for k, (fx, fy, px, py) in zip(fire.tolist(), args.reshape(4, -1)[:, fire].T.tolist(), strict=True):
+                bodies[k].ApplyLinearImpulse((fx, fy), (px, py), True)
+        fire_side = np.flatnonzero(side.ravel())
+        if fire_side.size:  # side engines (gymnasium's 17 px lever, not SIDE_ENGINE_HEIGHT, kept as it is)
+            u = 3 * d1 + direction * SIDE_ENGINE_AWAY / SCALE
+            ox = tip0 * d0 + side0 * u
+            oy = -tip1 * d0 - side1 * u
+            args = np.stack([-ox * SIDE_ENGINE_POWER * side, -oy * SIDE_ENGINE_POWER * side,
+                             x + ox - tip0 * 17 / SCALE, y + oy + tip1 * SIDE_ENGINE_HEIGHT / SCALE])
+            for k, (fx, fy, px, py) in zip(fire_side.tolist(), args.reshape(4, -1)[:, fire_side].T.tolist(),
+                                           strict=True):
+                bodies[k].ApplyLinearImpulse((fx, fy), (px, py), True)
+        if cfg.enable_wind:
+            self._wind(live)
+        for g in games:
+            worlds[g].world.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
+        # Read the flying landers back
+        ks = np.flatnonzero(live.ravel())
+        vals: list[float] = []
+        ext = vals.extend
+        for k in ks.tolist():
+            b = bodies[k]
+            p, v = b.position, b.linearVelocity
+            ext((p.x, p.y, v.x, v.y, b.angle, b.angularVelocity, b.awake))
+        r = np.array(vals).reshape(-1, 7)
+        seat, game = np.divmod(ks, n)
+        self._pos[0, seat, game] = r[:, 0]
+        self._pos[1, seat, game] = r[:, 1]
+        self._angle[seat, game] = r[:, 4]
+        legs = self._legs[ks] > 0
+        s = np.empty((len(ks), N_FEATURES))
+        s[:, 0] = (r[:, 0] - _X_HALF) / _X_HALF
+        s[:, 1] = (r[:, 1] - _Y_ZERO) / _Y_HALF
+        s[:, 2] = r[:, 2] * _X_HALF / FPS
+        s[:, 3] = r[:, 3] * _Y_HALF / FPS
+        s[:, 4] = r[:, 4]
+        s[:, 5] = 20.0 * r[:, 5] / FPS
+        s[:, 6:] = legs
+        self.state[seat, game] = s
+        shaping = (-100 * np.sqrt(s[:, 0] * s[:, 0] + s[:, 1] * s[:, 1])
+                   - 100 * np.sqrt(s[:, 2] * s[:, 2] + s[:, 3] * s[:, 3])
+                   - 100 * np.abs(s[:, 4]) + 10 * s[:, 6] + 10 * s[:, 7])
+        mp, sp = main[seat, game], side[seat, game]
+        rew = shaping - self._shaping[seat, game]
+        rew -= mp * 0.30
+        rew -= sp * 0.03
+        self._shaping[seat, game] = shaping
+        reward = np.zeros_like(self._zero)
+        if first:  # gymnasium's reset step: it sets the shaping, its reward is not given
+            self.main_power[:, games] = self.side_power[:, games] = 0.0
+            return reward
+        self.main_power[:] = main
+        self.side_power[:] = side
+        self.side_dir[:] = direction
+        crashed = self._crashed[ks] | (np.abs(s[:, 0]) >= 1.0)
+        rest = r[:, 6] == 0.0
+        rew[crashed] = -100.0
+        rew[rest] = +100.0
+        reward[seat, game] = rew
+        done = crashed | rest
+        if done.any():
+            ds, dg = seat[done], game[done]
+            self.alive[ds, dg] = False
+            code = np.where(rest[done], LANDED, np.where(np.abs(s[done, 0]) >= 1.0, OUT, CRASHED))
+            self.result[ds, dg] = code
+            for i, g, c in zip(ds.tolist(), dg.tolist(), code.tolist(), strict=True):
+                if c != LANDED:
+                    worlds[g].retire(i, c == OUT)
+        return reward
+
+    def _wind(self, live: np.ndarray) -> None:
+        """gymnasium's wind and turbulence on each live lander whose legs are off the ground (math's tanh, as
+        gymnasium's: numpy's differs in the last bit)."""
+        cfg, n = self.config, self.n
+        touching = self._legs.reshape(-1, 2).any(axis=1)
+        for k in np.flatnonzero(live.ravel() & ~touching).tolist():
+            seat, g = divmod(k, n)
+            w = self.worlds[g]
+            i, j = w.wind_idx[seat], w.torque_idx[seat]
+            wind = math.tanh(math.sin(0.02 * i) + math.sin(math.pi * 0.01 * i)) * cfg.wind_power
+            torque = math.tanh(math.sin(0.02 * j) + math.sin(math.pi * 0.01 * j)) * cfg.turbulence_power
+            w.wind_idx[seat], w.torque_idx[seat] = i + 1, j + 1
+            body = self._bodies[k]
+            body.ApplyForceToCenter((wind, 0.0), True)
+            body.ApplyTorque(torque, True)
+
+    # ----------------------------------------------------------------------------------------------------
+    def observe(self) -> np.ndarray:
+        """Each lander's 8 values ``(n_seats, n, 8)`` float32, clipped to the declared bounds; a lander that has
+        ended shows its last observation."""
+        return np.clip(self.state, _LOW64, _HIGH64).astype(np.float32)
+
+    def action_masks(self) -> list[None]:
+        return [None] * self.n_seats
+
+    def to_act(self) -> np.ndarray:
+        """``(n_seats, n)``: the landers still flying in running games."""
+        return self.alive & ~self.over
+
+    def team_return(self) -> np.ndarray:
+        """``(n,)``: each game's team return so far (the sum of the landers' scores)."""
+        return self.score.sum(axis=0)

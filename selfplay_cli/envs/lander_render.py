@@ -1,0 +1,147 @@
+"""Offscreen pygame renderer for the lander game (no window, no display, no audio): gymnasium's picture (black sky,
+white moon, yellow flags, purple landers) with every lander in its own colour, engine flames, and how each ended.
+
+The surface is 24-bit with its channel masks set so that its memory is a row-major ``(400, 600, 3)`` RGB array (as
+pong's renderer): a frame leaves it as one copy.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from .lander import CRASHED, FLYING, LANDED, SCALE, VIEWPORT_H, VIEWPORT_W
+from .lander_core import LanderCore
+
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+BLACK, WHITE, GREY = (0, 0, 0), (255, 255, 255), (150, 150, 150)
+FLAG, POLE = (204, 204, 0), (255, 255, 255)
+FLAME, WRECK, OUTLINE = (255, 140, 0), (110, 110, 110), (77, 77, 128)
+LANDED_MARK = (60, 200, 90)
+_TEXT_CACHE_SIZE = 256
+
+
+PALETTE = ((128, 102, 230), (230, 126, 34), (46, 204, 113), (52, 152, 219), (231, 76, 60), (241, 196, 15),
+           (26, 188, 156), (236, 100, 180))
+
+
+def lander_colour(seat: int) -> tuple[int, int, int]:
+    """gymnasium's lander purple for seat 0, a distinct hue for each other seat."""
+    return PALETTE[seat % len(PALETTE)]
+
+
+def _screen(x: float, y: float) -> tuple[float, float]:
+    """World metres to pixels, y pointing down."""
+    return x * SCALE, VIEWPORT_H - y * SCALE
+
+
+class LanderRenderer:
+    """Draws one game of a :class:`LanderCore` into an RGB array ``(400, 600, 3)`` uint8.
+
+    ``labels``: the players' names by seat (shown top left, one line per distinct name with its seats);
+    ``caption``: a line at the bottom (the recorder puts the step there). Each call returns a new array."""
+
+    def __init__(self) -> None:
+        import pygame
+
+        pygame.font.init()
+        self._pg = pygame
+        self.size = (VIEWPORT_W, VIEWPORT_H)
+        self.surface = pygame.Surface(self.size, 0, 24, (0x0000FF, 0x00FF00, 0xFF0000, 0))
+        self._direct = self._memory_is_rgb()
+        self.font = pygame.font.Font(None, 22)
+        self._texts: dict[tuple[str, tuple[int, int, int]], object] = {}
+
+    def _memory_is_rgb(self) -> bool:
+        self.surface.fill((1, 2, 3))
+        return bool((self._view_copy()[0, 0] == (1, 2, 3)).all())
+
+    def _view_copy(self) -> np.ndarray:
+        rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(VIEWPORT_H, self.surface.get_pitch())
+        return rows[:, : VIEWPORT_W * 3].reshape(VIEWPORT_H, VIEWPORT_W, 3).copy()
+
+    def _text(self, text: str, colour: tuple[int, int, int], cache: bool = True):
+        key = (text, colour)
+        img = self._texts.get(key)
+        if img is None:
+            img = self.font.render(text, True, colour, BLACK)
+            if cache:
+                if len(self._texts) >= _TEXT_CACHE_SIZE:
+                    self._texts.clear()
+                self._texts[key] = img
+        return img
+
+    def draw(self, core: LanderCore, game: int = 0, labels: tuple[str, ...] | None = None,
+             caption: str | None = None) -> np.ndarray:
+        pg, surf = self._pg, self.surface
+        world = core.worlds[game]
+        surf.fill(WHITE)
+        # the sky above the terrain, black (the moon is what stays white)
+        ground = [_screen(x, y) for x, y in world.terrain]
+        pg.draw.polygon(surf, BLACK, [(0, 0), (VIEWPORT_W, 0), *reversed(ground)])
+        for x in (world.helipad_x1, world.helipad_x2):
+            px, py = _screen(x, world.helipad_y)
+            pg.draw.line(surf, POLE, (px, py), (px, py - 50))
+            pg.draw.polygon(surf, FLAG, [(px, py - 50), (px, py - 40), (px + 25, py - 45)])
+        wrecks = [s for s in range(core.n_seats) if core.result[s, game] not in (FLYING, LANDED)]
+        for seat in wrecks + [s for s in range(core.n_seats) if s not in wrecks]:  # wrecks under the others
+            self._lander(core, world, seat, game)
+        self._hud(core, game, labels, caption)
+        if self._direct:
+            return self._view_copy()
+        return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(VIEWPORT_H, VIEWPORT_W, 3).copy()
+
+    def _lander(self, core: LanderCore, world, seat: int, game: int) -> None:
+        pg, surf = self._pg, self.surface
+        result = int(core.result[seat, game])
+        colour = WRECK if result not in (FLYING, LANDED) else lander_colour(seat)
+        body = world.bodies[seat]
+        for part in (*world.legs[seat], body):
+            t = part.transform
+            path = [_screen(*(t * v)) for v in part.fixtures[0].shape.vertices]
+            pg.draw.polygon(surf, colour, path)
+            pg.draw.polygon(surf, OUTLINE, path, 1)
+        x, y = body.position
+        a = body.angle
+        tip, side = (math.sin(a), math.cos(a)), (-math.cos(a), math.sin(a))
+        if result == FLYING and core.alive[seat, game] and not core.over[game]:
+            main = core.main_power[seat, game]
+            if main > 0:  # a flame below the body, as long as the throttle
+                length = 0.5 + 0.4 * min(main, 2.0)
+                base = (x - tip[0] * 0.35, y - tip[1] * 0.35)
+                end = (base[0] - tip[0] * length, base[1] - tip[1] * length)
+                w = (side[0] * 0.15, side[1] * 0.15)
+                pg.draw.polygon(surf, FLAME, [_screen(base[0] + w[0], base[1] + w[1]),
+                                              _screen(base[0] - w[0], base[1] - w[1]), _screen(*end)])
+            if core.side_power[seat, game] > 0:  # a puff on the side opposite to the push
+                d = core.side_dir[seat, game]
+                cx, cy = x - side[0] * d * 0.65 + tip[0] * 0.4, y - side[1] * d * 0.65 + tip[1] * 0.4
+                end = (cx - side[0] * d * 0.35, cy - side[1] * d * 0.35)
+                pg.draw.line(surf, FLAME, _screen(cx, cy), _screen(*end), 4)
+        if result == LANDED:
+            px, py = _screen(x, y)
+            pg.draw.circle(surf, LANDED_MARK, (round(px), round(py) - 28), 4)
+        elif result == CRASHED:
+            px, py = _screen(x, y)
+            c = (round(px), round(py))
+            pg.draw.line(surf, (220, 40, 40), (c[0] - 6, c[1] - 6), (c[0] + 6, c[1] + 6), 3)
+            pg.draw.line(surf, (220, 40, 40), (c[0] - 6, c[1] + 6), (c[0] + 6, c[1] - 6), 3)
+
+    def _hud(self, core: LanderCore, game: int, labels: tuple[str, ...] | None, caption: str | None) -> None:
+        surf = self.surface
+        team = self._text(f"team {core.score[:, game].sum():+.1f}", WHITE, cache=False)
+        surf.blit(team, (VIEWPORT_W - team.get_width() - 8, 6))
+        if labels:
+            seats: dict[str, list[int]] = {}
+            for s, name in enumerate(labels):
+                seats.setdefault(str(name), []).append(s)
+            for row, (name, ss) in enumerate(list(seats.items())[:8]):
+                img = self._text(f"{name} ({', '.join(map(str, ss))})" if len(seats) > 1 else name, GREY)
+                surf.blit(img, (8, 6 + 18 * row))
+        if caption:
+            c = self._text(caption, GREY, cache=False)
+            surf.blit(c, (VIEWPORT_W // 2 - c.get_width() // 2, 6))
