@@ -335,7 +335,7 @@ def test_names_that_are_not_games_each_get_one_clear_error():
             get_env(name)
         assert why in str(e.value), (name, str(e.value))
         assert "\n" not in str(e.value)
-    with pytest.raises(UnknownEnvError, match="unknown env 'pongg'; registered: pong"):
+    with pytest.raises(UnknownEnvError, match="unknown env 'pongg'; registered: lander, pong"):
         get_env("pongg")
 
 

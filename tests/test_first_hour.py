@@ -430,3 +430,16 @@ def test_options_that_a_resumed_run_would_ignore_are_refused(home, capsys):
     one_line_error(*run(capsys, "train", "--resume", "r", "--minutes", "0.1", "--games", "8"),
                    "--resume continues run 'r' under the configuration it was started with: --games, --minutes "
                    "cannot change it")
+
+
+def test_scripted_players_named_alone_find_their_game(home, capsys):
+    """With several games registered, `marl match A B` of scripted players finds the one game that has them both;
+    names several games share ask for --env in one line."""
+    code, out, err = run(capsys, "match", "random", "heuristic", "--games", "2", "--no-store", "--json")
+    assert code == 0, err
+    assert json.loads(out)["env"] == "lander"
+    code, out, err = run(capsys, "match", "cpu", "random", "--games", "2", "--no-store", "--json")
+    assert code == 0 and json.loads(out)["env"] == "pong", err
+    one_line_error(*run(capsys, "match", "random", "random", "--no-store"), "several games (lander, pong): say which "
+                   "with --env")
+    one_line_error(*run(capsys, "match", "heuristic", "cpu", "--no-store"), "heuristic plays lander but cpu plays pong")

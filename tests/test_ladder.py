@@ -342,14 +342,14 @@ def test_ladder_env_choice_and_default_anchor(league: League) -> None:
     _snap(league, None, "c")  # no games
     _record(league, _results(s1.id, cpu.id, 3, 0, 1) + _results(s1.id, s2.id, 2, 0, 2))
     assert _by_name(ladder(league, bootstrap=0))["cpu"].anchor
-    lander = "lander"
-    t1, t2 = _snap(league, None, "t1", env=lander), _snap(league, None, "t2", env=lander)
-    _snap(league, None, "t3", env=lander)
-    _record(league, _results(t1.id, t2.id, 2, 1, 1), env=lander)
+    other = "othergame"  # a second two-seat game (not registered: the ledger keeps games of any name)
+    t1, t2 = _snap(league, None, "t1", env=other), _snap(league, None, "t2", env=other)
+    _snap(league, None, "t3", env=other)
+    _record(league, _results(t1.id, t2.id, 2, 1, 1), env=other)
     with pytest.raises(LeagueError) as exc:
         ladder(league)
-    assert "several envs in the league (pong, lander): pass --env" in _one_line(exc)
-    rows = ladder(league, env=lander, bootstrap=0)
+    assert "several envs in the league (pong, othergame): pass --env" in _one_line(exc)
+    rows = ladder(league, env=other, bootstrap=0)
     assert {r.policy for r in rows} == {"t1", "t2"}  # t3 has no games
     assert _by_name(rows)["t1"].anchor  # tie on games: lowest id
     assert not any(r.policy == "c" for r in ladder(league, env=ENV, bootstrap=0))

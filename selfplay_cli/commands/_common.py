@@ -132,16 +132,36 @@ def resolve_players(league: League, names: list[str], env: str | None, teams: bo
         except MarlError:
             pending.append(i)
     if pending:
-        found = {r.env for r in rows.values()}
-        if env is None and len(found) == 1:
-            env = found.pop()
-        elif env is None and not found and len(env_names()) == 1:
-            env = env_names()[0]
+        snapshots = {r.env for r in rows.values() if not getattr(r, "is_bot", False)}
+        if env is None and len(snapshots) == 1:  # a snapshot implies its game
+            env = snapshots.pop()
+        elif env is None and not snapshots:  # scripted players only: the game they belong to, all of them
+            env = _game_of_bots(league, names)
+            pending = list(range(len(names))) if env is not None else pending
         if env is not None:
             league.ensure_bots(env, get_env(env).bots)
         for i in pending:
             rows[i] = find(league, names[i], env)  # raises the precise error (unknown, ambiguous, team...)
     return [rows[i] for i in range(len(names))]
+
+
+def _game_of_bots(league: League, names: list[str]) -> str | None:
+    """The game scripted players named alone (``marl match cpu random``) belong to: the one registered game, the one
+    game with all of them, or the one of those the league holds players of. None: the resolver then says what is
+    missing; names of scripted players of several games ask for --env."""
+    games = env_names()
+    if len(games) == 1:
+        return games[0]
+    having = [g for g in games if all(n in get_env(g).bots for n in names)]
+    if len(having) == 1:
+        return having[0]
+    held = {p.env for p in league.players()} & set(having)
+    if len(held) == 1:
+        return held.pop()
+    if len(having) > 1:
+        raise MarlError(f"{' and '.join(sorted(set(names)))}: scripted players of several games "
+                        f"({', '.join(having)}): say which with --env")
+    return None
 
 
 class RateColumn(ProgressColumn):
