@@ -135,7 +135,7 @@ def play(
     truncated and decided by the score at that moment (a length cap that needs no game option). A policy with an
     ``after_step()`` method is told of every step (a replay finds each step's action by it).
     """
-    spec = get_env(env) if isinstance(env, str) else env
+    spec = (get_env(env) if isinstance(env, str) else env).for_options(**(env_options or {}))
     if not games:
         return []
     n_seats = len(spec.agents)
@@ -150,6 +150,9 @@ def play(
         check(g)
     n = min(parallel, max(len(games), slots or 0))
     options = env_options or {}
+    for p in policies:  # scripted players act as these options make the game (the lander's continuous engines)
+        if callable(getattr(p, "configure", None)):
+            p.configure(options)  # type: ignore[attr-defined]
     core = spec.core(n, **options)
     seat_groups = _seat_groups(spec, spec.config(**options), n)
     whole = len(seat_groups) == 1  # one group of every seat, in order (Pong): its buffer is the step's actions

@@ -210,8 +210,9 @@ class SelfPlayGames:
         env_options: dict[str, Any] | None = None,
         first_seed: int = 0,
     ) -> None:
-        self.spec = spec = get_env(env) if isinstance(env, str) else env
         options = env_options or {}
+        self.spec = spec = (get_env(env) if isinstance(env, str) else env).for_options(**options)
+        self.options = dict(options)
         self.core = spec.core(n_games, **options)
         self.n = n_games
         self.n_seats = n_seats = spec.n_seats
@@ -281,6 +282,8 @@ class SelfPlayGames:
                     if id(p) not in index:
                         index[id(p)] = len(self.policies)
                         self.policies.append(p)
+                        if callable(getattr(p, "configure", None)):  # a scripted player: the run's game options
+                            p.configure(self.options)
                     self.opponent_of[slot] = index[id(p)]
         self._stale()
 

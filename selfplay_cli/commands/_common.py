@@ -24,6 +24,7 @@ from rich.text import Text
 from ..envs import env_names, get_env
 from ..errors import MarlError
 from ..league.store import League
+from ..policies.bots import league_bots
 from ._output import err_console
 
 HomeOpt = Annotated[
@@ -85,6 +86,11 @@ def _guess(raw: str) -> object:
     return text
 
 
+EnvOptionOpt = Annotated[list[str] | None, typer.Option(
+    "--env-option", metavar="KEY=VALUE", help="Game option over those the players were made for, repeatable (e.g. "
+    "landers=4 flies a lander team as 4; marl envs --json lists each game's options).")]
+
+
 def parse_env_options(env: str, items: list[str] | None) -> dict:
     """``KEY=VALUE`` game options, each read as the type the game's config declares for it (a whole number, a
     number, true/false, one of a few words), then checked by the game's own config (ranges, unknown options)."""
@@ -139,7 +145,7 @@ def resolve_players(league: League, names: list[str], env: str | None, teams: bo
             env = _game_of_bots(league, names)
             pending = list(range(len(names))) if env is not None else pending
         if env is not None:
-            league.ensure_bots(env, get_env(env).bots)
+            league.ensure_bots(env, league_bots(get_env(env)))
         for i in pending:
             rows[i] = find(league, names[i], env)  # raises the precise error (unknown, ambiguous, team...)
     return [rows[i] for i in range(len(names))]
@@ -152,7 +158,7 @@ def _game_of_bots(league: League, names: list[str]) -> str | None:
     games = env_names()
     if len(games) == 1:
         return games[0]
-    having = [g for g in games if all(n in get_env(g).bots for n in names)]
+    having = [g for g in games if all(n in league_bots(get_env(g)) for n in names)]
     if len(having) == 1:
         return having[0]
     held = {p.env for p in league.players()} & set(having)

@@ -25,10 +25,12 @@ from ._common import (
     DbOpt,
     DeviceOpt,
     EnvOpt,
+    EnvOptionOpt,
     HomeOpt,
     JsonOpt,
     QuietOpt,
     open_league,
+    parse_env_options,
     progress_bar,
     progress_enabled,
     resolve_players,
@@ -97,6 +99,7 @@ def match(
     games: Annotated[int, typer.Option("--games", "-n", min=1, max=MAX_GAMES, help="Games to play (whole pairs: "
                                        "each seed in both seat orders).")] = 200,
     env: EnvOpt = None,
+    env_option: EnvOptionOpt = None,
     seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="First game seed; pair i uses seed + i.")]
     = 0,
     parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once in the "
@@ -136,6 +139,7 @@ def match(
     try:
         side_a, side_b = resolve_players(league, [a, b], env, teams=True)
         pairs = pairings(a, side_a, b, side_b, sprt=sprt)
+        options = parse_env_options(pairs[0][0].env, env_option) if env_option else None
         for row_a, row_b in pairs:
             pa = load_player(league, row_a, device=device, seed=mix_seed(seed, 0))
             pb = load_player(league, row_b, device=device, seed=mix_seed(seed, 1))
@@ -145,7 +149,7 @@ def match(
                     reports.append(run_match(pa, pb, games=budget, first_seed=seed, parallel=parallel,
                                              league=league if store else None,
                                              player_ids={pa.id: row_a.id, pb.id: row_b.id}, sprt=settings,
-                                             confidence=confidence, on_games=tick))
+                                             confidence=confidence, on_games=tick, env_options=options))
             except MatchInterrupted as stop:
                 interrupted(stop.report, stored=store)
                 raise typer.Exit(130) from None

@@ -15,10 +15,12 @@ from ._common import (
     DbOpt,
     DeviceOpt,
     EnvOpt,
+    EnvOptionOpt,
     HomeOpt,
     JsonOpt,
     QuietOpt,
     open_league,
+    parse_env_options,
     progress_bar,
     progress_enabled,
 )
@@ -144,6 +146,7 @@ def record(
                                                 "ledger exactly as it was played (the games of marl match, "
                                                 "tournaments, gates and training).")] = None,
     env: EnvOpt = None,
+    env_option: EnvOptionOpt = None,
     games: Annotated[int, typer.Option("--games", "-n", min=1, max=1_000, help="Games to record, one file each; "
                                        "game i uses seed --seed + i.")] = 1,
     seconds: Annotated[float | None, typer.Option("--seconds", metavar="S", min=0.0, max=86_400.0, help="Stop each "
@@ -166,8 +169,8 @@ def record(
     hold: Annotated[float, typer.Option("--hold", min=0.0, max=60.0, help="Seconds the final frame stays on "
                                         "screen.")] = 1.0,
     out: Annotated[Path | None, typer.Option("--out", "-o", help="A .mp4/.gif file (one game), or a folder for "
-                                             "one file per game. Default <home>/videos/<run>-<name>-vs-<opponent>"
-                                             "-s<seed>.mp4.")] = None,
+                                             "one file per game. Default: a file in <home>/videos named after the "
+                                             "players and the seed.")] = None,
     device: DeviceOpt = "auto",
     quiet: QuietOpt = False,
     home: HomeOpt = None,
@@ -187,7 +190,7 @@ def record(
     if game_id is not None:
         given = [flag for flag, value in (("--vs", vs), ("--env", env), ("--max-steps", max_steps),
                                           ("--max-rallies", max_rallies), ("--seconds", seconds)) if value is not None]
-        given += ["--games"] * (games != 1) + ["--seed"] * (seed != 0)
+        given += ["--games"] * (games != 1) + ["--seed"] * (seed != 0) + ["--env-option"] * bool(env_option)
         if given:
             verb = "does" if len(given) == 1 else "do"
             raise MarlError(f"--game replays a stored game as it was played: {', '.join(given)} {verb} not apply")
@@ -201,8 +204,12 @@ def record(
         if game_id is not None:
             job = _replay_job(league, game_id, out, fmt)
         else:
+            from ..rated.lineup import lineups
+
+            game = lineups(league, ckpt, vs, env)[0].env
+            options = parse_env_options(game, env_option) if env_option else None
             job = _play_job(league, ckpt, vs, env, games, seed, max_steps, max_rallies, device, out, fmt,  # type: ignore[arg-type]
-                            stop_label)
+                            stop_label, options)
     finally:
         league.close()
     for path in job.paths:
@@ -259,20 +266,23 @@ def _replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> _Job:
 
 def _play_job(league: Any, ckpt: str, vs: str | None, env: str | None, games: int, seed: int,
               max_steps: int | None, max_rallies: int | None, device: str, out: Path | None,
-              fmt: str, stop_label: str | None = None) -> _Job:
+              fmt: str, stop_label: str | None = None, options: dict[str, Any] | None = None) -> _Job:
     """Seat the players, load their networks once, and play game i with seed ``seed + i``."""
     from ..arena import Game
     from ..envs import get_env
     from ..policies import ScriptedPolicy
-    from ..rated.lineup import lineups
-    from ..rated.match import env_options_of, load_player
+    from ..rated.lineup import lineups, refit
+    from ..rated.match import check_fits, env_options_of, load_player
     from ..record import record_game, renderer_of, stop_rule
 
     ups = lineups(league, ckpt, vs, env)  # one, or one per member of a team recorded against --vs
     spec = get_env(ups[0].env)
     renderer = renderer_of(spec)
     networks = {p.id: load_player(league, p, device=device) for lu in ups for p in lu.players if not p.is_bot}
-    env_options = env_options_of(*networks.values())
+    env_options = {**env_options_of(*networks.values()), **(options or {})}
+    spec = spec.for_options(**env_options)
+    check_fits(spec, env_options, *networks.values())
+    ups = [refit(lu, spec.n_seats, seed) for lu in ups]  # a team flown with more or fewer seats than it has
     stop = stop_rule(spec, env_options, max_steps, max_rallies)
     seats = tuple(range(len(ups[0].players)))
 

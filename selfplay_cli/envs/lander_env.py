@@ -30,7 +30,7 @@ from .lander import (
     observation_space,
 )
 from .lander_core import LanderCore
-from .registry import BotSpec, EnvSpec, random_bot
+from .registry import BotSpec, EnvSpec
 
 
 class _OneGame:
@@ -221,13 +221,12 @@ LANDER = EnvSpec(
     make_renderer=_renderer,
     bots={
         "heuristic": BotSpec("heuristic", "gymnasium's heuristic lander controller, each lander on its own "
-                             "observation (discrete actions)", heuristic_rule),
-        "heuristic-continuous": BotSpec("heuristic-continuous", "gymnasium's heuristic for continuous=true",
-                                        heuristic_continuous_rule),
-        "random": random_bot(action_space(None), "uniformly random engines (discrete actions)"),
-    },
+                             "observation (its continuous form with continuous=true)", heuristic_rule,
+                             make_rule=lambda cfg: heuristic_continuous_rule if cfg.continuous else heuristic_rule),
+    },  # random: marl's own, uniform over the config's action space (discrete or continuous)
     turns="simultaneous",
     kind="cooperative",
     render_fps=FPS,
+    make_agents=lambda cfg: agents(cfg.landers),  # landers=M: M seats (a team trained with N flies M)
 )
 """The lander game's declaration (registered as ``lander``)."""

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
@@ -66,12 +66,17 @@ class BotSpec:
     """A scripted player: a rule from a batch of one seat's observations (and a generator) to actions.
 
     With ``uses_mask`` the rule also takes the seat's action masks (``rule(obs, rng, mask)``, mask None when the
-    seat has none); without, ``rule(obs, rng)``."""
+    seat has none); without, ``rule(obs, rng)``. ``make_rule(cfg)``, where given, is the rule for a config whose
+    options change how the player must act (the lander's ``continuous=true``); ``rule`` is the default config's."""
 
     name: str
     description: str
     rule: BotRule
     uses_mask: bool = False
+    make_rule: Callable[[Any], BotRule] | None = None
+
+    def rule_for(self, cfg: Any) -> BotRule:
+        return self.rule if self.make_rule is None else self.make_rule(cfg)
 
 
 @dataclass(frozen=True)
@@ -236,7 +241,9 @@ class EnvSpec:
     ``make_parallel(**options)`` makes the game's PettingZoo env (a ParallelEnv for pong). ``make_seat_spaces``
     gives each seat's :class:`SeatSpace` for a config; without it every seat has ``observation_space(cfg)`` and
     ``action_space(cfg)`` and no masks. ``time_limit(cfg)``: the most steps a game lasts (None: no declared
-    limit); by default the config's ``max_steps`` if it has one. ``render_fps``: a recording's default frame rate
+    limit); by default the config's ``max_steps`` if it has one. ``make_agents(cfg)``: the seats of a config for a
+    game whose options change its seats (``agents`` are the default config's); see :meth:`for_options`.
+    ``render_fps``: a recording's default frame rate
     (a board game's moves at 2 a second; None: 60, one frame per step).
     """
 
@@ -257,6 +264,7 @@ class EnvSpec:
     make_seat_spaces: Callable[[Any], tuple[SeatSpace, ...]] | None = None
     time_limit: Callable[[Any], int | None] | None = None
     render_fps: int | None = None  # frames per second a recording of it plays at by default (None: one per step at 60)
+    make_agents: Callable[[Any], tuple[str, ...]] | None = None  # the seats of a config, where options change them
 
     def __post_init__(self) -> None:
         n = len(self.agents)
@@ -285,6 +293,14 @@ class EnvSpec:
 
     def config(self, **options: Any) -> Any:
         return self.make_config(**options)
+
+    def for_options(self, **options: Any) -> EnvSpec:
+        """The game as these options make it: itself, or, for a game whose seats follow its options
+        (``make_agents``: the lander's ``landers=M``), the same game declared with that config's seats."""
+        if self.make_agents is None or not options:
+            return self
+        agents = tuple(self.make_agents(self.make_config(**options)))
+        return self if agents == self.agents else replace(self, agents=agents)
 
     def core(self, n_games: int, **options: Any) -> BatchedCore:
         return self.make_core(n_games, self.make_config(**options))

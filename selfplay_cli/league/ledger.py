@@ -22,6 +22,7 @@ stores their games (several results of one game move the ratings together, from 
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections import defaultdict
 from collections.abc import Iterable, Iterator, Sequence
@@ -47,9 +48,9 @@ KIND_CODES = {TWO_SIDES: 0, COOPERATIVE: 1, FREE_FOR_ALL: 2}
 """The ``kind`` column of a :class:`GameTable`: what made each row."""
 
 
-def rules_for_env(env: str) -> Rules:
-    """The :class:`~selfplay_cli.results.Rules` a registered game declares; the default for a game this process
-    does not know."""
+def rules_for_env(env: str, env_options: dict[str, Any] | None = None) -> Rules:
+    """The :class:`~selfplay_cli.results.Rules` a registered game declares (with these options: a lander game of M
+    landers has M seats); the default for a game this process does not know."""
     from selfplay_cli.envs import get_env
     from selfplay_cli.envs.registry import UnknownEnvError
 
@@ -57,6 +58,8 @@ def rules_for_env(env: str) -> Rules:
         spec = get_env(env)
     except UnknownEnvError:
         return Rules()
+    with contextlib.suppress(TypeError, ValueError):  # options this version of the game does not take: as declared
+        spec = spec.for_options(**(env_options or {}))
     return Rules.of(spec)
 
 
@@ -492,7 +495,8 @@ def _match_params(env: str, kind: str, params: dict[str, Any] | None) -> dict[st
         raise LeagueError(f"unknown match kind {kind!r} (expected one of {', '.join(MATCH_KINDS)})")
     params = dict(params or {})
     if "rules" not in params:
-        rules = rules_for_env(env)
+        options = params.get("env_options")
+        rules = rules_for_env(env, options if isinstance(options, dict) else None)
         if not rules.is_default:
             params["rules"] = rules.to_json()
     else:

@@ -21,6 +21,12 @@ from .spaces import ActionHead, SpaceError, describe_space, seat_spaces_of, unif
 RANDOM = "random"
 
 
+def league_bots(spec: Any) -> list[str]:
+    """The scripted players a league holds for a game, in the game's order, ``random`` last if it does not
+    register its own."""
+    return list(dict.fromkeys([*spec.bots, RANDOM]))
+
+
 def bot_names(spec: Any) -> list[str]:
     """The scripted players of a game: the ones it registers, and ``random``, which every game has."""
     return sorted(set(spec.bots) | {RANDOM})
@@ -85,7 +91,26 @@ class ScriptedPolicy(Policy):
         if name not in spec.bots and name != RANDOM:
             known = ", ".join(bot_names(spec))
             raise KeyError(f"{env} has no scripted player '{name}'; it has: {known}")
-        seats = seat_spaces_of(spec, spec.config(**(env_options or {})))
+        super().__init__(name, env)
+        self._name, self._seat, self._seed, self._options = name, seat, seed, dict(env_options or {})
+        self._setup(spec, name, seed, self._options, seat)
+
+    def configure(self, env_options: dict[str, Any] | None) -> None:
+        """Play the game as ``env_options`` make it (the runner tells every player the options of the games it
+        plays): a rule or action space that depends on them follows. The random generator carries on."""
+        options = dict(env_options or {})
+        if options != self._options:
+            rng = self.rng
+            self._options = options
+            self._setup(get_env(self.env), self._name, self._seed, options, self._seat)
+            self.rng = rng
+            if self._random is not None:
+                self._random.rng = rng
+
+    def _setup(self, spec: Any, name: str, seed: int, env_options: dict[str, Any], seat: int | None) -> None:
+        env = spec.name
+        cfg = spec.config(**env_options)
+        seats = seat_spaces_of(spec.for_options(**env_options), cfg)
         if seat is not None:
             obs_space, act_space, _ = seats[seat]
         else:
@@ -94,7 +119,7 @@ class ScriptedPolicy(Policy):
             if name == RANDOM and len(kinds) > 1:
                 raise MarlError(f"{env}'s seats act differently ({', '.join(sorted(kinds))}): the random player "
                                 "needs its seat")
-        super().__init__(name, env, obs_space=obs_space, act_space=act_space)
+        self.obs_space, self.act_space = obs_space, act_space
         self.rng = np.random.default_rng(seed)
         self.bot = spec.bots.get(name)
         self._random = None
@@ -102,14 +127,15 @@ class ScriptedPolicy(Policy):
             self._random = RandomPolicy(act_space, name, env, seed=seed, obs_space=obs_space)
             self._random.rng = self.rng
         self._uses_mask = bool(getattr(self.bot, "uses_mask", False))
+        self._rule = self.bot.rule_for(cfg) if self.bot is not None else None
 
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         if self._random is not None:
             return self._random.act(obs, mask)
         if self._uses_mask:
-            actions = self.bot.rule(obs, self.rng, mask)  # type: ignore[union-attr]
+            actions = self._rule(obs, self.rng, mask)  # type: ignore[misc]
         else:
-            actions = self.bot.rule(obs, self.rng)  # type: ignore[union-attr]
+            actions = self._rule(obs, self.rng)  # type: ignore[misc]
         if isinstance(self.act_space, spaces.Box):
             return np.asarray(actions, dtype=np.float32)
         actions = np.asarray(actions, dtype=np.int64)

@@ -198,6 +198,7 @@ def play_gauntlet(
     index = {pid: i for i, pid in enumerate(ids)}
     roster = [loaded[pid] for pid in ids]
     options = env_options_of(*roster)
+    spec = spec.for_options(**options)
     rules = Rules.of(spec)
     per = round_size(rules, 2)
     span = cfg.max_pairs  # seeds reserved per matchup: one per round

@@ -27,10 +27,13 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..envs import EnvSpec, env_names, get_env
 from ..errors import MarlError
 from ..league.names import Team, find_team, resolve_or_team, seat_of, teammates
 from ..league.store import League, PlayerRow
+from ..policies.bots import league_bots
 from ..results import COOPERATIVE, TWO_SIDES, Rules
 
 __all__ = ["Lineup", "default_opponent", "find_team", "lineup", "lineups", "safe_filename", "seat_of", "teammates"]
@@ -63,6 +66,20 @@ class Lineup:
         return safe_filename(f"{me.full_name}-vs-{them}-s{seed}")
 
 
+def refit(lu: Lineup, n_seats: int, seed: int = 0) -> Lineup:
+    """The lineup for a game of ``n_seats`` seats when options change the number (a lander team trained with N
+    landers flown as M). A team that grows gives each extra seat a member chosen at random (seed 001's mapping:
+    the extra landers copy a policy of the team), one that shrinks keeps its first seats."""
+    have = len(lu.players)
+    if n_seats == have:
+        return lu
+    if n_seats < have:
+        return Lineup(lu.env, lu.players[:n_seats], focus=min(lu.focus, n_seats - 1))
+    rng = np.random.default_rng(seed)
+    extra = tuple(lu.players[int(i)] for i in rng.integers(0, have, size=n_seats - have))
+    return Lineup(lu.env, lu.players + extra, focus=lu.focus)
+
+
 def safe_filename(text: str) -> str:
     """A name made of letters, digits and ``._-`` (``/`` of ``run/name`` becomes ``-``)."""
     return re.sub(r"[^A-Za-z0-9._-]+", "_", text.replace("/", "-")).strip("._") or "video"
@@ -77,7 +94,7 @@ def _player_or_team(league: League, name: str, env: str | None) -> PlayerRow | l
 def _bots_ready(league: League, env: str | None) -> None:
     """Scripted players are league players once a game has used them: make sure they exist for ``env``."""
     for e in [env] if env else env_names():
-        league.ensure_bots(e, get_env(e).bots)
+        league.ensure_bots(e, league_bots(get_env(e)))
 
 
 def lineup(league: League, ckpt: str, vs: str | None = None, env: str | None = None) -> Lineup:

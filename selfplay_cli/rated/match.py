@@ -100,6 +100,21 @@ def env_options_of(*policies: Policy) -> dict[str, Any]:
     return found or {}
 
 
+def check_fits(spec: Any, options: dict[str, Any], *policies: Policy) -> None:
+    """Every network among ``policies`` reads the observations and plays the actions of the seats the game has
+    with ``options`` (a :class:`MarlError` naming the policy and both shapes otherwise)."""
+    seats = spec.seat_spaces(spec.config(**options))
+    for p in policies:
+        obs, act = getattr(p, "obs_space", None), getattr(p, "act_space", None)
+        if obs is None or act is None or getattr(p, "kind", "") == "bot":
+            continue
+        fits = [s for s in seats if tuple(s.observation.shape) == tuple(obs.shape) and s.action == act]
+        if not fits:
+            raise MarlError(f"{p.id} reads observations of shape {tuple(obs.shape)} and plays {act}, but with the "
+                            f"options {options} every seat of {spec.name} is {seats[0].observation} / "
+                            f"{seats[0].action}")
+
+
 def pentanomial(pair_points: np.ndarray) -> tuple[int, int, int, int, int]:
     """Counts of game pairs by A's points in the pair: (0, 0.5, 1, 1.5, 2) -> (LL, LD, WL+DD, WD, WW)."""
     idx = np.rint(np.asarray(pair_points, dtype=np.float64) * 2).astype(np.int64)
@@ -202,6 +217,7 @@ def run_match(
     sprt: SPRTSettings | None = None,
     confidence: float = 0.95,
     on_games: Callable[[int], None] | None = None,
+    env_options: dict[str, Any] | None = None,
 ) -> MatchReport:
     """Play up to ``games`` games (rounded up to whole rounds, see the module docstring) between ``a`` and ``b`` and
     report from A's view.
@@ -210,6 +226,8 @@ def run_match(
     finishes, each chunk in one transaction; the match row is created with the first chunk (so it never exists
     without games) and its ``params`` say ``status``: ``running``, then ``finished``, ``interrupted`` or ``failed``,
     with ``games_stored``. With ``sprt`` the match stops at the first round whose LLR crosses a bound.
+    ``env_options`` override the game options the players were made for (``landers=4`` flies a team trained with
+    2 landers as 4); each network must still fit the seats those options make.
 
     Ctrl-C raises :class:`MatchInterrupted` after storing the whole rounds already finished (of the chunk in play
     too: half a pair would leave its seed's seat luck uncancelled, half a comparison compares nothing; they are
@@ -223,9 +241,10 @@ def run_match(
         raise MarlError(f"--games must be at least 1, not {games}")
     if league is not None and player_ids is None:
         raise ValueError("player_ids are needed to store games")
-    spec = get_env(a.env)
+    options = {**env_options_of(a, b), **(env_options or {})}
+    spec = get_env(a.env).for_options(**options)
+    check_fits(spec, options, a, b)
     rules = Rules.of(spec)
-    options = env_options_of(a, b)
     per = round_size(rules, 2)
     n_rounds = -(-games // per)
     chunk_rounds = max(1, parallel // per)

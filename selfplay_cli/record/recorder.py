@@ -198,7 +198,7 @@ def record_replay(
     replay that ends otherwise (other game options, another version of the game's rules) raises
     :class:`~selfplay_cli.arena.replay.ReplayError` and leaves no file.
     """
-    spec = get_env(env) if isinstance(env, str) else env
+    spec = (get_env(env) if isinstance(env, str) else env).for_options(**(env_options or {}))
     moves = decode_actions(actions, len(spec.agents), length)
     policies = replay_policies(tuple(players), spec.name, moves)
 

@@ -11,7 +11,7 @@ from typing import Any
 
 from ..algos import LEARNERS, DQNConfig, PPOConfig
 from ..arena.selfplay import OPPONENT, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
-from ..envs import get_env
+from ..envs import EnvSpec, get_env
 from ..errors import MarlError
 from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
@@ -69,7 +69,10 @@ class TrainConfig:
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
         if self.algo not in ALGOS:
             raise MarlError(f"unknown --algo '{self.algo}'; available: {', '.join(ALGOS)}")
-        spec = get_env(self.env)
+        try:
+            spec = self.game()
+        except (TypeError, ValueError) as e:
+            raise MarlError(f"[env_options]: {e}") from None
         n_seats = spec.n_seats
         if self.sharing not in ("nops", "fups"):
             raise MarlError(f"--sharing must be nops or fups, not '{self.sharing}'")
@@ -94,9 +97,13 @@ class TrainConfig:
         _check_memory(self, tuple(spaces[0].observation.shape),
                       [int((layout == i).sum()) for i in range(len(spaces))])
 
+    def game(self) -> EnvSpec:
+        """The game as the run's options make it (a lander run of 3 landers has 3 seats)."""
+        return get_env(self.env).for_options(**self.env_options)
+
     def seat_plan(self) -> SeatPlan:
         """Which learner holds which seat of the game (``--agents``, ``--sharing``, ``--seats``)."""
-        spec = get_env(self.env)
+        spec = self.game()
         seats = parse_seats(self.seats, spec.n_seats) if self.seats else None
         return plan_seats(spec, self.agents, self.sharing, seats)
 

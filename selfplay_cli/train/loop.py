@@ -32,11 +32,11 @@ import torch
 
 from ..algos import get_learner
 from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_spaces, plan_layout
-from ..envs import get_env
 from ..errors import MarlError
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 from ..league.store import League, PlayerRow
 from ..policies import Policy
+from ..policies.bots import league_bots
 from ..policies.network import resolve_device
 from ..policies.snapshot import SnapshotMeta, save_snapshot
 from ..rated.match import load_player
@@ -121,7 +121,7 @@ class Trainer:
                  on_progress: Callable[[dict[str, Any]], None] | None = None) -> None:
         self.league, self.cfg = league, cfg
         self.on_progress = on_progress
-        self.spec = spec = get_env(cfg.env)
+        self.spec = spec = cfg.game()
         self.device = resolve_device(cfg.device)
         if self.device.type == "cpu":
             torch.set_num_threads(1)  # small networks: one thread is fastest, the other core runs the games
@@ -129,7 +129,7 @@ class Trainer:
             raise MarlError("training needs a league home for its snapshot files: pass --home")
         self.run_dir = league.home / "runs" / cfg.run
         game_cfg = spec.config(**cfg.env_options)
-        league.ensure_bots(spec.name, spec.bots)
+        league.ensure_bots(spec.name, league_bots(spec))
         self.bot_ids = {p.name: p.id for p in league.players(env=spec.name, kind="bot")}
 
         plan = cfg.seat_plan()
