@@ -242,4 +242,9 @@ def test_a_failing_gauntlet_in_the_worker_comes_back_as_one_error(tmp_path):
         ev.submit(GauntletJob((424242,), 0, 4, 2))
         with pytest.raises(MarlError, match="rating games failed: .*424242"):
             ev.wait()
+    with Evaluator(league, "cpu", background=True) as ev:  # jobs queued behind the failing one: its error, still
+        for k in range(3):
+            ev.submit(GauntletJob((424242 + k,), 0, 4, 2))
+        with pytest.raises(MarlError, match="rating games failed: .*424242"):
+            ev.wait()
     league.close()

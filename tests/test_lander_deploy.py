@@ -94,3 +94,49 @@ def test_a_fups_team_trained_with_two_landers_flies_one_to_four(home, tmp_path, 
 
     code, out_, err = run(capsys, "match", "l2/s4k", "heuristic", "--games", "2", "--env-option", "continuous=true")
     assert code == 2 and err.count("\n") == 1 and "l2/s4k reads observations" in err and "Box" in err, err
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# SA: one agent over the team's joint observation and action (seed 001)
+
+
+def test_joint_actions_round_trip_by_seed_001s_encoding():
+    from selfplay_cli.policies.joint import decode, encode
+
+    rng = np.random.default_rng(0)
+    for n in (1, 2, 3, 5):
+        a = rng.integers(0, 4, size=(n, 50))
+        b = encode(a, 4)
+        assert b.max() < 4**n and np.array_equal(decode(b, n, 4), a)
+    assert encode(np.array([[1], [2]]), 4).tolist() == [1 + 2 * 4]  # b = sum a_n 4^n
+    assert decode(np.arange(16), 2, 4)[:, 5].tolist() == [1, 1]
+
+
+def test_sa_refuses_what_it_cannot_be_in_one_line(home, capsys):
+    for args, says in ((["lander", "--env-option", "landers=7"], "16,384 joint actions"),
+                       (["lander", "--env-option", "continuous=true"], "joint action of Discrete actions"),
+                       (["pong"], "cooperative team acting together")):
+        code, out, err = run(capsys, "train", *args, "--sharing", "sa", "--run", "bad")
+        assert code == 2 and out == "" and err.count("\n") == 1, err
+        assert says in err, err
+    assert not (home / "runs" / "bad").exists()
+
+
+def test_an_sa_agent_trains_plays_and_records_its_team(home, tmp_path, capsys):
+    report = run_json(capsys, "train", "lander", "--sharing", "sa", "--steps", "4000", "--snapshot-steps", "4000",
+                      "--games", "8", "--eval-games", "2", "--run", "sa")
+    assert [f["snapshot"] for f in report["final"]] == ["sa/s4k"]
+    shown = run_json(capsys, "checkpoint", "show", "sa/s4k")
+    assert shown["file"]["act_space"] == {"kind": "discrete", "n": 16}  # 4 actions x 4 actions
+    assert shown["file"]["obs_space"]["shape"] == [16] and shown["file"]["extra"]["joint"] == {"seats": 2, "base": 4}
+    r = run_json(capsys, "match", "sa/s4k", "heuristic", "--games", "4")
+    assert r["games"] == 4 and r["losses"] >= 1  # an untrained agent against the heuristic
+    rows = {r["policy"]: r for r in run_json(capsys, "league", "ladder")}
+    assert rows["heuristic"]["anchor"] and rows["heuristic"]["elo"] == 1000.0  # the lander's anchor: its heuristic
+    assert rows["sa/s4k"]["mean_return"] is not None
+    code, _, err = run(capsys, "match", "sa/s4k", "heuristic", "--games", "2", "--env-option", "landers=3")
+    assert code == 2 and "one agent for a team of 2 seats" in err and err.count("\n") == 1, err
+    out = tmp_path / "sa.mp4"
+    code, _, err = run(capsys, "record", "--ckpt", "sa/s4k", "--seconds", "1", "--out", str(out))
+    assert code == 0, err
+    assert np.stack(list(iio.imiter(out))).shape[0] >= 50

@@ -190,20 +190,32 @@ def play(
     groups = _acting_groups(policies)
     with_masks = [bank is not None and _takes_masks(bank) for _, bank in groups]
     wanted = np.arange(len(policies) + 1)
+    # A joint (SA) policy flies its games whole: it is given every seat of them, acting or not.
+    joint = {i for i, p in enumerate(policies) if getattr(p, "seats", None)}
+
+    def owned(rows: np.ndarray, sg: _SeatGroup) -> list[list[np.ndarray]]:
+        """Every (seat, slot) position of ``rows`` (seats, slots) by the policy that holds it, in position order,
+        per acting group (one sort, no mask per policy)."""
+        own = seats if whole else seats[sg.seats]
+        picked = rows if whole else rows[sg.seats] if rows.shape[0] > 1 else rows
+        owner = np.where(picked, own, -1).ravel()
+        order = np.argsort(owner, kind="stable")
+        bounds = np.searchsorted(owner[order], wanted)
+        return [[order[bounds[m] : bounds[m + 1]] for m in members] for members, _ in groups]
 
     def positions(acting: np.ndarray | None) -> tuple[np.ndarray, list[list[list[np.ndarray]]]]:
         """Which slots have a game, and, per seat group, every (seat, slot) position that acts by the policy that
-        holds it, in position order (one sort, no mask per policy); they change only when games end or start, or
-        when the seats to act change."""
+        holds it; they change only when games end or start, or when the seats to act change."""
         active = game_of >= 0
         live = active[None, :] if acting is None else active[None, :] & acting
         held = []
         for sg in seat_groups:
-            own = seats if whole else seats[sg.seats]
-            owner = np.where(live if whole else live[sg.seats] if live.shape[0] > 1 else live, own, -1).ravel()
-            order = np.argsort(owner, kind="stable")
-            bounds = np.searchsorted(owner[order], wanted)
-            held.append([[order[bounds[m] : bounds[m + 1]] for m in members] for members, _ in groups])
+            by_group = owned(live, sg)
+            if joint:
+                every = owned(np.broadcast_to(active[None, :], (n_seats, n)), sg)
+                by_group = [[e if m in joint else w for m, w, e in zip(members, ws, es, strict=True)]
+                            for (members, _), ws, es in zip(groups, by_group, every, strict=True)]
+            held.append(by_group)
         return active, held
 
     acting = np.asarray(to_act(), dtype=bool) if to_act is not None else None

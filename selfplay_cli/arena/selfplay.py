@@ -40,6 +40,7 @@ from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules
 from .replay import ActionLog, SeatActions, encode_actions
 
 OPPONENT = -1
+SHARING = ("nops", "fups", "sa")  # one network per learner; one shared by all; one agent over the team's seats
 
 
 def _as_slice(index: np.ndarray) -> np.ndarray | slice:
@@ -91,9 +92,16 @@ def parse_seats(text: str, n_seats: int) -> tuple[int, ...]:
 def plan_seats(spec: EnvSpec, agents: int, sharing: str = "nops", seats: Sequence[int] | None = None) -> SeatPlan:
     """Which learner holds which seat (see the module docstring); a :class:`MarlError` for a mapping the game
     cannot take."""
-    if sharing not in ("nops", "fups"):
-        raise MarlError(f"--sharing must be nops or fups, not '{sharing}'")
+    if sharing not in SHARING:
+        raise MarlError(f"--sharing must be one of {', '.join(SHARING)}, not '{sharing}'")
     n = spec.n_seats
+    if sharing == "sa":  # one agent over the whole team: every seat of every game is its
+        if spec.kind != COOPERATIVE or spec.turns != "simultaneous":
+            raise MarlError(f"--sharing sa makes one agent of a cooperative team acting together; {spec.name} is "
+                            f"{spec.kind}, {spec.turns}: use --sharing fups or nops")
+        if seats is not None:
+            raise MarlError("--sharing sa holds every seat: --seats does not apply")
+        return SeatPlan(tuple(0 for _ in range(n)))
     if seats is not None:
         home = tuple(int(s) for s in seats)
         if len(home) != n:
@@ -120,7 +128,7 @@ def plan_seats(spec: EnvSpec, agents: int, sharing: str = "nops", seats: Sequenc
 
 
 def _shared(home: tuple[int, ...], sharing: str) -> tuple[int, ...]:
-    return tuple(0 if s >= 0 else s for s in home) if sharing == "fups" else home
+    return tuple(0 if s >= 0 else s for s in home) if sharing in ("fups", "sa") else home
 
 
 def plan_layout(plan: SeatPlan, n_games: int, agents: int, league_games: float = 0.0) -> np.ndarray:

@@ -291,9 +291,15 @@ def _play_job(league: Any, ckpt: str, vs: str | None, env: str | None, games: in
         return [networks[p.id] if not p.is_bot else ScriptedPolicy(p.env, p.name, seed=game_seed * len(seats) + s)
                 for s, p in enumerate(lu.players)]
 
+    def seating(lu: Any) -> tuple[int, ...]:
+        """Each seat's index into the policies: a network on several seats is one player there (a joint agent
+        flies its whole team at once), each scripted player its own."""
+        first: dict[int, int] = {}
+        return tuple(s if p.is_bot else first.setdefault(p.id, s) for s, p in enumerate(lu.players))
+
     def run(i: int, path: Path, settings: VideoSettings, tick: Tick) -> Recording:
         lu, game_seed = ups[i // games], seed + i % games
-        return record_game(spec, policies(lu, game_seed), Game(game_seed, seats), path, settings,
+        return record_game(spec, policies(lu, game_seed), Game(game_seed, seating(lu)), path, settings,
                            env_options=env_options, labels=lu.names, stop_when=stop, on_frame=tick, renderer=renderer,
                            stop_label=stop_label)
 

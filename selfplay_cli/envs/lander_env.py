@@ -228,5 +228,6 @@ LANDER = EnvSpec(
     kind="cooperative",
     render_fps=FPS,
     make_agents=lambda cfg: agents(cfg.landers),  # landers=M: M seats (a team trained with N flies M)
+    anchor="heuristic",  # the ratings' zero point: seed 001's heuristic
 )
 """The lander game's declaration (registered as ``lander``)."""

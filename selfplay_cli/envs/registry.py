@@ -265,6 +265,7 @@ class EnvSpec:
     time_limit: Callable[[Any], int | None] | None = None
     render_fps: int | None = None  # frames per second a recording of it plays at by default (None: one per step at 60)
     make_agents: Callable[[Any], tuple[str, ...]] | None = None  # the seats of a config, where options change them
+    anchor: str = "random"  # the scripted player whose rating is fixed (1000 by default): the ladder's zero point
 
     def __post_init__(self) -> None:
         n = len(self.agents)

@@ -341,12 +341,26 @@ def pick_env(league: League, env: str | None) -> str:
     return envs[0]
 
 
-def _default_anchor(population: list[PlayerRow], games: dict[int, int]) -> PlayerRow:
-    """``random`` bot if it played, else the first bot (by id) that played, else the most active player."""
+def declared_anchor(env: str) -> str:
+    """The scripted player a game anchors its ratings at (its declaration's ``anchor``: the lander's heuristic),
+    ``random`` for a game this process does not know."""
+    from ..envs import get_env
+    from ..envs.registry import UnknownEnvError
+
+    try:
+        return get_env(env).anchor
+    except UnknownEnvError:
+        return "random"
+
+
+def _default_anchor(population: list[PlayerRow], games: dict[int, int], preferred: str = "random") -> PlayerRow:
+    """The game's anchor bot (``preferred``) if it played, else ``random``, else the first bot (by id) that played,
+    else the most active player."""
     bots = [p for p in population if p.is_bot]
-    for p in bots:
-        if p.name == "random":
-            return p
+    for name in dict.fromkeys((preferred, "random")):
+        for p in bots:
+            if p.name == name:
+                return p
     if bots:
         return bots[0]
     live = [p for p in population if not p.removed] or population
@@ -449,7 +463,8 @@ def ladder(
     population = [known[int(i)] if int(i) in known else league.get_player(int(i)) for i in ids.tolist()]
     games = dict(zip(ids.tolist(), (np.bincount(a, minlength=ids.size) + np.bincount(b, minlength=ids.size))
                      .tolist(), strict=True))
-    anchor_player = _default_anchor(population, games) if anchor is None else _find_anchor(population, anchor, env)
+    anchor_player = (_default_anchor(population, games, declared_anchor(env)) if anchor is None
+                     else _find_anchor(population, anchor, env))
     removed = {p.id for p in population if p.removed}
     hidden = set() if include_removed else {p.full_name for p in population if p.removed}
     if anchor_player.full_name in hidden:

@@ -39,6 +39,7 @@ from safetensors.torch import save as st_save
 
 from .. import files
 from ..envs import UnknownEnvError, get_env
+from .joint import MAX_JOINT_ACTIONS, JointPolicy, joint_spaces
 from .network import Arch, NetworkPolicy, SnapshotError, build_network
 from .spaces import ActionHead, SpaceError, canonical_space, seat_spaces_of, space_from_dict
 
@@ -589,6 +590,17 @@ def _check_layout(path: Any, header: dict[str, Any], meta: SnapshotMeta) -> None
             raise SnapshotError(f"{path}: {name} declares {list(info['shape'])} but holds {end - begin} bytes")
 
 
+def _joint_of(path: Any, meta: SnapshotMeta) -> tuple[int, int] | None:
+    """``(seats, base)`` of a joint (SA) snapshot, None for any other; a malformed record is a SnapshotError."""
+    joint = (meta.extra or {}).get("joint")
+    if joint is None:
+        return None
+    seats, base = (joint.get("seats"), joint.get("base")) if isinstance(joint, dict) else (None, None)
+    if not (_is_int(seats) and _is_int(base) and 1 <= seats <= 64 and 2 <= base <= MAX_JOINT_ACTIONS):
+        raise SnapshotError(f"{path}: bad joint record in the snapshot's metadata ({_printable(str(joint), 80)})")
+    return int(seats), int(base)
+
+
 def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
     """The game must exist, take the snapshot's options, and have a seat with the snapshot's spaces (the seat the
     snapshot names, when it names one of the game's): the observation's shape and the action space exactly."""
@@ -606,6 +618,17 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
     except MemoryError:  # an option that sizes the game (the game should bound it; this is the last line)
         raise SnapshotError(f"{path}: the {meta.env} options in the snapshot ask for more memory than there is "
                             f"({_printable(json.dumps(meta.env_options), 120)})") from None
+    joint = _joint_of(path, meta)
+    if joint is not None:  # one agent over the team (SA): the joint spaces of the game's seats
+        obs, act, _ = seats[0]
+        try:
+            j_obs, j_act = joint_spaces(obs, act, joint[0], meta.env)
+        except Exception as e:  # noqa: BLE001 - a MarlError naming why, as a snapshot error
+            raise SnapshotError(f"{path}: {e}") from None
+        if tuple(meta.obs_shape or ()) != tuple(j_obs.shape) or meta.head != ActionHead.of(j_act):
+            raise SnapshotError(f"{path}: a joint snapshot of {joint[0]} seats must read {list(j_obs.shape)} and play "
+                                f"{j_act.n} joint actions; it reads {list(meta.obs_shape or ())}")
+        return
     if meta.seat in spec.agents:
         seats = [seats[spec.agents.index(meta.seat)]]
     shapes = [tuple(obs.shape or ()) for obs, _, _ in seats]
@@ -686,8 +709,14 @@ def policy_of(
         net.load_state_dict(snap.tensors, strict=True)
     except RuntimeError as e:
         raise SnapshotError(f"{path}: weights do not fit the network ({str(e).splitlines()[0]})") from None
-    return NetworkPolicy(net, id if id is not None else meta.id, meta.env, device=device, greedy=greedy,
-                         seed=seed, meta=meta)
+    policy = NetworkPolicy(net, id if id is not None else meta.id, meta.env, device=device, greedy=greedy,
+                           seed=seed, meta=meta)
+    joint = _joint_of(path, meta)
+    if joint is None:
+        return policy
+    spec = get_env(meta.env)
+    seat_obs, seat_act, _ = seat_spaces_of(spec, spec.config(**meta.env_options))[0]
+    return JointPolicy(policy, joint[0], joint[1], seat_obs, seat_act)  # type: ignore[return-value]
 
 
 def load_policy(

@@ -108,6 +108,10 @@ def check_fits(spec: Any, options: dict[str, Any], *policies: Policy) -> None:
         obs, act = getattr(p, "obs_space", None), getattr(p, "act_space", None)
         if obs is None or act is None or getattr(p, "kind", "") == "bot":
             continue
+        team = getattr(p, "seats", None)  # a joint (SA) policy flies exactly its team's number of seats
+        if team is not None and team != len(seats):
+            raise MarlError(f"{p.id} is one agent for a team of {team} seats (--sharing sa); with the options {options}"
+                            f" {spec.name} has {len(seats)}: a joint agent flies only the team it was trained as")
         fits = [s for s in seats if tuple(s.observation.shape) == tuple(obs.shape) and s.action == act]
         if not fits:
             raise MarlError(f"{p.id} reads observations of shape {tuple(obs.shape)} and plays {act}, but with the "

@@ -9,12 +9,15 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from ..algos import LEARNERS, DQNConfig, PPOConfig
-from ..arena.selfplay import OPPONENT, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
+from ..arena.selfplay import OPPONENT, SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
 from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
+from ..policies.joint import joint_spaces
 from ..policies.network import resolve_device
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
@@ -74,8 +77,8 @@ class TrainConfig:
         except (TypeError, ValueError) as e:
             raise MarlError(f"[env_options]: {e}") from None
         n_seats = spec.n_seats
-        if self.sharing not in ("nops", "fups"):
-            raise MarlError(f"--sharing must be nops or fups, not '{self.sharing}'")
+        if self.sharing not in SHARING:
+            raise MarlError(f"--sharing must be one of {', '.join(SHARING)}, not '{self.sharing}'")
         if not 0.0 <= self.league_games <= 1.0:
             raise MarlError(f"--league-games must lie between 0 and 1, not {self.league_games}")
         plan = self.seat_plan()
@@ -92,6 +95,10 @@ class TrainConfig:
             raise MarlError(f"[env_options]: {e}") from None
         layout = plan_layout(plan, self.games, self.agents, self.league_games)
         spaces = learner_spaces(spec, seat_spaces, layout)
+        if self.sharing == "sa":  # one agent over the team: its joint spaces (too many joint actions: refused)
+            obs, act = joint_spaces(spaces[0].observation, spaces[0].action, spec.n_seats, spec.name)
+            spaces = [type(spaces[0])(obs, act, False)]
+            layout = np.zeros((1, self.games), dtype=np.int64)  # one slot a game
         for space in spaces:
             LEARNERS[self.algo].check_seat(space)  # e.g. DQN and Box actions: refused before anything is written
         _check_memory(self, tuple(spaces[0].observation.shape),

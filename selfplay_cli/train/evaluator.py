@@ -133,7 +133,7 @@ class Evaluator:
     def wait(self, on_wait: Any = None) -> list[JobDone]:
         """Block until every submitted job is done; ``on_wait()`` is called about every second meanwhile."""
         if self.background:
-            while len(self._done) < len(self.pending):
+            while len(self._done) < len(self.pending) and not any(d.error for d in self._done):
                 try:
                     self._take(self._results.get(timeout=1.0))
                 except queue.Empty:

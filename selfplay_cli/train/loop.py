@@ -31,6 +31,7 @@ import numpy as np
 import torch
 
 from ..algos import get_learner
+from ..algos.joint import JointLearner
 from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_spaces, plan_layout
 from ..errors import MarlError
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
@@ -141,10 +142,19 @@ class Trainer:
         torch.manual_seed(cfg.seed)
         learner_cls, algo_cfg = get_learner(cfg.algo), getattr(cfg, cfg.algo)
         self.arch = algo_cfg.arch
-        self.learners: list[Any] = [
-            learner_cls(self.spaces[i], int((layout == i).sum()), algo_cfg, seed=cfg.seed + i, device=self.device)
-            for i in range(len(self.names))
-        ]
+        if cfg.sharing == "sa":  # one agent over the team's joint observation and action (seed 001's SA)
+            sa = JointLearner(learner_cls, self.spaces[0], spec.n_seats, cfg.games, algo_cfg, seed=cfg.seed,
+                              device=self.device)
+            self.learners: list[Any] = [sa]
+            self.saved_spaces = [sa.joint_seat]  # what its snapshots read and play
+            self.joint = {"seats": spec.n_seats, "base": sa.base}
+        else:
+            self.learners = [
+                learner_cls(self.spaces[i], int((layout == i).sum()), algo_cfg, seed=cfg.seed + i, device=self.device)
+                for i in range(len(self.names))
+            ]
+            self.saved_spaces = self.spaces
+            self.joint = None
         self.latest: list[int] = [0] * len(self.learners)  # player id of each learner's latest snapshot
         self.snapshots: list[str] = []
         self._snapshot_episode = self._snapshot_step = -1
@@ -262,11 +272,12 @@ class Trainer:
             rel = snapshot_relpath(cfg.run, name)
             parent = self.league.get_player(self.latest[i]).full_name if self.latest[i] else None
             meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options,
-                                obs_space=self.spaces[i].observation, act_space=self.spaces[i].action, arch=self.arch,
+                                obs_space=self.saved_spaces[i].observation, act_space=self.saved_spaces[i].action,
+                                arch=self.arch,
                                 algo=cfg.algo, step=self.steps,
                                 episode=self.episodes, run=cfg.run, name=name, parent=parent,
                                 seat=self.names[i] if len(self.names) > 1 else None,
-                                extra={"learner": self.names[i]})
+                                extra={"learner": self.names[i], **({"joint": self.joint} if self.joint else {})})
             meta = save_snapshot(self.league.home / rel, learner.net, meta)  # type: ignore[operator]
             rows.append(dict(env=self.spec.name, run=cfg.run, name=name, path=rel,  # the store hashes the file
                              step=self.steps, episode=self.episodes, algo=cfg.algo, parent_id=self.latest[i] or None,

@@ -1,0 +1,172 @@
+"""Seed 001's comparison of control modes on the 2-lander game: SA (one agent, joint actions), NoPS (one network a
+lander) and FuPS (one shared network), each trained by `marl train lander` for the same wall-clock budget.
+
+Per mode it prints the mean return per lander of every snapshot against training steps and wall time (from the
+run's rating games and metrics), the final snapshot's mean return per lander over fresh games, and the peak memory
+of the run's processes; then a FuPS policy trained with 2 landers flown with 1 to 4 landers, and the game's own
+steps/s. A PNG of mean return per lander against wall time goes to --png. Targets (issue 14): FuPS PPO reaches a
+mean return per lander of at least 200 within 30 minutes on 2 cores.
+
+Run: python benchmarks/lander_modes.py [--minutes 30] [--modes sa nops fups] [--algo ppo] [--png lander_modes.png]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+# Hyperparameters for the lander (gymnasium's LunarLander wants a longer horizon and a smaller step than pong).
+CONFIG = """
+[ppo]
+lr = 0.0005
+gamma = 0.999
+rollout_steps = 256
+[dqn]
+gamma = 0.99
+"""
+
+
+def marl(home: Path, *args: str) -> str:
+    env = dict(os.environ, MARL_HOME=str(home), COLUMNS="140", SDL_VIDEODRIVER="dummy")
+    out = subprocess.run([sys.executable, "-m", "selfplay_cli", *args], env=env, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"marl {' '.join(args)} failed ({out.returncode}): {out.stderr.strip()}")
+    return out.stdout
+
+
+def peak_kb(pid: int) -> int:
+    """The peak resident memory (VmHWM, kB) of a process and its children, 0 once gone."""
+    total = 0
+    for p in [pid, *_children(pid)]:
+        try:
+            for line in Path(f"/proc/{p}/status").read_text().splitlines():
+                if line.startswith("VmHWM:"):
+                    total += int(line.split()[1])
+        except OSError:
+            pass
+    return total
+
+
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        return []
+
+
+def train(home: Path, mode: str, minutes: float, algo: str, config: Path) -> dict:
+    args = [sys.executable, "-m", "selfplay_cli", "train", "lander", "--agents", "2", "--sharing", mode, "--algo",
+            algo, "--minutes", str(minutes), "--games", "64", "--snapshot-steps", "500000", "--config", str(config),
+            "--run", mode, "--quiet", "--json"]
+    env = dict(os.environ, MARL_HOME=str(home), SDL_VIDEODRIVER="dummy")
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(args, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    peak = 0
+    while proc.poll() is None:
+        peak = max(peak, peak_kb(proc.pid))
+        time.sleep(1.0)
+    out, err = proc.communicate()
+    if proc.returncode != 0:
+        raise SystemExit(f"marl train lander --sharing {mode} failed: {err.strip()}")
+    report = json.loads(out)
+    report["wall"] = time.perf_counter() - t0
+    report["peak_mb"] = peak / 1024
+    return report
+
+
+def curve(home: Path, run: str) -> list[tuple[int, float, float]]:
+    """(step, wall seconds, mean return per lander) of every snapshot of the run, from its rating games."""
+    rows = json.loads(marl(home, "league", "ladder", "--run", run, "--env", "lander", "--json"))
+    seconds = {}
+    metrics = home / "runs" / run / "metrics.jsonl"
+    for line in metrics.read_text().splitlines():
+        m = json.loads(line)
+        seconds[m["step"]] = m["seconds"]
+    steps = sorted(seconds)
+    out = []
+    for r in rows:
+        if r["kind"] != "snapshot" or r.get("mean_return") is None:
+            continue
+        step = int(r["step"])
+        near = min(steps, key=lambda s: abs(s - step)) if steps else 0
+        out.append((step, seconds.get(near, 0.0) if step else 0.0, r["mean_return"] / 2))
+    return sorted(out)
+
+
+def fly(home: Path, snapshot: str, landers: int, games: int) -> float:
+    """Mean return per lander of ``snapshot`` over ``games`` fresh games with ``landers`` landers."""
+    m = json.loads(marl(home, "match", snapshot, "heuristic", "--games", str(2 * games), "--env-option",
+                        f"landers={landers}", "--seed", "777", "--no-store", "--json"))
+    return m["points_for"] / games / landers
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--minutes", type=float, default=30.0)
+    p.add_argument("--modes", nargs="+", default=["sa", "nops", "fups"])
+    p.add_argument("--algo", default="ppo")
+    p.add_argument("--games", type=int, default=50, help="fresh games for each final figure")
+    p.add_argument("--png", type=Path, default=Path("lander_modes.png"))
+    p.add_argument("--keep", type=Path, help="folder to keep the league in (default: a temporary one)")
+    args = p.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        home = args.keep or Path(tmp) / "league"
+        config = Path(tmp) / "lander.toml"
+        config.write_text(CONFIG)
+        results = {}
+        for mode in args.modes:
+            r = train(home, mode, args.minutes, args.algo, config)
+            finals = [f["snapshot"] for f in r["final"]]
+            team = finals[0]  # nops: its first lander's network, flying every lander (rating a team of per-lander
+            # networks flying together is not in marl yet; see the closing note of issue 14)
+            final = fly(home, team, 2, args.games)
+            results[mode] = {"curve": curve(home, mode), "final": final, "report": r, "snapshot": team}
+            print(f"{mode}: {r['steps']:,} steps in {r['wall'] / 60:.1f} min ({r['steps_per_second']:,} steps/s), "
+                  f"peak memory {r['peak_mb']:,.0f} MB; final {team}: mean return per lander {final:.1f} over "
+                  f"{args.games} games")
+            for step, sec, ret in results[mode]["curve"]:
+                print(f"    step {step:>10,}  {sec / 60:5.1f} min  mean return per lander {ret:8.1f}")
+        if "fups" in results:
+            snap = results["fups"]["snapshot"]
+            print(f"{snap} (trained with 2 landers) flown with M landers, mean return per lander over "
+                  f"{args.games} games:")
+            for m in (1, 2, 3, 4):
+                print(f"    M = {m}: {fly(home, snap, m, args.games):8.1f}")
+        print(subprocess.run([sys.executable, str(ROOT / "benchmarks" / "lander_env_speed.py")], capture_output=True,
+                             text=True).stdout)
+        _plot(results, args.png)
+        print(f"plot: {args.png}")
+        if "fups" in results:
+            ok = results["fups"]["final"] >= 200 and args.minutes <= 30
+            print(f"target: FuPS {args.algo} mean return per lander >= 200 within 30 minutes: "
+                  f"{results['fups']['final']:.1f} after {args.minutes:g} min -> {'PASS' if ok else 'FAIL'}")
+
+
+def _plot(results: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    for mode, r in results.items():
+        pts = r["curve"]
+        ax.plot([s / 60 for _, s, _ in pts], [v for _, _, v in pts], marker="o", label=mode)
+    ax.axhline(200, color="grey", linestyle=":", label="200 (solved)")
+    ax.set_xlabel("wall time (minutes)")
+    ax.set_ylabel("mean return per lander")
+    ax.set_title("lander, 2 landers: control modes")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+if __name__ == "__main__":
+    main()
