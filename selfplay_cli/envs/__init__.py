@@ -8,6 +8,7 @@ Importing this package registers the built-in games. ``get_env(name)`` also find
 from __future__ import annotations
 
 from . import lander_env, pong, pong_env
+from .loading import env_names, get_env
 from .registry import (
     KINDS,
     TURNS,
@@ -20,8 +21,6 @@ from .registry import (
     UnknownEnvError,
     check_spaces,
     describe_space,
-    env_names,
-    get_env,
     random_bot,
     random_rule,
     register,

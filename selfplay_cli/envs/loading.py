@@ -24,7 +24,7 @@ import sys
 from typing import Any
 
 from .pettingzoo_games import adapt
-from .registry import _REGISTRY, EnvError, EnvSpec
+from .registry import _REGISTRY, EnvError, EnvSpec, UnknownEnvError
 
 ENTRY_POINT_GROUP = "selfplay_cli.envs"
 
@@ -163,3 +163,21 @@ def load_user_game(name: str) -> EnvSpec:
             return _as_spec(name, obj, f"{module}.{attr}")
     raise EnvError(name, f"game {name!r}: module {module} has neither parallel_env() nor env(); name its factory "
                          f"as {module}:FACTORY")
+
+
+def get_env(name: str) -> EnvSpec:
+    """The game called ``name``: a registered one (built in, or from an installed package's entry point), or a
+    user's PettingZoo game ``module:factory`` / ``module`` (loaded once, then kept)."""
+    spec = _REGISTRY.get(name)
+    if spec is not None:
+        return spec
+    found = find(name)
+    if found is not None:
+        return found
+    raise UnknownEnvError(name, env_names())
+
+
+def env_names() -> list[str]:
+    """The registered games: built in, and those of installed packages (entry-point group ``selfplay_cli.envs``)
+    that load."""
+    return sorted(set(_REGISTRY) | set(plugin_names()))

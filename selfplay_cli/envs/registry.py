@@ -363,28 +363,6 @@ def register(spec: EnvSpec) -> EnvSpec:
     return spec
 
 
-def get_env(name: str) -> EnvSpec:
-    """The game called ``name``: a registered one (built in, or from an installed package's entry point), or a
-    user's PettingZoo game ``module:factory`` / ``module`` (loaded once, then kept)."""
-    spec = _REGISTRY.get(name)
-    if spec is not None:
-        return spec
-    from . import loading
-
-    found = loading.find(name)
-    if found is not None:
-        return found
-    raise UnknownEnvError(name, env_names())
-
-
-def env_names() -> list[str]:
-    """The registered games: built in, and those of installed packages (entry-point group ``selfplay_cli.envs``)
-    that load."""
-    from . import loading
-
-    return sorted(set(_REGISTRY) | set(loading.plugin_names()))
-
-
 def random_rule(action_space: spaces.Space) -> BotRule:
     """Uniformly random actions for any supported action space: Discrete (uniform over the actions the mask
     allows, when given one), MultiDiscrete (each dimension uniform) and Box (uniform within its bounds).
