@@ -124,8 +124,7 @@ def main() -> None:
         for mode in args.modes:
             r = train(home, mode, args.minutes, args.algo, config)
             finals = [f["snapshot"] for f in r["final"]]
-            team = finals[0]  # nops: its first lander's network, flying every lander (rating a team of per-lander
-            # networks flying together is not in marl yet; see the closing note of issue 14)
+            team = finals[0].rsplit("-", 1)[0] if mode == "nops" else finals[0]  # nops: the team flies together
             final = fly(home, team, 2, args.games)
             results[mode] = {"curve": curve(home, mode), "final": final, "report": r, "snapshot": team}
             print(f"{mode}: {r['steps']:,} steps in {r['wall'] / 60:.1f} min ({r['steps_per_second']:,} steps/s), "

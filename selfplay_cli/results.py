@@ -212,13 +212,18 @@ def compare(return_a: float, return_b: float, tie_tolerance: float = 0.0) -> flo
     return 0.5 if abs(d) <= tie_tolerance else 1.0 if d > 0 else 0.0
 
 
+def crew(player: Any) -> frozenset:
+    """The players an id stands for: itself, or a team's members (a tuple of ids)."""
+    return frozenset(player) if isinstance(player, tuple) else frozenset((player,))
+
+
 def points_between(rules: Rules, games: Sequence[GameResult], a: Any, b: Any) -> list[float]:
     """A's points in every result between players ``a`` and ``b`` that ``games`` give (one round of rated play, see
     :mod:`selfplay_cli.arena.schedule`): two-sides and free-for-all, one per game (:func:`pairwise`); cooperative,
     one per comparison of A's episode with B's (the i-th of each, in order)."""
-    if rules.kind == COOPERATIVE:
-        mine = [sum(g.scores) for g in games if set(g.players) == {a}]
-        theirs = [sum(g.scores) for g in games if set(g.players) == {b}]
+    if rules.kind == COOPERATIVE:  # a or b may be a team flying together: a tuple of its members' ids
+        mine = [sum(g.scores) for g in games if frozenset(g.players) == crew(a)]
+        theirs = [sum(g.scores) for g in games if frozenset(g.players) == crew(b)]
         return [compare(x, y, rules.tie_tolerance) for x, y in zip(mine, theirs, strict=False)]
     out = []
     for g in games:

@@ -140,3 +140,23 @@ def test_an_sa_agent_trains_plays_and_records_its_team(home, tmp_path, capsys):
     code, _, err = run(capsys, "record", "--ckpt", "sa/s4k", "--seconds", "1", "--out", str(out))
     assert code == 0, err
     assert np.stack(list(iio.imiter(out))).shape[0] >= 50
+
+
+def test_a_team_of_per_lander_networks_flies_together_and_grows_by_copies(home, capsys):
+    run_json(capsys, "train", "lander", "--agents", "2", "--sharing", "nops", "--steps", "4000", "--snapshot-steps",
+             "4000", "--games", "8", "--eval-games", "0", "--run", "np")
+    r = run_json(capsys, "match", "np/s4k", "heuristic", "--games", "6", "--env-option", "landers=3")
+    assert r["a"] == "np/s4k" and r["games"] == 6 and r["wins"] + r["draws"] + r["losses"] == 3  # 3 comparisons
+    league = League.open(home=home)
+    try:
+        names = [[league.get_player(p).full_name for p in league.game(i).players] for i in r["game_ids"]]
+    finally:
+        league.close()
+    team = [n for n in names if "heuristic" not in n]
+    assert len(team) == 3 and all(len(n) == 3 for n in team)
+    for seats in team:  # each member on its own seat, the third lander a copy of one of them
+        assert seats[:2] == ["np/s4k-lander_0", "np/s4k-lander_1"] and seats[2] in seats[:2]
+    rows = {x["policy"]: x for x in run_json(capsys, "league", "ladder")}
+    assert rows["np/s4k-lander_0"]["games"] == rows["np/s4k-lander_1"]["games"] == 3  # the team's comparisons
+    code, _, err = run(capsys, "match", "heuristic", "np/s4k", "--games", "2")
+    assert code == 2 and "name it first" in err and err.count("\n") == 1, err

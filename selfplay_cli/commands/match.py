@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -125,7 +125,8 @@ def match(
     """Play rated games between two policies: W/D/L, Elo difference with its interval, LOS, optional SPRT.
 
     A team name (s6M: the snapshots s6M-left and s6M-right of one moment of a run) plays each of its members
-    against the other policy, one match after the other.
+    against the other policy, one match after the other; in a cooperative game (the lander) the team flies
+    together instead, each member on its own seat, in one match.
 
     Exit code: 0, or with --sprt: 0 when H1 is accepted, 1 when H0 is, 3 when --max-games ends it undecided.
     """
@@ -138,8 +139,29 @@ def match(
     reports: list[MatchReport] = []
     try:
         side_a, side_b = resolve_players(league, [a, b], env, teams=True)
-        pairs = pairings(a, side_a, b, side_b, sprt=sprt)
-        options = parse_env_options(pairs[0][0].env, env_option) if env_option else None
+        crew = _flying_team(side_a, side_b, a, b)
+        if crew is not None:  # a cooperative team: one match, the members on their seats together
+            options = parse_env_options(crew.env, env_option) if env_option else None
+            members = [load_player(league, m, device=device, seed=mix_seed(seed, 2 + i))
+                       for i, m in enumerate(crew.members)]
+            pb = load_player(league, side_b, device=device, seed=mix_seed(seed, 1))  # type: ignore[arg-type]
+            try:
+                with progress_bar(f"{crew.full_name} vs {pb.id}", budget + budget % 2, "games",
+                                  progress_enabled(quiet)) as tick:
+                    reports.append(run_match(members[0], pb, games=budget, first_seed=seed, parallel=parallel,
+                                             league=league if store else None,
+                                             player_ids={**{p.id: m.id for p, m in zip(members, crew.members,
+                                                                                        strict=True)},
+                                                         pb.id: side_b.id},  # type: ignore[union-attr]
+                                             sprt=settings, confidence=confidence, on_games=tick,
+                                             env_options=options, team=members, team_name=crew.full_name))
+            except MatchInterrupted as stop:
+                interrupted(stop.report, stored=store)
+                raise typer.Exit(130) from None
+            if not json_out:
+                render_report(reports[-1])
+        pairs = [] if crew is not None else pairings(a, side_a, b, side_b, sprt=sprt)
+        options = parse_env_options(pairs[0][0].env, env_option) if env_option and pairs else None
         for row_a, row_b in pairs:
             pa = load_player(league, row_a, device=device, seed=mix_seed(seed, 0))
             pb = load_player(league, row_b, device=device, seed=mix_seed(seed, 1))
@@ -157,11 +179,27 @@ def match(
                 render_report(reports[-1])
     finally:
         league.close()
-    team = next((side.full_name for side in (side_a, side_b) if isinstance(side, Team)), None)
+    team = next((side.full_name for side in (side_a, side_b) if isinstance(side, Team)), None) if not crew else None
     if json_out:
         print_json(reports[0].to_json() if team is None else {"team": team, "matches": [r.to_json() for r in reports]})
     if settings is not None:
         raise typer.Exit(sprt_exit_code(reports[0]))
+
+
+def _flying_team(side_a: Any, side_b: Any, a: str, b: str) -> Team | None:
+    """The team that flies together in one match (a cooperative game's per-seat snapshots, named first), or None
+    (each member then plays alone, as in a two-sides game)."""
+    from ..envs import get_env
+    from ..results import COOPERATIVE
+
+    team = side_a if isinstance(side_a, Team) else side_b if isinstance(side_b, Team) else None
+    if team is None or get_env(team.env).kind != COOPERATIVE:
+        return None
+    if team is side_b:
+        raise MarlError(f"'{b}' is a team that flies together: name it first (marl match {b} {a})")
+    if isinstance(side_b, Team):
+        raise MarlError(f"'{a}' and '{b}' are both teams: match each against a scripted player")
+    return team
 
 
 def pairings(a: str, side_a: PlayerRow | Team, b: str, side_b: PlayerRow | Team,

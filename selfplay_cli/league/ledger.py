@@ -195,25 +195,28 @@ class _Stored:
 
 
 class _Episodes:
-    """Cooperative episodes seen so far, by (match, seed) and player, to pair each new one with the others."""
+    """Cooperative episodes seen so far, by (match, seed) and crew (the players that flew it: one policy on every
+    seat, or a team of them), to pair each new one with the others."""
 
     def __init__(self) -> None:
-        self.seen: dict[tuple[int, int], dict[int, list[_Stored]]] = defaultdict(dict)
+        self.seen: dict[tuple[int, int], dict[frozenset[int], list[_Stored]]] = defaultdict(dict)
 
     def add(self, g: _Stored, rules: Rules) -> list[tuple[_Stored, int, int, float]]:
-        """Add an episode; returns the comparisons it completes: ``(earlier episode, a, b, a's points)``, ``a`` the
-        earlier episode's player. Only episodes flown by one player on every seat are compared."""
-        if len(g.players) != rules.n_seats or len(set(g.players)) != 1:
+        """Add an episode; returns the comparisons it completes: ``(earlier episode, a, b, a's points)`` for every
+        player ``a`` of the earlier episode's crew and ``b`` of this one's (a team's comparison counts for each of
+        its members; a player in both crews is not compared with itself)."""
+        if not g.players:
             return []
-        me = g.players[0]
-        by_player = self.seen[(g.match_id, g.seed)]
-        mine = by_player.setdefault(me, [])
+        me = frozenset(g.players)
+        by_crew = self.seen[(g.match_id, g.seed)]
+        mine = by_crew.setdefault(me, [])
         i = len(mine)
         out = []
-        for other, theirs in by_player.items():
+        for other, theirs in by_crew.items():
             if other != me and len(theirs) > i:
                 first = theirs[i]
-                out.append((first, other, me, compare(sum(first.scores), sum(g.scores), rules.tie_tolerance)))
+                pts = compare(sum(first.scores), sum(g.scores), rules.tie_tolerance)
+                out += [(first, a, b, pts) for a in sorted(other) for b in sorted(me) if a != b]
         mine.append(g)
         return out
 

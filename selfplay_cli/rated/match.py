@@ -21,19 +21,19 @@ from __future__ import annotations
 
 import contextlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from ..arena import play
+from ..arena import Game, play
 from ..arena.schedule import round_size, rounds
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..policies import Policy, ScriptedPolicy
-from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, points_between
+from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, crew, points_between
 from ..stats.match import MatchStats, match_stats
 from ..stats.sprt import SPRT
 
@@ -222,6 +222,8 @@ def run_match(
     confidence: float = 0.95,
     on_games: Callable[[int], None] | None = None,
     env_options: dict[str, Any] | None = None,
+    team: Sequence[Policy] | None = None,
+    team_name: str | None = None,
 ) -> MatchReport:
     """Play up to ``games`` games (rounded up to whole rounds, see the module docstring) between ``a`` and ``b`` and
     report from A's view.
@@ -233,22 +235,39 @@ def run_match(
     ``env_options`` override the game options the players were made for (``landers=4`` flies a team trained with
     2 landers as 4); each network must still fit the seats those options make.
 
+    ``team`` (a cooperative game only): A is that team of policies flying together, member i on seat i (a team
+    flown with more seats than members gives each extra seat a member drawn at random, seed 001's mapping; with
+    fewer, the first members fly); ``a`` is then its first member and ``team_name`` names it in the report.
+
     Ctrl-C raises :class:`MatchInterrupted` after storing the whole rounds already finished (of the chunk in play
     too: half a pair would leave its seed's seat luck uncancelled, half a comparison compares nothing; they are
     dropped).
     """
-    if a.env != b.env:
-        raise MarlError(f"{a.id} plays {a.env} but {b.id} plays {b.env}")
-    if a.id == b.id:
-        raise MarlError(f"a match needs two different players, got {a.id} twice")
+    members = list(team) if team else [a]
+    for m in members:
+        if m.env != b.env:
+            raise MarlError(f"{m.id} plays {m.env} but {b.id} plays {b.env}")
+        if m.id == b.id:
+            raise MarlError(f"a match needs two different players, got {b.id} twice")
     if games < 1:
         raise MarlError(f"--games must be at least 1, not {games}")
     if league is not None and player_ids is None:
         raise ValueError("player_ids are needed to store games")
-    options = {**env_options_of(a, b), **(env_options or {})}
-    spec = get_env(a.env).for_options(**options)
-    check_fits(spec, options, a, b)
+    options = {**env_options_of(*members, b), **(env_options or {})}
+    spec = get_env(b.env).for_options(**options)
+    check_fits(spec, options, *members, b)
     rules = Rules.of(spec)
+    roster: list[Policy] = [a, b]
+    team_seats: tuple[int, ...] | None = None
+    a_key: Any = a.id  # what A is in the results: a policy's id, or the ids of a team's members
+    if team:
+        if rules.kind != COOPERATIVE:
+            raise MarlError(f"a team flies together only in a cooperative game; {spec.name} is {rules.kind}")
+        roster = [*members, b]
+        pick = np.random.default_rng(first_seed).integers(0, len(members), size=max(rules.n_seats - len(members), 0))
+        team_seats = tuple(list(range(min(len(members), rules.n_seats))) + [int(i) for i in pick])
+        a_key = tuple(sorted({members[i].id for i in team_seats}))
+    a_name = team_name or a.id
     per = round_size(rules, 2)
     n_rounds = -(-games // per)
     chunk_rounds = max(1, parallel // per)
@@ -256,7 +275,7 @@ def run_match(
     if sprt is not None:
         chunk_rounds = max(1, min(chunk_rounds, 64))  # smaller batches waste fewer games past the decision
         test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta)
-    params: dict[str, Any] = {"a": a.id, "b": b.id, "games": games, "first_seed": first_seed, "env_options": options,
+    params: dict[str, Any] = {"a": a_name, "b": b.id, "games": games, "first_seed": first_seed, "env_options": options,
                               "status": "running"}
     if sprt is not None:
         params["sprt"] = asdict(sprt)
@@ -278,7 +297,7 @@ def run_match(
             if any(g is None for g in got):
                 continue
             new += got  # type: ignore[arg-type]
-            round_points.append(points_between(rules, got, a.id, b.id))  # type: ignore[arg-type]
+            round_points.append(points_between(rules, got, a_key, b.id))  # type: ignore[arg-type]
             if test is not None:
                 llr = test.llr(*_counts(rules, round_points))
                 decision = test.decide(llr)
@@ -307,15 +326,19 @@ def run_match(
     in_play: list[GameResult] = []
 
     def report() -> MatchReport:
-        return _report(spec.name, rules, a, b, kept, round_points, time.perf_counter() - start, match_id, first_seed,
-                       confidence, game_ids)
+        return _report(spec.name, rules, a_name, a_key, b, kept, round_points, time.perf_counter() - start, match_id,
+                       first_seed, confidence, game_ids)
 
     try:
         while done < n_rounds and decision is None:
             n = min(chunk_rounds, n_rounds - done)
-            schedule = rounds(rules, (0, 1), n, first_seed=first_seed + done)
+            if team_seats is None:
+                schedule = rounds(rules, (0, 1), n, first_seed=first_seed + done)
+            else:  # the team's episode and B's on each seed: one comparison
+                schedule = [g for r in range(n) for g in (Game(first_seed + done + r, team_seats),
+                                                          Game(first_seed + done + r, (len(members),) * rules.n_seats))]
             in_play = []
-            play(spec, [a, b], schedule, parallel=parallel, env_options=options, on_result=on_result,
+            play(spec, roster, schedule, parallel=parallel, env_options=options, on_result=on_result,
                  record_actions=league is not None)
             new = take(in_play)
             in_play = []
@@ -358,22 +381,29 @@ def _counts(rules: Rules, round_points: list[list[float]]) -> tuple[list[int], s
     return [int((pts < 0.5).sum()), int((pts == 0.5).sum()), int((pts > 0.5).sum())], "trinomial"
 
 
-def _report(env: str, rules: Rules, a: Policy, b: Policy, kept: list[GameResult], round_points: list[list[float]],
-            seconds: float, match_id: int | None, first_seed: int, confidence: float,
+def _report(env: str, rules: Rules, a_name: str, a_key: Any, b: Policy, kept: list[GameResult],
+            round_points: list[list[float]], seconds: float, match_id: int | None, first_seed: int, confidence: float,
             game_ids: list[int]) -> MatchReport:
     pts = np.array([x for p in round_points for x in p])
     wins, draws, losses = int((pts > 0.5).sum()), int((pts == 0.5).sum()), int((pts < 0.5).sum())
     paired = rules.kind == TWO_SIDES
     penta = pentanomial(np.array([sum(p) for p in round_points])) if paired else (0, 0, 0, 0, 0)
     return MatchReport(
-        env=env, a=a.id, b=b.id, games=len(kept), wins=wins, draws=draws, losses=losses,
-        points_for=_number(sum(r.score_of(a.id) for r in kept)),
+        env=env, a=a_name, b=b.id, games=len(kept), wins=wins, draws=draws, losses=losses,
+        points_for=_number(sum(_score_of(r, a_key) for r in kept)),
         points_against=_number(sum(r.score_of(b.id) for r in kept)),
         pentanomial=penta, stats=match_stats(wins, draws, losses, pentanomial=penta if paired else None,
                                              confidence=confidence),
         seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
         results=kept, game_ids=game_ids, kind=rules.kind,
     )
+
+
+def _score_of(r: GameResult, key: Any) -> float:
+    """A's score in one game: its seats' (a policy's id), or the team return of its crew's episodes (a team)."""
+    if isinstance(key, tuple):
+        return float(sum(r.scores)) if frozenset(r.players) == crew(key) else 0.0
+    return r.score_of(key)
 
 
 def sprt_exit_code(report: MatchReport) -> int:
