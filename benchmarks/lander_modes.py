@@ -26,6 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CONFIG = """
 [ppo]
 lr = 0.0005
+anneal_lr = false
 gamma = 0.999
 rollout_steps = 256
 [dqn]
