@@ -13,6 +13,7 @@ Run: python benchmarks/lander_modes.py [--minutes 30] [--modes sa nops fups] [--
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import subprocess
@@ -46,12 +47,10 @@ def peak_kb(pid: int) -> int:
     """The peak resident memory (VmHWM, kB) of a process and its children, 0 once gone."""
     total = 0
     for p in [pid, *_children(pid)]:
-        try:
+        with contextlib.suppress(OSError):  # a process that ended since it was listed has no status to read
             for line in Path(f"/proc/{p}/status").read_text().splitlines():
                 if line.startswith("VmHWM:"):
                     total += int(line.split()[1])
-        except OSError:
-            pass
     return total
 
 

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from selfplay_cli.arena.selfplay import SelfPlayGames, seat_layout
+from selfplay_cli.arena.selfplay import SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.envs import get_env
 from selfplay_cli.policies import ScriptedPolicy
 
 
@@ -13,7 +14,7 @@ def _learn_against_random(learner, n_games: int, budget: int) -> tuple[float, fl
     """Train ``learner`` (driving one seat of ``n_games`` games) for ``budget`` game steps against the random
     player; returns its win rate over the first and the last 300 games, and the number of games."""
     rnd = ScriptedPolicy("pong", "random", seed=1)
-    games = SelfPlayGames("pong", n_games, seat_layout(2, n_games, 1, "nops"), ["me"],
+    games = SelfPlayGames("pong", n_games, plan_layout(plan_seats(get_env("pong"), 1), n_games, 1), ["me"],
                           choose_opponents=lambda slots: [rnd] * len(slots), env_options={"points_to_win": 1})
     results: list[float] = []
     steps = 0
@@ -32,3 +33,24 @@ def _learn_against_random(learner, n_games: int, budget: int) -> tuple[float, fl
 def learn_against_random():
     """The play-and-learn loop of the learners' learning tests (see ``_learn_against_random``)."""
     return _learn_against_random
+
+
+@pytest.fixture
+def home(tmp_path, monkeypatch):
+    """A fresh league home for the CLI (``MARL_HOME``; no ``MARL_DB``), videos drawn offscreen."""
+    h = tmp_path / "league"
+    monkeypatch.setenv("MARL_HOME", str(h))
+    monkeypatch.delenv("MARL_DB", raising=False)
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    return h
+
+
+@pytest.fixture
+def one_thread():
+    """Small networks run fastest on one torch thread; the caller's setting comes back afterwards."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)

@@ -13,15 +13,6 @@ from selfplay_cli.algos.dqn import DQNConfig, DQNLearner, ReplayBuffer, epsilon_
 from selfplay_cli.policies.network import Arch
 
 
-@pytest.fixture
-def one_thread():
-    """Small networks run fastest on one thread; restore the caller's setting afterwards."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def test_linear_epsilon_schedule_by_transitions():
     cfg = DQNConfig(eps_start=1.0, eps_end=0.05, eps_decay_steps=1000)
     assert epsilon_at(cfg, 0) == pytest.approx(1.0)

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from cli_helpers import run
 
 from selfplay_cli.cli import build_command, main
 from selfplay_cli.commands._output import finite
@@ -25,11 +26,6 @@ from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def run(capsys, *args: str) -> tuple[int, str, str]:
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
 
 def one_line_error(code: int, out: str, err: str, needle: str, want: int = EXIT_USAGE) -> None:
     assert code == want, (code, err)
@@ -37,13 +33,6 @@ def one_line_error(code: int, out: str, err: str, needle: str, want: int = EXIT_
     assert needle in err, err
     assert "Traceback" not in err + out
 
-
-@pytest.fixture
-def home(tmp_path, monkeypatch) -> Path:
-    h = tmp_path / "league"
-    monkeypatch.setenv("MARL_HOME", str(h))
-    monkeypatch.delenv("MARL_DB", raising=False)
-    return h
 
 
 def snapshot_file(path: Path, run: str, name: str, seed: int) -> Path:

@@ -7,21 +7,15 @@ import json
 from collections import defaultdict
 
 import numpy as np
+from cli_helpers import run
 
 from selfplay_cli.arena import Game, play
-from selfplay_cli.cli import main
 from selfplay_cli.league.ladder import ladder
 from selfplay_cli.league.pairs import head_to_head
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.rated.gauntlet import GauntletConfig, choose_opponents, clear, play_gauntlet
 from selfplay_cli.results import GameResult
-
-
-def run(capsys, *args):
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def snapshot_rows(league: League, run: str, n: int, learners=("left", "right")) -> list:

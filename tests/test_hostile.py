@@ -17,9 +17,9 @@ from pathlib import Path
 
 import pytest
 import torch
+from cli_helpers import run
 from safetensors.torch import save_file
 
-from selfplay_cli.cli import main
 from selfplay_cli.files import sweep, sweep_home
 from selfplay_cli.league.store import League, LeagueError, check_name
 from selfplay_cli.policies.network import Arch, build_network
@@ -41,11 +41,6 @@ from selfplay_cli.results import GameResult
 ROOT = Path(__file__).resolve().parents[1]
 MB = 1 << 20
 
-
-def run(capsys, *args: str) -> tuple[int, str, str]:
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def one_line_error(code: int, err: str) -> str:

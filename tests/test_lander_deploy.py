@@ -4,38 +4,15 @@ network that cannot play the seats those options make is one clear line."""
 
 from __future__ import annotations
 
-import json
-
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from cli_helpers import run, run_json
 
-from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.rated.lineup import Lineup, refit
-
-
-def run(capsys, *args: str) -> tuple[int, str, str]:
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
-
-def run_json(capsys, *args: str):
-    code, out, err = run(capsys, *args, "--json")
-    assert code == 0, err
-    return json.loads(out)
-
-
-@pytest.fixture
-def home(tmp_path, monkeypatch):
-    h = tmp_path / "league"
-    monkeypatch.setenv("MARL_HOME", str(h))
-    monkeypatch.delenv("MARL_DB", raising=False)
-    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
-    return h
 
 
 def test_the_landers_option_makes_the_seats_and_pong_keeps_its_own():
@@ -160,3 +137,12 @@ def test_a_team_of_per_lander_networks_flies_together_and_grows_by_copies(home, 
     assert rows["np/s4k-lander_0"]["games"] == rows["np/s4k-lander_1"]["games"] == 3  # the team's comparisons
     code, _, err = run(capsys, "match", "heuristic", "np/s4k", "--games", "2")
     assert code == 2 and "name it first" in err and err.count("\n") == 1, err
+
+
+def test_one_learner_with_fups_is_a_shared_team_network_in_a_cooperative_game_only():
+    from selfplay_cli.errors import MarlError
+    from selfplay_cli.train.config import TrainConfig
+
+    assert TrainConfig(env="lander", agents=1, sharing="fups", run="x").seat_plan().home == (0, 0)
+    with pytest.raises(MarlError, match="needs --agents 2 or more"):
+        TrainConfig(env="pong", agents=1, sharing="fups", run="x")

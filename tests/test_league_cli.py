@@ -13,8 +13,8 @@ import time
 from pathlib import Path
 
 import pytest
+from cli_helpers import run
 
-from selfplay_cli.cli import main
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
@@ -28,23 +28,11 @@ def make_snapshot(path: Path, name: str, seed: int, run: str = "r1", obs_shape=(
     return path
 
 
-def run(capsys, *args: str) -> tuple[int, str, str]:
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
-
 
 def run_json(capsys, *args: str):
     code, out, err = run(capsys, *args, "--json")
     return code, json.loads(out)
 
-
-@pytest.fixture
-def home(tmp_path, monkeypatch):
-    h = tmp_path / "league"
-    monkeypatch.setenv("MARL_HOME", str(h))
-    monkeypatch.delenv("MARL_DB", raising=False)
-    return h
 
 
 # ---------------------------------------------------------------------------------------------------------------

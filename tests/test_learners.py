@@ -16,13 +16,6 @@ from selfplay_cli.policies.network import Arch
 BOX2 = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
 
-@pytest.fixture
-def one_thread():
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
 
 def constant_value(learner: PPOLearner, value: float) -> None:
     with torch.no_grad():

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cli_helpers import run
 
-from selfplay_cli.cli import main
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League, PlayerRow
 from selfplay_cli.report.matrix import build_matrix, pair_records, write_matrix_png
@@ -248,18 +248,6 @@ def test_terminal_renderings_without_colour_stay_plain(league: League) -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-@pytest.fixture
-def home(tmp_path, monkeypatch) -> Path:
-    h = tmp_path / "league"
-    monkeypatch.setenv("MARL_HOME", str(h))
-    monkeypatch.delenv("MARL_DB", raising=False)
-    return h
-
-
-def run(capsys, *args: str) -> tuple[int, str, str]:
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def _one_line_error(code: int, out: str, err: str, needle: str) -> None:

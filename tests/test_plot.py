@@ -6,8 +6,8 @@ import json
 from pathlib import Path
 
 import pytest
+from cli_helpers import run
 
-from selfplay_cli.cli import main
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.ladder import ladder
 from selfplay_cli.league.store import League, PlayerRow
@@ -184,18 +184,6 @@ def test_braille_chart_fits_its_width(league: League) -> None:
 # --------------------------------------------------------------------------------------------------
 
 
-@pytest.fixture
-def home(tmp_path, monkeypatch) -> Path:
-    h = tmp_path / "league"
-    monkeypatch.setenv("MARL_HOME", str(h))
-    monkeypatch.delenv("MARL_DB", raising=False)
-    return h
-
-
-def run(capsys, *args: str) -> tuple[int, str, str]:
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def _one_line_error(code: int, out: str, err: str, needle: str) -> None:

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
-from selfplay_cli.arena import Game, paired_schedule, play
+from selfplay_cli.arena import Game, play
+from selfplay_cli.arena.schedule import rounds
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.pong import (
     BALL_R,
@@ -25,6 +26,7 @@ from selfplay_cli.envs.pong import (
 )
 from selfplay_cli.envs.pong_env import PongParallelEnv
 from selfplay_cli.policies import ScriptedPolicy
+from selfplay_cli.results import Rules
 
 
 def core1(**options) -> PongCore:
@@ -420,7 +422,7 @@ def test_an_aiming_player_beats_the_tracker_under_classic_rules():
 
     aimer = Aimer("pong", "cpu")
     aimer.id = "aimer"
-    results = play("pong", [aimer, ScriptedPolicy("pong", "cpu")], paired_schedule(16))
+    results = play("pong", [aimer, ScriptedPolicy("pong", "cpu")], rounds(Rules(), (0, 1), 8))
     score = sum(r.points_of("aimer") for r in results) / len(results)
     assert score >= 0.9, score
 
@@ -604,7 +606,7 @@ def test_cpu_beats_random_by_a_wide_margin():
     spec = get_env("pong")
     assert set(spec.bots) == {"cpu", "random"}
     results = play("pong", [ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "random", seed=3)],
-                   paired_schedule(20))
+                   rounds(Rules(), (0, 1), 10))
     assert len(results) == 20
     assert sum(r.points_of("cpu") for r in results) == 20
     points_conceded = sum(r.scores[r.players.index("random")] for r in results)
@@ -624,7 +626,7 @@ def test_cpu_rule_moves_toward_the_ball_height_from_observations_only():
 
 
 def test_runner_plays_each_seed_in_both_seat_orders():
-    games = paired_schedule(6, first_seed=100)
+    games = rounds(Rules(), (0, 1), 3, first_seed=100)
     assert [(g.seed, g.seats) for g in games] == [
         (100, (0, 1)), (100, (1, 0)), (101, (0, 1)), (101, (1, 0)), (102, (0, 1)), (102, (1, 0))]
     cpu, rnd = ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "random", seed=1)

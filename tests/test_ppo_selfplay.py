@@ -7,27 +7,33 @@ import pytest
 import torch
 
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
-from selfplay_cli.arena.selfplay import OPPONENT, SelfPlayGames, seat_layout
+from selfplay_cli.arena.selfplay import OPPONENT, SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.envs import get_env
+from selfplay_cli.errors import MarlError
 from selfplay_cli.policies import ScriptedPolicy
 
 
+def seat_layout(n_games: int, agents: int, sharing: str, league_games: float = 0.0) -> np.ndarray:
+    return plan_layout(plan_seats(get_env("pong"), agents, sharing), n_games, agents, league_games)
+
+
 def test_seat_layouts_for_agents_and_sharing():
-    assert seat_layout(2, 4, 2, "nops").tolist() == [[0, 0, 0, 0], [1, 1, 1, 1]]
-    assert seat_layout(2, 4, 2, "fups").tolist() == [[0, 0, 0, 0], [0, 0, 0, 0]]
-    assert seat_layout(2, 4, 1, "nops").tolist() == [[0, OPPONENT, 0, OPPONENT], [OPPONENT, 0, OPPONENT, 0]]
-    assert seat_layout(2, 6, 2, "nops", league_games=0.5).tolist() == [[0, OPPONENT, 0, 0, 0, 0],
+    assert seat_layout(4, 2, "nops").tolist() == [[0, 0, 0, 0], [1, 1, 1, 1]]
+    assert seat_layout(4, 2, "fups").tolist() == [[0, 0, 0, 0], [0, 0, 0, 0]]
+    assert seat_layout(4, 1, "nops").tolist() == [[0, OPPONENT, 0, OPPONENT], [OPPONENT, 0, OPPONENT, 0]]
+    assert seat_layout(6, 2, "nops", league_games=0.5).tolist() == [[0, OPPONENT, 0, 0, 0, 0],
                                                                        [OPPONENT, 1, OPPONENT, 1, 1, 1]]
-    assert seat_layout(2, 4, 2, "fups", league_games=0.5).tolist() == [[0, OPPONENT, 0, 0], [OPPONENT, 0, 0, 0]]
-    with pytest.raises(ValueError):
-        seat_layout(2, 4, 3, "nops")
-    with pytest.raises(ValueError):
-        seat_layout(2, 4, 2, "shared")
+    assert seat_layout(4, 2, "fups", league_games=0.5).tolist() == [[0, OPPONENT, 0, 0], [OPPONENT, 0, 0, 0]]
+    with pytest.raises(MarlError, match="pong has 2 seats"):
+        seat_layout(4, 3, "nops")
+    with pytest.raises(MarlError, match="--sharing must be one of"):
+        seat_layout(4, 2, "shared")
 
 
 def test_selfplay_games_restart_with_fresh_seeds_and_report_results():
     cpu, rnd = ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "random", seed=3)
     n = 8
-    games = SelfPlayGames("pong", n, seat_layout(2, n, 1, "nops"), ["me"],
+    games = SelfPlayGames("pong", n, seat_layout(n, 1, "nops"), ["me"],
                           choose_opponents=lambda slots: [rnd] * len(slots),
                           env_options={"points_to_win": 2}, first_seed=100)
     finished = []

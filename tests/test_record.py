@@ -14,8 +14,9 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from selfplay_cli.arena import Game, paired_schedule, play
+from selfplay_cli.arena import Game, play
 from selfplay_cli.arena.replay import ReplayError, decode_actions, encode_actions, replay_policies
+from selfplay_cli.arena.schedule import rounds
 from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
@@ -25,7 +26,7 @@ from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
 from selfplay_cli.rated.lineup import lineup
 from selfplay_cli.record import VideoSettings, record_game, stop_rule
-from selfplay_cli.results import GameResult
+from selfplay_cli.results import GameResult, Rules
 
 
 def make_snapshot(path: Path, run: str, name: str, seed: int, env_options: dict | None = None) -> Path:
@@ -238,13 +239,13 @@ def test_the_runner_returns_actions_that_replay_every_game_exactly():
     """Games of a batch that reuses its slots (12 games on 3 slots), each replayed alone from its actions."""
     cpu, rnd = ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "random", seed=5)
     options = {"points_to_win": 2}
-    results = play("pong", [cpu, rnd], paired_schedule(12), parallel=3, env_options=options, record_actions=True)
+    results = play("pong", [cpu, rnd], rounds(Rules(), (0, 1), 6), parallel=3, env_options=options, record_actions=True)
     for r in results:
         actions = decode_actions(r.actions, 2, r.length)
         (again,) = play("pong", replay_policies(r.players, "pong", actions), [Game(r.seed, (0, 1))], parallel=1,
                         env_options=options)
         assert (again.scores, again.length, again.players) == (r.scores, r.length, r.players)
-    assert play("pong", [cpu, rnd], paired_schedule(2), env_options=options)[0].actions is None
+    assert play("pong", [cpu, rnd], rounds(Rules(), (0, 1), 1), env_options=options)[0].actions is None
     short = replay_policies(("cpu", "random"), "pong", decode_actions(results[0].actions, 2)[:10])
     with pytest.raises(ReplayError, match="ran out after 10 steps"):
         play("pong", short, [Game(results[0].seed, (0, 1))], parallel=1, env_options=options)

@@ -7,6 +7,7 @@ import tempfile
 
 import numpy as np
 import pytest
+from cli_helpers import run
 
 from selfplay_cli.algos.ppo import PPOConfig
 from selfplay_cli.arena.selfplay import OPPONENT
@@ -192,11 +193,6 @@ def test_train_flag_defaults_are_the_config_defaults():
              "opponents": mm.mode, "window": mm.window, "latest_ratio": mm.latest_ratio, "device": cfg.device}
     assert {k: params[k].default for k in flags} == flags
 
-
-def run(capsys, *args):
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def test_train_command_runs_and_reports(tmp_path, capsys):

@@ -5,18 +5,17 @@ are filmed; and every mapping of learners to seats that cannot work is one clear
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from cli_helpers import run, run_json
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from selfplay_cli.arena.selfplay import OPPONENT, parse_seats, plan_layout, plan_seats
-from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
 
@@ -28,25 +27,7 @@ TICTACTOE = "tests.games.tictactoe:env"
 RENDEZVOUS = "tests.games.rendezvous:parallel_env"
 
 
-def run(capsys, *args: str) -> tuple[int, str, str]:
-    code = main(list(args))
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
-
-def run_json(capsys, *args: str):
-    code, out, err = run(capsys, *args, "--json")
-    assert code == 0, err
-    return json.loads(out)
-
-
-@pytest.fixture
-def home(tmp_path, monkeypatch):
-    h = tmp_path / "league"
-    monkeypatch.setenv("MARL_HOME", str(h))
-    monkeypatch.delenv("MARL_DB", raising=False)
-    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
-    return h
 
 
 def _frames(path: Path) -> np.ndarray:

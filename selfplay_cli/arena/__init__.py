@@ -1,6 +1,6 @@
 """The batched game runner shared by matches, training evaluation and recording."""
 
 from ..results import GameResult
-from .runner import Game, paired_schedule, play
+from .runner import Game, play
 
-__all__ = ["Game", "GameResult", "paired_schedule", "play"]
+__all__ = ["Game", "GameResult", "play"]

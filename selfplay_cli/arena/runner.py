@@ -11,7 +11,6 @@ are asked), and results by the game's kind (:class:`~selfplay_cli.results.Rules`
 
 from __future__ import annotations
 
-import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -26,7 +25,7 @@ from ..results import GameResult, Rules
 from .replay import ActionLog, SeatActions, encode_actions
 
 __all__ = ["ActionLog", "FrameHook", "Game", "GameResult", "IllegalActionError", "StopRule", "encode_actions",
-           "paired_schedule", "play"]
+           "play"]
 
 FrameHook = Callable[[BatchedCore, int, int, bool], None]
 """``on_frame(core, slot, game_index, ended)``: see :func:`play`."""
@@ -53,18 +52,6 @@ def _acting_groups(policies: Sequence[Policy]) -> list[tuple[list[int], Any]]:
             for members in bank_groups(policies)]
 
 
-def paired_schedule(n_games: int, first_seed: int = 0, n_policies: int = 2) -> list[Game]:
-    """Game pairs of a two-seat game: each seed is played once with policy 0 on seat 0 and once with the seats
-    swapped (for any game, :func:`selfplay_cli.arena.schedule.rounds`)."""
-    if n_policies != 2:
-        raise ValueError("paired schedules are for two policies")
-    games = []
-    for i in range(n_games):
-        seed = first_seed + i // 2
-        games.append(Game(seed, (0, 1) if i % 2 == 0 else (1, 0)))
-    return games
-
-
 @dataclass
 class _SeatGroup:
     """Seats that share one observation shape, one action space and masks (all of Pong's seats): their
@@ -89,14 +76,6 @@ def _seat_groups(spec: EnvSpec, cfg: Any, n: int) -> list[_SeatGroup]:
         buf = np.zeros((len(seats), n, *action.shape), dtype=action.dtype)
         groups.append(_SeatGroup(seats, shape, action, masked, buf, buf.reshape(len(seats) * n, *action.shape)))
     return groups
-
-
-def _takes_masks(bank: Any) -> bool:
-    """Whether a network bank's ``act`` takes the members' masks as well as their observations."""
-    try:
-        return len(inspect.signature(bank.act).parameters) >= 2
-    except (TypeError, ValueError):
-        return False
 
 
 def play(
@@ -188,7 +167,6 @@ def play(
     start(np.arange(n))
     results: dict[int, GameResult] = {}
     groups = _acting_groups(policies)
-    with_masks = [bank is not None and _takes_masks(bank) for _, bank in groups]
     wanted = np.arange(len(policies) + 1)
     # A joint (SA) policy flies its games whole: it is given every seat of them, acting or not.
     joint = {i for i, p in enumerate(policies) if getattr(p, "seats", None)}
@@ -238,8 +216,8 @@ def play(
                 flat_actions[:] = flat_mask.argmax(axis=1)
             else:
                 sg.actions.fill(0)
-            for (members, bank), where, takes_masks in zip(groups, where_g, with_masks, strict=True):
-                if bank is None or (flat_mask is not None and not takes_masks):
+            for (members, bank), where in zip(groups, where_g, strict=True):
+                if bank is None:
                     for m, w in zip(members, where, strict=True):
                         if w.size:
                             p = policies[m]

@@ -61,10 +61,6 @@ class SeatPlan:
     rotate: bool = False
     sides: tuple[tuple[int, ...], ...] | None = None
 
-    @property
-    def n_learners(self) -> int:
-        return max(self.home) + 1 if max(self.home) >= 0 else 0
-
 
 def parse_seats(text: str, n_seats: int) -> tuple[int, ...]:
     """``--seats`` as a learner index per seat: ``"1,2"`` / ``"1,1,-"``: learners numbered from 1, ``-`` an
@@ -162,21 +158,6 @@ def plan_layout(plan: SeatPlan, n_games: int, agents: int, league_games: float =
     return layout
 
 
-def seat_layout(n_seats: int, n_games: int, agents: int, sharing: str, league_games: float = 0.0) -> np.ndarray:
-    """The layout of a game of ``n_seats`` seats each for itself (two seats: pong's), by ``--agents`` and
-    ``--sharing`` (see the module docstring)."""
-    if sharing not in ("nops", "fups"):
-        raise ValueError(f"sharing must be 'nops' or 'fups', not {sharing!r}")
-    if not 1 <= agents <= n_seats:
-        raise ValueError(f"this game has {n_seats} seats: --agents must be between 1 and {n_seats}, not {agents}")
-    if agents == 1 and n_seats > 1:
-        layout = np.full((n_seats, n_games), OPPONENT, dtype=np.int64)
-        layout[np.arange(n_games) % n_seats, np.arange(n_games)] = 0
-        return layout
-    home = _shared(tuple(range(n_seats)) if agents == n_seats else tuple(s % agents for s in range(n_seats)), sharing)
-    return plan_layout(SeatPlan(home, rotate=agents < n_seats), n_games, agents, league_games)
-
-
 def learner_spaces(spec: EnvSpec, seat_spaces: Sequence[SeatSpace], layout: np.ndarray) -> list[SeatSpace]:
     """Each learner's :class:`SeatSpace`: the seats a learner holds must share one (a network reads one observation
     shape and plays one action space); a :class:`MarlError` naming the seats otherwise."""
@@ -248,6 +229,10 @@ class SelfPlayGames:
         self.acts = [SeatActions.of(s.action) for s in self.seat_spaces]
         self.slots = [np.flatnonzero(self.layout.ravel() == i) for i in range(self.n_learners)]
         self._index = [_as_slice(s) for s in self.slots]
+        # Games with seats unlike each other: each learner's slots seat by seat, as (seat, rows of the learner's
+        # slots, their games), so per-seat arrays are gathered and scattered without working the split out per step.
+        self._by_seat = [[(s, rows, slots[rows] % n_games) for s in np.unique(slots // n_games).tolist()
+                          for rows in [np.flatnonzero(slots // n_games == s)]] for slots in self.slots]
         self.opponent_slots = np.flatnonzero(self.layout.ravel() == OPPONENT)
         self.policies: list[Policy] = []  # distinct opponent policies seen so far
         self.opponent_of = np.full(n_seats * n_games, -1, dtype=np.int64)  # index into self.policies per slot
@@ -317,12 +302,10 @@ class SelfPlayGames:
         """Learner ``i``'s rows of a per-seat quantity (observations, masks), in its slot order."""
         if flat is not None:
             return flat[self._index[i]]
-        slots = self.slots[i]
-        seats, games = slots // self.n, slots % self.n
-        out = np.empty((slots.size, *width), dtype=np.asarray(per_seat[int(seats[0])]).dtype)
-        for s in np.unique(seats).tolist():
-            rows = seats == s
-            out[rows] = np.asarray(per_seat[s])[games[rows]]
+        parts = self._by_seat[i]
+        out = np.empty((self.slots[i].size, *width), dtype=np.asarray(per_seat[parts[0][0]]).dtype)
+        for s, rows, games in parts:
+            out[rows] = np.asarray(per_seat[s])[games]
         return out
 
     def observe(self) -> list[np.ndarray]:
@@ -332,19 +315,21 @@ class SelfPlayGames:
                 for i in range(self.n_learners)]
 
     def _all_masks(self) -> Any:
+        """This step's masks per seat (all True for a seat without masks), and, where every seat is alike, all of
+        them in one flat array as the observations are."""
         if self._masks is None:
             masks = self.core.action_masks()  # type: ignore[attr-defined]
             width = [int(s.action.n) if s.mask else 0 for s in self.seat_spaces]  # type: ignore[attr-defined]
-            self._masks = [np.ones((self.n, w or 1), dtype=bool) if m is None else np.asarray(m, dtype=bool)
-                           for m, w in zip(masks, width, strict=True)]
+            per_seat = [np.ones((self.n, w or 1), dtype=bool) if m is None else np.asarray(m, dtype=bool)
+                        for m, w in zip(masks, width, strict=True)]
+            self._masks = (per_seat, np.concatenate(per_seat) if self.uniform else None)
         return self._masks
 
     def masks(self) -> list[np.ndarray | None]:
         """Each learner's action masks, ``(len(slots), n_actions)`` bool (None for a learner without masks)."""
         if not self.masked:
             return [None] * self.n_learners
-        masks = self._all_masks()
-        flat = np.concatenate(masks) if self.uniform else None
+        masks, flat = self._all_masks()
         return [self._gather(masks, flat, i, (int(self.spaces[i].action.n),)) if self.spaces[i].mask else None
                 for i in range(self.n_learners)]
 
@@ -374,12 +359,10 @@ class SelfPlayGames:
                 self._opponents_act(flat_actions)
             step_actions = flat_actions.reshape(n_seats, n, *flat_actions.shape[1:])
         else:
-            for i, a in enumerate(actions):
-                slots = self.slots[i]
+            for parts, a in zip(self._by_seat, actions, strict=True):
                 a = np.asarray(a)
-                for s in np.unique(slots // n).tolist():
-                    rows = slots // n == s
-                    self._actions[s][slots[rows] % n] = a[rows]
+                for s, rows, games in parts:
+                    self._actions[s][games] = a[rows]
             if self.needs_opponents:
                 self._opponents_act(None)
             step_actions = self._actions
@@ -428,8 +411,7 @@ class SelfPlayGames:
             slots = slots[self._to_act()[slots]]
         if not slots.size:
             return
-        masks = self._all_masks() if self.masked else None
-        flat_masks = np.concatenate(masks) if masks is not None and flat_actions is not None else None
+        masks, flat_masks = self._all_masks() if self.masked else (None, None)
         which = self.opponent_of[slots]
         for k in np.unique(which).tolist():
             idx = slots[which == k]

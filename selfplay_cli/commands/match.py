@@ -140,38 +140,22 @@ def match(
     try:
         side_a, side_b = resolve_players(league, [a, b], env, teams=True)
         crew = _flying_team(side_a, side_b, a, b)
-        if crew is not None:  # a cooperative team: one match, the members on their seats together
-            options = parse_env_options(crew.env, env_option) if env_option else None
-            members = [load_player(league, m, device=device, seed=mix_seed(seed, 2 + i))
-                       for i, m in enumerate(crew.members)]
-            pb = load_player(league, side_b, device=device, seed=mix_seed(seed, 1))  # type: ignore[arg-type]
+        # each match: A's rows (one player, or a cooperative team flying together), B's row, the team's name
+        jobs = ([(list(crew.members), side_b, crew.full_name)] if crew is not None
+                else [([row_a], row_b, None) for row_a, row_b in pairings(a, side_a, b, side_b, sprt=sprt)])
+        options = parse_env_options(jobs[0][1].env, env_option) if env_option else None  # type: ignore[union-attr]
+        for rows_a, row_b, team_name in jobs:
+            pa = [load_player(league, r, device=device, seed=mix_seed(seed, 0 if i == 0 else 1 + i))
+                  for i, r in enumerate(rows_a)]
+            pb = load_player(league, row_b, device=device, seed=mix_seed(seed, 1))  # type: ignore[arg-type]
+            ids = {**{p.id: r.id for p, r in zip(pa, rows_a, strict=True)}, pb.id: row_b.id}  # type: ignore[union-attr]
             try:
-                with progress_bar(f"{crew.full_name} vs {pb.id}", budget + budget % 2, "games",
+                with progress_bar(f"{team_name or pa[0].id} vs {pb.id}", budget + budget % 2, "games",
                                   progress_enabled(quiet)) as tick:
-                    reports.append(run_match(members[0], pb, games=budget, first_seed=seed, parallel=parallel,
-                                             league=league if store else None,
-                                             player_ids={**{p.id: m.id for p, m in zip(members, crew.members,
-                                                                                        strict=True)},
-                                                         pb.id: side_b.id},  # type: ignore[union-attr]
-                                             sprt=settings, confidence=confidence, on_games=tick,
-                                             env_options=options, team=members, team_name=crew.full_name))
-            except MatchInterrupted as stop:
-                interrupted(stop.report, stored=store)
-                raise typer.Exit(130) from None
-            if not json_out:
-                render_report(reports[-1])
-        pairs = [] if crew is not None else pairings(a, side_a, b, side_b, sprt=sprt)
-        options = parse_env_options(pairs[0][0].env, env_option) if env_option and pairs else None
-        for row_a, row_b in pairs:
-            pa = load_player(league, row_a, device=device, seed=mix_seed(seed, 0))
-            pb = load_player(league, row_b, device=device, seed=mix_seed(seed, 1))
-            try:
-                with progress_bar(f"{pa.id} vs {pb.id}", budget + budget % 2, "games",
-                                  progress_enabled(quiet)) as tick:
-                    reports.append(run_match(pa, pb, games=budget, first_seed=seed, parallel=parallel,
-                                             league=league if store else None,
-                                             player_ids={pa.id: row_a.id, pb.id: row_b.id}, sprt=settings,
-                                             confidence=confidence, on_games=tick, env_options=options))
+                    reports.append(run_match(pa[0], pb, games=budget, first_seed=seed, parallel=parallel,
+                                             league=league if store else None, player_ids=ids, sprt=settings,
+                                             confidence=confidence, on_games=tick, env_options=options,
+                                             team=pa if team_name else None, team_name=team_name))
             except MatchInterrupted as stop:
                 interrupted(stop.report, stored=store)
                 raise typer.Exit(130) from None

@@ -197,19 +197,21 @@ def record(
     fmt = _format_of(fmt, out)
     league = open_league(home, db)
     try:
+        from ..envs import get_env
+        from ..rated.lineup import lineups
+
+        # the players seated once (one lineup, or one per member of a team recorded against --vs)
+        ups = lineups(league, ckpt, vs, env) if game_id is None else []  # type: ignore[arg-type]
+        game = league.game(game_id).env if game_id is not None else ups[0].env
         if fps is None:  # the game's own pace (a board game: a move or two a second), else one frame per step
-            fps = _game_fps(league, game_id, ckpt, vs, env) or (50 if fmt == "gif" else 60)
+            fps = get_env(game).render_fps or (50 if fmt == "gif" else 60)
         settings = VideoSettings(fps=fps, size=parse_size(size), fmt=fmt, hold=hold)
         max_steps, max_rallies, stop_label, default_cap = _limits(seconds, max_steps, max_rallies, fps)
         if game_id is not None:
             job = _replay_job(league, game_id, out, fmt)
         else:
-            from ..rated.lineup import lineups
-
-            game = lineups(league, ckpt, vs, env)[0].env
             options = parse_env_options(game, env_option) if env_option else None
-            job = _play_job(league, ckpt, vs, env, games, seed, max_steps, max_rallies, device, out, fmt,  # type: ignore[arg-type]
-                            stop_label, options)
+            job = _play_job(league, ups, games, seed, max_steps, max_rallies, device, out, fmt, stop_label, options)
     finally:
         league.close()
     for path in job.paths:
@@ -229,15 +231,6 @@ def record(
         raise typer.Exit(130) from None
     if json_out:
         print_json(done)
-
-
-def _game_fps(league: Any, game_id: int | None, ckpt: str | None, vs: str | None, env: str | None) -> int | None:
-    """The frame rate the game asks recordings to play at (``render_fps``), if it says."""
-    from ..envs import get_env
-    from ..rated.lineup import lineups
-
-    name = league.game(game_id).env if game_id is not None else lineups(league, ckpt, vs, env)[0].env
-    return get_env(name).render_fps
 
 
 def _replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> _Job:
@@ -264,18 +257,17 @@ def _replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> _Job:
                 {"game_id": row.id, "match_id": row.match_id})
 
 
-def _play_job(league: Any, ckpt: str, vs: str | None, env: str | None, games: int, seed: int,
-              max_steps: int | None, max_rallies: int | None, device: str, out: Path | None,
-              fmt: str, stop_label: str | None = None, options: dict[str, Any] | None = None) -> _Job:
-    """Seat the players, load their networks once, and play game i with seed ``seed + i``."""
+def _play_job(league: Any, ups: list[Any], games: int, seed: int, max_steps: int | None, max_rallies: int | None,
+              device: str, out: Path | None, fmt: str, stop_label: str | None = None,
+              options: dict[str, Any] | None = None) -> _Job:
+    """For the lineups ``ups``: load the networks once, and play game i with seed ``seed + i``."""
     from ..arena import Game
     from ..envs import get_env
     from ..policies import ScriptedPolicy
-    from ..rated.lineup import lineups, refit
+    from ..rated.lineup import refit
     from ..rated.match import check_fits, env_options_of, load_player
     from ..record import record_game, renderer_of, stop_rule
 
-    ups = lineups(league, ckpt, vs, env)  # one, or one per member of a team recorded against --vs
     spec = get_env(ups[0].env)
     renderer = renderer_of(spec)
     networks = {p.id: load_player(league, p, device=device) for lu in ups for p in lu.players if not p.is_bot}

@@ -39,6 +39,7 @@ from safetensors.torch import save as st_save
 
 from .. import files
 from ..envs import UnknownEnvError, get_env
+from ..errors import MarlError
 from .joint import MAX_JOINT_ACTIONS, JointPolicy, joint_spaces
 from .network import Arch, NetworkPolicy, SnapshotError, build_network
 from .spaces import ActionHead, SpaceError, canonical_space, seat_spaces_of, space_from_dict
@@ -623,7 +624,7 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
         obs, act, _ = seats[0]
         try:
             j_obs, j_act = joint_spaces(obs, act, joint[0], meta.env)
-        except Exception as e:  # noqa: BLE001 - a MarlError naming why, as a snapshot error
+        except MarlError as e:  # a joint space the game cannot give (too large, not Discrete)
             raise SnapshotError(f"{path}: {e}") from None
         if tuple(meta.obs_shape or ()) != tuple(j_obs.shape) or meta.head != ActionHead.of(j_act):
             raise SnapshotError(f"{path}: a joint snapshot of {joint[0]} seats must read {list(j_obs.shape)} and play "

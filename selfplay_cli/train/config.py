@@ -85,7 +85,7 @@ class TrainConfig:
         if self.league_games and (plan.rotate or plan.sides is not None or OPPONENT in plan.home):
             raise MarlError(f"--league-games is for --agents {n_seats} (learners on every seat); with fewer learners "
                             "every game is already against the league")
-        if self.sharing == "fups" and self.agents == 1 and not self.seats:
+        if self.sharing == "fups" and self.agents == 1 and not self.seats and spec.kind != "cooperative":
             raise MarlError("--sharing fups shares one network between several learners: it needs --agents 2 or more")
         try:
             game = spec.config(**self.env_options)

@@ -163,6 +163,7 @@ class Trainer:
         self._policies: dict[int, Policy] = {}
         self._player_of: dict[str, int] = dict(self.bot_ids)  # policy id in game results -> league player id
         self._assigned: np.ndarray | None = None  # opponent id per game slot, with --swap-every
+        self._opponent_slots = np.flatnonzero(layout.ravel() == OPPONENT)  # flat (seat, game) slots of opponents
         self._next_swap = 0
         self.steps = 0
         learner_ids = [f"{cfg.run}/{n}" for n in self.names]
@@ -214,9 +215,8 @@ class Trainer:
         else:
             due = self.steps >= self._next_swap
             if due or self._assigned is None:
-                every = self.games.opponent_slots if hasattr(self, "games") else slots
                 self._assigned = np.zeros(len(self.spec.agents) * self.cfg.games, dtype=np.int64)
-                self._assigned[every] = self._draw(every)
+                self._assigned[self._opponent_slots] = self._draw(self._opponent_slots)
                 self._next_swap = self.steps + self.cfg.swap_every
             ids = self._assigned[slots]
         n = self.cfg.games

@@ -90,7 +90,7 @@ class Rendezvous(ParallelEnv):
         return img
 
     def close(self) -> None:
-        pass
+        """Nothing to release: the game holds no window, file or process."""
 
 
 def parallel_env(**options) -> Rendezvous:

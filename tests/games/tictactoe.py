@@ -100,7 +100,7 @@ class TicTacToe(AECEnv):
         return img
 
     def close(self) -> None:
-        pass
+        """Nothing to release: the game holds no window, file or process."""
 
 
 def env(**options) -> TicTacToe:
