@@ -109,7 +109,7 @@ def test_every_help_is_whole_and_plain(path, columns, capsys, monkeypatch):
 def test_config_help_keeps_its_bracketed_sections(capsys, monkeypatch):
     monkeypatch.setenv("COLUMNS", "200")
     code, out, err = run(capsys, "train", "--help")
-    assert "(top-level options, [ppo], [dqn], [opponents], [env_options])" in out
+    assert "(top-level options, [ppo], [dqn], [sac], [opponents], [env_options])" in out
     assert re.search(r"--json\s+Print JSON alone on stdout", out)
     assert "--config FILE" in out and "--env-option KEY=VALUE" in out and "[default: 6,000,000; 1 to" in out
 
@@ -429,6 +429,6 @@ def test_scripted_players_named_alone_find_their_game(home, capsys):
     assert json.loads(out)["env"] == "lander"
     code, out, err = run(capsys, "match", "cpu", "random", "--games", "2", "--no-store", "--json")
     assert code == 0 and json.loads(out)["env"] == "pong", err
-    one_line_error(*run(capsys, "match", "random", "random", "--no-store"), "several games (lander, pong): say which "
-                   "with --env")
+    one_line_error(*run(capsys, "match", "random", "random", "--no-store"),
+                   "several games (lander, pong, tennis): say which with --env")
     one_line_error(*run(capsys, "match", "heuristic", "cpu", "--no-store"), "heuristic plays lander but cpu plays pong")

@@ -8,7 +8,17 @@ import pytest
 import torch
 from gymnasium import spaces
 
-from selfplay_cli.algos import LEARNERS, DQNConfig, DQNLearner, Learner, PPOConfig, PPOLearner, Seat, get_learner
+from selfplay_cli.algos import (
+    LEARNERS,
+    DQNConfig,
+    DQNLearner,
+    Learner,
+    PPOConfig,
+    PPOLearner,
+    SACLearner,
+    Seat,
+    get_learner,
+)
 from selfplay_cli.envs import SeatSpace
 from selfplay_cli.errors import MarlError
 from selfplay_cli.policies.network import Arch
@@ -28,11 +38,11 @@ def constant_value(learner: PPOLearner, value: float) -> None:
 
 
 def test_registry_names_the_learners_and_refuses_unknown_ones():
-    assert {"ppo": PPOLearner, "dqn": DQNLearner} == LEARNERS
+    assert {"ppo": PPOLearner, "dqn": DQNLearner, "sac": SACLearner} == LEARNERS
     assert get_learner("ppo") is PPOLearner and PPOLearner.name == "ppo" and PPOLearner.config_class is PPOConfig
     assert DQNLearner.config_class is DQNConfig
-    with pytest.raises(MarlError, match="unknown algorithm 'sac'; known: dqn, ppo"):
-        get_learner("sac")
+    with pytest.raises(MarlError, match="unknown algorithm 'td3'; known: dqn, ppo, sac"):
+        get_learner("td3")
 
 
 @pytest.mark.parametrize("cls", [PPOLearner, DQNLearner])

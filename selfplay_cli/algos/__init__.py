@@ -1,5 +1,5 @@
 """Learners behind one interface (:class:`Learner`), registered by name in :data:`LEARNERS`: each algorithm one
-file that reads top to bottom (PPO, DQN), and the optimiser they share.
+file that reads top to bottom (PPO, DQN, SAC), and the optimiser they share.
 
 A learner is built from its seat's spaces and its config dataclass: ``LEARNERS[name](seat, n_slots, config,
 seed=..., device=...)``, ``seat`` a :class:`selfplay_cli.envs.SeatSpace` (or :class:`Seat`).
@@ -12,8 +12,9 @@ from .base import Learner, Seat
 from .dqn import DQNConfig, DQNLearner
 from .optim import FlatAdam, flatten
 from .ppo import PPOConfig, PPOLearner
+from .sac import SACConfig, SACLearner
 
-LEARNERS: dict[str, type] = {"ppo": PPOLearner, "dqn": DQNLearner}
+LEARNERS: dict[str, type] = {"ppo": PPOLearner, "dqn": DQNLearner, "sac": SACLearner}
 """Algorithm name -> learner class (each has ``name`` and ``config_class``)."""
 
 
@@ -25,5 +26,5 @@ def get_learner(name: str) -> type:
         raise MarlError(f"unknown algorithm '{name}'; known: {', '.join(sorted(LEARNERS))}") from None
 
 
-__all__ = ["LEARNERS", "DQNConfig", "DQNLearner", "FlatAdam", "Learner", "PPOConfig", "PPOLearner", "Seat",
-           "flatten", "get_learner"]
+__all__ = ["LEARNERS", "DQNConfig", "DQNLearner", "FlatAdam", "Learner", "PPOConfig", "PPOLearner", "SACConfig",
+           "SACLearner", "Seat", "flatten", "get_learner"]

@@ -33,6 +33,7 @@ arrive (its recorded log-probability is the behaviour policy's; its value is rec
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -61,6 +62,8 @@ class PPOConfig:
     vf_coef: float = 0.5  # value loss weight
     max_grad_norm: float = 0.5  # gradient clipping
     bootstrap_truncated: bool = True  # a game cut short bootstraps from V(final obs) (False: counts as its end)
+    reward_scale: float = 1.0  # rewards are multiplied by this before learning (keeps returns of order 1, so the
+    # value loss does not swamp the policy's gradient in the shared trunk: the lander's +-100 terms want 0.01)
     arch: Arch = field(default_factory=lambda: Arch(hidden=(64, 64), activation="relu", value_head=True))
 
     def __post_init__(self) -> None:
@@ -71,6 +74,8 @@ class PPOConfig:
                 raise ValueError(f"{name} must be at least 1")
         if not (0 < self.gamma <= 1 and 0 <= self.gae_lambda <= 1 and self.lr > 0 and self.clip_coef > 0):
             raise ValueError("gamma, gae_lambda, lr or clip_coef out of range")
+        if not (math.isfinite(self.reward_scale) and self.reward_scale > 0):
+            raise ValueError(f"reward_scale must be a positive number, not {self.reward_scale}")
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -189,6 +194,8 @@ class PPOLearner:
         :meth:`update` that follows this step) bootstrap the return; ``acting``: the slots whose seat acted on
         this step (None: all). ``final_mask`` is accepted for the interface's sake (values need no mask)."""
         self._check_final_given()
+        if self.cfg.reward_scale != 1.0:
+            rewards = np.asarray(rewards, dtype=np.float32) * np.float32(self.cfg.reward_scale)
         if self._np is not None:
             self._np["rewards"][self.t] = rewards
             self._np["dones"][self.t] = dones

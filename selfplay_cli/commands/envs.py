@@ -33,7 +33,10 @@ def env_row(name: str) -> dict[str, Any]:
         "observation_space": describe_space(seats[0].observation),
         "action_space": describe_space(seats[0].action),
         "bots": {b.name: b.description for b in spec.bots.values()},
+        "anchor": spec.anchor,
         "renderer": spec.make_renderer is not None,
+        "live_options": list(spec.live_options),
+        "train_defaults": spec.train_defaults,
     }
 
 
@@ -86,3 +89,17 @@ def envs(
         table.add_row(r["name"], ", ".join(r["agents"]), r["kind"], r["turns"], _per_seat(r, "observation"),
                       _per_seat(r, "action"), ", ".join(r["bots"]))
     console.print(table)
+    for r in rows:
+        if r.get("train_defaults"):
+            console.print(f"{r['name']} trains with its own defaults (a --config file or flags override them): "
+                          f"{_settings(r['train_defaults'])}", markup=False, highlight=False)
+        if r.get("live_options"):
+            console.print(f"{r['name']}: a [curriculum] may drive {', '.join(r['live_options'])}", markup=False,
+                          highlight=False)
+
+
+def _settings(d: dict[str, Any], prefix: str = "") -> str:
+    """``{"ppo": {"gamma": 0.999}, "games": 64}`` as ``games=64, [ppo] gamma=0.999``."""
+    plain = [f"{k}={v}" for k, v in d.items() if not isinstance(v, dict)]
+    tables = [f"[{k}] " + ", ".join(f"{kk}={vv}" for kk, vv in v.items()) for k, v in d.items() if isinstance(v, dict)]
+    return "; ".join(([", ".join(plain)] if plain else []) + tables)

@@ -68,8 +68,8 @@ def train(
     ctx: typer.Context,
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
     config: Annotated[Path | None, typer.Option("--config", metavar="FILE", help="TOML file of settings (top-level "
-                                                "options, [ppo], [dqn], [opponents], [env_options]); options typed "
-                                                "on the command line win over it.")] = None,
+                                                "options, [ppo], [dqn], [sac], [opponents], [env_options]); options "
+                                                "typed on the command line win over it.")] = None,
     agents: Annotated[int, typer.Option("--agents", min=1, max=64, help="Learning agents. Two sides: 2 is one learner "
                                         "per side (both pong paddles, seed 000), 1 one learner against opponents "
                                         "from the league; cooperative: seat s is learner s mod N; free-for-all: one "
@@ -77,8 +77,8 @@ def train(
     seats: Annotated[str | None, typer.Option("--seats", metavar="L,L,...", help="Which learner holds each seat, "
                                               "in the game's seat order: 1,2 or 1,1,- (- an opponent from the "
                                               "league); overrides --agents.")] = None,
-    algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo (any action space) or dqn (Discrete "
-                                      "actions).")] = "ppo",
+    algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo (any action space), dqn (Discrete "
+                                      "actions) or sac (Box actions).")] = "ppo",
     preset: Annotated[str | None, typer.Option("--preset", help="seed000: seed 000's DQN set-up (network sizes, "
                                                "learning rate, batch, buffer, target period, epsilon).")] = None,
     sharing: Annotated[str, typer.Option("--sharing", help="nops: one network per learner; fups: one shared "
@@ -126,7 +126,7 @@ def train(
     bots: Annotated[str, typer.Option("--bots", metavar="BOT=P,...", help="Mix in scripted players with these "
                                       "probabilities, e.g. cpu=0.1,random=0.05.")] = "",
     lr: Annotated[float | None, typer.Option("--lr", help="Learning rate (default: the algorithm's own, PPO 2e-3, "
-                                             "DQN 2.5e-4).")] = None,
+                                             "DQN 2.5e-4, SAC 3e-4).")] = None,
     env_option: Annotated[list[str] | None, typer.Option("--env-option", metavar="KEY=VALUE", help="Game option, "
                                                          "repeatable (e.g. points_to_win=5; marl envs --json lists "
                                                          "the games).")] = None,
@@ -139,7 +139,7 @@ def train(
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Train agents by self-play (PPO or DQN); every snapshot joins the league and is rated in a gauntlet."""
+    """Train agents by self-play (PPO, DQN or SAC); every snapshot joins the league and is rated in a gauntlet."""
     from ..algos.dqn import seed000_config
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
@@ -160,6 +160,7 @@ def train(
         if preset not in (None, "seed000"):
             raise MarlError(f"unknown --preset '{preset}'; available: seed000")
         settings = TrainConfig(env=spec.name, run="new").to_dict()  # the defaults
+        merge_settings(settings, spec.train_defaults)  # the game's own (marl envs NAME shows them)
         if preset == "seed000":
             settings["algo"] = "dqn"
             settings["dqn"] = seed000_config().to_dict()
@@ -177,7 +178,7 @@ def train(
         if "bots" in typed:
             settings["opponents"]["bots"] = parse_bots(bots)
         if "lr" in typed:
-            settings["ppo"]["lr"] = settings["dqn"]["lr"] = lr
+            settings["ppo"]["lr"] = settings["dqn"]["lr"] = settings["sac"]["lr"] = lr
         settings["env_options"] = {**settings["env_options"], **parse_env_options(spec.name, env_option)}
         try:
             spec.config(**settings["env_options"])

@@ -7,7 +7,7 @@ Importing this package registers the built-in games. ``get_env(name)`` also find
 
 from __future__ import annotations
 
-from . import lander_env, pong, pong_env
+from . import lander_env, pong, pong_env, tennis_env
 from .loading import env_names, get_env
 from .registry import (
     KINDS,
@@ -52,6 +52,7 @@ register(
     )
 )
 register(lander_env.LANDER)
+register(tennis_env.TENNIS)
 
 __all__ = ["KINDS", "TURNS", "BatchedCore", "BotSpec", "EnvError", "EnvSpec", "IllegalActionError", "SeatSpace",
            "UnknownEnvError", "check_spaces", "describe_space", "env_names", "get_env", "random_bot", "random_rule",

@@ -245,6 +245,11 @@ class EnvSpec:
     game whose options change its seats (``agents`` are the default config's); see :meth:`for_options`.
     ``render_fps``: a recording's default frame rate
     (a board game's moves at 2 a second; None: 60, one frame per step).
+
+    ``live_options``: the options the core's ``set_options(**values)`` changes between steps of running games (what
+    a training curriculum may drive: tennis's reward weights and bat size). ``train_defaults``: the game's own
+    training settings, laid out as a run's TOML (``{"ppo": {"gamma": 0.999}, "games": 64}``), applied over marl's
+    defaults and under a ``--config`` file and the flags typed (the lander wants a longer horizon than pong).
     """
 
     name: str
@@ -266,6 +271,8 @@ class EnvSpec:
     render_fps: int | None = None  # frames per second a recording of it plays at by default (None: one per step at 60)
     make_agents: Callable[[Any], tuple[str, ...]] | None = None  # the seats of a config, where options change them
     anchor: str = "random"  # the scripted player whose rating is fixed (1000 by default): the ladder's zero point
+    live_options: tuple[str, ...] = ()  # options the core's set_options() changes while games run (curricula)
+    train_defaults: dict[str, Any] = field(default_factory=dict)  # the game's training settings (a run's TOML layout)
 
     def __post_init__(self) -> None:
         n = len(self.agents)

@@ -6,12 +6,13 @@ few dozen rows). A :class:`NetworkBank` stacks the networks' layers into ``(P, i
 layer once for all of them with ``torch.baddbmm``, on a ``(P, M, in)`` batch padded to the largest player's rows.
 
 Sampling draws one uniform per row (and dimension) from the bank's own generator (inverse CDF of the softmax);
-greedy players take the argmax. Masked actions are never chosen (their logits are -inf, so their share of the CDF
-is empty). A MultiDiscrete head is handled as its dimensions' logits laid out side by side in one padded tensor; a
-Box head gives each member's Gaussian means, played as they are (greedy) or as ``mean + std * eps`` with one
-standard normal per row and dimension, clipped to the bounds. A match between the same players with the same
-schedule therefore replays the same actions. A bank computes tanh as ``2 sigmoid(2x) - 1`` (faster here): its
-scores equal a network's own to float rounding, not bit for bit.
+greedy players take the argmax. Masked actions are never chosen (their logits are -inf, so their share of the CDF is
+empty). A MultiDiscrete head is handled as its dimensions' logits laid out side by side in one padded tensor; a Box
+head gives each member's Gaussian means, played as they are (greedy) or as ``mean + std * eps`` with one standard
+normal per row and dimension, clipped to the bounds; a squashed one (SAC's actor) also its state-dependent log-stds,
+played as ``tanh(mean)`` or ``tanh(mean + std * eps)`` on the bounds. A match between the same players with the same
+schedule therefore replays the same actions. A bank computes tanh as ``2 sigmoid(2x) - 1`` (faster here): its scores
+equal a network's own to float rounding, not bit for bit.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
-from .heads import HeadMath, to_numpy_actions
+from .heads import HeadMath, squashed_log_std, to_numpy_actions
 from .network import MLPNet, NetworkPolicy
 
 
@@ -40,7 +41,8 @@ def bank_key(policy: object) -> tuple | None:
     if not isinstance(policy, NetworkPolicy):
         return None
     net = policy.net
-    return (str(policy.device), net.obs_dim, net.head, net.arch.hidden, net.arch.activation, net.arch.dueling)
+    return (str(policy.device), net.obs_dim, net.head, net.arch.hidden, net.arch.activation, net.arch.dueling,
+            net.arch.squash)
 
 
 def bank_groups(policies: Sequence[object]) -> list[list[int]]:
@@ -73,7 +75,11 @@ class NetworkBank:
             self.out_w = torch.stack([n.action_head.weight for n in nets]).contiguous()
             self.out_b = torch.stack([n.action_head.bias for n in nets]).unsqueeze(2).contiguous()
             self.std = None
-            if self.head.kind == "box":  # (P, d, 1): each member's standard deviations
+            self.log_std_head = None
+            if nets[0].squash:  # (P, d, H) and (P, d, 1): each member's log-std head, applied as the action head
+                self.log_std_head = (torch.stack([n.log_std_head.weight for n in nets]).contiguous(),  # type: ignore[union-attr]
+                                     torch.stack([n.log_std_head.bias for n in nets]).unsqueeze(2).contiguous())  # type: ignore[union-attr]
+            elif self.head.kind == "box":  # (P, d, 1): each member's standard deviations
                 self.std = torch.stack([n.log_std for n in nets]).exp().unsqueeze(2).contiguous()  # type: ignore[misc]
             self.state_value = None
             if nets[0].state_value is not None:
@@ -131,7 +137,10 @@ class NetworkBank:
         out = torch.baddbmm(self.out_b, self.out_w, zt)  # (P, A, M)
         if self.state_value is not None:
             out = torch.baddbmm(self.state_value[1], self.state_value[0], zt) + out - out.mean(dim=1, keepdim=True)
-        if self.head.kind == "discrete":
+        if self.log_std_head is not None:
+            log_std = squashed_log_std(torch.baddbmm(self.log_std_head[1], self.log_std_head[0], zt))
+            a = self._squashed(out, log_std)
+        elif self.head.kind == "discrete":
             a = self._categorical(out if mask is None else out.masked_fill(~mask, float("-inf")), len(obs), most)
         elif self.head.kind == "multidiscrete":
             a = self._multi(out, mask, len(obs), most)
@@ -175,4 +184,14 @@ class NetworkBank:
             sampled = out + self.std * eps
             a = sampled if not self.any_greedy else torch.where(self.greedy[:, :, None], out, sampled)
         a = a.transpose(1, 2)
+        return torch.maximum(torch.minimum(a, self.math.high), self.math.low)
+
+    def _squashed(self, out: torch.Tensor, log_std: torch.Tensor) -> torch.Tensor:
+        """Box, squashed: the means and log-stds ``(P, d, M)`` -> ``tanh(u)`` on the bounds ``(P, M, d)``."""
+        u = out
+        if self.any_sampling:
+            sampled = out + log_std.exp() * torch.randn(out.shape, generator=self.generator, device=self.device)
+            u = sampled if not self.any_greedy else torch.where(self.greedy[:, :, None], out, sampled)
+        y = torch.tanh(u).transpose(1, 2)
+        a = self.math.low + (y + 1.0) * (0.5 * (self.math.high - self.math.low))
         return torch.maximum(torch.minimum(a, self.math.high), self.math.low)

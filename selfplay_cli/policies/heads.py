@@ -8,6 +8,12 @@
 * Box: a diagonal Gaussian with the head's outputs as means and a learned, state-independent ``log_std`` per
   dimension. Log-probabilities and entropies are summed over dimensions; the sample ``mean + std * eps`` is what the
   learner stores (its log-probability is that of the unclipped sample), the game gets it clipped to the bounds.
+* Box, squashed (an arch with ``squash``, SAC's actor): a diagonal Gaussian whose mean and log-std both come from the
+  network (state-dependent std), squashed by tanh into [-1, 1] and mapped affinely onto the bounds. The log-std is
+  ``tanh`` of its head's output mapped onto [:data:`LOG_STD_MIN`, :data:`LOG_STD_MAX`] (CleanRL's SAC). Greedy is
+  ``tanh(mean)`` on the bounds; a sample is ``tanh(mean + std * eps)`` on the bounds. Log-probabilities (for
+  learning) are those of the squashed action ``y = tanh(u)`` in [-1, 1], whatever the bounds, so an entropy target
+  means the same for every Box.
 """
 
 from __future__ import annotations
@@ -21,6 +27,8 @@ from .spaces import ActionHead, pad_index
 
 MASKED = -1e9  # a disallowed action's logit in learning (exp underflows to exactly 0 in float32)
 LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0  # a squashed Gaussian's log-std range (CleanRL's SAC)
+LOG_2 = math.log(2.0)
 
 
 class HeadMath:
@@ -96,6 +104,37 @@ class HeadMath:
     def clip(self, a: torch.Tensor) -> torch.Tensor:
         flat = a.reshape(a.shape[0], -1)
         return torch.maximum(torch.minimum(flat, self.high), self.low).reshape(a.shape)
+
+    def to_bounds(self, y: torch.Tensor) -> torch.Tensor:
+        """Squashed actions ``y`` in [-1, 1] ``(B, d)`` mapped affinely onto the Box bounds (clipped against float
+        rounding, so an action is always within them)."""
+        return self.clip(self.low + (y + 1.0) * (0.5 * (self.high - self.low)))
+
+    def sample_squashed(self, mean: torch.Tensor, log_std: torch.Tensor, generator: torch.Generator,
+                        greedy: bool) -> torch.Tensor:
+        """A squashed Gaussian's played actions on the bounds: ``tanh(mean)`` (greedy) or ``tanh(mean + std * eps)``.
+        """
+        u = mean
+        if not greedy:
+            u = mean + log_std.exp() * torch.randn(mean.shape, generator=generator, device=mean.device)
+        return self.to_bounds(torch.tanh(u))
+
+
+def squashed_log_std(raw: torch.Tensor) -> torch.Tensor:
+    """A squashed Gaussian's log-std from its head's output: ``tanh`` mapped onto [LOG_STD_MIN, LOG_STD_MAX]."""
+    return LOG_STD_MIN + (0.5 * (LOG_STD_MAX - LOG_STD_MIN)) * (torch.tanh(raw) + 1.0)
+
+
+def squashed_sample(mean: torch.Tensor, log_std: torch.Tensor,
+                    generator: torch.Generator | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """A reparameterised sample ``y = tanh(mean + std * eps)`` in [-1, 1] ``(B, d)`` and its log-probability
+    ``(B,)``: ``log N(u; mean, std) - sum log(1 - tanh(u)^2)``, the Jacobian term written stably as
+    ``2 (log 2 - u - softplus(-2u))``. Gradients flow to ``mean`` and ``log_std``."""
+    eps = torch.randn(mean.shape, generator=generator, device=mean.device)
+    u = mean + log_std.exp() * eps
+    log_gauss = (-0.5 * eps.square() - log_std - LOG_SQRT_2PI).sum(-1)
+    log_jacobian = (2.0 * (LOG_2 - u - torch.nn.functional.softplus(-2.0 * u))).sum(-1)
+    return torch.tanh(u), log_gauss - log_jacobian
 
 
 def gaussian_log_prob(mean: torch.Tensor, log_std: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:

@@ -1,10 +1,11 @@
 """Neural policies: the network architecture record, the MLP itself and the policy that plays with it.
 
-The MLP serves both learners: its action head gives PPO's logits or DQN's Q-values, and an optional value head
-gives PPO's critic. The action head is the one its seat's action space calls for (:class:`ActionHead`): ``n``
-logits for ``Discrete(n)``, ``sum(nvec)`` logits (one block per dimension) for ``MultiDiscrete(nvec)``, and for a
-``Box`` the means of a Gaussian with a learned state-independent ``log_std`` parameter. Everything here is plain
-torch; nothing is set globally (threads, seeds, default dtype): callers that care about throughput may call
+The MLP serves every learner: its action head gives PPO's logits or DQN's Q-values, and an optional value head gives
+PPO's critic. The action head is the one its seat's action space calls for (:class:`ActionHead`): ``n`` logits for
+``Discrete(n)``, ``sum(nvec)`` logits (one block per dimension) for ``MultiDiscrete(nvec)``, and for a ``Box`` the
+means of a Gaussian with a learned state-independent ``log_std`` parameter, or, with ``Arch.squash`` (SAC's actor),
+the means and a second head of state-dependent log-stds of a tanh-squashed Gaussian. Everything here is plain torch;
+nothing is set globally (threads, seeds, default dtype): callers that care about throughput may call
 ``torch.set_num_threads`` themselves.
 """
 
@@ -22,7 +23,7 @@ from torch.nn import functional as F
 
 from ..errors import MarlError
 from .base import Policy
-from .heads import HeadMath, to_numpy_actions
+from .heads import HeadMath, squashed_log_std, to_numpy_actions
 from .spaces import ActionHead, SpaceError, box_of_shape
 
 KINDS = ("mlp",)
@@ -46,8 +47,10 @@ class Arch:
 
     ``kind`` is ``mlp`` (the only kind so far); ``hidden`` the widths of the trunk's layers; ``activation``
     ``tanh`` or ``relu``; ``value_head`` adds a state-value output (PPO's critic); ``dueling`` makes the action
-    head a dueling Q head (``V(s) + A(s, a) - mean_a A(s, a)``, for DQN). Invalid values raise
-    :class:`SnapshotError` (a user-facing error).
+    head a dueling Q head (``V(s) + A(s, a) - mean_a A(s, a)``, for DQN); ``squash`` makes a Box action head a
+    tanh-squashed Gaussian with a state-dependent std (SAC's actor: a second head gives the log-std). Invalid values
+    raise :class:`SnapshotError` (a user-facing error). ``squash`` is written out only when true, so every network
+    without it (PPO's, DQN's) is described exactly as before it existed.
     """
 
     kind: str = "mlp"
@@ -55,6 +58,7 @@ class Arch:
     activation: str = "tanh"
     value_head: bool = True
     dueling: bool = False
+    squash: bool = False
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -68,25 +72,28 @@ class Arch:
         if not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and h > 0 for h in hidden):
             raise SnapshotError(f"hidden layer sizes must be positive integers, not {list(hidden)!r}")
         object.__setattr__(self, "hidden", tuple(int(h) for h in hidden))
-        for name in ("value_head", "dueling"):
+        for name in ("value_head", "dueling", "squash"):
             if not isinstance(getattr(self, name), bool):
                 raise SnapshotError(f"arch field {name!r} must be true or false, not {getattr(self, name)!r}")
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        d = {
             "kind": self.kind,
             "hidden": list(self.hidden),
             "activation": self.activation,
             "value_head": self.value_head,
             "dueling": self.dueling,
         }
+        if self.squash:
+            d["squash"] = True
+        return d
 
     @classmethod
     def from_dict(cls, data: Any) -> Arch:
         """Inverse of :meth:`to_dict`; missing fields take their defaults, unknown fields are refused."""
         if not isinstance(data, dict):
             raise SnapshotError(f"network arch must be an object, not {type(data).__name__}")
-        known = {"kind", "hidden", "activation", "value_head", "dueling"}
+        known = {"kind", "hidden", "activation", "value_head", "dueling", "squash"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise SnapshotError(f"unknown network arch field(s) {', '.join(map(str, unknown))}")
@@ -99,6 +106,8 @@ class Arch:
             parts.append("+value")
         if self.dueling:
             parts.append("dueling")
+        if self.squash:
+            parts.append("tanh-gaussian")
         return " ".join(parts)
 
 
@@ -125,7 +134,9 @@ class MLPNet(nn.Module):
     value head. ``obs_space`` and ``act_space`` are the seat's spaces (gymnasium).
 
     Parameter names (the snapshot's tensor names): ``trunk.{2i}.weight/bias``, ``action_head.*``, ``log_std``
-    (Box actions), ``value_head.*`` and, for a dueling arch, ``state_value.*``.
+    (Box actions), ``value_head.*`` and, for a dueling arch, ``state_value.*``. A squashed arch (SAC's actor) has
+    ``log_std_head.*`` (the state-dependent log-std, see :meth:`gaussian`) instead of ``log_std``; its
+    ``forward`` gives the Gaussian's means (before the tanh).
     """
 
     def __init__(self, obs_dim: int, action: int | spaces.Space | ActionHead, arch: Arch,
@@ -139,6 +150,8 @@ class MLPNet(nn.Module):
             raise SnapshotError(f"a network needs obs_dim >= 1 and n_actions >= 1, got {obs_dim} and {head.outputs}")
         if arch.dueling and head.kind != "discrete":
             raise SnapshotError(f"a dueling head is for Discrete actions (Q-values), not {head.describe()}")
+        if arch.squash and head.kind != "box":
+            raise SnapshotError(f"a squashed Gaussian head is for Box actions, not {head.describe()}")
         self.obs_dim = int(obs_dim)
         self.head = head
         self.n_actions = head.outputs  # the action head's width (the action count of a Discrete space)
@@ -156,9 +169,11 @@ class MLPNet(nn.Module):
         self._linears = [m for m in layers if isinstance(m, nn.Linear)]
         self._activation = ACTIVATION_FNS[arch.activation]
         self.action_head = _layer(width, self.n_actions, 0.01, generator)
-        self.log_std = nn.Parameter(torch.zeros(self.n_actions)) if head.kind == "box" else None
+        self.squash = arch.squash
+        self.log_std = nn.Parameter(torch.zeros(self.n_actions)) if head.kind == "box" and not self.squash else None
         self.value_head = _layer(width, 1, 1.0, generator) if arch.value_head else None
         self.state_value = _layer(width, 1, 1.0, generator) if arch.dueling else None
+        self.log_std_head = _layer(width, self.n_actions, 0.01, generator) if self.squash else None
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
         if x.dim() == 1:
@@ -169,9 +184,7 @@ class MLPNet(nn.Module):
         # Layers without nn.Module call overhead (it dominates small batches), each activation in place on its layer's
         # output (autograd saves tanh's and relu's output, not their input, so this is the same computation with one
         # activation-sized tensor less per layer to allocate and fill).
-        z = x
-        for layer in self._linears:
-            z = self._activation(F.linear(z, layer.weight, layer.bias))
+        z = self._features(x)
         head = self.action_head
         out = F.linear(z, head.weight, head.bias)
         if self.state_value is not None:
@@ -180,6 +193,26 @@ class MLPNet(nn.Module):
         if self.value_head is not None:
             value = F.linear(z, self.value_head.weight, self.value_head.bias).squeeze(-1)
         return out, value
+
+    def _features(self, x: torch.Tensor) -> torch.Tensor:
+        z = x
+        for layer in self._linears:
+            z = self._activation(F.linear(z, layer.weight, layer.bias))
+        return z
+
+    def gaussian(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """A squashed arch's Gaussian before the tanh: ``(mean, log_std)``, both ``(batch, outputs)``, the log-std
+        state-dependent (:func:`~selfplay_cli.policies.heads.squashed_log_std` of its head's output)."""
+        if self.log_std_head is None:
+            raise ValueError("gaussian() is for a squashed arch (SAC's actor)")
+        if x.dim() == 1:
+            x = x.unsqueeze(0)
+        x = x.reshape(x.shape[0], -1)
+        if x.shape[1] != self.obs_dim:
+            raise ValueError(f"observations have {x.shape[1]} features per row; this network takes {self.obs_dim}")
+        z = self._features(x)
+        mean = F.linear(z, self.action_head.weight, self.action_head.bias)
+        return mean, squashed_log_std(F.linear(z, self.log_std_head.weight, self.log_std_head.bias))
 
 
 def _space_of(head: ActionHead) -> spaces.Space:
@@ -237,7 +270,8 @@ def resolve_device(name: str | torch.device = "cpu") -> torch.device:
 class NetworkPolicy(Policy):
     """A network playing one seat: greedy (the best action: argmax of the logits or Q-values, a Gaussian's mean
     clipped to the bounds) or sampling from its distribution (softmax of the logits, per dimension for
-    MultiDiscrete; ``clip(mean + std * eps)`` for Box actions). Masked actions are never chosen.
+    MultiDiscrete; ``clip(mean + std * eps)`` for Box actions). A squashed arch (SAC's actor) plays ``tanh(mean)``
+    greedily and ``tanh(mean + std(s) * eps)`` sampling, mapped onto the Box bounds. Masked actions are never chosen.
 
     ``act`` runs under ``torch.inference_mode`` and converts observations with ``torch.from_numpy`` (a copy is
     made only when the array is not already a writable float32 array). Sampling uses the policy's own
@@ -316,6 +350,10 @@ class NetworkPolicy(Policy):
 
     @torch.inference_mode()
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        if self.net.squash:  # SAC's actor: tanh(mean) or tanh(mean + std * eps), on the bounds
+            mean, log_std = self.net.gaussian(self._tensor(obs, np.float32))
+            self._mask(mask, mean.shape[0])  # a Box head takes no mask: refused as for any Box head
+            return to_numpy_actions(self.head, self.math.sample_squashed(mean, log_std, self.generator, self.greedy))
         if self.head.kind != "discrete":
             out, _ = self.net(self._tensor(obs, np.float32))
             _, played = self.math.sample(out, self._mask(mask, out.shape[0]), self.generator, self.greedy,

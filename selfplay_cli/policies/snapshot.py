@@ -278,6 +278,8 @@ def expected_tensors(obs_shape: tuple[int, ...], action: int | spaces.Space | Ac
         raise SnapshotError(f"an action head of {head.outputs:,} outputs is out of bounds (1 to {MAX_ACTIONS:,})")
     if arch.dueling and head.kind != "discrete":
         raise SnapshotError(f"a dueling head is for Discrete actions (Q-values), not {head.describe()}")
+    if arch.squash and head.kind != "box":
+        raise SnapshotError(f"a squashed Gaussian head is for Box actions, not {head.describe()}")
     if len(arch.hidden) > MAX_LAYERS:
         raise SnapshotError(f"{len(arch.hidden)} hidden layers is more than marl builds ({MAX_LAYERS})")
     if any(h > MAX_WIDTH for h in arch.hidden):
@@ -289,12 +291,14 @@ def expected_tensors(obs_shape: tuple[int, ...], action: int | spaces.Space | Ac
         width = h
     n = head.outputs
     shapes["action_head.weight"], shapes["action_head.bias"] = (n, width), (n,)
-    if head.kind == "box":
+    if head.kind == "box" and not arch.squash:
         shapes["log_std"] = (n,)
     if arch.value_head:
         shapes["value_head.weight"], shapes["value_head.bias"] = (1, width), (1,)
     if arch.dueling:
         shapes["state_value.weight"], shapes["state_value.bias"] = (1, width), (1,)
+    if arch.squash:  # SAC's actor: a state-dependent log-std head instead of the log_std parameter
+        shapes["log_std_head.weight"], shapes["log_std_head.bias"] = (n, width), (n,)
     params = sum(math.prod(s) for s in shapes.values())
     if params > MAX_PARAMS:
         raise SnapshotError(f"a {arch.describe()} network has {params:,} parameters, more than marl loads "

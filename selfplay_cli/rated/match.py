@@ -39,11 +39,13 @@ from ..stats.sprt import SPRT
 
 
 def plays_greedy(row: PlayerRow) -> bool:
-    """How a snapshot plays, in every game it is rated by: as its algorithm trained it. A DQN snapshot takes the
-    action of highest value; a policy-gradient snapshot (PPO) samples from its policy, which is what PPO optimises
-    (its argmax is another, untrained player, and against a deterministic opponent it can loop in endless rallies).
+    """How a snapshot plays, in every game it is rated by: as its algorithm is meant to be used. A DQN snapshot
+    takes the action of highest value; a SAC snapshot its mean action (tanh of the Gaussian's mean: SAC samples
+    only to explore, and is evaluated by its mean, as in its paper); a PPO snapshot samples from its policy, which
+    is what PPO optimises (its argmax is another, untrained player, and against a deterministic opponent it can
+    loop in endless rallies).
     """
-    return row.algo == "dqn"
+    return row.algo in ("dqn", "sac")
 
 
 def mix_seed(*parts: int) -> int:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from ..algos import LEARNERS, DQNConfig, PPOConfig
+from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
 from ..arena.selfplay import OPPONENT, SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
@@ -19,8 +19,10 @@ from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
 from ..policies.joint import joint_spaces
 from ..policies.network import resolve_device
+from .curriculum import Curriculum
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
+DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field
 
 
 @dataclass
@@ -48,8 +50,10 @@ class TrainConfig:
     eval_inline: bool = False  # play the gauntlets in the training process instead of a worker beside it
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
+    curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
+    sac: SACConfig = field(default_factory=SACConfig)
 
     def __post_init__(self) -> None:
         if self.steps < 1 and self.minutes is None:
@@ -89,10 +93,13 @@ class TrainConfig:
             raise MarlError("--sharing fups shares one network between several learners: it needs --agents 2 or more")
         try:
             game = spec.config(**self.env_options)
-            spec.make_core(1, game)  # options the game takes but cannot train with (pong's rgb frames) fail here
+            core = spec.make_core(1, game)  # options the game takes but cannot train with (pong's rgb frames) fail
             seat_spaces = spec.seat_spaces(game)
         except (TypeError, ValueError) as e:
             raise MarlError(f"[env_options]: {e}") from None
+        curriculum = Curriculum(self.curriculum, spec.name, spec.live_options)
+        if curriculum:
+            curriculum.check(core)
         layout = plan_layout(plan, self.games, self.agents, self.league_games)
         spaces = learner_spaces(spec, seat_spaces, layout)
         if self.sharing == "sa":  # one agent over the team: its joint spaces (too many joint actions: refused)
@@ -118,6 +125,7 @@ class TrainConfig:
         d = asdict(self)
         d["ppo"] = self.ppo.to_dict()
         d["dqn"] = self.dqn.to_dict()
+        d["sac"] = self.sac.to_dict()
         d["opponents"] = asdict(self.opponents)
         return d
 
@@ -130,12 +138,12 @@ class TrainConfig:
         from ..typecheck import check_fields, field_types
 
         d = dict(d)
-        sections = {"ppo": PPOConfig, "dqn": DQNConfig, "opponents": MatchmakerConfig}
+        sections = {"ppo": PPOConfig, "dqn": DQNConfig, "sac": SACConfig, "opponents": MatchmakerConfig}
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
             raise MarlError(f"unknown training setting(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-        plain = check_fields(cls, {k: v for k, v in d.items() if k not in sections and k != "env_options"},
+        plain = check_fields(cls, {k: v for k, v in d.items() if k not in sections and k not in DICT_SETTINGS},
                              where="setting ")
         d.update(plain)
         if "seed" in d and not 0 <= d["seed"] < 2**32:
@@ -147,6 +155,8 @@ class TrainConfig:
                 raise MarlError(f"[env_options] must be a table of game options, not {d['env_options']!r}")
             game = get_env(str(d["env"]))
             d["env_options"] = check_fields(type(game.config()), d["env_options"], where="[env_options] ")
+        if "curriculum" in d and not isinstance(d["curriculum"], dict):
+            raise MarlError(f"[curriculum] must be a table of the game's live options, not {d['curriculum']!r}")
         for key, section in sections.items():
             if key in d and not isinstance(d[key], section):
                 if not isinstance(d[key], dict):
@@ -172,8 +182,9 @@ def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]
         need = sum(per_obs * cfg.ppo.rollout_steps * n for n in slots)
         what = f"PPO's rollouts ({cfg.ppo.rollout_steps} steps of {sum(slots):,} seats)"
     else:
-        need = len(slots) * 2 * per_obs * cfg.dqn.buffer_size
-        what = f"DQN's replay buffers ({cfg.dqn.buffer_size:,} transitions each)"
+        buffer = cfg.dqn.buffer_size if cfg.algo == "dqn" else cfg.sac.buffer_size
+        need = len(slots) * 2 * per_obs * buffer
+        what = f"{cfg.algo.upper()}'s replay buffers ({buffer:,} transitions each)"
     try:
         have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (AttributeError, ValueError, OSError):

@@ -44,6 +44,7 @@ from ..rated.match import load_player
 from ..rated.snapshots import snapshot_relpath
 from ..results import GameResult
 from .config import TrainConfig, tensorboard_writer
+from .curriculum import Curriculum
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .team import LearnerTeam
 
@@ -174,6 +175,8 @@ class Trainer:
         self.games = SelfPlayGames(spec, cfg.games, layout, learner_ids,
                                    choose_opponents=self._choose if (layout == OPPONENT).any() else None,
                                    env_options=cfg.env_options, first_seed=cfg.seed * 1_000_003)
+        self.curriculum = Curriculum(cfg.curriculum, spec.name, spec.live_options)
+        self.lesson: dict[str, float] = {}  # the curriculum's values the training games play under now
         self.match_id = league.create_match(spec.name, "training", {"run": cfg.run, "env_options": cfg.env_options})
         self.episodes = 0
         self.elapsed = 0.0  # seconds trained before this process (resumed runs)
@@ -494,6 +497,14 @@ class Trainer:
             self.league.record_games(self.match_id, records)
 
     # -- the loop --------------------------------------------------------------------------------------------
+    def _follow_curriculum(self, progress: float) -> None:
+        """The training games' live options as the curriculum has them at this progress (changed only when they
+        change: a ramp moves them a little each step, lessons at their thresholds)."""
+        values = self.curriculum.values(progress)
+        if values != self.lesson:
+            self.games.core.set_options(**values)
+            self.lesson = values
+
     def train(self) -> TrainReport:
         """Train until the budget is spent (holding the run's lock), then take a final snapshot."""
         self._lock()
@@ -527,6 +538,8 @@ class Trainer:
                 progress = elapsed / (deadline - start) if deadline else self.steps / cfg.steps
                 if progress >= 1.0:
                     break
+                if self.curriculum:
+                    self._follow_curriculum(progress)
                 games = self.games
                 acting = games.acting() if games.sequential else None
                 rewards, dones, finished = games.step(self.team.act(obs, games.masks() if games.masked else None))
@@ -540,6 +553,7 @@ class Trainer:
                     pending = []
                     line = {"step": self.steps, "episodes": self.episodes, "seconds": round(elapsed, 2),
                             "steps_per_second": round(self.steps / max(elapsed, 1e-9)),
+                            **{f"curriculum/{k}": round(v, 5) for k, v in self.lesson.items()},
                             **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()}}
                     for rec in self.records:
                         line.update({f"eval/{rec.learner}/{bot}": round(rec.score(wdl), 4)

@@ -1,0 +1,126 @@
+"""The tennis game's speed, and what its scripted player does.
+
+1. Game steps/s of the batched core (one step of one game: both bats, 4 physics substeps) at 1, 16, 256 and 1024
+   games, random actions drawn ahead, ``observe()`` every step, games reset as they end.
+2. Steps/s of the PettingZoo view (one game).
+3. The serve-bot: its time per call, games played by it on both seats (steps/s), how many of its serves land
+   legally in each ``serve_mode`` (the receiver standing still), and its own rallies (hits per point, returns in).
+
+    .venv/bin/python benchmarks/tennis_env_speed.py [--seconds 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from selfplay_cli.envs.tennis import TennisConfig, serve_bot_for
+from selfplay_cli.envs.tennis_core import TennisCore
+from selfplay_cli.envs.tennis_env import TennisParallelEnv
+
+
+def core_speed(games: int, seconds: float) -> float:
+    """Game steps per second of the batched core under random actions (drawn ahead, observe() every step)."""
+    core = TennisCore(games)
+    actions = np.random.default_rng(0).uniform(-1, 1, (64, 2, games, 3)).astype(np.float32)
+    next_seed, steps, i = games, 0, 0
+    start = time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        core.observe()
+        core.step(actions[i % 64])
+        i += 1
+        steps += games
+        done = np.flatnonzero(core.over)
+        if done.size:
+            core.reset(done, np.arange(next_seed, next_seed + done.size))
+            next_seed += done.size
+    return steps / (time.perf_counter() - start)
+
+
+def view_speed(seconds: float) -> float:
+    env = TennisParallelEnv()
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        if not env.agents:
+            env.reset()
+        env.step({a: rng.uniform(-1, 1, 3).astype(np.float32) for a in env.agents})
+        steps += 1
+    return steps / (time.perf_counter() - start)
+
+
+def bot_call_ms(rows: int, calls: int = 40) -> float:
+    """Milliseconds per call of the serve-bot's rule on ``rows`` observations of games in play."""
+    core = TennisCore(rows)
+    rule = serve_bot_for(TennisConfig())
+    for _ in range(25):  # into the serves
+        core.step(np.stack([rule(o) for o in core.observe()]))
+    obs = core.observe()
+    start = time.perf_counter()
+    for _ in range(calls):
+        rule(obs[0])
+    return (time.perf_counter() - start) / calls * 1000
+
+
+def bot_games(games: int, steps: int, mode: str = "fixed") -> tuple[float, TennisCore]:
+    core = TennisCore(games, TennisConfig(serve_mode=mode))
+    rule = serve_bot_for(core.config)
+    start = time.perf_counter()
+    for _ in range(steps):
+        obs = core.observe()
+        core.step(np.stack([rule(obs[0]), rule(obs[1])]))
+    return games * steps / (time.perf_counter() - start), core
+
+
+def serves_in(mode: str, games: int = 32, steps: int = 1500) -> tuple[int, int]:
+    """The serve-bot on seat 0 against a receiver standing still: its serves (those decided: not still in the air
+    when the run stops), and those that landed legally."""
+    core = TennisCore(games, TennisConfig(serve_mode=mode))
+    core.reset(np.arange(games), np.arange(1000, 1000 + games))
+    rule = serve_bot_for(core.config)
+    served = landed = 0
+    next_seed = 2000
+    for _ in range(steps):
+        a = np.zeros((2, games, 3), dtype=np.float32)
+        a[0] = rule(core.observe()[0])
+        s, i = core.serves[0].sum(), core.serves_in[0].sum()
+        core.step(a)
+        served += core.serves[0].sum() - s
+        landed += core.serves_in[0].sum() - i
+        done = np.flatnonzero(core.over)
+        if done.size:
+            core.reset(done, np.arange(next_seed, next_seed + done.size))
+            next_seed += done.size
+    flying = (~core.tossing & core.serve_shot & ~core.landed & (core.hitter == 0)).sum()  # not decided yet
+    return int(served - flying), int(landed)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--seconds", type=float, default=3.0, help="seconds of play per measurement")
+    args = ap.parse_args()
+    print("batched core, random actions, observe() every step, games reset as they end")
+    print(f"{'games':>6} {'game steps/s':>13}")
+    for games in (1, 16, 256, 1024):
+        print(f"{games:>6} {core_speed(games, args.seconds):>13,.0f}")
+    print(f"\nPettingZoo view (one game): {view_speed(args.seconds):,.0f} steps/s")
+    print("\nserve-bot: ms per call of its rule (games in play)")
+    for rows in (1, 16, 256, 1024):
+        print(f"{rows:>6} rows {bot_call_ms(rows):>8.2f} ms")
+    rate, core = bot_games(64, 1500)
+    hits = core.serves.sum() + core.returns.sum()
+    points = core.score.sum()
+    print(f"\nserve-bot vs serve-bot, 64 games x 1500 steps: {rate:,.0f} game steps/s (bot time included); "
+          f"{hits / max(points, 1):.1f} hits per point, {core.returns_in.sum() / max(core.returns.sum(), 1):.1%} "
+          "of returns landed")
+    print("\nserve-bot's serves against a receiver standing still (32 games x 1500 steps)")
+    for mode in ("fixed", "velocity", "spin"):
+        served, landed = serves_in(mode)
+        print(f"{mode:>9}: {landed}/{served} landed legally ({landed / max(served, 1):.1%})")
+
+
+if __name__ == "__main__":
+    main()

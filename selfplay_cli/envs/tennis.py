@@ -1,0 +1,579 @@
+"""Table tennis in the vertical plane along the table (seed 002's game, re-implemented as a physics game).
+
+This module is the game's declaration: its constants, its options (:class:`TennisConfig`), each seat's spaces, the
+ball's physics (shared by the core and the scripted player, who plans with it) and the scripted players' rules. N
+games stepped at once are :class:`~selfplay_cli.envs.tennis_core.TennisCore`; the PettingZoo view and the
+``tennis`` :class:`~selfplay_cli.envs.registry.EnvSpec` are in :mod:`.tennis_env`, the renderer in
+:mod:`.tennis_render`.
+
+The world (SI units; x along the table, y up; seat 0 plays from the -x end, seat 1 from the +x end)
+    Table 2.74 m long, surface at y = 0, x from -1.37 to +1.37; net at x = 0, 0.1525 m high; floor at y = -0.76.
+    Ball: radius 20 mm, mass 2.7 g, a thin shell (moment of inertia 2/3 m r^2), with a scalar spin ``w`` about the
+    axis perpendicular to the plane (counter-clockwise positive: for a ball moving to +x, topspin is w < 0).
+
+Flight (:func:`accel`, integrated with semi-implicit Euler)
+    Gravity 9.81; quadratic air drag ``-k_d |v| v`` (k_d from rho = 1.2 kg/m3, C_d = 0.40 and the ball's cross
+    section); Magnus force ``k_m w x v`` (k_m = rho A r C_m / 2m with C_m = 1.0: at 150 rad/s and 10 m/s about 8 m/s2,
+    so topspin dips and backspin floats); spin decays slowly in the air (0.2 /s). ``drag`` and ``magnus`` scale the
+    two forces (0 switches them off).
+
+Contacts (:func:`contact`, one model for table and bats)
+    An impulse at the contact point: the normal relative velocity is reversed with a restitution (table 0.90, bat
+    0.85); friction acts on the contact point's slip ``u = v_t - r w`` (the surface's tangential speed of the ball
+    relative to the surface): it takes out the impulse that brings the slip to zero (the ball leaves rolling),
+    ``0.4 m |u|`` for a thin shell, unless that exceeds Coulomb's ``mu J_n`` (table 0.40, bat rubber 1.0), when the
+    ball keeps sliding. The same impulse changes the speed along the surface and the spin, so topspin (which slips
+    less) bounces off the table lower and faster than a ball without spin, and backspin (which slips more) higher
+    and slower; a bat's angle and velocity decide the return (the ball's velocity relative to the bat's contact point
+    is reflected about the bat's normal, friction on the rubber imparts spin), and a brushing stroke makes spin.
+    A ball without spin reaches rolling (grips) at the usual landing angles (steeper than ~28 degrees); the table's
+    0.40 is at the grippy end of measured values and is chosen for that.
+
+Substeps and tunnelling
+    50 decisions a second; each step is 4 physics substeps of 5 ms. Every substep tests the ball's whole path
+    against each bat (a swept test: the ball's signed distance to the bat's line at the start and end of the substep,
+    the bat moving and turning with it, and where along the face the crossing happens), against the net (the ball
+    crossing the net's plane below its top plus a radius, or touching it) and against the table (crossing the
+    surface from above), so a ball at any speed cannot pass through a bat, the net or the table.
+
+Bats
+    Each a thin segment 0.15 m long (``bat_scale`` times), with position, velocity, tilt and tilt rate. The tilt
+    ``angle`` is egocentric: 0 is the face upright facing the net, positive opens the face (turns it upward),
+    limits +-pi/2. Either side of the segment hits. A bat stays in its own reachable box: from 1.5 m behind its end
+    of the table up to the net (no part of it may cross the net's plane), 0.4 m below to 1.6 m above the table's
+    surface. Bats do not collide with the table, the net or each other.
+
+Actions (per seat)
+    ``Box(-1, 1, (3,))``: the bat's velocity toward the net and upward (times 6 m/s each) and its tilt rate (times
+    10 rad/s), held for the step, or with ``discrete=true`` ``MultiDiscrete([3, 3, 3])`` (0, 1, 2 meaning -1, 0, +1
+    on each axis). A bat pushed against its box stops there, and observes the velocity it really had.
+
+Rules
+    * Serve: at the start of a point the ball is tossed straight up (2.6 m/s, from 0.15 m above the table's height,
+      0.18 m behind the server's end, +-``toss_jitter`` m along the table at random), in front of the server's bat.
+      The server must strike it within ``serve_time`` seconds and before it touches anything else (the floor,
+      typically); otherwise the receiver wins the point. The struck ball must land on the receiver's half first: a
+      simplification of the real serve, which bounces once on the server's own half first. No lets.
+    * After each legal hit the ball must land on the opponent's half before anything else. The point goes to the
+      opponent of the player who hits into the net (any net contact before the landing: no net cords), hits out
+      (the ball reaches the floor, leaves the room (4.5 m from the net) or goes below the table's surface without
+      landing on the opponent's half), lands it on their own half, hits it twice (a second contact with the same
+      bat, after 40 ms: contacts within 40 ms are one stroke) or volleys (hits a ball the opponent sent before it
+      bounced on the hitter's half).
+    * Once the ball has landed on the opponent's half, the opponent must return it before it bounces again: any
+      other event (a second bounce, the floor, the net, the hitter's own half or bat) gives the point to the hitter.
+    * Serves alternate every 2 points, every point from 10-10 (``points_to_win - 1`` all); the first server is drawn
+      from the game's seed. A game is won at 11 (``points_to_win``) by 2 (terminated); after ``max_steps`` steps it
+      is truncated and decided by the points at that moment.
+    * The game tracks, as the seed does, the last hitter (:attr:`TennisCore.hitter`), the last surface the ball
+      touched (:attr:`TennisCore.surface`) and whose turn it is (:attr:`TennisCore.turn`), and why each point
+      ended (:attr:`TennisCore.reason`).
+
+Rewards and score
+    ``point_reward`` to the winner of a point and its negative to the loser (zero-sum), ``hit_reward`` to a player for
+    each legal hit (a serve's strike or a return of a ball that bounced on its half), a shaping reward as the seed's
+    reward curriculum uses. ``score`` is the points each seat won, so results and ratings go by points.
+    :meth:`TennisCore.set_options` changes ``hit_reward``, ``point_reward`` and ``bat_scale`` of running games
+    between steps (the curricula's hook).
+
+Observation (per seat, egocentric: x points from the seat's own end toward the net and the opponent, spins and
+velocities mirrored with it, so one policy plays either end; mirroring the world swaps the two seats' observations
+exactly). 25 float32 values, clipped to the declared bounds (which the ball leaves only far from play):
+
+    0-5    own bat: x, y (m), vx, vy (m/s / 10), angle (rad), tilt rate (/ 10 rad/s)
+    6-11   the opponent's bat, the same in my frame (its angle is its own tilt)
+    12-16  ball: x, y (m), vx, vy (m/s / 10), spin (rad/s / 100; topspin toward the opponent is negative)
+    17     the opponent hit last and the ball has not yet bounced on my half (I may not touch it)
+    18     the opponent hit last and the ball bounced on my half (my turn: return it before it bounces again)
+    19     I hit last and the ball has not yet landed on the opponent's half
+    20     I hit last and the ball landed on the opponent's half (their turn)
+    21     I am to serve (the toss is in the air)
+    22     the opponent is to serve
+    23     serve clock: the fraction of ``serve_time`` left while a toss is in the air, else 0
+    24     the bats' length (m), which ``bat_scale`` sets
+
+Scripted players: ``serve-bot`` (seed 002's serve bot, the ratings' anchor) plans with this module's physics: it
+serves by ``serve_mode`` (``fixed``: one serve; ``velocity``: random speed, arc and placement; ``spin``: random top-
+or backspin), solving the contact model backwards for the bat's tilt and velocity, and returns balls to the middle
+of the other half; it misjudges spin (see :func:`serve_bot_rule_for`), so spin beats it. ``random`` is marl's own
+(uniform actions). Randomness: the first server and each toss's place come from the game's seed (counter-based).
+
+Not modelled: the third dimension (sidespin, the table's width, the ball going wide), the real serve's first bounce
+on the server's half and lets, net cords (a net touch ends the point), the bounce of the ball off the net or the
+floor, the bat's edge and handle (a bat is a segment with no thickness, struck on either face, its ends included
+within half a ball radius), bat inertia (the velocity commanded is the velocity), rubber types, the ball's
+deformation (the bat's friction is an impulse limited only by Coulomb friction), and speed-dependent restitution.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, Literal
+
+import numpy as np
+from gymnasium import spaces
+
+# --------------------------------------------------------------------------------------------------------------
+# Time
+FPS = 50  # decisions (steps) per second
+DT = 1.0 / FPS
+SUBSTEPS = 4  # physics substeps per step
+H = DT / SUBSTEPS
+
+# Table, net, room (m)
+TABLE_HALF = 1.37  # the table runs from -1.37 to 1.37
+NET_H = 0.1525
+FLOOR_Y = -0.76
+X_OUT = 4.5  # a ball this far from the net has left the room
+
+# Ball
+G = 9.81
+BALL_R = 0.02
+BALL_M = 0.0027
+AIR_RHO = 1.20
+DRAG_CD = 0.40
+MAGNUS_CM = 1.0
+_AREA = math.pi * BALL_R * BALL_R
+K_DRAG = 0.5 * AIR_RHO * DRAG_CD * _AREA / BALL_M  # 1/m: drag acceleration = K_DRAG |v| v
+K_MAGNUS = 0.5 * AIR_RHO * _AREA * BALL_R * MAGNUS_CM / BALL_M  # Magnus acceleration = K_MAGNUS w x v
+SPIN_DECAY = 0.2  # 1/s, the spin's decay in the air
+MAX_SPIN = 1000.0  # rad/s, the most spin a ball keeps (~160 revolutions a second)
+INERTIA = 2.0 / 3.0  # thin shell: I = 2/3 m r^2
+STICK = INERTIA / (1.0 + INERTIA)  # 0.4: the friction impulse (per unit mass and slip) that stops the slip
+SPIN_GAIN = 1.0 / (INERTIA * BALL_R)  # spin change per unit friction impulse per mass
+
+E_TABLE, MU_TABLE = 0.90, 0.40
+E_BAT, MU_BAT = 0.85, 1.0
+
+# Bats
+BAT_LEN = 0.15
+MAX_BAT_SCALE = 5.0
+V_MAX = 6.0  # m/s per axis
+OMEGA_MAX = 10.0  # rad/s of tilt
+ANGLE_MAX = math.pi / 2
+BACK = 1.5  # how far behind its end of the table a bat reaches
+X_BACK = TABLE_HALF + BACK  # 2.87 m from the net
+NET_GAP = 0.02  # the closest any part of a bat comes to the net's plane
+Y_LOW, Y_HIGH = -0.4, 1.6
+HOME_X, HOME_Y = -1.8, 0.2  # (egocentric) where both bats start each point
+HIT_COOLDOWN = 0.04  # s: contacts of one bat this soon after its hit are the same stroke
+
+# Serve
+TOSS_X, TOSS_Y, TOSS_VY = -1.55, 0.15, 2.6  # egocentric, for the server
+
+# Observation layout and scales
+VEL_SCALE = 10.0  # velocities are observed in units of 10 m/s
+SPIN_SCALE = 100.0  # spins in units of 100 rad/s
+FEATURE_NAMES = (
+    "bat_x", "bat_y", "bat_vx", "bat_vy", "bat_angle", "bat_rate",
+    "opp_x", "opp_y", "opp_vx", "opp_vy", "opp_angle", "opp_rate",
+    "ball_x", "ball_y", "ball_vx", "ball_vy", "ball_spin",
+    "incoming", "my_turn", "outgoing", "landed_there", "i_serve", "they_serve", "serve_clock", "bat_length",
+)
+N_FEATURES = len(FEATURE_NAMES)
+(BAT_X, BAT_Y, BAT_VX, BAT_VY, BAT_ANGLE, BAT_RATE, OPP_X, OPP_Y, OPP_VX, OPP_VY, OPP_ANGLE, OPP_RATE, BALL_X,
+ BALL_Y, BALL_VX, BALL_VY, BALL_SPIN, INCOMING, MY_TURN, OUTGOING, LANDED_THERE, I_SERVE, THEY_SERVE, SERVE_CLOCK,
+ BAT_LENGTH) = range(N_FEATURES)
+_VB, _VBALL, _SB = V_MAX / VEL_SCALE, 40.0 / VEL_SCALE, MAX_SPIN / SPIN_SCALE
+OBS_LOW = np.array([-X_BACK, Y_LOW, -_VB, -_VB, -ANGLE_MAX, -1.0,
+                    0.0, Y_LOW, -_VB, -_VB, -ANGLE_MAX, -1.0,
+                    -X_OUT, FLOOR_Y, -_VBALL, -_VBALL, -_SB,
+                    0, 0, 0, 0, 0, 0, 0, 0], dtype=np.float32)
+OBS_HIGH = np.array([0.0, Y_HIGH, _VB, _VB, ANGLE_MAX, 1.0,
+                     X_BACK, Y_HIGH, _VB, _VB, ANGLE_MAX, 1.0,
+                     X_OUT, 6.0, _VBALL, _VBALL, _SB,
+                     1, 1, 1, 1, 1, 1, 1, BAT_LEN * MAX_BAT_SCALE], dtype=np.float32)
+
+# The last surface the ball touched (TennisCore.surface)
+NONE, TABLE_0, TABLE_1, BAT_0, BAT_1, NET, OUT = range(7)
+SURFACE_NAMES = ("none", "table_0", "table_1", "bat_0", "bat_1", "net", "out")
+# Why a point ended (TennisCore.reason), said of the player who lost it
+(NO_POINT, INTO_NET, HIT_OUT, OWN_HALF, DOUBLE_BOUNCE, DOUBLE_HIT, VOLLEY, MISSED_SERVE,
+ NOT_RETURNED) = range(9)
+REASON_NAMES = ("none", "net", "out", "own_half", "double_bounce", "double_hit", "volley", "missed_serve",
+                "not_returned")
+
+SERVE_MODES = ("fixed", "velocity", "spin")
+LIVE_OPTIONS = ("hit_reward", "point_reward", "bat_scale")  # what TennisCore.set_options changes
+
+
+@dataclass(frozen=True)
+class TennisConfig:
+    """Options of one tennis game (the defaults: the game marl trains and rates)."""
+
+    discrete: bool = False  # MultiDiscrete([3, 3, 3]) actions (-1/0/+1 per axis) instead of Box(-1, 1, (3,))
+    bat_scale: float = 1.0  # the bats' length is 0.15 m times this (curriculum: start large, shrink to 1)
+    hit_reward: float = 0.0  # shaping reward for each legal hit (curriculum: start high, decay)
+    point_reward: float = 1.0  # the winner of a point gets this, the loser its negative
+    points_to_win: int = 11  # a game is won at this many points, by 2
+    max_steps: int = 6000  # time limit in steps (2 minutes of play at 50 steps a second)
+    serve_time: float = 1.5  # seconds the server has to strike the toss
+    toss_jitter: float = 0.05  # the toss's place along the table varies by this much (m) either way
+    serve_mode: Literal["fixed", "velocity", "spin"] = "fixed"  # the serve-bot's serves (seed 002's three modes)
+    drag: float = 1.0  # scales the air drag (0: none)
+    magnus: float = 1.0  # scales the Magnus force (0: none)
+
+    def __post_init__(self) -> None:
+        for f in fields(self):  # the declared types, from Python too
+            value, kind = getattr(self, f.name), {"int": int, "float": float, "bool": bool}.get(str(f.type))
+            if kind is bool and not isinstance(value, (bool, np.bool_)):
+                raise ValueError(f"tennis option {f.name} wants true or false, not {value!r}")
+            if kind is int and (isinstance(value, bool) or not isinstance(value, (int, np.integer))):
+                raise ValueError(f"tennis option {f.name} wants a whole number, not {value!r}")
+            if kind is float and (isinstance(value, bool) or not isinstance(value, (int, float, np.floating))
+                                  or not math.isfinite(value)):
+                raise ValueError(f"tennis option {f.name} wants a finite number, not {value!r}")
+        if not 0.0 < self.bat_scale <= MAX_BAT_SCALE:
+            raise ValueError(f"bat_scale must lie in (0, {MAX_BAT_SCALE:g}], not {self.bat_scale}")
+        if self.point_reward < 0:
+            raise ValueError(f"point_reward must not be negative, not {self.point_reward}")
+        if self.points_to_win < 1:
+            raise ValueError(f"points_to_win must be at least 1, not {self.points_to_win}")
+        if self.max_steps < 1:
+            raise ValueError(f"max_steps must be at least 1, not {self.max_steps}")
+        if not 0.1 <= self.serve_time <= 10.0:
+            raise ValueError(f"serve_time must lie between 0.1 and 10 seconds, not {self.serve_time}")
+        if not 0.0 <= self.toss_jitter <= 0.15:
+            raise ValueError(f"toss_jitter must lie between 0 and 0.15 m, not {self.toss_jitter}")
+        if self.serve_mode not in SERVE_MODES:
+            raise ValueError(f"serve_mode must be one of {', '.join(SERVE_MODES)}, not {self.serve_mode!r}")
+        if not (0.0 <= self.drag <= 5.0 and 0.0 <= self.magnus <= 5.0):
+            raise ValueError("drag and magnus scale the air's forces: each must lie between 0 and 5")
+
+    @property
+    def bat_length(self) -> float:
+        return BAT_LEN * self.bat_scale
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def make_config(**options: Any) -> TennisConfig:
+    """A config from keyword options, with a clear error for an unknown option."""
+    known = set(TennisConfig.__dataclass_fields__)
+    unknown = sorted(set(options) - known)
+    if unknown:
+        raise ValueError(f"unknown tennis option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
+    return replace(TennisConfig(), **options)
+
+
+AGENTS = ("player_0", "player_1")
+
+
+def observation_space(config: TennisConfig | None = None) -> spaces.Box:
+    return spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
+
+
+def action_space(config: TennisConfig | None = None) -> spaces.Space:
+    if config is not None and config.discrete:
+        return spaces.MultiDiscrete([3, 3, 3])
+    return spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Physics shared by the core and the scripted player (numpy arrays of any shape, float64)
+def accel(vx: np.ndarray, vy: np.ndarray, w: np.ndarray, kd: float = K_DRAG,
+          km: float = K_MAGNUS) -> tuple[np.ndarray, np.ndarray]:
+    """The ball's acceleration in flight: gravity, drag ``-kd |v| v`` and Magnus ``km w x v``."""
+    speed = np.sqrt(vx * vx + vy * vy)
+    return -kd * speed * vx - km * w * vy, -G - kd * speed * vy + km * w * vx
+
+
+def contact(vx: np.ndarray, vy: np.ndarray, w: np.ndarray, nx: np.ndarray, ny: np.ndarray, cvx: Any, cvy: Any,
+            e: float, mu: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ball's velocity and spin after an impact on a surface with unit normal ``(nx, ny)`` pointing toward the
+    ball, whose contact point moves at ``(cvx, cvy)``: the normal relative velocity reversed times ``e``, and the
+    friction impulse that stops the contact point's slip (the ball leaves rolling) unless Coulomb's ``mu`` times
+    the normal impulse is less, when the ball slides through."""
+    tx, ty = -ny, nx
+    rx, ry = vx - cvx, vy - cvy
+    vn = rx * nx + ry * ny  # < 0: approaching
+    vt = rx * tx + ry * ty
+    slip = vt - BALL_R * w
+    jn = -(1.0 + e) * vn
+    cap = mu * np.abs(jn)
+    jt = np.clip(-STICK * slip, -cap, cap)
+    w2 = np.clip(w - SPIN_GAIN * jt, -MAX_SPIN, MAX_SPIN)
+    return vx + jn * nx + jt * tx, vy + jn * ny + jt * ty, w2
+
+
+def bat_normal(angle: np.ndarray, sigma: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The world normal of a bat's face with egocentric tilt ``angle`` for a seat whose forward is ``sigma`` (+1 for
+    seat 0, -1 for seat 1)."""
+    return sigma * np.cos(angle), np.sin(angle)
+
+
+def server_of(first: np.ndarray, points: np.ndarray, points_to_win: int) -> np.ndarray:
+    """Who serves after ``points`` points of a game whose first server is ``first``: serves alternate every 2
+    points, and every point once both players have ``points_to_win - 1``."""
+    deuce = 2 * (points_to_win - 1)
+    turn = np.where(points < deuce, points // 2, (deuce // 2) + (points - deuce))
+    return np.where(turn % 2 == 0, first, 1 - first).astype(np.int8)
+
+
+def game_won(score_a: np.ndarray, score_b: np.ndarray, points_to_win: int) -> np.ndarray:
+    """Whether a has won: at least ``points_to_win`` points and 2 more than b."""
+    return (score_a >= points_to_win) & (score_a - score_b >= 2)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# The scripted players
+#
+# serve-bot plans with the game's own physics, in its egocentric frame (own end at -x, net at 0): it predicts where
+# it will meet the ball, chooses the ball it wants to send (landing x, height over the net, spin), integrates the
+# flight to correct its aim for drag and Magnus, and solves the contact model backwards for the bat's normal and
+# velocity that produce that ball from the incoming one. It then brings its bat, tilted, to a point behind the
+# contact (along the stroke) and swings through the contact point at that velocity.
+_PLAN_DT = 0.02
+_SWING = 0.08  # s: the stroke's length before the contact
+_GAP = 0.003  # at the planned instant the bat's face is this far short of the ball (it touches just before)
+_REACH_X = -2.5  # the farthest back the bot meets a ball
+
+
+def _unit_hash(x: np.ndarray, salt: int) -> np.ndarray:
+    """Uniform [0, 1) numbers from the bits of float32 values (SplitMix64), one per value and salt."""
+    bits = np.asarray(x, dtype=np.float32).view(np.uint32).astype(np.uint64)
+    z = bits * np.uint64(0x9E3779B97F4A7C15) + np.uint64(salt)
+    z ^= z >> np.uint64(30)
+    z *= np.uint64(0xBF58476D1CE4E5B9)
+    z ^= z >> np.uint64(27)
+    z *= np.uint64(0x94D049BB133111EB)
+    z ^= z >> np.uint64(31)
+    return (z >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+
+
+def _fly_to_landing(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, w: np.ndarray, kd: float,
+                    km: float, t_max: float = 1.6) -> tuple[np.ndarray, np.ndarray]:
+    """Flights from (x, y) toward +x: the height at which each crosses the net's plane (below the table's surface
+    if it falls short of it) and where it comes down to the table's height (its x when it stops, if it does not
+    within ``t_max``). Integrated at 20 ms, second order in the step."""
+    x, y, vx, vy, w = (np.array(a, dtype=np.float64) for a in (x, y, vx, vy, w))
+    y_net = np.full(x.shape, -1.0)
+    x_land = x.copy()
+    flying = np.ones(x.shape, dtype=bool)
+    dt, half = _PLAN_DT, 0.5 * _PLAN_DT * _PLAN_DT
+    for _ in range(int(t_max / dt)):
+        ax, ay = accel(vx, vy, w, kd, km)
+        nx_, ny_ = x + vx * dt + ax * half, y + vy * dt + ay * half
+        vx, vy = vx + ax * dt, vy + ay * dt
+        cross = flying & (x < 0) & (nx_ >= 0)
+        y_net = np.where(cross, y + (-x / np.where(cross, nx_ - x, 1.0)) * (ny_ - y), y_net)
+        down = flying & (ny_ <= BALL_R) & (vy < 0)
+        f = np.clip((y - BALL_R) / np.where(down, y - ny_, 1.0), 0.0, 1.0)
+        x_land = np.where(down, x + f * (nx_ - x), np.where(flying, nx_, x_land))
+        flying &= ~down
+        x, y = nx_, ny_
+        if not flying.any():
+            break
+    return y_net, x_land
+
+
+def _parabola(x0: np.ndarray, y0: np.ndarray, over_y: np.ndarray, land_x: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The launch velocity of the drag-free path from (x0, y0) over (0, over_y) down to (land_x, ball radius)."""
+    x1, y1 = -x0, over_y - y0
+    x2, y2 = np.maximum(land_x - x0, x1 + 0.05), BALL_R - y0
+    c = np.minimum((y2 / x2 - y1 / x1) / (x2 - x1), -0.02)
+    b = y1 / x1 - c * x1
+    vx = np.sqrt(G / (-2.0 * c))
+    return vx, b * vx
+
+
+def plan_launch(x0: np.ndarray, y0: np.ndarray, w: np.ndarray, land_x: np.ndarray, over_y: np.ndarray,
+                kd: float = K_DRAG, km: float = K_MAGNUS, iterations: int = 2) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity to give a ball with spin ``w`` at (x0 < 0, y0) so that it crosses the net's plane at height
+    ``over_y`` and comes down at ``land_x``, with drag and Magnus: the drag-free parabola through those points, its
+    aim points moved by what the real flight (integrated) missed them by, ``iterations`` times."""
+    x0, y0, w = (np.asarray(a, dtype=np.float64) for a in (x0, y0, w))
+    land_x, over_y = np.asarray(land_x, dtype=np.float64), np.asarray(over_y, dtype=np.float64)
+    aim_x, aim_y = land_x.copy(), over_y.copy()
+    for _ in range(iterations):
+        vx, vy = _parabola(x0, y0, aim_y, aim_x)
+        got_y, got_x = _fly_to_landing(x0, y0, vx, vy, w, kd, km)
+        got_y = np.where(got_y < 0, np.minimum(y0, NET_H) - 0.2, got_y)  # fell short of the net: aim higher
+        aim_x = np.clip(aim_x + (land_x - got_x), 0.05, 3.0)
+        aim_y = np.clip(aim_y + (over_y - got_y), y0 - 1.0, 2.0)
+    return _parabola(x0, y0, aim_y, aim_x)
+
+
+def solve_stroke(vin_x: np.ndarray, vin_y: np.ndarray, w_in: np.ndarray, vout_x: np.ndarray, vout_y: np.ndarray,
+                 w_out: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The bat's face normal (toward the ball) and velocity that turn the ball (vin, w_in) into (vout, w_out) under
+    :func:`contact` with the bat's restitution and friction (the bat not turning at the contact).
+
+    The change of velocity has a normal part ``(1 + e) |v_n|`` and a tangential part ``-0.4 u`` fixed by the spin
+    wanted (``w_out - w_in = -1.5 / r`` times it), which sets the normal's direction; the relative normal and
+    tangential speeds then give the bat's velocity. Spin beyond what the rubber's friction can give is reduced.
+    Returns ``nx, ny, bat_vx, bat_vy``."""
+    dx, dy = vout_x - vin_x, vout_y - vin_y
+    size = np.sqrt(dx * dx + dy * dy)
+    tang = -(w_out - w_in) / SPIN_GAIN  # the tangential velocity change the spin needs (= jt)
+    most = MU_BAT * size / math.sqrt(1.0 + MU_BAT * MU_BAT) * 0.95
+    tang = np.clip(tang, -most, most)
+    norm = np.sqrt(np.maximum(size * size - tang * tang, 1e-12))
+    alpha = np.arctan2(dy, dx) - np.arctan2(tang, norm)
+    nx, ny = np.cos(alpha), np.sin(alpha)
+    tx, ty = -ny, nx
+    slip = -tang / STICK
+    vt = slip + BALL_R * w_in  # the ball's tangential speed relative to the bat before the contact
+    vn = -norm / (1.0 + E_BAT)
+    bn = (vin_x * nx + vin_y * ny) - vn
+    bt = (vin_x * tx + vin_y * ty) - vt
+    return nx, ny, bn * nx + bt * tx, bn * ny + bt * ty
+
+
+def _predict_contact(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, w: np.ndarray,
+                     bounced: np.ndarray, kd: float, km: float, t_max: float = 1.6) -> tuple[np.ndarray, ...]:
+    """Where to meet an incoming ball: its flight (with a bounce on my half, x < 0) to the top of its bounce, or to
+    where it passes ``_REACH_X``. Returns found, time, x, y, vx, vy, w (found False: it will not bounce on my
+    half, so it must not be touched)."""
+    x, y, vx, vy, w = (np.array(a, dtype=np.float64) for a in (x, y, vx, vy, w))
+    bounced = np.array(bounced, dtype=bool)
+    k = len(x)
+    found = np.zeros(k, dtype=bool)
+    alive = np.ones(k, dtype=bool)
+    out = np.zeros((6, k))
+    out[0] = t_max
+    t = 0.0
+    decay, half = 1.0 - SPIN_DECAY * _PLAN_DT, 0.5 * _PLAN_DT * _PLAN_DT
+    # a ball already on its way down after its bounce is met now
+    now = bounced & (vy <= 0)
+    if now.any():
+        found[now] = True
+        out[:, now] = np.stack([np.zeros(now.sum()), x[now], y[now], vx[now], vy[now], w[now]])
+        alive &= ~now
+    for _ in range(int(t_max / _PLAN_DT)):
+        if not alive.any():
+            break
+        t += _PLAN_DT
+        ax, ay = accel(vx, vy, w, kd, km)
+        x = x + vx * _PLAN_DT + ax * half
+        y = y + vy * _PLAN_DT + ay * half
+        vx = vx + ax * _PLAN_DT
+        vy = vy + ay * _PLAN_DT
+        w = w * decay
+        hit = alive & ~bounced & (y < BALL_R) & (vy < 0) & (np.abs(x) <= TABLE_HALF)
+        if hit.any():
+            mine = hit & (x < 0)
+            alive &= ~(hit & ~mine)  # lands on the other half: not mine to play
+            if mine.any():
+                zero = np.zeros(mine.sum())
+                vx[mine], vy[mine], w[mine] = contact(vx[mine], vy[mine], w[mine], zero, zero + 1.0, 0.0, 0.0,
+                                                      E_TABLE, MU_TABLE)
+                y[mine] = 2 * BALL_R - y[mine]
+                bounced |= mine
+        dead = alive & ((y < 0) & ((np.abs(x) < TABLE_HALF) | ~bounced) | (y < FLOOR_Y + 0.3))
+        alive &= ~dead
+        meet = alive & bounced & ((vy <= 0) | (x <= _REACH_X))
+        if meet.any():
+            found[meet] = True
+            out[:, meet] = np.stack([np.full(meet.sum(), t), x[meet], y[meet], vx[meet], vy[meet], w[meet]])
+            alive &= ~meet
+    return (found, *out)
+
+
+def _swing(o: np.ndarray, sel: np.ndarray, t_c: np.ndarray, px: np.ndarray, py: np.ndarray, vin_x: np.ndarray,
+           vin_y: np.ndarray, w_in: np.ndarray, land_x: np.ndarray, over_y: np.ndarray, w_out: np.ndarray,
+           kd: float, km: float, act: np.ndarray) -> None:
+    """Write into ``act[sel]`` the stroke that meets the ball at (px, py) in ``t_c`` seconds and sends it to land
+    at ``land_x`` over the net at ``over_y`` with spin ``w_out``."""
+    vx, vy = plan_launch(px, py, w_out, land_x, over_y, kd, km)
+    nx, ny, bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)
+    for _ in range(2):  # a stroke faster than the bat can swing: a slower ball, higher over the net
+        fast = np.flatnonzero(np.maximum(np.abs(bvx), np.abs(bvy)) > 0.8 * V_MAX)
+        if not fast.size:
+            break
+        over_y = over_y.copy()
+        over_y[fast] += 0.1
+        vx[fast], vy[fast] = plan_launch(px[fast], py[fast], w_out[fast], land_x[fast], over_y[fast], kd, km)
+        nx[fast], ny[fast], bvx[fast], bvy[fast] = solve_stroke(vin_x[fast], vin_y[fast], w_in[fast], vx[fast],
+                                                                vy[fast], w_out[fast])
+    # The face: the normal toward the ball, or the back face's tilt if that one faces the ball
+    angle = np.arctan2(ny, nx)
+    angle = np.where(angle > ANGLE_MAX, angle - math.pi, np.where(angle < -ANGLE_MAX, angle + math.pi, angle))
+    cx, cy = px - (BALL_R + _GAP) * nx, py - (BALL_R + _GAP) * ny  # the bat's centre at the contact
+    bx, by = o[sel, BAT_X], o[sel, BAT_Y]
+    far = t_c > _SWING
+    lead = np.where(far, _SWING, t_c)
+    want_x, want_y = cx - bvx * lead, cy - bvy * lead  # where the bat should be now (or wait, while far)
+    step = np.maximum(t_c, DT)
+    cmd_x = np.where(far, (want_x - bx) / DT, bvx + (want_x - bx) / step)
+    cmd_y = np.where(far, (want_y - by) / DT, bvy + (want_y - by) / step)
+    act[sel, 0] = cmd_x / V_MAX
+    act[sel, 1] = cmd_y / V_MAX
+    act[sel, 2] = (angle - o[sel, BAT_ANGLE]) / (DT * OMEGA_MAX)
+
+
+def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1.0, discrete: bool = False,
+                       spin_read: float = 0.6, return_spin: float = 0.0, return_land: float = 0.75):
+    """The serve-bot's rule ``rule(obs, rng=None, mask=None) -> actions`` for observations ``(k, 25)``.
+
+    Serving, it strikes the toss (the game tosses) as it falls through a chosen height, sending the ball to land on
+    the receiver's half: ``fixed`` always the same serve (0.8 m past the net, 12 cm over it, no spin), ``velocity``
+    a random landing point, height over the net and contact height (so a random speed and arc), ``spin`` random
+    top- or backspin up to 120 rad/s (19 turns a second). A serve's random choices are a hash of the toss's place
+    (drawn by the game for every serve and fixed while the toss is in the air), so a stateless rule keeps to one
+    plan for the whole serve and a game's serves are reproducible by its seed. Receiving, it waits for the ball to
+    bounce on its half, meets it at the top of its bounce and sends it back to the middle of the other half, 15 cm
+    over the net, without spin; a ball that will not bounce on its half it leaves alone. Otherwise it goes back to
+    its place behind the table. Its weakness, so that it can be beaten: it misjudges spin, planning with
+    ``spin_read`` (60%) of the spin it sees: against itself ~2% of its returns fail (~60 hits a point), but of
+    balls with 200-300 rad/s of topspin it returns about a quarter, where reading spin right it returns them all
+    (tests/test_tennis.py). ``return_spin`` and ``return_land`` change its returns (for experiments).
+    Deterministic: ``rng`` is not used. With ``discrete`` each axis is -1, 0 or +1 (the sign of the continuous
+    action beyond a quarter), a much weaker player."""
+    kd, km = K_DRAG * drag, K_MAGNUS * magnus
+
+    def rule(obs: np.ndarray, rng: Any = None, mask: Any = None) -> np.ndarray:
+        o = np.asarray(obs, dtype=np.float64).reshape(len(obs), N_FEATURES)
+        k = len(o)
+        act = np.zeros((k, 3))
+        # home: back to the waiting place, upright, unhurried (never chasing the ball just struck)
+        act[:, 0] = np.clip((HOME_X - o[:, BAT_X]) * 4.0, -2.0, 2.0) / V_MAX
+        act[:, 1] = np.clip((HOME_Y - o[:, BAT_Y]) * 4.0, -2.0, 2.0) / V_MAX
+        act[:, 2] = -o[:, BAT_ANGLE] / (DT * OMEGA_MAX)
+        px, py = o[:, BALL_X], o[:, BALL_Y]
+        vx, vy = o[:, BALL_VX] * VEL_SCALE, o[:, BALL_VY] * VEL_SCALE
+        w = o[:, BALL_SPIN] * SPIN_SCALE
+        serve = o[:, I_SERVE] > 0.5
+        if serve.any():
+            s = serve
+            u1, u2, u3 = (_unit_hash(o[s, BALL_X], salt) for salt in (1, 2, 3))
+            m = s.sum()
+            if mode == "velocity":
+                land, clear, spin, height = 0.35 + 0.65 * u1, 0.04 + 0.26 * u2, np.zeros(m), 0.22 + 0.2 * u3
+            elif mode == "spin":
+                land, clear, spin, height = 0.45 + 0.5 * u1, 0.10 + 0.10 * u2, (2 * u3 - 1) * 120.0, np.full(m, 0.3)
+            else:
+                land, clear, spin, height = np.full(m, 0.8), np.full(m, 0.12), np.zeros(m), np.full(m, 0.3)
+            y, v = py[s], vy[s]
+            disc = v * v + 2 * G * (y - height)
+            t_c = np.where(disc >= 0, (v + np.sqrt(np.maximum(disc, 0.0))) / G, np.maximum(v, 0.0) / G)
+            hy = np.where(disc >= 0, height, y + v * t_c - 0.5 * G * t_c * t_c)
+            _swing(o, s, t_c, px[s], hy, np.zeros(m), v - G * t_c, w[s], land, NET_H + clear, spin, kd, km, act)
+        receive = (o[:, INCOMING] > 0.5) | (o[:, MY_TURN] > 0.5)
+        if receive.any():
+            r = np.flatnonzero(receive)
+            found, t_c, cx, cy, cvx, cvy, cw = _predict_contact(px[r], py[r], vx[r], vy[r], w[r] * spin_read,
+                                                                 o[r, MY_TURN] > 0.5, kd, km)
+            if found.any():
+                sel = np.zeros(k, dtype=bool)
+                sel[r[found]] = True
+                f = found
+                n = f.sum()
+                _swing(o, sel, t_c[f], cx[f], cy[f], cvx[f], cvy[f], cw[f], np.full(n, return_land),
+                       np.full(n, NET_H + 0.15), np.full(n, return_spin), kd, km, act)
+        act = np.clip(act, -1.0, 1.0)
+        if discrete:
+            return (np.where(act > 0.25, 2, np.where(act < -0.25, 0, 1))).astype(np.int64)
+        return act.astype(np.float32)
+
+    return rule
+
+
+serve_bot_rule = serve_bot_rule_for()
+
+
+def serve_bot_for(cfg: TennisConfig):
+    """The serve-bot's rule for a game's options (its ``serve_mode``, the air's forces, discrete actions)."""
+    return serve_bot_rule_for(cfg.serve_mode, cfg.drag, cfg.magnus, cfg.discrete)

@@ -1,0 +1,134 @@
+"""Offscreen pygame renderer for the tennis game (no window, no display, no audio): the table seen from the side,
+the net, both bats at their tilt, the ball (with a short trail and a spin mark), the score, who serves, and the
+last point's reason.
+
+The surface is 24-bit with its channel masks set so that its memory is a row-major ``(360, 800, 3)`` RGB array (as
+the lander's renderer): a frame leaves it as one copy.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+
+from .tennis import BALL_R, FLOOR_Y, NET_H, REASON_NAMES, TABLE_HALF, X_OUT
+from .tennis_core import TennisCore
+
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
+
+WIDTH, HEIGHT = 800, 360
+SCALE = 125.0  # pixels per metre
+Y_TOP = 2.0  # the world's height at the top of the picture (m)
+BACKGROUND, FLOOR = (24, 30, 48), (60, 52, 48)
+TABLE, LINES, LEGS = (20, 70, 140), (235, 235, 235), (90, 90, 90)
+NET_COLOUR, BALL, TRAIL = (225, 225, 225), (255, 160, 40), (150, 100, 40)
+GREY, WHITE = (160, 160, 170), (240, 240, 240)
+BAT_COLOURS = ((220, 50, 50), (40, 200, 120))  # seat 0, seat 1
+_TRAIL = 6
+
+
+def _px(x: float, y: float) -> tuple[int, int]:
+    return round(WIDTH / 2 + x * SCALE), round((Y_TOP - y) * SCALE)
+
+
+class TennisRenderer:
+    """Draws one game of a :class:`TennisCore` into an RGB array ``(360, 800, 3)`` uint8.
+
+    ``labels``: the players' names by seat (shown on their sides); ``caption``: a line at the bottom (the recorder
+    puts the step there). Each call returns a new array. The renderer keeps the ball's last few places per game
+    slot for its trail."""
+
+    def __init__(self) -> None:
+        import pygame
+
+        pygame.font.init()
+        self._pg = pygame
+        self.size = (WIDTH, HEIGHT)
+        self.surface = pygame.Surface(self.size, 0, 24, (0x0000FF, 0x00FF00, 0xFF0000, 0))
+        self._direct = self._memory_is_rgb()
+        self.font = pygame.font.Font(None, 22)
+        self.big = pygame.font.Font(None, 40)
+        self._trail: dict[int, tuple[tuple[int, int], list[tuple[int, int]]]] = {}
+
+    def _memory_is_rgb(self) -> bool:
+        self.surface.fill((1, 2, 3))
+        return bool((self._view_copy()[0, 0] == (1, 2, 3)).all())
+
+    def _view_copy(self) -> np.ndarray:
+        rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(HEIGHT, self.surface.get_pitch())
+        return rows[:, : WIDTH * 3].reshape(HEIGHT, WIDTH, 3).copy()
+
+    def draw(self, core: TennisCore, game: int = 0, labels: tuple[str, ...] | None = None,
+             caption: str | None = None) -> np.ndarray:
+        pg, surf = self._pg, self.surface
+        surf.fill(BACKGROUND)
+        # floor, table, net
+        pg.draw.rect(surf, FLOOR, pg.Rect(0, _px(0, FLOOR_Y)[1], WIDTH, HEIGHT))
+        left, top = _px(-TABLE_HALF, 0.0)
+        right, _ = _px(TABLE_HALF, 0.0)
+        for lx in (-TABLE_HALF + 0.15, TABLE_HALF - 0.15):
+            a, b = _px(lx, 0.0), _px(lx, FLOOR_Y)
+            pg.draw.line(surf, LEGS, a, b, 4)
+        pg.draw.rect(surf, TABLE, pg.Rect(left, top, right - left, round(0.05 * SCALE)))
+        pg.draw.line(surf, LINES, (left, top), (right, top), 2)
+        pg.draw.line(surf, NET_COLOUR, _px(0.0, 0.0), _px(0.0, NET_H), 3)
+        # bats
+        half = core.half
+        for seat in (0, 1):
+            x, y, angle = core.bat[0, seat, game], core.bat[1, seat, game], core.bat[4, seat, game]
+            forward = 1.0 if seat == 0 else -1.0
+            tx, ty = -math.sin(angle), forward * math.cos(angle)  # along the face: the normal turned a quarter
+            if ty < 0:  # the handle at the lower end
+                tx, ty = -tx, -ty
+            a, b = _px(x - half * tx, y - half * ty), _px(x + half * tx, y + half * ty)
+            pg.draw.line(surf, BAT_COLOURS[seat], a, b, 6)
+            handle = _px(x - (half + 0.05) * tx, y - (half + 0.05) * ty)
+            pg.draw.line(surf, (150, 110, 70), a, handle, 4)
+        # ball (and its trail), marked off-screen at the edge
+        bx, by, spin = core.ball[0, game], core.ball[1, game], core.ball[4, game]
+        px, py = _px(float(np.clip(bx, -X_OUT, X_OUT)), float(by))
+        point = (int(core.score[:, game].sum()), int(core.steps[game]))
+        last, trail = self._trail.get(game, ((-1, -1), []))
+        if point[0] != last[0] or point[1] != last[1] + 1:  # a new point, or not the next step: no trail
+            trail = []
+        self._trail[game] = (point, trail)
+        trail.append((px, py))
+        del trail[:-_TRAIL]
+        for i, p in enumerate(trail[:-1]):
+            pg.draw.circle(surf, TRAIL, p, 1 + i // 2)
+        r = max(round(BALL_R * SCALE), 4)
+        py_shown = min(max(py, r), HEIGHT - r)
+        pg.draw.circle(surf, BALL, (px, py_shown), r)
+        if abs(spin) > 20:  # a mark on the ball's rim, ahead in the sense it turns
+            s = 1 if spin > 0 else -1
+            pg.draw.line(surf, WHITE, (px, py_shown), (px + s * r, py_shown - r), 2)
+        if py < 0:
+            pg.draw.polygon(surf, BALL, [(px - 5, 8), (px + 5, 8), (px, 2)])
+        self._hud(core, game, labels, caption)
+        if self._direct:
+            return self._view_copy()
+        return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(HEIGHT, WIDTH, 3).copy()
+
+    def _hud(self, core: TennisCore, game: int, labels: tuple[str, ...] | None, caption: str | None) -> None:
+        surf = self.surface
+        s0, s1 = int(core.score[0, game]), int(core.score[1, game])
+        score = self.big.render(f"{s0}  :  {s1}", True, WHITE)
+        surf.blit(score, (WIDTH // 2 - score.get_width() // 2, 8))
+        server = int(core.server[game])
+        dot_x = WIDTH // 2 + (-1 if server == 0 else 1) * (score.get_width() // 2 + 14)
+        self._pg.draw.circle(surf, BALL, (dot_x, 22), 5)
+        for seat in (0, 1):
+            name = labels[seat] if labels and len(labels) > seat else f"player {seat}"
+            img = self.font.render(str(name), True, BAT_COLOURS[seat])
+            x = 10 if seat == 0 else WIDTH - img.get_width() - 10
+            surf.blit(img, (x, 10))
+        if core.winner[game] >= 0:
+            last = self.font.render(f"last point: player {int(core.winner[game])} "
+                                    f"({REASON_NAMES[int(core.reason[game])].replace('_', ' ')})", True, GREY)
+            surf.blit(last, (WIDTH // 2 - last.get_width() // 2, 44))
+        if caption:
+            c = self.font.render(caption, True, GREY)
+            surf.blit(c, (WIDTH // 2 - c.get_width() // 2, HEIGHT - 20))
