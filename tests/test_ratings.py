@@ -570,3 +570,21 @@ def test_stats_does_not_import_torch() -> None:
     code = ("import sys, selfplay_cli.stats.elo, selfplay_cli.stats.match, selfplay_cli.stats.sprt, "
             "selfplay_cli.stats.bradley_terry, selfplay_cli.stats.intervals; sys.exit('torch' in sys.modules)")
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
+
+
+def test_a_sample_without_spread_still_has_an_interval():
+    """2 pairs of one win and one loss each (or 10 draws) show no spread: that is not certainty. The interval is the
+    one with a virtual result on either side (hand-computed: pairs 0.5, 0.5 plus 0.25 and 0.75 -> variance
+    0.125 / 4 over 4 pairs; score 0.5 +- 1.96 * 0.0884 -> +-125.6 Elo), and it narrows as pairs come in."""
+    from selfplay_cli.stats.match import match_stats
+
+    two = match_stats(2, 0, 2, pentanomial=(0, 0, 2, 0, 0))
+    se = math.sqrt(2 * 0.25**2 / 4 / 4)
+    z = 1.959963984540054
+    assert two.elo_high == pytest.approx(-400 * math.log10(1 / (0.5 + z * se) - 1), abs=0.01)
+    assert two.elo_low == pytest.approx(-two.elo_high)
+    assert two.elo_high == pytest.approx(125.57, abs=0.01)
+    many = match_stats(200, 0, 200, pentanomial=(0, 0, 200, 0, 0))
+    assert 0 < many.elo_high < 3
+    draws = match_stats(0, 10, 0)
+    assert draws.elo_low < 0 < draws.elo_high

@@ -9,6 +9,7 @@ from rich.table import Table
 
 from ..envs import describe_space, env_names, get_env
 from ..envs.loading import plugin_errors
+from ..policies.bots import league_bots
 from ._output import console, print_json
 
 __all__ = ["describe_space", "env_row", "env_rows", "envs"]
@@ -32,7 +33,9 @@ def env_row(name: str) -> dict[str, Any]:
         # one seat's spaces (the first), as before per-seat spaces existed
         "observation_space": describe_space(seats[0].observation),
         "action_space": describe_space(seats[0].action),
-        "bots": {b.name: b.description for b in spec.bots.values()},
+        # every game has a random player: its own, or marl's (uniform over the seat's legal actions)
+        "bots": {name: spec.bots[name].description if name in spec.bots else "uniformly random legal actions "
+                 "(marl's own)" for name in league_bots(spec)},
         "anchor": spec.anchor,
         "renderer": spec.make_renderer is not None,
         "live_options": list(spec.live_options),

@@ -39,13 +39,24 @@ from ..stats.sprt import SPRT
 
 
 def plays_greedy(row: PlayerRow) -> bool:
-    """How a snapshot plays, in every game it is rated by: as its algorithm is meant to be used. A DQN snapshot
-    takes the action of highest value; a SAC snapshot its mean action (tanh of the Gaussian's mean: SAC samples
-    only to explore, and is evaluated by its mean, as in its paper); a PPO snapshot samples from its policy, which
-    is what PPO optimises (its argmax is another, untrained player, and against a deterministic opponent it can
-    loop in endless rallies).
+    """How a snapshot plays, in every game it is rated by: as its algorithm and its game mean it to be used.
+
+    * DQN takes the action of highest value; SAC its mean action (tanh of the Gaussian's mean: SAC samples only to
+      explore, and is evaluated by its mean, as in its paper).
+    * PPO in a game against others (two sides, free-for-all) samples from its policy: a stochastic policy may be a
+      mixed strategy, which is what PPO optimises there, and its argmax is another, untrained player (in pong it
+      loops in endless rallies against a deterministic opponent).
+    * PPO in a cooperative game (a control task: the lander) takes its most likely action, the usual evaluation of a
+      control policy (what one deploys): the sampling noise only costs. Measured on the lander: a FuPS snapshot
+      after 6M steps 197 per lander greedy, 137 sampling, which fires engines at random once down and rarely comes
+      to rest.
     """
-    return row.algo in ("dqn", "sac")
+    if row.algo in ("dqn", "sac"):
+        return True
+    try:
+        return get_env(row.env).kind == COOPERATIVE
+    except (KeyError, MarlError):  # a game that cannot be loaded now: its games cannot be played anyway
+        return False
 
 
 def mix_seed(*parts: int) -> int:

@@ -62,6 +62,17 @@ def _likelihood_of_superiority(wins: float, losses: float) -> float:
     return 0.5 * (1.0 + math.erf((wins - losses) / math.sqrt(2.0 * decisive)))
 
 
+def _degenerate_se(games: int, pairs: int) -> float:
+    """The standard error of a score whose sample shows no spread (all draws, or every pair one win and one loss):
+    the sample's with one virtual result on either side of it (a pair 1.5-0.5 and one 0.5-1.5; a win and a loss),
+    as a 0 % / 100 % score is given a virtual draw. It shrinks as games come in (4 pairs of 1-1: +-82 Elo at 95%)."""
+    if pairs:
+        var = 2 * 0.25**2 / (pairs + 2)
+        return math.sqrt(var / (pairs + 2))
+    var = 2 * 0.5**2 / (games + 2)
+    return math.sqrt(var / (games + 2))
+
+
 def match_stats(
     wins: int,
     draws: int,
@@ -138,6 +149,8 @@ def match_stats(
         else:
             var_g = (w * (1 - score) ** 2 + d * (0.5 - score) ** 2 + lo * score**2) / n
             se = math.sqrt(var_g / n)
+        if se == 0.0:  # every pair (game) alike, e.g. 2 pairs of one win each: no spread observed is not certainty
+            se = _degenerate_se(n, pairs if use_penta else 0)
     lo_s = min(max(s_est - z * se, SCORE_CLIP), 1.0 - SCORE_CLIP)
     hi_s = min(max(s_est + z * se, SCORE_CLIP), 1.0 - SCORE_CLIP)
     elo = score_to_elo(s_est)

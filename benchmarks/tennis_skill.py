@@ -1,0 +1,169 @@
+"""Issue 15's figures for the tennis game: what the README's default tennis run learns in its budget.
+
+For each algorithm (SAC, the default, then PPO) it trains `marl train tennis --agents 2 --algo ALGO --minutes M`
+as a user types it (the game's own training defaults: `marl envs tennis`), then prints
+
+* the Elo of every snapshot of the run against game steps, on the seed's convention (the serve bot fixed at 1200);
+* how often the final snapshot returns the serve bot's randomized serves legally (serve_mode velocity and spin:
+  of the serves that landed legally on its half, the share it sent back onto the bot's half);
+* how many hits (serves included) a self-play rally of the final snapshot against itself lasts on average;
+
+and finally the two final snapshots, of equal budget, meet in a 200-game match (seed 002 found SAC stronger).
+Targets (issue 15): within 30 minutes on 2 cores the final snapshot returns at least 50% of randomized serves
+legally, and self-play rallies average at least 4 hits.
+
+Run: python benchmarks/tennis_skill.py [--minutes 30] [--algos sac ppo] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from selfplay_cli.envs import get_env
+from selfplay_cli.league.store import League
+from selfplay_cli.rated.match import load_player
+
+
+def marl(home: Path, *args: str) -> str:
+    env = dict(os.environ, MARL_HOME=str(home), COLUMNS="140", SDL_VIDEODRIVER="dummy")
+    out = subprocess.run([sys.executable, "-m", "selfplay_cli", *args], env=env, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"marl {' '.join(args)} failed ({out.returncode}): {out.stderr.strip()}")
+    return out.stdout
+
+
+def train(home: Path, algo: str, minutes: float, extra: list[str]) -> dict:
+    t0 = time.perf_counter()
+    report = json.loads(marl(home, "train", "tennis", "--agents", "2", "--algo", algo, "--minutes", str(minutes),
+                             "--run", algo, "--quiet", "--json", *extra))
+    report["wall"] = time.perf_counter() - t0
+    return report
+
+
+def policy(home: Path, name: str):
+    league = League.open(home=home, readonly=True)
+    from selfplay_cli.league.names import resolve
+
+    return load_player(league, resolve(league, name, "tennis"), seed=1)
+
+
+def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: int = 64,
+                  seed: int = 11) -> tuple[int, int]:
+    """(returned legally, serves landed legally) of the serve bot's serves (``serve_mode``) to ``snapshot``; the
+    snapshot plays seat 0 in half the games and seat 1 in the others."""
+    spec = get_env("tennis")
+    cfg = spec.config(serve_mode=mode)
+    core = spec.make_core(n, cfg)
+    bot = spec.bots["serve-bot"].rule_for(cfg)
+    rng = np.random.default_rng(seed)
+    me = np.arange(n) % 2  # the snapshot's seat in each game
+    rows = np.arange(n)
+    core.reset(np.arange(n), seed * 100_000 + np.arange(n))
+    player = policy(home, snapshot)
+    pending = np.zeros(n, dtype=bool)
+    returned = landed = 0
+    next_seed = n
+    while landed < serves:
+        obs = core.observe()
+        mine = player.act(obs[me, rows])
+        theirs = bot(obs[1 - me, rows], rng)
+        actions = [np.where((me == s)[:, None], mine, theirs).astype(np.float32) for s in (0, 1)]
+        before = (core.serves_in[1 - me, rows].copy(), core.returns_in[me, rows].copy(), core.score.sum(axis=0))
+        core.step(actions)
+        served = core.serves_in[1 - me, rows] > before[0]
+        back = (core.returns_in[me, rows] > before[1]) & pending
+        landed += int(served.sum())
+        returned += int(back.sum())
+        pending = (pending & ~back) | served
+        pending &= core.score.sum(axis=0) == before[2]  # a point ended: its serve was returned or not
+        done = np.flatnonzero(core.terminated | core.truncated)
+        if len(done):
+            core.reset(done, seed * 100_000 + next_seed + np.arange(len(done)))
+            next_seed += len(done)
+            pending[done] = False
+    return returned, landed
+
+
+def rally_hits(home: Path, snapshot: str, points: int = 400, n: int = 64, seed: int = 12) -> float:
+    """Hits (serves included) per point of ``snapshot`` playing itself."""
+    spec = get_env("tennis")
+    core = spec.make_core(n, spec.config())
+    core.reset(np.arange(n), seed * 100_000 + np.arange(n))
+    player = policy(home, snapshot)
+    hits = played = 0
+    next_seed = n
+    while played < points:
+        obs = core.observe()
+        actions = [player.act(obs[s]).astype(np.float32) for s in (0, 1)]
+        strikes = (core.serves + core.returns).sum()
+        score = core.score.sum()
+        core.step(actions)
+        hits += int((core.serves + core.returns).sum() - strikes)
+        played += int(core.score.sum() - score)
+        done = np.flatnonzero(core.terminated | core.truncated)
+        if len(done):
+            core.reset(done, seed * 100_000 + next_seed + np.arange(len(done)))
+            next_seed += len(done)
+    return hits / max(played, 1)
+
+
+def elo_curve(home: Path, run: str) -> list[tuple[int, str, float, float, float]]:
+    rows = json.loads(marl(home, "league", "ladder", "--env", "tennis", "--run", run, "--anchor", "serve-bot=1200",
+                           "--json"))
+    return sorted((int(r["step"]), r["policy"], r["elo"], r["ci_low"], r["ci_high"]) for r in rows
+                  if r["kind"] == "snapshot" and r.get("elo") is not None)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--minutes", type=float, default=30.0)
+    p.add_argument("--algos", nargs="+", default=["sac", "ppo"])
+    p.add_argument("--games", type=int, default=200, help="games of the SAC vs PPO match")
+    p.add_argument("--keep", type=Path, help="folder to keep the league in (default: a temporary one)")
+    p.add_argument("train_args", nargs="*", help="extra `marl train` arguments (after --)")
+    args = p.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        home = args.keep or Path(tmp) / "league"
+        finals: dict[str, str] = {}
+        verdicts = []
+        for algo in args.algos:
+            r = train(home, algo, args.minutes, args.train_args)
+            final = r["final"][0]["snapshot"]
+            finals[algo] = final
+            print(f"{algo}: {r['steps']:,} game steps in {r['wall'] / 60:.1f} min ({r['steps_per_second']:,} steps/s); "
+                  f"final snapshot {final}")
+            print("    Elo against steps (serve-bot = 1200, 95% interval):")
+            for step, name, elo, lo, hi in elo_curve(home, algo):
+                print(f"    {step:>12,}  {elo:7.1f}  [{lo:7.1f} .. {hi:7.1f}]  {name}")
+            shares = {}
+            for mode in ("velocity", "spin"):
+                back, landed = serve_returns(home, final, mode)
+                shares[mode] = back / max(landed, 1)
+                print(f"    returns of the serve bot's {mode} serves: {back} of {landed} legal serves "
+                      f"({shares[mode]:.1%})")
+            hits = rally_hits(home, final)
+            print(f"    self-play: {hits:.2f} hits per rally (serve included)")
+            ok = shares["velocity"] >= 0.5 and hits >= 4 and args.minutes <= 30
+            verdicts.append(f"{algo}: returns {shares['velocity']:.1%} of randomized serves (>= 50%), rallies "
+                            f"{hits:.2f} hits (>= 4) within {args.minutes:g} min: {'PASS' if ok else 'FAIL'}")
+        if "sac" in finals and "ppo" in finals:
+            m = json.loads(marl(home, "match", finals["sac"], finals["ppo"], "--games", str(args.games), "--seed", "5",
+                                "--json"))
+            print(f"{finals['sac']} vs {finals['ppo']} over {m['games']} games: {m['wins']} W {m['draws']} D "
+                  f"{m['losses']} L, score {m['score']:.1%}, Elo difference {m['elo']:+.0f} "
+                  f"[{m['elo_low']:+.0f} .. {m['elo_high']:+.0f}], points {m['points_for']}-{m['points_against']}")
+        for line in verdicts:
+            print("target: " + line)
+
+
+if __name__ == "__main__":
+    main()
