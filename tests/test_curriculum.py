@@ -67,14 +67,14 @@ def test_training_follows_the_curriculum(tmp_path, home, capsys):
     """A short tennis run: the metrics show each option as the schedule has it at that progress."""
     config = tmp_path / "c.toml"
     config.write_text("[curriculum]\nbat_scale = { start = 3.0, end = 1.0, until = 0.5 }\n"
-                      "hit_reward = { lessons = [[0.0, 0.5], [0.5, 0.0]] }\n[ppo]\nrollout_steps = 16\n")
-    run_json(capsys, "train", "tennis", "--steps", "8192", "--games", "32", "--snapshot-steps", "0", "--snapshot-every",
-             "1000000", "--eval-games", "0", "--config", str(config), "--run", "cur", "--seed", "3")
+                      "hit_reward = { lessons = [[0.0, 0.5], [0.5, 0.0]] }\n[ppo]\nrollout_steps = 256\n")
+    run_json(capsys, "train", "tennis", "--steps", "65536", "--games", "32", "--snapshot-steps", "0",
+             "--snapshot-every", "1000000", "--eval-games", "0", "--config", str(config), "--run", "cur", "--seed", "3")
     lines = [json.loads(x) for x in (home / "runs" / "cur" / "metrics.jsonl").read_text().splitlines()]
     assert len(lines) >= 8
     for line in lines:
         # the values were set before the last step of the rollout: progress then was (step - games) / budget
-        p = (line["step"] - 32) / 8192
+        p = (line["step"] - 32) / 65536
         assert line["curriculum/bat_scale"] == pytest.approx(max(1.0, 3.0 - 4.0 * p), abs=0.01)
         assert line["curriculum/hit_reward"] == (0.5 if p < 0.5 else 0.0)
     assert lines[0]["curriculum/bat_scale"] > 2.5 and lines[-1]["curriculum/bat_scale"] == 1.0

@@ -146,3 +146,22 @@ def test_one_learner_with_fups_is_a_shared_team_network_in_a_cooperative_game_on
     assert TrainConfig(env="lander", agents=1, sharing="fups", run="x").seat_plan().home == (0, 0)
     with pytest.raises(MarlError, match="needs --agents 2 or more"):
         TrainConfig(env="pong", agents=1, sharing="fups", run="x")
+
+
+@pytest.mark.parametrize("env, algo, greedy", [
+    ("pong", "ppo", False),  # against others a PPO policy samples (its argmax is another player)
+    ("tennis", "ppo", False),
+    ("lander", "ppo", True),  # a control task: its most likely action
+    ("pong", "dqn", True),
+    ("tennis", "sac", True),  # SAC is evaluated by its mean action
+    ("no_such_game", "ppo", False),  # a game that cannot be loaded: its games cannot be played either
+])
+def test_how_a_snapshot_plays_in_rated_games(env, algo, greedy):
+    from datetime import datetime
+
+    from selfplay_cli.league.roster import PlayerRow
+    from selfplay_cli.rated.match import plays_greedy
+
+    row = PlayerRow(1, env, "snapshot", "s1M", "r", 1, 0, algo, None, None, None, (), 1000.0, 0, False,
+                    datetime.now())
+    assert plays_greedy(row) is greedy

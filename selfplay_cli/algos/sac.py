@@ -403,7 +403,7 @@ class SACLearner:
             self.updates += 1
         mean = (sums / k).tolist() if k else [float("nan")] * 4
         return {"critic_loss": mean[0], "actor_loss": mean[1], "q_mean": mean[2], "entropy": mean[3],
-                "alpha": self.alpha, "buffer_size": float(len(self.buffer)), "grad_steps": float(k),
+                "alpha": self.alpha, "buffer_size": float(len(self.buffer)), "grad_steps": float(self.grad_steps),
                 "lr": self.actor_opt.lr}
 
     def _gradient_step(self, obs: torch.Tensor, actions: torch.Tensor, rewards: torch.Tensor,

@@ -48,6 +48,7 @@ from .curriculum import Curriculum
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .team import LearnerTeam
 
+METRICS_STEPS = 8192  # game steps between metrics lines at least (PPO's rollouts are longer: a line an update)
 STATE_VERSION = 3  # 2: flat-buffer optimiser state (FlatAdam); 3: snapshots by name, pending gauntlets
 
 
@@ -497,6 +498,21 @@ class Trainer:
             self.league.record_games(self.match_id, records)
 
     # -- the loop --------------------------------------------------------------------------------------------
+    def _report(self, metrics: Any, board: Any, stats: list[dict[str, float]], elapsed: float) -> None:
+        """One line of metrics (and TensorBoard scalars): counters, curriculum values, the learners' last update,
+        the latest rating games' scores."""
+        line = {"step": self.steps, "episodes": self.episodes, "seconds": round(elapsed, 2),
+                "steps_per_second": round(self.steps / max(elapsed, 1e-9)),
+                **{f"curriculum/{k}": round(v, 5) for k, v in self.lesson.items()},
+                **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()}}
+        for rec in self.records:
+            line.update({f"eval/{rec.learner}/{bot}": round(rec.score(wdl), 4) for bot, wdl in rec.vs.items()})
+        metrics.write(json.dumps(line) + "\n")
+        if board is not None:
+            for key, value in line.items():
+                if key != "step":
+                    board.add_scalar(key, value, global_step=self.steps)
+
     def _follow_curriculum(self, progress: float) -> None:
         """The training games' live options as the curriculum has them at this progress (changed only when they
         change: a ramp moves them a little each step, lessons at their thresholds)."""
@@ -530,6 +546,8 @@ class Trainer:
         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
         next_steps = (self.steps // cfg.snapshot_steps + 1) * cfg.snapshot_steps if cfg.snapshot_steps else None
         obs = self.games.observe()
+        line_step = -METRICS_STEPS  # the step of the last metrics line (the first update writes one)
+        stats: list[dict[str, float]] = []  # the learners' figures from their last update
         pending: list[GameResult] = []
         board = tensorboard_writer(self.run_dir / "tensorboard") if cfg.tensorboard else None
         with open(self.run_dir / "metrics.jsonl", "a", buffering=1) as metrics:
@@ -549,35 +567,30 @@ class Trainer:
                 pending += finished
                 if self.team.record(rewards, dones, games.truncated, acting, games.final_obs, games.final_masks):
                     stats = self.team.update(obs, progress)
-                    self._record(pending)
-                    pending = []
-                    line = {"step": self.steps, "episodes": self.episodes, "seconds": round(elapsed, 2),
-                            "steps_per_second": round(self.steps / max(elapsed, 1e-9)),
-                            **{f"curriculum/{k}": round(v, 5) for k, v in self.lesson.items()},
-                            **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()}}
-                    for rec in self.records:
-                        line.update({f"eval/{rec.learner}/{bot}": round(rec.score(wdl), 4)
-                                     for bot, wdl in rec.vs.items()})
-                    metrics.write(json.dumps(line) + "\n")
-                    if board is not None:
-                        for key, value in line.items():
-                            if key != "step":
-                                board.add_scalar(key, value, global_step=self.steps)
-                    self._collect(self.evaluator.poll())  # type: ignore[union-attr]
-                    if self.on_progress:
-                        train_s = time.perf_counter() - t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0)
-                        rate = (self.steps - steps0) / max(train_s, 1e-9)
-                        self.on_progress({"event": "training", "steps": self.steps, "episodes": self.episodes,
-                                          "progress": progress, "steps_per_second": rate,
-                                          "remaining": self._remaining(rate, deadline)})
+                    if self.steps - line_step >= METRICS_STEPS:  # off-policy learners update every step: a line
+                        line_step = self.steps  # and a ledger write per update would be megabytes a minute
+                        self._record(pending)
+                        pending = []
+                        self._report(metrics, board, stats, elapsed)
+                        self._collect(self.evaluator.poll())  # type: ignore[union-attr]
+                        if self.on_progress:
+                            train_s = time.perf_counter() - t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0)
+                            rate = (self.steps - steps0) / max(train_s, 1e-9)
+                            self.on_progress({"event": "training", "steps": self.steps, "episodes": self.episodes,
+                                              "progress": progress, "steps_per_second": rate,
+                                              "remaining": self._remaining(rate, deadline)})
                     spent = (time.perf_counter() >= deadline) if deadline else self.steps >= cfg.steps
                     by_steps = next_steps is not None and self.steps >= next_steps
                     if not spent and (by_steps or (next_episodes is not None and self.episodes >= next_episodes)):
+                        self._record(pending)  # the games played before the snapshot are filed before it
+                        pending = []
                         self.snapshot("steps" if by_steps else "episodes")  # (the budget's end takes the final)
                         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
                         if cfg.snapshot_steps:
                             next_steps = (self.steps // cfg.snapshot_steps + 1) * cfg.snapshot_steps
             self._record(pending)
+            if stats and self.steps > line_step:  # the run's last figures, whatever the spacing of the lines
+                self._report(metrics, board, stats, self.elapsed)
             self.snapshot("final")
         if board is not None:
             board.close()
