@@ -289,6 +289,20 @@ def test_volleying_a_ball_before_it_bounced_is_a_fault():
     assert (c.winner[0], c.reason[0], c.surface[0]) == (1, VOLLEY, BAT_0)
 
 
+def test_the_hit_reward_pays_for_a_touch_even_a_foul():
+    """Seed 002's reward curriculum pays for hitting the ball "regardless of whether the move made was a foul": a
+    volley earns the hit reward and loses the point."""
+    c = core_of(hit_reward=0.25, point_reward=2.0)
+    park(c)
+    c.bat[:, 0, 0] = [-0.3, 0.27, 0.0, 0.0, 0.0, 0.0]
+    rally(c, 1, ball=[0.3, 0.3, -6.0, 0.0, 0.0])
+    total = np.zeros(2)
+    while c.score.sum() == 0:
+        total += c.step(STILL)[:, 0]
+    assert c.reason[0] == VOLLEY
+    assert total.tolist() == [0.25 - 2.0, 2.0]
+
+
 def test_a_missed_toss_is_the_servers_fault_and_the_serve_clock_runs_out():
     c = core_of()
     server = int(c.server[0])
@@ -455,7 +469,7 @@ def test_set_options_changes_rewards_and_the_bat_of_running_games():
     r = np.zeros((2, 2))
     while not r.any():  # the serves
         r = c.step(bot_actions(c, rule))
-    assert sorted(r[r != 0].tolist()) == [0.5] * int((r != 0).sum()), "a legal hit earns hit_reward"
+    assert sorted(r[r != 0].tolist()) == [0.5] * int((r != 0).sum()), "a hit earns hit_reward"
     c.set_options(hit_reward=0.125, point_reward=3.0, bat_scale=2.0)
     assert c.config.hit_reward == 0.125 and c.half == pytest.approx(0.15)
     assert (c.observe()[..., BAT_LENGTH] == np.float32(0.3)).all()

@@ -71,10 +71,11 @@ Rules
 
 Rewards and score
     ``point_reward`` to the winner of a point and its negative to the loser (zero-sum), ``hit_reward`` to a player for
-    each legal hit (a serve's strike or a return of a ball that bounced on its half), a shaping reward as the seed's
-    reward curriculum uses. ``score`` is the points each seat won, so results and ratings go by points.
-    :meth:`TennisCore.set_options` changes ``hit_reward``, ``point_reward`` and ``bat_scale`` of running games
-    between steps (the curricula's hook).
+    each touch of the ball, fouls included (a new stroke: not the same stroke's contacts within 40 ms), the shaping
+    reward of the seed's reward curriculum ("high reward values for hitting the ball regardless of whether the move
+    made was a foul", decayed while the point reward grows). ``score`` is the points each seat won, so results and
+    ratings go by points. :meth:`TennisCore.set_options` changes ``hit_reward``, ``point_reward`` and ``bat_scale``
+    of running games between steps (the curricula's hook).
 
 Observation (per seat, egocentric: x points from the seat's own end toward the net and the opponent, spins and
 velocities mirrored with it, so one policy plays either end; mirroring the world swaps the two seats' observations
@@ -204,7 +205,7 @@ class TennisConfig:
 
     discrete: bool = False  # MultiDiscrete([3, 3, 3]) actions (-1/0/+1 per axis) instead of Box(-1, 1, (3,))
     bat_scale: float = 1.0  # the bats' length is 0.15 m times this (curriculum: start large, shrink to 1)
-    hit_reward: float = 0.0  # shaping reward for each legal hit (curriculum: start high, decay)
+    hit_reward: float = 0.0  # shaping reward for each touch of the ball, fouls included (curriculum: start high, decay)
     point_reward: float = 1.0  # the winner of a point gets this, the loser its negative
     points_to_win: int = 11  # a game is won at this many points, by 2
     max_steps: int = 6000  # time limit in steps (2 minutes of play at 50 steps a second)
