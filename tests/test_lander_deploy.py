@@ -165,3 +165,16 @@ def test_how_a_snapshot_plays_in_rated_games(env, algo, greedy):
     row = PlayerRow(1, env, "snapshot", "s1M", "r", 1, 0, algo, None, None, None, (), 1000.0, 0, False,
                     datetime.now())
     assert plays_greedy(row) is greedy
+
+
+def test_the_ladder_of_a_cooperative_game_shows_the_mean_return(home, capsys, monkeypatch):
+    """A cooperative game's ladder has a mean return column (the team's mean return per game), as its JSON has."""
+    code, out, err = run(capsys, "match", "heuristic", "random", "--env", "lander", "--games", "4")
+    assert code == 0, err
+    monkeypatch.setenv("COLUMNS", "200")
+    code, out, err = run(capsys, "league", "ladder", "--env", "lander")
+    assert code == 0, err
+    assert "mean return" in out and "team's mean return per game" in out.replace("\n", " ")
+    rows = {r["policy"]: r for r in run_json(capsys, "league", "ladder", "--env", "lander")}
+    shown = [line for line in out.splitlines() if "heuristic (anchor)" in line][0]
+    assert f"{rows['heuristic']['mean_return']:.1f}" in shown

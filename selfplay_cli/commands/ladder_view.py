@@ -38,8 +38,8 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
     """Print ladder rows: JSON alone (``--json``), CSV (``--csv``) or a rich table.
 
     ``online``: the online Elo by player id (an extra column). The table marks the anchor and the best snapshot
-    of each run (bold, ``(best)``), shows a flag next to the Elo, and one ``vs BOT`` column per scripted player
-    (score and games, blank without games).
+    of each run (bold, ``(best)``), shows a flag next to the Elo, the mean team return of a cooperative game's
+    players, and one ``vs BOT`` column per scripted player (score and games, blank without games).
     """
     if json_out:
         print_json([r.to_json() for r in rows])
@@ -53,6 +53,8 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
         for d in records:
             w.writerow([d.get(k, "") for k in keys])
         return
+    if caption and any(r.mean_return is not None for r in rows):
+        caption += " mean return: the team's mean return per game (all seats together)."
     table = Table(title=title, caption=caption)
     for col, just in (("rank", "right"), ("policy", "left"), ("kind", "left"), ("step", "right"),
                       ("Elo", "right"), (f"{100 * confidence:g}% interval", "center"), ("games", "right"),
@@ -60,6 +62,9 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
         table.add_column(col, justify=just)
     if online:
         table.add_column("online", justify="right")
+    returns = any(r.mean_return is not None for r in rows)  # a cooperative game: the team's mean return
+    if returns:
+        table.add_column("mean return", justify="right")
     bots = [v.bot for v in rows[0].vs] if rows else []
     for bot in bots:
         table.add_column(f"vs {escape(bot)}", justify="right")
@@ -72,6 +77,8 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
         if online:
             value = online.get(r.player_id) if r.player_id is not None else None
             cells.append("" if value is None else f"{value:.0f}")
+        if returns:
+            cells.append("" if r.mean_return is None else f"{r.mean_return:.1f}")
         for rec in r.vs:
             cells.append("" if rec.score is None else f"{100 * rec.score:.0f}% of {rec.games}")
         table.add_row(*cells, style="bold" if r.best else None)
