@@ -401,10 +401,12 @@ class SACLearner:
             for i in range(k):
                 sums += self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i])
             self.updates += 1
-        mean = (sums / k).tolist() if k else [float("nan")] * 4
-        return {"critic_loss": mean[0], "actor_loss": mean[1], "q_mean": mean[2], "entropy": mean[3],
-                "alpha": self.alpha, "buffer_size": float(len(self.buffer)), "grad_steps": float(self.grad_steps),
-                "lr": self.actor_opt.lr}
+        out = {"alpha": self.alpha, "buffer_size": float(len(self.buffer)), "grad_steps": float(self.grad_steps),
+               "lr": self.actor_opt.lr}
+        if k:  # the losses of this update's gradient steps (none yet while the buffer fills: no NaN in the metrics)
+            mean = (sums / k).tolist()
+            out.update({"critic_loss": mean[0], "actor_loss": mean[1], "q_mean": mean[2], "entropy": mean[3]})
+        return out
 
     def _gradient_step(self, obs: torch.Tensor, actions: torch.Tensor, rewards: torch.Tensor,
                        next_obs: torch.Tensor, dones: torch.Tensor) -> torch.Tensor:
