@@ -178,3 +178,29 @@ def test_the_ladder_of_a_cooperative_game_shows_the_mean_return(home, capsys, mo
     rows = {r["policy"]: r for r in run_json(capsys, "league", "ladder", "--env", "lander")}
     shown = [line for line in out.splitlines() if "heuristic (anchor)" in line][0]
     assert f"{rows['heuristic']['mean_return']:.1f}" in shown
+
+
+def test_a_nops_runs_gauntlet_rates_each_moment_as_the_team_it_flies_as(home, capsys):
+    """The per-lander snapshots of a NoPS moment fly their rating games together, each on its own lander, as the run
+    trained them (alone, each would fly both landers, one of them a seat it never learned); their comparisons count
+    for both members, and two members of one moment never meet each other."""
+    run_json(capsys, "train", "lander", "--agents", "2", "--sharing", "nops", "--steps", "4000", "--snapshot-steps",
+             "2000", "--games", "8", "--eval-games", "2", "--eval-inline", "--run", "np")
+    league = League.open(home=home)
+    try:
+        games = [league.game(i) for i in range(1, league.count_games() + 1)]
+        names = {p.id: p.full_name for p in league.players(env="lander")}
+    finally:
+        league.close()
+    rated = [[names[p] for p in g.players] for g in games if g.match_kind == "eval"]
+    flown = [seats for seats in rated if any(s.startswith("np/") for s in seats)]
+    assert flown, "the gauntlets played"
+    for seats in flown:  # a moment's team, lander_0 on seat 0 and lander_1 on seat 1; or a scripted player alone
+        moment = seats[0].rsplit("-", 1)[0]
+        assert seats == [f"{moment}-lander_0", f"{moment}-lander_1"], seats
+    teams = {seats[0].rsplit("-", 1)[0] for seats in flown}
+    assert teams == {"np/s0", "np/s2k", "np/s4k"}
+    rows = {x["policy"]: x for x in run_json(capsys, "league", "ladder")}
+    for moment in teams:
+        assert rows[f"{moment}-lander_0"]["games"] == rows[f"{moment}-lander_1"]["games"] > 0
+        assert rows[f"{moment}-lander_0"]["elo"] == pytest.approx(rows[f"{moment}-lander_1"]["elo"], abs=0.5)

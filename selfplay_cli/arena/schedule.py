@@ -29,8 +29,9 @@ def round_size(rules: Rules, n_policies: int) -> int:
     return rules.n_seats
 
 
-def round_of(rules: Rules, players: Sequence[int], seed: int) -> list[Game]:
-    """The games of one round on ``seed``: ``players`` are the policies' indices (two for two-sides games)."""
+def round_of(rules: Rules, players: Sequence[int | tuple[int, ...]], seed: int) -> list[Game]:
+    """The games of one round on ``seed``: ``players`` are the policies' indices (two for two-sides games); in a
+    cooperative game a player may be a crew, a tuple of one policy index per seat, flying together."""
     if not players:
         raise ValueError("a round needs players")
     n = rules.n_seats
@@ -47,8 +48,8 @@ def round_of(rules: Rules, players: Sequence[int], seed: int) -> list[Game]:
                 seats[s] = second
             games.append(Game(seed, tuple(seats)))
         return games
-    if rules.kind == COOPERATIVE:
-        return [Game(seed, (p,) * n) for p in players]
+    if rules.kind == COOPERATIVE:  # a player may be a crew: a tuple of policy indices, one per seat
+        return [Game(seed, tuple(p) if isinstance(p, tuple) else (p,) * n) for p in players]
     base = [players[i % len(players)] for i in range(n)]
     return [Game(seed, tuple(base[(i + r) % n] for i in range(n))) for r in range(n)]
 

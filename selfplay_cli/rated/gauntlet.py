@@ -11,7 +11,9 @@ When a run takes its snapshots (one per learner), each new snapshot meets
 Every matchup is played in rounds on shared seeds, as its game's kind asks (:mod:`selfplay_cli.arena.schedule`):
 seat-swapped pairs of a two-sides game (each seed once with either player on each side, so the serve luck and the
 seat cancel within a pair), one episode of each player on each seed of a cooperative game (compared by team
-return), every rotation of the seating of a free-for-all game. A "pair" below is one such round. All matchups of
+return), every rotation of the seating of a free-for-all game. In a cooperative game the per-seat snapshots of one
+moment (a run with one network per lander) are one player, a crew: they fly together, each on its own seat, and a
+comparison counts for every member (:func:`crews_of`). A "pair" below is one such round. All matchups of
 one snapshot moment are played together, in one batched call of the runner.
 
 Cheap where the result is clear: a matchup whose result is already clear from history (the new snapshot's lineage,
@@ -40,7 +42,7 @@ from ..envs import get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..policies import Policy
-from ..results import GameResult, Rules, points_between
+from ..results import COOPERATIVE, GameResult, Rules, points_between
 from ..stats.elo import normal_quantile
 from .match import env_options_of, load_player, mix_seed
 
@@ -176,20 +178,24 @@ def play_gauntlet(
     device: str = "cpu",
     policies: dict[int, Policy] | None = None,
     on_games: Callable[[int], None] | None = None,
+    crews: dict[int, tuple[PlayerRow, ...]] | None = None,
 ) -> list[Matchup]:
     """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
 
     ``policies`` may hold already loaded players by player id (scripted players are loaded afresh otherwise);
     seeds start at ``first_seed``, a disjoint range per matchup. ``on_games(n)`` is told of finished games.
+    ``crews`` (cooperative games): the per-seat members a player flies with (:func:`crews_of`), by player id; a
+    player without one flies every seat itself.
     """
     cfg = config or GauntletConfig()
     if not pairs:
         return []
     env = pairs[0][0].env
     spec = get_env(env)
+    crews = dict(crews or {})
     loaded: dict[int, Policy] = dict(policies or {})
     for a, b in pairs:
-        for row in (a, b):
+        for row in (a, b, *crews.get(a.id, ()), *crews.get(b.id, ())):
             if row.env != env:
                 raise MarlError(f"a gauntlet plays one game: {row.full_name} plays {row.env}, not {env}")
             if row.id not in loaded:
@@ -200,6 +206,17 @@ def play_gauntlet(
     options = env_options_of(*roster)
     spec = spec.for_options(**options)
     rules = Rules.of(spec)
+    seated = {pid: _seat_crew(crew, rules.n_seats) for pid, crew in crews.items()}
+
+    def player(row: PlayerRow) -> int | tuple[int, ...]:
+        """A player's place in a round: its roster index, or its crew's, seat by seat."""
+        crew = seated.get(row.id)
+        return index[row.id] if crew is None else tuple(index[m.id] for m in crew)
+
+    def key(row: PlayerRow) -> object:
+        """How a round's results name a player: its policy id, or its crew's (a tuple: see results.crew)."""
+        crew = seated.get(row.id)
+        return loaded[row.id].id if crew is None else tuple(dict.fromkeys(loaded[m.id].id for m in crew))
     per = round_size(rules, 2)
     span = cfg.max_pairs  # seeds reserved per matchup: one per round
     matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
@@ -212,7 +229,7 @@ def play_gauntlet(
 
     def schedule_pairs(k: int, n: int) -> None:
         m = matchups[k]
-        ia, ib = index[m.a.id], index[m.b.id]
+        ia, ib = player(m.a), player(m.b)
         for p in range(m.pairs, m.pairs + n):
             games = round_of(rules, (ia, ib), m.first_seed + p)
             schedule.extend(games)
@@ -228,7 +245,7 @@ def play_gauntlet(
         if len(got) == per:  # a whole round: its results between the two
             del rounds[(k, p)]
             got.sort(key=lambda g: g.index)
-            for points in points_between(rules, got, loaded[m.a.id].id, loaded[m.b.id].id):
+            for points in points_between(rules, got, key(m.a), key(m.b)):
                 m.wins += points > 0.5
                 m.draws += points == 0.5
                 m.losses += points < 0.5
@@ -237,7 +254,7 @@ def play_gauntlet(
         if on_games:
             on_games(1)
         if in_flight[k] == 0:  # every game scheduled so far is in: store them, then go on only if still open
-            _store(league, m, pending[k], loaded, options)
+            _store(league, m, pending[k], loaded, options, crews)
             pending[k] = []
             extra = m.more(z, cfg.pairs, cfg.max_pairs)
             if extra:
@@ -253,15 +270,18 @@ def play_gauntlet(
 
 
 def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[int, Policy],
-           options: dict) -> None:
+           options: dict, crews: dict[int, tuple[PlayerRow, ...]]) -> None:
     """One transaction per matchup and round; the matchup's match row is opened with its first games."""
     if not results:
         return
     pa, pb = loaded[m.a.id], loaded[m.b.id]
     if m.match_id is None:
-        m.match_id = league.create_match(m.a.env, "eval", {
-            "a": pa.id, "b": pb.id, "first_seed": m.first_seed, "env_options": options, "gauntlet": True})
-    player = {pa.id: m.a.id, pb.id: m.b.id}
+        info = {"a": pa.id, "b": pb.id, "first_seed": m.first_seed, "env_options": options, "gauntlet": True}
+        for side, row in (("a_crew", m.a), ("b_crew", m.b)):
+            if row.id in crews:
+                info[side] = [loaded[c.id].id for c in crews[row.id]]
+        m.match_id = league.create_match(m.a.env, "eval", info)
+    player = {loaded[r.id].id: r.id for r in (m.a, m.b, *crews.get(m.a.id, ()), *crews.get(m.b.id, ()))}
     m.game_ids += league.record_games(m.match_id, [r.with_players(player) for r in results])
 
 
@@ -288,9 +308,50 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     if not new:
         return []
     best = best_snapshot(league, new[0].run or "", new[0].env, exclude={p.id for p in new})
-    pairs = [(a, b) for a, b in choose_opponents(league, new, older=config.older, best=best)
-             if not _gauntlet_games(league, a, b)]
-    return play_gauntlet(league, pairs, first_seed=first_seed, config=config, device=device, on_games=on_games)
+    pairs = choose_opponents(league, new, older=config.older, best=best)
+    crews = crews_of(league, [p for pair in pairs for p in pair])
+    if crews:  # a cooperative game's per-lander snapshots fly as their moment's team: one matchup per two teams
+        lead = {pid: crew[0] for pid, crew in crews.items()}
+        unique: dict[frozenset[int], tuple[PlayerRow, PlayerRow]] = {}
+        for a, b in pairs:
+            a, b = lead.get(a.id, a), lead.get(b.id, b)
+            if a.id != b.id:
+                unique.setdefault(frozenset((a.id, b.id)), (a, b))
+        pairs = list(unique.values())
+    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b)]
+    return play_gauntlet(league, pairs, first_seed=first_seed, config=config, device=device, on_games=on_games,
+                         crews={m.id: crew for crew in crews.values() for m in crew[:1]})
+
+
+def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[PlayerRow, ...]]:
+    """Cooperative games: the team each per-seat learner's snapshot flies with, its moment's members in seat order
+    (``s6M-lander_0``, ``s6M-lander_1``: :func:`~selfplay_cli.league.names.teammates`), by player id; snapshots of
+    one shared network, bots and the players of other games are not in it. A team flies together, as the run
+    trained it: its members alone would each fly every lander, seats it never learned."""
+    from ..league.names import teammates
+
+    if not rows:
+        return {}
+    spec = get_env(rows[0].env)
+    if spec.kind != COOPERATIVE:
+        return {}
+    out: dict[int, tuple[PlayerRow, ...]] = {}
+    for row in rows:
+        if row.kind != "snapshot" or row.id in out:
+            continue
+        team = teammates(league, row, spec.agents)
+        if team is not None and len({m.id for m in team}) > 1:
+            for m in team:
+                out[m.id] = tuple(team)
+    return out
+
+
+def _seat_crew(crew: tuple[PlayerRow, ...], n_seats: int) -> tuple[PlayerRow, ...]:
+    """A crew on a game of ``n_seats`` seats (options may change them): seed 001's mapping, extra seats copy members
+    chosen at random (a fixed draw), fewer seats keep the first members."""
+    from .lineup import Lineup, refit
+
+    return refit(Lineup(crew[0].env, crew, 0), n_seats, seed=0).players
 
 
 def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow) -> bool:
