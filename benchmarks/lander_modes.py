@@ -82,10 +82,12 @@ def curve(home: Path, run: str) -> list[tuple[int, float, float]]:
         seconds[m["step"]] = m["seconds"]
     steps = sorted(seconds)
     out = []
+    seen = set()
     for r in rows:
-        if r["kind"] != "snapshot" or r.get("mean_return") is None:
-            continue
+        if r["kind"] != "snapshot" or r.get("mean_return") is None or int(r["step"]) in seen:
+            continue  # (a NoPS moment's members fly as one team: the same figure, once)
         step = int(r["step"])
+        seen.add(step)
         near = min(steps, key=lambda s: abs(s - step)) if steps else 0
         out.append((step, seconds.get(near, 0.0) if step else 0.0, r["mean_return"] / 2))
     return sorted(out)
