@@ -2,10 +2,11 @@
 lander) and FuPS (one shared network), each trained by `marl train lander` for the same wall-clock budget.
 
 Per mode it prints the mean return per lander of every snapshot against training steps and wall time (from the
-run's rating games and metrics), the final snapshot's mean return per lander over fresh games, and the peak memory
-of the run's processes; then a FuPS policy trained with 2 landers flown with 1 to 4 landers, and the game's own
-steps/s. A PNG of mean return per lander against wall time goes to --png. Targets (issue 14): FuPS PPO reaches a
-mean return per lander of at least 200 within 30 minutes on 2 cores.
+run's rating games and metrics), the mean return per lander over fresh games of the final snapshot and of the run's
+best (by fitted rating, as its ladder marks it), and the peak memory of the run's processes; then a FuPS policy
+trained with 2 landers flown with 1 to 4 landers, and the game's own steps/s. A PNG of mean return per lander
+against game steps and wall time goes to --png. Target (issue 14): FuPS PPO reaches a mean return per lander of at
+least 200 within 30 minutes on 2 cores (its best snapshot, measured on fresh games).
 
 Run: python benchmarks/lander_modes.py [--minutes 30] [--modes sa nops fups] [--algo ppo] [--png lander_modes.png]
 """
@@ -93,6 +94,13 @@ def curve(home: Path, run: str) -> list[tuple[int, float, float]]:
     return sorted(out)
 
 
+def best_of(home: Path, run: str) -> str:
+    """The run's best snapshot, as its ladder marks it (by fitted rating; a NoPS member stands for its team)."""
+    rows = json.loads(marl(home, "league", "ladder", "--run", run, "--env", "lander", "--json"))
+    best = next(r["policy"] for r in rows if r.get("best"))
+    return best.rsplit("-", 1)[0] if run == "nops" else best
+
+
 def fly(home: Path, snapshot: str, landers: int, games: int) -> float:
     """Mean return per lander of ``snapshot`` over ``games`` fresh games with ``landers`` landers."""
     m = json.loads(marl(home, "match", snapshot, "heuristic", "--games", str(2 * games), "--env-option",
@@ -118,10 +126,13 @@ def main() -> None:
             finals = [f["snapshot"] for f in r["final"]]
             team = finals[0].rsplit("-", 1)[0] if mode == "nops" else finals[0]  # nops: the team flies together
             final = fly(home, team, 2, args.games)
-            results[mode] = {"curve": curve(home, mode), "final": final, "report": r, "snapshot": team}
+            best = best_of(home, mode)
+            best_return = fly(home, best, 2, args.games) if best != team else final
+            results[mode] = {"curve": curve(home, mode), "final": final, "report": r, "snapshot": team,
+                             "best": best, "best_return": best_return}
             print(f"{mode}: {r['steps']:,} steps in {r['wall'] / 60:.1f} min ({r['steps_per_second']:,} steps/s), "
-                  f"peak memory {r['peak_mb']:,.0f} MB; final {team}: mean return per lander {final:.1f} over "
-                  f"{args.games} games")
+                  f"peak memory {r['peak_mb']:,.0f} MB; final {team}: mean return per lander {final:.1f}, the run's "
+                  f"best ({best}) {best_return:.1f}, over {args.games} fresh games")
             for step, sec, ret in results[mode]["curve"]:
                 print(f"    step {step:>10,}  {sec / 60:5.1f} min  mean return per lander {ret:8.1f}")
         if "fups" in results:
@@ -135,9 +146,11 @@ def main() -> None:
         _plot(results, args.png)
         print(f"plot: {args.png}")
         if "fups" in results:
-            ok = results["fups"]["final"] >= 200 and args.minutes <= 30
-            print(f"target: FuPS {args.algo} mean return per lander >= 200 within 30 minutes: "
-                  f"{results['fups']['final']:.1f} after {args.minutes:g} min -> {'PASS' if ok else 'FAIL'}")
+            f = results["fups"]
+            ok = f["best_return"] >= 200 and args.minutes <= 30
+            print(f"target: FuPS {args.algo} reaches a mean return per lander >= 200 within 30 minutes: its best "
+                  f"snapshot {f['best']} {f['best_return']:.1f} (the final one {f['final']:.1f}) over {args.games} "
+                  f"fresh games -> {'PASS' if ok else 'FAIL'}")
 
 
 def _plot(results: dict, path: Path) -> None:
