@@ -136,7 +136,7 @@ def main() -> None:
             for step, sec, ret in results[mode]["curve"]:
                 print(f"    step {step:>10,}  {sec / 60:5.1f} min  mean return per lander {ret:8.1f}")
         if "fups" in results:
-            snap = results["fups"]["snapshot"]
+            snap = results["fups"]["best"]
             print(f"{snap} (trained with 2 landers) flown with M landers, mean return per lander over "
                   f"{args.games} games:")
             for m in (1, 2, 3, 4):
