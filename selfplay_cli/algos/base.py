@@ -32,7 +32,7 @@ from gymnasium import spaces
 
 from ..errors import MarlError
 from ..policies.network import MLPNet, NetworkPolicy
-from ..policies.spaces import ActionHead, SpaceError, box_of_shape
+from ..policies.spaces import ActionHead, SpaceError, box_of_shape, describe_space
 
 
 @dataclass(frozen=True)
@@ -102,12 +102,20 @@ def learner_args(seat: Any, n_slots: Any, config: Any, legacy: Sequence[Any],
     return Seat(obs, act, mask), int(n_slots), config
 
 
-def action_head(algo: str, space: spaces.Space) -> ActionHead:
-    """The head for a seat's actions, or one clear :class:`MarlError` naming the algorithm and the space."""
+def action_head(algo: str, space: spaces.Space, only: str | None = None, advice: str = "") -> ActionHead:
+    """The head for a seat's actions, or one clear :class:`MarlError` naming the algorithm and the space; ``only``
+    (an :class:`ActionHead` kind and its name, e.g. ``"box:Box (continuous)"``) refuses every other kind, with
+    ``advice`` (which algorithm to use instead)."""
     try:
-        return ActionHead.of(space)
+        head = ActionHead.of(space)
     except SpaceError as e:
         raise MarlError(f"{algo} cannot learn this seat's actions: {e}") from None
+    if only is not None:
+        kind, _, what = only.partition(":")
+        if head.kind != kind:
+            raise MarlError(f"{algo} learns {what} actions only; this game's seat acts in {describe_space(space)}: "
+                            f"{advice}")
+    return head
 
 
 def as_bool(values: Any, n: int, what: str) -> np.ndarray:

@@ -59,10 +59,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from ..errors import MarlError
 from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
-from ..policies.spaces import ActionHead, describe_space, uniform_allowed
+from ..policies.spaces import ActionHead, uniform_allowed
 from .base import Seat, action_head, as_bool, fix_mask, learner_args
 from .optim import FlatAdam, flatten
 
@@ -221,11 +220,7 @@ class DQNLearner:
     @staticmethod
     def check_seat(seat: Any) -> ActionHead:
         """The head for the seat's actions, or one clear :class:`MarlError` (DQN plays Discrete actions only)."""
-        head = action_head("DQN", seat.action)
-        if head.kind != "discrete":
-            raise MarlError(f"DQN learns Discrete actions only; this game's seat acts in "
-                            f"{describe_space(seat.action)}: use --algo ppo")
-        return head
+        return action_head("DQN", seat.action, "discrete:Discrete", "use --algo ppo")
 
     def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:

@@ -57,10 +57,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from ..errors import MarlError
 from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
-from ..policies.spaces import ActionHead, describe_space
+from ..policies.spaces import ActionHead
 from .base import Seat, action_head, as_bool, learner_args
 from .optim import FlatAdam, flatten
 
@@ -213,16 +212,12 @@ class SACLearner:
     @staticmethod
     def check_seat(seat: Any) -> ActionHead:
         """The head for the seat's actions, or one clear :class:`MarlError` (SAC plays Box actions only)."""
-        head = action_head("SAC", seat.action)
-        if head.kind != "box":
-            raise MarlError(f"SAC learns Box (continuous) actions only; this game's seat acts in "
-                            f"{describe_space(seat.action)}: use --algo ppo or dqn")
-        return head
+        return action_head("SAC", seat.action, "box:Box (continuous)", "use --algo ppo or dqn")
 
-    def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
+    def __init__(self, seat: Any, n_slots: int, config: SACConfig | None = None, *, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:
         self.seat: Seat
-        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, legacy, SACConfig)
+        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, (), SACConfig)
         self.cfg = cfg
         self.head = self.check_seat(self.seat)
         self.device = torch.device(device)

@@ -52,6 +52,7 @@ from .lander import (
     LanderConfig,
     W,
 )
+from .registry import IllegalActionError, reset_slots
 
 # Collision categories: the moon is Box2D's default 0x0001; landers collide with the moon and each other
 BODY_BITS, LEG_BITS = 0x0010, 0x0020
@@ -219,12 +220,9 @@ class LanderCore:
     # ----------------------------------------------------------------------------------------------------
     def reset(self, games: Any, seeds: Any) -> None:
         """New games in the slots ``games`` with the given seeds (each with gymnasium's opening no-op step)."""
-        g = np.asarray(games, dtype=np.int64).reshape(-1)
-        s = np.asarray(seeds, dtype=np.int64).reshape(-1)
+        g, s = reset_slots(games, seeds)
         if g.size == 0:
             return
-        if g.size != s.size:
-            raise ValueError(f"{g.size} games but {s.size} seeds")
         n, L = self.n, self.n_seats
         for game, seed in zip(g.tolist(), s.tolist(), strict=True):
             ks = [seat * n + game for seat in range(L)]
@@ -260,7 +258,6 @@ class LanderCore:
             bad = ~np.isfinite(a).all(axis=2) & live
             if bad.any():
                 seat, game = np.argwhere(bad)[0]
-                from .registry import IllegalActionError
 
                 raise IllegalActionError(seat, game, a[seat, game].tolist(), "not a finite number")
             a = np.clip(a, -1.0, 1.0)
@@ -276,7 +273,6 @@ class LanderCore:
             bad = ((a < 0) | (a > 3) | (a != np.floor(a))) & live
             if bad.any():
                 seat, game = np.argwhere(bad)[0]
-                from .registry import IllegalActionError
 
                 raise IllegalActionError(seat, game, a[seat, game].item(), "outside Discrete(4)")
             main = (a == 2).astype(np.float64)

@@ -58,6 +58,15 @@ class BatchedCore(Protocol):
         ...
 
 
+def reset_slots(games: Any, seeds: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A core's :meth:`BatchedCore.reset` arguments as flat int64 arrays of equal length (a ValueError otherwise)."""
+    g = np.asarray(games, dtype=np.int64).reshape(-1)
+    s = np.asarray(seeds, dtype=np.int64).reshape(-1)
+    if g.size != s.size:
+        raise ValueError(f"{g.size} games but {s.size} seeds")
+    return g, s
+
+
 BotRule = Callable[..., np.ndarray]
 
 

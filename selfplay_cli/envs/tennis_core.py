@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .registry import IllegalActionError
+from .registry import IllegalActionError, reset_slots
 from .tennis import (
     ANGLE_MAX,
     BALL_R,
@@ -186,12 +186,9 @@ class TennisCore:
     # ----------------------------------------------------------------------------------------------------
     def reset(self, games: Any, seeds: Any) -> None:
         """New games in the slots ``games`` with the given seeds."""
-        g = np.asarray(games, dtype=np.int64).reshape(-1)
-        s = np.asarray(seeds, dtype=np.int64).reshape(-1)
+        g, s = reset_slots(games, seeds)
         if g.size == 0:
             return
-        if g.size != s.size:
-            raise ValueError(f"{g.size} games but {s.size} seeds")
         self.key[g] = game_key(s)
         self.first_server[g] = (_draw(self.key[g], np.zeros(g.size, dtype=np.int64)) >= 0.5).astype(np.int8)
         self.score[:, g] = 0.0
