@@ -44,6 +44,7 @@ from selfplay_cli.envs.tennis import (
     TennisConfig,
     game_won,
     make_config,
+    plan_launch,
     serve_bot_for,
     serve_bot_rule_for,
     server_of,
@@ -301,6 +302,29 @@ def test_the_hit_reward_pays_for_a_touch_even_a_foul():
         total += c.step(STILL)[:, 0]
     assert c.reason[0] == VOLLEY
     assert total.tolist() == [0.25 - 2.0, 2.0]
+
+
+def test_the_return_reward_pays_for_a_stroke_that_lands_on_the_opponents_half_only():
+    """Seed 002's practice reward for "the ball not only across the net but also onto the opponent's table": paid
+    when the ball lands there, and never for a stroke that lands on the hitter's own half."""
+    c = core_of(return_reward=0.5)
+    park(c)
+    rally(c, 1, ball=[0.5, 0.4, -4.0, 0.0, 0.0])  # seat 1's ball on its way to seat 0's half
+    total, paid_at_landing = np.zeros(2), None
+    while c.score.sum() == 0:
+        r = c.step(STILL)[:, 0]
+        if c.landed[0] and paid_at_landing is None:
+            paid_at_landing = r.tolist()
+        total += r
+    assert paid_at_landing == [0.0, 0.5], "paid on the step the ball lands"
+    assert c.reason[0] == NOT_RETURNED and total.tolist() == [-1.0, 1.5]
+    c = core_of(return_reward=0.5)
+    park(c)
+    rally(c, 1, ball=[0.5, 0.4, 2.0, 1.0, 0.0])  # seat 1's ball onto its own half
+    total = np.zeros(2)
+    while c.score.sum() == 0:
+        total += c.step(STILL)[:, 0]
+    assert c.reason[0] == OWN_HALF and total.tolist() == [1.0, -1.0]
 
 
 def test_a_missed_toss_is_the_servers_fault_and_the_serve_clock_runs_out():
@@ -567,6 +591,15 @@ def returned(rule, balls) -> tuple[np.ndarray, np.ndarray]:
     return landed, c.returns_in[1] > 0
 
 
+def test_serve_bot_plans_a_ball_at_the_net_without_overflow():
+    """A ball at the net gave the planner's parabola a near-zero run, launch speeds of thousands of m/s and an
+    overflowing flight model (RuntimeWarnings on a user's terminal); it now plans from 5 cm behind the net."""
+    x0 = np.array([-1e-4, -0.01, -0.5])
+    with np.errstate(all="raise"):
+        vx, vy = plan_launch(x0, np.array([0.3, 1.2, 0.2]), np.zeros(3), np.full(3, 0.8), np.full(3, 0.25))
+    assert np.isfinite(vx).all() and np.isfinite(vy).all() and (np.abs(vy) <= 30).all() and (vx <= 16).all()
+
+
 def test_serve_bot_misjudges_spin_so_spin_beats_it():
     balls = [(vx, vy, w) for vx in (5.0, 6.5, 8.0, 9.5) for vy in (0.0, 1.0, 2.0) for w in (-300.0, -200.0, 0.0)]
     spin = np.array([b[2] for b in balls]) != 0
@@ -582,7 +615,8 @@ def test_random_loses_to_the_serve_bot_through_the_arena():
     assert (spec.kind, spec.turns, spec.n_seats, spec.anchor) == ("two-sides", "simultaneous", 2, "serve-bot")
     assert list(spec.bots) == ["serve-bot"] and spec.side_seats() == ((0,), (1,))
     assert spec.max_steps() == 6000 and spec.render_fps == 50
-    assert spec.live_options == ("hit_reward", "point_reward", "bat_scale"), "what a curriculum may drive"
+    live = ("hit_reward", "return_reward", "point_reward", "bat_scale")
+    assert spec.live_options == live, "what a curriculum may drive"
     players = [ScriptedPolicy("tennis", "serve-bot", seed=1), ScriptedPolicy("tennis", "random", seed=1)]
     results = play(spec, players, [Game(s, (0, 1)) for s in range(2)] + [Game(s, (1, 0)) for s in range(2)])
     bot_points = [r.scores[0] for r in results[:2]] + [r.scores[1] for r in results[2:]]

@@ -73,8 +73,10 @@ Rewards and score
     ``point_reward`` to the winner of a point and its negative to the loser (zero-sum), ``hit_reward`` to a player for
     each touch of the ball, fouls included (a new stroke: not the same stroke's contacts within 40 ms), the shaping
     reward of the seed's reward curriculum ("high reward values for hitting the ball regardless of whether the move
-    made was a foul", decayed while the point reward grows). ``score`` is the points each seat won, so results and
-    ratings go by points. :meth:`TennisCore.set_options` changes ``hit_reward``, ``point_reward`` and ``bat_scale``
+    made was a foul", decayed while the point reward grows), and ``return_reward`` to a player whose stroke (serve or
+    return) lands on the opponent's half, the seed's reward for "the ball not only across the net but also onto the
+    opponent's table". ``score`` is the points each seat won, so results and ratings go by points.
+    :meth:`TennisCore.set_options` changes ``hit_reward``, ``return_reward``, ``point_reward`` and ``bat_scale``
     of running games between steps (the curricula's hook).
 
 Observation (per seat, egocentric: x points from the seat's own end toward the net and the opponent, spins and
@@ -196,7 +198,7 @@ REASON_NAMES = ("none", "net", "out", "own_half", "double_bounce", "double_hit",
                 "not_returned")
 
 SERVE_MODES = ("fixed", "velocity", "spin")
-LIVE_OPTIONS = ("hit_reward", "point_reward", "bat_scale")  # what TennisCore.set_options changes
+LIVE_OPTIONS = ("hit_reward", "return_reward", "point_reward", "bat_scale")  # what TennisCore.set_options changes
 
 
 @dataclass(frozen=True)
@@ -206,6 +208,7 @@ class TennisConfig:
     discrete: bool = False  # MultiDiscrete([3, 3, 3]) actions (-1/0/+1 per axis) instead of Box(-1, 1, (3,))
     bat_scale: float = 1.0  # the bats' length is 0.15 m times this (curriculum: start large, shrink to 1)
     hit_reward: float = 0.0  # shaping reward for each touch of the ball, fouls included (curriculum: start high, decay)
+    return_reward: float = 0.0  # shaping reward for a stroke (serve or return) that lands on the opponent's half
     point_reward: float = 1.0  # the winner of a point gets this, the loser its negative
     points_to_win: int = 11  # a game is won at this many points, by 2
     max_steps: int = 6000  # time limit in steps (2 minutes of play at 50 steps a second)
@@ -371,13 +374,15 @@ def _fly_to_landing(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray
 
 
 def _parabola(x0: np.ndarray, y0: np.ndarray, over_y: np.ndarray, land_x: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The launch velocity of the drag-free path from (x0, y0) over (0, over_y) down to (land_x, ball radius)."""
-    x1, y1 = -x0, over_y - y0
+    """The launch velocity of the drag-free path from (x0, y0) over (0, over_y) down to (land_x, ball radius). A
+    ball at the net is planned from 5 cm behind it and the launch kept within 30 m/s upward or downward (a bot at
+    the net otherwise asks its flight model for speeds that overflow it)."""
+    x1, y1 = np.maximum(-x0, 0.05), over_y - y0
     x2, y2 = np.maximum(land_x - x0, x1 + 0.05), BALL_R - y0
     c = np.minimum((y2 / x2 - y1 / x1) / (x2 - x1), -0.02)
     b = y1 / x1 - c * x1
     vx = np.sqrt(G / (-2.0 * c))
-    return vx, b * vx
+    return vx, np.clip(b * vx, -30.0, 30.0)
 
 
 def plan_launch(x0: np.ndarray, y0: np.ndarray, w: np.ndarray, land_x: np.ndarray, over_y: np.ndarray,

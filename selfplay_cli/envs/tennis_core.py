@@ -174,9 +174,9 @@ class TennisCore:
         return self.surface
 
     def set_options(self, **values: Any) -> None:
-        """Change ``hit_reward``, ``point_reward`` and ``bat_scale`` of every game, running ones included, from the
-        next step on (the curricula's hook). Values are checked as the options are (finite; ``bat_scale`` in
-        (0, 5]; ``point_reward`` not negative); anything else is refused."""
+        """Change ``hit_reward``, ``return_reward``, ``point_reward`` and ``bat_scale`` of every game, running ones
+        included, from the next step on (the curricula's hook). Values are checked as the options are (finite;
+        ``bat_scale`` in (0, 5]; ``point_reward`` not negative); anything else is refused."""
         other = sorted(set(values) - set(LIVE_OPTIONS))
         if other:
             raise ValueError(f"set_options changes only {', '.join(LIVE_OPTIONS)}, not {', '.join(other)}")
@@ -444,6 +444,8 @@ class TennisCore:
             served = self.serve_shot[gg]
             self.serves_in[hh[served], gg[served]] += 1
             self.returns_in[hh[~served], gg[~served]] += 1
+            if self.config.return_reward:  # the stroke landed on the opponent's half (seed 002's practice reward)
+                self._rewards[hh, gg] += self.config.return_reward
         own = ~toss & ~landed & (half == h)
         self._award(g[own], 1 - h[own], OWN_HALF)
         again = ~toss & landed

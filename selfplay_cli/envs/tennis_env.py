@@ -150,6 +150,6 @@ TENNIS = EnvSpec(
     sides=((0,), (1,)),
     render_fps=FPS,
     anchor="serve-bot",  # the ratings' zero point (seed 002 rates from 1200; marl's anchor rating is its own)
-    live_options=LIVE_OPTIONS,  # hit_reward, point_reward, bat_scale: TennisCore.set_options, for the curricula
+    live_options=LIVE_OPTIONS,  # the rewards and bat_scale: TennisCore.set_options, for the curricula
 )
 """The tennis game's declaration (registered as ``tennis``)."""
