@@ -22,6 +22,8 @@ from selfplay_cli.envs.tennis import (
     DOUBLE_HIT,
     FLOOR_Y,
     HIT_OUT,
+    HOME_X,
+    HOME_Y,
     I_SERVE,
     INCOMING,
     INTO_NET,
@@ -37,6 +39,7 @@ from selfplay_cli.envs.tennis import (
     OUT,
     OUTGOING,
     OWN_HALF,
+    REASON_NAMES,
     TABLE_0,
     TABLE_1,
     THEY_SERVE,
@@ -81,10 +84,11 @@ def rally(c: TennisCore, hitter: int, landed: bool = False, g: int = 0, ball=Non
 
 
 def run_point(c: TennisCore, actions=STILL, limit: int = 300) -> int:
-    """Step until the current point of game 0 ends; the steps it took."""
+    """Step until the current point of game 0 ends (``actions``: fixed, or a function of nothing called each
+    step); the steps it took."""
     points = c.score[:, 0].sum()
     for t in range(1, limit + 1):
-        c.step(actions)
+        c.step(actions() if callable(actions) else actions)
         if c.score[:, 0].sum() != points or c.over[0]:
             return t
     raise AssertionError("the point did not end")
@@ -598,6 +602,19 @@ def test_serve_bot_plans_a_ball_at_the_net_without_overflow():
     with np.errstate(all="raise"):
         vx, vy = plan_launch(x0, np.array([0.3, 1.2, 0.2]), np.zeros(3), np.full(3, 0.8), np.full(3, 0.25))
     assert np.isfinite(vx).all() and np.isfinite(vy).all() and (np.abs(vy) <= 30).all() and (vx <= 16).all()
+
+
+@pytest.mark.parametrize("ball", [[-1.0, 0.3, 8.0, 1.0, 0.0], [-0.6, 0.3, 9.0, 1.5, 0.0], [-0.8, 0.4, 7.0, 2.0, 0.0]])
+def test_serve_bot_keeps_its_bat_out_of_the_way_of_a_ball_going_long(ball):
+    """A ball that will not land on its half is the hitter's fault if let alone; the bot standing at home in its
+    path made it a volley, the bot's fault (learners found that and served into its bat instead of playing)."""
+    c = core_of()
+    park(c)
+    c.bat[0:2, 1, 0] = [-HOME_X, HOME_Y]  # the bot (seat 1) waiting at home
+    rally(c, 0, ball=ball)
+    rule = serve_bot_for(c.config)
+    run_point(c, actions=lambda: bot_actions(c, rule, seats=(1,)))
+    assert (c.winner[0], c.reason[0]) == (1, HIT_OUT), REASON_NAMES[c.reason[0]]
 
 
 def test_serve_bot_misjudges_spin_so_spin_beats_it():

@@ -521,8 +521,9 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
     (drawn by the game for every serve and fixed while the toss is in the air), so a stateless rule keeps to one
     plan for the whole serve and a game's serves are reproducible by its seed. Receiving, it waits for the ball to
     bounce on its half, meets it at the top of its bounce and sends it back to the middle of the other half, 15 cm
-    over the net, without spin; a ball that will not bounce on its half it leaves alone. Otherwise it goes back to
-    its place behind the table. Its weakness, so that it can be beaten: it misjudges spin, planning with
+    over the net, without spin; a ball past the end of its half without a bounce there (going long) it dodges,
+    moving its bat up or down away from it (standing in its path would be a volley, the bot's fault). Otherwise it
+    goes back to its place behind the table. Its weakness, so that it can be beaten: it misjudges spin, planning with
     ``spin_read`` (60%) of the spin it sees: against itself ~2% of its returns fail (~60 hits a point), but of
     balls with 200-300 rad/s of topspin it returns about a quarter, where reading spin right it returns them all
     (tests/test_tennis.py). ``return_spin`` and ``return_land`` change its returns (for experiments).
@@ -562,6 +563,12 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
             r = np.flatnonzero(receive)
             found, t_c, cx, cy, cvx, cvy, cw = _predict_contact(px[r], py[r], vx[r], vy[r], w[r] * spin_read,
                                                                  o[r, MY_TURN] > 0.5, kd, km)
+            # past the end of its half without a bounce there, the ball can no longer land: out of its way
+            dodge = r[(o[r, INCOMING] > 0.5) & (px[r] < -TABLE_HALF) & (vx[r] < 0.0)]
+            if dodge.size:
+                act[dodge, 0] = 0.0
+                act[dodge, 1] = np.where(o[dodge, BAT_Y] > py[dodge], 1.0, -1.0)
+                act[dodge, 2] = -o[dodge, BAT_ANGLE] / (DT * OMEGA_MAX)
             if found.any():
                 sel = np.zeros(k, dtype=bool)
                 sel[r[found]] = True

@@ -151,5 +151,16 @@ TENNIS = EnvSpec(
     render_fps=FPS,
     anchor="serve-bot",  # the ratings' zero point (seed 002 rates from 1200; marl's anchor rating is its own)
     live_options=LIVE_OPTIONS,  # the rewards and bat_scale: TennisCore.set_options, for the curricula
+    # SAC for tennis (benchmarks/tennis_skill.py; 25-minute trials at half speed): the serve bot's randomized serves
+    # to practise against (3 games in 4 against the serve bot, 1 in 4 against the league's snapshots), seed 002's
+    # curricula (a bat 3 times the size shrinking to normal by 80% of the run, a hit reward decaying to a tenth of
+    # the point's) and its practice reward for a ball landed on the other half; 4 times SAC's gradient steps per
+    # game step (in equal time 1/16 made 40% of the game steps of 1/64 and 1.6 times its gradient steps, and rated
+    # 1,120 against 794 with the serve bot at 1,200).
+    train_defaults={"algo": "sac", "league_games": 1.0, "opponents": {"bots": {"serve-bot": 0.75}},
+                    "env_options": {"serve_mode": "velocity", "return_reward": 0.5},
+                    "curriculum": {"bat_scale": {"start": 3.0, "end": 1.0, "until": 0.8},
+                                   "hit_reward": {"start": 0.3, "end": 0.1, "until": 0.6}},
+                    "sac": {"replay_ratio": 0.0625}},
 )
 """The tennis game's declaration (registered as ``tennis``)."""
