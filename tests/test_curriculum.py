@@ -68,7 +68,7 @@ def test_training_follows_the_curriculum(tmp_path, home, capsys):
     config = tmp_path / "c.toml"
     config.write_text("[curriculum]\nbat_scale = { start = 3.0, end = 1.0, until = 0.5 }\n"
                       "hit_reward = { lessons = [[0.0, 0.5], [0.5, 0.0]] }\n[ppo]\nrollout_steps = 256\n")
-    run_json(capsys, "train", "tennis", "--steps", "65536", "--games", "32", "--snapshot-steps", "0",
+    run_json(capsys, "train", "tennis", "--algo", "ppo", "--steps", "65536", "--games", "32", "--snapshot-steps", "0",
              "--snapshot-every", "1000000", "--eval-games", "0", "--config", str(config), "--run", "cur", "--seed", "3")
     lines = [json.loads(x) for x in (home / "runs" / "cur" / "metrics.jsonl").read_text().splitlines()]
     assert len(lines) >= 8

@@ -4,6 +4,7 @@ the serve-bot, the PettingZoo view, the arena and the renderer."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -710,3 +711,25 @@ def test_renderer_draws_the_table_the_bats_and_the_ball():
     env.reset(seed=0)
     assert env.render().shape == (360, 800, 3)
     assert FLOOR_Y < 0 < NET_H
+
+
+def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(tmp_path, monkeypatch, capsys):
+    """`marl train tennis` as typed: SAC against the serve bot's randomized serves, the seed's curricula and its
+    practice reward (`marl envs tennis` prints them); a flag and a --config file override them."""
+    from cli_helpers import run
+
+    monkeypatch.setenv("MARL_HOME", str(tmp_path / "league"))
+    small = ("--steps", "256", "--games", "8", "--eval-games", "0", "--quiet")
+    assert run(capsys, "train", "tennis", "--agents", "2", "--run", "d", *small)[0] == 0
+    cfg = json.loads((tmp_path / "league" / "runs" / "d" / "config.json").read_text())
+    assert (cfg["algo"], cfg["league_games"], cfg["opponents"]["bots"]) == ("sac", 1.0, {"serve-bot": 0.75})
+    assert cfg["env_options"]["serve_mode"] == "velocity" and cfg["env_options"]["return_reward"] == 0.5
+    assert cfg["curriculum"]["bat_scale"] == {"start": 3.0, "end": 1.0, "until": 0.8}
+    assert cfg["sac"]["replay_ratio"] == 0.0625
+    (tmp_path / "c.toml").write_text("[env_options]\nreturn_reward = 0.0\n"
+                                     "[curriculum]\nbat_scale = { lessons = [[0.0, 2.0]] }\n")
+    assert run(capsys, "train", "tennis", "--algo", "ppo", "--run", "o", "--config", str(tmp_path / "c.toml"),
+               *small)[0] == 0
+    cfg = json.loads((tmp_path / "league" / "runs" / "o" / "config.json").read_text())
+    assert cfg["algo"] == "ppo" and cfg["env_options"] == {"serve_mode": "velocity", "return_reward": 0.0}
+    assert cfg["curriculum"]["bat_scale"] == {"lessons": [[0.0, 2.0]]}
