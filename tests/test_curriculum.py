@@ -28,6 +28,11 @@ def test_lessons_step_at_their_thresholds():
     assert [s.value(p) for p in (0.0, 0.29, 0.3, 0.59, 0.6, 1.0)] == [0.5, 0.5, 0.25, 0.25, 0.0, 0.0]
 
 
+def test_a_plain_number_holds_for_the_whole_run():
+    s = parse_schedule("bat_scale", 1)
+    assert [s.value(p) for p in (0.0, 0.5, 1.0)] == [1.0, 1.0, 1.0]
+
+
 @pytest.mark.parametrize("entry, words", [
     ({"start": 1.0}, "start, end"),
     ({"start": 1.0, "end": 0.0, "until": 1.5}, "until <= 1"),
@@ -37,7 +42,9 @@ def test_lessons_step_at_their_thresholds():
     ({"lessons": [[0.2, 1.0]]}, "start at progress 0"),
     ({"lessons": [[0.0, 1.0], [0.5, 2.0], [0.4, 3.0]]}, "rise strictly"),
     ({"lessons": [[0.0, 1.0]], "start": 1.0}, "cannot be mixed"),
-    (3.0, "must be a table"),
+    ("3.0", "must be a table"),
+    (True, "must be a table"),
+    (float("inf"), "finite number"),
 ])
 def test_bad_schedules_are_one_clear_error(entry, words):
     with pytest.raises(MarlError) as e:

@@ -727,9 +727,9 @@ def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(t
     assert cfg["curriculum"]["bat_scale"] == {"start": 3.0, "end": 1.0, "until": 0.8}
     assert cfg["sac"]["replay_ratio"] == 0.0625
     (tmp_path / "c.toml").write_text("[env_options]\nreturn_reward = 0.0\n"
-                                     "[curriculum]\nbat_scale = { lessons = [[0.0, 2.0]] }\n")
+                                     "[curriculum]\nbat_scale = 2.0\n")
     assert run(capsys, "train", "tennis", "--algo", "ppo", "--run", "o", "--config", str(tmp_path / "c.toml"),
                *small)[0] == 0
     cfg = json.loads((tmp_path / "league" / "runs" / "o" / "config.json").read_text())
     assert cfg["algo"] == "ppo" and cfg["env_options"] == {"serve_mode": "velocity", "return_reward": 0.0}
-    assert cfg["curriculum"]["bat_scale"] == {"lessons": [[0.0, 2.0]]}
+    assert cfg["curriculum"]["bat_scale"] == 2.0, "a plain number holds the bat at one size (the default's off)"

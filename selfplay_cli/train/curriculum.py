@@ -10,7 +10,8 @@ or minutes with ``--minutes``), as seed 002 measured lessons by "the ratio of cu
     bat_scale = { lessons = [[0.0, 2.0], [0.3, 1.5], [0.6, 1.0]] }   # ML-Agents-style lessons: value from a progress
 
 A ramp holds ``start`` until ``from`` (default 0), moves linearly to ``end`` at ``until`` (default 1) and holds it.
-Lessons are ``[progress, value]`` pairs in increasing progress; the first must start at 0. Only training games
+Lessons are ``[progress, value]`` pairs in increasing progress; the first must start at 0. A plain number holds
+that value for the whole run (``bat_scale = 1.0`` switches off a game's default bat curriculum). Only training games
 follow the curriculum: rating games are played under the run's ``[env_options]``, the game as it is finally meant.
 """
 
@@ -57,9 +58,11 @@ def _number(option: str, what: str, value: Any) -> float:
 
 def parse_schedule(option: str, entry: Any) -> Schedule:
     """One ``[curriculum]`` entry checked; a :class:`MarlError` naming the option and what is wrong."""
+    if isinstance(entry, (int, float)) and not isinstance(entry, bool):  # one value throughout (a default's off)
+        return Schedule(option, lessons=((0.0, _number(option, "its value", entry)),))
     if not isinstance(entry, dict):
         raise MarlError(f"[curriculum] {option} must be a table such as {{ start = 2.0, end = 1.0, until = 0.5 }} "
-                        f"or {{ lessons = [[0.0, 2.0], [0.5, 1.0]] }}, not {entry!r}")
+                        f"or {{ lessons = [[0.0, 2.0], [0.5, 1.0]] }}, or one number, not {entry!r}")
     if "lessons" in entry:
         extra = sorted(set(entry) - {"lessons"})
         if extra:
