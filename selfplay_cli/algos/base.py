@@ -102,19 +102,17 @@ def learner_args(seat: Any, n_slots: Any, config: Any, legacy: Sequence[Any],
     return Seat(obs, act, mask), int(n_slots), config
 
 
-def action_head(algo: str, space: spaces.Space, only: str | None = None, advice: str = "") -> ActionHead:
+def action_head(algo: str, space: spaces.Space, only: tuple[str, str] | None = None, advice: str = "") -> ActionHead:
     """The head for a seat's actions, or one clear :class:`MarlError` naming the algorithm and the space; ``only``
-    (an :class:`ActionHead` kind and its name, e.g. ``"box:Box (continuous)"``) refuses every other kind, with
-    ``advice`` (which algorithm to use instead)."""
+    (an :class:`ActionHead` kind and how to name it, e.g. ``("box", "Box (continuous)")``) refuses every other kind,
+    with ``advice`` (which algorithm to use instead)."""
     try:
         head = ActionHead.of(space)
     except SpaceError as e:
         raise MarlError(f"{algo} cannot learn this seat's actions: {e}") from None
-    if only is not None:
-        kind, _, what = only.partition(":")
-        if head.kind != kind:
-            raise MarlError(f"{algo} learns {what} actions only; this game's seat acts in {describe_space(space)}: "
-                            f"{advice}")
+    if only is not None and head.kind != only[0]:
+        raise MarlError(f"{algo} learns {only[1]} actions only; this game's seat acts in {describe_space(space)}: "
+                        f"{advice}")
     return head
 
 

@@ -220,7 +220,7 @@ class DQNLearner:
     @staticmethod
     def check_seat(seat: Any) -> ActionHead:
         """The head for the seat's actions, or one clear :class:`MarlError` (DQN plays Discrete actions only)."""
-        return action_head("DQN", seat.action, "discrete:Discrete", "use --algo ppo")
+        return action_head("DQN", seat.action, ("discrete", "Discrete"), "use --algo ppo")
 
     def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:

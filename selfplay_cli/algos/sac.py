@@ -212,7 +212,7 @@ class SACLearner:
     @staticmethod
     def check_seat(seat: Any) -> ActionHead:
         """The head for the seat's actions, or one clear :class:`MarlError` (SAC plays Box actions only)."""
-        return action_head("SAC", seat.action, "box:Box (continuous)", "use --algo ppo or dqn")
+        return action_head("SAC", seat.action, ("box", "Box (continuous)"), "use --algo ppo or dqn")
 
     def __init__(self, seat: Any, n_slots: int, config: SACConfig | None = None, *, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:

@@ -258,7 +258,6 @@ class LanderCore:
             bad = ~np.isfinite(a).all(axis=2) & live
             if bad.any():
                 seat, game = np.argwhere(bad)[0]
-
                 raise IllegalActionError(seat, game, a[seat, game].tolist(), "not a finite number")
             a = np.clip(a, -1.0, 1.0)
             m, lat = a[..., 0], a[..., 1]
@@ -273,7 +272,6 @@ class LanderCore:
             bad = ((a < 0) | (a > 3) | (a != np.floor(a))) & live
             if bad.any():
                 seat, game = np.argwhere(bad)[0]
-
                 raise IllegalActionError(seat, game, a[seat, game].item(), "outside Discrete(4)")
             main = (a == 2).astype(np.float64)
             side = ((a == 1) | (a == 3)).astype(np.float64)

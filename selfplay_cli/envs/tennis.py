@@ -558,17 +558,17 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
             t_c = np.where(disc >= 0, (v + np.sqrt(np.maximum(disc, 0.0))) / G, np.maximum(v, 0.0) / G)
             hy = np.where(disc >= 0, height, y + v * t_c - 0.5 * G * t_c * t_c)
             _swing(o, s, t_c, px[s], hy, np.zeros(m), v - G * t_c, w[s], land, NET_H + clear, spin, kd, km, act)
-        receive = (o[:, INCOMING] > 0.5) | (o[:, MY_TURN] > 0.5)
+        # past the end of its half without a bounce there, the ball can no longer land: out of its way
+        dodge = (o[:, INCOMING] > 0.5) & (px < -TABLE_HALF) & (vx < 0.0)
+        if dodge.any():
+            act[dodge, 0] = 0.0
+            act[dodge, 1] = np.where(o[dodge, BAT_Y] > py[dodge], 1.0, -1.0)
+            act[dodge, 2] = -o[dodge, BAT_ANGLE] / (DT * OMEGA_MAX)
+        receive = ((o[:, INCOMING] > 0.5) | (o[:, MY_TURN] > 0.5)) & ~dodge
         if receive.any():
             r = np.flatnonzero(receive)
             found, t_c, cx, cy, cvx, cvy, cw = _predict_contact(px[r], py[r], vx[r], vy[r], w[r] * spin_read,
                                                                  o[r, MY_TURN] > 0.5, kd, km)
-            # past the end of its half without a bounce there, the ball can no longer land: out of its way
-            dodge = r[(o[r, INCOMING] > 0.5) & (px[r] < -TABLE_HALF) & (vx[r] < 0.0)]
-            if dodge.size:
-                act[dodge, 0] = 0.0
-                act[dodge, 1] = np.where(o[dodge, BAT_Y] > py[dodge], 1.0, -1.0)
-                act[dodge, 2] = -o[dodge, BAT_ANGLE] / (DT * OMEGA_MAX)
             if found.any():
                 sel = np.zeros(k, dtype=bool)
                 sel[r[found]] = True
