@@ -18,9 +18,10 @@ from selfplay_cli.envs.tennis import (
     BALL_R,
     BALL_X,
     BAT_0,
+    BAT_ANGLE,
+    BAT_LENGTH,
     BAT_X,
     BAT_Y,
-    BAT_LENGTH,
     DOUBLE_BOUNCE,
     DOUBLE_HIT,
     FLOOR_Y,
@@ -582,16 +583,16 @@ def test_serve_bot_returns_its_own_balls_and_rallies(mode):
         obs = c.observe()
         c.step(bot_actions(c, rule))
         for g in np.flatnonzero(tossing & (c.serves.sum(axis=0) > served)):  # the receiver, as the serve is struck
-            waits.add(tuple(np.round(obs[1 - c.hitter[g], g, [BAT_X, BAT_Y]].astype(float), 2).tolist()))
+            waits.add(tuple(np.round(obs[1 - c.hitter[g], g, [BAT_X, BAT_Y, BAT_ANGLE]].astype(float), 2).tolist()))
     returns, good = c.returns.sum(), c.returns_in.sum()
     assert good / returns >= 0.9, f"{good}/{returns} returns landed"
     if mode != "spin":  # the bot misjudges spin, so spin serves beat it
         assert (c.serves.sum() + returns) / max(c.score.sum(), 1) >= 4, "rallies of 4 hits or more on average"
     if mode == "fixed":
-        assert waits == {(HOME_X, HOME_Y)}, "it waits at home"
+        assert waits == {(HOME_X, HOME_Y, 0.0)}, "it waits at home, upright"
     else:
         spread = np.ptp(np.array(sorted(waits)), axis=0)
-        assert len(waits) >= 10 and (spread > [0.3, 0.15]).all(), f"{mode}: it waited within {spread} m"
+        assert len(waits) >= 10 and (spread > [0.3, 0.15, 0.4]).all(), f"{mode}: it waited within {spread} (m, m, rad)"
 
 
 def returned(rule, balls) -> tuple[np.ndarray, np.ndarray]:
