@@ -6,7 +6,8 @@ as a user types it (the game's own training defaults: `marl envs tennis`), then 
 * the Elo of every snapshot of the run against game steps, on the seed's convention (the serve bot fixed at 1200);
 * how often the final snapshot returns the serve bot's randomized serves legally (serve_mode velocity and spin:
   of the serves that landed legally on its half, the share it sent back onto the bot's half);
-* how many hits (serves included) a self-play rally of the final snapshot against itself lasts on average;
+* how many hits (serves included) a point of the final snapshot against itself lasts on average, and why: how
+  many of its tosses it strikes, how many serves and returns land legally;
 
 and finally the two final snapshots, of equal budget, meet in a 200-game match (seed 002 found SAC stronger).
 Targets (issue 15): within 30 minutes on 2 cores the final snapshot returns at least 50% of randomized serves
@@ -29,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from selfplay_cli.envs import get_env
+from selfplay_cli.envs.tennis import MISSED_SERVE
 from selfplay_cli.league.store import League
 from selfplay_cli.rated.match import load_player
 
@@ -93,27 +95,31 @@ def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: in
     return returned, landed
 
 
-def rally_hits(home: Path, snapshot: str, points: int = 400, n: int = 64, seed: int = 12) -> float:
-    """Hits (serves included) per point of ``snapshot`` playing itself."""
+def self_play(home: Path, snapshot: str, points: int = 400, n: int = 64, seed: int = 12) -> dict[str, int]:
+    """``snapshot`` playing itself until ``points`` points are over: points, points lost by a missed toss, serves
+    struck, serves landed legally, returns, returns landed legally (hits = serves + returns)."""
     spec = get_env("tennis")
     core = spec.make_core(n, spec.config())
     core.reset(np.arange(n), seed * 100_000 + np.arange(n))
     player = policy(home, snapshot)
-    hits = played = 0
+    counts = dict.fromkeys(("points", "missed", "serves", "serves_in", "returns", "returns_in"), 0)
     next_seed = n
-    while played < points:
+    while counts["points"] < points:
         obs = core.observe()
         actions = [player.act(obs[s]).astype(np.float32) for s in (0, 1)]
-        strikes = (core.serves + core.returns).sum()
-        score = core.score.sum()
+        before = {key: getattr(core, key).sum() for key in ("serves", "serves_in", "returns", "returns_in")}
+        score = core.score.sum(axis=0)
         core.step(actions)
-        hits += int((core.serves + core.returns).sum() - strikes)
-        played += int(core.score.sum() - score)
+        for key, value in before.items():  # before a reset (which zeroes the counters)
+            counts[key] += int(getattr(core, key).sum() - value)
+        ended = core.score.sum(axis=0) > score
+        counts["points"] += int(ended.sum())
+        counts["missed"] += int((ended & (core.reason == MISSED_SERVE)).sum())
         done = np.flatnonzero(core.terminated | core.truncated)
         if len(done):
             core.reset(done, seed * 100_000 + next_seed + np.arange(len(done)))
             next_seed += len(done)
-    return hits / max(played, 1)
+    return counts
 
 
 def elo_curve(home: Path, run: str) -> list[tuple[int, str, float, float, float]]:
@@ -150,8 +156,11 @@ def main() -> None:
                 shares[mode] = back / max(landed, 1)
                 print(f"    returns of the serve bot's {mode} serves: {back} of {landed} legal serves "
                       f"({shares[mode]:.1%})")
-            hits = rally_hits(home, final)
-            print(f"    self-play: {hits:.2f} hits per rally (serve included)")
+            c = self_play(home, final)
+            hits = (c["serves"] + c["returns"]) / max(c["points"], 1)
+            print(f"    self-play: {hits:.2f} hits per point (serve included) over {c['points']} points: "
+                  f"{c['missed']} tosses missed, {c['serves']} serves struck, {c['serves_in']} "
+                  f"landed legally; {c['returns']} returns, {c['returns_in']} landed legally")
             ok = shares["velocity"] >= 0.5 and hits >= 4 and args.minutes <= 30
             verdicts.append(f"{algo}: returns {shares['velocity']:.1%} of randomized serves (>= 50%), rallies "
                             f"{hits:.2f} hits (>= 4) within {args.minutes:g} min: {'PASS' if ok else 'FAIL'}")
