@@ -18,7 +18,10 @@ from selfplay_cli.envs.tennis import (
     BALL_R,
     BALL_X,
     BAT_0,
+    BAT_ANGLE,
     BAT_LENGTH,
+    BAT_X,
+    BAT_Y,
     DOUBLE_BOUNCE,
     DOUBLE_HIT,
     FLOOR_Y,
@@ -568,14 +571,28 @@ def test_serve_bot_serves_land_legally_in_each_mode(mode, rate):
     assert (len(variety) > 5) == (mode != "fixed"), "velocity and spin serves vary, fixed ones do not"
 
 
-def test_serve_bot_returns_its_own_balls_and_rallies():
-    c = core_of(seeds=tuple(range(6)))
+@pytest.mark.parametrize("mode", ["fixed", "velocity", "spin"])
+def test_serve_bot_returns_its_own_balls_and_rallies(mode):
+    """Against itself the bot rallies; in the randomized (practice) modes it waits for a serve at a random place
+    near its home, so a learner cannot tie its serve to where the receiver stands, and still returns."""
+    c = core_of(seeds=tuple(range(12)), serve_mode=mode)
     rule = serve_bot_for(c.config)
+    waits = set()
     for _ in range(800):
+        tossing, served = c.tossing.copy(), c.serves.sum(axis=0)
+        obs = c.observe()
         c.step(bot_actions(c, rule))
+        for g in np.flatnonzero(tossing & (c.serves.sum(axis=0) > served)):  # the receiver, as the serve is struck
+            waits.add(tuple(np.round(obs[1 - c.hitter[g], g, [BAT_X, BAT_Y, BAT_ANGLE]].astype(float), 2).tolist()))
     returns, good = c.returns.sum(), c.returns_in.sum()
     assert good / returns >= 0.9, f"{good}/{returns} returns landed"
-    assert (c.serves.sum() + returns) / max(c.score.sum(), 1) >= 4, "rallies of 4 hits or more on average"
+    if mode != "spin":  # the bot misjudges spin, so spin serves beat it
+        assert (c.serves.sum() + returns) / max(c.score.sum(), 1) >= 4, "rallies of 4 hits or more on average"
+    if mode == "fixed":
+        assert waits == {(HOME_X, HOME_Y, 0.0)}, "it waits at home, upright"
+    else:
+        spread = np.ptp(np.array(sorted(waits)), axis=0)
+        assert len(waits) >= 10 and (spread > [0.6, 0.6, 1.5]).all(), f"{mode}: it waited within {spread} (m, m, rad)"
 
 
 def returned(rule, balls) -> tuple[np.ndarray, np.ndarray]:
