@@ -333,6 +333,7 @@ _PLAN_DT = 0.02
 _SWING = 0.08  # s: the stroke's length before the contact
 _GAP = 0.003  # at the planned instant the bat's face is this far short of the ball (it touches just before)
 _REACH_X = -2.5  # the farthest back the bot meets a ball
+_REACH_Y = 1.2  # the highest it meets a ball (its bat reaches 1.6 m): a higher bounce it meets coming down
 _WAIT = ((-2.3, -1.3), (0.0, 1.2), (-1.4, 1.4))  # randomized modes: where (x, y, tilt) it may wait for a serve
 
 
@@ -431,9 +432,9 @@ def solve_stroke(vin_x: np.ndarray, vin_y: np.ndarray, w_in: np.ndarray, vout_x:
 
 def _predict_contact(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, w: np.ndarray,
                      bounced: np.ndarray, kd: float, km: float, t_max: float = 1.6) -> tuple[np.ndarray, ...]:
-    """Where to meet an incoming ball: its flight (with a bounce on my half, x < 0) to the top of its bounce, or to
-    where it passes ``_REACH_X``. Returns found, time, x, y, vx, vy, w (found False: it will not bounce on my
-    half, so it must not be touched)."""
+    """Where to meet an incoming ball: its flight (with a bounce on my half, x < 0) to the top of its bounce (if
+    that is above ``_REACH_Y``, to where it comes down through it), or to where it passes ``_REACH_X``. Returns
+    found, time, x, y, vx, vy, w (found False: it will not bounce on my half, so it must not be touched)."""
     x, y, vx, vy, w = (np.array(a, dtype=np.float64) for a in (x, y, vx, vy, w))
     bounced = np.array(bounced, dtype=bool)
     k = len(x)
@@ -444,7 +445,7 @@ def _predict_contact(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarra
     t = 0.0
     decay, half = 1.0 - SPIN_DECAY * _PLAN_DT, 0.5 * _PLAN_DT * _PLAN_DT
     # a ball already on its way down after its bounce is met now
-    now = bounced & (vy <= 0)
+    now = bounced & (vy <= 0) & (y <= _REACH_Y)
     if now.any():
         found[now] = True
         out[:, now] = np.stack([np.zeros(now.sum()), x[now], y[now], vx[now], vy[now], w[now]])
@@ -471,7 +472,7 @@ def _predict_contact(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarra
                 bounced |= mine
         dead = alive & ((y < 0) & ((np.abs(x) < TABLE_HALF) | ~bounced) | (y < FLOOR_Y + 0.3))
         alive &= ~dead
-        meet = alive & bounced & ((vy <= 0) | (x <= _REACH_X))
+        meet = alive & bounced & (((vy <= 0) & (y <= _REACH_Y)) | (x <= _REACH_X))
         if meet.any():
             found[meet] = True
             out[:, meet] = np.stack([np.full(meet.sum(), t), x[meet], y[meet], vx[meet], vy[meet], w[meet]])
@@ -483,7 +484,11 @@ def _swing(o: np.ndarray, sel: np.ndarray, t_c: np.ndarray, px: np.ndarray, py: 
            vin_y: np.ndarray, w_in: np.ndarray, land_x: np.ndarray, over_y: np.ndarray, w_out: np.ndarray,
            kd: float, km: float, act: np.ndarray) -> None:
     """Write into ``act[sel]`` the stroke that meets the ball at (px, py) in ``t_c`` seconds and sends it to land
-    at ``land_x`` over the net at ``over_y`` with spin ``w_out``."""
+    at ``land_x`` over the net at ``over_y`` with spin ``w_out``. A ball met high near the net cannot come down
+    that steeply and still fall as a ball falls: it crosses the net at least 5 cm above the straight line from the
+    contact to the landing point (a smash, not a stroke faster than any bat)."""
+    line_y = py + (BALL_R - py) * (-px) / np.maximum(land_x - px, 1e-3)  # the straight line's height at the net
+    over_y = np.maximum(over_y, line_y + 0.05)
     vx, vy = plan_launch(px, py, w_out, land_x, over_y, kd, km)
     nx, ny, bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)
     for _ in range(2):  # a stroke faster than the bat can swing: a slower ball, higher over the net
@@ -521,8 +526,9 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
     top- or backspin up to 120 rad/s (19 turns a second). A serve's random choices are a hash of the toss's place
     (drawn by the game for every serve and fixed while the toss is in the air), so a stateless rule keeps to one
     plan for the whole serve and a game's serves are reproducible by its seed. Receiving, it waits for the ball to
-    bounce on its half, meets it at the top of its bounce and sends it back to the middle of the other half, 15 cm
-    over the net, without spin; a ball past the end of its half without a bounce there (going long) it dodges,
+    bounce on its half, meets it at the top of its bounce (or, bouncing above 1.2 m, coming down through 1.2 m)
+    and sends it back to the middle of the other half, 15 cm over the net (higher if met high near the net),
+    without spin; a ball past the end of its half without a bounce there (going long) it dodges,
     moving its bat up or down away from it (standing in its path would be a volley, the bot's fault). Otherwise it
     goes back to its place behind the table; in the randomized modes (practice) it waits for the opponent's serve
     at a random place 1.3 to 2.3 m behind the net and 0 to 1.2 m above the table, its face tilted up to 1.4 rad
