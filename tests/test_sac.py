@@ -139,7 +139,7 @@ def _fill(learner: SACLearner, n: int = 512, seed: int = 0) -> None:
     rng = np.random.default_rng(seed)
     learner.buffer.add(rng.normal(size=(n, 4)).astype(np.float32), rng.uniform(-1, 1, (n, 2)).astype(np.float32),
                        rng.normal(size=n).astype(np.float32), rng.normal(size=(n, 4)).astype(np.float32),
-                       (rng.random(n) < 0.1).astype(np.float32))
+                       (rng.random(n) < 0.1).astype(np.float32), 0.99)
 
 
 @pytest.mark.parametrize("target, direction", [(5.0, 1), (-20.0, -1)])
@@ -210,6 +210,58 @@ def test_turn_based_transitions_run_from_decision_to_decision():
                    (1.0, 1.0, 3.0, 20.0 + 30.0, 0.0),  # slot 1: step 1 -> step 3 (the step-0 reward was before it)
                    (2.0, 0.0, 2.0, 3.0 + 4.0, 1.0),  # slot 0's last decision, ended with the game
                    (3.0, 1.0, 3.0, 40.0, 1.0)]
+
+
+def _stored(b) -> list[tuple[float, float, float, float, float]]:
+    """(obs[0], next_obs[0], reward, done, discount) of every transition in the buffer, sorted."""
+    n = len(b)
+    return sorted(zip(b.obs[:n, 0].tolist(), b.next_obs[:n, 0].tolist(), b.rewards[:n].tolist(),
+                      b.dones[:n].tolist(), b.discounts[:n].tolist(), strict=True))
+
+
+def test_n_step_transitions_by_hand_through_an_end_and_a_cut():
+    """n = 3, gamma 0.5, two slots: slot 0's game ends after 4 decisions, slot 1's is cut short after 2 (final
+    observation 9). Each full chain gives its oldest decision r0 + g r1 + g^2 r2 and s' three decisions on (discount
+    g^3); an end gives every waiting decision its rewards up to the end, done 1 (ended) or bootstrapping from the
+    final observation (cut short) with discount g^k."""
+    learner = SACLearner(REACH_SEAT, 2, small(learning_starts=10**6, n_step=3, gamma=0.5), seed=0)
+    r0 = [1.0, 2.0, 4.0, 8.0]  # slot 0's rewards at steps 0..3
+    r1 = [16.0, 32.0, 64.0, 128.0]
+    for t in range(4):
+        learner.act(np.array([[t, 0, 0, 0], [10 + t, 0, 0, 0]], np.float32))
+        done = np.array([t == 3, t == 1], dtype=np.float32)
+        learner.record(np.array([r0[t], r1[t]]), done, truncated=np.array([False, t == 1]),
+                       final_obs=np.full((2, 4), 9.0, np.float32))
+    got = _stored(learner.buffer)
+    expected = [
+        (0.0, 3.0, 1.0 + 0.5 * 2.0 + 0.25 * 4.0, 0.0, 0.125),  # slot 0, step 0: full chain, s' = step 3's obs
+        (1.0, 1.0, 2.0 + 0.5 * 4.0 + 0.25 * 8.0, 1.0, 0.125),  # steps 1..3 end the game: no bootstrap
+        (2.0, 1.0, 4.0 + 0.5 * 8.0, 1.0, 0.25),
+        (3.0, 1.0, 8.0, 1.0, 0.5),
+        (10.0, 9.0, 16.0 + 0.5 * 32.0, 0.0, 0.25),  # slot 1: cut short after 2: bootstrap from the final obs
+        (11.0, 9.0, 32.0, 0.0, 0.5),
+    ]
+    # (s' of a transition that ends its game is never read: not compared)
+    assert [(o, n if d == 0 else None, r, d, g) for o, n, r, d, g in got] == [
+        (o, n if d == 0 else None, r, d, g) for o, n, r, d, g in sorted(expected)]
+    # slot 1's next game: its step-2 decision waits in the chain, its step-3 one for its s'
+    assert learner.chains.count.tolist() == [0, 1]
+
+
+def test_n_step_one_is_the_one_step_target():
+    learner = SACLearner(REACH_SEAT, 2, small(learning_starts=10**6, gamma=0.9), seed=0)
+    for t in range(3):
+        learner.act(np.full((2, 4), float(t), np.float32))
+        learner.record(np.array([1.0, 2.0]), np.zeros(2))
+    assert _stored(learner.buffer) == sorted([(0.0, 1.0, 1.0, 0.0, pytest.approx(0.9)),
+                                              (0.0, 1.0, 2.0, 0.0, pytest.approx(0.9)),
+                                              (1.0, 2.0, 1.0, 0.0, pytest.approx(0.9)),
+                                              (1.0, 2.0, 2.0, 0.0, pytest.approx(0.9))])
+    # the target uses each transition's discount
+    _constant_critics(learner.target, 2.0, 2.0)
+    y = learner.td_target(torch.tensor([1.0, 1.0]), torch.zeros(2), torch.zeros((2, 4)), torch.zeros((2, 2)),
+                          torch.zeros(2), discounts=torch.tensor([0.5, 0.125]))
+    assert y.tolist() == pytest.approx([1.0 + 0.5 * 2.0, 1.0 + 0.125 * 2.0])
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -762,3 +762,10 @@ def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(t
     cfg = json.loads((tmp_path / "league" / "runs" / "o" / "config.json").read_text())
     assert cfg["algo"] == "ppo" and cfg["env_options"] == {"serve_mode": "velocity", "return_reward": 0.0}
     assert cfg["curriculum"]["bat_scale"] == 2.0, "a plain number holds the bat at one size (the default's off)"
+    # one learner: the game's share of league games (for learners on both seats) does not apply, and is dropped;
+    # typed, it is still one line
+    assert run(capsys, "train", "tennis", "--agents", "1", "--run", "a1", *small)[0] == 0
+    cfg = json.loads((tmp_path / "league" / "runs" / "a1" / "config.json").read_text())
+    assert cfg["league_games"] == 0.0 and cfg["opponents"]["bots"] == {"serve-bot": 0.75}
+    code, _, err = run(capsys, "train", "tennis", "--agents", "1", "--league-games", "0.5", "--run", "a2", *small)
+    assert code == 2 and "--league-games is for --agents 2" in err

@@ -16,6 +16,8 @@ every Box. A snapshot plays ``tanh(mean)`` greedily and ``tanh(mean + std * eps)
 Per gradient step, on a batch of ``batch_size`` transitions (s, y, r, s', done) drawn uniformly from the buffer,
 with y' ~ pi(.|s') and its log-probability log pi(y'|s'), alpha = exp(log_alpha):
     target  = r + gamma * (1 - done) * (min(Q1_targ(s', y'), Q2_targ(s', y')) - alpha * log pi(y'|s'))
+              (with ``n_step`` = n > 1: r the discounted rewards of n decisions, s' the state n decisions later and
+              gamma^n the discount, the return cut at a game's end: see :mod:`selfplay_cli.algos.nstep`)
     critics:  (Q1(s, y) - target)^2 + (Q2(s, y) - target)^2, averaged over the batch
     actor:    alpha * log pi(y~|s) - min(Q1(s, y~), Q2(s, y~)),  y~ ~ pi(.|s) reparameterised
     alpha:    -log_alpha * (log pi(y~|s) + target_entropy)        (autotune; else alpha stays fixed)
@@ -61,6 +63,7 @@ from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
 from .base import Seat, action_head, as_bool, learner_args
+from .nstep import NStepChains
 from .optim import FlatAdam, flatten
 
 
@@ -79,6 +82,7 @@ class SACConfig:
     batch_size: int = 256  # transitions per gradient step (CleanRL 256; seed 002's best run 128)
     lr: float = 3e-4  # Adam learning rate of the actor, the critics and the temperature (seed 002, the SAC paper)
     gamma: float = 0.99  # discount
+    n_step: int = 1  # n-step returns: bootstrap from the decision n later (1: SAC's own one-step target)
     tau: float = 0.005  # Polyak step of the target critics, every gradient step
     replay_ratio: float = 1 / 64  # gradient steps per transition (4 a step of 256 games; see the module docstring)
     learning_starts: int = 5_000  # uniform random actions, and no gradient step, for this many transitions
@@ -101,7 +105,7 @@ class SACConfig:
         self.critic_hidden = tuple(int(h) for h in self.critic_hidden)
         if not all(h > 0 for h in self.critic_hidden):
             raise ValueError("critic_hidden must be positive layer widths")
-        for name in ("buffer_size", "batch_size"):
+        for name in ("buffer_size", "batch_size", "n_step"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1")
         if self.learning_starts < 0:
@@ -118,7 +122,8 @@ class SACConfig:
 
 
 class ContinuousReplay:
-    """A ring of preallocated numpy arrays: obs and next_obs (float32, flattened), squashed actions, rewards, dones.
+    """A ring of preallocated numpy arrays: obs and next_obs (float32, flattened), squashed actions, rewards, dones
+    and each transition's bootstrap discount (gamma^k for a return over k decisions).
 
     ``add`` writes a batch of transitions at once (the oldest overwritten once full); ``sample`` draws uniformly,
     with replacement, from the filled entries with the caller's generator; ``(k, batch)`` draws k batches at once.
@@ -131,6 +136,7 @@ class ContinuousReplay:
         self.actions = np.zeros((capacity, act_dim), dtype=np.float32)
         self.rewards = np.zeros(capacity, dtype=np.float32)
         self.dones = np.zeros(capacity, dtype=np.float32)
+        self.discounts = np.zeros(capacity, dtype=np.float32)
         self.pos = 0
         self.size = 0
 
@@ -138,20 +144,21 @@ class ContinuousReplay:
         return self.size
 
     def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray, next_obs: np.ndarray,
-            dones: np.ndarray) -> None:
+            dones: np.ndarray, discounts: np.ndarray | float) -> None:
         n = len(rewards)
         if n == 0:
             return
+        discounts = np.broadcast_to(np.asarray(discounts, dtype=np.float32), (n,))
         if n > self.capacity:  # only the newest fit
-            obs, actions, rewards, next_obs, dones = (x[n - self.capacity:]
-                                                      for x in (obs, actions, rewards, next_obs, dones))
+            obs, actions, rewards, next_obs, dones, discounts = (
+                x[n - self.capacity:] for x in (obs, actions, rewards, next_obs, dones, discounts))
             n = self.capacity
         end = self.pos + n
         at: slice | np.ndarray = slice(self.pos, end)
         if end > self.capacity:
             at = np.arange(self.pos, end) % self.capacity
         self.obs[at], self.next_obs[at], self.actions[at] = obs, next_obs, actions
-        self.rewards[at], self.dones[at] = rewards, dones
+        self.rewards[at], self.dones[at], self.discounts[at] = rewards, dones, discounts
         self.pos = end % self.capacity
         self.size = min(self.size + n, self.capacity)
 
@@ -160,7 +167,7 @@ class ContinuousReplay:
             raise RuntimeError("cannot sample from an empty replay buffer")
         idx = rng.integers(0, self.size, size=size)
         return {"obs": self.obs[idx], "actions": self.actions[idx], "rewards": self.rewards[idx],
-                "next_obs": self.next_obs[idx], "dones": self.dones[idx]}
+                "next_obs": self.next_obs[idx], "dones": self.dones[idx], "discounts": self.discounts[idx]}
 
 
 class TwinQ(nn.Module):
@@ -196,10 +203,10 @@ class TwinQ(nn.Module):
 
 
 def soft_target(rewards: torch.Tensor, dones: torch.Tensor, q_next: torch.Tensor, next_logp: torch.Tensor,
-                alpha: float | torch.Tensor, gamma: float) -> torch.Tensor:
-    """The soft TD target ``r + gamma * (1 - done) * (min(Q1', Q2') - alpha * log pi(y'|s'))``; ``q_next`` is the
-    target critics' ``(2, batch)``."""
-    return rewards + gamma * (1.0 - dones) * (q_next.min(dim=0).values - alpha * next_logp)
+                alpha: float | torch.Tensor, discount: float | torch.Tensor) -> torch.Tensor:
+    """The soft TD target ``r + discount * (1 - done) * (min(Q1', Q2') - alpha * log pi(y'|s'))``; ``q_next`` is
+    the target critics' ``(2, batch)``, ``discount`` gamma (one step) or each transition's gamma^k (n steps)."""
+    return rewards + discount * (1.0 - dones) * (q_next.min(dim=0).values - alpha * next_logp)
 
 
 class SACLearner:
@@ -240,6 +247,7 @@ class SACLearner:
         self.gen = torch.Generator(device=self.device).manual_seed(seed)  # the actor's samples
         self.rng = np.random.default_rng(seed)  # random warm-up actions and replay sampling
         self.buffer = ContinuousReplay(cfg.buffer_size, self.obs_dim, self.act_dim)
+        self.chains = NStepChains(cfg.n_step, cfg.gamma, n_slots, self.obs_dim, (self.act_dim,))
         self.transitions = 0  # decisions collected so far (drives the random warm-up)
         self.grad_steps = 0
         self.updates = 0  # update() calls that made at least one gradient step
@@ -323,11 +331,10 @@ class SACLearner:
         close = p["valid"] & acts
         if close.any():  # the seat decides again: its previous decision's s' is this observation
             if every and close.all():
-                self.buffer.add(p["obs"], p["act"], p["rew"], obs, np.zeros(self.n_slots, np.float32))
+                self._store(np.arange(self.n_slots), p["obs"], p["act"], p["rew"], obs, np.zeros(self.n_slots))
             else:
                 rows = np.flatnonzero(close)
-                self.buffer.add(p["obs"][rows], p["act"][rows], p["rew"][rows], obs[rows],
-                                np.zeros(rows.size, np.float32))
+                self._store(rows, p["obs"][rows], p["act"][rows], p["rew"][rows], obs[rows], np.zeros(rows.size))
         if every:
             p["obs"][:], p["act"][:], p["rew"][:] = obs, actions, rewards
             p["valid"][:] = True
@@ -359,19 +366,28 @@ class SACLearner:
                 raise ValueError(f"final_obs has {len(final)} rows for {self.n_slots} slots")
             next_obs[boot] = final[rows[boot]]
         self._held = None
-        self.buffer.add(h["obs"], h["act"], h["rew"], next_obs, (~boot).astype(np.float32))
+        self._store(rows, h["obs"], h["act"], h["rew"], next_obs, (~boot).astype(np.float32), ended=True)
+
+    def _store(self, rows: np.ndarray, obs: np.ndarray, act: np.ndarray, rew: np.ndarray, next_obs: np.ndarray,
+               dones: np.ndarray, ended: bool = False) -> None:
+        """The one-step decisions of slots ``rows`` whose s' is ``next_obs`` (``ended``: their games ended there)
+        into the buffer, as the n-step transitions they complete (:mod:`selfplay_cli.algos.nstep`)."""
+        src, o, a, r, discount = self.chains.push(rows, obs, act, rew, np.full(len(rows), ended))
+        self.buffer.add(o, a, r, next_obs[src], np.asarray(dones, np.float32)[src], discount)
 
     # -- learning -------------------------------------------------------------------------------------------
     @torch.no_grad()
     def td_target(self, rewards: torch.Tensor, dones: torch.Tensor, next_obs: torch.Tensor,
-                  next_actions: torch.Tensor | None = None, next_logp: torch.Tensor | None = None) -> torch.Tensor:
+                  next_actions: torch.Tensor | None = None, next_logp: torch.Tensor | None = None,
+                  discounts: torch.Tensor | None = None) -> torch.Tensor:
         """The soft TD target (:func:`soft_target`) with the target critics, y' and log pi(y'|s') drawn from the
-        actor unless given."""
+        actor unless given; ``discounts``: each transition's gamma^k (default gamma)."""
         if next_actions is None or next_logp is None:
             mean, log_std = self.net.gaussian(next_obs)
             next_actions, next_logp = squashed_sample(mean, log_std, self.gen)
         q_next = self.target(next_obs, next_actions)
-        return soft_target(rewards, dones, q_next, next_logp, self.log_alpha.exp(), self.cfg.gamma)
+        discount = self.cfg.gamma if discounts is None else discounts
+        return soft_target(rewards, dones, q_next, next_logp, self.log_alpha.exp(), discount)
 
     def update(self, next_obs: np.ndarray | None = None, progress: float = 0.0,
                final_obs: np.ndarray | None = None) -> dict[str, float]:
@@ -390,11 +406,11 @@ class SACLearner:
         sums = torch.zeros(4, device=self.device)  # critic loss, actor loss, Q, entropy
         if k:
             batches = self.buffer.sample(self.rng, (k, cfg.batch_size))  # all k batches in one draw
-            obs, actions, rewards, next_o, dones = (
+            obs, actions, rewards, next_o, dones, discounts = (
                 torch.from_numpy(batches[key]).to(self.device)
-                for key in ("obs", "actions", "rewards", "next_obs", "dones"))
+                for key in ("obs", "actions", "rewards", "next_obs", "dones", "discounts"))
             for i in range(k):
-                sums += self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i])
+                sums += self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i], discounts[i])
             self.updates += 1
         out = {"alpha": self.alpha, "buffer_size": float(len(self.buffer)), "grad_steps": float(self.grad_steps),
                "lr": self.actor_opt.lr}
@@ -404,10 +420,10 @@ class SACLearner:
         return out
 
     def _gradient_step(self, obs: torch.Tensor, actions: torch.Tensor, rewards: torch.Tensor,
-                       next_obs: torch.Tensor, dones: torch.Tensor) -> torch.Tensor:
+                       next_obs: torch.Tensor, dones: torch.Tensor, discounts: torch.Tensor) -> torch.Tensor:
         """One step of the critics, the actor, the temperature and the targets; returns the statistics."""
         cfg = self.cfg
-        y = self.td_target(rewards, dones, next_obs)
+        y = self.td_target(rewards, dones, next_obs, discounts=discounts)
         q = self.critic(obs, actions)
         critic_loss = (q - y).square().mean(dim=1).sum()  # MSE of Q1 plus MSE of Q2
         self.critic_opt.zero_grad()
@@ -462,4 +478,5 @@ class SACLearner:
         self.credit = float(state["credit"])
         self._obs = self._actions = None
         self._pend["valid"][:] = False
+        self.chains.clear()
         self._held = None

@@ -61,6 +61,11 @@ class SeatPlan:
     rotate: bool = False
     sides: tuple[tuple[int, ...], ...] | None = None
 
+    @property
+    def every_seat_learns(self) -> bool:
+        """Whether learners hold every seat of every game (what ``league_games`` divides)."""
+        return not (self.rotate or self.sides is not None or OPPONENT in self.home)
+
 
 def parse_seats(text: str, n_seats: int) -> tuple[int, ...]:
     """``--seats`` as a learner index per seat: ``"1,2"`` / ``"1,1,-"``: learners numbered from 1, ``-`` an

@@ -144,7 +144,7 @@ def train(
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
     from ..league.store import check_name
-    from ..train.config import TrainConfig, save_run_config
+    from ..train.config import TrainConfig, save_run_config, seat_plan_of
     from ..train.loop import Trainer
 
     for what, name in (("run name", run), ("run name", resume)):
@@ -164,8 +164,8 @@ def train(
         if preset == "seed000":
             settings["algo"] = "dqn"
             settings["dqn"] = seed000_config().to_dict()
-        if config is not None:
-            merge_settings(settings, read_toml(config))
+        from_file = read_toml(config) if config is not None else {}
+        merge_settings(settings, from_file)
         flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
                  "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
                  "snapshot_steps": snapshot_steps, "eval_games": eval_games, "eval_older": eval_older,
@@ -185,6 +185,16 @@ def train(
         except (TypeError, ValueError) as e:
             raise MarlError(f"[env_options]: {e}") from None
         settings["env"] = spec.name
+        if settings["league_games"] and "league_games" not in typed and "league_games" not in from_file:
+            # the game's default share of league games is for learners on every seat (tennis: --agents 2); with
+            # fewer learners every game is already against the league
+            try:
+                plan = seat_plan_of(spec.for_options(**settings["env_options"]), settings["agents"],
+                                    settings["sharing"], settings["seats"])
+                if not plan.every_seat_learns:
+                    settings["league_games"] = 0.0
+            except MarlError:
+                pass  # the settings' own error follows, from TrainConfig
         TrainConfig.from_dict(settings)  # every setting checked: an error here leaves nothing behind
     league = open_league(home, db)
     try:

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
-from ..arena.selfplay import OPPONENT, SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
+from ..arena.selfplay import SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
 from ..league.matchmaking import MatchmakerConfig
@@ -86,7 +86,7 @@ class TrainConfig:
         if not 0.0 <= self.league_games <= 1.0:
             raise MarlError(f"--league-games must lie between 0 and 1, not {self.league_games}")
         plan = self.seat_plan()
-        if self.league_games and (plan.rotate or plan.sides is not None or OPPONENT in plan.home):
+        if self.league_games and not plan.every_seat_learns:
             raise MarlError(f"--league-games is for --agents {n_seats} (learners on every seat); with fewer learners "
                             "every game is already against the league")
         if self.sharing == "fups" and self.agents == 1 and not self.seats and spec.kind != "cooperative":
@@ -117,9 +117,7 @@ class TrainConfig:
 
     def seat_plan(self) -> SeatPlan:
         """Which learner holds which seat of the game (``--agents``, ``--sharing``, ``--seats``)."""
-        spec = self.game()
-        seats = parse_seats(self.seats, spec.n_seats) if self.seats else None
-        return plan_seats(spec, self.agents, self.sharing, seats)
+        return seat_plan_of(self.game(), self.agents, self.sharing, self.seats)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -172,6 +170,11 @@ class TrainConfig:
                 except (TypeError, ValueError) as e:
                     raise MarlError(f"[{key}]: {e}") from None
         return cls(**d)
+
+
+def seat_plan_of(spec: EnvSpec, agents: int, sharing: str, seats: str) -> SeatPlan:
+    """Which learner holds which seat of ``spec`` (as :meth:`TrainConfig.seat_plan`, from the plain settings)."""
+    return plan_seats(spec, agents, sharing, parse_seats(seats, spec.n_seats) if seats else None)
 
 
 def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]) -> None:
