@@ -185,9 +185,12 @@ def train(
         except (TypeError, ValueError) as e:
             raise MarlError(f"[env_options]: {e}") from None
         settings["env"] = spec.name
-        if settings["league_games"] and "league_games" not in typed and "league_games" not in from_file:
-            # the game's default share of league games is for learners on every seat (tennis: --agents 2); with
-            # fewer learners every game is already against the league
+        game_set = {key for key in spec.train_defaults if key not in typed and key not in from_file}
+        # the game's own defaults for learners on every seat (tennis: one shared network, a share of league games)
+        # are dropped with fewer learners, where every game is already against the league; typed, they are checked
+        if "sharing" in game_set and settings["sharing"] == "fups" and settings["agents"] < 2 and not settings["seats"]:
+            settings["sharing"] = "nops"
+        if settings["league_games"] and "league_games" in game_set:
             try:
                 plan = seat_plan_of(spec.for_options(**settings["env_options"]), settings["agents"],
                                     settings["sharing"], settings["seats"])

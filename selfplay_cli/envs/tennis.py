@@ -335,6 +335,12 @@ _GAP = 0.003  # at the planned instant the bat's face is this far short of the b
 _REACH_X = -2.5  # the farthest back the bot meets a ball
 _REACH_Y = 1.2  # the highest it meets a ball (its bat reaches 1.6 m): a higher bounce it meets coming down
 _WAIT = ((-2.3, -1.3), (0.0, 1.2), (-1.4, 1.4))  # randomized modes: where (x, y, tilt) it may wait for a serve
+# randomized modes: the return's pace follows the incoming ball's speed at the contact, from _PACE[0] m/s (a
+# slow ball: landing _MIRROR_LAND[0] past the net, _MIRROR_CLEAR[0] over it) to _PACE[1] and faster (deep and low)
+_PACE = (4.0, 9.0)
+_MIRROR_LAND = (0.6, 1.15)
+_MIRROR_CLEAR = (0.20, 0.05)
+_MIRROR_TOPSPIN = 120.0  # rad/s of topspin on the fastest returns in spin mode
 
 
 def _unit_hash(x: np.ndarray, salt: int) -> np.ndarray:
@@ -591,8 +597,14 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
                 sel[r[found]] = True
                 f = found
                 n = f.sum()
-                _swing(o, sel, t_c[f], cx[f], cy[f], cvx[f], cvy[f], cw[f], np.full(n, return_land),
-                       np.full(n, NET_H + 0.15), np.full(n, return_spin), kd, km, act)
+                land, over, spin = np.full(n, return_land), np.full(n, NET_H + 0.15), np.full(n, return_spin)
+                if mode != "fixed":  # practice: the ball goes back at the pace it came (and in spin mode, spin)
+                    pace = np.clip((np.hypot(cvx[f], cvy[f]) - _PACE[0]) / (_PACE[1] - _PACE[0]), 0.0, 1.0)
+                    land = _MIRROR_LAND[0] + (_MIRROR_LAND[1] - _MIRROR_LAND[0]) * pace
+                    over = NET_H + _MIRROR_CLEAR[0] + (_MIRROR_CLEAR[1] - _MIRROR_CLEAR[0]) * pace
+                    if mode == "spin":
+                        spin = -_MIRROR_TOPSPIN * pace
+                _swing(o, sel, t_c[f], cx[f], cy[f], cvx[f], cvy[f], cw[f], land, over, spin, kd, km, act)
         act = np.clip(act, -1.0, 1.0)
         if discrete:
             return (np.where(act > 0.25, 2, np.where(act < -0.25, 0, 1))).astype(np.int64)

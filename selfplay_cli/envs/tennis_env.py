@@ -151,16 +151,18 @@ TENNIS = EnvSpec(
     render_fps=FPS,
     anchor="serve-bot",  # the ratings' zero point (seed 002 rates from 1200; marl's anchor rating is its own)
     live_options=LIVE_OPTIONS,  # the rewards and bat_scale: TennisCore.set_options, for the curricula
-    # SAC for tennis (benchmarks/tennis_skill.py; 25-minute trials at half speed): the serve bot's randomized serves
-    # to practise against (3 games in 4 against the serve bot, 1 in 4 against the league's snapshots), seed 002's
-    # curricula (a bat 3 times the size shrinking to normal by 80% of the run, a hit reward decaying to a tenth of
-    # the point's) and its practice reward for a ball landed on the other half; 4 times SAC's gradient steps per
-    # game step (in equal time 1/16 made 40% of the game steps of 1/64 and 1.6 times its gradient steps). 30 minutes
-    # of it return 51.7% of the bot's randomized serves; self-play rallies are not learned yet (0.85 hits a point).
-    train_defaults={"algo": "sac", "league_games": 1.0, "opponents": {"bots": {"serve-bot": 0.75}},
+    # SAC for tennis (benchmarks/tennis_skill.py; 2.5M-step trials, two at a time): one network for both ends (the
+    # observation is egocentric), half the games learner against learner and half against a matchmaker's opponent
+    # (3 in 4 the serve bot's randomized serves, 1 in 4 the league's snapshots), seed 002's curricula (a bat 3 times
+    # the size shrinking to normal by 80% of the run; a hit reward decaying to 0 by 60% while the point reward grows
+    # from 0.1 to 1 over 30-90%) and its practice reward for a ball landed on the other half; 5-step returns (a
+    # point is decided 10-40 decisions after the stroke that decides it: 1-step SAC, 37% of the bot's serves
+    # returned; 5-step, 79-87%); SAC at 1 gradient step per 16 game steps.
+    train_defaults={"algo": "sac", "sharing": "fups", "league_games": 0.5, "opponents": {"bots": {"serve-bot": 0.75}},
                     "env_options": {"serve_mode": "velocity", "return_reward": 0.5},
                     "curriculum": {"bat_scale": {"start": 3.0, "end": 1.0, "until": 0.8},
-                                   "hit_reward": {"start": 0.3, "end": 0.1, "until": 0.6}},
-                    "sac": {"replay_ratio": 0.0625}},
+                                   "hit_reward": {"start": 0.3, "end": 0.0, "until": 0.6},
+                                   "point_reward": {"start": 0.1, "end": 1.0, "from": 0.3, "until": 0.9}},
+                    "sac": {"replay_ratio": 0.0625, "n_step": 5}},
 )
 """The tennis game's declaration (registered as ``tennis``)."""
