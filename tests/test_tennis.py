@@ -647,6 +647,41 @@ def test_serve_bot_smashes_a_ball_that_bounces_above_its_reach():
     assert back.all(), f"the bot returned {back.sum()} of {len(balls)}"
 
 
+def return_landings(rule, balls, steps: int = 90) -> tuple[np.ndarray, np.ndarray]:
+    """As :func:`returned`: where each ball the bot (seat 1) sent back landed on seat 0's half (m past the net,
+    nan where it did not return it), and the spin it gave the ball (topspin toward seat 0 is positive)."""
+    n = len(balls)
+    c = core_of(seeds=tuple(range(n)))
+    for g, (vx, vy, w) in enumerate(balls):
+        park(c, g)
+        c.bat[0:2, 1, g] = [1.8, 0.2]
+        rally(c, 0, g=g, ball=[-1.2, 0.3, vx, vy, w])
+    depth, spin = np.full(n, np.nan), np.full(n, np.nan)
+    for _ in range(steps):
+        a = np.zeros((2, n, 3), dtype=np.float32)
+        a[1] = rule(c.observe()[1])
+        c.step(a)
+        struck = (c.hitter == 1) & np.isnan(spin)
+        spin[struck] = c.ball[4, struck]
+        now = c.landed & (c.hitter == 1) & np.isnan(depth)
+        depth[now] = -c.ball[0, now]
+    return depth, spin
+
+
+def test_serve_bot_practice_returns_go_back_at_the_pace_they_came():
+    """In the practice modes the bot sends a fast ball back deep and low (in spin mode with topspin) and a slow one
+    short, so a learner practises against the pace it plays; its fixed mode returns every ball the same way."""
+    balls = [(vx, vy, 0.0) for vx, vy in ((3.0, 2.6), (3.5, 2.2), (10.5, 0.0), (11.0, -0.3))]
+    depth, flat = return_landings(serve_bot_for(TennisConfig(serve_mode="velocity")), balls)
+    assert not np.isnan(depth).any(), f"it returned every ball: {depth}"
+    assert depth[2:].min() > depth[:2].max() + 0.25, f"fast balls come back deeper: {depth} m past the net"
+    fixed, _ = return_landings(serve_bot_for(TennisConfig(serve_mode="fixed")), balls)
+    assert not np.isnan(fixed).any() and np.ptp(fixed) < 0.2, f"fixed: one return, {fixed} m past the net"
+    _, spin = return_landings(serve_bot_for(TennisConfig(serve_mode="spin")), balls)
+    assert np.allclose(spin[:2], flat[:2], atol=2.0) and (spin[2:] > flat[2:] + 30).all(), \
+        f"spin mode: topspin on the fast returns only, {spin} rad/s (velocity mode: {flat})"
+
+
 def test_serve_bot_misjudges_spin_so_spin_beats_it():
     balls = [(vx, vy, w) for vx in (5.0, 6.5, 8.0, 9.5) for vy in (0.0, 1.0, 2.0) for w in (-300.0, -200.0, 0.0)]
     spin = np.array([b[2] for b in balls]) != 0
@@ -751,10 +786,13 @@ def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(t
     small = ("--steps", "256", "--games", "8", "--eval-games", "0", "--quiet")
     assert run(capsys, "train", "tennis", "--agents", "2", "--run", "d", *small)[0] == 0
     cfg = json.loads((tmp_path / "league" / "runs" / "d" / "config.json").read_text())
-    assert (cfg["algo"], cfg["league_games"], cfg["opponents"]["bots"]) == ("sac", 1.0, {"serve-bot": 0.75})
+    assert (cfg["algo"], cfg["sharing"], cfg["league_games"]) == ("sac", "fups", 0.5)
+    assert cfg["opponents"]["bots"] == {"serve-bot": 0.75}
     assert cfg["env_options"]["serve_mode"] == "velocity" and cfg["env_options"]["return_reward"] == 0.5
     assert cfg["curriculum"]["bat_scale"] == {"start": 3.0, "end": 1.0, "until": 0.8}
-    assert cfg["sac"]["replay_ratio"] == 0.0625
+    assert cfg["curriculum"]["hit_reward"] == {"start": 0.3, "end": 0.0, "until": 0.6}
+    assert cfg["curriculum"]["point_reward"] == {"start": 0.1, "end": 1.0, "from": 0.3, "until": 0.9}
+    assert (cfg["sac"]["replay_ratio"], cfg["sac"]["n_step"]) == (0.0625, 5)
     (tmp_path / "c.toml").write_text("[env_options]\nreturn_reward = 0.0\n"
                                      "[curriculum]\nbat_scale = 2.0\n")
     assert run(capsys, "train", "tennis", "--algo", "ppo", "--run", "o", "--config", str(tmp_path / "c.toml"),
@@ -762,10 +800,12 @@ def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(t
     cfg = json.loads((tmp_path / "league" / "runs" / "o" / "config.json").read_text())
     assert cfg["algo"] == "ppo" and cfg["env_options"] == {"serve_mode": "velocity", "return_reward": 0.0}
     assert cfg["curriculum"]["bat_scale"] == 2.0, "a plain number holds the bat at one size (the default's off)"
-    # one learner: the game's share of league games (for learners on both seats) does not apply, and is dropped;
-    # typed, it is still one line
+    # one learner: the game's shared network and share of league games (for learners on both seats) do not apply,
+    # and are dropped; typed, each is still one line
     assert run(capsys, "train", "tennis", "--agents", "1", "--run", "a1", *small)[0] == 0
     cfg = json.loads((tmp_path / "league" / "runs" / "a1" / "config.json").read_text())
-    assert cfg["league_games"] == 0.0 and cfg["opponents"]["bots"] == {"serve-bot": 0.75}
+    assert (cfg["sharing"], cfg["league_games"], cfg["opponents"]["bots"]) == ("nops", 0.0, {"serve-bot": 0.75})
     code, _, err = run(capsys, "train", "tennis", "--agents", "1", "--league-games", "0.5", "--run", "a2", *small)
     assert code == 2 and "--league-games is for --agents 2" in err
+    code, _, err = run(capsys, "train", "tennis", "--agents", "1", "--sharing", "fups", "--run", "a3", *small)
+    assert code == 2 and "--sharing fups" in err and "--agents 2" in err

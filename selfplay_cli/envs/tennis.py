@@ -95,11 +95,12 @@ exactly). 25 float32 values, clipped to the declared bounds (which the ball leav
     23     serve clock: the fraction of ``serve_time`` left while a toss is in the air, else 0
     24     the bats' length (m), which ``bat_scale`` sets
 
-Scripted players: ``serve-bot`` (seed 002's serve bot, the ratings' anchor) plans with this module's physics: it
-serves by ``serve_mode`` (``fixed``: one serve; ``velocity``: random speed, arc and placement; ``spin``: random top-
-or backspin), solving the contact model backwards for the bat's tilt and velocity, and returns balls to the middle
-of the other half; it misjudges spin (see :func:`serve_bot_rule_for`), so spin beats it. ``random`` is marl's own
-(uniform actions). Randomness: the first server and each toss's place come from the game's seed (counter-based).
+Scripted players: ``serve-bot`` (seed 002's serve bot, the ratings' anchor) plans with this module's physics: it serves
+by ``serve_mode`` (``fixed``: one serve; ``velocity``: random speed, arc and placement; ``spin``: random top- or
+backspin), solving the contact model backwards for the bat's tilt and velocity, and returns balls to the middle of the
+other half (in the randomized modes at the pace they came); it misjudges spin (see :func:`serve_bot_rule_for`), so spin
+beats it. ``random`` is marl's own (uniform actions). Randomness: the first server and each toss's place come from the
+game's seed (counter-based).
 
 Not modelled: the third dimension (sidespin, the table's width, the ball going wide), the real serve's first bounce
 on the server's half and lets, net cords (a net touch ends the point), the bounce of the ball off the net or the
@@ -526,21 +527,23 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
                        spin_read: float = 0.6, return_spin: float = 0.0, return_land: float = 0.75):
     """The serve-bot's rule ``rule(obs, rng=None, mask=None) -> actions`` for observations ``(k, 25)``.
 
-    Serving, it strikes the toss (the game tosses) as it falls through a chosen height, sending the ball to land on
-    the receiver's half: ``fixed`` always the same serve (0.8 m past the net, 12 cm over it, no spin), ``velocity``
-    a random landing point, height over the net and contact height (so a random speed and arc), ``spin`` random
-    top- or backspin up to 120 rad/s (19 turns a second). A serve's random choices are a hash of the toss's place
-    (drawn by the game for every serve and fixed while the toss is in the air), so a stateless rule keeps to one
-    plan for the whole serve and a game's serves are reproducible by its seed. Receiving, it waits for the ball to
-    bounce on its half, meets it at the top of its bounce (or, bouncing above 1.2 m, coming down through 1.2 m)
-    and sends it back to the middle of the other half, 15 cm over the net (higher if met high near the net),
-    without spin; a ball past the end of its half without a bounce there (going long) it dodges,
-    moving its bat up or down away from it (standing in its path would be a volley, the bot's fault). Otherwise it
-    goes back to its place behind the table; in the randomized modes (practice) it waits for the opponent's serve
-    at a random place 1.3 to 2.3 m behind the net and 0 to 1.2 m above the table, its face tilted up to 1.4 rad
-    either way (a hash of the toss's place), so a learner's serve cannot come to depend on where its receiver
-    stands (a learner that practised against a bot always waiting upright at home served 221 of 256 serves in
-    against that bot and none against a receiver waiting with its face tilted by 1.3 rad, or 25 cm higher).
+    Serving, it strikes the toss (the game tosses) as it falls through a chosen height, sending the ball to land on the
+    receiver's half: ``fixed`` always the same serve (0.8 m past the net, 12 cm over it, no spin), ``velocity`` a random
+    landing point, height over the net and contact height (so a random speed and arc), ``spin`` random top- or backspin
+    up to 120 rad/s (19 turns a second). A serve's random choices are a hash of the toss's place (drawn by the game for
+    every serve and fixed while the toss is in the air), so a stateless rule keeps to one plan for the whole serve and a
+    game's serves are reproducible by its seed. Receiving, it waits for the ball to bounce on its half, meets it at the
+    top of its bounce (or, bouncing above 1.2 m, coming down through 1.2 m) and sends it back to the middle of the other
+    half, 15 cm over the net (higher if met high near the net), without spin; in the randomized modes (practice) at the
+    pace it came instead: a ball met at 4 m/s or slower goes back short (0.6 m past the net) and 20 cm over it, one at 9
+    m/s or faster deep (1.15 m) and 5 cm over, in ``spin`` mode with topspin growing with the pace (planned up to 120
+    rad/s), so a learner practises returning the pace it plays. A ball past the end of its half without a bounce there
+    (going long) it dodges, moving its bat up or down away from it (standing in its path would be a volley, the bot's
+    fault). Otherwise it goes back to its place behind the table; in the randomized modes (practice) it waits for the
+    opponent's serve at a random place 1.3 to 2.3 m behind the net and 0 to 1.2 m above the table, its face tilted up to
+    1.4 rad either way (a hash of the toss's place), so a learner's serve cannot come to depend on where its receiver
+    stands (a learner that practised against a bot always waiting upright at home served 221 of 256 serves in against
+    that bot and none against a receiver waiting with its face tilted by 1.3 rad, or 25 cm higher).
     Its weakness, so that it can be beaten: it misjudges spin, planning with ``spin_read`` (60%) of the spin it
     sees: against itself ~2% of its returns fail (~60 hits a point), but of balls with 200-300 rad/s of topspin it
     returns about a quarter, where reading spin right it returns them all (tests/test_tennis.py). ``return_spin``
