@@ -595,9 +595,11 @@ def test_serve_bot_returns_its_own_balls_and_rallies(mode):
         assert len(waits) >= 10 and (spread > [0.6, 0.6, 1.5]).all(), f"{mode}: it waited within {spread} (m, m, rad)"
 
 
-def returned(rule, balls, steps: int = 90) -> tuple[np.ndarray, np.ndarray]:
+def bot_plays(rule, balls, steps: int = 90) -> tuple[np.ndarray, ...]:
     """Seat 0 has just hit each ball (vx, vy, spin) from 1.2 m before the net; seat 1 plays ``rule`` for ``steps``
-    steps: which balls landed on seat 1's half, and which of those seat 1 returned onto seat 0's half."""
+    steps. Returns which balls landed on seat 1's half, which of those seat 1 returned onto seat 0's half, where each
+    return landed there (m past the net; nan where none did) and the spin seat 1's stroke gave it (topspin toward
+    seat 0 positive; nan where it did not hit)."""
     n = len(balls)
     c = core_of(seeds=tuple(range(n)))
     for g, (vx, vy, w) in enumerate(balls):
@@ -605,12 +607,22 @@ def returned(rule, balls, steps: int = 90) -> tuple[np.ndarray, np.ndarray]:
         c.bat[0:2, 1, g] = [1.8, 0.2]
         rally(c, 0, g=g, ball=[-1.2, 0.3, vx, vy, w])
     landed = np.zeros(n, dtype=bool)
+    depth, spin = np.full(n, np.nan), np.full(n, np.nan)
     for _ in range(steps):
         a = np.zeros((2, n, 3), dtype=np.float32)
         a[1] = rule(c.observe()[1])
         c.step(a)
         landed |= c.landed & (c.hitter == 0)
-    return landed, c.returns_in[1] > 0
+        struck = (c.hitter == 1) & np.isnan(spin)
+        spin[struck] = c.ball[4, struck]
+        back = c.landed & (c.hitter == 1) & np.isnan(depth)
+        depth[back] = -c.ball[0, back]
+    return landed, c.returns_in[1] > 0, depth, spin
+
+
+def returned(rule, balls, steps: int = 90) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`bot_plays`'s balls landed on seat 1's half and returned onto seat 0's."""
+    return bot_plays(rule, balls, steps)[:2]
 
 
 def test_serve_bot_plans_a_ball_at_the_net_without_overflow():
@@ -647,37 +659,16 @@ def test_serve_bot_smashes_a_ball_that_bounces_above_its_reach():
     assert back.all(), f"the bot returned {back.sum()} of {len(balls)}"
 
 
-def return_landings(rule, balls, steps: int = 90) -> tuple[np.ndarray, np.ndarray]:
-    """As :func:`returned`: where each ball the bot (seat 1) sent back landed on seat 0's half (m past the net,
-    nan where it did not return it), and the spin it gave the ball (topspin toward seat 0 is positive)."""
-    n = len(balls)
-    c = core_of(seeds=tuple(range(n)))
-    for g, (vx, vy, w) in enumerate(balls):
-        park(c, g)
-        c.bat[0:2, 1, g] = [1.8, 0.2]
-        rally(c, 0, g=g, ball=[-1.2, 0.3, vx, vy, w])
-    depth, spin = np.full(n, np.nan), np.full(n, np.nan)
-    for _ in range(steps):
-        a = np.zeros((2, n, 3), dtype=np.float32)
-        a[1] = rule(c.observe()[1])
-        c.step(a)
-        struck = (c.hitter == 1) & np.isnan(spin)
-        spin[struck] = c.ball[4, struck]
-        now = c.landed & (c.hitter == 1) & np.isnan(depth)
-        depth[now] = -c.ball[0, now]
-    return depth, spin
-
-
 def test_serve_bot_practice_returns_go_back_at_the_pace_they_came():
     """In the practice modes the bot sends a fast ball back deep and low (in spin mode with topspin) and a slow one
     short, so a learner practises against the pace it plays; its fixed mode returns every ball the same way."""
     balls = [(vx, vy, 0.0) for vx, vy in ((3.0, 2.6), (3.5, 2.2), (10.5, 0.0), (11.0, -0.3))]
-    depth, flat = return_landings(serve_bot_for(TennisConfig(serve_mode="velocity")), balls)
+    *_, depth, flat = bot_plays(serve_bot_for(TennisConfig(serve_mode="velocity")), balls)
     assert not np.isnan(depth).any(), f"it returned every ball: {depth}"
     assert depth[2:].min() > depth[:2].max() + 0.25, f"fast balls come back deeper: {depth} m past the net"
-    fixed, _ = return_landings(serve_bot_for(TennisConfig(serve_mode="fixed")), balls)
+    *_, fixed, _ = bot_plays(serve_bot_for(TennisConfig(serve_mode="fixed")), balls)
     assert not np.isnan(fixed).any() and np.ptp(fixed) < 0.2, f"fixed: one return, {fixed} m past the net"
-    _, spin = return_landings(serve_bot_for(TennisConfig(serve_mode="spin")), balls)
+    *_, spin = bot_plays(serve_bot_for(TennisConfig(serve_mode="spin")), balls)
     assert np.allclose(spin[:2], flat[:2], atol=2.0) and (spin[2:] > flat[2:] + 30).all(), \
         f"spin mode: topspin on the fast returns only, {spin} rad/s (velocity mode: {flat})"
 

@@ -39,17 +39,18 @@ class NStepChains:
         known; ``ended``: the row's game ended with it. Returns the transitions completed, ``(src, obs, act, ret,
         discount)``: ``src`` the index (into ``rows``) of the decision whose s' and done each one takes."""
         rows = np.asarray(rows, dtype=np.int64)
-        ended = np.asarray(ended, dtype=bool)
         g, k = self.gamma, self.n - 1
         m = rows.size
+        if not k:  # one step: every decision is its own transition, as it came
+            return np.arange(m), obs, act, np.asarray(rew, np.float32), np.full(m, g, np.float32)
+        ended = np.asarray(ended, dtype=bool)
         count = self.count[rows]
         cols = np.arange(m)
         # Each row's chain: entries 0 .. count-1 from the ring, then this decision at position count
         seq_obs = np.empty((k + 1, m, obs.shape[1]), np.float32)
         seq_act = np.empty((k + 1, *act.shape), self.act.dtype)
         seq_rew = np.zeros((k + 1, m), np.float32)
-        if k:
-            seq_obs[:k], seq_act[:k], seq_rew[:k] = self.obs[:, rows], self.act[:, rows], self.rew[:, rows]
+        seq_obs[:k], seq_act[:k], seq_rew[:k] = self.obs[:, rows], self.act[:, rows], self.rew[:, rows]
         seq_obs[count, cols], seq_act[count, cols], seq_rew[count, cols] = obs, act, rew
         ret = np.zeros((k + 2, m), np.float32)  # ret[j]: the discounted rewards from position j to the chain's end
         for j in reversed(range(k + 1)):
@@ -63,18 +64,15 @@ class NStepChains:
                 parts.append((take, seq_obs[j, take], seq_act[j, take], ret[j, take], disc))
         # The chains move on: an ended one starts afresh, a full one drops its oldest, a shorter one grows
         self.count[rows[ended]] = 0
-        if k:
-            go = ~ended
-            shift = np.flatnonzero(go & full)
-            if shift.size:
-                r = rows[shift]
-                self.obs[:, r], self.act[:, r], self.rew[:, r] = (seq_obs[1:, shift], seq_act[1:, shift],
-                                                                  seq_rew[1:, shift])
-            grow = np.flatnonzero(go & ~full)
-            if grow.size:
-                r, c = rows[grow], count[grow]
-                self.obs[c, r], self.act[c, r], self.rew[c, r] = obs[grow], act[grow], rew[grow]
-                self.count[r] = c + 1
+        shift = np.flatnonzero(~ended & full)
+        if shift.size:
+            r = rows[shift]
+            self.obs[:, r], self.act[:, r], self.rew[:, r] = seq_obs[1:, shift], seq_act[1:, shift], seq_rew[1:, shift]
+        grow = np.flatnonzero(~ended & ~full)
+        if grow.size:
+            r, c = rows[grow], count[grow]
+            self.obs[c, r], self.act[c, r], self.rew[c, r] = obs[grow], act[grow], rew[grow]
+            self.count[r] = c + 1
         if not parts:
             return (np.zeros(0, np.int64), np.zeros((0, obs.shape[1]), np.float32),
                     np.zeros((0, *act.shape[1:]), self.act.dtype), np.zeros(0, np.float32), np.zeros(0, np.float32))

@@ -144,7 +144,7 @@ def train(
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
     from ..league.store import check_name
-    from ..train.config import TrainConfig, save_run_config, seat_plan_of
+    from ..train.config import TrainConfig, fups_without_partners, save_run_config, seat_plan_of
     from ..train.loop import Trainer
 
     for what, name in (("run name", run), ("run name", resume)):
@@ -188,7 +188,8 @@ def train(
         game_set = {key for key in spec.train_defaults if key not in typed and key not in from_file}
         # the game's own defaults for learners on every seat (tennis: one shared network, a share of league games)
         # are dropped with fewer learners, where every game is already against the league; typed, they are checked
-        if "sharing" in game_set and settings["sharing"] == "fups" and settings["agents"] < 2 and not settings["seats"]:
+        if "sharing" in game_set and fups_without_partners(spec, settings["agents"], settings["sharing"],
+                                                           settings["seats"]):
             settings["sharing"] = "nops"
         if settings["league_games"] and "league_games" in game_set:
             try:

@@ -89,7 +89,7 @@ class TrainConfig:
         if self.league_games and not plan.every_seat_learns:
             raise MarlError(f"--league-games is for --agents {n_seats} (learners on every seat); with fewer learners "
                             "every game is already against the league")
-        if self.sharing == "fups" and self.agents == 1 and not self.seats and spec.kind != "cooperative":
+        if fups_without_partners(spec, self.agents, self.sharing, self.seats):
             raise MarlError("--sharing fups shares one network between several learners: it needs --agents 2 or more")
         try:
             game = spec.config(**self.env_options)
@@ -170,6 +170,12 @@ class TrainConfig:
                 except (TypeError, ValueError) as e:
                     raise MarlError(f"[{key}]: {e}") from None
         return cls(**d)
+
+
+def fups_without_partners(spec: EnvSpec, agents: int, sharing: str, seats: str) -> bool:
+    """``--sharing fups`` with a lone learner that has nothing to share its network with (no ``--seats`` giving it
+    several seats, and not a cooperative game's team)."""
+    return sharing == "fups" and agents == 1 and not seats and spec.kind != "cooperative"
 
 
 def seat_plan_of(spec: EnvSpec, agents: int, sharing: str, seats: str) -> SeatPlan:
