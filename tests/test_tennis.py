@@ -298,9 +298,9 @@ def test_volleying_a_ball_before_it_bounced_is_a_fault():
     assert (c.winner[0], c.reason[0], c.surface[0]) == (1, VOLLEY, BAT_0)
 
 
-def test_the_hit_reward_pays_for_a_touch_even_a_foul():
-    """Seed 002's reward curriculum pays for hitting the ball "regardless of whether the move made was a foul": a
-    volley earns the hit reward and loses the point."""
+def test_the_hit_reward_pays_a_legal_stroke_never_a_fouls_touch():
+    """The hit reward pays a serve of one's own toss and a return of a ball that bounced on one's own half; a foul's
+    touch (here a volley) earns nothing and loses the point. (Seed 002 paid fouls too; learners then volleyed.)"""
     c = core_of(hit_reward=0.25, point_reward=2.0)
     park(c)
     c.bat[:, 0, 0] = [-0.3, 0.27, 0.0, 0.0, 0.0, 0.0]
@@ -308,8 +308,18 @@ def test_the_hit_reward_pays_for_a_touch_even_a_foul():
     total = np.zeros(2)
     while c.score.sum() == 0:
         total += c.step(STILL)[:, 0]
-    assert c.reason[0] == VOLLEY
-    assert total.tolist() == [0.25 - 2.0, 2.0]
+    assert c.reason[0] == VOLLEY and c.surface[0] == BAT_0, "seat 0's bat touched the ball"
+    assert total.tolist() == [-2.0, 2.0], "no hit reward for the volley"
+    c = core_of(hit_reward=0.25, point_reward=2.0)
+    rule = serve_bot_for(c.config)
+    paid, returned = np.zeros(2), False
+    while c.score.sum() == 0:
+        paid += c.step(bot_actions(c, rule))[:, 0]
+        returned |= bool(c.returns[:, 0].sum())
+        if returned:
+            break
+    assert returned, "the bot returned the serve"
+    assert paid.tolist() == [0.25, 0.25], "the serve and the return each earned the hit reward"
 
 
 def test_the_return_reward_pays_for_a_stroke_that_lands_on_the_opponents_half_only():

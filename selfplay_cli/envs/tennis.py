@@ -70,12 +70,14 @@ Rules
       ended (:attr:`TennisCore.reason`).
 
 Rewards and score
-    ``point_reward`` to the winner of a point and its negative to the loser (zero-sum), ``hit_reward`` to a player for
-    each touch of the ball, fouls included (a new stroke: not the same stroke's contacts within 40 ms), the shaping
-    reward of the seed's reward curriculum ("high reward values for hitting the ball regardless of whether the move
-    made was a foul", decayed while the point reward grows), and ``return_reward`` to a player whose stroke (serve or
-    return) lands on the opponent's half, the seed's reward for "the ball not only across the net but also onto the
-    opponent's table". ``score`` is the points each seat won, so results and ratings go by points.
+    ``point_reward`` to the winner of a point and its negative to the loser (zero-sum); ``hit_reward`` to a player for
+    each legal stroke (a serve of the own toss, or a return of a ball that bounced on the own half), the shaping
+    reward of the seed's reward curriculum (decayed while the point reward grows); and ``return_reward`` to a player
+    whose stroke (serve or return) lands on the opponent's half, the seed's reward for "the ball not only across the
+    net but also onto the opponent's table". The seed paid its hit reward "regardless of whether the move made was a
+    foul"; marl does not pay a foul's touch: paid, learners learned to volley the serve (a 1M-step snapshot of a
+    30-minute run volleyed 42.5% of the serve bot's serves). ``score`` is the points each seat won, so results and
+    ratings go by points.
     :meth:`TennisCore.set_options` changes ``hit_reward``, ``return_reward``, ``point_reward`` and ``bat_scale``
     of running games between steps (the curricula's hook).
 
@@ -208,7 +210,7 @@ class TennisConfig:
 
     discrete: bool = False  # MultiDiscrete([3, 3, 3]) actions (-1/0/+1 per axis) instead of Box(-1, 1, (3,))
     bat_scale: float = 1.0  # the bats' length is 0.15 m times this (curriculum: start large, shrink to 1)
-    hit_reward: float = 0.0  # shaping reward for each touch of the ball, fouls included (curriculum: start high, decay)
+    hit_reward: float = 0.0  # shaping reward for each legal stroke, serve or return (curriculum: start high, decay)
     return_reward: float = 0.0  # shaping reward for a stroke (serve or return) that lands on the opponent's half
     point_reward: float = 1.0  # the winner of a point gets this, the loser its negative
     points_to_win: int = 11  # a game is won at this many points, by 2

@@ -414,14 +414,14 @@ class TennisCore:
         self.since_hit[g] = 0.0
         self.tossing[g] = False
         (self.serves if serve else self.returns)[seat, g] += 1
+        if self.config.hit_reward:  # a legal stroke, not a foul's touch (seed 002's reward curriculum, see tennis.py)
+            self._rewards[seat, g] += self.config.hit_reward
 
     def _bat(self, g: np.ndarray, seat: np.ndarray) -> None:
         hitter, toss, landed = self.hitter[g], self.tossing[g], self.landed[g]
         same = hitter == seat
         stroke = same & ~toss & (self.since_hit[g] < HIT_COOLDOWN)  # the same stroke still: physics only
         self.surface[g] = np.where(stroke, self.surface[g], BAT_0 + seat)
-        if self.config.hit_reward:  # every new touch of the ball, fouls included (seed 002's reward curriculum)
-            np.add.at(self._rewards, (seat[~stroke], g[~stroke]), self.config.hit_reward)
         serve = toss & (seat == self.server[g])
         if serve.any():
             self._legal_hit(g[serve], seat[serve], True)
