@@ -15,7 +15,9 @@ is switched off (``isolation_level = None``) and a ``begin`` event listener emit
 ``BEGIN IMMEDIATE`` for write units of work, so the write lock is taken up front and waits under the busy
 timeout (a deferred transaction that reads first and writes later can fail with ``SQLITE_BUSY`` without
 waiting), and a plain deferred ``BEGIN`` for read-only units of work. A bounded retry on "database is
-locked" covers what is left. Each batch of games is one transaction, so a crash never leaves half a batch.
+locked" covers what is left. Each batch of games is one transaction, so a crash never leaves half a batch, and
+Ctrl-C or SIGTERM during a unit of work waits until it has committed or rolled back (:mod:`selfplay_cli.signals`):
+an interrupt inside SQLAlchemy's own code could otherwise leave a connection in the middle of a transaction.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from sqlalchemy.pool import StaticPool
 
 from selfplay_cli.errors import EXIT_IO, MarlError, MarlIOError
 from selfplay_cli.league.models import Base, Meta, utcnow
+from selfplay_cli.signals import signals_held
 
 __all__ = ["DB_FILENAME", "DEFAULT_HOME", "MIGRATIONS", "SCHEMA_VERSION", "Database", "LeagueError", "LeagueIOError",
            "shown"]
@@ -360,7 +363,7 @@ class Database:
             raise LeagueError(f"league {self.home or self._where} is open read-only: this needs a command that writes")
         for attempt in range(_LOCK_RETRIES + 1):
             try:
-                with self.session(readonly=readonly) as s:
+                with signals_held(), self.session(readonly=readonly) as s:  # Ctrl-C waits for commit or rollback
                     return fn(s)
             except OperationalError as exc:
                 if not (self.is_sqlite and _is_locked(exc)):

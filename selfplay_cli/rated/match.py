@@ -34,6 +34,7 @@ from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..policies import Policy, ScriptedPolicy
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, crew, points_between
+from ..signals import signals_held
 from ..stats.match import MatchStats, match_stats
 from ..stats.sprt import SPRT
 
@@ -323,11 +324,12 @@ def run_match(
         if league is None or not new:
             return
         records = [r.with_players(player_ids) for r in new]  # type: ignore[arg-type]
-        if match_id is None:
-            match_id, ids = league.create_match_with_games(spec.name, kind, params, records)
-        else:
-            ids = league.record_games(match_id, records)
-        game_ids.extend(ids)
+        with signals_held():  # a Ctrl-C now waits until the games are stored and counted
+            if match_id is None:
+                match_id, ids = league.create_match_with_games(spec.name, kind, params, records)
+            else:
+                ids = league.record_games(match_id, records)
+            game_ids.extend(ids)
 
     def on_result(r: GameResult) -> None:
         in_play.append(r)

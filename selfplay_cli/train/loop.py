@@ -19,10 +19,8 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -43,6 +41,7 @@ from ..policies.snapshot import SnapshotMeta, save_snapshot
 from ..rated.match import load_player
 from ..rated.snapshots import snapshot_relpath
 from ..results import GameResult
+from ..signals import signals_held
 from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum
 from .evaluator import Evaluator, GauntletJob, JobDone
@@ -261,7 +260,7 @@ class Trainer:
         cfg = self.cfg
         if self.snapshots and self._snapshot_step == self.steps:
             return  # nothing played since the last snapshot
-        with _signals_held():  # Ctrl-C or SIGTERM now would cut the moment: they wait until it is whole
+        with signals_held():  # Ctrl-C or SIGTERM now would cut the moment: they wait until it is whole
             self._write_moment(trigger)
         if cfg.eval_games:
             self.evaluator.submit(self._job(self.jobs[-1]))  # type: ignore[union-attr]
@@ -630,37 +629,6 @@ class Trainer:
         per_event = self.eval_seconds / max(self.eval_events, 1)
         events = 1 + (left // self.cfg.snapshot_steps if self.cfg.snapshot_steps and self.cfg.eval_inline else 0)
         return left / max(rate, 1e-9) + events * per_event
-
-
-@contextmanager
-def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM wait until the block is done, then act as they would have: a snapshot moment is never cut
-    by Ctrl-C or a polite kill. (A signal mask would not do: the process has other threads, and a signal delivered
-    to one of them still runs Python's handler in this one.) SIGKILL cannot wait; :meth:`Trainer.restore` deals
-    with it. Outside the main thread signals cannot be handled here, and the block runs as it is."""
-    caught: list[int] = []
-
-    def hold(signum: int, frame: Any) -> None:
-        caught.append(signum)
-
-    try:
-        previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, signal.SIGTERM)}
-    except ValueError:  # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-    for sig in dict.fromkeys(caught):
-        handler = previous[sig]
-        if callable(handler):
-            handler(sig, None)
-        elif sig == signal.SIGINT and handler != signal.SIG_IGN:
-            raise KeyboardInterrupt
-        elif handler == signal.SIG_DFL:
-            signal.raise_signal(sig)
 
 
 def _alive(pid: int) -> bool:
