@@ -5,7 +5,8 @@ as a user types it (the game's own training defaults: `marl envs tennis`), then 
 
 * the Elo of every snapshot of the run against game steps, on the seed's convention (the serve bot fixed at 1200);
 * how often the final snapshot returns the serve bot's randomized serves legally (serve_mode velocity and spin:
-  of the serves that landed legally on its half, the share it sent back onto the bot's half);
+  of the serves that landed legally on its half, the share it sent back onto the bot's half; the target counts
+  both modes together), and why the others were lost (not_returned: never touched);
 * how many hits (serves included) a point of the final snapshot against itself lasts on average, and why: how
   many of its tosses it strikes, how many serves and returns land legally;
 
@@ -25,12 +26,13 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
 
 from selfplay_cli.envs import get_env
-from selfplay_cli.envs.tennis import MISSED_SERVE
+from selfplay_cli.envs.tennis import MISSED_SERVE, REASON_NAMES
 from selfplay_cli.league.store import League
 from selfplay_cli.rated.match import load_player
 
@@ -59,9 +61,9 @@ def policy(home: Path, name: str):
 
 
 def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: int = 64,
-                  seed: int = 11) -> tuple[int, int]:
-    """(returned legally, serves landed legally) of the serve bot's serves (``serve_mode``) to ``snapshot``; the
-    snapshot plays seat 0 in half the games and seat 1 in the others."""
+                  seed: int = 11) -> tuple[int, int, Counter]:
+    """(returned legally, serves landed legally, why the others were lost) of the serve bot's serves
+    (``serve_mode``) to ``snapshot``; the snapshot plays seat 0 in half the games and seat 1 in the others."""
     spec = get_env("tennis")
     cfg = spec.config(serve_mode=mode)
     core = spec.make_core(n, cfg)
@@ -73,6 +75,7 @@ def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: in
     player = policy(home, snapshot)
     pending = np.zeros(n, dtype=bool)
     returned = landed = 0
+    lost: Counter = Counter()
     next_seed = n
     while landed < serves:
         obs = core.observe()
@@ -86,13 +89,15 @@ def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: in
         landed += int(served.sum())
         returned += int(back.sum())
         pending = (pending & ~back) | served
-        pending &= core.score.sum(axis=0) == before[2]  # a point ended: its serve was returned or not
+        ended = core.score.sum(axis=0) > before[2]  # a point ended: its serve was returned or not
+        lost.update(REASON_NAMES[r] for r in core.reason[pending & ended])
+        pending &= ~ended
         done = np.flatnonzero(core.terminated | core.truncated)
         if len(done):
             core.reset(done, seed * 100_000 + next_seed + np.arange(len(done)))
             next_seed += len(done)
             pending[done] = False
-    return returned, landed
+    return returned, landed, lost
 
 
 def self_play(home: Path, snapshot: str, points: int = 400, n: int = 64, seed: int = 12) -> dict[str, int]:
@@ -150,19 +155,21 @@ def main() -> None:
             print("    Elo against steps (serve-bot = 1200, 95% interval):")
             for step, name, elo, lo, hi in elo_curve(home, algo):
                 print(f"    {step:>12,}  {elo:7.1f}  [{lo:7.1f} .. {hi:7.1f}]  {name}")
-            shares = {}
+            back_all = landed_all = 0
             for mode in ("velocity", "spin"):
-                back, landed = serve_returns(home, final, mode)
-                shares[mode] = back / max(landed, 1)
+                back, landed, lost = serve_returns(home, final, mode)
+                back_all, landed_all = back_all + back, landed_all + landed
+                why = ", ".join(f"{k} {v}" for k, v in lost.most_common())
                 print(f"    returns of the serve bot's {mode} serves: {back} of {landed} legal serves "
-                      f"({shares[mode]:.1%})")
+                      f"({back / max(landed, 1):.1%}); the others lost by: {why or '-'}")
+            share = back_all / max(landed_all, 1)
             c = self_play(home, final)
             hits = (c["serves"] + c["returns"]) / max(c["points"], 1)
             print(f"    self-play: {hits:.2f} hits per point (serve included) over {c['points']} points: "
                   f"{c['missed']} tosses missed, {c['serves']} serves struck, {c['serves_in']} "
                   f"landed legally; {c['returns']} returns, {c['returns_in']} landed legally")
-            ok = shares["velocity"] >= 0.5 and hits >= 4 and args.minutes <= 30
-            verdicts.append(f"{algo}: returns {shares['velocity']:.1%} of randomized serves (>= 50%), rallies "
+            ok = share >= 0.5 and hits >= 4 and args.minutes <= 30
+            verdicts.append(f"{algo}: returns {share:.1%} of randomized serves (>= 50%), rallies "
                             f"{hits:.2f} hits (>= 4) within {args.minutes:g} min: {'PASS' if ok else 'FAIL'}")
         if "sac" in finals and "ppo" in finals:
             m = json.loads(marl(home, "match", finals["sac"], finals["ppo"], "--games", str(args.games), "--seed", "5",
