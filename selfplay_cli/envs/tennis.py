@@ -52,8 +52,10 @@ Rules
     * Serve: at the start of a point the ball is tossed straight up (2.6 m/s, from 0.15 m above the table's height,
       0.18 m behind the server's end, +-``toss_jitter`` m along the table at random), in front of the server's bat.
       The server must strike it within ``serve_time`` seconds and before it touches anything else (the floor,
-      typically); otherwise the receiver wins the point. The struck ball must land on the receiver's half first: a
-      simplification of the real serve, which bounces once on the server's own half first. No lets.
+      typically); otherwise the receiver wins the point. By default the struck ball must land on the receiver's half
+      first, a simplification of the real serve; with ``serve_bounce=true`` it is table tennis's serve: it bounces
+      on the server's own half first (reason ``serve_no_bounce`` if it does not; a second bounce there is
+      ``own_half``), then on the receiver's half. No lets.
     * After each legal hit the ball must land on the opponent's half before anything else. The point goes to the
       opponent of the player who hits into the net (any net contact before the landing: no net cords), hits out
       (the ball reaches the floor, leaves the room (4.5 m from the net) or goes below the table's surface without
@@ -196,9 +198,9 @@ NONE, TABLE_0, TABLE_1, BAT_0, BAT_1, NET, OUT = range(7)
 SURFACE_NAMES = ("none", "table_0", "table_1", "bat_0", "bat_1", "net", "out")
 # Why a point ended (TennisCore.reason), said of the player who lost it
 (NO_POINT, INTO_NET, HIT_OUT, OWN_HALF, DOUBLE_BOUNCE, DOUBLE_HIT, VOLLEY, MISSED_SERVE,
- NOT_RETURNED) = range(9)
+ NOT_RETURNED, SERVE_NO_BOUNCE) = range(10)
 REASON_NAMES = ("none", "net", "out", "own_half", "double_bounce", "double_hit", "volley", "missed_serve",
-                "not_returned")
+                "not_returned", "serve_no_bounce")
 
 SERVE_MODES = ("fixed", "velocity", "spin")
 LIVE_OPTIONS = ("hit_reward", "return_reward", "point_reward", "bat_scale")  # what TennisCore.set_options changes
@@ -218,6 +220,7 @@ class TennisConfig:
     serve_time: float = 1.5  # seconds the server has to strike the toss
     toss_jitter: float = 0.05  # the toss's place along the table varies by this much (m) either way
     serve_mode: Literal["fixed", "velocity", "spin"] = "fixed"  # the serve-bot's serves (seed 002's three modes)
+    serve_bounce: bool = False  # table tennis's serve: it bounces on the server's half first, then the receiver's
     drag: float = 1.0  # scales the air drag (0: none)
     magnus: float = 1.0  # scales the Magnus force (0: none)
 
@@ -413,6 +416,78 @@ def plan_launch(x0: np.ndarray, y0: np.ndarray, w: np.ndarray, land_x: np.ndarra
     return _parabola(x0, y0, aim_y, aim_x)
 
 
+def _serve_flights(x0: np.ndarray, y0: np.ndarray, vx: np.ndarray, vy: np.ndarray, w: np.ndarray, kd: float,
+                   km: float, t_max: float = 1.6) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bounce serves from (x0 < 0, y0) launched at (vx, vy) with spin w: where each first comes down to the table
+    (its bounce, NaN if off the table), the height at which it then crosses the net's plane (-1 if it does not)
+    and where it comes down next (NaN if it does not within ``t_max``). Integrated at 20 ms as the planner's other
+    flights, the bounce by the game's own contact model."""
+    x, y, vx, vy, w = (np.array(a, dtype=np.float64) for a in np.broadcast_arrays(x0, y0, vx, vy, w))
+    bounce_x, y_net, land_x = np.full(x.shape, np.nan), np.full(x.shape, -1.0), np.full(x.shape, np.nan)
+    phase = np.zeros(x.shape, dtype=np.int8)  # 0 before the bounce, 1 after it, 2 done
+    dt, half, decay = _PLAN_DT, 0.5 * _PLAN_DT * _PLAN_DT, 1.0 - SPIN_DECAY * _PLAN_DT
+    for _ in range(int(t_max / dt)):
+        ax, ay = accel(vx, vy, w, kd, km)
+        nx_, ny_ = x + vx * dt + ax * half, y + vy * dt + ay * half
+        vx, vy, w = vx + ax * dt, vy + ay * dt, w * decay
+        cross = (phase == 1) & (x < 0) & (nx_ >= 0)
+        y_net = np.where(cross, y + (-x / np.where(cross, nx_ - x, 1.0)) * (ny_ - y), y_net)
+        down = (phase < 2) & (ny_ <= BALL_R) & (vy < 0)
+        f = np.clip((y - BALL_R) / np.where(down, y - ny_, 1.0), 0.0, 1.0)
+        at = x + f * (nx_ - x)
+        first, second = down & (phase == 0), down & (phase == 1)
+        on_table = first & (at >= -TABLE_HALF) & (at <= 0.0)
+        bounce_x = np.where(on_table, at, bounce_x)
+        land_x = np.where(second, at, land_x)
+        if on_table.any():
+            zero = np.zeros(int(on_table.sum()))
+            vx[on_table], vy[on_table], w[on_table] = contact(vx[on_table], vy[on_table], w[on_table], zero,
+                                                              zero + 1.0, 0.0, 0.0, E_TABLE, MU_TABLE)
+            ny_[on_table] = 2 * BALL_R - ny_[on_table]
+        phase = np.where(on_table, 1, np.where((first & ~on_table) | second, 2, phase)).astype(np.int8)
+        x, y = nx_, ny_
+        if (phase == 2).all():
+            break
+    return bounce_x, y_net, land_x
+
+
+_SERVE_VX = np.linspace(1.0, 7.0, 13)  # the bounce serve's launch velocities the planner tries (m/s)
+_SERVE_VY = np.linspace(-5.0, 1.0, 13)
+
+
+def plan_bounce_serve(x0: np.ndarray, y0: np.ndarray, w: np.ndarray, land_x: np.ndarray, over_y: np.ndarray,
+                      vin_x: np.ndarray, vin_y: np.ndarray, w_in: np.ndarray, kd: float = K_DRAG,
+                      km: float = K_MAGNUS) -> tuple[np.ndarray, np.ndarray]:
+    """The launch velocity of a serve under table tennis's rule (``serve_bounce``): from (x0 < 0, y0) with spin
+    ``w`` it bounces on the server's own half, then crosses the net's plane near ``over_y`` (at least a ball's
+    radius and 8 cm over the net, in the planner's coarser flight) and comes down near ``land_x`` on the receiver's half, struck from a toss moving
+    at (vin_x, vin_y) with spin ``w_in`` by a bat no faster than 80% of its top speed. A search over a grid of
+    launch velocities, then two finer ones around the best, each flight integrated with its bounce."""
+    x0, y0, w, land_x, over_y, vin_x, vin_y, w_in = (np.asarray(a, dtype=np.float64).reshape(-1) for a in (
+        x0, y0, w, land_x, over_y, vin_x, vin_y, w_in))
+    vx0, vy0 = np.meshgrid(_SERVE_VX, _SERVE_VY, indexing="ij")
+    gx, gy = vx0.reshape(1, -1), vy0.reshape(1, -1)
+    step_x, step_y = _SERVE_VX[1] - _SERVE_VX[0], _SERVE_VY[1] - _SERVE_VY[0]
+    best_vx, best_vy = np.zeros(len(x0)), np.zeros(len(x0))
+    for _ in range(3):
+        cand_x = np.broadcast_to(gx, (len(x0), gx.shape[1])) + best_vx[:, None]
+        cand_y = np.broadcast_to(gy, (len(x0), gy.shape[1])) + best_vy[:, None]
+        b, yn, lx = _serve_flights(x0[:, None], y0[:, None], cand_x, cand_y, w[:, None], kd, km)
+        legal = ~np.isnan(b) & (yn >= NET_H + BALL_R + 0.08) & (lx > 0.05) & (lx < TABLE_HALF - 0.03)
+        _, _, bvx, bvy = solve_stroke(vin_x[:, None], vin_y[:, None], w_in[:, None], cand_x, cand_y, w[:, None])
+        legal &= np.maximum(np.abs(bvx), np.abs(bvy)) <= 0.8 * V_MAX
+        cost = (np.nan_to_num(lx, nan=10.0) - land_x[:, None]) ** 2 + 0.5 * (yn - over_y[:, None]) ** 2
+        cost = np.where(legal, cost, cost + 100.0)
+        pick = np.argmin(cost, axis=1)
+        rows = np.arange(len(x0))
+        best_vx, best_vy = cand_x[rows, pick], cand_y[rows, pick]
+        # a finer grid around the best: one cell of the last grid either way, in thirds
+        fx, fy = np.meshgrid(np.linspace(-step_x, step_x, 7), np.linspace(-step_y, step_y, 7), indexing="ij")
+        gx, gy = fx.reshape(1, -1), fy.reshape(1, -1)
+        step_x, step_y = step_x / 3.0, step_y / 3.0
+    return best_vx, best_vy
+
+
 def solve_stroke(vin_x: np.ndarray, vin_y: np.ndarray, w_in: np.ndarray, vout_x: np.ndarray, vout_y: np.ndarray,
                  w_out: np.ndarray) -> tuple[np.ndarray, ...]:
     """The bat's face normal (toward the ball) and velocity that turn the ball (vin, w_in) into (vout, w_out) under
@@ -447,6 +522,7 @@ def _predict_contact(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarra
     x, y, vx, vy, w = (np.array(a, dtype=np.float64) for a in (x, y, vx, vy, w))
     bounced = np.array(bounced, dtype=bool)
     k = len(x)
+    far_bounced = np.zeros(k, dtype=bool)  # a ball may bounce once on the other half on its way (a bounce serve)
     found = np.zeros(k, dtype=bool)
     alive = np.ones(k, dtype=bool)
     out = np.zeros((6, k))
@@ -472,7 +548,14 @@ def _predict_contact(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarra
         hit = alive & ~bounced & (y < BALL_R) & (vy < 0) & (np.abs(x) <= TABLE_HALF)
         if hit.any():
             mine = hit & (x < 0)
-            alive &= ~(hit & ~mine)  # lands on the other half: not mine to play
+            far = hit & ~mine & ~far_bounced & (vx < 0)  # a bounce serve's bounce on the server's half
+            if far.any():
+                zero = np.zeros(far.sum())
+                vx[far], vy[far], w[far] = contact(vx[far], vy[far], w[far], zero, zero + 1.0, 0.0, 0.0, E_TABLE,
+                                                   MU_TABLE)
+                y[far] = 2 * BALL_R - y[far]
+                far_bounced |= far
+            alive &= ~(hit & ~mine & ~far)  # lands on the other half: not mine to play
             if mine.any():
                 zero = np.zeros(mine.sum())
                 vx[mine], vy[mine], w[mine] = contact(vx[mine], vy[mine], w[mine], zero, zero + 1.0, 0.0, 0.0,
@@ -491,16 +574,21 @@ def _predict_contact(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarra
 
 def _swing(o: np.ndarray, sel: np.ndarray, t_c: np.ndarray, px: np.ndarray, py: np.ndarray, vin_x: np.ndarray,
            vin_y: np.ndarray, w_in: np.ndarray, land_x: np.ndarray, over_y: np.ndarray, w_out: np.ndarray,
-           kd: float, km: float, act: np.ndarray) -> None:
+           kd: float, km: float, act: np.ndarray, bounce: bool = False) -> None:
     """Write into ``act[sel]`` the stroke that meets the ball at (px, py) in ``t_c`` seconds and sends it to land
-    at ``land_x`` over the net at ``over_y`` with spin ``w_out``. A ball met high near the net cannot come down
-    that steeply and still fall as a ball falls: it crosses the net at least 5 cm above the straight line from the
-    contact to the landing point (a smash, not a stroke faster than any bat)."""
-    line_y = py + (BALL_R - py) * (-px) / np.maximum(land_x - px, 1e-3)  # the straight line's height at the net
-    over_y = np.maximum(over_y, line_y + 0.05)
-    vx, vy = plan_launch(px, py, w_out, land_x, over_y, kd, km)
-    nx, ny, bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)
-    for _ in range(2):  # a stroke faster than the bat can swing: a slower ball, higher over the net
+    at ``land_x`` over the net at ``over_y`` with spin ``w_out`` (``bounce``: a serve bouncing on the own half
+    first, :func:`plan_bounce_serve`). A ball met high near the net cannot come down that steeply and still fall as
+    a ball falls: it crosses the net at least 5 cm above the straight line from the contact to the landing point (a
+    smash, not a stroke faster than any bat)."""
+    if bounce:
+        vx, vy = plan_bounce_serve(px, py, w_out, land_x, over_y, vin_x, vin_y, w_in, kd, km)
+        nx, ny, bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)
+    else:
+        line_y = py + (BALL_R - py) * (-px) / np.maximum(land_x - px, 1e-3)  # the straight line's height at the net
+        over_y = np.maximum(over_y, line_y + 0.05)
+        vx, vy = plan_launch(px, py, w_out, land_x, over_y, kd, km)
+        nx, ny, bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)
+    for _ in range(0 if bounce else 2):  # a stroke faster than the bat can swing: a slower ball, higher over the net
         fast = np.flatnonzero(np.maximum(np.abs(bvx), np.abs(bvy)) > 0.8 * V_MAX)
         if not fast.size:
             break
@@ -526,7 +614,8 @@ def _swing(o: np.ndarray, sel: np.ndarray, t_c: np.ndarray, px: np.ndarray, py: 
 
 
 def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1.0, discrete: bool = False,
-                       spin_read: float = 0.6, return_spin: float = 0.0, return_land: float = 0.75):
+                       spin_read: float = 0.6, return_spin: float = 0.0, return_land: float = 0.75,
+                       bounce: bool = False):
     """The serve-bot's rule ``rule(obs, rng=None, mask=None) -> actions`` for observations ``(k, 25)``.
 
     Serving, it strikes the toss (the game tosses) as it falls through a chosen height, sending the ball to land on the
@@ -585,7 +674,8 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
             disc = v * v + 2 * G * (y - height)
             t_c = np.where(disc >= 0, (v + np.sqrt(np.maximum(disc, 0.0))) / G, np.maximum(v, 0.0) / G)
             hy = np.where(disc >= 0, height, y + v * t_c - 0.5 * G * t_c * t_c)
-            _swing(o, s, t_c, px[s], hy, np.zeros(m), v - G * t_c, w[s], land, NET_H + clear, spin, kd, km, act)
+            _swing(o, s, t_c, px[s], hy, np.zeros(m), v - G * t_c, w[s], land, NET_H + clear, spin, kd, km, act,
+                   bounce)
         # past the end of its half without a bounce there, the ball can no longer land: out of its way
         dodge = (o[:, INCOMING] > 0.5) & (px < -TABLE_HALF) & (vx < 0.0)
         if dodge.any():
@@ -623,4 +713,4 @@ serve_bot_rule = serve_bot_rule_for()
 
 def serve_bot_for(cfg: TennisConfig):
     """The serve-bot's rule for a game's options (its ``serve_mode``, the air's forces, discrete actions)."""
-    return serve_bot_rule_for(cfg.serve_mode, cfg.drag, cfg.magnus, cfg.discrete)
+    return serve_bot_rule_for(cfg.serve_mode, cfg.drag, cfg.magnus, cfg.discrete, bounce=cfg.serve_bounce)

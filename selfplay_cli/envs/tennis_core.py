@@ -53,6 +53,7 @@ from .tennis import (
     OMEGA_MAX,
     OUT,
     OWN_HALF,
+    SERVE_NO_BOUNCE,
     SPIN_DECAY,
     SPIN_SCALE,
     SUBSTEPS,
@@ -140,6 +141,7 @@ class TennisCore:
         self.hitter = np.full(n, -1, dtype=np.int8)
         self.landed = np.zeros(n, dtype=bool)
         self.serve_shot = np.zeros(n, dtype=bool)  # the ball in flight was served
+        self.serve_bounced = np.zeros(n, dtype=bool)  # (serve_bounce) the serve has bounced on the server's half
         self.since_hit = np.full(n, _NEVER)
         self.clock = np.zeros(n)  # seconds the toss has been in the air
         self.surface = np.zeros(n, dtype=np.int8)
@@ -220,6 +222,7 @@ class TennisCore:
         self.hitter[g] = -1
         self.landed[g] = False
         self.serve_shot[g] = False
+        self.serve_bounced[g] = False
         self.since_hit[g] = _NEVER
         self.clock[g] = 0.0  # (surface keeps what ended the last point: the toss touches nothing)
 
@@ -411,6 +414,7 @@ class TennisCore:
         self.hitter[g] = seat
         self.landed[g] = False
         self.serve_shot[g] = serve
+        self.serve_bounced[g] = False
         self.since_hit[g] = 0.0
         self.tossing[g] = False
         (self.serves if serve else self.returns)[seat, g] += 1
@@ -437,7 +441,14 @@ class TennisCore:
     def _table(self, g: np.ndarray, half: np.ndarray) -> None:
         toss, landed, h = self.tossing[g], self.landed[g], self.hitter[g]
         self._award(g[toss], 1 - self.server[g[toss]], MISSED_SERVE)
-        good = ~toss & ~landed & (half != h)
+        dealt = toss
+        if self.config.serve_bounce:  # a serve's first bounce: on the server's own half, else a fault
+            first = ~toss & self.serve_shot[g] & ~self.serve_bounced[g]
+            self.serve_bounced[g[first & (half == h)]] = True
+            short = first & (half != h)
+            self._award(g[short], 1 - h[short], SERVE_NO_BOUNCE)
+            dealt = toss | first
+        good = ~dealt & ~landed & (half != h)
         if good.any():
             gg, hh = g[good], h[good]
             self.landed[gg] = True
@@ -446,9 +457,9 @@ class TennisCore:
             self.returns_in[hh[~served], gg[~served]] += 1
             if self.config.return_reward:  # the stroke landed on the opponent's half (seed 002's practice reward)
                 self._rewards[hh, gg] += self.config.return_reward
-        own = ~toss & ~landed & (half == h)
+        own = ~dealt & ~landed & (half == h)
         self._award(g[own], 1 - h[own], OWN_HALF)
-        again = ~toss & landed
+        again = ~dealt & landed
         self._award(g[again], h[again], np.where(half[again] != h[again], DOUBLE_BOUNCE, NOT_RETURNED))
 
     def _net(self, g: np.ndarray) -> None:
@@ -500,8 +511,8 @@ class TennisCore:
 
     # ----------------------------------------------------------------------------------------------------
     _STATE = ("ball", "bat", "score", "steps", "terminated", "truncated", "over", "key", "first_server", "server",
-              "tossing", "hitter", "landed", "serve_shot", "since_hit", "clock", "surface", "reason", "winner",
-              "serves", "serves_in", "returns", "returns_in")
+              "tossing", "hitter", "landed", "serve_shot", "serve_bounced", "since_hit", "clock", "surface", "reason",
+              "winner", "serves", "serves_in", "returns", "returns_in")
 
     def get_state(self, games: Any = None) -> dict[str, np.ndarray]:
         """A copy of the games' state (all games when None), game on the last axis."""
