@@ -460,9 +460,10 @@ def plan_bounce_serve(x0: np.ndarray, y0: np.ndarray, w: np.ndarray, land_x: np.
                       km: float = K_MAGNUS) -> tuple[np.ndarray, np.ndarray]:
     """The launch velocity of a serve under table tennis's rule (``serve_bounce``): from (x0 < 0, y0) with spin
     ``w`` it bounces on the server's own half, then crosses the net's plane near ``over_y`` (at least a ball's
-    radius and 8 cm over the net, in the planner's coarser flight) and comes down near ``land_x`` on the receiver's half, struck from a toss moving
-    at (vin_x, vin_y) with spin ``w_in`` by a bat no faster than 80% of its top speed. A search over a grid of
-    launch velocities, then two finer ones around the best, each flight integrated with its bounce."""
+    radius and 8 cm over the net in the planner's coarser flight: the game's comes out a few cm lower) and comes
+    down near ``land_x`` on the receiver's half, struck from a toss moving at (vin_x, vin_y) with spin ``w_in`` by
+    a bat no faster than 80% of its top speed. A search over a grid of launch velocities, then two finer ones
+    around the best, each flight integrated with its bounce."""
     x0, y0, w, land_x, over_y, vin_x, vin_y, w_in = (np.asarray(a, dtype=np.float64).reshape(-1) for a in (
         x0, y0, w, land_x, over_y, vin_x, vin_y, w_in))
     vx0, vy0 = np.meshgrid(_SERVE_VX, _SERVE_VY, indexing="ij")
