@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from selfplay_cli.envs import get_env
-from selfplay_cli.envs.tennis import MISSED_SERVE, REASON_NAMES
+from selfplay_cli.envs.tennis import LIVE_OPTIONS, MISSED_SERVE, REASON_NAMES
 from selfplay_cli.league.store import League
 from selfplay_cli.rated.match import load_player
 
@@ -60,12 +60,20 @@ def policy(home: Path, name: str):
     return load_player(league, resolve(league, name, "tennis"), seed=1)
 
 
+def rules_of(home: Path, run: str) -> dict:
+    """The run's game options that change the play (its serve rule, the air...): not the shaping rewards, the bat
+    size its curriculum drives, nor the serve bot's mode, which the measurements set."""
+    options = json.loads((home / "runs" / run / "config.json").read_text()).get("env_options", {})
+    return {k: v for k, v in options.items() if k not in (*LIVE_OPTIONS, "serve_mode")}
+
+
 def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: int = 64,
-                  seed: int = 11) -> tuple[int, int, Counter]:
+                  seed: int = 11, rules: dict | None = None) -> tuple[int, int, Counter]:
     """(returned legally, serves landed legally, why the others were lost) of the serve bot's serves
-    (``serve_mode``) to ``snapshot``; the snapshot plays seat 0 in half the games and seat 1 in the others."""
+    (``serve_mode``) to ``snapshot`` under the game options ``rules``; the snapshot plays seat 0 in half the games
+    and seat 1 in the others."""
     spec = get_env("tennis")
-    cfg = spec.config(serve_mode=mode)
+    cfg = spec.config(**{**(rules or {}), "serve_mode": mode})
     core = spec.make_core(n, cfg)
     bot = spec.bots["serve-bot"].rule_for(cfg)
     rng = np.random.default_rng(seed)
@@ -100,11 +108,13 @@ def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: in
     return returned, landed, lost
 
 
-def self_play(home: Path, snapshot: str, points: int = 400, n: int = 64, seed: int = 12) -> dict[str, int]:
-    """``snapshot`` playing itself until ``points`` points are over: points, points lost by a missed toss, serves
-    struck, serves landed legally, returns, returns landed legally (hits = serves + returns)."""
+def self_play(home: Path, snapshot: str, points: int = 400, n: int = 64, seed: int = 12,
+              rules: dict | None = None) -> dict[str, int]:
+    """``snapshot`` playing itself (game options ``rules``) until ``points`` points are over: points, points lost
+    by a missed toss, serves struck, serves landed legally, returns, returns landed legally (hits = serves +
+    returns)."""
     spec = get_env("tennis")
-    core = spec.make_core(n, spec.config())
+    core = spec.make_core(n, spec.config(**(rules or {})))
     core.reset(np.arange(n), seed * 100_000 + np.arange(n))
     player = policy(home, snapshot)
     counts = dict.fromkeys(("points", "missed", "serves", "serves_in", "returns", "returns_in"), 0)
@@ -155,15 +165,18 @@ def main() -> None:
             print("    Elo against steps (serve-bot = 1200, 95% interval):")
             for step, name, elo, lo, hi in elo_curve(home, algo):
                 print(f"    {step:>12,}  {elo:7.1f}  [{lo:7.1f} .. {hi:7.1f}]  {name}")
+            rules = rules_of(home, algo)
+            if rules:
+                print(f"    measured under the run's game options {rules}")
             back_all = landed_all = 0
             for mode in ("velocity", "spin"):
-                back, landed, lost = serve_returns(home, final, mode)
+                back, landed, lost = serve_returns(home, final, mode, rules=rules)
                 back_all, landed_all = back_all + back, landed_all + landed
                 why = ", ".join(f"{k} {v}" for k, v in lost.most_common())
                 print(f"    returns of the serve bot's {mode} serves: {back} of {landed} legal serves "
                       f"({back / max(landed, 1):.1%}); the others lost by: {why or '-'}")
             share = back_all / max(landed_all, 1)
-            c = self_play(home, final)
+            c = self_play(home, final, rules=rules)
             hits = (c["serves"] + c["returns"]) / max(c["points"], 1)
             print(f"    self-play: {hits:.2f} hits per point (serve included) over {c['points']} points: "
                   f"{c['missed']} tosses missed, {c['serves']} serves struck, {c['serves_in']} "
