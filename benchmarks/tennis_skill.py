@@ -10,7 +10,8 @@ as a user types it (the game's own training defaults: `marl envs tennis`), then 
 * how many hits (serves included) a point of the final snapshot against itself lasts on average, and why: how
   many of its tosses it strikes, how many serves and returns land legally;
 
-and finally the two final snapshots, of equal budget, meet in a 200-game match (seed 002 found SAC stronger).
+and finally SAC's final snapshot meets, in 200-game matches, PPO's final one (equal time) and PPO's snapshot at
+SAC's steps (equal steps); seed 002 found SAC stronger.
 Targets (issue 15): within 30 minutes on 2 cores the final snapshot returns at least 50% of randomized serves
 legally, and self-play rallies average at least 4 hits.
 
@@ -185,11 +186,16 @@ def main() -> None:
             verdicts.append(f"{algo}: returns {share:.1%} of randomized serves (>= 50%), rallies "
                             f"{hits:.2f} hits (>= 4) within {args.minutes:g} min: {'PASS' if ok else 'FAIL'}")
         if "sac" in finals and "ppo" in finals:
-            m = json.loads(marl(home, "match", finals["sac"], finals["ppo"], "--games", str(args.games), "--seed", "5",
-                                "--json"))
-            print(f"{finals['sac']} vs {finals['ppo']} over {m['games']} games: {m['wins']} W {m['draws']} D "
-                  f"{m['losses']} L, score {m['score']:.1%}, Elo difference {m['elo']:+.0f} "
-                  f"[{m['elo_low']:+.0f} .. {m['elo_high']:+.0f}], points {m['points_for']}-{m['points_against']}")
+            # equal time (both final snapshots), then equal game steps (PPO's snapshot nearest SAC's steps, not
+            # past them): on a CPU PPO makes several times SAC's steps in the same minutes
+            sac_steps = max(step for step, *_ in elo_curve(home, "sac"))
+            ppo_at = max((c for c in elo_curve(home, "ppo") if c[0] <= sac_steps), key=lambda c: c[0])[1]
+            for budget, ppo in (("equal time", finals["ppo"]), ("equal steps", ppo_at)):
+                m = json.loads(marl(home, "match", finals["sac"], ppo, "--games", str(args.games), "--seed", "5",
+                                    "--json"))
+                print(f"{budget}: {finals['sac']} vs {ppo} over {m['games']} games: {m['wins']} W {m['draws']} D "
+                      f"{m['losses']} L, score {m['score']:.1%}, Elo difference {m['elo']:+.0f} "
+                      f"[{m['elo_low']:+.0f} .. {m['elo_high']:+.0f}], points {m['points_for']}-{m['points_against']}")
         for line in verdicts:
             print("target: " + line)
 
