@@ -13,6 +13,14 @@ from selfplay_cli.league.store import League
 from selfplay_cli.signals import signals_held
 
 
+@pytest.fixture(autouse=True)
+def ctrl_c_raises():
+    """Python's own SIGINT handler for each test: a suite started in the background inherits SIGINT ignored."""
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)
+
+
 def test_ctrl_c_waits_for_the_block_then_interrupts():
     reached = []
     with pytest.raises(KeyboardInterrupt), signals_held():
