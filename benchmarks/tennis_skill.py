@@ -156,6 +156,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         home = args.keep or Path(tmp) / "league"
         finals: dict[str, str] = {}
+        curves: dict[str, list] = {}
         verdicts = []
         for algo in args.algos:
             r = train(home, algo, args.minutes, args.train_args)
@@ -164,7 +165,8 @@ def main() -> None:
             print(f"{algo}: {r['steps']:,} game steps in {r['wall'] / 60:.1f} min ({r['steps_per_second']:,} steps/s); "
                   f"final snapshot {final}")
             print("    Elo against steps (serve-bot = 1200, 95% interval):")
-            for step, name, elo, lo, hi in elo_curve(home, algo):
+            curves[algo] = elo_curve(home, algo)
+            for step, name, elo, lo, hi in curves[algo]:
                 print(f"    {step:>12,}  {elo:7.1f}  [{lo:7.1f} .. {hi:7.1f}]  {name}")
             rules = rules_of(home, algo)
             if rules:
@@ -188,8 +190,8 @@ def main() -> None:
         if "sac" in finals and "ppo" in finals:
             # equal time (both final snapshots), then equal game steps (PPO's snapshot nearest SAC's steps, not
             # past them): on a CPU PPO makes several times SAC's steps in the same minutes
-            sac_steps = max(step for step, *_ in elo_curve(home, "sac"))
-            ppo_at = max((c for c in elo_curve(home, "ppo") if c[0] <= sac_steps), key=lambda c: c[0])[1]
+            sac_steps = max(step for step, *_ in curves["sac"])
+            ppo_at = max((c for c in curves["ppo"] if c[0] <= sac_steps), key=lambda c: c[0])[1]
             for budget, ppo in (("equal time", finals["ppo"]), ("equal steps", ppo_at)):
                 m = json.loads(marl(home, "match", finals["sac"], ppo, "--games", str(args.games), "--seed", "5",
                                     "--json"))

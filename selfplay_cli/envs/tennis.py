@@ -362,13 +362,14 @@ def _unit_hash(x: np.ndarray, salt: int) -> np.ndarray:
 
 
 def _fly_to_landing(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, w: np.ndarray, kd: float,
-                    km: float, t_max: float = 1.6) -> tuple[np.ndarray, np.ndarray]:
+                    km: float, t_max: float = 1.6, full: bool = False) -> tuple[np.ndarray, ...]:
     """Flights from (x, y) toward +x: the height at which each crosses the net's plane (below the table's surface
     if it falls short of it) and where it comes down to the table's height (its x when it stops, if it does not
-    within ``t_max``). Integrated at 20 ms, second order in the step."""
-    x, y, vx, vy, w = (np.array(a, dtype=np.float64) for a in (x, y, vx, vy, w))
+    within ``t_max``). Integrated at 20 ms, second order in the step. ``full``: also the velocity it comes down
+    with and whether it came down within ``t_max``."""
+    x, y, vx, vy, w = (np.array(a, dtype=np.float64) for a in np.broadcast_arrays(x, y, vx, vy, w))
     y_net = np.full(x.shape, -1.0)
-    x_land = x.copy()
+    x_land, vx_land, vy_land = x.copy(), vx.copy(), vy.copy()
     flying = np.ones(x.shape, dtype=bool)
     dt, half = _PLAN_DT, 0.5 * _PLAN_DT * _PLAN_DT
     for _ in range(int(t_max / dt)):
@@ -380,11 +381,13 @@ def _fly_to_landing(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray
         down = flying & (ny_ <= BALL_R) & (vy < 0)
         f = np.clip((y - BALL_R) / np.where(down, y - ny_, 1.0), 0.0, 1.0)
         x_land = np.where(down, x + f * (nx_ - x), np.where(flying, nx_, x_land))
+        if full:
+            vx_land, vy_land = np.where(down, vx, vx_land), np.where(down, vy, vy_land)
         flying &= ~down
         x, y = nx_, ny_
         if not flying.any():
             break
-    return y_net, x_land
+    return (y_net, x_land, vx_land, vy_land, ~flying) if full else (y_net, x_land)
 
 
 def _parabola(x0: np.ndarray, y0: np.ndarray, over_y: np.ndarray, land_x: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -417,38 +420,18 @@ def plan_launch(x0: np.ndarray, y0: np.ndarray, w: np.ndarray, land_x: np.ndarra
 
 
 def _serve_flights(x0: np.ndarray, y0: np.ndarray, vx: np.ndarray, vy: np.ndarray, w: np.ndarray, kd: float,
-                   km: float, t_max: float = 1.6) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   km: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bounce serves from (x0 < 0, y0) launched at (vx, vy) with spin w: where each first comes down to the table
-    (its bounce, NaN if off the table), the height at which it then crosses the net's plane (-1 if it does not)
-    and where it comes down next (NaN if it does not within ``t_max``). Integrated at 20 ms as the planner's other
-    flights, the bounce by the game's own contact model."""
-    x, y, vx, vy, w = (np.array(a, dtype=np.float64) for a in np.broadcast_arrays(x0, y0, vx, vy, w))
-    bounce_x, y_net, land_x = np.full(x.shape, np.nan), np.full(x.shape, -1.0), np.full(x.shape, np.nan)
-    phase = np.zeros(x.shape, dtype=np.int8)  # 0 before the bounce, 1 after it, 2 done
-    dt, half, decay = _PLAN_DT, 0.5 * _PLAN_DT * _PLAN_DT, 1.0 - SPIN_DECAY * _PLAN_DT
-    for _ in range(int(t_max / dt)):
-        ax, ay = accel(vx, vy, w, kd, km)
-        nx_, ny_ = x + vx * dt + ax * half, y + vy * dt + ay * half
-        vx, vy, w = vx + ax * dt, vy + ay * dt, w * decay
-        cross = (phase == 1) & (x < 0) & (nx_ >= 0)
-        y_net = np.where(cross, y + (-x / np.where(cross, nx_ - x, 1.0)) * (ny_ - y), y_net)
-        down = (phase < 2) & (ny_ <= BALL_R) & (vy < 0)
-        f = np.clip((y - BALL_R) / np.where(down, y - ny_, 1.0), 0.0, 1.0)
-        at = x + f * (nx_ - x)
-        first, second = down & (phase == 0), down & (phase == 1)
-        on_table = first & (at >= -TABLE_HALF) & (at <= 0.0)
-        bounce_x = np.where(on_table, at, bounce_x)
-        land_x = np.where(second, at, land_x)
-        if on_table.any():
-            zero = np.zeros(int(on_table.sum()))
-            vx[on_table], vy[on_table], w[on_table] = contact(vx[on_table], vy[on_table], w[on_table], zero,
-                                                              zero + 1.0, 0.0, 0.0, E_TABLE, MU_TABLE)
-            ny_[on_table] = 2 * BALL_R - ny_[on_table]
-        phase = np.where(on_table, 1, np.where((first & ~on_table) | second, 2, phase)).astype(np.int8)
-        x, y = nx_, ny_
-        if (phase == 2).all():
-            break
-    return bounce_x, y_net, land_x
+    (its bounce, NaN if not on the server's half), the height at which it then crosses the net's plane (-1 if it
+    does not) and where it comes down next (NaN if it does not): two of :func:`_fly_to_landing`'s flights, the
+    bounce between them by the game's own contact model."""
+    _, bounce_x, bvx, bvy, down = _fly_to_landing(x0, y0, vx, vy, w, kd, km, full=True)
+    own = down & (bounce_x >= -TABLE_HALF) & (bounce_x <= 0.0)
+    zero = np.zeros(bvx.shape)
+    vx2, vy2, w2 = contact(bvx, bvy, np.broadcast_to(w, bvx.shape), zero, zero + 1.0, 0.0, 0.0, E_TABLE, MU_TABLE)
+    y_net, land_x, _, _, down2 = _fly_to_landing(bounce_x, BALL_R, vx2, vy2, w2, kd, km, full=True)
+    return (np.where(own, bounce_x, np.nan), np.where(own, y_net, -1.0),
+            np.where(own & down2, land_x, np.nan))
 
 
 _SERVE_VX = np.linspace(1.0, 7.0, 13)  # the bounce serve's launch velocities the planner tries (m/s)
@@ -581,23 +564,21 @@ def _swing(o: np.ndarray, sel: np.ndarray, t_c: np.ndarray, px: np.ndarray, py: 
     first, :func:`plan_bounce_serve`). A ball met high near the net cannot come down that steeply and still fall as
     a ball falls: it crosses the net at least 5 cm above the straight line from the contact to the landing point (a
     smash, not a stroke faster than any bat)."""
-    if bounce:
+    if bounce:  # (the planner keeps to what the bat can swing)
         vx, vy = plan_bounce_serve(px, py, w_out, land_x, over_y, vin_x, vin_y, w_in, kd, km)
-        nx, ny, bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)
     else:
         line_y = py + (BALL_R - py) * (-px) / np.maximum(land_x - px, 1e-3)  # the straight line's height at the net
         over_y = np.maximum(over_y, line_y + 0.05)
         vx, vy = plan_launch(px, py, w_out, land_x, over_y, kd, km)
-        nx, ny, bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)
-    for _ in range(0 if bounce else 2):  # a stroke faster than the bat can swing: a slower ball, higher over the net
-        fast = np.flatnonzero(np.maximum(np.abs(bvx), np.abs(bvy)) > 0.8 * V_MAX)
-        if not fast.size:
-            break
-        over_y = over_y.copy()
-        over_y[fast] += 0.1
-        vx[fast], vy[fast] = plan_launch(px[fast], py[fast], w_out[fast], land_x[fast], over_y[fast], kd, km)
-        nx[fast], ny[fast], bvx[fast], bvy[fast] = solve_stroke(vin_x[fast], vin_y[fast], w_in[fast], vx[fast],
-                                                                vy[fast], w_out[fast])
+        for _ in range(2):  # a stroke faster than the bat can swing: a slower ball, higher over the net
+            bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)[2:]
+            fast = np.flatnonzero(np.maximum(np.abs(bvx), np.abs(bvy)) > 0.8 * V_MAX)
+            if not fast.size:
+                break
+            over_y = over_y.copy()
+            over_y[fast] += 0.1
+            vx[fast], vy[fast] = plan_launch(px[fast], py[fast], w_out[fast], land_x[fast], over_y[fast], kd, km)
+    nx, ny, bvx, bvy = solve_stroke(vin_x, vin_y, w_in, vx, vy, w_out)
     # The face: the normal toward the ball, or the back face's tilt if that one faces the ball
     angle = np.arctan2(ny, nx)
     angle = np.where(angle > ANGLE_MAX, angle - math.pi, np.where(angle < -ANGLE_MAX, angle + math.pi, angle))
