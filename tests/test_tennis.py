@@ -604,29 +604,35 @@ def test_discrete_option():
 # ---------------------------------------------------------------------------------------------------------------
 # The serve-bot
 @pytest.mark.parametrize("bounce", [False, True], ids=["direct", "bounce"])
-@pytest.mark.parametrize("mode, rate", [("fixed", 0.97), ("velocity", 0.93), ("spin", 0.93)])
+@pytest.mark.parametrize("mode, rate", [("fixed", 0.97), ("velocity", 0.93), ("spin", 0.93), ("mixed", 0.93)])
 def test_serve_bot_serves_land_legally_in_each_mode(mode, rate, bounce):
-    """Under either serve rule (serve_bounce: first on its own half, then on the receiver's)."""
+    """Under either serve rule (serve_bounce: first on its own half, then on the receiver's). Spin: velocity's
+    serves carry none, spin's mostly 20 rad/s or more, mixed's either, about half each."""
     c = core_of(seeds=tuple(range(100, 132)), serve_mode=mode, serve_bounce=bounce)
     rule = serve_bot_for(c.config)
     served = landed = 0
     speeds: list[float] = []
+    spins: list[float] = []
     for _ in range(700):  # seat 0 serves with the bot, seat 1 stands still (it never strikes: it misses its toss)
         before = (c.serves[0].copy(), c.serves_in[0].copy())
         tossing = c.tossing & (c.server == 0)
         c.step(bot_actions(c, rule, seats=(0,)))
         struck = tossing & (c.serves[0] > before[0])
         speeds += np.hypot(c.ball[2, struck], c.ball[3, struck]).tolist()
+        spins += np.abs(c.ball[4, struck]).tolist()
         served += int((c.serves[0] - before[0]).sum())
         landed += int((c.serves_in[0] - before[1]).sum())
     assert served >= 60
     assert landed / served >= rate, f"{mode}: {landed}/{served} serves landed on the receiver's half"
     spread = float(np.std(speeds))
     assert (spread > 0.8) if mode != "fixed" else (spread < 0.4), f"{mode}: serves' speeds vary by {spread:.2f} m/s"
+    spun = float(np.mean(np.array(spins) > 20.0))
+    want = {"fixed": (0.0, 0.0), "velocity": (0.0, 0.0), "spin": (0.75, 1.0), "mixed": (0.3, 0.7)}[mode]
+    assert want[0] <= spun <= want[1], f"{mode}: {spun:.0%} of the serves spun at 20 rad/s or more"
 
 
 @pytest.mark.parametrize("bounce", [False, True], ids=["direct", "bounce"])
-@pytest.mark.parametrize("mode", ["fixed", "velocity", "spin"])
+@pytest.mark.parametrize("mode", ["fixed", "velocity", "spin", "mixed"])
 def test_serve_bot_returns_its_own_balls_and_rallies(mode, bounce):
     """Against itself the bot rallies (either serve rule); in the randomized (practice) modes it waits for a serve
     at a random place near its home, so a learner cannot tie its serve to where the receiver stands, and still
@@ -642,7 +648,7 @@ def test_serve_bot_returns_its_own_balls_and_rallies(mode, bounce):
             waits.add(tuple(np.round(obs[1 - c.hitter[g], g, [BAT_X, BAT_Y, BAT_ANGLE]].astype(float), 2).tolist()))
     returns, good = c.returns.sum(), c.returns_in.sum()
     assert good / returns >= 0.9, f"{good}/{returns} returns landed"
-    if mode != "spin":  # the bot misjudges spin, so spin serves beat it
+    if mode not in ("spin", "mixed"):  # the bot misjudges spin, so spin serves beat it
         assert (c.serves.sum() + returns) / max(c.score.sum(), 1) >= 4, "rallies of 4 hits or more on average"
     if mode == "fixed":
         assert waits == {(HOME_X, HOME_Y, 0.0)}, "it waits at home, upright"

@@ -101,16 +101,18 @@ exactly). 25 float32 values, clipped to the declared bounds (which the ball leav
 
 Scripted players: ``serve-bot`` (seed 002's serve bot, the ratings' anchor) plans with this module's physics: it serves
 by ``serve_mode`` (``fixed``: one serve; ``velocity``: random speed, arc and placement; ``spin``: random top- or
-backspin), solving the contact model backwards for the bat's tilt and velocity, and returns balls to the middle of the
+backspin; ``mixed``, marl's own: a ``velocity`` or a ``spin`` serve, drawn per serve, so one practice run meets both),
+solving the contact model backwards for the bat's tilt and velocity, and returns balls to the middle of the
 other half (in the randomized modes at the pace they came); it misjudges spin (see :func:`serve_bot_rule_for`), so spin
 beats it. ``random`` is marl's own (uniform actions). Randomness: the first server and each toss's place come from the
 game's seed (counter-based).
 
-Not modelled: the third dimension (sidespin, the table's width, the ball going wide), the real serve's first bounce
-on the server's half and lets, net cords (a net touch ends the point), the bounce of the ball off the net or the
-floor, the bat's edge and handle (a bat is a segment with no thickness, struck on either face, its ends included
-within half a ball radius), bat inertia (the velocity commanded is the velocity), rubber types, the ball's
-deformation (the bat's friction is an impulse limited only by Coulomb friction), and speed-dependent restitution.
+Not modelled: the third dimension (sidespin, the table's width, the ball going wide), lets (the real serve's first
+bounce on the server's half is an option, ``serve_bounce``, off by default), net cords (a net touch ends the point), the
+bounce of the ball off the net or the floor, the bat's edge and handle (a bat is a segment with no thickness, struck on
+either face, its ends included within half a ball radius), bat inertia (the velocity commanded is the velocity), rubber
+types, the ball's deformation (the bat's friction is an impulse limited only by Coulomb friction), and speed-dependent
+restitution.
 """
 
 from __future__ import annotations
@@ -202,7 +204,7 @@ SURFACE_NAMES = ("none", "table_0", "table_1", "bat_0", "bat_1", "net", "out")
 REASON_NAMES = ("none", "net", "out", "own_half", "double_bounce", "double_hit", "volley", "missed_serve",
                 "not_returned", "serve_no_bounce")
 
-SERVE_MODES = ("fixed", "velocity", "spin")
+SERVE_MODES = ("fixed", "velocity", "spin", "mixed")
 LIVE_OPTIONS = ("hit_reward", "return_reward", "point_reward", "bat_scale")  # what TennisCore.set_options changes
 
 
@@ -219,7 +221,7 @@ class TennisConfig:
     max_steps: int = 6000  # time limit in steps (2 minutes of play at 50 steps a second)
     serve_time: float = 1.5  # seconds the server has to strike the toss
     toss_jitter: float = 0.05  # the toss's place along the table varies by this much (m) either way
-    serve_mode: Literal["fixed", "velocity", "spin"] = "fixed"  # the serve-bot's serves (seed 002's three modes)
+    serve_mode: Literal["fixed", "velocity", "spin", "mixed"] = "fixed"  # the serve-bot's serves (seed 002's + mixed)
     serve_bounce: bool = False  # table tennis's serve: it bounces on the server's half first, then the receiver's
     drag: float = 1.0  # scales the air drag (0: none)
     magnus: float = 1.0  # scales the Magnus force (0: none)
@@ -603,20 +605,21 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
     Serving, it strikes the toss (the game tosses) as it falls through a chosen height, sending the ball to land on the
     receiver's half: ``fixed`` always the same serve (0.8 m past the net, 12 cm over it, no spin), ``velocity`` a random
     landing point, height over the net and contact height (so a random speed and arc), ``spin`` random top- or backspin
-    up to 120 rad/s (19 turns a second). A serve's random choices are a hash of the toss's place (drawn by the game for
-    every serve and fixed while the toss is in the air), so a stateless rule keeps to one plan for the whole serve and a
-    game's serves are reproducible by its seed. Receiving, it waits for the ball to bounce on its half, meets it at the
-    top of its bounce (or, bouncing above 1.2 m, coming down through 1.2 m) and sends it back to the middle of the other
-    half, 15 cm over the net (higher if met high near the net), without spin; in the randomized modes (practice) at the
-    pace it came instead: a ball met at 4 m/s or slower goes back short (0.6 m past the net) and 20 cm over it, one at 9
-    m/s or faster deep (1.15 m) and 5 cm over, in ``spin`` mode with topspin growing with the pace (planned up to 120
-    rad/s), so a learner practises returning the pace it plays. A ball past the end of its half without a bounce there
-    (going long) it dodges, moving its bat up or down away from it (standing in its path would be a volley, the bot's
-    fault). Otherwise it goes back to its place behind the table; in the randomized modes (practice) it waits for the
-    opponent's serve at a random place 1.3 to 2.3 m behind the net and 0 to 1.2 m above the table, its face tilted up to
-    1.4 rad either way (a hash of the toss's place), so a learner's serve cannot come to depend on where its receiver
-    stands (a learner that practised against a bot always waiting upright at home served 221 of 256 serves in against
-    that bot and none against a receiver waiting with its face tilted by 1.3 rad, or 25 cm higher).
+    up to 120 rad/s (19 turns a second), ``mixed`` either of the two randomized serves, half each. A serve's random
+    choices are a hash of the toss's place (drawn by the game for every serve and fixed while the toss is in the air),
+    so a stateless rule keeps to one plan for the whole serve and a game's serves are reproducible by its seed.
+    Receiving, it waits for the ball to bounce on its half, meets it at the top of its bounce (or, bouncing above 1.2 m,
+    coming down through 1.2 m) and sends it back to the middle of the other half, 15 cm over the net (higher if met high
+    near the net), without spin; in the randomized modes (practice) at the pace it came instead: a ball met at 4 m/s or
+    slower goes back short (0.6 m past the net) and 20 cm over it, one at 9 m/s or faster deep (1.15 m) and 5 cm over,
+    in ``spin`` and ``mixed`` modes with topspin growing with the pace (planned up to 120 rad/s), so a learner practises
+    returning the pace it plays. A ball past the end of its half without a bounce there (going long) it dodges, moving
+    its bat up or down away from it (standing in its path would be a volley, the bot's fault). Otherwise it goes back to
+    its place behind the table; in the randomized modes (practice) it waits for the opponent's serve at a random place
+    1.3 to 2.3 m behind the net and 0 to 1.2 m above the table, its face tilted up to 1.4 rad either way (a hash of the
+    toss's place), so a learner's serve cannot come to depend on where its receiver stands (a learner that practised
+    against a bot always waiting upright at home served 221 of 256 serves in against that bot and none against a
+    receiver waiting with its face tilted by 1.3 rad, or 25 cm higher).
     Its weakness, so that it can be beaten: it misjudges spin, planning with ``spin_read`` (60%) of the spin it
     sees: against itself ~2% of its returns fail (~60 hits a point), but of balls with 200-300 rad/s of topspin it
     returns about a quarter, where reading spin right it returns them all (tests/test_tennis.py). ``return_spin``
@@ -646,12 +649,14 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
             s = serve
             u1, u2, u3 = (_unit_hash(o[s, BALL_X], salt) for salt in (1, 2, 3))
             m = s.sum()
-            if mode == "velocity":
-                land, clear, spin, height = 0.35 + 0.65 * u1, 0.04 + 0.26 * u2, np.zeros(m), 0.22 + 0.2 * u3
-            elif mode == "spin":
-                land, clear, spin, height = 0.45 + 0.5 * u1, 0.10 + 0.10 * u2, (2 * u3 - 1) * 120.0, np.full(m, 0.3)
-            else:
+            if mode == "fixed":
                 land, clear, spin, height = np.full(m, 0.8), np.full(m, 0.12), np.zeros(m), np.full(m, 0.3)
+            else:  # velocity, spin, or (mixed) either, drawn per serve
+                spun = np.full(m, mode == "spin") if mode != "mixed" else _unit_hash(o[s, BALL_X], 7) < 0.5
+                land = np.where(spun, 0.45 + 0.5 * u1, 0.35 + 0.65 * u1)
+                clear = np.where(spun, 0.10 + 0.10 * u2, 0.04 + 0.26 * u2)
+                spin = np.where(spun, (2 * u3 - 1) * 120.0, 0.0)
+                height = np.where(spun, 0.3, 0.22 + 0.2 * u3)
             y, v = py[s], vy[s]
             disc = v * v + 2 * G * (y - height)
             t_c = np.where(disc >= 0, (v + np.sqrt(np.maximum(disc, 0.0))) / G, np.maximum(v, 0.0) / G)
@@ -679,7 +684,7 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
                     pace = np.clip((np.hypot(cvx[f], cvy[f]) - _PACE[0]) / (_PACE[1] - _PACE[0]), 0.0, 1.0)
                     land = _MIRROR_LAND[0] + (_MIRROR_LAND[1] - _MIRROR_LAND[0]) * pace
                     over = NET_H + _MIRROR_CLEAR[0] + (_MIRROR_CLEAR[1] - _MIRROR_CLEAR[0]) * pace
-                    if mode == "spin":
+                    if mode in ("spin", "mixed"):
                         spin = -_MIRROR_TOPSPIN * pace
                 _swing(o, sel, t_c[f], cx[f], cy[f], cvx[f], cvy[f], cw[f], land, over, spin, kd, km, act)
         act = np.clip(act, -1.0, 1.0)

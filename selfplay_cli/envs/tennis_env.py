@@ -142,7 +142,7 @@ TENNIS = EnvSpec(
     action_space=action_space,
     make_renderer=_renderer,
     bots={
-        "serve-bot": BotSpec("serve-bot", "seed 002's serve bot: serves by serve_mode (fixed, velocity, spin), "
+        "serve-bot": BotSpec("serve-bot", "seed 002's serve bot: serves by serve_mode (fixed, velocity, spin, mixed), "
                              "returns balls to the middle of the other half", serve_bot_rule, make_rule=serve_bot_for),
     },  # random: marl's own, uniform over the config's action space (continuous or discrete)
     turns="simultaneous",
