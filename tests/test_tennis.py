@@ -841,7 +841,7 @@ def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(t
     cfg = json.loads((tmp_path / "league" / "runs" / "d" / "config.json").read_text())
     assert (cfg["algo"], cfg["sharing"], cfg["league_games"]) == ("sac", "fups", 0.5)
     assert cfg["opponents"]["bots"] == {"serve-bot": 0.75}
-    assert cfg["env_options"]["serve_mode"] == "velocity" and cfg["env_options"]["return_reward"] == 0.5
+    assert cfg["env_options"]["serve_mode"] == "mixed" and cfg["env_options"]["return_reward"] == 0.5
     assert cfg["curriculum"]["bat_scale"] == {"start": 3.0, "end": 1.0, "until": 0.8}
     assert cfg["curriculum"]["hit_reward"] == {"start": 0.3, "end": 0.0, "until": 0.6}
     assert cfg["curriculum"]["point_reward"] == {"start": 0.1, "end": 1.0, "from": 0.3, "until": 0.9}
@@ -851,7 +851,7 @@ def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(t
     assert run(capsys, "train", "tennis", "--algo", "ppo", "--run", "o", "--config", str(tmp_path / "c.toml"),
                *small)[0] == 0
     cfg = json.loads((tmp_path / "league" / "runs" / "o" / "config.json").read_text())
-    assert cfg["algo"] == "ppo" and cfg["env_options"] == {"serve_mode": "velocity", "return_reward": 0.0}
+    assert cfg["algo"] == "ppo" and cfg["env_options"] == {"serve_mode": "mixed", "return_reward": 0.0}
     assert cfg["curriculum"]["bat_scale"] == 2.0, "a plain number holds the bat at one size (the default's off)"
     # one learner: the game's shared network and share of league games (for learners on both seats) do not apply,
     # and are dropped; typed, each is still one line

@@ -161,7 +161,7 @@ TENNIS = EnvSpec(
     # paying legal strokes only, 49%, 32% and 24.5% of its velocity serves in three: runs vary); SAC at 1 gradient
     # step per 16 game steps. Self-play rallies are not learned yet (README, "tennis").
     train_defaults={"algo": "sac", "sharing": "fups", "league_games": 0.5, "opponents": {"bots": {"serve-bot": 0.75}},
-                    "env_options": {"serve_mode": "velocity", "return_reward": 0.5},
+                    "env_options": {"serve_mode": "mixed", "return_reward": 0.5},
                     "curriculum": {"bat_scale": {"start": 3.0, "end": 1.0, "until": 0.8},
                                    "hit_reward": {"start": 0.3, "end": 0.0, "until": 0.6},
                                    "point_reward": {"start": 0.1, "end": 1.0, "from": 0.3, "until": 0.9}},
