@@ -652,7 +652,7 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
             if mode == "fixed":
                 land, clear, spin, height = np.full(m, 0.8), np.full(m, 0.12), np.zeros(m), np.full(m, 0.3)
             else:  # velocity, spin, or (mixed) either, drawn per serve
-                spun = np.full(m, mode == "spin") if mode != "mixed" else _unit_hash(o[s, BALL_X], 7) < 0.5
+                spun = _unit_hash(o[s, BALL_X], 7) < 0.5 if mode == "mixed" else np.full(m, mode == "spin")
                 land = np.where(spun, 0.45 + 0.5 * u1, 0.35 + 0.65 * u1)
                 clear = np.where(spun, 0.10 + 0.10 * u2, 0.04 + 0.26 * u2)
                 spin = np.where(spun, (2 * u3 - 1) * 120.0, 0.0)
