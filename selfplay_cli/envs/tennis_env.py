@@ -159,9 +159,9 @@ TENNIS = EnvSpec(
     # point is decided 10-40 decisions after the stroke that decides it: with 1-step SAC two trials returned none of
     # the bot's serves; with 5-step, 84% and 79% in two, none in two more, while the hit reward paid fouls' touches;
     # paying legal strokes only, 49%, 32% and 24.5% of its velocity serves in three, 29% of spin serves in one);
-    # practice against the bot's mixed serves (velocity or spin, per serve) rather than velocity's alone: 82.0% and
-    # 76.5% of velocity and spin serves together in two, 1.5% in a third (the 30-minute benchmark run: still
-    # bimodal); SAC at 1 gradient step per 16 game steps. Self-play rallies are not learned yet (README, "tennis").
+    # practice against the bot's mixed serves (velocity or spin, per serve) rather than velocity's alone: 82.0%,
+    # 76.2% and 76.5% of velocity and spin serves together in three, 1.5% in a fourth (the 30-minute benchmark run:
+    # still bimodal); SAC at 1 gradient step per 16 game steps. Self-play rallies are not learned yet (README).
     train_defaults={"algo": "sac", "sharing": "fups", "league_games": 0.5, "opponents": {"bots": {"serve-bot": 0.75}},
                     "env_options": {"serve_mode": "mixed", "return_reward": 0.5},
                     "curriculum": {"bat_scale": {"start": 3.0, "end": 1.0, "until": 0.8},
