@@ -146,6 +146,7 @@ def elo_curve(home: Path, run: str) -> list[tuple[int, str, float, float, float]
 
 
 def main() -> None:
+    sys.stdout.reconfigure(line_buffering=True)  # each figure as it is measured, also into a file or a pipe
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--minutes", type=float, default=30.0)
     p.add_argument("--algos", nargs="+", default=["sac", "ppo"])

@@ -769,6 +769,8 @@ def test_serve_bot_rule_follows_the_options():
     obs = c.observe()[server]
     fixed, spin = bot.rule_for(spec.config()), bot.rule_for(spec.config(serve_mode="spin"))
     assert not np.array_equal(fixed(obs), spin(obs)), "serve_mode changes the serve"
+    with pytest.raises(ValueError, match="serve_mode must be one of"):
+        serve_bot_rule_for("lob")
     assert obs[0, BALL_X] == c.observe()[server, 0, BALL_X], "the toss's place (the serve's choices) is fixed"
 
 

@@ -626,6 +626,8 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
     and ``return_land`` change its returns (for experiments). Deterministic: ``rng`` is not used. With
     ``discrete`` each axis is -1, 0 or +1 (the sign of the continuous action beyond a quarter), a much weaker
     player."""
+    if mode not in SERVE_MODES:  # (an unknown mode would otherwise serve as one of the others)
+        raise ValueError(f"serve_mode must be one of {', '.join(SERVE_MODES)}, not {mode!r}")
     kd, km = K_DRAG * drag, K_MAGNUS * magnus
 
     def rule(obs: np.ndarray, rng: Any = None, mask: Any = None) -> np.ndarray:
@@ -680,7 +682,7 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
                 f = found
                 n = f.sum()
                 land, over, spin = np.full(n, return_land), np.full(n, NET_H + 0.15), np.full(n, return_spin)
-                if mode != "fixed":  # practice: the ball goes back at the pace it came (and in spin mode, spin)
+                if mode != "fixed":  # practice: the ball goes back at the pace it came (spin, mixed: with topspin)
                     pace = np.clip((np.hypot(cvx[f], cvy[f]) - _PACE[0]) / (_PACE[1] - _PACE[0]), 0.0, 1.0)
                     land = _MIRROR_LAND[0] + (_MIRROR_LAND[1] - _MIRROR_LAND[0]) * pace
                     over = NET_H + _MIRROR_CLEAR[0] + (_MIRROR_CLEAR[1] - _MIRROR_CLEAR[0]) * pace
