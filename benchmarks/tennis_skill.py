@@ -8,7 +8,8 @@ as a user types it (the game's own training defaults: `marl envs tennis`), then 
   of the serves that landed legally on its half, the share it sent back onto the bot's half; the target counts
   both modes together), and why the others were lost (not_returned: never touched);
 * how many hits (serves included) a point of the final snapshot against itself lasts on average, and why: how
-  many of its tosses it strikes, how many serves and returns land legally;
+  many of its tosses it strikes, how many serves and returns land legally, how many rallies the game's time limit
+  cut (a rally that never ends is counted as one point of the hits it lasted);
 
 and finally SAC's final snapshot meets, in 200-game matches, PPO's final one (equal time) and PPO's snapshot at
 SAC's steps (equal steps); seed 002 found SAC stronger.
@@ -72,7 +73,7 @@ def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: in
                   seed: int = 11, rules: dict | None = None) -> tuple[int, int, Counter]:
     """(returned legally, serves landed legally, why the others were lost) of the serve bot's serves
     (``serve_mode``) to ``snapshot`` under the game options ``rules``; the snapshot plays seat 0 in half the games
-    and seat 1 in the others."""
+    and seat 1 in the others. Each game measures the bot's first serve (a new game follows once it is decided)."""
     spec = get_env("tennis")
     cfg = spec.config(**{**(rules or {}), "serve_mode": mode})
     core = spec.make_core(n, cfg)
@@ -86,41 +87,48 @@ def serve_returns(home: Path, snapshot: str, mode: str, serves: int = 400, n: in
     returned = landed = 0
     lost: Counter = Counter()
     next_seed = n
-    while landed < serves:
+    while landed < serves or pending.any():  # then the serves in flight are decided too
         obs = core.observe()
         mine = player.act(obs[me, rows])
         theirs = bot(obs[1 - me, rows], rng)
         actions = [np.where((me == s)[:, None], mine, theirs).astype(np.float32) for s in (0, 1)]
         before = (core.serves_in[1 - me, rows].copy(), core.returns_in[me, rows].copy(), core.score.sum(axis=0))
         core.step(actions)
-        served = core.serves_in[1 - me, rows] > before[0]
+        served = (core.serves_in[1 - me, rows] > before[0]) & (landed < serves)
         back = (core.returns_in[me, rows] > before[1]) & pending
         landed += int(served.sum())
         returned += int(back.sum())
         pending = (pending & ~back) | served
         ended = core.score.sum(axis=0) > before[2]  # a point ended: its serve was returned or not
         lost.update(REASON_NAMES[r] for r in core.reason[pending & ended])
+        decided = back | (pending & ended)
         pending &= ~ended
-        done = np.flatnonzero(core.terminated | core.truncated)
-        if len(done):
-            core.reset(done, seed * 100_000 + next_seed + np.arange(len(done)))
-            next_seed += len(done)
-            pending[done] = False
+        # A game whose serve is decided is done with (what follows cannot change it: two players who never miss
+        # would rally to the time limit), and so is one where the snapshot is to serve: a new game, until the bot
+        # serves first
+        done = decided | core.terminated | core.truncated | (core.tossing & (core.server == me))
+        while done.any():
+            g = np.flatnonzero(done)
+            core.reset(g, seed * 100_000 + next_seed + np.arange(len(g)))
+            next_seed += len(g)
+            pending[g] = False
+            done = core.tossing & (core.server == me)
     return returned, landed, lost
 
 
 def self_play(home: Path, snapshot: str, points: int = 400, n: int = 64, seed: int = 12,
-              rules: dict | None = None) -> dict[str, int]:
-    """``snapshot`` playing itself (game options ``rules``) until ``points`` points are over: points, points lost
-    by a missed toss, serves struck, serves landed legally, returns, returns landed legally (hits = serves +
-    returns)."""
+              rules: dict | None = None, max_games: int = 256) -> dict[str, int]:
+    """``snapshot`` playing itself (game options ``rules``) until ``points`` points are over, or ``max_games`` games
+    have been played: points, points lost by a missed toss, rallies cut by the game's time limit (each counted as a
+    point that lasted at least its hits: two players who never miss would otherwise never finish a point), serves
+    struck, serves landed legally, returns, returns landed legally (hits = serves + returns)."""
     spec = get_env("tennis")
     core = spec.make_core(n, spec.config(**(rules or {})))
     core.reset(np.arange(n), seed * 100_000 + np.arange(n))
     player = policy(home, snapshot)
-    counts = dict.fromkeys(("points", "missed", "serves", "serves_in", "returns", "returns_in"), 0)
+    counts = dict.fromkeys(("points", "missed", "cut", "games", "serves", "serves_in", "returns", "returns_in"), 0)
     next_seed = n
-    while counts["points"] < points:
+    while counts["points"] < points and counts["games"] < max_games:
         obs = core.observe()
         actions = [player.act(obs[s]).astype(np.float32) for s in (0, 1)]
         before = {key: getattr(core, key).sum() for key in ("serves", "serves_in", "returns", "returns_in")}
@@ -131,8 +139,12 @@ def self_play(home: Path, snapshot: str, points: int = 400, n: int = 64, seed: i
         ended = core.score.sum(axis=0) > score
         counts["points"] += int(ended.sum())
         counts["missed"] += int((ended & (core.reason == MISSED_SERVE)).sum())
+        cut = core.truncated & ~ended & ~core.tossing  # a rally the time limit ended (not a toss in the air)
+        counts["cut"] += int(cut.sum())
+        counts["points"] += int(cut.sum())
         done = np.flatnonzero(core.terminated | core.truncated)
         if len(done):
+            counts["games"] += len(done)
             core.reset(done, seed * 100_000 + next_seed + np.arange(len(done)))
             next_seed += len(done)
     return counts
@@ -182,9 +194,10 @@ def main() -> None:
             share = back_all / max(landed_all, 1)
             c = self_play(home, final, rules=rules)
             hits = (c["serves"] + c["returns"]) / max(c["points"], 1)
-            print(f"    self-play: {hits:.2f} hits per point (serve included) over {c['points']} points: "
-                  f"{c['missed']} tosses missed, {c['serves']} serves struck, {c['serves_in']} "
-                  f"landed legally; {c['returns']} returns, {c['returns_in']} landed legally")
+            print(f"    self-play: {hits:.2f} hits per point (serve included) over {c['points']} points of "
+                  f"{c['games']} games: {c['missed']} tosses missed, {c['cut']} rallies cut by the 2-minute time "
+                  f"limit (counted as points), {c['serves']} serves struck, {c['serves_in']} landed legally; "
+                  f"{c['returns']} returns, {c['returns_in']} landed legally")
             ok = share >= 0.5 and hits >= 4 and args.minutes <= 30
             verdicts.append(f"{algo}: returns {share:.1%} of randomized serves (>= 50%), rallies "
                             f"{hits:.2f} hits (>= 4) within {args.minutes:g} min: {'PASS' if ok else 'FAIL'}")

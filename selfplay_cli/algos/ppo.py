@@ -44,6 +44,7 @@ from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
 from .base import Seat, action_head, as_bool, fix_mask, learner_args, values_of
+from .kickstart import Imitation
 from .optim import FlatAdam
 
 
@@ -134,6 +135,11 @@ class PPOLearner:
                     if self.device.type == "cpu" else None)
         self.t = 0
         self.updates = 0
+        # Kickstarting (algos/kickstart.py): the teacher's labelled states and the imitation term's weight
+        self.imitation: Imitation | None = None
+        self.imitation_capacity = 300_000
+        self.teacher_weight = 0.0
+        self.rng = np.random.default_rng(seed)  # draws the imitation term's batches
 
     # -- acting ---------------------------------------------------------------------------------------------
     def _tensor(self, obs: np.ndarray) -> torch.Tensor:
@@ -235,6 +241,13 @@ class PPOLearner:
         if self._final_due is not None:
             raise ValueError("games were truncated on the last recorded step: pass their final observations "
                              "(final_obs) to record() or update()")
+
+    def teach(self, obs: np.ndarray, actions: np.ndarray, mask: np.ndarray | None = None) -> None:
+        """A teacher's actions for observations this learner met (and their masks): kept for the imitation term of
+        the loss while ``teacher_weight`` > 0 (:mod:`selfplay_cli.algos.kickstart`)."""
+        if self.imitation is None:
+            self.imitation = Imitation(self.head, int(np.prod(self.obs_shape)), self.imitation_capacity, self.device)
+        self.imitation.add(obs, actions, mask)
 
     # -- learning -------------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -366,8 +379,11 @@ class PPOLearner:
             turns = batch["next_carry"]
         n = b_obs.shape[0]
         mb = max(1, n // cfg.minibatches)
-        stats = torch.zeros(5, device=self.device)  # policy loss, value loss, entropy, approx KL, clip fraction
+        # policy loss, value loss, entropy, approx KL, clip fraction, imitation loss
+        stats = torch.zeros(6, device=self.device)
         count = 0
+        teaching = self.teacher_weight > 0 and self.imitation is not None and len(self.imitation) > 0
+        imitation = torch.zeros((), device=self.device)
         for _ in range(cfg.update_epochs if n else 0):
             order = torch.randperm(n, generator=self.gen, device=self.device)
             for start in range(0, n, mb):
@@ -384,12 +400,15 @@ class PPOLearner:
                 pg_loss = torch.max(-a * ratio, -a * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
                 v_loss = 0.5 * (value - b_ret.index_select(0, idx)).square().mean()
                 loss = pg_loss + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
+                if teaching:
+                    imitation = self.imitation.loss(self.net, idx.numel(), self.rng)  # type: ignore[union-attr]
+                    loss = loss + self.teacher_weight * imitation
                 self.opt.zero_grad()
                 loss.backward()
                 self.opt.step()  # clips the gradient norm to max_grad_norm first
                 with torch.no_grad():
                     stats += torch.stack((pg_loss, v_loss, entropy, (ratio - 1 - log_ratio).mean(),
-                                          ((ratio - 1).abs() > cfg.clip_coef).float().mean()))
+                                          ((ratio - 1).abs() > cfg.clip_coef).float().mean(), imitation))
                 count += 1
         if turns is not None:
             self._set_carry(*turns)
@@ -397,8 +416,12 @@ class PPOLearner:
             self.trunc_values.zero_()
         self.t = 0
         self.updates += 1
-        names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac")
+        names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac", "imitation_loss")
         out = {k: float(v) / max(count, 1) for k, v in zip(names, stats.tolist(), strict=True)}
+        if teaching:
+            out["teacher_weight"] = self.teacher_weight
+        else:
+            del out["imitation_loss"]
         out["explained_variance"] = float(1 - torch.var(b_ret - b_val) / (torch.var(b_ret) + 1e-8)) if n > 1 else 0.0
         out["lr"] = self.opt.lr
         if turns is not None:

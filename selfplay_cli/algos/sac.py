@@ -63,6 +63,7 @@ from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
 from .base import Seat, action_head, as_bool, learner_args
+from .kickstart import Imitation
 from .nstep import NStepChains
 from .optim import FlatAdam, flatten
 
@@ -259,6 +260,10 @@ class SACLearner:
         self._pend = {"obs": np.zeros((b, self.obs_dim), np.float32), "act": np.zeros((b, self.act_dim), np.float32),
                       "rew": np.zeros(b, np.float32), "valid": np.zeros(b, bool)}
         self._held: dict[str, np.ndarray] | None = None  # decisions of truncated games awaiting final_obs
+        # Kickstarting (algos/kickstart.py): the teacher's labelled states and the imitation term's weight
+        self.imitation: Imitation | None = None
+        self.imitation_capacity = 300_000
+        self.teacher_weight = 0.0
 
     @property
     def alpha(self) -> float:
@@ -375,6 +380,13 @@ class SACLearner:
         src, o, a, r, discount = self.chains.push(rows, obs, act, rew, np.full(len(rows), ended))
         self.buffer.add(o, a, r, next_obs[src], np.asarray(dones, np.float32)[src], discount)
 
+    def teach(self, obs: np.ndarray, actions: np.ndarray, mask: np.ndarray | None = None) -> None:
+        """A teacher's actions (on the Box bounds) for observations this learner met: kept for the imitation term
+        of the actor's loss while ``teacher_weight`` > 0 (:mod:`selfplay_cli.algos.kickstart`)."""
+        if self.imitation is None:
+            self.imitation = Imitation(self.head, self.obs_dim, self.imitation_capacity, self.device, squashed=True)
+        self.imitation.add(obs, actions, mask)
+
     # -- learning -------------------------------------------------------------------------------------------
     @torch.no_grad()
     def td_target(self, rewards: torch.Tensor, dones: torch.Tensor, next_obs: torch.Tensor,
@@ -403,7 +415,7 @@ class SACLearner:
             self._release(final_obs)
         k = int(self.credit) if len(self.buffer) >= max(1, cfg.learning_starts) else 0
         self.credit -= k
-        sums = torch.zeros(4, device=self.device)  # critic loss, actor loss, Q, entropy
+        sums = torch.zeros(5, device=self.device)  # critic loss, actor loss, Q, entropy, imitation loss
         if k:
             batches = self.buffer.sample(self.rng, (k, cfg.batch_size))  # all k batches in one draw
             obs, actions, rewards, next_o, dones, discounts = (
@@ -417,6 +429,8 @@ class SACLearner:
         if k:  # the losses of this update's gradient steps (none yet while the buffer fills: no NaN in the metrics)
             mean = (sums / k).tolist()
             out.update({"critic_loss": mean[0], "actor_loss": mean[1], "q_mean": mean[2], "entropy": mean[3]})
+            if self._teaching:
+                out.update({"teacher_weight": self.teacher_weight, "imitation_loss": mean[4]})
         return out
 
     def _gradient_step(self, obs: torch.Tensor, actions: torch.Tensor, rewards: torch.Tensor,
@@ -435,8 +449,12 @@ class SACLearner:
         new_actions, logp = squashed_sample(mean, log_std, self.gen)
         q_new = self.critic(obs, new_actions, frozen=True).min(dim=0).values
         actor_loss = (alpha * logp - q_new).mean()
+        imitation = torch.zeros((), device=self.device)
+        if self._teaching:
+            assert self.imitation is not None
+            imitation = self.imitation.loss(self.net, cfg.batch_size, self.rng)
         self.actor_opt.zero_grad()
-        actor_loss.backward()
+        (actor_loss + self.teacher_weight * imitation if self._teaching else actor_loss).backward()
         self.actor_opt.step()
 
         if cfg.autotune:
@@ -446,7 +464,12 @@ class SACLearner:
             self.alpha_opt.step()
         self.target_flat.lerp_(self.critic_opt.flat, cfg.tau)
         self.grad_steps += 1
-        return torch.stack((critic_loss.detach(), actor_loss.detach(), q.detach().mean(), -logp.detach().mean()))
+        return torch.stack((critic_loss.detach(), actor_loss.detach(), q.detach().mean(), -logp.detach().mean(),
+                            imitation.detach()))
+
+    @property
+    def _teaching(self) -> bool:
+        return self.teacher_weight > 0 and self.imitation is not None and len(self.imitation) > 0
 
     # -- playing and saving ---------------------------------------------------------------------------------
     def policy(self, id: str, env: str, greedy: bool = False) -> NetworkPolicy:

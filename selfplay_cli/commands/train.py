@@ -46,12 +46,21 @@ def read_toml(path: Path) -> dict[str, Any]:
 
 
 def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:
-    """Merge a config file into the settings: sections ([ppo], ...) key by key, everything else replaced."""
+    """Merge a config file into the settings: sections ([ppo], ...) key by key, and an algorithm's network
+    ([sac.arch], ...) key by key within its section (``hidden = [256, 256]`` alone keeps the activation); everything
+    else, a curriculum's or a teacher's schedule included, replaced whole."""
     for key, value in overrides.items():
         if isinstance(value, dict) and isinstance(settings.get(key), dict):
-            settings[key] = {**settings[key], **value}
+            section = {**settings[key], **value}
+            arch, old = value.get("arch"), settings[key].get("arch")
+            if key in ALGO_SECTIONS and isinstance(arch, dict) and isinstance(old, dict):
+                section["arch"] = {**old, **arch}
+            settings[key] = section
         else:
             settings[key] = value
+
+
+ALGO_SECTIONS = ("ppo", "dqn", "sac")
 
 
 def run_stem(env: str) -> str:
@@ -68,8 +77,9 @@ def train(
     ctx: typer.Context,
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
     config: Annotated[Path | None, typer.Option("--config", metavar="FILE", help="TOML file of settings (top-level "
-                                                "options, [ppo], [dqn], [sac], [opponents], [env_options]); options "
-                                                "typed on the command line win over it.")] = None,
+                                                "options, [ppo], [dqn], [sac], [opponents], [env_options], "
+                                                "[curriculum], [teacher]); options typed on the command line win over "
+                                                "it.")] = None,
     agents: Annotated[int, typer.Option("--agents", min=1, max=64, help="Learning agents. Two sides: 2 is one learner "
                                         "per side (both pong paddles, seed 000), 1 one learner against opponents "
                                         "from the league; cooperative: seat s is learner s mod N; free-for-all: one "
@@ -125,6 +135,11 @@ def train(
     = 0.5,
     bots: Annotated[str, typer.Option("--bots", metavar="BOT=P,...", help="Mix in scripted players with these "
                                       "probabilities, e.g. cpu=0.1,random=0.05.")] = "",
+    teacher: Annotated[str | None, typer.Option("--teacher", metavar="PLAYER", help="Kickstart the learners: they "
+                                                "also imitate this player (a scripted player such as serve-bot, or a "
+                                                "snapshot) on the states they visit, the imitation's weight fading "
+                                                "by [teacher] weight (default 1 to 0 over the first half of the run); "
+                                                "none: no teacher (a game's default one off).")] = None,
     lr: Annotated[float | None, typer.Option("--lr", help="Learning rate (default: the algorithm's own, PPO 2e-3, "
                                              "DQN 2.5e-4, SAC 3e-4).")] = None,
     env_option: Annotated[list[str] | None, typer.Option("--env-option", metavar="KEY=VALUE", help="Game option, "
@@ -144,7 +159,8 @@ def train(
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
     from ..league.store import check_name
-    from ..train.config import TrainConfig, fups_without_partners, save_run_config, seat_plan_of
+    from ..policies.bots import bot_names
+    from ..train.config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
     from ..train.loop import Trainer
 
     for what, name in (("run name", run), ("run name", resume)):
@@ -179,6 +195,8 @@ def train(
             settings["opponents"]["bots"] = parse_bots(bots)
         if "lr" in typed:
             settings["ppo"]["lr"] = settings["dqn"]["lr"] = settings["sac"]["lr"] = lr
+        if "teacher" in typed:
+            settings["teacher"]["player"] = teacher
         settings["env_options"] = {**settings["env_options"], **parse_env_options(spec.name, env_option)}
         try:
             spec.config(**settings["env_options"])
@@ -191,6 +209,8 @@ def train(
         if "sharing" in game_set and fups_without_partners(spec, settings["agents"], settings["sharing"],
                                                            settings["seats"]):
             settings["sharing"] = "nops"
+        if "teacher" in game_set and not can_teach(settings["algo"]):  # (e.g. a game's teacher, --algo dqn)
+            settings["teacher"]["player"] = ""
         if settings["league_games"] and "league_games" in game_set:
             try:
                 plan = seat_plan_of(spec.for_options(**settings["env_options"]), settings["agents"],
@@ -225,6 +245,13 @@ def train(
                 raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
             settings["run"] = run
             cfg = TrainConfig.from_dict(settings)
+            if cfg.teacher.player and cfg.teacher.player not in bot_names(cfg.game()):  # a snapshot the league does
+                from ..league.names import resolve  # not know: one line, before the run exists
+
+                try:
+                    resolve(league, cfg.teacher.player, cfg.env)
+                except MarlError as e:
+                    raise MarlError(f"--teacher: {e}") from None
             league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
             save_run_config(league, cfg)
         reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)

@@ -167,6 +167,8 @@ TENNIS = EnvSpec(
                     "curriculum": {"bat_scale": {"start": 3.0, "end": 1.0, "until": 0.8},
                                    "hit_reward": {"start": 0.3, "end": 0.0, "until": 0.6},
                                    "point_reward": {"start": 0.1, "end": 1.0, "from": 0.3, "until": 0.9}},
-                    "sac": {"replay_ratio": 0.0625, "n_step": 5}},
+                    "teacher": {"player": "serve-bot", "weight": {"start": 2.0, "end": 0.2, "until": 0.5}},
+                    "sac": {"replay_ratio": 0.0625, "n_step": 5, "arch": {"hidden": [256, 256]}},
+                    "ppo": {"arch": {"hidden": [256, 256]}}},
 )
 """The tennis game's declaration (registered as ``tennis``)."""

@@ -19,10 +19,35 @@ from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
 from ..policies.joint import joint_spaces
 from ..policies.network import resolve_device
-from .curriculum import Curriculum
+from .curriculum import Curriculum, Schedule, parse_schedule
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field
+
+
+@dataclass
+class TeacherConfig:
+    """``[teacher]``: kickstarting (:mod:`selfplay_cli.algos.kickstart`). The learners imitate ``player`` on the
+    states they visit, the imitation term weighted by ``weight`` against the run's progress (a schedule as a
+    ``[curriculum]`` entry takes: a ramp, lessons or one number), so their own objective takes over as it fades."""
+
+    player: str = ""  # a scripted player of the game (serve-bot) or a snapshot's name; "" or "none": no teacher
+    weight: Any = field(default_factory=lambda: {"start": 1.0, "end": 0.0, "until": 0.5})
+    states: int = 300_000  # labelled states each learner keeps to imitate (the newest)
+
+    def __post_init__(self) -> None:
+        if self.player.strip().lower() == "none":
+            self.player = ""
+        self.schedule()  # a bad weight is one line now
+        if self.states < 1:
+            raise MarlError(f"[teacher] states must be at least 1, not {self.states}")
+
+    def schedule(self) -> Schedule:
+        """The imitation term's weight against progress."""
+        schedule = parse_schedule("weight", self.weight, section="teacher")
+        if any(v < 0 for v in (schedule.start, schedule.end, *(v for _, v in schedule.lessons))):
+            raise MarlError(f"[teacher] weight must not be negative, not {self.weight!r}")
+        return schedule
 
 
 @dataclass
@@ -51,6 +76,7 @@ class TrainConfig:
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
     curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)
+    teacher: TeacherConfig = field(default_factory=TeacherConfig)  # kickstarting: a player the learners imitate
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
     sac: SACConfig = field(default_factory=SACConfig)
@@ -108,6 +134,8 @@ class TrainConfig:
             layout = np.zeros((1, self.games), dtype=np.int64)  # one slot a game
         for space in spaces:
             LEARNERS[self.algo].check_seat(space)  # e.g. DQN and Box actions: refused before anything is written
+        if self.teacher.player:
+            check_teacher(self.algo, self.sharing)
         _check_memory(self, tuple(spaces[0].observation.shape),
                       [int((layout == i).sum()) for i in range(len(spaces))])
 
@@ -125,6 +153,7 @@ class TrainConfig:
         d["dqn"] = self.dqn.to_dict()
         d["sac"] = self.sac.to_dict()
         d["opponents"] = asdict(self.opponents)
+        d["teacher"] = asdict(self.teacher)
         return d
 
     @classmethod
@@ -136,7 +165,8 @@ class TrainConfig:
         from ..typecheck import check_fields, field_types
 
         d = dict(d)
-        sections = {"ppo": PPOConfig, "dqn": DQNConfig, "sac": SACConfig, "opponents": MatchmakerConfig}
+        sections = {"ppo": PPOConfig, "dqn": DQNConfig, "sac": SACConfig, "opponents": MatchmakerConfig,
+                    "teacher": TeacherConfig}
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
@@ -170,6 +200,23 @@ class TrainConfig:
                 except (TypeError, ValueError) as e:
                     raise MarlError(f"[{key}]: {e}") from None
         return cls(**d)
+
+
+def can_teach(algo: str) -> bool:
+    """Whether the algorithm's learners can imitate a teacher (kickstarting: PPO and SAC)."""
+    return callable(getattr(LEARNERS.get(algo), "teach", None))
+
+
+def check_teacher(algo: str, sharing: str) -> None:
+    """A run that cannot have a teacher, as one line: an algorithm that cannot imitate, or one agent over the
+    joint team (its actions are not a seat's). The teacher's name is resolved, and its spaces checked, against the
+    league (:func:`selfplay_cli.train.loop.load_teacher`)."""
+    if not can_teach(algo):
+        learners = ", ".join(a for a in ALGOS if can_teach(a))
+        raise MarlError(f"--teacher: {algo} learners cannot imitate a teacher (kickstarting is for {learners})")
+    if sharing == "sa":
+        raise MarlError("--teacher: one agent over the whole team (--sharing sa) acts for every seat at once; a "
+                        "teacher plays one seat: use --sharing fups or nops")
 
 
 def fups_without_partners(spec: EnvSpec, agents: int, sharing: str, seats: str) -> bool:

@@ -50,44 +50,46 @@ class Schedule:
         return self.start + (self.end - self.start) * (p - self.begin) / (self.until - self.begin)
 
 
-def _number(option: str, what: str, value: Any) -> float:
+def _number(where: str, what: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise MarlError(f"[curriculum] {option}: {what} must be a finite number, not {value!r}")
+        raise MarlError(f"{where}: {what} must be a finite number, not {value!r}")
     return float(value)
 
 
-def parse_schedule(option: str, entry: Any) -> Schedule:
-    """One ``[curriculum]`` entry checked; a :class:`MarlError` naming the option and what is wrong."""
+def parse_schedule(option: str, entry: Any, section: str = "curriculum") -> Schedule:
+    """One ``[curriculum]`` entry (or another section's schedule, e.g. ``[teacher] weight``) checked; a
+    :class:`MarlError` naming the section, the option and what is wrong."""
+    where = f"[{section}] {option}"
     if isinstance(entry, (int, float)) and not isinstance(entry, bool):  # one value throughout (a default's off)
-        return Schedule(option, lessons=((0.0, _number(option, "its value", entry)),))
+        return Schedule(option, lessons=((0.0, _number(where, "its value", entry)),))
     if not isinstance(entry, dict):
-        raise MarlError(f"[curriculum] {option} must be a table such as {{ start = 2.0, end = 1.0, until = 0.5 }} "
+        raise MarlError(f"{where} must be a table such as {{ start = 2.0, end = 1.0, until = 0.5 }} "
                         f"or {{ lessons = [[0.0, 2.0], [0.5, 1.0]] }}, or one number, not {entry!r}")
     if "lessons" in entry:
         extra = sorted(set(entry) - {"lessons"})
         if extra:
-            raise MarlError(f"[curriculum] {option}: lessons cannot be mixed with {', '.join(extra)}")
+            raise MarlError(f"{where}: lessons cannot be mixed with {', '.join(extra)}")
         lessons = entry["lessons"]
         if not isinstance(lessons, list) or not lessons or not all(isinstance(x, list) and len(x) == 2
                                                                    for x in lessons):
-            raise MarlError(f"[curriculum] {option}: lessons must be a list of [progress, value] pairs, "
+            raise MarlError(f"{where}: lessons must be a list of [progress, value] pairs, "
                             f"not {lessons!r}")
-        pairs = tuple((_number(option, "a lesson's progress", a), _number(option, "a lesson's value", v))
+        pairs = tuple((_number(where, "a lesson's progress", a), _number(where, "a lesson's value", v))
                       for a, v in lessons)
         at = [a for a, _ in pairs]
         if at[0] != 0.0 or any(b <= a for a, b in zip(at, at[1:], strict=False)) or at[-1] > 1.0:
-            raise MarlError(f"[curriculum] {option}: lessons must start at progress 0 and rise strictly within "
+            raise MarlError(f"{where}: lessons must start at progress 0 and rise strictly within "
                             f"[0, 1], not {at}")
         return Schedule(option, lessons=pairs)
     extra = sorted(set(entry) - {"start", "end", "from", "until"})
     if extra or "start" not in entry or "end" not in entry:
-        raise MarlError(f"[curriculum] {option}: a ramp takes start, end and optionally from and until (progress "
+        raise MarlError(f"{where}: a ramp takes start, end and optionally from and until (progress "
                         f"0 to 1){'; unknown: ' + ', '.join(extra) if extra else ''}")
-    begin = _number(option, "from", entry.get("from", 0.0))
-    until = _number(option, "until", entry.get("until", 1.0))
+    begin = _number(where, "from", entry.get("from", 0.0))
+    until = _number(where, "until", entry.get("until", 1.0))
     if not 0.0 <= begin < until <= 1.0:
-        raise MarlError(f"[curriculum] {option}: needs 0 <= from < until <= 1, not from {begin} until {until}")
-    return Schedule(option, _number(option, "start", entry["start"]), _number(option, "end", entry["end"]),
+        raise MarlError(f"{where}: needs 0 <= from < until <= 1, not from {begin} until {until}")
+    return Schedule(option, _number(where, "start", entry["start"]), _number(where, "end", entry["end"]),
                     begin, until)
 
 

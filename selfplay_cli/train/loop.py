@@ -10,6 +10,10 @@ learner's update when its rollout is due, and every ``snapshot_every`` finished 
    learners' new snapshots, the run's best, older snapshots and the scripted players, in seat-swapped pairs;
 3. refreshes the matchmaker's pool (the run's snapshots).
 
+With a teacher (``[teacher]``, ``--teacher``: kickstarting, :mod:`selfplay_cli.algos.kickstart`) the teacher
+labels every learner's observations with its own actions while the schedule's weight is above 0, and each learner
+adds the imitation term, so weighted, to its policy's loss.
+
 Training games go to the ledger in batches (so ``marl record --game`` can replay them), filed under the learner's
 latest snapshot; the learner has moved on since, so they are kept out of every fitted rating (only the online
 Elo, a live view, counts them). The ratings come from the gauntlet games, which the snapshots themselves played.
@@ -43,7 +47,7 @@ from ..rated.snapshots import snapshot_relpath
 from ..results import GameResult
 from ..signals import signals_held
 from .config import TrainConfig, tensorboard_writer
-from .curriculum import Curriculum
+from .curriculum import Curriculum, Schedule
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .team import LearnerTeam
 
@@ -105,6 +109,33 @@ def step_label(steps: int) -> str:
         if rounded >= scale:
             return f"{rounded / scale:g}{unit}"
     return f"{rounded:g}"
+
+
+def load_teacher(league: League, cfg: TrainConfig, spaces: list[Any], device: str = "cpu") -> Policy | None:
+    """The run's teacher (``[teacher] player``) as a policy playing greedily, or None without one; one clear
+    :class:`MarlError` for a name the league does not know or a player whose spaces are not the learners'."""
+    name = cfg.teacher.player
+    if not name:
+        return None
+    from ..league.names import resolve
+    from ..policies.spaces import describe_space
+
+    try:
+        row = resolve(league, name, cfg.env)
+    except MarlError as e:
+        raise MarlError(f"--teacher: {e}") from None
+    teacher = load_player(league, row, device=device, greedy=True, seed=cfg.seed)
+    if callable(getattr(teacher, "configure", None)):  # a scripted player: the run's game options
+        teacher.configure(cfg.env_options)
+    for space in spaces:
+        obs, act = getattr(teacher, "obs_space", None), getattr(teacher, "act_space", None)
+        if obs is not None and tuple(obs.shape) != tuple(space.observation.shape):
+            raise MarlError(f"--teacher: {row.full_name} reads observations of shape {tuple(obs.shape)}; the learners "
+                            f"see {tuple(space.observation.shape)}")
+        if act is not None and describe_space(act) != describe_space(space.action):
+            raise MarlError(f"--teacher: {row.full_name} plays {describe_space(act)}; the learners play "
+                            f"{describe_space(space.action)}")
+    return teacher
 
 
 def _learner_names(agents: tuple[str, ...], home: tuple[int, ...], sharing: str) -> list[str]:
@@ -176,6 +207,11 @@ class Trainer:
                                    choose_opponents=self._choose if (layout == OPPONENT).any() else None,
                                    env_options=cfg.env_options, first_seed=cfg.seed * 1_000_003)
         self.curriculum = Curriculum(cfg.curriculum, spec.name, spec.live_options)
+        self.teacher = load_teacher(league, cfg, self.spaces, str(self.device))
+        self.teacher_schedule: Schedule | None = cfg.teacher.schedule() if self.teacher is not None else None
+        if self.teacher is not None:
+            for learner in self.learners:
+                learner.imitation_capacity = cfg.teacher.states
         self.lesson: dict[str, float] = {}  # the curriculum's values the training games play under now
         self.match_id = league.create_match(spec.name, "training", {"run": cfg.run, "env_options": cfg.env_options})
         self.episodes = 0
@@ -520,6 +556,23 @@ class Trainer:
             self.games.core.set_options(**values)
             self.lesson = values
 
+    def _teach(self, obs: list[np.ndarray], acting: list[np.ndarray | None] | None, progress: float) -> None:
+        """The teacher's actions for every learner's observations of this step (in turn-based games, the slots
+        that act), while the teacher's weight is above 0; each learner's weight for its next update."""
+        assert self.teacher is not None and self.teacher_schedule is not None
+        weight = self.teacher_schedule.value(progress)
+        if weight > 0:
+            masks = self.games.masks() if self.games.masked else [None] * len(self.learners)
+            for i, learner in enumerate(self.learners):
+                o, m = obs[i], masks[i]
+                rows = acting[i] if acting is not None else None
+                if rows is not None:
+                    o, m = o[rows], None if m is None else m[rows]
+                if len(o):
+                    learner.teach(o, self.teacher.act(o) if m is None else self.teacher.act(o, m), m)
+        for learner in self.learners:
+            learner.teacher_weight = weight
+
     def train(self) -> TrainReport:
         """Train until the budget is spent (holding the run's lock), then take a final snapshot."""
         self._lock()
@@ -559,6 +612,8 @@ class Trainer:
                     self._follow_curriculum(progress)
                 games = self.games
                 acting = games.acting() if games.sequential else None
+                if self.teacher is not None:
+                    self._teach(obs, acting, progress)
                 rewards, dones, finished = games.step(self.team.act(obs, games.masks() if games.masked else None))
                 obs = games.observe()
                 self.steps += cfg.games

@@ -1,0 +1,211 @@
+"""Kickstarting (a teacher the learners imitate, its weight fading): the imitation losses by hand, the ring of
+labelled states, learners that come to play as their teacher, and the run's settings and errors."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+from cli_helpers import run, run_json
+from gymnasium import spaces
+
+from selfplay_cli.algos import PPOLearner, SACLearner
+from selfplay_cli.algos.base import Seat
+from selfplay_cli.algos.kickstart import SQUASH_EDGE, Imitation
+from selfplay_cli.envs import get_env
+from selfplay_cli.errors import MarlError
+from selfplay_cli.league.names import resolve
+from selfplay_cli.league.store import League
+from selfplay_cli.policies.spaces import ActionHead
+from selfplay_cli.rated.match import load_player
+from selfplay_cli.train.config import TeacherConfig, TrainConfig
+
+
+class Fixed(torch.nn.Module):
+    """A 'network' whose outputs are parameters (the same row for every observation)."""
+
+    def __init__(self, out, log_std=None):
+        super().__init__()
+        self.out = torch.nn.Parameter(torch.tensor([out], dtype=torch.float32))
+        self.log_std = None if log_std is None else torch.tensor([log_std], dtype=torch.float32)
+
+    def forward(self, x):
+        return self.out.expand(len(x), -1), None
+
+    def gaussian(self, x):
+        return self.out.expand(len(x), -1), self.log_std.expand(len(x), -1)
+
+
+def test_box_imitation_compares_actions_on_the_unit_scale():
+    head = ActionHead.of(spaces.Box(np.array([-2.0, 0.0], np.float32), np.array([2.0, 10.0], np.float32)))
+    im = Imitation(head, obs_dim=3, capacity=10)
+    im.add(np.zeros((4, 3)), np.array([[1.0, 5.0]] * 4))  # on the unit scale: (0.5, 0.0)
+    net = Fixed([0.0, 7.5])  # the Gaussian's mean in bound units: (0, 7.5) -> (0, 0.5)
+    loss = im.loss(net, 8, np.random.default_rng(0))
+    assert loss.item() == pytest.approx(0.5 ** 2 + 0.5 ** 2)
+    loss.backward()  # d/dm (m/2 - 0.5)^2 at m = 0: -0.5; d/dm ((m - 5)/5 - 0)^2 at m = 7.5: 0.2
+    assert net.out.grad.tolist() == [[pytest.approx(-0.5), pytest.approx(0.2)]]
+
+
+def test_squashed_imitation_compares_the_tanh_of_the_mean_and_holds_targets_inside():
+    head = ActionHead.of(spaces.Box(-1.0, 1.0, (1,), np.float32))
+    im = Imitation(head, obs_dim=2, capacity=10, squashed=True)
+    im.add(np.zeros((2, 2)), np.array([[1.0], [-1.0]]))  # the bounds themselves: tanh reaches them only at infinity
+    assert im.actions[:2, 0].tolist() == [pytest.approx(SQUASH_EDGE), pytest.approx(-SQUASH_EDGE)]
+    net = Fixed([math.atanh(0.5)], log_std=[0.0])
+    loss = im.loss(net, 1000, np.random.default_rng(1)).item()
+    # half the draws are each row: (0.5 - 0.999)^2 and (0.5 + 0.999)^2, averaged
+    expect = 0.5 * ((0.5 - SQUASH_EDGE) ** 2 + (0.5 + SQUASH_EDGE) ** 2)
+    assert loss == pytest.approx(expect, rel=0.1)
+
+
+def test_discrete_imitation_is_the_cross_entropy_among_allowed_actions():
+    head = ActionHead.of(spaces.Discrete(3))
+    im = Imitation(head, obs_dim=1, capacity=5)
+    im.add(np.zeros((1, 1)), np.array([1]), mask=np.array([[True, True, False]]))
+    net = Fixed([0.0, math.log(2.0), 5.0])  # action 2 masked: p(1) = 2 / 3
+    assert im.loss(net, 4, np.random.default_rng(0)).item() == pytest.approx(-math.log(2 / 3))
+
+
+def test_multidiscrete_imitation_sums_the_dimensions_cross_entropies():
+    head = ActionHead.of(spaces.MultiDiscrete([2, 3]))
+    im = Imitation(head, obs_dim=1, capacity=5)
+    im.add(np.zeros((1, 1)), np.array([[0, 2]]))
+    net = Fixed([0.0, 0.0, 0.0, 0.0, math.log(2.0)])  # p(0) = 1/2; p(2) = 2/4
+    assert im.loss(net, 3, np.random.default_rng(0)).item() == pytest.approx(2 * math.log(2.0))
+
+
+def test_the_ring_keeps_the_newest_states():
+    head = ActionHead.of(spaces.Discrete(4))
+    im = Imitation(head, obs_dim=1, capacity=4)
+    im.add(np.array([[0.0], [1.0], [2.0]]), np.array([0, 1, 2]))
+    im.add(np.array([[3.0], [4.0], [5.0]]), np.array([3, 0, 1]))
+    assert len(im) == 4
+    assert sorted(im.obs[:, 0].tolist()) == [2.0, 3.0, 4.0, 5.0]
+    assert {int(o): int(a) for o, a in zip(im.obs[:, 0], im.actions, strict=True)} == {2: 2, 3: 3, 4: 0, 5: 1}
+    im.add(np.arange(9.0)[:, None], np.arange(9) % 4)  # more than it holds at once: the last four
+    assert sorted(im.obs[:, 0].tolist()) == [5.0, 6.0, 7.0, 8.0]
+
+
+@pytest.mark.parametrize("learner_cls", [SACLearner, PPOLearner])
+def test_a_learner_taught_comes_to_act_as_its_teacher(learner_cls):
+    """A teacher's rule a = clip(2 s0 - s1) on random states: with the imitation term weighted and no reward, the
+    learner's deterministic action follows the rule on states it never saw (its untaught error is ~25x larger)."""
+    rng = np.random.default_rng(0)
+    seat = Seat(spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Box(-1.0, 1.0, (1,), np.float32))
+    n = 64
+    if learner_cls is SACLearner:
+        from selfplay_cli.algos.sac import SACConfig
+
+        learner = SACLearner(seat, n, SACConfig(learning_starts=64, replay_ratio=1 / 16, batch_size=128,
+                                                 critic_hidden=(32, 32)), seed=0)
+    else:
+        from selfplay_cli.algos.ppo import PPOConfig
+
+        learner = PPOLearner(seat, n, PPOConfig(rollout_steps=8, lr=3e-3), seed=0)
+
+    def rule(s):
+        return np.clip(2 * s[:, :1] - s[:, 1:], -1, 1).astype(np.float32)
+
+    def error():
+        test = rng.uniform(-1, 1, (500, 2)).astype(np.float32)
+        with torch.no_grad():
+            policy = learner.policy("p", "toy", greedy=True)
+            return float(np.mean((policy.act(test) - rule(test)) ** 2))
+
+    before = error()
+    learner.teacher_weight = 1.0
+    for _ in range(400):
+        obs = rng.uniform(-1, 1, (n, 2)).astype(np.float32)
+        learner.act(obs)
+        learner.teach(obs, rule(obs))
+        if learner.record(np.zeros(n), np.zeros(n)):
+            stats = learner.update(obs, 0.0)
+    assert stats["teacher_weight"] == 1.0 and stats["imitation_loss"] >= 0
+    after = error()
+    assert after < 0.04 and after < before / 15, (before, after)
+
+
+def test_without_weight_a_learner_keeps_no_term():
+    seat = Seat(spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Discrete(3))
+    learner = PPOLearner(seat, 4, seed=0)
+    learner.teach(np.zeros((4, 2)), np.zeros(4, dtype=np.int64))
+    for _ in range(learner.cfg.rollout_steps):
+        learner.act(np.zeros((4, 2), np.float32))
+        learner.record(np.zeros(4), np.zeros(4))
+    stats = learner.update(np.zeros((4, 2), np.float32))
+    assert "imitation_loss" not in stats and "teacher_weight" not in stats
+
+
+# -- the run's settings ---------------------------------------------------------------------------------------
+def test_teacher_settings_and_their_errors():
+    t = TeacherConfig(player="cpu")
+    assert [t.schedule().value(p) for p in (0.0, 0.25, 0.5, 1.0)] == [1.0, 0.5, 0.0, 0.0]  # the default fade
+    assert TeacherConfig(player="None").player == ""  # "none" switches a game's default teacher off
+    with pytest.raises(MarlError, match=r"\[teacher\] weight must not be negative"):
+        TeacherConfig(player="cpu", weight=-1.0)
+    with pytest.raises(MarlError, match=r"\[teacher\] weight: a ramp takes start, end"):
+        TeacherConfig(player="cpu", weight={"start": 1.0})
+    with pytest.raises(MarlError, match=r"\[teacher\] states must be at least 1"):
+        TeacherConfig(player="cpu", states=0)
+    cfg = TrainConfig.from_dict({"env": "pong", "teacher": {"player": "cpu", "weight": 0.5}})
+    assert cfg.teacher.schedule().value(0.9) == 0.5
+    assert TrainConfig.from_dict(cfg.to_dict()).teacher == cfg.teacher  # saved with the run, resumed as it was
+    with pytest.raises(MarlError, match="dqn learners cannot imitate a teacher"):
+        TrainConfig.from_dict({"env": "pong", "algo": "dqn", "teacher": {"player": "cpu"}})
+    with pytest.raises(MarlError, match=r"unknown \[teacher\] setting\(s\) strength"):
+        TrainConfig.from_dict({"env": "pong", "teacher": {"player": "cpu", "strength": 1.0}})
+
+
+def test_a_teacher_the_run_cannot_have_is_one_line_and_no_run(tmp_path, capsys):
+    home = str(tmp_path / "league")
+    code, out, err = run(capsys, "train", "pong", "--teacher", "nobody", "--steps", "2000", "--home", home)
+    assert code != 0 and err.count("\n") == 1 and "--teacher: no policy named 'nobody'" in err, err
+    code, out, err = run(capsys, "train", "pong", "--algo", "dqn", "--teacher", "cpu", "--steps", "2000",
+                         "--home", home)
+    assert code != 0 and err.count("\n") == 1 and "dqn learners cannot imitate" in err, err
+    league = League.open(home=tmp_path / "league")
+    assert league.list_runs() == []  # refused before the run was created
+    league.close()
+
+
+def test_pong_learners_kickstarted_by_the_cpu_player_choose_its_moves(tmp_path, capsys):
+    """PPO on pong taught by the scripted cpu player (its weight held at 2): the final snapshot chooses the cpu
+    player's move in most states of a game between cpu and random players; an untaught snapshot of the same budget
+    agrees about as often as chance."""
+    home = tmp_path / "league"
+    config = tmp_path / "teach.toml"
+    config.write_text('[teacher]\nplayer = "cpu"\nweight = 2.0\n')
+    common = ("--agents", "2", "--steps", "200000", "--games", "64", "--eval-games", "0", "--quiet", "--home",
+              str(home))
+    taught = run_json(capsys, "train", "pong", "--config", str(config), "--run", "taught", *common)
+    plain = run_json(capsys, "train", "pong", "--run", "plain", *common)
+    metrics = [json.loads(line) for line in (home / "runs" / "taught" / "metrics.jsonl").read_text().splitlines()]
+    losses = [m["left/imitation_loss"] for m in metrics if "left/imitation_loss" in m]
+    assert losses[-1] < 0.5 * losses[0], losses
+
+    spec = get_env("pong")
+    core = spec.make_core(32, spec.config())
+    cpu = spec.bots["cpu"].rule_for(spec.config())
+    rng = np.random.default_rng(3)
+    league = League.open(home=home, readonly=True)
+    agree = {}
+    for name, report in (("taught", taught), ("plain", plain)):
+        snap = report["final"][0]["snapshot"]
+        player = load_player(league, resolve(league, snap, "pong"), greedy=True)
+        same = total = 0
+        core.reset(np.arange(32), np.arange(32))
+        for _ in range(300):
+            obs = core.observe()
+            teacher = cpu(obs[0], rng)
+            same += int((player.act(obs[0]) == teacher).sum())
+            total += len(teacher)
+            core.step([teacher, rng.integers(0, 3, 32)])
+            done = np.flatnonzero(core.terminated | core.truncated)
+            core.reset(done, 1000 + done)
+        agree[name] = same / total
+    league.close()
+    assert agree["taught"] > 0.75 and agree["taught"] > agree["plain"] + 0.3, agree
