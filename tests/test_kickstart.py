@@ -30,7 +30,7 @@ class Fixed(torch.nn.Module):
     def __init__(self, out, log_std=None):
         super().__init__()
         self.out = torch.nn.Parameter(torch.tensor([out], dtype=torch.float32))
-        self.log_std = None if log_std is None else torch.tensor([log_std], dtype=torch.float32)
+        self.log_std = None if log_std is None else torch.nn.Parameter(torch.tensor(log_std, dtype=torch.float32))
 
     def forward(self, x):
         return self.out.expand(len(x), -1), None
@@ -39,15 +39,19 @@ class Fixed(torch.nn.Module):
         return self.out.expand(len(x), -1), self.log_std.expand(len(x), -1)
 
 
-def test_box_imitation_compares_actions_on_the_unit_scale():
+def test_gaussian_imitation_is_the_teachers_likelihood_on_the_unit_scale():
+    """PPO's Gaussian: -log N(teacher; mean, std) on the [-1, 1] scale, less its constant, by hand."""
     head = ActionHead.of(spaces.Box(np.array([-2.0, 0.0], np.float32), np.array([2.0, 10.0], np.float32)))
     im = Imitation(head, obs_dim=3, capacity=10)
     im.add(np.zeros((4, 3)), np.array([[1.0, 5.0]] * 4))  # on the unit scale: (0.5, 0.0)
-    net = Fixed([0.0, 7.5])  # the Gaussian's mean in bound units: (0, 7.5) -> (0, 0.5)
+    net = Fixed([0.0, 7.5], log_std=[math.log(2.0), math.log(5.0)])  # mean (0, 0.5), std 1 on the unit scale
     loss = im.loss(net, 8, np.random.default_rng(0))
-    assert loss.item() == pytest.approx(0.5 ** 2 + 0.5 ** 2)
-    loss.backward()  # d/dm (m/2 - 0.5)^2 at m = 0: -0.5; d/dm ((m - 5)/5 - 0)^2 at m = 7.5: 0.2
-    assert net.out.grad.tolist() == [[pytest.approx(-0.5), pytest.approx(0.2)]]
+    assert loss.item() == pytest.approx(0.5 * (0.5 ** 2 + 0.5 ** 2))  # z = (-0.5, 0.5), log std 0
+    loss.backward()
+    # d/dm 0.5 (m/2 - 0.5)^2 at m = 0: -0.25; d/dm 0.5 ((m - 5)/5)^2 at m = 7.5: 0.1
+    assert net.out.grad.tolist() == [[pytest.approx(-0.25), pytest.approx(0.1)]]
+    # d/du (0.5 z^2 e^(-2u) + u) at u = 0: 1 - z^2 = 0.75: the spread shrinks toward what separates the actions
+    assert net.log_std.grad.tolist() == [pytest.approx(0.75), pytest.approx(0.75)]
 
 
 def test_squashed_imitation_compares_the_tanh_of_the_mean_and_holds_targets_inside():
@@ -55,7 +59,7 @@ def test_squashed_imitation_compares_the_tanh_of_the_mean_and_holds_targets_insi
     im = Imitation(head, obs_dim=2, capacity=10, squashed=True)
     im.add(np.zeros((2, 2)), np.array([[1.0], [-1.0]]))  # the bounds themselves: tanh reaches them only at infinity
     assert im.actions[:2, 0].tolist() == [pytest.approx(SQUASH_EDGE), pytest.approx(-SQUASH_EDGE)]
-    net = Fixed([math.atanh(0.5)], log_std=[0.0])
+    net = Fixed([math.atanh(0.5)], log_std=[0.0])  # (the squashed loss reads the mean alone)
     loss = im.loss(net, 1000, np.random.default_rng(1)).item()
     # half the draws are each row: (0.5 - 0.999)^2 and (0.5 + 0.999)^2, averaged
     expect = 0.5 * ((0.5 - SQUASH_EDGE) ** 2 + (0.5 + SQUASH_EDGE) ** 2)
@@ -124,7 +128,7 @@ def test_a_learner_taught_comes_to_act_as_its_teacher(learner_cls):
         learner.teach(obs, rule(obs))
         if learner.record(np.zeros(n), np.zeros(n)):
             stats = learner.update(obs, 0.0)
-    assert stats["teacher_weight"] == 1.0 and stats["imitation_loss"] >= 0
+    assert stats["teacher_weight"] == 1.0 and math.isfinite(stats["imitation_loss"])
     after = error()
     assert after < 0.04 and after < before / 15, (before, after)
 

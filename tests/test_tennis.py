@@ -848,6 +848,9 @@ def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(t
     assert cfg["curriculum"]["hit_reward"] == {"start": 0.3, "end": 0.0, "until": 0.6}
     assert cfg["curriculum"]["point_reward"] == {"start": 0.1, "end": 1.0, "from": 0.3, "until": 0.9}
     assert (cfg["sac"]["replay_ratio"], cfg["sac"]["n_step"]) == (0.0625, 5)
+    assert cfg["teacher"] == {"player": "serve-bot", "weight": {"start": 2.0, "end": 0.2, "until": 0.5},
+                              "states": 300_000}
+    assert (cfg["sac"]["arch"]["hidden"], cfg["sac"]["arch"]["activation"]) == ([256, 256], "relu")
     (tmp_path / "c.toml").write_text("[env_options]\nreturn_reward = 0.0\n"
                                      "[curriculum]\nbat_scale = 2.0\n")
     assert run(capsys, "train", "tennis", "--algo", "ppo", "--run", "o", "--config", str(tmp_path / "c.toml"),
@@ -855,6 +858,10 @@ def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(t
     cfg = json.loads((tmp_path / "league" / "runs" / "o" / "config.json").read_text())
     assert cfg["algo"] == "ppo" and cfg["env_options"] == {"serve_mode": "mixed", "return_reward": 0.0}
     assert cfg["curriculum"]["bat_scale"] == 2.0, "a plain number holds the bat at one size (the default's off)"
+    assert cfg["teacher"]["player"] == "serve-bot" and cfg["ppo"]["arch"]["hidden"] == [256, 256]
+    assert run(capsys, "train", "tennis", "--teacher", "none", "--run", "t0", *small)[0] == 0
+    cfg = json.loads((tmp_path / "league" / "runs" / "t0" / "config.json").read_text())
+    assert cfg["teacher"]["player"] == "", "--teacher none switches the game's teacher off"
     # one learner: the game's shared network and share of league games (for learners on both seats) do not apply,
     # and are dropped; typed, each is still one line
     assert run(capsys, "train", "tennis", "--agents", "1", "--run", "a1", *small)[0] == 0

@@ -16,6 +16,10 @@ calls, with one row per slot of the learner::
 * ``acting``: the slots whose seat acted on this step (turn-based games). A step where the seat did not act
   carries no decision: it is skipped, and its reward is credited to the seat's previous decision. None: all acted.
 
+A learner may also be taught (kickstarting, :mod:`selfplay_cli.algos.kickstart`; PPO and SAC can, DQN cannot):
+``learner.teach(obs, actions, mask)`` hands it a teacher's actions for observations of its slots, and
+``learner.teacher_weight`` weights the imitation term in the updates that follow (0, the default: none).
+
 Every optional argument left out gives the behaviour learners had before it existed (no truncation bootstrap,
 every slot acting). Algorithms are registered by name in :data:`selfplay_cli.algos.LEARNERS`.
 """

@@ -12,8 +12,13 @@ Each step the trainer hands the learner the teacher's actions for the learner's 
 gradient step of the learner's policy then adds ``weight * loss`` on a batch drawn from it, the loss by the action
 head:
 
-* Box: the mean squared difference between the policy's deterministic action (PPO: the Gaussian's mean; SAC: its
-  squashed mean) and the teacher's, both mapped from the bounds onto [-1, 1], summed over the action's numbers;
+* Box, squashed (SAC): the squared difference between the policy's deterministic action (tanh of its mean) and the
+  teacher's, both mapped from the bounds onto [-1, 1], summed over the action's numbers (SAC's temperature keeps
+  its own spread about that action);
+* Box, Gaussian (PPO): the negative log-likelihood of the teacher's action under the policy, on the same scale,
+  ``(a - mean)^2 / (2 std^2) + log std`` summed over the action's numbers (dropping the constant): it pulls the mean
+  onto the teacher's action and the state-independent spread down to what separates them (on tennis, imitating the
+  mean alone left PPO sampling with a spread of 1.5 on actions in [-1, 1]);
 * Discrete: the cross-entropy of the teacher's action under the policy (masked actions excluded);
 * MultiDiscrete: the cross-entropies of the dimensions, summed.
 
@@ -97,12 +102,14 @@ class Imitation:
             if self.squashed:
                 mean, _ = net.gaussian(obs)
                 pred = torch.tanh(mean)
-            else:
-                out, _ = net(obs)
-                center = torch.from_numpy(self._center).to(self.device)
-                half = torch.from_numpy(self._half).to(self.device)
-                pred = (out - center) / half
-            return (pred - target).square().sum(-1).mean()
+                return (pred - target).square().sum(-1).mean()
+            out, _ = net(obs)
+            center = torch.from_numpy(self._center).to(self.device)
+            half = torch.from_numpy(self._half).to(self.device)
+            assert net.log_std is not None
+            log_std = net.log_std - torch.log(half)  # the spread on the [-1, 1] scale
+            z = ((out - center) / half - target) * torch.exp(-log_std)
+            return (0.5 * z.square() + log_std).sum(-1).mean()
         out, _ = net(obs)
         mask = None if self.masks is None else torch.from_numpy(self.masks[idx]).to(self.device)
         logp = torch.log_softmax(self.math.masked(out, mask, MASKED), dim=-1)

@@ -9,7 +9,9 @@ shared network use the same code.
 Per update: ``rollout_steps`` steps of every slot are collected with the current policy (sampling), advantages
 come from GAE(lambda) over the rollout, and ``update_epochs`` passes of ``minibatches`` minibatches optimise
     L = -min(r A, clip(r, 1 - eps, 1 + eps) A) + vf_coef * (V - R)^2 / 2 - ent_coef * H
-with r the probability ratio of the new to the old policy.
+with r the probability ratio of the new to the old policy; with a teacher (kickstarting,
+:mod:`selfplay_cli.algos.kickstart`) each minibatch's loss also has ``teacher_weight`` times the imitation loss on
+as many states the teacher labelled.
 
 Action spaces (the policy's distribution; :mod:`selfplay_cli.policies.heads`):
 * Discrete: a categorical over the logits; masked actions get a logit of -1e9 (probability exactly 0), when acting

@@ -22,6 +22,8 @@ with y' ~ pi(.|s') and its log-probability log pi(y'|s'), alpha = exp(log_alpha)
     actor:    alpha * log pi(y~|s) - min(Q1(s, y~), Q2(s, y~)),  y~ ~ pi(.|s) reparameterised
     alpha:    -log_alpha * (log pi(y~|s) + target_entropy)        (autotune; else alpha stays fixed)
     targets:  Q_targ <- tau * Q + (1 - tau) * Q_targ                (Polyak, every gradient step)
+With a teacher (kickstarting, :mod:`selfplay_cli.algos.kickstart`) the actor's loss also has ``teacher_weight``
+times the squared distance of tanh(mean(s)) to the teacher's action, on a batch of states the teacher labelled.
 The two critics are one module whose layers hold both critics' weights side by side (one batched matmul a layer).
 
 Units. A *transition* is one decision of one slot (one game seat). Everything that counts experience counts
