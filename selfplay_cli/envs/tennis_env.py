@@ -159,8 +159,8 @@ TENNIS = EnvSpec(
     # per 16 game steps; seed 002's 256-wide layers. Kickstarted by the serve bot (its weight 2 fading to 0.2 by half
     # the run, then held): without a teacher, runs of these settings returned 0-82% of the bot's randomized serves
     # (bimodal) and rallied ~2 hits a point against themselves, never landing a return of their own serve; with the
-    # teacher faded to 0 one returned 79% and again landed none of its own serves (RL found a serve its imitated
-    # receiving could not return); held at 0.2, the 30-minute run returns 89% and rallies until the time limit.
+    # teacher faded to 0 one returned 77% and again landed none of its own serves (RL found a serve its imitated
+    # receiving could not return); held at 0.2, three 30-minute runs returned 89-97% and rallied to the time limit.
     train_defaults={"algo": "sac", "sharing": "fups", "league_games": 0.5, "opponents": {"bots": {"serve-bot": 0.75}},
                     "env_options": {"serve_mode": "mixed", "return_reward": 0.5},
                     "curriculum": {"bat_scale": {"start": 3.0, "end": 1.0, "until": 0.8},
