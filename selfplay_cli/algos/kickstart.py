@@ -55,6 +55,10 @@ class Imitation:
             self.actions = np.zeros((capacity, head.outputs), np.float32)
             low, high = np.asarray(head.low, np.float32), np.asarray(head.high, np.float32)
             self._center, self._half = (high + low) / 2, np.maximum((high - low) / 2, 1e-12)
+            # the same on the device, for the Gaussian's loss (made once, not per batch)
+            self._center_t = torch.from_numpy(self._center).to(self.device)
+            self._half_t = torch.from_numpy(self._half).to(self.device)
+            self._log_half_t = torch.log(self._half_t)
         else:
             self.actions = np.zeros((capacity, *head.action_shape), np.int64)
         self.masks: np.ndarray | None = None  # made when a mask first comes (games with action masks)
@@ -104,11 +108,9 @@ class Imitation:
                 pred = torch.tanh(mean)
                 return (pred - target).square().sum(-1).mean()
             out, _ = net(obs)
-            center = torch.from_numpy(self._center).to(self.device)
-            half = torch.from_numpy(self._half).to(self.device)
-            assert net.log_std is not None
-            log_std = net.log_std - torch.log(half)  # the spread on the [-1, 1] scale
-            z = ((out - center) / half - target) * torch.exp(-log_std)
+            assert net.log_std is not None, "a Gaussian policy's network has a log_std"
+            log_std = net.log_std - self._log_half_t  # the spread on the [-1, 1] scale
+            z = ((out - self._center_t) / self._half_t - target) * torch.exp(-log_std)
             return (0.5 * z.square() + log_std).sum(-1).mean()
         out, _ = net(obs)
         mask = None if self.masks is None else torch.from_numpy(self.masks[idx]).to(self.device)
