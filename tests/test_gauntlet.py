@@ -14,7 +14,7 @@ from selfplay_cli.league.ladder import ladder
 from selfplay_cli.league.pairs import head_to_head
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
-from selfplay_cli.rated.gauntlet import GauntletConfig, choose_opponents, clear, play_gauntlet
+from selfplay_cli.rated.gauntlet import GauntletConfig, best_snapshot, choose_opponents, clear, play_gauntlet, run_history
 from selfplay_cli.results import GameResult
 
 
@@ -56,6 +56,45 @@ def test_gauntlet_opponents_predecessor_partner_best_older_and_bots(tmp_path):
     league.close()
 
 
+def test_a_moments_gauntlet_knows_only_what_came_before_it(tmp_path):
+    """A rating worker that fell behind (snapshots ep2 and ep3 already taken when ep1's gauntlet starts), a user's
+    match and another run's gauntlet filed meanwhile change nothing of what ep1's gauntlet plays: its opponents
+    are the snapshots taken before it and the bots, its 'best so far' is fitted from the run's earlier gauntlets
+    alone."""
+    league = League.open(tmp_path / "league")
+    league.ensure_bots("pong", ["random", "cpu"])
+    rows = snapshot_rows(league, "r", 4)
+    other = snapshot_rows(league, "q", 1)
+    by = {r.name: r for r in rows}
+    bots = {p.name: p for p in league.players("pong", kind="bot")}
+
+    def games(kind, params, a, b, n, a_wins=True):
+        mid = league.create_match("pong", kind, params)
+        league.record_games(mid, [GameResult("pong", (a.id, b.id), seed=i, scores=(1, 0) if a_wins else (0, 1),
+                                             outcome=(1.0, 0.0) if a_wins else (0.0, 1.0), length=10,
+                                             truncated=False) for i in range(n)])
+
+    gauntlet = {"gauntlet": True}
+    games("eval", gauntlet, by["ep0-left"], bots["random"], 8)
+    games("eval", gauntlet, by["ep0-left"], by["ep0-right"], 6)
+    games("eval", gauntlet, by["ep0-right"], bots["random"], 4)
+    games("eval", gauntlet, bots["random"], by["ep0-right"], 4)
+    # filed meanwhile: a user's match and another run's gauntlet, both crowning ep0-right
+    games("match", {}, by["ep0-right"], by["ep0-left"], 40)
+    games("eval", gauntlet, other[0], by["ep0-left"], 30)
+    games("eval", gauntlet, by["ep0-right"], other[1], 30)
+    new = [by["ep1-left"], by["ep1-right"]]
+    history = run_history(league, new)
+    assert [p.name for p in history.snapshots] == ["ep0-left", "ep0-right"]
+    assert len(history.table) == 22  # the run's own gauntlets only
+    assert best_snapshot(history).name == "ep0-left"
+    pairs = choose_opponents(league, new, older=2, best=best_snapshot(history), history=history)
+    met = {p.name for pair in pairs for p in pair}
+    assert met == {"ep0-left", "ep0-right", "ep1-left", "ep1-right", "random", "cpu"}
+    assert not met & {"ep2-left", "ep2-right", "ep3-left", "ep3-right", "ep0-left_q"}
+    league.close()
+
+
 def test_clear_rule():
     assert clear(4, 0, 1.645) and not clear(3, 1, 1.645) and not clear(0, 0, 1.645) and clear(0, 9, 1.645)
 
@@ -70,8 +109,8 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
     rows = snapshot_rows(league, "r", 2, learners=("left",))
     old, new = rows
     bots = {p.name: p for p in league.players("pong", kind="bot")}
-    # the predecessor beat random 8-0 in stored games, so random is clear; cpu is not
-    mid = league.create_match("pong", "eval")
+    # the predecessor beat random 8-0 in its gauntlet, so random is clear; cpu is not
+    mid = league.create_match("pong", "eval", {"gauntlet": True})
     league.record_games(mid, [GameResult("pong", (old.id, bots["random"].id), seed=i, scores=(1, 0),
                                          outcome=(1.0, 0.0), length=10, truncated=False) for i in range(8)])
     stand_in = {old.id: "cpu", new.id: "cpu"}
@@ -84,7 +123,7 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
     monkeypatch.setattr(gauntlet_mod, "load_player", fake_load)
     pairs = [(new, old), (new, bots["random"]), (new, bots["cpu"])]
     cfg = GauntletConfig(pairs=2, clear_pairs=1, max_pairs=2)
-    ms = play_gauntlet(league, pairs, first_seed=500, config=cfg, policies=None)
+    ms = play_gauntlet(league, pairs, first_seed=500, config=cfg, policies=None, history=run_history(league, [new]))
     assert [m.pairs for m in ms] == [2, 1, 2]
     table = league.games("pong")
     for m in ms:
@@ -208,7 +247,7 @@ def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monk
     league.ensure_bots("pong", ["random", "cpu"])
     old, new = snapshot_rows(league, "r", 2, learners=("left",))
     rnd = league.find_players("random", "pong")[0]
-    mid = league.create_match("pong", "eval")
+    mid = league.create_match("pong", "eval", {"gauntlet": True})
     league.record_games(mid, [GameResult("pong", (rnd.id, old.id), seed=i, scores=(1, 0), outcome=(1.0, 0.0),
                                          length=10, truncated=False) for i in range(8)])
 
@@ -218,7 +257,8 @@ def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monk
         return p
 
     monkeypatch.setattr(gauntlet_mod, "load_player", fake_load)
-    (m,) = play_gauntlet(league, [(new, rnd)], first_seed=0, config=GauntletConfig(pairs=3, clear_pairs=1, max_pairs=3))
+    (m,) = play_gauntlet(league, [(new, rnd)], first_seed=0, config=GauntletConfig(pairs=3, clear_pairs=1, max_pairs=3),
+                         history=run_history(league, [new]))
     assert m.expect == 0.0 and m.pairs == 3 and m.wins == 6, (m.pairs, m.wins)
     league.close()
 

@@ -428,6 +428,19 @@ class Ledger(Database):
 
         return self._read(work)
 
+    def match_params(self, env: str | None = None, kind: str | None = None) -> dict[int, dict[str, Any]]:
+        """Every match's parameters (of ``env``, of ``kind``) by match id, in id order."""
+
+        def work(s: Session) -> dict[int, dict[str, Any]]:
+            q = select(Match.id, Match.params).order_by(Match.id)
+            if env is not None:
+                q = q.where(Match.env == env)
+            if kind is not None:
+                q = q.where(Match.kind == kind)
+            return {int(mid): dict(params or {}) for mid, params in s.execute(q)}
+
+        return self._read(work)
+
     def game(self, game_id: int) -> GameRow:
         """The stored game ``game_id`` with its seats, its match and its actions. Raises LeagueError if unknown."""
 

@@ -40,9 +40,11 @@ from ..arena import Game, play
 from ..arena.schedule import round_of, round_size
 from ..envs import get_env
 from ..errors import MarlError
+from ..league.ledger import GameTable
 from ..league.store import League, PlayerRow
 from ..policies import Policy
 from ..results import COOPERATIVE, GameResult, Rules, points_between
+from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry
 from ..stats.elo import normal_quantile
 from .match import env_options_of, load_player, mix_seed
 
@@ -113,16 +115,47 @@ def clear(wins: int, losses: int, z: float) -> bool:
     return decisive > 0 and abs(wins - losses) >= z * math.sqrt(decisive)
 
 
-def _clear_history(league: League, m: Matchup, z: float, enough: int) -> float | None:
-    """The score against the same opponent of the new snapshot's lineage (its predecessor, then theirs, as far back
-    as it takes to count ``enough`` games), if that record is clear; else None."""
-    from ..league.pairs import head_to_head
+@dataclass(frozen=True)
+class History:
+    """All that a snapshot moment's gauntlet may know: the run's snapshots taken before the moment (oldest first),
+    the game's scripted players, and the games of the run's earlier gauntlets between them.
 
+    Nothing else reaches the gauntlet's choices (its opponents, the run's best so far, the matchups whose result
+    is already clear), so what it plays depends on the run's seed and the order of its snapshots alone: not on a
+    worker that fell behind while later snapshots were taken, not on a user's matches or other runs filed
+    meanwhile."""
+
+    snapshots: list[PlayerRow]
+    bots: list[PlayerRow]
+    table: GameTable
+
+
+def run_history(league: League, new: Sequence[PlayerRow]) -> History:
+    """The :class:`History` of the moment whose snapshots are ``new`` (all of one run and game)."""
+    env, run = new[0].env, new[0].run
+    first = min(p.id for p in new)  # ids grow in registration order: the moment's own are its newest
+    snapshots = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id < first]
+    bots = league.players(env=env, kind="bot")
+    gauntlets = [mid for mid, params in league.match_params(env, kind="eval").items() if params.get("gauntlet")]
+    table = league.games(env=env, players=[p.id for p in snapshots + bots])
+    return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)))
+
+
+def _record(table: GameTable, a: int, b: int) -> tuple[int, int, int]:
+    """A's wins, draws and losses against B in ``table``."""
+    both = ((table.player_a == a) & (table.player_b == b)) | ((table.player_a == b) & (table.player_b == a))
+    pts = np.where(table.player_a[both] == a, table.score_a[both], 1.0 - table.score_a[both])
+    return int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))
+
+
+def _clear_history(league: League, history: History, m: Matchup, z: float, enough: int) -> float | None:
+    """The score against the same opponent of the new snapshot's lineage (its predecessor, then theirs, as far back
+    as it takes to count ``enough`` games) in the run's earlier gauntlets, if that record is clear; else None."""
     wins = draws = losses = 0
     pid = m.a.parent_id
     while pid is not None and pid != m.b.id and wins + draws + losses < enough:
-        h = head_to_head(league, pid, m.b.id)
-        wins, draws, losses = wins + h["wins"], draws + h["draws"], losses + h["losses"]
+        w, d, lo = _record(history.table, pid, m.b.id)
+        wins, draws, losses = wins + w, draws + d, losses + lo
         pid = league.get_player(pid).parent_id
     games = wins + draws + losses
     if games < enough or not clear(wins, losses, z):
@@ -131,20 +164,18 @@ def _clear_history(league: League, m: Matchup, z: float, enough: int) -> float |
 
 
 def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2,
-                     best: PlayerRow | None = None) -> list[tuple[PlayerRow, PlayerRow]]:
+                     best: PlayerRow | None = None, history: History | None = None) -> list[tuple[PlayerRow, PlayerRow]]:
     """The matchups of a snapshot moment: ``(new snapshot, opponent)``, each unordered pair once.
 
     ``new`` are the snapshots just taken (one per learner, all of one run and game); ``best`` the run's best
-    snapshot before them (by fitted rating), if known. Older snapshots are chosen evenly spread over the run's
+    snapshot before them (by fitted rating), if known. Opponents come from the moment's :class:`History` (the run's
+    snapshots taken before it, the scripted players). Older snapshots are chosen evenly spread over the run's
     history (oldest first), skipping the ones already met.
     """
     if not new:
         return []
-    env, run = new[0].env, new[0].run
-    new_ids = {p.id for p in new}
-    history = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id not in new_ids]
-    by_id = {p.id: p for p in history}
-    bots = league.players(env=env, kind="bot")
+    history = history or run_history(league, new)
+    by_id = {p.id: p for p in history.snapshots}
     pairs: list[tuple[PlayerRow, PlayerRow]] = []
     seen: set[frozenset[int]] = set()
 
@@ -159,11 +190,11 @@ def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2,
         chosen += [o for o in new if o.id != s.id]
         chosen.append(best if best is not None and best.id in by_id else None)
         taken = {c.id for c in chosen if c is not None}
-        rest = [p for p in history if p.id not in taken]
+        rest = [p for p in history.snapshots if p.id not in taken]
         if older and rest:
             picks = np.unique(np.linspace(0, len(rest) - 1, num=min(older, len(rest))).round().astype(int))
             chosen += [rest[i] for i in picks.tolist()]
-        chosen += bots
+        chosen += history.bots
         for opp in chosen:
             add(s, opp)
     return pairs
@@ -179,13 +210,15 @@ def play_gauntlet(
     policies: dict[int, Policy] | None = None,
     on_games: Callable[[int], None] | None = None,
     crews: dict[int, tuple[PlayerRow, ...]] | None = None,
+    history: History | None = None,
 ) -> list[Matchup]:
     """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
 
     ``policies`` may hold already loaded players by player id (scripted players are loaded afresh otherwise);
     seeds start at ``first_seed``, a disjoint range per matchup. ``on_games(n)`` is told of finished games.
     ``crews`` (cooperative games): the per-seat members a player flies with (:func:`crews_of`), by player id; a
-    player without one flies every seat itself.
+    player without one flies every seat itself. ``history``: the moment's :class:`History`, whose games say which
+    matchups are already clear (without one, none is).
     """
     cfg = config or GauntletConfig()
     if not pairs:
@@ -261,7 +294,7 @@ def play_gauntlet(
                 schedule_pairs(k, extra)
 
     for k, m in enumerate(matchups):
-        m.expect = _clear_history(league, m, z, 2 * cfg.pairs)
+        m.expect = None if history is None else _clear_history(league, history, m, z, 2 * cfg.pairs)
         schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
     most = 2 * cfg.max_pairs * len(matchups)
     play(spec, roster, schedule, parallel=cfg.parallel, env_options=options, record_actions=True,
@@ -285,21 +318,29 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
     m.game_ids += league.record_games(m.match_id, [r.with_players(player) for r in results])
 
 
-def best_snapshot(league: League, run: str, env: str, exclude: set[int]) -> PlayerRow | None:
-    """The run's highest-rated snapshot by the ladder fitted now, among those not in ``exclude``."""
-    from ..league.ladder import ladder
-
-    rows = [r for r in ladder(league, env, bootstrap=0)
-            if r.kind == "snapshot" and r.player_id not in exclude and r.policy.startswith(f"{run}/")]
-    if not rows:
+def best_snapshot(history: History, anchor: str = "random") -> PlayerRow | None:
+    """The highest-rated snapshot of the moment's history, fitted (Bradley-Terry under the ladder's prior) from the
+    run's earlier gauntlets alone; players the games do not link to the ``anchor`` bot count only when none is
+    linked. Ties go to the older snapshot."""
+    table = history.table
+    if not history.snapshots or not len(table):
         return None
-    top = max(rows, key=lambda r: (r.elo, -(r.player_id or 0)))
-    return league.get_player(int(top.player_id))  # type: ignore[arg-type]
+    ids, a, b = table.indexed()
+    index = {int(pid): i for i, pid in enumerate(ids.tolist())}
+    anchors = [index[p.id] for p in history.bots if p.name == anchor and p.id in index]
+    fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=anchors[0] if anchors else 0,
+                            prior_games=DEFAULT_PRIOR)
+    rated = [p for p in history.snapshots if p.id in index]
+    if not rated:
+        return None
+    linked = [p for p in rated if fit.flags[index[p.id]] is None] or rated
+    return max(linked, key=lambda p: (fit.ratings[index[p.id]], -p.id))
 
 
 def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: int, config: GauntletConfig,
                    device: str = "cpu", on_games: Callable[[int], None] | None = None) -> list[Matchup]:
-    """The whole gauntlet of one snapshot moment: the run's best so far, the opponents, the games.
+    """The whole gauntlet of one snapshot moment: the run's best so far, the opponents, the games, all chosen from
+    the moment's :class:`History`.
 
     Idempotent: a matchup that already has gauntlet games in the ledger (a gauntlet cut short by a kill, then run
     again on resume) is not played again, so asking twice never doubles a snapshot's games.
@@ -307,8 +348,9 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     new = [league.get_player(int(i)) for i in snapshot_ids]
     if not new:
         return []
-    best = best_snapshot(league, new[0].run or "", new[0].env, exclude={p.id for p in new})
-    pairs = choose_opponents(league, new, older=config.older, best=best)
+    history = run_history(league, new)
+    best = best_snapshot(history, get_env(new[0].env).anchor)
+    pairs = choose_opponents(league, new, older=config.older, best=best, history=history)
     crews = crews_of(league, [p for pair in pairs for p in pair])
     if crews:  # a cooperative game's per-lander snapshots fly as their moment's team: one matchup per two teams
         lead = {pid: crew[0] for pid, crew in crews.items()}
@@ -320,7 +362,7 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
         pairs = list(unique.values())
     pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b)]
     return play_gauntlet(league, pairs, first_seed=first_seed, config=config, device=device, on_games=on_games,
-                         crews={m.id: crew for crew in crews.values() for m in crew[:1]})
+                         crews={m.id: crew for crew in crews.values() for m in crew[:1]}, history=history)
 
 
 def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[PlayerRow, ...]]:
