@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.ladder import LadderRow, fit_table, ladder, select_rows
+from selfplay_cli.league.ladder import Fitted, LadderRow, _tiers, fit_table, ladder, select_rows
 from selfplay_cli.league.names import resolve, resolve_many
 from selfplay_cli.league.pairs import PairPlan, head_to_head, plan_tournament
 from selfplay_cli.league.results_csv import fit_csv, read_results_csv
@@ -25,7 +25,7 @@ from selfplay_cli.stats.sprt import sprt_llr
 
 ENV = "pong"
 JSON_KEYS = ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
-             "score", "step", "flag", "anchor", "run", "best", "vs"]
+             "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "vs"]
 D_7_OF_10 = 400.0 * math.log10(7.0 / 3.0)  # +147.2: the ML Elo difference of a 7/10 score
 
 
@@ -148,16 +148,53 @@ def test_chain_and_cycle_solve_the_score_equations(tmp_path: Path) -> None:
     assert [(r.rank, -r.elo) for r in ordered] == sorted((r.rank, -r.elo) for r in ordered)
 
 
-def test_rank_by_ci_separated_and_overlapping(tmp_path: Path) -> None:
+def test_ranks_follow_the_order_and_tiers_say_what_cannot_be_told_apart(tmp_path: Path) -> None:
     for boot in (0, 100):
         far = fit_csv(_csv_games(tmp_path, [("strong", "weak", 90, 0, 10)]), bootstrap=boot)
-        assert [(r.policy, r.rank) for r in far] == [("strong", 1), ("weak", 2)]
-        assert far[1].ci_high < far[0].ci_low
+        assert [(r.policy, r.rank, r.tier) for r in far] == [("strong", 1, 1), ("weak", 2, 2)]
+        assert far[1].ci_high < far[0].ci_low and far[0].margin.separated and far[0].margin.over == "weak"
         close = fit_csv(_csv_games(tmp_path, [("p", "q", 11, 0, 9)]), bootstrap=boot)
-        assert [r.rank for r in close] == [1, 1]
-        assert close[0].elo > close[1].elo  # ties in rank are ordered by Elo
+        assert [(r.rank, r.tier) for r in close] == [(1, 1), (2, 1)]  # one place each, one tier: not told apart
+        assert close[0].elo > close[1].elo and not close[0].margin.separated
         q = close[1]
         assert q.ci_low < q.elo < q.ci_high and q.ci_high > 1000.0
+
+
+def test_tiers_open_below_the_tiers_first_player_beyond_doubt() -> None:
+    """Tiers by hand: 0-1 differ by 100 with sd 40 (100 - 1.96 * 40 > 0: a new tier), 1-2 by 100 with sd 80 (not
+    separated: 2 joins 1's tier), though 0-2 would be; a flagged player is compared by whole intervals."""
+    z = normal_quantile(0.975)
+    sd = np.array([[0.0, 40.0, 60.0, 50.0], [40.0, 0.0, 80.0, 50.0], [60.0, 80.0, 0.0, 50.0],
+                   [50.0, 50.0, 50.0, 0.0]])
+    ratings = np.array([1300.0, 1200.0, 1100.0, 1050.0])
+    low, high = ratings - 300.0, ratings + 300.0
+    fitted = Fitted(["a", "b", "c", "d"], ratings, low, high, sd, [None, None, None, None], z)
+    assert 100 - z * 40 > 0 and 100 - z * 80 < 0 and 150 - z * 50 > 0
+    assert _tiers(fitted, [0, 1, 2, 3]) == {0: 1, 1: 2, 2: 2, 3: 3}  # d: 150 below b (the tier's first), sd 50
+    m = fitted.margin(1, 2)
+    assert (m.over, m.elo) == ("c", 100.0) and m.low == pytest.approx(100 - z * 80) and not m.separated
+    # d flagged (a bound): only whole intervals count, and 1350 (b's high... ) overlaps d's
+    flagged = replace(fitted, flags=[None, None, None, FLAG_PERFECT])
+    assert _tiers(flagged, [0, 1, 2, 3]) == {0: 1, 1: 2, 2: 2, 3: 2}
+    assert flagged.margin(1, 3).low == pytest.approx(low[1] - high[3])
+
+
+def test_the_best_of_a_run_says_by_how_much_and_when_it_cannot_tell(league: League) -> None:
+    p = _population(league)
+    rnd, cpu, e10, e90, r2 = (p[k].id for k in ("random", "cpu", "ep10", "ep90", "r2ep90"))
+    _record(league, _results(cpu, rnd, 30, 0, 10) + _results(e10, cpu, 30, 0, 10) + _results(e90, e10, 11, 0, 9)
+            + _results(r2, e10, 40, 0, 0) + _results(r2, rnd, 40, 0, 0))
+    by = _by_name(ladder(league, bootstrap=0))
+    best = by["r1/ep90"]
+    assert best.best and best.best_margin.over == "r1/ep10" and not best.best_margin.separated
+    assert best.tied == ("r1/ep10",)  # 11-9: the run's best by Elo, not beyond doubt
+    assert best.best_margin.elo == pytest.approx(best.elo - by["r1/ep10"].elo)
+    assert by["r2/ep90"].best and by["r2/ep90"].best_margin is None and by["r2/ep90"].tied == ()
+    _record(league, _results(e90, e10, 60, 0, 10))
+    best = _by_name(ladder(league, bootstrap=0))["r1/ep90"]
+    assert best.best_margin.separated and best.tied == () and best.best_margin.low > 0
+    d = best.to_json()
+    assert d["best_margin"]["over"] == "r1/ep10" and d["best_margin"]["separated"] is True and d["tied"] == []
 
 
 def test_bootstrap_is_seeded(tmp_path: Path) -> None:
@@ -512,7 +549,7 @@ def test_flagged_players_have_open_intervals_whatever_the_interval_method(tmp_pa
         assert rows["b"].flag is not None
         assert rows["b"].ci_low < 0 and rows["b"].ci_high > 2000, boot
         assert rows["a"].ci_low == rows["a"].ci_high == 1000.0
-        assert rows["b"].rank == 1, "b cannot be told apart from anyone"
+        assert rows["b"].rank == 3 and rows["b"].tier is None, "b's offset is unknown: last, in no tier"
 
 
 def test_prior_makes_the_same_ledger_finite_and_honest(tmp_path):
@@ -527,8 +564,8 @@ def test_prior_makes_the_same_ledger_finite_and_honest(tmp_path):
         assert [rows[n].flag for n in names] == [None, None, None]
         assert rows["b"].elo == pytest.approx(1000.0, abs=1e-6)  # symmetric with the anchor
         assert rows["c"].elo > 1000.0 + 300
-        assert rows["c"].ci_low > 1000.0 and rows["c"].rank == 1  # c beat both 10-0: above them beyond doubt
-        assert rows["a"].rank == rows["b"].rank == 2
+        assert rows["c"].ci_low > 1000.0 and rows["c"].tier == 1  # c beat both 10-0: above them beyond doubt
+        assert rows["a"].tier == rows["b"].tier == 2 and {rows["a"].rank, rows["b"].rank} == {2, 3}
         # b's interval carries two links (b-c and c-a), so it is wider than c's (one link)
         assert rows["b"].ci_high - rows["b"].ci_low > rows["c"].ci_high - rows["c"].ci_low > 400
 
@@ -554,7 +591,8 @@ def test_perfectly_separated_ledger_under_the_prior(league: League) -> None:
         assert all(r.flag is None for r in rows)
         elos = [r.elo for r in rows]
         assert all(math.isfinite(e) for e in elos) and elos == sorted(elos, reverse=True) and len(set(elos)) == 4
-        assert [r.rank for r in rows] == [1, 2, 3, 4], [(r.policy, r.elo, r.ci_low, r.ci_high) for r in rows]
+        assert [r.tier for r in rows] == [1, 2, 3, 4], [(r.policy, r.elo, r.ci_low, r.ci_high) for r in rows]
+        assert [r.rank for r in rows] == [1, 2, 3, 4]
         for r in rows:
             assert r.ci_low <= r.elo <= r.ci_high
             if not r.anchor:

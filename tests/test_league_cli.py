@@ -213,7 +213,10 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
     code, rows = run_json(capsys, "league", "ladder", "--bootstrap", "0")
     assert code == 0
     assert list(rows[0]) == ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses",
-                             "rank", "score", "step", "flag", "anchor", "run", "best", "vs"]
+                             "rank", "tier", "score", "step", "flag", "anchor", "run", "best", "margin",
+                             "best_margin", "tied", "vs"]
+    assert [r["rank"] for r in rows] == list(range(1, len(rows) + 1))  # the place by Elo, no gaps
+    assert [r["elo"] for r in rows] == sorted((r["elo"] for r in rows), reverse=True)
     by = {r["policy"]: r for r in rows}
     assert set(by) == {"random", "cpu", "r1/ep1", "r1/ep2", "r2/ep1"}
     # The prior: r2/ep1 won all its 16 games: finite and unflagged.
@@ -255,7 +258,13 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
     # The table: best marked, one column per bot with score and games, blank when none.
     code, out, err = run(capsys, "league", "ladder", "--bootstrap", "0")
     assert code == 0 and err == ""
-    assert "r1/ep2 (best)" in out and "r2/ep1 (best)" in out and "r1/ep1 (best)" not in out
+    assert "r1/ep2 (best" in out and "r2/ep1 (best)" in out and "r1/ep1 (best" not in out
+    best = next(r for r in rows if r["policy"] == "r1/ep2")
+    m = best["best_margin"]
+    assert m["over"] == "r1/ep1" and m["elo"] == round(best["elo"] - by["r1/ep1"]["elo"], 1)
+    said = "" if m["separated"] else " by Elo, not separated from r1/ep1"
+    assert f"best of r1: r1/ep2{said}" in " ".join(out.split())  # who is best, and by how much, under the table
+    assert "best of r2: r2/ep1 (the run's only rated snapshot)" in " ".join(out.split())
     assert "vs random" in out and "vs cpu" in out and "100% of 16" in out and "88% of 16" in out
     assert "random (anchor)" in out and "prior of 2 virtual draws" in out
     line = next(x for x in out.splitlines() if "r1/ep2 (best)" in x)

@@ -25,8 +25,6 @@ from selfplay_cli.stats.intervals import (
     bootstrap_intervals,
     laplace_ci,
     laplace_intervals,
-    rank_by_ci,
-    rank_pairwise,
 )
 from selfplay_cli.stats.match import match_stats
 from selfplay_cli.stats.sprt import SPRT, sprt_bounds, sprt_llr
@@ -460,7 +458,7 @@ def test_bootstrap_of_a_perfect_score_is_never_narrower_than_laplace() -> None:
 
 def test_perfectly_separated_chain_is_finite_ordered_and_ranked_under_the_prior() -> None:
     """A beats B beats C, every game, 20 games a pair: ML ratings are infinite; the MAP is finite, unflagged and
-    solves the score equations with the virtual draws added; the ranks separate all three."""
+    solves the score equations with the virtual draws added; the differences' intervals separate all three."""
     a, b, s = _games((0, 1, 20, 0, 0), (1, 2, 20, 0, 0), (0, 2, 20, 0, 0))
     ml = fit_bradley_terry(a, b, s, 3, anchor=2, anchor_rating=1000.0)
     assert ml.flags == [FLAG_PERFECT, FLAG_PERFECT, None]
@@ -477,30 +475,11 @@ def test_perfectly_separated_chain_is_finite_ordered_and_ranked_under_the_prior(
     for low, high, sd in (laplace_intervals(a, b, 3, r, 2, 0.95, 2.0),
                           bootstrap_intervals(a, b, s, 3, 2, 1000.0, 100, 0.95, 0, 2.0)):
         assert np.all(low <= r) and np.all(r <= high) and low[2] == high[2] == 1000.0
-        assert rank_pairwise(r, low, high, sd, 0.95).tolist() == [1, 2, 3]
+        z = normal_quantile(0.975)  # each step of the chain is separated by its difference's interval
+        assert r[0] - r[1] - z * sd[0, 1] > 0 and r[1] - r[2] - z * sd[1, 2] > 0
     # By whole intervals alone A and B overlap (both carry the uncertainty of their link to C).
     low, high, _ = laplace_intervals(a, b, 3, r, 2, 0.95, 2.0)
-    assert rank_by_ci(r, low, high).tolist() == [1, 1, 3]
-
-
-def test_rank_pairwise_hand_example() -> None:
-    r = np.array([1300.0, 1200.0, 1000.0])
-    low = np.array([1000.0, 900.0, 1000.0])
-    high = np.array([1600.0, 1500.0, 1000.0])
-    z = normal_quantile(0.975)
-    # Differences: 0-1 = 100 with sd 40 (100 - 1.96 * 40 = 21.6 > 0: 0 is above 1); 0-2 and 1-2 with sd 150:
-    # 300 - 294 > 0 (0 above 2), 200 - 294 < 0, but low_1 = 900 is not above high_2 = 1000 either.
-    sd = np.array([[0.0, 40.0, 150.0], [40.0, 0.0, 150.0], [150.0, 150.0, 0.0]])
-    assert 100 - z * 40 > 0 and 300 - z * 150 > 0 and 200 - z * 150 < 0
-    assert rank_pairwise(r, low, high, sd, 0.95).tolist() == [1, 2, 2]
-    # Player 1 not comparable (a flagged bound): only whole intervals count for it; low_0 = 1000 < high_1.
-    assert rank_pairwise(r, low, high, sd, 0.95, comparable=[True, False, True]).tolist() == [1, 1, 2]
-    # Whole intervals above always count, however uncertain the differences: low_1 = 1050 > high_2 = 1000.
-    vague = np.full((3, 3), 1e4) * (1 - np.eye(3))
-    assert rank_pairwise(r, low, high, vague, 0.95).tolist() == [1, 1, 1]
-    assert rank_pairwise(r, np.array([1000.0, 1050.0, 1000.0]), high, vague, 0.95).tolist() == [1, 1, 2]
-    with pytest.raises(ValueError):
-        rank_pairwise(r, low, high, sd[:2, :2])
+    assert low[0] < high[1]
 
 
 def test_laplace_ci_without_prior_is_the_wald_interval() -> None:
@@ -555,15 +534,6 @@ def test_bootstrap_ci_flagged_player_is_finite() -> None:
     a, b, s = _games((0, 1, 10, 5, 5), (2, 0, 4, 0, 0), (1, 3, 6, 0, 0))
     low, high = bootstrap_ci(a, b, s, 4, anchor=0, anchor_rating=0.0, n_boot=60, seed=2)
     assert np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(low <= high)
-
-
-def test_rank_by_ci_hand_example() -> None:
-    ratings = np.array([1200.0, 1150.0, 1000.0, 990.0])
-    low = np.array([1150.0, 1100.0, 950.0, 800.0])
-    high = np.array([1250.0, 1200.0, 1050.0, 1180.0])
-    # 0: nobody's low > 1250 -> 1; 1: nobody's low > 1200 -> 1;
-    # 2: low_0 = 1150 and low_1 = 1100 exceed 1050 -> 3; 3: no low exceeds 1180 -> 1
-    assert rank_by_ci(ratings, low, high).tolist() == [1, 1, 3, 1]
 
 
 def test_stats_does_not_import_torch() -> None:

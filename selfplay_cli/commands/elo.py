@@ -93,7 +93,7 @@ def fit(
 ) -> None:
     """Bradley-Terry ratings over the whole ledger (draw = half a point), 400 Elo scale: MAP under BayesElo's
     prior of 2 virtual draws by default (--prior 0: maximum likelihood), with confidence intervals and ranks."""
-    from ..league.ladder import ladder
+    from ..league.ladder import ladder, verdict_lines
     from ..league.results_csv import fit_csv
 
     name, rating = parse_anchor(anchor)
@@ -112,7 +112,8 @@ def fit(
         finally:
             league.close()
         title = "ratings fitted over the ledger"
-    render_ladder(rows, title, json_out=json_out, confidence=confidence, caption=prior_caption(prior))
+    render_ladder(rows, title, json_out=json_out, confidence=confidence, caption=prior_caption(prior),
+                  verdicts=verdict_lines(rows))
 
 
 @app.command("gate")

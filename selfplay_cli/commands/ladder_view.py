@@ -20,7 +20,9 @@ def prior_caption(prior: float) -> str:
     """One line saying how the ratings were fitted and how ranks are counted."""
     how = ("maximum likelihood (--prior 0)" if prior == 0 else
            f"MAP with a prior of {prior:g} virtual draws (BayesElo's; --prior 0 for maximum likelihood)")
-    return f"Elo: {how}. rank: 1 + players stronger beyond doubt. (best): best snapshot of its run."
+    return (f"Elo: {how}. rank: place by Elo. tier: players that cannot be told apart share one (a tier ends where a "
+            "player is below its first beyond doubt). (best): best snapshot of its run; (best, tied): best by Elo, "
+            "not beyond doubt.")
 
 
 def _csv_record(d: dict[str, Any]) -> dict[str, Any]:
@@ -34,12 +36,14 @@ def _csv_record(d: dict[str, Any]) -> dict[str, Any]:
 
 def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool = False,
                   online: dict[int, float] | None = None, confidence: float = 0.95,
-                  caption: str | None = None) -> None:
+                  caption: str | None = None, verdicts: list[str] | None = None) -> None:
     """Print ladder rows: JSON alone (``--json``), CSV (``--csv``) or a rich table.
 
     ``online``: the online Elo by player id (an extra column). The table marks the anchor and the best snapshot
-    of each run (bold, ``(best)``), shows a flag next to the Elo, the mean team return of a cooperative game's
-    players, and one ``vs BOT`` column per scripted player (score and games, blank without games).
+    of each run (bold, ``(best)``, or ``(best, tied)`` when it is not separated from the run's others), shows the
+    tier, a flag next to the Elo, the mean team return of a cooperative game's players, and one ``vs BOT`` column
+    per scripted player (score and games, blank without games); ``verdicts`` (:func:`~selfplay_cli.league.ladder.
+    verdict_lines`) follow the table.
     """
     if json_out:
         print_json([r.to_json() for r in rows])
@@ -56,7 +60,7 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
     if caption and any(r.mean_return is not None for r in rows):
         caption += " mean return: the team's mean return per game (all seats together)."
     table = Table(title=title, caption=caption)
-    for col, just in (("rank", "right"), ("policy", "left"), ("kind", "left"), ("step", "right"),
+    for col, just in (("rank", "right"), ("tier", "right"), ("policy", "left"), ("kind", "left"), ("step", "right"),
                       ("Elo", "right"), (f"{100 * confidence:g}% interval", "center"), ("games", "right"),
                       ("W-D-L", "center"), ("score", "right")):
         table.add_column(col, justify=just)
@@ -70,8 +74,8 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
         table.add_column(f"vs {escape(bot)}", justify="right")
     for r in rows:
         note = f" ({r.flag})" if r.flag else ""
-        marks = (" (anchor)" if r.anchor else "") + (" (best)" if r.best else "")
-        cells = [str(r.rank), escape(r.policy) + marks, r.kind, "" if r.step is None else f"{r.step:,}",
+        marks = (" (anchor)" if r.anchor else "") + ((" (best, tied)" if r.tied else " (best)") if r.best else "")
+        cells = [str(r.rank), "-" if r.tier is None else str(r.tier), escape(r.policy) + marks, r.kind, "" if r.step is None else f"{r.step:,}",
                  _fmt_elo(r.elo) + note, f"{_fmt_elo(r.ci_low)} .. {_fmt_elo(r.ci_high)}", str(r.games),
                  f"{r.wins}-{r.draws}-{r.losses}", f"{100 * r.score:.1f}%"]
         if online:
@@ -83,3 +87,5 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
             cells.append("" if rec.score is None else f"{100 * rec.score:.0f}% of {rec.games}")
         table.add_row(*cells, style="bold" if r.best else None)
     console.print(table)
+    for line in verdicts or ():
+        console.print(line, markup=False, highlight=False)

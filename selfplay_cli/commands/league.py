@@ -70,7 +70,7 @@ def ladder_cmd(
     json_out: JsonOpt = False,
     csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
 ) -> None:
-    from ..league.ladder import ladder, select_rows
+    from ..league.ladder import ladder, select_rows, verdict_lines
 
     if json_out and csv_out:
         raise MarlError("--json and --csv exclude each other")
@@ -97,8 +97,9 @@ def ladder_cmd(
         league.close()
     shown = select_rows(rows, run=run, top=top)
     title = "league ladder" + (f": run {run}" if run else "")
+    verdicts = [line for line in verdict_lines(rows) if run is None or line.startswith(f"best of {run}:")]
     render_ladder(shown, title, json_out=json_out, csv_out=csv_out, online=online, confidence=confidence,
-                  caption=prior_caption(prior))
+                  caption=prior_caption(prior), verdicts=verdicts)
     if run is not None and not json_out and not csv_out and not any(r.run == run for r in rows):
         console.print(f"run {run} has no snapshot with rated games yet")
 
@@ -127,7 +128,7 @@ def tournament(
 ) -> None:
     """Round robin (or gauntlet with --vs) over chosen policies, playing only the games still missing, then
     refit and print the ladder."""
-    from ..league.ladder import ladder
+    from ..league.ladder import ladder, verdict_lines
     from ..league.names import Team
     from ..league.pairs import plan_tournament
     from ..rated.match import load_player, mix_seed, run_match
@@ -178,7 +179,8 @@ def tournament(
         rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap))
     finally:
         league.close()
-    render_ladder(rows, f"{env} ladder after the tournament", json_out=json_out, caption=prior_caption(DEFAULT_PRIOR))
+    render_ladder(rows, f"{env} ladder after the tournament", json_out=json_out, caption=prior_caption(DEFAULT_PRIOR),
+                  verdicts=verdict_lines(rows))
 
 
 from .league_views import matrix_cmd, plot_cmd  # noqa: E402  (views of the league: commands/league_views.py)

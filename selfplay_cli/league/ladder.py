@@ -46,17 +46,21 @@ and a ``zero`` player's lower end are ``rating +- MAX_ELO``; disconnected and un
 ``rating -+ MAX_ELO`` on both sides; standard errors are capped at ``MAX_ELO``. Every number in a
 :class:`LadderRow` is finite.
 
-Ranks
------
-:func:`~selfplay_cli.stats.intervals.rank_pairwise`: ``rank = 1 + the number of players stronger beyond
-doubt``, i.e. players j for which the confidence interval of the difference ``r_j - r_i`` lies wholly above 0
-(from the same bootstrap replicates or Laplace covariance as the intervals, floored by the Laplace one under a
-prior), or whose whole interval lies above this player's. Players that cannot be told apart share a rank and
-ranks need not be consecutive. The difference is used, and not just the two intervals, because every interval
-is relative to the anchor: snapshots far above the anchor share the uncertainty of their link to it, so their
-intervals are wide and overlap even when their difference is measured precisely (a simulated 9-snapshot run
-put all nine at rank 1 by overlapping intervals, and separated them into 5 rank groups by differences).
-Players without an estimate (a flag) are compared by their whole intervals only.
+Order, ranks and tiers
+----------------------
+Rows are in order of Elo, highest first (players whose offset to the anchor is unknown, ``disconnected``, and
+players without games, ``unrated``, last), and the rank is the place in that order: 1, 2, 3, ... with no gaps, so
+rank and Elo always agree. What the data cannot separate is said by the *tier*: walking down the order, a player
+opens a new tier when it is below the first player of the current tier beyond doubt, i.e. the confidence interval
+of their difference ``r_j - r_i`` (from the same bootstrap replicates or Laplace covariance as the intervals,
+floored by the Laplace one under a prior) lies wholly above 0; players without an estimate (a flag) are compared
+by their whole intervals. Tier 1 is everyone who cannot be told apart from the top. The difference is used, and
+not the two intervals, because every interval is relative to the anchor: snapshots far above the anchor share the
+uncertainty of their link to it, so their intervals overlap even when their difference is measured precisely.
+
+Each row's ``margin`` is its difference over the next row, with its interval; the best snapshot of each run
+carries its margin over the run's next best and the run's snapshots it is not separated from (``tied``): the
+ladder says who is best, by how much, and when it cannot tell.
 """
 
 from __future__ import annotations
@@ -79,21 +83,24 @@ from selfplay_cli.stats.bradley_terry import (
     FLAG_ZERO,
     fit_bradley_terry,
 )
-from selfplay_cli.stats.elo import MAX_ELO
-from selfplay_cli.stats.intervals import bootstrap_intervals, laplace_intervals, rank_pairwise
+from selfplay_cli.stats.elo import MAX_ELO, normal_quantile
+from selfplay_cli.stats.intervals import bootstrap_intervals, laplace_intervals
 
 __all__ = [
     "DEFAULT_PRIOR",
     "BotRecord",
+    "Fitted",
     "LadderRow",
+    "Margin",
     "fit_table",
     "ladder",
     "pick_env",
     "select_rows",
+    "verdict_lines",
 ]
 
 _JSON_KEYS = ("policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
-              "score", "step", "flag", "anchor", "run", "best", "vs")
+              "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "vs")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -116,6 +123,30 @@ class BotRecord:
 
 
 @dataclass(frozen=True)
+class Margin:
+    """How far a player stands above another (``over``): the rating difference ``elo`` with its confidence interval
+    ``low .. high`` (from the same covariance as the ladder's intervals, so what the two share through the anchor
+    cancels). ``separated``: the whole interval lies above 0."""
+
+    over: str
+    elo: float
+    low: float
+    high: float
+
+    @property
+    def separated(self) -> bool:
+        return self.low > 0.0
+
+    def to_json(self) -> dict[str, Any]:
+        return {"over": self.over, "elo": round(float(self.elo), 1), "low": round(float(self.low), 1),
+                "high": round(float(self.high), 1), "separated": self.separated}
+
+    def text(self) -> str:
+        """``+97 [+12, +182]``."""
+        return f"{self.elo:+.0f} [{self.low:+.0f}, {self.high:+.0f}]"
+
+
+@dataclass(frozen=True)
 class LadderRow:
     """One player of a ladder.
 
@@ -128,12 +159,19 @@ class LadderRow:
         ci_low, ci_high: confidence interval of the rating, relative to the anchor.
         games, wins, draws, losses: the player's record in the fitted games.
         score: mean points per game.
-        rank: ``1 + #players stronger beyond doubt`` (see the module docstring).
+        rank: the place in the ladder's order (1, 2, 3, ...: see the module docstring).
+        tier: the group of players that cannot be told apart (1: the top's); None for players whose offset to the
+            anchor is unknown.
         flag: None, or the fit's flag: ``perfect``, ``zero`` (prior 0 only), ``disconnected``, ``unrated``.
         anchor: True for the anchor player.
         run: the snapshot's run (None for bots, run-less snapshots and CSV players).
         best: True for the best snapshot of its run (highest rating among the run's live snapshots that are
             comparable with the anchor).
+        margin: the difference over the next row of the ladder, with its interval (None for the last row and for
+            players without a comparable rating).
+        best_margin: for a run's best snapshot, its difference over the run's next best (None alone in its run).
+        tied: for a run's best snapshot, the run's snapshots it is not separated from (empty: the best beyond
+            doubt).
         vs: the record against each scripted player of the env, in the league's bot order (empty for CSV
             ladders); a bot's own entry has no games.
         mean_return: the player's mean team return over its cooperative episodes (None in other games).
@@ -158,6 +196,10 @@ class LadderRow:
     best: bool = False
     vs: tuple[BotRecord, ...] = ()
     mean_return: float | None = None
+    tier: int | None = None
+    margin: Margin | None = None
+    best_margin: Margin | None = None
+    tied: tuple[str, ...] = ()
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict: ``policy, kind, elo, ci_low, ci_high, games, wins, draws, losses, rank`` then
@@ -177,12 +219,16 @@ class LadderRow:
             "draws": int(self.draws),
             "losses": int(self.losses),
             "rank": int(self.rank),
+            "tier": self.tier,
             "score": round(float(self.score), 4),
             "step": None if self.step is None else int(self.step),
             "flag": self.flag,
             "anchor": bool(self.anchor),
             "run": self.run,
             "best": bool(self.best),
+            "margin": None if self.margin is None else self.margin.to_json(),
+            "best_margin": None if self.best_margin is None else self.best_margin.to_json(),
+            "tied": list(self.tied),
             "vs": {v.bot: {"score": None if v.score is None else round(float(v.score), 4), "games": int(v.games)}
                    for v in self.vs},
         }
@@ -213,8 +259,56 @@ def _open_flagged_sides(ratings: np.ndarray, flags: list[str | None], low: np.nd
             low[i] = min(low[i], ratings[i] - MAX_ELO)
 
 
-def _sort_rows(rows: list[LadderRow]) -> list[LadderRow]:
-    return sorted(rows, key=lambda r: (r.rank, -r.elo, r.policy))
+@dataclass(frozen=True)
+class Fitted:
+    """A fitted population: its ratings, intervals, flags and the standard deviations of every difference (Elo),
+    by index into ``names``; what the rows are made of, and what margins are read from."""
+
+    names: list[str]
+    ratings: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+    diff_sd: np.ndarray
+    flags: list[str | None]
+    z: float
+
+    def comparable(self, i: int) -> bool:
+        """Whether player ``i`` has an estimate (not a flagged bound, not an unknown offset)."""
+        return self.flags[i] is None
+
+    def margin(self, i: int, j: int) -> Margin:
+        """Player i's difference over player j: ``+- z sd`` where both have an estimate; else from their whole
+        intervals (the widest difference they allow)."""
+        d = float(self.ratings[i] - self.ratings[j])
+        if self.comparable(i) and self.comparable(j):
+            half = self.z * float(self.diff_sd[i, j])
+            return Margin(self.names[j], d, d - half, d + half)
+        return Margin(self.names[j], d, float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]))
+
+
+def _group(flag: str | None) -> int:
+    """Rows' order: players comparable with the anchor (estimates and flagged bounds) first, then those whose offset
+    is unknown, then those without games."""
+    return {FLAG_DISCONNECTED: 1, FLAG_UNRATED: 2}.get(flag or "", 0)
+
+
+def _order(fitted: Fitted, shown: list[int]) -> list[int]:
+    return sorted(shown, key=lambda i: (_group(fitted.flags[i]), -fitted.ratings[i], fitted.names[i]))
+
+
+def _tiers(fitted: Fitted, order: list[int]) -> dict[int, int | None]:
+    """Tier of each player in ``order`` (see the module docstring): a new tier opens below the current tier's first
+    player beyond doubt."""
+    tiers: dict[int, int | None] = {}
+    leader, tier = None, 0
+    for i in order:
+        if _group(fitted.flags[i]):
+            tiers[i] = None
+            continue
+        if leader is None or fitted.margin(leader, i).separated:
+            leader, tier = i, tier + 1
+        tiers[i] = tier
+    return tiers
 
 
 def check_prior(prior: float) -> float:
@@ -249,21 +343,32 @@ def fit_table(
 
     Bradley-Terry MAP ratings under BayesElo's prior of ``prior`` virtual draws (``prior=0``: maximum
     likelihood) anchored at ``anchor`` (its rating is ``anchor_rating``), intervals by a ``bootstrap``-replicate
-    percentile bootstrap (``bootstrap=0``: Laplace / normal approximation), ranks by
-    :func:`~selfplay_cli.stats.intervals.rank_pairwise` (see the module docstring). One row per name (players
-    without games are flagged ``unrated``), sorted by ``(rank, -elo, name)``. ``kinds`` / ``steps`` /
-    ``player_ids`` (keyed by name) fill the corresponding columns (default kind ``"player"``). Players in
-    ``hidden`` are fitted (their games count) but get no row and take no part in the ranks.
+    percentile bootstrap (``bootstrap=0``: Laplace / normal approximation), order, ranks, tiers and margins as the
+    module docstring says. One row per name (players without games are flagged ``unrated``), in the ladder's
+    order. ``kinds`` / ``steps`` / ``player_ids`` (keyed by name) fill the corresponding columns (default kind
+    ``"player"``). Players in ``hidden`` are fitted (their games count) but get no row and take no part in the
+    order.
 
     Raises:
         LeagueError: anchor not among the names (or hidden), no games, bad indices or options.
     """
+    rows, _ = _fit_rows(names, a, b, score_a, anchor, anchor_rating, bootstrap, confidence, seed, kinds, steps,
+                        player_ids, prior=prior, hidden=hidden)
+    return rows
+
+
+def _fit_rows(
+    names: list[str], a: npt.ArrayLike, b: npt.ArrayLike, score_a: npt.ArrayLike, anchor: str,
+    anchor_rating: float, bootstrap: int, confidence: float, seed: int, kinds: dict[str, str] | None,
+    steps: dict[str, int] | None, player_ids: dict[str, int] | None, *, prior: float, hidden: Collection[str],
+) -> tuple[list[LadderRow], Fitted]:
+    """:func:`fit_table`'s rows and the :class:`Fitted` population they come from."""
     names = [str(n) for n in names]
     if len(set(names)) != len(names):
         raise LeagueError("duplicate player names in the rating table")
     if anchor not in names:
-        shown = ", ".join(names[:20]) + (", ..." if len(names) > 20 else "")
-        raise LeagueError(f"anchor '{anchor}' is not a rated player; players: {shown or '(none)'}")
+        shown_names = ", ".join(names[:20]) + (", ..." if len(names) > 20 else "")
+        raise LeagueError(f"anchor '{anchor}' is not a rated player; players: {shown_names or '(none)'}")
     if bootstrap < 0:
         raise LeagueError(f"bootstrap must be >= 0, got {bootstrap}")
     if not 0.0 < confidence < 1.0:
@@ -292,22 +397,24 @@ def fit_table(
     _open_flagged_sides(ratings, list(fit.flags), low, high, k)
     if not (np.all(np.isfinite(ratings)) and np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
         raise AssertionError("rating fit produced a non-finite value")  # pragma: no cover
-    shown = np.array([name not in hidden for name in names])
-    ranks = np.zeros(n, dtype=np.int64)
-    ranks[shown] = rank_pairwise(ratings[shown], low[shown], high[shown], diff_sd[np.ix_(shown, shown)],
-                                 confidence, [f is None for f, s in zip(fit.flags, shown, strict=True) if s])
+    fitted = Fitted(names, ratings, low, high, np.asarray(diff_sd, dtype=np.float64), list(fit.flags),
+                    normal_quantile(0.5 + 0.5 * confidence))
+    order = _order(fitted, [i for i, name in enumerate(names) if name not in hidden])
+    tiers = _tiers(fitted, order)
     kinds, steps, player_ids = kinds or {}, steps or {}, player_ids or {}
-    rows = [
-        LadderRow(
+    rows = []
+    for place, i in enumerate(order):
+        below = order[place + 1] if place + 1 < len(order) else None
+        margin = (fitted.margin(i, below) if below is not None and not _group(fit.flags[i])
+                  and not _group(fit.flags[below]) else None)
+        name = names[i]
+        rows.append(LadderRow(
             policy=name, player_id=player_ids.get(name), kind=kinds.get(name, "player"), step=steps.get(name),
             elo=float(ratings[i]), ci_low=float(low[i]), ci_high=float(high[i]), games=int(fit.games[i]),
             wins=int(fit.wins[i]), draws=int(fit.draws[i]), losses=int(fit.losses[i]), score=float(fit.score[i]),
-            rank=int(ranks[i]), flag=fit.flags[i], anchor=i == k,
-        )
-        for i, name in enumerate(names)
-        if shown[i]
-    ]
-    return _sort_rows(rows)
+            rank=place + 1, flag=fit.flags[i], anchor=i == k, tier=tiers[i], margin=margin,
+        ))
+    return rows, fitted
 
 
 # --------------------------------------------------------------------------------------------------
@@ -411,18 +518,24 @@ def _bot_records(ids: npt.NDArray[np.int64], a: npt.NDArray[np.int64], b: npt.ND
     return out
 
 
-def _mark_best(rows: list[LadderRow], removed: set[int]) -> list[LadderRow]:
+def _mark_best(rows: list[LadderRow], removed: set[int], fitted: Fitted) -> list[LadderRow]:
     """``best=True`` on each run's highest-rated live snapshot; players comparable with the anchor first (a
-    ``disconnected`` or ``unrated`` rating only counts when no snapshot of the run has a comparable one)."""
+    ``disconnected`` or ``unrated`` rating only counts when no snapshot of the run has a comparable one). The best
+    carries its margin over the run's next best and the run's snapshots it is not separated from."""
     by_run: dict[str, list[LadderRow]] = defaultdict(list)
-    for r in rows:
+    for r in rows:  # in the ladder's order: the first comparable one of a run is its best
         if r.kind == "snapshot" and r.run is not None and r.player_id not in removed:
             by_run[r.run].append(r)
-    best_ids = set()
+    index = {name: i for i, name in enumerate(fitted.names)}
+    marked: dict[str, LadderRow] = {}
     for members in by_run.values():
-        comparable = [r for r in members if r.flag not in (FLAG_DISCONNECTED, FLAG_UNRATED)] or members
-        best_ids.add(max(comparable, key=lambda r: (r.elo, -(r.player_id or 0))).player_id)
-    return [replace(r, best=True) if r.player_id in best_ids else r for r in rows]
+        comparable = [r for r in members if not _group(r.flag)] or members
+        best, rest = comparable[0], comparable[1:]
+        i = index[best.policy]
+        margins = [fitted.margin(i, index[r.policy]) for r in rest]
+        marked[best.policy] = replace(best, best=True, best_margin=margins[0] if margins else None,
+                                      tied=tuple(m.over for m in margins if not m.separated))
+    return [marked.get(r.policy, r) for r in rows]
 
 
 def ladder(
@@ -470,13 +583,10 @@ def ladder(
     if anchor_player.full_name in hidden:
         hidden.discard(anchor_player.full_name)  # an explicitly chosen removed anchor stays visible
     names = [p.full_name for p in population]
-    rows = fit_table(
-        names, a, b, table.score_a, anchor=anchor_player.full_name, anchor_rating=anchor_rating,
-        bootstrap=bootstrap, confidence=confidence, seed=seed,
-        kinds={p.full_name: p.kind for p in population},
-        steps={p.full_name: p.step for p in population if not p.is_bot},
-        player_ids={p.full_name: p.id for p in population},
-        prior=prior, hidden=hidden,
+    rows, fitted = _fit_rows(
+        names, a, b, table.score_a, anchor_player.full_name, anchor_rating, bootstrap, confidence, seed,
+        {p.full_name: p.kind for p in population}, {p.full_name: p.step for p in population if not p.is_bot},
+        {p.full_name: p.id for p in population}, prior=prior, hidden=hidden,
     )
     bots = league.players(env=env, kind="bot", include_removed=True)
     records = _bot_records(ids, a, b, table.score_a, bots)
@@ -485,7 +595,33 @@ def ladder(
     rows = [replace(r, run=run_of.get(int(r.player_id)), vs=records.get(int(r.player_id), ()),
                     mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
             if r.player_id is not None else r for r in rows]
-    return _mark_best(rows, removed)
+    return _mark_best(rows, removed, fitted)
+
+
+def verdict_lines(rows: list[LadderRow]) -> list[str]:
+    """Who is best, and by how much, in plain lines: the ladder's top over the next player, then each run's best
+    over the run's next best (or the snapshots it cannot be told apart from)."""
+    lines = []
+    ranked = [r for r in rows if r.tier is not None]
+    if len(ranked) >= 2 and ranked[0].margin is not None:
+        top, m = ranked[0], ranked[0].margin
+        shared = sum(1 for r in ranked if r.tier == top.tier) - 1
+        lines.append(f"top: {top.policy}, {m.text()} Elo over {m.over}" + (
+            "" if m.separated and not shared else
+            f"; not separated from {shared} player{'s' if shared != 1 else ''} of its tier"))
+    for r in rows:
+        if not r.best:
+            continue
+        m = r.best_margin
+        if m is None:
+            lines.append(f"best of {r.run}: {r.policy} (the run's only rated snapshot)")
+        elif not r.tied:
+            lines.append(f"best of {r.run}: {r.policy}, {m.text()} Elo over {m.over}")
+        else:
+            names = ", ".join(r.tied[:3]) + (f" and {len(r.tied) - 3} more" if len(r.tied) > 3 else "")
+            lines.append(f"best of {r.run}: {r.policy} by Elo, not separated from {names} "
+                         f"({m.text()} over {m.over})")
+    return lines
 
 
 def select_rows(rows: list[LadderRow], run: str | None = None, top: int | None = None) -> list[LadderRow]:

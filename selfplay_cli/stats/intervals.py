@@ -1,5 +1,6 @@
 """Confidence intervals of Bradley-Terry ratings (Laplace approximation and percentile bootstrap, both under the
-prior) and ranks that count only the players stronger beyond doubt.
+prior), and the standard deviations of every rating difference, from which a ladder reads who is separated
+from whom.
 
 :func:`laplace_ci`: the Laplace (normal) approximation of the log-posterior at the fit: its negative Hessian
 is the weighted graph Laplacian of ``c_ij = (N_ij + V_ij) p_ij (1 - p_ij)`` (the virtual draws included),
@@ -28,7 +29,6 @@ import numpy.typing as npt
 
 from .bradley_terry import (
     FloatArray,
-    IntArray,
     _fit_matrices,
     _pair_matrices,
     _sigmoid,
@@ -39,7 +39,7 @@ from .bradley_terry import (
 )
 from .elo import MAX_ELO, NAT_TO_ELO, normal_quantile
 
-__all__ = ["bootstrap_ci", "bootstrap_intervals", "laplace_ci", "laplace_intervals", "rank_by_ci", "rank_pairwise"]
+__all__ = ["bootstrap_ci", "bootstrap_intervals", "laplace_ci", "laplace_intervals"]
 
 
 def _difference_sd(cov: FloatArray) -> FloatArray:
@@ -237,53 +237,3 @@ def bootstrap_ci(
     low, high, _ = bootstrap_intervals(a, b, score_a, n_players, anchor, anchor_rating, n_boot, confidence, seed,
                                        prior_games)
     return low, high
-
-
-def rank_by_ci(ratings: npt.ArrayLike, low: npt.ArrayLike, high: npt.ArrayLike) -> IntArray:
-    """Chatbot-Arena rank: ``rank_i = 1 + #{j : low_j > high_i}``.
-
-    A player is outranked only by players whose whole interval lies above its own, so players with
-    overlapping intervals share ranks (ties are allowed and ranks need not be consecutive).
-    ``ratings`` is only used to check the shapes (the rank depends on the intervals alone).
-    """
-    r = np.asarray(ratings, dtype=np.float64).ravel()
-    lo = np.asarray(low, dtype=np.float64).ravel()
-    hi = np.asarray(high, dtype=np.float64).ravel()
-    if not (r.size == lo.size == hi.size):
-        raise ValueError("rank_by_ci: ratings, low and high must have the same length")
-    sorted_low = np.sort(lo)
-    above = lo.size - np.searchsorted(sorted_low, hi, side="right")
-    return (1 + above).astype(np.int64)
-
-
-def rank_pairwise(
-    ratings: npt.ArrayLike,
-    low: npt.ArrayLike,
-    high: npt.ArrayLike,
-    diff_sd: npt.ArrayLike,
-    confidence: float = 0.95,
-    comparable: npt.ArrayLike | None = None,
-) -> IntArray:
-    """Rank = 1 + the number of players that are stronger beyond doubt.
-
-    Player j counts above player i when the confidence interval of the difference ``r_j - r_i``,
-    ``(r_j - r_i) -+ z * diff_sd[j, i]`` with ``z = Phi^-1((1 + confidence) / 2)``, lies wholly above 0 (both
-    players ``comparable``: they have an estimate, not a flagged bound), or when j's whole interval lies above
-    i's (``low_j > high_i``, the :func:`rank_by_ci` rule, which needs no comparability). Comparing the two
-    players directly leaves out the uncertainty they share through the anchor: two players far from the
-    anchor can have wide, overlapping intervals and still a well-measured difference. Ties are allowed and
-    ranks need not be consecutive.
-    """
-    r = np.asarray(ratings, dtype=np.float64).ravel()
-    lo = np.asarray(low, dtype=np.float64).ravel()
-    hi = np.asarray(high, dtype=np.float64).ravel()
-    sd = np.asarray(diff_sd, dtype=np.float64)
-    n = r.size
-    if not (lo.size == hi.size == n) or sd.shape != (n, n):
-        raise ValueError("rank_pairwise: ratings, low, high (n,) and diff_sd (n, n) must match")
-    comp = np.ones(n, dtype=bool) if comparable is None else np.asarray(comparable, dtype=bool).ravel()
-    z = normal_quantile(0.5 + 0.5 * confidence)
-    above = (r[:, None] - r[None, :] - z * sd > 0.0) & comp[:, None] & comp[None, :]  # above[j, i]
-    above |= lo[:, None] > hi[None, :]
-    np.fill_diagonal(above, False)
-    return (1 + above.sum(axis=0)).astype(np.int64)
