@@ -10,7 +10,7 @@ import numpy as np
 from cli_helpers import run
 
 from selfplay_cli.arena import Game, play
-from selfplay_cli.league.ladder import ladder
+from selfplay_cli.league.ladder import ladder, verdict_lines
 from selfplay_cli.league.pairs import head_to_head
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
@@ -281,4 +281,74 @@ def test_a_failing_gauntlet_in_the_worker_comes_back_as_one_error(tmp_path):
             ev.submit(GauntletJob((424242 + k,), 0, 4, 2))
         with pytest.raises(MarlError, match="rating games failed: .*424242"):
             ev.wait()
+    league.close()
+
+
+def _stand_ins(monkeypatch, module, league, who):
+    """Scripted players stand in for snapshots (``who``: player id -> bot name); no files are read."""
+
+    def fake_load(lg, row, device="cpu", greedy=None, seed=0):
+        p = ScriptedPolicy("pong", who.get(row.id, row.name), seed=seed)
+        p.id = row.full_name
+        return p
+
+    monkeypatch.setattr(module, "load_player", fake_load)
+
+
+def _gauntlet_games(league, a, b, a_points):
+    """Gauntlet games of A against B, one per entry of ``a_points`` (1, 0.5, 0)."""
+    mid = league.create_match("pong", "eval", {"gauntlet": True})
+    league.record_games(mid, [GameResult("pong", (a.id, b.id), seed=i, scores=(p, 1 - p), outcome=(p, 1 - p),
+                                         length=10, truncated=False) for i, p in enumerate(a_points)])
+
+
+def test_the_playoff_separates_the_best_and_stops_there(tmp_path, monkeypatch):
+    """A 3-1 lead after the gauntlet names no best beyond doubt; the playoff plays the two (cpu against random
+    standing in) round after round until the ladder separates them, well before its cap, and not again after."""
+    import selfplay_cli.rated.gauntlet as gauntlet_mod
+    from selfplay_cli.rated.playoff import PlayoffConfig, playoff
+
+    league = League.open(tmp_path / "league")
+    league.ensure_bots("pong", ["random", "cpu"])
+    old, new = snapshot_rows(league, "r", 2, learners=("left",))
+    bots = {p.name: p for p in league.players("pong", kind="bot")}
+    _gauntlet_games(league, new, old, [1, 1, 1, 0])
+    _gauntlet_games(league, new, bots["random"], [1] * 4)
+    _gauntlet_games(league, old, bots["random"], [1] * 4)
+    assert not ladder(league, "pong", bootstrap=0)[0].margin.separated
+    _stand_ins(monkeypatch, gauntlet_mod, league, {new.id: "cpu", old.id: "random"})
+    played = playoff(league, [new.id], first_seed=1000, config=PlayoffConfig(max_games=200, round_games=10))
+    assert 0 < played < 200 and played % 10 == 0, played  # whole rounds, stopped once separated
+    rows = ladder(league, "pong", bootstrap=0)
+    best = next(r for r in rows if r.best)
+    assert best.policy == "r/ep1-left" and best.best_margin.separated and best.tied == ()
+    h = head_to_head(league, new.id, old.id)
+    assert h["games"] == 4 + played and h["pairs"] >= played // 2  # seat-swapped pairs, on fresh seeds
+    table = league.games("pong")
+    playoff_matches = [m for m, p in league.match_params("pong").items() if p.get("playoff")]
+    assert playoff_matches and all(league.match_info(m)[1]["gauntlet"] for m in playoff_matches)
+    assert playoff(league, [new.id], first_seed=5000, config=PlayoffConfig(max_games=200, round_games=10)) == 0
+    assert len(league.games("pong")) == len(table)
+    league.close()
+
+
+def test_a_playoff_between_equals_stops_at_its_cap_and_the_ladder_says_tied(tmp_path, monkeypatch):
+    import selfplay_cli.rated.gauntlet as gauntlet_mod
+    from selfplay_cli.rated.playoff import PlayoffConfig, playoff
+
+    league = League.open(tmp_path / "league")
+    league.ensure_bots("pong", ["random", "cpu"])
+    a, b = snapshot_rows(league, "r", 1)
+    rnd = league.find_players("random", "pong")[0]
+    _gauntlet_games(league, a, b, [1, 0, 1, 0])
+    _gauntlet_games(league, a, rnd, [1] * 4)
+    _gauntlet_games(league, b, rnd, [1] * 4)
+    _stand_ins(monkeypatch, gauntlet_mod, league, {a.id: "random", b.id: "random"})
+    played = playoff(league, [a.id, b.id], first_seed=1000, config=PlayoffConfig(max_games=24, round_games=10))
+    assert played == 20, played  # 4 + 20 = 24 games between the two: the cap, in rounds of 10
+    assert head_to_head(league, a.id, b.id)["games"] == 24
+    rows = ladder(league, "pong", bootstrap=0)
+    best = next(r for r in rows if r.best)  # random against random (fixed seeds): tied, and the ladder says so
+    assert not best.best_margin.separated and len(best.tied) == 1
+    assert f"best of r: {best.policy} by Elo, not separated from {best.tied[0]}" in "\n".join(verdict_lines(rows))
     league.close()

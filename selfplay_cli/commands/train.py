@@ -125,6 +125,9 @@ def train(
     eval_inline: Annotated[bool, typer.Option("--eval-inline", help="Play the rating games in the training process, "
                                               "training paused (default: a worker process beside training).")]
     = False,
+    eval_playoff: Annotated[int, typer.Option("--eval-playoff", min=0, max=100_000, help="After the final "
+                                              "gauntlet the run's best candidates meet, up to this many games a "
+                                              "pair, until the best is separated (0: no playoff).")] = 100,
     opponents: Annotated[str, typer.Option("--opponents", help="League opponents (--agents 1, or --league-games): "
                                            "self | latest | uniform | pfsp, from the run's snapshots.")] = "pfsp",
     window: Annotated[int, typer.Option("--window", min=1, max=100_000, help="Opponents are drawn from the last N "
@@ -185,8 +188,8 @@ def train(
         flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
                  "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
                  "snapshot_steps": snapshot_steps, "eval_games": eval_games, "eval_older": eval_older,
-                 "eval_inline": eval_inline, "swap_every": swap_every, "tensorboard": tensorboard,
-                 "league_games": league_games, "seats": seats}
+                 "eval_inline": eval_inline, "eval_playoff": eval_playoff, "swap_every": swap_every,
+                 "tensorboard": tensorboard, "league_games": league_games, "seats": seats}
         settings.update({k: v for k, v in flags.items() if k in typed})
         matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
                        "latest_ratio": ("latest_ratio", latest_ratio)}

@@ -45,6 +45,7 @@ from ..league.store import League, PlayerRow
 from ..policies import Policy
 from ..results import COOPERATIVE, GameResult, Rules, points_between
 from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry
+from ..stats.intervals import laplace_intervals
 from ..stats.elo import normal_quantile
 from .match import env_options_of, load_player, mix_seed
 
@@ -130,18 +131,20 @@ class History:
     table: GameTable
 
 
-def run_history(league: League, new: Sequence[PlayerRow]) -> History:
-    """The :class:`History` of the moment whose snapshots are ``new`` (all of one run and game)."""
+def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = False) -> History:
+    """The :class:`History` of the moment whose snapshots are ``new`` (all of one run and game): what came before
+    it, or with ``including`` what stands once its gauntlet is played (its own snapshots too)."""
     env, run = new[0].env, new[0].run
-    first = min(p.id for p in new)  # ids grow in registration order: the moment's own are its newest
-    snapshots = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id < first]
+    # ids grow in registration order: the moment's own are its newest
+    last = max(p.id for p in new) if including else min(p.id for p in new) - 1
+    snapshots = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id <= last]
     bots = league.players(env=env, kind="bot")
     gauntlets = [mid for mid, params in league.match_params(env, kind="eval").items() if params.get("gauntlet")]
     table = league.games(env=env, players=[p.id for p in snapshots + bots])
     return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)))
 
 
-def _record(table: GameTable, a: int, b: int) -> tuple[int, int, int]:
+def record_between(table: GameTable, a: int, b: int) -> tuple[int, int, int]:
     """A's wins, draws and losses against B in ``table``."""
     both = ((table.player_a == a) & (table.player_b == b)) | ((table.player_a == b) & (table.player_b == a))
     pts = np.where(table.player_a[both] == a, table.score_a[both], 1.0 - table.score_a[both])
@@ -154,7 +157,7 @@ def _clear_history(league: League, history: History, m: Matchup, z: float, enoug
     wins = draws = losses = 0
     pid = m.a.parent_id
     while pid is not None and pid != m.b.id and wins + draws + losses < enough:
-        w, d, lo = _record(history.table, pid, m.b.id)
+        w, d, lo = record_between(history.table, pid, m.b.id)
         wins, draws, losses = wins + w, draws + d, losses + lo
         pid = league.get_player(pid).parent_id
     games = wins + draws + losses
@@ -211,6 +214,7 @@ def play_gauntlet(
     on_games: Callable[[int], None] | None = None,
     crews: dict[int, tuple[PlayerRow, ...]] | None = None,
     history: History | None = None,
+    label: str | None = None,
 ) -> list[Matchup]:
     """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
 
@@ -218,7 +222,8 @@ def play_gauntlet(
     seeds start at ``first_seed``, a disjoint range per matchup. ``on_games(n)`` is told of finished games.
     ``crews`` (cooperative games): the per-seat members a player flies with (:func:`crews_of`), by player id; a
     player without one flies every seat itself. ``history``: the moment's :class:`History`, whose games say which
-    matchups are already clear (without one, none is).
+    matchups are already clear (without one, none is). ``label``: a flag set in the matches' parameters besides
+    ``gauntlet`` (``playoff``).
     """
     cfg = config or GauntletConfig()
     if not pairs:
@@ -287,7 +292,7 @@ def play_gauntlet(
         if on_games:
             on_games(1)
         if in_flight[k] == 0:  # every game scheduled so far is in: store them, then go on only if still open
-            _store(league, m, pending[k], loaded, options, crews)
+            _store(league, m, pending[k], loaded, options, crews, label)
             pending[k] = []
             extra = m.more(z, cfg.pairs, cfg.max_pairs)
             if extra:
@@ -303,13 +308,15 @@ def play_gauntlet(
 
 
 def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[int, Policy],
-           options: dict, crews: dict[int, tuple[PlayerRow, ...]]) -> None:
+           options: dict, crews: dict[int, tuple[PlayerRow, ...]], label: str | None = None) -> None:
     """One transaction per matchup and round; the matchup's match row is opened with its first games."""
     if not results:
         return
     pa, pb = loaded[m.a.id], loaded[m.b.id]
     if m.match_id is None:
         info = {"a": pa.id, "b": pb.id, "first_seed": m.first_seed, "env_options": options, "gauntlet": True}
+        if label:
+            info[label] = True
         for side, row in (("a_crew", m.a), ("b_crew", m.b)):
             if row.id in crews:
                 info[side] = [loaded[c.id].id for c in crews[row.id]]
@@ -318,23 +325,53 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
     m.game_ids += league.record_games(m.match_id, [r.with_players(player) for r in results])
 
 
-def best_snapshot(history: History, anchor: str = "random") -> PlayerRow | None:
-    """The highest-rated snapshot of the moment's history, fitted (Bradley-Terry under the ladder's prior) from the
-    run's earlier gauntlets alone; players the games do not link to the ``anchor`` bot count only when none is
-    linked. Ties go to the older snapshot."""
+@dataclass(frozen=True)
+class Standing:
+    """The history's players fitted from its games: Bradley-Terry under the ladder's prior, anchored at the game's
+    anchor bot where it played, with the standard deviation of every difference (Laplace, Elo)."""
+
+    index: dict[int, int]  # player id -> position in the arrays
+    ratings: np.ndarray
+    diff_sd: np.ndarray
+    flags: list[str | None]
+
+    def rating(self, pid: int) -> float:
+        return float(self.ratings[self.index[pid]])
+
+    def linked(self, pid: int) -> bool:
+        """Whether the player's rating is an estimate linked to the anchor."""
+        return pid in self.index and self.flags[self.index[pid]] is None
+
+    def separated(self, top: int, other: int, z: float) -> bool:
+        """Whether ``top`` is above ``other`` beyond doubt: their difference's interval lies above 0."""
+        i, j = self.index[top], self.index[other]
+        return float(self.ratings[i] - self.ratings[j] - z * self.diff_sd[i, j]) > 0.0
+
+
+def standing(history: History, anchor: str = "random") -> Standing | None:
+    """The :class:`Standing` of the history's games (None without games)."""
     table = history.table
-    if not history.snapshots or not len(table):
+    if not len(table):
         return None
     ids, a, b = table.indexed()
     index = {int(pid): i for i, pid in enumerate(ids.tolist())}
     anchors = [index[p.id] for p in history.bots if p.name == anchor and p.id in index]
-    fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=anchors[0] if anchors else 0,
-                            prior_games=DEFAULT_PRIOR)
-    rated = [p for p in history.snapshots if p.id in index]
+    k = anchors[0] if anchors else 0
+    fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k, prior_games=DEFAULT_PRIOR)
+    _, _, diff_sd = laplace_intervals(a, b, ids.size, fit.ratings, k, 0.95, DEFAULT_PRIOR)
+    return Standing(index, fit.ratings, diff_sd, list(fit.flags))
+
+
+def best_snapshot(history: History, anchor: str = "random") -> PlayerRow | None:
+    """The highest-rated snapshot of the moment's history, fitted from the run's earlier gauntlets alone (its
+    :func:`standing`); players the games do not link to the ``anchor`` bot count only when none is linked. Ties go
+    to the older snapshot."""
+    fit = standing(history, anchor)
+    rated = [p for p in history.snapshots if fit is not None and p.id in fit.index]
     if not rated:
         return None
-    linked = [p for p in rated if fit.flags[index[p.id]] is None] or rated
-    return max(linked, key=lambda p: (fit.ratings[index[p.id]], -p.id))
+    linked = [p for p in rated if fit.linked(p.id)] or rated
+    return max(linked, key=lambda p: (fit.rating(p.id), -p.id))
 
 
 def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: int, config: GauntletConfig,

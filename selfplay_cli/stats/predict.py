@@ -29,15 +29,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+from scipy.optimize import minimize_scalar
 from scipy.stats import binom
 
 from .elo import NAT_TO_ELO, normal_quantile
 
-__all__ = ["ScorePrediction", "pair_effect", "pair_spread", "predict_score"]
-
-_NODES, _WEIGHTS = np.polynomial.hermite_e.hermegauss(48)  # probabilists' Hermite: weight exp(-x^2 / 2)
-_WEIGHTS = _WEIGHTS / _WEIGHTS.sum()
-
+__all__ = ["ScorePrediction", "pair_spread", "predict_pair"]
 
 def _expected(d_elo: npt.ArrayLike) -> np.ndarray:
     return 1.0 / (1.0 + np.power(10.0, -np.asarray(d_elo, dtype=np.float64) / 400.0))
@@ -67,77 +64,81 @@ class ScorePrediction:
                 "elo_sd": round(self.sd, 1)}
 
 
-def predict_score(diff: float, sd: float, games: int, confidence: float = 0.95) -> ScorePrediction:
-    """The score of A over ``games`` games when ``r_A - r_B ~ N(diff, sd^2)`` (Elo; see the module docstring).
-    ``games = 0`` predicts the expectation alone: the interval is that of ``E(d)``."""
-    if not (math.isfinite(diff) and math.isfinite(sd) and sd >= 0):
-        raise ValueError(f"the difference and its sd must be finite (sd >= 0), not {diff} / {sd}")
+def _grid(scale: float, size: int = 241) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes (nats) and weights of ``N(0, scale^2)`` on an even grid over +-6 standard deviations."""
+    if scale <= 0:
+        return np.zeros(1), np.ones(1)
+    x = np.linspace(-6.0, 6.0, size)
+    w = np.exp(-0.5 * x * x)
+    return scale * x, w / w.sum()
+
+
+def _log_likelihood(points: np.ndarray, games: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """``W log p + (n - W) log(1 - p)`` with ``p = sigmoid(theta)`` (nats), broadcast; a draw is half a point."""
+    return -points * np.logaddexp(0.0, -theta) - (games - points) * np.logaddexp(0.0, theta)
+
+
+def pair_spread(points: npt.ArrayLike, games: npt.ArrayLike, diff_elo: npt.ArrayLike) -> float:
+    """The spread ``tau`` (Elo) of pairs around what their ratings predict, from the pairs that met.
+
+    ``points[k]`` / ``games[k]``: the first player's points and the games of pair ``k``; ``diff_elo[k]`` its fitted
+    rating difference. Each pair's true difference is its fitted one plus a deviation ``e_k ~ N(0, tau^2)``;
+    ``tau`` maximises the marginal likelihood ``prod_k E_e[Binomial(W_k; n_k, E(d_k + e_k))]`` (quadrature over
+    ``e``). A 0-8 between players 1,500 Elo apart says nothing against the ratings, an upset there says much:
+    the likelihood weighs each as it should, where moment estimates on logits blow up at perfect scores.
+    0 without pairs."""
+    pts = np.asarray(points, dtype=np.float64)
+    n = np.asarray(games, dtype=np.float64)
+    d = np.asarray(diff_elo, dtype=np.float64) / NAT_TO_ELO
+    keep = n > 0
+    pts, n, d = pts[keep], n[keep], d[keep]
+    if not pts.size:
+        return 0.0
+    x, w = _grid(1.0, 121)
+
+    def neg(tau: float) -> float:
+        ll = _log_likelihood(pts[:, None], n[:, None], d[:, None] + tau * x[None, :]) + np.log(w)[None, :]
+        return -float(np.sum(np.logaddexp.reduce(ll, axis=1)))
+
+    best = minimize_scalar(neg, bounds=(0.0, 1500.0 / NAT_TO_ELO), method="bounded", options={"xatol": 1e-3})
+    tau = float(best.x)
+    return 0.0 if neg(0.0) <= best.fun + 1e-9 else tau * NAT_TO_ELO
+
+
+def predict_pair(diff: float, sd: float, games: int, *, spread: float = 0.0, met_points: float = 0.0,
+                 met_games: float = 0.0, confidence: float = 0.95) -> ScorePrediction:
+    """A's score over ``games`` games against B as a ladder predicts it: the fitted difference ``diff`` with its
+    ``sd`` (Elo), widened by the pairs' ``spread`` (:func:`pair_spread`), then updated with the pair's own record
+    (``met_points`` of ``met_games``): where the two met often, the prediction leans on their games; where they
+    never met, on the ratings and the spread alone."""
+    if not (math.isfinite(diff) and math.isfinite(sd) and sd >= 0 and math.isfinite(spread) and spread >= 0):
+        raise ValueError(f"the difference, its sd and the spread must be finite (sd, spread >= 0), not "
+                         f"{diff} / {sd} / {spread}")
     if games < 0:
         raise ValueError(f"games must be >= 0, not {games}")
     if not 0.0 < confidence < 1.0:
         raise ValueError("confidence must be in (0, 1)")
-    p = _expected(diff + sd * _NODES)
-    expected = float(np.dot(_WEIGHTS, p))
+    x, w = _grid(math.hypot(sd, spread) / NAT_TO_ELO)
+    theta = diff / NAT_TO_ELO + x
+    logw = np.log(w) + _log_likelihood(float(met_points), float(met_games), theta)
+    post = np.exp(logw - logw.max())
+    post /= post.sum()
+    p = 1.0 / (1.0 + np.exp(-theta))
+    mean_u = float(np.dot(post, x))
+    sd_u = math.sqrt(max(float(np.dot(post, (x - mean_u) ** 2)), 0.0))
+    expected = float(np.dot(post, p))
     tail = 0.5 * (1.0 - confidence)
+    shift, spread_sd = diff + mean_u * NAT_TO_ELO, sd_u * NAT_TO_ELO
     if games == 0:
-        z = normal_quantile(1.0 - tail)
-        low, high = _expected([diff - z * sd, diff + z * sd]).tolist()
-        return ScorePrediction(expected, low, high, 0, confidence, diff, sd)
+        order = np.argsort(p)
+        cdf = np.cumsum(post[order])
+        low = float(p[order][np.searchsorted(cdf, tail)])
+        high = float(p[order][min(np.searchsorted(cdf, 1.0 - tail), p.size - 1)])
+        return ScorePrediction(expected, low, high, 0, confidence, shift, spread_sd)
     k = np.arange(games + 1)
-    pmf = _WEIGHTS @ binom.pmf(k[None, :], games, p[:, None])
+    pmf = post @ binom.pmf(k[None, :], games, p[:, None])
     cdf = np.cumsum(pmf)
     lo_k = int(np.searchsorted(cdf, tail - 1e-12))  # the smallest k with P(K <= k) >= tail
     upper = np.cumsum(pmf[::-1])[::-1]  # P(K >= k)
     hi_k = int(np.flatnonzero(upper >= tail - 1e-12)[-1])  # the largest k with P(K >= k) >= tail
-    return ScorePrediction(expected, lo_k / games, hi_k / games, games, confidence, diff, sd)
-
-
-def _logit_residuals(points: np.ndarray, games: np.ndarray, diff_elo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per pair: the observed score's logit less the fitted one (nats), and its sampling variance, with half a point
-    of continuity correction (a perfect score keeps a finite logit)."""
-    s = (points + 0.5) / (games + 1.0)
-    p = _expected(diff_elo)
-    y = np.log(s / (1.0 - s)) - np.log(p / (1.0 - p))
-    v = 1.0 / ((games + 1.0) * s * (1.0 - s))
-    return y, v
-
-
-def pair_spread(points: npt.ArrayLike, games: npt.ArrayLike, diff_elo: npt.ArrayLike, n_players: int) -> float:
-    """The spread ``tau`` (Elo) of pairs around what their ratings predict, from the pairs that met.
-
-    ``points[k]`` / ``games[k]``: the first player's points and the games of pair ``k``; ``diff_elo[k]`` its fitted
-    rating difference. DerSimonian-Laird on the logit scale: ``Q = sum w y^2`` with ``y`` the residual logit and
-    ``w = 1 / v`` its inverse sampling variance, ``tau^2 = max(0, (Q - df) / (sum w - sum w^2 / sum w))`` where
-    ``df = pairs - (n_players - 1)`` (the ratings were fitted to the same games). 0 when the pairs are too few to
-    tell (df < 1)."""
-    pts = np.asarray(points, dtype=np.float64)
-    n = np.asarray(games, dtype=np.float64)
-    d = np.asarray(diff_elo, dtype=np.float64)
-    keep = n > 0
-    pts, n, d = pts[keep], n[keep], d[keep]
-    df = pts.size - (n_players - 1)
-    if df < 1:
-        return 0.0
-    y, v = _logit_residuals(pts, n, d)
-    w = 1.0 / v
-    q = float(np.sum(w * y * y))
-    denom = float(w.sum() - np.sum(w * w) / w.sum())
-    if denom <= 0:
-        return 0.0
-    tau2 = max(0.0, (q - df) / denom)
-    return math.sqrt(tau2) * NAT_TO_ELO
-
-
-def pair_effect(points: float, games: float, diff_elo: float, spread_elo: float) -> tuple[float, float]:
-    """How far this pair stands from its ratings' prediction, from its own games: the posterior mean and standard
-    deviation (Elo) of its deviation, a normal prior of sd ``spread_elo`` updated with the pair's residual logit.
-    Without games, or without spread, the ratings alone: ``(0, spread)``."""
-    if games <= 0 or spread_elo <= 0:
-        return 0.0, float(spread_elo)
-    y, v = _logit_residuals(np.array([points], dtype=np.float64), np.array([games], dtype=np.float64),
-                            np.array([diff_elo], dtype=np.float64))
-    t2 = (spread_elo / NAT_TO_ELO) ** 2
-    shrink = t2 / (t2 + float(v[0]))
-    mean = shrink * float(y[0]) * NAT_TO_ELO
-    sd = math.sqrt(t2 * float(v[0]) / (t2 + float(v[0]))) * NAT_TO_ELO
-    return mean, sd
+    return ScorePrediction(expected, lo_k / games, hi_k / games, games, confidence, shift, spread_sd)

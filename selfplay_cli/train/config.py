@@ -73,6 +73,7 @@ class TrainConfig:
     eval_games: int = 8  # games a new snapshot plays against each gauntlet opponent (2 where already clear)
     eval_older: int = 2  # older snapshots of the run in each gauntlet, besides the predecessor and the best
     eval_inline: bool = False  # play the gauntlets in the training process instead of a worker beside it
+    eval_playoff: int = 100  # after the final gauntlet the run's best candidates meet, up to this many games a pair
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
     curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)
@@ -98,6 +99,8 @@ class TrainConfig:
                             f"seat-swapped pairs), not {self.eval_games}")
         if self.eval_older < 0:
             raise MarlError(f"--eval-older must not be negative, not {self.eval_older}")
+        if self.eval_playoff < 0:
+            raise MarlError(f"--eval-playoff must not be negative, not {self.eval_playoff}")
         if self.snapshot_every < 0 or self.snapshot_steps < 0 or not (self.snapshot_every or self.snapshot_steps):
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
         if self.algo not in ALGOS:

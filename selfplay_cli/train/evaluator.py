@@ -5,7 +5,8 @@ the gauntlets (:func:`selfplay_cli.rated.gauntlet.rate_snapshots`) are played by
 in the order the snapshots were taken, so the run does not stop for them and their results do not depend on
 timing: the worker plays job after job, and each job picks the run's best from the games of the jobs before it,
 exactly as an inline evaluation would. The worker writes the ledger itself (SQLite in WAL mode takes both writers);
-the trainer only learns which jobs are done, and waits for the last one before it reports.
+the trainer only learns which jobs are done, and waits for the last one before it reports. The last job also plays
+the run's playoff (:mod:`selfplay_cli.rated.playoff`): its best candidates meet until the best is separated.
 
 ``background=False`` plays each gauntlet in the calling process instead, when it is submitted (the same games).
 
@@ -26,6 +27,9 @@ from typing import Any
 from ..errors import MarlError
 
 
+PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
+
+
 @dataclass(frozen=True)
 class GauntletJob:
     """The snapshots of one moment to rate, and how."""
@@ -35,6 +39,7 @@ class GauntletJob:
     games: int  # games per opponent (seat-swapped pairs)
     older: int
     full: bool = False  # every opponent gets ``games``, even where the lineage's result is already clear
+    playoff: int = 0  # after the gauntlet, the run's best candidates meet, up to this many games a pair (the final)
 
 
 @dataclass(frozen=True)
@@ -56,7 +61,13 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
     cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n, older=job.older)
     matchups = rate_snapshots(league, job.snapshot_ids, first_seed=job.first_seed, config=cfg, device=device,
                               on_games=on_games)
-    return JobDone(job, time.perf_counter() - t0, sum(m.games for m in matchups))
+    games = sum(m.games for m in matchups)
+    if job.playoff:
+        from ..rated.playoff import PlayoffConfig, playoff
+
+        games += playoff(league, job.snapshot_ids, first_seed=job.first_seed + PLAYOFF_SEEDS,
+                         config=PlayoffConfig(max_games=job.playoff), device=device, on_games=on_games)
+    return JobDone(job, time.perf_counter() - t0, games)
 
 
 def _worker(url: str, home: str | None, device: str, jobs: Any, done: Any, parent: int) -> None:

@@ -343,7 +343,8 @@ class Trainer:
         """The gauntlet of a moment's snapshots (by name: the run state names them before they have ids)."""
         names, first_seed, full = job
         ids = tuple(self._player_id(n) for n in names)
-        return GauntletJob(ids, first_seed, self.cfg.eval_games, self.cfg.eval_older, full=full)
+        return GauntletJob(ids, first_seed, self.cfg.eval_games, self.cfg.eval_older, full=full,
+                           playoff=self.cfg.eval_playoff if full else 0)
 
     def _player_id(self, full_name: str) -> int:
         run, _, name = full_name.partition("/")

@@ -1,0 +1,94 @@
+"""The end of a run: its best candidates meet until the best is separated, or the ladder can say they are tied.
+
+A gauntlet gives every snapshot a handful of games against each opponent: enough to rate a run's history, not to
+name its best. Two snapshots of the same moment, or of neighbouring ones, commonly stand within each other's
+intervals after it, and the one a ladder marks "best" is then the prior's choice; a 200-game match afterwards may
+well reverse it. So after the run's final gauntlet, the playoff:
+
+1. fits the run's snapshots from the run's own rating games (its gauntlets and this playoff, nothing else: the
+   history of the moment after the last, so the playoff repeats with the run's seed);
+2. takes the top snapshot and every snapshot of the run it is not separated from (the confidence interval of their
+   difference covers 0), the closest ``rivals`` of them;
+3. plays the top against each rival one round of ``round_games`` games (seat-swapped pairs, or the game kind's
+   rounds), and goes back to 1, until the top is separated from every snapshot of the run, or every pair of
+   top and rival has ``max_games`` games between them.
+
+The games are stored like the gauntlet's (kind ``eval``, flagged ``playoff``): they count in every rating, and the
+ladder shows the best with its margin over the next, or the snapshots it is tied with.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from ..envs import get_env
+from ..errors import MarlError
+from ..arena.schedule import round_size
+from ..league.store import League
+from ..results import COOPERATIVE, Rules
+from ..stats.elo import normal_quantile
+from .gauntlet import GauntletConfig, crews_of, play_gauntlet, record_between, run_history, standing
+
+__all__ = ["PlayoffConfig", "playoff"]
+
+
+@dataclass(frozen=True)
+class PlayoffConfig:
+    """How far the playoff goes (games are counted between the top and one rival)."""
+
+    max_games: int = 100  # results a pair of top and rival may reach (games; a cooperative game's comparisons)
+    round_games: int = 20  # results a pair adds in one round
+    rivals: int = 3  # rivals at most in a round, the closest to the top first
+    confidence: float = 0.95  # the level at which the best must be separated
+    max_rounds: int = 20  # a bound on the rounds whatever the top does (it may change between rounds)
+
+    def __post_init__(self) -> None:
+        if self.max_games < 0 or self.round_games < 2 or self.rivals < 1 or self.max_rounds < 1:
+            raise MarlError("a playoff needs max_games >= 0, round_games >= 2, rivals >= 1 and max_rounds >= 1")
+        if not 0.5 < self.confidence < 1.0:
+            raise MarlError(f"the playoff's confidence must lie in (0.5, 1), not {self.confidence}")
+
+
+def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config: PlayoffConfig | None = None,
+            device: str = "cpu", on_games: Callable[[int], None] | None = None) -> int:
+    """Play the playoff of the run whose final snapshots are ``final_ids`` (see the module docstring); returns the
+    number of games played. Seeds start at ``first_seed``, one range per round."""
+    cfg = config or PlayoffConfig()
+    final = [league.get_player(int(i)) for i in final_ids]
+    if not final or cfg.max_games == 0:
+        return 0
+    spec = get_env(final[0].env)
+    anchor = spec.anchor
+    rules = Rules.of(spec)
+    per_round = 1 if rules.kind == COOPERATIVE else round_size(rules, 2)  # results a round gives
+    z = normal_quantile(0.5 + 0.5 * cfg.confidence)  # the ladder's two-sided intervals of a difference
+    played, seed = 0, first_seed
+    for _ in range(cfg.max_rounds):
+        history = run_history(league, final, including=True)
+        fit = standing(history, anchor)
+        if fit is None:
+            return played
+        crews = crews_of(league, history.snapshots)
+        lead = {pid: crew[0] for pid, crew in crews.items()}  # a team of per-seat snapshots plays as one
+        players = list({lead.get(p.id, p).id: lead.get(p.id, p) for p in history.snapshots
+                        if not p.removed and fit.linked(p.id)}.values())
+        if len(players) < 2:
+            return played
+        players.sort(key=lambda p: (-fit.rating(p.id), p.id))
+        top, rest = players[0], players[1:]
+        left = {p.id: cfg.max_games - sum(record_between(history.table, top.id, p.id)) for p in rest}
+        rivals = [p for p in rest if not fit.separated(top.id, p.id, z) and left[p.id] > 0][:cfg.rivals]
+        by_rounds: dict[int, list] = {}  # the pairs by the rounds each plays now
+        for rival in rivals:
+            by_rounds.setdefault(max(1, min(cfg.round_games, left[rival.id]) // per_round), []).append((top, rival))
+        if not by_rounds:
+            return played
+        for n, pairs in sorted(by_rounds.items()):
+            matchups = play_gauntlet(league, pairs, first_seed=seed,
+                                     config=GauntletConfig(pairs=n, clear_pairs=n, max_pairs=n, older=0),
+                                     device=device, on_games=on_games, label="playoff",
+                                     crews={m.id: crew for crew in crews.values() for m in crew[:1]})
+            played += sum(m.games for m in matchups)
+            seed += n * len(pairs)
+    return played
