@@ -221,10 +221,13 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
                 h = head_to_head(league, p.id, bots[bot])
                 assert (rec["wins"], rec["draws"], rec["losses"], rec["games"]) == (
                     h["wins"], h["draws"], h["losses"], h["games"])
-                assert rec["score"] == round(h["score"], 4)
+                assert rec["score"] == round(h["score"], 4) and rec["games"] >= 32  # a final plays the bots in full
+                assert rec["score_low"] <= rec["score"] <= rec["score_high"]
             row = rows[f["snapshot"]]
             assert (f["elo"], f["ci_low"], f["ci_high"]) == (round(row.elo, 1), round(row.ci_low, 1),
                                                               round(row.ci_high, 1))
+        (best,) = [r for r in rows.values() if r.best and r.run == "pong-1"]  # the run's best, as the ladder has it
+        assert data["best"]["policy"] == best.policy and data["best"]["tied"] == list(best.tied)
     # the run's rating curves were drawn into its folder, as `marl league plot` draws them
     import matplotlib.image
 
@@ -235,7 +238,14 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     assert code == 0, err
     left, right = (ln.strip() for ln in out.splitlines() if ln.strip().startswith("pong-1/s"))
     assert left.startswith(finals[0]["snapshot"] + ": Elo ") and right.startswith(finals[1]["snapshot"] + ": Elo ")
-    assert "vs random" in left and "vs cpu" in right and "games)" in right
+    assert "vs random" in left and "vs cpu" in right
+    import re
+
+    for line in (left, right):  # each score with its interval, of the 32 games a final plays against each bot
+        for low, high in re.findall(r"vs \w+ \d+% \[(\d+)%, (\d+)%\] of 32 games", line):
+            assert int(low) <= int(high)
+        assert len(re.findall(r"of 32 games", line)) == 2, line
+    assert any(ln.strip().startswith("best of pong-1: ") for ln in out.splitlines()), out
 
 
 def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monkeypatch):
@@ -351,4 +361,23 @@ def test_a_playoff_between_equals_stops_at_its_cap_and_the_ladder_says_tied(tmp_
     best = next(r for r in rows if r.best)  # random against random (fixed seeds): tied, and the ladder says so
     assert not best.best_margin.separated and len(best.tied) == 1
     assert f"best of r: {best.policy} by Elo, not separated from {best.tied[0]}" in "\n".join(verdict_lines(rows))
+    league.close()
+
+
+def test_a_final_gauntlet_plays_the_bots_in_full_whatever_the_history(tmp_path, monkeypatch):
+    """A run reports its final snapshots' scores against the bots: those matchups get ``bot_pairs`` even where the
+    predecessor's record made them clear; the others keep the usual pairs."""
+    import selfplay_cli.rated.gauntlet as gauntlet_mod
+
+    league = League.open(tmp_path / "league")
+    league.ensure_bots("pong", ["random", "cpu"])
+    old, new = snapshot_rows(league, "r", 2, learners=("left",))
+    bots = {p.name: p for p in league.players("pong", kind="bot")}
+    _gauntlet_games(league, old, bots["random"], [1] * 8)  # clear: a non-final gauntlet would play 1 pair
+    _stand_ins(monkeypatch, gauntlet_mod, league, {old.id: "cpu", new.id: "cpu"})
+    pairs = [(new, old), (new, bots["random"]), (new, bots["cpu"])]
+    cfg = GauntletConfig(pairs=2, clear_pairs=2, max_pairs=2, bot_pairs=16)
+    ms = play_gauntlet(league, pairs, first_seed=0, config=cfg, history=run_history(league, [new]))
+    assert [m.games for m in ms] == [4, 32, 32]
+    assert len({s for s in league.games("pong").seed.tolist()}) >= 16 + 16 + 2  # disjoint seed ranges
     league.close()

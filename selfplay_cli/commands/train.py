@@ -290,7 +290,9 @@ def train(
             "seconds": round(report.seconds, 1), "rating_games": report.eval_games,
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
             "steps_per_second": round(report.steps_per_second), "snapshots": report.snapshots, "final": finals,
-            "plot": str(report.plot) if isinstance(report.plot, Path) else None}
+            "plot": str(report.plot) if isinstance(report.plot, Path) else None,
+            "best": None if report.best is None else {k: report.best.to_json()[k] for k in
+                                                      ("policy", "elo", "ci_low", "ci_high", "best_margin", "tied")}}
     if json_out:
         print_json(data)
         return
@@ -300,6 +302,11 @@ def train(
                   f"{report.eval_seconds:.0f} s, {report.wait_seconds:.0f} s of it waited for at the end)")
     for rec in report.finals:
         console.print("  " + describe_record(rec), markup=False)
+    if report.best is not None:
+        from ..league.ladder import verdict_lines
+
+        for line in verdict_lines([report.best]):
+            console.print("  " + line, markup=False)
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
     if report.plot is not None:
         console.print(f"  rating curves: {report.plot}", markup=False)
@@ -328,10 +335,16 @@ def stop_on_sigterm() -> Iterator[None]:
 
 
 def describe_record(rec: Any) -> str:
-    """``pong-1/ep37-left: Elo 2301 [2220, 2388]; vs random 100% (8 games), vs cpu 94% (16 games)``: every figure
-    measured on that snapshot (its stored games and its fitted rating)."""
+    """``pong-1/ep37-left: Elo 2301 [2220, 2388]; vs random 100% [89%, 100%] of 32 games, vs cpu 94% [...] of 32
+    games``: every figure measured on that snapshot (its stored games and its fitted rating), each score with its
+    95% interval."""
     parts = [f"Elo {rec.elo:.0f} [{rec.ci_low:.0f}, {rec.ci_high:.0f}]"] if rec.elo is not None else []
-    vs = ", ".join(f"vs {bot} {100 * rec.score(wdl):.0f}% ({sum(wdl)} games)" for bot, wdl in rec.vs.items())
+
+    def score(wdl: tuple[int, int, int]) -> str:
+        low, high = rec.interval(wdl)
+        return f"{100 * rec.score(wdl):.0f}% [{100 * low:.0f}%, {100 * high:.0f}%] of {sum(wdl)} {rec.unit}"
+
+    vs = ", ".join(f"vs {bot} {score(wdl)}" for bot, wdl in rec.vs.items())
     if vs:
         parts.append(vs)
     return f"{rec.name}: " + ("; ".join(parts) if parts else "not rated (--eval-games 0)")

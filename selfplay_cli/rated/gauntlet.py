@@ -59,6 +59,8 @@ class GauntletConfig:
     max_pairs: int = 4  # pairs a matchup may reach while its result is open (= pairs: never more, no waiting on
     # a matchup's first games; with long games each such wait costs a whole game's length)
     older: int = 2  # older snapshots of the run besides the predecessor and the best
+    bot_pairs: int = 0  # pairs against each scripted player, if more than ``pairs`` (a run's final snapshots:
+    # their figures against the bots are what the run reports)
     clear: float = 0.95  # a matchup is settled once the likelihood of superiority leaves [1 - clear, clear]
     parallel: int = 1024  # games at once
 
@@ -256,7 +258,7 @@ def play_gauntlet(
         crew = seated.get(row.id)
         return loaded[row.id].id if crew is None else tuple(dict.fromkeys(loaded[m.id].id for m in crew))
     per = round_size(rules, 2)
-    span = cfg.max_pairs  # seeds reserved per matchup: one per round
+    span = max(cfg.max_pairs, cfg.bot_pairs)  # seeds reserved per matchup: one per round
     matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
     z = normal_quantile(cfg.clear)
     schedule: list[Game] = []
@@ -300,8 +302,11 @@ def play_gauntlet(
 
     for k, m in enumerate(matchups):
         m.expect = None if history is None else _clear_history(league, history, m, z, 2 * cfg.pairs)
-        schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
-    most = 2 * cfg.max_pairs * len(matchups)
+        if cfg.bot_pairs and m.b.is_bot:  # the final's figures against the bots: in full, whatever the history
+            schedule_pairs(k, max(cfg.pairs, cfg.bot_pairs))
+        else:
+            schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
+    most = 2 * span * len(matchups)
     play(spec, roster, schedule, parallel=cfg.parallel, env_options=options, record_actions=True,
          on_result=finished, slots=min(cfg.parallel, most))
     return matchups

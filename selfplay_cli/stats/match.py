@@ -13,7 +13,7 @@ import numpy as np
 
 from .elo import MAX_ELO, SCORE_CLIP, normal_quantile, score_to_elo
 
-__all__ = ["MatchStats", "match_stats"]
+__all__ = ["MatchStats", "match_stats", "score_interval"]
 
 
 @dataclass(frozen=True)
@@ -166,3 +166,18 @@ def match_stats(
         used_pentanomial=use_penta,
     )
 
+
+
+def score_interval(wins: int, draws: int, losses: int, confidence: float = 0.95) -> tuple[float, float]:
+    """The Wilson interval of a score ``(W + D/2) / n``, a draw counted as half a success: honest at 0 % and 100 %
+    and with a handful of games (0 of 4 is ``[0 %, 49 %]``, not a point). ``(0, 1)`` without games."""
+    n = int(wins) + int(draws) + int(losses)
+    if n == 0:
+        return 0.0, 1.0
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"score_interval: confidence must be in (0, 1), got {confidence}")
+    p = (wins + 0.5 * draws) / n
+    z = normal_quantile(0.5 + 0.5 * confidence)
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return max(0.0, centre - half), min(1.0, centre + half)

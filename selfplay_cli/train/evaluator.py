@@ -27,6 +27,7 @@ from typing import Any
 from ..errors import MarlError
 
 
+FINAL_BOT_GAMES = 32  # a run's final snapshots play at least this many games against each scripted player
 PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
 
 
@@ -58,7 +59,8 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
 
     t0 = time.perf_counter()
     n = job.games // 2
-    cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n, older=job.older)
+    cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n, older=job.older,
+                         bot_pairs=max(n, FINAL_BOT_GAMES // 2) if job.full else 0)
     matchups = rate_snapshots(league, job.snapshot_ids, first_seed=job.first_seed, config=cfg, device=device,
                               on_games=on_games)
     games = sum(m.games for m in matchups)

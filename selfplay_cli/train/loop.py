@@ -44,7 +44,7 @@ from ..policies.network import resolve_device
 from ..policies.snapshot import SnapshotMeta, save_snapshot
 from ..rated.match import load_player
 from ..rated.snapshots import snapshot_relpath
-from ..results import GameResult
+from ..results import COOPERATIVE, GameResult
 from ..signals import signals_held
 from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum, Schedule
@@ -68,19 +68,28 @@ class SnapshotRecord:
     elo: float | None = None
     ci_low: float | None = None
     ci_high: float | None = None
+    unit: str = "games"  # what a result against a bot is: a game, or a cooperative game's comparison of two
 
     @staticmethod
     def score(wdl: tuple[int, int, int]) -> float:
         w, d, lo = wdl
         return (w + 0.5 * d) / max(w + d + lo, 1)
 
+    @staticmethod
+    def interval(wdl: tuple[int, int, int]) -> tuple[float, float]:
+        """The score's 95% interval (Wilson: honest with a handful of results and at 0 % or 100 %)."""
+        from ..stats.match import score_interval
+
+        return score_interval(*wdl)
+
     def to_json(self) -> dict[str, Any]:
         return {"snapshot": self.name, "learner": self.learner, "step": self.step,
                 "elo": None if self.elo is None else round(self.elo, 1),
                 "ci_low": None if self.ci_low is None else round(self.ci_low, 1),
                 "ci_high": None if self.ci_high is None else round(self.ci_high, 1),
-                "vs": {bot: {"score": round(self.score(wdl), 4), "games": sum(wdl), "wins": wdl[0], "draws": wdl[1],
-                             "losses": wdl[2]} for bot, wdl in self.vs.items()}}
+                "vs": {bot: {"score": round(self.score(wdl), 4), "score_low": round(self.interval(wdl)[0], 4),
+                             "score_high": round(self.interval(wdl)[1], 4), self.unit: sum(wdl), "wins": wdl[0],
+                             "draws": wdl[1], "losses": wdl[2]} for bot, wdl in self.vs.items()}}
 
 
 @dataclass
@@ -95,6 +104,7 @@ class TrainReport:
     snapshots: list[str]
     finals: list[SnapshotRecord]  # each learner's final snapshot, as the ledger rates it
     plot: Path | str | None = None  # the rating curves' PNG, or why there is none
+    best: Any = None  # the run's best snapshot as the ladder has it at the end (a LadderRow), None unrated
 
     @property
     def steps_per_second(self) -> float:
@@ -383,7 +393,8 @@ class Trainer:
                     vs[bot] = (h["wins"], h["draws"], h["losses"])
             r = rated.get(p.id)
             out.append(SnapshotRecord(p.full_name, p.meta.get("learner", ""), p.step, vs,
-                                      r.elo if r else None, r.ci_low if r else None, r.ci_high if r else None))
+                                      r.elo if r else None, r.ci_low if r else None, r.ci_high if r else None,
+                                      "comparisons" if self.spec.kind == COOPERATIVE else "games"))
         return out
 
     # -- one process per run ---------------------------------------------------------------------------------
@@ -656,7 +667,17 @@ class Trainer:
             self.records = self._records([self.league.get_player(i) for i in self.latest])
         plot = self._plot()
         return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - t0, self.eval_seconds,
-                           waited, self.eval_games, self.snapshots, list(self.records), plot)
+                           waited, self.eval_games, self.snapshots, list(self.records), plot, self._best())
+
+    def _best(self) -> Any:
+        """The run's best snapshot in the ladder fitted now (its margin over the run's next, or the snapshots it
+        is tied with), None without rating games."""
+        from ..league.ladder import ladder
+
+        if not self.cfg.eval_games:
+            return None
+        return next((r for r in ladder(self.league, self.spec.name, bootstrap=0) if r.best and r.run == self.cfg.run),
+                    None)
 
     def _plot(self) -> Path | str | None:
         """The run's rating curves as ``runs/<run>/ratings.png`` (as ``marl league plot --run`` draws them); None
