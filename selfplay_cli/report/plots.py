@@ -25,7 +25,7 @@ from ..stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, FLAG_ZERO
 from .png import check_png_path, new_figure, save_png
 
 __all__ = ["BOUND_FLAGS", "BotLevel", "CurvePoint", "LearnerCurve", "RunCurves", "coinciding", "dodge_steps",
-           "format_steps", "run_curves", "run_figure", "save_run_png", "write_run_plot", "y_limits"]
+           "format_steps", "run_curves", "run_figure", "save_run_png", "write_run_plot", "x_limits", "y_limits"]
 
 BOUND_FLAGS = (FLAG_PERFECT, FLAG_ZERO)
 """Flags whose rating is a bound: ``perfect`` (the true rating is higher) and ``zero`` (lower); ``--prior 0`` only."""
@@ -219,11 +219,21 @@ def coinciding(curves: RunCurves) -> list[tuple[int, ...]]:
     return [tuple(m) for m in members.values() if len(m) > 1]
 
 
+def x_limits(curves: RunCurves) -> tuple[float, float]:
+    """The training steps to show: the first to the last snapshot; around a single step, 5% of it either side."""
+    steps = [p.step for c in curves.curves for p in c.points]
+    lo, hi = float(min(steps)), float(max(steps))
+    if hi > lo:
+        return lo, hi
+    pad = max(1.0, 0.05 * abs(lo))
+    return lo - pad, hi + pad
+
+
 def dodge_steps(curves: RunCurves) -> dict[int, float]:
     """How far (in steps) each learner of a :func:`coinciding` group is drawn aside so that every member shows:
-    members spread symmetrically, 1.5% of the step range apart. Learners not in a group are not moved."""
-    steps = [p.step for c in curves.curves for p in c.points]
-    gap = 0.015 * max(max(steps) - min(steps), 2)
+    members spread symmetrically, 1.5% of the step range shown apart. Learners not in a group are not moved."""
+    lo, hi = x_limits(curves)
+    gap = 0.015 * (hi - lo)
     out = {}
     for members in coinciding(curves):
         for k, i in enumerate(members):
@@ -314,9 +324,8 @@ def run_figure(curves: RunCurves) -> Any:
         ax.text(0.995, bot.elo, f" {bot.name} ", transform=ax.get_yaxis_transform(), ha="right",
                 va="top" if near_top else "bottom", fontsize=9, color="0.3")
     ax.set_ylim(ylo, yhi)
-    steps_all = [p.step for c in curves.curves for p in c.points]
-    if min(steps_all) == max(steps_all):
-        ax.set_xlim(min(steps_all) - 1, max(steps_all) + 1)
+    if len({p.step for _, p in points}) == 1:  # one step: 5% of it either side (matplotlib's margins: a step)
+        ax.set_xlim(*x_limits(curves))
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: format_steps(x)))
     ax.set_xlabel("training step (game steps)")
     anchor = f"; {curves.anchor[0]} = {curves.anchor[1]:.0f}" if curves.anchor else ""

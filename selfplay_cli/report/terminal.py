@@ -26,7 +26,7 @@ from rich.text import Text
 
 from ..stats.bradley_terry import FLAG_PERFECT
 from .matrix import CYCLE_TEST, MatrixReport
-from .plots import BOUND_FLAGS, CurvePoint, RunCurves, format_steps, y_limits
+from .plots import BOUND_FLAGS, CurvePoint, RunCurves, format_steps, x_limits, y_limits
 
 __all__ = ["curves_chart", "curves_summary", "matrix_summary", "matrix_table", "nice_ticks"]
 
@@ -159,10 +159,7 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
     yticks = [t for t in nice_ticks(ylo, yhi, 5) if ylo <= t <= yhi]
     ylabels = [f"{t:.0f}" for t in yticks]
     left = max([len(s) for s in ylabels] + [4]) + 2
-    steps = [p.step for c in curves.curves for p in c.points]
-    x0, x1 = float(min(steps)), float(max(steps))
-    if x1 <= x0:
-        x0, x1 = x0 - 1.0, x1 + 1.0
+    x0, x1 = x_limits(curves)
     canvas = _Canvas(1, rows, unicode)  # the plot's height in pixels, before its width is known
 
     def py(y: float) -> int:
