@@ -245,7 +245,7 @@ def test_render_is_the_games_own_frame():
     spec = get_env(TTT)
     core = spec.core(2)
     core.step(np.array([[4, 0], [0, 0]]))
-    frame = spec.make_renderer().draw(core, 0, ("a", "b"), "step 1")
+    frame = spec.make_renderer().draw(core, 0)
     assert frame.shape == (96, 96, 3) and frame.dtype == np.uint8
     assert np.array_equal(frame, core.envs[0].render())
     assert not np.array_equal(frame, spec.make_renderer().draw(core, 1))

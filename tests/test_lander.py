@@ -402,10 +402,10 @@ def test_renderer_draws_even_frames_of_each_lander():
     spec = LANDER
     r = spec.make_renderer()
     c = core_of(3, (1,))
-    first = r.draw(c, 0, ("heuristic",) * 3, "step 0")
+    first = r.draw(c, 0)
     for _ in range(40):
         c.step(heuristic_actions(c))
-    frame = r.draw(c, 0, ("heuristic",) * 3, "step 40")
+    frame = r.draw(c, 0)
     assert frame.shape == (400, 600, 3) and frame.dtype == np.uint8
     assert frame.shape[0] % 2 == 0 and frame.shape[1] % 2 == 0
     assert not np.array_equal(first, frame)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -157,12 +158,13 @@ def test_ascii_chart_puts_the_points_where_they_belong(league: League) -> None:
         assert hits, (marker, col, text)
         return hits[0]
 
-    # left ("o") climbs from its first snapshot to its last, right ("x") falls; up is a smaller row number
-    assert row_of("o", first) > row_of("o", last)
+    # left ("o") climbs from its first snapshot to its last (the run's best: "*"), right ("x") falls; up is a
+    # smaller row number
+    assert row_of("o", first) > row_of("*", last)
     assert row_of("x", first) < row_of("x", last)
     cpu_row = next(r for r, line in enumerate(rows) if line.rstrip().endswith(" cpu"))
     random_row = next(r for r, line in enumerate(rows) if line.rstrip().endswith(" random"))
-    assert cpu_row < random_row and set(rows[cpu_row][first:last + 1]) <= {"-", "o", "x", ".", ":"}
+    assert cpu_row < random_row and set(rows[cpu_row][first:last + 1]) <= {"-", "o", "x", ".", ":", "*"}
     assert "o left" in text and "x right" in text and "steps" in text and "100k" in text and "300k" in text
 
 
@@ -174,9 +176,153 @@ def test_braille_chart_fits_its_width(league: League) -> None:
     assert any(ord(ch) in BRAILLE for ch in chart.plain)
     assert any(span.style for span in chart.spans)  # coloured
     summary = curves_summary(curves).plain
-    assert "left: 3 rated snapshots\n  latest r1/ep2-left (300k steps): " in summary
-    assert "right: 3 rated snapshots" in summary and "best   r1/ep0-right (100k steps): " in summary
+    assert "left: 3 rated snapshots\n  latest  r1/ep2-left (300k steps): " in summary
+    assert "right: 3 rated snapshots" in summary and "highest r1/ep0-right (100k steps): " in summary
     assert "scripted players\n  cpu: " in summary
+
+
+# --------------------------------------------------------------------------------------------------
+# what a figure says it shows, it shows: the best snapshot, bounds, a team's equal curves
+# --------------------------------------------------------------------------------------------------
+
+
+def _twin_run(lg: League, run: str = "twin") -> None:
+    """A team of two learners with the same record at every moment (as a team's members rated by the same team
+    games): their curves are equal."""
+    lg.create_run(run, ENV, {})
+    rnd, cpu = _bots(lg)
+    _play(lg, cpu, rnd, 16, 4)
+    for k, step in enumerate((100_000, 200_000, 300_000)):
+        for side in ("left", "right"):
+            snap = _snap(lg, run, f"s{k}-{side}", step, side)
+            _play(lg, snap, rnd, 10 + 3 * k, 10 - 3 * k)
+            _play(lg, snap, cpu, 2 + k, 8 - k)
+
+
+def _bounded_run(lg: League, run: str = "clean") -> None:
+    """ep0 scores 10-10 against random; ep1 wins every game (perfect), ep2 loses every game (zero): under --prior 0
+    their maximum-likelihood ratings are infinite and the ones shown are bounds."""
+    lg.create_run(run, ENV, {})
+    rnd, cpu = _bots(lg)
+    _play(lg, cpu, rnd, 16, 4)
+    for k, (wins, losses) in enumerate(((10, 10), (10, 0), (0, 10))):
+        snap = _snap(lg, run, f"ep{k}", 100_000 * (k + 1), None)
+        _play(lg, snap, rnd, wins, losses)
+        _play(lg, snap, cpu, wins // 2, losses // 2)
+
+
+def _figure(curves):
+    from selfplay_cli.report.plots import run_figure  # inside the tests that need it: the others run without it
+
+    return run_figure(curves).axes[0]
+
+
+def _marks(ax) -> dict[str, object]:
+    """The figure's marks by gid."""
+    return {line.get_gid(): line for line in ax.get_lines() if line.get_gid()}
+
+
+def _legend(ax) -> list[str]:
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def test_png_stars_the_snapshot_the_ladder_marks_best_and_its_legend_says_so(league: League) -> None:
+    _two_learner_run(league)
+    rows = ladder(league, ENV)
+    (best,) = [r for r in rows if r.best]
+    assert best.policy == "r1/ep2-left"
+    ax = _figure(run_curves(league, "r1"))
+    star = _marks(ax)["best"]
+    assert star.get_marker() == "*" and star.get_markerfacecolor() == "gold"
+    assert list(star.get_xdata()) == [300_000] and list(star.get_ydata()) == [best.elo]
+    assert f"best snapshot of the run (ladder): r1/ep2-left, {best.elo:.0f}" in _legend(ax)
+    assert "r1/ep2-left" in run_curves(league, "r1").to_json()["best"]
+
+    # the ladder marks none (its candidates tied): nothing starred and nothing said about a best
+    unmarked = run_curves(league, "r1", rows=[replace(r, best=False) for r in rows])
+    ax = _figure(unmarked)
+    assert "best" not in _marks(ax) and not any("best" in t for t in _legend(ax))
+    assert unmarked.best is None and unmarked.to_json()["best"] is None
+    text = curves_chart(unmarked, width=80, unicode=False).plain
+    assert "*" not in text and "best" not in text
+    assert "best" not in curves_summary(unmarked).plain
+
+
+def test_terminal_chart_stars_the_best_snapshot_and_says_so(league: League) -> None:
+    _two_learner_run(league)
+    curves = run_curves(league, "r1")
+    text = curves_chart(curves, width=80, unicode=False).plain
+    rows, first, last = _plot_area(text)
+    starred = [(r, c) for r, line in enumerate(rows) for c, ch in enumerate(line) if ch == "*"]
+    assert len(starred) == 1 and starred[0][1] == last, text  # at the last step: r1/ep2-left
+    assert "* best (ladder): r1/ep2-left" in text
+    braille = curves_chart(curves, width=72, unicode=True).plain
+    assert sum(line.count("*") for line in braille.splitlines()[1:15]) == 1
+    assert "* best (ladder): r1/ep2-left" in braille
+    summary = curves_summary(curves).plain
+    assert summary.startswith("best snapshot of the run (ladder): r1/ep2-left (300k steps): ")
+    assert "highest r1/ep0-right" in summary  # a learner's highest point is not called best: the ladder decides that
+
+
+def test_a_figure_shows_bounds_only_where_there_are_some_and_then_says_so(league: League) -> None:
+    _two_learner_run(league)
+    ax = _figure(run_curves(league, "r1"))  # the default prior: every rating an estimate, no bound
+    assert "bound" not in ax.get_title() and "open" not in ax.get_title()
+    assert not any("bound" in t or "open" in t for t in _legend(ax))
+    assert not any(gid.startswith(("bound:", "unanchored:")) for gid in _marks(ax))
+    # every legend entry has its marks: a learner its line and points, the best its star
+    assert _legend(ax) == ["left", "right", next(t for t in _legend(ax) if t.startswith("best snapshot"))]
+    assert {"line:left", "points:left", "line:right", "points:right", "best"} <= set(_marks(ax))
+    text = curves_chart(run_curves(league, "r1"), width=80, unicode=False).plain
+    assert "bound" not in text and "^" not in text
+
+    _bounded_run(league)
+    curves = run_curves(league, "clean", prior=0)
+    flags = {p.policy: p.flag for p in curves.curves[0].points}
+    assert flags == {"clean/ep0": None, "clean/ep1": "perfect", "clean/ep2": "zero"}
+    ax = _figure(curves)
+    open_marks = _marks(ax)["bound:clean"]
+    assert list(open_marks.get_xdata()) == [200_000, 300_000] and open_marks.get_markerfacecolor() == "white"
+    assert list(_marks(ax)["points:clean"].get_xdata()) == [100_000]  # filled: the estimate only
+    assert "open: a bound (perfect score: at least; zero: at most)" in _legend(ax)
+    best = next(p for p in curves.curves[0].points if p.best)  # the perfect score, starred and said to be a bound
+    assert best.policy == "clean/ep1"
+    assert f"best snapshot of the run (ladder): clean/ep1, {best.elo:.0f} (at least: a bound)" in _legend(ax)
+    assert "maximum likelihood" in ax.get_ylabel()
+    text = curves_chart(curves, width=80, unicode=False).plain
+    rows, first, last = _plot_area(text)
+    middle = next(c for c in range(first, last) if any(len(line) > c and line[c] == "*" for line in rows))
+    assert abs(middle - (first + last) / 2) <= 1, text  # ep1, the best: "*"
+    assert any(len(line) > last and line[last] == "v" for line in rows), text  # ep2: at most this
+    assert "v at most (a zero score: a bound)" in text and "* best (ladder): clean/ep1 (perfect: a bound)" in text
+    assert "^" not in text, "no legend for a mark that does not show (the star covers ep1's ^)"
+    assert "[perfect: a bound]" in curves_summary(curves).plain
+
+
+def test_a_teams_equal_curves_are_both_drawn_and_both_named(league: League) -> None:
+    _twin_run(league)
+    curves = run_curves(league, "twin")
+    left, right = curves.curves
+    assert [p.elo for p in left.points] == pytest.approx([p.elo for p in right.points], abs=1.0)  # the premise
+    ax = _figure(curves)
+    marks = _marks(ax)
+    a, b = marks["line:left"], marks["line:right"]
+    xa, xb = list(a.get_xdata()), list(b.get_xdata())
+    assert [y - x for x, y in zip(xa, xb, strict=True)] == [3000.0] * 3  # 1.5% of the 200k steps apart, not on top
+    assert a.get_linestyle() != b.get_linestyle()
+    assert marks["points:left"].get_marker() != marks["points:right"].get_marker()
+    legend = _legend(ax)
+    assert "left (same Elo as right at 3 of 3 snapshots; drawn -1.5k steps aside)" in legend, legend
+    assert "right (same Elo as left at 3 of 3 snapshots; drawn +1.5k steps aside)" in legend, legend
+
+    text = curves_chart(curves, width=80, unicode=False).plain
+    rows, first, last = _plot_area(text)
+    points = "".join(line[first] + line[(first + last) // 2] for line in rows if len(line) > last)
+    assert points.count("=") == 2 and "x" not in points and "o" not in points, text  # both there, said so
+    assert "= left = right (same point)" in text
+    assert "* best (ladder): twin/s2-left (with right)" in text
+    braille = curves_chart(curves, width=72, unicode=True).plain
+    assert "= left = right (same point)" in braille
 
 
 # --------------------------------------------------------------------------------------------------
@@ -200,7 +346,8 @@ def test_cli_plot_in_a_pipe_is_plain_text_at_80_columns(home: Path, capsys) -> N
     assert out.startswith("new (pong): fitted Elo by training step, 95% intervals")
     assert "\x1b" not in out and all(len(line) <= 80 for line in out.splitlines())
     assert "o left" in out and "x right" in out and " cpu" in out and " random" in out
-    assert "latest new/ep2-left" in out
+    assert "latest  new/ep2-left" in out
+    assert "* best (ladder): new/ep2-left" in out and "best snapshot of the run (ladder): new/ep2-left" in out
     code, out, err = run(capsys, "league", "plot", "--run", "old", "--env", "pong")
     assert code == 0 and out.startswith("old (pong)")
 
@@ -219,6 +366,22 @@ def test_cli_plot_out_and_json(home: Path, capsys, tmp_path: Path) -> None:
     assert data["run"] == "r1" and data["png"] is None
     assert [c["learner"] for c in data["learners"]] == ["left", "right"]
     assert [p["step"] for p in data["learners"][0]["points"]] == [100_000, 200_000, 300_000]
+    assert data["best"] == "r1/ep2-left" and [p["best"] for p in data["learners"][0]["points"]] == [False, False, True]
+    assert data["prior"] == 2
+
+
+def test_cli_plot_prior_0_draws_and_names_the_bounds(home: Path, capsys, tmp_path: Path) -> None:
+    with League.open(home=home) as lg:
+        _bounded_run(lg)
+    code, out, err = run(capsys, "league", "plot", "--prior", "0")
+    assert code == 0, err
+    assert "v at most (a zero score: a bound)" in out and "[zero: a bound]" in out
+    code, out, err = run(capsys, "league", "plot", "--prior", "0", "--json")
+    data = json.loads(out)
+    assert data["prior"] == 0 and [p["flag"] for p in data["learners"][0]["points"]] == [None, "perfect", "zero"]
+    code, out, err = run(capsys, "league", "plot")  # the default prior: no bound, none named
+    assert code == 0 and "bound" not in out
+    _one_line_error(*run(capsys, "league", "plot", "--prior", "-1"), "--prior must be")
 
 
 def test_cli_plot_errors_are_one_line(home: Path, capsys, tmp_path: Path) -> None:

@@ -119,15 +119,148 @@ def test_game_id_replays_the_stored_game_exactly(home, tmp_path, capsys):
     assert len(mp4_frames(path)[0]) == stored.length + 1
 
 
-def test_gif_streams_too(home, tmp_path, capsys):
+def test_a_gif_is_small_real_time_and_each_picture_once(home, tmp_path, capsys):
+    """300 steps of pong at 60 fps: every third frame stored (20 a second, at the game's own pace), the held final
+    frame stored once and shown for its second, one palette for the whole file, 640 pixels wide. Stored a frame per
+    step with a palette each (as before) the same clip took about 1.2 MB."""
     out = tmp_path / "clip.gif"
-    (rec,) = run_json(capsys, home, "--ckpt", "ep10", "--max-steps", "20", "--size", "120x60", "--fps", "25",
-                      "--hold", "0.2", "--out", str(out))
-    assert rec["format"] == "gif" and rec["frames"] == 21 + 5
+    (rec,) = run_json(capsys, home, "--ckpt", "cpu", "--vs", "cpu", "--env", "pong", "--max-steps", "300", "--out",
+                      str(out))
+    assert out.stat().st_size < 400_000, out.stat().st_size
+    assert rec["format"] == "gif" and rec["fps"] == 60 and rec["frames"] == 301 + 60  # serve, 300 steps, 1 s held
+    assert rec["stored_frames"] == 101  # frames 0, 3, ..., 300; the held ones repeat frame 300
     frames = iio.imread(out, index=None)
-    assert frames.shape[:3] == (26, 60, 120)
-    assert iio.immeta(out)["duration"] == 40  # ms per frame at 25 fps
-    assert differs(frames[0], frames[10])
+    assert frames.shape[0] == 101 and frames.shape[2] == 640 and rec["size"] == f"640x{frames.shape[1]}"
+    from selfplay_cli.record import gif_frames
+
+    global_palette, stored = gif_frames(out.read_bytes())
+    assert global_palette and not any(f.local_palette for f in stored)
+    assert [f.delay for f in stored] == [5] * 100 + [102]  # 1/20 s each; the last: 61 frames of 1/60 s
+    assert sum(f.delay for f in stored) == round(100 * 361 / 60)
+    assert differs(frames[0], frames[50])
+
+    wide = tmp_path / "wide.gif"  # --max-width 0: the frames' own width
+    (rec,) = run_json(capsys, home, "--ckpt", "cpu", "--vs", "cpu", "--env", "pong", "--max-steps", "10", "--hold",
+                      "0", "--max-width", "0", "--out", str(wide))
+    assert iio.imread(wide, index=None).shape[2] == 800 and rec["size"].startswith("800x")
+
+
+def test_a_gif_stores_a_picture_once_however_long_it_stays(tmp_path):
+    """A board between moves: frames that repeat the last stored one are not stored, it stays on screen longer."""
+    from selfplay_cli.record.video import VideoWriter
+
+    a, b = np.zeros((32, 48, 3), np.uint8), np.full((32, 48, 3), 200, np.uint8)
+    path = tmp_path / "board.gif"
+    with VideoWriter(path, fps=10, fmt="gif") as video:
+        for frame in [a] * 10 + [b] * 5 + [a] * 3:
+            video.write(frame)
+    frames = iio.imread(path, index=None)
+    assert frames.shape[:3] == (3, 32, 48) and frames[1].mean() > 150 > frames[2].mean()
+    assert [iio.immeta(path, index=i)["duration"] for i in range(3)] == [1000, 500, 300]  # ms on screen
+    assert (video.frames, video.stored) == (18, 3)
+
+
+def test_a_users_board_game_records_with_its_band_through_the_cli(tmp_path, capsys):
+    """`marl record` of a PettingZoo game (the game's own 96 x 96 render("rgb_array")): enlarged to 384 wide, the
+    band under it; each picture once in a GIF."""
+    home = tmp_path / "league"
+    recs = run_json(capsys, home, "--ckpt", "random", "--vs", "random", "--env", "tests.games.tictactoe:env",
+                    "--games", "2", "--out", str(tmp_path / "videos"))
+    for rec in recs:
+        frames = mp4_frames(Path(rec["path"]))[0]
+        assert frames.shape[0] == rec["length"] + 1 + 2 and frames.shape[2] == 384 and frames.shape[1] > 384 + 40
+    (rec,) = run_json(capsys, home, "--ckpt", "random", "--vs", "random", "--env", "tests.games.tictactoe:env",
+                      "--out", str(tmp_path / "ttt.gif"))
+    assert rec["stored_frames"] == rec["length"] + 1 and rec["frames"] == rec["length"] + 1 + 2  # 2 held: 1 s
+
+
+class _Kept:
+    """Stands in for the video writer: keeps every frame as it was handed over."""
+
+    def __init__(self, path, fps=60, size=None, fmt="mp4", max_width=0):
+        self.kept: list[np.ndarray] = []
+        _Kept.last = self
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
+
+    def write(self, frame):
+        self.kept.append(frame.copy())
+
+    @property
+    def frames(self):
+        return len(self.kept)
+
+    stored = frames
+
+    @property
+    def frame_shape(self):
+        return self.kept[0].shape
+
+    def out_size(self, width, height):
+        return width, height
+
+
+class _Seen:
+    """Stands in for a game's renderer: draws with it and keeps each picture with the score and step it showed."""
+
+    def __init__(self, inner):
+        self.inner, self.seen = inner, []
+
+    def __getattr__(self, name):
+        return getattr(self.inner, name)  # seat_colour, where the game has one
+
+    def draw(self, core, game):
+        picture = self.inner.draw(core, game)
+        self.seen.append((picture, core.score[:, game].copy(), int(core.steps[game])))
+        return picture
+
+
+def _score(x: float) -> str:
+    return f"{round(float(x), 2):g}"  # as the band shows a score: whole, else to two decimals
+
+
+@pytest.mark.parametrize(("env", "labels", "expected"), [
+    ("tests.games.tictactoe:env", ("alice", "bob"), lambda s: [f"x: alice  {_score(s[0])}", f"o: bob  {_score(s[1])}"]),
+    ("pong", ("r1/ep10", "cpu"), lambda s: [f"left: r1/ep10  {_score(s[0])}", f"right: cpu  {_score(s[1])}"]),
+    ("lander", ("heuristic", "heuristic"), lambda s: [f"team: heuristic x2  return {_score(s.sum())}"]),
+])
+def test_every_recording_carries_names_score_step_and_game_number(monkeypatch, tmp_path, env, labels, expected):
+    """A user's game (the game's own render("rgb_array")), pong and the lander: under the game's own picture, a band
+    with the players' names per seat, the running score per side, the game's number and the step."""
+    from selfplay_cli.record import recorder
+
+    spec = get_env(env)
+    monkeypatch.setattr(recorder, "VideoWriter", _Kept)
+    renderer = _Seen(spec.make_renderer())
+    bots = [ScriptedPolicy(spec.name, next(iter(spec.bots)), seed=s) for s in range(2)]
+    rec = record_game(spec, bots, Game(3, (0, 1)), tmp_path / "v.mp4", VideoSettings(fps=10, hold=0.2),
+                      labels=labels, renderer=renderer, heading="game 2 of 3",
+                      stop_when=stop_rule(spec, {}, max_steps=12))
+    frames = _Kept.last.kept
+    assert len(frames) == len(renderer.seen) + 2  # one per picture, the last held for 0.2 s
+    picture = renderer.seen[0][0]
+    scale = max(1, -(-360 // picture.shape[1]))  # a narrow board is enlarged so that its band's text fits
+    height, width = picture.shape[0] * scale, picture.shape[1] * scale
+    assert frames[0].shape[0] > height and frames[0].shape[1] == width, "a band under the game's picture"
+    for frame, (picture, _, _) in zip(frames, renderer.seen, strict=False):
+        assert np.array_equal(frame[:height], picture.repeat(scale, 0).repeat(scale, 1)), "the game's own picture"
+
+    from selfplay_cli.record import CaptionBand
+
+    band = CaptionBand(spec, labels, "game 2 of 3", getattr(renderer, "seat_colour", None))
+    for frame, (picture, score, step) in zip(frames, renderer.seen, strict=False):
+        tail = {"result": " · final", "time limit": " · time limit"}.get(rec.ended, " · stopped")
+        status = f"step {step}{tail if step == rec.result.length else ''}"
+        assert np.array_equal(frame, band(picture, score, status)), f"step {step}: the band shows {status}"
+    final = renderer.seen[-1][1]
+    assert band.lines(final, f"step {rec.result.length}")[:-1] == expected(final)
+    assert band.lines(final, "step 5")[-1] == "game 2 of 3 · step 5"
+    assert not np.array_equal(frames[1][height:], frames[2][height:]), "the step changes from frame to frame"
+    assert rec.result.length == renderer.seen[-1][2]
 
 
 def test_a_two_learner_snapshot_faces_its_partner_by_default(home, capsys):
@@ -165,7 +298,7 @@ def test_lineup_seats_teams_singles_and_opponents(tmp_path):
     (["--ckpt", "ep10", "--out", "{blocker}/clip.mp4"], "is a file, not a folder"),
     (["--ckpt", "ep10", "--fps", "0"], "--fps must lie between 1 and 240"),
     (["--ckpt", "ep10", "--games", "0"], "--games must be at least 1"),
-    (["--ckpt", "ep10", "--fps", "60", "--out", "{tmp}/v.gif"], "at most 50 frames per second"),
+    (["--ckpt", "ep10", "--max-width", "8", "--out", "{tmp}/v.gif"], "--max-width must be 0 (no limit) or lie"),
     (["--game", "99999"], "no game with id 99999"),
     ([], "--ckpt POLICY"),
 ])

@@ -815,11 +815,11 @@ def test_the_game_keeps_the_game_contract():
 def test_renderer_draws_the_table_the_bats_and_the_ball():
     r = TENNIS.make_renderer()
     c = core_of(seeds=(1,))
-    first = r.draw(c, 0, ("serve-bot", "random"), "step 0")
+    first = r.draw(c, 0)
     rule = serve_bot_for(c.config)
     for _ in range(30):
         c.step(bot_actions(c, rule))
-    frame = r.draw(c, 0, ("serve-bot", "random"), "step 30")
+    frame = r.draw(c, 0)
     assert frame.shape == (360, 800, 3) and frame.dtype == np.uint8
     assert not np.array_equal(first, frame)
     from selfplay_cli.envs.tennis_render import BALL, BAT_COLOURS

@@ -10,8 +10,10 @@ from typing import Annotated
 import typer
 
 from ..errors import MarlError
+from ..stats.bradley_terry import DEFAULT_PRIOR
 from ._common import MAX_GAMES, DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, progress_enabled
 from ._output import console, err_console, print_json
+from .elo import PriorOpt, check_prior
 
 RunOpt = Annotated[str | None, typer.Option("--run", help="Training run (default: the newest run of the env).")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Write a PNG image to this .png file.")]
@@ -35,17 +37,20 @@ def plot_cmd(
     env: EnvOpt = None,
     run: RunOpt = None,
     out: OutOpt = None,
+    prior: PriorOpt = DEFAULT_PRIOR,
     home: HomeOpt = None,
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Each learner's fitted Elo with its 95% interval against training steps, and the scripted players as
-    levels. Draws in the terminal, or writes a PNG with --out."""
+    """Each learner's fitted Elo with its 95% interval against training steps, the run's best snapshot (as the
+    ladder marks it) starred, and the scripted players as levels. Draws in the terminal, or writes a PNG with
+    --out."""
     from ..report.plots import run_curves, save_run_png
     from ..report.png import check_png_path
     from ..report.terminal import curves_chart, curves_summary
 
     env = check_env(env)
+    prior = check_prior(prior)
     if out is not None:
         out = check_png_path(out)
     league = open_league(home, db, readonly=True)
@@ -60,7 +65,7 @@ def plot_cmd(
             if info is not None and env is not None and info.env != env:
                 raise MarlError(f"run '{run}' trains {info.env}, not {env}")
         with _working("fitting ratings"):
-            curves = run_curves(league, run)
+            curves = run_curves(league, run, prior=prior)
     finally:
         league.close()
     written = save_run_png(curves, out) if out is not None else None

@@ -101,6 +101,7 @@ def score_text(env: str, scores: tuple[float, ...]) -> str:
 def _line(rec: Recording, default_cap: bool) -> str:
     """``<path>  A vs B 3-1 (stopped at 1:00 by --seconds 60 ...), 3,600 steps, 1:01 of video, rendered in 8.4 s``."""
     from ..record.recorder import ENDED_STOPPED, ENDED_TIME_LIMIT
+    from ..record.video import GIF_FPS
 
     r = rec.result
     score = score_text(r.env, r.scores)
@@ -112,8 +113,12 @@ def _line(rec: Recording, default_cap: bool) -> str:
         how = f" (the game's time limit: {r.length:,} steps, decided by the score)"
     else:
         how = ""
+    if rec.settings.fmt == "gif":
+        frames = f"{rec.stored:,} frames stored of {rec.frames:,}: each picture once, at most {GIF_FPS} a second"
+    else:
+        frames = f"{rec.frames:,} frames at {rec.settings.fps} fps"
     return (f"{rec.path}  {' vs '.join(r.players)} {score}{how}, {r.length:,} steps, {_clock(rec.video_seconds)} of "
-            f"video ({rec.frames:,} frames at {rec.settings.fps} fps), rendered in {rec.seconds:.1f} s")
+            f"video ({frames}), rendered in {rec.seconds:.1f} s")
 
 
 def _limits(seconds: float | None, max_steps: int | None, max_rallies: int | None,
@@ -161,9 +166,14 @@ def record(
     seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the first game.")] = 0,
     fps: Annotated[int | None, typer.Option("--fps", help="Frames per second; one frame per game "
                                             "step, so 60 is real time. Default: the game's own pace if it states "
-                                            "one (a PettingZoo game's render_fps), else 60 (mp4), 50 (gif).")] = None,
+                                            "one (a PettingZoo game's render_fps), else 60. A GIF stores at most 20 "
+                                            "a second, dropping the others, at the same pace.")] = None,
     size: Annotated[str | None, typer.Option("--size", metavar="WxH", help="WIDTHxHEIGHT of the video, even "
-                                             "numbers. Default: the game's own (pong 800x400).")] = None,
+                                             "numbers. Default: the game's picture and the caption band under it "
+                                             "(pong 800x456).")] = None,
+    max_width: Annotated[int | None, typer.Option("--max-width", metavar="W", min=0, max=4096, help="Scale "
+                                                  "wider videos down to W pixels, keeping their shape; 0: no limit. "
+                                                  "Default: 640 for a GIF, no limit for an mp4.")] = None,
     fmt: Annotated[str | None, typer.Option("--format", metavar="mp4|gif", help="mp4 (H.264, plays in browsers) or "
                                             "gif. Default: from --out, else mp4.")] = None,
     hold: Annotated[float, typer.Option("--hold", min=0.0, max=60.0, help="Seconds the final frame stays on "
@@ -177,8 +187,8 @@ def record(
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Record games as mp4/gif videos (score, players' names and step on every frame), or replay a stored game
-    exactly.
+    """Record games as mp4/gif videos (under every frame: the players' names per seat, the running score, the step
+    and the game's number), or replay a stored game exactly.
 
     A game plays until it is won, until its own time limit, or until the recording's limit: by default 60 seconds
     of video (--seconds 0 for the whole game; --max-steps or --max-rallies instead). The last frame and the printed
@@ -204,8 +214,8 @@ def record(
         ups = lineups(league, ckpt, vs, env) if game_id is None else []  # type: ignore[arg-type]
         game = league.game(game_id).env if game_id is not None else ups[0].env
         if fps is None:  # the game's own pace (a board game: a move or two a second), else one frame per step
-            fps = get_env(game).render_fps or (50 if fmt == "gif" else 60)
-        settings = VideoSettings(fps=fps, size=parse_size(size), fmt=fmt, hold=hold)
+            fps = get_env(game).render_fps or 60
+        settings = VideoSettings(fps=fps, size=parse_size(size), fmt=fmt, hold=hold, max_width=max_width)
         max_steps, max_rallies, stop_label, default_cap = _limits(seconds, max_steps, max_rallies, fps)
         if game_id is not None:
             job = _replay_job(league, game_id, out, fmt)
@@ -251,7 +261,8 @@ def _replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> _Job:
 
     def run(i: int, path: Path, settings: VideoSettings, tick: Tick) -> Recording:
         return record_replay(spec, names, row.seed, row.actions, path, settings, length=row.length,
-                             scores=row.scores, env_options=env_options, on_frame=tick)
+                             scores=row.scores, env_options=env_options, on_frame=tick,
+                             heading=f"replay of game {row.id}")
 
     return _Job(_targets(out, league.home, [stem], fmt), run, lambda i, s: row.length + 1 + s.hold_frames,
                 {"game_id": row.id, "match_id": row.match_id})
@@ -293,7 +304,7 @@ def _play_job(league: Any, ups: list[Any], games: int, seed: int, max_steps: int
         lu, game_seed = ups[i // games], seed + i % games
         return record_game(spec, policies(lu, game_seed), Game(game_seed, seating(lu)), path, settings,
                            env_options=env_options, labels=lu.names, stop_when=stop, on_frame=tick, renderer=renderer,
-                           stop_label=stop_label)
+                           stop_label=stop_label, heading=f"game {i + 1} of {len(ups) * games}")
 
     limit = getattr(spec.config(**env_options), "max_steps", None) or None  # the game's own time limit, if any
 

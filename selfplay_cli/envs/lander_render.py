@@ -18,11 +18,10 @@ from .lander_core import LanderCore
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
-BLACK, WHITE, GREY = (0, 0, 0), (255, 255, 255), (150, 150, 150)
+BLACK, WHITE = (0, 0, 0), (255, 255, 255)
 FLAG, POLE = (204, 204, 0), (255, 255, 255)
 FLAME, WRECK, OUTLINE = (255, 140, 0), (110, 110, 110), (77, 77, 128)
 LANDED_MARK = (60, 200, 90)
-_TEXT_CACHE_SIZE = 256
 
 
 PALETTE = ((128, 102, 230), (230, 126, 34), (46, 204, 113), (52, 152, 219), (231, 76, 60), (241, 196, 15),
@@ -40,10 +39,9 @@ def _screen(x: float, y: float) -> tuple[float, float]:
 
 
 class LanderRenderer:
-    """Draws one game of a :class:`LanderCore` into an RGB array ``(400, 600, 3)`` uint8.
-
-    ``labels``: the players' names by seat (shown top left, one line per distinct name with its seats);
-    ``caption``: a line at the bottom (the recorder puts the step there). Each call returns a new array."""
+    """Draws one game of a :class:`LanderCore` into an RGB array ``(400, 600, 3)`` uint8, the team's return top
+    right. Each call returns a new array. ``seat_colour`` gives each lander's colour to the recording's caption band
+    (which names the players)."""
 
     def __init__(self) -> None:
         import pygame
@@ -54,7 +52,6 @@ class LanderRenderer:
         self.surface = pygame.Surface(self.size, 0, 24, (0x0000FF, 0x00FF00, 0xFF0000, 0))
         self._direct = self._memory_is_rgb()
         self.font = pygame.font.Font(None, 22)
-        self._texts: dict[tuple[str, tuple[int, int, int]], object] = {}
 
     def _memory_is_rgb(self) -> bool:
         self.surface.fill((1, 2, 3))
@@ -64,19 +61,9 @@ class LanderRenderer:
         rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(VIEWPORT_H, self.surface.get_pitch())
         return rows[:, : VIEWPORT_W * 3].reshape(VIEWPORT_H, VIEWPORT_W, 3).copy()
 
-    def _text(self, text: str, colour: tuple[int, int, int], cache: bool = True):
-        key = (text, colour)
-        img = self._texts.get(key)
-        if img is None:
-            img = self.font.render(text, True, colour, BLACK)
-            if cache:
-                if len(self._texts) >= _TEXT_CACHE_SIZE:
-                    self._texts.clear()
-                self._texts[key] = img
-        return img
+    seat_colour = staticmethod(lander_colour)
 
-    def draw(self, core: LanderCore, game: int = 0, labels: tuple[str, ...] | None = None,
-             caption: str | None = None) -> np.ndarray:
+    def draw(self, core: LanderCore, game: int = 0) -> np.ndarray:
         pg, surf = self._pg, self.surface
         world = core.worlds[game]
         surf.fill(WHITE)
@@ -90,7 +77,7 @@ class LanderRenderer:
         wrecks = [s for s in range(core.n_seats) if core.result[s, game] not in (FLYING, LANDED)]
         for seat in wrecks + [s for s in range(core.n_seats) if s not in wrecks]:  # wrecks under the others
             self._lander(core, world, seat, game)
-        self._hud(core, game, labels, caption)
+        self._hud(core, game)
         if self._direct:
             return self._view_copy()
         return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(VIEWPORT_H, VIEWPORT_W, 3).copy()
@@ -131,17 +118,6 @@ class LanderRenderer:
             pg.draw.line(surf, (220, 40, 40), (c[0] - 6, c[1] - 6), (c[0] + 6, c[1] + 6), 3)
             pg.draw.line(surf, (220, 40, 40), (c[0] - 6, c[1] + 6), (c[0] + 6, c[1] - 6), 3)
 
-    def _hud(self, core: LanderCore, game: int, labels: tuple[str, ...] | None, caption: str | None) -> None:
-        surf = self.surface
-        team = self._text(f"team {core.score[:, game].sum():+.1f}", WHITE, cache=False)
-        surf.blit(team, (VIEWPORT_W - team.get_width() - 8, 6))
-        if labels:
-            seats: dict[str, list[int]] = {}
-            for s, name in enumerate(labels):
-                seats.setdefault(str(name), []).append(s)
-            for row, (name, ss) in enumerate(list(seats.items())[:8]):
-                img = self._text(f"{name} ({', '.join(map(str, ss))})" if len(seats) > 1 else name, GREY)
-                surf.blit(img, (8, 6 + 18 * row))
-        if caption:
-            c = self._text(caption, GREY, cache=False)
-            surf.blit(c, (VIEWPORT_W // 2 - c.get_width() // 2, 6))
+    def _hud(self, core: LanderCore, game: int) -> None:
+        team = self.font.render(f"team {core.score[:, game].sum():+.1f}", True, WHITE, BLACK)
+        self.surface.blit(team, (VIEWPORT_W - team.get_width() - 8, 6))

@@ -264,7 +264,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
 class PettingZooRenderer:
     """Frames of a PettingZoo game: the copy's own ``render()`` (``rgb_array``), as the recorder asks for them."""
 
-    def draw(self, core: PettingZooCore, game: int = 0, labels: Any = None, caption: Any = None) -> np.ndarray:
+    def draw(self, core: PettingZooCore, game: int = 0) -> np.ndarray:
         return core.render(game)
 
 

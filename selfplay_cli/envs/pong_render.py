@@ -6,8 +6,11 @@ Recording renders every step of a game, so a frame must cost well under a millis
   array: a frame leaves the surface as one contiguous copy, where ``surfarray.pixels3d(...).transpose(1, 0, 2)``
   costs a strided transpose (measured: 0.04 ms against 3 ms per 800x400 frame);
 * the court is two fills and the net twenty small ones (44 us; blitting a prerendered 24-bit court costs 130 us);
-* text is rendered opaque on the court's black and converted to the surface's format once per distinct string
-  (scores, names), so blitting it is a row copy (1 us) rather than alpha blending (13 us).
+* text is rendered opaque on the court's black and converted to the surface's format once per distinct score,
+  so blitting it is a row copy (1 us) rather than alpha blending (13 us).
+
+The players' names and the step are not drawn here: every recording adds them in a band under the frame
+(:mod:`selfplay_cli.record.overlay`), whatever the game.
 """
 
 from __future__ import annotations
@@ -28,11 +31,9 @@ _TEXT_CACHE_SIZE = 256
 
 
 class PongRenderer:
-    """Draws one game of a :class:`PongCore` into an RGB array ``(400, 800, 3)`` uint8.
-
-    ``labels`` are the players' names (left, right), shown under their paddles; ``caption`` a line of text at the
-    bottom centre (the recorder puts the step there). Only pygame's font module is initialised: ``pygame.init()``
-    would also start audio, which prints ALSA errors on machines without sound. Each call returns a new array.
+    """Draws one game of a :class:`PongCore` into an RGB array ``(400, 800, 3)`` uint8: the court, the paddles, the
+    ball and the score. Only pygame's font module is initialised: ``pygame.init()`` would also start audio, which
+    prints ALSA errors on machines without sound. Each call returns a new array.
     """
 
     def __init__(self) -> None:
@@ -45,8 +46,7 @@ class PongRenderer:
         self._direct = self._memory_is_rgb()
         self._net = [(WIDTH // 2 - 1, y + 5, 2, 10) for y in range(0, HEIGHT, 20)]
         self.score_font = pygame.font.Font(None, 56)
-        self.label_font = pygame.font.Font(None, 24)
-        self._texts: dict[tuple[int, str], object] = {}
+        self._texts: dict[str, object] = {}
 
     def _rgb_surface(self):
         """A 24-bit surface whose bytes are R, G, B per pixel, rows top to bottom (on little-endian machines)."""
@@ -62,22 +62,17 @@ class PongRenderer:
         rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(HEIGHT, self.surface.get_pitch())
         return rows[:, : WIDTH * 3].reshape(HEIGHT, WIDTH, 3).copy()
 
-    def _text(self, font, text: str, colour: tuple[int, int, int], cache: bool = True):
-        """``text`` rendered once and kept (scores and names recur every frame; a caption that changes each
-        frame, like the step, is rendered without evicting them)."""
-        key = (id(font), text)
-        img = self._texts.get(key)
+    def _text(self, text: str):
+        """A score rendered once and kept (scores recur every frame)."""
+        img = self._texts.get(text)
         if img is None:
-            img = font.render(text, True, colour, BLACK)
-            if cache:
-                img = img.convert(self.surface)
-                if len(self._texts) >= _TEXT_CACHE_SIZE:
-                    self._texts.clear()
-                self._texts[key] = img
+            img = self.score_font.render(text, True, WHITE, BLACK).convert(self.surface)
+            if len(self._texts) >= _TEXT_CACHE_SIZE:
+                self._texts.clear()
+            self._texts[text] = img
         return img
 
-    def draw(self, core: PongCore, game: int = 0, labels: tuple[str, ...] | None = None,
-             caption: str | None = None) -> np.ndarray:
+    def draw(self, core: PongCore, game: int = 0) -> np.ndarray:
         pg, surf = self._pg, self.surface
         surf.fill(BLACK)
         for rect in self._net:
@@ -86,16 +81,8 @@ class PongRenderer:
         surf.fill(WHITE, (WIDTH - PADDLE_X - PADDLE_W, round(core.paddle[1, game]), PADDLE_W, PADDLE_H))
         pg.draw.circle(surf, WHITE, (round(core.bx[game]), round(core.by[game])), BALL_R)
         for seat, cx in ((0, WIDTH // 2 - 60), (1, WIDTH // 2 + 60)):
-            img = self._text(self.score_font, str(int(core.score[seat, game])), WHITE)
+            img = self._text(str(int(core.score[seat, game])))
             surf.blit(img, (cx - img.get_width() // 2, 12))
-        if labels:
-            a = self._text(self.label_font, labels[0], GREY)
-            b = self._text(self.label_font, labels[-1], GREY)
-            surf.blit(a, (45, HEIGHT - 26))
-            surf.blit(b, (WIDTH - 45 - b.get_width(), HEIGHT - 26))
-        if caption:
-            c = self._text(self.label_font, caption, GREY, cache=False)
-            surf.blit(c, (WIDTH // 2 - c.get_width() // 2, HEIGHT - 26))
         if self._direct:
             return self._view_copy()
         return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(HEIGHT, WIDTH, 3).copy()

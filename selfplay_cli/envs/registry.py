@@ -253,7 +253,9 @@ class EnvSpec:
     limit); by default the config's ``max_steps`` if it has one. ``make_agents(cfg)``: the seats of a config for a
     game whose options change its seats (``agents`` are the default config's); see :meth:`for_options`.
     ``render_fps``: a recording's default frame rate
-    (a board game's moves at 2 a second; None: 60, one frame per step).
+    (a board game's moves at 2 a second; None: 60, one frame per step). ``make_renderer()``: an object whose
+    ``draw(core, game)`` returns game ``game``'s picture as an RGB array; it may offer ``seat_colour(seat)``, the
+    colour a seat is drawn in (the recording's caption band, which names the players, shows it beside each name).
 
     ``live_options``: the options the core's ``set_options(**values)`` changes between steps of running games (what
     a training curriculum may drive: tennis's reward weights and bat size). ``train_defaults``: the game's own

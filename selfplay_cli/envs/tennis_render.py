@@ -35,11 +35,10 @@ def _px(x: float, y: float) -> tuple[int, int]:
 
 
 class TennisRenderer:
-    """Draws one game of a :class:`TennisCore` into an RGB array ``(360, 800, 3)`` uint8.
-
-    ``labels``: the players' names by seat (shown on their sides); ``caption``: a line at the bottom (the recorder
-    puts the step there). Each call returns a new array. The renderer keeps the ball's last few places per game
-    slot for its trail."""
+    """Draws one game of a :class:`TennisCore` into an RGB array ``(360, 800, 3)`` uint8, the score, who serves and
+    the last point's reason at the top. Each call returns a new array. The renderer keeps the ball's last few places
+    per game slot for its trail. ``seat_colour`` gives each bat's colour to the recording's caption band (which
+    names the players)."""
 
     def __init__(self) -> None:
         import pygame
@@ -61,8 +60,11 @@ class TennisRenderer:
         rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(HEIGHT, self.surface.get_pitch())
         return rows[:, : WIDTH * 3].reshape(HEIGHT, WIDTH, 3).copy()
 
-    def draw(self, core: TennisCore, game: int = 0, labels: tuple[str, ...] | None = None,
-             caption: str | None = None) -> np.ndarray:
+    @staticmethod
+    def seat_colour(seat: int) -> tuple[int, int, int]:
+        return BAT_COLOURS[seat]
+
+    def draw(self, core: TennisCore, game: int = 0) -> np.ndarray:
         pg, surf = self._pg, self.surface
         surf.fill(BACKGROUND)
         # floor, table, net
@@ -107,12 +109,12 @@ class TennisRenderer:
             pg.draw.line(surf, WHITE, (px, py_shown), (px + s * r, py_shown - r), 2)
         if py < 0:
             pg.draw.polygon(surf, BALL, [(px - 5, 8), (px + 5, 8), (px, 2)])
-        self._hud(core, game, labels, caption)
+        self._hud(core, game)
         if self._direct:
             return self._view_copy()
         return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(HEIGHT, WIDTH, 3).copy()
 
-    def _hud(self, core: TennisCore, game: int, labels: tuple[str, ...] | None, caption: str | None) -> None:
+    def _hud(self, core: TennisCore, game: int) -> None:
         surf = self.surface
         s0, s1 = int(core.score[0, game]), int(core.score[1, game])
         score = self.big.render(f"{s0}  :  {s1}", True, WHITE)
@@ -120,15 +122,7 @@ class TennisRenderer:
         server = int(core.server[game])
         dot_x = WIDTH // 2 + (-1 if server == 0 else 1) * (score.get_width() // 2 + 14)
         self._pg.draw.circle(surf, BALL, (dot_x, 22), 5)
-        for seat in (0, 1):
-            name = labels[seat] if labels and len(labels) > seat else f"player {seat}"
-            img = self.font.render(str(name), True, BAT_COLOURS[seat])
-            x = 10 if seat == 0 else WIDTH - img.get_width() - 10
-            surf.blit(img, (x, 10))
         if core.winner[game] >= 0:
             last = self.font.render(f"last point: player {int(core.winner[game])} "
                                     f"({REASON_NAMES[int(core.reason[game])].replace('_', ' ')})", True, GREY)
             surf.blit(last, (WIDTH // 2 - last.get_width() // 2, 44))
-        if caption:
-            c = self.font.render(caption, True, GREY)
-            surf.blit(c, (WIDTH // 2 - c.get_width() // 2, HEIGHT - 20))

@@ -1,7 +1,9 @@
-"""Recording: turning a game into frames and frames into mp4 or gif (imports envs and arena only)."""
+"""Recording: turning a game into frames (the game's picture and the caption band under it) and frames into mp4 or
+gif (imports envs and arena only)."""
 
+from .overlay import CaptionBand
 from .recorder import Recording, VideoSettings, record_game, record_replay, renderer_of, stop_rule
-from .video import FORMATS, VideoWriter, check_writable, parse_size
+from .video import FORMATS, GIF_FPS, GIF_MAX_WIDTH, VideoWriter, check_writable, gif_frames, parse_size
 
-__all__ = ["FORMATS", "Recording", "VideoSettings", "VideoWriter", "check_writable", "parse_size", "record_game",
-           "record_replay", "renderer_of", "stop_rule"]
+__all__ = ["FORMATS", "GIF_FPS", "GIF_MAX_WIDTH", "CaptionBand", "Recording", "VideoSettings", "VideoWriter",
+           "check_writable", "gif_frames", "parse_size", "record_game", "record_replay", "renderer_of", "stop_rule"]

@@ -24,7 +24,8 @@ from ..arena.replay import check_replay, decode_actions, replay_policies
 from ..envs import EnvSpec, get_env
 from ..envs.registry import BatchedCore
 from ..errors import MarlError
-from .video import VideoWriter, check_format
+from .overlay import CaptionBand
+from .video import GIF_MAX_WIDTH, MAX_SIDE, MIN_SIDE, VideoWriter, check_format
 
 if TYPE_CHECKING:
     from ..policies import Policy
@@ -33,18 +34,30 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class VideoSettings:
     """How a game becomes a file: ``fps`` frames per second (one frame per game step, so 60 plays Pong at the
-    speed it was designed for), ``size`` (width, height) or None for the renderer's own, ``fmt`` mp4 or gif, and
-    ``hold`` seconds of the final frame at the end."""
+    speed it was designed for), ``size`` (width, height) or None for the frames' own (the game's picture and its
+    caption band), ``fmt`` mp4 or gif, ``hold`` seconds of the final frame at the end, and ``max_width``: frames
+    wider are scaled down to it (None: :data:`~.video.GIF_MAX_WIDTH` for a GIF, no limit for an mp4; 0: no limit)."""
 
     fps: int = 60
     size: tuple[int, int] | None = None
     fmt: str = "mp4"
     hold: float = 1.0
+    max_width: int | None = None
 
     def __post_init__(self) -> None:
         check_format(self.fmt, self.fps)
         if not 0 <= self.hold <= 60:
             raise MarlError(f"--hold must lie between 0 and 60 seconds, not {self.hold:g}")
+        if self.max_width is not None and self.max_width != 0 and not MIN_SIDE <= self.max_width <= MAX_SIDE:
+            raise MarlError(f"--max-width must be 0 (no limit) or lie between {MIN_SIDE} and {MAX_SIDE}, not "
+                            f"{self.max_width}")
+
+    @property
+    def width_limit(self) -> int:
+        """The widest frame the file keeps (0: no limit)."""
+        if self.max_width is not None:
+            return self.max_width
+        return GIF_MAX_WIDTH if self.fmt == "gif" else 0
 
     @property
     def hold_frames(self) -> int:
@@ -71,6 +84,7 @@ class Recording:
     size: tuple[int, int]  # width, height of the file's frames
     ended: str = ENDED_RESULT
     stopped_by: str | None = None
+    stored: int = 0  # frames the file holds (a GIF stores fewer than it was given: see video.VideoWriter)
 
     @property
     def video_seconds(self) -> float:
@@ -84,7 +98,8 @@ class Recording:
             "scores": [int(x) if float(x).is_integer() else x for x in r.scores], "outcome": list(r.outcome),
             "length": r.length, "truncated": r.truncated,
             "ended": self.ended, "stopped_by": self.stopped_by,
-            "frames": self.frames, "fps": self.settings.fps, "video_seconds": round(self.video_seconds, 2),
+            "frames": self.frames, "stored_frames": self.stored, "fps": self.settings.fps,
+            "video_seconds": round(self.video_seconds, 2),
             "size": f"{self.size[0]}x{self.size[1]}", "format": self.settings.fmt, "seconds": round(self.seconds, 3),
             "frames_per_second": round(self.frames / self.seconds, 1) if self.seconds > 0 else None,
         }
@@ -129,9 +144,12 @@ def record_game(
     on_frame: Callable[[int], None] | None = None,
     renderer: Any = None,
     stop_label: str | None = None,
+    heading: str | None = None,
 ) -> Recording:
     """Play ``game`` between ``policies`` and write it to ``path``; returns what was written.
 
+    Every frame is the game's own picture with the caption band under it (:class:`~.overlay.CaptionBand`): the
+    players' names per seat, the running score per side, ``heading`` (e.g. ``game 2 of 3``) and the step.
     ``labels`` are the names shown per seat (default: the policies' ids by seat). ``check(result)`` may raise to
     reject the game before the file takes its name (replays use it). ``on_frame(n)`` is told of every ``n``
     frames written (a progress bar). ``renderer`` reuses one renderer across games. ``stop_label`` names the limit
@@ -142,8 +160,10 @@ def record_game(
     settings = settings or VideoSettings()
     renderer = renderer if renderer is not None else renderer_of(spec)
     names = tuple(labels) if labels is not None else tuple(policies[s].id for s in game.seats)
+    band = CaptionBand(spec, names, heading, getattr(renderer, "seat_colour", None))
     start = time.perf_counter()
-    with VideoWriter(path, fps=settings.fps, size=settings.size, fmt=settings.fmt) as writer:
+    with VideoWriter(path, fps=settings.fps, size=settings.size, fmt=settings.fmt,
+                     max_width=settings.width_limit) as writer:
         last: list[np.ndarray] = []  # the latest frame only
         ending = [ENDED_RESULT]
 
@@ -158,7 +178,7 @@ def record_game(
                 else:
                     ending[0] = ENDED_STOPPED
                     tail = f" · stopped ({stop_label})" if stop_label else " · stopped"
-            frame = renderer.draw(core, slot, names, f"step {step}{tail}")
+            frame = band(renderer.draw(core, slot), core.score[:, slot], f"step {step}{tail}")
             writer.write(frame)
             if on_frame is not None:
                 on_frame(1)
@@ -175,8 +195,8 @@ def record_game(
             check(result)
     height, width = writer.frame_shape[:2]  # type: ignore[index]
     return Recording(path=Path(path), result=result, frames=writer.frames, seconds=time.perf_counter() - start,
-                     settings=settings, size=settings.size or (width, height), ended=ending[0],
-                     stopped_by=stop_label if ending[0] == ENDED_STOPPED else None)
+                     settings=settings, size=writer.out_size(width, height), ended=ending[0],
+                     stopped_by=stop_label if ending[0] == ENDED_STOPPED else None, stored=writer.stored)
 
 
 def record_replay(
@@ -191,8 +211,10 @@ def record_replay(
     scores: Sequence[float],
     env_options: dict[str, Any] | None = None,
     on_frame: Callable[[int], None] | None = None,
+    heading: str | None = None,
 ) -> Recording:
-    """Re-render a stored game from its seed and encoded actions, exactly as it was played.
+    """Re-render a stored game from its seed and encoded actions, exactly as it was played (``heading``: the
+    caption band's, e.g. ``replay of game 1234``).
 
     ``players`` are the names per seat; ``length`` and ``scores`` are what the ledger says the game came to: a
     replay that ends otherwise (other game options, another version of the game's rules) raises
@@ -206,4 +228,4 @@ def record_replay(
         check_replay(result, length, scores)
 
     return record_game(spec, policies, Game(seed, tuple(range(len(players)))), path, settings,
-                       env_options=env_options, labels=players, check=check, on_frame=on_frame)
+                       env_options=env_options, labels=players, check=check, on_frame=on_frame, heading=heading)

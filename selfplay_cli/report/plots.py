@@ -1,8 +1,15 @@
 """A run's fitted ratings against training steps: one curve per learner, the scripted players as levels.
 
 :func:`run_curves` collects them from the ladder (:func:`~selfplay_cli.league.ladder.ladder` with its defaults,
-so the ratings are the ones ``marl league ladder`` shows); :func:`save_run_png` draws them with matplotlib (Agg,
-headless); :func:`write_run_plot` does both and is what the training loop calls when a run ends.
+so the ratings are the ones ``marl league ladder`` shows), with the snapshot the ladder marks as the run's best;
+:func:`save_run_png` draws them with matplotlib (Agg, headless); :func:`write_run_plot` does both and is what the
+training loop calls when a run ends.
+
+What a figure says it shows, it shows, and what it shows it says: the best snapshot, ratings that are bounds
+(``perfect`` / ``zero``, only under ``--prior 0``) and ratings with no link to the anchor each get a marker and a
+legend entry only when there are some. Learners whose curves fall on each other (the members of a team rated by the
+same team games have equal ratings) are told apart by :func:`coinciding`: each gets its own marker and dash pattern
+and is drawn a little to the side, which its legend entry states.
 """
 
 from __future__ import annotations
@@ -14,15 +21,23 @@ from typing import Any
 
 from ..league.ladder import LadderRow, ladder
 from ..league.store import League, LeagueError
+from ..stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, FLAG_ZERO
 from .png import check_png_path, new_figure, save_png
 
-__all__ = ["BotLevel", "CurvePoint", "LearnerCurve", "RunCurves", "format_steps", "run_curves", "save_run_png",
-           "write_run_plot", "y_limits"]
+__all__ = ["BOUND_FLAGS", "BotLevel", "CurvePoint", "LearnerCurve", "RunCurves", "coinciding", "dodge_steps",
+           "format_steps", "run_curves", "run_figure", "save_run_png", "write_run_plot", "x_limits", "y_limits"]
+
+BOUND_FLAGS = (FLAG_PERFECT, FLAG_ZERO)
+"""Flags whose rating is a bound: ``perfect`` (the true rating is higher) and ``zero`` (lower); ``--prior 0`` only."""
+
+COINCIDE = 0.01
+"""Two learners' points closer than this share of the chart's Elo range (and at the same step) fall on each other."""
 
 
 @dataclass(frozen=True)
 class CurvePoint:
-    """One rated snapshot: its name, training step, fitted Elo and interval, and the fit's flag (or None)."""
+    """One rated snapshot: its name, training step, fitted Elo and interval, the fit's flag (or None) and whether
+    the ladder marks it as its run's best snapshot."""
 
     policy: str
     step: int
@@ -30,6 +45,17 @@ class CurvePoint:
     ci_low: float
     ci_high: float
     flag: str | None
+    best: bool = False
+
+    @property
+    def bound(self) -> bool:
+        """The rating is a bound, not an estimate (a ``perfect`` or ``zero`` flag)."""
+        return self.flag in BOUND_FLAGS
+
+    @property
+    def unanchored(self) -> bool:
+        """A flag other than a bound: no chain of games links this rating to the anchor."""
+        return self.flag is not None and not self.bound
 
 
 @dataclass(frozen=True)
@@ -60,6 +86,7 @@ class RunCurves:
         bots: the env's scripted players that have a rating, best first.
         anchor: the ladder's anchor (name and rating), the zero point of every rating.
         confidence: the level of the intervals.
+        prior: the fit's prior in virtual draws (0: maximum likelihood, where bounds appear).
     """
 
     env: str
@@ -68,6 +95,12 @@ class RunCurves:
     bots: tuple[BotLevel, ...]
     anchor: tuple[str, float] | None
     confidence: float = 0.95
+    prior: float = DEFAULT_PRIOR
+
+    @property
+    def best(self) -> CurvePoint | None:
+        """The snapshot the ladder marks as the run's best, if it marks one."""
+        return next((p for c in self.curves for p in c.points if p.best), None)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready dict (finite numbers only, Elo rounded to 0.1)."""
@@ -76,10 +109,12 @@ class RunCurves:
             "run": self.run,
             "anchor": None if self.anchor is None else {"policy": self.anchor[0], "elo": round(self.anchor[1], 1)},
             "confidence": self.confidence,
+            "prior": self.prior,
+            "best": None if self.best is None else self.best.policy,
             "learners": [
                 {"learner": c.learner,
                  "points": [{"policy": p.policy, "step": p.step, "elo": round(p.elo, 1), "ci_low": round(p.ci_low, 1),
-                             "ci_high": round(p.ci_high, 1), "flag": p.flag} for p in c.points]}
+                             "ci_high": round(p.ci_high, 1), "flag": p.flag, "best": p.best} for p in c.points]}
                 for c in self.curves
             ],
             "bots": [{"policy": b.name, "elo": round(b.elo, 1), "ci_low": round(b.ci_low, 1),
@@ -87,10 +122,13 @@ class RunCurves:
         }
 
 
-def run_curves(league: League, run: str, rows: list[LadderRow] | None = None) -> RunCurves:
-    """The curves of ``run``: its rated snapshots per learner and the env's rated bots.
+def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
+               prior: float = DEFAULT_PRIOR) -> RunCurves:
+    """The curves of ``run``: its rated snapshots per learner (each with the ladder's ``best`` mark) and the env's
+    rated bots.
 
-    ``rows``: a ladder of the run's env already fitted (default: ``ladder(league, env)`` with its defaults).
+    ``rows``: a ladder of the run's env already fitted (default: ``ladder(league, env, prior=prior)``, otherwise
+    the ladder's defaults).
     Snapshots are grouped by ``meta["learner"]`` (a run with one network has one group, named after the run);
     removed snapshots and snapshots without rated games are left out.
 
@@ -104,7 +142,7 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None) ->
         raise LeagueError(f"no run named '{run}' (runs: {shown})")
     env = info.env
     if rows is None:
-        rows = ladder(league, env)
+        rows = ladder(league, env, prior=prior)
     by_id = {r.player_id: r for r in rows if r.player_id is not None}
     groups: dict[str, list[CurvePoint]] = {}
     for p in league.players(env=env, kind="snapshot"):
@@ -112,7 +150,8 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None) ->
             continue
         r = by_id[p.id]
         learner = str(p.meta.get("learner") or "")
-        groups.setdefault(learner, []).append(CurvePoint(r.policy, int(p.step), r.elo, r.ci_low, r.ci_high, r.flag))
+        groups.setdefault(learner, []).append(CurvePoint(r.policy, int(p.step), r.elo, r.ci_low, r.ci_high, r.flag,
+                                                         best=bool(getattr(r, "best", False))))
     if not groups:
         raise LeagueError(f"run '{run}' has no rated snapshots yet (each snapshot is rated against the scripted "
                           "players after it is taken; or play some: marl league tournament --run ...)")
@@ -123,7 +162,7 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None) ->
     bots = tuple(BotLevel(r.policy, r.elo, r.ci_low, r.ci_high)
                  for r in sorted((r for r in rows if r.kind == "bot"), key=lambda r: -r.elo))
     anchor = next(((r.policy, r.elo) for r in rows if r.anchor), None)
-    return RunCurves(env=env, run=run, curves=curves, bots=bots, anchor=anchor)
+    return RunCurves(env=env, run=run, curves=curves, bots=bots, anchor=anchor, prior=prior)
 
 
 def y_limits(curves: RunCurves) -> tuple[float, float]:
@@ -150,60 +189,165 @@ def format_steps(x: float) -> str:
     return f"{x:.0f}"
 
 
-def save_run_png(curves: RunCurves, path: str | Path) -> Path:
-    """Draw ``curves`` into the PNG ``path`` (written to a temporary name, then renamed); returns the path.
+def _shared(a: LearnerCurve, b: LearnerCurve, tol: float) -> int:
+    """How many of ``a``'s points have a point of ``b`` at the same step within ``tol`` Elo."""
+    at = {p.step: p.elo for p in b.points}
+    return sum(1 for p in a.points if p.step in at and abs(at[p.step] - p.elo) <= tol)
 
-    Each learner: its snapshots' ratings joined by a line, the interval as a shaded band (error bars where a
-    learner has a single snapshot); open markers for ratings that are bounds (a perfect or zero score). Each
-    scripted player: a dashed horizontal line labelled with its name.
 
-    Raises:
-        LeagueError: the path is not a writable ``.png`` file.
+def coinciding(curves: RunCurves) -> list[tuple[int, ...]]:
+    """Groups (two or more, by index into ``curves.curves``) of learners whose curves fall on each other: linked by
+    at least one point at the same step within :data:`COINCIDE` of the chart's Elo range. Drawn as they are, the
+    last of a group would hide the others (a team's members rated by the same games have equal ratings)."""
+    lo, hi = y_limits(curves)
+    tol = COINCIDE * (hi - lo)
+    n = len(curves.curves)
+    group = list(range(n))
+
+    def root(i: int) -> int:
+        while group[i] != i:
+            i = group[i]
+        return i
+
+    for i in range(n):
+        for j in range(i + 1, n):
+            if _shared(curves.curves[i], curves.curves[j], tol):
+                group[root(j)] = root(i)
+    members: dict[int, list[int]] = {}
+    for i in range(n):
+        members.setdefault(root(i), []).append(i)
+    return [tuple(m) for m in members.values() if len(m) > 1]
+
+
+def x_limits(curves: RunCurves) -> tuple[float, float]:
+    """The training steps to show: the first to the last snapshot; around a single step, 5% of it either side."""
+    steps = [p.step for c in curves.curves for p in c.points]
+    lo, hi = float(min(steps)), float(max(steps))
+    if hi > lo:
+        return lo, hi
+    pad = max(1.0, 0.05 * abs(lo))
+    return lo - pad, hi + pad
+
+
+def dodge_steps(curves: RunCurves) -> dict[int, float]:
+    """How far (in steps) each learner of a :func:`coinciding` group is drawn aside so that every member shows:
+    members spread symmetrically, 1.5% of the step range shown apart. Learners not in a group are not moved."""
+    lo, hi = x_limits(curves)
+    gap = 0.015 * (hi - lo)
+    out = {}
+    for members in coinciding(curves):
+        for k, i in enumerate(members):
+            out[i] = (k - (len(members) - 1) / 2) * gap
+    return out
+
+
+_PNG_MARKERS = ("o", "s", "D", "P", "X", "h", "p", "8")
+_DASHES = ("-", "--", ":", "-.")
+
+
+def run_figure(curves: RunCurves) -> Any:
+    """``curves`` drawn on a matplotlib Figure (Agg canvas; :func:`save_run_png` writes it).
+
+    Each learner: its snapshots' ratings joined by a line, each point in the learner's own marker, the interval as
+    a shaded band (error bars where a learner has a single snapshot). Learners that fall on each other
+    (:func:`coinciding`) take different dash patterns and are drawn a little aside (:func:`dodge_steps`), which
+    their legend entries say. The ladder's best snapshot of the run: a gold star. Only when there are some: open
+    markers for ratings that are bounds (``perfect`` / ``zero``, under ``--prior 0``), crosses for ratings with no
+    chain of games to the anchor. Each scripted player: a dashed grey level labelled with its name. The legend
+    names every learner and every kind of mark drawn, and nothing else. The marks carry gids (``line:<learner>``,
+    ``points:<learner>``, ``bound:<learner>``, ``unanchored:<learner>``, ``best``) by which they can be found.
     """
     from matplotlib.ticker import FuncFormatter
 
     fig = new_figure(9.0, 5.0)
     ax = fig.add_subplot()
-    colors = [f"C{i % 10}" for i in range(len(curves.curves))]
-    for curve, color in zip(curves.curves, colors, strict=True):
-        steps = [p.step for p in curve.points]
+    ylo, yhi = y_limits(curves)
+    tol = COINCIDE * (yhi - ylo)
+    dodge = dodge_steps(curves)
+    groups = {i: g for g in coinciding(curves) for i in g}
+    names = [c.learner for c in curves.curves]
+    for k, curve in enumerate(curves.curves):
+        color, marker = f"C{k % 10}", _PNG_MARKERS[k % len(_PNG_MARKERS)]
+        shift = dodge.get(k, 0.0)
+        dash = _DASHES[groups[k].index(k) % len(_DASHES)] if k in groups else "-"
+        steps = [p.step + shift for p in curve.points]
         elo = [p.elo for p in curve.points]
         low = [p.ci_low for p in curve.points]
         high = [p.ci_high for p in curve.points]
         if len(steps) > 1:
             ax.fill_between(steps, low, high, color=color, alpha=0.18, linewidth=0)
-            ax.plot(steps, elo, color=color, linewidth=1.6, label=curve.learner)
+            line, = ax.plot(steps, elo, color=color, linewidth=1.6, linestyle=dash)
+            line.set_gid(f"line:{curve.learner}")
         else:
             ax.errorbar(steps, elo, yerr=[[elo[0] - low[0]], [high[0] - elo[0]]], color=color, capsize=3,
                         fmt="none")
-            ax.plot([], [], color=color, linewidth=1.6, label=curve.learner)
-        exact = [p for p in curve.points if p.flag is None]
-        bound = [p for p in curve.points if p.flag is not None]
-        ax.plot([p.step for p in exact], [p.elo for p in exact], "o", color=color, markersize=3.5)
+        exact = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.flag is None]
+        dots, = ax.plot([x for x, _ in exact], [p.elo for _, p in exact], linestyle="none", marker=marker,
+                        color=color, markersize=4.5)
+        dots.set_gid(f"points:{curve.learner}")
+        label = curve.learner
+        if k in groups:
+            others = [names[i] for i in groups[k] if i != k]
+            same = max(_shared(curve, curves.curves[i], tol) for i in groups[k] if i != k)
+            label += (f" (same Elo as {', '.join(others)} at {same} of {len(curve.points)} snapshot"
+                      f"{'s' if len(curve.points) != 1 else ''}; drawn {'+' if shift >= 0 else '-'}"
+                      f"{format_steps(abs(shift))} steps aside)")
+        ax.plot([], [], color=color, linestyle=dash, linewidth=1.6, marker=marker, markersize=4.5, label=label)
+        bound = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.bound]
         if bound:
-            ax.plot([p.step for p in bound], [p.elo for p in bound], "o", markerfacecolor="white", color=color,
-                    markersize=4.5)
-    ylo, yhi = y_limits(curves)
+            line, = ax.plot([x for x, _ in bound], [p.elo for _, p in bound], linestyle="none", marker=marker,
+                            markerfacecolor="white", color=color, markersize=6)
+            line.set_gid(f"bound:{curve.learner}")
+        loose = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.unanchored]
+        if loose:
+            line, = ax.plot([x for x, _ in loose], [p.elo for _, p in loose], linestyle="none", marker="x",
+                            color=color, markersize=6)
+            line.set_gid(f"unanchored:{curve.learner}")
+    points = [(k, p) for k, c in enumerate(curves.curves) for p in c.points]
+    best = next(((k, p) for k, p in points if p.best), None)
+    if best is not None:
+        k, p = best
+        note = {FLAG_PERFECT: " (at least: a bound)", FLAG_ZERO: " (at most: a bound)"}.get(p.flag or "", "")
+        star, = ax.plot([p.step + dodge.get(k, 0.0)], [p.elo], linestyle="none", marker="*", markersize=15,
+                        markerfacecolor="gold", markeredgecolor="black", markeredgewidth=0.8, zorder=5,
+                        label=f"best snapshot of the run (ladder): {p.policy}, {p.elo:.0f}{note}")
+        star.set_gid("best")
+    if any(p.bound and not p.best for _, p in points):  # a bound under the star shows no open marker
+        ax.plot([], [], linestyle="none", marker="o", markerfacecolor="white", color="0.3", markersize=6,
+                label="open: a bound (perfect score: at least; zero: at most)")
+    if any(p.unanchored and not p.best for _, p in points):
+        ax.plot([], [], linestyle="none", marker="x", color="0.3", markersize=6,
+                label="x: no games linking it to the anchor (offset unknown)")
     for bot in curves.bots:
         ax.axhline(bot.elo, color="0.45", linestyle="--", linewidth=1.0)
         near_top = bot.elo > ylo + 0.92 * (yhi - ylo)
         ax.text(0.995, bot.elo, f" {bot.name} ", transform=ax.get_yaxis_transform(), ha="right",
                 va="top" if near_top else "bottom", fontsize=9, color="0.3")
     ax.set_ylim(ylo, yhi)
-    steps_all = [p.step for c in curves.curves for p in c.points]
-    if min(steps_all) == max(steps_all):
-        ax.set_xlim(min(steps_all) - 1, max(steps_all) + 1)
+    if len({p.step for _, p in points}) == 1:  # one step: 5% of it either side (matplotlib's margins: a step)
+        ax.set_xlim(*x_limits(curves))
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: format_steps(x)))
     ax.set_xlabel("training step (game steps)")
-    anchor = f", {curves.anchor[0]} = {curves.anchor[1]:.0f}" if curves.anchor else ""
-    ax.set_ylabel(f"Elo (Bradley-Terry fit{anchor})")
+    anchor = f"; {curves.anchor[0]} = {curves.anchor[1]:.0f}" if curves.anchor else ""
+    fit = "maximum likelihood" if curves.prior == 0 else f"prior {curves.prior:g} draws"
+    ax.set_ylabel(f"Elo (Bradley-Terry, {fit}{anchor})")
     pct = f"{100 * curves.confidence:g}%"
-    ax.set_title(f"{curves.run} ({curves.env}): fitted Elo by training step, {pct} intervals; open = bound")
+    ax.set_title(f"{curves.run} ({curves.env}): fitted Elo by training step, {pct} intervals")
     ax.grid(True, color="0.9", linewidth=0.6)
-    ax.legend(loc="best", fontsize=9, title="learner", title_fontsize=9)
+    ax.legend(loc="best", fontsize=8)
     if not all(math.isfinite(v) for v in (ylo, yhi)):  # pragma: no cover - ladder rows are always finite
         raise AssertionError("non-finite plot range")
-    return save_png(fig, path)
+    return fig
+
+
+def save_run_png(curves: RunCurves, path: str | Path) -> Path:
+    """Draw ``curves`` (:func:`run_figure`) into the PNG ``path`` (written to a temporary name, then renamed);
+    returns the path.
+
+    Raises:
+        LeagueError: the path is not a writable ``.png`` file.
+    """
+    return save_png(run_figure(curves), path)
 
 
 def write_run_plot(league: League, run: str, path: str | Path) -> Path:

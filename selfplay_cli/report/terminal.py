@@ -3,7 +3,8 @@
 * :func:`curves_chart`: a run's rating curves as a character chart. ``unicode=True`` (a terminal) draws with
   braille dots (2 x 4 per character) in colour; ``unicode=False`` (a pipe, a log file) draws plain ASCII, one
   point per character, with no colour, readable at 80 columns.
-* :func:`curves_summary`: the numbers behind the chart, per learner.
+* :func:`curves_summary`: the numbers behind the chart: the run's best snapshot as the ladder marks it, then per
+  learner.
 * :func:`matrix_table` / :func:`matrix_summary`: the score matrix as a heat table, then its Nash mixture, cycles and
   the command that plays the missing games.
 
@@ -13,6 +14,7 @@ Everything is built from :class:`rich.text.Text`, never markup, so names with sq
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -22,13 +24,14 @@ from rich.style import Style
 from rich.table import Table
 from rich.text import Text
 
+from ..stats.bradley_terry import FLAG_PERFECT
 from .matrix import CYCLE_TEST, MatrixReport
-from .plots import RunCurves, format_steps, y_limits
+from .plots import BOUND_FLAGS, CurvePoint, RunCurves, format_steps, x_limits, y_limits
 
 __all__ = ["curves_chart", "curves_summary", "matrix_summary", "matrix_table", "nice_ticks"]
 
 _COLORS = ("cyan", "magenta", "green", "yellow", "blue", "red")
-_MARKERS = "ox+*#@%&"
+_MARKERS = "ox+#@%&~"  # a learner's points in ASCII; "*" (best), "=" (shared), "^ v ?" are marks (see _marks)
 _BOT_STYLE = "grey62"
 # braille dot bits by [row][column] inside one character cell (2 columns x 4 rows)
 _BRAILLE = ((0x01, 0x08), (0x02, 0x10), (0x04, 0x20), (0x40, 0x80))
@@ -98,30 +101,83 @@ class _Canvas:
         return out
 
 
+def _marks(curves: RunCurves, px: Callable[[float], int], py: Callable[[float], int], sx: int,
+           sy: int) -> tuple[dict[tuple[int, int], tuple[str, str]], list[tuple[str, str]]]:
+    """The character cells that carry a mark instead of a learner's own point, and the legend entries of the marks
+    that show: points of several learners in one cell (``=``: a team whose members have equal ratings, where
+    otherwise only the last learner drawn would show), bounds (``^`` at least, ``v`` at most), ratings with no
+    link to the anchor (``?``), and the ladder's best snapshot (``*``, which wins its cell)."""
+    cells: dict[tuple[int, int], tuple[str, str]] = {}
+    owners: dict[tuple[int, int], list[int]] = {}
+    where: dict[tuple[int, int], list[CurvePoint]] = {}
+    for k, curve in enumerate(curves.curves):
+        for p in curve.points:
+            cell = (py(p.elo) // sy, px(p.step) // sx)
+            where.setdefault(cell, []).append(p)
+            if k not in owners.setdefault(cell, []):
+                owners[cell].append(k)
+    for cell, ks in owners.items():
+        if len(ks) > 1:
+            cells[cell] = ("=", "bold")
+    for cell, points in where.items():
+        for p in points:
+            if p.bound:
+                cells[cell] = ("^" if p.flag == FLAG_PERFECT else "v", "bold")
+            elif p.unanchored:
+                cells[cell] = ("?", "bold")
+    best = curves.best
+    if best is not None:
+        cells[(py(best.elo) // sy, px(best.step) // sx)] = ("*", "bold yellow")  # "*": one cell wide anywhere
+    shown = {glyph for glyph, _ in cells.values()}
+    legend: list[tuple[str, str]] = []
+    if "=" in shown:
+        who = sorted({k for cell, ks in owners.items() if cells.get(cell, ("",))[0] == "=" for k in ks})
+        legend.append(("=", " = ".join(curves.curves[k].learner for k in who) + " (same point)"))
+    for glyph, what in (("^", "at least (a perfect score: a bound)"), ("v", "at most (a zero score: a bound)"),
+                        ("?", "no games linking it to the anchor")):
+        if glyph in shown:
+            legend.append((glyph, what))
+    if best is not None:
+        cell = (py(best.elo) // sy, px(best.step) // sx)
+        mine = next(k for k, c in enumerate(curves.curves) if best in c.points)
+        also = [curves.curves[k].learner for k in owners[cell] if k != mine]
+        notes = [f"with {', '.join(also)}"] if also else []
+        if best.flag is not None:
+            notes.append(_flag(best.flag).strip(" []"))  # "perfect: a bound"
+        legend.append(("*", f"best (ladder): {best.policy}" + (f" ({'; '.join(notes)})" if notes else "")))
+    return cells, legend
+
+
 def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, height: int | None = None) -> Text:
     """The rating curves of a run as text, ``width`` characters wide: the y axis in Elo, the x axis in training
     steps, a line per learner with its snapshots marked and their intervals as dotted bars, each scripted player
-    as a dashed level labelled on the right, a title and a legend."""
+    as a dashed level labelled on the right, a title and a legend. The ladder's best snapshot, points of several
+    learners in one character, bounds and unanchored ratings get marks of their own (:func:`_marks`), and the
+    legend names each mark drawn and no other."""
     rows = height or (14 if unicode else 18)
     ylo, yhi = y_limits(curves)
     yticks = [t for t in nice_ticks(ylo, yhi, 5) if ylo <= t <= yhi]
     ylabels = [f"{t:.0f}" for t in yticks]
     left = max([len(s) for s in ylabels] + [4]) + 2
-    bot_names = [b.name[:12] for b in curves.bots]
-    right = (max(len(s) for s in bot_names) + 1) if bot_names else 0
-    cols = max(width - left - right, 20)
-    steps = [p.step for c in curves.curves for p in c.points]
-    x0, x1 = float(min(steps)), float(max(steps))
-    if x1 <= x0:
-        x0, x1 = x0 - 1.0, x1 + 1.0
-    canvas = _Canvas(cols, rows, unicode)
-
-    def px(x: float) -> int:
-        return int(round((x - x0) / (x1 - x0) * (canvas.w - 1)))
+    x0, x1 = x_limits(curves)
+    canvas = _Canvas(1, rows, unicode)  # the plot's height in pixels, before its width is known
 
     def py(y: float) -> int:
         y = min(max(y, ylo), yhi)
         return int(round((yhi - y) / (yhi - ylo) * (canvas.h - 1)))
+
+    bot_rows: dict[int, str] = {}  # bots on one character row share its label
+    for bot in curves.bots:
+        r = py(bot.elo) // canvas.sy
+        bot_rows[r] = f"{bot_rows[r]}, {bot.name}" if r in bot_rows else bot.name
+    bot_rows = {r: name if len(name) <= 12 else name[:11] + "…" if unicode else name[:12]
+                for r, name in bot_rows.items()}
+    right = (max(len(s) for s in bot_rows.values()) + 1) if bot_rows else 0
+    cols = max(width - left - right, 20)
+    canvas = _Canvas(cols, rows, unicode)
+
+    def px(x: float) -> int:
+        return int(round((x - x0) / (x1 - x0) * (canvas.w - 1)))
 
     glyphs: list[str] = []
     styles: list[str] = []
@@ -153,11 +209,8 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
                     canvas.set(x + ddx if x + ddx < canvas.w else x - ddx, y + ddy if y + ddy < canvas.h else y - ddy,
                                base + 2, 3)
     cells = canvas.cells(glyphs)
+    marks, mark_legend = _marks(curves, px, py, canvas.sx, canvas.sy)
     tick_rows = {py(t) // canvas.sy: s for t, s in zip(yticks, ylabels, strict=True)}
-    bot_rows: dict[int, str] = {}
-    for bot, name in zip(curves.bots, bot_names, strict=True):
-        r = py(bot.elo) // canvas.sy
-        bot_rows.setdefault(r, name)
     vbar, tick, corner, hbar, xtick = ("│", "┤", "└", "─", "┬") if unicode else ("|", "+", "+", "-", "+")
 
     text = Text()
@@ -166,8 +219,12 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
     for r in range(rows):
         label = tick_rows.get(r)
         text.append((label or "").rjust(left - 2) + " " + (tick if label else vbar))
-        for ch, owner in cells[r]:
-            text.append(ch, style=styles[owner] if unicode and owner >= 0 else "")
+        for c, (ch, owner) in enumerate(cells[r]):
+            if (r, c) in marks:
+                ch, style = marks[(r, c)]
+                text.append(ch, style=style if unicode else "")
+            else:
+                text.append(ch, style=styles[owner] if unicode and owner >= 0 else "")
         if r in bot_rows:
             text.append(" " + bot_rows[r], style=_BOT_STYLE if unicode else "")
         text.append("\n")
@@ -183,34 +240,53 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
             under[start:start + len(s)] = list(s)
     text.append(" " * (left - 1) + corner + "".join(axis) + "\n")
     text.append("steps".ljust(left) + "".join(under).rstrip() + "\n")
-    legend = Text(" " * left)
+    items: list[tuple[str, str]] = []
     for k, curve in enumerate(curves.curves):
         color = _COLORS[k % len(_COLORS)]
-        legend.append(("━━ " if unicode else _MARKERS[k % len(_MARKERS)] + " ") + curve.learner,
-                      style=color if unicode else "")
-        legend.append("  ")
+        items.append((("━━ " if unicode else _MARKERS[k % len(_MARKERS)] + " ") + curve.learner, color))
     if curves.bots:
-        legend.append(("╌╌ " if unicode else "- ") + "scripted", style=_BOT_STYLE if unicode else "")
-        legend.append("  ")
-    legend.append(("⡇ " if unicode else ": ") + f"{pct} interval")
-    text.append_text(legend)
+        items.append((("╌╌ " if unicode else "- ") + "scripted", _BOT_STYLE))
+    items.append((("⡇ " if unicode else ": ") + f"{pct} interval", ""))
+    items += [(f"{glyph} {what}", "") for glyph, what in mark_legend]
+    text.append_text(_wrapped(items, left, width, unicode))
     return text
 
 
+def _wrapped(items: list[tuple[str, str]], indent: int, width: int, unicode: bool) -> Text:
+    """Legend items (text, style) two spaces apart, on as many lines as ``width`` needs, each indented."""
+    out = Text(" " * indent)
+    used = indent
+    for i, (item, style) in enumerate(items):
+        if i and used + 2 + len(item) > width:
+            out.append("\n" + " " * indent)
+            used = indent
+        elif i:
+            out.append("  ")
+            used += 2
+        out.append(item, style=style if unicode else "")
+        used += len(item)
+    return out
+
+
 def curves_summary(curves: RunCurves) -> Text:
-    """Per learner: how many snapshots are rated, the latest and the best with their intervals; the scripted
-    players' ratings; the anchor. Short lines (names and numbers only), so it reads at 80 columns."""
+    """Per learner: how many snapshots are rated, the latest and the highest rated with their intervals; the
+    snapshot the ladder marks as the run's best (the ladder decides it, which need not be the highest point); the
+    scripted players' ratings; the anchor. Short lines (names and numbers only), so it reads at 80 columns."""
     out = Text()
+    best = curves.best
+    if best is not None:
+        out.append(f"best snapshot of the run (ladder): {best.policy} ({format_steps(best.step)} steps): "
+                   f"{_elo(best.elo, best.ci_low, best.ci_high)}{_flag(best.flag)}\n", style="bold")
     for curve in curves.curves:
         last = curve.points[-1]
-        best = max(curve.points, key=lambda p: (p.elo, p.step))
+        top = max(curve.points, key=lambda p: (p.elo, p.step))
         count = len(curve.points)
         out.append(f"{curve.learner}: {count} rated snapshot{'s' if count != 1 else ''}\n", style="bold")
-        out.append(f"  latest {last.policy} ({format_steps(last.step)} steps): "
+        out.append(f"  latest  {last.policy} ({format_steps(last.step)} steps): "
                    f"{_elo(last.elo, last.ci_low, last.ci_high)}{_flag(last.flag)}\n")
-        if best is not last:
-            out.append(f"  best   {best.policy} ({format_steps(best.step)} steps): "
-                       f"{_elo(best.elo, best.ci_low, best.ci_high)}{_flag(best.flag)}\n")
+        if top is not last:
+            out.append(f"  highest {top.policy} ({format_steps(top.step)} steps): "
+                       f"{_elo(top.elo, top.ci_low, top.ci_high)}{_flag(top.flag)}\n")
     if curves.bots:
         out.append("scripted players\n", style="bold")
         for b in curves.bots:
@@ -225,7 +301,9 @@ def _elo(elo: float, low: float, high: float) -> str:
 
 
 def _flag(flag: str | None) -> str:
-    return f" [{flag}: a bound]" if flag else ""
+    if flag is None:
+        return ""
+    return f" [{flag}: a bound]" if flag in BOUND_FLAGS else f" [{flag}: no link to the anchor]"
 
 
 def _heat(score: float) -> Style:
