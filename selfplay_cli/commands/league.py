@@ -24,7 +24,7 @@ from ._common import (
     progress_enabled,
     resolve_players,
 )
-from ._output import console
+from ._output import console, print_json
 from .elo import AnchorOpt, BootstrapOpt, PriorOpt, check_bootstrap, check_prior, parse_anchor, resolve_anchor
 from .ladder_view import prior_caption, render_ladder
 
@@ -104,6 +104,48 @@ def ladder_cmd(
         console.print(f"run {run} has no snapshot with rated games yet")
 
 
+@app.command("predict")
+def predict_cmd(
+    a: Annotated[str, typer.Argument(help="First policy (a snapshot, a tag, best, latest, an id, a scripted player).")],
+    b: Annotated[str, typer.Argument(help="Second policy (same forms).")],
+    games: Annotated[int, typer.Option("--games", "-n", min=1, max=MAX_GAMES, help="Games of the match to "
+                                       "predict.")] = 200,
+    env: EnvOpt = None,
+    confidence: Annotated[float, typer.Option("--confidence", help="Level of the predicted interval.")] = 0.95,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    json_out: JsonOpt = False,
+) -> None:
+    """What the ladder predicts of a match not yet played: A's score over --games games against B, with the interval
+    a real match falls in with probability --confidence. It rests on their ratings' difference and its
+    uncertainty, how far the league's pairs scatter around their ratings, and the two's own games; `marl match`
+    prints the same prediction beside the games it plays."""
+    from ..league.forecast import Forecaster
+
+    if not 0.5 < confidence < 1:
+        raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
+    league = open_league(home, db, readonly=True)
+    try:
+        row_a, row_b = resolve_players(league, [a, b], env)
+        if row_a.env != row_b.env:
+            raise MarlError(f"{row_a.full_name} plays {row_a.env}, {row_b.full_name} plays {row_b.env}")
+        forecast = Forecaster.of_league(league, row_a.env)
+        p = forecast.predict(row_a.full_name, row_b.full_name, games, confidence)
+        met_points, met = forecast.met(row_a.full_name, row_b.full_name)
+    finally:
+        league.close()
+    if json_out:
+        print_json({"a": row_a.full_name, "b": row_b.full_name, **p.to_json(), "spread": round(forecast.spread, 1),
+                    "met": met, "met_score": round(met_points / met, 4) if met else None})
+        return
+    console.print(f"{row_a.full_name} against {row_b.full_name} over {games} games: {100 * p.score:.1f}% "
+                  f"[{100 * p.low:.1f}%, {100 * p.high:.1f}%] ({100 * confidence:g}% of such matches fall in it)",
+                  markup=False, highlight=False)
+    console.print(f"  Elo difference {p.diff:+.0f} (sd {p.sd:.0f}, pairs' spread around their ratings "
+                  f"{forecast.spread:.0f}); " + (f"they met in {met} rated results: {100 * met_points / met:.0f}%"
+                                                  if met else "they never met"), markup=False, highlight=False)
+
+
 @app.command("tournament")
 def tournament(
     players: Annotated[list[str] | None, typer.Argument(metavar="PLAYERS", help="Policies to include (snapshots, "
@@ -116,7 +158,9 @@ def tournament(
     vs: Annotated[str | None, typer.Option("--vs", help="Gauntlet: every player meets only this one.")] = None,
     games_per_pair: Annotated[int, typer.Option("--games-per-pair", min=2, max=MAX_GAMES, help="Games each pair must "
                                                 "have in the ledger; only the missing ones are played.")] = 100,
-    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the first new game.")] = 0,
+    seed: Annotated[int | None, typer.Option("--seed", min=0, max=MAX_SEED, help="Seed of the first new game of "
+                                             "every pair (default: for each pair, the first seed it has not "
+                                             "played, so no stored game is played and counted again).")] = None,
     parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once.")]
     = 1024,
     bootstrap: BootstrapOpt = 200,
@@ -162,18 +206,13 @@ def tournament(
         env = envs.pop()
         plan = plan_tournament(league, env, list(unique), games_per_pair, vs=anchor.id if anchor else None)
         total = sum(p.missing + p.missing % 2 for p in plan)
-        policies = {}
-        next_seed = seed
         with progress_bar("tournament", total, "games", progress_enabled(quiet or json_out)) as tick:
             for p in plan:
+                first = league.fresh_seed(p.a_id, p.b_id) if seed is None else seed
                 rows_ = [league.get_player(p.a_id), league.get_player(p.b_id)]
-                for row in rows_:
-                    if row.id not in policies:
-                        policies[row.id] = load_player(league, row, device=device, seed=mix_seed(seed, row.id))
-                pa, pb = policies[p.a_id], policies[p.b_id]
-                run_match(pa, pb, games=p.missing, first_seed=next_seed, parallel=parallel, league=league,
+                pa, pb = (load_player(league, row, device=device, seed=mix_seed(first, row.id)) for row in rows_)
+                run_match(pa, pb, games=p.missing, first_seed=first, parallel=parallel, league=league,
                           player_ids={pa.id: p.a_id, pb.id: p.b_id}, kind="tournament", on_games=tick)
-                next_seed += (p.missing + 1) // 2
         if not json_out:
             console.print(f"{len(plan)} pairs needed games, {total} played")
         rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap))

@@ -73,6 +73,11 @@ def render_report(r: MatchReport) -> None:
         verdict = {"H1": "H1 accepted", "H0": "H0 accepted"}.get(t["decision"], "undecided (--max-games reached)")
         console.print(f"  SPRT [{t['elo0']:g}, {t['elo1']:g}] alpha={t['alpha']:g} beta={t['beta']:g}: "
                       f"LLR {t['llr']:.2f} ({t['lower']:.2f}, {t['upper']:.2f}) -> {verdict}")
+    if r.predicted is not None:
+        p = r.predicted
+        console.print(f"  the ladder predicted {100 * p.score:.0f}% [{100 * p.low:.0f}%, {100 * p.high:.0f}%] over "
+                      f"these {p.games} results: " + ("held" if r.held else "did not hold (marl league ladder has "
+                                                      "these two wrong; these games now count in it)"))
     if r.match_id is not None:
         ids = r.game_ids
         games = (f", games #{ids[0]}-#{ids[-1]} (marl record --game ID replays one)"
@@ -100,8 +105,9 @@ def match(
                                        "each seed in both seat orders).")] = 200,
     env: EnvOpt = None,
     env_option: EnvOptionOpt = None,
-    seed: Annotated[int, typer.Option("--seed", min=0, max=MAX_SEED, help="First game seed; pair i uses seed + i.")]
-    = 0,
+    seed: Annotated[int | None, typer.Option("--seed", min=0, max=MAX_SEED, help="First game seed; pair i uses "
+                                             "seed + i (default: the first seed the two have not played, so no "
+                                             "stored game is played and counted again).")] = None,
     parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once in the "
                                           "batched core.")] = 1024,
     store: Annotated[bool, typer.Option("--store/--no-store", help="Record the games in the ledger.")] = True,
@@ -144,21 +150,25 @@ def match(
         jobs = ([(list(crew.members), side_b, crew.full_name)] if crew is not None
                 else [([row_a], row_b, None) for row_a, row_b in pairings(a, side_a, b, side_b, sprt=sprt)])
         options = parse_env_options(jobs[0][1].env, env_option) if env_option else None  # type: ignore[union-attr]
+        forecast = _forecaster(league, jobs[0][1].env) if not options else None  # type: ignore[union-attr]
         for rows_a, row_b, team_name in jobs:
-            pa = [load_player(league, r, device=device, seed=mix_seed(seed, 0 if i == 0 else 1 + i))
+            first = league.fresh_seed(rows_a[0].id, row_b.id) if seed is None else seed  # type: ignore[union-attr]
+            pa = [load_player(league, r, device=device, seed=mix_seed(first, 0 if i == 0 else 1 + i))
                   for i, r in enumerate(rows_a)]
-            pb = load_player(league, row_b, device=device, seed=mix_seed(seed, 1))  # type: ignore[arg-type]
+            pb = load_player(league, row_b, device=device, seed=mix_seed(first, 1))  # type: ignore[arg-type]
             ids = {**{p.id: r.id for p, r in zip(pa, rows_a, strict=True)}, pb.id: row_b.id}  # type: ignore[union-attr]
             try:
                 with progress_bar(f"{team_name or pa[0].id} vs {pb.id}", budget + budget % 2, "games",
                                   progress_enabled(quiet)) as tick:
-                    reports.append(run_match(pa[0], pb, games=budget, first_seed=seed, parallel=parallel,
+                    reports.append(run_match(pa[0], pb, games=budget, first_seed=first, parallel=parallel,
                                              league=league if store else None, player_ids=ids, sprt=settings,
                                              confidence=confidence, on_games=tick, env_options=options,
                                              team=pa if team_name else None, team_name=team_name))
             except MatchInterrupted as stop:
                 interrupted(stop.report, stored=store)
                 raise typer.Exit(130) from None
+            if forecast is not None and team_name is None:
+                reports[-1].predicted = _predict(forecast, rows_a[0], row_b, reports[-1])
             if not json_out:
                 render_report(reports[-1])
     finally:
@@ -168,6 +178,28 @@ def match(
         print_json(reports[0].to_json() if team is None else {"team": team, "matches": [r.to_json() for r in reports]})
     if settings is not None:
         raise typer.Exit(sprt_exit_code(reports[0]))
+
+
+def _forecaster(league: Any, env: str) -> Any:
+    """The ladder's forecaster of ``env`` as it stands before the match (None when it has no rated games)."""
+    from ..league.forecast import Forecaster
+    from ..league.store import LeagueError
+
+    try:
+        return Forecaster.of_league(league, env)
+    except LeagueError:
+        return None
+
+
+def _predict(forecast: Any, a: PlayerRow, b: PlayerRow, report: MatchReport) -> Any:
+    """What the ladder before the match predicted of its results (None for players it cannot predict)."""
+    from ..league.store import LeagueError
+
+    results = report.wins + report.draws + report.losses
+    try:
+        return forecast.predict(a.full_name, b.full_name, results) if results else None
+    except LeagueError:
+        return None
 
 
 def _flying_team(side_a: Any, side_b: Any, a: str, b: str) -> Team | None:

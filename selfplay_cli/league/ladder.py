@@ -460,7 +460,7 @@ def declared_anchor(env: str) -> str:
         return "random"
 
 
-def _default_anchor(population: list[PlayerRow], games: dict[int, int], preferred: str = "random") -> PlayerRow:
+def default_anchor(population: list[PlayerRow], games: dict[int, int], preferred: str = "random") -> PlayerRow:
     """The game's anchor bot (``preferred``) if it played, else ``random``, else the first bot (by id) that played,
     else the most active player."""
     bots = [p for p in population if p.is_bot]
@@ -576,7 +576,7 @@ def ladder(
     population = [known[int(i)] if int(i) in known else league.get_player(int(i)) for i in ids.tolist()]
     games = dict(zip(ids.tolist(), (np.bincount(a, minlength=ids.size) + np.bincount(b, minlength=ids.size))
                      .tolist(), strict=True))
-    anchor_player = (_default_anchor(population, games, declared_anchor(env)) if anchor is None
+    anchor_player = (default_anchor(population, games, declared_anchor(env)) if anchor is None
                      else _find_anchor(population, anchor, env))
     removed = {p.id for p in population if p.removed}
     hidden = set() if include_removed else {p.full_name for p in population if p.removed}

@@ -471,6 +471,13 @@ class Ledger(Database):
 
         return self._read(work)
 
+    def fresh_seed(self, a: int, b: int) -> int:
+        """The first seed above every stored game between players ``a`` and ``b`` (0 when they never met): where a
+        new match of the two starts by default, so that it never plays, and stores, games it already has (two
+        deterministic players on the same seeds play the same games: stored twice, they would count twice)."""
+        t = self.games(players=[int(a), int(b)], rated=False)
+        return int(t.seed.max()) + 1 if len(t) else 0
+
     def pair_counts(self, a: int, b: int) -> tuple[int, int, int]:
         """Wins, draws and losses of player ``a`` against player ``b`` over all their pairwise results, training
         games included."""

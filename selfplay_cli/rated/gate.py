@@ -56,7 +56,7 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
     penta = list(h2h["pentanomial"])
     played = 0
     if stored < games:
-        first = 1_000_003 * (1 + stored)
+        first = league.fresh_seed(cand.id, base.id)  # never the seeds of the stored games again
         pa = load_player(league, cand, device=device, seed=mix_seed(first, 0))
         pb = load_player(league, base, device=device, seed=mix_seed(first, 1))
         report = run_match(pa, pb, games=games - stored, first_seed=first, parallel=parallel,

@@ -181,6 +181,12 @@ class MatchReport:
     game_ids: list[int] = field(default_factory=list, repr=False)  # ledger ids of the stored games, in order
     interrupted: bool = False  # stopped by Ctrl-C: the whole rounds finished by then
     kind: str = TWO_SIDES  # the game's kind
+    predicted: Any = None  # what the ladder predicted of these games before they were played (a ScorePrediction)
+
+    @property
+    def held(self) -> bool | None:
+        """Whether the measured score lies in the ladder's predicted interval (None without a prediction)."""
+        return None if self.predicted is None else self.predicted.holds(self.stats.score)
 
     @property
     def games_per_second(self) -> float:
@@ -206,6 +212,7 @@ class MatchReport:
             "seconds": round(self.seconds, 3), "games_per_second": round(self.games_per_second, 1),
             "match_id": self.match_id, "first_seed": self.first_seed, "sprt": self.sprt,
             "game_ids": self.game_ids, "interrupted": self.interrupted, "kind": self.kind,
+            "predicted": None if self.predicted is None else {**self.predicted.to_json(), "held": self.held},
         }
         if self.mean_returns is not None:
             out["mean_return"] = {"a": round(self.mean_returns[0], 4), "b": round(self.mean_returns[1], 4)}

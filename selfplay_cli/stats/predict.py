@@ -8,16 +8,17 @@ stand between a fitted difference and the score a real match will show:
    intervals, so the uncertainty two players share through the anchor cancels);
 2. the luck of the match itself: ``n`` games give a score that is binomial around the true expectation;
 3. what one number per player cannot say: self-play is full of rock-paper-scissors, a snapshot that beats the
-   other paddle's latest more than their ratings say and loses to an older one more. :func:`pair_spread` measures
-   this spread ``tau`` (Elo) from the ledger itself: the excess of the pairs' observed scores over what (1) and (2)
-   explain, a random-effects (DerSimonian-Laird) estimate on the logit scale. A pair's own games then say where
-   this pair stands within that spread (:func:`pair_effect`): the prediction leans on them as far as their number
-   allows, and on the ratings for the rest.
+   other learner's latest more than their ratings say and loses to an older one more. :func:`pair_spread` measures
+   this spread ``tau`` (Elo) from the ledger itself: how far the pairs that met stand from what the rest of the
+   ledger predicts of them, beyond what (1) and (2) explain (a random effect per pair, fitted by marginal
+   likelihood). A pair's own games then say where this pair stands within that spread: the prediction leans on
+   them as far as their number allows, and on the ratings for the rest.
 
-:func:`predict_score` integrates all three: the difference ``d ~ N(diff, sd^2 + spread^2)``, the score ``K / n``
-with ``K ~ Binomial(n, E(d))``; its interval is the central ``confidence`` interval of that mixture (Gauss-Hermite
-quadrature over ``d``, exact binomial over ``K``). Draws are counted as half a point and modelled as a coin of the
-same mean, which overstates the spread of a score with draws: the interval errs wide, never narrow.
+:func:`predict_pair` integrates all three: the difference ``diff + e + delta`` with the pair's deviation ``e ~
+N(0, spread^2)`` updated by its own games and the fit's uncertainty ``delta ~ N(0, sd^2)``, the score ``K / n`` with
+``K ~ Binomial(n, E(d))``; its interval is the central ``confidence`` interval of that mixture (quadrature on a grid
+over ``e`` and ``delta``, exact binomials over ``K``). Draws are counted as half a point and modelled as a coin of
+the same mean, which overstates the spread of a score with draws: the interval errs wide, never narrow.
 
 numpy and scipy only.
 """
@@ -78,31 +79,35 @@ def _log_likelihood(points: np.ndarray, games: np.ndarray, theta: np.ndarray) ->
     return -points * np.logaddexp(0.0, -theta) - (games - points) * np.logaddexp(0.0, theta)
 
 
-def pair_spread(points: npt.ArrayLike, games: npt.ArrayLike, diff_elo: npt.ArrayLike) -> float:
+def pair_spread(points: npt.ArrayLike, games: npt.ArrayLike, diff_elo: npt.ArrayLike,
+                sd_elo: npt.ArrayLike | float = 0.0) -> float:
     """The spread ``tau`` (Elo) of pairs around what their ratings predict, from the pairs that met.
 
-    ``points[k]`` / ``games[k]``: the first player's points and the games of pair ``k``; ``diff_elo[k]`` its fitted
-    rating difference. Each pair's true difference is its fitted one plus a deviation ``e_k ~ N(0, tau^2)``;
-    ``tau`` maximises the marginal likelihood ``prod_k E_e[Binomial(W_k; n_k, E(d_k + e_k))]`` (quadrature over
-    ``e``). A 0-8 between players 1,500 Elo apart says nothing against the ratings, an upset there says much:
-    the likelihood weighs each as it should, where moment estimates on logits blow up at perfect scores.
-    0 without pairs."""
+    ``points[k]`` / ``games[k]``: the first player's points and the games of pair ``k``; ``diff_elo[k]`` the
+    difference its ratings predict and ``sd_elo[k]`` that prediction's own uncertainty. Best read from ratings fitted
+    without the pair's games (:meth:`~selfplay_cli.league.forecast.Forecaster.of_games` leaves each pair out in
+    turn): a fit that includes them has already moved toward them, and the spread it shows is too small. Each pair's
+    true difference is its predicted one plus ``N(0, sd^2 + tau^2)``; ``tau`` maximises the marginal likelihood
+    ``prod_k E[Binomial(W_k; n_k, E(d))]`` (quadrature). A 0-8 between players 1,500 Elo apart says nothing against
+    the ratings, an upset there says much: the likelihood weighs each as it should, where moment estimates on logits
+    blow up at perfect scores. 0 without pairs, or when no spread fits better than none."""
     pts = np.asarray(points, dtype=np.float64)
     n = np.asarray(games, dtype=np.float64)
     d = np.asarray(diff_elo, dtype=np.float64) / NAT_TO_ELO
+    sd = np.broadcast_to(np.asarray(sd_elo, dtype=np.float64) / NAT_TO_ELO, d.shape)
     keep = n > 0
-    pts, n, d = pts[keep], n[keep], d[keep]
+    pts, n, d, sd = pts[keep], n[keep], d[keep], sd[keep]
     if not pts.size:
         return 0.0
-    x, w = _grid(1.0, 121)
+    x, w = _grid(1.0, 61)
 
     def neg(tau: float) -> float:
-        ll = _log_likelihood(pts[:, None], n[:, None], d[:, None] + tau * x[None, :]) + np.log(w)[None, :]
+        scale = np.sqrt(sd * sd + tau * tau)
+        ll = _log_likelihood(pts[:, None], n[:, None], d[:, None] + scale[:, None] * x[None, :]) + np.log(w)[None, :]
         return -float(np.sum(np.logaddexp.reduce(ll, axis=1)))
 
     best = minimize_scalar(neg, bounds=(0.0, 1500.0 / NAT_TO_ELO), method="bounded", options={"xatol": 1e-3})
-    tau = float(best.x)
-    return 0.0 if neg(0.0) <= best.fun + 1e-9 else tau * NAT_TO_ELO
+    return 0.0 if neg(0.0) <= best.fun + 1e-9 else float(best.x) * NAT_TO_ELO
 
 
 def predict_pair(diff: float, sd: float, games: int, *, spread: float = 0.0, met_points: float = 0.0,
@@ -118,11 +123,19 @@ def predict_pair(diff: float, sd: float, games: int, *, spread: float = 0.0, met
         raise ValueError(f"games must be >= 0, not {games}")
     if not 0.0 < confidence < 1.0:
         raise ValueError("confidence must be in (0, 1)")
-    x, w = _grid(math.hypot(sd, spread) / NAT_TO_ELO)
+    # The pair's deviation e from its ratings ~ N(0, spread^2), updated with the pair's own games (read at the fitted
+    # difference: the fit's own uncertainty delta already holds what those games say of the ratings, so they update
+    # e alone), then the fit's uncertainty delta ~ N(0, sd^2) on top: theta = diff + e + delta.
+    e, we = _grid(spread / NAT_TO_ELO, 121)
+    loge = np.log(we) + _log_likelihood(float(met_points), float(met_games), diff / NAT_TO_ELO + e)
+    we = np.exp(loge - loge.max())
+    we /= we.sum()
+    delta, wd = _grid(sd / NAT_TO_ELO, 41)
+    x = (e[:, None] + delta[None, :]).ravel()
+    post = (we[:, None] * wd[None, :]).ravel()
+    keep = post > 1e-12 * post.max()  # nodes that weigh nothing cost a binomial each
+    x, post = x[keep], post[keep] / post[keep].sum()
     theta = diff / NAT_TO_ELO + x
-    logw = np.log(w) + _log_likelihood(float(met_points), float(met_games), theta)
-    post = np.exp(logw - logw.max())
-    post /= post.sum()
     p = 1.0 / (1.0 + np.exp(-theta))
     mean_u = float(np.dot(post, x))
     sd_u = math.sqrt(max(float(np.dot(post, (x - mean_u) ** 2)), 0.0))
@@ -135,6 +148,12 @@ def predict_pair(diff: float, sd: float, games: int, *, spread: float = 0.0, met
         low = float(p[order][np.searchsorted(cdf, tail)])
         high = float(p[order][min(np.searchsorted(cdf, 1.0 - tail), p.size - 1)])
         return ScorePrediction(expected, low, high, 0, confidence, shift, spread_sd)
+    if p.size > 256:  # the mixture's binomials at 256 levels of p, each weighted by the nodes it gathers
+        edges = np.linspace(p.min(), p.max(), 257)
+        where = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, 255)
+        mass = np.bincount(where, weights=post, minlength=256)
+        level = np.bincount(where, weights=post * p, minlength=256) / np.maximum(mass, 1e-300)
+        p, post = level[mass > 0], mass[mass > 0]
     k = np.arange(games + 1)
     pmf = post @ binom.pmf(k[None, :], games, p[:, None])
     cdf = np.cumsum(pmf)
