@@ -34,15 +34,18 @@ def _csv_record(d: dict[str, Any]) -> dict[str, Any]:
 
 def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool = False,
                   online: dict[int, float] | None = None, confidence: float = 0.95,
-                  caption: str | None = None) -> None:
+                  caption: str | None = None, variant: dict[str, Any] | None = None) -> None:
     """Print ladder rows: JSON alone (``--json``), CSV (``--csv``) or a rich table.
+
+    ``variant``: the options of the variant the rows were fitted in (``{}``: the default); each JSON row carries it
+    as ``variant`` (a ladder of a results file has none).
 
     ``online``: the online Elo by player id (an extra column). The table marks the anchor and the best snapshot
     of each run (bold, ``(best)``), shows a flag next to the Elo, the mean team return of a cooperative game's
     players, and one ``vs BOT`` column per scripted player (score and games, blank without games).
     """
     if json_out:
-        print_json([r.to_json() for r in rows])
+        print_json([r.to_json() | ({} if variant is None else {"variant": variant}) for r in rows])
         return
     if csv_out:
         w = csv.writer(sys.stdout)

@@ -10,7 +10,18 @@ from typing import Annotated
 import typer
 
 from ..errors import MarlError
-from ._common import MAX_GAMES, DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, progress_enabled
+from ._common import (
+    MAX_GAMES,
+    DbOpt,
+    EnvOpt,
+    HomeOpt,
+    JsonOpt,
+    VariantOpt,
+    check_env,
+    open_league,
+    progress_enabled,
+    shown_variant,
+)
 from ._output import console, err_console, print_json
 
 RunOpt = Annotated[str | None, typer.Option("--run", help="Training run (default: the newest run of the env).")]
@@ -33,6 +44,7 @@ def _width() -> int:
 
 def plot_cmd(
     env: EnvOpt = None,
+    env_option: VariantOpt = None,
     run: RunOpt = None,
     out: OutOpt = None,
     home: HomeOpt = None,
@@ -40,7 +52,8 @@ def plot_cmd(
     json_out: JsonOpt = False,
 ) -> None:
     """Each learner's fitted Elo with its 95% interval against training steps, and the scripted players as
-    levels. Draws in the terminal, or writes a PNG with --out."""
+    levels, in the ladder of the options the run trained under (--env-option: another variant's). Draws in the
+    terminal, or writes a PNG with --out."""
     from ..report.plots import run_curves, save_run_png
     from ..report.png import check_png_path
     from ..report.terminal import curves_chart, curves_summary
@@ -59,8 +72,9 @@ def plot_cmd(
             info = league.get_run(run)
             if info is not None and env is not None and info.env != env:
                 raise MarlError(f"run '{run}' trains {info.env}, not {env}")
+        variant = shown_variant(league, env, env_option, run)[1] if env_option else None  # None: the run's own
         with _working("fitting ratings"):
-            curves = run_curves(league, run)
+            curves = run_curves(league, run, variant=variant)
     finally:
         league.close()
     written = save_run_png(curves, out) if out is not None else None
@@ -77,6 +91,7 @@ def plot_cmd(
 
 def matrix_cmd(
     env: EnvOpt = None,
+    env_option: VariantOpt = None,
     top: Annotated[int, typer.Option("--top", min=2, max=100, help="Players in the matrix: the N best by fitted "
                                      "Elo.")] = 10,
     run: Annotated[str | None, typer.Option("--run", help="Only this run's snapshots and the scripted players.")]
@@ -90,7 +105,8 @@ def matrix_cmd(
 ) -> None:
     """Score matrix of the best players (row player's score against the column player, with game counts), the
     Nash equilibrium mixture of that meta-game and its statistically significant 3-cycles; pairs with too few
-    games come with the command that plays them."""
+    games come with the command that plays them. One variant of the game: its default options, those --env-option
+    asks for, or with --run the run's own."""
     from ..report.matrix import build_matrix, write_matrix_png
     from ..report.png import check_png_path
     from ..report.terminal import matrix_summary, matrix_table
@@ -100,8 +116,12 @@ def matrix_cmd(
         out = check_png_path(out)
     league = open_league(home, db, readonly=True)
     try:
+        if run is not None and league.get_run(run) is None:
+            variant = ""  # build_matrix says the run is unknown, listing the runs
+        else:
+            env, variant = shown_variant(league, env, env_option, run)
         with _working("fitting ratings"):
-            report = build_matrix(league, env, top=top, run=run, min_games=min_games)
+            report = build_matrix(league, env, top=top, run=run, min_games=min_games, variant=variant)
     finally:
         league.close()
     written = write_matrix_png(report, out) if out is not None else None

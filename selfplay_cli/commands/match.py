@@ -5,10 +5,12 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 import typer
+from rich.markup import escape
 
 from ..errors import MarlError
 from ..league.names import Team
 from ..league.store import PlayerRow
+from ..league.variants import describe_variant, variant_flags
 from ..rated.match import (
     MatchInterrupted,
     MatchReport,
@@ -78,6 +80,9 @@ def render_report(r: MatchReport) -> None:
         games = (f", games #{ids[0]}-#{ids[-1]} (marl record --game ID replays one)"
                  if ids and ids[-1] - ids[0] + 1 == len(ids) else "")
         console.print(f"  stored as match #{r.match_id}{games}")
+        if r.variant:  # games under options that change the game: rated apart, in a ladder of their own
+            console.print(f"  rated under {escape(describe_variant(r.variant))}, apart from {r.env}'s default "
+                          f"ladder: marl league ladder --env {r.env} {escape(variant_flags(r.variant))}")
 
 
 def interrupted(r: MatchReport, stored: bool) -> None:
@@ -138,7 +143,7 @@ def match(
     league.elo_k = k
     reports: list[MatchReport] = []
     try:
-        side_a, side_b = resolve_players(league, [a, b], env, teams=True)
+        side_a, side_b = resolve_players(league, [a, b], env, teams=True, env_option=env_option)
         crew = _flying_team(side_a, side_b, a, b)
         # each match: A's rows (one player, or a cooperative team flying together), B's row, the team's name
         jobs = ([(list(crew.members), side_b, crew.full_name)] if crew is not None

@@ -41,10 +41,12 @@ from ..arena.schedule import round_of, round_size
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
+from ..league.variants import variant_key
 from ..policies import Policy
 from ..results import COOPERATIVE, GameResult, Rules, points_between
 from ..stats.elo import normal_quantile
 from .match import env_options_of, load_player, mix_seed
+from .snapshots import player_options
 
 
 @dataclass(frozen=True)
@@ -113,15 +115,15 @@ def clear(wins: int, losses: int, z: float) -> bool:
     return decisive > 0 and abs(wins - losses) >= z * math.sqrt(decisive)
 
 
-def _clear_history(league: League, m: Matchup, z: float, enough: int) -> float | None:
+def _clear_history(league: League, m: Matchup, z: float, enough: int, variant: str = "") -> float | None:
     """The score against the same opponent of the new snapshot's lineage (its predecessor, then theirs, as far back
-    as it takes to count ``enough`` games), if that record is clear; else None."""
+    as it takes to count ``enough`` games) in the gauntlet's ``variant``, if that record is clear; else None."""
     from ..league.pairs import head_to_head
 
     wins = draws = losses = 0
     pid = m.a.parent_id
     while pid is not None and pid != m.b.id and wins + draws + losses < enough:
-        h = head_to_head(league, pid, m.b.id)
+        h = head_to_head(league, pid, m.b.id, variant=variant)
         wins, draws, losses = wins + h["wins"], draws + h["draws"], losses + h["losses"]
         pid = league.get_player(pid).parent_id
     games = wins + draws + losses
@@ -204,6 +206,7 @@ def play_gauntlet(
     index = {pid: i for i, pid in enumerate(ids)}
     roster = [loaded[pid] for pid in ids]
     options = env_options_of(*roster)
+    variant = variant_key(env, options)  # the games are filed under these options: their history is in this variant
     spec = spec.for_options(**options)
     rules = Rules.of(spec)
     seated = {pid: _seat_crew(crew, rules.n_seats) for pid, crew in crews.items()}
@@ -261,7 +264,7 @@ def play_gauntlet(
                 schedule_pairs(k, extra)
 
     for k, m in enumerate(matchups):
-        m.expect = _clear_history(league, m, z, 2 * cfg.pairs)
+        m.expect = _clear_history(league, m, z, 2 * cfg.pairs, variant)
         schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
     most = 2 * cfg.max_pairs * len(matchups)
     play(spec, roster, schedule, parallel=cfg.parallel, env_options=options, record_actions=True,
@@ -285,11 +288,12 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
     m.game_ids += league.record_games(m.match_id, [r.with_players(player) for r in results])
 
 
-def best_snapshot(league: League, run: str, env: str, exclude: set[int]) -> PlayerRow | None:
-    """The run's highest-rated snapshot by the ladder fitted now, among those not in ``exclude``."""
+def best_snapshot(league: League, run: str, env: str, exclude: set[int], variant: str = "") -> PlayerRow | None:
+    """The run's highest-rated snapshot by the ladder of its ``variant`` fitted now, among those not in
+    ``exclude``."""
     from ..league.ladder import ladder
 
-    rows = [r for r in ladder(league, env, bootstrap=0)
+    rows = [r for r in ladder(league, env, bootstrap=0, variant=variant)
             if r.kind == "snapshot" and r.player_id not in exclude and r.policy.startswith(f"{run}/")]
     if not rows:
         return None
@@ -307,7 +311,8 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     new = [league.get_player(int(i)) for i in snapshot_ids]
     if not new:
         return []
-    best = best_snapshot(league, new[0].run or "", new[0].env, exclude={p.id for p in new})
+    variant = variant_key(new[0].env, player_options(league, new[0]))  # the run's snapshots' options: its ladder
+    best = best_snapshot(league, new[0].run or "", new[0].env, exclude={p.id for p in new}, variant=variant)
     pairs = choose_opponents(league, new, older=config.older, best=best)
     crews = crews_of(league, [p for pair in pairs for p in pair])
     if crews:  # a cooperative game's per-lander snapshots fly as their moment's team: one matchup per two teams
@@ -318,7 +323,7 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
             if a.id != b.id:
                 unique.setdefault(frozenset((a.id, b.id)), (a, b))
         pairs = list(unique.values())
-    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b)]
+    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, variant)]
     return play_gauntlet(league, pairs, first_seed=first_seed, config=config, device=device, on_games=on_games,
                          crews={m.id: crew for crew in crews.values() for m in crew[:1]})
 
@@ -354,9 +359,9 @@ def _seat_crew(crew: tuple[PlayerRow, ...], n_seats: int) -> tuple[PlayerRow, ..
     return refit(Lineup(crew[0].env, crew, 0), n_seats, seed=0).players
 
 
-def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow) -> bool:
-    """Whether the ledger holds gauntlet games between ``a`` and ``b`` already."""
-    table = league.games(a.env, players=[a.id, b.id])
+def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow, variant: str = "") -> bool:
+    """Whether the ledger holds gauntlet games between ``a`` and ``b`` already (in ``variant``)."""
+    table = league.games(a.env, players=[a.id, b.id], variant=variant)
     if not len(table):
         return False
     return any(league.match_info(int(m))[1].get("gauntlet") for m in np.unique(table.match_id).tolist())

@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import MarlError
 from ..files import temp_path
@@ -46,6 +47,48 @@ def snapshot_file(league: League, row: PlayerRow) -> Path:
         return league.home_path(*path.parts)
     except LeagueError as e:
         raise MarlError(f"{row.full_name}: its file {row.path!r} is not under the league home ({e})") from None
+
+
+def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
+    """The game options a player was made for, which its games are played under: a snapshot's, as its file's
+    metadata records them (the header alone is read); none for a scripted player, which plays under any."""
+    if row.is_bot:
+        return {}
+    from ..policies.snapshot import read_meta
+
+    return dict(read_meta(snapshot_file(league, row)).env_options or {})
+
+
+def players_options(league: League, rows: Iterable[PlayerRow], override: dict[str, Any] | None = None
+                    ) -> dict[str, Any]:
+    """The options games between ``rows`` are played under: the ones their snapshots were made for (which must
+    agree, as :func:`~selfplay_cli.rated.match.env_options_of` asks of loaded players), then ``override`` (a
+    command's ``--env-option``) over them."""
+    found: dict[str, Any] | None = None
+    owner = ""
+    for row in rows:
+        if row.is_bot:
+            continue
+        opts = player_options(league, row)
+        if found is not None and opts != found:
+            raise MarlError(f"{owner} and {row.full_name} were made for different game options ({found} vs {opts})")
+        found, owner = opts, row.full_name
+    return {**(found or {}), **(override or {})}
+
+
+def run_options(league: League, run: str) -> dict[str, Any]:
+    """The game options a run's snapshots were made for: a trained run's ``[env_options]`` (its config), else (a run
+    of imported files) its newest readable snapshot's metadata; none when neither says."""
+    info = league.get_run(run)
+    if info is None:
+        raise MarlError(f"no run named '{run}'")
+    if isinstance((info.config or {}).get("env_options"), dict):
+        return dict(info.config["env_options"])
+    for p in reversed(league.players(env=info.env, kind="snapshot")):
+        if p.run == run:
+            with contextlib.suppress(MarlError, OSError):
+                return player_options(league, p)
+    return {}
 
 
 def check_file(row: PlayerRow, snap: Snapshot, path: Path) -> None:

@@ -87,10 +87,12 @@ class RunCurves:
         }
 
 
-def run_curves(league: League, run: str, rows: list[LadderRow] | None = None) -> RunCurves:
+def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, variant: str | None = None
+               ) -> RunCurves:
     """The curves of ``run``: its rated snapshots per learner and the env's rated bots.
 
-    ``rows``: a ladder of the run's env already fitted (default: ``ladder(league, env)`` with its defaults).
+    ``rows``: a ladder of the run's env already fitted (default: ``ladder(league, env)`` with its defaults, in
+    ``variant``: by default the run's own, the options its snapshots were made for).
     Snapshots are grouped by ``meta["learner"]`` (a run with one network has one group, named after the run);
     removed snapshots and snapshots without rated games are left out.
 
@@ -104,7 +106,12 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None) ->
         raise LeagueError(f"no run named '{run}' (runs: {shown})")
     env = info.env
     if rows is None:
-        rows = ladder(league, env)
+        if variant is None:
+            from ..league.variants import variant_key
+            from ..rated.snapshots import run_options
+
+            variant = variant_key(env, run_options(league, run))
+        rows = ladder(league, env, variant=variant)
     by_id = {r.player_id: r for r in rows if r.player_id is not None}
     groups: dict[str, list[CurvePoint]] = {}
     for p in league.players(env=env, kind="snapshot"):
