@@ -213,7 +213,8 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
     code, rows = run_json(capsys, "league", "ladder", "--bootstrap", "0")
     assert code == 0
     assert list(rows[0]) == ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses",
-                             "rank", "score", "step", "flag", "anchor", "run", "best", "vs"]
+                             "rank", "score", "step", "flag", "anchor", "run", "best", "vs", "variant"]
+    assert all(r["variant"] == {} for r in rows)  # the default variant: the game as declared
     by = {r["policy"]: r for r in rows}
     assert set(by) == {"random", "cpu", "r1/ep1", "r1/ep2", "r2/ep1"}
     # The prior: r2/ep1 won all its 16 games: finite and unflagged.
