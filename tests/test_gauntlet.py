@@ -190,6 +190,12 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
             row = rows[f["snapshot"]]
             assert (f["elo"], f["ci_low"], f["ci_high"]) == (round(row.elo, 1), round(row.ci_low, 1),
                                                               round(row.ci_high, 1))
+    # the ladder the summary points to (marl league ladder --run) is the run's variant's, with the same figures
+    code, out, err = run(capsys, "league", "ladder", "--run", "pong-1", "--bootstrap", "0", "--home", str(home),
+                         "--json")
+    shown = {r["policy"]: r for r in json.loads(out)}
+    assert code == 0 and all(r["variant"] == {"points_to_win": 1} for r in shown.values())
+    assert [shown[f["snapshot"]]["elo"] for f in finals] == [f["elo"] for f in finals]
     # the run's rating curves were drawn into its folder, as `marl league plot` draws them
     import matplotlib.image
 
