@@ -19,7 +19,6 @@ from selfplay_cli.policies.snapshot import load_policy
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer
 
-
 TINY = variant_key("pong", {"points_to_win": 1})  # the variant tiny runs play and are rated in
 
 
