@@ -45,8 +45,8 @@ LADDER_HELP = "\n\n".join((
     "at 1000) and (best) in bold for the best snapshot of each run (its highest Elo); kind (bot or snapshot); "
     "training step; Elo, the Bradley-Terry fit (a draw is half a point); its confidence interval (--confidence, "
     "--bootstrap), relative to the anchor; games and W-D-L; score (points per game); online Elo (the live estimate "
-    "updated after every game); vs BOT, one column per scripted player of the game: the score against it and the "
-    "number of games (blank when none).",
+    "updated after every game of the default options; in their ladder only); vs BOT, one column per scripted "
+    "player of the game: the score against it and the number of games (blank when none).",
     "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
     "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
     "--prior 0 gives the plain maximum-likelihood fit.",
