@@ -14,6 +14,8 @@ from selfplay_cli.envs.pettingzoo_games import adapt
 from selfplay_cli.league.names import resolve
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import describe_variant, variant_flags, variant_key, variant_options
+from selfplay_cli.policies.network import Arch, build_network
+from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
 from selfplay_cli.results import GameResult
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -147,6 +149,25 @@ def test_tournament_gate_and_matrix_work_in_one_variant(home, capsys):
     assert "--games-per-pair 50 --env-option points_to_win=3 --home" in report["command"]
     report = run_json(capsys, "league", "matrix", "--env", "pong")
     assert report["variant"] == {} and report["games"] == [[0, 20], [20, 0]]
+
+
+def test_networks_of_different_frame_stacks_share_one_ladder_through_the_bots(home, tmp_path, capsys):
+    """frame_stack is neutral: a network of 4 frames and one of 8 cannot meet, but both meet cpu in the one game."""
+    for name, frames in (("f4", 4), ("f8", 8)):
+        arch = Arch(hidden=(16,))
+        net = build_network((frames, 6), 3, arch, seed=frames)
+        meta = SnapshotMeta(env="pong", obs_shape=(frames, 6), n_actions=3, arch=arch, run="fs", name=name,
+                            algo="ppo", step=frames, env_options={"frame_stack": frames} if frames != 8 else {})
+        save_snapshot(tmp_path / f"{name}.safetensors", net, meta)
+        assert run(capsys, "checkpoint", "import", str(tmp_path / f"{name}.safetensors"))[0] == 0
+    rows = run_json(capsys, "league", "tournament", "--run", "fs", "--vs", "cpu", "--games-per-pair", "4",
+                    "--bootstrap", "0")
+    assert rows[0]["variant"] == {} and games_of(rows) == {"cpu": 8, "fs/f4": 4, "fs/f8": 4}
+    assert games_of(ladder_json(capsys, "--env", "pong")) == {"cpu": 8, "fs/f4": 4, "fs/f8": 4}
+    # a variant apart: both flown to 3 points, their games rated in that ladder alone
+    rows = run_json(capsys, "league", "tournament", "--run", "fs", "--vs", "cpu", "--games-per-pair", "2",
+                    "--env-option", "points_to_win=3", "--bootstrap", "0")
+    assert rows[0]["variant"] == {"points_to_win": 3} and games_of(rows) == {"cpu": 4, "fs/f4": 2, "fs/f8": 2}
 
 
 def seed_two_variants(home: Path) -> dict[str, int]:

@@ -148,9 +148,8 @@ def tournament(
     from ..league.ladder import ladder
     from ..league.names import Team
     from ..league.pairs import plan_tournament
-    from ..league.variants import variant_key
     from ..rated.match import load_player, mix_seed, run_match
-    from ..rated.snapshots import players_options
+    from ..rated.snapshots import players_variant
 
     if games_per_pair < 2:
         raise MarlError(f"--games-per-pair must be at least 2, not {games_per_pair}")
@@ -183,7 +182,7 @@ def tournament(
         env = envs.pop()
         options = parse_env_options(env, env_option) if env_option else None
         everyone = [*unique.values(), *([anchor] if anchor else [])]
-        variant = variant_key(env, players_options(league, everyone, options))  # where the games are filed
+        variant = players_variant(league, env, everyone, options)  # where the games are filed
         plan = plan_tournament(league, env, list(unique), games_per_pair, vs=anchor.id if anchor else None,
                                variant=variant)
         total = sum(p.missing + p.missing % 2 for p in plan)

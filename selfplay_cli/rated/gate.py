@@ -6,10 +6,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..league.store import League, PlayerRow
-from ..league.variants import variant_key
 from ..stats.match import MatchStats, match_stats
 from .match import load_player, mix_seed, run_match
-from .snapshots import players_options
+from .snapshots import players_variant
 
 
 @dataclass(frozen=True)
@@ -56,8 +55,7 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
         from ..errors import MarlError
 
         raise MarlError(f"the candidate and the baseline are the same player ({cand.full_name})")
-    options = players_options(league, [cand, base], env_options)
-    h2h = head_to_head(league, cand.id, base.id, variant=variant_key(cand.env, options))
+    h2h = head_to_head(league, cand.id, base.id, variant=players_variant(league, cand.env, [cand, base], env_options))
     stored = h2h["games"]  # ledger games (a cooperative comparison is two episodes)
     wins, draws, losses = h2h["wins"], h2h["draws"], h2h["losses"]
     penta = list(h2h["pentanomial"])

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import MarlError
 from ..files import temp_path
 from ..league.store import League, LeagueError, LeagueIOError, PlayerRow, check_existing_name, check_name
+from ..league.variants import describe_variant, variant_key
 
 if TYPE_CHECKING:
     from ..policies.snapshot import Snapshot
@@ -59,21 +60,22 @@ def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
     return dict(read_meta(snapshot_file(league, row)).env_options or {})
 
 
-def players_options(league: League, rows: Iterable[PlayerRow], override: dict[str, Any] | None = None
-                    ) -> dict[str, Any]:
-    """The options games between ``rows`` are played under: the ones their snapshots were made for (which must
-    agree, as :func:`~selfplay_cli.rated.match.env_options_of` asks of loaded players), then ``override`` (a
-    command's ``--env-option``) over them."""
-    found: dict[str, Any] | None = None
-    owner = ""
+def players_variant(league: League, env: str, rows: Iterable[PlayerRow], override: dict[str, Any] | None = None
+                    ) -> str:
+    """The variant (its key) the games among ``rows`` are filed in: the one each snapshot's options make, with
+    ``override`` (a command's ``--env-option``) over them. Snapshots made for options that differ only in neutral
+    ones (pong's frame stack) share a variant, though two of them cannot meet; snapshots of different variants are
+    a :class:`MarlError` naming two of them. Scripted players play in any."""
+    found: tuple[str, str] | None = None
     for row in rows:
         if row.is_bot:
             continue
-        opts = player_options(league, row)
-        if found is not None and opts != found:
-            raise MarlError(f"{owner} and {row.full_name} were made for different game options ({found} vs {opts})")
-        found, owner = opts, row.full_name
-    return {**(found or {}), **(override or {})}
+        key = variant_key(env, {**player_options(league, row), **(override or {})})
+        if found is not None and key != found[0]:
+            raise MarlError(f"{found[1]} and {row.full_name} play different variants of {env} "
+                            f"({describe_variant(found[0])}; {describe_variant(key)}): they are rated apart")
+        found = (key, row.full_name)
+    return found[0] if found is not None else variant_key(env, override)
 
 
 def run_options(league: League, run: str) -> dict[str, Any]:
