@@ -13,8 +13,16 @@ from selfplay_cli.arena import Game, play
 from selfplay_cli.league.ladder import ladder, verdict_lines
 from selfplay_cli.league.pairs import head_to_head
 from selfplay_cli.league.store import League
+from selfplay_cli.league.variants import variant_key
 from selfplay_cli.policies import ScriptedPolicy
-from selfplay_cli.rated.gauntlet import GauntletConfig, best_snapshot, choose_opponents, clear, play_gauntlet, run_history
+from selfplay_cli.rated.gauntlet import (
+    GauntletConfig,
+    best_snapshot,
+    choose_opponents,
+    clear,
+    play_gauntlet,
+    run_history,
+)
 from selfplay_cli.results import GameResult
 
 
@@ -202,23 +210,26 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     data = json.loads(out)
     lines = [ln for ln in err.splitlines() if ln.startswith("pong-1: ") and " rated " in ln]
     assert len(lines) == 3 and "rated s0-left (step 0): random " in lines[0] and "elapsed" in lines[-1], err
+    variant = variant_key("pong", {"points_to_win": 1})  # the run's options: its games are rated in that variant
     with League.open(home) as league:
         snaps = league.players("pong", kind="snapshot")
         bots = {p.name: p.id for p in league.players("pong", kind="bot")}
         assert len(snaps) == 6
         for s in snaps:
             for bot_id in bots.values():
-                assert head_to_head(league, s.id, bot_id)["games"] >= 2, s.name
+                assert head_to_head(league, s.id, bot_id, variant=variant)["games"] >= 2, s.name
+                assert head_to_head(league, s.id, bot_id)["games"] == 0  # none in the default game's ratings
             if s.parent_id is not None:
-                assert head_to_head(league, s.id, s.parent_id)["pairs"] >= 1, s.name
-        rows = {r.policy: r for r in ladder(league, "pong", bootstrap=0)}
+                assert head_to_head(league, s.id, s.parent_id, variant=variant)["pairs"] >= 1, s.name
+        assert ladder(league, "pong", bootstrap=0) == []
+        rows = {r.policy: r for r in ladder(league, "pong", bootstrap=0, variant=variant)}
         finals = data["final"]
         assert [f["snapshot"] for f in finals] == data["snapshots"][-2:]
         assert [f["learner"] for f in finals] == ["left", "right"]
         for f in finals:
             p = league.find_players(f["snapshot"], "pong")[0]
             for bot, rec in f["vs"].items():
-                h = head_to_head(league, p.id, bots[bot])
+                h = head_to_head(league, p.id, bots[bot], variant=variant)
                 assert (rec["wins"], rec["draws"], rec["losses"], rec["games"]) == (
                     h["wins"], h["draws"], h["losses"], h["games"])
                 assert rec["score"] == round(h["score"], 4) and rec["games"] >= 32  # a final plays the bots in full
@@ -228,6 +239,12 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
                                                               round(row.ci_high, 1))
         (best,) = [r for r in rows.values() if r.best and r.run == "pong-1"]  # the run's best, as the ladder has it
         assert data["best"]["policy"] == best.policy and data["best"]["tied"] == list(best.tied)
+    # the ladder the summary points to (marl league ladder --run) is the run's variant's, with the same figures
+    code, out, err = run(capsys, "league", "ladder", "--run", "pong-1", "--bootstrap", "0", "--home", str(home),
+                         "--json")
+    shown = {r["policy"]: r for r in json.loads(out)}
+    assert code == 0 and all(r["variant"] == {"points_to_win": 1} for r in shown.values())
+    assert [shown[f["snapshot"]]["elo"] for f in finals] == [f["elo"] for f in finals]
     # the run's rating curves were drawn into its folder, as `marl league plot` draws them
     import matplotlib.image
 

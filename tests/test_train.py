@@ -14,9 +14,12 @@ from selfplay_cli.arena.selfplay import OPPONENT
 from selfplay_cli.cli import main
 from selfplay_cli.league.matchmaking import MatchmakerConfig
 from selfplay_cli.league.store import League
+from selfplay_cli.league.variants import variant_key
 from selfplay_cli.policies.snapshot import load_policy
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer
+
+TINY = variant_key("pong", {"points_to_win": 1})  # the variant tiny runs play and are rated in
 
 
 def tiny(**kw) -> TrainConfig:
@@ -49,7 +52,7 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     policy = load_policy(league.home / last.path, expect_env="pong")
     assert policy.meta.seat == "right" and policy.meta.env_options == {"points_to_win": 1}
     # the ledger keeps the training games between the learners, but rates only games the snapshots played themselves
-    everything, rated = league.games("pong", rated=False), league.games("pong")
+    everything, rated = league.games("pong", rated=False, variant=TINY), league.games("pong", variant=TINY)
     assert len(everything) > len(rated) > 0
     with league.session() as s:
         from selfplay_cli.league.models import Match
@@ -60,7 +63,7 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     bots = {p.id for p in league.players("pong", kind="bot")}
     for snap in snaps:  # every snapshot of both learners was rated against both scripted players
         for bot in bots:
-            assert league.games("pong", players=[snap.id, bot]).game_id.size >= 2, (snap.name, bot)
+            assert league.games("pong", players=[snap.id, bot], variant=TINY).game_id.size >= 2, (snap.name, bot)
     lines = (league.home / "runs" / "t" / "metrics.jsonl").read_text().splitlines()
     assert len(lines) >= 3 and "left/entropy" in json.loads(lines[-1])
     league.close()
@@ -79,7 +82,7 @@ def test_one_learner_meets_league_opponents_and_bots(tmp_path):
 
         for m in s.query(Match).all():
             matches[m.id] = m.kind
-    table = league.games("pong", rated=False)
+    table = league.games("pong", rated=False, variant=TINY)
     cpu = league.find_players("cpu", "pong")[0].id
     training = [i for i, m in enumerate(table.match_id.tolist()) if matches[m] == "training"]
     assert any(cpu in (table.player_a[i], table.player_b[i]) for i in training), "games vs cpu from the mix"
@@ -108,7 +111,7 @@ def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats
 
         training = {m.id for m in s.query(Match).all() if m.kind == "training"}
     snaps = {p.id: p for p in league.players("pong", kind="snapshot")}
-    table = league.games("pong", rated=False)
+    table = league.games("pong", rated=False, variant=TINY)
     seen = set()
     for m, a, b in zip(table.match_id.tolist(), table.player_a.tolist(), table.player_b.tolist(), strict=True):
         if m in training and cpu in (a, b):

@@ -91,6 +91,13 @@ EnvOptionOpt = Annotated[list[str] | None, typer.Option(
     "landers=4 flies a lander team as 4; marl envs --json lists each game's options).")]
 
 
+VariantOpt = Annotated[list[str] | None, typer.Option(
+    "--env-option", metavar="KEY=VALUE", help="The variant of the game to rate: its games played under this option "
+    "(as marl match / marl train take it), repeatable, e.g. points_to_win=3. Default: the game's default options "
+    "(with --run: the options the run trained under). Options a game declares neutral (pong's frame_stack) split "
+    "nothing.")]
+
+
 def parse_env_options(env: str, items: list[str] | None) -> dict:
     """``KEY=VALUE`` game options, each read as the type the game's config declares for it (a whole number, a
     number, true/false, one of a few words), then checked by the game's own config (ranges, unknown options)."""
@@ -121,20 +128,44 @@ def parse_env_options(env: str, items: list[str] | None) -> dict:
     return options
 
 
-def resolve_players(league: League, names: list[str], env: str | None, teams: bool = False) -> list:
+def shown_variant(league: League, env: str | None, env_option: list[str] | None,
+                  run: str | None = None) -> tuple[str, str]:
+    """The game and the variant (its key) a command that reads ratings shows: the one ``--env-option`` asks for (over
+    the game's defaults); without, the run's own (``--run``: the options its snapshots were made for); else the
+    default. The game is ``env``, the run's, or the league's only one."""
+    from ..league.ladder import pick_env
+    from ..league.variants import variant_key
+    from ..rated.snapshots import run_options
+
+    if run is not None:
+        info = league.get_run(run)
+        env = env or (info.env if info is not None else None)
+    env = pick_env(league, env)
+    if env_option:
+        return env, variant_key(env, parse_env_options(env, env_option))
+    if run is not None and league.get_run(run) is not None:
+        return env, variant_key(env, run_options(league, run))
+    return env, ""
+
+
+def resolve_players(league: League, names: list[str], env: str | None, teams: bool = False,
+                    env_option: list[str] | None = None) -> list:
     """Resolve names to players (:mod:`selfplay_cli.league.names`). Snapshots imply their game; bot names need the
     game from them or --env. With ``teams`` a name may also stand for a team of per-seat snapshots (``s6M``:
     ``s6M-left`` and ``s6M-right``), returned as a :class:`~selfplay_cli.league.names.Team`; without, such a
-    name is refused in one line that names the members."""
+    name is refused in one line that names the members. ``best`` is the best of the variant ``env_option`` (the
+    command's ``--env-option``) makes, the default one without."""
     from ..league.names import resolve, resolve_or_team
 
     find = resolve_or_team if teams else resolve
     env = check_env(env)
+    best = [i for i, n in enumerate(names) if env_option and str(n).strip() == "best"]  # once the game is known
+    named = [i for i in range(len(names)) if i not in best]
     rows: dict[int, Any] = {}
     pending = []
-    for i, name in enumerate(names):
+    for i in named:
         try:
-            rows[i] = find(league, name, env)
+            rows[i] = find(league, names[i], env)
         except MarlError:
             pending.append(i)
     if pending:
@@ -142,12 +173,20 @@ def resolve_players(league: League, names: list[str], env: str | None, teams: bo
         if env is None and len(snapshots) == 1:  # a snapshot implies its game
             env = snapshots.pop()
         elif env is None and not snapshots:  # scripted players only: the game they belong to, all of them
-            env = _game_of_bots(league, names)
-            pending = list(range(len(names))) if env is not None else pending
+            env = _game_of_bots(league, [names[i] for i in named])
+            pending = named if env is not None else pending
         if env is not None:
             league.ensure_bots(env, league_bots(get_env(env)))
         for i in pending:
             rows[i] = find(league, names[i], env)  # raises the precise error (unknown, ambiguous, team...)
+    if best:  # the best of the variant the options make
+        from ..league.ladder import pick_env
+        from ..league.variants import variant_key
+
+        game = env or next((r.env for r in rows.values()), None) or pick_env(league, None)
+        variant = variant_key(game, parse_env_options(game, env_option))
+        for i in best:
+            rows[i] = find(league, names[i], game, variant=variant)
     return [rows[i] for i in range(len(names))]
 
 

@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from ..errors import MarlError
+from ..league.variants import describe_variant, other_variants_note, variant_options
 from ..rated.gate import gate_check
 from ..stats.bradley_terry import DEFAULT_PRIOR
 from ._common import (
@@ -18,11 +19,15 @@ from ._common import (
     DbOpt,
     DeviceOpt,
     EnvOpt,
+    EnvOptionOpt,
     HomeOpt,
     JsonOpt,
+    VariantOpt,
     check_env,
     open_league,
+    parse_env_options,
     resolve_players,
+    shown_variant,
 )
 from ._output import console, print_json
 from .ladder_view import prior_caption, render_ladder
@@ -45,15 +50,15 @@ def check_prior(prior: float) -> float:
     return float(prior)
 
 
-def resolve_anchor(league, name: str | None, env: str | None):
+def resolve_anchor(league, name: str | None, env: str | None, variant: str = ""):
     """The anchor a user named (any name ``marl`` understands: id, run/name, tag, bot, latest, best), in the env
-    the ladder will use; None for the default anchor."""
+    and variant the ladder will use; None for the default anchor."""
     if name is None:
         return None
     from ..league.ladder import pick_env
     from ..league.names import resolve
 
-    return resolve(league, name, pick_env(league, env))
+    return resolve(league, name, pick_env(league, env), variant=variant)
 
 
 def parse_anchor(anchor: str | None) -> tuple[str | None, float]:
@@ -80,6 +85,7 @@ def check_bootstrap(n: int) -> int:
 @app.command("fit")
 def fit(
     env: EnvOpt = None,
+    env_option: VariantOpt = None,
     anchor: AnchorOpt = None,
     bootstrap: BootstrapOpt = 200,
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the intervals.")] = 0.95,
@@ -92,28 +98,37 @@ def fit(
     json_out: JsonOpt = False,
 ) -> None:
     """Bradley-Terry ratings over the whole ledger (draw = half a point), 400 Elo scale: MAP under BayesElo's
-    prior of 2 virtual draws by default (--prior 0: maximum likelihood), with confidence intervals and ranks."""
+    prior of 2 virtual draws by default (--prior 0: maximum likelihood), with confidence intervals and ranks.
+
+    One variant of the game at a time: the games under its default options, or under those --env-option asks
+    for; a line below the table names the other variants with games."""
     from ..league.ladder import ladder, verdict_lines
     from ..league.results_csv import fit_csv
 
     name, rating = parse_anchor(anchor)
     check_bootstrap(bootstrap)
     prior = check_prior(prior)
+    variant = note = None
     if results is not None:
+        if env_option:
+            raise MarlError("--env-option chooses games of the league; a --results file has no game options")
         rows = fit_csv(results, anchor=name, anchor_rating=rating, bootstrap=bootstrap, confidence=confidence,
                        seed=seed, prior=prior)
         title = f"ratings of {results}"
     else:
         league = open_league(home, db, readonly=True)
         try:
-            env = check_env(env)
-            rows = ladder(league, env, anchor=resolve_anchor(league, name, env), anchor_rating=rating,
-                          bootstrap=bootstrap, confidence=confidence, seed=seed, prior=prior)
+            env, variant = shown_variant(league, check_env(env), env_option)
+            rows = ladder(league, env, anchor=resolve_anchor(league, name, env, variant), anchor_rating=rating,
+                          bootstrap=bootstrap, confidence=confidence, seed=seed, prior=prior, variant=variant)
+            note = other_variants_note(env, league.variants(env), variant, "marl elo fit")
         finally:
             league.close()
-        title = "ratings fitted over the ledger"
+        title = "ratings fitted over the ledger" + (f" ({env}: {describe_variant(variant)})" if variant else "")
     render_ladder(rows, title, json_out=json_out, confidence=confidence, caption=prior_caption(prior),
-                  verdicts=verdict_lines(rows))
+                  variant=None if variant is None else variant_options(variant), verdicts=verdict_lines(rows))
+    if note and not json_out:
+        console.print(note, markup=False)
 
 
 @app.command("gate")
@@ -125,6 +140,7 @@ def gate(
     min_diff: Annotated[float, typer.Option("--min-diff", min=-4000.0, max=4000.0, help="Required lower bound of "
                                             "Elo(CANDIDATE) - Elo(BASELINE).")] = 0.0,
     env: EnvOpt = None,
+    env_option: EnvOptionOpt = None,
     games: Annotated[int, typer.Option("--games", "-n", min=2, max=MAX_GAMES, help="Head-to-head games to base the "
                                        "verdict on; stored ones are reused, the rest are played and stored.")] = 400,
     confidence: Annotated[float, typer.Option("--confidence", help="One-sided level of the lower bound.")] = 0.95,
@@ -137,17 +153,19 @@ def gate(
 ) -> None:
     """Is CANDIDATE at least --min-diff Elo stronger than BASELINE? A verdict from their head-to-head games.
 
-    Stored games are reused and the missing ones played (and stored). Exit 0 (PASS) when the one-sided lower
-    confidence bound of Elo(CANDIDATE) - Elo(BASELINE) is at least --min-diff, 1 (FAIL) otherwise; 2 for a
-    mistake in the command, 4 for an I/O error, 5 for an internal error, so that CI can tell a failed model from a
-    broken run."""
+    Stored games are reused and the missing ones played (and stored), all of one variant of the game: the options
+    the two were made for, with --env-option over them (best: the best of that variant). Exit 0 (PASS) when the
+    one-sided lower confidence bound of Elo(CANDIDATE) - Elo(BASELINE) is at least --min-diff, 1 (FAIL) otherwise;
+    2 for a mistake in the command, 4 for an I/O error, 5 for an internal error, so that CI can tell a failed model
+    from a broken run."""
     if not 0.5 < confidence < 1:
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
     league = open_league(home, db)
     try:
-        cand, base = resolve_players(league, [candidate, vs], env)
+        cand, base = resolve_players(league, [candidate, vs], env, env_option=env_option)
+        options = parse_env_options(cand.env, env_option) if env_option else None
         verdict = gate_check(league, cand, base, min_diff=min_diff, games=games, confidence=confidence,
-                             parallel=parallel, device=device)
+                             parallel=parallel, device=device, env_options=options)
     finally:
         league.close()
     if json_out:

@@ -36,8 +36,12 @@ def _csv_record(d: dict[str, Any]) -> dict[str, Any]:
 
 def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool = False,
                   online: dict[int, float] | None = None, confidence: float = 0.95,
-                  caption: str | None = None, verdicts: list[str] | None = None) -> None:
+                  caption: str | None = None, variant: dict[str, Any] | None = None,
+                  verdicts: list[str] | None = None) -> None:
     """Print ladder rows: JSON alone (``--json``), CSV (``--csv``) or a rich table.
+
+    ``variant``: the options of the variant the rows were fitted in (``{}``: the default); each JSON row carries it
+    as ``variant`` (a ladder of a results file has none).
 
     ``online``: the online Elo by player id (an extra column). The table marks the anchor and the best snapshot
     of each run (bold, ``(best)``, or ``(best, tied)`` when it is not separated from the run's others), shows the
@@ -46,7 +50,7 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
     verdict_lines`) follow the table.
     """
     if json_out:
-        print_json([r.to_json() for r in rows])
+        print_json([r.to_json() | ({} if variant is None else {"variant": variant}) for r in rows])
         return
     if csv_out:
         w = csv.writer(sys.stdout)
@@ -75,7 +79,8 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
     for r in rows:
         note = f" ({r.flag})" if r.flag else ""
         marks = (" (anchor)" if r.anchor else "") + ((" (best, tied)" if r.tied else " (best)") if r.best else "")
-        cells = [str(r.rank), "-" if r.tier is None else str(r.tier), escape(r.policy) + marks, r.kind, "" if r.step is None else f"{r.step:,}",
+        cells = [str(r.rank), "-" if r.tier is None else str(r.tier), escape(r.policy) + marks, r.kind,
+                 "" if r.step is None else f"{r.step:,}",
                  _fmt_elo(r.elo) + note, f"{_fmt_elo(r.ci_low)} .. {_fmt_elo(r.ci_high)}", str(r.games),
                  f"{r.wins}-{r.draws}-{r.losses}", f"{100 * r.score:.1f}%"]
         if online:

@@ -7,6 +7,7 @@ from typing import Annotated
 import typer
 
 from ..errors import MarlError
+from ..league.variants import describe_variant, other_variants_note, variant_options
 from ..stats.bradley_terry import DEFAULT_PRIOR
 from ._common import (
     MAX_GAMES,
@@ -15,14 +16,18 @@ from ._common import (
     DbOpt,
     DeviceOpt,
     EnvOpt,
+    EnvOptionOpt,
     HomeOpt,
     JsonOpt,
     QuietOpt,
+    VariantOpt,
     check_env,
     open_league,
+    parse_env_options,
     progress_bar,
     progress_enabled,
     resolve_players,
+    shown_variant,
 )
 from ._output import console, print_json
 from .elo import AnchorOpt, BootstrapOpt, PriorOpt, check_bootstrap, check_prior, parse_anchor, resolve_anchor
@@ -33,13 +38,15 @@ app = typer.Typer(help="The league: ladder, tournaments, score matrix, rating pl
 
 
 LADDER_HELP = "\n\n".join((
-    "The ladder of one game: every player's Elo, fitted from all its stored rated games.",
+    "The ladder of one game: every player's Elo, fitted from all its stored rated games of one variant: the game's "
+    "default options, or those --env-option asks for (with --run: the options the run trained under). Games under "
+    "other options are rated apart; a line below the table names them and the command that shows them.",
     "Columns: rank; policy, marked (anchor) for the player whose rating is fixed (--anchor, default the random bot "
     "at 1000) and (best) in bold for the best snapshot of each run (its highest Elo); kind (bot or snapshot); "
     "training step; Elo, the Bradley-Terry fit (a draw is half a point); its confidence interval (--confidence, "
     "--bootstrap), relative to the anchor; games and W-D-L; score (points per game); online Elo (the live estimate "
-    "updated after every game); vs BOT, one column per scripted player of the game: the score against it and the "
-    "number of games (blank when none).",
+    "updated after every game of the default options; in their ladder only); vs BOT, one column per scripted "
+    "player of the game: the score against it and the number of games (blank when none).",
     "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
     "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
     "--prior 0 gives the plain maximum-likelihood fit.",
@@ -56,6 +63,7 @@ LADDER_HELP = "\n\n".join((
 @app.command("ladder", help=LADDER_HELP)
 def ladder_cmd(
     env: EnvOpt = None,
+    env_option: VariantOpt = None,
     run: Annotated[str | None, typer.Option("--run", help="Show only this run's snapshots, plus the scripted "
                                             "players for reference (ranks unchanged).")] = None,
     top: Annotated[int | None, typer.Option("--top", min=1, max=1_000_000, help="Show only the first N rows (ranks "
@@ -89,19 +97,25 @@ def ladder_cmd(
             if env is not None and r.env != env:
                 raise MarlError(f"run '{run}' plays {r.env}, not {env}")
             env = r.env
-        rows = ladder(league, env, anchor=resolve_anchor(league, name, env), anchor_rating=rating,
+        env, variant = shown_variant(league, env, env_option, run)
+        rows = ladder(league, env, anchor=resolve_anchor(league, name, env, variant), anchor_rating=rating,
                       bootstrap=check_bootstrap(bootstrap), confidence=confidence, include_removed=include_removed,
-                      prior=prior)
-        online = {p.id: p.elo for p in league.players(include_removed=True)}
+                      prior=prior, variant=variant)
+        # A player has one online Elo, moved by the default variant's games only: no column beside another's.
+        online = {p.id: p.elo for p in league.players(include_removed=True)} if not variant else None
+        note = other_variants_note(env, league.variants(env), variant, "marl league ladder")
     finally:
         league.close()
     shown = select_rows(rows, run=run, top=top)
-    title = "league ladder" + (f": run {run}" if run else "")
+    title = "league ladder" + (f": run {run}" if run else "") + (f" ({env}: {describe_variant(variant)})"
+                                                                  if variant else "")
     verdicts = [line for line in verdict_lines(rows) if run is None or line.startswith(f"best of {run}:")]
     render_ladder(shown, title, json_out=json_out, csv_out=csv_out, online=online, confidence=confidence,
-                  caption=prior_caption(prior), verdicts=verdicts)
+                  caption=prior_caption(prior), variant=variant_options(variant), verdicts=verdicts)
     if run is not None and not json_out and not csv_out and not any(r.run == run for r in rows):
         console.print(f"run {run} has no snapshot with rated games yet")
+    if note and not json_out and not csv_out:
+        console.print(note, markup=False)
 
 
 @app.command("predict")
@@ -111,6 +125,7 @@ def predict_cmd(
     games: Annotated[int, typer.Option("--games", "-n", min=1, max=MAX_GAMES, help="Games of the match to "
                                        "predict.")] = 200,
     env: EnvOpt = None,
+    env_option: EnvOptionOpt = None,
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the predicted interval.")] = 0.95,
     home: HomeOpt = None,
     db: DbOpt = None,
@@ -121,15 +136,18 @@ def predict_cmd(
     uncertainty, how far the league's pairs scatter around their ratings, and the two's own games; `marl match`
     prints the same prediction beside the games it plays."""
     from ..league.forecast import Forecaster
+    from ..rated.snapshots import players_variant
 
     if not 0.5 < confidence < 1:
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
     league = open_league(home, db, readonly=True)
     try:
-        row_a, row_b = resolve_players(league, [a, b], env)
+        row_a, row_b = resolve_players(league, [a, b], env, env_option=env_option)
         if row_a.env != row_b.env:
             raise MarlError(f"{row_a.full_name} plays {row_a.env}, {row_b.full_name} plays {row_b.env}")
-        forecast = Forecaster.of_league(league, row_a.env)
+        options = parse_env_options(row_a.env, env_option) if env_option else None
+        variant = players_variant(league, row_a.env, [row_a, row_b], options)  # the ladder a match of them is in
+        forecast = Forecaster.of_league(league, row_a.env, variant=variant)
         p = forecast.predict(row_a.full_name, row_b.full_name, games, confidence)
         met_points, met = forecast.met(row_a.full_name, row_b.full_name)
     finally:
@@ -152,6 +170,7 @@ def tournament(
                                                         "teams of per-seat snapshots such as s6M: each member, tags, "
                                                         "ids, scripted players).")] = None,
     env: EnvOpt = None,
+    env_option: EnvOptionOpt = None,
     run: Annotated[str | None, typer.Option("--run", help="Include every snapshot of this run.")] = None,
     top: Annotated[int | None, typer.Option("--top", max=10_000, help="Include the top K of the current ladder.")]
     = None,
@@ -171,17 +190,22 @@ def tournament(
     json_out: JsonOpt = False,
 ) -> None:
     """Round robin (or gauntlet with --vs) over chosen policies, playing only the games still missing, then
-    refit and print the ladder."""
+    refit and print the ladder.
+
+    The games are played under the options the players were made for, with --env-option over them, and count in
+    that variant of the game: its stored games are the ones reused, its ladder is the one printed."""
     from ..league.ladder import ladder, verdict_lines
     from ..league.names import Team
     from ..league.pairs import plan_tournament
     from ..rated.match import load_player, mix_seed, run_match
+    from ..rated.snapshots import players_variant
 
     if games_per_pair < 2:
         raise MarlError(f"--games-per-pair must be at least 2, not {games_per_pair}")
     league = open_league(home, db)
     try:
-        found = resolve_players(league, list(players or []), check_env(env), teams=True) if players else []
+        found = (resolve_players(league, list(players or []), check_env(env), teams=True, env_option=env_option)
+                 if players else [])
         chosen = [m for f in found for m in (f.members if isinstance(f, Team) else (f,))]  # a team: its members
         env = env or (chosen[0].env if chosen else None)
         if run is not None:
@@ -193,10 +217,11 @@ def tournament(
         if top is not None:
             if top < 2:
                 raise MarlError(f"--top must be at least 2, not {top}")
-            rows = ladder(league, env, bootstrap=0)
-            env = env or (league.get_player(rows[0].player_id).env if rows else None)
+            top_env, top_variant = shown_variant(league, env, env_option)  # the top of the variant asked for
+            rows = ladder(league, top_env, bootstrap=0, variant=top_variant)
+            env = env or top_env
             chosen += [league.get_player(r.player_id) for r in rows[:top] if r.player_id is not None]
-        anchor = resolve_players(league, [vs], env)[0] if vs else None
+        anchor = resolve_players(league, [vs], env, env_option=env_option)[0] if vs else None
         unique = {p.id: p for p in chosen if anchor is None or p.id != anchor.id}
         if len(unique) + (anchor is not None) < 2:
             raise MarlError("a tournament needs at least two players (list them, or use --run / --top)")
@@ -204,22 +229,29 @@ def tournament(
         if len(envs) > 1:
             raise MarlError(f"players of several games in one tournament: {', '.join(sorted(envs))}")
         env = envs.pop()
-        plan = plan_tournament(league, env, list(unique), games_per_pair, vs=anchor.id if anchor else None)
+        options = parse_env_options(env, env_option) if env_option else None
+        everyone = [*unique.values(), *([anchor] if anchor else [])]
+        variant = players_variant(league, env, everyone, options)  # where the games are filed
+        plan = plan_tournament(league, env, list(unique), games_per_pair, vs=anchor.id if anchor else None,
+                               variant=variant)
         total = sum(p.missing + p.missing % 2 for p in plan)
         with progress_bar("tournament", total, "games", progress_enabled(quiet or json_out)) as tick:
             for p in plan:
                 first = league.fresh_seed(p.a_id, p.b_id) if seed is None else seed
                 rows_ = [league.get_player(p.a_id), league.get_player(p.b_id)]
+                first = league.fresh_seed(p.a_id, p.b_id) if seed is None else seed
                 pa, pb = (load_player(league, row, device=device, seed=mix_seed(first, row.id)) for row in rows_)
                 run_match(pa, pb, games=p.missing, first_seed=first, parallel=parallel, league=league,
-                          player_ids={pa.id: p.a_id, pb.id: p.b_id}, kind="tournament", on_games=tick)
+                          player_ids={pa.id: p.a_id, pb.id: p.b_id}, kind="tournament", on_games=tick,
+                          env_options=options)
         if not json_out:
             console.print(f"{len(plan)} pairs needed games, {total} played")
-        rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap))
+        rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap), variant=variant)
     finally:
         league.close()
-    render_ladder(rows, f"{env} ladder after the tournament", json_out=json_out, caption=prior_caption(DEFAULT_PRIOR),
-                  verdicts=verdict_lines(rows))
+    title = f"{env} ladder after the tournament" + (f" ({describe_variant(variant)})" if variant else "")
+    render_ladder(rows, title, json_out=json_out, caption=prior_caption(DEFAULT_PRIOR),
+                  variant=variant_options(variant), verdicts=verdict_lines(rows))
 
 
 from .league_views import matrix_cmd, plot_cmd  # noqa: E402  (views of the league: commands/league_views.py)

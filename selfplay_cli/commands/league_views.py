@@ -11,7 +11,18 @@ import typer
 
 from ..errors import MarlError
 from ..stats.bradley_terry import DEFAULT_PRIOR
-from ._common import MAX_GAMES, DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league, progress_enabled
+from ._common import (
+    MAX_GAMES,
+    DbOpt,
+    EnvOpt,
+    HomeOpt,
+    JsonOpt,
+    VariantOpt,
+    check_env,
+    open_league,
+    progress_enabled,
+    shown_variant,
+)
 from ._output import console, err_console, print_json
 from .elo import PriorOpt, check_prior
 
@@ -35,6 +46,7 @@ def _width() -> int:
 
 def plot_cmd(
     env: EnvOpt = None,
+    env_option: VariantOpt = None,
     run: RunOpt = None,
     out: OutOpt = None,
     prior: PriorOpt = DEFAULT_PRIOR,
@@ -43,8 +55,8 @@ def plot_cmd(
     json_out: JsonOpt = False,
 ) -> None:
     """Each learner's fitted Elo with its 95% interval against training steps, the run's best snapshot (as the
-    ladder marks it) starred, and the scripted players as levels. Draws in the terminal, or writes a PNG with
-    --out."""
+    ladder marks it) starred, and the scripted players as levels, in the ladder of the options the run trained
+    under (--env-option: another variant's). Draws in the terminal, or writes a PNG with --out."""
     from ..report.plots import run_curves, save_run_png
     from ..report.png import check_png_path
     from ..report.terminal import curves_chart, curves_summary
@@ -64,8 +76,9 @@ def plot_cmd(
             info = league.get_run(run)
             if info is not None and env is not None and info.env != env:
                 raise MarlError(f"run '{run}' trains {info.env}, not {env}")
+        variant = shown_variant(league, env, env_option, run)[1] if env_option else None  # None: the run's own
         with _working("fitting ratings"):
-            curves = run_curves(league, run, prior=prior)
+            curves = run_curves(league, run, prior=prior, variant=variant)
     finally:
         league.close()
     written = save_run_png(curves, out) if out is not None else None
@@ -82,6 +95,7 @@ def plot_cmd(
 
 def matrix_cmd(
     env: EnvOpt = None,
+    env_option: VariantOpt = None,
     top: Annotated[int, typer.Option("--top", min=2, max=100, help="Players in the matrix: the N best by fitted "
                                      "Elo.")] = 10,
     run: Annotated[str | None, typer.Option("--run", help="Only this run's snapshots and the scripted players.")]
@@ -95,7 +109,8 @@ def matrix_cmd(
 ) -> None:
     """Score matrix of the best players (row player's score against the column player, with game counts), the
     Nash equilibrium mixture of that meta-game and its statistically significant 3-cycles; pairs with too few
-    games come with the command that plays them."""
+    games come with the command that plays them. One variant of the game: its default options, those --env-option
+    asks for, or with --run the run's own."""
     from ..report.matrix import build_matrix, write_matrix_png
     from ..report.png import check_png_path
     from ..report.terminal import matrix_summary, matrix_table
@@ -105,8 +120,12 @@ def matrix_cmd(
         out = check_png_path(out)
     league = open_league(home, db, readonly=True)
     try:
+        if run is not None and league.get_run(run) is None:
+            variant = ""  # build_matrix says the run is unknown, listing the runs
+        else:
+            env, variant = shown_variant(league, env, env_option, run)
         with _working("fitting ratings"):
-            report = build_matrix(league, env, top=top, run=run, min_games=min_games)
+            report = build_matrix(league, env, top=top, run=run, min_games=min_games, variant=variant)
     finally:
         league.close()
     written = write_matrix_png(report, out) if out is not None else None

@@ -5,10 +5,12 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 import typer
+from rich.markup import escape
 
 from ..errors import MarlError
 from ..league.names import Team
 from ..league.store import PlayerRow
+from ..league.variants import describe_variant, variant_flags
 from ..rated.match import (
     MatchInterrupted,
     MatchReport,
@@ -83,6 +85,9 @@ def render_report(r: MatchReport) -> None:
         games = (f", games #{ids[0]}-#{ids[-1]} (marl record --game ID replays one)"
                  if ids and ids[-1] - ids[0] + 1 == len(ids) else "")
         console.print(f"  stored as match #{r.match_id}{games}")
+        if r.variant:  # games under options that change the game: rated apart, in a ladder of their own
+            console.print(f"  rated under {escape(describe_variant(r.variant))}, apart from {r.env}'s default "
+                          f"ladder: marl league ladder --env {r.env} {escape(variant_flags(r.variant))}")
 
 
 def interrupted(r: MatchReport, stored: bool) -> None:
@@ -144,13 +149,14 @@ def match(
     league.elo_k = k
     reports: list[MatchReport] = []
     try:
-        side_a, side_b = resolve_players(league, [a, b], env, teams=True)
+        side_a, side_b = resolve_players(league, [a, b], env, teams=True, env_option=env_option)
         crew = _flying_team(side_a, side_b, a, b)
         # each match: A's rows (one player, or a cooperative team flying together), B's row, the team's name
         jobs = ([(list(crew.members), side_b, crew.full_name)] if crew is not None
                 else [([row_a], row_b, None) for row_a, row_b in pairings(a, side_a, b, side_b, sprt=sprt)])
         options = parse_env_options(jobs[0][1].env, env_option) if env_option else None  # type: ignore[union-attr]
-        forecast = _forecaster(league, jobs[0][1].env) if not options else None  # type: ignore[union-attr]
+        forecast = _forecaster(league, jobs[0][1].env, [r for job in jobs for r in (*job[0], job[1])],  # type: ignore
+                               options)
         for rows_a, row_b, team_name in jobs:
             first = league.fresh_seed(rows_a[0].id, row_b.id) if seed is None else seed  # type: ignore[union-attr]
             pa = [load_player(league, r, device=device, seed=mix_seed(first, 0 if i == 0 else 1 + i))
@@ -180,14 +186,16 @@ def match(
         raise typer.Exit(sprt_exit_code(reports[0]))
 
 
-def _forecaster(league: Any, env: str) -> Any:
-    """The ladder's forecaster of ``env`` as it stands before the match (None when it has no rated games)."""
+def _forecaster(league: Any, env: str, rows: list[PlayerRow], options: dict[str, Any] | None) -> Any:
+    """The ladder's forecaster of the variant the match is filed in, as it stands before the match (None when that
+    ladder has no rated games)."""
     from ..league.forecast import Forecaster
     from ..league.store import LeagueError
+    from ..rated.snapshots import players_variant
 
     try:
-        return Forecaster.of_league(league, env)
-    except LeagueError:
+        return Forecaster.of_league(league, env, variant=players_variant(league, env, rows, options))
+    except (LeagueError, MarlError):
         return None
 
 

@@ -250,9 +250,10 @@ def train(
             cfg = TrainConfig.from_dict(settings)
             if cfg.teacher.player and cfg.teacher.player not in bot_names(cfg.game()):  # a snapshot the league does
                 from ..league.names import resolve  # not know: one line, before the run exists
+                from ..league.variants import variant_key
 
-                try:
-                    resolve(league, cfg.teacher.player, cfg.env)
+                try:  # (best: the best of the run's own variant, as the trainer reads it)
+                    resolve(league, cfg.teacher.player, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
                 except MarlError as e:
                     raise MarlError(f"--teacher: {e}") from None
             league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)

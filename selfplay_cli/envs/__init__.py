@@ -49,6 +49,9 @@ register(
             "cpu": BotSpec("cpu", "seed 000's ball tracker: moves toward the ball's height",
                            lambda obs, rng: pong.cpu_rule(obs)),
         },
+        # The frames a policy sees (the bots read the latest one alone) and the touch reward (the score stays the
+        # points) leave the game as it is: one ladder for them all, where 4 frames can be weighed against 8.
+        neutral_options=("frame_stack", "obs_mode", "r_for_hit"),
     )
 )
 register(lander_env.LANDER)

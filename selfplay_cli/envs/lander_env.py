@@ -229,6 +229,7 @@ LANDER = EnvSpec(
     render_fps=FPS,
     make_agents=lambda cfg: agents(cfg.landers),  # landers=M: M seats (a team trained with N flies M)
     anchor="heuristic",  # the ratings' zero point: seed 001's heuristic
+    # No neutral options: each changes the flight, the score (the summed rewards) or how the heuristic flies.
     # PPO for the lander (benchmarks/lander_modes.py; FuPS, 2 landers, mean return per lander of the most likely
     # action over 100 games): rewards of +-100 scaled to order 1 (unscaled, the value loss swamps the policy's
     # gradient in the shared trunk: 25 after 6M steps; scaled, 197), 10 epochs of 8 minibatches (189 after 4M

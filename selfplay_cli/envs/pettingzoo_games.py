@@ -56,11 +56,13 @@ class Layout:
 class PettingZooConfig:
     """The options a game is made with (passed to its factory as keyword arguments) and what they make."""
 
-    __slots__ = ("options", "layout")
+    __slots__ = ("options", "layout", "defaults")
 
-    def __init__(self, options: Mapping[str, Any], layout: Layout) -> None:
+    def __init__(self, options: Mapping[str, Any], layout: Layout,
+                 defaults: Mapping[str, Any] | None = None) -> None:
         self.options = dict(options)
         self.layout = layout
+        self.defaults = dict(defaults or {})  # the factory's keyword defaults: an option given at its default is none
 
     @property
     def max_steps(self) -> int | None:
@@ -174,6 +176,16 @@ def _close(env: Any) -> None:
         env.close()
 
 
+def _keyword_defaults(factory: Callable[..., Any]) -> dict[str, Any]:
+    """The keyword arguments ``factory`` declares with a default, and their defaults (none when it cannot say)."""
+    try:
+        params = inspect.signature(factory).parameters.values()
+    except (TypeError, ValueError):
+        return {}
+    return {p.name: p.default for p in params if p.default is not inspect.Parameter.empty
+            and p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)}
+
+
 def _option_key(options: Mapping[str, Any]) -> Any:
     try:
         key = tuple(sorted(options.items()))
@@ -213,6 +225,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
                              "PettingZoo env)")
     default = probe(name, factory)
     layouts: dict[Any, Layout] = {(): default}
+    defaults = _keyword_defaults(factory)
 
     def make_config(**options: Any) -> PettingZooConfig:
         key = _option_key(options)
@@ -225,7 +238,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
                                  "are not supported (register each seating as its own game)")
             if len(layouts) < 64:
                 layouts[key] = layout
-        return PettingZooConfig(options, layout)
+        return PettingZooConfig(options, layout, defaults)
 
     kind, sides, tol = _kind_of(name, default)
     fps = default.metadata.get("render_fps")
@@ -255,6 +268,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
             make_seat_spaces=lambda cfg: cfg.layout.seats,
             time_limit=lambda cfg: cfg.layout.max_steps,
             render_fps=fps if default.renders else None,
+            neutral_options=("render_mode",),  # how it is drawn: marl sets it itself to record
         )
     except ValueError as e:
         raise EnvError(name, str(e)) from None

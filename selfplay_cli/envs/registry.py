@@ -10,8 +10,9 @@ group ``selfplay_cli.envs``), then a user's PettingZoo game named ``module:facto
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -258,9 +259,20 @@ class EnvSpec:
     colour a seat is drawn in (the recording's caption band, which names the players, shows it beside each name).
 
     ``live_options``: the options the core's ``set_options(**values)`` changes between steps of running games (what
-    a training curriculum may drive: tennis's reward weights and bat size). ``train_defaults``: the game's own
-    training settings, laid out as a run's TOML (``{"ppo": {"gamma": 0.999}, "games": 64}``), applied over marl's
-    defaults and under a ``--config`` file and the flags typed (the lander wants a longer horizon than pong).
+    a training curriculum may drive: tennis's reward weights and bat size).
+
+    ``neutral_options``: options that leave the game a result belongs to unchanged, so that ratings do not split over
+    them (:meth:`variant_options`): how it is drawn, what a policy observes, rewards that only shape learning while
+    the scores stay the game's. Every other option makes a *variant*: another game for ratings, with a ladder of its
+    own, because a result under it means something else (a game to 3 points, four landers, a serve bot serving
+    otherwise). An option that changes how a scripted player plays is never neutral: the bots anchor every ladder.
+    Observation options (pong's frame stack) are neutral although two networks made for different ones cannot meet
+    (:func:`~selfplay_cli.rated.match.env_options_of` refuses the match): the game and its bots are the same, so
+    ratings through the bots compare them, which is what a user who tries 4 frames against 8 asks of the ladder.
+
+    ``train_defaults``: the game's own training settings, laid out as a run's TOML (``{"ppo": {"gamma": 0.999},
+    "games": 64}``), applied over marl's defaults and under a ``--config`` file and the flags typed (the lander wants
+    a longer horizon than pong).
     """
 
     name: str
@@ -284,6 +296,7 @@ class EnvSpec:
     anchor: str = "random"  # the scripted player whose rating is fixed (1000 by default): the ladder's zero point
     live_options: tuple[str, ...] = ()  # options the core's set_options() changes while games run (curricula)
     train_defaults: dict[str, Any] = field(default_factory=dict)  # the game's training settings (a run's TOML layout)
+    neutral_options: tuple[str, ...] = ()  # options that split no rating: the same game drawn, seen or shaped otherwise
 
     def __post_init__(self) -> None:
         n = len(self.agents)
@@ -320,6 +333,21 @@ class EnvSpec:
             return self
         agents = tuple(self.make_agents(self.make_config(**options)))
         return self if agents == self.agents else replace(self, agents=agents)
+
+    def variant_options(self, options: Mapping[str, Any] | None) -> dict[str, Any]:
+        """The options among ``options`` that make a variant of this game (see ``neutral_options``), by name, in
+        canonical form (:func:`canonical_option`): each one not neutral whose value differs from the game's default.
+        Empty for the game as declared, whichever way it was asked for (no options, or options at their defaults)."""
+        defaults = option_defaults(self.make_config())
+        out: dict[str, Any] = {}
+        for key in sorted(options or {}):
+            if key in self.neutral_options:
+                continue
+            value = canonical_option(options[key])  # type: ignore[index]
+            if key in defaults and canonical_option(defaults[key]) == value:
+                continue
+            out[str(key)] = value
+        return out
 
     def core(self, n_games: int, **options: Any) -> BatchedCore:
         return self.make_core(n_games, self.make_config(**options))
@@ -363,6 +391,34 @@ class EnvSpec:
             return self.time_limit(cfg)
         limit = getattr(cfg, "max_steps", None)
         return int(limit) if isinstance(limit, (int, np.integer)) and limit > 0 else None
+
+
+def canonical_option(value: Any) -> Any:
+    """An option's value as a variant records it, one form per value: numbers as JSON numbers (a whole number
+    without a fraction, so ``3``, ``3.0`` and ``numpy.int64(3)`` are one value), sequences as lists, mappings sorted
+    by key; anything else as its text."""
+    if value is None or isinstance(value, (bool, str)):
+        return value
+    if isinstance(value, np.bool_):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        x = float(value)
+        return int(x) if x.is_integer() and abs(x) < 2**53 else x
+    if isinstance(value, (list, tuple)):
+        return [canonical_option(v) for v in value]
+    if isinstance(value, Mapping):
+        return {str(k): canonical_option(value[k]) for k in sorted(value, key=str)}
+    return str(value)
+
+
+def option_defaults(cfg: Any) -> dict[str, Any]:
+    """The default value of each option a game's config declares: a dataclass's fields, or a config's own
+    ``defaults`` mapping (a PettingZoo game: its factory's keyword defaults)."""
+    if dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
+        return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
+    return dict(getattr(cfg, "defaults", None) or {})
 
 
 def check_spaces(spec: EnvSpec, cfg: Any = None) -> tuple[SeatSpace, ...]:

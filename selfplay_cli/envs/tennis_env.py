@@ -151,6 +151,8 @@ TENNIS = EnvSpec(
     render_fps=FPS,
     anchor="serve-bot",  # the ratings' zero point (seed 002 rates from 1200; marl's anchor rating is its own)
     live_options=LIVE_OPTIONS,  # the rewards and bat_scale: TennisCore.set_options, for the curricula
+    neutral_options=("hit_reward", "return_reward", "point_reward"),  # rewards that shape learning: the score is the
+    # points won whatever they are, so results under them are one game's (bat_scale changes play: a variant)
     # SAC for tennis (benchmarks/tennis_skill.py): one network for both ends (the observation is egocentric), half
     # the games learner against learner and half against a matchmaker's opponent (3 in 4 the serve bot's randomized
     # serves, velocity or spin, 1 in 4 the league's snapshots), seed 002's curricula (a bat 3 times the size

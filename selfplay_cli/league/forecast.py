@@ -59,11 +59,12 @@ class Forecaster:
         return cls(list(names), np.asarray(fit.ratings), np.asarray(diff_sd), linked, points, games, spread)
 
     @classmethod
-    def of_league(cls, league: League, env: str, prior: float = DEFAULT_PRIOR) -> Forecaster:
-        """The forecaster of ``env``'s rated games (players by full name), anchored at the game's anchor bot."""
+    def of_league(cls, league: League, env: str, prior: float = DEFAULT_PRIOR, variant: str = "") -> Forecaster:
+        """The forecaster of ``env``'s rated games in ``variant`` (the default unless given; players by full name),
+        anchored at the game's anchor bot."""
         from selfplay_cli.league.ladder import declared_anchor, default_anchor
 
-        table = league.games(env=env)
+        table = league.games(env=env, variant=variant)
         if not len(table):
             raise LeagueError(f"{env} has no rated games yet: nothing to predict from")
         ids, a, b = table.indexed()

@@ -423,8 +423,8 @@ def _fit_rows(
 
 
 def _envs_in_order(league: League) -> list[str]:
-    """Envs that have rated results in the ledger, in order of their first one."""
-    table = league.games()
+    """Envs that have rated results in the ledger (in any variant), in order of their first one."""
+    table = league.games(variant=None)
     if len(table) == 0:
         return []
     env_of = {p.id: p.env for p in league.players(include_removed=True)}
@@ -549,8 +549,10 @@ def ladder(
     include_removed: bool = False,
     *,
     prior: float = DEFAULT_PRIOR,
+    variant: str = "",
 ) -> list[LadderRow]:
-    """The ladder of ``env``: a :func:`fit_table` over all pairwise results of that env in the ledger.
+    """The ladder of ``env``: a :func:`fit_table` over all pairwise results of that env in the ledger, in one
+    ``variant`` (its key, :func:`~selfplay_cli.league.variants.variant_key`; the default variant unless given).
 
     ``env=None`` uses the ledger's only env (LeagueError if it has several, or no games at all); an env
     without games gives an empty list. Only players with games appear. ``prior``: BayesElo's prior in virtual
@@ -568,7 +570,7 @@ def ladder(
     ``mean_return`` (its mean team return over its episodes).
     """
     env = pick_env(league, env)
-    table = league.games(env=env)
+    table = league.games(env=env, variant=variant)
     if len(table) == 0:
         return []
     ids, a, b = table.indexed()
@@ -591,7 +593,7 @@ def ladder(
     bots = league.players(env=env, kind="bot", include_removed=True)
     records = _bot_records(ids, a, b, table.score_a, bots)
     run_of = {p.id: p.run for p in population if not p.is_bot}
-    returns = league.mean_returns(env)
+    returns = league.mean_returns(env, variant=variant)
     rows = [replace(r, run=run_of.get(int(r.player_id)), vs=records.get(int(r.player_id), ()),
                     mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
             if r.player_id is not None else r for r in rows]

@@ -15,9 +15,14 @@ What ratings are fitted from is derived (:meth:`Ledger.games`), one row per pair
   seed is compared with the i-th of the other;
 * free-for-all: one row per two different players of a game, from the final order of their scores.
 
+Ratings are per variant (:mod:`selfplay_cli.league.variants`): every reader takes the games of one variant of a
+game, the default one unless it asks for another, derived from the options each match row records
+(``params["env_options"]``).
+
 The online Elo on each player row is a cache updated from the same pairwise results, in the transaction that
 stores their games (several results of one game move the ratings together, from the ratings before it);
-:meth:`Ledger.recompute_online_elo` rebuilds it from the ledger.
+:meth:`Ledger.recompute_online_elo` rebuilds it from the ledger. A player has one online Elo, so only the games of
+the default variant move it: it is the live view beside the default ladder.
 """
 
 from __future__ import annotations
@@ -38,6 +43,7 @@ from sqlalchemy.orm import Session, aliased, raiseload
 from selfplay_cli.league.db import Database, LeagueError
 from selfplay_cli.league.models import Game, GameSeat, Match, Player, utcnow
 from selfplay_cli.league.roster import DEFAULT_ELO, check_env_name
+from selfplay_cli.league.variants import variant_key
 from selfplay_cli.results import COOPERATIVE, FREE_FOR_ALL, TWO_SIDES, GameResult, Rules, compare, pairwise
 from selfplay_cli.stats.elo import elo_update
 
@@ -65,6 +71,12 @@ def rules_for_env(env: str, env_options: dict[str, Any] | None = None) -> Rules:
 
 def _rules_of(params: dict[str, Any] | None) -> Rules:
     return Rules.from_json((params or {}).get("rules"))
+
+
+def _variant_of(env: str, params: dict[str, Any] | None) -> str:
+    """The variant a match's games belong to, from the options its row records (none: the default)."""
+    options = (params or {}).get("env_options")
+    return variant_key(env, options if isinstance(options, dict) else None)
 
 
 @dataclass(frozen=True)
@@ -363,17 +375,23 @@ class Ledger(Database):
                        .order_by(Game.id))
             for old in _stored(s, earlier):
                 episodes.add(old, rules)
+        online = _variant_of(match.env, match.params) == ""  # the online Elo follows the default variant's games
         for gid, g in zip(ids, games, strict=True):
             stored = _Stored(gid, match.id, int(g.seed), int(g.length), bool(g.truncated), [int(p) for p in g.players],
                              [float(x) for x in g.scores], [float(x) for x in g.outcome])
             _count_game(players, stored.players)
-            _apply_elo(players, _results(stored, rules, episodes), self.elo_k)
+            if online:
+                _apply_elo(players, _results(stored, rules, episodes), self.elo_k)
         return ids
 
     def games(self, env: str | None = None, players: Iterable[int] | None = None,
-              any_seat: bool = False, rated: bool = True) -> GameTable:
+              any_seat: bool = False, rated: bool = True, variant: str | None = "") -> GameTable:
         """The pairwise results of the ledger (of ``env``), one row each, in game-id order (see the module
         docstring and :class:`GameTable`).
+
+        ``variant``: the key (:func:`~selfplay_cli.league.variants.variant_key`) of the variant whose games to take,
+        the default variant (``""``) unless given; None takes the games of every variant (which games exist, never a
+        rating).
 
         ``players`` restricts the table to results between those players (both in the set), or, with
         ``any_seat=True``, to results in which at least one of them played.
@@ -385,9 +403,10 @@ class Ledger(Database):
         """
 
         def work(s: Session) -> list[tuple]:
-            special = {mid: r for mid, r in _match_rules(s, env, rated).items() if not r.is_default}
+            matches = _match_rules(s, env, rated, variant)
+            special = {mid: r for mid, r in matches.items() if not r.is_default}
             rows = [(*r, 0) for r in s.execute(_two_seat_query(env, rated)).all()
-                    if not special or r[1] not in special]
+                    if r[1] in matches and r[1] not in special]
             if special:
                 rows += _derived_rows(s, env, rated, special)
                 rows.sort(key=lambda r: r[0])
@@ -400,12 +419,14 @@ class Ledger(Database):
             table = table.select(in_a | in_b if any_seat else in_a & in_b)
         return table
 
-    def mean_returns(self, env: str | None = None, rated: bool = True) -> dict[int, tuple[int, float]]:
-        """Every player's cooperative episodes and their mean team return (the sum of the seats' scores), by
-        player id: ``{player: (episodes, mean return)}``. Empty where there are no cooperative games."""
+    def mean_returns(self, env: str | None = None, rated: bool = True,
+                     variant: str | None = "") -> dict[int, tuple[int, float]]:
+        """Every player's cooperative episodes (of ``variant``, as in :meth:`games`) and their mean team return (the
+        sum of the seats' scores), by player id: ``{player: (episodes, mean return)}``. Empty where there are no
+        cooperative games."""
 
         def work(s: Session) -> dict[int, tuple[int, float]]:
-            coop = {mid for mid, r in _match_rules(s, env, rated).items() if r.kind == COOPERATIVE}
+            coop = {mid for mid, r in _match_rules(s, env, rated, variant).items() if r.kind == COOPERATIVE}
             totals: dict[int, list[float]] = defaultdict(lambda: [0, 0.0])
             if coop:
                 for g in _stored(s, _games_query(env, rated)):
@@ -414,6 +435,22 @@ class Ledger(Database):
                             totals[pid][0] += 1
                             totals[pid][1] += sum(g.scores)
             return {pid: (int(n), total / n) for pid, (n, total) in totals.items()}
+
+        return self._read(work)
+
+    def variants(self, env: str) -> dict[str, int]:
+        """The rated games of ``env`` (training games left out) by variant key, in key order; the default variant
+        is ``""`` (see :mod:`selfplay_cli.league.variants`)."""
+
+        def work(s: Session) -> dict[str, int]:
+            q = (select(Game.match_id, func.count(Game.id)).where(Game.env == env).group_by(Game.match_id))
+            counts = dict(s.execute(q).all())
+            out: dict[str, int] = defaultdict(int)
+            for mid, params in s.execute(select(Match.id, Match.params).where(Match.env == env,
+                                                                             Match.kind != "training")):
+                if counts.get(mid):
+                    out[_variant_of(env, params)] += int(counts[mid])
+            return dict(sorted(out.items()))
 
         return self._read(work)
 
@@ -472,18 +509,18 @@ class Ledger(Database):
         return self._read(work)
 
     def fresh_seed(self, a: int, b: int) -> int:
-        """The first seed above every stored game between players ``a`` and ``b`` (0 when they never met): where a
-        new match of the two starts by default, so that it never plays, and stores, games it already has (two
-        deterministic players on the same seeds play the same games: stored twice, they would count twice)."""
-        t = self.games(players=[int(a), int(b)], rated=False)
+        """The first seed above every stored game between players ``a`` and ``b``, in any variant (0 when they never
+        met): where a new match of the two starts by default, so that it never plays, and stores, games it already
+        has (two deterministic players on the same seeds play the same games: stored twice, they would count twice)."""
+        t = self.games(players=[int(a), int(b)], rated=False, variant=None)
         return int(t.seed.max()) + 1 if len(t) else 0
 
-    def pair_counts(self, a: int, b: int) -> tuple[int, int, int]:
-        """Wins, draws and losses of player ``a`` against player ``b`` over all their pairwise results, training
-        games included."""
+    def pair_counts(self, a: int, b: int, variant: str = "") -> tuple[int, int, int]:
+        """Wins, draws and losses of player ``a`` against player ``b`` over all their pairwise results in
+        ``variant`` (the default unless given), training games included."""
         if int(a) == int(b):
             raise LeagueError(f"player {a} cannot be paired with itself")
-        t = self.games(players=[int(a), int(b)], rated=False)
+        t = self.games(players=[int(a), int(b)], rated=False, variant=variant)
         pts = np.where(t.player_a == int(a), t.score_a, 1.0 - t.score_a)
         return int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))
 
@@ -491,7 +528,8 @@ class Ledger(Database):
         """Rebuild every player's online Elo and game count by replaying the ledger in game-id order.
 
         All players (of ``env``) restart from 1000 and 0 games; the result equals the incrementally
-        stored values, because games are numbered in commit order under SQLite's single writer.
+        stored values, because games are numbered in commit order under SQLite's single writer. As there, every game
+        counts in the players' game counts and only the default variant's move their online Elo.
         """
 
         def work(s: Session) -> None:
@@ -503,10 +541,12 @@ class Ledger(Database):
             for p in players.values():
                 p.elo, p.games = DEFAULT_ELO, 0
             rules = _match_rules(s, env, rated=False)
+            online = _match_rules(s, env, rated=False, variant="")
             episodes = _Episodes()
             for g in _stored(s, _games_query(env, rated=False)):
                 _count_game(players, g.players)
-                _apply_elo(players, _results(g, rules.get(g.match_id, Rules()), episodes), self.elo_k)
+                if g.match_id in online:
+                    _apply_elo(players, _results(g, rules.get(g.match_id, Rules()), episodes), self.elo_k)
 
         self._unit(work)
 
@@ -530,14 +570,16 @@ def _match_params(env: str, kind: str, params: dict[str, Any] | None) -> dict[st
     return params
 
 
-def _match_rules(s: Session, env: str | None, rated: bool) -> dict[int, Rules]:
-    """The rules of every match (of ``env``; without training matches when ``rated``) by match id."""
-    q = select(Match.id, Match.params)
+def _match_rules(s: Session, env: str | None, rated: bool, variant: str | None = None) -> dict[int, Rules]:
+    """The rules of every match (of ``env``; without training matches when ``rated``; of ``variant`` unless None)
+    by match id."""
+    q = select(Match.id, Match.env, Match.params)
     if env is not None:
         q = q.where(Match.env == env)
     if rated:
         q = q.where(Match.kind != "training")
-    return {int(mid): _rules_of(params) for mid, params in s.execute(q)}
+    return {int(mid): _rules_of(params) for mid, menv, params in s.execute(q)
+            if variant is None or _variant_of(menv, params) == variant}
 
 
 def _two_seat_query(env: str | None, rated: bool) -> Any:

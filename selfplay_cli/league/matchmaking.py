@@ -360,14 +360,15 @@ class WinRates:
 
 
 def load_win_rates(league: League, env: str, learner_ids: Iterable[int], decay: float = 0.99,
-                   prior: float = 1.0) -> WinRates:
-    """The win-rate book of ``learner_ids`` replayed from the league ledger of ``env`` (for a resumed run).
+                   prior: float = 1.0, variant: str = "") -> WinRates:
+    """The win-rate book of ``learner_ids`` replayed from the league ledger of ``env`` in the run's ``variant`` (for
+    a resumed run).
 
     Uses :meth:`League.games` (2-seat games between different players, in game-id order) restricted to games
     in which a learner sat, then :meth:`WinRates.from_ledger`.
     """
     ids = [int(x) for x in learner_ids]
-    table = league.games(env, players=ids, any_seat=True, rated=False)
+    table = league.games(env, players=ids, any_seat=True, rated=False, variant=variant)
     return WinRates.from_ledger(table, ids, decay=decay, prior=prior)
 
 

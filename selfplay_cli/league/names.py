@@ -6,8 +6,9 @@ Resolution order (the first rule that applies decides):
 1. an integer id, ``"17"`` or ``"#17"``;
 2. ``latest``: the most recently added non-removed snapshot of the env;
 3. ``best``: the highest fitted rating of the env among non-removed snapshots and bots
-   (``ladder(league, env, bootstrap=0)``, the ladder's default prior; players whose rating is not comparable
-   to the anchor's, i.e. flagged ``disconnected``, are only considered if nobody else is rated);
+   (``ladder(league, env, bootstrap=0)``, the ladder's default prior, in the variant asked for: the game's default
+   options unless ``variant`` says otherwise; players whose rating is not comparable to the anchor's, i.e. flagged
+   ``disconnected``, are only considered if nobody else is rated);
 4. ``run/name``;
 5. a tag, a bot name or a bare snapshot name (``s6M-left``) - all matches together; more than one distinct
    player is an ambiguity error.
@@ -27,12 +28,14 @@ names itself (its ``anchor`` is a player row, an id or a full name; commands res
 from __future__ import annotations
 
 import difflib
+import functools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from selfplay_cli.envs import env_names, get_env
 from selfplay_cli.league.ladder import LadderRow, ladder
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.league.variants import describe_variant
 from selfplay_cli.stats.bradley_terry import FLAG_DISCONNECTED, FLAG_UNRATED
 
 __all__ = ["MAX_CANDIDATES", "LadderFn", "Team", "find_team", "resolve", "resolve_many", "resolve_or_team",
@@ -125,8 +128,8 @@ def _where(env: str | None) -> str:
     return env or "the league"
 
 
-def _default_ladder(league: League, env: str | None) -> list[LadderRow]:
-    return ladder(league, env, bootstrap=0)
+def _default_ladder(league: League, env: str | None, variant: str = "") -> list[LadderRow]:
+    return ladder(league, env, bootstrap=0, variant=variant)
 
 
 def _label(players: list[PlayerRow]) -> str:
@@ -195,14 +198,15 @@ def _by_id(league: League, name: str, pid: int, env: str | None, include_removed
     return p
 
 
-def _best(league: League, env: str | None, ladder_fn: LadderFn) -> PlayerRow:
+def _best(league: League, env: str | None, ladder_fn: LadderFn, variant: str = "") -> PlayerRow:
     rows = [r for r in ladder_fn(league, env) if r.player_id is not None and r.kind in ("bot", "snapshot")]
     comparable = [r for r in rows if r.flag not in (FLAG_DISCONNECTED, FLAG_UNRATED)]
     for r in sorted(comparable or rows, key=lambda r: (-r.elo, r.player_id)):
         p = league.get_player(int(r.player_id))  # type: ignore[arg-type]
         if not p.removed:
             return p
-    raise LeagueError(f"no rated policy in {_where(env)} yet: 'best' needs games (marl match / tournament)")
+    where = _where(env) + (f" with {describe_variant(variant)}" if variant else "")
+    raise LeagueError(f"no rated policy in {where} yet: 'best' needs games (marl match / tournament)")
 
 
 def resolve(
@@ -211,8 +215,11 @@ def resolve(
     env: str | None = None,
     ladder_fn: LadderFn | None = None,
     include_removed: bool = False,
+    variant: str = "",
 ) -> PlayerRow:
-    """The player ``name`` means in ``env`` (any env if None); see the module docstring for the rules.
+    """The player ``name`` means in ``env`` (any env if None); see the module docstring for the rules. ``variant``:
+    the variant whose ladder ``best`` is read from (its key; the default variant unless given), where no
+    ``ladder_fn`` is.
 
     Raises:
         LeagueError: unknown name (with up to :data:`MAX_CANDIDATES` known names, closest first), an
@@ -231,7 +238,7 @@ def resolve(
             raise LeagueError(f"no snapshot in {_where(env)} yet: 'latest' needs one")
         return p
     if text == "best":
-        return _best(league, env, ladder_fn or _default_ladder)
+        return _best(league, env, ladder_fn or functools.partial(_default_ladder, variant=variant), variant)
     found = league.find_players(text, env=env, include_removed=True)
     if "/" in text:  # only run/name matches can contain a slash; keep exactly those
         run, _, snap = text.partition("/")
@@ -256,11 +263,12 @@ def resolve_or_team(
     env: str | None = None,
     ladder_fn: LadderFn | None = None,
     include_removed: bool = False,
+    variant: str = "",
 ) -> PlayerRow | Team:
     """What ``name`` means where a team makes sense: the one player :func:`resolve` finds, else the team of
     per-seat snapshots it names (``s6M``, ``pong-1/s6M``); the resolver's error otherwise."""
     try:
-        return resolve(league, name, env, ladder_fn=ladder_fn, include_removed=include_removed)
+        return resolve(league, name, env, ladder_fn=ladder_fn, include_removed=include_removed, variant=variant)
     except LeagueError:
         team = _team(league, str(name).strip(), env)
         if team is None:
@@ -274,9 +282,10 @@ def resolve_many(
     env: str | None = None,
     ladder_fn: LadderFn | None = None,
     include_removed: bool = False,
+    variant: str = "",
 ) -> list[PlayerRow]:
     """:func:`resolve` each name in order (the ladder behind ``best`` is fitted at most once)."""
-    base = ladder_fn or _default_ladder
+    base = ladder_fn or functools.partial(_default_ladder, variant=variant)
     cache: dict[str | None, list[LadderRow]] = {}
 
     def cached(lg: League, e: str | None) -> list[LadderRow]:
@@ -284,4 +293,5 @@ def resolve_many(
             cache[e] = base(lg, e)
         return cache[e]
 
-    return [resolve(league, n, env, ladder_fn=cached, include_removed=include_removed) for n in names]
+    return [resolve(league, n, env, ladder_fn=cached, include_removed=include_removed, variant=variant)
+            for n in names]

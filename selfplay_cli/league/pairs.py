@@ -30,9 +30,10 @@ class PairPlan:
 
 
 def plan_tournament(
-    league: League, env: str, player_ids: list[int], games_per_pair: int, vs: int | None = None
+    league: League, env: str, player_ids: list[int], games_per_pair: int, vs: int | None = None, variant: str = ""
 ) -> list[PairPlan]:
-    """Games still needed so that every pair has ``games_per_pair`` games in ``env``.
+    """Games still needed so that every pair has ``games_per_pair`` games in ``env``, in its ``variant`` (the
+    default unless given: games under other options count in their own variant only).
 
     Pairs: every unordered pair of ``player_ids`` (round robin, in list order), or with ``vs`` each player
     against ``vs`` only (gauntlet; ``a_id`` is the player, ``b_id`` is ``vs``). Existing games of a pair
@@ -59,7 +60,7 @@ def plan_tournament(
         if len(ids) < 2:
             raise LeagueError("a round robin needs at least two players")
         pairs = [(ids[i], ids[j]) for i in range(len(ids)) for j in range(i + 1, len(ids))]
-    table = league.games(env=env, players=check)
+    table = league.games(env=env, players=check, variant=variant)
     counts: dict[tuple[int, int], int] = defaultdict(int)
     weight = np.where(table.kind == KIND_CODES["cooperative"], 2, 1).tolist()  # a comparison: two episodes
     for x, y, w in zip(table.player_a.tolist(), table.player_b.tolist(), weight, strict=True):
@@ -73,9 +74,9 @@ def plan_tournament(
     return plan
 
 
-def head_to_head(league: League, a_id: int, b_id: int) -> dict[str, Any]:
-    """Record of player ``a_id`` against ``b_id`` over their stored pairwise results (training games
-    left out, as in every rating).
+def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dict[str, Any]:
+    """Record of player ``a_id`` against ``b_id`` over their stored pairwise results in ``variant`` (the default
+    unless given; training games left out, as in every rating).
 
     Returns a dict with ``a_id, b_id, games, results, wins, draws, losses, score`` (A's mean points, 0.5 without
     results), ``pentanomial`` and ``pairs``, ``unpaired``. ``games`` counts the ledger's games (a cooperative
@@ -90,7 +91,7 @@ def head_to_head(league: League, a_id: int, b_id: int) -> dict[str, Any]:
         raise LeagueError(f"player {a_id} cannot be paired with itself")
     league.get_player(a_id)
     league.get_player(b_id)
-    table = league.games(players=[a_id, b_id])
+    table = league.games(players=[a_id, b_id], variant=variant)
     first_side = table.player_a == a_id
     pts = np.where(first_side, table.score_a, 1.0 - table.score_a)
     wins, draws, losses = int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))

@@ -8,6 +8,7 @@ from typing import Any
 from ..league.store import League, PlayerRow
 from ..stats.match import MatchStats, match_stats
 from .match import load_player, mix_seed, run_match
+from .snapshots import players_variant
 
 
 @dataclass(frozen=True)
@@ -39,8 +40,12 @@ class GateVerdict:
 
 
 def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: float, games: int,
-               confidence: float = 0.95, parallel: int = 1024, device: str = "cpu") -> GateVerdict:
+               confidence: float = 0.95, parallel: int = 1024, device: str = "cpu",
+               env_options: dict[str, Any] | None = None) -> GateVerdict:
     """Reuse the stored head-to-head games, play (and store) the missing ones, then test the lower bound.
+
+    The games are those of one variant: played under the options the two were made for with ``env_options`` (a
+    command's ``--env-option``) over them, and only the stored games of that variant count.
 
     The bound comes from the pairwise results of the game's kind (:func:`~selfplay_cli.league.pairs.head_to_head`):
     its variance from the game pairs of a two-sides game (pentanomial), from the results themselves otherwise."""
@@ -50,7 +55,7 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
         from ..errors import MarlError
 
         raise MarlError(f"the candidate and the baseline are the same player ({cand.full_name})")
-    h2h = head_to_head(league, cand.id, base.id)
+    h2h = head_to_head(league, cand.id, base.id, variant=players_variant(league, cand.env, [cand, base], env_options))
     stored = h2h["games"]  # ledger games (a cooperative comparison is two episodes)
     wins, draws, losses = h2h["wins"], h2h["draws"], h2h["losses"]
     penta = list(h2h["pentanomial"])
@@ -60,7 +65,8 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
         pa = load_player(league, cand, device=device, seed=mix_seed(first, 0))
         pb = load_player(league, base, device=device, seed=mix_seed(first, 1))
         report = run_match(pa, pb, games=games - stored, first_seed=first, parallel=parallel,
-                           league=league, player_ids={pa.id: cand.id, pb.id: base.id}, kind="gate")
+                           league=league, player_ids={pa.id: cand.id, pb.id: base.id}, kind="gate",
+                           env_options=env_options)
         played = report.games
         wins, draws, losses = wins + report.wins, draws + report.draws, losses + report.losses
         penta = [x + y for x, y in zip(penta, report.pentanomial, strict=True)]

@@ -42,12 +42,14 @@ from ..envs import get_env
 from ..errors import MarlError
 from ..league.ledger import GameTable
 from ..league.store import League, PlayerRow
+from ..league.variants import variant_key
 from ..policies import Policy
 from ..results import COOPERATIVE, GameResult, Rules, points_between
 from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry
-from ..stats.intervals import laplace_intervals
 from ..stats.elo import normal_quantile
+from ..stats.intervals import laplace_intervals
 from .match import env_options_of, load_player, mix_seed
+from .snapshots import player_options
 
 
 @dataclass(frozen=True)
@@ -131,6 +133,7 @@ class History:
     snapshots: list[PlayerRow]
     bots: list[PlayerRow]
     table: GameTable
+    variant: str = ""  # the game's variant the run plays (its snapshots' options): its games are filed there
 
 
 def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = False) -> History:
@@ -142,8 +145,9 @@ def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = F
     snapshots = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id <= last]
     bots = league.players(env=env, kind="bot")
     gauntlets = [mid for mid, params in league.match_params(env, kind="eval").items() if params.get("gauntlet")]
-    table = league.games(env=env, players=[p.id for p in snapshots + bots])
-    return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)))
+    variant = variant_key(env, player_options(league, new[0]))  # the run's snapshots' options: its ladder
+    table = league.games(env=env, players=[p.id for p in snapshots + bots], variant=variant)
+    return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)), variant)
 
 
 def record_between(table: GameTable, a: int, b: int) -> tuple[int, int, int]:
@@ -168,8 +172,8 @@ def _clear_history(league: League, history: History, m: Matchup, z: float, enoug
     return (wins + 0.5 * draws) / games
 
 
-def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2,
-                     best: PlayerRow | None = None, history: History | None = None) -> list[tuple[PlayerRow, PlayerRow]]:
+def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2, best: PlayerRow | None = None,
+                     history: History | None = None) -> list[tuple[PlayerRow, PlayerRow]]:
     """The matchups of a snapshot moment: ``(new snapshot, opponent)``, each unordered pair once.
 
     ``new`` are the snapshots just taken (one per learner, all of one run and game); ``best`` the run's best
@@ -402,7 +406,7 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
             if a.id != b.id:
                 unique.setdefault(frozenset((a.id, b.id)), (a, b))
         pairs = list(unique.values())
-    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b)]
+    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant)]
     return play_gauntlet(league, pairs, first_seed=first_seed, config=config, device=device, on_games=on_games,
                          crews={m.id: crew for crew in crews.values() for m in crew[:1]}, history=history)
 
@@ -438,9 +442,9 @@ def _seat_crew(crew: tuple[PlayerRow, ...], n_seats: int) -> tuple[PlayerRow, ..
     return refit(Lineup(crew[0].env, crew, 0), n_seats, seed=0).players
 
 
-def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow) -> bool:
-    """Whether the ledger holds gauntlet games between ``a`` and ``b`` already."""
-    table = league.games(a.env, players=[a.id, b.id])
+def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow, variant: str = "") -> bool:
+    """Whether the ledger holds gauntlet games between ``a`` and ``b`` already (in ``variant``)."""
+    table = league.games(a.env, players=[a.id, b.id], variant=variant)
     if not len(table):
         return False
     return any(league.match_info(int(m))[1].get("gauntlet") for m in np.unique(table.match_id).tolist())

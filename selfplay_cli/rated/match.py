@@ -32,6 +32,7 @@ from ..arena.schedule import round_size, rounds
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
+from ..league.variants import variant_key, variant_options
 from ..policies import Policy, ScriptedPolicy
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, crew, points_between
 from ..signals import signals_held
@@ -181,6 +182,7 @@ class MatchReport:
     game_ids: list[int] = field(default_factory=list, repr=False)  # ledger ids of the stored games, in order
     interrupted: bool = False  # stopped by Ctrl-C: the whole rounds finished by then
     kind: str = TWO_SIDES  # the game's kind
+    variant: str = ""  # the key of the variant its games were played in (and are rated in): "" for the default
     predicted: Any = None  # what the ladder predicted of these games before they were played (a ScorePrediction)
 
     @property
@@ -212,6 +214,7 @@ class MatchReport:
             "seconds": round(self.seconds, 3), "games_per_second": round(self.games_per_second, 1),
             "match_id": self.match_id, "first_seed": self.first_seed, "sprt": self.sprt,
             "game_ids": self.game_ids, "interrupted": self.interrupted, "kind": self.kind,
+            "variant": variant_options(self.variant),
             "predicted": None if self.predicted is None else {**self.predicted.to_json(), "held": self.held},
         }
         if self.mean_returns is not None:
@@ -348,8 +351,10 @@ def run_match(
     in_play: list[GameResult] = []
 
     def report() -> MatchReport:
-        return _report(spec.name, rules, a_name, a_key, b, kept, round_points, time.perf_counter() - start, match_id,
-                       first_seed, confidence, game_ids)
+        out = _report(spec.name, rules, a_name, a_key, b, kept, round_points, time.perf_counter() - start, match_id,
+                      first_seed, confidence, game_ids)
+        out.variant = variant_key(spec.name, options)
+        return out
 
     try:
         while done < n_rounds and decision is None:

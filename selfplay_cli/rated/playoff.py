@@ -22,9 +22,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from ..arena.schedule import round_size
 from ..envs import get_env
 from ..errors import MarlError
-from ..arena.schedule import round_size
 from ..league.store import League
 from ..results import COOPERATIVE, Rules
 from ..stats.elo import normal_quantile

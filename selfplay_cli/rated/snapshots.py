@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from ..errors import MarlError
 from ..files import temp_path
 from ..league.store import League, LeagueError, LeagueIOError, PlayerRow, check_existing_name, check_name
+from ..league.variants import describe_variant, variant_key
 
 if TYPE_CHECKING:
     from ..policies.snapshot import Snapshot
@@ -46,6 +48,49 @@ def snapshot_file(league: League, row: PlayerRow) -> Path:
         return league.home_path(*path.parts)
     except LeagueError as e:
         raise MarlError(f"{row.full_name}: its file {row.path!r} is not under the league home ({e})") from None
+
+
+def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
+    """The game options a player was made for, which its games are played under: a snapshot's, as its file's
+    metadata records them (the header alone is read); none for a scripted player, which plays under any."""
+    if row.is_bot:
+        return {}
+    from ..policies.snapshot import read_meta
+
+    return dict(read_meta(snapshot_file(league, row)).env_options or {})
+
+
+def players_variant(league: League, env: str, rows: Iterable[PlayerRow], override: dict[str, Any] | None = None
+                    ) -> str:
+    """The variant (its key) the games among ``rows`` are filed in: the one each snapshot's options make, with
+    ``override`` (a command's ``--env-option``) over them. Snapshots made for options that differ only in neutral
+    ones (pong's frame stack) share a variant, though two of them cannot meet; snapshots of different variants are
+    a :class:`MarlError` naming two of them. Scripted players play in any."""
+    found: tuple[str, str] | None = None
+    for row in rows:
+        if row.is_bot:
+            continue
+        key = variant_key(env, {**player_options(league, row), **(override or {})})
+        if found is not None and key != found[0]:
+            raise MarlError(f"{found[1]} and {row.full_name} play different variants of {env} "
+                            f"({describe_variant(found[0])}; {describe_variant(key)}): they are rated apart")
+        found = (key, row.full_name)
+    return found[0] if found is not None else variant_key(env, override)
+
+
+def run_options(league: League, run: str) -> dict[str, Any]:
+    """The game options a run's snapshots were made for: a trained run's ``[env_options]`` (its config), else (a run
+    of imported files) its newest readable snapshot's metadata; none when neither says."""
+    info = league.get_run(run)
+    if info is None:
+        raise MarlError(f"no run named '{run}'")
+    if isinstance((info.config or {}).get("env_options"), dict):
+        return dict(info.config["env_options"])
+    for p in reversed(league.players(env=info.env, kind="snapshot")):
+        if p.run == run:
+            with contextlib.suppress(MarlError, OSError):
+                return player_options(league, p)
+    return {}
 
 
 def check_file(row: PlayerRow, snap: Snapshot, path: Path) -> None:

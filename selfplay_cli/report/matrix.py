@@ -28,6 +28,7 @@ import numpy.typing as npt
 
 from ..league.ladder import ladder
 from ..league.store import GameTable, League, LeagueError
+from ..league.variants import value_text, variant_options
 from ..stats.cycles import DEFAULT_ALPHA, Cycle, EdgeTests, significant_three_cycles
 from ..stats.nash import NashResult, measured_subgame, symmetric_nash
 from .png import new_figure, save_png
@@ -77,6 +78,7 @@ class MatrixReport:
     nash: NashResult | None
     edges: EdgeTests
     cycles: tuple[Cycle, ...]
+    variant: str = ""  # the key of the variant whose games it holds (the default: "")
 
     @property
     def n(self) -> int:
@@ -109,6 +111,8 @@ class MatrixReport:
         involved = sorted({i for i, _, _ in pairs} | {j for _, j, _ in pairs})
         words = ["marl", "league", "tournament", *(self.players[i].policy for i in involved), "--env", self.env,
                  "--games-per-pair", str(max(self.min_games, 2))]
+        for key, value in variant_options(self.variant).items():  # the games of its variant
+            words += ["--env-option", f"{key}={value_text(value)}"]
         if home is not None:
             words += ["--home", str(home)]
         return shlex.join(words)
@@ -132,6 +136,7 @@ class MatrixReport:
             }
         return {
             "env": self.env,
+            "variant": variant_options(self.variant),
             "run": self.run,
             "min_games": self.min_games,
             "players": [{"index": k + 1, "policy": p.policy, "kind": p.kind, "elo": round(p.elo, 1),
@@ -219,8 +224,10 @@ def build_matrix(
     run: str | None = None,
     min_games: int = 8,
     alpha: float = DEFAULT_ALPHA,
+    variant: str = "",
 ) -> MatrixReport:
-    """The score matrix of the ``top`` best-rated players of ``env`` (default: the ledger's only env).
+    """The score matrix of the ``top`` best-rated players of ``env`` (default: the ledger's only env), from the
+    games of one ``variant`` (its key; the default variant unless given).
 
     ``run``: only that run's snapshots and the env's scripted players take part. Ratings come from
     :func:`~selfplay_cli.league.ladder.ladder` (its defaults, normal-approximation intervals); the players are
@@ -242,7 +249,7 @@ def build_matrix(
         if env is not None and env != info.env:
             raise LeagueError(f"run '{run}' trains {info.env}, not {env}")
         env = info.env
-    rows = ladder(league, env, bootstrap=0)
+    rows = ladder(league, env, bootstrap=0, variant=variant)
     if not rows:
         raise LeagueError(f"no rated games in {env} yet: play some first (marl match / marl league tournament)")
     pool = {p.id: p for p in league.players(include_removed=True) if p.id in {r.player_id for r in rows}}
@@ -255,7 +262,7 @@ def build_matrix(
     players = tuple(MatrixPlayer(r.policy, int(r.player_id), r.kind, r.elo, r.ci_low, r.ci_high)
                     for r in rows if r.player_id is not None)
     ids = [p.player_id for p in players]
-    games, wins, draws, losses, units = pair_records(league.games(env=env, players=ids), ids)
+    games, wins, draws, losses, units = pair_records(league.games(env=env, players=ids, variant=variant), ids)
     measured = (games >= min_games) & ~np.eye(len(ids), dtype=bool)
     sub = measured_subgame(measured)
     nash = None
@@ -267,7 +274,7 @@ def build_matrix(
     edges, cycles = significant_three_cycles(units, measured, alpha)
     return MatrixReport(env=env, run=run, players=players, games=games, wins=wins, draws=draws, losses=losses,
                         unit_wins=units, min_games=int(min_games), nash_players=tuple(sub) if nash else (),
-                        nash=nash, edges=edges, cycles=tuple(cycles))
+                        nash=nash, edges=edges, cycles=tuple(cycles), variant=variant)
 
 
 def write_matrix_png(report: MatrixReport, path: str | Path) -> Path:

@@ -123,12 +123,12 @@ class RunCurves:
 
 
 def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
-               prior: float = DEFAULT_PRIOR) -> RunCurves:
+               prior: float = DEFAULT_PRIOR, variant: str | None = None) -> RunCurves:
     """The curves of ``run``: its rated snapshots per learner (each with the ladder's ``best`` mark) and the env's
     rated bots.
 
-    ``rows``: a ladder of the run's env already fitted (default: ``ladder(league, env, prior=prior)``, otherwise
-    the ladder's defaults).
+    ``rows``: a ladder of the run's env already fitted (default: ``ladder(league, env, prior=prior)``, in
+    ``variant``: by default the run's own, the options its snapshots were made for).
     Snapshots are grouped by ``meta["learner"]`` (a run with one network has one group, named after the run);
     removed snapshots and snapshots without rated games are left out.
 
@@ -142,7 +142,12 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
         raise LeagueError(f"no run named '{run}' (runs: {shown})")
     env = info.env
     if rows is None:
-        rows = ladder(league, env, prior=prior)
+        if variant is None:
+            from ..league.variants import variant_key
+            from ..rated.snapshots import run_options
+
+            variant = variant_key(env, run_options(league, run))
+        rows = ladder(league, env, prior=prior, variant=variant)
     by_id = {r.player_id: r for r in rows if r.player_id is not None}
     groups: dict[str, list[CurvePoint]] = {}
     for p in league.players(env=env, kind="snapshot"):

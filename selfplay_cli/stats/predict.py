@@ -33,7 +33,7 @@ import numpy.typing as npt
 from scipy.optimize import minimize_scalar
 from scipy.stats import binom
 
-from .elo import NAT_TO_ELO, normal_quantile
+from .elo import NAT_TO_ELO
 
 __all__ = ["ScorePrediction", "pair_spread", "predict_pair"]
 

@@ -26,7 +26,6 @@ from typing import Any
 
 from ..errors import MarlError
 
-
 FINAL_BOT_GAMES = 32  # a run's final snapshots play at least this many games against each scripted player
 PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
 

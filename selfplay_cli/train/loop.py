@@ -38,6 +38,7 @@ from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_spaces, plan_layou
 from ..errors import MarlError
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 from ..league.store import League, PlayerRow
+from ..league.variants import variant_key
 from ..policies import Policy
 from ..policies.bots import league_bots
 from ..policies.network import resolve_device
@@ -131,7 +132,7 @@ def load_teacher(league: League, cfg: TrainConfig, spaces: list[Any], device: st
     from ..policies.spaces import describe_space
 
     try:
-        row = resolve(league, name, cfg.env)
+        row = resolve(league, name, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
     except MarlError as e:
         raise MarlError(f"--teacher: {e}") from None
     teacher = load_player(league, row, device=device, greedy=True, seed=cfg.seed)
@@ -172,6 +173,7 @@ class Trainer:
             raise MarlError("training needs a league home for its snapshot files: pass --home")
         self.run_dir = league.home / "runs" / cfg.run
         game_cfg = spec.config(**cfg.env_options)
+        self.variant = variant_key(spec.name, cfg.env_options)  # where its games are rated: the run's own variant
         league.ensure_bots(spec.name, league_bots(spec))
         self.bot_ids = {p.name: p.id for p in league.players(env=spec.name, kind="bot")}
 
@@ -383,12 +385,12 @@ class Trainer:
 
         rated = {}
         if self.cfg.eval_games:
-            rated = {r.player_id: r for r in ladder(self.league, self.spec.name, bootstrap=0)}
+            rated = {r.player_id: r for r in ladder(self.league, self.spec.name, bootstrap=0, variant=self.variant)}
         out = []
         for p in new:
             vs = {}
             for bot, bot_id in self.bot_ids.items():
-                h = head_to_head(self.league, p.id, bot_id)
+                h = head_to_head(self.league, p.id, bot_id, variant=self.variant)
                 if h["games"]:
                     vs[bot] = (h["wins"], h["draws"], h["losses"])
             r = rated.get(p.id)
