@@ -49,7 +49,7 @@ from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry
 from ..stats.elo import normal_quantile
 from ..stats.intervals import laplace_intervals
 from .match import env_options_of, load_player, mix_seed
-from .snapshots import player_options
+from .snapshots import run_options
 
 
 @dataclass(frozen=True)
@@ -145,7 +145,7 @@ def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = F
     snapshots = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id <= last]
     bots = league.players(env=env, kind="bot")
     gauntlets = [mid for mid, params in league.match_params(env, kind="eval").items() if params.get("gauntlet")]
-    variant = variant_key(env, player_options(league, new[0]))  # the run's snapshots' options: its ladder
+    variant = variant_key(env, run_options(league, run or ""))  # the options the run plays: its ladder
     table = league.games(env=env, players=[p.id for p in snapshots + bots], variant=variant)
     return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)), variant)
 

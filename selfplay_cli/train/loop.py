@@ -678,8 +678,8 @@ class Trainer:
 
         if not self.cfg.eval_games:
             return None
-        return next((r for r in ladder(self.league, self.spec.name, bootstrap=0) if r.best and r.run == self.cfg.run),
-                    None)
+        rows = ladder(self.league, self.spec.name, bootstrap=0, variant=self.variant)
+        return next((r for r in rows if r.best and r.run == self.cfg.run), None)
 
     def _plot(self) -> Path | str | None:
         """The run's rating curves as ``runs/<run>/ratings.png`` (as ``marl league plot --run`` draws them); None
