@@ -147,8 +147,8 @@ def train(
     lr: Annotated[float | None, typer.Option("--lr", help="Learning rate (default: the algorithm's own, PPO 2e-3, "
                                              "DQN 2.5e-4, SAC 3e-4).")] = None,
     env_option: Annotated[list[str] | None, typer.Option("--env-option", metavar="KEY=VALUE", help="Game option, "
-                                                         "repeatable (e.g. points_to_win=5; marl envs --json lists "
-                                                         "the games).")] = None,
+                                                         "repeatable (e.g. points_to_win=5; marl envs NAME lists "
+                                                         "a game's options, types and defaults).")] = None,
     resume: Annotated[str | None, typer.Option("--resume", metavar="RUN", help="Continue a run that was stopped or "
                                                "killed, from its last snapshot (its saved configuration applies).")]
     = None,

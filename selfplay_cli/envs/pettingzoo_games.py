@@ -255,6 +255,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
             make_seat_spaces=lambda cfg: cfg.layout.seats,
             time_limit=lambda cfg: cfg.layout.max_steps,
             render_fps=fps if default.renders else None,
+            option_source=factory,
         )
     except ValueError as e:
         raise EnvError(name, str(e)) from None

@@ -282,6 +282,8 @@ class EnvSpec:
     anchor: str = "random"  # the scripted player whose rating is fixed (1000 by default): the ladder's zero point
     live_options: tuple[str, ...] = ()  # options the core's set_options() changes while games run (curricula)
     train_defaults: dict[str, Any] = field(default_factory=dict)  # the game's training settings (a run's TOML layout)
+    option_source: Callable[..., Any] | None = None  # a function whose keyword arguments are the options, for a game
+    # whose config is no dataclass (a PettingZoo game's factory): `marl envs NAME` reads them from its signature
 
     def __post_init__(self) -> None:
         n = len(self.agents)
