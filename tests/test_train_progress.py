@@ -6,14 +6,15 @@ from __future__ import annotations
 import io
 import json
 import re
+from pathlib import Path
 
 import pytest
 from cli_helpers import run
 from rich.console import Console
 
-import selfplay_cli.commands.train as train_cmd
+import selfplay_cli.commands.train_view as train_view
 from selfplay_cli.algos.ppo import PPOConfig
-from selfplay_cli.commands.train import TrainProgress, describe_games, describe_run
+from selfplay_cli.commands.train_view import TrainProgress, describe_games, describe_run
 from selfplay_cli.league.store import League
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import SnapshotRecord, Standing, Trainer, TrainReport
@@ -62,7 +63,7 @@ def test_progress_counts_what_moves_while_every_game_is_still_under_way(tmp_path
 def test_without_a_terminal_a_plain_line_comes_every_30_s_or_5_percent_whichever_is_rarer(monkeypatch):
     clock = Clock()
     buf = io.StringIO()
-    monkeypatch.setattr(train_cmd, "err_console", Console(file=buf, width=300))  # not a terminal
+    monkeypatch.setattr(train_view, "err_console", Console(file=buf, width=300))  # not a terminal
     cfg = TrainConfig(env="pong", run="r", steps=1_000_000)
     progress = TrainProgress(cfg, bar=False, lines=True, clock=clock)
     lines = []
@@ -88,7 +89,7 @@ def test_without_a_terminal_a_plain_line_comes_every_30_s_or_5_percent_whichever
 
 
 def test_quiet_prints_no_progress_line_and_json_keeps_stdout_for_the_json(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(train_cmd, "PLAIN_LINE_SECONDS", 0.0)  # a line at every 5% of this short budget
+    monkeypatch.setattr(train_view, "PLAIN_LINE_SECONDS", 0.0)  # a line at every 5% of this short budget
     args = ["train", "pong", "--steps", "4096", "--games", "16", "--env-option", "points_to_win=1", "--eval-games",
             "0", "--home", str(tmp_path / "h")]
     code, out, err = run(capsys, *args, "--json")
@@ -121,7 +122,7 @@ def _screen(text: str) -> list[str]:
 
 def test_the_bar_is_gone_when_the_run_ends_and_the_rated_lines_stay(monkeypatch):
     buf = io.StringIO()
-    monkeypatch.setattr(train_cmd, "err_console", Console(file=buf, force_terminal=True, width=200))
+    monkeypatch.setattr(train_view, "err_console", Console(file=buf, force_terminal=True, width=200))
     cfg = TrainConfig(env="pong", run="r", steps=1000)
     rec = SnapshotRecord("r/s0", "learner", 0, {"random": (2, 0, 0)}, 1100.0, 900.0, 1300.0)
     with TrainProgress(cfg, bar=True, lines=True) as progress:
@@ -191,8 +192,71 @@ def test_the_summary_of_a_resumed_run_states_the_whole_run():
         "run pong-1: 6,000,128 game steps in 2 sessions, 95 s in all (this session: 524,288 steps in 13 s, 10 s of "
         "training at 52,429 steps/s), 256 episodes, 14 snapshots; 444 rating games (40 of them this session, "
         "beside training: 9 s, 3 s of it waited for at the end)")
+    report.session_steps, report.train_seconds = 0, 0.0  # resumed after its budget was spent: nothing to train
+    assert "(this session: 0 steps in 13 s, no training left to do)" in describe_run(report)
 
 
 @pytest.mark.parametrize("ended, text", [(False, "16 under way"), (True, "16 left unfinished")])
 def test_games_under_way_are_named_as_they_are(ended, text):
     assert text in describe_games(standing(ended=ended, game_steps=12.5))
+
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+# the run each README section's commands name, and the `marl train` command that makes it (flags that change names)
+README_RUNS = {"pong-1": ("pong", {"agents": 2}), "tennis-1": ("tennis", {"agents": 2}),
+               "lander-1": ("lander", {"agents": 2, "sharing": "fups"}),
+               "lander-2": ("lander", {"agents": 2, "sharing": "nops", "algo": "dqn"}),
+               "connect_four_v3-1": ("pettingzoo.classic.connect_four_v3", {"sharing": "fups"})}
+
+
+def _learners_of(env: str, flags: dict) -> list[str]:
+    """The learners (so the snapshot suffixes) of `marl train ENV` with ``flags``, from the game's own training
+    defaults as `marl train` applies them."""
+    from selfplay_cli.commands.train import merge_settings
+    from selfplay_cli.envs import get_env
+    from selfplay_cli.train.loop import _learner_names
+
+    spec = get_env(env)
+    settings = TrainConfig(env=spec.name, run="x").to_dict()
+    merge_settings(settings, spec.train_defaults)
+    settings.update(flags)
+    cfg = TrainConfig.from_dict(settings)
+    return _learner_names(spec.agents, cfg.seat_plan().home, cfg.sharing)
+
+
+def test_readme_names_only_snapshots_its_runs_make():
+    """A shared network's snapshots have no seat suffix (tennis's default run: s0, not s0-player_0); a run of one
+    network per seat names a moment's team (s6M) or one member (s6M-left)."""
+    from selfplay_cli.envs import get_env
+
+    text = README.read_text()
+    named = re.findall(r"marl \w+(?: \w+)? .*?\b((?:pong|tennis|lander|connect_four_v3)-\d+)/([\w.-]+)", text)
+    assert len(named) >= 8
+    for run_name, snap in named:
+        env, flags = README_RUNS[run_name]
+        learners = _learners_of(env, flags)
+        agents = get_env(env).agents
+        seat = next((a for a in agents if snap.endswith(f"-{a}")), None)
+        assert re.fullmatch(r"(s\d+(\.\d+)?[kM]?|latest|best)", snap.removesuffix(f"-{seat}") if seat else snap), snap
+        if learners == ["learner"]:
+            assert seat is None, f"{run_name}/{snap}: that run trains one shared network, its snapshots have no seat"
+        else:
+            assert seat is None or seat in learners, f"{run_name}/{snap}"
+
+
+def test_a_seat_suffix_on_a_shared_networks_snapshot_is_answered_with_its_name(tmp_path):
+    from selfplay_cli.errors import MarlError
+    from selfplay_cli.league.names import resolve
+
+    cfg = TrainConfig(env="pong", run="t", steps=1024, games=8, sharing="fups", eval_games=0, ppo=FAST_PPO)
+    with League.open(tmp_path / "league") as league:
+        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        Trainer(league, cfg).train()
+        league.ensure_bots("lander", ["heuristic", "random"])  # a second game's players: its own random
+        assert resolve(league, "t/s0").name == "s0"
+        for typed, hint in (("t/s0-left", "name it t/s0"), ("s0-right", "name it s0")):
+            with pytest.raises(MarlError) as e:
+                resolve(league, typed)
+            assert f"t/s0 is one network for every seat (its run shares one), so its name has no seat: {hint}" \
+                in str(e.value)
+            assert str(e.value).count("random") == 1  # every game's random player, named once
