@@ -137,8 +137,8 @@ def test_the_bar_is_gone_when_the_run_ends_and_the_rated_lines_stay(monkeypatch)
     screen = _screen(buf.getvalue())
     assert not any(ln.startswith(("train r ", "games: ")) for ln in screen), screen  # the bar and its status: gone
     shown = "".join(screen)  # the rated line stays (wrapped at the terminal's width)
-    assert shown.startswith("r: 100% (1,000 of 1,000 steps") and "rated s0 (step 0): Elo 1100 [900, 1300], random " \
-        "100% of 2" in shown, screen
+    assert shown.startswith("r: 100% (1,000 of 1,000 steps") and "rated s0 (step 0): random 100% of 2, Elo 1100 " \
+        "[900, 1300]" in shown, screen
 
 
 def _stop_after(monkeypatch, steps: int) -> None:

@@ -170,8 +170,8 @@ class TrainProgress:
         elif kind == "snapshot":
             recs = "; ".join(
                 f"{r.name.split('/', 1)[-1]} (step {r.step:,}): "
-                + ", ".join(([elo_text(r)] if r.elo is not None else [])
-                            + [f"{bot} {100 * r.score(wdl):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()])
+                + ", ".join([f"{bot} {100 * r.score(wdl):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()]
+                            + ([elo_text(r)] if r.elo is not None else []))
                 or "unrated" for r in event["records"])
             self._print(self._where(standing, f"; rated {recs}"))
 
