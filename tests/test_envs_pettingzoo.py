@@ -402,7 +402,7 @@ def _marl(*args):
 
 
 def test_marl_envs_shows_kind_turns_and_per_seat_spaces_of_named_games():
-    out = _marl("envs", "--json", TTT, RDV)
+    out = _marl("envs", "--json", "pong", TTT, RDV)
     assert out.returncode == 0, out.stderr
     rows = {r["name"]: r for r in json.loads(out.stdout)}
     assert rows["pong"]["kind"] == "two-sides" and rows["pong"]["turns"] == "simultaneous"

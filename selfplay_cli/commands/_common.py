@@ -88,7 +88,7 @@ def _guess(raw: str) -> object:
 
 EnvOptionOpt = Annotated[list[str] | None, typer.Option(
     "--env-option", metavar="KEY=VALUE", help="Game option over those the players were made for, repeatable (e.g. "
-    "landers=4 flies a lander team as 4; marl envs --json lists each game's options).")]
+    "landers=4 flies a lander team as 4; marl envs NAME lists a game's options).")]
 
 
 VariantOpt = Annotated[list[str] | None, typer.Option(

@@ -1,4 +1,5 @@
-"""`marl envs`: the registered games, their seats, kind, turns, spaces and scripted players."""
+"""`marl envs`: the registered games, their seats, kind, turns, spaces and scripted players; `marl envs NAME`: a
+game's options too."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from typing import Annotated, Any
 import typer
 from rich.table import Table
 
-from ..envs import describe_space, env_names, get_env
+from ..envs import describe_space, env_names, game_options, get_env
 from ..envs.loading import plugin_errors
 from ..policies.bots import league_bots
 from ._output import console, print_json
@@ -20,6 +21,8 @@ def env_row(name: str) -> dict[str, Any]:
     spec = get_env(name)
     cfg = spec.config()
     seats = spec.seat_spaces(cfg)
+    options = game_options(spec)
+    trained = spec.train_defaults.get("env_options", {})
     return {
         "name": name,
         "description": spec.description,
@@ -40,22 +43,23 @@ def env_row(name: str) -> dict[str, Any]:
         "renderer": spec.make_renderer is not None,
         "live_options": list(spec.live_options),
         "train_defaults": spec.train_defaults,
+        # --env-option NAME=VALUE: type, default, whether a curriculum may drive it, and what `marl train` sets
+        "options": [{**o.to_json(), **({"train_default": trained[o.name]} if o.name in trained else {})}
+                    for o in options.options],
+        "options_from": options.source,  # config (a dataclass), factory (its signature), raw_env (PettingZoo's)
+        "options_open": options.open,  # it also takes keyword options it does not name (**kwargs)
     }
 
 
 def env_rows(names: list[str] | None = None) -> list[dict[str, Any]]:
-    """The registered games, then ``names`` (games of your own, ``module:factory``) not among them; an installed
-    package's game that fails to load is a row with its ``error``."""
+    """The games ``names`` (registered ones, or games of your own, ``module:factory``), each once, in the order
+    given; without names, every registered game, an installed package's game that fails to load as a row with its
+    ``error``."""
+    if names:
+        return [env_row(name) for name in dict.fromkeys(names)]
     rows, failed = [], plugin_errors()
-    registered = env_names()
-    for name in sorted(set(registered) | set(failed)):
-        if name in failed:
-            rows.append({"name": name, "error": str(failed[name])})
-        else:
-            rows.append(env_row(name))
-    for name in names or []:
-        if name not in registered and name not in failed and all(r["name"] != name for r in rows):
-            rows.append(env_row(name))
+    for name in sorted(set(env_names()) | set(failed)):
+        rows.append({"name": name, "error": str(failed[name])} if name in failed else env_row(name))
     return rows
 
 
@@ -68,12 +72,15 @@ def _per_seat(row: dict[str, Any], key: str) -> str:
 
 def envs(
     games: Annotated[list[str] | None, typer.Argument(
-        help="Also show these games of your own: module:factory (e.g. mypkg.mygame:env) or a module with a function "
-             "env or parallel_env.", show_default=False)] = None,
-    json_out: Annotated[bool, typer.Option("--json", help="Print JSON alone on stdout.")] = False,
+        help="Show only these games, with their options: registered ones (pong) or games of your own, "
+             "module:factory (e.g. mypkg.mygame:env) or a module with a function env or parallel_env.",
+        show_default=False)] = None,
+    json_out: Annotated[bool, typer.Option("--json", help="Print JSON alone on stdout (every game's options "
+                                           "included).")] = False,
 ) -> None:
-    """List the registered games (and any GAMES named) with their agents, kind, turns, per-seat spaces and
-    scripted players.
+    """List the registered games with their agents, kind, turns, per-seat spaces and scripted players; name GAMES
+    to see those alone, with their options (--env-option NAME=VALUE): type, default, and which a training
+    curriculum may drive.
 
     Games come from marl itself, from installed packages (entry-point group selfplay_cli.envs) and, named on the
     command line, from your own PettingZoo environments: `marl envs mypkg.mygame:env`.
@@ -99,6 +106,41 @@ def envs(
         if r.get("live_options"):
             console.print(f"{r['name']}: a [curriculum] may drive {', '.join(r['live_options'])}", markup=False,
                           highlight=False)
+    if games:
+        for r in rows:
+            _print_options(r)
+    else:
+        console.print("marl envs NAME shows a game's options (--env-option NAME=VALUE) with their types and defaults",
+                      markup=False, highlight=False)
+
+
+def _print_options(row: dict[str, Any]) -> None:
+    """A game's options as a table: name, type (or the values it takes), default, and, where the game has them,
+    whether a curriculum may drive it and what `marl train` sets it to."""
+    name, options = row["name"], row["options"]
+    more = " it also takes keyword options it does not name (**kwargs): see its documentation."
+    if not options:
+        console.print(f"{name}: no options {'named' if row['options_open'] else ''}".rstrip()
+                      + (f";{more}" if row["options_open"] else ""), markup=False, highlight=False)
+        return
+    live = any(o["live"] for o in options)
+    trained = any("train_default" in o for o in options)
+    where = {"config": "", "factory": " (its factory's keyword arguments)",
+             "raw_env": " (raw_env's keyword arguments: PettingZoo's env and parallel_env pass theirs on to it)"}
+    table = Table(title=f"{name}: options, --env-option NAME=VALUE{where.get(row['options_from'], '')}")
+    for col in ("option", "type", "default") + (("live",) if live else ()) + (("marl train sets",) if trained else ()):
+        table.add_column(col)
+    for o in options:
+        kind = "one of " + ", ".join(map(str, o["choices"])) if o["choices"] else o["type"]
+        cells = [o["name"], kind, "(required)" if o["required"] else str(o["default"])]
+        if live:
+            cells.append("curriculum" if o["live"] else "")
+        if trained:
+            cells.append(str(o["train_default"]) if "train_default" in o else "")
+        table.add_row(*cells)
+    console.print(table)
+    if row["options_open"]:
+        console.print(f"{name}:{more}", markup=False, highlight=False)
 
 
 def _settings(d: dict[str, Any], prefix: str = "") -> str:

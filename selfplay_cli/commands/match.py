@@ -49,19 +49,33 @@ def _points(mine: float, theirs: float) -> str:
     return f"return {'+' * (mine > 0)}{format_score(mine)} against {'+' * (theirs > 0)}{format_score(theirs)}"
 
 
+def played(r: MatchReport) -> str:
+    """The games played and what the W/D/L that follows counts: ``200 games in 100 seat-swapped pairs``; ``200
+    games: 100 comparisons of team returns on shared seeds`` (cooperative: one episode each a seed); ``30 games, every
+    rotation of the seating on each seed`` (free-for-all: a result a game)."""
+    from ..results import COOPERATIVE, TWO_SIDES
+
+    if r.kind == COOPERATIVE:
+        return (f"{r.games} games: {r.n_results} comparisons of team returns on shared seeds (each flies every seat "
+                "on the same seed)")
+    if r.kind == TWO_SIDES:
+        return f"{r.games} games in {r.games // 2} seat-swapped pairs"
+    return f"{r.games} games, every rotation of the seating on each seed (a result a game, from {r.a}'s and {r.b}'s " \
+        "scores)"
+
+
 def render_report(r: MatchReport) -> None:
     from ..results import COOPERATIVE
 
     s = r.stats
-    coop = r.kind == COOPERATIVE
-    unit = f"{r.games // 2} comparisons: each flies the same seeds" if coop else f"{r.games // 2} pairs"
-    console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {r.games} games ({unit}), {r.games_per_second:,.1f} games/s")
-    if coop:  # a result is one comparison of team returns on one seed; the returns per game read best as means
-        half = max(r.games // 2, 1)
+    console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {played(r)}, {r.games_per_second:,.1f} games/s")
+    if r.kind == COOPERATIVE:  # a result is one comparison of team returns on one seed; returns read best as means
+        half = max(r.games // 2, 1)  # A flies half the episodes
         shown = f"mean team return {r.points_for / half:.2f} against {r.points_against / half:.2f}"
     else:
         shown = _points(r.points_for, r.points_against)
-    console.print(f"  {r.a}: {r.wins} W  {r.draws} D  {r.losses} L   score {100 * s.score:.1f}%   {shown}")
+    console.print(f"  {r.a}: {r.wins} W  {r.draws} D  {r.losses} L of {r.n_results} {r.result_unit}s   score "
+                  f"{100 * s.score:.1f}%   {shown}")
     bound = " (bound: no game lost or none won)" if s.bounded else ""
     console.print(f"  Elo difference {s.elo:+.1f}  [{100 * s.confidence:g}% CI {s.elo_low:+.1f}, {s.elo_high:+.1f}]"
                   f"{bound}   LOS {100 * s.los:.1f}%")
@@ -97,8 +111,9 @@ def interrupted(r: MatchReport, stored: bool) -> None:
     elif r.match_id is None:
         err_console.print("interrupted before a pair of games finished: no game stored", markup=False)
     else:
-        err_console.print(f"interrupted: {r.games} games stored as match #{r.match_id} (whole pairs: {r.wins} W "
-                          f"{r.draws} D {r.losses} L for {r.a}); they count in the ratings", markup=False)
+        err_console.print(f"interrupted: {r.games} games stored as match #{r.match_id} (whole rounds: {r.wins} W "
+                          f"{r.draws} D {r.losses} L of {r.n_results} {r.result_unit}s for {r.a}); they count in the "
+                          "ratings", markup=False)
 
 
 def match(

@@ -5,14 +5,12 @@ from __future__ import annotations
 import re
 import signal
 import sys
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
 from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError
 from ._common import (
@@ -28,6 +26,7 @@ from ._common import (
     progress_enabled,
 )
 from ._output import console, err_console, print_json
+from .train_view import TrainProgress, describe_record, describe_run, report_json
 
 
 def read_toml(path: Path) -> dict[str, Any]:
@@ -146,8 +145,8 @@ def train(
     lr: Annotated[float | None, typer.Option("--lr", help="Learning rate (default: the algorithm's own, PPO 2e-3, "
                                              "DQN 2.5e-4, SAC 3e-4).")] = None,
     env_option: Annotated[list[str] | None, typer.Option("--env-option", metavar="KEY=VALUE", help="Game option, "
-                                                         "repeatable (e.g. points_to_win=5; marl envs --json lists "
-                                                         "the games).")] = None,
+                                                         "repeatable (e.g. points_to_win=5; marl envs NAME lists "
+                                                         "a game's options, types and defaults).")] = None,
     resume: Annotated[str | None, typer.Option("--resume", metavar="RUN", help="Continue a run that was stopped or "
                                                "killed, from its last snapshot (its saved configuration applies).")]
     = None,
@@ -286,21 +285,10 @@ def train(
         league.set_run_status(cfg.run, "finished")
     finally:
         league.close()
-    finals = [r.to_json() for r in report.finals]
-    data = {"run": report.run, "steps": report.steps, "episodes": report.episodes,
-            "seconds": round(report.seconds, 1), "rating_games": report.eval_games,
-            "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
-            "steps_per_second": round(report.steps_per_second), "snapshots": report.snapshots, "final": finals,
-            "plot": str(report.plot) if isinstance(report.plot, Path) else None,
-            "best": None if report.best is None else {k: report.best.to_json()[k] for k in
-                                                      ("policy", "elo", "ci_low", "ci_high", "best_margin", "tied")}}
     if json_out:
-        print_json(data)
+        print_json(report_json(report))
         return
-    where = "inline" if cfg.eval_inline else "beside training"
-    console.print(f"run {report.run}: {report.steps:,} game steps in {report.seconds:.0f} s, {report.episodes:,} "
-                  f"episodes, {len(report.snapshots)} snapshots; {report.eval_games:,} rating games ({where}: "
-                  f"{report.eval_seconds:.0f} s, {report.wait_seconds:.0f} s of it waited for at the end)")
+    console.print(describe_run(report, inline=cfg.eval_inline), markup=False, highlight=False)
     for rec in report.finals:
         console.print("  " + describe_record(rec), markup=False)
     if report.best is not None:
@@ -333,90 +321,3 @@ def stop_on_sigterm() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
-
-
-def describe_record(rec: Any) -> str:
-    """``pong-1/ep37-left: Elo 2301 [2220, 2388]; vs random 100% [89%, 100%] of 32 games, vs cpu 94% [...] of 32
-    games``: every figure measured on that snapshot (its stored games and its fitted rating), each score with its
-    95% interval."""
-    parts = [f"Elo {rec.elo:.0f} [{rec.ci_low:.0f}, {rec.ci_high:.0f}]"] if rec.elo is not None else []
-
-    def score(wdl: tuple[int, int, int]) -> str:
-        low, high = rec.interval(wdl)
-        return f"{100 * rec.score(wdl):.0f}% [{100 * low:.0f}%, {100 * high:.0f}%] of {sum(wdl)} {rec.unit}"
-
-    vs = ", ".join(f"vs {bot} {score(wdl)}" for bot, wdl in rec.vs.items())
-    if vs:
-        parts.append(vs)
-    return f"{rec.name}: " + ("; ".join(parts) if parts else "not rated (--eval-games 0)")
-
-
-def _clock(seconds: float) -> str:
-    s = int(max(seconds, 0) + 0.5)
-    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
-
-
-class TrainProgress:
-    """What a run shows while it trains: a rich progress bar on a terminal (phase, steps, steps/s, ETA from the
-    steps left), and one plain line per snapshot on stderr (also without a terminal, e.g. in CI logs)."""
-
-    def __init__(self, cfg: Any, bar: bool, lines: bool) -> None:
-        self.cfg = cfg
-        self.lines = lines
-        self.start = time.perf_counter()
-        self.remaining: float | None = None
-        self.rate = 0.0
-        self.progress = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.fields[info]}"),
-                                 TimeElapsedColumn(), TextColumn("{task.fields[eta]}"), console=err_console,
-                                 disable=not bar, transient=False)
-        self.task = self.progress.add_task(f"train {cfg.run}", total=1000, info="", eta="")
-
-    def __enter__(self) -> TrainProgress:
-        self.progress.__enter__()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.progress.__exit__(*exc)
-
-    def _fraction(self, steps: int) -> float:
-        if self.cfg.minutes is not None:
-            return min((time.perf_counter() - self.start) / (self.cfg.minutes * 60), 1.0)
-        return min(steps / self.cfg.steps, 1.0)
-
-    def _eta(self) -> str:
-        return "" if self.remaining is None else f"ETA {_clock(self.remaining)}"
-
-    def update(self, event: dict[str, Any]) -> None:
-        kind = event["event"]
-        steps = event["steps"]
-        if kind == "training":
-            self.rate, self.remaining = event["steps_per_second"], event["remaining"]
-            self.progress.update(self.task, description=f"train {self.cfg.run}",
-                                 completed=int(1000 * self._fraction(steps)), eta=self._eta(),
-                                 info=f"{steps:,} steps  {self.rate:,.0f}/s  {event['episodes']:,} games")
-        elif kind == "evaluating":
-            names = ", ".join(n.split("/", 1)[-1] for n in event["snapshots"])
-            self.progress.update(self.task, description=f"rating {names}", eta=self._eta(),
-                                 info=f"{event['games']} games played")
-        elif kind == "snapshot" and self.lines:
-            self._line(event)
-
-    def _line(self, event: dict[str, Any]) -> None:
-        """One plain line per rated snapshot moment: where training stands (steps, steps/s, games finished), the
-        new snapshots' measured scores against the scripted players, elapsed and remaining time."""
-        steps = event["steps"]
-        recs = "; ".join(
-            f"{r.name.split('/', 1)[-1]} (step {r.step:,}): "
-            + (", ".join(f"{bot} {100 * r.score(wdl):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()) or "unrated")
-            for r in event["records"])
-        elapsed = time.perf_counter() - self.start
-        done = self._fraction(steps) >= 1.0
-        left = "" if self.remaining is None or done else f", ~{_clock(self.remaining)} left"
-        budget = (f"{steps:,} steps" if self.cfg.minutes is not None
-                  else f"{steps:,} of {self.cfg.steps:,} steps")  # with --minutes, time is the budget
-        line = (f"{self.cfg.run}: {100 * self._fraction(steps):.0f}% ({budget}, {self.rate:,.0f}/s, "
-                f"{event['episodes']:,} games finished); rated {recs}; {_clock(elapsed)} elapsed{left}")
-        if self.progress.disable:
-            err_console.print(line, markup=False, highlight=False, soft_wrap=True)
-        else:
-            self.progress.console.print(line, markup=False, highlight=False)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from . import lander_env, pong, pong_env, tennis_env
 from .loading import env_names, get_env
+from .options import GameOption, GameOptions, game_options
 from .registry import (
     KINDS,
     TURNS,
@@ -57,6 +58,6 @@ register(
 register(lander_env.LANDER)
 register(tennis_env.TENNIS)
 
-__all__ = ["KINDS", "TURNS", "BatchedCore", "BotSpec", "EnvError", "EnvSpec", "IllegalActionError", "SeatSpace",
-           "UnknownEnvError", "check_spaces", "describe_space", "env_names", "get_env", "random_bot", "random_rule",
-           "register"]
+__all__ = ["KINDS", "TURNS", "BatchedCore", "BotSpec", "EnvError", "EnvSpec", "GameOption", "GameOptions",
+           "IllegalActionError", "SeatSpace", "UnknownEnvError", "check_spaces", "describe_space", "env_names",
+           "game_options", "get_env", "random_bot", "random_rule", "register"]

@@ -269,6 +269,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
             time_limit=lambda cfg: cfg.layout.max_steps,
             render_fps=fps if default.renders else None,
             neutral_options=("render_mode",),  # how it is drawn: marl sets it itself to record
+            option_source=factory,
         )
     except ValueError as e:
         raise EnvError(name, str(e)) from None

@@ -297,6 +297,8 @@ class EnvSpec:
     live_options: tuple[str, ...] = ()  # options the core's set_options() changes while games run (curricula)
     train_defaults: dict[str, Any] = field(default_factory=dict)  # the game's training settings (a run's TOML layout)
     neutral_options: tuple[str, ...] = ()  # options that split no rating: the same game drawn, seen or shaped otherwise
+    option_source: Callable[..., Any] | None = None  # a function whose keyword arguments are the options, for a game
+    # whose config is no dataclass (a PettingZoo game's factory): `marl envs NAME` reads them from its signature
 
     def __post_init__(self) -> None:
         n = len(self.agents)

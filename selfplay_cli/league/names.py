@@ -167,8 +167,12 @@ def _unknown(league: League, name: str, env: str | None) -> LeagueError:
         folded = name.casefold()
         close = [n for n in pool if n.casefold() == folded or n.casefold().startswith(folded)][:MAX_CANDIDATES]
     newest = [p.full_name for p in snapshots if p.full_name not in close][:MAX_CANDIDATES]
-    bots = [p.name for p in players if p.kind == "bot"]
+    bots = list(dict.fromkeys(p.name for p in players if p.kind == "bot"))  # random is every game's: named once
     parts = [f"no policy named '{name}' in {_where(env)}"]
+    shared = _seatless(snapshots, name)
+    if shared is not None:
+        parts.append(f"{shared.full_name} is one network for every seat (its run shares one), so its name has no "
+                     f"seat: name it {shared.full_name if '/' in name else shared.name}")
     if close:
         parts.append(f"closest: {', '.join(close)}")
     if newest:
@@ -177,6 +181,17 @@ def _unknown(league: League, name: str, env: str | None) -> LeagueError:
                                                           else ""))
     parts.append(", ".join(["latest", "best", *bots]) + " or an id also work")
     return LeagueError("; ".join(parts))
+
+
+def _seatless(snapshots: list[PlayerRow], name: str) -> PlayerRow | None:
+    """The snapshot ``name`` would be without a ``-<seat>`` suffix of its game's seats (``tennis-1/s0-player_0`` for
+    ``tennis-1/s0`` of a run that shares one network), if there is exactly one."""
+    found = {}
+    for p in snapshots:
+        agents = get_env(p.env).agents if p.env in env_names() else ()
+        if any(name in (f"{p.full_name}-{a}", f"{p.name}-{a}") for a in agents):
+            found[p.id] = p
+    return next(iter(found.values())) if len(found) == 1 else None
 
 
 def _removed(name: str, players: list[PlayerRow]) -> LeagueError:

@@ -195,6 +195,18 @@ class MatchReport:
         return self.games / self.seconds if self.seconds > 0 else float("inf")
 
     @property
+    def result_unit(self) -> str:
+        """What one of A's wins, draws or losses is: a ``comparison`` of team returns (cooperative: two episodes,
+        one each, on one seed) or a ``game`` (two-sides: a game, scored in pairs too; free-for-all: a game, from
+        the order of A's and B's scores)."""
+        return "comparison" if self.kind == COOPERATIVE else "game"
+
+    @property
+    def n_results(self) -> int:
+        """A's results against B, each a :attr:`result_unit`: what W + D + L add up to."""
+        return self.wins + self.draws + self.losses
+
+    @property
     def mean_returns(self) -> tuple[float, float] | None:
         """A's and B's mean team return per episode (cooperative games), else None."""
         if self.kind != COOPERATIVE or not self.results:
@@ -206,6 +218,7 @@ class MatchReport:
         s = self.stats
         out = {
             "env": self.env, "a": self.a, "b": self.b, "games": self.games,
+            "results": self.n_results, "result_unit": self.result_unit,  # what W + D + L count
             "wins": self.wins, "draws": self.draws, "losses": self.losses,
             "score": round(s.score, 4), "points_for": self.points_for, "points_against": self.points_against,
             "elo": round(s.elo, 1), "elo_low": round(s.elo_low, 1), "elo_high": round(s.elo_high, 1),

@@ -36,6 +36,7 @@ from ..algos import get_learner
 from ..algos.joint import JointLearner
 from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_spaces, plan_layout
 from ..errors import MarlError
+from ..league.ledger import KIND_CODES
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
@@ -93,23 +94,56 @@ class SnapshotRecord:
                              "draws": wdl[1], "losses": wdl[2]} for bot, wdl in self.vs.items()}}
 
 
+@dataclass(frozen=True)
+class Standing:
+    """Where a run stands, for a progress display, in counts that hold for every game (none of them assumes a
+    game's shape). Counts are of the whole run, every session of a resumed run included, unless they say
+    ``session``. Games that all end together (every game of a batch cut by the same time limit) leave
+    ``episodes`` at 0 for most of a run: ``playing`` and ``game_steps`` then say how far they are."""
+
+    progress: float  # share of the budget spent: steps of the budget, or minutes of all sessions (0 to 1)
+    steps: int  # game steps played: one step of each of the games played at once counts as that many
+    episodes: int  # training games finished
+    playing: int  # training games under way (the games played at once); once training has ended, those it left
+    game_steps: float  # steps since the games under way began, averaged over them
+    time_limit: int | None  # the most steps one game lasts, as the game declares it (None: it declares none)
+    snapshots: int  # snapshots taken (one per learner and snapshot moment)
+    rated: int  # of them, those whose gauntlet has finished (0 with rating games off)
+    newest: tuple[SnapshotRecord, ...]  # the newest rated moment's snapshots, as the ledger rates them
+    session_steps: int  # game steps played by this process (a resumed run: since it resumed)
+    steps_per_second: float | None  # this process's training rate (rating games played inline left out); None
+    # before it has played a step
+    remaining: float | None  # seconds left, estimated (None before the rate is known)
+    ended: bool = False  # training has ended (what remains is the wait for the last rating games)
+
+
 @dataclass
 class TrainReport:
+    """What a finished run says of itself: the whole run (every session of a resumed run), and this session's part
+    where a field says so."""
+
     run: str
-    steps: int
-    episodes: int
-    seconds: float  # wall time of this process's part of the run, rating games included
-    eval_seconds: float  # time the gauntlets took (beside training, unless inline)
-    wait_seconds: float  # time spent after training waiting for the last gauntlets
-    eval_games: int  # games the gauntlets played
-    snapshots: list[str]
+    steps: int  # game steps of the whole run
+    episodes: int  # training games finished in the whole run
+    seconds: float  # wall time of the whole run: each earlier session's up to its last snapshot moment (what the
+    # next one continued from: a killed session's later work was done again), then all of this session's
+    eval_games: int  # games the run's gauntlets played, every session (as the ledger holds them)
+    snapshots: list[str]  # the whole run's snapshots, oldest first
     finals: list[SnapshotRecord]  # each learner's final snapshot, as the ledger rates it
+    sessions: int  # processes that trained the run: the first, then one per resume from a snapshot moment
+    session_steps: int  # game steps this session played
+    session_seconds: float  # wall time of this session, rating games and the wait for the last ones included
+    train_seconds: float  # of it, training: the loop of games and updates (rating games played inline left out)
+    session_eval_games: int  # games this session's gauntlets played
+    eval_seconds: float  # this session: time the gauntlets took (beside training, unless inline)
+    wait_seconds: float  # this session: time spent after training waiting for the last gauntlets
     plot: Path | str | None = None  # the rating curves' PNG, or why there is none
     best: Any = None  # the run's best snapshot as the ladder has it at the end (a LadderRow), None unrated
 
     @property
     def steps_per_second(self) -> float:
-        return self.steps / self.seconds if self.seconds > 0 else 0.0
+        """This session's training rate: its game steps over its training time."""
+        return self.session_steps / self.train_seconds if self.train_seconds > 0 else 0.0
 
 
 def step_label(steps: int) -> str:
@@ -176,6 +210,7 @@ class Trainer:
         self.variant = variant_key(spec.name, cfg.env_options)  # where its games are rated: the run's own variant
         league.ensure_bots(spec.name, league_bots(spec))
         self.bot_ids = {p.name: p.id for p in league.players(env=spec.name, kind="bot")}
+        self.time_limit = spec.max_steps(game_cfg)  # the most steps a training game lasts (None: not declared)
 
         plan = cfg.seat_plan()
         layout = plan_layout(plan, cfg.games, cfg.agents, cfg.league_games)
@@ -235,6 +270,10 @@ class Trainer:
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
         self.eval_games = 0  # games they played
         self.eval_events = 0  # gauntlets finished in this process
+        self._t0 = 0.0  # when this process began training (perf_counter)
+        self._steps0 = 0  # the run's steps then
+        self._deadline: float | None = None  # when a budget in minutes runs out (perf_counter)
+        self._trained: float | None = None  # seconds this process trained, once its training has ended
         self.records: list[SnapshotRecord] = []  # the newest snapshots as the ledger rates them
 
     # -- opponents -------------------------------------------------------------------------------------------
@@ -375,8 +414,7 @@ class Trainer:
             self.eval_events += 1
             self.records = self._records([self.league.get_player(i) for i in d.job.snapshot_ids])
             if self.on_progress:
-                self.on_progress({"event": "snapshot", "records": self.records, "steps": self.steps,
-                                  "episodes": self.episodes})
+                self.on_progress({"event": "snapshot", "records": self.records, "standing": self.standing()})
 
     def _records(self, new: list[PlayerRow]) -> list[SnapshotRecord]:
         """Each new snapshot's record against the scripted players and its fitted rating, from the ledger."""
@@ -601,10 +639,13 @@ class Trainer:
 
     def _train(self) -> TrainReport:
         cfg = self.cfg
-        t0 = time.perf_counter()
+        t0 = self._t0 = time.perf_counter()
+        elapsed0 = self.elapsed  # the earlier sessions' time
         start = t0 - self.elapsed
-        deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
-        steps0 = self.steps
+        deadline = self._deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
+        self._steps0 = self.steps
+        if self.on_progress:  # at once: a resumed run shows where it stands before its first update
+            self.on_progress({"event": "training", "standing": self.standing()})
         for job in self.jobs:  # gauntlets a killed run had asked for (a finished one is not played again)
             self.evaluator.submit(self._job(job))  # type: ignore[union-attr]
         if not self.snapshots:
@@ -642,11 +683,7 @@ class Trainer:
                         self._report(metrics, board, stats, elapsed)
                         self._collect(self.evaluator.poll())  # type: ignore[union-attr]
                         if self.on_progress:
-                            train_s = time.perf_counter() - t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0)
-                            rate = (self.steps - steps0) / max(train_s, 1e-9)
-                            self.on_progress({"event": "training", "steps": self.steps, "episodes": self.episodes,
-                                              "progress": progress, "steps_per_second": rate,
-                                              "remaining": self._remaining(rate, deadline)})
+                            self.on_progress({"event": "training", "standing": self.standing()})
                     spent = (time.perf_counter() >= deadline) if deadline else self.steps >= cfg.steps
                     by_steps = next_steps is not None and self.steps >= next_steps
                     if not spent and (by_steps or (next_episodes is not None and self.episodes >= next_episodes)):
@@ -659,6 +696,7 @@ class Trainer:
             self._record(pending)
             if stats and self.steps > line_step:  # the run's last figures, whatever the spacing of the lines
                 self._report(metrics, board, stats, self.elapsed)
+            self._trained = self._train_seconds()
             self.snapshot("final")
         if board is not None:
             board.close()
@@ -668,8 +706,56 @@ class Trainer:
         if not self.records:  # no rating games: name the final snapshots all the same
             self.records = self._records([self.league.get_player(i) for i in self.latest])
         plot = self._plot()
-        return TrainReport(cfg.run, self.steps, self.episodes, time.perf_counter() - t0, self.eval_seconds,
-                           waited, self.eval_games, self.snapshots, list(self.records), plot, self._best())
+        session = time.perf_counter() - t0
+        return TrainReport(cfg.run, self.steps, self.episodes, seconds=elapsed0 + session,
+                           eval_games=self.rating_games(), snapshots=self.snapshots, finals=list(self.records),
+                           sessions=self.resumes + 1, session_steps=self.steps - self._steps0,
+                           session_seconds=session, train_seconds=self._train_seconds(),
+                           session_eval_games=self.eval_games,
+                           eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot, best=self._best())
+
+    def rating_games(self) -> int:
+        """Games the run's gauntlets have stored in the ledger, every session's: the ledger, not a count kept in
+        the run state, because a gauntlet that finished after the last snapshot moment of a killed session (or was
+        cut short in it: its finished matchups are stored, and not played again on resume) is in the ledger only.
+        A game counts once, a cooperative comparison as its two episodes."""
+        if not self.cfg.eval_games:
+            return 0
+        run = self.cfg.run
+        ids = [p.id for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True)
+               if p.run == run]
+        table = self.league.games(self.spec.name, players=ids, any_seat=True, variant=self.variant)
+        gauntlets = []
+        for match_id in np.unique(table.match_id).tolist():
+            kind, params = self.league.match_info(match_id)
+            if kind == "eval" and params.get("gauntlet"):
+                gauntlets.append(match_id)
+        mine = table.select(np.isin(table.match_id, gauntlets))
+        coop = mine.kind == KIND_CODES[COOPERATIVE]
+        return int(np.unique(mine.game_id[~coop]).size + 2 * np.unique(mine.game_id[coop]).size)
+
+    def standing(self) -> Standing:
+        """Where the run stands now (see :class:`Standing`); meaningful once training has begun."""
+        cfg = self.cfg
+        session_steps = self.steps - self._steps0
+        seconds = self._train_seconds()
+        rate = session_steps / seconds if session_steps > 0 and seconds > 0 else None
+        done = self.elapsed / (cfg.minutes * 60) if cfg.minutes is not None else self.steps / cfg.steps
+        pending = sum(len(names) for names, _, _ in self.jobs)
+        core_steps = np.asarray(self.games.core.steps)
+        return Standing(
+            progress=min(max(done, 0.0), 1.0), steps=self.steps, episodes=self.episodes, playing=cfg.games,
+            game_steps=float(core_steps.mean()) if core_steps.size else 0.0, time_limit=self.time_limit,
+            snapshots=len(self.snapshots), rated=len(self.snapshots) - pending if cfg.eval_games else 0,
+            newest=tuple(self.records) if cfg.eval_games else (), session_steps=session_steps,
+            steps_per_second=rate, remaining=self._remaining(rate), ended=self._trained is not None)
+
+    def _train_seconds(self) -> float:
+        """Seconds this process has trained (all of it once training has ended), rating games played inline left
+        out."""
+        if self._trained is not None:
+            return self._trained
+        return max(time.perf_counter() - self._t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0), 0.0)
 
     def _best(self) -> Any:
         """The run's best snapshot in the ladder fitted now (its margin over the run's next, or the snapshots it
@@ -696,18 +782,21 @@ class Trainer:
     def _waiting(self) -> None:
         if self.on_progress:
             self.on_progress({"event": "evaluating", "snapshots": [n for j in self.jobs for n in j[0]],
-                              "games": self.evaluator.games_played, "steps": self.steps,  # type: ignore[union-attr]
-                              "episodes": self.episodes})
+                              "games": self.evaluator.games_played,  # type: ignore[union-attr]
+                              "standing": self.standing()})
 
-    def _remaining(self, rate: float, deadline: float | None) -> float:
+    def _remaining(self, rate: float | None) -> float | None:
         """Seconds left: training at the measured rate for the steps left, then the final gauntlet (at the mean time
-        one took so far); inline, a gauntlet for every snapshot still to come. With --minutes: to the deadline."""
-        if deadline is not None:
-            return max(deadline - time.perf_counter(), 0.0)
+        one took so far); inline, a gauntlet for every snapshot still to come. With --minutes: to the deadline.
+        None before the rate is known."""
+        if self._deadline is not None:
+            return max(self._deadline - time.perf_counter(), 0.0)
+        if not rate:
+            return None
         left = max(self.cfg.steps - self.steps, 0)
         per_event = self.eval_seconds / max(self.eval_events, 1)
         events = 1 + (left // self.cfg.snapshot_steps if self.cfg.snapshot_steps and self.cfg.eval_inline else 0)
-        return left / max(rate, 1e-9) + events * per_event
+        return left / rate + events * per_event
 
 
 def _alive(pid: int) -> bool:

@@ -1,0 +1,215 @@
+"""What `marl train` shows: the progress while it trains (a bar with a status line on a terminal, plain lines in a
+log) and the summary at the end, in text or JSON. Every figure comes from the trainer's
+:class:`~selfplay_cli.train.loop.Standing` and :class:`~selfplay_cli.train.loop.TrainReport`, which say what each
+counts."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.text import Text
+
+from ._output import err_console
+
+if TYPE_CHECKING:
+    from ..train.loop import Standing, TrainReport
+
+
+def report_json(report: TrainReport) -> dict[str, Any]:
+    """``marl train --json``: the whole run's figures (every session of a resumed run), and this session's
+    (``session_*``; the rate and the rating games' time are this session's too)."""
+    return {"run": report.run, "steps": report.steps, "episodes": report.episodes, "seconds": round(report.seconds, 1),
+            "sessions": report.sessions, "rating_games": report.eval_games, "snapshots": report.snapshots,
+            "final": [r.to_json() for r in report.finals],
+            "plot": str(report.plot) if isinstance(report.plot, Path) else None,
+            "session_steps": report.session_steps, "session_seconds": round(report.session_seconds, 1),
+            "session_train_seconds": round(report.train_seconds, 1),
+            "session_rating_games": report.session_eval_games, "steps_per_second": round(report.steps_per_second),
+            "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
+            "best": None if report.best is None else {k: report.best.to_json()[k] for k in
+                                                      ("policy", "elo", "ci_low", "ci_high", "best_margin", "tied")}}
+
+
+def describe_run(report: TrainReport, inline: bool = False) -> str:
+    """The summary's first line: the whole run (every session of a resumed run: steps, episodes, snapshots, rating
+    games, wall time), and where the run had more than one session, this session's part and rate.
+
+    ``run pong-1: 6,000,128 game steps in 92 s (70 s of training at 85,700 steps/s), 256 episodes, 14 snapshots;
+    444 rating games (beside training: 82 s, 18 s of it waited for at the end)``"""
+    rate = (f"{report.train_seconds:.0f} s of training at {report.steps_per_second:,.0f} steps/s"
+            if report.session_steps else "no training left to do")
+    if report.sessions == 1:
+        when = f"in {report.seconds:.0f} s ({rate})"
+    else:
+        when = (f"in {report.sessions} sessions, {report.seconds:.0f} s in all (this session: "
+                f"{report.session_steps:,} steps in {report.session_seconds:.0f} s, {rate})")
+    where = "inline" if inline else "beside training"
+    this = f"{report.session_eval_games:,} of them this session, " if report.sessions > 1 else ""
+    return (f"run {report.run}: {report.steps:,} game steps {when}, {report.episodes:,} episodes, "
+            f"{len(report.snapshots)} snapshots; {report.eval_games:,} rating games ({this}{where}: "
+            f"{report.eval_seconds:.0f} s, {report.wait_seconds:.0f} s of it waited for at the end)")
+
+
+def elo_text(rec: Any) -> str:
+    """``Elo 2301 [2220, 2388]``: a snapshot's fitted rating with its interval; "" when it has none."""
+    return f"Elo {rec.elo:.0f} [{rec.ci_low:.0f}, {rec.ci_high:.0f}]" if rec.elo is not None else ""
+
+
+def describe_record(rec: Any) -> str:
+    """``pong-1/ep37-left: Elo 2301 [2220, 2388]; vs random 100% [89%, 100%] of 32 games, vs cpu 94% [...] of 32
+    games``: every figure measured on that snapshot (its stored games and its fitted rating), each score with its
+    95% interval and what was counted (a cooperative game's results are comparisons)."""
+    parts = [elo_text(rec)] if rec.elo is not None else []
+
+    def score(wdl: tuple[int, int, int]) -> str:
+        low, high = rec.interval(wdl)
+        return f"{100 * rec.score(wdl):.0f}% [{100 * low:.0f}%, {100 * high:.0f}%] of {sum(wdl)} {rec.unit}"
+
+    vs = ", ".join(f"vs {bot} {score(wdl)}" for bot, wdl in rec.vs.items())
+    if vs:
+        parts.append(vs)
+    return f"{rec.name}: " + ("; ".join(parts) if parts else "not rated (--eval-games 0)")
+
+
+def _clock(seconds: float) -> str:
+    s = int(max(seconds, 0) + 0.5)
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}"
+
+
+PLAIN_LINE_SECONDS = 30.0
+"""Without a terminal (a log, CI), a plain progress line comes at most every this many seconds ..."""
+PLAIN_LINE_SHARE = 0.05
+"""... and only once this share of the budget more is spent: whichever is rarer (a 90-second run: every 30 s; a
+30-minute run: every 90 s, 5% of it). Every rated snapshot moment prints a line besides."""
+
+
+def describe_rate(standing: Standing) -> str:
+    """This session's rate: ``77,937 steps/s``; ``- steps/s`` before it has played a step."""
+    rate = standing.steps_per_second
+    return "- steps/s" if rate is None else f"{rate:,.0f} steps/s"
+
+
+def describe_games(standing: Standing) -> str:
+    """What the training games are doing: ``games: 0 finished, 256 under way (14,336 steps in on average, of at most
+    18,000)``. Games that all end together near a time limit finish nothing for most of a run; how far the games
+    under way are says that they run."""
+    limit = f", of at most {standing.time_limit:,}" if standing.time_limit else ""
+    how = "left unfinished" if standing.ended else "under way"
+    return (f"games: {standing.episodes:,} finished, {standing.playing:,} {how} ({standing.game_steps:,.0f} steps in "
+            f"on average{limit})")
+
+
+def describe_snapshots(standing: Standing, rating: bool) -> str:
+    """``snapshots: 8 taken, 6 rated``: snapshots taken so far and, of them, those whose rating games are done."""
+    if not rating:
+        return f"snapshots: {standing.snapshots} taken (rating games off)"
+    return f"snapshots: {standing.snapshots} taken, {standing.rated} rated"
+
+
+def describe_elo(rec: Any) -> str:
+    """``s2M-left Elo 1432 [1300, 1560]``: a snapshot's fitted rating with its interval, by its short name."""
+    return f"{rec.name.split('/', 1)[-1]} {elo_text(rec) or 'not rated'}"
+
+
+class _StatusProgress(Progress):
+    """A progress bar with a line of status under it (the games, the snapshots, the newest ratings)."""
+
+    status = ""
+
+    def get_renderables(self) -> Iterator[Any]:
+        yield self.make_tasks_table(self.tasks)
+        if self.status:
+            yield Text(self.status, no_wrap=True, overflow="ellipsis")
+
+
+class TrainProgress:
+    """What a run shows while it trains. On a terminal: a rich progress bar (phase, steps, this session's steps/s,
+    elapsed time, ETA) with a status line under it (games finished and under way, snapshots taken and rated, the
+    newest rated snapshots' Elo), removed when the run ends so the summary stands alone. Without a terminal (a log,
+    CI): a plain line on stderr every :data:`PLAIN_LINE_SECONDS` and :data:`PLAIN_LINE_SHARE` of the budget,
+    whichever is rarer. Both: one plain line per rated snapshot moment. ``lines`` False (``--quiet``): no lines.
+    ``clock``: seconds (tests pass their own)."""
+
+    def __init__(self, cfg: Any, bar: bool, lines: bool, clock: Callable[[], float] = time.perf_counter) -> None:
+        self.cfg = cfg
+        self.lines = lines
+        self.clock = clock
+        self.start = self.last_line = clock()
+        self.line_share = 0.0  # the budget's share spent at the last plain line
+        self.progress = _StatusProgress(TextColumn("{task.description}"), BarColumn(),
+                                        TextColumn("{task.fields[info]}"), TimeElapsedColumn(),
+                                        TextColumn("{task.fields[eta]}"), console=err_console, disable=not bar,
+                                        transient=True)
+        self.task = self.progress.add_task(f"train {cfg.run}", total=1000, info="", eta="")
+
+    def __enter__(self) -> TrainProgress:
+        self.progress.__enter__()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.progress.__exit__(*exc)
+
+    def update(self, event: dict[str, Any]) -> None:
+        kind, standing = event["event"], event["standing"]
+        eta = "" if standing.remaining is None else f"ETA {_clock(standing.remaining)}"
+        status = f"{describe_games(standing)}; {describe_snapshots(standing, bool(self.cfg.eval_games))}"
+        if standing.newest:
+            status += "; newest rated " + ", ".join(describe_elo(r) for r in standing.newest)
+        self.progress.status = status
+        if kind == "training":
+            self.progress.update(self.task, description=f"train {self.cfg.run}", eta=eta,
+                                 completed=int(1000 * standing.progress),
+                                 info=f"{standing.steps:,} steps  {describe_rate(standing)}")
+            if self._due(standing.progress):
+                self._print(self._where(standing))
+        elif kind == "evaluating":
+            short = [n.split("/", 1)[-1] for n in event["snapshots"]]
+            names = ", ".join(short) if len(short) <= 2 else f"{short[0]} and {len(short) - 1} more snapshots"
+            self.progress.update(self.task, description=f"rating {names}", eta=eta,
+                                 info=f"{event['games']} games played")
+            if self._due(None):
+                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); rating {names} "
+                            f"({event['games']:,} rating games played in this session so far); {self._elapsed()} "
+                            "elapsed")
+        elif kind == "snapshot":
+            recs = "; ".join(
+                f"{r.name.split('/', 1)[-1]} (step {r.step:,}): "
+                + ", ".join([f"{bot} {100 * r.score(wdl):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()]
+                            + ([elo_text(r)] if r.elo is not None else []))
+                or "unrated" for r in event["records"])
+            self._print(self._where(standing, f"; rated {recs}"))
+
+    def _due(self, share: float | None) -> bool:
+        """Whether a plain line is due: no terminal, lines wanted, :data:`PLAIN_LINE_SECONDS` since the last line
+        and, while training (``share``: the budget spent), :data:`PLAIN_LINE_SHARE` more of the budget."""
+        if not self.progress.disable or not self.lines or self.clock() - self.last_line < PLAIN_LINE_SECONDS:
+            return False
+        return share is None or share - self.line_share >= PLAIN_LINE_SHARE
+
+    def _elapsed(self) -> str:
+        return _clock(self.clock() - self.start)
+
+    def _where(self, standing: Standing, rated: str = "") -> str:
+        """``pong-1: 61% (3,670,016 of 6,000,000 steps, 77,937 steps/s); games: ...; snapshots: ...; 0:00:47
+        elapsed, ~0:00:44 left``: where training stands (with --minutes, time is the budget)."""
+        budget = (f"{standing.steps:,} steps" if self.cfg.minutes is not None
+                  else f"{standing.steps:,} of {self.cfg.steps:,} steps")
+        done = standing.progress >= 1.0
+        left = "" if standing.remaining is None or done else f", ~{_clock(standing.remaining)} left"
+        self.line_share = standing.progress
+        return (f"{self.cfg.run}: {100 * standing.progress:.0f}% ({budget}, {describe_rate(standing)}); "
+                f"{describe_games(standing)}; {describe_snapshots(standing, bool(self.cfg.eval_games))}{rated}; "
+                f"{self._elapsed()} elapsed{left}")
+
+    def _print(self, line: str) -> None:
+        if not self.lines:
+            return
+        self.last_line = self.clock()
+        if self.progress.disable:
+            err_console.print(line, markup=False, highlight=False, soft_wrap=True)
+        else:
+            self.progress.console.print(line, markup=False, highlight=False)

@@ -1,0 +1,131 @@
+"""A game's options as a user can set them (``--env-option NAME=VALUE``, ``[env_options]``): name, type, default,
+and whether a training curriculum may drive it, read from what the game declares.
+
+* A game whose config is a dataclass (the built-in games): its fields, their declared types and defaults.
+* A user's PettingZoo game: its factory's keyword arguments (``spec.option_source``), with the defaults and the
+  types of the signature (an annotation, else the default's type). A factory that takes only ``**kwargs`` says
+  nothing of its options; where its module follows PettingZoo's convention of a ``raw_env`` that ``env`` and
+  ``parallel_env`` pass their options to, ``raw_env``'s signature is read instead, and the listing says so.
+  ``render_mode`` is marl's to set, not an option.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import sys
+import types
+import typing
+from dataclasses import dataclass
+from typing import Any, Literal, Union
+
+from .registry import EnvSpec
+
+__all__ = ["GameOption", "GameOptions", "game_options"]
+
+NOT_OPTIONS = frozenset({"render_mode"})  # keyword arguments of a factory that marl sets itself
+
+
+@dataclass(frozen=True)
+class GameOption:
+    """One option of a game."""
+
+    name: str
+    type: str  # int, float, bool, str, a type's name, or "any" where the game does not say
+    default: Any = None  # None also where there is none (``required``)
+    choices: tuple[Any, ...] = ()  # the only values it takes (a Literal), else empty
+    required: bool = False  # the factory has no default for it
+    live: bool = False  # a [curriculum] may drive it while games run (the game's live_options)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"name": self.name, "type": self.type, "default": self.default, "choices": list(self.choices),
+                "required": self.required, "live": self.live}
+
+
+@dataclass(frozen=True)
+class GameOptions:
+    """What a game says of its options: ``options`` as declared, ``source`` where they were read (``config``, a
+    dataclass; ``factory``: its keyword arguments; ``raw_env``: the module's raw_env, PettingZoo's convention), and
+    ``open``: it also takes keyword options it does not name (``**kwargs``), so the list may be incomplete."""
+
+    options: tuple[GameOption, ...]
+    source: str
+    open: bool = False
+
+
+def _describe(tp: Any) -> tuple[str, tuple[Any, ...]]:
+    """A type as a word and, for a Literal, its values: ``int``, ``float | None``, ``str`` with ``('a', 'b')``."""
+    if tp is inspect.Parameter.empty or tp is Any:
+        return "any", ()
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is Literal:
+        kinds = {type(a).__name__ for a in args}
+        return (kinds.pop() if len(kinds) == 1 else "any"), tuple(args)
+    if origin in (Union, types.UnionType):
+        parts = [_describe(a) for a in args if a is not type(None)]
+        words = " | ".join(p[0] for p in parts) + (" | None" if type(None) in args else "")
+        return words, tuple(c for p in parts for c in p[1])
+    if isinstance(tp, str):  # an annotation that could not be resolved: as written
+        return tp, ()
+    return getattr(tp, "__name__", str(tp)), ()
+
+
+def _from_dataclass(cfg: Any, live: set[str]) -> GameOptions:
+    try:
+        hints = typing.get_type_hints(type(cfg))
+    except Exception:  # an annotation that cannot be resolved: as written
+        hints = {}
+    out = []
+    for f in dataclasses.fields(cfg):
+        if not f.init:
+            continue
+        word, choices = _describe(hints.get(f.name, f.type))
+        out.append(GameOption(f.name, word, getattr(cfg, f.name), choices, live=f.name in live))
+    return GameOptions(tuple(out), "config")
+
+
+def _signature(fn: Any) -> inspect.Signature | None:
+    try:
+        return inspect.signature(fn, eval_str=True)
+    except Exception:  # an annotation that does not evaluate: read them as written
+        try:
+            return inspect.signature(fn)
+        except (TypeError, ValueError):
+            return None
+
+
+def _from_signature(sig: inspect.Signature, source: str, live: set[str]) -> GameOptions:
+    out, open_ = [], False
+    for p in sig.parameters.values():
+        if p.kind is p.VAR_KEYWORD:
+            open_ = True
+            continue
+        if p.kind in (p.VAR_POSITIONAL, p.POSITIONAL_ONLY) or p.name in NOT_OPTIONS:
+            continue
+        required = p.default is p.empty
+        default = None if required else p.default
+        word, choices = _describe(p.annotation)
+        if word == "any" and default is not None:
+            word = type(default).__name__
+        out.append(GameOption(p.name, word, default, choices, required=required, live=p.name in live))
+    return GameOptions(tuple(out), source, open_)
+
+
+def game_options(spec: EnvSpec) -> GameOptions:
+    """The options of ``spec`` (see the module docstring); ``GameOptions((), "none", open=True)`` where nothing
+    can be read."""
+    live = set(spec.live_options)
+    cfg = spec.config()
+    if dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
+        return _from_dataclass(cfg, live)
+    source = spec.option_source if spec.option_source is not None else spec.make_config
+    sig = _signature(source)
+    if sig is None:
+        return GameOptions((), "none", open=True)
+    found = _from_signature(sig, "factory", live)
+    if found.open and not found.options:  # env(**kwargs): PettingZoo's convention passes them to raw_env
+        raw = getattr(sys.modules.get(getattr(source, "__module__", "") or ""), "raw_env", None)
+        raw_sig = _signature(raw) if callable(raw) and raw is not source else None
+        if raw_sig is not None:
+            return _from_signature(raw_sig, "raw_env", live)
+    return found

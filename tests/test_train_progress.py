@@ -1,0 +1,264 @@
+"""What `marl train` shows while it runs and when it ends: counts that move while every game is still under way,
+plain lines at a steady pace without a terminal, a resumed run counted whole, no bar left above the summary."""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+from pathlib import Path
+
+import pytest
+from cli_helpers import run
+from rich.console import Console
+
+import selfplay_cli.commands.train_view as train_view
+from selfplay_cli.algos.ppo import PPOConfig
+from selfplay_cli.commands.train_view import TrainProgress, describe_games, describe_run
+from selfplay_cli.league.store import League
+from selfplay_cli.league.variants import variant_key
+from selfplay_cli.train.config import TrainConfig
+from selfplay_cli.train.loop import SnapshotRecord, Standing, Trainer, TrainReport
+
+FAST_PPO = PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1)
+
+
+def standing(**kw) -> Standing:
+    base = dict(progress=0.0, steps=0, episodes=0, playing=16, game_steps=0.0, time_limit=1000, snapshots=2,
+                rated=0, newest=(), session_steps=0, steps_per_second=None, remaining=None)
+    base.update(kw)
+    return Standing(**base)
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_progress_counts_what_moves_while_every_game_is_still_under_way(tmp_path):
+    """Games to 21 points never end in 8,192 steps of 16 games: 'games finished' stays 0, so the progress says how
+    far the games under way are, and how many snapshots were taken and rated, with the newest rated one's Elo."""
+    events = []
+    cfg = TrainConfig(env="pong", run="t", steps=8192, games=16, snapshot_steps=2048, eval_games=2, eval_inline=True,
+                      ppo=FAST_PPO)
+    with League.open(tmp_path / "league") as league:
+        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        Trainer(league, cfg, on_progress=events.append).train()
+    training = [e["standing"] for e in events if e["event"] == "training"]
+    assert len(training) >= 2
+    last = training[-1]
+    assert last.episodes == 0 and last.playing == 16 and last.time_limit == 18_000  # pong's 5-minute limit
+    assert last.game_steps == last.steps / 16 > 0  # every game began with the run: the steps are theirs, shared
+    assert "games: 0 finished, 16 under way" in describe_games(last)
+    assert f"{last.game_steps:,.0f} steps in on average, of at most 18,000" in describe_games(last)
+    rated = [e["standing"] for e in events if e["event"] == "snapshot"]
+    assert [s.rated for s in rated] == [2 * (i + 1) for i in range(len(rated))]  # two learners: 2 a moment
+    assert rated[-1].snapshots == rated[-1].rated == 10  # s0 .. s8.19k, both learners, all rated inline
+    assert {r.name for r in rated[-1].newest} == {"t/s8.19k-left", "t/s8.19k-right"}
+    assert all(r.elo is not None and r.ci_low < r.elo < r.ci_high for r in rated[-1].newest)
+
+
+def test_without_a_terminal_a_plain_line_comes_every_30_s_or_5_percent_whichever_is_rarer(monkeypatch):
+    clock = Clock()
+    buf = io.StringIO()
+    monkeypatch.setattr(train_view, "err_console", Console(file=buf, width=300))  # not a terminal
+    cfg = TrainConfig(env="pong", run="r", steps=1_000_000)
+    progress = TrainProgress(cfg, bar=False, lines=True, clock=clock)
+    lines = []
+
+    def at(t: float, share: float) -> None:
+        clock.t = 100.0 + t
+        progress.update({"event": "training", "standing": standing(progress=share, steps=int(share * 1e6),
+                                                                   session_steps=int(share * 1e6),
+                                                                   steps_per_second=share * 1e6 / max(t, 1),
+                                                                   remaining=60.0)})
+        lines.append(buf.getvalue().count("\n"))
+
+    at(10, 0.20)  # 20% of the budget, but only 10 s: no line
+    at(29, 0.30)
+    at(31, 0.31)  # 31 s and 31%: a line
+    at(50, 0.33)  # 19 s since it
+    at(62, 0.34)  # 31 s since, but only 3% more of the budget: a slow run waits for its 5%
+    at(70, 0.37)  # 39 s and 6%: a line
+    assert lines == [0, 0, 1, 1, 1, 2]
+    first = buf.getvalue().splitlines()[0]
+    assert first.startswith("r: 31% (310,000 of 1,000,000 steps, 10,000 steps/s); games: 0 finished, 16 under way")
+    assert "snapshots: 2 taken, 0 rated" in first and first.endswith("0:00:31 elapsed, ~0:01:00 left")
+
+
+def test_quiet_prints_no_progress_line_and_json_keeps_stdout_for_the_json(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(train_view, "PLAIN_LINE_SECONDS", 0.0)  # a line at every 5% of this short budget
+    args = ["train", "pong", "--steps", "4096", "--games", "16", "--env-option", "points_to_win=1", "--eval-games",
+            "0", "--home", str(tmp_path / "h")]
+    code, out, err = run(capsys, *args, "--json")
+    assert code == 0, err
+    assert json.loads(out)["steps"] >= 4096  # stdout: the JSON alone
+    progress = [ln for ln in err.splitlines() if ln.startswith("pong-1: ")]
+    assert progress and all("steps/s); games: " in ln for ln in progress)
+    code, out, err = run(capsys, *args, "--quiet")
+    assert code == 0 and err == "" and out.startswith("run pong-2: ")
+
+
+def _screen(text: str) -> list[str]:
+    """What a terminal shows after ``text``: lines, with carriage return, cursor up and erase line obeyed."""
+    rows, row, col = [""], 0, 0
+    for token in re.findall(r"\x1b\[[0-9;?]*[A-Za-z]|\r|\n|[^\x1b\r\n]+", text):
+        if token == "\n":
+            row, col = row + 1, 0
+            rows += [""] * (row + 1 - len(rows))
+        elif token == "\r":
+            col = 0
+        elif token == "\x1b[2K":
+            rows[row] = ""
+        elif re.fullmatch(r"\x1b\[\d*A", token):
+            row = max(row - int(token[2:-1] or 1), 0)
+        elif not token.startswith("\x1b"):
+            rows[row] = rows[row][:col] + token + rows[row][col + len(token):]
+            col += len(token)
+    return [r for r in rows if r.strip()]
+
+
+def test_the_bar_is_gone_when_the_run_ends_and_the_rated_lines_stay(monkeypatch):
+    buf = io.StringIO()
+    monkeypatch.setattr(train_view, "err_console", Console(file=buf, force_terminal=True, width=200))
+    cfg = TrainConfig(env="pong", run="r", steps=1000)
+    rec = SnapshotRecord("r/s0", "learner", 0, {"random": (2, 0, 0)}, 1100.0, 900.0, 1300.0)
+    with TrainProgress(cfg, bar=True, lines=True) as progress:
+        progress.update({"event": "training", "standing": standing(progress=0.5, steps=500, session_steps=500,
+                                                                   steps_per_second=100.0, remaining=5.0)})
+        progress.progress.refresh()
+        progress.update({"event": "snapshot", "records": [rec],
+                         "standing": standing(progress=1.0, steps=1000, rated=2, newest=(rec,))})
+        progress.progress.refresh()
+        assert any(ln.startswith("train r ") for ln in _screen(buf.getvalue()))  # the bar, while it runs
+        assert any("newest rated s0 Elo 1100 [900, 1300]" in ln for ln in _screen(buf.getvalue()))
+    screen = _screen(buf.getvalue())
+    assert not any(ln.startswith(("train r ", "games: ")) for ln in screen), screen  # the bar and its status: gone
+    shown = "".join(screen)  # the rated line stays (wrapped at the terminal's width)
+    assert shown.startswith("r: 100% (1,000 of 1,000 steps") and "rated s0 (step 0): random 100% of 2, Elo 1100 " \
+        "[900, 1300]" in shown, screen
+
+
+def _stop_after(monkeypatch, steps: int) -> None:
+    """Ctrl-C as the run's progress passes ``steps`` (the first session of a resumed run)."""
+    update = TrainProgress.update
+
+    def stopping(self, event):
+        update(self, event)
+        if event["standing"].steps >= steps and event["event"] == "snapshot":
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(TrainProgress, "update", stopping)
+
+
+RESUMABLE = ["train", "pong", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps", "2048",
+             "--steps", "12288", "--eval-games", "2", "--eval-inline", "--run", "r"]
+
+
+def test_a_resumed_run_reports_the_whole_run_and_this_sessions_rate(tmp_path, capsys, monkeypatch):
+    home = str(tmp_path / "h")
+    with monkeypatch.context() as m:
+        _stop_after(m, 6000)
+        code, out, err = run(capsys, *RESUMABLE, "--home", home)
+    assert code == 130 and "marl train --resume r" in err
+    with League.open(home) as league:
+        before = [p.full_name for p in league.players("pong", kind="snapshot")]
+        games_before = league.count_games("pong")
+    assert 4 <= len(before) < 12
+
+    code, out, err = run(capsys, "train", "--resume", "r", "--home", home, "--json")
+    assert code == 0, err
+    data = json.loads(out)
+    with League.open(home) as league:
+        snapshots = [p.full_name for p in league.players("pong", kind="snapshot")]
+        # the gauntlets' games, rated in the run's variant (training games are not rated)
+        rating_games = len(league.games("pong", variant=variant_key("pong", {"points_to_win": 1})))
+    assert data["sessions"] == 2 and data["snapshots"] == snapshots and len(snapshots) > len(before)
+    assert data["steps"] >= 12_288 and 0 < data["session_steps"] <= 12_288 - 4096
+    assert data["seconds"] > data["session_seconds"] > 0
+    assert data["session_rating_games"] < data["rating_games"] == rating_games
+    assert games_before > 0 and data["episodes"] > 0
+    # a rated moment of the resumed session, before its first update, shows the rate it has, not 0
+    lines = [ln for ln in err.splitlines() if ln.startswith("r: ")]
+    assert lines and not any(re.search(r"\b0(/s| steps/s)", ln) for ln in lines), lines
+
+
+def test_the_summary_of_a_resumed_run_states_the_whole_run():
+    report = TrainReport("pong-1", 6_000_128, 256, seconds=95.4, eval_games=444, snapshots=["a"] * 14, finals=[],
+                         sessions=2, session_steps=524_288, session_seconds=13.2, train_seconds=10.0,
+                         session_eval_games=40, eval_seconds=9.0, wait_seconds=3.0)
+    assert describe_run(report) == (
+        "run pong-1: 6,000,128 game steps in 2 sessions, 95 s in all (this session: 524,288 steps in 13 s, 10 s of "
+        "training at 52,429 steps/s), 256 episodes, 14 snapshots; 444 rating games (40 of them this session, "
+        "beside training: 9 s, 3 s of it waited for at the end)")
+    report.session_steps, report.train_seconds = 0, 0.0  # resumed after its budget was spent: nothing to train
+    assert "(this session: 0 steps in 13 s, no training left to do)" in describe_run(report)
+
+
+@pytest.mark.parametrize("ended, text", [(False, "16 under way"), (True, "16 left unfinished")])
+def test_games_under_way_are_named_as_they_are(ended, text):
+    assert text in describe_games(standing(ended=ended, game_steps=12.5))
+
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+# the run each README section's commands name, and the `marl train` command that makes it (flags that change names)
+README_RUNS = {"pong-1": ("pong", {"agents": 2}), "tennis-1": ("tennis", {"agents": 2}),
+               "lander-1": ("lander", {"agents": 2, "sharing": "fups"}),
+               "lander-2": ("lander", {"agents": 2, "sharing": "nops", "algo": "dqn"}),
+               "connect_four_v3-1": ("pettingzoo.classic.connect_four_v3", {"sharing": "fups"})}
+
+
+def _learners_of(env: str, flags: dict) -> list[str]:
+    """The learners (so the snapshot suffixes) of `marl train ENV` with ``flags``, from the game's own training
+    defaults as `marl train` applies them."""
+    from selfplay_cli.commands.train import merge_settings
+    from selfplay_cli.envs import get_env
+    from selfplay_cli.train.loop import _learner_names
+
+    spec = get_env(env)
+    settings = TrainConfig(env=spec.name, run="x").to_dict()
+    merge_settings(settings, spec.train_defaults)
+    settings.update(flags)
+    cfg = TrainConfig.from_dict(settings)
+    return _learner_names(spec.agents, cfg.seat_plan().home, cfg.sharing)
+
+
+def test_readme_names_only_snapshots_its_runs_make():
+    """A shared network's snapshots have no seat suffix (tennis's default run: s0, not s0-player_0); a run of one
+    network per seat names a moment's team (s6M) or one member (s6M-left)."""
+    from selfplay_cli.envs import get_env
+
+    text = README.read_text()
+    named = re.findall(r"marl \w+(?: \w+)? .*?\b((?:pong|tennis|lander|connect_four_v3)-\d+)/([\w.-]+)", text)
+    assert len(named) >= 8
+    for run_name, snap in named:
+        env, flags = README_RUNS[run_name]
+        learners = _learners_of(env, flags)
+        agents = get_env(env).agents
+        seat = next((a for a in agents if snap.endswith(f"-{a}")), None)
+        assert re.fullmatch(r"(s\d+(\.\d+)?[kM]?|latest|best)", snap.removesuffix(f"-{seat}") if seat else snap), snap
+        if learners == ["learner"]:
+            assert seat is None, f"{run_name}/{snap}: that run trains one shared network, its snapshots have no seat"
+        else:
+            assert seat is None or seat in learners, f"{run_name}/{snap}"
+
+
+def test_a_seat_suffix_on_a_shared_networks_snapshot_is_answered_with_its_name(tmp_path):
+    from selfplay_cli.errors import MarlError
+    from selfplay_cli.league.names import resolve
+
+    cfg = TrainConfig(env="pong", run="t", steps=1024, games=8, sharing="fups", eval_games=0, ppo=FAST_PPO)
+    with League.open(tmp_path / "league") as league:
+        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        Trainer(league, cfg).train()
+        league.ensure_bots("lander", ["heuristic", "random"])  # a second game's players: its own random
+        assert resolve(league, "t/s0").name == "s0"
+        for typed, hint in (("t/s0-left", "name it t/s0"), ("s0-right", "name it s0")):
+            with pytest.raises(MarlError) as e:
+                resolve(league, typed)
+            assert f"t/s0 is one network for every seat (its run shares one), so its name has no seat: {hint}" \
+                in str(e.value)
+            assert str(e.value).count("random") == 1  # every game's random player, named once
