@@ -78,7 +78,8 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
         table.add_column(f"vs {escape(bot)}", justify="right")
     for r in rows:
         note = f" ({r.flag})" if r.flag else ""
-        marks = (" (anchor)" if r.anchor else "") + ((" (best, tied)" if r.tied else " (best)") if r.best else "")
+        marks = ((" (anchor)" if r.anchor else "") + ((" (best, tied)" if r.tied else " (best)") if r.best else "")
+                 + (f" (= {escape(r.copy_of)}: the same weights)" if r.copy_of else ""))
         cells = [str(r.rank), "-" if r.tier is None else str(r.tier), escape(r.policy) + marks, r.kind,
                  "" if r.step is None else f"{r.step:,}",
                  _fmt_elo(r.elo) + note, f"{_fmt_elo(r.ci_low)} .. {_fmt_elo(r.ci_high)}", str(r.games),

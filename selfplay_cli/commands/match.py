@@ -169,6 +169,7 @@ def match(
         # each match: A's rows (one player, or a cooperative team flying together), B's row, the team's name
         jobs = ([(list(crew.members), side_b, crew.full_name)] if crew is not None
                 else [([row_a], row_b, None) for row_a, row_b in pairings(a, side_a, b, side_b, sprt=sprt)])
+        check_distinct_weights(league, [(r, job[1]) for job in jobs for r in job[0]])  # type: ignore[misc]
         options = parse_env_options(jobs[0][1].env, env_option) if env_option else None  # type: ignore[union-attr]
         forecast = _forecaster(league, jobs[0][1].env, [r for job in jobs for r in (*job[0], job[1])],  # type: ignore
                                options)
@@ -239,6 +240,16 @@ def _flying_team(side_a: Any, side_b: Any, a: str, b: str) -> Team | None:
     if isinstance(side_b, Team):
         raise MarlError(f"'{a}' and '{b}' are both teams: match each against a scripted player")
     return team
+
+
+def check_distinct_weights(league: Any, pairs: list[tuple[PlayerRow, PlayerRow]]) -> None:
+    """Refuse, in one line, a match between two names of the same weights: one player (a run repeated with its
+    seed), whose games against itself would say nothing."""
+    same = league.same_weights()
+    for x, y in pairs:
+        if same.get(x.id, x.id) == same.get(y.id, y.id):
+            raise MarlError(f"{x.full_name} and {y.full_name} hold the same weights: they are one player, rated as one "
+                            "(marl league ladder shows it once, its other names under it)")
 
 
 def pairings(a: str, side_a: PlayerRow | Team, b: str, side_b: PlayerRow | Team,

@@ -10,7 +10,7 @@ around their ratings (``spread``), and keeps each pair's own record, so that any
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -36,6 +36,7 @@ class Forecaster:
     points: np.ndarray  # (n, n): points i scored against j
     games: np.ndarray  # (n, n): results between i and j
     spread: float  # Elo: how far pairs scatter around their ratings' prediction
+    aliases: dict[str, str] = field(default_factory=dict)  # another name of a player's weights -> its first name
 
     @classmethod
     def of_games(cls, names: list[str], a: npt.ArrayLike, b: npt.ArrayLike, score_a: npt.ArrayLike, anchor: str,
@@ -71,17 +72,22 @@ class Forecaster:
         population = [league.get_player(int(i)) for i in ids.tolist()]
         counts = (np.bincount(a, minlength=ids.size) + np.bincount(b, minlength=ids.size)).tolist()
         anchor = default_anchor(population, dict(zip(ids.tolist(), counts, strict=True)), declared_anchor(env))
-        return cls.of_games([p.full_name for p in population], a, b, table.score_a, anchor.full_name, prior)
+        fitted = cls.of_games([p.full_name for p in population], a, b, table.score_a, anchor.full_name, prior)
+        lead = {p.id: p.full_name for p in population}
+        aliases = {league.get_player(pid).full_name: lead[first] for pid, first in league.same_weights(env).items()
+                   if first in lead}
+        return replace(fitted, aliases=aliases)
 
     def predict(self, a: str, b: str, games: int, confidence: float = 0.95) -> ScorePrediction:
         """A's score over ``games`` games against B (players by name); LeagueError for a player without rated
         games or one whose rating is not linked to the anchor (nothing to predict from)."""
+        a, b = self.aliases.get(a, a), self.aliases.get(b, b)  # one set of weights is one player
         for name in (a, b):
             if name not in self.names:
                 raise LeagueError(f"{name} has no rated games: the ladder cannot predict its score")
         i, j = self.names.index(a), self.names.index(b)
         if i == j:
-            raise LeagueError(f"{a} against itself: nothing to predict")
+            raise LeagueError(f"{a} against itself (the same weights): nothing to predict")
         for k, name in ((i, a), (j, b)):
             if not self.linked[k]:
                 raise LeagueError(f"{name}'s rating is not linked to the anchor by games: nothing to predict from")
@@ -91,7 +97,7 @@ class Forecaster:
 
     def met(self, a: str, b: str) -> tuple[float, int]:
         """A's points and the results between A and B in the fitted games."""
-        i, j = self.names.index(a), self.names.index(b)
+        i, j = self.names.index(self.aliases.get(a, a)), self.names.index(self.aliases.get(b, b))
         return float(self.points[i, j]), int(self.games[i, j])
 
 

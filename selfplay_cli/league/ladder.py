@@ -100,7 +100,8 @@ __all__ = [
 ]
 
 _JSON_KEYS = ("policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
-              "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "vs")
+              "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "copy_of",
+              "copies", "vs")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -172,6 +173,8 @@ class LadderRow:
         best_margin: for a run's best snapshot, its difference over the run's next best (None alone in its run).
         tied: for a run's best snapshot, the run's snapshots it is not separated from (empty: the best beyond
             doubt).
+        copy_of / copies: one set of weights is one player: its other names (a run repeated with its seed) get a
+            row each, with its rating, right under it (``copy_of`` it), and it lists them (``copies``).
         vs: the record against each scripted player of the env, in the league's bot order (empty for CSV
             ladders); a bot's own entry has no games.
         mean_return: the player's mean team return over its cooperative episodes (None in other games).
@@ -200,6 +203,8 @@ class LadderRow:
     margin: Margin | None = None
     best_margin: Margin | None = None
     tied: tuple[str, ...] = ()
+    copy_of: str | None = None  # another name of the weights of this player (its row just above): one player
+    copies: tuple[str, ...] = ()  # the player's other names (the same weights under another run or name)
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict: ``policy, kind, elo, ci_low, ci_high, games, wins, draws, losses, rank`` then
@@ -229,6 +234,8 @@ class LadderRow:
             "margin": None if self.margin is None else self.margin.to_json(),
             "best_margin": None if self.best_margin is None else self.best_margin.to_json(),
             "tied": list(self.tied),
+            "copy_of": self.copy_of,
+            "copies": list(self.copies),
             "vs": {v.bot: {"score": None if v.score is None else round(float(v.score), 4), "games": int(v.games)}
                    for v in self.vs},
         }
@@ -531,8 +538,8 @@ def _mark_best(rows: list[LadderRow], removed: set[int], fitted: Fitted) -> list
     for members in by_run.values():
         comparable = [r for r in members if not _group(r.flag)] or members
         best, rest = comparable[0], comparable[1:]
-        i = index[best.policy]
-        margins = [fitted.margin(i, index[r.policy]) for r in rest]
+        i = index[best.copy_of or best.policy]
+        margins = [replace(fitted.margin(i, index[r.copy_of or r.policy]), over=r.policy) for r in rest]
         marked[best.policy] = replace(best, best=True, best_margin=margins[0] if margins else None,
                                       tied=tuple(m.over for m in margins if not m.separated))
     return [marked.get(r.policy, r) for r in rows]
@@ -597,14 +604,36 @@ def ladder(
     rows = [replace(r, run=run_of.get(int(r.player_id)), vs=records.get(int(r.player_id), ()),
                     mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
             if r.player_id is not None else r for r in rows]
+    rows = _with_copies(league, env, rows, include_removed)
     return _mark_best(rows, removed, fitted)
+
+
+def _with_copies(league: League, env: str, rows: list[LadderRow], include_removed: bool) -> list[LadderRow]:
+    """Every other name of a rated player's weights (a run repeated with its seed, in the same league), as a row of
+    its own right under the player's: the same rating, rank and tier, ``copy_of`` the player; the player's row
+    lists them in ``copies``."""
+    same = league.same_weights(env)
+    if not same:
+        return rows
+    by_lead: dict[int, list[PlayerRow]] = defaultdict(list)
+    for pid, lead in same.items():
+        p = league.get_player(pid)
+        if include_removed or not p.removed:
+            by_lead[lead].append(p)
+    out = []
+    for r in rows:
+        copies = by_lead.get(r.player_id, []) if r.player_id is not None else []
+        out.append(replace(r, copies=tuple(p.full_name for p in copies)) if copies else r)
+        out += [replace(r, policy=p.full_name, player_id=p.id, run=p.run, step=p.step, anchor=False,
+                        copy_of=r.policy, copies=()) for p in copies]
+    return out
 
 
 def verdict_lines(rows: list[LadderRow]) -> list[str]:
     """Who is best, and by how much, in plain lines: the ladder's top over the next player, then each run's best
     over the run's next best (or the snapshots it cannot be told apart from)."""
     lines = []
-    ranked = [r for r in rows if r.tier is not None]
+    ranked = [r for r in rows if r.tier is not None and r.copy_of is None]
     if len(ranked) >= 2 and ranked[0].margin is not None:
         top, m = ranked[0], ranked[0].margin
         shared = sum(1 for r in ranked if r.tier == top.tier) - 1

@@ -385,7 +385,8 @@ class Ledger(Database):
         return ids
 
     def games(self, env: str | None = None, players: Iterable[int] | None = None,
-              any_seat: bool = False, rated: bool = True, variant: str | None = "") -> GameTable:
+              any_seat: bool = False, rated: bool = True, variant: str | None = "",
+              pooled: bool = True) -> GameTable:
         """The pairwise results of the ledger (of ``env``), one row each, in game-id order (see the module
         docstring and :class:`GameTable`).
 
@@ -396,13 +397,16 @@ class Ledger(Database):
         ``players`` restricts the table to results between those players (both in the set), or, with
         ``any_seat=True``, to results in which at least one of them played.
 
+        ``pooled`` (the default): snapshots of the same weights are one player (:meth:`same_weights`), their games
+        filed under the first of them (``players`` may name any of them); False keeps every name's games apart.
+
         ``rated`` (the default) leaves out the games of training matches: there a learner that kept learning after
         its latest snapshot played under that snapshot's name, so they measure no fixed player. Every rating is
         fitted from the others (matches, tournaments, gates and the evaluation games after each snapshot);
         ``rated=False`` includes the training games too.
         """
 
-        def work(s: Session) -> list[tuple]:
+        def work(s: Session) -> tuple[list[tuple], dict[int, int]]:
             matches = _match_rules(s, env, rated, variant)
             special = {mid: r for mid, r in matches.items() if not r.is_default}
             rows = [(*r, 0) for r in s.execute(_two_seat_query(env, rated)).all()
@@ -410,14 +414,25 @@ class Ledger(Database):
             if special:
                 rows += _derived_rows(s, env, rated, special)
                 rows.sort(key=lambda r: r[0])
-            return rows
+            return rows, (_same_weights(s, env) if pooled else {})
 
-        table = GameTable.of_rows(self._read(work))
+        rows, same = self._read(work)
+        table = GameTable.of_rows(rows)
+        if same:  # one set of weights is one player: its games under every name are its own
+            for column in (table.player_a, table.player_b):  # (fresh arrays of this call)
+                column[:] = [same.get(int(p), int(p)) for p in column.tolist()]
+            table = table.select(table.player_a != table.player_b)  # a player against its copy says nothing
         if players is not None:
-            pop = np.fromiter((int(p) for p in players), dtype=np.int64)
+            pop = np.fromiter((same.get(int(p), int(p)) for p in players), dtype=np.int64)
             in_a, in_b = np.isin(table.player_a, pop), np.isin(table.player_b, pop)
             table = table.select(in_a | in_b if any_seat else in_a & in_b)
         return table
+
+    def same_weights(self, env: str | None = None) -> dict[int, int]:
+        """Snapshots whose weights another snapshot of the game holds too: id -> the id of the player they all are
+        (the first live one, by id). One set of weights is one player: every rating pools its games under each of its
+        names (:meth:`games`), an import of known weights is refused, and two names of it never play each other."""
+        return self._read(lambda s: _same_weights(s, env))
 
     def mean_returns(self, env: str | None = None, rated: bool = True,
                      variant: str | None = "") -> dict[int, tuple[int, float]]:
@@ -549,6 +564,25 @@ class Ledger(Database):
                     _apply_elo(players, _results(g, rules.get(g.match_id, Rules()), episodes), self.elo_k)
 
         self._unit(work)
+
+
+def _same_weights(s: Session, env: str | None) -> dict[int, int]:
+    """:meth:`Ledger.same_weights` in a session: snapshots grouped by (game, weights' checksum), each mapped to its
+    group's first live member (its first member when all are removed); only groups of two or more."""
+    q = select(Player.id, Player.env, Player.meta, Player.removed).where(Player.kind == "snapshot").order_by(Player.id)
+    if env is not None:
+        q = q.where(Player.env == env)
+    groups: dict[tuple[str, str], list[tuple[int, bool]]] = defaultdict(list)
+    for pid, penv, meta, removed in s.execute(q):
+        sha = (meta or {}).get("weights_sha256")
+        if sha:
+            groups[(penv, sha)].append((int(pid), bool(removed)))
+    out: dict[int, int] = {}
+    for members in groups.values():
+        if len(members) > 1:
+            lead = next((pid for pid, removed in members if not removed), members[0][0])
+            out.update({pid: lead for pid, _ in members if pid != lead})
+    return out
 
 
 def _match_params(env: str, kind: str, params: dict[str, Any] | None) -> dict[str, Any]:

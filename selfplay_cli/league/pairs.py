@@ -60,6 +60,12 @@ def plan_tournament(
         if len(ids) < 2:
             raise LeagueError("a round robin needs at least two players")
         pairs = [(ids[i], ids[j]) for i in range(len(ids)) for j in range(i + 1, len(ids))]
+    same = league.same_weights(env)  # names of one set of weights: one player, whose games count under each
+    unique: dict[frozenset[int], tuple[int, int]] = {}
+    for x, y in pairs:
+        if same.get(x, x) != same.get(y, y):
+            unique.setdefault(frozenset((same.get(x, x), same.get(y, y))), (x, y))
+    pairs = list(unique.values())
     table = league.games(env=env, players=check, variant=variant)
     counts: dict[tuple[int, int], int] = defaultdict(int)
     weight = np.where(table.kind == KIND_CODES["cooperative"], 2, 1).tolist()  # a comparison: two episodes
@@ -67,7 +73,8 @@ def plan_tournament(
         counts[(min(x, y), max(x, y))] += w
     plan = []
     for x, y in pairs:
-        have = counts.get((min(x, y), max(x, y)), 0)
+        sx, sy = same.get(x, x), same.get(y, y)
+        have = counts.get((min(sx, sy), max(sx, sy)), 0)
         missing = max(games_per_pair - have, 0)
         if missing > 0:
             plan.append(PairPlan(a_id=x, b_id=y, existing=have, missing=missing))
@@ -91,8 +98,11 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
         raise LeagueError(f"player {a_id} cannot be paired with itself")
     league.get_player(a_id)
     league.get_player(b_id)
-    table = league.games(players=[a_id, b_id], variant=variant)
-    first_side = table.player_a == a_id
+    same = league.same_weights()  # a name of weights another snapshot holds: its games are the player's
+    if same.get(a_id, a_id) == same.get(b_id, b_id):
+        raise LeagueError(f"players {a_id} and {b_id} hold the same weights: one player, no record against itself")
+    table = league.games(players=[a_id, b_id], variant=variant)  # (filed under the first name of each)
+    first_side = table.player_a == same.get(a_id, a_id)
     pts = np.where(first_side, table.score_a, 1.0 - table.score_a)
     wins, draws, losses = int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))
     groups: dict[tuple[int, int], tuple[list[float], list[float]]] = defaultdict(lambda: ([], []))

@@ -55,6 +55,11 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
         from ..errors import MarlError
 
         raise MarlError(f"the candidate and the baseline are the same player ({cand.full_name})")
+    if league.same_weights().get(cand.id, cand.id) == league.same_weights().get(base.id, base.id):
+        from ..errors import MarlError
+
+        raise MarlError(f"{cand.full_name} and {base.full_name} hold the same weights: one player, not stronger "
+                        "than itself")
     h2h = head_to_head(league, cand.id, base.id, variant=players_variant(league, cand.env, [cand, base], env_options))
     stored = h2h["games"]  # ledger games (a cooperative comparison is two episodes)
     wins, draws, losses = h2h["wins"], h2h["draws"], h2h["losses"]

@@ -146,7 +146,7 @@ def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = F
     bots = league.players(env=env, kind="bot")
     gauntlets = [mid for mid, params in league.match_params(env, kind="eval").items() if params.get("gauntlet")]
     variant = variant_key(env, run_options(league, run or ""))  # the options the run plays: its ladder
-    table = league.games(env=env, players=[p.id for p in snapshots + bots], variant=variant)
+    table = league.games(env=env, players=[p.id for p in snapshots + bots], variant=variant, pooled=False)
     return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)), variant)
 
 

@@ -254,8 +254,10 @@ def build_matrix(
         raise LeagueError(f"no rated games in {env} yet: play some first (marl match / marl league tournament)")
     pool = {p.id: p for p in league.players(include_removed=True) if p.id in {r.player_id for r in rows}}
     env = pool[rows[0].player_id].env if rows[0].player_id in pool else str(env)
-    if run is not None:
-        rows = [r for r in rows if r.kind == "bot" or (r.player_id in pool and pool[r.player_id].run == run)]
+    if run is not None:  # (a player of the same weights as one of the run's is shown under its first name)
+        rows = [r for r in rows if r.kind == "bot" or (r.player_id in pool and pool[r.player_id].run == run)
+                or any(c.startswith(f"{run}/") for c in r.copies)]
+    rows = [r for r in rows if r.copy_of is None]  # one set of weights, one player
     rows = sorted(rows, key=lambda r: (-r.elo, r.policy))[:top]
     if len(rows) < 2:
         raise LeagueError(f"fewer than two rated players{f' in run {run!r} and the bots' if run else ''} in {env}")

@@ -724,7 +724,7 @@ class Trainer:
         run = self.cfg.run
         ids = [p.id for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True)
                if p.run == run]
-        table = self.league.games(self.spec.name, players=ids, any_seat=True, variant=self.variant)
+        table = self.league.games(self.spec.name, players=ids, any_seat=True, variant=self.variant, pooled=False)
         gauntlets = []
         for match_id in np.unique(table.match_id).tolist():
             kind, params = self.league.match_info(match_id)
