@@ -237,8 +237,8 @@ def test_state_round_trip_resumes_identically():
 def test_dqn_learns_to_beat_random_at_pong(one_thread, learn_against_random):
     """A real learning assertion: from an even game to a clear win against the random player.
 
-    The bar, measured on seeds 0-19: the first 300 games 0.51-0.61 (mean 0.565, sd 0.024: they end by ~60k steps,
-    so updates from 20k on count in them), the last 300 0.89-0.98 (mean 0.93, sd 0.026). 0.7 is 5.6 sd above the
+    The bar, measured on seeds 0-19: the first 300 games 0.51-0.61 (mean 0.56, sd 0.023: they end by ~60k steps,
+    so updates from 20k on count in them), the last 300 0.89-0.98 (mean 0.93, sd 0.026). 0.7 is 6 sd above the
     first and 8.7 sd below the last; a learner that never updates stays near its first games' rate."""
     cfg = DQNConfig(lr=1e-3, batch_size=128, replay_ratio=0.0625, target_period=100, n_step=5,
                     learning_starts=20_000, eps_decay_steps=50_000)
