@@ -235,7 +235,11 @@ def test_state_round_trip_resumes_identically():
 
 
 def test_dqn_learns_to_beat_random_at_pong(one_thread, learn_against_random):
-    """A real learning assertion: from an even game to a clear win against the random player."""
+    """A real learning assertion: from an even game to a clear win against the random player.
+
+    The bar, measured on seeds 0-19: the first 300 games 0.51-0.61 (mean 0.56, sd 0.023: they end by ~60k steps,
+    so updates from 20k on count in them), the last 300 0.89-0.98 (mean 0.93, sd 0.026). 0.7 is 6 sd above the
+    first and 8.7 sd below the last; a learner that never updates stays near its first games' rate."""
     cfg = DQNConfig(lr=1e-3, batch_size=128, replay_ratio=0.0625, target_period=100, n_step=5,
                     learning_starts=20_000, eps_decay_steps=50_000)
     learner = DQNLearner((8, 6), 3, 64, cfg, seed=0)
@@ -243,5 +247,4 @@ def test_dqn_learns_to_beat_random_at_pong(one_thread, learn_against_random):
     first, last, n_games = learn_against_random(learner, n_games=64, budget=160_000)
     print(f"DQN win rate vs random: first 300 games {first:.2f}, last 300 {last:.2f} ({n_games} games, "
           f"{learner.grad_steps} updates, {time.perf_counter() - start:.1f} s)")
-    assert first < 0.65, first
-    assert last > 0.75, (first, last)
+    assert first < 0.7 < last, (first, last)

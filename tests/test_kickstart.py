@@ -95,9 +95,13 @@ def test_the_ring_keeps_the_newest_states():
 
 
 @pytest.mark.parametrize("learner_cls", [SACLearner, PPOLearner])
-def test_a_learner_taught_comes_to_act_as_its_teacher(learner_cls):
+def test_a_learner_taught_comes_to_act_as_its_teacher(learner_cls, one_thread):
     """A teacher's rule a = clip(2 s0 - s1) on random states: with the imitation term weighted and no reward, the
-    learner's deterministic action follows the rule on states it never saw (its untaught error is ~25x larger)."""
+    learner's deterministic action follows the rule on states it never saw (its untaught error is ~25x larger).
+
+    The bar, measured on seeds 0-9: untaught errors 0.65-0.69; taught, SAC 0.0229-0.0252 (sd 0.0008: the bar 0.04 is
+    19 sd above) and PPO 0.0001-0.0014; two torch threads instead of one move them by less than 0.0012. Without the
+    imitation term nothing draws the action toward the rule (there is no reward): the error stays near its start."""
     rng = np.random.default_rng(0)
     seat = Seat(spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Box(-1.0, 1.0, (1,), np.float32))
     n = 64
@@ -133,7 +137,7 @@ def test_a_learner_taught_comes_to_act_as_its_teacher(learner_cls):
     assert after < 0.04 and after < before / 15, (before, after)
 
 
-def test_without_weight_a_learner_keeps_no_term():
+def test_without_weight_a_learner_keeps_no_term(one_thread):
     seat = Seat(spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Discrete(3))
     learner = PPOLearner(seat, 4, seed=0)
     learner.teach(np.zeros((4, 2)), np.zeros(4, dtype=np.int64))
@@ -176,40 +180,56 @@ def test_a_teacher_the_run_cannot_have_is_one_line_and_no_run(tmp_path, capsys):
     league.close()
 
 
-def test_pong_learners_kickstarted_by_the_cpu_player_choose_its_moves(tmp_path, capsys):
-    """PPO on pong taught by the scripted cpu player (its weight held at 2): the final snapshot chooses the cpu
-    player's move in most states of a game between cpu and random players; an untaught snapshot of the same budget
-    agrees about as often as chance."""
-    home = tmp_path / "league"
-    config = tmp_path / "teach.toml"
-    config.write_text('[teacher]\nplayer = "cpu"\nweight = 2.0\n')
-    common = ("--agents", "2", "--steps", "200000", "--games", "64", "--eval-games", "0", "--quiet", "--home",
-              str(home))
-    taught = run_json(capsys, "train", "pong", "--config", str(config), "--run", "taught", *common)
-    plain = run_json(capsys, "train", "pong", "--run", "plain", *common)
-    metrics = [json.loads(line) for line in (home / "runs" / "taught" / "metrics.jsonl").read_text().splitlines()]
-    losses = [m["left/imitation_loss"] for m in metrics if "left/imitation_loss" in m]
-    assert losses[-1] < 0.5 * losses[0], losses
-
+def agreement_with_cpu(league, snapshot: str) -> float:
+    """The share of states in which ``snapshot`` (greedy, on the left) chooses the scripted cpu player's move, over
+    9,600 states of 32 pong games between the cpu player and the random player (the same games for every call)."""
     spec = get_env("pong")
     core = spec.make_core(32, spec.config())
     cpu = spec.bots["cpu"].rule_for(spec.config())
     rng = np.random.default_rng(3)
-    league = League.open(home=home, readonly=True)
-    agree = {}
-    for name, report in (("taught", taught), ("plain", plain)):
-        snap = report["final"][0]["snapshot"]
-        player = load_player(league, resolve(league, snap, "pong"), greedy=True)
-        same = total = 0
-        core.reset(np.arange(32), np.arange(32))
-        for _ in range(300):
-            obs = core.observe()
-            teacher = cpu(obs[0], rng)
-            same += int((player.act(obs[0]) == teacher).sum())
-            total += len(teacher)
-            core.step([teacher, rng.integers(0, 3, 32)])
-            done = np.flatnonzero(core.terminated | core.truncated)
-            core.reset(done, 1000 + done)
-        agree[name] = same / total
-    league.close()
-    assert agree["taught"] > 0.75 and agree["taught"] > agree["plain"] + 0.3, agree
+    player = load_player(league, resolve(league, snapshot, "pong"), greedy=True)
+    same = total = 0
+    core.reset(np.arange(32), np.arange(32))
+    for _ in range(300):
+        obs = core.observe()
+        teacher = cpu(obs[0], rng)
+        same += int((player.act(obs[0]) == teacher).sum())
+        total += len(teacher)
+        core.step([teacher, rng.integers(0, 3, 32)])
+        done = np.flatnonzero(core.terminated | core.truncated)
+        core.reset(done, 1000 + done)
+    return same / total
+
+
+def test_pong_learners_kickstarted_by_the_cpu_player_choose_its_moves(tmp_path, capsys):
+    """PPO on pong taught by the scripted cpu player (its weight held at 2), on three seeds: the imitation loss falls
+    and the final snapshot chooses the cpu player's move in most states of games between cpu and random players.
+
+    The bar, measured on seeds 0-9 at this budget (50k steps: six PPO updates, 96 minibatches, each with its
+    imitation term): taught snapshots agree 0.731-0.745 (mean 0.740, sd 0.005; the imitation is supervised
+    learning, whose outcome hardly depends on the run's trajectory); untaught runs of the same budget agree
+    0.30-0.53 (mean 0.46, sd 0.07: a constant move agrees about half the time, since the cpu player never stays).
+    The bar 0.70 is 8 sd below the taught mean and 3.4 sd above the untaught one. The median of three seeds falls
+    below it only if two seeds do: even at three times the measured spread (p = 0.004 a seed), 3 p^2 < 1e-4. With
+    the imitation term broken the three runs are untaught ones, and the median clears 0.70 with p < 1e-6.
+
+    Not compared with an untaught run: one that learns pong learns to follow the ball, as the cpu player does
+    (seed 0: 0.52 at 200k steps; seed 6: 0.67 at 100k), so the gap between the two measured how far the untaught
+    run had got, which varies from machine to machine (this test once asked taught > untaught + 0.3 at 200k steps:
+    0.83 and 0.53 on torch 2.13)."""
+    home = tmp_path / "league"
+    config = tmp_path / "teach.toml"
+    config.write_text('[teacher]\nplayer = "cpu"\nweight = 2.0\n')
+    agree = []
+    for seed in (0, 1, 2):
+        taught = run_json(capsys, "train", "pong", "--config", str(config), "--run", f"taught{seed}", "--seed",
+                          str(seed), "--agents", "2", "--steps", "50000", "--games", "64", "--eval-games", "0",
+                          "--quiet", "--home", str(home))
+        lines = (home / "runs" / f"taught{seed}" / "metrics.jsonl").read_text().splitlines()
+        losses = [m["left/imitation_loss"] for m in map(json.loads, lines) if "left/imitation_loss" in m]
+        # the cross-entropy to the cpu player's moves: 0.90-0.92 after the first update, 0.22-0.24 at the end
+        assert losses[-1] < 0.5 * losses[0], (seed, losses)
+        league = League.open(home=home, readonly=True)
+        agree.append(agreement_with_cpu(league, taught["final"][0]["snapshot"]))
+        league.close()
+    assert sorted(agree)[1] > 0.70, agree

@@ -107,7 +107,9 @@ def test_an_sa_agent_trains_plays_and_records_its_team(home, tmp_path, capsys):
     assert shown["file"]["act_space"] == {"kind": "discrete", "n": 16}  # 4 actions x 4 actions
     assert shown["file"]["obs_space"]["shape"] == [16] and shown["file"]["extra"]["joint"] == {"seats": 2, "base": 4}
     r = run_json(capsys, "match", "sa/s4k", "heuristic", "--games", "4")
-    assert r["games"] == 4 and r["losses"] >= 1  # an untrained agent against the heuristic
+    # an untrained agent against the heuristic: measured on seeds 0-4, its team returns -440 to -1,650 a game, the
+    # heuristic's +277 on the same games, so it loses both comparisons on every seed
+    assert r["games"] == 4 and r["losses"] >= 1
     rows = {r["policy"]: r for r in run_json(capsys, "league", "ladder")}
     assert rows["heuristic"]["anchor"] and rows["heuristic"]["elo"] == 1000.0  # the lander's anchor: its heuristic
     assert rows["sa/s4k"]["mean_return"] is not None

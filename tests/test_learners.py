@@ -198,10 +198,15 @@ def test_ppo_never_samples_a_masked_action_and_learns_under_masks():
 
 
 def test_ppo_multidiscrete_learns_a_bandit(one_thread):
-    """Reward 1 for choosing (2, 0): the learned greedy action is that pair."""
+    """Reward 1 for choosing (2, 0): the learner samples that pair far more often in its last rollout than in its
+    first, and its greedy action is that pair.
+
+    The bar, measured on seeds 0-19: the first rollout's 512 draws hit (2, 0) 0.14-0.19 of the time (chance: 1/6),
+    the last rollout's 0.77-0.82 (sd 0.014); 0.4 is 15 sd from either. A learner that does not update keeps its
+    first rate (and its greedy pair is (2, 0) for one network in six: hence the rates, not the greedy pair alone)."""
     learner = PPOLearner(Seat(BOX2, spaces.MultiDiscrete([3, 2])), 32, PPOConfig(rollout_steps=16, lr=1e-2), seed=0)
     obs = np.zeros((32, 2), np.float32)
-    first = None
+    rates = []
     for u in range(15):
         hits = 0.0
         for _ in range(16):
@@ -209,9 +214,9 @@ def test_ppo_multidiscrete_learns_a_bandit(one_thread):
             r = ((a[:, 0] == 2) & (a[:, 1] == 0)).astype(np.float32)
             hits += r.mean()
             learner.record(r, np.ones(32))
-        first = hits / 16 if first is None else first
+        rates.append(hits / 16)
         learner.update(obs, progress=u / 15)
-    assert first < 0.4
+    assert rates[0] < 0.4 < rates[-1], rates
     assert learner.policy("p", "bandit", greedy=True).act(obs[:1]).tolist() == [[2, 0]]
 
 
@@ -246,7 +251,10 @@ def greedy_return(policy, b: int = 256) -> float:
 
 def test_ppo_learns_a_continuous_task(one_thread):
     """A Gaussian policy over Box(-1, 1, (1,)): from standing still (a return of about -5) to reaching the target
-    (the best return is about -0.5) in 12 updates of 32 games x 32 steps."""
+    (the best return is about -0.5) in 12 updates of 32 games x 32 steps.
+
+    The bars, measured on seeds 0-19: before -4.91 to -5.00, after -0.52 to -0.64 (sd 0.025): -3.0 and -1.2 are each
+    more than 20 sd away; a learner that does not update keeps its return of about -5."""
     seat = Seat(spaces.Box(-2, 2, (2,), np.float32), spaces.Box(-1, 1, (1,), np.float32))
     cfg = PPOConfig(rollout_steps=32, lr=3e-3, ent_coef=0.0, gamma=0.9, arch=Arch(hidden=(32, 32), activation="tanh"))
     learner = PPOLearner(seat, 32, cfg, seed=0)

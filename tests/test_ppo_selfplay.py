@@ -90,11 +90,16 @@ def test_learner_state_round_trip_resumes_identically():
     assert b.updates == 1
 
 
-def test_ppo_learns_to_beat_random_at_pong(learn_against_random):
-    """A real learning assertion: from an even game to a clear win against the random player."""
+def test_ppo_learns_to_beat_random_at_pong(learn_against_random, one_thread):
+    """A real learning assertion: from an even game to a clear win against the random player.
+
+    The bars, measured on seeds 0-19 (one torch thread): the first 300 games 0.39-0.55 (mean 0.49, sd 0.035), the
+    last 300 0.84-0.95 (mean 0.92, sd 0.03). 0.7 is 7 sd below the learned rate and 6 sd above what a learner that
+    never updates keeps (its first games' rate); 0.65 is 4.5 sd above the first games' mean. The budget is where
+    every seed has learned: at 200k steps the last 300 games are 0.46-0.87, at 150k 0.42-0.64."""
     torch.manual_seed(0)
     learner = PPOLearner((8, 6), 3, 128, PPOConfig(rollout_steps=64, lr=2e-3), seed=0)
     first, last, _ = learn_against_random(learner, n_games=128, budget=400_000)
     print(f"win rate vs random: first 300 games {first:.2f}, last 300 {last:.2f}")
     assert first < 0.65, first
-    assert last > 0.8, (first, last)
+    assert last > 0.7, (first, last)

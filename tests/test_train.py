@@ -34,7 +34,7 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     cfg = tiny(agents=2, sharing="nops")
     league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     report = Trainer(league, cfg).train()
-    assert report.steps >= 12_288 and report.episodes > 16
+    assert report.steps >= 12_288 and report.episodes > 16  # 60-70 measured on seeds 0-5: one-point games end fast
     snaps = [p for p in league.players("pong", kind="snapshot")]
     names = [p.name for p in snaps]
     assert names[:2] == ["s0-left", "s0-right"]
