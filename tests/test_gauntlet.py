@@ -398,3 +398,29 @@ def test_a_final_gauntlet_plays_the_bots_in_full_whatever_the_history(tmp_path, 
     assert [m.games for m in ms] == [4, 32, 32]
     assert len({s for s in league.games("pong").seed.tolist()}) >= 16 + 16 + 2  # disjoint seed ranges
     league.close()
+
+
+def test_a_run_repeated_with_its_seed_is_the_same_players_rated_once(tmp_path, capsys):
+    """The same command and seed twice in one league: bit-identical weights under new names. The second run plays
+    no rating game its first already played (they would be the same games, counted twice), its snapshots show the
+    first run's ratings, and a match of two names of one set of weights is refused in one line."""
+    home = tmp_path / "h"
+    args = ["train", "pong", "--agents", "2", "--steps", "4096", "--games", "16", "--env-option", "points_to_win=1",
+            "--snapshot-steps", "2048", "--eval-games", "4", "--home", str(home), "--json"]
+    code, out, err = run(capsys, *args)
+    assert code == 0, err
+    first = json.loads(out)
+    code, out, err = run(capsys, *args)
+    assert code == 0, err
+    second = json.loads(out)
+    assert (first["run"], second["run"]) == ("pong-1", "pong-2")
+    with League.open(home) as league:
+        same = league.same_weights("pong")
+        snaps = {p.full_name: p for p in league.players("pong", kind="snapshot")}
+        assert {snaps[n].id for n in second["snapshots"]} == set(same)  # every snapshot of pong-2 is a copy
+        assert {same[snaps[n].id] for n in second["snapshots"]} == {snaps[n].id for n in first["snapshots"]}
+    assert second["rating_games"] == 0 and first["rating_games"] > 0
+    for a, b in zip(first["final"], second["final"], strict=True):
+        assert (a["elo"], a["ci_low"], a["ci_high"]) == (b["elo"], b["ci_low"], b["ci_high"])
+    code, out, err = run(capsys, "match", "pong-1/s4.1k-left", "pong-2/s4.1k-left", "--home", str(home))
+    assert code == 2 and "hold the same weights" in err and len(err.strip().splitlines()) == 1

@@ -658,3 +658,49 @@ def test_removed_snapshots_leave_the_ranks(tmp_path: Path) -> None:
     part = _by_name(fit_table(names, a, b, s, anchor="low", bootstrap=0, hidden={"top"}))
     assert set(part) == {"mid", "low"} and part["mid"].rank == 1 and part["low"].rank == 2
     assert part["mid"].elo == full["mid"].elo  # top's games still count in the fit
+
+
+# --------------------------------------------------------------------------------------------------
+# one set of weights, one player
+# --------------------------------------------------------------------------------------------------
+
+
+def test_the_same_weights_under_two_names_are_one_player(league: League) -> None:
+    """A run repeated with its seed in the same league makes bit-identical snapshots under new names: one player,
+    whose games under either name count for one rating; the other name gets its row right under it, with that
+    rating and place; head-to-head and tournaments see one player."""
+    league.ensure_bots(ENV, ["random", "cpu"])
+    league.create_run("r1", ENV, {})
+    league.create_run("r2", ENV, {})
+    rnd, cpu = (league.find_players(n, ENV)[0].id for n in ("random", "cpu"))
+    first = league.add_snapshot(env=ENV, run="r1", name="s6M", path="r1/s6M", sha256="1" * 64,
+                                meta={"weights_sha256": "f" * 64})
+    copy = league.add_snapshot(env=ENV, run="r2", name="s6M", path="r2/s6M", sha256="2" * 64,
+                               meta={"weights_sha256": "f" * 64})
+    other = league.add_snapshot(env=ENV, run="r2", name="s5M", path="r2/s5M", sha256="3" * 64,
+                                meta={"weights_sha256": "e" * 64})
+    _record(league, _results(cpu, rnd, 7, 0, 3) + _results(first.id, cpu, 6, 0, 4) + _results(copy.id, cpu, 8, 0, 2)
+            + _results(other.id, copy.id, 3, 0, 7))
+    assert league.same_weights(ENV) == {copy.id: first.id}
+    rows = ladder(league, bootstrap=0)
+    by = _by_name(rows)
+    one, two = by["r1/s6M"], by["r2/s6M"]
+    assert one.copies == ("r2/s6M",) and two.copy_of == "r1/s6M" and one.copy_of is None
+    assert (two.elo, two.rank, two.tier, two.games) == (one.elo, one.rank, one.tier, one.games)
+    assert one.games == 30 and (one.wins, one.losses) == (21, 9)  # 6-4 and 8-2 against cpu, 7-3 against r2/s5M
+    assert rows.index(two) == rows.index(one) + 1
+    # the rating is the fit of every game filed under the first name
+    table = league.games(ENV)
+    assert copy.id not in set(table.player_a.tolist()) | set(table.player_b.tolist())
+    assert len(league.games(ENV, pooled=False)) == len(table)
+    h = head_to_head(league, copy.id, cpu)
+    assert (h["games"], h["wins"], h["losses"]) == (20, 14, 6) == (head_to_head(league, first.id, cpu)["games"],
+                                                                    14, 6)
+    with pytest.raises(LeagueError, match="hold the same weights"):
+        head_to_head(league, first.id, copy.id)
+    # a tournament of both names and cpu: one pair to fill, counted from both names' games
+    plan = plan_tournament(league, ENV, [first.id, copy.id, cpu], 24)
+    assert [(p.existing, p.missing) for p in plan] == [(20, 4)]
+    # the run of the copy has its best, the first name's rating, over its next
+    assert two.best and two.best_margin.over == "r2/s5M"
+    assert "copy_of" in two.to_json() and two.to_json()["copy_of"] == "r1/s6M"
