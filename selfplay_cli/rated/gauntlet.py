@@ -335,7 +335,7 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
 
 
 @dataclass(frozen=True)
-class Standing:
+class HistoryFit:
     """The history's players fitted from its games: Bradley-Terry under the ladder's prior, anchored at the game's
     anchor bot where it played, with the standard deviation of every difference (Laplace, Elo)."""
 
@@ -357,8 +357,8 @@ class Standing:
         return float(self.ratings[i] - self.ratings[j] - z * self.diff_sd[i, j]) > 0.0
 
 
-def standing(history: History, anchor: str = "random") -> Standing | None:
-    """The :class:`Standing` of the history's games (None without games)."""
+def fit_history(history: History, anchor: str = "random") -> HistoryFit | None:
+    """The :class:`HistoryFit` of the history's games (None without games)."""
     table = history.table
     if not len(table):
         return None
@@ -368,14 +368,14 @@ def standing(history: History, anchor: str = "random") -> Standing | None:
     k = anchors[0] if anchors else 0
     fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k, prior_games=DEFAULT_PRIOR)
     _, _, diff_sd = laplace_intervals(a, b, ids.size, fit.ratings, k, 0.95, DEFAULT_PRIOR)
-    return Standing(index, fit.ratings, diff_sd, list(fit.flags))
+    return HistoryFit(index, fit.ratings, diff_sd, list(fit.flags))
 
 
 def best_snapshot(history: History, anchor: str = "random") -> PlayerRow | None:
     """The highest-rated snapshot of the moment's history, fitted from the run's earlier gauntlets alone (its
-    :func:`standing`); players the games do not link to the ``anchor`` bot count only when none is linked. Ties go
+    :func:`fit_history`); players the games do not link to the ``anchor`` bot count only when none is linked. Ties go
     to the older snapshot."""
-    fit = standing(history, anchor)
+    fit = fit_history(history, anchor)
     rated = [p for p in history.snapshots if fit is not None and p.id in fit.index]
     if not rated:
         return None

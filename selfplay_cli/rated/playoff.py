@@ -28,7 +28,7 @@ from ..errors import MarlError
 from ..league.store import League
 from ..results import COOPERATIVE, Rules
 from ..stats.elo import normal_quantile
-from .gauntlet import GauntletConfig, crews_of, play_gauntlet, record_between, run_history, standing
+from .gauntlet import GauntletConfig, crews_of, fit_history, play_gauntlet, record_between, run_history
 
 __all__ = ["PlayoffConfig", "playoff"]
 
@@ -66,7 +66,7 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
     played, seed = 0, first_seed
     for _ in range(cfg.max_rounds):
         history = run_history(league, final, including=True)
-        fit = standing(history, anchor)
+        fit = fit_history(history, anchor)
         if fit is None:
             return played
         crews = crews_of(league, history.snapshots)
