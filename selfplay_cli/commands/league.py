@@ -97,7 +97,7 @@ def ladder_cmd(
         league.close()
     shown = select_rows(rows, run=run, top=top)
     title = "league ladder" + (f": run {run}" if run else "")
-    verdicts = [line for line in verdict_lines(rows) if run is None or line.startswith(f"best of {run}:")]
+    verdicts = [line for line in verdict_lines(rows) if run is None or f"best of {run}:" in line]
     render_ladder(shown, title, json_out=json_out, csv_out=csv_out, online=online, confidence=confidence,
                   caption=prior_caption(prior), verdicts=verdicts)
     if run is not None and not json_out and not csv_out and not any(r.run == run for r in rows):
@@ -132,6 +132,7 @@ def tournament(
     from ..league.names import Team
     from ..league.pairs import plan_tournament
     from ..rated.match import load_player, mix_seed, run_match
+    from ..rated.roles import RoleBook
 
     if games_per_pair < 2:
         raise MarlError(f"--games-per-pair must be at least 2, not {games_per_pair}")
@@ -160,7 +161,12 @@ def tournament(
         if len(envs) > 1:
             raise MarlError(f"players of several games in one tournament: {', '.join(sorted(envs))}")
         env = envs.pop()
-        plan = plan_tournament(league, env, list(unique), games_per_pair, vs=anchor.id if anchor else None)
+        book = RoleBook(league, env)  # a game whose seats hold different roles: who can meet whom
+        plan = plan_tournament(league, env, list(unique), games_per_pair, vs=anchor.id if anchor else None,
+                               meets=(lambda x, y: book.meets(league.get_player(x), league.get_player(y)))
+                               if book.differ else None)
+        apart = [p for p in plan if not p.meets]
+        plan = [p for p in plan if p.meets]
         total = sum(p.missing + p.missing % 2 for p in plan)
         policies = {}
         next_seed = seed
@@ -176,6 +182,10 @@ def tournament(
                 next_seed += (p.missing + 1) // 2
         if not json_out:
             console.print(f"{len(plan)} pairs needed games, {total} played")
+            if apart:
+                console.print(f"{len(apart)} pair{'s' * (len(apart) != 1)} cannot meet and were left out (in {env} a "
+                              "snapshot plays only seats of its own role: two of one role are rated through the "
+                              "players they both meet)", markup=False)
         rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap))
     finally:
         league.close()

@@ -48,11 +48,12 @@ def _points(mine: float, theirs: float) -> str:
 
 
 def render_report(r: MatchReport) -> None:
-    from ..results import COOPERATIVE
+    from ..results import COOPERATIVE, TWO_SIDES
 
     s = r.stats
     coop = r.kind == COOPERATIVE
-    unit = f"{r.games // 2} comparisons: each flies the same seeds" if coop else f"{r.games // 2} pairs"
+    unit = (f"{r.games // 2} comparisons: each flies the same seeds" if coop else f"{r.games // 2} pairs"
+            if r.paired or r.kind != TWO_SIDES else "one a seed: each plays only its own side")
     console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {r.games} games ({unit}), {r.games_per_second:,.1f} games/s")
     if coop:  # a result is one comparison of team returns on one seed; the returns per game read best as means
         half = max(r.games // 2, 1)

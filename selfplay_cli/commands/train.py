@@ -291,8 +291,9 @@ def train(
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
             "steps_per_second": round(report.steps_per_second), "snapshots": report.snapshots, "final": finals,
             "plot": str(report.plot) if isinstance(report.plot, Path) else None,
-            "best": None if report.best is None else {k: report.best.to_json()[k] for k in
-                                                      ("policy", "elo", "ci_low", "ci_high", "best_margin", "tied")}}
+            "best": None if report.best is None else _best_json(report.best)}
+    if report.side_bests:  # a game rated per side: its best on each side (ratings compare only within one)
+        data["best"] = [_best_json(r) for r in report.side_bests]
     if json_out:
         print_json(data)
         return
@@ -305,11 +306,17 @@ def train(
     if report.best is not None:
         from ..league.ladder import verdict_lines
 
-        for line in verdict_lines([report.best]):
+        for line in verdict_lines(report.side_bests or [report.best]):
             console.print("  " + line, markup=False)
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
     if report.plot is not None:
         console.print(f"  rating curves: {report.plot}", markup=False)
+
+
+def _best_json(row: Any) -> dict[str, Any]:
+    """What the run's JSON says of its best: the ladder row's name, rating, margin and ties (and its side)."""
+    keys = ("policy", "elo", "ci_low", "ci_high", "best_margin", "tied") + ("side",) * (row.side is not None)
+    return {k: row.to_json()[k] for k in keys}
 
 
 class Terminated(Exception):  # noqa: N818 (it is how the run learns of SIGTERM, not an error)

@@ -1,8 +1,14 @@
 """The game registry and the game contract: one :class:`EnvSpec` per game, everything the rest of `marl` needs to
 know about it, and the :class:`BatchedCore` protocol every game is played through.
 
-A game declares, once: its seats (``agents``), each seat's spaces (:meth:`EnvSpec.seat_spaces`), whether seats
-act together or in turns (``turns``) and what a result is (``kind``, ``sides``, ``tie_tolerance``). Names are
+A game declares, once: its seats (``agents``), each seat's spaces (:meth:`EnvSpec.seat_spaces`) and role
+(:meth:`EnvSpec.seat_roles`), whether seats act together or in turns (``turns``) and what a result is (``kind``,
+``sides``, ``tie_tolerance``).
+
+Roles: seats of one role are interchangeable, so one policy may play any of them (pong's left and right paddles see
+the court mirrored; a board game's two colours); a policy learned on one role plays only seats of that role. A game
+may declare its roles (``roles``, a name per seat); by default seats share a role when they have the same
+observation shape, action space and masks (a network that reads one can read the other). Names are
 found in this order: the registered games (pong, and games that installed packages register under the entry-point
 group ``selfplay_cli.envs``), then a user's PettingZoo game named ``module:factory`` or ``module`` (see
 :mod:`selfplay_cli.envs.loading`).
@@ -11,7 +17,8 @@ group ``selfplay_cli.envs``), then a user's PettingZoo game named ``module:facto
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+import re
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -255,6 +262,9 @@ class EnvSpec:
     ``render_fps``: a recording's default frame rate
     (a board game's moves at 2 a second; None: 60, one frame per step).
 
+    ``roles``: the role of each seat (see the module docstring), where the game says it; None infers them from the
+    seats' spaces (:meth:`seat_roles`).
+
     ``live_options``: the options the core's ``set_options(**values)`` changes between steps of running games (what
     a training curriculum may drive: tennis's reward weights and bat size). ``train_defaults``: the game's own
     training settings, laid out as a run's TOML (``{"ppo": {"gamma": 0.999}, "games": 64}``), applied over marl's
@@ -282,6 +292,7 @@ class EnvSpec:
     anchor: str = "random"  # the scripted player whose rating is fixed (1000 by default): the ladder's zero point
     live_options: tuple[str, ...] = ()  # options the core's set_options() changes while games run (curricula)
     train_defaults: dict[str, Any] = field(default_factory=dict)  # the game's training settings (a run's TOML layout)
+    roles: tuple[str, ...] | None = None  # each seat's role, where the game declares them (None: by their spaces)
 
     def __post_init__(self) -> None:
         n = len(self.agents)
@@ -307,6 +318,10 @@ class EnvSpec:
         elif self.kind == "two-sides" and n != 2:
             raise ValueError(f"game {self.name!r} has {n} seats: a two-sides game with other than 2 seats must "
                              "declare its sides")
+        if self.roles is not None and (len(self.roles) != n or not all(isinstance(r, str) and r
+                                                                        for r in self.roles)):
+            raise ValueError(f"game {self.name!r}: roles must name one role (a non-empty text) per seat, "
+                             f"{n} in all, not {self.roles!r}")
 
     def config(self, **options: Any) -> Any:
         return self.make_config(**options)
@@ -316,8 +331,12 @@ class EnvSpec:
         (``make_agents``: the lander's ``landers=M``), the same game declared with that config's seats."""
         if self.make_agents is None or not options:
             return self
-        agents = tuple(self.make_agents(self.make_config(**options)))
-        return self if agents == self.agents else replace(self, agents=agents)
+        cfg = self.make_config(**options)
+        agents = tuple(self.make_agents(cfg))
+        if agents == self.agents:
+            return self
+        resized = replace(self, agents=agents, roles=None)
+        return replace(resized, roles=resized.seat_roles(cfg))  # the roles of that config's seats, stated
 
     def core(self, n_games: int, **options: Any) -> BatchedCore:
         return self.make_core(n_games, self.make_config(**options))
@@ -337,7 +356,8 @@ class EnvSpec:
 
     def seat_spaces(self, cfg: Any = None) -> tuple[SeatSpace, ...]:
         """One :class:`SeatSpace` per seat for the config ``cfg`` (default options when None), checked: an
-        unsupported space is an :class:`EnvError` naming the game, the seat and why."""
+        unsupported space, or two seats of one declared role whose spaces differ, is an :class:`EnvError` naming
+        the game, the seats and why."""
         cfg = self.make_config() if cfg is None else cfg
         if self.make_seat_spaces is not None:
             seats = tuple(self.make_seat_spaces(cfg))
@@ -352,7 +372,21 @@ class EnvSpec:
                 check_seat_space(seat)
             except SpaceError as e:
                 raise EnvError(self.name, f"game {self.name!r}, seat {agent!r}: {e}") from None
+        first: dict[str, int] = {}
+        for s, role in enumerate(self.roles or ()):
+            k = first.setdefault(role, s)
+            if _space_key(seats[k]) != _space_key(seats[s]):
+                raise EnvError(self.name, f"game {self.name!r}: seats {self.agents[k]!r} and {self.agents[s]!r} are "
+                                          f"both of role {role!r} but their spaces differ (a role's seats must be "
+                                          "interchangeable)")
         return seats
+
+    def seat_roles(self, cfg: Any = None) -> tuple[str, ...]:
+        """The role of each seat for the config ``cfg`` (default options when None): the declared ``roles`` (which
+        :meth:`seat_spaces` checks), else inferred from the seats' spaces (:func:`infer_roles`)."""
+        if self.roles is not None:
+            return self.roles
+        return infer_roles(self.agents, self.seat_spaces(cfg))
 
     def max_steps(self, cfg: Any = None) -> int | None:
         """The most steps one game of this config lasts, if the game declares it."""
@@ -361,6 +395,23 @@ class EnvSpec:
             return self.time_limit(cfg)
         limit = getattr(cfg, "max_steps", None)
         return int(limit) if isinstance(limit, (int, np.integer)) and limit > 0 else None
+
+
+def _space_key(seat: SeatSpace) -> tuple[Any, ...]:
+    """What decides whether one network can play two seats: the observation's shape, the action space, the masks."""
+    return tuple(seat.observation.shape), describe_space(seat.action), seat.mask
+
+
+def infer_roles(agents: Sequence[str], seats: Sequence[SeatSpace]) -> tuple[str, ...]:
+    """Each seat's role when a game does not declare them: seats whose observation shape, action space and masks
+    agree share a role. A role is named after its first seat, less a trailing ``_<number>`` (``adversary_0`` and
+    ``adversary_1``: ``adversary``) unless that would give two roles one name."""
+    first: dict[tuple[Any, ...], str] = {}
+    for agent, seat in zip(agents, seats, strict=True):
+        first.setdefault(_space_key(seat), agent)
+    short = {key: re.sub(r"_\d+$", "", agent) or agent for key, agent in first.items()}
+    names = short if len(set(short.values())) == len(short) else first
+    return tuple(names[_space_key(seat)] for seat in seats)
 
 
 def check_spaces(spec: EnvSpec, cfg: Any = None) -> tuple[SeatSpace, ...]:

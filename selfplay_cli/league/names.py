@@ -30,7 +30,7 @@ import difflib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-from selfplay_cli.envs import env_names, get_env
+from selfplay_cli.envs import UnknownEnvError, env_names, get_env
 from selfplay_cli.league.ladder import LadderRow, ladder
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.stats.bradley_terry import FLAG_DISCONNECTED, FLAG_UNRATED
@@ -83,8 +83,12 @@ def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | N
     """The snapshots ``<name>-<seat>`` for every seat of the game, all from one run, in seat order; None if there
     are none. Raises LeagueError if several runs have such a team (``run/name`` chooses)."""
     teams: dict[tuple[str, str], list[PlayerRow]] = {}
-    for e in [env] if env else env_names():
-        agents = get_env(e).agents
+    # the registered games, and the users' games the league's runs play (mpe2.simple_push_v3, a module:factory)
+    for e in [env] if env else dict.fromkeys([*env_names(), *(r.env for r in league.list_runs())]):
+        try:
+            agents = get_env(e).agents
+        except UnknownEnvError:  # a game this process cannot load: its names are found one by one, not as teams
+            continue
         if len(agents) < 2:
             continue
         by_run: dict[str, list[PlayerRow | None]] = {}
