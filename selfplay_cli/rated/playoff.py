@@ -30,10 +30,9 @@ from dataclasses import dataclass
 from ..envs import get_env
 from ..errors import MarlError
 from ..arena.schedule import round_size
-from ..league.store import League
+from ..league.store import League, PlayerRow
 from ..results import COOPERATIVE, Rules
 from ..stats.elo import normal_quantile
-from ..league.store import PlayerRow
 from .gauntlet import GauntletConfig, History, crews_of, play_gauntlet, record_between, run_history, standing
 from .roles import RoleBook
 

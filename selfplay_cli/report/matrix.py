@@ -249,7 +249,13 @@ def build_matrix(
     env = pool[rows[0].player_id].env if rows[0].player_id in pool else str(env)
     if run is not None:
         rows = [r for r in rows if r.kind == "bot" or (r.player_id in pool and pool[r.player_id].run == run)]
-    rows = sorted(rows, key=lambda r: (-r.elo, r.policy))[:top]
+    ranked: list = []  # a game rated per side lists a scripted player once a side: here it is one player (each
+    seen: set = set()  # of its pairs was played on one side only)
+    for r in sorted(rows, key=lambda r: (-r.elo, r.policy)):
+        if r.player_id not in seen:
+            seen.add(r.player_id)
+            ranked.append(r)
+    rows = ranked[:top]
     if len(rows) < 2:
         raise LeagueError(f"fewer than two rated players{f' in run {run!r} and the bots' if run else ''} in {env}")
     players = tuple(MatrixPlayer(r.policy, int(r.player_id), r.kind, r.elo, r.ci_low, r.ci_high)

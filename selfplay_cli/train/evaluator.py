@@ -55,9 +55,8 @@ class JobDone:
 
 def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) -> JobDone:
     """Play one gauntlet in this process."""
-    from ..rated.gauntlet import GauntletConfig, rate_snapshots
-
     from ..envs import get_env
+    from ..rated.gauntlet import GauntletConfig, rate_snapshots
     from ..results import Rules
 
     t0 = time.perf_counter()

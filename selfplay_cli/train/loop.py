@@ -266,7 +266,7 @@ class Trainer:
         for i in np.unique(learners).tolist():  # a seat's opponents: the run's snapshots of the seat's role
             for role in dict.fromkeys(roles[learners == i].tolist()):
                 mine = (learners == i) & (roles == role)
-                ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates, among=self._can_play[role])
+                ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates, among=self._can_play.get(role, ()))
         return ids
 
     def _choose(self, slots: np.ndarray) -> list[Policy]:
