@@ -267,3 +267,20 @@ def test_training_seats_a_learner_on_one_role_only(home, capsys):
     assert code == 2 and err.count("\n") == 1 and "different spaces" in err, err
     code, _, err = run(capsys, "train", CHASE, "--seats", "1,-", "--steps", "100")
     assert code == 2 and err.count("\n") == 1 and "role runner, which no learner learns" in err, err
+
+
+def test_marl_envs_shows_each_seats_role(home, capsys):
+    rows = run_json(capsys, "envs", CHASE)
+    chase_row = next(r for r in rows if r["name"] == CHASE)
+    assert [(s["agent"], s["role"]) for s in chase_row["seats"]] == [("hunter", "hunter"), ("runner", "runner")]
+    code, out, err = run(capsys, "envs", CHASE)
+    assert code == 0, err
+    assert "seats of 2 roles (hunter: hunter, runner: runner): a snapshot plays only seats of the role it learned; " \
+           "rated per side" in " ".join(out.split())
+
+
+def test_best_is_per_side_where_the_sides_differ(chased, capsys):
+    home, _ = chased
+    code, out, err = run(capsys, "match", "best", "random", "--env", CHASE, "--home", str(home), "--no-store")
+    assert code == 2 and err.count("\n") == 1 and "'best' is per side" in err, err
+    assert "hunter side: " in err and "runner side: " in err

@@ -202,6 +202,12 @@ def _by_id(league: League, name: str, pid: int, env: str | None, include_removed
 def _best(league: League, env: str | None, ladder_fn: LadderFn) -> PlayerRow:
     rows = [r for r in ladder_fn(league, env) if r.player_id is not None and r.kind in ("bot", "snapshot")]
     comparable = [r for r in rows if r.flag not in (FLAG_DISCONNECTED, FLAG_UNRATED)]
+    sides = list(dict.fromkeys(r.side for r in rows))
+    if len(sides) > 1:  # a game rated per side: ratings of two sides do not compare
+        tops = [max([r for r in comparable if r.side == side] or [r for r in rows if r.side == side],
+                    key=lambda r: r.elo).policy for side in sides]
+        raise LeagueError(f"'best' is per side in {_where(env)}, whose sides differ: name one ("
+                          + "; ".join(f"{side} side: {top}" for side, top in zip(sides, tops, strict=True)) + ")")
     for r in sorted(comparable or rows, key=lambda r: (-r.elo, r.player_id)):
         p = league.get_player(int(r.player_id))  # type: ignore[arg-type]
         if not p.removed:
