@@ -284,3 +284,18 @@ def test_best_is_per_side_where_the_sides_differ(chased, capsys):
     code, out, err = run(capsys, "match", "best", "random", "--env", CHASE, "--home", str(home), "--no-store")
     assert code == 2 and err.count("\n") == 1 and "'best' is per side" in err, err
     assert "hunter side: " in err and "runner side: " in err
+
+
+def test_a_cooperative_crew_of_different_seats_flies_each_member_on_its_own_seat(home, capsys):
+    report = run_json(capsys, "train", "tests.games.chase:cooperative_env", "--agents", "2", "--steps", "1000",
+                      "--snapshot-steps", "500", "--games", "8", "--eval-games", "2", "--eval-inline", "--run", "crew")
+    assert [f["snapshot"] for f in report["final"]] == ["crew/s1k-hunter", "crew/s1k-runner"]
+    league = League.open(home=home)
+    try:
+        names = {p.id: p.name for p in league.players(env="tests.games.chase:cooperative_env")}
+        rated = [g for g in (league.game(i) for i in range(1, league.count_games() + 1)) if g.match_kind == "eval"]
+        seatings = {tuple(names[p].rsplit("-", 1)[-1] for p in g.players) for g in rated}
+    finally:
+        league.close()
+    # every rated episode: a crew (hunter on the hunter's seat, runner on the runner's) or a scripted player alone
+    assert seatings == {("hunter", "runner"), ("random", "random")}, seatings

@@ -101,3 +101,11 @@ class Chase(ParallelEnv):
 def parallel_env(**options) -> Chase:
     """A new game; options: ``max_cycles`` (12), ``render_mode``."""
     return Chase(**options)
+
+
+def cooperative_env(**options) -> Chase:
+    """The same game declared one team (``marl_kind`` cooperative; its team return is always 0): a crew whose two
+    members read and act differently, each of which must fly its own seat."""
+    env = Chase(**options)
+    env.metadata = {**env.metadata, "marl_kind": "cooperative"}
+    return env
