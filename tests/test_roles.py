@@ -299,3 +299,22 @@ def test_a_cooperative_crew_of_different_seats_flies_each_member_on_its_own_seat
         league.close()
     # every rated episode: a crew (hunter on the hunter's seat, runner on the runner's) or a scripted player alone
     assert seatings == {("hunter", "runner"), ("random", "random")}, seatings
+
+
+def test_an_older_file_without_a_role_plays_the_role_its_spaces_fit(chased, home, capsys, tmp_path):
+    from selfplay_cli.policies.snapshot import export_snapshot, read_meta
+
+    src = next((chased[0] / "snapshots" / "ch").glob("s3k-runner.*"))
+    old = tmp_path / "old-runner.safetensors"
+    export_snapshot(src, old, role=None, seat=None, run=None, extra={})  # as a file written before roles were
+    assert read_meta(old).role is None and read_meta(old).seat is None
+    code, _, err = run(capsys, "checkpoint", "import", str(old), "--run", "before")
+    assert code == 0, err
+    m = run_json(capsys, "match", "before/s3k-runner", "random", "--games", "6")
+    assert m["games"] == 6 and m["paired"] is False
+    league = League.open(home=home)
+    try:
+        me = next(p.id for p in league.players(env=CHASE) if p.run == "before")
+        assert all(league.game(g).players == (league.game(g).players[0], me) for g in m["game_ids"])  # runner's seat
+    finally:
+        league.close()

@@ -404,13 +404,20 @@ def _space_key(seat: SeatSpace) -> tuple[Any, ...]:
 
 def infer_roles(agents: Sequence[str], seats: Sequence[SeatSpace]) -> tuple[str, ...]:
     """Each seat's role when a game does not declare them: seats whose observation shape, action space and masks
-    agree share a role. A role is named after its first seat, less a trailing ``_<number>`` (``adversary_0`` and
-    ``adversary_1``: ``adversary``) unless that would give two roles one name."""
-    first: dict[tuple[Any, ...], str] = {}
+    agree share a role. A role is named after its seats: their name less a trailing ``_<number>`` where that is
+    one name (``adversary_0`` and ``adversary_1``: ``adversary``), else their names joined by ``/`` (pong's
+    ``left/right``); two roles never share a name (their seats' names then, ``player_0``, ``player_1``)."""
+    members: dict[tuple[Any, ...], list[str]] = {}
     for agent, seat in zip(agents, seats, strict=True):
-        first.setdefault(_space_key(seat), agent)
-    short = {key: re.sub(r"_\d+$", "", agent) or agent for key, agent in first.items()}
-    names = short if len(set(short.values())) == len(short) else first
+        members.setdefault(_space_key(seat), []).append(agent)
+
+    def name(group: list[str]) -> str:
+        short = {re.sub(r"_\d+$", "", agent) or agent for agent in group}
+        return short.pop() if len(short) == 1 else "/".join(group)
+
+    names = {key: name(group) for key, group in members.items()}
+    if len(set(names.values())) < len(names):
+        names = {key: "/".join(group) for key, group in members.items()}
     return tuple(names[_space_key(seat)] for seat in seats)
 
 
