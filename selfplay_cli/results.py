@@ -4,7 +4,9 @@ One record type, :class:`GameResult`, carries a game everywhere: the runner (:fu
 it with the policies' ids per seat, rated play and training swap those for league player ids
 (:meth:`GameResult.with_players`) and the ledger stores it (:meth:`selfplay_cli.league.store.League.record_games`).
 
-:class:`Rules` are the part of a game's declaration that decides results: its kind, its sides and its tie tolerance.
+:class:`Rules` are the part of a game's declaration that decides results and who may sit where: its kind, its sides,
+its tie tolerance and, where its seats differ, each seat's role (a policy plays only seats of its own role; see
+:meth:`~selfplay_cli.envs.registry.EnvSpec.seat_roles`).
 
 * ``two-sides``: zero-sum between two sides (``sides``: the seats of each; by default seat 0 against seat 1). The
   side with the higher total score wins; a difference of at most ``tie_tolerance`` is a draw. Every seat of a side
@@ -91,12 +93,14 @@ def format_score(x: float) -> str:
 
 @dataclass(frozen=True)
 class Rules:
-    """How a game's scores become results: its ``kind``, ``sides`` (two-sides) and ``tie_tolerance``."""
+    """How a game's scores become results: its ``kind``, ``sides`` (two-sides) and ``tie_tolerance``; ``roles``,
+    each seat's role where the seats are not all of one (None: any policy may sit anywhere)."""
 
     n_seats: int = 2
     kind: str = TWO_SIDES
     sides: tuple[tuple[int, ...], ...] | None = None
     tie_tolerance: float = 0.0
+    roles: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
@@ -118,13 +122,20 @@ class Rules:
             object.__setattr__(self, "sides", sides)
         elif self.sides is not None:
             raise ValueError(f"a {self.kind} game has no sides")
+        if self.roles is not None:
+            roles = tuple(str(r) for r in self.roles)
+            if len(roles) != self.n_seats:
+                raise ValueError(f"{len(roles)} roles for a game of {self.n_seats} seats")
+            object.__setattr__(self, "roles", roles if len(set(roles)) > 1 else None)
 
     @classmethod
     def of(cls, spec: Any) -> Rules:
         """The rules a game's declaration (an :class:`~selfplay_cli.envs.registry.EnvSpec`) states; a declaration
         without ``kind`` is a two-sides game."""
+        roles = spec.seat_roles() if callable(getattr(spec, "seat_roles", None)) else None
         return cls(n_seats=len(spec.agents), kind=getattr(spec, "kind", TWO_SIDES) or TWO_SIDES,
-                   sides=getattr(spec, "sides", None), tie_tolerance=float(getattr(spec, "tie_tolerance", 0.0) or 0.0))
+                   sides=getattr(spec, "sides", None), tie_tolerance=float(getattr(spec, "tie_tolerance", 0.0) or 0.0),
+                   roles=roles)
 
     @property
     def is_default(self) -> bool:
@@ -132,20 +143,40 @@ class Rules:
         none."""
         return self == Rules()
 
+    @property
+    def sides_differ(self) -> bool:
+        """A two-sides game whose sides hold different roles (a hunter against a runner): each policy plays only its
+        own side, so it is rated against the other side's players only, per side."""
+        if self.kind != TWO_SIDES or self.roles is None:
+            return False
+        assert self.sides is not None
+        first, second = (sorted(self.roles[s] for s in side) for side in self.sides)
+        return first != second
+
+    def side_roles(self) -> tuple[str, ...]:
+        """A name for each side of a two-sides game: its seats' roles (``hunter``; ``attacker+keeper``)."""
+        assert self.sides is not None
+        roles = self.roles or ("",) * self.n_seats
+        return tuple("+".join(dict.fromkeys(roles[s] for s in side)) for side in self.sides)
+
     def to_json(self) -> dict[str, Any]:
-        return {"n_seats": self.n_seats, "kind": self.kind,
-                "sides": None if self.sides is None else [list(s) for s in self.sides],
-                "tie_tolerance": self.tie_tolerance}
+        out = {"n_seats": self.n_seats, "kind": self.kind,
+               "sides": None if self.sides is None else [list(s) for s in self.sides],
+               "tie_tolerance": self.tie_tolerance}
+        if self.roles is not None:
+            out["roles"] = list(self.roles)
+        return out
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any] | None) -> Rules:
         """Rules stored with :meth:`to_json`; none stored: the default (:attr:`is_default`)."""
         if not data:
             return cls()
-        sides = data.get("sides")
+        sides, roles = data.get("sides"), data.get("roles")
         return cls(n_seats=int(data.get("n_seats", 2)), kind=str(data.get("kind", TWO_SIDES)),
                    sides=None if sides is None else tuple(tuple(s) for s in sides),
-                   tie_tolerance=float(data.get("tie_tolerance", 0.0)))
+                   tie_tolerance=float(data.get("tie_tolerance", 0.0)),
+                   roles=None if roles is None else tuple(roles))
 
     def _cmp(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Points of ``x`` against ``y``: 1 above, 0 below, 0.5 within the tie tolerance."""

@@ -1,4 +1,4 @@
-"""Every game against its own declaration: the registered games (pong, unchanged) and the suite's two PettingZoo games
+"""Every game against its own declaration: the registered games (pong, unchanged) and the suite's three PettingZoo games
 through the adapter.
 
 What a game declares (seats, per-seat spaces, turns, kind, time limit) is what the rest of marl builds on, so each
@@ -27,7 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
     sys.path.insert(0, str(ROOT))
 
-TEST_GAMES = ["tests.games.tictactoe:env", "tests.games.rendezvous:parallel_env"]
+TEST_GAMES = ["tests.games.tictactoe:env", "tests.games.rendezvous:parallel_env", "tests.games.chase:parallel_env"]
 GAMES = sorted(set(env_names())) + TEST_GAMES
 
 

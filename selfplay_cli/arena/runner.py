@@ -120,20 +120,31 @@ def play(
     n_seats = len(spec.agents)
     rules = Rules.of(spec)
 
+    options = env_options or {}
+    declared = spec.seat_spaces(spec.config(**options))
+    seen: set[tuple[int, int]] = set()
+
     def check(g: Game) -> Game:
         if len(g.seats) != n_seats or not all(0 <= s < len(policies) for s in g.seats):
             raise ValueError(f"game {g} does not seat {n_seats} of the {len(policies)} policies")
+        for seat, p in enumerate(g.seats):
+            if (seat, p) not in seen:
+                seen.add((seat, p))
+                _check_seat(spec, policies[p], seat, declared[seat])
         return g
 
     for g in games:
         check(g)
     n = min(parallel, max(len(games), slots or 0))
-    options = env_options or {}
     for p in policies:  # scripted players act as these options make the game (the lander's continuous engines)
         if callable(getattr(p, "configure", None)):
             p.configure(options)  # type: ignore[attr-defined]
     core = spec.core(n, **options)
     seat_groups = _seat_groups(spec, spec.config(**options), n)
+    # A policy that acts by the seat it plays (a scripted player whose seats act differently) acts through its
+    # stand-in for each group of seats.
+    by_group = [[p.for_seat(sg.seats[0]) if callable(getattr(p, "for_seat", None)) else p for p in policies]
+                for sg in seat_groups]
     whole = len(seat_groups) == 1  # one group of every seat, in order (Pong): its buffer is the step's actions
     step_actions: Any = seat_groups[0].actions if whole else [None] * n_seats
     if not whole:
@@ -202,7 +213,7 @@ def play(
     while playing:
         obs = core.observe()
         masks = core.action_masks() if masked else None  # type: ignore[attr-defined]
-        for sg, where_g in zip(seat_groups, held, strict=True):
+        for sg, where_g, acting_as in zip(seat_groups, held, by_group, strict=True):
             if whole and isinstance(obs, np.ndarray):
                 flat_obs = obs.reshape(-1, *obs.shape[2:])
             else:
@@ -220,7 +231,7 @@ def play(
                 if bank is None:
                     for m, w in zip(members, where, strict=True):
                         if w.size:
-                            p = policies[m]
+                            p = acting_as[m]
                             flat_actions[w] = p.act(flat_obs[w]) if flat_mask is None else p.act(flat_obs[w],
                                                                                                 flat_mask[w])
                 elif any(w.size for w in where):
@@ -281,6 +292,18 @@ def play(
             active, held = positions(acting)
             playing = int(active.sum())
     return [results[i] for i in sorted(results)]
+
+
+def _check_seat(spec: EnvSpec, policy: Policy, seat: int, declared: Any) -> None:
+    """A network given a seat whose observations it cannot read (a seat of another role) is a :class:`MarlError`
+    naming both, before any game is played (scripted players, and joint agents that fly a whole team, play any)."""
+    obs = getattr(policy, "obs_space", None)
+    if obs is None or getattr(policy, "kind", "") == "bot" or getattr(policy, "seats", None):
+        return
+    want = tuple(declared.observation.shape)
+    if tuple(obs.shape) != want:
+        raise MarlError(f"{policy.id} reads observations of shape {tuple(obs.shape)} but seat {spec.agents[seat]} of "
+                        f"{spec.name} observes {want}: a policy plays only seats of the role it learned")
 
 
 def _illegal(e: Exception, spec: EnvSpec, policies: Sequence[Policy], seats: np.ndarray, game_of: np.ndarray,

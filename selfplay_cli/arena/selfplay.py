@@ -163,9 +163,11 @@ def plan_layout(plan: SeatPlan, n_games: int, agents: int, league_games: float =
     return layout
 
 
-def learner_spaces(spec: EnvSpec, seat_spaces: Sequence[SeatSpace], layout: np.ndarray) -> list[SeatSpace]:
+def learner_spaces(spec: EnvSpec, seat_spaces: Sequence[SeatSpace], layout: np.ndarray,
+                   roles: Sequence[str] | None = None) -> list[SeatSpace]:
     """Each learner's :class:`SeatSpace`: the seats a learner holds must share one (a network reads one observation
-    shape and plays one action space); a :class:`MarlError` naming the seats otherwise."""
+    shape and plays one action space) and, where the game gives its seats ``roles``, one role; a
+    :class:`MarlError` naming the seats otherwise."""
     out = []
     for i in range(int(layout.max()) + 1):
         held = sorted({int(s) for s in np.nonzero(layout == i)[0]})
@@ -177,8 +179,21 @@ def learner_spaces(spec: EnvSpec, seat_spaces: Sequence[SeatSpace], layout: np.n
                 raise MarlError(f"{spec.name}: seats {spec.agents[held[0]]} and {spec.agents[s]} have different "
                                 "spaces, so one network cannot play both; give them separate learners "
                                 "(--sharing nops, or --seats)")
+            if roles is not None and roles[s] != roles[held[0]]:
+                raise MarlError(f"{spec.name}: seats {spec.agents[held[0]]} and {spec.agents[s]} are of different "
+                                f"roles ({roles[held[0]]}, {roles[s]}), so one network cannot play both; give them "
+                                "separate learners (--sharing nops, or --seats)")
         out.append(first)
     return out
+
+
+def learner_roles(layout: np.ndarray, roles: Sequence[str] | None) -> list[str | None]:
+    """The role each learner learns (of the seats it holds: :func:`learner_spaces` sees they share one), None for
+    every learner of a game whose seats are all of one role."""
+    n = int(layout.max()) + 1
+    if roles is None:
+        return [None] * n
+    return [roles[int(np.nonzero(layout == i)[0][0])] for i in range(n)]
 
 
 class SelfPlayGames:
@@ -425,11 +440,14 @@ class SelfPlayGames:
                 mask = None if flat_masks is None else flat_masks[idx]
                 flat_actions[idx] = self._act(self.policies[k], obs, mask)
                 continue
+            policy = self.policies[k]
             for s in np.unique(idx // self.n).tolist():
                 rows = idx[idx // self.n == s] % self.n
                 obs = np.asarray(self._seat_obs[s])[rows]
                 mask = None if masks is None or not self.seat_spaces[s].mask else masks[s][rows]
-                self._actions[s][rows] = self._act(self.policies[k], obs, mask)
+                # a scripted player acts as the seat's own (random: its action space)
+                player = policy.for_seat(s) if callable(getattr(policy, "for_seat", None)) else policy
+                self._actions[s][rows] = self._act(player, obs, mask)
 
     @staticmethod
     def _act(policy: Policy, obs: np.ndarray, mask: np.ndarray | None) -> np.ndarray:

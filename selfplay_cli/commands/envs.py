@@ -11,6 +11,7 @@ from rich.table import Table
 from ..envs import describe_space, env_names, game_options, get_env
 from ..envs.loading import plugin_errors
 from ..policies.bots import league_bots
+from ..results import Rules
 from ._output import console, print_json
 
 __all__ = ["describe_space", "env_row", "env_rows", "envs"]
@@ -32,7 +33,8 @@ def env_row(name: str) -> dict[str, Any]:
         "sides": [list(side) for side in spec.side_seats()] if spec.kind == "two-sides" else None,
         "tie_tolerance": spec.tie_tolerance if spec.kind == "cooperative" else None,
         "max_steps": spec.max_steps(cfg),
-        "seats": [{"agent": agent, **seat.to_json()} for agent, seat in zip(spec.agents, seats, strict=True)],
+        "seats": [{"agent": agent, "role": role, **seat.to_json()}
+                  for agent, role, seat in zip(spec.agents, spec.seat_roles(cfg), seats, strict=True)],
         # one seat's spaces (the first), as before per-seat spaces existed
         "observation_space": describe_space(seats[0].observation),
         "action_space": describe_space(seats[0].action),
@@ -100,6 +102,14 @@ def envs(
                       _per_seat(r, "action"), ", ".join(r["bots"]))
     console.print(table)
     for r in rows:
+        roles = dict.fromkeys(seat["role"] for seat in r.get("seats", ()))
+        if len(roles) > 1:  # seats that differ: a snapshot plays only its own role
+            rules = Rules.of(get_env(r["name"]))
+            per_side = "; rated per side" if rules.sides_differ else ""
+            console.print(f"{r['name']}: seats of {len(roles)} roles ("
+                          + ", ".join(f"{s['agent']}: {s['role']}" for s in r["seats"])
+                          + f"): a snapshot plays only seats of the role it learned{per_side}", markup=False,
+                          highlight=False)
         if r.get("train_defaults"):
             console.print(f"{r['name']} trains with its own defaults (a --config file or flags override them): "
                           f"{_settings(r['train_defaults'])}", markup=False, highlight=False)

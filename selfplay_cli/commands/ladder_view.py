@@ -63,6 +63,22 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
         return
     if caption and any(r.mean_return is not None for r in rows):
         caption += " mean return: the team's mean return per game (all seats together)."
+    sides = list(dict.fromkeys(r.side for r in rows))
+    if sides and sides != [None]:  # a game whose sides differ: one table per side, each with its own anchor
+        caption = ((caption + " ") if caption else "") + (
+            f"This game's sides differ ({', '.join(map(str, sides))}): a player plays only its own side, so each side "
+            "is rated on its own, anchored at its anchor on that side; a rating compares only with its side's.")
+        for side in sides:
+            _table([r for r in rows if r.side == side], f"{title}: {side} side", online, confidence,
+                   caption if side == sides[-1] else None)
+    else:
+        _table(rows, title, online, confidence, caption)
+    for line in verdicts or ():
+        console.print(line, markup=False, highlight=False)
+
+
+def _table(rows: list, title: str, online: dict[int, float] | None, confidence: float, caption: str | None) -> None:
+    """One ladder table (see :func:`render_ladder`)."""
     table = Table(title=title, caption=caption)
     for col, just in (("rank", "right"), ("tier", "right"), ("policy", "left"), ("kind", "left"), ("step", "right"),
                       ("Elo", "right"), (f"{100 * confidence:g}% interval", "center"), ("games", "right"),
@@ -93,5 +109,3 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
             cells.append("" if rec.score is None else f"{100 * rec.score:.0f}% of {rec.games}")
         table.add_row(*cells, style="bold" if r.best else None)
     console.print(table)
-    for line in verdicts or ():
-        console.print(line, markup=False, highlight=False)

@@ -109,7 +109,7 @@ def ladder_cmd(
     shown = select_rows(rows, run=run, top=top)
     title = "league ladder" + (f": run {run}" if run else "") + (f" ({env}: {describe_variant(variant)})"
                                                                   if variant else "")
-    verdicts = [line for line in verdict_lines(rows) if run is None or line.startswith(f"best of {run}:")]
+    verdicts = [line for line in verdict_lines(rows) if run is None or f"best of {run}:" in line]
     render_ladder(shown, title, json_out=json_out, csv_out=csv_out, online=online, confidence=confidence,
                   caption=prior_caption(prior), variant=variant_options(variant), verdicts=verdicts)
     if run is not None and not json_out and not csv_out and not any(r.run == run for r in rows):
@@ -198,6 +198,7 @@ def tournament(
     from ..league.names import Team
     from ..league.pairs import plan_tournament
     from ..rated.match import load_player, mix_seed, run_match
+    from ..rated.roles import RoleBook
     from ..rated.snapshots import players_variant
 
     if games_per_pair < 2:
@@ -232,8 +233,13 @@ def tournament(
         options = parse_env_options(env, env_option) if env_option else None
         everyone = [*unique.values(), *([anchor] if anchor else [])]
         variant = players_variant(league, env, everyone, options)  # where the games are filed
+        book = RoleBook(league, env)  # a game whose seats hold different roles: who can meet whom
         plan = plan_tournament(league, env, list(unique), games_per_pair, vs=anchor.id if anchor else None,
-                               variant=variant)
+                               variant=variant, meets=(lambda x, y: book.meets(league.get_player(x),
+                                                                              league.get_player(y)))
+                               if book.differ else None)
+        apart = [p for p in plan if not p.meets]
+        plan = [p for p in plan if p.meets]
         total = sum(p.missing + p.missing % 2 for p in plan)
         with progress_bar("tournament", total, "games", progress_enabled(quiet or json_out)) as tick:
             for p in plan:
@@ -246,6 +252,10 @@ def tournament(
                           env_options=options)
         if not json_out:
             console.print(f"{len(plan)} pairs needed games, {total} played")
+            if apart:
+                console.print(f"{len(apart)} pair{'s' * (len(apart) != 1)} cannot meet and were left out (in {env} a "
+                              "snapshot plays only seats of its own role: two of one role are rated through the "
+                              "players they both meet)", markup=False)
         rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap), variant=variant)
     finally:
         league.close()

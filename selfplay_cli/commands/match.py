@@ -59,6 +59,8 @@ def played(r: MatchReport) -> str:
         return (f"{r.games} games: {r.n_results} comparisons of team returns on shared seeds (each flies every seat "
                 "on the same seed)")
     if r.kind == TWO_SIDES:
+        if not r.paired:  # sides that differ: no seat swap
+            return f"{r.games} games, one a seed: each plays only its own side"
         return f"{r.games} games in {r.games // 2} seat-swapped pairs"
     return f"{r.games} games, every rotation of the seating on each seed (a result a game, from {r.a}'s and {r.b}'s " \
         "scores)"

@@ -294,7 +294,7 @@ def train(
     if report.best is not None:
         from ..league.ladder import verdict_lines
 
-        for line in verdict_lines([report.best]):
+        for line in verdict_lines(report.side_bests or [report.best]):
             console.print("  " + line, markup=False)
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
     if report.plot is not None:

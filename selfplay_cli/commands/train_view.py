@@ -30,8 +30,14 @@ def report_json(report: TrainReport) -> dict[str, Any]:
             "session_train_seconds": round(report.train_seconds, 1),
             "session_rating_games": report.session_eval_games, "steps_per_second": round(report.steps_per_second),
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
-            "best": None if report.best is None else {k: report.best.to_json()[k] for k in
-                                                      ("policy", "elo", "ci_low", "ci_high", "best_margin", "tied")}}
+            "best": ([_best_json(r) for r in report.side_bests] if report.side_bests  # a game rated per side
+                     else None if report.best is None else _best_json(report.best))}
+
+
+def _best_json(row: Any) -> dict[str, Any]:
+    """What the run's JSON says of its best: the ladder row's name, rating, margin and ties (and its side)."""
+    keys = ("policy", "elo", "ci_low", "ci_high", "best_margin", "tied") + ("side",) * (row.side is not None)
+    return {k: row.to_json()[k] for k in keys}
 
 
 def describe_run(report: TrainReport, inline: bool = False) -> str:

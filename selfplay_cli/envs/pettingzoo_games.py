@@ -10,6 +10,9 @@ copies that the arena plays exactly as it plays pong (no second game loop).
   game of 2 seats is two-sides, of one seat cooperative, of more free-for-all (cooperative games must say so).
   ``metadata["marl_sides"]`` (the seats, by index or agent name, of each of the two sides) and
   ``metadata["marl_tie_tolerance"]`` complete it;
+- roles: ``metadata["marl_roles"]``, the role of each agent (a list in ``possible_agents`` order, or a dict from
+  agent name to role); by default agents whose spaces agree share a role (see
+  :meth:`~selfplay_cli.envs.registry.EnvSpec.seat_roles`);
 - time limit: ``metadata["marl_max_steps"]``, else the env's ``max_cycles`` (times the seats for an AEC game, a
   core step being one agent's move), else none;
 - recording: when ``metadata["render_modes"]`` lists ``"rgb_array"``, every copy is made with
@@ -218,6 +221,20 @@ def _kind_of(name: str, layout: Layout) -> tuple[str, tuple[tuple[int, ...], ...
     return kind, sides, float(tol)
 
 
+def _roles_of(name: str, layout: Layout) -> tuple[str, ...] | None:
+    """``metadata["marl_roles"]`` as one role per seat, or None when the game does not declare them."""
+    roles, agents = layout.metadata.get("marl_roles"), layout.agents
+    if roles is None:
+        return None
+    if isinstance(roles, dict) and set(roles) == set(agents):
+        roles = [roles[a] for a in agents]
+    if (not isinstance(roles, (list, tuple)) or len(roles) != len(agents)
+            or not all(isinstance(r, str) and r for r in roles)):
+        raise EnvError(name, f"game {name!r}: metadata marl_roles must give each agent ({', '.join(agents)}) a role "
+                             f"name, as a list in that order or a dict by agent, not {roles!r}")
+    return tuple(roles)
+
+
 def adapt(name: str, factory: Callable[..., Any], description: str | None = None) -> EnvSpec:
     """The :class:`EnvSpec` of the PettingZoo game that ``factory(**options)`` makes, probed with no options."""
     if not callable(factory):
@@ -250,7 +267,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
         f"PettingZoo {'AEC' if default.api == 'aec' else 'parallel'} game "
         f"{default.metadata.get('name') or getattr(factory, '__qualname__', name)}")
     try:
-        return EnvSpec(
+        spec = EnvSpec(
             name=name,
             description=str(text),
             agents=default.agents,
@@ -270,9 +287,12 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
             render_fps=fps if default.renders else None,
             neutral_options=("render_mode",),  # how it is drawn: marl sets it itself to record
             option_source=factory,
+            roles=_roles_of(name, default),
         )
     except ValueError as e:
         raise EnvError(name, str(e)) from None
+    spec.seat_spaces()  # declared roles must keep to the seats' spaces: refused here, in one line, if not
+    return spec
 
 
 # --------------------------------------------------------------------------------------------------------------

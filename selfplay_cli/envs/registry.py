@@ -1,8 +1,14 @@
 """The game registry and the game contract: one :class:`EnvSpec` per game, everything the rest of `marl` needs to
 know about it, and the :class:`BatchedCore` protocol every game is played through.
 
-A game declares, once: its seats (``agents``), each seat's spaces (:meth:`EnvSpec.seat_spaces`), whether seats
-act together or in turns (``turns``) and what a result is (``kind``, ``sides``, ``tie_tolerance``). Names are
+A game declares, once: its seats (``agents``), each seat's spaces (:meth:`EnvSpec.seat_spaces`) and role
+(:meth:`EnvSpec.seat_roles`), whether seats act together or in turns (``turns``) and what a result is (``kind``,
+``sides``, ``tie_tolerance``).
+
+Roles: seats of one role are interchangeable, so one policy may play any of them (pong's left and right paddles see
+the court mirrored; a board game's two colours); a policy learned on one role plays only seats of that role. A game
+may declare its roles (``roles``, a name per seat); by default seats share a role when they have the same
+observation shape, action space and masks (a network that reads one can read the other). Names are
 found in this order: the registered games (pong, and games that installed packages register under the entry-point
 group ``selfplay_cli.envs``), then a user's PettingZoo game named ``module:factory`` or ``module`` (see
 :mod:`selfplay_cli.envs.loading`).
@@ -12,7 +18,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Mapping
+import re
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
@@ -258,6 +265,9 @@ class EnvSpec:
     ``draw(core, game)`` returns game ``game``'s picture as an RGB array; it may offer ``seat_colour(seat)``, the
     colour a seat is drawn in (the recording's caption band, which names the players, shows it beside each name).
 
+    ``roles``: the role of each seat (see the module docstring), where the game says it; None infers them from the
+    seats' spaces (:meth:`seat_roles`).
+
     ``live_options``: the options the core's ``set_options(**values)`` changes between steps of running games (what
     a training curriculum may drive: tennis's reward weights and bat size).
 
@@ -299,6 +309,7 @@ class EnvSpec:
     neutral_options: tuple[str, ...] = ()  # options that split no rating: the same game drawn, seen or shaped otherwise
     option_source: Callable[..., Any] | None = None  # a function whose keyword arguments are the options, for a game
     # whose config is no dataclass (a PettingZoo game's factory): `marl envs NAME` reads them from its signature
+    roles: tuple[str, ...] | None = None  # each seat's role, where the game declares them (None: by their spaces)
 
     def __post_init__(self) -> None:
         n = len(self.agents)
@@ -324,6 +335,10 @@ class EnvSpec:
         elif self.kind == "two-sides" and n != 2:
             raise ValueError(f"game {self.name!r} has {n} seats: a two-sides game with other than 2 seats must "
                              "declare its sides")
+        if self.roles is not None and (len(self.roles) != n or not all(isinstance(r, str) and r
+                                                                        for r in self.roles)):
+            raise ValueError(f"game {self.name!r}: roles must name one role (a non-empty text) per seat, "
+                             f"{n} in all, not {self.roles!r}")
 
     def config(self, **options: Any) -> Any:
         return self.make_config(**options)
@@ -333,8 +348,12 @@ class EnvSpec:
         (``make_agents``: the lander's ``landers=M``), the same game declared with that config's seats."""
         if self.make_agents is None or not options:
             return self
-        agents = tuple(self.make_agents(self.make_config(**options)))
-        return self if agents == self.agents else replace(self, agents=agents)
+        cfg = self.make_config(**options)
+        agents = tuple(self.make_agents(cfg))
+        if agents == self.agents:
+            return self
+        resized = replace(self, agents=agents, roles=None)
+        return replace(resized, roles=resized.seat_roles(cfg))  # the roles of that config's seats, stated
 
     def variant_options(self, options: Mapping[str, Any] | None) -> dict[str, Any]:
         """The options among ``options`` that make a variant of this game (see ``neutral_options``), by name, in
@@ -369,7 +388,8 @@ class EnvSpec:
 
     def seat_spaces(self, cfg: Any = None) -> tuple[SeatSpace, ...]:
         """One :class:`SeatSpace` per seat for the config ``cfg`` (default options when None), checked: an
-        unsupported space is an :class:`EnvError` naming the game, the seat and why."""
+        unsupported space, or two seats of one declared role whose spaces differ, is an :class:`EnvError` naming
+        the game, the seats and why."""
         cfg = self.make_config() if cfg is None else cfg
         if self.make_seat_spaces is not None:
             seats = tuple(self.make_seat_spaces(cfg))
@@ -384,7 +404,21 @@ class EnvSpec:
                 check_seat_space(seat)
             except SpaceError as e:
                 raise EnvError(self.name, f"game {self.name!r}, seat {agent!r}: {e}") from None
+        first: dict[str, int] = {}
+        for s, role in enumerate(self.roles or ()):
+            k = first.setdefault(role, s)
+            if _space_key(seats[k]) != _space_key(seats[s]):
+                raise EnvError(self.name, f"game {self.name!r}: seats {self.agents[k]!r} and {self.agents[s]!r} are "
+                                          f"both of role {role!r} but their spaces differ (a role's seats must be "
+                                          "interchangeable)")
         return seats
+
+    def seat_roles(self, cfg: Any = None) -> tuple[str, ...]:
+        """The role of each seat for the config ``cfg`` (default options when None): the declared ``roles`` (which
+        :meth:`seat_spaces` checks), else inferred from the seats' spaces (:func:`infer_roles`)."""
+        if self.roles is not None:
+            return self.roles
+        return infer_roles(self.agents, self.seat_spaces(cfg))
 
     def max_steps(self, cfg: Any = None) -> int | None:
         """The most steps one game of this config lasts, if the game declares it."""
@@ -421,6 +455,28 @@ def option_defaults(cfg: Any) -> dict[str, Any]:
     if dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
         return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
     return dict(getattr(cfg, "defaults", None) or {})
+def _space_key(seat: SeatSpace) -> tuple[Any, ...]:
+    """What decides whether one network can play two seats: the observation's shape, the action space, the masks."""
+    return tuple(seat.observation.shape), describe_space(seat.action), seat.mask
+
+
+def infer_roles(agents: Sequence[str], seats: Sequence[SeatSpace]) -> tuple[str, ...]:
+    """Each seat's role when a game does not declare them: seats whose observation shape, action space and masks
+    agree share a role. A role is named after its seats: their name less a trailing ``_<number>`` where that is
+    one name (``adversary_0`` and ``adversary_1``: ``adversary``), else their names joined by ``/`` (pong's
+    ``left/right``); two roles never share a name (their seats' names then, ``player_0``, ``player_1``)."""
+    members: dict[tuple[Any, ...], list[str]] = {}
+    for agent, seat in zip(agents, seats, strict=True):
+        members.setdefault(_space_key(seat), []).append(agent)
+
+    def name(group: list[str]) -> str:
+        short = {re.sub(r"_\d+$", "", agent) or agent for agent in group}
+        return short.pop() if len(short) == 1 else "/".join(group)
+
+    names = {key: name(group) for key, group in members.items()}
+    if len(set(names.values())) < len(names):
+        names = {key: "/".join(group) for key, group in members.items()}
+    return tuple(names[_space_key(seat)] for seat in seats)
 
 
 def check_spaces(spec: EnvSpec, cfg: Any = None) -> tuple[SeatSpace, ...]:

@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from selfplay_cli.league.ledger import GameTable, rules_for_env
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.stats.bradley_terry import (
     DEFAULT_PRIOR,
@@ -178,6 +179,8 @@ class LadderRow:
         vs: the record against each scripted player of the env, in the league's bot order (empty for CSV
             ladders); a bot's own entry has no games.
         mean_return: the player's mean team return over its cooperative episodes (None in other games).
+        side: in a two-sides game whose sides differ (rated per side: see :func:`ladder`), the side's role(s)
+            this row is rated on (``adversary``); None in every other game.
     """
 
     policy: str
@@ -205,12 +208,13 @@ class LadderRow:
     tied: tuple[str, ...] = ()
     copy_of: str | None = None  # another name of the weights of this player (its row just above): one player
     copies: tuple[str, ...] = ()  # the player's other names (the same weights under another run or name)
+    side: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict: ``policy, kind, elo, ci_low, ci_high, games, wins, draws, losses, rank`` then
         ``score, step, flag, anchor, run, best, vs`` (Elo values rounded to 0.1, scores to 1e-4; never NaN /
-        inf), and ``mean_return`` last for a player of a cooperative game. ``vs`` maps each scripted player to
-        ``{"score": s, "games": n}`` (``score`` null without games)."""
+        inf), and ``mean_return`` last for a player of a cooperative game, ``side`` for a row of a game rated per
+        side. ``vs`` maps each scripted player to ``{"score": s, "games": n}`` (``score`` null without games)."""
         for value in (self.elo, self.ci_low, self.ci_high, self.score):
             assert math.isfinite(value), f"non-finite value in ladder row {self.policy}: {value}"
         out: dict[str, Any] = {
@@ -243,6 +247,8 @@ class LadderRow:
         if self.mean_return is not None:
             assert math.isfinite(self.mean_return), f"non-finite mean return in ladder row {self.policy}"
             out["mean_return"] = round(float(self.mean_return), 4)
+        if self.side is not None:
+            out["side"] = self.side
         return out
 
 
@@ -580,6 +586,10 @@ def ladder(
     table = league.games(env=env, variant=variant)
     if len(table) == 0:
         return []
+    rules = rules_for_env(env)
+    if rules.sides_differ:
+        return _ladder_by_side(league, env, table, rules.side_roles(), anchor, anchor_rating, bootstrap, confidence,
+                               seed, include_removed, prior, variant)
     ids, a, b = table.indexed()
     known = {p.id: p for p in league.players(env=env, include_removed=True)}
     population = [known[int(i)] if int(i) in known else league.get_player(int(i)) for i in ids.tolist()]
@@ -629,9 +639,72 @@ def _with_copies(league: League, env: str, rows: list[LadderRow], include_remove
     return out
 
 
+def _ladder_by_side(league: League, env: str, table: GameTable, labels: tuple[str, ...],
+                    anchor: PlayerRow | int | str | None, anchor_rating: float, bootstrap: int, confidence: float,
+                    seed: int, include_removed: bool, prior: float, variant: str = "") -> list[LadderRow]:
+    """The ladder of a two-sides game whose sides differ (``labels``: each side's role): one table per side.
+
+    A player of one side meets only the other side's players, so its rating compares only with its own side's:
+    each player is fitted as the side it played (:meth:`GameTable.by_side`; a scripted player, which plays either
+    side, is one player a side), and each side's table is anchored at its own anchor (the anchor bot playing that
+    side, at ``anchor_rating``), its rows carrying ``side``. Everything else reads as in :func:`ladder`, per side:
+    ranks, tiers, margins, each run's best and the records against the scripted players (on the other side)."""
+    sided, sides = table.by_side()
+    keys, a, b = sided.indexed()
+    known = {p.id: p for p in league.players(env=env, include_removed=True)}
+    row_of = {int(k): known.get(sides[int(k)][0]) or league.get_player(sides[int(k)][0]) for k in keys.tolist()}
+    side_of = {int(k): sides[int(k)][1] for k in keys.tolist()}
+    counts = np.bincount(a, minlength=keys.size) + np.bincount(b, minlength=keys.size)
+    bots = league.players(env=env, kind="bot", include_removed=True)
+    returns = league.mean_returns(env, variant=variant)
+    chosen = None if anchor is None else _find_anchor(list({p.id: p for p in row_of.values()}.values()), anchor, env)
+    out: list[LadderRow] = []
+    for side, label in enumerate(labels):
+        mine = [k for k in row_of if side_of[k] == side]
+        if not mine:
+            continue
+        names = [row_of[k].full_name if side_of[k] == side else f"{row_of[k].full_name} ({labels[side_of[k]]})"
+                 for k in keys.tolist()]
+        population = [row_of[k] for k in mine]
+        games = {row_of[k].id: int(counts[i]) for i, k in enumerate(keys.tolist()) if side_of[k] == side}
+        lead = (chosen if chosen is not None and chosen.id in games
+                else default_anchor(population, games, declared_anchor(env)))
+        removed = {p.id for p in population if p.removed}
+        hidden = {n for n, k in zip(names, keys.tolist(), strict=True) if side_of[k] != side}
+        if not include_removed:
+            hidden |= {p.full_name for p in population if p.removed and p.id != lead.id}
+        rows, fitted = _fit_rows(
+            names, a, b, sided.score_a, lead.full_name, anchor_rating, bootstrap, confidence, seed,
+            {p.full_name: p.kind for p in population}, {p.full_name: p.step for p in population if not p.is_bot},
+            {p.full_name: p.id for p in population}, prior=prior, hidden=hidden,
+        )
+        key_of = {row_of[k].id: k for k in mine}
+        # each row's record against the scripted players, as they played the other side
+        other = {row_of[k].id: k for k in row_of if side_of[k] != side}
+        theirs = [replace(bot, id=other.get(bot.id, -(2 * bot.id + 1 - side) - 1)) for bot in bots]  # (or no games)
+        records = _bot_records(keys, a, b, sided.score_a, theirs)
+        rows = [replace(r, run=row_of[key_of[int(r.player_id)]].run, side=label,
+                        vs=records.get(key_of[int(r.player_id)], ()),
+                        mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
+                for r in rows]
+        out += _mark_best(rows, removed, fitted)
+    return out
+
+
 def verdict_lines(rows: list[LadderRow]) -> list[str]:
     """Who is best, and by how much, in plain lines: the ladder's top over the next player, then each run's best
-    over the run's next best (or the snapshots it cannot be told apart from)."""
+    over the run's next best (or the snapshots it cannot be told apart from); in a game rated per side, for each
+    side (its lines led by ``<side> side:``), since ratings compare only within a side."""
+    by_side: dict[str | None, list[LadderRow]] = {}
+    for r in rows:
+        by_side.setdefault(r.side, []).append(r)
+    if list(by_side) != [None] and by_side:
+        return [f"{side} side: {line}" for side, group in by_side.items() for line in _verdicts(group)]
+    return _verdicts(rows)
+
+
+def _verdicts(rows: list[LadderRow]) -> list[str]:
+    """:func:`verdict_lines` of one table."""
     lines = []
     ranked = [r for r in rows if r.tier is not None and r.copy_of is None]
     if len(ranked) >= 2 and ranked[0].margin is not None:

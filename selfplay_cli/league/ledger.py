@@ -31,7 +31,7 @@ import contextlib
 import math
 from collections import defaultdict
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime
 from typing import Any
 
@@ -164,6 +164,21 @@ class GameTable:
     def select(self, mask: npt.NDArray[np.bool_]) -> GameTable:
         """The sub-table of the rows where ``mask`` is True."""
         return GameTable(*(getattr(self, f)[mask] for f in _GAME_TABLE_FIELDS))
+
+    def by_side(self) -> tuple[GameTable, dict[int, tuple[int, int]]]:
+        """The table with each player as the side it played (``player_a`` the first side's, ``player_b`` the
+        second's; two-sides rows), for a game whose sides differ, where a player's rating means something only
+        against the other side's. A player seen on both sides (a scripted player) becomes two players, keyed
+        ``-(2 * id + side) - 1``; one seen on one side keeps its id. Returns the table and, for every key in it,
+        ``(player id, side)`` (side 0 or 1)."""
+        both = np.intersect1d(self.player_a, self.player_b)
+        a = np.where(np.isin(self.player_a, both), -(2 * self.player_a) - 1, self.player_a)
+        b = np.where(np.isin(self.player_b, both), -(2 * self.player_b + 1) - 1, self.player_b)
+        sides: dict[int, tuple[int, int]] = {}
+        for keys, side in ((a, 0), (b, 1)):
+            for key in np.unique(keys).tolist():
+                sides[int(key)] = ((-int(key) - 1) // 2, side) if key < 0 else (int(key), side)
+        return replace(self, player_a=a.astype(np.int64), player_b=b.astype(np.int64)), sides
 
     def games_played(self) -> int:
         """How many ledger games the rows stand for: two per cooperative comparison (its two episodes), one per

@@ -50,7 +50,7 @@ keys: they may be player ids or learner indices (a learner key equal to a snapsh
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -431,11 +431,19 @@ class Matchmaker:
         """The last ``window`` snapshots of the pool, oldest first."""
         return self._pool[-self.config.window:]
 
+    def candidates_among(self, among: Collection[int] | None) -> tuple[int, ...]:
+        """The last ``window`` snapshots of the pool that are in ``among`` (all of them when None): the snapshots that
+        can play a seat (a game whose seats hold different roles)."""
+        if among is None:
+            return self.candidates
+        return tuple(p for p in self._pool if p in among)[-self.config.window:]
+
     # ------------------------------------------------------------------ distribution
 
-    def pool_weights(self, learner: int, rates: WinRates) -> dict[int, float]:
-        """The mode's distribution over :attr:`candidates` alone (sums to 1; empty for an empty pool / ``self``)."""
-        cand = self.candidates
+    def pool_weights(self, learner: int, rates: WinRates, among: Collection[int] | None = None) -> dict[int, float]:
+        """The mode's distribution over :attr:`candidates` alone (sums to 1; empty for an empty pool / ``self``);
+        ``among``: only the candidates of :meth:`candidates_among`."""
+        cand = self.candidates_among(among)
         mode = self.config.mode
         if not cand or mode == "self":
             return {}
@@ -449,8 +457,9 @@ class Matchmaker:
             return {c: 1.0 / len(cand) for c in cand}
         return {c: float(x) / total for c, x in zip(cand, w, strict=True)}
 
-    def probabilities(self, learner: int, rates: WinRates) -> dict[int, float]:
-        """Opponent id (bots, :data:`LATEST_LEARNER`, snapshots) -> probability, summing to 1.
+    def probabilities(self, learner: int, rates: WinRates, among: Collection[int] | None = None) -> dict[int, float]:
+        """Opponent id (bots, :data:`LATEST_LEARNER`, snapshots) -> probability, summing to 1; ``among`` limits the
+        snapshots (:meth:`candidates_among`).
 
         Ids with probability 0 are omitted. Order: bots (config order), LATEST_LEARNER, candidates.
         """
@@ -464,7 +473,7 @@ class Matchmaker:
         for name, p in cfg.bots.items():
             add(self.bot_ids[name], p)
         rest = max(0.0, 1.0 - sum(cfg.bots.values()))
-        pool = self.pool_weights(learner, rates)
+        pool = self.pool_weights(learner, rates, among)
         if not pool:
             add(LATEST_LEARNER, rest)
             return out
@@ -474,12 +483,13 @@ class Matchmaker:
             add(pid, share * p)
         return out
 
-    def sample(self, learner: int, n: int, rates: WinRates) -> npt.NDArray[np.int64]:
+    def sample(self, learner: int, n: int, rates: WinRates, among: Collection[int] | None = None
+               ) -> npt.NDArray[np.int64]:
         """``n`` opponent ids drawn i.i.d. from :meth:`probabilities` (int64 array)."""
         n = int(n)
         if n < 0:
             raise ValueError(f"sample: n must be >= 0, got {n}")
-        probs = self.probabilities(learner, rates)
+        probs = self.probabilities(learner, rates, among)
         ids = np.fromiter(probs.keys(), dtype=np.int64, count=len(probs))
         cdf = np.cumsum(np.fromiter(probs.values(), dtype=np.float64, count=len(probs)))
         cdf /= cdf[-1]

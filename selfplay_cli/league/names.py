@@ -32,7 +32,7 @@ import functools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-from selfplay_cli.envs import env_names, get_env
+from selfplay_cli.envs import UnknownEnvError, env_names, get_env
 from selfplay_cli.league.ladder import LadderRow, ladder
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.league.variants import describe_variant
@@ -86,8 +86,12 @@ def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | N
     """The snapshots ``<name>-<seat>`` for every seat of the game, all from one run, in seat order; None if there
     are none. Raises LeagueError if several runs have such a team (``run/name`` chooses)."""
     teams: dict[tuple[str, str], list[PlayerRow]] = {}
-    for e in [env] if env else env_names():
-        agents = get_env(e).agents
+    # the registered games, and the users' games the league's runs play (mpe2.simple_push_v3, a module:factory)
+    for e in [env] if env else dict.fromkeys([*env_names(), *(r.env for r in league.list_runs())]):
+        try:
+            agents = get_env(e).agents
+        except UnknownEnvError:  # a game this process cannot load: its names are found one by one, not as teams
+            continue
         if len(agents) < 2:
             continue
         by_run: dict[str, list[PlayerRow | None]] = {}
@@ -216,6 +220,12 @@ def _by_id(league: League, name: str, pid: int, env: str | None, include_removed
 def _best(league: League, env: str | None, ladder_fn: LadderFn, variant: str = "") -> PlayerRow:
     rows = [r for r in ladder_fn(league, env) if r.player_id is not None and r.kind in ("bot", "snapshot")]
     comparable = [r for r in rows if r.flag not in (FLAG_DISCONNECTED, FLAG_UNRATED)]
+    sides = list(dict.fromkeys(r.side for r in rows))
+    if len(sides) > 1:  # a game rated per side: ratings of two sides do not compare
+        tops = [max([r for r in comparable if r.side == side] or [r for r in rows if r.side == side],
+                    key=lambda r: r.elo).policy for side in sides]
+        raise LeagueError(f"'best' is per side in {_where(env)}, whose sides differ: name one ("
+                          + "; ".join(f"{side} side: {top}" for side, top in zip(sides, tops, strict=True)) + ")")
     for r in sorted(comparable or rows, key=lambda r: (-r.elo, r.player_id)):
         p = league.get_player(int(r.player_id))  # type: ignore[arg-type]
         if not p.removed:

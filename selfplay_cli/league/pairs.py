@@ -8,6 +8,7 @@ free-for-all game one per two players in it.
 from __future__ import annotations
 
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,16 +22,19 @@ __all__ = ["PairPlan", "head_to_head", "plan_tournament"]
 
 @dataclass
 class PairPlan:
-    """One pair of a tournament: games already in the ledger (either seat order) and games still missing."""
+    """One pair of a tournament: games already in the ledger (either seat order) and games still missing;
+    ``meets`` False for a pair that cannot play (nothing missing, nothing to play)."""
 
     a_id: int
     b_id: int
     existing: int
     missing: int
+    meets: bool = True
 
 
 def plan_tournament(
-    league: League, env: str, player_ids: list[int], games_per_pair: int, vs: int | None = None, variant: str = ""
+    league: League, env: str, player_ids: list[int], games_per_pair: int, vs: int | None = None, variant: str = "",
+    meets: Callable[[int, int], bool] | None = None,
 ) -> list[PairPlan]:
     """Games still needed so that every pair has ``games_per_pair`` games in ``env``, in its ``variant`` (the
     default unless given: games under other options count in their own variant only).
@@ -38,7 +42,8 @@ def plan_tournament(
     Pairs: every unordered pair of ``player_ids`` (round robin, in list order), or with ``vs`` each player
     against ``vs`` only (gauntlet; ``a_id`` is the player, ``b_id`` is ``vs``). Existing games of a pair
     count in both seat orders (a cooperative comparison as its two episodes). Pairs with nothing missing are left
-    out.
+    out. ``meets(a, b)``: whether two players can play each other (in a game whose seats hold different roles,
+    two snapshots of one role cannot); a pair that cannot is listed with ``meets=False`` and nothing missing.
 
     Raises:
         LeagueError: unknown player or one of another env, fewer than two players, negative games_per_pair.
@@ -73,6 +78,9 @@ def plan_tournament(
         counts[(min(x, y), max(x, y))] += w
     plan = []
     for x, y in pairs:
+        if meets is not None and not meets(x, y):
+            plan.append(PairPlan(a_id=x, b_id=y, existing=0, missing=0, meets=False))
+            continue
         sx, sy = same.get(x, x), same.get(y, y)
         have = counts.get((min(sx, sy), max(sx, sy)), 0)
         missing = max(games_per_pair - have, 0)

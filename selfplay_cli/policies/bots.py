@@ -79,8 +79,10 @@ class ScriptedPolicy(Policy):
     """A game's scripted player ``name`` (``random`` for any game: :class:`RandomPolicy` unless the game registers
     its own).
 
-    ``env_options`` configure the game (the seat's spaces depend on them); ``seat`` picks the seat whose action
-    space ``random`` plays, needed only when a game's seats act differently. A rule that returns an action its mask
+    ``env_options`` configure the game (the seat's spaces depend on them); ``seat`` picks the seat whose spaces it
+    plays (default the first). A scripted player plays any seat: the runner asks :meth:`for_seat` for the player
+    of each seat, which is this one where that seat's spaces are its own, else a copy bound to that seat (``random``
+    where the seats act differently: a hunter's 3 actions, a runner's 5). A rule that returns an action its mask
     forbids is a clear error naming the player."""
 
     kind = "bot"
@@ -93,7 +95,25 @@ class ScriptedPolicy(Policy):
             raise KeyError(f"{env} has no scripted player '{name}'; it has: {known}")
         super().__init__(name, env)
         self._name, self._seat, self._seed, self._options = name, seat, seed, dict(env_options or {})
+        self._by_seat: dict[int, ScriptedPolicy] = {}
         self._setup(spec, name, seed, self._options, seat)
+
+    def for_seat(self, seat: int) -> ScriptedPolicy:
+        """The player of seat ``seat``: itself where that seat reads and acts as its own, else a copy bound to the
+        seat, drawing from the same generator (so a game's draws do not depend on how its seats are grouped)."""
+        player = self._by_seat.get(seat)
+        if player is None:
+            spec = get_env(self.env).for_options(**self._options)
+            obs, act, _ = seat_spaces_of(spec, spec.config(**self._options))[seat]
+            same = (tuple(obs.shape) == tuple(self.obs_space.shape)
+                    and describe_space(act) == describe_space(self.act_space))
+            player = self if same else ScriptedPolicy(self.env, self._name, self._seed, self._options, seat=seat)
+            self._by_seat[seat] = player
+        if player is not self:
+            player.rng = self.rng
+            if player._random is not None:
+                player._random.rng = self.rng
+        return player
 
     def configure(self, env_options: dict[str, Any] | None) -> None:
         """Play the game as ``env_options`` make it (the runner tells every player the options of the games it
@@ -102,6 +122,7 @@ class ScriptedPolicy(Policy):
         if options != self._options:
             rng = self.rng
             self._options = options
+            self._by_seat = {}
             self._setup(get_env(self.env), self._name, self._seed, options, self._seat)
             self.rng = rng
             if self._random is not None:
@@ -111,14 +132,7 @@ class ScriptedPolicy(Policy):
         env = spec.name
         cfg = spec.config(**env_options)
         seats = seat_spaces_of(spec.for_options(**env_options), cfg)
-        if seat is not None:
-            obs_space, act_space, _ = seats[seat]
-        else:
-            obs_space, act_space, _ = seats[0]
-            kinds = {describe_space(a) for _, a, _ in seats}
-            if name == RANDOM and len(kinds) > 1:
-                raise MarlError(f"{env}'s seats act differently ({', '.join(sorted(kinds))}): the random player "
-                                "needs its seat")
+        obs_space, act_space, _ = seats[seat if seat is not None else 0]
         self.obs_space, self.act_space = obs_space, act_space
         self.rng = np.random.default_rng(seed)
         self.bot = spec.bots.get(name)

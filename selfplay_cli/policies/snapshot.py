@@ -19,6 +19,7 @@ characters.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -106,7 +107,9 @@ class SnapshotMeta:
     ``n_actions`` instead (an unbounded float32 Box, ``Discrete(n_actions)``). Either way both are filled in:
     ``obs_shape`` is the observation's shape, ``n_actions`` the action count of a Discrete space (None for other
     action spaces). ``parent`` is the snapshot it was trained from (``"run/ep80"``); ``seat`` names the seat
-    of a per-seat learner (``"left"``), ``None`` when one network plays every seat; ``created`` is ISO UTC;
+    of a per-seat learner (``"left"``), ``None`` when one network plays every seat; ``role`` the role of the seats
+    it learned in a game whose seats hold several (``"adversary"``; see :func:`snapshot_roles`), else None;
+    ``created`` is ISO UTC;
     ``weights_sha256`` is filled by :func:`save_snapshot`; ``extra`` is free-form JSON (hyperparameters...).
     ``env_options`` and ``extra`` go through JSON, so tuples in them come back as lists.
     """
@@ -124,6 +127,7 @@ class SnapshotMeta:
     parent: str | None = None
     created: str = field(default_factory=utc_now)
     seat: str | None = None
+    role: str | None = None
     weights_sha256: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
     obs_shape: tuple[int, ...] | None = None
@@ -206,7 +210,7 @@ class SnapshotMeta:
         for key in ("env", "name", "algo", "created", "weights_sha256"):
             if key in kw and not isinstance(kw[key], str):
                 raise ValueError(f"field {key!r} must be a string")
-        for key in ("run", "parent", "seat"):
+        for key in ("run", "parent", "seat", "role"):
             if kw.get(key) is not None and not isinstance(kw[key], str):
                 raise ValueError(f"field {key!r} must be a string or null")
         for key in ("env_options", "extra"):
@@ -636,6 +640,9 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
         return
     if meta.seat in spec.agents:
         seats = [seats[spec.agents.index(meta.seat)]]
+    elif meta.role is not None and len(seats) == spec.n_seats:  # the seats of the role it says it learned
+        roles = spec.seat_roles(cfg)
+        seats = [seat for seat, role in zip(seats, roles, strict=True) if role == meta.role] or seats
     shapes = [tuple(obs.shape or ()) for obs, _, _ in seats]
     if meta.obs_shape not in shapes:
         observes = " or ".join(sorted({str(list(s)) for s in shapes}))
@@ -654,6 +661,30 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
                                 f"{' or '.join(sorted({str(h.nvec[0]) for h in heads}))}")
         acts = " or ".join(sorted({h.describe() for h in heads})) or "actions marl cannot play"
         raise SnapshotError(f"{path}: snapshot acts in {head.describe()} but {meta.env} acts in {acts}")
+
+
+def snapshot_roles(meta: SnapshotMeta, spec: Any) -> frozenset[str] | None:
+    """The roles of its game a snapshot may play (the seats of other roles read and act differently, or mean
+    something else): the role it learned, as its metadata records it (``role``, or the role of its ``seat``); for a
+    file that records neither (one written before roles were), every role whose seats have its spaces. None where
+    that is every role of the game (it plays any seat), and for a joint agent (it flies its whole team)."""
+    if (meta.extra or {}).get("joint") is not None:
+        return None
+    sized = spec.for_options(**meta.env_options)
+    cfg = sized.config(**meta.env_options)
+    roles = sized.seat_roles(cfg)
+    if len(set(roles)) == 1:
+        return None
+    if meta.role in roles:
+        return frozenset((meta.role,))
+    if meta.seat in sized.agents:
+        return frozenset((roles[sized.agents.index(meta.seat)],))
+    fit = set()
+    for role, seat in zip(roles, sized.seat_spaces(cfg), strict=True):
+        with contextlib.suppress(SpaceError):
+            if tuple(seat.observation.shape) == tuple(meta.obs_shape or ()) and ActionHead.of(seat.action) == meta.head:
+                fit.add(role)
+    return None if fit == set(roles) else frozenset(fit)
 
 
 @dataclass(frozen=True)

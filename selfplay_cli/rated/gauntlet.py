@@ -16,6 +16,12 @@ moment (a run with one network per lander) are one player, a crew: they fly toge
 comparison counts for every member (:func:`crews_of`). A "pair" below is one such round. All matchups of
 one snapshot moment are played together, in one batched call of the runner.
 
+In a game whose seats hold different roles (:mod:`.roles`) a snapshot meets only players it can be seated against:
+a new ``adversary`` snapshot of a game of one adversary against one agent meets the run's ``agent`` snapshots (the
+other learner's new one, the best of that side, older ones) and the scripted players, each on its own side; its
+predecessor, of its own role, it cannot meet. The run's best is then taken per side (:attr:`History.sided`: such
+a game is rated per side).
+
 Cheap where the result is clear: a matchup whose result is already clear from history (the new snapshot's lineage,
 its predecessor and theirs, met the same opponent at least ``2 * pairs`` times and won or lost clearly, by the rule
 below) plays ``clear_pairs`` pairs, and ``pairs`` after all if they go against that history (the snapshot has
@@ -37,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..arena import Game, play
-from ..arena.schedule import round_of, round_size
+from ..arena.schedule import CannotMeet, round_of
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.ledger import GameTable
@@ -49,6 +55,7 @@ from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry
 from ..stats.elo import normal_quantile
 from ..stats.intervals import laplace_intervals
 from .match import env_options_of, load_player, mix_seed
+from .roles import RoleBook, cannot_meet_message, policy_roles
 from .snapshots import run_options
 
 
@@ -134,6 +141,7 @@ class History:
     bots: list[PlayerRow]
     table: GameTable
     variant: str = ""  # the game's variant the run plays (its snapshots' options): its games are filed there
+    sided: bool = False  # a two-sides game whose sides differ: ratings are fitted per side (GameTable.by_side)
 
 
 def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = False) -> History:
@@ -147,7 +155,8 @@ def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = F
     gauntlets = [mid for mid, params in league.match_params(env, kind="eval").items() if params.get("gauntlet")]
     variant = variant_key(env, run_options(league, run or ""))  # the options the run plays: its ladder
     table = league.games(env=env, players=[p.id for p in snapshots + bots], variant=variant, pooled=False)
-    return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)), variant)
+    return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)), variant,
+                   sided=Rules.of(get_env(env)).sides_differ)
 
 
 def record_between(table: GameTable, a: int, b: int) -> tuple[int, int, int]:
@@ -172,24 +181,30 @@ def _clear_history(league: League, history: History, m: Matchup, z: float, enoug
     return (wins + 0.5 * draws) / games
 
 
-def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2, best: PlayerRow | None = None,
-                     history: History | None = None) -> list[tuple[PlayerRow, PlayerRow]]:
+def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2,
+                     best: PlayerRow | Sequence[PlayerRow] | None = None, history: History | None = None,
+                     meets: Callable[[PlayerRow, PlayerRow], bool] | None = None,
+                     ) -> list[tuple[PlayerRow, PlayerRow]]:
     """The matchups of a snapshot moment: ``(new snapshot, opponent)``, each unordered pair once.
 
     ``new`` are the snapshots just taken (one per learner, all of one run and game); ``best`` the run's best
-    snapshot before them (by fitted rating), if known. Opponents come from the moment's :class:`History` (the run's
-    snapshots taken before it, the scripted players). Older snapshots are chosen evenly spread over the run's
-    history (oldest first), skipping the ones already met.
+    snapshot before them (by fitted rating), if known, or the best of each side of a game rated per side. Opponents
+    come from the moment's :class:`History` (the run's snapshots taken before it, the scripted players). Older
+    snapshots are chosen evenly spread over the run's history (oldest first), skipping the ones already met.
+    ``meets(a, b)``: whether two players can play each other (a game whose seats hold different roles,
+    :class:`~selfplay_cli.rated.roles.RoleBook`); a snapshot's opponents are chosen among those it meets.
     """
     if not new:
         return []
     history = history or run_history(league, new)
     by_id = {p.id: p for p in history.snapshots}
+    bests = [best] if isinstance(best, PlayerRow) else list(best or [])
+    can = meets or (lambda a, b: True)
     pairs: list[tuple[PlayerRow, PlayerRow]] = []
     seen: set[frozenset[int]] = set()
 
     def add(a: PlayerRow, b: PlayerRow | None) -> None:
-        if b is None or a.id == b.id or frozenset((a.id, b.id)) in seen:
+        if b is None or a.id == b.id or frozenset((a.id, b.id)) in seen or not can(a, b):
             return
         seen.add(frozenset((a.id, b.id)))
         pairs.append((a, b))
@@ -197,9 +212,9 @@ def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2, b
     for s in new:
         chosen: list[PlayerRow | None] = [by_id.get(s.parent_id) if s.parent_id is not None else None]
         chosen += [o for o in new if o.id != s.id]
-        chosen.append(best if best is not None and best.id in by_id else None)
+        chosen += [b for b in bests if b.id in by_id and can(s, b)][:1]
         taken = {c.id for c in chosen if c is not None}
-        rest = [p for p in history.snapshots if p.id not in taken]
+        rest = [p for p in history.snapshots if p.id not in taken and can(s, p)]
         if older and rest:
             picks = np.unique(np.linspace(0, len(rest) - 1, num=min(older, len(rest))).round().astype(int))
             chosen += [rest[i] for i in picks.tolist()]
@@ -251,6 +266,7 @@ def play_gauntlet(
     spec = spec.for_options(**options)
     rules = Rules.of(spec)
     seated = {pid: _seat_crew(crew, rules.n_seats) for pid, crew in crews.items()}
+    roles = {i: policy_roles(p, spec) for i, p in enumerate(roster)}  # who may sit where (None: anywhere)
 
     def player(row: PlayerRow) -> int | tuple[int, ...]:
         """A player's place in a round: its roster index, or its crew's, seat by seat."""
@@ -261,9 +277,17 @@ def play_gauntlet(
         """How a round's results name a player: its policy id, or its crew's (a tuple: see results.crew)."""
         crew = seated.get(row.id)
         return loaded[row.id].id if crew is None else tuple(dict.fromkeys(loaded[m.id].id for m in crew))
-    per = round_size(rules, 2)
+
+    def round_games(m: Matchup, seed: int) -> list[Game]:
+        try:
+            return round_of(rules, (player(m.a), player(m.b)), seed, roles)
+        except CannotMeet:
+            raise MarlError(cannot_meet_message(spec.name, rules, m.a.full_name, roles[index[m.a.id]], m.b.full_name,
+                                                roles[index[m.b.id]])) from None
+
     span = max(cfg.max_pairs, cfg.bot_pairs)  # seeds reserved per matchup: one per round
     matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
+    per = [len(round_games(m, m.first_seed)) for m in matchups]  # games in a round of each (seatings that fit)
     z = normal_quantile(cfg.clear)
     schedule: list[Game] = []
     owner: list[tuple[int, int]] = []  # per game: its matchup's index and its round
@@ -273,20 +297,19 @@ def play_gauntlet(
 
     def schedule_pairs(k: int, n: int) -> None:
         m = matchups[k]
-        ia, ib = player(m.a), player(m.b)
         for p in range(m.pairs, m.pairs + n):
-            games = round_of(rules, (ia, ib), m.first_seed + p)
+            games = round_games(m, m.first_seed + p)
             schedule.extend(games)
             owner.extend((k, p) for _ in games)
         m.pairs += n
-        in_flight[k] += per * n
+        in_flight[k] += per[k] * n
 
     def finished(r: GameResult) -> None:
         k, p = owner[r.index]
         m = matchups[k]
         got = rounds.setdefault((k, p), [])
         got.append(r)
-        if len(got) == per:  # a whole round: its results between the two
+        if len(got) == per[k]:  # a whole round: its results between the two
             del rounds[(k, p)]
             got.sort(key=lambda g: g.index)
             for points in points_between(rules, got, key(m.a), key(m.b)):
@@ -358,25 +381,33 @@ class HistoryFit:
 
 
 def fit_history(history: History, anchor: str = "random") -> HistoryFit | None:
-    """The :class:`HistoryFit` of the history's games (None without games)."""
+    """The :class:`HistoryFit` of the history's games (None without games). In a game rated per side
+    (:attr:`History.sided`) each player is fitted as the side it played (:meth:`GameTable.by_side`: a scripted
+    player is one player a side); a snapshot keeps its id, so its rating and its differences with the snapshots of
+    its side read as ever, and only those compare."""
     table = history.table
     if not len(table):
         return None
+    sides = None
+    if history.sided:
+        table, sides = table.by_side()
     ids, a, b = table.indexed()
     index = {int(pid): i for i, pid in enumerate(ids.tolist())}
-    anchors = [index[p.id] for p in history.bots if p.name == anchor and p.id in index]
+    anchor_ids = {p.id for p in history.bots if p.name == anchor}
+    anchors = [i for key, i in index.items() if (sides[key][0] if sides else key) in anchor_ids]
     k = anchors[0] if anchors else 0
     fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k, prior_games=DEFAULT_PRIOR)
     _, _, diff_sd = laplace_intervals(a, b, ids.size, fit.ratings, k, 0.95, DEFAULT_PRIOR)
     return HistoryFit(index, fit.ratings, diff_sd, list(fit.flags))
 
 
-def best_snapshot(history: History, anchor: str = "random") -> PlayerRow | None:
-    """The highest-rated snapshot of the moment's history, fitted from the run's earlier gauntlets alone (its
-    :func:`fit_history`); players the games do not link to the ``anchor`` bot count only when none is linked. Ties go
-    to the older snapshot."""
+def best_snapshot(history: History, anchor: str = "random",
+                  among: Callable[[PlayerRow], bool] | None = None) -> PlayerRow | None:
+    """The highest-rated snapshot of the moment's history (of those ``among`` keeps: the snapshots of one side of
+    a game rated per side), fitted from the run's earlier gauntlets alone (its :func:`fit_history`); players the games
+    do not link to the ``anchor`` bot count only when none is linked. Ties go to the older snapshot."""
     fit = fit_history(history, anchor)
-    rated = [p for p in history.snapshots if fit is not None and p.id in fit.index]
+    rated = [p for p in history.snapshots if fit is not None and p.id in fit.index and (among is None or among(p))]
     if not rated:
         return None
     linked = [p for p in rated if fit.linked(p.id)] or rated
@@ -395,8 +426,16 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     if not new:
         return []
     history = run_history(league, new)
-    best = best_snapshot(history, get_env(new[0].env).anchor)
-    pairs = choose_opponents(league, new, older=config.older, best=best, history=history)
+    anchor = get_env(new[0].env).anchor
+    book = RoleBook(league, new[0].env)
+    if book.differ and book.rules.kind != COOPERATIVE:  # the best of each role the moment's snapshots can meet
+        bests = [best_snapshot(history, anchor, among=lambda p, s=s: book.meets(s, p)) for s in new]
+        best: PlayerRow | list[PlayerRow] | None = [b for b in bests if b is not None]
+    else:
+        best = best_snapshot(history, anchor)
+    # a cooperative game's per-seat snapshots fly as crews (below), each member on its own seat: paired as crews
+    meets = book.meets if book.differ and book.rules.kind != COOPERATIVE else None
+    pairs = choose_opponents(league, new, older=config.older, best=best, history=history, meets=meets)
     crews = crews_of(league, [p for pair in pairs for p in pair])
     if crews:  # a cooperative game's per-lander snapshots fly as their moment's team: one matchup per two teams
         lead = {pid: crew[0] for pid, crew in crews.items()}

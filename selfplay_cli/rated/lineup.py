@@ -35,15 +35,16 @@ from ..league.names import Team, find_team, resolve_or_team, seat_of, teammates
 from ..league.store import League, PlayerRow
 from ..policies.bots import league_bots
 from ..results import COOPERATIVE, TWO_SIDES, Rules
+from .roles import RoleBook, cannot_meet_message, roles_text
 
 __all__ = ["Lineup", "default_opponent", "find_team", "lineup", "lineups", "safe_filename", "seat_of", "teammates"]
 
 
-def default_opponent(spec: EnvSpec) -> str | None:
+def default_opponent(spec: EnvSpec) -> str:
     """The scripted player a policy meets when the user names none: the game's first that is not ``random`` (the
-    stronger anchor), else ``random``; None for a game without scripted players."""
-    bots = list(spec.bots)
-    return next((b for b in bots if b != "random"), bots[0] if bots else None)
+    stronger anchor), else ``random`` (which every game has, whether it registers it or not)."""
+    bots = league_bots(spec)  # random too, which every game has
+    return next((b for b in bots if b != "random"), bots[-1])
 
 
 @dataclass(frozen=True)
@@ -132,7 +133,10 @@ def _seat(league: League, me: PlayerRow, vs: str | None) -> Lineup:
     spec = get_env(me.env)
     rules = Rules.of(spec)
     agents = spec.agents
+    book = RoleBook(league, me.env)
     seat = seat_of(me, agents)
+    if seat is None and book.roles(me) is not None:  # a snapshot of one role: the first seat of that role
+        seat = next((s for s, role in enumerate(rules.roles or ()) if role in book.roles(me)), None)
     focus = seat if seat is not None else 0
     if vs is None:
         team = teammates(league, me, agents)
@@ -141,8 +145,6 @@ def _seat(league: League, me: PlayerRow, vs: str | None) -> Lineup:
         if rules.kind == COOPERATIVE:
             return Lineup(me.env, (me,) * len(agents), focus=focus)
         vs = default_opponent(spec)
-        if vs is None:
-            raise MarlError(f"{spec.name} has no scripted player to face {me.full_name}: pass --vs")
     them = _player_or_team(league, vs, me.env)
     players = list(them) if isinstance(them, list) else [them] * len(agents)
     mine = [focus]
@@ -151,4 +153,13 @@ def _seat(league: League, me: PlayerRow, vs: str | None) -> Lineup:
         mine = list(next(side for side in rules.sides if focus in side))
     for s in mine:
         players[s] = me
+    misfit = [(s, p) for s, p in enumerate(players)  # a game whose seats differ: everyone on a seat of its role
+              if rules.roles is not None and book.roles(p) is not None and rules.roles[s] not in book.roles(p)]
+    if misfit:
+        s, p = misfit[0]
+        if not isinstance(them, list):
+            raise MarlError(cannot_meet_message(spec.name, rules, me.full_name, book.roles(me), them.full_name,
+                                                book.roles(them)))
+        raise MarlError(f"{p.full_name} ({roles_text(book.roles(p))}) cannot play seat {agents[s]} of {spec.name} "
+                        f"(role {rules.roles[s]})")  # type: ignore[index]
     return Lineup(me.env, tuple(players), focus=focus)

@@ -9,6 +9,10 @@ A match between A and B plays *rounds* on shared seeds, as the game's kind asks 
 * free-for-all: every rotation of the seating on each seed; one result per game from the final order of A's and B's
   scores, the SPRT counting results (trinomial) after each whole round.
 
+In a game whose seats hold different roles each player sits only on seats of its own role (:mod:`.roles`): in a
+two-sides game whose sides differ a round is then one game, each on its own side, counted as a result, not a pair
+(trinomial); two players of the same role cannot meet, and the match is refused in one line.
+
 Results are stored chunk by chunk, each chunk in one transaction, so a match killed midway leaves whole rounds,
 consistent games, in the ledger.
 
@@ -28,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from ..arena import Game, play
-from ..arena.schedule import round_size, rounds
+from ..arena.schedule import CannotMeet, round_of, rounds
 from ..envs import get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
@@ -38,6 +42,7 @@ from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, crew, points_be
 from ..signals import signals_held
 from ..stats.match import MatchStats, match_stats
 from ..stats.sprt import SPRT
+from .roles import cannot_meet_message, policy_roles
 
 
 def plays_greedy(row: PlayerRow) -> bool:
@@ -189,6 +194,7 @@ class MatchReport:
     def held(self) -> bool | None:
         """Whether the measured score lies in the ladder's predicted interval (None without a prediction)."""
         return None if self.predicted is None else self.predicted.holds(self.stats.score)
+    paired: bool = True  # a two-sides game's rounds are seat-swapped pairs (False: one game a seed, sides that differ)
 
     @property
     def games_per_second(self) -> float:
@@ -229,6 +235,7 @@ class MatchReport:
             "game_ids": self.game_ids, "interrupted": self.interrupted, "kind": self.kind,
             "variant": variant_options(self.variant),
             "predicted": None if self.predicted is None else {**self.predicted.to_json(), "held": self.held},
+            "paired": self.paired,
         }
         if self.mean_returns is not None:
             out["mean_return"] = {"a": round(self.mean_returns[0], 4), "b": round(self.mean_returns[1], 4)}
@@ -305,7 +312,13 @@ def run_match(
         team_seats = tuple(list(range(min(len(members), rules.n_seats))) + [int(i) for i in pick])
         a_key = tuple(sorted({members[i].id for i in team_seats}))
     a_name = team_name or a.id
-    per = round_size(rules, 2)
+    roles = {i: policy_roles(p, spec) for i, p in enumerate(roster)}  # who may sit where (None: anywhere)
+    b_index = len(roster) - 1
+    try:  # the seatings of one round: games per round (a two-sides game whose sides differ: one)
+        per = len(round_of(rules, (team_seats if team_seats is not None else 0, b_index), first_seed, roles))
+    except CannotMeet:
+        raise MarlError(cannot_meet_message(spec.name, rules, a_name, roles[0], b.id, roles[b_index])) from None
+    paired = rules.kind == TWO_SIDES and per == 2  # seat-swapped pairs: pentanomial statistics
     n_rounds = -(-games // per)
     chunk_rounds = max(1, parallel // per)
     test = None
@@ -336,7 +349,7 @@ def run_match(
             new += got  # type: ignore[arg-type]
             round_points.append(points_between(rules, got, a_key, b.id))  # type: ignore[arg-type]
             if test is not None:
-                llr = test.llr(*_counts(rules, round_points))
+                llr = test.llr(*_counts(paired, round_points))
                 decision = test.decide(llr)
                 if decision is not None:
                     break
@@ -364,8 +377,8 @@ def run_match(
     in_play: list[GameResult] = []
 
     def report() -> MatchReport:
-        out = _report(spec.name, rules, a_name, a_key, b, kept, round_points, time.perf_counter() - start, match_id,
-                      first_seed, confidence, game_ids)
+        out = _report(spec.name, rules, paired, a_name, a_key, b, kept, round_points, time.perf_counter() - start,
+                      match_id, first_seed, confidence, game_ids)
         out.variant = variant_key(spec.name, options)
         return out
 
@@ -373,7 +386,7 @@ def run_match(
         while done < n_rounds and decision is None:
             n = min(chunk_rounds, n_rounds - done)
             if team_seats is None:
-                schedule = rounds(rules, (0, 1), n, first_seed=first_seed + done)
+                schedule = rounds(rules, (0, 1), n, first_seed=first_seed + done, roles=roles)
             else:  # the team's episode and B's on each seed: one comparison
                 schedule = [g for r in range(n) for g in (Game(first_seed + done + r, team_seats),
                                                           Game(first_seed + done + r, (len(members),) * rules.n_seats))]
@@ -407,26 +420,25 @@ def run_match(
         out.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
                     "llr": round(llr, 4), "lower": round(test.lower, 4), "upper": round(test.upper, 4),
                     "decision": decision, "pairs": len(round_points)}
-        if rules.kind != TWO_SIDES:
+        if not paired:
             out.sprt["model"] = "trinomial"
     return out
 
 
-def _counts(rules: Rules, round_points: list[list[float]]) -> tuple[list[int], str]:
-    """What the SPRT counts: game pairs by A's points (pentanomial) in a two-sides game, else A's results
-    (trinomial: losses, draws, wins)."""
-    if rules.kind == TWO_SIDES:
+def _counts(paired: bool, round_points: list[list[float]]) -> tuple[list[int], str]:
+    """What the SPRT counts: game pairs by A's points (pentanomial) where rounds are seat-swapped pairs, else A's
+    results (trinomial: losses, draws, wins)."""
+    if paired:
         return list(pentanomial(np.array([sum(p) for p in round_points]))), "pentanomial"
     pts = np.array([x for p in round_points for x in p])
     return [int((pts < 0.5).sum()), int((pts == 0.5).sum()), int((pts > 0.5).sum())], "trinomial"
 
 
-def _report(env: str, rules: Rules, a_name: str, a_key: Any, b: Policy, kept: list[GameResult],
+def _report(env: str, rules: Rules, paired: bool, a_name: str, a_key: Any, b: Policy, kept: list[GameResult],
             round_points: list[list[float]], seconds: float, match_id: int | None, first_seed: int, confidence: float,
             game_ids: list[int]) -> MatchReport:
     pts = np.array([x for p in round_points for x in p])
     wins, draws, losses = int((pts > 0.5).sum()), int((pts == 0.5).sum()), int((pts < 0.5).sum())
-    paired = rules.kind == TWO_SIDES
     penta = pentanomial(np.array([sum(p) for p in round_points])) if paired else (0, 0, 0, 0, 0)
     return MatchReport(
         env=env, a=a_name, b=b.id, games=len(kept), wins=wins, draws=draws, losses=losses,
@@ -435,7 +447,7 @@ def _report(env: str, rules: Rules, a_name: str, a_key: Any, b: Policy, kept: li
         pentanomial=penta, stats=match_stats(wins, draws, losses, pentanomial=penta if paired else None,
                                              confidence=confidence),
         seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
-        results=kept, game_ids=game_ids, kind=rules.kind,
+        results=kept, game_ids=game_ids, kind=rules.kind, paired=paired,
     )
 
 

@@ -13,6 +13,11 @@ well reverse it. So after the run's final gauntlet, the playoff:
    rounds), and goes back to 1, until the top is separated from every snapshot of the run, or every pair of
    top and rival has ``max_games`` games between them.
 
+A game whose sides differ (a hunter against a runner) is rated per side: each side has its top and its rivals,
+and two snapshots of one side cannot meet, so each of them plays the other side's best instead (their difference
+is measured through that common opponent), until the top is separated or the rival has ``max_games`` games
+against it.
+
 The games are stored like the gauntlet's (kind ``eval``, flagged ``playoff``): they count in every rating, and the
 ladder shows the best with its margin over the next, or the snapshots it is tied with.
 """
@@ -25,10 +30,11 @@ from dataclasses import dataclass
 from ..arena.schedule import round_size
 from ..envs import get_env
 from ..errors import MarlError
-from ..league.store import League
+from ..league.store import League, PlayerRow
 from ..results import COOPERATIVE, Rules
 from ..stats.elo import normal_quantile
-from .gauntlet import GauntletConfig, crews_of, fit_history, play_gauntlet, record_between, run_history
+from .gauntlet import GauntletConfig, History, crews_of, fit_history, play_gauntlet, record_between, run_history
+from .roles import RoleBook
 
 __all__ = ["PlayoffConfig", "playoff"]
 
@@ -61,7 +67,9 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
     spec = get_env(final[0].env)
     anchor = spec.anchor
     rules = Rules.of(spec)
-    per_round = 1 if rules.kind == COOPERATIVE else round_size(rules, 2)  # results a round gives
+    # results a round gives: one comparison, one game of each on its own side, or a seat-swapped pair
+    per_round = 1 if rules.kind == COOPERATIVE or rules.sides_differ else round_size(rules, 2)
+    book = RoleBook(league, final[0].env)
     z = normal_quantile(0.5 + 0.5 * cfg.confidence)  # the ladder's two-sided intervals of a difference
     played, seed = 0, first_seed
     for _ in range(cfg.max_rounds):
@@ -76,15 +84,25 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
         if len(players) < 2:
             return played
         players.sort(key=lambda p: (-fit.rating(p.id), p.id))
-        top, rest = players[0], players[1:]
-        left = {p.id: cfg.max_games - sum(record_between(history.table, top.id, p.id)) for p in rest}
-        rivals = [p for p in rest if not fit.separated(top.id, p.id, z) and left[p.id] > 0][:cfg.rivals]
-        by_rounds: dict[int, list] = {}  # the pairs by the rounds each plays now
-        for rival in rivals:
-            by_rounds.setdefault(max(1, min(cfg.round_games, left[rival.id]) // per_round), []).append((top, rival))
+        by_rounds: dict[int, dict[frozenset[int], tuple]] = {}  # the pairs by the rounds each plays now
+        for group in _comparable(book, players, history.sided):
+            top, taken = group[0], 0
+            for rival in group[1:]:
+                if taken == cfg.rivals:
+                    break
+                if fit.separated(top.id, rival.id, z):
+                    continue
+                pairs, left = _meeting(book, history, players, top, rival, cfg.max_games)
+                if not pairs or left <= 0:
+                    continue
+                taken += 1
+                n = max(1, min(cfg.round_games, left) // per_round)
+                for a, b in pairs:
+                    by_rounds.setdefault(n, {}).setdefault(frozenset((a.id, b.id)), (a, b))
         if not by_rounds:
             return played
-        for n, pairs in sorted(by_rounds.items()):
+        for n, unique in sorted(by_rounds.items()):
+            pairs = list(unique.values())
             matchups = play_gauntlet(league, pairs, first_seed=seed,
                                      config=GauntletConfig(pairs=n, clear_pairs=n, max_pairs=n, older=0),
                                      device=device, on_games=on_games, label="playoff",
@@ -92,3 +110,27 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
             played += sum(m.games for m in matchups)
             seed += n * len(pairs)
     return played
+
+
+def _comparable(book: RoleBook, players: list[PlayerRow], sided: bool) -> list[list[PlayerRow]]:
+    """The groups whose ratings compare, each best first: all the players, or in a game rated per side the
+    snapshots of each side (role)."""
+    if not sided:
+        return [players]
+    groups: dict[frozenset[str] | None, list[PlayerRow]] = {}
+    for p in players:
+        groups.setdefault(book.roles(p), []).append(p)
+    return [g for g in groups.values() if len(g) > 1]
+
+
+def _meeting(book: RoleBook, history: History, players: list[PlayerRow], top: PlayerRow, rival: PlayerRow,
+             max_games: int) -> tuple[list[tuple[PlayerRow, PlayerRow]], int]:
+    """What separates ``top`` from ``rival`` and how many more results it may take: their own games, or, where
+    they cannot meet (one side of a game whose sides differ), each one's games against the best player that meets
+    both (the other side's best: the difference of two ratings measured through a common opponent)."""
+    if book.rules.kind == COOPERATIVE or book.meets(top, rival):  # a cooperative game's snapshots meet as crews
+        return [(top, rival)], max_games - sum(record_between(history.table, top.id, rival.id))
+    common = next((p for p in players if book.meets(top, p) and book.meets(rival, p)), None)
+    if common is None:
+        return [], 0
+    return [(top, common), (rival, common)], max_games - sum(record_between(history.table, rival.id, common.id))

@@ -257,8 +257,13 @@ def build_matrix(
     if run is not None:  # (a player of the same weights as one of the run's is shown under its first name)
         rows = [r for r in rows if r.kind == "bot" or (r.player_id in pool and pool[r.player_id].run == run)
                 or any(c.startswith(f"{run}/") for c in r.copies)]
-    rows = [r for r in rows if r.copy_of is None]  # one set of weights, one player
-    rows = sorted(rows, key=lambda r: (-r.elo, r.policy))[:top]
+    ranked: list = []  # one set of weights is one player (its other names' rows are left out), and a game rated
+    seen: set = set()  # per side lists a scripted player once a side: here it is one player
+    for r in sorted(rows, key=lambda r: (-r.elo, r.policy)):
+        if r.player_id not in seen and r.copy_of is None:
+            seen.add(r.player_id)
+            ranked.append(r)
+    rows = ranked[:top]
     if len(rows) < 2:
         raise LeagueError(f"fewer than two rated players{f' in run {run!r} and the bots' if run else ''} in {env}")
     players = tuple(MatrixPlayer(r.policy, int(r.player_id), r.kind, r.elo, r.ci_low, r.ci_high)

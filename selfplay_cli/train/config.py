@@ -130,7 +130,15 @@ class TrainConfig:
         if curriculum:
             curriculum.check(core)
         layout = plan_layout(plan, self.games, self.agents, self.league_games)
-        spaces = learner_spaces(spec, seat_spaces, layout)
+        roles = spec.seat_roles(game)
+        spaces = learner_spaces(spec, seat_spaces, layout, roles if len(set(roles)) > 1 else None)
+        learned = {roles[s] for s in range(n_seats) if (layout[s] >= 0).any()}
+        foreign = [s for s in range(n_seats) if roles[s] not in learned]
+        if foreign and sum(self.opponents.bots.values()) < 1:  # its opponents: no snapshot, no live learner fits
+            s = foreign[0]
+            raise MarlError(f"seat {spec.agents[s]} of {spec.name} is of role {roles[s]}, which no learner learns: "
+                            "only scripted players can play it; give it a learner (--seats), or let scripted "
+                            "players fill it (--bots random=1)")
         if self.sharing == "sa":  # one agent over the team: its joint spaces (too many joint actions: refused)
             obs, act = joint_spaces(spaces[0].observation, spaces[0].action, spec.n_seats, spec.name)
             spaces = [type(spaces[0])(obs, act, False)]

@@ -36,7 +36,7 @@ class GauntletJob:
 
     snapshot_ids: tuple[int, ...]
     first_seed: int
-    games: int  # games per opponent (seat-swapped pairs)
+    games: int  # games per opponent (seat-swapped pairs, or single games where each plays only its own side)
     older: int
     full: bool = False  # every opponent gets ``games``, even where the lineage's result is already clear
     playoff: int = 0  # after the gauntlet, the run's best candidates meet, up to this many games a pair (the final)
@@ -54,12 +54,16 @@ class JobDone:
 
 def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) -> JobDone:
     """Play one gauntlet in this process."""
+    from ..envs import get_env
     from ..rated.gauntlet import GauntletConfig, rate_snapshots
+    from ..results import Rules
 
     t0 = time.perf_counter()
-    n = job.games // 2
+    # games in a round of two players: a seat-swapped pair, or one game where each plays only its own side
+    per = 1 if Rules.of(get_env(league.get_player(job.snapshot_ids[0]).env)).sides_differ else 2
+    n = max(job.games // per, 1)
     cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n, older=job.older,
-                         bot_pairs=max(n, FINAL_BOT_GAMES // 2) if job.full else 0)
+                         bot_pairs=max(n, FINAL_BOT_GAMES // per) if job.full else 0)
     matchups = rate_snapshots(league, job.snapshot_ids, first_seed=job.first_seed, config=cfg, device=device,
                               on_games=on_games)
     games = sum(m.games for m in matchups)

@@ -25,7 +25,7 @@ import json
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,7 +34,7 @@ import torch
 
 from ..algos import get_learner
 from ..algos.joint import JointLearner
-from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_spaces, plan_layout
+from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
 from ..errors import MarlError
 from ..league.ledger import KIND_CODES
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
@@ -45,6 +45,7 @@ from ..policies.bots import league_bots
 from ..policies.network import resolve_device
 from ..policies.snapshot import SnapshotMeta, save_snapshot
 from ..rated.match import load_player
+from ..rated.roles import RoleBook
 from ..rated.snapshots import snapshot_relpath
 from ..results import COOPERATIVE, GameResult
 from ..signals import signals_held
@@ -139,6 +140,7 @@ class TrainReport:
     wait_seconds: float  # this session: time spent after training waiting for the last gauntlets
     plot: Path | str | None = None  # the rating curves' PNG, or why there is none
     best: Any = None  # the run's best snapshot as the ladder has it at the end (a LadderRow), None unrated
+    side_bests: list[Any] = field(default_factory=list)  # a game rated per side: the run's best of each side
 
     @property
     def steps_per_second(self) -> float:
@@ -217,7 +219,11 @@ class Trainer:
         self.home = plan.home  # the learner of each seat when learners hold every seat (its 'latest' opponent)
         self.learner_of_game = layout.max(axis=0)  # the learner in each game (opponent slots: the one it faces)
         self.names = _learner_names(spec.agents, plan.home, cfg.sharing)
-        self.spaces = learner_spaces(spec, spec.seat_spaces(game_cfg), layout)
+        roles = spec.seat_roles(game_cfg)
+        self.seat_roles = roles if len(set(roles)) > 1 else None  # each seat's role, where seats differ
+        self.spaces = learner_spaces(spec, spec.seat_spaces(game_cfg), layout, self.seat_roles)
+        self.roles = learner_roles(layout, self.seat_roles)  # the role each learner learns (None: one role)
+        self._can_play: dict[str, set[int]] = {}  # per role, the pool's snapshots that can play it
         torch.manual_seed(cfg.seed)
         learner_cls, algo_cfg = get_learner(cfg.algo), getattr(cfg, cfg.algo)
         self.arch = algo_cfg.arch
@@ -292,9 +298,16 @@ class Trainer:
         the learner that plays that game."""
         ids = np.empty(len(slots), dtype=np.int64)
         learners = self.learner_of_game[slots % self.cfg.games]
-        for i in np.unique(learners).tolist():
-            mine = learners == i
-            ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates)
+        if self.seat_roles is None:
+            for i in np.unique(learners).tolist():
+                mine = learners == i
+                ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates)
+            return ids
+        roles = np.asarray(self.seat_roles, dtype=object)[slots // self.cfg.games]
+        for i in np.unique(learners).tolist():  # a seat's opponents: the run's snapshots of the seat's role
+            for role in dict.fromkeys(roles[learners == i].tolist()):
+                mine = (learners == i) & (roles == role)
+                ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates, among=self._can_play.get(role, ()))
         return ids
 
     def _choose(self, slots: np.ndarray) -> list[Policy]:
@@ -366,12 +379,15 @@ class Trainer:
                                 arch=self.arch,
                                 algo=cfg.algo, step=self.steps,
                                 episode=self.episodes, run=cfg.run, name=name, parent=parent,
-                                seat=self.names[i] if len(self.names) > 1 else None,
+                                seat=self.names[i] if len(self.names) > 1 else None, role=self.roles[i],
                                 extra={"learner": self.names[i], **({"joint": self.joint} if self.joint else {})})
             meta = save_snapshot(self.league.home / rel, learner.net, meta)  # type: ignore[operator]
+            row_meta = {"weights_sha256": meta.weights_sha256, "learner": self.names[i]}
+            if self.roles[i] is not None:  # the seats it plays (a game whose seats hold several roles)
+                row_meta["role"] = self.roles[i]
             rows.append(dict(env=self.spec.name, run=cfg.run, name=name, path=rel,  # the store hashes the file
                              step=self.steps, episode=self.episodes, algo=cfg.algo, parent_id=self.latest[i] or None,
-                             meta={"weights_sha256": meta.weights_sha256, "learner": self.names[i]}))
+                             meta=row_meta))
         full = [f"{cfg.run}/{n}" for n in names]
         jobs = list(self.jobs)
         if cfg.eval_games:
@@ -384,11 +400,17 @@ class Trainer:
         self.latest = [r.id for r in registered]
         self.snapshots += full
         self.jobs = jobs
-        self.matchmaker.set_pool(self._pool())
+        self._set_pool()
 
-    def _pool(self) -> list[int]:
-        """The run's snapshots, oldest first: the matchmaker's pool."""
-        return [p.id for p in self.league.players(env=self.spec.name, kind="snapshot") if p.run == self.cfg.run]
+    def _set_pool(self) -> None:
+        """The matchmaker's pool: the run's snapshots, oldest first; in a game whose seats hold different roles,
+        also which of them can play each role (a snapshot only its own)."""
+        pool = [p for p in self.league.players(env=self.spec.name, kind="snapshot") if p.run == self.cfg.run]
+        self.matchmaker.set_pool([p.id for p in pool])
+        if self.seat_roles is not None:
+            book = RoleBook(self.league, self.spec.name)
+            self._can_play = {role: {p.id for p in pool if book.roles(p) is None or role in book.roles(p)}
+                              for role in set(self.seat_roles)}
 
     def _job(self, job: tuple[tuple[str, ...], int, bool]) -> GauntletJob:
         """The gauntlet of a moment's snapshots (by name: the run state names them before they have ids)."""
@@ -516,7 +538,7 @@ class Trainer:
             else:
                 self.pending_path.unlink()
         if not self.state_path.exists():
-            if self._pool():
+            if any(p.run == self.cfg.run for p in self.league.players(env=self.spec.name, kind="snapshot")):
                 raise MarlError(f"run '{self.cfg.run}' has snapshots but no resume state ({self.state_path})")
             self._remove_strays()  # killed before its first snapshot: nothing to continue, start it again
             return f"restarted {self.cfg.run} from the beginning (it was stopped before its first snapshot)"
@@ -532,7 +554,7 @@ class Trainer:
         self._snapshot_episode, self._snapshot_step = int(state["snapshot_episode"]), int(state["snapshot_step"])
         self.elapsed = float(state["elapsed"])
         self.matchmaker.load_state_dict(json.loads(state["matchmaker"]))
-        self.matchmaker.set_pool(self._pool())
+        self._set_pool()
         self.rates = WinRates.from_dict(json.loads(state["rates"]))
         self.jobs = [(tuple(names), int(seed), bool(full)) for names, seed, full in state["jobs"]]
         removed = self._remove_strays()
@@ -712,7 +734,7 @@ class Trainer:
                            sessions=self.resumes + 1, session_steps=self.steps - self._steps0,
                            session_seconds=session, train_seconds=self._train_seconds(),
                            session_eval_games=self.eval_games,
-                           eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot, best=self._best())
+                           eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot, **self._best())
 
     def rating_games(self) -> int:
         """Games the run's gauntlets have stored in the ledger, every session's: the ledger, not a count kept in
@@ -757,15 +779,16 @@ class Trainer:
             return self._trained
         return max(time.perf_counter() - self._t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0), 0.0)
 
-    def _best(self) -> Any:
+    def _best(self) -> tuple[Any, list[Any]]:
         """The run's best snapshot in the ladder fitted now (its margin over the run's next, or the snapshots it
-        is tied with), None without rating games."""
+        is tied with), None without rating games; and in a game rated per side the best of each side."""
         from ..league.ladder import ladder
 
         if not self.cfg.eval_games:
-            return None
-        rows = ladder(self.league, self.spec.name, bootstrap=0, variant=self.variant)
-        return next((r for r in rows if r.best and r.run == self.cfg.run), None)
+            return {}
+        bests = [r for r in ladder(self.league, self.spec.name, bootstrap=0, variant=self.variant)
+                 if r.best and r.run == self.cfg.run]
+        return {"best": bests[0] if bests else None, "side_bests": [r for r in bests if r.side is not None]}
 
     def _plot(self) -> Path | str | None:
         """The run's rating curves as ``runs/<run>/ratings.png`` (as ``marl league plot --run`` draws them); None
