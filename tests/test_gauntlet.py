@@ -424,3 +424,30 @@ def test_a_run_repeated_with_its_seed_is_the_same_players_rated_once(tmp_path, c
         assert (a["elo"], a["ci_low"], a["ci_high"]) == (b["elo"], b["ci_low"], b["ci_high"])
     code, out, err = run(capsys, "match", "pong-1/s4.1k-left", "pong-2/s4.1k-left", "--home", str(home))
     assert code == 2 and "hold the same weights" in err and len(err.strip().splitlines()) == 1
+
+
+def _rating_games(home):
+    """Every rated game of a league, by the names of its players: what a run's gauntlets played, comparable across
+    leagues (player ids and game ids are the league's own)."""
+    with League.open(home) as league:
+        names = {p.id: p.full_name for p in league.players(include_removed=True)}
+        t = league.games(variant=None, pooled=False)
+        return sorted(zip((names[int(a)] for a in t.player_a), (names[int(b)] for b in t.player_b),
+                          t.seed.tolist(), t.score_a.tolist(), t.length.tolist(), strict=True))
+
+
+def test_the_rating_games_repeat_with_the_seed_whatever_the_timing(tmp_path, capsys):
+    """The same command and seed in two homes, once with the gauntlets in a worker beside training (which may fall
+    behind) and once inline (never behind): the same weights, and the very same rating games, playoff included."""
+    base = ["train", "pong", "--agents", "2", "--steps", "6144", "--games", "16", "--env-option", "points_to_win=1",
+            "--snapshot-steps", "2048", "--eval-games", "4", "--seed", "3", "--json"]
+    code, out, err = run(capsys, *base, "--home", str(tmp_path / "worker"))
+    assert code == 0, err
+    worker = json.loads(out)
+    code, out, err = run(capsys, *base, "--eval-inline", "--home", str(tmp_path / "inline"))
+    assert code == 0, err
+    inline = json.loads(out)
+    games = _rating_games(tmp_path / "worker")
+    assert games and games == _rating_games(tmp_path / "inline")
+    assert worker["rating_games"] == inline["rating_games"] and worker["final"] == inline["final"]
+    assert worker["best"] == inline["best"]
