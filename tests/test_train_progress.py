@@ -43,7 +43,7 @@ def test_progress_counts_what_moves_while_every_game_is_still_under_way(tmp_path
     far the games under way are, and how many snapshots were taken and rated, with the newest rated one's Elo."""
     events = []
     cfg = TrainConfig(env="pong", run="t", steps=8192, games=16, snapshot_steps=2048, eval_games=2, eval_inline=True,
-                      ppo=FAST_PPO)
+                      eval_playoff=0, ppo=FAST_PPO)
     with League.open(tmp_path / "league") as league:
         league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
         Trainer(league, cfg, on_progress=events.append).train()

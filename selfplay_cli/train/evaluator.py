@@ -26,7 +26,8 @@ from typing import Any
 
 from ..errors import MarlError
 
-FINAL_BOT_GAMES = 32  # a run's final snapshots play at least this many games against each scripted player
+FINAL_BOT_GAMES = 4  # a run's final snapshots play this many times --eval-games against each scripted player (32
+# at the default 8): the run's summary reports their scores against the bots, and each score's interval
 PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
 
 
@@ -63,7 +64,7 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
     per = 1 if Rules.of(get_env(league.get_player(job.snapshot_ids[0]).env)).sides_differ else 2
     n = max(job.games // per, 1)
     cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n, older=job.older,
-                         bot_pairs=max(n, FINAL_BOT_GAMES // per) if job.full else 0)
+                         bot_pairs=max(n, FINAL_BOT_GAMES * job.games // per) if job.full else 0)
     matchups = rate_snapshots(league, job.snapshot_ids, first_seed=job.first_seed, config=cfg, device=device,
                               on_games=on_games)
     games = sum(m.games for m in matchups)
