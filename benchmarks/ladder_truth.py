@@ -12,6 +12,7 @@ rising with the steps), with and without pairs that scatter around their ratings
 snapshots), so the real figure can be read against what the method gives where the model holds.
 
 Run: python benchmarks/ladder_truth.py [--seeds 0 1] [--games 200] [--pairs N] [--keep DIR] [--simulated 20]
+     [--out pairs.json]
 """
 
 from __future__ import annotations
@@ -62,6 +63,8 @@ def check_run(home: Path, run: str, games: int, max_pairs: int | None, rng: np.r
         forecast = Forecaster.of_league(league, "pong")
         rows = {r.policy: r for r in ladder(league, "pong")}
         players = [p for p in league.players("pong") if p.is_bot or p.run == run]
+        last = max(p.step for p in players if not p.is_bot)
+        finals = {p.id for p in players if not p.is_bot and p.step == last}
         pairs = list(itertools.combinations(players, 2))
         if max_pairs is not None and len(pairs) > max_pairs:
             pairs = [pairs[i] for i in sorted(rng.choice(len(pairs), max_pairs, replace=False))]
@@ -74,7 +77,8 @@ def check_run(home: Path, run: str, games: int, max_pairs: int | None, rng: np.r
             r = run_match(pa, pb, games=games, first_seed=first)
             score = (r.wins + 0.5 * r.draws) / max(r.wins + r.draws + r.losses, 1)
             met_points, met = forecast.met(a.full_name, b.full_name)
-            out.append({"a": a.full_name, "b": b.full_name, "predicted": pred.score, "low": pred.low,
+            out.append({"a": a.full_name, "b": b.full_name, "final": a.id in finals or b.id in finals,
+                        "measured_wdl": [r.wins, r.draws, r.losses], "predicted": pred.score, "low": pred.low,
                         "high": pred.high, "measured": score, "held": pred.holds(score), "met": met,
                         "ladder_diff": rows[a.full_name].elo - rows[b.full_name].elo})
             if not out[-1]["held"]:
@@ -169,6 +173,7 @@ def main() -> None:
     ap.add_argument("--pairs", type=int, default=None, help="pairs to check per run (default: all)")
     ap.add_argument("--keep", type=Path, help="folder of the runs' leagues (kept; a finished run is reused)")
     ap.add_argument("--simulated", type=int, default=20, help="simulated leagues per spread")
+    ap.add_argument("--out", type=Path, help="write every checked pair (prediction and measured score) as JSON")
     args = ap.parse_args()
     rng = np.random.default_rng(0)
     with tempfile.TemporaryDirectory() as tmp:
@@ -182,6 +187,9 @@ def main() -> None:
             real += records
         if args.seeds:
             summary("all runs", real)
+            summary("all runs, pairs with a run's final snapshot", [r for r in real if r["final"]])
+        if args.out:
+            args.out.write_text(json.dumps(real, indent=1))
     for tau in (0.0, 150.0):
         sim = [r for _ in range(args.simulated) for r in simulated(rng, tau, args.games)]
         summary(f"simulated leagues ({args.simulated}, pairs' true spread {tau:.0f} Elo)", sim)

@@ -28,6 +28,9 @@ from ..errors import MarlError
 
 FINAL_BOT_GAMES = 4  # a run's final snapshots play this many times --eval-games against each scripted player (32
 # at the default 8): the run's summary reports their scores against the bots, and each score's interval
+FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapshots (all of a default run's), spread
+# over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
+# rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
 PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
 
 
@@ -63,7 +66,8 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
     # games in a round of two players: a seat-swapped pair, or one game where each plays only its own side
     per = 1 if Rules.of(get_env(league.get_player(job.snapshot_ids[0]).env)).sides_differ else 2
     n = max(job.games // per, 1)
-    cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n, older=job.older,
+    cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n,
+                         older=max(job.older, FINAL_OLDER) if job.full else job.older,
                          bot_pairs=max(n, FINAL_BOT_GAMES * job.games // per) if job.full else 0)
     matchups = rate_snapshots(league, job.snapshot_ids, first_seed=job.first_seed, config=cfg, device=device,
                               on_games=on_games)
