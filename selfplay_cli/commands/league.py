@@ -41,8 +41,9 @@ LADDER_HELP = "\n\n".join((
     "The ladder of one game: every player's Elo, fitted from all its stored rated games of one variant: the game's "
     "default options, or those --env-option asks for (with --run: the options the run trained under). Games under "
     "other options are rated apart; a line below the table names them and the command that shows them.",
-    "Columns: rank; policy, marked (anchor) for the player whose rating is fixed (--anchor, default the random bot "
-    "at 1000) and (best) in bold for the best snapshot of each run (its highest Elo); kind (bot or snapshot); "
+    "Columns: rank; tier; policy, marked (anchor) for the player whose rating is fixed (--anchor, default the random "
+    "bot at 1000), (best) in bold for the best snapshot of each run ((best, tied) when it is the best by Elo but not "
+    "beyond doubt) and (= NAME) for another name of a player's weights; kind (bot or snapshot); "
     "training step; Elo, the Bradley-Terry fit (a draw is half a point); its confidence interval (--confidence, "
     "--bootstrap), relative to the anchor; games and W-D-L; score (points per game); online Elo (the live estimate "
     "updated after every game of the default options; in their ladder only); vs BOT, one column per scripted "
@@ -50,10 +51,12 @@ LADDER_HELP = "\n\n".join((
     "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
     "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
     "--prior 0 gives the plain maximum-likelihood fit.",
-    "Rank: 1 + the number of players stronger beyond doubt, those whose rating minus this one's has its whole "
-    "confidence interval above zero (or whose whole interval lies above this one's). Comparing two players "
-    "directly keeps out the uncertainty they share through the anchor. Players that cannot be told apart share a "
-    "rank. --run and --top only choose the rows shown: the ranks stay those of the whole ladder.",
+    "Rank: the place in the order of Elo (1, 2, 3, ...). Tier: players that cannot be told apart; a new tier starts "
+    "at the first player below the current tier's first beyond doubt (the confidence interval of their difference "
+    "lies wholly above zero; comparing two players directly keeps out the uncertainty they share through the "
+    "anchor). Under the table: the top's margin over the next and each run's best's over the run's next best, with "
+    "the intervals of the differences, or the snapshots the best cannot be told apart from. --run and --top only "
+    "choose the rows shown: ranks and tiers stay those of the whole ladder.",
     "Flags next to the Elo: perfect or zero, only with --prior 0: the maximum-likelihood rating is infinite (all "
     "games won or lost against the rest), the Elo shown is a bound and the interval is open on that side; "
     "disconnected: no chain of games links the player to the anchor, so its offset is unknown; unrated: no games.",
