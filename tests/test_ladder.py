@@ -189,6 +189,7 @@ def test_the_best_of_a_run_says_by_how_much_and_when_it_cannot_tell(league: Leag
     best = by["r1/ep90"]
     assert best.best and best.best_margin.over == "r1/ep10" and not best.best_margin.separated
     assert best.tied == ("r1/ep10",)  # 11-9: the run's best by Elo, not beyond doubt
+    assert best.best_margin.record == (11, 0, 9) and "(head to head 11-0-9)" in best.best_margin.text()
     assert best.best_margin.elo == pytest.approx(best.elo - by["r1/ep10"].elo)
     assert by["r2/ep90"].best and by["r2/ep90"].best_margin is None and by["r2/ep90"].tied == ()
     _record(league, _results(e90, e10, 60, 0, 10))
@@ -196,6 +197,7 @@ def test_the_best_of_a_run_says_by_how_much_and_when_it_cannot_tell(league: Leag
     assert best.best_margin.separated and best.tied == () and best.best_margin.low > 0
     d = best.to_json()
     assert d["best_margin"]["over"] == "r1/ep10" and d["best_margin"]["separated"] is True and d["tied"] == []
+    assert d["best_margin"]["head_to_head"] == [71, 0, 19]
 
 
 def test_bootstrap_is_seeded(tmp_path: Path) -> None:

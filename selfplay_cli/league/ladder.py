@@ -134,6 +134,7 @@ class Margin:
     elo: float
     low: float
     high: float
+    record: tuple[int, int, int] = (0, 0, 0)  # the two's own results: wins, draws, losses of the first
 
     @property
     def separated(self) -> bool:
@@ -141,11 +142,13 @@ class Margin:
 
     def to_json(self) -> dict[str, Any]:
         return {"over": self.over, "elo": round(float(self.elo), 1), "low": round(float(self.low), 1),
-                "high": round(float(self.high), 1), "separated": self.separated}
+                "high": round(float(self.high), 1), "separated": self.separated, "head_to_head": list(self.record)}
 
     def text(self) -> str:
-        """``+97 [+12, +182]``."""
-        return f"{self.elo:+.0f} [{self.low:+.0f}, {self.high:+.0f}]"
+        """``+97 [+12, +182] Elo over NAME (head to head 40-3-17)``: the two's own record where they met."""
+        w, d, lo = self.record
+        met = f"head to head {w}-{d}-{lo}" if w + d + lo else "they never met"
+        return f"{self.elo:+.0f} [{self.low:+.0f}, {self.high:+.0f}] Elo over {self.over} ({met})"
 
 
 @dataclass(frozen=True)
@@ -284,6 +287,7 @@ class Fitted:
     diff_sd: np.ndarray
     flags: list[str | None]
     z: float
+    wdl: np.ndarray | None = None  # (3, n, n): i's wins, draws and losses against j in the fitted games
 
     def comparable(self, i: int) -> bool:
         """Whether player ``i`` has an estimate (not a flagged bound, not an unknown offset)."""
@@ -293,10 +297,12 @@ class Fitted:
         """Player i's difference over player j: ``+- z sd`` where both have an estimate; else from their whole
         intervals (the widest difference they allow)."""
         d = float(self.ratings[i] - self.ratings[j])
+        record = (0, 0, 0) if self.wdl is None else tuple(int(x) for x in self.wdl[:, i, j])
         if self.comparable(i) and self.comparable(j):
             half = self.z * float(self.diff_sd[i, j])
-            return Margin(self.names[j], d, d - half, d + half)
-        return Margin(self.names[j], d, float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]))
+            return Margin(self.names[j], d, d - half, d + half, record)  # type: ignore[arg-type]
+        return Margin(self.names[j], d, float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]),
+                      record)  # type: ignore[arg-type]
 
 
 def _group(flag: str | None) -> int:
@@ -410,8 +416,12 @@ def _fit_rows(
     _open_flagged_sides(ratings, list(fit.flags), low, high, k)
     if not (np.all(np.isfinite(ratings)) and np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
         raise AssertionError("rating fit produced a non-finite value")  # pragma: no cover
+    wdl = np.zeros((3, n, n), dtype=np.int64)
+    for result, (x, y) in enumerate(((sc > 0.5, sc < 0.5), (sc == 0.5, sc == 0.5), (sc < 0.5, sc > 0.5))):
+        np.add.at(wdl[result], (ai[x], bi[x]), 1)  # a's win, draw or loss against b, and b's against a
+        np.add.at(wdl[result], (bi[y], ai[y]), 1)
     fitted = Fitted(names, ratings, low, high, np.asarray(diff_sd, dtype=np.float64), list(fit.flags),
-                    normal_quantile(0.5 + 0.5 * confidence))
+                    normal_quantile(0.5 + 0.5 * confidence), wdl)
     order = _order(fitted, [i for i, name in enumerate(names) if name not in hidden])
     tiers = _tiers(fitted, order)
     kinds, steps, player_ids = kinds or {}, steps or {}, player_ids or {}
@@ -710,7 +720,7 @@ def _verdicts(rows: list[LadderRow]) -> list[str]:
     if len(ranked) >= 2 and ranked[0].margin is not None:
         top, m = ranked[0], ranked[0].margin
         shared = sum(1 for r in ranked if r.tier == top.tier) - 1
-        lines.append(f"top: {top.policy}, {m.text()} Elo over {m.over}" + (
+        lines.append(f"top: {top.policy}, {m.text()}" + (
             "" if m.separated and not shared else
             f"; not separated from {shared} player{'s' if shared != 1 else ''} of its tier"))
     for r in rows:
@@ -720,11 +730,10 @@ def _verdicts(rows: list[LadderRow]) -> list[str]:
         if m is None:
             lines.append(f"best of {r.run}: {r.policy} (the run's only rated snapshot)")
         elif not r.tied:
-            lines.append(f"best of {r.run}: {r.policy}, {m.text()} Elo over {m.over}")
+            lines.append(f"best of {r.run}: {r.policy}, {m.text()}")
         else:
             names = ", ".join(r.tied[:3]) + (f" and {len(r.tied) - 3} more" if len(r.tied) > 3 else "")
-            lines.append(f"best of {r.run}: {r.policy} by Elo, not separated from {names} "
-                         f"({m.text()} over {m.over})")
+            lines.append(f"best of {r.run}: {r.policy} by Elo, not separated from {names}: {m.text()}")
     return lines
 
 
