@@ -17,8 +17,9 @@ stand between a fitted difference and the score a real match will show:
 :func:`predict_pair` integrates all three: the difference ``diff + e + delta`` with the pair's deviation ``e ~
 N(0, spread^2)`` updated by its own games and the fit's uncertainty ``delta ~ N(0, sd^2)``, the score ``K / n`` with
 ``K ~ Binomial(n, E(d))``; its interval is the central ``confidence`` interval of that mixture (quadrature on a grid
-over ``e`` and ``delta``, gathered into 256 levels of ``E(d)``, exact binomials over ``K``). Draws are counted as half a point and modelled as a coin of
-the same mean, which overstates the spread of a score with draws: the interval errs wide, never narrow.
+over ``e`` and ``delta``, gathered into 256 levels of ``E(d)``, exact binomials over ``K``). Draws are counted as
+half a point and modelled as a coin of the same mean, which overstates the spread of a score with draws: the
+interval errs wide, never narrow.
 
 numpy and scipy only.
 """
