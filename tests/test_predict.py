@@ -98,3 +98,33 @@ def test_a_player_without_games_is_one_line():
         f.predict("p1", "ghost", 200)
     with pytest.raises(LeagueError, match="nobody has no rated games"):
         f.predict("nobody", "p1", 200)
+
+
+def test_marl_league_predict_and_marl_match_say_what_the_ladder_expects(tmp_path, capsys):
+    """`marl league predict` prints the forecaster's prediction (JSON: the same numbers); `marl match` reports the
+    prediction made before its games and whether the games bore it out; an empty league is one line, exit 2."""
+    from cli_helpers import run, run_json
+
+    from selfplay_cli.league.store import League
+    from selfplay_cli.results import GameResult
+
+    home = str(tmp_path / "league")
+    code, out, err = run(capsys, "league", "predict", "cpu", "random", "--env", "pong", "--home", home)
+    assert code == 2 and err.count("\n") == 1 and "no rated games" in err
+    with League.open(home) as league:
+        league.ensure_bots("pong", ["random", "cpu"])
+        rnd, cpu = (league.find_players(n, "pong")[0].id for n in ("random", "cpu"))
+        mid = league.create_match("pong", "match")
+        league.record_games(mid, [GameResult("pong", (cpu, rnd) if i % 2 else (rnd, cpu), seed=i,
+                                             scores=(21, 3) if i % 2 else (3, 21),
+                                             outcome=(1.0, 0.0) if i % 2 else (0.0, 1.0), length=100,
+                                             truncated=False) for i in range(20)])
+        expect = Forecaster.of_league(league, "pong").predict("cpu", "random", 50)
+    data = run_json(capsys, "league", "predict", "cpu", "random", "--env", "pong", "--games", "50", "--home", home)
+    assert (data["score"], data["low"], data["high"]) == (round(expect.score, 4), round(expect.low, 4),
+                                                          round(expect.high, 4))
+    assert data["met"] == 20 and data["met_score"] == 1.0 and data["low"] > 0.5
+    report = run_json(capsys, "match", "cpu", "random", "--env", "pong", "--games", "40", "--home", home)
+    assert report["predicted"]["games"] == 40 and report["predicted"]["held"] == (
+        report["predicted"]["low"] <= report["score"] <= report["predicted"]["high"])
+    assert report["first_seed"] == 20  # after the 20 stored games' seeds: none of them played again

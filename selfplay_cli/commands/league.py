@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -145,6 +145,10 @@ def predict_cmd(
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
     league = open_league(home, db, readonly=True)
     try:
+        env = check_env(env)
+        if env is not None and not league.count_games(env):  # (nothing to predict from, nor bots to name)
+            raise MarlError(f"{env} has no rated games in this league yet: nothing to predict from (marl match or "
+                            "marl train first)")
         row_a, row_b = resolve_players(league, [a, b], env, env_option=env_option)
         if row_a.env != row_b.env:
             raise MarlError(f"{row_a.full_name} plays {row_a.env}, {row_b.full_name} plays {row_b.env}")
@@ -245,11 +249,14 @@ def tournament(
         plan = [p for p in plan if p.meets]
         total = sum(p.missing + p.missing % 2 for p in plan)
         with progress_bar("tournament", total, "games", progress_enabled(quiet or json_out)) as tick:
+            policies: dict[int, Any] = {}  # each player's file read and checked once, whatever its pairs
             for p in plan:
                 first = league.fresh_seed(p.a_id, p.b_id) if seed is None else seed
-                rows_ = [league.get_player(p.a_id), league.get_player(p.b_id)]
-                first = league.fresh_seed(p.a_id, p.b_id) if seed is None else seed
-                pa, pb = (load_player(league, row, device=device, seed=mix_seed(first, row.id)) for row in rows_)
+                for pid in (p.a_id, p.b_id):
+                    if pid not in policies:
+                        policies[pid] = load_player(league, league.get_player(pid), device=device,
+                                                    seed=mix_seed(first, pid))
+                pa, pb = policies[p.a_id], policies[p.b_id]
                 run_match(pa, pb, games=p.missing, first_seed=first, parallel=parallel, league=league,
                           player_ids={pa.id: p.a_id, pb.id: p.b_id}, kind="tournament", on_games=tick,
                           env_options=options)

@@ -24,7 +24,6 @@ from selfplay_cli.stats.predict import ScorePrediction, pair_spread, predict_pai
 __all__ = ["Forecaster"]
 
 
-
 @dataclass(frozen=True)
 class Forecaster:
     """A fitted population that predicts pairs (see the module docstring); players by name."""
@@ -69,12 +68,13 @@ class Forecaster:
         if not len(table):
             raise LeagueError(f"{env} has no rated games yet: nothing to predict from")
         ids, a, b = table.indexed()
-        population = [league.get_player(int(i)) for i in ids.tolist()]
+        known = {p.id: p for p in league.players(env=env, include_removed=True)}
+        population = [known[int(i)] for i in ids.tolist()]
         counts = (np.bincount(a, minlength=ids.size) + np.bincount(b, minlength=ids.size)).tolist()
         anchor = default_anchor(population, dict(zip(ids.tolist(), counts, strict=True)), declared_anchor(env))
         fitted = cls.of_games([p.full_name for p in population], a, b, table.score_a, anchor.full_name, prior)
         lead = {p.id: p.full_name for p in population}
-        aliases = {league.get_player(pid).full_name: lead[first] for pid, first in league.same_weights(env).items()
+        aliases = {known[pid].full_name: lead[first] for pid, first in league.same_weights(env).items()
                    if first in lead}
         return replace(fitted, aliases=aliases)
 

@@ -297,12 +297,12 @@ class Fitted:
         """Player i's difference over player j: ``+- z sd`` where both have an estimate; else from their whole
         intervals (the widest difference they allow)."""
         d = float(self.ratings[i] - self.ratings[j])
-        record = (0, 0, 0) if self.wdl is None else tuple(int(x) for x in self.wdl[:, i, j])
+        w, dr, lo = (0, 0, 0) if self.wdl is None else (int(x) for x in self.wdl[:, i, j])
         if self.comparable(i) and self.comparable(j):
             half = self.z * float(self.diff_sd[i, j])
-            return Margin(self.names[j], d, d - half, d + half, record)  # type: ignore[arg-type]
+            return Margin(self.names[j], d, d - half, d + half, (w, dr, lo))
         return Margin(self.names[j], d, float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]),
-                      record)  # type: ignore[arg-type]
+                      (w, dr, lo))
 
 
 def _group(flag: str | None) -> int:
@@ -636,8 +636,9 @@ def _with_copies(league: League, env: str, rows: list[LadderRow], include_remove
     if not same:
         return rows
     by_lead: dict[int, list[PlayerRow]] = defaultdict(list)
+    known = {p.id: p for p in league.players(env=env, kind="snapshot", include_removed=True)}
     for pid, lead in same.items():
-        p = league.get_player(pid)
+        p = known[pid]
         if include_removed or not p.removed:
             by_lead[lead].append(p)
     out = []

@@ -30,7 +30,7 @@ from __future__ import annotations
 import contextlib
 import math
 from collections import defaultdict
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
 from typing import Any
@@ -401,7 +401,7 @@ class Ledger(Database):
 
     def games(self, env: str | None = None, players: Iterable[int] | None = None,
               any_seat: bool = False, rated: bool = True, variant: str | None = "",
-              pooled: bool = True) -> GameTable:
+              pooled: bool | Mapping[int, int] = True) -> GameTable:
         """The pairwise results of the ledger (of ``env``), one row each, in game-id order (see the module
         docstring and :class:`GameTable`).
 
@@ -413,7 +413,8 @@ class Ledger(Database):
         ``any_seat=True``, to results in which at least one of them played.
 
         ``pooled`` (the default): snapshots of the same weights are one player (:meth:`same_weights`), their games
-        filed under the first of them (``players`` may name any of them); False keeps every name's games apart.
+        filed under the first of them (``players`` may name any of them); False keeps every name's games apart; a
+        caller that has looked :meth:`same_weights` up already passes it.
 
         ``rated`` (the default) leaves out the games of training matches: there a learner that kept learning after
         its latest snapshot played under that snapshot's name, so they measure no fixed player. Every rating is
@@ -429,7 +430,7 @@ class Ledger(Database):
             if special:
                 rows += _derived_rows(s, env, rated, special)
                 rows.sort(key=lambda r: r[0])
-            return rows, (_same_weights(s, env) if pooled else {})
+            return rows, (_same_weights(s, env) if pooled is True else dict(pooled or {}))
 
         rows, same = self._read(work)
         table = GameTable.of_rows(rows)
@@ -550,8 +551,9 @@ class Ledger(Database):
         ``variant`` (the default unless given), training games included."""
         if int(a) == int(b):
             raise LeagueError(f"player {a} cannot be paired with itself")
-        t = self.games(players=[int(a), int(b)], rated=False, variant=variant)
-        pts = np.where(t.player_a == int(a), t.score_a, 1.0 - t.score_a)
+        same = self.same_weights()  # (a name of another's weights: its games are filed under the first name)
+        t = self.games(players=[int(a), int(b)], rated=False, variant=variant, pooled=same)
+        pts = np.where(t.player_a == same.get(int(a), int(a)), t.score_a, 1.0 - t.score_a)
         return int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))
 
     def recompute_online_elo(self, env: str | None = None) -> None:

@@ -71,7 +71,7 @@ def plan_tournament(
         if same.get(x, x) != same.get(y, y):
             unique.setdefault(frozenset((same.get(x, x), same.get(y, y))), (x, y))
     pairs = list(unique.values())
-    table = league.games(env=env, players=check, variant=variant)
+    table = league.games(env=env, players=check, variant=variant, pooled=same)
     counts: dict[tuple[int, int], int] = defaultdict(int)
     weight = np.where(table.kind == KIND_CODES["cooperative"], 2, 1).tolist()  # a comparison: two episodes
     for x, y, w in zip(table.player_a.tolist(), table.player_b.tolist(), weight, strict=True):
@@ -109,7 +109,7 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
     same = league.same_weights()  # a name of weights another snapshot holds: its games are the player's
     if same.get(a_id, a_id) == same.get(b_id, b_id):
         raise LeagueError(f"players {a_id} and {b_id} hold the same weights: one player, no record against itself")
-    table = league.games(players=[a_id, b_id], variant=variant)  # (filed under the first name of each)
+    table = league.games(players=[a_id, b_id], variant=variant, pooled=same)  # (filed under each one's first name)
     first_side = table.player_a == same.get(a_id, a_id)
     pts = np.where(first_side, table.score_a, 1.0 - table.score_a)
     wins, draws, losses = int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))

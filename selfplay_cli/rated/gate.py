@@ -55,7 +55,8 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
         from ..errors import MarlError
 
         raise MarlError(f"the candidate and the baseline are the same player ({cand.full_name})")
-    if league.same_weights().get(cand.id, cand.id) == league.same_weights().get(base.id, base.id):
+    same = league.same_weights(cand.env)
+    if same.get(cand.id, cand.id) == same.get(base.id, base.id):
         from ..errors import MarlError
 
         raise MarlError(f"{cand.full_name} and {base.full_name} hold the same weights: one player, not stronger "

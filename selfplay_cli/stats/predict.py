@@ -121,8 +121,8 @@ def predict_pair(diff: float, sd: float, games: int, *, spread: float = 0.0, met
     if not (math.isfinite(diff) and math.isfinite(sd) and sd >= 0 and math.isfinite(spread) and spread >= 0):
         raise ValueError(f"the difference, its sd and the spread must be finite (sd, spread >= 0), not "
                          f"{diff} / {sd} / {spread}")
-    if games < 0:
-        raise ValueError(f"games must be >= 0, not {games}")
+    if games < 1:
+        raise ValueError(f"games must be at least 1, not {games}")
     if not 0.0 < confidence < 1.0:
         raise ValueError("confidence must be in (0, 1)")
     # The pair's deviation e from its ratings ~ N(0, spread^2), updated with the pair's own games (read at the fitted
@@ -144,12 +144,6 @@ def predict_pair(diff: float, sd: float, games: int, *, spread: float = 0.0, met
     expected = float(np.dot(post, p))
     tail = 0.5 * (1.0 - confidence)
     shift, spread_sd = diff + mean_u * NAT_TO_ELO, sd_u * NAT_TO_ELO
-    if games == 0:
-        order = np.argsort(p)
-        cdf = np.cumsum(post[order])
-        low = float(p[order][np.searchsorted(cdf, tail)])
-        high = float(p[order][min(np.searchsorted(cdf, 1.0 - tail), p.size - 1)])
-        return ScorePrediction(expected, low, high, 0, confidence, shift, spread_sd)
     if p.size > 256:  # the mixture's binomials at 256 levels of p, each weighted by the nodes it gathers
         edges = np.linspace(p.min(), p.max(), 257)
         where = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, 255)

@@ -779,9 +779,10 @@ class Trainer:
             return self._trained
         return max(time.perf_counter() - self._t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0), 0.0)
 
-    def _best(self) -> tuple[Any, list[Any]]:
-        """The run's best snapshot in the ladder fitted now (its margin over the run's next, or the snapshots it
-        is tied with), None without rating games; and in a game rated per side the best of each side."""
+    def _best(self) -> dict[str, Any]:
+        """The report's ``best``: the run's best snapshot in the ladder fitted now (its margin over the run's next,
+        or the snapshots it is tied with), and ``side_bests``: in a game rated per side, the best of each side. None
+        of them without rating games."""
         from ..league.ladder import ladder
 
         if not self.cfg.eval_games:
