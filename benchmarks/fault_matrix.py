@@ -554,6 +554,25 @@ for _point in ("after-first-file", "after-pending-state", "during-state-file", "
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# Issue 30: hostile files and dying processes, round two
+
+
+# --- issue 30: a name read from a file is never imported ---
+
+
+# --- issue 30: the rating worker, signals, resume ---
+
+
+# --- issue 30: paths from the database, removing a snapshot a run needs ---
+
+
+# --- issue 30: non-finite numbers ---
+
+
+# --- issue 30: limits, users' games, recordings ---
+
+
+# ---------------------------------------------------------------------------------------------------------------
 
 
 def main() -> int:
