@@ -81,9 +81,11 @@ def _env() -> dict[str, str]:
 
 
 def marl(*args: str, limits: dict[int, int] | None = None, prefix: list[str] | None = None,
-         timeout: float = 600, signal_after: tuple[Callable[[], bool], int] | None = None) -> Run:
-    """Run ``marl *args`` (optionally under resource ``limits`` or after a ``prefix`` command such as unshare), wait
-    for it and measure it. ``signal_after=(ready, sig)`` sends ``sig`` once ``ready()`` is true."""
+         timeout: float = 600, signal_after: tuple[Callable[[], bool], int] | None = None,
+         cwd: Path | None = None) -> Run:
+    """Run ``marl *args`` (optionally under resource ``limits`` or after a ``prefix`` command such as unshare, in
+    folder ``cwd``), wait for it and measure it. ``signal_after=(ready, sig)`` sends ``sig`` once ``ready()`` is
+    true; a process still running after ``timeout`` seconds is killed (exit -9)."""
 
     def preexec() -> None:
         for which, value in (limits or {}).items():
@@ -92,15 +94,22 @@ def marl(*args: str, limits: dict[int, int] | None = None, prefix: list[str] | N
     cmd = [*(prefix or []), sys.executable, "-m", "selfplay_cli", *args]
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         t = time.perf_counter()
-        p = subprocess.Popen(cmd, stdout=out, stderr=err, env=_env(), preexec_fn=preexec if limits else None)
-        if signal_after is not None:
-            ready, sig = signal_after
-            deadline = time.time() + timeout
-            while p.poll() is None and not ready() and time.time() < deadline:
-                time.sleep(0.1)
-            if p.poll() is None:
+        p = subprocess.Popen(cmd, stdout=out, stderr=err, env=_env(), preexec_fn=preexec if limits else None,
+                             cwd=cwd)
+        deadline = time.time() + timeout
+        ready, sig = signal_after or (None, 0)
+        while True:  # reaped here, with its resource usage (Popen.poll would reap it without)
+            pid, status, usage = os.wait4(p.pid, os.WNOHANG)
+            if pid:
+                break
+            if ready is not None and ready():
                 p.send_signal(sig)
-        _, status, usage = os.wait4(p.pid, 0)
+                ready = None
+            if time.time() > deadline:
+                p.kill()
+                _, status, usage = os.wait4(p.pid, 0)
+                break
+            time.sleep(0.05)
         p.returncode = os.waitstatus_to_exitcode(status)
         seconds = time.perf_counter() - t
         out.seek(0)
@@ -558,6 +567,26 @@ for _point in ("after-first-file", "after-pending-state", "during-state-file", "
 
 
 # --- issue 30: a name read from a file is never imported ---
+
+EVIL_MODULE = "from pathlib import Path\nPath('PWNED').write_text('evilmod ran')\nenv = None\n"
+
+
+@fault("snapshot naming its game evilmod:env, os:abort, signal:pause, sys:exit, imported beside evilmod.py")
+def file_named_game(scratch: Path) -> tuple[bool, str]:
+    (scratch / "evilmod.py").write_text(EVIL_MODULE)
+    seen = []
+    for named in ("evilmod:env", "evilmod", "os:abort", "signal:pause", "sys:exit"):
+        file = crafted_snapshot(scratch / "contrib.safetensors", arch={"hidden": [64, 64]}, env=named)
+        r = marl("checkpoint", "import", str(file), "--home", str(scratch / "league"), cwd=scratch, timeout=120)
+        ok = r.code == 2 and r.one_line and "never imported" in r.err and r.seconds < 60
+        seen.append((named, ok, r))
+    pwned = (scratch / "PWNED").exists()
+    left = (scratch / "league" / "snapshots").exists()
+    held = all(ok for _, ok, _ in seen) and not pwned and not left
+    worst = next((r for _, ok, r in seen if not ok), seen[0][2])
+    return held, (f"{sum(ok for _, ok, _ in seen)}/{len(seen)} refused in one line (exit "
+                  f"{', '.join(str(r.code) for _, _, r in seen)}), module ran: {pwned}, league written: {left}: "
+                  f"{worst.line.replace(str(scratch) + '/', '')[:90]}")
 
 
 # --- issue 30: the rating worker, signals, resume ---

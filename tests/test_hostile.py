@@ -611,3 +611,67 @@ def test_writing_to_a_readonly_league_is_an_io_error(tmp_path):
     p = _read_only_mount(home, [sys.executable, "-m", "selfplay_cli", "checkpoint", "tag", "r/s0-left", "champ",
                                 "--home", str(home)])
     assert p.returncode == 4 and "league.db" in p.stderr and p.stderr.count("\n") == 1, p.stderr
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A name read from a file is never imported (issue 30)
+
+GAME_MODULE = textwrap.dedent("""
+    from pathlib import Path
+    Path("IMPORTED").write_text("this module ran")
+    from tests.games.tictactoe import env
+""")
+
+
+def _tictactoe_file(path: Path, env: str, seed: int = 0) -> Path:
+    """A valid snapshot of tic-tac-toe (27 inputs, 9 masked actions) whose metadata names its game ``env``."""
+    from selfplay_cli.envs import get_env
+    from selfplay_cli.policies.spaces import seat_spaces_of
+
+    spec = get_env("tests.games.tictactoe:env")
+    obs, act, _ = seat_spaces_of(spec, spec.config())[0]
+    arch = Arch(hidden=(16,))
+    save_snapshot(path, build_network(obs, act, arch, seed=seed),
+                  SnapshotMeta(env=env, obs_space=obs, act_space=act, arch=arch, algo="ppo", run="contrib",
+                               name=f"c{seed}"))
+    return path
+
+
+@pytest.mark.parametrize("named", ["mygame:env", "mygame", "os:abort", "sys:exit", "signal:pause", "os.path:join"])
+def test_a_game_named_by_a_file_is_never_imported(tmp_path, named):
+    """A contributed file naming its game `mygame:env`, imported without --env in a folder holding mygame.py: that
+    module never runs (it would write IMPORTED); `os:abort` does not abort, `signal:pause` does not hang, `sys:exit`
+    does not exit 0. One line, exit 2, nothing written to the league."""
+    (tmp_path / "mygame.py").write_text(GAME_MODULE)
+    file = crafted(tmp_path / "contrib.safetensors", hidden=(16,),
+                   tensors=build_network((8, 6), 3, Arch(hidden=(16,)), seed=0).state_dict(), env=named)
+    r = cli("checkpoint", "import", str(file), "--home", str(tmp_path / "league"), cwd=tmp_path)
+    err = one_line_error(r.returncode, r.stderr)
+    assert r.returncode == 2 and "not a registered game" in err and "--env" in err, err
+    assert not (tmp_path / "IMPORTED").exists()
+    assert not (tmp_path / "league" / "snapshots").exists()
+
+
+def test_a_users_game_is_imported_when_the_user_names_it_or_the_league_plays_it(tmp_path):
+    """The same module is loaded when the user names the game (--env mygame:env); after that the league plays
+    mygame:env, so a second file of it imports without --env (the name was the user's); a file of another module in
+    the same folder still does not."""
+    (tmp_path / "mygame.py").write_text(GAME_MODULE)
+    (tmp_path / "othergame.py").write_text(GAME_MODULE.replace("IMPORTED", "OTHER"))
+    home = ["--home", str(tmp_path / "league")]
+    first = _tictactoe_file(tmp_path / "first.safetensors", "mygame:env", seed=1)
+    r = cli("checkpoint", "import", str(first), *home, cwd=tmp_path)
+    assert r.returncode == 2 and not (tmp_path / "IMPORTED").exists(), r.stderr
+    r = cli("checkpoint", "import", str(first), "--env", "mygame:env", *home, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "IMPORTED").exists()
+    (tmp_path / "IMPORTED").unlink()
+    second = _tictactoe_file(tmp_path / "second.safetensors", "mygame:env", seed=2)
+    r = cli("checkpoint", "import", str(second), *home, "--json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["env"] == "mygame:env" and (tmp_path / "IMPORTED").exists()
+    other = _tictactoe_file(tmp_path / "other.safetensors", "othergame:env", seed=3)
+    r = cli("checkpoint", "import", str(other), *home, cwd=tmp_path)
+    assert r.returncode == 2 and not (tmp_path / "OTHER").exists(), r.stderr
+    r = cli("match", "contrib/c1", "contrib/c2", "--games", "4", *home, "--json", cwd=tmp_path)
+    assert r.returncode == 0 and json.loads(r.stdout)["games"] == 4, r.stderr

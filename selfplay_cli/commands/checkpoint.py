@@ -166,7 +166,7 @@ def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination 
             raise MarlError(f"{p.full_name} is a scripted player: there is no file to export")
         path = _snapshot_path(league, p)
         check_file(p, read_snapshot(path, expect_env=p.env), path)  # never export a file that is not the row's
-        export_snapshot(path, out)
+        export_snapshot(path, out, expect_env=p.env)
     finally:
         league.close()
     console.print(f"exported {p.full_name} to {out}", markup=False)

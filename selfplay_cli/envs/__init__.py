@@ -8,7 +8,7 @@ Importing this package registers the built-in games. ``get_env(name)`` also find
 from __future__ import annotations
 
 from . import lander_env, pong, pong_env, tennis_env
-from .loading import env_names, get_env
+from .loading import env_names, get_env, known_env
 from .options import GameOption, GameOptions, game_options
 from .registry import (
     KINDS,
@@ -60,4 +60,4 @@ register(tennis_env.TENNIS)
 
 __all__ = ["KINDS", "TURNS", "BatchedCore", "BotSpec", "EnvError", "EnvSpec", "GameOption", "GameOptions",
            "IllegalActionError", "SeatSpace", "UnknownEnvError", "check_spaces", "describe_space", "env_names",
-           "game_options", "get_env", "random_bot", "random_rule", "register"]
+           "game_options", "get_env", "known_env", "random_bot", "random_rule", "register"]

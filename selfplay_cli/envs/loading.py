@@ -12,6 +12,10 @@
   folder tried last, so ``marl train mygame:env`` works from the folder that holds ``mygame.py``.
 
 Games loaded by name are kept for the life of the process; entry points are read once.
+
+Only a name a user gave (a command's argument or ``--env``, a config file, a league's rows, which hold names users
+gave) is imported. A name read from a snapshot file is resolved with :func:`known_env`, which never imports: a
+file that says it plays ``evilmod:env`` must not run ``evilmod.py`` from the folder it was imported in.
 """
 
 from __future__ import annotations
@@ -163,6 +167,21 @@ def load_user_game(name: str) -> EnvSpec:
             return _as_spec(name, obj, f"{module}.{attr}")
     raise EnvError(name, f"game {name!r}: module {module} has neither parallel_env() nor env(); name its factory "
                          f"as {module}:FACTORY")
+
+
+def known_env(name: str) -> EnvSpec | None:
+    """The game called ``name`` if it is already known: built in, an installed package's entry point, or a game of
+    your own this process has loaded because a user named it. Nothing is imported: this is how a name read from a
+    file (a snapshot's metadata) is resolved, since importing a module a file names runs that module's code."""
+    spec = _REGISTRY.get(name)
+    if spec is not None:
+        return spec
+    plugins = load_plugins()
+    if name in plugins:
+        return plugins[name]
+    if name in _PLUGIN_ERRORS:
+        raise _PLUGIN_ERRORS[name]
+    return _LOADED.get(name)
 
 
 def get_env(name: str) -> EnvSpec:

@@ -39,7 +39,7 @@ from gymnasium import spaces
 from safetensors.torch import save as st_save
 
 from .. import files
-from ..envs import UnknownEnvError, get_env
+from ..envs import EnvError, UnknownEnvError, get_env, known_env
 from ..errors import MarlError
 from .joint import MAX_JOINT_ACTIONS, JointPolicy, joint_spaces
 from .network import Arch, NetworkPolicy, SnapshotError, build_network
@@ -612,13 +612,23 @@ def _joint_of(path: Any, meta: SnapshotMeta) -> tuple[int, int] | None:
 
 def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
     """The game must exist, take the snapshot's options, and have a seat with the snapshot's spaces (the seat the
-    snapshot names, when it names one of the game's): the observation's shape and the action space exactly."""
+    snapshot names, when it names one of the game's): the observation's shape and the action space exactly.
+
+    The game is the one the caller expects (a name a user gave, or the league row's), which may be loaded; without
+    one, the file's own name is looked up among the games already known and never imported
+    (:func:`~selfplay_cli.envs.loading.known_env`): a file must not run the module it names."""
     if expect_env is not None and meta.env != expect_env:
-        raise SnapshotError(f"{path}: snapshot plays {meta.env!r}, not {expect_env!r}")
+        raise SnapshotError(f"{path}: snapshot plays {_printable(meta.env, 80)!r}, not {_printable(expect_env, 80)!r}")
     try:
-        spec = get_env(meta.env)
+        spec = get_env(expect_env) if expect_env is not None else known_env(meta.env)
+    except EnvError as e:  # a game that does not load, or breaks the contract
+        raise SnapshotError(f"{path}: {_printable(str(e), 300)}") from None
     except UnknownEnvError as e:
         raise SnapshotError(f"{path}: snapshot plays an {e}") from None
+    if spec is None:
+        raise SnapshotError(f"{path}: snapshot plays an unknown env {_printable(meta.env, 80)!r}: it is not a "
+                            "registered game, and a game named by a file is never imported from it (if you trust "
+                            "that module, name the game yourself with --env)")
     try:
         cfg = spec.config(**meta.env_options)
         seats = seat_spaces_of(spec, cfg)
@@ -775,11 +785,12 @@ def load_policy(
 # Moving snapshots around
 
 
-def export_snapshot(src: str | os.PathLike[str], dst: str | os.PathLike[str], **overrides: Any) -> SnapshotMeta:
-    """Validate ``src`` and write it as one portable file at ``dst`` (atomically), with optional metadata
-    overrides (``run=``, ``name=``, ``parent=``, ...). If ``dst`` is an existing directory the file keeps its
-    name. ``weights_sha256`` cannot be overridden (it is recomputed)."""
-    tensors, meta = load_snapshot(src)
+def export_snapshot(src: str | os.PathLike[str], dst: str | os.PathLike[str], expect_env: str | None = None,
+                    **overrides: Any) -> SnapshotMeta:
+    """Validate ``src`` (playing ``expect_env``, as :func:`read_snapshot`) and write it as one portable file at
+    ``dst`` (atomically), with optional metadata overrides (``run=``, ``name=``, ``parent=``, ...). If ``dst`` is
+    an existing directory the file keeps its name. ``weights_sha256`` cannot be overridden (it is recomputed)."""
+    tensors, meta = load_snapshot(src, expect_env=expect_env)
     names = {f.name for f in dataclasses.fields(SnapshotMeta)} - {"weights_sha256"}
     unknown = sorted(set(overrides) - names)
     if unknown:

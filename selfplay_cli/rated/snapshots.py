@@ -123,14 +123,15 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
     already in the league are refused.
 
     Names are checked before anything is created, so a refused import writes nothing anywhere: no folder, no file,
-    no row.
+    no row. The game is ``env`` when given (a name the user typed), else the one the file names if it is registered
+    or this league already plays it (:func:`_league_game`); a module a file names is never imported.
     """
     from ..policies.snapshot import read_snapshot
 
     file = Path(file)
     if league.home is None:
         raise MarlError("this league has no home directory for snapshot files: pass --home")
-    snap = read_snapshot(file, expect_env=env)
+    snap = read_snapshot(file, expect_env=env if env is not None else _league_game(league, file))
     meta = snap.meta
     run = run or meta.run or "imported"
     name = name or meta.name
@@ -173,6 +174,17 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
         dest.unlink(missing_ok=True)
         _remove_empty(made)
         raise
+
+
+def _league_game(league: League, file: Path) -> str | None:
+    """The game ``file`` names when this league already plays it (a run of it exists: a user named that game to
+    train or import it here), so a file of a user's game that the league rates imports without ``--env``. None for
+    any other name, which :func:`~selfplay_cli.policies.snapshot.read_snapshot` then only looks up among the games
+    already known, never importing the module a file names."""
+    from ..policies.snapshot import read_meta
+
+    named = read_meta(file).env
+    return named if league.list_runs(env=named) else None
 
 
 def _file_bytes(file: Path, sha256: str) -> bytes:
