@@ -133,7 +133,8 @@ def test_games_name_the_first_seat_and_game_whose_observation_is_not_finite():
 
 def _ppo(**cfg) -> tuple[PPOLearner, np.ndarray]:
     seat = Seat(spaces.Box(-1, 1, (4,), np.float32), spaces.Discrete(3))
-    return PPOLearner(seat, 8, PPOConfig(rollout_steps=8, **cfg), seed=0), np.random.default_rng(0).uniform(-1, 1, (8, 4))
+    obs = np.random.default_rng(0).uniform(-1, 1, (8, 4))
+    return PPOLearner(seat, 8, PPOConfig(rollout_steps=8, **cfg), seed=0), obs
 
 
 def _ppo_update(learner: PPOLearner, obs: np.ndarray, reward: float = 1.0) -> dict:
@@ -216,7 +217,8 @@ def _metadata_nan(path: Path, value: str) -> Path:
     raw = file.read_bytes()
     n = int.from_bytes(raw[:8], "little")
     header = json.loads(raw[8:8 + n])
-    header["__metadata__"]["marl"] = header["__metadata__"]["marl"].replace('"extra": {}', '"extra": {"x": ' + value + '}')
+    marl = header["__metadata__"]["marl"]
+    header["__metadata__"]["marl"] = marl.replace('"extra": {}', '"extra": {"x": ' + value + "}")
     body = json.dumps(header).encode()
     file.write_bytes(len(body).to_bytes(8, "little") + body + raw[8 + n:])
     return file
@@ -239,7 +241,8 @@ CRAFTED = {
         lambda p: _lander_joint(p, 2),
         r"bad joint record in the snapshot's metadata: 2 seats of 2 actions make 4 joint actions, but its network "
         r"plays Discrete\(16\)"),
-    "NaN in the metadata": (lambda p: _metadata_nan(p, "NaN"), r"bad snapshot metadata \(a number that is not finite\)"),
+    "NaN in the metadata": (lambda p: _metadata_nan(p, "NaN"),
+                            r"bad snapshot metadata \(a number that is not finite\)"),
     "1e999 in the metadata": (lambda p: _metadata_nan(p, "1e999"),
                               r"bad snapshot metadata \(a number that is not finite\)"),
 }

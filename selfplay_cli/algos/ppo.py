@@ -35,7 +35,6 @@ arrive (its recorded log-probability is the behaviour policy's; its value is rec
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -50,8 +49,7 @@ from .base import Seat, action_head, as_bool, check_steps, fix_mask, learner_arg
 from .kickstart import Imitation
 from .optim import FlatAdam
 
-
-F32_TINY, F32_MAX = float(np.finfo(np.float32).smallest_subnormal), float(np.finfo(np.float32).max)
+F32_TINY, F32_MAX = float(np.finfo(np.float32).smallest_subnormal), float(np.finfo(np.float32).max)  # float32 > 0
 # a minibatch's figures, in order (checked to be finite every update; the first six are its statistics)
 STEP_FIGURES = ("the policy loss", "the value loss", "the entropy", "the approximate KL", "the clip fraction",
                 "the imitation loss", "the gradient norm")

@@ -69,7 +69,6 @@ from .kickstart import Imitation
 from .nstep import NStepChains
 from .optim import FlatAdam, flatten
 
-
 # a gradient step's figures, in order (checked to be finite every update; the first five are its statistics)
 STEP_FIGURES = ("the critic loss", "the actor loss", "the mean Q-value", "the entropy", "the imitation loss",
                 "the critics' gradient norm", "the actor's gradient norm", "the log-temperature")
