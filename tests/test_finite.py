@@ -189,9 +189,9 @@ def _craft(path: Path, env: str, obs: spaces.Box, act: spaces.Space, arch: Arch,
     return path
 
 
-def _tennis(path: Path, arch: Arch, change=None) -> Path:
+def _tennis(path: Path, arch: Arch, change=None, **meta) -> Path:
     seat = get_env("tennis").seat_spaces(get_env("tennis").config())[0]
-    return _craft(path, "tennis", seat.observation, seat.action, arch, change)
+    return _craft(path, "tennis", seat.observation, seat.action, arch, change, **meta)
 
 
 SAC_ARCH = Arch(hidden=(32, 32), activation="relu", value_head=False, squash=True)
@@ -245,12 +245,17 @@ CRAFTED = {
                             r"bad snapshot metadata \(a number that is not finite\)"),
     "1e999 in the metadata": (lambda p: _metadata_nan(p, "1e999"),
                               r"bad snapshot metadata \(a number that is not finite\)"),
+    "step 2**70 in the metadata": (lambda p: _tennis(p, PPO_BOX, step=2**70),
+                                   r"bad snapshot metadata \(field 'step' must lie between 0 and 2\*\*63 - 1\)"),
+    "episode -1 in the metadata": (lambda p: _tennis(p, PPO_BOX, episode=-1),
+                                   r"bad snapshot metadata \(field 'episode' must lie between 0 and 2\*\*63 - 1\)"),
 }
 SOUND = {  # the same files without the fault: imported
     "SAC actor": lambda p: _tennis(p, SAC_ARCH),
     "Gaussian head with log_std 79": lambda p: _tennis(p, PPO_BOX, _set("log_std", 2, 79.0)),
     "joint record of base 4 for lander's 4 actions": lambda p: _lander_joint(p, 4),
     "metadata with 1e300": lambda p: _metadata_nan(p, "1e300"),
+    "step 2**63 - 1": lambda p: _tennis(p, PPO_BOX, step=2**63 - 1),
 }
 
 
