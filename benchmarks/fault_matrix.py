@@ -598,6 +598,137 @@ def file_named_game(scratch: Path) -> tuple[bool, str]:
 # --- issue 30: non-finite numbers ---
 
 
+def _train_state(home: Path) -> tuple[str, list[str], bool]:
+    """The run ``r``'s status, its snapshots, and whether every one loads with finite weights (and no file lacks its
+    row)."""
+    import torch
+
+    from selfplay_cli.league.store import League
+    from selfplay_cli.policies.snapshot import load_snapshot
+
+    with League.open(home, readonly=True) as league:
+        run = league.get_run("r")
+        snaps = league.players(kind="snapshot")
+        finite = all(bool(torch.isfinite(t).all()) for s in snaps for t in load_snapshot(home / s.path)[0].values())
+    files = sorted(p.name for p in (home / "snapshots" / "r").iterdir())
+    return (run.status if run else "no run"), sorted(s.name for s in snaps), finite and files == sorted(
+        Path(s.path).name for s in snaps)
+
+
+NAN_TRAIN = ["train", "tests.games.tug:parallel_env", "--steps", "20000", "--games", "16", "--snapshot-steps", "2000",
+             "--eval-games", "0", "--run", "r", "-q"]
+
+
+@fault("non-finite: a user's game whose observations turn NaN at step 4,800 (marl train, then --resume)")
+def nan_observations(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    r = marl(*NAN_TRAIN, "--home", str(home))
+    status, names, sound = _train_state(home)
+    again = marl("train", "--resume", "r", "--home", str(home), "-q")
+    status2 = _train_state(home)[0]
+    held = (r.code == again.code == 2 and r.one_line and "observation of seat 1 (player_1)" in r.line
+            and "NaN" in r.line and status == status2 == "failed" and sound and len(names) == 6)
+    return held, (f"exit {r.code}, run {status}, {len(names)} snapshots (s0 to s4k) all finite: {r.line[13:]}; "
+                  f"resumed: exit {again.code}, run {status2}")
+
+
+@fault("non-finite: a user's game whose rewards turn NaN (marl train)")
+def nan_rewards(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    r = marl(*NAN_TRAIN, "--env-option", "nan_in=reward", "--home", str(home))
+    status, names, sound = _train_state(home)
+    held = r.code == 2 and r.one_line and "reward of seat 1 (player_1)" in r.line and status == "failed" and sound
+    return held, f"exit {r.code}, run {status}, {len(names)} snapshots all finite: {r.line[13:]}"
+
+
+@fault("non-finite: reward_scale = 1e308, and 1e38 (whose squares overflow the value loss)")
+def nan_losses(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    cfg = scratch / "c.toml"
+    cfg.write_text("[ppo]\nreward_scale = 1e308\n")
+    a = marl(*NAN_TRAIN, "--env-option", "nan_after=-1", "--config", str(cfg), "--home", str(home))
+    runs = db(home, "select count(*) from runs")[0][0] if (home / "league.db").exists() else 0
+    cfg.write_text("[ppo]\nreward_scale = 1e38\n")
+    b = marl(*NAN_TRAIN, "--env-option", "nan_after=-1", "--config", str(cfg), "--home", str(home))
+    status, names, sound = _train_state(home)
+    held = (a.code == b.code == 2 and a.one_line and b.one_line and runs == 0 and status == "failed" and sound
+            and "the value loss is inf" in b.line)
+    return held, (f"1e308: exit {a.code}, {runs} runs; 1e38: exit {b.code}, run {status}, {len(names)} snapshots: "
+                  f"{b.line[13:]}")
+
+
+def _network_file(path: Path, env: str, arch: dict, change: Callable | None = None, joint: int = 0,
+                  extra: str = "{}") -> Path:
+    """A snapshot file of a network for ``env``'s first seat (its ``joint``-seat joint spaces when > 0), checksum
+    consistent, its weights changed by ``change(tensors)`` and its metadata's ``extra`` the JSON text ``extra``."""
+    from safetensors.torch import save_file
+
+    from selfplay_cli.envs import get_env
+    from selfplay_cli.policies.joint import joint_spaces
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot import FORMAT, SnapshotMeta, weights_sha256
+
+    spec = get_env(env)
+    seat = spec.seat_spaces(spec.config())[0]
+    obs, act = joint_spaces(seat.observation, seat.action, joint) if joint else (seat.observation, seat.action)
+    tensors = {k: v.detach().clone() for k, v in build_network(obs, act, Arch(**arch), seed=0).state_dict().items()}
+    if change is not None:
+        change(tensors)
+    meta = SnapshotMeta(env=env, obs_space=obs, act_space=act, arch=Arch(**arch), algo="x", run="contrib",
+                        name="c").to_dict() | {"weights_sha256": weights_sha256(tensors)}
+    text = json.dumps(meta).replace('"extra": {}', f'"extra": {extra}')
+    save_file(tensors, str(path), metadata={"format": FORMAT, "format_version": "2", "marl": text})
+    return path
+
+
+def _imports_refused(scratch: Path, files: dict[str, Path]) -> tuple[bool, str]:
+    """``marl checkpoint import`` of each file: held when each is refused in one line and nothing is written."""
+    home = scratch / "league"
+    held, said = True, []
+    for what, file in files.items():
+        r = marl("checkpoint", "import", str(file), "--home", str(home))
+        held &= r.code == 2 and r.one_line and not list(scratch.rglob("league/**/*.safetensors"))
+        said.append(f"{what}: exit {r.code}, {r.line.split(': ', 3)[-1][:100]}")
+    return held, "; ".join(said)
+
+
+def _set(name: str, index: int, value: float) -> Callable:
+    return lambda tensors: tensors[name].view(-1).__setitem__(index, value)
+
+
+SAC_ARCH = {"hidden": (32, 32), "activation": "relu", "value_head": False, "squash": True}
+BOX_ARCH = {"hidden": (32, 32), "activation": "tanh", "value_head": True}
+
+
+@fault("non-finite: crafted SAC snapshot with a NaN weight, or an inf log-std head (tennis), imported")
+def nan_sac_file(scratch: Path) -> tuple[bool, str]:
+    return _imports_refused(scratch, {
+        "NaN weight": _network_file(scratch / "a.safetensors", "tennis", SAC_ARCH,
+                                    _set("trunk.2.weight", 7, float("nan"))),
+        "inf log-std head": _network_file(scratch / "b.safetensors", "tennis", SAC_ARCH,
+                                          _set("log_std_head.bias", 0, float("inf")))})
+
+
+@fault("non-finite: crafted Gaussian-head snapshot with log_std inf, or 100 (tennis), imported")
+def nan_log_std_file(scratch: Path) -> tuple[bool, str]:
+    return _imports_refused(scratch, {
+        "log_std inf": _network_file(scratch / "a.safetensors", "tennis", BOX_ARCH, _set("log_std", 1, float("inf"))),
+        "log_std 100": _network_file(scratch / "b.safetensors", "tennis", BOX_ARCH, _set("log_std", 2, 100.0))})
+
+
+@fault("non-finite: crafted SA file claiming joint base 2 for lander's 4 actions; NaN in a file's metadata")
+def contradicting_meta_file(scratch: Path) -> tuple[bool, str]:
+    arch = {"hidden": (32,), "activation": "relu", "value_head": False}
+    held, what = _imports_refused(scratch, {
+        "base 2": _network_file(scratch / "a.safetensors", "lander", arch, joint=2,
+                                extra='{"joint": {"seats": 2, "base": 2}}'),
+        "NaN in extra": _network_file(scratch / "b.safetensors", "tennis", BOX_ARCH, extra='{"x": NaN}')})
+    sound = marl("checkpoint", "import", str(_network_file(scratch / "c.safetensors", "lander", arch, joint=2,
+                                                            extra='{"joint": {"seats": 2, "base": 4}}')),
+                 "--home", str(scratch / "league"))
+    return held and sound.code == 0, f"{what}; base 4 (the game's): exit {sound.code}"
+
+
 # --- issue 30: limits, users' games, recordings ---
 
 

@@ -49,3 +49,14 @@ class MarlIOError(MarlError):
     the message names the path and the cause."""
 
     exit_code = EXIT_IO
+
+
+class NonFiniteError(MarlError):
+    """A number that must be finite is NaN or infinite: a game's observation or reward, a learner's loss or gradient,
+    a snapshot's weights. The message names the first place it appeared.
+
+    Exit 2 (a user error), like any other bad input: the numbers come from what the user gave marl (their game, or
+    settings such as ``lr`` or ``reward_scale`` that make the learning overflow), and the fix is theirs to make;
+    marl's own code is not at fault, so it is not an internal error (5), nor an I/O one (4)."""
+
+    learner: int | None = None  # in training, the learner whose update met it (its index); None: the game's numbers

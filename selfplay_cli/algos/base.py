@@ -20,13 +20,18 @@ A learner may also be taught (kickstarting, :mod:`selfplay_cli.algos.kickstart`;
 ``learner.teach(obs, actions, mask)`` hands it a teacher's actions for observations of its slots, and
 ``learner.teacher_weight`` weights the imitation term in the updates that follow (0, the default: none).
 
+A learner refuses to learn from a number that is NaN or infinite: the trainer checks what the game gives before a
+learner sees it, and each update checks its own losses and gradient norms (:func:`check_steps`), raising
+:class:`~selfplay_cli.errors.NonFiniteError` before a broken network can be saved.
+
 Every optional argument left out gives the behaviour learners had before it existed (no truncation bootstrap,
 every slot acting). Algorithms are registered by name in :data:`selfplay_cli.algos.LEARNERS`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
@@ -34,7 +39,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
-from ..errors import MarlError
+from ..errors import MarlError, NonFiniteError
 from ..policies.network import MLPNet, NetworkPolicy
 from ..policies.spaces import ActionHead, SpaceError, box_of_shape, describe_space
 
@@ -155,3 +160,19 @@ def values_of(net: MLPNet, obs: np.ndarray, device: torch.device) -> torch.Tenso
         _, value = net(torch.as_tensor(np.asarray(obs, dtype=np.float32), device=device).reshape(len(obs), -1))
     assert value is not None
     return value
+
+
+def check_steps(rows: torch.Tensor, names: Sequence[str], step: Callable[[int], str]) -> None:
+    """Refuse an update whose figures are not all finite: ``rows`` holds one row per gradient step of the update
+    (its losses and gradient norm, as ``names`` call them), checked at once (one device sync an update, not one a
+    gradient step). A :class:`NonFiniteError` names the first step at fault (``step(row)`` says which) and what in
+    it is NaN or infinite: the first figure in ``names``' order (losses first: a figure after it, such as the gradient
+    norm, follows from it), and a loss that breaks spoils the weights of every step after it, so the first step is
+    where it began."""
+    finite = torch.isfinite(rows)
+    if rows.numel() == 0 or bool(finite.all()):
+        return
+    r, c = (int(i) for i in (~finite).nonzero()[0])  # row-major: the first step, then its first figure
+    value = float(rows[r, c])
+    kind = "NaN" if math.isnan(value) else "inf" if value > 0 else "-inf"
+    raise NonFiniteError(f"{names[c]} is {kind} in {step(r)}")

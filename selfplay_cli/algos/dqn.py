@@ -62,9 +62,10 @@ from torch import nn
 from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead, uniform_allowed
-from .base import Seat, action_head, as_bool, fix_mask, learner_args
+from .base import Seat, action_head, as_bool, check_steps, fix_mask, learner_args
 from .optim import FlatAdam, flatten
 
+STEP_FIGURES = ("the TD loss", "the mean Q-value", "the gradient norm")  # a gradient step's figures, checked finite
 EPS_SCHEDULES = ("linear", "exponential")
 LOSSES = ("huber", "mse")
 
@@ -534,7 +535,7 @@ class DQNLearner:
             self._push(self._flat(next_obs))
         k = int(self.credit) if len(self.buffer) >= max(1, cfg.learning_starts) else 0
         self.credit -= k
-        loss_sum, q_sum = torch.zeros((), device=self.device), torch.zeros((), device=self.device)
+        loss_mean = q_mean = float("nan")
         if k:
             batches = self.buffer.sample(self.rng, (k, cfg.batch_size))  # all k batches in one draw
             obs, actions, rewards, next_o, dones, discounts = (
@@ -543,6 +544,7 @@ class DQNLearner:
             masks = batches.get("next_masks")
             next_masks = None if masks is None else torch.from_numpy(masks).to(self.device)
             loss_fn = nn.functional.smooth_l1_loss if cfg.loss == "huber" else nn.functional.mse_loss
+            rows = []  # per gradient step: its loss, mean Q and gradient norm
             for i in range(k):
                 y = self.td_target(rewards[i], dones[i], next_o[i], discounts[i],
                                    None if next_masks is None else next_masks[i])
@@ -551,14 +553,17 @@ class DQNLearner:
                 loss = loss_fn(q, y)
                 self.opt.zero_grad()
                 loss.backward()
-                self.opt.step()  # clips the gradient norm to max_grad_norm first (0: no clipping)
+                grad_norm = self.opt.step()  # clips the gradient norm to max_grad_norm first (0: no clipping)
                 self.grad_steps += 1
                 if self.grad_steps % cfg.target_period == 0:
                     self._sync_target()
-                loss_sum += loss.detach()
-                q_sum += q.detach().mean()
+                rows.append(torch.stack((loss.detach(), q.detach().mean(), grad_norm)))
+            figures = torch.stack(rows)
+            first = self.grad_steps - k + 1
+            check_steps(figures, STEP_FIGURES, lambda r: f"gradient step {first + r:,}")
             self.updates += 1
-        return {"loss": float(loss_sum) / k if k else float("nan"), "q_mean": float(q_sum) / k if k else float("nan"),
+            loss_mean, q_mean = (v / k for v in figures[:, :2].sum(0).tolist())
+        return {"loss": loss_mean, "q_mean": q_mean,
                 "epsilon": self.epsilon, "buffer_size": float(len(self.buffer)), "grad_steps": float(k),
                 "lr": self.opt.lr}
 

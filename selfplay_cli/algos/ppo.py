@@ -35,19 +35,24 @@ arrive (its recorded log-probability is the behaviour policy's; its value is rec
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 
+from ..errors import NonFiniteError
 from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
-from .base import Seat, action_head, as_bool, fix_mask, learner_args, values_of
+from .base import Seat, action_head, as_bool, check_steps, fix_mask, learner_args, values_of
 from .kickstart import Imitation
 from .optim import FlatAdam
+
+F32_TINY, F32_MAX = float(np.finfo(np.float32).smallest_subnormal), float(np.finfo(np.float32).max)  # float32 > 0
+# a minibatch's figures, in order (checked to be finite every update; the first six are its statistics)
+STEP_FIGURES = ("the policy loss", "the value loss", "the entropy", "the approximate KL", "the clip fraction",
+                "the imitation loss", "the gradient norm")
 
 
 @dataclass
@@ -77,8 +82,9 @@ class PPOConfig:
                 raise ValueError(f"{name} must be at least 1")
         if not (0 < self.gamma <= 1 and 0 <= self.gae_lambda <= 1 and self.lr > 0 and self.clip_coef > 0):
             raise ValueError("gamma, gae_lambda, lr or clip_coef out of range")
-        if not (math.isfinite(self.reward_scale) and self.reward_scale > 0):
-            raise ValueError(f"reward_scale must be a positive number, not {self.reward_scale}")
+        if not F32_TINY <= self.reward_scale <= F32_MAX:  # (NaN fails too)
+            raise ValueError(f"reward_scale must be a positive number that float32 holds (1e-45 to 3.4e38), "
+                             f"not {self.reward_scale}")
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -203,7 +209,13 @@ class PPOLearner:
         this step (None: all). ``final_mask`` is accepted for the interface's sake (values need no mask)."""
         self._check_final_given()
         if self.cfg.reward_scale != 1.0:
-            rewards = np.asarray(rewards, dtype=np.float32) * np.float32(self.cfg.reward_scale)
+            raw = np.asarray(rewards, dtype=np.float32)
+            with np.errstate(over="ignore"):
+                rewards = raw * np.float32(self.cfg.reward_scale)
+            if not np.isfinite(rewards).all():  # the games gave finite rewards: the scale overflowed them
+                r = float(raw[~np.isfinite(rewards)][0])
+                raise NonFiniteError(f"a reward of {r:g} times reward_scale {self.cfg.reward_scale:g} is beyond "
+                                     "float32 (inf): lower reward_scale")
         if self._np is not None:
             self._np["rewards"][self.t] = rewards
             self._np["dones"][self.t] = dones
@@ -381,9 +393,8 @@ class PPOLearner:
             turns = batch["next_carry"]
         n = b_obs.shape[0]
         mb = max(1, n // cfg.minibatches)
-        # policy loss, value loss, entropy, approx KL, clip fraction, imitation loss
-        stats = torch.zeros(6, device=self.device)
-        count = 0
+        # per minibatch: policy loss, value loss, entropy, approx KL, clip fraction, imitation loss, gradient norm
+        rows: list[torch.Tensor] = []
         teaching = self.teacher_weight > 0 and self.imitation is not None and len(self.imitation) > 0
         imitation = torch.zeros((), device=self.device)
         for _ in range(cfg.update_epochs if n else 0):
@@ -407,11 +418,16 @@ class PPOLearner:
                     loss = loss + self.teacher_weight * imitation
                 self.opt.zero_grad()
                 loss.backward()
-                self.opt.step()  # clips the gradient norm to max_grad_norm first
+                grad_norm = self.opt.step()  # clips the gradient norm to max_grad_norm first
                 with torch.no_grad():
-                    stats += torch.stack((pg_loss, v_loss, entropy, (ratio - 1 - log_ratio).mean(),
-                                          ((ratio - 1).abs() > cfg.clip_coef).float().mean(), imitation))
-                count += 1
+                    rows.append(torch.stack((pg_loss, v_loss, entropy, (ratio - 1 - log_ratio).mean(),
+                                             ((ratio - 1).abs() > cfg.clip_coef).float().mean(), imitation,
+                                             grad_norm)))
+        count, per_epoch = len(rows), -(-n // mb)
+        figures = torch.stack(rows) if rows else torch.zeros((0, len(STEP_FIGURES)), device=self.device)
+        check_steps(figures, STEP_FIGURES, lambda r: f"update {self.updates + 1:,} (epoch {r // per_epoch + 1}, "
+                                                     f"minibatch {r % per_epoch + 1})")
+        stats = figures[:, :6].sum(0)
         if turns is not None:
             self._set_carry(*turns)
         if self.trunc_values is not None:

@@ -64,10 +64,14 @@ from torch import nn
 from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
-from .base import Seat, action_head, as_bool, learner_args
+from .base import Seat, action_head, as_bool, check_steps, learner_args
 from .kickstart import Imitation
 from .nstep import NStepChains
 from .optim import FlatAdam, flatten
+
+# a gradient step's figures, in order (checked to be finite every update; the first five are its statistics)
+STEP_FIGURES = ("the critic loss", "the actor loss", "the mean Q-value", "the entropy", "the imitation loss",
+                "the critics' gradient norm", "the actor's gradient norm", "the log-temperature")
 
 
 @dataclass
@@ -417,14 +421,16 @@ class SACLearner:
             self._release(final_obs)
         k = int(self.credit) if len(self.buffer) >= max(1, cfg.learning_starts) else 0
         self.credit -= k
-        sums = torch.zeros(5, device=self.device)  # critic loss, actor loss, Q, entropy, imitation loss
         if k:
             batches = self.buffer.sample(self.rng, (k, cfg.batch_size))  # all k batches in one draw
             obs, actions, rewards, next_o, dones, discounts = (
                 torch.from_numpy(batches[key]).to(self.device)
                 for key in ("obs", "actions", "rewards", "next_obs", "dones", "discounts"))
-            for i in range(k):
-                sums += self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i], discounts[i])
+            figures = torch.stack([self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i],
+                                                       discounts[i]) for i in range(k)])
+            first = self.grad_steps - k + 1
+            check_steps(figures, STEP_FIGURES, lambda r: f"gradient step {first + r:,}")
+            sums = figures[:, :5].sum(0)  # critic loss, actor loss, Q, entropy, imitation loss
             self.updates += 1
         out = {"alpha": self.alpha, "buffer_size": float(len(self.buffer)), "grad_steps": float(self.grad_steps),
                "lr": self.actor_opt.lr}
@@ -437,14 +443,15 @@ class SACLearner:
 
     def _gradient_step(self, obs: torch.Tensor, actions: torch.Tensor, rewards: torch.Tensor,
                        next_obs: torch.Tensor, dones: torch.Tensor, discounts: torch.Tensor) -> torch.Tensor:
-        """One step of the critics, the actor, the temperature and the targets; returns the statistics."""
+        """One step of the critics, the actor, the temperature and the targets; returns its figures
+        (:data:`STEP_FIGURES`)."""
         cfg = self.cfg
         y = self.td_target(rewards, dones, next_obs, discounts=discounts)
         q = self.critic(obs, actions)
         critic_loss = (q - y).square().mean(dim=1).sum()  # MSE of Q1 plus MSE of Q2
         self.critic_opt.zero_grad()
         critic_loss.backward()
-        self.critic_opt.step()
+        critic_norm = self.critic_opt.step()
 
         alpha = self.log_alpha.detach().exp()
         mean, log_std = self.net.gaussian(obs)
@@ -457,7 +464,7 @@ class SACLearner:
             imitation = self.imitation.loss(self.net, cfg.batch_size, self.rng)
         self.actor_opt.zero_grad()
         (actor_loss + self.teacher_weight * imitation if self._teaching else actor_loss).backward()
-        self.actor_opt.step()
+        actor_norm = self.actor_opt.step()
 
         if cfg.autotune:
             alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
@@ -467,7 +474,7 @@ class SACLearner:
         self.target_flat.lerp_(self.critic_opt.flat, cfg.tau)
         self.grad_steps += 1
         return torch.stack((critic_loss.detach(), actor_loss.detach(), q.detach().mean(), -logp.detach().mean(),
-                            imitation.detach()))
+                            imitation.detach(), critic_norm, actor_norm, self.log_alpha.detach()[0]))
 
     @property
     def _teaching(self) -> bool:

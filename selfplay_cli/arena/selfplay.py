@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..envs import EnvSpec, SeatSpace, get_env
-from ..errors import MarlError
+from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules
 from .replay import ActionLog, SeatActions, encode_actions
@@ -312,6 +312,7 @@ class SelfPlayGames:
     def _read(self) -> None:
         if self._seat_obs is None:
             obs = self.core.observe()
+            self._check_finite(obs, "observation")
             self._seat_obs = obs
             if self.uniform and isinstance(obs, np.ndarray):
                 self._flat = obs.reshape(-1, *obs.shape[2:])
@@ -387,6 +388,7 @@ class SelfPlayGames:
                 self._opponents_act(None)
             step_actions = self._actions
         rewards = np.asarray(self.core.step(step_actions), dtype=np.float32)
+        self._check_finite(rewards, "reward")
         self._log.append(step_actions)  # every slot always has a game running
         self._stale()
         done_games = self.core.terminated | self.core.truncated
@@ -415,6 +417,25 @@ class SelfPlayGames:
                     actions=encode_actions(self._log.take(g))))
             self._start(ended)
         return out_r, out_d, finished
+
+    def _check_finite(self, per_seat: Any, what: str) -> None:
+        """Refuse a NaN or infinite ``what`` (``observation``, ``reward``) from the game: one
+        ``np.isfinite(...).all()`` per seat array (one for the whole step where every seat is alike), and only when
+        one fails, the first seat and game at fault, named in a :class:`NonFiniteError` with the game's seed and how
+        many steps it had played (enough to replay it). A learner must never learn from such a number."""
+        arrays = [per_seat] if isinstance(per_seat, np.ndarray) else [np.asarray(a) for a in per_seat]
+        if all(a.dtype.kind not in "fc" or np.isfinite(a).all() for a in arrays):
+            return
+        for s in range(self.n_seats):  # the first (seat, game) at fault
+            a = np.asarray(per_seat[s]).reshape(self.n, -1)
+            bad = ~np.isfinite(a).all(axis=1) if a.dtype.kind in "fc" else np.zeros(self.n, dtype=bool)
+            if bad.any():
+                g = int(np.flatnonzero(bad)[0])
+                row = a[g]
+                value = row[~np.isfinite(row)][0]
+                kind = "NaN" if np.isnan(value) else "inf" if value > 0 else "-inf"
+                raise NonFiniteError(f"{what} of seat {s} ({self.spec.agents[s]}) in game {g} (seed "
+                                     f"{int(self.seeds[g])}) is {kind} at that game's step {int(self.core.steps[g]):,}")
 
     def _player_id(self, seat: int, game: int) -> str:
         who = self.layout[seat, game]

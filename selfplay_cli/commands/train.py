@@ -12,7 +12,7 @@ from typing import Annotated, Any
 
 import typer
 
-from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError
+from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError, NonFiniteError
 from ._common import (
     MAX_PARALLEL,
     MAX_SEED,
@@ -275,8 +275,9 @@ def train(
                 err_console.print(f"stopped {cfg.run}{at} ({why}); its last snapshot is kept: continue it with: "
                                   f"marl train --resume {cfg.run}", markup=False)
                 raise typer.Exit(EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED) from None
-            except MarlError:
-                if resume is None:  # a refused resume (e.g. another process trains it) leaves the run as it is
+            except MarlError as e:
+                # a refused resume (e.g. another process trains it) leaves the run as it is; one that broke has failed
+                if resume is None or isinstance(e, NonFiniteError):
                     league.set_run_status(cfg.run, "failed")
                 raise
             except Exception:

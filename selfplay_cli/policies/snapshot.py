@@ -59,9 +59,13 @@ MAX_OBS_SIZE = 1 << 24  # numbers in an observation
 MAX_ACTIONS = 65_536  # outputs of an action head (actions of a Discrete space, sum(nvec), a Box's numbers)
 MAX_PARAMS = 100_000_000  # parameters of a network (400 MB of float32)
 MAX_FILE_BYTES = 8 + MAX_HEADER + 4 * MAX_PARAMS
+# A Gaussian head's log_std (a Box head without squash) lies within +-MAX_LOG_STD: beyond it exp(log_std) leaves
+# float32's normal range, and sampling (mean + std * eps) or a log-probability ((a - mean) / std) overflows. (A
+# squashed head's log-std is bounded by construction: heads.LOG_STD_MIN to LOG_STD_MAX from finite weights.)
+MAX_LOG_STD = 80.0
 LIMITS = {"header_bytes": MAX_HEADER, "hidden_layers": MAX_LAYERS, "layer_width": MAX_WIDTH,
           "observation_axes": MAX_OBS_DIMS, "observation_size": MAX_OBS_SIZE, "actions": MAX_ACTIONS,
-          "parameters": MAX_PARAMS, "file_bytes": MAX_FILE_BYTES}
+          "parameters": MAX_PARAMS, "file_bytes": MAX_FILE_BYTES, "log_std": MAX_LOG_STD}
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 
 __all__ = [
@@ -225,6 +229,9 @@ class SnapshotMeta:
                 raise ValueError("field 'obs_shape' must be a list of integers")
             if len(shape) > MAX_OBS_DIMS:
                 raise ValueError(f"observations of {len(shape):,} axes are more than marl plays ({MAX_OBS_DIMS})")
+        for key in ("step", "episode"):  # counts, which the league stores as 64-bit integers
+            if key in kw and not 0 <= kw[key] < 2**63:
+                raise ValueError(f"field {key!r} must lie between 0 and 2**63 - 1")
         if "n_actions" in kw and not 1 <= kw["n_actions"] <= MAX_ACTIONS:
             raise ValueError(f"{kw['n_actions']} actions is out of bounds (1 to {MAX_ACTIONS:,})")
         kw["arch"] = Arch.from_dict(kw.get("arch", {}))
@@ -336,6 +343,23 @@ def _check_fits(path: Any, found: dict[str, tuple[int, ...]], meta: SnapshotMeta
         raise SnapshotError(f"{path}: weights do not fit the {meta.arch.describe()} network ({'; '.join(problems)})")
 
 
+def _check_values(path: Any, arrays: dict[str, np.ndarray]) -> None:
+    """Refuse weights a network cannot play: a NaN or infinite number in any tensor, or a Gaussian head's
+    ``log_std`` outside +-:data:`MAX_LOG_STD`. One min and one max per tensor (NaN propagates through both): nothing
+    is allocated beside the weights themselves, whatever their size."""
+    for name in sorted(arrays):
+        a = arrays[name]
+        if not a.size:
+            continue
+        lo, hi = float(a.min()), float(a.max())
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            kind = "NaN" if math.isnan(lo) or math.isnan(hi) else "inf" if hi == math.inf else "-inf"
+            raise SnapshotError(f"{path}: weights are not finite ({_printable(name, 40)} holds {kind})")
+        if name == "log_std" and not -MAX_LOG_STD <= lo <= hi <= MAX_LOG_STD:
+            raise SnapshotError(f"{path}: log_std holds {lo if lo < -MAX_LOG_STD else hi:g}, outside the "
+                                f"{-MAX_LOG_STD:g} to {MAX_LOG_STD:g} a Gaussian head's log-std may take")
+
+
 def _printable(text: str, limit: int = 60) -> str:
     """``text`` safe to print on a terminal: control and format characters escaped, cut short."""
     cut = text[:limit]
@@ -384,8 +408,9 @@ def save_snapshot(
 ) -> SnapshotMeta:
     """Write weights + ``meta`` to ``path`` atomically (temp file, fsync, rename); parent dirs are created.
 
-    The weights must fit the network ``meta`` describes, in float32 and within :data:`LIMITS` (checked, so a saved
-    file always loads). Returns ``meta`` with ``weights_sha256`` filled in.
+    The weights must fit the network ``meta`` describes, in float32 and within :data:`LIMITS`, every one finite, and
+    a joint record in ``meta`` must agree with the action head (checked, so a saved file always loads). Returns
+    ``meta`` with ``weights_sha256`` filled in.
     """
     path = Path(path)
     tensors = _state_dict(net_or_state_dict)
@@ -393,6 +418,8 @@ def save_snapshot(
     if odd:
         raise SnapshotError(f"{path}: weights must be float32 ({', '.join(odd[:4])} are not)")
     _check_fits(path, {k: tuple(v.shape) for k, v in tensors.items()}, meta)
+    _check_values(path, {k: v.numpy() for k, v in tensors.items()})
+    _joint_of(path, meta)
     meta = dataclasses.replace(meta, weights_sha256=weights_sha256(tensors))
     try:
         meta_json = json.dumps(meta.to_dict(), sort_keys=True)
@@ -540,6 +567,22 @@ def _has_controls(value: Any, depth: int = 0) -> bool:
     return False
 
 
+class _NotFinite(Exception):
+    """NaN, Infinity or a number too large for a float in a file's metadata JSON (which Python's json reads as
+    floats, and marl's own JSON output could then not print)."""
+
+
+def _no_constant(name: str) -> Any:
+    raise _NotFinite(name)
+
+
+def _finite_float(text: str) -> float:
+    x = float(text)
+    if not math.isfinite(x):
+        raise _NotFinite(text)
+    return x
+
+
 def _meta_of(path: Any, header: dict[str, Any]) -> SnapshotMeta:
     md = header.get("__metadata__")
     if not isinstance(md, dict) or "format" not in md:
@@ -563,7 +606,9 @@ def _meta_of(path: Any, header: dict[str, Any]) -> SnapshotMeta:
     if not isinstance(raw, str):
         raise SnapshotError(f"{path}: not a marl snapshot (no 'marl' metadata)")
     try:
-        data = json.loads(raw)
+        data = json.loads(raw, parse_constant=_no_constant, parse_float=_finite_float)
+    except _NotFinite:
+        raise SnapshotError(f"{path}: bad snapshot metadata (a number that is not finite)") from None
     except (ValueError, RecursionError):
         raise SnapshotError(f"{path}: bad snapshot metadata (not JSON)") from None
     if _has_controls(data):
@@ -600,13 +645,19 @@ def _check_layout(path: Any, header: dict[str, Any], meta: SnapshotMeta) -> None
 
 
 def _joint_of(path: Any, meta: SnapshotMeta) -> tuple[int, int] | None:
-    """``(seats, base)`` of a joint (SA) snapshot, None for any other; a malformed record is a SnapshotError."""
+    """``(seats, base)`` of a joint (SA) snapshot, None for any other; a malformed record is a SnapshotError, and so
+    is one the action head contradicts: a joint agent plays Discrete(base ** seats), one digit of base a seat (with
+    the game's check that the head is its seats' joint space, the base is then the game's seat action count)."""
     joint = (meta.extra or {}).get("joint")
     if joint is None:
         return None
     seats, base = (joint.get("seats"), joint.get("base")) if isinstance(joint, dict) else (None, None)
     if not (_is_int(seats) and _is_int(base) and 1 <= seats <= 64 and 2 <= base <= MAX_JOINT_ACTIONS):
         raise SnapshotError(f"{path}: bad joint record in the snapshot's metadata ({_printable(str(joint), 80)})")
+    head = meta.head
+    if head.kind != "discrete" or head.nvec[0] != base ** seats:
+        raise SnapshotError(f"{path}: bad joint record in the snapshot's metadata: {seats} seats of {base} actions "
+                            f"make {base ** seats:,} joint actions, but its network plays {head.describe()}")
     return int(seats), int(base)
 
 
@@ -710,7 +761,8 @@ class Snapshot:
 def read_snapshot(path: str | os.PathLike[str], expect_env: str | None = None) -> Snapshot:
     """Read one snapshot file, checking everything before building anything from it: the file's size, its header,
     format and version, metadata, the declared tensors against the network the metadata describes (names, dtypes,
-    shapes, byte ranges, :data:`LIMITS`), the game (and ``expect_env``) and its spaces, then the weights' checksum.
+    shapes, byte ranges, :data:`LIMITS`), the game (and ``expect_env``) and its spaces, then the weights' checksum
+    and their values (every one finite; a Gaussian head's log-std within bounds).
     The file is read once: the weights, the checksum and the file's hash all come from the same bytes."""
     data, header, start = _read_whole(path)
     meta = _meta_of(path, header)
@@ -718,16 +770,18 @@ def read_snapshot(path: str | os.PathLike[str], expect_env: str | None = None) -
     _check_env(path, meta, expect_env)
     if not meta.weights_sha256:
         raise SnapshotError(f"{path}: snapshot has no weights checksum")
-    tensors = {}
+    arrays = {}
     for name, info in header.items():
         if name == "__metadata__":
             continue
         begin, end = info["data_offsets"]
         count = (end - begin) // 4
         array = np.frombuffer(data, dtype="<f4", count=count, offset=start + begin).astype(np.float32)
-        tensors[name] = torch.from_numpy(array).reshape(tuple(info["shape"]))
+        arrays[name] = array.reshape(tuple(info["shape"]))
+    tensors = {name: torch.from_numpy(a) for name, a in arrays.items()}
     if weights_sha256(tensors) != meta.weights_sha256:
         raise SnapshotError(f"{path}: weights do not match their checksum (file corrupt?)")
+    _check_values(path, arrays)
     return Snapshot(tensors=tensors, meta=meta, sha256=hashlib.sha256(data).hexdigest())
 
 

@@ -35,7 +35,7 @@ import torch
 from ..algos import get_learner
 from ..algos.joint import JointLearner
 from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
-from ..errors import MarlError
+from ..errors import MarlError, NonFiniteError
 from ..league.ledger import KIND_CODES
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 from ..league.store import League, PlayerRow
@@ -674,7 +674,10 @@ class Trainer:
             self.snapshot("start")  # s0: every learner has an identity in the league from the start
         next_episodes = self.episodes + cfg.snapshot_every if cfg.snapshot_every else None
         next_steps = (self.steps // cfg.snapshot_steps + 1) * cfg.snapshot_steps if cfg.snapshot_steps else None
-        obs = self.games.observe()
+        try:
+            obs = self.games.observe()
+        except NonFiniteError as e:
+            raise self._stopped(e, self.steps) from None
         line_step = -METRICS_STEPS  # the step of the last metrics line (the first update writes one)
         stats: list[dict[str, float]] = []  # the learners' figures from their last update
         pending: list[GameResult] = []
@@ -691,13 +694,21 @@ class Trainer:
                 acting = games.acting() if games.sequential else None
                 if self.teacher is not None:
                     self._teach(obs, acting, progress)
-                rewards, dones, finished = games.step(self.team.act(obs, games.masks() if games.masked else None))
-                obs = games.observe()
+                try:
+                    rewards, dones, finished = games.step(self.team.act(obs, games.masks() if games.masked else None))
+                    obs = games.observe()
+                except NonFiniteError as e:  # before any learner sees it
+                    raise self._stopped(e, self.steps + cfg.games) from None
                 self.steps += cfg.games
                 self.episodes += len(finished)
                 pending += finished
-                if self.team.record(rewards, dones, games.truncated, acting, games.final_obs, games.final_masks):
-                    stats = self.team.update(obs, progress)
+                try:  # a learner's numbers (scaled rewards, losses, gradients), before a broken network is saved
+                    due = self.team.record(rewards, dones, games.truncated, acting, games.final_obs, games.final_masks)
+                    if due:
+                        stats = self.team.update(obs, progress)
+                except NonFiniteError as e:
+                    raise self._stopped(e, self.steps) from None
+                if due:
                     if self.steps - line_step >= METRICS_STEPS:  # off-policy learners update every step: a line
                         line_step = self.steps  # and a ledger write per update would be megabytes a minute
                         self._record(pending)
@@ -735,6 +746,15 @@ class Trainer:
                            session_seconds=session, train_seconds=self._train_seconds(),
                            session_eval_games=self.eval_games,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot, **self._best())
+
+    def _stopped(self, e: NonFiniteError, step: int) -> NonFiniteError:
+        """The one line that stops a run at a number that is not finite: where it appeared (the game's seat, or the
+        learner and its update), and the step the run stopped at. Nothing of it was saved: the last snapshot moment
+        came before it."""
+        if e.learner is None:
+            return NonFiniteError(f"{e}; training stopped at step {step:,}")
+        return NonFiniteError(f"learner {self.names[e.learner]}: {e}; training stopped at step {step:,} (the game's "
+                              "numbers were finite: a smaller lr or reward_scale may help)")
 
     def rating_games(self) -> int:
         """Games the run's gauntlets have stored in the ledger, every session's: the ledger, not a count kept in

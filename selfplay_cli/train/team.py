@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..errors import NonFiniteError
+
 
 def _single_torch_thread() -> None:
     torch.set_num_threads(1)
@@ -81,12 +83,21 @@ class LearnerTeam:
         return all(due)
 
     def update(self, obs: Sequence[np.ndarray], progress: float) -> list[dict[str, float]]:
-        """Every learner's update, side by side; returns their statistics in learner order."""
+        """Every learner's update, side by side; returns their statistics in learner order. A learner whose update
+        met a number that is not finite raises its :class:`NonFiniteError` with ``learner`` set to its index."""
         pairs = list(zip(self.learners, obs, strict=True))
         if self._pool is None:
-            return [learner.update(o, progress) for learner, o in pairs]
-        futures = [self._pool.submit(learner.update, o, progress) for learner, o in pairs]
-        return [f.result() for f in futures]
+            calls = [lambda learner=learner, o=o: learner.update(o, progress) for learner, o in pairs]
+        else:
+            calls = [self._pool.submit(learner.update, o, progress).result for learner, o in pairs]
+        out = []
+        for i, call in enumerate(calls):
+            try:
+                out.append(call())
+            except NonFiniteError as e:
+                e.learner = i
+                raise
+        return out
 
     def close(self) -> None:
         if self._pool is not None:

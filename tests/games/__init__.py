@@ -2,4 +2,6 @@
 
 - ``tests.games.tictactoe:env``: turn-based (AEC), 2 seats, two sides, Discrete(9) with action masks.
 - ``tests.games.rendezvous:parallel_env``: simultaneous (parallel), 3 seats, cooperative, Box(-1, 1, (2,)) actions.
+- ``tests.games.tug:parallel_env``: simultaneous, 2 seats, two sides, Discrete(3); its observations or rewards turn
+  NaN after a while (a user's buggy game).
 """
