@@ -20,6 +20,8 @@ be shared across ``fork``; open one per process. Everything importable from here
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from selfplay_cli.league.db import (
     DB_FILENAME,
     DEFAULT_HOME,
@@ -46,6 +48,9 @@ from selfplay_cli.league.roster import (
 )
 from selfplay_cli.results import GameResult
 
+SNAPSHOTS = "snapshots"
+"""The folder of the league home that holds every snapshot file (``snapshots/<run>/<name>.safetensors``)."""
+
 __all__ = [
     "DEFAULT_ELO",
     "DEFAULT_HOME",
@@ -58,6 +63,7 @@ __all__ = [
     "RESERVED_NAMES",
     "RUN_STATUSES",
     "SCHEMA_VERSION",
+    "SNAPSHOTS",
     "GameResult",
     "GameRow",
     "GameTable",
@@ -76,4 +82,30 @@ __all__ = [
 
 class League(Ledger, Roster, Database):
     """The league database: players, runs, matches and the game ledger (see the module docstring)."""
+
+    def snapshot_file(self, row: PlayerRow) -> Path:
+        """The file of a snapshot row, checked to stay inside the league: the one way marl turns a path read from the
+        database into a file it reads or deletes.
+
+        A row's path is relative to the home and lies under its ``snapshots`` folder (``snapshots/<run>/<name>
+        .safetensors``, as :func:`~selfplay_cli.rated.snapshots.snapshot_relpath` writes it): plain names only (no
+        ``..``, no NUL byte), and, symlinks followed, still under ``snapshots`` (which may itself be a symlink to
+        another disk). A path that is absolute, climbs out, or ends outside through a symlink is a row that was
+        written by something else than marl or edited: a :class:`LeagueError` naming the snapshot, before anything
+        is read or deleted. A league without a home (a database URL opened without ``--home``) has no files."""
+        if not row.path:
+            raise LeagueError(f"{row.full_name} has no snapshot file")
+        if self.home is None:
+            raise LeagueError(f"{row.full_name}: this league has no home directory for its snapshot files: pass "
+                              "--home")
+        leaves = LeagueError(f"{row.full_name}: its file path {shown(row.path)} leaves the league (snapshot files "
+                             f"lie under {self.home / SNAPSHOTS}): the row was not written by marl; nothing was read "
+                             "or deleted")
+        parts = Path(row.path).parts if "\0" not in row.path else ()
+        if len(parts) < 2 or parts[0] != SNAPSHOTS:  # absolute ('/' first), another folder, or a bare name
+            raise leaves
+        try:
+            return self.home_path(*parts)  # plain names; symlinks followed, still under snapshots/
+        except LeagueError:
+            raise leaves from None
 
