@@ -13,6 +13,9 @@ The league is made of three concerns, each in its own module:
 * :mod:`selfplay_cli.league.ledger`: matches, the games with their seats, the online Elo and the rating table
   derived for every kind of game.
 
+A snapshot row's path becomes a file only through :meth:`League.snapshot_file`, which keeps it inside the home's
+``snapshots`` folder whatever the database says.
+
 Objects returned to callers are frozen dataclasses (:class:`RunRow`, :class:`PlayerRow`, :class:`GameTable`,
 :class:`GameRow`), never ORM instances, so nothing lazy-loads after a session has closed. A :class:`League` must not
 be shared across ``fork``; open one per process. Everything importable from here before the split still is.
