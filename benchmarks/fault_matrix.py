@@ -595,6 +595,103 @@ def file_named_game(scratch: Path) -> tuple[bool, str]:
 # --- issue 30: paths from the database, removing a snapshot a run needs ---
 
 
+def _bad_row(scratch: Path, path: str) -> Path:
+    """A league whose row r/s1M-left holds ``path`` (its file gone), with ``<scratch>/victim`` beside it."""
+    home = scratch / "league"
+    make_league(home)
+    (scratch / "victim").write_bytes(b"precious")
+    (home / "snapshots/r/link.safetensors").symlink_to(scratch / "victim")
+    (home / "snapshots/r/s1M-left.safetensors").unlink()
+    with sqlite3.connect(home / "league.db") as con:
+        con.execute("update players set path = ? where name = 's1M-left'", (path,))
+    return home
+
+
+for _label, _path in (("../victim", "../victim"), ("absolute", "<scratch>/victim"),
+                      ("symlink out", "snapshots/r/link.safetensors"), ("NUL byte", "snapshots/r/x\0../../victim")):
+    def _rm_bad_row(scratch: Path, path: str = _path) -> tuple[bool, str]:
+        home = _bad_row(scratch, path.replace("<scratch>", str(scratch)))
+        runs = [marl(*args, "--home", str(home)) for args in (
+            ("checkpoint", "rm", "r/s1M-left"), ("checkpoint", "show", "r/s1M-left"),
+            ("checkpoint", "export", "r/s1M-left", str(scratch / "out.safetensors")),
+            ("match", "r/s1M-left", "cpu", "--games", "2", "-q"))]
+        gone = db(home, "select removed from players where name = 's1M-left'")[0][0]
+        victim = (scratch / "victim").is_file() and (scratch / "victim").read_bytes() == b"precious"
+        held = (all(r.code == 2 and r.one_line and "leaves the league" in r.err and "r/s1M-left" in r.err
+                    for r in runs) and not gone and victim and not (scratch / "out.safetensors").exists())
+        return held, (f"rm/show/export/match exit {[r.code for r in runs]}, victim {'intact' if victim else 'GONE'}, "
+                      f"row {'removed' if gone else 'kept'}: {runs[0].line.split('error: ', 1)[-1][:80]}")
+
+    fault(f"db path: a row's path {_label}, then marl checkpoint rm / show / export / match")(_rm_bad_row)
+
+
+def _stopped_run(scratch: Path, eval_games: int = 0) -> tuple[Path, Run]:
+    """Run 'long' trained until it has 4 snapshots, then stopped with Ctrl-C."""
+    home = scratch / "league"
+
+    def moments() -> bool:
+        return (home / "league.db").exists() and len(list((home / "snapshots/long").glob("s*.safetensors"))) >= 4
+
+    r = marl("train", "pong", "--agents", "2", "--minutes", "3", "--snapshot-steps", "20000", "--games", "16",
+             "--eval-games", str(eval_games), "--run", "long", "--home", str(home), "-q",
+             signal_after=(moments, signal.SIGINT), timeout=300)
+    return home, r
+
+
+def _newest(home: Path, like: str) -> str:
+    return db(home, f"select name from players where name like '{like}' and removed = 0 order by id desc")[0][0]
+
+
+@fault("rm needed: the snapshot a stopped run resumes from (refused, --force ends the run, --resume says so)")
+def rm_needed_latest(scratch: Path) -> tuple[bool, str]:
+    home, stop = _stopped_run(scratch)
+    name = "long/" + _newest(home, "%-left")
+    refused = marl("checkpoint", "rm", name, "--home", str(home))
+    kept = (home / f"snapshots/{name}.safetensors").exists()
+    forced = marl("checkpoint", "rm", "--force", name, "--home", str(home))
+    status = db(home, "select status from runs where name = 'long'")[0][0]
+    resume = marl("train", "--resume", "long", "--home", str(home))
+    held = (stop.code == 130 and refused.code == 2 and refused.one_line and "needed by run 'long'" in refused.err
+            and kept and forced.code == 0 and not (home / f"snapshots/{name}.safetensors").exists()
+            and status == "ended" and resume.code == 2 and resume.one_line and "was ended" in resume.err)
+    return held, (f"rm exit {refused.code} (file {'kept' if kept else 'GONE'}), --force exit {forced.code}, status "
+                  f"{status}, --resume exit {resume.code}: {resume.line.split('error: ', 1)[-1][:70]}")
+
+
+@fault("rm needed: a snapshot of a run whose trainer is at work (refused even with --force)")
+def rm_needed_live(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    cmd = [sys.executable, "-m", "selfplay_cli", "train", "pong", "--agents", "2", "--minutes", "3", "--games", "16",
+           "--eval-games", "0", "--run", "live", "--home", str(home), "-q"]
+    trainer = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=_env())
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline and not (home / "snapshots/live/s0-left.safetensors").exists():
+            time.sleep(0.2)
+        time.sleep(1)  # its row is registered right after the file
+        r = marl("checkpoint", "rm", "--force", "live/s0-left", "--home", str(home))
+    finally:
+        trainer.send_signal(signal.SIGINT)
+        code = trainer.wait(timeout=120)
+    removed = db(home, "select removed from players where name = 's0-left'")[0][0]
+    status = db(home, "select status from runs where name = 'live'")[0][0]
+    held = (r.code == 2 and r.one_line and f"process {trainer.pid}" in r.err and not removed and code == 130
+            and status == "stopped")
+    return held, (f"rm --force exit {r.code}, row {'removed' if removed else 'kept'}, the trainer then stopped with "
+                  f"exit {code}, status {status}: {r.line.split('error: ', 1)[-1][:60]}")
+
+
+@fault("dying trainer: a resumed run whose rating games fail (files gone behind marl's back) is not left running")
+def resumed_dies(scratch: Path) -> tuple[bool, str]:
+    home, stop = _stopped_run(scratch, eval_games=2)
+    for f in (home / "snapshots/long").glob("s0-*.safetensors"):
+        f.unlink()  # the oldest snapshots, which the next moment's gauntlet plays
+    r = marl("train", "--resume", "long", "--home", str(home), "-q", timeout=300)
+    status = db(home, "select status from runs where name = 'long'")[0][0]
+    held = stop.code == 130 and r.code == 2 and r.one_line and "rating games failed" in r.err and status == "failed"
+    return held, f"stopped exit {stop.code}, resume exit {r.code}, status {status}: {r.line[-70:]}"
+
+
 # --- issue 30: non-finite numbers ---
 
 

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from ..errors import MarlError
+from ..errors import MarlError, MarlIOError
 from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league
 from ._output import console, print_json
 
@@ -23,11 +23,6 @@ def _row_json(p) -> dict:
             "step": p.step, "episode": p.episode, "algo": p.algo, "tags": list(p.tags), "elo_online": round(p.elo, 1),
             "games": p.games, "path": p.path, "sha256": p.sha256, "parent_id": p.parent_id, "removed": p.removed,
             "created": p.created_at.isoformat()}
-
-
-def _snapshot_path(league, p) -> Path:
-    path = Path(p.path)
-    return path if path.is_absolute() or league.home is None else league.home / path
 
 
 @app.command("list")
@@ -73,7 +68,7 @@ def _details(league, p) -> dict:
         parent = q.parent_id
     data["lineage"] = lineage
     if not p.is_bot and not p.removed:
-        data["file"] = read_meta(_snapshot_path(league, p)).to_dict()
+        data["file"] = read_meta(league.snapshot_file(p)).to_dict()
     return data
 
 
@@ -132,23 +127,54 @@ def tag(name: NameArg, tag_name: Annotated[str, typer.Argument(metavar="TAG", he
 
 @app.command("rm")
 def rm(name: NameArg, env: EnvOpt = None,
-       keep_file: Annotated[bool, typer.Option("--keep-file", help="Keep the snapshot file on disk.")] = False,
+       keep_file: Annotated[bool, typer.Option("--keep-file", help="Keep the snapshot file on disk (and touch no "
+                                               "file: this also removes a row whose path leaves the league).")]
+       = False,
+       force: Annotated[bool, typer.Option("--force", help="Remove it even though a stopped run needs it to resume "
+                                           "(its last snapshot, a gauntlet it owes, its teacher): that run is ended "
+                                           "for good (status ended). A run being trained is never ended from here.")]
+       = False,
        home: HomeOpt = None, db: DbOpt = None) -> None:
-    """Remove a snapshot from the pool; its games stay in the ledger and keep counting in the ratings."""
+    """Remove a snapshot from the pool; its games stay in the ledger and keep counting in the ratings. A snapshot a
+    run still needs is refused (which run, and why), unless --force."""
     from ..league.names import resolve
+    from ..train.needs import needs_of
 
     league = open_league(home, db)
     try:
         p = resolve(league, name, check_env(env))
         if p.is_bot:
             raise MarlError(f"{p.full_name} is a scripted player; only snapshots can be removed")
-        removed = league.remove_snapshot(p.id)
-        path = _snapshot_path(league, removed)
+        path = None
+        if not keep_file:
+            try:
+                path = league.snapshot_file(p)  # before anything changes: a row whose path leaves the league
+            except MarlError as e:
+                raise MarlError(f"{e}; marl checkpoint rm --keep-file {name} removes the row alone") from None
+        needs = needs_of(league, p)
+        live = [n for n in needs if n.pid is not None]
+        if live:
+            raise MarlError(f"{p.full_name} is needed by {live[0].describe()}: stop that training first (Ctrl-C, "
+                            f"or kill {live[0].pid}), then remove it")
+        if needs and not force:
+            raise MarlError(f"{p.full_name} is needed by {'; by '.join(n.describe() for n in needs)}; marl "
+                            f"checkpoint rm --force {name} removes it and ends {_runs(needs)} for good")
+        league.remove_snapshot(p.id, end_runs=[n.run for n in needs])
     finally:
         league.close()
-    if not keep_file and path.exists():
-        path.unlink()
-    console.print(f"removed {p.full_name} ({p.games} games stay in the ledger)", markup=False)
+    if path is not None and path.is_file():
+        try:
+            path.unlink()
+        except OSError as e:
+            raise MarlIOError(f"removed {p.full_name} from the league, but cannot delete {path}: "
+                              f"{e.strerror or e}") from None
+    ended = f"; ended {_runs(needs)}, which needed it" if needs else ""
+    console.print(f"removed {p.full_name} ({p.games} games stay in the ledger){ended}", markup=False)
+
+
+def _runs(needs) -> str:
+    names = list(dict.fromkeys(n.run for n in needs))
+    return ("run " if len(names) == 1 else "runs ") + ", ".join(f"'{r}'" for r in names)
 
 
 @app.command("export")
@@ -164,7 +190,7 @@ def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination 
         p = resolve(league, name, check_env(env))
         if p.is_bot:
             raise MarlError(f"{p.full_name} is a scripted player: there is no file to export")
-        path = _snapshot_path(league, p)
+        path = league.snapshot_file(p)
         check_file(p, read_snapshot(path, expect_env=p.env), path)  # never export a file that is not the row's
         export_snapshot(path, out, expect_env=p.env)
     finally:

@@ -12,7 +12,7 @@ from typing import Annotated, Any
 
 import typer
 
-from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError, NonFiniteError
+from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError
 from ._common import (
     MAX_PARALLEL,
     MAX_SEED,
@@ -160,10 +160,11 @@ def train(
     from ..algos.dqn import seed000_config
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
-    from ..league.store import check_name
+    from ..league.store import check_name, shown
     from ..policies.bots import bot_names
     from ..train.config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
     from ..train.loop import Trainer
+    from ..train.needs import check_resumable
 
     for what, name in (("run name", run), ("run name", resume)):
         if name is not None:
@@ -235,7 +236,11 @@ def train(
                 raise MarlError(f"no run named '{resume}' to resume")
             if env is not None and env != old.env:
                 raise MarlError(f"run '{resume}' trains {old.env}, not {env}")
+            check_resumable(league, old)  # a run a removed snapshot has ended: one line saying which
             cfg = TrainConfig.from_dict(old.config)
+            if cfg.run != old.name:  # its folder: runs/<run> of the run's own name, never a name read elsewhere
+                raise MarlError(f"run '{resume}': its saved configuration names another run ({shown(cfg.run)}); "
+                                "the league's record of it was changed: start a new run")
             if device != "auto":
                 cfg.device = device
         else:
@@ -260,10 +265,12 @@ def train(
         reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
         with reporter, stop_on_sigterm():
             trainer = None
+            claimed = resume is None  # a resumed run is this process's once restore has taken its lock
             try:
                 trainer = Trainer(league, cfg, on_progress=reporter.update)
                 if resume is not None:
                     note = trainer.restore()
+                    claimed = True
                     league.set_run_status(cfg.run, "running")
                     if not quiet:  # stderr: --json keeps stdout for the JSON alone
                         err_console.print(note, markup=False)
@@ -275,12 +282,11 @@ def train(
                 err_console.print(f"stopped {cfg.run}{at} ({why}); its last snapshot is kept: continue it with: "
                                   f"marl train --resume {cfg.run}", markup=False)
                 raise typer.Exit(EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED) from None
-            except MarlError as e:
-                # a refused resume (e.g. another process trains it) leaves the run as it is; one that broke has failed
-                if resume is None or isinstance(e, NonFiniteError):
+            except MarlError:
+                if claimed:  # a refused resume (e.g. another process trains it) leaves the run as it is
                     league.set_run_status(cfg.run, "failed")
                 raise
-            except Exception:
+            except BaseException:  # whatever else ends it, the run is not left 'running'
                 league.set_run_status(cfg.run, "failed")
                 raise
         league.set_run_status(cfg.run, "finished")

@@ -12,7 +12,7 @@ hashes the file itself when it registers a snapshot (:meth:`Roster.add_snapshots
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
 from pathlib import Path
@@ -30,8 +30,10 @@ __all__ = ["DEFAULT_ELO", "ENV_NAME_PATTERN", "NAME_PATTERN", "RESERVED_NAMES", 
            "RunRow", "check_env_name", "check_existing_name", "check_name"]
 
 DEFAULT_ELO = 1000.0
-RUN_STATUSES = ("running", "finished", "killed", "failed", "interrupted")
-"""Run statuses the rest of marl uses; :meth:`League.set_run_status` accepts any short word."""
+RUN_STATUSES = ("running", "stopped", "finished", "failed", "ended", "killed", "interrupted")
+"""Run statuses the rest of marl uses (``stopped``: by Ctrl-C or SIGTERM, resumable; ``failed``: by an error, which
+a resume may get past; ``ended``: a snapshot it needed was removed with ``marl checkpoint rm --force``, final like
+``finished``); :meth:`League.set_run_status` accepts any short word."""
 RESERVED_NAMES = ("latest", "best")
 """Names resolved by higher-level code; no tag may take them."""
 
@@ -451,14 +453,17 @@ class Roster(Database):
 
         self._unit(work)
 
-    def remove_snapshot(self, player_id: int) -> PlayerRow:
-        """Mark a snapshot removed (soft delete) and drop its tags; its games stay in the ledger.
+    def remove_snapshot(self, player_id: int, end_runs: Collection[str] = (), status: str = "ended") -> PlayerRow:
+        """Mark a snapshot removed (soft delete) and drop its tags; its games stay in the ledger. The runs named in
+        ``end_runs`` (runs that needed it, removed anyway) get ``status`` in the same transaction.
 
         Returns the player row as it was just before removal (with its path, so the caller can delete
         the file, and its former tags). Raises LeagueError for bots, unknown or already removed players.
         """
 
         def work(s: Session) -> PlayerRow:
+            for run in s.execute(select(Run).where(Run.name.in_(list(end_runs)))).scalars():
+                run.status = status
             p = s.get(Player, int(player_id))
             if p is None:
                 raise LeagueError(f"no player with id {player_id}")

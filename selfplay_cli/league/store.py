@@ -13,12 +13,17 @@ The league is made of three concerns, each in its own module:
 * :mod:`selfplay_cli.league.ledger`: matches, the games with their seats, the online Elo and the rating table
   derived for every kind of game.
 
+A snapshot row's path becomes a file only through :meth:`League.snapshot_file`, which keeps it inside the home's
+``snapshots`` folder whatever the database says.
+
 Objects returned to callers are frozen dataclasses (:class:`RunRow`, :class:`PlayerRow`, :class:`GameTable`,
 :class:`GameRow`), never ORM instances, so nothing lazy-loads after a session has closed. A :class:`League` must not
 be shared across ``fork``; open one per process. Everything importable from here before the split still is.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 from selfplay_cli.league.db import (
     DB_FILENAME,
@@ -46,6 +51,9 @@ from selfplay_cli.league.roster import (
 )
 from selfplay_cli.results import GameResult
 
+SNAPSHOTS = "snapshots"
+"""The folder of the league home that holds every snapshot file (``snapshots/<run>/<name>.safetensors``)."""
+
 __all__ = [
     "DEFAULT_ELO",
     "DEFAULT_HOME",
@@ -58,6 +66,7 @@ __all__ = [
     "RESERVED_NAMES",
     "RUN_STATUSES",
     "SCHEMA_VERSION",
+    "SNAPSHOTS",
     "GameResult",
     "GameRow",
     "GameTable",
@@ -76,4 +85,30 @@ __all__ = [
 
 class League(Ledger, Roster, Database):
     """The league database: players, runs, matches and the game ledger (see the module docstring)."""
+
+    def snapshot_file(self, row: PlayerRow) -> Path:
+        """The file of a snapshot row, checked to stay inside the league: the one way marl turns a path read from the
+        database into a file it reads or deletes.
+
+        A row's path is relative to the home and lies under its ``snapshots`` folder (``snapshots/<run>/<name>
+        .safetensors``, as :func:`~selfplay_cli.rated.snapshots.snapshot_relpath` writes it): plain names only (no
+        ``..``, no NUL byte), and, symlinks followed, still under ``snapshots`` (which may itself be a symlink to
+        another disk). A path that is absolute, climbs out, or ends outside through a symlink is a row that was
+        written by something else than marl or edited: a :class:`LeagueError` naming the snapshot, before anything
+        is read or deleted. A league without a home (a database URL opened without ``--home``) has no files."""
+        if not row.path:
+            raise LeagueError(f"{row.full_name} has no snapshot file")
+        if self.home is None:
+            raise LeagueError(f"{row.full_name}: this league has no home directory for its snapshot files: pass "
+                              "--home")
+        leaves = LeagueError(f"{row.full_name}: its file path {shown(row.path)} leaves the league (snapshot files "
+                             f"lie under {self.home / SNAPSHOTS}): the row was not written by marl; nothing was read "
+                             "or deleted")
+        parts = Path(row.path).parts if "\0" not in row.path else ()
+        if len(parts) < 2 or parts[0] != SNAPSHOTS:  # absolute ('/' first), another folder, or a bare name
+            raise leaves
+        try:
+            return self.home_path(*parts)  # plain names; symlinks followed, still under snapshots/
+        except LeagueError:
+            raise leaves from None
 

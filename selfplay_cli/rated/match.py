@@ -85,12 +85,12 @@ def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: boo
     if row.is_bot:
         return ScriptedPolicy(row.env, row.name, seed=seed)
     from ..policies.snapshot import policy_of, read_snapshot  # torch is imported only when a network is needed
-    from .snapshots import check_file, snapshot_file
+    from .snapshots import check_file
 
     _inference_threads(device)
     if row.removed:
         raise MarlError(f"{row.full_name} was removed from the league; its games stay in the ledger")
-    path = snapshot_file(league, row)
+    path = league.snapshot_file(row)
     snap = read_snapshot(path, expect_env=row.env)
     check_file(row, snap, path)
     return policy_of(snap, path, id=row.full_name, device=device,

@@ -69,10 +69,9 @@ class RoleBook:
         if isinstance(role, str) and role in self.rules.roles:  # type: ignore[operator]
             return frozenset((role,))
         from ..policies.snapshot import read_meta, snapshot_roles
-        from .snapshots import snapshot_file
 
         try:
-            meta = read_meta(snapshot_file(self.league, row))
+            meta = read_meta(self.league.snapshot_file(row))
         except (MarlError, OSError):  # a file that is gone or bad is refused when it is loaded to play
             return None
         return snapshot_roles(meta, self.spec)

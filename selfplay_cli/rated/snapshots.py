@@ -1,5 +1,5 @@
-"""Snapshot files and their league rows: where a snapshot's file lives, importing one, and checking that a file is
-the one its row registered.
+"""Snapshot files and their league rows: where a new snapshot's file goes, importing one, and checking that a file
+is the one its row registered (where a row's file lies is :meth:`League.snapshot_file`'s to say).
 
 A row's ``sha256`` is the sha256 of its whole file (:attr:`selfplay_cli.league.models.Player.sha256`), and every
 load of a league player checks it (:func:`check_file`), so a file copied over another, or edited, never plays under
@@ -16,13 +16,11 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import MarlError
 from ..files import temp_path
-from ..league.store import League, LeagueError, LeagueIOError, PlayerRow, check_existing_name, check_name
+from ..league.store import SNAPSHOTS, League, LeagueIOError, PlayerRow, check_existing_name, check_name
 from ..league.variants import describe_variant, variant_key
 
 if TYPE_CHECKING:
     from ..policies.snapshot import Snapshot
-
-SNAPSHOTS = "snapshots"
 
 
 def snapshot_relpath(run: str, name: str) -> str:
@@ -34,22 +32,6 @@ def snapshot_relpath(run: str, name: str) -> str:
     return f"{SNAPSHOTS}/{run}/{name}.safetensors"
 
 
-def snapshot_file(league: League, row: PlayerRow) -> Path:
-    """The file of a snapshot row: its relative path under the home (checked to stay there), or its absolute
-    path."""
-    if not row.path:
-        raise MarlError(f"{row.full_name} has no snapshot file")
-    path = Path(row.path)
-    if path.is_absolute():
-        return path
-    if league.home is None:
-        raise MarlError(f"{row.full_name}: the league has no home directory for its file {row.path}: pass --home")
-    try:
-        return league.home_path(*path.parts)
-    except LeagueError as e:
-        raise MarlError(f"{row.full_name}: its file {row.path!r} is not under the league home ({e})") from None
-
-
 def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
     """The game options a player was made for, which its games are played under: a snapshot's, as its file's
     metadata records them (the header alone is read); none for a scripted player, which plays under any."""
@@ -57,7 +39,7 @@ def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
         return {}
     from ..policies.snapshot import read_meta
 
-    return dict(read_meta(snapshot_file(league, row)).env_options or {})
+    return dict(read_meta(league.snapshot_file(row)).env_options or {})
 
 
 def players_variant(league: League, env: str, rows: Iterable[PlayerRow], override: dict[str, Any] | None = None

@@ -275,7 +275,7 @@ def tensorboard_writer(log_dir: Path | None) -> Any:
 
 def save_run_config(league: League, cfg: TrainConfig) -> Path:
     """The resolved configuration, next to the run's metrics (written atomically)."""
-    run_dir = league.home / "runs" / cfg.run  # type: ignore[operator]
+    run_dir = league.home_path("runs", cfg.run)
     run_dir.mkdir(parents=True, exist_ok=True)
     path = run_dir / "config.json"
     tmp = path.with_name(f"config.json.tmp-{os.getpid()}")

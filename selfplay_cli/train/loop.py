@@ -21,6 +21,7 @@ Elo, a live view, counts them). The ratings come from the gauntlet games, which 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
@@ -207,7 +208,7 @@ class Trainer:
             torch.set_num_threads(1)  # small networks: one thread is fastest, the other core runs the games
         if league.home is None:
             raise MarlError("training needs a league home for its snapshot files: pass --home")
-        self.run_dir = league.home / "runs" / cfg.run
+        self.run_dir = league.home_path("runs", cfg.run)
         game_cfg = spec.config(**cfg.env_options)
         self.variant = variant_key(spec.name, cfg.env_options)  # where its games are rated: the run's own variant
         league.ensure_bots(spec.name, league_bots(spec))
@@ -578,11 +579,14 @@ class Trainer:
         folder = self.league.home / snapshot_relpath(self.cfg.run, "x").rsplit("/", 1)[0]  # type: ignore[operator]
         if not folder.is_dir():
             return 0
-        rows = self.league.players(env=self.spec.name, kind="snapshot", include_removed=True)
-        known = {Path(p.path).name for p in rows if p.run == self.cfg.run and p.path}
+        known = set()
+        for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True):
+            if p.run == self.cfg.run:
+                with contextlib.suppress(MarlError):  # a row whose path leaves the league names no file here
+                    known.add(self.league.snapshot_file(p))
         removed = 0
         for f in folder.iterdir():
-            if f.is_file() and f.name not in known:
+            if f.is_file() and f not in known:
                 f.unlink()
                 removed += 1
         return removed
