@@ -583,7 +583,7 @@ def _config_refused(scratch: Path, name: str, text: str | bytes, *args: str) -> 
     return held, f"{name}: exit {r.code}, {len(r.err):,} chars, league {'created' if home.exists() else 'none'}"
 
 
-@fault("config: network sizes past a snapshot's limits ([ppo.arch] hidden = [1e8, 1e8]; 70 layers) refused before a run")
+@fault("config: networks past a snapshot's limits ([ppo.arch] hidden = [1e8, 1e8]; 70 layers) refused before a run")
 def network_sizes(scratch: Path) -> tuple[bool, str]:
     outcomes = [_config_refused(scratch, "wide", "[ppo.arch]\nhidden = [1e8, 1e8]\n"),
                 _config_refused(scratch, "deep", "[ppo.arch]\nhidden = [" + ", ".join(["8"] * 70) + "]\n")]

@@ -16,8 +16,7 @@ import numpy as np
 import pytest
 from cli_helpers import run
 
-from selfplay_cli.arena import Game, play
-from selfplay_cli.arena import runner
+from selfplay_cli.arena import Game, play, runner
 from selfplay_cli.arena.selfplay import SelfPlayGames
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import EXIT_IO, EXIT_USAGE

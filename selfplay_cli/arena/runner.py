@@ -149,8 +149,8 @@ def play(
     its steps, before its slot is reused, so it sees every state the game passes through (a recording renders
     them); ``ended`` is True on a game's last call. ``stop_when(core)`` ends the games it marks after a step, as
     truncated and decided by the score at that moment (a length cap that needs no game option). A game that reaches
-    its declared length (:class:`GameLength`) ends there, as truncated, even if the game itself would go on. A policy with an
-    ``after_step()`` method is told of every step (a replay finds each step's action by it).
+    its declared length (:class:`GameLength`) ends there, as truncated, even if the game itself would go on. A
+    policy with an ``after_step()`` method is told of every step (a replay finds each step's action by it).
     """
     spec = (get_env(env) if isinstance(env, str) else env).for_options(**(env_options or {}))
     if not games:

@@ -44,7 +44,8 @@ def read_toml(path: Path) -> dict[str, Any]:
     except tomllib.TOMLDecodeError as e:
         raise MarlError(f"{path}: not valid TOML ({e})") from None
     except UnicodeDecodeError as e:  # TOML is UTF-8 text
-        raise MarlError(f"{path}: not valid TOML (not UTF-8 text: byte {e.start} is {e.object[e.start]:#04x})") from None
+        byte = e.object[e.start]
+        raise MarlError(f"{path}: not valid TOML (not UTF-8 text: byte {e.start} is {byte:#04x})") from None
     except RecursionError:
         raise MarlError(f"{path}: not valid TOML for marl (tables or arrays nested too deeply)") from None
 

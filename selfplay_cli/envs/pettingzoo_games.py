@@ -24,9 +24,9 @@ The core (:class:`PettingZooCore`) steps N copies: ``reset(games, seeds)`` reset
 over when every agent is done (``terminated``, or ``truncated`` when any agent was cut by truncation); agents that
 leave early (terminated or truncated) no longer act. Agents that come and go otherwise (one that vanishes from
 ``agents`` without being done, one that joins after the game began) are not supported yet: the core refuses the
-game in one line (:class:`EnvError`) naming the agent and the step. In an AEC game a seat's observation is refreshed when its turn comes and when it
-leaves the game (zeros before its first turn). The action masks of seats that do not act are all True (their
-actions are ignored).
+game in one line (:class:`EnvError`) naming the agent and the step. In an AEC game a seat's observation is
+refreshed when its turn comes and when it leaves the game (zeros before its first turn). The action masks of seats
+that do not act are all True (their actions are ignored).
 """
 
 from __future__ import annotations
