@@ -577,7 +577,8 @@ def _config_refused(scratch: Path, name: str, text: str | bytes, *args: str) -> 
     path = scratch / f"{name}.toml"
     path.write_bytes(text.encode() if isinstance(text, str) else text)
     home = scratch / f"league-{name}"
-    r = marl("train", "pong", "--config", str(path), "--steps", "1000", "--games", "8", "--eval-games", "0", "-q",
+    games = () if name.startswith("games") else ("--games", "8")  # (typed, it would win over the file's)
+    r = marl("train", "pong", "--config", str(path), "--steps", "1000", *games, "--eval-games", "0", "-q",
              "--home", str(home), *args, timeout=120)
     held = r.code == 2 and r.one_line and len(r.err) < 2_100 and not home.exists()
     return held, f"{name}: exit {r.code}, {len(r.err):,} chars, league {'created' if home.exists() else 'none'}"
@@ -591,12 +592,13 @@ def network_sizes(scratch: Path) -> tuple[bool, str]:
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes) + f"; says: {r.line[-70:]}"
 
 
-@fault("config: lr 1e300, minutes 1e-300, [teacher] states 9e18, 5,000-deep tables, random bytes, a 10 MB name")
+@fault("config: lr 1e300, minutes 1e-300, [teacher] states 9e18, 5,000-deep tables, random bytes, a 10 MB name, "
+       "games 1e9")
 def config_numbers(scratch: Path) -> tuple[bool, str]:
     cases = {"lr": "[ppo]\nlr = 1e300\n", "minutes": "minutes = 1e-300\n",
              "states": '[teacher]\nplayer = "cpu"\nstates = 9000000000000000000\n',
              "nested": "a = " + "{b = " * 5000 + "1" + "}" * 5000 + "\n", "random-bytes": b"\xb2" + os.urandom(4000),
-             "10MB-name": "x" * 10_000_000 + " = 1\n"}
+             "10MB-name": "x" * 10_000_000 + " = 1\n", "games-1e9": 'games = 1e9\nalgo = "dqn"\n'}
     outcomes = [_config_refused(scratch, name, text) for name, text in cases.items()]
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
 

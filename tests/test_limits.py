@@ -34,11 +34,14 @@ UNDECLARED = "tests.games.endless:undeclared"  # never ends and declares no maxi
 SHIFTING = "tests.games.shifting"
 
 
-def _train(capsys, home: Path, config: str | bytes, *args: str, env: str = "pong") -> tuple[int, str]:
+def _train(capsys, home: Path, config: str | bytes, *args: str, env: str = "pong", games: int | None = 4
+           ) -> tuple[int, str]:
+    """``marl train ENV --config FILE`` (FILE holding ``config``), tiny; ``games=None``: the file's own."""
     path = home.parent / "settings.toml"
     path.write_bytes(config.encode() if isinstance(config, str) else config)
-    code, _, err = run(capsys, "train", env, "--config", str(path), "--steps", "1000", "--games", "4",
-                       "--eval-games", "0", "--quiet", *args)
+    typed = ("--games", str(games)) if games is not None else ()
+    code, _, err = run(capsys, "train", env, "--config", str(path), "--steps", "1000", *typed, "--eval-games", "0",
+                       "--quiet", *args)
     return code, err
 
 
@@ -70,6 +73,14 @@ def test_sac_critics_are_held_to_the_same_limits(home, capsys):
 def test_a_teachers_states_are_counted_against_memory(home, capsys):
     code, err = _train(capsys, home, '[teacher]\nplayer = "cpu"\nstates = 9000000000000000000\n')
     _refused_before_a_run(code, err, home, "teacher's labelled states", "GB")
+
+
+def test_more_games_at_once_than_memory_holds_are_refused_before_the_layout_is_built(home, capsys, monkeypatch):
+    from selfplay_cli.train import config
+
+    monkeypatch.setattr(config, "_machine_memory", lambda: 2**30)  # 1 GB: pong's 2 seats of 48 numbers a game
+    code, err = _train(capsys, home, "games = 2_000_000\n", "--algo", "dqn", games=None)  # ~3.2 GB of observations
+    _refused_before_a_run(code, err, home, "2,000,000 games at once would take 3.", "GB", "use fewer --games")
 
 
 # --- 2. numbers and files that were internal errors ---------------------------------------------------------------

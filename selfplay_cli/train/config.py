@@ -176,6 +176,7 @@ class TrainConfig:
         curriculum = Curriculum(self.curriculum, spec.name, spec.live_options)
         if curriculum:
             curriculum.check(core)
+        _check_games(self, seat_spaces)
         layout = plan_layout(plan, self.games, self.agents, self.league_games)
         roles = spec.seat_roles(game)
         spaces = learner_spaces(spec, seat_spaces, layout, roles if len(set(roles)) > 1 else None)
@@ -308,6 +309,25 @@ def _check_networks(cfg: TrainConfig, space: Any) -> None:
         raise MarlError(f"[{cfg.algo}] network: {e}") from None
 
 
+def _machine_memory() -> int | None:
+    """Bytes of physical memory, or None where the system does not say."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _check_games(cfg: TrainConfig, seat_spaces: Any) -> None:
+    """Refuse, before the seats are laid out, more games at once than this machine holds (``games = 1e9`` in a
+    config file): each step every seat's observation of every game is read, gathered, stored and kept as the final
+    one (~4 float32 copies), beside the game's own state."""
+    need = cfg.games * sum(16 * math.prod(s.observation.shape) + 64 for s in seat_spaces)
+    have = _machine_memory()
+    if have is not None and need > 0.8 * have:
+        raise MarlError(f"{cfg.games:,} games at once would take {need / 2**30:,.1f} GB of observations alone; this "
+                        f"machine has {have / 2**30:,.1f} GB: use fewer --games")
+
+
 def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]) -> None:
     """Refuse, before anything is built, a run whose learners' buffers of observations would not fit in this
     machine's memory (e.g. pong's 400x800 RGB frames in 256 games: ~125 GB of PPO rollout), the teacher's labelled
@@ -323,11 +343,8 @@ def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]
     if cfg.teacher.player:  # each learner keeps its teacher's labelled states (observation and action: ~2 of them)
         need += len(slots) * 2 * per_obs * cfg.teacher.states
         what += f" and the teacher's labelled states ({cfg.teacher.states:,} each)"
-    try:
-        have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (AttributeError, ValueError, OSError):
-        return
-    if need > 0.8 * have:
+    have = _machine_memory()
+    if have is not None and need > 0.8 * have:
         raise MarlError(f"{what} of {'x'.join(map(str, obs_shape))} observations would take {need / 2**30:,.1f} GB; "
                         f"this machine has {have / 2**30:,.1f} GB: use fewer --games, a shorter rollout or buffer, or "
                         "smaller observations")
