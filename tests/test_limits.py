@@ -91,6 +91,7 @@ def test_more_games_at_once_than_memory_holds_are_refused_before_the_layout_is_b
     ("[dqn]\nlr = 1e300\n", "[dqn] lr must be"),
     ("[ppo]\nreward_scale = 1e308\n", "[ppo] reward_scale must be"),
     ("[sac]\nalpha = 1e300\n", "[sac] alpha must be"),
+    ("[dqn]\nbatch_size = 1_000_000_000_000\n", "[dqn] batch_size must be at most buffer_size (100,000)"),
 ])
 def test_number_settings_outside_their_range_are_one_line(home, capsys, config, needle):
     code, err = _train(capsys, home, config)

@@ -62,7 +62,8 @@ update), checked in one pass by :func:`check_ranges` before anything is built. P
 
 
 def check_ranges(cfg: Any) -> None:
-    """Refuse the first setting of :data:`RANGES` that lies outside its range (None: not set, nothing to check)."""
+    """Refuse the first setting of :data:`RANGES` that lies outside its range (None: not set, nothing to check),
+    and a replay batch larger than its buffer (a 1e12 batch is drawn as 1e12 indices)."""
     for path, bound in RANGES.items():
         value: Any = cfg
         for part in path.split("."):
@@ -71,6 +72,11 @@ def check_ranges(cfg: Any) -> None:
             section, _, key = path.rpartition(".")
             name = f"[{section}] {key}" if section else f"--{key.replace('_', '-')}"
             raise MarlError(f"{name} must be {bound.describe()}, not {value:g}")
+    for algo in ("dqn", "sac"):
+        section = getattr(cfg, algo)
+        if section.batch_size > section.buffer_size:
+            raise MarlError(f"[{algo}] batch_size must be at most buffer_size ({section.buffer_size:,}), not "
+                            f"{section.batch_size:,}")
 
 
 @dataclass
