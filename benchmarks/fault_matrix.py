@@ -829,6 +829,110 @@ def contradicting_meta_file(scratch: Path) -> tuple[bool, str]:
 # --- issue 30: limits, users' games, recordings ---
 
 
+def _config_refused(scratch: Path, name: str, text: str | bytes, *args: str) -> tuple[bool, str]:
+    """``marl train pong --config FILE`` with ``text`` in FILE: exit 2, one short line, no league created."""
+    path = scratch / f"{name}.toml"
+    path.write_bytes(text.encode() if isinstance(text, str) else text)
+    home = scratch / f"league-{name}"
+    games = () if name.startswith("games") else ("--games", "8")  # (typed, it would win over the file's)
+    r = marl("train", "pong", "--config", str(path), "--steps", "1000", *games, "--eval-games", "0", "-q",
+             "--home", str(home), *args, timeout=120)
+    held = r.code == 2 and r.one_line and len(r.err) < 2_100 and not home.exists()
+    return held, f"{name}: exit {r.code}, {len(r.err):,} chars, league {'created' if home.exists() else 'none'}"
+
+
+@fault("config: networks past a snapshot's limits ([ppo.arch] hidden = [1e8, 1e8]; 70 layers) refused before a run")
+def network_sizes(scratch: Path) -> tuple[bool, str]:
+    outcomes = [_config_refused(scratch, "wide", "[ppo.arch]\nhidden = [1e8, 1e8]\n"),
+                _config_refused(scratch, "deep", "[ppo.arch]\nhidden = [" + ", ".join(["8"] * 70) + "]\n")]
+    r = marl("train", "pong", "--config", str(scratch / "wide.toml"), "--home", str(scratch / "x"), timeout=120)
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes) + f"; says: {r.line[-70:]}"
+
+
+@fault("config: lr 1e300, minutes 1e-300, [teacher] states 9e18, 5,000-deep tables, random bytes, a 10 MB name, "
+       "games 1e9")
+def config_numbers(scratch: Path) -> tuple[bool, str]:
+    cases = {"lr": "[ppo]\nlr = 1e300\n", "minutes": "minutes = 1e-300\n",
+             "states": '[teacher]\nplayer = "cpu"\nstates = 9000000000000000000\n',
+             "nested": "a = " + "{b = " * 5000 + "1" + "}" * 5000 + "\n", "random-bytes": b"\xb2" + os.urandom(4000),
+             "10MB-name": "x" * 10_000_000 + " = 1\n", "games-1e9": 'games = 1e9\nalgo = "dqn"\n'}
+    outcomes = [_config_refused(scratch, name, text) for name, text in cases.items()]
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
+
+
+@fault("snapshot metadata step = 2**70: marl checkpoint import")
+def snapshot_step(scratch: Path) -> tuple[bool, str]:
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+
+    path, home = scratch / "big-step.safetensors", scratch / "league"
+    save_snapshot(path, build_network((8, 6), 3, Arch(hidden=(8,)), seed=0),
+                  SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=Arch(hidden=(8,)), run="r", name="s",
+                               algo="ppo", step=2**70))
+    r = marl("checkpoint", "import", str(path), "--home", str(home), timeout=120)
+    try:  # (a refused import may leave no league at all, or an empty database)
+        rows = db(home, "select count(*) from players where kind = 'snapshot'")[0][0]
+    except sqlite3.Error:
+        rows = 0
+    held = r.code == 2 and r.one_line and rows == 0
+    return held, f"exit {r.code}, {r.line[-90:]}; {rows} snapshot rows"
+
+
+@fault("a user's game that never ends though it declares marl_max_steps = 30: train (with gauntlets), match")
+def endless_game(scratch: Path) -> tuple[bool, str]:
+    home, game = scratch / "league", "tests.games.endless:env"
+    t = marl("train", game, "--steps", "2000", "--snapshot-steps", "1000", "--games", "4", "--eval-games", "2",
+             "--eval-playoff", "0", "--run", "e", "--home", str(home), "-q", timeout=300)
+    m = marl("match", "e/s2k-a", "random", "--env", game, "--games", "10", "--home", str(home), "-q", timeout=120)
+    lengths = db(home, "select min(length), max(length), sum(truncated), count(*) from games")[0]
+    held = t.code == 0 and m.code == 0 and lengths[:2] == (30, 30) and lengths[2] == lengths[3] > 10
+    return held, (f"train exit {t.code} in {t.seconds:.0f} s, match exit {m.code} in {m.seconds:.0f} s; {lengths[3]} "
+                  f"games stored, lengths {lengths[0]} to {lengths[1]}, {lengths[2]} truncated")
+
+
+@fault("a user's game whose agents come and go (one vanishes without being done; one joins late): marl train")
+def agents_come_and_go(scratch: Path) -> tuple[bool, str]:
+    outcomes = []
+    for factory in ("parallel_env", "joining"):
+        r = marl("train", f"tests.games.shifting:{factory}", "--steps", "500", "--games", "4", "--eval-games", "0",
+                 "--home", str(scratch / factory), "-q", timeout=120)
+        said = r.line.split("not supported yet: ")[-1]
+        outcomes.append((r.code == 2 and r.one_line and "come and go" in r.err, f"{factory}: exit {r.code}, {said}"))
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
+
+
+@fault("disk full under marl record: 200 KB tmpfs (root) / file size limit 256 KB, mp4 and gif")
+def record_full_disk(scratch: Path) -> tuple[bool, str]:
+    from selfplay_cli.league.store import League
+
+    home = scratch / "league"
+    League.open(home=home).close()
+    args = ("record", "--ckpt", "cpu", "--vs", "random", "--env", "pong", "--home", str(home), "-q")
+    outcomes = []
+    for fmt in ("mp4", "gif"):
+        out = scratch / "fsize" / f"game.{fmt}"
+        r = marl(*args, "--out", str(out), limits={resource.RLIMIT_FSIZE: 256 * 1024}, timeout=300)
+        left = sorted(p.name for p in out.parent.iterdir()) if out.parent.exists() else []
+        outcomes.append((r.code == 4 and r.one_line and str(out) in r.err and not left,
+                         f"RLIMIT_FSIZE {fmt}: exit {r.code}, {len(left)} files left"))
+        if can_mount():
+            mnt = scratch / f"mnt-{fmt}"
+            mnt.mkdir()
+            out = mnt / f"game.{fmt}"
+            cmd = " ".join(f'"{a}"' for a in (sys.executable, "-m", "selfplay_cli", *args, "--out", str(out)))
+            script = (f'mount -t tmpfs -o size=200k tmpfs "{mnt}" && {cmd} 2>"{scratch}/err.txt"; echo "exit $?"; '
+                      f'ls -A "{mnt}" | wc -l')
+            p = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, env=_env(),
+                               timeout=300)
+            lines = p.stdout.split()
+            code, left_n = (int(lines[1]), int(lines[2])) if len(lines) >= 3 else (-1, -1)
+            err = (scratch / "err.txt").read_text()
+            ok = code == 4 and err.count("\n") == 1 and "No space left on device" in err and left_n == 0
+            outcomes.append((ok, f"tmpfs {fmt}: exit {code}, {left_n} files left"))
+    said = r.line[len("marl: I/O error: "):][-80:]
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes) + f"; says: {said}"
+
+
 # ---------------------------------------------------------------------------------------------------------------
 
 

@@ -365,8 +365,25 @@ def _usage_error(e: click_exc.UsageError, args: list[str]) -> str:
     return msg + where
 
 
+MAX_WORD = 160  # characters of one word of an error line (a name, a value, a path) before it is cut
+MAX_LINE = 2_000  # characters of a whole error line
+
+
+def _shortened(line: str) -> str:
+    """An error line as printed: on one line, control characters escaped, each word (a quoted name or value, a
+    path) cut at :data:`MAX_WORD` characters and the whole line at :data:`MAX_LINE`, so a 10 MB name read from a
+    file or typed by mistake is named, not echoed. The one place every message is shortened, whoever wrote it."""
+    words = []
+    for word in _one_line(line).split(" "):
+        if not word.isprintable():
+            word = "".join(c if c.isprintable() else repr(c)[1:-1] for c in word)
+        words.append(word if len(word) <= MAX_WORD else f"{word[:MAX_WORD - 3]}...")
+    text = " ".join(words)
+    return text if len(text) <= MAX_LINE else f"{text[:MAX_LINE - 3]}..."
+
+
 def _err(line: str) -> None:
-    sys.stderr.write(line + "\n")
+    sys.stderr.write(_shortened(line) + "\n")
     sys.stderr.flush()
 
 

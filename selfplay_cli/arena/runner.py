@@ -11,6 +11,7 @@ are asked), and results by the game's kind (:class:`~selfplay_cli.results.Rules`
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -24,13 +25,49 @@ from ..policies import Policy
 from ..results import GameResult, Rules
 from .replay import ActionLog, SeatActions, encode_actions
 
-__all__ = ["ActionLog", "FrameHook", "Game", "GameResult", "IllegalActionError", "StopRule", "encode_actions",
-           "play"]
+__all__ = ["UNDECLARED_MAX_STEPS", "ActionLog", "FrameHook", "Game", "GameLength", "GameResult", "IllegalActionError",
+           "StopRule", "encode_actions", "play"]
 
 FrameHook = Callable[[BatchedCore, int, int, bool], None]
 """``on_frame(core, slot, game_index, ended)``: see :func:`play`."""
 StopRule = Callable[[BatchedCore], np.ndarray]
 """``stop_when(core) -> (n,) bool``: games to end now, as truncated (see :func:`play`)."""
+
+
+UNDECLARED_MAX_STEPS = 100_000
+"""The most steps a game is played for when it declares no maximum length (a PettingZoo game without
+``metadata["marl_max_steps"]`` or ``max_cycles``, pong with ``max_steps=0``): 5.5 times the longest game a built-in
+game declares (pong's 18,000), so a game that can end is never cut by it, while one that never ends still does."""
+
+_warned: set[str] = set()  # games whose cut by UNDECLARED_MAX_STEPS was already reported (once a process)
+
+
+@dataclass(frozen=True)
+class GameLength:
+    """How long one game of a game (for given options) may last: the most steps it declares, else
+    :data:`UNDECLARED_MAX_STEPS`. The one game loop (:func:`play`, and training's
+    :class:`~selfplay_cli.arena.selfplay.SelfPlayGames`) ends a game that reaches it as truncated, so every game
+    ends, whether or not the game itself keeps its declared length."""
+
+    name: str
+    limit: int
+    declared: bool
+
+    @classmethod
+    def of(cls, spec: EnvSpec, cfg: Any) -> GameLength:
+        declared = spec.max_steps(cfg)
+        return cls(spec.name, int(declared), True) if declared else cls(spec.name, UNDECLARED_MAX_STEPS, False)
+
+    def over(self, steps: np.ndarray, done: np.ndarray) -> np.ndarray:
+        """The games not yet ``done`` that have played their length (to end now, as truncated); the first time a
+        game is cut by the loop's own cap, one line on stderr says so."""
+        over = (np.asarray(steps) >= self.limit) & ~done
+        if not self.declared and self.name not in _warned and over.any():
+            _warned.add(self.name)
+            sys.stderr.write(f"marl: warning: {self.name} declares no maximum game length (metadata marl_max_steps) "
+                             f"and a game reached {self.limit:,} steps: such games are cut there, as truncated\n")
+            sys.stderr.flush()
+        return over
 
 
 @dataclass(frozen=True)
@@ -111,8 +148,9 @@ def play(
     replayed exactly). ``on_frame(core, slot, game_index, ended)`` is called when a game starts and after each of
     its steps, before its slot is reused, so it sees every state the game passes through (a recording renders
     them); ``ended`` is True on a game's last call. ``stop_when(core)`` ends the games it marks after a step, as
-    truncated and decided by the score at that moment (a length cap that needs no game option). A policy with an
-    ``after_step()`` method is told of every step (a replay finds each step's action by it).
+    truncated and decided by the score at that moment (a length cap that needs no game option). A game that reaches
+    its declared length (:class:`GameLength`) ends there, as truncated, even if the game itself would go on. A
+    policy with an ``after_step()`` method is told of every step (a replay finds each step's action by it).
     """
     spec = (get_env(env) if isinstance(env, str) else env).for_options(**(env_options or {}))
     if not games:
@@ -121,7 +159,8 @@ def play(
     rules = Rules.of(spec)
 
     options = env_options or {}
-    declared = spec.seat_spaces(spec.config(**options))
+    game_cfg = spec.config(**options)
+    declared = spec.seat_spaces(game_cfg)
     seen: set[tuple[int, int]] = set()
 
     def check(g: Game) -> Game:
@@ -140,7 +179,8 @@ def play(
         if callable(getattr(p, "configure", None)):
             p.configure(options)  # type: ignore[attr-defined]
     core = spec.core(n, **options)
-    seat_groups = _seat_groups(spec, spec.config(**options), n)
+    length = GameLength.of(spec, game_cfg)
+    seat_groups = _seat_groups(spec, game_cfg, n)
     # A policy that acts by the seat it plays (a scripted player whose seats act differently) acts through its
     # stand-in for each group of seats.
     by_group = [[p.for_seat(sg.seats[0]) if callable(getattr(p, "for_seat", None)) else p for p in policies]
@@ -250,11 +290,10 @@ def play(
         if on_step is not None:
             on_step(playing)
         done = core.terminated | core.truncated
-        stopped = None
+        stopped = length.over(core.steps, done | ~active)  # ended by the loop, as truncated
         if stop_when is not None:
-            stopped = np.asarray(stop_when(core), dtype=bool) & ~done
-            done = done | stopped
-        done &= active
+            stopped |= np.asarray(stop_when(core), dtype=bool) & ~done
+        done = (done | stopped) & active
         if on_frame is not None:
             for slot in np.flatnonzero(active).tolist():
                 on_frame(core, slot, int(game_of[slot]), bool(done[slot]))
@@ -273,7 +312,7 @@ def play(
                     scores=tuple(float(x) for x in scores[:, k]),
                     outcome=tuple(float(x) for x in outcome[:, k]),
                     length=int(core.steps[slot]),
-                    truncated=bool(core.truncated[slot] or (stopped is not None and stopped[slot])),
+                    truncated=bool(core.truncated[slot] or stopped[slot]),
                     index=gi,
                     actions=encode_actions(log.take(slot)) if log is not None else None,
                 )

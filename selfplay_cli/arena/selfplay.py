@@ -38,6 +38,7 @@ from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules
 from .replay import ActionLog, SeatActions, encode_actions
+from .runner import GameLength
 
 OPPONENT = -1
 SHARING = ("nops", "fups", "sa")  # one network per learner; one shared by all; one agent over the team's seats
@@ -233,7 +234,9 @@ class SelfPlayGames:
         self.n_learners = int(self.layout.max()) + 1
         if len(self.learner_ids) != self.n_learners:
             raise ValueError(f"{self.n_learners} learners in the layout but {len(self.learner_ids)} ids")
-        self.seat_spaces = spec.seat_spaces(spec.config(**options))
+        game_cfg = spec.config(**options)
+        self.seat_spaces = spec.seat_spaces(game_cfg)
+        self.length = GameLength.of(spec, game_cfg)  # a game that reaches it ends there, as truncated
         self.spaces = learner_spaces(spec, self.seat_spaces, self.layout)
         self.needs_opponents = bool((self.layout == OPPONENT).any())
         if self.needs_opponents and choose_opponents is None:
@@ -391,7 +394,8 @@ class SelfPlayGames:
         self._check_finite(rewards, "reward")
         self._log.append(step_actions)  # every slot always has a game running
         self._stale()
-        done_games = self.core.terminated | self.core.truncated
+        cut = self.core.truncated | self.length.over(self.core.steps, self.core.terminated | self.core.truncated)
+        done_games = self.core.terminated | cut
         flat_rewards = rewards.reshape(-1)
         flat_done = np.tile(done_games, n_seats)
         out_r = [flat_rewards[s] for s in self._index]
@@ -400,7 +404,6 @@ class SelfPlayGames:
         finished: list[GameResult] = []
         ended = np.flatnonzero(done_games)
         if ended.size:
-            cut = self.core.truncated
             if cut.any():  # what a learner bootstraps a cut game from: its final observation, before the restart
                 flat_cut = np.tile(cut, n_seats)
                 self.truncated = [flat_cut[s] for s in self._index]

@@ -30,7 +30,8 @@ from .train_view import TrainProgress, describe_record, describe_run, report_jso
 
 
 def read_toml(path: Path) -> dict[str, Any]:
-    """A --config file; a missing or malformed one is a one-line error naming it."""
+    """A --config file; a missing or malformed one (not TOML, not UTF-8 text, nested past Python's recursion limit)
+    is a one-line error naming it."""
     if sys.version_info >= (3, 11):
         import tomllib
     else:  # pragma: no cover
@@ -42,6 +43,11 @@ def read_toml(path: Path) -> dict[str, Any]:
         raise MarlError(f"{path}: cannot read ({e.strerror or e})") from None
     except tomllib.TOMLDecodeError as e:
         raise MarlError(f"{path}: not valid TOML ({e})") from None
+    except UnicodeDecodeError as e:  # TOML is UTF-8 text
+        byte = e.object[e.start]
+        raise MarlError(f"{path}: not valid TOML (not UTF-8 text: byte {e.start} is {byte:#04x})") from None
+    except RecursionError:
+        raise MarlError(f"{path}: not valid TOML for marl (tables or arrays nested too deeply)") from None
 
 
 def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:

@@ -22,9 +22,11 @@ copies that the arena plays exactly as it plays pong (no second game loop).
 The core (:class:`PettingZooCore`) steps N copies: ``reset(games, seeds)`` resets copies with ``reset(seed=...)``;
 ``step(actions)`` gives every acting agent its seat's action; ``score`` is each seat's summed rewards; a game is
 over when every agent is done (``terminated``, or ``truncated`` when any agent was cut by truncation); agents that
-leave early no longer act. In an AEC game a seat's observation is refreshed when its turn comes and when it
-leaves the game (zeros before its first turn). The action masks of seats that do not act are all True (their
-actions are ignored).
+leave early (terminated or truncated) no longer act. Agents that come and go otherwise (one that vanishes from
+``agents`` without being done, one that joins after the game began) are not supported yet: the core refuses the
+game in one line (:class:`EnvError`) naming the agent and the step. In an AEC game a seat's observation is
+refreshed when its turn comes and when it leaves the game (zeros before its first turn). The action masks of seats
+that do not act are all True (their actions are ignored).
 """
 
 from __future__ import annotations
@@ -379,6 +381,8 @@ class PettingZooCore:
         self._mask: list[list[Any]] = [[None] * n for _ in range(S)]
         self._live = np.zeros((S, n), dtype=bool)  # agents still in each game
         self._live_agents: list[list[tuple[int, str]]] = [[] for _ in range(n)]
+        self._began: list[frozenset[str]] = [frozenset()] * n  # the agents each game began with
+        self._seeds = [0] * n  # each game's seed (to name the game in an error)
         self._turn = [-1] * n  # AEC: the seat whose turn it is in each game, -1 when it is over
         self._acting: np.ndarray | None = None  # to_act() until the next step or reset
         self._ones = [np.ones(seat.action.n, dtype=bool) if seat.mask else None for seat in layout.seats]
@@ -417,6 +421,7 @@ class PettingZooCore:
         self._acting = None
         for g, seed in zip(g_list, s_list, strict=True):
             env = self.envs[g]
+            self._seeds[g] = int(seed)
             self.score[:, g] = 0.0
             self.steps[g] = 0
             self.terminated[g] = self.truncated[g] = self._cut[g] = False
@@ -425,10 +430,15 @@ class PettingZooCore:
                 self._mask[s][g] = None
             if self._aec:  # each seat observes when its turn comes (zeros until then)
                 env.reset(seed=int(seed))
+                self._began[g] = frozenset(env.agents)
                 self._running[g] = True
                 self._settle(g)
             else:
                 obs, _ = env.reset(seed=int(seed))
+                self._began[g] = frozenset(env.agents)
+                stranger = next((a for a in env.agents if a not in self._seat_of), None)
+                if stranger is not None:
+                    self._came_and_went(g, stranger, "is in the game at its start")
                 live = [(self._seat_of[a], a) for a in env.agents]
                 for s, agent in live:
                     self._store(s, g, obs[agent])
@@ -444,6 +454,8 @@ class PettingZooCore:
         env, seat_of = self.envs[g], self._seat_of
         while env.agents:
             agent = env.agent_selection
+            if agent not in self._began[g]:
+                self._came_and_went(g, agent, f"joined at step {int(self.steps[g])}")
             term, trunc = env.terminations.get(agent, False), env.truncations.get(agent, False)
             s = seat_of[agent]
             if not (term or trunc):
@@ -583,6 +595,28 @@ class PettingZooCore:
                 self._leave(g, live, term, trunc)
             elif not envs[g].agents:
                 self._over(g)
+            if self._running[g]:
+                self._check_agents(g)
+
+    def _check_agents(self, g: int) -> None:
+        """Refuse a parallel game whose agents changed on this step other than by being done: one that vanished
+        from ``agents`` without being terminated or truncated, or one that joined after the game began."""
+        now, live = self.envs[g].agents, self._live_agents[g]
+        if len(now) == len(live) and all(a == b for (_, a), b in zip(live, now, strict=True)):
+            return
+        step, playing, present = int(self.steps[g]) + 1, {a for _, a in live}, set(now)
+        for _, a in live:
+            if a not in present:
+                self._came_and_went(g, a, f"left at step {step} without being terminated or truncated")
+        for a in now:
+            if a not in playing and a not in self._began[g]:
+                self._came_and_went(g, a, f"joined at step {step}")
+
+    def _came_and_went(self, g: int, agent: str, what: str) -> None:
+        name = self.layout.name
+        stranger = "" if agent in self._seat_of else " (not one of its possible_agents)"
+        raise EnvError(name, f"game {name!r}: agents that come and go are not supported yet: {agent!r}{stranger} "
+                             f"{what} (the game of seed {self._seeds[g]})")
 
     def _leave(self, g: int, live: list[tuple[int, str]], term: Mapping[str, Any], trunc: Mapping[str, Any]) -> None:
         """Agents of game g that are done leave it; the game is over when none is left."""

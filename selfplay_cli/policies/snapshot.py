@@ -41,6 +41,7 @@ from safetensors.torch import save as st_save
 from .. import files
 from ..envs import EnvError, UnknownEnvError, get_env, known_env
 from ..errors import MarlError
+from ..typecheck import MAX_INT
 from .joint import MAX_JOINT_ACTIONS, JointPolicy, joint_spaces
 from .network import Arch, NetworkPolicy, SnapshotError, build_network
 from .spaces import ActionHead, SpaceError, canonical_space, seat_spaces_of, space_from_dict
@@ -223,6 +224,8 @@ class SnapshotMeta:
         for key in ("n_actions", "step", "episode"):
             if key in kw and (not isinstance(kw[key], int) or isinstance(kw[key], bool)):
                 raise ValueError(f"field {key!r} must be an integer")
+            if key in kw and not 0 <= kw[key] <= MAX_INT:  # what the league's integer columns hold
+                raise ValueError(f"field {key!r} must lie between 0 and {MAX_INT:,}, not {kw[key]:,}")
         if "obs_shape" in kw:
             shape = kw["obs_shape"]
             if not isinstance(shape, list) or not all(isinstance(d, int) and not isinstance(d, bool) for d in shape):

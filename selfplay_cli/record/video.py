@@ -35,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import signal
 import struct
 import subprocess
 import sys
@@ -46,7 +47,7 @@ from types import TracebackType
 import numpy as np
 
 from .. import files
-from ..errors import MarlError
+from ..errors import MarlError, MarlIOError
 
 FORMATS = ("mp4", "gif")
 GIF_FPS = 20
@@ -198,6 +199,29 @@ def set_gif_delays(path: Path, delays: list[int]) -> None:
         fh.write(data)
 
 
+_IO_CAUSES = {  # what ffmpeg says when the disk, not the video, is at fault -> what to do about it
+    "no space left on device": "free some space on that disk and run it again",
+    "disk quota exceeded": "the disk quota is used up: free some space",
+    "file too large": "a file size limit stops the write (ulimit -f): raise it",
+    "read-only file system": "the file system is read-only: write the video elsewhere (--out)",
+    "permission denied": "check the permissions of that folder, or write the video elsewhere (--out)",
+    "input/output error": "the device reported an error: check the disk",
+}
+
+
+def ffmpeg_failure(path: Path, what: str, said: str, code: int | None) -> MarlError:
+    """The error for an ffmpeg that failed writing ``path``: a :class:`MarlIOError` (exit 4) naming the path and
+    the cause when the disk is at fault (full, a quota, a file size limit: ffmpeg killed by SIGXFSZ, read-only,
+    permissions), else a :class:`MarlError` with what ffmpeg said."""
+    if code == -signal.SIGXFSZ:
+        return MarlIOError(f"{what} {path}: File too large (EFBIG): ffmpeg was stopped by the file size limit; "
+                           f"{_IO_CAUSES['file too large']}")
+    hint = next((h for words, h in _IO_CAUSES.items() if words in said.lower()), None)
+    if hint is not None:
+        return MarlIOError(f"{what} {path}: {said}; {hint}")
+    return MarlError(f"{what} {path}: {said}")
+
+
 def _ffmpeg() -> str:
     try:
         import imageio_ffmpeg
@@ -316,15 +340,17 @@ class VideoWriter:
         try:
             self._proc.stdin.write(data)  # type: ignore[union-attr]
         except (BrokenPipeError, OSError):
-            self._proc.wait()  # type: ignore[union-attr]
-            raise MarlError(f"ffmpeg stopped while writing {self.path}: {self._ffmpeg_says()}") from None
+            code = self._proc.wait()  # type: ignore[union-attr]
+            raise ffmpeg_failure(self.path, "ffmpeg stopped while writing", self._ffmpeg_says(), code) from None
 
     def _ffmpeg_says(self) -> str:
         if self._log is None:
             return "no output"
         self._log.seek(0)
         lines = [ln.strip() for ln in self._log.read().decode(errors="replace").splitlines() if ln.strip()]
-        return lines[-1] if lines else f"exit status {self._proc.returncode if self._proc else '?'}"
+        if not lines:
+            return f"exit status {self._proc.returncode if self._proc else '?'}"
+        return re.sub(r"^\[[^\]]*@ 0x[0-9a-f]+\]\s*", "", lines[-1])  # "[out#0/mp4 @ 0x55b7...] " says nothing
 
     def close(self) -> Path:
         """Finish the file and move it to its final name; returns the path."""
@@ -345,7 +371,7 @@ class VideoWriter:
         if code != 0:
             reason = self._ffmpeg_says()
             self.abort()
-            raise MarlError(f"ffmpeg could not write {self.path}: {reason}")
+            raise ffmpeg_failure(self.path, "ffmpeg could not write", reason, code)
         os.replace(self.tmp, self.path)
         self._cleanup()
         return self.path

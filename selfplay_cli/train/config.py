@@ -18,11 +18,65 @@ from ..errors import MarlError
 from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
 from ..policies.joint import joint_spaces
-from ..policies.network import resolve_device
+from ..policies.network import Arch, resolve_device
+from ..policies.snapshot import expected_tensors
 from .curriculum import Curriculum, Schedule, parse_schedule
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field
+
+
+@dataclass(frozen=True)
+class Range:
+    """Where a number setting must lie: from ``low`` (excluded when ``open_low``) to ``high``."""
+
+    low: float
+    high: float
+    open_low: bool = False
+
+    def holds(self, value: float) -> bool:
+        return (value > self.low if self.open_low else value >= self.low) and value <= self.high
+
+    def describe(self) -> str:
+        low = f"more than {self.low:g}" if self.open_low else f"at least {self.low:g}"
+        return f"{low} and at most {self.high:g}"
+
+
+RANGES: dict[str, Range] = {
+    "minutes": Range(1e-3, 1e6),  # 0.06 s to ~2 years: 1e-300 minutes is no budget at all
+    **{f"{algo}.lr": Range(0.0, 1.0, open_low=True) for algo in ("ppo", "dqn", "sac")},
+    "ppo.clip_coef": Range(0.0, 1.0, open_low=True),  # a ratio clipped to [1 - c, 1 + c]
+    "ppo.ent_coef": Range(0.0, 1e3),
+    "ppo.vf_coef": Range(0.0, 1e3),
+    "ppo.max_grad_norm": Range(0.0, 1e6, open_low=True),
+    "dqn.max_grad_norm": Range(0.0, 1e6),  # 0: no clipping
+    "ppo.reward_scale": Range(0.0, 1e6, open_low=True),
+    **{f"{algo}.replay_ratio": Range(0.0, 64.0, open_low=True) for algo in ("dqn", "sac")},  # updates a transition
+    **{f"{algo}.n_step": Range(1, 1_000) for algo in ("dqn", "sac")},
+    "sac.alpha": Range(0.0, 1e3, open_low=True),
+    "sac.target_entropy": Range(-1e6, 1e6),
+}
+"""The ranges of the number settings that their types and the learners' own checks leave open (a learning rate of
+1e300 overflows float32 at the first update; 1e-300 minutes divides by zero; a replay ratio of 1e300 never ends an
+update), checked in one pass by :func:`check_ranges` before anything is built. Past these bounds nothing is meant."""
+
+
+def check_ranges(cfg: Any) -> None:
+    """Refuse the first setting of :data:`RANGES` that lies outside its range (None: not set, nothing to check),
+    and a replay batch larger than its buffer (a 1e12 batch is drawn as 1e12 indices)."""
+    for path, bound in RANGES.items():
+        value: Any = cfg
+        for part in path.split("."):
+            value = getattr(value, part)
+        if value is not None and not bound.holds(value):
+            section, _, key = path.rpartition(".")
+            name = f"[{section}] {key}" if section else f"--{key.replace('_', '-')}"
+            raise MarlError(f"{name} must be {bound.describe()}, not {value:g}")
+    for algo in ("dqn", "sac"):
+        section = getattr(cfg, algo)
+        if section.batch_size > section.buffer_size:
+            raise MarlError(f"[{algo}] batch_size must be at most buffer_size ({section.buffer_size:,}), not "
+                            f"{section.batch_size:,}")
 
 
 @dataclass
@@ -85,8 +139,7 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.steps < 1 and self.minutes is None:
             raise MarlError(f"--steps must be positive, not {self.steps}")
-        if self.minutes is not None and self.minutes <= 0:
-            raise MarlError(f"--minutes must be positive, not {self.minutes}")
+        check_ranges(self)
         if self.games < 2:
             raise MarlError(f"--games must be at least 2, not {self.games}")
         resolve_device(self.device)  # an unknown or unavailable device fails before anything is written
@@ -129,6 +182,7 @@ class TrainConfig:
         curriculum = Curriculum(self.curriculum, spec.name, spec.live_options)
         if curriculum:
             curriculum.check(core)
+        _check_games(self, seat_spaces)
         layout = plan_layout(plan, self.games, self.agents, self.league_games)
         roles = spec.seat_roles(game)
         spaces = learner_spaces(spec, seat_spaces, layout, roles if len(set(roles)) > 1 else None)
@@ -145,6 +199,7 @@ class TrainConfig:
             layout = np.zeros((1, self.games), dtype=np.int64)  # one slot a game
         for space in spaces:
             LEARNERS[self.algo].check_seat(space)  # e.g. DQN and Box actions: refused before anything is written
+            _check_networks(self, space)
         if self.teacher.player:
             check_teacher(self.algo, self.sharing)
         _check_memory(self, tuple(spaces[0].observation.shape),
@@ -241,9 +296,48 @@ def seat_plan_of(spec: EnvSpec, agents: int, sharing: str, seats: str) -> SeatPl
     return plan_seats(spec, agents, sharing, parse_seats(seats, spec.n_seats) if seats else None)
 
 
+def _check_networks(cfg: TrainConfig, space: Any) -> None:
+    """Refuse, before the run exists, networks bigger than a snapshot may be (:data:`~selfplay_cli.policies.snapshot.
+    LIMITS`: layers, widths, parameters), so a run never grows out of memory building one, nor refuses its own
+    first snapshot: the learner's network (what its snapshots save), and SAC's critics (the observation and the
+    action in, one value out)."""
+    section = getattr(cfg, cfg.algo, None)
+    arch = getattr(section, "arch", None)
+    if not isinstance(arch, Arch):
+        return
+    try:
+        expected_tensors(tuple(space.observation.shape), space.action, arch)
+        critics = getattr(section, "critic_hidden", None)
+        if critics is not None:
+            inputs = math.prod(space.observation.shape) + math.prod(space.action.shape)
+            expected_tensors((inputs,), 1, Arch(hidden=critics, activation=arch.activation, value_head=False))
+    except MarlError as e:
+        raise MarlError(f"[{cfg.algo}] network: {e}") from None
+
+
+def _machine_memory() -> int | None:
+    """Bytes of physical memory, or None where the system does not say."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _check_games(cfg: TrainConfig, seat_spaces: Any) -> None:
+    """Refuse, before the seats are laid out, more games at once than this machine holds (``games = 1e9`` in a
+    config file): each step every seat's observation of every game is read, gathered, stored and kept as the final
+    one (~4 float32 copies), beside the game's own state."""
+    need = cfg.games * sum(16 * math.prod(s.observation.shape) + 64 for s in seat_spaces)
+    have = _machine_memory()
+    if have is not None and need > 0.8 * have:
+        raise MarlError(f"{cfg.games:,} games at once would take {need / 2**30:,.1f} GB of observations alone; this "
+                        f"machine has {have / 2**30:,.1f} GB: use fewer --games")
+
+
 def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]) -> None:
     """Refuse, before anything is built, a run whose learners' buffers of observations would not fit in this
-    machine's memory (e.g. pong's 400x800 RGB frames in 256 games: ~125 GB of PPO rollout)."""
+    machine's memory (e.g. pong's 400x800 RGB frames in 256 games: ~125 GB of PPO rollout), the teacher's labelled
+    states included."""
     per_obs = 4 * math.prod(obs_shape)  # float32
     if cfg.algo == "ppo":
         need = sum(per_obs * cfg.ppo.rollout_steps * n for n in slots)
@@ -252,11 +346,11 @@ def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]
         buffer = cfg.dqn.buffer_size if cfg.algo == "dqn" else cfg.sac.buffer_size
         need = len(slots) * 2 * per_obs * buffer
         what = f"{cfg.algo.upper()}'s replay buffers ({buffer:,} transitions each)"
-    try:
-        have = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (AttributeError, ValueError, OSError):
-        return
-    if need > 0.8 * have:
+    if cfg.teacher.player:  # each learner keeps its teacher's labelled states (observation and action: ~2 of them)
+        need += len(slots) * 2 * per_obs * cfg.teacher.states
+        what += f" and the teacher's labelled states ({cfg.teacher.states:,} each)"
+    have = _machine_memory()
+    if have is not None and need > 0.8 * have:
         raise MarlError(f"{what} of {'x'.join(map(str, obs_shape))} observations would take {need / 2**30:,.1f} GB; "
                         f"this machine has {have / 2**30:,.1f} GB: use fewer --games, a shorter rollout or buffer, or "
                         "smaller observations")
