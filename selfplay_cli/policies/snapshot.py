@@ -232,9 +232,6 @@ class SnapshotMeta:
                 raise ValueError("field 'obs_shape' must be a list of integers")
             if len(shape) > MAX_OBS_DIMS:
                 raise ValueError(f"observations of {len(shape):,} axes are more than marl plays ({MAX_OBS_DIMS})")
-        for key in ("step", "episode"):  # counts, which the league stores as 64-bit integers
-            if key in kw and not 0 <= kw[key] < 2**63:
-                raise ValueError(f"field {key!r} must lie between 0 and 2**63 - 1")
         if "n_actions" in kw and not 1 <= kw["n_actions"] <= MAX_ACTIONS:
             raise ValueError(f"{kw['n_actions']} actions is out of bounds (1 to {MAX_ACTIONS:,})")
         kw["arch"] = Arch.from_dict(kw.get("arch", {}))
