@@ -706,7 +706,8 @@ def _train_state(home: Path) -> tuple[str, list[str], bool]:
     with League.open(home, readonly=True) as league:
         run = league.get_run("r")
         snaps = league.players(kind="snapshot")
-        finite = all(bool(torch.isfinite(t).all()) for s in snaps for t in load_snapshot(home / s.path)[0].values())
+        finite = all(bool(torch.isfinite(t).all()) for s in snaps
+                     for t in load_snapshot(home / s.path, expect_env=s.env)[0].values())
     files = sorted(p.name for p in (home / "snapshots" / "r").iterdir())
     return (run.status if run else "no run"), sorted(s.name for s in snaps), finite and files == sorted(
         Path(s.path).name for s in snaps)
@@ -738,20 +739,20 @@ def nan_rewards(scratch: Path) -> tuple[bool, str]:
     return held, f"exit {r.code}, run {status}, {len(names)} snapshots all finite: {r.line[13:]}"
 
 
-@fault("non-finite: reward_scale = 1e308, and 1e38 (whose squares overflow the value loss)")
+@fault("non-finite: reward_scale = 1e308; a game whose rewards of 1e30 overflow the value loss")
 def nan_losses(scratch: Path) -> tuple[bool, str]:
     home = scratch / "league"
     cfg = scratch / "c.toml"
     cfg.write_text("[ppo]\nreward_scale = 1e308\n")
     a = marl(*NAN_TRAIN, "--env-option", "nan_after=-1", "--config", str(cfg), "--home", str(home))
     runs = db(home, "select count(*) from runs")[0][0] if (home / "league.db").exists() else 0
-    cfg.write_text("[ppo]\nreward_scale = 1e38\n")
-    b = marl(*NAN_TRAIN, "--env-option", "nan_after=-1", "--config", str(cfg), "--home", str(home))
+    b = marl(*NAN_TRAIN, "--env-option", "nan_after=0", "--env-option", "nan_in=reward", "--env-option",
+             "nan_value=1e30", "--home", str(home))
     status, names, sound = _train_state(home)
     held = (a.code == b.code == 2 and a.one_line and b.one_line and runs == 0 and status == "failed" and sound
             and "the value loss is inf" in b.line)
-    return held, (f"1e308: exit {a.code}, {runs} runs; 1e38: exit {b.code}, run {status}, {len(names)} snapshots: "
-                  f"{b.line[13:]}")
+    return held, (f"1e308: exit {a.code}, {runs} runs; rewards 1e30: exit {b.code}, run {status}, {len(names)} "
+                  f"snapshots: {b.line[13:]}")
 
 
 def _network_file(path: Path, env: str, arch: dict, change: Callable | None = None, joint: int = 0,
