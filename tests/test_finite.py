@@ -114,6 +114,25 @@ def test_a_loss_that_overflows_stops_training_naming_the_learner_and_the_loss(ho
     assert status == "failed" and names == ["s0-player_0", "s0-player_1"]
 
 
+@pytest.mark.parametrize("nan_in, said", [("observation", "observation of seat 1 (player_1) in the game of seed "),
+                                           ("reward", "the score of seat 1 (player_1) in the game of seed ")])
+def test_a_rated_game_that_turns_nan_stores_nothing(home, capsys, nan_in, said):
+    """`marl match` of a game whose observations (or rewards) turn NaN: one line naming the seat and the game's
+    seed, exit 2, and no game of it in the ledger (a NaN score would have been stored as a result)."""
+    code, _, err = run(capsys, "train", TUG, "--env-option", "nan_after=-1", "--steps", "2048", "--games", "16",
+                       "--eval-games", "0", "--run", "r", "-q")
+    assert code == 0, err
+    with League.open(home, readonly=True) as league:
+        before = len(league.games())
+    code, _, err = run(capsys, "match", "r/s0-player_0", "random", "--games", "20", "--env-option", "nan_after=5",
+                       "--env-option", f"nan_in={nan_in}")
+    line = _one_line(err)
+    assert code == 2 and said in line and ("is NaN at its step 5" in line if nan_in == "observation"
+                                           else line.endswith(" is NaN")), line
+    with League.open(home, readonly=True) as league:
+        assert len(league.games()) == before
+
+
 def _games(env: str, n: int = 4) -> SelfPlayGames:
     spec = get_env(env)
     return SelfPlayGames(spec, n, plan_layout(plan_seats(spec, spec.n_seats), n, spec.n_seats),

@@ -20,13 +20,13 @@ import numpy as np
 
 from ..envs import EnvSpec, get_env
 from ..envs.registry import BatchedCore, IllegalActionError
-from ..errors import MarlError
+from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
 from ..results import GameResult, Rules
 from .replay import ActionLog, SeatActions, encode_actions
 
 __all__ = ["UNDECLARED_MAX_STEPS", "ActionLog", "FrameHook", "Game", "GameLength", "GameResult", "IllegalActionError",
-           "StopRule", "encode_actions", "play"]
+           "StopRule", "encode_actions", "first_nonfinite", "play"]
 
 FrameHook = Callable[[BatchedCore, int, int, bool], None]
 """``on_frame(core, slot, game_index, ended)``: see :func:`play`."""
@@ -40,6 +40,23 @@ UNDECLARED_MAX_STEPS = 100_000
 game declares (pong's 18,000), so a game that can end is never cut by it, while one that never ends still does."""
 
 _warned: set[str] = set()  # games whose cut by UNDECLARED_MAX_STEPS was already reported (once a process)
+
+
+def first_nonfinite(per_seat: Any, n: int) -> tuple[int, int, str] | None:
+    """``(seat, slot, "NaN" | "inf" | "-inf")`` of the first number in ``per_seat`` (per seat, ``(n, ...)`` arrays: a
+    step's observations or rewards) that is not finite, None when all are. One ``np.isfinite(...).all()`` per seat
+    array (one for all of them when they are one array): the search for the culprit runs only when one fails."""
+    arrays = [per_seat] if isinstance(per_seat, np.ndarray) else [np.asarray(a) for a in per_seat]
+    if all(a.dtype.kind not in "fc" or np.isfinite(a).all() for a in arrays):
+        return None
+    for s in range(len(per_seat)):
+        a = np.asarray(per_seat[s]).reshape(n, -1)
+        bad = ~np.isfinite(a).all(axis=1) if a.dtype.kind in "fc" else np.zeros(n, dtype=bool)
+        if bad.any():
+            slot = int(np.flatnonzero(bad)[0])
+            value = a[slot][~np.isfinite(a[slot])][0]
+            return s, slot, "NaN" if np.isnan(value) else "inf" if value > 0 else "-inf"
+    return None
 
 
 @dataclass(frozen=True)
@@ -252,6 +269,11 @@ def play(
     playing = int(active.sum())
     while playing:
         obs = core.observe()
+        bad = first_nonfinite(obs, len(game_of))
+        if bad is not None and active[bad[1]]:  # a number no policy can act on, and no result can be made of
+            seat, slot, kind = bad
+            raise NonFiniteError(f"{spec.name}: observation of seat {seat} ({spec.agents[seat]}) in the game of seed "
+                                 f"{games[int(game_of[slot])].seed} is {kind} at its step {int(core.steps[slot]):,}")
         masks = core.action_masks() if masked else None  # type: ignore[attr-defined]
         for sg, where_g, acting_as in zip(seat_groups, held, by_group, strict=True):
             if whole and isinstance(obs, np.ndarray):
@@ -301,6 +323,11 @@ def play(
         changed = False
         if ended.size:
             scores = np.asarray(core.score[:, ended], dtype=np.float64)
+            bad = first_nonfinite(scores, ended.size)
+            if bad is not None:  # a result that is not a number never reaches the league
+                seat, k, kind = bad
+                raise NonFiniteError(f"{spec.name}: the score of seat {seat} ({spec.agents[seat]}) in the game of seed "
+                                     f"{games[int(game_of[ended[k]])].seed} is {kind}")
             outcome = rules.outcome(scores)
             for k, slot in enumerate(ended.tolist()):
                 gi = int(game_of[slot])

@@ -38,7 +38,7 @@ from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules
 from .replay import ActionLog, SeatActions, encode_actions
-from .runner import GameLength
+from .runner import GameLength, first_nonfinite
 
 OPPONENT = -1
 SHARING = ("nops", "fups", "sa")  # one network per learner; one shared by all; one agent over the team's seats
@@ -422,23 +422,15 @@ class SelfPlayGames:
         return out_r, out_d, finished
 
     def _check_finite(self, per_seat: Any, what: str) -> None:
-        """Refuse a NaN or infinite ``what`` (``observation``, ``reward``) from the game: one
-        ``np.isfinite(...).all()`` per seat array (one for the whole step where every seat is alike), and only when
-        one fails, the first seat and game at fault, named in a :class:`NonFiniteError` with the game's seed and how
-        many steps it had played (enough to replay it). A learner must never learn from such a number."""
-        arrays = [per_seat] if isinstance(per_seat, np.ndarray) else [np.asarray(a) for a in per_seat]
-        if all(a.dtype.kind not in "fc" or np.isfinite(a).all() for a in arrays):
-            return
-        for s in range(self.n_seats):  # the first (seat, game) at fault
-            a = np.asarray(per_seat[s]).reshape(self.n, -1)
-            bad = ~np.isfinite(a).all(axis=1) if a.dtype.kind in "fc" else np.zeros(self.n, dtype=bool)
-            if bad.any():
-                g = int(np.flatnonzero(bad)[0])
-                row = a[g]
-                value = row[~np.isfinite(row)][0]
-                kind = "NaN" if np.isnan(value) else "inf" if value > 0 else "-inf"
-                raise NonFiniteError(f"{what} of seat {s} ({self.spec.agents[s]}) in game {g} (seed "
-                                     f"{int(self.seeds[g])}) is {kind} at that game's step {int(self.core.steps[g]):,}")
+        """Refuse a NaN or infinite ``what`` (``observation``, ``reward``) from the game
+        (:func:`~selfplay_cli.arena.runner.first_nonfinite`): the first seat and game at fault, named in a
+        :class:`NonFiniteError` with the game's seed and how many steps it had played (enough to replay it). A
+        learner must never learn from such a number."""
+        bad = first_nonfinite(per_seat, self.n)
+        if bad is not None:
+            s, g, kind = bad
+            raise NonFiniteError(f"{what} of seat {s} ({self.spec.agents[s]}) in game {g} (seed "
+                                 f"{int(self.seeds[g])}) is {kind} at that game's step {int(self.core.steps[g]):,}")
 
     def _player_id(self, seat: int, game: int) -> str:
         who = self.layout[seat, game]
