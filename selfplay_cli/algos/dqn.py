@@ -62,6 +62,7 @@ from torch import nn
 from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead, uniform_allowed
+from ..signals import stop_requested
 from .base import Seat, action_head, as_bool, fix_mask, learner_args
 from .optim import FlatAdam, flatten
 
@@ -544,6 +545,8 @@ class DQNLearner:
             next_masks = None if masks is None else torch.from_numpy(masks).to(self.device)
             loss_fn = nn.functional.smooth_l1_loss if cfg.loss == "huber" else nn.functional.mse_loss
             for i in range(k):
+                if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
+                    break
                 y = self.td_target(rewards[i], dones[i], next_o[i], discounts[i],
                                    None if next_masks is None else next_masks[i])
                 q_all, _ = self.net(obs[i])

@@ -64,6 +64,7 @@ from torch import nn
 from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
+from ..signals import stop_requested
 from .base import Seat, action_head, as_bool, learner_args
 from .kickstart import Imitation
 from .nstep import NStepChains
@@ -424,6 +425,8 @@ class SACLearner:
                 torch.from_numpy(batches[key]).to(self.device)
                 for key in ("obs", "actions", "rewards", "next_obs", "dones", "discounts"))
             for i in range(k):
+                if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
+                    break
                 sums += self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i], discounts[i])
             self.updates += 1
         out = {"alpha": self.alpha, "buffer_size": float(len(self.buffer)), "grad_steps": float(self.grad_steps),

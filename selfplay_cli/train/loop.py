@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -48,7 +49,7 @@ from ..rated.match import load_player
 from ..rated.roles import RoleBook
 from ..rated.snapshots import snapshot_relpath
 from ..results import COOPERATIVE, GameResult
-from ..signals import signals_held
+from ..signals import signals_held, stoppable
 from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum, Schedule
 from .evaluator import Evaluator, GauntletJob, JobDone
@@ -461,18 +462,34 @@ class Trainer:
 
     # -- one process per run ---------------------------------------------------------------------------------
     def _lock(self) -> None:
-        """Claim the run for this process (``runs/<run>/lock`` holds its pid); refuse while another live process
-        holds it. A run killed with SIGKILL leaves a stale lock whose pid is gone, which is taken over."""
+        """Claim the run for this process (``runs/<run>/lock`` names it, and its rating worker once started:
+        :meth:`_lock_worker`); refuse while the process that holds it lives. A run killed with SIGKILL leaves a stale
+        lock, which is taken over; a rating worker of that run still alive (where the kernel did not end it with
+        its trainer) is ended first, so that nothing of the old session plays on beside the new one. A process is
+        recognised by its pid and its start time, so a pid the system has given to another process since is never
+        mistaken for the run's, nor killed."""
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        holder = _read_lock(self.run_dir / "lock")
+        trainer = holder.get("trainer")
+        if trainer is not None and trainer[0] != os.getpid() and _same_process(*trainer):
+            raise MarlError(f"run '{self.cfg.run}' is being trained by process {trainer[0]}; stop it before resuming")
+        worker = holder.get("worker")
+        if worker is not None and worker[1] is not None and _same_process(*worker) and worker[0] != os.getpid():
+            _end_process(worker[0])
+        self._write_lock(None)
+
+    def _lock_worker(self, pid: int) -> None:
+        """Record the run's (new) rating worker in its lock."""
+        self._write_lock(pid)
+
+    def _write_lock(self, worker: int | None) -> None:
         lock = self.run_dir / "lock"
-        try:
-            pid = int(lock.read_text().strip())
-        except (OSError, ValueError):
-            pid = None
-        if pid is not None and pid != os.getpid() and _alive(pid):
-            raise MarlError(f"run '{self.cfg.run}' is being trained by process {pid}; stop it before resuming")
-        tmp = lock.with_name(f"lock.tmp-{os.getpid()}")
-        tmp.write_text(str(os.getpid()))
+        me = os.getpid()
+        holder = {"trainer": [me, process_start(me)]}
+        if worker is not None:
+            holder["worker"] = [worker, process_start(worker)]
+        tmp = lock.with_name(f"lock.tmp-{me}")
+        tmp.write_text(json.dumps(holder))
         os.replace(tmp, lock)
 
     def _unlock(self) -> None:
@@ -652,8 +669,10 @@ class Trainer:
         self._lock()
         try:
             background = bool(self.cfg.eval_games) and not self.cfg.eval_inline
+            # (stoppable() innermost: a stop tells the learners' update threads first, so nothing waits for them)
             with LearnerTeam(self.learners) as self.team, \
-                    Evaluator(self.league, str(self.device), background=background) as self.evaluator:
+                    Evaluator(self.league, str(self.device), background=background,
+                              on_worker=self._lock_worker) as self.evaluator, stoppable():
                 return self._train()
         finally:
             self.evaluator = None
@@ -831,3 +850,64 @@ def _alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
+
+
+def process_start(pid: int) -> str | None:
+    """When process ``pid`` started, in the kernel's clock ticks since boot (``/proc/<pid>/stat``, field 22): with
+    the pid, what tells a process from a later one given the same pid. None where there is no ``/proc``, or no such
+    process."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat[stat.rfind(")") + 2:].split()  # after the command name, which may hold spaces and parentheses
+    return fields[19] if len(fields) > 19 else None
+
+
+def _same_process(pid: int, start: str | None) -> bool:
+    """Whether ``pid`` is alive and, where its start time was recorded and can be read, still the same process."""
+    if not _alive(pid):
+        return False
+    now = process_start(pid)
+    return start is None or now is None or now == start
+
+
+def _read_lock(lock: Path) -> dict[str, tuple[int, str | None]]:
+    """The processes a run's lock names: ``{"trainer": (pid, start), "worker": (pid, start)}`` (an older marl's
+    lock holds the trainer's pid alone); empty for no lock, or one that cannot be read."""
+    try:
+        text = lock.read_text().strip()
+    except OSError:
+        return {}
+    try:
+        return {"trainer": (int(text), None)}
+    except ValueError:
+        pass
+    try:
+        raw = json.loads(text)
+        return {role: (int(v[0]), None if v[1] is None else str(v[1])) for role, v in raw.items()
+                if role in ("trainer", "worker")}
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError):
+        return {}
+
+
+def _end_process(pid: int, timeout: float = 10.0) -> None:
+    """SIGKILL ``pid`` and wait (up to ``timeout`` s) until it is gone."""
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        return
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and _running(pid):
+        time.sleep(0.05)
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` is alive and not a zombie (dead, its exit not yet collected by its parent)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except FileNotFoundError:
+        return False
+    except OSError:
+        return _alive(pid)
+    return stat[stat.rfind(")") + 2:].split()[:1] != ["Z"]
