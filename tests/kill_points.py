@@ -30,7 +30,8 @@ from selfplay_cli.cli import main
 from selfplay_cli.league.store import League
 
 POINTS = ("after-first-file", "after-pending-state", "during-state-file", "after-rows", "worker-mid-job")
-SECOND_MOMENT = range(10_010_000, 10_020_000)  # the seeds of the second snapshot moment's gauntlet (loop.py)
+SECOND_MOMENT = range(10_010_000, 10_030_000)  # the seeds of the second snapshot moment's gauntlet (loop.py: a
+# moment's seeds start 10,000 a snapshot taken before it above 10,000,000: with one learner or two)
 
 
 def arm_worker() -> None:

@@ -247,14 +247,14 @@ def test_a_job_cut_by_a_kill_is_stored_as_an_uninterrupted_run_stores_it(tmp_pat
     child = subprocess.run([sys.executable, str(KILL_POINTS), "worker-mid-job", str(killed), *args],
                            capture_output=True, text=True, timeout=600, env=_env())
     assert child.returncode == -signal.SIGKILL, child.stderr[-2000:]
-    second = loop_seeds = range(10_010_000, 10_020_000)
+    second = range(10_020_000, 10_030_000)  # (two learners: the first moment took two snapshots)
     cut = _gauntlet_record(killed, second)
     assert 0 < sum(map(len, cut.values())), "the kill came before the moment's first games were stored"
     assert main(["train", "--resume", "r", "--home", str(killed), "--json"]) == 0, capsys.readouterr().err
-    whole, resumed = _gauntlet_record(tmp_path / "whole", loop_seeds), _gauntlet_record(killed, loop_seeds)
+    whole, resumed = _gauntlet_record(tmp_path / "whole", second), _gauntlet_record(killed, second)
     assert Counter({k: len(v) for k, v in resumed.items()}) == Counter({k: len(v) for k, v in whole.items()})
     assert resumed == whole
-    first = range(10_000_000, 10_010_000)  # the first moment's gauntlet, finished before the kill
+    first = range(10_000_000, 10_020_000)  # the first moment's gauntlet, finished before the kill
     assert _gauntlet_record(killed, first) == _gauntlet_record(tmp_path / "whole", first)
 
 

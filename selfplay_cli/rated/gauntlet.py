@@ -282,7 +282,7 @@ def play_gauntlet(
         crew = seated.get(row.id)
         return index[row.id] if crew is None else tuple(index[m.id] for m in crew)
 
-    def key(row: PlayerRow) -> object:
+    def result_id(row: PlayerRow) -> object:
         """How a round's results name a player: its policy id, or its crew's (a tuple: see results.crew)."""
         crew = seated.get(row.id)
         return loaded[row.id].id if crew is None else tuple(dict.fromkeys(loaded[m.id].id for m in crew))
@@ -328,7 +328,7 @@ def play_gauntlet(
         if len(got) == per[k]:  # a whole round: its results between the two
             del rounds[(k, p)]
             got.sort(key=lambda g: g.index)
-            for points in points_between(rules, got, key(m.a), key(m.b)):
+            for points in points_between(rules, got, result_id(m.a), result_id(m.b)):
                 m.wins += points > 0.5
                 m.draws += points == 0.5
                 m.losses += points < 0.5
