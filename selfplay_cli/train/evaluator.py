@@ -206,6 +206,8 @@ class Evaluator:
         return None if self._proc is None else self._proc.pid
 
     def submit(self, job: GauntletJob) -> None:
+        if not self.pending:
+            self._progress = time.monotonic()  # an idle worker was not stalled: the clock starts with its work
         self.pending.append(job)
         if self.background:
             self._jobs.put(job)
