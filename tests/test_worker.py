@@ -5,6 +5,7 @@ stores the same gauntlet games twice over."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -95,10 +96,8 @@ def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
         assert _eval_games(home / "league.db") == stored, "games stored after the trainer died"
     finally:
         for pid in [trainer.pid, *_children(trainer.pid)]:
-            try:
+            with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
 
 
 # -- 2. the run lock covers both processes ------------------------------------------------------------------
@@ -220,6 +219,16 @@ def test_a_stopped_worker_is_reported_and_replaced(rated_league):
     assert _eval_games(league.db_path) == 4
 
 
+def test_an_idle_worker_given_work_is_not_taken_for_stalled(rated_league):
+    league, snap = rated_league
+    notes: list[str] = []
+    with Evaluator(league, "cpu", background=True, note=notes.append, stall_seconds=2.0) as ev:
+        time.sleep(2.5)  # nothing to do for longer than the stall time
+        ev.submit(GauntletJob((snap.id,), 0, 2, 0))
+        ev.poll()
+        assert ev.restarts == 0 and notes == []
+
+
 # -- 3. no game is ever counted twice -------------------------------------------------------------------------
 def _gauntlet_record(home: Path, seeds: range) -> dict[tuple[str, str], list[tuple]]:
     """The gauntlet games whose matchup starts in ``seeds``: per (a, b) of the matchup, each game's seed and its
@@ -249,7 +258,7 @@ def test_a_job_cut_by_a_kill_is_stored_as_an_uninterrupted_run_stores_it(tmp_pat
     assert child.returncode == -signal.SIGKILL, child.stderr[-2000:]
     second = range(10_020_000, 10_030_000)  # (two learners: the first moment took two snapshots)
     cut = _gauntlet_record(killed, second)
-    assert 0 < sum(map(len, cut.values())), "the kill came before the moment's first games were stored"
+    assert sum(map(len, cut.values())) > 0, "the kill came before the moment's first games were stored"
     assert main(["train", "--resume", "r", "--home", str(killed), "--json"]) == 0, capsys.readouterr().err
     whole, resumed = _gauntlet_record(tmp_path / "whole", second), _gauntlet_record(killed, second)
     assert Counter({k: len(v) for k, v in resumed.items()}) == Counter({k: len(v) for k, v in whole.items()})

@@ -23,6 +23,7 @@ run stops with an internal error (exit 5).
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import multiprocessing as mp
 import os
@@ -107,10 +108,8 @@ def die_with_parent(parent: int) -> None:
     thread); everywhere a watchdog thread checks the parent every :data:`WATCH_SECONDS` as well, and ends the
     process with SIGKILL (nothing runs on the way out: no queue feeder thread keeps it waiting)."""
     if sys.platform.startswith("linux"):
-        try:
+        with contextlib.suppress(OSError, AttributeError):  # no libc to ask: the watchdog alone
             ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-        except (OSError, AttributeError):  # no libc to ask: the watchdog alone
-            pass
 
     def watch() -> None:
         while True:
@@ -126,7 +125,7 @@ def die_with_parent(parent: int) -> None:
 def _error_kind(e: BaseException) -> str:
     """How the trainer reports a failed job: ``usage`` for a user's mistake (exit 2), ``io`` for a file or disk the
     system refused (exit 4), ``internal`` for a bug (exit 5)."""
-    if isinstance(e, MarlIOError) or isinstance(e, OSError):
+    if isinstance(e, (MarlIOError, OSError)):
         return "io"
     return "usage" if isinstance(e, MarlError) else "internal"
 

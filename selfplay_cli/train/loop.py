@@ -463,7 +463,7 @@ class Trainer:
     # -- one process per run ---------------------------------------------------------------------------------
     def _lock(self) -> None:
         """Claim the run for this process (``runs/<run>/lock`` names it, and its rating worker once started:
-        :meth:`_lock_worker`); refuse while the process that holds it lives. A run killed with SIGKILL leaves a stale
+        :meth:`_write_lock`); refuse while the process that holds it lives. A run killed with SIGKILL leaves a stale
         lock, which is taken over; a rating worker of that run still alive (where the kernel did not end it with
         its trainer) is ended first, so that nothing of the old session plays on beside the new one. A process is
         recognised by its pid and its start time, so a pid the system has given to another process since is never
@@ -478,11 +478,9 @@ class Trainer:
             _end_process(worker[0])
         self._write_lock(None)
 
-    def _lock_worker(self, pid: int) -> None:
-        """Record the run's (new) rating worker in its lock."""
-        self._write_lock(pid)
-
     def _write_lock(self, worker: int | None) -> None:
+        """The run's lock naming this process and, once one is started (and each time it is replaced), its rating
+        worker."""
         lock = self.run_dir / "lock"
         me = os.getpid()
         holder = {"trainer": [me, process_start(me)]}
@@ -672,7 +670,7 @@ class Trainer:
             # (stoppable() innermost: a stop tells the learners' update threads first, so nothing waits for them)
             with LearnerTeam(self.learners) as self.team, \
                     Evaluator(self.league, str(self.device), background=background,
-                              on_worker=self._lock_worker) as self.evaluator, stoppable():
+                              on_worker=self._write_lock) as self.evaluator, stoppable():
                 return self._train()
         finally:
             self.evaluator = None
