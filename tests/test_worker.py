@@ -76,14 +76,14 @@ def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
     trainer = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "train", "pong", *FAST, "--steps", "200000",
                                 "--eval-games", "64", "--run", "r", "--home", str(home)],
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=_env())
+    workers: list[int] = []
     try:
         deadline = time.time() + 240
         while time.time() < deadline and not ((home / "league.db").exists() and _eval_games(home / "league.db")):
             time.sleep(0.2)  # the worker has stored its first games: it is at work
         workers = _children(trainer.pid)
         assert len(workers) >= 1, "no rating worker found"
-        lock = json.loads((home / "runs" / "r" / "lock").read_text())
-        assert lock["trainer"][0] == trainer.pid and lock["worker"][0] in workers
+        lock = (home / "runs" / "r" / "lock").read_text()
         trainer.kill()
         trainer.wait(timeout=30)
         t0 = time.time()
@@ -94,8 +94,10 @@ def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
         time.sleep(2.0)
         assert all(_gone(w) for w in workers) and took < 2.0, f"worker alive {took:.1f} s after its trainer died"
         assert _eval_games(home / "league.db") == stored, "games stored after the trainer died"
+        named = json.loads(lock)
+        assert named["trainer"][0] == trainer.pid and named["worker"][0] in workers
     finally:
-        for pid in [trainer.pid, *_children(trainer.pid)]:
+        for pid in [trainer.pid, *workers, *_children(trainer.pid)]:  # (an orphan, where the fix is missing)
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
 
