@@ -294,6 +294,8 @@ def test_a_league_of_schema_1_gets_its_work_keys(tmp_path):
     con.execute("update meta set value = '1' where key = 'schema_version'")
     con.commit()
     con.close()
+    with League.open(tmp_path / "h", readonly=True) as league:  # a command that only reads reads it as it is
+        assert league.schema_version() == 1 and league.count_games("pong") == 0
     with League.open(tmp_path / "h") as league:
         assert league.schema_version() == 2
         league.ensure_bots("pong", ["random"])

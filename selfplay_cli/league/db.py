@@ -57,6 +57,10 @@ def _add_work_keys(conn: Connection) -> None:
         conn.exec_driver_sql("CREATE UNIQUE INDEX uq_matches_work_key ON matches (work_key)")
 
 
+OLDEST_READABLE = 1
+"""The oldest schema version a command that only reads reads as it is, without the upgrade it may not make:
+version 2 added a column only writers use (``matches.work_key``, deferred in the mapping, so reads never select it)."""
+
 MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_work_keys}
 """``MIGRATIONS[v](conn)`` upgrades a version-``v`` database to ``v + 1`` inside the opening transaction; an older
 database is accepted only if every step up to :data:`SCHEMA_VERSION` is here."""
@@ -315,6 +319,8 @@ class Database:
                 f"{SCHEMA_VERSION} of this marl: upgrade marl"
             )
         missing = [v for v in range(stored, SCHEMA_VERSION) if v not in MIGRATIONS]
+        if self.readonly and stored >= OLDEST_READABLE:
+            return
         if self.readonly and not missing:
             raise LeagueError(
                 f"league database {self._where} has schema version {stored} and needs upgrading to version "

@@ -186,7 +186,7 @@ class Match(Base):
     kind: Mapped[str] = mapped_column(String(32))
     params: Mapped[dict[str, Any]] = mapped_column(default=dict)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
-    work_key: Mapped[str | None] = mapped_column(String(200))
+    work_key: Mapped[str | None] = mapped_column(String(200), deferred=True)  # (only writers read it)
     """The unit of work whose games the match holds, where a unit may be done twice (a training run's gauntlet
     matchup, played again when the run resumes after a kill): stored with its games in one transaction, and unique,
     so the second time stores nothing and the games count once. None for everything else."""
