@@ -591,6 +591,202 @@ def file_named_game(scratch: Path) -> tuple[bool, str]:
 
 # --- issue 30: the rating worker, signals, resume ---
 
+_QUICK = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
+          "2048", "--run", "r", "--quiet"]
+
+
+def _proc_children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            text = stat.read_text()
+        except OSError:
+            continue
+        if int(text[text.rfind(")") + 2:].split()[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def _proc_gone(pid: int) -> bool:
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True
+    return text[text.rfind(")") + 2:].split()[0] == "Z"
+
+
+def _eval_count(home: Path) -> int:
+    try:
+        return db(home, "select count(*) from games g join matches m on m.id = g.match_id where m.kind = 'eval'")[0][0]
+    except sqlite3.Error:
+        return 0
+
+
+def _stored_twice(home: Path) -> int:
+    """Gauntlet games stored more than once: the same two players on the same seats and seed, in two matches."""
+    rows = db(home, "select g.seed, group_concat(s.player_id, ',') from games g join matches m on m.id = g.match_id "
+                    "join game_seats s on s.game_id = g.id where m.kind = 'eval' group by g.id")
+    return len(rows) - len(set(rows))
+
+
+@fault("rating worker: marl train killed (SIGKILL) while its worker plays a gauntlet")
+def worker_orphan(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    p = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *_QUICK, "--steps", "200000", "--eval-games", "64",
+                          "--home", str(home)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=_env())
+    deadline = time.time() + 300
+    while time.time() < deadline and not _eval_count(home):
+        time.sleep(0.2)
+    workers = _proc_children(p.pid)
+    lock = json.loads((home / "runs" / "r" / "lock").read_text())
+    p.kill()
+    p.wait()
+    t = time.time()
+    while time.time() - t < 10 and not all(_proc_gone(w) for w in workers):
+        time.sleep(0.05)
+    took, stored = time.time() - t, _eval_count(home)
+    time.sleep(2.0)
+    after = _eval_count(home) - stored
+    held = bool(workers) and lock.get("worker", [0])[0] in workers and all(map(_proc_gone, workers)) and took < 2 \
+        and after == 0
+    return held, f"worker {workers} named in the lock, gone {took:.2f} s after its trainer; {after} games stored after"
+
+
+@fault("rating worker: --resume of a run whose lock names a live worker of the killed session")
+def worker_stale_lock(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    killed = subprocess.run([sys.executable, str(ROOT / "tests" / "kill_points.py"), "after-rows", str(home), *_QUICK,
+                             "--steps", "4096", "--eval-games", "0"], capture_output=True, env=_env(), timeout=600)
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    orphan = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(300)"])
+    time.sleep(0.3)
+    start = Path(f"/proc/{orphan.pid}/stat").read_text()
+    start = start[start.rfind(")") + 2:].split()[19]
+    (home / "runs" / "r" / "lock").write_text(json.dumps({"trainer": [dead.pid, None], "worker": [orphan.pid, start]}))
+    t = time.time()
+    resumed = marl("train", "--resume", "r", "--home", str(home), "--quiet")
+    ended = orphan.poll()
+    orphan.kill()
+    orphan.wait()
+    held = (killed.returncode == -signal.SIGKILL and resumed.code == 0 and ended == -signal.SIGKILL
+            and not (home / "runs" / "r" / "lock").exists())
+    return held, (f"resume exit {resumed.code} in {time.time() - t:.0f} s; the old worker {orphan.pid} "
+                  f"{'ended (SIGKILL)' if ended == -signal.SIGKILL else 'left alive'}: {resumed.line[:60]}")
+
+
+@fault("rating worker killed (SIGKILL, with its trainer) mid-gauntlet, then --resume: no game stored twice")
+def worker_killed_mid_job(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    args = [*_QUICK, "--steps", "6144", "--eval-games", "4"]
+    killed = subprocess.run([sys.executable, str(ROOT / "tests" / "kill_points.py"), "worker-mid-job", str(home),
+                             *args], capture_output=True, text=True, env=_env(), timeout=600)
+    cut = _eval_count(home)
+    r = marl("train", "--resume", "r", "--home", str(home), "--quiet")
+    twice = _stored_twice(home)
+    records = db(home, "select m.params, count(g.id) from matches m join games g on g.match_id = m.id "
+                       "where m.kind = 'eval' group by m.id")
+    whole = sum(json.loads(p)["record"][3] * 2 == n for p, n in records)  # a seat-swapped pair is two games
+    held = killed.returncode == -signal.SIGKILL and r.code == 0 and twice == 0 and whole == len(records)
+    return held, (f"{cut} games stored when killed; resumed: exit {r.code}, {_eval_count(home)} games, {twice} stored "
+                  f"twice, {whole} of {len(records)} matchups whole")
+
+
+@fault("rating worker killed (SIGKILL) alone during training: noticed, replaced, run finishes")
+def worker_replaced(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    lock = home / "runs" / "r" / "lock"
+
+    def killed_worker() -> bool:
+        try:
+            pid = json.loads(lock.read_text())["worker"][0]
+        except (OSError, ValueError, KeyError):
+            return False
+        os.kill(pid, signal.SIGKILL)
+        return True
+
+    p = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *_QUICK, "--steps", "8192", "--eval-games", "8",
+                          "--home", str(home)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    deadline = time.time() + 300
+    while time.time() < deadline and not killed_worker():
+        time.sleep(0.1)
+    out, err = p.communicate(timeout=900)
+    status = db(home, "select status from runs")[0][0]
+    twice = _stored_twice(home)
+    held = p.returncode == 0 and "ended unexpectedly (killed by SIGKILL)" in err and status == "finished" and twice == 0
+    line = next((ln for ln in err.splitlines() if "rating worker" in ln), "no line")
+    return held, f"exit {p.returncode}, {status}, {twice} games stored twice: {line[:90]}"
+
+
+STALLED = textwrap.dedent("""
+    import sys
+    import selfplay_cli.train.evaluator as evaluator
+    from selfplay_cli.cli import main
+    evaluator.STALL_SECONDS = 20.0  # (300 s in marl: a matrix row waits for 20)
+    sys.exit(main(sys.argv[1:]))
+""")
+
+
+@fault("rating worker stopped (SIGSTOP) during training: reported and replaced (stall time 20 s here)")
+def worker_stalled(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    lock = home / "runs" / "r" / "lock"
+    stopped: list[int] = []
+
+    def stop_worker() -> bool:
+        try:
+            pid = json.loads(lock.read_text())["worker"][0]
+        except (OSError, ValueError, KeyError):
+            return False
+        os.kill(pid, signal.SIGSTOP)
+        stopped.append(pid)
+        return True
+
+    p = subprocess.Popen([sys.executable, "-c", STALLED, *_QUICK, "--steps", "8192", "--eval-games", "8",
+                          "--home", str(home)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+    deadline = time.time() + 300
+    while time.time() < deadline and not stop_worker():
+        time.sleep(0.1)
+    out, err = p.communicate(timeout=900)
+    held = p.returncode == 0 and "finished no game for" in err and bool(stopped) and _proc_gone(stopped[0])
+    line = next((ln for ln in err.splitlines() if "rating worker" in ln), "no line")
+    return held, f"exit {p.returncode}: {line[:110]}"
+
+
+@fault("SIGTERM to marl train with update_epochs = 1e9 (two learners updating in threads)")
+def sigterm_endless_update(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    config = scratch / "endless.toml"
+    config.write_text("[ppo]\nupdate_epochs = 1_000_000_000\n")
+    state = home / "runs" / "r" / "state.pt"
+    ready_at: list[float] = []
+
+    def ready() -> bool:  # 8 s into the first update (its rollout: 2,048 steps of 16 games)
+        if state.exists() and not ready_at:
+            ready_at.append(time.time())
+        return bool(ready_at) and time.time() - ready_at[0] > 8.0
+
+    r = marl(*_QUICK, "--steps", "100000", "--eval-games", "0", "--config", str(config), "--home", str(home),
+             signal_after=(ready, signal.SIGTERM), timeout=300)
+    took = time.time() - ready_at[0] - 8.0 if ready_at else float("nan")
+    status = db(home, "select status from runs")[0][0]
+    held = r.code == 143 and status == "stopped" and "marl train --resume r" in r.err and took < 5
+    return held, f"exit {r.code} {took:.1f} s after SIGTERM, status {status}: {r.line[:70]}"
+
+
+@fault("the same marl train command and seed twice (two leagues): the same gauntlet games")
+def same_seed_twice(scratch: Path) -> tuple[bool, str]:
+    games = []
+    for h in ("one", "two"):
+        home = scratch / h
+        marl(*_QUICK, "--steps", "4096", "--eval-games", "4", "--seed", "3", "--home", str(home))
+        games.append(sorted(db(home, "select g.seed, group_concat(p.name || ':' || s.points, ' ') from games g "
+                                     "join matches m on m.id = g.match_id join game_seats s on s.game_id = g.id "
+                                     "join players p on p.id = s.player_id where m.kind = 'eval' group by g.id")))
+    held = bool(games[0]) and games[0] == games[1]
+    return held, f"{len(games[0])} and {len(games[1])} gauntlet games, {'identical' if held else 'different'}"
+
+
 
 # --- issue 30: paths from the database, removing a snapshot a run needs ---
 

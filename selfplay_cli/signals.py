@@ -1,4 +1,11 @@
-"""Ctrl-C and a polite kill held off a block that must finish whole (a database transaction, a snapshot moment).
+"""Ctrl-C and a polite kill held off a block that must finish whole (a database transaction, a snapshot moment),
+and long work told to stop when they come.
+
+A signal's handler runs in the main thread, between two of its bytecodes. Work that other threads do (a run's
+learners update side by side in threads) does not see it, and the main thread, unwinding, waits for them: with
+``update_epochs = 1e9`` that was an hour. So whoever stops on a signal calls :func:`request_stop`, and long loops
+in any thread ask :func:`stop_requested` between their steps (a learner's minibatches and gradient steps) and end
+early; the work they leave is thrown away with the process (a run resumes from its last snapshot moment).
 
 Nothing here imports from the rest of marl, so every room can use it.
 """
@@ -6,11 +13,38 @@ Nothing here imports from the rest of marl, so every room can use it.
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["signals_held"]
+__all__ = ["request_stop", "signals_held", "stop_requested", "stoppable"]
+
+_stop = threading.Event()
+
+
+def request_stop() -> None:
+    """Tell every long loop of the process (in any thread) to end at its next step: the process is stopping."""
+    _stop.set()
+
+
+def stop_requested() -> bool:
+    """Whether the process is stopping (:func:`request_stop`): a long loop ends at once when it is."""
+    return _stop.is_set()
+
+
+@contextmanager
+def stoppable() -> Iterator[None]:
+    """A block of long work (a training run) that stops on any exception leaving it (Ctrl-C, SIGTERM's, an
+    error): :func:`request_stop` is called before the exception goes on, so threads still at work end at their next
+    step instead of keeping the clean-up of the blocks around it waiting (so it goes innermost). The request stands
+    until the next such block starts (a process may train again after a stopped run, as a test does)."""
+    _stop.clear()
+    try:
+        yield
+    except BaseException:
+        request_stop()
+        raise
 
 
 @contextmanager

@@ -8,7 +8,13 @@ second time a snapshot moment reaches that point, so the first moment (s0) is co
 * ``during-state-file``: half of its pending run state is written;
 * ``after-rows``: its rows are committed, the pending state not yet renamed into place.
 
-Used by tests/test_kill_resume.py and benchmarks/fault_matrix.py.
+One point is in the rating worker instead (a process of its own, started by spawn, which imports this file as
+``__mp_main__`` with the same arguments, so the point is armed there too):
+
+* ``worker-mid-job``: the worker has stored two games' batches of the second moment's gauntlet and is storing a
+  third: it kills the trainer, then itself (SIGKILL both), before that third batch is committed.
+
+Used by tests/test_kill_resume.py, tests/test_worker.py and benchmarks/fault_matrix.py.
 """
 
 from __future__ import annotations
@@ -23,7 +29,27 @@ import selfplay_cli.train.loop as loop
 from selfplay_cli.cli import main
 from selfplay_cli.league.store import League
 
-POINTS = ("after-first-file", "after-pending-state", "during-state-file", "after-rows")
+POINTS = ("after-first-file", "after-pending-state", "during-state-file", "after-rows", "worker-mid-job")
+SECOND_MOMENT = range(10_010_000, 10_030_000)  # the seeds of the second snapshot moment's gauntlet (loop.py: a
+# moment's seeds start 10,000 a snapshot taken before it above 10,000,000: with one learner or two)
+
+
+def arm_worker() -> None:
+    """In the rating worker: kill the trainer and the worker as the second moment's third batch is being stored."""
+    from selfplay_cli.league.ledger import Ledger
+
+    real = Ledger._insert_games
+    stores = []
+
+    def insert(self, s, match, games, pids):
+        if int((match.params or {}).get("first_seed", -1)) in SECOND_MOMENT:
+            stores.append(match.id)
+            if len(stores) == 3:
+                os.kill(os.getppid(), signal.SIGKILL)
+                os.kill(os.getpid(), signal.SIGKILL)
+        return real(self, s, match, games, pids)
+
+    Ledger._insert_games = insert
 
 
 def arm(point: str) -> None:
@@ -65,6 +91,8 @@ def arm(point: str) -> None:
 
     if point not in POINTS:
         raise SystemExit(f"kill point must be one of {', '.join(POINTS)}, not {point!r}")
+    if point == "worker-mid-job":
+        return  # armed in the worker (below)
     if point == "after-first-file":
         loop.save_snapshot = save_file
     elif point == "during-state-file":
@@ -74,6 +102,9 @@ def arm(point: str) -> None:
     else:
         League.add_snapshots = rows_then
 
+
+if __name__ == "__mp_main__" and sys.argv[1:2] == ["worker-mid-job"]:  # this file, imported by the worker
+    arm_worker()
 
 if __name__ == "__main__":
     arm(sys.argv[1])

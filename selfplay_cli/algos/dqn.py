@@ -62,6 +62,7 @@ from torch import nn
 from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead, uniform_allowed
+from ..signals import stop_requested
 from .base import Seat, action_head, as_bool, check_steps, fix_mask, learner_args
 from .optim import FlatAdam, flatten
 
@@ -546,6 +547,8 @@ class DQNLearner:
             loss_fn = nn.functional.smooth_l1_loss if cfg.loss == "huber" else nn.functional.mse_loss
             rows = []  # per gradient step: its loss, mean Q and gradient norm
             for i in range(k):
+                if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
+                    break
                 y = self.td_target(rewards[i], dones[i], next_o[i], discounts[i],
                                    None if next_masks is None else next_masks[i])
                 q_all, _ = self.net(obs[i])
@@ -558,11 +561,13 @@ class DQNLearner:
                 if self.grad_steps % cfg.target_period == 0:
                     self._sync_target()
                 rows.append(torch.stack((loss.detach(), q.detach().mean(), grad_norm)))
-            figures = torch.stack(rows)
-            first = self.grad_steps - k + 1
-            check_steps(figures, STEP_FIGURES, lambda r: f"gradient step {first + r:,}")
+            k = len(rows)  # fewer when stopped
+            if k:
+                figures = torch.stack(rows)
+                first = self.grad_steps - k + 1
+                check_steps(figures, STEP_FIGURES, lambda r: f"gradient step {first + r:,}")
+                loss_mean, q_mean = (v / k for v in figures[:, :2].sum(0).tolist())
             self.updates += 1
-            loss_mean, q_mean = (v / k for v in figures[:, :2].sum(0).tolist())
         return {"loss": loss_mean, "q_mean": q_mean,
                 "epsilon": self.epsilon, "buffer_size": float(len(self.buffer)), "grad_steps": float(k),
                 "lr": self.opt.lr}

@@ -45,6 +45,7 @@ from ..errors import NonFiniteError
 from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
+from ..signals import stop_requested
 from .base import Seat, action_head, as_bool, check_steps, fix_mask, learner_args, values_of
 from .kickstart import Imitation
 from .optim import FlatAdam
@@ -396,8 +397,12 @@ class PPOLearner:
         teaching = self.teacher_weight > 0 and self.imitation is not None and len(self.imitation) > 0
         imitation = torch.zeros((), device=self.device)
         for _ in range(cfg.update_epochs if n else 0):
+            if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
+                break
             order = torch.randperm(n, generator=self.gen, device=self.device)
             for start in range(0, n, mb):
+                if stop_requested():
+                    break
                 idx = order[start:start + mb]
                 out, value = self.net(b_obs.index_select(0, idx))
                 m = None if b_mask is None else b_mask.index_select(0, idx)

@@ -64,6 +64,7 @@ from torch import nn
 from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
+from ..signals import stop_requested
 from .base import Seat, action_head, as_bool, check_steps, learner_args
 from .kickstart import Imitation
 from .nstep import NStepChains
@@ -426,11 +427,17 @@ class SACLearner:
             obs, actions, rewards, next_o, dones, discounts = (
                 torch.from_numpy(batches[key]).to(self.device)
                 for key in ("obs", "actions", "rewards", "next_obs", "dones", "discounts"))
-            figures = torch.stack([self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i],
-                                                       discounts[i]) for i in range(k)])
-            first = self.grad_steps - k + 1
-            check_steps(figures, STEP_FIGURES, lambda r: f"gradient step {first + r:,}")
-            sums = figures[:, :5].sum(0)  # critic loss, actor loss, Q, entropy, imitation loss
+            steps = []
+            for i in range(k):
+                if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
+                    break
+                steps.append(self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i], discounts[i]))
+            k = len(steps)  # fewer when stopped
+            if k:
+                figures = torch.stack(steps)
+                first = self.grad_steps - k + 1
+                check_steps(figures, STEP_FIGURES, lambda r: f"gradient step {first + r:,}")
+                sums = figures[:, :5].sum(0)  # critic loss, actor loss, Q, entropy, imitation loss
             self.updates += 1
         out = {"alpha": self.alpha, "buffer_size": float(len(self.buffer)), "grad_steps": float(self.grad_steps),
                "lr": self.actor_opt.lr}

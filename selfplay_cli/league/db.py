@@ -44,13 +44,26 @@ from selfplay_cli.signals import signals_held
 __all__ = ["DB_FILENAME", "DEFAULT_HOME", "MIGRATIONS", "SCHEMA_VERSION", "Database", "LeagueError", "LeagueIOError",
            "shown"]
 
-SCHEMA_VERSION = 1
-"""Version of the schema in :mod:`selfplay_cli.league.models`, stored in ``meta.schema_version``."""
+SCHEMA_VERSION = 2
+"""Version of the schema in :mod:`selfplay_cli.league.models`, stored in ``meta.schema_version``. 2: matches have a
+unique ``work_key``."""
 
-MIGRATIONS: dict[int, Callable[[Connection], None]] = {}
-"""``MIGRATIONS[v](conn)`` upgrades a version-``v`` database to ``v + 1`` inside the opening transaction.
 
-Empty for now; an older database is accepted only if every step up to :data:`SCHEMA_VERSION` is here."""
+def _add_work_keys(conn: Connection) -> None:
+    """Version 1 to 2: ``matches.work_key`` (nullable; existing matches keep none) and its unique index."""
+    if "work_key" not in {c["name"] for c in inspect(conn).get_columns("matches")}:
+        conn.exec_driver_sql("ALTER TABLE matches ADD COLUMN work_key VARCHAR(200)")
+    if "uq_matches_work_key" not in {i["name"] for i in inspect(conn).get_indexes("matches")}:
+        conn.exec_driver_sql("CREATE UNIQUE INDEX uq_matches_work_key ON matches (work_key)")
+
+
+OLDEST_READABLE = 1
+"""The oldest schema version a command that only reads reads as it is, without the upgrade it may not make:
+version 2 added a column only writers use (``matches.work_key``, deferred in the mapping, so reads never select it)."""
+
+MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_work_keys}
+"""``MIGRATIONS[v](conn)`` upgrades a version-``v`` database to ``v + 1`` inside the opening transaction; an older
+database is accepted only if every step up to :data:`SCHEMA_VERSION` is here."""
 
 DEFAULT_HOME = "./league"
 DB_FILENAME = "league.db"
@@ -306,6 +319,8 @@ class Database:
                 f"{SCHEMA_VERSION} of this marl: upgrade marl"
             )
         missing = [v for v in range(stored, SCHEMA_VERSION) if v not in MIGRATIONS]
+        if self.readonly and stored >= OLDEST_READABLE:
+            return
         if self.readonly and not missing:
             raise LeagueError(
                 f"league database {self._where} has schema version {stored} and needs upgrading to version "

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from sqlalchemy import and_, func, select
+from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, aliased, raiseload
 
 from selfplay_cli.league.db import Database, LeagueError
@@ -327,20 +328,44 @@ class Ledger(Database):
         return self._unit(work)
 
     def create_match_with_games(self, env: str, kind: str, params: dict[str, Any] | None,
-                                games: Sequence[GameResult]) -> tuple[int, list[int]]:
+                                games: Sequence[GameResult], key: str | None = None) -> tuple[int, list[int]]:
         """Open a match record and store its first games in ONE transaction (a match row never exists without
-        games, whatever instant the process is killed at). Returns the match id and the game ids."""
+        games, whatever instant the process is killed at). Returns the match id and the game ids.
+
+        ``key``: the unit of work these games are (:attr:`Match.work_key`). If a match holds that key already, the
+        work was done before (by a process killed since, or by another one at the same time): nothing is stored, and
+        that match's id comes back with no game ids."""
         params = _match_params(env, kind, params)
         games = list(games)
         pids = _check_games(games)
 
         def work(s: Session) -> tuple[int, list[int]]:
-            m = Match(env=env, kind=kind, params=params)
+            if key is not None:
+                done = s.execute(select(Match.id).where(Match.work_key == key)).scalar()
+                if done is not None:
+                    return int(done), []
+            m = Match(env=env, kind=kind, params=params, work_key=key)
             s.add(m)
             s.flush()
             return m.id, self._insert_games(s, m, games, pids) if games else []
 
-        return self._unit(work)
+        try:
+            return self._unit(work)
+        except IntegrityError:  # another process stored the same unit between our look and our insert
+            if key is None:
+                raise
+            return self._unit(work)
+
+    def keyed_matches(self, prefix: str) -> dict[str, tuple[int, dict[str, Any]]]:
+        """The matches whose :attr:`~selfplay_cli.league.models.Match.work_key` starts with ``prefix``: key ->
+        (match id, parameters)."""
+        like = prefix.replace("\\", "\\\\").replace("%", "\\%").replace("_", "\\_") + "%"
+
+        def work(s: Session) -> dict[str, tuple[int, dict[str, Any]]]:
+            q = select(Match.work_key, Match.id, Match.params).where(Match.work_key.like(like, escape="\\"))
+            return {str(k): (int(i), dict(p or {})) for k, i, p in s.execute(q)}
+
+        return self._read(work)
 
     def update_match(self, match_id: int, **params: Any) -> None:
         """Merge ``params`` into a match's parameters (e.g. ``status="interrupted"``). LeagueError if unknown."""

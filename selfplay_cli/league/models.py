@@ -14,7 +14,8 @@ Tables
 * ``tags(env, tag) -> player_id``: human names for players, unique per env.
 * ``matches``: one row per match / tournament / gate / training / eval session that produced games; its
   ``params`` say how it was played (and, for rated matches, ``status``: ``running``, ``finished``,
-  ``interrupted`` or ``failed``, with the number of ``games_stored``).
+  ``interrupted`` or ``failed``, with the number of ``games_stored``). ``work_key`` (unique where set) names the
+  unit of work that stored it, where a unit may be done twice (schema version 2).
 * ``games`` + ``game_seats``: the append-only ledger. A game has ``n_seats`` seat rows holding the
   player, its raw score and its points (1 win, 0.5 draw, 0 loss).
 
@@ -178,12 +179,17 @@ class Match(Base):
     """A session that produced games (a match, tournament, gate, training run or evaluation)."""
 
     __tablename__ = "matches"
+    __table_args__ = (Index("uq_matches_work_key", "work_key", unique=True),)
 
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     env: Mapped[str] = mapped_column(String(100), index=True)
     kind: Mapped[str] = mapped_column(String(32))
     params: Mapped[dict[str, Any]] = mapped_column(default=dict)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    work_key: Mapped[str | None] = mapped_column(String(200), deferred=True)  # (only writers read it)
+    """The unit of work whose games the match holds, where a unit may be done twice (a training run's gauntlet
+    matchup, played again when the run resumes after a kill): stored with its games in one transaction, and unique,
+    so the second time stores nothing and the games count once. None for everything else."""
 
 
 class Game(Base):

@@ -30,8 +30,8 @@ a matchup whose games are all in goes on (doubling its pairs, up to ``max_pairs`
 i.e. while ``|W - L| < z * sqrt(W + L)`` with ``z`` the one-sided normal quantile of ``clear`` (0.95: 4-0 is clear,
 3-1 is not). Each such wait for a matchup's games costs up to a game's length, so the training loop leaves it off.
 The extra pairs join the running batch as soon as their matchup asks for them, so a short matchup never waits for
-the longest game of the batch. Every game is stored in the ledger as its batch of the matchup completes (kind
-``eval``, one match per matchup, one transaction per batch).
+the longest game of the batch. A matchup's games are stored in the ledger together once it is settled (kind
+``eval``, one match per matchup, one transaction), so a matchup is in the ledger whole or not at all.
 """
 
 from __future__ import annotations
@@ -236,6 +236,7 @@ def play_gauntlet(
     crews: dict[int, tuple[PlayerRow, ...]] | None = None,
     history: History | None = None,
     label: str | None = None,
+    key: str | None = None,
 ) -> list[Matchup]:
     """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
 
@@ -245,6 +246,14 @@ def play_gauntlet(
     player without one flies every seat itself. ``history``: the moment's :class:`History`, whose games say which
     matchups are already clear (without one, none is). ``label``: a flag set in the matches' parameters besides
     ``gauntlet`` (``playoff``).
+
+    ``key``: the unit of work these matchups are (a run's gauntlet of one moment, a round of its playoff), where it
+    may be played twice (its process killed, then the run resumed; a rating worker replaced): each matchup is
+    stored whole, in one transaction, under the key ``<key>/<first seed>/<a>/<b>`` (:meth:`League.
+    create_match_with_games`), so a matchup is in the ledger entirely or not at all, and never twice. Played again,
+    a unit whose matchups are all stored plays nothing (their records come from the ledger); one cut short is
+    played whole again, the same games on the same seeds in the same batch (so the same moves, where players sample),
+    and stores only the matchups that are missing: the ledger ends as an uninterrupted run leaves it.
     """
     cfg = config or GauntletConfig()
     if not pairs:
@@ -273,7 +282,7 @@ def play_gauntlet(
         crew = seated.get(row.id)
         return index[row.id] if crew is None else tuple(index[m.id] for m in crew)
 
-    def key(row: PlayerRow) -> object:
+    def result_id(row: PlayerRow) -> object:
         """How a round's results name a player: its policy id, or its crew's (a tuple: see results.crew)."""
         crew = seated.get(row.id)
         return loaded[row.id].id if crew is None else tuple(dict.fromkeys(loaded[m.id].id for m in crew))
@@ -287,6 +296,13 @@ def play_gauntlet(
 
     span = max(cfg.max_pairs, cfg.bot_pairs)  # seeds reserved per matchup: one per round
     matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
+    keys = [None if key is None else f"{key}/{m.first_seed}/{m.a.id}/{m.b.id}" for m in matchups]
+    stored = league.keyed_matches(f"{key}/") if key is not None else {}
+    if key is not None and all(k in stored for k in keys):  # done before: what the ledger holds of it
+        for m, k in zip(matchups, keys, strict=True):
+            m.match_id, params = stored[k]
+            m.wins, m.draws, m.losses, m.pairs = (int(x) for x in params.get("record", (0, 0, 0, 0)))
+        return matchups
     per = [len(round_games(m, m.first_seed)) for m in matchups]  # games in a round of each (seatings that fit)
     z = normal_quantile(cfg.clear)
     schedule: list[Game] = []
@@ -312,7 +328,7 @@ def play_gauntlet(
         if len(got) == per[k]:  # a whole round: its results between the two
             del rounds[(k, p)]
             got.sort(key=lambda g: g.index)
-            for points in points_between(rules, got, key(m.a), key(m.b)):
+            for points in points_between(rules, got, result_id(m.a), result_id(m.b)):
                 m.wins += points > 0.5
                 m.draws += points == 0.5
                 m.losses += points < 0.5
@@ -320,12 +336,15 @@ def play_gauntlet(
         in_flight[k] -= 1
         if on_games:
             on_games(1)
-        if in_flight[k] == 0:  # every game scheduled so far is in: store them, then go on only if still open
-            _store(league, m, pending[k], loaded, options, crews, label)
-            pending[k] = []
+        if in_flight[k] == 0:  # every game scheduled so far is in: go on while still open, else store them all
             extra = m.more(z, cfg.pairs, cfg.max_pairs)
             if extra:
                 schedule_pairs(k, extra)
+            elif keys[k] not in stored:
+                _store(league, m, pending[k], loaded, options, crews, label, keys[k])
+                pending[k] = []
+            else:  # stored the first time round: these are the same games
+                m.match_id = stored[keys[k]][0]  # type: ignore[index]
 
     for k, m in enumerate(matchups):
         m.expect = None if history is None else _clear_history(league, history, m, z, 2 * cfg.pairs)
@@ -340,21 +359,24 @@ def play_gauntlet(
 
 
 def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[int, Policy],
-           options: dict, crews: dict[int, tuple[PlayerRow, ...]], label: str | None = None) -> None:
-    """One transaction per matchup and round; the matchup's match row is opened with its first games."""
+           options: dict, crews: dict[int, tuple[PlayerRow, ...]], label: str | None = None,
+           key: str | None = None) -> None:
+    """A settled matchup: its match row and all its games in one transaction, under ``key`` if given (its record,
+    wins, draws, losses and rounds, in the row's parameters: what a second playing of the unit reads back)."""
     if not results:
         return
     pa, pb = loaded[m.a.id], loaded[m.b.id]
-    if m.match_id is None:
-        info = {"a": pa.id, "b": pb.id, "first_seed": m.first_seed, "env_options": options, "gauntlet": True}
-        if label:
-            info[label] = True
-        for side, row in (("a_crew", m.a), ("b_crew", m.b)):
-            if row.id in crews:
-                info[side] = [loaded[c.id].id for c in crews[row.id]]
-        m.match_id = league.create_match(m.a.env, "eval", info)
+    info = {"a": pa.id, "b": pb.id, "first_seed": m.first_seed, "env_options": options, "gauntlet": True,
+            "record": [m.wins, m.draws, m.losses, m.pairs]}
+    if label:
+        info[label] = True
+    for side, row in (("a_crew", m.a), ("b_crew", m.b)):
+        if row.id in crews:
+            info[side] = [loaded[c.id].id for c in crews[row.id]]
     player = {loaded[r.id].id: r.id for r in (m.a, m.b, *crews.get(m.a.id, ()), *crews.get(m.b.id, ()))}
-    m.game_ids += league.record_games(m.match_id, [r.with_players(player) for r in results])
+    m.match_id, ids = league.create_match_with_games(m.a.env, "eval", info,
+                                                     [r.with_players(player) for r in results], key=key)
+    m.game_ids += ids
 
 
 @dataclass(frozen=True)
@@ -419,8 +441,10 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     """The whole gauntlet of one snapshot moment: the run's best so far, the opponents, the games, all chosen from
     the moment's :class:`History`.
 
-    Idempotent: a matchup that already has gauntlet games in the ledger (a gauntlet cut short by a kill, then run
-    again on resume) is not played again, so asking twice never doubles a snapshot's games.
+    Idempotent: the gauntlet is one unit of work keyed by the moment (``gauntlet/<its first snapshot id>``,
+    :func:`play_gauntlet`'s ``key``): played again (cut short by a kill, then run again on resume), it stores what is
+    missing and nothing twice, with the same choices. A pair whose players, or copies of them (the same weights,
+    :meth:`League.same_weights`: another run with the same seed), already met in another gauntlet is left out.
     """
     new = [league.get_player(int(i)) for i in snapshot_ids]
     if not new:
@@ -445,9 +469,11 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
             if a.id != b.id:
                 unique.setdefault(frozenset((a.id, b.id)), (a, b))
         pairs = list(unique.values())
-    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant)]
+    key = f"gauntlet/{min(p.id for p in new)}"
+    mine = {match_id for match_id, _ in league.keyed_matches(f"{key}/").values()}  # (this unit's, played before)
+    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant, ignore=mine)]
     return play_gauntlet(league, pairs, first_seed=first_seed, config=config, device=device, on_games=on_games,
-                         crews={m.id: crew for crew in crews.values() for m in crew[:1]}, history=history)
+                         crews={m.id: crew for crew in crews.values() for m in crew[:1]}, history=history, key=key)
 
 
 def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[PlayerRow, ...]]:
@@ -481,9 +507,10 @@ def _seat_crew(crew: tuple[PlayerRow, ...], n_seats: int) -> tuple[PlayerRow, ..
     return refit(Lineup(crew[0].env, crew, 0), n_seats, seed=0).players
 
 
-def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow, variant: str = "") -> bool:
-    """Whether the ledger holds gauntlet games between ``a`` and ``b`` already (in ``variant``)."""
+def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow, variant: str = "",
+                    ignore: set[int] | frozenset[int] = frozenset()) -> bool:
+    """Whether the ledger holds gauntlet games between ``a`` and ``b``, or copies of them (in ``variant``), in
+    matches other than ``ignore``."""
     table = league.games(a.env, players=[a.id, b.id], variant=variant)
-    if not len(table):
-        return False
-    return any(league.match_info(int(m))[1].get("gauntlet") for m in np.unique(table.match_id).tolist())
+    return any(league.match_info(int(m))[1].get("gauntlet") for m in np.unique(table.match_id).tolist()
+               if int(m) not in ignore)

@@ -13,6 +13,10 @@ well reverse it. So after the run's final gauntlet, the playoff:
    rounds), and goes back to 1, until the top is separated from every snapshot of the run, or every pair of
    top and rival has ``max_games`` games between them.
 
+Each round is a unit of work keyed by the run's final moment and the round's first seed: a playoff played again
+(its worker killed, the run resumed) skips the rounds it stored, and plays the one it was cut in again from the
+history that round saw, storing only what is missing (:func:`~selfplay_cli.rated.gauntlet.play_gauntlet`).
+
 A game whose sides differ (a hunter against a runner) is rated per side: each side has its top and its rivals,
 and two snapshots of one side cannot meet, so each of them plays the other side's best instead (their difference
 is measured through that common opponent), until the top is separated or the rival has ``max_games`` games
@@ -25,7 +29,9 @@ ladder shows the best with its margin over the next, or the snapshots it is tied
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+
+import numpy as np
 
 from ..arena.schedule import round_size
 from ..envs import get_env
@@ -72,8 +78,9 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
     book = RoleBook(league, final[0].env)
     z = normal_quantile(0.5 + 0.5 * cfg.confidence)  # the ladder's two-sided intervals of a difference
     played, seed = 0, first_seed
+    key = f"playoff/{min(p.id for p in final)}"  # a round's unit of work: f"{key}/{its first seed}"
     for _ in range(cfg.max_rounds):
-        history = run_history(league, final, including=True)
+        history = _before(league, run_history(league, final, including=True), key, seed)
         fit = fit_history(history, anchor)
         if fit is None:
             return played
@@ -105,11 +112,20 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
             pairs = list(unique.values())
             matchups = play_gauntlet(league, pairs, first_seed=seed,
                                      config=GauntletConfig(pairs=n, clear_pairs=n, max_pairs=n, older=0),
-                                     device=device, on_games=on_games, label="playoff",
+                                     device=device, on_games=on_games, label="playoff", key=f"{key}/{seed}",
                                      crews={m.id: crew for crew in crews.values() for m in crew[:1]})
             played += sum(m.games for m in matchups)
             seed += n * len(pairs)
     return played
+
+
+def _before(league: League, history: History, key: str, seed: int) -> History:
+    """The history as the round starting at ``seed`` saw it the first time: without the games of that round and
+    later ones (stored before the process playing them was killed; played again now, see :func:`play_gauntlet`)."""
+    later = [mid for k, (mid, _) in league.keyed_matches(f"{key}/").items() if int(k.split("/")[2]) >= seed]
+    if not later:
+        return history
+    return replace(history, table=history.table.select(~np.isin(history.table.match_id, later)))
 
 
 def _comparable(book: RoleBook, players: list[PlayerRow], sided: bool) -> list[list[PlayerRow]]:

@@ -10,21 +10,34 @@ the run's playoff (:mod:`selfplay_cli.rated.playoff`): its best candidates meet 
 
 ``background=False`` plays each gauntlet in the calling process instead, when it is submitted (the same games).
 
-The worker leaves when told to, when a job fails (the failure comes back as the job's error) or when the training
-process is gone (killed with SIGKILL: it checks its parent every second).
+The worker leaves when told to, or when a job fails (the failure comes back as the job's error, raised in the
+trainer in its class: a user's mistake, an I/O failure, or a bug). It dies with the trainer, at once, however the
+trainer ends (:func:`die_with_parent`), so no orphan plays on. The trainer notices a worker that died as soon as
+it next looks (every metrics line, every snapshot moment, every second of the final wait), and one that finished
+no game for :data:`STALL_SECONDS` while it had a job (stopped with SIGSTOP, or stuck): it says so on stderr and
+starts another, which plays the unfinished jobs again. That is safe because a job's stored work is idempotent
+(:func:`selfplay_cli.rated.gauntlet.rate_snapshots`: a matchup is stored whole under a key, and a job played again
+stores only what is missing, and makes the same choices). After :data:`MAX_RESTARTS` workers lost in a row the
+run stops with an internal error (exit 5).
 """
 
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import multiprocessing as mp
 import os
 import queue
+import signal
+import sys
+import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..errors import MarlError
+from ..errors import MarlError, MarlIOError
 
 FINAL_BOT_GAMES = 4  # a run's final snapshots play this many times --eval-games against each scripted player (32
 # at the default 8): the run's summary reports their scores against the bots, and each score's interval
@@ -32,6 +45,12 @@ FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapsh
 # over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
 # rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
 PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
+STALL_SECONDS = 300.0  # a worker that has a job and reports no finished game for this long is stuck (a stopped
+# process, a game that never ends) and is replaced: a gauntlet's games all start at once, so one game's length
+# (seconds in pong, under two minutes for the longest built-in game on a loaded machine) passes between reports
+MAX_RESTARTS = 3  # workers replaced in a row (no job finished in between) before the run stops with an error
+WATCH_SECONDS = 0.5  # how often a worker's watchdog looks for its parent (where the kernel does not watch)
+_PR_SET_PDEATHSIG = 1  # prctl option (linux/prctl.h): the signal a process gets when its parent ends
 
 
 @dataclass(frozen=True)
@@ -54,6 +73,7 @@ class JobDone:
     seconds: float
     games: int
     error: str | None = None
+    error_kind: str = "usage"  # a failed job's class: usage (exit 2), io (4) or internal (5)
 
 
 def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) -> JobDone:
@@ -80,13 +100,42 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
     return JobDone(job, time.perf_counter() - t0, games)
 
 
+def die_with_parent(parent: int) -> None:
+    """End this process the moment its parent (the trainer, pid ``parent``) ends, however it ends (SIGKILL
+    included): nobody waits for its games then, and an orphan would play on for minutes, store them, and keep the
+    terminal's output open. On Linux the kernel sends SIGKILL when the parent goes (``prctl(PR_SET_PDEATHSIG)``:
+    strictly, when the parent's thread that started this process ends; the trainer starts its workers from its main
+    thread); everywhere a watchdog thread checks the parent every :data:`WATCH_SECONDS` as well, and ends the
+    process with SIGKILL (nothing runs on the way out: no queue feeder thread keeps it waiting)."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):  # no libc to ask: the watchdog alone
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+
+    def watch() -> None:
+        while True:
+            if os.getppid() != parent:
+                os.kill(os.getpid(), signal.SIGKILL)
+            time.sleep(WATCH_SECONDS)
+
+    if os.getppid() != parent:  # gone before the kernel was asked
+        os.kill(os.getpid(), signal.SIGKILL)
+    threading.Thread(target=watch, name="marl-parent-watch", daemon=True).start()
+
+
+def _error_kind(e: BaseException) -> str:
+    """How the trainer reports a failed job: ``usage`` for a user's mistake (exit 2), ``io`` for a file or disk the
+    system refused (exit 4), ``internal`` for a bug (exit 5)."""
+    if isinstance(e, (MarlIOError, OSError)):
+        return "io"
+    return "usage" if isinstance(e, MarlError) else "internal"
+
+
 def _worker(url: str, home: str | None, device: str, jobs: Any, done: Any, parent: int) -> None:
-    """The worker process: jobs in order until told to stop (None), a job fails, or the parent is gone."""
-    import signal
+    """The worker process: jobs in order until told to stop (None) or a job fails; it dies with its parent."""
+    die_with_parent(parent)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the trainer's to handle; it stops the worker
 
     import torch
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the trainer's to handle; it stops the worker
 
     from ..league.store import League
 
@@ -94,43 +143,70 @@ def _worker(url: str, home: str | None, device: str, jobs: Any, done: Any, paren
     league = League(url, home=home)
     try:
         while True:
-            try:
-                job = jobs.get(timeout=1.0)
-            except queue.Empty:
-                if os.getppid() != parent:
-                    return  # the trainer was killed: nobody waits for these games
-                continue
+            job = jobs.get()
             if job is None:
                 return
             try:
                 done.put(run_job(league, job, device, on_games=lambda n: done.put(("games", n))))
             except Exception as e:  # reported to the trainer, which raises it there as one line
                 done.put(JobDone(job, 0.0, 0, error=f"{type(e).__name__}: {e}" if not isinstance(e, MarlError)
-                                 else str(e)))
+                                 else str(e), error_kind=_error_kind(e)))
                 return
     finally:
         league.close()
 
 
-class Evaluator:
-    """Gauntlet jobs, played in a worker process (``background``) or inline; see the module docstring."""
+class RatingWorkerError(RuntimeError):
+    """The rating worker kept dying, or a job failed on a bug: an internal error (exit 5), not the user's."""
 
-    def __init__(self, league: Any, device: str, background: bool = True) -> None:
+
+class Evaluator:
+    """Gauntlet jobs, played in a worker process (``background``) or inline; see the module docstring.
+
+    ``on_worker(pid)`` is told of every worker process started (the run's lock records it); ``note(line)`` says
+    on stderr that a worker died or stalled and was replaced."""
+
+    def __init__(self, league: Any, device: str, background: bool = True,
+                 on_worker: Callable[[int], None] | None = None, note: Callable[[str], None] | None = None,
+                 stall_seconds: float | None = None) -> None:
         self.league, self.device, self.background = league, device, background
         self.pending: list[GauntletJob] = []
         self.games_played = 0  # games the worker reported since the last poll
+        self.restarts = 0  # workers started to replace one that died or stalled
+        self.stall_seconds = STALL_SECONDS if stall_seconds is None else stall_seconds
+        self._on_worker = on_worker
+        self._note = note or (lambda line: print(line, file=sys.stderr, flush=True))
         self._done: list[JobDone] = []
         self._proc: Any = None
+        self._failures = 0  # workers lost since a job last finished
+        self._progress = time.monotonic()  # when the worker last reported a game or a job
         if background:
-            ctx = mp.get_context("spawn")  # no fork: the trainer holds threads, a database engine and torch state
-            self._jobs, self._results = ctx.Queue(), ctx.Queue()
-            home = None if league.home is None else str(Path(league.home))
-            self._proc = ctx.Process(target=_worker, name="marl-rating",
-                                     args=(league.url.render_as_string(hide_password=False), home, device,
-                                           self._jobs, self._results, os.getpid()), daemon=True)
-            self._proc.start()
+            self._start()
+
+    def _start(self) -> None:
+        """Start a worker on fresh queues (a killed worker may have died holding a lock of the old ones) and hand
+        it every unfinished job, in order."""
+        ctx = mp.get_context("spawn")  # no fork: the trainer holds threads, a database engine and torch state
+        self._jobs, self._results = ctx.Queue(), ctx.Queue()
+        home = None if self.league.home is None else str(Path(self.league.home))
+        self._proc = ctx.Process(target=_worker, name="marl-rating",
+                                 args=(self.league.url.render_as_string(hide_password=False), home, self.device,
+                                       self._jobs, self._results, os.getpid()), daemon=True)
+        self._proc.start()
+        self._progress = time.monotonic()
+        for job in self.pending:
+            self._jobs.put(job)
+        if self._on_worker is not None:
+            self._on_worker(self._proc.pid)
+
+    @property
+    def worker_pid(self) -> int | None:
+        """The live worker's process id (None inline)."""
+        return None if self._proc is None else self._proc.pid
 
     def submit(self, job: GauntletJob) -> None:
+        if not self.pending:
+            self._progress = time.monotonic()  # an idle worker was not stalled: the clock starts with its work
         self.pending.append(job)
         if self.background:
             self._jobs.put(job)
@@ -141,14 +217,11 @@ class Evaluator:
         self.games_played += n
 
     def poll(self) -> list[JobDone]:
-        """The jobs finished since the last call (never blocks). A failed job raises its error."""
+        """The jobs finished since the last call (never blocks, beyond replacing a worker that died or stalled). A
+        failed job raises its error."""
         if self.background:
-            while True:
-                try:
-                    item = self._results.get_nowait()
-                except queue.Empty:
-                    break
-                self._take(item)
+            self._drain()
+            self._check()
         return self._finish()
 
     def wait(self, on_wait: Any = None) -> list[JobDone]:
@@ -158,41 +231,87 @@ class Evaluator:
                 try:
                     self._take(self._results.get(timeout=1.0))
                 except queue.Empty:
-                    if not self._proc.is_alive():
-                        try:  # it may have said why just before it left
-                            self._take(self._results.get(timeout=2.0))
-                        except queue.Empty:
-                            raise MarlError(f"the rating worker process ended unexpectedly (exit code "
-                                            f"{self._proc.exitcode})") from None
+                    self._check()
                 if on_wait is not None:
                     on_wait()
         return self._finish()
 
+    def _drain(self) -> None:
+        while True:
+            try:
+                item = self._results.get_nowait()
+            except queue.Empty:
+                return
+            self._take(item)
+
+    def _check(self) -> None:
+        """Replace a worker that died (a job it owed is played again: a job's stored matchups count once, see
+        :func:`selfplay_cli.rated.gauntlet.rate_snapshots`), or that reported nothing for :attr:`stall_seconds`
+        while it had a job; raise :class:`RatingWorkerError` once :data:`MAX_RESTARTS` workers in a row were lost."""
+        if any(d.error for d in self._done):
+            return  # a job failed: its error, not a restart
+        if self._proc.is_alive():
+            waited = time.monotonic() - self._progress
+            if not self.pending or waited < self.stall_seconds:
+                return
+            why = (f"the rating worker (process {self._proc.pid}) finished no game for {waited:.0f} s "
+                   f"(stopped, or stuck in a game); replacing it")
+            self._proc.kill()
+            self._proc.join(timeout=10)
+        else:
+            self._drain()  # what it said just before it left (a job it finished, or why it failed)
+            if any(d.error for d in self._done) or (not self.pending and self._proc.exitcode == 0):
+                return
+            why = f"the rating worker (process {self._proc.pid}) ended unexpectedly ({_exit(self._proc.exitcode)})"
+        self._failures += 1
+        if self._failures > MAX_RESTARTS:
+            raise RatingWorkerError(f"{why}; it was replaced {MAX_RESTARTS} times and lost each time, so the run "
+                                    f"stops (continue it with marl train --resume once the cause is gone)")
+        self._note(f"{why}; its unfinished gauntlet is played again, and the games it stored count once")
+        self._discard_queues()
+        self.restarts += 1
+        self._start()
+
     def _take(self, item: Any) -> None:
+        self._progress = time.monotonic()
         if isinstance(item, tuple):
             self.games_played += int(item[1])
         else:
+            self._failures = 0
             self._done.append(item)
 
     def _finish(self) -> list[JobDone]:
         out, self._done = self._done, []
         for d in out:
             if d.error is not None:
-                raise MarlError(f"rating games failed: {d.error}")
+                message = f"rating games failed: {d.error}"
+                if d.error_kind == "io":
+                    raise MarlIOError(message)
+                if d.error_kind == "internal":
+                    raise RatingWorkerError(message)
+                raise MarlError(message)
             self.pending.remove(d.job)
         return out
 
+    def _discard_queues(self) -> None:
+        for q in (self._jobs, self._results):
+            q.cancel_join_thread()  # nothing flushed to a reader that is gone
+            q.close()
+
     def close(self) -> None:
-        """Stop the worker (a job in progress is abandoned; its finished matchups are in the ledger)."""
+        """Stop the worker: at once when it is in the middle of a job (the job is abandoned; its stored matchups
+        count once when it is played again on resume), else after it has read the stop."""
         if self._proc is not None:
             if self._proc.is_alive():
-                self._jobs.put(None)
+                if self.pending:
+                    self._proc.kill()
+                else:
+                    self._jobs.put(None)
                 self._proc.join(timeout=5)
             if self._proc.is_alive():
-                self._proc.terminate()
+                self._proc.kill()
                 self._proc.join(timeout=5)
-            self._jobs.close()
-            self._results.close()
+            self._discard_queues()
             self._proc = None
 
     def __enter__(self) -> Evaluator:
@@ -200,3 +319,13 @@ class Evaluator:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _exit(code: int | None) -> str:
+    """A worker's exit code as words."""
+    if code is not None and code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"

@@ -49,10 +49,11 @@ from ..rated.match import load_player
 from ..rated.roles import RoleBook
 from ..rated.snapshots import snapshot_relpath
 from ..results import COOPERATIVE, GameResult
-from ..signals import signals_held
+from ..signals import signals_held, stoppable
 from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum, Schedule
 from .evaluator import Evaluator, GauntletJob, JobDone
+from .lock import claim, write_lock
 from .team import LearnerTeam
 
 METRICS_STEPS = 8192  # game steps between metrics lines at least (PPO's rollouts are longer: a line an update)
@@ -462,19 +463,15 @@ class Trainer:
 
     # -- one process per run ---------------------------------------------------------------------------------
     def _lock(self) -> None:
-        """Claim the run for this process (``runs/<run>/lock`` holds its pid); refuse while another live process
-        holds it. A run killed with SIGKILL leaves a stale lock whose pid is gone, which is taken over."""
+        """Claim the run for this process (:func:`~selfplay_cli.train.lock.claim`: refused while another live
+        process trains it; a rating worker of a killed session still alive is ended first)."""
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        lock = self.run_dir / "lock"
-        try:
-            pid = int(lock.read_text().strip())
-        except (OSError, ValueError):
-            pid = None
-        if pid is not None and pid != os.getpid() and _alive(pid):
-            raise MarlError(f"run '{self.cfg.run}' is being trained by process {pid}; stop it before resuming")
-        tmp = lock.with_name(f"lock.tmp-{os.getpid()}")
-        tmp.write_text(str(os.getpid()))
-        os.replace(tmp, lock)
+        claim(self.run_dir / "lock", self.cfg.run)
+
+    def _write_lock(self, worker: int | None) -> None:
+        """The run's lock naming this process and, once one is started (and each time it is replaced), its rating
+        worker."""
+        write_lock(self.run_dir / "lock", worker)
 
     def _unlock(self) -> None:
         (self.run_dir / "lock").unlink(missing_ok=True)
@@ -656,8 +653,10 @@ class Trainer:
         self._lock()
         try:
             background = bool(self.cfg.eval_games) and not self.cfg.eval_inline
+            # (stoppable() innermost: a stop tells the learners' update threads first, so nothing waits for them)
             with LearnerTeam(self.learners) as self.team, \
-                    Evaluator(self.league, str(self.device), background=background) as self.evaluator:
+                    Evaluator(self.league, str(self.device), background=background,
+                              on_worker=self._write_lock) as self.evaluator, stoppable():
                 return self._train()
         finally:
             self.evaluator = None
@@ -845,13 +844,3 @@ class Trainer:
         per_event = self.eval_seconds / max(self.eval_events, 1)
         events = 1 + (left // self.cfg.snapshot_steps if self.cfg.snapshot_steps and self.cfg.eval_inline else 0)
         return left / rate + events * per_event
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True

@@ -15,13 +15,13 @@ the removal), and ``--resume`` of such a run is one line saying what it lacks (:
 from __future__ import annotations
 
 import contextlib
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ..errors import MarlError
 from ..league.store import League, LeagueError, PlayerRow, RunRow
+from .lock import live_trainer
 
 ENDED = "ended"
 """The status of a run ended because a snapshot it needed was removed (``marl checkpoint rm --force``): final,
@@ -44,17 +44,10 @@ class Need:
 
 
 def trainer_pid(league: League, run: str) -> int | None:
-    """The live process training ``run`` (the pid in ``runs/<run>/lock``), or None: no lock, a stale lock of a
-    killed process, or a league without a home."""
+    """The live process training ``run`` (:func:`~selfplay_cli.train.lock.live_trainer`), or None: no lock, a
+    stale lock of a killed process, or a league without a home."""
     folder = _run_folder(league, run)
-    if folder is None:
-        return None
-    try:
-        text = (folder / "lock").read_text().split()
-        pid = int(text[0]) if text else None
-    except (OSError, ValueError):
-        return None
-    return pid if pid is not None and pid > 0 and _alive(pid) else None
+    return None if folder is None else live_trainer(folder / "lock")
 
 
 def needs_of(league: League, row: PlayerRow) -> list[Need]:
@@ -184,13 +177,3 @@ def _resolve_teacher(league: League, run: RunRow, name: str, include_removed: bo
     options = (run.config or {}).get("env_options")
     return resolve(league, name, run.env, include_removed=include_removed,
                    variant=variant_key(run.env, options if isinstance(options, dict) else {}))
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
