@@ -365,7 +365,7 @@ def _usage_error(e: click_exc.UsageError, args: list[str]) -> str:
     return msg + where
 
 
-MAX_WORD = 160  # characters of one word of an error line (a name, a value, a path) before it is cut
+MAX_WORD = 400  # characters of one word of an error line (a name, a value, a path: most paths fit) before it is cut
 MAX_LINE = 2_000  # characters of a whole error line
 
 
