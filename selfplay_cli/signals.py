@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["request_stop", "signals_held", "stop_requested", "stoppable"]
+__all__ = ["clear_stop", "request_stop", "signals_held", "stop_requested", "stoppable"]
 
 _stop = threading.Event()
 
@@ -38,13 +38,19 @@ def stoppable() -> Iterator[None]:
     """A block of long work (a training run) that stops on any exception leaving it (Ctrl-C, SIGTERM's, an
     error): :func:`request_stop` is called before the exception goes on, so threads still at work end at their next
     step instead of keeping the clean-up of the blocks around it waiting (so it goes innermost). The request stands
-    until the next such block starts (a process may train again after a stopped run, as a test does)."""
+    until whoever waits for those threads has seen them end and calls :func:`clear_stop` (a process may go on
+    learning after a stopped run, as a test does: a request left standing would end every later update at once)."""
     _stop.clear()
     try:
         yield
     except BaseException:
         request_stop()
         raise
+
+
+def clear_stop() -> None:
+    """The threads a stop was for have ended: long loops run to their end again."""
+    _stop.clear()
 
 
 @contextmanager

@@ -23,6 +23,7 @@ from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+from selfplay_cli.train import loop
 from selfplay_cli.train.evaluator import MAX_RESTARTS, Evaluator, GauntletJob, RatingWorkerError
 from selfplay_cli.train.lock import claim, process_start
 
@@ -332,3 +333,27 @@ def test_one_command_and_seed_store_the_same_gauntlet_games_twice(tmp_path):
     every = range(0, 10**9)
     one, two = _gauntlet_record(tmp_path / "one", every), _gauntlet_record(tmp_path / "two", every)
     assert one and one == two
+
+
+def test_a_stopped_run_leaves_no_stop_standing_for_later_learning(tmp_path, monkeypatch):
+    """A run that ends on an error tells its learners' threads to stop; once they have, later learning in the same
+    process (a test after it, a second run) updates in full again: an update is not cut short by an old stop."""
+    from selfplay_cli.algos.ppo import PPOConfig
+    from selfplay_cli.signals import stop_requested
+    from selfplay_cli.train.config import TrainConfig
+
+    league = League.open(tmp_path / "league")
+    cfg = TrainConfig(env="pong", steps=4096, games=16, eval_games=0, run="t", env_options={"points_to_win": 1},
+                      ppo=PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1))
+    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    seen = []
+
+    def broken(self):
+        seen.append(stop_requested())
+        raise RuntimeError("broken")
+
+    monkeypatch.setattr(loop.Trainer, "_train", broken)
+    with pytest.raises(RuntimeError, match="broken"):
+        loop.Trainer(league, cfg).train()
+    assert seen == [False] and not stop_requested()
+    league.close()

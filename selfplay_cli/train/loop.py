@@ -49,7 +49,7 @@ from ..rated.match import load_player
 from ..rated.roles import RoleBook
 from ..rated.snapshots import snapshot_relpath
 from ..results import COOPERATIVE, GameResult
-from ..signals import signals_held, stoppable
+from ..signals import clear_stop, signals_held, stoppable
 from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum, Schedule
 from .evaluator import Evaluator, GauntletJob, JobDone
@@ -659,6 +659,7 @@ class Trainer:
                               on_worker=self._write_lock) as self.evaluator, stoppable():
                 return self._train()
         finally:
+            clear_stop()  # the learners' threads have ended (the team waited for them)
             self.evaluator = None
             self._unlock()
 
