@@ -9,8 +9,11 @@ Faults covered here: a crafted snapshot (huge arch; huge game option), a snapsho
 that try to leave the home (``--run ..``, ``--name ../..``, a symlinked run folder), control characters in names, a
 read-only league (a read-only bind mount in a private mount namespace as root, permissions otherwise), reading a
 league that is not there, a full disk (a 1 MB tmpfs as root, and a file size limit anywhere), 4 concurrent
-writers storing games, leftovers of killed processes, and an interrupted match. More faults (kill points of
-`marl train`) can be added with :func:`fault`.
+writers storing games, leftovers of killed processes, an interrupted match, and SIGKILL at each point of a
+snapshot moment. Issue 30's rows: snapshot files naming modules as their game, the rating worker killed, stopped
+or orphaned and its games counted once, SIGTERM in an endless update, rows whose paths leave the league, removing
+what a run needs, games and settings that turn numbers NaN, configs past every limit, games that never end or
+whose agents come and go, and a full disk under `marl record`. More faults can be added with :func:`fault`.
 
 Run with ``python benchmarks/fault_matrix.py`` (``--only NAME`` runs the faults whose name contains NAME).
 """
