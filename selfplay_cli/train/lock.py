@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 from ..errors import MarlError
+from ..files import pid_alive, temp_path
 
 __all__ = ["claim", "live_trainer", "process_start", "read_lock", "write_lock"]
 
@@ -39,7 +40,7 @@ def write_lock(lock: Path, worker: int | None) -> None:
     holder = {"trainer": [me, process_start(me)]}
     if worker is not None:
         holder["worker"] = [worker, process_start(worker)]
-    tmp = lock.with_name(f"lock.tmp-{me}")
+    tmp = temp_path(lock)
     tmp.write_text(json.dumps(holder))
     os.replace(tmp, lock)
 
@@ -48,16 +49,6 @@ def live_trainer(lock: Path) -> int | None:
     """The pid of the live process the lock names as training the run; None for no lock or a stale one."""
     trainer = read_lock(lock).get("trainer")
     return trainer[0] if trainer is not None and trainer[0] > 0 and same_process(*trainer) else None
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def process_start(pid: int) -> str | None:
@@ -74,7 +65,7 @@ def process_start(pid: int) -> str | None:
 
 def same_process(pid: int, start: str | None) -> bool:
     """Whether ``pid`` is alive and, where its start time was recorded and can be read, still the same process."""
-    if not _alive(pid):
+    if not pid_alive(pid):
         return False
     now = process_start(pid)
     return start is None or now is None or now == start
@@ -117,5 +108,5 @@ def _running(pid: int) -> bool:
     except FileNotFoundError:
         return False
     except OSError:
-        return _alive(pid)
+        return pid_alive(pid)
     return stat[stat.rfind(")") + 2:].split()[:1] != ["Z"]
