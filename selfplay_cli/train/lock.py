@@ -78,10 +78,8 @@ def read_lock(lock: Path) -> dict[str, tuple[int, str | None]]:
         text = lock.read_text().strip()
     except OSError:
         return {}
-    try:
+    if text.isdigit():  # an older marl's lock
         return {"trainer": (int(text), None)}
-    except ValueError:
-        pass
     try:
         raw = json.loads(text)
         return {role: (int(v[0]), None if v[1] is None else str(v[1])) for role, v in raw.items()
