@@ -17,13 +17,16 @@ Nothing here imports from the rest of marl, so every room can use it.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import IO
 
-__all__ = ["STALE_PATTERNS", "describe_removed", "file_sha256", "pid_alive", "sweep", "sweep_home", "temp_path"]
+__all__ = ["STALE_PATTERNS", "atomic_write", "describe_removed", "file_sha256", "pid_alive", "publish", "sweep",
+           "sweep_home", "temp_path", "write_atomic"]
 
 STALE_PATTERNS = (
     re.compile(r"^.+\.tmp-(?P<pid>\d{1,10})$"),
@@ -39,6 +42,51 @@ def temp_path(path: str | os.PathLike[str]) -> Path:
     """The temporary name beside ``path`` that this process writes before renaming: ``<name>.tmp-<pid>``."""
     p = Path(path)
     return p.with_name(f"{p.name}.tmp-{os.getpid()}")
+
+
+def sync_folder(folder: str | os.PathLike[str]) -> None:
+    """Make a rename in ``folder`` durable (best effort: not every platform can open a folder)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def publish(tmp: str | os.PathLike[str], path: str | os.PathLike[str]) -> None:
+    """Rename a complete temporary file over ``path`` and make the rename durable."""
+    os.replace(tmp, path)
+    sync_folder(Path(path).parent)
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike[str], mode: str = "wb") -> Iterator[IO]:
+    """Open :func:`temp_path` of ``path`` for writing; once the block ends, flush, fsync and rename it over
+    ``path``. On any exception (Ctrl-C included) the temporary file is removed and ``path`` is untouched.
+    Parent folders are not made: a missing folder is the caller's ``OSError``."""
+    p = Path(path)
+    tmp = temp_path(p)
+    try:
+        with open(tmp, mode) as f:
+            yield f
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, p)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    sync_folder(p.parent)
+
+
+def write_atomic(path: str | os.PathLike[str], data: bytes | str) -> None:
+    """Write all of ``data`` to ``path`` through :func:`atomic_write` (text as UTF-8)."""
+    with atomic_write(path, "wb") as f:
+        f.write(data.encode() if isinstance(data, str) else data)
 
 
 def file_sha256(path: str | os.PathLike[str]) -> str:

@@ -377,30 +377,6 @@ def _state_dict(net_or_state_dict: torch.nn.Module | dict[str, torch.Tensor]) ->
     return {str(k): v.detach().to("cpu").contiguous().clone() for k, v in sd.items()}
 
 
-def _atomic_write(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = files.temp_path(path)
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    try:  # make the rename itself durable (best effort; not possible on every platform)
-        fd = os.open(path.parent, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)
-
-
 def save_snapshot(
     path: str | os.PathLike[str],
     net_or_state_dict: torch.nn.Module | dict[str, torch.Tensor],
@@ -430,7 +406,8 @@ def save_snapshot(
     if len(data) > MAX_FILE_BYTES or struct.unpack("<Q", data[:8])[0] > MAX_HEADER:
         raise SnapshotError(f"{path}: snapshot would be bigger than marl reads (metadata too large?)")
     try:
-        _atomic_write(path, data)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        files.write_atomic(path, data)
     except OSError as e:
         raise SnapshotError(f"{path}: cannot write ({e.strerror or e})") from None
     return meta

@@ -9,13 +9,12 @@ the row's name.
 from __future__ import annotations
 
 import contextlib
-import os
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import MarlError
-from ..files import temp_path
+from ..files import write_atomic
 from ..league.store import SNAPSHOTS, League, LeagueIOError, PlayerRow, check_existing_name, check_name
 from ..league.variants import describe_variant, variant_key
 
@@ -133,16 +132,10 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
         raise MarlError(f"league {league.home} is open read-only: cannot import into it")
     data = _file_bytes(file, snap.sha256)  # the bytes that were checked (the file may have changed since)
     made = [d for d in (dest.parent.parent, dest.parent) if not d.exists()]
-    tmp = temp_path(dest)
     try:
         dest.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, dest)
+        write_atomic(dest, data)
     except BaseException as e:
-        tmp.unlink(missing_ok=True)
         _remove_empty(made)
         if isinstance(e, OSError):
             raise LeagueIOError(f"cannot write {dest}: {e.strerror or e}") from None

@@ -372,7 +372,7 @@ class VideoWriter:
             reason = self._ffmpeg_says()
             self.abort()
             raise ffmpeg_failure(self.path, "ffmpeg could not write", reason, code)
-        os.replace(self.tmp, self.path)
+        files.publish(self.tmp, self.path)
         self._cleanup()
         return self.path
 

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 from typing import Any
 
+from ..files import atomic_write
 from ..league.store import LeagueError
 
 __all__ = ["check_png_path", "new_figure", "save_png"]
@@ -32,18 +32,11 @@ def save_png(fig: Any, path: str | Path, dpi: int = 110) -> Path:
         LeagueError: the path is not a writable ``.png`` file name.
     """
     p = check_png_path(path)
-    tmp = p.with_name(f".{p.name}.{os.getpid()}.tmp")
     try:
-        with open(tmp, "wb") as fh:
+        with atomic_write(p) as fh:
             fig.savefig(fh, format="png", dpi=dpi)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, p)
     except OSError as exc:
         raise LeagueError(f"cannot write {p}: {exc.strerror or exc}") from exc
-    finally:
-        if tmp.exists():
-            tmp.unlink(missing_ok=True)
     return p
 
 

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import files
 from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
 from ..arena.selfplay import SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..envs import EnvSpec, get_env
@@ -372,7 +373,5 @@ def save_run_config(league: League, cfg: TrainConfig) -> Path:
     run_dir = league.home_path("runs", cfg.run)
     run_dir.mkdir(parents=True, exist_ok=True)
     path = run_dir / "config.json"
-    tmp = path.with_name(f"config.json.tmp-{os.getpid()}")
-    tmp.write_text(json.dumps(cfg.to_dict(), indent=2))
-    os.replace(tmp, path)
+    files.write_atomic(path, json.dumps(cfg.to_dict(), indent=2))
     return path

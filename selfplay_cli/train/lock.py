@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from ..errors import MarlError
-from ..files import pid_alive, temp_path
+from ..files import pid_alive, write_atomic
 
 __all__ = ["claim", "live_trainer", "process_start", "read_lock", "write_lock"]
 
@@ -40,9 +40,7 @@ def write_lock(lock: Path, worker: int | None) -> None:
     holder = {"trainer": [me, process_start(me)]}
     if worker is not None:
         holder["worker"] = [worker, process_start(worker)]
-    tmp = temp_path(lock)
-    tmp.write_text(json.dumps(holder))
-    os.replace(tmp, lock)
+    write_atomic(lock, json.dumps(holder))
 
 
 def live_trainer(lock: Path) -> int | None:

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -33,6 +32,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from .. import files
 from ..algos import get_learner
 from ..algos.joint import JointLearner
 from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
@@ -397,7 +397,7 @@ class Trainer:
         self._write_state(self.pending_path, latest=full, snapshots=self.snapshots + full, jobs=jobs,
                           snapshot_step=self.steps, snapshot_episode=self.episodes)
         registered = self.league.add_snapshots(rows)  # the moment exists from here on
-        os.replace(self.pending_path, self.state_path)
+        files.publish(self.pending_path, self.state_path)
         self._snapshot_episode, self._snapshot_step = self.episodes, self.steps
         self.latest = [r.id for r in registered]
         self.snapshots += full
@@ -500,12 +500,8 @@ class Trainer:
             "jobs": [[list(names), seed, full] for names, seed, full in jobs],
         }
         self.run_dir.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f"{path.name}.tmp-{os.getpid()}")
-        with open(tmp, "wb") as f:
+        with files.atomic_write(path) as f:
             torch.save(state, f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
 
     def _read_state(self, path: Path) -> dict[str, Any]:
         try:
@@ -531,7 +527,7 @@ class Trainer:
         if self.pending_path.exists():
             pending = self._read_state(self.pending_path)
             if all(self._registered(n) for n in pending["latest"]):
-                os.replace(self.pending_path, self.state_path)
+                files.publish(self.pending_path, self.state_path)
                 notes.append(f"the snapshots {', '.join(pending['latest'])} were registered as it was killed")
             else:
                 self.pending_path.unlink()
