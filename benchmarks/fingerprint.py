@@ -2,7 +2,7 @@
 
 A refactor should change no figure. This script trains small seeded runs of every learner on every built-in game
 (rating games inline, so nothing depends on a second process's timing), then prints the sha256 of every snapshot
-file, and the JSON that `marl match`, `marl elo`, `marl league ladder` and `marl checkpoint ls` print about them
+file (all of it but the time it was written), and the JSON that `marl match`, `marl elo`, `marl league ladder` and `marl checkpoint ls` print about them
 (wall-clock fields removed), and the hash of a recorded video's frames. Run it on two commits and diff the output:
 
     python benchmarks/fingerprint.py > before.txt   # on the old commit
@@ -26,7 +26,7 @@ from pathlib import Path
 # Fields that measure time or place, not behaviour.
 VOLATILE = {"seconds", "steps_per_second", "rating_seconds", "rating_wait_seconds", "created", "created_at",
             "path", "home", "db", "wall_seconds", "elapsed", "games_per_second", "file", "video", "at", "when",
-            "training_seconds", "started", "ended", "time"}
+            "training_seconds", "started", "ended", "time", "plot", "session_seconds"}
 
 RUNS = {
     "pong-ppo": ["pong", "--agents", "2", "--steps", "40000", "--games", "16", "--snapshot-steps", "10000"],
@@ -67,6 +67,18 @@ def scrub(value):
     return value
 
 
+def snapshot_digest(path: Path) -> str:
+    """A snapshot file's bytes, except the clock time it was written at (its metadata's ``created``)."""
+    data = path.read_bytes()
+    n = int.from_bytes(data[:8], "little")
+    header = json.loads(data[8:8 + n])
+    marl_meta = json.loads(header.get("__metadata__", {}).get("marl", "{}"))
+    marl_meta.pop("created", None)
+    header.get("__metadata__", {}).pop("marl", None)
+    both = json.dumps([header, marl_meta], sort_keys=True).encode() + data[8 + n:]
+    return hashlib.sha256(both).hexdigest()[:16]
+
+
 def digest(value) -> str:
     return hashlib.sha256(json.dumps(scrub(value), sort_keys=True).encode()).hexdigest()[:16]
 
@@ -76,7 +88,7 @@ def one_run(home: Path, name: str, args: list[str]) -> None:
                              "--eval-games", "4", "--eval-playoff", "6", "--quiet", "--json"))
     print(f"[{name}] train report {digest(report)}")
     for snap in sorted((home / "snapshots" / name).iterdir()):
-        print(f"  {snap.name} {hashlib.sha256(snap.read_bytes()).hexdigest()[:16]}")
+        print(f"  {snap.name} {snapshot_digest(snap)}")
     ladder = json.loads(marl(home, "league", "ladder", "--run", name, "--json"))
     print(f"  ladder {digest(ladder)}")
     finals = [f["snapshot"] for f in report["final"]]
