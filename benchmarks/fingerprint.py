@@ -2,8 +2,8 @@
 
 A refactor should change no figure. This script trains small seeded runs of every learner on every built-in game
 (rating games inline, so nothing depends on a second process's timing), then prints the sha256 of every snapshot
-file (all of it but the time it was written), and the JSON that `marl match`, `marl elo`, `marl league ladder` and `marl checkpoint ls` print about them
-(wall-clock fields removed), and the hash of a recorded video's frames. Run it on two commits and diff the output:
+file (all of it but the time it was written), and the JSON that `marl match`, `marl elo fit`, `marl elo gate`,
+`marl league ladder` and `marl checkpoint ls` print about them (wall-clock fields removed), and the hash of a recorded video's frames. Run it on two commits and diff the output:
 
     python benchmarks/fingerprint.py > before.txt   # on the old commit
     python benchmarks/fingerprint.py > after.txt    # on the new one
@@ -106,7 +106,9 @@ def main() -> None:
         home = args.keep or Path(tmp)
         for name in args.only or RUNS:
             one_run(home, name, RUNS[name])
-        print(f"elo {digest(json.loads(marl(home, 'elo', '--json')))}")
+        print(f"elo {digest(json.loads(marl(home, 'elo', 'fit', '--json')))}")
+        gate = json.loads(marl(home, "elo", "gate", "pong-ppo/s40k-left", "pong-ppo/s0-left", "--json", check=False))
+        print(f"gate {digest(gate)}")
         print(f"checkpoints {digest(json.loads(marl(home, 'checkpoint', 'ls', '--json')))}")
         video = home / "fp.gif"
         marl(home, "record", "--ckpt", "pong-ppo/s40k-left", "--vs", "cpu", "--seed", "3", "--max-steps", "300",
