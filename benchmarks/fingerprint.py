@@ -3,7 +3,8 @@
 A refactor should change no figure. This script trains small seeded runs of every learner on every built-in game
 (rating games inline, so nothing depends on a second process's timing), then prints the sha256 of every snapshot
 file (all of it but the time it was written), and the JSON that `marl match`, `marl elo fit`, `marl elo gate`,
-`marl league ladder` and `marl checkpoint ls` print about them (wall-clock fields removed), and the hash of a recorded video's frames. Run it on two commits and diff the output:
+`marl league ladder` and `marl checkpoint ls` print about them (wall-clock fields removed), and the hash of a
+recorded GIF. Run it on two commits and diff the output:
 
     python benchmarks/fingerprint.py > before.txt   # on the old commit
     python benchmarks/fingerprint.py > after.txt    # on the new one
