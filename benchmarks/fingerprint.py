@@ -3,7 +3,7 @@
 A refactor should change no figure. This script trains small seeded runs of every learner on every built-in game
 (rating games inline, so nothing depends on a second process's timing), then prints the sha256 of every snapshot
 file (all of it but the time it was written), and the JSON that `marl match`, `marl elo fit`, `marl elo gate`,
-`marl league ladder` and `marl checkpoint ls` print about them (wall-clock fields removed), and the hash of a
+`marl league ladder` and `marl checkpoint list` print about them (wall-clock fields removed), and the hash of a
 recorded GIF. Run it on two commits and diff the output:
 
     python benchmarks/fingerprint.py > before.txt   # on the old commit
@@ -107,10 +107,12 @@ def main() -> None:
         home = args.keep or Path(tmp)
         for name in args.only or RUNS:
             one_run(home, name, RUNS[name])
-        print(f"elo {digest(json.loads(marl(home, 'elo', 'fit', '--json')))}")
-        gate = json.loads(marl(home, "elo", "gate", "pong-ppo/s40k-left", "pong-ppo/s0-left", "--json", check=False))
+        for game in sorted({RUNS[name][0] for name in args.only or RUNS}):
+            print(f"elo fit {game} {digest(json.loads(marl(home, 'elo', 'fit', '--env', game, '--json')))}")
+        gate = json.loads(marl(home, "elo", "gate", "pong-ppo/s40k-left", "--vs", "pong-ppo/s0-left", "--json",
+                               check=False))
         print(f"gate {digest(gate)}")
-        print(f"checkpoints {digest(json.loads(marl(home, 'checkpoint', 'ls', '--json')))}")
+        print(f"checkpoints {digest(json.loads(marl(home, 'checkpoint', 'list', '--json')))}")
         video = home / "fp.gif"
         marl(home, "record", "--ckpt", "pong-ppo/s40k-left", "--vs", "cpu", "--seed", "3", "--max-steps", "300",
              "--out", str(video), "--quiet")
