@@ -626,10 +626,9 @@ GAME_MODULE = textwrap.dedent("""
 def _tictactoe_file(path: Path, env: str, seed: int = 0) -> Path:
     """A valid snapshot of tic-tac-toe (27 inputs, 9 masked actions) whose metadata names its game ``env``."""
     from selfplay_cli.envs import get_env
-    from selfplay_cli.policies.spaces import seat_spaces_of
-
     spec = get_env("tests.games.tictactoe:env")
-    obs, act, _ = seat_spaces_of(spec, spec.config())[0]
+    seat = spec.seat_spaces(spec.config())[0]
+    obs, act = seat.observation, seat.action
     arch = Arch(hidden=(16,))
     save_snapshot(path, build_network(obs, act, arch, seed=seed),
                   SnapshotMeta(env=env, obs_space=obs, act_space=act, arch=arch, algo="ppo", run="contrib",

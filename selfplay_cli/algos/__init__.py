@@ -8,7 +8,7 @@ seed=..., device=...)``, ``seat`` a :class:`selfplay_cli.envs.SeatSpace` (or :cl
 from __future__ import annotations
 
 from ..errors import MarlError
-from .base import Learner, Seat
+from .base import Learner
 from .dqn import DQNConfig, DQNLearner
 from .optim import FlatAdam, flatten
 from .ppo import PPOConfig, PPOLearner
@@ -27,4 +27,4 @@ def get_learner(name: str) -> type:
 
 
 __all__ = ["LEARNERS", "DQNConfig", "DQNLearner", "FlatAdam", "Learner", "PPOConfig", "PPOLearner", "SACConfig",
-           "SACLearner", "Seat", "flatten", "get_learner"]
+           "SACLearner", "flatten", "get_learner"]

@@ -13,28 +13,28 @@ from typing import Any
 
 import numpy as np
 
+from ..envs import SeatSpace
 from ..errors import MarlError
 from ..policies.joint import JointPolicy, decode, joint_spaces, regroup
-from .base import Seat
 
 
 class JointLearner:
     """``inner_cls`` over the joint spaces of ``n_seats`` seats like ``seat``, for ``n_games`` games."""
 
-    def __init__(self, inner_cls: type, seat: Any, n_seats: int, n_games: int, config: Any, *, seed: int = 0,
+    def __init__(self, inner_cls: type, seat: SeatSpace, n_seats: int, n_games: int, config: Any, *, seed: int = 0,
                  device: Any = "cpu") -> None:
-        if getattr(seat, "mask", False):
+        if seat.mask:
             raise MarlError("--sharing sa plays games without action masks")
         obs, act = joint_spaces(seat.observation, seat.action, n_seats)
         self.seat_space, self.n, self.games = seat, int(n_seats), int(n_games)
         self.base = int(seat.action.n)
-        self.inner = inner_cls(Seat(obs, act, False), self.games, config, seed=seed, device=device)
+        self.inner = inner_cls(SeatSpace(obs, act, False), self.games, config, seed=seed, device=device)
         self.net = self.inner.net
         self.n_slots = self.n * self.games
         self.name = getattr(inner_cls, "name", "")
 
     @property
-    def joint_seat(self) -> Seat:
+    def joint_seat(self) -> SeatSpace:
         return self.inner.seat
 
     def _games(self, per_seat: np.ndarray) -> np.ndarray:

@@ -41,12 +41,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..envs import SeatSpace
 from ..errors import NonFiniteError
 from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
 from ..signals import stop_requested
-from .base import Seat, action_head, as_bool, check_steps, fix_mask, learner_args, values_of
+from .base import action_head, as_bool, check_steps, fix_mask, learner_args, values_of
 from .kickstart import Imitation
 from .optim import FlatAdam
 
@@ -94,23 +95,21 @@ class PPOConfig:
 class PPOLearner:
     """One network, its optimiser and its rollout buffer over ``n_slots`` slots of the games.
 
-    Built as ``PPOLearner(seat, n_slots, config, seed=0, device="cpu")`` from the seat's spaces (a
-    :class:`~selfplay_cli.envs.SeatSpace` or :class:`~selfplay_cli.algos.base.Seat`); the older form
-    ``PPOLearner(obs_shape, n_actions, n_slots, config, ...)`` builds a Discrete(n_actions) learner.
+    Built as ``PPOLearner(seat, n_slots, config, seed=0, device="cpu")`` from the seat's
+    :class:`~selfplay_cli.envs.SeatSpace`.
     """
 
     name = "ppo"
     config_class = PPOConfig
 
     @staticmethod
-    def check_seat(seat: Any) -> ActionHead:
+    def check_seat(seat: SeatSpace) -> ActionHead:
         """The head for the seat's actions, or one clear :class:`MarlError` (an action space PPO cannot learn)."""
         return action_head("PPO", seat.action)
 
-    def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
+    def __init__(self, seat: SeatSpace, n_slots: int, config: PPOConfig | None = None, *, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:
-        self.seat: Seat
-        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, legacy, PPOConfig)
+        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, PPOConfig)
         self.cfg = cfg
         self.device = torch.device(device)
         self.head = self.check_seat(self.seat)

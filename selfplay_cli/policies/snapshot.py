@@ -44,7 +44,7 @@ from ..errors import MarlError
 from ..typecheck import MAX_INT
 from .joint import MAX_JOINT_ACTIONS, JointPolicy, joint_spaces
 from .network import Arch, NetworkPolicy, SnapshotError, build_network
-from .spaces import ActionHead, SpaceError, canonical_space, seat_spaces_of, space_from_dict
+from .spaces import ActionHead, SpaceError, canonical_space, space_from_dict
 
 FORMAT = "marl-snapshot"
 FORMAT_VERSION = 2
@@ -659,7 +659,7 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
                             "that module, name the game yourself with --env)")
     try:
         cfg = spec.config(**meta.env_options)
-        seats = seat_spaces_of(spec, cfg)
+        seats = spec.seat_spaces(cfg)
     except (ValueError, TypeError, UnknownEnvError) as e:
         raise SnapshotError(f"{path}: bad {meta.env} options in snapshot ({_printable(str(e), 200)})") from None
     except MemoryError:  # an option that sizes the game (the game should bound it; this is the last line)
@@ -667,9 +667,8 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
                             f"({_printable(json.dumps(meta.env_options), 120)})") from None
     joint = _joint_of(path, meta)
     if joint is not None:  # one agent over the team (SA): the joint spaces of the game's seats
-        obs, act, _ = seats[0]
         try:
-            j_obs, j_act = joint_spaces(obs, act, joint[0], meta.env)
+            j_obs, j_act = joint_spaces(seats[0].observation, seats[0].action, joint[0], meta.env)
         except MarlError as e:  # a joint space the game cannot give (too large, not Discrete)
             raise SnapshotError(f"{path}: {e}") from None
         if tuple(meta.obs_shape or ()) != tuple(j_obs.shape) or meta.head != ActionHead.of(j_act):
@@ -681,16 +680,16 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
     elif meta.role is not None and len(seats) == spec.n_seats:  # the seats of the role it says it learned
         roles = spec.seat_roles(cfg)
         seats = [seat for seat, role in zip(seats, roles, strict=True) if role == meta.role] or seats
-    shapes = [tuple(obs.shape or ()) for obs, _, _ in seats]
+    shapes = [tuple(seat.observation.shape or ()) for seat in seats]
     if meta.obs_shape not in shapes:
         observes = " or ".join(sorted({str(list(s)) for s in shapes}))
         raise SnapshotError(f"{path}: snapshot observations are {list(meta.obs_shape or ())} but {meta.env} with "
                             f"these options observes {observes}")
     head = meta.head
     heads = []
-    for _obs, act, _ in seats:
+    for seat in seats:
         try:
-            heads.append(ActionHead.of(act))
+            heads.append(ActionHead.of(seat.action))
         except SpaceError:
             continue
     if head not in heads:
@@ -792,8 +791,8 @@ def policy_of(
     if joint is None:
         return policy
     spec = get_env(meta.env)
-    seat_obs, seat_act, _ = seat_spaces_of(spec, spec.config(**meta.env_options))[0]
-    return JointPolicy(policy, joint[0], joint[1], seat_obs, seat_act)  # type: ignore[return-value]
+    seat = spec.seat_spaces(spec.config(**meta.env_options))[0]
+    return JointPolicy(policy, joint[0], joint[1], seat.observation, seat.action)  # type: ignore[return-value]
 
 
 def load_policy(
