@@ -28,18 +28,16 @@ from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import NonFiniteError
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.joint import joint_spaces
-from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import (
+from selfplay_cli.policies.network import Arch, SnapshotError, build_network
+from selfplay_cli.policies.snapshot_format import (
     FORMAT,
     MAX_LOG_STD,
-    SnapshotError,
     SnapshotMeta,
-    _check_values,
-    load_snapshot,
-    read_snapshot,
+    check_values,
     save_snapshot,
     weights_sha256,
 )
+from selfplay_cli.policies.snapshot_reader import load_snapshot, read_snapshot
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
@@ -332,7 +330,7 @@ def test_checking_the_values_allocates_nothing_beside_the_weights():
     tracemalloc.start()
     try:
         with pytest.raises(SnapshotError, match="big holds NaN"):
-            _check_values("f", {"big": big})
+            check_values("f", {"big": big})
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()

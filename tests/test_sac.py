@@ -21,7 +21,9 @@ from selfplay_cli.envs import SeatSpace
 from selfplay_cli.errors import MarlError
 from selfplay_cli.policies.bank import NetworkBank
 from selfplay_cli.policies.network import Arch, NetworkPolicy, build_network
-from selfplay_cli.policies.snapshot import SnapshotMeta, load_policy, read_snapshot, save_snapshot
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
+from selfplay_cli.policies.snapshot_policy import load_policy
+from selfplay_cli.policies.snapshot_reader import read_snapshot
 from selfplay_cli.train.config import TrainConfig
 
 ROOT = Path(__file__).resolve().parents[1]
