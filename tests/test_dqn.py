@@ -11,7 +11,6 @@ import torch
 from gymnasium import spaces
 
 from selfplay_cli.algos.dqn import DQNConfig, DQNLearner, epsilon_at, seed000_config
-from selfplay_cli.algos.replay import ReplayBuffer
 from selfplay_cli.envs import SeatSpace
 from selfplay_cli.policies.network import Arch
 from selfplay_cli.policies.spaces import box_of_shape
@@ -74,42 +73,6 @@ def test_config_rejects_bad_values():
     with pytest.raises(ValueError):
         DQNConfig(arch=Arch(value_head=True))
     assert DQNConfig(arch=DQNConfig().arch.to_dict()).arch == DQNConfig().arch
-
-
-def _batch(ids: list[int], d: int = 2):
-    ids_a = np.asarray(ids)
-    obs = np.repeat(ids_a[:, None], d, axis=1).astype(np.float32)
-    return obs, ids_a, ids_a.astype(np.float32), obs + 0.5, (ids_a % 2).astype(np.float32)
-
-
-def test_replay_buffer_ring_keeps_the_newest_transitions():
-    buf = ReplayBuffer(5, 2)
-    buf.add(*_batch([0, 1, 2]))
-    assert (len(buf), buf.pos) == (3, 3)
-    buf.add(*_batch([3, 4, 5, 6]))  # wraps around: 0 and 1 are overwritten
-    assert (len(buf), buf.pos) == (5, 2)
-    assert sorted(buf.actions.tolist()) == [2, 3, 4, 5, 6]
-    assert np.array_equal(buf.obs[:, 0], buf.actions.astype(np.float32))  # rows stay aligned
-    assert np.array_equal(buf.next_obs[:, 1], buf.actions + 0.5)
-    assert np.array_equal(buf.dones, buf.actions % 2)
-    buf.add(*_batch(list(range(10, 17))))  # more than the capacity: only the newest 5 are kept
-    assert sorted(buf.actions.tolist()) == [12, 13, 14, 15, 16] and len(buf) == 5
-
-
-def test_replay_buffer_samples_only_filled_entries_with_the_right_shapes():
-    buf = ReplayBuffer(100, 2)
-    buf.add(*_batch(list(range(1, 11))))
-    rng = np.random.default_rng(0)
-    b = buf.sample(rng, 1000)
-    assert b["obs"].shape == (1000, 2) and b["next_obs"].shape == (1000, 2)
-    assert b["actions"].shape == b["rewards"].shape == b["dones"].shape == (1000,)
-    assert b["obs"].dtype == np.float32 and b["actions"].dtype == np.int64
-    assert set(b["actions"].tolist()) == set(range(1, 11))  # every filled entry, and nothing else
-    assert np.array_equal(b["rewards"], b["actions"].astype(np.float32))
-    k = buf.sample(rng, (3, 7))
-    assert k["obs"].shape == (3, 7, 2) and k["actions"].shape == (3, 7)
-    with pytest.raises(RuntimeError):
-        ReplayBuffer(4, 2).sample(rng, 1)
 
 
 def test_learner_stores_transitions_with_next_obs_and_dones():
