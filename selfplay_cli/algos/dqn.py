@@ -1,8 +1,8 @@
 """DQN (double DQN, Huber loss, target network, epsilon-greedy) for a learner that drives some slots of the games.
 
 Reads top to bottom as CleanRL's dqn.py does: the hyperparameters with their meaning, the epsilon schedule, the TD
-target, the learner (its replay buffer and n-step returns: :mod:`selfplay_cli.algos.replay`). Same interface as :class:`~selfplay_cli.algos.ppo.PPOLearner`, so one
-trainer loop drives both::
+target, the learner (its replay buffer and n-step returns: :mod:`selfplay_cli.algos.replay`). Same interface as
+:class:`~selfplay_cli.algos.ppo.PPOLearner`, so one trainer loop drives both::
 
     obs = games.observe()
     while ...:
@@ -14,14 +14,14 @@ trainer loop drives both::
 Units. A *transition* is one step of one slot (one game seat). A *learner step* is one ``act`` call, i.e.
 ``n_slots`` transitions. Everything that counts experience counts transitions (``buffer_size``,
 ``learning_starts``, the epsilon schedules), so a config means the same with 1 game or 256; ``target_period``
-counts gradient updates. With one game per learner, as in seed 000, a transition is an env step.
+counts gradient updates. With one game per learner a transition is an env step.
 
 Per transition collected, ``replay_ratio`` gradient updates are due (fractions carry over: 1/32 with 128
 slots is 4 updates per learner step, with 1 slot one update every 32 steps). Each update samples ``batch_size``
 transitions uniformly and minimises ``loss(Q(s, a), y)`` (Huber or MSE) with, for n-step returns
 (``n_step`` = n; n = 1 is classic DQN) R = r_t + gamma r_{t+1} + ... + gamma^(n-1) r_{t+n-1} and s' = s_{t+n},
     y = R + gamma^n * (1 - done) * Q_target(s', argmax_a' Q(s', a'))     (double DQN)
-    y = R + gamma^n * (1 - done) * max_a' Q_target(s', a')               (plain DQN, seed 000)
+    y = R + gamma^n * (1 - done) * max_a' Q_target(s', a')               (plain DQN)
 Every ``target_period`` updates the target moves to ``tau * online + (1 - tau) * target`` (tau = 1: a copy).
 A game that ends (won or lost) is a done: the value after it is not bootstrapped, and an n-step return stops at
 it. A game cut short by a time limit (``truncated``, with its final observation) ends the return there too but
@@ -79,18 +79,18 @@ class DQNConfig:
     batch_size: int = 512  # transitions per gradient update (512 costs ~1.15x a 256 batch here: fewer, larger steps)
     lr: float = 2.5e-4  # Adam learning rate
     gamma: float = 0.99  # discount
-    n_step: int = 3  # n-step returns: bootstrap from the state n steps later (1: classic DQN, seed 000)
+    n_step: int = 3  # n-step returns: bootstrap from the state n steps later (1: classic DQN)
     replay_ratio: float = 1 / 32  # gradient updates per transition (CleanRL: 1 / train_frequency); each is seen ~16x
     target_period: int = 125  # gradient updates between target-network updates (every 4,000 transitions)
     tau: float = 1.0  # target update: 1 copies the online net (hard update), < 1 is Polyak averaging
     learning_starts: int = 5_000  # updates start once the buffer holds this many transitions (and refilled)
-    eps_schedule: str = "linear"  # "linear" (CleanRL) or "exponential" (seed 000)
+    eps_schedule: str = "linear"  # "linear" (CleanRL) or "exponential" (--preset seed000)
     eps_start: float = 1.0  # epsilon at transition 0
     eps_end: float = 0.05  # final epsilon (the floor of the exponential schedule)
     eps_decay_steps: int = 100_000  # linear: transitions over which epsilon goes from eps_start to eps_end
     eps_decay: float = 0.995  # exponential: epsilon = max(eps_end, eps_start * eps_decay ** transitions)
     double_dqn: bool = True  # choose the next action with the online net, value it with the target net
-    loss: str = "huber"  # "huber" (smooth L1) or "mse" (seed 000)
+    loss: str = "huber"  # "huber" (smooth L1) or "mse" (--preset seed000)
     max_grad_norm: float = 10.0  # gradient clipping; 0 turns it off
     bootstrap_truncated: bool = True  # a game cut short bootstraps from its final observation (False: an end)
     arch: Arch = field(default_factory=lambda: Arch(hidden=(64, 64), activation="relu", value_head=False))
@@ -121,12 +121,11 @@ class DQNConfig:
 
 
 def seed000_config() -> DQNConfig:
-    """Seed 000's DQN exactly (``--preset seed000``): its network, optimiser, buffer and schedules.
-
-    The seed trains once per env step (replay ratio 1), copies the target every 250 steps (= 250 updates),
-    starts at step 2000, and decays epsilon by x0.995 per step to 0.25, which reaches the floor after 277
-    steps, long before learning starts. Plain (not double) DQN, MSE loss, no gradient clipping. It is slow
-    with many games: one gradient update per transition.
+    """The DQN of ``--preset seed000`` (where it comes from: docs/history/learners.md): a 512-512-256-128-64 MLP,
+    one gradient update per transition (replay ratio 1), a target copied every 250 updates, learning from
+    transition 2000, epsilon decayed by x0.995 per transition to 0.25 (the floor after 277 transitions, long before
+    learning starts), plain (not double) DQN, MSE loss, no gradient clipping. It is slow with many games: one
+    gradient update per transition.
     """
     return DQNConfig(
         buffer_size=100_000, batch_size=64, lr=1e-3, gamma=0.99, n_step=1, replay_ratio=1.0, target_period=250, tau=1.0,

@@ -1,9 +1,9 @@
-"""SA: any registered learner as one agent for a whole cooperative team (seed 001's single-agent mode).
+"""SA: any registered learner as one agent for a whole cooperative team (``--sharing sa``).
 
 The trainer hands a learner its slots seat by seat: ``(N * G, obs)`` for N seats of G games. :class:`JointLearner`
 regroups them into one row per game (every seat's observation side by side), lets the inner learner (PPO or DQN,
 built on the joint spaces of :func:`selfplay_cli.policies.joint.joint_spaces`) choose one joint action per game, and
-decodes it into each seat's action. The team's reward is the sum over its seats (seed 001's team reward); a game is
+decodes it into each seat's action. The team's reward is the sum over its seats; a game is
 over for the agent when it is over; a truncated game bootstraps from the joint final observation.
 """
 

@@ -78,18 +78,15 @@ STEP_FIGURES = ("the critic loss", "the actor loss", "the mean Q-value", "the en
 
 @dataclass
 class SACConfig:
-    """SAC's hyperparameters. The defaults are CleanRL's and seed 002's (lr 3e-4, 2 hidden layers, tau 0.005,
-    gamma 0.99, batch 256) sized for a 2-core CPU, measured on a 256-game vectorised Pendulum given 100 s of CPU per
-    setting (returns per 200-step game, greedy, at 25 s and at 100 s; random play ~-1200): layers of 128 make ~185
-    gradient steps/s and solved it within 25 s (-168, -152); 256 (seed 002's width) makes ~64/s at batch 256 or
-    ~135/s at batch 128 and got there later (-1297 then -380; -731 then -157); 64 makes ~333/s and learns too
-    (-178, -155), with less room for a harder game. A replay ratio of 1/64 (4 gradient steps per step of 256 games)
-    beat 1/256 (-454, -209): more gradient steps on fewer transitions, while the games are cheap beside the
-    updates."""
+    """SAC's hyperparameters. The defaults are CleanRL's (lr 3e-4, 2 hidden layers, tau 0.005, gamma 0.99,
+    batch 256) sized for a 2-core CPU: layers of 128 (wider layers make fewer gradient steps a second and learned
+    later; narrower ones leave less room for a harder game), and a replay ratio of 1/64, 4 gradient steps per step
+    of 256 games (more gradient steps on fewer transitions, while the games are cheap beside the updates). The
+    measurements behind these choices: docs/history/learners.md."""
 
     buffer_size: int = 300_000  # replay capacity in transitions; the oldest are overwritten
-    batch_size: int = 256  # transitions per gradient step (CleanRL 256; seed 002's best run 128)
-    lr: float = 3e-4  # Adam learning rate of the actor, the critics and the temperature (seed 002, the SAC paper)
+    batch_size: int = 256  # transitions per gradient step (CleanRL's)
+    lr: float = 3e-4  # Adam learning rate of the actor, the critics and the temperature (the SAC paper's)
     gamma: float = 0.99  # discount
     n_step: int = 1  # n-step returns: bootstrap from the decision n later (1: SAC's own one-step target)
     tau: float = 0.005  # Polyak step of the target critics, every gradient step
