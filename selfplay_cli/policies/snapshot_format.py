@@ -340,6 +340,7 @@ def printable(text: str, limit: int = 60) -> str:
     return out + ("..." if len(text) > limit else "")
 
 def is_int(x: Any) -> bool:
+    """An integer of the JSON a file holds (not a bool, which Python counts as one)."""
     return isinstance(x, int) and not isinstance(x, bool)
 
 
