@@ -146,7 +146,7 @@ def make_league(home: Path, names: tuple[str, ...] = ("s0-left", "s1M-left"), ga
     """A league with run ``r`` and a small snapshot per name, registered as training registers them."""
     from selfplay_cli.league.store import League
     from selfplay_cli.policies.network import Arch, build_network
-    from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+    from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
     from selfplay_cli.rated.snapshots import snapshot_relpath
     from selfplay_cli.results import GameResult
 
@@ -175,7 +175,7 @@ def crafted_snapshot(path: Path, **changes) -> Path:
     from safetensors.torch import save_file
 
     from selfplay_cli.policies.network import Arch, build_network
-    from selfplay_cli.policies.snapshot import FORMAT, SnapshotMeta, weights_sha256
+    from selfplay_cli.policies.snapshot_format import FORMAT, SnapshotMeta, weights_sha256
 
     tensors = build_network((8, 6), 3, Arch(hidden=(64, 64)), seed=0).state_dict()
     meta = SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=Arch(hidden=(64, 64)), algo="ppo",
@@ -191,7 +191,7 @@ def crafted_snapshot(path: Path, **changes) -> Path:
 
 def plain_snapshot(path: Path, seed: int = 7, name: str = "c", run: str = "contrib") -> Path:
     from selfplay_cli.policies.network import Arch, build_network
-    from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+    from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 
     save_snapshot(path, build_network((8, 6), 3, Arch(hidden=(64, 64)), seed=seed),
                   SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=Arch(hidden=(64, 64)), algo="ppo",
@@ -214,7 +214,7 @@ BOUNDED = textwrap.dedent("""
     from selfplay_cli.errors import MarlError
     from selfplay_cli.league.store import League
     from selfplay_cli.rated.snapshots import import_snapshot
-    import selfplay_cli.policies.snapshot
+    import selfplay_cli.policies.snapshot_reader
 
     league = League.open(sys.argv[2])
     vm = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize:")) * 1024
@@ -535,7 +535,8 @@ def _kill_then_resume(scratch: Path, point: str) -> tuple[bool, str]:
     """SIGKILL `marl train` at ``point`` of its second snapshot moment (tests/kill_points.py), resume it to the end,
     then check every row against its file and that nothing else is left."""
     from selfplay_cli.league.store import League
-    from selfplay_cli.policies.snapshot import load_snapshot, weights_sha256
+    from selfplay_cli.policies.snapshot_format import weights_sha256
+    from selfplay_cli.policies.snapshot_reader import load_snapshot
 
     home = scratch / "league"
     args = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
@@ -900,7 +901,7 @@ def _train_state(home: Path) -> tuple[str, list[str], bool]:
     import torch
 
     from selfplay_cli.league.store import League
-    from selfplay_cli.policies.snapshot import load_snapshot
+    from selfplay_cli.policies.snapshot_reader import load_snapshot
 
     with League.open(home, readonly=True) as league:
         run = league.get_run("r")
@@ -963,7 +964,7 @@ def _network_file(path: Path, env: str, arch: dict, change: Callable | None = No
     from selfplay_cli.envs import get_env
     from selfplay_cli.policies.joint import joint_spaces
     from selfplay_cli.policies.network import Arch, build_network
-    from selfplay_cli.policies.snapshot import FORMAT, SnapshotMeta, weights_sha256
+    from selfplay_cli.policies.snapshot_format import FORMAT, SnapshotMeta, weights_sha256
 
     spec = get_env(env)
     seat = spec.seat_spaces(spec.config())[0]
@@ -1063,7 +1064,7 @@ def config_numbers(scratch: Path) -> tuple[bool, str]:
 @fault("snapshot metadata step = 2**70: marl checkpoint import")
 def snapshot_step(scratch: Path) -> tuple[bool, str]:
     from selfplay_cli.policies.network import Arch, build_network
-    from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+    from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 
     path, home = scratch / "big-step.safetensors", scratch / "league"
     save_snapshot(path, build_network((8, 6), 3, Arch(hidden=(8,)), seed=0),

@@ -98,7 +98,7 @@ def scipy_check(a: np.ndarray, b: np.ndarray, s: np.ndarray, n: int, ratings: np
 def match_throughput(n_games: int) -> tuple[float, dict]:
     """Wall time of `marl match A B --games n` between two untrained 64x64 network snapshots in pong."""
     from selfplay_cli.policies.network import Arch, build_network
-    from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+    from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 
     with tempfile.TemporaryDirectory() as tmp:
         env = dict(os.environ, MARL_HOME=str(Path(tmp) / "league"))

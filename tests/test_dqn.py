@@ -8,9 +8,17 @@ import time
 import numpy as np
 import pytest
 import torch
+from gymnasium import spaces
 
-from selfplay_cli.algos.dqn import DQNConfig, DQNLearner, ReplayBuffer, epsilon_at, seed000_config
+from selfplay_cli.algos.dqn import DQNConfig, DQNLearner, epsilon_at, seed000_config
+from selfplay_cli.envs import SeatSpace
 from selfplay_cli.policies.network import Arch
+from selfplay_cli.policies.spaces import box_of_shape
+
+
+def discrete_seat(shape: tuple[int, ...], n: int) -> SeatSpace:
+    """A seat that reads an unbounded float32 Box of ``shape`` and plays ``Discrete(n)``."""
+    return SeatSpace(box_of_shape(shape), spaces.Discrete(n))
 
 
 def test_linear_epsilon_schedule_by_transitions():
@@ -21,7 +29,7 @@ def test_linear_epsilon_schedule_by_transitions():
     assert epsilon_at(cfg, 1000) == pytest.approx(0.05)
     assert epsilon_at(cfg, 10**6) == pytest.approx(0.05)
     # The learner counts transitions: 4 slots x 25 steps = 100 transitions.
-    learner = DQNLearner((3,), 2, 4, cfg, seed=0)
+    learner = DQNLearner(discrete_seat((3,), 2), 4, cfg, seed=0)
     obs = np.zeros((4, 3), dtype=np.float32)
     for _ in range(25):
         learner.act(obs)
@@ -48,7 +56,7 @@ def test_seed000_config_is_the_seeds_setup():
     assert (cfg.target_period, cfg.tau, cfg.learning_starts) == (250, 1.0, 2000)
     assert (cfg.eps_schedule, cfg.eps_start, cfg.eps_decay, cfg.eps_end) == ("exponential", 1.0, 0.995, 0.25)
     assert (cfg.double_dqn, cfg.loss, cfg.n_step, cfg.replay_ratio, cfg.max_grad_norm) == (False, "mse", 1, 1.0, 0)
-    learner = DQNLearner((8, 6), 3, 1, cfg, seed=0)
+    learner = DQNLearner(discrete_seat((8, 6), 3), 1, cfg, seed=0)
     widths = [m.out_features for m in learner.net.modules() if isinstance(m, torch.nn.Linear)]
     assert widths == [512, 512, 256, 128, 64, 3]
 
@@ -67,45 +75,9 @@ def test_config_rejects_bad_values():
     assert DQNConfig(arch=DQNConfig().arch.to_dict()).arch == DQNConfig().arch
 
 
-def _batch(ids: list[int], d: int = 2):
-    ids_a = np.asarray(ids)
-    obs = np.repeat(ids_a[:, None], d, axis=1).astype(np.float32)
-    return obs, ids_a, ids_a.astype(np.float32), obs + 0.5, (ids_a % 2).astype(np.float32)
-
-
-def test_replay_buffer_ring_keeps_the_newest_transitions():
-    buf = ReplayBuffer(5, 2)
-    buf.add(*_batch([0, 1, 2]))
-    assert (len(buf), buf.pos) == (3, 3)
-    buf.add(*_batch([3, 4, 5, 6]))  # wraps around: 0 and 1 are overwritten
-    assert (len(buf), buf.pos) == (5, 2)
-    assert sorted(buf.actions.tolist()) == [2, 3, 4, 5, 6]
-    assert np.array_equal(buf.obs[:, 0], buf.actions.astype(np.float32))  # rows stay aligned
-    assert np.array_equal(buf.next_obs[:, 1], buf.actions + 0.5)
-    assert np.array_equal(buf.dones, buf.actions % 2)
-    buf.add(*_batch(list(range(10, 17))))  # more than the capacity: only the newest 5 are kept
-    assert sorted(buf.actions.tolist()) == [12, 13, 14, 15, 16] and len(buf) == 5
-
-
-def test_replay_buffer_samples_only_filled_entries_with_the_right_shapes():
-    buf = ReplayBuffer(100, 2)
-    buf.add(*_batch(list(range(1, 11))))
-    rng = np.random.default_rng(0)
-    b = buf.sample(rng, 1000)
-    assert b["obs"].shape == (1000, 2) and b["next_obs"].shape == (1000, 2)
-    assert b["actions"].shape == b["rewards"].shape == b["dones"].shape == (1000,)
-    assert b["obs"].dtype == np.float32 and b["actions"].dtype == np.int64
-    assert set(b["actions"].tolist()) == set(range(1, 11))  # every filled entry, and nothing else
-    assert np.array_equal(b["rewards"], b["actions"].astype(np.float32))
-    k = buf.sample(rng, (3, 7))
-    assert k["obs"].shape == (3, 7, 2) and k["actions"].shape == (3, 7)
-    with pytest.raises(RuntimeError):
-        ReplayBuffer(4, 2).sample(rng, 1)
-
-
 def test_learner_stores_transitions_with_next_obs_and_dones():
     """One step's obs is the next obs of the step before; a done's next obs (the new game's) is stored too."""
-    learner = DQNLearner((1,), 2, 2, DQNConfig(n_step=1, learning_starts=10**6), seed=0)
+    learner = DQNLearner(discrete_seat((1,), 2), 2, DQNConfig(n_step=1, learning_starts=10**6), seed=0)
     observations = [np.array([[0.0], [10.0]]), np.array([[1.0], [11.0]]), np.array([[2.0], [12.0]])]
     learner.act(observations[0])
     assert not learner.record(np.array([0.0, 1.0]), np.array([0.0, 1.0]))
@@ -125,7 +97,7 @@ def test_learner_stores_transitions_with_next_obs_and_dones():
 
 def test_n_step_returns_stop_at_the_end_of_a_game():
     gamma = 0.5
-    learner = DQNLearner((1,), 2, 2, DQNConfig(n_step=3, gamma=gamma, learning_starts=10**6), seed=0)
+    learner = DQNLearner(discrete_seat((1,), 2), 2, DQNConfig(n_step=3, gamma=gamma, learning_starts=10**6), seed=0)
     rewards = [[1.0, 1.0], [2.0, 2.0], [4.0, 4.0], [8.0, 8.0]]
     dones = [[0, 0], [0, 1], [0, 0], [0, 0]]  # slot 1's game ends after step 1
     for t in range(4):
@@ -133,13 +105,16 @@ def test_n_step_returns_stop_at_the_end_of_a_game():
         learner.record(np.array(rewards[t]), np.array(dones[t], dtype=float))
     learner.update(np.array([[4.0], [14.0]]))
     b = learner.buffer
-    assert len(b) == 4  # steps 0 and 1 of both slots; steps 2 and 3 still wait for later rewards
-    assert b.obs[:4, 0].tolist() == [0.0, 10.0, 1.0, 11.0]
-    assert b.next_obs[:4, 0].tolist() == [3.0, 13.0, 4.0, 14.0]  # s_{t+3}
+    # slot 1's game ended at step 1: both its decisions were written then (s' never read: done); slot 0's steps 0
+    # and 1 as its chain grew to 3 decisions; steps 2 and 3 of both slots still wait for later rewards
+    assert len(b) == 4
+    assert b.obs[:4, 0].tolist() == [10.0, 11.0, 0.0, 1.0]
+    assert b.next_obs[:4, 0].tolist() == [12.0, 12.0, 3.0, 4.0]  # s_{t+3} for slot 0
     r0 = 1 + gamma * 2 + gamma**2 * 4
     r1 = 2 + gamma * 4 + gamma**2 * 8
-    assert b.rewards[:4].tolist() == pytest.approx([r0, 1 + gamma * 2, r1, 2.0])
-    assert b.dones[:4].tolist() == [0.0, 1.0, 0.0, 1.0]
+    assert b.rewards[:4].tolist() == pytest.approx([1 + gamma * 2, 2.0, r0, r1])
+    assert b.dones[:4].tolist() == [1.0, 1.0, 0.0, 0.0]
+    assert b.discounts[:4].tolist() == pytest.approx([gamma**2, gamma, gamma**3, gamma**3])
 
 
 def _constant_q(net: torch.nn.Module, values: list[float]) -> None:
@@ -151,7 +126,7 @@ def _constant_q(net: torch.nn.Module, values: list[float]) -> None:
 @pytest.mark.parametrize("double", [True, False])
 def test_td_target_double_and_plain(double):
     gamma = 0.9
-    learner = DQNLearner((2,), 3, 1, DQNConfig(gamma=gamma, double_dqn=double, n_step=1), seed=0)
+    learner = DQNLearner(discrete_seat((2,), 3), 1, DQNConfig(gamma=gamma, double_dqn=double, n_step=1), seed=0)
     _constant_q(learner.net, [1.0, 3.0, 2.0])  # the online net prefers action 1
     _constant_q(learner.target, [10.0, 20.0, 30.0])  # the target values action 1 at 20, its own best at 30
     r = torch.tensor([1.0, -1.0, 0.5])
@@ -161,7 +136,7 @@ def test_td_target_double_and_plain(double):
     q_next = 20.0 if double else 30.0  # Q_target(s', argmax_a Q(s', a)) vs max_a Q_target(s', a)
     assert y.tolist() == pytest.approx([1 + gamma * q_next, -1.0, 0.5 + gamma * q_next])
     # n-step: the bootstrap is discounted by gamma^n.
-    learner3 = DQNLearner((2,), 3, 1, DQNConfig(gamma=gamma, double_dqn=double, n_step=3), seed=0)
+    learner3 = DQNLearner(discrete_seat((2,), 3), 1, DQNConfig(gamma=gamma, double_dqn=double, n_step=3), seed=0)
     _constant_q(learner3.net, [1.0, 3.0, 2.0])
     _constant_q(learner3.target, [10.0, 20.0, 30.0])
     assert learner3.td_target(r, d, s2).tolist() == pytest.approx([1 + gamma**3 * q_next, -1.0,
@@ -182,7 +157,7 @@ def _fill(learner: DQNLearner, steps: int, seed: int = 0) -> np.ndarray:
 
 def test_updates_follow_the_replay_ratio_and_sync_the_target():
     cfg = DQNConfig(replay_ratio=0.25, learning_starts=40, batch_size=8, target_period=5, n_step=1)
-    learner = DQNLearner((3,), 3, 4, cfg, seed=0)
+    learner = DQNLearner(discrete_seat((3,), 3), 4, cfg, seed=0)
     obs = _fill(learner, 9)  # 36 transitions: not started
     assert learner.grad_steps == 0
     # 21 steps more; from the step that brings the buffer to 40 on (steps 10 to 30), each step's 4 transitions
@@ -202,7 +177,7 @@ def test_updates_follow_the_replay_ratio_and_sync_the_target():
 
 
 def test_polyak_target_update():
-    learner = DQNLearner((3,), 3, 1, DQNConfig(tau=0.1), seed=0)
+    learner = DQNLearner(discrete_seat((3,), 3), 1, DQNConfig(tau=0.1), seed=0)
     with torch.no_grad():
         for p in learner.net.parameters():
             p.add_(1.0)
@@ -214,13 +189,13 @@ def test_polyak_target_update():
 
 def test_state_round_trip_resumes_identically():
     cfg = DQNConfig(learning_starts=64, batch_size=16, eps_decay_steps=400)
-    a = DQNLearner((8, 6), 3, 8, cfg, seed=1)
+    a = DQNLearner(discrete_seat((8, 6), 3), 8, cfg, seed=1)
     _fill(a, 30)
     assert a.grad_steps > 0
     buf = io.BytesIO()
     torch.save(a.state_dict(), buf)  # a checkpoint goes through torch.save / torch.load (weights_only)
     buf.seek(0)
-    b = DQNLearner((8, 6), 3, 8, cfg, seed=99)
+    b = DQNLearner(discrete_seat((8, 6), 3), 8, cfg, seed=99)
     b.load_state_dict(torch.load(buf))
     obs = np.random.default_rng(5).standard_normal((8, 8, 6)).astype(np.float32)
     assert b.epsilon == a.epsilon and b.transitions == a.transitions == 240
@@ -242,7 +217,7 @@ def test_dqn_learns_to_beat_random_at_pong(one_thread, learn_against_random):
     first and 8.7 sd below the last; a learner that never updates stays near its first games' rate."""
     cfg = DQNConfig(lr=1e-3, batch_size=128, replay_ratio=0.0625, target_period=100, n_step=5,
                     learning_starts=20_000, eps_decay_steps=50_000)
-    learner = DQNLearner((8, 6), 3, 64, cfg, seed=0)
+    learner = DQNLearner(discrete_seat((8, 6), 3), 64, cfg, seed=0)
     start = time.perf_counter()
     first, last, n_games = learn_against_random(learner, n_games=64, budget=160_000)
     print(f"DQN win rate vs random: first 300 games {first:.2f}, last 300 {last:.2f} ({n_games} games, "

@@ -20,27 +20,24 @@ from cli_helpers import run
 from gymnasium import spaces
 from safetensors.torch import save_file
 
-from selfplay_cli.algos.base import Seat
 from selfplay_cli.algos.dqn import DQNConfig, DQNLearner
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
 from selfplay_cli.algos.sac import SACConfig, SACLearner
 from selfplay_cli.arena.selfplay import SelfPlayGames, plan_layout, plan_seats
-from selfplay_cli.envs import get_env
+from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import NonFiniteError
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.joint import joint_spaces
-from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import (
+from selfplay_cli.policies.network import Arch, SnapshotError, build_network
+from selfplay_cli.policies.snapshot_format import (
     FORMAT,
     MAX_LOG_STD,
-    SnapshotError,
     SnapshotMeta,
-    _check_values,
-    load_snapshot,
-    read_snapshot,
+    check_values,
     save_snapshot,
     weights_sha256,
 )
+from selfplay_cli.policies.snapshot_reader import load_snapshot, read_snapshot
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
@@ -151,7 +148,7 @@ def test_games_name_the_first_seat_and_game_whose_observation_is_not_finite():
 
 
 def _ppo(**cfg) -> tuple[PPOLearner, np.ndarray]:
-    seat = Seat(spaces.Box(-1, 1, (4,), np.float32), spaces.Discrete(3))
+    seat = SeatSpace(spaces.Box(-1, 1, (4,), np.float32), spaces.Discrete(3))
     obs = np.random.default_rng(0).uniform(-1, 1, (8, 4))
     return PPOLearner(seat, 8, PPOConfig(rollout_steps=8, **cfg), seed=0), obs
 
@@ -180,9 +177,9 @@ def test_ppo_rewards_the_scale_overflows_are_named():
 
 def test_dqn_and_sac_name_the_first_gradient_step_that_broke():
     rng = np.random.default_rng(0)
-    dqn = DQNLearner(Seat(spaces.Box(-1, 1, (4,), np.float32), spaces.Discrete(3)), 8,
+    dqn = DQNLearner(SeatSpace(spaces.Box(-1, 1, (4,), np.float32), spaces.Discrete(3)), 8,
                      DQNConfig(lr=1e30, learning_starts=16, batch_size=8, replay_ratio=1.0, loss="mse"), seed=0)
-    sac = SACLearner(Seat(spaces.Box(-1, 1, (4,), np.float32), spaces.Box(-1, 1, (2,), np.float32)), 8,
+    sac = SACLearner(SeatSpace(spaces.Box(-1, 1, (4,), np.float32), spaces.Box(-1, 1, (2,), np.float32)), 8,
                      SACConfig(lr=1e30, learning_starts=16, batch_size=8, replay_ratio=1.0), seed=0)
     for learner in (dqn, sac):
         with pytest.raises(NonFiniteError, match=r"^the [a-zA-Z' -]+ is (NaN|inf|-inf) in gradient step \d+$"):
@@ -333,7 +330,7 @@ def test_checking_the_values_allocates_nothing_beside_the_weights():
     tracemalloc.start()
     try:
         with pytest.raises(SnapshotError, match="big holds NaN"):
-            _check_values("f", {"big": big})
+            check_values("f", {"big": big})
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()

@@ -21,7 +21,7 @@ from selfplay_cli.cli import build_command, main
 from selfplay_cli.commands._output import finite
 from selfplay_cli.errors import EXIT_CODES, EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_IO, EXIT_USAGE
 from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -22,18 +22,16 @@ from safetensors.torch import save_file
 
 from selfplay_cli.files import sweep, sweep_home
 from selfplay_cli.league.store import League, LeagueError, check_name
-from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import (
+from selfplay_cli.policies.network import Arch, SnapshotError, build_network
+from selfplay_cli.policies.snapshot_format import (
     FORMAT,
-    SnapshotError,
     SnapshotMeta,
     expected_tensors,
     file_sha256,
-    import_check,
-    read_snapshot,
     save_snapshot,
     weights_sha256,
 )
+from selfplay_cli.policies.snapshot_reader import import_check, read_snapshot
 from selfplay_cli.rated.match import load_player
 from selfplay_cli.rated.snapshots import snapshot_relpath
 from selfplay_cli.results import GameResult
@@ -111,7 +109,7 @@ BOUNDED = textwrap.dedent("""
     from selfplay_cli.errors import MarlError
     from selfplay_cli.league.store import League
     from selfplay_cli.rated.snapshots import import_snapshot
-    import selfplay_cli.policies.snapshot  # torch and everything else loaded before the limit
+    import selfplay_cli.policies.snapshot_reader  # torch and everything else loaded before the limit
 
     league = League.open(sys.argv[2])
     vm = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize:")) * 1024
@@ -626,10 +624,9 @@ GAME_MODULE = textwrap.dedent("""
 def _tictactoe_file(path: Path, env: str, seed: int = 0) -> Path:
     """A valid snapshot of tic-tac-toe (27 inputs, 9 masked actions) whose metadata names its game ``env``."""
     from selfplay_cli.envs import get_env
-    from selfplay_cli.policies.spaces import seat_spaces_of
-
     spec = get_env("tests.games.tictactoe:env")
-    obs, act, _ = seat_spaces_of(spec, spec.config())[0]
+    seat = spec.seat_spaces(spec.config())[0]
+    obs, act = seat.observation, seat.action
     arch = Arch(hidden=(16,))
     save_snapshot(path, build_network(obs, act, arch, seed=seed),
                   SnapshotMeta(env=env, obs_space=obs, act_space=act, arch=arch, algo="ppo", run="contrib",

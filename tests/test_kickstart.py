@@ -13,9 +13,8 @@ from cli_helpers import run, run_json
 from gymnasium import spaces
 
 from selfplay_cli.algos import PPOLearner, SACLearner
-from selfplay_cli.algos.base import Seat
 from selfplay_cli.algos.kickstart import SQUASH_EDGE, Imitation
-from selfplay_cli.envs import get_env
+from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.names import resolve
 from selfplay_cli.league.store import League
@@ -103,7 +102,7 @@ def test_a_learner_taught_comes_to_act_as_its_teacher(learner_cls, one_thread):
     19 sd above) and PPO 0.0001-0.0014; two torch threads instead of one move them by less than 0.0012. Without the
     imitation term nothing draws the action toward the rule (there is no reward): the error stays near its start."""
     rng = np.random.default_rng(0)
-    seat = Seat(spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Box(-1.0, 1.0, (1,), np.float32))
+    seat = SeatSpace(spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Box(-1.0, 1.0, (1,), np.float32))
     n = 64
     if learner_cls is SACLearner:
         from selfplay_cli.algos.sac import SACConfig
@@ -138,7 +137,7 @@ def test_a_learner_taught_comes_to_act_as_its_teacher(learner_cls, one_thread):
 
 
 def test_without_weight_a_learner_keeps_no_term(one_thread):
-    seat = Seat(spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Discrete(3))
+    seat = SeatSpace(spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Discrete(3))
     learner = PPOLearner(seat, 4, seed=0)
     learner.teach(np.zeros((4, 2)), np.zeros(4, dtype=np.int64))
     for _ in range(learner.cfg.rollout_steps):

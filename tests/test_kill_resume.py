@@ -15,7 +15,8 @@ import pytest
 
 from selfplay_cli.cli import main
 from selfplay_cli.league.store import League
-from selfplay_cli.policies.snapshot import load_snapshot, weights_sha256
+from selfplay_cli.policies.snapshot_format import weights_sha256
+from selfplay_cli.policies.snapshot_reader import load_snapshot
 
 pytestmark = pytest.mark.skipif(sys.platform == "win32", reason="SIGKILL")
 

@@ -17,7 +17,7 @@ from cli_helpers import run
 
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 
 
 def make_snapshot(path: Path, name: str, seed: int, run: str = "r1", obs_shape=(8, 6)) -> Path:

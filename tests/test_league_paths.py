@@ -16,7 +16,7 @@ from cli_helpers import run
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 from selfplay_cli.rated.snapshots import snapshot_relpath
 from selfplay_cli.train.loop import STATE_VERSION, Trainer
 

@@ -16,15 +16,20 @@ from selfplay_cli.algos import (
     PPOConfig,
     PPOLearner,
     SACLearner,
-    Seat,
     get_learner,
 )
 from selfplay_cli.envs import SeatSpace
 from selfplay_cli.errors import MarlError
 from selfplay_cli.policies.network import Arch
+from selfplay_cli.policies.spaces import box_of_shape
 
 BOX2 = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
+
+
+def discrete_seat(shape: tuple[int, ...], n: int) -> SeatSpace:
+    """A seat that reads an unbounded float32 Box of ``shape`` and plays ``Discrete(n)``."""
+    return SeatSpace(box_of_shape(shape), spaces.Discrete(n))
 
 
 def constant_value(learner: PPOLearner, value: float) -> None:
@@ -46,10 +51,10 @@ def test_registry_names_the_learners_and_refuses_unknown_ones():
 
 
 @pytest.mark.parametrize("cls", [PPOLearner, DQNLearner])
-def test_built_from_a_seat_space_or_the_older_arguments(cls):
+def test_built_from_a_seat_space_alone(cls):
     seat = SeatSpace(spaces.Box(0.0, 1.0, (3, 2), np.float32), spaces.Discrete(4), True)
     a = cls(seat, 5, cls.config_class(), seed=3)
-    b = cls((3, 2), 4, 5, cls.config_class(), seed=3)  # (obs_shape, n_actions, n_slots, config): the older form
+    b = cls(discrete_seat((3, 2), 4), 5, cls.config_class(), seed=3)  # unbounded observations, no masks
     assert isinstance(a, Learner)
     assert a.n_slots == b.n_slots == 5 and a.obs_shape == b.obs_shape == (3, 2) and a.n_actions == 4
     for (ka, va), (kb, vb) in zip(a.net.state_dict().items(), b.net.state_dict().items(), strict=True):
@@ -58,17 +63,19 @@ def test_built_from_a_seat_space_or_the_older_arguments(cls):
     assert a.net.obs_space == seat.observation
     with pytest.raises(TypeError, match="(?i)config"):
         cls(seat, 5, "not a config")
+    with pytest.raises(TypeError, match="built from a SeatSpace, not tuple"):  # (obs_shape, n_actions, ...): gone
+        cls((3, 2), 4, cls.config_class())
 
 
 def test_dqn_refuses_other_action_spaces_in_one_line():
     for space, shown in ((BOX2, "Box(-1, 1, (2,), float32)"), (spaces.MultiDiscrete([3, 2]), "MultiDiscrete([3, 2])")):
         with pytest.raises(MarlError) as e:
-            DQNLearner(Seat(BOX2, space), 4)
+            DQNLearner(SeatSpace(BOX2, space), 4)
         msg = str(e.value)
         assert msg.startswith("DQN learns Discrete actions only") and shown in msg and "--algo ppo" in msg, msg
         assert "\n" not in msg
     with pytest.raises(MarlError, match="PPO cannot learn this seat's actions: .*finite bounds"):
-        PPOLearner(Seat(BOX2, spaces.Box(-np.inf, np.inf, (1,), np.float32)), 2)
+        PPOLearner(SeatSpace(BOX2, spaces.Box(-np.inf, np.inf, (1,), np.float32)), 2)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -78,7 +85,7 @@ def test_dqn_refuses_other_action_spaces_in_one_line():
 @pytest.mark.parametrize("bootstrap", [True, False])
 def test_ppo_truncated_game_bootstraps_from_its_final_observation(bootstrap):
     cfg = PPOConfig(rollout_steps=3, gamma=0.9, gae_lambda=0.5, bootstrap_truncated=bootstrap)
-    learner = PPOLearner(Seat(BOX2, spaces.Discrete(2)), 1, cfg, seed=0)
+    learner = PPOLearner(SeatSpace(BOX2, spaces.Discrete(2)), 1, cfg, seed=0)
     obs = np.zeros((1, 2), np.float32)
     rewards, dones, truncated = [0.0, 1.0, -1.0], [0.0, 1.0, 0.0], [False, True, False]
     for t in range(3):
@@ -99,7 +106,7 @@ def test_ppo_truncated_game_bootstraps_from_its_final_observation(bootstrap):
 
 
 def test_ppo_final_observations_may_come_with_the_update_and_are_required():
-    learner = PPOLearner(Seat(BOX2, spaces.Discrete(2)), 2, PPOConfig(rollout_steps=1), seed=0)
+    learner = PPOLearner(SeatSpace(BOX2, spaces.Discrete(2)), 2, PPOConfig(rollout_steps=1), seed=0)
     obs = np.zeros((2, 2), np.float32)
     learner.act(obs)
     learner.record(np.zeros(2), np.array([1.0, 0.0]), truncated=np.array([True, False]))
@@ -119,7 +126,7 @@ def test_turn_gae_skips_steps_where_the_seat_did_not_act():
     """Slot 0 decides at steps 0, 2 and 4; the opponent's moves (steps 1, 3, 5) bring rewards and, at step 3, the
     game's end. Slot 1 always acts (the ordinary GAE)."""
     cfg = PPOConfig(rollout_steps=6, gamma=0.9, gae_lambda=0.5)
-    learner = PPOLearner(Seat(BOX2, spaces.Discrete(2)), 2, cfg, seed=0)
+    learner = PPOLearner(SeatSpace(BOX2, spaces.Discrete(2)), 2, cfg, seed=0)
     g, lam = 0.9, 0.5
     acting = np.array([[1, 0, 1, 0, 1, 0], [1, 1, 1, 1, 1, 1]], bool).T
     rewards = np.array([[0.0, 0.5, 0.0, -1.0, 0.0, 0.25], [1.0, 0.0, 0.0, 2.0, 0.0, 1.0]], np.float32).T
@@ -150,7 +157,7 @@ def test_turn_gae_skips_steps_where_the_seat_did_not_act():
 
 def test_turn_rollout_learns_only_decisions_and_carries_the_last_one():
     cfg = PPOConfig(rollout_steps=4, minibatches=1, update_epochs=1)
-    learner = PPOLearner(Seat(spaces.Box(-10, 10, (1,), np.float32), spaces.Discrete(3)), 1, cfg, seed=0)
+    learner = PPOLearner(SeatSpace(spaces.Box(-10, 10, (1,), np.float32), spaces.Discrete(3)), 1, cfg, seed=0)
     acting = [True, False, True, False]
     for t in range(4):
         learner.act(np.array([[float(t)]], np.float32), mask=np.array([[True, True, acting[t]]]))
@@ -179,7 +186,7 @@ def test_turn_rollout_learns_only_decisions_and_carries_the_last_one():
 def test_ppo_never_samples_a_masked_action_and_learns_under_masks():
     rng = np.random.default_rng(0)
     for space, width in ((spaces.Discrete(5), 5), (spaces.MultiDiscrete([3, 4]), 7)):
-        learner = PPOLearner(Seat(BOX2, space), 64, PPOConfig(rollout_steps=8), seed=1)
+        learner = PPOLearner(SeatSpace(BOX2, space), 64, PPOConfig(rollout_steps=8), seed=1)
         for _ in range(8):
             mask = rng.random((64, width)) < 0.4
             mask[np.arange(64), rng.integers(0, width, 64)] = True
@@ -204,7 +211,8 @@ def test_ppo_multidiscrete_learns_a_bandit(one_thread):
     The bar, measured on seeds 0-19: the first rollout's 512 draws hit (2, 0) 0.14-0.19 of the time (chance: 1/6),
     the last rollout's 0.77-0.82 (sd 0.014); 0.4 is 15 sd from either. A learner that does not update keeps its
     first rate (and its greedy pair is (2, 0) for one network in six: hence the rates, not the greedy pair alone)."""
-    learner = PPOLearner(Seat(BOX2, spaces.MultiDiscrete([3, 2])), 32, PPOConfig(rollout_steps=16, lr=1e-2), seed=0)
+    learner = PPOLearner(SeatSpace(BOX2, spaces.MultiDiscrete([3, 2])), 32, PPOConfig(rollout_steps=16, lr=1e-2),
+                         seed=0)
     obs = np.zeros((32, 2), np.float32)
     rates = []
     for u in range(15):
@@ -255,7 +263,7 @@ def test_ppo_learns_a_continuous_task(one_thread):
 
     The bars, measured on seeds 0-19: before -4.91 to -5.00, after -0.52 to -0.64 (sd 0.025): -3.0 and -1.2 are each
     more than 20 sd away; a learner that does not update keeps its return of about -5."""
-    seat = Seat(spaces.Box(-2, 2, (2,), np.float32), spaces.Box(-1, 1, (1,), np.float32))
+    seat = SeatSpace(spaces.Box(-2, 2, (2,), np.float32), spaces.Box(-1, 1, (1,), np.float32))
     cfg = PPOConfig(rollout_steps=32, lr=3e-3, ent_coef=0.0, gamma=0.9, arch=Arch(hidden=(32, 32), activation="tanh"))
     learner = PPOLearner(seat, 32, cfg, seed=0)
     before = greedy_return(learner.policy("p", "reach", greedy=True))
@@ -276,7 +284,7 @@ def test_ppo_learns_a_continuous_task(one_thread):
 
 
 def test_ppo_box_state_round_trip_resumes_identically():
-    seat = Seat(BOX2, spaces.Box(-1, 1, (3,), np.float32))
+    seat = SeatSpace(BOX2, spaces.Box(-1, 1, (3,), np.float32))
     obs = np.random.default_rng(0).standard_normal((4, 2)).astype(np.float32)
     a = PPOLearner(seat, 4, PPOConfig(rollout_steps=2), seed=1)
     for _ in range(2):
@@ -296,7 +304,7 @@ def test_ppo_box_state_round_trip_resumes_identically():
 def test_dqn_masked_acting_and_targets():
     rng = np.random.default_rng(0)
     for eps in (1.0, 0.0):  # exploring, then greedy
-        learner = DQNLearner(Seat(BOX2, spaces.Discrete(6), True), 50,
+        learner = DQNLearner(SeatSpace(BOX2, spaces.Discrete(6), True), 50,
                              DQNConfig(eps_start=eps, eps_end=eps, learning_starts=10**6), seed=0)
         for _ in range(20):
             mask = rng.random((50, 6)) < 0.3
@@ -305,7 +313,7 @@ def test_dqn_masked_acting_and_targets():
             assert mask[np.arange(50), a].all()
             learner.record(np.zeros(50), np.zeros(50))
         assert learner.buffer.next_masks is not None and len(learner.buffer) == (20 - 3) * 50  # the last n_step wait
-    learner = DQNLearner(Seat(BOX2, spaces.Discrete(3), True), 1, DQNConfig(gamma=0.9, n_step=1), seed=0)
+    learner = DQNLearner(SeatSpace(BOX2, spaces.Discrete(3), True), 1, DQNConfig(gamma=0.9, n_step=1), seed=0)
     for net, values in ((learner.net, [1.0, 3.0, 2.0]), (learner.target, [10.0, 20.0, 30.0])):
         with torch.no_grad():
             net.action_head.weight.zero_()
@@ -321,7 +329,7 @@ def test_dqn_masked_acting_and_targets():
 
 def test_dqn_n_step_return_bootstraps_a_truncated_game_from_its_final_observation():
     gamma = 0.5
-    learner = DQNLearner((1,), 2, 2, DQNConfig(n_step=3, gamma=gamma, learning_starts=10**6), seed=0)
+    learner = DQNLearner(discrete_seat((1,), 2), 2, DQNConfig(n_step=3, gamma=gamma, learning_starts=10**6), seed=0)
     rewards = [[1.0, 1.0], [2.0, 2.0], [4.0, 4.0], [8.0, 8.0]]
     dones = [[0, 0], [0, 1], [0, 0], [0, 0]]  # slot 1's game is cut short after step 1
     for t in range(4):
@@ -330,19 +338,20 @@ def test_dqn_n_step_return_bootstraps_a_truncated_game_from_its_final_observatio
                        final_obs=np.array([[-1.0], [99.0]]))
     learner.update(np.array([[4.0], [14.0]]))
     b = learner.buffer
-    assert b.obs[:4, 0].tolist() == [0.0, 10.0, 1.0, 11.0]
-    assert b.next_obs[:4, 0].tolist() == [3.0, 99.0, 4.0, 99.0]  # slot 1: the final observation of its game
-    assert b.rewards[:4].tolist() == pytest.approx([1 + gamma * 2 + gamma**2 * 4, 1 + gamma * 2,
-                                                    2 + gamma * 4 + gamma**2 * 8, 2.0])
+    # slot 1's two decisions are written when its game is cut short, slot 0's as its chain grows to 3 decisions
+    assert b.obs[:4, 0].tolist() == [10.0, 11.0, 0.0, 1.0]
+    assert b.next_obs[:4, 0].tolist() == [99.0, 99.0, 3.0, 4.0]  # slot 1: the final observation of its game
+    assert b.rewards[:4].tolist() == pytest.approx([1 + gamma * 2, 2.0, 1 + gamma * 2 + gamma**2 * 4,
+                                                    2 + gamma * 4 + gamma**2 * 8])
     assert b.dones[:4].tolist() == [0.0, 0.0, 0.0, 0.0]  # bootstrapped, not ended
-    assert b.discounts[:4].tolist() == pytest.approx([gamma**3, gamma**2, gamma**3, gamma])
+    assert b.discounts[:4].tolist() == pytest.approx([gamma**2, gamma, gamma**3, gamma**3])
 
 
 def test_dqn_turn_based_transitions_run_from_decision_to_decision():
     """One slot deciding at steps 0, 2 and 4; the opponent's moves' rewards go to the decision before them; the
     game ends (lost) at step 3 and a new one starts with the seat's decision at step 4."""
     gamma = 0.5
-    learner = DQNLearner((1,), 2, 1, DQNConfig(n_step=2, gamma=gamma, learning_starts=10**6), seed=0)
+    learner = DQNLearner(discrete_seat((1,), 2), 1, DQNConfig(n_step=2, gamma=gamma, learning_starts=10**6), seed=0)
     acting = [True, False, True, False, True, False, True]
     rewards = [0.5, 0.25, 0.0, -1.0, 0.0, 2.0, 0.0]
     dones = [0, 0, 0, 1, 0, 0, 0]

@@ -24,7 +24,7 @@ from selfplay_cli.errors import EXIT_IO, EXIT_USAGE
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.bots import ScriptedPolicy
 from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the suite's games are tests.games.*

@@ -5,12 +5,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from gymnasium import spaces
 
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
 from selfplay_cli.arena.selfplay import OPPONENT, SelfPlayGames, plan_layout, plan_seats
-from selfplay_cli.envs import get_env
+from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import MarlError
 from selfplay_cli.policies import ScriptedPolicy
+from selfplay_cli.policies.spaces import box_of_shape
+
+
+def discrete_seat(shape: tuple[int, ...], n: int) -> SeatSpace:
+    """A seat that reads an unbounded float32 Box of ``shape`` and plays ``Discrete(n)``."""
+    return SeatSpace(box_of_shape(shape), spaces.Discrete(n))
 
 
 def seat_layout(n_games: int, agents: int, sharing: str, league_games: float = 0.0) -> np.ndarray:
@@ -57,7 +64,7 @@ def test_selfplay_games_restart_with_fresh_seeds_and_report_results():
 
 def test_gae_matches_hand_computed_advantages():
     cfg = PPOConfig(rollout_steps=3, gamma=0.9, gae_lambda=0.5)
-    learner = PPOLearner((2,), 2, 1, cfg, seed=0)
+    learner = PPOLearner(discrete_seat((2,), 2), 1, cfg, seed=0)
     learner.values[:, 0] = torch.tensor([1.0, 2.0, 3.0])
     learner.rewards[:, 0] = torch.tensor([0.0, 1.0, -1.0])
     learner.dones[:, 0] = torch.tensor([0.0, 1.0, 0.0])  # the game ends after step 1; step 2 starts a new one
@@ -78,13 +85,13 @@ def test_gae_matches_hand_computed_advantages():
 def test_learner_state_round_trip_resumes_identically():
     rng = np.random.default_rng(0)
     obs = rng.standard_normal((4, 8, 6)).astype(np.float32)
-    a = PPOLearner((8, 6), 3, 4, PPOConfig(rollout_steps=2), seed=1)
+    a = PPOLearner(discrete_seat((8, 6), 3), 4, PPOConfig(rollout_steps=2), seed=1)
     for _ in range(2):
         a.act(obs)
         a.record(np.ones(4), np.zeros(4))
     a.update(obs)
     state = a.state_dict()
-    b = PPOLearner((8, 6), 3, 4, PPOConfig(rollout_steps=2), seed=99)
+    b = PPOLearner(discrete_seat((8, 6), 3), 4, PPOConfig(rollout_steps=2), seed=99)
     b.load_state_dict(state)
     assert np.array_equal(a.act(obs), b.act(obs)), "same weights and same sampling stream"
     assert b.updates == 1
@@ -98,7 +105,7 @@ def test_ppo_learns_to_beat_random_at_pong(learn_against_random, one_thread):
     never updates keeps (its first games' rate); 0.65 is 4.5 sd above the first games' mean. The budget is where
     every seed has learned: at 200k steps the last 300 games are 0.46-0.87, at 150k 0.42-0.64."""
     torch.manual_seed(0)
-    learner = PPOLearner((8, 6), 3, 128, PPOConfig(rollout_steps=64, lr=2e-3), seed=0)
+    learner = PPOLearner(discrete_seat((8, 6), 3), 128, PPOConfig(rollout_steps=64, lr=2e-3), seed=0)
     first, last, _ = learn_against_random(learner, n_games=128, budget=400_000)
     print(f"win rate vs random: first 300 games {first:.2f}, last 300 {last:.2f}")
     assert first < 0.65, first

@@ -23,7 +23,7 @@ from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 from selfplay_cli.rated.lineup import lineup
 from selfplay_cli.record import VideoSettings, record_game, stop_rule
 from selfplay_cli.results import GameResult, Rules

@@ -30,7 +30,7 @@ from selfplay_cli.envs.registry import EnvError
 from selfplay_cli.league.ledger import GameTable
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
-from selfplay_cli.policies.snapshot import SnapshotMeta, snapshot_roles
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, snapshot_roles
 from selfplay_cli.results import Rules
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -302,7 +302,7 @@ def test_a_cooperative_crew_of_different_seats_flies_each_member_on_its_own_seat
 
 
 def test_an_older_file_without_a_role_plays_the_role_its_spaces_fit(chased, home, capsys, tmp_path):
-    from selfplay_cli.policies.snapshot import export_snapshot, read_meta
+    from selfplay_cli.policies.snapshot_reader import export_snapshot, read_meta
 
     src = next((chased[0] / "snapshots" / "ch").glob("s3k-runner.*"))
     old = tmp_path / "old-runner.safetensors"

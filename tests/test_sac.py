@@ -15,12 +15,15 @@ import torch
 from cli_helpers import run, run_json
 from gymnasium import spaces
 
-from selfplay_cli.algos import LEARNERS, SACConfig, SACLearner, Seat, get_learner
+from selfplay_cli.algos import LEARNERS, SACConfig, SACLearner, get_learner
 from selfplay_cli.algos.sac import soft_target
+from selfplay_cli.envs import SeatSpace
 from selfplay_cli.errors import MarlError
 from selfplay_cli.policies.bank import NetworkBank
 from selfplay_cli.policies.network import Arch, NetworkPolicy, build_network
-from selfplay_cli.policies.snapshot import SnapshotMeta, load_policy, read_snapshot, save_snapshot
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
+from selfplay_cli.policies.snapshot_policy import load_policy
+from selfplay_cli.policies.snapshot_reader import read_snapshot
 from selfplay_cli.train.config import TrainConfig
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -77,7 +80,7 @@ def final_distance(act, seed: int = 99, n: int = 1000) -> float:
     return float(dist.mean())
 
 
-REACH_SEAT = Seat(spaces.Box(-3.0, 3.0, (4,), np.float32), BOX2)
+REACH_SEAT = SeatSpace(spaces.Box(-3.0, 3.0, (4,), np.float32), BOX2)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -165,7 +168,7 @@ def test_entropy_tuning_moves_alpha_towards_the_target(one_thread, target, direc
 
 def test_default_entropy_target_is_minus_the_action_size():
     assert SACLearner(REACH_SEAT, 1, small()).target_entropy == -2.0
-    assert SACLearner(Seat(REACH_SEAT.observation, spaces.Box(-1, 1, (3, 2), np.float32)), 1,
+    assert SACLearner(SeatSpace(REACH_SEAT.observation, spaces.Box(-1, 1, (3, 2), np.float32)), 1,
                       small()).target_entropy == -6.0
 
 
@@ -310,7 +313,7 @@ def test_state_dict_round_trip_resumes_identically(one_thread):
 
 
 def test_snapshot_of_the_actor_loads_and_plays_as_the_learner(tmp_path, one_thread):
-    learner = SACLearner(Seat(spaces.Box(-2.0, 2.0, (7,), np.float32), BOX2), 8, small(learning_starts=10), seed=1)
+    learner = SACLearner(SeatSpace(spaces.Box(-2.0, 2.0, (7,), np.float32), BOX2), 8, small(learning_starts=10), seed=1)
     rng = np.random.default_rng(0)
     for _ in range(30):  # move the actor off its initialisation
         learner.act(rng.normal(size=(8, 7)).astype(np.float32))
@@ -359,7 +362,7 @@ def test_networks_without_squash_are_described_and_built_as_before():
 
 def test_actions_always_lie_within_the_box_bounds(one_thread):
     box = spaces.Box(np.array([-2.0, 0.5], np.float32), np.array([3.0, 0.75], np.float32), dtype=np.float32)
-    learner = SACLearner(Seat(spaces.Box(-np.inf, np.inf, (4,), np.float32), box), 256, small(learning_starts=512),
+    learner = SACLearner(SeatSpace(spaces.Box(-np.inf, np.inf, (4,), np.float32), box), 256, small(learning_starts=512),
                          seed=0)
     rng = np.random.default_rng(0)
     low, high = box.low, box.high
@@ -390,7 +393,7 @@ def test_registry_and_refusal_of_other_action_spaces_in_one_line():
     assert LEARNERS["sac"] is SACLearner and get_learner("sac") is SACLearner and SACLearner.config_class is SACConfig
     for space, shown in ((spaces.Discrete(3), "Discrete(3)"), (spaces.MultiDiscrete([3, 2]), "MultiDiscrete([3, 2])")):
         with pytest.raises(MarlError) as e:
-            SACLearner(Seat(BOX2, space), 4)
+            SACLearner(SeatSpace(BOX2, space), 4)
         msg = str(e.value)
         assert msg.startswith("SAC learns Box (continuous) actions only") and shown in msg and "--algo ppo" in msg
         assert "\n" not in msg

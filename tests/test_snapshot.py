@@ -12,20 +12,10 @@ import pytest
 import torch
 from safetensors.torch import save_file
 
-from selfplay_cli.policies.network import Arch, MLPNet, NetworkPolicy, build_network, resolve_device
-from selfplay_cli.policies.snapshot import (
-    FORMAT,
-    FORMAT_VERSION,
-    SnapshotError,
-    SnapshotMeta,
-    export_snapshot,
-    file_sha256,
-    import_check,
-    load_policy,
-    load_snapshot,
-    read_meta,
-    save_snapshot,
-)
+from selfplay_cli.policies.network import Arch, MLPNet, NetworkPolicy, SnapshotError, build_network, resolve_device
+from selfplay_cli.policies.snapshot_format import FORMAT, FORMAT_VERSION, SnapshotMeta, file_sha256, save_snapshot
+from selfplay_cli.policies.snapshot_policy import load_policy
+from selfplay_cli.policies.snapshot_reader import export_snapshot, import_check, load_snapshot, read_meta
 
 OBS_SHAPE = (8, 6)
 
@@ -311,7 +301,7 @@ def test_weights_not_fitting_arch_refused(saved, tmp_path):
     # a file whose header lies about the arch (consistent checksum) is refused at load, naming the file
     tensors, _ = load_snapshot(path)
     tensors["extra.weight"] = torch.zeros(2)
-    from selfplay_cli.policies.snapshot import weights_sha256
+    from selfplay_cli.policies.snapshot_format import weights_sha256
 
     lying = meta.to_dict() | {"weights_sha256": weights_sha256(tensors)}
     _rewrite_header(path, tensors, format=FORMAT, format_version="1", marl=json.dumps(lying))

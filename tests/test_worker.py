@@ -22,7 +22,7 @@ from selfplay_cli.cli import main
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot import SnapshotMeta, save_snapshot
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 from selfplay_cli.train import loop
 from selfplay_cli.train.evaluator import MAX_RESTARTS, Evaluator, GauntletJob, RatingWorkerError
 from selfplay_cli.train.lock import claim, process_start

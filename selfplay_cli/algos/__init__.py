@@ -1,14 +1,17 @@
-"""Learners behind one interface (:class:`Learner`), registered by name in :data:`LEARNERS`: each algorithm one
-file that reads top to bottom (PPO, DQN, SAC), and the optimiser they share.
+"""Learners behind one interface (:class:`Learner`, :mod:`.base`), registered by name in :data:`LEARNERS`: each
+algorithm one file that reads top to bottom (:mod:`.ppo`, :mod:`.dqn`, :mod:`.sac`), and what they share: the
+replay buffer and n-step returns of the off-policy learners (:mod:`.replay`), the flat Adam optimiser
+(:mod:`.optim`), kickstarting from a teacher (:mod:`.kickstart`) and any learner as one agent for a cooperative
+team (:mod:`.joint`, ``--sharing sa``).
 
 A learner is built from its seat's spaces and its config dataclass: ``LEARNERS[name](seat, n_slots, config,
-seed=..., device=...)``, ``seat`` a :class:`selfplay_cli.envs.SeatSpace` (or :class:`Seat`).
+seed=..., device=...)``, ``seat`` a :class:`selfplay_cli.envs.SeatSpace`.
 """
 
 from __future__ import annotations
 
 from ..errors import MarlError
-from .base import Learner, Seat
+from .base import Learner
 from .dqn import DQNConfig, DQNLearner
 from .optim import FlatAdam, flatten
 from .ppo import PPOConfig, PPOLearner
@@ -27,4 +30,4 @@ def get_learner(name: str) -> type:
 
 
 __all__ = ["LEARNERS", "DQNConfig", "DQNLearner", "FlatAdam", "Learner", "PPOConfig", "PPOLearner", "SACConfig",
-           "SACLearner", "Seat", "flatten", "get_learner"]
+           "SACLearner", "flatten", "get_learner"]

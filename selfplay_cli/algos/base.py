@@ -32,26 +32,16 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 import torch
 from gymnasium import spaces
 
+from ..envs import SeatSpace
 from ..errors import MarlError, NonFiniteError
 from ..policies.network import MLPNet, NetworkPolicy
-from ..policies.spaces import ActionHead, SpaceError, box_of_shape, describe_space
-
-
-@dataclass(frozen=True)
-class Seat:
-    """What a learner is built from: a seat's observation Box, its action space and whether it has action masks
-    (the fields of :class:`selfplay_cli.envs.SeatSpace`, which any learner also takes)."""
-
-    observation: spaces.Box
-    action: spaces.Space
-    mask: bool = False
+from ..policies.spaces import ActionHead, SpaceError, describe_space
 
 
 @runtime_checkable
@@ -64,7 +54,7 @@ class Learner(Protocol):
     n_slots: int
 
     @staticmethod
-    def check_seat(seat: Any) -> ActionHead:
+    def check_seat(seat: SeatSpace) -> ActionHead:
         """The head for a seat's actions, or one clear error if the algorithm cannot learn them (checked before a
         run is created)."""
         ...
@@ -85,30 +75,18 @@ class Learner(Protocol):
     def load_state_dict(self, state: dict[str, Any]) -> None: ...
 
 
-def learner_args(seat: Any, n_slots: Any, config: Any, legacy: Sequence[Any],
-                 config_class: type) -> tuple[Seat, int, Any]:
-    """The (seat, slots, config) a learner is built from, given either ``(seat, n_slots, config)`` (a
-    :class:`Seat` or any object with ``observation`` and ``action``) or the older
-    ``(obs_shape, n_actions_or_action_space, n_slots, config)``."""
-    if hasattr(seat, "observation") and hasattr(seat, "action"):
-        if legacy:
-            raise TypeError("a learner takes (seat, n_slots, config) and keyword-only seed and device")
-        obs, act, mask = seat.observation, seat.action, bool(getattr(seat, "mask", False))
-    else:  # (obs_shape, n_actions or action space, n_slots, config)
-        if len(legacy) > 1:
-            raise TypeError("a learner takes (obs_shape, action_space, n_slots, config) and keyword-only seed "
-                            "and device")
-        obs = seat if isinstance(seat, spaces.Box) else box_of_shape(tuple(seat))
-        act = spaces.Discrete(int(n_slots)) if isinstance(n_slots, (int, np.integer)) else n_slots
-        n_slots, config = config, (legacy[0] if legacy else None)
-        mask = False
+def learner_args(seat: SeatSpace, n_slots: Any, config: Any, config_class: type) -> tuple[SeatSpace, int, Any]:
+    """The (seat, slots, config) a learner is built from, checked: ``seat`` a :class:`SeatSpace`, at least one
+    slot, and ``config`` an instance of ``config_class`` (None: its defaults)."""
+    if not isinstance(seat, SeatSpace):
+        raise TypeError(f"a learner is built from a SeatSpace, not {type(seat).__name__}")
     if not isinstance(n_slots, (int, np.integer)) or isinstance(n_slots, bool) or n_slots < 1:
         raise ValueError(f"a learner needs at least one slot, not {n_slots!r}")
     if config is None:
         config = config_class()
     elif not isinstance(config, config_class):
         raise TypeError(f"expected a {config_class.__name__}, not {type(config).__name__}")
-    return Seat(obs, act, mask), int(n_slots), config
+    return seat, int(n_slots), config
 
 
 def action_head(algo: str, space: spaces.Space, only: tuple[str, str] | None = None, advice: str = "") -> ActionHead:

@@ -1,8 +1,8 @@
 """DQN (double DQN, Huber loss, target network, epsilon-greedy) for a learner that drives some slots of the games.
 
-Reads top to bottom as CleanRL's dqn.py does: the hyperparameters with their meaning, the epsilon schedule, the
-replay buffer, the TD target, the learner. Same interface as :class:`~selfplay_cli.algos.ppo.PPOLearner`, so one
-trainer loop drives both::
+Reads top to bottom as CleanRL's dqn.py does: the hyperparameters with their meaning, the epsilon schedule, the TD
+target, the learner (its replay buffer and n-step returns: :mod:`selfplay_cli.algos.replay`). Same interface as
+:class:`~selfplay_cli.algos.ppo.PPOLearner`, so one trainer loop drives both::
 
     obs = games.observe()
     while ...:
@@ -14,14 +14,14 @@ trainer loop drives both::
 Units. A *transition* is one step of one slot (one game seat). A *learner step* is one ``act`` call, i.e.
 ``n_slots`` transitions. Everything that counts experience counts transitions (``buffer_size``,
 ``learning_starts``, the epsilon schedules), so a config means the same with 1 game or 256; ``target_period``
-counts gradient updates. With one game per learner, as in seed 000, a transition is an env step.
+counts gradient updates. With one game per learner a transition is an env step.
 
 Per transition collected, ``replay_ratio`` gradient updates are due (fractions carry over: 1/32 with 128
 slots is 4 updates per learner step, with 1 slot one update every 32 steps). Each update samples ``batch_size``
 transitions uniformly and minimises ``loss(Q(s, a), y)`` (Huber or MSE) with, for n-step returns
 (``n_step`` = n; n = 1 is classic DQN) R = r_t + gamma r_{t+1} + ... + gamma^(n-1) r_{t+n-1} and s' = s_{t+n},
     y = R + gamma^n * (1 - done) * Q_target(s', argmax_a' Q(s', a'))     (double DQN)
-    y = R + gamma^n * (1 - done) * max_a' Q_target(s', a')               (plain DQN, seed 000)
+    y = R + gamma^n * (1 - done) * max_a' Q_target(s', a')               (plain DQN)
 Every ``target_period`` updates the target moves to ``tau * online + (1 - tau) * target`` (tau = 1: a copy).
 A game that ends (won or lost) is a done: the value after it is not bootstrapped, and an n-step return stops at
 it. A game cut short by a time limit (``truncated``, with its final observation) ends the return there too but
@@ -37,11 +37,11 @@ end of the game), its reward the sum of the rewards in between; n-step returns c
 waits in the learner until the seat's next one or the end of its game.
 
 Auto-reset. The games restart a finished game at once, so the observation that follows a done is the *next*
-game's first, and that is what lands in ``next_obs`` of a transition whose steps include a done. It is
-harmless: with done = 1 the target ignores ``next_obs``. Transitions are completed lazily: ``act(obs)``
-remembers (obs, actions), ``record`` stashes (rewards, dones), and the next observation (given to ``update`` or
-the next ``act``; with masks only the next ``act``, which brings the mask of s') closes them and pushes the whole
-batch of slots into the ring buffer in one vectorised write.
+game's first, and that is what lands in ``next_obs`` of a transition that ends its game. It is harmless: with
+done = 1 the target ignores ``next_obs``. Transitions are completed lazily: ``act(obs)`` remembers (obs, actions),
+``record`` stashes (rewards, dones), and the next observation (given to ``update`` or the next ``act``; with masks
+only the next ``act``, which brings the mask of s') closes them and hands the whole batch of slots to the n-step
+chains, whose completed transitions go into the ring buffer in one vectorised write.
 
 Resume. :meth:`DQNLearner.state_dict` holds the online and target networks, the optimiser, the random generator
 and the counters, but not the replay buffer (up to ~40 MB per learner; most DQN implementations do the same).
@@ -59,12 +59,14 @@ import numpy as np
 import torch
 from torch import nn
 
+from ..envs import SeatSpace
 from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead, uniform_allowed
 from ..signals import stop_requested
-from .base import Seat, action_head, as_bool, check_steps, fix_mask, learner_args
+from .base import action_head, as_bool, check_steps, fix_mask, learner_args
 from .optim import FlatAdam, flatten
+from .replay import NStepChains, ReplayBuffer, store_decisions
 
 STEP_FIGURES = ("the TD loss", "the mean Q-value", "the gradient norm")  # a gradient step's figures, checked finite
 EPS_SCHEDULES = ("linear", "exponential")
@@ -77,18 +79,18 @@ class DQNConfig:
     batch_size: int = 512  # transitions per gradient update (512 costs ~1.15x a 256 batch here: fewer, larger steps)
     lr: float = 2.5e-4  # Adam learning rate
     gamma: float = 0.99  # discount
-    n_step: int = 3  # n-step returns: bootstrap from the state n steps later (1: classic DQN, seed 000)
+    n_step: int = 3  # n-step returns: bootstrap from the state n steps later (1: classic DQN)
     replay_ratio: float = 1 / 32  # gradient updates per transition (CleanRL: 1 / train_frequency); each is seen ~16x
     target_period: int = 125  # gradient updates between target-network updates (every 4,000 transitions)
     tau: float = 1.0  # target update: 1 copies the online net (hard update), < 1 is Polyak averaging
     learning_starts: int = 5_000  # updates start once the buffer holds this many transitions (and refilled)
-    eps_schedule: str = "linear"  # "linear" (CleanRL) or "exponential" (seed 000)
+    eps_schedule: str = "linear"  # "linear" (CleanRL) or "exponential" (--preset seed000)
     eps_start: float = 1.0  # epsilon at transition 0
     eps_end: float = 0.05  # final epsilon (the floor of the exponential schedule)
     eps_decay_steps: int = 100_000  # linear: transitions over which epsilon goes from eps_start to eps_end
     eps_decay: float = 0.995  # exponential: epsilon = max(eps_end, eps_start * eps_decay ** transitions)
     double_dqn: bool = True  # choose the next action with the online net, value it with the target net
-    loss: str = "huber"  # "huber" (smooth L1) or "mse" (seed 000)
+    loss: str = "huber"  # "huber" (smooth L1) or "mse" (--preset seed000)
     max_grad_norm: float = 10.0  # gradient clipping; 0 turns it off
     bootstrap_truncated: bool = True  # a game cut short bootstraps from its final observation (False: an end)
     arch: Arch = field(default_factory=lambda: Arch(hidden=(64, 64), activation="relu", value_head=False))
@@ -119,12 +121,11 @@ class DQNConfig:
 
 
 def seed000_config() -> DQNConfig:
-    """Seed 000's DQN exactly (``--preset seed000``): its network, optimiser, buffer and schedules.
-
-    The seed trains once per env step (replay ratio 1), copies the target every 250 steps (= 250 updates),
-    starts at step 2000, and decays epsilon by x0.995 per step to 0.25, which reaches the floor after 277
-    steps, long before learning starts. Plain (not double) DQN, MSE loss, no gradient clipping. It is slow
-    with many games: one gradient update per transition.
+    """The DQN of ``--preset seed000`` (where it comes from: docs/history/learners.md): a 512-512-256-128-64 MLP,
+    one gradient update per transition (replay ratio 1), a target copied every 250 updates, learning from
+    transition 2000, epsilon decayed by x0.995 per transition to 0.25 (the floor after 277 transitions, long before
+    learning starts), plain (not double) DQN, MSE loss, no gradient clipping. It is slow with many games: one
+    gradient update per transition.
     """
     return DQNConfig(
         buffer_size=100_000, batch_size=64, lr=1e-3, gamma=0.99, n_step=1, replay_ratio=1.0, target_period=250, tau=1.0,
@@ -144,90 +145,24 @@ def epsilon_at(cfg: DQNConfig, transitions: int) -> float:
     return cfg.eps_start + frac * (cfg.eps_end - cfg.eps_start)
 
 
-class ReplayBuffer:
-    """A ring of preallocated numpy arrays: obs and next_obs (float32, flattened), actions, rewards, dones, the
-    discount of each transition's bootstrap (gamma^steps to s'; 1 when not given) and, once a transition comes
-    with one, the action mask of its s' (True everywhere for transitions without).
-
-    ``add`` writes a whole batch of slots at once; once full, each write overwrites the oldest entries, so the
-    buffer always holds the newest ``capacity`` transitions. ``sample`` draws uniformly (with replacement)
-    from the filled entries with the caller's generator.
-    """
-
-    def __init__(self, capacity: int, obs_dim: int) -> None:
-        self.capacity = int(capacity)
-        self.obs = np.zeros((capacity, obs_dim), dtype=np.float32)
-        self.next_obs = np.zeros((capacity, obs_dim), dtype=np.float32)
-        self.actions = np.zeros(capacity, dtype=np.int64)
-        self.rewards = np.zeros(capacity, dtype=np.float32)
-        self.dones = np.zeros(capacity, dtype=np.float32)
-        self.discounts = np.ones(capacity, dtype=np.float32)
-        self.next_masks: np.ndarray | None = None  # (capacity, n_actions) bool, made by the first masked add
-        self.pos = 0  # next entry to write
-        self.size = 0  # filled entries
-
-    def __len__(self) -> int:
-        return self.size
-
-    def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray, next_obs: np.ndarray,
-            dones: np.ndarray, discounts: np.ndarray | float = 1.0, next_masks: np.ndarray | None = None) -> None:
-        n = len(actions)
-        discounts = np.broadcast_to(np.asarray(discounts, dtype=np.float32), (n,))
-        if next_masks is not None and self.next_masks is None:
-            self.next_masks = np.ones((self.capacity, next_masks.shape[1]), dtype=bool)
-        if n > self.capacity:  # only the newest fit
-            obs, actions, rewards, next_obs, dones, discounts = (x[n - self.capacity:] for x in
-                                                                 (obs, actions, rewards, next_obs, dones, discounts))
-            next_masks = None if next_masks is None else next_masks[n - self.capacity:]
-            n = self.capacity
-        end = self.pos + n
-        if end <= self.capacity:  # one contiguous write (the common case)
-            at: slice | np.ndarray = slice(self.pos, end)
-        else:
-            at = np.arange(self.pos, end) % self.capacity
-        self.obs[at] = obs
-        self.next_obs[at] = next_obs
-        self.actions[at] = actions
-        self.rewards[at] = rewards
-        self.dones[at] = dones
-        self.discounts[at] = discounts
-        if self.next_masks is not None:
-            self.next_masks[at] = True if next_masks is None else next_masks
-        self.pos = end % self.capacity
-        self.size = min(self.size + n, self.capacity)
-
-    def sample(self, rng: np.random.Generator, size: int | tuple[int, ...]) -> dict[str, np.ndarray]:
-        """``size`` transitions drawn uniformly from the filled entries; ``(k, batch)`` draws k batches at once."""
-        if self.size == 0:
-            raise RuntimeError("cannot sample from an empty replay buffer")
-        idx = rng.integers(0, self.size, size=size)
-        out = {"obs": self.obs[idx], "actions": self.actions[idx], "rewards": self.rewards[idx],
-               "next_obs": self.next_obs[idx], "dones": self.dones[idx], "discounts": self.discounts[idx]}
-        if self.next_masks is not None:
-            out["next_masks"] = self.next_masks[idx]
-        return out
-
-
 class DQNLearner:
     """An online Q-network, its target copy, its optimiser and its replay buffer over ``n_slots`` slots.
 
     Built as ``DQNLearner(seat, n_slots, config, seed=0, device="cpu")`` from the seat's spaces (Discrete actions
-    only: anything else is a :class:`~selfplay_cli.errors.MarlError` naming the space); the older form
-    ``DQNLearner(obs_shape, n_actions, n_slots, config, ...)`` still works.
+    only: anything else is a :class:`~selfplay_cli.errors.MarlError` naming the space).
     """
 
     name = "dqn"
     config_class = DQNConfig
 
     @staticmethod
-    def check_seat(seat: Any) -> ActionHead:
+    def check_seat(seat: SeatSpace) -> ActionHead:
         """The head for the seat's actions, or one clear :class:`MarlError` (DQN plays Discrete actions only)."""
         return action_head("DQN", seat.action, ("discrete", "Discrete"), "use --algo ppo")
 
-    def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
+    def __init__(self, seat: SeatSpace, n_slots: int, config: DQNConfig | None = None, *, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:
-        self.seat: Seat
-        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, legacy, DQNConfig)
+        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, DQNConfig)
         self.cfg = cfg
         self.head = self.check_seat(self.seat)
         self.device = torch.device(device)
@@ -241,11 +176,11 @@ class DQNLearner:
         self.target_flat = flatten(self.target.parameters())  # the target update is one operation on it
         self.rng = np.random.default_rng(seed)  # exploration and replay sampling
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_dim)
+        self.chains = NStepChains(cfg.n_step, cfg.gamma, n_slots, self.obs_dim, (), np.int64)
         self.transitions = 0  # collected so far (drives epsilon)
         self.grad_steps = 0  # gradient updates so far (drives the target updates)
         self.updates = 0  # update() calls that made at least one gradient update
         self.credit = 0.0  # gradient updates due but not yet made (replay_ratio per transition)
-        self.n_discount = np.float32(cfg.gamma ** cfg.n_step)  # an n-step transition's bootstrap discount
         # The step in flight: obs, actions and mask from act(), rewards, dones and truncations from record().
         self._obs: np.ndarray | None = None
         self._actions: np.ndarray | None = None
@@ -254,7 +189,6 @@ class DQNLearner:
         self._dones: np.ndarray | None = None
         self._trunc: tuple[np.ndarray, np.ndarray | None, np.ndarray | None] | None = None  # (cut, final obs, mask)
         self._masked = False  # masks were given: transitions close at the next act(), which brings s' mask
-        self._window: list[tuple[Any, ...]] = []  # the last n_step - 1 completed steps (n-step returns)
         self._turns: dict[str, np.ndarray] | None = None  # turn-based games: decisions in flight (see _turn_step)
         self._held: dict[str, Any] | None = None  # turns: decisions ended by a truncation, awaiting final_obs
         del n_actions
@@ -272,41 +206,24 @@ class DQNLearner:
         return (self._trunc is not None and self._trunc[1] is None) or self._held is not None
 
     def _push(self, next_obs: np.ndarray, next_mask: np.ndarray | None = None) -> None:
-        """Close the step in flight with the observations that followed it; store the transitions it completes.
-
-        With ``n_step`` > 1 the last n steps of every slot wait in a window; the oldest becomes the transition
-        (s_t, a_t, R, s_{t+n}, done) with R = r_t + gamma r_{t+1} + ... cut after the first done in the window
-        (where that done is a truncation, s' is the game's final observation, done 0, the discount gamma^k).
-        """
+        """Close the step in flight with the observations that followed it and store the n-step transitions it
+        completes (:func:`~selfplay_cli.algos.replay.store_decisions`): s' is ``next_obs``, or where a game was cut
+        short its final observation (and mask), with done 0."""
         if self._obs is None or self._rewards is None or self._turns is not None:
             return
-        self._window.append((self._obs, self._actions, self._rewards, self._dones, self._trunc))
+        assert self._actions is not None and self._dones is not None
+        dones, ended = self._dones, self._dones > 0
+        if self._trunc is not None:
+            cut, final, fmask = self._trunc
+            assert final is not None
+            next_obs, dones = next_obs.copy(), dones.copy()
+            next_obs[cut], dones[cut] = final[cut], 0.0
+            if fmask is not None:
+                next_mask = np.ones_like(fmask) if next_mask is None else next_mask.copy()
+                next_mask[cut] = fmask[cut]
+        store_decisions(self.buffer, self.chains, np.arange(len(dones)), self._obs, self._actions, self._rewards,
+                        next_obs, dones, ended, next_mask)
         self._obs = self._actions = self._rewards = self._dones = self._trunc = None
-        if len(self._window) < self.cfg.n_step:
-            return
-        obs, actions, ret, done0, trunc = self._window.pop(0)
-        ret, done = ret.copy(), done0.copy()
-        discount = 1.0
-        for _, _, r, d, _ in self._window:  # later steps count until the slot's game ends
-            discount *= self.cfg.gamma
-            ret += discount * (1.0 - done) * r
-            np.maximum(done, d, out=done)
-        discounts = np.full(len(ret), self.n_discount, dtype=np.float32)
-        if trunc is not None or any(w[4] is not None for w in self._window):
-            next_obs, next_mask = next_obs.copy(), None if next_mask is None else next_mask.copy()
-            ended = np.zeros(len(ret), dtype=bool)
-            for k, (_, _, _, d, cut) in enumerate([(obs, actions, ret, done0, trunc), *self._window]):
-                if cut is not None:
-                    first = cut[0] & ~ended  # the slot's game ends here, cut short: bootstrap from its end
-                    if first.any():
-                        done[first] = 0.0
-                        next_obs[first] = cut[1][first]  # type: ignore[index]
-                        discounts[first] = self.cfg.gamma ** (k + 1)
-                        if cut[2] is not None:
-                            next_mask = np.ones_like(cut[2]) if next_mask is None else next_mask
-                            next_mask[first] = cut[2][first]
-                ended |= d > 0
-        self.buffer.add(obs, actions, ret, next_obs, done, discounts, next_mask)
 
     @torch.no_grad()
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
@@ -336,7 +253,7 @@ class DQNLearner:
             greedy = q.argmax(dim=1).cpu().numpy()
             actions = np.where(explore, actions, greedy)
         if self._obs is not None and self._turns is None:  # an earlier step left without record() is dropped
-            self._window.clear()
+            self.chains.clear()
         self._obs, self._actions, self._mask = x, actions, m
         return actions
 
@@ -394,12 +311,10 @@ class DQNLearner:
     # -- turn-based games -----------------------------------------------------------------------------------
     def _start_turns(self) -> None:
         """From now on, transitions run from decision to decision (on the first step that says who acted)."""
-        b, d, k = self.n_slots, self.obs_dim, self.cfg.n_step - 1
-        self._window.clear()
+        b, d = self.n_slots, self.obs_dim
+        self.chains.clear()
         self._turns = {"obs": np.zeros((b, d), np.float32), "act": np.zeros(b, np.int64),
-                       "rew": np.zeros(b, np.float32), "valid": np.zeros(b, bool),
-                       "ring_obs": np.zeros((k, b, d), np.float32), "ring_act": np.zeros((k, b), np.int64),
-                       "ring_rew": np.zeros((k, b), np.float32), "count": np.zeros(b, np.int64)}
+                       "rew": np.zeros(b, np.float32), "valid": np.zeros(b, bool)}
 
     def _turn_step(self, rewards: np.ndarray, dones: np.ndarray, cut: np.ndarray | None, acts: np.ndarray,
                    final_obs: np.ndarray | None, final_mask: np.ndarray | None) -> None:
@@ -409,9 +324,9 @@ class DQNLearner:
         assert p is not None and self._obs is not None and self._actions is not None
         close = np.flatnonzero(acts & p["valid"])
         if close.size:  # the seat decides again: its previous decision's s' is this observation
-            self._emit(close, p["obs"][close], p["act"][close], p["rew"][close], self._obs[close],
-                       None if self._mask is None else self._mask[close], np.zeros(close.size, np.float32),
-                       ended=False)
+            store_decisions(self.buffer, self.chains, close, p["obs"][close], p["act"][close], p["rew"][close],
+                            self._obs[close], np.zeros(close.size, np.float32), False,
+                            None if self._mask is None else self._mask[close])
         p["obs"][acts], p["act"][acts], p["rew"][acts] = self._obs[acts], self._actions[acts], 0.0
         p["valid"] |= acts
         p["rew"] += np.where(p["valid"], rewards, 0.0).astype(np.float32)
@@ -441,55 +356,8 @@ class DQNLearner:
         if next_mask is None and self._masked:
             next_mask = np.ones((rows.size, self.n_actions), dtype=bool)
         self._held = None
-        self._emit(rows, h["obs"], h["act"], h["rew"], next_obs, next_mask, (~boot).astype(np.float32), ended=True)
-
-    def _emit(self, rows: np.ndarray, obs: np.ndarray, act: np.ndarray, rew: np.ndarray, next_obs: np.ndarray,
-              next_mask: np.ndarray | None, done: np.ndarray, ended: bool) -> None:
-        """Decision-to-decision transitions of ``rows`` into each slot's n-step chain: a chain of n decisions
-        gives its oldest one's n-step transition; a game's end gives every decision in its chain its return up to
-        the end (discount gamma^k, k the decisions from it to the end)."""
-        p = self._turns
-        assert p is not None
-        g, k_max = self.cfg.gamma, self.cfg.n_step - 1
-        count = p["count"][rows]
-        m = rows.size
-        # Each row's chain: ring entries 0 .. count-1, then this decision at position count.
-        seq_obs = np.zeros((k_max + 1, m, self.obs_dim), np.float32)
-        seq_act = np.zeros((k_max + 1, m), np.int64)
-        seq_rew = np.zeros((k_max + 1, m), np.float32)
-        cols = np.arange(m)
-        for j in range(k_max):
-            seq_obs[j], seq_act[j], seq_rew[j] = p["ring_obs"][j, rows], p["ring_act"][j, rows], p["ring_rew"][j, rows]
-        seq_obs[count, cols], seq_act[count, cols], seq_rew[count, cols] = obs, act, rew
-        ret = np.zeros((k_max + 2, m), np.float32)  # ret[j]: the return from position j to the chain's end
-        for j in reversed(range(k_max + 1)):
-            ret[j] = np.where(j <= count, seq_rew[j] + g * ret[j + 1], 0.0)
-        full = count == k_max
-        out: list[tuple[np.ndarray, ...]] = []
-        for j in range(k_max + 1):
-            take = (j <= count) if ended else (full & (j == 0))
-            if not take.any():
-                continue
-            steps = count[take] - j + 1
-            nm = None if next_mask is None else next_mask[take]
-            out.append((seq_obs[j, take], seq_act[j, take], ret[j, take], next_obs[take], done[take],
-                        (g ** steps).astype(np.float32), nm))
-        for o, a, r, s2, d, disc, nm in out:
-            self.buffer.add(o, a, r, s2, d, disc, nm)
-        if ended:
-            p["count"][rows] = 0
-            return
-        keep = rows[full]  # the chain moves on by one: entries 1 .. k_max
-        if keep.size:
-            f = np.flatnonzero(full)
-            for j in range(k_max):
-                p["ring_obs"][j, keep], p["ring_act"][j, keep] = seq_obs[j + 1, f], seq_act[j + 1, f]
-                p["ring_rew"][j, keep] = seq_rew[j + 1, f]
-        grow = ~full
-        if grow.any():
-            r_g, c_g = rows[grow], count[grow]
-            p["ring_obs"][c_g, r_g], p["ring_act"][c_g, r_g], p["ring_rew"][c_g, r_g] = obs[grow], act[grow], rew[grow]
-            p["count"][r_g] = c_g + 1
+        store_decisions(self.buffer, self.chains, rows, h["obs"], h["act"], h["rew"], next_obs,
+                        (~boot).astype(np.float32), True, next_mask)
 
     # -- learning -------------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -594,7 +462,7 @@ class DQNLearner:
         self.updates = int(state["updates"])
         self.credit = float(state["credit"])
         self._obs = self._actions = self._mask = self._rewards = self._dones = self._trunc = None
-        self._window.clear()
+        self.chains.clear()
         self._held = None
         if self._turns is not None:
             self._start_turns()

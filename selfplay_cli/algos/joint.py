@@ -1,9 +1,9 @@
-"""SA: any registered learner as one agent for a whole cooperative team (seed 001's single-agent mode).
+"""SA: any registered learner as one agent for a whole cooperative team (``--sharing sa``).
 
 The trainer hands a learner its slots seat by seat: ``(N * G, obs)`` for N seats of G games. :class:`JointLearner`
 regroups them into one row per game (every seat's observation side by side), lets the inner learner (PPO or DQN,
 built on the joint spaces of :func:`selfplay_cli.policies.joint.joint_spaces`) choose one joint action per game, and
-decodes it into each seat's action. The team's reward is the sum over its seats (seed 001's team reward); a game is
+decodes it into each seat's action. The team's reward is the sum over its seats; a game is
 over for the agent when it is over; a truncated game bootstraps from the joint final observation.
 """
 
@@ -13,28 +13,28 @@ from typing import Any
 
 import numpy as np
 
+from ..envs import SeatSpace
 from ..errors import MarlError
 from ..policies.joint import JointPolicy, decode, joint_spaces, regroup
-from .base import Seat
 
 
 class JointLearner:
     """``inner_cls`` over the joint spaces of ``n_seats`` seats like ``seat``, for ``n_games`` games."""
 
-    def __init__(self, inner_cls: type, seat: Any, n_seats: int, n_games: int, config: Any, *, seed: int = 0,
+    def __init__(self, inner_cls: type, seat: SeatSpace, n_seats: int, n_games: int, config: Any, *, seed: int = 0,
                  device: Any = "cpu") -> None:
-        if getattr(seat, "mask", False):
+        if seat.mask:
             raise MarlError("--sharing sa plays games without action masks")
         obs, act = joint_spaces(seat.observation, seat.action, n_seats)
         self.seat_space, self.n, self.games = seat, int(n_seats), int(n_games)
         self.base = int(seat.action.n)
-        self.inner = inner_cls(Seat(obs, act, False), self.games, config, seed=seed, device=device)
+        self.inner = inner_cls(SeatSpace(obs, act, False), self.games, config, seed=seed, device=device)
         self.net = self.inner.net
         self.n_slots = self.n * self.games
         self.name = getattr(inner_cls, "name", "")
 
     @property
-    def joint_seat(self) -> Seat:
+    def joint_seat(self) -> SeatSpace:
         return self.inner.seat
 
     def _games(self, per_seat: np.ndarray) -> np.ndarray:

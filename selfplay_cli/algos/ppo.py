@@ -41,12 +41,13 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..envs import SeatSpace
 from ..errors import NonFiniteError
 from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
 from ..signals import stop_requested
-from .base import Seat, action_head, as_bool, check_steps, fix_mask, learner_args, values_of
+from .base import action_head, as_bool, check_steps, fix_mask, learner_args, values_of
 from .kickstart import Imitation
 from .optim import FlatAdam
 
@@ -94,23 +95,21 @@ class PPOConfig:
 class PPOLearner:
     """One network, its optimiser and its rollout buffer over ``n_slots`` slots of the games.
 
-    Built as ``PPOLearner(seat, n_slots, config, seed=0, device="cpu")`` from the seat's spaces (a
-    :class:`~selfplay_cli.envs.SeatSpace` or :class:`~selfplay_cli.algos.base.Seat`); the older form
-    ``PPOLearner(obs_shape, n_actions, n_slots, config, ...)`` builds a Discrete(n_actions) learner.
+    Built as ``PPOLearner(seat, n_slots, config, seed=0, device="cpu")`` from the seat's
+    :class:`~selfplay_cli.envs.SeatSpace`.
     """
 
     name = "ppo"
     config_class = PPOConfig
 
     @staticmethod
-    def check_seat(seat: Any) -> ActionHead:
+    def check_seat(seat: SeatSpace) -> ActionHead:
         """The head for the seat's actions, or one clear :class:`MarlError` (an action space PPO cannot learn)."""
         return action_head("PPO", seat.action)
 
-    def __init__(self, seat: Any, n_slots: Any, config: Any = None, *legacy: Any, seed: int = 0,
+    def __init__(self, seat: SeatSpace, n_slots: int, config: PPOConfig | None = None, *, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:
-        self.seat: Seat
-        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, legacy, PPOConfig)
+        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, PPOConfig)
         self.cfg = cfg
         self.device = torch.device(device)
         self.head = self.check_seat(self.seat)
@@ -366,6 +365,43 @@ class PPOLearner:
         c.setdefault("masks", None)  # type: ignore[arg-type]
         self.carry = c
 
+    def _batch(self, next_obs: np.ndarray) -> dict[str, Any]:
+        """The rollout flat, one row a step of a slot (a decision, in turn-based games: with ``next_carry``, what
+        carries over): observations, actions, log-probabilities, values, advantages, returns and masks (or None)."""
+        if self.acting is not None:
+            return self._turn_batch()
+        adv, returns = self._advantages(next_obs)
+        return {"obs": self.obs.reshape(-1, self.obs.shape[-1]),
+                "actions": self.actions.reshape(-1, *self.actions.shape[2:]), "logprobs": self.logprobs.reshape(-1),
+                "values": self.values.reshape(-1), "adv": adv.reshape(-1), "returns": returns.reshape(-1),
+                "masks": None if self.masks is None else self.masks.reshape(-1, self.masks.shape[-1])}
+
+    def _minibatch_step(self, batch: dict[str, Any], idx: torch.Tensor, teaching: bool) -> torch.Tensor:
+        """One gradient step on the minibatch ``idx`` of ``batch``; returns its figures (:data:`STEP_FIGURES`)."""
+        cfg = self.cfg
+        out, value = self.net(batch["obs"].index_select(0, idx))
+        m = None if batch.get("masks") is None else batch["masks"].index_select(0, idx)
+        logp, ent = self.math.log_prob_entropy(out, batch["actions"].index_select(0, idx), m, self.net.log_std)
+        entropy = ent.mean()
+        log_ratio = logp - batch["logprobs"].index_select(0, idx)
+        ratio = log_ratio.exp()
+        a = batch["adv"].index_select(0, idx)
+        if cfg.norm_adv and a.numel() > 1:
+            a = (a - a.mean()) / (a.std() + 1e-8)
+        pg_loss = torch.max(-a * ratio, -a * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
+        v_loss = 0.5 * (value - batch["returns"].index_select(0, idx)).square().mean()
+        loss = pg_loss + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
+        imitation = torch.zeros((), device=self.device)
+        if teaching:
+            imitation = self.imitation.loss(self.net, idx.numel(), self.rng)  # type: ignore[union-attr]
+            loss = loss + self.teacher_weight * imitation
+        self.opt.zero_grad()
+        loss.backward()
+        grad_norm = self.opt.step()  # clips the gradient norm to max_grad_norm first
+        with torch.no_grad():
+            return torch.stack((pg_loss, v_loss, entropy, (ratio - 1 - log_ratio).mean(),
+                                ((ratio - 1).abs() > cfg.clip_coef).float().mean(), imitation, grad_norm))
+
     def update(self, next_obs: np.ndarray, progress: float = 0.0,
                final_obs: np.ndarray | None = None) -> dict[str, float]:
         """One PPO update on the full rollout; ``progress`` in [0, 1] anneals the learning rate. ``final_obs``: the
@@ -378,24 +414,12 @@ class PPOLearner:
             raise RuntimeError("update() before the rollout is full")
         if cfg.anneal_lr:
             self.opt.lr = cfg.lr * max(0.0, 1.0 - progress)
-        turns = None
-        if self.acting is None:
-            adv, returns = self._advantages(next_obs)
-            b_obs = self.obs.reshape(-1, self.obs.shape[-1])
-            b_act, b_logp = self.actions.reshape(-1, *self.actions.shape[2:]), self.logprobs.reshape(-1)
-            b_adv, b_ret, b_val = adv.reshape(-1), returns.reshape(-1), self.values.reshape(-1)
-            b_mask = None if self.masks is None else self.masks.reshape(-1, self.masks.shape[-1])
-        else:
-            batch = self._turn_batch()
-            b_obs, b_act, b_logp, b_val = batch["obs"], batch["actions"], batch["logprobs"], batch["values"]
-            b_adv, b_ret, b_mask = batch["adv"], batch["returns"], batch.get("masks")
-            turns = batch["next_carry"]
-        n = b_obs.shape[0]
+        batch = self._batch(next_obs)
+        turns = batch.get("next_carry")
+        n = batch["obs"].shape[0]
         mb = max(1, n // cfg.minibatches)
-        # per minibatch: policy loss, value loss, entropy, approx KL, clip fraction, imitation loss, gradient norm
-        rows: list[torch.Tensor] = []
+        rows: list[torch.Tensor] = []  # per minibatch: its figures (STEP_FIGURES)
         teaching = self.teacher_weight > 0 and self.imitation is not None and len(self.imitation) > 0
-        imitation = torch.zeros((), device=self.device)
         for _ in range(cfg.update_epochs if n else 0):
             if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
                 break
@@ -403,29 +427,7 @@ class PPOLearner:
             for start in range(0, n, mb):
                 if stop_requested():
                     break
-                idx = order[start:start + mb]
-                out, value = self.net(b_obs.index_select(0, idx))
-                m = None if b_mask is None else b_mask.index_select(0, idx)
-                logp, ent = self.math.log_prob_entropy(out, b_act.index_select(0, idx), m, self.net.log_std)
-                entropy = ent.mean()
-                log_ratio = logp - b_logp.index_select(0, idx)
-                ratio = log_ratio.exp()
-                a = b_adv.index_select(0, idx)
-                if cfg.norm_adv and a.numel() > 1:
-                    a = (a - a.mean()) / (a.std() + 1e-8)
-                pg_loss = torch.max(-a * ratio, -a * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
-                v_loss = 0.5 * (value - b_ret.index_select(0, idx)).square().mean()
-                loss = pg_loss + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
-                if teaching:
-                    imitation = self.imitation.loss(self.net, idx.numel(), self.rng)  # type: ignore[union-attr]
-                    loss = loss + self.teacher_weight * imitation
-                self.opt.zero_grad()
-                loss.backward()
-                grad_norm = self.opt.step()  # clips the gradient norm to max_grad_norm first
-                with torch.no_grad():
-                    rows.append(torch.stack((pg_loss, v_loss, entropy, (ratio - 1 - log_ratio).mean(),
-                                             ((ratio - 1).abs() > cfg.clip_coef).float().mean(), imitation,
-                                             grad_norm)))
+                rows.append(self._minibatch_step(batch, order[start:start + mb], teaching))
         count, per_epoch = len(rows), -(-n // mb)
         figures = torch.stack(rows) if rows else torch.zeros((0, len(STEP_FIGURES)), device=self.device)
         check_steps(figures, STEP_FIGURES, lambda r: f"update {self.updates + 1:,} (epoch {r // per_epoch + 1}, "
@@ -443,6 +445,7 @@ class PPOLearner:
             out["teacher_weight"] = self.teacher_weight
         else:
             del out["imitation_loss"]
+        b_ret, b_val = batch["returns"], batch["values"]
         out["explained_variance"] = float(1 - torch.var(b_ret - b_val) / (torch.var(b_ret) + 1e-8)) if n > 1 else 0.0
         out["lr"] = self.opt.lr
         if turns is not None:

@@ -1,8 +1,8 @@
 """SAC (twin critics, target critics, automatic entropy tuning) for a learner that drives some slots of the games.
 
-Reads top to bottom as CleanRL's sac_continuous_action.py does: the hyperparameters with their meaning, the replay
-buffer, the twin critics, the soft TD target, the learner. Same interface as
-:class:`~selfplay_cli.algos.ppo.PPOLearner` and :class:`~selfplay_cli.algos.dqn.DQNLearner` (see
+Reads top to bottom as CleanRL's sac_continuous_action.py does: the hyperparameters with their meaning, the twin
+critics, the soft TD target, the learner (its replay buffer and n-step returns: :mod:`selfplay_cli.algos.replay`).
+Same interface as :class:`~selfplay_cli.algos.ppo.PPOLearner` and :class:`~selfplay_cli.algos.dqn.DQNLearner` (see
 :mod:`selfplay_cli.algos.base`), so the one trainer loop drives it.
 
 Actions. SAC plays Box actions only (any other action space is refused in one line: use PPO or DQN). The actor
@@ -17,7 +17,7 @@ Per gradient step, on a batch of ``batch_size`` transitions (s, y, r, s', done) 
 with y' ~ pi(.|s') and its log-probability log pi(y'|s'), alpha = exp(log_alpha):
     target  = r + gamma * (1 - done) * (min(Q1_targ(s', y'), Q2_targ(s', y')) - alpha * log pi(y'|s'))
               (with ``n_step`` = n > 1: r the discounted rewards of n decisions, s' the state n decisions later and
-              gamma^n the discount, the return cut at a game's end: see :mod:`selfplay_cli.algos.nstep`)
+              gamma^n the discount, the return cut at a game's end: see :mod:`selfplay_cli.algos.replay`)
     critics:  (Q1(s, y) - target)^2 + (Q2(s, y) - target)^2, averaged over the batch
     actor:    alpha * log pi(y~|s) - min(Q1(s, y~), Q2(s, y~)),  y~ ~ pi(.|s) reparameterised
     alpha:    -log_alpha * (log pi(y~|s) + target_entropy)        (autotune; else alpha stays fixed)
@@ -61,14 +61,15 @@ import numpy as np
 import torch
 from torch import nn
 
+from ..envs import SeatSpace
 from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
 from ..signals import stop_requested
-from .base import Seat, action_head, as_bool, check_steps, learner_args
+from .base import action_head, as_bool, check_steps, learner_args
 from .kickstart import Imitation
-from .nstep import NStepChains
 from .optim import FlatAdam, flatten
+from .replay import NStepChains, ReplayBuffer, store_decisions
 
 # a gradient step's figures, in order (checked to be finite every update; the first five are its statistics)
 STEP_FIGURES = ("the critic loss", "the actor loss", "the mean Q-value", "the entropy", "the imitation loss",
@@ -77,18 +78,15 @@ STEP_FIGURES = ("the critic loss", "the actor loss", "the mean Q-value", "the en
 
 @dataclass
 class SACConfig:
-    """SAC's hyperparameters. The defaults are CleanRL's and seed 002's (lr 3e-4, 2 hidden layers, tau 0.005,
-    gamma 0.99, batch 256) sized for a 2-core CPU, measured on a 256-game vectorised Pendulum given 100 s of CPU per
-    setting (returns per 200-step game, greedy, at 25 s and at 100 s; random play ~-1200): layers of 128 make ~185
-    gradient steps/s and solved it within 25 s (-168, -152); 256 (seed 002's width) makes ~64/s at batch 256 or
-    ~135/s at batch 128 and got there later (-1297 then -380; -731 then -157); 64 makes ~333/s and learns too
-    (-178, -155), with less room for a harder game. A replay ratio of 1/64 (4 gradient steps per step of 256 games)
-    beat 1/256 (-454, -209): more gradient steps on fewer transitions, while the games are cheap beside the
-    updates."""
+    """SAC's hyperparameters. The defaults are CleanRL's (lr 3e-4, 2 hidden layers, tau 0.005, gamma 0.99,
+    batch 256) sized for a 2-core CPU: layers of 128 (wider layers make fewer gradient steps a second and learned
+    later; narrower ones leave less room for a harder game), and a replay ratio of 1/64, 4 gradient steps per step
+    of 256 games (more gradient steps on fewer transitions, while the games are cheap beside the updates). The
+    measurements behind these choices: docs/history/learners.md."""
 
     buffer_size: int = 300_000  # replay capacity in transitions; the oldest are overwritten
-    batch_size: int = 256  # transitions per gradient step (CleanRL 256; seed 002's best run 128)
-    lr: float = 3e-4  # Adam learning rate of the actor, the critics and the temperature (seed 002, the SAC paper)
+    batch_size: int = 256  # transitions per gradient step (CleanRL's)
+    lr: float = 3e-4  # Adam learning rate of the actor, the critics and the temperature (the SAC paper's)
     gamma: float = 0.99  # discount
     n_step: int = 1  # n-step returns: bootstrap from the decision n later (1: SAC's own one-step target)
     tau: float = 0.005  # Polyak step of the target critics, every gradient step
@@ -127,55 +125,6 @@ class SACConfig:
         d["arch"] = self.arch.to_dict()
         d["critic_hidden"] = list(self.critic_hidden)
         return d
-
-
-class ContinuousReplay:
-    """A ring of preallocated numpy arrays: obs and next_obs (float32, flattened), squashed actions, rewards, dones
-    and each transition's bootstrap discount (gamma^k for a return over k decisions).
-
-    ``add`` writes a batch of transitions at once (the oldest overwritten once full); ``sample`` draws uniformly,
-    with replacement, from the filled entries with the caller's generator; ``(k, batch)`` draws k batches at once.
-    """
-
-    def __init__(self, capacity: int, obs_dim: int, act_dim: int) -> None:
-        self.capacity = int(capacity)
-        self.obs = np.zeros((capacity, obs_dim), dtype=np.float32)
-        self.next_obs = np.zeros((capacity, obs_dim), dtype=np.float32)
-        self.actions = np.zeros((capacity, act_dim), dtype=np.float32)
-        self.rewards = np.zeros(capacity, dtype=np.float32)
-        self.dones = np.zeros(capacity, dtype=np.float32)
-        self.discounts = np.zeros(capacity, dtype=np.float32)
-        self.pos = 0
-        self.size = 0
-
-    def __len__(self) -> int:
-        return self.size
-
-    def add(self, obs: np.ndarray, actions: np.ndarray, rewards: np.ndarray, next_obs: np.ndarray,
-            dones: np.ndarray, discounts: np.ndarray | float) -> None:
-        n = len(rewards)
-        if n == 0:
-            return
-        discounts = np.broadcast_to(np.asarray(discounts, dtype=np.float32), (n,))
-        if n > self.capacity:  # only the newest fit
-            obs, actions, rewards, next_obs, dones, discounts = (
-                x[n - self.capacity:] for x in (obs, actions, rewards, next_obs, dones, discounts))
-            n = self.capacity
-        end = self.pos + n
-        at: slice | np.ndarray = slice(self.pos, end)
-        if end > self.capacity:
-            at = np.arange(self.pos, end) % self.capacity
-        self.obs[at], self.next_obs[at], self.actions[at] = obs, next_obs, actions
-        self.rewards[at], self.dones[at], self.discounts[at] = rewards, dones, discounts
-        self.pos = end % self.capacity
-        self.size = min(self.size + n, self.capacity)
-
-    def sample(self, rng: np.random.Generator, size: int | tuple[int, ...]) -> dict[str, np.ndarray]:
-        if self.size == 0:
-            raise RuntimeError("cannot sample from an empty replay buffer")
-        idx = rng.integers(0, self.size, size=size)
-        return {"obs": self.obs[idx], "actions": self.actions[idx], "rewards": self.rewards[idx],
-                "next_obs": self.next_obs[idx], "dones": self.dones[idx], "discounts": self.discounts[idx]}
 
 
 class TwinQ(nn.Module):
@@ -225,14 +174,13 @@ class SACLearner:
     config_class = SACConfig
 
     @staticmethod
-    def check_seat(seat: Any) -> ActionHead:
+    def check_seat(seat: SeatSpace) -> ActionHead:
         """The head for the seat's actions, or one clear :class:`MarlError` (SAC plays Box actions only)."""
         return action_head("SAC", seat.action, ("box", "Box (continuous)"), "use --algo ppo or dqn")
 
-    def __init__(self, seat: Any, n_slots: int, config: SACConfig | None = None, *, seed: int = 0,
+    def __init__(self, seat: SeatSpace, n_slots: int, config: SACConfig | None = None, *, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:
-        self.seat: Seat
-        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, (), SACConfig)
+        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, SACConfig)
         self.cfg = cfg
         self.head = self.check_seat(self.seat)
         self.device = torch.device(device)
@@ -254,7 +202,7 @@ class SACLearner:
         self.math = HeadMath(self.head, self.device)
         self.gen = torch.Generator(device=self.device).manual_seed(seed)  # the actor's samples
         self.rng = np.random.default_rng(seed)  # random warm-up actions and replay sampling
-        self.buffer = ContinuousReplay(cfg.buffer_size, self.obs_dim, self.act_dim)
+        self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_dim, (self.act_dim,), np.float32)
         self.chains = NStepChains(cfg.n_step, cfg.gamma, n_slots, self.obs_dim, (self.act_dim,))
         self.transitions = 0  # decisions collected so far (drives the random warm-up)
         self.grad_steps = 0
@@ -383,9 +331,8 @@ class SACLearner:
     def _store(self, rows: np.ndarray, obs: np.ndarray, act: np.ndarray, rew: np.ndarray, next_obs: np.ndarray,
                dones: np.ndarray, ended: bool = False) -> None:
         """The one-step decisions of slots ``rows`` whose s' is ``next_obs`` (``ended``: their games ended there)
-        into the buffer, as the n-step transitions they complete (:mod:`selfplay_cli.algos.nstep`)."""
-        src, o, a, r, discount = self.chains.push(rows, obs, act, rew, np.full(len(rows), ended))
-        self.buffer.add(o, a, r, next_obs[src], np.asarray(dones, np.float32)[src], discount)
+        into the buffer, as the n-step transitions they complete (:mod:`selfplay_cli.algos.replay`)."""
+        store_decisions(self.buffer, self.chains, rows, obs, act, rew, next_obs, dones, ended)
 
     def teach(self, obs: np.ndarray, actions: np.ndarray, mask: np.ndarray | None = None) -> None:
         """A teacher's actions (on the Box bounds) for observations this learner met: kept for the imitation term

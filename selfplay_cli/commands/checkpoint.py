@@ -58,7 +58,7 @@ def list_cmd(
 
 def _details(league, p) -> dict:
     """A player's league record, its lineage (parent, grandparent, ...) and its file's metadata."""
-    from ..policies.snapshot import read_meta
+    from ..policies.snapshot_reader import read_meta
 
     data = _row_json(p)
     lineage, parent = [], p.parent_id
@@ -182,7 +182,7 @@ def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination 
            env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
     """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
     from ..league.names import resolve
-    from ..policies.snapshot import export_snapshot, read_snapshot
+    from ..policies.snapshot_reader import export_snapshot, read_snapshot
     from ..rated.snapshots import check_file
 
     league = open_league(home, db, readonly=True)

@@ -1,4 +1,9 @@
-"""Players: the one ``Policy`` interface, scripted bots as policies, network policies and snapshot files."""
+"""Players: the one ``Policy`` interface (:mod:`.base`), scripted players as policies (:mod:`.bots`), network
+policies (:mod:`.network`: the MLP and its arch; :mod:`.heads`: the action heads' maths; :mod:`.bank`: many
+networks stacked to act at once), one agent for a whole team (:mod:`.joint`), the spaces a seat reads and acts in
+(:mod:`.spaces`), and snapshot files in three parts: the file format (:mod:`.snapshot_format`: metadata,
+checksums, limits, saving), the hostile-input reader (:mod:`.snapshot_reader`: every check before anything is
+built) and policy building from a checked file (:mod:`.snapshot_policy`)."""
 
 from .base import Policy
 from .bots import ScriptedPolicy
@@ -12,23 +17,23 @@ _LAZY = {
     "NetworkPolicy": "network",
     "build_network": "network",
     "resolve_device": "network",
-    "FORMAT": "snapshot",
-    "FORMAT_VERSION": "snapshot",
-    "LIMITS": "snapshot",
-    "Snapshot": "snapshot",
-    "SnapshotError": "snapshot",
-    "SnapshotMeta": "snapshot",
-    "expected_tensors": "snapshot",
-    "export_snapshot": "snapshot",
-    "file_sha256": "snapshot",
-    "import_check": "snapshot",
-    "load_policy": "snapshot",
-    "load_snapshot": "snapshot",
-    "policy_of": "snapshot",
-    "read_meta": "snapshot",
-    "read_snapshot": "snapshot",
-    "save_snapshot": "snapshot",
-    "weights_sha256": "snapshot",
+    "FORMAT": "snapshot_format",
+    "FORMAT_VERSION": "snapshot_format",
+    "LIMITS": "snapshot_format",
+    "Snapshot": "snapshot_reader",
+    "SnapshotError": "network",
+    "SnapshotMeta": "snapshot_format",
+    "expected_tensors": "snapshot_format",
+    "export_snapshot": "snapshot_reader",
+    "file_sha256": "snapshot_format",
+    "import_check": "snapshot_reader",
+    "load_policy": "snapshot_policy",
+    "load_snapshot": "snapshot_reader",
+    "policy_of": "snapshot_policy",
+    "read_meta": "snapshot_reader",
+    "read_snapshot": "snapshot_reader",
+    "save_snapshot": "snapshot_format",
+    "weights_sha256": "snapshot_format",
 }
 __all__ += list(_LAZY)
 

@@ -16,7 +16,7 @@ from gymnasium import spaces
 from ..envs import get_env
 from ..errors import MarlError
 from .base import Policy
-from .spaces import ActionHead, SpaceError, describe_space, seat_spaces_of, uniform_allowed
+from .spaces import ActionHead, SpaceError, describe_space, uniform_allowed
 
 RANDOM = "random"
 
@@ -104,9 +104,9 @@ class ScriptedPolicy(Policy):
         player = self._by_seat.get(seat)
         if player is None:
             spec = get_env(self.env).for_options(**self._options)
-            obs, act, _ = seat_spaces_of(spec, spec.config(**self._options))[seat]
-            same = (tuple(obs.shape) == tuple(self.obs_space.shape)
-                    and describe_space(act) == describe_space(self.act_space))
+            space = spec.seat_spaces(spec.config(**self._options))[seat]
+            same = (tuple(space.observation.shape) == tuple(self.obs_space.shape)
+                    and describe_space(space.action) == describe_space(self.act_space))
             player = self if same else ScriptedPolicy(self.env, self._name, self._seed, self._options, seat=seat)
             self._by_seat[seat] = player
         if player is not self:
@@ -131,14 +131,13 @@ class ScriptedPolicy(Policy):
     def _setup(self, spec: Any, name: str, seed: int, env_options: dict[str, Any], seat: int | None) -> None:
         env = spec.name
         cfg = spec.config(**env_options)
-        seats = seat_spaces_of(spec.for_options(**env_options), cfg)
-        obs_space, act_space, _ = seats[seat if seat is not None else 0]
-        self.obs_space, self.act_space = obs_space, act_space
+        space = spec.for_options(**env_options).seat_spaces(cfg)[seat if seat is not None else 0]
+        self.obs_space, self.act_space = space.observation, space.action
         self.rng = np.random.default_rng(seed)
         self.bot = spec.bots.get(name)
         self._random = None
         if self.bot is None:  # random, which the game does not register
-            self._random = RandomPolicy(act_space, name, env, seed=seed, obs_space=obs_space)
+            self._random = RandomPolicy(space.action, name, env, seed=seed, obs_space=space.observation)
             self._random.rng = self.rng
         self._uses_mask = bool(getattr(self.bot, "uses_mask", False))
         self._rule = self.bot.rule_for(cfg) if self.bot is not None else None

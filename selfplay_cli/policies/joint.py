@@ -1,7 +1,7 @@
-"""One agent for a whole cooperative team (seed 001's "SA" mode): a network over every seat's observation, side by
+"""One agent for a whole cooperative team (``--sharing sa``): a network over every seat's observation, side by
 side, choosing one joint action that stands for every seat's action.
 
-With N seats of ``base`` actions each, the joint action is ``b = sum_n a_n * base**n`` (seed 001's encoding), so
+With N seats of ``base`` actions each, the joint action is ``b = sum_n a_n * base**n``, so
 ``a_n = (b // base**n) % base``. The joint space grows as ``base**N``: :data:`MAX_JOINT_ACTIONS` bounds it.
 
 A :class:`JointPolicy` plays every seat of each game it is given: the runner hands a policy its rows seat by seat

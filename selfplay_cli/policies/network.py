@@ -34,11 +34,9 @@ ACTIVATION_FNS = {"tanh": torch.tanh_, "relu": torch.relu_}  # in place, on each
 class SnapshotError(MarlError):
     """A snapshot file (or the network it describes) that cannot be saved, read or played.
 
-    Messages about a file always start with the file's path. Defined here (the lowest module of the two)
-    and re-exported by :mod:`selfplay_cli.policies.snapshot`, which is where callers should import it from.
+    Messages about a file always start with the file's path. Defined here, the lowest of the modules that raise it
+    (a network's arch; the snapshot format, reader and policy building).
     """
-
-    __module__ = "selfplay_cli.policies.snapshot"
 
 
 @dataclass(frozen=True)
@@ -277,7 +275,7 @@ class NetworkPolicy(Policy):
     made only when the array is not already a writable float32 array). Sampling uses the policy's own
     ``torch.Generator`` seeded with ``seed``, so a seeded policy replays the same actions for the same
     observations. For large batches on the CPU, callers may tune ``torch.set_num_threads``; nothing global
-    is set here. ``meta`` is the :class:`~selfplay_cli.policies.snapshot.SnapshotMeta` it was loaded from,
+    is set here. ``meta`` is the :class:`~selfplay_cli.policies.snapshot_format.SnapshotMeta` it was loaded from,
     if any; ``obs_space`` and ``act_space`` are the network's.
     """
 

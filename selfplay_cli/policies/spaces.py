@@ -309,16 +309,3 @@ def pad_index(nvec: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray]:
         offset += n
     return index, valid
 
-
-def seat_spaces_of(spec: Any, cfg: Any) -> list[tuple[spaces.Box, spaces.Space, bool]]:
-    """Every seat's (observation Box, action space, has masks) from a game's registration: its ``seat_spaces``
-    when the registry has them, else the one observation and action space every seat shares (no masks)."""
-    if hasattr(spec, "seat_spaces"):
-        out = []
-        for s in spec.seat_spaces(cfg):
-            out.append((s.observation, s.action, bool(getattr(s, "mask", False))))
-        return out
-    obs, act = spec.observation_space(cfg), spec.action_space(cfg)
-    if isinstance(obs, spaces.Dict) and "observation" in obs.spaces:
-        return [(obs["observation"], act, "action_mask" in obs.spaces)] * len(spec.agents)
-    return [(obs, act, False)] * len(spec.agents)

@@ -78,13 +78,14 @@ def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: boo
     """The policy a league player stands for: a scripted bot, or a network loaded from its snapshot file, playing
     as :func:`plays_greedy` says unless ``greedy`` is given; ``seed`` seeds its sampling.
 
-    The file is validated in full before anything is built from it (:func:`~selfplay_cli.policies.snapshot.
+    The file is validated in full before anything is built from it (:func:`~selfplay_cli.policies.snapshot_reader.
     read_snapshot`) and must be the file the row registered (:func:`~selfplay_cli.rated.snapshots.check_file`):
     a file copied over it, or edited, is refused with an error naming it, so no game is ever played or stored under
     the wrong identity."""
     if row.is_bot:
         return ScriptedPolicy(row.env, row.name, seed=seed)
-    from ..policies.snapshot import policy_of, read_snapshot  # torch is imported only when a network is needed
+    from ..policies.snapshot_policy import policy_of  # torch is imported only when a network is needed
+    from ..policies.snapshot_reader import read_snapshot
     from .snapshots import check_file
 
     _inference_threads(device)

@@ -1,6 +1,6 @@
 """Which seats a league player may take, and who can meet whom, in a game whose seats hold different roles.
 
-A snapshot belongs to the role it learned (:func:`~selfplay_cli.policies.snapshot.snapshot_roles`): in
+A snapshot belongs to the role it learned (:func:`~selfplay_cli.policies.snapshot_format.snapshot_roles`): in
 ``mpe2.simple_push_v3`` an ``adversary`` snapshot reads 8 values and plays only the adversary's seat, an ``agent``
 snapshot reads 19 and plays only the agent's. Scripted players play any seat. Every rated game is seated by these
 roles (:mod:`selfplay_cli.arena.schedule`), and two players that no seating fits (two adversaries, in a game of one
@@ -29,7 +29,7 @@ __all__ = ["RoleBook", "cannot_meet_message", "policy_roles", "roles_text"]
 def policy_roles(policy: Policy, spec: object) -> frozenset[str] | None:
     """The roles a loaded policy may play (None: any seat): a snapshot's, from its metadata; a scripted player's
     or any other policy's: every seat."""
-    from ..policies.snapshot import snapshot_roles
+    from ..policies.snapshot_format import snapshot_roles
 
     meta = getattr(policy, "meta", None)
     if meta is None or getattr(policy, "kind", "") == "bot":
@@ -68,7 +68,8 @@ class RoleBook:
         role = row.meta.get("role")
         if isinstance(role, str) and role in self.rules.roles:  # type: ignore[operator]
             return frozenset((role,))
-        from ..policies.snapshot import read_meta, snapshot_roles
+        from ..policies.snapshot_format import snapshot_roles
+        from ..policies.snapshot_reader import read_meta
 
         try:
             meta = read_meta(self.league.snapshot_file(row))

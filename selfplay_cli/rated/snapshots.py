@@ -19,7 +19,7 @@ from ..league.store import SNAPSHOTS, League, LeagueIOError, PlayerRow, check_ex
 from ..league.variants import describe_variant, variant_key
 
 if TYPE_CHECKING:
-    from ..policies.snapshot import Snapshot
+    from ..policies.snapshot_reader import Snapshot
 
 
 def snapshot_relpath(run: str, name: str) -> str:
@@ -36,7 +36,7 @@ def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
     metadata records them (the header alone is read); none for a scripted player, which plays under any."""
     if row.is_bot:
         return {}
-    from ..policies.snapshot import read_meta
+    from ..policies.snapshot_reader import read_meta
 
     return dict(read_meta(league.snapshot_file(row)).env_options or {})
 
@@ -81,7 +81,7 @@ def check_file(row: PlayerRow, snap: Snapshot, path: Path) -> None:
     checksum instead (trained snapshots of older leagues): then the weights (already verified against that checksum)
     and the file's own run, name and step must be the row's.
     """
-    from ..policies.snapshot import SnapshotError
+    from ..policies.network import SnapshotError
 
     if row.sha256 and snap.sha256 == row.sha256:
         return
@@ -107,7 +107,7 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
     no row. The game is ``env`` when given (a name the user typed), else the one the file names if it is registered
     or this league already plays it (:func:`_league_game`); a module a file names is never imported.
     """
-    from ..policies.snapshot import read_snapshot
+    from ..policies.snapshot_reader import read_snapshot
 
     file = Path(file)
     if league.home is None:
@@ -154,9 +154,9 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
 def _league_game(league: League, file: Path) -> str | None:
     """The game ``file`` names when this league already plays it (a run of it exists: a user named that game to
     train or import it here), so a file of a user's game that the league rates imports without ``--env``. None for
-    any other name, which :func:`~selfplay_cli.policies.snapshot.read_snapshot` then only looks up among the games
-    already known, never importing the module a file names."""
-    from ..policies.snapshot import read_meta
+    any other name, which :func:`~selfplay_cli.policies.snapshot_reader.read_snapshot` then only looks up among the
+    games already known, never importing the module a file names."""
+    from ..policies.snapshot_reader import read_meta
 
     named = read_meta(file).env
     return named if league.list_runs(env=named) else None
@@ -166,7 +166,7 @@ def _file_bytes(file: Path, sha256: str) -> bytes:
     """The file's bytes, refused unless they are the ones that were validated (hash ``sha256``)."""
     import hashlib
 
-    from ..policies.snapshot import SnapshotError
+    from ..policies.network import SnapshotError
 
     try:
         data = file.read_bytes()

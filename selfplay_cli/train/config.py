@@ -20,7 +20,7 @@ from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
 from ..policies.joint import joint_spaces
 from ..policies.network import Arch, resolve_device
-from ..policies.snapshot import expected_tensors
+from ..policies.snapshot_format import expected_tensors
 from .curriculum import Curriculum, Schedule, parse_schedule
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
@@ -298,10 +298,10 @@ def seat_plan_of(spec: EnvSpec, agents: int, sharing: str, seats: str) -> SeatPl
 
 
 def _check_networks(cfg: TrainConfig, space: Any) -> None:
-    """Refuse, before the run exists, networks bigger than a snapshot may be (:data:`~selfplay_cli.policies.snapshot.
-    LIMITS`: layers, widths, parameters), so a run never grows out of memory building one, nor refuses its own
-    first snapshot: the learner's network (what its snapshots save), and SAC's critics (the observation and the
-    action in, one value out)."""
+    """Refuse, before the run exists, networks bigger than a snapshot may be (:data:`~selfplay_cli.policies.
+    snapshot_format.LIMITS`: layers, widths, parameters), so a run never grows out of memory building one, nor
+    refuses its own first snapshot: the learner's network (what its snapshots save), and SAC's critics (the
+    observation and the action in, one value out)."""
     section = getattr(cfg, cfg.algo, None)
     arch = getattr(section, "arch", None)
     if not isinstance(arch, Arch):

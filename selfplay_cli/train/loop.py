@@ -44,7 +44,7 @@ from ..league.variants import variant_key
 from ..policies import Policy
 from ..policies.bots import league_bots
 from ..policies.network import resolve_device
-from ..policies.snapshot import SnapshotMeta, save_snapshot
+from ..policies.snapshot_format import SnapshotMeta, save_snapshot
 from ..rated.match import load_player
 from ..rated.roles import RoleBook
 from ..rated.snapshots import snapshot_relpath
