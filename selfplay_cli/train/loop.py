@@ -35,7 +35,7 @@ import torch
 from .. import files
 from ..algos import get_learner
 from ..algos.joint import JointLearner
-from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
+from ..arena.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
 from ..errors import MarlError, NonFiniteError
 from ..league.ledger import KIND_CODES
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates

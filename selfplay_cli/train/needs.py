@@ -20,13 +20,13 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import MarlError
-from ..league.store import League, LeagueError, PlayerRow, RunRow
+from ..league.store import League, LeagueError, PlayerRow, RunRow, RunStatus
 from .lock import live_trainer
 
-ENDED = "ended"
+ENDED = RunStatus.ENDED
 """The status of a run ended because a snapshot it needed was removed (``marl checkpoint rm --force``): final,
 like ``finished``; ``--resume`` refuses it in one line."""
-OVER = ("finished", ENDED)
+OVER = (RunStatus.FINISHED, ENDED)
 """Statuses of runs that will not be resumed, and so need no snapshot."""
 DYNAMIC_NAMES = ("best", "latest")  # a teacher named so is whatever is best or newest when the run resumes
 
