@@ -202,9 +202,9 @@ def tournament(
     The games are played under the options the players were made for, with --env-option over them, and count in
     that variant of the game: its stored games are the ones reused, its ladder is the one printed."""
     from ..league.ladder import ladder, verdict_lines
-    from ..league.names import Team
     from ..league.pairs import plan_tournament
     from ..rated.match import load_player, mix_seed, run_match
+    from ..rated.names import Team
     from ..rated.roles import RoleBook
     from ..rated.snapshots import players_variant
 

@@ -8,7 +8,6 @@ import typer
 from rich.markup import escape
 
 from ..errors import MarlError
-from ..league.names import Team
 from ..league.store import PlayerRow
 from ..league.variants import describe_variant, variant_flags
 from ..rated.match import (
@@ -20,6 +19,7 @@ from ..rated.match import (
     run_match,
     sprt_exit_code,
 )
+from ..rated.names import Team
 from ._common import (
     MAX_GAMES,
     MAX_PARALLEL,

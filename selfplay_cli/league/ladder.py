@@ -583,7 +583,7 @@ def ladder(
 
     The default anchor is the env's ``random`` bot if it played, else the first bot (lowest id) that played,
     else the (non-removed) player with the most games. ``anchor`` may be a player row (e.g. from
-    :func:`selfplay_cli.league.names.resolve`, which understands every name a user types), a player id
+    :func:`selfplay_cli.rated.names.resolve`, which understands every name a user types), a player id
     (``17`` or ``"#17"``) or a full name as shown in the ladder (``"r1/ep90"``, ``"cpu"``); the anchor must
     have games in the env. Removed snapshots are fitted (their games count) but left out of the rows and the
     ranks unless ``include_removed``.

@@ -166,8 +166,8 @@ def load_teacher(league: League, cfg: TrainConfig, spaces: list[Any], device: st
     name = cfg.teacher.player
     if not name:
         return None
-    from ..league.names import resolve
     from ..policies.spaces import describe_space
+    from ..rated.names import resolve
 
     try:
         row = resolve(league, name, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
