@@ -23,7 +23,8 @@ an error saying it was removed.
 
 It lives with rated play, not in the league, because a team is known by its game's seats (the game's registry, which
 the league does not import). Imports go one way: this module uses :mod:`selfplay_cli.league.ladder` (for ``best``);
-the ladder never resolves names itself (its ``anchor`` is a player row, an id or a full name; commands resolve what users type here first).
+the ladder never resolves names itself (its ``anchor`` is a player row, an id or a full name; commands resolve
+what users type here first).
 """
 
 from __future__ import annotations
