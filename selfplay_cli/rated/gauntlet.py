@@ -14,7 +14,7 @@ seat cancel within a pair), one episode of each player on each seed of a coopera
 return), every rotation of the seating of a free-for-all game. In a cooperative game the per-seat snapshots of one
 moment (a run with one network per lander) are one player, a crew: they fly together, each on its own seat, and a
 comparison counts for every member (:func:`crews_of`). A "pair" below is one such round. All matchups of
-one snapshot moment are played together, in one batched call of the runner.
+one snapshot moment are played together, in one batched call of :func:`selfplay_cli.arena.play`.
 
 In a game whose seats hold different roles (:mod:`.roles`) a snapshot meets only players it can be seated against:
 a new ``adversary`` snapshot of a game of one adversary against one agent meets the run's ``agent`` snapshots (the
@@ -518,8 +518,8 @@ def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[Playe
 
 
 def _seat_crew(crew: tuple[PlayerRow, ...], n_seats: int) -> tuple[PlayerRow, ...]:
-    """A crew on a game of ``n_seats`` seats (options may change them): seed 001's mapping, extra seats copy members
-    chosen at random (a fixed draw), fewer seats keep the first members."""
+    """A crew on a game of ``n_seats`` seats (options may change them), as :func:`~.lineup.refit` seats a
+    team: extra seats copy members chosen at random (a fixed draw), fewer seats keep the first members."""
     from .lineup import Lineup, refit
 
     return refit(Lineup(crew[0].env, crew, 0), n_seats, seed=0).players

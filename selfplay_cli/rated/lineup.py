@@ -69,8 +69,8 @@ class Lineup:
 
 def refit(lu: Lineup, n_seats: int, seed: int = 0) -> Lineup:
     """The lineup for a game of ``n_seats`` seats when options change the number (a lander team trained with N
-    landers flown as M). A team that grows gives each extra seat a member chosen at random (seed 001's mapping:
-    the extra landers copy a policy of the team), one that shrinks keeps its first seats."""
+    landers flown as M). A team that grows gives each extra seat a member chosen at random (a fixed draw from
+    ``seed``: the extra landers copy a policy of the team), one that shrinks keeps its first seats."""
     have = len(lu.players)
     if n_seats == have:
         return lu
