@@ -7,7 +7,6 @@ players' records (:mod:`.pairs`), and forecasts of matches not yet played (:mod:
 rates any results file the same way. Resolving the names users type, which needs a game's seats, is rated play's
 (:mod:`selfplay_cli.rated.names`).
 
-Three readings still ask the game registry what a game declares, by a lazy import: the rules its results follow
-(:func:`.ledger.rules_for_env`), the options that make a variant (:func:`.variants.variant_key`) and the player its
-ratings are anchored at (:func:`.ladder.declared_anchor`).
+The league imports no game: what it needs of one (the rules its results follow, the options that make a variant,
+the player its ratings are anchored at) it looks up in the catalog :mod:`.games` is given.
 """

@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from selfplay_cli.league.games import declaration
 from selfplay_cli.league.ledger import GameTable, rules_for_env
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.stats.bradley_terry import (
@@ -474,13 +475,8 @@ def pick_env(league: League, env: str | None) -> str:
 def declared_anchor(env: str) -> str:
     """The scripted player a game anchors its ratings at (its declaration's ``anchor``: the lander's heuristic),
     ``random`` for a game this process does not know."""
-    from ..envs import get_env
-    from ..envs.registry import UnknownEnvError
-
-    try:
-        return get_env(env).anchor
-    except UnknownEnvError:
-        return "random"
+    spec = declaration(env)
+    return "random" if spec is None else spec.anchor
 
 
 def default_anchor(population: list[PlayerRow], games: dict[int, int], preferred: str = "random") -> PlayerRow:
