@@ -1,7 +1,8 @@
 """What a finished game is, from the runner to the ledger, and what it means by the game's kind.
 
-One record type, :class:`GameResult`, carries a game everywhere: the runner (:func:`selfplay_cli.arena.play`) makes
-it with the policies' ids per seat, rated play and training swap those for league player ids
+One record type, :class:`GameResult`, carries a game everywhere: both game loops (:func:`selfplay_cli.arena.play`
+for whole games, :class:`~selfplay_cli.arena.training_games.SelfPlayGames` for training's) make it, by
+:func:`game_results`, with the players' ids per seat; rated play swaps policy ids for league player ids
 (:meth:`GameResult.with_players`) and the ledger stores it (:meth:`selfplay_cli.league.store.League.record_games`).
 
 :class:`Rules` are the part of a game's declaration that decides results and who may sit where: its kind, its sides,
@@ -34,7 +35,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["COOPERATIVE", "FREE_FOR_ALL", "KINDS", "TWO_SIDES", "GameResult", "Rules", "compare", "format_score",
-           "pairwise", "points_between"]
+           "game_results", "pairwise", "points_between"]
 
 TWO_SIDES = "two-sides"
 COOPERATIVE = "cooperative"
@@ -48,17 +49,17 @@ class GameResult:
 
     Attributes:
         env: the game's registered name.
-        players: one entry per seat: the policy's id (from the runner) or the league player's id (to the ledger;
+        players: one entry per seat: the policy's id (from a game loop) or the league player's id (to the ledger;
             see :meth:`with_players`).
         seed: the game's seed.
         scores: each seat's score (float: points in Pong, summed rewards in a PettingZoo game).
         outcome: each seat's points by the game's :class:`Rules`: 1 win, 0.5 draw, 0 loss (two-sides); its mean
             pairwise result (free-for-all); 0.5 (cooperative: a single game has no winner).
         length: steps played.
-        truncated: the game was cut short (its time limit, or the runner's ``stop_when``) and decided by the score
-            at that moment.
+        truncated: the game was cut short (its time limit, or :func:`~selfplay_cli.arena.play`'s ``stop_when``) and
+            decided by the score at that moment.
         actions: the encoded actions of every step (:mod:`selfplay_cli.arena.replay`), when they were recorded.
-        index: the game's position in the runner's schedule (0 where there is none).
+        index: the game's position in :func:`~selfplay_cli.arena.play`'s schedule (training's games: its slot).
     """
 
     env: str
@@ -83,6 +84,21 @@ class GameResult:
     def with_players(self, ids: Mapping[Any, Any]) -> GameResult:
         """The same game with every seat's player replaced by ``ids[player]`` (policy ids to league player ids)."""
         return replace(self, players=tuple(ids[p] for p in self.players))
+
+
+def game_results(env: str, rules: Rules, scores: np.ndarray, players: Sequence[tuple[Any, ...]],
+                 seeds: Sequence[int], lengths: Sequence[int], truncated: Sequence[bool], indices: Sequence[int],
+                 actions: Sequence[bytes | None] | None = None) -> list[GameResult]:
+    """The results of games that ended together, from their final ``scores`` (``(n_seats, m)``, one column per game)
+    and, per game, its players by seat, seed, length, whether it was cut short, its index and its encoded actions:
+    each seat's points by ``rules``, every number a plain Python one. The one place a game loop makes results."""
+    scores = np.asarray(scores, dtype=np.float64)
+    outcome = rules.outcome(scores)
+    return [GameResult(env=env, players=tuple(players[k]), seed=int(seeds[k]),
+                       scores=tuple(float(x) for x in scores[:, k]), outcome=tuple(float(x) for x in outcome[:, k]),
+                       length=int(lengths[k]), truncated=bool(truncated[k]), index=int(indices[k]),
+                       actions=None if actions is None else actions[k])
+            for k in range(scores.shape[1])]
 
 
 def format_score(x: float) -> str:

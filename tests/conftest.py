@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from selfplay_cli.arena.selfplay import SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.envs import get_env
 from selfplay_cli.policies import ScriptedPolicy
 

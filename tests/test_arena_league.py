@@ -18,7 +18,7 @@ from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.rated.gate import gate_check
 from selfplay_cli.rated.lineup import lineup
 from selfplay_cli.rated.match import SPRTSettings, run_match
-from selfplay_cli.results import GameResult
+from selfplay_cli.results import FREE_FOR_ALL, GameResult, Rules, game_results
 from selfplay_cli.stats.elo import elo_update
 
 COOP, FFA, SEQ, SIDES = "arena-coop2", "arena-ffa3", "arena-seq2", "arena-sides4"
@@ -53,6 +53,19 @@ def test_one_record_type_from_the_runner_to_the_ledger():
     stored = r.with_players({"a": 11, "b": 12})
     assert stored.players == (11, 12) and (stored.seed, stored.scores, stored.actions) == (3, (21.0, 4.0), b"x")
     assert r.points_of("a") == 1.0 and r.score_of("b") == 4.0
+
+
+def test_both_game_loops_make_results_by_one_function():
+    """game_results: one result per column of final scores, each seat's points by the rules, plain numbers."""
+    scores = np.array([[3.0, 1.0], [2.0, 1.0], [1.0, 1.0]], dtype=np.float32)  # (seats, games)
+    got = game_results(FFA, Rules(n_seats=3, kind=FREE_FOR_ALL), scores, [("a", "b", "c"), ("c", "b", "a")],
+                       seeds=np.array([5, 6]), lengths=np.array([40, 9]), truncated=np.array([False, True]),
+                       indices=[0, 3], actions=[b"x", None])
+    first, second = got
+    assert first == GameResult(FFA, ("a", "b", "c"), 5, (3.0, 2.0, 1.0), (1.0, 0.5, 0.0), 40, False, b"x", 0)
+    assert second == GameResult(FFA, ("c", "b", "a"), 6, (1.0, 1.0, 1.0), (0.5, 0.5, 0.5), 9, True, None, 3)
+    assert all(type(x) is float for x in (*second.scores, *second.outcome))
+    assert type(second.seed) is int and type(second.length) is int and type(second.truncated) is bool
 
 
 def test_free_for_all_gives_every_two_players_one_result_and_moves_elo_together(league):

@@ -23,7 +23,7 @@ from safetensors.torch import save_file
 from selfplay_cli.algos.dqn import DQNConfig, DQNLearner
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
 from selfplay_cli.algos.sac import SACConfig, SACLearner
-from selfplay_cli.arena.selfplay import SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import NonFiniteError
 from selfplay_cli.league.store import League

@@ -1,5 +1,5 @@
 """Tests for selfplay_cli.league.ladder (ladders, results CSV, tournament plans, head-to-head) and
-selfplay_cli.league.names (name resolution)."""
+selfplay_cli.rated.names (name resolution)."""
 
 from __future__ import annotations
 
@@ -13,10 +13,10 @@ import pytest
 
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.ladder import Fitted, LadderRow, _tiers, fit_table, ladder, select_rows
-from selfplay_cli.league.names import resolve, resolve_many
 from selfplay_cli.league.pairs import PairPlan, head_to_head, plan_tournament
 from selfplay_cli.league.results_csv import fit_csv, read_results_csv
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.rated.names import resolve, resolve_many
 from selfplay_cli.results import GameResult
 from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, fit_bradley_terry
 from selfplay_cli.stats.elo import NAT_TO_ELO, elo_to_score, normal_quantile

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from cli_helpers import run
 
-from selfplay_cli.arena import Game, play, runner
-from selfplay_cli.arena.selfplay import SelfPlayGames
+from selfplay_cli.arena import Game, limits, play
+from selfplay_cli.arena.training_games import SelfPlayGames
 from selfplay_cli.cli import MAX_LINE, MAX_WORD
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import EXIT_IO, EXIT_USAGE
@@ -168,8 +168,8 @@ def test_a_game_that_never_ends_stops_at_its_declared_length_in_training():
 
 
 def test_a_game_that_declares_no_length_stops_at_the_stated_cap_with_one_warning(monkeypatch, capsys):
-    monkeypatch.setattr(runner, "UNDECLARED_MAX_STEPS", 50)
-    monkeypatch.setattr(runner, "_warned", set())
+    monkeypatch.setattr(limits, "UNDECLARED_MAX_STEPS", 50)
+    monkeypatch.setattr(limits, "_warned", set())
     results = _play_in_time(UNDECLARED) + _play_in_time(UNDECLARED)
     assert [r.length for r in results] == [50, 50] and all(r.truncated for r in results)
     err = capsys.readouterr().err

@@ -184,6 +184,11 @@ def test_runs_crud(league: League) -> None:
     assert [x.name for x in league.list_runs(env=ENV)] == ["r1"]
     with pytest.raises(LeagueError):
         league.set_run_status("nope", "killed")
+    league.set_run_status("r1", store.RunStatus.STOPPED)  # stored as its word, read back equal to it
+    assert league.get_run("r1").status == "stopped" == store.RunStatus.STOPPED
+    with pytest.raises(LeagueError, match="unknown run status 'paused': one of running, stopped, finished"):
+        league.set_run_status("r1", "paused")  # the docstring's promise: a status is one of RunStatus's words
+    assert league.get_run("r1").status == "stopped"
     with pytest.raises(LeagueError):
         league.create_run("a/b", ENV, {})
 

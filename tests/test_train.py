@@ -10,7 +10,7 @@ import pytest
 from cli_helpers import run
 
 from selfplay_cli.algos.ppo import PPOConfig
-from selfplay_cli.arena.selfplay import OPPONENT
+from selfplay_cli.arena.training_games import OPPONENT
 from selfplay_cli.cli import main
 from selfplay_cli.league.matchmaking import MatchmakerConfig
 from selfplay_cli.league.store import League

@@ -11,11 +11,11 @@ from pathlib import Path
 from cli_helpers import run, run_json
 
 from selfplay_cli.envs.pettingzoo_games import adapt
-from selfplay_cli.league.names import resolve
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import describe_variant, variant_flags, variant_key, variant_options
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
+from selfplay_cli.rated.names import resolve
 from selfplay_cli.results import GameResult
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -15,7 +15,7 @@ from cli_helpers import run, run_json
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from selfplay_cli.arena.selfplay import OPPONENT, parse_seats, plan_layout, plan_seats
+from selfplay_cli.arena.training_games import OPPONENT, parse_seats, plan_layout, plan_seats
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
 

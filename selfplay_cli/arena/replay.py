@@ -1,5 +1,5 @@
-"""Actions to replay a game: a compact encoding for the ledger, the log the runner keeps them in, and a policy that
-plays them back.
+"""Actions to replay a game: a compact encoding for the ledger, the log both game loops keep them in, and a policy
+that plays them back.
 
 A game core is deterministic given its seed, its options and every step's actions (randomness is counter-based,
 see :mod:`selfplay_cli.envs.pong`), so the actions are all the ledger needs to re-render a game exactly as it
@@ -230,7 +230,7 @@ def seat_actions(actions: np.ndarray | Sequence[np.ndarray]) -> list[np.ndarray]
     return list(actions)
 
 
-# ------------------------------------------------------------------------------------------------ the runner's log
+# -------------------------------------------------------------------------------------------- the game loops' log
 
 
 @dataclass(frozen=True)
@@ -391,10 +391,10 @@ class ReplayError(MarlError):
 
 class ReplayPolicy(Policy):
     """Plays one seat of one recorded game: at game step t it returns the action recorded at step t, whatever it
-    observes (the runner tells it of every step through :meth:`after_step`, so a seat that acts only on some steps
-    of a turn-based game still finds its own).
+    observes (:func:`~.matches.play` tells it of every step through :meth:`after_step`, so a seat that acts only on
+    some steps of a turn-based game still finds its own).
 
-    It stands in for the original player under that player's id, so a replay goes through the same runner (and
+    It stands in for the original player under that player's id, so a replay goes through the same game loop (and
     shows the same names) as the game did.
     """
 

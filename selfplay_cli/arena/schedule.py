@@ -26,7 +26,7 @@ from __future__ import annotations
 from collections.abc import Collection, Mapping, Sequence
 
 from ..results import COOPERATIVE, TWO_SIDES, Rules
-from .runner import Game
+from .matches import Game
 
 __all__ = ["CannotMeet", "PlayerRoles", "can_meet", "round_of", "round_size", "rounds"]
 

@@ -150,12 +150,12 @@ def shown_variant(league: League, env: str | None, env_option: list[str] | None,
 
 def resolve_players(league: League, names: list[str], env: str | None, teams: bool = False,
                     env_option: list[str] | None = None) -> list:
-    """Resolve names to players (:mod:`selfplay_cli.league.names`). Snapshots imply their game; bot names need the
+    """Resolve names to players (:mod:`selfplay_cli.rated.names`). Snapshots imply their game; bot names need the
     game from them or --env. With ``teams`` a name may also stand for a team of per-seat snapshots (``s6M``:
-    ``s6M-left`` and ``s6M-right``), returned as a :class:`~selfplay_cli.league.names.Team`; without, such a
+    ``s6M-left`` and ``s6M-right``), returned as a :class:`~selfplay_cli.rated.names.Team`; without, such a
     name is refused in one line that names the members. ``best`` is the best of the variant ``env_option`` (the
     command's ``--env-option``) makes, the default one without."""
-    from ..league.names import resolve, resolve_or_team
+    from ..rated.names import resolve, resolve_or_team
 
     find = resolve_or_team if teams else resolve
     env = check_env(env)

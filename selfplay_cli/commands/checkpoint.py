@@ -89,7 +89,7 @@ def show(
 ) -> None:
     """Everything about one snapshot: league record, lineage and the file's metadata. A team name (s6M) shows each
     of its members (s6M-left, s6M-right)."""
-    from ..league.names import Team, resolve_or_team
+    from ..rated.names import Team, resolve_or_team
 
     league = open_league(home, db, readonly=True)
     try:
@@ -114,7 +114,7 @@ def show(
 def tag(name: NameArg, tag_name: Annotated[str, typer.Argument(metavar="TAG", help="The tag to give it.")],
         env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
     """Give a snapshot a name of your own (moves the tag if another snapshot had it)."""
-    from ..league.names import resolve
+    from ..rated.names import resolve
 
     league = open_league(home, db)
     try:
@@ -137,7 +137,7 @@ def rm(name: NameArg, env: EnvOpt = None,
        home: HomeOpt = None, db: DbOpt = None) -> None:
     """Remove a snapshot from the pool; its games stay in the ledger and keep counting in the ratings. A snapshot a
     run still needs is refused (which run, and why), unless --force."""
-    from ..league.names import resolve
+    from ..rated.names import resolve
     from ..train.needs import needs_of
 
     league = open_league(home, db)
@@ -181,8 +181,8 @@ def _runs(needs) -> str:
 def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination file (.safetensors).")],
            env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
     """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
-    from ..league.names import resolve
     from ..policies.snapshot_reader import export_snapshot, read_snapshot
+    from ..rated.names import resolve
     from ..rated.snapshots import check_file
 
     league = open_league(home, db, readonly=True)

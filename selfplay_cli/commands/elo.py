@@ -56,7 +56,7 @@ def resolve_anchor(league, name: str | None, env: str | None, variant: str = "")
     if name is None:
         return None
     from ..league.ladder import pick_env
-    from ..league.names import resolve
+    from ..rated.names import resolve
 
     return resolve(league, name, pick_env(league, env), variant=variant)
 

@@ -202,77 +202,64 @@ def tournament(
     The games are played under the options the players were made for, with --env-option over them, and count in
     that variant of the game: its stored games are the ones reused, its ladder is the one printed."""
     from ..league.ladder import ladder, verdict_lines
-    from ..league.names import Team
-    from ..league.pairs import plan_tournament
-    from ..rated.match import load_player, mix_seed, run_match
-    from ..rated.roles import RoleBook
-    from ..rated.snapshots import players_variant
+    from ..rated.tournament import TournamentPlan
 
     if games_per_pair < 2:
         raise MarlError(f"--games-per-pair must be at least 2, not {games_per_pair}")
     league = open_league(home, db)
     try:
-        found = (resolve_players(league, list(players or []), check_env(env), teams=True, env_option=env_option)
-                 if players else [])
-        chosen = [m for f in found for m in (f.members if isinstance(f, Team) else (f,))]  # a team: its members
-        env = env or (chosen[0].env if chosen else None)
-        if run is not None:
-            r = league.get_run(run)
-            if r is None:
-                raise MarlError(f"no run named '{run}'")
-            env = env or r.env
-            chosen += [p for p in league.players(env=r.env, kind="snapshot") if p.run == run]
-        if top is not None:
-            if top < 2:
-                raise MarlError(f"--top must be at least 2, not {top}")
-            top_env, top_variant = shown_variant(league, env, env_option)  # the top of the variant asked for
-            rows = ladder(league, top_env, bootstrap=0, variant=top_variant)
-            env = env or top_env
-            chosen += [league.get_player(r.player_id) for r in rows[:top] if r.player_id is not None]
-        anchor = resolve_players(league, [vs], env, env_option=env_option)[0] if vs else None
-        unique = {p.id: p for p in chosen if anchor is None or p.id != anchor.id}
-        if len(unique) + (anchor is not None) < 2:
-            raise MarlError("a tournament needs at least two players (list them, or use --run / --top)")
-        envs = {p.env for p in unique.values()} | ({anchor.env} if anchor else set())
-        if len(envs) > 1:
-            raise MarlError(f"players of several games in one tournament: {', '.join(sorted(envs))}")
-        env = envs.pop()
+        env, unique, anchor = _field(league, players, env, env_option, run, top, vs)
         options = parse_env_options(env, env_option) if env_option else None
-        everyone = [*unique.values(), *([anchor] if anchor else [])]
-        variant = players_variant(league, env, everyone, options)  # where the games are filed
-        book = RoleBook(league, env)  # a game whose seats hold different roles: who can meet whom
-        plan = plan_tournament(league, env, list(unique), games_per_pair, vs=anchor.id if anchor else None,
-                               variant=variant, meets=(lambda x, y: book.meets(league.get_player(x),
-                                                                              league.get_player(y)))
-                               if book.differ else None)
-        apart = [p for p in plan if not p.meets]
-        plan = [p for p in plan if p.meets]
-        total = sum(p.missing + p.missing % 2 for p in plan)
-        with progress_bar("tournament", total, "games", progress_enabled(quiet or json_out)) as tick:
-            policies: dict[int, Any] = {}  # each player's file read and checked once, whatever its pairs
-            for p in plan:
-                first = league.fresh_seed(p.a_id, p.b_id) if seed is None else seed
-                for pid in (p.a_id, p.b_id):
-                    if pid not in policies:
-                        policies[pid] = load_player(league, league.get_player(pid), device=device,
-                                                    seed=mix_seed(first, pid))
-                pa, pb = policies[p.a_id], policies[p.b_id]
-                run_match(pa, pb, games=p.missing, first_seed=first, parallel=parallel, league=league,
-                          player_ids={pa.id: p.a_id, pb.id: p.b_id}, kind="tournament", on_games=tick,
-                          env_options=options)
+        plan = TournamentPlan.of(league, env, unique, anchor, games_per_pair, options)
+        with progress_bar("tournament", plan.total, "games", progress_enabled(quiet or json_out)) as tick:
+            plan.play(league, seed, parallel, device, on_games=tick)
         if not json_out:
-            console.print(f"{len(plan)} pairs needed games, {total} played")
-            if apart:
-                console.print(f"{len(apart)} pair{'s' * (len(apart) != 1)} cannot meet and were left out (in {env} a "
-                              "snapshot plays only seats of its own role: two of one role are rated through the "
-                              "players they both meet)", markup=False)
-        rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap), variant=variant)
+            console.print(f"{len(plan.pairs)} pairs needed games, {plan.total} played")
+            if plan.apart:
+                console.print(f"{len(plan.apart)} pair{'s' * (len(plan.apart) != 1)} cannot meet and were left out "
+                              f"(in {env} a snapshot plays only seats of its own role: two of one role are rated "
+                              "through the players they both meet)", markup=False)
+        rows = ladder(league, env, bootstrap=check_bootstrap(bootstrap), variant=plan.variant)
     finally:
         league.close()
+    variant = plan.variant
     title = f"{env} ladder after the tournament" + (f" ({describe_variant(variant)})" if variant else "")
     render_ladder(rows, title, json_out=json_out, caption=prior_caption(DEFAULT_PRIOR),
                   variant=variant_options(variant), verdicts=verdict_lines(rows))
 
+
+def _field(league: Any, players: list[str] | None, env: str | None, env_option: list[str] | None, run: str | None,
+           top: int | None, vs: str | None) -> tuple[str, dict[int, Any], Any]:
+    """The tournament's game, its players by id (named, a run's snapshots, the ladder's top) and the player every
+    one meets (--vs), from what the user typed; refused in one line where they make no tournament."""
+    from ..league.ladder import ladder
+    from ..rated.names import Team
+
+    found = (resolve_players(league, list(players or []), check_env(env), teams=True, env_option=env_option)
+             if players else [])
+    chosen = [m for f in found for m in (f.members if isinstance(f, Team) else (f,))]  # a team: its members
+    env = env or (chosen[0].env if chosen else None)
+    if run is not None:
+        r = league.get_run(run)
+        if r is None:
+            raise MarlError(f"no run named '{run}'")
+        env = env or r.env
+        chosen += [p for p in league.players(env=r.env, kind="snapshot") if p.run == run]
+    if top is not None:
+        if top < 2:
+            raise MarlError(f"--top must be at least 2, not {top}")
+        top_env, top_variant = shown_variant(league, env, env_option)  # the top of the variant asked for
+        rows = ladder(league, top_env, bootstrap=0, variant=top_variant)
+        env = env or top_env
+        chosen += [league.get_player(r.player_id) for r in rows[:top] if r.player_id is not None]
+    anchor = resolve_players(league, [vs], env, env_option=env_option)[0] if vs else None
+    unique = {p.id: p for p in chosen if anchor is None or p.id != anchor.id}
+    if len(unique) + (anchor is not None) < 2:
+        raise MarlError("a tournament needs at least two players (list them, or use --run / --top)")
+    envs = {p.env for p in unique.values()} | ({anchor.env} if anchor else set())
+    if len(envs) > 1:
+        raise MarlError(f"players of several games in one tournament: {', '.join(sorted(envs))}")
+    return envs.pop(), unique, anchor
 
 from .league_views import matrix_cmd, plot_cmd  # noqa: E402  (views of the league: commands/league_views.py)
 

@@ -2,24 +2,16 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 from rich.markup import escape
 
 from ..errors import MarlError
-from ..league.names import Team
-from ..league.store import PlayerRow
 from ..league.variants import describe_variant, variant_flags
-from ..rated.match import (
-    MatchInterrupted,
-    MatchReport,
-    SPRTSettings,
-    load_player,
-    mix_seed,
-    run_match,
-    sprt_exit_code,
-)
+from ..rated.match import MatchInterrupted, MatchReport, SPRTSettings, run_match, sprt_exit_code
+from ..rated.match_jobs import forecaster, match_jobs, predict
+from ..rated.names import Team
 from ._common import (
     MAX_GAMES,
     MAX_PARALLEL,
@@ -167,32 +159,25 @@ def match(
     reports: list[MatchReport] = []
     try:
         side_a, side_b = resolve_players(league, [a, b], env, teams=True, env_option=env_option)
-        crew = _flying_team(side_a, side_b, a, b)
-        # each match: A's rows (one player, or a cooperative team flying together), B's row, the team's name
-        jobs = ([(list(crew.members), side_b, crew.full_name)] if crew is not None
-                else [([row_a], row_b, None) for row_a, row_b in pairings(a, side_a, b, side_b, sprt=sprt)])
-        check_distinct_weights(league, [(r, job[1]) for job in jobs for r in job[0]])  # type: ignore[misc]
-        options = parse_env_options(jobs[0][1].env, env_option) if env_option else None  # type: ignore[union-attr]
-        forecast = _forecaster(league, jobs[0][1].env, [r for job in jobs for r in (*job[0], job[1])],  # type: ignore
-                               options)
-        for rows_a, row_b, team_name in jobs:
-            first = league.fresh_seed(rows_a[0].id, row_b.id) if seed is None else seed  # type: ignore[union-attr]
-            pa = [load_player(league, r, device=device, seed=mix_seed(first, 0 if i == 0 else 1 + i))
-                  for i, r in enumerate(rows_a)]
-            pb = load_player(league, row_b, device=device, seed=mix_seed(first, 1))  # type: ignore[arg-type]
-            ids = {**{p.id: r.id for p, r in zip(pa, rows_a, strict=True)}, pb.id: row_b.id}  # type: ignore[union-attr]
+        jobs, crew = match_jobs(league, a, side_a, b, side_b, sprt=sprt)
+        options = parse_env_options(jobs[0].row_b.env, env_option) if env_option else None
+        forecast = forecaster(league, jobs[0].row_b.env, [r for job in jobs for r in (*job.rows_a, job.row_b)],
+                              options)
+        for job in jobs:
+            first = league.fresh_seed(job.rows_a[0].id, job.row_b.id) if seed is None else seed
+            pa, pb, ids = job.load(league, first, device)
             try:
-                with progress_bar(f"{team_name or pa[0].id} vs {pb.id}", budget + budget % 2, "games",
+                with progress_bar(f"{job.team_name or pa[0].id} vs {pb.id}", budget + budget % 2, "games",
                                   progress_enabled(quiet)) as tick:
                     reports.append(run_match(pa[0], pb, games=budget, first_seed=first, parallel=parallel,
                                              league=league if store else None, player_ids=ids, sprt=settings,
                                              confidence=confidence, on_games=tick, env_options=options,
-                                             team=pa if team_name else None, team_name=team_name))
+                                             team=pa if job.team_name else None, team_name=job.team_name))
             except MatchInterrupted as stop:
                 interrupted(stop.report, stored=store)
                 raise typer.Exit(130) from None
-            if forecast is not None and team_name is None:
-                reports[-1].predicted = _predict(forecast, rows_a[0], row_b, reports[-1])
+            if forecast is not None and job.team_name is None:
+                reports[-1].predicted = predict(forecast, job.rows_a[0], job.row_b, reports[-1])
             if not json_out:
                 render_report(reports[-1])
     finally:
@@ -202,81 +187,3 @@ def match(
         print_json(reports[0].to_json() if team is None else {"team": team, "matches": [r.to_json() for r in reports]})
     if settings is not None:
         raise typer.Exit(sprt_exit_code(reports[0]))
-
-
-def _forecaster(league: Any, env: str, rows: list[PlayerRow], options: dict[str, Any] | None) -> Any:
-    """The ladder's forecaster of the variant the match is filed in, as it stands before the match (None when that
-    ladder has no rated games)."""
-    from ..league.forecast import Forecaster
-    from ..league.store import LeagueError
-    from ..rated.snapshots import players_variant
-
-    try:
-        return Forecaster.of_league(league, env, variant=players_variant(league, env, rows, options))
-    except (LeagueError, MarlError):
-        return None
-
-
-def _predict(forecast: Any, a: PlayerRow, b: PlayerRow, report: MatchReport) -> Any:
-    """What the ladder before the match predicted of its results (None for players it cannot predict)."""
-    from ..league.store import LeagueError
-
-    results = report.wins + report.draws + report.losses
-    try:
-        return forecast.predict(a.full_name, b.full_name, results) if results else None
-    except LeagueError:
-        return None
-
-
-def _flying_team(side_a: Any, side_b: Any, a: str, b: str) -> Team | None:
-    """The team that flies together in one match (a cooperative game's per-seat snapshots, named first), or None
-    (each member then plays alone, as in a two-sides game)."""
-    from ..envs import get_env
-    from ..results import COOPERATIVE
-
-    team = side_a if isinstance(side_a, Team) else side_b if isinstance(side_b, Team) else None
-    if team is None or get_env(team.env).kind != COOPERATIVE:
-        return None
-    if team is side_b:
-        raise MarlError(f"'{b}' is a team that flies together: name it first (marl match {b} {a})")
-    if isinstance(side_b, Team):
-        raise MarlError(f"'{a}' and '{b}' are both teams: match each against a scripted player")
-    return team
-
-
-def check_distinct_weights(league: Any, pairs: list[tuple[PlayerRow, PlayerRow]]) -> None:
-    """Refuse, in one line, a match between two names of the same weights: one player (a run repeated with its
-    seed), whose games against itself would say nothing."""
-    same = league.same_weights()
-    for x, y in pairs:
-        if same.get(x.id, x.id) == same.get(y.id, y.id):
-            raise MarlError(f"{x.full_name} and {y.full_name} hold the same weights: they are one player, rated as one "
-                            "(marl league ladder shows it once, its other names under it)")
-
-
-def pairings(a: str, side_a: PlayerRow | Team, b: str, side_b: PlayerRow | Team,
-             sprt: bool = False) -> list[tuple[PlayerRow, PlayerRow]]:
-    """The matches ``marl match A B`` plays: one, or one per member when one side names a team. Refused in one line:
-    the same player twice (``latest best`` when the newest snapshot is also the best), two teams, a team under
-    ``--sprt`` (one test, one verdict)."""
-    if isinstance(side_a, Team) and isinstance(side_b, Team):
-        raise MarlError(f"'{a}' and '{b}' are both teams: match one member of each, e.g. marl match "
-                        f"{side_a.members[0].full_name} {side_b.members[0].full_name}")
-    team = side_a if isinstance(side_a, Team) else side_b if isinstance(side_b, Team) else None
-    if team is not None and sprt:
-        name = a if team is side_a else b
-        raise MarlError(f"--sprt tests one pair of policies, and '{name}' is a team ({team.describe()}): name one "
-                        "member")
-    if team is None:
-        pairs = [(side_a, side_b)]
-    elif team is side_a:
-        pairs = [(m, side_b) for m in team.members]
-    else:
-        pairs = [(side_a, m) for m in team.members]
-    for x, y in pairs:  # type: ignore[misc]
-        if x.id == y.id:
-            said = f"'{a}' and '{b}' are the same player, {x.full_name}" if a != b else f"'{a}' on both sides"
-            other = "cpu" if not x.is_bot or x.name != "cpu" else "random"
-            raise MarlError(f"{said}: a match needs two different players (e.g. marl match {x.full_name} {other}; "
-                            "marl checkpoint list shows the snapshots)")
-    return pairs  # type: ignore[return-value]

@@ -166,7 +166,7 @@ def train(
     from ..algos.dqn import seed000_config
     from ..envs import get_env
     from ..league.matchmaking import parse_bots
-    from ..league.store import check_name, shown
+    from ..league.store import RunStatus, check_name, shown
     from ..policies.bots import bot_names
     from ..train.config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
     from ..train.loop import Trainer
@@ -259,8 +259,8 @@ def train(
             settings["run"] = run
             cfg = TrainConfig.from_dict(settings)
             if cfg.teacher.player and cfg.teacher.player not in bot_names(cfg.game()):  # a snapshot the league does
-                from ..league.names import resolve  # not know: one line, before the run exists
                 from ..league.variants import variant_key
+                from ..rated.names import resolve  # not know: one line, before the run exists
 
                 try:  # (best: the best of the run's own variant, as the trainer reads it)
                     resolve(league, cfg.teacher.player, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
@@ -277,12 +277,12 @@ def train(
                 if resume is not None:
                     note = trainer.restore()
                     claimed = True
-                    league.set_run_status(cfg.run, "running")
+                    league.set_run_status(cfg.run, RunStatus.RUNNING)
                     if not quiet:  # stderr: --json keeps stdout for the JSON alone
                         err_console.print(note, markup=False)
                 report = trainer.train()
             except (KeyboardInterrupt, Terminated) as stop:
-                league.set_run_status(cfg.run, "stopped")
+                league.set_run_status(cfg.run, RunStatus.STOPPED)
                 at = f" at step {trainer.steps:,}" if trainer is not None else ""
                 why = "SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C"
                 err_console.print(f"stopped {cfg.run}{at} ({why}); its last snapshot is kept: continue it with: "
@@ -290,12 +290,12 @@ def train(
                 raise typer.Exit(EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED) from None
             except MarlError:
                 if claimed:  # a refused resume (e.g. another process trains it) leaves the run as it is
-                    league.set_run_status(cfg.run, "failed")
+                    league.set_run_status(cfg.run, RunStatus.FAILED)
                 raise
             except BaseException:  # whatever else ends it, the run is not left 'running'
-                league.set_run_status(cfg.run, "failed")
+                league.set_run_status(cfg.run, RunStatus.FAILED)
                 raise
-        league.set_run_status(cfg.run, "finished")
+        league.set_run_status(cfg.run, RunStatus.FINISHED)
     finally:
         league.close()
     if json_out:

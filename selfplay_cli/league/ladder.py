@@ -74,6 +74,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from selfplay_cli.league.games import declaration
 from selfplay_cli.league.ledger import GameTable, rules_for_env
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.stats.bradley_terry import (
@@ -474,13 +475,8 @@ def pick_env(league: League, env: str | None) -> str:
 def declared_anchor(env: str) -> str:
     """The scripted player a game anchors its ratings at (its declaration's ``anchor``: the lander's heuristic),
     ``random`` for a game this process does not know."""
-    from ..envs import get_env
-    from ..envs.registry import UnknownEnvError
-
-    try:
-        return get_env(env).anchor
-    except UnknownEnvError:
-        return "random"
+    spec = declaration(env)
+    return "random" if spec is None else spec.anchor
 
 
 def default_anchor(population: list[PlayerRow], games: dict[int, int], preferred: str = "random") -> PlayerRow:
@@ -583,7 +579,7 @@ def ladder(
 
     The default anchor is the env's ``random`` bot if it played, else the first bot (lowest id) that played,
     else the (non-removed) player with the most games. ``anchor`` may be a player row (e.g. from
-    :func:`selfplay_cli.league.names.resolve`, which understands every name a user types), a player id
+    :func:`selfplay_cli.rated.names.resolve`, which understands every name a user types), a player id
     (``17`` or ``"#17"``) or a full name as shown in the ladder (``"r1/ep90"``, ``"cpu"``); the anchor must
     have games in the env. Removed snapshots are fitted (their games count) but left out of the rows and the
     ranks unless ``include_removed``.

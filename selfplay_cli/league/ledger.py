@@ -42,6 +42,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, aliased, raiseload
 
 from selfplay_cli.league.db import Database, LeagueError
+from selfplay_cli.league.games import declaration
 from selfplay_cli.league.models import Game, GameSeat, Match, Player, utcnow
 from selfplay_cli.league.roster import DEFAULT_ELO, check_env_name
 from selfplay_cli.league.variants import variant_key
@@ -58,12 +59,8 @@ KIND_CODES = {TWO_SIDES: 0, COOPERATIVE: 1, FREE_FOR_ALL: 2}
 def rules_for_env(env: str, env_options: dict[str, Any] | None = None) -> Rules:
     """The :class:`~selfplay_cli.results.Rules` a registered game declares (with these options: a lander game of M
     landers has M seats); the default for a game this process does not know."""
-    from selfplay_cli.envs import get_env
-    from selfplay_cli.envs.registry import UnknownEnvError
-
-    try:
-        spec = get_env(env)
-    except UnknownEnvError:
+    spec = declaration(env)
+    if spec is None:
         return Rules()
     with contextlib.suppress(TypeError, ValueError):  # options this version of the game does not take: as declared
         spec = spec.for_options(**(env_options or {}))

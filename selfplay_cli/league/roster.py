@@ -15,6 +15,7 @@ import re
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -26,14 +27,31 @@ from selfplay_cli.files import file_sha256
 from selfplay_cli.league.db import Database, LeagueError, shown
 from selfplay_cli.league.models import Player, Run, Tag, utcnow
 
-__all__ = ["DEFAULT_ELO", "ENV_NAME_PATTERN", "NAME_PATTERN", "RESERVED_NAMES", "RUN_STATUSES", "PlayerRow", "Roster",
-           "RunRow", "check_env_name", "check_existing_name", "check_name"]
+__all__ = ["DEFAULT_ELO", "ENV_NAME_PATTERN", "NAME_PATTERN", "RESERVED_NAMES", "PlayerRow", "Roster", "RunRow",
+           "RunStatus", "check_env_name", "check_existing_name", "check_name"]
 
 DEFAULT_ELO = 1000.0
-RUN_STATUSES = ("running", "stopped", "finished", "failed", "ended", "killed", "interrupted")
-"""Run statuses the rest of marl uses (``stopped``: by Ctrl-C or SIGTERM, resumable; ``failed``: by an error, which
-a resume may get past; ``ended``: a snapshot it needed was removed with ``marl checkpoint rm --force``, final like
-``finished``); :meth:`League.set_run_status` accepts any short word."""
+
+
+class RunStatus(str, Enum):
+    """A training run's status. Each is the very word the ledger stores and JSON shows (a member equals its word,
+    and prints as it), so leagues written before this type read the same."""
+
+    RUNNING = "running"
+    STOPPED = "stopped"
+    """Stopped by Ctrl-C or SIGTERM: resumable."""
+    FINISHED = "finished"
+    FAILED = "failed"
+    """Ended by an error, which a resume may get past."""
+    ENDED = "ended"
+    """A snapshot it needed was removed with ``marl checkpoint rm --force``: final, like ``finished``."""
+    KILLED = "killed"
+    INTERRUPTED = "interrupted"
+
+    def __str__(self) -> str:
+        return self.value
+
+
 RESERVED_NAMES = ("latest", "best")
 """Names resolved by higher-level code; no tag may take them."""
 
@@ -132,6 +150,15 @@ def check_existing_name(what: str, value: object) -> str:
     return value
 
 
+def _run_status(status: RunStatus | str) -> str:
+    """The word stored for ``status``; a :class:`LeagueError` for one that is not a :class:`RunStatus`."""
+    try:
+        return RunStatus(status).value
+    except ValueError:
+        raise LeagueError(f"unknown run status {shown(status)}: one of "
+                          f"{', '.join(s.value for s in RunStatus)}") from None
+
+
 def _player_row(p: Player) -> PlayerRow:
     """Copy an ORM player (with its run and tags loaded) into a :class:`PlayerRow`."""
     return PlayerRow(
@@ -154,10 +181,11 @@ class Roster(Database):
     # ---------------------------------------------------------------- runs
 
     def create_run(self, name: str, env: str, config: dict[str, Any], algo: str | None = None,
-                   status: str = "running") -> RunRow:
+                   status: RunStatus = RunStatus.RUNNING) -> RunRow:
         """Register a new training run. Raises LeagueError if the name is taken."""
         _check_name("run name", name)
         check_env_name(env)
+        status = _run_status(status)
 
         def work(s: Session) -> RunRow:
             if s.execute(select(Run.id).where(Run.name == name)).first() is not None:
@@ -181,10 +209,10 @@ class Roster(Database):
 
         return self._read(work)
 
-    def set_run_status(self, name: str, status: str) -> None:
-        """Set a run's status (``running``, ``finished``, ``killed``, ...). Raises LeagueError if unknown."""
-        if not status or not status.strip():
-            raise LeagueError("run status must not be empty")
+    def set_run_status(self, name: str, status: RunStatus | str) -> None:
+        """Set a run's status (a :class:`RunStatus`, or its word). Raises LeagueError for an unknown run or a word
+        that is not a status."""
+        status = _run_status(status)
 
         def work(s: Session) -> None:
             run = s.execute(select(Run).where(Run.name == name)).scalar_one_or_none()
@@ -275,7 +303,8 @@ class Roster(Database):
             if run is not None:
                 run_row = s.execute(select(Run).where(Run.name == run)).scalar_one_or_none()
                 if run_row is None and run_config is not None:
-                    run_row = Run(name=run, env=env, algo=algo, config=dict(run_config), status="finished")
+                    run_row = Run(name=run, env=env, algo=algo, config=dict(run_config),
+                                  status=RunStatus.FINISHED.value)
                     s.add(run_row)
                     s.flush()
                 if run_row is None:
@@ -453,13 +482,16 @@ class Roster(Database):
 
         self._unit(work)
 
-    def remove_snapshot(self, player_id: int, end_runs: Collection[str] = (), status: str = "ended") -> PlayerRow:
+    def remove_snapshot(self, player_id: int, end_runs: Collection[str] = (),
+                        status: RunStatus = RunStatus.ENDED) -> PlayerRow:
         """Mark a snapshot removed (soft delete) and drop its tags; its games stay in the ledger. The runs named in
         ``end_runs`` (runs that needed it, removed anyway) get ``status`` in the same transaction.
 
         Returns the player row as it was just before removal (with its path, so the caller can delete
         the file, and its former tags). Raises LeagueError for bots, unknown or already removed players.
         """
+
+        status = _run_status(status)
 
         def work(s: Session) -> PlayerRow:
             for run in s.execute(select(Run).where(Run.name.in_(list(end_runs)))).scalars():

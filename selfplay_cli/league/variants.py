@@ -24,6 +24,8 @@ import shlex
 from collections.abc import Mapping
 from typing import Any
 
+from selfplay_cli.league.games import canonical_option, declaration
+
 __all__ = ["describe_variant", "other_variants_note", "value_text", "variant_flags", "variant_key", "variant_options"]
 
 
@@ -33,21 +35,14 @@ def variant_key(env: str, options: Mapping[str, Any] | None) -> str:
     cannot load, which options are neutral or at their default is unknown: every option given counts."""
     if not options or not isinstance(options, Mapping):
         return ""
-    from selfplay_cli.envs.registry import canonical_option
-
     return _key(str(env), json.dumps(canonical_option(options), sort_keys=True))
 
 
 @functools.lru_cache(maxsize=4096)
 def _key(env: str, options_json: str) -> str:
-    from selfplay_cli.envs import get_env
-    from selfplay_cli.envs.registry import UnknownEnvError
-
     options = json.loads(options_json)
-    try:
-        variant = get_env(env).variant_options(options)
-    except UnknownEnvError:
-        variant = options
+    spec = declaration(env)
+    variant = options if spec is None else spec.variant_options(options)
     return json.dumps(variant, sort_keys=True, separators=(",", ":"), ensure_ascii=False) if variant else ""
 
 

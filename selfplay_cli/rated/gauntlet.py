@@ -14,7 +14,7 @@ seat cancel within a pair), one episode of each player on each seed of a coopera
 return), every rotation of the seating of a free-for-all game. In a cooperative game the per-seat snapshots of one
 moment (a run with one network per lander) are one player, a crew: they fly together, each on its own seat, and a
 comparison counts for every member (:func:`crews_of`). A "pair" below is one such round. All matchups of
-one snapshot moment are played together, in one batched call of the runner.
+one snapshot moment are played together, in one batched call of :func:`selfplay_cli.arena.play`.
 
 In a game whose seats hold different roles (:mod:`.roles`) a snapshot meets only players it can be seated against:
 a new ``adversary`` snapshot of a game of one adversary against one agent meets the run's ``agent`` snapshots (the
@@ -44,7 +44,7 @@ import numpy as np
 
 from ..arena import Game, play
 from ..arena.schedule import CannotMeet, round_of
-from ..envs import get_env
+from ..envs import EnvSpec, get_env
 from ..errors import MarlError
 from ..league.ledger import GameTable
 from ..league.store import League, PlayerRow
@@ -268,32 +268,7 @@ def play_gauntlet(
                 raise MarlError(f"a gauntlet plays one game: {row.full_name} plays {row.env}, not {env}")
             if row.id not in loaded:
                 loaded[row.id] = load_player(league, row, device=device, seed=mix_seed(first_seed, row.id))
-    ids = list(loaded)
-    index = {pid: i for i, pid in enumerate(ids)}
-    roster = [loaded[pid] for pid in ids]
-    options = env_options_of(*roster)
-    spec = spec.for_options(**options)
-    rules = Rules.of(spec)
-    seated = {pid: _seat_crew(crew, rules.n_seats) for pid, crew in crews.items()}
-    roles = {i: policy_roles(p, spec) for i, p in enumerate(roster)}  # who may sit where (None: anywhere)
-
-    def player(row: PlayerRow) -> int | tuple[int, ...]:
-        """A player's place in a round: its roster index, or its crew's, seat by seat."""
-        crew = seated.get(row.id)
-        return index[row.id] if crew is None else tuple(index[m.id] for m in crew)
-
-    def result_id(row: PlayerRow) -> object:
-        """How a round's results name a player: its policy id, or its crew's (a tuple: see results.crew)."""
-        crew = seated.get(row.id)
-        return loaded[row.id].id if crew is None else tuple(dict.fromkeys(loaded[m.id].id for m in crew))
-
-    def round_games(m: Matchup, seed: int) -> list[Game]:
-        try:
-            return round_of(rules, (player(m.a), player(m.b)), seed, roles)
-        except CannotMeet:
-            raise MarlError(cannot_meet_message(spec.name, rules, m.a.full_name, roles[index[m.a.id]], m.b.full_name,
-                                                roles[index[m.b.id]])) from None
-
+    gauntlet = _Gauntlet(league, cfg, loaded, crews, label, spec)
     span = max(cfg.max_pairs, cfg.bot_pairs)  # seeds reserved per matchup: one per round
     matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
     keys = [None if key is None else f"{key}/{m.first_seed}/{m.a.id}/{m.b.id}" for m in matchups]
@@ -303,59 +278,102 @@ def play_gauntlet(
             m.match_id, params = stored[k]
             m.wins, m.draws, m.losses, m.pairs = (int(x) for x in params.get("record", (0, 0, 0, 0)))
         return matchups
-    per = [len(round_games(m, m.first_seed)) for m in matchups]  # games in a round of each (seatings that fit)
-    z = normal_quantile(cfg.clear)
-    schedule: list[Game] = []
-    owner: list[tuple[int, int]] = []  # per game: its matchup's index and its round
-    in_flight = dict.fromkeys(range(len(matchups)), 0)  # games scheduled but not finished, per matchup
-    pending: dict[int, list[GameResult]] = {k: [] for k in range(len(matchups))}
-    rounds: dict[tuple[int, int], list[GameResult]] = {}  # the finished games of rounds still incomplete
+    gauntlet.plan(matchups, keys, stored)
+    for k, m in enumerate(matchups):
+        m.expect = None if history is None else _clear_history(league, history, m, gauntlet.z, 2 * cfg.pairs)
+        if cfg.bot_pairs and m.b.is_bot:  # the final's figures against the bots: in full, whatever the history
+            gauntlet.schedule_pairs(k, max(cfg.pairs, cfg.bot_pairs))
+        else:
+            gauntlet.schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
+    most = 2 * span * len(matchups)
+    play(gauntlet.spec, gauntlet.roster, gauntlet.schedule, parallel=cfg.parallel, env_options=gauntlet.options,
+         record_actions=True, on_result=lambda r: gauntlet.finished(r, on_games), slots=min(cfg.parallel, most))
+    return matchups
 
-    def schedule_pairs(k: int, n: int) -> None:
-        m = matchups[k]
+
+class _Gauntlet:
+    """One call of :func:`play_gauntlet` with its players loaded: the roster they play as, the schedule as it grows
+    (a matchup still open gets more rounds as its last ones come in) and what is still to come of each matchup."""
+
+    def __init__(self, league: League, cfg: GauntletConfig, loaded: dict[int, Policy],
+                 crews: dict[int, tuple[PlayerRow, ...]], label: str | None, spec: EnvSpec) -> None:
+        self.league, self.cfg, self.loaded, self.crews, self.label = league, cfg, loaded, crews, label
+        ids = list(loaded)
+        self.index = {pid: i for i, pid in enumerate(ids)}
+        self.roster = [loaded[pid] for pid in ids]
+        self.options = env_options_of(*self.roster)
+        self.spec = spec = spec.for_options(**self.options)
+        self.rules = rules = Rules.of(spec)
+        self.seated = {pid: _seat_crew(crew, rules.n_seats) for pid, crew in crews.items()}
+        self.roles = {i: policy_roles(p, spec) for i, p in enumerate(self.roster)}  # who may sit where (None: any)
+        self.z = normal_quantile(cfg.clear)
+        self.schedule: list[Game] = []
+        self.owner: list[tuple[int, int]] = []  # per game: its matchup's index and its round
+        self.rounds: dict[tuple[int, int], list[GameResult]] = {}  # the finished games of rounds still incomplete
+
+    def player(self, row: PlayerRow) -> int | tuple[int, ...]:
+        """A player's place in a round: its roster index, or its crew's, seat by seat."""
+        crew = self.seated.get(row.id)
+        return self.index[row.id] if crew is None else tuple(self.index[m.id] for m in crew)
+
+    def result_id(self, row: PlayerRow) -> object:
+        """How a round's results name a player: its policy id, or its crew's (a tuple: see results.crew)."""
+        crew = self.seated.get(row.id)
+        return self.loaded[row.id].id if crew is None else tuple(dict.fromkeys(self.loaded[m.id].id for m in crew))
+
+    def round_games(self, m: Matchup, seed: int) -> list[Game]:
+        try:
+            return round_of(self.rules, (self.player(m.a), self.player(m.b)), seed, self.roles)
+        except CannotMeet:
+            roles, index = self.roles, self.index
+            raise MarlError(cannot_meet_message(self.spec.name, self.rules, m.a.full_name, roles[index[m.a.id]],
+                                                m.b.full_name, roles[index[m.b.id]])) from None
+
+    def plan(self, matchups: list[Matchup], keys: list[str | None], stored: dict) -> None:
+        """The matchups to play, their keys and those already stored; the games in a round of each."""
+        self.matchups, self.keys, self.stored = matchups, keys, stored
+        self.per = [len(self.round_games(m, m.first_seed)) for m in matchups]  # seatings that fit
+        self.in_flight = dict.fromkeys(range(len(matchups)), 0)  # games scheduled but not finished, per matchup
+        self.pending: dict[int, list[GameResult]] = {k: [] for k in range(len(matchups))}
+
+    def schedule_pairs(self, k: int, n: int) -> None:
+        """``n`` more rounds of matchup ``k`` onto the schedule."""
+        m = self.matchups[k]
         for p in range(m.pairs, m.pairs + n):
-            games = round_games(m, m.first_seed + p)
-            schedule.extend(games)
-            owner.extend((k, p) for _ in games)
+            games = self.round_games(m, m.first_seed + p)
+            self.schedule.extend(games)
+            self.owner.extend((k, p) for _ in games)
         m.pairs += n
-        in_flight[k] += per[k] * n
+        self.in_flight[k] += self.per[k] * n
 
-    def finished(r: GameResult) -> None:
-        k, p = owner[r.index]
-        m = matchups[k]
-        got = rounds.setdefault((k, p), [])
+    def finished(self, r: GameResult, on_games: Callable[[int], None] | None) -> None:
+        """A game is in: count its round once whole; once a matchup's scheduled games are all in, give it more
+        rounds while it is still open, else store it."""
+        k, p = self.owner[r.index]
+        m = self.matchups[k]
+        got = self.rounds.setdefault((k, p), [])
         got.append(r)
-        if len(got) == per[k]:  # a whole round: its results between the two
-            del rounds[(k, p)]
+        if len(got) == self.per[k]:  # a whole round: its results between the two
+            del self.rounds[(k, p)]
             got.sort(key=lambda g: g.index)
-            for points in points_between(rules, got, result_id(m.a), result_id(m.b)):
+            for points in points_between(self.rules, got, self.result_id(m.a), self.result_id(m.b)):
                 m.wins += points > 0.5
                 m.draws += points == 0.5
                 m.losses += points < 0.5
-        pending[k].append(r)
-        in_flight[k] -= 1
+        self.pending[k].append(r)
+        self.in_flight[k] -= 1
         if on_games:
             on_games(1)
-        if in_flight[k] == 0:  # every game scheduled so far is in: go on while still open, else store them all
-            extra = m.more(z, cfg.pairs, cfg.max_pairs)
+        if self.in_flight[k] == 0:  # every game scheduled so far is in: go on while still open, else store them all
+            extra = m.more(self.z, self.cfg.pairs, self.cfg.max_pairs)
+            key = self.keys[k]
             if extra:
-                schedule_pairs(k, extra)
-            elif keys[k] not in stored:
-                _store(league, m, pending[k], loaded, options, crews, label, keys[k])
-                pending[k] = []
+                self.schedule_pairs(k, extra)
+            elif key not in self.stored:
+                _store(self.league, m, self.pending[k], self.loaded, self.options, self.crews, self.label, key)
+                self.pending[k] = []
             else:  # stored the first time round: these are the same games
-                m.match_id = stored[keys[k]][0]  # type: ignore[index]
-
-    for k, m in enumerate(matchups):
-        m.expect = None if history is None else _clear_history(league, history, m, z, 2 * cfg.pairs)
-        if cfg.bot_pairs and m.b.is_bot:  # the final's figures against the bots: in full, whatever the history
-            schedule_pairs(k, max(cfg.pairs, cfg.bot_pairs))
-        else:
-            schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
-    most = 2 * span * len(matchups)
-    play(spec, roster, schedule, parallel=cfg.parallel, env_options=options, record_actions=True,
-         on_result=finished, slots=min(cfg.parallel, most))
-    return matchups
+                m.match_id = self.stored[key][0]
 
 
 def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[int, Policy],
@@ -478,10 +496,10 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
 
 def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[PlayerRow, ...]]:
     """Cooperative games: the team each per-seat learner's snapshot flies with, its moment's members in seat order
-    (``s6M-lander_0``, ``s6M-lander_1``: :func:`~selfplay_cli.league.names.teammates`), by player id; snapshots of
+    (``s6M-lander_0``, ``s6M-lander_1``: :func:`~selfplay_cli.rated.names.teammates`), by player id; snapshots of
     one shared network, bots and the players of other games are not in it. A team flies together, as the run
     trained it: its members alone would each fly every lander, seats it never learned."""
-    from ..league.names import teammates
+    from .names import teammates
 
     if not rows:
         return {}
@@ -500,8 +518,8 @@ def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[Playe
 
 
 def _seat_crew(crew: tuple[PlayerRow, ...], n_seats: int) -> tuple[PlayerRow, ...]:
-    """A crew on a game of ``n_seats`` seats (options may change them): seed 001's mapping, extra seats copy members
-    chosen at random (a fixed draw), fewer seats keep the first members."""
+    """A crew on a game of ``n_seats`` seats (options may change them), as :func:`~.lineup.refit` seats a
+    team: extra seats copy members chosen at random (a fixed draw), fewer seats keep the first members."""
     from .lineup import Lineup, refit
 
     return refit(Lineup(crew[0].env, crew, 0), n_seats, seed=0).players

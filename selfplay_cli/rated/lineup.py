@@ -2,7 +2,7 @@
 
 A run that trains one network per seat files its snapshots as ``<name>-<seat>`` (``s6M-left``, ``s6M-right``),
 the seat's learner in the snapshot's league metadata. So a name can mean a *team* (see
-:mod:`selfplay_cli.league.names`, where names are resolved the same way for every command):
+:mod:`selfplay_cli.rated.names`, where names are resolved the same way for every command):
 
 * ``s6M`` (or ``run/s6M``), when no single snapshot has that name but ``s6M-<seat>`` exists for every seat in
   one run, is that team, each on its own seat: left s6M against right s6M;
@@ -31,10 +31,10 @@ import numpy as np
 
 from ..envs import EnvSpec, env_names, get_env
 from ..errors import MarlError
-from ..league.names import Team, find_team, resolve_or_team, seat_of, teammates
 from ..league.store import League, PlayerRow
 from ..policies.bots import league_bots
 from ..results import COOPERATIVE, TWO_SIDES, Rules
+from .names import Team, find_team, resolve_or_team, seat_of, teammates
 from .roles import RoleBook, cannot_meet_message, roles_text
 
 __all__ = ["Lineup", "default_opponent", "find_team", "lineup", "lineups", "safe_filename", "seat_of", "teammates"]
@@ -69,8 +69,8 @@ class Lineup:
 
 def refit(lu: Lineup, n_seats: int, seed: int = 0) -> Lineup:
     """The lineup for a game of ``n_seats`` seats when options change the number (a lander team trained with N
-    landers flown as M). A team that grows gives each extra seat a member chosen at random (seed 001's mapping:
-    the extra landers copy a policy of the team), one that shrinks keeps its first seats."""
+    landers flown as M). A team that grows gives each extra seat a member chosen at random (a fixed draw from
+    ``seed``: the extra landers copy a policy of the team), one that shrinks keeps its first seats."""
     have = len(lu.players)
     if n_seats == have:
         return lu

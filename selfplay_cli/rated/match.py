@@ -1,4 +1,4 @@
-"""Rated play: league players become policies, play fair rounds in the batched runner, and land in the ledger.
+"""Rated play: league players become policies, play fair rounds in the arena's whole-game loop, and land in the ledger.
 
 A match between A and B plays *rounds* on shared seeds, as the game's kind asks (:mod:`selfplay_cli.arena.schedule`):
 
@@ -33,7 +33,7 @@ import numpy as np
 
 from ..arena import Game, play
 from ..arena.schedule import CannotMeet, round_of, rounds
-from ..envs import get_env
+from ..envs import EnvSpec, get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key, variant_options
@@ -281,7 +281,7 @@ def run_match(
     2 landers as 4); each network must still fit the seats those options make.
 
     ``team`` (a cooperative game only): A is that team of policies flying together, member i on seat i (a team
-    flown with more seats than members gives each extra seat a member drawn at random, seed 001's mapping; with
+    flown with more seats than members gives each extra seat a member drawn at random from ``first_seed``; with
     fewer, the first members fly); ``a`` is then its first member and ``team_name`` names it in the report.
 
     Ctrl-C raises :class:`MatchInterrupted` after storing the whole rounds already finished (of the chunk in play
@@ -301,46 +301,146 @@ def run_match(
     options = {**env_options_of(*members, b), **(env_options or {})}
     spec = get_env(b.env).for_options(**options)
     check_fits(spec, options, *members, b)
-    rules = Rules.of(spec)
-    roster: list[Policy] = [a, b]
-    team_seats: tuple[int, ...] | None = None
-    a_key: Any = a.id  # what A is in the results: a policy's id, or the ids of a team's members
+    match = _Match(spec=spec, rules=Rules.of(spec), options=options, a=a, b=b, roster=[a, b], a_name=team_name or a.id,
+                   first_seed=first_seed, confidence=confidence, league=league, player_ids=player_ids, kind=kind,
+                   on_games=on_games)
     if team:
-        if rules.kind != COOPERATIVE:
-            raise MarlError(f"a team flies together only in a cooperative game; {spec.name} is {rules.kind}")
-        roster = [*members, b]
-        pick = np.random.default_rng(first_seed).integers(0, len(members), size=max(rules.n_seats - len(members), 0))
-        team_seats = tuple(list(range(min(len(members), rules.n_seats))) + [int(i) for i in pick])
-        a_key = tuple(sorted({members[i].id for i in team_seats}))
-    a_name = team_name or a.id
-    roles = {i: policy_roles(p, spec) for i, p in enumerate(roster)}  # who may sit where (None: anywhere)
-    b_index = len(roster) - 1
-    try:  # the seatings of one round: games per round (a two-sides game whose sides differ: one)
-        per = len(round_of(rules, (team_seats if team_seats is not None else 0, b_index), first_seed, roles))
-    except CannotMeet:
-        raise MarlError(cannot_meet_message(spec.name, rules, a_name, roles[0], b.id, roles[b_index])) from None
-    paired = rules.kind == TWO_SIDES and per == 2  # seat-swapped pairs: pentanomial statistics
-    n_rounds = -(-games // per)
-    chunk_rounds = max(1, parallel // per)
-    test = None
+        match.seat_team(members)
+    match.plan_rounds()
+    n_rounds = -(-games // match.per)
+    chunk_rounds = max(1, parallel // match.per)
     if sprt is not None:
         chunk_rounds = max(1, min(chunk_rounds, 64))  # smaller batches waste fewer games past the decision
-        test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta)
-    params: dict[str, Any] = {"a": a_name, "b": b.id, "games": games, "first_seed": first_seed, "env_options": options,
-                              "status": "running"}
+        match.test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta)
+    match.params = {"a": match.a_name, "b": b.id, "games": games, "first_seed": first_seed, "env_options": options,
+                    "status": "running"}
     if sprt is not None:
-        params["sprt"] = asdict(sprt)
+        match.params["sprt"] = asdict(sprt)
+    match.play(n_rounds, chunk_rounds, parallel)
+    out = match.report()
+    if sprt is not None:
+        test = match.test
+        assert test is not None
+        out.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
+                    "llr": round(match.llr, 4), "lower": round(test.lower, 4), "upper": round(test.upper, 4),
+                    "decision": match.decision, "pairs": len(match.round_points)}
+        if not match.paired:
+            out.sprt["model"] = "trinomial"
+    return out
 
+
+@dataclass
+class _Match:
+    """One call of :func:`run_match` once its players are checked: what it plays (the game, the roster of policies,
+    how A is seated and known in the results, the seatings of one round), the games it has kept and filed, and the
+    SPRT's state."""
+
+    spec: EnvSpec
+    rules: Rules
+    options: dict[str, Any]
+    a: Policy
+    b: Policy
+    roster: list[Policy]
+    a_name: str
+    first_seed: int
+    confidence: float
+    league: League | None
+    player_ids: dict[str, int] | None
+    kind: str
+    on_games: Callable[[int], None] | None
+    a_key: Any = None  # what A is in the results: a policy's id, or the ids of a team's members
+    team_seats: tuple[int, ...] | None = None
+    roles: dict[int, Any] = field(default_factory=dict)
+    per: int = 1  # games per round
+    paired: bool = False  # rounds are seat-swapped pairs: pentanomial statistics
+    test: SPRT | None = None
+    params: dict[str, Any] = field(default_factory=dict)
     match_id: int | None = None
-    kept: list[GameResult] = []
-    game_ids: list[int] = []
-    round_points: list[list[float]] = []  # A's points in each round's results against B
+    kept: list[GameResult] = field(default_factory=list)
+    game_ids: list[int] = field(default_factory=list)
+    round_points: list[list[float]] = field(default_factory=list)  # A's points in each round's results against B
     decision: str | None = None
-    llr = 0.0
+    llr: float = 0.0
+    in_play: list[GameResult] = field(default_factory=list)
+    start: float = 0.0
 
-    def take(finished: list[GameResult]) -> list[GameResult]:
+    def __post_init__(self) -> None:
+        self.a_key = self.a.id
+
+    def seat_team(self, members: list[Policy]) -> None:
+        """A is a team flying together: member i on seat i, each extra seat a member drawn from the first seed."""
+        rules = self.rules
+        if rules.kind != COOPERATIVE:
+            raise MarlError(f"a team flies together only in a cooperative game; {self.spec.name} is {rules.kind}")
+        self.roster = [*members, self.b]
+        pick = np.random.default_rng(self.first_seed).integers(0, len(members),
+                                                               size=max(rules.n_seats - len(members), 0))
+        self.team_seats = tuple(list(range(min(len(members), rules.n_seats))) + [int(i) for i in pick])
+        self.a_key = tuple(sorted({members[i].id for i in self.team_seats}))
+
+    def plan_rounds(self) -> None:
+        """Who may sit where, and the games of one round (a two-sides game whose sides differ: one)."""
+        rules, roster = self.rules, self.roster
+        self.roles = roles = {i: policy_roles(p, self.spec) for i, p in enumerate(roster)}  # None: anywhere
+        b_index = len(roster) - 1
+        try:
+            self.per = len(round_of(rules, (self.team_seats if self.team_seats is not None else 0, b_index),
+                                    self.first_seed, roles))
+        except CannotMeet:
+            raise MarlError(cannot_meet_message(self.spec.name, rules, self.a_name, roles[0], self.b.id,
+                                                roles[b_index])) from None
+        self.paired = rules.kind == TWO_SIDES and self.per == 2
+
+    def schedule(self, done: int, n: int) -> list[Game]:
+        """The games of ``n`` rounds from the ``done``-th on."""
+        first, rules = self.first_seed + done, self.rules
+        if self.team_seats is None:
+            return rounds(rules, (0, 1), n, first_seed=first, roles=self.roles)
+        # the team's episode and B's on each seed: one comparison
+        b_index = len(self.roster) - 1
+        return [g for r in range(n)
+                for g in (Game(first + r, self.team_seats), Game(first + r, (b_index,) * rules.n_seats))]
+
+    def play(self, n_rounds: int, chunk_rounds: int, parallel: int) -> None:
+        """Play chunk after chunk of rounds until ``n_rounds`` or an SPRT decision, keeping and filing each
+        chunk's whole rounds; the match row's status says how it ended (:class:`MatchInterrupted` on Ctrl-C)."""
+        self.start = time.perf_counter()
+        done = 0
+        try:
+            while done < n_rounds and self.decision is None:
+                n = min(chunk_rounds, n_rounds - done)
+                self.in_play = []
+                play(self.spec, self.roster, self.schedule(done, n), parallel=parallel, env_options=self.options,
+                     on_result=self.on_result, record_actions=self.league is not None)
+                self.keep()
+                done += n
+        except KeyboardInterrupt:
+            self.keep()
+            self.set_status("interrupted")
+            interrupted = self.report()
+            interrupted.interrupted = True
+            raise MatchInterrupted(interrupted) from None
+        except BaseException:
+            with contextlib.suppress(Exception):  # say so on the row, if the database still takes it (a full disk
+                self.set_status("failed")  # may not)
+            raise
+        self.set_status("finished")
+
+    def on_result(self, r: GameResult) -> None:
+        self.in_play.append(r)
+        if self.on_games is not None:
+            self.on_games(1)
+
+    def keep(self) -> None:
+        """The whole rounds of the chunk in play, kept and filed (the rest dropped)."""
+        new = self.take(self.in_play)
+        self.in_play = []
+        self.store(new)
+        self.kept += new
+
+    def take(self, finished: list[GameResult]) -> list[GameResult]:
         """The whole rounds among ``finished`` (results of one chunk), in order, up to an SPRT decision."""
-        nonlocal decision, llr
+        per = self.per
         by_index = {r.index: r for r in finished}
         new: list[GameResult] = []
         for i in sorted({r.index // per for r in finished}):
@@ -348,82 +448,38 @@ def run_match(
             if any(g is None for g in got):
                 continue
             new += got  # type: ignore[arg-type]
-            round_points.append(points_between(rules, got, a_key, b.id))  # type: ignore[arg-type]
-            if test is not None:
-                llr = test.llr(*_counts(paired, round_points))
-                decision = test.decide(llr)
-                if decision is not None:
+            self.round_points.append(points_between(self.rules, got, self.a_key, self.b.id))  # type: ignore[arg-type]
+            if self.test is not None:
+                self.llr = self.test.llr(*_counts(self.paired, self.round_points))
+                self.decision = self.test.decide(self.llr)
+                if self.decision is not None:
                     break
         return new
 
-    def store(new: list[GameResult]) -> None:
-        nonlocal match_id
-        if league is None or not new:
+    def store(self, new: list[GameResult]) -> None:
+        """File ``new`` in one transaction (the match row with the first of them)."""
+        if self.league is None or not new:
             return
-        records = [r.with_players(player_ids) for r in new]  # type: ignore[arg-type]
+        records = [r.with_players(self.player_ids) for r in new]  # type: ignore[arg-type]
         with signals_held():  # a Ctrl-C now waits until the games are stored and counted
-            if match_id is None:
-                match_id, ids = league.create_match_with_games(spec.name, kind, params, records)
+            if self.match_id is None:
+                self.match_id, ids = self.league.create_match_with_games(self.spec.name, self.kind, self.params,
+                                                                         records)
             else:
-                ids = league.record_games(match_id, records)
-            game_ids.extend(ids)
+                ids = self.league.record_games(self.match_id, records)
+            self.game_ids.extend(ids)
 
-    def on_result(r: GameResult) -> None:
-        in_play.append(r)
-        if on_games is not None:
-            on_games(1)
+    def set_status(self, status: str) -> None:
+        if self.match_id is not None:
+            self.league.update_match(self.match_id, status=status,  # type: ignore[union-attr]
+                                     games_stored=len(self.game_ids))
 
-    start = time.perf_counter()
-    done = 0
-    in_play: list[GameResult] = []
-
-    def report() -> MatchReport:
-        out = _report(spec.name, rules, paired, a_name, a_key, b, kept, round_points, time.perf_counter() - start,
-                      match_id, first_seed, confidence, game_ids)
-        out.variant = variant_key(spec.name, options)
+    def report(self) -> MatchReport:
+        out = _report(self.spec.name, self.rules, self.paired, self.a_name, self.a_key, self.b, self.kept,
+                      self.round_points, time.perf_counter() - self.start, self.match_id, self.first_seed,
+                      self.confidence, self.game_ids)
+        out.variant = variant_key(self.spec.name, self.options)
         return out
-
-    try:
-        while done < n_rounds and decision is None:
-            n = min(chunk_rounds, n_rounds - done)
-            if team_seats is None:
-                schedule = rounds(rules, (0, 1), n, first_seed=first_seed + done, roles=roles)
-            else:  # the team's episode and B's on each seed: one comparison
-                schedule = [g for r in range(n) for g in (Game(first_seed + done + r, team_seats),
-                                                          Game(first_seed + done + r, (len(members),) * rules.n_seats))]
-            in_play = []
-            play(spec, roster, schedule, parallel=parallel, env_options=options, on_result=on_result,
-                 record_actions=league is not None)
-            new = take(in_play)
-            in_play = []
-            store(new)
-            kept += new
-            done += n
-    except KeyboardInterrupt:
-        new = take(in_play)
-        store(new)
-        kept += new
-        if match_id is not None:
-            league.update_match(match_id, status="interrupted", games_stored=len(game_ids))  # type: ignore[union-attr]
-        interrupted = report()
-        interrupted.interrupted = True
-        raise MatchInterrupted(interrupted) from None
-    except BaseException:
-        if match_id is not None:  # say so on the row, if the database still takes it (a full disk may not)
-            with contextlib.suppress(Exception):
-                league.update_match(match_id, status="failed", games_stored=len(game_ids))  # type: ignore[union-attr]
-        raise
-    if match_id is not None:
-        league.update_match(match_id, status="finished", games_stored=len(game_ids))  # type: ignore[union-attr]
-    out = report()
-    if sprt is not None:
-        assert test is not None
-        out.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
-                    "llr": round(llr, 4), "lower": round(test.lower, 4), "upper": round(test.upper, 4),
-                    "decision": decision, "pairs": len(round_points)}
-        if not paired:
-            out.sprt["model"] = "trinomial"
-    return out
 
 
 def _counts(paired: bool, round_points: list[list[float]]) -> tuple[list[int], str]:

@@ -1,5 +1,6 @@
-"""Recording: turning a game into frames (the game's picture and the caption band under it) and frames into mp4 or
-gif (imports envs and arena only)."""
+"""Recording: a game played (or replayed from the ledger) through the arena's whole-game loop
+(:func:`selfplay_cli.arena.play`), each state turned into a frame (the game's picture and the caption band under it,
+:mod:`.overlay`), and the frames into mp4 or gif (:mod:`.video`). Imports envs, arena and results only."""
 
 from .overlay import CaptionBand
 from .recorder import Recording, VideoSettings, record_game, record_replay, renderer_of, stop_rule

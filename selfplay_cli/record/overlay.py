@@ -1,7 +1,7 @@
 """The caption band of a recording: who plays which seat, the running score, the step and which game this is.
 
 Every recording carries it, whatever the game: a band of text under the game's own frame (the frame itself is left
-as the game drew it). It is built from what every game declares and the runner knows, so nothing here depends on
+as the game drew it). It is built from what every game declares and the game loop knows, so nothing here depends on
 one game's shape:
 
 * one entry per side (:meth:`~selfplay_cli.envs.registry.EnvSpec.side_seats`: each seat of a two-sides game or a

@@ -1,6 +1,6 @@
 """A game to a video: the arena plays it, the env's renderer draws each state, the writer encodes it.
 
-The game is played by the same runner as every match (:func:`selfplay_cli.arena.play`), one game at a time, with
+The game is played by the same game loop as every match (:func:`selfplay_cli.arena.play`), one game at a time, with
 a hook that renders every state it passes through and streams the frame to the encoder at once: one frame for the
 serve, one per step, then the final frame held for ``hold`` seconds so the result can be read. Nothing is kept
 but the latest frame, so memory does not grow with the game's length.
@@ -107,8 +107,9 @@ class Recording:
 
 def stop_rule(spec: EnvSpec, env_options: dict[str, Any], max_steps: int | None = None,
               max_rallies: int | None = None) -> Callable[[BatchedCore], np.ndarray] | None:
-    """The runner's ``stop_when`` for a recording cut short after ``max_steps`` steps or ``max_rallies`` rallies
-    (serves played out, whether they ended in a point, a re-serve or the rally cap; only cores that count serves)."""
+    """:func:`selfplay_cli.arena.play`'s ``stop_when`` for a recording cut short after ``max_steps`` steps or
+    ``max_rallies`` rallies (serves played out, whether they ended in a point, a re-serve or the rally cap; only
+    cores that count serves)."""
     if max_steps is not None and max_rallies is not None:
         raise MarlError("--max-steps and --max-rallies exclude each other")
     if max_steps is not None:

@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import files
 from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
-from ..arena.selfplay import SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
+from ..arena.training_games import SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
 from ..league.matchmaking import MatchmakerConfig

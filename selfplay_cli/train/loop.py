@@ -35,7 +35,7 @@ import torch
 from .. import files
 from ..algos import get_learner
 from ..algos.joint import JointLearner
-from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
+from ..arena.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
 from ..errors import MarlError, NonFiniteError
 from ..league.ledger import KIND_CODES
 from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
@@ -166,8 +166,8 @@ def load_teacher(league: League, cfg: TrainConfig, spaces: list[Any], device: st
     name = cfg.teacher.player
     if not name:
         return None
-    from ..league.names import resolve
     from ..policies.spaces import describe_space
+    from ..rated.names import resolve
 
     try:
         row = resolve(league, name, cfg.env, variant=variant_key(cfg.env, cfg.env_options))

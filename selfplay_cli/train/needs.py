@@ -20,13 +20,13 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import MarlError
-from ..league.store import League, LeagueError, PlayerRow, RunRow
+from ..league.store import League, LeagueError, PlayerRow, RunRow, RunStatus
 from .lock import live_trainer
 
-ENDED = "ended"
+ENDED = RunStatus.ENDED
 """The status of a run ended because a snapshot it needed was removed (``marl checkpoint rm --force``): final,
 like ``finished``; ``--resume`` refuses it in one line."""
-OVER = ("finished", ENDED)
+OVER = (RunStatus.FINISHED, ENDED)
 """Statuses of runs that will not be resumed, and so need no snapshot."""
 DYNAMIC_NAMES = ("best", "latest")  # a teacher named so is whatever is best or newest when the run resumes
 
@@ -171,8 +171,8 @@ def _teacher(run: RunRow) -> str | None:
 
 def _resolve_teacher(league: League, run: RunRow, name: str, include_removed: bool = False) -> PlayerRow:
     """The player ``name`` means as the run's teacher, found as the trainer finds it."""
-    from ..league.names import resolve
     from ..league.variants import variant_key
+    from ..rated.names import resolve
 
     options = (run.config or {}).get("env_options")
     return resolve(league, name, run.env, include_removed=include_removed,

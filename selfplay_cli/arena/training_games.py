@@ -1,6 +1,11 @@
-"""Self-play rollouts: N games in one batched core that never stop, some seats driven by learners.
+"""Training's games: N games in one batched core that never stop, some seats driven by learners.
 
-This is the training side of the arena. Each (seat, game) slot is either a learner's (learner index >= 0, fixed
+This is one of the arena's two game loops, the one training steps. Rated play needs whole games (a schedule of
+seeds and seat swaps, each game played to its end and counted, replays, recordings: :mod:`.matches`); training
+needs slots that never stop (a game that ends restarts at once) and, every step, each learner's transitions
+(observations, rewards, dones, what a cut game bootstraps from) for the slots it holds. Both keep to the same
+limits (:mod:`.limits`: a game's length, numbers that are not finite) and make results the same way
+(:func:`~selfplay_cli.results.game_results`). Each (seat, game) slot is either a learner's (learner index >= 0, fixed
 for the whole run) or an opponent's (-1), filled at every game start by ``choose_opponents`` (the matchmaker draws
 for every opponent slot on its own: a pool snapshot, a scripted bot, or a live learner). A learner sees only its own
 slots, in a fixed order, as a vectorised environment: ``observe()`` -> observations (and ``masks()``, ``acting()``),
@@ -36,9 +41,9 @@ import numpy as np
 from ..envs import EnvSpec, SeatSpace, get_env
 from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
-from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules
+from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, game_results
+from .limits import GameLength, first_nonfinite
 from .replay import ActionLog, SeatActions, encode_actions
-from .runner import GameLength, first_nonfinite
 
 OPPONENT = -1
 SHARING = ("nops", "fups", "sa")  # one network per learner; one shared by all; one agent over the team's seats
@@ -409,21 +414,18 @@ class SelfPlayGames:
                 self.truncated = [flat_cut[s] for s in self._index]
                 self.final_obs = self.observe()
                 self.final_masks = self.masks()
-            scores = np.asarray(self.core.score[:, ended], dtype=np.float64)
-            outcome = self.rules.outcome(scores)
-            for k, g in enumerate(ended.tolist()):
-                players = tuple(self._player_id(seat, g) for seat in range(n_seats))
-                finished.append(GameResult(
-                    env=self.spec.name, players=players, seed=int(self.seeds[g]),
-                    scores=tuple(float(x) for x in scores[:, k]), outcome=tuple(float(x) for x in outcome[:, k]),
-                    length=int(self.core.steps[g]), truncated=bool(cut[g]), index=g,
-                    actions=encode_actions(self._log.take(g))))
+            games = ended.tolist()
+            finished = game_results(
+                self.spec.name, self.rules, self.core.score[:, ended],
+                [tuple(self._player_id(seat, g) for seat in range(n_seats)) for g in games], seeds=self.seeds[ended],
+                lengths=self.core.steps[ended], truncated=cut[ended], indices=games,
+                actions=[encode_actions(self._log.take(g)) for g in games])
             self._start(ended)
         return out_r, out_d, finished
 
     def _check_finite(self, per_seat: Any, what: str) -> None:
         """Refuse a NaN or infinite ``what`` (``observation``, ``reward``) from the game
-        (:func:`~selfplay_cli.arena.runner.first_nonfinite`): the first seat and game at fault, named in a
+        (:func:`~selfplay_cli.arena.limits.first_nonfinite`): the first seat and game at fault, named in a
         :class:`NonFiniteError` with the game's seed and how many steps it had played (enough to replay it). A
         learner must never learn from such a number."""
         bad = first_nonfinite(per_seat, self.n)

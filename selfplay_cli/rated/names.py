@@ -21,8 +21,10 @@ sense (``marl record`` seats it, ``marl match`` plays each member, ``marl checkp
 Removed snapshots are not resolved unless ``include_removed=True`` (for ``marl show``); naming one gives
 an error saying it was removed.
 
-Imports go one way: this module uses :mod:`selfplay_cli.league.ladder` (for ``best``); the ladder never resolves
-names itself (its ``anchor`` is a player row, an id or a full name; commands resolve what users type here first).
+It lives with rated play, not in the league, because a team is known by its game's seats (the game's registry, which
+the league does not import). Imports go one way: this module uses :mod:`selfplay_cli.league.ladder` (for ``best``);
+the ladder never resolves names itself (its ``anchor`` is a player row, an id or a full name; commands resolve
+what users type here first).
 """
 
 from __future__ import annotations
@@ -32,11 +34,11 @@ import functools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-from selfplay_cli.envs import UnknownEnvError, env_names, get_env
-from selfplay_cli.league.ladder import LadderRow, ladder
-from selfplay_cli.league.store import League, LeagueError, PlayerRow
-from selfplay_cli.league.variants import describe_variant
-from selfplay_cli.stats.bradley_terry import FLAG_DISCONNECTED, FLAG_UNRATED
+from ..envs import UnknownEnvError, env_names, get_env
+from ..league.ladder import LadderRow, ladder
+from ..league.store import League, LeagueError, PlayerRow
+from ..league.variants import describe_variant
+from ..stats.bradley_terry import FLAG_DISCONNECTED, FLAG_UNRATED
 
 __all__ = ["MAX_CANDIDATES", "LadderFn", "Team", "find_team", "resolve", "resolve_many", "resolve_or_team",
            "seat_of", "teammates"]
