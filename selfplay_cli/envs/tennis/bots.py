@@ -1,336 +1,54 @@
-"""Table tennis in the vertical plane along the table (seed 002's game, re-implemented as a physics game).
-
-This module is the game's declaration: its constants, its options (:class:`TennisConfig`), each seat's spaces, the
-ball's physics (shared by the core and the scripted player, who plans with it) and the scripted players' rules. N
-games stepped at once are :class:`~selfplay_cli.envs.tennis_core.TennisCore`; the PettingZoo view and the
-``tennis`` :class:`~selfplay_cli.envs.registry.EnvSpec` are in :mod:`.tennis_env`, the renderer in
-:mod:`.tennis_render`.
-
-The world (SI units; x along the table, y up; seat 0 plays from the -x end, seat 1 from the +x end)
-    Table 2.74 m long, surface at y = 0, x from -1.37 to +1.37; net at x = 0, 0.1525 m high; floor at y = -0.76.
-    Ball: radius 20 mm, mass 2.7 g, a thin shell (moment of inertia 2/3 m r^2), with a scalar spin ``w`` about the
-    axis perpendicular to the plane (counter-clockwise positive: for a ball moving to +x, topspin is w < 0).
-
-Flight (:func:`accel`, integrated with semi-implicit Euler)
-    Gravity 9.81; quadratic air drag ``-k_d |v| v`` (k_d from rho = 1.2 kg/m3, C_d = 0.40 and the ball's cross
-    section); Magnus force ``k_m w x v`` (k_m = rho A r C_m / 2m with C_m = 1.0: at 150 rad/s and 10 m/s about 8 m/s2,
-    so topspin dips and backspin floats); spin decays slowly in the air (0.2 /s). ``drag`` and ``magnus`` scale the
-    two forces (0 switches them off).
-
-Contacts (:func:`contact`, one model for table and bats)
-    An impulse at the contact point: the normal relative velocity is reversed with a restitution (table 0.90, bat
-    0.85); friction acts on the contact point's slip ``u = v_t - r w`` (the surface's tangential speed of the ball
-    relative to the surface): it takes out the impulse that brings the slip to zero (the ball leaves rolling),
-    ``0.4 m |u|`` for a thin shell, unless that exceeds Coulomb's ``mu J_n`` (table 0.40, bat rubber 1.0), when the
-    ball keeps sliding. The same impulse changes the speed along the surface and the spin, so topspin (which slips
-    less) bounces off the table lower and faster than a ball without spin, and backspin (which slips more) higher
-    and slower; a bat's angle and velocity decide the return (the ball's velocity relative to the bat's contact point
-    is reflected about the bat's normal, friction on the rubber imparts spin), and a brushing stroke makes spin.
-    A ball without spin reaches rolling (grips) at the usual landing angles (steeper than ~28 degrees); the table's
-    0.40 is at the grippy end of measured values and is chosen for that.
-
-Substeps and tunnelling
-    50 decisions a second; each step is 4 physics substeps of 5 ms. Every substep tests the ball's whole path
-    against each bat (a swept test: the ball's signed distance to the bat's line at the start and end of the substep,
-    the bat moving and turning with it, and where along the face the crossing happens), against the net (the ball
-    crossing the net's plane below its top plus a radius, or touching it) and against the table (crossing the
-    surface from above), so a ball at any speed cannot pass through a bat, the net or the table.
-
-Bats
-    Each a thin segment 0.15 m long (``bat_scale`` times), with position, velocity, tilt and tilt rate. The tilt
-    ``angle`` is egocentric: 0 is the face upright facing the net, positive opens the face (turns it upward),
-    limits +-pi/2. Either side of the segment hits. A bat stays in its own reachable box: from 1.5 m behind its end
-    of the table up to the net (no part of it may cross the net's plane), 0.4 m below to 1.6 m above the table's
-    surface. Bats do not collide with the table, the net or each other.
-
-Actions (per seat)
-    ``Box(-1, 1, (3,))``: the bat's velocity toward the net and upward (times 6 m/s each) and its tilt rate (times
-    10 rad/s), held for the step, or with ``discrete=true`` ``MultiDiscrete([3, 3, 3])`` (0, 1, 2 meaning -1, 0, +1
-    on each axis). A bat pushed against its box stops there, and observes the velocity it really had.
-
-Rules
-    * Serve: at the start of a point the ball is tossed straight up (2.6 m/s, from 0.15 m above the table's height,
-      0.18 m behind the server's end, +-``toss_jitter`` m along the table at random), in front of the server's bat.
-      The server must strike it within ``serve_time`` seconds and before it touches anything else (the floor,
-      typically); otherwise the receiver wins the point. By default the struck ball must land on the receiver's half
-      first, a simplification of the real serve; with ``serve_bounce=true`` it is table tennis's serve: it bounces
-      on the server's own half first (reason ``serve_no_bounce`` if it does not; a second bounce there is
-      ``own_half``), then on the receiver's half. No lets.
-    * After each legal hit the ball must land on the opponent's half before anything else. The point goes to the
-      opponent of the player who hits into the net (any net contact before the landing: no net cords), hits out
-      (the ball reaches the floor, leaves the room (4.5 m from the net) or goes below the table's surface without
-      landing on the opponent's half), lands it on their own half, hits it twice (a second contact with the same
-      bat, after 40 ms: contacts within 40 ms are one stroke) or volleys (hits a ball the opponent sent before it
-      bounced on the hitter's half).
-    * Once the ball has landed on the opponent's half, the opponent must return it before it bounces again: any
-      other event (a second bounce, the floor, the net, the hitter's own half or bat) gives the point to the hitter.
-    * Serves alternate every 2 points, every point from 10-10 (``points_to_win - 1`` all); the first server is drawn
-      from the game's seed. A game is won at 11 (``points_to_win``) by 2 (terminated); after ``max_steps`` steps it
-      is truncated and decided by the points at that moment.
-    * The game tracks, as the seed does, the last hitter (:attr:`TennisCore.hitter`), the last surface the ball
-      touched (:attr:`TennisCore.surface`) and whose turn it is (:attr:`TennisCore.turn`), and why each point
-      ended (:attr:`TennisCore.reason`).
-
-Rewards and score
-    ``point_reward`` to the winner of a point and its negative to the loser (zero-sum); ``hit_reward`` to a player for
-    each legal stroke (a serve of the own toss, or a return of a ball that bounced on the own half), the shaping
-    reward of the seed's reward curriculum (decayed while the point reward grows); and ``return_reward`` to a player
-    whose stroke (serve or return) lands on the opponent's half, the seed's reward for "the ball not only across the
-    net but also onto the opponent's table". The seed paid its hit reward "regardless of whether the move made was a
-    foul"; marl does not pay a foul's touch: paid, learners learned to volley the serve (a 1M-step snapshot of a
-    30-minute run volleyed 42.5% of the serve bot's serves). ``score`` is the points each seat won, so results and
-    ratings go by points.
-    :meth:`TennisCore.set_options` changes ``hit_reward``, ``return_reward``, ``point_reward`` and ``bat_scale``
-    of running games between steps (the curricula's hook).
-
-Observation (per seat, egocentric: x points from the seat's own end toward the net and the opponent, spins and
-velocities mirrored with it, so one policy plays either end; mirroring the world swaps the two seats' observations
-exactly). 25 float32 values, clipped to the declared bounds (which the ball leaves only far from play):
-
-    0-5    own bat: x, y (m), vx, vy (m/s / 10), angle (rad), tilt rate (/ 10 rad/s)
-    6-11   the opponent's bat, the same in my frame (its angle is its own tilt)
-    12-16  ball: x, y (m), vx, vy (m/s / 10), spin (rad/s / 100; topspin toward the opponent is negative)
-    17     the opponent hit last and the ball has not yet bounced on my half (I may not touch it)
-    18     the opponent hit last and the ball bounced on my half (my turn: return it before it bounces again)
-    19     I hit last and the ball has not yet landed on the opponent's half
-    20     I hit last and the ball landed on the opponent's half (their turn)
-    21     I am to serve (the toss is in the air)
-    22     the opponent is to serve
-    23     serve clock: the fraction of ``serve_time`` left while a toss is in the air, else 0
-    24     the bats' length (m), which ``bat_scale`` sets
-
-Scripted players: ``serve-bot`` (seed 002's serve bot, the ratings' anchor) plans with this module's physics: it serves
-by ``serve_mode`` (``fixed``: one serve; ``velocity``: random speed, arc and placement; ``spin``: random top- or
-backspin; ``mixed``, marl's own: a ``velocity`` or a ``spin`` serve, drawn per serve, so one practice run meets both),
-solving the contact model backwards for the bat's tilt and velocity, and returns balls to the middle of the
-other half (in the randomized modes at the pace they came); it misjudges spin (see :func:`serve_bot_rule_for`), so spin
-beats it. ``random`` is marl's own (uniform actions). Randomness: the first server and each toss's place come from the
-game's seed (counter-based).
-
-Not modelled: the third dimension (sidespin, the table's width, the ball going wide), lets (the real serve's first
-bounce on the server's half is an option, ``serve_bounce``, off by default), net cords (a net touch ends the point), the
-bounce of the ball off the net or the floor, the bat's edge and handle (a bat is a segment with no thickness, struck on
-either face, its ends included within half a ball radius), bat inertia (the velocity commanded is the velocity), rubber
-types, the ball's deformation (the bat's friction is an impulse limited only by Coulomb friction), and speed-dependent
-restitution.
-"""
+"""The tennis game's scripted player, ``serve-bot``: it plans with the game's own physics (:mod:`.physics`)."""
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields, replace
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 
-# --------------------------------------------------------------------------------------------------------------
-# Time
-FPS = 50  # decisions (steps) per second
-DT = 1.0 / FPS
-SUBSTEPS = 4  # physics substeps per step
-H = DT / SUBSTEPS
-
-# Table, net, room (m)
-TABLE_HALF = 1.37  # the table runs from -1.37 to 1.37
-NET_H = 0.1525
-FLOOR_Y = -0.76
-X_OUT = 4.5  # a ball this far from the net has left the room
-
-# Ball
-G = 9.81
-BALL_R = 0.02
-BALL_M = 0.0027
-AIR_RHO = 1.20
-DRAG_CD = 0.40
-MAGNUS_CM = 1.0
-_AREA = math.pi * BALL_R * BALL_R
-K_DRAG = 0.5 * AIR_RHO * DRAG_CD * _AREA / BALL_M  # 1/m: drag acceleration = K_DRAG |v| v
-K_MAGNUS = 0.5 * AIR_RHO * _AREA * BALL_R * MAGNUS_CM / BALL_M  # Magnus acceleration = K_MAGNUS w x v
-SPIN_DECAY = 0.2  # 1/s, the spin's decay in the air
-MAX_SPIN = 1000.0  # rad/s, the most spin a ball keeps (~160 revolutions a second)
-INERTIA = 2.0 / 3.0  # thin shell: I = 2/3 m r^2
-STICK = INERTIA / (1.0 + INERTIA)  # 0.4: the friction impulse (per unit mass and slip) that stops the slip
-SPIN_GAIN = 1.0 / (INERTIA * BALL_R)  # spin change per unit friction impulse per mass
-
-E_TABLE, MU_TABLE = 0.90, 0.40
-E_BAT, MU_BAT = 0.85, 1.0
-
-# Bats
-BAT_LEN = 0.15
-MAX_BAT_SCALE = 5.0
-V_MAX = 6.0  # m/s per axis
-OMEGA_MAX = 10.0  # rad/s of tilt
-ANGLE_MAX = math.pi / 2
-BACK = 1.5  # how far behind its end of the table a bat reaches
-X_BACK = TABLE_HALF + BACK  # 2.87 m from the net
-NET_GAP = 0.02  # the closest any part of a bat comes to the net's plane
-Y_LOW, Y_HIGH = -0.4, 1.6
-HOME_X, HOME_Y = -1.8, 0.2  # (egocentric) where both bats start each point
-HIT_COOLDOWN = 0.04  # s: contacts of one bat this soon after its hit are the same stroke
-
-# Serve
-TOSS_X, TOSS_Y, TOSS_VY = -1.55, 0.15, 2.6  # egocentric, for the server
-
-# Observation layout and scales
-VEL_SCALE = 10.0  # velocities are observed in units of 10 m/s
-SPIN_SCALE = 100.0  # spins in units of 100 rad/s
-FEATURE_NAMES = (
-    "bat_x", "bat_y", "bat_vx", "bat_vy", "bat_angle", "bat_rate",
-    "opp_x", "opp_y", "opp_vx", "opp_vy", "opp_angle", "opp_rate",
-    "ball_x", "ball_y", "ball_vx", "ball_vy", "ball_spin",
-    "incoming", "my_turn", "outgoing", "landed_there", "i_serve", "they_serve", "serve_clock", "bat_length",
+from ..rng import GOLDEN, mix64, to_unit
+from .config import (
+    ANGLE_MAX,
+    BALL_R,
+    BALL_SPIN,
+    BALL_VX,
+    BALL_VY,
+    BALL_X,
+    BALL_Y,
+    BAT_ANGLE,
+    BAT_X,
+    BAT_Y,
+    DT,
+    E_BAT,
+    E_TABLE,
+    FLOOR_Y,
+    HOME_X,
+    HOME_Y,
+    I_SERVE,
+    INCOMING,
+    K_DRAG,
+    K_MAGNUS,
+    MU_BAT,
+    MU_TABLE,
+    MY_TURN,
+    N_FEATURES,
+    NET_H,
+    OMEGA_MAX,
+    SERVE_MODES,
+    SPIN_DECAY,
+    SPIN_GAIN,
+    SPIN_SCALE,
+    STICK,
+    TABLE_HALF,
+    THEY_SERVE,
+    V_MAX,
+    VEL_SCALE,
+    G,
+    TennisConfig,
 )
-N_FEATURES = len(FEATURE_NAMES)
-(BAT_X, BAT_Y, BAT_VX, BAT_VY, BAT_ANGLE, BAT_RATE, OPP_X, OPP_Y, OPP_VX, OPP_VY, OPP_ANGLE, OPP_RATE, BALL_X,
- BALL_Y, BALL_VX, BALL_VY, BALL_SPIN, INCOMING, MY_TURN, OUTGOING, LANDED_THERE, I_SERVE, THEY_SERVE, SERVE_CLOCK,
- BAT_LENGTH) = range(N_FEATURES)
-_VB, _VBALL, _SB = V_MAX / VEL_SCALE, 40.0 / VEL_SCALE, MAX_SPIN / SPIN_SCALE
-OBS_LOW = np.array([-X_BACK, Y_LOW, -_VB, -_VB, -ANGLE_MAX, -1.0,
-                    0.0, Y_LOW, -_VB, -_VB, -ANGLE_MAX, -1.0,
-                    -X_OUT, FLOOR_Y, -_VBALL, -_VBALL, -_SB,
-                    0, 0, 0, 0, 0, 0, 0, 0], dtype=np.float32)
-OBS_HIGH = np.array([0.0, Y_HIGH, _VB, _VB, ANGLE_MAX, 1.0,
-                     X_BACK, Y_HIGH, _VB, _VB, ANGLE_MAX, 1.0,
-                     X_OUT, 6.0, _VBALL, _VBALL, _SB,
-                     1, 1, 1, 1, 1, 1, 1, BAT_LEN * MAX_BAT_SCALE], dtype=np.float32)
+from .physics import accel, contact
 
-# The last surface the ball touched (TennisCore.surface)
-NONE, TABLE_0, TABLE_1, BAT_0, BAT_1, NET, OUT = range(7)
-SURFACE_NAMES = ("none", "table_0", "table_1", "bat_0", "bat_1", "net", "out")
-# Why a point ended (TennisCore.reason), said of the player who lost it
-(NO_POINT, INTO_NET, HIT_OUT, OWN_HALF, DOUBLE_BOUNCE, DOUBLE_HIT, VOLLEY, MISSED_SERVE,
- NOT_RETURNED, SERVE_NO_BOUNCE) = range(10)
-REASON_NAMES = ("none", "net", "out", "own_half", "double_bounce", "double_hit", "volley", "missed_serve",
-                "not_returned", "serve_no_bounce")
-
-SERVE_MODES = ("fixed", "velocity", "spin", "mixed")
-LIVE_OPTIONS = ("hit_reward", "return_reward", "point_reward", "bat_scale")  # what TennisCore.set_options changes
-
-
-@dataclass(frozen=True)
-class TennisConfig:
-    """Options of one tennis game (the defaults: the game marl trains and rates)."""
-
-    discrete: bool = False  # MultiDiscrete([3, 3, 3]) actions (-1/0/+1 per axis) instead of Box(-1, 1, (3,))
-    bat_scale: float = 1.0  # the bats' length is 0.15 m times this (curriculum: start large, shrink to 1)
-    hit_reward: float = 0.0  # shaping reward for each legal stroke, serve or return (curriculum: start high, decay)
-    return_reward: float = 0.0  # shaping reward for a stroke (serve or return) that lands on the opponent's half
-    point_reward: float = 1.0  # the winner of a point gets this, the loser its negative
-    points_to_win: int = 11  # a game is won at this many points, by 2
-    max_steps: int = 6000  # time limit in steps (2 minutes of play at 50 steps a second)
-    serve_time: float = 1.5  # seconds the server has to strike the toss
-    toss_jitter: float = 0.05  # the toss's place along the table varies by this much (m) either way
-    serve_mode: Literal["fixed", "velocity", "spin", "mixed"] = "fixed"  # the serve-bot's serves (seed 002's + mixed)
-    serve_bounce: bool = False  # table tennis's serve: it bounces on the server's half first, then the receiver's
-    drag: float = 1.0  # scales the air drag (0: none)
-    magnus: float = 1.0  # scales the Magnus force (0: none)
-
-    def __post_init__(self) -> None:
-        for f in fields(self):  # the declared types, from Python too
-            value, kind = getattr(self, f.name), {"int": int, "float": float, "bool": bool}.get(str(f.type))
-            if kind is bool and not isinstance(value, (bool, np.bool_)):
-                raise ValueError(f"tennis option {f.name} wants true or false, not {value!r}")
-            if kind is int and (isinstance(value, bool) or not isinstance(value, (int, np.integer))):
-                raise ValueError(f"tennis option {f.name} wants a whole number, not {value!r}")
-            if kind is float and (isinstance(value, bool) or not isinstance(value, (int, float, np.floating))
-                                  or not math.isfinite(value)):
-                raise ValueError(f"tennis option {f.name} wants a finite number, not {value!r}")
-        if not 0.0 < self.bat_scale <= MAX_BAT_SCALE:
-            raise ValueError(f"bat_scale must lie in (0, {MAX_BAT_SCALE:g}], not {self.bat_scale}")
-        if self.point_reward < 0:
-            raise ValueError(f"point_reward must not be negative, not {self.point_reward}")
-        if self.points_to_win < 1:
-            raise ValueError(f"points_to_win must be at least 1, not {self.points_to_win}")
-        if self.max_steps < 1:
-            raise ValueError(f"max_steps must be at least 1, not {self.max_steps}")
-        if not 0.1 <= self.serve_time <= 10.0:
-            raise ValueError(f"serve_time must lie between 0.1 and 10 seconds, not {self.serve_time}")
-        if not 0.0 <= self.toss_jitter <= 0.15:
-            raise ValueError(f"toss_jitter must lie between 0 and 0.15 m, not {self.toss_jitter}")
-        if self.serve_mode not in SERVE_MODES:
-            raise ValueError(f"serve_mode must be one of {', '.join(SERVE_MODES)}, not {self.serve_mode!r}")
-        if not (0.0 <= self.drag <= 5.0 and 0.0 <= self.magnus <= 5.0):
-            raise ValueError("drag and magnus scale the air's forces: each must lie between 0 and 5")
-
-    @property
-    def bat_length(self) -> float:
-        return BAT_LEN * self.bat_scale
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-def make_config(**options: Any) -> TennisConfig:
-    """A config from keyword options, with a clear error for an unknown option."""
-    known = set(TennisConfig.__dataclass_fields__)
-    unknown = sorted(set(options) - known)
-    if unknown:
-        raise ValueError(f"unknown tennis option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    return replace(TennisConfig(), **options)
-
-
-AGENTS = ("player_0", "player_1")
-
-
-def observation_space(config: TennisConfig | None = None) -> spaces.Box:
-    return spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
-
-
-def action_space(config: TennisConfig | None = None) -> spaces.Space:
-    if config is not None and config.discrete:
-        return spaces.MultiDiscrete([3, 3, 3])
-    return spaces.Box(-1.0, 1.0, (3,), dtype=np.float32)
-
-
-# --------------------------------------------------------------------------------------------------------------
-# Physics shared by the core and the scripted player (numpy arrays of any shape, float64)
-def accel(vx: np.ndarray, vy: np.ndarray, w: np.ndarray, kd: float = K_DRAG,
-          km: float = K_MAGNUS) -> tuple[np.ndarray, np.ndarray]:
-    """The ball's acceleration in flight: gravity, drag ``-kd |v| v`` and Magnus ``km w x v``."""
-    speed = np.sqrt(vx * vx + vy * vy)
-    return -kd * speed * vx - km * w * vy, -G - kd * speed * vy + km * w * vx
-
-
-def contact(vx: np.ndarray, vy: np.ndarray, w: np.ndarray, nx: np.ndarray, ny: np.ndarray, cvx: Any, cvy: Any,
-            e: float, mu: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The ball's velocity and spin after an impact on a surface with unit normal ``(nx, ny)`` pointing toward the
-    ball, whose contact point moves at ``(cvx, cvy)``: the normal relative velocity reversed times ``e``, and the
-    friction impulse that stops the contact point's slip (the ball leaves rolling) unless Coulomb's ``mu`` times
-    the normal impulse is less, when the ball slides through."""
-    tx, ty = -ny, nx
-    rx, ry = vx - cvx, vy - cvy
-    vn = rx * nx + ry * ny  # < 0: approaching
-    vt = rx * tx + ry * ty
-    slip = vt - BALL_R * w
-    jn = -(1.0 + e) * vn
-    cap = mu * np.abs(jn)
-    jt = np.clip(-STICK * slip, -cap, cap)
-    w2 = np.clip(w - SPIN_GAIN * jt, -MAX_SPIN, MAX_SPIN)
-    return vx + jn * nx + jt * tx, vy + jn * ny + jt * ty, w2
-
-
-def bat_normal(angle: np.ndarray, sigma: Any) -> tuple[np.ndarray, np.ndarray]:
-    """The world normal of a bat's face with egocentric tilt ``angle`` for a seat whose forward is ``sigma`` (+1 for
-    seat 0, -1 for seat 1)."""
-    return sigma * np.cos(angle), np.sin(angle)
-
-
-def server_of(first: np.ndarray, points: np.ndarray, points_to_win: int) -> np.ndarray:
-    """Who serves after ``points`` points of a game whose first server is ``first``: serves alternate every 2
-    points, and every point once both players have ``points_to_win - 1``."""
-    deuce = 2 * (points_to_win - 1)
-    turn = np.where(points < deuce, points // 2, (deuce // 2) + (points - deuce))
-    return np.where(turn % 2 == 0, first, 1 - first).astype(np.int8)
-
-
-def game_won(score_a: np.ndarray, score_b: np.ndarray, points_to_win: int) -> np.ndarray:
-    """Whether a has won: at least ``points_to_win`` points and 2 more than b."""
-    return (score_a >= points_to_win) & (score_a - score_b >= 2)
-
-
-# --------------------------------------------------------------------------------------------------------------
-# The scripted players
 #
 # serve-bot plans with the game's own physics, in its egocentric frame (own end at -x, net at 0): it predicts where
 # it will meet the ball, chooses the ball it wants to send (landing x, height over the net, spin), integrates the
@@ -354,13 +72,7 @@ _MIRROR_TOPSPIN = 120.0  # rad/s of topspin on the fastest returns in spin mode
 def _unit_hash(x: np.ndarray, salt: int) -> np.ndarray:
     """Uniform [0, 1) numbers from the bits of float32 values (SplitMix64), one per value and salt."""
     bits = np.asarray(x, dtype=np.float32).view(np.uint32).astype(np.uint64)
-    z = bits * np.uint64(0x9E3779B97F4A7C15) + np.uint64(salt)
-    z ^= z >> np.uint64(30)
-    z *= np.uint64(0xBF58476D1CE4E5B9)
-    z ^= z >> np.uint64(27)
-    z *= np.uint64(0x94D049BB133111EB)
-    z ^= z >> np.uint64(31)
-    return (z >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+    return to_unit(mix64(bits * np.uint64(GOLDEN) + np.uint64(salt)))
 
 
 def _fly_to_landing(x: np.ndarray, y: np.ndarray, vx: np.ndarray, vy: np.ndarray, w: np.ndarray, kd: float,

@@ -22,7 +22,8 @@ import Box2D
 import numpy as np
 from Box2D.b2 import edgeShape, fixtureDef, polygonShape, revoluteJointDef
 
-from .lander import (
+from ..registry import IllegalActionError, reset_slots
+from .config import (
     CHUNKS,
     CRASHED,
     FLYING,
@@ -52,7 +53,6 @@ from .lander import (
     LanderConfig,
     W,
 )
-from .registry import IllegalActionError, reset_slots
 
 # Collision categories: the moon is Box2D's default 0x0001; landers collide with the moon and each other
 BODY_BITS, LEG_BITS = 0x0010, 0x0020
@@ -184,7 +184,7 @@ class LanderCore:
 
     ``actions[seat]``: ``(n,)`` ints in 0..3, or ``(n, 2)`` floats with ``continuous``. A lander that has ended
     and every lander of a finished game are ignored. ``result`` ``(n_seats, n)`` says how each lander ended
-    (:data:`~selfplay_cli.envs.lander.FLYING`, ``LANDED``, ``CRASHED``, ``OUT``). The core never resets a game by
+    (:data:`~selfplay_cli.envs.lander.config.FLYING`, ``LANDED``, ``CRASHED``, ``OUT``). The core never resets a game by
     itself: a finished game stands still, keeping its score, until :meth:`reset`.
     """
 
