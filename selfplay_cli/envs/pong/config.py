@@ -32,9 +32,9 @@ class PongConfig:
 
     rules: Literal["classic", "seed"] = "classic"
     points_to_win: int = 21
-    frame_stack: int = 8  # observation frames (seed 000 trains with 8)
+    frame_stack: int = 8  # observation frames a policy sees, oldest first
     obs_mode: Literal["coords", "rgb"] = "coords"
-    r_for_hit: float = 0.0  # seed 000's optional shaping reward for touching the ball
+    r_for_hit: float = 0.0  # optional shaping reward for touching the ball
     max_bounce_deg: float = 60.0  # classic: steepest angle a ball leaves a paddle at (from the horizontal)
     max_deflect_deg: float = 45.0  # classic: turn given by a hit at the very edge of a paddle
     speedup: float = 0.5  # classic: px/step added to the ball speed by each paddle hit

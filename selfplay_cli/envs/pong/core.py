@@ -130,7 +130,7 @@ class PongCore:
         self.terminated[g] = False
         self.truncated[g] = False
         self._serve(g)
-        # A fresh game's history is its first frame repeated (as the seed's frame stack does).
+        # A fresh game's history is its first frame repeated.
         left = self._frame_of(g)
         self._ring[0, g] = left[:, None, :]
         self._ring[1, g] = _mirror(left)[:, None, :]
@@ -205,7 +205,7 @@ class PongCore:
         bx, by, vx, vy = self.bx, self.by, self.vx, self.vy
         wall = (by - BALL_R <= 0) | (by + BALL_R >= HEIGHT)
         np.negative(vy, out=vy, where=wall)
-        # The seed tests the ball's edge strictly inside the paddle's x-range and its centre strictly inside the
+        # rules="seed" tests the ball's edge strictly inside the paddle's x-range and its centre strictly inside the
         # paddle's y-range, with no regard to the direction of travel.
         left_edge = bx - BALL_R
         hit0 = (left_edge > PADDLE_X) & (left_edge < LEFT_FACE)
@@ -284,7 +284,7 @@ class PongCore:
     def _points(self, g: np.ndarray, rewards: np.ndarray) -> None:
         """The ball left the court in games g: the side that touched it in this rally scores; then a new serve.
 
-        On a point the seed overwrites any hit reward of the step with +1/-1; without one, rewards stay.
+        A point overwrites any hit reward of the step with +1/-1; without one, rewards stay.
         """
         out_left = self.bx[g] < 0
         right_scores = g[out_left & self.touched[1, g]]

@@ -329,9 +329,7 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
     its bat up or down away from it (standing in its path would be a volley, the bot's fault). Otherwise it goes back to
     its place behind the table; in the randomized modes (practice) it waits for the opponent's serve at a random place
     1.3 to 2.3 m behind the net and 0 to 1.2 m above the table, its face tilted up to 1.4 rad either way (a hash of the
-    toss's place), so a learner's serve cannot come to depend on where its receiver stands (a learner that practised
-    against a bot always waiting upright at home served 221 of 256 serves in against that bot and none against a
-    receiver waiting with its face tilted by 1.3 rad, or 25 cm higher).
+    toss's place), so a learner's serve cannot come to depend on where its receiver stands.
     Its weakness, so that it can be beaten: it misjudges spin, planning with ``spin_read`` (60%) of the spin it
     sees: against itself ~2% of its returns fail (~60 hits a point), but of balls with 200-300 rad/s of topspin it
     returns about a quarter, where reading spin right it returns them all (tests/test_tennis.py). ``return_spin``
@@ -344,69 +342,101 @@ def serve_bot_rule_for(mode: str = "fixed", drag: float = 1.0, magnus: float = 1
 
     def rule(obs: np.ndarray, rng: Any = None, mask: Any = None) -> np.ndarray:
         o = np.asarray(obs, dtype=np.float64).reshape(len(obs), N_FEATURES)
-        k = len(o)
-        act = np.zeros((k, 3))
-        # home: back to the waiting place, upright, unhurried (never chasing the ball just struck)
-        home_x, home_y, home_a = np.full(k, HOME_X), np.full(k, HOME_Y), np.zeros(k)
-        if mode != "fixed":  # practice: wait for the opponent's serve at a random place (a hash of the toss's)
-            t = o[:, THEY_SERVE] > 0.5
-            for arr, (low, high), salt in zip((home_x, home_y, home_a), _WAIT, (4, 5, 6), strict=True):
-                arr[t] = low + (high - low) * _unit_hash(o[t, BALL_X], salt)
-        act[:, 0] = np.clip((home_x - o[:, BAT_X]) * 4.0, -2.0, 2.0) / V_MAX
-        act[:, 1] = np.clip((home_y - o[:, BAT_Y]) * 4.0, -2.0, 2.0) / V_MAX
-        act[:, 2] = (home_a - o[:, BAT_ANGLE]) / (DT * OMEGA_MAX)
-        px, py = o[:, BALL_X], o[:, BALL_Y]
-        vx, vy = o[:, BALL_VX] * VEL_SCALE, o[:, BALL_VY] * VEL_SCALE
-        w = o[:, BALL_SPIN] * SPIN_SCALE
+        act = _go_home(o, mode)
         serve = o[:, I_SERVE] > 0.5
         if serve.any():
-            s = serve
-            u1, u2, u3 = (_unit_hash(o[s, BALL_X], salt) for salt in (1, 2, 3))
-            m = s.sum()
-            if mode == "fixed":
-                land, clear, spin, height = np.full(m, 0.8), np.full(m, 0.12), np.zeros(m), np.full(m, 0.3)
-            else:  # velocity, spin, or (mixed) either, drawn per serve
-                spun = _unit_hash(o[s, BALL_X], 7) < 0.5 if mode == "mixed" else np.full(m, mode == "spin")
-                land = np.where(spun, 0.45 + 0.5 * u1, 0.35 + 0.65 * u1)
-                clear = np.where(spun, 0.10 + 0.10 * u2, 0.04 + 0.26 * u2)
-                spin = np.where(spun, (2 * u3 - 1) * 120.0, 0.0)
-                height = np.where(spun, 0.3, 0.22 + 0.2 * u3)
-            y, v = py[s], vy[s]
-            disc = v * v + 2 * G * (y - height)
-            t_c = np.where(disc >= 0, (v + np.sqrt(np.maximum(disc, 0.0))) / G, np.maximum(v, 0.0) / G)
-            hy = np.where(disc >= 0, height, y + v * t_c - 0.5 * G * t_c * t_c)
-            _swing(o, s, t_c, px[s], hy, np.zeros(m), v - G * t_c, w[s], land, NET_H + clear, spin, kd, km, act,
-                   bounce)
-        # past the end of its half without a bounce there, the ball can no longer land: out of its way
-        dodge = (o[:, INCOMING] > 0.5) & (px < -TABLE_HALF) & (vx < 0.0)
-        if dodge.any():
-            act[dodge, 0] = 0.0
-            act[dodge, 1] = np.where(o[dodge, BAT_Y] > py[dodge], 1.0, -1.0)
-            act[dodge, 2] = -o[dodge, BAT_ANGLE] / (DT * OMEGA_MAX)
+            _serve(o, serve, mode, kd, km, bounce, act)
+        dodge = _dodge(o, act)
         receive = ((o[:, INCOMING] > 0.5) | (o[:, MY_TURN] > 0.5)) & ~dodge
         if receive.any():
-            r = np.flatnonzero(receive)
-            found, t_c, cx, cy, cvx, cvy, cw = _predict_contact(px[r], py[r], vx[r], vy[r], w[r] * spin_read,
-                                                                 o[r, MY_TURN] > 0.5, kd, km)
-            if found.any():
-                sel = np.zeros(k, dtype=bool)
-                sel[r[found]] = True
-                f = found
-                n = f.sum()
-                land, over, spin = np.full(n, return_land), np.full(n, NET_H + 0.15), np.full(n, return_spin)
-                if mode != "fixed":  # practice: the ball goes back at the pace it came (spin, mixed: with topspin)
-                    pace = np.clip((np.hypot(cvx[f], cvy[f]) - _PACE[0]) / (_PACE[1] - _PACE[0]), 0.0, 1.0)
-                    land = _MIRROR_LAND[0] + (_MIRROR_LAND[1] - _MIRROR_LAND[0]) * pace
-                    over = NET_H + _MIRROR_CLEAR[0] + (_MIRROR_CLEAR[1] - _MIRROR_CLEAR[0]) * pace
-                    if mode in ("spin", "mixed"):
-                        spin = -_MIRROR_TOPSPIN * pace
-                _swing(o, sel, t_c[f], cx[f], cy[f], cvx[f], cvy[f], cw[f], land, over, spin, kd, km, act)
+            _receive(o, receive, mode, kd, km, spin_read, return_spin, return_land, act)
         act = np.clip(act, -1.0, 1.0)
         if discrete:
             return (np.where(act > 0.25, 2, np.where(act < -0.25, 0, 1))).astype(np.int64)
         return act.astype(np.float32)
 
     return rule
+
+
+def _ball(o: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The ball's position, velocity (m/s) and spin (rad/s) in observations ``o`` ``(k, 25)``."""
+    return (o[:, BALL_X], o[:, BALL_Y], o[:, BALL_VX] * VEL_SCALE, o[:, BALL_VY] * VEL_SCALE,
+            o[:, BALL_SPIN] * SPIN_SCALE)
+
+
+def _go_home(o: np.ndarray, mode: str) -> np.ndarray:
+    """The actions ``(k, 3)`` that take each bat back to its waiting place, upright and unhurried (never chasing the
+    ball just struck); in the randomized modes (practice) it waits for the opponent's serve at a random place (a hash
+    of the toss's)."""
+    k = len(o)
+    act = np.zeros((k, 3))
+    home_x, home_y, home_a = np.full(k, HOME_X), np.full(k, HOME_Y), np.zeros(k)
+    if mode != "fixed":
+        t = o[:, THEY_SERVE] > 0.5
+        for arr, (low, high), salt in zip((home_x, home_y, home_a), _WAIT, (4, 5, 6), strict=True):
+            arr[t] = low + (high - low) * _unit_hash(o[t, BALL_X], salt)
+    act[:, 0] = np.clip((home_x - o[:, BAT_X]) * 4.0, -2.0, 2.0) / V_MAX
+    act[:, 1] = np.clip((home_y - o[:, BAT_Y]) * 4.0, -2.0, 2.0) / V_MAX
+    act[:, 2] = (home_a - o[:, BAT_ANGLE]) / (DT * OMEGA_MAX)
+    return act
+
+
+def _serve(o: np.ndarray, s: np.ndarray, mode: str, kd: float, km: float, bounce: bool, act: np.ndarray) -> None:
+    """Write into ``act[s]`` the serve of the tosses ``s``: the ball to send (by ``mode``; random choices a hash of
+    the toss's place), struck as the toss falls through the chosen height."""
+    px, py, _, vy, w = _ball(o)
+    u1, u2, u3 = (_unit_hash(o[s, BALL_X], salt) for salt in (1, 2, 3))
+    m = s.sum()
+    if mode == "fixed":
+        land, clear, spin, height = np.full(m, 0.8), np.full(m, 0.12), np.zeros(m), np.full(m, 0.3)
+    else:  # velocity, spin, or (mixed) either, drawn per serve
+        spun = _unit_hash(o[s, BALL_X], 7) < 0.5 if mode == "mixed" else np.full(m, mode == "spin")
+        land = np.where(spun, 0.45 + 0.5 * u1, 0.35 + 0.65 * u1)
+        clear = np.where(spun, 0.10 + 0.10 * u2, 0.04 + 0.26 * u2)
+        spin = np.where(spun, (2 * u3 - 1) * 120.0, 0.0)
+        height = np.where(spun, 0.3, 0.22 + 0.2 * u3)
+    y, v = py[s], vy[s]
+    disc = v * v + 2 * G * (y - height)
+    t_c = np.where(disc >= 0, (v + np.sqrt(np.maximum(disc, 0.0))) / G, np.maximum(v, 0.0) / G)
+    hy = np.where(disc >= 0, height, y + v * t_c - 0.5 * G * t_c * t_c)
+    _swing(o, s, t_c, px[s], hy, np.zeros(m), v - G * t_c, w[s], land, NET_H + clear, spin, kd, km, act, bounce)
+
+
+def _dodge(o: np.ndarray, act: np.ndarray) -> np.ndarray:
+    """The bats whose ball is past the end of their half without a bounce there (it can no longer land): out of its
+    way, up or down (standing in its path would be a volley). Writes their actions into ``act``; returns them."""
+    px, py, vx, _, _ = _ball(o)
+    dodge = (o[:, INCOMING] > 0.5) & (px < -TABLE_HALF) & (vx < 0.0)
+    if dodge.any():
+        act[dodge, 0] = 0.0
+        act[dodge, 1] = np.where(o[dodge, BAT_Y] > py[dodge], 1.0, -1.0)
+        act[dodge, 2] = -o[dodge, BAT_ANGLE] / (DT * OMEGA_MAX)
+    return dodge
+
+
+def _receive(o: np.ndarray, receive: np.ndarray, mode: str, kd: float, km: float, spin_read: float,
+             return_spin: float, return_land: float, act: np.ndarray) -> None:
+    """Write into ``act`` the returns of the incoming balls ``receive`` that will bounce on the bot's half: met where
+    :func:`_predict_contact` says (reading ``spin_read`` of their spin), sent to ``return_land`` past the net, or in
+    the randomized modes (practice) back at the pace they came."""
+    px, py, vx, vy, w = _ball(o)
+    r = np.flatnonzero(receive)
+    found, t_c, cx, cy, cvx, cvy, cw = _predict_contact(px[r], py[r], vx[r], vy[r], w[r] * spin_read,
+                                                        o[r, MY_TURN] > 0.5, kd, km)
+    if not found.any():
+        return
+    sel = np.zeros(len(o), dtype=bool)
+    sel[r[found]] = True
+    f = found
+    n = f.sum()
+    land, over, spin = np.full(n, return_land), np.full(n, NET_H + 0.15), np.full(n, return_spin)
+    if mode != "fixed":  # practice: the ball goes back at the pace it came (spin, mixed: with topspin)
+        pace = np.clip((np.hypot(cvx[f], cvy[f]) - _PACE[0]) / (_PACE[1] - _PACE[0]), 0.0, 1.0)
+        land = _MIRROR_LAND[0] + (_MIRROR_LAND[1] - _MIRROR_LAND[0]) * pace
+        over = NET_H + _MIRROR_CLEAR[0] + (_MIRROR_CLEAR[1] - _MIRROR_CLEAR[0]) * pace
+        if mode in ("spin", "mixed"):
+            spin = -_MIRROR_TOPSPIN * pace
+    _swing(o, sel, t_c[f], cx[f], cy[f], cvx[f], cvy[f], cw[f], land, over, spin, kd, km, act)
 
 
 serve_bot_rule = serve_bot_rule_for()
