@@ -99,15 +99,19 @@ class OneGameView(OneGame, ParallelEnv):
         obs = self._observe()
         cut = self._cut()
         out_obs, out_rew, term, trunc, infos = {}, {}, {}, {}, {}
+        index, ended_of, info_of = self._index, self._ended, self._info
+        playing = []
         for agent in self.agents:
-            i = self._index[agent]
+            i = index[agent]
             out_obs[agent] = obs[i]
             out_rew[agent] = float(rewards[i])
-            ended = self._ended(i)
+            ended = ended_of(i)
             term[agent] = ended
             trunc[agent] = cut and not ended
-            infos[agent] = self._info(i)
-        self.agents = [a for a in self.agents if not (term[a] or trunc[a])]
+            infos[agent] = info_of(i)
+            if not (ended or cut):
+                playing.append(agent)
+        self.agents = playing
         return out_obs, out_rew, term, trunc, infos
 
     def _play(self, actions: dict[str, Any]) -> Sequence[float]:
