@@ -15,9 +15,10 @@ import time
 
 import numpy as np
 
-from selfplay_cli.envs.lander import LanderConfig, heuristic_rule
-from selfplay_cli.envs.lander_core import LanderCore
-from selfplay_cli.envs.lander_env import LanderAECEnv, LanderParallelEnv
+from selfplay_cli.envs.lander.bots import heuristic_rule
+from selfplay_cli.envs.lander.config import LanderConfig
+from selfplay_cli.envs.lander.core import LanderCore
+from selfplay_cli.envs.lander.view import LanderAECEnv, LanderParallelEnv
 
 
 def core_speed(landers: int, games: int, seconds: float) -> float:

@@ -91,7 +91,7 @@ def seed_way(frames: int, folder: Path) -> float:
     import pygame
     from PIL import Image
 
-    from selfplay_cli.envs.pong import BALL_R, HEIGHT, PADDLE_H, PADDLE_W, PADDLE_X, WIDTH
+    from selfplay_cli.envs.pong.config import BALL_R, HEIGHT, PADDLE_H, PADDLE_W, PADDLE_X, WIDTH
 
     pygame.font.init()
     surf = pygame.Surface((WIDTH, HEIGHT))

@@ -16,9 +16,10 @@ import time
 
 import numpy as np
 
-from selfplay_cli.envs.tennis import TennisConfig, serve_bot_for
-from selfplay_cli.envs.tennis_core import TennisCore
-from selfplay_cli.envs.tennis_env import TennisParallelEnv
+from selfplay_cli.envs.tennis.bots import serve_bot_for
+from selfplay_cli.envs.tennis.config import TennisConfig
+from selfplay_cli.envs.tennis.core import TennisCore
+from selfplay_cli.envs.tennis.view import TennisParallelEnv
 
 
 def core_speed(games: int, seconds: float) -> float:

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from selfplay_cli.envs import get_env
-from selfplay_cli.envs.tennis import LIVE_OPTIONS, MISSED_SERVE, REASON_NAMES
+from selfplay_cli.envs.tennis.config import LIVE_OPTIONS, MISSED_SERVE, REASON_NAMES
 from selfplay_cli.league.store import League
 from selfplay_cli.rated.match import load_player
 

@@ -20,7 +20,7 @@ from pettingzoo import AECEnv, ParallelEnv
 from pettingzoo.test import api_test, parallel_api_test
 
 from selfplay_cli.envs import EnvSpec, env_names, get_env
-from selfplay_cli.envs.pettingzoo_games import adapt
+from selfplay_cli.envs.adapters.pettingzoo import adapt
 from selfplay_cli.envs.registry import random_rule
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -14,7 +14,7 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 
 from selfplay_cli.envs import EnvError, IllegalActionError, UnknownEnvError, env_names, get_env, loading
-from selfplay_cli.envs.pettingzoo_games import PettingZooCore, adapt
+from selfplay_cli.envs.adapters.pettingzoo import PettingZooCore, adapt
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
@@ -354,7 +354,7 @@ def plugin(tmp_path, monkeypatch):
     """An installed package (a dist-info on sys.path) registering games under selfplay_cli.envs."""
     (tmp_path / "ttt_plugin_pkg.py").write_text(
         "from tests.games.tictactoe import env\n"
-        "from selfplay_cli.envs.pettingzoo_games import adapt\n"
+        "from selfplay_cli.envs.adapters.pettingzoo import adapt\n"
         "SPEC = adapt('whatever', env)\n"
         "NOT_A_GAME = 3\n")
     info = tmp_path / "ttt_plugin_pkg-1.0.dist-info"

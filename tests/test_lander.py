@@ -14,19 +14,19 @@ from gymnasium.envs.box2d.lunar_lander import heuristic as gym_heuristic
 from pettingzoo.test import api_test, parallel_api_test
 
 from selfplay_cli.arena import Game, play
-from selfplay_cli.envs.lander import (
+from selfplay_cli.envs.lander import LANDER
+from selfplay_cli.envs.lander.bots import heuristic_continuous_rule, heuristic_rule
+from selfplay_cli.envs.lander.config import (
     CRASHED,
     FLYING,
     LANDED,
     MAIN,
     OUT,
     LanderConfig,
-    heuristic_continuous_rule,
-    heuristic_rule,
     make_config,
 )
-from selfplay_cli.envs.lander_core import LanderCore
-from selfplay_cli.envs.lander_env import LANDER, LanderAECEnv, LanderParallelEnv
+from selfplay_cli.envs.lander.core import LanderCore
+from selfplay_cli.envs.lander.view import LanderAECEnv, LanderParallelEnv
 from selfplay_cli.policies import ScriptedPolicy
 
 
@@ -409,7 +409,7 @@ def test_renderer_draws_even_frames_of_each_lander():
     assert frame.shape == (400, 600, 3) and frame.dtype == np.uint8
     assert frame.shape[0] % 2 == 0 and frame.shape[1] % 2 == 0
     assert not np.array_equal(first, frame)
-    from selfplay_cli.envs.lander_render import PALETTE
+    from selfplay_cli.envs.lander.render import PALETTE
 
     for colour in PALETTE[:3]:
         assert (frame == colour).all(axis=2).sum() > 50, f"lander colour {colour} is drawn"

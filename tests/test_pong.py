@@ -11,7 +11,8 @@ from pettingzoo.test import parallel_api_test, parallel_seed_test
 from selfplay_cli.arena import Game, play
 from selfplay_cli.arena.schedule import rounds
 from selfplay_cli.envs import get_env
-from selfplay_cli.envs.pong import (
+from selfplay_cli.envs.pong.bots import cpu_rule
+from selfplay_cli.envs.pong.config import (
     BALL_R,
     DOWN,
     HEIGHT,
@@ -21,10 +22,9 @@ from selfplay_cli.envs.pong import (
     UP,
     WIDTH,
     PongConfig,
-    PongCore,
-    cpu_rule,
 )
-from selfplay_cli.envs.pong_env import PongParallelEnv
+from selfplay_cli.envs.pong.core import PongCore
+from selfplay_cli.envs.pong.view import PongParallelEnv
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.results import Rules
 

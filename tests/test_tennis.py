@@ -14,7 +14,9 @@ from pettingzoo.test import parallel_api_test
 
 from selfplay_cli.arena import Game, play
 from selfplay_cli.envs import get_env
-from selfplay_cli.envs.tennis import (
+from selfplay_cli.envs.tennis import TENNIS
+from selfplay_cli.envs.tennis.bots import plan_launch, serve_bot_for, serve_bot_rule_for
+from selfplay_cli.envs.tennis.config import (
     BALL_R,
     BALL_X,
     BAT_0,
@@ -50,15 +52,11 @@ from selfplay_cli.envs.tennis import (
     THEY_SERVE,
     VOLLEY,
     TennisConfig,
-    game_won,
     make_config,
-    plan_launch,
-    serve_bot_for,
-    serve_bot_rule_for,
-    server_of,
 )
-from selfplay_cli.envs.tennis_core import TennisCore, mirrored
-from selfplay_cli.envs.tennis_env import TENNIS, TennisParallelEnv
+from selfplay_cli.envs.tennis.core import TennisCore, mirrored
+from selfplay_cli.envs.tennis.physics import game_won, server_of
+from selfplay_cli.envs.tennis.view import TennisParallelEnv
 from selfplay_cli.policies import ScriptedPolicy
 
 STILL = np.zeros((2, 1, 3))
@@ -822,7 +820,7 @@ def test_renderer_draws_the_table_the_bats_and_the_ball():
     frame = r.draw(c, 0)
     assert frame.shape == (360, 800, 3) and frame.dtype == np.uint8
     assert not np.array_equal(first, frame)
-    from selfplay_cli.envs.tennis_render import BALL, BAT_COLOURS
+    from selfplay_cli.envs.tennis.render import BALL, BAT_COLOURS
 
     for colour in (*BAT_COLOURS, BALL):
         assert (frame == colour).all(axis=2).sum() > 10, f"{colour} is drawn"

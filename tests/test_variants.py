@@ -10,7 +10,7 @@ from pathlib import Path
 
 from cli_helpers import run, run_json
 
-from selfplay_cli.envs.pettingzoo_games import adapt
+from selfplay_cli.envs.adapters.pettingzoo import adapt
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import describe_variant, variant_flags, variant_key, variant_options
 from selfplay_cli.policies.network import Arch, build_network

@@ -1,15 +1,26 @@
-"""Games: batched numpy cores, their PettingZoo views, the PettingZoo adapter for users' games, renderers, the
-scripted players' rules, and the registry with the game contract.
+"""Games: the game contract, the built-in games, and what makes a user's game one.
 
-Importing this package registers the built-in games. ``get_env(name)`` also finds games of installed packages
-(entry-point group ``selfplay_cli.envs``) and a user's PettingZoo game named ``module:factory`` or ``module``.
+- :mod:`.registry`: the game contract (:class:`EnvSpec`: seats, spaces, turns, kind, options; the
+  :class:`BatchedCore` protocol every game is stepped through; scripted players' :class:`BotSpec`) and the registry.
+- :mod:`.loading`: finding a game by name (``get_env``): the registered games, games of installed packages
+  (entry-point group ``selfplay_cli.envs``), a user's PettingZoo game named ``module:factory`` or ``module``.
+- :mod:`.options`: a game's options as a user sets them (``--env-option``), read from its declaration.
+- The built-in games, one package each, registered when this package is imported: :mod:`.pong`, :mod:`.lander`,
+  :mod:`.tennis`. Each holds its declaration (the ``EnvSpec``) in its ``__init__`` and modules by concern: ``config``
+  (constants, options, spaces), ``core`` (the batched core), ``view`` (its PettingZoo view), ``render`` (the
+  offscreen renderer), ``bots`` (the scripted players' rules), and what else the game needs.
+- :mod:`.view`: the one-game PettingZoo view the built-in games share; :mod:`.rng`: their counter-based randomness.
+- :mod:`.adapters`: users' games as `marl` games (:mod:`.adapters.pettingzoo`).
+
+The arena steps every game, built in or adapted, through its batched core.
 """
 
 from __future__ import annotations
 
-from . import lander_env, pong, pong_env, tennis_env
+from .lander import LANDER
 from .loading import env_names, get_env, known_env
 from .options import GameOption, GameOptions, game_options
+from .pong import PONG
 from .registry import (
     KINDS,
     TURNS,
@@ -26,37 +37,11 @@ from .registry import (
     random_rule,
     register,
 )
+from .tennis import TENNIS
 
-
-def _pong_renderer():
-    from .pong_render import PongRenderer
-
-    return PongRenderer()
-
-
-register(
-    EnvSpec(
-        name="pong",
-        description="Two-paddle Pong, first to 21 (seed 000), egocentric coordinate observations",
-        agents=pong_env.AGENTS,
-        make_config=pong.make_config,
-        make_core=pong.make_batched_core,
-        make_parallel=pong_env.PongParallelEnv,
-        observation_space=pong_env.observation_space,
-        action_space=pong_env.action_space,
-        make_renderer=_pong_renderer,
-        bots={
-            "random": BotSpec("random", "uniformly random stay/up/down", random_rule(pong_env.action_space(None))),
-            "cpu": BotSpec("cpu", "seed 000's ball tracker: moves toward the ball's height",
-                           lambda obs, rng: pong.cpu_rule(obs)),
-        },
-        # The frames a policy sees (the bots read the latest one alone) and the touch reward (the score stays the
-        # points) leave the game as it is: one ladder for them all, where 4 frames can be weighed against 8.
-        neutral_options=("frame_stack", "obs_mode", "r_for_hit"),
-    )
-)
-register(lander_env.LANDER)
-register(tennis_env.TENNIS)
+register(PONG)
+register(LANDER)
+register(TENNIS)
 
 __all__ = ["KINDS", "TURNS", "BatchedCore", "BotSpec", "EnvError", "EnvSpec", "GameOption", "GameOptions",
            "IllegalActionError", "SeatSpace", "UnknownEnvError", "check_spaces", "describe_space", "env_names",

@@ -27,7 +27,7 @@ import re
 import sys
 from typing import Any
 
-from .pettingzoo_games import adapt
+from .adapters.pettingzoo import adapt
 from .registry import _REGISTRY, EnvError, EnvSpec, UnknownEnvError
 
 ENTRY_POINT_GROUP = "selfplay_cli.envs"

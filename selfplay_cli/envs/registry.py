@@ -26,6 +26,8 @@ from typing import Any, Protocol
 import numpy as np
 from gymnasium import spaces
 
+from ..errors import MarlError
+
 TURNS = ("simultaneous", "sequential")
 KINDS = ("two-sides", "cooperative", "free-for-all")
 
@@ -161,8 +163,11 @@ def describe_space(space: spaces.Space) -> str:
     return str(space)
 
 
-class SpaceError(ValueError):
-    """An unsupported space (the message says which and why; the caller adds the game and the seat)."""
+class SpaceError(MarlError, ValueError):
+    """A space marl cannot play, or a space description that is not one (the message says which and why; the caller
+    adds the game and the seat). Both a user's mistake (:class:`~selfplay_cli.errors.MarlError`: exit code 2) and a
+    ValueError, as the checks of the game contract and of snapshot files (:mod:`selfplay_cli.policies.spaces`) raise
+    it."""
 
 
 def _check_action(space: spaces.Space) -> spaces.Space:

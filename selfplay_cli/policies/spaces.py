@@ -26,29 +26,10 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from ..errors import MarlError
+from ..envs.registry import SpaceError, describe_space
 
 KINDS = ("discrete", "multidiscrete", "box")
 MAX_BOUNDS = 65_536  # numbers of non-uniform bounds written out (larger observation bounds are written as unknown)
-
-
-class SpaceError(MarlError):
-    """A space that marl's policies cannot play (or a space description that is not one)."""
-
-
-def describe_space(space: spaces.Space) -> str:
-    """Short human form: ``Discrete(3)``, ``MultiDiscrete([3 2])``, ``Box(-1, 1, (2,), float32)``."""
-    if isinstance(space, spaces.Discrete):
-        start = int(space.start)
-        return f"Discrete({int(space.n)})" if start == 0 else f"Discrete({int(space.n)}, start={start})"
-    if isinstance(space, spaces.MultiDiscrete):
-        return f"MultiDiscrete({np.asarray(space.nvec).tolist()})"
-    if isinstance(space, spaces.Box):
-        lo, hi = np.asarray(space.low), np.asarray(space.high)
-        lo_s = f"{lo.min():g}" if lo.size else "-"
-        hi_s = f"{hi.max():g}" if hi.size else "-"
-        return f"Box({lo_s}, {hi_s}, {tuple(space.shape)}, {space.dtype})"
-    return type(space).__name__
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -12,8 +12,8 @@ import os
 
 import numpy as np
 
-from .lander import CRASHED, FLYING, LANDED, SCALE, VIEWPORT_H, VIEWPORT_W
-from .lander_core import LanderCore
+from .config import CRASHED, FLYING, LANDED, SCALE, VIEWPORT_H, VIEWPORT_W
+from .core import LanderCore
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")

@@ -3,13 +3,13 @@
 Layout: the ball is ``ball[(x, y, vx, vy, spin), game]`` and the bats ``bat[(x, y, vx, vy, angle, rate), seat,
 game]``, in world coordinates (x along the table, seat 0 at the -x end) except a bat's angle and rate, which are
 egocentric tilts (see :mod:`selfplay_cli.envs.tennis`). A step moves the bats (clamped to their boxes), then runs
-:data:`~selfplay_cli.envs.tennis.SUBSTEPS` physics substeps, each a flight step of every ball in play and swept
+:data:`~selfplay_cli.envs.tennis.config.SUBSTEPS` physics substeps, each a flight step of every ball in play and swept
 tests against both bats, the net and the table; the few games with a contact in a substep are then resolved on
 their own (index arrays), which is where the rules are applied.
 
-Randomness is counter-based (as pong's): each game has a 64-bit key from its seed, and the first server and every
-toss's place are ``hash(key, counter)``; a game therefore plays the same alone or in a batch of thousands, and
-``reset(games, seeds)`` reproduces it.
+Randomness is counter-based (:mod:`selfplay_cli.envs.rng`): each game has a 64-bit key from its seed, and the
+first server and every toss's place are ``hash(key, counter)``; a game therefore plays the same alone or in a batch
+of thousands, and ``reset(games, seeds)`` reproduces it.
 """
 
 from __future__ import annotations
@@ -19,8 +19,9 @@ from typing import Any
 
 import numpy as np
 
-from .registry import IllegalActionError, reset_slots
-from .tennis import (
+from ..registry import IllegalActionError, reset_slots
+from ..rng import game_key, uniform
+from .config import (
     ANGLE_MAX,
     BALL_R,
     BAT_0,
@@ -71,40 +72,13 @@ from .tennis import (
     Y_LOW,
     H,
     TennisConfig,
-    accel,
-    contact,
-    game_won,
-    server_of,
 )
+from .physics import accel, contact, game_won, server_of
 
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
 _SIGMA = np.array([[1.0], [-1.0]])  # each seat's forward along x: seat 0 plays toward +x
 _LOW64, _HIGH64 = OBS_LOW.astype(np.float64), OBS_HIGH.astype(np.float64)
 _NEVER = 1e9  # time since the last hit, before any
 _PER_DT = 1.0 / DT
-
-
-def _splitmix(x: np.ndarray) -> np.ndarray:
-    z = np.asarray(x, dtype=np.uint64) + _GOLDEN
-    z ^= z >> np.uint64(30)
-    z *= _M1
-    z ^= z >> np.uint64(27)
-    z *= _M2
-    z ^= z >> np.uint64(31)
-    return z
-
-
-def game_key(seed: Any) -> np.ndarray:
-    """The 64-bit key of games from their seeds (any integers; negative seeds wrap)."""
-    return _splitmix(np.asarray(seed, dtype=np.int64).astype(np.uint64))
-
-
-def _draw(keys: np.ndarray, counter: np.ndarray) -> np.ndarray:
-    """A uniform [0, 1) number per game: ``hash(key, counter)``."""
-    bits = _splitmix(keys ^ _splitmix(np.asarray(counter, dtype=np.int64).astype(np.uint64)))
-    return (bits >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
 
 
 class TennisCore:
@@ -192,7 +166,7 @@ class TennisCore:
         if g.size == 0:
             return
         self.key[g] = game_key(s)
-        self.first_server[g] = (_draw(self.key[g], np.zeros(g.size, dtype=np.int64)) >= 0.5).astype(np.int8)
+        self.first_server[g] = (uniform(self.key[g], np.zeros(g.size, dtype=np.int64)) >= 0.5).astype(np.int8)
         self.score[:, g] = 0.0
         self.steps[g] = 0
         self.terminated[g] = self.truncated[g] = self.over[g] = False
@@ -208,7 +182,7 @@ class TennisCore:
         points = self.score[:, g].sum(axis=0).astype(np.int64)
         server = server_of(self.first_server[g], points, self.config.points_to_win)
         self.server[g] = server
-        u = _draw(self.key[g], 1 + points)
+        u = uniform(self.key[g], 1 + points)
         forward = np.where(server == 0, 1.0, -1.0)
         self.ball[0, g] = forward * (TOSS_X + (2.0 * u - 1.0) * self.config.toss_jitter)
         self.ball[1, g] = TOSS_Y
@@ -418,7 +392,7 @@ class TennisCore:
         self.since_hit[g] = 0.0
         self.tossing[g] = False
         (self.serves if serve else self.returns)[seat, g] += 1
-        if self.config.hit_reward:  # a legal stroke, not a foul's touch (seed 002's reward curriculum, see tennis.py)
+        if self.config.hit_reward:  # a legal stroke, not a foul's touch (see the package's Rewards)
             self._rewards[seat, g] += self.config.hit_reward
 
     def _bat(self, g: np.ndarray, seat: np.ndarray) -> None:
@@ -455,7 +429,7 @@ class TennisCore:
             served = self.serve_shot[gg]
             self.serves_in[hh[served], gg[served]] += 1
             self.returns_in[hh[~served], gg[~served]] += 1
-            if self.config.return_reward:  # the stroke landed on the opponent's half (seed 002's practice reward)
+            if self.config.return_reward:  # the stroke landed on the opponent's half (practice)
                 self._rewards[hh, gg] += self.config.return_reward
         own = ~dealt & ~landed & (half == h)
         self._award(g[own], 1 - h[own], OWN_HALF)

@@ -19,7 +19,8 @@ import os
 
 import numpy as np
 
-from .pong import BALL_R, HEIGHT, PADDLE_H, PADDLE_W, PADDLE_X, WIDTH, PongCore
+from .config import BALL_R, HEIGHT, PADDLE_H, PADDLE_W, PADDLE_X, WIDTH
+from .core import PongCore
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")

@@ -1,61 +1,33 @@
-"""Two-paddle Pong as a batched numpy core (seed 000's game, re-implemented).
+"""Pong's batched core: N games in numpy arrays, stepped together (the rules are the package's docstring,
+:mod:`selfplay_cli.envs.pong`).
 
-Court 800x400, paddles 10x70 at 20 px from each wall, ball radius 10, paddle speed 8, serve speed 10.
-Every serve starts from the centre toward a random point of a random paddle, with both paddles re-placed at
-random. A point counts only if the scorer touched the ball in that rally (otherwise the ball is re-served).
-First to ``points_to_win`` (21) wins.
-
-Two rule sets:
-
-``rules="classic"`` (default)
-    Skill decides points. The bounce angle off a paddle depends on where the ball meets it (up to
-    ``max_bounce_deg`` from the horizontal), each hit speeds the ball up by ``speedup`` px/step up to
-    ``max_speed``, collisions are swept (a fast ball cannot tunnel through a paddle), the ball reflects off the
-    top and bottom walls, and paddles clamp at the walls.
-``rules="seed"``
-    Seed 000's physics exactly as printed: a paddle hit only flips the horizontal velocity (so a
-    ball-tracking paddle never misses and two trackers rally forever), a wall hit flips the vertical velocity
-    without moving the ball, a paddle move that would leave the court is refused. Kept for comparison.
-
-Under both rules a rally longer than ``max_rally_steps`` ends the point as a draw: nobody scores and the ball is
-re-served (so leading and then rallying forever earns nothing). A game longer than ``max_steps`` (18,000 steps,
-five minutes at 60 frames a second) is truncated and decided by the score at that moment: between players who
-return nearly every ball a game to 21 would otherwise last half an hour (measured: ~50,000 steps between two
-trained snapshots), which no one watches and no rating needs.
-
-Randomness is counter-based: each game has a 64-bit key (its seed) and every serve draws from
-``hash(key, serve_number, draw)``. A game therefore plays the same whether it runs alone or inside a batch of
-thousands, and ``reset(seed=...)`` makes it reproducible without any global random state.
-
-Seats: 0 is the left paddle, 1 the right. Actions per seat: 0 stay, 1 up, 2 down.
-Observations are egocentric: each seat sees the court from its own side (x mirrored for the right seat), so a
-policy trained on one side plays either side.
+Randomness is counter-based (:mod:`selfplay_cli.envs.rng`): each game has a 64-bit key (from its seed) and every
+serve draws from ``hash(key, serve_number, draw)``. A game therefore plays the same whether it runs alone or inside a
+batch of thousands, and ``reset(seed=...)`` makes it reproducible without any global random state.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
-WIDTH, HEIGHT = 800, 400
-PADDLE_W, PADDLE_H = 10, 70
-PADDLE_X = 20  # gap between a wall and its paddle
-BALL_R = 10
-PADDLE_SPEED = 8
-SERVE_SPEED = 10.0
-
-LEFT_FACE = PADDLE_X + PADDLE_W  # 30: the face of the left paddle
-RIGHT_FACE = WIDTH - PADDLE_X - PADDLE_W  # 770
-PADDLE_Y_MAX = HEIGHT - PADDLE_H  # 330
-
-MAX_FRAME_STACK = 1024  # stacked frames an observation may hold (a crafted file must not ask for gigabytes)
-
-STAY, UP, DOWN = 0, 1, 2
-ACTION_NAMES = ("stay", "up", "down")
-N_FEATURES = 6  # ball x, ball y, own paddle y, opponent paddle y, ball vx, ball vy
-FEATURE_NAMES = ("ball_x", "ball_y", "own_y", "opp_y", "ball_vx", "ball_vy")
+from ..rng import game_key, uniform
+from .config import (
+    BALL_R,
+    HEIGHT,
+    LEFT_FACE,
+    N_FEATURES,
+    PADDLE_H,
+    PADDLE_SPEED,
+    PADDLE_W,
+    PADDLE_X,
+    PADDLE_Y_MAX,
+    RIGHT_FACE,
+    SERVE_SPEED,
+    WIDTH,
+    PongConfig,
+)
 
 _MOVE = np.array([0.0, -PADDLE_SPEED, PADDLE_SPEED])
 _CENTRE = np.array([[WIDTH // 2], [HEIGHT // 2]], dtype=np.float64)  # where every serve starts, (x, y)
@@ -76,54 +48,6 @@ def _mirror(frames: np.ndarray) -> np.ndarray:
     return frames[..., _MIRROR_PERM] * _MIRROR_SIGN
 
 
-@dataclass(frozen=True)
-class PongConfig:
-    """Rules and observation options of one Pong game (the defaults are the game `marl` trains on)."""
-
-    rules: Literal["classic", "seed"] = "classic"
-    points_to_win: int = 21
-    frame_stack: int = 8  # observation frames (seed 000 trains with 8)
-    obs_mode: Literal["coords", "rgb"] = "coords"
-    r_for_hit: float = 0.0  # seed 000's optional shaping reward for touching the ball
-    max_bounce_deg: float = 60.0  # classic: steepest angle a ball leaves a paddle at (from the horizontal)
-    max_deflect_deg: float = 45.0  # classic: turn given by a hit at the very edge of a paddle
-    speedup: float = 0.5  # classic: px/step added to the ball speed by each paddle hit
-    max_speed: float = 16.0  # classic: speed cap (px/step)
-    max_rally_steps: int = 3000  # 0 = no cap
-    max_steps: int = 18_000  # a game's time limit: 5 minutes at 60 frames a second (0 = no cap)
-
-    def __post_init__(self) -> None:
-        for f in fields(self):  # the declared types, from Python too (a float where a count goes is refused)
-            value, kind = getattr(self, f.name), {"int": int, "float": float}.get(str(f.type))
-            if kind is int and (isinstance(value, bool) or not isinstance(value, int)):
-                raise ValueError(f"pong option {f.name} wants a whole number, not {value!r}")
-            if kind is float and (isinstance(value, bool) or not isinstance(value, (int, float)) or value != value
-                                  or value in (float("inf"), float("-inf"))):
-                raise ValueError(f"pong option {f.name} wants a finite number, not {value!r}")
-        if self.rules not in ("classic", "seed"):
-            raise ValueError(f"pong rules must be 'classic' or 'seed', not {self.rules!r}")
-        if self.obs_mode not in ("coords", "rgb"):
-            raise ValueError(f"pong obs_mode must be 'coords' or 'rgb', not {self.obs_mode!r}")
-        if self.points_to_win < 1:
-            raise ValueError(f"points_to_win must be at least 1, not {self.points_to_win}")
-        if not 1 <= self.frame_stack <= MAX_FRAME_STACK:
-            raise ValueError(f"frame_stack must lie between 1 and {MAX_FRAME_STACK}, not {self.frame_stack}")
-        if not SERVE_SPEED <= self.max_speed <= 2 * (BALL_R + PADDLE_W) + SERVE_SPEED:
-            raise ValueError(f"max_speed must lie in [{SERVE_SPEED}, 40], not {self.max_speed}")
-        if not 0.0 <= self.max_bounce_deg < 80.0:
-            raise ValueError(f"max_bounce_deg must lie in [0, 80), not {self.max_bounce_deg}")
-        if self.speedup < 0 or self.max_rally_steps < 0 or self.max_steps < 0:
-            raise ValueError("speedup, max_rally_steps and max_steps must not be negative")
-
-    @property
-    def velocity_scale(self) -> float:
-        """Largest velocity component: observations divide velocities by it."""
-        return SERVE_SPEED if self.rules == "seed" else self.max_speed
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
 def make_batched_core(n_games: int, config: PongConfig) -> PongCore:
     """The batched core for training and matches, which observe coordinates: ``obs_mode=rgb`` frames come from the
     PettingZoo view (one game at a time, rendered), and are refused here."""
@@ -133,46 +57,14 @@ def make_batched_core(n_games: int, config: PongConfig) -> PongCore:
     return PongCore(n_games, config)
 
 
-def make_config(**options: Any) -> PongConfig:
-    """A config from keyword options, with a clear error for an unknown option."""
-    known = set(PongConfig.__dataclass_fields__)
-    unknown = sorted(set(options) - known)
-    if unknown:
-        raise ValueError(f"unknown pong option(s) {', '.join(unknown)}; known: {', '.join(sorted(known))}")
-    return replace(PongConfig(), **options)
-
-
 # --------------------------------------------------------------------------------------------------------------
-# Counter-based randomness: SplitMix64 over uint64 arrays (wrapping arithmetic is what we want here).
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
 _DRAWS_PER_SERVE = 4  # left paddle y, right paddle y, side, target point on the paddle
-_DRAW = np.arange(_DRAWS_PER_SERVE, dtype=np.uint64)[:, None]
-
-
-def _splitmix(x: np.ndarray) -> np.ndarray:
-    """SplitMix64's finaliser (uint64 array arithmetic wraps silently, which is what the hash wants)."""
-    z = np.asarray(x, dtype=np.uint64) + _GOLDEN
-    z ^= z >> np.uint64(30)
-    z *= _M1
-    z ^= z >> np.uint64(27)
-    z *= _M2
-    z ^= z >> np.uint64(31)
-    return z
-
-
-def game_key(seed: int | np.ndarray) -> np.ndarray:
-    """The 64-bit key of a game from its seed (any integer; negative seeds wrap)."""
-    s = np.asarray(seed, dtype=np.int64).astype(np.uint64)
-    return _splitmix(s)
+_DRAW = np.arange(_DRAWS_PER_SERVE, dtype=np.int64)[:, None]
 
 
 def _serve_draws(keys: np.ndarray, serves: np.ndarray) -> np.ndarray:
     """The uniform [0, 1) draws of serve number ``serves`` of the games with ``keys``: ``(4, len(keys))``."""
-    counter = serves.astype(np.uint64) * np.uint64(_DRAWS_PER_SERVE) + _DRAW
-    bits = _splitmix(keys ^ _splitmix(counter))
-    return (bits >> np.uint64(11)).astype(np.float64) * (1.0 / 9007199254740992.0)
+    return uniform(keys, serves * _DRAWS_PER_SERVE + _DRAW)
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -238,7 +130,7 @@ class PongCore:
         self.terminated[g] = False
         self.truncated[g] = False
         self._serve(g)
-        # A fresh game's history is its first frame repeated (as the seed's frame stack does).
+        # A fresh game's history is its first frame repeated.
         left = self._frame_of(g)
         self._ring[0, g] = left[:, None, :]
         self._ring[1, g] = _mirror(left)[:, None, :]
@@ -313,7 +205,7 @@ class PongCore:
         bx, by, vx, vy = self.bx, self.by, self.vx, self.vy
         wall = (by - BALL_R <= 0) | (by + BALL_R >= HEIGHT)
         np.negative(vy, out=vy, where=wall)
-        # The seed tests the ball's edge strictly inside the paddle's x-range and its centre strictly inside the
+        # rules="seed" tests the ball's edge strictly inside the paddle's x-range and its centre strictly inside the
         # paddle's y-range, with no regard to the direction of travel.
         left_edge = bx - BALL_R
         hit0 = (left_edge > PADDLE_X) & (left_edge < LEFT_FACE)
@@ -392,7 +284,7 @@ class PongCore:
     def _points(self, g: np.ndarray, rewards: np.ndarray) -> None:
         """The ball left the court in games g: the side that touched it in this rally scores; then a new serve.
 
-        On a point the seed overwrites any hit reward of the step with +1/-1; without one, rewards stay.
+        A point overwrites any hit reward of the step with +1/-1; without one, rewards stay.
         """
         out_left = self.bx[g] < 0
         right_scores = g[out_left & self.touched[1, g]]
@@ -471,13 +363,3 @@ class PongCore:
         ring = frames[:, (np.arange(2 * k) - self._head - 1) % k]  # ring position p holds window frame p - head - 1
         self._ring[0, rows] = ring
         self._ring[1, rows] = _mirror(ring)
-
-
-# --------------------------------------------------------------------------------------------------------------
-# Scripted players' rules. They see only the observation (flattened or not) of their own seat.
-def cpu_rule(obs: np.ndarray) -> np.ndarray:
-    """Seed 000's ball tracker: move (at paddle speed 8) toward the ball's height, from the latest frame."""
-    last = np.asarray(obs, dtype=np.float32).reshape(len(obs), -1)[:, -N_FEATURES:]
-    ball_y = (last[:, 1] + 1) * (HEIGHT / 2)
-    centre = (last[:, 2] + 1) * (PADDLE_Y_MAX / 2) + PADDLE_H // 2
-    return np.where(centre < ball_y - 1e-3, DOWN, np.where(centre > ball_y + 1e-3, UP, STAY)).astype(np.int64)

@@ -1,5 +1,5 @@
 """Any PettingZoo game as a `marl` game: an :class:`EnvSpec` probed from one instance, and a batched core of N
-copies that the arena plays exactly as it plays pong (no second game loop).
+copies, which the arena steps as it steps the built-in games' cores.
 
 ``adapt(name, factory)`` calls ``factory(**options)`` once and reads the game's declaration from it:
 
@@ -41,7 +41,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 
-from .registry import KINDS, EnvError, EnvSpec, IllegalActionError, SeatSpace, SpaceError, random_bot, seat_space_of
+from ..registry import KINDS, EnvError, EnvSpec, IllegalActionError, SeatSpace, SpaceError, random_bot, seat_space_of
 
 __all__ = ["Layout", "PettingZooConfig", "PettingZooCore", "PettingZooRenderer", "adapt", "probe"]
 

@@ -1,5 +1,5 @@
 """One Pong game in plain Python floats: the same rules, numbers and randomness as the batched core
-(:mod:`selfplay_cli.envs.pong`), for the PettingZoo view, which plays one game at a time.
+(:mod:`selfplay_cli.envs.pong.core`), for the PettingZoo view, which plays one game at a time.
 
 numpy pays ~1 us per operation whatever the size of the array, so a batch of one spends its time in overhead; here
 a step is a few dozen float operations. It is the core's step transcribed line by line, and it must stay so: the
@@ -7,7 +7,8 @@ tests play both side by side and compare every observation, reward and score bit
 
 - every value is an IEEE double computed with the same operations in the same order as the core's float64 arrays;
   the transcendental functions of a paddle hit (hypot, arctan2, cos, sin) are numpy's own, called on the scalar;
-- the serve's randomness is the same counter-based SplitMix64 hash, in Python integers masked to 64 bits;
+- the serve's randomness is the same counter-based SplitMix64 hash, in Python integers masked to 64 bits
+  (:mod:`selfplay_cli.envs.rng`'s ``*_int`` functions);
 - observations are float32 like the core's: ``f32(f32(x * scale) - offset)``. ``struct``'s ``f`` format rounds a
   double to the nearest float32 (as numpy's cast does), and the subtraction done in double and then rounded gives
   the float32 subtraction's result (a double has more than 2 x 24 + 2 bits, so the double rounding is harmless).
@@ -21,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from .pong import (
+from ..rng import game_key_int, uniform_int
+from .config import (
     BALL_R,
     HEIGHT,
     LEFT_FACE,
@@ -36,11 +38,6 @@ from .pong import (
     PongConfig,
 )
 
-_MASK = 0xFFFFFFFFFFFFFFFF
-_GOLDEN = 0x9E3779B97F4A7C15
-_M1 = 0xBF58476D1CE4E5B9
-_M2 = 0x94D049BB133111EB
-_UNIT = 1.0 / 9007199254740992.0  # 2**-53
 _MOVE = (0.0, -8.0, 8.0)  # stay, up, down (PADDLE_SPEED 8)
 
 _F6 = struct.Struct("6f")
@@ -48,23 +45,6 @@ _F12 = struct.Struct("12f")
 _FRAME_BYTES = 2 * N_FEATURES * 4  # both seats' frames, float32
 
 _hypot, _arctan2, _cos, _sin = np.hypot, np.arctan2, np.cos, np.sin
-
-
-def _splitmix(x: int) -> int:
-    z = (x + _GOLDEN) & _MASK
-    z ^= z >> 30
-    z = (z * _M1) & _MASK
-    z ^= z >> 27
-    z = (z * _M2) & _MASK
-    return z ^ (z >> 31)
-
-
-def game_key(seed: int) -> int:
-    """The 64-bit key of a game from its seed, as :func:`selfplay_cli.envs.pong.game_key` computes it."""
-    seed = int(seed)
-    if not -(2**63) <= seed < 2**63:
-        raise OverflowError(f"a pong seed must fit in 64 signed bits, not {seed}")
-    return _splitmix(seed & _MASK)
 
 
 class ScalarPong:
@@ -100,7 +80,9 @@ class ScalarPong:
 
     # ----------------------------------------------------------------------------------------------------
     def reset(self, seed: int) -> None:
-        self.key = game_key(seed)
+        if not -(2**63) <= int(seed) < 2**63:
+            raise OverflowError(f"a pong seed must fit in 64 signed bits, not {seed}")
+        self.key = game_key_int(seed)
         self.s0 = self.s1 = 0.0
         self.hits0 = self.hits1 = 0
         self.drawn_rallies = self.steps = self.serves = 0
@@ -114,10 +96,7 @@ class ScalarPong:
     def _serve(self) -> None:
         base = self.serves * 4
         key = self.key
-        u0 = (_splitmix(key ^ _splitmix(base)) >> 11) * _UNIT
-        u1 = (_splitmix(key ^ _splitmix(base + 1)) >> 11) * _UNIT
-        u2 = (_splitmix(key ^ _splitmix(base + 2)) >> 11) * _UNIT
-        u3 = (_splitmix(key ^ _splitmix(base + 3)) >> 11) * _UNIT
+        u0, u1, u2, u3 = (uniform_int(key, base + i) for i in range(4))
         p0 = float(int(u0 * (PADDLE_Y_MAX + 1)))  # floor of a non-negative number
         p1 = float(int(u1 * (PADDLE_Y_MAX + 1)))
         to_left = u2 < 0.5
@@ -274,7 +253,7 @@ class ScalarPong:
 
     # ----------------------------------------------------------------------------------------------------
     def get_state(self) -> dict[str, Any]:
-        """The game's exact state in :meth:`selfplay_cli.envs.pong.PongCore.get_state`'s format for one game."""
+        """The game's exact state in :meth:`selfplay_cli.envs.pong.core.PongCore.get_state`'s format for one game."""
         h = self._head
         return {
             "bx": np.array([self.bx]), "by": np.array([self.by]), "vx": np.array([self.vx]),

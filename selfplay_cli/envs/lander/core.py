@@ -22,7 +22,8 @@ import Box2D
 import numpy as np
 from Box2D.b2 import edgeShape, fixtureDef, polygonShape, revoluteJointDef
 
-from .lander import (
+from ..registry import IllegalActionError, reset_slots
+from .config import (
     CHUNKS,
     CRASHED,
     FLYING,
@@ -52,7 +53,6 @@ from .lander import (
     LanderConfig,
     W,
 )
-from .registry import IllegalActionError, reset_slots
 
 # Collision categories: the moon is Box2D's default 0x0001; landers collide with the moon and each other
 BODY_BITS, LEG_BITS = 0x0010, 0x0020
@@ -184,7 +184,7 @@ class LanderCore:
 
     ``actions[seat]``: ``(n,)`` ints in 0..3, or ``(n, 2)`` floats with ``continuous``. A lander that has ended
     and every lander of a finished game are ignored. ``result`` ``(n_seats, n)`` says how each lander ended
-    (:data:`~selfplay_cli.envs.lander.FLYING`, ``LANDED``, ``CRASHED``, ``OUT``). The core never resets a game by
+    (:data:`~selfplay_cli.envs.lander.config.FLYING`, ``LANDED``, ``CRASHED``, ``OUT``). The core never resets a game by
     itself: a finished game stands still, keeping its score, until :meth:`reset`.
     """
 
@@ -301,7 +301,41 @@ class LanderCore:
                  direction: np.ndarray, first: bool = False) -> np.ndarray:
         """Fire the engines of the ``live`` landers, step the worlds ``games``, read the landers back, and score
         them (gymnasium's step, for all at once). Returns the rewards ``(L, n)`` (zero where not live)."""
-        cfg, n, bodies, worlds = self.config, self.n, self._bodies, self.worlds
+        self._fire(games, main, side, direction)
+        if self.config.enable_wind:
+            self._wind(live)
+        for g in games:
+            self.worlds[g].world.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
+        ks, seat, game, s, awake = self._read_back(live)
+        shaping = (-100 * np.sqrt(s[:, 0] * s[:, 0] + s[:, 1] * s[:, 1])
+                   - 100 * np.sqrt(s[:, 2] * s[:, 2] + s[:, 3] * s[:, 3])
+                   - 100 * np.abs(s[:, 4]) + 10 * s[:, 6] + 10 * s[:, 7])
+        mp, sp = main[seat, game], side[seat, game]
+        rew = shaping - self._shaping[seat, game]
+        rew -= mp * 0.30
+        rew -= sp * 0.03
+        self._shaping[seat, game] = shaping
+        reward = np.zeros_like(self._zero)
+        if first:  # gymnasium's reset step: it sets the shaping, its reward is not given
+            self.main_power[:, games] = self.side_power[:, games] = 0.0
+            return reward
+        self.main_power[:] = main
+        self.side_power[:] = side
+        self.side_dir[:] = direction
+        crashed = self._crashed[ks] | (np.abs(s[:, 0]) >= 1.0)
+        rest = awake == 0.0
+        rew[crashed] = -100.0
+        rew[rest] = +100.0
+        reward[seat, game] = rew
+        done = crashed | rest
+        if done.any():
+            self._end(seat[done], game[done], rest[done], s[done, 0])
+        return reward
+
+    def _fire(self, games: list[int], main: np.ndarray, side: np.ndarray, direction: np.ndarray) -> None:
+        """Draw this step's dispersion of every lander of the running ``games`` and apply the impulses of the engines
+        that fire (main and side powers ``(L, n)``), as gymnasium does."""
+        bodies, worlds = self._bodies, self.worlds
         disp = self._disp
         for g in games:  # 2 draws per lander, in lander order: gymnasium's two per step for one lander
             worlds[g].rng.random(out=disp[g])
@@ -328,11 +362,11 @@ class LanderCore:
             for k, (fx, fy, px, py) in zip(fire_side.tolist(), args.reshape(4, -1)[:, fire_side].T.tolist(),
                                            strict=True):
                 bodies[k].ApplyLinearImpulse((fx, fy), (px, py), True)
-        if cfg.enable_wind:
-            self._wind(live)
-        for g in games:
-            worlds[g].world.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
-        # Read the flying landers back
+
+    def _read_back(self, live: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Read the ``live`` landers back from Box2D after the step: their flat indices, seats and games, gymnasium's
+        state ``(k, 8)`` of each (also written to :attr:`state`), and whether each body is awake."""
+        n, bodies = self.n, self._bodies
         ks = np.flatnonzero(live.ravel())
         vals: list[float] = []
         ext = vals.extend
@@ -355,36 +389,16 @@ class LanderCore:
         s[:, 5] = 20.0 * r[:, 5] / FPS
         s[:, 6:] = legs
         self.state[seat, game] = s
-        shaping = (-100 * np.sqrt(s[:, 0] * s[:, 0] + s[:, 1] * s[:, 1])
-                   - 100 * np.sqrt(s[:, 2] * s[:, 2] + s[:, 3] * s[:, 3])
-                   - 100 * np.abs(s[:, 4]) + 10 * s[:, 6] + 10 * s[:, 7])
-        mp, sp = main[seat, game], side[seat, game]
-        rew = shaping - self._shaping[seat, game]
-        rew -= mp * 0.30
-        rew -= sp * 0.03
-        self._shaping[seat, game] = shaping
-        reward = np.zeros_like(self._zero)
-        if first:  # gymnasium's reset step: it sets the shaping, its reward is not given
-            self.main_power[:, games] = self.side_power[:, games] = 0.0
-            return reward
-        self.main_power[:] = main
-        self.side_power[:] = side
-        self.side_dir[:] = direction
-        crashed = self._crashed[ks] | (np.abs(s[:, 0]) >= 1.0)
-        rest = r[:, 6] == 0.0
-        rew[crashed] = -100.0
-        rew[rest] = +100.0
-        reward[seat, game] = rew
-        done = crashed | rest
-        if done.any():
-            ds, dg = seat[done], game[done]
-            self.alive[ds, dg] = False
-            code = np.where(rest[done], LANDED, np.where(np.abs(s[done, 0]) >= 1.0, OUT, CRASHED))
-            self.result[ds, dg] = code
-            for i, g, c in zip(ds.tolist(), dg.tolist(), code.tolist(), strict=True):
-                if c != LANDED:
-                    worlds[g].retire(i, c == OUT)
-        return reward
+        return ks, seat, game, s, r[:, 6]
+
+    def _end(self, seat: np.ndarray, game: np.ndarray, rest: np.ndarray, x: np.ndarray) -> None:
+        """The landers (seat, game) have ended, at rest or not: record how, and retire the crashed and the lost."""
+        self.alive[seat, game] = False
+        code = np.where(rest, LANDED, np.where(np.abs(x) >= 1.0, OUT, CRASHED))
+        self.result[seat, game] = code
+        for i, g, c in zip(seat.tolist(), game.tolist(), code.tolist(), strict=True):
+            if c != LANDED:
+                self.worlds[g].retire(i, c == OUT)
 
     def _wind(self, live: np.ndarray) -> None:
         """gymnasium's wind and turbulence on each live lander whose legs are off the ground (math's tanh, as

@@ -13,8 +13,8 @@ import os
 
 import numpy as np
 
-from .tennis import BALL_R, FLOOR_Y, NET_H, REASON_NAMES, TABLE_HALF, X_OUT
-from .tennis_core import TennisCore
+from .config import BALL_R, FLOOR_Y, NET_H, REASON_NAMES, TABLE_HALF, X_OUT
+from .core import TennisCore
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 os.environ.setdefault("SDL_VIDEODRIVER", "dummy")

@@ -1,0 +1,2 @@
+"""Adapters that make users' games `marl` games: :mod:`.pettingzoo` turns any PettingZoo ``AECEnv`` or
+``ParallelEnv`` factory into an :class:`~selfplay_cli.envs.registry.EnvSpec` and a batched core of N copies."""

@@ -1,0 +1,164 @@
+"""The one-game PettingZoo view every built-in game is offered through (its ``EnvSpec.make_parallel``).
+
+:class:`OneGame` holds what any view of one game needs, whatever PettingZoo API it speaks: the config, the seats and
+their spaces, the game seeds (``reset(seed=s)`` plays game ``s``; later resets without a seed draw game seeds from a
+generator seeded by ``s``), the offscreen renderer. :class:`OneGameView` is the ``ParallelEnv``: every seat acts at
+each step, a seat leaves ``agents`` on the step it ends, and every seat still playing is truncated when the game is.
+:class:`CoreGame` plays the game as one game of its batched core (the lander's and tennis's views); pong's view plays
+a scalar copy of its core's rules instead (faster for one game) and gives the same hooks itself.
+
+A game's view sets ``game_name`` (in messages), ``metadata`` and ``renderer`` (a class whose ``draw(scene, 0)``
+returns an RGB array), calls :meth:`OneGame._setup` from its ``__init__`` and provides the hooks: ``_start(seed)``
+(begin a game), ``_info(seat)``, ``_scene()`` (what the renderer draws), and for :class:`OneGameView`
+``_play(actions)`` (one step: each seat's reward), ``_observe()`` (each seat's observation), ``_ended(seat)`` and
+``_cut()`` (the game was truncated on this step).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+
+class OneGame:
+    """The config, seats, spaces, seeds and renderer of one game (mixed into a ParallelEnv or an AECEnv)."""
+
+    game_name: ClassVar[str]
+    renderer: ClassVar[Any]
+
+    def _setup(self, render_mode: str | None, config: Any, agents: Sequence[str], observation_space: spaces.Space,
+               action_space: spaces.Space) -> None:
+        self.render_mode = render_mode
+        self.config = config
+        self.possible_agents = list(agents)
+        self.agents: list[str] = []
+        self._index = {a: i for i, a in enumerate(self.possible_agents)}
+        self._obs_space = observation_space
+        self._act_space = action_space
+        self._seeds = np.random.default_rng()
+        self._renderer: Any = None
+        self.game_seed: int | None = None
+
+    def _check_render_mode(self, render_mode: str | None) -> None:
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"{self.game_name} renders only 'rgb_array' (offscreen), not {render_mode!r}")
+
+    def observation_space(self, agent: str) -> spaces.Space:
+        return self._obs_space
+
+    def action_space(self, agent: str) -> spaces.Space:
+        return self._act_space
+
+    def _new_game(self, seed: int | None) -> None:
+        if seed is not None:
+            self._seeds = np.random.default_rng(seed)
+            self.game_seed = int(seed)
+        else:
+            self.game_seed = int(self._seeds.integers(2**62))
+        self._start(self.game_seed)
+
+    def _start(self, seed: int) -> None:
+        raise NotImplementedError
+
+    def _info(self, seat: int) -> dict[str, Any]:
+        raise NotImplementedError
+
+    def _scene(self) -> Any:
+        raise NotImplementedError
+
+    def render_frame(self) -> np.ndarray:
+        if self._renderer is None:
+            self._renderer = self.renderer()
+        return self._renderer.draw(self._scene(), 0)
+
+    def render(self) -> np.ndarray | None:
+        return self.render_frame() if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        self._renderer = None
+
+
+class OneGameView(OneGame, ParallelEnv):
+    """One game as a PettingZoo ``ParallelEnv`` (see the module docstring for what a game provides)."""
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        self._new_game(seed)
+        self.agents = self.possible_agents[:]
+        obs = self._observe()
+        return ({a: obs[i] for i, a in enumerate(self.agents)},
+                {a: self._info(i) for i, a in enumerate(self.agents)})
+
+    def step(self, actions: dict[str, Any]):
+        if not self.agents:
+            raise RuntimeError("step() called on a finished game: call reset() first")
+        rewards = self._play(actions)
+        obs = self._observe()
+        cut = self._cut()
+        out_obs, out_rew, term, trunc, infos = {}, {}, {}, {}, {}
+        index, ended_of, info_of = self._index, self._ended, self._info
+        playing = []
+        for agent in self.agents:
+            i = index[agent]
+            out_obs[agent] = obs[i]
+            out_rew[agent] = float(rewards[i])
+            ended = ended_of(i)
+            term[agent] = ended
+            trunc[agent] = cut and not ended
+            infos[agent] = info_of(i)
+            if not (ended or cut):
+                playing.append(agent)
+        self.agents = playing
+        return out_obs, out_rew, term, trunc, infos
+
+    def _play(self, actions: dict[str, Any]) -> Sequence[float]:
+        raise NotImplementedError
+
+    def _observe(self) -> Sequence[np.ndarray]:
+        raise NotImplementedError
+
+    def _ended(self, seat: int) -> bool:
+        raise NotImplementedError
+
+    def _cut(self) -> bool:
+        raise NotImplementedError
+
+
+class CoreGame(OneGame):
+    """The hooks for a game played as one game of its batched core (``self.core``, made by :meth:`_setup_core`).
+
+    A seat's action goes through ``_action(agent, action)`` (checked, as the core takes it); a seat not given one, or
+    no longer playing, acts with the ``noop`` of :meth:`_setup_core`. A seat ends with its game (``_ended``), unless
+    the game says otherwise."""
+
+    def _setup_core(self, core: Any, noop: np.ndarray) -> None:
+        self.core = core
+        self._noop = noop
+
+    def _action(self, agent: str, action: Any) -> Any:
+        raise NotImplementedError
+
+    def _start(self, seed: int) -> None:
+        self.core.reset([0], [seed])
+
+    def _play(self, actions: dict[str, Any]) -> np.ndarray:
+        buf = self._noop.copy()
+        for agent in self.agents:
+            if agent in actions:
+                buf[self._index[agent], 0] = self._action(agent, actions[agent])
+        return self.core.step(buf)[:, 0]
+
+    def _observe(self) -> np.ndarray:
+        return self.core.observe()[:, 0]
+
+    def _ended(self, seat: int) -> bool:
+        return bool(self.core.terminated[0])
+
+    def _cut(self) -> bool:
+        return bool(self.core.truncated[0])
+
+    def _scene(self) -> Any:
+        return self.core
