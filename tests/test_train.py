@@ -12,12 +12,12 @@ from cli_helpers import run
 from selfplay_cli.algos.ppo import PPOConfig
 from selfplay_cli.arena.selfplay import OPPONENT
 from selfplay_cli.cli import main
-from selfplay_cli.league.matchmaking import MatchmakerConfig
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.policies.snapshot import load_policy
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer
+from selfplay_cli.train.matchmaking import MatchmakerConfig
 
 TINY = variant_key("pong", {"points_to_win": 1})  # the variant tiny runs play and are rated in
 

@@ -16,12 +16,12 @@ from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
 from ..arena.selfplay import SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
-from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
 from ..policies.joint import joint_spaces
 from ..policies.network import Arch, resolve_device
 from ..policies.snapshot import expected_tensors
 from .curriculum import Curriculum, Schedule, parse_schedule
+from .matchmaking import MatchmakerConfig
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field

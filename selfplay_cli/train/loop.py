@@ -38,7 +38,6 @@ from ..algos.joint import JointLearner
 from ..arena.selfplay import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
 from ..errors import MarlError, NonFiniteError
 from ..league.ledger import KIND_CODES
-from ..league.matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
 from ..policies import Policy
@@ -54,6 +53,7 @@ from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum, Schedule
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .lock import claim, write_lock
+from .matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 from .team import LearnerTeam
 
 METRICS_STEPS = 8192  # game steps between metrics lines at least (PPO's rollouts are longer: a line an update)
