@@ -118,7 +118,7 @@ def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats
             seat = 0 if b == cpu else 1
             seen.add((seat, snaps[a if seat == 0 else b].meta["learner"]))
     assert seen == {(0, "left"), (1, "right")}, seen  # each learner met cpu, always on its own side
-    assert {pair[0] for pair in trainer.rates.to_dict()["pairs"]} == {0, 1}, "win rates per learner (PFSP)"
+    assert {pair[0] for pair in trainer.opponents.rates.to_dict()["pairs"]} == {0, 1}, "win rates per learner (PFSP)"
     league.close()
 
 
@@ -341,7 +341,7 @@ def test_swap_every_keeps_each_slot_on_its_opponent_until_the_swap(tmp_path):
     assert set(first) == {"cpu", "random"}, "both bots drawn across the slots"
     trainer.train()
     after = [trainer.games.policies[k].id for k in trainer.games.opponent_of.tolist()]
-    assert trainer.episodes > cfg.games and after == first, "no swap within the budget: every slot kept its draw"
+    assert trainer.state.episodes > cfg.games and after == first, "no swap within the budget: every slot kept its draw"
     league.close()
 
 

@@ -27,6 +27,9 @@ from ._output import console, err_console, print_json
 from .train_view import TrainProgress, describe_record, describe_run, report_json
 
 
+# Long for its signature: a Typer command whose parameters are its ~30 options (about 90 lines); the body parses
+# them, runs the trainer and prints (the settings are resolved by selfplay_cli.train.settings). Its docstring is
+# `marl train --help`'s text.
 def train(
     ctx: typer.Context,
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
@@ -146,7 +149,7 @@ def train(
                 report = trainer.train()
             except (KeyboardInterrupt, Terminated) as stop:
                 league.set_run_status(cfg.run, "stopped")
-                at = f" at step {trainer.steps:,}" if trainer is not None else ""
+                at = f" at step {trainer.state.steps:,}" if trainer is not None else ""
                 why = "SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C"
                 err_console.print(f"stopped {cfg.run}{at} ({why}); its last snapshot is kept: continue it with: "
                                   f"marl train --resume {cfg.run}", markup=False)

@@ -277,7 +277,7 @@ def can_teach(algo: str) -> bool:
 def check_teacher(algo: str, sharing: str) -> None:
     """A run that cannot have a teacher, as one line: an algorithm that cannot imitate, or one agent over the
     joint team (its actions are not a seat's). The teacher's name is resolved, and its spaces checked, against the
-    league (:func:`selfplay_cli.train.loop.load_teacher`)."""
+    league (:func:`selfplay_cli.train.rollouts.load_teacher`)."""
     if not can_teach(algo):
         learners = ", ".join(a for a in ALGOS if can_teach(a))
         raise MarlError(f"--teacher: {algo} learners cannot imitate a teacher (kickstarting is for {learners})")

@@ -24,7 +24,8 @@ from .matchmaking import parse_bots
 ALGO_SECTIONS = ("ppo", "dqn", "sac")
 
 PRESETS = ("seed000",)
-"""The names ``--preset`` takes: a learner's whole set-up, as a named earlier experiment had it."""
+"""The names ``--preset`` takes, each a learner's whole set-up (``seed000``: DQN's network sizes, learning rate,
+batch, buffer, target period and epsilon schedule; docs/history/training.md says where it comes from)."""
 
 FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
                  "snapshot_steps", "eval_games", "eval_older", "eval_inline", "eval_playoff", "swap_every",
