@@ -18,7 +18,8 @@ from selfplay_cli.commands.train_view import TrainProgress, describe_games, desc
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.train.config import TrainConfig
-from selfplay_cli.train.loop import SnapshotRecord, Standing, Trainer, TrainReport
+from selfplay_cli.train.loop import Trainer
+from selfplay_cli.train.progress import SnapshotRecord, Standing, TrainReport
 
 FAST_PPO = PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1)
 
