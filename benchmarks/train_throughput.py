@@ -16,7 +16,8 @@ import tempfile
 from pathlib import Path
 
 from selfplay_cli.league.store import League
-from selfplay_cli.train.loop import TrainConfig, Trainer
+from selfplay_cli.train.config import TrainConfig
+from selfplay_cli.train.loop import Trainer
 
 
 def steps_per_second(algo: str, steps: int, games: int) -> tuple[float, int]:

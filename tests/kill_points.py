@@ -25,12 +25,12 @@ import sys
 
 import torch
 
-import selfplay_cli.train.loop as loop
+import selfplay_cli.train.state as run_state
 from selfplay_cli.cli import main
 from selfplay_cli.league.store import League
 
 POINTS = ("after-first-file", "after-pending-state", "during-state-file", "after-rows", "worker-mid-job")
-SECOND_MOMENT = range(10_010_000, 10_030_000)  # the seeds of the second snapshot moment's gauntlet (loop.py: a
+SECOND_MOMENT = range(10_010_000, 10_030_000)  # the seeds of the second snapshot moment's gauntlet (state.py: a
 # moment's seeds start 10,000 a snapshot taken before it above 10,000,000: with one learner or two)
 
 
@@ -63,7 +63,7 @@ def arm(point: str) -> None:
     def die() -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
-    real_file, real_state, real_rows = loop.save_snapshot, torch.save, League.add_snapshots
+    real_file, real_state, real_rows = run_state.save_snapshot, torch.save, League.add_snapshots
 
     def save_file(*args, **kwargs):
         out = real_file(*args, **kwargs)
@@ -94,7 +94,7 @@ def arm(point: str) -> None:
     if point == "worker-mid-job":
         return  # armed in the worker (below)
     if point == "after-first-file":
-        loop.save_snapshot = save_file
+        run_state.save_snapshot = save_file
     elif point == "during-state-file":
         torch.save = save_state
     elif point == "after-pending-state":

@@ -1,4 +1,4 @@
-"""Tests for selfplay_cli.league.matchmaking: opponent distributions per mode, sampling proportions
+"""Tests for selfplay_cli.train.matchmaking: opponent distributions per mode, sampling proportions
 (chi-square goodness of fit), the decayed win-rate book, config / --bots validation and resume state."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.matchmaking import (
+from selfplay_cli.train.matchmaking import (
     LATEST_LEARNER,
     Matchmaker,
     MatchmakerConfig,
@@ -458,10 +458,10 @@ def test_load_state_dict_rejects_bad_state() -> None:
 
 
 def test_module_imports_no_torch_or_project_code() -> None:
-    code = ("import sys, selfplay_cli.league.matchmaking; "
+    code = ("import sys, selfplay_cli.train.matchmaking; "
             "bad = [m for m in sys.modules if m.split('.')[0] in ('torch', 'scipy', 'sqlalchemy') or "
-            "(m.startswith('selfplay_cli') and m not in ('selfplay_cli', 'selfplay_cli.errors', 'selfplay_cli.league', "
-            "'selfplay_cli.league.matchmaking'))]; print(bad); sys.exit(1 if bad else 0)")
+            "(m.startswith('selfplay_cli') and m not in ('selfplay_cli', 'selfplay_cli.errors', 'selfplay_cli.train', "
+            "'selfplay_cli.train.matchmaking'))]; print(bad); sys.exit(1 if bad else 0)")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stdout + res.stderr
 

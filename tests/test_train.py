@@ -12,12 +12,12 @@ from cli_helpers import run
 from selfplay_cli.algos.ppo import PPOConfig
 from selfplay_cli.arena.training_games import OPPONENT
 from selfplay_cli.cli import main
-from selfplay_cli.league.matchmaking import MatchmakerConfig
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.policies.snapshot_policy import load_policy
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer
+from selfplay_cli.train.matchmaking import MatchmakerConfig
 
 TINY = variant_key("pong", {"points_to_win": 1})  # the variant tiny runs play and are rated in
 
@@ -118,7 +118,7 @@ def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats
             seat = 0 if b == cpu else 1
             seen.add((seat, snaps[a if seat == 0 else b].meta["learner"]))
     assert seen == {(0, "left"), (1, "right")}, seen  # each learner met cpu, always on its own side
-    assert {pair[0] for pair in trainer.rates.to_dict()["pairs"]} == {0, 1}, "win rates per learner (PFSP)"
+    assert {pair[0] for pair in trainer.opponents.rates.to_dict()["pairs"]} == {0, 1}, "win rates per learner (PFSP)"
     league.close()
 
 
@@ -341,7 +341,7 @@ def test_swap_every_keeps_each_slot_on_its_opponent_until_the_swap(tmp_path):
     assert set(first) == {"cpu", "random"}, "both bots drawn across the slots"
     trainer.train()
     after = [trainer.games.policies[k].id for k in trainer.games.opponent_of.tolist()]
-    assert trainer.episodes > cfg.games and after == first, "no swap within the budget: every slot kept its draw"
+    assert trainer.state.episodes > cfg.games and after == first, "no swap within the budget: every slot kept its draw"
     league.close()
 
 
@@ -426,3 +426,27 @@ def test_run_status_after_a_refused_device_an_interrupt_and_a_crash(tmp_path, ca
     with League.open(home) as league:
         assert league.get_run("a").status == "stopped"
         assert league.get_run("b").status == "failed"
+
+
+def test_a_new_runs_settings_resolve_without_the_cli(tmp_path):
+    """train/settings layers a run's settings: the defaults, the game's own, a preset, the config file, then the
+    options typed; a game's default that a lone learner cannot use is dropped, the same setting typed is refused."""
+    from selfplay_cli.errors import MarlError
+    from selfplay_cli.train.settings import new_settings
+
+    conf = tmp_path / "run.toml"
+    conf.write_text('steps = 5000\n[sac]\nlr = 1e-4\n[sac.arch]\nactivation = "tanh"\n')
+    s = new_settings("tennis", {"agents": 1, "lr": 2e-4}, config=conf)
+    assert (s["algo"], s["steps"], s["agents"]) == ("sac", 5000, 1)  # the game's learner, the file's budget, typed
+    assert s["sac"]["arch"]["hidden"] == [256, 256] and s["sac"]["arch"]["activation"] == "tanh"  # game, then file
+    assert s["sac"]["lr"] == s["ppo"]["lr"] == 2e-4  # --lr over the file's [sac] lr, for every learner
+    assert s["opponents"]["bots"] == {"serve-bot": 0.75} and s["teacher"]["player"] == "serve-bot"  # the game's
+    assert s["sharing"] == "nops" and s["league_games"] == 0.0  # tennis's shared network and league share: dropped
+    both = new_settings("tennis", {"agents": 2})
+    assert both["sharing"] == "fups" and both["league_games"] == 0.5  # kept where every seat learns
+    with pytest.raises(MarlError, match="--sharing fups"):
+        new_settings("tennis", {"agents": 1, "sharing": "fups"})  # typed: checked, not dropped
+    seed = new_settings("pong", {}, preset="seed000")
+    assert seed["algo"] == "dqn" and seed["dqn"]["lr"] == 1e-3 and seed["dqn"]["arch"]["hidden"][0] == 512
+    opponents = new_settings("pong", {"opponents": "uniform", "bots": "cpu=0.25"})["opponents"]
+    assert opponents["mode"] == "uniform" and opponents["bots"] == {"cpu": 0.25}  # --opponents is [opponents] mode

@@ -18,7 +18,8 @@ from selfplay_cli.commands.train_view import TrainProgress, describe_games, desc
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.train.config import TrainConfig
-from selfplay_cli.train.loop import SnapshotRecord, Standing, Trainer, TrainReport
+from selfplay_cli.train.loop import Trainer
+from selfplay_cli.train.progress import SnapshotRecord, Standing, TrainReport
 
 FAST_PPO = PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1)
 
@@ -214,15 +215,12 @@ README_RUNS = {"pong-1": ("pong", {"agents": 2}), "tennis-1": ("tennis", {"agent
 def _learners_of(env: str, flags: dict) -> list[str]:
     """The learners (so the snapshot suffixes) of `marl train ENV` with ``flags``, from the game's own training
     defaults as `marl train` applies them."""
-    from selfplay_cli.commands.train import merge_settings
     from selfplay_cli.envs import get_env
     from selfplay_cli.train.loop import _learner_names
+    from selfplay_cli.train.settings import new_settings
 
     spec = get_env(env)
-    settings = TrainConfig(env=spec.name, run="x").to_dict()
-    merge_settings(settings, spec.train_defaults)
-    settings.update(flags)
-    cfg = TrainConfig.from_dict(settings)
+    cfg = TrainConfig.from_dict({**new_settings(env, flags), "run": "x"})
     return _learner_names(spec.agents, cfg.seat_plan().home, cfg.sharing)
 
 

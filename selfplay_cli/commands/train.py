@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import re
 import signal
-import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -29,55 +27,9 @@ from ._output import console, err_console, print_json
 from .train_view import TrainProgress, describe_record, describe_run, report_json
 
 
-def read_toml(path: Path) -> dict[str, Any]:
-    """A --config file; a missing or malformed one (not TOML, not UTF-8 text, nested past Python's recursion limit)
-    is a one-line error naming it."""
-    if sys.version_info >= (3, 11):
-        import tomllib
-    else:  # pragma: no cover
-        import tomli as tomllib
-    try:
-        with open(path, "rb") as f:
-            return tomllib.load(f)
-    except OSError as e:
-        raise MarlError(f"{path}: cannot read ({e.strerror or e})") from None
-    except tomllib.TOMLDecodeError as e:
-        raise MarlError(f"{path}: not valid TOML ({e})") from None
-    except UnicodeDecodeError as e:  # TOML is UTF-8 text
-        byte = e.object[e.start]
-        raise MarlError(f"{path}: not valid TOML (not UTF-8 text: byte {e.start} is {byte:#04x})") from None
-    except RecursionError:
-        raise MarlError(f"{path}: not valid TOML for marl (tables or arrays nested too deeply)") from None
-
-
-def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:
-    """Merge a config file into the settings: sections ([ppo], ...) key by key, and an algorithm's network
-    ([sac.arch], ...) key by key within its section (``hidden = [256, 256]`` alone keeps the activation); everything
-    else, a curriculum's or a teacher's schedule included, replaced whole."""
-    for key, value in overrides.items():
-        if isinstance(value, dict) and isinstance(settings.get(key), dict):
-            section = {**settings[key], **value}
-            arch, old = value.get("arch"), settings[key].get("arch")
-            if key in ALGO_SECTIONS and isinstance(arch, dict) and isinstance(old, dict):
-                section["arch"] = {**old, **arch}
-            settings[key] = section
-        else:
-            settings[key] = value
-
-
-ALGO_SECTIONS = ("ppo", "dqn", "sac")
-
-
-def run_stem(env: str) -> str:
-    """A default run name's stem from a game's name: ``pong``; ``tictactoe`` for ``mypkg.tictactoe:env``."""
-    stem = re.sub(r"[^A-Za-z0-9_-]+", "-", env.split(":")[0].rsplit(".", 1)[-1]).strip("-")
-    return stem or "run"
-
-
-RESUME_OPTIONS = frozenset({"resume", "env", "device", "quiet", "json_out", "home", "db"})
-"""What may be typed with --resume: a resumed run keeps the configuration it was started with."""
-
-
+# Long for its signature: a Typer command whose parameters are its ~30 options (about 90 lines); the body parses
+# them, runs the trainer and prints (the settings are resolved by selfplay_cli.train.settings). Its docstring is
+# `marl train --help`'s text.
 def train(
     ctx: typer.Context,
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
@@ -163,14 +115,9 @@ def train(
     json_out: JsonOpt = False,
 ) -> None:
     """Train agents by self-play (PPO, DQN or SAC); every snapshot joins the league and is rated in a gauntlet."""
-    from ..algos.dqn import seed000_config
-    from ..envs import get_env
-    from ..league.matchmaking import parse_bots
-    from ..league.store import RunStatus, check_name, shown
-    from ..policies.bots import bot_names
-    from ..train.config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
+    from ..league.store import RunStatus, check_name
     from ..train.loop import Trainer
-    from ..train.needs import check_resumable
+    from ..train.settings import new_settings, resumed_config, start_run
 
     for what, name in (("run name", run), ("run name", resume)):
         if name is not None:
@@ -179,95 +126,14 @@ def train(
              if getattr(ctx.get_parameter_source(name), "name", "") in ("COMMANDLINE", "ENVIRONMENT")}
     settings: dict[str, Any] = {}
     if resume is None:  # the whole configuration is checked before the league is opened (or created)
-        if env is None:
-            raise MarlError("name the game to train on (e.g. marl train pong), or --resume RUN")
-        spec = get_env(env)
-        if preset not in (None, "seed000"):
-            raise MarlError(f"unknown --preset '{preset}'; available: seed000")
-        settings = TrainConfig(env=spec.name, run="new").to_dict()  # the defaults
-        merge_settings(settings, spec.train_defaults)  # the game's own (marl envs NAME shows them)
-        if preset == "seed000":
-            settings["algo"] = "dqn"
-            settings["dqn"] = seed000_config().to_dict()
-        from_file = read_toml(config) if config is not None else {}
-        merge_settings(settings, from_file)
-        flags = {"agents": agents, "algo": algo, "sharing": sharing, "steps": steps, "minutes": minutes,
-                 "seed": seed, "device": device, "games": games, "snapshot_every": snapshot_every,
-                 "snapshot_steps": snapshot_steps, "eval_games": eval_games, "eval_older": eval_older,
-                 "eval_inline": eval_inline, "eval_playoff": eval_playoff, "swap_every": swap_every,
-                 "tensorboard": tensorboard, "league_games": league_games, "seats": seats}
-        settings.update({k: v for k, v in flags.items() if k in typed})
-        matchmaking = {"opponents": ("mode", opponents), "window": ("window", window),
-                       "latest_ratio": ("latest_ratio", latest_ratio)}
-        settings["opponents"].update({key: value for flag, (key, value) in matchmaking.items() if flag in typed})
-        if "bots" in typed:
-            settings["opponents"]["bots"] = parse_bots(bots)
-        if "lr" in typed:
-            settings["ppo"]["lr"] = settings["dqn"]["lr"] = settings["sac"]["lr"] = lr
-        if "teacher" in typed:
-            settings["teacher"]["player"] = teacher
-        settings["env_options"] = {**settings["env_options"], **parse_env_options(spec.name, env_option)}
-        try:
-            spec.config(**settings["env_options"])
-        except (TypeError, ValueError) as e:
-            raise MarlError(f"[env_options]: {e}") from None
-        settings["env"] = spec.name
-        game_set = {key for key in spec.train_defaults if key not in typed and key not in from_file}
-        # the game's own defaults for learners on every seat (tennis: one shared network, a share of league games)
-        # are dropped with fewer learners, where every game is already against the league; typed, they are checked
-        if "sharing" in game_set and fups_without_partners(spec, settings["agents"], settings["sharing"],
-                                                           settings["seats"]):
-            settings["sharing"] = "nops"
-        if "teacher" in game_set and not can_teach(settings["algo"]):  # (e.g. a game's teacher, --algo dqn)
-            settings["teacher"]["player"] = ""
-        if settings["league_games"] and "league_games" in game_set:
-            try:
-                plan = seat_plan_of(spec.for_options(**settings["env_options"]), settings["agents"],
-                                    settings["sharing"], settings["seats"])
-                if not plan.every_seat_learns:
-                    settings["league_games"] = 0.0
-            except MarlError:
-                pass  # the settings' own error follows, from TrainConfig
-        TrainConfig.from_dict(settings)  # every setting checked: an error here leaves nothing behind
+        settings = new_settings(env, {name: ctx.params[name] for name in typed}, config=config, preset=preset,
+                                env_options=lambda game: parse_env_options(game, env_option))
     league = open_league(home, db)
     try:
         if resume is not None:
-            ignored = sorted(typed - RESUME_OPTIONS)
-            if ignored:
-                flags = ", ".join("--" + name.replace("_", "-") for name in ignored)
-                raise MarlError(f"--resume continues run '{resume}' under the configuration it was started with: "
-                                f"{flags} cannot change it (only --device, --quiet, --json, --home, --db apply)")
-            old = league.get_run(resume)
-            if old is None:
-                raise MarlError(f"no run named '{resume}' to resume")
-            if env is not None and env != old.env:
-                raise MarlError(f"run '{resume}' trains {old.env}, not {env}")
-            check_resumable(league, old)  # a run a removed snapshot has ended: one line saying which
-            cfg = TrainConfig.from_dict(old.config)
-            if cfg.run != old.name:  # its folder: runs/<run> of the run's own name, never a name read elsewhere
-                raise MarlError(f"run '{resume}': its saved configuration names another run ({shown(cfg.run)}); "
-                                "the league's record of it was changed: start a new run")
-            if device != "auto":
-                cfg.device = device
+            cfg = resumed_config(league, resume, env, typed, device)
         else:
-            if run is None:
-                taken = {r.name for r in league.list_runs()}
-                stem = run_stem(settings["env"])
-                run = next(f"{stem}-{i}" for i in range(1, 10_000) if f"{stem}-{i}" not in taken)
-            elif league.get_run(run) is not None:
-                raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
-            settings["run"] = run
-            cfg = TrainConfig.from_dict(settings)
-            if cfg.teacher.player and cfg.teacher.player not in bot_names(cfg.game()):  # a snapshot the league does
-                from ..league.variants import variant_key
-                from ..rated.names import resolve  # not know: one line, before the run exists
-
-                try:  # (best: the best of the run's own variant, as the trainer reads it)
-                    resolve(league, cfg.teacher.player, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
-                except MarlError as e:
-                    raise MarlError(f"--teacher: {e}") from None
-            league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
-            save_run_config(league, cfg)
+            cfg = start_run(league, settings, run)
         reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
         with reporter, stop_on_sigterm():
             trainer = None
@@ -283,7 +149,7 @@ def train(
                 report = trainer.train()
             except (KeyboardInterrupt, Terminated) as stop:
                 league.set_run_status(cfg.run, RunStatus.STOPPED)
-                at = f" at step {trainer.steps:,}" if trainer is not None else ""
+                at = f" at step {trainer.state.steps:,}" if trainer is not None else ""
                 why = "SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C"
                 err_console.print(f"stopped {cfg.run}{at} ({why}); its last snapshot is kept: continue it with: "
                                   f"marl train --resume {cfg.run}", markup=False)

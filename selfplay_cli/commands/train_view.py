@@ -1,7 +1,7 @@
 """What `marl train` shows: the progress while it trains (a bar with a status line on a terminal, plain lines in a
 log) and the summary at the end, in text or JSON. Every figure comes from the trainer's
-:class:`~selfplay_cli.train.loop.Standing` and :class:`~selfplay_cli.train.loop.TrainReport`, which say what each
-counts."""
+:class:`~selfplay_cli.train.progress.Standing` and :class:`~selfplay_cli.train.progress.TrainReport`, which say
+what each counts."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from rich.text import Text
 from ._output import err_console
 
 if TYPE_CHECKING:
-    from ..train.loop import Standing, TrainReport
+    from ..train.progress import Standing, TrainReport
 
 
 def report_json(report: TrainReport) -> dict[str, Any]:

@@ -1,5 +1,16 @@
-"""Training a run: its settings (:mod:`.config`), the loop (:mod:`.loop`: learners play endless batched self-play
-games, take snapshot moments into the league and resume from them), the learners side by side (:mod:`.team`),
-curricula (:mod:`.curriculum`), the rating worker that plays each moment's gauntlet beside training
-(:mod:`.evaluator`), the run's lock (:mod:`.lock`), and which runs still need a snapshot (:mod:`.needs`).
+"""Training a run: the trainer (:mod:`.loop`) and the parts it composes.
+
+- :mod:`.settings`: a run's settings as `marl train` resolves them (defaults, the game's own, a preset, a config
+  file, the options typed; a resumed run's saved configuration); :mod:`.config`: the one dataclass that holds them,
+  checked, saved with the run.
+- :mod:`.loop`: the :class:`~.loop.Trainer`: the budget, the clock, metrics, and the loop that steps the games,
+  takes snapshot moments and collects their ratings.
+- :mod:`.state`: the run state and its snapshot moments (files, rows and state written as one unit; the resume).
+- :mod:`.opponents`: who the learners play in the opponent seats, over :mod:`.matchmaking` (self / latest / uniform
+  / PFSP and scripted players, the decayed win-rate book).
+- :mod:`.rollouts`: stepping the self-play games and feeding the learners, with curricula (:mod:`.curriculum`)
+  and a teacher; the learners side by side (:mod:`.team`).
+- :mod:`.progress`: what a run says of itself: its standing, its snapshots' records, its report.
+- :mod:`.evaluator`: the rating worker that plays each moment's gauntlet beside training.
+- :mod:`.lock`: one process per run; :mod:`.needs`: which runs still need a snapshot.
 """

@@ -16,12 +16,12 @@ from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
 from ..arena.training_games import SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
-from ..league.matchmaking import MatchmakerConfig
 from ..league.store import League
 from ..policies.joint import joint_spaces
 from ..policies.network import Arch, resolve_device
 from ..policies.snapshot_format import expected_tensors
 from .curriculum import Curriculum, Schedule, parse_schedule
+from .matchmaking import MatchmakerConfig
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field
@@ -277,7 +277,7 @@ def can_teach(algo: str) -> bool:
 def check_teacher(algo: str, sharing: str) -> None:
     """A run that cannot have a teacher, as one line: an algorithm that cannot imitate, or one agent over the
     joint team (its actions are not a seat's). The teacher's name is resolved, and its spaces checked, against the
-    league (:func:`selfplay_cli.train.loop.load_teacher`)."""
+    league (:func:`selfplay_cli.train.rollouts.load_teacher`)."""
     if not can_teach(algo):
         learners = ", ".join(a for a in ALGOS if can_teach(a))
         raise MarlError(f"--teacher: {algo} learners cannot imitate a teacher (kickstarting is for {learners})")

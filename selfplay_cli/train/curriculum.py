@@ -1,8 +1,8 @@
-"""Curricula driven by training progress (seed 002): game options that change as a run goes on.
+"""Curricula driven by training progress: game options that change as a run goes on.
 
 A run's TOML takes a ``[curriculum]`` table, one entry per live option of the game (``EnvSpec.live_options``; the
 game's core changes them between steps with ``set_options``). ``progress`` is the share of the budget spent (steps,
-or minutes with ``--minutes``), as seed 002 measured lessons by "the ratio of current steps to maximum steps"::
+or minutes with ``--minutes``): lessons are measured by the ratio of the steps played to the steps of the budget::
 
     [curriculum]
     hit_reward = { start = 0.5, end = 0.0, until = 0.5 }      # linear from 0.5 to 0 over the first half of the run

@@ -108,7 +108,7 @@ def _state_names(path: Path) -> tuple[list[str], list[str]] | None:
         return None
     import torch
 
-    from .loop import STATE_VERSION
+    from .state import STATE_VERSION
 
     try:
         state: Any = torch.load(path, map_location="cpu", weights_only=True, mmap=True)

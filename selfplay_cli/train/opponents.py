@@ -1,0 +1,132 @@
+"""A run's opponents: who sits in the opponent seats of its training games, and what their games teach PFSP.
+
+The :class:`~.matchmaking.Matchmaker` draws an opponent id for each opponent slot of a game starting (a scripted
+player, one of the run's snapshots, or :data:`~.matchmaking.LATEST_LEARNER`); :class:`Opponents` turns the ids into
+policies (the snapshots loaded once, then kept), keeps a slot's opponent until the next swap with ``--swap-every``,
+keeps the matchmaker's pool the run's snapshots, and reads each finished game into the win-rate book and the ledger.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from ..league.store import League
+from ..policies import Policy
+from ..rated.match import load_player
+from ..rated.roles import RoleBook
+from ..results import GameResult
+from .config import TrainConfig
+from .matchmaking import LATEST_LEARNER, Matchmaker, WinRates
+
+
+class Opponents:
+    """The opponents of one run's training games.
+
+    ``home``: the learner of each seat when learners hold every seat (its 'latest' opponent, -1 where none does);
+    ``learner_of_game``: the learner in each game; ``seat_roles``: each seat's role where seats differ (None: one
+    role); ``opponent_slots``: the flat ``seat * games + game`` slots that opponents hold; ``live``: each learner's
+    live policy, the 'latest' opponent."""
+
+    def __init__(self, league: League, cfg: TrainConfig, bot_ids: dict[str, int], *, n_seats: int,
+                 home: tuple[int, ...], learner_of_game: np.ndarray, seat_roles: tuple[str, ...] | None,
+                 opponent_slots: np.ndarray, live: list[Policy], device: str) -> None:
+        self.league, self.cfg, self.device = league, cfg, device
+        self.n_seats, self.home, self.learner_of_game = n_seats, home, learner_of_game
+        self.seat_roles, self.opponent_slots, self.live = seat_roles, opponent_slots, live
+        self.matchmaker = Matchmaker(cfg.opponents, np.random.default_rng(cfg.seed), bot_ids)
+        self.rates = WinRates(decay=cfg.opponents.decay, prior=cfg.opponents.prior)
+        self._can_play: dict[str, set[int]] = {}  # per role, the pool's snapshots that can play it
+        self._policies: dict[int, Policy] = {}
+        self._player_of: dict[str, int] = dict(bot_ids)  # policy id in game results -> league player id
+        self._assigned: np.ndarray | None = None  # opponent id per game slot, with --swap-every
+        self._next_swap = 0
+
+    def policy(self, pid: int, seat: int, learner: int) -> Policy:
+        """The policy of opponent ``pid`` in ``seat`` of a game of ``learner``."""
+        if pid == LATEST_LEARNER:  # ML-Agents' "latest model": the learner that holds this seat when learners hold
+            home = self.home[seat]  # every seat, as it is now (pong: the other learner; one learner: itself)
+            return self.live[home if home >= 0 else learner]
+        if pid not in self._policies:
+            self._policies[pid] = load_player(self.league, self.league.get_player(pid), device=self.device,
+                                              greedy=False, seed=pid)
+            self._player_of[self._policies[pid].id] = pid
+        return self._policies[pid]
+
+    def _draw(self, slots: np.ndarray) -> np.ndarray:
+        """Opponent ids for the opponent ``slots`` (flat ``seat * games + game``), each drawn by the matchmaker for
+        the learner that plays that game."""
+        ids = np.empty(len(slots), dtype=np.int64)
+        learners = self.learner_of_game[slots % self.cfg.games]
+        if self.seat_roles is None:
+            for i in np.unique(learners).tolist():
+                mine = learners == i
+                ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates)
+            return ids
+        roles = np.asarray(self.seat_roles, dtype=object)[slots // self.cfg.games]
+        for i in np.unique(learners).tolist():  # a seat's opponents: the run's snapshots of the seat's role
+            for role in dict.fromkeys(roles[learners == i].tolist()):
+                mine = (learners == i) & (roles == role)
+                ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates, among=self._can_play.get(role, ()))
+        return ids
+
+    def choose(self, slots: np.ndarray, steps: int) -> list[Policy]:
+        """Opponents for the opponent ``slots`` of the games starting now, the run at ``steps``, one each: drawn afresh
+        for every game, or with --swap-every kept per slot until the next swap (ML-Agents' swap_steps, counted in
+        game steps)."""
+        if not self.cfg.swap_every:
+            ids = self._draw(slots)
+        else:
+            due = steps >= self._next_swap
+            if due or self._assigned is None:
+                self._assigned = np.zeros(self.n_seats * self.cfg.games, dtype=np.int64)
+                self._assigned[self.opponent_slots] = self._draw(self.opponent_slots)
+                self._next_swap = steps + self.cfg.swap_every
+            ids = self._assigned[slots]
+        n = self.cfg.games
+        return [self.policy(int(i), int(slot) // n, int(self.learner_of_game[slot % n]))
+                for i, slot in zip(ids, slots, strict=True)]
+
+    def set_pool(self, env: str) -> None:
+        """The matchmaker's pool: the run's snapshots, oldest first; in a game whose seats hold different roles,
+        also which of them can play each role (a snapshot only its own)."""
+        pool = [p for p in self.league.players(env=env, kind="snapshot") if p.run == self.cfg.run]
+        self.matchmaker.set_pool([p.id for p in pool])
+        if self.seat_roles is not None:
+            book = RoleBook(self.league, env)
+            self._can_play = {role: {p.id for p in pool if book.roles(p) is None or role in book.roles(p)}
+                              for role in set(self.seat_roles)}
+
+    def file_games(self, finished: list[GameResult], learner_players: dict[str, int], match_id: int) -> None:
+        """File finished training games in the ledger (under ``match_id``), each learner as the player of its
+        latest snapshot (``learner_players``: learner id in game results -> player id); a learner's result against
+        an opponent of the league also goes into its win-rate book (PFSP)."""
+        learner_ids = list(learner_players)
+        records = []
+        for r in finished:
+            ids = [learner_players[p] if p in learner_players else self._player_of.get(p, 0) for p in r.players]
+            if 0 in ids or len(set(ids)) < 2:
+                continue  # the learners among themselves (or a live copy) carry no rating information
+            records.append(r.with_players(dict(zip(r.players, ids, strict=True))))
+            learners = {learner_ids.index(p) for p in r.players if p in learner_ids}
+            if len(learners) == 1:  # a learner against the league: its win rate against each opponent (PFSP)
+                (i,) = learners
+                mine = learner_ids[i]
+                points = r.points_of(mine)
+                for opponent in dict.fromkeys(q for p, q in zip(r.players, ids, strict=True) if p != mine):
+                    self.rates.update(i, opponent, points)
+        if records:
+            self.league.record_games(match_id, records)
+
+    def state_dict(self) -> dict[str, Any]:
+        """What the run state keeps of the opponents (under the keys it has always had): the matchmaker's generator
+        and pool, and the win-rate book, each as JSON text."""
+        return {"matchmaker": json.dumps(self.matchmaker.state_dict()), "rates": json.dumps(self.rates.to_dict())}
+
+    def load_state_dict(self, state: dict[str, Any], env: str) -> None:
+        """Restore :meth:`state_dict`; the pool is the league's (the run's snapshots as they are now)."""
+        self.matchmaker.load_state_dict(json.loads(state["matchmaker"]))
+        self.set_pool(env)
+        self.rates = WinRates.from_dict(json.loads(state["rates"]))

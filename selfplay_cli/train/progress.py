@@ -1,0 +1,99 @@
+"""What a run says of itself: where it stands while it trains (:class:`Standing`), what the ledger says of its
+newest snapshots (:class:`SnapshotRecord`), and its report at the end (:class:`TrainReport`). `marl train` shows them
+(:mod:`selfplay_cli.commands.train_view`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass(frozen=True)
+class SnapshotRecord:
+    """What the ledger says of one snapshot right after its gauntlet: its record against each scripted player
+    (``{bot: (wins, draws, losses)}``, every stored game between the two) and its fitted rating with the interval,
+    None when evaluation is off."""
+
+    name: str
+    learner: str
+    step: int
+    vs: dict[str, tuple[int, int, int]]
+    elo: float | None = None
+    ci_low: float | None = None
+    ci_high: float | None = None
+    unit: str = "games"  # what a result against a bot is: a game, or a cooperative game's comparison of two
+
+    @staticmethod
+    def score(wdl: tuple[int, int, int]) -> float:
+        w, d, lo = wdl
+        return (w + 0.5 * d) / max(w + d + lo, 1)
+
+    @staticmethod
+    def interval(wdl: tuple[int, int, int]) -> tuple[float, float]:
+        """The score's 95% interval (Wilson: honest with a handful of results and at 0 % or 100 %)."""
+        from ..stats.match import score_interval
+
+        return score_interval(*wdl)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"snapshot": self.name, "learner": self.learner, "step": self.step,
+                "elo": None if self.elo is None else round(self.elo, 1),
+                "ci_low": None if self.ci_low is None else round(self.ci_low, 1),
+                "ci_high": None if self.ci_high is None else round(self.ci_high, 1),
+                "vs": {bot: {"score": round(self.score(wdl), 4), "score_low": round(self.interval(wdl)[0], 4),
+                             "score_high": round(self.interval(wdl)[1], 4), self.unit: sum(wdl), "wins": wdl[0],
+                             "draws": wdl[1], "losses": wdl[2]} for bot, wdl in self.vs.items()}}
+
+
+@dataclass(frozen=True)
+class Standing:
+    """Where a run stands, for a progress display, in counts that hold for every game (none of them assumes a
+    game's shape). Counts are of the whole run, every session of a resumed run included, unless they say
+    ``session``. Games that all end together (every game of a batch cut by the same time limit) leave
+    ``episodes`` at 0 for most of a run: ``playing`` and ``game_steps`` then say how far they are."""
+
+    progress: float  # share of the budget spent: steps of the budget, or minutes of all sessions (0 to 1)
+    steps: int  # game steps played: one step of each of the games played at once counts as that many
+    episodes: int  # training games finished
+    playing: int  # training games under way (the games played at once); once training has ended, those it left
+    game_steps: float  # steps since the games under way began, averaged over them
+    time_limit: int | None  # the most steps one game lasts, as the game declares it (None: it declares none)
+    snapshots: int  # snapshots taken (one per learner and snapshot moment)
+    rated: int  # of them, those whose gauntlet has finished (0 with rating games off)
+    newest: tuple[SnapshotRecord, ...]  # the newest rated moment's snapshots, as the ledger rates them
+    session_steps: int  # game steps played by this process (a resumed run: since it resumed)
+    steps_per_second: float | None  # this process's training rate (rating games played inline left out); None
+    # before it has played a step
+    remaining: float | None  # seconds left, estimated (None before the rate is known)
+    ended: bool = False  # training has ended (what remains is the wait for the last rating games)
+
+
+@dataclass
+class TrainReport:
+    """What a finished run says of itself: the whole run (every session of a resumed run), and this session's part
+    where a field says so."""
+
+    run: str
+    steps: int  # game steps of the whole run
+    episodes: int  # training games finished in the whole run
+    seconds: float  # wall time of the whole run: each earlier session's up to its last snapshot moment (what the
+    # next one continued from: a killed session's later work was done again), then all of this session's
+    eval_games: int  # games the run's gauntlets played, every session (as the ledger holds them)
+    snapshots: list[str]  # the whole run's snapshots, oldest first
+    finals: list[SnapshotRecord]  # each learner's final snapshot, as the ledger rates it
+    sessions: int  # processes that trained the run: the first, then one per resume from a snapshot moment
+    session_steps: int  # game steps this session played
+    session_seconds: float  # wall time of this session, rating games and the wait for the last ones included
+    train_seconds: float  # of it, training: the loop of games and updates (rating games played inline left out)
+    session_eval_games: int  # games this session's gauntlets played
+    eval_seconds: float  # this session: time the gauntlets took (beside training, unless inline)
+    wait_seconds: float  # this session: time spent after training waiting for the last gauntlets
+    plot: Path | str | None = None  # the rating curves' PNG, or why there is none
+    best: Any = None  # the run's best snapshot as the ladder has it at the end (a LadderRow), None unrated
+    side_bests: list[Any] = field(default_factory=list)  # a game rated per side: the run's best of each side
+
+    @property
+    def steps_per_second(self) -> float:
+        """This session's training rate: its game steps over its training time."""
+        return self.session_steps / self.train_seconds if self.train_seconds > 0 else 0.0

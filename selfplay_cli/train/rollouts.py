@@ -1,0 +1,120 @@
+"""A run's rollouts: stepping its self-play games and feeding the learners what they played.
+
+Each step, the games play under the curriculum's options at the run's progress; with a teacher (``[teacher]``,
+``--teacher``: kickstarting, :mod:`selfplay_cli.algos.kickstart`) the teacher labels every learner's observations
+with its own actions while the schedule's weight is above 0, and each learner adds the imitation term, so weighted,
+to its policy's loss; the learners act, the games step; then each learner records its transitions and, when its
+rollout is due, updates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..arena.training_games import SelfPlayGames
+from ..errors import MarlError
+from ..league.store import League
+from ..league.variants import variant_key
+from ..policies import Policy
+from ..rated.match import load_player
+from ..results import GameResult
+from .config import TrainConfig
+from .curriculum import Curriculum, Schedule
+from .team import LearnerTeam
+
+
+def load_teacher(league: League, cfg: TrainConfig, spaces: list[Any], device: str = "cpu") -> Policy | None:
+    """The run's teacher (``[teacher] player``) as a policy playing greedily, or None without one; one clear
+    :class:`MarlError` for a name the league does not know or a player whose spaces are not the learners'."""
+    name = cfg.teacher.player
+    if not name:
+        return None
+    from ..policies.spaces import describe_space
+    from ..rated.names import resolve
+
+    try:
+        row = resolve(league, name, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
+    except MarlError as e:
+        raise MarlError(f"--teacher: {e}") from None
+    teacher = load_player(league, row, device=device, greedy=True, seed=cfg.seed)
+    if callable(getattr(teacher, "configure", None)):  # a scripted player: the run's game options
+        teacher.configure(cfg.env_options)
+    for space in spaces:
+        obs, act = getattr(teacher, "obs_space", None), getattr(teacher, "act_space", None)
+        if obs is not None and tuple(obs.shape) != tuple(space.observation.shape):
+            raise MarlError(f"--teacher: {row.full_name} reads observations of shape {tuple(obs.shape)}; the learners "
+                            f"see {tuple(space.observation.shape)}")
+        if act is not None and describe_space(act) != describe_space(space.action):
+            raise MarlError(f"--teacher: {row.full_name} plays {describe_space(act)}; the learners play "
+                            f"{describe_space(space.action)}")
+    return teacher
+
+
+@dataclass
+class Step:
+    """One step of every training game: the observations after it, the rewards and ends, the games it finished,
+    and (turn-based games) the slots that acted."""
+
+    obs: list[np.ndarray]
+    rewards: Any
+    dones: Any
+    finished: list[GameResult]
+    acting: list[np.ndarray | None] | None
+
+
+class Rollouts:
+    """The training games of one run and what its learners take from them."""
+
+    def __init__(self, games: SelfPlayGames, learners: list[Any], curriculum: Curriculum, teacher: Policy | None,
+                 teacher_schedule: Schedule | None) -> None:
+        self.games, self.learners, self.curriculum = games, learners, curriculum
+        self.teacher, self.teacher_schedule = teacher, teacher_schedule
+        self.lesson: dict[str, float] = {}  # the curriculum's values the training games play under now
+
+    def step(self, team: LearnerTeam, obs: list[np.ndarray], progress: float) -> Step:
+        """Play one step of every game at ``progress`` (0 to 1 of the budget) from observations ``obs``."""
+        if self.curriculum:
+            self._follow_curriculum(progress)
+        games = self.games
+        acting = games.acting() if games.sequential else None
+        if self.teacher is not None:
+            self._teach(obs, acting, progress)
+        rewards, dones, finished = games.step(team.act(obs, games.masks() if games.masked else None))
+        return Step(games.observe(), rewards, dones, finished, acting)
+
+    def learn(self, team: LearnerTeam, step: Step, progress: float) -> list[dict[str, float]] | None:
+        """The learners record ``step``; those whose rollout is due update. Their figures from the update, None
+        when none was due."""
+        games = self.games
+        if not team.record(step.rewards, step.dones, games.truncated, step.acting, games.final_obs,
+                           games.final_masks):
+            return None
+        return team.update(step.obs, progress)
+
+    def _follow_curriculum(self, progress: float) -> None:
+        """The training games' live options as the curriculum has them at this progress (changed only when they
+        change: a ramp moves them a little each step, lessons at their thresholds)."""
+        values = self.curriculum.values(progress)
+        if values != self.lesson:
+            self.games.core.set_options(**values)
+            self.lesson = values
+
+    def _teach(self, obs: list[np.ndarray], acting: list[np.ndarray | None] | None, progress: float) -> None:
+        """The teacher's actions for every learner's observations of this step (in turn-based games, the slots
+        that act), while the teacher's weight is above 0; each learner's weight for its next update."""
+        assert self.teacher is not None and self.teacher_schedule is not None
+        weight = self.teacher_schedule.value(progress)
+        if weight > 0:
+            masks = self.games.masks() if self.games.masked else [None] * len(self.learners)
+            for i, learner in enumerate(self.learners):
+                o, m = obs[i], masks[i]
+                rows = acting[i] if acting is not None else None
+                if rows is not None:
+                    o, m = o[rows], None if m is None else m[rows]
+                if len(o):
+                    learner.teach(o, self.teacher.act(o) if m is None else self.teacher.act(o, m), m)
+        for learner in self.learners:
+            learner.teacher_weight = weight

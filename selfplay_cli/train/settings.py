@@ -1,0 +1,205 @@
+"""A run's settings as `marl train` resolves them, without the command line.
+
+A new run's settings are built in layers, each over the last: the defaults of :class:`~.config.TrainConfig`, the
+game's own training defaults (``marl envs NAME`` shows them), a preset, a ``--config`` TOML file, then the options
+typed on the command line. A game's own default that makes no sense for the run as typed (a shared network for a
+lone learner, a teacher for a learner that cannot imitate, league games where some seat is already the league's) is
+dropped; one the user typed or wrote in the file is checked instead. A resumed run keeps the configuration saved
+with it: only the device may change.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from collections.abc import Callable, Collection, Mapping
+from pathlib import Path
+from typing import Any
+
+from ..errors import MarlError
+from ..league.store import League, shown
+from .config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
+from .matchmaking import parse_bots
+
+ALGO_SECTIONS = ("ppo", "dqn", "sac")
+
+PRESETS = ("seed000",)
+"""The names ``--preset`` takes, each a learner's whole set-up (``seed000``: DQN's network sizes, learning rate,
+batch, buffer, target period and epsilon schedule; docs/history/training.md says where it comes from)."""
+
+FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
+                 "snapshot_steps", "eval_games", "eval_older", "eval_inline", "eval_playoff", "swap_every",
+                 "tensorboard", "league_games", "seats")
+"""Options whose value is a top-level setting of the same name."""
+
+OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio"}
+"""Options that set a key of ``[opponents]``: the option's name, then the key's."""
+
+RESUME_OPTIONS = frozenset({"resume", "env", "device", "quiet", "json_out", "home", "db"})
+"""What may be typed with --resume: a resumed run keeps the configuration it was started with."""
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """A --config file; a missing or malformed one (not TOML, not UTF-8 text, nested past Python's recursion limit)
+    is a one-line error naming it."""
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as e:
+        raise MarlError(f"{path}: cannot read ({e.strerror or e})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise MarlError(f"{path}: not valid TOML ({e})") from None
+    except UnicodeDecodeError as e:  # TOML is UTF-8 text
+        byte = e.object[e.start]
+        raise MarlError(f"{path}: not valid TOML (not UTF-8 text: byte {e.start} is {byte:#04x})") from None
+    except RecursionError:
+        raise MarlError(f"{path}: not valid TOML for marl (tables or arrays nested too deeply)") from None
+
+
+def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:
+    """Merge a config file into the settings: sections ([ppo], ...) key by key, and an algorithm's network
+    ([sac.arch], ...) key by key within its section (``hidden = [256, 256]`` alone keeps the activation); everything
+    else, a curriculum's or a teacher's schedule included, replaced whole."""
+    for key, value in overrides.items():
+        if isinstance(value, dict) and isinstance(settings.get(key), dict):
+            section = {**settings[key], **value}
+            arch, old = value.get("arch"), settings[key].get("arch")
+            if key in ALGO_SECTIONS and isinstance(arch, dict) and isinstance(old, dict):
+                section["arch"] = {**old, **arch}
+            settings[key] = section
+        else:
+            settings[key] = value
+
+
+def run_stem(env: str) -> str:
+    """A default run name's stem from a game's name: ``pong``; ``tictactoe`` for ``mypkg.tictactoe:env``."""
+    stem = re.sub(r"[^A-Za-z0-9_-]+", "-", env.split(":")[0].rsplit(".", 1)[-1]).strip("-")
+    return stem or "run"
+
+
+def new_settings(env: str | None, flags: Mapping[str, Any], *, config: Path | None = None,
+                 preset: str | None = None,
+                 env_options: Callable[[str], dict[str, Any]] = lambda game: {}) -> dict[str, Any]:
+    """A new run's settings (``TrainConfig.to_dict``'s layout, the run not named yet), every one checked: an error
+    here leaves nothing behind.
+
+    ``flags``: the options the user typed, by their parameter name (``agents``, ``opponents``, ``bots`` as typed,
+    ``lr``, ``teacher``, ...), their values as the command line read them; an option left at its default is not
+    among them. ``env_options``: the game's options from the command line, read for the game's registered name.
+    """
+    from ..envs import get_env
+
+    if env is None:
+        raise MarlError("name the game to train on (e.g. marl train pong), or --resume RUN")
+    spec = get_env(env)
+    if preset not in (None, *PRESETS):
+        raise MarlError(f"unknown --preset '{preset}'; available: {', '.join(PRESETS)}")
+    settings = TrainConfig(env=spec.name, run="new").to_dict()  # the defaults
+    merge_settings(settings, spec.train_defaults)  # the game's own (marl envs NAME shows them)
+    if preset == "seed000":
+        from ..algos.dqn import seed000_config
+
+        settings["algo"] = "dqn"
+        settings["dqn"] = seed000_config().to_dict()
+    from_file = read_toml(config) if config is not None else {}
+    merge_settings(settings, from_file)
+    _apply_flags(settings, flags)
+    settings["env_options"] = {**settings["env_options"], **env_options(spec.name)}
+    try:
+        spec.config(**settings["env_options"])
+    except (TypeError, ValueError) as e:
+        raise MarlError(f"[env_options]: {e}") from None
+    settings["env"] = spec.name
+    _drop_game_defaults(settings, spec, {key for key in spec.train_defaults if key not in flags and
+                                         key not in from_file})
+    TrainConfig.from_dict(settings)  # every setting checked
+    return settings
+
+
+def _apply_flags(settings: dict[str, Any], flags: Mapping[str, Any]) -> None:
+    """The typed options over the settings (the options' names are not always the settings': ``--opponents`` is
+    ``[opponents] mode``, ``--lr`` every learner's ``lr``)."""
+    settings.update({k: v for k, v in flags.items() if k in FLAG_SETTINGS})
+    settings["opponents"].update({key: flags[flag] for flag, key in OPPONENT_FLAGS.items() if flag in flags})
+    if "bots" in flags:
+        settings["opponents"]["bots"] = parse_bots(flags["bots"])
+    if "lr" in flags:
+        settings["ppo"]["lr"] = settings["dqn"]["lr"] = settings["sac"]["lr"] = flags["lr"]
+    if "teacher" in flags:
+        settings["teacher"]["player"] = flags["teacher"]
+
+
+def _drop_game_defaults(settings: dict[str, Any], spec: Any, game_set: Collection[str]) -> None:
+    """The game's own defaults for learners on every seat (tennis: one shared network, a share of league games)
+    are dropped with fewer learners, where every game is already against the league; typed, they are checked.
+    ``game_set``: the settings that hold the game's default (neither typed nor in the config file)."""
+    if "sharing" in game_set and fups_without_partners(spec, settings["agents"], settings["sharing"],
+                                                       settings["seats"]):
+        settings["sharing"] = "nops"
+    if "teacher" in game_set and not can_teach(settings["algo"]):  # (e.g. a game's teacher, --algo dqn)
+        settings["teacher"]["player"] = ""
+    if settings["league_games"] and "league_games" in game_set:
+        try:
+            plan = seat_plan_of(spec.for_options(**settings["env_options"]), settings["agents"],
+                                settings["sharing"], settings["seats"])
+            if not plan.every_seat_learns:
+                settings["league_games"] = 0.0
+        except MarlError:
+            pass  # the settings' own error follows, from TrainConfig
+
+
+def start_run(league: League, settings: dict[str, Any], run: str | None) -> TrainConfig:
+    """Register a new run of ``settings`` (from :func:`new_settings`) in the league under ``run`` (default:
+    ``<game>-<n>``, the first free), its resolved configuration saved beside its metrics."""
+    from ..policies.bots import bot_names
+
+    if run is None:
+        taken = {r.name for r in league.list_runs()}
+        stem = run_stem(settings["env"])
+        run = next(f"{stem}-{i}" for i in range(1, 10_000) if f"{stem}-{i}" not in taken)
+    elif league.get_run(run) is not None:
+        raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
+    settings["run"] = run
+    cfg = TrainConfig.from_dict(settings)
+    if cfg.teacher.player and cfg.teacher.player not in bot_names(cfg.game()):  # a snapshot the league does
+        from ..league.variants import variant_key
+        from ..rated.names import resolve  # not know: one line, before the run exists
+
+        try:  # (best: the best of the run's own variant, as the trainer reads it)
+            resolve(league, cfg.teacher.player, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
+        except MarlError as e:
+            raise MarlError(f"--teacher: {e}") from None
+    league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
+    save_run_config(league, cfg)
+    return cfg
+
+
+def resumed_config(league: League, resume: str, env: str | None, typed: Collection[str],
+                   device: str = "auto") -> TrainConfig:
+    """The configuration a stopped or killed run was started with, to continue it (``--resume``): ``typed``, the
+    options the user typed, may not change it (only the device, and what is not a setting); ``env``, when given,
+    must be the run's game."""
+    from .needs import check_resumable
+
+    ignored = sorted(set(typed) - RESUME_OPTIONS)
+    if ignored:
+        flags = ", ".join("--" + name.replace("_", "-") for name in ignored)
+        raise MarlError(f"--resume continues run '{resume}' under the configuration it was started with: "
+                        f"{flags} cannot change it (only --device, --quiet, --json, --home, --db apply)")
+    old = league.get_run(resume)
+    if old is None:
+        raise MarlError(f"no run named '{resume}' to resume")
+    if env is not None and env != old.env:
+        raise MarlError(f"run '{resume}' trains {old.env}, not {env}")
+    check_resumable(league, old)  # a run a removed snapshot has ended: one line saying which
+    cfg = TrainConfig.from_dict(old.config)
+    if cfg.run != old.name:  # its folder: runs/<run> of the run's own name, never a name read elsewhere
+        raise MarlError(f"run '{resume}': its saved configuration names another run ({shown(cfg.run)}); "
+                        "the league's record of it was changed: start a new run")
+    if device != "auto":
+        cfg.device = device
+    return cfg

@@ -1,0 +1,265 @@
+"""A run's state and its snapshot moments: what a moment saves, how it is written as one unit, and the resume.
+
+A snapshot moment saves every learner as a snapshot file, registers them in the league, and writes the run state
+(``runs/<run>/state.pt``: the learners' and optimisers' state, the counters, the games' next seed, the opponents'
+generator and win rates, the gauntlets asked for) that continues the run exactly from that moment.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from .. import files
+from ..arena.training_games import SelfPlayGames
+from ..envs import EnvSpec
+from ..errors import MarlError
+from ..league.store import League
+from ..policies.snapshot_format import SnapshotMeta, save_snapshot
+from ..rated.snapshots import snapshot_relpath
+from .config import TrainConfig
+from .opponents import Opponents
+
+STATE_VERSION = 3  # 2: flat-buffer optimiser state (FlatAdam); 3: snapshots by name, pending gauntlets
+
+Job = tuple[tuple[str, ...], int, bool]
+"""A gauntlet asked for, not known to be done: the moment's snapshot names, its first seed, and whether it is the
+final one (played in full)."""
+
+
+@dataclass
+class RunState:
+    """Where a run stands: the counters and names a snapshot moment saves and a resume restores."""
+
+    steps: int = 0  # game steps played, every session's
+    episodes: int = 0  # training games finished
+    elapsed: float = 0.0  # seconds trained: before this process (a resumed run), then as training goes
+    resumes: int = 0  # sessions before this one
+    snapshots: list[str] = field(default_factory=list)  # full names of the run's snapshots, oldest first
+    latest: list[int] = field(default_factory=list)  # player id of each learner's latest snapshot (0: none yet)
+    jobs: list[Job] = field(default_factory=list)  # gauntlets asked for, not known to be done
+    snapshot_step: int = -1  # the steps and episodes at the last snapshot moment
+    snapshot_episode: int = -1
+
+
+def step_label(steps: int) -> str:
+    """A step count as a short name, to three significant figures: ``0``, ``500``, ``250k``, ``1M``, ``1.5M``,
+    ``4.92M``."""
+    rounded = float(f"{int(steps):.3g}")
+    for scale, unit in ((1e9, "G"), (1e6, "M"), (1e3, "k")):
+        if rounded >= scale:
+            return f"{rounded / scale:g}{unit}"
+    return f"{rounded:g}"
+
+
+@dataclass(frozen=True)
+class SavedAs:
+    """What every learner's snapshot says of it, beside its weights: the spaces it reads and plays, its network,
+    the role it learns (None: the game has one), and a joint learner's seats and base (None: not one)."""
+
+    spaces: list[Any]
+    arch: Any
+    roles: list[str | None]
+    joint: dict[str, Any] | None
+
+
+class SnapshotMoments:
+    """Takes one run's snapshot moments and resumes it from the last (see :meth:`write`)."""
+
+    def __init__(self, league: League, cfg: TrainConfig, spec: EnvSpec, run_dir: Path, *, learners: list[Any],
+                 names: list[str], saved: SavedAs, state: RunState, games: SelfPlayGames, opponents: Opponents,
+                 device: Any) -> None:
+        self.league, self.cfg, self.spec, self.run_dir = league, cfg, spec, run_dir
+        self.learners, self.names, self.saved, self.state = learners, names, saved, state
+        self.games, self.opponents, self.device = games, opponents, device
+
+    @property
+    def state_path(self) -> Path:
+        return self.run_dir / "state.pt"
+
+    @property
+    def pending_path(self) -> Path:
+        return self.run_dir / "state.pt.pending"
+
+    def base_name(self, trigger: str) -> str:
+        """The name of this snapshot moment (``-<learner>`` is added per learner): by the training step it stands
+        for (``s0``, ``s1M``, ``s2M``, ... ``s6M``: every ``--snapshot-steps``, named by the schedule, and the final
+        one by the budget), or, taken every ``--snapshot-every`` episodes, by the episodes finished (``ep90``)."""
+        cfg, steps = self.cfg, self.state.steps
+        if trigger == "episodes":
+            base = f"ep{self.state.episodes}"
+        elif trigger == "steps":
+            base = "s" + step_label(steps // cfg.snapshot_steps * cfg.snapshot_steps)
+        elif trigger == "final" and cfg.minutes is None:
+            base = "s" + step_label(cfg.steps)
+        else:  # the start, or the end of a budget in minutes
+            base = "s" + step_label(steps)
+        first = base if len(self.names) == 1 else f"{base}-{self.names[0]}"
+        if f"{cfg.run}/{first}" in self.state.snapshots:  # two moments that round to one label: the exact count
+            base = f"s{steps}" if not base.startswith("ep") else f"{base}.{steps}"  # decides
+        return base
+
+    def write(self, trigger: str) -> None:
+        """Save and register every learner's snapshot, named for ``trigger`` (:meth:`base_name`), and ask for its
+        gauntlet (with rating games on).
+
+        One moment is one unit, whatever instant a kill comes at: the files are written first (each to a temporary
+        name, then renamed), then the run state as it will be once they are registered (``state.pt.pending``),
+        then all the rows in one transaction, which is the moment the snapshots exist; then the pending state
+        becomes ``state.pt``. Killed before the transaction, the moment never happened (:meth:`restore` removes its
+        files and pending state); killed after it, the pending state is the moment's, complete.
+        """
+        cfg, state = self.cfg, self.state
+        base = self.base_name(trigger)
+        names = [base if len(self.names) == 1 else f"{base}-{n}" for n in self.names]
+        rows = [self._save(i, learner, name) for i, (learner, name) in enumerate(zip(self.learners, names,
+                                                                                      strict=True))]
+        full = [f"{cfg.run}/{n}" for n in names]
+        jobs = list(state.jobs)
+        if cfg.eval_games:
+            jobs.append((tuple(full), 10_000_000 + 10_000 * len(state.snapshots), trigger == "final"))
+        self.write_state(self.pending_path, latest=full, snapshots=state.snapshots + full, jobs=jobs,
+                         snapshot_step=state.steps, snapshot_episode=state.episodes)
+        registered = self.league.add_snapshots(rows)  # the moment exists from here on
+        files.publish(self.pending_path, self.state_path)
+        state.snapshot_episode, state.snapshot_step = state.episodes, state.steps
+        state.latest = [r.id for r in registered]
+        state.snapshots += full
+        state.jobs = jobs
+        self.opponents.set_pool(self.spec.name)
+
+    def _save(self, i: int, learner: Any, name: str) -> dict[str, Any]:
+        """Learner ``i``'s snapshot file, written as ``name``; the league row that will register it."""
+        cfg, state, saved = self.cfg, self.state, self.saved
+        rel = snapshot_relpath(cfg.run, name)
+        latest = state.latest[i]
+        parent = self.league.get_player(latest).full_name if latest else None
+        meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options,
+                            obs_space=saved.spaces[i].observation, act_space=saved.spaces[i].action, arch=saved.arch,
+                            algo=cfg.algo, step=state.steps,
+                            episode=state.episodes, run=cfg.run, name=name, parent=parent,
+                            seat=self.names[i] if len(self.names) > 1 else None, role=saved.roles[i],
+                            extra={"learner": self.names[i], **({"joint": saved.joint} if saved.joint else {})})
+        meta = save_snapshot(self.league.home / rel, learner.net, meta)  # type: ignore[operator]
+        row_meta = {"weights_sha256": meta.weights_sha256, "learner": self.names[i]}
+        if saved.roles[i] is not None:  # the seats it plays (a game whose seats hold several roles)
+            row_meta["role"] = saved.roles[i]
+        return dict(env=self.spec.name, run=cfg.run, name=name, path=rel,  # the store hashes the file
+                    step=state.steps, episode=state.episodes, algo=cfg.algo, parent_id=latest or None, meta=row_meta)
+
+    def write_state(self, path: Path, *, latest: list[str], snapshots: list[str], jobs: list[Job],
+                    snapshot_step: int, snapshot_episode: int) -> None:
+        """Everything to continue exactly from a snapshot moment, written to a temporary name, flushed to disk and
+        renamed to ``path``. Snapshots are named, not numbered: the state of a moment is written before its rows
+        (and their ids) exist."""
+        state = self.state
+        opponents = self.opponents.state_dict()
+        saved = {
+            "version": STATE_VERSION,
+            "learners": [learner.state_dict() for learner in self.learners],
+            "latest": latest, "snapshots": snapshots, "steps": state.steps, "episodes": state.episodes,
+            "snapshot_episode": snapshot_episode, "snapshot_step": snapshot_step,
+            "next_seed": self.games.next_seed, "elapsed": state.elapsed, "resumes": state.resumes,
+            "matchmaker": opponents["matchmaker"], "rates": opponents["rates"],
+            "jobs": [[list(names), seed, full] for names, seed, full in jobs],
+        }
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        with files.atomic_write(path) as f:
+            torch.save(saved, f)
+
+    def read_state(self, path: Path) -> dict[str, Any]:
+        try:
+            state = torch.load(path, map_location=self.device, weights_only=True)
+        except Exception as e:  # a torn or foreign file: say which, never a traceback
+            raise MarlError(f"{path}: cannot read the resume state ({e})") from None
+        if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
+            raise MarlError(f"{path}: resume state written by another marl version; start a new run")
+        return state
+
+    def restore(self) -> str:
+        """Continue a stopped or killed run from its latest snapshot moment (its lock held); returns a line saying
+        from where.
+
+        The league is the authority (see :meth:`write`): a pending state whose snapshots are registered is the
+        newest moment's (the run was killed between the rows and the rename); one whose snapshots are not is a
+        moment that never happened, and goes, with the files written for it. Files under the run's snapshot folder
+        that no row names (a moment cut short, a temporary file of a killed process) go too.
+        """
+        notes = []
+        for torn in self.run_dir.glob("*.tmp-*"):  # half-written by a killed process (the lock is ours now)
+            torn.unlink()
+        if self.pending_path.exists():
+            pending = self.read_state(self.pending_path)
+            if all(self._registered(n) for n in pending["latest"]):
+                files.publish(self.pending_path, self.state_path)
+                notes.append(f"the snapshots {', '.join(pending['latest'])} were registered as it was killed")
+            else:
+                self.pending_path.unlink()
+        if not self.state_path.exists():
+            if any(p.run == self.cfg.run for p in self.league.players(env=self.spec.name, kind="snapshot")):
+                raise MarlError(f"run '{self.cfg.run}' has snapshots but no resume state ({self.state_path})")
+            self._remove_strays()  # killed before its first snapshot: nothing to continue, start it again
+            return f"restarted {self.cfg.run} from the beginning (it was stopped before its first snapshot)"
+        self._load(self.read_state(self.state_path))
+        removed = self._remove_strays()
+        if removed:
+            notes.append(f"removed {removed} file(s) of a snapshot moment that never completed")
+        self.games.restart_all()
+        return f"resumed {self.cfg.run} at step {self.state.steps:,} (snapshot {self.state.snapshots[-1]})" + "".join(
+            f"; {n}" for n in notes)
+
+    def _load(self, saved: dict[str, Any]) -> None:
+        """The learners, counters, opponents and games' next seed as a run state file has them (this session
+        counted as one more resume)."""
+        try:
+            for learner, ls in zip(self.learners, saved["learners"], strict=True):
+                learner.load_state_dict(ls)
+        except (KeyError, ValueError, RuntimeError) as e:
+            raise MarlError(f"{self.state_path}: cannot resume from this state ({e})") from None
+        state = self.state
+        state.snapshots = list(saved["snapshots"])
+        state.latest = [self.player_id(n) for n in saved["latest"]]
+        state.steps, state.episodes = int(saved["steps"]), int(saved["episodes"])
+        state.snapshot_episode, state.snapshot_step = int(saved["snapshot_episode"]), int(saved["snapshot_step"])
+        state.elapsed = float(saved["elapsed"])
+        self.opponents.load_state_dict(saved, self.spec.name)
+        state.jobs = [(tuple(names), int(seed), bool(full)) for names, seed, full in saved["jobs"]]
+        state.resumes = int(saved["resumes"]) + 1
+        self.games.next_seed = int(saved["next_seed"]) + (state.resumes << 40)  # a seed range of its own
+
+    def player_id(self, full_name: str) -> int:
+        """The league player of one of the run's snapshots, by its full name (``run/name``)."""
+        run, _, name = full_name.partition("/")
+        found = [p for p in self.league.find_players(full_name, env=self.spec.name) if p.run == run and p.name == name]
+        if not found:
+            raise MarlError(f"run '{self.cfg.run}': snapshot {full_name} of its resume state is not in the league")
+        return found[0].id
+
+    def _registered(self, full_name: str) -> bool:
+        try:
+            self.player_id(full_name)
+        except MarlError:
+            return False
+        return True
+
+    def _remove_strays(self) -> int:
+        """Remove the files under ``snapshots/<run>/`` that no row of the league names."""
+        folder = self.league.home / snapshot_relpath(self.cfg.run, "x").rsplit("/", 1)[0]  # type: ignore[operator]
+        if not folder.is_dir():
+            return 0
+        known = set()
+        for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True):
+            if p.run == self.cfg.run:
+                with contextlib.suppress(MarlError):  # a row whose path leaves the league names no file here
+                    known.add(self.league.snapshot_file(p))
+        removed = 0
+        for f in folder.iterdir():
+            if f.is_file() and f not in known:
+                f.unlink()
+                removed += 1
+        return removed
+
