@@ -18,7 +18,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["clear_stop", "request_stop", "signals_held", "stop_requested", "stoppable"]
+__all__ = ["Terminated", "clear_stop", "request_stop", "signals_held", "stop_on_sigterm", "stop_requested", "stoppable"]
 
 _stop = threading.Event()
 
@@ -82,3 +82,26 @@ def signals_held() -> Iterator[None]:
             raise KeyboardInterrupt
         elif handler == signal.SIG_DFL:
             signal.raise_signal(sig)
+
+
+class Terminated(Exception):  # noqa: N818 (it is how a run learns of SIGTERM, not an error)
+    """SIGTERM arrived (under :func:`stop_on_sigterm`): the work stops as it does on Ctrl-C."""
+
+
+@contextmanager
+def stop_on_sigterm() -> Iterator[None]:
+    """While a block runs, SIGTERM (a CI job cancelled, ``kill``, a container stopped) raises :class:`Terminated` in
+    the main thread, so the work ends cleanly: a training run stops its rating worker, sets its status and says how
+    to resume it."""
+    def handler(signum: int, frame: Any) -> None:
+        raise Terminated()
+
+    try:
+        previous = signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (e.g. called from a test harness thread): leave SIGTERM alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)

@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import signal
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
 
-from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError
+from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED
+from ..signals import stop_on_sigterm
 from ._common import (
     MAX_PARALLEL,
     MAX_SEED,
@@ -115,8 +113,8 @@ def train(
     json_out: JsonOpt = False,
 ) -> None:
     """Train agents by self-play (PPO, DQN or SAC); every snapshot joins the league and is rated in a gauntlet."""
-    from ..league.store import RunStatus, check_name
-    from ..train.loop import Trainer
+    from ..league.store import check_name
+    from ..train.session import RunStopped, run_training
     from ..train.settings import new_settings, resumed_config, start_run
 
     for what, name in (("run name", run), ("run name", resume)):
@@ -136,32 +134,14 @@ def train(
             cfg = start_run(league, settings, run)
         reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
         with reporter, stop_on_sigterm():
-            trainer = None
-            claimed = resume is None  # a resumed run is this process's once restore has taken its lock
             try:
-                trainer = Trainer(league, cfg, on_progress=reporter.update)
-                if resume is not None:
-                    note = trainer.restore()
-                    claimed = True
-                    league.set_run_status(cfg.run, RunStatus.RUNNING)
-                    if not quiet:  # stderr: --json keeps stdout for the JSON alone
-                        err_console.print(note, markup=False)
-                report = trainer.train()
-            except (KeyboardInterrupt, Terminated) as stop:
-                league.set_run_status(cfg.run, RunStatus.STOPPED)
-                at = f" at step {trainer.state.steps:,}" if trainer is not None else ""
-                why = "SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C"
-                err_console.print(f"stopped {cfg.run}{at} ({why}); its last snapshot is kept: continue it with: "
+                report = run_training(league, cfg, resumed=resume is not None, on_progress=reporter.update,
+                                      on_note=None if quiet else lambda note: err_console.print(note, markup=False))
+            except RunStopped as stop:  # stderr: --json keeps stdout for the JSON alone
+                at = f" at step {stop.steps:,}" if stop.steps is not None else ""
+                err_console.print(f"stopped {cfg.run}{at} ({stop.why}); its last snapshot is kept: continue it with: "
                                   f"marl train --resume {cfg.run}", markup=False)
-                raise typer.Exit(EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED) from None
-            except MarlError:
-                if claimed:  # a refused resume (e.g. another process trains it) leaves the run as it is
-                    league.set_run_status(cfg.run, RunStatus.FAILED)
-                raise
-            except BaseException:  # whatever else ends it, the run is not left 'running'
-                league.set_run_status(cfg.run, RunStatus.FAILED)
-                raise
-        league.set_run_status(cfg.run, RunStatus.FINISHED)
+                raise typer.Exit(EXIT_TERMINATED if stop.why == "SIGTERM" else EXIT_INTERRUPTED) from None
     finally:
         league.close()
     if json_out:
@@ -178,25 +158,3 @@ def train(
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
     if report.plot is not None:
         console.print(f"  rating curves: {report.plot}", markup=False)
-
-
-class Terminated(Exception):  # noqa: N818 (it is how the run learns of SIGTERM, not an error)
-    """SIGTERM arrived: the run stops as it does on Ctrl-C."""
-
-
-@contextmanager
-def stop_on_sigterm() -> Iterator[None]:
-    """While training, SIGTERM (a CI job cancelled, ``kill``, a container stopped) raises :class:`Terminated` in the
-    main thread, so the run ends cleanly: the rating worker stopped, the status set, the resume hint printed."""
-    def handler(signum: int, frame: Any) -> None:
-        raise Terminated()
-
-    try:
-        previous = signal.signal(signal.SIGTERM, handler)
-    except ValueError:  # not the main thread (e.g. called from a test harness thread): leave SIGTERM alone
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
