@@ -77,11 +77,10 @@ def test_sigterm_stops_a_run_cleanly_and_it_resumes(tmp_path, capsys):
     args = [*ARGS[:ARGS.index("--steps")], "--steps", "100000", *ARGS[ARGS.index("--steps") + 2:]]
     proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args, "--home", str(home)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    state = home / "runs" / "r" / "state.pt"
+    metrics = home / "runs" / "r" / "metrics.jsonl"  # its first line: the first update is done, training under way
     deadline = time.time() + 120
-    while time.time() < deadline and not state.exists():
+    while time.time() < deadline and not (metrics.exists() and "\n" in metrics.read_text()):
         time.sleep(0.1)
-    time.sleep(1.0)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, (proc.returncode, err[-2000:])
