@@ -165,6 +165,7 @@ def _peak(args: list[str], tmp_path: Path) -> tuple[int, str, int]:
     return p.returncode, err_file.read_text(), usage.ru_maxrss
 
 
+@pytest.mark.slow
 def test_crafted_import_from_the_cli_is_one_line_and_small(tmp_path):
     """`marl checkpoint import` of the crafted file: exit 2, one line, and no more memory than refusing a garbage
     file (read no further than its first bytes) plus 200 MB."""
@@ -398,6 +399,7 @@ def test_symlinked_run_folder_leading_out_is_refused(tmp_path, capsys):
     assert list(outside.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_train_run_dotdot_refused_with_nothing_written(tmp_path):
     home = tmp_path / "home"
     make_league(home).close()
@@ -665,6 +667,7 @@ def test_a_game_named_by_a_file_is_never_imported(tmp_path, named):
     assert not (tmp_path / "league" / "snapshots").exists()
 
 
+@pytest.mark.slow
 def test_a_users_game_is_imported_when_the_user_names_it_or_the_league_plays_it(tmp_path):
     """The same module is loaded when the user names the game (--env mygame:env); after that the league plays
     mygame:env, so a second file of it imports without --env (the name was the user's); a file of another module in

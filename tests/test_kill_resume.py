@@ -41,6 +41,7 @@ def check_league(home: Path) -> list:
         return snaps
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("point", ["after-first-file", "after-pending-state", "during-state-file", "after-rows"])
 def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path, capsys, point):
     home = tmp_path / "h"
@@ -72,6 +73,7 @@ def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path,
         assert league.get_run("r").status == "finished"
 
 
+@pytest.mark.slow
 def test_sigterm_stops_a_run_cleanly_and_it_resumes(tmp_path, capsys):
     home = tmp_path / "h"
     args = [*ARGS[:ARGS.index("--steps")], "--steps", "100000", *ARGS[ARGS.index("--steps") + 2:]]

@@ -38,6 +38,7 @@ class Clock:
         return self.t
 
 
+@pytest.mark.slow
 def test_progress_counts_what_moves_while_every_game_is_still_under_way(tmp_path):
     """Games to 21 points never end in 8,192 steps of 16 games: 'games finished' stays 0, so the progress says how
     far the games under way are, and how many snapshots were taken and rated, with the newest rated one's Elo. (A
@@ -159,6 +160,7 @@ RESUMABLE = ["train", "pong", "--games", "16", "--env-option", "points_to_win=1"
              "--steps", "12288", "--eval-games", "2", "--eval-inline", "--run", "r"]
 
 
+@pytest.mark.slow
 def test_a_resumed_run_reports_the_whole_run_and_this_sessions_rate(tmp_path, capsys, monkeypatch):
     home = str(tmp_path / "h")
     with monkeypatch.context() as m:

@@ -77,6 +77,7 @@ def _stored_any(db: Path) -> bool:
 
 
 # -- 1. the worker dies with its trainer ----------------------------------------------------------------------
+@pytest.mark.slow
 def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
     """SIGKILL of `marl train` while its worker is in the middle of a gauntlet (64 games a matchup): the worker is
     gone, not playing on, and stores nothing more (it used to play on for minutes, then hang with init as parent).
@@ -170,6 +171,7 @@ def rated_league(tmp_path):
     league.close()
 
 
+@pytest.mark.slow
 def test_a_dead_worker_is_noticed_by_poll_and_replaced_and_its_job_done(rated_league):
     league, snap = rated_league
     notes: list[str] = []
@@ -203,6 +205,7 @@ def test_a_worker_that_keeps_dying_stops_the_run_as_an_internal_error(rated_leag
         assert not isinstance(e.value, MarlError)  # exit 5 (internal), not 2 (a user's mistake)
 
 
+@pytest.mark.slow
 def test_a_stopped_worker_is_reported_and_replaced(rated_league):
     league, snap = rated_league
     notes: list[str] = []
@@ -250,6 +253,7 @@ def _gauntlet_record(home: Path, seeds: range) -> dict[tuple[str, str], list[tup
     return {k: sorted(v) for k, v in out.items()}
 
 
+@pytest.mark.slow
 def test_a_job_cut_by_a_kill_is_stored_as_an_uninterrupted_run_stores_it(tmp_path, capsys):
     """The worker is killed (and its trainer with it) as it stores the second moment's gauntlet; `marl train
     --resume` plays that job again: every matchup of the moment ends with exactly the games, seeds and results of
@@ -306,6 +310,7 @@ def test_a_league_of_schema_1_gets_its_work_keys(tmp_path):
 
 
 # -- 5. SIGTERM within seconds, whatever the settings --------------------------------------------------------
+@pytest.mark.slow
 def test_sigterm_stops_a_run_within_seconds_even_in_an_endless_update(tmp_path):
     """update_epochs = 1e9: the learners' updates (two, in threads) would run for hours; SIGTERM stops the run with
     exit 143 and status stopped (how soon, under five seconds, is measured by benchmarks/fault_matrix.py)."""
