@@ -447,7 +447,7 @@ def test_the_rating_games_repeat_with_the_seed_whatever_the_timing(tmp_path, cap
     behind) and once inline (never behind): the same weights, and the very same rating games, playoff included.
     (This is also the check that one command with one seed stores the same gauntlet games twice over, which
     test_worker.py ran on two more runs of its own.)"""
-    base = ["train", "pong", "--agents", "2", "--steps", "6144", "--games", "16", "--env-option", "points_to_win=1",
+    base = ["train", "pong", "--agents", "2", "--steps", "4096", "--games", "16", "--env-option", "points_to_win=1",
             "--snapshot-steps", "2048", "--eval-games", "4", "--seed", "3", "--json"]
     code, out, err = run(capsys, *base, "--home", str(tmp_path / "worker"))
     assert code == 0, err

@@ -258,7 +258,7 @@ def test_a_job_cut_by_a_kill_is_stored_as_an_uninterrupted_run_stores_it(tmp_pat
     """The worker is killed (and its trainer with it) as it stores the second moment's gauntlet; `marl train
     --resume` plays that job again: every matchup of the moment ends with exactly the games, seeds and results of
     an uninterrupted run of the same command (none stored twice, none missing, none different)."""
-    args = ["train", "pong", *FAST, "--steps", "6144", "--eval-games", "4", "--run", "r"]
+    args = ["train", "pong", *FAST, "--steps", "4096", "--eval-games", "4", "--run", "r"]
     assert main([*args, "--home", str(tmp_path / "whole")]) == 0
     killed = tmp_path / "killed"
     child = subprocess.run([sys.executable, str(KILL_POINTS), "worker-mid-job", str(killed), *args],
