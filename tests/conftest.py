@@ -10,6 +10,20 @@ from selfplay_cli.envs import get_env
 from selfplay_cli.policies import ScriptedPolicy
 
 
+@pytest.hookimpl(tryfirst=True)
+def pytest_cmdline_main(config):
+    """``-n N`` hands tests out by work stealing (an idle process takes half of a busy one's queue), not in fixed
+    chunks: with the slow tests first (below), no process is left with a long test while the other idles."""
+    if getattr(config.option, "numprocesses", None) and config.option.dist == "no":
+        config.option.dist = "worksteal"
+
+
+def pytest_collection_modifyitems(items):
+    """Tests marked ``slow`` (a training run, subprocesses, thousands of game steps) first, in their order, then the
+    rest: the long ones start early, and the suite's last minutes are short tests that balance out."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 def _learn_against_random(learner, n_games: int, budget: int) -> tuple[float, float, int]:
     """Train ``learner`` (driving one seat of ``n_games`` games) for ``budget`` game steps against the random
     player; returns its win rate over the first and the last 300 games, and the number of games."""

@@ -361,6 +361,7 @@ def test_an_io_error_is_one_line_naming_the_path_and_cause(capsys, monkeypatch):
     one_line_error(*run(capsys, "envs"), "out of memory: use fewer games at once", EXIT_IO)
 
 
+@pytest.mark.slow
 def test_a_full_disk_is_an_io_error(home, capsys):
     """A file size limit stands in for a full disk: the database cannot grow past it."""
     assert main(["match", "cpu", "random", "--env", "pong", "-n", "2", "-q"]) == 0

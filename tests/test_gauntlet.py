@@ -7,6 +7,7 @@ import json
 from collections import defaultdict
 
 import numpy as np
+import pytest
 from cli_helpers import run
 
 from selfplay_cli.arena import Game, play
@@ -198,6 +199,7 @@ def test_play_takes_games_appended_while_it_plays():
     assert results[3].players == ("cpu2", "cpu") and results[4].players == ("cpu", "cpu2")
 
 
+@pytest.mark.slow
 def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     """A tiny two-learner run through the CLI without a terminal: every snapshot of both learners has gauntlet games
     (predecessor, partner, bots); the plain progress lines appear on stderr, one per snapshot moment; the final
@@ -290,6 +292,7 @@ def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monk
     league.close()
 
 
+@pytest.mark.slow
 def test_a_failing_gauntlet_in_the_worker_comes_back_as_one_error(tmp_path):
     """The rating worker reports a job's failure (here: a snapshot id the league does not have) instead of dying
     silently, and the trainer raises it as one line."""
@@ -381,6 +384,7 @@ def test_a_playoff_between_equals_stops_at_its_cap_and_the_ladder_says_tied(tmp_
     league.close()
 
 
+@pytest.mark.slow
 def test_a_final_gauntlet_plays_the_bots_in_full_whatever_the_history(tmp_path, monkeypatch):
     """A run reports its final snapshots' scores against the bots: those matchups get ``bot_pairs`` even where the
     predecessor's record made them clear; the others keep the usual pairs."""
@@ -400,6 +404,7 @@ def test_a_final_gauntlet_plays_the_bots_in_full_whatever_the_history(tmp_path, 
     league.close()
 
 
+@pytest.mark.slow
 def test_a_run_repeated_with_its_seed_is_the_same_players_rated_once(tmp_path, capsys):
     """The same command and seed twice in one league: bit-identical weights under new names. The second run plays
     no rating game its first already played (they would be the same games, counted twice), its snapshots show the
@@ -436,10 +441,13 @@ def _rating_games(home):
                           t.seed.tolist(), t.score_a.tolist(), t.length.tolist(), strict=True))
 
 
+@pytest.mark.slow
 def test_the_rating_games_repeat_with_the_seed_whatever_the_timing(tmp_path, capsys):
     """The same command and seed in two homes, once with the gauntlets in a worker beside training (which may fall
-    behind) and once inline (never behind): the same weights, and the very same rating games, playoff included."""
-    base = ["train", "pong", "--agents", "2", "--steps", "6144", "--games", "16", "--env-option", "points_to_win=1",
+    behind) and once inline (never behind): the same weights, and the very same rating games, playoff included.
+    (This is also the check that one command with one seed stores the same gauntlet games twice over, which
+    test_worker.py ran on two more runs of its own.)"""
+    base = ["train", "pong", "--agents", "2", "--steps", "4096", "--games", "16", "--env-option", "points_to_win=1",
             "--snapshot-steps", "2048", "--eval-games", "4", "--seed", "3", "--json"]
     code, out, err = run(capsys, *base, "--home", str(tmp_path / "worker"))
     assert code == 0, err

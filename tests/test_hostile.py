@@ -104,18 +104,24 @@ def crafted(path: Path, hidden=(100_000_000, 100_000_000), tensors: dict | None 
 # 2. A crafted snapshot cannot hurt
 
 BOUNDED = textwrap.dedent("""
-    import json, resource, sys, time, tracemalloc
+    import json, resource, sys, tracemalloc
     from pathlib import Path
+    import torch
     from selfplay_cli.errors import MarlError
     from selfplay_cli.league.store import League
     from selfplay_cli.rated.snapshots import import_snapshot
     import selfplay_cli.policies.snapshot_reader  # torch and everything else loaded before the limit
 
+    built = []
+    module_init = torch.nn.Module.__init__
+    def counted(self, *args, **kwargs):
+        built.append(type(self).__name__)
+        module_init(self, *args, **kwargs)
+    torch.nn.Module.__init__ = counted
     league = League.open(sys.argv[2])
     vm = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize:")) * 1024
     resource.setrlimit(resource.RLIMIT_AS, (vm + 200 * 2**20, resource.getrlimit(resource.RLIMIT_AS)[1]))
     tracemalloc.start()
-    t = time.perf_counter()
     try:
         import_snapshot(league, Path(sys.argv[1]))
         out = {"error": None}
@@ -123,16 +129,17 @@ BOUNDED = textwrap.dedent("""
         out = {"error": str(e)}
     except MemoryError:
         out = {"error": "MemoryError"}
-    out["seconds"] = time.perf_counter() - t
+    out["built"] = len(built)
     out["peak"] = tracemalloc.get_traced_memory()[1]
     print(json.dumps(out))
 """)
 
 
 @pytest.mark.parametrize("hidden", [(100_000_000, 100_000_000), (30_000, 30_000), [64] * 10_000, (64, 0)])
-def test_crafted_arch_refused_within_a_second_and_200mb(tmp_path, hidden):
+def test_crafted_arch_refused_before_building_and_within_200mb(tmp_path, hidden):
     """The issue's 31 KB file (OOM before), its 10-minute cousin, a 10,000-layer arch and a zero-width layer: each
-    is refused in under a second, in a process whose address space may grow by 200 MB only."""
+    is refused before a single torch module is built, in a process whose address space may grow by 200 MB only.
+    (How long a refusal takes is measured by benchmarks/fault_matrix.py's crafted-snapshot rows: under a second.)"""
     path = crafted(tmp_path / "evil.safetensors", hidden=hidden)
     assert path.stat().st_size < 100_000
     proc = subprocess.run([sys.executable, "-c", BOUNDED, str(path), str(tmp_path / "league")], capture_output=True,
@@ -140,24 +147,23 @@ def test_crafted_arch_refused_within_a_second_and_200mb(tmp_path, hidden):
     assert proc.returncode == 0, proc.stderr[-2000:]
     out = json.loads(proc.stdout)
     assert out["error"] and out["error"].startswith(str(path)) and "MemoryError" not in out["error"], out
-    assert out["seconds"] < 1.0 and out["peak"] < 200 * MB, out
+    assert out["built"] == 0 and out["peak"] < 200 * MB, out
     assert not (tmp_path / "league" / "snapshots").exists()
 
 
-def _peak(args: list[str], tmp_path: Path) -> tuple[int, str, int, float]:
-    """Exit code, stderr, peak RSS (kB) and seconds of ``marl *args`` (its own rusage, from wait4)."""
+def _peak(args: list[str], tmp_path: Path) -> tuple[int, str, int]:
+    """Exit code, stderr and peak RSS (kB) of ``marl *args`` (its own rusage, from wait4)."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     err_file = tmp_path / "stderr.txt"
-    t = time.perf_counter()
     with open(err_file, "w") as err:
         p = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], stdout=subprocess.DEVNULL, stderr=err,
                              env=env)
         _, status, usage = os.wait4(p.pid, 0)
-    seconds = time.perf_counter() - t
     p.returncode = os.waitstatus_to_exitcode(status)
-    return p.returncode, err_file.read_text(), usage.ru_maxrss, seconds
+    return p.returncode, err_file.read_text(), usage.ru_maxrss
 
 
+@pytest.mark.slow
 def test_crafted_import_from_the_cli_is_one_line_and_small(tmp_path):
     """`marl checkpoint import` of the crafted file: exit 2, one line, and no more memory than refusing a garbage
     file (read no further than its first bytes) plus 200 MB."""
@@ -165,13 +171,12 @@ def test_crafted_import_from_the_cli_is_one_line_and_small(tmp_path):
     junk = tmp_path / "junk.safetensors"
     junk.write_bytes(b"\x08" + b"\x00" * 7 + b"not json")
     home = ["--home", str(tmp_path / "league")]
-    code_junk, err_junk, rss_junk, _ = _peak(["checkpoint", "import", str(junk), *home], tmp_path)
-    code, err, rss, _ = _peak(["checkpoint", "import", str(evil), *home], tmp_path)
+    code_junk, err_junk, rss_junk = _peak(["checkpoint", "import", str(junk), *home], tmp_path)
+    code, err, rss = _peak(["checkpoint", "import", str(evil), *home], tmp_path)
     assert code_junk == 2 and code == 2, (err_junk, err)
     assert err.startswith(f"marl: error: {evil}: ") and err.count("\n") == 1, err
     assert "hidden layer sizes [100000000, 100000000] exceed" in err, err
-    assert rss < rss_junk + 200 * 1024, (rss_junk, rss)  # kilobytes (the time bound is measured in-process above:
-    # two start-ups of the CLI differ by more than a second on a busy machine)
+    assert rss < rss_junk + 200 * 1024, (rss_junk, rss)  # kilobytes
 
 
 def test_crafted_layouts_are_refused_before_anything_is_built(tmp_path):
@@ -209,11 +214,19 @@ def test_crafted_layouts_are_refused_before_anything_is_built(tmp_path):
     body = json.dumps(header).encode()
     overlap.write_bytes(len(body).to_bytes(8, "little") + body + raw[8 + n:])
     cases["offsets past the end"] = overlap
+    built = []
+    module_init = torch.nn.Module.__init__
+
+    def counted(self, *args, **kwargs):
+        built.append(type(self).__name__)
+        module_init(self, *args, **kwargs)
+
     for why, path in cases.items():
-        t = time.perf_counter()
-        with pytest.raises(SnapshotError) as e:
-            import_check(path)
-        assert time.perf_counter() - t < 1.0, why
+        with pytest.MonkeyPatch.context() as m:
+            m.setattr(torch.nn.Module, "__init__", counted)
+            with pytest.raises(SnapshotError) as e:
+                import_check(path)
+        assert built == [], (why, built)
         msg = str(e.value)
         assert msg.startswith(str(path)) and "\n" not in msg and "\x1b" not in msg, (why, msg)
 
@@ -384,6 +397,7 @@ def test_symlinked_run_folder_leading_out_is_refused(tmp_path, capsys):
     assert list(outside.iterdir()) == []
 
 
+@pytest.mark.slow
 def test_train_run_dotdot_refused_with_nothing_written(tmp_path):
     home = tmp_path / "home"
     make_league(home).close()
@@ -509,10 +523,9 @@ def test_killed_recording_leaves_a_part_file_that_the_next_one_removes(tmp_path)
                          stderr=subprocess.DEVNULL)
     deadline = time.time() + 120
     parts: list[Path] = []
-    while time.time() < deadline and not parts:
+    while time.time() < deadline and not (parts and parts[0].stat().st_size > 0):  # frames under way
         parts = [f for f in (home / "videos").glob(".*.part")] if (home / "videos").exists() else []
         time.sleep(0.1)
-    time.sleep(0.5)
     p.send_signal(signal.SIGKILL)
     p.wait()
     assert parts and parts[0].exists(), "the recording never started"
@@ -520,7 +533,9 @@ def test_killed_recording_leaves_a_part_file_that_the_next_one_removes(tmp_path)
         found = subprocess.run(["pgrep", "-f", parts[0].name], capture_output=True, text=True).stdout.split()
         for child in found:
             os.kill(int(child), signal.SIGKILL)
-        time.sleep(0.2)
+        deadline = time.time() + 60
+        while time.time() < deadline and any(Path(f"/proc/{child}").exists() for child in found):
+            time.sleep(0.05)  # (reparented to init, which reaps it)
     q = subprocess.run(args + ["--max-steps", "30"], env=env, capture_output=True, text=True, timeout=300)
     assert q.returncode == 0, q.stderr
     assert not parts[0].exists()
@@ -649,6 +664,7 @@ def test_a_game_named_by_a_file_is_never_imported(tmp_path, named):
     assert not (tmp_path / "league" / "snapshots").exists()
 
 
+@pytest.mark.slow
 def test_a_users_game_is_imported_when_the_user_names_it_or_the_league_plays_it(tmp_path):
     """The same module is loaded when the user names the game (--env mygame:env); after that the league plays
     mygame:env, so a second file of it imports without --env (the name was the user's); a file of another module in

@@ -42,6 +42,7 @@ def check_league(home: Path) -> list:
         return snaps
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("point", ["after-first-file", "after-pending-state", "during-state-file", "after-rows"])
 def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path, capsys, point):
     home = tmp_path / "h"
@@ -73,16 +74,16 @@ def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path,
         assert league.get_run("r").status == "finished"
 
 
+@pytest.mark.slow
 def test_sigterm_stops_a_run_cleanly_and_it_resumes(tmp_path, capsys):
     home = tmp_path / "h"
     args = [*ARGS[:ARGS.index("--steps")], "--steps", "100000", *ARGS[ARGS.index("--steps") + 2:]]
     proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args, "--home", str(home)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    state = home / "runs" / "r" / "state.pt"
+    metrics = home / "runs" / "r" / "metrics.jsonl"  # its first line: the first update is done, training under way
     deadline = time.time() + 120
-    while time.time() < deadline and not state.exists():
+    while time.time() < deadline and not (metrics.exists() and "\n" in metrics.read_text()):
         time.sleep(0.1)
-    time.sleep(1.0)
     proc.send_signal(signal.SIGTERM)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 143, (proc.returncode, err[-2000:])

@@ -99,6 +99,7 @@ def test_sa_refuses_what_it_cannot_be_in_one_line(home, capsys):
     assert not (home / "runs" / "bad").exists()
 
 
+@pytest.mark.slow
 def test_an_sa_agent_trains_plays_and_records_its_team(home, tmp_path, capsys):
     report = run_json(capsys, "train", "lander", "--sharing", "sa", "--steps", "4000", "--snapshot-steps", "4000",
                       "--games", "8", "--eval-games", "2", "--run", "sa")
@@ -182,6 +183,7 @@ def test_the_ladder_of_a_cooperative_game_shows_the_mean_return(home, capsys, mo
     assert f"{rows['heuristic']['mean_return']:.1f}" in shown
 
 
+@pytest.mark.slow
 def test_a_nops_runs_gauntlet_rates_each_moment_as_the_team_it_flies_as(home, capsys):
     """The per-lander snapshots of a NoPS moment fly their rating games together, each on its own lander, as the run
     trained them (alone, each would fly both landers, one of them a seat it never learned); their comparisons count

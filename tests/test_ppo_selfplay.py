@@ -97,6 +97,7 @@ def test_learner_state_round_trip_resumes_identically():
     assert b.updates == 1
 
 
+@pytest.mark.slow
 def test_ppo_learns_to_beat_random_at_pong(learn_against_random, one_thread):
     """A real learning assertion: from an even game to a clear win against the random player.
 

@@ -425,6 +425,7 @@ def test_run_settings_take_a_sac_section():
 # End to end
 
 
+@pytest.mark.slow
 def test_marl_train_sac_on_a_box_game_snapshots_and_plays(home, tmp_path, capsys):
     config = tmp_path / "sac.toml"
     config.write_text("[sac]\nlearning_starts = 200\nbatch_size = 64\nreplay_ratio = 0.125\ncritic_hidden = [32, 32]\n"

@@ -422,14 +422,17 @@ def test_recompute_online_elo_reproduces_stored_values(league: League) -> None:
 
 
 def _writer(url: str, match_id: int, players: list[int], n_games: int, batch: int, seed: int, start: object,
-            out: str, pause: float = 0.0) -> None:
+            out: str, pause: float = 0.0, ready: object = None) -> None:
     """Child process: record ``n_games`` games in batches (forever if n_games < 0), report the ids.
 
-    ``pause`` seconds between batches stand in for playing the next batch of games.
+    ``pause`` seconds between batches stand in for playing the next batch of games. ``ready`` (an Event) is set
+    once the league is open, then ``start`` is waited for.
     """
     result: dict[str, object] = {}
     try:
         lg = League(url)
+        if ready is not None:
+            ready.set()  # type: ignore[attr-defined]
         start.wait(60)  # type: ignore[attr-defined]
         rng = random.Random(seed)
         ids: list[int] = []
@@ -463,11 +466,12 @@ def test_two_processes_write_concurrently(tmp_path: Path) -> None:
     ctx = mp.get_context("spawn")
     start = ctx.Event()
     outs = [tmp_path / f"w{i}.json" for i in range(2)]
-    procs = [ctx.Process(target=_writer, args=(url, match_id, players, 300, 10, i, start, str(outs[i]), 0.005))
-             for i in range(2)]
+    ready = [ctx.Event() for _ in range(2)]
+    procs = [ctx.Process(target=_writer, args=(url, match_id, players, 300, 10, i, start, str(outs[i]), 0.005,
+                                               ready[i])) for i in range(2)]
     for p in procs:
         p.start()
-    time.sleep(0.5)  # let both import and connect, then release them together
+    assert all(r.wait(120) for r in ready), "a writer never opened the league"  # both connected: release together
     start.set()
     for p in procs:
         p.join(60)

@@ -601,6 +601,7 @@ def test_discrete_option():
 
 # ---------------------------------------------------------------------------------------------------------------
 # The serve-bot
+@pytest.mark.slow
 @pytest.mark.parametrize("bounce", [False, True], ids=["direct", "bounce"])
 @pytest.mark.parametrize("mode, rate", [("fixed", 0.97), ("velocity", 0.93), ("spin", 0.93), ("mixed", 0.93)])
 def test_serve_bot_serves_land_legally_in_each_mode(mode, rate, bounce):
@@ -629,6 +630,7 @@ def test_serve_bot_serves_land_legally_in_each_mode(mode, rate, bounce):
     assert want[0] <= spun <= want[1], f"{mode}: {spun:.0%} of the serves spun at 20 rad/s or more"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("bounce", [False, True], ids=["direct", "bounce"])
 @pytest.mark.parametrize("mode", ["fixed", "velocity", "spin", "mixed"])
 def test_serve_bot_returns_its_own_balls_and_rallies(mode, bounce):

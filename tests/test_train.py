@@ -29,6 +29,7 @@ def tiny(**kw) -> TrainConfig:
     return TrainConfig(**base)
 
 
+@pytest.mark.slow
 def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     league = League.open(tmp_path / "league")
     cfg = tiny(agents=2, sharing="nops")
@@ -69,6 +70,7 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     league.close()
 
 
+@pytest.mark.slow
 def test_one_learner_meets_league_opponents_and_bots(tmp_path):
     league = League.open(tmp_path / "league")
     cfg = tiny(agents=1, opponents=MatchmakerConfig(mode="pfsp", bots={"cpu": 0.5}, latest_ratio=0.2))
@@ -89,6 +91,7 @@ def test_one_learner_meets_league_opponents_and_bots(tmp_path):
     league.close()
 
 
+@pytest.mark.slow
 def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats(tmp_path):
     """--league-games with --agents 2: that share of games seats one learner (on its own side) against an opponent
     drawn for *that* learner; the rest are learner against learner. The ledger and PFSP's win rates get them."""
@@ -198,6 +201,7 @@ def test_train_flag_defaults_are_the_config_defaults():
 
 
 
+@pytest.mark.slow
 def test_train_command_runs_and_reports(tmp_path, capsys):
     code, out, err = run(capsys, "train", "pong", "--agents", "2", "--steps", "4096", "--games", "16",
                          "--env-option", "points_to_win=1", "--snapshot-every", "32", "--home",
@@ -228,6 +232,7 @@ def test_bad_train_options_are_one_line_errors(tmp_path, capsys, args, needle):
     assert code == 2 and needle in err and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_a_run_killed_with_sigkill_resumes_from_its_last_snapshot(tmp_path, capsys):
     import os
     import signal
@@ -286,6 +291,7 @@ def test_resume_errors_are_one_line(tmp_path, capsys):
     assert code == 2 and "marl train pong" in err
 
 
+@pytest.mark.slow
 def test_dqn_and_the_seed000_preset_train_through_the_same_loop(tmp_path, capsys):
     home = str(tmp_path / "h")
     code, out, err = run(capsys, "train", "pong", "--agents", "1", "--algo", "dqn", "--steps", "6000", "--games", "16",

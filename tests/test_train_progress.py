@@ -39,22 +39,24 @@ class Clock:
         return self.t
 
 
+@pytest.mark.slow
 def test_progress_counts_what_moves_while_every_game_is_still_under_way(tmp_path):
     """Games to 21 points never end in 8,192 steps of 16 games: 'games finished' stays 0, so the progress says how
-    far the games under way are, and how many snapshots were taken and rated, with the newest rated one's Elo."""
+    far the games under way are, and how many snapshots were taken and rated, with the newest rated one's Elo. (A
+    time limit of 2,000 steps, not pong's 18,000, keeps the rating games short; a game of the run reaches 512.)"""
     events = []
     cfg = TrainConfig(env="pong", run="t", steps=8192, games=16, snapshot_steps=2048, eval_games=2, eval_inline=True,
-                      eval_playoff=0, ppo=FAST_PPO)
+                      eval_playoff=0, ppo=FAST_PPO, env_options={"max_steps": 2000})
     with League.open(tmp_path / "league") as league:
         league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
         Trainer(league, cfg, on_progress=events.append).train()
     training = [e["standing"] for e in events if e["event"] == "training"]
     assert len(training) >= 2
     last = training[-1]
-    assert last.episodes == 0 and last.playing == 16 and last.time_limit == 18_000  # pong's 5-minute limit
+    assert last.episodes == 0 and last.playing == 16 and last.time_limit == 2_000  # the game's time limit
     assert last.game_steps == last.steps / 16 > 0  # every game began with the run: the steps are theirs, shared
     assert "games: 0 finished, 16 under way" in describe_games(last)
-    assert f"{last.game_steps:,.0f} steps in on average, of at most 18,000" in describe_games(last)
+    assert f"{last.game_steps:,.0f} steps in on average, of at most 2,000" in describe_games(last)
     rated = [e["standing"] for e in events if e["event"] == "snapshot"]
     assert [s.rated for s in rated] == [2 * (i + 1) for i in range(len(rated))]  # two learners: 2 a moment
     assert rated[-1].snapshots == rated[-1].rated == 10  # s0 .. s8.19k, both learners, all rated inline
@@ -159,6 +161,7 @@ RESUMABLE = ["train", "pong", "--games", "16", "--env-option", "points_to_win=1"
              "--steps", "12288", "--eval-games", "2", "--eval-inline", "--run", "r"]
 
 
+@pytest.mark.slow
 def test_a_resumed_run_reports_the_whole_run_and_this_sessions_rate(tmp_path, capsys, monkeypatch):
     home = str(tmp_path / "h")
     with monkeypatch.context() as m:

@@ -8,6 +8,7 @@ import shutil
 import sys
 from pathlib import Path
 
+import pytest
 from cli_helpers import run, run_json
 
 from selfplay_cli.envs.adapters.pettingzoo import adapt
@@ -125,6 +126,7 @@ def test_a_neutral_option_does_not_split_the_ladder(home, capsys):
     assert code == 0 and "other options" not in out
 
 
+@pytest.mark.slow
 def test_tournament_gate_and_matrix_work_in_one_variant(home, capsys):
     rows = run_json(capsys, "league", "tournament", "cpu", "random", "--env", "pong", "--env-option",
                     "points_to_win=3", "--games-per-pair", "10", "--bootstrap", "0")
@@ -151,6 +153,7 @@ def test_tournament_gate_and_matrix_work_in_one_variant(home, capsys):
     assert report["variant"] == {} and report["games"] == [[0, 20], [20, 0]]
 
 
+@pytest.mark.slow
 def test_networks_of_different_frame_stacks_share_one_ladder_through_the_bots(home, tmp_path, capsys):
     """frame_stack is neutral: a network of 4 frames and one of 8 cannot meet, but both meet cpu in the one game."""
     for name, frames in (("f4", 4), ("f8", 8)):

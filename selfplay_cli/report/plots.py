@@ -262,53 +262,72 @@ def run_figure(curves: RunCurves) -> Any:
     names every learner and every kind of mark drawn, and nothing else. The marks carry gids (``line:<learner>``,
     ``points:<learner>``, ``bound:<learner>``, ``unanchored:<learner>``, ``best``) by which they can be found.
     """
-    from matplotlib.ticker import FuncFormatter
-
     fig = new_figure(9.0, 5.0)
     ax = fig.add_subplot()
     ylo, yhi = y_limits(curves)
-    tol = COINCIDE * (yhi - ylo)
     dodge = dodge_steps(curves)
     groups = {i: g for g in coinciding(curves) for i in g}
-    names = [c.learner for c in curves.curves]
-    for k, curve in enumerate(curves.curves):
-        color, marker = f"C{k % 10}", _PNG_MARKERS[k % len(_PNG_MARKERS)]
-        shift = dodge.get(k, 0.0)
-        dash = _DASHES[groups[k].index(k) % len(_DASHES)] if k in groups else "-"
-        steps = [p.step + shift for p in curve.points]
-        elo = [p.elo for p in curve.points]
-        low = [p.ci_low for p in curve.points]
-        high = [p.ci_high for p in curve.points]
-        if len(steps) > 1:
-            ax.fill_between(steps, low, high, color=color, alpha=0.18, linewidth=0)
-            line, = ax.plot(steps, elo, color=color, linewidth=1.6, linestyle=dash)
-            line.set_gid(f"line:{curve.learner}")
-        else:
-            ax.errorbar(steps, elo, yerr=[[elo[0] - low[0]], [high[0] - elo[0]]], color=color, capsize=3,
-                        fmt="none")
-        exact = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.flag is None]
-        dots, = ax.plot([x for x, _ in exact], [p.elo for _, p in exact], linestyle="none", marker=marker,
-                        color=color, markersize=4.5)
-        dots.set_gid(f"points:{curve.learner}")
-        label = curve.learner
-        if k in groups:
-            others = [names[i] for i in groups[k] if i != k]
-            same = max(_shared(curve, curves.curves[i], tol) for i in groups[k] if i != k)
-            label += (f" (same Elo as {', '.join(others)} at {same} of {len(curve.points)} snapshot"
-                      f"{'s' if len(curve.points) != 1 else ''}; drawn {'+' if shift >= 0 else '-'}"
-                      f"{format_steps(abs(shift))} steps aside)")
-        ax.plot([], [], color=color, linestyle=dash, linewidth=1.6, marker=marker, markersize=4.5, label=label)
-        bound = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.bound]
-        if bound:
-            line, = ax.plot([x for x, _ in bound], [p.elo for _, p in bound], linestyle="none", marker=marker,
-                            markerfacecolor="white", color=color, markersize=6)
-            line.set_gid(f"bound:{curve.learner}")
-        loose = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.unanchored]
-        if loose:
-            line, = ax.plot([x for x, _ in loose], [p.elo for _, p in loose], linestyle="none", marker="x",
-                            color=color, markersize=6)
-            line.set_gid(f"unanchored:{curve.learner}")
+    for k in range(len(curves.curves)):
+        _draw_learner(ax, curves, k, dodge.get(k, 0.0), groups.get(k), COINCIDE * (yhi - ylo))
     points = [(k, p) for k, c in enumerate(curves.curves) for p in c.points]
+    _draw_best_and_legend_marks(ax, points, dodge)
+    for bot in curves.bots:
+        ax.axhline(bot.elo, color="0.45", linestyle="--", linewidth=1.0)
+        near_top = bot.elo > ylo + 0.92 * (yhi - ylo)
+        ax.text(0.995, bot.elo, f" {bot.name} ", transform=ax.get_yaxis_transform(), ha="right",
+                va="top" if near_top else "bottom", fontsize=9, color="0.3")
+    _label_axes(ax, curves, points, ylo, yhi)
+    if not all(math.isfinite(v) for v in (ylo, yhi)):  # pragma: no cover - ladder rows are always finite
+        raise AssertionError("non-finite plot range")
+    return fig
+
+
+def _draw_learner(ax: Any, curves: RunCurves, k: int, shift: float, group: tuple[int, ...] | None,
+                  tol: float) -> None:
+    """Learner ``k`` of ``curves`` on ``ax`` (see :func:`run_figure`): its line and band (or error bar), its exact
+    points, its legend entry (naming the learners of its coinciding ``group``, within ``tol`` Elo, and the
+    ``shift`` it is drawn aside by), its bounds and its unanchored points."""
+    curve = curves.curves[k]
+    color, marker = f"C{k % 10}", _PNG_MARKERS[k % len(_PNG_MARKERS)]
+    dash = _DASHES[group.index(k) % len(_DASHES)] if group else "-"
+    steps = [p.step + shift for p in curve.points]
+    elo = [p.elo for p in curve.points]
+    low = [p.ci_low for p in curve.points]
+    high = [p.ci_high for p in curve.points]
+    if len(steps) > 1:
+        ax.fill_between(steps, low, high, color=color, alpha=0.18, linewidth=0)
+        line, = ax.plot(steps, elo, color=color, linewidth=1.6, linestyle=dash)
+        line.set_gid(f"line:{curve.learner}")
+    else:
+        ax.errorbar(steps, elo, yerr=[[elo[0] - low[0]], [high[0] - elo[0]]], color=color, capsize=3,
+                    fmt="none")
+    exact = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.flag is None]
+    dots, = ax.plot([x for x, _ in exact], [p.elo for _, p in exact], linestyle="none", marker=marker,
+                    color=color, markersize=4.5)
+    dots.set_gid(f"points:{curve.learner}")
+    label = curve.learner
+    if group:
+        others = [curves.curves[i].learner for i in group if i != k]
+        same = max(_shared(curve, curves.curves[i], tol) for i in group if i != k)
+        label += (f" (same Elo as {', '.join(others)} at {same} of {len(curve.points)} snapshot"
+                  f"{'s' if len(curve.points) != 1 else ''}; drawn {'+' if shift >= 0 else '-'}"
+                  f"{format_steps(abs(shift))} steps aside)")
+    ax.plot([], [], color=color, linestyle=dash, linewidth=1.6, marker=marker, markersize=4.5, label=label)
+    bound = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.bound]
+    if bound:
+        line, = ax.plot([x for x, _ in bound], [p.elo for _, p in bound], linestyle="none", marker=marker,
+                        markerfacecolor="white", color=color, markersize=6)
+        line.set_gid(f"bound:{curve.learner}")
+    loose = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.unanchored]
+    if loose:
+        line, = ax.plot([x for x, _ in loose], [p.elo for _, p in loose], linestyle="none", marker="x",
+                        color=color, markersize=6)
+        line.set_gid(f"unanchored:{curve.learner}")
+
+
+def _draw_best_and_legend_marks(ax: Any, points: list[tuple[int, CurvePoint]], dodge: dict[int, float]) -> None:
+    """The ladder's best snapshot as a gold star, and a legend entry for each kind of mark drawn (bounds,
+    unanchored ratings) that is not under the star."""
     best = next(((k, p) for k, p in points if p.best), None)
     if best is not None:
         k, p = best
@@ -323,11 +342,12 @@ def run_figure(curves: RunCurves) -> Any:
     if any(p.unanchored and not p.best for _, p in points):
         ax.plot([], [], linestyle="none", marker="x", color="0.3", markersize=6,
                 label="x: no games linking it to the anchor (offset unknown)")
-    for bot in curves.bots:
-        ax.axhline(bot.elo, color="0.45", linestyle="--", linewidth=1.0)
-        near_top = bot.elo > ylo + 0.92 * (yhi - ylo)
-        ax.text(0.995, bot.elo, f" {bot.name} ", transform=ax.get_yaxis_transform(), ha="right",
-                va="top" if near_top else "bottom", fontsize=9, color="0.3")
+
+
+def _label_axes(ax: Any, curves: RunCurves, points: list[tuple[int, CurvePoint]], ylo: float, yhi: float) -> None:
+    """Limits, tick format, axis labels (the fit and its anchor), title, grid and legend of the run's figure."""
+    from matplotlib.ticker import FuncFormatter
+
     ax.set_ylim(ylo, yhi)
     if len({p.step for _, p in points}) == 1:  # one step: 5% of it either side (matplotlib's margins: a step)
         ax.set_xlim(*x_limits(curves))
@@ -340,9 +360,6 @@ def run_figure(curves: RunCurves) -> Any:
     ax.set_title(f"{curves.run} ({curves.env}): fitted Elo by training step, {pct} intervals")
     ax.grid(True, color="0.9", linewidth=0.6)
     ax.legend(loc="best", fontsize=8)
-    if not all(math.isfinite(v) for v in (ylo, yhi)):  # pragma: no cover - ladder rows are always finite
-        raise AssertionError("non-finite plot range")
-    return fig
 
 
 def save_run_png(curves: RunCurves, path: str | Path) -> Path:

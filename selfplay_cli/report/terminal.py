@@ -166,12 +166,7 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
         y = min(max(y, ylo), yhi)
         return int(round((yhi - y) / (yhi - ylo) * (canvas.h - 1)))
 
-    bot_rows: dict[int, str] = {}  # bots on one character row share its label
-    for bot in curves.bots:
-        r = py(bot.elo) // canvas.sy
-        bot_rows[r] = f"{bot_rows[r]}, {bot.name}" if r in bot_rows else bot.name
-    bot_rows = {r: name if len(name) <= 12 else name[:11] + "…" if unicode else name[:12]
-                for r, name in bot_rows.items()}
+    bot_rows = _bot_labels(curves, lambda y: py(y) // canvas.sy, unicode)
     right = (max(len(s) for s in bot_rows.values()) + 1) if bot_rows else 0
     cols = max(width - left - right, 20)
     canvas = _Canvas(cols, rows, unicode)
@@ -179,6 +174,57 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
     def px(x: float) -> int:
         return int(round((x - x0) / (x1 - x0) * (canvas.w - 1)))
 
+    glyphs, styles = _draw(canvas, curves, px, py)
+    cells = canvas.cells(glyphs)
+    marks, mark_legend = _marks(curves, px, py, canvas.sx, canvas.sy)
+    tick_rows = {py(t) // canvas.sy: s for t, s in zip(yticks, ylabels, strict=True)}
+    vbar, tick = ("│", "┤") if unicode else ("|", "+")
+
+    text = Text()
+    pct = f"{100 * curves.confidence:g}%"
+    text.append(f"{curves.run} ({curves.env}): fitted Elo by training step, {pct} intervals\n", style="bold")
+    for r in range(rows):
+        label = tick_rows.get(r)
+        text.append((label or "").rjust(left - 2) + " " + (tick if label else vbar))
+        for c, (ch, owner) in enumerate(cells[r]):
+            if (r, c) in marks:
+                ch, style = marks[(r, c)]
+                text.append(ch, style=style if unicode else "")
+            else:
+                text.append(ch, style=styles[owner] if unicode and owner >= 0 else "")
+        if r in bot_rows:
+            text.append(" " + bot_rows[r], style=_BOT_STYLE if unicode else "")
+        text.append("\n")
+    xticks = [t for t in nice_ticks(x0, x1, max(cols // 16, 2)) if x0 <= t <= x1]
+    text.append(_x_axis(xticks, lambda t: px(t) // canvas.sx, left, cols, right, unicode))
+    items: list[tuple[str, str]] = []
+    for k, curve in enumerate(curves.curves):
+        color = _COLORS[k % len(_COLORS)]
+        items.append((("━━ " if unicode else _MARKERS[k % len(_MARKERS)] + " ") + curve.learner, color))
+    if curves.bots:
+        items.append((("╌╌ " if unicode else "- ") + "scripted", _BOT_STYLE))
+    items.append((("⡇ " if unicode else ": ") + f"{pct} interval", ""))
+    items += [(f"{glyph} {what}", "") for glyph, what in mark_legend]
+    text.append_text(_wrapped(items, left, width, unicode))
+    return text
+
+
+def _bot_labels(curves: RunCurves, row_of: Callable[[float], int], unicode: bool) -> dict[int, str]:
+    """The scripted players' labels by character row (``row_of`` an Elo), players on one row sharing its label,
+    each label cut to 12 characters."""
+    bot_rows: dict[int, str] = {}
+    for bot in curves.bots:
+        r = row_of(bot.elo)
+        bot_rows[r] = f"{bot_rows[r]}, {bot.name}" if r in bot_rows else bot.name
+    return {r: name if len(name) <= 12 else name[:11] + "…" if unicode else name[:12]
+            for r, name in bot_rows.items()}
+
+
+def _draw(canvas: _Canvas, curves: RunCurves, px: Callable[[float], int],
+          py: Callable[[float], int]) -> tuple[list[str], list[str]]:
+    """Draw the scripted players' dashed levels and each learner's intervals, line and points on ``canvas``
+    (``px``, ``py``: a step and an Elo to pixels); returns the glyph and the style of each layer drawn."""
+    unicode = canvas.unicode
     glyphs: list[str] = []
     styles: list[str] = []
     for b, bot in enumerate(curves.bots):
@@ -208,48 +254,24 @@ def curves_chart(curves: RunCurves, width: int = 80, unicode: bool = True, heigh
                 for ddx, ddy in ((1, 0), (0, 1), (1, 1)):
                     canvas.set(x + ddx if x + ddx < canvas.w else x - ddx, y + ddy if y + ddy < canvas.h else y - ddy,
                                base + 2, 3)
-    cells = canvas.cells(glyphs)
-    marks, mark_legend = _marks(curves, px, py, canvas.sx, canvas.sy)
-    tick_rows = {py(t) // canvas.sy: s for t, s in zip(yticks, ylabels, strict=True)}
-    vbar, tick, corner, hbar, xtick = ("│", "┤", "└", "─", "┬") if unicode else ("|", "+", "+", "-", "+")
+    return glyphs, styles
 
-    text = Text()
-    pct = f"{100 * curves.confidence:g}%"
-    text.append(f"{curves.run} ({curves.env}): fitted Elo by training step, {pct} intervals\n", style="bold")
-    for r in range(rows):
-        label = tick_rows.get(r)
-        text.append((label or "").rjust(left - 2) + " " + (tick if label else vbar))
-        for c, (ch, owner) in enumerate(cells[r]):
-            if (r, c) in marks:
-                ch, style = marks[(r, c)]
-                text.append(ch, style=style if unicode else "")
-            else:
-                text.append(ch, style=styles[owner] if unicode and owner >= 0 else "")
-        if r in bot_rows:
-            text.append(" " + bot_rows[r], style=_BOT_STYLE if unicode else "")
-        text.append("\n")
-    xticks = [t for t in nice_ticks(x0, x1, max(cols // 16, 2)) if x0 <= t <= x1]
+
+def _x_axis(xticks: list[float], col_of: Callable[[float], int], left: int, cols: int, right: int,
+            unicode: bool) -> str:
+    """The chart's x axis: its line with a tick at each of ``xticks`` (``col_of``: a step to its column), and
+    under it "steps" and the ticks' labels, a label left out where it would touch another."""
+    corner, hbar, xtick = ("└", "─", "┬") if unicode else ("+", "-", "+")
     axis = [hbar] * cols
     under = [" "] * (cols + right)
     for t in xticks:
-        c = px(t) // canvas.sx
+        c = col_of(t)
         axis[c] = xtick
         s = format_steps(t)
         start = min(max(c - len(s) // 2, 0), cols + right - len(s))
         if all(ch == " " for ch in under[max(start - 1, 0):start + len(s) + 1]):
             under[start:start + len(s)] = list(s)
-    text.append(" " * (left - 1) + corner + "".join(axis) + "\n")
-    text.append("steps".ljust(left) + "".join(under).rstrip() + "\n")
-    items: list[tuple[str, str]] = []
-    for k, curve in enumerate(curves.curves):
-        color = _COLORS[k % len(_COLORS)]
-        items.append((("━━ " if unicode else _MARKERS[k % len(_MARKERS)] + " ") + curve.learner, color))
-    if curves.bots:
-        items.append((("╌╌ " if unicode else "- ") + "scripted", _BOT_STYLE))
-    items.append((("⡇ " if unicode else ": ") + f"{pct} interval", ""))
-    items += [(f"{glyph} {what}", "") for glyph, what in mark_legend]
-    text.append_text(_wrapped(items, left, width, unicode))
-    return text
+    return " " * (left - 1) + corner + "".join(axis) + "\n" + "steps".ljust(left) + "".join(under).rstrip() + "\n"
 
 
 def _wrapped(items: list[tuple[str, str]], indent: int, width: int, unicode: bool) -> Text:

@@ -206,12 +206,13 @@ def _fit_matrices(
     w: FloatArray, n: FloatArray, anchor: int, anchor_rating: float, prior_games: float,
     init: FloatArray | None, tol: float, max_iter: int,
 ) -> tuple[FloatArray, list[str | None], int, bool]:
-    """Core of :func:`fit_bradley_terry` on the aggregated pair matrices (see its docstring)."""
+    """Core of :func:`fit_bradley_terry` on the aggregated pair matrices (see its docstring): each connected
+    component of the game graph fitted on its own (:func:`_fit_map_component` under a prior,
+    :func:`_fit_ml_component` without), then placed on the anchor's scale."""
     n_players = w.shape[0]
     games = n.sum(axis=1)
     has_games = games > 0
     played = n > 0
-    scored = w > 0
     ratings = np.full(n_players, float(anchor_rating))
     flags: list[str | None] = [None if g else FLAG_UNRATED for g in has_games]
     tol_nat = tol / NAT_TO_ELO
@@ -231,60 +232,77 @@ def _fit_matrices(
         with_anchor = bool(comp[anchor])
         root = anchor if with_anchor else int(members[np.argmax(games[members])])
         r = int(np.searchsorted(members, root))
-        wc, nc = w[np.ix_(members, members)], n[np.ix_(members, members)]
         theta = start_theta[members] - start_theta[root]
         theta[r] = 0.0
-        if prior_games > 0.0:
-            # MAP: the virtual draws link every pair that met, so the posterior has a finite maximum on the
-            # whole component; only its offset to another component stays undetermined.
-            if not with_anchor:
-                for i in members:
-                    flags[i] = FLAG_DISCONNECTED
-            v = prior_draws(nc, prior_games)
-            free = np.ones(members.size, dtype=bool)
-            free[r] = False
-            theta, its, ok = _newton(wc + 0.5 * v, nc + v, theta, free, tol_nat, max_iter)
-            iterations, converged = iterations + its, converged and ok
-        else:
-            fwd = reachable(scored, root)  # players the root's group (transitively) scored against
-            bwd = reachable(scored.T, root)  # players that (transitively) scored against the root
-            main = fwd & bwd  # strongly connected component of the root: ML exists there (Hunter 2004)
+        if not with_anchor:
             for i in members:
-                if not with_anchor:
-                    flags[i] = FLAG_DISCONNECTED
-                elif main[i]:
-                    continue
-                elif bwd[i] and not fwd[i]:  # scored against the anchor's group, never conceded to it
-                    flags[i] = FLAG_PERFECT
-                elif fwd[i] and not bwd[i]:
-                    flags[i] = FLAG_ZERO
-                else:
-                    flags[i] = FLAG_DISCONNECTED
-            main_c = main[members]
-            mi = np.flatnonzero(main_c)
-            free_m = np.ones(mi.size, dtype=bool)
-            free_m[int(np.flatnonzero(mi == r)[0])] = False
-            sub = np.ix_(mi, mi)
-            th_m, its, ok = _newton(wc[sub], nc[sub], theta[mi], free_m, tol_nat, max_iter)
-            iterations, converged = iterations + its, converged and ok
-            if not main_c.all():
-                # Bounds: BOUND_PRIOR_GAMES virtual draws for each player outside the root's strongly connected
-                # component, spread over its opponents pro rata (symmetrised); main stays fixed.
-                g = np.where(main_c, 0.0, BOUND_PRIOR_GAMES)
-                v = (g / games[members])[:, None] * nc
-                v = v + v.T
-                # Start the bounded players from their heuristic, shifted like the main group moved.
-                theta[~main_c] += float(np.mean(th_m - theta[mi]))
-                theta[mi] = th_m
-                theta, its, ok = _newton(wc + 0.5 * v, nc + v, theta, ~main_c, tol_nat, max_iter)
-                iterations, converged = iterations + its, converged and ok
-            else:
-                theta[mi] = th_m
+                flags[i] = FLAG_DISCONNECTED
+        if prior_games > 0.0:
+            theta, its, ok = _fit_map_component(w, n, members, r, theta, prior_games, tol_nat, max_iter)
+        else:
+            theta, its, ok = _fit_ml_component(w, n, members, root, r, theta, flags if with_anchor else None,
+                                               tol_nat, max_iter)
+        iterations, converged = iterations + its, converged and ok
         if with_anchor:
             ratings[members] = anchor_rating + (theta - theta[r]) * NAT_TO_ELO
         else:
             ratings[members] = anchor_rating + (theta - theta.mean()) * NAT_TO_ELO
     return ratings, flags, iterations, converged
+
+
+def _fit_map_component(w: FloatArray, n: FloatArray, members: IntArray, r: int, theta: FloatArray,
+                       prior_games: float, tol_nat: float, max_iter: int) -> tuple[FloatArray, int, bool]:
+    """The MAP fit of one connected component (``members``, its root at position ``r`` held fixed): the virtual
+    draws link every pair that met, so the posterior has a finite maximum on the whole component; only its offset
+    to another component stays undetermined."""
+    wc, nc = w[np.ix_(members, members)], n[np.ix_(members, members)]
+    v = prior_draws(nc, prior_games)
+    free = np.ones(members.size, dtype=bool)
+    free[r] = False
+    return _newton(wc + 0.5 * v, nc + v, theta, free, tol_nat, max_iter)
+
+
+def _fit_ml_component(w: FloatArray, n: FloatArray, members: IntArray, root: int, r: int, theta: FloatArray,
+                      flags: list[str | None] | None, tol_nat: float, max_iter: int) -> tuple[FloatArray, int, bool]:
+    """The maximum-likelihood fit of one connected component (``members``; ``root``, at position ``r``, held
+    fixed): its root's strongly connected component exactly, every other member a bound. ``flags`` (the anchor's
+    component only; None for another component, whose members are all disconnected) gets each bounded member's
+    flag."""
+    games = n.sum(axis=1)
+    scored = w > 0
+    wc, nc = w[np.ix_(members, members)], n[np.ix_(members, members)]
+    fwd = reachable(scored, root)  # players the root's group (transitively) scored against
+    bwd = reachable(scored.T, root)  # players that (transitively) scored against the root
+    main = fwd & bwd  # strongly connected component of the root: ML exists there (Hunter 2004)
+    if flags is not None:
+        for i in members:
+            if main[i]:
+                continue
+            elif bwd[i] and not fwd[i]:  # scored against the anchor's group, never conceded to it
+                flags[i] = FLAG_PERFECT
+            elif fwd[i] and not bwd[i]:
+                flags[i] = FLAG_ZERO
+            else:
+                flags[i] = FLAG_DISCONNECTED
+    main_c = main[members]
+    mi = np.flatnonzero(main_c)
+    free_m = np.ones(mi.size, dtype=bool)
+    free_m[int(np.flatnonzero(mi == r)[0])] = False
+    sub = np.ix_(mi, mi)
+    th_m, iterations, converged = _newton(wc[sub], nc[sub], theta[mi], free_m, tol_nat, max_iter)
+    if main_c.all():
+        theta[mi] = th_m
+        return theta, iterations, converged
+    # Bounds: BOUND_PRIOR_GAMES virtual draws for each player outside the root's strongly connected component,
+    # spread over its opponents pro rata (symmetrised); main stays fixed.
+    g = np.where(main_c, 0.0, BOUND_PRIOR_GAMES)
+    v = (g / games[members])[:, None] * nc
+    v = v + v.T
+    # Start the bounded players from their heuristic, shifted like the main group moved.
+    theta[~main_c] += float(np.mean(th_m - theta[mi]))
+    theta[mi] = th_m
+    theta, its, ok = _newton(wc + 0.5 * v, nc + v, theta, ~main_c, tol_nat, max_iter)
+    return theta, iterations + its, converged and ok
 
 
 def _validate_games(
@@ -341,6 +359,9 @@ def fit_bradley_terry(
     max_iter: int = 100,
 ) -> BTFit:
     """Maximum-likelihood (``prior_games=0``) or MAP Bradley-Terry (Elo) ratings of a population from its games.
+
+    (Long for its docstring, the model and what the fit does where a rating does not exist; the work is in
+    :func:`_fit_matrices` and :func:`_player_counts`.)
 
     Model: game ``k`` between ``a[k]`` and ``b[k]`` gives A ``score_a[k]`` points (1 win, 1/2 draw,
     0 loss) and B ``1 - score_a[k]``, with ``P(a beats b) = E(r_a - r_b) = 1 / (1 + 10**(-(r_a - r_b)/400))``.
@@ -410,6 +431,13 @@ def fit_bradley_terry(
     ratings, flags, iterations, converged = _fit_matrices(
         w, nmat, anchor, float(anchor_rating), float(prior_games), init_arr, tol, max_iter
     )
+    return BTFit(ratings=ratings, flags=flags, **_player_counts(ai, bi, sc, wt, n_players), iterations=iterations,
+                 converged=converged, anchor=int(anchor), anchor_rating=float(anchor_rating))
+
+
+def _player_counts(ai: IntArray, bi: IntArray, sc: FloatArray, wt: FloatArray | None,
+                   n_players: int) -> dict[str, npt.NDArray[np.int64] | FloatArray]:
+    """Per player: (weighted) games, wins, draws, losses (int64 unless a weight is not whole) and mean score."""
     g = np.ones_like(sc) if wt is None else wt
     win, draw, loss = g * (sc > 0.5), g * (sc == 0.5), g * (sc < 0.5)
 
@@ -422,8 +450,4 @@ def fit_bradley_terry(
     score = np.divide(points, games, out=np.full(n_players, 0.5), where=games > 0)
     integral = wt is None or bool(np.all(wt == np.round(wt)))
     conv = (lambda x: np.rint(x).astype(np.int64)) if integral else (lambda x: x)
-    return BTFit(
-        ratings=ratings, flags=flags, games=conv(games), wins=conv(wins), draws=conv(draws),
-        losses=conv(losses), score=score, iterations=iterations, converged=converged, anchor=int(anchor),
-        anchor_rating=float(anchor_rating),
-    )
+    return {"games": conv(games), "wins": conv(wins), "draws": conv(draws), "losses": conv(losses), "score": score}

@@ -73,6 +73,33 @@ def _degenerate_se(games: int, pairs: int) -> float:
     return math.sqrt(var / (games + 2))
 
 
+def _estimate(w: int, d: int, lo: int, penta: tuple[int, ...] | None, bounded: bool) -> tuple[float, float, bool]:
+    """The score :func:`match_stats` reports its Elo from, its standard error, and whether the pentanomial gave it
+    (see :func:`match_stats` for each formula)."""
+    n = w + d + lo
+    if bounded:
+        n_eff, w_eff, d_eff, l_eff = n + 1, w, d + 1, lo
+        s_est = (w_eff + 0.5 * d_eff) / n_eff
+        var_g = (w_eff * (1 - s_est) ** 2 + d_eff * (0.5 - s_est) ** 2 + l_eff * s_est**2) / n_eff
+        return s_est, math.sqrt(var_g / n_eff), False
+    score = (w + 0.5 * d) / n
+    use_penta = False
+    pairs = sum(penta) if penta is not None else 0
+    if penta is not None and pairs > 0:
+        a = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
+        p = np.asarray(penta, dtype=float) / pairs
+        mu = float(p @ a)
+        var_p = float(p @ (a - mu) ** 2)
+        se = math.sqrt(var_p / pairs)
+        use_penta = True
+    else:
+        var_g = (w * (1 - score) ** 2 + d * (0.5 - score) ** 2 + lo * score**2) / n
+        se = math.sqrt(var_g / n)
+    if se == 0.0:  # every pair (game) alike, e.g. 2 pairs of one win each: no spread observed is not certainty
+        se = _degenerate_se(n, pairs if use_penta else 0)
+    return score, se, use_penta
+
+
 def match_stats(
     wins: int,
     draws: int,
@@ -130,27 +157,7 @@ def match_stats(
 
     score = (w + 0.5 * d) / n
     bounded = w + 0.5 * d <= 0.0 or lo + 0.5 * d <= 0.0  # score exactly 0 or 1
-    use_penta = False
-    if bounded:
-        n_eff, w_eff, d_eff, l_eff = n + 1, w, d + 1, lo
-        s_est = (w_eff + 0.5 * d_eff) / n_eff
-        var_g = (w_eff * (1 - s_est) ** 2 + d_eff * (0.5 - s_est) ** 2 + l_eff * s_est**2) / n_eff
-        se = math.sqrt(var_g / n_eff)
-    else:
-        s_est = score
-        pairs = sum(penta) if penta is not None else 0
-        if penta is not None and pairs > 0:
-            a = np.array([0.0, 0.25, 0.5, 0.75, 1.0])
-            p = np.asarray(penta, dtype=float) / pairs
-            mu = float(p @ a)
-            var_p = float(p @ (a - mu) ** 2)
-            se = math.sqrt(var_p / pairs)
-            use_penta = True
-        else:
-            var_g = (w * (1 - score) ** 2 + d * (0.5 - score) ** 2 + lo * score**2) / n
-            se = math.sqrt(var_g / n)
-        if se == 0.0:  # every pair (game) alike, e.g. 2 pairs of one win each: no spread observed is not certainty
-            se = _degenerate_se(n, pairs if use_penta else 0)
+    s_est, se, use_penta = _estimate(w, d, lo, penta, bounded)
     lo_s = min(max(s_est - z * se, SCORE_CLIP), 1.0 - SCORE_CLIP)
     hi_s = min(max(s_est + z * se, SCORE_CLIP), 1.0 - SCORE_CLIP)
     elo = score_to_elo(s_est)

@@ -39,10 +39,6 @@ from .elo import NAT_TO_ELO
 __all__ = ["ScorePrediction", "pair_spread", "predict_pair"]
 
 
-def _expected(d_elo: npt.ArrayLike) -> np.ndarray:
-    return 1.0 / (1.0 + np.power(10.0, -np.asarray(d_elo, dtype=np.float64) / 400.0))
-
-
 @dataclass(frozen=True)
 class ScorePrediction:
     """A's predicted score against B over ``games`` games: its expectation and the central interval the measured
