@@ -257,7 +257,7 @@ def test_render_is_the_games_own_frame():
 def test_env_options_reach_the_factory_and_are_checked():
     spec = get_env(RDV)
     cfg = spec.config(max_cycles=5)
-    assert spec.max_steps(cfg) == 5 and cfg.as_dict() == {"max_cycles": 5}
+    assert spec.max_steps(cfg) == 5 and cfg.options == {"max_cycles": 5}
     core = spec.make_core(2, cfg)
     for _ in range(5):
         core.step(np.zeros((3, 2, 2), dtype=np.float32))

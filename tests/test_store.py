@@ -272,11 +272,6 @@ def test_tags(league: League) -> None:
         _one_line(exc)
     with pytest.raises(LeagueError):
         league.tag(999, "x")
-    league.untag("gold")
-    assert league.get_player(b.id).tags == ()
-    with pytest.raises(LeagueError) as exc:
-        league.untag("gold")
-    _one_line(exc)
 
 
 def test_remove_snapshot_keeps_games(league: League) -> None:

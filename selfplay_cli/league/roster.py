@@ -465,23 +465,6 @@ class Roster(Database):
 
         self._unit(work)
 
-    def untag(self, tag: str, env: str | None = None) -> None:
-        """Remove a tag. Raises LeagueError if it does not exist, or exists in several envs and env is None."""
-
-        def work(s: Session) -> None:
-            q = select(Tag).where(Tag.tag == tag)
-            if env is not None:
-                q = q.where(Tag.env == env)
-            rows = s.execute(q).scalars().all()
-            if not rows:
-                raise LeagueError(f"no tag {tag!r}" + (f" in env {env!r}" if env else ""))
-            if len(rows) > 1:
-                envs = ", ".join(sorted(r.env for r in rows))
-                raise LeagueError(f"tag {tag!r} exists in several envs ({envs}); choose one with --env")
-            s.delete(rows[0])
-
-        self._unit(work)
-
     def remove_snapshot(self, player_id: int, end_runs: Collection[str] = (),
                         status: RunStatus = RunStatus.ENDED) -> PlayerRow:
         """Mark a snapshot removed (soft delete) and drop its tags; its games stay in the ledger. The runs named in

@@ -184,11 +184,6 @@ def box_of_shape(shape: tuple[int, ...]) -> spaces.Box:
     return spaces.Box(-np.inf, np.inf, shape=tuple(int(d) for d in shape), dtype=np.float32)
 
 
-def same_space(a: spaces.Space, b: spaces.Space) -> bool:
-    """Equal kinds, sizes and (for Box actions) bounds; observation bounds are compared by shape only elsewhere."""
-    return space_to_dict(a) == space_to_dict(b)
-
-
 # ---------------------------------------------------------------------------------------------------------------
 # The action head a space calls for
 

@@ -196,11 +196,6 @@ class MatchmakerConfig:
         object.__setattr__(self, "prior", float(self.prior))
         object.__setattr__(self, "bots", _check_bots(self.bots))
 
-    def new_win_rates(self) -> WinRates:
-        """An empty win-rate book with this config's decay and prior."""
-        return WinRates(decay=self.decay, prior=self.prior)
-
-
 # --------------------------------------------------------------------------------------------------
 # Win rates
 # --------------------------------------------------------------------------------------------------

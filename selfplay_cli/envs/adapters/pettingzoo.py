@@ -73,9 +73,6 @@ class PettingZooConfig:
     def max_steps(self) -> int | None:
         return self.layout.max_steps
 
-    def as_dict(self) -> dict[str, Any]:
-        return dict(self.options)
-
     def __repr__(self) -> str:
         return f"PettingZooConfig({self.layout.name}, {self.options})"
 

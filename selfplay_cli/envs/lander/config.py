@@ -4,7 +4,7 @@ spaces, how a lander ended."""
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -79,10 +79,6 @@ class LanderConfig:
             raise ValueError("wind_power and turbulence_power must not be negative")
         if not 0.0 < self.engine_scale <= 2 * MAX_LANDERS:
             raise ValueError(f"engine_scale must lie in (0, {2 * MAX_LANDERS}], not {self.engine_scale}")
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 def make_config(**options: Any) -> LanderConfig:
     """A config from keyword options, with a clear error for an unknown option."""

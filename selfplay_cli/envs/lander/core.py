@@ -428,7 +428,3 @@ class LanderCore:
     def to_act(self) -> np.ndarray:
         """``(n_seats, n)``: the landers still flying in running games."""
         return self.alive & ~self.over
-
-    def team_return(self) -> np.ndarray:
-        """``(n,)``: each game's team return so far (the sum of the landers' scores)."""
-        return self.score.sum(axis=0)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -69,10 +69,6 @@ class PongConfig:
     def velocity_scale(self) -> float:
         """Largest velocity component: observations divide velocities by it."""
         return SERVE_SPEED if self.rules == "seed" else self.max_speed
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 def make_config(**options: Any) -> PongConfig:
     """A config from keyword options, with a clear error for an unknown option."""

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -142,10 +142,6 @@ class TennisConfig:
     @property
     def bat_length(self) -> float:
         return BAT_LEN * self.bat_scale
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
 
 def make_config(**options: Any) -> TennisConfig:
     """A config from keyword options, with a clear error for an unknown option."""

@@ -141,14 +141,6 @@ class TennisCore:
         """``(n,)``: the seat that must hit the ball next (the server while the toss is in the air)."""
         return np.where(self.tossing, self.server, 1 - self.hitter).astype(np.int8)
 
-    @property
-    def last_hitter(self) -> np.ndarray:
-        return self.hitter
-
-    @property
-    def last_surface(self) -> np.ndarray:
-        return self.surface
-
     def set_options(self, **values: Any) -> None:
         """Change ``hit_reward``, ``return_reward``, ``point_reward`` and ``bat_scale`` of every game, running ones
         included, from the next step on (the curricula's hook). Values are checked as the options are (finite;

@@ -35,12 +35,6 @@ def contact(vx: np.ndarray, vy: np.ndarray, w: np.ndarray, nx: np.ndarray, ny: n
     return vx + jn * nx + jt * tx, vy + jn * ny + jt * ty, w2
 
 
-def bat_normal(angle: np.ndarray, sigma: Any) -> tuple[np.ndarray, np.ndarray]:
-    """The world normal of a bat's face with egocentric tilt ``angle`` for a seat whose forward is ``sigma`` (+1 for
-    seat 0, -1 for seat 1)."""
-    return sigma * np.cos(angle), np.sin(angle)
-
-
 def server_of(first: np.ndarray, points: np.ndarray, points_to_win: int) -> np.ndarray:
     """Who serves after ``points`` points of a game whose first server is ``first``: serves alternate every 2
     points, and every point once both players have ``points_to_win - 1``."""
