@@ -71,18 +71,19 @@ def test_a_value_the_game_refuses_fails_before_the_run(tmp_path):
 
 
 @pytest.mark.slow
-def test_training_follows_the_curriculum(tmp_path, home, capsys):
+def test_training_follows_the_curriculum(tmp_path, home, capsys, monkeypatch):
     """A short tennis run: the metrics show each option as the schedule has it at that progress."""
+    monkeypatch.setattr("selfplay_cli.train.loop.METRICS_STEPS", 1024)  # a metrics line each 1,024 steps, not 8,192
     config = tmp_path / "c.toml"
     config.write_text("[curriculum]\nbat_scale = { start = 3.0, end = 1.0, until = 0.5 }\n"
-                      "hit_reward = { lessons = [[0.0, 0.5], [0.5, 0.0]] }\n[ppo]\nrollout_steps = 64\n")
-    run_json(capsys, "train", "tennis", "--algo", "ppo", "--steps", "32768", "--games", "32", "--snapshot-steps", "0",
+                      "hit_reward = { lessons = [[0.0, 0.5], [0.5, 0.0]] }\n[ppo]\nrollout_steps = 32\n")
+    run_json(capsys, "train", "tennis", "--algo", "ppo", "--steps", "8192", "--games", "16", "--snapshot-steps", "0",
              "--snapshot-every", "1000000", "--eval-games", "0", "--config", str(config), "--run", "cur", "--seed", "3")
     lines = [json.loads(x) for x in (home / "runs" / "cur" / "metrics.jsonl").read_text().splitlines()]
-    assert len(lines) >= 4  # the first update's, then one each 8,192 steps: both lessons, both sides of `until`
+    assert len(lines) >= 6  # the first update's, then one each 1,024 steps: both lessons, both sides of `until`
     for line in lines:
         # the values were set before the last step of the rollout: progress then was (step - games) / budget
-        p = (line["step"] - 32) / 32768
+        p = (line["step"] - 16) / 8192
         assert line["curriculum/bat_scale"] == pytest.approx(max(1.0, 3.0 - 4.0 * p), abs=0.01)
         assert line["curriculum/hit_reward"] == (0.5 if p < 0.5 else 0.0)
     assert lines[0]["curriculum/bat_scale"] > 2.5 and lines[-1]["curriculum/bat_scale"] == 1.0

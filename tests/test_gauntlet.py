@@ -206,7 +206,8 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     summary (JSON and text) states exactly the ledger's numbers for each learner's final snapshot."""
     home = tmp_path / "h"
     args = ["train", "pong", "--agents", "2", "--steps", "4096", "--games", "16", "--env-option", "points_to_win=1",
-            "--snapshot-steps", "2048", "--snapshot-every", "0", "--eval-games", "4", "--home", str(home)]
+            "--snapshot-steps", "2048", "--snapshot-every", "0", "--eval-games", "4", "--eval-playoff", "0",
+            "--home", str(home)]
     code, out, err = run(capsys, *args, "--json")
     assert code == 0, err
     data = json.loads(out)

@@ -295,7 +295,8 @@ def test_resume_errors_are_one_line(tmp_path, capsys):
 def test_dqn_and_the_seed000_preset_train_through_the_same_loop(tmp_path, capsys):
     home = str(tmp_path / "h")
     code, out, err = run(capsys, "train", "pong", "--agents", "1", "--algo", "dqn", "--steps", "6000", "--games", "16",
-                         "--env-option", "points_to_win=1", "--eval-games", "4", "--home", home, "--json")
+                         "--env-option", "points_to_win=1", "--eval-games", "4", "--eval-playoff", "0", "--home", home,
+                         "--json")
     assert code == 0, err
     assert json.loads(out)["snapshots"][0] == "pong-1/s0"
     code, out, err = run(capsys, "train", "pong", "--preset", "seed000", "--steps", "2000", "--games", "8",

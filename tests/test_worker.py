@@ -258,7 +258,7 @@ def test_a_job_cut_by_a_kill_is_stored_as_an_uninterrupted_run_stores_it(tmp_pat
     """The worker is killed (and its trainer with it) as it stores the second moment's gauntlet; `marl train
     --resume` plays that job again: every matchup of the moment ends with exactly the games, seeds and results of
     an uninterrupted run of the same command (none stored twice, none missing, none different)."""
-    args = ["train", "pong", *FAST, "--steps", "4096", "--eval-games", "4", "--run", "r"]
+    args = ["train", "pong", *FAST, "--steps", "4096", "--eval-games", "4", "--eval-playoff", "0", "--run", "r"]
     assert main([*args, "--home", str(tmp_path / "whole")]) == 0
     killed = tmp_path / "killed"
     child = subprocess.run([sys.executable, str(KILL_POINTS), "worker-mid-job", str(killed), *args],
@@ -324,7 +324,7 @@ def test_sigterm_stops_a_run_within_seconds_even_in_an_endless_update(tmp_path):
         deadline = time.time() + 120
         while time.time() < deadline and not (home / "runs" / "r" / "state.pt").exists():
             time.sleep(0.1)
-        time.sleep(8.0)  # well into the first update (its rollout is 2,048 steps of 16 games)
+        time.sleep(3.0)  # into the first update: its rollout, 2,048 steps of 16 games, takes well under a second
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=120)  # the update alone would run for hours
     finally:
