@@ -9,7 +9,8 @@
   :mod:`.tennis`. Each holds its declaration (the ``EnvSpec``) in its ``__init__`` and modules by concern: ``config``
   (constants, options, spaces), ``core`` (the batched core), ``view`` (its PettingZoo view), ``render`` (the
   offscreen renderer), ``bots`` (the scripted players' rules), and what else the game needs.
-- :mod:`.view`: the one-game PettingZoo view the built-in games share; :mod:`.rng`: their counter-based randomness.
+- :mod:`.view`: the one-game PettingZoo view the built-in games share; :mod:`.rng`: their counter-based randomness;
+  :mod:`.canvas`: the offscreen surface their renderers draw on.
 - :mod:`.adapters`: users' games as `marl` games (:mod:`.adapters.pettingzoo`).
 
 The arena steps every game, built in or adapted, through its batched core.

@@ -12,6 +12,7 @@ import os
 
 import numpy as np
 
+from ..canvas import Canvas
 from .config import CRASHED, FLYING, LANDED, SCALE, VIEWPORT_H, VIEWPORT_W
 from .core import LanderCore
 
@@ -38,28 +39,15 @@ def _screen(x: float, y: float) -> tuple[float, float]:
     return x * SCALE, VIEWPORT_H - y * SCALE
 
 
-class LanderRenderer:
+class LanderRenderer(Canvas):
     """Draws one game of a :class:`LanderCore` into an RGB array ``(400, 600, 3)`` uint8, the team's return top
     right. Each call returns a new array. ``seat_colour`` gives each lander's colour to the recording's caption band
     (which names the players)."""
 
     def __init__(self) -> None:
-        import pygame
-
-        pygame.font.init()
-        self._pg = pygame
-        self.size = (VIEWPORT_W, VIEWPORT_H)
-        self.surface = pygame.Surface(self.size, 0, 24, (0x0000FF, 0x00FF00, 0xFF0000, 0))
-        self._direct = self._memory_is_rgb()
+        super().__init__(VIEWPORT_W, VIEWPORT_H)
+        pygame = self._pg
         self.font = pygame.font.Font(None, 22)
-
-    def _memory_is_rgb(self) -> bool:
-        self.surface.fill((1, 2, 3))
-        return bool((self._view_copy()[0, 0] == (1, 2, 3)).all())
-
-    def _view_copy(self) -> np.ndarray:
-        rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(VIEWPORT_H, self.surface.get_pitch())
-        return rows[:, : VIEWPORT_W * 3].reshape(VIEWPORT_H, VIEWPORT_W, 3).copy()
 
     seat_colour = staticmethod(lander_colour)
 
@@ -78,9 +66,7 @@ class LanderRenderer:
         for seat in wrecks + [s for s in range(core.n_seats) if s not in wrecks]:  # wrecks under the others
             self._lander(core, world, seat, game)
         self._hud(core, game)
-        if self._direct:
-            return self._view_copy()
-        return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(VIEWPORT_H, VIEWPORT_W, 3).copy()
+        return self.pixels()
 
     def _lander(self, core: LanderCore, world, seat: int, game: int) -> None:
         pg, surf = self._pg, self.surface

@@ -19,6 +19,7 @@ import os
 
 import numpy as np
 
+from ..canvas import Canvas
 from .config import BALL_R, HEIGHT, PADDLE_H, PADDLE_W, PADDLE_X, WIDTH
 from .core import PongCore
 
@@ -31,37 +32,18 @@ BLACK = (0, 0, 0)
 _TEXT_CACHE_SIZE = 256
 
 
-class PongRenderer:
+class PongRenderer(Canvas):
     """Draws one game of a :class:`PongCore` into an RGB array ``(400, 800, 3)`` uint8: the court, the paddles, the
     ball and the score. Only pygame's font module is initialised: ``pygame.init()`` would also start audio, which
     prints ALSA errors on machines without sound. Each call returns a new array.
     """
 
     def __init__(self) -> None:
-        import pygame
-
-        pygame.font.init()
-        self._pg = pygame
-        self.size = (WIDTH, HEIGHT)
-        self.surface = self._rgb_surface()
-        self._direct = self._memory_is_rgb()
+        super().__init__(WIDTH, HEIGHT)
+        pygame = self._pg
         self._net = [(WIDTH // 2 - 1, y + 5, 2, 10) for y in range(0, HEIGHT, 20)]
         self.score_font = pygame.font.Font(None, 56)
         self._texts: dict[str, object] = {}
-
-    def _rgb_surface(self):
-        """A 24-bit surface whose bytes are R, G, B per pixel, rows top to bottom (on little-endian machines)."""
-        return self._pg.Surface((WIDTH, HEIGHT), 0, 24, (0x0000FF, 0x00FF00, 0xFF0000, 0))
-
-    def _memory_is_rgb(self) -> bool:
-        """Whether the surface's memory reads as RGB; if not (another byte order), frames take the slower copy."""
-        self.surface.fill((1, 2, 3))
-        return bool((self._view_copy()[0, 0] == (1, 2, 3)).all())
-
-    def _view_copy(self) -> np.ndarray:
-        """A copy of the surface's pixels; the buffer (which locks the surface) is released on return."""
-        rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(HEIGHT, self.surface.get_pitch())
-        return rows[:, : WIDTH * 3].reshape(HEIGHT, WIDTH, 3).copy()
 
     def _text(self, text: str):
         """A score rendered once and kept (scores recur every frame)."""
@@ -84,6 +66,4 @@ class PongRenderer:
         for seat, cx in ((0, WIDTH // 2 - 60), (1, WIDTH // 2 + 60)):
             img = self._text(str(int(core.score[seat, game])))
             surf.blit(img, (cx - img.get_width() // 2, 12))
-        if self._direct:
-            return self._view_copy()
-        return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(HEIGHT, WIDTH, 3).copy()
+        return self.pixels()

@@ -13,6 +13,7 @@ import os
 
 import numpy as np
 
+from ..canvas import Canvas
 from .config import BALL_R, FLOOR_Y, NET_H, REASON_NAMES, TABLE_HALF, X_OUT
 from .core import TennisCore
 
@@ -34,31 +35,18 @@ def _px(x: float, y: float) -> tuple[int, int]:
     return round(WIDTH / 2 + x * SCALE), round((Y_TOP - y) * SCALE)
 
 
-class TennisRenderer:
+class TennisRenderer(Canvas):
     """Draws one game of a :class:`TennisCore` into an RGB array ``(360, 800, 3)`` uint8, the score, who serves and
     the last point's reason at the top. Each call returns a new array. The renderer keeps the ball's last few places
     per game slot for its trail. ``seat_colour`` gives each bat's colour to the recording's caption band (which
     names the players)."""
 
     def __init__(self) -> None:
-        import pygame
-
-        pygame.font.init()
-        self._pg = pygame
-        self.size = (WIDTH, HEIGHT)
-        self.surface = pygame.Surface(self.size, 0, 24, (0x0000FF, 0x00FF00, 0xFF0000, 0))
-        self._direct = self._memory_is_rgb()
+        super().__init__(WIDTH, HEIGHT)
+        pygame = self._pg
         self.font = pygame.font.Font(None, 22)
         self.big = pygame.font.Font(None, 40)
         self._trail: dict[int, tuple[tuple[int, int], list[tuple[int, int]]]] = {}
-
-    def _memory_is_rgb(self) -> bool:
-        self.surface.fill((1, 2, 3))
-        return bool((self._view_copy()[0, 0] == (1, 2, 3)).all())
-
-    def _view_copy(self) -> np.ndarray:
-        rows = np.frombuffer(self.surface.get_buffer(), dtype=np.uint8).reshape(HEIGHT, self.surface.get_pitch())
-        return rows[:, : WIDTH * 3].reshape(HEIGHT, WIDTH, 3).copy()
 
     @staticmethod
     def seat_colour(seat: int) -> tuple[int, int, int]:
@@ -110,9 +98,7 @@ class TennisRenderer:
         if py < 0:
             pg.draw.polygon(surf, BALL, [(px - 5, 8), (px + 5, 8), (px, 2)])
         self._hud(core, game)
-        if self._direct:
-            return self._view_copy()
-        return np.frombuffer(pg.image.tobytes(surf, "RGB"), dtype=np.uint8).reshape(HEIGHT, WIDTH, 3).copy()
+        return self.pixels()
 
     def _hud(self, core: TennisCore, game: int) -> None:
         surf = self.surface
