@@ -16,6 +16,7 @@ returns an RGB array), calls :meth:`OneGame._setup` from its ``__init__`` and pr
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from typing import Any, ClassVar
 
@@ -24,7 +25,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 
-class OneGame:
+class OneGame(ABC):
     """The config, seats, spaces, seeds and renderer of one game (mixed into a ParallelEnv or an AECEnv)."""
 
     game_name: ClassVar[str]
@@ -61,14 +62,17 @@ class OneGame:
             self.game_seed = int(self._seeds.integers(2**62))
         self._start(self.game_seed)
 
+    @abstractmethod
     def _start(self, seed: int) -> None:
-        raise NotImplementedError
+        """A game's hook (see the module docstring)."""
 
+    @abstractmethod
     def _info(self, seat: int) -> dict[str, Any]:
-        raise NotImplementedError
+        """A game's hook (see the module docstring)."""
 
+    @abstractmethod
     def _scene(self) -> Any:
-        raise NotImplementedError
+        """A game's hook (see the module docstring)."""
 
     def render_frame(self) -> np.ndarray:
         if self._renderer is None:
@@ -114,17 +118,21 @@ class OneGameView(OneGame, ParallelEnv):
         self.agents = playing
         return out_obs, out_rew, term, trunc, infos
 
+    @abstractmethod
     def _play(self, actions: dict[str, Any]) -> Sequence[float]:
-        raise NotImplementedError
+        """A game's hook (see the module docstring)."""
 
+    @abstractmethod
     def _observe(self) -> Sequence[np.ndarray]:
-        raise NotImplementedError
+        """A game's hook (see the module docstring)."""
 
+    @abstractmethod
     def _ended(self, seat: int) -> bool:
-        raise NotImplementedError
+        """A game's hook (see the module docstring)."""
 
+    @abstractmethod
     def _cut(self) -> bool:
-        raise NotImplementedError
+        """A game's hook (see the module docstring)."""
 
 
 class CoreGame(OneGame):
@@ -138,8 +146,9 @@ class CoreGame(OneGame):
         self.core = core
         self._noop = noop
 
+    @abstractmethod
     def _action(self, agent: str, action: Any) -> Any:
-        raise NotImplementedError
+        """A game's hook (see the module docstring)."""
 
     def _start(self, seed: int) -> None:
         self.core.reset([0], [seed])
