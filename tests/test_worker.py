@@ -21,7 +21,7 @@ import pytest
 
 from selfplay_cli.cli import main
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.store import League
+from selfplay_cli.league.store import SCHEMA_VERSION, League
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 from selfplay_cli.train import loop
@@ -303,7 +303,7 @@ def test_a_league_of_schema_1_gets_its_work_keys(tmp_path):
     with League.open(tmp_path / "h", readonly=True) as league:  # a command that only reads reads it as it is
         assert league.schema_version() == 1 and league.count_games("pong") == 0
     with League.open(tmp_path / "h") as league:
-        assert league.schema_version() == 2
+        assert league.schema_version() == SCHEMA_VERSION
         league.ensure_bots("pong", ["random"])
         league.create_match_with_games("pong", "eval", {}, [], key="k")
         assert set(league.keyed_matches("k")) == {"k"}

@@ -44,9 +44,9 @@ from selfplay_cli.signals import signals_held
 __all__ = ["DB_FILENAME", "DEFAULT_HOME", "MIGRATIONS", "SCHEMA_VERSION", "Database", "LeagueError", "LeagueIOError",
            "shown"]
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """Version of the schema in :mod:`selfplay_cli.league.models`, stored in ``meta.schema_version``. 2: matches have a
-unique ``work_key``."""
+unique ``work_key``. 3: snapshot blobs and the work queue (``blobs``, ``workers``, ``jobs``)."""
 
 
 def _add_work_keys(conn: Connection) -> None:
@@ -57,11 +57,18 @@ def _add_work_keys(conn: Connection) -> None:
         conn.exec_driver_sql("CREATE UNIQUE INDEX uq_matches_work_key ON matches (work_key)")
 
 
+def _add_queue(conn: Connection) -> None:
+    """Version 2 to 3: the tables of snapshot blobs and the work queue."""
+    from selfplay_cli.league.models import Blob, Job, Worker
+
+    Base.metadata.create_all(conn, tables=[Blob.__table__, Worker.__table__, Job.__table__])
+
+
 OLDEST_READABLE = 1
 """The oldest schema version a command that only reads reads as it is, without the upgrade it may not make:
 version 2 added a column only writers use (``matches.work_key``, deferred in the mapping, so reads never select it)."""
 
-MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_work_keys}
+MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_work_keys, 2: _add_queue}
 """``MIGRATIONS[v](conn)`` upgrades a version-``v`` database to ``v + 1`` inside the opening transaction; an older
 database is accepted only if every step up to :data:`SCHEMA_VERSION` is here."""
 

@@ -18,6 +18,12 @@ Tables
   unit of work that stored it, where a unit may be done twice (schema version 2).
 * ``games`` + ``game_seats``: the append-only ledger. A game has ``n_seats`` seat rows holding the
   player, its raw score and its points (1 win, 0.5 draw, 0 loss).
+* ``blobs``: snapshot files by the sha256 of their bytes, so that a machine that has only the database URL can play
+  any snapshot (the bytes in the row, or at a ``url`` the league names); never trusted by name, always re-hashed.
+* ``workers`` and ``jobs``: the work queue. A job is a few minutes of rating games (its ``spec``), queued in a
+  ``batch`` (a tournament, an SPRT, a run's gauntlets), leased by one worker at a time that beats a heart on it; a job
+  whose heart stopped goes back to the queue, one that failed is tried again later, and its games are stored with
+  the job marked done in one transaction under the match key ``job:<id>``, so a job finished twice counts once.
 
 All timestamps are stored as naive UTC and returned as timezone-aware UTC datetimes.
 """
@@ -46,7 +52,8 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 from sqlalchemy.types import TypeDecorator
 
-__all__ = ["Base", "Game", "GameSeat", "Match", "Meta", "Player", "Run", "Tag", "UTCDateTime", "utcnow"]
+__all__ = ["Base", "Blob", "Game", "GameSeat", "Job", "Match", "Meta", "Player", "Run", "Tag", "UTCDateTime", "Worker",
+           "utcnow"]
 
 
 def utcnow() -> datetime:
@@ -220,3 +227,61 @@ class GameSeat(Base):
     player_id: Mapped[int] = mapped_column(ForeignKey("players.id"))
     score: Mapped[float] = mapped_column(Float)
     points: Mapped[float] = mapped_column(Float)
+
+
+class Blob(Base):
+    """A snapshot file's bytes, keyed by their sha256: stored in the row (``data``) or kept at ``url`` (a location the
+    league names: ``file://``, ``http(s)://``), read back only after the bytes hash to the key."""
+
+    __tablename__ = "blobs"
+
+    sha256: Mapped[str] = mapped_column(String(64), primary_key=True)
+    size: Mapped[int] = mapped_column(BigInteger)
+    data: Mapped[bytes | None] = mapped_column(LargeBinary, deferred=True)
+    url: Mapped[str | None] = mapped_column(Text)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Worker(Base):
+    """A ``marl worker`` (or a command playing its own queued work): where it runs and when its heart last beat."""
+
+    __tablename__ = "workers"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    name: Mapped[str] = mapped_column(String(200))
+    host: Mapped[str] = mapped_column(String(200))
+    pid: Mapped[int] = mapped_column(Integer)
+    started_at: Mapped[datetime] = mapped_column(default=utcnow)
+    beat_at: Mapped[datetime] = mapped_column(default=utcnow)
+    stopped_at: Mapped[datetime | None] = mapped_column()
+    jobs_done: Mapped[int] = mapped_column(Integer, default=0)
+    games: Mapped[int] = mapped_column(BigInteger, default=0)
+    seconds: Mapped[float] = mapped_column(Float, default=0.0)
+    """Seconds spent playing the jobs it finished (its games/s is ``games / seconds``)."""
+
+
+class Job(Base):
+    """One unit of queued rating work (see the module docstring). ``state``: ``queued``, ``leased``, ``done``,
+    ``dead`` (failed ``tries`` times; ``error`` says why) or ``cancelled``. ``after``: a job that must be done first
+    (a run's gauntlets are played in order). ``not_before``: a failed job waits until then (backoff)."""
+
+    __tablename__ = "jobs"
+    __table_args__ = (Index("ix_jobs_state_priority", "state", "priority", "id"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    batch: Mapped[str] = mapped_column(String(200), index=True)
+    kind: Mapped[str] = mapped_column(String(32))
+    env: Mapped[str] = mapped_column(String(100))
+    spec: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    priority: Mapped[int] = mapped_column(Integer, default=0)
+    state: Mapped[str] = mapped_column(String(16), default="queued")
+    after: Mapped[int | None] = mapped_column(ForeignKey("jobs.id"))
+    tries: Mapped[int] = mapped_column(Integer, default=0)
+    worker_id: Mapped[int | None] = mapped_column(ForeignKey("workers.id"), index=True)
+    leased_at: Mapped[datetime | None] = mapped_column()
+    beat_at: Mapped[datetime | None] = mapped_column()
+    not_before: Mapped[datetime | None] = mapped_column()
+    error: Mapped[str | None] = mapped_column(Text)
+    result: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+    finished_at: Mapped[datetime | None] = mapped_column()
