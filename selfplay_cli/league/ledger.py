@@ -337,14 +337,7 @@ class Ledger(Database):
         pids = _check_games(games)
 
         def work(s: Session) -> tuple[int, list[int]]:
-            if key is not None:
-                done = s.execute(select(Match.id).where(Match.work_key == key)).scalar()
-                if done is not None:
-                    return int(done), []
-            m = Match(env=env, kind=kind, params=params, work_key=key)
-            s.add(m)
-            s.flush()
-            return m.id, self._insert_games(s, m, games, pids) if games else []
+            return self._store_match(s, env, kind, params, games, pids, key)
 
         try:
             return self._unit(work)
@@ -352,6 +345,18 @@ class Ledger(Database):
             if key is None:
                 raise
             return self._unit(work)
+
+    def _store_match(self, s: Session, env: str, kind: str, params: dict[str, Any], games: list[GameResult],
+                     pids: set[int], key: str | None) -> tuple[int, list[int]]:
+        """:meth:`create_match_with_games` inside the caller's transaction (``params`` and ``games`` checked)."""
+        if key is not None:
+            done = s.execute(select(Match.id).where(Match.work_key == key)).scalar()
+            if done is not None:
+                return int(done), []
+        m = Match(env=env, kind=kind, params=params, work_key=key)
+        s.add(m)
+        s.flush()
+        return m.id, self._insert_games(s, m, games, pids) if games else []
 
     def keyed_matches(self, prefix: str) -> dict[str, tuple[int, dict[str, Any]]]:
         """The matches whose :attr:`~selfplay_cli.league.models.Match.work_key` starts with ``prefix``: key ->

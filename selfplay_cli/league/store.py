@@ -36,6 +36,7 @@ from selfplay_cli.league.db import (
     shown,
 )
 from selfplay_cli.league.ledger import KIND_CODES, MATCH_KINDS, GameRow, GameTable, Ledger, rules_for_env
+from selfplay_cli.league.queue import Queue
 from selfplay_cli.league.roster import (
     DEFAULT_ELO,
     ENV_NAME_PATTERN,
@@ -83,7 +84,7 @@ __all__ = [
 ]
 
 
-class League(Ledger, Roster, Database):
+class League(Queue, Ledger, Roster, Database):
     """The league database: players, runs, matches and the game ledger (see the module docstring)."""
 
     def snapshot_file(self, row: PlayerRow) -> Path:

@@ -190,6 +190,7 @@ class MatchReport:
     kind: str = TWO_SIDES  # the game's kind
     variant: str = ""  # the key of the variant its games were played in (and are rated in): "" for the default
     predicted: Any = None  # what the ladder predicted of these games before they were played (a ScorePrediction)
+    round_points: list[list[float]] = field(default_factory=list, repr=False)  # A's points in each round, in order
 
     @property
     def held(self) -> bool | None:
@@ -269,6 +270,7 @@ def run_match(
     env_options: dict[str, Any] | None = None,
     team: Sequence[Policy] | None = None,
     team_name: str | None = None,
+    rounds: int | None = None,
 ) -> MatchReport:
     """Play up to ``games`` games (rounded up to whole rounds, see the module docstring) between ``a`` and ``b`` and
     report from A's view.
@@ -284,10 +286,50 @@ def run_match(
     flown with more seats than members gives each extra seat a member drawn at random from ``first_seed``; with
     fewer, the first members fly); ``a`` is then its first member and ``team_name`` names it in the report.
 
+    ``rounds``: play exactly this many rounds (``games`` then only has to be positive): round ``r`` is played on seed
+    ``first_seed + r``, so the rounds ``[k, k + n)`` of a match are the match of ``n`` rounds from seed
+    ``first_seed + k`` (a queued match is cut into jobs that way).
+
     Ctrl-C raises :class:`MatchInterrupted` after storing the whole rounds already finished (of the chunk in play
     too: half a pair would leave its seed's seat luck uncancelled, half a comparison compares nothing; they are
     dropped).
     """
+    match = _setup(a, b, games=games, first_seed=first_seed, league=league, player_ids=player_ids, kind=kind,
+                   confidence=confidence, on_games=on_games, env_options=env_options, team=team, team_name=team_name)
+    n_rounds = -(-games // match.per) if rounds is None else int(rounds)
+    chunk_rounds = max(1, parallel // match.per)
+    if sprt is not None:
+        chunk_rounds = max(1, min(chunk_rounds, 64))  # smaller batches waste fewer games past the decision
+        match.test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta)
+    match.params = {"a": match.a_name, "b": b.id, "games": games if rounds is None else n_rounds * match.per,
+                    "first_seed": first_seed, "env_options": match.options, "status": "running"}
+    if sprt is not None:
+        match.params["sprt"] = asdict(sprt)
+    match.play(n_rounds, chunk_rounds, parallel)
+    out = match.report()
+    if sprt is not None:
+        test = match.test
+        assert test is not None
+        out.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
+                    "llr": round(match.llr, 4), "lower": round(test.lower, 4), "upper": round(test.upper, 4),
+                    "decision": match.decision, "pairs": len(match.round_points)}
+        if not match.paired:
+            out.sprt["model"] = "trinomial"
+    return out
+
+
+def round_size(a: Policy, b: Policy, *, first_seed: int = 0, env_options: dict[str, Any] | None = None,
+               team: Sequence[Policy] | None = None) -> int:
+    """The games of one round of a match between ``a`` and ``b`` (see the module docstring), refused in one line
+    where :func:`run_match` would refuse them."""
+    return _setup(a, b, games=1, first_seed=first_seed, env_options=env_options, team=team).per
+
+
+def _setup(a: Policy, b: Policy, *, games: int, first_seed: int, league: League | None = None,
+           player_ids: dict[str, int] | None = None, kind: str = "match", confidence: float = 0.95,
+           on_games: Callable[[int], None] | None = None, env_options: dict[str, Any] | None = None,
+           team: Sequence[Policy] | None = None, team_name: str | None = None) -> _Match:
+    """The :class:`_Match` of :func:`run_match`'s arguments, checked, its rounds planned."""
     members = list(team) if team else [a]
     for m in members:
         if m.env != b.env:
@@ -307,26 +349,7 @@ def run_match(
     if team:
         match.seat_team(members)
     match.plan_rounds()
-    n_rounds = -(-games // match.per)
-    chunk_rounds = max(1, parallel // match.per)
-    if sprt is not None:
-        chunk_rounds = max(1, min(chunk_rounds, 64))  # smaller batches waste fewer games past the decision
-        match.test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta)
-    match.params = {"a": match.a_name, "b": b.id, "games": games, "first_seed": first_seed, "env_options": options,
-                    "status": "running"}
-    if sprt is not None:
-        match.params["sprt"] = asdict(sprt)
-    match.play(n_rounds, chunk_rounds, parallel)
-    out = match.report()
-    if sprt is not None:
-        test = match.test
-        assert test is not None
-        out.sprt = {"elo0": sprt.elo0, "elo1": sprt.elo1, "alpha": sprt.alpha, "beta": sprt.beta,
-                    "llr": round(match.llr, 4), "lower": round(test.lower, 4), "upper": round(test.upper, 4),
-                    "decision": match.decision, "pairs": len(match.round_points)}
-        if not match.paired:
-            out.sprt["model"] = "trinomial"
-    return out
+    return match
 
 
 @dataclass
@@ -504,7 +527,7 @@ def _report(env: str, rules: Rules, paired: bool, a_name: str, a_key: Any, b: Po
         pentanomial=penta, stats=match_stats(wins, draws, losses, pentanomial=penta if paired else None,
                                              confidence=confidence),
         seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
-        results=kept, game_ids=game_ids, kind=rules.kind, paired=paired,
+        results=kept, game_ids=game_ids, kind=rules.kind, paired=paired, round_points=round_points,
     )
 
 

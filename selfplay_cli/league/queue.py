@@ -1,0 +1,398 @@
+"""The work queue: rating games as jobs that any number of workers, on any machine, lease from the league.
+
+This is fishtest's pull model, kept in the league's own database (the one source of truth): a command that has games
+to play (a tournament, an SPRT, the games a gate still needs, a run's gauntlets) queues them as jobs of a few minutes
+each, in a ``batch``; ``marl worker`` processes anywhere lease one job at a time, beat a heart on it while they play,
+and store its games together with the job's end in one transaction.
+
+* **Leasing** (:meth:`Queue.claim`) takes the first job by priority then age that is queued (and past its backoff),
+  or leased by a worker whose heart has not beaten on it for ``scavenge`` seconds (fishtest's 360 s): the job goes
+  back to the pool by being taken again. On PostgreSQL the row is taken with ``FOR UPDATE SKIP LOCKED``, so workers
+  never wait for each other's claims; on SQLite the unit of work holds the write lock (``BEGIN IMMEDIATE``). A job
+  can wait for another (``after``: a run's gauntlets are played in order).
+* **Finishing** (:meth:`Queue.finish_job`) stores the job's games as the match keyed ``job:<id>`` and marks the job
+  done in one transaction, with the job's row locked: a job finished twice (a worker thought dead that comes back
+  after another took its job) stores its games once; the second finish stores nothing.
+* **Failing** (:meth:`Queue.fail_job`) puts the job back with a growing wait (backoff), or, after ``max_tries``
+  leases, marks it ``dead`` with its error. A job leased that many times whose workers all went silent is marked dead
+  too, when the next claim finds it lapsed.
+* **Cancelling** (:meth:`Queue.cancel_jobs`) ends queued and leased jobs (a decided SPRT's remaining batches); a
+  worker holding one learns it at its next heartbeat and stops, and a finish of a cancelled job stores nothing.
+
+Times are the workers' own clocks in UTC; a lease lapses after minutes, so clocks a few seconds apart do not matter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import datetime, timedelta
+from typing import Any
+
+from sqlalchemy import and_, exists, func, or_, select, update
+from sqlalchemy.orm import Session, aliased
+
+from selfplay_cli.league.db import LeagueError
+from selfplay_cli.league.models import Job, Worker, utcnow
+from selfplay_cli.results import GameResult
+
+__all__ = ["BACKOFF_SECONDS", "BEAT_SECONDS", "ENDED", "JOB_STATES", "MAX_TRIES", "SCAVENGE_SECONDS", "JobRow",
+           "NewJob", "Queue", "WorkerRow"]
+
+JOB_STATES = ("queued", "leased", "done", "dead", "cancelled")
+ENDED = frozenset({"done", "dead", "cancelled"})
+BEAT_SECONDS = 120.0
+"""How often a worker beats its heart on the job it plays (fishtest's 120 s)."""
+SCAVENGE_SECONDS = 360.0
+"""A leased job whose heart has not beaten for this long goes back to the queue (fishtest's 360 s)."""
+MAX_TRIES = 5
+"""Leases of one job before a failure (or a silent worker) marks it dead."""
+BACKOFF_SECONDS = 10.0
+"""A job that failed waits this long before it is leased again, doubling with each failure (at most 10 minutes)."""
+_BACKOFF_CAP = 600.0
+
+
+@dataclass(frozen=True)
+class NewJob:
+    """A job to queue: its ``kind`` (what plays it), the game, and the ``spec`` its kind reads. ``max_tries``: leases
+    before it is marked dead."""
+
+    kind: str
+    env: str
+    spec: dict[str, Any]
+    priority: int = 0
+    max_tries: int = MAX_TRIES
+
+
+@dataclass(frozen=True)
+class JobRow:
+    """A job as stored (see :class:`~selfplay_cli.league.models.Job`); ``worker``: the name of the worker that
+    holds or held it."""
+
+    id: int
+    batch: str
+    kind: str
+    env: str
+    spec: dict[str, Any]
+    priority: int
+    state: str
+    after: int | None
+    tries: int
+    worker_id: int | None
+    worker: str | None
+    leased_at: datetime | None
+    beat_at: datetime | None
+    not_before: datetime | None
+    error: str | None
+    result: dict[str, Any] | None
+    created_at: datetime
+    finished_at: datetime | None
+
+    @property
+    def max_tries(self) -> int:
+        return int(self.spec.get("max_tries", MAX_TRIES))
+
+    def to_json(self) -> dict[str, Any]:
+        out = {k: getattr(self, k) for k in ("id", "batch", "kind", "env", "state", "after", "tries", "worker",
+                                             "error", "result", "priority")}
+        for k in ("leased_at", "beat_at", "not_before", "created_at", "finished_at"):
+            v = getattr(self, k)
+            out[k] = v.isoformat() if v is not None else None
+        return out
+
+
+@dataclass(frozen=True)
+class WorkerRow:
+    """A worker as stored, with the jobs it holds now."""
+
+    id: int
+    name: str
+    host: str
+    pid: int
+    started_at: datetime
+    beat_at: datetime
+    stopped_at: datetime | None
+    jobs_done: int
+    games: int
+    seconds: float
+    holding: tuple[int, ...] = field(default=())
+
+    @property
+    def games_per_second(self) -> float | None:
+        return self.games / self.seconds if self.seconds > 0 else None
+
+    def alive(self, within: float = SCAVENGE_SECONDS, now: datetime | None = None) -> bool:
+        """Not stopped, and its heart beat within ``within`` seconds."""
+        now = now or utcnow()
+        return self.stopped_at is None and (now - self.beat_at).total_seconds() <= within
+
+    def to_json(self) -> dict[str, Any]:
+        gps = self.games_per_second
+        return {"id": self.id, "name": self.name, "host": self.host, "pid": self.pid,
+                "started_at": self.started_at.isoformat(), "beat_at": self.beat_at.isoformat(),
+                "stopped_at": self.stopped_at.isoformat() if self.stopped_at else None, "jobs_done": self.jobs_done,
+                "games": self.games, "seconds": round(self.seconds, 3),
+                "games_per_second": round(gps, 2) if gps is not None else None, "holding": list(self.holding)}
+
+
+def _job_row(j: Job, worker: str | None) -> JobRow:
+    return JobRow(id=j.id, batch=j.batch, kind=j.kind, env=j.env, spec=dict(j.spec or {}), priority=j.priority,
+                  state=j.state, after=j.after, tries=j.tries, worker_id=j.worker_id, worker=worker,
+                  leased_at=j.leased_at, beat_at=j.beat_at, not_before=j.not_before, error=j.error,
+                  result=dict(j.result) if j.result is not None else None, created_at=j.created_at,
+                  finished_at=j.finished_at)
+
+
+def _worker_row(w: Worker, holding: tuple[int, ...] = ()) -> WorkerRow:
+    return WorkerRow(id=w.id, name=w.name, host=w.host, pid=w.pid, started_at=w.started_at, beat_at=w.beat_at,
+                     stopped_at=w.stopped_at, jobs_done=w.jobs_done, games=int(w.games), seconds=float(w.seconds),
+                     holding=holding)
+
+
+def backoff(tries: int, base: float = BACKOFF_SECONDS) -> float:
+    """Seconds a job that failed on its ``tries``-th lease waits: ``base``, doubling per failure, at most 10 min."""
+    return min(base * 2.0 ** max(tries - 1, 0), _BACKOFF_CAP)
+
+
+class Queue:
+    """The work queue of a league (a part of :class:`~selfplay_cli.league.store.League`; see the module docstring).
+    """
+
+    # -- workers
+
+    def add_worker(self, name: str, host: str, pid: int) -> int:
+        """Register a worker; its id."""
+
+        def work(s: Session) -> int:
+            w = Worker(name=name[:200], host=host[:200], pid=int(pid))
+            s.add(w)
+            s.flush()
+            return w.id
+
+        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+
+    def worker_beat(self, worker_id: int, job_id: int | None = None) -> bool:
+        """Beat ``worker_id``'s heart (and its lease on ``job_id``). False when the job is no longer this worker's to
+        play: cancelled, dead, done by another, or taken by another after this worker's lease lapsed."""
+
+        def work(s: Session) -> bool:
+            now = utcnow()
+            s.execute(update(Worker).where(Worker.id == worker_id).values(beat_at=now))
+            if job_id is None:
+                return True
+            hit = s.execute(update(Job).where(Job.id == job_id, Job.worker_id == worker_id, Job.state == "leased")
+                            .values(beat_at=now))
+            return bool(hit.rowcount)  # type: ignore[attr-defined]
+
+        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+
+    def stop_worker(self, worker_id: int, give_back: bool = True) -> None:
+        """Mark a worker stopped; with ``give_back``, the jobs it still holds go back to the queue at once (not
+        counted as a try)."""
+
+        def work(s: Session) -> None:
+            now = utcnow()
+            s.execute(update(Worker).where(Worker.id == worker_id).values(stopped_at=now, beat_at=now))
+            if give_back:
+                for j in s.execute(select(Job).where(Job.worker_id == worker_id, Job.state == "leased")).scalars():
+                    j.state, j.tries, j.leased_at, j.beat_at = "queued", max(j.tries - 1, 0), None, None
+
+        self._unit(work)  # type: ignore[attr-defined]
+
+    def workers(self, alive_within: float | None = None) -> list[WorkerRow]:
+        """Every worker (or those whose heart beat within ``alive_within`` seconds and that have not stopped), with
+        the jobs each holds."""
+
+        def work(s: Session) -> list[WorkerRow]:
+            q = select(Worker).order_by(Worker.id)
+            if alive_within is not None:
+                q = q.where(Worker.stopped_at.is_(None), Worker.beat_at >= utcnow() - timedelta(seconds=alive_within))
+            held: dict[int, list[int]] = {}
+            for jid, wid in s.execute(select(Job.id, Job.worker_id).where(Job.state == "leased").order_by(Job.id)):
+                held.setdefault(int(wid), []).append(int(jid))
+            return [_worker_row(w, tuple(held.get(w.id, ()))) for w in s.execute(q).scalars()]
+
+        return self._read(work)  # type: ignore[attr-defined,no-any-return]
+
+    # -- jobs
+
+    def enqueue(self, batch: str, jobs: Sequence[NewJob], *, chain: bool = False, after: int | None = None
+                ) -> list[int]:
+        """Queue ``jobs`` in ``batch`` in one transaction; their ids, in order. ``chain``: each job waits for the one
+        before it (the first for ``after``, when given)."""
+        if not batch or len(batch) > 200:
+            raise LeagueError(f"a batch name must have 1 to 200 characters, not {len(batch)}")
+
+        def work(s: Session) -> list[int]:
+            ids: list[int] = []
+            prev = after
+            for nj in jobs:
+                spec = dict(nj.spec)
+                if nj.max_tries != MAX_TRIES:
+                    spec["max_tries"] = int(nj.max_tries)
+                j = Job(batch=batch, kind=nj.kind, env=nj.env, spec=spec, priority=int(nj.priority), state="queued",
+                        after=prev)
+                s.add(j)
+                s.flush()
+                ids.append(j.id)
+                if chain:
+                    prev = j.id
+            return ids
+
+        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+
+    def claim(self, worker_id: int, *, batches: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
+              scavenge: float = SCAVENGE_SECONDS) -> JobRow | None:
+        """Lease the next job for ``worker_id`` (of ``batches`` / ``kinds`` only, when given), or None if none is
+        ready. A job leased as many times as it may be whose lease lapsed again is marked dead first."""
+
+        def work(s: Session) -> JobRow | None:
+            now = utcnow()
+            lapsed = now - timedelta(seconds=scavenge)
+            where = [Job.state == "leased", Job.beat_at < lapsed]
+            for j in s.execute(select(Job).where(*where)).scalars():  # silent workers, too often: dead
+                if j.tries >= int((j.spec or {}).get("max_tries", MAX_TRIES)):
+                    j.state, j.finished_at = "dead", now
+                    j.error = (f"its worker went silent (no heartbeat for {scavenge:g} s) on each of its {j.tries} "
+                               "leases")
+            s.flush()
+            before = aliased(Job)
+            ready = or_(Job.after.is_(None),
+                        exists().where(before.id == Job.after, before.state.in_(tuple(ENDED))))
+            takeable = or_(and_(Job.state == "queued", or_(Job.not_before.is_(None), Job.not_before <= now)),
+                           and_(Job.state == "leased", Job.beat_at < lapsed))
+            q = select(Job).where(takeable, ready).order_by(Job.priority.desc(), Job.id).limit(1)
+            if batches is not None:
+                q = q.where(Job.batch.in_(list(batches)))
+            if kinds is not None:
+                q = q.where(Job.kind.in_(list(kinds)))
+            if not self.is_sqlite:  # type: ignore[attr-defined]
+                q = q.with_for_update(skip_locked=True, of=Job)
+            j = s.execute(q).scalars().first()
+            if j is None:
+                return None
+            j.state, j.worker_id, j.leased_at, j.beat_at, j.tries = "leased", worker_id, now, now, j.tries + 1
+            s.execute(update(Worker).where(Worker.id == worker_id).values(beat_at=now))
+            name = s.execute(select(Worker.name).where(Worker.id == worker_id)).scalar()
+            return _job_row(j, name)
+
+        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+
+    def finish_job(self, job_id: int, worker_id: int, *, games: Sequence[GameResult] = (), match_kind: str = "match",
+                   params: dict[str, Any] | None = None, result: dict[str, Any] | None = None,
+                   seconds: float = 0.0) -> bool:
+        """End a job: store its ``games`` (player ids per seat) as the match keyed ``job:<id>`` and mark it done, in one
+        transaction with the job's row locked. False, and nothing stored, when the job was cancelled, marked dead, or
+        finished before (by another worker that took it after this one's lease lapsed): it counts once."""
+        from selfplay_cli.league.ledger import _check_games, _match_params
+
+        games = list(games)
+        pids = _check_games(games)
+
+        def work(s: Session) -> bool:
+            q = select(Job).where(Job.id == job_id)
+            if not self.is_sqlite:  # type: ignore[attr-defined]
+                q = q.with_for_update()
+            j = s.execute(q).scalars().first()
+            if j is None:
+                raise LeagueError(f"no job with id {job_id}")
+            if j.state in ENDED:
+                return False
+            out = dict(result or {})
+            if games:
+                mp = _match_params(j.env, match_kind, {**(params or {}), "job": j.id, "batch": j.batch})
+                match_id, ids = self._store_match(s, j.env, match_kind, mp, games, pids,  # type: ignore[attr-defined]
+                                                  f"job:{j.id}")
+                out.update(match_id=match_id, games_stored=len(ids))
+            now = utcnow()
+            j.state, j.result, j.finished_at, j.worker_id, j.error = "done", out, now, worker_id, None
+            s.execute(update(Worker).where(Worker.id == worker_id).values(
+                beat_at=now, jobs_done=Worker.jobs_done + 1, games=Worker.games + len(games),
+                seconds=Worker.seconds + float(seconds)))
+            return True
+
+        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+
+    def fail_job(self, job_id: int, worker_id: int, error: str, *, base_backoff: float = BACKOFF_SECONDS) -> str:
+        """A job that ``worker_id`` could not play: back to the queue after :func:`backoff`, or ``dead`` with
+        ``error`` once it was leased ``max_tries`` times. Its new state (unchanged when it was not this worker's)."""
+
+        def work(s: Session) -> str:
+            j = s.get(Job, job_id)
+            if j is None:
+                raise LeagueError(f"no job with id {job_id}")
+            if j.state != "leased" or j.worker_id != worker_id:
+                return j.state
+            now = utcnow()
+            j.error = error[:2000]
+            if j.tries >= int((j.spec or {}).get("max_tries", MAX_TRIES)):
+                j.state, j.finished_at = "dead", now
+            else:
+                j.state, j.not_before = "queued", now + timedelta(seconds=backoff(j.tries, base_backoff))
+                j.leased_at = j.beat_at = None
+            return j.state
+
+        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+
+    def cancel_jobs(self, *, batch: str | None = None, ids: Sequence[int] | None = None) -> int:
+        """Cancel the queued and leased jobs of ``batch`` and/or with ``ids``; how many were cancelled."""
+        if batch is None and ids is None:
+            raise LeagueError("say which jobs to cancel (a batch or job ids)")
+
+        def work(s: Session) -> int:
+            q = update(Job).where(Job.state.in_(("queued", "leased")))
+            if batch is not None:
+                q = q.where(Job.batch == batch)
+            if ids is not None:
+                q = q.where(Job.id.in_([int(i) for i in ids]))
+            hit = s.execute(q.values(state="cancelled", finished_at=utcnow()))
+            return int(hit.rowcount)  # type: ignore[attr-defined]
+
+        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+
+    def jobs(self, *, batch: str | None = None, ids: Sequence[int] | None = None, states: Sequence[str] | None = None,
+             limit: int | None = None) -> list[JobRow]:
+        """Jobs (of ``batch``, with ``ids``, in ``states``), newest last; the last ``limit`` of them when given."""
+
+        def work(s: Session) -> list[JobRow]:
+            q = select(Job, Worker.name).outerjoin(Worker, Worker.id == Job.worker_id)
+            if batch is not None:
+                q = q.where(Job.batch == batch)
+            if ids is not None:
+                q = q.where(Job.id.in_([int(i) for i in ids]))
+            if states is not None:
+                q = q.where(Job.state.in_(list(states)))
+            q = q.order_by(Job.id.desc())
+            if limit is not None:
+                q = q.limit(int(limit))
+            rows = [_job_row(j, name) for j, name in s.execute(q)]
+            return rows[::-1]
+
+        return self._read(work)  # type: ignore[attr-defined,no-any-return]
+
+    def job_counts(self, batch: str | None = None) -> dict[str, int]:
+        """How many jobs (of ``batch``) are in each state (every state listed, zeros included)."""
+
+        def work(s: Session) -> dict[str, int]:
+            q = select(Job.state, func.count()).group_by(Job.state)
+            if batch is not None:
+                q = q.where(Job.batch == batch)
+            counts = dict.fromkeys(JOB_STATES, 0)
+            counts.update({str(k): int(n) for k, n in s.execute(q)})
+            return counts
+
+        return self._read(work)  # type: ignore[attr-defined,no-any-return]
+
+    def batches(self) -> list[tuple[str, dict[str, int]]]:
+        """Every batch with its job counts by state, oldest first."""
+
+        def work(s: Session) -> list[tuple[str, dict[str, int]]]:
+            q = select(Job.batch, Job.state, func.count(), func.min(Job.id)).group_by(Job.batch, Job.state)
+            out: dict[str, dict[str, int]] = {}
+            first: dict[str, int] = {}
+            for b, st, n, lo in s.execute(q):
+                out.setdefault(b, dict.fromkeys(JOB_STATES, 0))[st] = int(n)
+                first[b] = min(first.get(b, lo), lo)
+            return sorted(out.items(), key=lambda kv: first[kv[0]])
+
+        return self._read(work)  # type: ignore[attr-defined,no-any-return]

@@ -1,0 +1,138 @@
+"""The worker loop: lease a job, play it while a heart beats, store it, again; wait (backing off) when the queue is
+empty, and keep going through a database that went away for a while.
+
+Stopping: Ctrl-C or SIGTERM gives the job in play back to the queue at once (it is not counted as a try) and the
+worker leaves (exit 130 or 143); SIGKILL leaves the job leased until its lease lapses (``scavenge``), when another
+worker takes it. A database that cannot be reached stops nothing: the worker says so once and tries again with a
+growing wait; games played while it was away are stored when it is back (the job's key keeps them from counting
+twice if another worker took the job meanwhile).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..errors import MarlIOError
+from ..league.queue import BEAT_SECONDS, SCAVENGE_SECONDS, JobRow
+from ..league.store import League
+from ..rated.jobs import Outcome, play_leased, worker_name
+
+__all__ = ["WorkerOptions", "WorkerReport", "run_worker"]
+
+_IDLE_MAX = 10.0  # the longest wait between two looks at an empty queue
+_AWAY_MAX = 30.0  # the longest wait between two tries of a database that cannot be reached
+
+
+@dataclass(frozen=True)
+class WorkerOptions:
+    """How a worker works: which batches (None: all), how many jobs before it leaves (None: no limit), whether it
+    leaves when the queue is empty (``until_empty``), its heartbeat and the lease it lets lapse, where networks run."""
+
+    batches: tuple[str, ...] | None = None
+    max_jobs: int | None = None
+    until_empty: bool = False
+    beat: float = BEAT_SECONDS
+    scavenge: float = SCAVENGE_SECONDS
+    device: str = "cpu"
+    parallel: int = 1024
+    name: str | None = None
+    poll: float = 1.0
+
+
+@dataclass
+class WorkerReport:
+    """What a worker did: jobs done (stored by it), counted (finished by another first), failed, lost; games."""
+
+    worker_id: int
+    name: str
+    done: int = 0
+    counted: int = 0
+    failed: int = 0
+    lost: int = 0
+    games: int = 0
+    seconds: float = 0.0
+    outcomes: list[dict[str, Any]] = field(default_factory=list)
+
+    def to_json(self) -> dict[str, Any]:
+        return {"worker_id": self.worker_id, "name": self.name, "done": self.done, "counted": self.counted,
+                "failed": self.failed, "lost": self.lost, "games": self.games, "seconds": round(self.seconds, 3),
+                "games_per_second": round(self.games / self.seconds, 2) if self.seconds > 0 else None,
+                "jobs": self.outcomes}
+
+
+def _retrying(fn: Callable[[], Any], say: Callable[[str], None], what: str) -> Any:
+    """``fn()``, tried again with a growing wait while the database cannot be reached (said once)."""
+    wait, said = 1.0, False
+    while True:
+        try:
+            return fn()
+        except MarlIOError as exc:
+            if not said:
+                say(f"{what}: {exc}; trying again until it is back")
+                said = True
+            time.sleep(wait)
+            wait = min(wait * 2, _AWAY_MAX)
+
+
+def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], None] = lambda _: None,
+               on_job: Callable[[Outcome], None] | None = None,
+               on_games: Callable[[int], None] | None = None) -> WorkerReport:
+    """Work the queue of ``league`` as ``options`` say (see the module docstring); what was done."""
+    name = options.name or worker_name()
+    wid = _retrying(lambda: league.add_worker(name, socket.gethostname(), os.getpid()), say, "league unreachable")
+    report = WorkerReport(wid, name)
+    idle = options.poll
+    job: JobRow | None = None
+    try:
+        while options.max_jobs is None or report.done + report.counted + report.failed < options.max_jobs:
+            job = _retrying(lambda: league.claim(wid, batches=options.batches, scavenge=options.scavenge), say,
+                            "league unreachable")
+            if job is None:
+                if options.until_empty and not _retrying(lambda: _open_work(league, options), say,
+                                                          "league unreachable"):
+                    break
+                time.sleep(idle)
+                idle = min(idle * 1.5, _IDLE_MAX)
+                _retrying(lambda: league.worker_beat(wid), say, "league unreachable")
+                continue
+            idle = options.poll
+            out = play_leased(league, wid, job, beat=options.beat, device=options.device, parallel=options.parallel,
+                              on_games=on_games, retry=lambda fn: _retrying(fn, say, "league unreachable"))
+            job = None
+            _count(report, out)
+            if on_job is not None:
+                on_job(out)
+    finally:  # Ctrl-C, SIGTERM, an error: the job in play goes back to the queue now, not when its lease lapses
+        with contextlib.suppress(Exception):  # (the database away: the lease lapses instead)
+            league.stop_worker(wid, give_back=True)
+    return report
+
+
+def _open_work(league: League, options: WorkerOptions) -> bool:
+    """Whether the batches this worker serves still have jobs not ended (queued, waiting, or leased by others)."""
+    counts: dict[str, int] = {}
+    for batch in options.batches or [b for b, _ in league.batches()]:
+        for state, n in league.job_counts(batch).items():
+            counts[state] = counts.get(state, 0) + n
+    return counts.get("queued", 0) + counts.get("leased", 0) > 0
+
+
+def _count(report: WorkerReport, out: Outcome) -> None:
+    if out.state == "done":
+        report.done += 1
+        report.games += out.games
+        report.seconds += out.seconds
+    elif out.state == "counted":
+        report.counted += 1
+    elif out.state == "failed":
+        report.failed += 1
+    else:
+        report.lost += 1
+    report.outcomes.append({"job": out.job.id, "batch": out.job.batch, "state": out.state, "games": out.games,
+                            "seconds": round(out.seconds, 3), "error": out.error})
