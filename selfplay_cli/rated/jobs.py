@@ -30,8 +30,8 @@ from ..league.store import League, PlayerRow
 from ..stats.match import match_stats
 from .match import MatchReport, env_options_of, load_player, mix_seed, round_size, run_match
 
-__all__ = ["GAMES", "JOB_ROUNDS", "JobLost", "Outcome", "Played", "combine", "games_jobs", "play_job", "play_leased",
-           "see_through", "sprt_verdict", "summary", "worker_name"]
+__all__ = ["GAMES", "JOB_ROUNDS", "KINDS", "JobLost", "Outcome", "Played", "combine", "games_jobs", "play_job",
+           "play_leased", "see_through", "sprt_verdict", "summary", "worker_name"]
 
 GAMES = "games"
 JOB_ROUNDS = 64
@@ -86,9 +86,16 @@ class Played:
 
 def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int = 1024,
              on_games: Callable[[int], None] | None = None) -> Played:
-    """Play ``job`` in this process (nothing stored)."""
-    if job.kind != GAMES:
+    """Play ``job`` in this process (nothing stored) by the player of its kind (:data:`KINDS`)."""
+    player = KINDS.get(job.kind)
+    if player is None:
         raise MarlError(f"job {job.id} is of kind {job.kind!r}, which this marl does not play: upgrade marl")
+    return player(league, job, device=device, parallel=parallel, on_games=on_games)
+
+
+def _play_games(league: League, job: JobRow, *, device: str, parallel: int,
+                on_games: Callable[[int], None] | None) -> Played:
+    """A ``games`` job: its rounds of one match."""
     spec = job.spec
     first = int(spec["first_seed"])
     rows_a = [league.get_player(int(i)) for i in spec["a"]]
@@ -109,6 +116,11 @@ def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int 
               "status": "finished", "games_stored": report.games, **(spec.get("params") or {})}
     return Played(games=[r.with_players(ids) for r in report.results], match_kind=str(spec["match_kind"]),
                   params=params, result=summary(report), seconds=seconds)
+
+
+KINDS: dict[str, Callable[..., Played]] = {GAMES: _play_games}
+"""The player of each kind of job: ``player(league, job, device=, parallel=, on_games=) -> Played``. A kind's module
+adds itself here."""
 
 
 def summary(report: MatchReport) -> dict[str, Any]:
