@@ -26,8 +26,10 @@ from .commands import elo as elo_cmd
 from .commands import envs as envs_cmd
 from .commands import league as league_cmd
 from .commands import match as match_cmd
+from .commands import queue as queue_cmd
 from .commands import record as record_cmd
 from .commands import train as train_cmd
+from .commands import worker as worker_cmd
 from .envs import UnknownEnvError
 from .errors import EXIT_INTERNAL, EXIT_INTERRUPTED, EXIT_IO, EXIT_USAGE, MarlError
 
@@ -74,6 +76,8 @@ app.command("match")(match_cmd.match)
 app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence intervals; gate a model on its strength.")
 app.add_typer(league_cmd.app, name="league", help="The league: ladder, tournaments, score matrix, rating plots.")
 app.command("record")(record_cmd.record)
+app.command("worker", help=worker_cmd.WORKER_HELP)(worker_cmd.worker)
+app.add_typer(queue_cmd.app, name="queue", help="The league's work queue: batches, jobs, workers; cancel jobs.")
 
 
 # ---------------------------------------------------------------------------------------------------------------
