@@ -146,6 +146,9 @@ def gate(
     confidence: Annotated[float, typer.Option("--confidence", help="One-sided level of the lower bound.")] = 0.95,
     parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once.")]
     = 1024,
+    queue: Annotated[bool, typer.Option("--queue", help="Put the missing games on the league's work queue as jobs "
+                                        "of a few minutes: every marl worker attached plays them, and so does this "
+                                        "command.")] = False,
     device: DeviceOpt = "auto",
     home: HomeOpt = None,
     db: DbOpt = None,
@@ -165,7 +168,7 @@ def gate(
         cand, base = resolve_players(league, [candidate, vs], env, env_option=env_option)
         options = parse_env_options(cand.env, env_option) if env_option else None
         verdict = gate_check(league, cand, base, min_diff=min_diff, games=games, confidence=confidence,
-                             parallel=parallel, device=device, env_options=options)
+                             parallel=parallel, device=device, env_options=options, queue=queue)
     finally:
         league.close()
     if json_out:

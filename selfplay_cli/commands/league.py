@@ -29,7 +29,7 @@ from ._common import (
     resolve_players,
     shown_variant,
 )
-from ._output import console, print_json
+from ._output import console, err_console, print_json
 from .elo import AnchorOpt, BootstrapOpt, PriorOpt, check_bootstrap, check_prior, parse_anchor, resolve_anchor
 from .ladder_view import prior_caption, render_ladder
 
@@ -190,6 +190,12 @@ def tournament(
     parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once.")]
     = 1024,
     bootstrap: BootstrapOpt = 200,
+    queue: Annotated[bool, typer.Option("--queue", help="Put the missing games on the league's work queue as jobs "
+                                        "of a few minutes: every marl worker attached plays them, and so does this "
+                                        "command.")] = False,
+    wait: Annotated[bool, typer.Option("--wait/--no-wait", help="With --queue: wait for the games (default), or "
+                                       "only queue them and leave them to the workers (marl queue shows them).")]
+    = True,
     device: DeviceOpt = "auto",
     quiet: QuietOpt = False,
     home: HomeOpt = None,
@@ -211,8 +217,20 @@ def tournament(
         env, unique, anchor = _field(league, players, env, env_option, run, top, vs)
         options = parse_env_options(env, env_option) if env_option else None
         plan = TournamentPlan.of(league, env, unique, anchor, games_per_pair, options)
-        with progress_bar("tournament", plan.total, "games", progress_enabled(quiet or json_out)) as tick:
-            plan.play(league, seed, parallel, device, on_games=tick)
+        if not wait and not queue:
+            raise MarlError("--no-wait leaves queued games to the workers: add --queue")
+        if queue:
+            batch = _queued_tournament(league, plan, seed, parallel, device, wait, quiet or json_out)
+            if not wait:
+                if json_out:
+                    print_json({"batch": batch, "jobs": len(league.jobs(batch=batch)), "games": plan.total})
+                else:
+                    console.print(f"queued {plan.total} games of {len(plan.pairs)} pairs as batch {batch}: marl "
+                                  f"worker plays them, marl queue --batch {batch} follows them", markup=False)
+                return
+        else:
+            with progress_bar("tournament", plan.total, "games", progress_enabled(quiet or json_out)) as tick:
+                plan.play(league, seed, parallel, device, on_games=tick)
         if not json_out:
             console.print(f"{len(plan.pairs)} pairs needed games, {plan.total} played")
             if plan.apart:
@@ -226,6 +244,40 @@ def tournament(
     title = f"{env} ladder after the tournament" + (f" ({describe_variant(variant)})" if variant else "")
     render_ladder(rows, title, json_out=json_out, caption=prior_caption(DEFAULT_PRIOR),
                   variant=variant_options(variant), verdicts=verdict_lines(rows))
+
+
+def _queued_tournament(league: Any, plan: Any, seed: int | None, parallel: int, device: str, wait: bool,
+                       quiet: bool) -> str:
+    """The tournament's missing games queued as a batch; with ``wait`` played by the workers and this command until
+    every job has ended (a job that died: one line, exit 2, after the games that were played are stored)."""
+    from ..rated.jobs import see_through
+    from ..rated.queued import dead_jobs_error
+
+    batch = plan.enqueue(league, seed, device)
+    if not wait:
+        return batch
+    if not quiet:
+        err_console.print(f"queued {len(league.jobs(batch=batch))} jobs as batch {batch}; playing them with the "
+                          "workers attached", markup=False)
+    done = [0]
+    with progress_bar("tournament (queued)", plan.total, "games", progress_enabled(quiet)) as tick:
+        def on_change(jobs: list[Any]) -> bool:
+            n = sum(int((j.result or {}).get("games", 0)) for j in jobs if j.state == "done")
+            tick(n - done[0])
+            done[0] = n
+            return False
+
+        try:
+            jobs = see_through(league, batch, device=device, parallel=parallel, on_change=on_change)
+        except KeyboardInterrupt:
+            n = league.cancel_jobs(batch=batch)
+            err_console.print(f"interrupted: {n} jobs of {batch} cancelled; the games of the jobs done are stored",
+                              markup=False)
+            raise
+    dead = dead_jobs_error(jobs)
+    if dead is not None:
+        raise dead
+    return batch
 
 
 def _field(league: Any, players: list[str] | None, env: str | None, env_option: list[str] | None, run: str | None,

@@ -136,6 +136,9 @@ def match(
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the Elo interval.")] = 0.95,
     k: Annotated[float, typer.Option("--k", min=0.0, max=1000.0, help="K factor of the online Elo updated after "
                                      "each stored game (0: no update).")] = 16.0,
+    queue: Annotated[bool, typer.Option("--queue", help="Put the games on the league's work queue as jobs of a "
+                                        "few minutes (with --sprt: batches, the rest cancelled once decided): every "
+                                        "marl worker attached plays them, and so does this command.")] = False,
     device: DeviceOpt = "auto",
     quiet: QuietOpt = False,
     home: HomeOpt = None,
@@ -152,6 +155,8 @@ def match(
     """
     if not 0.5 < confidence < 1:
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
+    if queue and not store:
+        raise MarlError("--queue stores every game (its workers write them to the league): drop --no-store")
     settings = SPRTSettings(elo0, elo1, alpha, beta) if sprt else None
     budget = (max_games or games) if sprt else games
     league = open_league(home, db)
@@ -165,6 +170,15 @@ def match(
                               options)
         for job in jobs:
             first = league.fresh_seed(job.rows_a[0].id, job.row_b.id) if seed is None else seed
+            if queue:
+                report, batch = _queued(league, job, budget, first, options, settings, confidence, device, parallel,
+                                        quiet or json_out)
+                reports.append(report)
+                if not json_out:
+                    render_report(report)
+                    console.print(f"  stored as the jobs of batch {batch} (one match each: marl queue --batch "
+                                  f"{batch})", markup=False)
+                continue
             pa, pb, ids = job.load(league, first, device)
             try:
                 with progress_bar(f"{job.team_name or pa[0].id} vs {pb.id}", budget + budget % 2, "games",
@@ -187,3 +201,31 @@ def match(
         print_json(reports[0].to_json() if team is None else {"team": team, "matches": [r.to_json() for r in reports]})
     if settings is not None:
         raise typer.Exit(sprt_exit_code(reports[0]))
+
+
+def _queued(league, job, games: int, first: int, options, settings, confidence: float, device: str, parallel: int,
+            quiet: bool) -> tuple[MatchReport, str]:
+    """One match of ``marl match --queue``: queued as jobs, played by the workers and this command, reported as one."""
+    from ..rated.queued import queue_match
+
+    queued = queue_match(league, job.rows_a, job.row_b, games=games, first_seed=first, env_options=options,
+                         team_name=job.team_name, sprt=settings, confidence=confidence, device=device)
+    if not quiet:
+        err_console.print(f"queued {len(league.jobs(batch=queued.batch))} jobs as batch {queued.batch} (marl queue "
+                          f"--batch {queued.batch}); playing them with the workers attached", markup=False)
+    try:
+        done = [0]
+
+        with progress_bar(f"{job.team_name or job.rows_a[0].full_name} vs {job.row_b.full_name} (queued)",
+                          games + games % 2, "games", progress_enabled(quiet)) as tick:
+            def on_jobs(jobs) -> None:
+                n = sum(int((j.result or {}).get("games", 0)) for j in jobs if j.state == "done")
+                tick(n - done[0])
+                done[0] = n
+
+            return queued.see_through(device=device, parallel=parallel, on_jobs=on_jobs), queued.batch
+    except KeyboardInterrupt:
+        n = league.cancel_jobs(batch=queued.batch)
+        err_console.print(f"interrupted: {n} jobs of {queued.batch} cancelled; the games of the jobs done are stored "
+                          "and count in the ratings", markup=False)
+        raise typer.Exit(130) from None

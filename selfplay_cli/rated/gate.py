@@ -41,8 +41,9 @@ class GateVerdict:
 
 def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: float, games: int,
                confidence: float = 0.95, parallel: int = 1024, device: str = "cpu",
-               env_options: dict[str, Any] | None = None) -> GateVerdict:
-    """Reuse the stored head-to-head games, play (and store) the missing ones, then test the lower bound.
+               env_options: dict[str, Any] | None = None, queue: bool = False) -> GateVerdict:
+    """Reuse the stored head-to-head games, play (and store) the missing ones, then test the lower bound. With
+    ``queue`` the missing games go on the league's work queue, played by the workers attached and by this process.
 
     The games are those of one variant: played under the options the two were made for with ``env_options`` (a
     command's ``--env-option``) over them, and only the stored games of that variant count.
@@ -68,11 +69,17 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
     played = 0
     if stored < games:
         first = league.fresh_seed(cand.id, base.id)  # never the seeds of the stored games again
-        pa = load_player(league, cand, device=device, seed=mix_seed(first, 0))
-        pb = load_player(league, base, device=device, seed=mix_seed(first, 1))
-        report = run_match(pa, pb, games=games - stored, first_seed=first, parallel=parallel,
-                           league=league, player_ids={pa.id: cand.id, pb.id: base.id}, kind="gate",
-                           env_options=env_options)
+        if queue:
+            from .queued import queue_match
+
+            report = queue_match(league, [cand], base, games=games - stored, first_seed=first, match_kind="gate",
+                                 env_options=env_options, device=device).see_through(device=device, parallel=parallel)
+        else:
+            pa = load_player(league, cand, device=device, seed=mix_seed(first, 0))
+            pb = load_player(league, base, device=device, seed=mix_seed(first, 1))
+            report = run_match(pa, pb, games=games - stored, first_seed=first, parallel=parallel,
+                               league=league, player_ids={pa.id: cand.id, pb.id: base.id}, kind="gate",
+                               env_options=env_options)
         played = report.games
         wins, draws, losses = wins + report.wins, draws + report.draws, losses + report.losses
         penta = [x + y for x, y in zip(penta, report.pentanomial, strict=True)]

@@ -10,6 +10,7 @@ from typing import Any
 
 from ..league.pairs import PairPlan, plan_tournament
 from ..league.store import League, PlayerRow
+from .jobs import JOB_ROUNDS, games_jobs
 from .match import load_player, mix_seed, run_match
 from .roles import RoleBook
 from .snapshots import players_variant
@@ -45,6 +46,21 @@ class TournamentPlan:
                                                                               league.get_player(y)))
                                if book.differ else None)
         return cls(env, variant, options, [p for p in plan if p.meets], [p for p in plan if not p.meets])
+
+    def enqueue(self, league: League, seed: int | None, device: str, job_rounds: int = JOB_ROUNDS) -> str:
+        """Queue every pair's missing games as jobs (:func:`~selfplay_cli.rated.jobs.games_jobs`) in one new batch,
+        each pair from ``seed`` (None: its first seed not played); the batch's name."""
+        from .queued import batch_name
+
+        batch = batch_name("tournament", self.env)
+        jobs = []
+        for p in self.pairs:
+            first = league.fresh_seed(p.a_id, p.b_id) if seed is None else seed
+            jobs += games_jobs(league, [league.get_player(p.a_id)], league.get_player(p.b_id), games=p.missing,
+                               first_seed=first, match_kind="tournament", env_options=self.options,
+                               job_rounds=job_rounds, device=device)
+        league.enqueue(batch, jobs)
+        return batch
 
     def play(self, league: League, seed: int | None, parallel: int, device: str,
              on_games: Callable[[int], None] | None = None) -> None:
