@@ -1,0 +1,194 @@
+"""Workers on the queue as users run them: `marl worker` processes killed mid-lease, many workers at once, an SPRT
+decided across workers, `marl queue`; on SQLite and on a real PostgreSQL."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import Counter
+
+import pytest
+from cli_helpers import run, run_json
+from sqlalchemy import select
+
+from selfplay_cli.league.models import Game, GameSeat
+from selfplay_cli.league.store import League
+from selfplay_cli.rated.jobs import games_jobs
+from selfplay_cli.rated.match import SPRTSettings, run_match
+from selfplay_cli.rated.queued import queue_match
+from selfplay_cli.work import WorkerOptions, run_worker
+
+SHORT = {"points_to_win": 1}
+
+
+def _league(url, home):
+    lg = League(url, home=home)
+    lg.ensure_bots("pong", ["random", "cpu"])
+    return lg
+
+
+def _bots(league):
+    return league.find_players("cpu", env="pong")[0], league.find_players("random", env="pong")[0]
+
+
+def _stored(league) -> list[tuple[int, int]]:
+    """Every stored game as (seed, cpu's seat): two games of one seed differ by the seat."""
+    cpu, _ = _bots(league)
+    with league.session(readonly=True) as s:
+        q = select(Game.seed, GameSeat.seat).join(GameSeat, GameSeat.game_id == Game.id).where(
+            GameSeat.player_id == cpu.id)
+        return [(int(a), int(b)) for a, b in s.execute(q)]
+
+
+def _worker(url: str, home, *args: str) -> subprocess.Popen:
+    env = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
+    return subprocess.Popen([sys.executable, "-m", "selfplay_cli", "worker", "--db", url, "--home", str(home),
+                             "--quiet", *args], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _wait(pred, timeout: float = 60.0, every: float = 0.02) -> None:
+    end = time.monotonic() + timeout
+    while not pred():
+        assert time.monotonic() < end, "timed out"
+        time.sleep(every)
+
+
+@pytest.mark.slow
+def test_a_worker_killed_mid_lease_its_job_played_again_once_and_counted_once(db_url, tmp_path):
+    """kill -9 of a `marl worker` while it plays a job: nothing of the job is stored; the lease lapses, a second worker
+    plays it again (its second try) and stores it once; every seed's pair of games is there exactly once."""
+    league = _league(db_url, tmp_path / "h")
+    cpu, rnd = _bots(league)
+    (jid,) = league.enqueue("k", games_jobs(league, [cpu], rnd, games=3000, first_seed=0, match_kind="match",
+                                            env_options=SHORT, job_rounds=1500))
+    first = _worker(db_url, tmp_path / "h", "--beat", "0.2", "--scavenge", "1")
+    _wait(lambda: league.jobs(ids=[jid])[0].state == "leased")
+    os.kill(first.pid, signal.SIGKILL)
+    first.wait()
+    assert league.jobs(ids=[jid])[0].state == "leased" and _stored(league) == []
+    second = _worker(db_url, tmp_path / "h", "--beat", "0.2", "--scavenge", "1", "--until-empty", "--json")
+    out, err = second.communicate(timeout=180)
+    assert second.returncode == 0, err
+    report = json.loads(out)
+    assert report["done"] == 1 and report["games"] == 3000
+    (job,) = league.jobs(ids=[jid])
+    assert job.state == "done" and job.tries == 2 and job.worker.startswith("worker@")
+    games = _stored(league)
+    assert len(games) == 3000 and Counter(games) == Counter((s, k) for s in range(1500) for k in (0, 1))
+    league.close()
+
+
+def test_many_workers_at_once_play_every_job_once(db_url, tmp_path):
+    """Eight workers (threads, each with its own connection to the league) on 48 small jobs: every job done once by
+    one worker, every game stored once, no lock error anywhere."""
+    league = _league(db_url, tmp_path / "h")
+    cpu, rnd = _bots(league)
+    league.enqueue("many", games_jobs(league, [cpu], rnd, games=192, first_seed=0, match_kind="tournament",
+                                      env_options=SHORT, job_rounds=2))
+    reports, errors = [], []
+
+    def work(i: int) -> None:
+        lg = League(db_url, home=tmp_path / "h")
+        try:
+            reports.append(run_worker(lg, WorkerOptions(until_empty=True, poll=0.01, name=f"w{i}")))
+        except Exception as exc:  # any lock error fails the test
+            errors.append(exc)
+        finally:
+            lg.close()
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=300)
+    assert errors == []
+    assert sum(r.done for r in reports) == 48 and sum(r.failed + r.lost + r.counted for r in reports) == 0
+    assert sum(r.games for r in reports) == 192
+    jobs = league.jobs(batch="many")
+    assert {j.state for j in jobs} == {"done"} and all(j.tries == 1 for j in jobs)
+    games = _stored(league)
+    assert Counter(games) == Counter((s, k) for s in range(96) for k in (0, 1))
+    assert league.lock_retries >= 0
+    league.close()
+
+
+def test_an_sprt_decided_across_two_workers_cancels_its_remaining_jobs(db_url, tmp_path):
+    """cpu against random under an SPRT, queued in jobs of 2 pairs, played by two workers while the command only
+    waits: the verdict falls on the pair a single match stops at; the jobs after it are cancelled; the games stored
+    are those of the jobs done, once each."""
+    league = _league(db_url, tmp_path / "h")
+    cpu, rnd = _bots(league)
+    settings = SPRTSettings(elo0=0, elo1=400, alpha=0.05, beta=0.05)
+    queued = queue_match(league, [cpu], rnd, games=400, first_seed=0, env_options=SHORT, sprt=settings, job_rounds=2)
+    stop = threading.Event()
+    reports = []
+
+    def work(i: int) -> None:
+        lg = League(db_url, home=tmp_path / "h")
+        try:
+            reports.append(run_worker(lg, WorkerOptions(batches=(queued.batch,), until_empty=True, poll=0.01,
+                                                        name=f"w{i}")))
+        finally:
+            lg.close()
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    report = queued.see_through(play=False, poll=0.01)
+    for t in threads:
+        t.join(timeout=120)
+    stop.set()
+    from selfplay_cli.policies import ScriptedPolicy
+
+    local = run_match(ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "random"), games=400, first_seed=0,
+                      env_options=SHORT, sprt=settings)
+    assert report.sprt["decision"] == local.sprt["decision"] == "H1"
+    assert report.sprt["pairs"] == local.sprt["pairs"]
+    jobs = league.jobs(batch=queued.batch)
+    counts = Counter(j.state for j in jobs)
+    assert counts["queued"] == counts["leased"] == counts["dead"] == 0
+    assert counts["cancelled"] >= 90 and counts["done"] >= -(-local.sprt["pairs"] // 2)
+    assert {j.worker for j in jobs if j.state == "done"} <= {"w0", "w1"}
+    done_games = sum(j.result["games"] for j in jobs if j.state == "done")
+    games = _stored(league)
+    assert len(games) == done_games == len(set(games))
+    league.close()
+
+
+def test_marl_queue_shows_and_cancels(tmp_path, capsys, monkeypatch):
+    home = tmp_path / "h"
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    monkeypatch.delenv("MARL_DB", raising=False)
+    code, out, err = run(capsys, "league", "tournament", "cpu", "random", "--env", "pong", "--env-option",
+                         "points_to_win=1", "--games-per-pair", "300", "--queue", "--no-wait", "--home", str(home))
+    assert code == 0, err
+    assert "queued 300 games of 1 pairs as batch tournament:pong:" in out
+    shown = run_json(capsys, "queue", "--home", str(home))
+    (batch,) = shown["batches"]
+    assert (batch["queued"], batch["done"]) == (3, 0) and shown["workers"] == []
+    code, out, err = run(capsys, "queue", "cancel", str(shown["jobs"][0]["id"]), "--home", str(home))
+    assert code == 0 and "cancelled 1 job" in out
+    code, out, err = run(capsys, "worker", "--home", str(home), "--until-empty", "--quiet")
+    assert code == 0, err
+    shown = run_json(capsys, "queue", "--home", str(home))
+    (batch,) = shown["batches"]
+    assert (batch["queued"], batch["done"], batch["cancelled"]) == (0, 2, 1)
+    (w,) = shown["workers"]
+    assert w["jobs_done"] == 2 and w["games"] == 172 and w["status"] == "stopped"
+    code, out, err = run(capsys, "queue", "cancel", "999", "--home", str(home))
+    assert code == 2 and err.count("\n") == 1 and "no job 999" in err
+    code, out, err = run(capsys, "queue", "--state", "nope", "--home", str(home))
+    assert code == 2 and err.count("\n") == 1
+
+
+def test_a_worker_refuses_a_league_that_is_not_on_this_machine(tmp_path, capsys):
+    code, out, err = run(capsys, "worker", "--db", f"sqlite:///{tmp_path}/elsewhere/league.db", "--until-empty")
+    assert code == 2 and err.count("\n") == 1 and "PostgreSQL" in err
+    assert not (tmp_path / "elsewhere").exists()
+    code, out, err = run(capsys, "worker", "--home", str(tmp_path / "none"), "--until-empty")
+    assert code == 2 and err.count("\n") == 1 and not (tmp_path / "none").exists()
