@@ -274,7 +274,8 @@ class Database:
                 self._connect(mode)
                 return
             except LeagueError:
-                self.engine.dispose()
+                if hasattr(self, "engine"):  # (none where the driver is missing)
+                    self.engine.dispose()
                 raise
             except DBAPIError as exc:
                 self.engine.dispose()
