@@ -197,20 +197,31 @@ def _tables(url: str) -> list[tuple[str]]:
     return names
 
 
-def test_the_league_file_of_the_previous_release_upgrades(tmp_path: Path) -> None:
-    """A real league file written by an older release (schema 1, ``tests/data``): read as it is, then upgraded."""
+def test_the_league_file_of_the_previous_release_upgrades(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A real league file written by an older release (schema 1, ``tests/data``), through the CLI: a command that
+    reads reads it as it is and changes nothing; the first command that writes upgrades it, in one line on stderr."""
+    from cli_helpers import run
+
     home = tmp_path / "h"
     home.mkdir()
     shutil.copy(OLD_LEAGUE, home / "league.db")
+    code, out, err = run(capsys, "league", "ladder", "--home", str(home), "--env", "pong", "--bootstrap", "0", "--json")
+    assert code == 0 and err == "" and json.loads(out)
+    assert (home / "league.db").read_bytes() == OLD_LEAGUE.read_bytes()
+    match = ("match", "cpu", "random", "--env", "pong", "--env-option", "points_to_win=1", "--games", "2", "-q",
+             "--home", str(home), "--json")
+    code, out, err = run(capsys, *match)
+    assert code == 0 and json.loads(out)["games"] == 2, err
+    assert err == (f"marl: upgraded league database {(home / 'league.db').resolve()} from schema 1 to 0003 "
+                   "(match work keys; snapshot blobs, work queue)\n")
+    code, out, err = run(capsys, *match)
+    assert code == 0 and err == ""  # once
     with League.open(home, readonly=True) as lg:
-        assert lg.schema_revision() == "legacy 1"
-        names = sorted(p.name for p in lg.players())
-    notes: list[str] = []
-    with League.open(home, note=notes.append) as lg:
-        assert lg.schema_revision() == "0003" and sorted(p.name for p in lg.players()) == names
-    assert len(notes) == 1 and "from schema 1 to 0003" in notes[0]
-    assert compare_metadata(MigrationContext.configure(create_engine(f"sqlite:///{home / 'league.db'}").connect()),
-                            Base.metadata) == []
+        assert lg.schema_revision() == "0003" and lg.count_games("pong") == 12 + 4  # 12 pong games before
+    engine = create_engine(f"sqlite:///{home / 'league.db'}")
+    with engine.connect() as conn:
+        assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
+    engine.dispose()
 
 
 @pytest.mark.parametrize("what", ["revision", "legacy"])
