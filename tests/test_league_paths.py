@@ -1,17 +1,19 @@
 """Paths read from the league database never reach outside the league, and removing a snapshot never kills a run
-for good (issue 30, points 3 and 4)."""
+for good (issue 30, points 3 and 4). The league's rows are the point of the first part, which runs on SQLite and on
+PostgreSQL (``league_db``); the second copies a trained league file, and stays on SQLite."""
 
 from __future__ import annotations
 
 import os
 import shutil
-import sqlite3
 import sys
 from pathlib import Path
 
 import pytest
 import torch
 from cli_helpers import run
+from sqlalchemy import create_engine, text
+from sqlalchemy.exc import DataError
 
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League, LeagueError
@@ -42,9 +44,23 @@ def make_league(home: Path, names=("s0-left", "s1M-left"), run_name: str = "r") 
         league.ensure_bots("pong", ["cpu", "random"])
 
 
-def set_sql(home: Path, sql: str, *args) -> None:
-    with sqlite3.connect(home / "league.db") as con:
-        con.execute(sql, args)
+@pytest.fixture(params=["sqlite", "postgresql"])
+def league_db(request, monkeypatch) -> str:
+    """The league of the test: SQLite in its home, or a fresh PostgreSQL database that ``MARL_DB`` names to every
+    League and command of the test."""
+    if request.param == "sqlite":
+        monkeypatch.delenv("MARL_DB", raising=False)
+    else:
+        monkeypatch.setenv("MARL_DB", request.getfixturevalue("pg_url"))
+    return request.param
+
+
+def set_sql(home: Path, sql: str, **params) -> None:
+    """Edit the league's database by hand (as something else than marl would): ``MARL_DB``'s, or the home's file."""
+    engine = create_engine(os.environ.get("MARL_DB") or f"sqlite:///{home / 'league.db'}")
+    with engine.begin() as conn:
+        conn.execute(text(sql), params)
+    engine.dispose()
 
 
 def status(home: Path, run_name: str) -> str:
@@ -72,11 +88,17 @@ def _bad_paths(tmp_path: Path, home: Path) -> dict[str, str]:
 
 @pytest.mark.parametrize("which", ["dotdot", "absolute", "dotdot inside", "symlink out", "not under snapshots",
                                    "nul byte"])
-def test_rm_never_deletes_a_file_a_row_points_outside(tmp_path, capsys, which):
+def test_rm_never_deletes_a_file_a_row_points_outside(tmp_path, capsys, league_db, which):
     home = tmp_path / "home"
     make_league(home)
+    if league_db == "postgresql":
+        (home / "league.db").write_bytes(b"a file of the home's that is no snapshot")  # what "league.db" points at
     path = _bad_paths(tmp_path, home)[which]
-    set_sql(home, "update players set path = ? where name = 's1M-left'", path)
+    if league_db == "postgresql" and "\0" in path:  # PostgreSQL's text holds no NUL: no such row can be
+        with pytest.raises(DataError, match="cannot contain NUL"):
+            set_sql(home, "update players set path = :path where name = 's1M-left'", path=path)
+        return
+    set_sql(home, "update players set path = :path where name = 's1M-left'", path=path)
     before = {p: p.read_bytes() for p in (tmp_path / "victim", home / "league.db")}
     err = one_line_error(*run(capsys, "checkpoint", "rm", "r/s1M-left", "--home", str(home))[::2])
     assert "r/s1M-left" in err and "leaves the league" in err and "--keep-file" in err
@@ -88,7 +110,7 @@ def test_rm_never_deletes_a_file_a_row_points_outside(tmp_path, capsys, which):
     assert removed(home, "s1M-left") and (tmp_path / "victim").read_bytes() == before[tmp_path / "victim"]
 
 
-def test_no_command_reads_a_copy_outside_the_league(tmp_path, capsys):
+def test_no_command_reads_a_copy_outside_the_league(tmp_path, capsys, league_db):
     """An absolute path to an exact copy of the registered file (its sha256 matches) outside the home: show, export,
     match and record refuse it, naming the snapshot."""
     home = tmp_path / "home"
@@ -96,7 +118,7 @@ def test_no_command_reads_a_copy_outside_the_league(tmp_path, capsys):
     outside = tmp_path / "outside.safetensors"
     shutil.copy(home / snapshot_relpath("r", "s1M-left"), outside)
     (home / snapshot_relpath("r", "s1M-left")).unlink()
-    set_sql(home, "update players set path = ? where name = 's1M-left'", str(outside))
+    set_sql(home, "update players set path = :path where name = 's1M-left'", path=str(outside))
     for args in (("checkpoint", "show", "r/s1M-left"), ("checkpoint", "export", "r/s1M-left", str(tmp_path / "x")),
                  ("match", "r/s1M-left", "cpu", "--games", "2"),
                  ("record", "--ckpt", "r/s1M-left", "--vs", "cpu", "--max-steps", "5")):
@@ -105,7 +127,7 @@ def test_no_command_reads_a_copy_outside_the_league(tmp_path, capsys):
     assert not (tmp_path / "x").exists()
 
 
-def test_snapshot_file_is_the_one_check(tmp_path):
+def test_snapshot_file_is_the_one_check(tmp_path, league_db):
     home = tmp_path / "home"
     make_league(home)
     with League.open(home) as league:
@@ -181,7 +203,7 @@ def test_rm_refuses_a_snapshot_whose_gauntlet_a_run_owes(stopped, capsys):
     assert not removed(home, "s0-right")
 
 
-def test_rm_refuses_a_stopped_runs_teacher(tmp_path, capsys):
+def test_rm_refuses_a_stopped_runs_teacher(tmp_path, capsys, league_db):
     home = tmp_path / "home"
     make_league(home, run_name="t")
     with League.open(home) as league:
@@ -212,7 +234,7 @@ def test_a_run_whose_needed_snapshot_was_removed_before_is_ended_at_resume(stopp
     """A league where an older marl removed the snapshot a run resumes from: --resume says so in one line and the
     run is no longer left 'stopped' or 'running'."""
     home = stopped
-    set_sql(home, "update players set removed = 1 where name = 's2k-right'")
+    set_sql(home, "update players set removed = true where name = 's2k-right'")
     err = one_line_error(*run(capsys, "train", "--resume", "r", "--home", str(home))[::2])
     assert "r/s2k-right" in err and "cannot be resumed" in err
     assert status(home, "r") == "ended"

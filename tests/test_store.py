@@ -7,6 +7,7 @@ import json
 import multiprocessing as mp
 import os
 import random
+import shutil
 import signal
 import sqlite3
 import sys
@@ -16,14 +17,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from sqlalchemy import select, text
+from alembic.autogenerate import compare_metadata
+from alembic.runtime.migration import MigrationContext
+from sqlalchemy import create_engine, inspect, select, text
+from sqlalchemy.engine import make_url
 from sqlalchemy.exc import OperationalError
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league import store
-from selfplay_cli.league.models import Player
+from selfplay_cli.league import db as league_db
+from selfplay_cli.league import migrations, store
+from selfplay_cli.league.models import Base, Player
 from selfplay_cli.league.store import (
-    SCHEMA_VERSION,
     GameResult,
     League,
     LeagueError,
@@ -32,13 +36,34 @@ from selfplay_cli.league.store import (
 from selfplay_cli.stats.elo import elo_update
 
 ENV = "pong"
+OLD_LEAGUE = Path(__file__).parent / "data" / "league_before_variants.db"
 
 
 @pytest.fixture
-def league(tmp_path: Path) -> League:
+def league(tmp_path: Path, db_url: str) -> League:
+    """A fresh league, once on SQLite and once on PostgreSQL (conftest's ``db_url``), its home under ``tmp_path``."""
+    lg = League.open(home=tmp_path / "league", url=db_url)
+    yield lg
+    lg.close()
+
+
+@pytest.fixture
+def sqlite_league(tmp_path: Path) -> League:
+    """A fresh league in the default place, SQLite (the tests of what only SQLite has: pragmas, locks, files)."""
     lg = League.open(home=tmp_path / "league")
     yield lg
     lg.close()
+
+
+def _sql(url: str, query: str, **params: object) -> list[tuple]:
+    """Run one SQL statement on the database at ``url`` outside marl (committed); its rows, if any."""
+    engine = create_engine(url)
+    try:
+        with engine.begin() as conn:
+            result = conn.execute(text(query), params)
+            return [tuple(r) for r in result] if result.returns_rows else []
+    finally:
+        engine.dispose()
 
 
 def _one_line(exc: pytest.ExceptionInfo[BaseException]) -> str:
@@ -63,55 +88,214 @@ def _snap(lg: League, name: str, run: str | None = "r1", env: str = ENV, **kw: o
 # --------------------------------------------------------------------------------------------------
 
 
-def test_schema_created_and_version_stored(tmp_path: Path) -> None:
-    lg = League.open(home=tmp_path / "h")
-    assert lg.home == (tmp_path / "h").resolve()
-    assert lg.db_path == (tmp_path / "h" / "league.db").resolve()
-    assert lg.schema_version() == SCHEMA_VERSION == 3
-    lg.close()
-    con = sqlite3.connect(tmp_path / "h" / "league.db")
-    tables = {r[0] for r in con.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-    assert {"meta", "runs", "players", "tags", "matches", "games", "game_seats"} <= tables
-    assert con.execute("SELECT value FROM meta WHERE key = 'schema_version'").fetchone() == ("3",)
-    con.close()
-    # Re-opening an existing league keeps it.
-    with League.open(home=tmp_path / "h") as lg2:
-        assert lg2.schema_version() == 3
+LEAGUE_TABLES = {"meta", "runs", "players", "tags", "matches", "games", "game_seats", "blobs", "workers", "jobs",
+                 "alembic_version"}
 
 
-@pytest.mark.parametrize("stored", [99, 0])
-def test_other_schema_version_is_refused(tmp_path: Path, stored: int) -> None:
-    League.open(home=tmp_path).close()
-    db = tmp_path / "league.db"
-    with sqlite3.connect(db) as con:
-        con.execute("UPDATE meta SET value = ? WHERE key = 'schema_version'", (str(stored),))
-    con.close()
-    with pytest.raises(LeagueError) as exc:
-        League.open(home=tmp_path)
-    msg = _one_line(exc)
-    assert f"version {stored}" in msg and f"version {SCHEMA_VERSION}" in msg and str(db.resolve()) in msg
+def test_a_new_league_is_at_the_newest_revision(db_url: str) -> None:
+    with League(db_url) as lg:
+        assert lg.schema_revision() == migrations.head() == "0003"
+    engine = create_engine(db_url)
+    with engine.connect() as conn:
+        assert set(inspect(conn).get_table_names()) == LEAGUE_TABLES
+    engine.dispose()
+    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0003",)]
+    # meta.schema_version stays above what a release from before Alembic reads (2): such a release refuses the league
+    assert _sql(db_url, "SELECT value FROM meta WHERE key = 'schema_version'") == [("3",)]
+    with League(db_url) as lg2:  # re-opening an existing league keeps it
+        assert lg2.schema_revision() == "0003"
 
 
-def test_old_schema_goes_through_migrations(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    League.open(home=tmp_path).close()
-    with sqlite3.connect(tmp_path / "league.db") as con:
-        con.execute("UPDATE meta SET value = '0' WHERE key = 'schema_version'")
-    con.close()
-    calls: list[int] = []
-    monkeypatch.setitem(store.MIGRATIONS, 0, lambda conn: calls.append(conn.execute(text("SELECT 1")).scalar()))
-    with League.open(home=tmp_path) as lg:
-        assert calls == [1]
-        assert lg.schema_version() == SCHEMA_VERSION
+def _schema(url: str) -> dict[str, object]:
+    """Everything a database says of its league tables: columns (type, nullable), keys, indexes (with partial
+    ``WHERE``), unique constraints, foreign keys."""
+    engine = create_engine(url)
+    out: dict[str, object] = {}
+    with engine.connect() as conn:
+        insp = inspect(conn)
+        for t in sorted(set(insp.get_table_names()) - {"alembic_version"}):
+            out[t] = {
+                "columns": [(c["name"], str(c["type"]), c["nullable"]) for c in insp.get_columns(t)],
+                "pk": insp.get_pk_constraint(t)["constrained_columns"],
+                "fks": sorted((tuple(f["constrained_columns"]), f["referred_table"], tuple(f["referred_columns"]),
+                               str(f.get("options"))) for f in insp.get_foreign_keys(t)),
+                "indexes": sorted((i["name"], tuple(i["column_names"]), bool(i["unique"]),
+                                   str(sorted((k, str(v)) for k, v in (i.get("dialect_options") or {}).items())))
+                                  for i in insp.get_indexes(t)),
+                "uniques": sorted((u["name"] or "", tuple(u["column_names"])) for u in insp.get_unique_constraints(t)),
+            }
+    engine.dispose()
+    return out
 
 
-def test_foreign_or_corrupt_database_is_refused(tmp_path: Path) -> None:
-    other = tmp_path / "other.db"
-    with sqlite3.connect(other) as con:
-        con.execute("CREATE TABLE stuff (x INTEGER)")
-    con.close()
-    with pytest.raises(LeagueError) as exc:
-        League(f"sqlite:///{other}")
-    assert "not a marl league" in _one_line(exc)
+def test_the_revisions_make_the_schema_create_all_makes(db_url: str, pg_url: str, tmp_path: Path) -> None:
+    """Run from nothing, the Alembic revisions give the very schema of the models (the one a new league gets):
+    Alembic's own comparison finds nothing to change, and every column, key and index (the partial unique one and
+    the work keys' among them) reads back the same."""
+    other = pg_url if db_url.startswith("postgresql") else f"sqlite:///{tmp_path / 'by_create_all.db'}"
+    League(other).close()  # create_all, stamped
+    engine = create_engine(db_url)
+    with engine.begin() as conn:
+        assert migrations.upgrade(conn, None) == ["0002", "0003"]
+    with engine.connect() as conn:
+        assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
+    engine.dispose()
+    migrated, created = _schema(db_url), _schema(other)
+    assert "uq_players_env_name_no_run" in str(migrated["players"]) and "run_id IS NULL" in str(migrated["players"])
+    assert "uq_matches_work_key" in str(migrated["matches"])
+    assert migrated == created
+    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0003",)]
+
+
+def _make_legacy(url: str, version: int) -> None:
+    """Turn the league at ``url`` into one the last release before Alembic wrote: no queue tables, no Alembic table,
+    ``meta.schema_version`` = ``version`` (1: no work keys either)."""
+    for statement in ("DROP TABLE jobs", "DROP TABLE workers", "DROP TABLE blobs", "DROP TABLE alembic_version"):
+        _sql(url, statement)
+    if version == 1:
+        _sql(url, "DROP INDEX uq_matches_work_key")
+        _sql(url, "ALTER TABLE matches DROP COLUMN work_key")
+    _sql(url, "UPDATE meta SET value = :v WHERE key = 'schema_version'", v=str(version))
+
+
+@pytest.mark.parametrize("legacy", [1, 2])
+def test_a_league_of_the_previous_release_is_upgraded_in_place_once(db_url: str, pg_url: str, tmp_path: Path,
+                                                                     legacy: int) -> None:
+    with League(db_url) as lg:
+        lg.ensure_bots(ENV, ["a", "b"])
+        a, b = (p.id for p in lg.players())
+        lg.record_games(lg.create_match(ENV, "match"), [_game(a, b, 1.0, 1), _game(b, a, 0.5, 2)])
+        before = {p.id: (p.elo, p.games) for p in lg.players()}
+    _make_legacy(db_url, legacy)
+    notes: list[str] = []
+    with League(db_url, readonly=True, note=notes.append) as lg:  # a command that only reads reads it as it is
+        assert lg.schema_revision() == f"legacy {legacy}"
+        assert {p.id: (p.elo, p.games) for p in lg.players()} == before and lg.count_games() == 2
+    assert notes == [] and ("alembic_version",) not in _tables(db_url)
+    with League(db_url, note=notes.append) as lg:  # a command that writes upgrades it, and says so once
+        assert lg.schema_revision() == "0003"
+        assert {p.id: (p.elo, p.games) for p in lg.players()} == before and lg.count_games() == 2
+        lg.create_match_with_games(ENV, "eval", {}, [_game(a, b, 1.0, 3)], key="k")  # what the upgrade brought
+        assert set(lg.keyed_matches("k")) == {"k"} and lg.count_games() == 3
+    where = str(tmp_path / "league.db") if db_url.startswith("sqlite") else make_url(db_url).render_as_string()
+    brought = ("match work keys; " if legacy == 1 else "") + "snapshot blobs, work queue"
+    assert notes == [f"marl: upgraded league database {where} from schema {legacy} to 0003 ({brought})"]
+    with League(db_url, note=notes.append):
+        pass
+    assert len(notes) == 1
+    other = pg_url if db_url.startswith("postgresql") else f"sqlite:///{tmp_path / 'new.db'}"
+    League(other).close()
+    assert _schema(db_url) == _schema(other)  # the upgraded league is a new league's schema
+    assert _sql(db_url, "SELECT value FROM meta WHERE key = 'schema_version'") == [("3",)]
+
+
+def _tables(url: str) -> list[tuple[str]]:
+    engine = create_engine(url)
+    with engine.connect() as conn:
+        names = [(t,) for t in inspect(conn).get_table_names()]
+    engine.dispose()
+    return names
+
+
+def test_the_league_file_of_the_previous_release_upgrades(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A real league file written by an older release (schema 1, ``tests/data``), through the CLI: a command that
+    reads reads it as it is and changes nothing; the first command that writes upgrades it, in one line on stderr."""
+    from cli_helpers import run
+
+    home = tmp_path / "h"
+    home.mkdir()
+    shutil.copy(OLD_LEAGUE, home / "league.db")
+    code, out, err = run(capsys, "league", "ladder", "--home", str(home), "--env", "pong", "--bootstrap", "0", "--json")
+    assert code == 0 and err == "" and json.loads(out)
+    assert (home / "league.db").read_bytes() == OLD_LEAGUE.read_bytes()
+    match = ("match", "cpu", "random", "--env", "pong", "--env-option", "points_to_win=1", "--games", "2", "-q",
+             "--home", str(home), "--json")
+    code, out, err = run(capsys, *match)
+    assert code == 0 and json.loads(out)["games"] == 2, err
+    assert err == (f"marl: upgraded league database {(home / 'league.db').resolve()} from schema 1 to 0003 "
+                   "(match work keys; snapshot blobs, work queue)\n")
+    code, out, err = run(capsys, *match)
+    assert code == 0 and err == ""  # once
+    with League.open(home, readonly=True) as lg:
+        assert lg.schema_revision() == "0003" and lg.count_games("pong") == 12 + 4  # 12 pong games before
+    engine = create_engine(f"sqlite:///{home / 'league.db'}")
+    with engine.connect() as conn:
+        assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
+    engine.dispose()
+
+
+@pytest.mark.parametrize("what", ["revision", "legacy"])
+def test_a_league_of_a_newer_marl_is_refused(db_url: str, what: str) -> None:
+    League(db_url).close()
+    if what == "revision":
+        _sql(db_url, "UPDATE alembic_version SET version_num = '0099'")
+    else:
+        _sql(db_url, "DROP TABLE alembic_version")
+        _sql(db_url, "UPDATE meta SET value = '99' WHERE key = 'schema_version'")
+    for readonly in (False, True):
+        with pytest.raises(LeagueError) as exc:
+            League(db_url, readonly=readonly)
+        msg = _one_line(exc)
+        assert f"was written by a newer marl (schema {'0099' if what == 'revision' else '99'}); upgrade marl" in msg
+    if what == "revision":
+        assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0099",)]  # nothing written
+
+
+def test_a_league_without_a_valid_version_is_refused(db_url: str) -> None:
+    League(db_url).close()
+    _sql(db_url, "DROP TABLE alembic_version")
+    _sql(db_url, "UPDATE meta SET value = '0' WHERE key = 'schema_version'")
+    with pytest.raises(LeagueError, match="has no valid schema version") as exc:
+        League(db_url)
+    _one_line(exc)
+
+
+def _open_at_once(url: str, start: object, out: str) -> None:
+    """Child process: open the league at ``url`` when ``start`` is set; write the lines it said."""
+    notes: list[str] = []
+    start.wait(60)  # type: ignore[attr-defined]
+    try:
+        League(url, note=notes.append).close()
+    except BaseException:
+        notes.append("error: " + traceback.format_exc())
+    Path(out).write_text(json.dumps(notes))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("old", [False, True])
+def test_two_processes_opening_a_new_or_old_league_at_once(db_url: str, tmp_path: Path, old: bool) -> None:
+    """The opening transactions are serialised: one creates (or upgrades) the league, the other finds it done."""
+    if old:
+        League(db_url).close()
+        _make_legacy(db_url, 2)
+    ctx = mp.get_context("spawn")
+    start = ctx.Event()
+    outs = [tmp_path / f"open{i}.json" for i in range(3)]
+    procs = [ctx.Process(target=_open_at_once, args=(db_url, start, str(o))) for o in outs]
+    for p in procs:
+        p.start()
+    time.sleep(1.5)  # all three waiting on the event (spawn imports marl first)
+    start.set()
+    for p in procs:
+        p.join(60)
+    notes = [json.loads(o.read_text()) for o in outs]
+    assert not any(n.startswith("error") for said in notes for n in said), notes
+    assert sum(len(said) for said in notes) == (1 if old else 0), notes
+    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0003",)]
+    assert _sql(db_url, "SELECT count(*) FROM meta WHERE key = 'schema_version'") == [(1,)]
+    assert set(_tables(db_url)) == {(t,) for t in LEAGUE_TABLES}
+
+
+def test_a_database_that_is_not_a_league_is_refused_and_left_alone(db_url: str) -> None:
+    _sql(db_url, "CREATE TABLE stuff (x INTEGER)")
+    for readonly in (False, True):
+        with pytest.raises(LeagueError) as exc:
+            League(db_url, readonly=readonly)
+        assert "is not a marl league database (it holds other tables: stuff)" in _one_line(exc)
+    assert _tables(db_url) == [("stuff",)]
+
+
+def test_corrupt_database_or_url_is_refused(tmp_path: Path) -> None:
     junk = tmp_path / "junk.db"
     junk.write_bytes(b"this is not sqlite at all" * 100)
     with pytest.raises(LeagueError) as exc:
@@ -121,7 +305,8 @@ def test_foreign_or_corrupt_database_is_refused(tmp_path: Path) -> None:
         League("not a url at all")
 
 
-def test_sqlite_pragmas_wal(league: League) -> None:
+def test_sqlite_pragmas_wal(sqlite_league: League) -> None:
+    league = sqlite_league
     with league.session() as s:
         assert s.execute(text("PRAGMA journal_mode")).scalar() == "wal"
         assert s.execute(text("PRAGMA busy_timeout")).scalar() == 30000
@@ -132,8 +317,9 @@ def test_sqlite_pragmas_wal(league: League) -> None:
     con.close()
 
 
-def test_write_sessions_begin_immediate(league: League) -> None:
-    """A write session takes the write lock at BEGIN; readers are never blocked by it (WAL)."""
+def test_write_sessions_begin_immediate(sqlite_league: League) -> None:
+    """SQLite: a write session takes the write lock at BEGIN; readers are never blocked by it (WAL)."""
+    league = sqlite_league
     other = League(f"sqlite:///{league.db_path}", busy_timeout=0.1)
     try:
         with league.session() as s:
@@ -294,9 +480,8 @@ def test_remove_snapshot_keeps_games(league: League) -> None:
     table = league.games()
     assert table.game_id.tolist() == ids and snap.id in table.player_ids()
     assert league.pair_counts(snap.id, bot.id) == (1, 1, 0)
-    with sqlite3.connect(league.db_path) as con:
-        assert con.execute("SELECT count(*) FROM game_seats WHERE player_id = ?", (snap.id,)).fetchone() == (2,)
-    con.close()
+    with league.session(readonly=True) as s:
+        assert s.execute(text("SELECT count(*) FROM game_seats WHERE player_id = :p"), {"p": snap.id}).all() == [(2,)]
     with pytest.raises(LeagueError):
         league.remove_snapshot(snap.id)  # already removed
     with pytest.raises(LeagueError):
@@ -448,16 +633,21 @@ def _writer(url: str, match_id: int, players: list[int], n_games: int, batch: in
         Path(out).write_text(json.dumps(result))
 
 
-def _setup_league(tmp_path: Path) -> tuple[str, int, list[int]]:
-    with League.open(home=tmp_path / "league") as lg:
+def _setup_league(url: str) -> tuple[int, list[int]]:
+    with League(url) as lg:
         lg.ensure_bots(ENV, ["a", "b", "c", "d"])
         players = [p.id for p in lg.players()]
         match_id = lg.create_match(ENV, "tournament")
-        return f"sqlite:///{lg.db_path}", match_id, players
+        return match_id, players
 
 
-def test_two_processes_write_concurrently(tmp_path: Path) -> None:
-    url, match_id, players = _setup_league(tmp_path)
+def _count_games(url: str) -> int:
+    return _sql(url, "SELECT count(*) FROM games")[0][0]
+
+
+def test_two_processes_write_concurrently(tmp_path: Path, db_url: str) -> None:
+    url = db_url
+    match_id, players = _setup_league(url)
     ctx = mp.get_context("spawn")
     start = ctx.Event()
     outs = [tmp_path / f"w{i}.json" for i in range(2)]
@@ -486,15 +676,16 @@ def test_two_processes_write_concurrently(tmp_path: Path) -> None:
         stored = {p.id: p.elo for p in lg.players()}
         lg.recompute_online_elo()  # online updates were serialized in game-id order
         assert {p.id: p.elo for p in lg.players()} == stored
-    # BEGIN IMMEDIATE + busy_timeout suffice; the lock retry is only a safety net.
+    # SQLite: BEGIN IMMEDIATE + busy_timeout suffice; PostgreSQL: the players' rows are locked in one order, so the
+    # writers never deadlock. The retry is only a safety net.
     assert results[0]["retries"] == results[1]["retries"] == 0
 
 
-def test_sigkill_mid_run_leaves_consistent_ledger(tmp_path: Path) -> None:
+def test_sigkill_mid_run_leaves_consistent_ledger(tmp_path: Path, db_url: str) -> None:
     if sys.platform == "win32":  # pragma: no cover
         pytest.skip("SIGKILL is POSIX")
-    url, match_id, players = _setup_league(tmp_path)
-    db = url.removeprefix("sqlite:///")
+    url = db_url
+    match_id, players = _setup_league(url)
     ctx = mp.get_context("spawn")
     start = ctx.Event()
     start.set()
@@ -504,9 +695,7 @@ def test_sigkill_mid_run_leaves_consistent_ledger(tmp_path: Path) -> None:
     count = 0
     while count < 200 and time.monotonic() < deadline:
         time.sleep(0.02)
-        con = sqlite3.connect(db, timeout=5)
-        count = con.execute("SELECT count(*) FROM games").fetchone()[0]
-        con.close()
+        count = _count_games(url)
     assert count >= 200, "writer made no progress"
     time.sleep(random.uniform(0.0, 0.05))
     os.kill(proc.pid, signal.SIGKILL)
@@ -514,7 +703,8 @@ def test_sigkill_mid_run_leaves_consistent_ledger(tmp_path: Path) -> None:
     assert proc.exitcode == -signal.SIGKILL
 
     with League(url) as lg, lg.session(readonly=True) as s:
-        assert s.execute(text("PRAGMA integrity_check")).scalar() == "ok"
+        if lg.is_sqlite:
+            assert s.execute(text("PRAGMA integrity_check")).scalar() == "ok"
         n = s.execute(text("SELECT count(*) FROM games")).scalar()
         assert n >= 200 and n % 10 == 0  # whole batches only
         incomplete = s.execute(text(
@@ -524,10 +714,71 @@ def test_sigkill_mid_run_leaves_consistent_ledger(tmp_path: Path) -> None:
             "SELECT count(*) FROM game_seats x LEFT JOIN games g ON g.id = x.game_id WHERE g.id IS NULL")).scalar()
         assert incomplete == 0 and orphans == 0
         assert s.execute(text("SELECT sum(games) FROM players")).scalar() == 2 * n  # Elo cache in step
-        assert s.execute(text("PRAGMA foreign_key_check")).all() == []
+        if lg.is_sqlite:
+            assert s.execute(text("PRAGMA foreign_key_check")).all() == []
     with League(url) as lg:
         stored = {p.id: p.elo for p in lg.players()}
         lg.recompute_online_elo()
         assert {p.id: p.elo for p in lg.players()} == stored
         lg.record_games(match_id, [_game(players[0], players[1], 1.0)])  # still writable
         assert lg.count_games() == n + 1
+
+
+# --------------------------------------------------------------------------------------------------
+# SQLite on a network file system
+# --------------------------------------------------------------------------------------------------
+
+
+def _mountinfo(tmp_path: Path) -> str:
+    """A /proc/self/mountinfo of a machine whose ``tmp_path/nfs`` is NFS (with a local disk mounted inside it),
+    ``tmp_path/my share`` SMB and ``tmp_path/remote`` sshfs."""
+    for d in ("nfs/local", "nfsx", "my share", "remote"):
+        (tmp_path / d).mkdir(parents=True)
+    t = str(tmp_path.resolve())
+    return "\n".join([
+        "22 1 8:1 / / rw,relatime shared:1 - ext4 /dev/sda1 rw",
+        f"40 22 0:50 / {t}/nfs rw,relatime shared:30 - nfs4 server:/export rw,vers=4.2",
+        f"41 40 8:2 / {t}/nfs/local rw,relatime - xfs /dev/sdb1 rw",
+        f"42 22 0:51 / {t}/my\\040share rw,relatime shared:31 master:2 - cifs //nas/share rw",
+        f"43 22 0:52 / {t}/remote rw,nosuid - fuse.sshfs me@host:/data rw,user_id=0",
+        "garbage line",
+    ])
+
+
+def test_network_filesystem_is_told_by_the_longest_mount_point(tmp_path: Path) -> None:
+    info = _mountinfo(tmp_path)
+    nfs = league_db.network_filesystem
+    assert nfs(tmp_path / "nfs", info) == "nfs4"
+    assert nfs(tmp_path / "nfs" / "not" / "made" / "yet", info) == "nfs4"  # a league home still to be created
+    assert nfs(tmp_path / "nfs" / "local", info) is None  # a local disk mounted inside the NFS share
+    assert nfs(tmp_path / "nfsx", info) is None  # a neighbour whose name starts the same is not inside it
+    assert nfs(tmp_path / "my share", info) == "cifs"  # mountinfo writes a space as \040
+    assert nfs(tmp_path / "remote", info) == "fuse.sshfs"
+    assert nfs(tmp_path, info) is None
+    (tmp_path / "link").symlink_to(tmp_path / "remote")
+    assert nfs(tmp_path / "link", info) == "fuse.sshfs"  # symlinks followed
+    assert nfs(tmp_path, "") is None
+
+
+def test_a_sqlite_league_on_a_network_file_system_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    from cli_helpers import run
+
+    info = _mountinfo(tmp_path)
+    home = tmp_path / "nfs" / "league"
+    League.open(home).close()  # made before the share was mounted over it, say
+    monkeypatch.setattr(league_db, "_read_mountinfo", lambda: info)
+    monkeypatch.delenv(league_db.ALLOW_NETWORK_SQLITE, raising=False)
+    before = (home / "league.db").read_bytes()
+    for args in (("league", "ladder"), ("checkpoint", "list"), ("elo", "fit")):
+        code, out, err = run(capsys, *args, "--home", str(home))
+        assert code == 2 and out == "" and err.count("\n") == 1, (args, code, err)
+        assert f"{home.resolve() / 'league.db'} is on a network file system (nfs4)" in err
+        assert "use a PostgreSQL league" in err and "MARL_ALLOW_NETWORK_SQLITE=1" in err
+    assert (home / "league.db").read_bytes() == before
+    with pytest.raises(LeagueError, match="network file system"):
+        League.open(tmp_path / "remote" / "new")
+    assert not (tmp_path / "remote" / "new").exists()  # refused before anything is made
+    monkeypatch.setenv(league_db.ALLOW_NETWORK_SQLITE, "1")  # the user knows better
+    code, _, err = run(capsys, "checkpoint", "list", "--home", str(home))
+    assert code == 0, err

@@ -18,13 +18,36 @@ waiting), and a plain deferred ``BEGIN`` for read-only units of work. A bounded 
 locked" covers what is left. Each batch of games is one transaction, so a crash never leaves half a batch, and
 Ctrl-C or SIGTERM during a unit of work waits until it has committed or rolled back (:mod:`selfplay_cli.signals`):
 an interrupt inside SQLAlchemy's own code could otherwise leave a connection in the middle of a transaction.
+SQLite's locks are not to be trusted on a network file system (NFS, SMB, sshfs, cluster file systems): a league file
+there is refused (:func:`network_filesystem`) with a line that says to use PostgreSQL.
+
+PostgreSQL
+----------
+``postgresql://`` and ``postgres://`` URLs mean psycopg 3 (``postgresql+psycopg://``), the driver of the
+``[postgres]`` extra. Connections are checked before use (``pool_pre_ping``); a read-only unit of work runs in a
+``READ ONLY`` transaction. A unit that fails on a serialization failure or a deadlock is retried like a SQLite lock;
+one that loses the server (restarted, unreachable) is retried with backoff for up to :attr:`Database.reconnect_for`
+seconds, saying once on stderr that it is waiting, then ends with a :class:`LeagueIOError` (exit 4). A unit whose
+COMMIT went out but whose answer never came back is not retried (it may have been stored): that too is a
+:class:`LeagueIOError`, and the command resumes from the league as it is.
+
+The schema
+----------
+Versioned with Alembic (:mod:`selfplay_cli.league.migrations`). Opening a league creates a new one (``create_all``,
+stamped with the newest revision), or checks the stored revision: a league written by a newer marl is refused, and
+an older one (also one from before Alembic, by its ``meta.schema_version``) is upgraded in place by a command that
+writes, in the opening transaction, with one line on stderr; a command that only reads reads it as it is. Two
+processes opening a new or old league at once do not both create or upgrade it: SQLite's ``BEGIN IMMEDIATE`` and,
+on PostgreSQL, a transaction-scoped advisory lock serialise the opening transactions.
 """
 
 from __future__ import annotations
 
 import os
 import random
+import re
 import sqlite3
+import sys
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -38,44 +61,23 @@ from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
 
 from selfplay_cli.errors import EXIT_IO, MarlError, MarlIOError
+from selfplay_cli.league import migrations
 from selfplay_cli.league.models import Base, Meta, utcnow
 from selfplay_cli.signals import signals_held
 
-__all__ = ["DB_FILENAME", "DEFAULT_HOME", "MIGRATIONS", "SCHEMA_VERSION", "Database", "LeagueError", "LeagueIOError",
-           "shown"]
-
-SCHEMA_VERSION = 3
-"""Version of the schema in :mod:`selfplay_cli.league.models`, stored in ``meta.schema_version``. 2: matches have a
-unique ``work_key``. 3: snapshot blobs and the work queue (``blobs``, ``workers``, ``jobs``)."""
-
-
-def _add_work_keys(conn: Connection) -> None:
-    """Version 1 to 2: ``matches.work_key`` (nullable; existing matches keep none) and its unique index."""
-    if "work_key" not in {c["name"] for c in inspect(conn).get_columns("matches")}:
-        conn.exec_driver_sql("ALTER TABLE matches ADD COLUMN work_key VARCHAR(200)")
-    if "uq_matches_work_key" not in {i["name"] for i in inspect(conn).get_indexes("matches")}:
-        conn.exec_driver_sql("CREATE UNIQUE INDEX uq_matches_work_key ON matches (work_key)")
-
-
-def _add_queue(conn: Connection) -> None:
-    """Version 2 to 3: the tables of snapshot blobs and the work queue."""
-    from selfplay_cli.league.models import Blob, Job, Worker
-
-    Base.metadata.create_all(conn, tables=[Blob.__table__, Worker.__table__, Job.__table__])
-
-
-OLDEST_READABLE = 1
-"""The oldest schema version a command that only reads reads as it is, without the upgrade it may not make:
-version 2 added a column only writers use (``matches.work_key``, deferred in the mapping, so reads never select it)."""
-
-MIGRATIONS: dict[int, Callable[[Connection], None]] = {1: _add_work_keys, 2: _add_queue}
-"""``MIGRATIONS[v](conn)`` upgrades a version-``v`` database to ``v + 1`` inside the opening transaction; an older
-database is accepted only if every step up to :data:`SCHEMA_VERSION` is here."""
+__all__ = ["ALLOW_NETWORK_SQLITE", "DB_FILENAME", "DEFAULT_HOME", "Database", "LeagueError", "LeagueIOError",
+           "network_filesystem", "shown"]
 
 DEFAULT_HOME = "./league"
 DB_FILENAME = "league.db"
 
+ALLOW_NETWORK_SQLITE = "MARL_ALLOW_NETWORK_SQLITE"
+"""The environment variable that, set to 1, lets a SQLite league lie on a network file system (for users who know
+their file system's locks work)."""
+
 _LOCK_RETRIES = 8
+_RECONNECT_FOR = 60.0
+_SCHEMA_LOCK = 0x6D61726C  # "marl": the key of the advisory lock that serialises the opening of a PostgreSQL league
 T = TypeVar("T")
 D = TypeVar("D", bound="Database")
 
@@ -102,10 +104,91 @@ def shown(value: object, limit: int = 60) -> str:
     return repr(cut)[:-1] + ("..." + repr(cut)[-1] if len(text) > limit else repr(cut)[-1])
 
 
+def _to_stderr(line: str) -> None:
+    sys.stderr.write(line + "\n")
+    sys.stderr.flush()
+
+
 def _is_locked(exc: BaseException) -> bool:
     """True if a DB error is SQLite's transient "database is locked" / "busy"."""
     msg = str(getattr(exc, "orig", exc)).lower()
     return "database is locked" in msg or "database table is locked" in msg
+
+
+_PG_RETRY = ("40001", "40P01")  # serialization_failure, deadlock_detected: the unit is retried at once
+_PG_GONE = ("57P01", "57P02", "57P03")  # admin / crash shutdown, cannot connect now: the server is going or coming
+_PG_REFUSED = ("password authentication failed", "authentication failed", "does not exist", "no pg_hba.conf entry",
+               "permission denied for database")  # the URL's user, password or database is wrong: the user's to fix
+
+NETWORK_FILESYSTEMS = ("nfs", "nfs4", "cifs", "smb3", "smbfs", "ncpfs", "afs", "ceph", "glusterfs", "lustre", "gpfs",
+                       "beegfs", "ocfs2", "gfs2", "davfs", "fuse.sshfs", "fuse.s3fs", "fuse.gcsfuse", "fuse.rclone",
+                       "fuse.glusterfs", "fuse.juicefs", "fuse.davfs2", "fuse.cephfs", "fuse.beegfs")
+"""File systems whose locks SQLite cannot rely on (shared across machines, or over a network)."""
+
+
+def _read_mountinfo() -> str:
+    """The mounts of this process (Linux); empty where there is no such file."""
+    try:
+        return Path("/proc/self/mountinfo").read_text(errors="surrogateescape")
+    except OSError:
+        return ""
+
+
+def network_filesystem(path: Path, mountinfo: str | None = None) -> str | None:
+    """The type of the network file system ``path`` lies on (``nfs4``, ``cifs``, ``fuse.sshfs``...), or None.
+
+    Read from ``mountinfo`` (the text of ``/proc/self/mountinfo``; read here when None: off Linux there is none,
+    and the answer is None): the mount whose mount point is the longest prefix of the path, its nearest existing folder
+    resolved (symlinks followed)."""
+    if mountinfo is None:
+        mountinfo = _read_mountinfo()
+    where = Path(path).expanduser().absolute()
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    where = where.resolve()
+    best, fstype = -1, None
+    for line in mountinfo.splitlines():
+        fields = line.split()
+        try:
+            kind = fields[fields.index("-", 6) + 1]  # after the optional fields and their "-": the type
+        except (ValueError, IndexError):
+            continue
+        point = Path(re.sub(r"\\([0-7]{3})", lambda m: chr(int(m[1], 8)), fields[4]))  # "\040" is a space
+        if (where == point or point in where.parents) and len(point.parts) > best:
+            best, fstype = len(point.parts), kind
+    return fstype if fstype in NETWORK_FILESYSTEMS else None
+
+
+def _refuse_network_sqlite(db_file: Path) -> None:
+    """A :class:`LeagueError` if the SQLite file ``db_file`` lies on a network file system (unless the user said
+    :data:`ALLOW_NETWORK_SQLITE`)."""
+    if os.environ.get(ALLOW_NETWORK_SQLITE) == "1":
+        return
+    fstype = network_filesystem(db_file.parent)
+    if fstype is not None:
+        raise LeagueError(
+            f"{db_file} is on a network file system ({fstype}), where SQLite's locks cannot be trusted and a "
+            f"league gets corrupted: use a PostgreSQL league for several machines (--db postgresql://user@host/db; "
+            f"README: A league on PostgreSQL), or set {ALLOW_NETWORK_SQLITE}=1")
+
+
+def _driver_url(url: URL) -> URL:
+    """``postgresql://`` (which SQLAlchemy takes to mean psycopg2) and ``postgres://`` as psycopg 3, the driver that
+    ``pip install "selfplay-cli[postgres]"`` brings."""
+    if url.drivername in ("postgresql", "postgres"):
+        return url.set(drivername="postgresql+psycopg")
+    return url
+
+
+def _sqlstate(exc: BaseException) -> str | None:
+    return getattr(getattr(exc, "orig", None), "sqlstate", None)
+
+
+def _reason(exc: BaseException) -> str:
+    """The driver's first line of a database error (psycopg's ``connection failed: `` prefix dropped)."""
+    orig = getattr(exc, "orig", None)
+    text = str(orig if orig is not None else exc).strip().splitlines()
+    return (text[0] if text else type(exc).__name__).removeprefix("connection failed: ")
 
 
 def _sqlite_file(url: URL) -> Path | None:
@@ -126,12 +209,19 @@ class Database:
         home: the league home directory (snapshot files live under it); for a direct ``League(url)``
             it defaults to the directory of a SQLite file, else None.
         db_path: the SQLite database file, or None for other backends / in-memory databases.
+        is_sqlite, is_postgres: the backend (for code that must differ, such as the work queue's
+            ``FOR UPDATE SKIP LOCKED`` on PostgreSQL).
         elo_k: K factor of the online Elo updates (default 16).
-        lock_retries: how many times a unit of work was retried after "database is locked" (diagnostic).
+        lock_retries: how many times a unit of work was retried after "database is locked", a serialization
+            failure or a deadlock (diagnostic).
+        reconnects: how many times a unit of work was retried after losing the server (diagnostic).
+        reconnect_for: seconds a unit of work waits for a lost PostgreSQL server to come back (default 60).
+        note: where a line for the user goes (an upgrade made, the server lost): stderr unless given.
     """
 
     def __init__(self, url: str | URL, *, home: str | Path | None = None, elo_k: float = 16.0,
-                 busy_timeout: float = 30.0, readonly: bool = False) -> None:
+                 busy_timeout: float = 30.0, readonly: bool = False, reconnect_for: float = _RECONNECT_FOR,
+                 note: Callable[[str], None] | None = None) -> None:
         """Open (creating if new) the league at ``url``; with ``readonly`` open an existing one for reading only.
 
         A read-only league creates nothing (no folder, no database, no tables) and writes nothing: every method
@@ -140,17 +230,26 @@ class Database:
         ``mode=ro`` where the file or its folder cannot be written, and to ``immutable=1`` on read-only media where
         SQLite cannot even make its shared-memory file (no writer can be at work there then).
 
+        A league that a command that writes opens is brought to the newest schema first (one line through ``note``
+        says so); a league written by a newer marl is refused.
+
         Raises:
-            LeagueError: invalid URL, missing driver, unreadable or foreign database, schema version
-                this code cannot handle; read-only: no database there.
+            LeagueError: invalid URL, missing driver, unreadable or foreign database, wrong user, password or
+                database name, schema this code cannot handle (written by a newer marl), SQLite on a network file
+                system; read-only: no database there.
+            LeagueIOError: the server cannot be reached, or the file cannot be read or written.
         """
         try:
-            self.url: URL = make_url(url)
+            self.url: URL = _driver_url(make_url(url))
         except ArgumentError as exc:
             raise LeagueError(f"invalid database URL {shown(str(url))}") from exc
         self.db_path: Path | None = _sqlite_file(self.url)
         self.is_sqlite = self.url.get_backend_name() == "sqlite"
+        self.is_postgres = self.url.get_backend_name() == "postgresql"
         self.readonly = bool(readonly)
+        self.reconnect_for = float(reconnect_for)
+        self.reconnects = 0
+        self.note: Callable[[str], None] = note or _to_stderr
         if home is not None:
             self.home: Path | None = Path(home).expanduser().resolve()
         else:
@@ -161,6 +260,8 @@ class Database:
         self._where = str(self.db_path) if self.db_path is not None else self.url.render_as_string(True)
         if self.readonly and self.db_path is not None and not self.db_path.is_file():
             raise LeagueError(f"no league database at {self._where} (nothing trained or imported there yet)")
+        if self.db_path is not None:
+            _refuse_network_sqlite(self.db_path)
         self._empty = False
         if self.db_path is not None and not self.readonly:
             try:
@@ -173,13 +274,18 @@ class Database:
                 self._connect(mode)
                 return
             except LeagueError:
-                self.engine.dispose()
+                if hasattr(self, "engine"):  # (none where the driver is missing)
+                    self.engine.dispose()
                 raise
             except DBAPIError as exc:
                 self.engine.dispose()
-                reason = str(exc.orig).splitlines()[0] if exc.orig is not None else type(exc).__name__
+                reason = _reason(exc)
                 if i + 1 < len(modes) and ("unable to open" in reason or "readonly" in reason):
                     continue  # read-only file, folder or medium: the next, more restricted way to read it
+                if self.is_postgres and self._refused(exc):
+                    raise LeagueError(f"cannot open league database {self._where}: {reason}") from exc
+                if self.is_postgres and self._unreachable(exc):
+                    raise LeagueIOError(f"cannot reach league database {self._where}: {reason}") from exc
                 error = LeagueIOError if any(w in reason.lower() for w in _IO_REASONS) else LeagueError
                 raise error(f"cannot open league database {self._where}: {reason}") from exc
 
@@ -195,12 +301,20 @@ class Database:
             if self._empty:  # an empty league to read: one connection (every thread sees the same tables)
                 self.engine: Engine = create_engine(engine_url, poolclass=StaticPool,
                                                     connect_args={"check_same_thread": False})
-            else:
-                self.engine = create_engine(engine_url)
+            else:  # a connection the server dropped (restarted) is found out before use, not by the unit of work
+                self.engine = create_engine(engine_url, pool_pre_ping=not self.is_sqlite)
         except (NoSuchModuleError, ImportError) as exc:
-            raise LeagueError(f"cannot use database {self._where}: no driver ({exc})") from exc
+            extra = ' (pip install "selfplay-cli[postgres]")' if self.is_postgres else ""
+            raise LeagueError(f"cannot use database {self._where}: no driver{extra} ({exc})") from exc
         if self.is_sqlite:
             self._install_sqlite_listeners()
+        elif self.is_postgres:
+            readonly_league = self.readonly
+
+            @event.listens_for(self.engine, "begin")
+            def _on_begin(conn: Connection) -> None:  # a unit that only reads cannot write, whatever it runs
+                if readonly_league or conn.get_execution_options().get("marl_readonly", False):
+                    conn.exec_driver_sql("SET TRANSACTION READ ONLY")
         self._sessions = sessionmaker(self.engine, expire_on_commit=False)
         self._read_sessions = sessionmaker(self.engine.execution_options(marl_readonly=True),
                                            expire_on_commit=False)
@@ -224,6 +338,7 @@ class Database:
                 if not (home_path / DB_FILENAME).exists():  # nothing there yet: read an empty league, create nothing
                     return cls(URL.create("sqlite", database=":memory:"), home=home_path, readonly=True, **kwargs)
             else:
+                _refuse_network_sqlite(home_path / DB_FILENAME)  # before the home is made there
                 try:
                     home_path.mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
@@ -284,70 +399,74 @@ class Database:
             conn.exec_driver_sql("BEGIN" if readonly else "BEGIN IMMEDIATE")
 
     def _init_schema(self) -> None:
-        """Create the tables of a new database, or check (and migrate) the stored schema version."""
-
-        def init(conn: Connection) -> None:
-            tables = set(inspect(conn).get_table_names())
-            if "meta" not in tables:
-                if tables & {"players", "games", "runs"} or (tables and self.db_path is not None):
-                    raise LeagueError(f"{self._where} is not a marl league database (no meta table)")
-                if self.readonly and not self._empty:
-                    raise LeagueError(f"{self._where} holds no league yet (no tables)")
-                Base.metadata.create_all(conn)
-                conn.execute(Meta.__table__.insert().values(key="schema_version", value=str(SCHEMA_VERSION)))
-                conn.execute(Meta.__table__.insert().values(key="created_at", value=utcnow().isoformat()))
-                return
-            raw = conn.execute(select(Meta.value).where(Meta.key == "schema_version")).scalar()
-            try:
-                stored = int(raw) if raw is not None else None
-            except ValueError:
-                stored = None
-            if stored is None:
-                raise LeagueError(f"league database {self._where} has no valid schema version ({raw!r})")
-            self._migrate(conn, stored)
-
+        """Create the tables of a new database, or check the stored schema and bring it to the newest (see the
+        module docstring), in one transaction."""
         for attempt in range(_LOCK_RETRIES + 1):
             try:
                 with self.engine.begin() as conn:
-                    init(conn)
-                return
+                    if self.is_postgres and not self.readonly:  # one opener at a time creates or upgrades
+                        conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({_SCHEMA_LOCK})")
+                    said = self._schema(conn)
+                break
             except OperationalError as exc:
-                if not (self.is_sqlite and _is_locked(exc)) or attempt == _LOCK_RETRIES:
+                if not self._transient(exc) or attempt == _LOCK_RETRIES:
                     raise
                 self._backoff(attempt)
+        if said:
+            self.note(f"marl: {said}")
 
-    def _migrate(self, conn: Connection, stored: int) -> None:
-        """Bring a version-``stored`` database to :data:`SCHEMA_VERSION` through :data:`MIGRATIONS`."""
-        if stored == SCHEMA_VERSION:
-            return
-        if stored > SCHEMA_VERSION:
-            raise LeagueError(
-                f"league database {self._where} has schema version {stored}, newer than version "
-                f"{SCHEMA_VERSION} of this marl: upgrade marl"
-            )
-        missing = [v for v in range(stored, SCHEMA_VERSION) if v not in MIGRATIONS]
-        if self.readonly and stored >= OLDEST_READABLE:
-            return
-        if self.readonly and not missing:
-            raise LeagueError(
-                f"league database {self._where} has schema version {stored} and needs upgrading to version "
-                f"{SCHEMA_VERSION}, which a command that only reads does not do: run one that writes first"
-            )
-        if missing:
-            raise LeagueError(
-                f"league database {self._where} has schema version {stored}, this marl needs version "
-                f"{SCHEMA_VERSION} and has no migration from it"
-            )
-        for v in range(stored, SCHEMA_VERSION):
-            MIGRATIONS[v](conn)
-        conn.execute(
-            Meta.__table__.update().where(Meta.key == "schema_version").values(value=str(SCHEMA_VERSION))
-        )
+    def _schema(self, conn: Connection) -> str | None:
+        """The work of :meth:`_init_schema`; what was upgraded, as a line for the user, or None."""
+        tables = set(inspect(conn).get_table_names())
+        if "meta" not in tables:
+            if tables:
+                raise LeagueError(f"{self._where} is not a marl league database (it holds other tables: "
+                                  f"{', '.join(sorted(tables)[:3])}{', ...' if len(tables) > 3 else ''})")
+            if self.readonly and not self._empty:
+                raise LeagueError(f"{self._where} holds no league yet (no tables)")
+            Base.metadata.create_all(conn)
+            migrations.stamp_head(conn)
+            conn.execute(Meta.__table__.insert().values(key="schema_version", value=str(migrations.ALEMBIC_MARK)))
+            conn.execute(Meta.__table__.insert().values(key="created_at", value=utcnow().isoformat()))
+            return None
+        revision = migrations.current(conn)
+        legacy = None
+        if revision is None:  # written before Alembic: its meta.schema_version says where it stands
+            raw = conn.execute(select(Meta.value).where(Meta.key == "schema_version")).scalar()
+            try:
+                legacy = int(raw) if raw is not None else None
+            except ValueError:
+                legacy = None
+            if legacy is None or legacy < 1:
+                raise LeagueError(f"league database {self._where} has no valid schema version ({raw!r})")
+            if legacy > migrations.ALEMBIC_MARK:
+                raise LeagueError(f"league database {self._where} was written by a newer marl (schema {legacy}); "
+                                  "upgrade marl")
+        elif not migrations.known(revision):
+            raise LeagueError(f"league database {self._where} was written by a newer marl (schema {revision}); "
+                              "upgrade marl")
+        if revision == migrations.head() or self.readonly:
+            return None  # a command that only reads reads any schema this marl knows as it is
+        start = revision if legacy is None else migrations.legacy_revision(conn, legacy)
+        applied = migrations.upgrade(conn, start)
+        conn.execute(Meta.__table__.update().where(Meta.key == "schema_version")
+                     .values(value=str(migrations.ALEMBIC_MARK)))
+        what = (["match work keys"] if legacy == 1 else []) + ([migrations.summary(applied)] if applied else [])
+        return (f"upgraded league database {self._where} from schema {revision or legacy} to {migrations.head()}"
+                f" ({'; '.join(what) or 'its version now kept by Alembic'})")
 
-    def schema_version(self) -> int:
-        """The schema version stored in the database."""
-        with self.session(readonly=True) as s:
-            return int(s.execute(select(Meta.value).where(Meta.key == "schema_version")).scalar_one())
+    def schema_revision(self) -> str:
+        """The schema the database is at: its Alembic revision, or ``"legacy N"`` for a league from before Alembic
+        that a command that only reads opened (``meta.schema_version`` N)."""
+
+        def work(s: Session) -> str:
+            conn = s.connection()
+            revision = migrations.current(conn)
+            if revision is not None:
+                return revision
+            return f"legacy {s.execute(select(Meta.value).where(Meta.key == 'schema_version')).scalar_one()}"
+
+        return self._read(work)
 
     def close(self) -> None:
         """Close every pooled connection."""
@@ -377,28 +496,69 @@ class Database:
         self.lock_retries += 1
         time.sleep(min(0.05 * 2**attempt, 2.0) * (0.5 + random.random()))
 
+    def _transient(self, exc: OperationalError) -> bool:
+        """True for a failure that retrying the unit at once cures: SQLite's lock, PostgreSQL's serialization
+        failure or deadlock."""
+        return _is_locked(exc) if self.is_sqlite else _sqlstate(exc) in _PG_RETRY
+
+    def _refused(self, exc: DBAPIError) -> bool:
+        """True if the PostgreSQL server refused the URL's user, password or database (the user's to fix)."""
+        return any(w in _reason(exc).lower() for w in _PG_REFUSED)
+
+    def _unreachable(self, exc: DBAPIError) -> bool:
+        """True if the PostgreSQL server was lost or cannot be reached: the connection broke, the server is
+        shutting down or starting up, or no server answers at the URL."""
+        if not self.is_postgres or self._refused(exc):
+            return False
+        state = _sqlstate(exc)
+        return (bool(exc.connection_invalidated) or (state or "").startswith("08") or state in _PG_GONE
+                or (state is None and isinstance(exc, OperationalError)))
+
     def _unit(self, fn: Callable[[Session], T], readonly: bool = False) -> T:
-        """Run ``fn`` in one transaction, retrying the whole unit a few times if SQLite reports a lock.
+        """Run ``fn`` in one transaction, retrying the whole unit a few times if SQLite reports a lock or PostgreSQL a
+        serialization failure or deadlock, and for up to :attr:`reconnect_for` seconds while the PostgreSQL server
+        is lost (one line says so, once). A unit whose COMMIT was sent when the server was lost is not retried: it
+        may have been stored (:class:`LeagueIOError`).
 
         A write unit of a read-only league is refused before anything starts."""
         if self.readonly and not readonly:
             raise LeagueError(f"league {self.home or self._where} is open read-only: this needs a command that writes")
-        for attempt in range(_LOCK_RETRIES + 1):
+        attempt = tries = 0
+        lost_since: float | None = None
+        while True:
+            committing = False
             try:
                 with signals_held(), self.session(readonly=readonly) as s:  # Ctrl-C waits for commit or rollback
-                    return fn(s)
-            except OperationalError as exc:
-                if not (self.is_sqlite and _is_locked(exc)):
-                    error = self._io_error(exc)
+                    result = fn(s)
+                    committing = True  # leaving the block commits
+                return result
+            except DBAPIError as exc:
+                if self._transient(exc):
+                    if attempt == _LOCK_RETRIES:
+                        busy = "locked by another process" if self.is_sqlite else "in conflict with other writers"
+                        raise LeagueError(f"league database {self._where} stayed {busy}; try again") from exc
+                    self._backoff(attempt)
+                    attempt += 1
+                    continue
+                if not self._unreachable(exc):
+                    error = self._io_error(exc) if isinstance(exc, OperationalError) else exc
                     if error is exc:
                         raise
                     raise error from exc
-                if attempt == _LOCK_RETRIES:
-                    raise LeagueError(
-                        f"league database {self._where} stayed locked by another process; try again"
-                    ) from exc
-                self._backoff(attempt)
-        raise AssertionError("unreachable")  # pragma: no cover
+                if committing and not readonly:
+                    raise LeagueIOError(f"lost league database {self._where} while committing (the last write may or "
+                                        f"may not be stored; run the command again): {_reason(exc)}") from exc
+                now = time.monotonic()
+                if lost_since is None:
+                    lost_since = now
+                    self.note(f"marl: league database {self._where} unreachable, retrying for up to "
+                              f"{self.reconnect_for:.0f} s ({_reason(exc)})")
+                if now - lost_since >= self.reconnect_for:
+                    raise LeagueIOError(f"league database {self._where} unreachable for {self.reconnect_for:.0f} s: "
+                                        f"{_reason(exc)}") from exc
+                self.reconnects += 1
+                tries += 1
+                time.sleep(min(0.25 * 2 ** min(tries, 5), 5.0, lost_since + self.reconnect_for - now))
 
     def _io_error(self, exc: OperationalError) -> Exception:
         """The error to raise for a database failure: one naming the database and the cause where the cause is

@@ -382,7 +382,8 @@ class Ledger(Database):
 
     def _insert_games(self, s: Session, match: Match, games: list[GameResult], pids: set[int]) -> list[int]:
         """Store checked ``games`` of ``match`` inside the session's transaction; the online Elo goes with them."""
-        q = select(Player).where(Player.id.in_(pids)).options(raiseload("*")).with_for_update()
+        # Locked in one order (PostgreSQL): two writers sharing players queue behind each other, never deadlock.
+        q = select(Player).where(Player.id.in_(pids)).order_by(Player.id).options(raiseload("*")).with_for_update()
         rows = s.execute(q).scalars().all()
         players = {p.id: p for p in rows}
         for i, g in enumerate(games):
@@ -595,7 +596,7 @@ class Ledger(Database):
             pq = select(Player)
             if env is not None:
                 pq = pq.where(Player.env == env)
-            pq = pq.options(raiseload("*")).with_for_update()
+            pq = pq.order_by(Player.id).options(raiseload("*")).with_for_update()
             players = {p.id: p for p in s.execute(pq).scalars()}
             for p in players.values():
                 p.elo, p.games = DEFAULT_ELO, 0

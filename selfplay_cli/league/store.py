@@ -8,7 +8,8 @@ games it counts, and :meth:`League.recompute_online_elo` rebuilds it from scratc
 The league is made of three concerns, each in its own module:
 
 * :mod:`selfplay_cli.league.db`: the engine, one session per unit of work (retried on SQLite's "database is
-  locked"), the schema and its version (SQLite concurrency is described there);
+  locked", PostgreSQL's conflicts and a lost server), the schema and its Alembic revision (SQLite concurrency and
+  PostgreSQL are described there);
 * :mod:`selfplay_cli.league.roster`: runs, players and tags, and the rule every name follows;
 * :mod:`selfplay_cli.league.ledger`: matches, the games with their seats, the online Elo and the rating table
   derived for every kind of game.
@@ -28,8 +29,6 @@ from pathlib import Path
 from selfplay_cli.league.db import (
     DB_FILENAME,
     DEFAULT_HOME,
-    MIGRATIONS,
-    SCHEMA_VERSION,
     Database,
     LeagueError,
     LeagueIOError,
@@ -62,10 +61,8 @@ __all__ = [
     "ENV_NAME_PATTERN",
     "KIND_CODES",
     "MATCH_KINDS",
-    "MIGRATIONS",
     "NAME_PATTERN",
     "RESERVED_NAMES",
-    "SCHEMA_VERSION",
     "SNAPSHOTS",
     "GameResult",
     "GameRow",
