@@ -127,8 +127,10 @@ def queue_cost(db: str, jobs: int = 200) -> float:
         a, b = (league.find_players(n, env="pong")[0].id for n in ("cpu", "random"))
         league.enqueue("cost", [NewJob("games", "pong", {"i": i}) for i in range(jobs)])
         w = league.add_worker("bench", "here", os.getpid())
-        games = [GameResult(env="pong", players=(a, b), scores=(21.0, 3.0), outcome=(1.0, 0.0), seed=0, length=900, truncated=False),
-                 GameResult(env="pong", players=(b, a), scores=(5.0, 21.0), outcome=(0.0, 1.0), seed=0, length=950, truncated=False)]
+        games = [GameResult(env="pong", players=(a, b), scores=(21.0, 3.0), outcome=(1.0, 0.0), seed=0, length=900,
+                            truncated=False),
+                 GameResult(env="pong", players=(b, a), scores=(5.0, 21.0), outcome=(0.0, 1.0), seed=0, length=950,
+                            truncated=False)]
         start = time.perf_counter()
         for _ in range(jobs):
             job = league.claim(w)

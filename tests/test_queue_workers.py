@@ -192,3 +192,25 @@ def test_a_worker_refuses_a_league_that_is_not_on_this_machine(tmp_path, capsys)
     assert not (tmp_path / "elsewhere").exists()
     code, out, err = run(capsys, "worker", "--home", str(tmp_path / "none"), "--until-empty")
     assert code == 2 and err.count("\n") == 1 and not (tmp_path / "none").exists()
+
+
+@pytest.mark.slow
+def test_a_worker_goes_on_through_a_postgresql_restart(pg_url, pg_restart, tmp_path):
+    """PostgreSQL stopped for 3 s and started again under a `marl worker` playing a batch: it says once that the
+    league is unreachable, waits for it, and finishes the batch: every job done, every game stored once."""
+    league = _league(pg_url, tmp_path / "h")
+    cpu, rnd = _bots(league)
+    league.enqueue("r", games_jobs(league, [cpu], rnd, games=2400, first_seed=0, match_kind="match",
+                                   env_options=SHORT, job_rounds=50))
+    proc = _worker(pg_url, tmp_path / "h", "--beat", "0.2", "--until-empty", "--json")
+    _wait(lambda: league.job_counts("r")["done"] >= 3, timeout=120)
+    league.close()
+    pg_restart(down=3.0)
+    out, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    assert err.count("unreachable") == 1  # said once, waited for
+    assert json.loads(out)["done"] == 24
+    league = League(pg_url, home=tmp_path / "h")
+    assert league.job_counts("r")["done"] == 24
+    assert Counter(_stored(league)) == Counter((s, k) for s in range(1200) for k in (0, 1))
+    league.close()
