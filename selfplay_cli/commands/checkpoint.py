@@ -1,4 +1,4 @@
-"""`marl checkpoint list|show|tag|rm|export|import`: the snapshots of the league."""
+"""`marl checkpoint list|show|tag|rm|export|import|push`: the snapshots of the league."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import typer
 from rich.table import Table
 
 from ..errors import MarlError, MarlIOError
-from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league
+from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, QuietOpt, check_env, open_league, progress_bar, progress_enabled
 from ._output import console, print_json
 
-app = typer.Typer(help="List, inspect, tag, remove, export and import snapshots.", no_args_is_help=True,
+app = typer.Typer(help="List, inspect, tag, remove, export, import and push snapshots.", no_args_is_help=True,
                   rich_markup_mode=None)
 NameArg = Annotated[str, typer.Argument(metavar="NAME", help="A snapshot: s6M-left, pong-1/s6M-left, a tag, latest, "
                                         "best or an id.")]
@@ -221,3 +221,53 @@ def import_cmd(
         print_json(_row_json(p))
     else:
         console.print(f"imported {file} as {p.full_name} (id {p.id}, {p.env})", markup=False)
+
+
+@app.command("push")
+def push(
+    names: Annotated[list[str] | None, typer.Argument(metavar="[NAME]...", help="Snapshots to store: s6M-left, "
+                                                      "pong-1/s6M-left, a tag, an id; a team name stores each "
+                                                      "member.")] = None,
+    every: Annotated[bool, typer.Option("--all", help="Every snapshot of the league (of --env), removed ones "
+                                        "too: their games stay rated.")] = False,
+    env: EnvOpt = None,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    quiet: QuietOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Store snapshot files in the league's database, so that any machine that has only the database (--db) can
+    play them. Snapshots trained or imported by this marl are there already; this stores those of leagues made
+    before, from this machine's files, each checked by hash first. Says how many were stored (and their bytes),
+    how many were there already, whose file is not on this machine and whose file is not the one registered;
+    exits 1 if any snapshot asked for is still not in the database."""
+    from ..rated.names import Team, resolve_or_team
+    from ..rated.snapshots import check_legacy_file
+
+    if bool(names) == every:
+        raise MarlError("name the snapshots to push, or pass --all for every snapshot of the league")
+    league = open_league(home, db)
+    try:
+        if every:
+            rows = league.players(env=check_env(env), kind="snapshot", include_removed=True)
+        else:
+            rows = []
+            for name in names or []:
+                found = resolve_or_team(league, name, check_env(env))
+                rows += found.members if isinstance(found, Team) else [found]
+            rows = list({p.id: p for p in rows if not p.is_bot}.values())
+        with progress_bar("storing snapshot files", len(rows), "files", progress_enabled(quiet or json_out)) as bar:
+            report = league.ensure_blobs(rows, check_legacy=check_legacy_file, advance=bar)
+    finally:
+        league.close()
+    if json_out:
+        print_json(report.to_dict())
+    else:
+        console.print(f"stored {len(report.stored)} snapshot file{'s' * (len(report.stored) != 1)} in the league "
+                      f"({report.stored_bytes:,} bytes); {len(report.present)} there already", markup=False)
+        for what, names_ in (("not on this machine, not in the league", report.missing),
+                             ("refused", report.refused)):
+            for name in names_:
+                console.print(f"{what}: {name}: {report.reasons[name]}", markup=False)
+    if report.missing or report.refused:
+        raise typer.Exit(1)
