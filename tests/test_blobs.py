@@ -320,3 +320,37 @@ def test_a_swapped_file_in_the_home_is_refused_not_replaced_by_the_blob(db_url, 
     with pytest.raises(SnapshotError, match="not the snapshot r/s1"):
         load_player(a, s1)
     a.close()
+
+
+def test_a_league_can_keep_its_blobs_in_a_shared_folder(db_url, tmp_path, capsys):
+    home, shared = tmp_path / "home", tmp_path / "shared disk"
+    shared.mkdir()
+    a = trained(db_url, home, names=("s1",))  # stored in the database, the default
+    assert a.blob_location() is None
+    for bad, why in (("http://host/blobs", "file://"), ("file://relative", "file://"),
+                     ((tmp_path / "absent").as_uri(), "not a folder")):
+        with pytest.raises(LeagueError, match=why):
+            a.set_blob_location(bad)
+    assert a.set_blob_location(shared.as_uri()) == shared.as_uri() == a.blob_location()
+    row = a.add_snapshot(env="pong", run="r", name="s2", path=save(home, "s2", seed=2))
+    assert (shared / row.sha256).read_bytes() == (home / row.path).read_bytes()
+    with a.session(readonly=True) as s:
+        stored = s.execute(select(Blob.url, Blob.data, Blob.size).where(Blob.sha256 == row.sha256)).one()
+    assert stored == ((shared / row.sha256).as_uri(), None, (home / row.path).stat().st_size)
+    elsewhere = League.open(tmp_path / "elsewhere", url=db_url)
+    assert results(elsewhere, "s2") == results(a, "s2")
+    assert load_player(elsewhere, elsewhere.find_players("r/s1")[0]).id == "r/s1"  # (still in the database)
+    elsewhere.close()
+    execute(a, "delete from blobs")
+    a.close()
+    where = ("--db", db_url, "--home", str(home))
+    code, out, err = run(capsys, "checkpoint", "push", "--to", "db", *where, "--json")
+    assert (code, json.loads(out)) == (0, {"blob_url": None}), err
+    code, out, err = run(capsys, "checkpoint", "push", "--all", "--to", str(shared), *where)
+    assert code == 2 and err.count("\n") == 1 and "file://" in err
+    code, out, err = run(capsys, "checkpoint", "push", "--all", "--to", shared.as_uri(), *where)
+    assert code == 0 and out.splitlines()[0] == f"the league keeps its snapshot files in {shared.as_uri()} from now on"
+    assert "stored 2 snapshot files" in out
+    with League.open(home, url=db_url) as league:
+        s1 = league.find_players("r/s1")[0]
+        assert league.blob_bytes(s1.sha256) == (shared / s1.sha256).read_bytes() == (home / s1.path).read_bytes()

@@ -230,6 +230,11 @@ def push(
                                                       "member.")] = None,
     every: Annotated[bool, typer.Option("--all", help="Every snapshot of the league (of --env), removed ones "
                                         "too: their games stay rated.")] = False,
+    to: Annotated[str | None, typer.Option("--to", metavar="URL", help="From now on keep the league's snapshot "
+                                           "files in this folder instead of the database: a file:// URL of a disk "
+                                           "every machine of the league mounts at the same path (file:///mnt/"
+                                           "shared/marl-blobs); 'db': in the database again. Files stored before "
+                                           "stay where they are.")] = None,
     env: EnvOpt = None,
     home: HomeOpt = None,
     db: DbOpt = None,
@@ -240,14 +245,27 @@ def push(
     play them. Snapshots trained or imported by this marl are there already; this stores those of leagues made
     before, from this machine's files, each checked by hash first. Says how many were stored (and their bytes),
     how many were there already, whose file is not on this machine and whose file is not the one registered;
-    exits 1 if any snapshot asked for is still not in the database."""
+    exits 1 if any snapshot asked for is still not in the database. With --to alone, only sets where the league
+    keeps them."""
     from ..rated.names import Team, resolve_or_team
     from ..rated.snapshots import check_legacy_file
 
-    if bool(names) == every:
+    if names and every:
+        raise MarlError("name the snapshots to push, or pass --all for every snapshot of the league, not both")
+    if not names and not every and to is None:
         raise MarlError("name the snapshots to push, or pass --all for every snapshot of the league")
     league = open_league(home, db)
     try:
+        if to is not None:
+            league.set_blob_location(None if to == "db" else to)
+        location = league.blob_location()
+        if to is not None and not json_out:
+            console.print(f"the league keeps its snapshot files in {location or 'the database'} from now on",
+                          markup=False)
+        if not names and not every:
+            if json_out:
+                print_json({"blob_url": location})
+            return
         if every:
             rows = league.players(env=check_env(env), kind="snapshot", include_removed=True)
         else:
@@ -261,7 +279,7 @@ def push(
     finally:
         league.close()
     if json_out:
-        print_json(report.to_dict())
+        print_json({**report.to_dict(), "blob_url": location})
     else:
         console.print(f"stored {len(report.stored)} snapshot file{'s' * (len(report.stored) != 1)} in the league "
                       f"({report.stored_bytes:,} bytes); {len(report.present)} there already", markup=False)

@@ -2,9 +2,14 @@
 database URL can play any snapshot.
 
 A blob is the whole file of a snapshot, keyed by the sha256 of its bytes (the ``sha256`` of the snapshot's row,
-:attr:`selfplay_cli.league.models.Player.sha256`). Its bytes are in the row (``data``), or at a ``url`` the row names
-(``file://`` on a shared disk, ``http(s)://``). Whoever reads a blob hashes what it read and refuses bytes that do not
-hash to the key (:meth:`Blobs.blob_bytes`): a blob is never trusted by its name, wherever it comes from.
+:attr:`selfplay_cli.league.models.Player.sha256`). Its bytes are in the row (``data``, the default), or at a ``url``
+the row names (``file://`` on a shared disk, ``http(s)://``). Whoever reads a blob hashes what it read and refuses
+bytes that do not hash to the key (:meth:`Blobs.blob_bytes`): a blob is never trusted by its name, wherever it comes
+from.
+
+A league may keep its new blobs in a folder instead of the database (:meth:`Blobs.set_blob_location`, ``meta``
+key ``blob_url``): a ``file://`` URL of a disk that every machine of the league mounts at the same path. A blob is
+then written there as ``<sha256>`` (through a temporary name) before its row, which names it by URL, is inserted.
 
 Training and ``marl checkpoint import`` store a snapshot's blob in the same transaction as its row
 (:meth:`~selfplay_cli.league.roster.Roster.add_snapshots`); leagues made before blobs existed get theirs from the
@@ -32,13 +37,17 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from selfplay_cli.errors import MarlError
+from selfplay_cli.files import file_sha256, write_atomic
 from selfplay_cli.league.db import Database, LeagueError, LeagueIOError, shown
-from selfplay_cli.league.models import Blob, Player, utcnow
+from selfplay_cli.league.models import Blob, Meta, Player, utcnow
 
 if TYPE_CHECKING:
     from selfplay_cli.league.roster import PlayerRow
 
-__all__ = ["FETCH_TIMEOUT", "Blobs", "BlobsReport", "check_sha", "store_blob"]
+__all__ = ["BLOB_URL", "FETCH_TIMEOUT", "Blobs", "BlobsReport", "blob_folder", "check_sha", "store_blob"]
+
+BLOB_URL = "blob_url"
+"""The ``meta`` key of the folder (a ``file://`` URL) a league keeps its new blobs in; none: in the database."""
 
 FETCH_TIMEOUT = 30.0
 """Seconds an ``http(s)://`` blob may take to answer (and between reads)."""
@@ -61,6 +70,16 @@ def store_blob(s: Session, sha: str, data: bytes) -> bool:
         return False
     table = Blob.__table__
     values = dict(sha256=sha, size=len(data), data=data, url=None, created_at=utcnow())
+    location = s.execute(select(Meta.value).where(Meta.key == BLOB_URL)).scalar()
+    if location:  # the league keeps its blobs in a folder: the file first, then the row that names it
+        path = blob_folder(location) / sha
+        try:
+            if not (path.is_file() and file_sha256(path) == sha):  # (a file left by a unit that was rolled back)
+                write_atomic(path, data)
+        except OSError as exc:
+            raise LeagueIOError(f"cannot write {path}, in the folder the league keeps its snapshot files in "
+                                f"({location}): {exc.strerror or exc}") from None
+        values.update(data=None, url=path.as_uri())
     dialect = s.get_bind().dialect.name
     if dialect == "postgresql":  # (psycopg reports no row count here: the row it returns says it was stored)
         from sqlalchemy.dialects.postgresql import insert as pg_insert
@@ -78,6 +97,17 @@ def store_blob(s: Session, sha: str, data: bytes) -> bool:
         return True
     except IntegrityError:
         return False
+
+
+def blob_folder(url: str) -> Path:
+    """The folder a league's ``blob_url`` names (``file:///path``, an absolute path); a :class:`LeagueError`
+    otherwise."""
+    parsed = urlparse(url)
+    folder = Path(unquote(parsed.path))
+    if parsed.scheme != "file" or parsed.netloc not in ("", "localhost") or not folder.is_absolute():
+        raise LeagueError(f"{shown(url, 200)} is not a folder as a file:// URL (file:///mnt/shared/marl-blobs): "
+                          "blobs are written only to a disk this machine mounts")
+    return folder
 
 
 def _read_url(url: str, size: int, sha: str, of: str = "") -> bytes:
@@ -143,6 +173,33 @@ class Blobs(Database):
         if sha not in self.has_blobs([sha]):
             self._unit(lambda s: store_blob(s, sha, data))
         return sha
+
+    def blob_location(self) -> str | None:
+        """The folder (a ``file://`` URL) this league keeps its new blobs in, or None: in the database."""
+        return self._read(lambda s: s.execute(select(Meta.value).where(Meta.key == BLOB_URL)).scalar()) or None
+
+    def set_blob_location(self, url: str | None) -> str | None:
+        """Keep the league's new blobs in the folder ``url`` names (``file:///path``: a disk every machine of the
+        league mounts at the same path, which must exist and be writable here), or, with None, in the database
+        again; blobs stored before stay where they are (each row says where). Returns the URL stored."""
+        if url is not None:
+            folder = blob_folder(url)
+            if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
+                raise LeagueError(f"{folder} is not a folder this machine can write (make it, or mount the shared "
+                                  "disk, first)")
+            url = folder.as_uri()
+
+        def work(s: Session) -> None:
+            row = s.get(Meta, BLOB_URL)
+            if url is None and row is not None:
+                s.delete(row)
+            elif url is not None and row is None:
+                s.add(Meta(key=BLOB_URL, value=url))
+            elif url is not None and row is not None:
+                row.value = url
+
+        self._unit(work)
+        return url
 
     def has_blobs(self, shas: Iterable[str]) -> set[str]:
         """Which of ``shas`` the league holds a blob for."""
