@@ -354,3 +354,16 @@ def test_a_league_can_keep_its_blobs_in_a_shared_folder(db_url, tmp_path, capsys
     with League.open(home, url=db_url) as league:
         s1 = league.find_players("r/s1")[0]
         assert league.blob_bytes(s1.sha256) == (shared / s1.sha256).read_bytes() == (home / s1.path).read_bytes()
+
+
+def test_show_and_export_work_with_only_the_database_url(db_url, tmp_path, capsys):
+    home = tmp_path / "home"
+    trained(db_url, home, names=("s1",)).close()
+    where = ("--db", db_url, "--home", str(tmp_path / "elsewhere"))
+    code, out, err = run(capsys, "checkpoint", "show", "r/s1", *where, "--json")
+    assert code == 0 and json.loads(out)["file"]["name"] == "s1", err
+    code, _, err = run(capsys, "checkpoint", "export", "r/s1", str(tmp_path / "out.safetensors"), *where)
+    assert code == 0, err
+    from selfplay_cli.policies.snapshot_reader import read_snapshot
+
+    assert read_snapshot(tmp_path / "out.safetensors").meta.name == "s1"

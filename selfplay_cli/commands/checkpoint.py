@@ -59,6 +59,7 @@ def list_cmd(
 def _details(league, p) -> dict:
     """A player's league record, its lineage (parent, grandparent, ...) and its file's metadata."""
     from ..policies.snapshot_reader import read_meta
+    from ..rated.snapshots import snapshot_path
 
     data = _row_json(p)
     lineage, parent = [], p.parent_id
@@ -68,7 +69,7 @@ def _details(league, p) -> dict:
         parent = q.parent_id
     data["lineage"] = lineage
     if not p.is_bot and not p.removed:
-        data["file"] = read_meta(league.snapshot_file(p)).to_dict()
+        data["file"] = read_meta(snapshot_path(league, p)).to_dict()
     return data
 
 
@@ -183,14 +184,14 @@ def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination 
     """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
     from ..policies.snapshot_reader import export_snapshot, read_snapshot
     from ..rated.names import resolve
-    from ..rated.snapshots import check_file
+    from ..rated.snapshots import check_file, snapshot_path
 
     league = open_league(home, db, readonly=True)
     try:
         p = resolve(league, name, check_env(env))
         if p.is_bot:
             raise MarlError(f"{p.full_name} is a scripted player: there is no file to export")
-        path = league.snapshot_file(p)
+        path = snapshot_path(league, p)  # (the home's file, or the league's copy where this machine has none)
         check_file(p, read_snapshot(path, expect_env=p.env), path)  # never export a file that is not the row's
         export_snapshot(path, out, expect_env=p.env)
     finally:
