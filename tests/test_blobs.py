@@ -310,6 +310,9 @@ def test_checkpoint_push_backfills_and_reports(db_url, tmp_path, capsys):
     assert "not on this machine, not in the league: r/s3" in out
     with League.open(tmp_path / "elsewhere", url=db_url) as elsewhere:
         assert load_player(elsewhere, elsewhere.find_players("r/s2")[0]).id == "r/s2"
+        elsewhere.remove_snapshot(rows["s3"].id)  # a removed snapshot is played nowhere: --all leaves it out
+    code, out, _ = run(capsys, "checkpoint", "push", "--all", *where)
+    assert (code, out) == (0, "stored 0 snapshot files in the league (0 bytes); 2 there already\n")
 
 
 def test_a_swapped_file_in_the_home_is_refused_not_replaced_by_the_blob(db_url, tmp_path):

@@ -229,8 +229,8 @@ def push(
     names: Annotated[list[str] | None, typer.Argument(metavar="[NAME]...", help="Snapshots to store: s6M-left, "
                                                       "pong-1/s6M-left, a tag, an id; a team name stores each "
                                                       "member.")] = None,
-    every: Annotated[bool, typer.Option("--all", help="Every snapshot of the league (of --env), removed ones "
-                                        "too: their games stay rated.")] = False,
+    every: Annotated[bool, typer.Option("--all", help="Every snapshot of the league (of --env) but removed ones, "
+                                        "which no machine plays.")] = False,
     to: Annotated[str | None, typer.Option("--to", metavar="URL", help="From now on keep the league's snapshot "
                                            "files in this folder instead of the database: a file:// URL of a disk "
                                            "every machine of the league mounts at the same path (file:///mnt/"
@@ -268,7 +268,7 @@ def push(
                 print_json({"blob_url": location})
             return
         if every:
-            rows = league.players(env=check_env(env), kind="snapshot", include_removed=True)
+            rows = league.players(env=check_env(env), kind="snapshot")
         else:
             rows = []
             for name in names or []:
