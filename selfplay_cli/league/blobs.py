@@ -23,6 +23,7 @@ kept.
 from __future__ import annotations
 
 import hashlib
+import http.client
 import os
 import urllib.error
 import urllib.request
@@ -125,7 +126,7 @@ def _read_url(url: str, size: int, sha: str, of: str = "") -> bytes:
         if parsed.scheme in ("http", "https"):
             with urllib.request.urlopen(url, timeout=FETCH_TIMEOUT) as response:  # noqa: S310 (scheme checked)
                 return response.read(size + 1)
-    except (OSError, urllib.error.URLError, ValueError) as exc:
+    except (OSError, urllib.error.URLError, http.client.HTTPException, ValueError) as exc:
         reason = getattr(exc, "reason", None) or getattr(exc, "strerror", None) or exc
         raise LeagueIOError(f"{where}: cannot read it ({reason})") from None
     raise LeagueError(f"{where}: not a file://, http:// or https:// URL")
@@ -150,10 +151,11 @@ class BlobsReport:
                 "missing": self.missing, "refused": self.refused, "reasons": self.reasons}
 
 
-LegacyCheck = Callable[["PlayerRow", Path], None]
+LegacyCheck = Callable[["PlayerRow", Path], str]
 """Accepts the file of a row whose ``sha256`` is not the file's (a row written before it meant the file: it holds the
-weights' checksum) when the file is that snapshot, and raises otherwise. Reading a snapshot file is the policies'
-business, so the check is given by the caller (:func:`selfplay_cli.rated.snapshots.check_legacy_file`)."""
+weights' checksum) when the file is that snapshot, returning the sha256 of the bytes it checked, and raises
+otherwise. Reading a snapshot file is the policies' business, so the check is given by the caller
+(:func:`selfplay_cli.rated.snapshots.check_legacy_file`)."""
 
 
 class Blobs(Database):
@@ -289,7 +291,8 @@ class Blobs(Database):
                 if check_legacy is None:
                     raise LeagueError(f"{path}: the file's sha256 {sha[:12]}... is not the "
                                       f"{str(row.sha256)[:12]}... registered")
-                check_legacy(row, path)
+                if check_legacy(row, path) != sha:  # (the bytes checked must be the bytes stored)
+                    raise LeagueError(f"{path}: the file changed while its blob was being stored")
             except MarlError as exc:
                 report.refused.append(name)
                 report.reasons[name] = str(exc)

@@ -79,12 +79,15 @@ def cached_blob(league: League, sha: str, name: str) -> Path:
     return path
 
 
-def check_legacy_file(row: PlayerRow, path: Path) -> None:
+def check_legacy_file(row: PlayerRow, path: Path) -> str:
     """Refuse (:class:`SnapshotError`) a file that is not the snapshot of a row written before ``sha256`` meant the
-    whole file (see :func:`check_file`); what :meth:`League.ensure_blobs` needs to store such a row's blob."""
+    whole file (see :func:`check_file`), else return the sha256 of the bytes checked: what
+    :meth:`League.ensure_blobs` needs to store such a row's blob."""
     from ..policies.snapshot_reader import read_snapshot
 
-    check_file(row, read_snapshot(path, expect_env=row.env), path)
+    snap = read_snapshot(path, expect_env=row.env)
+    check_file(row, snap, path)
+    return snap.sha256
 
 
 def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
