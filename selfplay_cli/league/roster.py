@@ -6,7 +6,8 @@ Database`'s units of work). Objects returned to callers are frozen dataclasses (
 
 A snapshot's ``sha256`` is the sha256 of its whole file (:attr:`selfplay_cli.league.models.Player.sha256`); the
 weights' own checksum, where a snapshot has one, is ``meta["weights_sha256"]``. The two are never mixed: the store
-hashes the file itself when it registers a snapshot (:meth:`Roster.add_snapshots`).
+hashes the file itself when it registers a snapshot (:meth:`Roster.add_snapshots`), and keeps the very bytes it hashed
+as the snapshot's blob (:mod:`selfplay_cli.league.blobs`), so that any machine with the database can play it.
 """
 
 from __future__ import annotations

@@ -16,7 +16,8 @@ The league is made of four concerns, each in its own module:
   database can play any snapshot.
 
 A snapshot row's path becomes a file only through :meth:`League.snapshot_file`, which keeps it inside the home's
-``snapshots`` folder whatever the database says.
+``snapshots`` folder whatever the database says; where this machine has no such file, the snapshot is played from
+its blob (:func:`selfplay_cli.rated.snapshots.snapshot_path`).
 
 Objects returned to callers are frozen dataclasses (:class:`RunRow`, :class:`PlayerRow`, :class:`GameTable`,
 :class:`GameRow`), never ORM instances, so nothing lazy-loads after a session has closed. A :class:`League` must not
