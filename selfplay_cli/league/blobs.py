@@ -106,7 +106,7 @@ def blob_folder(url: str) -> Path:
     parsed = urlparse(url)
     folder = Path(unquote(parsed.path))
     if parsed.scheme != "file" or parsed.netloc not in ("", "localhost") or not folder.is_absolute():
-        raise LeagueError(f"{shown(url, 200)} is not a folder as a file:// URL (file:///mnt/shared/marl-blobs): "
+        raise LeagueError(f"{shown(url, 200)} is not the file:// URL of a folder (file:///mnt/shared/marl-blobs): "
                           "blobs are written only to a disk this machine mounts")
     return folder
 
