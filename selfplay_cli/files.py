@@ -25,8 +25,8 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
-__all__ = ["STALE_PATTERNS", "atomic_write", "describe_removed", "file_sha256", "pid_alive", "publish", "sweep",
-           "sweep_home", "temp_path", "write_atomic"]
+__all__ = ["STALE_PATTERNS", "atomic_write", "cache_home", "describe_removed", "file_sha256", "pid_alive", "publish",
+           "sweep", "sweep_home", "temp_path", "write_atomic"]
 
 STALE_PATTERNS = (
     re.compile(r"^.+\.tmp-(?P<pid>\d{1,10})$"),
@@ -96,6 +96,12 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
         while chunk := f.read(1 << 20):
             h.update(chunk)
     return h.hexdigest()
+
+
+def cache_home() -> Path:
+    """The folder of this machine's cache (``$MARL_CACHE``, else ``~/.cache/marl``): what marl fetched and may fetch
+    again (snapshot files from a league's database). Not created here."""
+    return Path(os.environ.get("MARL_CACHE") or Path.home() / ".cache" / "marl").expanduser()
 
 
 def pid_alive(pid: int) -> bool:

@@ -1,4 +1,4 @@
-"""`marl checkpoint list|show|tag|rm|export|import`: the snapshots of the league."""
+"""`marl checkpoint list|show|tag|rm|export|import|push`: the snapshots of the league."""
 
 from __future__ import annotations
 
@@ -9,10 +9,10 @@ import typer
 from rich.table import Table
 
 from ..errors import MarlError, MarlIOError
-from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, check_env, open_league
+from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, QuietOpt, check_env, open_league, progress_bar, progress_enabled
 from ._output import console, print_json
 
-app = typer.Typer(help="List, inspect, tag, remove, export and import snapshots.", no_args_is_help=True,
+app = typer.Typer(help="List, inspect, tag, remove, export, import and push snapshots.", no_args_is_help=True,
                   rich_markup_mode=None)
 NameArg = Annotated[str, typer.Argument(metavar="NAME", help="A snapshot: s6M-left, pong-1/s6M-left, a tag, latest, "
                                         "best or an id.")]
@@ -59,6 +59,7 @@ def list_cmd(
 def _details(league, p) -> dict:
     """A player's league record, its lineage (parent, grandparent, ...) and its file's metadata."""
     from ..policies.snapshot_reader import read_meta
+    from ..rated.snapshots import snapshot_path
 
     data = _row_json(p)
     lineage, parent = [], p.parent_id
@@ -68,7 +69,7 @@ def _details(league, p) -> dict:
         parent = q.parent_id
     data["lineage"] = lineage
     if not p.is_bot and not p.removed:
-        data["file"] = read_meta(league.snapshot_file(p)).to_dict()
+        data["file"] = read_meta(snapshot_path(league, p)).to_dict()
     return data
 
 
@@ -183,14 +184,14 @@ def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination 
     """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
     from ..policies.snapshot_reader import export_snapshot, read_snapshot
     from ..rated.names import resolve
-    from ..rated.snapshots import check_file
+    from ..rated.snapshots import check_file, snapshot_path
 
     league = open_league(home, db, readonly=True)
     try:
         p = resolve(league, name, check_env(env))
         if p.is_bot:
             raise MarlError(f"{p.full_name} is a scripted player: there is no file to export")
-        path = league.snapshot_file(p)
+        path = snapshot_path(league, p)  # (the home's file, or the league's copy where this machine has none)
         check_file(p, read_snapshot(path, expect_env=p.env), path)  # never export a file that is not the row's
         export_snapshot(path, out, expect_env=p.env)
     finally:
@@ -221,3 +222,71 @@ def import_cmd(
         print_json(_row_json(p))
     else:
         console.print(f"imported {file} as {p.full_name} (id {p.id}, {p.env})", markup=False)
+
+
+@app.command("push")
+def push(
+    names: Annotated[list[str] | None, typer.Argument(metavar="[NAME]...", help="Snapshots to store: s6M-left, "
+                                                      "pong-1/s6M-left, a tag, an id; a team name stores each "
+                                                      "member.")] = None,
+    every: Annotated[bool, typer.Option("--all", help="Every snapshot of the league (of --env) but removed ones, "
+                                        "which no machine plays.")] = False,
+    to: Annotated[str | None, typer.Option("--to", metavar="URL", help="From now on keep the league's snapshot "
+                                           "files in this folder instead of the database: a file:// URL of a disk "
+                                           "every machine of the league mounts at the same path (file:///mnt/"
+                                           "shared/marl-blobs); 'db': in the database again. Files stored before "
+                                           "stay where they are.")] = None,
+    env: EnvOpt = None,
+    home: HomeOpt = None,
+    db: DbOpt = None,
+    quiet: QuietOpt = False,
+    json_out: JsonOpt = False,
+) -> None:
+    """Store snapshot files in the league's database, so that any machine that has only the database (--db) can
+    play them. Snapshots trained or imported by this marl are there already; this stores those of leagues made
+    before, from this machine's files, each checked by hash first. Says how many were stored (and their bytes),
+    how many were there already, whose file is not on this machine and whose file is not the one registered;
+    exits 1 if any snapshot asked for is still not in the database. With --to alone, only sets where the league
+    keeps them."""
+    from ..rated.names import Team, resolve_or_team
+    from ..rated.snapshots import check_legacy_file
+
+    if names and every:
+        raise MarlError("name the snapshots to push, or pass --all for every snapshot of the league, not both")
+    if not names and not every and to is None:
+        raise MarlError("name the snapshots to push, or pass --all for every snapshot of the league")
+    league = open_league(home, db)
+    try:
+        if to is not None:
+            league.set_blob_location(None if to == "db" else to)
+        location = league.blob_location()
+        if to is not None and not json_out:
+            console.print(f"the league keeps its snapshot files in {location or 'the database'} from now on",
+                          markup=False)
+        if not names and not every:
+            if json_out:
+                print_json({"blob_url": location})
+            return
+        if every:
+            rows = league.players(env=check_env(env), kind="snapshot")
+        else:
+            rows = []
+            for name in names or []:
+                found = resolve_or_team(league, name, check_env(env))
+                rows += found.members if isinstance(found, Team) else [found]
+            rows = list({p.id: p for p in rows if not p.is_bot}.values())
+        with progress_bar("storing snapshot files", len(rows), "files", progress_enabled(quiet or json_out)) as bar:
+            report = league.ensure_blobs(rows, check_legacy=check_legacy_file, advance=bar)
+    finally:
+        league.close()
+    if json_out:
+        print_json({**report.to_dict(), "blob_url": location})
+    else:
+        console.print(f"stored {len(report.stored)} snapshot file{'s' * (len(report.stored) != 1)} in the league "
+                      f"({report.stored_bytes:,} bytes); {len(report.present)} there already", markup=False)
+        for what, names_ in (("not on this machine, not in the league", report.missing),
+                             ("refused", report.refused)):
+            for name in names_:
+                console.print(f"{what}: {name}: {report.reasons[name]}", markup=False)
+    if report.missing or report.refused:
+        raise typer.Exit(1)

@@ -6,11 +6,13 @@ Database`'s units of work). Objects returned to callers are frozen dataclasses (
 
 A snapshot's ``sha256`` is the sha256 of its whole file (:attr:`selfplay_cli.league.models.Player.sha256`); the
 weights' own checksum, where a snapshot has one, is ``meta["weights_sha256"]``. The two are never mixed: the store
-hashes the file itself when it registers a snapshot (:meth:`Roster.add_snapshots`).
+hashes the file itself when it registers a snapshot (:meth:`Roster.add_snapshots`), and keeps the very bytes it hashed
+as the snapshot's blob (:mod:`selfplay_cli.league.blobs`), so that any machine with the database can play it.
 """
 
 from __future__ import annotations
 
+import hashlib
 import re
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field, replace
@@ -23,7 +25,7 @@ from sqlalchemy import and_, or_, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from selfplay_cli.files import file_sha256
+from selfplay_cli.league.blobs import store_blob
 from selfplay_cli.league.db import Database, LeagueError, shown
 from selfplay_cli.league.models import Player, Run, Tag, utcnow
 
@@ -287,13 +289,18 @@ class Roster(Database):
                       ) -> list[PlayerRow]:
         """Register several snapshots (the keyword arguments of :meth:`add_snapshot`, one dict each) in ONE
         transaction: all of them or none (a training run's snapshots of one moment are one unit). ``run_config``
-        as in :meth:`add_snapshot`."""
+        as in :meth:`add_snapshot`.
+
+        The bytes of each file are stored in the league as its blob (:mod:`selfplay_cli.league.blobs`) in the same
+        transaction as its row: the very bytes that were hashed, so any machine with the database can play it. A
+        row registered without its file (kept elsewhere) has no blob."""
         for item in items:
             check_env_name(item["env"])
             _check_name("snapshot name", item["name"])
             if item.get("run") is not None:  # a new run is checked like any new name; an existing one stays usable
                 (check_name if run_config is not None else check_existing_name)("run name", item["run"])
-        items = [{**item, "sha256": self._file_hash(item)} for item in items]
+        files = [self._file_bytes(item) for item in items]
+        items = [{**item, "sha256": sha} for item, (sha, _) in zip(items, files, strict=True)]
 
         def insert(s: Session, env: str, run: str | None, name: str, path: str, sha256: str, step: int = 0,
                    episode: int = 0, algo: str | None = None, parent_id: int | None = None,
@@ -328,6 +335,9 @@ class Roster(Database):
 
         def work(s: Session) -> list[PlayerRow]:
             players = [insert(s, **item) for item in items]
+            for sha, data in files:
+                if data is not None:
+                    store_blob(s, sha, data)
             for p in players:
                 s.refresh(p, ["tags"])
             return [_player_row(p) for p in players]
@@ -338,8 +348,9 @@ class Roster(Database):
             names = ", ".join(f"{i['run']}/{i['name']}" if i["run"] else i["name"] for i in items)
             raise LeagueError(f"snapshot {names} already exists") from exc
 
-    def _file_hash(self, item: dict[str, Any]) -> str:
-        """The sha256 a snapshot row gets: its file's (see :meth:`add_snapshot`)."""
+    def _file_bytes(self, item: dict[str, Any]) -> tuple[str, bytes | None]:
+        """The sha256 a snapshot row gets, its file's (see :meth:`add_snapshot`), and the file's bytes that hash to
+        it (None for a row registered without its file)."""
         given, where = item.get("sha256"), item["path"]
         file = Path(where)
         if not file.is_absolute():
@@ -349,17 +360,18 @@ class Roster(Database):
                 file = self.home_path(*Path(where).parts)
         if file is not None and file.is_file():
             try:
-                actual = file_sha256(file)
+                data = file.read_bytes()
             except OSError as exc:
                 raise LeagueError(f"{file}: cannot read ({exc.strerror or exc})") from exc
+            actual = hashlib.sha256(data).hexdigest()
             legacy = (item.get("meta") or {}).get("weights_sha256")
             if given is not None and given != actual and given != legacy:
                 raise LeagueError(f"{file}: the file's sha256 is not the {given[:12]}... given for it (changed while "
                                   "it was being registered?)")
-            return actual
+            return actual, data
         if not given:
             raise LeagueError(f"no snapshot file at {file or where} to register")
-        return str(given)
+        return str(given), None
 
     def get_player(self, player_id: int) -> PlayerRow:
         """The player with this id (removed ones included). Raises LeagueError if there is none."""

@@ -5,17 +5,20 @@ A :class:`League` wraps one SQLAlchemy engine. The default database is SQLite at
 / ``game_seats`` ledger; the online Elo kept on each player row is a cache updated in the same transaction as the
 games it counts, and :meth:`League.recompute_online_elo` rebuilds it from scratch.
 
-The league is made of three concerns, each in its own module:
+The league is made of four concerns, each in its own module:
 
 * :mod:`selfplay_cli.league.db`: the engine, one session per unit of work (retried on SQLite's "database is
   locked", PostgreSQL's conflicts and a lost server), the schema and its Alembic revision (SQLite concurrency and
   PostgreSQL are described there);
 * :mod:`selfplay_cli.league.roster`: runs, players and tags, and the rule every name follows;
 * :mod:`selfplay_cli.league.ledger`: matches, the games with their seats, the online Elo and the rating table
-  derived for every kind of game.
+  derived for every kind of game;
+* :mod:`selfplay_cli.league.blobs`: the snapshot files' bytes by their sha256, so that a machine that has only the
+  database can play any snapshot.
 
 A snapshot row's path becomes a file only through :meth:`League.snapshot_file`, which keeps it inside the home's
-``snapshots`` folder whatever the database says.
+``snapshots`` folder whatever the database says; where this machine has no such file, the snapshot is played from
+its blob (:func:`selfplay_cli.rated.snapshots.snapshot_path`).
 
 Objects returned to callers are frozen dataclasses (:class:`RunRow`, :class:`PlayerRow`, :class:`GameTable`,
 :class:`GameRow`), never ORM instances, so nothing lazy-loads after a session has closed. A :class:`League` must not
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from selfplay_cli.league.blobs import Blobs, BlobsReport
 from selfplay_cli.league.db import (
     DB_FILENAME,
     DEFAULT_HOME,
@@ -64,6 +68,7 @@ __all__ = [
     "NAME_PATTERN",
     "RESERVED_NAMES",
     "SNAPSHOTS",
+    "BlobsReport",
     "GameResult",
     "GameRow",
     "GameTable",
@@ -81,7 +86,7 @@ __all__ = [
 ]
 
 
-class League(Queue, Ledger, Roster, Database):
+class League(Queue, Ledger, Roster, Blobs, Database):
     """The league database: players, runs, matches and the game ledger (see the module docstring)."""
 
     def snapshot_file(self, row: PlayerRow) -> Path:

@@ -31,7 +31,7 @@ from ..stats.match import match_stats
 from .match import MatchReport, env_options_of, load_player, mix_seed, round_size, run_match
 
 __all__ = ["GAMES", "JOB_ROUNDS", "KINDS", "JobLost", "Outcome", "Played", "combine", "games_jobs", "play_job",
-           "play_leased", "see_through", "sprt_verdict", "summary", "worker_name"]
+           "play_leased", "see_through", "share_snapshots", "sprt_verdict", "summary", "worker_name"]
 
 GAMES = "games"
 JOB_ROUNDS = 64
@@ -59,9 +59,7 @@ def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *,
     pb = load_player(league, row_b, device=device, seed=mix_seed(first_seed, 1))
     team = pa if len(pa) > 1 or team_name else None
     per = round_size(pa[0], pb, first_seed=first_seed, env_options=env_options, team=team)
-    ensure = getattr(league, "ensure_blobs", None)
-    if ensure is not None:
-        ensure([r for r in (*rows_a, row_b) if not r.is_bot])
+    share_snapshots(league, [*rows_a, row_b])
     total = -(-games // per)
     out = []
     for start in range(0, total, job_rounds):
@@ -71,6 +69,17 @@ def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *,
             "round": start, "match_seed": first_seed, "env_options": dict(env_options or {}),
             "match_kind": match_kind, "params": dict(params or {}), "team_name": team_name}))
     return out
+
+
+def share_snapshots(league: League, rows: Sequence[PlayerRow]) -> None:
+    """Put the snapshot files of ``rows`` in the league (by their sha256) where it has them not yet, so a worker on
+    any machine can fetch them; a :class:`MarlError` naming the first that cannot be (its file not here)."""
+    from .snapshots import check_legacy_file
+
+    report = league.ensure_blobs([r for r in rows if not r.is_bot], check_legacy=check_legacy_file)
+    for name in (*report.missing, *report.refused):
+        raise MarlError(f"{name}: {report.reasons.get(name, 'its file is not on this machine')}; workers elsewhere "
+                        "could not play it")
 
 
 @dataclass

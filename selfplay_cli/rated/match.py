@@ -78,20 +78,22 @@ def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: boo
     """The policy a league player stands for: a scripted bot, or a network loaded from its snapshot file, playing
     as :func:`plays_greedy` says unless ``greedy`` is given; ``seed`` seeds its sampling.
 
-    The file is validated in full before anything is built from it (:func:`~selfplay_cli.policies.snapshot_reader.
-    read_snapshot`) and must be the file the row registered (:func:`~selfplay_cli.rated.snapshots.check_file`):
-    a file copied over it, or edited, is refused with an error naming it, so no game is ever played or stored under
-    the wrong identity."""
+    The file is the one in the league home, or, where this machine has none (a database opened from another
+    machine, or without a home), the snapshot's blob fetched from the league into the local cache
+    (:func:`~selfplay_cli.rated.snapshots.snapshot_path`). It is validated in full before anything is built from it
+    (:func:`~selfplay_cli.policies.snapshot_reader.read_snapshot`) and must be the file the row registered
+    (:func:`~selfplay_cli.rated.snapshots.check_file`): a file copied over it, or edited, is refused with an error
+    naming it, so no game is ever played or stored under the wrong identity."""
     if row.is_bot:
         return ScriptedPolicy(row.env, row.name, seed=seed)
     from ..policies.snapshot_policy import policy_of  # torch is imported only when a network is needed
     from ..policies.snapshot_reader import read_snapshot
-    from .snapshots import check_file
+    from .snapshots import check_file, snapshot_path
 
     _inference_threads(device)
     if row.removed:
         raise MarlError(f"{row.full_name} was removed from the league; its games stay in the ledger")
-    path = league.snapshot_file(row)
+    path = snapshot_path(league, row)
     snap = read_snapshot(path, expect_env=row.env)
     check_file(row, snap, path)
     return policy_of(snap, path, id=row.full_name, device=device,

@@ -70,9 +70,10 @@ class RoleBook:
             return frozenset((role,))
         from ..policies.snapshot_format import snapshot_roles
         from ..policies.snapshot_reader import read_meta
+        from .snapshots import snapshot_path
 
         try:
-            meta = read_meta(self.league.snapshot_file(row))
+            meta = read_meta(snapshot_path(self.league, row))
         except (MarlError, OSError):  # a file that is gone or bad is refused when it is loaded to play
             return None
         return snapshot_roles(meta, self.spec)

@@ -1,9 +1,15 @@
-"""Snapshot files and their league rows: where a new snapshot's file goes, importing one, and checking that a file
-is the one its row registered (where a row's file lies is :meth:`League.snapshot_file`'s to say).
+"""Snapshot files and their league rows: where a new snapshot's file goes, importing one, where this machine reads a
+snapshot from, and checking that a file is the one its row registered.
 
 A row's ``sha256`` is the sha256 of its whole file (:attr:`selfplay_cli.league.models.Player.sha256`), and every
 load of a league player checks it (:func:`check_file`), so a file copied over another, or edited, never plays under
 the row's name.
+
+Where a snapshot is read from (:func:`snapshot_path`): its file in the league home where the league has a home and
+the file is there (where a row's file lies is :meth:`League.snapshot_file`'s to say); otherwise (a database opened
+on another machine, or without a home) its blob, fetched from the league by the row's sha256 into this machine's
+cache (``$MARL_CACHE`` or ``~/.cache/marl``, ``blobs/<sha256[:2]>/<sha256>.safetensors``). A cached file is hashed
+again before every use and fetched anew when it does not hash to its name: nothing is trusted by name.
 """
 
 from __future__ import annotations
@@ -13,8 +19,9 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from ..errors import MarlError
-from ..files import write_atomic
+from ..errors import MarlError, MarlIOError
+from ..files import cache_home, file_sha256, write_atomic
+from ..league.blobs import check_sha
 from ..league.store import SNAPSHOTS, League, LeagueIOError, PlayerRow, check_existing_name, check_name
 from ..league.variants import describe_variant, variant_key
 
@@ -31,6 +38,58 @@ def snapshot_relpath(run: str, name: str) -> str:
     return f"{SNAPSHOTS}/{run}/{name}.safetensors"
 
 
+def snapshot_path(league: League, row: PlayerRow) -> Path:
+    """The file this machine reads the snapshot ``row`` from: its file in the league home when the league has a home
+    and the file is there (checked to stay inside the home, :meth:`League.snapshot_file`), else the snapshot's blob
+    from the league in this machine's cache (:func:`cached_blob`). Whether the file is the one the row registered is
+    for the reader to check (:func:`check_file`); a file in the home that is not is refused, never replaced."""
+    home_file = None
+    if league.home is not None:
+        home_file = league.snapshot_file(row)
+        if home_file.exists():
+            return home_file
+    if not row.sha256:
+        raise MarlError(f"{row.full_name} has no snapshot file")
+    return cached_blob(league, row.sha256, f"{row.full_name} (no file at {home_file})" if home_file else
+                       row.full_name)
+
+
+def blob_cache_file(sha: str) -> Path:
+    """Where this machine caches the blob ``sha``: ``<cache>/blobs/<sha[:2]>/<sha>.safetensors``."""
+    check_sha(sha)  # (a row's sha256 becomes a path: hex digits only)
+    return cache_home() / "blobs" / sha[:2] / f"{sha}.safetensors"
+
+
+def cached_blob(league: League, sha: str, name: str) -> Path:
+    """The blob ``sha`` as a file of this machine's cache: the cached file when it hashes to ``sha``, else fetched
+    from the league (:meth:`League.blob_bytes`, which refuses bytes that do not hash to it) and written through a
+    temporary name. ``name`` (the snapshot) is for messages."""
+    path = blob_cache_file(sha)
+    if path.is_file():
+        with contextlib.suppress(OSError):
+            if file_sha256(path) == sha:
+                return path
+    data = league.blob_bytes(sha, name)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_atomic(path, data)
+    except OSError as e:
+        raise MarlIOError(f"cannot write {path}: {e.strerror or e} (MARL_CACHE names the folder of marl's cache)"
+                          ) from None
+    return path
+
+
+def check_legacy_file(row: PlayerRow, path: Path) -> str:
+    """Refuse (:class:`SnapshotError`) a file that is not the snapshot of a row written before ``sha256`` meant the
+    whole file (see :func:`check_file`), else return the sha256 of the bytes checked: what
+    :meth:`League.ensure_blobs` needs to store such a row's blob."""
+    from ..policies.snapshot_reader import read_snapshot
+
+    snap = read_snapshot(path, expect_env=row.env)
+    check_file(row, snap, path)
+    return snap.sha256
+
+
 def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
     """The game options a player was made for, which its games are played under: a snapshot's, as its file's
     metadata records them (the header alone is read); none for a scripted player, which plays under any."""
@@ -38,7 +97,7 @@ def player_options(league: League, row: PlayerRow) -> dict[str, Any]:
         return {}
     from ..policies.snapshot_reader import read_meta
 
-    return dict(read_meta(league.snapshot_file(row)).env_options or {})
+    return dict(read_meta(snapshot_path(league, row)).env_options or {})
 
 
 def players_variant(league: League, env: str, rows: Iterable[PlayerRow], override: dict[str, Any] | None = None
