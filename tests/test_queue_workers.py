@@ -18,7 +18,7 @@ from sqlalchemy import select
 
 from selfplay_cli.league.models import Game, GameSeat
 from selfplay_cli.league.store import League
-from selfplay_cli.rated.jobs import games_jobs
+from selfplay_cli.rated.jobs import games_jobs, play_job
 from selfplay_cli.rated.match import SPRTSettings, run_match
 from selfplay_cli.rated.queued import queue_match
 from selfplay_cli.work import WorkerOptions, run_worker
@@ -213,4 +213,40 @@ def test_a_worker_goes_on_through_a_postgresql_restart(pg_url, pg_restart, tmp_p
     league = League(pg_url, home=tmp_path / "h")
     assert league.job_counts("r")["done"] == 24
     assert Counter(_stored(league)) == Counter((s, k) for s in range(1200) for k in (0, 1))
+    league.close()
+
+
+def test_a_worker_with_only_the_url_plays_network_snapshots_from_the_league(db_url, tmp_path):
+    """Two network snapshots registered in home H; a worker with another, empty home (another machine) fetches their
+    files from the league by sha256 into its cache and plays the queued match: the games equal the ones played in
+    H from the files."""
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
+
+    home = tmp_path / "h"
+    league = _league(db_url, home)
+    league.create_run("r", "pong", {}, algo="ppo")
+    arch = Arch(hidden=(16, 16))
+    rows = []
+    for i in (1, 2):
+        path = home / "snapshots" / "r" / f"s{i}.safetensors"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        save_snapshot(path, build_network((8, 6), 3, arch, seed=i), SnapshotMeta(
+            env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="r", name=f"s{i}", algo="ppo", step=i))
+        rows.append(league.add_snapshot(env="pong", run="r", name=f"s{i}", path=str(path.relative_to(home)), step=i))
+    jobs = games_jobs(league, [rows[0]], rows[1], games=8, first_seed=7, match_kind="match", env_options=SHORT,
+                      job_rounds=2)
+    league.enqueue("far", jobs)
+    env = {**os.environ, "SDL_VIDEODRIVER": "dummy", "MARL_CACHE": str(tmp_path / "cache")}
+    out = subprocess.run([sys.executable, "-m", "selfplay_cli", "worker", "--db", db_url, "--home",
+                          str(tmp_path / "elsewhere"), "--until-empty", "--json"], env=env, capture_output=True,
+                         text=True, timeout=180)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["done"] == 2
+    assert len(list((tmp_path / "cache").rglob("*.safetensors"))) == 2  # fetched, cached
+    assert not (tmp_path / "elsewhere" / "snapshots").exists()
+    here = [g for job in league.jobs(batch="far") for g in play_job(league, job).games]  # from H's files
+    with league.session(readonly=True) as s:
+        stored = sorted((int(g.seed), int(g.length)) for g in s.execute(select(Game)).scalars())
+    assert len(stored) == 8 and stored == sorted((r.seed, r.length) for r in here)
     league.close()
