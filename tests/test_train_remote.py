@@ -261,3 +261,34 @@ def test_a_config_of_an_earlier_release_keeps_its_inline_rating():
     assert "eval_inline" not in TrainConfig(env="pong", eval="remote").to_dict()
     with pytest.raises(MarlError, match="cannot go with eval = \"remote\""):
         TrainConfig.from_dict({"env": "pong", "eval_inline": True, "eval": "remote"})
+
+
+def test_the_wait_at_the_end_says_how_many_gauntlets_are_left_and_who_plays_them(monkeypatch):
+    """Without a terminal, the wait's line every 30 s names the gauntlets left and the workers holding them, or says
+    the run plays them itself; the bar's text says the same."""
+    import io
+
+    from rich.console import Console
+
+    import selfplay_cli.commands.train_view as train_view
+    from selfplay_cli.train.progress import Standing
+
+    buf = io.StringIO()
+    monkeypatch.setattr(train_view, "err_console", Console(file=buf, width=400))
+    now = [100.0]
+    progress = train_view.TrainProgress(TrainConfig(env="pong", run="r", steps=1000), bar=False, lines=True,
+                                        clock=lambda: now[0])
+    standing = Standing(progress=1.0, steps=1000, episodes=4, playing=16, game_steps=10.0, time_limit=None,
+                        snapshots=6, rated=2, newest=(), session_steps=1000, steps_per_second=100.0, remaining=None,
+                        ended=True)
+    for t, queued in ((31.0, QueueStanding(left=2, workers=("w1", "w2"), here=False, attached=3)),
+                      (62.0, QueueStanding(left=1, workers=(), here=True, attached=0)),
+                      (93.0, QueueStanding(left=1, workers=(), here=False, attached=1))):
+        now[0] = 100.0 + t
+        progress.update({"event": "evaluating", "snapshots": ["r/s1k-left", "r/s1k-right"], "games": 40,
+                         "queue": queued, "standing": standing})
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 3
+    assert "rating s1k-left, s1k-right (2 gauntlets left in the queue, played by w1, w2)" in lines[0]
+    assert "(1 gauntlet left in the queue, played here: no worker attached (40 games so far))" in lines[1]
+    assert "(1 gauntlet left in the queue, waiting for one of 1 worker)" in lines[2]
