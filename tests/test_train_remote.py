@@ -86,7 +86,8 @@ def test_workers_play_a_runs_gauntlets_and_the_games_are_the_local_workers(db_ur
         assert not worker.is_alive(), "the worker did not get the run's three gauntlets"
     finally:
         worker_league.close()
-    assert data["rating_jobs_left"] == 0 and data["rating_batch"] == BATCH and data["best"] is not None
+    assert data["rating"] == "remote" and data["rating_batch"] == BATCH
+    assert data["rating_jobs_left"] == 0 and data["best"] is not None
     assert reports[0].done == 3 and reports[0].failed == 0
     with League(db_url, home=home) as league:
         jobs = league.jobs(batch=BATCH)

@@ -152,7 +152,7 @@ def train(
     finally:
         league.close()
     if json_out:
-        print_json(report_json(report))
+        print_json(report_json(report, cfg.eval))
         return
     console.print(describe_run(report, cfg.eval), markup=False, highlight=False)
     for rec in report.finals:

@@ -20,9 +20,11 @@ if TYPE_CHECKING:
     from ..train.progress import Standing, TrainReport
 
 
-def report_json(report: TrainReport) -> dict[str, Any]:
+def report_json(report: TrainReport, eval: str = "local") -> dict[str, Any]:
     """``marl train --json``: the whole run's figures (every session of a resumed run), and this session's
-    (``session_*``; the rate and the rating games' time are this session's too)."""
+    (``session_*``; the rate and the rating games' time are this session's too). ``eval``: who played the rating
+    games (``--eval``); ``rating_batch``: the run's batch in the league's queue (``--eval remote``), and
+    ``rating_jobs_left`` its gauntlets not played yet (``--no-wait``), while ``best`` is null."""
     return {"run": report.run, "steps": report.steps, "episodes": report.episodes, "seconds": round(report.seconds, 1),
             "sessions": report.sessions, "rating_games": report.eval_games, "snapshots": report.snapshots,
             "final": [r.to_json() for r in report.finals],
@@ -31,7 +33,8 @@ def report_json(report: TrainReport) -> dict[str, Any]:
             "session_train_seconds": round(report.train_seconds, 1),
             "session_rating_games": report.session_eval_games, "steps_per_second": round(report.steps_per_second),
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
-            "rating_jobs_left": report.rating_left, "rating_batch": run_batch(report.run),
+            "rating": eval, "rating_batch": run_batch(report.run) if eval == "remote" else None,
+            "rating_jobs_left": report.rating_left,
             "best": (None if report.rating_left  # not decided before the final gauntlet and the playoff are in
                      else [_best_json(r) for r in report.side_bests] if report.side_bests  # a game rated per side
                      else None if report.best is None else _best_json(report.best))}
