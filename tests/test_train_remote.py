@@ -147,6 +147,7 @@ def test_no_wait_says_the_ratings_are_still_coming(tmp_path, capsys):
     assert "ratings still coming: 3 gauntlets of this run" in out
     assert f"marl queue --batch {BATCH}" in out and "marl league ladder --run r" in out
     assert "best of r" not in out  # the playoff, which names it, is not played yet
+    assert "no plot written" not in out  # (nothing is rated yet: the lines above say why)
 
 
 @pytest.mark.slow
@@ -293,3 +294,19 @@ def test_the_wait_at_the_end_says_how_many_gauntlets_are_left_and_who_plays_them
     assert "rating s1k-left, s1k-right (2 gauntlets left in the queue, played by w1, w2)" in lines[0]
     assert "(1 gauntlet left in the queue, played here: no worker attached (40 games so far))" in lines[1]
     assert "(1 gauntlet left in the queue, waiting for one of 1 worker)" in lines[2]
+
+
+def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
+    """Whether this session's end waits for the workers is the session's to say (--wait/--no-wait with --resume);
+    who rates the run is the run's configuration, kept."""
+    from selfplay_cli.train.settings import resumed_config
+
+    with League.open(tmp_path / "h") as league:
+        for name, mode in (("a", "remote"), ("b", "local")):
+            league.create_run(name, "pong", TrainConfig(env="pong", run=name, eval=mode).to_dict(), algo="ppo")
+        assert resumed_config(league, "a", None, {"resume", "eval_wait"}, wait=False).eval_wait is False
+        assert resumed_config(league, "a", None, {"resume"}).eval_wait is True
+        with pytest.raises(MarlError, match="--no-wait is for --eval remote"):
+            resumed_config(league, "b", None, {"resume", "eval_wait"}, wait=False)
+        with pytest.raises(MarlError, match="--eval cannot change it"):
+            resumed_config(league, "a", None, {"resume", "eval"})

@@ -166,5 +166,5 @@ def train(
         for line in verdict_lines(report.side_bests or [report.best]):
             console.print("  " + line, markup=False)
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
-    if report.plot is not None:
+    if report.plot is not None and (isinstance(report.plot, Path) or not report.rating_left):  # (none yet: said)
         console.print(f"  rating curves: {report.plot}", markup=False)
