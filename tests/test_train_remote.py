@@ -310,3 +310,29 @@ def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
             resumed_config(league, "b", None, {"resume", "eval_wait"}, wait=False)
         with pytest.raises(MarlError, match="--eval cannot change it"):
             resumed_config(league, "a", None, {"resume", "eval"})
+
+
+def test_work_no_attached_worker_takes_is_played_by_the_run(one_snapshot):
+    """A worker is attached (its heart beats) but never takes the run's gauntlet (busy with other work, or serving
+    other batches): after ``untaken`` seconds the run's end plays it itself, and says so while it does."""
+    league, snap = one_snapshot
+    busy = league.add_worker("busy", "elsewhere", 1)
+    ev = RemoteEvaluator(league, "w", "cpu", untaken=0.5, poll_seconds=0.05)
+    ev.submit(GauntletJob((snap.id,), 0, 2, 0))
+    seen: list[QueueStanding] = []
+
+    def looked() -> None:
+        league.worker_beat(busy)
+        seen.append(ev.queue_standing())
+
+    out: list = []
+    waiting = threading.Thread(target=lambda: out.append(ev.wait(on_wait=looked)), daemon=True)
+    waiting.start()
+    waiting.join(timeout=60)
+    assert out, "the run waited on for a worker that never took its gauntlet"
+    (done,) = out[0]
+    assert done.games == 4 and ev.games_played == 4
+    (job,) = league.jobs(batch=run_batch("w"))
+    assert job.state == "done" and job.worker.startswith("train@")
+    assert seen[0] == QueueStanding(left=1, workers=(), here=False, attached=1)
+    assert any(s.here for s in seen)

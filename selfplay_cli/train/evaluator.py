@@ -328,6 +328,10 @@ def _exit(code: int | None) -> str:
 _COORDINATORS = ("train@", "marl@")  # names of commands that play their own batch's jobs (see_through), not others'
 
 
+UNTAKEN_SECONDS = 60.0  # the run's end plays its owed gauntlets itself when the workers attached took none of them
+# for this long (an idle worker looks at the queue every 10 s at most: they are busy with other work)
+
+
 def run_batch(run: str) -> str:
     """The queue batch of a run's gauntlets (``--eval remote``): ``run:<run>``, as ``marl queue`` lists it."""
     return f"run:{run}"
@@ -354,14 +358,16 @@ class RemoteEvaluator:
 
     :meth:`poll` reports the jobs done, so the run's progress and ladder fill in as their games arrive. :meth:`wait`
     (the run's end) waits for the jobs still owed; while no worker is attached (none whose heart beat within
-    ``alive_within`` seconds) this process plays them itself (:func:`~selfplay_cli.rated.jobs.see_through`), so the
-    work is done with no worker at all. With ``wait=False`` (``--no-wait``) it returns at once and leaves them to
-    the workers. A job that ends dead (it failed on every try) raises its error; one cancelled in the queue (``marl
-    queue cancel``) leaves its snapshots unrated, said in one line.
+    ``alive_within`` seconds), or none took any of them for ``untaken`` seconds (the workers attached are busy with
+    other batches, or serve only those), this process plays them itself (:func:`~selfplay_cli.rated.jobs.
+    see_through`, beside any worker that takes a share), so the work is done with no worker at all. With
+    ``wait=False`` (``--no-wait``) it returns at once and leaves them to the workers. A job that ends dead (it failed
+    on every try) raises its error; one cancelled in the queue (``marl queue cancel``) leaves its snapshots unrated,
+    said in one line.
     """
 
     def __init__(self, league: Any, run: str, device: str, *, wait: bool = True, alive_within: float | None = None,
-                 poll_seconds: float = 1.0, scavenge: float | None = None,
+                 untaken: float = UNTAKEN_SECONDS, poll_seconds: float = 1.0, scavenge: float | None = None,
                  note: Callable[[str], None] | None = None) -> None:
         from ..league.queue import SCAVENGE_SECONDS
 
@@ -369,7 +375,7 @@ class RemoteEvaluator:
         self.batch = run_batch(run)
         self.alive_within = SCAVENGE_SECONDS if alive_within is None else alive_within
         self.scavenge = SCAVENGE_SECONDS if scavenge is None else scavenge
-        self.poll_seconds = poll_seconds
+        self.untaken, self.poll_seconds = untaken, poll_seconds
         self.pending: list[GauntletJob] = []
         self.games_played = 0  # games this process played of the run's jobs (none while workers play them)
         self.restarts = 0  # (no process of its own to replace)
@@ -423,14 +429,28 @@ class RemoteEvaluator:
         """Block until every submitted job is done (``wait``), playing them here while no worker is attached;
         ``on_wait()`` is called about every second meanwhile. With ``wait=False``: the jobs done now."""
         done = self.poll()
+        taken = time.monotonic()  # when a worker last held or finished one of the run's jobs
         while self.wait_for and self.pending:
-            if not self.serving():
+            if self._held():
+                taken = time.monotonic()
+            if not self.serving() or time.monotonic() - taken > self.untaken:
                 self._play_here(on_wait)
             else:
                 self._tick(on_wait, force=True)
                 time.sleep(self.poll_seconds)
-            done += self.poll()
+            finished = self.poll()
+            if finished:
+                taken = time.monotonic()
+            done += finished
         return done
+
+    def _held(self) -> bool:
+        """A worker holds one of the run's jobs now, its heart beating on it (a silent one's lease lapses)."""
+        from ..league.models import utcnow
+
+        now = utcnow()
+        return any(r.state == "leased" and r.beat_at is not None and (now - r.beat_at).total_seconds() < self.scavenge
+                   for r in self.league.jobs(ids=list(self._ids.values())))
 
     def serving(self) -> list[str]:
         """The workers attached to the league now: not stopped, heart beaten within ``alive_within`` seconds (the
