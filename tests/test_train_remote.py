@@ -27,7 +27,8 @@ from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 from selfplay_cli.rated.jobs import play_leased
 from selfplay_cli.train.config import TrainConfig
-from selfplay_cli.train.evaluator import GauntletJob, QueueStanding, RemoteEvaluator, run_batch
+from selfplay_cli.train.evaluator import GauntletJob
+from selfplay_cli.train.remote import QueueStanding, RemoteEvaluator, run_batch
 from selfplay_cli.work import WorkerOptions, run_worker
 
 KILL_POINTS = Path(__file__).with_name("kill_points.py")
@@ -292,7 +293,7 @@ def test_the_wait_at_the_end_says_how_many_gauntlets_are_left_and_who_plays_them
     lines = buf.getvalue().splitlines()
     assert len(lines) == 3
     assert "rating s1k-left, s1k-right (2 gauntlets left in the queue, played by w1, w2)" in lines[0]
-    assert "(1 gauntlet left in the queue, played here: no worker attached (40 games so far))" in lines[1]
+    assert "(1 gauntlet left in the queue, played here: no worker takes it (40 games so far))" in lines[1]
     assert "(1 gauntlet left in the queue, waiting for one of 1 worker)" in lines[2]
 
 

@@ -27,7 +27,7 @@ ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field
 EVAL_MODES = ("local", "inline", "remote")
 """Who plays a run's gauntlets (``--eval``): a worker process beside training, the training process itself, or the
-league's workers (:mod:`selfplay_cli.train.evaluator`)."""
+league's workers (:mod:`selfplay_cli.train.evaluator`, :mod:`selfplay_cli.train.remote`)."""
 
 
 @dataclass(frozen=True)
