@@ -195,7 +195,7 @@ def test_train_flag_defaults_are_the_config_defaults():
     flags = {"agents": cfg.agents, "algo": cfg.algo, "sharing": cfg.sharing, "steps": cfg.steps, "seed": cfg.seed,
              "games": cfg.games, "snapshot_every": cfg.snapshot_every, "snapshot_steps": cfg.snapshot_steps,
              "swap_every": cfg.swap_every, "league_games": cfg.league_games, "eval_games": cfg.eval_games,
-             "eval_older": cfg.eval_older, "eval_inline": cfg.eval_inline,
+             "eval_older": cfg.eval_older, "eval_inline": cfg.eval_inline, "eval": cfg.eval, "eval_wait": cfg.eval_wait,
              "opponents": mm.mode, "window": mm.window, "latest_ratio": mm.latest_ratio, "device": cfg.device}
     assert {k: params[k].default for k in flags} == flags
 

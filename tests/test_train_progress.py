@@ -45,7 +45,7 @@ def test_progress_counts_what_moves_while_every_game_is_still_under_way(tmp_path
     far the games under way are, and how many snapshots were taken and rated, with the newest rated one's Elo. (A
     time limit of 2,000 steps, not pong's 18,000, keeps the rating games short; a game of the run reaches 512.)"""
     events = []
-    cfg = TrainConfig(env="pong", run="t", steps=8192, games=16, snapshot_steps=2048, eval_games=2, eval_inline=True,
+    cfg = TrainConfig(env="pong", run="t", steps=8192, games=16, snapshot_steps=2048, eval_games=2, eval="inline",
                       eval_playoff=0, ppo=FAST_PPO, env_options={"max_steps": 2000})
     with League.open(tmp_path / "league") as league:
         league.create_run("t", "pong", cfg.to_dict(), algo="ppo")

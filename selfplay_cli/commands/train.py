@@ -22,7 +22,7 @@ from ._common import (
     progress_enabled,
 )
 from ._output import console, err_console, print_json
-from .train_view import TrainProgress, describe_record, describe_run, report_json
+from .train_view import TrainProgress, describe_record, describe_run, report_json, still_coming
 
 
 # Long for its signature: a Typer command whose parameters are its ~30 options (about 90 lines); the body parses
@@ -77,9 +77,16 @@ def train(
                                             "clear. 0: no rating games.")] = 8,
     eval_older: Annotated[int, typer.Option("--eval-older", min=0, max=1_000, help="Older snapshots of the run in "
                                             "each gauntlet, besides the predecessor and the best.")] = 2,
-    eval_inline: Annotated[bool, typer.Option("--eval-inline", help="Play the rating games in the training process, "
-                                              "training paused (default: a worker process beside training).")]
-    = False,
+    eval: Annotated[str, typer.Option("--eval", metavar="local|inline|remote", help="Who plays the rating games: "
+                                      "local, a worker process beside training; inline, the training process "
+                                      "(training paused); remote, the league's workers (marl worker, on any "
+                                      "machine), from its work queue, this process playing what no worker takes "
+                                      "at the run's end.")] = "local",
+    eval_inline: Annotated[bool, typer.Option("--eval-inline", help="Same as --eval inline.")] = False,
+    eval_wait: Annotated[bool, typer.Option("--wait/--no-wait", help="--eval remote: the run's end waits for its "
+                                            "rating games (showing how many are left and which workers play "
+                                            "them), or, with --no-wait, ends and leaves them to the workers (marl "
+                                            "queue shows them; the ladder fills in as they are played).")] = True,
     eval_playoff: Annotated[int, typer.Option("--eval-playoff", min=0, max=100_000, help="After the final "
                                               "gauntlet the run's best candidates meet, up to this many games a "
                                               "pair, until the best is separated (0: no playoff).")] = 100,
@@ -129,7 +136,7 @@ def train(
     league = open_league(home, db)
     try:
         if resume is not None:
-            cfg = resumed_config(league, resume, env, typed, device)
+            cfg = resumed_config(league, resume, env, typed, device, wait=eval_wait if "eval_wait" in typed else None)
         else:
             cfg = start_run(league, settings, run)
         reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
@@ -145,16 +152,19 @@ def train(
     finally:
         league.close()
     if json_out:
-        print_json(report_json(report))
+        print_json(report_json(report, cfg.eval))
         return
-    console.print(describe_run(report, inline=cfg.eval_inline), markup=False, highlight=False)
+    console.print(describe_run(report, cfg.eval), markup=False, highlight=False)
     for rec in report.finals:
-        console.print("  " + describe_record(rec), markup=False)
-    if report.best is not None:
+        console.print("  " + describe_record(rec, pending=bool(report.rating_left)), markup=False)
+    if report.rating_left:
+        for line in still_coming(report):
+            console.print("  " + line, markup=False)
+    elif report.best is not None:
         from ..league.ladder import verdict_lines
 
         for line in verdict_lines(report.side_bests or [report.best]):
             console.print("  " + line, markup=False)
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
-    if report.plot is not None:
+    if report.plot is not None and (isinstance(report.plot, Path) or not report.rating_left):  # (none yet: said)
         console.print(f"  rating curves: {report.plot}", markup=False)

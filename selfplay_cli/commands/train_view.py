@@ -13,15 +13,18 @@ from typing import TYPE_CHECKING, Any
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.text import Text
 
+from ..train.remote import run_batch
 from ._output import err_console
 
 if TYPE_CHECKING:
     from ..train.progress import Standing, TrainReport
 
 
-def report_json(report: TrainReport) -> dict[str, Any]:
+def report_json(report: TrainReport, eval: str = "local") -> dict[str, Any]:
     """``marl train --json``: the whole run's figures (every session of a resumed run), and this session's
-    (``session_*``; the rate and the rating games' time are this session's too)."""
+    (``session_*``; the rate and the rating games' time are this session's too). ``eval``: who played the rating
+    games (``--eval``); ``rating_batch``: the run's batch in the league's queue (``--eval remote``), and
+    ``rating_jobs_left`` its gauntlets not played yet (``--no-wait``), while ``best`` is null."""
     return {"run": report.run, "steps": report.steps, "episodes": report.episodes, "seconds": round(report.seconds, 1),
             "sessions": report.sessions, "rating_games": report.eval_games, "snapshots": report.snapshots,
             "final": [r.to_json() for r in report.finals],
@@ -30,7 +33,10 @@ def report_json(report: TrainReport) -> dict[str, Any]:
             "session_train_seconds": round(report.train_seconds, 1),
             "session_rating_games": report.session_eval_games, "steps_per_second": round(report.steps_per_second),
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
-            "best": ([_best_json(r) for r in report.side_bests] if report.side_bests  # a game rated per side
+            "rating": eval, "rating_batch": run_batch(report.run) if eval == "remote" else None,
+            "rating_jobs_left": report.rating_left,
+            "best": (None if report.rating_left  # not decided before the final gauntlet and the playoff are in
+                     else [_best_json(r) for r in report.side_bests] if report.side_bests  # a game rated per side
                      else None if report.best is None else _best_json(report.best))}
 
 
@@ -40,9 +46,10 @@ def _best_json(row: Any) -> dict[str, Any]:
     return {k: row.to_json()[k] for k in keys}
 
 
-def describe_run(report: TrainReport, inline: bool = False) -> str:
+def describe_run(report: TrainReport, eval: str = "local") -> str:
     """The summary's first line: the whole run (every session of a resumed run: steps, episodes, snapshots, rating
-    games, wall time), and where the run had more than one session, this session's part and rate.
+    games, wall time), and where the run had more than one session, this session's part and rate. ``eval``: who
+    played the rating games (``--eval``).
 
     ``run pong-1: 6,000,128 game steps in 92 s (70 s of training at 85,700 steps/s), 256 episodes, 14 snapshots;
     444 rating games (beside training: 82 s, 18 s of it waited for at the end)``"""
@@ -53,11 +60,24 @@ def describe_run(report: TrainReport, inline: bool = False) -> str:
     else:
         when = (f"in {report.sessions} sessions, {report.seconds:.0f} s in all (this session: "
                 f"{report.session_steps:,} steps in {report.session_seconds:.0f} s, {rate})")
-    where = "inline" if inline else "beside training"
+    where = {"inline": "inline", "remote": "through the league's queue"}.get(eval, "beside training")
     this = f"{report.session_eval_games:,} of them this session, " if report.sessions > 1 else ""
+    games = f"{report.eval_games:,} rating games"
+    if report.rating_left:
+        games += f" so far, {report.rating_left} gauntlet{'s' * (report.rating_left > 1)} still queued"
     return (f"run {report.run}: {report.steps:,} game steps {when}, {report.episodes:,} episodes, "
-            f"{len(report.snapshots)} snapshots; {report.eval_games:,} rating games ({this}{where}: "
+            f"{len(report.snapshots)} snapshots; {games} ({this}{where}: "
             f"{report.eval_seconds:.0f} s, {report.wait_seconds:.0f} s of it waited for at the end)")
+
+
+def still_coming(report: TrainReport) -> list[str]:
+    """What a run that left its gauntlets to the league's workers (``--no-wait``) says instead of its best: that the
+    ratings are still coming, and where to see them arrive."""
+    n = report.rating_left
+    return [f"ratings still coming: {n} gauntlet{'s' * (n > 1)} of this run (the final one with its playoff, which "
+            "names the run's best) wait in the league's queue for its workers (marl worker)",
+            f"  progress: marl queue --batch {run_batch(report.run)}; the final ratings and the best, once they are "
+            f"played: marl league ladder --run {report.run}"]
 
 
 def elo_text(rec: Any) -> str:
@@ -65,10 +85,11 @@ def elo_text(rec: Any) -> str:
     return f"Elo {rec.elo:.0f} [{rec.ci_low:.0f}, {rec.ci_high:.0f}]" if rec.elo is not None else ""
 
 
-def describe_record(rec: Any) -> str:
+def describe_record(rec: Any, pending: bool = False) -> str:
     """``pong-1/ep37-left: Elo 2301 [2220, 2388]; vs random 100% [89%, 100%] of 32 games, vs cpu 94% [...] of 32
     games``: every figure measured on that snapshot (its stored games and its fitted rating), each score with its
-    95% interval and what was counted (a cooperative game's results are comparisons)."""
+    95% interval and what was counted (a cooperative game's results are comparisons). ``pending``: its gauntlet is
+    still queued (``--no-wait``), so the figures, if any, are not its last."""
     parts = [elo_text(rec)] if rec.elo is not None else []
 
     def score(wdl: tuple[int, int, int]) -> str:
@@ -78,7 +99,21 @@ def describe_record(rec: Any) -> str:
     vs = ", ".join(f"vs {bot} {score(wdl)}" for bot, wdl in rec.vs.items())
     if vs:
         parts.append(vs)
+    if pending:
+        return f"{rec.name}: " + ("; ".join(parts) + " so far" if parts else "not rated yet (its gauntlet is queued)")
     return f"{rec.name}: " + ("; ".join(parts) if parts else "not rated (--eval-games 0)")
+
+
+def describe_queue(q: Any, games: int) -> str:
+    """Where a run's queued gauntlets stand (:class:`~selfplay_cli.train.remote.QueueStanding`): ``2 gauntlets
+    left in the queue, played by worker@a:12, worker@b:7``, or ``1 gauntlet left in the queue, played here: no
+    worker takes it (40 games so far)``."""
+    left = f"{q.left} gauntlet{'s' * (q.left != 1)} left in the queue"
+    if q.here:
+        return f"{left}, played here: no worker takes {'them' if q.left != 1 else 'it'} ({games:,} games so far)"
+    if q.workers:
+        return f"{left}, played by {', '.join(q.workers)}"
+    return f"{left}, waiting for one of {q.attached} worker{'s' * (q.attached != 1)}"
 
 
 def _clock(seconds: float) -> str:
@@ -175,12 +210,14 @@ class TrainProgress:
         elif kind == "evaluating":
             short = [n.split("/", 1)[-1] for n in event["snapshots"]]
             names = ", ".join(short) if len(short) <= 2 else f"{short[0]} and {len(short) - 1} more snapshots"
-            self.progress.update(self.task, description=f"rating {names}", eta=eta,
-                                 info=f"{event['games']} games played")
+            queued = event.get("queue")
+            info = f"{event['games']} games played" if queued is None else describe_queue(queued, event["games"])
+            self.progress.update(self.task, description=f"rating {names}", eta=eta, info=info)
             if self._due(None):
-                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); rating {names} "
-                            f"({event['games']:,} rating games played in this session so far); {self._elapsed()} "
-                            "elapsed")
+                played = (f"{event['games']:,} rating games played in this session so far" if queued is None
+                          else info)
+                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); rating {names} ({played}); "
+                            f"{self._elapsed()} elapsed")
         elif kind == "snapshot":
             recs = "; ".join(
                 f"{r.name.split('/', 1)[-1]} (step {r.step:,}): "

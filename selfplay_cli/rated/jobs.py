@@ -302,3 +302,6 @@ def sprt_verdict(jobs: Sequence[JobRow], test: Any, paired: bool) -> tuple[float
             break
     return llr, decision, n
 
+
+
+from . import gauntlet_jobs  # noqa: E402,F401  (registers the "gauntlet" kind: a training run's gauntlets)

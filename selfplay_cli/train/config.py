@@ -25,6 +25,9 @@ from .matchmaking import MatchmakerConfig
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field
+EVAL_MODES = ("local", "inline", "remote")
+"""Who plays a run's gauntlets (``--eval``): a worker process beside training, the training process itself, or the
+league's workers (:mod:`selfplay_cli.train.evaluator`, :mod:`selfplay_cli.train.remote`)."""
 
 
 @dataclass(frozen=True)
@@ -127,7 +130,9 @@ class TrainConfig:
     league_games: float = 0.0  # all seats learning: share of games one learner plays a league opponent instead
     eval_games: int = 8  # games a new snapshot plays against each gauntlet opponent (2 where already clear)
     eval_older: int = 2  # older snapshots of the run in each gauntlet, besides the predecessor and the best
-    eval_inline: bool = False  # play the gauntlets in the training process instead of a worker beside it
+    eval: str = "local"  # who plays the gauntlets: local (a worker process beside training), inline (the training
+    # process, paused), remote (the league's workers, from its work queue: marl worker, on any machine)
+    eval_wait: bool = True  # --eval remote: the run's end waits for its gauntlets (False: leaves them to the workers)
     eval_playoff: int = 100  # after the final gauntlet the run's best candidates meet, up to this many games a pair
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
@@ -155,6 +160,11 @@ class TrainConfig:
             raise MarlError(f"--eval-older must not be negative, not {self.eval_older}")
         if self.eval_playoff < 0:
             raise MarlError(f"--eval-playoff must not be negative, not {self.eval_playoff}")
+        if self.eval not in EVAL_MODES:
+            raise MarlError(f"--eval must be one of {', '.join(EVAL_MODES)}, not '{self.eval}'")
+        if not self.eval_wait and self.eval != "remote":
+            raise MarlError(f"--no-wait is for --eval remote (the league's workers play what the run leaves); with "
+                            f"--eval {self.eval} the run's own process plays every gauntlet")
         if self.snapshot_every < 0 or self.snapshot_steps < 0 or not (self.snapshot_every or self.snapshot_steps):
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
         if self.algo not in ALGOS:
@@ -206,6 +216,11 @@ class TrainConfig:
         _check_memory(self, tuple(spaces[0].observation.shape),
                       [int((layout == i).sum()) for i in range(len(spaces))])
 
+    @property
+    def eval_inline(self) -> bool:
+        """The gauntlets are played in the training process (``--eval inline``)."""
+        return self.eval == "inline"
+
     def game(self) -> EnvSpec:
         """The game as the run's options make it (a lander run of 3 landers has 3 seats)."""
         return get_env(self.env).for_options(**self.env_options)
@@ -232,6 +247,7 @@ class TrainConfig:
         from ..typecheck import check_fields, field_types
 
         d = dict(d)
+        _legacy_eval_inline(d)
         sections = {"ppo": PPOConfig, "dqn": DQNConfig, "sac": SACConfig, "opponents": MatchmakerConfig,
                     "teacher": TeacherConfig}
         known = {f.name for f in fields(cls)}
@@ -267,6 +283,20 @@ class TrainConfig:
                 except (TypeError, ValueError) as e:
                     raise MarlError(f"[{key}]: {e}") from None
         return cls(**d)
+
+
+def _legacy_eval_inline(d: dict[str, Any]) -> None:
+    """``eval_inline = true`` (a run saved by an earlier release, or a config file written for one) is ``eval =
+    "inline"``; with another ``eval`` than the default it is a contradiction, refused."""
+    if "eval_inline" not in d:
+        return
+    inline = d.pop("eval_inline")
+    if not isinstance(inline, bool):
+        raise MarlError(f"setting eval_inline wants true or false, not {inline!r}")
+    if inline:
+        if d.get("eval", "local") not in ("local", "inline"):
+            raise MarlError(f"eval_inline = true is eval = \"inline\": it cannot go with eval = \"{d['eval']}\"")
+        d["eval"] = "inline"
 
 
 def can_teach(algo: str) -> bool:

@@ -9,6 +9,9 @@ the trainer only learns which jobs are done, and waits for the last one before i
 the run's playoff (:mod:`selfplay_cli.rated.playoff`): its best candidates meet until the best is separated.
 
 ``background=False`` plays each gauntlet in the calling process instead, when it is submitted (the same games).
+:mod:`.remote` (``marl train --eval remote``) puts them on the league's work queue instead, for ``marl worker``
+processes on any machine, and plays them itself at the run's end if no worker takes them (the same games again: one
+function plays a gauntlet wherever it is played, :func:`selfplay_cli.rated.gauntlet_jobs.play_gauntlet_spec`).
 
 The worker leaves when told to, or when a job fails (the failure comes back as the job's error, raised in the
 trainer in its class: a user's mistake, an I/O failure, or a bug). It dies with the trainer, at once, however the
@@ -35,16 +38,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import MarlError, MarlIOError
 
-FINAL_BOT_GAMES = 4  # a run's final snapshots play this many times --eval-games against each scripted player (32
-# at the default 8): the run's summary reports their scores against the bots, and each score's interval
-FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapshots (all of a default run's), spread
-# over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
-# rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
-PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
+if TYPE_CHECKING:
+    from .remote import RemoteEvaluator
+
 STALL_SECONDS = 300.0  # a worker that has a job and reports no finished game for this long is stuck (a stopped
 # process, a game that never ends) and is replaced: a gauntlet's games all start at once, so one game's length
 # (seconds in pong, under two minutes for the longest built-in game on a loaded machine) passes between reports
@@ -77,27 +77,17 @@ class JobDone:
 
 
 def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) -> JobDone:
-    """Play one gauntlet in this process."""
-    from ..envs import get_env
-    from ..rated.gauntlet import GauntletConfig, rate_snapshots
-    from ..results import Rules
+    """Play one gauntlet in this process (as a worker of the league's queue plays it: the same spec, the same
+    games)."""
+    from ..rated.gauntlet_jobs import play_gauntlet_spec
 
-    t0 = time.perf_counter()
-    # games in a round of two players: a seat-swapped pair, or one game where each plays only its own side
-    per = 1 if Rules.of(get_env(league.get_player(job.snapshot_ids[0]).env)).sides_differ else 2
-    n = max(job.games // per, 1)
-    cfg = GauntletConfig(pairs=n, clear_pairs=n if job.full else 1, max_pairs=n,
-                         older=max(job.older, FINAL_OLDER) if job.full else job.older,
-                         bot_pairs=max(n, FINAL_BOT_GAMES * job.games // per) if job.full else 0)
-    matchups = rate_snapshots(league, job.snapshot_ids, first_seed=job.first_seed, config=cfg, device=device,
-                              on_games=on_games)
-    games = sum(m.games for m in matchups)
-    if job.playoff:
-        from ..rated.playoff import PlayoffConfig, playoff
+    games, seconds = play_gauntlet_spec(league, _spec(job), device=device, on_games=on_games)
+    return JobDone(job, seconds, games)
 
-        games += playoff(league, job.snapshot_ids, first_seed=job.first_seed + PLAYOFF_SEEDS,
-                         config=PlayoffConfig(max_games=job.playoff), device=device, on_games=on_games)
-    return JobDone(job, time.perf_counter() - t0, games)
+
+def _spec(job: GauntletJob) -> dict[str, Any]:
+    return {"snapshot_ids": list(job.snapshot_ids), "first_seed": job.first_seed, "games": job.games,
+            "older": job.older, "full": job.full, "playoff": job.playoff}
 
 
 def die_with_parent(parent: int) -> None:
@@ -216,6 +206,11 @@ class Evaluator:
     def _count(self, n: int) -> None:
         self.games_played += n
 
+    def queue_standing(self) -> None:
+        """Nothing of a local worker's is in the league's queue (see :meth:`.remote.RemoteEvaluator.queue_standing`).
+        """
+        return None
+
     def poll(self) -> list[JobDone]:
         """The jobs finished since the last call (never blocks, beyond replacing a worker that died or stalled). A
         failed job raises its error."""
@@ -329,3 +324,15 @@ def _exit(code: int | None) -> str:
         except ValueError:
             return f"killed by signal {-code}"
     return f"exit code {code}"
+
+
+def make_evaluator(league: Any, cfg: Any, device: str, on_worker: Callable[[int], None] | None = None
+                   ) -> Evaluator | RemoteEvaluator:
+    """The run's rating worker as ``cfg.eval`` says: ``local`` (a process beside training), ``inline`` (in the
+    training process), ``remote`` (the league's workers, :mod:`.remote`); none plays anything with
+    ``--eval-games 0``."""
+    if cfg.eval_games and cfg.eval == "remote":
+        from .remote import RemoteEvaluator
+
+        return RemoteEvaluator(league, cfg.run, device, wait=cfg.eval_wait)
+    return Evaluator(league, device, background=bool(cfg.eval_games) and cfg.eval == "local", on_worker=on_worker)

@@ -41,10 +41,11 @@ from ..results import COOPERATIVE, GameResult
 from ..signals import clear_stop, signals_held, stoppable
 from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum
-from .evaluator import Evaluator, GauntletJob, JobDone
+from .evaluator import Evaluator, GauntletJob, JobDone, make_evaluator
 from .lock import claim, write_lock
 from .opponents import Opponents
 from .progress import SnapshotRecord, Standing, TrainReport
+from .remote import RemoteEvaluator
 from .rollouts import Rollouts, load_teacher
 from .state import Job, RunState, SavedAs, SnapshotMoments
 from .team import LearnerTeam
@@ -117,7 +118,7 @@ class Trainer:
         self.moments = SnapshotMoments(league, cfg, spec, self.run_dir, learners=self.learners, names=self.names,
                                        saved=saved, state=self.state, games=self.games, opponents=self.opponents,
                                        device=self.device)
-        self.evaluator: Evaluator | None = None  # set while training
+        self.evaluator: Evaluator | RemoteEvaluator | None = None  # set while training
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
         self.eval_games = 0  # games they played
         self.eval_events = 0  # gauntlets finished in this process
@@ -268,11 +269,10 @@ class Trainer:
         """Train until the budget is spent (holding the run's lock), then take a final snapshot."""
         self._lock()
         try:
-            background = bool(self.cfg.eval_games) and not self.cfg.eval_inline
             # (stoppable() innermost: a stop tells the learners' update threads first, so nothing waits for them)
             with LearnerTeam(self.learners) as self.team, \
-                    Evaluator(self.league, str(self.device), background=background,
-                              on_worker=self._write_lock) as self.evaluator, stoppable():
+                    make_evaluator(self.league, self.cfg, str(self.device),
+                                   on_worker=self._write_lock) as self.evaluator, stoppable():
                 return self._train()
         finally:
             clear_stop()  # the learners' threads have ended (the team waited for them)
@@ -305,7 +305,8 @@ class Trainer:
         t1 = time.perf_counter()
         self._collect(self.evaluator.wait(on_wait=self._waiting))  # type: ignore[union-attr]
         waited = time.perf_counter() - t1
-        if not self.records:  # no rating games: name the final snapshots all the same
+        if not self.records or state.jobs:  # no rating games, or not all played yet (--no-wait): the final
+            # snapshots as the ledger has them now
             self.records = self._records([self.league.get_player(i) for i in state.latest])
         plot = self._plot()
         session = time.perf_counter() - t0
@@ -314,7 +315,8 @@ class Trainer:
                            sessions=state.resumes + 1, session_steps=state.steps - self._steps0,
                            session_seconds=session, train_seconds=self._train_seconds(),
                            session_eval_games=self.eval_games,
-                           eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot, **self._best())
+                           eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
+                           rating_left=len(state.jobs), **self._best())
 
     def _play(self, start: float, metrics: TextIO, board: Any) -> None:
         """The games and updates until the budget is spent (the run's clock started at ``start``): a metrics line
@@ -446,6 +448,7 @@ class Trainer:
         if self.on_progress:
             self.on_progress({"event": "evaluating", "snapshots": [n for j in self.state.jobs for n in j[0]],
                               "games": self.evaluator.games_played,  # type: ignore[union-attr]
+                              "queue": self.evaluator.queue_standing(),  # type: ignore[union-attr]
                               "standing": self.standing()})
 
     def _remaining(self, rate: float | None) -> float | None:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import re
 import sys
 from collections.abc import Callable, Collection, Mapping
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -28,15 +29,16 @@ PRESETS = ("seed000",)
 batch, buffer, target period and epsilon schedule; docs/history/training.md says where it comes from)."""
 
 FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
-                 "snapshot_steps", "eval_games", "eval_older", "eval_inline", "eval_playoff", "swap_every",
+                 "snapshot_steps", "eval_games", "eval_older", "eval", "eval_wait", "eval_playoff", "swap_every",
                  "tensorboard", "league_games", "seats")
 """Options whose value is a top-level setting of the same name."""
 
 OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio"}
 """Options that set a key of ``[opponents]``: the option's name, then the key's."""
 
-RESUME_OPTIONS = frozenset({"resume", "env", "device", "quiet", "json_out", "home", "db"})
-"""What may be typed with --resume: a resumed run keeps the configuration it was started with."""
+RESUME_OPTIONS = frozenset({"resume", "env", "device", "eval_wait", "quiet", "json_out", "home", "db"})
+"""What may be typed with --resume: a resumed run keeps the configuration it was started with (whether this session's
+end waits for the league's workers, ``--wait/--no-wait``, is this session's to say)."""
 
 
 def read_toml(path: Path) -> dict[str, Any]:
@@ -124,6 +126,10 @@ def _apply_flags(settings: dict[str, Any], flags: Mapping[str, Any]) -> None:
     """The typed options over the settings (the options' names are not always the settings': ``--opponents`` is
     ``[opponents] mode``, ``--lr`` every learner's ``lr``)."""
     settings.update({k: v for k, v in flags.items() if k in FLAG_SETTINGS})
+    if flags.get("eval_inline"):  # --eval-inline, as earlier releases spelled --eval inline
+        if flags.get("eval", "inline") != "inline":
+            raise MarlError(f"--eval-inline is --eval inline: it cannot go with --eval {flags['eval']}")
+        settings["eval"] = "inline"
     settings["opponents"].update({key: flags[flag] for flag, key in OPPONENT_FLAGS.items() if flag in flags})
     if "bots" in flags:
         settings["opponents"]["bots"] = parse_bots(flags["bots"])
@@ -179,17 +185,18 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
 
 
 def resumed_config(league: League, resume: str, env: str | None, typed: Collection[str],
-                   device: str = "auto") -> TrainConfig:
+                   device: str = "auto", wait: bool | None = None) -> TrainConfig:
     """The configuration a stopped or killed run was started with, to continue it (``--resume``): ``typed``, the
-    options the user typed, may not change it (only the device, and what is not a setting); ``env``, when given,
-    must be the run's game."""
+    options the user typed, may not change it (only the device, whether this session's end ``wait``s for the
+    league's workers, and what is not a setting); ``env``, when given, must be the run's game."""
     from .needs import check_resumable
 
     ignored = sorted(set(typed) - RESUME_OPTIONS)
     if ignored:
         flags = ", ".join("--" + name.replace("_", "-") for name in ignored)
         raise MarlError(f"--resume continues run '{resume}' under the configuration it was started with: "
-                        f"{flags} cannot change it (only --device, --quiet, --json, --home, --db apply)")
+                        f"{flags} cannot change it (only --device, --wait/--no-wait, --quiet, --json, --home, --db "
+                        "apply)")
     old = league.get_run(resume)
     if old is None:
         raise MarlError(f"no run named '{resume}' to resume")
@@ -202,4 +209,6 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
                         "the league's record of it was changed: start a new run")
     if device != "auto":
         cfg.device = device
+    if wait is not None and wait != cfg.eval_wait:
+        cfg = replace(cfg, eval_wait=wait)  # (checked: --no-wait is for a run rated by the league's workers)
     return cfg

@@ -1,0 +1,92 @@
+"""A training run's gauntlets as jobs of the league's queue (kind ``gauntlet``): what one holds, and how it is played.
+
+A run's snapshot moment asks for one gauntlet (:func:`~selfplay_cli.rated.gauntlet.rate_snapshots`), and the final
+moment's is played in full and followed by the run's playoff (:mod:`~selfplay_cli.rated.playoff`). Played by the
+training process itself (``marl train``'s default, a worker process beside training, or inline) or, with ``marl
+train --eval remote``, by any ``marl worker`` that leases it from the queue: the same function plays it either way,
+from the same spec, so the games are the same.
+
+A gauntlet stores its own games, each matchup whole under a key of the moment (``gauntlet/<first snapshot id>/...``;
+the playoff's rounds under ``playoff/...``), and a gauntlet played again stores only the matchups it is missing and
+makes the same choices. So a job finished twice, or played again after its worker went silent, counts once: its
+:class:`~selfplay_cli.rated.jobs.Played` carries no games of its own (the queue only marks it done), and a summary
+(games, seconds, the snapshots it rated).
+
+What a gauntlet chooses (the run's best so far, which matchups are already clear) comes from the run's earlier
+gauntlets, so a run's jobs are queued in a chain (each waits for the one before it), played in the order the
+snapshots were taken, as the training process plays them.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from ..envs import get_env
+from ..league.queue import JobRow, NewJob
+from ..league.store import League
+from ..results import Rules
+from .gauntlet import GauntletConfig, rate_snapshots
+from .jobs import KINDS, Played
+
+__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "gauntlet_job", "play_gauntlet_spec"]
+
+GAUNTLET = "gauntlet"
+FINAL_BOT_GAMES = 4  # a run's final snapshots play this many times --eval-games against each scripted player (32
+# at the default 8): the run's summary reports their scores against the bots, and each score's interval
+FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapshots (all of a default run's), spread
+# over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
+# rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
+PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
+
+
+def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int, games: int, older: int,
+                 full: bool = False, playoff: int = 0) -> NewJob:
+    """The queue's job of one moment's gauntlet (``full``: the final moment's, with a ``playoff`` of up to that many
+    games a pair). The snapshots' bytes are put in the league where it keeps them, so a worker on another machine can
+    fetch them."""
+    rows = [league.get_player(int(i)) for i in snapshot_ids]
+    ensure = getattr(league, "ensure_blobs", None)
+    if ensure is not None:
+        ensure(rows)
+    return NewJob(kind=GAUNTLET, env=rows[0].env, spec={
+        "snapshot_ids": [int(i) for i in snapshot_ids], "first_seed": int(first_seed), "games": int(games),
+        "older": int(older), "full": bool(full), "playoff": int(playoff),
+        "snapshots": [r.full_name for r in rows]})
+
+
+def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "cpu",
+                       on_games: Callable[[int], None] | None = None) -> tuple[int, float]:
+    """Play one moment's gauntlet (and, for the final one, the playoff) as ``spec`` says (:func:`gauntlet_job`'s
+    fields), storing its games; the games played and the seconds they took."""
+    from .playoff import PlayoffConfig, playoff
+
+    ids = [int(i) for i in spec["snapshot_ids"]]
+    games, older, full = int(spec["games"]), int(spec["older"]), bool(spec.get("full", False))
+    first_seed = int(spec["first_seed"])
+    t0 = time.perf_counter()
+    # games in a round of two players: a seat-swapped pair, or one game where each plays only its own side
+    per = 1 if Rules.of(get_env(league.get_player(ids[0]).env)).sides_differ else 2
+    n = max(games // per, 1)
+    cfg = GauntletConfig(pairs=n, clear_pairs=n if full else 1, max_pairs=n,
+                         older=max(older, FINAL_OLDER) if full else older,
+                         bot_pairs=max(n, FINAL_BOT_GAMES * games // per) if full else 0)
+    matchups = rate_snapshots(league, ids, first_seed=first_seed, config=cfg, device=device, on_games=on_games)
+    played = sum(m.games for m in matchups)
+    if int(spec.get("playoff", 0)):
+        played += playoff(league, ids, first_seed=first_seed + PLAYOFF_SEEDS,
+                          config=PlayoffConfig(max_games=int(spec["playoff"])), device=device, on_games=on_games)
+    return played, time.perf_counter() - t0
+
+
+def _play(league: League, job: JobRow, *, device: str, parallel: int,
+          on_games: Callable[[int], None] | None) -> Played:
+    """A ``gauntlet`` job: its games are stored as it plays them (keyed: once), so the job's end stores none."""
+    del parallel  # a gauntlet plays all its matchups in one batch of its own size
+    games, seconds = play_gauntlet_spec(league, job.spec, device=device, on_games=on_games)
+    return Played(games=[], match_kind="eval", params={}, seconds=seconds,
+                  result={"games": games, "seconds": round(seconds, 3), "snapshots": job.spec.get("snapshots", [])})
+
+
+KINDS[GAUNTLET] = _play

@@ -1,0 +1,339 @@
+"""`marl train --eval remote`: a run's gauntlets as jobs of the league's queue, played by `marl worker`s (here the
+library's worker loop in a thread), by the run itself at its end when no worker is attached, or later, after a run
+that did not wait (--no-wait); on SQLite and on a real PostgreSQL. The games are the local rating worker's, seed by
+seed, whoever plays them and whenever."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from cli_helpers import run
+from sqlalchemy import select, update
+
+from selfplay_cli.cli import main
+from selfplay_cli.commands.train_view import describe_queue
+from selfplay_cli.errors import MarlError
+from selfplay_cli.league.models import Game, GameSeat, Job, Match, Player
+from selfplay_cli.league.store import League
+from selfplay_cli.policies.network import Arch, build_network
+from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
+from selfplay_cli.rated.jobs import play_leased
+from selfplay_cli.train.config import TrainConfig
+from selfplay_cli.train.evaluator import GauntletJob
+from selfplay_cli.train.remote import QueueStanding, RemoteEvaluator, run_batch
+from selfplay_cli.work import WorkerOptions, run_worker
+
+KILL_POINTS = Path(__file__).with_name("kill_points.py")
+RUN = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
+       "2048", "--steps", "4096", "--eval-games", "4", "--eval-playoff", "4", "--seed", "3", "--run", "r", "--quiet"]
+"""Three snapshot moments (s0, s2.05k, s4.1k) of two learners: three gauntlets, the last in full with a playoff."""
+BATCH = run_batch("r")
+
+
+def _record(league: League) -> Counter:
+    """Every rating game in the league: its seed, length, and each seat's player (by name) and points; a multiset."""
+    out: Counter = Counter()
+    with league.session(readonly=True) as s:
+        names = dict(s.execute(select(Player.id, Player.name)).all())
+        games = s.execute(select(Game.id, Game.seed, Game.length).join(Match, Match.id == Game.match_id)
+                          .where(Match.kind == "eval")).all()
+        seats: dict[int, list] = {}
+        for gid, _seat, pid, points in s.execute(select(GameSeat.game_id, GameSeat.seat, GameSeat.player_id,
+                                                       GameSeat.points).order_by(GameSeat.seat)):
+            seats.setdefault(gid, []).append((names[pid], points))
+    for gid, seed, length in games:
+        out[(seed, length, tuple(seats[gid]))] += 1
+    return out
+
+
+@pytest.fixture(scope="module")
+def local_record(tmp_path_factory) -> Counter:
+    """The rating games of the run with the default rating worker (a process beside training)."""
+    home = tmp_path_factory.mktemp("local")
+    assert main([*RUN, "--home", str(home)]) == 0
+    with League.open(home) as league:
+        record = _record(league)
+    assert sum(record.values()) > 50
+    return record
+
+
+def _train_json(capsys, db_url: str, home: Path, *extra: str) -> dict:
+    code, out, err = run(capsys, *RUN, "--eval", "remote", "--db", db_url, "--home", str(home), "--json", *extra)
+    assert code == 0, err
+    return json.loads(out)
+
+
+@pytest.mark.slow
+def test_workers_play_a_runs_gauntlets_and_the_games_are_the_local_workers(db_url, tmp_path, capsys, local_record):
+    """A worker attached to the league plays every gauntlet of the run (the run plays none itself), in the order the
+    snapshots were taken, and the ledger ends with the very games the default local worker stores."""
+    home = tmp_path / "home"
+    worker_league = League(db_url, home=home)
+    reports = []
+    worker = threading.Thread(target=lambda: reports.append(run_worker(worker_league, WorkerOptions(
+        batches=(BATCH,), max_jobs=3, poll=0.05, beat=1.0, name="w1"))), daemon=True)
+    worker.start()
+    try:
+        data = _train_json(capsys, db_url, home)
+        worker.join(timeout=120)
+        assert not worker.is_alive(), "the worker did not get the run's three gauntlets"
+    finally:
+        worker_league.close()
+    assert data["rating"] == "remote" and data["rating_batch"] == BATCH
+    assert data["rating_jobs_left"] == 0 and data["best"] is not None
+    assert reports[0].done == 3 and reports[0].failed == 0
+    with League(db_url, home=home) as league:
+        jobs = league.jobs(batch=BATCH)
+        assert [(j.kind, j.state, j.worker) for j in jobs] == [("gauntlet", "done", "w1")] * 3
+        assert [j.spec["snapshots"] for j in jobs] == [["r/s0-left", "r/s0-right"], ["r/s2.05k-left",
+                                                       "r/s2.05k-right"], ["r/s4.1k-left", "r/s4.1k-right"]]
+        assert [j.after for j in jobs] == [None, jobs[0].id, jobs[1].id]  # each waited for the one before it
+        assert [j.spec["full"] for j in jobs] == [False, False, True] and jobs[2].spec["playoff"] == 4
+        assert _record(league) == local_record
+        assert data["rating_games"] == sum(local_record.values())
+
+
+@pytest.mark.slow
+def test_with_no_worker_attached_the_run_plays_its_gauntlets_itself(tmp_path, capsys, local_record):
+    """No worker at all: the queued gauntlets are still played, by the run at its end (listed in the queue as the
+    run's own process), with the same games."""
+    home = tmp_path / "home"
+    data = _train_json(capsys, f"sqlite:///{home / 'league.db'}", home)
+    assert data["rating_jobs_left"] == 0 and data["best"] is not None
+    with League.open(home) as league:
+        jobs = league.jobs(batch=BATCH)
+        assert len(jobs) == 3 and {j.state for j in jobs} == {"done"}
+        assert all(j.worker.startswith("train@") for j in jobs)
+        assert _record(league) == local_record
+
+
+@pytest.mark.slow
+def test_no_wait_leaves_the_gauntlets_to_workers_and_the_ladder_fills_in_later(db_url, tmp_path, capsys,
+                                                                                local_record):
+    """--no-wait: the run ends with its three gauntlets queued (nothing rated, no best, said so); a worker that comes
+    later plays them, in order, and the run's six snapshots are on the ladder, with the local worker's games."""
+    home = tmp_path / "home"
+    data = _train_json(capsys, db_url, home, "--no-wait")
+    assert data["rating_jobs_left"] == 3 and data["best"] is None and data["rating_games"] == 0
+    with League(db_url, home=home) as league:
+        assert league.job_counts(BATCH)["queued"] == 3
+        assert _record(league) == Counter()
+        report = run_worker(league, WorkerOptions(until_empty=True, poll=0.05, name="later"))
+        assert (report.done, report.failed) == (3, 0)
+        assert [j.worker for j in league.jobs(batch=BATCH)] == ["later"] * 3
+        assert _record(league) == local_record
+    code, out, err = run(capsys, "league", "ladder", "--run", "r", "--db", db_url, "--home", str(home), "--json")
+    assert code == 0, err
+    rows = json.loads(out)
+    rows = rows["rows"] if isinstance(rows, dict) else rows
+    rated = {r["policy"] for r in rows if r.get("elo") is not None}
+    assert {f"r/{n}-{side}" for n in ("s0", "s2.05k", "s4.1k") for side in ("left", "right")} <= rated
+
+
+@pytest.mark.slow
+def test_no_wait_says_the_ratings_are_still_coming(tmp_path, capsys):
+    home = tmp_path / "home"
+    code, out, err = run(capsys, *RUN, "--eval", "remote", "--no-wait", "--home", str(home))
+    assert code == 0, err
+    assert "0 rating games so far, 3 gauntlets still queued (through the league's queue" in out
+    assert "r/s4.1k-left: not rated yet (its gauntlet is queued)" in out
+    assert "ratings still coming: 3 gauntlets of this run" in out
+    assert f"marl queue --batch {BATCH}" in out and "marl league ladder --run r" in out
+    assert "best of r" not in out  # the playoff, which names it, is not played yet
+    assert "no plot written" not in out  # (nothing is rated yet: the lines above say why)
+
+
+@pytest.mark.slow
+def test_a_run_killed_and_resumed_queues_no_gauntlet_twice(tmp_path, capsys):
+    """Killed as its second moment's rows are committed (its gauntlet not queued yet; the first one queued): the
+    resumed run finds the first gauntlet in the queue and queues the second and the rest once each, in order."""
+    home = tmp_path / "home"
+    env = {**os.environ, "SDL_VIDEODRIVER": "dummy", "SDL_AUDIODRIVER": "dummy"}
+    child = subprocess.run([sys.executable, str(KILL_POINTS), "after-rows", str(home), *RUN, "--eval", "remote"],
+                           capture_output=True, text=True, timeout=600, env=env)
+    assert child.returncode == -signal.SIGKILL, child.stderr[-2000:]
+    with League.open(home) as league:
+        before = league.jobs(batch=BATCH)
+    assert [j.spec["snapshots"] for j in before] == [["r/s0-left", "r/s0-right"]]
+    code, out, err = run(capsys, "train", "--resume", "r", "--home", str(home), "--json")
+    assert code == 0, err
+    with League.open(home) as league:
+        jobs = league.jobs(batch=BATCH)
+    names = [tuple(j.spec["snapshots"]) for j in jobs]
+    assert jobs[0].id == before[0].id and len(names) == len(set(names)) == 3
+    assert names[1] == ("r/s2.05k-left", "r/s2.05k-right")
+    assert [j.after for j in jobs] == [None, jobs[0].id, jobs[1].id] and {j.state for j in jobs} == {"done"}
+
+
+# -- the evaluator on its own (a snapshot, the scripted players) -------------------------------------------------------
+@pytest.fixture
+def one_snapshot(tmp_path):
+    home = tmp_path / "h"
+    arch = Arch(hidden=(16,))
+    meta = SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="w", name="s0", algo="ppo", step=0,
+                        env_options={"points_to_win": 1})
+    save_snapshot(tmp_path / "s0.safetensors", build_network((8, 6), 3, arch, seed=1), meta)
+    assert main(["checkpoint", "import", str(tmp_path / "s0.safetensors"), "--home", str(home)]) == 0
+    league = League.open(home)
+    league.ensure_bots("pong", ["random", "cpu"])
+    (snap,) = league.players("pong", kind="snapshot")
+    yield league, snap
+    league.close()
+
+
+def test_a_gauntlet_already_queued_is_not_queued_again(one_snapshot):
+    """A resumed session submits the gauntlets its run state still owes: those already in the batch are found by
+    their snapshot ids and waited for, a new one waits for the last of them."""
+    league, snap = one_snapshot
+    first = RemoteEvaluator(league, "w", "cpu")
+    first.submit(GauntletJob((snap.id,), 0, 2, 0))
+    (queued,) = league.jobs(batch=run_batch("w"))
+    again = RemoteEvaluator(league, "w", "cpu")
+    again.submit(GauntletJob((snap.id,), 0, 2, 0))
+    again.submit(GauntletJob((snap.id, snap.id), 100, 2, 0))
+    jobs = league.jobs(batch=run_batch("w"))
+    assert [j.id for j in jobs[:1]] == [queued.id] and len(jobs) == 2 and jobs[1].after == queued.id
+    assert again.poll() == [] and len(again.pending) == 2
+
+
+def test_the_wait_shows_which_worker_plays_and_a_dead_job_is_one_error(one_snapshot):
+    """While a worker holds the run's gauntlet the wait names it (and this process plays nothing); a job that ended
+    dead is raised as its error, in one line that says where to look."""
+    league, snap = one_snapshot
+    ev = RemoteEvaluator(league, "w", "cpu", poll_seconds=0.05)
+    ev.submit(GauntletJob((snap.id,), 0, 2, 0))
+    assert ev.queue_standing() == QueueStanding(left=1, workers=(), here=False, attached=0)
+    wid = league.add_worker("w9", "elsewhere", 1)
+    job = league.claim(wid)
+    assert ev.queue_standing() == QueueStanding(left=1, workers=("w9",), here=False, attached=1)
+    assert describe_queue(ev.queue_standing(), 0) == "1 gauntlet left in the queue, played by w9"
+    seen: list[QueueStanding] = []
+    finisher = threading.Timer(0.3, lambda: play_leased(league, wid, job))
+    finisher.start()
+    (done,) = ev.wait(on_wait=lambda: seen.append(ev.queue_standing()))
+    finisher.join()
+    assert done.games == 4 and ev.pending == [] and ev.games_played == 0  # all of it played by the worker
+    assert seen and seen[0].workers == ("w9",)
+    ev.submit(GauntletJob((snap.id, snap.id), 100, 2, 0))
+    (jid,) = [j.id for j in league.jobs(batch=run_batch("w"), states=["queued"])]
+    with league.session() as s:
+        s.execute(update(Job).where(Job.id == jid).values(state="dead", tries=5,
+                                                           error="MarlError: s0: snapshot file missing"))
+    with pytest.raises(MarlError, match=f"job {jid} .* failed on each of its 5 tries: MarlError: s0: snapshot file "
+                                        f"missing \\(marl queue --batch run:w shows it\\)"):
+        ev.poll()
+
+
+def test_a_cancelled_gauntlet_leaves_its_snapshots_unrated_in_one_line(one_snapshot):
+    league, snap = one_snapshot
+    notes: list[str] = []
+    ev = RemoteEvaluator(league, "w", "cpu", note=notes.append)
+    ev.submit(GauntletJob((snap.id,), 0, 2, 0))
+    assert league.cancel_jobs(batch=run_batch("w")) == 1
+    (done,) = ev.wait()
+    assert done.games == 0 and ev.pending == []
+    assert notes == [f"job {league.jobs(batch=run_batch('w'))[0].id} (the gauntlet of w/s0) was cancelled in the "
+                     "queue: those snapshots stay unrated"]
+
+
+# -- the option -------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("args", "needle"), [
+    (["--eval", "cloud"], "--eval must be one of local, inline, remote, not 'cloud'"),
+    (["--no-wait"], "--no-wait is for --eval remote"),
+    (["--eval", "inline", "--no-wait"], "--no-wait is for --eval remote"),
+    (["--eval", "remote", "--eval-inline"], "--eval-inline is --eval inline: it cannot go with --eval remote"),
+])
+def test_bad_eval_options_are_one_line_and_start_nothing(args, needle, home, capsys):
+    code, out, err = run(capsys, "train", "pong", *args)
+    assert code == 2 and needle in err and len(err.strip().splitlines()) == 1 and out == ""
+    assert not (home / "runs").exists()
+
+
+def test_a_config_of_an_earlier_release_keeps_its_inline_rating():
+    """Runs saved before --eval (and config files written for them) say ``eval_inline``: true is --eval inline."""
+    assert TrainConfig.from_dict({"env": "pong", "eval_inline": True}).eval == "inline"
+    assert TrainConfig.from_dict({"env": "pong", "eval_inline": False}).eval == "local"
+    assert "eval_inline" not in TrainConfig(env="pong", eval="remote").to_dict()
+    with pytest.raises(MarlError, match="cannot go with eval = \"remote\""):
+        TrainConfig.from_dict({"env": "pong", "eval_inline": True, "eval": "remote"})
+
+
+def test_the_wait_at_the_end_says_how_many_gauntlets_are_left_and_who_plays_them(monkeypatch):
+    """Without a terminal, the wait's line every 30 s names the gauntlets left and the workers holding them, or says
+    the run plays them itself; the bar's text says the same."""
+    import io
+
+    from rich.console import Console
+
+    import selfplay_cli.commands.train_view as train_view
+    from selfplay_cli.train.progress import Standing
+
+    buf = io.StringIO()
+    monkeypatch.setattr(train_view, "err_console", Console(file=buf, width=400))
+    now = [100.0]
+    progress = train_view.TrainProgress(TrainConfig(env="pong", run="r", steps=1000), bar=False, lines=True,
+                                        clock=lambda: now[0])
+    standing = Standing(progress=1.0, steps=1000, episodes=4, playing=16, game_steps=10.0, time_limit=None,
+                        snapshots=6, rated=2, newest=(), session_steps=1000, steps_per_second=100.0, remaining=None,
+                        ended=True)
+    for t, queued in ((31.0, QueueStanding(left=2, workers=("w1", "w2"), here=False, attached=3)),
+                      (62.0, QueueStanding(left=1, workers=(), here=True, attached=0)),
+                      (93.0, QueueStanding(left=1, workers=(), here=False, attached=1))):
+        now[0] = 100.0 + t
+        progress.update({"event": "evaluating", "snapshots": ["r/s1k-left", "r/s1k-right"], "games": 40,
+                         "queue": queued, "standing": standing})
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 3
+    assert "rating s1k-left, s1k-right (2 gauntlets left in the queue, played by w1, w2)" in lines[0]
+    assert "(1 gauntlet left in the queue, played here: no worker takes it (40 games so far))" in lines[1]
+    assert "(1 gauntlet left in the queue, waiting for one of 1 worker)" in lines[2]
+
+
+def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
+    """Whether this session's end waits for the workers is the session's to say (--wait/--no-wait with --resume);
+    who rates the run is the run's configuration, kept."""
+    from selfplay_cli.train.settings import resumed_config
+
+    with League.open(tmp_path / "h") as league:
+        for name, mode in (("a", "remote"), ("b", "local")):
+            league.create_run(name, "pong", TrainConfig(env="pong", run=name, eval=mode).to_dict(), algo="ppo")
+        assert resumed_config(league, "a", None, {"resume", "eval_wait"}, wait=False).eval_wait is False
+        assert resumed_config(league, "a", None, {"resume"}).eval_wait is True
+        with pytest.raises(MarlError, match="--no-wait is for --eval remote"):
+            resumed_config(league, "b", None, {"resume", "eval_wait"}, wait=False)
+        with pytest.raises(MarlError, match="--eval cannot change it"):
+            resumed_config(league, "a", None, {"resume", "eval"})
+
+
+def test_work_no_attached_worker_takes_is_played_by_the_run(one_snapshot):
+    """A worker is attached (its heart beats) but never takes the run's gauntlet (busy with other work, or serving
+    other batches): after ``untaken`` seconds the run's end plays it itself, and says so while it does."""
+    league, snap = one_snapshot
+    busy = league.add_worker("busy", "elsewhere", 1)
+    ev = RemoteEvaluator(league, "w", "cpu", untaken=0.5, poll_seconds=0.05)
+    ev.submit(GauntletJob((snap.id,), 0, 2, 0))
+    seen: list[QueueStanding] = []
+
+    def looked() -> None:
+        league.worker_beat(busy)
+        seen.append(ev.queue_standing())
+
+    out: list = []
+    waiting = threading.Thread(target=lambda: out.append(ev.wait(on_wait=looked)), daemon=True)
+    waiting.start()
+    waiting.join(timeout=60)
+    assert out, "the run waited on for a worker that never took its gauntlet"
+    (done,) = out[0]
+    assert done.games == 4 and ev.games_played == 4
+    (job,) = league.jobs(batch=run_batch("w"))
+    assert job.state == "done" and job.worker.startswith("train@")
+    assert seen[0] == QueueStanding(left=1, workers=(), here=False, attached=1)
+    assert any(s.here for s in seen)
