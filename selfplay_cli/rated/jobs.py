@@ -91,6 +91,11 @@ class Played:
     params: dict[str, Any]
     result: dict[str, Any]
     seconds: float
+    played: int | None = None  # games played, where they are not ``games`` (a gauntlet stores its own as it plays)
+
+    @property
+    def count(self) -> int:
+        return len(self.games) if self.played is None else self.played
 
 
 def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int = 1024,
@@ -241,8 +246,9 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
             state = retry(lambda: league.fail_job(job.id, worker_id, error, **kwargs))
             return Outcome(job, "failed", error=line, error_kind=kind, extra={"state": state})
     stored = retry(lambda: league.finish_job(job.id, worker_id, games=played.games, match_kind=played.match_kind,
-                                             params=played.params, result=played.result, seconds=played.seconds))
-    return Outcome(job, "done" if stored else "counted", games=len(played.games), seconds=played.seconds)
+                                             params=played.params, result=played.result, seconds=played.seconds,
+                                             played=played.count))
+    return Outcome(job, "done" if stored else "counted", games=played.count, seconds=played.seconds)
 
 
 def see_through(league: League, batch: str, *, device: str = "cpu", parallel: int = 1024, play: bool = True,
