@@ -150,7 +150,7 @@ def eight_workers(jobs: int = 96) -> dict[str, int]:
 
     from selfplay_cli.league.models import Game, GameSeat
     from selfplay_cli.league.store import League
-    from selfplay_cli.rated.jobs import games_jobs
+    from selfplay_cli.rated.games_jobs import games_jobs
 
     with tempfile.TemporaryDirectory() as tmp:
         home = Path(tmp) / "league"

@@ -11,7 +11,8 @@ from sqlalchemy import func, select
 from selfplay_cli.league.models import Game, Match
 from selfplay_cli.league.queue import NewJob, backoff
 from selfplay_cli.league.store import League
-from selfplay_cli.rated.jobs import GAMES, combine, games_jobs, play_job, play_leased, see_through
+from selfplay_cli.rated.games_jobs import GAMES, combine, games_jobs
+from selfplay_cli.rated.jobs import play_job, play_leased, see_through
 from selfplay_cli.work import WorkerOptions, run_worker
 
 SHORT = {"points_to_win": 1}

@@ -18,7 +18,8 @@ from sqlalchemy import select
 
 from selfplay_cli.league.models import Game, GameSeat
 from selfplay_cli.league.store import League
-from selfplay_cli.rated.jobs import games_jobs, play_job
+from selfplay_cli.rated.games_jobs import games_jobs
+from selfplay_cli.rated.jobs import play_job
 from selfplay_cli.rated.match import SPRTSettings, run_match
 from selfplay_cli.rated.queued import queue_match
 from selfplay_cli.work import WorkerOptions, run_worker

@@ -9,7 +9,7 @@ from the same spec, so the games are the same.
 A gauntlet stores its own games, each matchup whole under a key of the moment (``gauntlet/<first snapshot id>/...``;
 the playoff's rounds under ``playoff/...``), and a gauntlet played again stores only the matchups it is missing and
 makes the same choices. So a job finished twice, or played again after its worker went silent, counts once: its
-:class:`~selfplay_cli.rated.jobs.Played` carries no games of its own (the queue only marks it done), and a summary
+:class:`~selfplay_cli.rated.played.Played` carries no games of its own (the queue only marks it done), and a summary
 (games, seconds, the snapshots it rated).
 
 What a gauntlet chooses (the run's best so far, which matchups are already clear) comes from the run's earlier
@@ -28,9 +28,11 @@ from ..league.queue import JobRow, NewJob
 from ..league.store import League
 from ..results import Rules
 from .gauntlet import GauntletConfig, rate_snapshots
-from .jobs import KINDS, Played, share_snapshots
+from .played import Played
+from .snapshots import share_snapshots
 
-__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "gauntlet_job", "play_gauntlet_spec"]
+__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "gauntlet_job", "play",
+           "play_gauntlet_spec"]
 
 GAUNTLET = "gauntlet"
 FINAL_BOT_GAMES = 4  # a run's final snapshots play this many times --eval-games against each scripted player (32
@@ -78,7 +80,7 @@ def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "c
     return played, time.perf_counter() - t0
 
 
-def _play(league: League, job: JobRow, *, device: str, parallel: int,
+def play(league: League, job: JobRow, *, device: str, parallel: int,
           on_games: Callable[[int], None] | None) -> Played:
     """A ``gauntlet`` job: its games are stored as it plays them (keyed: once), so the job's end stores none."""
     del parallel  # a gauntlet plays all its matchups in one batch of its own size
@@ -86,5 +88,3 @@ def _play(league: League, job: JobRow, *, device: str, parallel: int,
     return Played(games=[], match_kind="eval", params={}, seconds=seconds, played=games,
                   result={"games": games, "seconds": round(seconds, 3), "snapshots": job.spec.get("snapshots", [])})
 
-
-KINDS[GAUNTLET] = _play

@@ -1,17 +1,12 @@
-"""Rating work as jobs of the league's queue (:mod:`selfplay_cli.league.queue`): what a job holds, how one is played,
-and how a command that queued a batch sees it through.
+"""Rating work on the league's queue (:mod:`selfplay_cli.league.queue`): playing a job of any kind, a leased one with
+its heart beating, and seeing a queued batch through.
 
-A ``games`` job is a few minutes of one match: ``rounds`` rounds between side A (one player, or a cooperative team
-flying together) and player B from ``first_seed``. Round ``r`` of a match is always played on seed
-``first_seed + r`` (:func:`~selfplay_cli.rated.match.run_match`), so a match cut into jobs plays exactly the seeds
-the whole match would, whichever worker plays which job, in whatever order. Each job's players are loaded afresh,
-seeded from the job's own first seed, so a job played twice (by a worker thought dead, and by the one that took it
-over) plays the same games; its games are stored once, under the job's key (``job:<id>``), with the job's end.
-
-:func:`play_leased` plays one leased job while a thread beats its heart, then finishes it (or fails it, with the
-error's first line, to be tried again after a backoff). The worker (:mod:`selfplay_cli.work`) and
-:func:`see_through` both use it: a command that queued a batch plays the batch's jobs that no worker has taken, and
-waits for those that workers play, so queued work is done even with no worker attached.
+The kinds of job are :mod:`.games_jobs` (a few minutes of one match) and :mod:`.gauntlet_jobs` (a training run's
+gauntlet of one snapshot moment); :data:`KINDS` finds each one's player. :func:`play_leased` plays one leased job
+while a thread beats its heart, then finishes it (or fails it, with the error's first line, to be tried again after a
+backoff). The worker (:mod:`selfplay_cli.work`) and :func:`see_through` both use it: a command that queued a batch
+plays the batch's jobs that no worker has taken, and waits for those that workers play, so queued work is done even
+with no worker attached.
 """
 
 from __future__ import annotations
@@ -25,17 +20,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import MarlError
-from ..league.queue import BEAT_SECONDS, ENDED, SCAVENGE_SECONDS, JobRow, NewJob
-from ..league.store import League, PlayerRow
-from ..stats.match import match_stats
-from .match import MatchReport, env_options_of, load_player, mix_seed, round_size, run_match
+from ..league.queue import BEAT_SECONDS, ENDED, SCAVENGE_SECONDS, JobRow
+from ..league.store import League
+from . import games_jobs, gauntlet_jobs
+from .played import Played
 
-__all__ = ["GAMES", "JOB_ROUNDS", "KINDS", "JobLost", "Outcome", "Played", "combine", "games_jobs", "play_job",
-           "play_leased", "see_through", "share_snapshots", "sprt_verdict", "summary", "worker_name"]
+__all__ = ["KINDS", "JobLost", "Outcome", "play_job", "play_leased", "see_through", "sprt_verdict", "worker_name"]
 
-GAMES = "games"
-JOB_ROUNDS = 64
-"""Rounds per ``games`` job by default: 128 games of a two-sides game, seconds to a few minutes of play."""
+KINDS: dict[str, Callable[..., Played]] = {games_jobs.GAMES: games_jobs.play,
+                                           gauntlet_jobs.GAUNTLET: gauntlet_jobs.play}
+"""The player of each kind of job: ``player(league, job, device=, parallel=, on_games=) -> Played``."""
 
 
 class JobLost(Exception):
@@ -47,57 +41,6 @@ def worker_name(role: str = "worker") -> str:
     return f"{role}@{socket.gethostname()}:{os.getpid()}"
 
 
-def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *, games: int, first_seed: int,
-               match_kind: str, env_options: dict[str, Any] | None = None, params: dict[str, Any] | None = None,
-               team_name: str | None = None, job_rounds: int = JOB_ROUNDS, device: str = "cpu") -> list[NewJob]:
-    """The jobs of a match of ``games`` games (rounded up to whole rounds) from ``first_seed``: ``job_rounds`` rounds
-    each, the last the rest. The players are loaded once here to know a round's size (and to refuse, in one line, a
-    match that cannot be played) and their snapshots' bytes are put in the league, so any worker can fetch them."""
-    if games < 1:
-        raise MarlError(f"--games must be at least 1, not {games}")
-    pa = [load_player(league, r, device=device, seed=mix_seed(first_seed, i)) for i, r in enumerate(rows_a)]
-    pb = load_player(league, row_b, device=device, seed=mix_seed(first_seed, 1))
-    team = pa if len(pa) > 1 or team_name else None
-    per = round_size(pa[0], pb, first_seed=first_seed, env_options=env_options, team=team)
-    share_snapshots(league, [*rows_a, row_b])
-    total = -(-games // per)
-    out = []
-    for start in range(0, total, job_rounds):
-        n = min(job_rounds, total - start)
-        out.append(NewJob(kind=GAMES, env=row_b.env, spec={
-            "a": [r.id for r in rows_a], "b": row_b.id, "rounds": n, "first_seed": first_seed + start,
-            "round": start, "match_seed": first_seed, "env_options": dict(env_options or {}),
-            "match_kind": match_kind, "params": dict(params or {}), "team_name": team_name}))
-    return out
-
-
-def share_snapshots(league: League, rows: Sequence[PlayerRow]) -> None:
-    """Put the snapshot files of ``rows`` in the league (by their sha256) where it has them not yet, so a worker on
-    any machine can fetch them; a :class:`MarlError` naming the first that cannot be (its file not here)."""
-    from .snapshots import check_legacy_file
-
-    report = league.ensure_blobs([r for r in rows if not r.is_bot], check_legacy=check_legacy_file)
-    for name in (*report.missing, *report.refused):
-        raise MarlError(f"{name}: {report.reasons.get(name, 'its file is not on this machine')}; workers elsewhere "
-                        "could not play it")
-
-
-@dataclass
-class Played:
-    """A job played: its games (league player ids per seat), the match they are filed as, and a summary."""
-
-    games: list[Any]
-    match_kind: str
-    params: dict[str, Any]
-    result: dict[str, Any]
-    seconds: float
-    played: int | None = None  # games played, where they are not ``games`` (a gauntlet stores its own as it plays)
-
-    @property
-    def count(self) -> int:
-        return len(self.games) if self.played is None else self.played
-
-
 def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int = 1024,
              on_games: Callable[[int], None] | None = None) -> Played:
     """Play ``job`` in this process (nothing stored) by the player of its kind (:data:`KINDS`)."""
@@ -105,73 +48,6 @@ def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int 
     if player is None:
         raise MarlError(f"job {job.id} is of kind {job.kind!r}, which this marl does not play: upgrade marl")
     return player(league, job, device=device, parallel=parallel, on_games=on_games)
-
-
-def _play_games(league: League, job: JobRow, *, device: str, parallel: int,
-                on_games: Callable[[int], None] | None) -> Played:
-    """A ``games`` job: its rounds of one match."""
-    spec = job.spec
-    first = int(spec["first_seed"])
-    rows_a = [league.get_player(int(i)) for i in spec["a"]]
-    row_b = league.get_player(int(spec["b"]))
-    pa = [load_player(league, r, device=device, seed=mix_seed(first, 0 if i == 0 else 1 + i))
-          for i, r in enumerate(rows_a)]
-    pb = load_player(league, row_b, device=device, seed=mix_seed(first, 1))
-    team_name = spec.get("team_name")
-    team = pa if len(pa) > 1 or team_name else None
-    options = spec.get("env_options") or {}
-    start = time.perf_counter()
-    report = run_match(pa[0], pb, games=1, rounds=int(spec["rounds"]), first_seed=first, parallel=parallel,
-                       on_games=on_games, env_options=options, team=team, team_name=team_name)
-    seconds = time.perf_counter() - start
-    ids = {**{p.id: r.id for p, r in zip(pa, rows_a, strict=True)}, pb.id: row_b.id}
-    played = {**env_options_of(*pa, pb), **options}
-    params = {"a": report.a, "b": report.b, "games": report.games, "first_seed": first, "env_options": played,
-              "status": "finished", "games_stored": report.games, **(spec.get("params") or {})}
-    return Played(games=[r.with_players(ids) for r in report.results], match_kind=str(spec["match_kind"]),
-                  params=params, result=summary(report), seconds=seconds)
-
-
-KINDS: dict[str, Callable[..., Played]] = {GAMES: _play_games}
-"""The player of each kind of job: ``player(league, job, device=, parallel=, on_games=) -> Played``. A kind's module
-adds itself here."""
-
-
-def summary(report: MatchReport) -> dict[str, Any]:
-    """What a job's row keeps of its match: the counts and A's points round by round (what :func:`combine` and an
-    SPRT read)."""
-    return {"games": report.games, "wins": report.wins, "draws": report.draws, "losses": report.losses,
-            "pentanomial": list(report.pentanomial), "points_for": report.points_for,
-            "points_against": report.points_against, "truncated": report.truncated, "paired": report.paired,
-            "kind": report.kind, "a": report.a, "b": report.b, "variant": report.variant,
-            "round_points": report.round_points, "seconds": round(report.seconds, 3)}
-
-
-def combine(jobs: Sequence[JobRow], *, confidence: float = 0.95) -> MatchReport | None:
-    """One report of the done ``jobs`` of one match (their rounds in order), None when none is done."""
-    parts = sorted((j for j in jobs if j.state == "done" and j.result), key=lambda j: int(j.spec.get("round", 0)))
-    if not parts:
-        return None
-    r0 = parts[0].result
-    assert r0 is not None
-    total = {k: sum(p.result[k] for p in parts) for k in ("games", "wins", "draws", "losses", "truncated")}  # type: ignore[index]
-    penta = tuple(int(sum(p.result["pentanomial"][i] for p in parts)) for i in range(5))  # type: ignore[index]
-    rounds = [pts for p in parts for pts in p.result["round_points"]]  # type: ignore[index]
-    paired = bool(r0["paired"])
-    stats = match_stats(total["wins"], total["draws"], total["losses"], pentanomial=penta if paired else None,
-                        confidence=confidence)
-    pf = sum(float(p.result["points_for"]) for p in parts)  # type: ignore[index]
-    pa = sum(float(p.result["points_against"]) for p in parts)  # type: ignore[index]
-    return MatchReport(env=parts[0].env, a=r0["a"], b=r0["b"], games=total["games"], wins=total["wins"],
-                       draws=total["draws"], losses=total["losses"], points_for=_number(pf), points_against=_number(pa),
-                       pentanomial=penta, stats=stats, seconds=sum(float(p.result["seconds"]) for p in parts),  # type: ignore[index]
-                       match_id=None, first_seed=int(parts[0].spec.get("match_seed", parts[0].spec["first_seed"])),
-                       truncated=total["truncated"], kind=r0["kind"], variant=r0.get("variant", ""), paired=paired,
-                       round_points=rounds)
-
-
-def _number(x: float) -> int | float:
-    return int(x) if float(x).is_integer() else round(float(x), 4)
 
 
 class _Heart:
@@ -307,7 +183,3 @@ def sprt_verdict(jobs: Sequence[JobRow], test: Any, paired: bool) -> tuple[float
         if decision is not None:
             break
     return llr, decision, n
-
-
-
-from . import gauntlet_jobs  # noqa: E402,F401  (registers the "gauntlet" kind: a training run's gauntlets)

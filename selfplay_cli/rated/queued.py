@@ -15,7 +15,8 @@ from ..errors import MarlError
 from ..league.queue import JobRow
 from ..league.store import League, PlayerRow
 from ..stats.sprt import SPRT
-from .jobs import JOB_ROUNDS, combine, games_jobs, see_through, sprt_verdict
+from .games_jobs import JOB_ROUNDS, combine, games_jobs
+from .jobs import see_through, sprt_verdict
 from .match import MatchReport, SPRTSettings
 
 __all__ = ["QueuedMatch", "batch_name", "dead_jobs_error", "queue_match"]

@@ -15,7 +15,7 @@ again before every use and fetched anew when it does not hash to its name: nothi
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -241,3 +241,12 @@ def _remove_empty(folders: list[Path]) -> None:
     for d in reversed(folders):
         with contextlib.suppress(OSError):
             d.rmdir()
+
+
+def share_snapshots(league: League, rows: Sequence[PlayerRow]) -> None:
+    """Put the snapshot files of ``rows`` in the league (by their sha256) where it has them not yet, so a worker on
+    any machine can fetch them; a :class:`MarlError` naming the first that cannot be (its file not here)."""
+    report = league.ensure_blobs([r for r in rows if not r.is_bot], check_legacy=check_legacy_file)
+    for name in (*report.missing, *report.refused):
+        raise MarlError(f"{name}: {report.reasons.get(name, 'its file is not on this machine')}; workers elsewhere "
+                        "could not play it")

@@ -10,7 +10,7 @@ from typing import Any
 
 from ..league.pairs import PairPlan, plan_tournament
 from ..league.store import League, PlayerRow
-from .jobs import JOB_ROUNDS, games_jobs
+from .games_jobs import JOB_ROUNDS, games_jobs
 from .match import load_player, mix_seed, run_match
 from .roles import RoleBook
 from .snapshots import players_variant

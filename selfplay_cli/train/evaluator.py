@@ -38,12 +38,9 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..errors import MarlError, MarlIOError
-
-if TYPE_CHECKING:
-    from .remote import RemoteEvaluator
 
 STALL_SECONDS = 300.0  # a worker that has a job and reports no finished game for this long is stuck (a stopped
 # process, a game that never ends) and is replaced: a gauntlet's games all start at once, so one game's length
@@ -324,15 +321,3 @@ def _exit(code: int | None) -> str:
         except ValueError:
             return f"killed by signal {-code}"
     return f"exit code {code}"
-
-
-def make_evaluator(league: Any, cfg: Any, device: str, on_worker: Callable[[int], None] | None = None
-                   ) -> Evaluator | RemoteEvaluator:
-    """The run's rating worker as ``cfg.eval`` says: ``local`` (a process beside training), ``inline`` (in the
-    training process), ``remote`` (the league's workers, :mod:`.remote`); none plays anything with
-    ``--eval-games 0``."""
-    if cfg.eval_games and cfg.eval == "remote":
-        from .remote import RemoteEvaluator
-
-        return RemoteEvaluator(league, cfg.run, device, wait=cfg.eval_wait)
-    return Evaluator(league, device, background=bool(cfg.eval_games) and cfg.eval == "local", on_worker=on_worker)

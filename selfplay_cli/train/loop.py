@@ -41,11 +41,11 @@ from ..results import COOPERATIVE, GameResult
 from ..signals import clear_stop, signals_held, stoppable
 from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum
-from .evaluator import Evaluator, GauntletJob, JobDone, make_evaluator
+from .evaluator import Evaluator, GauntletJob, JobDone
 from .lock import claim, write_lock
 from .opponents import Opponents
 from .progress import SnapshotRecord, Standing, TrainReport
-from .remote import RemoteEvaluator
+from .remote import RemoteEvaluator, make_evaluator
 from .rollouts import Rollouts, load_teacher
 from .state import Job, RunState, SavedAs, SnapshotMoments
 from .team import LearnerTeam

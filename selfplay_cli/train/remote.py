@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import MarlError, MarlIOError
-from .evaluator import GauntletJob, JobDone, RatingWorkerError
+from .evaluator import Evaluator, GauntletJob, JobDone, RatingWorkerError
 
 __all__ = ["UNTAKEN_SECONDS", "QueueStanding", "RemoteEvaluator", "run_batch"]
 
@@ -213,3 +213,13 @@ def _dead(row: Any) -> Exception:
 
 def _subclass_names(cls: type) -> set[str]:
     return {cls.__name__}.union(*(_subclass_names(c) for c in cls.__subclasses__()))
+
+
+def make_evaluator(league: Any, cfg: Any, device: str, on_worker: Callable[[int], None] | None = None
+                   ) -> Evaluator | RemoteEvaluator:
+    """The run's rating worker as ``cfg.eval`` says: ``local`` (a process beside training), ``inline`` (in the
+    training process), ``remote`` (the league's workers, :mod:`.remote`); none plays anything with
+    ``--eval-games 0``."""
+    if cfg.eval_games and cfg.eval == "remote":
+        return RemoteEvaluator(league, cfg.run, device, wait=cfg.eval_wait)
+    return Evaluator(league, device, background=bool(cfg.eval_games) and cfg.eval == "local", on_worker=on_worker)
