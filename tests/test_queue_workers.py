@@ -327,3 +327,25 @@ def test_a_training_run_goes_on_through_a_postgresql_restart(pg_url, pg_restart,
         rated = set(s.execute(select(GameSeat.player_id).distinct()).scalars())
     assert {p.id for p in snaps} <= rated  # every snapshot played its gauntlet
     league.close()
+
+
+def test_marl_match_sprt_queue_decides_exits_as_a_match_and_cancels_the_rest(tmp_path, capsys, monkeypatch):
+    """`marl match --sprt --queue` with no worker attached: the command plays the first job itself, decides H1 (exit
+    0, as a match does), and the rest of its jobs are cancelled; the verdict equals a single match's."""
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    monkeypatch.delenv("MARL_DB", raising=False)
+    home = str(tmp_path / "h")
+    args = ["match", "cpu", "random", "--env", "pong", "--env-option", "points_to_win=1", "--sprt", "--elo1", "400",
+            "--max-games", "2000", "--seed", "0", "--home", home, "--json"]
+    code, out, err = run(capsys, *args, "--queue")
+    assert code == 0, err
+    queued = json.loads(out)
+    code, out, err = run(capsys, *args[:-3], "--home", str(tmp_path / "other"), "--json")
+    assert code == 0, err
+    local = json.loads(out)
+    assert queued["sprt"]["decision"] == local["sprt"]["decision"] == "H1"
+    assert queued["sprt"]["pairs"] == local["sprt"]["pairs"]
+    shown = run_json(capsys, "queue", "--home", home)
+    (batch,) = shown["batches"]
+    assert batch["batch"].startswith("sprt:cpu-vs-random:") and batch["done"] == 1 and batch["cancelled"] == 15
+    assert batch["queued"] == batch["leased"] == 0

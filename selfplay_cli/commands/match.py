@@ -173,27 +173,17 @@ def match(
             if queue:
                 report, batch = _queued(league, job, budget, first, options, settings, confidence, device, parallel,
                                         quiet or json_out)
-                reports.append(report)
-                if not json_out:
-                    render_report(report)
+            else:
+                report, batch = _local(league, store, job, budget, first, options, settings, confidence, device,
+                                       parallel, quiet), None
+            if forecast is not None and job.team_name is None:
+                report.predicted = predict(forecast, job.rows_a[0], job.row_b, report)
+            reports.append(report)
+            if not json_out:
+                render_report(report)
+                if batch is not None:
                     console.print(f"  stored as the jobs of batch {batch} (one match each: marl queue --batch "
                                   f"{batch})", markup=False)
-                continue
-            pa, pb, ids = job.load(league, first, device)
-            try:
-                with progress_bar(f"{job.team_name or pa[0].id} vs {pb.id}", budget + budget % 2, "games",
-                                  progress_enabled(quiet)) as tick:
-                    reports.append(run_match(pa[0], pb, games=budget, first_seed=first, parallel=parallel,
-                                             league=league if store else None, player_ids=ids, sprt=settings,
-                                             confidence=confidence, on_games=tick, env_options=options,
-                                             team=pa if job.team_name else None, team_name=job.team_name))
-            except MatchInterrupted as stop:
-                interrupted(stop.report, stored=store)
-                raise typer.Exit(130) from None
-            if forecast is not None and job.team_name is None:
-                reports[-1].predicted = predict(forecast, job.rows_a[0], job.row_b, reports[-1])
-            if not json_out:
-                render_report(reports[-1])
     finally:
         league.close()
     team = next((side.full_name for side in (side_a, side_b) if isinstance(side, Team)), None) if not crew else None
@@ -201,6 +191,22 @@ def match(
         print_json(reports[0].to_json() if team is None else {"team": team, "matches": [r.to_json() for r in reports]})
     if settings is not None:
         raise typer.Exit(sprt_exit_code(reports[0]))
+
+
+def _local(league, store: bool, job, games: int, first: int, options, settings, confidence: float, device: str,
+           parallel: int, quiet: bool) -> MatchReport:
+    """One match of ``marl match``, played here (and stored, with ``store``); Ctrl-C: what was kept, exit 130."""
+    pa, pb, ids = job.load(league, first, device)
+    try:
+        with progress_bar(f"{job.team_name or pa[0].id} vs {pb.id}", games + games % 2, "games",
+                          progress_enabled(quiet)) as tick:
+            return run_match(pa[0], pb, games=games, first_seed=first, parallel=parallel,
+                             league=league if store else None, player_ids=ids, sprt=settings, confidence=confidence,
+                             on_games=tick, env_options=options, team=pa if job.team_name else None,
+                             team_name=job.team_name)
+    except MatchInterrupted as stop:
+        interrupted(stop.report, stored=store)
+        raise typer.Exit(130) from None
 
 
 def _queued(league, job, games: int, first: int, options, settings, confidence: float, device: str, parallel: int,
