@@ -223,3 +223,15 @@ def test_a_league_error_is_not_mistaken_for_a_lost_server(pg_url: str) -> None:
         with pytest.raises(LeagueError, match="already exists"):
             lg.create_run("r", ENV, {})
         assert time.monotonic() - began < 5 and lg.reconnects == 0
+
+
+def test_a_new_empty_database_reads_as_an_empty_league(pg_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """A database just made for the league (createdb): the commands that only read see an empty league, as they do
+    a home without one, and create nothing there; the first command that writes makes the league."""
+    code, out, err = run(capsys, "checkpoint", "list", "--db", pg_url, "--json")
+    assert code == 0 and json.loads(out) == [], err
+    err = _one_line(*run(capsys, "league", "ladder", "--db", pg_url), exit_code=2)
+    assert "no games yet" in err
+    assert _tables(pg_url) == set()
+    assert run(capsys, "checkpoint", "tag", "x", "y", "--db", pg_url)[0] == 2  # no snapshot x: but the league is made
+    assert "alembic_version" in _tables(pg_url)

@@ -86,6 +86,10 @@ class LeagueError(MarlError):
     """A user-facing league problem (unknown or duplicate name, bad database, version mismatch)."""
 
 
+class _NoLeagueYet(LeagueError):
+    """A database server's database with no tables yet, opened to read: read as an empty league instead."""
+
+
 class LeagueIOError(LeagueError, MarlIOError):
     """The league's database or files could not be read or written for a reason outside marl (disk full, I/O error,
     file size limit, read-only file system, permissions); the message names the path and the cause."""
@@ -273,6 +277,10 @@ class Database:
             try:
                 self._connect(mode)
                 return
+            except _NoLeagueYet:  # (a database just made for the league): read an empty one, create nothing
+                self.engine.dispose()
+                self._connect(None, empty=True)
+                return
             except LeagueError:
                 if hasattr(self, "engine"):  # (none where the driver is missing)
                     self.engine.dispose()
@@ -289,14 +297,18 @@ class Database:
                 error = LeagueIOError if any(w in reason.lower() for w in _IO_REASONS) else LeagueError
                 raise error(f"cannot open league database {self._where}: {reason}") from exc
 
-    def _connect(self, mode: str | None) -> None:
-        """Make the engine (a read-only SQLite file through a ``file:`` URI with ``mode``) and check the schema."""
+    def _connect(self, mode: str | None, empty: bool = False) -> None:
+        """Make the engine (a read-only SQLite file through a ``file:`` URI with ``mode``; ``empty``: an empty league
+        in memory, to read) and check the schema."""
         engine_url = self.url
         if mode is not None:
             assert self.db_path is not None
             uri = f"{self.db_path.resolve().as_uri()}?mode={mode}"
             engine_url = URL.create("sqlite", database=uri, query={"uri": "true"})
-        self._empty = self.readonly and self.is_sqlite and self.db_path is None and self.url.database == ":memory:"
+        self._empty = empty or (self.readonly and self.is_sqlite and self.db_path is None
+                                and self.url.database == ":memory:")
+        if empty:
+            engine_url = URL.create("sqlite", database=":memory:")
         try:
             if self._empty:  # an empty league to read: one connection (every thread sees the same tables)
                 self.engine: Engine = create_engine(engine_url, poolclass=StaticPool,
@@ -306,7 +318,7 @@ class Database:
         except (NoSuchModuleError, ImportError) as exc:
             extra = ' (pip install "selfplay-cli[postgres]")' if self.is_postgres else ""
             raise LeagueError(f"cannot use database {self._where}: no driver{extra} ({exc})") from exc
-        if self.is_sqlite:
+        if engine_url.get_backend_name() == "sqlite":
             self._install_sqlite_listeners()
         elif self.is_postgres:
             readonly_league = self.readonly
@@ -423,6 +435,8 @@ class Database:
                 raise LeagueError(f"{self._where} is not a marl league database (it holds other tables: "
                                   f"{', '.join(sorted(tables)[:3])}{', ...' if len(tables) > 3 else ''})")
             if self.readonly and not self._empty:
+                if self.db_path is None:
+                    raise _NoLeagueYet(f"{self._where} holds no league yet")
                 raise LeagueError(f"{self._where} holds no league yet (no tables)")
             Base.metadata.create_all(conn)
             migrations.stamp_head(conn)
