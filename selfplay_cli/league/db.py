@@ -528,11 +528,12 @@ class Database:
         return (bool(exc.connection_invalidated) or (state or "").startswith("08") or state in _PG_GONE
                 or (state is None and isinstance(exc, OperationalError)))
 
-    def _unit(self, fn: Callable[[Session], T], readonly: bool = False) -> T:
+    def _unit(self, fn: Callable[[Session], T], readonly: bool = False, idempotent: bool = False) -> T:
         """Run ``fn`` in one transaction, retrying the whole unit a few times if SQLite reports a lock or PostgreSQL a
         serialization failure or deadlock, and for up to :attr:`reconnect_for` seconds while the PostgreSQL server
         is lost (one line says so, once). A unit whose COMMIT was sent when the server was lost is not retried: it
-        may have been stored (:class:`LeagueIOError`).
+        may have been stored (:class:`LeagueIOError`); unless it is ``idempotent`` (done twice, it counts once: its
+        rows are keyed by a unique work key that it looks for first).
 
         A write unit of a read-only league is refused before anything starts."""
         if self.readonly and not readonly:
@@ -559,7 +560,7 @@ class Database:
                     if error is exc:
                         raise
                     raise error from exc
-                if committing and not readonly:
+                if committing and not (readonly or idempotent):
                     raise LeagueIOError(f"lost league database {self._where} while committing (the last write may or "
                                         f"may not be stored; run the command again): {_reason(exc)}") from exc
                 now = time.monotonic()

@@ -346,12 +346,12 @@ class Ledger(Database):
             s.flush()
             return m.id, self._insert_games(s, m, games, pids) if games else []
 
-        try:
-            return self._unit(work)
+        try:  # a keyed unit may be done again after its COMMIT was cut off: stored then, it stores nothing now
+            return self._unit(work, idempotent=key is not None)
         except IntegrityError:  # another process stored the same unit between our look and our insert
             if key is None:
                 raise
-            return self._unit(work)
+            return self._unit(work, idempotent=True)
 
     def keyed_matches(self, prefix: str) -> dict[str, tuple[int, dict[str, Any]]]:
         """The matches whose :attr:`~selfplay_cli.league.models.Match.work_key` starts with ``prefix``: key ->
