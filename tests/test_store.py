@@ -10,6 +10,7 @@ import random
 import shutil
 import signal
 import sqlite3
+import subprocess
 import sys
 import time
 import traceback
@@ -145,6 +146,22 @@ def test_the_revisions_make_the_schema_create_all_makes(db_url: str, pg_url: str
     assert "uq_matches_work_key" in str(migrated["matches"])
     assert migrated == created
     assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0003",)]
+
+
+def test_the_revisions_marl_knows_are_the_versions_folder() -> None:
+    """``REVISIONS`` (read without Alembic) is the chain Alembic reads from ``versions/``, oldest first."""
+    chain = [sc.revision for sc in migrations.scripts().walk_revisions()][::-1]
+    assert tuple(chain) == migrations.REVISIONS and migrations.head() == migrations.scripts().get_current_head()
+
+
+def test_opening_an_up_to_date_league_does_not_import_alembic(tmp_path: Path) -> None:
+    """Every command opens the league: one that is up to date costs a row read, not Alembic's import."""
+    url = f"sqlite:///{tmp_path / 'league.db'}"
+    League(url).close()
+    code = f"import sys; from selfplay_cli.league.store import League; League({url!r}).close(); " \
+           "print('alembic' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.stdout.strip() == "False", out.stderr
 
 
 def _make_legacy(url: str, version: int) -> None:
