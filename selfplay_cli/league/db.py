@@ -2,7 +2,7 @@
 
 :class:`Database` is the base of :class:`~selfplay_cli.league.store.League`: it opens any SQLAlchemy URL (the default
 is SQLite at ``<home>/league.db``), creates or checks the schema, and runs every unit of work in one transaction
-(:meth:`Database._unit`), retried when SQLite reports a lock. What is stored is in
+(:meth:`Database._unit`), retried when SQLite reports a lock (PostgreSQL: see below). What is stored is in
 :mod:`selfplay_cli.league.roster` (runs, players, tags) and :mod:`selfplay_cli.league.ledger` (matches and games).
 
 SQLite concurrency
@@ -29,7 +29,9 @@ PostgreSQL
 one that loses the server (restarted, unreachable) is retried with backoff for up to :attr:`Database.reconnect_for`
 seconds, saying once on stderr that it is waiting, then ends with a :class:`LeagueIOError` (exit 4). A unit whose
 COMMIT went out but whose answer never came back is not retried (it may have been stored): that too is a
-:class:`LeagueIOError`, and the command resumes from the league as it is.
+:class:`LeagueIOError`, and the command resumes from the league as it is; a unit keyed by its work (a unique work key
+it looks for first: ``idempotent``) is, since done twice it counts once. A database with no tables yet, opened to
+read, reads as an empty league and is left as it is.
 
 The schema
 ----------
