@@ -11,6 +11,10 @@ Leagues written before Alembic have no ``alembic_version`` table; their ``meta.s
 league written by a development build of the queue) says where they stand (:func:`legacy_revision`). A league
 Alembic manages keeps ``meta.schema_version`` at :data:`ALEMBIC_MARK` so that a release from before Alembic refuses
 it, in its own one line, as newer than itself.
+
+A change to the models is a new file in ``versions/`` (``revision`` the next number, ``down_revision`` the last one,
+a first docstring line that says what it brings: the upgrade line quotes it) and its id at the end of
+:data:`REVISIONS`; ``tests/test_store.py`` checks that the revisions, run from nothing, give the models' schema.
 """
 
 from __future__ import annotations
