@@ -11,7 +11,7 @@ import time
 import pytest
 from cli_helpers import run
 from conftest import start_postgres, stop_postgres
-from sqlalchemy import create_engine, inspect, text
+from sqlalchemy import create_engine, event, inspect, text
 from sqlalchemy.exc import DBAPIError
 
 from selfplay_cli.league.store import GameResult, League, LeagueError, LeagueIOError
@@ -223,3 +223,67 @@ def test_a_league_error_is_not_mistaken_for_a_lost_server(pg_url: str) -> None:
         with pytest.raises(LeagueError, match="already exists"):
             lg.create_run("r", ENV, {})
         assert time.monotonic() - began < 5 and lg.reconnects == 0
+
+
+def test_a_new_empty_database_reads_as_an_empty_league(pg_url: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """A database just made for the league (createdb): the commands that only read see an empty league, as they do
+    a home without one, and create nothing there; the first command that writes makes the league."""
+    code, out, err = run(capsys, "checkpoint", "list", "--db", pg_url, "--json")
+    assert code == 0 and json.loads(out) == [], err
+    err = _one_line(*run(capsys, "league", "ladder", "--db", pg_url), exit_code=2)
+    assert "no games yet" in err
+    assert _tables(pg_url) == set()
+    assert run(capsys, "checkpoint", "tag", "x", "y", "--db", pg_url)[0] == 2  # no snapshot x: but the league is made
+    assert "alembic_version" in _tables(pg_url)
+
+
+def test_a_write_whose_commit_is_cut_off_is_not_retried(pg_url: str) -> None:
+    """The connection dies as COMMIT goes out: whether it was stored cannot be known from here, so the unit is not
+    played again (it could count twice); one line, exit 4. (Here the server had not committed it: nothing stored.)"""
+    lg = League(pg_url, reconnect_for=30)
+    lg.ensure_bots(ENV, ["a", "b"])
+    a, b = (p.id for p in lg.players())
+    match = lg.create_match(ENV, "match")
+    killer = create_engine(pg_url)
+
+    def cut(session) -> None:  # the server drops this very connection just before COMMIT is sent
+        pid = session.connection().exec_driver_sql("SELECT pg_backend_pid()").scalar()
+        with killer.begin() as conn:
+            conn.execute(text("SELECT pg_terminate_backend(:pid)"), {"pid": pid})
+
+    event.listen(lg._sessions, "before_commit", cut)
+    with pytest.raises(LeagueIOError) as exc:
+        lg.record_games(match, _games(a, b, 4, 0))
+    event.remove(lg._sessions, "before_commit", cut)
+    killer.dispose()
+    msg = str(exc.value)
+    assert "\n" not in msg and "while committing" in msg and "may or may not be stored" in msg, msg
+    assert lg.reconnects == 0 and lg.count_games() == 0
+    lg.record_games(match, _games(a, b, 4, 0))  # the league goes on
+    assert lg.count_games() == 4
+    lg.close()
+
+
+def test_a_keyed_write_whose_commit_is_cut_off_is_done_again_once(pg_url: str) -> None:
+    """A unit keyed by its work key (a gauntlet's matchup, a job's games) is safe to do twice: retried after the cut,
+    its games are stored once."""
+    notes: list[str] = []
+    lg = League(pg_url, reconnect_for=30, note=notes.append)
+    lg.ensure_bots(ENV, ["a", "b"])
+    a, b = (p.id for p in lg.players())
+    killer = create_engine(pg_url)
+    cuts: list[int] = []
+
+    def cut(session) -> None:
+        if not cuts:
+            cuts.append(session.connection().exec_driver_sql("SELECT pg_backend_pid()").scalar())
+            with killer.begin() as conn:
+                conn.execute(text("SELECT pg_terminate_backend(:pid)"), {"pid": cuts[0]})
+
+    event.listen(lg._sessions, "before_commit", cut)
+    match, ids = lg.create_match_with_games(ENV, "eval", {}, _games(a, b, 4, 0), key="gauntlet/r/1")
+    event.remove(lg._sessions, "before_commit", cut)
+    killer.dispose()
+    assert len(cuts) == 1 and len(ids) == 4 and lg.reconnects == 1 and len(notes) == 1
+    assert lg.count_games() == 4 and set(lg.keyed_matches("gauntlet/r/")) == {"gauntlet/r/1"}
+    lg.close()

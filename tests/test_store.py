@@ -10,6 +10,7 @@ import random
 import shutil
 import signal
 import sqlite3
+import subprocess
 import sys
 import time
 import traceback
@@ -147,18 +148,34 @@ def test_the_revisions_make_the_schema_create_all_makes(db_url: str, pg_url: str
     assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0003",)]
 
 
+def test_the_revisions_marl_knows_are_the_versions_folder() -> None:
+    """``REVISIONS`` (read without Alembic) is the chain Alembic reads from ``versions/``, oldest first."""
+    chain = [sc.revision for sc in migrations.scripts().walk_revisions()][::-1]
+    assert tuple(chain) == migrations.REVISIONS and migrations.head() == migrations.scripts().get_current_head()
+
+
+def test_opening_an_up_to_date_league_does_not_import_alembic(tmp_path: Path) -> None:
+    """Every command opens the league: one that is up to date costs a row read, not Alembic's import."""
+    url = f"sqlite:///{tmp_path / 'league.db'}"
+    League(url).close()
+    code = f"import sys; from selfplay_cli.league.store import League; League({url!r}).close(); " \
+           "print('alembic' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.stdout.strip() == "False", out.stderr
+
+
 def _make_legacy(url: str, version: int) -> None:
     """Turn the league at ``url`` into one the last release before Alembic wrote: no queue tables, no Alembic table,
-    ``meta.schema_version`` = ``version`` (1: no work keys either)."""
-    for statement in ("DROP TABLE jobs", "DROP TABLE workers", "DROP TABLE blobs", "DROP TABLE alembic_version"):
-        _sql(url, statement)
+    ``meta.schema_version`` = ``version`` (1: no work keys either; 3: a development build's, with the queue tables)."""
+    for table in ("jobs", "workers", "blobs", "alembic_version")[(3 if version == 3 else 0):]:
+        _sql(url, f"DROP TABLE {table}")
     if version == 1:
         _sql(url, "DROP INDEX uq_matches_work_key")
         _sql(url, "ALTER TABLE matches DROP COLUMN work_key")
     _sql(url, "UPDATE meta SET value = :v WHERE key = 'schema_version'", v=str(version))
 
 
-@pytest.mark.parametrize("legacy", [1, 2])
+@pytest.mark.parametrize("legacy", [1, 2, 3])
 def test_a_league_of_the_previous_release_is_upgraded_in_place_once(db_url: str, pg_url: str, tmp_path: Path,
                                                                      legacy: int) -> None:
     with League(db_url) as lg:
@@ -178,7 +195,8 @@ def test_a_league_of_the_previous_release_is_upgraded_in_place_once(db_url: str,
         lg.create_match_with_games(ENV, "eval", {}, [_game(a, b, 1.0, 3)], key="k")  # what the upgrade brought
         assert set(lg.keyed_matches("k")) == {"k"} and lg.count_games() == 3
     where = str(tmp_path / "league.db") if db_url.startswith("sqlite") else make_url(db_url).render_as_string()
-    brought = ("match work keys; " if legacy == 1 else "") + "snapshot blobs, work queue"
+    brought = {1: "match work keys; snapshot blobs, work queue", 2: "snapshot blobs, work queue",
+               3: "its version now kept by Alembic"}[legacy]
     assert notes == [f"marl: upgraded league database {where} from schema {legacy} to 0003 ({brought})"]
     with League(db_url, note=notes.append):
         pass

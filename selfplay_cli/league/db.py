@@ -2,7 +2,7 @@
 
 :class:`Database` is the base of :class:`~selfplay_cli.league.store.League`: it opens any SQLAlchemy URL (the default
 is SQLite at ``<home>/league.db``), creates or checks the schema, and runs every unit of work in one transaction
-(:meth:`Database._unit`), retried when SQLite reports a lock. What is stored is in
+(:meth:`Database._unit`), retried when SQLite reports a lock (PostgreSQL: see below). What is stored is in
 :mod:`selfplay_cli.league.roster` (runs, players, tags) and :mod:`selfplay_cli.league.ledger` (matches and games).
 
 SQLite concurrency
@@ -29,7 +29,9 @@ PostgreSQL
 one that loses the server (restarted, unreachable) is retried with backoff for up to :attr:`Database.reconnect_for`
 seconds, saying once on stderr that it is waiting, then ends with a :class:`LeagueIOError` (exit 4). A unit whose
 COMMIT went out but whose answer never came back is not retried (it may have been stored): that too is a
-:class:`LeagueIOError`, and the command resumes from the league as it is.
+:class:`LeagueIOError`, and the command resumes from the league as it is; a unit keyed by its work (a unique work key
+it looks for first: ``idempotent``) is, since done twice it counts once. A database with no tables yet, opened to
+read, reads as an empty league and is left as it is.
 
 The schema
 ----------
@@ -84,6 +86,10 @@ D = TypeVar("D", bound="Database")
 
 class LeagueError(MarlError):
     """A user-facing league problem (unknown or duplicate name, bad database, version mismatch)."""
+
+
+class _NoLeagueYet(LeagueError):
+    """A database server's database with no tables yet, opened to read: read as an empty league instead."""
 
 
 class LeagueIOError(LeagueError, MarlIOError):
@@ -273,6 +279,10 @@ class Database:
             try:
                 self._connect(mode)
                 return
+            except _NoLeagueYet:  # (a database just made for the league): read an empty one, create nothing
+                self.engine.dispose()
+                self._connect(None, empty=True)
+                return
             except LeagueError:
                 if hasattr(self, "engine"):  # (none where the driver is missing)
                     self.engine.dispose()
@@ -289,14 +299,18 @@ class Database:
                 error = LeagueIOError if any(w in reason.lower() for w in _IO_REASONS) else LeagueError
                 raise error(f"cannot open league database {self._where}: {reason}") from exc
 
-    def _connect(self, mode: str | None) -> None:
-        """Make the engine (a read-only SQLite file through a ``file:`` URI with ``mode``) and check the schema."""
+    def _connect(self, mode: str | None, empty: bool = False) -> None:
+        """Make the engine (a read-only SQLite file through a ``file:`` URI with ``mode``; ``empty``: an empty league
+        in memory, to read) and check the schema."""
         engine_url = self.url
         if mode is not None:
             assert self.db_path is not None
             uri = f"{self.db_path.resolve().as_uri()}?mode={mode}"
             engine_url = URL.create("sqlite", database=uri, query={"uri": "true"})
-        self._empty = self.readonly and self.is_sqlite and self.db_path is None and self.url.database == ":memory:"
+        self._empty = empty or (self.readonly and self.is_sqlite and self.db_path is None
+                                and self.url.database == ":memory:")
+        if empty:
+            engine_url = URL.create("sqlite", database=":memory:")
         try:
             if self._empty:  # an empty league to read: one connection (every thread sees the same tables)
                 self.engine: Engine = create_engine(engine_url, poolclass=StaticPool,
@@ -306,7 +320,7 @@ class Database:
         except (NoSuchModuleError, ImportError) as exc:
             extra = ' (pip install "selfplay-cli[postgres]")' if self.is_postgres else ""
             raise LeagueError(f"cannot use database {self._where}: no driver{extra} ({exc})") from exc
-        if self.is_sqlite:
+        if engine_url.get_backend_name() == "sqlite":
             self._install_sqlite_listeners()
         elif self.is_postgres:
             readonly_league = self.readonly
@@ -423,6 +437,8 @@ class Database:
                 raise LeagueError(f"{self._where} is not a marl league database (it holds other tables: "
                                   f"{', '.join(sorted(tables)[:3])}{', ...' if len(tables) > 3 else ''})")
             if self.readonly and not self._empty:
+                if self.db_path is None:
+                    raise _NoLeagueYet(f"{self._where} holds no league yet")
                 raise LeagueError(f"{self._where} holds no league yet (no tables)")
             Base.metadata.create_all(conn)
             migrations.stamp_head(conn)
@@ -514,11 +530,12 @@ class Database:
         return (bool(exc.connection_invalidated) or (state or "").startswith("08") or state in _PG_GONE
                 or (state is None and isinstance(exc, OperationalError)))
 
-    def _unit(self, fn: Callable[[Session], T], readonly: bool = False) -> T:
+    def _unit(self, fn: Callable[[Session], T], readonly: bool = False, idempotent: bool = False) -> T:
         """Run ``fn`` in one transaction, retrying the whole unit a few times if SQLite reports a lock or PostgreSQL a
         serialization failure or deadlock, and for up to :attr:`reconnect_for` seconds while the PostgreSQL server
         is lost (one line says so, once). A unit whose COMMIT was sent when the server was lost is not retried: it
-        may have been stored (:class:`LeagueIOError`).
+        may have been stored (:class:`LeagueIOError`); unless it is ``idempotent`` (done twice, it counts once: its
+        rows are keyed by a unique work key that it looks for first).
 
         A write unit of a read-only league is refused before anything starts."""
         if self.readonly and not readonly:
@@ -545,7 +562,7 @@ class Database:
                     if error is exc:
                         raise
                     raise error from exc
-                if committing and not readonly:
+                if committing and not (readonly or idempotent):
                     raise LeagueIOError(f"lost league database {self._where} while committing (the last write may or "
                                         f"may not be stored; run the command again): {_reason(exc)}") from exc
                 now = time.monotonic()

@@ -339,12 +339,12 @@ class Ledger(Database):
         def work(s: Session) -> tuple[int, list[int]]:
             return self._store_match(s, env, kind, params, games, pids, key)
 
-        try:
-            return self._unit(work)
+        try:  # a keyed unit may be done again after its COMMIT was cut off: stored then, it stores nothing now
+            return self._unit(work, idempotent=key is not None)
         except IntegrityError:  # another process stored the same unit between our look and our insert
             if key is None:
                 raise
-            return self._unit(work)
+            return self._unit(work, idempotent=True)
 
     def _store_match(self, s: Session, env: str, kind: str, params: dict[str, Any], games: list[GameResult],
                      pids: set[int], key: str | None) -> tuple[int, list[int]]:

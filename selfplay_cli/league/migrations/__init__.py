@@ -11,18 +11,30 @@ Leagues written before Alembic have no ``alembic_version`` table; their ``meta.s
 league written by a development build of the queue) says where they stand (:func:`legacy_revision`). A league
 Alembic manages keeps ``meta.schema_version`` at :data:`ALEMBIC_MARK` so that a release from before Alembic refuses
 it, in its own one line, as newer than itself.
+
+A change to the models is a new file in ``versions/`` (``revision`` the next number, ``down_revision`` the last one,
+a first docstring line that says what it brings: the upgrade line quotes it) and its id at the end of
+:data:`REVISIONS`; ``tests/test_store.py`` checks that the revisions, run from nothing, give the models' schema.
 """
 
 from __future__ import annotations
 
+from functools import cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from alembic.operations import Operations
-from alembic.runtime.migration import MigrationContext
-from alembic.script import ScriptDirectory
 from sqlalchemy import Connection, inspect
 
-__all__ = ["ALEMBIC_MARK", "current", "head", "known", "legacy_revision", "stamp_head", "summary", "upgrade"]
+if TYPE_CHECKING:
+    from alembic.script import ScriptDirectory
+
+__all__ = ["ALEMBIC_MARK", "REVISIONS", "current", "head", "known", "legacy_revision", "stamp_head", "summary",
+           "upgrade"]
+
+REVISIONS = ("0002", "0003")
+"""Every revision in ``versions/``, oldest first (a test checks this against Alembic's own reading of the folder).
+Kept here so that opening a league that is up to date reads one row and imports nothing of Alembic (~0.1 s that every
+command would pay); Alembic is imported only to create, stamp or upgrade."""
 
 ALEMBIC_MARK = 3
 """``meta.schema_version`` of every league whose schema Alembic keeps: one more than the newest version (2) a release
@@ -32,26 +44,30 @@ _LEGACY = {2: "0002", 3: "0003"}
 """The revision that a pre-Alembic ``meta.schema_version`` stands for (1 is 2 without the work keys: see
 :func:`legacy_revision`)."""
 
-_SCRIPTS = ScriptDirectory(str(Path(__file__).parent))  # the revisions: its versions/ folder
+
+@cache
+def scripts() -> ScriptDirectory:
+    """Alembic's view of the revisions (the package folder is the script location; its ``versions/`` the scripts)."""
+    from alembic.script import ScriptDirectory
+
+    return ScriptDirectory(str(Path(__file__).parent))
 
 
 def head() -> str:
     """The newest revision this code knows."""
-    rev = _SCRIPTS.get_current_head()
-    assert rev is not None
-    return rev
+    return REVISIONS[-1]
 
 
 def known(revision: str) -> bool:
     """True if ``revision`` is one of this code's (False: a newer marl wrote it)."""
-    return any(s.revision == revision for s in _SCRIPTS.walk_revisions())
+    return revision in REVISIONS
 
 
 def current(conn: Connection) -> str | None:
     """The revision stored in the database (None: no ``alembic_version`` table, a league from before Alembic)."""
     if "alembic_version" not in inspect(conn).get_table_names():
         return None
-    return MigrationContext.configure(conn).get_current_revision()
+    return conn.exec_driver_sql("SELECT version_num FROM alembic_version").scalar()
 
 
 def legacy_revision(conn: Connection, version: int) -> str:
@@ -69,24 +85,29 @@ def legacy_revision(conn: Connection, version: int) -> str:
 
 def stamp_head(conn: Connection) -> None:
     """Record the newest revision in the database (whose tables ``create_all`` just made)."""
-    MigrationContext.configure(conn).stamp(_SCRIPTS, "heads")
+    from alembic.runtime.migration import MigrationContext
+
+    MigrationContext.configure(conn).stamp(scripts(), "heads")
 
 
 def upgrade(conn: Connection, start: str | None) -> list[str]:
     """Apply every revision after ``start`` (None: from nothing) up to :func:`head`, in order, inside the caller's
     transaction, recording each in ``alembic_version`` as it goes; the revisions applied."""
+    from alembic.operations import Operations
+    from alembic.runtime.migration import MigrationContext
+
     ctx = MigrationContext.configure(conn)
     if start is not None and ctx.get_current_revision() != start:
-        ctx.stamp(_SCRIPTS, start)  # a league from before Alembic: where it stands
-    steps = list(reversed(list(_SCRIPTS.iterate_revisions("heads", start or "base"))))
+        ctx.stamp(scripts(), start)  # a league from before Alembic: where it stands
+    steps = list(reversed(list(scripts().iterate_revisions("heads", start or "base"))))
     for script in steps:
         with Operations.context(ctx):
             assert script.module is not None
             script.module.upgrade()
-        ctx.stamp(_SCRIPTS, script.revision)
+        ctx.stamp(scripts(), script.revision)
     return [s.revision for s in steps]
 
 
 def summary(revisions: list[str]) -> str:
     """What ``revisions`` bring, from the first line of each one's docstring (``"snapshot blobs, work queue"``)."""
-    return "; ".join((_SCRIPTS.get_revision(r).doc or r).strip() for r in revisions)
+    return "; ".join((scripts().get_revision(r).doc or r).strip() for r in revisions)
