@@ -123,9 +123,10 @@ def _print_workers(workers: list[WorkerRow], now: datetime) -> None:
     rows = []
     for w in workers:
         gps = w.games_per_second
-        rows.append([w.name, _status(w, now), _ago(w.beat_at, now), ", ".join(map(str, w.holding)) or "-",
-                     w.jobs_done, w.games, f"{gps:.1f}" if gps is not None else "-"])
-    _table("workers", ["worker", "status", "last beat", "holding", "jobs", "games", "games/s"], rows)
+        rows.append([w.name, _status(w, now), _ago(w.beat_at, now), "all" if w.serves is None else
+                     ", ".join(w.serves), ", ".join(map(str, w.holding)) or "-", w.jobs_done, w.games,
+                     f"{gps:.1f}" if gps is not None else "-"])
+    _table("workers", ["worker", "status", "last beat", "batches", "holding", "jobs", "games", "games/s"], rows)
 
 
 def _print_jobs(jobs: list[JobRow], now: datetime) -> None:

@@ -258,6 +258,8 @@ class Worker(Base):
     games: Mapped[int] = mapped_column(BigInteger, default=0)
     seconds: Mapped[float] = mapped_column(Float, default=0.0)
     """Seconds spent playing the jobs it finished (its games/s is ``games / seconds``)."""
+    serves: Mapped[list[str] | None] = mapped_column(JSON)
+    """The batches it takes jobs from (``marl worker --batch``; a command playing its own batch), None: every batch."""
 
 
 class Job(Base):

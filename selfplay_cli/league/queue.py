@@ -116,7 +116,12 @@ class WorkerRow:
     jobs_done: int
     games: int
     seconds: float
+    serves: tuple[str, ...] | None = None  # the batches it takes jobs from (None: all)
     holding: tuple[int, ...] = field(default=())
+
+    def takes(self, batch: str) -> bool:
+        """Whether it takes jobs of ``batch``."""
+        return self.serves is None or batch in self.serves
 
     @property
     def games_per_second(self) -> float | None:
@@ -133,6 +138,7 @@ class WorkerRow:
                 "started_at": self.started_at.isoformat(), "beat_at": self.beat_at.isoformat(),
                 "stopped_at": self.stopped_at.isoformat() if self.stopped_at else None, "jobs_done": self.jobs_done,
                 "games": self.games, "seconds": round(self.seconds, 3),
+                "serves": list(self.serves) if self.serves is not None else None,
                 "games_per_second": round(gps, 2) if gps is not None else None, "holding": list(self.holding)}
 
 
@@ -147,7 +153,7 @@ def _job_row(j: Job, worker: str | None) -> JobRow:
 def _worker_row(w: Worker, holding: tuple[int, ...] = ()) -> WorkerRow:
     return WorkerRow(id=w.id, name=w.name, host=w.host, pid=w.pid, started_at=w.started_at, beat_at=w.beat_at,
                      stopped_at=w.stopped_at, jobs_done=w.jobs_done, games=int(w.games), seconds=float(w.seconds),
-                     holding=holding)
+                     serves=tuple(w.serves) if w.serves is not None else None, holding=holding)
 
 
 def _lazy_commit(s: Session, sqlite: bool) -> None:
@@ -189,11 +195,11 @@ class Queue:
 
     # -- workers
 
-    def add_worker(self, name: str, host: str, pid: int) -> int:
-        """Register a worker; its id."""
+    def add_worker(self, name: str, host: str, pid: int, serves: Sequence[str] | None = None) -> int:
+        """Register a worker that takes jobs of the batches it ``serves`` (None: of every batch); its id."""
 
         def work(s: Session) -> int:
-            w = Worker(name=name[:200], host=host[:200], pid=int(pid))
+            w = Worker(name=name[:200], host=host[:200], pid=int(pid), serves=list(serves) if serves else None)
             s.add(w)
             s.flush()
             return w.id
@@ -229,9 +235,9 @@ class Queue:
 
         self._unit(work)  # type: ignore[attr-defined]
 
-    def workers(self, alive_within: float | None = None) -> list[WorkerRow]:
-        """Every worker (or those whose heart beat within ``alive_within`` seconds and that have not stopped), with
-        the jobs each holds."""
+    def workers(self, alive_within: float | None = None, taking: str | None = None) -> list[WorkerRow]:
+        """Every worker (or those whose heart beat within ``alive_within`` seconds and that have not stopped; that
+        take jobs of batch ``taking``), with the jobs each holds."""
 
         def work(s: Session) -> list[WorkerRow]:
             q = select(Worker).order_by(Worker.id)
@@ -240,7 +246,8 @@ class Queue:
             held: dict[int, list[int]] = {}
             for jid, wid in s.execute(select(Job.id, Job.worker_id).where(Job.state == "leased").order_by(Job.id)):
                 held.setdefault(int(wid), []).append(int(jid))
-            return [_worker_row(w, tuple(held.get(w.id, ()))) for w in s.execute(q).scalars()]
+            rows = [_worker_row(w, tuple(held.get(w.id, ()))) for w in s.execute(q).scalars()]
+            return [w for w in rows if taking is None or w.takes(taking)]
 
         return self._read(work)  # type: ignore[attr-defined,no-any-return]
 

@@ -135,7 +135,8 @@ def see_through(league: League, batch: str, *, device: str = "cpu", parallel: in
     play, until every job has ended; the batch's jobs then. ``on_change(jobs)`` is called whenever a job ended (and
     once at the start); when it returns True the batch's remaining jobs are cancelled (a decided SPRT) and this
     returns. Ctrl-C gives a job in play back to the queue."""
-    worker_id = league.add_worker(worker_name(role), socket.gethostname(), os.getpid()) if play else None
+    worker_id = league.add_worker(worker_name(role), socket.gethostname(), os.getpid(), serves=[batch]) if play \
+        else None
     ended: set[int] = set()
     try:
         while True:

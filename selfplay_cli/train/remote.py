@@ -18,7 +18,6 @@ from .evaluator import Evaluator, GauntletJob, JobDone, RatingWorkerError
 
 __all__ = ["UNTAKEN_SECONDS", "QueueStanding", "RemoteEvaluator", "run_batch"]
 
-_COORDINATORS = ("train@", "marl@")  # names of commands that play their own batch's jobs (see_through), not others'
 
 
 UNTAKEN_SECONDS = 60.0  # the run's end plays its owed gauntlets itself when the workers attached took none of them
@@ -144,10 +143,16 @@ class RemoteEvaluator:
                    for r in self.league.jobs(ids=list(self._ids.values())))
 
     def serving(self) -> list[str]:
-        """The workers attached to the league now: not stopped, heart beaten within ``alive_within`` seconds (the
-        commands that play only their own batch's jobs left out)."""
-        return [w.name for w in self.league.workers(alive_within=self.alive_within)
-                if not w.name.startswith(_COORDINATORS)]
+        """The workers attached to the league that take the run's jobs now: not stopped, heart beaten within
+        ``alive_within`` seconds (this process, playing them itself, left out)."""
+        return [w.name for w in self.league.workers(alive_within=self.alive_within, taking=self.batch)
+                if not self._is_me(w.name)]
+
+    @staticmethod
+    def _is_me(name: str) -> bool:
+        from ..rated.jobs import worker_name
+
+        return name == worker_name("train")
 
     def _play_here(self, on_wait: Any) -> None:
         """Play the batch's queued jobs in this process, and wait for those that workers hold, until all have ended
@@ -178,8 +183,7 @@ class RemoteEvaluator:
 
         rows = self.league.jobs(ids=list(self._ids.values())) if self._ids else []
         left = [r for r in rows if r.state not in ENDED]
-        who = sorted({r.worker for r in left if r.state == "leased" and r.worker
-                      and not r.worker.startswith(_COORDINATORS)})
+        who = sorted({r.worker for r in left if r.state == "leased" and r.worker and not self._is_me(r.worker)})
         return QueueStanding(left=len(left), workers=tuple(who), here=self.here, attached=len(self.serving()))
 
     def close(self) -> None:

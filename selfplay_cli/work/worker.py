@@ -85,7 +85,8 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
                on_games: Callable[[int], None] | None = None) -> WorkerReport:
     """Work the queue of ``league`` as ``options`` say (see the module docstring); what was done."""
     name = options.name or worker_name()
-    wid = _retrying(lambda: league.add_worker(name, socket.gethostname(), os.getpid()), say, "league unreachable")
+    wid = _retrying(lambda: league.add_worker(name, socket.gethostname(), os.getpid(), serves=options.batches), say,
+                    "league unreachable")
     report = WorkerReport(wid, name)
     idle = options.poll
     job: JobRow | None = None

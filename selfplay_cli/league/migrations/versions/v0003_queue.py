@@ -35,6 +35,7 @@ def upgrade() -> None:
         sa.Column("jobs_done", sa.Integer(), nullable=False),
         sa.Column("games", sa.BigInteger(), nullable=False),
         sa.Column("seconds", sa.Float(), nullable=False),
+        sa.Column("serves", sa.JSON(), nullable=True),
     )
     op.create_table(
         "jobs",
