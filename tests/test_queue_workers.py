@@ -349,3 +349,17 @@ def test_marl_match_sprt_queue_decides_exits_as_a_match_and_cancels_the_rest(tmp
     (batch,) = shown["batches"]
     assert batch["batch"].startswith("sprt:cpu-vs-random:") and batch["done"] == 1 and batch["cancelled"] == 15
     assert batch["queued"] == batch["leased"] == 0
+
+
+def test_marl_queue_reads_a_league_from_before_the_queue_as_an_empty_queue(tmp_path, capsys):
+    """A league of the previous release, read only (nothing upgraded): an empty queue, not an error."""
+    import shutil
+    from pathlib import Path
+
+    home = tmp_path / "old"
+    home.mkdir()
+    shutil.copy(Path(__file__).parent / "data" / "league_before_variants.db", home / "league.db")
+    before = (home / "league.db").read_bytes()
+    shown = run_json(capsys, "queue", "--home", str(home))
+    assert shown == {"batches": [], "workers": [], "jobs": []}
+    assert (home / "league.db").read_bytes() == before

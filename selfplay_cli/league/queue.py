@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timedelta
 from typing import Any
 
-from sqlalchemy import and_, bindparam, exists, func, or_, select, text, update
+from sqlalchemy import and_, bindparam, exists, func, inspect, or_, select, text, update
 from sqlalchemy.orm import Session, aliased
 
 from selfplay_cli.league.db import LeagueError
@@ -193,6 +193,16 @@ class Queue:
     """The work queue of a league (a part of :class:`~selfplay_cli.league.store.League`; see the module docstring).
     """
 
+    def _has_queue(self) -> bool:
+        """Whether the database has the queue's tables: always once a command that writes has opened it; a league from
+        before the queue, opened only to read, has none (and so an empty queue)."""
+        if not self.readonly:  # type: ignore[attr-defined]
+            return True
+        known = getattr(self, "_queue_tables", None)
+        if known is None:
+            known = self._queue_tables = inspect(self.engine).has_table("jobs")  # type: ignore[attr-defined]
+        return bool(known)
+
     # -- workers
 
     def add_worker(self, name: str, host: str, pid: int, serves: Sequence[str] | None = None) -> int:
@@ -238,6 +248,9 @@ class Queue:
     def workers(self, alive_within: float | None = None, taking: str | None = None) -> list[WorkerRow]:
         """Every worker (or those whose heart beat within ``alive_within`` seconds and that have not stopped; that
         take jobs of batch ``taking``), with the jobs each holds."""
+
+        if not self._has_queue():
+            return []
 
         def work(s: Session) -> list[WorkerRow]:
             q = select(Worker).order_by(Worker.id)
@@ -387,6 +400,9 @@ class Queue:
              limit: int | None = None) -> list[JobRow]:
         """Jobs (of ``batch``, with ``ids``, in ``states``), newest last; the last ``limit`` of them when given."""
 
+        if not self._has_queue():
+            return []
+
         def work(s: Session) -> list[JobRow]:
             q = select(Job, Worker.name).outerjoin(Worker, Worker.id == Job.worker_id)
             if batch is not None:
@@ -406,6 +422,9 @@ class Queue:
     def job_counts(self, batch: str | None = None) -> dict[str, int]:
         """How many jobs (of ``batch``) are in each state (every state listed, zeros included)."""
 
+        if not self._has_queue():
+            return dict.fromkeys(JOB_STATES, 0)
+
         def work(s: Session) -> dict[str, int]:
             q = select(Job.state, func.count()).group_by(Job.state)
             if batch is not None:
@@ -418,6 +437,9 @@ class Queue:
 
     def batches(self) -> list[tuple[str, dict[str, int]]]:
         """Every batch with its job counts by state, oldest first."""
+
+        if not self._has_queue():
+            return []
 
         def work(s: Session) -> list[tuple[str, dict[str, int]]]:
             q = select(Job.batch, Job.state, func.count(), func.min(Job.id)).group_by(Job.batch, Job.state)
