@@ -255,6 +255,7 @@ class Database:
         self.readonly = bool(readonly)
         self.reconnect_for = float(reconnect_for)
         self.reconnects = 0
+        self._lost_said = False  # "unreachable" said for the loss under way (once, whatever the threads)
         self.note: Callable[[str], None] = note or _to_stderr
         if home is not None:
             self.home: Path | None = Path(home).expanduser().resolve()
@@ -548,6 +549,8 @@ class Database:
                 with signals_held(), self.session(readonly=readonly) as s:  # Ctrl-C waits for commit or rollback
                     result = fn(s)
                     committing = True  # leaving the block commits
+                if lost_since is not None:
+                    self._lost_said = False  # back: a later loss is said again
                 return result
             except DBAPIError as exc:
                 if self._transient(exc):
@@ -568,8 +571,10 @@ class Database:
                 now = time.monotonic()
                 if lost_since is None:
                     lost_since = now
-                    self.note(f"marl: league database {self._where} unreachable, retrying for up to "
-                              f"{self.reconnect_for:.0f} s ({_reason(exc)})")
+                    if not self._lost_said:  # once for the process, whatever its threads that wait
+                        self._lost_said = True
+                        self.note(f"marl: league database {self._where} unreachable, retrying for up to "
+                                  f"{self.reconnect_for:.0f} s ({_reason(exc)})")
                 if now - lost_since >= self.reconnect_for:
                     raise LeagueIOError(f"league database {self._where} unreachable for {self.reconnect_for:.0f} s: "
                                         f"{_reason(exc)}") from exc

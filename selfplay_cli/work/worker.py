@@ -25,7 +25,7 @@ from ..rated.jobs import Outcome, play_leased, worker_name
 
 __all__ = ["WorkerOptions", "WorkerReport", "run_worker"]
 
-_IDLE_MAX = 10.0  # the longest wait between two looks at an empty queue
+_IDLE_MAX = 2.0  # the longest wait between two looks at an empty queue (a claim is one cheap query)
 _AWAY_MAX = 30.0  # the longest wait between two tries of a database that cannot be reached
 
 
