@@ -347,9 +347,10 @@ class Ledger(Database):
             return self._unit(work, idempotent=True)
 
     def _store_match(self, s: Session, env: str, kind: str, params: dict[str, Any], games: list[GameResult],
-                     pids: set[int], key: str | None) -> tuple[int, list[int]]:
-        """:meth:`create_match_with_games` inside the caller's transaction (``params`` and ``games`` checked)."""
-        if key is not None:
+                     pids: set[int], key: str | None, look: bool = True) -> tuple[int, list[int]]:
+        """:meth:`create_match_with_games` inside the caller's transaction (``params`` and ``games`` checked).
+        ``look=False``: the caller knows no match holds ``key`` yet (its unique index still says so if one does)."""
+        if key is not None and look:
             done = s.execute(select(Match.id).where(Match.work_key == key)).scalar()
             if done is not None:
                 return int(done), []

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import datetime, timedelta
 from typing import Any
 
@@ -174,13 +174,13 @@ def _claim_query(by_batch: bool, by_kind: bool, sqlite: bool) -> Any:
     ready = or_(Job.after.is_(None), exists().where(before.id == Job.after, before.state.in_(tuple(ENDED))))
     takeable = or_(and_(Job.state == "queued", or_(Job.not_before.is_(None), Job.not_before <= now)),
                    and_(Job.state == "leased", Job.beat_at < lapsed))
-    q = select(Job).where(takeable, ready).order_by(Job.priority.desc(), Job.id).limit(1)
+    q = select(Job.__table__).where(takeable, ready).order_by(Job.priority.desc(), Job.id).limit(1)
     if by_batch:
         q = q.where(Job.batch.in_(bindparam("batches", expanding=True)))
     if by_kind:
         q = q.where(Job.kind.in_(bindparam("kinds", expanding=True)))
     if not sqlite:  # workers never wait for each other's claims
-        q = q.with_for_update(skip_locked=True, of=Job)
+        q = q.with_for_update(skip_locked=True, of=Job.__table__)
     return q
 
 
@@ -306,19 +306,22 @@ class Queue:
             if kinds is not None:
                 params["kinds"] = list(kinds)
             q = _claim_query(batches is not None, kinds is not None, self.is_sqlite)  # type: ignore[attr-defined]
-            while True:
-                j = s.execute(q, params).scalars().first()
+            jobs = Job.__table__
+            while True:  # (Core statements: the ORM's bookkeeping would double the time a lease takes)
+                j = s.execute(q, params).first()
                 if j is None:
                     return None
                 if j.state == "queued" or j.tries < int((j.spec or {}).get("max_tries", MAX_TRIES)):
                     break
-                j.state, j.finished_at = "dead", now  # its workers went silent on every lease it may have
-                j.error = f"its worker went silent (no heartbeat for {scavenge:g} s) on each of its {j.tries} leases"
-                s.flush()
-            j.state, j.worker_id, j.leased_at, j.beat_at, j.tries = "leased", worker_id, now, now, j.tries + 1
-            name = s.execute(update(Worker).where(Worker.id == worker_id).values(beat_at=now)
-                             .returning(Worker.name)).scalar()
-            return _job_row(j, name)
+                s.execute(jobs.update().where(jobs.c.id == j.id).values(  # silent on every lease it may have
+                    state="dead", finished_at=now,
+                    error=f"its worker went silent (no heartbeat for {scavenge:g} s) on each of its {j.tries} leases"))
+            s.execute(jobs.update().where(jobs.c.id == j.id).values(state="leased", worker_id=worker_id, leased_at=now,
+                                                                    beat_at=now, tries=j.tries + 1))
+            name = s.execute(Worker.__table__.update().where(Worker.__table__.c.id == worker_id).values(beat_at=now)
+                             .returning(Worker.__table__.c.name)).scalar()
+            return replace(_job_row(j, name), state="leased", worker_id=worker_id, leased_at=now, beat_at=now,
+                           tries=j.tries + 1)
 
         return self._unit(work)  # type: ignore[attr-defined,no-any-return]
 
@@ -335,26 +338,29 @@ class Queue:
         pids = _check_games(games)
 
         def work(s: Session) -> bool:
-            q = select(Job).where(Job.id == job_id)
+            jobs, workers = Job.__table__, Worker.__table__
+            q = select(jobs.c.state, jobs.c.env, jobs.c.batch).where(jobs.c.id == job_id)
             if not self.is_sqlite:  # type: ignore[attr-defined]
                 q = q.with_for_update()
-            j = s.execute(q).scalars().first()
+            j = s.execute(q).first()
             if j is None:
                 raise LeagueError(f"no job with id {job_id}")
             if j.state in ENDED:
                 return False
             out = dict(result or {})
             if games:
-                mp = _match_params(j.env, match_kind, {**(params or {}), "job": j.id, "batch": j.batch})
+                mp = _match_params(j.env, match_kind, {**(params or {}), "job": job_id, "batch": j.batch})
+                # (a job not ended has stored no games: they go in with its end, and its row is locked)
                 match_id, ids = self._store_match(s, j.env, match_kind, mp, games, pids,  # type: ignore[attr-defined]
-                                                  f"job:{j.id}")
+                                                  f"job:{job_id}", look=False)
                 out.update(match_id=match_id, games_stored=len(ids))
             now = utcnow()
-            j.state, j.result, j.finished_at, j.worker_id, j.error = "done", out, now, worker_id, None
-            s.execute(update(Worker).where(Worker.id == worker_id).values(
-                beat_at=now, jobs_done=Worker.jobs_done + 1, games=Worker.games + (len(games) if played is None
-                                                                                   else int(played)),
-                seconds=Worker.seconds + float(seconds)))
+            s.execute(jobs.update().where(jobs.c.id == job_id).values(state="done", result=out, finished_at=now,
+                                                                      worker_id=worker_id, error=None))
+            s.execute(workers.update().where(workers.c.id == worker_id).values(
+                beat_at=now, jobs_done=workers.c.jobs_done + 1,
+                games=workers.c.games + (len(games) if played is None else int(played)),
+                seconds=workers.c.seconds + float(seconds)))
             return True
 
         return self._unit(work)  # type: ignore[attr-defined,no-any-return]
