@@ -155,3 +155,25 @@ def pg_restart(pg_server):
     yield restart
     if not pg_server.get_postmaster_info().is_running():
         start_postgres(pg_server)
+
+
+@pytest.fixture
+def rated_league(tmp_path):
+    """A league with one real snapshot (a small untrained network) and the scripted players: its gauntlet is a
+    real job of a few seconds."""
+    from selfplay_cli.cli import main
+    from selfplay_cli.league.store import League
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
+
+    home = tmp_path / "h"
+    arch = Arch(hidden=(16,))
+    meta = SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="w", name="s0", algo="ppo", step=0,
+                        env_options={"points_to_win": 1})
+    save_snapshot(tmp_path / "s0.safetensors", build_network((8, 6), 3, arch, seed=1), meta)
+    assert main(["checkpoint", "import", str(tmp_path / "s0.safetensors"), "--home", str(home)]) == 0
+    league = League.open(home)
+    league.ensure_bots("pong", ["random", "cpu"])
+    (snap,) = league.players("pong", kind="snapshot")
+    yield league, snap
+    league.close()

@@ -23,8 +23,6 @@ from selfplay_cli.commands.train_view import describe_queue
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.models import Game, GameSeat, Job, Match, Player
 from selfplay_cli.league.store import League
-from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 from selfplay_cli.rated.jobs import play_leased
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.evaluator import GauntletJob
@@ -174,25 +172,10 @@ def test_a_run_killed_and_resumed_queues_no_gauntlet_twice(tmp_path, capsys):
 
 
 # -- the evaluator on its own (a snapshot, the scripted players) -------------------------------------------------------
-@pytest.fixture
-def one_snapshot(tmp_path):
-    home = tmp_path / "h"
-    arch = Arch(hidden=(16,))
-    meta = SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="w", name="s0", algo="ppo", step=0,
-                        env_options={"points_to_win": 1})
-    save_snapshot(tmp_path / "s0.safetensors", build_network((8, 6), 3, arch, seed=1), meta)
-    assert main(["checkpoint", "import", str(tmp_path / "s0.safetensors"), "--home", str(home)]) == 0
-    league = League.open(home)
-    league.ensure_bots("pong", ["random", "cpu"])
-    (snap,) = league.players("pong", kind="snapshot")
-    yield league, snap
-    league.close()
-
-
-def test_a_gauntlet_already_queued_is_not_queued_again(one_snapshot):
+def test_a_gauntlet_already_queued_is_not_queued_again(rated_league):
     """A resumed session submits the gauntlets its run state still owes: those already in the batch are found by
     their snapshot ids and waited for, a new one waits for the last of them."""
-    league, snap = one_snapshot
+    league, snap = rated_league
     first = RemoteEvaluator(league, "w", "cpu")
     first.submit(GauntletJob((snap.id,), 0, 2, 0))
     (queued,) = league.jobs(batch=run_batch("w"))
@@ -204,10 +187,10 @@ def test_a_gauntlet_already_queued_is_not_queued_again(one_snapshot):
     assert again.poll() == [] and len(again.pending) == 2
 
 
-def test_the_wait_shows_which_worker_plays_and_a_dead_job_is_one_error(one_snapshot):
+def test_the_wait_shows_which_worker_plays_and_a_dead_job_is_one_error(rated_league):
     """While a worker holds the run's gauntlet the wait names it (and this process plays nothing); a job that ended
     dead is raised as its error, in one line that says where to look."""
-    league, snap = one_snapshot
+    league, snap = rated_league
     ev = RemoteEvaluator(league, "w", "cpu", poll_seconds=0.05)
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))
     assert ev.queue_standing() == QueueStanding(left=1, workers=(), here=False, attached=0)
@@ -232,8 +215,8 @@ def test_the_wait_shows_which_worker_plays_and_a_dead_job_is_one_error(one_snaps
         ev.poll()
 
 
-def test_a_cancelled_gauntlet_leaves_its_snapshots_unrated_in_one_line(one_snapshot):
-    league, snap = one_snapshot
+def test_a_cancelled_gauntlet_leaves_its_snapshots_unrated_in_one_line(rated_league):
+    league, snap = rated_league
     notes: list[str] = []
     ev = RemoteEvaluator(league, "w", "cpu", note=notes.append)
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))
@@ -313,10 +296,10 @@ def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
             resumed_config(league, "a", None, {"resume", "eval"})
 
 
-def test_work_no_attached_worker_takes_is_played_by_the_run(one_snapshot):
+def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     """A worker is attached (its heart beats) but never takes the run's gauntlet (busy with other work, or serving
     other batches): after ``untaken`` seconds the run's end plays it itself, and says so while it does."""
-    league, snap = one_snapshot
+    league, snap = rated_league
     busy = league.add_worker("busy", "elsewhere", 1)
     ev = RemoteEvaluator(league, "w", "cpu", untaken=0.5, poll_seconds=0.05)
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))

@@ -23,8 +23,6 @@ from selfplay_cli.cli import main
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league import migrations
 from selfplay_cli.league.store import League
-from selfplay_cli.policies.network import Arch, build_network
-from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 from selfplay_cli.train import loop
 from selfplay_cli.train.evaluator import MAX_RESTARTS, Evaluator, GauntletJob, RatingWorkerError
 from selfplay_cli.train.lock import claim, process_start
@@ -155,23 +153,6 @@ def test_a_stale_lock_ends_the_old_runs_live_worker_and_only_it(tmp_path):
 
 
 # -- 4. a dead or stalled worker is noticed at once and replaced ----------------------------------------------
-@pytest.fixture
-def rated_league(tmp_path):
-    """A league with one real snapshot (a small untrained network) and the scripted players: its gauntlet is a
-    real job of a few seconds."""
-    home = tmp_path / "h"
-    arch = Arch(hidden=(16,))
-    meta = SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="w", name="s0", algo="ppo", step=0,
-                        env_options={"points_to_win": 1})
-    save_snapshot(tmp_path / "s0.safetensors", build_network((8, 6), 3, arch, seed=1), meta)
-    assert main(["checkpoint", "import", str(tmp_path / "s0.safetensors"), "--home", str(home)]) == 0
-    league = League.open(home)
-    league.ensure_bots("pong", ["random", "cpu"])
-    (snap,) = league.players("pong", kind="snapshot")
-    yield league, snap
-    league.close()
-
-
 @pytest.mark.slow
 def test_a_dead_worker_is_noticed_by_poll_and_replaced_and_its_job_done(rated_league):
     league, snap = rated_league

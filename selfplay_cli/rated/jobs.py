@@ -132,21 +132,19 @@ def see_through(league: League, batch: str, *, device: str = "cpu", parallel: in
                 on_games: Callable[[int], None] | None = None,
                 on_change: Callable[[list[JobRow]], bool] | None = None, role: str = "marl") -> list[JobRow]:
     """See a queued batch through: play its jobs that no worker has taken (``play``), wait for those that workers
-    play, until every job has ended; the batch's jobs then. ``on_change(jobs)`` is called whenever a job ended (and
-    once at the start); when it returns True the batch's remaining jobs are cancelled (a decided SPRT) and this
-    returns. Ctrl-C gives a job in play back to the queue."""
+    play, until every job has ended; the batch's jobs then. ``on_change(jobs)`` is called at every look at the batch
+    (before each job this process plays, and each ``poll`` seconds while it waits: a progress display follows it);
+    when it returns True the batch's remaining jobs are cancelled (a decided SPRT) and this returns. Ctrl-C gives a
+    job in play back to the queue."""
     worker_id = league.add_worker(worker_name(role), socket.gethostname(), os.getpid(), serves=[batch]) if play \
         else None
-    ended: set[int] = set()
     try:
         while True:
             jobs = league.jobs(batch=batch)
-            now_ended = {j.id for j in jobs if j.state in ENDED}
-            if (now_ended != ended or not ended) and on_change is not None and on_change(jobs):
+            if on_change is not None and on_change(jobs):
                 league.cancel_jobs(batch=batch)
                 return league.jobs(batch=batch)
-            ended = now_ended
-            if len(ended) == len(jobs):
+            if all(j.state in ENDED for j in jobs):
                 return jobs
             job = league.claim(worker_id, batches=[batch], scavenge=scavenge) if worker_id is not None else None
             if job is None:

@@ -37,13 +37,17 @@ class QueuedMatch:
         self.settings = sprt
         self.test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta) if sprt else None
         self.verdict: tuple[float, str | None, int] = (0.0, None, 0)
+        self._done: frozenset[int] | None = None  # the jobs the verdict was taken over
 
     def decided(self, jobs: list[JobRow]) -> bool:
-        """Whether the SPRT is decided over the jobs done so far (always False without one)."""
+        """Whether the SPRT is decided over the jobs done so far (always False without one); taken again only when
+        another job is done."""
         if self.test is None or not jobs:
             return False
-        paired = next((bool(j.result["paired"]) for j in jobs if j.result), True)
-        self.verdict = sprt_verdict(jobs, self.test, paired)
+        done = frozenset(j.id for j in jobs if j.state == "done")
+        if done != self._done:
+            paired = next((bool(j.result["paired"]) for j in jobs if j.result), True)
+            self.verdict, self._done = sprt_verdict(jobs, self.test, paired), done
         return self.verdict[1] is not None
 
     def see_through(self, *, device: str = "cpu", parallel: int = 1024, play: bool = True,

@@ -117,11 +117,8 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
 
 def _open_work(league: League, options: WorkerOptions) -> bool:
     """Whether the batches this worker serves still have jobs not ended (queued, waiting, or leased by others)."""
-    counts: dict[str, int] = {}
-    for batch in options.batches or [b for b, _ in league.batches()]:
-        for state, n in league.job_counts(batch).items():
-            counts[state] = counts.get(state, 0) + n
-    return counts.get("queued", 0) + counts.get("leased", 0) > 0
+    return any(counts["queued"] + counts["leased"] > 0 for batch, counts in league.batches()
+               if options.batches is None or batch in options.batches)
 
 
 def _count(report: WorkerReport, out: Outcome) -> None:
