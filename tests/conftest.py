@@ -101,6 +101,18 @@ def pg_server():
     yield server
 
 
+@pytest.fixture(scope="session")
+def ray_local():
+    """Ray started once in this test process (4 CPUs as Ray counts them: two rollout actors and rating workers fit
+    on this machine's two cores), shared by its Ray tests; a run finds it running and leaves it running."""
+    from selfplay_cli.train.ray_support import connect, ray_module
+
+    connect(num_cpus=4)
+    ray = ray_module()
+    yield ray
+    ray.shutdown()
+
+
 def _fresh_database(server) -> str:
     """A new, empty database on ``server``: its SQLAlchemy URL (psycopg 3 over the server's socket)."""
     import psycopg

@@ -25,9 +25,13 @@ from .matchmaking import MatchmakerConfig
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field
-EVAL_MODES = ("local", "inline", "remote")
-"""Who plays a run's gauntlets (``--eval``): a worker process beside training, the training process itself, or the
-league's workers (:mod:`selfplay_cli.train.evaluator`, :mod:`selfplay_cli.train.remote`)."""
+EVAL_MODES = ("local", "inline", "remote", "ray")
+"""Who plays a run's gauntlets (``--eval``): a worker process beside training, the training process itself, the
+league's workers (:mod:`selfplay_cli.train.evaluator`, :mod:`selfplay_cli.train.remote`), or queue workers on Ray
+actors started for the run."""
+EXECUTORS = ("local", "ray")
+"""Where a run's training games are stepped (``--executor``): this process, or Ray actors
+(:mod:`selfplay_cli.train.ray_rollouts`)."""
 
 
 @dataclass(frozen=True)
@@ -133,6 +137,11 @@ class TrainConfig:
     eval: str = "local"  # who plays the gauntlets: local (a worker process beside training), inline (the training
     # process, paused), remote (the league's workers, from its work queue: marl worker, on any machine)
     eval_wait: bool = True  # --eval remote: the run's end waits for its gauntlets (False: leaves them to the workers)
+    executor: str = "local"  # where the training games are stepped: local (this process) or ray (Ray actors)
+    actors: int = 2  # --executor ray: rollout actors, each stepping a share of the games
+    ray_address: str = ""  # --executor ray, --eval ray: a Ray cluster to join ("": Ray started on this machine)
+    fragment_steps: int = 0  # --executor ray: steps of every game an actor plays between weight updates (PPO: its
+    # rollout, always; SAC and DQN: 0 means 16)
     eval_playoff: int = 100  # after the final gauntlet the run's best candidates meet, up to this many games a pair
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
@@ -162,6 +171,16 @@ class TrainConfig:
             raise MarlError(f"--eval-playoff must not be negative, not {self.eval_playoff}")
         if self.eval not in EVAL_MODES:
             raise MarlError(f"--eval must be one of {', '.join(EVAL_MODES)}, not '{self.eval}'")
+        if self.executor not in EXECUTORS:
+            raise MarlError(f"--executor must be one of {', '.join(EXECUTORS)}, not '{self.executor}'")
+        if self.executor == "ray" and not 1 <= self.actors <= self.games:
+            raise MarlError(f"--actors must be between 1 and --games ({self.games}), not {self.actors}")
+        if self.fragment_steps < 0:
+            raise MarlError(f"--fragment-steps must not be negative, not {self.fragment_steps}")
+        if "ray" in (self.executor, self.eval):
+            from .ray_support import ray_module
+
+            ray_module()  # Ray not installed: one line now, before anything is written
         if not self.eval_wait and self.eval != "remote":
             raise MarlError(f"--no-wait is for --eval remote (the league's workers play what the run leaves); with "
                             f"--eval {self.eval} the run's own process plays every gauntlet")

@@ -1,0 +1,86 @@
+"""Ray for a run (``--executor ray``, ``--eval ray``): the optional import and joining a cluster, each failure one line.
+
+Ray is an optional extra (``pip install "selfplay-cli[ray]"``). :func:`ray_module` imports it or refuses in one line
+(exit 2) before anything is written; :func:`connect` starts Ray on this machine's cores or joins a running cluster
+(``--ray-address``, e.g. ``ray start --head`` on one machine and ``ray start --address HEAD:6379`` on the others),
+and says in one line (exit 4) when the cluster cannot be reached. :class:`RayConnection` is the context a run holds:
+Ray is shut down at its end only if this process started it (a test, or a script, may have started it already).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+from types import ModuleType
+from typing import Any
+
+from ..errors import MarlError, MarlIOError
+
+INSTALL_HINT = 'pip install "selfplay-cli[ray]"'
+
+
+def ray_module() -> ModuleType:
+    """The ``ray`` module, or one :class:`MarlError` (exit 2) saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise MarlError(f"--executor ray and --eval ray need Ray, which is not installed ({INSTALL_HINT})") from None
+    return ray
+
+
+def connect(address: str = "", *, num_cpus: int | None = None) -> bool:
+    """Join the Ray cluster at ``address`` ("": start Ray on this machine; ``RAY_ADDRESS`` in the environment is
+    honoured as Ray honours it); returns whether this call started (or joined) Ray, False when it was running
+    already. A cluster that cannot be reached is one :class:`MarlIOError` (exit 4)."""
+    ray = ray_module()
+    if ray.is_initialized():
+        return False
+    kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.ERROR, "log_to_driver": False,
+                              "configure_logging": True}
+    where = address or os.environ.get("RAY_ADDRESS", "")
+    if where:
+        kwargs["address"] = where
+    else:
+        kwargs["num_cpus"] = num_cpus or os.cpu_count() or 1
+        # the workers find the package as this process does (an editable install, or the current folder)
+        kwargs["runtime_env"] = {"env_vars": {"SDL_VIDEODRIVER": "dummy", "SDL_AUDIODRIVER": "dummy"}}
+    if where:
+        _reachable(where)
+    try:
+        ray.init(**kwargs)
+    except (ConnectionError, TimeoutError, RuntimeError, ValueError) as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise MarlIOError(f"cannot reach the Ray cluster at {where}: {first}") from None
+    return True
+
+
+def _reachable(address: str) -> None:
+    """A ``host:port`` cluster address checked with one TCP connection (5 s at most) before Ray tries it, so a wrong
+    address is one line at once rather than Ray's retries and their log lines; other forms (``auto``,
+    ``ray://...``) are left to Ray."""
+    host, sep, port = address.rpartition(":")
+    if not sep or not port.isdigit() or "/" in address:
+        return
+    try:
+        socket.create_connection((host or "127.0.0.1", int(port)), timeout=5).close()
+    except OSError as e:
+        raise MarlIOError(f"cannot reach the Ray cluster at {address}: {e.strerror or e}") from None
+
+
+class RayConnection:
+    """Ray for the length of a ``with`` block: :func:`connect` on entry, ``ray.shutdown()`` on exit when this block
+    started it."""
+
+    def __init__(self, address: str = "") -> None:
+        self.address = address
+        self.started = False
+
+    def __enter__(self) -> RayConnection:
+        self.started = connect(self.address)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self.started:
+            ray_module().shutdown()
+            self.started = False
