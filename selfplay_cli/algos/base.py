@@ -75,6 +75,34 @@ class Learner(Protocol):
     def load_state_dict(self, state: dict[str, Any]) -> None: ...
 
 
+Share = tuple[np.ndarray, int]
+"""An actor's rows of a learner's batch: ``(rows, total)``, this batch being rows ``rows`` of the learner's ``total``
+slots (:mod:`selfplay_cli.train.shards`)."""
+
+
+def padded(x: torch.Tensor, share: Share | None, fill: float | bool = 0) -> torch.Tensor:
+    """``x`` (one row per slot of an actor's share) as rows ``share[0]`` of a batch of all ``share[1]`` slots, the
+    others ``fill``; ``x`` itself without a share. A sampler run on the padded batch draws what it would draw for
+    the whole batch, so each row's action is the same however the slots are split between actors."""
+    if share is None:
+        return x
+    rows, total = share
+    out = x.new_full((total, *x.shape[1:]), fill)
+    out[torch.as_tensor(rows, device=x.device)] = x
+    return out
+
+
+def unpadded(x: torch.Tensor, share: Share | None) -> torch.Tensor:
+    """The share's rows of a padded batch (:func:`padded`)."""
+    return x if share is None else x[torch.as_tensor(share[0], device=x.device)]
+
+
+def share_draw(draw: Callable[[int], np.ndarray], n: int, share: Share | None) -> np.ndarray:
+    """``draw(total)`` (a numpy generator's draw of one value per slot) at the share's rows: the values the whole
+    batch would get at them."""
+    return draw(n) if share is None else draw(share[1])[share[0]]
+
+
 def learner_args(seat: SeatSpace, n_slots: Any, config: Any, config_class: type) -> tuple[SeatSpace, int, Any]:
     """The (seat, slots, config) a learner is built from, checked: ``seat`` a :class:`SeatSpace`, at least one
     slot, and ``config`` an instance of ``config_class`` (None: its defaults)."""

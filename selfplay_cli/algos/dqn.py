@@ -64,7 +64,7 @@ from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead, uniform_allowed
 from ..signals import stop_requested
-from .base import action_head, as_bool, check_steps, fix_mask, learner_args
+from .base import Share, action_head, as_bool, check_steps, fix_mask, learner_args, share_draw
 from .optim import FlatAdam, flatten
 from .replay import NStepChains, ReplayBuffer, store_decisions
 
@@ -154,6 +154,7 @@ class DQNLearner:
 
     name = "dqn"
     config_class = DQNConfig
+    synchronous = False  # rollout actors feed the replay with weights up to one fragment old
 
     @staticmethod
     def check_seat(seat: SeatSpace) -> ActionHead:
@@ -175,6 +176,7 @@ class DQNLearner:
         self.opt = FlatAdam(self.net.parameters(), cfg.lr, max_grad_norm=cfg.max_grad_norm)
         self.target_flat = flatten(self.target.parameters())  # the target update is one operation on it
         self.rng = np.random.default_rng(seed)  # exploration and replay sampling
+        self.share: Share | None = None  # in a rollout actor: its rows of the slots (draws stay the whole batch's)
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_dim)
         self.chains = NStepChains(cfg.n_step, cfg.gamma, n_slots, self.obs_dim, (), np.int64)
         self.transitions = 0  # collected so far (drives epsilon)
@@ -226,36 +228,67 @@ class DQNLearner:
         self._obs = self._actions = self._rewards = self._dones = self._trunc = None
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        """Epsilon-greedy actions for this step's observations (which also complete the previous step): with a
-        mask, exploration is uniform over the allowed actions and the greedy action the best allowed one."""
+    def decide(self, obs: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Epsilon-greedy actions for this step's observations, and what :meth:`take` keeps of them (the actions, the
+        mask): with a mask, exploration is uniform over the allowed actions and the greedy action the best allowed
+        one. With a :attr:`share` (a rollout actor's rows) the draws are the whole batch's."""
         if self._final_missing():
             raise ValueError("games were truncated on the last recorded step: pass their final observations "
                              "(final_obs) to record() or update()")
-        x = self._flat(obs)
+        x = np.asarray(obs, dtype=np.float32).reshape(len(obs), self.obs_dim)
         m = fix_mask(mask, self.head, len(x))
         if m is not None:
             self._masked = True
         elif self._masked:
             m = np.ones((len(x), self.n_actions), dtype=bool)
-        self._push(x, m)
-        n = len(x)
-        eps = self.epsilon
-        explore = self.rng.random(n) < eps
+        n, share = len(x), self.share
+        explore = share_draw(self.rng.random, n, share) < self.epsilon
         if m is None:
-            actions = self.rng.integers(0, self.n_actions, size=n)
+            actions = share_draw(lambda k: self.rng.integers(0, self.n_actions, size=k), n, share)
         else:
-            actions = uniform_allowed(m, self.rng.random(n))
+            actions = uniform_allowed(m, share_draw(self.rng.random, n, share))
         if not explore.all():
             q, _ = self.net(torch.from_numpy(x).to(self.device))
             if m is not None:
                 q = q.masked_fill(~torch.from_numpy(m).to(self.device), MASKED)
             greedy = q.argmax(dim=1).cpu().numpy()
             actions = np.where(explore, actions, greedy)
+        return actions, {"actions": actions, "mask": m}
+
+    def take(self, obs: np.ndarray, taken: dict[str, Any]) -> None:
+        """This step's observations and the actions :meth:`decide` chose (here or in a rollout actor): they complete
+        the previous step, and wait for :meth:`record` to bring their own outcome."""
+        if self._final_missing():
+            raise ValueError("games were truncated on the last recorded step: pass their final observations "
+                             "(final_obs) to record() or update()")
+        x = self._flat(obs)
+        m = taken.get("mask")
+        if m is not None:
+            self._masked = True
+        self._push(x, m)
         if self._obs is not None and self._turns is None:  # an earlier step left without record() is dropped
             self.chains.clear()
-        self._obs, self._actions, self._mask = x, actions, m
-        return actions
+        self._obs, self._actions, self._mask = x, np.asarray(taken["actions"]), m
+
+    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Epsilon-greedy actions for this step's observations, which also complete the previous step
+        (:meth:`decide`, then :meth:`take`)."""
+        played, taken = self.decide(obs, mask)
+        self.take(obs, taken)
+        return played
+
+    def acting_state(self) -> dict[str, Any]:
+        """What a rollout actor's copy needs to act as this learner does now: the online network's weights (on the
+        CPU) and the transitions collected (epsilon follows them)."""
+        return {"net": {k: v.detach().cpu() for k, v in self.net.state_dict().items()},
+                "transitions": self.transitions}
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        """:meth:`acting_state` into a rollout actor's copy; ``noise_seed`` seeds its draws afresh."""
+        self.net.load_state_dict(state["net"])
+        self.transitions = int(state["transitions"])
+        if "noise_seed" in state:
+            self.rng = np.random.default_rng(int(state["noise_seed"]))
 
     def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,
                acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,

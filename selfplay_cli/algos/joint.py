@@ -41,9 +41,42 @@ class JointLearner:
         """A per-slot (seat by seat) flag or value -> per game ``(N, G)``."""
         return np.asarray(per_seat).reshape(self.n, self.games)
 
+    @property
+    def synchronous(self) -> bool:
+        return bool(getattr(self.inner, "synchronous", False))
+
+    @property
+    def share(self) -> Any:
+        return self.inner.share
+
+    @share.setter
+    def share(self, share: Any) -> None:
+        """A rollout actor's rows of the per-seat slots (seat by seat, ``seat * games + game``) as the inner learner's
+        rows, one a game: the first seat's rows are the actor's games."""
+        if share is None:
+            self.inner.share = None
+            return
+        rows, total = share
+        games = total // self.n
+        self.inner.share = (np.asarray(rows)[np.asarray(rows) < games], games)
+
+    def decide(self, obs: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        joint, taken = self.inner.decide(regroup(obs, self.n))
+        return decode(joint, self.n, self.base).reshape(-1), taken
+
+    def take(self, obs: np.ndarray, taken: dict[str, Any]) -> None:
+        self.inner.take(regroup(obs, self.n), taken)
+
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        joint = self.inner.act(regroup(obs, self.n))
-        return decode(joint, self.n, self.base).reshape(-1)
+        played, taken = self.decide(obs, mask)
+        self.take(obs, taken)
+        return played
+
+    def acting_state(self) -> dict[str, Any]:
+        return self.inner.acting_state()
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        self.inner.load_acting_state(state)
 
     def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,
                acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,

@@ -47,7 +47,7 @@ from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
 from ..signals import stop_requested
-from .base import action_head, as_bool, check_steps, fix_mask, learner_args, values_of
+from .base import Share, action_head, as_bool, check_steps, fix_mask, learner_args, padded, unpadded, values_of
 from .kickstart import Imitation
 from .optim import FlatAdam
 
@@ -101,6 +101,7 @@ class PPOLearner:
 
     name = "ppo"
     config_class = PPOConfig
+    synchronous = True  # rollout actors collect each rollout with the weights it updates (the same run as local)
 
     @staticmethod
     def check_seat(seat: SeatSpace) -> ActionHead:
@@ -146,56 +147,83 @@ class PPOLearner:
         self.imitation_capacity = 300_000
         self.teacher_weight = 0.0
         self.rng = np.random.default_rng(seed)  # draws the imitation term's batches
+        self.share: Share | None = None  # in a rollout actor: its rows of the slots (draws stay the whole batch's)
 
     # -- acting ---------------------------------------------------------------------------------------------
     def _tensor(self, obs: np.ndarray) -> torch.Tensor:
         return torch.as_tensor(np.asarray(obs, dtype=np.float32), device=self.device).reshape(len(obs), -1)
 
     @torch.inference_mode()
-    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        """Sample actions for this step's observations (never an action ``mask`` forbids) and remember what the
-        update needs.
+    def decide(self, obs: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
+        """Sample actions for this step's observations (never an action ``mask`` forbids): the actions the game
+        gets, and what the rollout keeps of this step besides the observations (the sampled actions, their
+        log-probabilities, the values, the mask), for :meth:`take`. :meth:`act` is the two in one; a rollout actor
+        decides (for its :attr:`share` of the slots) and the trainer's learner takes.
 
         Discrete sampling is the inverse-CDF draw ``a = #{k : cdf_k <= u}`` with one uniform ``u`` per slot from the
-        learner's generator (multinomial does the same draw several times slower on small batches); the count is a
-        binary search in each row's cdf, written straight into the rollout buffer."""
+        learner's generator (multinomial does the same draw several times slower on small batches); with a share,
+        the draws are the whole batch's (:func:`~.base.padded`)."""
+        self._check_final_given()
+        share = self.share
+        x = self._tensor(obs)
+        logits, value = self.net(x)
+        m = fix_mask(mask, self.head, len(x))
+        m_t = None if m is None else torch.as_tensor(m, device=self.device)
+        if self.head.kind == "discrete" and m_t is None:
+            logp_all = torch.log_softmax(logits, dim=-1)
+            u = unpadded(torch.rand((share[1] if share else len(x), 1), generator=self.gen, device=self.device),
+                         share)
+            cdf = logp_all.exp().cumsum_(dim=1)
+            action = torch.searchsorted(cdf, u, right=True).clamp_(max=self.n_actions - 1)
+            logp = logp_all.gather(1, action).squeeze(1)
+            stored = played = action.squeeze(1)
+        else:
+            full_m = None if m_t is None else padded(m_t, share, True)
+            stored, played = self.math.sample(padded(logits, share), full_m, self.gen, greedy=False,
+                                              log_std=self.net.log_std, fill=MASKED)
+            stored, played = unpadded(stored, share), unpadded(played, share)
+            logp, _ = self.math.log_prob_entropy(logits, stored, m_t, self.net.log_std)
+        return to_numpy_actions(self.head, played), {"actions": stored, "logprobs": logp, "values": value,
+                                                      "mask": m_t}
+
+    def take(self, obs: np.ndarray, taken: dict[str, Any]) -> None:
+        """Keep one step of the rollout: its observations and what :meth:`decide` chose for them (here or in a
+        rollout actor; tensors or numpy arrays)."""
         self._check_final_given()
         t = self.t
-        x = self.obs[t]
         if self._np is not None:
-            self._np["obs"][t] = obs.reshape(len(obs), -1)
+            self._np["obs"][t] = np.asarray(obs, dtype=np.float32).reshape(len(obs), -1)
         else:
-            x.copy_(self._tensor(obs))
-        logits, value = self.net(x)
-        if self.head.kind == "discrete" and mask is None and self.masks is None:
-            logp_all = torch.log_softmax(logits, dim=-1)
-            u = torch.rand((x.shape[0], 1), generator=self.gen, device=self.device)
-            cdf = logp_all.exp().cumsum_(dim=1)
-            action = self.actions[t, :, None]
-            torch.searchsorted(cdf, u, right=True, out=action).clamp_(max=self.n_actions - 1)
-            torch.gather(logp_all, 1, action, out=self.logprobs[t, :, None])
-            self.values[t] = value
-            return self.actions[t].numpy().copy() if self.device.type == "cpu" else self.actions[t].cpu().numpy()
-        m = self._store_mask(t, mask)
-        stored, played = self.math.sample(logits, m, self.gen, greedy=False, log_std=self.net.log_std, fill=MASKED)
-        logp, _ = self.math.log_prob_entropy(logits, stored, m, self.net.log_std)
-        self.actions[t] = stored
-        self.logprobs[t] = logp
-        self.values[t] = value
-        return to_numpy_actions(self.head, played)
+            self.obs[t].copy_(self._tensor(obs))
+        self.actions[t] = torch.as_tensor(taken["actions"], device=self.device).reshape(self.actions[t].shape)
+        self.logprobs[t] = torch.as_tensor(taken["logprobs"], device=self.device)
+        self.values[t] = torch.as_tensor(taken["values"], device=self.device)
+        m = taken.get("mask")
+        if m is not None or self.masks is not None:
+            if self.masks is None:
+                self.masks = torch.ones((self.cfg.rollout_steps, self.n_slots, self.head.mask_width),
+                                        dtype=torch.bool, device=self.device)
+            self.masks[t] = True if m is None else torch.as_tensor(m, device=self.device)
 
-    def _store_mask(self, t: int, mask: np.ndarray | None) -> torch.Tensor | None:
-        m = fix_mask(mask, self.head, self.n_slots)
-        if m is None and self.masks is None:
-            return None
-        if self.masks is None:
-            self.masks = torch.ones((self.cfg.rollout_steps, self.n_slots, self.head.mask_width), dtype=torch.bool,
-                                    device=self.device)
-        if m is None:
-            self.masks[t] = True
-        else:
-            self.masks[t] = torch.as_tensor(m, device=self.device)
-        return self.masks[t]
+    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Sample actions for this step's observations and remember what the update needs (:meth:`decide`, then
+        :meth:`take`)."""
+        played, taken = self.decide(obs, mask)
+        self.take(obs, taken)
+        return played
+
+    def acting_state(self) -> dict[str, Any]:
+        """What a rollout actor's copy needs to act as this learner does now: the network's weights (on the CPU) and
+        the sampling generator's state."""
+        return {"net": {k: v.detach().cpu() for k, v in self.net.state_dict().items()},
+                "gen": self.gen.get_state().cpu()}
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        """:meth:`acting_state` (or a part of it: the trainer takes back the generator state its actors ended with)."""
+        if "net" in state:
+            self.net.load_state_dict(state["net"])
+        if "gen" in state:
+            self.gen.set_state(state["gen"])
 
     def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,
                acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,

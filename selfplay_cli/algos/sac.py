@@ -66,7 +66,7 @@ from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
 from ..signals import stop_requested
-from .base import action_head, as_bool, check_steps, learner_args
+from .base import Share, action_head, as_bool, check_steps, learner_args, padded, share_draw, unpadded
 from .kickstart import Imitation
 from .optim import FlatAdam, flatten
 from .replay import NStepChains, ReplayBuffer, store_decisions
@@ -172,6 +172,7 @@ class SACLearner:
 
     name = "sac"
     config_class = SACConfig
+    synchronous = False  # rollout actors feed the replay with weights up to one fragment old
 
     @staticmethod
     def check_seat(seat: SeatSpace) -> ActionHead:
@@ -202,6 +203,7 @@ class SACLearner:
         self.math = HeadMath(self.head, self.device)
         self.gen = torch.Generator(device=self.device).manual_seed(seed)  # the actor's samples
         self.rng = np.random.default_rng(seed)  # random warm-up actions and replay sampling
+        self.share: Share | None = None  # in a rollout actor: its rows of the slots (draws stay the whole batch's)
         self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_dim, (self.act_dim,), np.float32)
         self.chains = NStepChains(cfg.n_step, cfg.gamma, n_slots, self.obs_dim, (self.act_dim,))
         self.transitions = 0  # decisions collected so far (drives the random warm-up)
@@ -234,22 +236,53 @@ class SACLearner:
                              "(final_obs) to record() or update()")
 
     @torch.no_grad()
-    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+    def decide(self, obs: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
         """Actions for this step's observations, within the Box bounds: uniform while the learner warms up
-        (``learning_starts``), then sampled from the actor (``tanh(mean + std * eps)`` on the bounds)."""
+        (``learning_starts``), then sampled from the actor (``tanh(mean + std * eps)`` on the bounds); and, for
+        :meth:`take`, the squashed actions the buffer keeps. With a :attr:`share` (a rollout actor's rows) the draws
+        are the whole batch's (:func:`~.base.padded`)."""
         self._check_final_given()
-        x = self._flat(obs)
+        x = np.asarray(obs, dtype=np.float32).reshape(len(obs), self.obs_dim)
         self.head.check_mask(mask, len(x))  # Box actions take no mask: one clear error if one is given
+        share = self.share
         if self.transitions < self.cfg.learning_starts:
-            y = self.rng.uniform(-1.0, 1.0, (len(x), self.act_dim)).astype(np.float32)
+            y = share_draw(lambda n: self.rng.uniform(-1.0, 1.0, (n, self.act_dim)), len(x), share)
+            y = y.astype(np.float32)
             played = self.math.to_bounds(torch.from_numpy(y).to(self.device))
         else:
             mean, log_std = self.net.gaussian(torch.from_numpy(x).to(self.device))
-            y_t, _ = squashed_sample(mean, log_std, self.gen)
+            y_t, _ = squashed_sample(padded(mean, share), padded(log_std, share), self.gen)
+            y_t = unpadded(y_t, share)
             played = self.math.to_bounds(y_t)
             y = y_t.cpu().numpy()
-        self._obs, self._actions = x, y
-        return to_numpy_actions(self.head, played)
+        return to_numpy_actions(self.head, played), {"actions": y}
+
+    def take(self, obs: np.ndarray, taken: dict[str, Any]) -> None:
+        """Keep this step's observations and the squashed actions :meth:`decide` chose (here or in a rollout actor)
+        until :meth:`record` brings their outcome."""
+        self._check_final_given()
+        self._obs, self._actions = self._flat(obs), np.asarray(taken["actions"], dtype=np.float32)
+
+    def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
+        """Actions for this step's observations (:meth:`decide`, then :meth:`take`)."""
+        played, taken = self.decide(obs, mask)
+        self.take(obs, taken)
+        return played
+
+    def acting_state(self) -> dict[str, Any]:
+        """What a rollout actor's copy needs to act as this learner does now: the actor's weights (on the CPU) and the
+        transitions collected (the random warm-up ends at ``learning_starts``)."""
+        return {"net": {k: v.detach().cpu() for k, v in self.net.state_dict().items()},
+                "transitions": self.transitions}
+
+    def load_acting_state(self, state: dict[str, Any]) -> None:
+        """:meth:`acting_state` into a rollout actor's copy; ``noise_seed`` seeds its draws afresh (an actor's draws
+        are its own stream, not the trainer's, which its updates use)."""
+        self.net.load_state_dict(state["net"])
+        self.transitions = int(state["transitions"])
+        if "noise_seed" in state:
+            self.gen.manual_seed(int(state["noise_seed"]))
+            self.rng = np.random.default_rng(int(state["noise_seed"]))
 
     def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,
                acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,

@@ -207,8 +207,10 @@ class SelfPlayGames:
 
     ``learner_ids`` names each learner in game results (e.g. ``"run/left"``); ``choose_opponents(slots)`` returns
     one policy for each opponent slot of the games starting now (``slots``: flat ``seat * n_games + game``
-    indices, game by game). Seeds of successive games are ``first_seed``, ``first_seed + 1``, ... in the order games
-    start, so a run is reproducible.
+    indices, game by game). The k-th game played in game slot g has the seed ``first_seed + k * total + g``: a
+    function of the slot and its count, not of the order games end in, so a run is reproducible and plays the same
+    games when its slots are split between rollout actors. An actor's share is ``game_ids`` (the global slots of
+    its ``n_games``) of ``total_games`` (default: the whole run, ``arange(n_games)`` of ``n_games``).
 
     Each step: ``observe()`` (and, where the game has them, ``masks()``; in turn-based games ``acting()``) for each
     learner's slots, then ``step(actions)``. Opponents act by themselves, given their masks, and only the seats that
@@ -224,6 +226,8 @@ class SelfPlayGames:
         choose_opponents: Callable[[np.ndarray], Sequence[Policy]] | None = None,
         env_options: dict[str, Any] | None = None,
         first_seed: int = 0,
+        game_ids: Sequence[int] | None = None,
+        total_games: int | None = None,
     ) -> None:
         options = env_options or {}
         self.spec = spec = (get_env(env) if isinstance(env, str) else env).for_options(**options)
@@ -275,7 +279,12 @@ class SelfPlayGames:
         self.truncated: list[np.ndarray] | None = None  # set by step(): per learner, its slots' games cut short
         self.final_obs: list[np.ndarray] | None = None  # ... and their final observations (before the restart)
         self.final_masks: list[np.ndarray | None] | None = None
-        self.next_seed = first_seed
+        self.next_seed = first_seed  # the seeds' base (a resumed run moves it to a range of its own)
+        self.game_ids = np.arange(n_games, dtype=np.int64) if game_ids is None else np.asarray(game_ids, np.int64)
+        self.total_games = n_games if total_games is None else int(total_games)
+        if self.game_ids.shape != (n_games,) or n_games > self.total_games:
+            raise ValueError(f"game_ids must name {n_games} of the {self.total_games} games")
+        self.starts = np.zeros(n_games, dtype=np.int64)  # games started in each slot since the seeds' base was set
         self.seeds = np.zeros(n_games, dtype=np.int64)
         self.games_started = 0
         # Every game's actions, so the ledger can replay training games too (`marl record --game ID`).
@@ -284,8 +293,8 @@ class SelfPlayGames:
 
     # -- games ---------------------------------------------------------------------------------------------------
     def _start(self, games: np.ndarray) -> None:
-        seeds = np.arange(self.next_seed, self.next_seed + games.size)
-        self.next_seed += games.size
+        seeds = self.next_seed + self.starts[games] * self.total_games + self.game_ids[games]
+        self.starts[games] += 1
         self.games_started += games.size
         self.seeds[games] = seeds
         self.core.reset(games, seeds)
@@ -312,8 +321,10 @@ class SelfPlayGames:
         self._flat = self._seat_obs = self._masks = self._acting = None
 
     def restart_all(self) -> None:
-        """Abandon the games in progress and start fresh ones (from ``next_seed``), e.g. after a resume."""
+        """Abandon the games in progress and start fresh ones from the seeds' base ``next_seed`` (a resume gives it a
+        range of its own first)."""
         self.games_started -= self.n
+        self.starts[:] = 0
         self._start(np.arange(self.n))
 
     # -- what the learners see -------------------------------------------------------------------------------------
@@ -418,7 +429,7 @@ class SelfPlayGames:
             finished = game_results(
                 self.spec.name, self.rules, self.core.score[:, ended],
                 [tuple(self._player_id(seat, g) for seat in range(n_seats)) for g in games], seeds=self.seeds[ended],
-                lengths=self.core.steps[ended], truncated=cut[ended], indices=games,
+                lengths=self.core.steps[ended], truncated=cut[ended], indices=self.game_ids[ended].tolist(),
                 actions=[encode_actions(self._log.take(g)) for g in games])
             self._start(ended)
         return out_r, out_d, finished

@@ -45,8 +45,10 @@ from .evaluator import Evaluator, GauntletJob, JobDone
 from .lock import claim, write_lock
 from .opponents import Opponents
 from .progress import SnapshotRecord, Standing, TrainReport
+from .ray_rollouts import OFF_POLICY_FRAGMENT, RayRollouts
 from .remote import RemoteEvaluator, make_evaluator
 from .rollouts import Rollouts, load_teacher
+from .shards import ShardSetup, plan_shards
 from .state import Job, RunState, SavedAs, SnapshotMoments
 from .team import LearnerTeam
 
@@ -104,19 +106,25 @@ class Trainer:
                                    learner_of_game=layout.max(axis=0), seat_roles=seat_roles,
                                    opponent_slots=np.flatnonzero(layout.ravel() == OPPONENT), live=live,
                                    device=str(self.device))
-        self.games = SelfPlayGames(spec, cfg.games, layout, learner_ids,
-                                   choose_opponents=self._choose if (layout == OPPONENT).any() else None,
-                                   env_options=cfg.env_options, first_seed=cfg.seed * 1_000_003)
+        self.learner_ids = learner_ids
         curriculum = Curriculum(cfg.curriculum, spec.name, spec.live_options)
         teacher = load_teacher(league, cfg, self.spaces, str(self.device))
         schedule = cfg.teacher.schedule() if teacher is not None else None
         if teacher is not None:
             for learner in self.learners:
                 learner.imitation_capacity = cfg.teacher.states
-        self.rollouts = Rollouts(self.games, self.learners, curriculum, teacher, schedule)
+        first_seed = cfg.seed * 1_000_003
+        self.rollouts: Rollouts
+        if cfg.executor == "ray":
+            self.rollouts = self._ray_rollouts(layout, plan.home, seat_roles, curriculum, teacher, schedule, first_seed)
+        else:
+            games = SelfPlayGames(spec, cfg.games, layout, learner_ids,
+                                  choose_opponents=self._choose if (layout == OPPONENT).any() else None,
+                                  env_options=cfg.env_options, first_seed=first_seed)
+            self.rollouts = Rollouts(games, self.learners, curriculum, teacher, schedule)
         self.match_id = league.create_match(spec.name, "training", {"run": cfg.run, "env_options": cfg.env_options})
         self.moments = SnapshotMoments(league, cfg, spec, self.run_dir, learners=self.learners, names=self.names,
-                                       saved=saved, state=self.state, games=self.games, opponents=self.opponents,
+                                       saved=saved, state=self.state, games=self.rollouts, opponents=self.opponents,
                                        device=self.device)
         self.evaluator: Evaluator | RemoteEvaluator | None = None  # set while training
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
@@ -142,6 +150,33 @@ class Trainer:
         learners = [learner_cls(self.spaces[i], int((layout == i).sum()), algo_cfg, seed=cfg.seed + i,
                                 device=self.device) for i in range(len(self.names))]
         return learners, SavedAs(self.spaces, algo_cfg.arch, roles, None)
+
+    @property
+    def games(self) -> SelfPlayGames | None:
+        """The training games, where this process steps them (None with ``--executor ray``)."""
+        return self.rollouts.games
+
+    def _ray_rollouts(self, layout: np.ndarray, home: tuple[int, ...], seat_roles: tuple[str, ...] | None,
+                      curriculum: Curriculum, teacher: Any, schedule: Any, first_seed: int) -> RayRollouts:
+        """The run's games on ``--actors`` Ray actors (:mod:`.ray_rollouts`), each built from its share."""
+        cfg, league = self.cfg, self.league
+        plan = plan_shards(layout, cfg.actors)
+        config = cfg.to_dict()
+        url = league.url.render_as_string(hide_password=False)
+        setups = [ShardSetup(config, layout, k, plan.games[k], plan.positions[k], plan.totals, self.learner_ids,
+                             self.spaces, home, seat_roles, url, str(league.home) if league.home else None)
+                  for k in range(cfg.actors)]
+        fragment = (cfg.ppo.rollout_steps if cfg.algo == "ppo"
+                    else cfg.fragment_steps or OFF_POLICY_FRAGMENT)
+        return RayRollouts(setups, plan, self.learners, curriculum, teacher, schedule,
+                           self.opponents if (layout == OPPONENT).any() else None, seed=cfg.seed,
+                           first_seed=first_seed, steps_of=lambda: self.state.steps, fragment_steps=fragment,
+                           address=cfg.ray_address, note=self._note)
+
+    def _note(self, line: str) -> None:
+        """One line about the run (a rollout actor restarted) to whoever follows its progress."""
+        if self.on_progress:
+            self.on_progress({"event": "note", "line": line})
 
     def _choose(self, slots: np.ndarray) -> list[Any]:
         """Opponents for the opponent ``slots`` of the games starting now (:meth:`Opponents.choose`)."""
@@ -262,7 +297,7 @@ class Trainer:
 
     def _file_games(self, finished: list[GameResult]) -> None:
         """File finished training games in the ledger, each learner as its latest snapshot."""
-        learner_players = {lid: self.state.latest[i] for i, lid in enumerate(self.games.learner_ids)}
+        learner_players = {lid: self.state.latest[i] for i, lid in enumerate(self.learner_ids)}
         self.opponents.file_games(finished, learner_players, self.match_id)
 
     def train(self) -> TrainReport:
@@ -277,6 +312,7 @@ class Trainer:
         finally:
             clear_stop()  # the learners' threads have ended (the team waited for them)
             self.evaluator = None
+            self.rollouts.close()
             self._unlock()
 
     def _train(self) -> TrainReport:
@@ -324,7 +360,7 @@ class Trainer:
         training games filed in the ledger before each moment and at the end."""
         cfg, state = self.cfg, self.state
         try:
-            obs = self.games.observe()
+            obs = self.rollouts.observe()
         except NonFiniteError as e:
             raise self._stopped(e, state.steps) from None
         line_step = -METRICS_STEPS  # the step of the last metrics line (the first update writes one)
@@ -405,7 +441,7 @@ class Trainer:
         rate = session_steps / seconds if session_steps > 0 and seconds > 0 else None
         done = self.state.elapsed / (cfg.minutes * 60) if cfg.minutes is not None else self.state.steps / cfg.steps
         pending = sum(len(names) for names, _, _ in self.state.jobs)
-        core_steps = np.asarray(self.games.core.steps)
+        core_steps = self.rollouts.game_steps()
         return Standing(
             progress=min(max(done, 0.0), 1.0), steps=self.state.steps, episodes=self.state.episodes, playing=cfg.games,
             game_steps=float(core_steps.mean()) if core_steps.size else 0.0, time_limit=self.time_limit,

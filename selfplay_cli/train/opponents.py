@@ -9,6 +9,7 @@ keeps the matchmaker's pool the run's snapshots, and reads each finished game in
 from __future__ import annotations
 
 import json
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -20,6 +21,30 @@ from ..rated.roles import RoleBook
 from ..results import GameResult
 from .config import TrainConfig
 from .matchmaking import LATEST_LEARNER, Matchmaker, WinRates
+
+POLICY_CACHE = 32
+"""Opponent snapshots kept loaded, the most recently drawn (a run's pool is its last ``--window`` snapshots): memory
+stays flat however many snapshots the league holds. A game keeps the policy it started with."""
+
+
+class PolicyCache:
+    """League players loaded as policies by id, the :data:`POLICY_CACHE` most recently used kept."""
+
+    def __init__(self, load: Any, size: int = POLICY_CACHE) -> None:
+        self._load, self.size = load, size
+        self._kept: OrderedDict[int, Policy] = OrderedDict()
+
+    def get(self, pid: int) -> Policy:
+        if pid in self._kept:
+            self._kept.move_to_end(pid)
+            return self._kept[pid]
+        policy = self._kept[pid] = self._load(pid)
+        while len(self._kept) > self.size:
+            self._kept.popitem(last=False)
+        return policy
+
+    def __len__(self) -> int:
+        return len(self._kept)
 
 
 class Opponents:
@@ -39,7 +64,7 @@ class Opponents:
         self.matchmaker = Matchmaker(cfg.opponents, np.random.default_rng(cfg.seed), bot_ids)
         self.rates = WinRates(decay=cfg.opponents.decay, prior=cfg.opponents.prior)
         self._can_play: dict[str, set[int]] = {}  # per role, the pool's snapshots that can play it
-        self._policies: dict[int, Policy] = {}
+        self._policies = PolicyCache(self._load)
         self._player_of: dict[str, int] = dict(bot_ids)  # policy id in game results -> league player id
         self._assigned: np.ndarray | None = None  # opponent id per game slot, with --swap-every
         self._next_swap = 0
@@ -49,11 +74,12 @@ class Opponents:
         if pid == LATEST_LEARNER:  # ML-Agents' "latest model": the learner that holds this seat when learners hold
             home = self.home[seat]  # every seat, as it is now (pong: the other learner; one learner: itself)
             return self.live[home if home >= 0 else learner]
-        if pid not in self._policies:
-            self._policies[pid] = load_player(self.league, self.league.get_player(pid), device=self.device,
-                                              greedy=False, seed=pid)
-            self._player_of[self._policies[pid].id] = pid
-        return self._policies[pid]
+        return self._policies.get(pid)
+
+    def _load(self, pid: int) -> Policy:
+        policy = load_player(self.league, self.league.get_player(pid), device=self.device, greedy=False, seed=pid)
+        self._player_of[policy.id] = pid
+        return policy
 
     def _draw(self, slots: np.ndarray) -> np.ndarray:
         """Opponent ids for the opponent ``slots`` (flat ``seat * games + game``), each drawn by the matchmaker for
@@ -72,19 +98,37 @@ class Opponents:
                 ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates, among=self._can_play.get(role, ()))
         return ids
 
+    def _assignment(self, steps: int) -> np.ndarray:
+        """--swap-every: the opponent of every game slot, drawn afresh when a swap is due."""
+        if self._assigned is None or steps >= self._next_swap:
+            self._assigned = np.zeros(self.n_seats * self.cfg.games, dtype=np.int64)
+            self._assigned[self.opponent_slots] = self._draw(self.opponent_slots)
+            self._next_swap = steps + self.cfg.swap_every
+        return self._assigned
+
+    def shard_table(self, steps: int) -> dict[str, Any]:
+        """What rollout actors draw their games' opponents from (:class:`~.shards.ShardOpponents`), the run at
+        ``steps``: with --swap-every the opponent id of every game slot; otherwise, per learner and seat role (None:
+        one role), the matchmaker's probabilities over opponent ids as the pool and the win rates stand now."""
+        if self.cfg.swap_every:
+            return {"assigned": self._assignment(steps).copy()}
+        draws: dict[tuple[int, str | None], dict[int, float]] = {}
+        roles = [None] if self.seat_roles is None else list(dict.fromkeys(self.seat_roles))
+        for i in np.unique(self.learner_of_game).tolist():
+            for role in roles:
+                among = None if role is None else self._can_play.get(role, ())
+                draws[(i, role)] = self.matchmaker.probabilities(i, self.rates, among=among)
+        return {"draws": draws}
+
+    def know_players(self, players: dict[str, int]) -> None:
+        """Policy ids (in game results) of league players that rollout actors loaded, so their games are filed."""
+        self._player_of.update(players)
+
     def choose(self, slots: np.ndarray, steps: int) -> list[Policy]:
         """Opponents for the opponent ``slots`` of the games starting now, the run at ``steps``, one each: drawn afresh
         for every game, or with --swap-every kept per slot until the next swap (ML-Agents' swap_steps, counted in
         game steps)."""
-        if not self.cfg.swap_every:
-            ids = self._draw(slots)
-        else:
-            due = steps >= self._next_swap
-            if due or self._assigned is None:
-                self._assigned = np.zeros(self.n_seats * self.cfg.games, dtype=np.int64)
-                self._assigned[self.opponent_slots] = self._draw(self.opponent_slots)
-                self._next_swap = steps + self.cfg.swap_every
-            ids = self._assigned[slots]
+        ids = self._assignment(steps)[slots] if self.cfg.swap_every else self._draw(slots)
         n = self.cfg.games
         return [self.policy(int(i), int(slot) // n, int(self.learner_of_game[slot % n]))
                 for i, slot in zip(ids, slots, strict=True)]

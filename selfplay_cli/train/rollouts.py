@@ -56,41 +56,77 @@ def load_teacher(league: League, cfg: TrainConfig, spaces: list[Any], device: st
 @dataclass
 class Step:
     """One step of every training game: the observations after it, the rewards and ends, the games it finished,
-    and (turn-based games) the slots that acted."""
+    (turn-based games) the slots that acted, and, per learner, the games cut short on it with their final
+    observations and masks (None: none was)."""
 
     obs: list[np.ndarray]
     rewards: Any
     dones: Any
     finished: list[GameResult]
     acting: list[np.ndarray | None] | None
+    truncated: list[np.ndarray] | None = None
+    final_obs: list[np.ndarray] | None = None
+    final_masks: list[np.ndarray | None] | None = None
 
 
 class Rollouts:
-    """The training games of one run and what its learners take from them."""
+    """The training games of one run, stepped in this process (``--executor local``), and what its learners take
+    from them. :class:`~selfplay_cli.train.ray_rollouts.RayRollouts` steps them on Ray actors instead, behind the
+    same calls."""
 
-    def __init__(self, games: SelfPlayGames, learners: list[Any], curriculum: Curriculum, teacher: Policy | None,
-                 teacher_schedule: Schedule | None) -> None:
+    def __init__(self, games: SelfPlayGames | None, learners: list[Any], curriculum: Curriculum,
+                 teacher: Policy | None, teacher_schedule: Schedule | None) -> None:
         self.games, self.learners, self.curriculum = games, learners, curriculum
         self.teacher, self.teacher_schedule = teacher, teacher_schedule
         self.lesson: dict[str, float] = {}  # the curriculum's values the training games play under now
 
+    # -- what the run reads of its games (its snapshot moments save the seeds' base, a resume restarts them) ----
+    @property
+    def next_seed(self) -> int:
+        assert self.games is not None
+        return self.games.next_seed
+
+    @next_seed.setter
+    def next_seed(self, value: int) -> None:
+        assert self.games is not None
+        self.games.next_seed = value
+
+    def restart_all(self) -> None:
+        assert self.games is not None
+        self.games.restart_all()
+
+    def game_steps(self) -> np.ndarray:
+        """Steps played so far in each game in progress."""
+        assert self.games is not None
+        return np.asarray(self.games.core.steps)
+
+    def observe(self) -> list[np.ndarray] | None:
+        """Each learner's observations of the games as they stand (None where they are stepped elsewhere)."""
+        assert self.games is not None
+        return self.games.observe()
+
+    def close(self) -> None:
+        """Let go of what stepping the games holds (nothing, in this process)."""
+
+    # -- a step ---------------------------------------------------------------------------------------------
     def step(self, team: LearnerTeam, obs: list[np.ndarray], progress: float) -> Step:
         """Play one step of every game at ``progress`` (0 to 1 of the budget) from observations ``obs``."""
         if self.curriculum:
             self._follow_curriculum(progress)
         games = self.games
+        assert games is not None
         acting = games.acting() if games.sequential else None
+        masks = games.masks() if games.masked else None
         if self.teacher is not None:
-            self._teach(obs, acting, progress)
-        rewards, dones, finished = games.step(team.act(obs, games.masks() if games.masked else None))
-        return Step(games.observe(), rewards, dones, finished, acting)
+            self._teach(obs, masks, acting, progress)
+        rewards, dones, finished = games.step(team.act(obs, masks))
+        return Step(games.observe(), rewards, dones, finished, acting, games.truncated, games.final_obs,
+                    games.final_masks)
 
     def learn(self, team: LearnerTeam, step: Step, progress: float) -> list[dict[str, float]] | None:
         """The learners record ``step``; those whose rollout is due update. Their figures from the update, None
         when none was due."""
-        games = self.games
-        if not team.record(step.rewards, step.dones, games.truncated, step.acting, games.final_obs,
-                           games.final_masks):
+        if not team.record(step.rewards, step.dones, step.truncated, step.acting, step.final_obs, step.final_masks):
             return None
         return team.update(step.obs, progress)
 
@@ -99,16 +135,18 @@ class Rollouts:
         change: a ramp moves them a little each step, lessons at their thresholds)."""
         values = self.curriculum.values(progress)
         if values != self.lesson:
+            assert self.games is not None
             self.games.core.set_options(**values)
             self.lesson = values
 
-    def _teach(self, obs: list[np.ndarray], acting: list[np.ndarray | None] | None, progress: float) -> None:
+    def _teach(self, obs: list[np.ndarray], masks: list[np.ndarray | None] | None,
+               acting: list[np.ndarray | None] | None, progress: float) -> None:
         """The teacher's actions for every learner's observations of this step (in turn-based games, the slots
         that act), while the teacher's weight is above 0; each learner's weight for its next update."""
         assert self.teacher is not None and self.teacher_schedule is not None
         weight = self.teacher_schedule.value(progress)
         if weight > 0:
-            masks = self.games.masks() if self.games.masked else [None] * len(self.learners)
+            masks = masks if masks is not None else [None] * len(self.learners)
             for i, learner in enumerate(self.learners):
                 o, m = obs[i], masks[i]
                 rows = acting[i] if acting is not None else None

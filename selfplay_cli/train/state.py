@@ -15,7 +15,6 @@ from typing import Any
 import torch
 
 from .. import files
-from ..arena.training_games import SelfPlayGames
 from ..envs import EnvSpec
 from ..errors import MarlError
 from ..league.store import League
@@ -23,6 +22,7 @@ from ..policies.snapshot_format import SnapshotMeta, save_snapshot
 from ..rated.snapshots import snapshot_relpath
 from .config import TrainConfig
 from .opponents import Opponents
+from .rollouts import Rollouts
 
 STATE_VERSION = 3  # 2: flat-buffer optimiser state (FlatAdam); 3: snapshots by name, pending gauntlets
 
@@ -71,7 +71,7 @@ class SnapshotMoments:
     """Takes one run's snapshot moments and resumes it from the last (see :meth:`write`)."""
 
     def __init__(self, league: League, cfg: TrainConfig, spec: EnvSpec, run_dir: Path, *, learners: list[Any],
-                 names: list[str], saved: SavedAs, state: RunState, games: SelfPlayGames, opponents: Opponents,
+                 names: list[str], saved: SavedAs, state: RunState, games: Rollouts, opponents: Opponents,
                  device: Any) -> None:
         self.league, self.cfg, self.spec, self.run_dir = league, cfg, spec, run_dir
         self.learners, self.names, self.saved, self.state = learners, names, saved, state

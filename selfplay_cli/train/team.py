@@ -64,6 +64,12 @@ class LearnerTeam:
             return [learner.act(o) for learner, o in zip(self.learners, obs, strict=True)]
         return [learner.act(o, m) for learner, o, m in zip(self.learners, obs, masks, strict=True)]
 
+    def take(self, obs: Sequence[np.ndarray], taken: Sequence[dict[str, Any]]) -> None:
+        """Each learner keeps a step it did not act on itself: its observations and the decisions a rollout actor
+        made for them (``learner.take``), as ``act`` would have kept them."""
+        for learner, o, t in zip(self.learners, obs, taken, strict=True):
+            learner.take(o, t)
+
     def record(self, rewards: Sequence[np.ndarray], dones: Sequence[np.ndarray],
                truncated: Sequence[np.ndarray] | None = None, acting: Sequence[np.ndarray | None] | None = None,
                final_obs: Sequence[np.ndarray] | None = None,
