@@ -161,30 +161,31 @@ class PPOLearner:
         decides (for its :attr:`share` of the slots) and the trainer's learner takes.
 
         Discrete sampling is the inverse-CDF draw ``a = #{k : cdf_k <= u}`` with one uniform ``u`` per slot from the
-        learner's generator (multinomial does the same draw several times slower on small batches); with a share,
-        the draws are the whole batch's (:func:`~.base.padded`)."""
+        learner's generator (multinomial does the same draw several times slower on small batches). With a share,
+        the network is evaluated and sampled on the whole batch's rows, the others zeros (:func:`~.base.padded`):
+        a matrix product's rows can round differently with the batch's size, and PPO's promise is the local run's
+        numbers, bit for bit, for the cost of a forward pass (microseconds beside a step of the games)."""
         self._check_final_given()
         share = self.share
-        x = self._tensor(obs)
-        logits, value = self.net(x)
-        m = fix_mask(mask, self.head, len(x))
+        m = fix_mask(mask, self.head, len(obs))
         m_t = None if m is None else torch.as_tensor(m, device=self.device)
-        if self.head.kind == "discrete" and m_t is None:
+        x = padded(self._tensor(obs), share)
+        full_m = None if m_t is None else padded(m_t, share, True)
+        logits, value = self.net(x)
+        if self.head.kind == "discrete" and full_m is None:
             logp_all = torch.log_softmax(logits, dim=-1)
-            u = unpadded(torch.rand((share[1] if share else len(x), 1), generator=self.gen, device=self.device),
-                         share)
+            u = torch.rand((x.shape[0], 1), generator=self.gen, device=self.device)
             cdf = logp_all.exp().cumsum_(dim=1)
             action = torch.searchsorted(cdf, u, right=True).clamp_(max=self.n_actions - 1)
             logp = logp_all.gather(1, action).squeeze(1)
             stored = played = action.squeeze(1)
         else:
-            full_m = None if m_t is None else padded(m_t, share, True)
-            stored, played = self.math.sample(padded(logits, share), full_m, self.gen, greedy=False,
-                                              log_std=self.net.log_std, fill=MASKED)
-            stored, played = unpadded(stored, share), unpadded(played, share)
-            logp, _ = self.math.log_prob_entropy(logits, stored, m_t, self.net.log_std)
-        return to_numpy_actions(self.head, played), {"actions": stored, "logprobs": logp, "values": value,
-                                                      "mask": m_t}
+            stored, played = self.math.sample(logits, full_m, self.gen, greedy=False, log_std=self.net.log_std,
+                                              fill=MASKED)
+            logp, _ = self.math.log_prob_entropy(logits, stored, full_m, self.net.log_std)
+        return to_numpy_actions(self.head, unpadded(played, share)), {
+            "actions": unpadded(stored, share), "logprobs": unpadded(logp, share), "values": unpadded(value, share),
+            "mask": m_t}
 
     def take(self, obs: np.ndarray, taken: dict[str, Any]) -> None:
         """Keep one step of the rollout: its observations and what :meth:`decide` chose for them (here or in a

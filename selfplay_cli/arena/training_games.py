@@ -315,7 +315,19 @@ class SelfPlayGames:
                         if callable(getattr(p, "configure", None)):  # a scripted player: the run's game options
                             p.configure(self.options)
                     self.opponent_of[slot] = index[id(p)]
+            self._forget_idle()
         self._stale()
+
+    def _forget_idle(self) -> None:
+        """Let go of opponent policies no game plays any more (kept, they would hold every snapshot a long run ever
+        drew), once they outnumber those in play."""
+        used = np.unique(self.opponent_of[self.opponent_slots])
+        if len(self.policies) <= max(16, 2 * used.size):
+            return
+        remap = np.full(len(self.policies), -1, dtype=np.int64)
+        remap[used] = np.arange(used.size)
+        self.policies = [self.policies[i] for i in used.tolist()]
+        self.opponent_of[self.opponent_slots] = remap[self.opponent_of[self.opponent_slots]]
 
     def _stale(self) -> None:
         self._flat = self._seat_obs = self._masks = self._acting = None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -90,6 +91,20 @@ def train(
     eval_playoff: Annotated[int, typer.Option("--eval-playoff", min=0, max=100_000, help="After the final "
                                               "gauntlet the run's best candidates meet, up to this many games a "
                                               "pair, until the best is separated (0: no playoff).")] = 100,
+    executor: Annotated[str, typer.Option("--executor", metavar="local|ray", help="Where the training games are "
+                                          "stepped: local, this process; ray, Ray actors (--actors), on this "
+                                          "machine's cores or a cluster (--ray-address); the learners update here. "
+                                          "Needs pip install \"selfplay-cli[ray]\".")] = "local",
+    actors: Annotated[int, typer.Option("--actors", min=1, max=4096, help="--executor ray: rollout actors, one CPU "
+                                        "each, each stepping a share of --games.")] = 2,
+    ray_address: Annotated[str, typer.Option("--ray-address", metavar="HOST:PORT", help="--executor ray, --eval "
+                                             "ray: join this running Ray cluster (ray start --head on one machine, "
+                                             "ray start --address HOST:PORT on the others); default: Ray started on "
+                                             "this machine.")] = "",
+    fragment_steps: Annotated[int, typer.Option("--fragment-steps", min=0, max=1_000_000, help="--executor ray, SAC "
+                                                "and DQN: steps of every game an actor plays between weight updates "
+                                                "(the actors' weights are at most this old); 0: 16. PPO always "
+                                                "collects one rollout a fragment.")] = 0,
     opponents: Annotated[str, typer.Option("--opponents", help="League opponents (--agents 1, or --league-games): "
                                            "self | latest | uniform | pfsp, from the run's snapshots.")] = "pfsp",
     window: Annotated[int, typer.Option("--window", min=1, max=100_000, help="Opponents are drawn from the last N "
@@ -121,8 +136,9 @@ def train(
 ) -> None:
     """Train agents by self-play (PPO, DQN or SAC); every snapshot joins the league and is rated in a gauntlet."""
     from ..league.store import check_name
+    from ..train.ray_support import ray_for
     from ..train.session import RunStopped, run_training
-    from ..train.settings import new_settings, resumed_config, start_run
+    from ..train.settings import EXECUTOR_OPTIONS, new_settings, resumed_config, start_run
 
     for what, name in (("run name", run), ("run name", resume)):
         if name is not None:
@@ -133,24 +149,31 @@ def train(
     if resume is None:  # the whole configuration is checked before the league is opened (or created)
         settings = new_settings(env, {name: ctx.params[name] for name in typed}, config=config, preset=preset,
                                 env_options=lambda game: parse_env_options(game, env_option))
-    league = open_league(home, db)
-    try:
-        if resume is not None:
-            cfg = resumed_config(league, resume, env, typed, device, wait=eval_wait if "eval_wait" in typed else None)
-        else:
-            cfg = start_run(league, settings, run)
-        reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
-        with reporter, stop_on_sigterm():
-            try:
-                report = run_training(league, cfg, resumed=resume is not None, on_progress=reporter.update,
-                                      on_note=None if quiet else lambda note: err_console.print(note, markup=False))
-            except RunStopped as stop:  # stderr: --json keeps stdout for the JSON alone
-                at = f" at step {stop.steps:,}" if stop.steps is not None else ""
-                err_console.print(f"stopped {cfg.run}{at} ({stop.why}); its last snapshot is kept: continue it with: "
-                                  f"marl train --resume {cfg.run}", markup=False)
-                raise typer.Exit(EXIT_TERMINATED if stop.why == "SIGTERM" else EXIT_INTERRUPTED) from None
-    finally:
-        league.close()
+    with contextlib.ExitStack() as ray_here:
+        if resume is None:  # --executor/--eval ray: joined first, so a cluster out of reach leaves nothing behind
+            ray_here.enter_context(ray_for(settings))
+        league = open_league(home, db)
+        try:
+            if resume is not None:
+                cfg = resumed_config(league, resume, env, typed, device,
+                                     wait=eval_wait if "eval_wait" in typed else None,
+                                     executor={k: ctx.params[k] for k in EXECUTOR_OPTIONS if k in typed})
+                ray_here.enter_context(ray_for(cfg.to_dict()))
+            else:
+                cfg = start_run(league, settings, run)
+            reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
+            with reporter, stop_on_sigterm():
+                try:
+                    report = run_training(league, cfg, resumed=resume is not None, on_progress=reporter.update,
+                                          on_note=None if quiet else lambda note: err_console.print(note,
+                                                                                                   markup=False))
+                except RunStopped as stop:  # stderr: --json keeps stdout for the JSON alone
+                    at = f" at step {stop.steps:,}" if stop.steps is not None else ""
+                    err_console.print(f"stopped {cfg.run}{at} ({stop.why}); its last snapshot is kept: continue it "
+                                      f"with: marl train --resume {cfg.run}", markup=False)
+                    raise typer.Exit(EXIT_TERMINATED if stop.why == "SIGTERM" else EXIT_INTERRUPTED) from None
+        finally:
+            league.close()
     if json_out:
         print_json(report_json(report, cfg.eval))
         return

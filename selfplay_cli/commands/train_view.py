@@ -218,6 +218,8 @@ class TrainProgress:
                           else info)
                 self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); rating {names} ({played}); "
                             f"{self._elapsed()} elapsed")
+        elif kind == "note":  # something the run met and went on from (a rollout actor restarted)
+            self._print(f"{self.cfg.run}: {event['line']}")
         elif kind == "snapshot":
             recs = "; ".join(
                 f"{r.name.split('/', 1)[-1]} (step {r.step:,}): "

@@ -176,7 +176,7 @@ class Trainer:
     def _note(self, line: str) -> None:
         """One line about the run (a rollout actor restarted) to whoever follows its progress."""
         if self.on_progress:
-            self.on_progress({"event": "note", "line": line})
+            self.on_progress({"event": "note", "line": line, "standing": self.standing()})
 
     def _choose(self, slots: np.ndarray) -> list[Any]:
         """Opponents for the opponent ``slots`` of the games starting now (:meth:`Opponents.choose`)."""

@@ -133,6 +133,24 @@ class RayRollouts(Rollouts):
         """Each actor's peak resident memory in bytes."""
         return [int(m) for m in self.ray.get([a.peak_memory.remote() for a in self.actors])]
 
+    def _await_restart(self, k: int) -> None:
+        """Wait until Ray has restarted actor ``k`` (a new process: it imports marl and torch again)."""
+        from ray.exceptions import ActorUnavailableError, GetTimeoutError, RayActorError
+
+        deadline = time.perf_counter() + ACTOR_START_SECONDS
+        while True:
+            try:
+                self.ray.get(self.actors[k].pid.remote(), timeout=ACTOR_START_SECONDS)
+                return
+            except (ActorUnavailableError, GetTimeoutError, RayActorError) as e:
+                if isinstance(e, RayActorError) and not isinstance(e, ActorUnavailableError) \
+                        and "restart" not in str(e).lower() and time.perf_counter() > deadline:
+                    raise
+                if time.perf_counter() > deadline:
+                    raise MarlIOError(f"rollout actor {k + 1} was not restarted within {ACTOR_START_SECONDS:.0f} s; "
+                                      "the run stops (resume it with marl train --resume)") from None
+                time.sleep(0.2)
+
     # -- a step ---------------------------------------------------------------------------------------------
     def step(self, team: LearnerTeam, obs: Any, progress: float) -> Step:
         """The next step of every game, from the current fragment (a new one when it is used up): the learners take
@@ -215,8 +233,9 @@ class RayRollouts(Rollouts):
                                           "fragment; the run stops (resume it with marl train --resume)") from None
                     self._restarts += 1
                     reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-                    self.note(f"rollout actor {k + 1} of {len(self.actors)} died ({reason[:120]}); Ray restarts it "
+                    self.note(f"rollout actor {k + 1} of {len(self.actors)} died ({reason[:100]}); Ray restarts it "
                               "and its share of the fragment is collected again from fresh games")
+                    self._await_restart(k)
                     msg = dict(msg, restart=self._next_seed + (self._restarts << 36))
                     ref = self.actors[k].collect.remote(states, msg)
             pieces.append(piece)

@@ -9,6 +9,7 @@ Ray is shut down at its end only if this process started it (a test, or a script
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import socket
@@ -34,25 +35,44 @@ def connect(address: str = "", *, num_cpus: int | None = None) -> bool:
     honoured as Ray honours it); returns whether this call started (or joined) Ray, False when it was running
     already. A cluster that cannot be reached is one :class:`MarlIOError` (exit 4)."""
     ray = ray_module()
+    where = address or os.environ.get("RAY_ADDRESS", "")
+    if where:
+        _reachable(where)
     if ray.is_initialized():
         return False
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.ERROR, "log_to_driver": False,
                               "configure_logging": True}
-    where = address or os.environ.get("RAY_ADDRESS", "")
     if where:
         kwargs["address"] = where
     else:
         kwargs["num_cpus"] = num_cpus or os.cpu_count() or 1
         # the workers find the package as this process does (an editable install, or the current folder)
         kwargs["runtime_env"] = {"env_vars": {"SDL_VIDEODRIVER": "dummy", "SDL_AUDIODRIVER": "dummy"}}
-    if where:
-        _reachable(where)
     try:
         ray.init(**kwargs)
     except (ConnectionError, TimeoutError, RuntimeError, ValueError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise MarlIOError(f"cannot reach the Ray cluster at {where}: {first}") from None
+    _errors_to_stderr()
     return True
+
+
+def _errors_to_stderr() -> None:
+    """Ray's driver prints what its workers report (an actor that died, say) on stdout; a run's stdout is its
+    ``--json`` report alone, so they go to stderr instead."""
+    try:
+        from ray._private import worker
+    except ImportError:  # (a Ray without this module: nothing to redirect)
+        return
+    show = worker.print_to_stdstream
+    if getattr(show, "to_stderr", False):
+        return
+
+    def to_stderr(data: dict[str, Any], ignore_prefix: bool) -> None:
+        show({**data, "is_err": True}, ignore_prefix)
+
+    to_stderr.to_stderr = True  # type: ignore[attr-defined]
+    worker.print_to_stdstream = to_stderr
 
 
 def _reachable(address: str) -> None:
@@ -72,15 +92,26 @@ class RayConnection:
     """Ray for the length of a ``with`` block: :func:`connect` on entry, ``ray.shutdown()`` on exit when this block
     started it."""
 
-    def __init__(self, address: str = "") -> None:
-        self.address = address
+    def __init__(self, address: str = "", num_cpus: int | None = None) -> None:
+        self.address, self.num_cpus = address, num_cpus
         self.started = False
 
     def __enter__(self) -> RayConnection:
-        self.started = connect(self.address)
+        self.started = connect(self.address, num_cpus=self.num_cpus)
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self.started:
             ray_module().shutdown()
             self.started = False
+
+
+def ray_for(settings: dict[str, Any]) -> contextlib.AbstractContextManager[Any]:
+    """Ray for a run whose settings (``TrainConfig.to_dict()``'s layout) put its games or its rating games on Ray
+    (``executor`` or ``eval`` ``ray``), nothing otherwise. Started here, Ray counts at least one CPU per actor and one
+    for the trainer, whatever the machine has: an actor waits for a CPU of Ray's count, not for a core."""
+    if "ray" not in (settings.get("executor"), settings.get("eval")):
+        return contextlib.nullcontext()
+    want = int(settings.get("actors", 2)) * (settings.get("executor") == "ray") + 1 + int(settings.get("eval_actors",
+                                                                                                     1))
+    return RayConnection(str(settings.get("ray_address") or ""), num_cpus=max(os.cpu_count() or 1, want))

@@ -30,15 +30,20 @@ batch, buffer, target period and epsilon schedule; docs/history/training.md says
 
 FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
                  "snapshot_steps", "eval_games", "eval_older", "eval", "eval_wait", "eval_playoff", "swap_every",
-                 "tensorboard", "league_games", "seats")
+                 "tensorboard", "league_games", "seats", "executor", "actors", "ray_address", "fragment_steps")
 """Options whose value is a top-level setting of the same name."""
 
 OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio"}
 """Options that set a key of ``[opponents]``: the option's name, then the key's."""
 
-RESUME_OPTIONS = frozenset({"resume", "env", "device", "eval_wait", "quiet", "json_out", "home", "db"})
+EXECUTOR_OPTIONS = ("executor", "actors", "ray_address", "fragment_steps")
+"""Where a run's games are stepped: a session's to say, so a resumed run may move (a cluster's new address, more
+actors, back to this process)."""
+RESUME_OPTIONS = frozenset({"resume", "env", "device", "eval_wait", "quiet", "json_out", "home", "db",
+                            *EXECUTOR_OPTIONS})
 """What may be typed with --resume: a resumed run keeps the configuration it was started with (whether this session's
-end waits for the league's workers, ``--wait/--no-wait``, is this session's to say)."""
+end waits for the league's workers, ``--wait/--no-wait``, and where its games are stepped are this session's to
+say)."""
 
 
 def read_toml(path: Path) -> dict[str, Any]:
@@ -185,18 +190,20 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
 
 
 def resumed_config(league: League, resume: str, env: str | None, typed: Collection[str],
-                   device: str = "auto", wait: bool | None = None) -> TrainConfig:
+                   device: str = "auto", wait: bool | None = None,
+                   executor: Mapping[str, Any] | None = None) -> TrainConfig:
     """The configuration a stopped or killed run was started with, to continue it (``--resume``): ``typed``, the
     options the user typed, may not change it (only the device, whether this session's end ``wait``s for the
-    league's workers, and what is not a setting); ``env``, when given, must be the run's game."""
+    league's workers, ``executor``: the :data:`EXECUTOR_OPTIONS` typed, and what is not a setting); ``env``, when
+    given, must be the run's game."""
     from .needs import check_resumable
 
     ignored = sorted(set(typed) - RESUME_OPTIONS)
     if ignored:
         flags = ", ".join("--" + name.replace("_", "-") for name in ignored)
         raise MarlError(f"--resume continues run '{resume}' under the configuration it was started with: "
-                        f"{flags} cannot change it (only --device, --wait/--no-wait, --quiet, --json, --home, --db "
-                        "apply)")
+                        f"{flags} cannot change it (only --device, --wait/--no-wait, --executor, --actors, "
+                        "--ray-address, --fragment-steps, --quiet, --json, --home, --db apply)")
     old = league.get_run(resume)
     if old is None:
         raise MarlError(f"no run named '{resume}' to resume")
@@ -211,4 +218,6 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
         cfg.device = device
     if wait is not None and wait != cfg.eval_wait:
         cfg = replace(cfg, eval_wait=wait)  # (checked: --no-wait is for a run rated by the league's workers)
+    if executor:
+        cfg = replace(cfg, **{k: v for k, v in executor.items() if k in EXECUTOR_OPTIONS})  # (checked again)
     return cfg
