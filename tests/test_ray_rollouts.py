@@ -263,3 +263,16 @@ def test_ray_missing_and_bad_actor_counts_are_one_line(tmp_path, capsys, monkeyp
     code, _, err = run_cli(capsys, "train", "pong", "--executor", "ray", "--home", str(home))
     assert code == 2 and 'pip install "selfplay-cli[ray]"' in err and not home.exists()
     assert len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_one_learner_meets_league_snapshots_loaded_by_the_actors_and_repeats(ray_local, tmp_path):
+    kw = dict(env=TICTACTOE, env_options={}, steps=3000, snapshot_steps=512, agents=1, executor="ray", actors=2)
+    first, report, _, _, league = _train(tmp_path / "a", **kw)
+    again, _, _, _, _ = _train(tmp_path / "b", **kw)
+    assert _digest(first.learners) == _digest(again.learners)  # the same seed and actors: the same run
+    snapshots = {p.id for p in league.players(first.spec.name, kind="snapshot")}
+    games = league.games(first.spec.name, rated=False, variant=None, pooled=False)
+    # the learner (filed as its latest snapshot) against a snapshot of the pool the actors loaded from the league
+    against = np.isin(games.player_a, list(snapshots)) & np.isin(games.player_b, list(snapshots))
+    assert report.episodes > 300 and int(against.sum()) > 20

@@ -42,6 +42,10 @@ class JointLearner:
         return np.asarray(per_seat).reshape(self.n, self.games)
 
     @property
+    def device(self) -> Any:
+        return getattr(self.inner, "device", "cpu")
+
+    @property
     def synchronous(self) -> bool:
         return bool(getattr(self.inner, "synchronous", False))
 

@@ -225,6 +225,8 @@ class PPOLearner:
             self.net.load_state_dict(state["net"])
         if "gen" in state:
             self.gen.set_state(state["gen"])
+        if "noise_seed" in state:  # an actor of a trainer on another device: draws of its own
+            self.gen.manual_seed(int(state["noise_seed"]))
 
     def record(self, rewards: np.ndarray, dones: np.ndarray, truncated: np.ndarray | None = None,
                acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,

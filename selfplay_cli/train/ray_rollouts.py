@@ -20,6 +20,7 @@ ledger are the local run's.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from collections.abc import Callable
@@ -62,6 +63,10 @@ class RayRollouts(Rollouts):
         self.steps_of = steps_of  # the run's steps now (--swap-every draws by them)
         self.note = note or (lambda line: None)
         self.synchronous = all(getattr(learner, "synchronous", False) for learner in learners)
+        # bit for bit the local run: learners on the CPU, as the actors are (a CUDA generator and CUDA's floats
+        # cannot be repeated there: the actors then draw streams of their own, seeded per fragment)
+        self.exact = self.synchronous and all(str(getattr(learner, "device", "cpu")).startswith("cpu")
+                                              for learner in learners)
         self.fragment_steps = fragment_steps
         actor = ray.remote(num_cpus=1, max_restarts=MAX_RESTARTS, max_task_retries=0)(RolloutShard)
         self.actors = [actor.remote(setup) for setup in setups]
@@ -75,9 +80,10 @@ class RayRollouts(Rollouts):
         self._inflight: list[tuple[Any, Any, dict[str, Any]]] | None = None
         self._core_steps = np.zeros(sum(s.game_ids.size for s in setups), dtype=np.int64)
         # where the time goes (benchmarks/ray_rollouts.py): actors' own stepping, and the rest of waiting for them
-        self.actor_seconds = 0.0
+        self.actor_seconds = 0.0  # per fragment, the slowest actor's
         self.wait_seconds = 0.0
         self.merge_seconds = 0.0
+        self.actor_peaks: list[int] = []  # each actor's peak memory (bytes), read as the run ends
 
     # -- what the run reads of its games ----------------------------------------------------------------------
     @property
@@ -118,7 +124,10 @@ class RayRollouts(Rollouts):
                             "installed on every machine of the cluster?)") from None
 
     def close(self) -> None:
-        """End the actors (and Ray, when this run started it)."""
+        """End the actors (and Ray, when this run started it), their peak memory read first."""
+        if self.actors:
+            with contextlib.suppress(Exception):  # (an actor that cannot answer any more has no figure)
+                self.actor_peaks = self.peak_memory()
         for actor in self.actors:
             self.ray.kill(actor)
         self.actors = []
@@ -183,7 +192,7 @@ class RayRollouts(Rollouts):
             self._core_steps[self.plan.games[k]] = piece["core_steps"]
             if self.opponents is not None and piece["players"]:
                 self.opponents.know_players(piece["players"])
-        if self.synchronous:  # the actors drew the whole batch's noise: the learner's generator is where theirs are
+        if self.exact:  # the actors drew the whole batch's noise: the learner's generator is where theirs are
             for learner, state in zip(self.learners, pieces[0]["gen"], strict=True):
                 if state is not None:
                     learner.load_acting_state({"gen": state})
@@ -194,8 +203,9 @@ class RayRollouts(Rollouts):
         """Ask every actor for its share of the next fragment."""
         steps = self.fragment_steps
         states = [learner.acting_state() for learner in self.learners]
-        if not self.synchronous:
+        if not self.exact:
             for i, state in enumerate(states):
+                state.pop("gen", None)
                 state["noise_seed"] = noise_seed(self.seed, i, self._fragments)
         self._fragments += 1
         ref = self.ray.put(states)
@@ -239,6 +249,6 @@ class RayRollouts(Rollouts):
                     msg = dict(msg, restart=self._next_seed + (self._restarts << 36))
                     ref = self.actors[k].collect.remote(states, msg)
             pieces.append(piece)
-            self.actor_seconds += float(piece["seconds"])
+        self.actor_seconds += max(float(p["seconds"]) for p in pieces)
         self.wait_seconds += time.perf_counter() - t0
         return pieces

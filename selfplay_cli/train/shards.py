@@ -259,6 +259,8 @@ class RolloutShard:
             "dones": [np.stack(dones[i]) for i in range(n)],
             "cuts": cuts, "finished": finished, "core_steps": np.asarray(games.core.steps).copy(),
             "players": dict(self.opponents.players),
+            # the rows of the decisions among all of a learner's (SA: one a game, not one a seat)
+            "decided": [learner.share for learner in self.learners],
             "gen": [learner.acting_state().get("gen") if getattr(learner, "synchronous", False) else None
                     for learner in self.learners],
             "seconds": time.perf_counter() - t0,
@@ -301,9 +303,11 @@ class Fragment:
             if all(x is None for x in parts):
                 return None
             like = next(x for x in parts if x is not None)
-            out = np.empty((like.shape[0], plan.totals[i], *like.shape[2:]), dtype=like.dtype)
+            rows = ([p["decided"][i][0] for p in pieces], pieces[0]["decided"][i][1]) if sub is not None else \
+                ([plan.positions[k][i] for k in range(len(pieces))], plan.totals[i])
+            out = np.empty((like.shape[0], rows[1], *like.shape[2:]), dtype=like.dtype)
             for k, x in enumerate(parts):
-                out[:, plan.positions[k][i]] = True if x is None else x
+                out[:, rows[0][k]] = True if x is None else x
             return out
 
         taken = [{key: join("taken", i, sub=key) for key in pieces[0]["taken"][i]} for i in range(n)]
