@@ -276,3 +276,30 @@ def test_one_learner_meets_league_snapshots_loaded_by_the_actors_and_repeats(ray
     # the learner (filed as its latest snapshot) against a snapshot of the pool the actors loaded from the league
     against = np.isin(games.player_a, list(snapshots)) & np.isin(games.player_b, list(snapshots))
     assert report.episodes > 300 and int(against.sum()) > 20
+
+
+@pytest.mark.slow
+def test_a_trainer_killed_with_sigkill_resumes_on_actors(ray_local, tmp_path, capsys):
+    import subprocess
+    import time
+
+    home = tmp_path / "h"
+    args = ["train", "pong", "--agents", "2", "--games", "16", "--steps", "100000", "--snapshot-steps", "8192",
+            "--eval-games", "0", "--env-option", "points_to_win=1", "--executor", "ray", "--actors", "2",
+            "--run", "r", "--home", str(home), "--quiet"]
+    proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, cwd=os.path.dirname(os.path.dirname(__file__)))
+    folder = home / "snapshots" / "r"
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(folder.glob("*.safetensors"))) < 6:  # s0 and two moments after it
+        time.sleep(0.1)
+    proc.kill()
+    proc.communicate(timeout=60)
+    assert len(list(folder.glob("*.safetensors"))) >= 6
+    code, out, err = run_cli(capsys, "train", "--resume", "r", "--home", str(home), "--actors", "1", "--json")
+    assert code == 0, err
+    report = __import__("json").loads(out)
+    assert report["steps"] == 100_000 and report["sessions"] == 2
+    with League.open(home) as league:
+        assert league.get_run("r").status == "finished"
+        assert {"s0-left", "s100k-left"} <= {p.name for p in league.players("pong", kind="snapshot")}

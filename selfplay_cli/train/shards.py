@@ -163,7 +163,8 @@ class RolloutShard:
 
         torch.set_num_threads(1)  # small networks: one thread each; the actors are the parallelism
         self.setup = setup
-        self.cfg = cfg = TrainConfig.from_dict(setup.config)
+        # (an actor acts on the CPU and writes no metrics, whatever device and TensorBoard the trainer has)
+        self.cfg = cfg = TrainConfig.from_dict({**setup.config, "device": "cpu", "tensorboard": False})
         self.spec = cfg.game()
         self.layout = setup.layout[:, setup.game_ids]
         self.learners = self._learners()
