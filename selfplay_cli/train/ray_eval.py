@@ -1,0 +1,203 @@
+"""A run's gauntlets on Ray actors (``marl train --eval ray``): the league's work queue as ``--eval remote`` uses it
+(:class:`~.remote.RemoteEvaluator`: each snapshot moment's gauntlet a job of the run's batch ``run:<run>``, chained
+to the one before, waited for at the run's end), played by ``--eval-actors`` queue workers on Ray actors started for
+the run. Each actor runs ``marl worker``'s loop (:func:`selfplay_cli.work.run_worker`) on the run's batch alone,
+against the league's database, and is listed among the league's workers (``marl queue``) as ``ray@<host>:<pid>``; the
+games are those any worker, or the local rating worker, plays (one function plays a gauntlet wherever it is played).
+
+Where the actors run: a SQLite league is a file on this machine, so they are placed on this machine's Ray node; any
+other database (PostgreSQL) is reached by its URL from every node, so they are spread over the cluster, and the
+snapshots they play come from the league by their sha256 where the node has no copy of the league home
+(:func:`selfplay_cli.rated.snapshots.snapshot_path`), as every worker's do. They play on the CPU.
+
+How they end: when the run's gauntlets are all done, and however the run ends (finished, Ctrl-C or SIGTERM, an
+error), each actor's loop is cancelled (``ray.cancel``), which the loop reads as its ``stop()``: the job in play goes
+back to the queue at once and the worker's row is marked stopped, as Ctrl-C does to ``marl worker``. An actor whose
+loop has not left within :data:`STOP_SECONDS` is ended with ``ray.kill`` (the last resort), and its job handed back
+by this process. A driver killed with SIGKILL cannot ask: the actors are not detached (``lifetime=None``), so Ray
+ends them with the driver that owns them (with Ray started by the run, Ray's own processes end with the driver and
+its actors with them: measured, an actor's process gone within 5 s of the driver's SIGKILL); the job one held goes
+back to the queue when its lease lapses, where a resumed run finds it. That is why the run's lock names no process
+for them (it names the local rating worker, which a resume must end itself), and also why they cannot be named
+there: on a cluster they are processes of other machines.
+
+An actor's loop that ends on an error is said in one line; the others, or this process at the run's end as with
+``--eval remote`` when no worker takes the run's jobs, play its share. Nothing an actor writes reaches this process's
+stdout (``--json`` keeps it for the JSON alone): the actors write to their stderr, which the run does not forward
+either (:func:`~.ray_support.connect`: ``log_to_driver=False``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+from .ray_support import RayConnection, ray_module
+from .remote import RemoteEvaluator
+
+__all__ = ["RATING_ACTOR_CPUS", "START_SECONDS", "STOP_SECONDS", "RatingActor", "RayEvaluator"]
+
+RATING_ACTOR_CPUS = 0
+"""The CPUs each rating actor asks Ray for: none, so that it is scheduled beside the rollout actors whatever they
+take. Rating games are a sideline of training, as the local rating worker is a process beside the trainer that the
+system shares with it. A run that also steps its games on Ray
+actors (``--executor ray``) gives each rollout actor a CPU, and Ray started for a run counts this machine's cores:
+a rating actor asking for even half a CPU would wait behind the rollout actors until training ends."""
+STOP_SECONDS = 30.0  # an actor told to stop leaves within this long (at its next game report) or is killed
+START_SECONDS = 120.0  # the run's end waits this long for its actors to join the queue (Ray starting a worker process
+# and importing torch: seconds) before it plays the gauntlets itself
+
+
+class RatingActor:
+    """One queue worker on a Ray actor (made remote by :class:`RayEvaluator`): ``marl worker`` serving one batch."""
+
+    def __init__(self, url: str, home: str | None, batch: str) -> None:
+        os.dup2(2, 1)  # nothing on stdout, even where the driver forwards its workers' output (a Ray started with
+        sys.stdout = sys.stderr  # log_to_driver): a --json run's stdout is its JSON alone
+        import torch
+
+        from ..league.store import League
+        from ..rated.jobs import worker_name
+
+        torch.set_num_threads(1)  # one core's worth, beside training (as the local rating worker)
+        self.league = League(url, home=home)
+        self.batch = batch
+        self.worker = worker_name("ray")
+
+    def name(self) -> str:
+        """How the league lists this worker."""
+        return self.worker
+
+    def work(self) -> dict[str, Any]:
+        """The worker loop on the run's batch until this call is cancelled; what it did (``marl worker --json``)."""
+        import ray
+
+        from ..work import WorkerOptions, run_worker
+
+        try:
+            report = run_worker(self.league, WorkerOptions(batches=(self.batch,), name=self.worker),
+                                say=lambda line: print(f"marl worker: {line}", file=sys.stderr, flush=True),
+                                stop=ray.get_runtime_context().is_canceled)
+        finally:
+            self.league.close()
+        return report.to_json()
+
+    def left(self) -> bool:
+        """True, once :meth:`work` has returned (an actor runs its calls one at a time, in the order sent)."""
+        return True
+
+
+class RayEvaluator(RemoteEvaluator):
+    """``--eval ray``: :class:`RemoteEvaluator`'s queueing and waiting, with ``actors`` queue workers on Ray actors
+    started now (Ray joined at ``address``, or started on this machine, or the one already running in this process,
+    which is then left running); see the module docstring."""
+
+    def __init__(self, league: Any, run: str, device: str, *, actors: int = 1, address: str = "",
+                 note: Callable[[str], None] | None = None, stop_seconds: float = STOP_SECONDS,
+                 start_seconds: float = START_SECONDS, **kwargs: Any) -> None:
+        super().__init__(league, run, device, wait=True, note=note, **kwargs)
+        self.stop_seconds, self.start_seconds = stop_seconds, start_seconds
+        self._ray = RayConnection(address)
+        self._ray.__enter__()
+        try:
+            self._start(actors)
+        except BaseException:
+            self._ray.__exit__()
+            raise
+
+    def _start(self, n: int) -> None:
+        ray = ray_module()
+        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+        if self.league.is_sqlite:  # the league is a file of this machine
+            where: Any = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
+        else:
+            where = "SPREAD"
+        cls = ray.remote(RatingActor).options(num_cpus=RATING_ACTOR_CPUS, lifetime=None, scheduling_strategy=where,
+                                              max_restarts=2, max_task_retries=2)
+        url = self.league.url.render_as_string(hide_password=False)
+        home = None if self.league.home is None else str(self.league.home)
+        self._actors = [cls.remote(url, home, self.batch) for _ in range(n)]
+        self._names = [a.name.remote() for a in self._actors]  # (sent first: answered before the loop starts)
+        self._loops = [a.work.remote() for a in self._actors]
+
+    def poll(self) -> list[Any]:
+        self._check_actors()
+        return super().poll()
+
+    def wait(self, on_wait: Any = None) -> list[Any]:
+        """:meth:`RemoteEvaluator.wait`, once the actors have joined the queue (so the run does not play its
+        gauntlets itself merely because they were still starting); then the actors are stopped."""
+        since = time.monotonic()
+        while self.pending and self._loops and not self.serving() and time.monotonic() - since < self.start_seconds:
+            self._check_actors()
+            self._tick(on_wait, force=True)
+            time.sleep(self.poll_seconds)
+        done = super().wait(on_wait)
+        if not self.pending:
+            self._stop_actors()
+        return done
+
+    def _check_actors(self) -> None:
+        """Say in one line that an actor's loop ended (on an error: a stopped loop is not looked at again)."""
+        if not self._loops:
+            return
+        ray = ray_module()
+        ended, _ = ray.wait(self._loops, num_returns=len(self._loops), timeout=0)
+        for ref in ended:
+            i = self._loops.index(ref)
+            try:
+                ray.get(ref)
+                why = "its loop returned"
+            except Exception as e:  # (RayActorError, RayTaskError: the first line says which and why)
+                why = (str(e).strip().splitlines() or [type(e).__name__])[0]
+            self._note(f"a rating actor of this run ended ({why}); its share of the gauntlets is played by the "
+                       "others, or by this process at the run's end")
+            ray.kill(self._actors[i])
+            del self._actors[i], self._names[i], self._loops[i]
+
+    def _stop_actors(self) -> None:
+        """Cancel every actor's loop (the job in play back to the queue), wait up to :attr:`stop_seconds` for the
+        loops to leave, end the actors (``ray.kill``: what is left of an actor whose loop has left is an idle process),
+        and hand back the jobs of those whose loops were still in play."""
+        if not self._actors:
+            return
+        ray = ray_module()
+        for ref in self._loops:
+            ray.cancel(ref)
+        left = [a.left.remote() for a in self._actors]
+        ready, _ = ray.wait(left, num_returns=len(left), timeout=self.stop_seconds)
+        stuck = [name for name, ref in zip(self._names, left, strict=True) if ref not in ready]
+        for actor in self._actors:
+            ray.kill(actor)  # (an actor whose loop has left holds nothing; one that is stuck: the last resort)
+        self._actors, self._names, self._loops = [], [], []
+        if stuck:
+            self._give_back(stuck)
+
+    def _give_back(self, refs: list[Any]) -> None:
+        """The jobs held by killed actors back to the queue now (not when their leases lapse)."""
+        ray = ray_module()
+        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=0)
+        names = set()
+        for ref in ready:  # (an actor that never started holds nothing)
+            with contextlib.suppress(Exception):
+                names.add(ray.get(ref))
+        for w in self.league.workers(taking=self.batch):
+            if w.name in names and w.stopped_at is None:
+                self.league.stop_worker(w.id, give_back=True)
+        self._note(f"{len(refs)} rating actor(s) did not stop within {self.stop_seconds:.0f} s and were killed; "
+                   "their gauntlets went back to the queue")
+
+    def close(self) -> None:
+        """Stop the actors (if the wait has not), then leave Ray as it was found."""
+        try:
+            self._stop_actors()
+        finally:
+            self._ray.__exit__()
+
+    def __enter__(self) -> RayEvaluator:
+        return self
