@@ -6,9 +6,14 @@ queue (the worker loop's ``stop()``). Ray itself is the suite's (the ``ray_local
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections import Counter
+from pathlib import Path
 
 import pytest
 from cli_helpers import run
@@ -19,6 +24,7 @@ from selfplay_cli.league.models import Game, GameSeat, Match, Player
 from selfplay_cli.league.store import League
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.evaluator import GauntletJob
+from selfplay_cli.train.lock import process_start, same_process
 from selfplay_cli.train.remote import RemoteEvaluator, run_batch
 from selfplay_cli.work import WorkerOptions, run_worker
 
@@ -77,21 +83,27 @@ def test_a_runs_gauntlets_are_played_on_its_ray_actors_with_the_remote_runs_game
 
 @pytest.mark.slow
 def test_a_run_that_ends_mid_gauntlet_gives_its_actors_job_back_at_once(ray_local, rated_league):
-    """The run ends (Ctrl-C, an error) while its actor plays a long gauntlet: the actor's loop is told to stop, gives
-    the job back to the queue at once (not counted as a try) and leaves, its worker row stopped, its process gone:
-    nothing plays on after the run, and a resumed run's workers take the job at once."""
+    """A resumed run takes back at once the job its killed session's actor held. The run ends (Ctrl-C, an error)
+    while its actor plays that long gauntlet: the actor's loop is told to stop, gives the job back to the queue at
+    once (not counted as a try) and leaves, its worker row stopped, its process gone: nothing plays on after the run,
+    and the next session's actors take the job at once."""
     from selfplay_cli.train.ray_eval import RayEvaluator
 
     league, snap = rated_league
+    job = GauntletJob((snap.id,), 0, 2000, 0, full=True)  # minutes of games: still in play when stopped
+    RemoteEvaluator(league, "w", "cpu").submit(job)  # a killed session's job, held by its actor killed with it
+    dead = league.add_worker("ray@elsewhere:1", "elsewhere", 1, serves=[run_batch("w")])
+    assert league.claim(dead) is not None
     notes: list[str] = []
     ev = RayEvaluator(league, "w", "cpu", actors=1, note=notes.append)
     try:
-        ev.submit(GauntletJob((snap.id,), 0, 2000, 0, full=True))  # minutes of games: still in play when stopped
+        ev.submit(job)  # found in the queue, taken back from the dead actor at once (not in minutes)
         deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not league.jobs(batch=run_batch("w"), states=["leased"]):
+        while time.monotonic() < deadline and not [j for j in league.jobs(batch=run_batch("w"), states=["leased"])
+                                                   if j.worker != "ray@elsewhere:1"]:
             time.sleep(0.1)
         (job,) = league.jobs(batch=run_batch("w"))
-        assert job.state == "leased" and job.worker.startswith("ray@")
+        assert job.state == "leased" and job.worker.startswith("ray@") and job.worker != "ray@elsewhere:1"
         time.sleep(0.5)  # (games under way)
     finally:
         t0 = time.monotonic()
@@ -99,10 +111,62 @@ def test_a_run_that_ends_mid_gauntlet_gives_its_actors_job_back_at_once(ray_loca
         took = time.monotonic() - t0
     (job,) = league.jobs(batch=run_batch("w"))
     assert (job.state, job.tries) == ("queued", 0)
-    (worker,) = league.workers()
-    assert worker.stopped_at is not None and worker.holding == ()
+    earlier, worker = league.workers()
+    assert earlier.stopped_at is not None and worker.stopped_at is not None and worker.holding == ()
     assert took < 10 and notes == []  # it left by itself: not killed
     assert _gone(worker.pid)
+
+
+def _descendants(root: int) -> list[tuple[int, str | None]]:
+    """Every process descended from ``root`` now, each with its start time (to end only those, later)."""
+    parent: dict[int, int] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            parent[int(entry.name)] = int(stat[stat.rfind(")") + 2:].split()[1])
+    found, frontier = [], {root}
+    while frontier:
+        frontier = {pid for pid, ppid in parent.items() if ppid in frontier}
+        found += [(pid, process_start(pid)) for pid in frontier]
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc")
+def test_a_trainer_killed_with_sigkill_takes_its_ray_actors_with_it(tmp_path):
+    """kill -9 of a training process that started Ray itself: its rating actor (not detached: owned by the driver)
+    ends with it within seconds, rather than play on for a run nobody trains."""
+    home = tmp_path / "home"
+    env = {**os.environ, "SDL_VIDEODRIVER": "dummy", "SDL_AUDIODRIVER": "dummy"}
+    env.pop("RAY_ADDRESS", None)
+    trainer = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *RUN[:-1], "--steps", "50000000", "--eval",
+                                "ray", "--home", str(home), "--quiet"], env=env, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE)
+    ray_processes: list[tuple[int, str | None]] = []
+    try:
+        deadline, workers = time.monotonic() + 90, []
+        while time.monotonic() < deadline and not workers and trainer.poll() is None:
+            time.sleep(0.5)
+            if (home / "league.db").exists():
+                with League.open(home, readonly=True) as league:
+                    workers = [w for w in league.workers() if w.name.startswith("ray@")]
+        assert workers, trainer.stderr.read().decode()[-2000:] if trainer.poll() is not None else "no actor"
+        ray_processes = _descendants(trainer.pid)
+        assert workers[0].pid in {pid for pid, _ in ray_processes}
+        trainer.send_signal(signal.SIGKILL)
+        trainer.wait(timeout=10)
+        assert _gone(workers[0].pid, within=20), "the rating actor plays on after its trainer was killed"
+    finally:
+        if trainer.poll() is None:
+            trainer.kill()
+            trainer.wait()
+        trainer.stderr.close()
+        for pid, start in ray_processes:  # what Ray itself leaves behind a killed driver (idle agents): ended here
+            if same_process(pid, start):
+                os.kill(pid, signal.SIGKILL)
 
 
 def test_a_worker_told_to_stop_gives_its_job_in_play_back_and_leaves(rated_league):

@@ -16,10 +16,10 @@ back to the queue at once and the worker's row is marked stopped, as Ctrl-C does
 loop has not left within :data:`STOP_SECONDS` is ended with ``ray.kill`` (the last resort), and its job handed back
 by this process. A driver killed with SIGKILL cannot ask: the actors are not detached (``lifetime=None``), so Ray
 ends them with the driver that owns them (with Ray started by the run, Ray's own processes end with the driver and
-its actors with them: measured, an actor's process gone within 5 s of the driver's SIGKILL); the job one held goes
-back to the queue when its lease lapses, where a resumed run finds it. That is why the run's lock names no process
-for them (it names the local rating worker, which a resume must end itself), and also why they cannot be named
-there: on a cluster they are processes of other machines.
+its actors with them: ``tests/test_eval_ray.py`` kills a trainer and sees its actor's process end); the job one
+held is handed back by the resumed run as it starts (or goes back to the queue when its lease lapses). That is why
+the run's lock names no process for them (it names the local rating worker, which a resume must end itself), and
+also why they cannot be named there: on a cluster they are processes of other machines.
 
 An actor's loop that ends on an error is said in one line; the others, or this process at the run's end as with
 ``--eval remote`` when no worker takes the run's jobs, play its share. Nothing an actor writes reaches this process's
@@ -39,7 +39,7 @@ from typing import Any
 from .ray_support import RayConnection, ray_module
 from .remote import RemoteEvaluator
 
-__all__ = ["RATING_ACTOR_CPUS", "START_SECONDS", "STOP_SECONDS", "RatingActor", "RayEvaluator"]
+__all__ = ["ACTOR_ROLE", "RATING_ACTOR_CPUS", "START_SECONDS", "STOP_SECONDS", "RatingActor", "RayEvaluator"]
 
 RATING_ACTOR_CPUS = 0
 """The CPUs each rating actor asks Ray for: none, so that it is scheduled beside the rollout actors whatever they
@@ -47,6 +47,7 @@ take. Rating games are a sideline of training, as the local rating worker is a p
 system shares with it. A run that also steps its games on Ray
 actors (``--executor ray``) gives each rollout actor a CPU, and Ray started for a run counts this machine's cores:
 a rating actor asking for even half a CPU would wait behind the rollout actors until training ends."""
+ACTOR_ROLE = "ray"  # the actors' worker names: ray@<host>:<pid>
 STOP_SECONDS = 30.0  # an actor told to stop leaves within this long (at its next game report) or is killed
 START_SECONDS = 120.0  # the run's end waits this long for its actors to join the queue (Ray starting a worker process
 # and importing torch: seconds) before it plays the gauntlets itself
@@ -66,7 +67,7 @@ class RatingActor:
         torch.set_num_threads(1)  # one core's worth, beside training (as the local rating worker)
         self.league = League(url, home=home)
         self.batch = batch
-        self.worker = worker_name("ray")
+        self.worker = worker_name(ACTOR_ROLE)
 
     def name(self) -> str:
         """How the league lists this worker."""
@@ -101,6 +102,7 @@ class RayEvaluator(RemoteEvaluator):
                  start_seconds: float = START_SECONDS, **kwargs: Any) -> None:
         super().__init__(league, run, device, wait=True, note=note, **kwargs)
         self.stop_seconds, self.start_seconds = stop_seconds, start_seconds
+        self._take_back()
         self._ray = RayConnection(address)
         self._ray.__enter__()
         try:
@@ -108,6 +110,14 @@ class RayEvaluator(RemoteEvaluator):
         except BaseException:
             self._ray.__exit__()
             raise
+
+    def _take_back(self) -> None:
+        """The jobs that the actors of an earlier session of this run still hold, back to the queue now rather than
+        when their leases lapse (minutes): those actors ended with their driver (killed), since the run's lock lets
+        one process train it at a time, and a run's actors take jobs of its batch alone."""
+        for w in self.league.workers(taking=self.batch):
+            if w.stopped_at is None and w.serves == (self.batch,) and w.name.startswith(f"{ACTOR_ROLE}@"):
+                self.league.stop_worker(w.id, give_back=True)
 
     def _start(self, n: int) -> None:
         ray = ray_module()
