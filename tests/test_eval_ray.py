@@ -82,39 +82,54 @@ def test_a_runs_gauntlets_are_played_on_its_ray_actors_with_the_remote_runs_game
 
 
 @pytest.mark.slow
-def test_a_run_that_ends_mid_gauntlet_gives_its_actors_job_back_at_once(ray_local, rated_league):
-    """A resumed run takes back at once the job its killed session's actor held. The run ends (Ctrl-C, an error)
-    while its actor plays that long gauntlet: the actor's loop is told to stop, gives the job back to the queue at
-    once (not counted as a try) and leaves, its worker row stopped, its process gone: nothing plays on after the run,
-    and the next session's actors take the job at once."""
+def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rated_league):
+    """A long gauntlet's job, held by an actor of a killed session of the run: the new session takes it back at once
+    (the run's lock says that actor is dead) and its actor plays it. That actor is killed mid-job: said in one line,
+    the job back in the queue at once, another actor started, which takes it. The run ends while that one plays:
+    its loop is told to stop, gives the job back (not counted as a try) and leaves, its worker row stopped, its
+    process gone: nothing plays on after the run, and the next session's actors take the job at once."""
     from selfplay_cli.train.ray_eval import RayEvaluator
 
     league, snap = rated_league
+    batch = run_batch("w")
     job = GauntletJob((snap.id,), 0, 2000, 0, full=True)  # minutes of games: still in play when stopped
-    RemoteEvaluator(league, "w", "cpu").submit(job)  # a killed session's job, held by its actor killed with it
-    dead = league.add_worker("ray@elsewhere:1", "elsewhere", 1, serves=[run_batch("w")])
+    RemoteEvaluator(league, "w", "cpu").submit(job)
+    dead = league.add_worker("ray@elsewhere:1", "elsewhere", 1, serves=[batch])
     assert league.claim(dead) is not None
+
+    def held_by_another(than: set[str]) -> str:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            ev.poll()
+            (row,) = league.jobs(batch=batch)
+            if row.state == "leased" and row.worker not in than:
+                return row.worker
+            time.sleep(0.1)
+        raise AssertionError(f"the job stayed with {than}")
+
     notes: list[str] = []
     ev = RayEvaluator(league, "w", "cpu", actors=1, note=notes.append)
     try:
         ev.submit(job)  # found in the queue, taken back from the dead actor at once (not in minutes)
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline and not [j for j in league.jobs(batch=run_batch("w"), states=["leased"])
-                                                   if j.worker != "ray@elsewhere:1"]:
-            time.sleep(0.1)
-        (job,) = league.jobs(batch=run_batch("w"))
-        assert job.state == "leased" and job.worker.startswith("ray@") and job.worker != "ray@elsewhere:1"
+        first = held_by_another({"ray@elsewhere:1"})
+        assert first.startswith("ray@") and notes == []
+        os.kill(int(first.rsplit(":", 1)[1]), signal.SIGKILL)
+        second = held_by_another({"ray@elsewhere:1", first})
+        assert second.startswith("ray@")
+        assert len(notes) == 1 and notes[0].startswith("a rating actor of this run ended (")
+        assert notes[0].endswith("its gauntlet went back to the queue and another is started")
         time.sleep(0.5)  # (games under way)
     finally:
         t0 = time.monotonic()
         ev.close()
         took = time.monotonic() - t0
-    (job,) = league.jobs(batch=run_batch("w"))
-    assert (job.state, job.tries) == ("queued", 0)
-    earlier, worker = league.workers()
-    assert earlier.stopped_at is not None and worker.stopped_at is not None and worker.holding == ()
-    assert took < 10 and notes == []  # it left by itself: not killed
-    assert _gone(worker.pid)
+    (row,) = league.jobs(batch=batch)
+    assert (row.state, row.tries) == ("queued", 0)
+    workers = {w.name: w for w in league.workers()}
+    assert list(workers) == ["ray@elsewhere:1", first, second]
+    assert all(w.stopped_at is not None and w.holding == () for w in workers.values())
+    assert took < 10 and len(notes) == 1  # the second left by itself: not killed
+    assert _gone(workers[second].pid)
 
 
 def _descendants(root: int) -> list[tuple[int, str | None]]:

@@ -21,10 +21,11 @@ held is handed back by the resumed run as it starts (or goes back to the queue w
 the run's lock names no process for them (it names the local rating worker, which a resume must end itself), and
 also why they cannot be named there: on a cluster they are processes of other machines.
 
-An actor's loop that ends on an error is said in one line; the others, or this process at the run's end as with
-``--eval remote`` when no worker takes the run's jobs, play its share. Nothing an actor writes reaches this process's
-stdout (``--json`` keeps it for the JSON alone): the actors write to their stderr, which the run does not forward
-either (:func:`~.ray_support.connect`: ``log_to_driver=False``).
+An actor that dies (its process killed, its node lost) or whose loop fails is said in one line, its job goes back to
+the queue at once, and another actor takes its place (up to :data:`MAX_REPLACED` in a run; then the others, or this
+process at the run's end as with ``--eval remote`` when no worker takes the run's jobs, play its share). Nothing an
+actor writes reaches this process's stdout (``--json`` keeps it for the JSON alone): the actors write to their
+stderr, which the run does not forward either (:func:`~.ray_support.connect`: ``log_to_driver=False``).
 """
 
 from __future__ import annotations
@@ -39,7 +40,8 @@ from typing import Any
 from .ray_support import RayConnection, ray_module
 from .remote import RemoteEvaluator
 
-__all__ = ["ACTOR_ROLE", "RATING_ACTOR_CPUS", "START_SECONDS", "STOP_SECONDS", "RatingActor", "RayEvaluator"]
+__all__ = ["ACTOR_ROLE", "MAX_REPLACED", "RATING_ACTOR_CPUS", "START_SECONDS", "STOP_SECONDS", "RatingActor",
+           "RayEvaluator"]
 
 RATING_ACTOR_CPUS = 0
 """The CPUs each rating actor asks Ray for: none, so that it is scheduled beside the rollout actors whatever they
@@ -49,6 +51,7 @@ actors (``--executor ray``) gives each rollout actor a CPU, and Ray started for 
 a rating actor asking for even half a CPU would wait behind the rollout actors until training ends."""
 ACTOR_ROLE = "ray"  # the actors' worker names: ray@<host>:<pid>
 STOP_SECONDS = 30.0  # an actor told to stop leaves within this long (at its next game report) or is killed
+MAX_REPLACED = 3  # actors started in a run in place of ones that died, before their share is left to the others
 START_SECONDS = 120.0  # the run's end waits this long for its actors to join the queue (Ray starting a worker process
 # and importing torch: seconds) before it plays the gauntlets itself
 
@@ -102,13 +105,29 @@ class RayEvaluator(RemoteEvaluator):
                  start_seconds: float = START_SECONDS, **kwargs: Any) -> None:
         super().__init__(league, run, device, wait=True, note=note, **kwargs)
         self.stop_seconds, self.start_seconds = stop_seconds, start_seconds
+        self.replaced = 0  # actors started in place of one that died
+        self._actors: list[Any] = []
+        self._names: list[Any] = []  # each actor's worker name (an object ref, answered before its loop starts)
+        self._loops: list[Any] = []  # each actor's worker loop (an object ref, ready once the loop has ended)
         self._take_back()
         self._ray = RayConnection(address)
         self._ray.__enter__()
         try:
-            self._start(actors)
+            ray = ray_module()
+            from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+            if league.is_sqlite:  # the league is a file of this machine
+                where: Any = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
+            else:
+                where = "SPREAD"
+            # not detached (lifetime None): owned by this process, the actors end with it however it ends; not
+            # restarted by Ray (a restarted actor would be a new worker while its old row still held the job)
+            self._cls = ray.remote(RatingActor).options(num_cpus=RATING_ACTOR_CPUS, lifetime=None,
+                                                        scheduling_strategy=where, max_restarts=0)
+            for _ in range(actors):
+                self._spawn()
         except BaseException:
-            self._ray.__exit__()
+            self.close()
             raise
 
     def _take_back(self) -> None:
@@ -119,21 +138,13 @@ class RayEvaluator(RemoteEvaluator):
             if w.stopped_at is None and w.serves == (self.batch,) and w.name.startswith(f"{ACTOR_ROLE}@"):
                 self.league.stop_worker(w.id, give_back=True)
 
-    def _start(self, n: int) -> None:
-        ray = ray_module()
-        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
-
-        if self.league.is_sqlite:  # the league is a file of this machine
-            where: Any = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
-        else:
-            where = "SPREAD"
-        cls = ray.remote(RatingActor).options(num_cpus=RATING_ACTOR_CPUS, lifetime=None, scheduling_strategy=where,
-                                              max_restarts=2, max_task_retries=2)
-        url = self.league.url.render_as_string(hide_password=False)
+    def _spawn(self) -> None:
+        """Start one actor and its worker loop."""
         home = None if self.league.home is None else str(self.league.home)
-        self._actors = [cls.remote(url, home, self.batch) for _ in range(n)]
-        self._names = [a.name.remote() for a in self._actors]  # (sent first: answered before the loop starts)
-        self._loops = [a.work.remote() for a in self._actors]
+        actor = self._cls.remote(self.league.url.render_as_string(hide_password=False), home, self.batch)
+        self._actors.append(actor)
+        self._names.append(actor.name.remote())  # (sent first: answered before the loop starts)
+        self._loops.append(actor.work.remote())
 
     def poll(self) -> list[Any]:
         self._check_actors()
@@ -153,7 +164,9 @@ class RayEvaluator(RemoteEvaluator):
         return done
 
     def _check_actors(self) -> None:
-        """Say in one line that an actor's loop ended (on an error: a stopped loop is not looked at again)."""
+        """An actor whose loop ended (it died, or its loop failed): said in one line, its job back in the queue at
+        once, and another actor started in its place, up to :data:`MAX_REPLACED` in a run (then the others, or this
+        process at the run's end, play its share)."""
         if not self._loops:
             return
         ray = ray_module()
@@ -165,10 +178,17 @@ class RayEvaluator(RemoteEvaluator):
                 why = "its loop returned"
             except Exception as e:  # (RayActorError, RayTaskError: the first line says which and why)
                 why = (str(e).strip().splitlines() or [type(e).__name__])[0]
-            self._note(f"a rating actor of this run ended ({why}); its share of the gauntlets is played by the "
-                       "others, or by this process at the run's end")
             ray.kill(self._actors[i])
+            self._release([self._names[i]])
             del self._actors[i], self._names[i], self._loops[i]
+            if self.replaced < MAX_REPLACED:
+                self.replaced += 1
+                self._spawn()
+                then = "another is started"
+            else:
+                then = (f"{MAX_REPLACED} were replaced already, so its share is played by the others, or by this "
+                        "process at the run's end")
+            self._note(f"a rating actor of this run ended ({why}); its gauntlet went back to the queue and {then}")
 
     def _stop_actors(self) -> None:
         """Cancel every actor's loop (the job in play back to the queue), wait up to :attr:`stop_seconds` for the
@@ -186,21 +206,22 @@ class RayEvaluator(RemoteEvaluator):
             ray.kill(actor)  # (an actor whose loop has left holds nothing; one that is stuck: the last resort)
         self._actors, self._names, self._loops = [], [], []
         if stuck:
-            self._give_back(stuck)
+            self._release(stuck)
+            self._note(f"{len(stuck)} rating actor(s) did not stop within {self.stop_seconds:.0f} s and were killed; "
+                       "their gauntlets went back to the queue")
 
-    def _give_back(self, refs: list[Any]) -> None:
-        """The jobs held by killed actors back to the queue now (not when their leases lapse)."""
+    def _release(self, names: list[Any]) -> None:
+        """The workers of ended actors (their names' refs) marked stopped, and their jobs back to the queue now (not
+        when their leases lapse)."""
         ray = ray_module()
-        ready, _ = ray.wait(refs, num_returns=len(refs), timeout=0)
-        names = set()
-        for ref in ready:  # (an actor that never started holds nothing)
+        ready, _ = ray.wait(names, num_returns=len(names), timeout=0)
+        gone = set()
+        for ref in ready:  # (an actor that never answered never joined the queue)
             with contextlib.suppress(Exception):
-                names.add(ray.get(ref))
+                gone.add(ray.get(ref))
         for w in self.league.workers(taking=self.batch):
-            if w.name in names and w.stopped_at is None:
+            if w.name in gone and w.stopped_at is None:
                 self.league.stop_worker(w.id, give_back=True)
-        self._note(f"{len(refs)} rating actor(s) did not stop within {self.stop_seconds:.0f} s and were killed; "
-                   "their gauntlets went back to the queue")
 
     def close(self) -> None:
         """Stop the actors (if the wait has not), then leave Ray as it was found."""
