@@ -11,8 +11,10 @@ snapshots they play come from the league by their sha256 where the node has no c
 (:func:`selfplay_cli.rated.snapshots.snapshot_path`), as every worker's do. They play on the CPU.
 
 How they end: when the run's gauntlets are all done, and however the run ends (finished, Ctrl-C or SIGTERM, an
-error), each actor's loop is cancelled (``ray.cancel``), which the loop reads as its ``stop()``: the job in play goes
-back to the queue at once and the worker's row is marked stopped, as Ctrl-C does to ``marl worker``. An actor whose
+error), each actor is told to stop (:meth:`RatingActor.stop`, answered on the actor's second thread while its loop
+runs on the first), which its loop reads as its ``stop()``: the job in play goes back to the queue at once and the
+worker's row is marked stopped, as Ctrl-C does to ``marl worker``. (Not ``ray.cancel`` on the loop: a loop cancelled
+before the actor had started it kept the actor's later calls waiting.) An actor whose
 loop has not left within :data:`STOP_SECONDS` is ended with ``ray.kill`` (the last resort), and its job handed back
 by this process. A driver killed with SIGKILL cannot ask: the actors are not detached (``lifetime=None``), so Ray
 ends them with the driver that owns them (with Ray started by the run, Ray's own processes end with the driver and
@@ -33,6 +35,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -71,28 +74,27 @@ class RatingActor:
         self.league = League(url, home=home)
         self.batch = batch
         self.worker = worker_name(ACTOR_ROLE)
+        self.stopping = threading.Event()
 
     def name(self) -> str:
         """How the league lists this worker."""
         return self.worker
 
     def work(self) -> dict[str, Any]:
-        """The worker loop on the run's batch until this call is cancelled; what it did (``marl worker --json``)."""
-        import ray
-
+        """The worker loop on the run's batch until :meth:`stop`; what it did (as ``marl worker --json`` says)."""
         from ..work import WorkerOptions, run_worker
 
         try:
             report = run_worker(self.league, WorkerOptions(batches=(self.batch,), name=self.worker),
                                 say=lambda line: print(f"marl worker: {line}", file=sys.stderr, flush=True),
-                                stop=ray.get_runtime_context().is_canceled)
+                                stop=self.stopping.is_set)
         finally:
             self.league.close()
         return report.to_json()
 
-    def left(self) -> bool:
-        """True, once :meth:`work` has returned (an actor runs its calls one at a time, in the order sent)."""
-        return True
+    def stop(self) -> None:
+        """Tell :meth:`work` to leave (before it has begun, too: it then leaves at once)."""
+        self.stopping.set()
 
 
 class RayEvaluator(RemoteEvaluator):
@@ -122,8 +124,10 @@ class RayEvaluator(RemoteEvaluator):
                 where = "SPREAD"
             # not detached (lifetime None): owned by this process, the actors end with it however it ends; not
             # restarted by Ray (a restarted actor would be a new worker while its old row still held the job)
+            # (two threads: stop() is answered while work() runs)
             self._cls = ray.remote(RatingActor).options(num_cpus=RATING_ACTOR_CPUS, lifetime=None,
-                                                        scheduling_strategy=where, max_restarts=0)
+                                                        scheduling_strategy=where, max_restarts=0,
+                                                        max_concurrency=2)
             for _ in range(actors):
                 self._spawn()
         except BaseException:
@@ -191,17 +195,16 @@ class RayEvaluator(RemoteEvaluator):
             self._note(f"a rating actor of this run ended ({why}); its gauntlet went back to the queue and {then}")
 
     def _stop_actors(self) -> None:
-        """Cancel every actor's loop (the job in play back to the queue), wait up to :attr:`stop_seconds` for the
-        loops to leave, end the actors (``ray.kill``: what is left of an actor whose loop has left is an idle process),
-        and hand back the jobs of those whose loops were still in play."""
+        """Tell every actor's loop to stop (the job in play back to the queue), wait up to :attr:`stop_seconds` for
+        the loops to leave, end the actors (``ray.kill``: what is left of an actor whose loop has left is an idle
+        process), and hand back the jobs of those whose loops were still in play."""
         if not self._actors:
             return
         ray = ray_module()
-        for ref in self._loops:
-            ray.cancel(ref)
-        left = [a.left.remote() for a in self._actors]
-        ready, _ = ray.wait(left, num_returns=len(left), timeout=self.stop_seconds)
-        stuck = [name for name, ref in zip(self._names, left, strict=True) if ref not in ready]
+        for actor in self._actors:
+            actor.stop.remote()
+        ready, _ = ray.wait(self._loops, num_returns=len(self._loops), timeout=self.stop_seconds)
+        stuck = [name for name, ref in zip(self._names, self._loops, strict=True) if ref not in ready]
         for actor in self._actors:
             ray.kill(actor)  # (an actor whose loop has left holds nothing; one that is stuck: the last resort)
         self._actors, self._names, self._loops = [], [], []
