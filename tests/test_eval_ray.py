@@ -82,12 +82,13 @@ def test_a_runs_gauntlets_are_played_on_its_ray_actors_with_the_remote_runs_game
 
 
 @pytest.mark.slow
-def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rated_league):
+def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rated_league, capsys):
     """A long gauntlet's job, held by an actor of a killed session of the run: the new session takes it back at once
     (the run's lock says that actor is dead) and its actor plays it. That actor is killed mid-job: said in one line,
     the job back in the queue at once, another actor started, which takes it. The run ends while that one plays:
     its loop is told to stop, gives the job back (not counted as a try) and leaves, its worker row stopped, its
-    process gone: nothing plays on after the run, and the next session's actors take the job at once."""
+    process gone: nothing plays on after the run, and the next session's actors take the job at once. Ray's news of
+    the dead actor is on stderr: stdout is the JSON's under --json."""
     from selfplay_cli.train.ray_eval import RayEvaluator
 
     league, snap = rated_league
@@ -130,6 +131,8 @@ def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rate
     assert all(w.stopped_at is not None and w.holding == () for w in workers.values())
     assert took < 10 and len(notes) == 1  # the second left by itself: not killed
     assert _gone(workers[second].pid)
+    out, err = capsys.readouterr()
+    assert "A worker died or was killed" in err and out == ""
 
 
 

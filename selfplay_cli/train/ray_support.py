@@ -52,7 +52,28 @@ def connect(address: str = "", *, num_cpus: int | None = None) -> bool:
     except (ConnectionError, TimeoutError, RuntimeError, ValueError) as e:
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
         raise MarlIOError(f"cannot reach the Ray cluster at {where}: {first}") from None
+    _errors_to_stderr()
     return True
+
+
+def _errors_to_stderr() -> None:
+    """Ray's news of its workers' deaths ("(raylet) A worker died or was killed ...") on stderr, not stdout: the
+    driver prints them from a thread of its own (``log_to_driver`` or not) on stdout, which under ``--json`` is
+    the JSON's alone. Ray calls its module's ``print_to_stdstream`` for each; it is given the line marked as an
+    error. (Nothing is changed where a Ray without that function is installed.)"""
+    try:
+        from ray._private import worker
+    except ImportError:
+        return
+    show = getattr(worker, "print_to_stdstream", None)
+    if show is None or getattr(show, "marl_stderr", False):
+        return
+
+    def to_stderr(data: dict[str, Any], *args: Any, **kwargs: Any) -> None:
+        show({**data, "is_err": True}, *args, **kwargs)
+
+    to_stderr.marl_stderr = True  # type: ignore[attr-defined]
+    worker.print_to_stdstream = to_stderr
 
 
 def _reachable(address: str) -> None:
