@@ -48,10 +48,9 @@ __all__ = ["ACTOR_ROLE", "MAX_REPLACED", "RATING_ACTOR_CPUS", "START_SECONDS", "
 
 RATING_ACTOR_CPUS = 0
 """The CPUs each rating actor asks Ray for: none, so that it is scheduled beside the rollout actors whatever they
-take. Rating games are a sideline of training, as the local rating worker is a process beside the trainer that the
-system shares with it. A run that also steps its games on Ray
-actors (``--executor ray``) gives each rollout actor a CPU, and Ray started for a run counts this machine's cores:
-a rating actor asking for even half a CPU would wait behind the rollout actors until training ends."""
+take. Ray started for a run counts this machine's cores, and the rollout actors of ``--executor ray`` may ask for
+all of them: a rating actor asking for even half a CPU would then wait until training ends. Rating games are a
+sideline of training, as the local rating worker is a process beside the trainer that the system shares with it."""
 ACTOR_ROLE = "ray"  # the actors' worker names: ray@<host>:<pid>
 STOP_SECONDS = 30.0  # an actor told to stop leaves within this long (at its next game report) or is killed
 MAX_REPLACED = 3  # actors started in a run in place of ones that died, before their share is left to the others
@@ -109,7 +108,7 @@ class RayEvaluator(RemoteEvaluator):
         self.stop_seconds, self.start_seconds = stop_seconds, start_seconds
         self.replaced = 0  # actors started in place of one that died
         self._actors: list[Any] = []
-        self._names: list[Any] = []  # each actor's worker name (an object ref, answered before its loop starts)
+        self._names: list[Any] = []  # each actor's worker name (an object ref, answered at once)
         self._loops: list[Any] = []  # each actor's worker loop (an object ref, ready once the loop has ended)
         self._take_back()
         self._ray = RayConnection(address)
@@ -123,8 +122,8 @@ class RayEvaluator(RemoteEvaluator):
             else:
                 where = "SPREAD"
             # not detached (lifetime None): owned by this process, the actors end with it however it ends; not
-            # restarted by Ray (a restarted actor would be a new worker while its old row still held the job)
-            # (two threads: stop() is answered while work() runs)
+            # restarted by Ray (a restarted actor would be a new worker while its old row still held the job); two
+            # threads, so that stop() is answered while work() runs
             self._cls = ray.remote(RatingActor).options(num_cpus=RATING_ACTOR_CPUS, lifetime=None,
                                                         scheduling_strategy=where, max_restarts=0,
                                                         max_concurrency=2)
@@ -147,7 +146,7 @@ class RayEvaluator(RemoteEvaluator):
         home = None if self.league.home is None else str(self.league.home)
         actor = self._cls.remote(self.league.url.render_as_string(hide_password=False), home, self.batch)
         self._actors.append(actor)
-        self._names.append(actor.name.remote())  # (sent first: answered before the loop starts)
+        self._names.append(actor.name.remote())
         self._loops.append(actor.work.remote())
 
     def poll(self) -> list[Any]:
@@ -158,10 +157,11 @@ class RayEvaluator(RemoteEvaluator):
         """:meth:`RemoteEvaluator.wait`, once the actors have joined the queue (so the run does not play its
         gauntlets itself merely because they were still starting); then the actors are stopped."""
         since = time.monotonic()
+        self._check_actors()  # (a dead actor's worker row would pass for one that serves)
         while self.pending and self._loops and not self.serving() and time.monotonic() - since < self.start_seconds:
-            self._check_actors()
             self._tick(on_wait, force=True)
             time.sleep(self.poll_seconds)
+            self._check_actors()
         done = super().wait(on_wait)
         if not self.pending:
             self._stop_actors()
