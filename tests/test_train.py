@@ -196,6 +196,7 @@ def test_train_flag_defaults_are_the_config_defaults():
              "games": cfg.games, "snapshot_every": cfg.snapshot_every, "snapshot_steps": cfg.snapshot_steps,
              "swap_every": cfg.swap_every, "league_games": cfg.league_games, "eval_games": cfg.eval_games,
              "eval_older": cfg.eval_older, "eval_inline": cfg.eval_inline, "eval": cfg.eval, "eval_wait": cfg.eval_wait,
+             "eval_actors": cfg.eval_actors,
              "opponents": mm.mode, "window": mm.window, "latest_ratio": mm.latest_ratio, "device": cfg.device}
     assert {k: params[k].default for k in flags} == flags
 

@@ -229,7 +229,7 @@ def test_a_cancelled_gauntlet_leaves_its_snapshots_unrated_in_one_line(rated_lea
 
 # -- the option -------------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize(("args", "needle"), [
-    (["--eval", "cloud"], "--eval must be one of local, inline, remote, not 'cloud'"),
+    (["--eval", "cloud"], "--eval must be one of local, inline, remote, ray, not 'cloud'"),
     (["--no-wait"], "--no-wait is for --eval remote"),
     (["--eval", "inline", "--no-wait"], "--no-wait is for --eval remote"),
     (["--eval", "remote", "--eval-inline"], "--eval-inline is --eval inline: it cannot go with --eval remote"),

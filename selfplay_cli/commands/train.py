@@ -78,11 +78,15 @@ def train(
                                             "clear. 0: no rating games.")] = 8,
     eval_older: Annotated[int, typer.Option("--eval-older", min=0, max=1_000, help="Older snapshots of the run in "
                                             "each gauntlet, besides the predecessor and the best.")] = 2,
-    eval: Annotated[str, typer.Option("--eval", metavar="local|inline|remote", help="Who plays the rating games: "
-                                      "local, a worker process beside training; inline, the training process "
+    eval: Annotated[str, typer.Option("--eval", metavar="local|inline|remote|ray", help="Who plays the rating "
+                                      "games: local, a worker process beside training; inline, the training process "
                                       "(training paused); remote, the league's workers (marl worker, on any "
                                       "machine), from its work queue, this process playing what no worker takes "
-                                      "at the run's end.")] = "local",
+                                      "at the run's end; ray, queue workers on Ray actors started for the run "
+                                      "(--eval-actors; --ray-address joins a cluster).")] = "local",
+    eval_actors: Annotated[int, typer.Option("--eval-actors", min=1, max=1_000, help="--eval ray: Ray actors "
+                                             "playing the run's rating games (each a marl worker on the run's "
+                                             "gauntlets; they stop when the run ends).")] = 1,
     eval_inline: Annotated[bool, typer.Option("--eval-inline", help="Same as --eval inline.")] = False,
     eval_wait: Annotated[bool, typer.Option("--wait/--no-wait", help="--eval remote: the run's end waits for its "
                                             "rating games (showing how many are left and which workers play "

@@ -19,11 +19,14 @@ from ._output import err_console
 if TYPE_CHECKING:
     from ..train.progress import Standing, TrainReport
 
+QUEUED = ("remote", "ray")
+"""The ``--eval`` modes whose gauntlets are jobs of the league's queue (in the run's batch, :func:`run_batch`)."""
+
 
 def report_json(report: TrainReport, eval: str = "local") -> dict[str, Any]:
     """``marl train --json``: the whole run's figures (every session of a resumed run), and this session's
     (``session_*``; the rate and the rating games' time are this session's too). ``eval``: who played the rating
-    games (``--eval``); ``rating_batch``: the run's batch in the league's queue (``--eval remote``), and
+    games (``--eval``); ``rating_batch``: the run's batch in the league's queue (``--eval remote`` or ``ray``), and
     ``rating_jobs_left`` its gauntlets not played yet (``--no-wait``), while ``best`` is null."""
     return {"run": report.run, "steps": report.steps, "episodes": report.episodes, "seconds": round(report.seconds, 1),
             "sessions": report.sessions, "rating_games": report.eval_games, "snapshots": report.snapshots,
@@ -33,7 +36,7 @@ def report_json(report: TrainReport, eval: str = "local") -> dict[str, Any]:
             "session_train_seconds": round(report.train_seconds, 1),
             "session_rating_games": report.session_eval_games, "steps_per_second": round(report.steps_per_second),
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
-            "rating": eval, "rating_batch": run_batch(report.run) if eval == "remote" else None,
+            "rating": eval, "rating_batch": run_batch(report.run) if eval in QUEUED else None,
             "rating_jobs_left": report.rating_left,
             "best": (None if report.rating_left  # not decided before the final gauntlet and the playoff are in
                      else [_best_json(r) for r in report.side_bests] if report.side_bests  # a game rated per side
@@ -60,7 +63,8 @@ def describe_run(report: TrainReport, eval: str = "local") -> str:
     else:
         when = (f"in {report.sessions} sessions, {report.seconds:.0f} s in all (this session: "
                 f"{report.session_steps:,} steps in {report.session_seconds:.0f} s, {rate})")
-    where = {"inline": "inline", "remote": "through the league's queue"}.get(eval, "beside training")
+    where = {"inline": "inline", "remote": "through the league's queue",
+             "ray": "on Ray actors, through the league's queue"}.get(eval, "beside training")
     this = f"{report.session_eval_games:,} of them this session, " if report.sessions > 1 else ""
     games = f"{report.eval_games:,} rating games"
     if report.rating_left:

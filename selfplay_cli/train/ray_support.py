@@ -39,6 +39,7 @@ def connect(address: str = "", *, num_cpus: int | None = None) -> bool:
     if where:
         _reachable(where)
     if ray.is_initialized():
+        _errors_to_stderr()
         return False
     kwargs: dict[str, Any] = {"include_dashboard": False, "logging_level": logging.ERROR, "log_to_driver": False,
                               "configure_logging": True}
@@ -58,20 +59,22 @@ def connect(address: str = "", *, num_cpus: int | None = None) -> bool:
 
 
 def _errors_to_stderr() -> None:
-    """Ray's driver prints what its workers report (an actor that died, say) on stdout; a run's stdout is its
-    ``--json`` report alone, so they go to stderr instead."""
+    """Ray's news of its workers' deaths ("(raylet) A worker died or was killed ...") on stderr, not stdout: the
+    driver prints them from a thread of its own (``log_to_driver`` or not) on stdout, which under ``--json`` is
+    the JSON's alone. Ray calls its module's ``print_to_stdstream`` for each; it is given the line marked as an
+    error. (Nothing is changed where a Ray without that function is installed.)"""
     try:
         from ray._private import worker
-    except ImportError:  # (a Ray without this module: nothing to redirect)
+    except ImportError:
         return
-    show = worker.print_to_stdstream
-    if getattr(show, "to_stderr", False):
+    show = getattr(worker, "print_to_stdstream", None)
+    if show is None or getattr(show, "marl_stderr", False):
         return
 
-    def to_stderr(data: dict[str, Any], ignore_prefix: bool) -> None:
-        show({**data, "is_err": True}, ignore_prefix)
+    def to_stderr(data: dict[str, Any], *args: Any, **kwargs: Any) -> None:
+        show({**data, "is_err": True}, *args, **kwargs)
 
-    to_stderr.to_stderr = True  # type: ignore[attr-defined]
+    to_stderr.marl_stderr = True  # type: ignore[attr-defined]
     worker.print_to_stdstream = to_stderr
 
 

@@ -29,8 +29,9 @@ PRESETS = ("seed000",)
 batch, buffer, target period and epsilon schedule; docs/history/training.md says where it comes from)."""
 
 FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
-                 "snapshot_steps", "eval_games", "eval_older", "eval", "eval_wait", "eval_playoff", "swap_every",
-                 "tensorboard", "league_games", "seats", "executor", "actors", "ray_address", "fragment_steps")
+                 "snapshot_steps", "eval_games", "eval_older", "eval", "eval_wait", "eval_actors", "eval_playoff",
+                 "swap_every", "tensorboard", "league_games", "seats", "executor", "actors", "ray_address",
+                 "fragment_steps")
 """Options whose value is a top-level setting of the same name."""
 
 OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio"}

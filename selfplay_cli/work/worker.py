@@ -2,10 +2,11 @@
 empty, and keep going through a database that went away for a while.
 
 Stopping: Ctrl-C or SIGTERM gives the job in play back to the queue at once (it is not counted as a try) and the
-worker leaves (exit 130 or 143); SIGKILL leaves the job leased until its lease lapses (``scavenge``), when another
-worker takes it. A database that cannot be reached stops nothing: the worker says so once and tries again with a
-growing wait; games played while it was away are stored when it is back (the job's key keeps them from counting
-twice if another worker took the job meanwhile).
+worker leaves (exit 130 or 143), and so does ``stop()`` turning true (a worker run by another program: ``marl train
+--eval ray``'s actors, :mod:`selfplay_cli.train.ray_eval`); SIGKILL leaves the job leased until its lease lapses
+(``scavenge``), when another worker takes it. A database that cannot be reached stops nothing: the worker says so
+once and tries again with a growing wait; games played while it was away are stored when it is back (the job's key
+keeps them from counting twice if another worker took the job meanwhile).
 """
 
 from __future__ import annotations
@@ -45,6 +46,11 @@ class WorkerOptions:
     poll: float = 1.0
 
 
+class _Stopped(BaseException):
+    """``stop()`` said so while a job was in play: raised from its games' reports, past the job's own error handling
+    (as Ctrl-C is), to the worker loop, which gives the job back."""
+
+
 @dataclass
 class WorkerReport:
     """What a worker did: jobs done (stored by it), counted (finished by another first), failed, lost; games."""
@@ -82,8 +88,19 @@ def _retrying(fn: Callable[[], Any], say: Callable[[str], None], what: str) -> A
 
 def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], None] = lambda _: None,
                on_job: Callable[[Outcome], None] | None = None,
-               on_games: Callable[[int], None] | None = None) -> WorkerReport:
-    """Work the queue of ``league`` as ``options`` say (see the module docstring); what was done."""
+               on_games: Callable[[int], None] | None = None,
+               stop: Callable[[], bool] | None = None) -> WorkerReport:
+    """Work the queue of ``league`` as ``options`` say (see the module docstring); what was done. ``stop()`` is asked
+    before each claim, at each look at an empty queue and at each game report of the job in play: once it is true
+    the worker leaves, the job in play given back to the queue at once."""
+    stopped = stop or (lambda: False)
+
+    def counted(n: int) -> None:
+        if stopped():
+            raise _Stopped
+        if on_games is not None:
+            on_games(n)
+
     name = options.name or worker_name()
     wid = _retrying(lambda: league.add_worker(name, socket.gethostname(), os.getpid(), serves=options.batches), say,
                     "league unreachable")
@@ -91,7 +108,8 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
     idle = options.poll
     job: JobRow | None = None
     try:
-        while options.max_jobs is None or report.done + report.counted + report.failed < options.max_jobs:
+        while (options.max_jobs is None or report.done + report.counted + report.failed < options.max_jobs) \
+                and not stopped():
             job = _retrying(lambda: league.claim(wid, batches=options.batches, scavenge=options.scavenge), say,
                             "league unreachable")
             if job is None:
@@ -103,8 +121,12 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
                 _retrying(lambda: league.worker_beat(wid), say, "league unreachable")
                 continue
             idle = options.poll
-            out = play_leased(league, wid, job, beat=options.beat, device=options.device, parallel=options.parallel,
-                              on_games=on_games, retry=lambda fn: _retrying(fn, say, "league unreachable"))
+            try:
+                out = play_leased(league, wid, job, beat=options.beat, device=options.device,
+                                  parallel=options.parallel, on_games=counted,
+                                  retry=lambda fn: _retrying(fn, say, "league unreachable"))
+            except _Stopped:
+                break
             job = None
             _count(report, out)
             if on_job is not None:
