@@ -112,6 +112,21 @@ def main() -> None:
             else:
                 extra = f"{'-':>14}{'-':>11}{'-':>11}{'-':>11}{'-':>10}"
             print(f"  {name:<14}{r['steps_per_second']:>10,.0f}{speed:>9}{r['driver_peak_mb']:>11.0f}{extra}")
+        one_actor = next((r for r in rows if r["actors"] == 1), None)
+        if one_actor is not None:
+            print("  " + project(one_actor))
+
+
+def project(r: dict) -> str:
+    """Steps/s with more actors (a core each), projected from the one-actor run: an update's time is the actors'
+    stepping, shared N ways, plus what does not shrink with N (the learner, the trainer's bookkeeping, moving)."""
+    per_fragment = r["steps"] / r["fragments"]
+    stepping = r["actor_ms"] / 1000
+    fixed = (r["update_ms"] - r["actor_ms"]) / 1000
+    rates = {n: per_fragment / (stepping / n + fixed) for n in (2, 4, 8, 16)}
+    return (f"projected from 1 actor (stepping {1000 * stepping:.0f} ms, the rest {1000 * fixed:.0f} ms an "
+            "update): " + ", ".join(f"{n} actors {v:,.0f}" for n, v in rates.items())
+            + f"; at most {per_fragment / fixed:,.0f} steps/s however many")
 
 
 if __name__ == "__main__":
