@@ -199,6 +199,16 @@ def test_a_pettingzoo_game_with_turns_and_masks_through_actors_is_the_local_run(
 
 
 @pytest.mark.slow
+def test_one_agent_for_the_whole_team_on_the_lander_through_actors_is_the_local_run(ray_local, tmp_path):
+    kw = dict(env="lander", env_options={}, agents=2, sharing="sa", steps=4096, snapshot_steps=2048,
+              ppo=PPOConfig(rollout_steps=64, minibatches=2, update_epochs=1))
+    local, rep_l, snaps_l, _, _ = _train(tmp_path / "local", **kw)
+    ray, rep_r, snaps_r, _, _ = _train(tmp_path / "ray", executor="ray", actors=2, **kw)
+    assert rep_l.episodes == rep_r.episodes > 0  # (SA: one decision a game, placed by game, not by seat)
+    assert _digest(local.learners) == _digest(ray.learners) and snaps_l == snaps_r
+
+
+@pytest.mark.slow
 def test_an_actor_killed_mid_run_is_restarted_and_the_run_loses_nothing(ray_local, tmp_path):
     league = League.open(tmp_path / "league")
     cfg = TrainConfig(env="pong", steps=40_960, games=16, snapshot_steps=8192, snapshot_every=0, eval_games=0,
