@@ -13,6 +13,9 @@ import contextlib
 import logging
 import os
 import socket
+import sys
+import tempfile
+from collections.abc import Iterator
 from types import ModuleType
 from typing import Any
 
@@ -49,13 +52,45 @@ def connect(address: str = "", *, num_cpus: int | None = None) -> bool:
         kwargs["num_cpus"] = num_cpus or os.cpu_count() or 1
         # the workers find the package as this process does (an editable install, or the current folder)
         kwargs["runtime_env"] = {"env_vars": {"SDL_VIDEODRIVER": "dummy", "SDL_AUDIODRIVER": "dummy"}}
-    try:
-        ray.init(**kwargs)
+    kept = _Kept()
+    try:  # joining, Ray's core says each failed try on stderr, for 20 s: one line says it all
+        with _stderr_kept() if where else contextlib.nullcontext(kept) as kept:
+            ray.init(**kwargs)
     except (ConnectionError, TimeoutError, RuntimeError, ValueError) as e:
+        said = kept.text
         first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        if "InvalidAuthToken" in said or "Unauthenticated" in said:
+            first = ("it asks for a token this process does not have (Ray 2.59 and later): set RAY_AUTH_MODE=token "
+                     "here, with the head's token in ~/.ray/auth_token or RAY_AUTH_TOKEN (ray get-auth-token prints "
+                     "it)")
         raise MarlIOError(f"cannot reach the Ray cluster at {where}: {first}") from None
     _errors_to_stderr()
     return True
+
+
+class _Kept:
+    """What this process wrote on its stderr while it was held (:func:`_stderr_kept`), once the block has ended."""
+
+    text = ""
+
+
+@contextlib.contextmanager
+def _stderr_kept() -> Iterator[_Kept]:
+    """Hold what this process writes on its stderr (file descriptor 2: Ray's C++ core writes there directly) in a
+    temporary file for the length of the block; :attr:`_Kept.text` has it afterwards."""
+    kept = _Kept()
+    with tempfile.TemporaryFile() as held:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(held.fileno(), 2)
+        try:
+            yield kept
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            held.seek(0)
+            kept.text = held.read().decode(errors="replace")
 
 
 def _errors_to_stderr() -> None:
