@@ -211,7 +211,7 @@ def test_one_agent_for_the_whole_team_on_the_lander_through_actors_is_the_local_
 @pytest.mark.slow
 def test_an_actor_killed_mid_run_is_restarted_and_the_run_loses_nothing(ray_local, tmp_path):
     league = League.open(tmp_path / "league")
-    cfg = TrainConfig(env="pong", steps=40_960, games=16, snapshot_steps=8192, snapshot_every=0, eval_games=0,
+    cfg = TrainConfig(env="pong", steps=24_576, games=16, snapshot_steps=8192, snapshot_every=0, eval_games=0,
                       run="k", env_options={"points_to_win": 1}, executor="ray", actors=2,
                       ppo=PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1))
     league.create_run("k", "pong", cfg.to_dict(), algo="ppo")
@@ -227,11 +227,11 @@ def test_an_actor_killed_mid_run_is_restarted_and_the_run_loses_nothing(ray_loca
     trainer = Trainer(league, cfg, on_progress=watch)
     report = trainer.train()
     assert killed and len(notes) == 1 and "rollout actor 2 of 2 died" in notes[0], notes
-    assert report.steps == 40_960
+    assert report.steps == 24_576
     rows = league.players("pong", kind="snapshot")
-    moments = {p.name.rsplit("-", 1)[0] for p in rows}  # every 8,192 steps (at an update), from s0 to the final s41k
-    assert len(rows) == 12 and len(moments) == 6 and {"s0", "s41k"} <= moments, sorted(moments)
-    assert [p.step for p in rows if p.name.endswith("-left")] == [0, 8192, 16384, 24576, 32768, 40960]
+    moments = {p.name.rsplit("-", 1)[0] for p in rows}  # every 8,192 steps (at an update), from s0 to the final one
+    assert len(rows) == 8 and len(moments) == 4 and "s0" in moments, sorted(moments)
+    assert [p.step for p in rows if p.name.endswith("-left")] == [0, 8192, 16384, 24576]
     for p in rows:
         assert league.snapshot_file(p).is_file()
 
@@ -294,7 +294,7 @@ def test_a_trainer_killed_with_sigkill_resumes_on_actors(ray_local, tmp_path, ca
     import time
 
     home = tmp_path / "h"
-    args = ["train", "pong", "--agents", "2", "--games", "16", "--steps", "100000", "--snapshot-steps", "8192",
+    args = ["train", "pong", "--agents", "2", "--games", "16", "--steps", "60000", "--snapshot-steps", "8192",
             "--eval-games", "0", "--env-option", "points_to_win=1", "--executor", "ray", "--actors", "2",
             "--run", "r", "--home", str(home), "--quiet"]
     proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], stdout=subprocess.PIPE,
@@ -309,7 +309,7 @@ def test_a_trainer_killed_with_sigkill_resumes_on_actors(ray_local, tmp_path, ca
     code, out, err = run_cli(capsys, "train", "--resume", "r", "--home", str(home), "--actors", "1", "--json")
     assert code == 0, err
     report = __import__("json").loads(out)
-    assert report["steps"] == 100_000 and report["sessions"] == 2
+    assert report["steps"] == 60_000 and report["sessions"] == 2
     with League.open(home) as league:
         assert league.get_run("r").status == "finished"
-        assert {"s0-left", "s100k-left"} <= {p.name for p in league.players("pong", kind="snapshot")}
+        assert {"s0-left", "s60k-left"} <= {p.name for p in league.players("pong", kind="snapshot")}

@@ -138,9 +138,10 @@ class ShardOpponents:
 
 
 def _numpy(x: Any) -> Any:
-    if x is None or isinstance(x, np.ndarray):
-        return x
-    return x.detach().cpu().numpy()
+    """A decision's array as numpy, its own (a mask may be the game's buffer; a tensor is the learner's)."""
+    if x is None:
+        return None
+    return np.array(x) if isinstance(x, np.ndarray) else x.detach().cpu().numpy()
 
 
 def _stack(rows: list[Any]) -> np.ndarray | None:
@@ -240,15 +241,17 @@ class RolloutShard:
             a = games.acting() if games.sequential else [None] * n
             decided = [learner.decide(o[i], m[i]) for i, learner in enumerate(self.learners)]
             r, d, done = games.step([played for played, _ in decided])
-            for i in range(n):
-                obs[i].append(o[i])
-                masks[i].append(m[i])
-                acting[i].append(a[i])
+            for i in range(n):  # copies: a game's core may hand out the same buffers step after step
+                obs[i].append(np.array(o[i]))
+                masks[i].append(None if m[i] is None else np.array(m[i]))
+                acting[i].append(None if a[i] is None else np.array(a[i]))
                 taken[i].append({k: _numpy(v) for k, v in decided[i][1].items()})
-                rewards[i].append(r[i])
-                dones[i].append(d[i])
+                rewards[i].append(np.array(r[i]))
+                dones[i].append(np.array(d[i]))
             if games.truncated is not None:
-                cuts.append((t, games.truncated, games.final_obs or [None] * n, games.final_masks or [None] * n))
+                copied = [[None if x is None else np.array(x) for x in part or [None] * n]
+                          for part in (games.truncated, games.final_obs, games.final_masks)]
+                cuts.append((t, *copied))
             finished += [(t, g) for g in done]
         last = games.observe()
         out = {
