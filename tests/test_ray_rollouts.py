@@ -310,6 +310,7 @@ def test_a_trainer_killed_with_sigkill_resumes_on_actors(ray_local, tmp_path, ca
     assert code == 0, err
     report = __import__("json").loads(out)
     assert report["steps"] == 60_000 and report["sessions"] == 2
+    assert (report["executor"], report["actors"]) == ("ray", 1)  # this session: moved to one actor
     with League.open(home) as league:
         assert league.get_run("r").status == "finished"
         assert {"s0-left", "s60k-left"} <= {p.name for p in league.players("pong", kind="snapshot")}

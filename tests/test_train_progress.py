@@ -198,6 +198,7 @@ def test_the_summary_of_a_resumed_run_states_the_whole_run():
         "run pong-1: 6,000,128 game steps in 2 sessions, 95 s in all (this session: 524,288 steps in 13 s, 10 s of "
         "training at 52,429 steps/s), 256 episodes, 14 snapshots; 444 rating games (40 of them this session, "
         "beside training: 9 s, 3 s of it waited for at the end)")
+    assert "10 s of training at 52,429 steps/s on 2 Ray actors)" in describe_run(report, actors=2)  # --executor ray
     report.session_steps, report.train_seconds = 0, 0.0  # resumed after its budget was spent: nothing to train
     assert "(this session: 0 steps in 13 s, no training left to do)" in describe_run(report)
 

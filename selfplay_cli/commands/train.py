@@ -179,9 +179,9 @@ def train(
         finally:
             league.close()
     if json_out:
-        print_json(report_json(report, cfg.eval))
+        print_json(report_json(report, cfg.eval, _actors(cfg)))
         return
-    console.print(describe_run(report, cfg.eval), markup=False, highlight=False)
+    console.print(describe_run(report, cfg.eval, _actors(cfg)), markup=False, highlight=False)
     for rec in report.finals:
         console.print("  " + describe_record(rec, pending=bool(report.rating_left)), markup=False)
     if report.rating_left:
@@ -195,3 +195,8 @@ def train(
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
     if report.plot is not None and (isinstance(report.plot, Path) or not report.rating_left):  # (none yet: said)
         console.print(f"  rating curves: {report.plot}", markup=False)
+
+
+def _actors(cfg: Any) -> int:
+    """The Ray actors that stepped the session's games (0: this process did)."""
+    return cfg.actors if cfg.executor == "ray" else 0

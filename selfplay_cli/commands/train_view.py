@@ -23,11 +23,12 @@ QUEUED = ("remote", "ray")
 """The ``--eval`` modes whose gauntlets are jobs of the league's queue (in the run's batch, :func:`run_batch`)."""
 
 
-def report_json(report: TrainReport, eval: str = "local") -> dict[str, Any]:
+def report_json(report: TrainReport, eval: str = "local", actors: int = 0) -> dict[str, Any]:
     """``marl train --json``: the whole run's figures (every session of a resumed run), and this session's
     (``session_*``; the rate and the rating games' time are this session's too). ``eval``: who played the rating
     games (``--eval``); ``rating_batch``: the run's batch in the league's queue (``--eval remote`` or ``ray``), and
-    ``rating_jobs_left`` its gauntlets not played yet (``--no-wait``), while ``best`` is null."""
+    ``rating_jobs_left`` its gauntlets not played yet (``--no-wait``), while ``best`` is null. ``actors``: the Ray
+    actors this session's games were stepped on (``--executor ray``; 0: this process), as ``executor``/``actors``."""
     return {"run": report.run, "steps": report.steps, "episodes": report.episodes, "seconds": round(report.seconds, 1),
             "sessions": report.sessions, "rating_games": report.eval_games, "snapshots": report.snapshots,
             "final": [r.to_json() for r in report.finals],
@@ -38,6 +39,7 @@ def report_json(report: TrainReport, eval: str = "local") -> dict[str, Any]:
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
             "rating": eval, "rating_batch": run_batch(report.run) if eval in QUEUED else None,
             "rating_jobs_left": report.rating_left,
+            "executor": "ray" if actors else "local", "actors": actors,
             "best": (None if report.rating_left  # not decided before the final gauntlet and the playoff are in
                      else [_best_json(r) for r in report.side_bests] if report.side_bests  # a game rated per side
                      else None if report.best is None else _best_json(report.best))}
@@ -49,14 +51,15 @@ def _best_json(row: Any) -> dict[str, Any]:
     return {k: row.to_json()[k] for k in keys}
 
 
-def describe_run(report: TrainReport, eval: str = "local") -> str:
+def describe_run(report: TrainReport, eval: str = "local", actors: int = 0) -> str:
     """The summary's first line: the whole run (every session of a resumed run: steps, episodes, snapshots, rating
     games, wall time), and where the run had more than one session, this session's part and rate. ``eval``: who
-    played the rating games (``--eval``).
+    played the rating games (``--eval``); ``actors``: the Ray actors that stepped this session's games (0: none).
 
     ``run pong-1: 6,000,128 game steps in 92 s (70 s of training at 85,700 steps/s), 256 episodes, 14 snapshots;
     444 rating games (beside training: 82 s, 18 s of it waited for at the end)``"""
-    rate = (f"{report.train_seconds:.0f} s of training at {report.steps_per_second:,.0f} steps/s"
+    on = f" on {actors} Ray actor{'s' * (actors > 1)}" if actors else ""
+    rate = (f"{report.train_seconds:.0f} s of training at {report.steps_per_second:,.0f} steps/s{on}"
             if report.session_steps else "no training left to do")
     if report.sessions == 1:
         when = f"in {report.seconds:.0f} s ({rate})"
