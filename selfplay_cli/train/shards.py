@@ -297,7 +297,7 @@ class Fragment:
     _finished: dict[int, list[GameResult]] = field(default_factory=dict)
 
     @classmethod
-    def merge(cls, plan: ShardPlan, pieces: list[dict[str, Any]], games: int) -> Fragment:
+    def merge(cls, plan: ShardPlan, pieces: list[dict[str, Any]]) -> Fragment:
         """The pieces of actors ``0 .. k-1`` (in :class:`ShardPlan` order) as one fragment."""
         n = len(plan.totals)
         steps = pieces[0]["rewards"][0].shape[0]
@@ -315,13 +315,11 @@ class Fragment:
             return out
 
         taken = [{key: join("taken", i, sub=key) for key in pieces[0]["taken"][i]} for i in range(n)]
-        cuts: dict[int, tuple[list[Any], list[Any], list[Any]]] = {}
         by_step: dict[int, dict[int, tuple[list[Any], list[Any], list[Any]]]] = {}
         for k, p in enumerate(pieces):
             for t, trunc, final_obs, final_masks in p["cuts"]:
                 by_step.setdefault(t, {})[k] = (trunc, final_obs, final_masks)
-        for t, parts in by_step.items():
-            cuts[t] = _join_cut(plan, parts, pieces)
+        cuts = {t: _join_cut(plan, parts, pieces) for t, parts in by_step.items()}
         finished: dict[int, list[GameResult]] = {}
         for p in pieces:
             for t, g in p["finished"]:
