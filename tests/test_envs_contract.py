@@ -84,8 +84,10 @@ def test_seat_space_of_reads_dict_observations_and_normalises_what_policies_see(
 
 
 @pytest.mark.parametrize("obs, act, why", [
-    (spaces.Discrete(5), spaces.Discrete(2), "Discrete.*marl reads Box observations"),
-    (spaces.Dict({"observation": BOX, "extra": BOX}), spaces.Discrete(2), "not 'extra'"),
+    (spaces.Text(5), spaces.Discrete(2), "Text.*no fixed size"),
+    (spaces.Tuple([BOX, spaces.Sequence(spaces.Discrete(2))]), spaces.Discrete(2), "Sequence.*no fixed size"),
+    (spaces.Dict({"observation": BOX, "action_mask": spaces.MultiBinary(2)}), spaces.Box(-1, 1, (2,)),
+     "action_mask needs a Discrete action space"),
     (spaces.Box(0, 1, (0,)), spaces.Discrete(2), "is empty"),
     (BOX, spaces.Box(-1, 1, (2,), dtype=np.int64), "must be floating point"),
     (BOX, spaces.MultiDiscrete([[2, 2], [2, 2]]), "one flat vector"),
@@ -142,3 +144,20 @@ def test_random_multidiscrete_and_box():
     assert b[:, 1].max() > 9 and b[:, 1].min() < 1
     with pytest.raises(TypeError, match="no rule for action space"):
         random_rule(spaces.MultiBinary(2))
+
+
+def test_every_fixed_size_observation_space_is_read_flat_in_a_stated_order():
+    from selfplay_cli.envs.obs_spaces import FlatObs
+
+    space = spaces.Dict({"b": spaces.Tuple([spaces.Discrete(3, start=1), spaces.MultiBinary(2)]),
+                         "a": spaces.Box(-2, 2, (2,), dtype=np.float64), "c": spaces.MultiDiscrete([2, 3])})
+    seat = seat_space_of(space, spaces.Discrete(2))
+    assert seat.observation.shape == (12,) and seat.observation.dtype == np.float32 and not seat.mask
+    assert seat.observation.low.tolist() == [-2, -2] + [0] * 10 and seat.observation.high.tolist() == [2, 2] + [1] * 10
+    row = FlatObs(space).read({"a": np.array([0.5, -1.0]), "b": (2, np.array([1, 0])), "c": np.array([1, 2])})
+    # keys in the Dict's order (a, b, c); Discrete(3, start=1) of 2 is one-hot at 1; MultiDiscrete a one-hot per entry
+    assert row.tolist() == [0.5, -1.0, 0, 1, 0, 1, 0, 0, 1, 0, 0, 1]
+    assert seat_space_of(spaces.Discrete(5), spaces.Discrete(2)).observation.shape == (5,)
+    masked = seat_space_of(spaces.Dict({"board": spaces.MultiBinary((3, 3)), "turn": spaces.Discrete(2),
+                                        "action_mask": spaces.MultiBinary(9)}), spaces.Discrete(9))
+    assert masked.mask and masked.observation.shape == (11,)  # the mask is not read as observation

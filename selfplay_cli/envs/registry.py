@@ -197,7 +197,7 @@ def _check_action(space: spaces.Space) -> spaces.Space:
 def _check_observation(space: spaces.Space) -> spaces.Box:
     if not isinstance(space, spaces.Box):
         raise SpaceError(f"observation space {describe_space(space)} ({type(space).__name__}) is not supported: "
-                         "marl reads Box observations, or a Dict of 'observation' (a Box) and 'action_mask'")
+                         "marl reads Box, Discrete, MultiDiscrete, MultiBinary, and Tuples and Dicts of them")
     if space.shape is None or math.prod(space.shape) == 0:
         raise SpaceError(f"observation space {describe_space(space)} is empty")
     return space
@@ -206,31 +206,27 @@ def _check_observation(space: spaces.Space) -> spaces.Box:
 def seat_space_of(observation: spaces.Space, action: spaces.Space) -> SeatSpace:
     """The :class:`SeatSpace` of a seat with these gymnasium spaces, or :class:`SpaceError` saying why not.
 
-    A Dict observation space must hold ``observation`` (a Box) and may hold ``action_mask`` (MultiBinary(n) or a
-    Box of n zeros and ones, for a Discrete(n) action space), nothing else. The observation a policy reads is a
-    float32 Box with the same bounds and shape."""
-    mask = False
-    if isinstance(observation, spaces.Dict):
-        keys = set(observation.spaces)
-        if "observation" not in keys:
-            raise SpaceError(f"observation space {describe_space(observation)}: a Dict needs an 'observation' entry "
-                             "(and may have an 'action_mask')")
-        extra = sorted(keys - {"observation", "action_mask"})
-        if extra:
-            raise SpaceError(f"observation space {describe_space(observation)}: a Dict may hold only 'observation' "
-                             f"and 'action_mask', not {', '.join(map(repr, extra))}")
-        if "action_mask" in keys:
-            m = observation.spaces["action_mask"]
-            if not isinstance(action, spaces.Discrete):
-                raise SpaceError(f"an action_mask needs a Discrete action space, not {describe_space(action)}")
-            size = (int(m.n) if isinstance(m, spaces.MultiBinary) and np.ndim(m.n) == 0
-                    else (m.shape[0] if isinstance(m, spaces.Box) and len(m.shape) == 1 else None))
-            if size != int(action.n):
-                raise SpaceError(f"action_mask {describe_space(m)} must be MultiBinary({action.n}) or a Box of "
-                                 f"shape ({action.n},), one entry per action of {describe_space(action)}")
-            mask = True
-        observation = observation.spaces["observation"]
-    box = _check_observation(observation)
+    Any observation space of a fixed size is read (:class:`~selfplay_cli.envs.obs_spaces.SeatObs`): a Box as it is,
+    anything else (Discrete, MultiDiscrete, MultiBinary, Tuples and Dicts of them, nested) flattened in a stated
+    order. A top-level Dict's ``action_mask`` (MultiBinary(n) or a Box of n zeros and ones, for a Discrete(n) action
+    space) is the seat's action mask; a Dict of ``observation`` and ``action_mask`` (PettingZoo's classic games) is
+    read as its ``observation``. The observation a policy reads is a float32 Box."""
+    from .obs_spaces import SeatObs
+
+    try:
+        seat_obs = SeatObs(observation)
+    except ValueError as e:
+        raise SpaceError(f"observation space {describe_space(observation)}: {e}") from None
+    m = seat_obs.mask_space
+    if m is not None:
+        if not isinstance(action, spaces.Discrete):
+            raise SpaceError(f"an action_mask needs a Discrete action space, not {describe_space(action)}")
+        size = (int(m.n) if isinstance(m, spaces.MultiBinary) and np.ndim(m.n) == 0
+                else (m.shape[0] if isinstance(m, spaces.Box) and len(m.shape) == 1 else None))
+        if size != int(action.n):
+            raise SpaceError(f"action_mask {describe_space(m)} must be MultiBinary({action.n}) or a Box of "
+                             f"shape ({action.n},), one entry per action of {describe_space(action)}")
+    box = _check_observation(seat_obs.box)
     _check_action(action)
     if isinstance(action, spaces.Discrete) and int(action.start) != 0:  # policies play 0 .. n-1
         action = spaces.Discrete(int(action.n))
@@ -238,7 +234,7 @@ def seat_space_of(observation: spaces.Space, action: spaces.Space) -> SeatSpace:
         action = spaces.MultiDiscrete(action.nvec)
     if box.dtype != np.float32:
         box = spaces.Box(box.low.astype(np.float32), box.high.astype(np.float32), dtype=np.float32)
-    return SeatSpace(box, action, mask)
+    return SeatSpace(box, action, seat_obs.mask)
 
 
 def check_seat_space(seat: SeatSpace) -> None:

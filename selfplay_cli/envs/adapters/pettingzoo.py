@@ -3,8 +3,9 @@ copies, which the arena steps as it steps the built-in games' cores.
 
 ``adapt(name, factory)`` calls ``factory(**options)`` once and reads the game's declaration from it:
 
-- seats: ``possible_agents`` (names, in order); per seat the observation space (a Box, or a Dict of
-  ``observation`` and ``action_mask``) and the action space (Discrete, MultiDiscrete, Box);
+- seats: ``possible_agents`` (names, in order); per seat the observation space (any of a fixed size: a Box as it is,
+  Discrete, MultiDiscrete, MultiBinary, Tuples and Dicts of them flattened, a top-level Dict's ``action_mask`` taken
+  as the seat's mask: :mod:`selfplay_cli.envs.obs_spaces`) and the action space (Discrete, MultiDiscrete, Box);
 - turns: a ``ParallelEnv`` is simultaneous, an ``AECEnv`` sequential (its ``agent_selection`` acts);
 - kind: ``env.metadata["marl_kind"]`` (``"two-sides"``, ``"cooperative"`` or ``"free-for-all"``); by default a
   game of 2 seats is two-sides, of one seat cooperative, of more free-for-all (cooperative games must say so).
@@ -41,6 +42,7 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 
+from ..obs_spaces import SeatObs
 from ..registry import KINDS, EnvError, EnvSpec, IllegalActionError, SeatSpace, SpaceError, random_bot, seat_space_of
 
 __all__ = ["Layout", "PettingZooConfig", "PettingZooCore", "PettingZooRenderer", "adapt", "probe"]
@@ -360,7 +362,8 @@ class PettingZooCore:
         self._aec = layout.api == "aec"
         self._seats = [_Seat(raw, seat) for raw, seat in zip(layout.act_spaces, layout.seats, strict=True)]
         self._masked = any(s.mask for s in self._seats)
-        self._dict_obs = [isinstance(o, spaces.Dict) for o in layout.obs_spaces]
+        self._reads = [SeatObs(o) for o in layout.obs_spaces]  # each seat's observation as a policy reads it
+        self._plain = all(r.raw is r.box for r in self._reads)  # every seat's a Box, read as it is
         shapes = {s.observation.shape for s in layout.seats}
         self._stacked = len(shapes) == 1
         self.envs: list[Any] = []
@@ -404,10 +407,9 @@ class PettingZooCore:
 
     # ----------------------------------------------------------------------------------------------------
     def _store(self, seat: int, g: int, o: Any) -> None:
-        if self._dict_obs[seat]:
-            self._mask[seat][g] = o.get("action_mask")
-            o = o["observation"]
-        self._obs[seat][g] = o
+        self._obs[seat][g], mask = self._reads[seat].split(o)
+        if isinstance(self.layout.obs_spaces[seat], spaces.Dict):
+            self._mask[seat][g] = mask
 
     def reset(self, games: Any, seeds: Any) -> None:
         """Start new games in the slots ``games``, copy g with ``reset(seed=seeds[i])``."""
@@ -569,7 +571,7 @@ class PettingZooCore:
 
     def _step_parallel(self, games: list[int], cols: list[list[Any]], rewards: np.ndarray) -> None:
         seat_of, envs, live_agents, obs_of = self._seat_of, self.envs, self._live_agents, self._obs
-        plain = not any(self._dict_obs)
+        plain = self._plain
         for g in games:  # the hot loop: plain loops, no comprehensions (each would build a function in 3.11)
             live = live_agents[g]
             act = {}

@@ -1,0 +1,144 @@
+"""Every gymnasium observation space as what a policy reads: one flat float32 vector, in a stated order.
+
+:class:`FlatObs` reads observations of one space into a float32 row of :attr:`FlatObs.size` numbers:
+
+* **Box** (any shape, any dtype): its numbers in C order, as float32;
+* **Discrete(n, start)**: one-hot, n numbers (a 1 at ``x - start``);
+* **MultiDiscrete(nvec, start)**: a one-hot per entry (in C order), side by side;
+* **MultiBinary(n)** (any shape): its zeros and ones, in C order;
+* **Tuple**: its parts in order; **Dict**: its entries in the Dict's own key order (gymnasium sorts the keys of a
+  plain dict), nested spaces read the same way all the way down.
+
+The bounds of the row (:meth:`FlatObs.box`) are the parts' bounds (0 and 1 for one-hots and binaries), so a policy's
+input is checked as any Box observation is. A game's ``action_mask`` is not read here: the adapter takes it out of
+a top-level Dict first (:func:`~selfplay_cli.envs.registry.seat_space_of`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+__all__ = ["FlatObs", "flat_obs"]
+
+
+class FlatObs:
+    """Reads observations of ``space`` as flat float32 rows (see the module docstring); :class:`ValueError` for a
+    space it cannot read (Text, Graph, Sequence: no fixed size), naming it."""
+
+    def __init__(self, space: spaces.Space) -> None:
+        self.space = space
+        self._parts: list[tuple[str, Any, int, int]] = []  # (kind, space, offset, size), leaves in reading order
+        lows: list[np.ndarray] = []
+        highs: list[np.ndarray] = []
+        self.size = self._plan(space, lows, highs)
+        if self.size == 0:
+            raise ValueError(f"observation space {space} holds no numbers")
+        self.low = np.concatenate(lows).astype(np.float32)
+        self.high = np.concatenate(highs).astype(np.float32)
+
+    def _plan(self, space: spaces.Space, lows: list[np.ndarray], highs: list[np.ndarray], offset: int = 0) -> int:
+        """Lay out the leaves of ``space`` from ``offset``; returns the numbers they take."""
+        if isinstance(space, spaces.Box):
+            n = math.prod(space.shape)
+            kind = "box"
+            lows.append(np.asarray(space.low, dtype=np.float64).reshape(-1))
+            highs.append(np.asarray(space.high, dtype=np.float64).reshape(-1))
+        elif isinstance(space, spaces.Discrete):
+            n = int(space.n)
+            kind = "discrete"
+        elif isinstance(space, spaces.MultiDiscrete):
+            n = int(np.sum(space.nvec))
+            kind = "multidiscrete"
+        elif isinstance(space, spaces.MultiBinary):
+            n = math.prod(np.atleast_1d(space.n).tolist())
+            kind = "binary"
+        elif isinstance(space, (spaces.Tuple, spaces.Dict)):
+            at = offset
+            for sub in (space.spaces if isinstance(space, spaces.Tuple) else space.spaces.values()):
+                at += self._plan(sub, lows, highs, at)
+            return at - offset
+        else:
+            raise ValueError(f"observation space {space} ({type(space).__name__}) has no fixed size: marl reads Box, "
+                             "Discrete, MultiDiscrete, MultiBinary, and Tuples and Dicts of them")
+        if kind != "box":
+            lows.append(np.zeros(n))
+            highs.append(np.ones(n))
+        self._parts.append((kind, space, offset, n))
+        return n
+
+    def box(self) -> spaces.Box:
+        """The flat float32 Box a policy reads."""
+        return spaces.Box(self.low, self.high, dtype=np.float32)
+
+    def read(self, x: Any, out: np.ndarray | None = None) -> np.ndarray:
+        """One observation as a flat float32 row (into ``out`` when given)."""
+        row = np.zeros(self.size, dtype=np.float32) if out is None else out
+        if out is not None:
+            row[:] = 0.0
+        leaves = _leaves(self.space, x)
+        for (kind, space, offset, n), value in zip(self._parts, leaves, strict=True):
+            if kind == "box" or kind == "binary":
+                row[offset:offset + n] = np.asarray(value, dtype=np.float32).reshape(-1)
+            elif kind == "discrete":
+                row[offset + int(value) - int(space.start)] = 1.0
+            else:
+                values = np.asarray(value).reshape(-1) - np.asarray(space.start).reshape(-1)
+                starts = np.concatenate(([0], np.cumsum(np.asarray(space.nvec).reshape(-1))[:-1]))
+                row[offset + starts + values] = 1.0
+        return row
+
+
+def _leaves(space: spaces.Space, x: Any) -> list[Any]:
+    """The leaf values of observation ``x`` of ``space``, in :class:`FlatObs`'s reading order."""
+    if isinstance(space, spaces.Tuple):
+        return [v for sub, part in zip(space.spaces, x, strict=True) for v in _leaves(sub, part)]
+    if isinstance(space, spaces.Dict):
+        return [v for key, sub in space.spaces.items() for v in _leaves(sub, x[key])]
+    return [x]
+
+
+def flat_obs(space: spaces.Space) -> FlatObs | None:
+    """The reader of a space that is not already a flat-readable Box (None for a Box: read as it is)."""
+    return None if isinstance(space, spaces.Box) else FlatObs(space)
+
+
+class SeatObs:
+    """A seat's observation as a game gives it, and as a policy reads it: an ``action_mask`` entry of a top-level
+    Dict is the seat's action mask (not read as observation); what remains is ``observation`` alone where the Dict
+    holds only that (PettingZoo's classic games), else the rest of the Dict; it is read as it is where it is a Box,
+    else flattened by :class:`FlatObs`. :attr:`box` is what the policy reads, :attr:`mask` whether there is a mask."""
+
+    def __init__(self, space: spaces.Space) -> None:
+        self.raw = space
+        self.mask_space: spaces.Space | None = None
+        self._key: str | None = None  # the entry read as the observation (None: the rest of the Dict, or all)
+        self._rest: tuple[str, ...] | None = None  # a Dict's entries read, where more than 'observation'
+        inner = space
+        if isinstance(space, spaces.Dict):
+            rest = {k: v for k, v in space.spaces.items() if k != "action_mask"}
+            self.mask_space = space.spaces.get("action_mask")
+            if set(rest) == {"observation"}:
+                self._key, inner = "observation", rest["observation"]
+            elif self.mask_space is not None:
+                self._rest, inner = tuple(rest), spaces.Dict(rest)
+        self.reader = None if isinstance(inner, spaces.Box) else FlatObs(inner)
+        self.box: spaces.Space = inner if self.reader is None else self.reader.box()
+
+    @property
+    def mask(self) -> bool:
+        return self.mask_space is not None
+
+    def split(self, x: Any) -> tuple[Any, Any]:
+        """One observation as the game gives it: (what the policy reads, the action mask or None)."""
+        mask = None
+        if isinstance(self.raw, spaces.Dict):
+            mask = x.get("action_mask")
+            if self._key is not None:
+                x = x[self._key]
+            elif self._rest is not None:
+                x = {k: x[k] for k in self._rest}
+        return (x if self.reader is None else self.reader.read(x)), mask
