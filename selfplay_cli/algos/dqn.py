@@ -204,6 +204,11 @@ class DQNLearner:
         """Our own flat float32 copy (the n-step window keeps it, so the caller may reuse its array)."""
         return np.array(obs, dtype=np.float32, order="C").reshape(len(obs), self.obs_dim)
 
+    def _check_final_given(self) -> None:
+        if self._final_missing():
+            raise ValueError("games were truncated on the last recorded step: pass their final observations "
+                             "(final_obs) to record() or update()")
+
     def _final_missing(self) -> bool:
         return (self._trunc is not None and self._trunc[1] is None) or self._held is not None
 
@@ -232,9 +237,7 @@ class DQNLearner:
         """Epsilon-greedy actions for this step's observations, and what :meth:`take` keeps of them (the actions, the
         mask): with a mask, exploration is uniform over the allowed actions and the greedy action the best allowed
         one. With a :attr:`share` (a rollout actor's rows) the draws are the whole batch's."""
-        if self._final_missing():
-            raise ValueError("games were truncated on the last recorded step: pass their final observations "
-                             "(final_obs) to record() or update()")
+        self._check_final_given()
         x = np.asarray(obs, dtype=np.float32).reshape(len(obs), self.obs_dim)
         m = fix_mask(mask, self.head, len(x))
         if m is not None:
@@ -258,9 +261,7 @@ class DQNLearner:
     def take(self, obs: np.ndarray, taken: dict[str, Any]) -> None:
         """This step's observations and the actions :meth:`decide` chose (here or in a rollout actor): they complete
         the previous step, and wait for :meth:`record` to bring their own outcome."""
-        if self._final_missing():
-            raise ValueError("games were truncated on the last recorded step: pass their final observations "
-                             "(final_obs) to record() or update()")
+        self._check_final_given()
         x = self._flat(obs)
         m = taken.get("mask")
         if m is not None:
@@ -300,9 +301,7 @@ class DQNLearner:
         ``acting``: the slots whose seat acted on this step (None: all)."""
         if self._obs is None:
             raise RuntimeError("record() without act()")
-        if self._final_missing():
-            raise ValueError("games were truncated on the last recorded step: pass their final observations "
-                             "(final_obs) to record() or update()")
+        self._check_final_given()
         rewards = np.asarray(rewards, dtype=np.float32).reshape(-1)
         dones = np.asarray(dones, dtype=np.float32).reshape(-1)
         n = len(rewards)
@@ -430,9 +429,7 @@ class DQNLearner:
         cfg = self.cfg
         if final_obs is not None and self._final_missing():
             self._give_final(final_obs, None)
-        if self._final_missing():
-            raise ValueError("games were truncated on the last recorded step: pass their final observations "
-                             "(final_obs) to record() or update()")
+        self._check_final_given()
         if not self._masked:
             self._push(self._flat(next_obs))
         k = int(self.credit) if len(self.buffer) >= max(1, cfg.learning_starts) else 0

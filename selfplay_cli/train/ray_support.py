@@ -146,10 +146,10 @@ class RayConnection:
 
 def ray_for(settings: dict[str, Any]) -> contextlib.AbstractContextManager[Any]:
     """Ray for a run whose settings (``TrainConfig.to_dict()``'s layout) put its games or its rating games on Ray
-    (``executor`` or ``eval`` ``ray``), nothing otherwise. Started here, Ray counts at least one CPU per actor and one
-    for the trainer, whatever the machine has: an actor waits for a CPU of Ray's count, not for a core."""
+    (``executor`` or ``eval`` ``ray``), nothing otherwise. Started here, Ray counts at least one CPU per rollout actor
+    and one for the trainer, whatever the machine has: an actor waits for a CPU of Ray's count, not for a core (rating
+    actors ask for none)."""
     if "ray" not in (settings.get("executor"), settings.get("eval")):
         return contextlib.nullcontext()
-    want = int(settings.get("actors", 2)) * (settings.get("executor") == "ray") + 1 + int(settings.get("eval_actors",
-                                                                                                     1))
+    want = (int(settings.get("actors", 2)) if settings.get("executor") == "ray" else 0) + 1
     return RayConnection(str(settings.get("ray_address") or ""), num_cpus=max(os.cpu_count() or 1, want))

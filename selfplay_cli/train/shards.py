@@ -94,7 +94,8 @@ class ShardOpponents:
         self.n_games = setup.layout.shape[1]
         self.learner_of_game = setup.layout.max(axis=0)
         self.rng = np.random.default_rng([seed, setup.index])
-        self.table: dict[str, Any] = {}
+        self._table: dict[str, Any] = {}
+        self._cdfs: dict[Any, tuple[np.ndarray, np.ndarray]] = {}  # per (learner, role): opponent ids, their cdf
         self.players: dict[str, int] = {}  # policy id in game results -> league player id
         self._league: Any = None
         self._cache = PolicyCache(self._load)
@@ -109,6 +110,19 @@ class ShardOpponents:
         self.players[policy.id] = pid
         return policy
 
+    @property
+    def table(self) -> dict[str, Any]:
+        return self._table
+
+    @table.setter
+    def table(self, table: dict[str, Any]) -> None:
+        """The trainer's table of a fragment; its probabilities as cumulative sums, once."""
+        self._table = table
+        self._cdfs = {}
+        for key, probs in table.get("draws", {}).items():
+            cdf = np.cumsum(np.fromiter(probs.values(), dtype=np.float64, count=len(probs)))
+            self._cdfs[key] = (np.fromiter(probs.keys(), dtype=np.int64, count=len(probs)), cdf / cdf[-1])
+
     def choose(self, slots: np.ndarray) -> list[Any]:
         """Policies for the opponent ``slots`` (flat ``seat * n + game`` of the actor's ``n`` games) of the games
         starting now."""
@@ -122,11 +136,8 @@ class ShardOpponents:
             roles = self.setup.seat_roles
             ids = np.empty(slots.size, dtype=np.int64)
             for k, (learner, seat) in enumerate(zip(learners.tolist(), seats.tolist(), strict=True)):
-                probs = self.table["draws"][(learner, None if roles is None else roles[seat])]
-                keys = np.fromiter(probs.keys(), dtype=np.int64, count=len(probs))
-                cdf = np.cumsum(np.fromiter(probs.values(), dtype=np.float64, count=len(probs)))
-                ids[k] = keys[min(int(np.searchsorted(cdf / cdf[-1], self.rng.random(), side="right")),
-                                  keys.size - 1)]
+                keys, cdf = self._cdfs[(learner, None if roles is None else roles[seat])]
+                ids[k] = keys[min(int(np.searchsorted(cdf, self.rng.random(), side="right")), keys.size - 1)]
         return [self.policy(int(pid), int(seat), int(learner))
                 for pid, seat, learner in zip(ids, seats, learners, strict=True)]
 
@@ -324,9 +335,11 @@ class Fragment:
         for p in pieces:
             for t, g in p["finished"]:
                 finished.setdefault(t, []).append(g)
-        return cls(steps, [join("obs", i) for i in range(n)], [join("masks", i) for i in range(n)],  # type: ignore
-                   [join("acting", i) for i in range(n)], taken, [join("rewards", i) for i in range(n)],  # type: ignore
-                   [join("dones", i) for i in range(n)], cuts, finished)  # type: ignore[arg-type]
+        def per_learner(key: str) -> list[Any]:
+            return [join(key, i) for i in range(n)]
+
+        return cls(steps, per_learner("obs"), per_learner("masks"), per_learner("acting"), taken,
+                   per_learner("rewards"), per_learner("dones"), cuts, finished)
 
     def obs(self, t: int) -> list[np.ndarray]:
         return [o[t] for o in self._obs]
