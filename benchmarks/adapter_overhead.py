@@ -5,7 +5,8 @@ Run: python benchmarks/adapter_overhead.py [--seconds 0.5] [--rounds 5] [--copie
 For each game it prints game steps/s both ways and the ratio direct / adapter (the adapter's cost per game step as
 a factor; the median of alternating rounds); the target is a ratio below 2 for every game. Games: pong's
 PettingZoo view (parallel, the fastest game here, so the adapter's share is the largest), the test suite's
-rendezvous (parallel, Box actions, 3 seats) and tic-tac-toe (AEC, action masks).
+rendezvous (parallel, Box actions, 3 seats), tic-tac-toe (AEC, action masks), cue (Discrete observations, read
+one-hot) and race (a nested Dict/Tuple observation flattened, with a top-level action mask).
 
 Both ways play random legal actions drawn ahead of time, and both do what a player needs each step: the direct
 loop reads the observations ``step`` returns (``last()`` for AEC) and resets finished games; through the adapter
@@ -31,6 +32,8 @@ GAMES = {
     "pong (parallel)": "pong",
     "rendezvous (parallel, Box)": "tests.games.rendezvous:parallel_env",
     "tictactoe (AEC, masks)": "tests.games.tictactoe:env",
+    "cue (Discrete obs)": "tests.games.cue:parallel_env",
+    "race (Dict/Tuple obs, masks)": "tests.games.race:parallel_env",
 }
 
 
@@ -50,13 +53,21 @@ def direct(name: str, seconds: float) -> float:
     draws = [_random_actions(s, 4096, rng) for s in spaces]
     steps, t0 = 0, time.perf_counter()
     if spec.turns == "simultaneous":
-        env.reset(seed=0)
+        obs, _ = env.reset(seed=0)
         while time.perf_counter() - t0 < seconds:
             for i in range(256):
                 j = (steps + i) & 4095
-                obs, *_ = env.step({a: draws[s][j] for s, a in enumerate(agents)})
+                act = {}
+                for s, a in enumerate(agents):
+                    o = obs[a]
+                    if isinstance(o, dict) and "action_mask" in o:  # the k-th legal action, k drawn ahead
+                        legal = np.flatnonzero(o["action_mask"])
+                        act[a] = int(legal[draws[s][j] % len(legal)])
+                    else:
+                        act[a] = draws[s][j]
+                obs, *_ = env.step(act)
                 if not env.agents:
-                    env.reset()
+                    obs, _ = env.reset()
             steps += 256
     else:
         env.reset(seed=0)

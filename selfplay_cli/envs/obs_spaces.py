@@ -17,12 +17,13 @@ a top-level Dict first (:func:`~selfplay_cli.envs.registry.seat_space_of`).
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["FlatObs", "flat_obs"]
+__all__ = ["FlatObs", "SeatObs"]
 
 
 class FlatObs:
@@ -39,6 +40,8 @@ class FlatObs:
             raise ValueError(f"observation space {space} holds no numbers")
         self.low = np.concatenate(lows).astype(np.float32)
         self.high = np.concatenate(highs).astype(np.float32)
+        self._one_hot = any(kind in ("discrete", "multidiscrete") for kind, *_ in self._parts)
+        self._writers = _writers(self._parts, _paths(space))
 
     def _plan(self, space: spaces.Space, lows: list[np.ndarray], highs: list[np.ndarray], offset: int = 0) -> int:
         """Lay out the leaves of ``space`` from ``offset``; returns the numbers they take."""
@@ -76,34 +79,48 @@ class FlatObs:
 
     def read(self, x: Any, out: np.ndarray | None = None) -> np.ndarray:
         """One observation as a flat float32 row (into ``out`` when given)."""
-        row = np.zeros(self.size, dtype=np.float32) if out is None else out
-        if out is not None:
-            row[:] = 0.0
-        leaves = _leaves(self.space, x)
-        for (kind, space, offset, n), value in zip(self._parts, leaves, strict=True):
-            if kind == "box" or kind == "binary":
-                row[offset:offset + n] = np.asarray(value, dtype=np.float32).reshape(-1)
-            elif kind == "discrete":
-                row[offset + int(value) - int(space.start)] = 1.0
-            else:
-                values = np.asarray(value).reshape(-1) - np.asarray(space.start).reshape(-1)
-                starts = np.concatenate(([0], np.cumsum(np.asarray(space.nvec).reshape(-1))[:-1]))
-                row[offset + starts + values] = 1.0
+        row = np.empty(self.size, dtype=np.float32) if out is None else out
+        if self._one_hot:
+            row.fill(0.0)
+        for path, write in self._writers:
+            value = x
+            for key in path:
+                value = value[key]
+            write(row, value)
         return row
 
 
-def _leaves(space: spaces.Space, x: Any) -> list[Any]:
-    """The leaf values of observation ``x`` of ``space``, in :class:`FlatObs`'s reading order."""
+def _writers(parts: list[tuple[str, Any, int, int]], paths: list[tuple[Any, ...]]) -> list[tuple[tuple[Any, ...], Any]]:
+    """Per leaf, where it sits in an observation (its keys and indices) and a function that writes its value into a
+    row: the per-step work of :meth:`FlatObs.read` planned once, so a step costs a few Python operations a leaf."""
+    out = []
+    for (kind, space, offset, n), path in zip(parts, paths, strict=True):
+        end = offset + n
+        if kind in ("box", "binary"):
+            flat = len(space.shape) <= 1
+
+            def write(row: np.ndarray, v: Any, o: int = offset, e: int = end, flat: bool = flat) -> None:
+                row[o:e] = v if flat else np.ravel(v)
+        elif kind == "discrete":
+            def write(row: np.ndarray, v: Any, at: int = offset - int(space.start)) -> None:
+                row[at + int(v)] = 1.0
+        else:
+            nvec = np.asarray(space.nvec).reshape(-1)
+            base = offset + np.concatenate(([0], np.cumsum(nvec)[:-1])) - np.asarray(space.start).reshape(-1)
+
+            def write(row: np.ndarray, v: Any, base: np.ndarray = base) -> None:
+                row[base + np.ravel(v)] = 1.0
+        out.append((path, write))
+    return out
+
+
+def _paths(space: spaces.Space, at: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+    """The keys and indices that reach each leaf of ``space``, in :class:`FlatObs`'s reading order."""
     if isinstance(space, spaces.Tuple):
-        return [v for sub, part in zip(space.spaces, x, strict=True) for v in _leaves(sub, part)]
+        return [p for i, sub in enumerate(space.spaces) for p in _paths(sub, (*at, i))]
     if isinstance(space, spaces.Dict):
-        return [v for key, sub in space.spaces.items() for v in _leaves(sub, x[key])]
-    return [x]
-
-
-def flat_obs(space: spaces.Space) -> FlatObs | None:
-    """The reader of a space that is not already a flat-readable Box (None for a Box: read as it is)."""
-    return None if isinstance(space, spaces.Box) else FlatObs(space)
+        return [p for key, sub in space.spaces.items() for p in _paths(sub, (*at, key))]
+    return [at]
 
 
 class SeatObs:
@@ -116,17 +133,17 @@ class SeatObs:
         self.raw = space
         self.mask_space: spaces.Space | None = None
         self._key: str | None = None  # the entry read as the observation (None: the rest of the Dict, or all)
-        self._rest: tuple[str, ...] | None = None  # a Dict's entries read, where more than 'observation'
         inner = space
         if isinstance(space, spaces.Dict):
-            rest = {k: v for k, v in space.spaces.items() if k != "action_mask"}
+            rest = OrderedDict((k, v) for k, v in space.spaces.items() if k != "action_mask")
             self.mask_space = space.spaces.get("action_mask")
             if set(rest) == {"observation"}:
                 self._key, inner = "observation", rest["observation"]
-            elif self.mask_space is not None:
-                self._rest, inner = tuple(rest), spaces.Dict(rest)
+            elif self.mask_space is not None:  # the reader reads the other entries from the whole observation
+                inner = spaces.Dict(rest)
         self.reader = None if isinstance(inner, spaces.Box) else FlatObs(inner)
         self.box: spaces.Space = inner if self.reader is None else self.reader.box()
+        self._dict = isinstance(space, spaces.Dict)
 
     @property
     def mask(self) -> bool:
@@ -135,10 +152,8 @@ class SeatObs:
     def split(self, x: Any) -> tuple[Any, Any]:
         """One observation as the game gives it: (what the policy reads, the action mask or None)."""
         mask = None
-        if isinstance(self.raw, spaces.Dict):
+        if self._dict:
             mask = x.get("action_mask")
             if self._key is not None:
                 x = x[self._key]
-            elif self._rest is not None:
-                x = {k: x[k] for k in self._rest}
         return (x if self.reader is None else self.reader.read(x)), mask

@@ -407,8 +407,9 @@ class PettingZooCore:
 
     # ----------------------------------------------------------------------------------------------------
     def _store(self, seat: int, g: int, o: Any) -> None:
-        self._obs[seat][g], mask = self._reads[seat].split(o)
-        if isinstance(self.layout.obs_spaces[seat], spaces.Dict):
+        read = self._reads[seat]
+        self._obs[seat][g], mask = read.split(o)
+        if read.mask_space is not None:
             self._mask[seat][g] = mask
 
     def reset(self, games: Any, seeds: Any) -> None:
