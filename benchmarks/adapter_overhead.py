@@ -6,7 +6,7 @@ For each game it prints game steps/s both ways and the ratio direct / adapter (t
 a factor; the median of alternating rounds); the target is a ratio below 2 for every game. Games: pong's
 PettingZoo view (parallel, the fastest game here, so the adapter's share is the largest), the test suite's
 rendezvous (parallel, Box actions, 3 seats), tic-tac-toe (AEC, action masks), cue (Discrete observations, read
-one-hot) and race (a nested Dict/Tuple observation flattened, with a top-level action mask).
+one-hot) and dash (a nested Dict/Tuple observation flattened, with a top-level action mask).
 
 Both ways play random legal actions drawn ahead of time, and both do what a player needs each step: the direct
 loop reads the observations ``step`` returns (``last()`` for AEC) and resets finished games; through the adapter
@@ -33,7 +33,7 @@ GAMES = {
     "rendezvous (parallel, Box)": "tests.games.rendezvous:parallel_env",
     "tictactoe (AEC, masks)": "tests.games.tictactoe:env",
     "cue (Discrete obs)": "tests.games.cue:parallel_env",
-    "race (Dict/Tuple obs, masks)": "tests.games.race:parallel_env",
+    "dash (Dict/Tuple obs, masks)": "tests.games.dash:parallel_env",
 }
 
 

@@ -28,7 +28,7 @@ if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
     sys.path.insert(0, str(ROOT))
 
 TEST_GAMES = ["tests.games.tictactoe:env", "tests.games.rendezvous:parallel_env", "tests.games.chase:parallel_env",
-              "tests.games.reach:parallel_env", "tests.games.cue:parallel_env", "tests.games.race:parallel_env"]
+              "tests.games.reach:parallel_env", "tests.games.cue:parallel_env", "tests.games.dash:parallel_env"]
 GAMES = sorted(set(env_names())) + TEST_GAMES
 
 

@@ -1,4 +1,4 @@
-"""Games whose observations are not a Box, through every command: the suite's cue (Discrete observations) and race
+"""Games whose observations are not a Box, through every command: the suite's cue (Discrete observations) and dash
 (a nested Dict with a Tuple inside, MultiBinary, Discrete and Box leaves, and a top-level action mask). Each is
 trained with a tiny budget and must learn to read what it is shown (a policy that ignores its observation cannot
 beat random by the margin asserted), then matched, rated on the ladder and filmed."""
@@ -20,11 +20,11 @@ if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
     sys.path.insert(0, str(ROOT))
 
 CUE = "tests.games.cue:parallel_env"
-RACE = "tests.games.race:parallel_env"
+DASH = "tests.games.dash:parallel_env"
 
 
-def test_race_observation_is_read_in_the_stated_order_and_its_mask_is_the_seats():
-    spec = get_env(RACE)
+def test_dash_observation_is_read_in_the_stated_order_and_its_mask_is_the_seats():
+    spec = get_env(DASH)
     (red, blue) = spec.seat_spaces()
     assert red.mask and red.observation.shape == (19,) and blue == red
     core = spec.make_core(1, spec.config())
@@ -46,7 +46,7 @@ def test_race_observation_is_read_in_the_stated_order_and_its_mask_is_the_seats(
     assert core.action_masks()[0][0].tolist() == [True, True, False]
 
 
-@pytest.mark.parametrize(("game", "steps", "seat"), [(CUE, 12000, "p0"), (RACE, 16000, "red")], ids=["cue", "race"])
+@pytest.mark.parametrize(("game", "steps", "seat"), [(CUE, 12000, "p0"), (DASH, 16000, "red")], ids=["cue", "dash"])
 def test_a_game_with_discrete_or_dict_observations_learns_matches_rates_and_records(home, tmp_path, capsys, game,
                                                                                       steps, seat):
     report = run_json(capsys, "train", game, "--steps", str(steps), "--snapshot-steps", str(steps), "--games", "16",
@@ -54,7 +54,7 @@ def test_a_game_with_discrete_or_dict_observations_learns_matches_rates_and_reco
     final = f"obs/s{steps // 1000}k-{seat}"
     assert final in [f["snapshot"] for f in report["final"]]
     match = run_json(capsys, "match", final, "random", "--games", "100", "--seed", "7")
-    # random answers its cue one round in four (cue) and wanders (race): a policy that reads its observation wins
+    # random answers its cue one round in four (cue) and wanders (dash): a policy that reads its observation wins
     # nearly every game (measured: 90% and 95%), one that does not, about half
     assert match["score"] > 0.75, match
     ladder = {r["policy"]: r for r in run_json(capsys, "league", "ladder")}

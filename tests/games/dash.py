@@ -1,4 +1,4 @@
-"""Race: two runners race down a track, a PettingZoo parallel game whose observations are a nested Dict with a Tuple
+"""Dash: two runners race down a track, a PettingZoo parallel game whose observations are a nested Dict with a Tuple
 inside and an action mask.
 
 Both runners start at cell 0 of a track of ``length`` cells (8). Each step a runner waits (action 0), steps one cell
@@ -27,13 +27,13 @@ SIZE = 64
 COLOURS = ((220, 40, 40), (40, 40, 220))
 
 
-class Race(ParallelEnv):
-    metadata = {"name": "race_v0", "render_modes": ["rgb_array"], "render_fps": 4, "is_parallelizable": True,
+class Dash(ParallelEnv):
+    metadata = {"name": "dash_v0", "render_modes": ["rgb_array"], "render_fps": 4, "is_parallelizable": True,
                 "marl_description": "race down a track, nested Dict/Tuple observations with a mask (tests/games)"}
 
     def __init__(self, length: int = 8, dashes: int = 1, max_cycles: int = 12, render_mode: str | None = None) -> None:
         if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"race renders only 'rgb_array', not {render_mode!r}")
+            raise ValueError(f"dash renders only 'rgb_array', not {render_mode!r}")
         if int(length) != length or length < 3 or int(dashes) != dashes or dashes < 0:
             raise ValueError("length must be a whole number >= 3 and dashes a whole number >= 0")
         if int(max_cycles) != max_cycles or max_cycles < 1:
@@ -121,6 +121,6 @@ class Race(ParallelEnv):
         """Nothing to release: the game holds no window, file or process."""
 
 
-def parallel_env(**options) -> Race:
+def parallel_env(**options) -> Dash:
     """A new game; options: ``length`` (8), ``dashes`` (1), ``max_cycles`` (12), ``render_mode``."""
-    return Race(**options)
+    return Dash(**options)
