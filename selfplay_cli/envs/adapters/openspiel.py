@@ -250,6 +250,7 @@ class OpenSpielCore:
         self._running = np.zeros(n, dtype=bool)
         self._keys = [0] * n  # each game's random key (from its seed) and the chance draws made so far
         self._draws = [0] * n
+        self._last: list[tuple[int, list[int]] | None] = [None] * n  # each game's last move: (player, actions)
         self._tensor = "information_state_tensor" if config.info_state else "observation_tensor"
         self._all_seats = list(range(S))
         self.reset(np.arange(n), np.arange(n))
@@ -269,6 +270,7 @@ class OpenSpielCore:
             self.steps[g] = 0
             self.terminated[g] = self.truncated[g] = False
             self._obs[:, g] = 0.0
+            self._last[g] = None
             self._running[g] = True
             self._settle(g, scratch)
             if self._running[g]:  # rewards of chance alone (a game that rewards the deal)
@@ -346,8 +348,11 @@ class OpenSpielCore:
             st = states[g]
             if config.simultaneous and st.is_simultaneous_node():
                 st.apply_actions(by_game[g])
+                self._last[g] = (_SIMULTANEOUS, by_game[g])
             else:
-                st.apply_action(by_game[g][st.current_player()])
+                p = st.current_player()
+                st.apply_action(by_game[g][p])
+                self._last[g] = (p, by_game[g])
             if config.rewarding and not st.is_terminal():
                 rewards[:, g] += st.rewards()
             self._settle(g, rewards)
@@ -374,9 +379,16 @@ class OpenSpielCore:
 
     # ----------------------------------------------------------------------------------------------------
     def text(self, game: int = 0) -> list[str]:
-        """Game ``game`` as lines of text: the game's name, whose move it is (or the returns), ``str(state)``."""
+        """Game ``game`` as lines of text: the game's name, the last move, whose move it is (or the returns), and
+        ``str(state)``."""
         st = self.states[game]
         head = f"{self.config.long_name} · move {int(self.steps[game])}"
+        last = self._last[game]
+        if last is not None:
+            p, moves = last
+            players = self._all_seats if p == _SIMULTANEOUS else [p]
+            said = ", ".join(f"{self.agents[q]} {st.action_to_string(q, moves[q])}" for q in players)
+            head += f" · last: {said}"
         if st.is_terminal():
             returns = ", ".join(f"{a} {r:+g}" for a, r in zip(self.agents, st.returns(), strict=True))
             status = f"over: {returns}"
