@@ -23,7 +23,8 @@ so a game the core plays is always ``terminated``, never ``truncated``.
 A game marl cannot play (no tensor observations, chance it samples itself, mean-field games) and a name OpenSpiel
 does not know or parameters it refuses are refused in one line naming the game and why. ``pyspiel`` comes with the
 optional extra ``[openspiel]`` (``pip install "selfplay-cli[openspiel]"``); without it an ``openspiel:`` name is
-refused in one line saying so. Recordings draw ``str(state)`` as text (:class:`~selfplay_cli.envs.text_frame.TextFrame`).
+refused in one line saying so. Recordings draw ``str(state)`` as text
+(:class:`~selfplay_cli.envs.text_frame.TextFrame`).
 """
 
 from __future__ import annotations
