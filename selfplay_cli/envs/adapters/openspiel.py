@@ -47,6 +47,7 @@ __all__ = ["EXTRA", "PREFIX", "OpenSpielConfig", "OpenSpielCore", "OpenSpielRend
 PREFIX = "openspiel:"
 EXTRA = 'pip install "selfplay-cli[openspiel]"'
 _SIMULTANEOUS = -2  # pyspiel.PlayerId.SIMULTANEOUS: every player acts at this node
+_OVER = -4  # pyspiel.PlayerId.TERMINAL: nobody acts
 
 
 def _pyspiel(name: str) -> Any:
@@ -231,7 +232,10 @@ class OpenSpielRenderer:
 
 
 class OpenSpielCore:
-    """N OpenSpiel states stepped as one batched core (see the module's docstring for the rules)."""
+    """N OpenSpiel states stepped as one batched core (see the module's docstring for the rules).
+
+    The hot loop stays in plain Python (each game's turn in a list; the tensors and legal-action masks OpenSpiel
+    gives, as lists, queued): the arrays the arena reads take the queued rows in one assignment a step, on demand."""
 
     def __init__(self, n_games: int, config: OpenSpielConfig) -> None:
         if n_games < 1:
@@ -239,15 +243,19 @@ class OpenSpielCore:
         self.config, self.game, self.n = config, config.game, n_games
         self.agents = config.agents
         self.n_seats = S = config.n_players
-        n, A = n_games, config.n_actions
+        n = n_games
         self.terminated = np.zeros(n, dtype=bool)
         self.truncated = np.zeros(n, dtype=bool)
         self.score = np.zeros((S, n))
         self.steps = np.zeros(n, dtype=np.int64)
         self.states: list[Any] = [None] * n
-        self._obs = np.zeros((S, n, config.size), dtype=np.float32)
-        self._mask = np.ones((S, n, A), dtype=bool)  # an acting seat's legal actions; all True for the others
-        self._acting = np.zeros((S, n), dtype=bool)
+        self._obs = np.zeros((S, n, config.size), dtype=np.float32)  # each seat's latest tensor in each game
+        self._legal = np.ones((S, n, config.n_actions), dtype=bool)  # ... and its latest legal-action mask
+        self._new_obs: list[tuple[int, int, list[float]]] = []  # (seat, game, tensor) not yet in self._obs
+        self._new_legal: list[tuple[int, int, list[int]]] = []  # (seat, game, mask) not yet in self._legal
+        self._turn = [_OVER] * n  # who acts next in each game: a player, _SIMULTANEOUS, or _OVER
+        self._acting: np.ndarray | None = None  # to_act() until the next step or reset
+        self._masks: np.ndarray | None = None  # action_masks() until the next step or reset
         self._running = np.zeros(n, dtype=bool)
         self._keys = [0] * n  # each game's random key (from its seed) and the chance draws made so far
         self._draws = [0] * n
@@ -263,25 +271,27 @@ class OpenSpielCore:
         s_list = np.asarray(seeds, dtype=np.int64).reshape(-1).tolist()
         if len(g_list) != len(s_list):
             raise ValueError(f"reset got {len(g_list)} games but {len(s_list)} seeds")
-        scratch = np.zeros((self.n_seats, self.n), dtype=np.float32)
+        self._acting = self._masks = None
+        self._flush()
+        self._obs[:, g_list] = 0.0
+        rewards = np.zeros((self.n_seats, self.n), dtype=np.float32)
+        self.score[:, g_list] = 0.0
+        self.steps[g_list] = 0
+        self.terminated[g_list] = self.truncated[g_list] = False
+        self._running[g_list] = True
+        ended: list[tuple[int, list[float]]] = []
         for g, seed in zip(g_list, s_list, strict=True):
             self.states[g] = self.game.new_initial_state()
             self._keys[g], self._draws[g] = game_key_int(seed), 0
-            self.score[:, g] = 0.0
-            self.steps[g] = 0
-            self.terminated[g] = self.truncated[g] = False
-            self._obs[:, g] = 0.0
             self._last[g] = None
-            self._running[g] = True
-            self._settle(g, scratch)
-            if self._running[g]:  # rewards of chance alone (a game that rewards the deal)
-                self.score[:, g] += scratch[:, g]
+            self._settle(g, rewards, ended)
+        self._end(ended, rewards)
+        self.score[:, g_list] += rewards[:, g_list] * self._running[g_list]  # chance's own rewards (of a deal)
 
-    def _settle(self, g: int, rewards: np.ndarray) -> None:
-        """Play game g's chance nodes by its seeded draws, then either end it (its final returns) or say who acts
-        next and refresh what they see and may do."""
+    def _settle(self, g: int, rewards: np.ndarray, ended: list[tuple[int, list[float]]]) -> None:
+        """Play game g's chance nodes by its seeded draws, then either note it ended (with its returns, for
+        :meth:`_end`) or say who acts next and keep what they see and may do."""
         st = self.states[g]
-        config = self.config
         while st.is_chance_node():
             outcomes = st.chance_outcomes()
             u = uniform_int(self._keys[g], self._draws[g])
@@ -293,38 +303,70 @@ class OpenSpielCore:
                     action = a
                     break
             st.apply_action(action)
-            if config.rewarding and not st.is_terminal():
+            if self.config.rewarding and not st.is_terminal():
                 rewards[:, g] += st.rewards()
-        acting = self._acting
-        acting[:, g] = False
-        self._mask[:, g] = True
+        tensor = getattr(st, self._tensor)
         if st.is_terminal():
-            returns = st.returns()
-            rewards[:, g] = np.asarray(returns) - self.score[:, g]
-            self.score[:, g] = returns  # exactly OpenSpiel's returns, whatever the sum of the rewards came to
-            self._running[g] = False
-            self.terminated[g] = True
+            self._turn[g] = _OVER
             for p in self._all_seats:  # every seat sees how the game ended
-                self._obs[p, g] = getattr(st, self._tensor)(p)
+                self._new_obs.append((p, g, tensor(p)))
+            ended.append((g, st.returns()))
             return
         p = st.current_player()
+        self._turn[g] = p
         for q in (self._all_seats if p == _SIMULTANEOUS else (p,)):
-            acting[q, g] = True
-            self._obs[q, g] = getattr(st, self._tensor)(q)
-            self._mask[q, g] = st.legal_actions_mask(q)
+            self._new_obs.append((q, g, tensor(q)))
+            self._new_legal.append((q, g, st.legal_actions_mask(q)))
+
+    def _flush(self) -> None:
+        """Put the queued tensors and masks in their arrays (one assignment each)."""
+        if self._new_obs:
+            seats, games, rows = zip(*self._new_obs)
+            self._obs[seats, games] = rows
+            self._new_obs.clear()
+        if self._new_legal:
+            seats, games, rows = zip(*self._new_legal)
+            self._legal[seats, games] = rows
+            self._new_legal.clear()
+
+    def _end(self, ended: list[tuple[int, list[float]]], rewards: np.ndarray) -> None:
+        """The games that ended: their final score is exactly OpenSpiel's returns (whatever the rewards summed to),
+        their last step's reward what takes the score there."""
+        if not ended:
+            return
+        idx = [g for g, _ in ended]
+        returns = np.array([r for _, r in ended], dtype=np.float64).T
+        rewards[:, idx] = returns - self.score[:, idx]
+        self.score[:, idx] = returns
+        self._running[idx] = False
+        self.terminated[idx] = True
 
     # ----------------------------------------------------------------------------------------------------
     def to_act(self) -> np.ndarray:
         """``(n_seats, n)`` bool: the seats that act on the next step."""
+        if self._acting is None:
+            turn = np.array(self._turn)
+            acting = np.zeros((self.n_seats, self.n), dtype=bool)
+            one = np.flatnonzero(turn >= 0)
+            acting[turn[one], one] = True
+            acting[:, turn == _SIMULTANEOUS] = True
+            self._acting = acting
         return self._acting.copy()
 
     def observe(self) -> np.ndarray:
         """``(n_seats, n, *shape)`` float32: each seat's latest tensor (zeros before its first move)."""
+        self._flush()
         return self._obs.reshape(self.n_seats, self.n, *self.config.shape).copy()
 
     def action_masks(self) -> list[np.ndarray | None]:
         """Per seat ``(n, n_actions)`` bool: the legal actions of an acting seat, all True for the others."""
-        return list(self._mask.copy())
+        if self._masks is None:
+            self.to_act()
+            self._flush()
+            masks = self._legal.copy()
+            masks[~self._acting] = True  # type: ignore[operator]
+            self._masks = masks
+        return list(self._masks.copy())
 
     def step(self, actions: Any) -> np.ndarray:
         """Each acting seat's action applied to its game (a simultaneous node's all at once), chance played; returns
@@ -344,27 +386,29 @@ class OpenSpielCore:
         self.truncated.fill(False)
         running = np.flatnonzero(self._running)
         by_game = cols.T.tolist()
-        config, states = self.config, self.states
-        for g in running.tolist():
-            st = states[g]
-            if config.simultaneous and st.is_simultaneous_node():
+        rewarding, states, turn, last = self.config.rewarding, self.states, self._turn, self._last
+        ended: list[tuple[int, list[float]]] = []
+        for g in running.tolist():  # the hot loop
+            st, p = states[g], turn[g]
+            if p == _SIMULTANEOUS:
                 st.apply_actions(by_game[g])
-                self._last[g] = (_SIMULTANEOUS, by_game[g])
             else:
-                p = st.current_player()
                 st.apply_action(by_game[g][p])
-                self._last[g] = (p, by_game[g])
-            if config.rewarding and not st.is_terminal():
+            last[g] = (p, by_game[g])
+            if rewarding and not st.is_terminal():
                 rewards[:, g] += st.rewards()
-            self._settle(g, rewards)
+            self._settle(g, rewards, ended)
+        self._acting = self._masks = None
         self.steps[running] += 1
-        live = self._running[running]
-        self.score[:, running[live]] += rewards[:, running[live]]
+        live = running[self._running[running]]
+        self.score[:, live] += rewards[:, live]
+        self._end(ended, rewards)
         return rewards
 
     def _check(self, cols: np.ndarray) -> None:
         """An :class:`IllegalActionError` for an acting seat's action outside its space or not legal now."""
-        seat, game = np.nonzero(self._acting)
+        self.action_masks()
+        seat, game = np.nonzero(self._acting)  # type: ignore[arg-type]
         if not seat.size:
             return
         a = cols[seat, game]
@@ -373,7 +417,7 @@ class OpenSpielCore:
         if outside.any():
             i = int(np.flatnonzero(outside)[0])
             raise IllegalActionError(int(seat[i]), int(game[i]), int(a[i]), f"outside Discrete({n_actions})")
-        bad = ~self._mask[seat, game, a]
+        bad = ~self._masks[seat, game, a]  # type: ignore[index]
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise IllegalActionError(int(seat[i]), int(game[i]), int(a[i]))
