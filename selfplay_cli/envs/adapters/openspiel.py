@@ -321,11 +321,11 @@ class OpenSpielCore:
     def _flush(self) -> None:
         """Put the queued tensors and masks in their arrays (one assignment each)."""
         if self._new_obs:
-            seats, games, rows = zip(*self._new_obs)
+            seats, games, rows = zip(*self._new_obs, strict=True)
             self._obs[seats, games] = rows
             self._new_obs.clear()
         if self._new_legal:
-            seats, games, rows = zip(*self._new_legal)
+            seats, games, rows = zip(*self._new_legal, strict=True)
             self._legal[seats, games] = rows
             self._new_legal.clear()
 
