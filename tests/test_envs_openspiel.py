@@ -18,6 +18,7 @@ from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.registry import IllegalActionError, random_rule
 from selfplay_cli.envs.rng import game_key_int, uniform_int
+from selfplay_cli.league.roster import check_env_name
 
 
 def random_games(name: str, games: int, parallel: int = 64, seed: int = 0, record: bool = True) -> list[tuple]:
@@ -145,6 +146,7 @@ def test_a_simultaneous_move_game_plays_every_player_at_once():
 
 def test_kinds_turns_and_limits_come_from_the_game():
     three = get_env("openspiel:leduc_poker(players=3)")
+    assert check_env_name(three.name) == "openspiel:leduc_poker(players=3)"  # the league files it as it is named
     assert three.agents == ("player_0", "player_1", "player_2") and three.kind == "free-for-all"
     assert three.seat_roles() == ("player",) * 3
     ttt = get_env("openspiel:tic_tac_toe")
