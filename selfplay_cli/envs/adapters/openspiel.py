@@ -48,6 +48,7 @@ PREFIX = "openspiel:"
 EXTRA = 'pip install "selfplay-cli[openspiel]"'
 _SIMULTANEOUS = -2  # pyspiel.PlayerId.SIMULTANEOUS: every player acts at this node
 _OVER = -4  # pyspiel.PlayerId.TERMINAL: nobody acts
+_CHANCE = -1  # pyspiel.PlayerId.CHANCE: the game draws
 
 
 def _pyspiel(name: str) -> Any:
@@ -260,7 +261,8 @@ class OpenSpielCore:
         self._keys = [0] * n  # each game's random key (from its seed) and the chance draws made so far
         self._draws = [0] * n
         self._last: list[tuple[int, list[int]] | None] = [None] * n  # each game's last move: (player, actions)
-        self._tensor = "information_state_tensor" if config.info_state else "observation_tensor"
+        state_type = type(config.game.new_initial_state())
+        self._tensor = state_type.information_state_tensor if config.info_state else state_type.observation_tensor
         self._all_seats = list(range(S))
         self.reset(np.arange(n), np.arange(n))
 
@@ -284,39 +286,48 @@ class OpenSpielCore:
             self.states[g] = self.game.new_initial_state()
             self._keys[g], self._draws[g] = game_key_int(seed), 0
             self._last[g] = None
-            self._settle(g, rewards, ended)
+            self._settle(g, self.states[g], rewards, ended)
         self._end(ended, rewards)
         self.score[:, g_list] += rewards[:, g_list] * self._running[g_list]  # chance's own rewards (of a deal)
 
-    def _settle(self, g: int, rewards: np.ndarray, ended: list[tuple[int, list[float]]]) -> None:
-        """Play game g's chance nodes by its seeded draws, then either note it ended (with its returns, for
-        :meth:`_end`) or say who acts next and keep what they see and may do."""
-        st = self.states[g]
-        while st.is_chance_node():
+    def _settle(self, g: int, st: Any, rewards: np.ndarray, ended: list[tuple[int, list[float]]]) -> None:
+        """Play game g's chance nodes (state ``st``) by its seeded draws, then either note that it ended (with its
+        returns, for :meth:`_end`) or say who acts next and keep what they see and may do."""
+        p = st.current_player()
+        if p == _CHANCE:
+            p = self._chance(g, st, rewards)
+        if p >= 0:
+            self._turn[g] = p
+            self._new_obs.append((p, g, self._tensor(st, p)))
+            self._new_legal.append((p, g, st.legal_actions_mask(p)))
+        elif p == _SIMULTANEOUS:
+            self._turn[g] = p
+            for q in self._all_seats:
+                self._new_obs.append((q, g, self._tensor(st, q)))
+                self._new_legal.append((q, g, st.legal_actions_mask(q)))
+        else:  # over: each seat's observation stays that of its last move (nothing reads a finished game's)
+            self._turn[g] = _OVER
+            ended.append((g, st.returns()))
+
+    def _chance(self, g: int, st: Any, rewards: np.ndarray) -> int:
+        """Play game g's chance nodes from their ``chance_outcomes()`` by the game's next draws; the player to act
+        after them."""
+        p = _CHANCE
+        while p == _CHANCE:
             outcomes = st.chance_outcomes()
             u = uniform_int(self._keys[g], self._draws[g])
             self._draws[g] += 1
             action = outcomes[-1][0]
-            for a, p in outcomes:
-                u -= p
+            for a, prob in outcomes:
+                u -= prob
                 if u < 0.0:
                     action = a
                     break
             st.apply_action(action)
-            if self.config.rewarding and not st.is_terminal():
+            p = st.current_player()
+            if self.config.rewarding and p != _OVER:
                 rewards[:, g] += st.rewards()
-        tensor = getattr(st, self._tensor)
-        if st.is_terminal():
-            self._turn[g] = _OVER
-            for p in self._all_seats:  # every seat sees how the game ended
-                self._new_obs.append((p, g, tensor(p)))
-            ended.append((g, st.returns()))
-            return
-        p = st.current_player()
-        self._turn[g] = p
-        for q in (self._all_seats if p == _SIMULTANEOUS else (p,)):
-            self._new_obs.append((q, g, tensor(q)))
-            self._new_legal.append((q, g, st.legal_actions_mask(q)))
+        return p
 
     def _flush(self) -> None:
         """Put the queued tensors and masks in their arrays (one assignment each)."""
@@ -397,7 +408,7 @@ class OpenSpielCore:
             last[g] = (p, by_game[g])
             if rewarding and not st.is_terminal():
                 rewards[:, g] += st.rewards()
-            self._settle(g, rewards, ended)
+            self._settle(g, st, rewards, ended)
         self._acting = self._masks = None
         self.steps[running] += 1
         live = running[self._running[running]]
