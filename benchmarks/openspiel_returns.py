@@ -7,8 +7,9 @@ plain pyspiel state (the same chance outcomes, drawn as the adapter documents, a
 games whose ``returns()`` equal the adapter's final scores exactly. Then the speed, pinned to one core: those same
 games (seeds and moves) played again through the adapter (``observe()``, ``action_masks()``, ``to_act()`` and
 ``step()`` each step, finished games reset) against a plain loop over pyspiel states that does what a player needs
-at each move (its tensor and its legal actions); the ratio adapter / direct time is the adapter's cost per game step
-as a factor (target below 2), the median of alternating rounds. The same check runs in the test suite
+at each move (its tensor and its legal actions, as OpenSpiel's lists, and again as the numpy arrays a network
+reads); the ratio adapter / direct time is the adapter's cost per game step as a factor (target below 2), the
+median of alternating rounds. The same check runs in the test suite
 (tests/test_envs_openspiel.py), 10,000 games a game.
 """
 
@@ -71,12 +72,13 @@ def through_adapter(name: str, played: list[tuple], parallel: int) -> float:
     return time.perf_counter() - t0
 
 
-def directly(name: str, played: list[tuple]) -> float:
-    """Seconds to play the same games on pyspiel states one by one, reading what a player needs at each move."""
+def directly(name: str, played: list[tuple], arrays: bool = False) -> float:
+    """Seconds to play the same games on pyspiel states one by one, reading what a player needs at each move (as
+    numpy arrays with ``arrays``)."""
     game = pyspiel.load_game(name)
     t0 = time.perf_counter()
     for seed, m, _, _, _ in played:
-        replay(game, seed, m, observe=True)
+        replay(game, seed, m, observe=True, arrays=arrays)
     return time.perf_counter() - t0
 
 
@@ -95,13 +97,15 @@ def main() -> None:
         moves = sum(len(m) for _, m, _, _, _ in played)
         print(f"{name}: {len(played):,} games, {moves:,} moves: returns equal to OpenSpiel's in {equal:,}, "
               f"different in {len(played) - equal:,}")
-        adapter, direct = [], []
+        adapter, direct, numpy = [], [], []
         for _ in range(args.rounds):
             adapter.append(through_adapter(name, played, args.parallel))
             direct.append(directly(name, played))
-        a, d = float(np.median(adapter)), float(np.median(direct))
+            numpy.append(directly(name, played, arrays=True))
+        a, d, n = (float(np.median(x)) for x in (adapter, direct, numpy))
         print(f"  speed: adapter {moves / a:,.0f} steps/s, pyspiel directly {moves / d:,.0f} steps/s "
-              f"(ratio {a / d:.2f}x, median of {args.rounds} rounds)")
+              f"(ratio {a / d:.2f}x), directly with numpy arrays {moves / n:,.0f} steps/s (ratio {a / n:.2f}x); "
+              f"medians of {args.rounds} rounds")
 
 
 if __name__ == "__main__":

@@ -60,11 +60,12 @@ def random_games(name: str, games: int, parallel: int = 64, seed: int = 0, recor
     return out if record else [done_count]
 
 
-def replay(game, seed: int, moves: list[tuple[int, int]], observe: bool = False) -> list[float]:
+def replay(game, seed: int, moves: list[tuple[int, int]], observe: bool = False, arrays: bool = False) -> list[float]:
     """Game ``seed`` played on a plain pyspiel state: chance by the adapter's documented draws (the k-th draw of a
     game is ``uniform_int(game_key_int(seed), k)`` against the cumulative ``chance_outcomes()``), the players'
     ``moves`` in order (each by the player OpenSpiel says is to move); its ``returns()``. ``observe`` also reads
-    what a player needs at each move (its tensor, its legal actions), as a loop of one's own would."""
+    what a player needs at each move (its tensor, its legal actions), as a loop of one's own would; ``arrays`` as
+    numpy arrays (a network's input and mask) rather than OpenSpiel's lists."""
     st = game.new_initial_state()
     key, draws, i = game_key_int(seed), 0, 0
     info = game.get_type().provides_information_state_tensor
@@ -84,7 +85,10 @@ def replay(game, seed: int, moves: list[tuple[int, int]], observe: bool = False)
         seat, a = moves[i]
         i += 1
         assert st.current_player() == seat, f"game {seat}: the adapter let seat {seat} move out of turn"
-        if observe:
+        if arrays:
+            np.asarray(st.information_state_tensor(seat) if info else st.observation_tensor(seat), np.float32)
+            np.asarray(st.legal_actions_mask(seat), bool)
+        elif observe:
             st.information_state_tensor(seat) if info else st.observation_tensor(seat)
             st.legal_actions(seat)
         st.apply_action(a)

@@ -333,11 +333,11 @@ class OpenSpielCore:
         """Put the queued tensors and masks in their arrays (one assignment each)."""
         if self._new_obs:
             seats, games, rows = zip(*self._new_obs, strict=True)
-            self._obs[seats, games] = rows
+            self._obs[seats, games] = np.array(rows, dtype=np.float32)
             self._new_obs.clear()
         if self._new_legal:
             seats, games, rows = zip(*self._new_legal, strict=True)
-            self._legal[seats, games] = rows
+            self._legal[seats, games] = np.array(rows, dtype=bool)
             self._new_legal.clear()
 
     def _end(self, ended: list[tuple[int, list[float]]], rewards: np.ndarray) -> None:
