@@ -18,7 +18,10 @@ Chance nodes are played inside the core by the game's own ``chance_outcomes()`` 
 counter-based generator (:mod:`selfplay_cli.envs.rng`) keyed by the game's reset seed: the same seed deals the same
 cards, alone or in a batch. Scores are OpenSpiel's: a game's final score is exactly ``state.returns()`` (given at the
 end, or step by step as ``state.rewards()`` where the game rewards along the way). OpenSpiel ends its games itself,
-so a game the core plays is always ``terminated``, never ``truncated``.
+so a game the core plays is always ``terminated``, never ``truncated``. A seat's observation is refreshed when it is
+to move (zeros before its first move) and stays its last once the game is over; the masks of seats not to move are
+all True (their actions are ignored). OpenSpiel games have no PettingZoo view (``make_parallel`` says so): marl
+plays them through this core only.
 
 A game marl cannot play (no tensor observations, chance it samples itself, mean-field games) and a name OpenSpiel
 does not know or parameters it refuses are refused in one line naming the game and why. ``pyspiel`` comes with the
@@ -435,23 +438,21 @@ class OpenSpielCore:
 
     # ----------------------------------------------------------------------------------------------------
     def text(self, game: int = 0) -> list[str]:
-        """Game ``game`` as lines of text: the game's name, the last move, whose move it is (or the returns), and
-        ``str(state)``."""
+        """Game ``game`` as lines of text: the game's name and move, the last move, whose move it is (or the
+        returns), and ``str(state)``."""
         st = self.states[game]
-        head = f"{self.config.long_name} · move {int(self.steps[game])}"
+        lines = [f"{self.config.long_name} · move {int(self.steps[game])}"]
         last = self._last[game]
         if last is not None:
             p, moves = last
             players = self._all_seats if p == _SIMULTANEOUS else [p]
-            said = ", ".join(f"{self.agents[q]} {st.action_to_string(q, moves[q])}" for q in players)
-            head += f" · last: {said}"
+            lines.append("last: " + ", ".join(f"{self.agents[q]} {st.action_to_string(q, moves[q])}" for q in players))
         if st.is_terminal():
-            returns = ", ".join(f"{a} {r:+g}" for a, r in zip(self.agents, st.returns(), strict=True))
-            status = f"over: {returns}"
+            lines.append("over: " + ", ".join(f"{a} {r:+g}" for a, r in zip(self.agents, st.returns(), strict=True)))
         else:
             p = st.current_player()
-            status = "all players move" if p == _SIMULTANEOUS else f"{self.agents[p]} to move"
-        return [head, status, "", *str(st).splitlines()]
+            lines.append("all players move" if p == _SIMULTANEOUS else f"{self.agents[p]} to move")
+        return [*lines, "", *str(st).splitlines()]
 
     def render(self, game: int = 0) -> np.ndarray:
         """Game ``game``'s text frame, ``(height, width, 3)`` uint8."""
