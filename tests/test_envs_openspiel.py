@@ -60,6 +60,22 @@ def random_games(name: str, games: int, parallel: int = 64, seed: int = 0, recor
     return out if record else [done_count]
 
 
+def play_chance(st, key: int, draws: list[int]) -> None:
+    """Play ``st``'s chance nodes as the adapter documents: the k-th draw of a game (``draws[0]``, counted on) is
+    ``uniform_int(key, k)``, taken against the cumulative ``chance_outcomes()``."""
+    while st.is_chance_node():
+        u = uniform_int(key, draws[0])
+        draws[0] += 1
+        outcomes = st.chance_outcomes()
+        action = outcomes[-1][0]
+        for a, p in outcomes:
+            u -= p
+            if u < 0.0:
+                action = a
+                break
+        st.apply_action(action)
+
+
 def replay(game, seed: int, moves: list[tuple[int, int]], observe: bool = False, arrays: bool = False) -> list[float]:
     """Game ``seed`` played on a plain pyspiel state: chance by the adapter's documented draws (the k-th draw of a
     game is ``uniform_int(game_key_int(seed), k)`` against the cumulative ``chance_outcomes()``), the players'
@@ -67,20 +83,11 @@ def replay(game, seed: int, moves: list[tuple[int, int]], observe: bool = False,
     what a player needs at each move (its tensor, its legal actions), as a loop of one's own would; ``arrays`` as
     numpy arrays (a network's input and mask) rather than OpenSpiel's lists."""
     st = game.new_initial_state()
-    key, draws, i = game_key_int(seed), 0, 0
+    key, draws, i = game_key_int(seed), [0], 0
     info = game.get_type().provides_information_state_tensor
     while not st.is_terminal():
         if st.is_chance_node():
-            u = uniform_int(key, draws)
-            draws += 1
-            outcomes = st.chance_outcomes()
-            action = outcomes[-1][0]
-            for a, p in outcomes:
-                u -= p
-                if u < 0.0:
-                    action = a
-                    break
-            st.apply_action(action)
+            play_chance(st, key, draws)
             continue
         seat, a = moves[i]
         i += 1
@@ -106,6 +113,28 @@ def test_returns_through_the_adapter_are_openspiels_own(name):
         assert score.tolist() == returns, (seed, moves)  # exactly, not approximately
         assert np.allclose(summed, returns) and not truncated
     assert len({tuple(r[2]) for r in played}) > 2  # several outcomes, not one game over and over
+
+
+def test_a_game_that_rewards_along_the_way_gives_openspiels_rewards_step_by_step():
+    """2048 rewards every merge, and chance places a tile after every move: each step's reward is the one OpenSpiel
+    gives for it (``rewards()`` after the move and its chance node, as its rl_environment reads it), counted once."""
+    spec = get_env("openspiel:2048")
+    core = spec.core(1)
+    core.reset([0], [3])
+    plain = pyspiel.load_game("2048").new_initial_state()
+    key, draws = game_key_int(3), [0]
+    play_chance(plain, key, draws)
+    rng = np.random.default_rng(0)
+    expected, got = [], []
+    while not core.terminated[0]:
+        a = int(rng.choice(np.flatnonzero(core.action_masks()[0][0])))
+        got.append(float(core.step([np.array([a])])[0, 0]))
+        plain.apply_action(a)
+        play_chance(plain, key, draws)
+        expected.append(plain.rewards()[0])
+    returns = plain.returns()[0]
+    assert len(got) > 20 and core.score[0, 0] == returns and sum(got) == pytest.approx(returns)
+    assert got[:-1] == expected[:-1] and sum(got[:-1]) > 0  # merges rewarded step by step, not at the end
 
 
 def test_the_same_seed_deals_the_same_cards_alone_or_in_a_batch():

@@ -16,12 +16,13 @@ What marl reads from the game (``pyspiel.load_game(string)``, once per name):
 
 Chance nodes are played inside the core by the game's own ``chance_outcomes()`` distribution, drawn from marl's
 counter-based generator (:mod:`selfplay_cli.envs.rng`) keyed by the game's reset seed: the same seed deals the same
-cards, alone or in a batch. Scores are OpenSpiel's: a game's final score is exactly ``state.returns()`` (given at the
-end, or step by step as ``state.rewards()`` where the game rewards along the way). OpenSpiel ends its games itself,
-so a game the core plays is always ``terminated``, never ``truncated``. A seat's observation is refreshed when it is
-to move (zeros before its first move) and stays its last once the game is over; the masks of seats not to move are
-all True (their actions are ignored). OpenSpiel games have no PettingZoo view (``make_parallel`` says so): marl
-plays them through this core only.
+cards, alone or in a batch. Scores are OpenSpiel's: a game's final score is exactly ``state.returns()``, given at the
+end, or step by step where the game rewards along the way (``state.rewards()`` read once a step, after chance, as
+OpenSpiel's own ``rl_environment`` reads it; the last step's reward takes the score to the returns). OpenSpiel ends
+its games itself, so a game the core plays is always ``terminated``, never ``truncated``. A seat's observation is
+refreshed when it is to move (zeros before its first move) and stays its last once the game is over; the masks of
+seats not to move are all True (their actions are ignored). OpenSpiel games have no PettingZoo view
+(``make_parallel`` says so): marl plays them through this core only.
 
 A game marl cannot play (no tensor observations, chance it samples itself, mean-field games) and a name OpenSpiel
 does not know or parameters it refuses are refused in one line naming the game and why. ``pyspiel`` comes with the
@@ -289,16 +290,15 @@ class OpenSpielCore:
             self.states[g] = self.game.new_initial_state()
             self._keys[g], self._draws[g] = game_key_int(seed), 0
             self._last[g] = None
-            self._settle(g, self.states[g], rewards, ended)
-        self._end(ended, rewards)
-        self.score[:, g_list] += rewards[:, g_list] * self._running[g_list]  # chance's own rewards (of a deal)
+            self._settle(g, self.states[g], ended)
+        self._end(ended, rewards)  # a game that chance alone decided
 
-    def _settle(self, g: int, st: Any, rewards: np.ndarray, ended: list[tuple[int, list[float]]]) -> None:
+    def _settle(self, g: int, st: Any, ended: list[tuple[int, list[float]]]) -> None:
         """Play game g's chance nodes (state ``st``) by its seeded draws, then either note that it ended (with its
         returns, for :meth:`_end`) or say who acts next and keep what they see and may do."""
         p = st.current_player()
         if p == _CHANCE:
-            p = self._chance(g, st, rewards)
+            p = self._chance(g, st)
         if p >= 0:
             self._turn[g] = p
             self._new_obs.append((p, g, self._tensor(st, p)))
@@ -312,7 +312,7 @@ class OpenSpielCore:
             self._turn[g] = _OVER
             ended.append((g, st.returns()))
 
-    def _chance(self, g: int, st: Any, rewards: np.ndarray) -> int:
+    def _chance(self, g: int, st: Any) -> int:
         """Play game g's chance nodes from their ``chance_outcomes()`` by the game's next draws; the player to act
         after them."""
         p = _CHANCE
@@ -328,8 +328,6 @@ class OpenSpielCore:
                     break
             st.apply_action(action)
             p = st.current_player()
-            if self.config.rewarding and p != _OVER:
-                rewards[:, g] += st.rewards()
         return p
 
     def _flush(self) -> None:
@@ -409,14 +407,14 @@ class OpenSpielCore:
             else:
                 st.apply_action(by_game[g][p])
             last[g] = (p, by_game[g])
-            if rewarding and not st.is_terminal():
-                rewards[:, g] += st.rewards()
-            self._settle(g, st, rewards, ended)
+            self._settle(g, st, ended)
+            if rewarding and turn[g] != _OVER:  # read once a step, after chance, as OpenSpiel's rl_environment does
+                rewards[:, g] = st.rewards()
         self._acting = self._masks = None
         self.steps[running] += 1
+        self._end(ended, rewards)
         live = running[self._running[running]]
         self.score[:, live] += rewards[:, live]
-        self._end(ended, rewards)
         return rewards
 
     def _check(self, cols: np.ndarray) -> None:
