@@ -29,6 +29,9 @@ if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
 
 TEST_GAMES = ["tests.games.tictactoe:env", "tests.games.rendezvous:parallel_env", "tests.games.chase:parallel_env",
               "tests.games.reach:parallel_env", "tests.games.cue:parallel_env", "tests.games.dash:parallel_env"]
+# OpenSpiel's games are played through marl's own core (they have no PettingZoo view)
+OPENSPIEL_GAMES = ["openspiel:kuhn_poker", "openspiel:leduc_poker", "openspiel:tic_tac_toe",
+                   "openspiel:goofspiel(imp_info=True,num_cards=5)"]
 GAMES = sorted(set(env_names())) + TEST_GAMES
 
 
@@ -151,7 +154,7 @@ def check_game(spec: EnvSpec, n: int = 6, max_play: int = 20_000) -> None:
     assert _same(a, b), "same seeds and actions must give the same observations, masks and scores"
 
 
-@pytest.mark.parametrize("name", GAMES)
+@pytest.mark.parametrize("name", GAMES + OPENSPIEL_GAMES)
 def test_every_game_keeps_its_declaration(name):
     check_game(get_env(name))
 

@@ -6,6 +6,8 @@
       [project.entry-points."selfplay_cli.envs"]
       mygame = "mypkg.mygame:env"
 
+- ``openspiel:GAME`` or ``openspiel:GAME(param=value,...)`` is an OpenSpiel game (OpenSpiel's own game string),
+  played through marl's adapter (:mod:`selfplay_cli.envs.adapters.openspiel`; needs the extra ``[openspiel]``).
 - ``module:factory`` names a callable (keyword arguments are the game's options, ``--env-option k=v``) that
   returns a PettingZoo AECEnv or ParallelEnv (or an EnvSpec object); a dotted ``module`` alone is a module that
   has ``parallel_env()`` (preferred) or ``env()``. The module is imported as Python would, with the current
@@ -15,7 +17,8 @@ Games loaded by name are kept for the life of the process; entry points are read
 
 Only a name a user gave (a command's argument or ``--env``, a config file, a league's rows, which hold names users
 gave) is imported. A name read from a snapshot file is resolved with :func:`known_env`, which never imports: a
-file that says it plays ``evilmod:env`` must not run ``evilmod.py`` from the folder it was imported in.
+file that says it plays ``evilmod:env`` must not run ``evilmod.py`` from the folder it was imported in. An
+``openspiel:`` name runs no one's code but OpenSpiel's, so it is resolved wherever it is read.
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ import re
 import sys
 from typing import Any
 
+from .adapters.openspiel import PREFIX as OPENSPIEL_PREFIX
+from .adapters.openspiel import openspiel_game
 from .adapters.pettingzoo import adapt
 from .registry import _REGISTRY, EnvError, EnvSpec, UnknownEnvError
 
@@ -108,9 +113,12 @@ def find(name: str) -> EnvSpec | None:
         raise _PLUGIN_ERRORS[name]
     if name in _LOADED:
         return _LOADED[name]
-    if ":" not in name and "." not in name:
+    if name.startswith(OPENSPIEL_PREFIX):
+        spec = openspiel_game(name)
+    elif ":" not in name and "." not in name:
         return None
-    spec = load_user_game(name)
+    else:
+        spec = load_user_game(name)
     _LOADED[name] = spec
     return spec
 
@@ -181,12 +189,15 @@ def known_env(name: str) -> EnvSpec | None:
         return plugins[name]
     if name in _PLUGIN_ERRORS:
         raise _PLUGIN_ERRORS[name]
+    if name.startswith(OPENSPIEL_PREFIX):  # OpenSpiel's own games: nothing of the file's choosing is imported
+        return find(name)
     return _LOADED.get(name)
 
 
 def get_env(name: str) -> EnvSpec:
     """The game called ``name``: a registered one (built in, or from an installed package's entry point), or a
-    user's PettingZoo game ``module:factory`` / ``module`` (loaded once, then kept)."""
+    user's PettingZoo game ``module:factory`` / ``module`` or an OpenSpiel game ``openspiel:GAME(params)`` (loaded
+    once, then kept)."""
     spec = _REGISTRY.get(name)
     if spec is not None:
         return spec

@@ -129,16 +129,18 @@ def check_name(what: str, value: object) -> str:
 
 _check_name = check_name
 
-ENV_NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*(:[A-Za-z_][A-Za-z0-9_.]*)?")
-"""What a game's name may be: a league name (:data:`NAME_PATTERN`), or a user's PettingZoo game as ``module:factory``
-(``mypkg.mygame:env``). A game's name is never a file or folder name."""
+ENV_NAME_PATTERN = re.compile(r"[A-Za-z0-9][A-Za-z0-9._+-]*(:[A-Za-z_][A-Za-z0-9_.]*)?"
+                              r"|openspiel:[A-Za-z0-9_]+(\([A-Za-z0-9_.=,+()-]*\))?")
+"""What a game's name may be: a league name (:data:`NAME_PATTERN`), a user's PettingZoo game as ``module:factory``
+(``mypkg.mygame:env``), or an OpenSpiel game with its parameters (``openspiel:leduc_poker(players=3)``). A game's
+name is never a file or folder name."""
 
 
 def check_env_name(value: object) -> str:
     """Validate a game's name (:data:`ENV_NAME_PATTERN`, at most 200 characters); a :class:`LeagueError` otherwise."""
     if not isinstance(value, str) or not value or len(value) > _MAX_NAME or not ENV_NAME_PATTERN.fullmatch(value):
-        raise LeagueError(f"invalid env {shown(value)}: a registered game's name (letters, digits and . _ + -) or a "
-                          "PettingZoo game's module:factory")
+        raise LeagueError(f"invalid env {shown(value)}: a registered game's name (letters, digits and . _ + -), a "
+                          "PettingZoo game's module:factory or openspiel:GAME(param=value,...)")
     return value
 
 

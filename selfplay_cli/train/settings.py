@@ -84,8 +84,10 @@ def merge_settings(settings: dict[str, Any], overrides: dict[str, Any]) -> None:
 
 
 def run_stem(env: str) -> str:
-    """A default run name's stem from a game's name: ``pong``; ``tictactoe`` for ``mypkg.tictactoe:env``."""
-    stem = re.sub(r"[^A-Za-z0-9_-]+", "-", env.split(":")[0].rsplit(".", 1)[-1]).strip("-")
+    """A default run name's stem from a game's name: ``pong``; ``tictactoe`` for ``mypkg.tictactoe:env``;
+    ``kuhn_poker`` for ``openspiel:kuhn_poker`` (``leduc_poker-players-3`` for ``openspiel:leduc_poker(players=3)``)."""
+    game = env.partition(":")[2] if env.startswith("openspiel:") else env.split(":")[0].rsplit(".", 1)[-1]
+    stem = re.sub(r"[^A-Za-z0-9_-]+", "-", game).strip("-")
     return stem or "run"
 
 

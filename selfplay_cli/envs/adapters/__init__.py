@@ -1,2 +1,3 @@
 """Adapters that make users' games `marl` games: :mod:`.pettingzoo` turns any PettingZoo ``AECEnv`` or
-``ParallelEnv`` factory into an :class:`~selfplay_cli.envs.registry.EnvSpec` and a batched core of N copies."""
+``ParallelEnv`` factory into an :class:`~selfplay_cli.envs.registry.EnvSpec` and a batched core of N copies;
+:mod:`.openspiel` does the same for OpenSpiel's games (``openspiel:GAME(params)``), a core of N OpenSpiel states."""
