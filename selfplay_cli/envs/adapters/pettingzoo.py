@@ -425,6 +425,7 @@ class PettingZooCore:
         self._mask: list[list[Any]] = [[None] * n for _ in range(S)]
         self._live = np.zeros((S, n), dtype=bool)  # the seats whose agents are in each game
         self._live_agents: list[list[tuple[int, str]]] = [[] for _ in range(n)]  # parallel: (seat, agent), in order
+        self._listed: list[list[str] | None] = [None] * n  # AEC: each game's agents when last seen
         self.seat_done = np.zeros((S, n), dtype=bool)  # set by step(): whose part in a game ended on it
         self.seat_cut = np.zeros((S, n), dtype=bool)  # ... of those, the ones cut short (truncated)
         self._seeds = [0] * n  # each game's seed (to name the game in an error)
@@ -472,11 +473,14 @@ class PettingZooCore:
             for s in range(self.n_seats):
                 self._obs[s][g] = self._zero_obs[s]
                 self._mask[s][g] = None
-            self._live[:, g] = False
+            self._live[:, g] = self.seat_done[:, g] = self.seat_cut[:, g] = False
             if self._aec:  # each seat observes when its turn comes (zeros until then)
                 env.reset(seed=int(seed))
                 self._running[g] = True
-                self._present(g)
+                self._listed[g] = agents = list(env.agents)
+                for agent in agents:
+                    s = self._seat_of.get(agent)
+                    self._live[self._seat(g, agent) if s is None else s, g] = True
                 self._settle(g)
             else:
                 obs, _ = env.reset(seed=int(seed))
@@ -488,8 +492,6 @@ class PettingZooCore:
                     self._store(s, g, obs[agent])
                 self._live_agents[g] = live
                 self._running[g] = bool(live)
-        self.seat_done[:, g_list] = False
-        self.seat_cut[:, g_list] = False
 
     @property
     def in_game(self) -> np.ndarray:
@@ -517,16 +519,18 @@ class PettingZooCore:
     def _settle(self, g: int) -> None:
         """AEC: step the agents that are done out of the game (PettingZoo's ``step(None)``), keeping their final
         observation, until a live agent has the turn or nobody is left; then see who else left or joined."""
-        env = self.envs[g]
-        while env.agents:
+        env, seat_of = self.envs[g], self._seat_of
+        while agents := env.agents:
             agent = env.agent_selection
-            s = self._seat(g, agent)
+            s = seat_of.get(agent)
+            if s is None:
+                s = self._seat(g, agent)  # (refused)
             term, trunc = env.terminations.get(agent, False), env.truncations.get(agent, False)
             self._store(s, g, env.observe(agent))
             if not (term or trunc):
-                self._live[s, g] = True  # (an agent that joins has its first turn)
                 self._turn[g] = s
-                self._present(g)
+                if agents != self._listed[g]:
+                    self._present(g, agents)
                 return
             env.step(None)
             if self._live[s, g]:
@@ -535,12 +539,11 @@ class PettingZooCore:
         if self._running[g]:
             self._over(g)
 
-    def _present(self, g: int) -> None:
-        """AEC: the seats in game g as its ``agents`` now are: one that vanished left it, one that appeared joined."""
-        env, live = self.envs[g], self._live[:, g]
-        agents = env.agents
-        if len(agents) == int(live.sum()) and all(live[self._seat(g, a)] for a in agents):
-            return
+    def _present(self, g: int, agents: list[str]) -> None:
+        """AEC: the seats in game g as its ``agents`` now are (they changed since last seen): one that vanished left
+        it, one that appeared joined."""
+        live = self._live[:, g]
+        self._listed[g] = list(agents)
         now = np.zeros(self.n_seats, dtype=bool)
         for a in agents:
             now[self._seat(g, a)] = True
