@@ -83,6 +83,7 @@ def main() -> None:
     p.add_argument("--games", type=int, default=16, help="training games played at once")
     p.add_argument("--match", type=int, default=40, help="games of the final snapshot against random")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--lr", type=float, help="PPO's learning rate (default: marl's)")
     p.add_argument("--keep", type=Path, help="folder to keep the league in (default: a temporary one)")
     args = p.parse_args()
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
@@ -94,7 +95,8 @@ def main() -> None:
         t0 = time.perf_counter()
         with Departures().counting() as training:
             report = marl("train", GAME, "--minutes", str(args.minutes), "--games", str(args.games),
-                          "--agents", "1", "--eval-games", "0", "--seed", str(args.seed), "--run", "kaz", "--quiet")
+                          "--agents", "1", "--eval-games", "0", "--seed", str(args.seed), "--run", "kaz", "--quiet",
+                          *(["--lr", str(args.lr)] if args.lr else []))
         wall = time.perf_counter() - t0
         (final,) = report["final"]
         with Departures().counting() as played:
@@ -105,10 +107,10 @@ def main() -> None:
           f"({wall:.0f} s wall): {report['steps_per_second']:,} steps/s; {report['episodes']:,} games")
     print(f"  agents that left a game that went on: {training.left:,} in training ({training.left / max(training.games, 1):.2f} "
           f"a game over {training.games:,} games), {played.left:,} in the match ({played.games:,} games)")
-    print(f"  {final['snapshot']} vs random, {m['games']} games each flying the team on the same seeds: "
-          f"score {100 * m['score']:.1f}% ({m['wins']} W {m['draws']} D {m['losses']} L), team kills "
-          f"{m['points_for'] / max(m['games'], 1):.2f} against {m['points_against'] / max(m['games'], 1):.2f} a game, "
-          f"Elo {m['elo']:+.0f} [{m['elo_low']:+.0f}, {m['elo_high']:+.0f}]")
+    episodes = max(m["games"] // 2, 1)  # each seed flown once by each team
+    print(f"  {final['snapshot']} vs random, {episodes} seeds each flown by both teams: score {100 * m['score']:.1f}% "
+          f"({m['wins']} W {m['draws']} D {m['losses']} L), team kills {m['points_for'] / episodes:.2f} against "
+          f"{m['points_against'] / episodes:.2f} a game, Elo {m['elo']:+.0f} [{m['elo_low']:+.0f}, {m['elo_high']:+.0f}]")
     sys.exit(0 if np.isfinite(m["score"]) else 1)
 
 

@@ -205,5 +205,25 @@ def test_the_race_trains_beats_random_rates_and_records(home, capsys, tmp_path):
     (rec,) = run_json(capsys, "record", "--ckpt", final["snapshot"], "--vs", "random", "--seconds", "0", "--out",
                       str(out))
     assert rec["players"][0] == final["snapshot"] and out.stat().st_size > 0 and rec["frames"] >= 2
+    (replay,) = run_json(capsys, "record", "--game", "1", "--out", str(tmp_path / "game1.gif"))  # a training game
+    assert replay["frames"] >= 2 and replay["length"] <= 12
     code, text, err = run(capsys, "league", "ladder", "--bootstrap", "0")
     assert code == 0 and final["snapshot"] in text and "random (anchor)" in text, err
+
+
+def test_one_agent_for_the_whole_team_ends_its_game_when_everyone_in_it_is_done():
+    from selfplay_cli.algos.joint import JointLearner
+
+    seat = get_env(RACE).seat_spaces()[0]
+    joint = JointLearner(PPOLearner, seat, 3, 2, PPOConfig(rollout_steps=4), seed=0)  # 3 seats of 2 games
+    obs = np.zeros((6, *seat.observation.shape), dtype=np.float32)  # slots seat by seat: seat * 2 + game
+    for dones, acting in [
+        ([0, 0, 1, 0, 0, 0], None),  # seat 1 of game 0 leaves; game 0 goes on
+        ([0, 0, 0, 0, 0, 0], [1, 1, 0, 1, 1, 1]),
+        ([1, 0, 0, 0, 1, 0], [1, 1, 0, 1, 1, 1]),  # the others of game 0 are done: it ended
+        ([1, 1, 1, 1, 1, 1], None),  # both games end
+    ]:
+        joint.act(obs)
+        joint.record(np.zeros(6, np.float32), np.array(dones, np.float32),
+                     acting=None if acting is None else np.array(acting, bool))
+    assert joint.inner.dones.cpu().numpy().tolist() == [[0, 0], [0, 0], [1, 0], [1, 1]]

@@ -8,8 +8,10 @@ limits (:mod:`.limits`: a game's length, numbers that are not finite) and make r
 (:func:`~selfplay_cli.results.game_results`). Each (seat, game) slot is either a learner's (learner index >= 0, fixed
 for the whole run) or an opponent's (-1), filled at every game start by ``choose_opponents`` (the matchmaker draws
 for every opponent slot on its own: a pool snapshot, a scripted bot, or a live learner). A learner sees only its own
-slots, in a fixed order, as a vectorised environment: ``observe()`` -> observations (and ``masks()``, ``acting()``),
-``step(actions)`` -> rewards, dones and what a truncated game's learner needs to bootstrap. A finished game restarts
+slots, in a fixed order, as a vectorised environment: ``observe()`` -> observations (and ``masks()``, ``acting()``,
+``state()``), ``step(actions)`` -> rewards, dones and what a truncated game's learner needs to bootstrap. A slot's
+done is its seat's own end in its game: the game's, or, where agents come and go (a PettingZoo game whose agents die
+or finish), the step its agent left; a seat out of its game does not act (``acting()``). A finished game restarts
 at once with a fresh seed (auto-reset: the observation after a done is the new game's first) and comes back as a
 :class:`GameResult`, so the ledger gets every training game.
 
