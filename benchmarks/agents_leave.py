@@ -7,7 +7,13 @@ score) with `marl train --minutes`, counting on the way how many agents left a g
 ``seat_done`` on a step whose game did not end), then plays the final snapshot against ``random`` (both flying the
 whole team on the same seeds) and prints the run's steps/s, the departures, and the match.
 
-Run from the repository's root: python benchmarks/agents_leave.py [--minutes 2] [--games 16] [--match 40]
+Measured (2 cores shared with other work): seed 0, 63,072 steps in 2 minutes (526 steps/s), 189 agents left a game
+that went on (0.53 a game); seed 1, 97,760 steps (815 steps/s), 300 left (0.53 a game). Both final snapshots against
+random over 40 seeds: 63.7% (21 W 9 D 10 L), 2.95 team kills a game against 2.20, Elo +98 [+6, +207] (the same
+games: the two greedy policies played alike). With marl's default learning rate (2e-3, 16 games) the snapshot
+scored 27.5% (kills 1.65 against 2.70).
+
+Run from the repository's root: python benchmarks/agents_leave.py [--minutes 2] [--games 32] [--match 80] [--lr 5e-4]
 """
 
 from __future__ import annotations
@@ -21,8 +27,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
@@ -80,10 +84,12 @@ def marl(*args: str) -> dict:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--minutes", type=float, default=2.0)
-    p.add_argument("--games", type=int, default=16, help="training games played at once")
-    p.add_argument("--match", type=int, default=40, help="games of the final snapshot against random")
+    p.add_argument("--games", type=int, default=32, help="training games played at once")
+    p.add_argument("--match", type=int, default=80, help="games of the final snapshot against random (each seed "
+                                                       "flown by both teams)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--lr", type=float, help="PPO's learning rate (default: marl's)")
+    p.add_argument("--lr", type=float, default=5e-4, help="PPO's learning rate (marl's default 2e-3 learned "
+                                                          "nothing here in two minutes)")
     p.add_argument("--keep", type=Path, help="folder to keep the league in (default: a temporary one)")
     args = p.parse_args()
     os.environ.setdefault("SDL_VIDEODRIVER", "dummy")
@@ -96,7 +102,7 @@ def main() -> None:
         with Departures().counting() as training:
             report = marl("train", GAME, "--minutes", str(args.minutes), "--games", str(args.games),
                           "--agents", "1", "--eval-games", "0", "--seed", str(args.seed), "--run", "kaz", "--quiet",
-                          *(["--lr", str(args.lr)] if args.lr else []))
+                          "--lr", str(args.lr))
         wall = time.perf_counter() - t0
         (final,) = report["final"]
         with Departures().counting() as played:
@@ -105,13 +111,15 @@ def main() -> None:
     print(f"knights_archers_zombies_v11 (4 agents, vector observations), {args.games} games at once, one network:")
     print(f"  trained {report['steps']:,} steps in {report['session_train_seconds']:.0f} s of training "
           f"({wall:.0f} s wall): {report['steps_per_second']:,} steps/s; {report['episodes']:,} games")
-    print(f"  agents that left a game that went on: {training.left:,} in training ({training.left / max(training.games, 1):.2f} "
-          f"a game over {training.games:,} games), {played.left:,} in the match ({played.games:,} games)")
+    per_game = training.left / max(training.games, 1)
+    print(f"  agents that left a game that went on: {training.left:,} in training ({per_game:.2f} a game over "
+          f"{training.games:,} games), {played.left:,} in the match ({played.games:,} games)")
     episodes = max(m["games"] // 2, 1)  # each seed flown once by each team
     print(f"  {final['snapshot']} vs random, {episodes} seeds each flown by both teams: score {100 * m['score']:.1f}% "
           f"({m['wins']} W {m['draws']} D {m['losses']} L), team kills {m['points_for'] / episodes:.2f} against "
-          f"{m['points_against'] / episodes:.2f} a game, Elo {m['elo']:+.0f} [{m['elo_low']:+.0f}, {m['elo_high']:+.0f}]")
-    sys.exit(0 if np.isfinite(m["score"]) else 1)
+          f"{m['points_against'] / episodes:.2f} a game, Elo {m['elo']:+.0f} "
+          f"[{m['elo_low']:+.0f}, {m['elo_high']:+.0f}]")
+    sys.exit(0 if training.left > 0 else 1)  # the point: agents left games that went on, and training went on
 
 
 if __name__ == "__main__":

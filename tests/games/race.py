@@ -36,7 +36,8 @@ class Race(ParallelEnv):
             raise ValueError(f"race renders only 'rgb_array', not {render_mode!r}")
         if not (1 <= join_at < max_cycles and goal >= 1):
             raise ValueError("need goal >= 1 and 1 <= join_at < max_cycles")
-        self.goal, self.join_at, self.max_cycles, self.render_mode = int(goal), int(join_at), int(max_cycles), render_mode
+        self.goal, self.join_at, self.max_cycles = int(goal), int(join_at), int(max_cycles)
+        self.render_mode = render_mode
         self.possible_agents = list(AGENTS)
         self.agents: list[str] = []
         self._obs = spaces.Box(0.0, 1.0, (3,), dtype=np.float32)

@@ -676,7 +676,7 @@ class PettingZooCore:
             now = env.agents
             changed = True in term.values() or True in trunc.values() or len(now) != len(live)
             if not changed:
-                for (_, a), b in zip(live, now):
+                for (_, a), b in zip(live, now, strict=True):  # (of equal length here)
                     if a != b:
                         changed = True
                         break
