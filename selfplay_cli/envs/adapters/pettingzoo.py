@@ -27,16 +27,17 @@ agent was cut by truncation).
 
 Agents come and go. An agent leaves its game when it is terminated or truncated, or when it vanishes from ``agents``
 (it died, it finished): from then on it does not act, its observation stays the last it had, and rewards the game
-still gives it count in its score. An agent of ``possible_agents`` that was not in the game (at its start, or since
-it left) joins when it appears in ``agents``: it acts from then on, played by its seat's policy (its seat is its
-index in ``possible_agents``), and observes zeros until then. An agent that is not one of ``possible_agents`` is
-refused in one line (:class:`EnvError`) naming it and the game's seed. After each step ``seat_done`` says whose part in
-a game ended on it (it left, or the game ended with it in; ``seat_cut``: of those, the ones cut short by truncation)
-and ``in_game`` who is in each game, so that a learner stops at its seat's own end, not only at the game's. In an AEC
-game an agent leaves when PettingZoo steps it out (its ``step(None)``, on its turn after it was done), so the rewards
-the game gives it between its end and then still reach it; a seat's observation is refreshed when its turn comes
-and when it leaves the game (zeros before its first turn). The action masks of seats that do not act are all True
-(their actions are ignored).
+still gives it count in its score. An agent of ``possible_agents`` that is not in the game (it was not there at the
+start, or it vanished; one that was terminated or truncated is done with that game) joins when it appears in
+``agents``: it acts from then on, played by its seat's policy (its seat is its index in ``possible_agents``), and
+observes zeros until then. An agent that is not one of ``possible_agents`` is refused in one line (:class:`EnvError`)
+naming it, the game's seed and the step. After each step ``seat_done`` says whose part in a game ended on it (it
+left, or the game ended with it in; ``seat_cut``: of those, the ones cut short by truncation) and ``in_game`` who is
+in each game, so that a learner stops at its seat's own end, not only at the game's. In an AEC game an agent leaves
+when PettingZoo steps it out (its ``step(None)``, on its turn after it was done), so the rewards the game gives it
+between its end and then still reach it; a seat's observation is refreshed when its turn comes and when it leaves
+the game (zeros before its first turn). The action masks of seats that do not act are all True (their actions are
+ignored).
 
 Global state: where the env has a ``state_space`` (PettingZoo's ``state()``: what a centralised critic reads), the
 spec declares it (:meth:`~selfplay_cli.envs.registry.EnvSpec.state_space`, read as observations are: a Box as it is,
@@ -426,6 +427,7 @@ class PettingZooCore:
         self._live = np.zeros((S, n), dtype=bool)  # the seats whose agents are in each game
         self._live_agents: list[list[tuple[int, str]]] = [[] for _ in range(n)]  # parallel: (seat, agent), in order
         self._listed: list[list[str] | None] = [None] * n  # AEC: each game's agents when last seen
+        self._done_agents: list[set[str]] = [set() for _ in range(n)]  # parallel: agents done in each game (no return)
         self.seat_done = np.zeros((S, n), dtype=bool)  # set by step(): whose part in a game ended on it
         self.seat_cut = np.zeros((S, n), dtype=bool)  # ... of those, the ones cut short (truncated)
         self._seeds = [0] * n  # each game's seed (to name the game in an error)
@@ -484,6 +486,7 @@ class PettingZooCore:
                 self._settle(g)
             else:
                 obs, _ = env.reset(seed=int(seed))
+                self._done_agents[g] = set()
                 live = []
                 for agent in env.agents:
                     s = self._seat(g, agent)
@@ -689,14 +692,16 @@ class PettingZooCore:
         the game is over when none is left."""
         present = self.envs[g].agents
         was = {a: s for s, a in self._live_agents[g]}
-        listed = set(present)
+        listed, done = set(present), self._done_agents[g]
         for a, s in was.items():
             ended, cut = term.get(a), trunc.get(a)
+            if ended or cut:
+                done.add(a)
             if ended or cut or a not in listed:
                 self._leaves(s, g, cut=bool(cut and not ended))
         stay = []
         for a in present:
-            if term.get(a) or trunc.get(a):  # (a done agent the env still lists has left all the same)
+            if a in done:  # (an agent done in this game that the env still lists has left all the same)
                 continue
             s = was.get(a)
             if s is None:  # one of possible_agents that was not in the game: it joins
