@@ -4,8 +4,11 @@ through the adapter.
 What a game declares (seats, per-seat spaces, turns, kind, time limit) is what the rest of marl builds on, so each
 game is played and held to it: observations, masks, actions and rewards have the declared shapes, dtypes and
 bounds; an acting seat always has a legal action; the same seed and the same actions give the same game; scores
-are finite floats; random play ends within the declared limit. The checks live in :func:`check_game`, and the last
-tests feed it games that break one rule each, so a check that cannot fail would show here.
+are finite floats; random play ends within the declared limit. In a game whose agents come and go (the core says who
+is in each game: ``in_game``, ``seat_done``) the seats in a game are the ones that act (simultaneous games), a seat's
+part ends once, when it leaves or with its game, and a game that ended has nobody in it. The checks live in
+:func:`check_game`, and the last tests feed it games that break one rule each, so a check that cannot fail would
+show here.
 """
 
 from __future__ import annotations
@@ -28,7 +31,8 @@ if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
     sys.path.insert(0, str(ROOT))
 
 TEST_GAMES = ["tests.games.tictactoe:env", "tests.games.rendezvous:parallel_env", "tests.games.chase:parallel_env",
-              "tests.games.reach:parallel_env", "tests.games.cue:parallel_env", "tests.games.dash:parallel_env"]
+              "tests.games.reach:parallel_env", "tests.games.cue:parallel_env", "tests.games.dash:parallel_env",
+              "tests.games.race:parallel_env", "tests.games.race:env"]
 # OpenSpiel's games are played through marl's own core (they have no PettingZoo view)
 OPENSPIEL_GAMES = ["openspiel:kuhn_poker", "openspiel:leduc_poker", "openspiel:tic_tac_toe",
                    "openspiel:goofspiel(imp_info=True,num_cards=5)"]
@@ -96,11 +100,18 @@ def check_game(spec: EnvSpec, n: int = 6, max_play: int = 20_000) -> None:
         assert isinstance(acting, np.ndarray) and acting.shape == (S, n) and acting.dtype == bool, "to_act()"
         assert len(masks) == S, "action_masks(): one entry per seat"
         running = ~ended
+        in_game = getattr(core, "in_game", None)  # a core whose agents may come and go says who is in each game
+        if in_game is not None:
+            assert in_game.shape == (S, n) and in_game.dtype == bool, "in_game"
+            assert not (acting & ~in_game)[:, running].any(), "only seats in their game act"
+            if spec.turns == "simultaneous":
+                assert (acting[:, running] == in_game[:, running]).all(), "every seat in a game acts (simultaneous)"
+            was_in = in_game.copy()
         if spec.turns == "sequential":
             assert (acting[:, running].sum(axis=0) == 1).all(), "one seat acts at a time in a sequential game"
         else:
             assert acting[:, running].any(axis=0).all(), "every running game has seats to act"
-            if steps == 0:
+            if steps == 0 and in_game is None:
                 assert acting.all(), "all seats act at the start of a simultaneous game"
         for s, seat in enumerate(seats):
             o = obs[s]
@@ -141,6 +152,15 @@ def check_game(spec: EnvSpec, n: int = 6, max_play: int = 20_000) -> None:
         assert (core.steps[running] == length[running]).all(), "steps counts the steps of each game"
         done = (core.terminated | core.truncated) & running
         assert not (core.terminated & core.truncated).any(), "a game ends either terminated or truncated"
+        if in_game is not None:
+            seat_done, seat_cut, now_in = core.seat_done, core.seat_cut, core.in_game
+            assert not (seat_cut & ~seat_done).any(), "a seat cut short is done"
+            assert not (seat_done & ~was_in).any(), "only a seat in its game is done in it"
+            assert not (seat_done & now_in).any(), "a seat done in its game is out of it"
+            assert not now_in[:, done].any(), "a game that ended has nobody in it"
+            assert (seat_done[:, done] == was_in[:, done]).all(), "a game's end ends the part of everyone in it"
+            left = (was_in & ~now_in)[:, running & ~done]
+            assert (left == seat_done[:, running & ~done]).all(), "a seat that leaves a running game is done in it"
         ended |= done
         if limit is not None:
             assert (length[running] <= limit).all(), f"a game ran past its declared limit of {limit} steps"
@@ -215,6 +235,8 @@ class _Walk(ParallelEnv):
 
     def step(self, actions):
         self.t += 1
+        if self.flaw == "stranger" and self.t == 2:
+            self.agents = ["w", "x"]
         end = self.t >= (50 if self.flaw == "too long" else 5)
         reward = float("nan") if self.flaw == "nan reward" else 1.0
         out = self._obs(), {"w": reward}, {"w": end}, {"w": False}, {"w": {}}
@@ -230,6 +252,7 @@ class _Walk(ParallelEnv):
     ("nan reward", "finite"),
     ("too long", "limit"),
     ("unseeded", "same seeds"),
+    ("stranger", "'x' is in the game of seed 100 at its step 2 but is not one of its possible_agents"),
 ])
 def test_the_conformance_check_catches_a_game_that_breaks_its_declaration(flaw, why):
     spec = adapt(f"walk-{flaw or 'ok'}", lambda: _Walk(flaw))

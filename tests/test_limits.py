@@ -1,7 +1,7 @@
 """Issue 30's limits, users' games and recordings: sizes and numbers a config file can hold are refused in one line
 before a run exists, error lines stay short whatever they quote, every game ends (at its declared length, else at
-the loop's stated cap), a game whose agents come and go is refused, and a full disk under `marl record` is an I/O
-error (exit 4)."""
+the loop's stated cap), an agent that is not one of the game's possible_agents is refused, and a full disk under
+`marl record` is an I/O error (exit 4)."""
 
 from __future__ import annotations
 
@@ -176,17 +176,14 @@ def test_a_game_that_declares_no_length_stops_at_the_stated_cap_with_one_warning
     assert err.count("\n") == 1 and "declares no maximum game length" in err and "50 steps" in err, err
 
 
-# --- 4. agents that come and go ------------------------------------------------------------------------------------
+# --- 4. an agent from nowhere --------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize(("factory", "says"), [
-    ("parallel_env", "'b' left at step 3 without being terminated or truncated"),
-    ("joining", "'b' joined at step 3"),
-])
-def test_a_game_whose_agents_come_and_go_is_refused_in_one_line(home, capsys, factory, says):
-    code, _, err = run(capsys, "train", f"{SHIFTING}:{factory}", "--steps", "200", "--games", "2", "--eval-games",
+def test_an_agent_that_is_not_one_of_possible_agents_is_refused_in_one_line(home, capsys):
+    code, _, err = run(capsys, "train", f"{SHIFTING}:stranger", "--steps", "200", "--games", "2", "--eval-games",
                        "0", "--quiet")
     assert code == EXIT_USAGE, err
-    assert err.count("\n") == 1 and "agents that come and go are not supported yet" in err and says in err, err
+    assert err.count("\n") == 1 and "agent 'c' is in the game of seed" in err, err
+    assert "at its step 3 but is not one of its possible_agents (a, b)" in err, err
 
 
 # --- 5. a full disk under marl record ------------------------------------------------------------------------------

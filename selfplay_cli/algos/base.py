@@ -8,13 +8,17 @@ calls, with one row per slot of the learner::
     if learner.record(rewards, dones, truncated=truncated, acting=acting, final_obs=final_obs):
         stats = learner.update(next_obs, progress)
 
-* ``dones``: the slot's game ended on this step (won, lost or cut short); the games restart it at once, so
-  ``next_obs`` of such a slot is the next game's first observation.
-* ``truncated``: the game was cut short (a time limit): a subset of ``dones``. Its final observation
+* ``dones``: the slot's seat is done in its game on this step: the game ended (won, lost or cut short), or, in a
+  game whose agents come and go, the seat's agent left it (it died, it finished) while the others play on. Nothing
+  is bootstrapped past it: the step's reward is the seat's last in that game. A game that ended restarts at once,
+  so ``next_obs`` of such a slot is the next game's first observation; a seat that left does not act again
+  (``acting`` False) until its game restarts (or its agent rejoins).
+* ``truncated``: the seat was cut short (a time limit): a subset of ``dones``. Its final observation
   (``final_obs``, rows read only where ``truncated``; ``final_mask`` likewise for a learner that needs it) is
   valued to bootstrap the return instead of counting the cut as the end of the game.
-* ``acting``: the slots whose seat acted on this step (turn-based games). A step where the seat did not act
-  carries no decision: it is skipped, and its reward is credited to the seat's previous decision. None: all acted.
+* ``acting``: the slots whose seat acted on this step (turn-based games, and games whose agents come and go: a seat
+  not in its game does not act). A step where the seat did not act carries no decision: it is skipped, and its
+  reward is credited to the seat's previous decision, up to the seat's next ``done``. None: all acted.
 
 A learner may also be taught (kickstarting, :mod:`selfplay_cli.algos.kickstart`; PPO and SAC can, DQN cannot):
 ``learner.teach(obs, actions, mask)`` hands it a teacher's actions for observations of its slots, and

@@ -4,7 +4,8 @@ The trainer hands a learner its slots seat by seat: ``(N * G, obs)`` for N seats
 regroups them into one row per game (every seat's observation side by side), lets the inner learner (PPO or DQN,
 built on the joint spaces of :func:`selfplay_cli.policies.joint.joint_spaces`) choose one joint action per game, and
 decodes it into each seat's action. The team's reward is the sum over its seats; a game is
-over for the agent when it is over; a truncated game bootstraps from the joint final observation.
+over for the agent when it is over (in a game whose agents come and go, a seat that leaves does not end it: the game
+ends when every seat that was in it is done); a truncated game bootstraps from the joint final observation.
 """
 
 from __future__ import annotations
@@ -86,10 +87,12 @@ class JointLearner:
                acting: np.ndarray | None = None, final_obs: np.ndarray | None = None,
                final_mask: np.ndarray | None = None) -> bool:
         team = self._games(rewards).sum(axis=0)  # the team's reward: the sum over its seats
-        done = self._games(dones).any(axis=0)
+        seat_done = self._games(dones) > 0
+        in_game = np.ones_like(seat_done) if acting is None else self._games(acting).astype(bool)
+        done = seat_done.any(axis=0) & (seat_done | ~in_game).all(axis=0)  # everyone in the game is done
         extra: dict[str, Any] = {}
         if truncated is not None:
-            extra["truncated"] = self._games(truncated).any(axis=0)
+            extra["truncated"] = self._games(truncated).any(axis=0) & done
             if final_obs is not None:
                 extra["final_obs"] = regroup(final_obs, self.n)
         return self.inner.record(team, done.astype(np.float32), **extra)

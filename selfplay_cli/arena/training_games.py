@@ -8,8 +8,10 @@ limits (:mod:`.limits`: a game's length, numbers that are not finite) and make r
 (:func:`~selfplay_cli.results.game_results`). Each (seat, game) slot is either a learner's (learner index >= 0, fixed
 for the whole run) or an opponent's (-1), filled at every game start by ``choose_opponents`` (the matchmaker draws
 for every opponent slot on its own: a pool snapshot, a scripted bot, or a live learner). A learner sees only its own
-slots, in a fixed order, as a vectorised environment: ``observe()`` -> observations (and ``masks()``, ``acting()``),
-``step(actions)`` -> rewards, dones and what a truncated game's learner needs to bootstrap. A finished game restarts
+slots, in a fixed order, as a vectorised environment: ``observe()`` -> observations (and ``masks()``, ``acting()``,
+``state()``), ``step(actions)`` -> rewards, dones and what a truncated game's learner needs to bootstrap. A slot's
+done is its seat's own end in its game: the game's, or, where agents come and go (a PettingZoo game whose agents die
+or finish), the step its agent left; a seat out of its game does not act (``acting()``). A finished game restarts
 at once with a fresh seed (auto-reset: the observation after a done is the new game's first) and comes back as a
 :class:`GameResult`, so the ledger gets every training game.
 
@@ -38,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from ..envs import EnvSpec, SeatSpace, get_env
+from ..envs import EnvSpec, SeatSpace, describe_space, get_env
 from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, game_results
@@ -183,14 +185,21 @@ def learner_spaces(spec: EnvSpec, seat_spaces: Sequence[SeatSpace], layout: np.n
             if (other.observation.shape != first.observation.shape or other.action != first.action
                     or other.mask != first.mask):
                 raise MarlError(f"{spec.name}: seats {spec.agents[held[0]]} and {spec.agents[s]} have different "
-                                "spaces, so one network cannot play both; give them separate learners "
-                                "(--sharing nops, or --seats)")
+                                f"spaces ({_describe_seat(spec.agents[held[0]], first)}; "
+                                f"{_describe_seat(spec.agents[s], other)}), so one network cannot play both; give "
+                                "them separate learners (--sharing nops, or --seats)")
             if roles is not None and roles[s] != roles[held[0]]:
                 raise MarlError(f"{spec.name}: seats {spec.agents[held[0]]} and {spec.agents[s]} are of different "
                                 f"roles ({roles[held[0]]}, {roles[s]}), so one network cannot play both; give them "
                                 "separate learners (--sharing nops, or --seats)")
         out.append(first)
     return out
+
+
+def _describe_seat(agent: str, seat: SeatSpace) -> str:
+    """``agent: observation (3,), actions Discrete(3), masked``: what decides whether one network plays a seat."""
+    return (f"{agent}: observation {tuple(seat.observation.shape)}, actions {describe_space(seat.action)}"
+            f"{', masked' if seat.mask else ''}")
 
 
 def learner_roles(layout: np.ndarray, roles: Sequence[str] | None) -> list[str | None]:
@@ -258,6 +267,9 @@ class SelfPlayGames:
                            and s.mask == first.mask for s in self.seat_spaces)
         self.masked = any(s.mask for s in self.seat_spaces)
         self.sequential = spec.turns == "sequential"
+        # A core whose agents may come and go (a PettingZoo game's) says whose part in a game ended on each step
+        # (seat_done): a seat ends there, not only with its game, and while it is out of a game it does not act.
+        self.comes_and_goes = hasattr(self.core, "seat_done")
         self.acts = [SeatActions.of(s.action) for s in self.seat_spaces]
         self.slots = [np.flatnonzero(self.layout.ravel() == i) for i in range(self.n_learners)]
         self._index = [_as_slice(s) for s in self.slots]
@@ -391,17 +403,28 @@ class SelfPlayGames:
         return self._acting
 
     def acting(self) -> list[np.ndarray | None]:
-        """In turn-based games, each learner's slots whose seat acts on this step (None for simultaneous games)."""
-        if not self.sequential:
+        """Each learner's slots whose seat acts on this step: in turn-based games, and in games whose agents come and
+        go (a seat out of its game does not act); None for a learner all of whose slots act."""
+        if not (self.sequential or self.comes_and_goes):
             return [None] * self.n_learners
         flat = self._to_act()
-        return [flat[s] for s in self._index]
+        if self.sequential:
+            return [flat[s] for s in self._index]
+        return [None if a.all() else a for a in (flat[s] for s in self._index)]
+
+    def state(self) -> list[np.ndarray]:
+        """Each learner's rows of the games' global state (the game's :meth:`~selfplay_cli.envs.EnvSpec.state_space`),
+        ``(len(slots), *state_shape)``: each slot's game's state, in the learner's slot order."""
+        state = self.core.state()  # type: ignore[attr-defined]
+        return [state[slots % self.n] for slots in self.slots]
 
     # -- a step ---------------------------------------------------------------------------------------------------
     def step(self, actions: Sequence[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray], list[GameResult]]:
         """Apply each learner's actions (opponents act by themselves); returns per learner the rewards and dones of
-        its slots, and the games that ended on this step (already restarted). Games cut short on this step are
-        :attr:`truncated` (per learner), their final observations :attr:`final_obs` (and :attr:`final_masks`)."""
+        its slots, and the games that ended on this step (already restarted). A slot is done when its seat's part in
+        its game ended: with the game, or, in a game whose agents come and go, when its agent left (then it does not
+        act until its game restarts: :meth:`acting`). Slots cut short on this step are :attr:`truncated` (per
+        learner), their final observations :attr:`final_obs` (and :attr:`final_masks`)."""
         n, n_seats = self.n, self.n_seats
         if self.uniform:
             flat_actions = self._actions
@@ -422,21 +445,26 @@ class SelfPlayGames:
         self._check_finite(rewards, "reward")
         self._log.append(step_actions)  # every slot always has a game running
         self._stale()
-        cut = self.core.truncated | self.length.over(self.core.steps, self.core.terminated | self.core.truncated)
+        stopped = self.length.over(self.core.steps, self.core.terminated | self.core.truncated)
+        cut = self.core.truncated | stopped
         done_games = self.core.terminated | cut
         flat_rewards = rewards.reshape(-1)
-        flat_done = np.tile(done_games, n_seats)
+        if self.comes_and_goes:  # each seat's own end: when its agent left, or with its game
+            in_game = self.core.in_game & stopped  # type: ignore[attr-defined]  # games the loop cuts: who was in
+            flat_done = (self.core.seat_done | in_game).reshape(-1)  # type: ignore[attr-defined]
+            flat_cut = (self.core.seat_cut | in_game).reshape(-1)  # type: ignore[attr-defined]
+        else:
+            flat_done, flat_cut = np.tile(done_games, n_seats), np.tile(cut, n_seats)
         out_r = [flat_rewards[s] for s in self._index]
         out_d = [flat_done[s] for s in self._index]
         self.truncated = self.final_obs = self.final_masks = None
+        if flat_cut.any():  # what a learner bootstraps a cut seat from: its final observation, before the restart
+            self.truncated = [flat_cut[s] for s in self._index]
+            self.final_obs = self.observe()
+            self.final_masks = self.masks()
         finished: list[GameResult] = []
         ended = np.flatnonzero(done_games)
         if ended.size:
-            if cut.any():  # what a learner bootstraps a cut game from: its final observation, before the restart
-                flat_cut = np.tile(cut, n_seats)
-                self.truncated = [flat_cut[s] for s in self._index]
-                self.final_obs = self.observe()
-                self.final_masks = self.masks()
             games = ended.tolist()
             finished = game_results(
                 self.spec.name, self.rules, self.core.score[:, ended],
@@ -468,7 +496,7 @@ class SelfPlayGames:
         in turn-based games only opponents whose seat acts are asked."""
         self._read()
         slots = self.opponent_slots
-        if self.sequential:
+        if self.sequential or self.comes_and_goes:
             slots = slots[self._to_act()[slots]]
         if not slots.size:
             return

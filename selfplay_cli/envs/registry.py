@@ -67,6 +67,12 @@ class BatchedCore(Protocol):
         """``(n_seats, n)`` bool: the seats that act on the next step."""
         ...
 
+    # A core whose agents may come and go (a PettingZoo game's) also has, set by each step, ``seat_done`` and
+    # ``seat_cut`` (``(n_seats, n)`` bool: whose part in a game ended on it, and of those whose was cut short) and
+    # ``in_game`` (who is in each game now); a core without them has every seat in every game from its start to its
+    # end. A core of a game with a global state (:meth:`EnvSpec.state_space`) has ``state()``: ``(n, *shape)``
+    # float32.
+
 
 def reset_slots(games: Any, seeds: Any) -> tuple[np.ndarray, np.ndarray]:
     """A core's :meth:`BatchedCore.reset` arguments as flat int64 arrays of equal length (a ValueError otherwise)."""
@@ -281,6 +287,10 @@ class EnvSpec:
     (:func:`~selfplay_cli.rated.match.env_options_of` refuses the match): the game and its bots are the same, so
     ratings through the bots compare them, which is what a user who tries 4 frames against 8 asks of the ladder.
 
+    ``make_state_space(cfg)``: the space of the game's global state for a config (a float32 Box), where the game
+    gives one: its core's ``state()`` is then every game's state, ``(n_games, *shape)`` float32, what a centralised
+    critic reads (:meth:`state_space`; None, the default: the game gives no state).
+
     ``train_defaults``: the game's own training settings, laid out as a run's TOML (``{"ppo": {"gamma": 0.999},
     "games": 64}``), applied over marl's defaults and under a ``--config`` file and the flags typed (the lander wants
     a longer horizon than pong).
@@ -311,6 +321,7 @@ class EnvSpec:
     option_source: Callable[..., Any] | None = None  # a function whose keyword arguments are the options, for a game
     # whose config is no dataclass (a PettingZoo game's factory): `marl envs NAME` reads them from its signature
     roles: tuple[str, ...] | None = None  # each seat's role, where the game declares them (None: by their spaces)
+    make_state_space: Callable[[Any], spaces.Box | None] | None = None  # the global state's space for a config
 
     def __post_init__(self) -> None:
         n = len(self.agents)
@@ -413,6 +424,13 @@ class EnvSpec:
                                           f"both of role {role!r} but their spaces differ (a role's seats must be "
                                           "interchangeable)")
         return seats
+
+    def state_space(self, cfg: Any = None) -> spaces.Box | None:
+        """The space of the game's global state for the config ``cfg`` (default options when None), None when the
+        game gives none (see ``make_state_space``)."""
+        if self.make_state_space is None:
+            return None
+        return self.make_state_space(self.make_config() if cfg is None else cfg)
 
     def seat_roles(self, cfg: Any = None) -> tuple[str, ...]:
         """The role of each seat for the config ``cfg`` (default options when None): the declared ``roles`` (which

@@ -5,6 +5,13 @@ Each step, the games play under the curriculum's options at the run's progress; 
 with its own actions while the schedule's weight is above 0, and each learner adds the imitation term, so weighted,
 to its policy's loss; the learners act, the games step; then each learner records its transitions and, when its
 rollout is due, updates.
+
+Global state. A learner that declares ``wants_state = True`` (a centralised critic) is handed the global state of
+its slots' games (:meth:`~selfplay_cli.arena.training_games.SelfPlayGames.state`: one row a slot, in its slot order)
+with every observation it is handed: ``see_state(rows)`` right before it acts on a step's observations (the state
+they were made in) and right before an update that takes them as the next observations. A game that gives no state
+(:meth:`~selfplay_cli.envs.EnvSpec.state_space` None) is refused for such a learner in one line; when no learner
+wants it, no state is read.
 """
 
 from __future__ import annotations
@@ -55,9 +62,10 @@ def load_teacher(league: League, cfg: TrainConfig, spaces: list[Any], device: st
 
 @dataclass
 class Step:
-    """One step of every training game: the observations after it, the rewards and ends, the games it finished,
-    (turn-based games) the slots that acted, and, per learner, the games cut short on it with their final
-    observations and masks (None: none was)."""
+    """One step of every training game: the observations after it, the rewards and ends (per slot: its seat's part
+    in its game ended), the games it finished, the slots that acted (turn-based games, and games whose agents come
+    and go; None: all did), per learner the slots cut short on it with their final observations and masks (None:
+    none was), and the global state after it for the learners that want it."""
 
     obs: list[np.ndarray]
     rewards: Any
@@ -67,6 +75,8 @@ class Step:
     truncated: list[np.ndarray] | None = None
     final_obs: list[np.ndarray] | None = None
     final_masks: list[np.ndarray | None] | None = None
+    state: list[np.ndarray] | None = None  # each learner's rows of the global state after the step (learners that
+    # want it only: None when none does)
 
 
 class Rollouts:
@@ -79,6 +89,14 @@ class Rollouts:
         self.games, self.learners, self.curriculum = games, learners, curriculum
         self.teacher, self.teacher_schedule = teacher, teacher_schedule
         self.lesson: dict[str, float] = {}  # the curriculum's values the training games play under now
+        self.wants_state = [bool(getattr(learner, "wants_state", False)) for learner in learners]
+        self._state: list[np.ndarray] | None = None  # the state the games stand in, while it is known
+        if any(self.wants_state):
+            if games is None:
+                raise MarlError("a learner that reads the game's global state trains with --executor local only")
+            if games.spec.state_space(games.spec.config(**games.options)) is None:
+                raise MarlError(f"a learner that reads the game's global state cannot train on {games.spec.name}: "
+                                "the game gives none (its env has no state_space)")
 
     # -- what the run reads of its games (its snapshot moments save the seeds' base, a resume restarts them) ----
     @property
@@ -94,6 +112,7 @@ class Rollouts:
     def restart_all(self) -> None:
         assert self.games is not None
         self.games.restart_all()
+        self._state = None
 
     def game_steps(self) -> np.ndarray:
         """Steps played so far in each game in progress."""
@@ -115,20 +134,31 @@ class Rollouts:
             self._follow_curriculum(progress)
         games = self.games
         assert games is not None
-        acting = games.acting() if games.sequential else None
+        acting = games.acting() if games.sequential or games.comes_and_goes else None
         masks = games.masks() if games.masked else None
         if self.teacher is not None:
             self._teach(obs, masks, acting, progress)
+        if any(self.wants_state):
+            self._hand_state(self._state if self._state is not None else games.state())
         rewards, dones, finished = games.step(team.act(obs, masks))
+        self._state = games.state() if any(self.wants_state) else None
         return Step(games.observe(), rewards, dones, finished, acting, games.truncated, games.final_obs,
-                    games.final_masks)
+                    games.final_masks, self._state)
 
     def learn(self, team: LearnerTeam, step: Step, progress: float) -> list[dict[str, float]] | None:
         """The learners record ``step``; those whose rollout is due update. Their figures from the update, None
         when none was due."""
         if not team.record(step.rewards, step.dones, step.truncated, step.acting, step.final_obs, step.final_masks):
             return None
+        if step.state is not None:
+            self._hand_state(step.state)
         return team.update(step.obs, progress)
+
+    def _hand_state(self, state: list[np.ndarray]) -> None:
+        """Each learner that wants it its rows of the global state (see the module docstring)."""
+        for learner, wants, rows in zip(self.learners, self.wants_state, state, strict=True):
+            if wants:
+                learner.see_state(rows)
 
     def _follow_curriculum(self, progress: float) -> None:
         """The training games' live options as the curriculum has them at this progress (changed only when they

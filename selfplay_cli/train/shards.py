@@ -249,7 +249,7 @@ class RolloutShard:
         for t in range(steps):
             o = games.observe()
             m = games.masks() if games.masked else [None] * n
-            a = games.acting() if games.sequential else [None] * n
+            a = games.acting()  # (turn-based games, and games whose agents come and go; else all None)
             decided = [learner.decide(o[i], m[i]) for i, learner in enumerate(self.learners)]
             r, d, done = games.step([played for played, _ in decided])
             for i in range(n):  # copies: a game's core may hand out the same buffers step after step

@@ -1,9 +1,10 @@
-"""Shifting: a two-sides PettingZoo parallel game whose agents change mid-game, which marl does not support yet.
+"""Shifting: a two-sides PettingZoo parallel game whose agents change mid-game without being done.
 
-Two agents ``a`` and ``b`` pick 0 or 1 each step. In ``parallel_env`` agent ``b`` vanishes from ``agents`` at step
-``at`` (3 by default) without being terminated or truncated; in ``joining`` only ``a`` plays at first and ``b``
-joins at step ``at``. Either way the agents playing change mid-game, which the adapter must refuse in one line. No
-agent is ever done; the game declares ``marl_max_steps = 20``.
+Two agents ``a`` and ``b`` pick 0 or 1 each step, rewarded what they pick. In ``parallel_env`` agent ``b`` vanishes
+from ``agents`` at step ``at`` (3 by default) without being terminated or truncated (it left: it keeps its score and
+acts no more); in ``joining`` only ``a`` plays at first and ``b`` joins at step ``at``; in ``stranger`` an agent
+``c``, not one of ``possible_agents``, appears at step ``at``, which the adapter refuses in one line. No agent is
+ever done; the game declares ``marl_max_steps = 20``.
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ AGENTS = ("a", "b")
 class Shifting(ParallelEnv):
     metadata = {"name": "shifting_v0", "marl_kind": "two-sides", "marl_max_steps": 20}
 
-    def __init__(self, at: int = 3, rejoin: bool = False) -> None:
-        self.at, self.rejoin = at, rejoin
+    def __init__(self, at: int = 3, rejoin: bool = False, stranger: bool = False) -> None:
+        self.at, self.rejoin, self.stranger = at, rejoin, stranger
         self.possible_agents = list(AGENTS)
         self.agents: list[str] = []
         self.t = 0
@@ -36,8 +37,8 @@ class Shifting(ParallelEnv):
 
     def step(self, actions):
         self.t += 1
-        if self.t == self.at:
-            self.agents = list(AGENTS) if self.rejoin else ["a"]  # b joins late, or vanishes without being done
+        if self.t == self.at:  # b joins late, c (a stranger) appears, or b vanishes without being done
+            self.agents = list(AGENTS) if self.rejoin else [*AGENTS, "c"] if self.stranger else ["a"]
         obs = {x: np.full(1, self.t % 2, np.float32) for x in self.agents}
         rewards = {x: float(actions.get(x, 0)) for x in self.agents}
         never = {x: False for x in self.agents}
@@ -52,3 +53,8 @@ def parallel_env(at: int = 3) -> Shifting:
 def joining(at: int = 3) -> Shifting:
     """``b`` is missing at the start and joins at step ``at``."""
     return Shifting(at, rejoin=True)
+
+
+def stranger(at: int = 3) -> Shifting:
+    """An agent ``c`` that is not one of ``possible_agents`` appears at step ``at``."""
+    return Shifting(at, stranger=True)

@@ -21,13 +21,28 @@ copies, which the arena steps as it steps the built-in games' cores.
   ``render()`` makes the video's frames, at ``metadata["render_fps"]`` frames a second by default.
 
 The core (:class:`PettingZooCore`) steps N copies: ``reset(games, seeds)`` resets copies with ``reset(seed=...)``;
-``step(actions)`` gives every acting agent its seat's action; ``score`` is each seat's summed rewards; a game is
-over when every agent is done (``terminated``, or ``truncated`` when any agent was cut by truncation); agents that
-leave early (terminated or truncated) no longer act. Agents that come and go otherwise (one that vanishes from
-``agents`` without being done, one that joins after the game began) are not supported yet: the core refuses the
-game in one line (:class:`EnvError`) naming the agent and the step. In an AEC game a seat's observation is
-refreshed when its turn comes and when it leaves the game (zeros before its first turn). The action masks of seats
-that do not act are all True (their actions are ignored).
+``step(actions)`` gives every acting agent its seat's action; ``score`` is each seat's summed rewards (a seat whose
+agent left keeps its score); a game is over when no agent is left in it (``terminated``, or ``truncated`` when an
+agent was cut by truncation).
+
+Agents come and go. An agent leaves its game when it is terminated or truncated, or when it vanishes from ``agents``
+(it died, it finished): from then on it does not act, its observation stays the last it had, and rewards the game
+still gives it count in its score. An agent of ``possible_agents`` that is not in the game (it was not there at the
+start, or it vanished; one that was terminated or truncated is done with that game) joins when it appears in
+``agents``: it acts from then on, played by its seat's policy (its seat is its index in ``possible_agents``), and
+observes zeros until then. An agent that is not one of ``possible_agents`` is refused in one line (:class:`EnvError`)
+naming it, the game's seed and the step. After each step ``seat_done`` says whose part in a game ended on it (it
+left, or the game ended with it in; ``seat_cut``: of those, the ones cut short by truncation) and ``in_game`` who is
+in each game, so that a learner stops at its seat's own end, not only at the game's. In an AEC game an agent leaves
+when PettingZoo steps it out (its ``step(None)``, on its turn after it was done), so the rewards the game gives it
+between its end and then still reach it; a seat's observation is refreshed when its turn comes and when it leaves
+the game (zeros before its first turn). The action masks of seats that do not act are all True (their actions are
+ignored).
+
+Global state: where the env has a ``state_space`` (PettingZoo's ``state()``: what a centralised critic reads), the
+spec declares it (:meth:`~selfplay_cli.envs.registry.EnvSpec.state_space`, read as observations are: a Box as it is,
+any other fixed-size space flattened) and the core's ``state()`` gives it for every game, ``(n_games, *shape)``
+float32; a game without one has ``state_space()`` None.
 """
 
 from __future__ import annotations
@@ -49,15 +64,27 @@ __all__ = ["Layout", "PettingZooConfig", "PettingZooCore", "PettingZooRenderer",
 
 
 class Layout:
-    """What one instance of a game declares (for given options): the API, the seats and their spaces."""
+    """What one instance of a game declares (for given options): the API, the seats and their spaces, and the
+    global state's space (``state_space``, the env's own; None when it has none) and how it is read
+    (``state``: None, or a :class:`SeatObs` whose ``box`` is what ``state()`` gives)."""
 
     def __init__(self, name: str, make: Callable[[], Any], api: str, agents: tuple[str, ...],
                  obs_spaces: tuple[spaces.Space, ...], act_spaces: tuple[spaces.Space, ...],
                  seats: tuple[SeatSpace, ...], metadata: Mapping[str, Any], max_steps: int | None,
-                 renders: bool) -> None:
+                 renders: bool, state_space: spaces.Space | None = None) -> None:
         self.name, self.make, self.api, self.agents = name, make, api, agents
         self.obs_spaces, self.act_spaces, self.seats = obs_spaces, act_spaces, seats
         self.metadata, self.max_steps, self.renders = metadata, max_steps, renders
+        self.state_space = state_space
+        self.state = None if state_space is None else SeatObs(state_space)
+
+    @property
+    def state_box(self) -> spaces.Box | None:
+        """What the core's ``state()`` gives for one game (float32), or None."""
+        if self.state is None:
+            return None
+        box = self.state.box
+        return spaces.Box(np.asarray(box.low, np.float32), np.asarray(box.high, np.float32), dtype=np.float32)
 
 
 class PettingZooConfig:
@@ -124,6 +151,22 @@ def _spaces_of(name: str, env: Any, agents: tuple[str, ...]) -> tuple[tuple[spac
     return obs, act
 
 
+def _state_space_of(env: Any) -> spaces.Space | None:
+    """The env's ``state_space`` (PettingZoo's global state), None when it declares none, or one of no fixed size
+    (a Graph, a Sequence: the game plays on without a state, as a game that gives none)."""
+    try:
+        space = getattr(env, "state_space", None)
+    except Exception:  # a wrapper that raises for an attribute its env lacks: no state
+        return None
+    if space is None or not isinstance(space, spaces.Space):
+        return None
+    try:
+        SeatObs(space)
+    except ValueError:
+        return None
+    return space
+
+
 def _max_steps(name: str, env: Any, api: str, n_agents: int, metadata: Mapping[str, Any]) -> int | None:
     limit = metadata.get("marl_max_steps")
     if limit is None:
@@ -166,13 +209,14 @@ def probe(name: str, factory: Callable[..., Any], options: Mapping[str, Any] | N
         render_mode = "rgb_array" if renders and _takes_render_mode(factory) else None
         renders = renders and render_mode is not None
         max_steps = _max_steps(name, env, api, len(agents), metadata)
+        state_space = _state_space_of(env)
     finally:
         _close(env)
 
     def make() -> Any:
         return _make(name, factory, options, render_mode)
 
-    return Layout(name, make, api, agents, obs, act, tuple(seats), metadata, max_steps, renders)
+    return Layout(name, make, api, agents, obs, act, tuple(seats), metadata, max_steps, renders, state_space)
 
 
 def _close(env: Any) -> None:
@@ -284,6 +328,7 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
             sides=sides,
             tie_tolerance=tol,
             make_seat_spaces=lambda cfg: cfg.layout.seats,
+            make_state_space=lambda cfg: cfg.layout.state_box,
             time_limit=lambda cfg: cfg.layout.max_steps,
             render_fps=fps if default.renders else None,
             neutral_options=("render_mode",),  # how it is drawn: marl sets it itself to record
@@ -379,9 +424,12 @@ class PettingZooCore:
         self._zero_obs = [np.zeros(s.observation.shape, dtype=np.float32) for s in layout.seats]
         self._obs: list[list[Any]] = [[z] * n for z in self._zero_obs]
         self._mask: list[list[Any]] = [[None] * n for _ in range(S)]
-        self._live = np.zeros((S, n), dtype=bool)  # agents still in each game
-        self._live_agents: list[list[tuple[int, str]]] = [[] for _ in range(n)]
-        self._began: list[frozenset[str]] = [frozenset()] * n  # the agents each game began with
+        self._live = np.zeros((S, n), dtype=bool)  # the seats whose agents are in each game
+        self._live_agents: list[list[tuple[int, str]]] = [[] for _ in range(n)]  # parallel: (seat, agent), in order
+        self._listed: list[list[str] | None] = [None] * n  # AEC: each game's agents when last seen
+        self._done_agents: list[set[str]] = [set() for _ in range(n)]  # parallel: agents done in each game (no return)
+        self.seat_done = np.zeros((S, n), dtype=bool)  # set by step(): whose part in a game ended on it
+        self.seat_cut = np.zeros((S, n), dtype=bool)  # ... of those, the ones cut short (truncated)
         self._seeds = [0] * n  # each game's seed (to name the game in an error)
         self._turn = [-1] * n  # AEC: the seat whose turn it is in each game, -1 when it is over
         self._acting: np.ndarray | None = None  # to_act() until the next step or reset
@@ -428,49 +476,84 @@ class PettingZooCore:
             for s in range(self.n_seats):
                 self._obs[s][g] = self._zero_obs[s]
                 self._mask[s][g] = None
+            self._live[:, g] = self.seat_done[:, g] = self.seat_cut[:, g] = False
             if self._aec:  # each seat observes when its turn comes (zeros until then)
                 env.reset(seed=int(seed))
-                self._began[g] = frozenset(env.agents)
                 self._running[g] = True
+                self._listed[g] = agents = list(env.agents)
+                for agent in agents:
+                    s = self._seat_of.get(agent)
+                    self._live[self._seat(g, agent) if s is None else s, g] = True
                 self._settle(g)
             else:
                 obs, _ = env.reset(seed=int(seed))
-                self._began[g] = frozenset(env.agents)
-                stranger = next((a for a in env.agents if a not in self._seat_of), None)
-                if stranger is not None:
-                    self._came_and_went(g, stranger, "is in the game at its start")
-                live = [(self._seat_of[a], a) for a in env.agents]
-                for s, agent in live:
+                self._done_agents[g] = set()
+                live = []
+                for agent in env.agents:
+                    s = self._seat(g, agent)
+                    live.append((s, agent))
+                    self._live[s, g] = True
                     self._store(s, g, obs[agent])
                 self._live_agents[g] = live
-                self._live[:, g] = False
-                for s, _ in live:
-                    self._live[s, g] = True
                 self._running[g] = bool(live)
+
+    @property
+    def in_game(self) -> np.ndarray:
+        """``(n_seats, n)`` bool: the seats whose agents are in each game now (none in a game that is over)."""
+        return self._live.copy()
+
+    def _seat(self, g: int, agent: Any) -> int:
+        """The seat of ``agent``, which is in game g; an :class:`EnvError` for one not among ``possible_agents``."""
+        s = self._seat_of.get(agent)
+        if s is None:
+            name = self.layout.name
+            raise EnvError(name, f"game {name!r}: agent {agent!r} is in the game of seed {self._seeds[g]} at its step "
+                                 f"{int(self.steps[g])} but is not one of its possible_agents "
+                                 f"({', '.join(self.agents)}): marl plays a seat for each of possible_agents only")
+        return s
+
+    def _leaves(self, s: int, g: int, cut: bool = False) -> None:
+        """Seat s's agent left game g on this step (``cut``: by truncation)."""
+        self._live[s, g] = False
+        self.seat_done[s, g] = True
+        if cut:
+            self.seat_cut[s, g] = True
+            self._cut[g] = True
 
     def _settle(self, g: int) -> None:
         """AEC: step the agents that are done out of the game (PettingZoo's ``step(None)``), keeping their final
-        observation, until a live agent has the turn or nobody is left."""
+        observation, until a live agent has the turn or nobody is left; then see who else left or joined."""
         env, seat_of = self.envs[g], self._seat_of
-        while env.agents:
+        while agents := env.agents:
             agent = env.agent_selection
-            if agent not in self._began[g]:
-                self._came_and_went(g, agent, f"joined at step {int(self.steps[g])}")
+            s = seat_of.get(agent)
+            if s is None:
+                s = self._seat(g, agent)  # (refused)
             term, trunc = env.terminations.get(agent, False), env.truncations.get(agent, False)
-            s = seat_of[agent]
-            if not (term or trunc):
-                self._store(s, g, env.observe(agent))
-                self._turn[g] = s
-                return
             self._store(s, g, env.observe(agent))
-            if trunc and not term:
-                self._cut[g] = True
+            if not (term or trunc):
+                self._turn[g] = s
+                if agents != self._listed[g]:
+                    self._present(g, agents)
+                return
             env.step(None)
+            if self._live[s, g]:
+                self._leaves(s, g, cut=bool(trunc and not term))
         self._turn[g] = -1
         if self._running[g]:
-            self._running[g] = False
-            self.truncated[g] = bool(self._cut[g])
-            self.terminated[g] = not self._cut[g]
+            self._over(g)
+
+    def _present(self, g: int, agents: list[str]) -> None:
+        """AEC: the seats in game g as its ``agents`` now are (they changed since last seen): one that vanished left
+        it, one that appeared joined."""
+        live = self._live[:, g]
+        self._listed[g] = list(agents)
+        now = np.zeros(self.n_seats, dtype=bool)
+        for a in agents:
+            now[self._seat(g, a)] = True
+        for s in np.flatnonzero(live & ~now).tolist():
+            self._leaves(s, g)
+        live[now] = True
 
     # ----------------------------------------------------------------------------------------------------
     def to_act(self) -> np.ndarray:
@@ -561,12 +644,14 @@ class PettingZooCore:
         self._acting = None
         self.terminated.fill(False)
         self.truncated.fill(False)
+        self.seat_done.fill(False)
+        self.seat_cut.fill(False)
         running = np.flatnonzero(self._running)
+        self.steps[running] += 1  # (first: an error on this step names it)
         if self._aec:
             self._step_aec(running.tolist(), cols, rewards)
         else:
             self._step_parallel(running.tolist(), cols, rewards)
-        self.steps[running] += 1
         self.score += rewards
         return rewards
 
@@ -578,7 +663,8 @@ class PettingZooCore:
             act = {}
             for s, agent in live:
                 act[agent] = cols[s][g]
-            obs, rew, term, trunc, _ = envs[g].step(act)
+            env = envs[g]
+            obs, rew, term, trunc, _ = env.step(act)
             for agent, r in rew.items():
                 if r:
                     s = seat_of.get(agent)
@@ -591,48 +677,47 @@ class PettingZooCore:
                         obs_of[s][g] = o
                     else:
                         self._store(s, g, o)
-            if True in term.values() or True in trunc.values():
-                self._leave(g, live, term, trunc)
-            elif not envs[g].agents:
-                self._over(g)
-            if self._running[g]:
-                self._check_agents(g)
+            now = env.agents
+            changed = True in term.values() or True in trunc.values() or len(now) != len(live)
+            if not changed:
+                for (_, a), b in zip(live, now, strict=True):  # (of equal length here)
+                    if a != b:
+                        changed = True
+                        break
+            if changed:
+                self._come_and_go(g, obs, term, trunc)
 
-    def _check_agents(self, g: int) -> None:
-        """Refuse a parallel game whose agents changed on this step other than by being done: one that vanished
-        from ``agents`` without being terminated or truncated, or one that joined after the game began."""
-        now, live = self.envs[g].agents, self._live_agents[g]
-        if len(now) == len(live) and all(a == b for (_, a), b in zip(live, now, strict=True)):
-            return
-        step, playing, present = int(self.steps[g]) + 1, {a for _, a in live}, set(now)
-        for _, a in live:
-            if a not in present:
-                self._came_and_went(g, a, f"left at step {step} without being terminated or truncated")
-        for a in now:
-            if a not in playing and a not in self._began[g]:
-                self._came_and_went(g, a, f"joined at step {step}")
-
-    def _came_and_went(self, g: int, agent: str, what: str) -> None:
-        name = self.layout.name
-        stranger = "" if agent in self._seat_of else " (not one of its possible_agents)"
-        raise EnvError(name, f"game {name!r}: agents that come and go are not supported yet: {agent!r}{stranger} "
-                             f"{what} (the game of seed {self._seeds[g]})")
-
-    def _leave(self, g: int, live: list[tuple[int, str]], term: Mapping[str, Any], trunc: Mapping[str, Any]) -> None:
-        """Agents of game g that are done leave it; the game is over when none is left."""
+    def _come_and_go(self, g: int, obs: Mapping[str, Any], term: Mapping[str, Any], trunc: Mapping[str, Any]) -> None:
+        """Parallel game g after a step where its agents changed: those done (terminated or truncated) or gone from
+        ``agents`` leave it, those of ``possible_agents`` that appeared join it (their first observation stored);
+        the game is over when none is left."""
+        present = self.envs[g].agents
+        was = {a: s for s, a in self._live_agents[g]}
+        listed, done = set(present), self._done_agents[g]
+        for a, s in was.items():
+            ended, cut = term.get(a), trunc.get(a)
+            if ended or cut:
+                done.add(a)
+            if ended or cut or a not in listed:
+                self._leaves(s, g, cut=bool(cut and not ended))
         stay = []
-        for s, a in live:
-            if term.get(a) or trunc.get(a):
-                self._live[s, g] = False
-                if trunc.get(a) and not term.get(a):
-                    self._cut[g] = True
-            else:
-                stay.append((s, a))
+        for a in present:
+            if a in done:  # (an agent done in this game that the env still lists has left all the same)
+                continue
+            s = was.get(a)
+            if s is None:  # one of possible_agents that was not in the game: it joins
+                s = self._seat(g, a)
+                self._live[s, g] = True
+                o = obs.get(a)
+                if o is not None:
+                    self._store(s, g, o)
+            stay.append((s, a))
         self._live_agents[g] = stay
-        if not stay or not self.envs[g].agents:
+        if not stay:
             self._over(g)
 
     def _over(self, g: int) -> None:
+        self.seat_done[:, g] |= self._live[:, g]  # the seats still in it: their part ends with the game
         self._live[:, g] = False
         self._live_agents[g] = []
         self._running[g] = False
@@ -646,8 +731,28 @@ class PettingZooCore:
             env.step(cols[turn[g]][g])
             for agent, r in env.rewards.items():
                 if r:
-                    rewards[seat_of[agent], g] += r
+                    s = seat_of.get(agent)
+                    if s is not None:
+                        rewards[s, g] += r
             self._settle(g)
+
+    def state(self) -> np.ndarray:
+        """Every game's global state as its env's ``state()`` gives it, ``(n, *shape)`` float32 (games that are over
+        and not yet reset: their final state). An :class:`EnvError` for a game that gives none, or one of another
+        shape than its ``state_space``."""
+        name, read = self.layout.name, self.layout.state
+        if read is None:
+            raise EnvError(name, f"game {name!r} gives no global state (its env has no state_space)")
+        shape = self.layout.state_box.shape  # type: ignore[union-attr]
+        out = np.empty((self.n, *shape), dtype=np.float32)
+        for g, env in enumerate(self.envs):
+            try:
+                x, _ = read.split(env.state())
+                out[g] = x
+            except ValueError as e:
+                raise EnvError(name, f"game {name!r}: state() in game slot {g} does not fit its state_space "
+                                     f"{self.layout.state_space}: {e}") from None
+        return out
 
     # ----------------------------------------------------------------------------------------------------
     def render(self, game: int = 0) -> np.ndarray:
