@@ -6,7 +6,8 @@ For each game it prints game steps/s both ways and the ratio direct / adapter (t
 a factor; the median of alternating rounds); the target is a ratio below 2 for every game. Games: pong's
 PettingZoo view (parallel, the fastest game here, so the adapter's share is the largest), the test suite's
 rendezvous (parallel, Box actions, 3 seats), tic-tac-toe (AEC, action masks), cue (Discrete observations, read
-one-hot) and dash (a nested Dict/Tuple observation flattened, with a top-level action mask).
+one-hot) dash (a nested Dict/Tuple observation flattened, with a top-level action mask) and race (agents that leave as they
+finish and one that joins late). OpenSpiel games have their own figures: benchmarks/openspiel_returns.py.
 
 Both ways play random legal actions drawn ahead of time, and both do what a player needs each step: the direct
 loop reads the observations ``step`` returns (``last()`` for AEC) and resets finished games; through the adapter
@@ -34,6 +35,7 @@ GAMES = {
     "tictactoe (AEC, masks)": "tests.games.tictactoe:env",
     "cue (Discrete obs)": "tests.games.cue:parallel_env",
     "dash (Dict/Tuple obs, masks)": "tests.games.dash:parallel_env",
+    "race (agents leave, join)": "tests.games.race:parallel_env",
 }
 
 
@@ -49,6 +51,7 @@ def direct(name: str, seconds: float) -> float:
     env = spec.make_parallel()
     rng = np.random.default_rng(0)
     agents = list(env.possible_agents)
+    seat_of = {a: s for s, a in enumerate(agents)}
     spaces = [env.action_space(a) for a in agents]
     draws = [_random_actions(s, 4096, rng) for s in spaces]
     steps, t0 = 0, time.perf_counter()
@@ -58,7 +61,8 @@ def direct(name: str, seconds: float) -> float:
             for i in range(256):
                 j = (steps + i) & 4095
                 act = {}
-                for s, a in enumerate(agents):
+                for a in env.agents:  # the agents in the game now (some leave and join: race)
+                    s = seat_of[a]
                     o = obs[a]
                     if isinstance(o, dict) and "action_mask" in o:  # the k-th legal action, k drawn ahead
                         legal = np.flatnonzero(o["action_mask"])
