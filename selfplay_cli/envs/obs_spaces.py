@@ -12,6 +12,11 @@
 The bounds of the row (:meth:`FlatObs.box`) are the parts' bounds (0 and 1 for one-hots and binaries), so a policy's
 input is checked as any Box observation is. A game's ``action_mask`` is not read here: the adapter takes it out of
 a top-level Dict first (:func:`~selfplay_cli.envs.registry.seat_space_of`).
+
+**Images** are the one exception to the flat float32 row (:func:`image_layout`): a Box of three axes whose numbers
+lie in 0..255 (uint8, or any dtype with those bounds) and whose channel axis holds 1 to 4 channels is read as it is,
+its shape and dtype kept, so a uint8 frame stays one byte a number from the game to the network (which scales it to
+[0, 1] itself) and a convolutional encoder reads it.
 """
 
 from __future__ import annotations
@@ -22,7 +27,31 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["FlatObs", "flat_obs"]
+__all__ = ["FlatObs", "flat_obs", "image_layout"]
+
+MAX_CHANNELS = 4  # an image's channels (grey, grey+alpha, RGB, RGBA); a bigger axis is a side, not the channels
+MIN_SIDE = 4  # an image's smaller side: below it there is nothing for a convolution to slide over
+
+
+def image_layout(space: spaces.Space) -> str | None:
+    """``"hwc"`` or ``"chw"`` for an image observation, else None.
+
+    An image is a Box of three axes with numbers in 0..255 (dtype uint8, or bounds 0 and 255 of any dtype) whose
+    channel axis holds 1 to 4 channels: the last axis when it holds at most 4 (HxWxC, what PettingZoo's butterfly
+    and Atari games give), else the first (CxHxW); its other two sides hold at least 4 pixels each."""
+    if not isinstance(space, spaces.Box) or len(space.shape) != 3:
+        return None
+    if space.dtype != np.uint8:
+        low, high = np.asarray(space.low), np.asarray(space.high)
+        if not (np.all(low == 0) and np.all(high == 255)):
+            return None
+    h, w, c = space.shape
+    if 1 <= c <= MAX_CHANNELS and min(h, w) >= MIN_SIDE:
+        return "hwc"
+    c, h, w = space.shape
+    if 1 <= c <= MAX_CHANNELS and min(h, w) >= MIN_SIDE:
+        return "chw"
+    return None
 
 
 class FlatObs:

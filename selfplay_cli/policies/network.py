@@ -1,6 +1,10 @@
-"""Neural policies: the network architecture record, the MLP itself and the policy that plays with it.
+"""Neural policies: the network architecture record, the network itself and the policy that plays with it.
 
-The MLP serves every learner: its action head gives PPO's logits or DQN's Q-values, and an optional value head gives
+Image observations (:func:`~selfplay_cli.envs.obs_spaces.image_layout`: uint8 HxWxC or CxHxW) are read by a
+convolutional encoder in front of the MLP trunk (``Arch.conv``), by default (:func:`default_conv`) the Nature-CNN's
+``32x8s4, 64x4s2, 64x3s1`` where the image's smaller side has 64 pixels or more, else ``16x3s1, 32x3s2`` (sides of 7
+to 63 pixels; ``16x3s1`` alone below); no padding, ReLU after each convolution, the pixels scaled to [0, 1] inside the
+network (frames stay uint8 everywhere before it). The MLP serves every learner: its action head gives PPO's logits or DQN's Q-values, and an optional value head gives
 PPO's critic. The action head is the one its seat's action space calls for (:class:`ActionHead`): ``n`` logits for
 ``Discrete(n)``, ``sum(nvec)`` logits (one block per dimension) for ``MultiDiscrete(nvec)``, and for a ``Box`` the
 means of a Gaussian with a learned state-independent ``log_std`` parameter, or, with ``Arch.squash`` (SAC's actor),
@@ -11,6 +15,7 @@ nothing is set globally (threads, seeds, default dtype): callers that care about
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -26,7 +31,10 @@ from .base import Policy
 from .heads import HeadMath, squashed_log_std, to_numpy_actions
 from .spaces import ActionHead, SpaceError, box_of_shape
 
-KINDS = ("mlp",)
+KINDS = ("mlp", "cnn")
+LAYOUTS = ("hwc", "chw")  # where an image's channels are: last (HxWxC) or first (CxHxW)
+NATURE_CNN = ((32, 8, 4), (64, 4, 2), (64, 3, 1))  # (channels, kernel, stride) per layer: DQN's Atari encoder
+SMALL_CNN = ((16, 3, 1), (32, 3, 2))  # for images with a smaller side of 7 to 63 pixels (16x16 suite games)
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
 ACTIVATION_FNS = {"tanh": torch.tanh_, "relu": torch.relu_}  # in place, on each layer's fresh output
 
@@ -43,12 +51,17 @@ class SnapshotError(MarlError):
 class Arch:
     """The shape of a policy network: everything needed (with the env's spaces) to rebuild it from weights.
 
-    ``kind`` is ``mlp`` (the only kind so far); ``hidden`` the widths of the trunk's layers; ``activation``
+    ``kind`` is ``mlp`` or ``cnn`` (a convolutional encoder in front of the trunk, for image observations);
+    ``conv`` the encoder's layers as ``(channels, kernel, stride)`` (text ``"16x3s1,32x3s2"`` is read too): None
+    (the default) means "by the observation": :meth:`for_obs` gives an image seat :func:`default_conv` and any other
+    seat the MLP alone; ``()`` never a CNN (an image's pixels flattened into the MLP); ``layout`` where a cnn's
+    image keeps its channels (``hwc`` or ``chw``, set by :meth:`for_obs`). ``hidden`` the widths of the trunk's
+    layers (after the encoder, if any); ``activation``
     ``tanh`` or ``relu``; ``value_head`` adds a state-value output (PPO's critic); ``dueling`` makes the action
     head a dueling Q head (``V(s) + A(s, a) - mean_a A(s, a)``, for DQN); ``squash`` makes a Box action head a
     tanh-squashed Gaussian with a state-dependent std (SAC's actor: a second head gives the log-std). Invalid values
-    raise :class:`SnapshotError` (a user-facing error). ``squash`` is written out only when true, so every network
-    without it (PPO's, DQN's) is described exactly as before it existed.
+    raise :class:`SnapshotError` (a user-facing error). ``squash`` is written out only when true, and ``conv`` and
+    ``layout`` only when set, so every network without them is described exactly as before they existed.
     """
 
     kind: str = "mlp"
@@ -57,8 +70,11 @@ class Arch:
     value_head: bool = True
     dueling: bool = False
     squash: bool = False
+    conv: tuple[tuple[int, int, int], ...] | None = None
+    layout: str = ""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "conv", parse_conv(self.conv))
         if self.kind not in KINDS:
             raise SnapshotError(f"unknown network kind {self.kind!r}; known: {', '.join(KINDS)}")
         if self.activation not in ACTIVATIONS:
@@ -73,6 +89,31 @@ class Arch:
         for name in ("value_head", "dueling", "squash"):
             if not isinstance(getattr(self, name), bool):
                 raise SnapshotError(f"arch field {name!r} must be true or false, not {getattr(self, name)!r}")
+        if self.kind == "cnn" and (not self.conv or self.layout not in LAYOUTS):
+            raise SnapshotError(f"a cnn arch needs its conv layers and the image's layout ({' or '.join(LAYOUTS)}), "
+                                f"not conv {self.conv!r} and layout {self.layout!r}")
+        if self.kind == "mlp" and self.layout:
+            raise SnapshotError(f"an mlp arch has no image layout (not {self.layout!r})")
+
+    def for_obs(self, space: spaces.Space) -> Arch:
+        """This arch for a seat observing ``space`` (before any frame stacking): an image gets a cnn (the ``conv``
+        asked for, else :func:`default_conv`) unless ``conv`` is ``()``; other observations the MLP. An arch
+        already resolved (a cnn) is returned as it is. Conv layers for a seat that does not observe an image are a
+        :class:`SnapshotError`."""
+        if self.kind == "cnn":
+            return self
+        from ..envs.obs_spaces import image_layout
+
+        layout = image_layout(space)
+        if layout is None:
+            if self.conv:
+                raise SnapshotError(f"conv layers ({format_conv(self.conv)}) read images (uint8 HxWxC or CxHxW, 1 to "
+                                    f"4 channels); this seat observes {_describe(space)}")
+            return self
+        if self.conv == ():
+            return self
+        h, w = space.shape[:2] if layout == "hwc" else space.shape[1:]
+        return dataclasses.replace(self, kind="cnn", conv=self.conv or default_conv(h, w), layout=layout)
 
     def to_dict(self) -> dict[str, Any]:
         d = {
@@ -84,6 +125,10 @@ class Arch:
         }
         if self.squash:
             d["squash"] = True
+        if self.conv is not None:
+            d["conv"] = [list(layer) for layer in self.conv]
+        if self.layout:
+            d["layout"] = self.layout
         return d
 
     @classmethod
@@ -91,7 +136,7 @@ class Arch:
         """Inverse of :meth:`to_dict`; missing fields take their defaults, unknown fields are refused."""
         if not isinstance(data, dict):
             raise SnapshotError(f"network arch must be an object, not {type(data).__name__}")
-        known = {"kind", "hidden", "activation", "value_head", "dueling", "squash"}
+        known = {"kind", "hidden", "activation", "value_head", "dueling", "squash", "conv", "layout"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise SnapshotError(f"unknown network arch field(s) {', '.join(map(str, unknown))}")
@@ -99,7 +144,10 @@ class Arch:
 
     def describe(self) -> str:
         """Short human form, e.g. ``mlp 64x64 tanh +value``."""
-        parts = [self.kind, "x".join(map(str, self.hidden)) or "linear", self.activation]
+        parts = [self.kind]
+        if self.kind == "cnn":
+            parts += [format_conv(self.conv or ()), self.layout, "+"]
+        parts += ["x".join(map(str, self.hidden)) or "linear", self.activation]
         if self.value_head:
             parts.append("+value")
         if self.dueling:
@@ -107,6 +155,81 @@ class Arch:
         if self.squash:
             parts.append("tanh-gaussian")
         return " ".join(parts)
+
+
+MAX_CONV_LAYERS = 16
+MAX_KERNEL = 32
+MAX_STRIDE = 16
+MAX_WIDTH_CONV = 4096  # channels of a conv layer
+
+
+def parse_conv(value: Any) -> tuple[tuple[int, int, int], ...] | None:
+    """Conv layers as ``(channels, kernel, stride)`` triples, from triples or text (``"32x8s4,64x4s2"``; ``""`` or
+    ``"none"``: no conv layers); None stays None. A :class:`SnapshotError` for anything else."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        text = value.strip().lower()
+        if text in ("", "none"):
+            return ()
+        layers = []
+        for part in text.split(","):
+            c, sep, rest = part.strip().partition("x")
+            k, sep2, st = rest.partition("s")
+            if not (sep and c.isdigit() and k.isdigit() and (not sep2 or st.isdigit())):
+                raise SnapshotError(f"conv layer {part.strip()!r} is not CHANNELSxKERNELsSTRIDE (e.g. 32x8s4)")
+            layers.append((int(c), int(k), int(st) if sep2 else 1))
+        value = layers
+    try:
+        layers = [tuple(layer) for layer in value]
+    except TypeError:
+        raise SnapshotError(f"conv layers must be a list of [channels, kernel, stride], not {value!r}") from None
+    if len(layers) > MAX_CONV_LAYERS:
+        raise SnapshotError(f"{len(layers)} conv layers is more than marl builds ({MAX_CONV_LAYERS})")
+    bounds = (MAX_WIDTH_CONV, MAX_KERNEL, MAX_STRIDE)
+    for layer in layers:
+        if not (len(layer) == 3 and all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in layer)
+                and all(1 <= v <= hi for v, hi in zip(layer, bounds, strict=True))):
+            raise SnapshotError(f"conv layer {list(layer)[:4]!r} must be [channels, kernel, stride] of 1 to "
+                                f"{MAX_WIDTH_CONV:,} channels, a kernel of 1 to {MAX_KERNEL}, a stride of 1 to "
+                                f"{MAX_STRIDE}")
+    return tuple((int(c), int(k), int(st)) for c, k, st in layers)
+
+
+
+def format_conv(conv: tuple[tuple[int, int, int], ...]) -> str:
+    """``32x8s4,64x4s2,64x3s1``: what :func:`parse_conv` reads."""
+    return ",".join(f"{c}x{k}s{st}" for c, k, st in conv) or "none"
+
+
+def default_conv(h: int, w: int) -> tuple[tuple[int, int, int], ...]:
+    """The conv layers an image of ``h`` x ``w`` pixels gets by default: :data:`NATURE_CNN` where its smaller side
+    has 64 pixels or more, :data:`SMALL_CNN` from 7, one ``16x3s1`` layer below."""
+    side = min(int(h), int(w))
+    return NATURE_CNN if side >= 64 else SMALL_CNN if side >= 7 else SMALL_CNN[:1]
+
+
+def conv_shapes(obs_shape: tuple[int, ...], arch: Arch) -> tuple[list[tuple[int, int, int, int]], int]:
+    """A cnn arch's conv weights ``(out, in, k, k)`` for observations of ``obs_shape``, and the width of the
+    flattened output; a :class:`SnapshotError` where the observation is not an image of that layout or a layer
+    leaves nothing to slide over."""
+    if len(obs_shape) != 3:
+        raise SnapshotError(f"a cnn reads images of three axes, not observations of shape {list(obs_shape)}")
+    c, h, w = (obs_shape[2], *obs_shape[:2]) if arch.layout == "hwc" else obs_shape
+    weights = []
+    for out, k, st in arch.conv or ():
+        if k > h or k > w:
+            raise SnapshotError(f"conv layer {out}x{k}s{st} does not fit the {h}x{w} image it is given (observations "
+                                f"{list(obs_shape)}, conv {format_conv(arch.conv or ())})")
+        weights.append((out, c, k, k))
+        c, h, w = out, (h - k) // st + 1, (w - k) // st + 1
+    return weights, c * h * w
+
+
+def _describe(space: spaces.Space) -> str:
+    from ..envs.registry import describe_space
+
+    return describe_space(space)
 
 
 def _layer(in_dim: int, out_dim: int, gain: float, generator: torch.Generator | None) -> nn.Linear:
@@ -124,14 +247,16 @@ def _layer(in_dim: int, out_dim: int, gain: float, generator: torch.Generator | 
 
 
 class MLPNet(nn.Module):
-    """Flattened observation -> trunk (Linear + activation per hidden width) -> heads.
+    """Flattened observation (or, for a cnn arch, the image through the conv encoder) -> trunk (Linear + activation
+    per hidden width) -> heads.
 
     ``forward(x)`` takes ``(batch, *obs_shape)`` (or already flat ``(batch, obs_dim)``) and returns
     ``(action_out, value)``: ``action_out`` is ``(batch, head.outputs)``: logits (PPO; per dimension, side by side,
     for MultiDiscrete), Q-values (DQN) or Gaussian means (Box); ``value`` is ``(batch,)`` or ``None`` without a
     value head. ``obs_space`` and ``act_space`` are the seat's spaces (gymnasium).
 
-    Parameter names (the snapshot's tensor names): ``trunk.{2i}.weight/bias``, ``action_head.*``, ``log_std``
+    Parameter names (the snapshot's tensor names): ``encoder.{2i}.weight/bias`` (a cnn's conv layers),
+    ``trunk.{2i}.weight/bias``, ``action_head.*``, ``log_std``
     (Box actions), ``value_head.*`` and, for a dueling arch, ``state_value.*``. A squashed arch (SAC's actor) has
     ``log_std_head.*`` (the state-dependent log-std, see :meth:`gaussian`) instead of ``log_std``; its
     ``forward`` gives the Gaussian's means (before the tanh).
@@ -156,9 +281,19 @@ class MLPNet(nn.Module):
         self.obs_space = obs_space if obs_space is not None else box_of_shape((self.obs_dim,))
         self.act_space = action if isinstance(action, spaces.Space) else _space_of(head)
         self.arch = arch
+        self.obs_shape = tuple(int(d) for d in self.obs_space.shape)
         hidden_gain = math.sqrt(2.0)
-        layers: list[nn.Module] = []
         width = self.obs_dim
+        self.encoder: nn.Sequential | None = None
+        self._convs: list[nn.Conv2d] = []
+        if arch.kind == "cnn":
+            weights, width = conv_shapes(self.obs_shape, arch)
+            convs: list[nn.Module] = []
+            for (out, cin, k, _), (_, _, stride) in zip(weights, arch.conv or (), strict=True):
+                convs += [_conv(cin, out, k, stride, hidden_gain, generator), nn.ReLU()]
+            self.encoder = nn.Sequential(*convs)
+            self._convs = [m for m in convs if isinstance(m, nn.Conv2d)]
+        layers: list[nn.Module] = []
         for h in arch.hidden:
             layers.append(_layer(width, h, hidden_gain, generator))
             layers.append(ACTIVATIONS[arch.activation]())
@@ -173,12 +308,25 @@ class MLPNet(nn.Module):
         self.state_value = _layer(width, 1, 1.0, generator) if arch.dueling else None
         self.log_std_head = _layer(width, self.n_actions, 0.01, generator) if self.squash else None
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+    def _inputs(self, x: torch.Tensor) -> torch.Tensor:
+        """Observations ``(batch, *obs_shape)`` or flat ``(batch, obs_dim)``, of any dtype, as the trunk's float
+        input: a cnn's images scaled to [0, 1] (here, not before: frames travel as uint8) and encoded."""
         if x.dim() == 1:
             x = x.unsqueeze(0)
         x = x.reshape(x.shape[0], -1)
         if x.shape[1] != self.obs_dim:
             raise ValueError(f"observations have {x.shape[1]} features per row; this network takes {self.obs_dim}")
+        if self.encoder is None:
+            return x if x.dtype == torch.float32 else x.float()
+        z = x.reshape(x.shape[0], *self.obs_shape).float().mul_(1.0 / 255.0)
+        if self.arch.layout == "hwc":
+            z = z.permute(0, 3, 1, 2)
+        for conv in self._convs:
+            z = torch.relu_(conv(z))
+        return z.flatten(1)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        x = self._inputs(x)
         # Layers without nn.Module call overhead (it dominates small batches), each activation in place on its layer's
         # output (autograd saves tanh's and relu's output, not their input, so this is the same computation with one
         # activation-sized tensor less per layer to allocate and fill).
@@ -203,14 +351,19 @@ class MLPNet(nn.Module):
         state-dependent (:func:`~selfplay_cli.policies.heads.squashed_log_std` of its head's output)."""
         if self.log_std_head is None:
             raise ValueError("gaussian() is for a squashed arch (SAC's actor)")
-        if x.dim() == 1:
-            x = x.unsqueeze(0)
-        x = x.reshape(x.shape[0], -1)
-        if x.shape[1] != self.obs_dim:
-            raise ValueError(f"observations have {x.shape[1]} features per row; this network takes {self.obs_dim}")
-        z = self._features(x)
+        z = self._features(self._inputs(x))
         mean = F.linear(z, self.action_head.weight, self.action_head.bias)
         return mean, squashed_log_std(F.linear(z, self.log_std_head.weight, self.log_std_head.bias))
+
+
+def _conv(cin: int, out: int, k: int, stride: int, gain: float, generator: torch.Generator | None) -> nn.Conv2d:
+    """A Conv2d layer (no padding) with the same init as :func:`_layer`: orthogonal weights, zero bias."""
+    with torch.random.fork_rng(devices=[]):
+        layer = nn.Conv2d(cin, out, k, stride)
+    with torch.no_grad():
+        nn.init.orthogonal_(layer.weight, gain, generator=generator)
+        layer.bias.zero_()
+    return layer
 
 
 def _space_of(head: ActionHead) -> spaces.Space:
@@ -225,7 +378,8 @@ def _space_of(head: ActionHead) -> spaces.Space:
 def build_network(obs: tuple[int, ...] | spaces.Box, action: int | spaces.Space | ActionHead, arch: Arch,
                   seed: int | None = None) -> MLPNet:
     """A freshly initialised network for a seat's observations (a Box, or just its shape) and actions (a space, or
-    an int ``n`` for ``Discrete(n)``).
+    an int ``n`` for ``Discrete(n)``); ``arch`` as :meth:`Arch.for_obs` makes it for the observation (an image seat
+    gets a cnn; the network's ``arch`` is the resolved one, what a snapshot records).
 
     With ``seed`` the init is reproducible and the global torch RNG is left alone; without it the global RNG
     is used. The network is built on the CPU (move it with ``.to(device)``).
@@ -240,6 +394,7 @@ def build_network(obs: tuple[int, ...] | spaces.Box, action: int | spaces.Space 
         raise SnapshotError(f"bad observation shape {raw!r}")
     if obs_space is None:
         obs_space = box_of_shape(shape)
+    arch = arch.for_obs(obs_space)
     generator = torch.Generator().manual_seed(int(seed)) if seed is not None else None
     if isinstance(action, (int, np.integer)) and not isinstance(action, bool):
         action = int(action)
@@ -272,7 +427,8 @@ class NetworkPolicy(Policy):
     greedily and ``tanh(mean + std(s) * eps)`` sampling, mapped onto the Box bounds. Masked actions are never chosen.
 
     ``act`` runs under ``torch.inference_mode`` and converts observations with ``torch.from_numpy`` (a copy is
-    made only when the array is not already a writable float32 array). Sampling uses the policy's own
+    made only when the array is not already a writable array of the observation's dtype: float32, or an image's
+    uint8, which the network scales itself). Sampling uses the policy's own
     ``torch.Generator`` seeded with ``seed``, so a seeded policy replays the same actions for the same
     observations. For large batches on the CPU, callers may tune ``torch.set_num_threads``; nothing global
     is set here. ``meta`` is the :class:`~selfplay_cli.policies.snapshot_format.SnapshotMeta` it was loaded from,
@@ -297,6 +453,7 @@ class NetworkPolicy(Policy):
         self.head = net.head
         self.greedy = bool(greedy)
         self.meta = meta
+        self.obs_dtype = np.dtype(net.obs_space.dtype)  # what act() hands the network: uint8 frames stay uint8
         self.generator = torch.Generator(device=self.device)
         self._math: HeadMath | None = None
         self.reseed(seed)
@@ -340,7 +497,7 @@ class NetworkPolicy(Policy):
     def action_scores(self, obs: np.ndarray, mask: np.ndarray | None = None) -> torch.Tensor:
         """The action head's ``(batch, outputs)`` output, with disallowed actions set to ``-inf`` (Discrete and
         MultiDiscrete heads; a Box head's outputs are its means)."""
-        scores, _ = self.net(self._tensor(obs, np.float32))
+        scores, _ = self.net(self._tensor(obs, self.obs_dtype))
         m = self._mask(mask, scores.shape[0])
         if m is not None:
             scores = scores.masked_fill(~m, float("-inf"))
@@ -349,11 +506,11 @@ class NetworkPolicy(Policy):
     @torch.inference_mode()
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         if self.net.squash:  # SAC's actor: tanh(mean) or tanh(mean + std * eps), on the bounds
-            mean, log_std = self.net.gaussian(self._tensor(obs, np.float32))
+            mean, log_std = self.net.gaussian(self._tensor(obs, self.obs_dtype))
             self._mask(mask, mean.shape[0])  # a Box head takes no mask: refused as for any Box head
             return to_numpy_actions(self.head, self.math.sample_squashed(mean, log_std, self.generator, self.greedy))
         if self.head.kind != "discrete":
-            out, _ = self.net(self._tensor(obs, np.float32))
+            out, _ = self.net(self._tensor(obs, self.obs_dtype))
             _, played = self.math.sample(out, self._mask(mask, out.shape[0]), self.generator, self.greedy,
                                          log_std=self.net.log_std)
             return to_numpy_actions(self.head, played)

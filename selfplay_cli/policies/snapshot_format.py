@@ -39,7 +39,7 @@ from safetensors.torch import save as st_save
 from .. import files
 from ..typecheck import MAX_INT
 from .joint import MAX_JOINT_ACTIONS
-from .network import Arch, SnapshotError
+from .network import Arch, SnapshotError, conv_shapes
 from .spaces import ActionHead, SpaceError, canonical_space, space_from_dict
 
 FORMAT = "marl-snapshot"
@@ -249,7 +249,8 @@ def expected_tensors(obs_shape: tuple[int, ...], action: int | spaces.Space | Ac
                      arch: Arch) -> dict[str, tuple[int, ...]]:
     """Name -> shape of every tensor of the network ``arch`` describes for observations of ``obs_shape`` and the
     action space ``action`` (an int n: ``Discrete(n)``), as :class:`MLPNet` names them, computed without building
-    anything, after checking the description against :data:`LIMITS` (:class:`SnapshotError`)."""
+    anything, after checking the description against :data:`LIMITS` (:class:`SnapshotError`). A cnn's conv layers
+    must fit the image they are given (a layer whose kernel is wider than what reaches it is refused)."""
     check_obs_shape(tuple(obs_shape))
     obs_dim = math.prod(obs_shape)
     if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and not 1 <= action <= MAX_ACTIONS:
@@ -270,6 +271,12 @@ def expected_tensors(obs_shape: tuple[int, ...], action: int | spaces.Space | Ac
         raise SnapshotError(f"hidden layer sizes {list(arch.hidden)} exceed {MAX_WIDTH:,}")
     shapes: dict[str, tuple[int, ...]] = {}
     width = obs_dim
+    if arch.kind == "cnn":  # the conv encoder: its weights from the image's shape, layer by layer
+        weights, width = conv_shapes(tuple(obs_shape), arch)
+        for i, w in enumerate(weights):
+            shapes[f"encoder.{2 * i}.weight"], shapes[f"encoder.{2 * i}.bias"] = w, (w[0],)
+    elif arch.layout:
+        raise SnapshotError(f"an mlp network has no image layout ({arch.layout!r})")
     for i, h in enumerate(arch.hidden):
         shapes[f"trunk.{2 * i}.weight"], shapes[f"trunk.{2 * i}.bias"] = (h, width), (h,)
         width = h

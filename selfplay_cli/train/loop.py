@@ -146,10 +146,10 @@ class Trainer:
         if cfg.sharing == "sa":
             sa = JointLearner(learner_cls, self.spaces[0], spec.n_seats, cfg.games, algo_cfg, seed=cfg.seed,
                               device=self.device)
-            return [sa], SavedAs([sa.joint_seat], algo_cfg.arch, roles, {"seats": spec.n_seats, "base": sa.base})
+            return [sa], SavedAs([sa.joint_seat], roles, {"seats": spec.n_seats, "base": sa.base})
         learners = [learner_cls(self.spaces[i], int((layout == i).sum()), algo_cfg, seed=cfg.seed + i,
                                 device=self.device) for i in range(len(self.names))]
-        return learners, SavedAs(self.spaces, algo_cfg.arch, roles, None)
+        return learners, SavedAs(self.spaces, roles, None)
 
     @property
     def games(self) -> SelfPlayGames | None:
