@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["FlatObs", "flat_obs", "image_layout"]
+__all__ = ["FlatObs", "flat_obs", "image_layout", "stacked_space"]
 
 MAX_CHANNELS = 4  # an image's channels (grey, grey+alpha, RGB, RGBA); a bigger axis is a side, not the channels
 MIN_SIDE = 4  # an image's smaller side: below it there is nothing for a convolution to slide over
@@ -119,6 +119,21 @@ class FlatObs:
                 starts = np.concatenate(([0], np.cumsum(np.asarray(space.nvec).reshape(-1))[:-1]))
                 row[offset + starts + values] = 1.0
         return row
+
+
+def stacked_space(box: spaces.Box, k: int) -> spaces.Box:
+    """What a policy stacking ``k`` observations of ``box`` reads (``box`` itself for k = 1): an image's frames on
+    its channel axis (HxWx(k*C), (k*C)xHxW), any other observation's k rows one after the other, flat (the oldest
+    first; :mod:`selfplay_cli.arena.frames` keeps them)."""
+    if k == 1:
+        return box
+    layout = image_layout(box)
+    axis = -1 if layout == "hwc" else 0
+    if layout is None:
+        low, high = np.asarray(box.low).reshape(-1), np.asarray(box.high).reshape(-1)
+        return spaces.Box(np.tile(low, k), np.tile(high, k), dtype=box.dtype)
+    return spaces.Box(np.concatenate([box.low] * k, axis=axis), np.concatenate([box.high] * k, axis=axis),
+                      dtype=box.dtype)
 
 
 def _leaves(space: spaces.Space, x: Any) -> list[Any]:

@@ -70,7 +70,7 @@ class Arch:
     value_head: bool = True
     dueling: bool = False
     squash: bool = False
-    conv: tuple[tuple[int, int, int], ...] | None = None
+    conv: tuple[tuple[int, int, int], ...] | str | None = None  # text is read (parse_conv) into the triples
     layout: str = ""
 
     def __post_init__(self) -> None:
