@@ -17,6 +17,8 @@ from gymnasium import spaces
 
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
 from selfplay_cli.arena.matches import Game, play
+from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.envs import get_env
 from selfplay_cli.envs.registry import seat_space_of
 from selfplay_cli.policies import Policy, ScriptedPolicy
 from selfplay_cli.policies.network import NATURE_CNN, SMALL_CNN, Arch, SnapshotError, build_network
@@ -160,3 +162,23 @@ def test_ppo_learns_to_read_the_image_and_beats_random(tmp_path, capsys):
     assert code == 0, err
     frames = iio.imread(tmp_path / "spot.mp4")
     assert frames.shape[0] >= 9 and frames.shape[-1] == 3  # the first frame and one a round (8 rounds)
+
+
+def test_training_games_stack_vector_observations_side_by_side():
+    """In training's games a learner with frame_stack 3 reads its seat's last 3 vector observations one after the
+    other: the first observation three times at the start, then one older frame dropped a step (the suite's reach
+    game, (4,) float32 a seat)."""
+    reach = "tests.games.reach:parallel_env"
+    spec = get_env(reach)
+    games = SelfPlayGames(reach, 2, plan_layout(plan_seats(spec, 1), 2, 1), ["me"], frame_stack=3)
+    assert games.spaces[0].observation.shape == (12,)
+    raw = [games.core.observe().reshape(4, 4).copy()]
+    seen = [games.observe()[0]]
+    for _ in range(3):
+        games.step([np.ones((4, 2), np.float32)])
+        raw.append(games.core.observe().reshape(4, 4).copy())
+        seen.append(games.observe()[0])
+    assert np.array_equal(seen[0], np.concatenate([raw[0]] * 3, axis=1))
+    assert np.array_equal(seen[1], np.concatenate([raw[0], raw[0], raw[1]], axis=1))
+    assert np.array_equal(seen[3], np.concatenate([raw[1], raw[2], raw[3]], axis=1))
+    assert not np.array_equal(raw[1], raw[3])  # the points moved: the frames differ

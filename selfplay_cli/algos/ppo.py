@@ -292,7 +292,8 @@ class PPOLearner:
         """A teacher's actions for observations this learner met (and their masks): kept for the imitation term of
         the loss while ``teacher_weight`` > 0 (:mod:`selfplay_cli.algos.kickstart`)."""
         if self.imitation is None:
-            self.imitation = Imitation(self.head, int(np.prod(self.obs_shape)), self.imitation_capacity, self.device)
+            self.imitation = Imitation(self.head, int(np.prod(self.obs_shape)), self.imitation_capacity, self.device,
+                                       obs_dtype=self.obs_dtype)
         self.imitation.add(obs, actions, mask)
 
     # -- learning -------------------------------------------------------------------------------------------

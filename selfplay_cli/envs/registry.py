@@ -103,8 +103,8 @@ class SeatSpace:
     """What one seat's policy sees and does.
 
     ``observation``: the Box a policy reads (float32 arrays of its shape, or an image's own dtype, uint8; for a
-    Dict observation space, its ``observation`` part). ``action``: Discrete (actions ``0 .. n-1``), MultiDiscrete or Box. ``mask``: whether
-    the seat has action masks (Discrete only)."""
+    Dict observation space, its ``observation`` part). ``action``: Discrete (actions ``0 .. n-1``), MultiDiscrete or
+    Box. ``mask``: whether the seat has action masks (Discrete only)."""
 
     observation: spaces.Box
     action: spaces.Space

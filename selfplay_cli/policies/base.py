@@ -30,10 +30,10 @@ class Policy(ABC):
 
     @abstractmethod
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-        """``obs`` is ``(batch, *observation_shape)`` float32 (an image's uint8); ``mask``, if given, the ``(batch, n_actions)`` bool
-        array of allowed actions (MultiDiscrete: each dimension's mask side by side). Returns the seat's actions:
-        ``(batch,)`` int64 (Discrete), ``(batch, k)`` int64 (MultiDiscrete) or ``(batch, *shape)`` float32 within
-        the bounds (Box). A policy never returns an action its mask forbids."""
+        """``obs`` is ``(batch, *observation_shape)`` float32 (an image's uint8); ``mask``, if given, the
+        ``(batch, n_actions)`` bool array of allowed actions (MultiDiscrete: each dimension's mask side by side).
+        Returns the seat's actions: ``(batch,)`` int64 (Discrete), ``(batch, k)`` int64 (MultiDiscrete) or
+        ``(batch, *shape)`` float32 within the bounds (Box). A policy never returns an action its mask forbids."""
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.id!r}, env={self.env!r})"

@@ -4,7 +4,9 @@ Image observations (:func:`~selfplay_cli.envs.obs_spaces.image_layout`: uint8 Hx
 convolutional encoder in front of the MLP trunk (``Arch.conv``), by default (:func:`default_conv`) the Nature-CNN's
 ``32x8s4, 64x4s2, 64x3s1`` where the image's smaller side has 64 pixels or more, else ``16x3s1, 32x3s2`` (sides of 7
 to 63 pixels; ``16x3s1`` alone below); no padding, ReLU after each convolution, the pixels scaled to [0, 1] inside the
-network (frames stay uint8 everywhere before it). The MLP serves every learner: its action head gives PPO's logits or DQN's Q-values, and an optional value head gives
+network (frames stay uint8 everywhere before it).
+
+The MLP serves every learner: its action head gives PPO's logits or DQN's Q-values, and an optional value head gives
 PPO's critic. The action head is the one its seat's action space calls for (:class:`ActionHead`): ``n`` logits for
 ``Discrete(n)``, ``sum(nvec)`` logits (one block per dimension) for ``MultiDiscrete(nvec)``, and for a ``Box`` the
 means of a Gaussian with a learned state-independent ``log_std`` parameter, or, with ``Arch.squash`` (SAC's actor),

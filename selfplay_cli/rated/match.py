@@ -138,11 +138,12 @@ def check_fits(spec: Any, options: dict[str, Any], *policies: Policy) -> None:
             raise MarlError(f"{p.id} is one agent for a team of {team} seats (--sharing sa); with the options {options}"
                             f" {spec.name} has {len(seats)}: a joint agent flies only the team it was trained as")
         k = frame_stack_of(p)  # a policy reading its last k observations reads them stacked
-        fits = [s for s in seats if tuple(stacked_space(s.observation, k).shape) == tuple(obs.shape) and s.action == act]
+        fits = [s for s in seats
+                if tuple(stacked_space(s.observation, k).shape) == tuple(obs.shape) and s.action == act]
         if not fits:
-            raise MarlError(f"{p.id} reads observations of shape {tuple(obs.shape)}{f' ({k} stacked)' if k > 1 else ''} "
-                            f"and plays {act}, but with the "
-                            f"options {options} every seat of {spec.name} is {seats[0].observation} / "
+            stacked = f" (its last {k} stacked)" if k > 1 else ""
+            raise MarlError(f"{p.id} reads observations of shape {tuple(obs.shape)}{stacked} and plays {act}, but with "
+                            f"the options {options} every seat of {spec.name} is {seats[0].observation} / "
                             f"{seats[0].action}")
 
 

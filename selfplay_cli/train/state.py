@@ -140,8 +140,9 @@ class SnapshotMoments:
         latest = state.latest[i]
         parent = self.league.get_player(latest).full_name if latest else None
         meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options,
-                            obs_space=stacked_space(saved.spaces[i].observation, cfg.frame_stack), act_space=saved.spaces[i].action, arch=learner.net.arch,
-                            algo=cfg.algo, step=state.steps, frame_stack=cfg.frame_stack,
+                            obs_space=stacked_space(saved.spaces[i].observation, cfg.frame_stack),
+                            act_space=saved.spaces[i].action, arch=learner.net.arch, algo=cfg.algo, step=state.steps,
+                            frame_stack=cfg.frame_stack,
                             episode=state.episodes, run=cfg.run, name=name, parent=parent,
                             seat=self.names[i] if len(self.names) > 1 else None, role=saved.roles[i],
                             extra={"learner": self.names[i], **({"joint": saved.joint} if saved.joint else {})})
