@@ -21,7 +21,8 @@ from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_s
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.registry import seat_space_of
 from selfplay_cli.policies import Policy, ScriptedPolicy
-from selfplay_cli.policies.network import NATURE_CNN, SMALL_CNN, Arch, SnapshotError, build_network
+from selfplay_cli.policies.arch import NATURE_CNN, SMALL_CNN, Arch, SnapshotError
+from selfplay_cli.policies.network import build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 from selfplay_cli.policies.snapshot_policy import load_policy
 

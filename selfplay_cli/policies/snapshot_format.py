@@ -39,8 +39,8 @@ from safetensors.torch import save as st_save
 from .. import files
 from ..envs.obs_spaces import stacked_space
 from ..typecheck import MAX_INT
+from .arch import Arch, SnapshotError, conv_shapes
 from .joint import MAX_JOINT_ACTIONS
-from .network import Arch, SnapshotError, conv_shapes
 from .spaces import ActionHead, SpaceError, canonical_space, space_from_dict
 
 FORMAT = "marl-snapshot"
