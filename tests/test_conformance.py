@@ -24,6 +24,7 @@ from pettingzoo.test import api_test, parallel_api_test
 
 from selfplay_cli.envs import EnvSpec, env_names, get_env
 from selfplay_cli.envs.adapters.pettingzoo import adapt
+from selfplay_cli.envs.obs_spaces import image_layout
 from selfplay_cli.envs.registry import random_rule
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,7 +33,7 @@ if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
 
 TEST_GAMES = ["tests.games.tictactoe:env", "tests.games.rendezvous:parallel_env", "tests.games.chase:parallel_env",
               "tests.games.reach:parallel_env", "tests.games.cue:parallel_env", "tests.games.dash:parallel_env",
-              "tests.games.race:parallel_env", "tests.games.race:env"]
+              "tests.games.race:parallel_env", "tests.games.race:env", "tests.games.spot:parallel_env"]
 # OpenSpiel's games are played through marl's own core (they have no PettingZoo view)
 OPENSPIEL_GAMES = ["openspiel:kuhn_poker", "openspiel:leduc_poker", "openspiel:tic_tac_toe",
                    "openspiel:goofspiel(imp_info=True,num_cards=5)"]
@@ -115,7 +116,10 @@ def check_game(spec: EnvSpec, n: int = 6, max_play: int = 20_000) -> None:
                 assert acting.all(), "all seats act at the start of a simultaneous game"
         for s, seat in enumerate(seats):
             o = obs[s]
-            assert isinstance(o, np.ndarray) and o.dtype == np.float32, f"seat {s}: observations are float32"
+            assert isinstance(o, np.ndarray) and o.dtype == seat.observation.dtype, \
+                f"seat {s}: observations are of the seat's dtype"
+            assert o.dtype == np.float32 or image_layout(seat.observation) is not None, \
+                f"seat {s}: observations are float32 (an image's own dtype, uint8)"
             assert o.shape == (n, *seat.observation.shape), f"seat {s}: observation shape {o.shape}"
             box = seat.observation
             live = o[running]

@@ -165,9 +165,11 @@ def fix_mask(mask: np.ndarray | None, head: ActionHead, n: int) -> np.ndarray | 
 
 
 def values_of(net: MLPNet, obs: np.ndarray, device: torch.device) -> torch.Tensor:
-    """V(obs) from the network's value head, without gradients."""
+    """V(obs) from the network's value head, without gradients (observations of any dtype: the network reads an
+    image's uint8 itself)."""
     with torch.no_grad():
-        _, value = net(torch.as_tensor(np.asarray(obs, dtype=np.float32), device=device).reshape(len(obs), -1))
+        x = obs if isinstance(obs, torch.Tensor) else torch.as_tensor(np.asarray(obs))
+        _, value = net(x.to(device).reshape(len(obs), -1))
     assert value is not None
     return value
 

@@ -177,8 +177,9 @@ class DQNLearner:
         self.target_flat = flatten(self.target.parameters())  # the target update is one operation on it
         self.rng = np.random.default_rng(seed)  # exploration and replay sampling
         self.share: Share | None = None  # in a rollout actor: its rows of the slots (draws stay the whole batch's)
-        self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_dim)
-        self.chains = NStepChains(cfg.n_step, cfg.gamma, n_slots, self.obs_dim, (), np.int64)
+        self.obs_dtype = np.dtype(self.seat.observation.dtype)  # an image's uint8 stays uint8 in the buffer
+        self.buffer = ReplayBuffer(cfg.buffer_size, self.obs_dim, obs_dtype=self.obs_dtype)
+        self.chains = NStepChains(cfg.n_step, cfg.gamma, n_slots, self.obs_dim, (), np.int64, self.obs_dtype)
         self.transitions = 0  # collected so far (drives epsilon)
         self.grad_steps = 0  # gradient updates so far (drives the target updates)
         self.updates = 0  # update() calls that made at least one gradient update
@@ -201,8 +202,9 @@ class DQNLearner:
         return epsilon_at(self.cfg, self.transitions)
 
     def _flat(self, obs: np.ndarray) -> np.ndarray:
-        """Our own flat float32 copy (the n-step window keeps it, so the caller may reuse its array)."""
-        return np.array(obs, dtype=np.float32, order="C").reshape(len(obs), self.obs_dim)
+        """Our own flat copy, in the observation's dtype (the n-step window keeps it, so the caller may reuse its
+        array)."""
+        return np.array(obs, dtype=self.obs_dtype, order="C").reshape(len(obs), self.obs_dim)
 
     def _check_final_given(self) -> None:
         if self._final_missing():
@@ -238,7 +240,7 @@ class DQNLearner:
         mask): with a mask, exploration is uniform over the allowed actions and the greedy action the best allowed
         one. With a :attr:`share` (a rollout actor's rows) the draws are the whole batch's."""
         self._check_final_given()
-        x = np.asarray(obs, dtype=np.float32).reshape(len(obs), self.obs_dim)
+        x = np.asarray(obs, dtype=self.obs_dtype).reshape(len(obs), self.obs_dim)
         m = fix_mask(mask, self.head, len(x))
         if m is not None:
             self._masked = True
@@ -345,7 +347,7 @@ class DQNLearner:
         """From now on, transitions run from decision to decision (on the first step that says who acted)."""
         b, d = self.n_slots, self.obs_dim
         self.chains.clear()
-        self._turns = {"obs": np.zeros((b, d), np.float32), "act": np.zeros(b, np.int64),
+        self._turns = {"obs": np.zeros((b, d), self.obs_dtype), "act": np.zeros(b, np.int64),
                        "rew": np.zeros(b, np.float32), "valid": np.zeros(b, bool)}
 
     def _turn_step(self, rewards: np.ndarray, dones: np.ndarray, cut: np.ndarray | None, acts: np.ndarray,

@@ -28,6 +28,8 @@ learner neither stores labels nor computes the term.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import torch
 
@@ -40,17 +42,18 @@ SQUASH_EDGE = 1.0 - 1e-3  # a squashed policy reaches +-1 only at infinity: teac
 
 class Imitation:
     """The labelled states of one learner: a ring of ``capacity`` (observation, teacher action[, mask]) rows, and the
-    imitation loss of a network on a batch of them (see the module docstring)."""
+    imitation loss of a network on a batch of them (see the module docstring). The observations are kept in
+    ``obs_dtype`` (an image's uint8, as the game gives it; float32 otherwise)."""
 
     def __init__(self, head: ActionHead, obs_dim: int, capacity: int, device: torch.device | str = "cpu",
-                 squashed: bool = False) -> None:
+                 squashed: bool = False, obs_dtype: Any = np.float32) -> None:
         if capacity < 1:
             raise ValueError(f"the imitation buffer needs room for at least one state, not {capacity}")
         self.head, self.squashed = head, squashed
         self.math = HeadMath(head, device)
         self.device = torch.device(device)
         self.capacity = int(capacity)
-        self.obs = np.zeros((capacity, obs_dim), np.float32)
+        self.obs = np.zeros((capacity, obs_dim), obs_dtype)
         if head.kind == "box":
             self.actions = np.zeros((capacity, head.outputs), np.float32)
             low, high = np.asarray(head.low, np.float32), np.asarray(head.high, np.float32)
@@ -78,7 +81,7 @@ class Imitation:
         n = len(obs)
         if n == 0:
             return
-        x = np.asarray(obs, np.float32).reshape(n, -1)
+        x = np.asarray(obs, self.obs.dtype).reshape(n, -1)
         a = self.unit(actions) if self.head.kind == "box" else np.asarray(actions, np.int64).reshape(
             n, *self.head.action_shape)
         if mask is not None and self.masks is None:

@@ -122,7 +122,10 @@ class PPOLearner:
         self.gen = torch.Generator(device=self.device).manual_seed(seed)
         self.math = HeadMath(self.head, self.device)
         t, b, d = cfg.rollout_steps, n_slots, int(np.prod(self.obs_shape))
-        self.obs = torch.zeros((t, b, d), device=self.device)
+        # The observations in their own dtype: an image's uint8 frames take a quarter of float32's memory (the
+        # network scales them), other observations float32.
+        self.obs_dtype = np.dtype(self.seat.observation.dtype)
+        self.obs = torch.zeros((t, b, d), dtype=torch.from_numpy(np.zeros(0, self.obs_dtype)).dtype, device=self.device)
         if self.head.kind == "box":  # the sampled (unclipped) actions, flat
             self.actions = torch.zeros((t, b, self.head.outputs), device=self.device)
         else:
@@ -151,7 +154,7 @@ class PPOLearner:
 
     # -- acting ---------------------------------------------------------------------------------------------
     def _tensor(self, obs: np.ndarray) -> torch.Tensor:
-        return torch.as_tensor(np.asarray(obs, dtype=np.float32), device=self.device).reshape(len(obs), -1)
+        return torch.as_tensor(np.asarray(obs, dtype=self.obs_dtype), device=self.device).reshape(len(obs), -1)
 
     @torch.inference_mode()
     def decide(self, obs: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
@@ -193,7 +196,7 @@ class PPOLearner:
         self._check_final_given()
         t = self.t
         if self._np is not None:
-            self._np["obs"][t] = np.asarray(obs, dtype=np.float32).reshape(len(obs), -1)
+            self._np["obs"][t] = np.asarray(obs).reshape(len(obs), -1)
         else:
             self.obs[t].copy_(self._tensor(obs))
         self.actions[t] = torch.as_tensor(taken["actions"], device=self.device).reshape(self.actions[t].shape)
@@ -274,7 +277,7 @@ class PPOLearner:
         """V(final obs) of the games truncated on the last recorded step, into ``trunc_values``."""
         assert self._final_due is not None and self.trunc_values is not None
         t, rows = self._final_due
-        final = np.asarray(final_obs, dtype=np.float32)
+        final = np.asarray(final_obs, dtype=self.obs_dtype)
         if len(final) != self.n_slots:
             raise ValueError(f"final_obs has {len(final)} rows for {self.n_slots} slots")
         self.trunc_values[t, torch.as_tensor(rows, device=self.device)] = values_of(self.net, final[rows], self.device)
@@ -289,7 +292,8 @@ class PPOLearner:
         """A teacher's actions for observations this learner met (and their masks): kept for the imitation term of
         the loss while ``teacher_weight`` > 0 (:mod:`selfplay_cli.algos.kickstart`)."""
         if self.imitation is None:
-            self.imitation = Imitation(self.head, int(np.prod(self.obs_shape)), self.imitation_capacity, self.device)
+            self.imitation = Imitation(self.head, int(np.prod(self.obs_shape)), self.imitation_capacity, self.device,
+                                       obs_dtype=self.obs_dtype)
         self.imitation.add(obs, actions, mask)
 
     # -- learning -------------------------------------------------------------------------------------------

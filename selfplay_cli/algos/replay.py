@@ -16,11 +16,14 @@ transition.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 
 class ReplayBuffer:
-    """A ring of preallocated numpy arrays: obs and next_obs (float32, flattened), actions (``act_shape`` of
+    """A ring of preallocated numpy arrays: obs and next_obs (flattened, of ``obs_dtype``: float32, or an image's
+    uint8, a quarter of the memory), actions (``act_shape`` of
     ``act_dtype`` each: a Discrete action's int64, a Box's float32 numbers), rewards, dones, each transition's
     bootstrap discount (gamma^k for a return over k decisions) and, once a transition comes with one, the action
     mask of its s' (True everywhere for transitions without).
@@ -31,10 +34,10 @@ class ReplayBuffer:
     """
 
     def __init__(self, capacity: int, obs_dim: int, act_shape: tuple[int, ...] = (),
-                 act_dtype: type = np.int64) -> None:
+                 act_dtype: type = np.int64, obs_dtype: Any = np.float32) -> None:
         self.capacity = int(capacity)
-        self.obs = np.zeros((capacity, obs_dim), dtype=np.float32)
-        self.next_obs = np.zeros((capacity, obs_dim), dtype=np.float32)
+        self.obs = np.zeros((capacity, obs_dim), dtype=obs_dtype)
+        self.next_obs = np.zeros((capacity, obs_dim), dtype=obs_dtype)
         self.actions = np.zeros((capacity, *act_shape), dtype=act_dtype)
         self.rewards = np.zeros(capacity, dtype=np.float32)
         self.dones = np.zeros(capacity, dtype=np.float32)
@@ -88,15 +91,16 @@ class ReplayBuffer:
 
 
 class NStepChains:
-    """The chains of ``n_slots`` slots (see the module docstring); ``act_shape`` and ``act_dtype`` are one action's."""
+    """The chains of ``n_slots`` slots (see the module docstring); ``act_shape`` and ``act_dtype`` are one action's,
+    ``obs_dtype`` an observation's."""
 
     def __init__(self, n: int, gamma: float, n_slots: int, obs_dim: int, act_shape: tuple[int, ...] = (),
-                 act_dtype: type = np.float32) -> None:
+                 act_dtype: type = np.float32, obs_dtype: Any = np.float32) -> None:
         if n < 1:
             raise ValueError(f"n-step returns need n >= 1, not {n}")
         self.n, self.gamma = int(n), float(gamma)
         k = self.n - 1
-        self.obs = np.zeros((k, n_slots, obs_dim), np.float32)
+        self.obs = np.zeros((k, n_slots, obs_dim), obs_dtype)
         self.act = np.zeros((k, n_slots, *act_shape), act_dtype)
         self.rew = np.zeros((k, n_slots), np.float32)
         self.count = np.zeros(n_slots, np.int64)  # decisions waiting in each slot's chain (< n)
@@ -119,7 +123,7 @@ class NStepChains:
         count = self.count[rows]
         cols = np.arange(m)
         # Each row's chain: entries 0 .. count-1 from the ring, then this decision at position count
-        seq_obs = np.empty((k + 1, m, obs.shape[1]), np.float32)
+        seq_obs = np.empty((k + 1, m, obs.shape[1]), self.obs.dtype)
         seq_act = np.empty((k + 1, *act.shape), self.act.dtype)
         seq_rew = np.zeros((k + 1, m), np.float32)
         seq_obs[:k], seq_act[:k], seq_rew[:k] = self.obs[:, rows], self.act[:, rows], self.rew[:, rows]
@@ -146,7 +150,7 @@ class NStepChains:
             self.obs[c, r], self.act[c, r], self.rew[c, r] = obs[grow], act[grow], rew[grow]
             self.count[r] = c + 1
         if not parts:
-            return (np.zeros(0, np.int64), np.zeros((0, obs.shape[1]), np.float32),
+            return (np.zeros(0, np.int64), np.zeros((0, obs.shape[1]), self.obs.dtype),
                     np.zeros((0, *act.shape[1:]), self.act.dtype), np.zeros(0, np.float32), np.zeros(0, np.float32))
         return tuple(np.concatenate(x) for x in zip(*parts, strict=True))
 

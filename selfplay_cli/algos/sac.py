@@ -62,9 +62,11 @@ import torch
 from torch import nn
 
 from ..envs import SeatSpace
+from ..envs.obs_spaces import image_layout
+from ..errors import MarlError
 from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
-from ..policies.spaces import ActionHead
+from ..policies.spaces import ActionHead, describe_space
 from ..signals import stop_requested
 from .base import Share, action_head, as_bool, check_steps, learner_args, padded, share_draw, unpadded
 from .kickstart import Imitation
@@ -176,7 +178,11 @@ class SACLearner:
 
     @staticmethod
     def check_seat(seat: SeatSpace) -> ActionHead:
-        """The head for the seat's actions, or one clear :class:`MarlError` (SAC plays Box actions only)."""
+        """The head for the seat's actions, or one clear :class:`MarlError` (SAC plays Box actions only, and reads
+        flat observations: its critics are MLPs, so an image seat is refused rather than fed raw pixels)."""
+        if image_layout(seat.observation) is not None:
+            raise MarlError(f"SAC's critics read flat observations, not images ({describe_space(seat.observation)}): "
+                            "use --algo ppo or dqn, whose networks read images with a convolutional encoder")
         return action_head("SAC", seat.action, ("box", "Box (continuous)"), "use --algo ppo or dqn")
 
     def __init__(self, seat: SeatSpace, n_slots: int, config: SACConfig | None = None, *, seed: int = 0,

@@ -28,6 +28,7 @@ from ..envs.registry import BatchedCore, IllegalActionError
 from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
 from ..results import GameResult, Rules, game_results
+from .frames import FrameStacks, stacked_space
 from .limits import GameLength, first_nonfinite
 from .replay import ActionLog, SeatActions, encode_actions
 
@@ -160,6 +161,13 @@ class _Batch:
                 for k, seat in enumerate(sg.seats):
                     self.step_actions[seat] = sg.actions[k]
         self.masked = any(sg.masked for sg in self.seat_groups)
+        # Policies that read their last K observations (:mod:`.frames`): every seat group's stacks of the most any of
+        # them reads, moved on by the positions that act.
+        self.stack_k = [frame_stack_of(p) for p in policies]
+        most = max(self.stack_k, default=1)
+        self.frames = ([FrameStacks(self.declared[sg.seats[0]].observation, most, len(sg.seats) * n)
+                        for sg in self.seat_groups] if most > 1 else None)
+        self.step_no = 0
         self.to_act = getattr(self.core, "to_act", None)
         self.seats = np.zeros((n_seats, n), dtype=np.int64)  # policy index per (seat, slot)
         self.game_of = np.full(n, -1, dtype=np.int64)  # schedule index per slot, -1 when idle
@@ -194,6 +202,9 @@ class _Batch:
             self.game_of[take] = np.arange(first, first + take.size)
             self.seats[:, take] = np.array([g.seats for g in chosen]).T
             self.core.reset(take, [g.seed for g in chosen])
+            if self.frames is not None:
+                for sg, frames in zip(self.seat_groups, self.frames, strict=True):
+                    frames.restart((np.arange(len(sg.seats))[:, None] * self.n + take[None, :]).ravel())
             self.next_game += take.size
             if self.log is not None:
                 self.log.begin(take)
@@ -236,6 +247,7 @@ class _Batch:
                 self.core.step(self.step_actions)
             except IllegalActionError as e:
                 raise _illegal(e, self.spec, self.policies, self.seats, self.game_of, self.games) from None
+            self.step_no += 1
             if self.log is not None:
                 self.log.append(self.step_actions, self.active)
             for hook in self.hooks:
@@ -257,11 +269,21 @@ class _Batch:
                                  f"of seed {self.games[int(self.game_of[slot])].seed} is {kind} at its step "
                                  f"{int(core.steps[slot]):,}")
         masks = core.action_masks() if self.masked else None  # type: ignore[attr-defined]
-        for sg, where_g, acting_as in zip(self.seat_groups, self.held, self.by_group, strict=True):
+        for gi, (sg, where_g, acting_as) in enumerate(zip(self.seat_groups, self.held, self.by_group, strict=True)):
             if self.whole and isinstance(obs, np.ndarray):
                 flat_obs = obs.reshape(-1, *obs.shape[2:])
             else:
                 flat_obs = np.stack([np.asarray(obs[s]) for s in sg.seats]).reshape(-1, *sg.obs_shape)
+            frames = None if self.frames is None else self.frames[gi]
+            if frames is not None:  # the acting positions' stacks move on
+                rows = np.concatenate([w for ws in where_g for w in ws])
+                frames.see(rows, flat_obs[rows], self.step_no)
+
+            def seen(m: int, w: np.ndarray, flat_obs: np.ndarray = flat_obs, frames: Any = frames) -> np.ndarray:
+                """What policy ``m`` reads at positions ``w``: the observations, or its stacks of them."""
+                k = self.stack_k[m]
+                return flat_obs[w] if k == 1 or frames is None else frames.read(w, k)
+
             flat_mask = None
             if sg.masked and masks is not None:
                 flat_mask = np.concatenate([np.ones((n, 1), dtype=bool) if masks[s] is None else np.asarray(masks[s])
@@ -276,11 +298,11 @@ class _Batch:
                     for m, w in zip(members, where, strict=True):
                         if w.size:
                             p = acting_as[m]
-                            flat_actions[w] = p.act(flat_obs[w]) if flat_mask is None else p.act(flat_obs[w],
+                            flat_actions[w] = p.act(seen(m, w)) if flat_mask is None else p.act(seen(m, w),
                                                                                                 flat_mask[w])
                 elif any(w.size for w in where):
-                    acts = (bank.act([flat_obs[w] for w in where]) if flat_mask is None
-                            else bank.act([flat_obs[w] for w in where], [flat_mask[w] for w in where]))
+                    x = [seen(m, w) for m, w in zip(members, where, strict=True)]
+                    acts = bank.act(x) if flat_mask is None else bank.act(x, [flat_mask[w] for w in where])
                     for w, a in zip(where, acts, strict=True):
                         flat_actions[w] = a
 
@@ -341,10 +363,16 @@ def _check_seat(spec: EnvSpec, policy: Policy, seat: int, declared: Any) -> None
     obs = getattr(policy, "obs_space", None)
     if obs is None or getattr(policy, "kind", "") == "bot" or getattr(policy, "seats", None):
         return
-    want = tuple(declared.observation.shape)
+    want = tuple(stacked_space(declared.observation, frame_stack_of(policy)).shape)
     if tuple(obs.shape) != want:
         raise MarlError(f"{policy.id} reads observations of shape {tuple(obs.shape)} but seat {spec.agents[seat]} of "
                         f"{spec.name} observes {want}: a policy plays only seats of the role it learned")
+
+
+def frame_stack_of(policy: Policy) -> int:
+    """The observations a policy reads at once (its ``frame_stack``; 1 for a policy without one)."""
+    k = getattr(policy, "frame_stack", 1)
+    return int(k) if isinstance(k, (int, np.integer)) and k >= 1 else 1
 
 
 def _illegal(e: Exception, spec: EnvSpec, policies: Sequence[Policy], seats: np.ndarray, game_of: np.ndarray,

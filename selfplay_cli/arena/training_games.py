@@ -44,7 +44,9 @@ from ..envs import EnvSpec, SeatSpace, describe_space, get_env
 from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, game_results
+from .frames import FrameStacks, stacked_space
 from .limits import GameLength, first_nonfinite
+from .matches import frame_stack_of
 from .replay import ActionLog, SeatActions, encode_actions
 
 OPPONENT = -1
@@ -223,7 +225,8 @@ class SelfPlayGames:
 
     Each step: ``observe()`` (and, where the game has them, ``masks()``; in turn-based games ``acting()``) for each
     learner's slots, then ``step(actions)``. Opponents act by themselves, given their masks, and only the seats that
-    act are asked.
+    act are asked. With ``frame_stack`` K > 1 the learners read their seats' last K observations
+    (:mod:`.frames`; :attr:`spaces` are then the stacked ones), and an opponent its own ``frame_stack``.
     """
 
     def __init__(
@@ -237,6 +240,7 @@ class SelfPlayGames:
         first_seed: int = 0,
         game_ids: Sequence[int] | None = None,
         total_games: int | None = None,
+        frame_stack: int = 1,
     ) -> None:
         options = env_options or {}
         self.spec = spec = (get_env(env) if isinstance(env, str) else env).for_options(**options)
@@ -255,7 +259,14 @@ class SelfPlayGames:
         game_cfg = spec.config(**options)
         self.seat_spaces = spec.seat_spaces(game_cfg)
         self.length = GameLength.of(spec, game_cfg)  # a game that reaches it ends there, as truncated
-        self.spaces = learner_spaces(spec, self.seat_spaces, self.layout)
+        self.frame_stack = int(frame_stack)
+        self.spaces = [SeatSpace(stacked_space(s.observation, self.frame_stack), s.action, s.mask)
+                       for s in learner_spaces(spec, self.seat_spaces, self.layout)]
+        self._frames: list[FrameStacks] | None = None  # each seat's stacks, where anyone reads more than one
+        self._raw: Any = None  # this step's observations as the game gives them, where stacks are kept
+        self._steps = 0  # steps played (a stack moves on once a step)
+        if self.frame_stack > 1:
+            self._stack_frames(self.frame_stack)
         self.needs_opponents = bool((self.layout == OPPONENT).any())
         if self.needs_opponents and choose_opponents is None:
             raise ValueError("opponent seats need a choose_opponents callback")
@@ -310,6 +321,9 @@ class SelfPlayGames:
         self.games_started += games.size
         self.seeds[games] = seeds
         self.core.reset(games, seeds)
+        if self._frames is not None:
+            for frames in self._frames:
+                frames.restart(games)
         self._log.begin(games)
         if self.needs_opponents:
             is_opp = self.layout[:, games] == OPPONENT  # (seats, games)
@@ -326,6 +340,8 @@ class SelfPlayGames:
                         self.policies.append(p)
                         if callable(getattr(p, "configure", None)):  # a scripted player: the run's game options
                             p.configure(self.options)
+                        if frame_stack_of(p) > 1:  # a snapshot that reads its last observations
+                            self._stack_frames(frame_stack_of(p))
                     self.opponent_of[slot] = index[id(p)]
             self._forget_idle()
         self._stale()
@@ -352,10 +368,26 @@ class SelfPlayGames:
         self._start(np.arange(self.n))
 
     # -- what the learners see -------------------------------------------------------------------------------------
+    def _stack_frames(self, k: int) -> None:
+        """Keep each seat's last ``k`` observations from now on (at least)."""
+        if self._frames is None:
+            self._frames = [FrameStacks(seat.observation, k, self.n) for seat in self.seat_spaces]
+        for frames in self._frames:
+            frames.grow(k)
+
     def _read(self) -> None:
         if self._seat_obs is None:
             obs = self.core.observe()
             self._check_finite(obs, "observation")
+            if self._frames is not None:  # the stacks of the seats that act move on; the learners read theirs
+                self._raw = obs
+                acting = self._to_act().reshape(self.n_seats, self.n) if self.sequential else None
+                for s, frames in enumerate(self._frames):
+                    rows = np.arange(self.n) if acting is None else np.flatnonzero(acting[s])
+                    frames.see(rows, np.asarray(obs[s])[rows], self._steps)
+                if self.frame_stack > 1:
+                    seen = [frames.read(slice(None), self.frame_stack) for frames in self._frames]
+                    obs = np.stack(seen) if isinstance(obs, np.ndarray) else seen
             self._seat_obs = obs
             if self.uniform and isinstance(obs, np.ndarray):
                 self._flat = obs.reshape(-1, *obs.shape[2:])
@@ -442,6 +474,7 @@ class SelfPlayGames:
                 self._opponents_act(None)
             step_actions = self._actions
         rewards = np.asarray(self.core.step(step_actions), dtype=np.float32)
+        self._steps += 1
         self._check_finite(rewards, "reward")
         self._log.append(step_actions)  # every slot always has a game running
         self._stale()
@@ -504,7 +537,7 @@ class SelfPlayGames:
         which = self.opponent_of[slots]
         for k in np.unique(which).tolist():
             idx = slots[which == k]
-            if flat_actions is not None:
+            if flat_actions is not None and frame_stack_of(self.policies[k]) == self.frame_stack:
                 obs = self._flat[idx]  # type: ignore[index]
                 mask = None if flat_masks is None else flat_masks[idx]
                 flat_actions[idx] = self._act(self.policies[k], obs, mask)
@@ -512,11 +545,24 @@ class SelfPlayGames:
             policy = self.policies[k]
             for s in np.unique(idx // self.n).tolist():
                 rows = idx[idx // self.n == s] % self.n
-                obs = np.asarray(self._seat_obs[s])[rows]
+                obs = self._seen(policy, s, rows)
                 mask = None if masks is None or not self.seat_spaces[s].mask else masks[s][rows]
                 # a scripted player acts as the seat's own (random: its action space)
                 player = policy.for_seat(s) if callable(getattr(policy, "for_seat", None)) else policy
-                self._actions[s][rows] = self._act(player, obs, mask)
+                played = self._act(player, obs, mask)
+                if flat_actions is not None:
+                    flat_actions[s * self.n + rows] = played
+                else:
+                    self._actions[s][rows] = played
+
+    def _seen(self, policy: Policy, seat: int, rows: np.ndarray) -> np.ndarray:
+        """What ``policy`` reads on ``seat`` in the games ``rows``: its own number of the seat's last observations."""
+        k = frame_stack_of(policy)
+        if k == self.frame_stack:
+            return np.asarray(self._seat_obs[seat])[rows]
+        if k == 1 or self._frames is None:
+            return np.asarray(self._raw[seat])[rows]
+        return self._frames[seat].read(rows, k)
 
     @staticmethod
     def _act(policy: Policy, obs: np.ndarray, mask: np.ndarray | None) -> np.ndarray:

@@ -124,6 +124,18 @@ def train(
                                                 "snapshot) on the states they visit, the imitation's weight fading "
                                                 "by [teacher] weight (default 1 to 0 over the first half of the run); "
                                                 "none: no teacher (a game's default one off).")] = None,
+    frame_stack: Annotated[int, typer.Option("--frame-stack", metavar="K", min=1, max=16, help="Each learner reads "
+                                             "its seat's last K observations at once: an image's K frames on its "
+                                             "channel axis, any other observation's K side by side (a game's first "
+                                             "fills the stack at its start); its snapshots play the same way in "
+                                             "match, ladder and record.")] = 1,
+    conv: Annotated[str | None, typer.Option("--conv", metavar="LAYERS", help="The convolutional encoder of image "
+                                             "seats (observations of uint8 HxWxC or CxHxW, 1 to 4 channels), as "
+                                             "CHANNELSxKERNELsSTRIDE layers: e.g. 16x3s1,32x3s2; none: the pixels "
+                                             "straight into the MLP. Default: 32x8s4,64x4s2,64x3s1 (the Nature-CNN) "
+                                             "where the image's smaller side has 64 pixels or more, else "
+                                             "16x3s1,32x3s2; then the MLP's hidden layers ([ppo.arch] hidden).")]
+    = None,
     lr: Annotated[float | None, typer.Option("--lr", help="Learning rate (default: the algorithm's own, PPO 2e-3, "
                                              "DQN 2.5e-4, SAC 3e-4).")] = None,
     env_option: Annotated[list[str] | None, typer.Option("--env-option", metavar="KEY=VALUE", help="Game option, "

@@ -12,6 +12,11 @@
 The bounds of the row (:meth:`FlatObs.box`) are the parts' bounds (0 and 1 for one-hots and binaries), so a policy's
 input is checked as any Box observation is. A game's ``action_mask`` is not read here: the adapter takes it out of
 a top-level Dict first (:func:`~selfplay_cli.envs.registry.seat_space_of`).
+
+**Images** are the one exception to the flat float32 row (:func:`image_layout`): a Box of three axes whose numbers
+lie in 0..255 (uint8, or any dtype with those bounds) and whose channel axis holds 1 to 4 channels is read as it is,
+its shape and dtype kept, so a uint8 frame stays one byte a number from the game to the network (which scales it to
+[0, 1] itself) and a convolutional encoder reads it.
 """
 
 from __future__ import annotations
@@ -23,7 +28,31 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-__all__ = ["FlatObs", "SeatObs"]
+__all__ = ["FlatObs", "SeatObs", "image_layout", "stacked_space"]
+
+MAX_CHANNELS = 4  # an image's channels (grey, grey+alpha, RGB, RGBA); a bigger axis is a side, not the channels
+MIN_SIDE = 4  # an image's smaller side: below it there is nothing for a convolution to slide over
+
+
+def image_layout(space: spaces.Space) -> str | None:
+    """``"hwc"`` or ``"chw"`` for an image observation, else None.
+
+    An image is a Box of three axes with numbers in 0..255 (dtype uint8, or bounds 0 and 255 of any dtype) whose
+    channel axis holds 1 to 4 channels: the last axis when it holds at most 4 (HxWxC, what PettingZoo's butterfly
+    and Atari games give), else the first (CxHxW); its other two sides hold at least 4 pixels each."""
+    if not isinstance(space, spaces.Box) or len(space.shape) != 3:
+        return None
+    if space.dtype != np.uint8:
+        low, high = np.asarray(space.low), np.asarray(space.high)
+        if not (np.all(low == 0) and np.all(high == 255)):
+            return None
+    h, w, c = space.shape
+    if 1 <= c <= MAX_CHANNELS and min(h, w) >= MIN_SIDE:
+        return "hwc"
+    c, h, w = space.shape
+    if 1 <= c <= MAX_CHANNELS and min(h, w) >= MIN_SIDE:
+        return "chw"
+    return None
 
 
 class FlatObs:
@@ -121,6 +150,21 @@ def _paths(space: spaces.Space, at: tuple[Any, ...] = ()) -> list[tuple[Any, ...
     if isinstance(space, spaces.Dict):
         return [p for key, sub in space.spaces.items() for p in _paths(sub, (*at, key))]
     return [at]
+
+
+def stacked_space(box: spaces.Box, k: int) -> spaces.Box:
+    """What a policy stacking ``k`` observations of ``box`` reads (``box`` itself for k = 1): an image's frames on
+    its channel axis (HxWx(k*C), (k*C)xHxW), any other observation's k rows one after the other, flat (the oldest
+    first; :mod:`selfplay_cli.arena.frames` keeps them)."""
+    if k == 1:
+        return box
+    layout = image_layout(box)
+    axis = -1 if layout == "hwc" else 0
+    if layout is None:
+        low, high = np.asarray(box.low).reshape(-1), np.asarray(box.high).reshape(-1)
+        return spaces.Box(np.tile(low, k), np.tile(high, k), dtype=box.dtype)
+    return spaces.Box(np.concatenate([box.low] * k, axis=axis), np.concatenate([box.high] * k, axis=axis),
+                      dtype=box.dtype)
 
 
 class SeatObs:

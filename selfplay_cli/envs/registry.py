@@ -55,8 +55,8 @@ class BatchedCore(Protocol):
         ...
 
     def observe(self) -> Any:
-        """``obs[seat]`` is ``(n, *observation.shape)`` float32: one array ``(n_seats, n, ...)`` when every seat has
-        the same shape, else a list."""
+        """``obs[seat]`` is ``(n, *observation.shape)`` of the seat's observation dtype (float32; an image's uint8):
+        one array ``(n_seats, n, ...)`` when every seat has the same shape, else a list."""
         ...
 
     def action_masks(self) -> list[np.ndarray | None]:
@@ -108,9 +108,9 @@ class BotSpec:
 class SeatSpace:
     """What one seat's policy sees and does.
 
-    ``observation``: the Box a policy reads (float32 arrays of its shape; for a Dict observation space, its
-    ``observation`` part). ``action``: Discrete (actions ``0 .. n-1``), MultiDiscrete or Box. ``mask``: whether
-    the seat has action masks (Discrete only)."""
+    ``observation``: the Box a policy reads (float32 arrays of its shape, or an image's own dtype, uint8; for a
+    Dict observation space, its ``observation`` part). ``action``: Discrete (actions ``0 .. n-1``), MultiDiscrete or
+    Box. ``mask``: whether the seat has action masks (Discrete only)."""
 
     observation: spaces.Box
     action: spaces.Space
@@ -216,8 +216,9 @@ def seat_space_of(observation: spaces.Space, action: spaces.Space) -> SeatSpace:
     anything else (Discrete, MultiDiscrete, MultiBinary, Tuples and Dicts of them, nested) flattened in a stated
     order. A top-level Dict's ``action_mask`` (MultiBinary(n) or a Box of n zeros and ones, for a Discrete(n) action
     space) is the seat's action mask; a Dict of ``observation`` and ``action_mask`` (PettingZoo's classic games) is
-    read as its ``observation``. The observation a policy reads is a float32 Box."""
-    from .obs_spaces import SeatObs
+    read as its ``observation``. The observation a policy reads is a float32 Box, except an image
+    (:func:`~selfplay_cli.envs.obs_spaces.image_layout`), which keeps its shape and dtype (uint8 frames stay uint8)."""
+    from .obs_spaces import SeatObs, image_layout
 
     try:
         seat_obs = SeatObs(observation)
@@ -238,7 +239,7 @@ def seat_space_of(observation: spaces.Space, action: spaces.Space) -> SeatSpace:
         action = spaces.Discrete(int(action.n))
     elif isinstance(action, spaces.MultiDiscrete) and np.any(action.start != 0):
         action = spaces.MultiDiscrete(action.nvec)
-    if box.dtype != np.float32:
+    if box.dtype != np.float32 and image_layout(box) is None:
         box = spaces.Box(box.low.astype(np.float32), box.high.astype(np.float32), dtype=np.float32)
     return SeatSpace(box, action, seat_obs.mask)
 

@@ -1,9 +1,10 @@
 """Players: the one ``Policy`` interface (:mod:`.base`), scripted players as policies (:mod:`.bots`), network
-policies (:mod:`.network`: the MLP and its arch; :mod:`.heads`: the action heads' maths; :mod:`.bank`: many
-networks stacked to act at once), one agent for a whole team (:mod:`.joint`), the spaces a seat reads and acts in
-(:mod:`.spaces`), and snapshot files in three parts: the file format (:mod:`.snapshot_format`: metadata,
-checksums, limits, saving), the hostile-input reader (:mod:`.snapshot_reader`: every check before anything is
-built) and policy building from a checked file (:mod:`.snapshot_policy`)."""
+policies (:mod:`.network`: the MLP, with a convolutional encoder for images; :mod:`.arch`: its shape; :mod:`.heads`:
+the action heads' maths; :mod:`.bank`: many networks stacked to act at once), one agent for a whole team
+(:mod:`.joint`), the spaces a seat reads and acts in (:mod:`.spaces`), and snapshot files in three parts: the file
+format (:mod:`.snapshot_format`: metadata, checksums, limits, saving), the hostile-input reader
+(:mod:`.snapshot_reader`: every check before anything is built) and policy building from a checked file
+(:mod:`.snapshot_policy`)."""
 
 from .base import Policy
 from .bots import ScriptedPolicy
@@ -12,7 +13,7 @@ __all__ = ["Policy", "ScriptedPolicy"]
 
 # Network policies and snapshot files need torch, which is slow to import: load them on first use.
 _LAZY = {
-    "Arch": "network",
+    "Arch": "arch",
     "MLPNet": "network",
     "NetworkPolicy": "network",
     "build_network": "network",
@@ -21,7 +22,7 @@ _LAZY = {
     "FORMAT_VERSION": "snapshot_format",
     "LIMITS": "snapshot_format",
     "Snapshot": "snapshot_reader",
-    "SnapshotError": "network",
+    "SnapshotError": "arch",
     "SnapshotMeta": "snapshot_format",
     "expected_tensors": "snapshot_format",
     "export_snapshot": "snapshot_reader",

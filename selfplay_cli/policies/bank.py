@@ -36,9 +36,9 @@ _FAST = {"tanh": _tanh, "relu": torch.relu_}
 
 
 def bank_key(policy: object) -> tuple | None:
-    """Policies with the same key can act in one bank: network policies of one architecture and one action head
-    (kind, sizes and bounds) on one device."""
-    if not isinstance(policy, NetworkPolicy):
+    """Policies with the same key can act in one bank: network policies of one MLP architecture and one action
+    head (kind, sizes and bounds) on one device (a cnn has no key: its convolutions are not batched here)."""
+    if not isinstance(policy, NetworkPolicy) or policy.net.encoder is not None:  # a cnn acts on its own
         return None
     net = policy.net
     return (str(policy.device), net.obs_dim, net.head, net.arch.hidden, net.arch.activation, net.arch.dueling,

@@ -1,4 +1,11 @@
-"""Neural policies: the network architecture record, the MLP itself and the policy that plays with it.
+"""Neural policies: the network itself and the policy that plays with it (its shape, :class:`Arch`, is
+:mod:`.arch`'s).
+
+Image observations (:func:`~selfplay_cli.envs.obs_spaces.image_layout`: uint8 HxWxC or CxHxW) are read by a
+convolutional encoder in front of the MLP trunk (``Arch.conv``), by default (:func:`~.arch.default_conv`) the
+Nature-CNN's ``32x8s4, 64x4s2, 64x3s1`` where the image's smaller side has 64 pixels or more, else ``16x3s1, 32x3s2``
+(sides of 7 to 63 pixels; ``16x3s1`` alone below); no padding, ReLU after each convolution, the pixels scaled to
+[0, 1] inside the network (frames stay uint8 everywhere before it).
 
 The MLP serves every learner: its action head gives PPO's logits or DQN's Q-values, and an optional value head gives
 PPO's critic. The action head is the one its seat's action space calls for (:class:`ActionHead`): ``n`` logits for
@@ -12,7 +19,6 @@ nothing is set globally (threads, seeds, default dtype): callers that care about
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -21,92 +27,13 @@ from gymnasium import spaces
 from torch import nn
 from torch.nn import functional as F
 
-from ..errors import MarlError
+from .arch import Arch, SnapshotError, conv_shapes
 from .base import Policy
 from .heads import HeadMath, squashed_log_std, to_numpy_actions
 from .spaces import ActionHead, SpaceError, box_of_shape
 
-KINDS = ("mlp",)
 ACTIVATIONS = {"tanh": nn.Tanh, "relu": nn.ReLU}
 ACTIVATION_FNS = {"tanh": torch.tanh_, "relu": torch.relu_}  # in place, on each layer's fresh output
-
-
-class SnapshotError(MarlError):
-    """A snapshot file (or the network it describes) that cannot be saved, read or played.
-
-    Messages about a file always start with the file's path. Defined here, the lowest of the modules that raise it
-    (a network's arch; the snapshot format, reader and policy building).
-    """
-
-
-@dataclass(frozen=True)
-class Arch:
-    """The shape of a policy network: everything needed (with the env's spaces) to rebuild it from weights.
-
-    ``kind`` is ``mlp`` (the only kind so far); ``hidden`` the widths of the trunk's layers; ``activation``
-    ``tanh`` or ``relu``; ``value_head`` adds a state-value output (PPO's critic); ``dueling`` makes the action
-    head a dueling Q head (``V(s) + A(s, a) - mean_a A(s, a)``, for DQN); ``squash`` makes a Box action head a
-    tanh-squashed Gaussian with a state-dependent std (SAC's actor: a second head gives the log-std). Invalid values
-    raise :class:`SnapshotError` (a user-facing error). ``squash`` is written out only when true, so every network
-    without it (PPO's, DQN's) is described exactly as before it existed.
-    """
-
-    kind: str = "mlp"
-    hidden: tuple[int, ...] = (64, 64)
-    activation: str = "tanh"
-    value_head: bool = True
-    dueling: bool = False
-    squash: bool = False
-
-    def __post_init__(self) -> None:
-        if self.kind not in KINDS:
-            raise SnapshotError(f"unknown network kind {self.kind!r}; known: {', '.join(KINDS)}")
-        if self.activation not in ACTIVATIONS:
-            raise SnapshotError(f"unknown activation {self.activation!r}; known: {', '.join(ACTIVATIONS)}")
-        try:
-            hidden = tuple(self.hidden)
-        except TypeError:
-            raise SnapshotError(f"hidden layer sizes must be a list of integers, not {self.hidden!r}") from None
-        if not all(isinstance(h, (int, np.integer)) and not isinstance(h, bool) and h > 0 for h in hidden):
-            raise SnapshotError(f"hidden layer sizes must be positive integers, not {list(hidden)!r}")
-        object.__setattr__(self, "hidden", tuple(int(h) for h in hidden))
-        for name in ("value_head", "dueling", "squash"):
-            if not isinstance(getattr(self, name), bool):
-                raise SnapshotError(f"arch field {name!r} must be true or false, not {getattr(self, name)!r}")
-
-    def to_dict(self) -> dict[str, Any]:
-        d = {
-            "kind": self.kind,
-            "hidden": list(self.hidden),
-            "activation": self.activation,
-            "value_head": self.value_head,
-            "dueling": self.dueling,
-        }
-        if self.squash:
-            d["squash"] = True
-        return d
-
-    @classmethod
-    def from_dict(cls, data: Any) -> Arch:
-        """Inverse of :meth:`to_dict`; missing fields take their defaults, unknown fields are refused."""
-        if not isinstance(data, dict):
-            raise SnapshotError(f"network arch must be an object, not {type(data).__name__}")
-        known = {"kind", "hidden", "activation", "value_head", "dueling", "squash"}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise SnapshotError(f"unknown network arch field(s) {', '.join(map(str, unknown))}")
-        return cls(**data)
-
-    def describe(self) -> str:
-        """Short human form, e.g. ``mlp 64x64 tanh +value``."""
-        parts = [self.kind, "x".join(map(str, self.hidden)) or "linear", self.activation]
-        if self.value_head:
-            parts.append("+value")
-        if self.dueling:
-            parts.append("dueling")
-        if self.squash:
-            parts.append("tanh-gaussian")
-        return " ".join(parts)
 
 
 def _layer(in_dim: int, out_dim: int, gain: float, generator: torch.Generator | None) -> nn.Linear:
@@ -124,14 +51,16 @@ def _layer(in_dim: int, out_dim: int, gain: float, generator: torch.Generator | 
 
 
 class MLPNet(nn.Module):
-    """Flattened observation -> trunk (Linear + activation per hidden width) -> heads.
+    """Flattened observation (or, for a cnn arch, the image through the conv encoder) -> trunk (Linear + activation
+    per hidden width) -> heads.
 
     ``forward(x)`` takes ``(batch, *obs_shape)`` (or already flat ``(batch, obs_dim)``) and returns
     ``(action_out, value)``: ``action_out`` is ``(batch, head.outputs)``: logits (PPO; per dimension, side by side,
     for MultiDiscrete), Q-values (DQN) or Gaussian means (Box); ``value`` is ``(batch,)`` or ``None`` without a
     value head. ``obs_space`` and ``act_space`` are the seat's spaces (gymnasium).
 
-    Parameter names (the snapshot's tensor names): ``trunk.{2i}.weight/bias``, ``action_head.*``, ``log_std``
+    Parameter names (the snapshot's tensor names): ``encoder.{2i}.weight/bias`` (a cnn's conv layers),
+    ``trunk.{2i}.weight/bias``, ``action_head.*``, ``log_std``
     (Box actions), ``value_head.*`` and, for a dueling arch, ``state_value.*``. A squashed arch (SAC's actor) has
     ``log_std_head.*`` (the state-dependent log-std, see :meth:`gaussian`) instead of ``log_std``; its
     ``forward`` gives the Gaussian's means (before the tanh).
@@ -156,9 +85,19 @@ class MLPNet(nn.Module):
         self.obs_space = obs_space if obs_space is not None else box_of_shape((self.obs_dim,))
         self.act_space = action if isinstance(action, spaces.Space) else _space_of(head)
         self.arch = arch
+        self.obs_shape = tuple(int(d) for d in self.obs_space.shape)
         hidden_gain = math.sqrt(2.0)
-        layers: list[nn.Module] = []
         width = self.obs_dim
+        self.encoder: nn.Sequential | None = None
+        self._convs: list[nn.Conv2d] = []
+        if arch.kind == "cnn":
+            weights, width = conv_shapes(self.obs_shape, arch)
+            convs: list[nn.Module] = []
+            for (out, cin, k, _), (_, _, stride) in zip(weights, arch.conv or (), strict=True):
+                convs += [_conv(cin, out, k, stride, hidden_gain, generator), nn.ReLU()]
+            self.encoder = nn.Sequential(*convs)
+            self._convs = [m for m in convs if isinstance(m, nn.Conv2d)]
+        layers: list[nn.Module] = []
         for h in arch.hidden:
             layers.append(_layer(width, h, hidden_gain, generator))
             layers.append(ACTIVATIONS[arch.activation]())
@@ -173,12 +112,25 @@ class MLPNet(nn.Module):
         self.state_value = _layer(width, 1, 1.0, generator) if arch.dueling else None
         self.log_std_head = _layer(width, self.n_actions, 0.01, generator) if self.squash else None
 
-    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+    def _inputs(self, x: torch.Tensor) -> torch.Tensor:
+        """Observations ``(batch, *obs_shape)`` or flat ``(batch, obs_dim)``, of any dtype, as the trunk's float
+        input: a cnn's images scaled to [0, 1] (here, not before: frames travel as uint8) and encoded."""
         if x.dim() == 1:
             x = x.unsqueeze(0)
         x = x.reshape(x.shape[0], -1)
         if x.shape[1] != self.obs_dim:
             raise ValueError(f"observations have {x.shape[1]} features per row; this network takes {self.obs_dim}")
+        if self.encoder is None:
+            return x if x.dtype == torch.float32 else x.float()
+        z = x.reshape(x.shape[0], *self.obs_shape).float().mul_(1.0 / 255.0)
+        if self.arch.layout == "hwc":
+            z = z.permute(0, 3, 1, 2)
+        for conv in self._convs:
+            z = torch.relu_(conv(z))
+        return z.flatten(1)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        x = self._inputs(x)
         # Layers without nn.Module call overhead (it dominates small batches), each activation in place on its layer's
         # output (autograd saves tanh's and relu's output, not their input, so this is the same computation with one
         # activation-sized tensor less per layer to allocate and fill).
@@ -203,14 +155,19 @@ class MLPNet(nn.Module):
         state-dependent (:func:`~selfplay_cli.policies.heads.squashed_log_std` of its head's output)."""
         if self.log_std_head is None:
             raise ValueError("gaussian() is for a squashed arch (SAC's actor)")
-        if x.dim() == 1:
-            x = x.unsqueeze(0)
-        x = x.reshape(x.shape[0], -1)
-        if x.shape[1] != self.obs_dim:
-            raise ValueError(f"observations have {x.shape[1]} features per row; this network takes {self.obs_dim}")
-        z = self._features(x)
+        z = self._features(self._inputs(x))
         mean = F.linear(z, self.action_head.weight, self.action_head.bias)
         return mean, squashed_log_std(F.linear(z, self.log_std_head.weight, self.log_std_head.bias))
+
+
+def _conv(cin: int, out: int, k: int, stride: int, gain: float, generator: torch.Generator | None) -> nn.Conv2d:
+    """A Conv2d layer (no padding) with the same init as :func:`_layer`: orthogonal weights, zero bias."""
+    with torch.random.fork_rng(devices=[]):
+        layer = nn.Conv2d(cin, out, k, stride)
+    with torch.no_grad():
+        nn.init.orthogonal_(layer.weight, gain, generator=generator)
+        layer.bias.zero_()
+    return layer
 
 
 def _space_of(head: ActionHead) -> spaces.Space:
@@ -225,7 +182,8 @@ def _space_of(head: ActionHead) -> spaces.Space:
 def build_network(obs: tuple[int, ...] | spaces.Box, action: int | spaces.Space | ActionHead, arch: Arch,
                   seed: int | None = None) -> MLPNet:
     """A freshly initialised network for a seat's observations (a Box, or just its shape) and actions (a space, or
-    an int ``n`` for ``Discrete(n)``).
+    an int ``n`` for ``Discrete(n)``); ``arch`` as :meth:`Arch.for_obs` makes it for the observation (an image seat
+    gets a cnn; the network's ``arch`` is the resolved one, what a snapshot records).
 
     With ``seed`` the init is reproducible and the global torch RNG is left alone; without it the global RNG
     is used. The network is built on the CPU (move it with ``.to(device)``).
@@ -240,6 +198,7 @@ def build_network(obs: tuple[int, ...] | spaces.Box, action: int | spaces.Space 
         raise SnapshotError(f"bad observation shape {raw!r}")
     if obs_space is None:
         obs_space = box_of_shape(shape)
+    arch = arch.for_obs(obs_space)
     generator = torch.Generator().manual_seed(int(seed)) if seed is not None else None
     if isinstance(action, (int, np.integer)) and not isinstance(action, bool):
         action = int(action)
@@ -272,7 +231,8 @@ class NetworkPolicy(Policy):
     greedily and ``tanh(mean + std(s) * eps)`` sampling, mapped onto the Box bounds. Masked actions are never chosen.
 
     ``act`` runs under ``torch.inference_mode`` and converts observations with ``torch.from_numpy`` (a copy is
-    made only when the array is not already a writable float32 array). Sampling uses the policy's own
+    made only when the array is not already a writable array of the observation's dtype: float32, or an image's
+    uint8, which the network scales itself). Sampling uses the policy's own
     ``torch.Generator`` seeded with ``seed``, so a seeded policy replays the same actions for the same
     observations. For large batches on the CPU, callers may tune ``torch.set_num_threads``; nothing global
     is set here. ``meta`` is the :class:`~selfplay_cli.policies.snapshot_format.SnapshotMeta` it was loaded from,
@@ -297,6 +257,7 @@ class NetworkPolicy(Policy):
         self.head = net.head
         self.greedy = bool(greedy)
         self.meta = meta
+        self.obs_dtype = np.dtype(net.obs_space.dtype)  # what act() hands the network: uint8 frames stay uint8
         self.generator = torch.Generator(device=self.device)
         self._math: HeadMath | None = None
         self.reseed(seed)
@@ -340,7 +301,7 @@ class NetworkPolicy(Policy):
     def action_scores(self, obs: np.ndarray, mask: np.ndarray | None = None) -> torch.Tensor:
         """The action head's ``(batch, outputs)`` output, with disallowed actions set to ``-inf`` (Discrete and
         MultiDiscrete heads; a Box head's outputs are its means)."""
-        scores, _ = self.net(self._tensor(obs, np.float32))
+        scores, _ = self.net(self._tensor(obs, self.obs_dtype))
         m = self._mask(mask, scores.shape[0])
         if m is not None:
             scores = scores.masked_fill(~m, float("-inf"))
@@ -349,11 +310,11 @@ class NetworkPolicy(Policy):
     @torch.inference_mode()
     def act(self, obs: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
         if self.net.squash:  # SAC's actor: tanh(mean) or tanh(mean + std * eps), on the bounds
-            mean, log_std = self.net.gaussian(self._tensor(obs, np.float32))
+            mean, log_std = self.net.gaussian(self._tensor(obs, self.obs_dtype))
             self._mask(mask, mean.shape[0])  # a Box head takes no mask: refused as for any Box head
             return to_numpy_actions(self.head, self.math.sample_squashed(mean, log_std, self.generator, self.greedy))
         if self.head.kind != "discrete":
-            out, _ = self.net(self._tensor(obs, np.float32))
+            out, _ = self.net(self._tensor(obs, self.obs_dtype))
             _, played = self.math.sample(out, self._mask(mask, out.shape[0]), self.generator, self.greedy,
                                          log_std=self.net.log_std)
             return to_numpy_actions(self.head, played)

@@ -37,9 +37,10 @@ from gymnasium import spaces
 from safetensors.torch import save as st_save
 
 from .. import files
+from ..envs.obs_spaces import stacked_space
 from ..typecheck import MAX_INT
+from .arch import Arch, SnapshotError, conv_shapes
 from .joint import MAX_JOINT_ACTIONS
-from .network import Arch, SnapshotError
 from .spaces import ActionHead, SpaceError, canonical_space, space_from_dict
 
 FORMAT = "marl-snapshot"
@@ -60,6 +61,7 @@ MAX_FILE_BYTES = 8 + MAX_HEADER + 4 * MAX_PARAMS
 # float32's normal range, and sampling (mean + std * eps) or a log-probability ((a - mean) / std) overflows. (A
 # squashed head's log-std is bounded by construction: heads.LOG_STD_MIN to LOG_STD_MAX from finite weights.)
 MAX_LOG_STD = 80.0
+MAX_FRAME_STACK = 16  # observations a policy reads at once (selfplay_cli.arena.frames keeps the same bound)
 LIMITS = {"header_bytes": MAX_HEADER, "hidden_layers": MAX_LAYERS, "layer_width": MAX_WIDTH,
           "observation_axes": MAX_OBS_DIMS, "observation_size": MAX_OBS_SIZE, "actions": MAX_ACTIONS,
           "parameters": MAX_PARAMS, "file_bytes": MAX_FILE_BYTES, "log_std": MAX_LOG_STD}
@@ -88,7 +90,9 @@ class SnapshotMeta:
     action spaces). ``parent`` is the snapshot it was trained from (``"run/ep80"``); ``seat`` names the seat
     of a per-seat learner (``"left"``), ``None`` when one network plays every seat; ``role`` the role of the seats
     it learned in a game whose seats hold several (``"adversary"``; see :func:`snapshot_roles`), else None;
-    ``created`` is ISO UTC;
+    ``created`` is ISO UTC; ``frame_stack`` how many of its seat's last observations it reads at once (its
+    observation space is then the stacked one: :func:`~selfplay_cli.arena.frames.stacked_space`; written only when
+    more than 1);
     ``weights_sha256`` is filled by :func:`save_snapshot`; ``extra`` is free-form JSON (hyperparameters...).
     ``env_options`` and ``extra`` go through JSON, so tuples in them come back as lists.
     """
@@ -109,6 +113,7 @@ class SnapshotMeta:
     role: str | None = None
     weights_sha256: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
+    frame_stack: int = 1
     obs_shape: tuple[int, ...] | None = None
     n_actions: int | None = None
 
@@ -165,6 +170,8 @@ class SnapshotMeta:
     def to_dict(self) -> dict[str, Any]:
         d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         del d["obs_shape"], d["n_actions"]  # derived from the spaces
+        if self.frame_stack == 1:
+            del d["frame_stack"]
         d["arch"] = self.arch.to_dict()
         return d
 
@@ -195,6 +202,8 @@ class SnapshotMeta:
         for key in ("env_options", "extra"):
             if key in kw and not isinstance(kw[key], dict):
                 raise ValueError(f"field {key!r} must be an object")
+        if "frame_stack" in kw and not (is_int(kw["frame_stack"]) and 1 <= kw["frame_stack"] <= MAX_FRAME_STACK):
+            raise ValueError(f"field 'frame_stack' must be a whole number from 1 to {MAX_FRAME_STACK}")
         for key in ("n_actions", "step", "episode"):
             if key in kw and (not isinstance(kw[key], int) or isinstance(kw[key], bool)):
                 raise ValueError(f"field {key!r} must be an integer")
@@ -249,7 +258,8 @@ def expected_tensors(obs_shape: tuple[int, ...], action: int | spaces.Space | Ac
                      arch: Arch) -> dict[str, tuple[int, ...]]:
     """Name -> shape of every tensor of the network ``arch`` describes for observations of ``obs_shape`` and the
     action space ``action`` (an int n: ``Discrete(n)``), as :class:`MLPNet` names them, computed without building
-    anything, after checking the description against :data:`LIMITS` (:class:`SnapshotError`)."""
+    anything, after checking the description against :data:`LIMITS` (:class:`SnapshotError`). A cnn's conv layers
+    must fit the image they are given (a layer whose kernel is wider than what reaches it is refused)."""
     check_obs_shape(tuple(obs_shape))
     obs_dim = math.prod(obs_shape)
     if isinstance(action, (int, np.integer)) and not isinstance(action, bool) and not 1 <= action <= MAX_ACTIONS:
@@ -270,6 +280,12 @@ def expected_tensors(obs_shape: tuple[int, ...], action: int | spaces.Space | Ac
         raise SnapshotError(f"hidden layer sizes {list(arch.hidden)} exceed {MAX_WIDTH:,}")
     shapes: dict[str, tuple[int, ...]] = {}
     width = obs_dim
+    if arch.kind == "cnn":  # the conv encoder: its weights from the image's shape, layer by layer
+        weights, width = conv_shapes(tuple(obs_shape), arch)
+        for i, w in enumerate(weights):
+            shapes[f"encoder.{2 * i}.weight"], shapes[f"encoder.{2 * i}.bias"] = w, (w[0],)
+    elif arch.layout:
+        raise SnapshotError(f"an mlp network has no image layout ({arch.layout!r})")
     for i, h in enumerate(arch.hidden):
         shapes[f"trunk.{2 * i}.weight"], shapes[f"trunk.{2 * i}.bias"] = (h, width), (h,)
         width = h
@@ -379,7 +395,8 @@ def snapshot_roles(meta: SnapshotMeta, spec: Any) -> frozenset[str] | None:
     fit = set()
     for role, seat in zip(roles, sized.seat_spaces(cfg), strict=True):
         with contextlib.suppress(SpaceError):
-            if tuple(seat.observation.shape) == tuple(meta.obs_shape or ()) and ActionHead.of(seat.action) == meta.head:
+            seen = stacked_space(seat.observation, meta.frame_stack)
+            if tuple(seen.shape) == tuple(meta.obs_shape or ()) and ActionHead.of(seat.action) == meta.head:
                 fit.add(role)
     return None if fit == set(roles) else frozenset(fit)
 

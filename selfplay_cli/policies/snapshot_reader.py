@@ -29,6 +29,7 @@ import numpy as np
 import torch
 
 from ..envs import EnvError, UnknownEnvError, get_env, known_env
+from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
 from .joint import joint_spaces
 from .network import Arch, SnapshotError
@@ -291,7 +292,7 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
     elif meta.role is not None and len(seats) == spec.n_seats:  # the seats of the role it says it learned
         roles = spec.seat_roles(cfg)
         seats = [seat for seat, role in zip(seats, roles, strict=True) if role == meta.role] or seats
-    shapes = [tuple(seat.observation.shape or ()) for seat in seats]
+    shapes = [tuple(stacked_space(seat.observation, meta.frame_stack).shape or ()) for seat in seats]
     if meta.obs_shape not in shapes:
         observes = " or ".join(sorted({str(list(s)) for s in shapes}))
         raise SnapshotError(f"{path}: snapshot observations are {list(meta.obs_shape or ())} but {meta.env} with "

@@ -32,8 +32,10 @@ from typing import Any
 import numpy as np
 
 from ..arena import Game, play
+from ..arena.matches import frame_stack_of
 from ..arena.schedule import CannotMeet, round_of, rounds
 from ..envs import EnvSpec, get_env
+from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key, variant_options
@@ -135,10 +137,13 @@ def check_fits(spec: Any, options: dict[str, Any], *policies: Policy) -> None:
         if team is not None and team != len(seats):
             raise MarlError(f"{p.id} is one agent for a team of {team} seats (--sharing sa); with the options {options}"
                             f" {spec.name} has {len(seats)}: a joint agent flies only the team it was trained as")
-        fits = [s for s in seats if tuple(s.observation.shape) == tuple(obs.shape) and s.action == act]
+        k = frame_stack_of(p)  # a policy reading its last k observations reads them stacked
+        fits = [s for s in seats
+                if tuple(stacked_space(s.observation, k).shape) == tuple(obs.shape) and s.action == act]
         if not fits:
-            raise MarlError(f"{p.id} reads observations of shape {tuple(obs.shape)} and plays {act}, but with the "
-                            f"options {options} every seat of {spec.name} is {seats[0].observation} / "
+            stacked = f" (its last {k} stacked)" if k > 1 else ""
+            raise MarlError(f"{p.id} reads observations of shape {tuple(obs.shape)}{stacked} and plays {act}, but with "
+                            f"the options {options} every seat of {spec.name} is {seats[0].observation} / "
                             f"{seats[0].action}")
 
 

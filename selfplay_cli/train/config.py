@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -13,8 +13,10 @@ import numpy as np
 
 from .. import files
 from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
+from ..arena.frames import check_frame_stack
 from ..arena.training_games import SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
-from ..envs import EnvSpec, get_env
+from ..envs import EnvSpec, SeatSpace, get_env
+from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
 from ..league.store import League
 from ..policies.joint import joint_spaces
@@ -144,6 +146,7 @@ class TrainConfig:
     ray_address: str = ""  # --executor ray, --eval ray: a Ray cluster to join ("": Ray started on this machine)
     fragment_steps: int = 0  # --executor ray: steps of every game an actor plays between weight updates (PPO: its
     # rollout, always; SAC and DQN: 0 means 16)
+    frame_stack: int = 1  # observations each learner reads at once: its seat's last K (images on the channel axis)
     eval_playoff: int = 100  # after the final gauntlet the run's best candidates meet, up to this many games a pair
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
@@ -195,6 +198,10 @@ class TrainConfig:
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
         if self.algo not in ALGOS:
             raise MarlError(f"unknown --algo '{self.algo}'; available: {', '.join(ALGOS)}")
+        check_frame_stack(self.frame_stack)
+        if self.frame_stack > 1 and self.sharing == "sa":
+            raise MarlError("--frame-stack is for agents that read their own seat (--sharing nops or fups), not one "
+                            "agent over the team's joint observation (--sharing sa)")
         try:
             spec = self.game()
         except (TypeError, ValueError) as e:
@@ -239,8 +246,9 @@ class TrainConfig:
             _check_networks(self, space)
         if self.teacher.player:
             check_teacher(self.algo, self.sharing)
-        _check_memory(self, tuple(spaces[0].observation.shape),
-                      [int((layout == i).sum()) for i in range(len(spaces))])
+        seen = stacked_space(spaces[0].observation, self.frame_stack)
+        _check_memory(self, tuple(seen.shape), [int((layout == i).sum()) for i in range(len(spaces))],
+                      np.dtype(seen.dtype).itemsize)
 
     @property
     def eval_inline(self) -> bool:
@@ -359,17 +367,28 @@ def _check_networks(cfg: TrainConfig, space: Any) -> None:
     refuses its own first snapshot: the learner's network (what its snapshots save), and SAC's critics (the
     observation and the action in, one value out)."""
     section = getattr(cfg, cfg.algo, None)
-    arch = getattr(section, "arch", None)
-    if not isinstance(arch, Arch):
+    if not isinstance(getattr(section, "arch", None), Arch):
         return
     try:
-        expected_tensors(tuple(space.observation.shape), space.action, arch)
+        seat, section = learner_setup(cfg, space)
+        arch = section.arch
+        expected_tensors(tuple(seat.observation.shape), seat.action, arch)
         critics = getattr(section, "critic_hidden", None)
         if critics is not None:
             inputs = math.prod(space.observation.shape) + math.prod(space.action.shape)
             expected_tensors((inputs,), 1, Arch(hidden=critics, activation=arch.activation, value_head=False))
     except MarlError as e:
         raise MarlError(f"[{cfg.algo}] network: {e}") from None
+
+
+def learner_setup(cfg: TrainConfig, space: SeatSpace) -> tuple[SeatSpace, Any]:
+    """A learner of the seat ``space`` as the run makes it: the seat it reads (its last ``frame_stack``
+    observations: :func:`~selfplay_cli.envs.obs_spaces.stacked_space`) and its algorithm's settings with the network
+    made for the seat's observation (:meth:`~selfplay_cli.policies.network.Arch.for_obs`: an image seat's cnn, told
+    from the observation before it is stacked)."""
+    section = getattr(cfg, cfg.algo)
+    seat = SeatSpace(stacked_space(space.observation, cfg.frame_stack), space.action, space.mask)
+    return seat, replace(section, arch=section.arch.for_obs(space.observation))
 
 
 def _machine_memory() -> int | None:
@@ -391,11 +410,12 @@ def _check_games(cfg: TrainConfig, seat_spaces: Any) -> None:
                         f"machine has {have / 2**30:,.1f} GB: use fewer --games")
 
 
-def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]) -> None:
+def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int], itemsize: int = 4) -> None:
     """Refuse, before anything is built, a run whose learners' buffers of observations would not fit in this
     machine's memory (e.g. pong's 400x800 RGB frames in 256 games: ~125 GB of PPO rollout), the teacher's labelled
-    states included."""
-    per_obs = 4 * math.prod(obs_shape)  # float32
+    states included. ``itemsize``: the bytes of one number of an observation as the learners keep it (float32's 4,
+    an image's 1)."""
+    per_obs = itemsize * math.prod(obs_shape)
     if cfg.algo == "ppo":
         need = sum(per_obs * cfg.ppo.rollout_steps * n for n in slots)
         what = f"PPO's rollouts ({cfg.ppo.rollout_steps} steps of {sum(slots):,} seats)"

@@ -39,7 +39,7 @@ from ..policies.bots import league_bots
 from ..policies.network import resolve_device
 from ..results import COOPERATIVE, GameResult
 from ..signals import clear_stop, signals_held, stoppable
-from .config import TrainConfig, tensorboard_writer
+from .config import TrainConfig, learner_setup, tensorboard_writer
 from .curriculum import Curriculum
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .lock import claim, write_lock
@@ -102,6 +102,8 @@ class Trainer:
         # one object per learner, so the games it plays share a batch.
         live = [learner.policy(lid, spec.name, greedy=cfg.algo == "dqn")
                 for learner, lid in zip(self.learners, learner_ids, strict=True)]
+        for policy in live:  # it plays as the learner reads: its seat's last frame_stack observations
+            policy.frame_stack = cfg.frame_stack
         self.opponents = Opponents(league, cfg, self.bot_ids, n_seats=len(spec.agents), home=plan.home,
                                    learner_of_game=layout.max(axis=0), seat_roles=seat_roles,
                                    opponent_slots=np.flatnonzero(layout.ravel() == OPPONENT), live=live,
@@ -120,7 +122,7 @@ class Trainer:
         else:
             games = SelfPlayGames(spec, cfg.games, layout, learner_ids,
                                   choose_opponents=self._choose if (layout == OPPONENT).any() else None,
-                                  env_options=cfg.env_options, first_seed=first_seed)
+                                  env_options=cfg.env_options, first_seed=first_seed, frame_stack=cfg.frame_stack)
             self.rollouts = Rollouts(games, self.learners, curriculum, teacher, schedule)
         self.match_id = league.create_match(spec.name, "training", {"run": cfg.run, "env_options": cfg.env_options})
         self.moments = SnapshotMoments(league, cfg, spec, self.run_dir, learners=self.learners, names=self.names,
@@ -146,10 +148,11 @@ class Trainer:
         if cfg.sharing == "sa":
             sa = JointLearner(learner_cls, self.spaces[0], spec.n_seats, cfg.games, algo_cfg, seed=cfg.seed,
                               device=self.device)
-            return [sa], SavedAs([sa.joint_seat], algo_cfg.arch, roles, {"seats": spec.n_seats, "base": sa.base})
-        learners = [learner_cls(self.spaces[i], int((layout == i).sum()), algo_cfg, seed=cfg.seed + i,
-                                device=self.device) for i in range(len(self.names))]
-        return learners, SavedAs(self.spaces, algo_cfg.arch, roles, None)
+            return [sa], SavedAs([sa.joint_seat], roles, {"seats": spec.n_seats, "base": sa.base})
+        setups = [learner_setup(cfg, space) for space in self.spaces]
+        learners = [learner_cls(seat, int((layout == i).sum()), section, seed=cfg.seed + i, device=self.device)
+                    for i, (seat, section) in enumerate(setups)]
+        return learners, SavedAs(self.spaces, roles, None)
 
     @property
     def games(self) -> SelfPlayGames | None:

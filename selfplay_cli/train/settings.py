@@ -31,7 +31,7 @@ batch, buffer, target period and epsilon schedule; docs/history/training.md says
 FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
                  "snapshot_steps", "eval_games", "eval_older", "eval", "eval_wait", "eval_actors", "eval_playoff",
                  "swap_every", "tensorboard", "league_games", "seats", "executor", "actors", "ray_address",
-                 "fragment_steps")
+                 "fragment_steps", "frame_stack")
 """Options whose value is a top-level setting of the same name."""
 
 OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio"}
@@ -143,6 +143,9 @@ def _apply_flags(settings: dict[str, Any], flags: Mapping[str, Any]) -> None:
         settings["opponents"]["bots"] = parse_bots(flags["bots"])
     if "lr" in flags:
         settings["ppo"]["lr"] = settings["dqn"]["lr"] = settings["sac"]["lr"] = flags["lr"]
+    if "conv" in flags:  # every learner's network: [ppo.arch] conv, ...
+        for key in ALGO_SECTIONS:
+            settings[key]["arch"] = {**settings[key]["arch"], "conv": flags["conv"]}
     if "teacher" in flags:
         settings["teacher"]["player"] = flags["teacher"]
 

@@ -184,6 +184,8 @@ class RolloutShard:
             learner.share = (rows, total)
         self.live = [learner.policy(lid, self.spec.name, greedy=cfg.algo == "dqn")
                      for learner, lid in zip(self.learners, setup.learner_ids, strict=True)]
+        for policy in self.live:
+            policy.frame_stack = cfg.frame_stack
         self.opponents = ShardOpponents(setup, self.live, cfg.seed)
         self.games: SelfPlayGames | None = None  # built by the first fragment (its opponents' table comes with it)
         self.lesson: dict[str, float] = {}
@@ -191,14 +193,16 @@ class RolloutShard:
     def _learners(self) -> list[Any]:
         from ..algos import get_learner
         from ..algos.joint import JointLearner
+        from .config import learner_setup
 
         cfg, setup = self.cfg, self.setup
         learner_cls, algo_cfg = get_learner(cfg.algo), getattr(cfg, cfg.algo)
         if cfg.sharing == "sa":
             return [JointLearner(learner_cls, setup.spaces[0], self.spec.n_seats, setup.game_ids.size, algo_cfg,
                                  seed=cfg.seed, device="cpu")]
-        return [learner_cls(space, int(rows.size), algo_cfg, seed=cfg.seed + i, device="cpu")
-                for i, (space, rows) in enumerate(zip(setup.spaces, setup.positions, strict=True))]
+        setups = [learner_setup(cfg, space) for space in setup.spaces]
+        return [learner_cls(seat, int(rows.size), section, seed=cfg.seed + i, device="cpu")
+                for i, ((seat, section), rows) in enumerate(zip(setups, setup.positions, strict=True))]
 
     def pid(self) -> int:
         import os
@@ -215,7 +219,7 @@ class RolloutShard:
         self.games = SelfPlayGames(self.spec, self.setup.game_ids.size, self.layout, self.setup.learner_ids,
                                    choose_opponents=self.opponents.choose if (self.layout == OPPONENT).any() else None,
                                    env_options=cfg.env_options, first_seed=seed_base, game_ids=self.setup.game_ids,
-                                   total_games=cfg.games)
+                                   total_games=cfg.games, frame_stack=cfg.frame_stack)
         if self.lesson:
             self.games.core.set_options(**self.lesson)
 

@@ -16,6 +16,7 @@ import torch
 
 from .. import files
 from ..envs import EnvSpec
+from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
 from ..league.store import League
 from ..policies.snapshot_format import SnapshotMeta, save_snapshot
@@ -58,11 +59,11 @@ def step_label(steps: int) -> str:
 
 @dataclass(frozen=True)
 class SavedAs:
-    """What every learner's snapshot says of it, beside its weights: the spaces it reads and plays, its network,
-    the role it learns (None: the game has one), and a joint learner's seats and base (None: not one)."""
+    """What every learner's snapshot says of it, beside its weights and its network's arch (the learner's own, as
+    its observations made it: an image seat's cnn): the spaces it reads and plays, the role it learns (None: the
+    game has one), and a joint learner's seats and base (None: not one)."""
 
     spaces: list[Any]
-    arch: Any
     roles: list[str | None]
     joint: dict[str, Any] | None
 
@@ -139,8 +140,9 @@ class SnapshotMoments:
         latest = state.latest[i]
         parent = self.league.get_player(latest).full_name if latest else None
         meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options,
-                            obs_space=saved.spaces[i].observation, act_space=saved.spaces[i].action, arch=saved.arch,
-                            algo=cfg.algo, step=state.steps,
+                            obs_space=stacked_space(saved.spaces[i].observation, cfg.frame_stack),
+                            act_space=saved.spaces[i].action, arch=learner.net.arch, algo=cfg.algo, step=state.steps,
+                            frame_stack=cfg.frame_stack,
                             episode=state.episodes, run=cfg.run, name=name, parent=parent,
                             seat=self.names[i] if len(self.names) > 1 else None, role=saved.roles[i],
                             extra={"learner": self.names[i], **({"joint": saved.joint} if saved.joint else {})})

@@ -409,7 +409,7 @@ class PettingZooCore:
         self._masked = any(s.mask for s in self._seats)
         self._reads = [SeatObs(o) for o in layout.obs_spaces]  # each seat's observation as a policy reads it
         self._plain = all(r.raw is r.box for r in self._reads)  # every seat's a Box, read as it is
-        shapes = {s.observation.shape for s in layout.seats}
+        shapes = {(s.observation.shape, s.observation.dtype) for s in layout.seats}
         self._stacked = len(shapes) == 1
         self.envs: list[Any] = []
         for i in range(n_games):
@@ -421,7 +421,7 @@ class PettingZooCore:
         self.truncated = np.zeros(n, dtype=bool)
         self.score = np.zeros((S, n))
         self.steps = np.zeros(n, dtype=np.int64)
-        self._zero_obs = [np.zeros(s.observation.shape, dtype=np.float32) for s in layout.seats]
+        self._zero_obs = [np.zeros(s.observation.shape, dtype=s.observation.dtype) for s in layout.seats]
         self._obs: list[list[Any]] = [[z] * n for z in self._zero_obs]
         self._mask: list[list[Any]] = [[None] * n for _ in range(S)]
         self._live = np.zeros((S, n), dtype=bool)  # the seats whose agents are in each game
@@ -570,17 +570,17 @@ class PettingZooCore:
         return self._acting.copy()
 
     def observe(self) -> Any:
-        """Per seat ``(n, *shape)`` float32: one array ``(n_seats, n, ...)`` if all seats have one shape, else a
-        list."""
+        """Per seat ``(n, *shape)`` of the seat's dtype (float32; an image's uint8): one array ``(n_seats, n, ...)``
+        if all seats have one shape and dtype, else a list."""
         n = self.n
         if self._stacked:
-            out = np.empty((self.n_seats, n, *self._zero_obs[0].shape), dtype=np.float32)
+            out = np.empty((self.n_seats, n, *self._zero_obs[0].shape), dtype=self._zero_obs[0].dtype)
             for s in range(self.n_seats):
                 self._stack(s, out[s])
             return out
         outs = []
         for s in range(self.n_seats):
-            buf = np.empty((n, *self._zero_obs[s].shape), dtype=np.float32)
+            buf = np.empty((n, *self._zero_obs[s].shape), dtype=self._zero_obs[s].dtype)
             self._stack(s, buf)
             outs.append(buf)
         return outs
