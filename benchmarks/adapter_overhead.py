@@ -6,8 +6,9 @@ For each game it prints game steps/s both ways and the ratio direct / adapter (t
 a factor; the median of alternating rounds); the target is a ratio below 2 for every game. Games: pong's
 PettingZoo view (parallel, the fastest game here, so the adapter's share is the largest), the test suite's
 rendezvous (parallel, Box actions, 3 seats), tic-tac-toe (AEC, action masks), cue (Discrete observations, read
-one-hot) dash (a nested Dict/Tuple observation flattened, with a top-level action mask) and race (agents that leave as they
-finish and one that joins late). OpenSpiel games have their own figures: benchmarks/openspiel_returns.py.
+one-hot), dash (a nested Dict/Tuple observation flattened, with a top-level action mask), race (agents that leave
+as they finish and one that joins late) and spot (16x16x3 uint8 image observations, kept as they are). OpenSpiel
+games have their own figures: benchmarks/openspiel_returns.py.
 
 Both ways play random legal actions drawn ahead of time, and both do what a player needs each step: the direct
 loop reads the observations ``step`` returns (``last()`` for AEC) and resets finished games; through the adapter
@@ -36,6 +37,7 @@ GAMES = {
     "cue (Discrete obs)": "tests.games.cue:parallel_env",
     "dash (Dict/Tuple obs, masks)": "tests.games.dash:parallel_env",
     "race (agents leave, join)": "tests.games.race:parallel_env",
+    "spot (16x16x3 uint8 images)": "tests.games.spot:parallel_env",
 }
 
 

@@ -65,3 +65,14 @@ def test_a_game_with_discrete_or_dict_observations_learns_matches_rates_and_reco
     frames = np.stack(list(iio.imiter(out)))
     assert frames.shape[0] >= 2 and frames.shape[-1] == 3
 
+
+
+def test_marl_envs_shows_the_space_a_game_gives_how_it_is_read_and_its_global_state(capsys):
+    cue, dash, race = run_json(capsys, "envs", CUE, DASH, "tests.games.race:parallel_env")
+    assert cue["seats"][0]["given"] == "Discrete(4)" and cue["seats"][0]["observation"] == "Box(0, 1, (4,), float32)"
+    assert dash["seats"][1]["given"].startswith("Dict(action_mask: MultiBinary(3), clock: Box(0, 1, (1,), float32), "
+                                                "me: Dict(cell: Discrete(8), dash: MultiBinary(1)), rival: Tuple(")
+    assert dash["state_space"] is None and race["state_space"] == "Box(0, 1, (4,), float32)"
+    assert "given" not in race["seats"][0]  # a Box, read as it is
+    code, out, _ = run(capsys, "envs", CUE)
+    assert code == 0 and "p0, p1 observe Discrete(4), read as Box(0, 1, (4,), float32)" in out

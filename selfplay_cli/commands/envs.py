@@ -33,6 +33,8 @@ def env_row(name: str) -> dict[str, Any]:
         "sides": [list(side) for side in spec.side_seats()] if spec.kind == "two-sides" else None,
         "tie_tolerance": spec.tie_tolerance if spec.kind == "cooperative" else None,
         "max_steps": spec.max_steps(cfg),
+        # the game's global state (PettingZoo's state()), for learners that read it; None where it has none
+        "state_space": None if (state := spec.state_space(cfg)) is None else describe_space(state),
         "seats": [{"agent": agent, "role": role, **seat.to_json()}
                   for agent, role, seat in zip(spec.agents, spec.seat_roles(cfg), seats, strict=True)],
         # one seat's spaces (the first), as before per-seat spaces existed
@@ -102,6 +104,7 @@ def envs(
                       _per_seat(r, "action"), ", ".join(r["bots"]))
     console.print(table)
     for r in rows:
+        _print_reading(r)
         roles = dict.fromkeys(seat["role"] for seat in r.get("seats", ()))
         if len(roles) > 1:  # seats that differ: a snapshot plays only its own role
             rules = Rules.of(get_env(r["name"]))
@@ -122,6 +125,22 @@ def envs(
     else:
         console.print("marl envs NAME shows a game's options (--env-option NAME=VALUE) with their types and defaults",
                       markup=False, highlight=False)
+
+
+def _print_reading(row: dict[str, Any]) -> None:
+    """How the seats' observations are read where the game gives them otherwise (flattened, a mask taken out), and
+    the game's global state where it has one."""
+    given: dict[str, list[str]] = {}
+    for seat in row.get("seats", ()):
+        if "given" in seat:
+            given.setdefault(f"{seat['given']}, read as {seat['observation']}", []).append(seat["agent"])
+    for text, agents in given.items():
+        console.print(f"{row['name']}: {', '.join(agents)} observe {text} (selfplay_cli/envs/obs_spaces.py: "
+                      "one-hots, the Dict's key order; an action_mask entry is the seat's mask)", markup=False,
+                      highlight=False)
+    if row.get("state_space"):
+        console.print(f"{row['name']}: global state {row['state_space']} (for learners that read it)", markup=False,
+                      highlight=False)
 
 
 def _print_options(row: dict[str, Any]) -> None:

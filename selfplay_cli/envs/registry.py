@@ -110,15 +110,21 @@ class SeatSpace:
 
     ``observation``: the Box a policy reads (float32 arrays of its shape, or an image's own dtype, uint8; for a
     Dict observation space, its ``observation`` part). ``action``: Discrete (actions ``0 .. n-1``), MultiDiscrete or
-    Box. ``mask``: whether the seat has action masks (Discrete only)."""
+    Box. ``mask``: whether the seat has action masks (Discrete only). ``given``: the observation space as the game
+    declares it, where the policy reads it otherwise (flattened, or its ``action_mask`` taken out); None where the
+    two are one."""
 
     observation: spaces.Box
     action: spaces.Space
     mask: bool = False
+    given: spaces.Space | None = field(default=None, compare=False)
 
     def to_json(self) -> dict[str, Any]:
-        return {"observation": describe_space(self.observation), "action": describe_space(self.action),
-                "mask": self.mask}
+        out = {"observation": describe_space(self.observation), "action": describe_space(self.action),
+               "mask": self.mask}
+        if self.given is not None:
+            out["given"] = describe_space(self.given)
+        return out
 
 
 class UnknownEnvError(KeyError):
@@ -166,6 +172,8 @@ def describe_space(space: spaces.Space) -> str:
         return f"MultiDiscrete({space.nvec.tolist()})"
     if isinstance(space, spaces.Dict):
         return "Dict(" + ", ".join(f"{k}: {describe_space(v)}" for k, v in space.spaces.items()) + ")"
+    if isinstance(space, spaces.Tuple):
+        return "Tuple(" + ", ".join(describe_space(v) for v in space.spaces) + ")"
     return str(space)
 
 
@@ -241,7 +249,7 @@ def seat_space_of(observation: spaces.Space, action: spaces.Space) -> SeatSpace:
         action = spaces.MultiDiscrete(action.nvec)
     if box.dtype != np.float32 and image_layout(box) is None:
         box = spaces.Box(box.low.astype(np.float32), box.high.astype(np.float32), dtype=np.float32)
-    return SeatSpace(box, action, seat_obs.mask)
+    return SeatSpace(box, action, seat_obs.mask, None if observation is box else observation)
 
 
 def check_seat_space(seat: SeatSpace) -> None:
