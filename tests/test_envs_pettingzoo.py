@@ -424,8 +424,10 @@ def test_marl_envs_shows_kind_turns_and_per_seat_spaces_of_named_games():
     assert rows["pong"]["kind"] == "two-sides" and rows["pong"]["turns"] == "simultaneous"
     ttt = rows[TTT]
     assert ttt["turns"] == "sequential" and ttt["max_steps"] == 9
+    given = "Dict(action_mask: Box(0, 1, (9,), int8), observation: Box(0, 1, (27,), float32))"  # as the game gives it
     assert ttt["seats"] == [{"agent": a, "role": "x/o", "observation": "Box(0, 1, (27,), float32)",
-                             "action": "Discrete(9)", "mask": True} for a in ("x", "o")]  # one role: x or o
+                             "action": "Discrete(9)", "mask": True, "given": given}
+                            for a in ("x", "o")]  # one role: x or o
     assert rows[RDV]["kind"] == "cooperative" and len(rows[RDV]["seats"]) == 3
     table = _marl("envs", TTT)
     assert table.returncode == 0 and "sequential" in table.stdout and "Discrete(9) masked" in table.stdout
