@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -187,17 +188,22 @@ class SeatObs:
                 inner = spaces.Dict(rest)
         self.reader = None if isinstance(inner, spaces.Box) else FlatObs(inner)
         self.box: spaces.Space = inner if self.reader is None else self.reader.box()
-        self._dict = isinstance(space, spaces.Dict)
+        self.split = self._splitter(isinstance(space, spaces.Dict))
 
     @property
     def mask(self) -> bool:
         return self.mask_space is not None
 
-    def split(self, x: Any) -> tuple[Any, Any]:
-        """One observation as the game gives it: (what the policy reads, the action mask or None)."""
-        mask = None
-        if self._dict:
-            mask = x.get("action_mask")
-            if self._key is not None:
-                x = x[self._key]
-        return (x if self.reader is None else self.reader.read(x)), mask
+    def _splitter(self, is_dict: bool) -> Callable[[Any], tuple[Any, Any]]:
+        """``split(x)``: one observation as the game gives it -> (what the policy reads, the action mask or None),
+        made once for this seat's space (it runs for every seat of every game at every step)."""
+        key = self._key
+        read = None if self.reader is None else self.reader.read
+        if not is_dict:
+            return (lambda x: (x, None)) if read is None else (lambda x: (read(x), None))
+        if key is None:  # a Dict read whole (its action_mask aside: the reader reads only its own entries)
+            assert read is not None
+            return lambda x: (read(x), x.get("action_mask"))
+        if read is None:
+            return lambda x: (x[key], x.get("action_mask"))
+        return lambda x: (read(x[key]), x.get("action_mask"))

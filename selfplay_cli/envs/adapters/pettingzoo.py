@@ -426,6 +426,7 @@ class PettingZooCore:
         self._mask: list[list[Any]] = [[None] * n for _ in range(S)]
         self._live = np.zeros((S, n), dtype=bool)  # the seats whose agents are in each game
         self._live_agents: list[list[tuple[int, str]]] = [[] for _ in range(n)]  # parallel: (seat, agent), in order
+        self._live_names: list[list[str]] = [[] for _ in range(n)]  # ... and their names alone (compared per step)
         self._listed: list[list[str] | None] = [None] * n  # AEC: each game's agents when last seen
         self._done_agents: list[set[str]] = [set() for _ in range(n)]  # parallel: agents done in each game (no return)
         self.seat_done = np.zeros((S, n), dtype=bool)  # set by step(): whose part in a game ended on it
@@ -495,6 +496,7 @@ class PettingZooCore:
                     self._live[s, g] = True
                     self._store(s, g, obs[agent])
                 self._live_agents[g] = live
+                self._live_names[g] = [a for _, a in live]
                 self._running[g] = bool(live)
 
     @property
@@ -657,7 +659,9 @@ class PettingZooCore:
 
     def _step_parallel(self, games: list[int], cols: list[list[Any]], rewards: np.ndarray) -> None:
         seat_of, envs, live_agents, obs_of = self._seat_of, self.envs, self._live_agents, self._obs
-        plain = self._plain
+        live_names = self._live_names
+        plain, splits, masks_of = self._plain, [r.split for r in self._reads], self._mask
+        masked = [r.mask_space is not None for r in self._reads]
         for g in games:  # the hot loop: plain loops, no comprehensions (each would build a function in 3.11)
             live = live_agents[g]
             act = {}
@@ -675,16 +679,11 @@ class PettingZooCore:
                 if o is not None:
                     if plain:
                         obs_of[s][g] = o
-                    else:
-                        self._store(s, g, o)
-            now = env.agents
-            changed = True in term.values() or True in trunc.values() or len(now) != len(live)
-            if not changed:
-                for (_, a), b in zip(live, now, strict=True):  # (of equal length here)
-                    if a != b:
-                        changed = True
-                        break
-            if changed:
+                    else:  # _store, inlined
+                        obs_of[s][g], m = splits[s](o)
+                        if masked[s]:
+                            masks_of[s][g] = m
+            if True in term.values() or True in trunc.values() or env.agents != live_names[g]:
                 self._come_and_go(g, obs, term, trunc)
 
     def _come_and_go(self, g: int, obs: Mapping[str, Any], term: Mapping[str, Any], trunc: Mapping[str, Any]) -> None:
@@ -713,6 +712,7 @@ class PettingZooCore:
                     self._store(s, g, o)
             stay.append((s, a))
         self._live_agents[g] = stay
+        self._live_names[g] = [a for _, a in stay]
         if not stay:
             self._over(g)
 
@@ -720,6 +720,7 @@ class PettingZooCore:
         self.seat_done[:, g] |= self._live[:, g]  # the seats still in it: their part ends with the game
         self._live[:, g] = False
         self._live_agents[g] = []
+        self._live_names[g] = []
         self._running[g] = False
         self.truncated[g] = bool(self._cut[g])
         self.terminated[g] = not self._cut[g]
