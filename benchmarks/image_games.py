@@ -14,6 +14,7 @@ team return of each with its 95% interval). The run: ``marl train --agents 2`` (
 its defaults, ``--eval-games 0`` (rated at the end here instead).
 
 Run from the repository's root: python benchmarks/image_games.py [--minutes 3] [--stride 4] [--games 8]
+[--sharing nops|fups] [--lr X]
 """
 
 from __future__ import annotations
@@ -126,6 +127,8 @@ def main() -> None:
     p.add_argument("--games", type=int, default=8, help="games played at once while training")
     p.add_argument("--match-games", type=int, default=20, help="games of the final match (seed pairs x 2)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--sharing", default="nops", help="nops (a network a paddle) or fups (one for both)")
+    p.add_argument("--lr", type=float, help="PPO's learning rate (default: marl's)")
     p.add_argument("--keep", type=Path, help="folder to keep the league in (default: a temporary one)")
     args = p.parse_args()
     speed = env_speed(args.stride, args.games)
@@ -135,10 +138,12 @@ def main() -> None:
         home = args.keep or Path(tmp)
         report = json.loads(marl(home, "train", GAME, "--env-option", f"stride={args.stride}", "--agents", "2",
                                  "--minutes", str(args.minutes), "--games", str(args.games), "--seed", str(args.seed),
-                                 "--eval-games", "0", "--run", "pong-images", "--quiet", "--json"))
+                                 "--eval-games", "0", "--run", "pong-images", "--sharing", args.sharing,
+                                 *(("--lr", str(args.lr)) if args.lr else ()), "--quiet", "--json"))
         print(f"training: {report['steps']:,} game steps in {args.minutes:g} min, {report['steps_per_second']:,} "
               f"steps/s, {report['episodes']:,} games")
-        team = report["final"][0]["snapshot"].rsplit("-", 1)[0]  # the moment's team: one snapshot a paddle
+        final = report["final"][0]["snapshot"]  # fups: one snapshot for both paddles; nops: the moment's team
+        team = final if len(report["final"]) == 1 else final.rsplit("-", 1)[0]
         m = json.loads(marl(home, "match", team, "random", "--games", str(args.match_games), "--seed", "1000000",
                             "--json"))
         for who, (mean, half, n) in team_returns(home, m["game_ids"]).items():

@@ -46,7 +46,7 @@ from .lock import claim, write_lock
 from .opponents import Opponents
 from .progress import SnapshotRecord, Standing, TrainReport
 from .ray_rollouts import OFF_POLICY_FRAGMENT, RayRollouts
-from .remote import RemoteEvaluator, make_evaluator
+from .remote import RemoteEvaluator
 from .rollouts import Rollouts, load_teacher
 from .shards import ShardSetup, plan_shards
 from .state import Job, RunState, SavedAs, SnapshotMoments
@@ -64,6 +64,21 @@ def _learner_names(agents: tuple[str, ...], home: tuple[int, ...], sharing: str)
     return [agents[home.index(i)] for i in range(n)]
 
 
+
+
+def make_evaluator(league: Any, cfg: Any, device: str, on_worker: Callable[[int], None] | None = None
+                   ) -> Evaluator | RemoteEvaluator:
+    """The run's rating worker as ``cfg.eval`` says: ``local`` (a process beside training), ``inline`` (in the
+    training process), ``remote`` (the league's workers, :mod:`.remote`), ``ray`` (queue workers on Ray actors
+    started for the run, :mod:`.ray_eval`); none plays anything with ``--eval-games 0``. ``on_worker(pid)`` is told
+    of a local worker process (the run's lock names it); Ray's actors end with the run's process by themselves."""
+    if cfg.eval_games and cfg.eval == "remote":
+        return RemoteEvaluator(league, cfg.run, device, wait=cfg.eval_wait)
+    if cfg.eval_games and cfg.eval == "ray":
+        from .ray_eval import RayEvaluator
+
+        return RayEvaluator(league, cfg.run, device, actors=cfg.eval_actors, address=cfg.ray_address)
+    return Evaluator(league, device, background=bool(cfg.eval_games) and cfg.eval == "local", on_worker=on_worker)
 
 class Trainer:
     """Runs one training run against one league (see the module docstring). It composes the run's state and

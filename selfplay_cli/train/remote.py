@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..errors import MarlError, MarlIOError
-from .evaluator import Evaluator, GauntletJob, JobDone, RatingWorkerError
+from .evaluator import GauntletJob, JobDone, RatingWorkerError
 
 __all__ = ["UNTAKEN_SECONDS", "QueueStanding", "RemoteEvaluator", "run_batch"]
 
@@ -217,18 +217,3 @@ def _dead(row: Any) -> Exception:
 
 def _subclass_names(cls: type) -> set[str]:
     return {cls.__name__}.union(*(_subclass_names(c) for c in cls.__subclasses__()))
-
-
-def make_evaluator(league: Any, cfg: Any, device: str, on_worker: Callable[[int], None] | None = None
-                   ) -> Evaluator | RemoteEvaluator:
-    """The run's rating worker as ``cfg.eval`` says: ``local`` (a process beside training), ``inline`` (in the
-    training process), ``remote`` (the league's workers, :mod:`.remote`), ``ray`` (queue workers on Ray actors
-    started for the run, :mod:`.ray_eval`); none plays anything with ``--eval-games 0``. ``on_worker(pid)`` is told
-    of a local worker process (the run's lock names it); Ray's actors end with the run's process by themselves."""
-    if cfg.eval_games and cfg.eval == "remote":
-        return RemoteEvaluator(league, cfg.run, device, wait=cfg.eval_wait)
-    if cfg.eval_games and cfg.eval == "ray":
-        from .ray_eval import RayEvaluator
-
-        return RayEvaluator(league, cfg.run, device, actors=cfg.eval_actors, address=cfg.ray_address)
-    return Evaluator(league, device, background=bool(cfg.eval_games) and cfg.eval == "local", on_worker=on_worker)
