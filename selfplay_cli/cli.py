@@ -24,6 +24,7 @@ from . import __version__
 from .commands import checkpoint as checkpoint_cmd
 from .commands import elo as elo_cmd
 from .commands import envs as envs_cmd
+from .commands import exploit as exploit_cmd
 from .commands import league as league_cmd
 from .commands import match as match_cmd
 from .commands import queue as queue_cmd
@@ -74,6 +75,7 @@ app.command("train")(train_cmd.train)
 app.add_typer(checkpoint_cmd.app, name="checkpoint", help="List, inspect, tag, remove, export and import snapshots.")
 app.command("match")(match_cmd.match)
 app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence intervals; gate a model on its strength.")
+app.command("exploit")(exploit_cmd.exploit)
 app.add_typer(league_cmd.app, name="league", help="The league: ladder, tournaments, score matrix, rating plots.")
 app.command("record")(record_cmd.record)
 app.command("worker", help=worker_cmd.WORKER_HELP)(worker_cmd.worker)
