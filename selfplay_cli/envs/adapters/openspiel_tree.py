@@ -3,8 +3,9 @@
 The policy comes as a function ``probabilities(tensors, masks) -> (B, n_actions)``: what a seat sees at a decision
 (the tensor marl's adapter gives it there, :mod:`.openspiel`: the player's ``information_state_tensor``, else its
 ``observation_tensor``) and its legal-action mask, in batches, to the probability of each action. One policy plays
-every player, as in self-play (OpenSpiel games through marl have one role for all their seats). This module imports
-nothing of marl's policies: a caller wraps a network or a scripted player in such a function.
+every player, as in self-play (OpenSpiel games through marl have one role for all their seats), or one function per
+player plays its own seat (a team of per-seat networks). This module imports nothing of marl's policies: a caller
+wraps a network or a scripted player in such a function.
 
 How: the game tree is walked once (every history, chance outcomes included), stopping with an error past
 :data:`MAX_NODES` histories (tic-tac-toe has 549,946, Leduc poker 9,457, Kuhn poker 58; chess is refused within
@@ -94,26 +95,29 @@ def check_walkable(name: str) -> Any:
     return game
 
 
-def _tables(name: str, game: Any, policies: Sequence[ProbabilitiesFn], max_nodes: int,
+def _tables(name: str, game: Any, policies: Sequence[Sequence[ProbabilitiesFn]], max_nodes: int,
             tick: Callable[[int], None] | None) -> tuple[list[dict[str, list[tuple[int, float]]]], int]:
-    """Walk the tree; each policy's ``{information_state_string: [(action, probability), ...]}`` and the
-    histories walked."""
+    """Walk the tree; each policy's ``{information_state_string: [(action, probability), ...]}`` (a policy is one
+    function per player, asked at that player's information states) and the histories walked."""
     info = bool(game.get_type().provides_information_state_tensor)
     n_actions = int(game.num_distinct_actions())
     tables: list[dict[str, list[tuple[int, float]]]] = [{} for _ in policies]
-    pending: list[tuple[str, list[float], list[int]]] = []
+    pending: list[tuple[str, int, list[float], list[int]]] = []
 
     def ask() -> None:
-        keys, tensors, masks = zip(*pending, strict=True)
+        keys, players, tensors, masks = zip(*pending, strict=True)
         mask = np.array(masks, dtype=bool)
         x = np.array(tensors, dtype=np.float32)
-        for probabilities, table in zip(policies, tables, strict=True):
-            probs = np.asarray(probabilities(x, mask), dtype=np.float64)
-            if probs.shape != (len(keys), n_actions) or not np.isfinite(probs).all():
-                raise ValueError(f"a policy gave probabilities of shape {probs.shape} (finite: "
-                                 f"{bool(np.isfinite(probs).all())}), not {(len(keys), n_actions)}")
-            for key, row, m in zip(keys, probs, mask, strict=True):
-                table[key] = [(int(a), float(row[a])) for a in np.flatnonzero(m)]
+        player = np.array(players)
+        for per_player, table in zip(policies, tables, strict=True):
+            for p in np.unique(player).tolist():
+                rows = np.flatnonzero(player == p)
+                probs = np.asarray(per_player[p](x[rows], mask[rows]), dtype=np.float64)
+                if probs.shape != (len(rows), n_actions) or not np.isfinite(probs).all():
+                    raise ValueError(f"a policy gave probabilities of shape {probs.shape} (finite: "
+                                     f"{bool(np.isfinite(probs).all())}), not {(len(rows), n_actions)}")
+                for i, row in zip(rows.tolist(), probs, strict=True):
+                    table[keys[i]] = [(int(a), float(row[a])) for a in np.flatnonzero(mask[i])]
         pending.clear()
 
     seen: set[str] = set()
@@ -137,7 +141,7 @@ def _tables(name: str, game: Any, policies: Sequence[ProbabilitiesFn], max_nodes
         if key not in seen:
             seen.add(key)
             tensor = state.information_state_tensor(p) if info else state.observation_tensor(p)
-            pending.append((key, tensor, state.legal_actions_mask(p)))
+            pending.append((key, p, tensor, state.legal_actions_mask(p)))
             if len(pending) >= BATCH:
                 ask()
         stack.extend(state.child(a) for a in state.legal_actions())
@@ -170,12 +174,13 @@ def _mixed(game: Any, tables: list[dict[str, list[tuple[int, float]]]],
     return {key: sorted(probs.items()) for per_player in mixed.policy for key, probs in per_player.items()}
 
 
-def tree_figures(name: str, policies: Sequence[tuple[ProbabilitiesFn, float]], max_nodes: int = MAX_NODES,
-                 tick: Callable[[int], None] | None = None) -> TreeFigures:
+def tree_figures(name: str, policies: Sequence[tuple[ProbabilitiesFn | Sequence[ProbabilitiesFn], float]],
+                 max_nodes: int = MAX_NODES, tick: Callable[[int], None] | None = None) -> TreeFigures:
     """The exact best-response values, NashConv and exploitability of a policy playing every player of
     ``openspiel:GAME`` (``name``): ``policies`` is ``[(probabilities, 1.0)]`` for one, or a mixture
-    ``[(probabilities_i, weight_i), ...]`` (weights summing to 1: :func:`_mixed`). ``tick(n)`` is told of every n
-    histories walked (a progress bar).
+    ``[(probabilities_i, weight_i), ...]`` (weights summing to 1: :func:`_mixed`). A policy is one function that
+    plays every player, or a sequence of one function per player (a team of per-seat networks). ``tick(n)`` is told
+    of every n histories walked (a progress bar).
 
     Raises :class:`EnvError` (one line) for what :func:`check_walkable` refuses and a tree of more than ``max_nodes``
     histories."""
@@ -185,11 +190,14 @@ def tree_figures(name: str, policies: Sequence[tuple[ProbabilitiesFn, float]], m
     weights = [float(w) for _, w in policies]
     if not policies or min(weights) < 0 or abs(sum(weights) - 1.0) > 1e-9:
         raise ValueError(f"a mixture's weights must be at least 0 and sum to 1, not {weights}")
-    tables, nodes = _tables(name, game, [f for f, _ in policies], max_nodes, tick)
+    n = int(game.num_players())
+    per_player = [[f] * n if callable(f) else list(f) for f, _ in policies]
+    if any(len(fs) != n for fs in per_player):
+        raise ValueError(f"a policy of {name} is one function, or one per player ({n})")
+    tables, nodes = _tables(name, game, per_player, max_nodes, tick)
     table = tables[0] if len(tables) == 1 else _mixed(game, tables, weights)
     policy = pyspiel.TabularPolicy(table)
     root = game.new_initial_state()
-    n = int(game.num_players())
     best = tuple(float(pyspiel.TabularBestResponse(game, p, policy).value_from_state(root)) for p in range(n))
     on = tuple(float(v) for v in pyspiel.expected_returns(root, policy, -1, True))
     return TreeFigures(name, tuple(f"player_{p}" for p in range(n)), best, on, len(table), nodes)
