@@ -46,7 +46,8 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
     context_settings=HELP_SETTINGS,
-    epilog="Exit codes: 0 success (gate passed, SPRT accepted H1); 1 gate failed or SPRT accepted H0; 2 a mistake "
+    epilog="Exit codes: 0 success (gate passed, SPRT accepted H1); 1 gate failed, SPRT accepted H0 or exploitability "
+    "above --max-exploitability; 2 a mistake "
     "in the command (bad option or value, unknown name, bad file); 3 SPRT undecided; 4 I/O or resource error "
     "(disk full, permission denied, read-only, file size limit, out of memory); 5 internal error (a bug: the "
     "traceback goes to a file); 130 interrupted; 143 stopped by SIGTERM.",
