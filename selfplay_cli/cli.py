@@ -24,6 +24,7 @@ from . import __version__
 from .commands import checkpoint as checkpoint_cmd
 from .commands import elo as elo_cmd
 from .commands import envs as envs_cmd
+from .commands import exploit as exploit_cmd
 from .commands import league as league_cmd
 from .commands import match as match_cmd
 from .commands import queue as queue_cmd
@@ -45,7 +46,8 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
     context_settings=HELP_SETTINGS,
-    epilog="Exit codes: 0 success (gate passed, SPRT accepted H1); 1 gate failed or SPRT accepted H0; 2 a mistake "
+    epilog="Exit codes: 0 success (gate passed, SPRT accepted H1); 1 gate failed, SPRT accepted H0 or exploitability "
+    "above --max-exploitability; 2 a mistake "
     "in the command (bad option or value, unknown name, bad file); 3 SPRT undecided; 4 I/O or resource error "
     "(disk full, permission denied, read-only, file size limit, out of memory); 5 internal error (a bug: the "
     "traceback goes to a file); 130 interrupted; 143 stopped by SIGTERM.",
@@ -74,6 +76,7 @@ app.command("train")(train_cmd.train)
 app.add_typer(checkpoint_cmd.app, name="checkpoint", help="List, inspect, tag, remove, export and import snapshots.")
 app.command("match")(match_cmd.match)
 app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence intervals; gate a model on its strength.")
+app.command("exploit")(exploit_cmd.exploit)
 app.add_typer(league_cmd.app, name="league", help="The league: ladder, tournaments, score matrix, rating plots.")
 app.command("record")(record_cmd.record)
 app.command("worker", help=worker_cmd.WORKER_HELP)(worker_cmd.worker)
