@@ -460,6 +460,30 @@ def test_find_players(league: League) -> None:
     assert league.find_players("champion")[0].tags == ("champion",)
 
 
+def test_exploitability_is_filed_in_the_row_exact_replaced_lower_bound_only_by_a_tighter_one(
+        sqlite_league: League) -> None:
+    lg = sqlite_league
+    lg.create_run("r1", ENV, {})
+    p = _snap(lg, "s1", meta={"league_role": "main"})
+    lg.set_exploitability(p.id, {"kind": "exact", "value": 0.3, "nash_conv": 0.6})
+    lg.set_exploitability(p.id, {"kind": "exact", "value": 0.2, "nash_conv": 0.4})  # a newer exact figure replaces
+    lg.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.1, "low": 0.05, "high": 0.15, "by": "x/s1"})
+    lg.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.2, "low": 0.01, "high": 0.4})  # looser: kept out
+    row = lg.get_player(p.id)
+    book = row.meta["exploitability"]
+    assert row.meta["league_role"] == "main"
+    assert (book["exact"]["value"], book["exact"]["nash_conv"]) == (0.2, 0.4)
+    assert (book["lower_bound"]["low"], book["lower_bound"]["by"]) == (0.05, "x/s1")
+    lg.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.12, "low": 0.08, "high": 0.16})
+    assert lg.get_player(p.id).meta["exploitability"]["lower_bound"]["low"] == 0.08
+    for bad in ({"kind": "guess", "value": 0.1}, {"kind": "exact", "value": float("nan")}):
+        with pytest.raises(LeagueError) as exc:
+            lg.set_exploitability(p.id, bad)
+        _one_line(exc)
+    with pytest.raises(LeagueError):
+        lg.set_exploitability(10**6, {"kind": "exact", "value": 0.1})
+
+
 def test_tags(league: League) -> None:
     league.ensure_bots(ENV, ["random"])
     league.create_run("r1", ENV, {})

@@ -13,6 +13,7 @@ as the snapshot's blob (:mod:`selfplay_cli.league.blobs`), so that any machine w
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 from collections.abc import Collection, Iterable, Sequence
 from dataclasses import dataclass, field, replace
@@ -55,6 +56,8 @@ class RunStatus(str, Enum):
 
 
 RESERVED_NAMES = ("latest", "best")
+EXPLOITABILITY_KINDS = ("exact", "lower_bound")
+"""How a filed exploitability was measured (:meth:`Roster.set_exploitability`)."""
 """Names resolved by higher-level code; no tag may take them."""
 
 _MAX_NAME = 200
@@ -171,6 +174,12 @@ def _player_row(p: Player) -> PlayerRow:
         parent_id=p.parent_id, tags=tuple(t.tag for t in p.tags), elo=float(p.elo), games=int(p.games),
         removed=bool(p.removed), created_at=p.created_at, meta=dict(p.meta or {}),
     )
+
+
+def _bound_of(record: dict[str, Any]) -> float:
+    """The figure a lower bound stands on: its interval's low end, else its value."""
+    low = record.get("low")
+    return float(low if low is not None else record["value"])
 
 
 def _run_row(r: Run) -> RunRow:
@@ -478,6 +487,40 @@ class Roster(Database):
             s.add(Tag(env=p.env, tag=tag, player_id=p.id))
 
         self._unit(work)
+
+    def set_exploitability(self, player_id: int, record: dict[str, Any]) -> PlayerRow:
+        """File a measured exploitability of a player in its row (``meta["exploitability"][kind]``), in one
+        transaction; returns the row as it is now.
+
+        ``record["kind"]`` is ``exact`` (OpenSpiel's best-response computation: it replaces any older exact figure)
+        or ``lower_bound`` (a trained best response's mean return against the player, ``low``/``high`` its 95%
+        interval: it replaces an older lower bound only when its ``low`` is higher, since each is a bound and the
+        tightest one stands). ``record["value"]`` is in the game's return units. Raises LeagueError for an unknown
+        player, a kind that is neither, or a value that is not a finite number."""
+        kind = record.get("kind")
+        if kind not in EXPLOITABILITY_KINDS:
+            raise LeagueError(f"exploitability kind must be one of {', '.join(EXPLOITABILITY_KINDS)}, not {kind!r}")
+        value = record.get("value")
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+            raise LeagueError(f"exploitability value must be a finite number, not {value!r}")
+        new = {**record, "at": utcnow().isoformat(timespec="seconds")}
+
+        def work(s: Session) -> PlayerRow:
+            p = s.get(Player, int(player_id))
+            if p is None:
+                raise LeagueError(f"no player with id {player_id}")
+            meta = dict(p.meta or {})
+            book = dict(meta.get("exploitability") or {})
+            old = book.get(kind)
+            if kind == "lower_bound" and old is not None and _bound_of(old) >= _bound_of(new):
+                return _player_row(p)
+            book[kind] = new
+            meta["exploitability"] = book
+            p.meta = meta  # (a new dict: the JSON column sees the change)
+            s.flush()
+            return _player_row(p)
+
+        return self._unit(work)
 
     def remove_snapshot(self, player_id: int, end_runs: Collection[str] = (),
                         status: RunStatus = RunStatus.ENDED) -> PlayerRow:
