@@ -25,12 +25,42 @@ def prior_caption(prior: float) -> str:
             "not beyond doubt.")
 
 
-def _csv_record(d: dict[str, Any]) -> dict[str, Any]:
-    """A row's JSON with ``vs`` flattened into ``vs_<bot>_score`` / ``vs_<bot>_games`` columns."""
-    out = {k: v for k, v in d.items() if k != "vs"}
+EXPLOITABILITY_NOTE = ("exploitability: how much a best response wins against the player, in the game's returns: "
+                       "exact (OpenSpiel's best response over the whole game tree, marl exploit --exact), or >= a "
+                       "lower bound (a trained best response's mean return, its 95% interval in brackets).")
+
+
+def exploitability_text(record: dict[str, Any] | None) -> str:
+    """A filed exploitability (:func:`~selfplay_cli.league.ladder.shown_exploitability`) as a ladder cell: ``0.183``
+    for an exact figure, ``>= 0.120 [0.080, 0.160]`` for a lower bound with its interval; blank for none."""
+    if record is None:
+        return ""
+    if record["kind"] == "exact":
+        return f"{record['value']:.3f}"
+    low, high = record.get("low"), record.get("high")
+    interval = f" [{low:.3f}, {high:.3f}]" if low is not None and high is not None else ""
+    return f">= {record['value']:.3f}{interval}"
+
+
+def _marked(rows: list) -> tuple[bool, bool]:
+    """Whether any row has a league role, and whether any has a filed exploitability (their columns show then)."""
+    return any(r.league_role for r in rows), any(r.exploitability is not None for r in rows)
+
+
+def _csv_record(d: dict[str, Any], marks: bool) -> dict[str, Any]:
+    """A row's JSON with ``vs`` flattened into ``vs_<bot>_score`` / ``vs_<bot>_games`` columns, and (with ``marks``,
+    a ladder where some row has a league role or an exploitability) ``league_role`` and the exploitability as
+    ``exploitability_kind`` / ``exploitability`` / ``exploitability_low`` / ``exploitability_high``."""
+    out = {k: v for k, v in d.items() if k not in ("vs", "league_role", "exploitability")}
     for bot, rec in d.get("vs", {}).items():
         out[f"vs_{bot}_score"] = "" if rec["score"] is None else rec["score"]
         out[f"vs_{bot}_games"] = rec["games"]
+    if marks:
+        record = d["exploitability"] or {}
+        out["league_role"] = d["league_role"] or ""
+        for key, field in (("exploitability_kind", "kind"), ("exploitability", "value"),
+                           ("exploitability_low", "low"), ("exploitability_high", "high")):
+            out[key] = "" if record.get(field) is None else record[field]
     return out
 
 
@@ -47,14 +77,15 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
     of each run (bold, ``(best)``, or ``(best, tied)`` when it is not separated from the run's others), shows the
     tier, a flag next to the Elo, the mean team return of a cooperative game's players, and one ``vs BOT`` column
     per scripted player (score and games, blank without games); ``verdicts`` (:func:`~selfplay_cli.league.ladder.
-    verdict_lines`) follow the table.
+    verdict_lines`) follow the table. A ``league role`` column and an ``exploitability`` column
+    (:func:`exploitability_text`) show only when some row has one.
     """
     if json_out:
         print_json([r.to_json() | ({} if variant is None else {"variant": variant}) for r in rows])
         return
     if csv_out:
         w = csv.writer(sys.stdout)
-        records = [_csv_record(r.to_json()) for r in rows]
+        records = [_csv_record(r.to_json(), any(_marked(rows))) for r in rows]
         keys = list(records[0]) if records else ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins",
                                                   "draws", "losses", "rank"]
         w.writerow(keys)
@@ -63,6 +94,8 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
         return
     if caption and any(r.mean_return is not None for r in rows):
         caption += " mean return: the team's mean return per game (all seats together)."
+    if caption and _marked(rows)[1]:
+        caption += " " + EXPLOITABILITY_NOTE
     sides = list(dict.fromkeys(r.side for r in rows))
     if sides and sides != [None]:  # a game whose sides differ: one table per side, each with its own anchor
         caption = ((caption + " ") if caption else "") + (
@@ -80,9 +113,12 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
 def _table(rows: list, title: str, online: dict[int, float] | None, confidence: float, caption: str | None) -> None:
     """One ladder table (see :func:`render_ladder`)."""
     table = Table(title=title, caption=caption)
-    for col, just in (("rank", "right"), ("tier", "right"), ("policy", "left"), ("kind", "left"), ("step", "right"),
-                      ("Elo", "right"), (f"{100 * confidence:g}% interval", "center"), ("games", "right"),
-                      ("W-D-L", "center"), ("score", "right")):
+    roles, exploits = _marked(rows)
+    for col, just in ((("rank", "right"), ("tier", "right"), ("policy", "left"), ("kind", "left"))
+                      + ((("league role", "left"),) if roles else ()) + (
+                      ("step", "right"), ("Elo", "right"), (f"{100 * confidence:g}% interval", "center"),
+                      ("games", "right"), ("W-D-L", "center"), ("score", "right"))
+                      + ((("exploitability", "right"),) if exploits else ())):
         table.add_column(col, justify=just)
     if online:
         table.add_column("online", justify="right")
@@ -97,9 +133,11 @@ def _table(rows: list, title: str, online: dict[int, float] | None, confidence: 
         marks = ((" (anchor)" if r.anchor else "") + ((" (best, tied)" if r.tied else " (best)") if r.best else "")
                  + (f" (= {escape(r.copy_of)}: the same weights)" if r.copy_of else ""))
         cells = [str(r.rank), "-" if r.tier is None else str(r.tier), escape(r.policy) + marks, r.kind,
+                 *([escape(r.league_role or "")] if roles else []),
                  "" if r.step is None else f"{r.step:,}",
                  _fmt_elo(r.elo) + note, f"{_fmt_elo(r.ci_low)} .. {_fmt_elo(r.ci_high)}", str(r.games),
-                 f"{r.wins}-{r.draws}-{r.losses}", f"{100 * r.score:.1f}%"]
+                 f"{r.wins}-{r.draws}-{r.losses}", f"{100 * r.score:.1f}%",
+                 *([exploitability_text(r.exploitability)] if exploits else [])]
         if online:
             value = online.get(r.player_id) if r.player_id is not None else None
             cells.append("" if value is None else f"{value:.0f}")

@@ -14,12 +14,14 @@ from ..stats.bradley_terry import DEFAULT_PRIOR
 from ._common import (
     MAX_GAMES,
     DbOpt,
+    DeviceOpt,
     EnvOpt,
     HomeOpt,
     JsonOpt,
     VariantOpt,
     check_env,
     open_league,
+    progress_bar,
     progress_enabled,
     shown_variant,
 )
@@ -50,22 +52,31 @@ def plot_cmd(
     run: RunOpt = None,
     out: OutOpt = None,
     prior: PriorOpt = DEFAULT_PRIOR,
+    exploitability: Annotated[bool, typer.Option(
+        "--exploitability", help="Also each snapshot's exact exploitability against training steps (a game with a "
+        "known tree: openspiel:GAME), on its own panel with a log scale: computed by OpenSpiel's best response for "
+        "the snapshots that have none filed yet, and filed in their rows (the ladder shows it).")] = False,
+    device: DeviceOpt = "auto",
     home: HomeOpt = None,
     db: DbOpt = None,
     json_out: JsonOpt = False,
 ) -> None:
-    """Each learner's fitted Elo with its 95% interval against training steps, the run's best snapshot (as the
-    ladder marks it) starred, and the scripted players as levels, in the ladder of the options the run trained
-    under (--env-option: another variant's). Draws in the terminal, or writes a PNG with --out."""
+    """Each learner's fitted Elo with its 95% interval against training steps (a league run: a line per league role),
+    the run's best snapshot (as the ladder marks it) starred, and the scripted players as levels, in the ladder of
+    the options the run trained under (--env-option: another variant's); with --exploitability, each snapshot's exact
+    exploitability too. Draws in the terminal, or writes a PNG with --out."""
+    from dataclasses import replace
+
+    from ..rated.exploit import run_exploitability, run_moments
     from ..report.plots import run_curves, save_run_png
     from ..report.png import check_png_path
-    from ..report.terminal import curves_chart, curves_summary
+    from ..report.terminal import curves_chart, curves_summary, exploitability_table
 
     env = check_env(env)
     prior = check_prior(prior)
     if out is not None:
         out = check_png_path(out)
-    league = open_league(home, db, readonly=True)
+    league = open_league(home, db, readonly=not exploitability)  # (the figures computed are filed)
     try:
         if run is None:
             runs = league.list_runs(env)
@@ -77,8 +88,13 @@ def plot_cmd(
             if info is not None and env is not None and info.env != env:
                 raise MarlError(f"run '{run}' trains {info.env}, not {env}")
         variant = shown_variant(league, env, env_option, run)[1] if env_option else None  # None: the run's own
+        moments = run_moments(league, run) if exploitability else []  # (a game without a tree: one line, first)
         with _working("fitting ratings"):
             curves = run_curves(league, run, prior=prior, variant=variant)
+        if exploitability:
+            with progress_bar("exact exploitability", len(moments), "snapshots", progress_enabled(json_out)) as tick:
+                curves = replace(curves, exploitability=tuple(run_exploitability(league, run, device=device,
+                                                                                 tick=tick)))
     finally:
         league.close()
     written = save_run_png(curves, out) if out is not None else None
@@ -91,6 +107,8 @@ def plot_cmd(
     unicode = console.is_terminal
     console.print(curves_chart(curves, width=_width(), unicode=unicode))
     console.print(curves_summary(curves))
+    if curves.exploitability is not None:
+        console.print(exploitability_table(curves.exploitability))
 
 
 def matrix_cmd(

@@ -98,12 +98,13 @@ __all__ = [
     "ladder",
     "pick_env",
     "select_rows",
+    "shown_exploitability",
     "verdict_lines",
 ]
 
 _JSON_KEYS = ("policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
               "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "copy_of",
-              "copies", "vs")
+              "copies", "vs", "league_role", "exploitability")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -185,6 +186,11 @@ class LadderRow:
         mean_return: the player's mean team return over its cooperative episodes (None in other games).
         side: in a two-sides game whose sides differ (rated per side: see :func:`ladder`), the side's role(s)
             this row is rated on (``adversary``); None in every other game.
+        league_role: the snapshot's role in its league (``meta["league_role"]``: ``main``, ``main_exploiter``,
+            ``league_exploiter``, ``exploiter``); None for ordinary snapshots, bots and CSV players.
+        exploitability: the exploitability filed for the player (:func:`shown_exploitability`): its exact figure
+            where there is one, else its lower bound, as filed (``kind``, ``value``, ``low``, ``high``, ...); None
+            where none was measured.
     """
 
     policy: str
@@ -213,12 +219,15 @@ class LadderRow:
     copy_of: str | None = None  # another name of the weights of this player (its row just above): one player
     copies: tuple[str, ...] = ()  # the player's other names (the same weights under another run or name)
     side: str | None = None
+    league_role: str | None = None
+    exploitability: dict[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict: ``policy, kind, elo, ci_low, ci_high, games, wins, draws, losses, rank`` then
-        ``score, step, flag, anchor, run, best, vs`` (Elo values rounded to 0.1, scores to 1e-4; never NaN /
-        inf), and ``mean_return`` last for a player of a cooperative game, ``side`` for a row of a game rated per
-        side. ``vs`` maps each scripted player to ``{"score": s, "games": n}`` (``score`` null without games)."""
+        ``score, step, flag, anchor, run, best, vs, league_role, exploitability`` (Elo values rounded to 0.1,
+        scores to 1e-4; never NaN / inf; ``league_role`` and ``exploitability`` null where the player has none),
+        and ``mean_return`` last for a player of a cooperative game, ``side`` for a row of a game rated per side.
+        ``vs`` maps each scripted player to ``{"score": s, "games": n}`` (``score`` null without games)."""
         for value in (self.elo, self.ci_low, self.ci_high, self.score):
             assert math.isfinite(value), f"non-finite value in ladder row {self.policy}: {value}"
         out: dict[str, Any] = {
@@ -246,6 +255,8 @@ class LadderRow:
             "copies": list(self.copies),
             "vs": {v.bot: {"score": None if v.score is None else round(float(v.score), 4), "games": int(v.games)}
                    for v in self.vs},
+            "league_role": self.league_role,
+            "exploitability": None if self.exploitability is None else dict(self.exploitability),
         }
         assert tuple(out) == _JSON_KEYS
         if self.mean_return is not None:
@@ -621,7 +632,31 @@ def ladder(
                     mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
             if r.player_id is not None else r for r in rows]
     rows = _with_copies(league, env, rows, include_removed)
-    return _mark_best(rows, removed, fitted)
+    return _with_league_marks(_mark_best(rows, removed, fitted), known | {p.id: p for p in population})
+
+
+def shown_exploitability(meta: dict[str, Any]) -> dict[str, Any] | None:
+    """The exploitability a player's row shows, from its ``meta["exploitability"]`` (filed by
+    :meth:`~selfplay_cli.league.store.League.set_exploitability`): the exact figure where there is one (it says how
+    beatable the player is), else the lower bound (a trained best response's return: the player is at least that
+    beatable), as filed with its ``kind``; None where nothing was measured."""
+    book = meta.get("exploitability") or {}
+    for kind in ("exact", "lower_bound"):
+        record = book.get(kind)
+        if isinstance(record, dict):
+            return {**record, "kind": kind}
+    return None
+
+
+def _with_league_marks(rows: list[LadderRow], players: dict[int, PlayerRow]) -> list[LadderRow]:
+    """Each row's league role and filed exploitability, read from its player's meta (a copy's from its own row)."""
+    out = []
+    for r in rows:
+        p = players.get(r.player_id) if r.player_id is not None else None
+        meta = p.meta if p is not None else {}
+        role = meta.get("league_role")
+        out.append(replace(r, league_role=str(role) if role else None, exploitability=shown_exploitability(meta)))
+    return out
 
 
 def _with_copies(league: League, env: str, rows: list[LadderRow], include_removed: bool) -> list[LadderRow]:
@@ -695,7 +730,7 @@ def _ladder_by_side(league: League, env: str, table: GameTable, labels: tuple[st
                         mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
                 for r in rows]
         out += _mark_best(rows, removed, fitted)
-    return out
+    return _with_league_marks(out, known | {p.id: p for p in row_of.values()})
 
 
 def verdict_lines(rows: list[LadderRow]) -> list[str]:

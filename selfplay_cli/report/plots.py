@@ -10,6 +10,11 @@ What a figure says it shows, it shows, and what it shows it says: the best snaps
 legend entry only when there are some. Learners whose curves fall on each other (the members of a team rated by the
 same team games have equal ratings) are told apart by :func:`coinciding`: each gets its own marker and dash pattern
 and is drawn a little to the side, which its legend entry states.
+
+A league run (``--league alphastar``) has a line per league role (``meta["league_role"]``: main, main exploiter,
+league exploiter), labelled with it. With exact exploitabilities (:func:`~selfplay_cli.rated.exploit.
+run_exploitability`, a game with a known tree) the figure has a second panel: each snapshot's exact exploitability
+against training steps, a line per learner in its Elo line's colour, on a log scale.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ from typing import Any
 
 from ..league.ladder import LadderRow, ladder
 from ..league.store import League, LeagueError
+from ..rated.exploit import RunPoint
 from ..stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, FLAG_ZERO
 from .png import check_png_path, new_figure, save_png
 
@@ -60,10 +66,12 @@ class CurvePoint:
 
 @dataclass(frozen=True)
 class LearnerCurve:
-    """The rated snapshots of one learner of a run, in step order."""
+    """The rated snapshots of one learner of a run, in step order; ``learner`` is its label (its league role where
+    it has one)."""
 
     learner: str
     points: tuple[CurvePoint, ...]
+    league_role: str | None = None
 
 
 @dataclass(frozen=True)
@@ -87,6 +95,8 @@ class RunCurves:
         anchor: the ladder's anchor (name and rating), the zero point of every rating.
         confidence: the level of the intervals.
         prior: the fit's prior in virtual draws (0: maximum likelihood, where bounds appear).
+        exploitability: the exact exploitability of the run's snapshots, in step order, where it was asked for
+            (:func:`~selfplay_cli.rated.exploit.run_exploitability`); None otherwise.
     """
 
     env: str
@@ -96,6 +106,7 @@ class RunCurves:
     anchor: tuple[str, float] | None
     confidence: float = 0.95
     prior: float = DEFAULT_PRIOR
+    exploitability: tuple[RunPoint, ...] | None = None
 
     @property
     def best(self) -> CurvePoint | None:
@@ -112,14 +123,23 @@ class RunCurves:
             "prior": self.prior,
             "best": None if self.best is None else self.best.policy,
             "learners": [
-                {"learner": c.learner,
+                {"learner": c.learner, "league_role": c.league_role,
                  "points": [{"policy": p.policy, "step": p.step, "elo": round(p.elo, 1), "ci_low": round(p.ci_low, 1),
                              "ci_high": round(p.ci_high, 1), "flag": p.flag, "best": p.best} for p in c.points]}
                 for c in self.curves
             ],
             "bots": [{"policy": b.name, "elo": round(b.elo, 1), "ci_low": round(b.ci_low, 1),
                       "ci_high": round(b.ci_high, 1)} for b in self.bots],
+            "exploitability": None if self.exploitability is None else [p.to_json() for p in self.exploitability],
         }
+
+
+def line_label(league_role: str | None, learner: str, shared: bool) -> str:
+    """The label of a learner's line: its league role where it has one (``role: learner`` when the role has several
+    learners, ``shared``), else the learner."""
+    if not league_role:
+        return learner
+    return f"{league_role}: {learner}" if shared else league_role
 
 
 def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
@@ -129,8 +149,9 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
 
     ``rows``: a ladder of the run's env already fitted (default: ``ladder(league, env, prior=prior)``, in
     ``variant``: by default the run's own, the options its snapshots were made for).
-    Snapshots are grouped by ``meta["learner"]`` (a run with one network has one group, named after the run);
-    removed snapshots and snapshots without rated games are left out.
+    Snapshots are grouped by ``meta["learner"]`` (a run with one network has one group, named after the run) and
+    ``meta["league_role"]`` (a league run's line per role, labelled with it: :func:`line_label`); removed snapshots
+    and snapshots without rated games are left out.
 
     Raises:
         LeagueError: unknown run, or a run without rated snapshots.
@@ -149,20 +170,22 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
             variant = variant_key(env, run_options(league, run))
         rows = ladder(league, env, prior=prior, variant=variant)
     by_id = {r.player_id: r for r in rows if r.player_id is not None}
-    groups: dict[str, list[CurvePoint]] = {}
+    groups: dict[tuple[str | None, str], list[CurvePoint]] = {}
     for p in league.players(env=env, kind="snapshot"):
         if p.run != run or p.id not in by_id:
             continue
         r = by_id[p.id]
-        learner = str(p.meta.get("learner") or "")
-        groups.setdefault(learner, []).append(CurvePoint(r.policy, int(p.step), r.elo, r.ci_low, r.ci_high, r.flag,
-                                                         best=bool(getattr(r, "best", False))))
+        key = (str(p.meta.get("league_role") or "") or None, str(p.meta.get("learner") or "") or run)
+        groups.setdefault(key, []).append(CurvePoint(r.policy, int(p.step), r.elo, r.ci_low, r.ci_high, r.flag,
+                                                     best=bool(getattr(r, "best", False))))
     if not groups:
         raise LeagueError(f"run '{run}' has no rated snapshots yet (each snapshot is rated against the scripted "
                           "players after it is taken; or play some: marl league tournament --run ...)")
+    roles = [role for role, _ in groups]
     curves = tuple(
-        LearnerCurve(learner=name or run, points=tuple(sorted(points, key=lambda q: (q.step, q.policy))))
-        for name, points in groups.items()
+        LearnerCurve(learner=line_label(role, learner, roles.count(role) > 1),
+                     points=tuple(sorted(points, key=lambda q: (q.step, q.policy))), league_role=role)
+        for (role, learner), points in groups.items()
     )
     bots = tuple(BotLevel(r.policy, r.elo, r.ci_low, r.ci_high)
                  for r in sorted((r for r in rows if r.kind == "bot"), key=lambda r: -r.elo))
@@ -261,9 +284,11 @@ def run_figure(curves: RunCurves) -> Any:
     chain of games to the anchor. Each scripted player: a dashed grey level labelled with its name. The legend
     names every learner and every kind of mark drawn, and nothing else. The marks carry gids (``line:<learner>``,
     ``points:<learner>``, ``bound:<learner>``, ``unanchored:<learner>``, ``best``) by which they can be found.
+    With ``curves.exploitability``: a second panel below, sharing the steps (:func:`_draw_exploitability`).
     """
-    fig = new_figure(9.0, 5.0)
-    ax = fig.add_subplot()
+    panels = bool(curves.exploitability)
+    fig = new_figure(9.0, 8.0 if panels else 5.0)
+    ax = fig.add_subplot(2, 1, 1) if panels else fig.add_subplot()
     ylo, yhi = y_limits(curves)
     dodge = dodge_steps(curves)
     groups = {i: g for g in coinciding(curves) for i in g}
@@ -279,7 +304,46 @@ def run_figure(curves: RunCurves) -> Any:
     _label_axes(ax, curves, points, ylo, yhi)
     if not all(math.isfinite(v) for v in (ylo, yhi)):  # pragma: no cover - ladder rows are always finite
         raise AssertionError("non-finite plot range")
+    if panels:
+        _draw_exploitability(fig.add_subplot(2, 1, 2, sharex=ax), curves)
     return fig
+
+
+EXPLOIT_FLOOR = 1e-4
+"""Where an exploitability below it (an equilibrium's 0, or rounding below it) is drawn on the log scale."""
+
+
+def _draw_exploitability(ax: Any, curves: RunCurves) -> None:
+    """The exact exploitability of each snapshot against training steps on ``ax``, log scale: a line per learner
+    (labelled as its Elo line, in its colour; a team run's teams on a line of their own), figures below
+    :data:`EXPLOIT_FLOOR` drawn at it and said so in the legend. Gids: ``exploitability:<label>``."""
+    from matplotlib.ticker import FuncFormatter
+
+    points = curves.exploitability or ()
+    colors = {c.learner: f"C{k % 10}" for k, c in enumerate(curves.curves)}
+    roles = [role for role, _ in dict.fromkeys((p.league_role, p.learner) for p in points)]
+    lines: dict[str, list[RunPoint]] = {}
+    for p in points:
+        label = line_label(p.league_role, p.learner, roles.count(p.league_role) > 1)
+        lines.setdefault(label + (" (teams)" if p.team else ""), []).append(p)
+    for k, (label, group) in enumerate(lines.items()):
+        color = colors.get(label, f"C{(len(colors) + k) % 10}")
+        marker = _PNG_MARKERS[list(colors).index(label) % len(_PNG_MARKERS)] if label in colors else "o"
+        line, = ax.plot([p.step for p in group], [max(p.exploitability, EXPLOIT_FLOOR) for p in group], color=color,
+                        marker=marker, markersize=4.5, linewidth=1.6, label=label)
+        line.set_gid(f"exploitability:{label}")
+    if any(p.exploitability < EXPLOIT_FLOOR for p in points):
+        ax.plot([], [], linestyle="none", label=f"below {EXPLOIT_FLOOR:g} (0: an equilibrium): drawn at it")
+    ax.set_yscale("log")
+    plain = FuncFormatter(lambda y, _pos: f"{y:.3g}")  # 0.3, not 3 x 10^-1
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_formatter(plain)
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _pos: format_steps(x)))
+    ax.set_xlabel("training step (game steps)")
+    ax.set_ylabel("exact exploitability (game's returns, log)")
+    ax.set_title(f"{curves.run}: exact exploitability by training step (OpenSpiel's best response over the game tree)")
+    ax.grid(True, which="both", color="0.9", linewidth=0.6)
+    ax.legend(loc="best", fontsize=8)
 
 
 def _draw_learner(ax: Any, curves: RunCurves, k: int, shift: float, group: tuple[int, ...] | None,

@@ -24,6 +24,7 @@ from rich.style import Style
 from rich.table import Table
 from rich.text import Text
 
+from ..rated.exploit import RunPoint
 from ..stats.bradley_terry import FLAG_PERFECT
 from .matrix import CYCLE_TEST, MatrixReport
 from .plots import BOUND_FLAGS, CurvePoint, RunCurves, format_steps, x_limits, y_limits
@@ -411,3 +412,18 @@ def matrix_summary(report: MatrixReport, home: str | Path | None = None, unicode
     else:
         out.append(f"\nEvery pair has at least {report.min_games} games.\n")
     return Group(out)
+
+
+def exploitability_table(points: tuple[RunPoint, ...]) -> Table:
+    """The exact exploitability of a run's snapshots (``marl league plot --exploitability``), one row each, in step
+    order: its name, step, league role, exploitability and NashConv, and whether it was computed now or read from
+    the figure filed earlier."""
+    table = Table(title="exact exploitability (OpenSpiel's best response over the game tree, in the game's returns)")
+    for column in ("snapshot", "step", "league role", "exploitability", "NashConv", "figure"):
+        table.add_column(column, justify="left" if column in ("snapshot", "league role", "figure") else "right")
+    for p in points:
+        table.add_row(p.policy, f"{p.step:,}", p.league_role or "", f"{p.exploitability:.4f}",
+                      "" if p.nash_conv is None else f"{p.nash_conv:.4f}",
+                      ("computed now" + (", filed" if p.filed else " (a team: not filed)")) if p.computed
+                      else "filed earlier")
+    return table
