@@ -26,7 +26,7 @@ from selfplay_cli.stats.sprt import sprt_llr
 ENV = "pong"
 JSON_KEYS = ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
              "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "copy_of",
-             "copies", "vs"]
+             "copies", "vs", "league_role", "exploitability"]
 D_7_OF_10 = 400.0 * math.log10(7.0 / 3.0)  # +147.2: the ML Elo difference of a 7/10 score
 
 

@@ -216,7 +216,9 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
     assert code == 0
     assert list(rows[0]) == ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses",
                              "rank", "tier", "score", "step", "flag", "anchor", "run", "best", "margin",
-                             "best_margin", "tied", "copy_of", "copies", "vs", "variant"]
+                             "best_margin", "tied", "copy_of", "copies", "vs", "league_role", "exploitability",
+                             "variant"]
+    assert all(r["league_role"] is None and r["exploitability"] is None for r in rows)  # none measured, no role
     assert all(r["variant"] == {} for r in rows)  # the default variant: the game as declared
     assert [r["rank"] for r in rows] == list(range(1, len(rows) + 1))  # the place by Elo, no gaps
     assert [r["elo"] for r in rows] == sorted((r["elo"] for r in rows), reverse=True)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import closing, contextmanager
 from pathlib import Path
 from typing import Annotated
 
@@ -76,7 +76,7 @@ def plot_cmd(
     prior = check_prior(prior)
     if out is not None:
         out = check_png_path(out)
-    league = open_league(home, db, readonly=not exploitability)  # (the figures computed are filed)
+    league = open_league(home, db, readonly=True)
     try:
         if run is None:
             runs = league.list_runs(env)
@@ -91,12 +91,12 @@ def plot_cmd(
         moments = run_moments(league, run) if exploitability else []  # (a game without a tree: one line, first)
         with _working("fitting ratings"):
             curves = run_curves(league, run, prior=prior, variant=variant)
-        if exploitability:
-            with progress_bar("exact exploitability", len(moments), "snapshots", progress_enabled(json_out)) as tick:
-                curves = replace(curves, exploitability=tuple(run_exploitability(league, run, device=device,
-                                                                                 tick=tick)))
     finally:
         league.close()
+    if exploitability:  # the figures computed are filed in their rows as they come
+        with (closing(open_league(home, db)) as league,
+              progress_bar("exact exploitability", len(moments), "snapshots", progress_enabled(json_out)) as tick):
+            curves = replace(curves, exploitability=tuple(run_exploitability(league, run, device=device, tick=tick)))
     written = save_run_png(curves, out) if out is not None else None
     if json_out:
         print_json({**curves.to_json(), "png": None if written is None else str(written)})
