@@ -416,13 +416,14 @@ def matrix_summary(report: MatrixReport, home: str | Path | None = None, unicode
 
 def exploitability_table(points: tuple[RunPoint, ...]) -> Table:
     """The exact exploitability of a run's snapshots (``marl league plot --exploitability``), one row each, in step
-    order: its name, step, league role, exploitability and NashConv, and whether it was computed now or read from
-    the figure filed earlier."""
+    order: its name, step, league role (a column only when some snapshot has one), exploitability and NashConv, and
+    whether it was computed now or read from the figure filed earlier."""
+    roles = any(p.league_role for p in points)
     table = Table(title="exact exploitability (OpenSpiel's best response over the game tree, in the game's returns)")
-    for column in ("snapshot", "step", "league role", "exploitability", "NashConv", "figure"):
+    for column in ("snapshot", "step", *(["league role"] if roles else []), "exploitability", "NashConv", "figure"):
         table.add_column(column, justify="left" if column in ("snapshot", "league role", "figure") else "right")
     for p in points:
-        table.add_row(p.policy, f"{p.step:,}", p.league_role or "", f"{p.exploitability:.4f}",
+        table.add_row(p.policy, f"{p.step:,}", *([p.league_role or ""] if roles else []), f"{p.exploitability:.4f}",
                       "" if p.nash_conv is None else f"{p.nash_conv:.4f}",
                       ("computed now" + (", filed" if p.filed else " (a team: not filed)")) if p.computed
                       else "filed earlier")
