@@ -47,7 +47,10 @@ LADDER_HELP = "\n\n".join((
     "training step; Elo, the Bradley-Terry fit (a draw is half a point); its confidence interval (--confidence, "
     "--bootstrap), relative to the anchor; games and W-D-L; score (points per game); online Elo (the live estimate "
     "updated after every game of the default options; in their ladder only); vs BOT, one column per scripted "
-    "player of the game: the score against it and the number of games (blank when none).",
+    "player of the game: the score against it and the number of games (blank when none). Only when some row has "
+    "one: league role (main, main_exploiter, league_exploiter of a --league alphastar run; exploiter, a best "
+    "response marl exploit filed) and exploitability (what a best response wins against the player, in the game's "
+    "returns: exact, from marl exploit --exact, or >= a trained best response's lower bound [its 95% interval]).",
     "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
     "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
     "--prior 0 gives the plain maximum-likelihood fit.",
