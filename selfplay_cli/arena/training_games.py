@@ -173,6 +173,15 @@ def plan_layout(plan: SeatPlan, n_games: int, agents: int, league_games: float =
     return layout
 
 
+def league_layout(plan: SeatPlan, n_games: int, n_learners: int) -> np.ndarray:
+    """A league's layout (``--league``): game g is learner ``g % n_learners``'s, on the seats a lone learner takes
+    in its ``g // n_learners``-th game (``plan``: :func:`plan_seats` with one learner: one side, alternating game by
+    game; free-for-all: one seat, rotating), opponents on the rest."""
+    games = np.arange(n_games)
+    lone = plan_layout(plan, -(-n_games // n_learners), 1)
+    return np.where(lone[:, games // n_learners] == 0, games % n_learners, OPPONENT)
+
+
 def learner_spaces(spec: EnvSpec, seat_spaces: Sequence[SeatSpace], layout: np.ndarray,
                    roles: Sequence[str] | None = None) -> list[SeatSpace]:
     """Each learner's :class:`SeatSpace`: the seats a learner holds must share one (a network reads one observation
