@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 import torch
+from cli_helpers import run
 from scipy.stats import chisquare
 
 from selfplay_cli.arena.training_games import OPPONENT, league_layout, plan_seats
@@ -20,7 +21,6 @@ from selfplay_cli.train.league_roles import LeagueConfig, LeagueRoles, Past, liv
 from selfplay_cli.train.loop import Trainer
 from selfplay_cli.train.matchmaking import WinRates
 from selfplay_cli.train.state import SnapshotMoments
-from cli_helpers import run
 
 TTT = "tests.games.tictactoe:env"
 DRAWS = 20_000

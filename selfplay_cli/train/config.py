@@ -14,8 +14,15 @@ import numpy as np
 from .. import files
 from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
 from ..arena.frames import check_frame_stack
-from ..arena.training_games import (SHARING, SeatPlan, league_layout, learner_spaces, parse_seats, plan_layout,
-                                    plan_seats)
+from ..arena.training_games import (
+    SHARING,
+    SeatPlan,
+    league_layout,
+    learner_spaces,
+    parse_seats,
+    plan_layout,
+    plan_seats,
+)
 from ..envs import EnvSpec, SeatSpace, get_env
 from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError

@@ -1,6 +1,6 @@
-"""AlphaStar's league roles (``--league alphastar``): whom each learner plays, when it takes a snapshot, when it restarts.
+"""AlphaStar's league roles (``--league alphastar``): whom each learner plays, when it snapshots, when it restarts.
 
-A run with ``--league alphastar`` trains one learner per role seat: ``main`` main agents, ``main_exploiters`` main
+A run with ``--league alphastar`` trains one learner per role: ``main`` main agents, ``main_exploiters`` main
 exploiters and ``league_exploiters`` league exploiters (AlphaStar's 1, 1, 2 by default), each with its own network,
 optimiser, buffer and seed, each playing its own share of the run's games in one seat against opponents its role's
 rule draws. Everything here works on plain data (player ids, learner indices, a :class:`~.matchmaking.WinRates` book),
@@ -152,8 +152,8 @@ class LeagueConfig:
         """Each learner's name (its snapshots end in it): ``main``, ``mainx``, ``leaguex1``, ``leaguex2``; numbered
         where a role has several learners."""
         out = []
-        for role, short, count in (("main", "main", self.main), ("main_exploiter", "mainx", self.main_exploiters),
-                                   ("league_exploiter", "leaguex", self.league_exploiters)):
+        for short, count in (("main", self.main), ("mainx", self.main_exploiters),
+                             ("leaguex", self.league_exploiters)):
             out += [short if count == 1 else f"{short}{k + 1}" for k in range(count)]
         return out
 
