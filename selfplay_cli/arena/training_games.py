@@ -27,6 +27,8 @@ Which learner holds which seat (:func:`plan_seats`), by the game's kind, ``--age
   (a learner number or ``-`` for an opponent, per seat);
 * with every seat a learner's, ``league_games`` > 0 gives that share of the games to one learner (on its own
   seats, the learners taking turns game by game) against opponents from the league.
+* a league of roles (``--league alphastar``, :func:`league_layout`): each learner has games of its own, one seat in
+  each as a lone learner would take them, opponents on the others.
 
 An opponent slot's "latest" opponent is the live network of the learner that holds that seat when every seat is a
 learner's (the learner itself where it would hold it): self-play against the current policies.

@@ -2,7 +2,8 @@
 
 One loop for every algorithm: it steps the shared :class:`SelfPlayGames` (:mod:`.rollouts`: curricula, the teacher,
 each learner's slots, its update when its rollout is due), and every ``snapshot_every`` finished games (episodes)
-or ``snapshot_steps`` game steps it takes a snapshot moment (:mod:`.state`):
+or ``snapshot_steps`` game steps it takes a snapshot moment (:mod:`.state`; in a league, ``--league alphastar``,
+each learner takes its own when its role's rule says so, :mod:`.league_roles`):
 
 1. saves each learner as a snapshot file and registers it in the league (``epN``; ``epN-left``/``epN-right`` when
    each seat has its own network), with its parent (the learner's previous snapshot), with the run state that
