@@ -278,12 +278,12 @@ def test_marl_train_league_alphastar_end_to_end_killed_and_resumed(tmp_path, cap
 def test_a_free_for_all_game_trains_a_league(tmp_path, capsys):
     home = str(tmp_path / "h")
     code, out, err = run(capsys, "train", "tests.games.race:parallel_env", "--league", "alphastar",
-                         "--league-league-exploiters", "1", "--games", "6", "--steps", "600", "--eval-games", "0",
+                         "--league-league-exploiters", "1", "--games", "9", "--steps", "603", "--eval-games", "0",
                          "--run", "r", "--home", home, "--json")
     assert code == 0, err
     roles = {p.name: p.meta["league_role"] for p in league_rows(home)}
     assert roles == {"s0-main": "main", "s0-mainx": "main_exploiter", "s0-leaguex": "league_exploiter",
-                     "s600-main": "main", "s600-mainx": "main_exploiter", "s600-leaguex": "league_exploiter"}
+                     "s603-main": "main", "s603-mainx": "main_exploiter", "s603-leaguex": "league_exploiter"}
 
 
 @pytest.mark.parametrize(("args", "needle"), [
@@ -293,7 +293,8 @@ def test_a_free_for_all_game_trains_a_league(tmp_path, capsys):
     ([TTT, "--league", "alphastar", "--seats", "1,-"], "--seats does not apply"),
     ([TTT, "--league-main", "2"], "--league-main sizes a league of roles: it needs --league alphastar"),
     ([TTT, "--league", "psro"], "--league must be one of alphastar, not 'psro'"),
-    ([TTT, "--league", "alphastar", "--games", "3"], "--games must be at least the league's 4 learners"),
+    ([TTT, "--league", "alphastar", "--games", "7"], "--games must be at least 8 with --league alphastar: each of its "
+                                                      "4 learners plays a game in each of the game's 2 sides"),
 ])
 def test_a_league_that_makes_no_sense_is_one_line(tmp_path, capsys, args, needle):
     code, out, err = run(capsys, "train", *args, "--home", str(tmp_path / "h"))

@@ -359,8 +359,12 @@ def _check_league(cfg: TrainConfig, spec: EnvSpec) -> None:
     if cfg.executor != "local":
         raise MarlError("--league alphastar trains with --executor local only")
     n = len(cfg.league.roles())  # type: ignore[union-attr]
-    if cfg.games < n:
-        raise MarlError(f"--games must be at least the league's {n} learners (each plays its share), not {cfg.games}")
+    lone = plan_seats(spec, 1)  # the seats a learner takes in turn: the two sides, or every seat of a free-for-all
+    places = len(lone.sides) if lone.sides is not None else spec.n_seats
+    if cfg.games < n * places:
+        where = "sides" if lone.sides else "seats"
+        raise MarlError(f"--games must be at least {n * places} with --league alphastar: each of its {n} learners "
+                        f"plays a game in each of the game's {places} {where}, not {cfg.games}")
 
 
 def _legacy_eval_inline(d: dict[str, Any]) -> None:
