@@ -27,6 +27,8 @@ Which learner holds which seat (:func:`plan_seats`), by the game's kind, ``--age
   (a learner number or ``-`` for an opponent, per seat);
 * with every seat a learner's, ``league_games`` > 0 gives that share of the games to one learner (on its own
   seats, the learners taking turns game by game) against opponents from the league.
+* a league of roles (``--league alphastar``, :func:`league_layout`): each learner has games of its own, one seat in
+  each as a lone learner would take them, opponents on the others.
 
 An opponent slot's "latest" opponent is the live network of the learner that holds that seat when every seat is a
 learner's (the learner itself where it would hold it): self-play against the current policies.
@@ -171,6 +173,15 @@ def plan_layout(plan: SeatPlan, n_games: int, agents: int, league_games: float =
                 i = g % len(learners)
                 layout[list(seat_of[i]), g] = learners[i]
     return layout
+
+
+def league_layout(plan: SeatPlan, n_games: int, n_learners: int) -> np.ndarray:
+    """A league's layout (``--league``): game g is learner ``g % n_learners``'s, on the seats a lone learner takes
+    in its ``g // n_learners``-th game (``plan``: :func:`plan_seats` with one learner: one side, alternating game by
+    game; free-for-all: one seat, rotating), opponents on the rest."""
+    games = np.arange(n_games)
+    lone = plan_layout(plan, -(-n_games // n_learners), 1)
+    return np.where(lone[:, games // n_learners] == 0, games % n_learners, OPPONENT)
 
 
 def learner_spaces(spec: EnvSpec, seat_spaces: Sequence[SeatSpace], layout: np.ndarray,

@@ -34,8 +34,8 @@ def train(
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
     config: Annotated[Path | None, typer.Option("--config", metavar="FILE", help="TOML file of settings (top-level "
                                                 "options, [ppo], [dqn], [sac], [opponents], [env_options], "
-                                                "[curriculum], [teacher]); options typed on the command line win over "
-                                                "it.")] = None,
+                                                "[curriculum], [teacher], [league]); options typed on the command "
+                                                "line win over it.")] = None,
     agents: Annotated[int, typer.Option("--agents", min=1, max=64, help="Learning agents. Two sides: 2 is one learner "
                                         "per side (both pong paddles, seed 000), 1 one learner against opponents "
                                         "from the league; cooperative: seat s is learner s mod N; free-for-all: one "
@@ -119,6 +119,18 @@ def train(
     = 0.5,
     bots: Annotated[str, typer.Option("--bots", metavar="BOT=P,...", help="Mix in scripted players with these "
                                       "probabilities, e.g. cpu=0.1,random=0.05.")] = "",
+    league: Annotated[str | None, typer.Option("--league", metavar="alphastar", help="AlphaStar's league roles: "
+                                               "main agents, main exploiters and league exploiters, each a learner "
+                                               "of its own playing its share of the games against opponents its "
+                                               "role's rule draws, snapshotting when it beats its targets or at a "
+                                               "step limit ([league] table: the rules' numbers).")] = None,
+    league_main: Annotated[int | None, typer.Option("--league-main", min=1, max=16, help="--league: main agents "
+                                                    "(default 1).")] = None,
+    league_main_exploiters: Annotated[int | None, typer.Option("--league-main-exploiters", min=0, max=16,
+                                                               help="--league: main exploiters (default 1).")] = None,
+    league_league_exploiters: Annotated[int | None, typer.Option("--league-league-exploiters", min=0, max=16,
+                                                                 help="--league: league exploiters (default 2).")]
+    = None,
     teacher: Annotated[str | None, typer.Option("--teacher", metavar="PLAYER", help="Kickstart the learners: they "
                                                 "also imitate this player (a scripted player such as serve-bot, or a "
                                                 "snapshot) on the states they visit, the imitation's weight fading "

@@ -14,7 +14,15 @@ import numpy as np
 from .. import files
 from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
 from ..arena.frames import check_frame_stack
-from ..arena.training_games import SHARING, SeatPlan, learner_spaces, parse_seats, plan_layout, plan_seats
+from ..arena.training_games import (
+    SHARING,
+    SeatPlan,
+    league_layout,
+    learner_spaces,
+    parse_seats,
+    plan_layout,
+    plan_seats,
+)
 from ..envs import EnvSpec, SeatSpace, get_env
 from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
@@ -23,6 +31,7 @@ from ..policies.joint import joint_spaces
 from ..policies.network import Arch, resolve_device
 from ..policies.snapshot_format import expected_tensors
 from .curriculum import Curriculum, Schedule, parse_schedule
+from .league_roles import LeagueConfig
 from .matchmaking import MatchmakerConfig
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
@@ -152,6 +161,7 @@ class TrainConfig:
     env_options: dict[str, Any] = field(default_factory=dict)
     curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)
     teacher: TeacherConfig = field(default_factory=TeacherConfig)  # kickstarting: a player the learners imitate
+    league: LeagueConfig | None = None  # AlphaStar's league roles (--league alphastar, a [league] table); None: off
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
     sac: SACConfig = field(default_factory=SACConfig)
@@ -211,6 +221,8 @@ class TrainConfig:
             raise MarlError(f"--sharing must be one of {', '.join(SHARING)}, not '{self.sharing}'")
         if not 0.0 <= self.league_games <= 1.0:
             raise MarlError(f"--league-games must lie between 0 and 1, not {self.league_games}")
+        if self.league is not None:
+            _check_league(self, spec)
         plan = self.seat_plan()
         if self.league_games and not plan.every_seat_learns:
             raise MarlError(f"--league-games is for --agents {n_seats} (learners on every seat); with fewer learners "
@@ -227,7 +239,7 @@ class TrainConfig:
         if curriculum:
             curriculum.check(core)
         _check_games(self, seat_spaces)
-        layout = plan_layout(plan, self.games, self.agents, self.league_games)
+        layout = self.layout(plan)
         roles = spec.seat_roles(game)
         spaces = learner_spaces(spec, seat_spaces, layout, roles if len(set(roles)) > 1 else None)
         learned = {roles[s] for s in range(n_seats) if (layout[s] >= 0).any()}
@@ -260,8 +272,18 @@ class TrainConfig:
         return get_env(self.env).for_options(**self.env_options)
 
     def seat_plan(self) -> SeatPlan:
-        """Which learner holds which seat of the game (``--agents``, ``--sharing``, ``--seats``)."""
+        """Which learner holds which seat of the game (``--agents``, ``--sharing``, ``--seats``); in a league
+        (``--league``), the seats of a lone learner, which each of its learners takes in its own games."""
+        if self.league is not None:
+            return plan_seats(self.game(), 1)
         return seat_plan_of(self.game(), self.agents, self.sharing, self.seats)
+
+    def layout(self, plan: SeatPlan) -> np.ndarray:
+        """The learner of every (seat, game) slot, -1 for an opponent's (:func:`~selfplay_cli.arena.training_games.
+        plan_layout`; a league's: :func:`~selfplay_cli.arena.training_games.league_layout`)."""
+        if self.league is not None:
+            return league_layout(plan, self.games, len(self.league.roles()))
+        return plan_layout(plan, self.games, self.agents, self.league_games)
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -270,6 +292,7 @@ class TrainConfig:
         d["sac"] = self.sac.to_dict()
         d["opponents"] = asdict(self.opponents)
         d["teacher"] = asdict(self.teacher)
+        d["league"] = asdict(self.league) if self.league is not None else None
         return d
 
     @classmethod
@@ -283,7 +306,7 @@ class TrainConfig:
         d = dict(d)
         _legacy_eval_inline(d)
         sections = {"ppo": PPOConfig, "dqn": DQNConfig, "sac": SACConfig, "opponents": MatchmakerConfig,
-                    "teacher": TeacherConfig}
+                    "teacher": TeacherConfig, "league": LeagueConfig}
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
         if unknown:
@@ -303,7 +326,7 @@ class TrainConfig:
         if "curriculum" in d and not isinstance(d["curriculum"], dict):
             raise MarlError(f"[curriculum] must be a table of the game's live options, not {d['curriculum']!r}")
         for key, section in sections.items():
-            if key in d and not isinstance(d[key], section):
+            if key in d and d[key] is not None and not isinstance(d[key], section):
                 if not isinstance(d[key], dict):
                     raise MarlError(f"[{key}] must be a table of settings, not {d[key]!r}")
                 values = dict(d[key])
@@ -317,6 +340,31 @@ class TrainConfig:
                 except (TypeError, ValueError) as e:
                     raise MarlError(f"[{key}]: {e}") from None
         return cls(**d)
+
+
+def _check_league(cfg: TrainConfig, spec: EnvSpec) -> None:
+    """A league (``--league alphastar``) lays out its own learners, one per role, each on one seat of its own games
+    against opponents its role draws: what contradicts that is refused, one line each."""
+    if spec.kind == "cooperative":
+        raise MarlError(f"{spec.name} is cooperative: cooperative games have no exploiters (--league alphastar is for "
+                        "two-sides and free-for-all games)")
+    if cfg.sharing != "nops":
+        raise MarlError(f"--league alphastar gives each role its own network: --sharing {cfg.sharing} does not apply")
+    if cfg.seats:
+        raise MarlError("--league alphastar seats each learner in its own games itself: --seats does not apply")
+    if cfg.league_games:
+        raise MarlError("--league alphastar plays every game against the league: --league-games does not apply")
+    if cfg.opponents.bots:
+        raise MarlError("--league alphastar draws every opponent by its role's rule: --bots does not apply")
+    if cfg.executor != "local":
+        raise MarlError("--league alphastar trains with --executor local only")
+    n = len(cfg.league.roles())  # type: ignore[union-attr]
+    lone = plan_seats(spec, 1)  # the seats a learner takes in turn: the two sides, or every seat of a free-for-all
+    places = len(lone.sides) if lone.sides is not None else spec.n_seats
+    if cfg.games < n * places:
+        where = "sides" if lone.sides else "seats"
+        raise MarlError(f"--games must be at least {n * places} with --league alphastar: each of its {n} learners "
+                        f"plays a game in each of the game's {places} {where}, not {cfg.games}")
 
 
 def _legacy_eval_inline(d: dict[str, Any]) -> None:

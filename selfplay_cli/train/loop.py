@@ -2,7 +2,8 @@
 
 One loop for every algorithm: it steps the shared :class:`SelfPlayGames` (:mod:`.rollouts`: curricula, the teacher,
 each learner's slots, its update when its rollout is due), and every ``snapshot_every`` finished games (episodes)
-or ``snapshot_steps`` game steps it takes a snapshot moment (:mod:`.state`):
+or ``snapshot_steps`` game steps it takes a snapshot moment (:mod:`.state`; in a league, ``--league alphastar``,
+each learner takes its own when its role's rule says so, :mod:`.league_roles`):
 
 1. saves each learner as a snapshot file and registers it in the league (``epN``; ``epN-left``/``epN-right`` when
    each seat has its own network), with its parent (the learner's previous snapshot), with the run state that
@@ -19,6 +20,7 @@ Elo, a live view, counts them). The ratings come from the gauntlet games, which 
 
 from __future__ import annotations
 
+import copy
 import json
 import time
 from collections.abc import Callable
@@ -30,7 +32,7 @@ import torch
 
 from ..algos import get_learner
 from ..algos.joint import JointLearner
-from ..arena.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces, plan_layout
+from ..arena.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces
 from ..errors import MarlError, NonFiniteError
 from ..league.ledger import KIND_CODES
 from ..league.store import League, PlayerRow
@@ -42,6 +44,7 @@ from ..signals import clear_stop, signals_held, stoppable
 from .config import TrainConfig, learner_setup, tensorboard_writer
 from .curriculum import Curriculum
 from .evaluator import Evaluator, GauntletJob, JobDone
+from .league_roles import LeagueRoles
 from .lock import claim, write_lock
 from .opponents import Opponents
 from .progress import SnapshotRecord, Standing, TrainReport
@@ -103,14 +106,20 @@ class Trainer:
         self.time_limit = spec.max_steps(game_cfg)  # the most steps a training game lasts (None: not declared)
 
         plan = cfg.seat_plan()
-        layout = plan_layout(plan, cfg.games, cfg.agents, cfg.league_games)
-        self.names = _learner_names(spec.agents, plan.home, cfg.sharing)
+        layout = cfg.layout(plan)
+        self.names = cfg.league.names() if cfg.league else _learner_names(spec.agents, plan.home, cfg.sharing)
         roles = spec.seat_roles(game_cfg)
         seat_roles = roles if len(set(roles)) > 1 else None  # each seat's role, where seats differ
         self.spaces = learner_spaces(spec, spec.seat_spaces(game_cfg), layout, seat_roles)
         learned = learner_roles(layout, seat_roles)  # the role each learner learns (None: one role)
         torch.manual_seed(cfg.seed)
         self.learners, saved = self._learners(layout, learned)
+        self.roles: LeagueRoles | None = None  # a league's roles (--league alphastar), each learner's first state
+        first = None
+        if cfg.league is not None:
+            shares = [float((layout == i).any(axis=0).mean()) for i in range(len(self.learners))]
+            self.roles = LeagueRoles(cfg.league, shares, np.random.default_rng([cfg.seed, 1]))
+            first = [copy.deepcopy(learner.state_dict()) for learner in self.learners]
         self.state = RunState(latest=[0] * len(self.learners))
         learner_ids = [f"{cfg.run}/{n}" for n in self.names]
         # The 'latest' opponent of learner i: the next learner's live network (with one learner, itself), sampling;
@@ -122,7 +131,7 @@ class Trainer:
         self.opponents = Opponents(league, cfg, self.bot_ids, n_seats=len(spec.agents), home=plan.home,
                                    learner_of_game=layout.max(axis=0), seat_roles=seat_roles,
                                    opponent_slots=np.flatnonzero(layout.ravel() == OPPONENT), live=live,
-                                   device=str(self.device))
+                                   device=str(self.device), roles=self.roles, names=self.names)
         self.learner_ids = learner_ids
         curriculum = Curriculum(cfg.curriculum, spec.name, spec.live_options)
         teacher = load_teacher(league, cfg, self.spaces, str(self.device))
@@ -142,7 +151,7 @@ class Trainer:
         self.match_id = league.create_match(spec.name, "training", {"run": cfg.run, "env_options": cfg.env_options})
         self.moments = SnapshotMoments(league, cfg, spec, self.run_dir, learners=self.learners, names=self.names,
                                        saved=saved, state=self.state, games=self.rollouts, opponents=self.opponents,
-                                       device=self.device)
+                                       device=self.device, roles=self.roles, first=first)
         self.evaluator: Evaluator | RemoteEvaluator | None = None  # set while training
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
         self.eval_games = 0  # games they played
@@ -201,15 +210,15 @@ class Trainer:
         return self.opponents.choose(slots, self.state.steps)
 
     # -- snapshots -------------------------------------------------------------------------------------------
-    def snapshot(self, trigger: str = "steps") -> None:
-        """Take a snapshot moment (:meth:`SnapshotMoments.write`: ``trigger`` is ``start``, ``steps``, ``episodes``
-        or ``final``, which names it), then rate its snapshots (the final ones against every opponent in full: the
-        run's answer rests on them)."""
+    def snapshot(self, trigger: str = "steps", which: list[int] | None = None) -> None:
+        """Take a snapshot moment (:meth:`SnapshotMoments.write`: ``trigger`` is ``start``, ``steps``, ``episodes``,
+        ``roles`` (a league's learners ``which`` whose role's rule says so) or ``final``, which names it), then rate
+        its snapshots (the final ones against every opponent in full: the run's answer rests on them)."""
         cfg, state = self.cfg, self.state
         if state.snapshots and state.snapshot_step == state.steps:
             return  # nothing played since the last snapshot
         with signals_held():  # Ctrl-C or SIGTERM now would cut the moment: they wait until it is whole
-            self.moments.write(trigger)
+            self.moments.write(trigger, which)
         if cfg.eval_games:
             self.evaluator.submit(self._job(state.jobs[-1]))  # type: ignore[union-attr]
         self._collect(self.evaluator.poll())  # type: ignore[union-attr]
@@ -217,6 +226,8 @@ class Trainer:
     def _plan_snapshots(self) -> None:
         """The episodes and steps the next snapshot moment is due at (None: not by that count)."""
         cfg, state = self.cfg, self.state
+        if self.roles is not None:  # a league: each learner's role says when it takes its snapshot
+            return
         self._next_episodes = state.episodes + cfg.snapshot_every if cfg.snapshot_every else None
         if cfg.snapshot_steps:
             self._next_steps = (state.steps // cfg.snapshot_steps + 1) * cfg.snapshot_steps
@@ -232,6 +243,8 @@ class Trainer:
             return "steps"
         if self._next_episodes is not None and state.episodes >= self._next_episodes:
             return "episodes"
+        if self.roles is not None and self.roles.due(state.steps, self.opponents.rates):
+            return "roles"
         return None
 
     def _job(self, job: Job) -> GauntletJob:
@@ -416,7 +429,9 @@ class Trainer:
             if trigger is not None:
                 self._file_games(pending)  # the games played before the snapshot are filed before it
                 pending = []
-                self.snapshot(trigger)
+                due = self.roles.due(state.steps, self.opponents.rates) if self.roles and trigger == "roles" else None
+                if due != []:  # (a league's learners: still due with the games just filed)
+                    self.snapshot(trigger, due)
                 self._plan_snapshots()
         self._file_games(pending)
         if stats and state.steps > line_step:  # the run's last figures, whatever the spacing of the lines

@@ -4,6 +4,8 @@ The :class:`~.matchmaking.Matchmaker` draws an opponent id for each opponent slo
 player, one of the run's snapshots, or :data:`~.matchmaking.LATEST_LEARNER`); :class:`Opponents` turns the ids into
 policies (the snapshots loaded once, then kept), keeps a slot's opponent until the next swap with ``--swap-every``,
 keeps the matchmaker's pool the run's snapshots, and reads each finished game into the win-rate book and the ledger.
+In a league (``--league alphastar``) each learner's role draws its opponents instead (:mod:`.league_roles`), and a
+learner's games against the learners as they are now go into its win-rate book too.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from ..rated.match import load_player
 from ..rated.roles import RoleBook
 from ..results import GameResult
 from .config import TrainConfig
+from .league_roles import LeagueRoles, Past, live, live_learner
 from .matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 
 POLICY_CACHE = 32
@@ -53,11 +56,12 @@ class Opponents:
     ``home``: the learner of each seat when learners hold every seat (its 'latest' opponent, -1 where none does);
     ``learner_of_game``: the learner in each game; ``seat_roles``: each seat's role where seats differ (None: one
     role); ``opponent_slots``: the flat ``seat * games + game`` slots that opponents hold; ``live``: each learner's
-    live policy, the 'latest' opponent."""
+    live policy, the 'latest' opponent; ``roles``: a league's roles (their learners' names are its snapshots')."""
 
     def __init__(self, league: League, cfg: TrainConfig, bot_ids: dict[str, int], *, n_seats: int,
                  home: tuple[int, ...], learner_of_game: np.ndarray, seat_roles: tuple[str, ...] | None,
-                 opponent_slots: np.ndarray, live: list[Policy], device: str) -> None:
+                 opponent_slots: np.ndarray, live: list[Policy], device: str,
+                 roles: LeagueRoles | None = None, names: list[str] | None = None) -> None:
         self.league, self.cfg, self.device = league, cfg, device
         self.n_seats, self.home, self.learner_of_game = n_seats, home, learner_of_game
         self.seat_roles, self.opponent_slots, self.live = seat_roles, opponent_slots, live
@@ -68,12 +72,15 @@ class Opponents:
         self._player_of: dict[str, int] = dict(bot_ids)  # policy id in game results -> league player id
         self._assigned: np.ndarray | None = None  # opponent id per game slot, with --swap-every
         self._next_swap = 0
+        self.roles, self.names = roles, names
 
     def policy(self, pid: int, seat: int, learner: int) -> Policy:
         """The policy of opponent ``pid`` in ``seat`` of a game of ``learner``."""
         if pid == LATEST_LEARNER:  # ML-Agents' "latest model": the learner that holds this seat when learners hold
             home = self.home[seat]  # every seat, as it is now (pong: the other learner; one learner: itself)
             return self.live[home if home >= 0 else learner]
+        if pid <= live(0):  # a league learner as it is now
+            return self.live[live_learner(pid)]  # type: ignore[index]
         return self._policies.get(pid)
 
     def _load(self, pid: int) -> Policy:
@@ -86,6 +93,11 @@ class Opponents:
         the learner that plays that game."""
         ids = np.empty(len(slots), dtype=np.int64)
         learners = self.learner_of_game[slots % self.cfg.games]
+        if self.roles is not None:  # a league: each learner's role draws its opponents
+            for i in np.unique(learners).tolist():
+                mine = learners == i
+                ids[mine] = self.roles.sample(i, int(mine.sum()), self.rates)
+            return ids
         if self.seat_roles is None:
             for i in np.unique(learners).tolist():
                 mine = learners == i
@@ -138,6 +150,9 @@ class Opponents:
         also which of them can play each role (a snapshot only its own)."""
         pool = [p for p in self.league.players(env=env, kind="snapshot") if p.run == self.cfg.run]
         self.matchmaker.set_pool([p.id for p in pool])
+        if self.roles is not None:
+            self.roles.set_pool([Past(p.id, self.names.index(p.meta["learner"])) for p in pool  # type: ignore[union-attr]
+                                 if p.meta.get("learner") in self.names])  # type: ignore[operator]
         if self.seat_roles is not None:
             book = RoleBook(self.league, env)
             self._can_play = {role: {p.id for p in pool if book.roles(p) is None or role in book.roles(p)}
@@ -151,9 +166,13 @@ class Opponents:
         records = []
         for r in finished:
             ids = [learner_players[p] if p in learner_players else self._player_of.get(p, 0) for p in r.players]
+            if self.roles is not None:  # (its own latest snapshot too, which the ledger cannot tell from it)
+                self._league_rates(r, ids, learner_ids)
             if 0 in ids or len(set(ids)) < 2:
                 continue  # the learners among themselves (or a live copy) carry no rating information
             records.append(r.with_players(dict(zip(r.players, ids, strict=True))))
+            if self.roles is not None:
+                continue
             learners = {learner_ids.index(p) for p in r.players if p in learner_ids}
             if len(learners) == 1:  # a learner against the league: its win rate against each opponent (PFSP)
                 (i,) = learners
@@ -163,6 +182,16 @@ class Opponents:
                     self.rates.update(i, opponent, points)
         if records:
             self.league.record_games(match_id, records)
+
+    def _league_rates(self, r: GameResult, ids: list[int], learner_ids: list[str]) -> None:
+        """A league game into the win-rate book of the learner whose game it is: against each opponent, a snapshot
+        by its player id, a learner as it is now by its :func:`~.league_roles.live` id."""
+        i = int(self.learner_of_game[r.index])
+        mine = learner_ids[i]
+        points = r.points_of(mine)
+        for p, q in dict.fromkeys(zip(r.players, ids, strict=True)):
+            if p != mine:
+                self.rates.update(i, live(learner_ids.index(p)) if p in learner_ids else q, points)
 
     def state_dict(self) -> dict[str, Any]:
         """What the run state keeps of the opponents (under the keys it has always had): the matchmaker's generator

@@ -37,6 +37,12 @@ FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "devic
 OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio"}
 """Options that set a key of ``[opponents]``: the option's name, then the key's."""
 
+LEAGUE_FLAGS = {"league_main": "main", "league_main_exploiters": "main_exploiters",
+                "league_league_exploiters": "league_exploiters"}
+"""Options that set a key of ``[league]`` (AlphaStar's roles): the option's name, then the key's."""
+NOT_IN_A_LEAGUE = ("agents", "opponents", "window", "latest_ratio")
+"""Options a league's roles decide instead (its learners, and whom each plays), refused with ``--league``."""
+
 EXECUTOR_OPTIONS = ("executor", "actors", "ray_address", "fragment_steps")
 """Where a run's games are stepped: a session's to say, so a resumed run may move (a cluster's new address, more
 actors, back to this process)."""
@@ -148,12 +154,42 @@ def _apply_flags(settings: dict[str, Any], flags: Mapping[str, Any]) -> None:
             settings[key]["arch"] = {**settings[key]["arch"], "conv": flags["conv"]}
     if "teacher" in flags:
         settings["teacher"]["player"] = flags["teacher"]
+    _apply_league(settings, flags)
+
+
+def _apply_league(settings: dict[str, Any], flags: Mapping[str, Any]) -> None:
+    """``--league alphastar`` (or a ``[league]`` table) and the options that size it; what a league decides itself
+    (its learners, whom each plays) refused when typed, one line each."""
+    from .league_roles import LEAGUE_MODES
+
+    if "league" in flags:
+        if flags["league"] not in LEAGUE_MODES:
+            raise MarlError(f"--league must be one of {', '.join(LEAGUE_MODES)}, not '{flags['league']}'")
+        settings["league"] = settings.get("league") or {}
+    sized = [flag for flag in LEAGUE_FLAGS if flag in flags]
+    if settings.get("league") is None:
+        if sized:
+            raise MarlError(f"--{sized[0].replace('_', '-')} sizes a league of roles: it needs --league alphastar")
+        return
+    for flag in NOT_IN_A_LEAGUE:
+        if flag in flags:
+            raise MarlError(f"--{flag.replace('_', '-')} does not apply with --league alphastar: its learners are its "
+                            "roles (--league-main, --league-main-exploiters, --league-league-exploiters), each "
+                            "drawing its opponents by its role's rule")
+    if not isinstance(settings["league"], dict):
+        raise MarlError(f"[league] must be a table of settings, not {settings['league']!r}")
+    settings["league"] = {**settings["league"], **{key: flags[flag] for flag, key in LEAGUE_FLAGS.items()
+                                                   if flag in flags}}
 
 
 def _drop_game_defaults(settings: dict[str, Any], spec: Any, game_set: Collection[str]) -> None:
     """The game's own defaults for learners on every seat (tennis: one shared network, a share of league games)
     are dropped with fewer learners, where every game is already against the league; typed, they are checked.
     ``game_set``: the settings that hold the game's default (neither typed nor in the config file)."""
+    if settings.get("league") is not None:  # a league seats its own learners, one network each
+        for key in ("sharing", "league_games", "seats"):
+            if key in game_set:
+                settings[key] = {"sharing": "nops", "league_games": 0.0, "seats": ""}[key]
     if "sharing" in game_set and fups_without_partners(spec, settings["agents"], settings["sharing"],
                                                        settings["seats"]):
         settings["sharing"] = "nops"

@@ -8,6 +8,7 @@ generator and win rates, the gauntlets asked for) that continues the run exactly
 from __future__ import annotations
 
 import contextlib
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +23,7 @@ from ..league.store import League
 from ..policies.snapshot_format import SnapshotMeta, save_snapshot
 from ..rated.snapshots import snapshot_relpath
 from .config import TrainConfig
+from .league_roles import LeagueRoles
 from .opponents import Opponents
 from .rollouts import Rollouts
 
@@ -69,14 +71,17 @@ class SavedAs:
 
 
 class SnapshotMoments:
-    """Takes one run's snapshot moments and resumes it from the last (see :meth:`write`)."""
+    """Takes one run's snapshot moments and resumes it from the last (see :meth:`write`). In a league
+    (``--league``), ``roles`` and each learner's ``first`` state (its ``state_dict`` as it was built), which a
+    restart at a snapshot returns it to; both are part of the run state."""
 
     def __init__(self, league: League, cfg: TrainConfig, spec: EnvSpec, run_dir: Path, *, learners: list[Any],
                  names: list[str], saved: SavedAs, state: RunState, games: Rollouts, opponents: Opponents,
-                 device: Any) -> None:
+                 device: Any, roles: LeagueRoles | None = None, first: list[dict[str, Any]] | None = None) -> None:
         self.league, self.cfg, self.spec, self.run_dir = league, cfg, spec, run_dir
         self.learners, self.names, self.saved, self.state = learners, names, saved, state
         self.games, self.opponents, self.device = games, opponents, device
+        self.roles, self.first = roles, first
 
     @property
     def state_path(self) -> Path:
@@ -86,10 +91,12 @@ class SnapshotMoments:
     def pending_path(self) -> Path:
         return self.run_dir / "state.pt.pending"
 
-    def base_name(self, trigger: str) -> str:
+    def base_name(self, trigger: str, which: list[int] | None = None) -> str:
         """The name of this snapshot moment (``-<learner>`` is added per learner): by the training step it stands
         for (``s0``, ``s1M``, ``s2M``, ... ``s6M``: every ``--snapshot-steps``, named by the schedule, and the final
-        one by the budget), or, taken every ``--snapshot-every`` episodes, by the episodes finished (``ep90``)."""
+        one by the budget; a league role's, ``roles``, by the step it was taken at), or, taken every
+        ``--snapshot-every`` episodes, by the episodes finished (``ep90``). ``which``: the learners it saves (None:
+        every one)."""
         cfg, steps = self.cfg, self.state.steps
         if trigger == "episodes":
             base = f"ep{self.state.episodes}"
@@ -99,14 +106,20 @@ class SnapshotMoments:
             base = "s" + step_label(cfg.steps)
         else:  # the start, or the end of a budget in minutes
             base = "s" + step_label(steps)
-        first = base if len(self.names) == 1 else f"{base}-{self.names[0]}"
-        if f"{cfg.run}/{first}" in self.state.snapshots:  # two moments that round to one label: the exact count
+        taken = {f"{cfg.run}/{n}" for n in self.moment_names(base, which)}
+        if taken & set(self.state.snapshots):  # two moments that round to one label: the exact count
             base = f"s{steps}" if not base.startswith("ep") else f"{base}.{steps}"  # decides
         return base
 
-    def write(self, trigger: str) -> None:
-        """Save and register every learner's snapshot, named for ``trigger`` (:meth:`base_name`), and ask for its
-        gauntlet (with rating games on).
+    def moment_names(self, base: str, which: list[int] | None = None) -> list[str]:
+        """The snapshot names of a moment called ``base`` of the learners ``which`` (None: every one)."""
+        which = list(range(len(self.names))) if which is None else which
+        return [base if len(self.names) == 1 else f"{base}-{self.names[i]}" for i in which]
+
+    def write(self, trigger: str, which: list[int] | None = None) -> None:
+        """Save and register the snapshot of every learner (``which``: only these), named for ``trigger``
+        (:meth:`base_name`), and ask for its gauntlet (with rating games on). A league's role moment (``roles``)
+        then restarts the learners its rule restarts (:meth:`LeagueRoles.taken`), before the run state is written.
 
         One moment is one unit, whatever instant a kill comes at: the files are written first (each to a temporary
         name, then renamed), then the run state as it will be once they are registered (``state.pt.pending``),
@@ -115,20 +128,26 @@ class SnapshotMoments:
         files and pending state); killed after it, the pending state is the moment's, complete.
         """
         cfg, state = self.cfg, self.state
-        base = self.base_name(trigger)
-        names = [base if len(self.names) == 1 else f"{base}-{n}" for n in self.names]
-        rows = [self._save(i, learner, name) for i, (learner, name) in enumerate(zip(self.learners, names,
-                                                                                      strict=True))]
+        which = list(range(len(self.learners))) if which is None else list(which)
+        names = self.moment_names(self.base_name(trigger, which), which)
+        rows = [self._save(i, self.learners[i], name) for i, name in zip(which, names, strict=True)]
         full = [f"{cfg.run}/{n}" for n in names]
+        latest = [self.league.get_player(p).full_name if p else "" for p in state.latest]
+        for i, name in zip(which, full, strict=True):
+            latest[i] = name
         jobs = list(state.jobs)
         if cfg.eval_games:
             jobs.append((tuple(full), 10_000_000 + 10_000 * len(state.snapshots), trigger == "final"))
-        self.write_state(self.pending_path, latest=full, snapshots=state.snapshots + full, jobs=jobs,
+        if self.roles is not None and trigger == "roles":
+            for i in self.roles.taken(which, state.steps):  # the snapshot is saved: now the restart
+                self.learners[i].load_state_dict(self.first[i])  # type: ignore[index]
+        self.write_state(self.pending_path, latest=latest, snapshots=state.snapshots + full, jobs=jobs,
                          snapshot_step=state.steps, snapshot_episode=state.episodes)
         registered = self.league.add_snapshots(rows)  # the moment exists from here on
         files.publish(self.pending_path, self.state_path)
         state.snapshot_episode, state.snapshot_step = state.episodes, state.steps
-        state.latest = [r.id for r in registered]
+        for i, row in zip(which, registered, strict=True):
+            state.latest[i] = row.id
         state.snapshots += full
         state.jobs = jobs
         self.opponents.set_pool(self.spec.name)
@@ -150,6 +169,8 @@ class SnapshotMoments:
         row_meta = {"weights_sha256": meta.weights_sha256, "learner": self.names[i]}
         if saved.roles[i] is not None:  # the seats it plays (a game whose seats hold several roles)
             row_meta["role"] = saved.roles[i]
+        if self.roles is not None:  # its league role (--league)
+            row_meta["league_role"] = self.roles.roles[i]
         return dict(env=self.spec.name, run=cfg.run, name=name, path=rel,  # the store hashes the file
                     step=state.steps, episode=state.episodes, algo=cfg.algo, parent_id=latest or None, meta=row_meta)
 
@@ -169,6 +190,8 @@ class SnapshotMoments:
             "matchmaker": opponents["matchmaker"], "rates": opponents["rates"],
             "jobs": [[list(names), seed, full] for names, seed, full in jobs],
         }
+        if self.roles is not None:
+            saved.update(roles=json.dumps(self.roles.state_dict()), first=self.first)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         with files.atomic_write(path) as f:
             torch.save(saved, f)
@@ -229,6 +252,11 @@ class SnapshotMoments:
         state.snapshot_episode, state.snapshot_step = int(saved["snapshot_episode"]), int(saved["snapshot_step"])
         state.elapsed = float(saved["elapsed"])
         self.opponents.load_state_dict(saved, self.spec.name)
+        if self.roles is not None:
+            if "roles" not in saved or "first" not in saved:
+                raise MarlError(f"{self.state_path}: the run state has no league roles to resume")
+            self.roles.load_state_dict(json.loads(saved["roles"]))
+            self.first = list(saved["first"])
         state.jobs = [(tuple(names), int(seed), bool(full)) for names, seed, full in saved["jobs"]]
         state.resumes = int(saved["resumes"]) + 1
         self.games.next_seed = int(saved["next_seed"]) + (state.resumes << 40)  # a seed range of its own
