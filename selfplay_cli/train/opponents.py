@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import json
 from collections import OrderedDict
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 
-from ..league.store import League
+from ..league.store import League, LeagueError
 from ..policies import Policy
 from ..rated.match import load_player
 from ..rated.roles import RoleBook
@@ -25,6 +26,25 @@ from .matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 POLICY_CACHE = 32
 """Opponent snapshots kept loaded, the most recently drawn (a run's pool is its last ``--window`` snapshots): memory
 stays flat however many snapshots the league holds. A game keeps the policy it started with."""
+
+
+def fixed_opponents(league: League, env: str, names: Iterable[str], bot_ids: dict[str, int]) -> dict[str, int]:
+    """The league players among ``names`` (``[opponents] bots``) that are not scripted players of the game, by id:
+    a snapshot named by its full name (``run/name``) is drawn with its probability as a bot is, and plays as it is
+    rated (``marl exploit`` trains a best response against such a fixed target). A name the league does not hold
+    is left to the matchmaker's one-line refusal."""
+    from ..rated.names import resolve
+
+    out = {}
+    for name in names:
+        if name in bot_ids:
+            continue
+        try:
+            row = resolve(league, name, env)
+        except LeagueError:
+            continue
+        out[name] = row.id
+    return out
 
 
 class PolicyCache:
@@ -77,7 +97,12 @@ class Opponents:
         return self._policies.get(pid)
 
     def _load(self, pid: int) -> Policy:
-        policy = load_player(self.league, self.league.get_player(pid), device=self.device, greedy=False, seed=pid)
+        """Opponent ``pid`` as a policy: a pool snapshot sampling from its policy (diverse games), a player the
+        config names in ``bots`` (a scripted player, or a fixed league player: ``marl exploit``'s target) as it
+        plays when rated."""
+        named = pid in self.matchmaker.bot_ids.values()
+        policy = load_player(self.league, self.league.get_player(pid), device=self.device,
+                             greedy=None if named else False, seed=pid)
         self._player_of[policy.id] = pid
         return policy
 
