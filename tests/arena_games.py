@@ -13,8 +13,12 @@ that keep the game contract directly, so every result can be worked out by hand)
 - ``arena-sides4``: two-sides, 4 seats, sides (0, 1) against (2, 3), Discrete(3) actions; 3 steps, each seat scores
   its action.
 
+- ``arena-rps``: two-sides, 2 seats acting together, Discrete(3): rock-paper-scissors, one throw a game (0 rock, 1
+  paper, 2 scissors; paper beats rock, scissors paper, rock scissors): the winner scores +1, the loser -1.
+
 Each game has scripted players: ``high`` and ``low`` (and ``mid`` for arena-coop2), constant or, in arena-seq2, the
-highest / lowest number still free.
+highest / lowest number still free; arena-rps has ``rock``, which always throws rock (its counter: paper, every
+time).
 """
 
 from __future__ import annotations
@@ -155,6 +159,19 @@ class SidesCore(_Core):
         return rewards
 
 
+class RPSCore(_Core):
+    def __init__(self, n: int, cfg: Any) -> None:
+        super().__init__(n, 2, 1)
+
+    def step(self, actions: Any) -> np.ndarray:
+        a = np.stack([np.asarray(actions[s]) for s in range(2)]).astype(np.int64)
+        live = self.running
+        first = ((a[0] - a[1]) % 3 == 1).astype(np.float64) - ((a[1] - a[0]) % 3 == 1)
+        rewards = self._advance(live, np.stack([first, -first]))
+        self.terminated |= live & (self.steps >= self.length)
+        return rewards
+
+
 def _const(action: Any) -> Any:
     return lambda obs, rng: np.repeat(np.asarray(action)[None], len(obs), axis=0)
 
@@ -190,6 +207,7 @@ SPECS = {
                                 {"high": _free(True), "low": _free(False)}, turns="sequential", masked=True),
     "arena-sides4": lambda: _spec("arena-sides4", SidesCore, 4, 2, spaces.Discrete(3),
                                   {"high": _const(2), "low": _const(0)}, sides=((0, 1), (2, 3))),
+    "arena-rps": lambda: _spec("arena-rps", RPSCore, 2, 2, spaces.Discrete(3), {"rock": _const(0)}),
 }
 
 

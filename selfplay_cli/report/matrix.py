@@ -325,3 +325,20 @@ def write_matrix_png(report: MatrixReport, path: str | Path) -> Path:
                  f"{report.min_games} games)", fontsize=10)
     fig.colorbar(im, ax=ax, shrink=0.7, label="score")
     return save_png(fig, path)
+
+
+def nash_mixture(league: League, run: str, top: int = 50, min_games: int = 8) -> list[tuple[str, float]]:
+    """The Nash mixture of run ``run``'s players (its snapshots and the game's scripted players) as ``[(name,
+    weight)]``, the weights of :func:`build_matrix`'s ``nash`` over its measured sub-game (the members of weight 0
+    left out): what ``marl exploit --vs-mixture nash --run RUN`` trains against. A :class:`LeagueError` when the run
+    has no measured sub-game of two players or more."""
+    report = build_matrix(league, top=top, run=run, min_games=min_games)
+    if report.nash is None:
+        raise LeagueError(f"run '{run}' has no Nash mixture yet: fewer than two of its players have met in {min_games} "
+                          "games or more (marl league matrix --run shows the pairs)")
+    out = []
+    for k in report.nash.support:
+        player = report.players[report.nash_players[k]]
+        row = league.get_player(player.player_id)
+        out.append((row.name if row.is_bot else row.full_name, float(report.nash.mixture[k])))
+    return out

@@ -35,7 +35,7 @@ from .league_roles import LeagueConfig
 from .matchmaking import MatchmakerConfig
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
-DICT_SETTINGS = ("env_options", "curriculum")  # tables checked by the game, not by the type of a field
+DICT_SETTINGS = ("env_options", "curriculum", "snapshot_meta")  # tables checked by the game, not by the type of a field
 EVAL_MODES = ("local", "inline", "remote", "ray")
 """Who plays a run's gauntlets (``--eval``): a worker process beside training, the training process itself, the
 league's workers (:mod:`selfplay_cli.train.evaluator`, :mod:`selfplay_cli.train.remote`), or queue workers on Ray
@@ -162,6 +162,8 @@ class TrainConfig:
     curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)
     teacher: TeacherConfig = field(default_factory=TeacherConfig)  # kickstarting: a player the learners imitate
     league: LeagueConfig | None = None  # AlphaStar's league roles (--league alphastar, a [league] table); None: off
+    snapshot_meta: dict[str, Any] = field(default_factory=dict)  # entries of every snapshot row's meta (marl exploit's
+    # best response: league_role = "exploiter", target)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
     sac: SACConfig = field(default_factory=SACConfig)
@@ -172,6 +174,8 @@ class TrainConfig:
         check_ranges(self)
         if self.games < 2:
             raise MarlError(f"--games must be at least 2, not {self.games}")
+        if not isinstance(self.snapshot_meta, dict):
+            raise MarlError(f"snapshot_meta must be a table, not {self.snapshot_meta!r}")
         resolve_device(self.device)  # an unknown or unavailable device fails before anything is written
         if self.tensorboard:
             tensorboard_writer(None)  # fails now, with the install hint, rather than after the run is created

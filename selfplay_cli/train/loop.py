@@ -46,7 +46,7 @@ from .curriculum import Curriculum
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .league_roles import LeagueRoles
 from .lock import claim, write_lock
-from .opponents import Opponents
+from .opponents import Opponents, fixed_opponents
 from .progress import SnapshotRecord, Standing, TrainReport
 from .ray_rollouts import OFF_POLICY_FRAGMENT, RayRollouts
 from .remote import RemoteEvaluator
@@ -103,6 +103,7 @@ class Trainer:
         self.variant = variant_key(spec.name, cfg.env_options)  # where its games are rated: the run's own variant
         league.ensure_bots(spec.name, league_bots(spec))
         self.bot_ids = {p.name: p.id for p in league.players(env=spec.name, kind="bot")}
+        self.bot_ids.update(fixed_opponents(league, spec.name, cfg.opponents.bots, self.bot_ids))
         self.time_limit = spec.max_steps(game_cfg)  # the most steps a training game lasts (None: not declared)
 
         plan = cfg.seat_plan()

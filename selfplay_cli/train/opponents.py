@@ -12,11 +12,12 @@ from __future__ import annotations
 
 import json
 from collections import OrderedDict
+from collections.abc import Iterable
 from typing import Any
 
 import numpy as np
 
-from ..league.store import League
+from ..league.store import League, LeagueError
 from ..policies import Policy
 from ..rated.match import load_player
 from ..rated.roles import RoleBook
@@ -28,6 +29,41 @@ from .matchmaking import LATEST_LEARNER, Matchmaker, WinRates
 POLICY_CACHE = 32
 """Opponent snapshots kept loaded, the most recently drawn (a run's pool is its last ``--window`` snapshots): memory
 stays flat however many snapshots the league holds. A game keeps the policy it started with."""
+
+
+def fixed_opponents(league: League, env: str, names: Iterable[str], bot_ids: dict[str, int]) -> dict[str, int]:
+    """The league players among ``names`` (``[opponents] bots``) that are not scripted players of the game, by id:
+    a snapshot named by its full name (``run/name``) is drawn with its probability as a bot is, and plays as it is
+    rated (``marl exploit`` trains a best response against such a fixed target). A name the league does not hold
+    is left to the matchmaker's one-line refusal."""
+    from ..rated.names import resolve
+
+    out = {}
+    for name in names:
+        if name in bot_ids:
+            continue
+        try:
+            row = resolve(league, name, env)
+        except LeagueError:
+            continue
+        out[name] = row.id
+    return out
+
+
+def fixed_teams(league: League, cfg: TrainConfig, bot_ids: dict[str, int]) -> dict[int, tuple[int, ...]]:
+    """The fixed opponents of ``[opponents] bots`` that are per-seat learners' snapshots whose whole team is fixed
+    too: each member's id -> its team's ids in seat order."""
+    from ..rated.names import teammates
+
+    agents = cfg.game().agents
+    out: dict[int, tuple[int, ...]] = {}
+    fixed = {bot_ids[name] for name in cfg.opponents.bots if name in bot_ids}
+    for pid in fixed:
+        row = league.get_player(pid)
+        team = teammates(league, row, agents) if row.kind == "snapshot" else None
+        if team is not None and all(m.id in fixed for m in team):
+            out[pid] = tuple(m.id for m in team)
+    return out
 
 
 class PolicyCache:
@@ -71,6 +107,7 @@ class Opponents:
         self._policies = PolicyCache(self._load)
         self._player_of: dict[str, int] = dict(bot_ids)  # policy id in game results -> league player id
         self._assigned: np.ndarray | None = None  # opponent id per game slot, with --swap-every
+        self._team_of = fixed_teams(league, cfg, bot_ids)  # a fixed per-seat snapshot -> its team, seat by seat
         self._next_swap = 0
         self.roles, self.names = roles, names
 
@@ -84,7 +121,12 @@ class Opponents:
         return self._policies.get(pid)
 
     def _load(self, pid: int) -> Policy:
-        policy = load_player(self.league, self.league.get_player(pid), device=self.device, greedy=False, seed=pid)
+        """Opponent ``pid`` as a policy: a pool snapshot sampling from its policy (diverse games), a player the
+        config names in ``bots`` (a scripted player, or a fixed league player: ``marl exploit``'s target) as it
+        plays when rated."""
+        named = pid in self.matchmaker.bot_ids.values()
+        policy = load_player(self.league, self.league.get_player(pid), device=self.device,
+                             greedy=None if named else False, seed=pid)
         self._player_of[policy.id] = pid
         return policy
 
@@ -102,13 +144,22 @@ class Opponents:
             for i in np.unique(learners).tolist():
                 mine = learners == i
                 ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates)
-            return ids
+            return self._own_seats(ids, slots)
         roles = np.asarray(self.seat_roles, dtype=object)[slots // self.cfg.games]
         for i in np.unique(learners).tolist():  # a seat's opponents: the run's snapshots of the seat's role
             for role in dict.fromkeys(roles[learners == i].tolist()):
                 mine = (learners == i) & (roles == role)
                 ids[mine] = self.matchmaker.sample(i, int(mine.sum()), self.rates, among=self._can_play.get(role, ()))
-        return ids
+        return self._own_seats(ids, slots)
+
+    def _own_seats(self, ids: np.ndarray, slots: np.ndarray) -> np.ndarray:
+        """A fixed team of per-seat snapshots holds each seat with its own member: a member drawn for another seat
+        gives it to the teammate that learned it (``marl exploit`` of a team)."""
+        if not self._team_of:
+            return ids
+        seats = (slots // self.cfg.games).tolist()
+        return np.array([self._team_of[i][s] if i in self._team_of else i for i, s in zip(ids.tolist(), seats,
+                                                                                         strict=True)], dtype=np.int64)
 
     def _assignment(self, steps: int) -> np.ndarray:
         """--swap-every: the opponent of every game slot, drawn afresh when a swap is due."""

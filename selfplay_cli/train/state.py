@@ -166,7 +166,7 @@ class SnapshotMoments:
                             seat=self.names[i] if len(self.names) > 1 else None, role=saved.roles[i],
                             extra={"learner": self.names[i], **({"joint": saved.joint} if saved.joint else {})})
         meta = save_snapshot(self.league.home / rel, learner.net, meta)  # type: ignore[operator]
-        row_meta = {"weights_sha256": meta.weights_sha256, "learner": self.names[i]}
+        row_meta = {**cfg.snapshot_meta, "weights_sha256": meta.weights_sha256, "learner": self.names[i]}
         if saved.roles[i] is not None:  # the seats it plays (a game whose seats hold several roles)
             row_meta["role"] = saved.roles[i]
         if self.roles is not None:  # its league role (--league)
