@@ -37,6 +37,7 @@ from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
 from ..policies.bots import league_bots
 from ..policies.network import resolve_device
+from ..rated.gauntlet import ALL_OLDER
 from ..results import COOPERATIVE, GameResult
 from ..signals import clear_stop, signals_held, stoppable
 from .config import TrainConfig, learner_setup, tensorboard_writer
@@ -238,7 +239,9 @@ class Trainer:
         """The gauntlet of a moment's snapshots (by name: the run state names them before they have ids)."""
         names, first_seed, full = job
         ids = tuple(self.moments.player_id(n) for n in names)
-        return GauntletJob(ids, first_seed, self.cfg.eval_games, self.cfg.eval_older, full=full,
+        # --opponents nash: every earlier snapshot, so the run's payoff matrix is whole and its mixture over them all
+        older = ALL_OLDER if self.cfg.opponents.mode == "nash" else self.cfg.eval_older
+        return GauntletJob(ids, first_seed, self.cfg.eval_games, older, full=full,
                            playoff=self.cfg.eval_playoff if full else 0)
 
     def _collect(self, done: list[JobDone]) -> None:
@@ -252,6 +255,8 @@ class Trainer:
             self.records = self._records([self.league.get_player(i) for i in d.job.snapshot_ids])
             if self.on_progress:
                 self.on_progress({"event": "snapshot", "records": self.records, "standing": self.standing()})
+        if done:  # new rated games: --opponents nash solves its mixture again
+            self.opponents.resolve_nash()
 
     def _records(self, new: list[PlayerRow]) -> list[SnapshotRecord]:
         """Each new snapshot's record against the scripted players and its fitted rating, from the ledger."""
@@ -307,10 +312,11 @@ class Trainer:
                 **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()}}
         for rec in self.records:
             line.update({f"eval/{rec.learner}/{bot}": round(rec.score(wdl), 4) for bot, wdl in rec.vs.items()})
+        line.update(self.opponents.nash_metrics())
         metrics.write(json.dumps(line) + "\n")
         if board is not None:
             for key, value in line.items():
-                if key != "step":
+                if key != "step" and not isinstance(value, dict):  # (scalars only: nash/weights is a dict)
                     board.add_scalar(key, value, global_step=steps)
 
     def _file_games(self, finished: list[GameResult]) -> None:
@@ -370,7 +376,7 @@ class Trainer:
                            session_seconds=session, train_seconds=self._train_seconds(),
                            session_eval_games=self.eval_games,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
-                           rating_left=len(state.jobs), **self._best())
+                           rating_left=len(state.jobs), nash=self._nash(), **self._best())
 
     def _play(self, start: float, metrics: TextIO, board: Any) -> None:
         """The games and updates until the budget is spent (the run's clock started at ``start``): a metrics line
@@ -466,6 +472,14 @@ class Trainer:
             snapshots=len(self.state.snapshots), rated=len(self.state.snapshots) - pending if cfg.eval_games else 0,
             newest=tuple(self.records) if cfg.eval_games else (), session_steps=session_steps,
             steps_per_second=rate, remaining=self._remaining(rate), ended=self._trained is not None)
+
+    def _nash(self) -> dict[str, float] | None:
+        """``--opponents nash``: the run's Nash mixture as the ledger has it at the end (full name -> weight); None
+        in other modes, or without one."""
+        if self.cfg.opponents.mode != "nash":
+            return None
+        self.opponents.resolve_nash()
+        return None if self.opponents.nash is None else self.opponents.nash.by_name()
 
     def _train_seconds(self) -> float:
         """Seconds this process has trained (all of it once training has ended), rating games played inline left

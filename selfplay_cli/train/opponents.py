@@ -4,6 +4,9 @@ The :class:`~.matchmaking.Matchmaker` draws an opponent id for each opponent slo
 player, one of the run's snapshots, or :data:`~.matchmaking.LATEST_LEARNER`); :class:`Opponents` turns the ids into
 policies (the snapshots loaded once, then kept), keeps a slot's opponent until the next swap with ``--swap-every``,
 keeps the matchmaker's pool the run's snapshots, and reads each finished game into the win-rate book and the ledger.
+With ``--opponents nash`` it also keeps the matchmaker's Nash mixture, solved again from the ledger
+(:func:`~selfplay_cli.rated.meta_nash.run_nash`) whenever the pool changes and whenever gauntlets finish: only rated
+games change the matrix, and solving it is a small linear program, so not at every game.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import numpy as np
 from ..league.store import League
 from ..policies import Policy
 from ..rated.match import load_player
+from ..rated.meta_nash import RunNash, run_nash
 from ..rated.roles import RoleBook
 from ..results import GameResult
 from .config import TrainConfig
@@ -68,6 +72,9 @@ class Opponents:
         self._player_of: dict[str, int] = dict(bot_ids)  # policy id in game results -> league player id
         self._assigned: np.ndarray | None = None  # opponent id per game slot, with --swap-every
         self._next_swap = 0
+        self.nash: RunNash | None = None  # --opponents nash: the mixture drawn from, as last solved
+        self.nash_step: int | None = None  # ... and the run's step then (None: before its first game)
+        self._steps: int | None = None  # the run's step at the last draw
 
     def policy(self, pid: int, seat: int, learner: int) -> Policy:
         """The policy of opponent ``pid`` in ``seat`` of a game of ``learner``."""
@@ -110,6 +117,7 @@ class Opponents:
         """What rollout actors draw their games' opponents from (:class:`~.shards.ShardOpponents`), the run at
         ``steps``: with --swap-every the opponent id of every game slot; otherwise, per learner and seat role (None:
         one role), the matchmaker's probabilities over opponent ids as the pool and the win rates stand now."""
+        self._steps = steps
         if self.cfg.swap_every:
             return {"assigned": self._assignment(steps).copy()}
         draws: dict[tuple[int, str | None], dict[int, float]] = {}
@@ -128,6 +136,7 @@ class Opponents:
         """Opponents for the opponent ``slots`` of the games starting now, the run at ``steps``, one each: drawn afresh
         for every game, or with --swap-every kept per slot until the next swap (ML-Agents' swap_steps, counted in
         game steps)."""
+        self._steps = steps
         ids = self._assignment(steps)[slots] if self.cfg.swap_every else self._draw(slots)
         n = self.cfg.games
         return [self.policy(int(i), int(slot) // n, int(self.learner_of_game[slot % n]))
@@ -142,6 +151,30 @@ class Opponents:
             book = RoleBook(self.league, env)
             self._can_play = {role: {p.id for p in pool if book.roles(p) is None or role in book.roles(p)}
                               for role in set(self.seat_roles)}
+        self.resolve_nash()
+
+    def resolve_nash(self) -> None:
+        """``--opponents nash``: solve the run's Nash mixture again from the ledger's rated games and draw from it
+        (nothing in other modes)."""
+        cfg = self.cfg.opponents
+        if cfg.mode != "nash":
+            return
+        self.nash = run_nash(self.league, self.cfg.run, payoff=cfg.nash_payoff)
+        self.nash_step = self._steps
+        self.matchmaker.set_mixture(None if self.nash is None else self.nash.weights)
+
+    def nash_metrics(self) -> dict[str, Any]:
+        """The mixture drawn from, for a metrics line: ``nash/support`` (snapshots with a positive weight),
+        ``nash/over`` (snapshots it was solved over), ``nash/games`` (rated games it was solved from),
+        ``nash/solved_step`` and ``nash/weights`` (full name -> weight); before the first mixture, a support of 0 and
+        no weights (the draws are uniform over the pool then); nothing in other modes."""
+        if self.cfg.opponents.mode != "nash":
+            return {}
+        n = self.nash
+        return {"nash/support": len(n.support) if n else 0, "nash/over": len(n.over) if n else 0,
+                "nash/games": n.games if n else 0,
+                "nash/solved_step": self.nash_step if self.nash_step is not None else 0,
+                "nash/weights": {name: round(w, 6) for name, w in n.by_name().items()} if n else {}}
 
     def file_games(self, finished: list[GameResult], learner_players: dict[str, int], match_id: int) -> None:
         """File finished training games in the ledger (under ``match_id``), each learner as the player of its
