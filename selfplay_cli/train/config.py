@@ -172,6 +172,9 @@ class TrainConfig:
                             f"seat-swapped pairs), not {self.eval_games}")
         if self.eval_older < 0:
             raise MarlError(f"--eval-older must not be negative, not {self.eval_older}")
+        if self.opponents.mode == "nash" and not self.eval_games:
+            raise MarlError("--opponents nash draws from the Nash mixture of the run's rated games: it needs "
+                            "--eval-games above 0")
         if self.eval_playoff < 0:
             raise MarlError(f"--eval-playoff must not be negative, not {self.eval_playoff}")
         if self.eval not in EVAL_MODES:
