@@ -12,12 +12,12 @@ import pytest
 from cli_helpers import run, run_json
 from scipy.stats import chisquare
 
-from selfplay_cli.league.pairs import pair_payoffs
+from selfplay_cli.league.pairs import PAYOFFS, pair_payoffs
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.rated.meta_nash import nash_mixture, run_nash
 from selfplay_cli.report.matrix import build_matrix
 from selfplay_cli.results import GameResult
-from selfplay_cli.train.matchmaking import Matchmaker, MatchmakerConfig, WinRates
+from selfplay_cli.train.matchmaking import NASH_PAYOFFS, Matchmaker, MatchmakerConfig, WinRates
 
 ENV = "pong"
 KUHN = "openspiel:kuhn_poker"
@@ -127,6 +127,7 @@ def test_payoff_in_score_units_gives_another_mixture(league: League) -> None:
     assert by_score.to_json()["nash"]["payoff"] == "score" and names  # the players are the same either way
     with pytest.raises(LeagueError, match="payoff"):
         run_nash(league, "r", payoff="chips")
+    assert NASH_PAYOFFS == PAYOFFS  # (the matchmaker's names of them, which imports nothing of the league)
 
 
 def test_a_nash_run_through_the_cli_measures_every_pair_and_shows_its_mixture(tmp_path: Path, capsys) -> None:

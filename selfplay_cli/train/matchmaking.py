@@ -63,7 +63,6 @@ import numpy as np
 import numpy.typing as npt
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.pairs import PAYOFFS as NASH_PAYOFFS
 
 if TYPE_CHECKING:  # pragma: no cover
     from selfplay_cli.league.store import League
@@ -86,6 +85,10 @@ LATEST_LEARNER = -1
 
 MODES = ("self", "latest", "uniform", "pfsp", "nash")
 """Opponent selection modes of :class:`MatchmakerConfig`."""
+
+NASH_PAYOFFS = ("points", "score")
+"""Units of the ``nash`` mode's meta-game: :data:`selfplay_cli.league.pairs.PAYOFFS` (named again here: this module
+imports nothing of the league)."""
 
 _SUM_TOL = 1e-9
 _STATE_VERSION = 1
