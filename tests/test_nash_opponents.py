@@ -159,8 +159,8 @@ def test_a_nash_run_through_the_cli_measures_every_pair_and_shows_its_mixture(tm
     lines = [json.loads(s) for s in (home / "runs" / report["run"] / "metrics.jsonl").read_text().splitlines()]
     assert lines and all({"nash/support", "nash/weights", "nash/solved_step"} <= set(line) for line in lines)
     assert lines[0]["nash/weights"] == {f"{report['run']}/s0": 1.0}  # one snapshot: all its weight
-    # (inline rating: the gauntlets up to s8k are in before the last line) solved again over five snapshots
-    assert lines[-1]["nash/over"] == 5 and lines[-1]["nash/games"] == 40 and lines[-1]["nash/solved_step"] > 0
+    # solved again at the moment of s8k, over the snapshots whose gauntlets were in then: s0 to s6k (6 pairs x 4 games)
+    assert lines[-1]["nash/over"] == 4 and lines[-1]["nash/games"] == 24 and lines[-1]["nash/solved_step"] == 8192
     assert sum(lines[-1]["nash/weights"].values()) == pytest.approx(1.0)
 
     code, out, err = run(capsys, "league", "matrix", "--run", report["run"], "--min-games", "1", "--payoff", "score",

@@ -209,6 +209,11 @@ def train(
 
         for line in verdict_lines(report.side_bests or [report.best]):
             console.print("  " + line, markup=False)
+    if report.nash:
+        mixture = ", ".join(f"{name.rpartition('/')[2]} {100 * w:.0f}%" for name, w in report.nash.items())
+        console.print(f"  Nash mixture of the run's snapshots ({cfg.opponents.nash_payoff}): {mixture}; the matrix: "
+                      f"marl league matrix --run {report.run} --min-games 1 --payoff {cfg.opponents.nash_payoff}",
+                      markup=False)
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
     if report.plot is not None and (isinstance(report.plot, Path) or not report.rating_left):  # (none yet: said)
         console.print(f"  rating curves: {report.plot}", markup=False)

@@ -209,6 +209,9 @@ class Trainer:
         cfg, state = self.cfg, self.state
         if state.snapshots and state.snapshot_step == state.steps:
             return  # nothing played since the last snapshot
+        if cfg.opponents.mode == "nash" and state.jobs:  # the earlier moments' gauntlets in first (rarely a wait:
+            # they had a whole interval): the mixture the moment solves is then the same in every run of this seed
+            self._collect(self.evaluator.wait(on_wait=self._waiting))  # type: ignore[union-attr]
         with signals_held():  # Ctrl-C or SIGTERM now would cut the moment: they wait until it is whole
             self.moments.write(trigger)
         if cfg.eval_games:
@@ -255,8 +258,6 @@ class Trainer:
             self.records = self._records([self.league.get_player(i) for i in d.job.snapshot_ids])
             if self.on_progress:
                 self.on_progress({"event": "snapshot", "records": self.records, "standing": self.standing()})
-        if done:  # new rated games: --opponents nash solves its mixture again
-            self.opponents.resolve_nash()
 
     def _records(self, new: list[PlayerRow]) -> list[SnapshotRecord]:
         """Each new snapshot's record against the scripted players and its fitted rating, from the ledger."""
@@ -316,7 +317,7 @@ class Trainer:
         metrics.write(json.dumps(line) + "\n")
         if board is not None:
             for key, value in line.items():
-                if key != "step" and not isinstance(value, dict):  # (scalars only: nash/weights is a dict)
+                if key != "step" and isinstance(value, int | float):  # (numbers only: nash/weights is a dict)
                     board.add_scalar(key, value, global_step=steps)
 
     def _file_games(self, finished: list[GameResult]) -> None:
@@ -478,7 +479,7 @@ class Trainer:
         in other modes, or without one."""
         if self.cfg.opponents.mode != "nash":
             return None
-        self.opponents.resolve_nash()
+        self.opponents.resolve_nash(self.state.steps)
         return None if self.opponents.nash is None else self.opponents.nash.by_name()
 
     def _train_seconds(self) -> float:
