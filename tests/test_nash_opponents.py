@@ -132,10 +132,14 @@ def test_payoff_in_score_units_gives_another_mixture(league: League) -> None:
 
 def test_a_nash_run_through_the_cli_measures_every_pair_and_shows_its_mixture(tmp_path: Path, capsys) -> None:
     home = tmp_path / "league"
-    for wrong, says in ((("--nash-payoff", "chips"), "unknown Nash payoff 'chips' (expected one of points, score)"),
-                        (("--eval-games", "0"), "--opponents nash draws from the Nash mixture of the run's rated "
-                                                "games: it needs --eval-games above 0")):
-        code, _, err = run(capsys, "train", KUHN, "--agents", "1", "--opponents", "nash", *wrong, "--steps", "100",
+    for game, wrong, says in (
+            (KUHN, ("--nash-payoff", "chips"), "unknown Nash payoff 'chips' (expected one of points, score)"),
+            (KUHN, ("--eval-games", "0"), "--opponents nash draws from the Nash mixture of the run's rated games: it "
+                                          "needs --eval-games above 0"),
+            ("tests.games.chase:parallel_env", (),
+             "the seats of tests.games.chase:parallel_env hold different roles (hunter, runner), whose snapshots never "
+             "meet: use --opponents pfsp")):
+        code, _, err = run(capsys, "train", game, "--agents", "1", "--opponents", "nash", *wrong, "--steps", "100",
                            "--home", str(home))
         assert code == 2 and says in err and "Traceback" not in err and not home.exists()
     report = run_json(capsys, "train", KUHN, "--agents", "1", "--opponents", "nash", "--nash-payoff", "score",

@@ -232,6 +232,10 @@ class TrainConfig:
         _check_games(self, seat_spaces)
         layout = plan_layout(plan, self.games, self.agents, self.league_games)
         roles = spec.seat_roles(game)
+        if self.opponents.mode == "nash" and len(set(roles)) > 1:  # (a meta-game per pair of roles: not yet)
+            raise MarlError(f"--opponents nash solves one symmetric meta-game over the run's snapshots, but the seats "
+                            f"of {spec.name} hold different roles ({', '.join(dict.fromkeys(roles))}), whose "
+                            "snapshots never meet: use --opponents pfsp")
         spaces = learner_spaces(spec, seat_spaces, layout, roles if len(set(roles)) > 1 else None)
         learned = {roles[s] for s in range(n_seats) if (layout[s] >= 0).any()}
         foreign = [s for s in range(n_seats) if roles[s] not in learned]
