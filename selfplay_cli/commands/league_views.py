@@ -120,6 +120,9 @@ def matrix_cmd(
     = None,
     min_games: Annotated[int, typer.Option("--min-games", min=1, max=MAX_GAMES, help="Games a pair needs to count "
                                            "as measured (a training run's rating games give 8 per pair).")] = 8,
+    payoff: Annotated[str, typer.Option("--payoff", help="The Nash meta-game's payoff: points (win 1, draw 0.5) "
+                                        "or score (the game's own scores, e.g. poker's chips: PSRO's expected "
+                                        "return).")] = "points",
     out: OutOpt = None,
     home: HomeOpt = None,
     db: DbOpt = None,
@@ -143,7 +146,8 @@ def matrix_cmd(
         else:
             env, variant = shown_variant(league, env, env_option, run)
         with _working("fitting ratings"):
-            report = build_matrix(league, env, top=top, run=run, min_games=min_games, variant=variant)
+            report = build_matrix(league, env, top=top, run=run, min_games=min_games, variant=variant,
+                                  payoff=payoff)
     finally:
         league.close()
     written = write_matrix_png(report, out) if out is not None else None

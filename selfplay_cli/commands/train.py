@@ -110,9 +110,14 @@ def train(
                                                 "(the actors' weights are at most this old); 0: 16. PPO always "
                                                 "collects one rollout a fragment.")] = 0,
     opponents: Annotated[str, typer.Option("--opponents", help="League opponents (--agents 1, or --league-games): "
-                                           "self | latest | uniform | pfsp, from the run's snapshots.")] = "pfsp",
+                                           "self | latest | uniform | pfsp | nash, from the run's snapshots (nash: "
+                                           "PSRO's Nash mixture of all of them, from their rated games, each new "
+                                           "snapshot rated against every earlier one).")] = "pfsp",
     window: Annotated[int, typer.Option("--window", min=1, max=100_000, help="Opponents are drawn from the last N "
-                                        "snapshots (ML-Agents' window).")] = 10,
+                                        "snapshots (ML-Agents' window; not with nash: all of them).")] = 10,
+    nash_payoff: Annotated[str, typer.Option("--nash-payoff", help="--opponents nash: the meta-game's payoff, "
+                                             "points (win 1, draw 0.5) or score (the game's own scores, e.g. "
+                                             "poker's chips: PSRO's expected return).")] = "points",
     latest_ratio: Annotated[float, typer.Option("--latest-ratio", help="Share of league games against the "
                                                 "current learner (two learners: the other one); ML-Agents' "
                                                 "play_against_latest_model_ratio.")]
@@ -216,6 +221,11 @@ def train(
 
         for line in verdict_lines(report.side_bests or [report.best]):
             console.print("  " + line, markup=False)
+    if report.nash:
+        mixture = ", ".join(f"{name.rpartition('/')[2]} {100 * w:.0f}%" for name, w in report.nash.items())
+        console.print(f"  Nash mixture of the run's snapshots ({cfg.opponents.nash_payoff}): {mixture}; the matrix: "
+                      f"marl league matrix --run {report.run} --min-games 1 --payoff {cfg.opponents.nash_payoff}",
+                      markup=False)
     console.print(f"  all snapshots: marl league ladder --run {report.run}", markup=False)
     if report.plot is not None and (isinstance(report.plot, Path) or not report.rating_left):  # (none yet: said)
         console.print(f"  rating curves: {report.plot}", markup=False)

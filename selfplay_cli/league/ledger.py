@@ -111,7 +111,10 @@ class GameTable:
     several seats); ``player_a`` is the first side's player (two-sides), the player of the earlier episode
     (cooperative) or of the lower seat (free-for-all). ``game_id``, ``length`` and ``truncated`` are the game's (a
     cooperative comparison: its later episode's id and length, truncated if either episode was); ``kind`` is the
-    :data:`KIND_CODES` code of the game's kind.
+    :data:`KIND_CODES` code of the game's kind. ``margin_a`` is half of ``player_a``'s score minus ``player_b``'s (the
+    game's own units: chips, goals; a player on several seats: the mean of its seats' scores; cooperative: the two
+    team returns): in a zero-sum game of two seats, exactly ``player_a``'s return. NaN where not known (a table built
+    from rows without it).
     """
 
     game_id: npt.NDArray[np.int64]
@@ -123,10 +126,13 @@ class GameTable:
     length: npt.NDArray[np.int64]
     truncated: npt.NDArray[np.bool_]
     kind: npt.NDArray[np.int8] = field(default=None)  # type: ignore[assignment]
+    margin_a: npt.NDArray[np.float64] = field(default=None)  # type: ignore[assignment]
 
     def __post_init__(self) -> None:
         if self.kind is None:
             object.__setattr__(self, "kind", np.zeros(self.game_id.size, dtype=np.int8))
+        if self.margin_a is None:
+            object.__setattr__(self, "margin_a", np.full(self.game_id.size, np.nan))
     def __len__(self) -> int:
         return int(self.game_id.size)
 
@@ -191,18 +197,21 @@ class GameTable:
 
     @classmethod
     def of_rows(cls, rows: Sequence[tuple]) -> GameTable:
-        """A table of ``(game_id, match_id, player_a, player_b, score_a, seed, length, truncated, kind)`` rows."""
+        """A table of ``(game_id, match_id, player_a, player_b, score_a, seed, length, truncated, kind[, margin_a])``
+        rows (all with the margin or none)."""
         if not rows:
             return cls.empty()
         cols = list(zip(*rows, strict=True))
+        margin = np.asarray(cols[9], dtype=np.float64) if len(cols) > 9 else None
         return cls(game_id=np.asarray(cols[0], dtype=np.int64), match_id=np.asarray(cols[1], dtype=np.int64),
                    player_a=np.asarray(cols[2], dtype=np.int64), player_b=np.asarray(cols[3], dtype=np.int64),
                    score_a=np.asarray(cols[4], dtype=np.float64), seed=np.asarray(cols[5], dtype=np.int64),
                    length=np.asarray(cols[6], dtype=np.int64), truncated=np.asarray(cols[7], dtype=bool),
-                   kind=np.asarray(cols[8], dtype=np.int8))
+                   kind=np.asarray(cols[8], dtype=np.int8), margin_a=margin)
 
 
-_GAME_TABLE_FIELDS = ("game_id", "match_id", "player_a", "player_b", "score_a", "seed", "length", "truncated", "kind")
+_GAME_TABLE_FIELDS = ("game_id", "match_id", "player_a", "player_b", "score_a", "seed", "length", "truncated", "kind",
+                      "margin_a")
 
 
 @dataclass
@@ -454,7 +463,7 @@ class Ledger(Database):
         def work(s: Session) -> tuple[list[tuple], dict[int, int]]:
             matches = _match_rules(s, env, rated, variant)
             special = {mid: r for mid, r in matches.items() if not r.is_default}
-            rows = [(*r, 0) for r in s.execute(_two_seat_query(env, rated)).all()
+            rows = [(*r[:8], 0, 0.5 * (r[8] - r[9])) for r in s.execute(_two_seat_query(env, rated)).all()
                     if r[1] in matches and r[1] not in special]
             if special:
                 rows += _derived_rows(s, env, rated, special)
@@ -664,10 +673,12 @@ def _match_rules(s: Session, env: str | None, rated: bool, variant: str | None =
 
 def _two_seat_query(env: str | None, rated: bool) -> Any:
     """Games of two seats held by two different players, as ``(game, match, seat 0's player, seat 1's player, seat 0's
-    points, seed, length, truncated)``: the whole derivation for games with the default rules, in one query."""
+    points, seed, length, truncated, seat 0's score, seat 1's score)``: the whole derivation for games with the
+    default rules, in one query."""
     s0, s1 = aliased(GameSeat), aliased(GameSeat)
     q = (
-        select(Game.id, Game.match_id, s0.player_id, s1.player_id, s0.points, Game.seed, Game.length, Game.truncated)
+        select(Game.id, Game.match_id, s0.player_id, s1.player_id, s0.points, Game.seed, Game.length, Game.truncated,
+               s0.score, s1.score)
         .join(s0, and_(s0.game_id == Game.id, s0.seat == 0))
         .join(s1, and_(s1.game_id == Game.id, s1.seat == 1))
         .where(Game.n_seats == 2, s0.player_id != s1.player_id)
@@ -722,8 +733,18 @@ def _derived_rows(s: Session, env: str | None, rated: bool, special: dict[int, R
         code = KIND_CODES[rules.kind]
         for a, b, pts, first in _results(g, rules, episodes):
             truncated = g.truncated or (first is not None and first.truncated)
-            rows.append((g.id, g.match_id, a, b, pts, g.seed, g.length, truncated, code))
+            if first is not None:  # a cooperative comparison: the two team returns
+                margin = 0.5 * (sum(first.scores) - sum(g.scores))
+            else:  # each player's mean score over its seats
+                margin = 0.5 * (_mean_score(g, a) - _mean_score(g, b))
+            rows.append((g.id, g.match_id, a, b, pts, g.seed, g.length, truncated, code, margin))
     return rows
+
+
+def _mean_score(g: _Stored, player: int) -> float:
+    """The mean score of ``player``'s seats in game ``g``."""
+    mine = [x for p, x in zip(g.players, g.scores, strict=True) if p == player]
+    return sum(mine) / len(mine)
 
 
 def _check_games(games: list[GameResult]) -> set[int]:

@@ -1,6 +1,7 @@
-"""Two players at a time: their record from the ledger (with game pairs), and the games a tournament still needs.
+"""Two players at a time: their record from the ledger (with game pairs), the games a tournament still needs, and
+the records and payoffs of every pair of a set of players (the score matrix, the Nash meta-game).
 
-Both read the ledger's pairwise results (:meth:`~selfplay_cli.league.store.League.games`), so they work for every
+All read the ledger's pairwise results (:meth:`~selfplay_cli.league.store.League.games`), so they work for every
 kind of game: a two-sides game is one result, a cooperative comparison (two episodes on one seed) one, a
 free-for-all game one per two players in it.
 """
@@ -13,11 +14,12 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from selfplay_cli.league.store import KIND_CODES, League, LeagueError
+from selfplay_cli.league.store import KIND_CODES, GameTable, League, LeagueError
 from selfplay_cli.results import TWO_SIDES
 
-__all__ = ["PairPlan", "head_to_head", "plan_tournament"]
+__all__ = ["PAYOFFS", "PairPlan", "head_to_head", "pair_payoffs", "pair_records", "plan_tournament"]
 
 
 @dataclass
@@ -139,3 +141,105 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
         "pairs": pairs,
         "unpaired": n - 2 * pairs,
     }
+
+
+def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64], ...]:
+    """W/D/L and sign-test units of every pair of ``ids`` from ``table`` (games with both players in ``ids``).
+
+    Returns ``(games, wins, draws, losses, unit_wins)``, each ``n x n`` from the row player's side. Units: within
+    one match, games of the same seed with the seats swapped are paired in game-id order (as
+    :func:`~selfplay_cli.league.pairs.head_to_head` pairs them); a pair is won by the player with more than half of
+    its two games' points, level pairs count for no one; a game without a partner is a unit of its own, and so is every
+    result of a cooperative or free-for-all game (they come in no seat-swapped pairs).
+    """
+    n = len(ids)
+    index = {int(pid): k for k, pid in enumerate(ids)}
+    games = np.zeros((n, n), dtype=np.int64)
+    wins = np.zeros((n, n), dtype=np.int64)
+    draws = np.zeros((n, n), dtype=np.int64)
+    units = np.zeros((n, n), dtype=np.int64)
+    # (match, seed, lo, hi) -> lo's points in the games with lo on seat 0, and with lo on seat 1
+    groups: dict[tuple[int, int, int, int], tuple[list[float], list[float]]] = {}
+    single: list[tuple[int, int, float]] = []  # results that pair with none (cooperative, free-for-all): units
+    for m, sd, pa, pb, sa, kind in zip(table.match_id.tolist(), table.seed.tolist(), table.player_a.tolist(),
+                                       table.player_b.tolist(), table.score_a.tolist(), table.kind.tolist(),
+                                       strict=True):
+        i, j = index.get(pa), index.get(pb)
+        if i is None or j is None or i == j:
+            continue
+        games[i, j] += 1
+        games[j, i] += 1
+        if sa > 0.5:
+            wins[i, j] += 1
+        elif sa < 0.5:
+            wins[j, i] += 1
+        else:
+            draws[i, j] += 1
+            draws[j, i] += 1
+        lo, hi = min(i, j), max(i, j)
+        pts = sa if i == lo else 1.0 - sa
+        if kind != 0:
+            single.append((lo, hi, pts))
+            continue
+        groups.setdefault((m, sd, lo, hi), ([], []))[0 if i == lo else 1].append(pts)
+    for (_m, _sd, lo, hi), (first, second) in groups.items():
+        k = min(len(first), len(second))
+        for total in [p + q for p, q in zip(first[:k], second[:k], strict=True)]:
+            if total > 1.0:
+                units[lo, hi] += 1
+            elif total < 1.0:
+                units[hi, lo] += 1
+        for p in first[k:] + second[k:]:
+            if p > 0.5:
+                units[lo, hi] += 1
+            elif p < 0.5:
+                units[hi, lo] += 1
+    for lo, hi, p in single:
+        if p > 0.5:
+            units[lo, hi] += 1
+        elif p < 0.5:
+            units[hi, lo] += 1
+    losses = wins.T.copy()
+    return games, wins, draws, losses, units
+
+
+PAYOFFS = ("points", "score")
+"""Units of a meta-game's payoff (:func:`pair_payoffs`): ``points`` (win 1, draw 1/2, loss 0: the result, whatever
+the margin) or ``score`` (the game's own scores: chips, goals, returns)."""
+
+
+def pair_payoffs(table: GameTable, ids: list[int], payoff: str = "points") -> npt.NDArray[np.float64]:
+    """The row player's mean payoff against the column player over the results of ``table`` between ``ids``, an
+    antisymmetric ``n x n`` matrix (0 on the diagonal and for a pair without results): the symmetric zero-sum
+    meta-game :func:`~selfplay_cli.stats.nash.symmetric_nash` solves.
+
+    ``points``: mean points minus one half, ``(W + D/2) / G - 1/2``. ``score``: the mean of half the row player's
+    score minus the column player's (:attr:`GameTable.margin_a`), which in a zero-sum game of two seats (Kuhn and Leduc
+    poker's chips) is the row player's expected return, PSRO's meta-game payoff; in other games the half-margin
+    keeps the matrix antisymmetric (the row player's gain is the column player's loss).
+
+    Raises:
+        LeagueError: an unknown ``payoff``; ``score`` for results stored without scores.
+    """
+    if payoff not in PAYOFFS:
+        raise LeagueError(f"unknown payoff {payoff!r} (expected one of {', '.join(PAYOFFS)})")
+    if payoff == "points":
+        games, wins, draws, _, _ = pair_records(table, ids)
+        out = np.where(games > 0, (wins + 0.5 * draws) / np.maximum(games, 1), 0.5) - 0.5
+        np.fill_diagonal(out, 0.0)
+        return out
+    n = len(ids)
+    index = {int(pid): k for k, pid in enumerate(ids)}
+    total = np.zeros((n, n))
+    count = np.zeros((n, n))
+    for pa, pb, margin in zip(table.player_a.tolist(), table.player_b.tolist(), table.margin_a.tolist(), strict=True):
+        i, j = index.get(pa), index.get(pb)
+        if i is None or j is None or i == j:
+            continue
+        if not np.isfinite(margin):
+            raise LeagueError("a result without scores: the payoff in score units needs each seat's score")
+        total[i, j] += margin
+        total[j, i] -= margin
+        count[i, j] += 1
+        count[j, i] += 1
+    return np.where(count > 0, total / np.maximum(count, 1), 0.0)

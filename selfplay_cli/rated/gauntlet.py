@@ -58,6 +58,9 @@ from .match import env_options_of, load_player, mix_seed
 from .roles import RoleBook, cannot_meet_message, policy_roles
 from .snapshots import run_options
 
+ALL_OLDER = 1_000_000_000
+"""``older`` that takes every earlier snapshot of the run (``marl train --opponents nash``: its payoff matrix whole)."""
+
 
 @dataclass(frozen=True)
 class GauntletConfig:

@@ -5,7 +5,8 @@ game between two of them (either seat order) the row player's mean score against
 counts. A pair with fewer than ``min_games`` games is *not measured*: it shows as such, and takes part in
 neither the Nash mixture nor the cycle tests.
 
-* Nash mixture (:func:`~selfplay_cli.stats.nash.symmetric_nash`, payoff ``score - 0.5``): solved over the
+* Nash mixture (:func:`~selfplay_cli.stats.nash.symmetric_nash`, payoff ``score - 0.5``, or in the game's own
+  score units with ``payoff="score"``: :func:`~selfplay_cli.league.pairs.pair_payoffs`): solved over the
   measured sub-game of :func:`~selfplay_cli.stats.nash.measured_subgame`, the largest set of players whose pairs
   are all measured (ties: the better-rated set). A missing score is never guessed; the report names the players
   the mixture is over.
@@ -27,13 +28,14 @@ import numpy as np
 import numpy.typing as npt
 
 from ..league.ladder import ladder
-from ..league.store import GameTable, League, LeagueError
+from ..league.pairs import PAYOFFS, pair_payoffs, pair_records
+from ..league.store import League, LeagueError
 from ..league.variants import value_text, variant_options
 from ..stats.cycles import DEFAULT_ALPHA, Cycle, EdgeTests, significant_three_cycles
 from ..stats.nash import NashResult, measured_subgame, symmetric_nash
 from .png import new_figure, save_png
 
-__all__ = ["CYCLE_TEST", "MatrixPlayer", "MatrixReport", "build_matrix", "pair_records", "write_matrix_png"]
+__all__ = ["CYCLE_TEST", "MatrixPlayer", "MatrixReport", "build_matrix", "write_matrix_png"]
 
 CYCLE_TEST = ("exact one-sided sign test per edge on game pairs (same seed, seats swapped; unpaired games count "
               "singly; level units dropped), Holm-corrected over all tested edges")
@@ -79,6 +81,7 @@ class MatrixReport:
     edges: EdgeTests
     cycles: tuple[Cycle, ...]
     variant: str = ""  # the key of the variant whose games it holds (the default: "")
+    payoff: str = "points"  # the Nash meta-game's units (:data:`~selfplay_cli.league.pairs.PAYOFFS`)
 
     @property
     def n(self) -> int:
@@ -133,6 +136,7 @@ class MatrixReport:
                             for k in self.nash.support],
                 "value": round(float(self.nash.value), 6) + 0.0,
                 "over": _NASH_NOTE,
+                "payoff": self.payoff,
             }
         return {
             "env": self.env,
@@ -157,66 +161,6 @@ class MatrixReport:
         }
 
 
-def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64], ...]:
-    """W/D/L and sign-test units of every pair of ``ids`` from ``table`` (games with both players in ``ids``).
-
-    Returns ``(games, wins, draws, losses, unit_wins)``, each ``n x n`` from the row player's side. Units: within
-    one match, games of the same seed with the seats swapped are paired in game-id order (as
-    :func:`~selfplay_cli.league.pairs.head_to_head` pairs them); a pair is won by the player with more than half of
-    its two games' points, level pairs count for no one; a game without a partner is a unit of its own, and so is every
-    result of a cooperative or free-for-all game (they come in no seat-swapped pairs).
-    """
-    n = len(ids)
-    index = {int(pid): k for k, pid in enumerate(ids)}
-    games = np.zeros((n, n), dtype=np.int64)
-    wins = np.zeros((n, n), dtype=np.int64)
-    draws = np.zeros((n, n), dtype=np.int64)
-    units = np.zeros((n, n), dtype=np.int64)
-    # (match, seed, lo, hi) -> lo's points in the games with lo on seat 0, and with lo on seat 1
-    groups: dict[tuple[int, int, int, int], tuple[list[float], list[float]]] = {}
-    single: list[tuple[int, int, float]] = []  # results that pair with none (cooperative, free-for-all): units
-    for m, sd, pa, pb, sa, kind in zip(table.match_id.tolist(), table.seed.tolist(), table.player_a.tolist(),
-                                       table.player_b.tolist(), table.score_a.tolist(), table.kind.tolist(),
-                                       strict=True):
-        i, j = index.get(pa), index.get(pb)
-        if i is None or j is None or i == j:
-            continue
-        games[i, j] += 1
-        games[j, i] += 1
-        if sa > 0.5:
-            wins[i, j] += 1
-        elif sa < 0.5:
-            wins[j, i] += 1
-        else:
-            draws[i, j] += 1
-            draws[j, i] += 1
-        lo, hi = min(i, j), max(i, j)
-        pts = sa if i == lo else 1.0 - sa
-        if kind != 0:
-            single.append((lo, hi, pts))
-            continue
-        groups.setdefault((m, sd, lo, hi), ([], []))[0 if i == lo else 1].append(pts)
-    for (_m, _sd, lo, hi), (first, second) in groups.items():
-        k = min(len(first), len(second))
-        for total in [p + q for p, q in zip(first[:k], second[:k], strict=True)]:
-            if total > 1.0:
-                units[lo, hi] += 1
-            elif total < 1.0:
-                units[hi, lo] += 1
-        for p in first[k:] + second[k:]:
-            if p > 0.5:
-                units[lo, hi] += 1
-            elif p < 0.5:
-                units[hi, lo] += 1
-    for lo, hi, p in single:
-        if p > 0.5:
-            units[lo, hi] += 1
-        elif p < 0.5:
-            units[hi, lo] += 1
-    losses = wins.T.copy()
-    return games, wins, draws, losses, units
-
-
 def build_matrix(
     league: League,
     env: str | None = None,
@@ -225,9 +169,13 @@ def build_matrix(
     min_games: int = 8,
     alpha: float = DEFAULT_ALPHA,
     variant: str = "",
+    payoff: str = "points",
 ) -> MatrixReport:
     """The score matrix of the ``top`` best-rated players of ``env`` (default: the ledger's only env), from the
     games of one ``variant`` (its key; the default variant unless given).
+
+    ``payoff``: the Nash meta-game's units (:func:`~selfplay_cli.league.pairs.pair_payoffs`): ``points`` (the
+    default: the result, as the ladder rates it) or ``score`` (the game's own scores, e.g. poker's chips).
 
     ``run``: only that run's snapshots and the env's scripted players take part. Ratings come from
     :func:`~selfplay_cli.league.ladder.ladder` (its defaults, normal-approximation intervals); the players are
@@ -241,6 +189,8 @@ def build_matrix(
         raise LeagueError(f"--top must be at least 2, not {top}")
     if min_games < 1:
         raise LeagueError(f"--min-games must be at least 1, not {min_games}")
+    if payoff not in PAYOFFS:
+        raise LeagueError(f"--payoff must be one of {', '.join(PAYOFFS)}, not {payoff!r}")
     if run is not None:
         info = league.get_run(run)
         if info is None:
@@ -269,19 +219,17 @@ def build_matrix(
     players = tuple(MatrixPlayer(r.policy, int(r.player_id), r.kind, r.elo, r.ci_low, r.ci_high)
                     for r in rows if r.player_id is not None)
     ids = [p.player_id for p in players]
-    games, wins, draws, losses, units = pair_records(league.games(env=env, players=ids, variant=variant), ids)
+    table = league.games(env=env, players=ids, variant=variant)
+    games, wins, draws, losses, units = pair_records(table, ids)
     measured = (games >= min_games) & ~np.eye(len(ids), dtype=bool)
     sub = measured_subgame(measured)
     nash = None
     if len(sub) >= 2:
-        w, d, g = wins[np.ix_(sub, sub)], draws[np.ix_(sub, sub)], games[np.ix_(sub, sub)]
-        payoff = np.where(g > 0, (w + 0.5 * d) / np.maximum(g, 1), 0.5) - 0.5
-        np.fill_diagonal(payoff, 0.0)
-        nash = symmetric_nash(payoff)
+        nash = symmetric_nash(pair_payoffs(table, ids, payoff)[np.ix_(sub, sub)])
     edges, cycles = significant_three_cycles(units, measured, alpha)
     return MatrixReport(env=env, run=run, players=players, games=games, wins=wins, draws=draws, losses=losses,
                         unit_wins=units, min_games=int(min_games), nash_players=tuple(sub) if nash else (),
-                        nash=nash, edges=edges, cycles=tuple(cycles), variant=variant)
+                        nash=nash, edges=edges, cycles=tuple(cycles), variant=variant, payoff=payoff)
 
 
 def write_matrix_png(report: MatrixReport, path: str | Path) -> Path:
@@ -326,19 +274,3 @@ def write_matrix_png(report: MatrixReport, path: str | Path) -> Path:
     fig.colorbar(im, ax=ax, shrink=0.7, label="score")
     return save_png(fig, path)
 
-
-def nash_mixture(league: League, run: str, top: int = 50, min_games: int = 8) -> list[tuple[str, float]]:
-    """The Nash mixture of run ``run``'s players (its snapshots and the game's scripted players) as ``[(name,
-    weight)]``, the weights of :func:`build_matrix`'s ``nash`` over its measured sub-game (the members of weight 0
-    left out): what ``marl exploit --vs-mixture nash --run RUN`` trains against. A :class:`LeagueError` when the run
-    has no measured sub-game of two players or more."""
-    report = build_matrix(league, top=top, run=run, min_games=min_games)
-    if report.nash is None:
-        raise LeagueError(f"run '{run}' has no Nash mixture yet: fewer than two of its players have met in {min_games} "
-                          "games or more (marl league matrix --run shows the pairs)")
-    out = []
-    for k in report.nash.support:
-        player = report.players[report.nash_players[k]]
-        row = league.get_player(player.player_id)
-        out.append((row.name if row.is_bot else row.full_name, float(report.nash.mixture[k])))
-    return out

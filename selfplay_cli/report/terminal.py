@@ -375,7 +375,9 @@ def matrix_summary(report: MatrixReport, home: str | Path | None = None, unicode
     out.append(f"? : fewer than {report.min_games} games (--min-games): not measured; left out of the Nash mixture "
                "and the cycle tests.\n", style="dim")
     out.append("\nNash equilibrium of the meta-game ", style="bold")
-    out.append("(payoff = score - 0.5; a population mix no player beats on average)\n", style="dim")
+    units = ("score - 0.5" if report.payoff == "points"
+             else "half the row player's game score minus the column player's: its return in a zero-sum game")
+    out.append(f"(payoff = {units}; a population mix no player beats on average)\n", style="dim")
     if report.nash is None:
         out.append(f"  needs two players with at least {report.min_games} games against each other.\n")
     else:

@@ -186,6 +186,9 @@ class TrainConfig:
                             f"seat-swapped pairs), not {self.eval_games}")
         if self.eval_older < 0:
             raise MarlError(f"--eval-older must not be negative, not {self.eval_older}")
+        if self.opponents.mode == "nash" and not self.eval_games:
+            raise MarlError("--opponents nash draws from the Nash mixture of the run's rated games: it needs "
+                            "--eval-games above 0")
         if self.eval_playoff < 0:
             raise MarlError(f"--eval-playoff must not be negative, not {self.eval_playoff}")
         if self.eval not in EVAL_MODES:
@@ -245,6 +248,10 @@ class TrainConfig:
         _check_games(self, seat_spaces)
         layout = self.layout(plan)
         roles = spec.seat_roles(game)
+        if self.opponents.mode == "nash" and len(set(roles)) > 1:  # (a meta-game per pair of roles: not yet)
+            raise MarlError(f"--opponents nash solves one symmetric meta-game over the run's snapshots, but the seats "
+                            f"of {spec.name} hold different roles ({', '.join(dict.fromkeys(roles))}), whose "
+                            "snapshots never meet: use --opponents pfsp")
         spaces = learner_spaces(spec, seat_spaces, layout, roles if len(set(roles)) > 1 else None)
         learned = {roles[s] for s in range(n_seats) if (layout[s] >= 0).any()}
         foreign = [s for s in range(n_seats) if roles[s] not in learned]

@@ -39,6 +39,7 @@ from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
 from ..policies.bots import league_bots
 from ..policies.network import resolve_device
+from ..rated.gauntlet import ALL_OLDER
 from ..results import COOPERATIVE, GameResult
 from ..signals import clear_stop, signals_held, stoppable
 from .config import TrainConfig, learner_setup, tensorboard_writer
@@ -218,6 +219,9 @@ class Trainer:
         cfg, state = self.cfg, self.state
         if state.snapshots and state.snapshot_step == state.steps:
             return  # nothing played since the last snapshot
+        if cfg.opponents.mode == "nash" and state.jobs:  # the earlier moments' gauntlets in first (rarely a wait:
+            # they had a whole interval): the mixture the moment solves is then the same in every run of this seed
+            self._collect(self.evaluator.wait(on_wait=self._waiting))  # type: ignore[union-attr]
         with signals_held():  # Ctrl-C or SIGTERM now would cut the moment: they wait until it is whole
             self.moments.write(trigger, which)
         if cfg.eval_games:
@@ -252,7 +256,9 @@ class Trainer:
         """The gauntlet of a moment's snapshots (by name: the run state names them before they have ids)."""
         names, first_seed, full = job
         ids = tuple(self.moments.player_id(n) for n in names)
-        return GauntletJob(ids, first_seed, self.cfg.eval_games, self.cfg.eval_older, full=full,
+        # --opponents nash: every earlier snapshot, so the run's payoff matrix is whole and its mixture over them all
+        older = ALL_OLDER if self.cfg.opponents.mode == "nash" else self.cfg.eval_older
+        return GauntletJob(ids, first_seed, self.cfg.eval_games, older, full=full,
                            playoff=self.cfg.eval_playoff if full else 0)
 
     def _collect(self, done: list[JobDone]) -> None:
@@ -321,10 +327,11 @@ class Trainer:
                 **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()}}
         for rec in self.records:
             line.update({f"eval/{rec.learner}/{bot}": round(rec.score(wdl), 4) for bot, wdl in rec.vs.items()})
+        line.update(self.opponents.nash_metrics())
         metrics.write(json.dumps(line) + "\n")
         if board is not None:
             for key, value in line.items():
-                if key != "step":
+                if key != "step" and isinstance(value, int | float):  # (numbers only: nash/weights is a dict)
                     board.add_scalar(key, value, global_step=steps)
 
     def _file_games(self, finished: list[GameResult]) -> None:
@@ -384,7 +391,7 @@ class Trainer:
                            session_seconds=session, train_seconds=self._train_seconds(),
                            session_eval_games=self.eval_games,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
-                           rating_left=len(state.jobs), **self._best())
+                           rating_left=len(state.jobs), nash=self._nash(), **self._best())
 
     def _play(self, start: float, metrics: TextIO, board: Any) -> None:
         """The games and updates until the budget is spent (the run's clock started at ``start``): a metrics line
@@ -482,6 +489,14 @@ class Trainer:
             snapshots=len(self.state.snapshots), rated=len(self.state.snapshots) - pending if cfg.eval_games else 0,
             newest=tuple(self.records) if cfg.eval_games else (), session_steps=session_steps,
             steps_per_second=rate, remaining=self._remaining(rate), ended=self._trained is not None)
+
+    def _nash(self) -> dict[str, float] | None:
+        """``--opponents nash``: the run's Nash mixture as the ledger has it at the end (full name -> weight); None
+        in other modes, or without one."""
+        if self.cfg.opponents.mode != "nash":
+            return None
+        self.opponents.resolve_nash(self.state.steps)
+        return None if self.opponents.nash is None else self.opponents.nash.by_name()
 
     def _train_seconds(self) -> float:
         """Seconds this process has trained (all of it once training has ended), rating games played inline left

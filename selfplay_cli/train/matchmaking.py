@@ -1,4 +1,4 @@
-"""Opponent matchmaking for self-play training: self / latest / uniform / PFSP over a snapshot pool, plus bots.
+"""Opponent matchmaking for self-play training: self / latest / uniform / PFSP / Nash over a snapshot pool, plus bots.
 
 The training loop asks a :class:`Matchmaker` for the opponents of a batch of new games of one learner, and
 reports finished games back to a :class:`WinRates` book, which PFSP reads. Everything here works on plain
@@ -22,6 +22,11 @@ For a learner, :meth:`Matchmaker.probabilities` builds the distribution in three
    * ``pfsp``: AlphaStar prioritized fictitious self-play, candidate ``B`` weighted by ``f(P[learner beats B])``
      with ``f_hard(x) = (1 - x)**2`` (focus on the opponents the learner loses to) or
      ``f_var(x) = x * (1 - x)`` (focus on opponents of the learner's level), weights normalised.
+
+   * ``nash``: PSRO's meta-strategy, the Nash mixture of the run's snapshots (:meth:`Matchmaker.set_mixture`, solved
+     from the ledger by :func:`~selfplay_cli.rated.meta_nash.run_nash`), restricted to the candidates and
+     renormalised; uniform over them while no mixture is known (or none of its support is a candidate). The
+     ``window`` does not cut it: PSRO mixes over the whole population, so every snapshot of the pool is a candidate.
 
    PFSP has **no epsilon floor** (as in AlphaStar): with the default ``prior > 0`` every win rate lies
    strictly inside (0, 1), so every candidate already has a positive weight. Only with ``prior = 0`` can a
@@ -78,8 +83,12 @@ __all__ = [
 LATEST_LEARNER = -1
 """Sentinel opponent id: the learner itself / its current partner (never a player id of the league)."""
 
-MODES = ("self", "latest", "uniform", "pfsp")
+MODES = ("self", "latest", "uniform", "pfsp", "nash")
 """Opponent selection modes of :class:`MatchmakerConfig`."""
+
+NASH_PAYOFFS = ("points", "score")
+"""Units of the ``nash`` mode's meta-game: :data:`selfplay_cli.league.pairs.PAYOFFS` (named again here: this module
+imports nothing of the league)."""
 
 _SUM_TOL = 1e-9
 _STATE_VERSION = 1
@@ -159,14 +168,16 @@ class MatchmakerConfig:
     """How a learner's opponents are chosen (see the module docstring for the exact distribution).
 
     Attributes:
-        mode: ``self`` | ``latest`` | ``uniform`` | ``pfsp``.
-        window: how many of the newest pool snapshots are candidates (ML-Agents ``window``, >= 1).
+        mode: ``self`` | ``latest`` | ``uniform`` | ``pfsp`` | ``nash``.
+        window: how many of the newest pool snapshots are candidates (ML-Agents ``window``, >= 1; ``nash``: all).
         latest_ratio: probability (after bots) of playing :data:`LATEST_LEARNER` (ML-Agents
             ``play_against_latest_model_ratio``), in [0, 1].
         bots: bot name -> probability of facing that bot, taken before anything else; sum <= 1.
         pfsp: PFSP weighting, ``hard`` (``(1-x)**2``) or ``var`` (``x*(1-x)``).
         decay: per-game decay of the win-rate book, in (0, 1].
         prior: weight (in games) of the 50 % prior of the win-rate book, >= 0.
+        nash_payoff: ``nash``: the meta-game's units, ``points`` (win 1, draw 0.5) or ``score`` (the game's own
+            scores: a poker game's chips, PSRO's expected return); see :mod:`selfplay_cli.rated.meta_nash`.
     """
 
     mode: str = "pfsp"
@@ -176,10 +187,13 @@ class MatchmakerConfig:
     pfsp: str = "hard"
     decay: float = 0.99
     prior: float = 1.0
+    nash_payoff: str = "points"
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise MarlError(f"unknown matchmaking mode {self.mode!r} (expected one of {', '.join(MODES)})")
+        if self.nash_payoff not in NASH_PAYOFFS:
+            raise MarlError(f"unknown Nash payoff {self.nash_payoff!r} (expected one of {', '.join(NASH_PAYOFFS)})")
         if self.pfsp not in PFSP_WEIGHTINGS:
             raise MarlError(f"unknown PFSP weighting {self.pfsp!r} (expected one of {', '.join(PFSP_WEIGHTINGS)})")
         if not isinstance(self.window, (int, np.integer)) or isinstance(self.window, bool) or self.window < 1:
@@ -397,6 +411,7 @@ class Matchmaker:
                 raise ValueError(f"bot {name!r} has the reserved id {LATEST_LEARNER}")
         self._weight_fn = PFSP_WEIGHTINGS[config.pfsp]
         self._pool: tuple[int, ...] = ()
+        self._mixture: dict[int, float] = {}  # mode nash: snapshot id -> Nash weight (empty: none solved yet)
 
     # ------------------------------------------------------------------ pool
 
@@ -423,15 +438,31 @@ class Matchmaker:
 
     @property
     def candidates(self) -> tuple[int, ...]:
-        """The last ``window`` snapshots of the pool, oldest first."""
-        return self._pool[-self.config.window:]
+        """The last ``window`` snapshots of the pool, oldest first (mode ``nash``: the whole pool)."""
+        return self._pool if self.config.mode == "nash" else self._pool[-self.config.window:]
 
     def candidates_among(self, among: Collection[int] | None) -> tuple[int, ...]:
-        """The last ``window`` snapshots of the pool that are in ``among`` (all of them when None): the snapshots that
-        can play a seat (a game whose seats hold different roles)."""
+        """The :attr:`candidates` that are in ``among`` (all of them when None): the snapshots that can play a seat
+        (a game whose seats hold different roles)."""
         if among is None:
             return self.candidates
-        return tuple(p for p in self._pool if p in among)[-self.config.window:]
+        mine = tuple(p for p in self._pool if p in among)
+        return mine if self.config.mode == "nash" else mine[-self.config.window:]
+
+    def set_mixture(self, weights: Mapping[int, float] | None) -> None:
+        """Mode ``nash``: the Nash mixture to draw the pool's share from (snapshot id -> weight; weights of ids
+        outside the pool are ignored), or None while there is none (uniform over the candidates).
+
+        Raises ValueError for a negative or non-finite weight."""
+        mixture = {int(p): float(w) for p, w in (weights or {}).items()}
+        if any(not (math.isfinite(w) and w >= 0.0) for w in mixture.values()):
+            raise ValueError("set_mixture: weights must be finite and >= 0")
+        self._mixture = mixture
+
+    @property
+    def mixture(self) -> dict[int, float]:
+        """The Nash mixture of :meth:`set_mixture` (empty: none)."""
+        return dict(self._mixture)
 
     # ------------------------------------------------------------------ distribution
 
@@ -446,6 +477,12 @@ class Matchmaker:
             return {cand[-1]: 1.0}
         if mode == "uniform":
             return {c: 1.0 / len(cand) for c in cand}
+        if mode == "nash":
+            mine = {c: self._mixture.get(c, 0.0) for c in cand}
+            total = sum(mine.values())
+            if not total > 0.0:  # no mixture yet, or none of its support can play here: uniform
+                return {c: 1.0 / len(cand) for c in cand}
+            return {c: w / total for c, w in mine.items() if w > 0.0}
         w = self._weight_fn(rates.p_win_many(learner, cand))
         total = float(w.sum())
         if not total > 0.0:  # only possible with prior = 0: every candidate always won / lost

@@ -6,6 +6,10 @@ policies (the snapshots loaded once, then kept), keeps a slot's opponent until t
 keeps the matchmaker's pool the run's snapshots, and reads each finished game into the win-rate book and the ledger.
 In a league (``--league alphastar``) each learner's role draws its opponents instead (:mod:`.league_roles`), and a
 learner's games against the learners as they are now go into its win-rate book too.
+With ``--opponents nash`` it also keeps the matchmaker's Nash mixture, solved again from the ledger
+(:func:`~selfplay_cli.rated.meta_nash.run_nash`) whenever the pool changes, at each snapshot moment, once the
+gauntlets of the moments before it are in (the trainer waits for them there): only rated games change the matrix, and
+solving it then, not whenever a gauntlet happens to finish, keeps a run with a fixed seed the same run.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import numpy as np
 from ..league.store import League, LeagueError
 from ..policies import Policy
 from ..rated.match import load_player
+from ..rated.meta_nash import RunNash, run_nash
 from ..rated.roles import RoleBook
 from ..results import GameResult
 from .config import TrainConfig
@@ -110,6 +115,8 @@ class Opponents:
         self._team_of = fixed_teams(league, cfg, bot_ids)  # a fixed per-seat snapshot -> its team, seat by seat
         self._next_swap = 0
         self.roles, self.names = roles, names
+        self.nash: RunNash | None = None  # --opponents nash: the mixture drawn from, as last solved
+        self.nash_step: int | None = None  # ... and the run's step then (None: solved as a resumed run began)
 
     def policy(self, pid: int, seat: int, learner: int) -> Policy:
         """The policy of opponent ``pid`` in ``seat`` of a game of ``learner``."""
@@ -196,9 +203,10 @@ class Opponents:
         return [self.policy(int(i), int(slot) // n, int(self.learner_of_game[slot % n]))
                 for i, slot in zip(ids, slots, strict=True)]
 
-    def set_pool(self, env: str) -> None:
+    def set_pool(self, env: str, steps: int | None = None) -> None:
         """The matchmaker's pool: the run's snapshots, oldest first; in a game whose seats hold different roles,
-        also which of them can play each role (a snapshot only its own)."""
+        also which of them can play each role (a snapshot only its own). ``steps``: the run's step now (the Nash
+        mixture's, which is solved again here)."""
         pool = [p for p in self.league.players(env=env, kind="snapshot") if p.run == self.cfg.run]
         self.matchmaker.set_pool([p.id for p in pool])
         if self.roles is not None:
@@ -208,6 +216,31 @@ class Opponents:
             book = RoleBook(self.league, env)
             self._can_play = {role: {p.id for p in pool if book.roles(p) is None or role in book.roles(p)}
                               for role in set(self.seat_roles)}
+        self.resolve_nash(steps)
+
+    def resolve_nash(self, steps: int | None = None) -> None:
+        """``--opponents nash``: solve the run's Nash mixture again from the ledger's rated games and draw from it, the
+        run at ``steps`` (nothing in other modes)."""
+        cfg = self.cfg.opponents
+        if cfg.mode != "nash":
+            return
+        self.nash = run_nash(self.league, self.cfg.run, payoff=cfg.nash_payoff)
+        self.nash_step = steps
+        self.matchmaker.set_mixture(None if self.nash is None else self.nash.weights)
+
+    def nash_metrics(self) -> dict[str, Any]:
+        """The mixture drawn from, for a metrics line: ``nash/support`` (snapshots with a positive weight),
+        ``nash/over`` (snapshots it was solved over), ``nash/games`` (rated games it was solved from),
+        ``nash/solved_step`` (null: solved as a resumed run began) and ``nash/weights`` (full name -> weight); before
+        the first mixture, a support of 0 and no weights (the draws are uniform over the pool then); nothing in other
+        modes."""
+        if self.cfg.opponents.mode != "nash":
+            return {}
+        n = self.nash
+        return {"nash/support": len(n.support) if n else 0, "nash/over": len(n.over) if n else 0,
+                "nash/games": n.games if n else 0,
+                "nash/solved_step": self.nash_step,
+                "nash/weights": {name: round(w, 6) for name, w in n.by_name().items()} if n else {}}
 
     def file_games(self, finished: list[GameResult], learner_players: dict[str, int], match_id: int) -> None:
         """File finished training games in the ledger (under ``match_id``), each learner as the player of its

@@ -92,6 +92,7 @@ class TrainReport:
     plot: Path | str | None = None  # the rating curves' PNG, or why there is none
     best: Any = None  # the run's best snapshot as the ladder has it at the end (a LadderRow), None unrated
     side_bests: list[Any] = field(default_factory=list)  # a game rated per side: the run's best of each side
+    nash: dict[str, float] | None = None  # --opponents nash: the run's Nash mixture at the end (name -> weight)
     rating_left: int = 0  # gauntlets not played yet (--eval remote --no-wait: the league's workers play them
     # later); while any is left the ratings above are not the run's last, and its best is not decided
 

@@ -34,7 +34,7 @@ FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "devic
                  "fragment_steps", "frame_stack")
 """Options whose value is a top-level setting of the same name."""
 
-OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio"}
+OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio", "nash_payoff": "nash_payoff"}
 """Options that set a key of ``[opponents]``: the option's name, then the key's."""
 
 LEAGUE_FLAGS = {"league_main": "main", "league_main_exploiters": "main_exploiters",

@@ -150,7 +150,7 @@ class SnapshotMoments:
             state.latest[i] = row.id
         state.snapshots += full
         state.jobs = jobs
-        self.opponents.set_pool(self.spec.name)
+        self.opponents.set_pool(self.spec.name, steps=state.steps)
 
     def _save(self, i: int, learner: Any, name: str) -> dict[str, Any]:
         """Learner ``i``'s snapshot file, written as ``name``; the league row that will register it."""
