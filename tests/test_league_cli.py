@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 from cli_helpers import run
+from league_helpers import record_plan
 
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.network import Arch, build_network
@@ -183,7 +184,6 @@ def seed_ladder(home: Path) -> dict[str, int]:
     """A league with two runs and the pong bots; games written straight to the ledger (results chosen by hand).
 
     Returns the player ids by name."""
-    from selfplay_cli.results import GameResult
 
     with League.open(home) as lg:
         lg.ensure_bots("pong", ["random", "cpu"])
@@ -197,16 +197,7 @@ def seed_ladder(home: Path) -> dict[str, int]:
             ids[f"{run}/{name}"] = p.id
         plan = [("cpu", "random", 14, 2), ("r1/ep1", "random", 16, 0), ("r1/ep1", "cpu", 10, 6),
                 ("r1/ep2", "cpu", 14, 2), ("r1/ep2", "r1/ep1", 12, 4), ("r2/ep1", "random", 16, 0)]
-        match = lg.create_match("pong", "match")
-        games = []
-        k = 0
-        for x, y, wins, losses in plan:
-            for score in [1.0] * wins + [0.0] * losses:
-                a, b, sa = (ids[x], ids[y], score) if k % 2 == 0 else (ids[y], ids[x], 1.0 - score)
-                games.append(GameResult(env="pong", players=(a, b), seed=k, scores=(sa * 21, (1 - sa) * 21),
-                                        outcome=(sa, 1.0 - sa), length=100, truncated=False))
-                k += 1
-        lg.record_games(match, games)
+        record_plan(lg, ids, plan)
     return ids
 
 
