@@ -142,12 +142,15 @@ def test_a_league_of_a_newer_marl_is_exit_2(pg_url: str, capsys: pytest.CaptureF
 @pytest.mark.slow
 def test_writes_go_on_across_a_server_restart(pg_server, pg_url: str, pg_restart) -> None:
     """The server is stopped (every connection cut) for 3 s while a league writes batch after batch: the writes wait
-    for it, say so once, and go on; every batch is stored once, none is lost, and the Elo cache matches the ledger."""
+    for it, say so once, and go on; every batch is stored once, none is lost, and the Elo cache matches the ledger.
+    Each batch is a unit of work with its key, as every unit marl writes under a server that may go away is (a
+    gauntlet's matchup, a queued job): a stop that cuts a COMMIT off leaves it unknown whether the batch is stored,
+    and only a keyed unit may then be done again (it counts once). An unkeyed write cut there is refused instead
+    (test_a_write_whose_commit_is_cut_off_is_not_retried): the stop lands in one now and then under load."""
     notes: list[str] = []
     lg = League(pg_url, note=notes.append)
     lg.ensure_bots(ENV, ["a", "b", "c"])
     a, b, c = (p.id for p in lg.players())
-    match = lg.create_match(ENV, "tournament")
     written = threading.Event()
     times: dict[str, float] = {}
 
@@ -167,7 +170,8 @@ def test_writes_go_on_across_a_server_restart(pg_server, pg_url: str, pg_restart
     batches = 0
     deadline = time.monotonic() + 60
     while (not times.get("up") or stamps[-1] < times["up"] + 1.0) and time.monotonic() < deadline:
-        ids += lg.record_games(match, _games(a if batches % 2 else c, b, 10, 10 * batches))
+        ids += lg.create_match_with_games(ENV, "tournament", None, _games(a if batches % 2 else c, b, 10, 10 * batches),
+                                          key=f"restart-batch-{batches}")[1]
         stamps.append(time.monotonic())
         batches += 1
         if batches == 20:
@@ -175,7 +179,7 @@ def test_writes_go_on_across_a_server_restart(pg_server, pg_url: str, pg_restart
         time.sleep(0.01)
     thread.join(30)
     assert "up" in times and stamps[-1] > times["up"], "the writes never went on after the restart"
-    assert len(ids) == len(set(ids)) == 10 * batches
+    assert len(ids) == len(set(ids)) >= 10 * (batches - 1)  # (a batch done again after a cut COMMIT: stored once)
     assert lg.count_games() == 10 * batches
     assert sorted(lg.games().seed.tolist()) == list(range(10 * batches))  # every batch once, none lost
     stored = {p.id: (p.elo, p.games) for p in lg.players()}
