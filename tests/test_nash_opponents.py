@@ -169,6 +169,10 @@ def test_a_nash_run_through_the_cli_measures_every_pair_and_shows_its_mixture(tm
         met = {frozenset(pair) for pair in zip(table.player_a.tolist(), table.player_b.tolist(), strict=True)}
         missing = [(x, y) for i, x in enumerate(ids) for y in ids[i + 1:] if frozenset((x, y)) not in met]
         assert len(ids) >= 3 and missing == []  # the matrix of the run's snapshots is whole
+        counts = {}
+        for pair in zip(table.player_a.tolist(), table.player_b.tolist(), strict=True):
+            counts[frozenset(pair)] = counts.get(frozenset(pair), 0) + 1
+        assert min(counts.values()) >= 4  # every cell its --eval-games: none cut short by a clear history
         assert nash_mixture(league, report["run"], payoff="score") == pytest.approx(report["nash"], abs=1e-6)
     finally:
         league.close()
@@ -185,3 +189,58 @@ def test_a_nash_run_through_the_cli_measures_every_pair_and_shows_its_mixture(tm
     assert json.loads(out)["nash"]["payoff"] == "score"
     code, _, err = run(capsys, "league", "matrix", "--run", report["run"], "--payoff", "chips", "--home", str(home))
     assert code == 2 and "--payoff must be one of points, score" in err and "Traceback" not in err
+
+
+def _weights(net) -> dict:
+    return {k: v.detach().clone() for k, v in net.state_dict().items()}
+
+
+def test_a_psro_oracle_restarts_from_its_first_weights_after_each_snapshot_but_the_final(tmp_path: Path) -> None:
+    import torch
+
+    from selfplay_cli.policies.snapshot_reader import load_snapshot
+    from selfplay_cli.train.config import TrainConfig
+    from selfplay_cli.train.loop import Trainer
+
+    league = League.open(tmp_path / "h")
+    try:
+        cfg = TrainConfig.from_dict({"env": KUHN, "run": "r", "agents": 1, "games": 8, "eval_games": 2,
+                                     "restart_at_snapshot": True, "snapshot_steps": 1000,
+                                     "opponents": {"mode": "nash", "nash_payoff": "score"}})
+        league.create_run("r", cfg.env, cfg.to_dict(), algo=cfg.algo)
+        trainer = Trainer(league, cfg)
+        trainer.moments.write("start")
+        learner = trainer.learners[0]
+        first = _weights(learner.net)
+
+        def teach() -> dict:  # (as training would move them)
+            with torch.no_grad():
+                for p in learner.net.parameters():
+                    p.add_(0.25)
+            learner.updates = 7
+            return _weights(learner.net)
+
+        taught = teach()
+        trainer.state.steps = 1000
+        trainer.moments.write("steps")
+        (row,) = [p for p in league.players(kind="snapshot") if p.name == "s1k"]
+        tensors, _ = load_snapshot(league.home / row.path)
+        assert all(torch.equal(tensors[k], taught[k]) for k in taught)  # the snapshot holds what it learned
+        assert all(torch.equal(v, first[k]) for k, v in _weights(learner.net).items())  # then the restart
+        assert learner.updates == 0  # its optimiser and schedule too
+        taught = teach()
+        trainer.state.steps = 1500
+        trainer.moments.write("final")
+        assert all(torch.equal(v, taught[k]) for k, v in _weights(learner.net).items())  # the final: no restart
+        saved = torch.load(trainer.moments.state_path, weights_only=True)
+        assert all(torch.equal(saved["first"][0]["net"][k], first[k]) for k in first)  # a resumed run has them
+    finally:
+        league.close()
+
+
+def test_restart_at_snapshot_with_league_roles_is_one_line(tmp_path: Path, capsys) -> None:
+    home = tmp_path / "league"
+    code, _, err = run(capsys, "train", "tests.games.tictactoe:env", "--league", "alphastar",
+                       "--restart-at-snapshot", "--steps", "100", "--home", str(home))
+    assert code == 2 and "with --league each role's own rule says when a learner restarts" in err
+    assert "Traceback" not in err and not home.exists()

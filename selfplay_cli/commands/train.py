@@ -124,6 +124,11 @@ def train(
     = 0.5,
     bots: Annotated[str, typer.Option("--bots", metavar="BOT=P,...", help="Mix in scripted players with these "
                                       "probabilities, e.g. cpu=0.1,random=0.05.")] = "",
+    restart_at_snapshot: Annotated[bool, typer.Option("--restart-at-snapshot", help="Each learner starts again from "
+                                                      "its first weights, optimiser fresh, after every snapshot "
+                                                      "but the final one: PSRO's oracle (with --opponents nash), a "
+                                                      "new best response to the opponents of the moment.")]
+    = False,
     league: Annotated[str | None, typer.Option("--league", metavar="alphastar", help="AlphaStar's league roles: "
                                                "main agents, main exploiters and league exploiters, each a learner "
                                                "of its own playing its share of the games against opponents its "

@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from sqlalchemy import and_, func, select
+from sqlalchemy import and_, func, or_, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, aliased, raiseload
 
@@ -461,14 +461,20 @@ class Ledger(Database):
         """
 
         def work(s: Session) -> tuple[list[tuple], dict[int, int]]:
+            same = _same_weights(s, env) if pooled is True else dict(pooled or {})
+            names = None  # the players' every name (one set of weights may have several): the query's filter
+            if players is not None:
+                pop = {same.get(int(p), int(p)) for p in players}
+                names = sorted(pop | {k for k, v in same.items() if v in pop})
             matches = _match_rules(s, env, rated, variant)
             special = {mid: r for mid, r in matches.items() if not r.is_default}
-            rows = [(*r[:8], 0, 0.5 * (r[8] - r[9])) for r in s.execute(_two_seat_query(env, rated)).all()
+            query = _two_seat_query(env, rated, names, any_seat)
+            rows = [(*r[:8], 0, 0.5 * (r[8] - r[9])) for r in s.execute(query).all()
                     if r[1] in matches and r[1] not in special]
             if special:
                 rows += _derived_rows(s, env, rated, special)
                 rows.sort(key=lambda r: r[0])
-            return rows, (_same_weights(s, env) if pooled is True else dict(pooled or {}))
+            return rows, same
 
         rows, same = self._read(work)
         table = GameTable.of_rows(rows)
@@ -671,10 +677,16 @@ def _match_rules(s: Session, env: str | None, rated: bool, variant: str | None =
             if variant is None or _variant_of(menv, params) == variant}
 
 
-def _two_seat_query(env: str | None, rated: bool) -> Any:
+PLAYER_FILTER_MAX = 5_000
+"""Players a ledger query names in its ``WHERE`` at most (more: the whole ledger is read, then filtered)."""
+
+
+def _two_seat_query(env: str | None, rated: bool, players: Sequence[int] | None = None,
+                    any_seat: bool = False) -> Any:
     """Games of two seats held by two different players, as ``(game, match, seat 0's player, seat 1's player, seat 0's
     points, seed, length, truncated, seat 0's score, seat 1's score)``: the whole derivation for games with the
-    default rules, in one query."""
+    default rules, in one query. ``players``: only games between two of them (``any_seat``: with one of them), found
+    by the seats' player index, so a pair's games are read without the league's million training games."""
     s0, s1 = aliased(GameSeat), aliased(GameSeat)
     q = (
         select(Game.id, Game.match_id, s0.player_id, s1.player_id, s0.points, Game.seed, Game.length, Game.truncated,
@@ -688,6 +700,10 @@ def _two_seat_query(env: str | None, rated: bool) -> Any:
         q = q.where(Game.env == env)
     if rated:
         q = q.join(Match, Match.id == Game.match_id).where(Match.kind != "training")
+    if players is not None and len(players) <= PLAYER_FILTER_MAX:
+        ids = [int(p) for p in players]
+        both = (s0.player_id.in_(ids), s1.player_id.in_(ids))
+        q = q.where(or_(*both) if any_seat else and_(*both))
     return q
 
 

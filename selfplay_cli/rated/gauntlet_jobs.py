@@ -44,15 +44,16 @@ PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its ga
 
 
 def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int, games: int, older: int,
-                 full: bool = False, playoff: int = 0) -> NewJob:
+                 full: bool = False, playoff: int = 0, whole: bool = False) -> NewJob:
     """The queue's job of one moment's gauntlet (``full``: the final moment's, with a ``playoff`` of up to that many
-    games a pair). The snapshots' bytes are put in the league where it keeps them, so a worker on another machine can
-    fetch them."""
+    games a pair; ``whole``: every matchup plays all its games, none cut short by a clear history, as the cells of a
+    payoff matrix need). The snapshots' bytes are put in the league where it keeps them, so a worker on another
+    machine can fetch them."""
     rows = [league.get_player(int(i)) for i in snapshot_ids]
     share_snapshots(league, rows)
     return NewJob(kind=GAUNTLET, env=rows[0].env, spec={
         "snapshot_ids": [int(i) for i in snapshot_ids], "first_seed": int(first_seed), "games": int(games),
-        "older": int(older), "full": bool(full), "playoff": int(playoff),
+        "older": int(older), "full": bool(full), "playoff": int(playoff), "whole": bool(whole),
         "snapshots": [r.full_name for r in rows]})
 
 
@@ -69,7 +70,9 @@ def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "c
     # games in a round of two players: a seat-swapped pair, or one game where each plays only its own side
     per = 1 if Rules.of(get_env(league.get_player(ids[0]).env)).sides_differ else 2
     n = max(games // per, 1)
-    cfg = GauntletConfig(pairs=n, clear_pairs=n if full else 1, max_pairs=n,
+    # (a payoff matrix's cell of 2 games would weigh as much as one of 400 in its Nash mixture: none cut short)
+    whole = full or bool(spec.get("whole", False))
+    cfg = GauntletConfig(pairs=n, clear_pairs=n if whole else 1, max_pairs=n,
                          older=max(older, FINAL_OLDER) if full else older,
                          bot_pairs=max(n, FINAL_BOT_GAMES * games // per) if full else 0)
     matchups = rate_snapshots(league, ids, first_seed=first_seed, config=cfg, device=device, on_games=on_games)

@@ -162,6 +162,8 @@ class TrainConfig:
     curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)
     teacher: TeacherConfig = field(default_factory=TeacherConfig)  # kickstarting: a player the learners imitate
     league: LeagueConfig | None = None  # AlphaStar's league roles (--league alphastar, a [league] table); None: off
+    restart_at_snapshot: bool = False  # each learner starts again from its first weights (and a fresh optimiser)
+    # after every snapshot but the final one: PSRO's oracle, a new best response to the opponents of the moment
     snapshot_meta: dict[str, Any] = field(default_factory=dict)  # entries of every snapshot row's meta (marl exploit's
     # best response: league_role = "exploiter", target)
     ppo: PPOConfig = field(default_factory=PPOConfig)
@@ -230,6 +232,9 @@ class TrainConfig:
             raise MarlError(f"--league-games must lie between 0 and 1, not {self.league_games}")
         if self.league is not None:
             _check_league(self, spec)
+        if self.restart_at_snapshot and self.league is not None:
+            raise MarlError("--restart-at-snapshot is for one league of learners without roles; with --league each "
+                            "role's own rule says when a learner restarts")
         plan = self.seat_plan()
         if self.league_games and not plan.every_seat_learns:
             raise MarlError(f"--league-games is for --agents {n_seats} (learners on every seat); with fewer learners "

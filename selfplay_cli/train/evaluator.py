@@ -60,6 +60,7 @@ class GauntletJob:
     older: int
     full: bool = False  # every opponent gets ``games``, even where the lineage's result is already clear
     playoff: int = 0  # after the gauntlet, the run's best candidates meet, up to this many games a pair (the final)
+    whole: bool = False  # every matchup plays all its ``games`` (cells of a payoff matrix: --opponents nash)
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,8 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
 
 def _spec(job: GauntletJob) -> dict[str, Any]:
     return {"snapshot_ids": list(job.snapshot_ids), "first_seed": job.first_seed, "games": job.games,
-            "older": job.older, "full": job.full, "playoff": job.playoff}
+            "older": job.older, "full": job.full, "playoff": job.playoff,
+            "whole": job.whole}
 
 
 def die_with_parent(parent: int) -> None:

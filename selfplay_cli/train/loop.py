@@ -121,6 +121,7 @@ class Trainer:
         if cfg.league is not None:
             shares = [float((layout == i).any(axis=0).mean()) for i in range(len(self.learners))]
             self.roles = LeagueRoles(cfg.league, shares, np.random.default_rng([cfg.seed, 1]))
+        if cfg.league is not None or cfg.restart_at_snapshot:  # the weights a learner restarts from
             first = [copy.deepcopy(learner.state_dict()) for learner in self.learners]
         self.state = RunState(latest=[0] * len(self.learners))
         learner_ids = [f"{cfg.run}/{n}" for n in self.names]
@@ -257,9 +258,10 @@ class Trainer:
         names, first_seed, full = job
         ids = tuple(self.moments.player_id(n) for n in names)
         # --opponents nash: every earlier snapshot, so the run's payoff matrix is whole and its mixture over them all
-        older = ALL_OLDER if self.cfg.opponents.mode == "nash" else self.cfg.eval_older
+        nash = self.cfg.opponents.mode == "nash"
+        older = ALL_OLDER if nash else self.cfg.eval_older
         return GauntletJob(ids, first_seed, self.cfg.eval_games, older, full=full,
-                           playoff=self.cfg.eval_playoff if full else 0)
+                           playoff=self.cfg.eval_playoff if full else 0, whole=nash)
 
     def _collect(self, done: list[JobDone]) -> None:
         """Take note of finished gauntlets: each snapshot's record as the ledger has it now, to ``on_progress``."""
@@ -419,7 +421,7 @@ class Trainer:
             state.episodes += len(step.finished)
             pending += step.finished
             try:  # a learner's numbers (scaled rewards, losses, gradients), before a broken network is saved
-                updated = self.rollouts.learn(self.team, step, progress)
+                updated = self.rollouts.learn(self.team, step, self._learning(progress))
             except NonFiniteError as e:
                 raise self._stopped(e, state.steps) from None
             if updated is None:
@@ -444,6 +446,14 @@ class Trainer:
         self._file_games(pending)
         if stats and state.steps > line_step:  # the run's last figures, whatever the spacing of the lines
             self._report(metrics, board, stats, state.elapsed)
+
+    def _learning(self, progress: float) -> float:
+        """The learners' progress (their learning rate's schedule): the run's, or with ``--restart-at-snapshot`` the
+        oracle's own, from its restart to its next snapshot, so each new best response learns as the first did."""
+        cfg, state = self.cfg, self.state
+        if cfg.restart_at_snapshot and cfg.snapshot_steps:
+            return min(1.0, (state.steps - state.snapshot_step) / cfg.snapshot_steps)
+        return progress
 
     def _stopped(self, e: NonFiniteError, step: int) -> NonFiniteError:
         """The one line that stops a run at a number that is not finite: where it appeared (the game's seat, or the

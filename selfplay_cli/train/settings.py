@@ -31,7 +31,7 @@ batch, buffer, target period and epsilon schedule; docs/history/training.md says
 FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
                  "snapshot_steps", "eval_games", "eval_older", "eval", "eval_wait", "eval_actors", "eval_playoff",
                  "swap_every", "tensorboard", "league_games", "seats", "executor", "actors", "ray_address",
-                 "fragment_steps", "frame_stack")
+                 "fragment_steps", "frame_stack", "restart_at_snapshot")
 """Options whose value is a top-level setting of the same name."""
 
 OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio", "nash_payoff": "nash_payoff"}

@@ -141,6 +141,9 @@ class SnapshotMoments:
         if self.roles is not None and trigger == "roles":
             for i in self.roles.taken(which, state.steps):  # the snapshot is saved: now the restart
                 self.learners[i].load_state_dict(self.first[i])  # type: ignore[index]
+        elif cfg.restart_at_snapshot and trigger in ("steps", "episodes"):  # PSRO's oracle: a new best response
+            for i in which:
+                self.learners[i].load_state_dict(self.first[i])  # type: ignore[index]
         self.write_state(self.pending_path, latest=latest, snapshots=state.snapshots + full, jobs=jobs,
                          snapshot_step=state.steps, snapshot_episode=state.episodes)
         registered = self.league.add_snapshots(rows)  # the moment exists from here on
@@ -191,7 +194,9 @@ class SnapshotMoments:
             "jobs": [[list(names), seed, full] for names, seed, full in jobs],
         }
         if self.roles is not None:
-            saved.update(roles=json.dumps(self.roles.state_dict()), first=self.first)
+            saved.update(roles=json.dumps(self.roles.state_dict()))
+        if self.first is not None:
+            saved.update(first=self.first)
         self.run_dir.mkdir(parents=True, exist_ok=True)
         with files.atomic_write(path) as f:
             torch.save(saved, f)
@@ -256,6 +261,9 @@ class SnapshotMoments:
             if "roles" not in saved or "first" not in saved:
                 raise MarlError(f"{self.state_path}: the run state has no league roles to resume")
             self.roles.load_state_dict(json.loads(saved["roles"]))
+        if self.first is not None:
+            if "first" not in saved:
+                raise MarlError(f"{self.state_path}: the run state has no first weights to restart from")
             self.first = list(saved["first"])
         state.jobs = [(tuple(names), int(seed), bool(full)) for names, seed, full in saved["jobs"]]
         state.resumes = int(saved["resumes"]) + 1
