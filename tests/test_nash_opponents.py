@@ -244,3 +244,22 @@ def test_restart_at_snapshot_with_league_roles_is_one_line(tmp_path: Path, capsy
                        "--restart-at-snapshot", "--steps", "100", "--home", str(home))
     assert code == 2 and "with --league each role's own rule says when a learner restarts" in err
     assert "Traceback" not in err and not home.exists()
+
+
+def test_a_restarted_oracle_learns_at_the_full_rate_even_when_its_interval_is_shorter_than_a_rollout(
+        tmp_path: Path, capsys) -> None:
+    home = tmp_path / "league"
+    # 32 games x a 128-step PPO rollout = 4,096 steps an update, more than the 2,048 between snapshots
+    report = run_json(capsys, "train", KUHN, "--agents", "1", "--opponents", "nash", "--nash-payoff", "score",
+                      "--latest-ratio", "0", "--restart-at-snapshot", "--steps", "12288", "--snapshot-steps", "2048",
+                      "--games", "32", "--seed", "0", "--eval-games", "2", "--eval-playoff", "0", "--eval", "inline",
+                      "--quiet", "--home", str(home))
+    lines = [json.loads(s) for s in (home / "runs" / report["run"] / "metrics.jsonl").read_text().splitlines()]
+    assert lines and all(line["learner/lr"] == pytest.approx(2e-3) for line in lines)  # each update: a restart's
+    league = League.open(home=home, readonly=True)
+    try:
+        rows = [p for p in league.players(env=KUHN, kind="snapshot") if p.run == report["run"]]
+        same = league.same_weights(KUHN)
+        assert len(rows) >= 3 and not same  # each snapshot learned something of its own from the first weights
+    finally:
+        league.close()

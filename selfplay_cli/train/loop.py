@@ -165,6 +165,7 @@ class Trainer:
         self._trained: float | None = None  # seconds this process trained, once its training has ended
         self._next_episodes: int | None = None  # the episodes and steps the next snapshot moment is due at
         self._next_steps: int | None = None
+        self._updated_step = 0  # the step of the learners' last update (--restart-at-snapshot: its schedule)
         self.records: list[SnapshotRecord] = []  # the newest snapshots as the ledger rates them
 
     def _learners(self, layout: np.ndarray, roles: list[str | None]) -> tuple[list[Any], SavedAs]:
@@ -426,6 +427,7 @@ class Trainer:
                 raise self._stopped(e, state.steps) from None
             if updated is None:
                 continue
+            self._updated_step = state.steps
             stats = updated
             if state.steps - line_step >= METRICS_STEPS:  # off-policy learners update every step: a line and a
                 line_step = state.steps  # ledger write per update would be megabytes a minute
@@ -449,10 +451,13 @@ class Trainer:
 
     def _learning(self, progress: float) -> float:
         """The learners' progress (their learning rate's schedule): the run's, or with ``--restart-at-snapshot`` the
-        oracle's own, from its restart to its next snapshot, so each new best response learns as the first did."""
+        oracle's own, from its restart to its next snapshot, so each new best response learns as the first did. It is
+        taken where the update's data began (the step of the learners' last update, or of the restart): an interval
+        shorter than one PPO rollout still learns at the full rate, not at a rate annealed to 0."""
         cfg, state = self.cfg, self.state
         if cfg.restart_at_snapshot and cfg.snapshot_steps:
-            return min(1.0, (state.steps - state.snapshot_step) / cfg.snapshot_steps)
+            begun = max(self._updated_step, state.snapshot_step)
+            return min(1.0, (begun - state.snapshot_step) / cfg.snapshot_steps)
         return progress
 
     def _stopped(self, e: NonFiniteError, step: int) -> NonFiniteError:
