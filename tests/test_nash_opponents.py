@@ -122,7 +122,7 @@ def test_a_snapshot_not_measured_yet_weighs_nothing_and_no_games_means_no_mixtur
         nash_mixture(league, "empty")
 
 
-def test_payoff_in_score_units_gives_another_mixture(league: League) -> None:
+def test_payoff_in_score_units_gives_another_mixture(league: League, tmp_path: Path) -> None:
     # A wins 3 small pots (+1) and loses 1 big one (-5): 3 of 4 in points, -0.5 a game in score
     a, b = _snap(league, "a"), _snap(league, "b")
     _play(league, a, b, [(1.0, 1.0)] * 3 + [(0.0, -5.0)])
@@ -137,6 +137,23 @@ def test_payoff_in_score_units_gives_another_mixture(league: League) -> None:
     assert by_points.to_json()["nash"]["mixture"] == [{"policy": "r/a", "weight": 1.0}]
     assert by_score.to_json()["nash"]["mixture"] == [{"policy": "r/b", "weight": 1.0}]
     assert by_score.to_json()["nash"]["payoff"] == "score" and names  # the players are the same either way
+    # the cells show the payoff the mixture was solved from: A's -0.5 a game, not its 75% of the points
+    i, j = names.index("r/a"), names.index("r/b")
+    assert by_score.to_json()["payoffs"][i][j] == -0.5 and by_score.to_json()["payoffs"][j][i] == 0.5
+    assert by_points.to_json()["payoffs"] is None and by_points.cell(i, j) == ("75", 0.75)
+    assert by_score.cell(i, j) == ("-0.50", 0.0) and by_score.cell(j, i) == ("+0.50", 1.0)
+    from rich.console import Console
+
+    from selfplay_cli.report.terminal import matrix_table
+
+    console = Console(width=120, record=True)
+    console.print(matrix_table(by_score, unicode=False))
+    shown = console.export_text()
+    assert "half the score" in shown and "-0.50" in shown and "+0.50" in shown and "75" not in shown
+    from selfplay_cli.report.matrix import write_matrix_png
+
+    png = write_matrix_png(by_score, tmp_path / "m.png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(LeagueError, match="payoff"):
         run_nash(league, "r", payoff="chips")
     assert NASH_PAYOFFS == PAYOFFS  # (the matchmaker's names of them, which imports nothing of the league)

@@ -82,6 +82,7 @@ class MatrixReport:
     cycles: tuple[Cycle, ...]
     variant: str = ""  # the key of the variant whose games it holds (the default: "")
     payoff: str = "points"  # the Nash meta-game's units (:data:`~selfplay_cli.league.pairs.PAYOFFS`)
+    payoffs: npt.NDArray[np.float64] | None = None  # payoff "score": the row player's mean payoff in the game's units
 
     @property
     def n(self) -> int:
@@ -94,6 +95,15 @@ class MatrixReport:
             s = (self.wins + 0.5 * self.draws) / self.games
         s[self.games == 0] = np.nan
         return s
+
+    def cell(self, i: int, j: int) -> tuple[str, float]:
+        """Cell ``[i, j]`` as shown (the row player's score in percent, or with ``payoff="score"`` its mean payoff in
+        the game's own units) and its colour's place from 0 (loses) to 1 (wins)."""
+        if self.payoffs is None:
+            return f"{100 * self.scores[i, j]:.0f}", float(self.scores[i, j])
+        v = float(self.payoffs[i, j])
+        top = float(np.nanmax(np.abs(self.payoffs))) or 1.0
+        return f"{v:+.2f}", 0.5 + 0.5 * v / top
 
     @property
     def measured(self) -> npt.NDArray[np.bool_]:
@@ -147,6 +157,10 @@ class MatrixReport:
                          "ci_low": round(p.ci_low, 1), "ci_high": round(p.ci_high, 1)}
                         for k, p in enumerate(self.players)],
             "score": [[None if math.isnan(v) else round(float(v), 4) for v in row] for row in scores],
+            "payoff": self.payoff,
+            "payoffs": None if self.payoffs is None else [[None if self.games[i, j] == 0 or i == j
+                                                             else round(float(v), 4) for j, v in enumerate(row)]
+                                                            for i, row in enumerate(self.payoffs)],
             "games": matrix(self.games),
             "wins": matrix(self.wins),
             "draws": matrix(self.draws),
@@ -224,12 +238,14 @@ def build_matrix(
     measured = (games >= min_games) & ~np.eye(len(ids), dtype=bool)
     sub = measured_subgame(measured)
     nash = None
+    payoffs = pair_payoffs(table, ids, payoff)
     if len(sub) >= 2:
-        nash = symmetric_nash(pair_payoffs(table, ids, payoff)[np.ix_(sub, sub)])
+        nash = symmetric_nash(payoffs[np.ix_(sub, sub)])
     edges, cycles = significant_three_cycles(units, measured, alpha)
     return MatrixReport(env=env, run=run, players=players, games=games, wins=wins, draws=draws, losses=losses,
                         unit_wins=units, min_games=int(min_games), nash_players=tuple(sub) if nash else (),
-                        nash=nash, edges=edges, cycles=tuple(cycles), variant=variant, payoff=payoff)
+                        nash=nash, edges=edges, cycles=tuple(cycles), variant=variant, payoff=payoff,
+                        payoffs=payoffs if payoff == "score" else None)
 
 
 def write_matrix_png(report: MatrixReport, path: str | Path) -> Path:
@@ -243,8 +259,8 @@ def write_matrix_png(report: MatrixReport, path: str | Path) -> Path:
     from matplotlib import colormaps
 
     n = report.n
-    scores = report.scores
-    shown = np.where(report.measured, scores, np.nan)
+    places = np.array([[report.cell(i, j)[1] if i != j else np.nan for j in range(n)] for i in range(n)])
+    shown = np.where(report.measured, places, np.nan)
     side = max(4.5, 0.62 * n + 3.0)
     fig = new_figure(side + 1.6, side)
     ax = fig.add_subplot()
@@ -259,7 +275,8 @@ def write_matrix_png(report: MatrixReport, path: str | Path) -> Path:
                 continue
             g = int(report.games[i, j])
             if report.measured[i, j]:
-                text = f"{100 * scores[i, j]:.0f}%\n{g}"
+                shown_as, _ = report.cell(i, j)
+                text = f"{shown_as}{'%' if report.payoffs is None else ''}\n{g}"
             else:
                 text = f"n={g}" if g else "none"
             ax.text(j, i, text, ha="center", va="center", fontsize=7 if n > 8 else 8, color="black")
@@ -269,8 +286,9 @@ def write_matrix_png(report: MatrixReport, path: str | Path) -> Path:
     ax.set_xticks(range(n), [str(k + 1) for k in range(n)])
     ax.set_yticks(range(n), [f"{k + 1}. {lab}" for k, lab in enumerate(ylabels)], fontsize=8)
     ax.set_xlabel("column player (numbered as the rows)")
-    ax.set_title(f"{report.env}: row player's score against column player\n(top {n} by fitted Elo; grey: fewer than "
-                 f"{report.min_games} games)", fontsize=10)
-    fig.colorbar(im, ax=ax, shrink=0.7, label="score")
+    what = "score" if report.payoffs is None else "mean payoff (half the score margin)"
+    ax.set_title(f"{report.env}: row player's {what} against column player\n(top {n} by fitted Elo; grey: fewer "
+                 f"than {report.min_games} games)", fontsize=10)
+    fig.colorbar(im, ax=ax, shrink=0.7, label="score" if report.payoffs is None else "payoff, scaled to the largest")
     return save_png(fig, path)
 

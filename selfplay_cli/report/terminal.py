@@ -340,13 +340,14 @@ def _heat(score: float) -> Style:
 
 def matrix_table(report: MatrixReport, unicode: bool = True) -> Table:
     """The score matrix as a heat table: a row per player (number, name, Elo), a column per player (by number);
-    each cell the row player's score in percent over the game count, coloured red (loses) to green (wins).
-    A pair with fewer than ``min_games`` games shows ``?`` over its count."""
+    each cell the row player's score in percent (with ``--payoff score``: its mean payoff in the game's units) over
+    the game count, coloured red (loses) to green (wins). A pair with fewer than ``min_games`` games shows ``?`` over
+    its count."""
     n = report.n
-    scores = report.scores
     measured = report.measured
+    what = "score %" if report.payoffs is None else "mean payoff (half the score margin)"
     table = Table(box=box.SIMPLE_HEAD if unicode else box.ASCII2, padding=(0, 0), pad_edge=False, show_edge=False,
-                  collapse_padding=True, title=Text(f"{report.env}: row player's score % against column player "
+                  collapse_padding=True, title=Text(f"{report.env}: row player's {what} against column player "
                                                      "(games below)"))
     table.add_column("#", justify="right", no_wrap=True)
     table.add_column(" player", justify="left", no_wrap=True, overflow="ellipsis", max_width=24)
@@ -360,7 +361,8 @@ def matrix_table(report: MatrixReport, unicode: bool = True) -> Table:
             if i == j:
                 cells.append(Text("·\n" if unicode else ".\n", style="dim"))
             elif measured[i, j]:
-                cells.append(Text(f"{100 * scores[i, j]:.0f} \n{g} ", style=_heat(scores[i, j]) if unicode else ""))
+                shown, place = report.cell(i, j)
+                cells.append(Text(f"{shown} \n{g} ", style=_heat(place) if unicode else ""))
             else:
                 cells.append(Text(f"? \n{g} ", style="dim"))
         table.add_row(*cells)
