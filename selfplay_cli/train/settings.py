@@ -226,6 +226,16 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
             resolve(league, cfg.teacher.player, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
         except MarlError as e:
             raise MarlError(f"--teacher: {e}") from None
+    scripted = bot_names(cfg.game())
+    for name in cfg.opponents.bots:  # a scripted player of the game, or a league player by name: one line, before
+        if name not in scripted:  # the run exists
+            from ..rated.names import resolve
+
+            try:
+                resolve(league, name, cfg.env)
+            except MarlError:
+                raise MarlError(f"unknown bot {name!r} (known bots: {', '.join(sorted(scripted)) or 'none'}; or a "
+                                f"player of the league by its full name, e.g. run/s1M)") from None
     league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
     save_run_config(league, cfg)
     return cfg
