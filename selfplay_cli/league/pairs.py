@@ -208,7 +208,8 @@ PAYOFFS = ("points", "score")
 the margin) or ``score`` (the game's own scores: chips, goals, returns)."""
 
 
-def pair_payoffs(table: GameTable, ids: list[int], payoff: str = "points") -> npt.NDArray[np.float64]:
+def pair_payoffs(table: GameTable, ids: list[int], payoff: str = "points",
+                 records: tuple[npt.NDArray[np.int64], ...] | None = None) -> npt.NDArray[np.float64]:
     """The row player's mean payoff against the column player over the results of ``table`` between ``ids``, an
     antisymmetric ``n x n`` matrix (0 on the diagonal and for a pair without results): the symmetric zero-sum
     meta-game :func:`~selfplay_cli.stats.nash.symmetric_nash` solves.
@@ -216,7 +217,9 @@ def pair_payoffs(table: GameTable, ids: list[int], payoff: str = "points") -> np
     ``points``: mean points minus one half, ``(W + D/2) / G - 1/2``. ``score``: the mean of half the row player's
     score minus the column player's (:attr:`GameTable.margin_a`), which in a zero-sum game of two seats (Kuhn and Leduc
     poker's chips) is the row player's expected return, PSRO's meta-game payoff; in other games the half-margin
-    keeps the matrix antisymmetric (the row player's gain is the column player's loss).
+    keeps the matrix antisymmetric (the row player's gain is the column player's loss). ``records``: what
+    :func:`pair_records` gave for ``table`` and ``ids``, where the caller has it (``points`` is read from it, not
+    from the table again).
 
     Raises:
         LeagueError: an unknown ``payoff``; ``score`` for results stored without scores.
@@ -224,7 +227,7 @@ def pair_payoffs(table: GameTable, ids: list[int], payoff: str = "points") -> np
     if payoff not in PAYOFFS:
         raise LeagueError(f"unknown payoff {payoff!r} (expected one of {', '.join(PAYOFFS)})")
     if payoff == "points":
-        games, wins, draws, _, _ = pair_records(table, ids)
+        games, wins, draws, _, _ = records if records is not None else pair_records(table, ids)
         out = np.where(games > 0, (wins + 0.5 * draws) / np.maximum(games, 1), 0.5) - 0.5
         np.fill_diagonal(out, 0.0)
         return out

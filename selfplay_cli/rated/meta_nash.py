@@ -7,10 +7,11 @@ against the column side over their rated games (:func:`~selfplay_cli.league.pair
 average: ``marl train --opponents nash`` draws its training opponents from it (one learner as PSRO's oracle),
 ``marl exploit --vs-mixture nash`` trains a best response against it.
 
-A pair is measured once it has ``min_games`` rated games (by default one: a run's gauntlets give each pair of its
-snapshots ``--eval-games`` games with ``--opponents nash``, two where the result was already clear). A missing score
-is never guessed: the mixture is over the measured sub-game (:func:`~selfplay_cli.stats.nash.measured_subgame`, the
-largest set of snapshots whose pairs are all measured; ties: the newer set), and the snapshots outside it weigh 0.
+A pair is measured once it has ``min_games`` rated games (by default one: with ``--opponents nash`` a run's
+gauntlets give each pair of its snapshots all its ``--eval-games`` games, none cut short where a result looks
+clear). A missing score is never guessed: the mixture is over the measured sub-game
+(:func:`~selfplay_cli.stats.nash.measured_subgame`, the largest set of snapshots whose pairs are all measured; ties:
+the newer set), and the snapshots outside it weigh 0.
 
 Payoff units: ``points`` is the default, as in ``marl league matrix``: a result is what the ladder rates, and the
 matrix of points is antisymmetric for every game kind. ``score`` is PSRO's own payoff where a game's scores are
@@ -92,11 +93,11 @@ def run_nash(league: League, run: str, payoff: str = "points", min_games: int = 
         return RunNash(run, payoff, snapshots, {ids[0]: 1.0}, (ids[0],), 0.0, 0)
     newest_first = ids[::-1]  # (the sub-game's ties go to the set whose indices come first: the newer snapshots)
     table = league.games(env=info.env, players=ids, variant=variant_key(info.env, run_options(league, run)))
-    games = pair_records(table, newest_first)[0]
-    sub = measured_subgame((games >= min_games) & ~np.eye(len(ids), dtype=bool))
+    records = pair_records(table, newest_first)
+    sub = measured_subgame((records[0] >= min_games) & ~np.eye(len(ids), dtype=bool))
     if len(sub) < 2:
         return None
-    nash = symmetric_nash(pair_payoffs(table, newest_first, payoff)[np.ix_(sub, sub)])
+    nash = symmetric_nash(pair_payoffs(table, newest_first, payoff, records=records)[np.ix_(sub, sub)])
     weights = dict.fromkeys(ids, 0.0)
     for k, i in enumerate(sub):
         weights[newest_first[i]] = float(nash.mixture[k])

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import shlex
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -88,7 +89,7 @@ class MatrixReport:
     def n(self) -> int:
         return len(self.players)
 
-    @property
+    @cached_property
     def scores(self) -> npt.NDArray[np.float64]:
         """Row player's mean score against the column player; NaN without games and on the diagonal."""
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -102,8 +103,12 @@ class MatrixReport:
         if self.payoffs is None:
             return f"{100 * self.scores[i, j]:.0f}", float(self.scores[i, j])
         v = float(self.payoffs[i, j])
-        top = float(np.nanmax(np.abs(self.payoffs))) or 1.0
-        return f"{v:+.2f}", 0.5 + 0.5 * v / top
+        return f"{v:+.2f}", 0.5 + 0.5 * v / self._payoff_scale
+
+    @cached_property
+    def _payoff_scale(self) -> float:
+        """The largest payoff in size (the colours' ends; 1 when every payoff is 0)."""
+        return float(np.nanmax(np.abs(self.payoffs))) or 1.0 if self.payoffs is not None else 1.0
 
     @property
     def measured(self) -> npt.NDArray[np.bool_]:
@@ -234,11 +239,12 @@ def build_matrix(
                     for r in rows if r.player_id is not None)
     ids = [p.player_id for p in players]
     table = league.games(env=env, players=ids, variant=variant)
-    games, wins, draws, losses, units = pair_records(table, ids)
+    records = pair_records(table, ids)
+    games, wins, draws, losses, units = records
     measured = (games >= min_games) & ~np.eye(len(ids), dtype=bool)
     sub = measured_subgame(measured)
     nash = None
-    payoffs = pair_payoffs(table, ids, payoff)
+    payoffs = pair_payoffs(table, ids, payoff, records=records)
     if len(sub) >= 2:
         nash = symmetric_nash(payoffs[np.ix_(sub, sub)])
     edges, cycles = significant_three_cycles(units, measured, alpha)

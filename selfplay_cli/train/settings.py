@@ -226,16 +226,15 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
             resolve(league, cfg.teacher.player, cfg.env, variant=variant_key(cfg.env, cfg.env_options))
         except MarlError as e:
             raise MarlError(f"--teacher: {e}") from None
-    scripted = bot_names(cfg.game())
-    for name in cfg.opponents.bots:  # a scripted player of the game, or a league player by name: one line, before
-        if name not in scripted:  # the run exists
-            from ..rated.names import resolve
+    from .opponents import fixed_opponents
 
-            try:
-                resolve(league, name, cfg.env)
-            except MarlError:
-                raise MarlError(f"unknown bot {name!r} (known bots: {', '.join(sorted(scripted)) or 'none'}; or a "
-                                f"player of the league by its full name, e.g. run/s1M)") from None
+    # each --bots name is a scripted player of the game or a league player (one line, before the run exists)
+    scripted = dict.fromkeys(bot_names(cfg.game()), 0)
+    known = {**scripted, **fixed_opponents(league, cfg.game().name, cfg.opponents.bots, scripted)}
+    missing = [name for name in cfg.opponents.bots if name not in known]
+    if missing:
+        raise MarlError(f"unknown bot {missing[0]!r} (known bots: {', '.join(sorted(scripted)) or 'none'}; or a "
+                        "player of the league by its full name, e.g. run/s1M)")
     league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
     save_run_config(league, cfg)
     return cfg
