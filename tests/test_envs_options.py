@@ -73,7 +73,9 @@ def test_a_pettingzoo_factorys_keyword_arguments_are_its_options(tmp_path, monke
 def test_pettingzoos_own_games_show_their_raw_env_options(capsys):
     (row,) = json.loads(run(capsys, "envs", "pettingzoo.classic.connect_four_v3", "--json")[1])
     assert row["options_from"] == "raw_env"  # env(**kwargs) passes them on to raw_env(render_mode, screen_scaling)
-    assert [(o["name"], o["type"], o["default"]) for o in row["options"]] == [("screen_scaling", "int", 9)]
+    assert [(o["name"], o["type"], o["default"]) for o in row["options"]] == [
+        ("screen_scaling", "int", 9), ("kind", "str", "two-sides")]  # kind: marl's, the game does not declare it
+    assert row["kind"] == "two-sides" and row["kind_from"] == "agents"
 
 
 def test_train_help_points_at_the_listing_that_exists(capsys):

@@ -286,11 +286,36 @@ def test_a_tuple_observation_is_read_one_hot_then_box_by_the_core():
     np.testing.assert_allclose(core.observe()[1, 1], [0, 1, 0, 0, 0, 0.1, 0.1])
 
 
-def test_options_that_change_the_seats_are_refused():
+def test_options_that_change_the_seats_make_the_game_at_that_size():
     spec = adapt("sized", lambda n=2, **o: _Simple(n=n, **o))
-    assert spec.config(n=2).layout.agents == ("p0", "p1")
-    with pytest.raises(ValueError, match="options that change a game's seats are not supported"):
-        spec.config(n=3)
+    assert spec.config(n=2).layout.agents == ("p0", "p1") and spec.for_options(n=2) is spec
+    three = spec.for_options(n=3)
+    assert three.agents == ("p0", "p1", "p2") and three.n_seats == 3
+    assert three.kind == "free-for-all" and three.kind_from == "agents"  # undeclared: by the number of agents
+    assert len(three.seat_spaces()) == 3 and len(set(three.seat_roles())) == 1  # its own config's seats, one role
+    assert len(spec.seat_spaces(spec.config(n=3))) == 3  # the base declaration asked of a config of 3
+    core = three.core(2, n=3)
+    assert core.n_seats == 3 and core.observe().shape[:2] == (3, 2)
+    team = spec.for_options(n=3, kind="cooperative")
+    assert team.kind == "cooperative" and team.kind_from == "option" and team.side_seats() == ((0, 1, 2),)
+    assert spec.variant_options({"n": 3, "kind": "cooperative"}) == {"kind": "cooperative", "n": 3}
+    assert spec.variant_options({"kind": "two-sides"}) == {}  # the kind it has without the option
+    with pytest.raises(ValueError, match="two-sides game of other than 2 agents needs its sides"):
+        spec.for_options(n=3, kind="two-sides")
+    with pytest.raises(ValueError, match="kind must be one of"):
+        spec.config(kind="teams")
+
+
+class _Declared(_Simple):
+    metadata = {"name": "declared", "marl_kind": "free-for-all"}
+
+
+def test_a_game_that_declares_its_kind_keeps_it():
+    spec = adapt("declared", lambda **o: _Declared(n=3, **o))
+    assert spec.kind == "free-for-all" and spec.kind_from == "metadata"
+    assert spec.for_options(kind="free-for-all").kind == "free-for-all"  # said again: nothing to choose
+    with pytest.raises(ValueError, match=r"declares its kind in its metadata \(free-for-all\)"):
+        spec.config(kind="cooperative")
 
 
 # ---------------------------------------------------------------------------------------------------------------

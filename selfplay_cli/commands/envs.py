@@ -29,6 +29,9 @@ def env_row(name: str) -> dict[str, Any]:
         "description": spec.description,
         "agents": list(spec.agents),
         "kind": spec.kind,
+        # where the kind came from: declared (marl's own game), metadata (a PettingZoo game's marl_kind), agents (not
+        # declared: by the number of agents; marl train --kind, or the option kind=..., sets it)
+        "kind_from": spec.kind_from,
         "turns": spec.turns,
         "sides": [list(side) for side in spec.side_seats()] if spec.kind == "two-sides" else None,
         "tie_tolerance": spec.tie_tolerance if spec.kind == "cooperative" else None,
@@ -105,6 +108,10 @@ def envs(
     console.print(table)
     for r in rows:
         _print_reading(r)
+        if r.get("kind_from") == "agents":
+            console.print(f"{r['name']}: {r['kind']} by default ({len(r['agents'])} agents; the game does not "
+                          "declare its kind): marl train --kind cooperative trains its agents as one team, "
+                          "--env-option kind=... plays it so", markup=False, highlight=False)
         roles = dict.fromkeys(seat["role"] for seat in r.get("seats", ()))
         if len(roles) > 1:  # seats that differ: a snapshot plays only its own role
             rules = Rules.of(get_env(r["name"]))

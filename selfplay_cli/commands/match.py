@@ -70,6 +70,10 @@ def render_report(r: MatchReport) -> None:
         shown = _points(r.points_for, r.points_against)
     console.print(f"  {r.a}: {r.wins} W  {r.draws} D  {r.losses} L of {r.n_results} {r.result_unit}s   score "
                   f"{100 * s.score:.1f}%   {shown}")
+    if r.seating is not None and len(set(r.seating)) > 1:  # a team of distinct members at another size
+        console.print(f"  {r.a} flew {len(r.seating)} seats: " + ", ".join(r.seating)
+                      + " (a team at another size: the first two keep their seats, the others drawn from the third "
+                      "on)", markup=False, highlight=False)
     bound = " (bound: no game lost or none won)" if s.bounded else ""
     console.print(f"  Elo difference {s.elo:+.1f}  [{100 * s.confidence:g}% CI {s.elo_low:+.1f}, {s.elo_high:+.1f}]"
                   f"{bound}   LOS {100 * s.los:.1f}%")
@@ -164,8 +168,9 @@ def match(
     reports: list[MatchReport] = []
     try:
         side_a, side_b = resolve_players(league, [a, b], env, teams=True, env_option=env_option)
-        jobs, crew = match_jobs(league, a, side_a, b, side_b, sprt=sprt)
-        options = parse_env_options(jobs[0].row_b.env, env_option) if env_option else None
+        game = side_b.env
+        options = parse_env_options(game, env_option) if env_option else None
+        jobs, crew = match_jobs(league, a, side_a, b, side_b, sprt=sprt, options=options)
         forecast = forecaster(league, jobs[0].row_b.env, [r for job in jobs for r in (*job.rows_a, job.row_b)],
                               options)
         for job in jobs:

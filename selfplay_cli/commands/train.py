@@ -163,6 +163,12 @@ def train(
     env_option: Annotated[list[str] | None, typer.Option("--env-option", metavar="KEY=VALUE", help="Game option, "
                                                          "repeatable (e.g. points_to_win=5; marl envs NAME lists "
                                                          "a game's options, types and defaults).")] = None,
+    kind: Annotated[str | None, typer.Option("--kind", metavar="KIND", help="two-sides, cooperative or "
+                                             "free-for-all: what a result is, for a PettingZoo game whose metadata "
+                                             "does not say (by default 2 agents are two sides, more a free-for-all): "
+                                             "pursuit's pursuers are one team (--kind cooperative). A game option "
+                                             "(kind=...): the run's snapshots carry it, and its results are rated "
+                                             "apart from the game's other kinds.")] = None,
     resume: Annotated[str | None, typer.Option("--resume", metavar="RUN", help="Continue a run that was stopped or "
                                                "killed, from its last snapshot (its saved configuration applies).")]
     = None,

@@ -19,7 +19,7 @@ import typing
 from dataclasses import dataclass
 from typing import Any, Literal, Union
 
-from .registry import EnvSpec
+from .registry import KINDS, EnvSpec
 
 __all__ = ["GameOption", "GameOptions", "game_options"]
 
@@ -121,11 +121,20 @@ def game_options(spec: EnvSpec) -> GameOptions:
     source = spec.option_source if spec.option_source is not None else spec.make_config
     sig = _signature(source)
     if sig is None:
-        return GameOptions((), "none", open=True)
+        return _with_kind(spec, GameOptions((), "none", open=True))
     found = _from_signature(sig, "factory", live)
     if found.open and not found.options:  # env(**kwargs): PettingZoo's convention passes them to raw_env
         raw = getattr(sys.modules.get(getattr(source, "__module__", "") or ""), "raw_env", None)
         raw_sig = _signature(raw) if callable(raw) and raw is not source else None
         if raw_sig is not None:
-            return _from_signature(raw_sig, "raw_env", live)
-    return found
+            found = _from_signature(raw_sig, "raw_env", live)
+    return _with_kind(spec, found)
+
+
+def _with_kind(spec: EnvSpec, found: GameOptions) -> GameOptions:
+    """``found`` and, for a game that takes marl's ``kind`` option (a PettingZoo game that does not declare its
+    kind), that option: its default is the kind the game has without it."""
+    if spec.make_kind is None or spec.kind_from == "metadata" or any(o.name == "kind" for o in found.options):
+        return found
+    kind = GameOption("kind", "str", spec.kind, KINDS)
+    return GameOptions((*found.options, kind), found.source, found.open)

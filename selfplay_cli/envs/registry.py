@@ -331,6 +331,14 @@ class EnvSpec:
     # whose config is no dataclass (a PettingZoo game's factory): `marl envs NAME` reads them from its signature
     roles: tuple[str, ...] | None = None  # each seat's role, where the game declares them (None: by their spaces)
     make_state_space: Callable[[Any], spaces.Box | None] | None = None  # the global state's space for a config
+    make_kind: Callable[[Any], tuple[str, tuple[tuple[int, ...], ...] | None, str]] | None = None  # a config's
+    # (kind, sides, kind_from), for a game whose options choose them (a PettingZoo game that does not declare its
+    # kind: its ``kind`` option; one whose agents change with its options: its default kind for their number)
+    make_roles: Callable[[Any], tuple[str, ...] | None] | None = None  # a config's declared roles (None: inferred)
+    sized_config: Any = field(default=None, compare=False)  # the config :meth:`for_options` declared these seats
+    # for (None: the default config's): what the methods taking ``cfg=None`` read
+    kind_from: str = "declared"  # where the kind comes from: declared (by marl's game), metadata (a PettingZoo
+    # game's), option (the ``kind`` option), agents (none said: by the number of agents)
 
     def __post_init__(self) -> None:
         n = len(self.agents)
@@ -366,15 +374,28 @@ class EnvSpec:
 
     def for_options(self, **options: Any) -> EnvSpec:
         """The game as these options make it: itself, or, for a game whose seats follow its options
-        (``make_agents``: the lander's ``landers=M``), the same game declared with that config's seats."""
-        if self.make_agents is None or not options:
+        (``make_agents``: the lander's ``landers=M``, pursuit's ``n_pursuers``), the same game declared with that
+        config's seats; for a game whose options choose its kind (``make_kind``), with that kind."""
+        if (self.make_agents is None and self.make_kind is None) or not options:
             return self
-        cfg = self.make_config(**options)
-        agents = tuple(self.make_agents(cfg))
-        if agents == self.agents:
+        return self.for_config(self.make_config(**options))
+
+    def for_config(self, cfg: Any) -> EnvSpec:
+        """:meth:`for_options` for a config already made."""
+        changes: dict[str, Any] = {}
+        if self.make_kind is not None:
+            kind, sides, kind_from = self.make_kind(cfg)
+            if (kind, sides, kind_from) != (self.kind, self.sides, self.kind_from):
+                changes.update(kind=kind, sides=sides, kind_from=kind_from)
+        agents = tuple(self.make_agents(cfg)) if self.make_agents is not None else self.agents
+        if agents != self.agents:
+            changes.update(agents=agents, roles=self.make_roles(cfg) if self.make_roles is not None else None)
+        if not changes:
             return self
-        resized = replace(self, agents=agents, roles=None)
-        return replace(resized, roles=resized.seat_roles(cfg))  # the roles of that config's seats, stated
+        out = replace(self, **changes, sized_config=cfg)
+        if agents != self.agents and out.roles is None:
+            out = replace(out, roles=out.seat_roles(cfg))  # the roles of that config's seats, stated
+        return out
 
     def variant_options(self, options: Mapping[str, Any] | None) -> dict[str, Any]:
         """The options among ``options`` that make a variant of this game (see ``neutral_options``), by name, in
@@ -411,22 +432,23 @@ class EnvSpec:
         """One :class:`SeatSpace` per seat for the config ``cfg`` (default options when None), checked: an
         unsupported space, or two seats of one declared role whose spaces differ, is an :class:`EnvError` naming
         the game, the seats and why."""
-        cfg = self.make_config() if cfg is None else cfg
+        cfg = self._config(cfg)
         if self.make_seat_spaces is not None:
             seats = tuple(self.make_seat_spaces(cfg))
         else:
             obs, act = self.observation_space(cfg), self.action_space(cfg)
             seats = tuple(SeatSpace(obs, act, False) for _ in self.agents)
-        if len(seats) != self.n_seats:
-            raise EnvError(self.name, f"game {self.name!r} declares {self.n_seats} seats but {len(seats)} seat "
+        agents = self._agents_of(cfg)
+        if len(seats) != len(agents):
+            raise EnvError(self.name, f"game {self.name!r} declares {len(agents)} seats but {len(seats)} seat "
                                       "spaces")
-        for agent, seat in zip(self.agents, seats, strict=True):
+        for agent, seat in zip(agents, seats, strict=True):
             try:
                 check_seat_space(seat)
             except SpaceError as e:
                 raise EnvError(self.name, f"game {self.name!r}, seat {agent!r}: {e}") from None
         first: dict[str, int] = {}
-        for s, role in enumerate(self.roles or ()):
+        for s, role in enumerate((self.roles or ()) if agents == self.agents else ()):
             k = first.setdefault(role, s)
             if _space_key(seats[k]) != _space_key(seats[s]):
                 raise EnvError(self.name, f"game {self.name!r}: seats {self.agents[k]!r} and {self.agents[s]!r} are "
@@ -434,23 +456,37 @@ class EnvSpec:
                                           "interchangeable)")
         return seats
 
+    def _config(self, cfg: Any) -> Any:
+        """``cfg``, or when None the config this declaration is of (``sized_config``, else the default's)."""
+        if cfg is not None:
+            return cfg
+        return self.sized_config if self.sized_config is not None else self.make_config()
+
+    def _agents_of(self, cfg: Any) -> tuple[str, ...]:
+        """The seats of the config ``cfg``: ``agents``, or, for a game whose options change them, that config's."""
+        return self.agents if self.make_agents is None else tuple(self.make_agents(cfg))
+
     def state_space(self, cfg: Any = None) -> spaces.Box | None:
         """The space of the game's global state for the config ``cfg`` (default options when None), None when the
         game gives none (see ``make_state_space``)."""
         if self.make_state_space is None:
             return None
-        return self.make_state_space(self.make_config() if cfg is None else cfg)
+        return self.make_state_space(self._config(cfg))
 
     def seat_roles(self, cfg: Any = None) -> tuple[str, ...]:
         """The role of each seat for the config ``cfg`` (default options when None): the declared ``roles`` (which
         :meth:`seat_spaces` checks), else inferred from the seats' spaces (:func:`infer_roles`)."""
+        cfg = self._config(cfg)
+        agents = self._agents_of(cfg)
+        if agents != self.agents:  # a config of other seats (pursuit's n_pursuers=3 asked of the default game)
+            return self.for_config(cfg).seat_roles(cfg)
         if self.roles is not None:
             return self.roles
         return infer_roles(self.agents, self.seat_spaces(cfg))
 
     def max_steps(self, cfg: Any = None) -> int | None:
         """The most steps one game of this config lasts, if the game declares it."""
-        cfg = self.make_config() if cfg is None else cfg
+        cfg = self._config(cfg)
         if self.time_limit is not None:
             return self.time_limit(cfg)
         limit = getattr(cfg, "max_steps", None)

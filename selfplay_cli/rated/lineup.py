@@ -24,11 +24,11 @@ each member.
 
 from __future__ import annotations
 
+import contextlib
 import re
 from dataclasses import dataclass
 
-import numpy as np
-
+from ..arena.schedule import resize_team
 from ..envs import EnvSpec, env_names, get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
@@ -36,6 +36,7 @@ from ..policies.bots import league_bots
 from ..results import COOPERATIVE, TWO_SIDES, Rules
 from .names import Team, find_team, resolve_or_team, seat_of, teammates
 from .roles import RoleBook, cannot_meet_message, roles_text
+from .snapshots import player_options
 
 __all__ = ["Lineup", "default_opponent", "find_team", "lineup", "lineups", "safe_filename", "seat_of", "teammates"]
 
@@ -69,16 +70,13 @@ class Lineup:
 
 def refit(lu: Lineup, n_seats: int, seed: int = 0) -> Lineup:
     """The lineup for a game of ``n_seats`` seats when options change the number (a lander team trained with N
-    landers flown as M). A team that grows gives each extra seat a member chosen at random (a fixed draw from
-    ``seed``: the extra landers copy a policy of the team), one that shrinks keeps its first seats."""
-    have = len(lu.players)
-    if n_seats == have:
+    landers flown as M), by seed 001's rule (:func:`~selfplay_cli.arena.schedule.resize_team`, a fixed draw from
+    ``seed``): the first members keep their places, extra seats copy members from the third on, fewer seats drop
+    members from the third on."""
+    if n_seats == len(lu.players):
         return lu
-    if n_seats < have:
-        return Lineup(lu.env, lu.players[:n_seats], focus=min(lu.focus, n_seats - 1))
-    rng = np.random.default_rng(seed)
-    extra = tuple(lu.players[int(i)] for i in rng.integers(0, have, size=n_seats - have))
-    return Lineup(lu.env, lu.players + extra, focus=lu.focus)
+    players = tuple(lu.players[i] for i in resize_team(len(lu.players), n_seats, seed))
+    return Lineup(lu.env, players, focus=min(lu.focus, n_seats - 1))
 
 
 def safe_filename(text: str) -> str:
@@ -131,6 +129,9 @@ def _seat(league: League, me: PlayerRow, vs: str | None) -> Lineup:
     """``me`` on its own seat (a per-seat learner's, else the first) and the seats the game's kind gives it, against
     ``vs``, its teammates or the default opponent (see the module docstring)."""
     spec = get_env(me.env)
+    if not me.is_bot and (spec.make_kind is not None or spec.make_agents is not None):
+        with contextlib.suppress(MarlError, OSError, TypeError, ValueError):  # unreadable: refused when loaded
+            spec = spec.for_options(**player_options(league, me))  # the game as it trained (its kind, its seats)
     rules = Rules.of(spec)
     agents = spec.agents
     book = RoleBook(league, me.env)

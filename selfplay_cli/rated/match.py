@@ -33,7 +33,7 @@ import numpy as np
 
 from ..arena import Game, play
 from ..arena.matches import frame_stack_of
-from ..arena.schedule import CannotMeet, round_of, rounds
+from ..arena.schedule import CannotMeet, resize_team, round_of, rounds
 from ..envs import EnvSpec, get_env
 from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
@@ -198,6 +198,7 @@ class MatchReport:
     variant: str = ""  # the key of the variant its games were played in (and are rated in): "" for the default
     predicted: Any = None  # what the ladder predicted of these games before they were played (a ScorePrediction)
     round_points: list[list[float]] = field(default_factory=list, repr=False)  # A's points in each round, in order
+    seating: tuple[str, ...] | None = None  # a team flown at another size: its member on each seat
 
     @property
     def held(self) -> bool | None:
@@ -246,6 +247,8 @@ class MatchReport:
             "predicted": None if self.predicted is None else {**self.predicted.to_json(), "held": self.held},
             "paired": self.paired,
         }
+        if self.seating is not None:
+            out["seating"] = list(self.seating)
         if self.mean_returns is not None:
             out["mean_return"] = {"a": round(self.mean_returns[0], 4), "b": round(self.mean_returns[1], 4)}
         return out
@@ -290,8 +293,9 @@ def run_match(
     2 landers as 4); each network must still fit the seats those options make.
 
     ``team`` (a cooperative game only): A is that team of policies flying together, member i on seat i (a team
-    flown with more seats than members gives each extra seat a member drawn at random from ``first_seed``; with
-    fewer, the first members fly); ``a`` is then its first member and ``team_name`` names it in the report.
+    flown at another number of seats is seated by :func:`~selfplay_cli.arena.schedule.resize_team`, drawn from
+    ``first_seed``: the report's ``seating`` names the member on each seat); ``a`` is then its first member and
+    ``team_name`` names it in the report.
 
     ``rounds``: play exactly this many rounds (``games`` then only has to be positive): round ``r`` is played on seed
     ``first_seed + r``, so the rounds ``[k, k + n)`` of a match are the match of ``n`` rounds from seed
@@ -310,6 +314,8 @@ def run_match(
         match.test = SPRT(elo0=sprt.elo0, elo1=sprt.elo1, alpha=sprt.alpha, beta=sprt.beta)
     match.params = {"a": match.a_name, "b": b.id, "games": games if rounds is None else n_rounds * match.per,
                     "first_seed": first_seed, "env_options": match.options, "status": "running"}
+    if match.team_seats is not None:  # who flew each seat (a team at another size: seed 001's rule's draw)
+        match.params["seating"] = [match.roster[i].id for i in match.team_seats]
     if sprt is not None:
         match.params["sprt"] = asdict(sprt)
     match.play(n_rounds, chunk_rounds, parallel)
@@ -398,14 +404,13 @@ class _Match:
         self.a_key = self.a.id
 
     def seat_team(self, members: list[Policy]) -> None:
-        """A is a team flying together: member i on seat i, each extra seat a member drawn from the first seed."""
+        """A is a team flying together: member i on seat i; at another number of seats, seated by seed 001's rule
+        (:func:`~selfplay_cli.arena.schedule.resize_team`, drawn from the first seed)."""
         rules = self.rules
         if rules.kind != COOPERATIVE:
             raise MarlError(f"a team flies together only in a cooperative game; {self.spec.name} is {rules.kind}")
         self.roster = [*members, self.b]
-        pick = np.random.default_rng(self.first_seed).integers(0, len(members),
-                                                               size=max(rules.n_seats - len(members), 0))
-        self.team_seats = tuple(list(range(min(len(members), rules.n_seats))) + [int(i) for i in pick])
+        self.team_seats = resize_team(len(members), rules.n_seats, self.first_seed)
         self.a_key = tuple(sorted({members[i].id for i in self.team_seats}))
 
     def plan_rounds(self) -> None:
@@ -509,6 +514,8 @@ class _Match:
                       self.round_points, time.perf_counter() - self.start, self.match_id, self.first_seed,
                       self.confidence, self.game_ids)
         out.variant = variant_key(self.spec.name, self.options)
+        if self.team_seats is not None and len(self.team_seats) != len(self.roster) - 1:  # a team resized
+            out.seating = tuple(self.roster[i].id for i in self.team_seats)
         return out
 
 

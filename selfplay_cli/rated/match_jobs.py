@@ -35,11 +35,12 @@ class MatchJob:
 
 
 def match_jobs(league: League, a: str, side_a: PlayerRow | Team, b: str, side_b: PlayerRow | Team,
-               sprt: bool = False) -> tuple[list[MatchJob], Team | None]:
+               sprt: bool = False, options: dict[str, Any] | None = None) -> tuple[list[MatchJob], Team | None]:
     """The matches ``marl match A B`` plays, and the team flying together in one of them (None: each member of a
     team, if one is named, plays alone); refused in one line as :func:`pairings` and
-    :func:`check_distinct_weights` say."""
-    crew = _flying_team(side_a, side_b, a, b)
+    :func:`check_distinct_weights` say. ``options``: the command's ``--env-option`` (the game's kind may follow
+    them, and the options the team was made for)."""
+    crew = _flying_team(league, side_a, side_b, a, b, options)
     jobs = ([MatchJob(tuple(crew.members), side_b, crew.full_name)] if crew is not None  # type: ignore[arg-type]
             else [MatchJob((row_a,), row_b) for row_a, row_b in pairings(a, side_a, b, side_b, sprt=sprt)])
     check_distinct_weights(league, [(r, job.row_b) for job in jobs for r in job.rows_a])
@@ -70,14 +71,25 @@ def predict(forecast: Any, a: PlayerRow, b: PlayerRow, report: MatchReport) -> A
         return None
 
 
-def _flying_team(side_a: Any, side_b: Any, a: str, b: str) -> Team | None:
-    """The team that flies together in one match (a cooperative game's per-seat snapshots, named first), or None
-    (each member then plays alone, as in a two-sides game)."""
+def _flying_team(league: League, side_a: Any, side_b: Any, a: str, b: str,
+                 options: dict[str, Any] | None = None) -> Team | None:
+    """The team that flies together in one match (a cooperative game's per-seat snapshots, named first; the game as
+    the team's options, and ``options`` over them, make it: a PettingZoo game trained with ``--kind cooperative``),
+    or None (each member then plays alone, as in a two-sides game)."""
     from ..envs import get_env
     from ..results import COOPERATIVE
+    from .snapshots import player_options
 
     team = side_a if isinstance(side_a, Team) else side_b if isinstance(side_b, Team) else None
-    if team is None or get_env(team.env).kind != COOPERATIVE:
+    if team is None:
+        return None
+    spec = get_env(team.env)
+    if spec.make_kind is not None:  # a game whose options may choose its kind
+        try:
+            spec = spec.for_options(**{**player_options(league, team.members[0]), **(options or {})})
+        except (TypeError, ValueError) as e:
+            raise MarlError(f"{team.full_name}: {e}") from None
+    if spec.kind != COOPERATIVE:
         return None
     if team is side_b:
         raise MarlError(f"'{b}' is a team that flies together: name it first (marl match {b} {a})")

@@ -29,6 +29,7 @@ what users type here first).
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import functools
 from collections.abc import Callable, Iterable
@@ -85,26 +86,35 @@ def seat_of(row: PlayerRow, agents: tuple[str, ...]) -> int | None:
 
 
 def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | None:
-    """The snapshots ``<name>-<seat>`` for every seat of the game, all from one run, in seat order; None if there
-    are none. Raises LeagueError if several runs have such a team (``run/name`` chooses)."""
+    """The snapshots ``<name>-<seat>`` for every seat of the game as their run played it (a run whose options change
+    the seats, ``landers=3``, ``n_pursuers=3``: those seats), all from one run, in seat order; None if there are
+    none. Raises LeagueError if several runs have such a team (``run/name`` chooses)."""
     teams: dict[tuple[str, str], list[PlayerRow]] = {}
+    runs = league.list_runs(env)
     # the registered games, and the users' games the league's runs play (mpe2.simple_push_v3, a module:factory)
-    for e in [env] if env else dict.fromkeys([*env_names(), *(r.env for r in league.list_runs())]):
+    for e in [env] if env else dict.fromkeys([*env_names(), *(r.env for r in runs)]):
         try:
-            agents = get_env(e).agents
+            spec = get_env(e)
         except UnknownEnvError:  # a game this process cannot load: its names are found one by one, not as teams
             continue
-        if len(agents) < 2:
-            continue
-        by_run: dict[str, list[PlayerRow | None]] = {}
-        for seat, agent in enumerate(agents):
-            for p in league.find_players(f"{name}-{agent}", env=e):
-                if p.kind != "snapshot" or p.run is None or ("/" in name and p.full_name != f"{name}-{agent}"):
-                    continue
-                by_run.setdefault(p.run, [None] * len(agents))[seat] = p
-        for run, members in by_run.items():
-            if all(m is not None for m in members):
-                teams[(e, run)] = members  # type: ignore[assignment]
+        seatings = {spec.agents: None}  # the seats of the game, and those its runs' options made
+        for r in runs:
+            if r.env == e and (options := (r.config or {}).get("env_options")):
+                with contextlib.suppress(TypeError, ValueError, UnknownEnvError):
+                    seatings.setdefault(spec.for_options(**options).agents, r.name)
+        for agents in seatings:
+            if len(agents) < 2:
+                continue
+            by_run: dict[str, list[PlayerRow | None]] = {}
+            for seat, agent in enumerate(agents):
+                for p in league.find_players(f"{name}-{agent}", env=e):
+                    if p.kind != "snapshot" or p.run is None or ("/" in name and p.full_name != f"{name}-{agent}"):
+                        continue
+                    by_run.setdefault(p.run, [None] * len(agents))[seat] = p
+            for run, members in by_run.items():
+                whole = all(m is not None for m in members)
+                if whole and len(members) > len(teams.get((e, run), ())):  # the run's whole team, not a part
+                    teams[(e, run)] = members  # type: ignore[assignment]
     if len(teams) > 1:
         listed = ", ".join(f"{run}/{name}" for _, run in sorted(teams))
         raise LeagueError(f"'{name}' is a team in several runs: {listed}; use run/name")

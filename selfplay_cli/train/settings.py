@@ -125,6 +125,9 @@ def new_settings(env: str | None, flags: Mapping[str, Any], *, config: Path | No
     merge_settings(settings, from_file)
     _apply_flags(settings, flags)
     settings["env_options"] = {**settings["env_options"], **env_options(spec.name)}
+    kind = flags.get("kind", settings.pop("kind", None))  # --kind, or kind = "..." at a config file's top level
+    if kind is not None:
+        settings["env_options"]["kind"] = check_kind(spec, kind)
     try:
         spec.config(**settings["env_options"])
     except (TypeError, ValueError) as e:
@@ -134,6 +137,21 @@ def new_settings(env: str | None, flags: Mapping[str, Any], *, config: Path | No
                                          key not in from_file})
     TrainConfig.from_dict(settings)  # every setting checked
     return settings
+
+
+def check_kind(spec: Any, kind: Any) -> str:
+    """``--kind`` for ``spec``: one of the kinds, for a game that does not declare its own (a refusal otherwise)."""
+    from ..envs import KINDS
+
+    if kind not in KINDS:
+        raise MarlError(f"--kind must be one of {', '.join(KINDS)}, not {kind!r}")
+    if spec.make_kind is None or spec.kind_from == "metadata":
+        if kind == spec.kind:
+            return kind
+        where = "in its metadata" if spec.kind_from == "metadata" else "itself"
+        raise MarlError(f"{spec.name} declares its kind {where} ({spec.kind}): --kind is for PettingZoo games that "
+                        "do not declare one")
+    return kind
 
 
 def _apply_flags(settings: dict[str, Any], flags: Mapping[str, Any]) -> None:

@@ -7,10 +7,16 @@ copies, which the arena steps as it steps the built-in games' cores.
   Discrete, MultiDiscrete, MultiBinary, Tuples and Dicts of them flattened, a top-level Dict's ``action_mask`` taken
   as the seat's mask: :mod:`selfplay_cli.envs.obs_spaces`) and the action space (Discrete, MultiDiscrete, Box);
 - turns: a ``ParallelEnv`` is simultaneous, an ``AECEnv`` sequential (its ``agent_selection`` acts);
-- kind: ``env.metadata["marl_kind"]`` (``"two-sides"``, ``"cooperative"`` or ``"free-for-all"``); by default a
-  game of 2 seats is two-sides, of one seat cooperative, of more free-for-all (cooperative games must say so).
-  ``metadata["marl_sides"]`` (the seats, by index or agent name, of each of the two sides) and
-  ``metadata["marl_tie_tolerance"]`` complete it;
+- kind: ``env.metadata["marl_kind"]`` (``"two-sides"``, ``"cooperative"`` or ``"free-for-all"``); a game whose
+  metadata does not say takes it from its ``kind`` option (``--kind`` of ``marl train``, ``--env-option kind=...``
+  elsewhere: a PettingZoo game's metadata is not the user's to edit), and by default a game of 2 seats is two-sides,
+  of one seat cooperative, of more free-for-all. ``metadata["marl_sides"]`` (the seats, by index or agent name, of
+  each of the two sides) and ``metadata["marl_tie_tolerance"]`` complete it. The kind is part of the game's
+  identity: results under another kind are another variant, rated apart; ``EnvSpec.kind_from`` says where it came
+  from (``metadata``, ``option`` or ``agents``, the default by their number);
+- team size: options may change the agents (pursuit's ``n_pursuers``): each config is probed, and
+  ``EnvSpec.for_options`` declares the game with that config's agents, kind and roles, as the lander's ``landers``
+  option does (the API, parallel or AEC, must stay the same);
 - roles: ``metadata["marl_roles"]``, the role of each agent (a list in ``possible_agents`` order, or a dict from
   agent name to role); by default agents whose spaces agree share a role (see
   :meth:`~selfplay_cli.envs.registry.EnvSpec.seat_roles`);
@@ -90,13 +96,16 @@ class Layout:
 class PettingZooConfig:
     """The options a game is made with (passed to its factory as keyword arguments) and what they make."""
 
-    __slots__ = ("options", "layout", "defaults")
+    __slots__ = ("options", "layout", "defaults", "kind", "kind_from", "sides")
 
     def __init__(self, options: Mapping[str, Any], layout: Layout,
-                 defaults: Mapping[str, Any] | None = None) -> None:
-        self.options = dict(options)
+                 defaults: Mapping[str, Any] | None = None, kind: str | None = None,
+                 kind_from: str = "agents", sides: tuple[tuple[int, ...], ...] | None = None) -> None:
+        self.options = dict(options)  # what the factory is called with (``kind`` is marl's, not the factory's)
         self.layout = layout
         self.defaults = dict(defaults or {})  # the factory's keyword defaults: an option given at its default is none
+        self.kind = kind or default_kind(len(layout.agents))
+        self.kind_from, self.sides = kind_from, sides
 
     @property
     def max_steps(self) -> int | None:
@@ -243,11 +252,29 @@ def _option_key(options: Mapping[str, Any]) -> Any:
         return repr(sorted(options.items(), key=lambda kv: kv[0]))
 
 
-def _kind_of(name: str, layout: Layout) -> tuple[str, tuple[tuple[int, ...], ...] | None, float]:
+KIND_OPTION = "kind"
+"""The option that gives a game whose metadata does not declare its kind one (``--kind`` of ``marl train``)."""
+
+
+def default_kind(n_agents: int) -> str:
+    """The kind of a game that declares none: two-sides for 2 agents, cooperative for one, free-for-all for more."""
+    return "two-sides" if n_agents == 2 else ("cooperative" if n_agents == 1 else "free-for-all")
+
+
+def _kind_of(name: str, layout: Layout, option: str | None = None
+             ) -> tuple[str, tuple[tuple[int, ...], ...] | None, float, str]:
+    """The game's kind, sides, tie tolerance and where the kind came from (``metadata``, ``option``, ``agents``)."""
     md, agents = layout.metadata, layout.agents
-    kind = md.get("marl_kind")
-    if kind is None:
-        kind = "two-sides" if len(agents) == 2 else ("cooperative" if len(agents) == 1 else "free-for-all")
+    kind, source = md.get("marl_kind"), "metadata"
+    if kind is None and option is not None:
+        kind, source = option, "option"
+        if kind not in KINDS:
+            raise ValueError(f"{name}: kind must be one of {', '.join(KINDS)}, not {kind!r}")
+    elif kind is None:
+        kind, source = default_kind(len(agents)), "agents"
+    elif option is not None and option != kind:
+        raise ValueError(f"{name} declares its kind in its metadata ({kind}): the kind option is for games that do "
+                         "not")
     if kind not in KINDS:
         raise EnvError(name, f"game {name!r}: metadata marl_kind must be one of {', '.join(KINDS)}, not {kind!r}")
     sides = md.get("marl_sides")
@@ -258,12 +285,17 @@ def _kind_of(name: str, layout: Layout) -> tuple[str, tuple[tuple[int, ...], ...
             raise EnvError(name, f"game {name!r}: metadata marl_sides must list the seats (indices or agent "
                                  f"names) of each side, not {md.get('marl_sides')!r}") from None
     elif kind == "two-sides" and len(agents) != 2:
+        if source == "option":
+            raise ValueError(f"{name} has {len(agents)} agents: a two-sides game of other than 2 agents needs its "
+                             "sides (the game's metadata marl_sides), which it does not declare")
         raise EnvError(name, f"game {name!r} has {len(agents)} agents: a two-sides game of other than 2 agents "
                              "must declare metadata marl_sides (the agents of each side)")
+    if sides is not None and kind != "two-sides":
+        sides = None  # the sides of a game played, by the option, as a team or every agent for itself
     tol = md.get("marl_tie_tolerance", 0.0)
     if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol) or tol < 0:
         raise EnvError(name, f"game {name!r}: metadata marl_tie_tolerance must be a number >= 0, not {tol!r}")
-    return kind, sides, float(tol)
+    return kind, sides, float(tol), source
 
 
 def _roles_of(name: str, layout: Layout) -> tuple[str, ...] | None:
@@ -288,21 +320,31 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
     default = probe(name, factory)
     layouts: dict[Any, Layout] = {(): default}
     defaults = _keyword_defaults(factory)
+    kind, sides, tol, kind_from = _kind_of(name, default)
+    # A game that does not declare its kind takes the kind option, unless its factory has an option of that name.
+    kind_option = kind_from != "metadata" and KIND_OPTION not in defaults
+    if kind_option:
+        defaults[KIND_OPTION] = kind
 
     def make_config(**options: Any) -> PettingZooConfig:
+        chosen = options.pop(KIND_OPTION, None) if kind_option else None
+        if not kind_option and KIND_OPTION in options and KIND_OPTION not in defaults:
+            given = options.pop(KIND_OPTION)  # the kind the game declares, given again: nothing to choose
+            if given != kind:
+                raise ValueError(f"{name} declares its kind in its metadata ({kind}): the kind option is for games "
+                                 "that do not")
         key = _option_key(options)
         layout = layouts.get(key)
         if layout is None:
             layout = probe(name, factory, options)
-            if layout.agents != default.agents or layout.api != default.api:
-                raise ValueError(f"{name} with options {options} has agents {list(layout.agents)} ({layout.api}), "
-                                 f"not {list(default.agents)} ({default.api}): options that change a game's seats "
-                                 "are not supported (register each seating as its own game)")
+            if layout.api != default.api:
+                raise ValueError(f"{name} with options {options} is a {layout.api} game, not {default.api}: options "
+                                 "that change a game's API are not supported (register each as its own game)")
             if len(layouts) < 64:
                 layouts[key] = layout
-        return PettingZooConfig(options, layout, defaults)
+        k, s, _, src = _kind_of(name, layout, None if chosen is None else str(chosen))
+        return PettingZooConfig(options, layout, defaults, k, src, s)
 
-    kind, sides, tol = _kind_of(name, default)
     fps = default.metadata.get("render_fps")
     fps = int(fps) if isinstance(fps, (int, float)) and not isinstance(fps, bool) and 1 <= fps <= 240 else None
     first = default.seats[0].action
@@ -334,6 +376,10 @@ def adapt(name: str, factory: Callable[..., Any], description: str | None = None
             neutral_options=("render_mode",),  # how it is drawn: marl sets it itself to record
             option_source=factory,
             roles=_roles_of(name, default),
+            make_agents=lambda cfg: cfg.layout.agents,
+            make_kind=lambda cfg: (cfg.kind, cfg.sides, cfg.kind_from),
+            make_roles=lambda cfg: _roles_of(name, cfg.layout),
+            kind_from=kind_from,
         )
     except ValueError as e:
         raise EnvError(name, str(e)) from None
