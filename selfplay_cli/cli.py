@@ -29,6 +29,7 @@ from .commands import league as league_cmd
 from .commands import match as match_cmd
 from .commands import queue as queue_cmd
 from .commands import record as record_cmd
+from .commands import study as study_cmd
 from .commands import train as train_cmd
 from .commands import worker as worker_cmd
 from .envs import UnknownEnvError
@@ -79,6 +80,7 @@ app.add_typer(elo_cmd.app, name="elo", help="Fit ratings with confidence interva
 app.command("exploit")(exploit_cmd.exploit)
 app.add_typer(league_cmd.app, name="league", help="The league: ladder, tournaments, score matrix, rating plots.")
 app.command("record")(record_cmd.record)
+app.add_typer(study_cmd.app, name="study", help="Multi-run studies: team size (train N, fly M, adapt vs afresh).")
 app.command("worker", help=worker_cmd.WORKER_HELP)(worker_cmd.worker)
 app.add_typer(queue_cmd.app, name="queue", help="The league's work queue: batches, jobs, workers; cancel jobs.")
 

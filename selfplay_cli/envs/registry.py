@@ -337,6 +337,8 @@ class EnvSpec:
     make_roles: Callable[[Any], tuple[str, ...] | None] | None = None  # a config's declared roles (None: inferred)
     sized_config: Any = field(default=None, compare=False)  # the config :meth:`for_options` declared these seats
     # for (None: the default config's): what the methods taking ``cfg=None`` read
+    size_option: str | None = None  # the option that sets the team size (the lander's ``landers``), where the game
+    # names one: what ``marl study team-size`` varies (a PettingZoo game: ``--size-option n_pursuers``)
     kind_from: str = "declared"  # where the kind comes from: declared (by marl's game), metadata (a PettingZoo
     # game's), option (the ``kind`` option), agents (none said: by the number of agents)
 

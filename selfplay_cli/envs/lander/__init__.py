@@ -70,6 +70,7 @@ LANDER = EnvSpec(
     kind="cooperative",
     render_fps=FPS,
     make_agents=lambda cfg: agents(cfg.landers),  # landers=M: M seats (a team trained with N flies M)
+    size_option="landers",
     anchor="heuristic",  # the ratings' zero point: gymnasium's heuristic
     # No neutral options: each changes the flight, the score (the summed rewards) or how the heuristic flies.
     # PPO's settings for the lander (benchmarks/lander_modes.py; docs/history/games.md has the runs that chose them):

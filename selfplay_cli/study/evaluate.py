@@ -1,0 +1,59 @@
+"""A study's measures of a team: its final snapshot flown at a size on fixed seeds, and its snapshots' returns."""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from typing import Any
+
+from ..errors import MarlError
+from ..league.store import League, LeagueError
+from ..league.variants import variant_key
+from ..policies.bots import league_bots
+from ..rated.match import run_match
+from ..rated.match_jobs import MatchJob
+from ..rated.names import Team, resolve, resolve_or_team
+
+__all__ = ["fly", "snapshot_returns"]
+
+
+def fly(league: League, team: str, vs: str, options: dict[str, Any], games: int, seed: int) -> dict[str, Any]:
+    """``team`` (a snapshot, or a run's team of per-seat snapshots) flown with the game ``options`` (its size among
+    them) for ``games`` episodes on seeds ``seed``, ``seed + 1``, ..., and ``vs`` on the same seeds: each one's mean
+    team return per episode with its 95% interval. Not filed in the ledger (the study's table is its record)."""
+    from .team_size import mean_interval
+
+    found = resolve_or_team(league, team)
+    rows = list(found.members) if isinstance(found, Team) else [found]
+    env = rows[0].env
+    league.ensure_bots(env, league_bots(_spec(env)))
+    try:
+        opponent = resolve(league, vs, env)
+    except LeagueError as e:
+        raise MarlError(str(e)) from None
+    job = MatchJob(tuple(rows), opponent, found.full_name if isinstance(found, Team) else None)
+    pa, pb, _ = job.load(league, seed, "cpu")
+    report = run_match(pa[0], pb, games=2 * games, first_seed=seed, env_options=options,
+                       team=pa if len(pa) > 1 else None, team_name=job.team_name)
+    mine = {p.id for p in pa}
+    ours = [sum(r.scores) for r in report.results if set(r.players) <= mine]
+    theirs = [sum(r.scores) for r in report.results if set(r.players) == {pb.id}]
+    return {**mean_interval(ours), "vs": {"player": pb.id, **mean_interval(theirs)}, "team": team,
+            "seating": list(report.seating) if report.seating is not None else None}
+
+
+def _spec(env: str) -> Any:
+    from ..envs import get_env
+
+    return get_env(env)
+
+
+def snapshot_returns(league: League, env: str, run: str, options: dict[str, Any]) -> list[tuple[int, float]]:
+    """(step, mean team return) of each snapshot moment of ``run`` in the variant ``options`` make, from the
+    league's cooperative games of its snapshots (its training gauntlets): a team's members, which fly together, the
+    mean of theirs. Moments without such games are left out."""
+    returns = league.mean_returns(env, variant=variant_key(env, options))
+    by_step: dict[int, list[float]] = defaultdict(list)
+    for p in league.players(env=env, kind="snapshot"):
+        if p.run == run and not p.removed and p.id in returns:
+            by_step[int(p.step or 0)].append(returns[p.id][1])
+    return [(step, sum(v) / len(v)) for step, v in sorted(by_step.items())]
