@@ -248,3 +248,17 @@ def test_a_resumed_run_keeps_its_own_weights(home, capsys, monkeypatch, ppo_toml
     assert r["steps"] == 2000 and r["sessions"] == 2 and r["init_from"]["source"] == "l3/s1k"
     lines = (home / "runs" / "k" / "metrics.jsonl").read_text().splitlines()
     assert sum("init_from" in json.loads(line) for line in lines) == 1  # started once, resumed once
+
+
+def test_a_run_not_yet_started_needs_the_snapshot_it_starts_from(home, capsys, monkeypatch, ppo_toml):
+    def interrupted(self):
+        raise KeyboardInterrupt  # stopped before its first snapshot moment
+
+    monkeypatch.setattr(Trainer, "train", interrupted)
+    code, out, err = run(capsys, "train", "lander", "--agents", "2", "--init-from", "l2f/s1k", "--run", "w",
+                         "--config", ppo_toml, *TINY)
+    assert code == 130, err
+    code, out, err = run(capsys, "checkpoint", "rm", "l2f/s1k")
+    assert code == 2 and "needed by run 'w' (--init-from: its learners start from it" in err, err
+    code, out, err = run(capsys, "checkpoint", "rm", "l2f/s0")  # not its parent: removed
+    assert code == 0, err
