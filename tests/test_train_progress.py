@@ -220,12 +220,12 @@ def _learners_of(env: str, flags: dict) -> list[str]:
     """The learners (so the snapshot suffixes) of `marl train ENV` with ``flags``, from the game's own training
     defaults as `marl train` applies them."""
     from selfplay_cli.envs import get_env
-    from selfplay_cli.train.loop import _learner_names
+    from selfplay_cli.train.config import learner_names
     from selfplay_cli.train.settings import new_settings
 
     spec = get_env(env)
     cfg = TrainConfig.from_dict({**new_settings(env, flags), "run": "x"})
-    return _learner_names(spec.agents, cfg.seat_plan().home, cfg.sharing)
+    return learner_names(spec.agents, cfg.seat_plan().home, cfg.sharing)
 
 
 def test_readme_names_only_snapshots_its_runs_make():

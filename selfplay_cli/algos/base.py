@@ -78,6 +78,10 @@ class Learner(Protocol):
 
     def load_state_dict(self, state: dict[str, Any]) -> None: ...
 
+    def start_from(self, weights: dict[str, torch.Tensor]) -> None:
+        """Start from a snapshot's network weights (``marl train --init-from``), everything else kept fresh."""
+        ...
+
 
 Share = tuple[np.ndarray, int]
 """An actor's rows of a learner's batch: ``(rows, total)``, this batch being rows ``rows`` of the learner's ``total``

@@ -484,6 +484,12 @@ class DQNLearner:
                 "rng": self.rng.bit_generator.state, "transitions": self.transitions,
                 "grad_steps": self.grad_steps, "updates": self.updates, "credit": self.credit}
 
+    def start_from(self, weights: dict[str, torch.Tensor]) -> None:
+        """Start from a snapshot's weights (``marl train --init-from``): the online network takes them and the target
+        network is synced to it; the optimiser stays as it is, fresh in a new learner."""
+        self.net.load_state_dict(weights)
+        self.target.load_state_dict(self.net.state_dict())
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.net.load_state_dict(state["net"])
         self.target.load_state_dict(state["target"])

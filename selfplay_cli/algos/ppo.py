@@ -500,6 +500,11 @@ class PPOLearner:
         return {"net": self.net.state_dict(), "opt": self.opt.state_dict(), "gen": self.gen.get_state(),
                 "updates": self.updates}
 
+    def start_from(self, weights: dict[str, torch.Tensor]) -> None:
+        """Start from a snapshot's weights (``marl train --init-from``): the network takes them (its value head
+        too: a snapshot holds the whole network); the optimiser stays as it is, fresh in a new learner."""
+        self.net.load_state_dict(weights)
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.net.load_state_dict(state["net"])
         self.opt.load_state_dict(state["opt"])

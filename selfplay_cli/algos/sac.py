@@ -486,6 +486,11 @@ class SACLearner:
                 "gen": self.gen.get_state(), "rng": self.rng.bit_generator.state, "transitions": self.transitions,
                 "grad_steps": self.grad_steps, "updates": self.updates, "credit": self.credit}
 
+    def start_from(self, weights: dict[str, torch.Tensor]) -> None:
+        """Start from a snapshot's weights (``marl train --init-from``): the actor takes them; a snapshot holds no
+        critics, so the critics (and their target) stay as built, and every optimiser stays fresh."""
+        self.net.load_state_dict(weights)
+
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.net.load_state_dict(state["net"])
         self.critic.load_state_dict(state["critic"])

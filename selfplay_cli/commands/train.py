@@ -23,7 +23,7 @@ from ._common import (
     progress_enabled,
 )
 from ._output import console, err_console, print_json
-from .train_view import TrainProgress, describe_record, describe_run, report_json, still_coming
+from .train_view import TrainProgress, describe_init, describe_record, describe_run, report_json, still_coming
 
 
 # Long for its signature: a Typer command whose parameters are its ~30 options (about 90 lines); the body parses
@@ -141,6 +141,14 @@ def train(
     league_league_exploiters: Annotated[int | None, typer.Option("--league-league-exploiters", min=0, max=16,
                                                                  help="--league: league exploiters (default 2).")]
     = None,
+    init_from: Annotated[str | None, typer.Option("--init-from", metavar="SNAPSHOT_OR_TEAM", help="Start the "
+                                                  "learners from a snapshot's weights (optimiser fresh; it is their "
+                                                  "first snapshots' parent), also of another variant of the game "
+                                                  "(another team size): one snapshot starts every learner; a team "
+                                                  "(run/s4k of s4k-lander_0, ...) gives learner i its member i, "
+                                                  "extra learners copies of members from the third on, fewer "
+                                                  "learners dropping members from the third on, drawn from --seed "
+                                                  "(a shared network: the first member).")] = None,
     teacher: Annotated[str | None, typer.Option("--teacher", metavar="PLAYER", help="Kickstart the learners: they "
                                                 "also imitate this player (a scripted player such as serve-bot, or a "
                                                 "snapshot) on the states they visit, the imitation's weight fading "
@@ -219,9 +227,12 @@ def train(
         finally:
             league.close()
     if json_out:
-        print_json(report_json(report, cfg.eval, _actors(cfg)))
+        print_json({**report_json(report, cfg.eval, _actors(cfg)),
+                    **({"init_from": cfg.init_plan} if cfg.init_plan else {})})
         return
     console.print(describe_run(report, cfg.eval, _actors(cfg)), markup=False, highlight=False)
+    if cfg.init_plan:
+        console.print("  " + describe_init(cfg.init_plan), markup=False, highlight=False)
     for rec in report.finals:
         console.print("  " + describe_record(rec, pending=bool(report.rating_left)), markup=False)
     if report.rating_left:

@@ -46,6 +46,15 @@ def report_json(report: TrainReport, eval: str = "local", actors: int = 0) -> di
                      else None if report.best is None else _best_json(report.best))}
 
 
+def describe_init(plan: dict[str, Any]) -> str:
+    """The line saying what ``--init-from`` started the learners from (the run's ``init_plan``): ``started from
+    l4/s4k (4 members, 3 seats: ...): lander_0 <- l4/s4k-lander_0 (member 0), ...``."""
+    learners = plan.get("learners", {})
+    each = ", ".join(f"{name} <- {e['snapshot']}" + (f" (member {e['member']})" if len(plan["members"]) > 1 else "")
+                     for name, e in learners.items())
+    return f"started from {plan['source']} ({plan['rule']}): {each}"
+
+
 def _best_json(row: Any) -> dict[str, Any]:
     """What the run's JSON says of its best: the ladder row's name, rating, margin and ties (and its side)."""
     keys = ("policy", "elo", "ci_low", "ci_high", "best_margin", "tied") + ("side",) * (row.side is not None)

@@ -35,7 +35,8 @@ from .league_roles import LeagueConfig
 from .matchmaking import MatchmakerConfig
 
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
-DICT_SETTINGS = ("env_options", "curriculum", "snapshot_meta")  # tables checked by the game, not by the type of a field
+DICT_SETTINGS = ("env_options", "curriculum", "snapshot_meta", "init_plan")  # tables checked by the game (or their
+# owner), not by the type of a field
 EVAL_MODES = ("local", "inline", "remote", "ray")
 """Who plays a run's gauntlets (``--eval``): a worker process beside training, the training process itself, the
 league's workers (:mod:`selfplay_cli.train.evaluator`, :mod:`selfplay_cli.train.remote`), or queue workers on Ray
@@ -166,6 +167,9 @@ class TrainConfig:
     # after every snapshot but the final one: PSRO's oracle, a new best response to the opponents of the moment
     snapshot_meta: dict[str, Any] = field(default_factory=dict)  # entries of every snapshot row's meta (marl exploit's
     # best response: league_role = "exploiter", target)
+    init_from: str = ""  # a snapshot or team whose weights the learners start from (--init-from; "": fresh ones)
+    init_plan: dict[str, Any] = field(default_factory=dict)  # what init_from resolved to when the run was created
+    # (written by marl, :mod:`.init_from`): the source, its members, and the member each learner starts from
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
     sac: SACConfig = field(default_factory=SACConfig)
@@ -178,6 +182,12 @@ class TrainConfig:
             raise MarlError(f"--games must be at least 2, not {self.games}")
         if not isinstance(self.snapshot_meta, dict):
             raise MarlError(f"snapshot_meta must be a table, not {self.snapshot_meta!r}")
+        if not isinstance(self.init_plan, dict):
+            raise MarlError(f"init_plan must be a table, not {self.init_plan!r}")
+        self.init_from = self.init_from.strip()
+        if self.init_from and self.sharing == "sa":
+            raise MarlError("--init-from starts learners of one seat each (--sharing nops or fups) from a snapshot; "
+                            "one agent over the whole team (--sharing sa) is not one of them")
         resolve_device(self.device)  # an unknown or unavailable device fails before anything is written
         if self.tensorboard:
             tensorboard_writer(None)  # fails now, with the install hint, rather than after the run is created
@@ -418,6 +428,28 @@ def fups_without_partners(spec: EnvSpec, agents: int, sharing: str, seats: str) 
     """``--sharing fups`` with a lone learner that has nothing to share its network with (no ``--seats`` giving it
     several seats, and not a cooperative game's team)."""
     return sharing == "fups" and agents == 1 and not seats and spec.kind != "cooperative"
+
+
+def learner_names(agents: tuple[str, ...], home: tuple[int, ...], sharing: str) -> list[str]:
+    """Each learner's name: with one network per learner, the seat (agent) it holds first (``left``, ``right``);
+    with one network for all, ``learner``."""
+    n = max(home) + 1
+    if sharing == "fups" or n == 1:
+        return ["learner"]
+    return [agents[home.index(i)] for i in range(n)]
+
+
+def run_learners(cfg: TrainConfig) -> tuple[list[str], list[SeatSpace]]:
+    """The run's learners as the trainer builds them: each one's name (its snapshots end in it) and the seat space
+    it learns (before its frame stack: :func:`learner_setup`)."""
+    spec = cfg.game()
+    game = spec.config(**cfg.env_options)
+    plan = cfg.seat_plan()
+    layout = cfg.layout(plan)
+    names = cfg.league.names() if cfg.league is not None else learner_names(spec.agents, plan.home, cfg.sharing)
+    roles = spec.seat_roles(game)
+    spaces = learner_spaces(spec, spec.seat_spaces(game), layout, roles if len(set(roles)) > 1 else None)
+    return names, list(spaces)
 
 
 def seat_plan_of(spec: EnvSpec, agents: int, sharing: str, seats: str) -> SeatPlan:

@@ -42,7 +42,7 @@ from ..policies.network import resolve_device
 from ..rated.gauntlet import ALL_OLDER
 from ..results import COOPERATIVE, GameResult
 from ..signals import clear_stop, signals_held, stoppable
-from .config import TrainConfig, learner_setup, tensorboard_writer
+from .config import TrainConfig, learner_names, learner_setup, tensorboard_writer
 from .curriculum import Curriculum
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .league_roles import LeagueRoles
@@ -57,17 +57,6 @@ from .state import Job, RunState, SavedAs, SnapshotMoments
 from .team import LearnerTeam
 
 METRICS_STEPS = 8192  # game steps between metrics lines at least (PPO's rollouts are longer: a line an update)
-
-
-def _learner_names(agents: tuple[str, ...], home: tuple[int, ...], sharing: str) -> list[str]:
-    """Each learner's name: with one network per learner, the seat (agent) it holds first (``left``, ``right``);
-    with one network for all, ``learner``."""
-    n = max(home) + 1
-    if sharing == "fups" or n == 1:
-        return ["learner"]
-    return [agents[home.index(i)] for i in range(n)]
-
-
 
 
 def make_evaluator(league: Any, cfg: Any, device: str, on_worker: Callable[[int], None] | None = None
@@ -109,7 +98,7 @@ class Trainer:
 
         plan = cfg.seat_plan()
         layout = cfg.layout(plan)
-        self.names = cfg.league.names() if cfg.league else _learner_names(spec.agents, plan.home, cfg.sharing)
+        self.names = cfg.league.names() if cfg.league else learner_names(spec.agents, plan.home, cfg.sharing)
         roles = spec.seat_roles(game_cfg)
         seat_roles = roles if len(set(roles)) > 1 else None  # each seat's role, where seats differ
         self.spaces = learner_spaces(spec, spec.seat_spaces(game_cfg), layout, seat_roles)
@@ -371,6 +360,8 @@ class Trainer:
         for job in state.jobs:  # gauntlets a killed run had asked for (a finished one is not played again)
             self.evaluator.submit(self._job(job))  # type: ignore[union-attr]
         if not state.snapshots:
+            if cfg.init_plan:  # --init-from: a run starting (not a resumed one: its own state won)
+                self._start_from()
             self.snapshot("start")  # s0: every learner has an identity in the league from the start
         self._plan_snapshots()
         board = tensorboard_writer(self.run_dir / "tensorboard") if cfg.tensorboard else None
@@ -395,6 +386,18 @@ class Trainer:
                            session_eval_games=self.eval_games,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
                            rating_left=len(state.jobs), nash=self._nash(), **self._best())
+
+    def _start_from(self) -> None:
+        """``--init-from``: each learner starts from its snapshot of the run's ``init_plan`` (which is then its first
+        snapshot's parent, and the weights a restart returns it to), said in the first metrics line."""
+        from .init_from import load_init
+
+        self.moments.parents = load_init(self.league, self.cfg, self.learners, self.names)
+        if self.moments.first is not None:
+            self.moments.first = [copy.deepcopy(learner.state_dict()) for learner in self.learners]
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        with open(self.run_dir / "metrics.jsonl", "a") as metrics:
+            metrics.write(json.dumps({"step": self.state.steps, "init_from": self.cfg.init_plan}) + "\n")
 
     def _play(self, start: float, metrics: TextIO, board: Any) -> None:
         """The games and updates until the budget is spent (the run's clock started at ``start``): a metrics line

@@ -67,6 +67,10 @@ def needs_of(league: League, row: PlayerRow) -> list[Need]:
             if why is not None:
                 needs.append(Need(run.name, why))
                 continue
+        if _starts_from(league, run, row):
+            needs.append(Need(run.name, "--init-from: its learners start from it when it takes its first snapshot",
+                              pid))
+            continue
         teacher = _teacher(run)
         if teacher is not None and teacher not in DYNAMIC_NAMES:
             with contextlib.suppress(MarlError):
@@ -161,6 +165,17 @@ def _missing(league: League, run: RunRow) -> list[str]:
             if found.removed:
                 missing.append(f"its teacher {found.full_name}")
     return missing
+
+
+def _starts_from(league: League, run: RunRow, row: PlayerRow) -> bool:
+    """Whether ``run``'s learners are still to start from snapshot ``row`` (``--init-from``: its ``init_plan``
+    names it, and the run has no state of its own yet, which it would resume from instead)."""
+    plan = (run.config or {}).get("init_plan")
+    learners = plan.get("learners") if isinstance(plan, dict) else None
+    if not isinstance(learners, dict) or row.id not in {e.get("id") for e in learners.values() if isinstance(e, dict)}:
+        return False
+    folder = _run_folder(league, run.name)
+    return folder is None or not any((folder / f).exists() for f in ("state.pt", "state.pt.pending"))
 
 
 def _teacher(run: RunRow) -> str | None:

@@ -31,7 +31,7 @@ batch, buffer, target period and epsilon schedule; docs/history/training.md says
 FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
                  "snapshot_steps", "eval_games", "eval_older", "eval", "eval_wait", "eval_actors", "eval_playoff",
                  "swap_every", "tensorboard", "league_games", "seats", "executor", "actors", "ray_address",
-                 "fragment_steps", "frame_stack", "restart_at_snapshot")
+                 "fragment_steps", "frame_stack", "restart_at_snapshot", "init_from")
 """Options whose value is a top-level setting of the same name."""
 
 OPPONENT_FLAGS = {"opponents": "mode", "window": "window", "latest_ratio": "latest_ratio", "nash_payoff": "nash_payoff"}
@@ -122,6 +122,9 @@ def new_settings(env: str | None, flags: Mapping[str, Any], *, config: Path | No
         settings["algo"] = "dqn"
         settings["dqn"] = seed000_config().to_dict()
     from_file = read_toml(config) if config is not None else {}
+    if "init_plan" in from_file:  # (what marl resolves init_from to, when the run is created)
+        raise MarlError(f"{config}: init_plan is written by marl when a run is created; set init_from = \"NAME\" "
+                        "(a snapshot or a team) instead")
     merge_settings(settings, from_file)
     _apply_flags(settings, flags)
     settings["env_options"] = {**settings["env_options"], **env_options(spec.name)}
@@ -253,6 +256,10 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
     if missing:
         raise MarlError(f"unknown bot {missing[0]!r} (known bots: {', '.join(sorted(scripted)) or 'none'}; or a "
                         "player of the league by its full name, e.g. run/s1M)")
+    if cfg.init_from:  # the snapshots each learner starts from, read and fitted: one line, before the run exists
+        from .init_from import plan_init
+
+        cfg = replace(cfg, init_plan=plan_init(league, cfg))
     league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
     save_run_config(league, cfg)
     return cfg

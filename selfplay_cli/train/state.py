@@ -82,6 +82,8 @@ class SnapshotMoments:
         self.learners, self.names, self.saved, self.state = learners, names, saved, state
         self.games, self.opponents, self.device = games, opponents, device
         self.roles, self.first = roles, first
+        self.parents: list[int] | None = None  # --init-from: the snapshot each learner started from (player id),
+        # its first snapshot's parent
 
     @property
     def state_path(self) -> Path:
@@ -160,6 +162,8 @@ class SnapshotMoments:
         cfg, state, saved = self.cfg, self.state, self.saved
         rel = snapshot_relpath(cfg.run, name)
         latest = state.latest[i]
+        if not latest and self.parents is not None:  # its first snapshot: the one it started from (--init-from)
+            latest = self.parents[i]
         parent = self.league.get_player(latest).full_name if latest else None
         meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options,
                             obs_space=stacked_space(saved.spaces[i].observation, cfg.frame_stack),
