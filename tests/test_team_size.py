@@ -9,11 +9,17 @@ from __future__ import annotations
 import pytest
 from cli_helpers import run, run_json
 
-from selfplay_cli.arena.schedule import resize_team
 from selfplay_cli.envs import get_env
 from selfplay_cli.league.store import League
+from selfplay_cli.policies.resize import resize_members
 
 PURSUIT = "pettingzoo.sisl.pursuit_v5"
+
+
+def resize_team(have: int, want: int, seed: int) -> tuple[int, ...]:
+    return tuple(resize_members(have, want, seed))
+
+
 SMALL = ["--env-option", "max_cycles=20", "--env-option", "x_size=8", "--env-option", "y_size=8",
          "--env-option", "n_evaders=4"]
 

@@ -25,12 +25,10 @@ from __future__ import annotations
 
 from collections.abc import Collection, Mapping, Sequence
 
-import numpy as np
-
 from ..results import COOPERATIVE, TWO_SIDES, Rules
 from .matches import Game
 
-__all__ = ["KEPT_PLACES", "CannotMeet", "PlayerRoles", "can_meet", "resize_team", "round_of", "round_size", "rounds"]
+__all__ = ["CannotMeet", "PlayerRoles", "can_meet", "round_of", "round_size", "rounds"]
 
 PlayerRoles = Mapping[int, Collection[str] | None]
 """Per policy index, the roles it may play (None: any seat)."""
@@ -126,29 +124,3 @@ def rounds(rules: Rules, players: Sequence[int], n_rounds: int, first_seed: int 
            roles: PlayerRoles | None = None) -> list[Game]:
     """``n_rounds`` rounds, round ``r`` on seed ``first_seed + r`` (:func:`round_of`)."""
     return [g for r in range(n_rounds) for g in round_of(rules, players, first_seed + r, roles)]
-
-
-KEPT_PLACES = 2
-"""A team of distinct members flown at another size keeps its first members on their seats (seed 001's rule: the
-first two walkers of multiwalker always stay the first two, their places differ from the rest)."""
-
-
-def resize_team(have: int, want: int, seed: int) -> tuple[int, ...]:
-    """The member (an index of ``have`` members, seat order) each of ``want`` seats takes when a team of distinct
-    policies (NoPS) flies at another size, by seed 001's rule: the first members keep their places
-    (:data:`KEPT_PLACES`); more seats are copies of members drawn at random from the third on; fewer seats drop
-    members drawn at random from the third on (the others keep their order). A team of two or fewer members has no
-    third: its extra seats copy any member. The draw is ``numpy.random.default_rng(seed)``'s, so a seating repeats."""
-    if have < 1 or want < 1:
-        raise ValueError(f"a team of {have} members cannot fly {want} seats")
-    if want == have:
-        return tuple(range(have))
-    keep = min(KEPT_PLACES, have)
-    rng = np.random.default_rng(seed)
-    if want < have:
-        if want <= keep:
-            return tuple(range(want))
-        kept = rng.choice(np.arange(keep, have), size=want - keep, replace=False)
-        return tuple(range(keep)) + tuple(sorted(int(i) for i in kept))
-    pool = np.arange(keep, have) if have > keep else np.arange(have)
-    return tuple(range(have)) + tuple(int(i) for i in rng.choice(pool, size=want - have))

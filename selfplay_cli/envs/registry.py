@@ -435,12 +435,12 @@ class EnvSpec:
         unsupported space, or two seats of one declared role whose spaces differ, is an :class:`EnvError` naming
         the game, the seats and why."""
         cfg = self._config(cfg)
+        agents = self._agents_of(cfg)
         if self.make_seat_spaces is not None:
             seats = tuple(self.make_seat_spaces(cfg))
         else:
             obs, act = self.observation_space(cfg), self.action_space(cfg)
-            seats = tuple(SeatSpace(obs, act, False) for _ in self.agents)
-        agents = self._agents_of(cfg)
+            seats = tuple(SeatSpace(obs, act, False) for _ in agents)
         if len(seats) != len(agents):
             raise EnvError(self.name, f"game {self.name!r} declares {len(agents)} seats but {len(seats)} seat "
                                       "spaces")

@@ -28,11 +28,11 @@ import contextlib
 import re
 from dataclasses import dataclass
 
-from ..arena.schedule import resize_team
 from ..envs import EnvSpec, env_names, get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..policies.bots import league_bots
+from ..policies.resize import resize_members
 from ..results import COOPERATIVE, TWO_SIDES, Rules
 from .names import Team, find_team, resolve_or_team, seat_of, teammates
 from .roles import RoleBook, cannot_meet_message, roles_text
@@ -70,12 +70,12 @@ class Lineup:
 
 def refit(lu: Lineup, n_seats: int, seed: int = 0) -> Lineup:
     """The lineup for a game of ``n_seats`` seats when options change the number (a lander team trained with N
-    landers flown as M), by seed 001's rule (:func:`~selfplay_cli.arena.schedule.resize_team`, a fixed draw from
+    landers flown as M), by seed 001's rule (:func:`~selfplay_cli.policies.resize.resize_members`, a fixed draw from
     ``seed``): the first members keep their places, extra seats copy members from the third on, fewer seats drop
     members from the third on."""
     if n_seats == len(lu.players):
         return lu
-    players = tuple(lu.players[i] for i in resize_team(len(lu.players), n_seats, seed))
+    players = tuple(lu.players[i] for i in resize_members(len(lu.players), n_seats, seed))
     return Lineup(lu.env, players, focus=min(lu.focus, n_seats - 1))
 
 

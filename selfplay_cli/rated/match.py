@@ -33,13 +33,14 @@ import numpy as np
 
 from ..arena import Game, play
 from ..arena.matches import frame_stack_of
-from ..arena.schedule import CannotMeet, resize_team, round_of, rounds
+from ..arena.schedule import CannotMeet, round_of, rounds
 from ..envs import EnvSpec, get_env
 from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key, variant_options
 from ..policies import Policy, ScriptedPolicy
+from ..policies.resize import resize_members
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, crew, points_between
 from ..signals import signals_held
 from ..stats.match import MatchStats, match_stats
@@ -293,7 +294,7 @@ def run_match(
     2 landers as 4); each network must still fit the seats those options make.
 
     ``team`` (a cooperative game only): A is that team of policies flying together, member i on seat i (a team
-    flown at another number of seats is seated by :func:`~selfplay_cli.arena.schedule.resize_team`, drawn from
+    flown at another number of seats is seated by :func:`~selfplay_cli.policies.resize.resize_members`, drawn from
     ``first_seed``: the report's ``seating`` names the member on each seat); ``a`` is then its first member and
     ``team_name`` names it in the report.
 
@@ -405,12 +406,12 @@ class _Match:
 
     def seat_team(self, members: list[Policy]) -> None:
         """A is a team flying together: member i on seat i; at another number of seats, seated by seed 001's rule
-        (:func:`~selfplay_cli.arena.schedule.resize_team`, drawn from the first seed)."""
+        (:func:`~selfplay_cli.policies.resize.resize_members`, drawn from the first seed)."""
         rules = self.rules
         if rules.kind != COOPERATIVE:
             raise MarlError(f"a team flies together only in a cooperative game; {self.spec.name} is {rules.kind}")
         self.roster = [*members, self.b]
-        self.team_seats = resize_team(len(members), rules.n_seats, self.first_seed)
+        self.team_seats = tuple(resize_members(len(members), rules.n_seats, self.first_seed))
         self.a_key = tuple(sorted({members[i].id for i in self.team_seats}))
 
     def plan_rounds(self) -> None:

@@ -65,9 +65,10 @@ def plot_curves(report: dict[str, Any], path: Path) -> Path:
         for key, label, style in (("fresh_curve", f"fresh at {a['to']}", "--"),
                                   ("curve", f"adapted {a['from']} -> {a['to']}", "-")):
             pts = a[key]
-            ax.plot([p[0] / 1e6 for p in pts], [p[2] for p in pts], style, marker="o", markersize=3, label=label)
+            ax.plot([p[0] for p in pts], [p[2] for p in pts], style, marker="o", markersize=3, label=label)
         ax.set_title(f"{a['from']} -> {a['to']}")
-        ax.set_xlabel("game steps (millions)")
+        ax.set_xlabel("game steps")
+        ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     for ax in list(axes.flat)[len(pairs):]:

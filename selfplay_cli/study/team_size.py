@@ -4,7 +4,7 @@
    each run ``<study>-n<N>``, for the same budget (``--steps`` or ``--minutes`` per run).
 2. **Altered sizes.** Fly each trained team's final snapshot at each size M of ``eval`` against the same opponent
    (``random`` by default) on the same seeds: the mean team return per game with its 95% interval. A shared network
-   flies any M; a team of networks (NoPS) by seed 001's rule (:func:`~selfplay_cli.arena.schedule.resize_team`).
+   flies any M; a team of networks (NoPS) by seed 001's rule (:func:`~selfplay_cli.policies.resize.resize_members`).
 3. **Adaptive training.** Resume each trained team at each other trained size M from its final snapshot
    (``--init-from``; the run ``<study>-n<N>-to<M>``) for the same budget, and compare it with the team trained at
    M from scratch (step 1's run): the return each reached (on the same seeds), and the steps and minutes the adapted
@@ -205,7 +205,7 @@ class Study:
             return
         existing = self.league.get_run(run)
         if existing is not None and existing.status == "finished":
-            entry["done"] = True
+            entry["done"], entry["steps"] = True, self._final_step(run)
             self._save()
             return
         if existing is not None:
@@ -231,15 +231,23 @@ class Study:
             raise MarlError(f"study {self.plan.name}: training {run} failed (exit {code}): {tail} (the whole log: "
                             f"{self.dir / 'logs' / (run + '.log')})")
         entry["done"] = True
-        entry["steps"] = last_step(metrics)
+        entry["steps"] = self._final_step(run)
         self._save()
         self.on_progress(run, 1.0)
 
-    def final_team(self, run: str) -> str:
-        """``run/<name>`` of a run's final moment: its one snapshot, or its team of per-seat snapshots."""
+    def _snapshots(self, run: str) -> list[Any]:
         rows = [p for p in self.league.players(kind="snapshot") if p.run == run and not p.removed]
         if not rows:
             raise MarlError(f"study {self.plan.name}: run {run} has no snapshots")
+        return rows
+
+    def _final_step(self, run: str) -> int:
+        """The game steps a run trained: its final snapshot's."""
+        return max(int(p.step or 0) for p in self._snapshots(run))
+
+    def final_team(self, run: str) -> str:
+        """``run/<name>`` of a run's final moment: its one snapshot, or its team of per-seat snapshots."""
+        rows = self._snapshots(run)
         last = max(int(p.step or 0) for p in rows)
         names = sorted(p.name for p in rows if int(p.step or 0) == last)
         if len(names) == 1:
@@ -305,8 +313,9 @@ class Study:
                     "fresh_minutes": round(f_curve[-1][1] / 60, 2) if f_curve else None,
                     "curve": [list(p) for p in a_curve], "fresh_curve": [list(p) for p in f_curve],
                 })
-        figures = [{"run": run, "size": e["size"], "from": e["from"], "steps": e.get("steps"),
-                    **summed(e["segments"])} for run, e in runs.items() if e.get("segments")]
+        figures = [{"run": run, "size": runs[run]["size"], "from": runs[run]["from"], "steps": runs[run].get("steps"),
+                    **summed(runs[run]["segments"])} for run, _, _ in plan.runs()
+                   if runs.get(run, {}).get("segments")]
         return {"study": plan.name, "env": plan.env, "size_option": plan.size_option, "train": list(plan.train),
                 "eval": list(plan.eval), "budget": {"steps": plan.steps, "minutes": plan.minutes},
                 "sharing": plan.sharing, "algo": plan.algo, "vs": plan.vs, "eval_games": plan.eval_games,

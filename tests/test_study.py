@@ -1,0 +1,106 @@
+"""``marl study team-size``: seed 001's method end to end on pursuit with tiny budgets, a study killed midway that
+goes on where it stopped, and the refusals."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import imageio.v3 as iio
+from cli_helpers import run, run_json
+
+from selfplay_cli.league.store import League
+
+PURSUIT = "pettingzoo.sisl.pursuit_v5"
+PLAN = ["study", "team-size", PURSUIT, "--size-option", "n_pursuers", "--kind", "cooperative", "--train", "1,2",
+        "--eval", "1-3", "--steps", "160", "--snapshots", "2", "--games", "2", "--eval-games", "3",
+        "--env-option", "max_cycles=10", "--env-option", "x_size=8", "--env-option", "y_size=8",
+        "--env-option", "n_evaders=3", "--name", "ts"]
+RUNS = {"ts-n1", "ts-n2", "ts-n1-to2", "ts-n2-to1"}
+
+
+def test_a_study_trains_flies_adapts_and_measures(home, capsys):
+    r = run_json(capsys, *PLAN, "--json")
+    assert (r["train"], r["eval"], r["size_option"]) == ([1, 2], [1, 2, 3], "n_pursuers")
+    cells = {(c["trained"], c["evaluated"]): c for c in r["returns"]}
+    assert set(cells) == {(n, m) for n in (1, 2) for m in (1, 2, 3)}
+    for c in cells.values():  # 3 episodes each, on the same seeds as the opponent's
+        assert c["games"] == 3 and c["low"] <= c["mean"] <= c["high"] and c["vs"]["games"] == 3
+    assert len({c["vs"]["mean"] for c in cells.values() if c["evaluated"] == 2}) == 1  # one opponent, one measure
+    pairs = {(a["from"], a["to"]): a for a in r["adaptive"]}
+    assert set(pairs) == {(1, 2), (2, 1)}
+    a = pairs[(1, 2)]
+    assert a["run"] == "ts-n1-to2" and a["fresh_run"] == "ts-n2" and a["return"]["games"] == 3
+    assert a["fresh_return"] == {k: v for k, v in cells[(2, 2)].items() if k in a["fresh_return"]}
+    assert a["fresh_steps"] == 160 and a["curve"][0][0] == 0 and a["curve"][-1][0] == 160  # its first and last
+    target = a["fresh_final_curve"]
+    assert target == a["fresh_curve"][-1][2]  # the fresh run's final return, by its own rating games
+    first = next((p[0] for p in a["curve"] if p[2] >= target), None)
+    assert a["steps_to_reach"] == first  # the adapted run's first snapshot at or above it
+    figures = {x["run"]: x for x in r["runs"]}
+    assert set(figures) == RUNS
+    for x in figures.values():  # each run in its own process, measured
+        assert x["steps"] == 160 and x["wall_seconds"] > 0 and x["cpu_seconds"] > 0 and x["peak_mb"] > 50
+        assert 0 < x["mean_cpu"] <= os.cpu_count() + 0.5
+    assert figures["ts-n1-to2"]["from"] == 1 and figures["ts-n2"]["from"] is None
+    for png in r["plots"].values():
+        assert iio.imread(png).ndim == 3  # a picture that decodes
+    league = League.open(home=home)
+    try:
+        runs = {x.name: x for x in league.list_runs()}
+        assert set(runs) == RUNS and all(x.status == "finished" for x in runs.values())
+        parent = league.get_player(next(p for p in league.players(kind="snapshot")
+                                        if p.run == "ts-n1-to2" and p.step == 0).parent_id)
+        assert parent.full_name == "ts-n1/s160"  # the adapted run started from the 1-team's final snapshot
+    finally:
+        league.close()
+    saved = json.loads((home / "studies" / "ts" / "report.json").read_text())
+    assert saved["returns"] == r["returns"]
+    again = run_json(capsys, *PLAN, "--json")  # everything done: the same report, nothing trained again
+    assert again["returns"] == r["returns"] and again["runs"] == r["runs"]
+    code, out, _ = run(capsys, *PLAN)
+    assert code == 0 and "mean team return by size trained" in out and "ts-n2-to1" in out
+    code, _, err = run(capsys, *PLAN[:-2], "--name", "ts", "--eval-games", "5")  # the same name, other settings
+    assert code == 2 and "exists with other settings" in err and err.count("\n") == 1, err
+
+
+def test_a_killed_study_goes_on_where_it_stopped(home, capsys):
+    env = dict(os.environ, MARL_HOME=str(home), SDL_VIDEODRIVER="dummy")
+    proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *PLAN, "--quiet"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    state = home / "studies" / "ts" / "study.json"
+    deadline = time.time() + 120
+    while time.time() < deadline:  # killed once its first run is done and its second has begun
+        if state.exists() and '"ts-n2"' in state.read_text():
+            break
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)  # the study and its training child, at once
+    proc.wait()
+    assert (home / "runs" / "ts-n1").exists()
+    r = run_json(capsys, *PLAN, "--json")
+    assert {x["run"] for x in r["runs"]} == RUNS and all(x["steps"] == 160 for x in r["runs"])
+    league = League.open(home=home)
+    try:
+        assert sorted(x.name for x in league.list_runs()) == sorted(RUNS)  # no run twice
+    finally:
+        league.close()
+    kept = json.loads(state.read_text())["runs"]
+    assert len(kept["ts-n1"]["segments"]) == 1  # finished before the kill: not trained again
+
+
+def test_refusals_are_one_line(home, capsys):
+    code, _, err = run(capsys, "study", "team-size", PURSUIT, "--steps", "100")
+    assert code == 2 and "names no team-size option" in err and err.count("\n") == 1, err
+    code, _, err = run(capsys, "study", "team-size", "lander", "--steps", "100", "--minutes", "1")
+    assert code == 2 and "--steps N or --minutes M" in err and err.count("\n") == 1, err
+    code, _, err = run(capsys, "study", "team-size", "lander", "--steps", "100", "--train", "3-2")
+    assert code == 2 and "team sizes run from 1 to 64" in err and err.count("\n") == 1, err
+    code, _, err = run(capsys, "study", "team-size", "lander", "--steps", "100", "--env-option", "landers=3")
+    assert code == 2 and "is the team size the study varies" in err and err.count("\n") == 1, err
+    code, _, err = run(capsys, "study", "team-size", "lander", "--steps", "100", "--sharing", "sa")
+    assert code == 2 and "fups or nops" in err and err.count("\n") == 1, err
+    assert not (home / "runs").exists() or not any((home / "runs").iterdir())
