@@ -1,9 +1,8 @@
 """Learners behind one interface (:class:`Learner`, :mod:`.base`), registered by name in :data:`LEARNERS`: each
-algorithm one file that reads top to bottom (:mod:`.ppo`, :mod:`.dqn`, :mod:`.sac`; :mod:`.mappo` and :mod:`.poca`, PPO with a critic of the whole
-cooperative team), and what they share: the
-replay buffer and n-step returns of the off-policy learners (:mod:`.replay`), the flat Adam optimiser
-(:mod:`.optim`), kickstarting from a teacher (:mod:`.kickstart`) and any learner as one agent for a cooperative
-team (:mod:`.joint`, ``--sharing sa``).
+algorithm one file that reads top to bottom (:mod:`.ppo`, :mod:`.dqn`, :mod:`.sac`; :mod:`.mappo` and :mod:`.poca`,
+PPO with a critic of the whole cooperative team), and what they share: the replay buffer and n-step returns of the
+off-policy learners (:mod:`.replay`), the flat Adam optimiser (:mod:`.optim`), kickstarting from a teacher
+(:mod:`.kickstart`) and any learner as one agent for a cooperative team (:mod:`.joint`, ``--sharing sa``).
 
 A learner is built from its seat's spaces and its config dataclass: ``LEARNERS[name](seat, n_slots, config,
 seed=..., device=...)``, ``seat`` a :class:`selfplay_cli.envs.SeatSpace`.
