@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from cli_helpers import run_json
 from team_helpers import DUET, RELAY, duet_together, relay_scout_right, train_team
 
 from selfplay_cli.algos.poca import TeamCritic
@@ -59,3 +60,17 @@ def test_the_baseline_reads_the_others_actions_and_not_its_own():
     torch.testing.assert_close(critic.baseline(obs, absent, present, seat, None), base)
     values = critic.value(obs, torch.zeros(5, 3, dtype=torch.bool), None)  # nobody in the game: still defined
     assert torch.isfinite(values).all() and np.isfinite(base.detach().numpy()).all()
+
+
+@pytest.mark.parametrize("algo", ["mappo", "poca"])
+def test_three_agents_with_box_actions_no_state_and_a_time_limit_train(home, capsys, algo):
+    report = run_json(capsys, "train", "tests.games.rendezvous:parallel_env", "--algo", algo, "--agents", "3",
+                      "--sharing", "fups", "--steps", "1200", "--games", "8", "--eval-games", "0", "--run", "r",
+                      "--config", str(_rollout(home)))
+    assert report["steps"] >= 1200 and len(report["final"]) == 1, report  # games cut at 50 steps bootstrapped
+
+
+def _rollout(home: Path) -> Path:
+    path = home.parent / "short.toml"
+    path.write_text("[mappo]\nrollout_steps = 16\n[poca]\nrollout_steps = 16\n")
+    return path
