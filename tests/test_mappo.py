@@ -2,11 +2,11 @@
 
 On the suite's duet (tests/games/duet.py) a round pays only when both singers name their own targets, and each
 sees luck of its own that moves the team's reward: PPO FuPS, whose critic reads one seat, carries the other's luck
-as noise in its advantages, and MAPPO, whose critic reads the team, does not. Measured over seeds 0-4 at 10,000
-steps (32 games, 16-step rollouts): PPO FuPS 0.29, 0.26, 0.29, 0.29, 0.22 (the chance both are right); MAPPO FuPS
-0.999, 0.998, 0.998 ..., NoPS 0.997, 0.998, 0.996. Also: the team's view the trainer hands a centralised learner,
-the snapshot (the actor alone, played by `marl match` like PPO's), a killed run's resume restoring the critic, and
-the refusals (a game that is not cooperative, one agent over the team).
+as noise in its advantages, and MAPPO, whose critic reads the team, does not. Measured (10,000 steps, 32 games,
+16-step rollouts), the chance both are right: PPO FuPS 0.32, 0.26, 0.29, 0.43, 0.19 over seeds 0-4; MAPPO FuPS
+0.999, 0.998, 0.998, 0.999, 0.999; MAPPO NoPS 0.997, 0.998, 0.996 over seeds 0-2. Also: the team's view the trainer
+hands a centralised learner, the snapshot (the actor alone, played by `marl match` like PPO's), a killed run's
+resume restoring the critic, and the refusals (a game that is not cooperative, one agent over the team).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def test_mappo_learns_the_duet_that_ppo_fups_does_not_at_equal_steps(home, capsy
     ppo = duet_together(train_team(capsys, home, DUET, "ppo", "fups", seed=0, run="ppo"))
     fups = duet_together(train_team(capsys, home, DUET, "mappo", "fups", seed=0, run="mappo-fups"))
     nops = duet_together(train_team(capsys, home, DUET, "mappo", "nops", seed=0, run="mappo-nops"))
-    assert ppo < 0.5 and fups > 0.9 and nops > 0.9, (ppo, fups, nops)
+    assert ppo < 0.6 and fups > 0.9 and nops > 0.9, (ppo, fups, nops)
 
 
 def test_the_team_view_is_every_seat_of_the_slots_game_and_who_is_in_it():

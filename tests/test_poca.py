@@ -1,12 +1,13 @@
 """MA-POCA (``--algo poca``): an attention critic over the agents present, a counterfactual baseline per agent, and
 credit for an agent's decisions after it left; trained through `marl train`.
 
-The duet (tests/games/duet.py; see tests/test_mappo.py): measured over seeds 0-2 at 10,000 steps, PPO FuPS 0.32,
-0.26, 0.29 (the chance both singers are right), POCA FuPS 0.999, 0.999, 0.998, NoPS 0.997, 0.998, 0.996. The relay
-(tests/games/relay.py): the scout answers once and leaves, and whether it was right is the runner's reward at the
-game's end; measured over seeds 0-2, the scout's chance of answering right: PPO FuPS 0.47, 0.44, 0.46 and MAPPO
-0.44, 0.49, 0.44 (both stop at the scout's own end, where its reward is always 0: it answers at random), POCA FuPS
-0.999 on each, NoPS 0.998.
+Measured at 10,000 steps (32 games, 16-step rollouts). The duet (tests/games/duet.py; see tests/test_mappo.py), the
+chance both singers are right: PPO FuPS 0.32, 0.26, 0.29, 0.43, 0.19 over seeds 0-4, POCA FuPS 0.999, 0.999, 0.998,
+0.998, 0.998, POCA NoPS 0.997, 0.998, 0.996 over seeds 0-2. The relay (tests/games/relay.py): the scout answers once
+and leaves, and whether it was right is the runner's reward at the game's end; the scout's chance of answering
+right: PPO FuPS 0.47, 0.44, 0.46 and MAPPO FuPS 0.44, 0.49, 0.44 over seeds 0-2, PPO NoPS 0.58, 0.48 over seeds 3-4
+(they stop at the scout's own end, where its reward is always 0: it answers at random); POCA FuPS 0.999 over seeds
+0-2, POCA NoPS 0.998, 0.998, 0.998, 0.999 over seeds 0, 1, 3, 4.
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
 def test_poca_learns_the_duet_that_ppo_fups_does_not_at_equal_steps(home, capsys):
     ppo = duet_together(train_team(capsys, home, DUET, "ppo", "fups", seed=1, run="ppo"))
     poca = duet_together(train_team(capsys, home, DUET, "poca", "fups", seed=1, run="poca"))
-    assert ppo < 0.5 and poca > 0.9, (ppo, poca)
+    assert ppo < 0.6 and poca > 0.9, (ppo, poca)
 
 
 @pytest.mark.slow
