@@ -33,7 +33,8 @@ if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
 
 TEST_GAMES = ["tests.games.tictactoe:env", "tests.games.rendezvous:parallel_env", "tests.games.chase:parallel_env",
               "tests.games.reach:parallel_env", "tests.games.cue:parallel_env", "tests.games.dash:parallel_env",
-              "tests.games.race:parallel_env", "tests.games.race:env", "tests.games.spot:parallel_env"]
+              "tests.games.race:parallel_env", "tests.games.race:env", "tests.games.spot:parallel_env",
+              "tests.games.duet:parallel_env", "tests.games.relay:parallel_env"]
 # OpenSpiel's games are played through marl's own core (they have no PettingZoo view)
 OPENSPIEL_GAMES = ["openspiel:kuhn_poker", "openspiel:leduc_poker", "openspiel:tic_tac_toe",
                    "openspiel:goofspiel(imp_info=True,num_cards=5)"]

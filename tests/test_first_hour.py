@@ -109,7 +109,8 @@ def test_every_help_is_whole_and_plain(path, columns, capsys, monkeypatch):
 def test_config_help_keeps_its_bracketed_sections(capsys, monkeypatch):
     monkeypatch.setenv("COLUMNS", "200")
     code, out, err = run(capsys, "train", "--help")
-    sections = "(top-level options, [ppo], [dqn], [sac], [opponents], [env_options], [curriculum], [teacher], [league])"
+    sections = ("(top-level options, [ppo], [dqn], [sac], [mappo], [poca], [opponents], [env_options], [curriculum], "
+                "[teacher], [league])")
     assert sections in squash(out)
     assert re.search(r"--json\s+Print JSON alone on stdout", out)
     assert "--config FILE" in out and "--env-option KEY=VALUE" in out and "[default: 6,000,000; 1 to" in out

@@ -13,6 +13,8 @@ from selfplay_cli.algos import (
     DQNConfig,
     DQNLearner,
     Learner,
+    MAPPOLearner,
+    POCALearner,
     PPOConfig,
     PPOLearner,
     SACLearner,
@@ -43,10 +45,11 @@ def constant_value(learner: PPOLearner, value: float) -> None:
 
 
 def test_registry_names_the_learners_and_refuses_unknown_ones():
-    assert {"ppo": PPOLearner, "dqn": DQNLearner, "sac": SACLearner} == LEARNERS
+    assert {"ppo": PPOLearner, "dqn": DQNLearner, "sac": SACLearner, "mappo": MAPPOLearner,
+            "poca": POCALearner} == LEARNERS
     assert get_learner("ppo") is PPOLearner and PPOLearner.name == "ppo" and PPOLearner.config_class is PPOConfig
     assert DQNLearner.config_class is DQNConfig
-    with pytest.raises(MarlError, match="unknown algorithm 'td3'; known: dqn, ppo, sac"):
+    with pytest.raises(MarlError, match="unknown algorithm 'td3'; known: dqn, mappo, poca, ppo, sac"):
         get_learner("td3")
 
 

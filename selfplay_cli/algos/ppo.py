@@ -110,7 +110,7 @@ class PPOLearner:
 
     def __init__(self, seat: SeatSpace, n_slots: int, config: PPOConfig | None = None, *, seed: int = 0,
                  device: str | torch.device = "cpu") -> None:
-        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, PPOConfig)
+        self.seat, n_slots, cfg = learner_args(seat, n_slots, config, type(self).config_class)
         self.cfg = cfg
         self.device = torch.device(device)
         self.head = self.check_seat(self.seat)
@@ -151,6 +151,9 @@ class PPOLearner:
         self.teacher_weight = 0.0
         self.rng = np.random.default_rng(seed)  # draws the imitation term's batches
         self.share: Share | None = None  # in a rollout actor: its rows of the slots (draws stay the whole batch's)
+        # Rollout buffers of a subclass beyond PPO's own ((t, b, ...) tensors: a centralised critic's inputs), kept,
+        # flattened and carried over with the observations (:mod:`.mappo`); PPO has none.
+        self.extra: dict[str, torch.Tensor] = {}
 
     # -- acting ---------------------------------------------------------------------------------------------
     def _tensor(self, obs: np.ndarray) -> torch.Tensor:
@@ -201,7 +204,8 @@ class PPOLearner:
             self.obs[t].copy_(self._tensor(obs))
         self.actions[t] = torch.as_tensor(taken["actions"], device=self.device).reshape(self.actions[t].shape)
         self.logprobs[t] = torch.as_tensor(taken["logprobs"], device=self.device)
-        self.values[t] = torch.as_tensor(taken["values"], device=self.device)
+        if taken["values"] is not None:  # (an actor without a value head: its critic values the rollout later)
+            self.values[t] = torch.as_tensor(taken["values"], device=self.device)
         m = taken.get("mask")
         if m is not None or self.masks is not None:
             if self.masks is None:
@@ -280,8 +284,29 @@ class PPOLearner:
         final = np.asarray(final_obs, dtype=self.obs_dtype)
         if len(final) != self.n_slots:
             raise ValueError(f"final_obs has {len(final)} rows for {self.n_slots} slots")
-        self.trunc_values[t, torch.as_tensor(rows, device=self.device)] = values_of(self.net, final[rows], self.device)
+        self.trunc_values[t, torch.as_tensor(rows, device=self.device)] = self._final_values(final[rows], rows)
         self._final_due = None
+
+    # -- the values the returns rest on (a centralised critic's subclass values other inputs: :mod:`.mappo`) -------
+    def _values(self, obs: torch.Tensor, extra: dict[str, torch.Tensor]) -> torch.Tensor:
+        """V of rows of the rollout (their flat observations, and the same rows of :attr:`extra`), no gradients."""
+        return values_of(self.net, obs, self.device)
+
+    def _final_values(self, final: np.ndarray, rows: np.ndarray) -> torch.Tensor:
+        """V of the final observations ``final`` of the slots ``rows``, cut short on the last recorded step."""
+        return values_of(self.net, final, self.device)
+
+    def _next_values(self, next_obs: np.ndarray) -> torch.Tensor:
+        """V of the observations after the rollout's last step (what its last steps bootstrap from)."""
+        return values_of(self.net, self._tensor(next_obs), self.device)
+
+    def _forward(self, batch: dict[str, Any], idx: torch.Tensor) -> tuple[torch.Tensor, Any]:
+        """The policy's outputs and the values (with gradients) of the minibatch ``idx`` of ``batch``."""
+        return self.net(batch["obs"].index_select(0, idx))
+
+    def _value_loss(self, value: Any, batch: dict[str, Any], idx: torch.Tensor) -> torch.Tensor:
+        """The value loss of the minibatch: (V - R)^2 / 2."""
+        return 0.5 * (value - batch["returns"].index_select(0, idx)).square().mean()
 
     def _check_final_given(self) -> None:
         if self._final_due is not None:
@@ -302,7 +327,7 @@ class PPOLearner:
         """GAE(lambda): A_t = delta_t + gamma * lambda * (1 - done_t) * A_{t+1},
         delta_t = r_t + gamma * (1 - done_t) * V(s_{t+1}) + gamma * trunc_t * V(final_t) - V(s_t)."""
         cfg = self.cfg
-        _, next_value = self.net(self._tensor(next_obs))
+        next_value = self._next_values(next_obs)
         next_values = torch.cat((self.values[1:], next_value[None]))  # V(s_{t+1}) for every t
         live = 1.0 - self.dones
         deltas = self.rewards + cfg.gamma * next_values * live - self.values  # all steps at once; only A is a recursion
@@ -368,9 +393,11 @@ class PPOLearner:
             zeros = torch.zeros((1, b), device=self.device)
             c = {"obs": self.obs[:1] * 0, "actions": self.actions[:1] * 0, "logprobs": zeros, "values": zeros,
                  "reward": zeros[0], "valid": torch.zeros(b, dtype=torch.bool, device=self.device),
-                 "masks": None if self.masks is None else torch.ones_like(self.masks[:1])}
+                 "masks": None if self.masks is None else torch.ones_like(self.masks[:1]),
+                 **{k: v[:1] * 0 for k, v in self.extra.items()}}
         ext = {"obs": torch.cat((c["obs"], self.obs)), "actions": torch.cat((c["actions"], self.actions)),
-               "logprobs": torch.cat((c["logprobs"], self.logprobs)), "values": torch.cat((c["values"], self.values))}
+               "logprobs": torch.cat((c["logprobs"], self.logprobs)), "values": torch.cat((c["values"], self.values)),
+               **{k: torch.cat((c[k], v)) for k, v in self.extra.items()}}
         if self.masks is not None:
             cm = c["masks"] if c["masks"] is not None else torch.ones_like(self.masks[:1])
             ext["masks"] = torch.cat((cm, self.masks))
@@ -396,7 +423,7 @@ class PPOLearner:
         c = {k: v[rows, cols][None].clone() for k, v in ext.items()}
         c["reward"] = torch.as_tensor(carry_reward, device=self.device)
         c["valid"] = torch.as_tensor(carried.any(axis=0), device=self.device)
-        c["values"] = values_of(self.net, c["obs"][0], self.device)[None]
+        c["values"] = self._values(c["obs"][0], {k: c[k][0] for k in self.extra})[None]
         c.setdefault("masks", None)  # type: ignore[arg-type]
         self.carry = c
 
@@ -409,12 +436,13 @@ class PPOLearner:
         return {"obs": self.obs.reshape(-1, self.obs.shape[-1]),
                 "actions": self.actions.reshape(-1, *self.actions.shape[2:]), "logprobs": self.logprobs.reshape(-1),
                 "values": self.values.reshape(-1), "adv": adv.reshape(-1), "returns": returns.reshape(-1),
-                "masks": None if self.masks is None else self.masks.reshape(-1, self.masks.shape[-1])}
+                "masks": None if self.masks is None else self.masks.reshape(-1, self.masks.shape[-1]),
+                **{k: v.reshape(-1, *v.shape[2:]) for k, v in self.extra.items()}}
 
     def _minibatch_step(self, batch: dict[str, Any], idx: torch.Tensor, teaching: bool) -> torch.Tensor:
         """One gradient step on the minibatch ``idx`` of ``batch``; returns its figures (:data:`STEP_FIGURES`)."""
         cfg = self.cfg
-        out, value = self.net(batch["obs"].index_select(0, idx))
+        out, value = self._forward(batch, idx)
         m = None if batch.get("masks") is None else batch["masks"].index_select(0, idx)
         logp, ent = self.math.log_prob_entropy(out, batch["actions"].index_select(0, idx), m, self.net.log_std)
         entropy = ent.mean()
@@ -424,7 +452,7 @@ class PPOLearner:
         if cfg.norm_adv and a.numel() > 1:
             a = (a - a.mean()) / (a.std() + 1e-8)
         pg_loss = torch.max(-a * ratio, -a * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
-        v_loss = 0.5 * (value - batch["returns"].index_select(0, idx)).square().mean()
+        v_loss = self._value_loss(value, batch, idx)
         loss = pg_loss + cfg.vf_coef * v_loss - cfg.ent_coef * entropy
         imitation = torch.zeros((), device=self.device)
         if teaching:

@@ -314,6 +314,7 @@ class SelfPlayGames:
         self.final_obs: list[np.ndarray] | None = None  # ... and their final observations (before the restart)
         self.final_masks: list[np.ndarray | None] | None = None
         self.next_seed = first_seed  # the seeds' base (a resumed run moves it to a range of its own)
+        self.team: Any = None  # a TeamViews (.team_view) when a learner's critic reads the whole team: told each step
         self.game_ids = np.arange(n_games, dtype=np.int64) if game_ids is None else np.asarray(game_ids, np.int64)
         self.total_games = n_games if total_games is None else int(total_games)
         if self.game_ids.shape != (n_games,) or n_games > self.total_games:
@@ -415,6 +416,11 @@ class SelfPlayGames:
             out[rows] = np.asarray(per_seat[s])[games]
         return out
 
+    def seat_observations(self) -> Any:
+        """This step's observations seat by seat (each ``(n_games, *shape)``, as the learners read them)."""
+        self._read()
+        return self._seat_obs
+
     def observe(self) -> list[np.ndarray]:
         """Each learner's observations, ``(len(slots), *obs_shape)`` in its fixed slot order."""
         self._read()
@@ -506,6 +512,8 @@ class SelfPlayGames:
             self.truncated = [flat_cut[s] for s in self._index]
             self.final_obs = self.observe()
             self.final_masks = self.masks()
+        if self.team is not None:  # the step as the whole team played it, before its ended games restart
+            self.team.stepped(step_actions, rewards, done_games, cut, bool(flat_cut.any()))
         finished: list[GameResult] = []
         ended = np.flatnonzero(done_games)
         if ended.size:

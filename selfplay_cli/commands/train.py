@@ -33,9 +33,9 @@ def train(
     ctx: typer.Context,
     env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
     config: Annotated[Path | None, typer.Option("--config", metavar="FILE", help="TOML file of settings (top-level "
-                                                "options, [ppo], [dqn], [sac], [opponents], [env_options], "
-                                                "[curriculum], [teacher], [league]); options typed on the command "
-                                                "line win over it.")] = None,
+                                                "options, [ppo], [dqn], [sac], [mappo], [poca], [opponents], "
+                                                "[env_options], [curriculum], [teacher], [league]); options typed on "
+                                                "the command line win over it.")] = None,
     agents: Annotated[int, typer.Option("--agents", min=1, max=64, help="Learning agents. Two sides: 2 is one learner "
                                         "per side (both pong paddles, seed 000), 1 one learner against opponents "
                                         "from the league; cooperative: seat s is learner s mod N; free-for-all: one "
@@ -44,11 +44,14 @@ def train(
                                               "in the game's seat order: 1,2 or 1,1,- (- an opponent from the "
                                               "league); overrides --agents.")] = None,
     algo: Annotated[str, typer.Option("--algo", help="Learning algorithm: ppo (any action space), dqn (Discrete "
-                                      "actions) or sac (Box actions).")] = "ppo",
+                                      "actions), sac (Box actions); for a cooperative team, mappo (PPO whose critic "
+                                      "reads the team) or poca (MA-POCA: an attention critic over the agents "
+                                      "present, credit after an agent leaves).")] = "ppo",
     preset: Annotated[str | None, typer.Option("--preset", help="seed000: seed 000's DQN set-up (network sizes, "
                                                "learning rate, batch, buffer, target period, epsilon).")] = None,
     sharing: Annotated[str, typer.Option("--sharing", help="nops: one network per learner; fups: one shared "
-                                         "network.")] = "nops",
+                                         "network; sa: one agent over a cooperative team's joint observation "
+                                         "and action (not with mappo or poca).")] = "nops",
     steps: Annotated[int, typer.Option("--steps", min=1, max=10**12, help="Budget in game steps.")] = 6_000_000,
     minutes: Annotated[float | None, typer.Option("--minutes", max=10**6, help="Budget in minutes of wall clock "
                                                   "instead (fractions allowed).")] = None,

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from .. import files
-from ..algos import LEARNERS, DQNConfig, PPOConfig, SACConfig
+from ..algos import LEARNERS, DQNConfig, MAPPOConfig, POCAConfig, PPOConfig, SACConfig
 from ..arena.frames import check_frame_stack
 from ..arena.training_games import (
     SHARING,
@@ -37,6 +37,7 @@ from .matchmaking import MatchmakerConfig
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum", "snapshot_meta", "init_plan")  # tables checked by the game (or their
 # owner), not by the type of a field
+ON_POLICY = ("ppo", "mappo", "poca")  # PPO and the learners built on it: one rollout an update, PPO's settings
 EVAL_MODES = ("local", "inline", "remote", "ray")
 """Who plays a run's gauntlets (``--eval``): a worker process beside training, the training process itself, the
 league's workers (:mod:`selfplay_cli.train.evaluator`, :mod:`selfplay_cli.train.remote`), or queue workers on Ray
@@ -64,13 +65,13 @@ class Range:
 
 RANGES: dict[str, Range] = {
     "minutes": Range(1e-3, 1e6),  # 0.06 s to ~2 years: 1e-300 minutes is no budget at all
-    **{f"{algo}.lr": Range(0.0, 1.0, open_low=True) for algo in ("ppo", "dqn", "sac")},
-    "ppo.clip_coef": Range(0.0, 1.0, open_low=True),  # a ratio clipped to [1 - c, 1 + c]
-    "ppo.ent_coef": Range(0.0, 1e3),
-    "ppo.vf_coef": Range(0.0, 1e3),
-    "ppo.max_grad_norm": Range(0.0, 1e6, open_low=True),
+    **{f"{algo}.lr": Range(0.0, 1.0, open_low=True) for algo in ("ppo", "dqn", "sac", "mappo", "poca")},
+    **{f"{algo}.clip_coef": Range(0.0, 1.0, open_low=True) for algo in ON_POLICY},  # a ratio clipped to [1-c, 1+c]
+    **{f"{algo}.ent_coef": Range(0.0, 1e3) for algo in ON_POLICY},
+    **{f"{algo}.vf_coef": Range(0.0, 1e3) for algo in ON_POLICY},
+    **{f"{algo}.max_grad_norm": Range(0.0, 1e6, open_low=True) for algo in ON_POLICY},
     "dqn.max_grad_norm": Range(0.0, 1e6),  # 0: no clipping
-    "ppo.reward_scale": Range(0.0, 1e6, open_low=True),
+    **{f"{algo}.reward_scale": Range(0.0, 1e6, open_low=True) for algo in ON_POLICY},
     **{f"{algo}.replay_ratio": Range(0.0, 64.0, open_low=True) for algo in ("dqn", "sac")},  # updates a transition
     **{f"{algo}.n_step": Range(1, 1_000) for algo in ("dqn", "sac")},
     "sac.alpha": Range(0.0, 1e3, open_low=True),
@@ -173,6 +174,8 @@ class TrainConfig:
     ppo: PPOConfig = field(default_factory=PPOConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
     sac: SACConfig = field(default_factory=SACConfig)
+    mappo: MAPPOConfig = field(default_factory=MAPPOConfig)  # --algo mappo: PPO's settings and the team critic's
+    poca: POCAConfig = field(default_factory=POCAConfig)  # --algo poca: MAPPO's and the attention's heads
 
     def __post_init__(self) -> None:
         if self.steps < 1 and self.minutes is None:
@@ -238,6 +241,11 @@ class TrainConfig:
         n_seats = spec.n_seats
         if self.sharing not in SHARING:
             raise MarlError(f"--sharing must be one of {', '.join(SHARING)}, not '{self.sharing}'")
+        if getattr(LEARNERS[self.algo], "centralised", False):  # a critic of the whole team (MAPPO, MA-POCA)
+            LEARNERS[self.algo].check_game(spec, self.sharing)
+            if self.executor != "local":
+                raise MarlError(f"--algo {self.algo} trains with --executor local only (its critic reads every "
+                                "seat of a game each step)")
         if not 0.0 <= self.league_games <= 1.0:
             raise MarlError(f"--league-games must lie between 0 and 1, not {self.league_games}")
         if self.league is not None:
@@ -316,6 +324,8 @@ class TrainConfig:
         d["ppo"] = self.ppo.to_dict()
         d["dqn"] = self.dqn.to_dict()
         d["sac"] = self.sac.to_dict()
+        d["mappo"] = self.mappo.to_dict()
+        d["poca"] = self.poca.to_dict()
         d["opponents"] = asdict(self.opponents)
         d["teacher"] = asdict(self.teacher)
         d["league"] = asdict(self.league) if self.league is not None else None
@@ -331,7 +341,8 @@ class TrainConfig:
 
         d = dict(d)
         _legacy_eval_inline(d)
-        sections = {"ppo": PPOConfig, "dqn": DQNConfig, "sac": SACConfig, "opponents": MatchmakerConfig,
+        sections = {"ppo": PPOConfig, "dqn": DQNConfig, "sac": SACConfig, "mappo": MAPPOConfig, "poca": POCAConfig,
+                    "opponents": MatchmakerConfig,
                     "teacher": TeacherConfig, "league": LeagueConfig}
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(d) - known)
@@ -512,9 +523,10 @@ def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int]
     states included. ``itemsize``: the bytes of one number of an observation as the learners keep it (float32's 4,
     an image's 1)."""
     per_obs = itemsize * math.prod(obs_shape)
-    if cfg.algo == "ppo":
-        need = sum(per_obs * cfg.ppo.rollout_steps * n for n in slots)
-        what = f"PPO's rollouts ({cfg.ppo.rollout_steps} steps of {sum(slots):,} seats)"
+    if cfg.algo in ON_POLICY:
+        steps = getattr(cfg, cfg.algo).rollout_steps
+        need = sum(per_obs * steps * n for n in slots)
+        what = f"{cfg.algo.upper()}'s rollouts ({steps} steps of {sum(slots):,} seats)"
     else:
         buffer = cfg.dqn.buffer_size if cfg.algo == "dqn" else cfg.sac.buffer_size
         need = len(slots) * 2 * per_obs * buffer

@@ -33,6 +33,7 @@ import torch
 from ..algos import get_learner
 from ..algos.joint import JointLearner
 from ..arena.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces
+from ..envs.team import team_spec
 from ..errors import MarlError, NonFiniteError
 from ..league.ledger import KIND_CODES
 from ..league.store import League, PlayerRow
@@ -167,8 +168,13 @@ class Trainer:
                               device=self.device)
             return [sa], SavedAs([sa.joint_seat], roles, {"seats": spec.n_seats, "base": sa.base})
         setups = [learner_setup(cfg, space) for space in self.spaces]
-        learners = [learner_cls(seat, int((layout == i).sum()), section, seed=cfg.seed + i, device=self.device)
-                    for i, (seat, section) in enumerate(setups)]
+        team: Callable[[int], dict[str, Any]] = lambda i: {}  # noqa: E731
+        if getattr(learner_cls, "centralised", False):  # a critic of the whole team: what it reads of the team
+            game_cfg = spec.config(**cfg.env_options)
+            seat_spaces = [learner_setup(cfg, s)[0] for s in spec.seat_spaces(game_cfg)]
+            team = lambda i: {"team": team_spec(spec, game_cfg, seat_spaces, layout, i)}  # noqa: E731
+        learners = [learner_cls(seat, int((layout == i).sum()), section, seed=cfg.seed + i, device=self.device,
+                                **team(i)) for i, (seat, section) in enumerate(setups)]
         return learners, SavedAs(self.spaces, roles, None)
 
     @property

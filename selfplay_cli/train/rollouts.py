@@ -12,6 +12,12 @@ with every observation it is handed: ``see_state(rows)`` right before it acts on
 they were made in) and right before an update that takes them as the next observations. A game that gives no state
 (:meth:`~selfplay_cli.envs.EnvSpec.state_space` None) is refused for such a learner in one line; when no learner
 wants it, no state is read.
+
+The team's view. A learner that declares ``centralised = True`` (MAPPO, MA-POCA: a critic of the whole team) is
+handed, right before it records each step, its rows of the step as the whole team played it
+(:class:`~selfplay_cli.arena.team_view.TeamStep`: every seat's observations and actions, who was in each game, the
+global state where the game has one, the team's reward and end): ``see_team(step)``. Nothing of it is read when no
+learner is centralised.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..arena.team_view import TeamStep, TeamView, TeamViews
 from ..arena.training_games import SelfPlayGames
 from ..errors import MarlError
 from ..league.store import League
@@ -77,6 +84,7 @@ class Step:
     final_masks: list[np.ndarray | None] | None = None
     state: list[np.ndarray] | None = None  # each learner's rows of the global state after the step (learners that
     # want it only: None when none does)
+    team: list[TeamStep] | None = None  # each learner's rows of the team's step (None when no learner is centralised)
 
 
 class Rollouts:
@@ -91,6 +99,12 @@ class Rollouts:
         self.lesson: dict[str, float] = {}  # the curriculum's values the training games play under now
         self.wants_state = [bool(getattr(learner, "wants_state", False)) for learner in learners]
         self._state: list[np.ndarray] | None = None  # the state the games stand in, while it is known
+        self.centralised = [bool(getattr(learner, "centralised", False)) for learner in learners]
+        self._team_view: TeamView | None = None  # the team's view of the games as they stand, while it is known
+        if any(self.centralised):
+            if games is None:
+                raise MarlError("a learner with a critic of the whole team trains with --executor local only")
+            games.team = TeamViews(games)
         if any(self.wants_state):
             if games is None:
                 raise MarlError("a learner that reads the game's global state trains with --executor local only")
@@ -113,6 +127,7 @@ class Rollouts:
         assert self.games is not None
         self.games.restart_all()
         self._state = None
+        self._team_view = None
 
     def game_steps(self) -> np.ndarray:
         """Steps played so far in each game in progress."""
@@ -140,14 +155,25 @@ class Rollouts:
             self._teach(obs, masks, acting, progress)
         if any(self.wants_state):
             self._hand_state(self._state if self._state is not None else games.state())
+        before = None
+        if games.team is not None:
+            before = self._team_view if self._team_view is not None else games.team.view()
         rewards, dones, finished = games.step(team.act(obs, masks))
         self._state = games.state() if any(self.wants_state) else None
+        team_steps = None
+        if before is not None:
+            self._team_view = games.team.view()
+            team_steps = games.team.steps(before, self._team_view)
         return Step(games.observe(), rewards, dones, finished, acting, games.truncated, games.final_obs,
-                    games.final_masks, self._state)
+                    games.final_masks, self._state, team_steps)
 
     def learn(self, team: LearnerTeam, step: Step, progress: float) -> list[dict[str, float]] | None:
         """The learners record ``step``; those whose rollout is due update. Their figures from the update, None
         when none was due."""
+        if step.team is not None:
+            for learner, centralised, rows in zip(self.learners, self.centralised, step.team, strict=True):
+                if centralised:
+                    learner.see_team(rows)
         if not team.record(step.rewards, step.dones, step.truncated, step.acting, step.final_obs, step.final_masks):
             return None
         if step.state is not None:

@@ -22,7 +22,7 @@ from ..league.store import League, shown
 from .config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
 from .matchmaking import parse_bots
 
-ALGO_SECTIONS = ("ppo", "dqn", "sac")
+ALGO_SECTIONS = ("ppo", "dqn", "sac", "mappo", "poca")
 
 PRESETS = ("seed000",)
 """The names ``--preset`` takes, each a learner's whole set-up (``seed000``: DQN's network sizes, learning rate,
@@ -169,7 +169,8 @@ def _apply_flags(settings: dict[str, Any], flags: Mapping[str, Any]) -> None:
     if "bots" in flags:
         settings["opponents"]["bots"] = parse_bots(flags["bots"])
     if "lr" in flags:
-        settings["ppo"]["lr"] = settings["dqn"]["lr"] = settings["sac"]["lr"] = flags["lr"]
+        for key in ALGO_SECTIONS:
+            settings[key]["lr"] = flags["lr"]
     if "conv" in flags:  # every learner's network: [ppo.arch] conv, ...
         for key in ALGO_SECTIONS:
             settings[key]["arch"] = {**settings[key]["arch"], "conv": flags["conv"]}

@@ -4,4 +4,8 @@
 - ``tests.games.rendezvous:parallel_env``: simultaneous (parallel), 3 seats, cooperative, Box(-1, 1, (2,)) actions.
 - ``tests.games.tug:parallel_env``: simultaneous, 2 seats, two sides, Discrete(3); its observations or rewards turn
   NaN after a while (a user's buggy game).
+- ``tests.games.duet:parallel_env``: simultaneous, 2 seats (``agents``), cooperative, Discrete(3); reward only when
+  every agent names its own target, plus luck each agent alone sees: a team critic's game (MAPPO, MA-POCA).
+- ``tests.games.relay:parallel_env``: simultaneous, 2 seats, cooperative, Discrete(2); the scout answers and leaves,
+  the runner is paid for its answer later: credit after leaving (MA-POCA).
 """
