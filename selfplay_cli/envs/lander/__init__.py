@@ -76,7 +76,7 @@ LANDER = EnvSpec(
     # PPO's settings for the lander (benchmarks/lander_modes.py; docs/history/games.md has the runs that chose them):
     # rewards of +-100 scaled to order 1 (unscaled, the value loss swamps the policy's gradient in the shared trunk),
     # 10 epochs of 8 minibatches, the long horizon gymnasium's lander wants (gamma 0.999), a constant step; 64 games.
-    train_defaults={"games": 64, "ppo": {"lr": 5e-4, "anneal_lr": False, "gamma": 0.999, "rollout_steps": 256,
+    train_defaults={"games": 64, "ppo": {"lr": 1e-3, "anneal_lr": True, "gamma": 0.999, "rollout_steps": 256,
                                          "update_epochs": 10, "minibatches": 8, "reward_scale": 0.01}},
 )
 """The lander game's declaration (registered as ``lander``)."""
