@@ -106,3 +106,14 @@ def test_the_kind_is_refused_where_the_game_declares_it_or_it_is_no_kind(home, c
     (row,) = run_json(capsys, "envs", "tests.games.rendezvous:parallel_env")
     assert row["kind_from"] == "metadata" and "kind" not in [o["name"] for o in row["options"]]
     assert run_json(capsys, "envs", "pong")[0]["kind_from"] == "declared"
+
+
+def test_the_kind_from_a_config_file_and_from_the_flag(tmp_path):
+    from selfplay_cli.train.settings import new_settings
+
+    toml = tmp_path / "run.toml"
+    toml.write_text('kind = "cooperative"\n[env_options]\nn_pursuers = 3\n')
+    settings = new_settings(PURSUIT, {}, config=toml)
+    assert settings["env_options"] == {"kind": "cooperative", "n_pursuers": 3} and "kind" not in settings
+    flagged = new_settings(PURSUIT, {"kind": "free-for-all"}, config=toml)  # the flag over the file
+    assert flagged["env_options"]["kind"] == "free-for-all"
