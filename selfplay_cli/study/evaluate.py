@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from typing import Any
+
+import numpy as np
 
 from ..errors import MarlError
 from ..league.store import League, LeagueError
@@ -13,15 +16,13 @@ from ..rated.match import run_match
 from ..rated.match_jobs import MatchJob
 from ..rated.names import Team, resolve, resolve_or_team
 
-__all__ = ["fly", "snapshot_returns"]
+__all__ = ["fly", "mean_interval", "snapshot_returns"]
 
 
 def fly(league: League, team: str, vs: str, options: dict[str, Any], games: int, seed: int) -> dict[str, Any]:
     """``team`` (a snapshot, or a run's team of per-seat snapshots) flown with the game ``options`` (its size among
     them) for ``games`` episodes on seeds ``seed``, ``seed + 1``, ..., and ``vs`` on the same seeds: each one's mean
     team return per episode with its 95% interval. Not filed in the ledger (the study's table is its record)."""
-    from .team_size import mean_interval
-
     found = resolve_or_team(league, team)
     rows = list(found.members) if isinstance(found, Team) else [found]
     env = rows[0].env
@@ -57,3 +58,15 @@ def snapshot_returns(league: League, env: str, run: str, options: dict[str, Any]
         if p.run == run and not p.removed and p.id in returns:
             by_step[int(p.step or 0)].append(returns[p.id][1])
     return [(step, sum(v) / len(v)) for step, v in sorted(by_step.items())]
+
+
+def mean_interval(values: Any) -> dict[str, Any]:
+    """Mean and its 95% interval (normal approximation) of per-game figures; no interval from one game."""
+    x = np.asarray(values, dtype=float)
+    if x.size == 0:
+        return {"mean": None, "low": None, "high": None, "games": 0}
+    m = float(x.mean())
+    if x.size < 2:
+        return {"mean": round(m, 4), "low": None, "high": None, "games": 1}
+    half = 1.96 * float(x.std(ddof=1)) / math.sqrt(x.size)
+    return {"mean": round(m, 4), "low": round(m - half, 4), "high": round(m + half, 4), "games": int(x.size)}

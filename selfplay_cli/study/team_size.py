@@ -29,11 +29,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..errors import MarlError
 from ..files import write_atomic
 from ..league.store import League
+from .evaluate import fly, snapshot_returns
 from .measure import last_step, summed, train_process
 
 __all__ = ["Study", "TeamSizePlan", "parse_sizes", "run_study"]
@@ -269,8 +268,6 @@ class Study:
         key = f"{run}@{size}"
         if key in self.state["evals"]:
             return self.state["evals"][key]
-        from .evaluate import fly
-
         self.on_progress(f"{run} at {size}", 0.0)
         out = fly(self.league, self.final_team(run), self.plan.vs, self.plan.options(size), self.plan.eval_games,
                   seed=1_000_003 + self.plan.seed)
@@ -281,8 +278,6 @@ class Study:
     # ------------------------------------------------------------------------------------------------ report
     def curve(self, run: str, size: int) -> list[tuple[int, float, float]]:
         """(step, training seconds, mean team return) of each snapshot moment of ``run`` from its rating games."""
-        from .evaluate import snapshot_returns
-
         seconds = _seconds_by_step(self.league.home_path("runs", run) / "metrics.jsonl")
         out = []
         for step, ret in snapshot_returns(self.league, self.plan.env, run, self.plan.options(size)):
@@ -359,15 +354,3 @@ def run_study(league: League, plan: TeamSizePlan, on_progress: Callable[[str, fl
                         "curves": str(plot_curves(out, study.dir / "curves.png"))}
     write_atomic(study.dir / "report.json", json.dumps(out, indent=1))
     return out
-
-
-def mean_interval(values: Any) -> dict[str, float]:
-    """Mean and its 95% interval (normal approximation) of per-game figures."""
-    x = np.asarray(values, dtype=float)
-    if x.size == 0:
-        return {"mean": None, "low": None, "high": None, "games": 0}
-    m = float(x.mean())
-    if x.size < 2:  # one game: no spread to measure
-        return {"mean": round(m, 4), "low": None, "high": None, "games": 1}
-    half = 1.96 * float(x.std(ddof=1)) / math.sqrt(x.size)
-    return {"mean": round(m, 4), "low": round(m - half, 4), "high": round(m + half, 4), "games": int(x.size)}
