@@ -77,6 +77,12 @@ def test_a_pursuit_team_trained_with_3_flies_2_and_5(home, capsys):
     rows = run_json(capsys, "league", "ladder", "--env", PURSUIT, "--env-option", "kind=cooperative",
                     "--env-option", "n_pursuers=5", *SMALL)
     assert {m for m in members} <= {x["policy"] for x in rows}  # the members, rated in the 5-pursuer ladder
+    flown = [x["flown"] for x in rows if x["policy"] in members]
+    assert flown and all(f["trained_seats"] == 3 and f["seats"] == 5 and f["team"] == "p3/s400" for f in flown)
+    assert "from the third on" in flown[0]["rule"]  # the ladder states the rule that seated them
+    code, out, _ = run(capsys, "league", "ladder", "--env", PURSUIT, "--env-option", "kind=cooperative",
+                       "--env-option", "n_pursuers=5", *SMALL)
+    assert code == 0 and "p3/s400: trained with 3 seats, flown here with 5" in out
 
 
 def test_a_shared_network_trained_with_3_flies_any_size(home, capsys):

@@ -67,7 +67,7 @@ def _csv_record(d: dict[str, Any], marks: bool) -> dict[str, Any]:
 def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool = False,
                   online: dict[int, float] | None = None, confidence: float = 0.95,
                   caption: str | None = None, variant: dict[str, Any] | None = None,
-                  verdicts: list[str] | None = None) -> None:
+                  verdicts: list[str] | None = None, flown: dict[int, dict[str, Any]] | None = None) -> None:
     """Print ladder rows: JSON alone (``--json``), CSV (``--csv``) or a rich table.
 
     ``variant``: the options of the variant the rows were fitted in (``{}``: the default); each JSON row carries it
@@ -80,8 +80,10 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
     verdict_lines`) follow the table. A ``league role`` column and an ``exploitability`` column
     (:func:`exploitability_text`) show only when some row has one.
     """
+    flown = flown or {}
     if json_out:
-        print_json([r.to_json() | ({} if variant is None else {"variant": variant}) for r in rows])
+        print_json([r.to_json() | ({} if variant is None else {"variant": variant})
+                    | ({"flown": flown[r.player_id]} if r.player_id in flown else {}) for r in rows])
         return
     if csv_out:
         w = csv.writer(sys.stdout)
@@ -108,6 +110,21 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
         _table(rows, title, online, confidence, caption)
     for line in verdicts or ():
         console.print(line, markup=False, highlight=False)
+    for line in _flown_lines(rows, flown):
+        console.print(line, markup=False, highlight=False)
+
+
+def _flown_lines(rows: list, flown: dict[int, dict[str, Any]]) -> list[str]:
+    """One line per team (or network) that this ladder's variant flies with another number of seats than it
+    trained with: who, from how many to how many, and the rule that seats it."""
+    seen: dict[str, str] = {}
+    for r in rows:
+        f = flown.get(r.player_id)
+        if f is not None:
+            who = f["team"] or r.policy
+            seen.setdefault(who, f"{who}: trained with {f['trained_seats']} seats, flown here with {f['seats']}: "
+                                 f"{f['rule']}")
+    return list(seen.values())
 
 
 def _table(rows: list, title: str, online: dict[int, float] | None, confidence: float, caption: str | None) -> None:

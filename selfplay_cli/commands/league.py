@@ -85,6 +85,7 @@ def ladder_cmd(
     csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
 ) -> None:
     from ..league.ladder import ladder, select_rows, verdict_lines
+    from ..rated.lineup import resized_in_variant
 
     if json_out and csv_out:
         raise MarlError("--json and --csv exclude each other")
@@ -110,14 +111,15 @@ def ladder_cmd(
         # A player has one online Elo, moved by the default variant's games only: no column beside another's.
         online = {p.id: p.elo for p in league.players(include_removed=True)} if not variant else None
         note = other_variants_note(env, league.variants(env), variant, "marl league ladder")
+        shown = select_rows(rows, run=run, top=top)
+        flown = resized_in_variant(league, env, shown, variant_options(variant)) if env is not None else {}
     finally:
         league.close()
-    shown = select_rows(rows, run=run, top=top)
     title = "league ladder" + (f": run {run}" if run else "") + (f" ({env}: {describe_variant(variant)})"
                                                                   if variant else "")
     verdicts = [line for line in verdict_lines(rows) if run is None or f"best of {run}:" in line]
     render_ladder(shown, title, json_out=json_out, csv_out=csv_out, online=online, confidence=confidence,
-                  caption=prior_caption(prior), variant=variant_options(variant), verdicts=verdicts)
+                  caption=prior_caption(prior), variant=variant_options(variant), verdicts=verdicts, flown=flown)
     if run is not None and not json_out and not csv_out and not any(r.run == run for r in rows):
         console.print(f"run {run} has no snapshot with rated games yet")
     if note and not json_out and not csv_out:

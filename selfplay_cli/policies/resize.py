@@ -41,8 +41,9 @@ def resize_members(n_have: int, n_want: int, seed: int) -> list[int]:
     return [i for i in range(n_have) if i not in dropped][:n_want]
 
 
-def describe_resize(n_have: int, n_want: int) -> str:
-    """The rule :func:`resize_members` applied to a team of ``n_have`` flown as ``n_want``, in words."""
+def describe_resize(n_have: int, n_want: int, drawn_from: str = "the run's seed") -> str:
+    """The rule :func:`resize_members` applied to a team of ``n_have`` flown as ``n_want``, in words (the draw comes
+    from ``drawn_from``)."""
     if n_want == n_have:
         return f"{n_have} members, {n_want} seats: each member keeps its place"
     if n_want > n_have:
@@ -50,9 +51,9 @@ def describe_resize(n_have: int, n_want: int) -> str:
         extra = n_want - n_have
         seats = f"{extra} more seat{'s' * (extra > 1)}"
         return (f"{n_have} members, {n_want} seats: the {n_have} keep their places; {seats} copy {pool}, drawn at "
-                "random from the run's seed")
+                f"random from {drawn_from}")
     if n_want >= KEPT:
         dropped = n_have - n_want
         return (f"{n_have} members, {n_want} seats: {dropped} member{'s' * (dropped > 1)} from the third on "
-                f"dropped, drawn at random from the run's seed; the others keep their order")
+                f"dropped, drawn at random from {drawn_from}; the others keep their order")
     return f"{n_have} members, {n_want} seat{'s' * (n_want > 1)}: the first {n_want} keep their places"

@@ -27,12 +27,13 @@ from __future__ import annotations
 import contextlib
 import re
 from dataclasses import dataclass
+from typing import Any
 
-from ..envs import EnvSpec, env_names, get_env
+from ..envs import EnvSpec, UnknownEnvError, env_names, get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..policies.bots import league_bots
-from ..policies.resize import resize_members
+from ..policies.resize import describe_resize, resize_members
 from ..results import COOPERATIVE, TWO_SIDES, Rules
 from .names import Team, find_team, resolve_or_team, seat_of, teammates
 from .roles import RoleBook, cannot_meet_message, roles_text
@@ -164,3 +165,36 @@ def _seat(league: League, me: PlayerRow, vs: str | None) -> Lineup:
         raise MarlError(f"{p.full_name} ({roles_text(book.roles(p))}) cannot play seat {agents[s]} of {spec.name} "
                         f"(role {rules.roles[s]})")  # type: ignore[index]
     return Lineup(me.env, tuple(players), focus=focus)
+
+
+def resized_in_variant(league: League, env: str, rows: Any, variant: dict[str, Any]) -> dict[int, dict[str, Any]]:
+    """The snapshots among ladder ``rows`` that the variant ``variant`` (its options) flies with another number of
+    seats than they trained with, by player id: ``trained_seats``, ``seats``, their ``team`` (``run/name`` of a team
+    of per-seat networks; None for one network, which plays every seat) and the ``rule`` that seats the team (seed
+    001's, in words). A snapshot whose file cannot be read is left out (its row says nothing more)."""
+    try:
+        spec = get_env(env)
+        if spec.make_agents is None:
+            return {}
+        seats = spec.for_options(**variant).n_seats
+    except (TypeError, ValueError, UnknownEnvError):  # a game not loadable here, options it no longer takes
+        return {}
+    out: dict[int, dict[str, Any]] = {}
+    for r in rows:
+        if r.kind != "snapshot" or r.player_id is None:
+            continue
+        try:
+            row = league.get_player(int(r.player_id))
+            trained = spec.for_options(**player_options(league, row))
+        except (MarlError, OSError, TypeError, ValueError):
+            continue
+        if trained.n_seats == seats:
+            continue
+        team = teammates(league, row, trained.agents)
+        members = len(team) if team is not None else 1
+        out[int(r.player_id)] = {
+            "trained_seats": trained.n_seats, "seats": seats,
+            "team": f"{row.run}/{row.name.rsplit('-', 1)[0]}" if team is not None else None,
+            "rule": (describe_resize(members, seats, "each match's first seed") if team is not None
+                     else "one network on every seat")}
+    return out
