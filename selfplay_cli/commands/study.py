@@ -104,11 +104,12 @@ def team_size(
 
 @contextlib.contextmanager
 def _progress(quiet: bool, n_runs: int) -> Any:
-    """A rich bar over the study's runs (the current one's share of its budget), on stderr at a terminal."""
+    """A rich bar over the study's runs (the current one's share of its budget, its steps and steps/s), on stderr at
+    a terminal."""
     from ._common import progress_enabled
 
     if not progress_enabled(quiet):
-        yield lambda what, done: None
+        yield lambda key, done, detail="": None
         return
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -116,12 +117,13 @@ def _progress(quiet: bool, n_runs: int) -> Any:
                   TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), console=err_console,
                   transient=True) as prog:
         task = prog.add_task("study", total=1.0)
-        seen: dict[str, float] = {}
+        runs: dict[str, float] = {}
 
-        def on_progress(what: str, done: float) -> None:
-            seen[what] = done
-            runs_done = sum(v for k, v in seen.items() if "@" not in k and " at " not in k)
-            prog.update(task, description=f"study: {what}", completed=min(1.0, runs_done / max(n_runs, 1)))
+        def on_progress(key: str, done: float, detail: str = "") -> None:
+            if not key.startswith("eval "):
+                runs[key] = done
+            shown = f"{key} ({detail})" if detail else key
+            prog.update(task, description=f"study: {shown}", completed=min(1.0, sum(runs.values()) / max(n_runs, 1)))
 
         yield on_progress
 

@@ -100,8 +100,8 @@ def train_process(args: Sequence[str], env: dict[str, str], log: Path,
     return proc.returncode, Segment(time.perf_counter() - start, cpu, peak_mb)
 
 
-def last_step(metrics: Path) -> int:
-    """The step of a run's last metrics line (0 before its first)."""
+def last_line(metrics: Path) -> dict[str, Any]:
+    """A run's last metrics line (``step``, ``steps_per_second``, ...); empty before its first."""
     try:
         with open(metrics, "rb") as f:
             f.seek(0, os.SEEK_END)
@@ -109,11 +109,13 @@ def last_step(metrics: Path) -> int:
             f.seek(max(0, size - 4096))
             lines = f.read().decode(errors="replace").strip().splitlines()
     except OSError:
-        return 0
+        return {}
     for line in reversed(lines):
-        with contextlib.suppress(ValueError, TypeError, KeyError):
-            return int(json.loads(line)["step"])
-    return 0
+        with contextlib.suppress(ValueError, TypeError):
+            out = json.loads(line)
+            if isinstance(out, dict) and "step" in out:
+                return out
+    return {}
 
 
 def summed(segments: Sequence[dict[str, Any]]) -> dict[str, float]:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -33,7 +34,7 @@ from ..errors import MarlError
 from ..files import write_atomic
 from ..league.store import League
 from .evaluate import fly, snapshot_returns
-from .measure import last_step, summed, train_process
+from .measure import last_line, summed, train_process
 
 __all__ = ["Study", "TeamSizePlan", "parse_sizes", "run_study"]
 
@@ -153,13 +154,14 @@ class Study:
     """A team-size study in a league: its plan, its state file, and the stages that fill it."""
 
     def __init__(self, league: League, plan: TeamSizePlan,
-                 on_progress: Callable[[str, float], None] | None = None) -> None:
+                 on_progress: Callable[..., None] | None = None) -> None:
         if league.home is None:
             raise MarlError("a study needs a league home for its runs and its files: pass --home")
         self.league, self.plan = league, plan
         self.dir = league.home_path("studies", plan.name)
         self.path = self.dir / "study.json"
-        self.on_progress = on_progress or (lambda what, done: None)
+        # on_progress(key, share done, detail): a run's name (its share of its budget), or "eval RUN at SIZE"
+        self.on_progress = on_progress or (lambda key, done, detail="": None)
         self.state = self._load()
 
     # ------------------------------------------------------------------------------------------------ state
@@ -201,6 +203,7 @@ class Study:
         """Train ``run`` (or resume it, or leave it, finished), measured, its figures kept in the state."""
         entry = self.state["runs"].setdefault(run, {"size": size, "from": parent_size, "segments": []})
         if entry.get("done"):
+            self.on_progress(run, 1.0, "done")
             return
         existing = self.league.get_run(run)
         if existing is not None and existing.status == "finished":
@@ -215,11 +218,16 @@ class Study:
                 parent = self.final_team(self.plan.fresh(parent_size))
             args = _train_args(self.plan, run, size, parent)
         metrics = self.league.home_path("runs", run) / "metrics.jsonl"
-        budget = self.plan.steps
+        started = time.monotonic()
 
         def tick() -> None:
-            if budget:
-                self.on_progress(run, min(1.0, last_step(metrics) / budget))
+            line = last_line(metrics)
+            step, rate = int(line.get("step", 0)), line.get("steps_per_second")
+            if self.plan.steps:
+                done = step / self.plan.steps
+            else:  # a run of --minutes: its share of the minutes (the first piece's; a resumed run starts again)
+                done = (time.monotonic() - started) / (60 * float(self.plan.minutes or 1))
+            self.on_progress(run, min(1.0, done), f"{step:,} steps" + (f", {rate:,} steps/s" if rate else ""))
 
         self.on_progress(run, 0.0)
         code, segment = train_process(args, self.child_env(), self.dir / "logs" / f"{run}.log", on_tick=tick)
@@ -268,7 +276,7 @@ class Study:
         key = f"{run}@{size}"
         if key in self.state["evals"]:
             return self.state["evals"][key]
-        self.on_progress(f"{run} at {size}", 0.0)
+        self.on_progress(f"eval {run} at {size}", 0.0)
         out = fly(self.league, self.final_team(run), self.plan.vs, self.plan.options(size), self.plan.eval_games,
                   seed=1_000_003 + self.plan.seed)
         self.state["evals"][key] = out
@@ -340,7 +348,7 @@ def _tail(log: Path) -> str:
     return lines[-1].strip() if lines else "(an empty log)"
 
 
-def run_study(league: League, plan: TeamSizePlan, on_progress: Callable[[str, float], None] | None = None,
+def run_study(league: League, plan: TeamSizePlan, on_progress: Callable[..., None] | None = None,
               plots: bool = True) -> dict[str, Any]:
     """Every stage of the study (each skipped where the state has it), then its report (and PNGs)."""
     study = Study(league, plan, on_progress)
