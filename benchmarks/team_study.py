@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PURSUIT = ["pettingzoo.sisl.pursuit_v5", "--size-option", "n_pursuers", "--kind", "cooperative",
            "--env-option", "x_size=8", "--env-option", "y_size=8", "--env-option", "n_evaders=5",
            "--env-option", "max_cycles=100", "--train", "2,3,4", "--eval", "1-6", "--games", "16"]
-LANDER = ["lander", "--train", "1,2,3", "--eval", "1-4"]
+LANDER = ["lander", "--train", "1,2,3", "--eval", "1-4", "--vs", "heuristic"]
 
 
 def marl(home: Path, *args: str, capture: bool = True) -> str:
