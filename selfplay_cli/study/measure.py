@@ -23,7 +23,7 @@ from typing import Any
 
 from ..errors import MarlError
 
-__all__ = ["Segment", "tree_rss_kb", "train_process"]
+__all__ = ["Segment", "last_line", "summed", "train_process", "tree_rss_kb"]
 
 
 @dataclass(frozen=True)

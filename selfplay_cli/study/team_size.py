@@ -163,6 +163,7 @@ class Study:
         # on_progress(key, share done, detail): a run's name (its share of its budget), or "eval RUN at SIZE"
         self.on_progress = on_progress or (lambda key, done, detail="": None)
         self.state = self._load()
+        self._curves: dict[tuple[str, int], list[tuple[int, float, float]]] = {}
 
     # ------------------------------------------------------------------------------------------------ state
     def _load(self) -> dict[str, Any]:
@@ -285,7 +286,13 @@ class Study:
 
     # ------------------------------------------------------------------------------------------------ report
     def curve(self, run: str, size: int) -> list[tuple[int, float, float]]:
-        """(step, training seconds, mean team return) of each snapshot moment of ``run`` from its rating games."""
+        """(step, training seconds, mean team return) of each snapshot moment of ``run`` from its rating games (read
+        once per run: a fresh run's curve serves every adaptation to its size)."""
+        if (run, size) not in self._curves:
+            self._curves[(run, size)] = self._read_curve(run, size)
+        return self._curves[(run, size)]
+
+    def _read_curve(self, run: str, size: int) -> list[tuple[int, float, float]]:
         seconds = _seconds_by_step(self.league.home_path("runs", run) / "metrics.jsonl")
         out = []
         for step, ret in snapshot_returns(self.league, self.plan.env, run, self.plan.options(size)):
