@@ -101,16 +101,18 @@ def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | N
         for r in runs:
             if r.env == e and (options := (r.config or {}).get("env_options")):
                 with contextlib.suppress(TypeError, ValueError, UnknownEnvError):
-                    seatings.setdefault(spec.for_options(**options).agents, r.name)
+                    seatings.setdefault(spec.for_options(**options).agents)
+        seatings = {agents: None for agents in seatings if len(agents) > 1}  # in order: the game's own first
+        found: dict[str, list[PlayerRow]] = {}  # each seat's snapshots, asked for once whatever seatings share it
+        for agent in dict.fromkeys(a for agents in seatings for a in agents):
+            found[agent] = [p for p in league.find_players(f"{name}-{agent}", env=e)
+                            if p.kind == "snapshot" and p.run is not None
+                            and ("/" not in name or p.full_name == f"{name}-{agent}")]
         for agents in seatings:
-            if len(agents) < 2:
-                continue
             by_run: dict[str, list[PlayerRow | None]] = {}
             for seat, agent in enumerate(agents):
-                for p in league.find_players(f"{name}-{agent}", env=e):
-                    if p.kind != "snapshot" or p.run is None or ("/" in name and p.full_name != f"{name}-{agent}"):
-                        continue
-                    by_run.setdefault(p.run, [None] * len(agents))[seat] = p
+                for p in found[agent]:
+                    by_run.setdefault(p.run, [None] * len(agents))[seat] = p  # type: ignore[arg-type]
             for run, members in by_run.items():
                 whole = all(m is not None for m in members)
                 if whole and len(members) > len(teams.get((e, run), ())):  # the run's whole team, not a part
