@@ -17,6 +17,7 @@ and peak memory); its report and PNGs are copied to ``--docs`` (``docs/team-stud
 ``--keep`` folder.
 
 Run: python benchmarks/team_study.py [--parts pursuit lander critics] [--minutes 5] [--critic-minutes 30]
+     [--critic-algos ppo mappo poca]
      [--keep DIR] [--docs docs]
 """
 
@@ -60,10 +61,10 @@ def study(home: Path, part: str, args: list[str], minutes: float, docs: Path) ->
     print(f"{part}: report and PNGs in {docs}/team-study-{part}*", flush=True)
 
 
-def critics(home: Path, minutes: float, games: int) -> None:
+def critics(home: Path, minutes: float, games: int, algos: list[str]) -> None:
     print(f"== critics: marl train lander --agents 2 --sharing fups --algo ALGO --minutes {minutes:g}", flush=True)
     rows = []
-    for algo in ("ppo", "mappo", "poca"):
+    for algo in algos:
         run = f"critic-{algo}"
         r = json.loads(marl(home, "train", "lander", "--agents", "2", "--sharing", "fups", "--algo", algo,
                             "--minutes", f"{minutes:g}", "--run", run, "--quiet", "--json"))
@@ -87,6 +88,7 @@ def main() -> None:
     p.add_argument("--minutes", type=float, default=5.0, help="minutes per study run")
     p.add_argument("--critic-minutes", type=float, default=30.0, help="minutes per lander critic run")
     p.add_argument("--games", type=int, default=50, help="fresh games for the critics' final figures")
+    p.add_argument("--critic-algos", nargs="+", default=["ppo", "mappo", "poca"], choices=["ppo", "mappo", "poca"])
     p.add_argument("--keep", type=Path, help="league folder to keep (and to go on with a study killed midway)")
     p.add_argument("--docs", type=Path, default=ROOT / "docs")
     args = p.parse_args()
@@ -97,7 +99,7 @@ def main() -> None:
         if "lander" in args.parts:
             study(home, "lander", LANDER, args.minutes, args.docs)
         if "critics" in args.parts:
-            critics(home, args.critic_minutes, args.games)
+            critics(home, args.critic_minutes, args.games, args.critic_algos)
 
 
 if __name__ == "__main__":

@@ -37,10 +37,14 @@ def test_a_study_trains_flies_adapts_and_measures(home, capsys):
     assert a["run"] == "ts-n1-to2" and a["fresh_run"] == "ts-n2" and a["return"]["games"] == 3
     assert a["fresh_return"] == {k: v for k, v in cells[(2, 2)].items() if k in a["fresh_return"]}
     assert a["fresh_steps"] == 160 and a["curve"][0][0] == 0 and a["curve"][-1][0] == 160  # its first and last
-    target = a["fresh_final_curve"]
-    assert target == a["fresh_curve"][-1][2]  # the fresh run's final return, by its own rating games
-    first = next((p[0] for p in a["curve"] if p[2] >= target), None)
-    assert a["steps_to_reach"] == first  # the adapted run's first snapshot at or above it
+    state = json.loads((home / "studies" / "ts" / "study.json").read_text())
+    target = a["fresh_return"]["mean"]  # the fresh run's final return: the table's, on the study's seeds
+    flown = {int(k.rpartition(":")[2]): v["mean"] for k, v in state["evals"].items() if k.startswith("ts-n1-to2@2:")}
+    flown[160] = a["return"]["mean"]  # its moments flown in order until one reached it, on the same seeds
+    first = next((step for step, got in sorted(flown.items()) if got >= target), None)
+    assert a["steps_to_reach"] == first  # the adapted run's first moment at or above it
+    assert first is None or a["reached_return"] == flown[first] >= target
+    assert state["evals"]["ts-n1-to2@2:0"]["team"] == "ts-n1-to2/s0"  # the parent flown at the new size
     figures = {x["run"]: x for x in r["runs"]}
     assert set(figures) == RUNS
     for x in figures.values():  # each run in its own process, measured

@@ -458,3 +458,10 @@ def test_a_new_runs_settings_resolve_without_the_cli(tmp_path):
     assert seed["algo"] == "dqn" and seed["dqn"]["lr"] == 1e-3 and seed["dqn"]["arch"]["hidden"][0] == 512
     opponents = new_settings("pong", {"opponents": "uniform", "bots": "cpu=0.25"})["opponents"]
     assert opponents["mode"] == "uniform" and opponents["bots"] == {"cpu": 0.25}  # --opponents is [opponents] mode
+    team = tmp_path / "team.toml"
+    team.write_text("[poca]\nlr = 3e-4\n")
+    critic = new_settings("lander", {"algo": "mappo"}, config=team)  # PPO with a team critic: the game's PPO too
+    for algo in ("mappo", "poca"):
+        assert (critic[algo]["gamma"], critic[algo]["reward_scale"], critic[algo]["rollout_steps"]) == (0.999, 0.01,
+                                                                                                         256)
+    assert (critic["mappo"]["lr"], critic["poca"]["lr"]) == (1e-3, 3e-4)  # the file's [poca] over the game's [ppo]

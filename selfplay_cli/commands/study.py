@@ -150,16 +150,14 @@ def render(r: dict[str, Any]) -> None:
     t.add_row(r["vs"], *[_ci(vs.get(m)) for m in r["eval"]])
     console.print(t)
     a = Table(title="adapted from another size vs trained afresh (same budget): return at the end, and when the "
-                    "adapted run reached the fresh run's final return (its rating games)")
-    for col in ("from -> to", "adapted", "fresh", "fresh's final (rating games)", "adapted reached it at",
-                "fresh took"):
+                    "adapted run reached the fresh run's final return (its snapshots flown on the same seeds)")
+    for col in ("from -> to", "adapted", "fresh", "adapted reached fresh's final at", "fresh took"):
         a.add_column(col)
     for x in r["adaptive"]:
         reached = ("not reached" if x["steps_to_reach"] is None
-                   else f"{x['steps_to_reach']:,} steps, {x['minutes_to_reach']:.1f} min")
+                   else f"{x['steps_to_reach']:,} steps, {x['minutes_to_reach']:.1f} min ({x['reached_return']:.1f})")
         took = "-" if x["fresh_steps"] is None else f"{x['fresh_steps']:,} steps, {x['fresh_minutes']:.1f} min"
-        target = "-" if x["fresh_final_curve"] is None else f"{x['fresh_final_curve']:.1f}"
-        a.add_row(f"{x['from']} -> {x['to']}", _ci(x["return"]), _ci(x["fresh_return"]), target, reached, took)
+        a.add_row(f"{x['from']} -> {x['to']}", _ci(x["return"]), _ci(x["fresh_return"]), reached, took)
     console.print(a)
     f = Table(title="runs: wall time, CPU (mean cores busy), peak memory")
     for col in ("run", "size", "from", "steps", "wall", "CPU", "peak memory"):

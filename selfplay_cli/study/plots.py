@@ -55,7 +55,8 @@ def plot_returns(report: dict[str, Any], path: Path) -> Path:
 
 
 def plot_curves(report: dict[str, Any], path: Path) -> Path:
-    """Each adapted run's snapshots' mean team return against training steps, beside the fresh run of its size."""
+    """Each adapted run's snapshots' mean team return (their rating games) against training steps, beside the fresh
+    run of its size, and a line where it reached the fresh run's final return on the study's seeds."""
     plt = _pyplot()
     pairs = report["adaptive"]
     cols = max(1, min(3, len(pairs)))
@@ -66,6 +67,8 @@ def plot_curves(report: dict[str, Any], path: Path) -> Path:
                                   ("curve", f"adapted {a['from']} -> {a['to']}", "-")):
             pts = a[key]
             ax.plot([p[0] for p in pts], [p[2] for p in pts], style, marker="o", markersize=3, label=label)
+        if a.get("steps_to_reach") is not None:  # the moment it reached the fresh run's final (the study's seeds)
+            ax.axvline(a["steps_to_reach"], color="grey", linestyle=":", label="reached fresh's final")
         ax.set_title(f"{a['from']} -> {a['to']}")
         ax.set_xlabel("game steps")
         ax.ticklabel_format(axis="x", style="sci", scilimits=(-3, 4))

@@ -8,8 +8,9 @@
 3. **Adaptive training.** Resume each trained team at each other trained size M from its final snapshot
    (``--init-from``; the run ``<study>-n<N>-to<M>``) for the same budget, and compare it with the team trained at
    M from scratch (step 1's run): the return each reached (on the same seeds), and the steps and minutes the adapted
-   team took to reach the fresh team's final return (both read from the runs' own rating games, snapshot by
-   snapshot: one measure for both).
+   team took to reach the fresh team's final return: its snapshot moments flown in order on those seeds until one
+   scores at or above it (one measure for both, the table's: not the runs' few rating games, whose noise could
+   call a run "reached" that the table shows below).
 
 Every run is trained in its own process, measured (:mod:`.measure`): wall time, CPU time (mean cores busy) and peak
 memory. The study's state is ``<home>/studies/<study>/study.json`` (written to a temporary name, then renamed):
@@ -164,6 +165,7 @@ class Study:
         self.on_progress = on_progress or (lambda key, done, detail="": None)
         self.state = self._load()
         self._curves: dict[tuple[str, int], list[tuple[int, float, float]]] = {}
+        self._moments: dict[str, list[tuple[int, str]]] = {}  # a finished run's moments (read once)
 
     # ------------------------------------------------------------------------------------------------ state
     def _load(self) -> dict[str, Any]:
@@ -253,15 +255,25 @@ class Study:
         """The game steps a run trained: its final snapshot's."""
         return max(int(p.step or 0) for p in self._snapshots(run))
 
+    def moments(self, run: str) -> list[tuple[int, str]]:
+        """(step, ``run/<name>``) of each snapshot moment of a run in step order: its one snapshot, or its team of
+        per-seat snapshots."""
+        if run in self._moments:
+            return self._moments[run]
+        by_step: dict[int, list[str]] = {}
+        for p in self._snapshots(run):
+            by_step.setdefault(int(p.step or 0), []).append(p.name)
+        out = []
+        for step, names in sorted(by_step.items()):
+            names.sort()
+            out.append((step, f"{run}/{names[0] if len(names) == 1 else os.path.commonprefix(names).rstrip('-')}"))
+        if self.state["runs"].get(run, {}).get("done"):
+            self._moments[run] = out
+        return out
+
     def final_team(self, run: str) -> str:
         """``run/<name>`` of a run's final moment: its one snapshot, or its team of per-seat snapshots."""
-        rows = self._snapshots(run)
-        last = max(int(p.step or 0) for p in rows)
-        names = sorted(p.name for p in rows if int(p.step or 0) == last)
-        if len(names) == 1:
-            return f"{run}/{names[0]}"
-        base = os.path.commonprefix(names).rstrip("-")
-        return f"{run}/{base}"
+        return self.moments(run)[-1][1]
 
     def evaluate_all(self) -> None:
         for n in self.plan.train:
@@ -271,16 +283,42 @@ class Study:
             for m in self.plan.train:
                 if m != n:
                     self.evaluate(self.plan.adapted(n, m), m)
+        for n in self.plan.train:
+            for m in self.plan.train:
+                if m != n:
+                    self.reach(self.plan.adapted(n, m), m)
 
-    def evaluate(self, run: str, size: int) -> dict[str, Any]:
-        """The final team of ``run`` flown at ``size`` against the plan's opponent on the study's seeds (kept)."""
-        key = f"{run}@{size}"
+    def evaluate(self, run: str, size: int, moment: tuple[int, str] | None = None) -> dict[str, Any]:
+        """The final team of ``run`` (or its team at ``moment``: (step, name)) flown at ``size`` against the plan's
+        opponent on the study's seeds (kept)."""
+        final = moment is None or moment == self.moments(run)[-1]
+        key = f"{run}@{size}" if final else f"{run}@{size}:{moment[0]}"  # type: ignore[index]
         if key in self.state["evals"]:
             return self.state["evals"][key]
-        self.on_progress(f"eval {run} at {size}", 0.0)
-        out = fly(self.league, self.final_team(run), self.plan.vs, self.plan.options(size), self.plan.eval_games,
+        team = self.final_team(run) if moment is None else moment[1]
+        self.on_progress(f"eval {run} at {size}" + ("" if final else f", step {moment[0]:,}"), 0.0)  # type: ignore[index]
+        out = fly(self.league, team, self.plan.vs, self.plan.options(size), self.plan.eval_games,
                   seed=1_000_003 + self.plan.seed)
         self.state["evals"][key] = out
+        self._save()
+        return out
+
+    def reach(self, run: str, size: int) -> dict[str, Any]:
+        """When the adapted ``run`` reached the final return of the fresh run at ``size``: its snapshot moments flown
+        in step order on the study's seeds (the table's measure) until one scores at or above the fresh run's final
+        team; that moment's step, training seconds and return, or ``reached: False`` (kept)."""
+        if run in self.state.setdefault("reach", {}):
+            return self.state["reach"][run]
+        target = self.evaluate(self.plan.fresh(size), size)["mean"]
+        seconds = _seconds_by_step(self.league.home_path("runs", run) / "metrics.jsonl")
+        out: dict[str, Any] = {"reached": False, "target": target}
+        for step, team in self.moments(run):
+            got = self.evaluate(run, size, (step, team))["mean"]
+            if target is not None and got is not None and got >= target:
+                out = {"reached": True, "target": target, "step": step, "seconds": _seconds_at(seconds, step),
+                       "return": got, "team": team}
+                break
+        self.state["reach"][run] = out
         self._save()
         return out
 
@@ -294,11 +332,8 @@ class Study:
 
     def _read_curve(self, run: str, size: int) -> list[tuple[int, float, float]]:
         seconds = _seconds_by_step(self.league.home_path("runs", run) / "metrics.jsonl")
-        out = []
-        for step, ret in snapshot_returns(self.league, self.plan.env, run, self.plan.options(size)):
-            near = min(seconds, key=lambda s: abs(s - step)) if seconds and step else None
-            out.append((step, seconds.get(near, 0.0) if near is not None else 0.0, ret))
-        return out
+        return [(step, _seconds_at(seconds, step), ret)
+                for step, ret in snapshot_returns(self.league, self.plan.env, run, self.plan.options(size))]
 
     def report(self) -> dict[str, Any]:
         plan, runs, evals = self.plan, self.state["runs"], self.state["evals"]
@@ -310,18 +345,19 @@ class Study:
                 if m == n:
                     continue
                 a_run, f_run = plan.adapted(n, m), plan.fresh(m)
-                a_curve, f_curve = self.curve(a_run, m), self.curve(f_run, m)
-                target = f_curve[-1][2] if f_curve else None
-                reached = next(((s, sec) for s, sec, r in a_curve if target is not None and r >= target), None)
+                reach = self.state.get("reach", {}).get(a_run) or {}
+                f_steps = runs.get(f_run, {}).get("steps")
+                f_seconds = _seconds_by_step(self.league.home_path("runs", f_run) / "metrics.jsonl")
                 adaptive.append({
                     "from": n, "to": m, "run": a_run, "fresh_run": f_run,
                     "return": evals.get(f"{a_run}@{m}"), "fresh_return": evals.get(f"{f_run}@{m}"),
-                    "fresh_final_curve": target,
-                    "steps_to_reach": reached[0] if reached else None,
-                    "minutes_to_reach": round(reached[1] / 60, 2) if reached else None,
-                    "fresh_steps": f_curve[-1][0] if f_curve else None,
-                    "fresh_minutes": round(f_curve[-1][1] / 60, 2) if f_curve else None,
-                    "curve": [list(p) for p in a_curve], "fresh_curve": [list(p) for p in f_curve],
+                    "steps_to_reach": reach.get("step"),
+                    "minutes_to_reach": round(reach["seconds"] / 60, 2) if reach.get("reached") else None,
+                    "reached_with": reach.get("team"), "reached_return": reach.get("return"),
+                    "fresh_steps": f_steps,
+                    "fresh_minutes": round(_seconds_at(f_seconds, f_steps) / 60, 2) if f_steps is not None else None,
+                    "curve": [list(p) for p in self.curve(a_run, m)],
+                    "fresh_curve": [list(p) for p in self.curve(f_run, m)],
                 })
         figures = [{"run": run, "size": runs[run]["size"], "from": runs[run]["from"], "steps": runs[run].get("steps"),
                     **summed(runs[run]["segments"])} for run, _, _ in plan.runs()
@@ -345,6 +381,13 @@ def _seconds_by_step(metrics: Path) -> dict[int, float]:
         except (ValueError, KeyError, TypeError):
             continue
     return out
+
+
+def _seconds_at(seconds: dict[int, float], step: int) -> float:
+    """The training seconds at ``step`` by the run's metrics lines (the nearest line's; 0 at step 0)."""
+    if not seconds or not step:
+        return 0.0
+    return seconds[min(seconds, key=lambda s: abs(s - step))]
 
 
 def _tail(log: Path) -> str:

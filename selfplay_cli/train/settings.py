@@ -19,7 +19,7 @@ from typing import Any
 
 from ..errors import MarlError
 from ..league.store import League, shown
-from .config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
+from .config import ON_POLICY, TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
 from .matchmaking import parse_bots
 
 ALGO_SECTIONS = ("ppo", "dqn", "sac", "mappo", "poca")
@@ -115,7 +115,7 @@ def new_settings(env: str | None, flags: Mapping[str, Any], *, config: Path | No
     if preset not in (None, *PRESETS):
         raise MarlError(f"unknown --preset '{preset}'; available: {', '.join(PRESETS)}")
     settings = TrainConfig(env=spec.name, run="new").to_dict()  # the defaults
-    merge_settings(settings, spec.train_defaults)  # the game's own (marl envs NAME shows them)
+    merge_settings(settings, game_defaults(spec))  # the game's own (marl envs NAME shows them)
     if preset == "seed000":
         from ..algos.dqn import seed000_config
 
@@ -140,6 +140,18 @@ def new_settings(env: str | None, flags: Mapping[str, Any], *, config: Path | No
                                          key not in from_file})
     TrainConfig.from_dict(settings)  # every setting checked
     return settings
+
+
+def game_defaults(spec: Any) -> dict[str, Any]:
+    """A game's own training settings (``spec.train_defaults``), its ``[ppo]`` also the start of the learners built
+    on PPO (``[mappo]``, ``[poca]``: PPO with a critic of the team, so the lander's tuned PPO, its reward scale,
+    horizon and schedule, is theirs too), under what the game gives them itself."""
+    out = dict(spec.train_defaults)
+    if isinstance(out.get("ppo"), dict):
+        for algo in ON_POLICY:
+            if algo != "ppo":
+                out[algo] = {**out["ppo"], **out.get(algo, {})}
+    return out
 
 
 def check_kind(spec: Any, kind: Any) -> str:
