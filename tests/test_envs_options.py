@@ -56,6 +56,8 @@ def test_marl_envs_name_shows_the_options_and_json_carries_them(capsys):
     assert "lander" not in out  # only the game named
     code, out, err = run(capsys, "envs")
     assert code == 0 and "marl envs NAME shows a game's options" in out
+    lander = next(line for line in out.splitlines() if line.startswith("lander trains with its own defaults"))
+    assert "[ppo] lr=0.001" in lander and lander.endswith("its [ppo] is also where [mappo] and [poca] start")
 
 
 def test_a_pettingzoo_factorys_keyword_arguments_are_its_options(tmp_path, monkeypatch, capsys):

@@ -122,7 +122,9 @@ def envs(
                           highlight=False)
         if r.get("train_defaults"):
             console.print(f"{r['name']} trains with its own defaults (a --config file or flags override them): "
-                          f"{_settings(r['train_defaults'])}", markup=False, highlight=False)
+                          f"{_settings(r['train_defaults'])}"
+                          + ("; its [ppo] is also where [mappo] and [poca] start" if "ppo" in r["train_defaults"]
+                             else ""), markup=False, highlight=False)
         if r.get("live_options"):
             console.print(f"{r['name']}: a [curriculum] may drive {', '.join(r['live_options'])}", markup=False,
                           highlight=False)
