@@ -166,6 +166,7 @@ class Study:
         self.state = self._load()
         self._curves: dict[tuple[str, int], list[tuple[int, float, float]]] = {}
         self._moments: dict[str, list[tuple[int, str]]] = {}  # a finished run's moments (read once)
+        self._seconds: dict[str, dict[int, float]] = {}  # a finished run's seconds by step (read once)
 
     # ------------------------------------------------------------------------------------------------ state
     def _load(self) -> dict[str, Any]:
@@ -310,7 +311,7 @@ class Study:
         if run in self.state.setdefault("reach", {}):
             return self.state["reach"][run]
         target = self.evaluate(self.plan.fresh(size), size)["mean"]
-        seconds = _seconds_by_step(self.league.home_path("runs", run) / "metrics.jsonl")
+        seconds = self.seconds(run)
         out: dict[str, Any] = {"reached": False, "target": target}
         for step, team in self.moments(run):
             got = self.evaluate(run, size, (step, team))["mean"]
@@ -330,8 +331,14 @@ class Study:
             self._curves[(run, size)] = self._read_curve(run, size)
         return self._curves[(run, size)]
 
+    def seconds(self, run: str) -> dict[int, float]:
+        """A finished run's training seconds by step, from its metrics lines (read once per run)."""
+        if run not in self._seconds:
+            self._seconds[run] = _seconds_by_step(self.league.home_path("runs", run) / "metrics.jsonl")
+        return self._seconds[run]
+
     def _read_curve(self, run: str, size: int) -> list[tuple[int, float, float]]:
-        seconds = _seconds_by_step(self.league.home_path("runs", run) / "metrics.jsonl")
+        seconds = self.seconds(run)
         return [(step, _seconds_at(seconds, step), ret)
                 for step, ret in snapshot_returns(self.league, self.plan.env, run, self.plan.options(size))]
 
@@ -347,7 +354,6 @@ class Study:
                 a_run, f_run = plan.adapted(n, m), plan.fresh(m)
                 reach = self.state.get("reach", {}).get(a_run) or {}
                 f_steps = runs.get(f_run, {}).get("steps")
-                f_seconds = _seconds_by_step(self.league.home_path("runs", f_run) / "metrics.jsonl")
                 adaptive.append({
                     "from": n, "to": m, "run": a_run, "fresh_run": f_run,
                     "return": evals.get(f"{a_run}@{m}"), "fresh_return": evals.get(f"{f_run}@{m}"),
@@ -355,7 +361,8 @@ class Study:
                     "minutes_to_reach": round(reach["seconds"] / 60, 2) if reach.get("reached") else None,
                     "reached_with": reach.get("team"), "reached_return": reach.get("return"),
                     "fresh_steps": f_steps,
-                    "fresh_minutes": round(_seconds_at(f_seconds, f_steps) / 60, 2) if f_steps is not None else None,
+                    "fresh_minutes": (round(_seconds_at(self.seconds(f_run), f_steps) / 60, 2)
+                                      if f_steps is not None else None),
                     "curve": [list(p) for p in self.curve(a_run, m)],
                     "fresh_curve": [list(p) for p in self.curve(f_run, m)],
                 })
