@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.ladder import Fitted, LadderRow, _tiers, fit_table, ladder, select_rows
+from selfplay_cli.league.forecast import Forecaster
+from selfplay_cli.league.ladder import Fitted, LadderRow, _ranks_and_tiers, fit_table, ladder, select_rows
 from selfplay_cli.league.pairs import PairPlan, head_to_head, plan_tournament
 from selfplay_cli.league.results_csv import fit_csv, read_results_csv
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
@@ -21,6 +22,7 @@ from selfplay_cli.results import GameResult
 from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, fit_bradley_terry
 from selfplay_cli.stats.elo import NAT_TO_ELO, elo_to_score, normal_quantile
 from selfplay_cli.stats.match import match_stats
+from selfplay_cli.stats.predict import PairModel, Spread
 from selfplay_cli.stats.sprt import sprt_llr
 
 ENV = "pong"
@@ -156,29 +158,62 @@ def test_ranks_follow_the_order_and_tiers_say_what_cannot_be_told_apart(tmp_path
         assert [(r.policy, r.rank, r.tier) for r in far] == [("strong", 1, 1), ("weak", 2, 2)]
         assert far[1].ci_high < far[0].ci_low and far[0].margin.separated and far[0].margin.over == "weak"
         close = fit_csv(_csv_games(tmp_path, [("p", "q", 11, 0, 9)]), bootstrap=boot)
-        assert [(r.rank, r.tier) for r in close] == [(1, 1), (2, 1)]  # one place each, one tier: not told apart
+        assert [(r.rank, r.tier) for r in close] == [(1, 1), (1, 1)]  # not told apart: one rank, one tier
         assert close[0].elo > close[1].elo and not close[0].margin.separated
         q = close[1]
         assert q.ci_low < q.elo < q.ci_high and q.ci_high > 1000.0
 
 
-def test_tiers_open_below_the_tiers_first_player_beyond_doubt() -> None:
-    """Tiers by hand: 0-1 differ by 100 with sd 40 (100 - 1.96 * 40 > 0: a new tier), 1-2 by 100 with sd 80 (not
-    separated: 2 joins 1's tier), though 0-2 would be; a flagged player is compared by whole intervals."""
+def test_ranks_count_the_players_above_beyond_doubt_and_tiers_part_only_where_every_pair_does() -> None:
+    """Ranks and tiers by hand, from differences known exactly (no games yet, no spread): a-b 100 with sd 40 (100 -
+    1.96 * 40 > 0: a above b beyond doubt), b-c 100 with sd 80 (not), a-c 200 sd 60, a-d 250 sd 50, b-d 150 sd 50
+    (all beyond doubt), c-d 50 sd 50 (not). Rank = 1 + the players above beyond doubt: a 1, b 2, c 2 (only a is above
+    it), d 3 (a and b are). Tiers: a boundary after a (a is above all three), none after b (b is not above c) nor
+    after c (c is not above d): a | b c d. A flagged player is compared by whole intervals."""
     z = normal_quantile(0.975)
     sd = np.array([[0.0, 40.0, 60.0, 50.0], [40.0, 0.0, 80.0, 50.0], [60.0, 80.0, 0.0, 50.0],
                    [50.0, 50.0, 50.0, 0.0]])
     ratings = np.array([1300.0, 1200.0, 1100.0, 1050.0])
     low, high = ratings - 300.0, ratings + 300.0
-    fitted = Fitted(["a", "b", "c", "d"], ratings, low, high, sd, [None, None, None, None], z)
-    assert 100 - z * 40 > 0 and 100 - z * 80 < 0 and 150 - z * 50 > 0
-    assert _tiers(fitted, [0, 1, 2, 3]) == {0: 1, 1: 2, 2: 2, 3: 3}  # d: 150 below b (the tier's first), sd 50
+    none = np.zeros((4, 4))
+    pairs = PairModel(ratings, sd, [True] * 4, none, none, 2.0, spread=Spread.known(0.0), anchor=3)
+    fitted = Fitted(["a", "b", "c", "d"], ratings, low, high, [None, None, None, None], 0.95, pairs)
+    assert 100 - z * 40 > 0 and 100 - z * 80 < 0 and 150 - z * 50 > 0 and 50 - z * 50 < 0
+    ranks, tiers = _ranks_and_tiers(fitted, [0, 1, 2, 3])
+    assert ranks == {0: 1, 1: 2, 2: 2, 3: 3} and tiers == {0: 1, 1: 2, 2: 2, 3: 2}
     m = fitted.margin(1, 2)
-    assert (m.over, m.elo) == ("c", 100.0) and m.low == pytest.approx(100 - z * 80) and not m.separated
-    # d flagged (a bound): only whole intervals count, and 1350 (b's high... ) overlaps d's
+    assert m.over == "c" and m.elo == pytest.approx(100.0, abs=0.5) and not m.separated
+    assert (m.low, m.high) == pytest.approx((100 - z * 80, 100 + z * 80), abs=2.0)
+    # d flagged (a bound): only whole intervals count, and they all overlap d's: nobody is above it
     flagged = replace(fitted, flags=[None, None, None, FLAG_PERFECT])
-    assert _tiers(flagged, [0, 1, 2, 3]) == {0: 1, 1: 2, 2: 2, 3: 2}
+    ranks, tiers = _ranks_and_tiers(flagged, [0, 1, 2, 3])
+    assert ranks == {0: 1, 1: 2, 2: 2, 3: 1} and tiers == {0: 1, 1: 1, 2: 1, 3: 1}
     assert flagged.margin(1, 3).low == pytest.approx(low[1] - high[3])
+
+
+def test_a_margin_between_two_players_is_their_pairs_not_their_ratings_difference() -> None:
+    """Two players rated far apart through a third (each 100 games against it: 90-10 and 50-50) whose own 40 games
+    are even: the margin, rank and tier follow their own games (a margin near 0, not separated, one rank), a
+    prediction of their match says an even score, and the ladder, the forecaster and a prediction give the one
+    figure. Without games of their own, three pairs cannot say whether the ratings hold for pairs that never met: the
+    margin follows the ratings, with an interval wide enough to hold 0."""
+    names = ["bot", "hi", "lo"]
+    a = [1] * 100 + [2] * 100 + [1] * 40
+    b = [0] * 100 + [0] * 100 + [2] * 40
+    s = [1.0] * 90 + [0.0] * 10 + [1.0] * 50 + [0.0] * 50 + [1.0, 0.0] * 20
+    rows = {r.policy: r for r in fit_table(names, a, b, s, anchor="bot", bootstrap=0)}
+    hi, lo = rows["hi"], rows["lo"]
+    assert hi.elo - lo.elo > 150.0  # what the ratings alone say
+    assert hi.margin.over == "lo" and abs(hi.margin.elo) < 40.0 and not hi.margin.separated
+    assert hi.rank == lo.rank and hi.tier == lo.tier
+    f = Forecaster.of_games(names, a, b, s, anchor="bot")
+    pred = f.predict("hi", "lo", 200)
+    assert pred.low < 0.5 < pred.high and abs(pred.score - 0.5) < 0.05
+    belief = f.belief("hi", "lo")
+    assert belief.mean == pytest.approx(hi.margin.elo) and belief.interval() == pytest.approx(
+        (hi.margin.low, hi.margin.high))  # one claim, one figure
+    apart = Forecaster.of_games(names, a[:200], b[:200], s[:200], anchor="bot").belief("hi", "lo")
+    assert apart.mean > 300.0 and apart.interval()[0] < 0.0 < apart.interval()[1]
 
 
 def test_the_best_of_a_run_says_by_how_much_and_when_it_cannot_tell(league: League) -> None:
@@ -191,7 +226,9 @@ def test_the_best_of_a_run_says_by_how_much_and_when_it_cannot_tell(league: Leag
     assert best.best and best.best_margin.over == "r1/ep10" and not best.best_margin.separated
     assert best.tied == ("r1/ep10",)  # 11-9: the run's best by Elo, not beyond doubt
     assert best.best_margin.record == (11, 0, 9) and "(head to head 11-0-9)" in best.best_margin.text()
-    assert best.best_margin.elo == pytest.approx(best.elo - by["r1/ep10"].elo)
+    belief = Forecaster.of_league(league, "pong").belief("r1/ep90", "r1/ep10")  # the same claim, the same figure
+    assert (best.best_margin.elo, best.best_margin.low, best.best_margin.high) == pytest.approx(
+        (belief.mean, *belief.interval()))
     assert by["r2/ep90"].best and by["r2/ep90"].best_margin is None and by["r2/ep90"].tied == ()
     _record(league, _results(e90, e10, 60, 0, 10))
     best = _by_name(ladder(league, bootstrap=0))["r1/ep90"]
@@ -569,7 +606,7 @@ def test_prior_makes_the_same_ledger_finite_and_honest(tmp_path):
         assert rows["b"].elo == pytest.approx(1000.0, abs=1e-6)  # symmetric with the anchor
         assert rows["c"].elo > 1000.0 + 300
         assert rows["c"].ci_low > 1000.0 and rows["c"].tier == 1  # c beat both 10-0: above them beyond doubt
-        assert rows["a"].tier == rows["b"].tier == 2 and {rows["a"].rank, rows["b"].rank} == {2, 3}
+        assert rows["a"].tier == rows["b"].tier == 2 and rows["a"].rank == rows["b"].rank == 2  # never met
         # b's interval carries two links (b-c and c-a), so it is wider than c's (one link)
         assert rows["b"].ci_high - rows["b"].ci_low > rows["c"].ci_high - rows["c"].ci_low > 400
 

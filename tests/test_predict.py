@@ -10,7 +10,7 @@ from scipy.stats import binom
 
 from selfplay_cli.league.forecast import Forecaster
 from selfplay_cli.league.store import LeagueError
-from selfplay_cli.stats.predict import pair_spread, predict_pair
+from selfplay_cli.stats.predict import Spread, belief, measure_spread
 
 
 def _expected(d):
@@ -22,25 +22,38 @@ def test_a_sure_difference_predicts_the_binomial_interval_of_its_score():
     by scipy's quantiles."""
     for diff, n in ((0.0, 200), (191.0, 200), (-400.0, 50)):
         p = float(_expected(diff))
-        pred = predict_pair(diff, 0.0, n)
+        pred = belief(diff, 0.0).predict(n)
         assert pred.score == pytest.approx(p)
         assert (pred.low, pred.high) == (binom.ppf(0.025, n, p) / n, binom.ppf(0.975, n, p) / n)
-    assert (predict_pair(0.0, 0.0, 200).low, predict_pair(0.0, 0.0, 200).high) == (0.43, 0.57)
+    assert (belief(0.0, 0.0).predict(200).low, belief(0.0, 0.0).predict(200).high) == (0.43, 0.57)
 
 
 def test_uncertain_ratings_and_a_spread_widen_the_interval_and_met_games_narrow_it():
-    base = predict_pair(100.0, 0.0, 200)
-    wide = predict_pair(100.0, 80.0, 200)
-    wider = predict_pair(100.0, 80.0, 200, spread=120.0)
+    base = belief(100.0, 0.0).predict(200)
+    wide = belief(100.0, 80.0).predict(200)
+    wider = belief(100.0, 80.0, 120.0).predict(200)
     assert base.high - base.low < wide.high - wide.low < wider.high - wider.low
     # 1,000 games between the two at 70% where pairs scatter around their ratings: the prediction follows them,
     # whatever the ratings said (50%)
-    met = predict_pair(0.0, 10.0, 200, spread=100.0, met_points=700.0, met_games=1000.0)
+    met = belief(0.0, 10.0, 100.0, met_points=700.0, met_games=1000.0).predict(200)
     assert met.score == pytest.approx(0.70, abs=0.01) and met.low > 0.6 and met.high < 0.8
-    # without spread the ratings are the whole model: the pair's games are already in them (its sd), not again
-    assert predict_pair(0.0, 0.0, 200, met_points=700.0, met_games=1000.0).score == pytest.approx(0.5)
+    # where the rest of the ledger knows the difference exactly and pairs do not scatter, the pair's games cannot
+    # move it
+    assert belief(0.0, 0.0, 0.0, met_points=700.0, met_games=1000.0).predict(200).score == pytest.approx(0.5)
     with pytest.raises(ValueError):
-        predict_pair(0.0, -1.0, 200)
+        belief(0.0, -1.0)
+    with pytest.raises(ValueError):
+        belief(0.0, 1.0, met_points=9.0, met_games=8.0)
+
+
+def test_a_belief_by_hand_a_normal_prior_and_no_games():
+    """No games of its own: the pair's difference is the normal N(diff, sd^2 + tau^2); its interval diff -+ 1.96 *
+    sqrt(sd^2 + tau^2) and the chance it is below 0 the normal's (by hand: 150 Elo with sd 60 and tau 80 is
+    1.5 sd of 100 above 0, P = 6.68%)."""
+    b = belief(150.0, 60.0, 80.0)
+    assert b.mean == pytest.approx(150.0, abs=0.5) and b.sd == pytest.approx(100.0, rel=0.01)
+    assert b.interval() == pytest.approx((150.0 - 195.996, 150.0 + 195.996), abs=2.0)
+    assert b.below(0.0) == pytest.approx(0.0668, abs=0.002)
 
 
 def _pairs(rng, n_pairs, games, tau):
@@ -52,12 +65,17 @@ def _pairs(rng, n_pairs, games, tau):
 
 def test_the_spread_of_pairs_is_measured_from_their_records():
     rng = np.random.default_rng(5)
-    assert pair_spread(*_pairs(rng, 400, 50, 0.0)) < 40.0  # pairs as their ratings say: no spread to speak of
-    tau = pair_spread(*_pairs(rng, 400, 50, 150.0))
+    assert measure_spread(*_pairs(rng, 400, 50, 0.0)).mean < 40.0  # pairs as their ratings say: no spread to speak of
+    tau = measure_spread(*_pairs(rng, 400, 50, 150.0)).mean
     assert 110.0 < tau < 190.0, tau
-    # a 0-8 far below: no evidence against the ratings (moment estimates on logits blow up there)
-    assert pair_spread([0.0] * 50, [8.0] * 50, [-1500.0] * 50) == 0.0
-    assert pair_spread([], [], []) == 0.0
+    # with no pairs the prior (half-normal of scale 200: mean 200 sqrt(2 / pi) = 159.6); 0-8s far below say next to
+    # nothing against the ratings, so leave it near there (moment estimates on logits blow up at such scores)
+    prior = measure_spread([], [], [])
+    assert prior.mean == pytest.approx(159.6, abs=3.0) and prior.pairs == 0
+    assert measure_spread([0.0] * 50, [8.0] * 50, [-1500.0] * 50).mean == pytest.approx(prior.mean, abs=25.0)
+    # a few pairs say little: the spread stays uncertain, and wide (not the most likely value, 0)
+    few = measure_spread(*_pairs(rng, 3, 8, 0.0))
+    assert few.mean > 60.0 and len(few.mixture[0]) > 1
 
 
 def _simulated_league(rng, n_players=12, games=8):

@@ -125,7 +125,7 @@ def fit(
         finally:
             league.close()
         title = "ratings fitted over the ledger" + (f" ({env}: {describe_variant(variant)})" if variant else "")
-    render_ladder(rows, title, json_out=json_out, confidence=confidence, caption=prior_caption(prior),
+    render_ladder(rows, title, json_out=json_out, confidence=confidence, caption=prior_caption(prior, confidence),
                   variant=None if variant is None else variant_options(variant), verdicts=verdict_lines(rows))
     if note and not json_out:
         console.print(note, markup=False)

@@ -16,13 +16,14 @@ def _fmt_elo(x: float) -> str:
     return f"{x:.1f}"
 
 
-def prior_caption(prior: float) -> str:
+def prior_caption(prior: float, confidence: float = 0.95) -> str:
     """One line saying how the ratings were fitted and how ranks are counted."""
     how = ("maximum likelihood (--prior 0)" if prior == 0 else
            f"MAP with a prior of {prior:g} virtual draws (BayesElo's; --prior 0 for maximum likelihood)")
-    return (f"Elo: {how}. rank: place by Elo. tier: players that cannot be told apart share one (a tier ends where a "
-            "player is below its first beyond doubt). (best): best snapshot of its run; (best, tied): best by Elo, "
-            "not beyond doubt.")
+    return (f"Elo: {how}. rank: 1 + the players above it beyond doubt (players not told apart share a rank). tier: a "
+            "tier boundary says everyone above it is above everyone below it beyond doubt (at "
+            f"{100 * confidence:g}% for each pair, head-to-head games and the pairs' spread around their ratings "
+            "taken in). (best): best snapshot of its run; (best, tied): best by Elo, not beyond doubt.")
 
 
 EXPLOITABILITY_NOTE = ("exploitability: how much a best response wins against the player, in the game's returns: "

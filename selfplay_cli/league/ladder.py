@@ -49,18 +49,24 @@ and a ``zero`` player's lower end are ``rating +- MAX_ELO``; disconnected and un
 Order, ranks and tiers
 ----------------------
 Rows are in order of Elo, highest first (players whose offset to the anchor is unknown, ``disconnected``, and
-players without games, ``unrated``, last), and the rank is the place in that order: 1, 2, 3, ... with no gaps, so
-rank and Elo always agree. What the data cannot separate is said by the *tier*: walking down the order, a player
-opens a new tier when it is below the first player of the current tier beyond doubt, i.e. the confidence interval
-of their difference ``r_j - r_i`` (from the same bootstrap replicates or Laplace covariance as the intervals,
-floored by the Laplace one under a prior) lies wholly above 0; players without an estimate (a flag) are compared
-by their whole intervals. Tier 1 is everyone who cannot be told apart from the top. The difference is used, and
-not the two intervals, because every interval is relative to the anchor: snapshots far above the anchor share the
-uncertainty of their link to it, so their intervals overlap even when their difference is measured precisely.
+players without games, ``unrated``, last). Ranks and tiers are claims about pairs, and every claim about two players
+comes from one model of the pair (:class:`~selfplay_cli.stats.predict.PairModel`): what the rest of the ledger says
+of their difference (their ratings fitted without their own games, with that fit's uncertainty), widened by how far
+the game's pairs scatter around their ratings (the spread, measured from the ledger), then updated by their own
+games. Two ratings far apart through the scripted players, whose head-to-head games are even, are not claimed far
+apart. One player is *above another beyond doubt* when the ``confidence`` interval of that pair's difference lies
+wholly above 0.
 
-Each row's ``margin`` is its difference over the next row, with its interval; the best snapshot of each run
-carries its margin over the run's next best and the run's snapshots it is not separated from (``tied``): the
-ladder says who is best, by how much, and when it cannot tell.
+A player's *rank* is one more than the number of players above it beyond doubt (as Chatbot Arena ranks): players
+the games cannot order share a rank, and a rank never claims an order nobody measured. Its *tier*: walking down the
+order, a tier boundary falls between two places only where every player above it (in the tier it closes) is above
+every player below it beyond doubt, so a boundary reads "everyone above is stronger than everyone below".
+
+Each row's ``margin`` is its difference over the next row, with its interval, from the same pair model; the best
+snapshot of each run carries its margin over the run's next best (another name of its own weights, or a teammate of
+a cooperative game's team, is not its rival) and the run's snapshots it is not separated from (``tied``): the ladder
+says who is best, by how much, and when it cannot tell. The summary of ``marl train``, ``marl league predict`` and
+``marl match`` read the same model, so one claim has one figure wherever it is printed.
 """
 
 from __future__ import annotations
@@ -77,6 +83,8 @@ import numpy.typing as npt
 from selfplay_cli.league.games import declaration
 from selfplay_cli.league.ledger import GameTable, rules_for_env
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.league.variants import variant_options
+from selfplay_cli.results import COOPERATIVE
 from selfplay_cli.stats.bradley_terry import (
     DEFAULT_PRIOR,
     FLAG_DISCONNECTED,
@@ -84,9 +92,11 @@ from selfplay_cli.stats.bradley_terry import (
     FLAG_UNRATED,
     FLAG_ZERO,
     fit_bradley_terry,
+    pair_matrices,
 )
-from selfplay_cli.stats.elo import MAX_ELO, normal_quantile
+from selfplay_cli.stats.elo import MAX_ELO
 from selfplay_cli.stats.intervals import bootstrap_intervals, laplace_intervals
+from selfplay_cli.stats.predict import PairModel, Spread
 
 __all__ = [
     "DEFAULT_PRIOR",
@@ -289,16 +299,17 @@ def _open_flagged_sides(ratings: np.ndarray, flags: list[str | None], low: np.nd
 
 @dataclass(frozen=True)
 class Fitted:
-    """A fitted population: its ratings, intervals, flags and the standard deviations of every difference (Elo),
-    by index into ``names``; what the rows are made of, and what margins are read from."""
+    """A fitted population: its ratings, intervals and flags, by index into ``names``, and its pairs
+    (:class:`~selfplay_cli.stats.predict.PairModel`: what the ladder says of any two players); what the rows are made
+    of, and what margins, ranks and tiers are read from."""
 
     names: list[str]
     ratings: np.ndarray
     low: np.ndarray
     high: np.ndarray
-    diff_sd: np.ndarray
     flags: list[str | None]
-    z: float
+    confidence: float
+    pairs: PairModel
     wdl: np.ndarray | None = None  # (3, n, n): i's wins, draws and losses against j in the fitted games
 
     def comparable(self, i: int) -> bool:
@@ -306,15 +317,41 @@ class Fitted:
         return self.flags[i] is None
 
     def margin(self, i: int, j: int) -> Margin:
-        """Player i's difference over player j: ``+- z sd`` where both have an estimate; else from their whole
-        intervals (the widest difference they allow)."""
-        d = float(self.ratings[i] - self.ratings[j])
-        w, dr, lo = (0, 0, 0) if self.wdl is None else (int(x) for x in self.wdl[:, i, j])
-        if self.comparable(i) and self.comparable(j):
-            half = self.z * float(self.diff_sd[i, j])
-            return Margin(self.names[j], d, d - half, d + half, (w, dr, lo))
-        return Margin(self.names[j], d, float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]),
-                      (w, dr, lo))
+        """Player i's difference over player j, as the pair model says it (:meth:`PairModel.belief`: their ratings'
+        difference with its uncertainty and the pairs' spread, their own games taken in) where both have an
+        estimate; else from their whole intervals (the widest difference they allow)."""
+        return self.margins([(i, j)])[0]
+
+    def margins(self, pairs: list[tuple[int, int]]) -> list[Margin]:
+        """:meth:`margin` of many pairs at once."""
+        est = [k for k, (i, j) in enumerate(pairs) if self.comparable(i) and self.comparable(j)]
+        beliefs = dict(zip(est, self.pairs.beliefs([pairs[k][0] for k in est], [pairs[k][1] for k in est]),
+                           strict=True))
+        out = []
+        for k, (i, j) in enumerate(pairs):
+            w, dr, lo = (0, 0, 0) if self.wdl is None else (int(x) for x in self.wdl[:, i, j])
+            if k in beliefs:
+                low, high = beliefs[k].interval(self.confidence)
+                out.append(Margin(self.names[j], beliefs[k].mean, low, high, (w, dr, lo)))
+            else:
+                out.append(Margin(self.names[j], float(self.ratings[i] - self.ratings[j]),
+                                  float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]), (w, dr, lo)))
+        return out
+
+    def above(self, order: list[int]) -> np.ndarray:
+        """``(m, m)`` bool over the players of ``order``: ``[a, b]`` when ``order[a]`` is above ``order[b]`` beyond
+        doubt (the interval of their difference lies wholly above 0), as :meth:`margin` would say of each pair."""
+        tail = 0.5 * (1.0 - self.confidence)
+        idx = np.asarray(order, dtype=np.int64)
+        out = np.zeros((idx.size, idx.size), dtype=bool)
+        est = np.array([self.comparable(int(i)) for i in idx], dtype=bool)
+        if est.any():
+            sub = np.flatnonzero(est)
+            out[np.ix_(sub, sub)] = self.pairs.below(idx[sub]) < tail
+        bound = ~est[:, None] | ~est[None, :]  # a flagged bound compares by its whole interval
+        out |= bound & (self.low[idx][:, None] > self.high[idx][None, :])
+        np.fill_diagonal(out, False)
+        return out
 
 
 def _group(flag: str | None) -> int:
@@ -327,19 +364,24 @@ def _order(fitted: Fitted, shown: list[int]) -> list[int]:
     return sorted(shown, key=lambda i: (_group(fitted.flags[i]), -fitted.ratings[i], fitted.names[i]))
 
 
-def _tiers(fitted: Fitted, order: list[int]) -> dict[int, int | None]:
-    """Tier of each player in ``order`` (see the module docstring): a new tier opens below the current tier's first
-    player beyond doubt."""
+def _ranks_and_tiers(fitted: Fitted, order: list[int]) -> tuple[dict[int, int], dict[int, int | None]]:
+    """Each player's rank and tier (see the module docstring). Rank: one more than the players above it beyond
+    doubt. Tier: walking down the order, a boundary falls between two places only where every player of the tier
+    above it is above every player below it beyond doubt. Players whose offset to the anchor is unknown keep their
+    place as rank and have no tier."""
+    placed = [i for i in order if not _group(fitted.flags[i])]
+    above = fitted.above(placed)
+    ranks = {i: 1 + int(above[:, a].sum()) for a, i in enumerate(placed)}
     tiers: dict[int, int | None] = {}
-    leader, tier = None, 0
-    for i in order:
-        if _group(fitted.flags[i]):
-            tiers[i] = None
-            continue
-        if leader is None or fitted.margin(leader, i).separated:
-            leader, tier = i, tier + 1
+    start, tier = 0, 1
+    for a, i in enumerate(placed):
         tiers[i] = tier
-    return tiers
+        if a + 1 < len(placed) and above[start:a + 1, a + 1:].all():
+            start, tier = a + 1, tier + 1
+    for place, i in enumerate(order):
+        if _group(fitted.flags[i]):
+            ranks[i], tiers[i] = place + 1, None
+    return ranks, tiers
 
 
 def check_prior(prior: float) -> float:
@@ -369,6 +411,7 @@ def fit_table(
     *,
     prior: float = DEFAULT_PRIOR,
     hidden: Collection[str] = (),
+    spread: Spread | None = None,
 ) -> list[LadderRow]:
     """Fit a ladder from games given as index arrays into ``names``.
 
@@ -384,7 +427,7 @@ def fit_table(
         LeagueError: anchor not among the names (or hidden), no games, bad indices or options.
     """
     rows, _ = _fit_rows(names, a, b, score_a, anchor, anchor_rating, bootstrap, confidence, seed, kinds, steps,
-                        player_ids, prior=prior, hidden=hidden)
+                        player_ids, prior=prior, hidden=hidden, spread=spread)
     return rows
 
 
@@ -392,6 +435,7 @@ def _fit_rows(
     names: list[str], a: npt.ArrayLike, b: npt.ArrayLike, score_a: npt.ArrayLike, anchor: str,
     anchor_rating: float, bootstrap: int, confidence: float, seed: int, kinds: dict[str, str] | None,
     steps: dict[str, int] | None, player_ids: dict[str, int] | None, *, prior: float, hidden: Collection[str],
+    spread: Spread | None = None,
 ) -> tuple[list[LadderRow], Fitted]:
     """:func:`fit_table`'s rows and the :class:`Fitted` population they come from."""
     names = [str(n) for n in names]
@@ -414,12 +458,10 @@ def _fit_rows(
     k = names.index(anchor)
     try:
         fit = fit_bradley_terry(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating, prior_games=prior)
+        low, high, diff_sd = laplace_intervals(ai, bi, n, fit.ratings, k, confidence, prior)
         if bootstrap > 0:
-            low, high, diff_sd = bootstrap_intervals(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating,
-                                                     n_boot=bootstrap, confidence=confidence, seed=seed,
-                                                     prior_games=prior)
-        else:
-            low, high, diff_sd = laplace_intervals(ai, bi, n, fit.ratings, k, confidence, prior)
+            low, high, _ = bootstrap_intervals(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating,
+                                               n_boot=bootstrap, confidence=confidence, seed=seed, prior_games=prior)
     except ValueError as exc:
         raise LeagueError(f"cannot fit ratings: {exc}") from exc
     ratings = np.asarray(fit.ratings, dtype=np.float64)
@@ -432,22 +474,23 @@ def _fit_rows(
     for result, (x, y) in enumerate(((sc > 0.5, sc < 0.5), (sc == 0.5, sc == 0.5), (sc < 0.5, sc > 0.5))):
         np.add.at(wdl[result], (ai[x], bi[x]), 1)  # a's win, draw or loss against b, and b's against a
         np.add.at(wdl[result], (bi[y], ai[y]), 1)
-    fitted = Fitted(names, ratings, low, high, np.asarray(diff_sd, dtype=np.float64), list(fit.flags),
-                    normal_quantile(0.5 + 0.5 * confidence), wdl)
+    points, games = pair_matrices(ai, bi, sc, n)
+    pairs = PairModel(ratings, diff_sd, [f is None for f in fit.flags], points, games, prior, spread, anchor=k)
+    fitted = Fitted(names, ratings, low, high, list(fit.flags), confidence, pairs, wdl)
     order = _order(fitted, [i for i, name in enumerate(names) if name not in hidden])
-    tiers = _tiers(fitted, order)
+    ranks, tiers = _ranks_and_tiers(fitted, order)
     kinds, steps, player_ids = kinds or {}, steps or {}, player_ids or {}
+    adjacent = [(i, j) for i, j in zip(order, order[1:], strict=False) if not _group(fit.flags[i])
+                and not _group(fit.flags[j])]
+    margins = dict(zip((i for i, _ in adjacent), fitted.margins(adjacent), strict=True))
     rows = []
-    for place, i in enumerate(order):
-        below = order[place + 1] if place + 1 < len(order) else None
-        margin = (fitted.margin(i, below) if below is not None and not _group(fit.flags[i])
-                  and not _group(fit.flags[below]) else None)
+    for i in order:
         name = names[i]
         rows.append(LadderRow(
             policy=name, player_id=player_ids.get(name), kind=kinds.get(name, "player"), step=steps.get(name),
             elo=float(ratings[i]), ci_low=float(low[i]), ci_high=float(high[i]), games=int(fit.games[i]),
             wins=int(fit.wins[i]), draws=int(fit.draws[i]), losses=int(fit.losses[i]), score=float(fit.score[i]),
-            rank=place + 1, flag=fit.flags[i], anchor=i == k, tier=tiers[i], margin=margin,
+            rank=ranks[i], flag=fit.flags[i], anchor=i == k, tier=tiers[i], margin=margins.get(i),
         ))
     return rows, fitted
 
@@ -548,10 +591,12 @@ def _bot_records(ids: npt.NDArray[np.int64], a: npt.NDArray[np.int64], b: npt.ND
     return out
 
 
-def _mark_best(rows: list[LadderRow], removed: set[int], fitted: Fitted) -> list[LadderRow]:
+def _mark_best(rows: list[LadderRow], removed: set[int], fitted: Fitted, teams: bool = False) -> list[LadderRow]:
     """``best=True`` on each run's highest-rated live snapshot; players comparable with the anchor first (a
     ``disconnected`` or ``unrated`` rating only counts when no snapshot of the run has a comparable one). The best
-    carries its margin over the run's next best and the run's snapshots it is not separated from."""
+    carries its margin over the run's next best and the run's snapshots it is not separated from. Neither counts
+    another name of the best's own weights, nor, where ``teams`` (a cooperative game, whose per-seat snapshots of
+    one moment fly as one team), the best's teammates: the best is not compared with itself."""
     by_run: dict[str, list[LadderRow]] = defaultdict(list)
     for r in rows:  # in the ladder's order: the first comparable one of a run is its best
         if r.kind == "snapshot" and r.run is not None and r.player_id not in removed:
@@ -560,11 +605,15 @@ def _mark_best(rows: list[LadderRow], removed: set[int], fitted: Fitted) -> list
     marked: dict[str, LadderRow] = {}
     for members in by_run.values():
         comparable = [r for r in members if not _group(r.flag)] or members
-        best, rest = comparable[0], comparable[1:]
+        best = comparable[0]
         i = index[best.copy_of or best.policy]
-        margins = [replace(fitted.margin(i, index[r.copy_of or r.policy]), over=r.policy) for r in rest]
-        marked[best.policy] = replace(best, best=True, best_margin=margins[0] if margins else None,
-                                      tied=tuple(m.over for m in margins if not m.separated))
+        rest = [r for r in comparable[1:] if index[r.copy_of or r.policy] != i
+                and not (teams and r.step == best.step)]
+        margin = replace(fitted.margin(i, index[rest[0].copy_of or rest[0].policy]), over=rest[0].policy) \
+            if rest else None
+        above = fitted.above([i] + [index[r.copy_of or r.policy] for r in rest])[0, 1:] if rest else []
+        marked[best.policy] = replace(best, best=True, best_margin=margin,
+                                      tied=tuple(r.policy for r, sure in zip(rest, above, strict=True) if not sure))
     return [marked.get(r.policy, r) for r in rows]
 
 
@@ -603,7 +652,7 @@ def ladder(
     table = league.games(env=env, variant=variant)
     if len(table) == 0:
         return []
-    rules = rules_for_env(env)
+    rules = rules_for_env(env, variant_options(variant))
     if rules.sides_differ:
         return _ladder_by_side(league, env, table, rules.side_roles(), anchor, anchor_rating, bootstrap, confidence,
                                seed, include_removed, prior, variant)
@@ -632,7 +681,8 @@ def ladder(
                     mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
             if r.player_id is not None else r for r in rows]
     rows = _with_copies(league, env, rows, include_removed)
-    return _with_league_marks(_mark_best(rows, removed, fitted), known | {p.id: p for p in population})
+    teams = rules.kind == COOPERATIVE
+    return _with_league_marks(_mark_best(rows, removed, fitted, teams), known | {p.id: p for p in population})
 
 
 def shown_exploitability(meta: dict[str, Any]) -> dict[str, Any] | None:

@@ -51,9 +51,10 @@ from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
 from ..policies import Policy
 from ..results import COOPERATIVE, GameResult, Rules, points_between
-from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry
+from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry, pair_matrices
 from ..stats.elo import normal_quantile
 from ..stats.intervals import laplace_intervals
+from ..stats.predict import PairModel
 from .match import env_options_of, load_player, mix_seed
 from .roles import RoleBook, cannot_meet_message, policy_roles
 from .snapshots import run_options
@@ -403,12 +404,13 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
 @dataclass(frozen=True)
 class HistoryFit:
     """The history's players fitted from its games: Bradley-Terry under the ladder's prior, anchored at the game's
-    anchor bot where it played, with the standard deviation of every difference (Laplace, Elo)."""
+    anchor bot where it played, and its pairs as the ladder judges them (:class:`~selfplay_cli.stats.predict.
+    PairModel`: the ratings' difference, its uncertainty, the pairs' spread and their own games)."""
 
     index: dict[int, int]  # player id -> position in the arrays
     ratings: np.ndarray
-    diff_sd: np.ndarray
     flags: list[str | None]
+    pairs: PairModel
 
     def rating(self, pid: int) -> float:
         return float(self.ratings[self.index[pid]])
@@ -417,10 +419,11 @@ class HistoryFit:
         """Whether the player's rating is an estimate linked to the anchor."""
         return pid in self.index and self.flags[self.index[pid]] is None
 
-    def separated(self, top: int, other: int, z: float) -> bool:
-        """Whether ``top`` is above ``other`` beyond doubt: their difference's interval lies above 0."""
-        i, j = self.index[top], self.index[other]
-        return float(self.ratings[i] - self.ratings[j] - z * self.diff_sd[i, j]) > 0.0
+    def separated(self, top: int, other: int, confidence: float) -> bool:
+        """Whether ``top`` is above ``other`` beyond doubt: the ``confidence`` interval of their difference lies above
+        0, as the ladder would say it."""
+        below = self.pairs.below([self.index[top], self.index[other]])
+        return bool(below[0, 1] < 0.5 * (1.0 - confidence))
 
 
 def fit_history(history: History, anchor: str = "random") -> HistoryFit | None:
@@ -441,7 +444,9 @@ def fit_history(history: History, anchor: str = "random") -> HistoryFit | None:
     k = anchors[0] if anchors else 0
     fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k, prior_games=DEFAULT_PRIOR)
     _, _, diff_sd = laplace_intervals(a, b, ids.size, fit.ratings, k, 0.95, DEFAULT_PRIOR)
-    return HistoryFit(index, fit.ratings, diff_sd, list(fit.flags))
+    points, games = pair_matrices(a, b, table.score_a, ids.size)
+    pairs = PairModel(fit.ratings, diff_sd, [f is None for f in fit.flags], points, games, DEFAULT_PRIOR, anchor=k)
+    return HistoryFit(index, fit.ratings, list(fit.flags), pairs)
 
 
 def best_snapshot(history: History, anchor: str = "random",

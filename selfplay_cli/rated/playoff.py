@@ -38,7 +38,6 @@ from ..envs import get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..results import COOPERATIVE, Rules
-from ..stats.elo import normal_quantile
 from .gauntlet import GauntletConfig, History, crews_of, fit_history, play_gauntlet, record_between, run_history
 from .roles import RoleBook
 
@@ -76,7 +75,6 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
     # results a round gives: one comparison, one game of each on its own side, or a seat-swapped pair
     per_round = 1 if rules.kind == COOPERATIVE or rules.sides_differ else round_size(rules, 2)
     book = RoleBook(league, final[0].env)
-    z = normal_quantile(0.5 + 0.5 * cfg.confidence)  # the ladder's two-sided intervals of a difference
     played, seed = 0, first_seed
     key = f"playoff/{min(p.id for p in final)}"  # a round's unit of work: f"{key}/{its first seed}"
     for _ in range(cfg.max_rounds):
@@ -97,7 +95,7 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
             for rival in group[1:]:
                 if taken == cfg.rivals:
                     break
-                if fit.separated(top.id, rival.id, z):
+                if fit.separated(top.id, rival.id, cfg.confidence):
                     continue
                 pairs, left = _meeting(book, history, players, top, rival, cfg.max_games)
                 if not pairs or left <= 0:

@@ -40,7 +40,7 @@ import numpy.typing as npt
 from .elo import NAT_TO_ELO
 
 __all__ = ["BOUND_PRIOR_GAMES", "DEFAULT_PRIOR", "FLAG_DISCONNECTED", "FLAG_PERFECT", "FLAG_UNRATED", "FLAG_ZERO",
-           "BTFit", "fit_bradley_terry", "prior_draws", "reachable"]
+           "BTFit", "fit_bradley_terry", "pair_matrices", "prior_draws", "reachable"]
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -330,6 +330,14 @@ def _validate_games(
         if wt.size != ai.size or not np.all(np.isfinite(wt)) or np.any(wt < 0):
             raise ValueError("weights must be finite, non-negative and one per game")
     return ai, bi, sc, wt
+
+
+def pair_matrices(a: npt.ArrayLike, b: npt.ArrayLike, score_a: npt.ArrayLike,
+                  n_players: int) -> tuple[FloatArray, FloatArray]:
+    """``(W, N)``: ``W[i, j]`` the points i scored against j, ``N[i, j] = N[j, i]`` the games between them, from games
+    given as index arrays (``a`` scored ``score_a`` against ``b``)."""
+    ai, bi = np.asarray(a, dtype=np.int64).ravel(), np.asarray(b, dtype=np.int64).ravel()
+    return _pair_matrices(ai, bi, np.asarray(score_a, dtype=np.float64).ravel(), None, n_players)
 
 
 def _pair_matrices(ai: IntArray, bi: IntArray, sc: FloatArray, wt: FloatArray | None,

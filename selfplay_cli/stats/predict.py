@@ -1,49 +1,148 @@
-"""What a ladder predicts of a match not yet played: the score of A against B over ``n`` games, with an interval
-that a longer match can check.
+"""What a ladder may claim of a pair of players: how far apart they are (a margin with its interval), whether one is
+above the other beyond doubt, and what a match not yet played between them will show.
 
-A ladder's ratings are a model, Bradley-Terry: ``P(A beats B) = E(r_A - r_B)``, one number per player. Three things
-stand between a fitted difference and the score a real match will show:
+A ladder's ratings are a model, Bradley-Terry: ``P(A beats B) = E(r_A - r_B)``, one number per player. A claim about
+two players is a claim about their *pair*: the difference ``T`` that sets A's expected score against B. Three things
+stand between the fitted difference and ``T``, and a fourth between ``T`` and the score a real match will show:
 
-1. the uncertainty of the fitted difference (its standard deviation ``sd``, from the same covariance as the ladder's
-   intervals, so the uncertainty two players share through the anchor cancels);
-2. the luck of the match itself: ``n`` games give a score that is binomial around the true expectation;
-3. what one number per player cannot say: self-play is full of rock-paper-scissors, a snapshot that beats the
-   other learner's latest more than their ratings say and loses to an older one more. :func:`pair_spread` measures
-   this spread ``tau`` (Elo) from the ledger itself: how far the pairs that met stand from what the rest of the
-   ledger predicts of them, beyond what (1) and (2) explain (a random effect per pair, fitted by marginal
-   likelihood). A pair's own games then say where this pair stands within that spread: the prediction leans on
-   them as far as their number allows, and on the ratings for the rest.
+1. the uncertainty of the fitted difference (from the covariance of the fit, so the uncertainty two players share
+   through the anchor cancels);
+2. what one number per player cannot say: self-play is full of rock-paper-scissors, a snapshot that beats the other
+   learner's latest more than their ratings say and loses to an older one more; a tennis player rated far above
+   another through their games against the serve bot while the two, head to head, are even. This is the *spread*
+   ``tau`` of pairs around their ratings, measured from the ledger itself (:func:`measure_spread`): how far the pairs
+   that met stand from what the rest of the ledger predicts of them, beyond what (1) and their luck explain. Where
+   few pairs met, ``tau`` is little known: its posterior (a half-normal prior of scale :data:`SPREAD_PRIOR` Elo,
+   then the pairs' marginal likelihood) is kept whole, not replaced by its most likely value, so a ladder with
+   little evidence of its model claims little;
+3. the pair's own games: where the two met, ``T`` is what the rest of the ledger says of it (ratings fitted without
+   those games, :class:`PairModel`) updated by their own record, so a pair that met often is judged by its games and
+   a pair that never met by the ratings and the spread alone;
+4. the luck of the match itself: ``n`` games give a score that is binomial around ``E(T)``.
 
-:func:`predict_pair` integrates all three: the difference ``diff + e + delta`` with the pair's deviation ``e ~
-N(0, spread^2)`` updated by its own games and the fit's uncertainty ``delta ~ N(0, sd^2)``, the score ``K / n`` with
-``K ~ Binomial(n, E(d))``; its interval is the central ``confidence`` interval of that mixture (quadrature on a grid
-over ``e`` and ``delta``, gathered into 256 levels of ``E(d)``, exact binomials over ``K``). Draws are counted as
-half a point and modelled as a coin of the same mean, which overstates the spread of a score with draws: the
-interval errs wide, never narrow.
+:func:`belief` gives the distribution of ``T`` on a grid (:class:`Belief`): its mean and central interval are a
+margin ("A over B by +M [lo, hi]"), its lower tail says whether A is above B beyond doubt, and
+:meth:`Belief.predict` adds (4) for a match of ``n`` games (exact binomials, mixed over ``T``). Draws count as half a
+point and are modelled as a coin of the same mean, which overstates the spread of a score with draws: the intervals
+err wide, never narrow. Games played in seat-swapped pairs on one seed are correlated (a serve that wins either
+way); treating them as independent errs wide too.
 
 numpy and scipy only.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.optimize import minimize_scalar
+from scipy.special import ndtr
 from scipy.stats import binom
 
-from .elo import NAT_TO_ELO
+from .bradley_terry import _fit_matrices, prior_draws, reachable
+from .elo import MAX_ELO, NAT_TO_ELO
 
-__all__ = ["ScorePrediction", "pair_spread", "predict_pair"]
+__all__ = ["FREE_SD", "SPREAD_PRIOR", "Belief", "PairModel", "ScorePrediction", "Spread", "belief", "measure_spread"]
+
+SPREAD_PRIOR: float = 200.0
+"""Scale (Elo) of the half-normal prior on the pairs' spread ``tau``: before any pair has met, a pair is believed to
+stand within a few hundred Elo of what its ratings say (the default pong runs measure 120 to 214)."""
+
+FREE_SD: float = 1000.0
+"""Standard deviation (Elo) of the prior of a pair's difference where the rest of the ledger says nothing of it (the
+pair's own games are all that link the two)."""
+
+_TAUS = np.concatenate([np.arange(0.0, 200.0, 10.0), np.arange(200.0, 500.0, 25.0), np.arange(500.0, 1001.0, 50.0)])
+"""The spread's grid (Elo)."""
+_MIXTURE = 8  # components the spread's posterior is gathered into where it enters a pair's belief
+_NODES = 121  # grid points of a pair's difference, in each of two passes (the whole range, then the posterior's bulk)
+_HERMITE = np.polynomial.hermite_e.hermegauss(12)  # nodes and weights of E[f(x)], x ~ N(0, 1), up to sqrt(2 pi)
+_LEVERAGE = 0.3  # a pair carrying more of its two players' link than this is left out by a refit, not one step
+_REFITS = 64  # refits at most in one population (the most leveraged pairs; the others say nothing)
+
+
+@dataclass(frozen=True)
+class Spread:
+    """The posterior of the pairs' spread ``tau`` (Elo) on a grid: ``taus`` with their ``weights`` (summing to 1),
+    measured from ``pairs`` pairs."""
+
+    taus: np.ndarray
+    weights: np.ndarray
+    pairs: int = 0
+
+    @property
+    def mean(self) -> float:
+        return float(self.taus @ self.weights)
+
+    def __post_init__(self) -> None:
+        keep = self.weights > 1e-9 * self.weights.max()  # nodes that weigh nothing cost a mixture term each
+        w = self.weights[keep]
+        object.__setattr__(self, "taus", np.asarray(self.taus[keep], dtype=np.float64))
+        object.__setattr__(self, "weights", w / w.sum())
+
+    @functools.cached_property
+    def mixture(self) -> tuple[np.ndarray, np.ndarray]:
+        """The posterior gathered into at most :data:`_MIXTURE` components of equal mass (each the root mean square
+        of the spreads it gathers, which keeps ``E[tau^2]``): ``(taus, weights)``, what a pair's belief mixes over."""
+        if self.taus.size <= _MIXTURE:
+            return self.taus, self.weights
+        edges = np.linspace(0.0, 1.0, _MIXTURE + 1)[1:-1]
+        group = np.searchsorted(edges, np.cumsum(self.weights) - 0.5 * self.weights)
+        mass = np.bincount(group, weights=self.weights, minlength=_MIXTURE)
+        power = np.bincount(group, weights=self.weights * self.taus**2, minlength=_MIXTURE)
+        keep = mass > 0
+        return np.sqrt(power[keep] / mass[keep]), mass[keep] / mass[keep].sum()
+
+    @classmethod
+    def known(cls, tau: float) -> Spread:
+        """A spread taken as exactly ``tau`` (a simulation's truth, a test's)."""
+        return cls(np.array([float(tau)]), np.ones(1))
+
+
+def _log_likelihood(points: np.ndarray, games: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """``W log p + (n - W) log(1 - p)`` with ``p = sigmoid(theta)`` (nats), broadcast; a draw is half a point."""
+    return points * theta - games * np.logaddexp(0.0, theta)
+
+
+def measure_spread(points: npt.ArrayLike, games: npt.ArrayLike, diff_elo: npt.ArrayLike,
+                   sd_elo: npt.ArrayLike | float = 0.0, prior_scale: float = SPREAD_PRIOR) -> Spread:
+    """The posterior of the spread ``tau`` (Elo) of pairs around what their ratings predict, from the pairs that met.
+
+    ``points[k]`` / ``games[k]``: the first player's points and the games of pair ``k``; ``diff_elo[k]`` the
+    difference its ratings predict and ``sd_elo[k]`` that prediction's own uncertainty, best read from ratings fitted
+    without the pair's games (:class:`PairModel` leaves each pair out in turn: a fit that includes them has already
+    moved toward them, and the spread it shows is too small). Each pair's true difference is its predicted one plus
+    ``N(0, sd^2 + tau^2)``; the likelihood of ``tau`` is ``prod_k E[Binomial(W_k; n_k, E(d))]`` (quadrature), its
+    prior half-normal of scale ``prior_scale``. A 0-8 between players 1,500 Elo apart says nothing against the
+    ratings, an upset there says much: the likelihood weighs each as it should. Without pairs, the prior."""
+    pts = np.asarray(points, dtype=np.float64).ravel()
+    n = np.asarray(games, dtype=np.float64).ravel()
+    d = np.asarray(diff_elo, dtype=np.float64).ravel() / NAT_TO_ELO
+    sd = np.broadcast_to(np.asarray(sd_elo, dtype=np.float64) / NAT_TO_ELO, d.shape)
+    keep = n > 0
+    pts, n, d, sd = pts[keep], n[keep], d[keep], sd[keep]
+    mids = 0.5 * (_TAUS[1:] + _TAUS[:-1])
+    cell = np.diff(np.concatenate([_TAUS[:1], mids, _TAUS[-1:]]))  # the grid is finer near 0: each node weighs its cell
+    log_w = -0.5 * (_TAUS / prior_scale) ** 2 + np.log(cell)
+    if pts.size:
+        x, wx = _HERMITE
+        lx = np.log(wx / wx.sum())
+        tau = _TAUS / NAT_TO_ELO
+        scale = np.sqrt(sd[:, None] ** 2 + tau[None, :] ** 2)  # (pairs, taus)
+        theta = d[:, None, None] + scale[:, :, None] * x[None, None, :]
+        ll = _log_likelihood(pts[:, None, None], n[:, None, None], theta) + lx
+        log_w = log_w + _logsumexp(ll, axis=2).sum(axis=0)
+    w = np.exp(log_w - log_w.max())
+    return Spread(_TAUS.copy(), w / w.sum(), int(pts.size))
 
 
 @dataclass(frozen=True)
 class ScorePrediction:
     """A's predicted score against B over ``games`` games: its expectation and the central interval the measured
-    score falls in with probability ``confidence``; ``diff`` / ``sd`` the Elo difference the prediction rests on
-    (after the pair's own games) and its standard deviation (model spread included)."""
+    score falls in with probability ``confidence``; ``diff`` / ``sd`` the mean and standard deviation (Elo) of the
+    pair's difference the prediction rests on."""
 
     score: float
     low: float
@@ -57,99 +156,301 @@ class ScorePrediction:
         """Whether a measured score lies in the predicted interval."""
         return self.low - 1e-12 <= measured <= self.high + 1e-12
 
+    @property
+    def width(self) -> float:
+        return self.high - self.low
+
     def to_json(self) -> dict[str, float | int]:
         return {"score": round(self.score, 4), "low": round(self.low, 4), "high": round(self.high, 4),
                 "games": self.games, "confidence": self.confidence, "elo_diff": round(self.diff, 1),
                 "elo_sd": round(self.sd, 1)}
 
 
-def _grid(scale: float, size: int = 241) -> tuple[np.ndarray, np.ndarray]:
-    """Nodes (nats) and weights of ``N(0, scale^2)`` on an even grid over +-6 standard deviations."""
-    if scale <= 0:
-        return np.zeros(1), np.ones(1)
-    x = np.linspace(-6.0, 6.0, size)
-    w = np.exp(-0.5 * x * x)
-    return scale * x, w / w.sum()
+@dataclass(frozen=True)
+class Belief:
+    """What is known of one pair's difference ``T`` (Elo, A's over B's): a distribution on the grid ``nodes``
+    (increasing) with ``weights`` summing to 1. ``met`` / ``met_points``: the results between the two it
+    includes."""
+
+    nodes: np.ndarray
+    weights: np.ndarray
+    met: float = 0.0
+    met_points: float = 0.0
+
+    @property
+    def mean(self) -> float:
+        return float(self.nodes @ self.weights)
+
+    @property
+    def sd(self) -> float:
+        return math.sqrt(max(float(((self.nodes - self.mean) ** 2) @ self.weights), 0.0))
+
+    def quantile(self, q: float) -> float:
+        """The ``q`` quantile of ``T`` (linear between the grid's points)."""
+        cdf = np.cumsum(self.weights) - 0.5 * self.weights  # each node's mass centred on it
+        return float(np.interp(q, cdf, self.nodes))
+
+    def interval(self, confidence: float = 0.95) -> tuple[float, float]:
+        """The central ``confidence`` interval of ``T`` (Elo)."""
+        tail = 0.5 * (1.0 - confidence)
+        return self.quantile(tail), self.quantile(1.0 - tail)
+
+    def below(self, x: float = 0.0) -> float:
+        """``P(T <= x)``."""
+        return float(_cdf_at(self.nodes[None, :], self.weights[None, :], x)[0])
+
+    def flipped(self) -> Belief:
+        """B's difference over A's."""
+        return Belief(-self.nodes[::-1], self.weights[::-1], self.met, self.met - self.met_points)
+
+    def predict(self, games: int, confidence: float = 0.95) -> ScorePrediction:
+        """A's score over ``games`` games: ``K / games`` with ``K ~ Binomial(games, E(T))``, mixed over ``T``; the
+        smallest and largest scores that leave at most ``(1 - confidence) / 2`` outside on either side."""
+        if games < 1:
+            raise ValueError(f"games must be at least 1, not {games}")
+        if not 0.0 < confidence < 1.0:
+            raise ValueError("confidence must be in (0, 1)")
+        keep = self.weights > 1e-12 * self.weights.max()
+        p = 1.0 / (1.0 + np.exp(-self.nodes[keep] / NAT_TO_ELO))
+        post = self.weights[keep] / self.weights[keep].sum()
+        expected = float(post @ p)
+        if p.size > 256:  # the mixture's binomials at 256 levels of p, each weighted by the nodes it gathers
+            edges = np.linspace(p.min(), p.max(), 257)
+            where = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, 255)
+            mass = np.bincount(where, weights=post, minlength=256)
+            level = np.bincount(where, weights=post * p, minlength=256) / np.maximum(mass, 1e-300)
+            p, post = level[mass > 0], mass[mass > 0]
+        k = np.arange(games + 1)
+        pmf = post @ binom.pmf(k[None, :], games, p[:, None])
+        tail = 0.5 * (1.0 - confidence)
+        lo_k = int(np.searchsorted(np.cumsum(pmf), tail - 1e-12))  # the smallest k with P(K <= k) >= tail
+        upper = np.cumsum(pmf[::-1])[::-1]  # P(K >= k)
+        hi_k = int(np.flatnonzero(upper >= tail - 1e-12)[-1])  # the largest k with P(K >= k) >= tail
+        return ScorePrediction(expected, lo_k / games, hi_k / games, games, confidence, self.mean, self.sd)
 
 
-def _log_likelihood(points: np.ndarray, games: np.ndarray, theta: np.ndarray) -> np.ndarray:
-    """``W log p + (n - W) log(1 - p)`` with ``p = sigmoid(theta)`` (nats), broadcast; a draw is half a point."""
-    return -points * np.logaddexp(0.0, -theta) - (games - points) * np.logaddexp(0.0, theta)
+def _logsumexp(x: np.ndarray, axis: int) -> np.ndarray:
+    top = x.max(axis=axis, keepdims=True)
+    return np.log(np.exp(x - top).sum(axis=axis)) + np.squeeze(top, axis=axis)
 
 
-def pair_spread(points: npt.ArrayLike, games: npt.ArrayLike, diff_elo: npt.ArrayLike,
-                sd_elo: npt.ArrayLike | float = 0.0) -> float:
-    """The spread ``tau`` (Elo) of pairs around what their ratings predict, from the pairs that met.
-
-    ``points[k]`` / ``games[k]``: the first player's points and the games of pair ``k``; ``diff_elo[k]`` the
-    difference its ratings predict and ``sd_elo[k]`` that prediction's own uncertainty. Best read from ratings fitted
-    without the pair's games (:meth:`~selfplay_cli.league.forecast.Forecaster.of_games` leaves each pair out in
-    turn): a fit that includes them has already moved toward them, and the spread it shows is too small. Each pair's
-    true difference is its predicted one plus ``N(0, sd^2 + tau^2)``; ``tau`` maximises the marginal likelihood
-    ``prod_k E[Binomial(W_k; n_k, E(d))]`` (quadrature). A 0-8 between players 1,500 Elo apart says nothing against
-    the ratings, an upset there says much: the likelihood weighs each as it should, where moment estimates on logits
-    blow up at perfect scores. 0 without pairs, or when no spread fits better than none."""
-    pts = np.asarray(points, dtype=np.float64)
-    n = np.asarray(games, dtype=np.float64)
-    d = np.asarray(diff_elo, dtype=np.float64) / NAT_TO_ELO
-    sd = np.broadcast_to(np.asarray(sd_elo, dtype=np.float64) / NAT_TO_ELO, d.shape)
-    keep = n > 0
-    pts, n, d, sd = pts[keep], n[keep], d[keep], sd[keep]
-    if not pts.size:
-        return 0.0
-    x, w = _grid(1.0, 61)
-
-    def neg(tau: float) -> float:
-        scale = np.sqrt(sd * sd + tau * tau)
-        ll = _log_likelihood(pts[:, None], n[:, None], d[:, None] + scale[:, None] * x[None, :]) + np.log(w)[None, :]
-        return -float(np.sum(np.logaddexp.reduce(ll, axis=1)))
-
-    best = minimize_scalar(neg, bounds=(0.0, 1500.0 / NAT_TO_ELO), method="bounded", options={"xatol": 1e-3})
-    return 0.0 if neg(0.0) <= best.fun + 1e-9 else float(best.x) * NAT_TO_ELO
+def _posterior(nodes: np.ndarray, diff: np.ndarray, sd: np.ndarray, spread: Spread, met_points: np.ndarray,
+               met_games: np.ndarray) -> np.ndarray:
+    """Weights (pairs, nodes) of the pairs' beliefs on the grids ``nodes``: the prior mixture times the games."""
+    taus, tw = spread.mixture
+    s_mix = np.sqrt(sd[:, None] ** 2 + taus[None, :] ** 2)  # (pairs, components)
+    z = (nodes[:, :, None] - diff[:, None, None]) / s_mix[:, None, :]
+    log_prior = _logsumexp(np.log(tw)[None, None, :] - np.log(s_mix)[:, None, :] - 0.5 * z * z, axis=2)
+    log_post = log_prior + _log_likelihood(met_points[:, None], met_games[:, None], nodes / NAT_TO_ELO)
+    w = np.exp(log_post - log_post.max(axis=1, keepdims=True))
+    return w / w.sum(axis=1, keepdims=True)
 
 
-def predict_pair(diff: float, sd: float, games: int, *, spread: float = 0.0, met_points: float = 0.0,
-                 met_games: float = 0.0, confidence: float = 0.95) -> ScorePrediction:
-    """A's score over ``games`` games against B as a ladder predicts it: the fitted difference ``diff`` with its
-    ``sd`` (Elo), widened by the pairs' ``spread`` (:func:`pair_spread`), then updated with the pair's own record
-    (``met_points`` of ``met_games``): where the two met often, the prediction leans on their games; where they
-    never met, on the ratings and the spread alone."""
-    if not (math.isfinite(diff) and math.isfinite(sd) and sd >= 0 and math.isfinite(spread) and spread >= 0):
-        raise ValueError(f"the difference, its sd and the spread must be finite (sd, spread >= 0), not "
-                         f"{diff} / {sd} / {spread}")
-    if games < 1:
-        raise ValueError(f"games must be at least 1, not {games}")
-    if not 0.0 < confidence < 1.0:
-        raise ValueError("confidence must be in (0, 1)")
-    # The pair's deviation e from its ratings ~ N(0, spread^2), updated with the pair's own games (read at the fitted
-    # difference: the fit's own uncertainty delta already holds what those games say of the ratings, so they update
-    # e alone), then the fit's uncertainty delta ~ N(0, sd^2) on top: theta = diff + e + delta.
-    e, we = _grid(spread / NAT_TO_ELO, 121)
-    loge = np.log(we) + _log_likelihood(float(met_points), float(met_games), diff / NAT_TO_ELO + e)
-    we = np.exp(loge - loge.max())
-    we /= we.sum()
-    delta, wd = _grid(sd / NAT_TO_ELO, 41)
-    x = (e[:, None] + delta[None, :]).ravel()
-    post = (we[:, None] * wd[None, :]).ravel()
-    keep = post > 1e-12 * post.max()  # nodes that weigh nothing cost a binomial each
-    x, post = x[keep], post[keep] / post[keep].sum()
-    theta = diff / NAT_TO_ELO + x
-    p = 1.0 / (1.0 + np.exp(-theta))
-    mean_u = float(np.dot(post, x))
-    sd_u = math.sqrt(max(float(np.dot(post, (x - mean_u) ** 2)), 0.0))
-    expected = float(np.dot(post, p))
-    tail = 0.5 * (1.0 - confidence)
-    shift, spread_sd = diff + mean_u * NAT_TO_ELO, sd_u * NAT_TO_ELO
-    if p.size > 256:  # the mixture's binomials at 256 levels of p, each weighted by the nodes it gathers
-        edges = np.linspace(p.min(), p.max(), 257)
-        where = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, 255)
-        mass = np.bincount(where, weights=post, minlength=256)
-        level = np.bincount(where, weights=post * p, minlength=256) / np.maximum(mass, 1e-300)
-        p, post = level[mass > 0], mass[mass > 0]
-    k = np.arange(games + 1)
-    pmf = post @ binom.pmf(k[None, :], games, p[:, None])
-    cdf = np.cumsum(pmf)
-    lo_k = int(np.searchsorted(cdf, tail - 1e-12))  # the smallest k with P(K <= k) >= tail
-    upper = np.cumsum(pmf[::-1])[::-1]  # P(K >= k)
-    hi_k = int(np.flatnonzero(upper >= tail - 1e-12)[-1])  # the largest k with P(K >= k) >= tail
-    return ScorePrediction(expected, lo_k / games, hi_k / games, games, confidence, shift, spread_sd)
+def _beliefs(diff: np.ndarray, sd: np.ndarray, spread: Spread, met_points: np.ndarray,
+             met_games: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The grids (pairs, nodes) and weights of many pairs' beliefs at once (see :func:`belief`): a first grid over
+    everything the prior and the games allow, then a second over the bulk of the posterior the first found."""
+    s_max = np.sqrt(sd**2 + float(spread.taus.max()) ** 2)
+    lo, hi = diff - 6.0 * s_max, diff + 6.0 * s_max
+    met = met_games > 0
+    if met.any():  # the games' own likelihood, wherever it lies
+        s = (met_points + 0.5) / (met_games + 1.0)
+        mode = NAT_TO_ELO * np.log(s / (1.0 - s))
+        se = NAT_TO_ELO / np.sqrt((met_games + 1.0) * s * (1.0 - s))
+        lo = np.where(met, np.minimum(lo, mode - 6.0 * se), lo)
+        hi = np.where(met, np.maximum(hi, mode + 6.0 * se), hi)
+    lo, hi = np.maximum(lo, diff - 3 * MAX_ELO), np.minimum(hi, diff + 3 * MAX_ELO)
+    u = np.linspace(0.0, 1.0, _NODES)
+    nodes = lo[:, None] + (hi - lo)[:, None] * u[None, :]  # (pairs, nodes)
+    w = _posterior(nodes, diff, sd, spread, met_points, met_games)
+    mean = (nodes * w).sum(axis=1)
+    width = np.sqrt(np.maximum((((nodes - mean[:, None]) ** 2) * w).sum(axis=1), 0.0))
+    step = (hi - lo) / (_NODES - 1)
+    half = 8.0 * np.maximum(width, step)
+    lo2, hi2 = np.maximum(mean - half, lo), np.minimum(mean + half, hi)
+    nodes = lo2[:, None] + (hi2 - lo2)[:, None] * u[None, :]
+    return nodes, _posterior(nodes, diff, sd, spread, met_points, met_games)
+
+
+def belief(diff: float, sd: float, spread: Spread | float = 0.0, met_points: float = 0.0,
+           met_games: float = 0.0) -> Belief:
+    """One pair's difference ``T`` (Elo): before its own games, ``N(diff, sd^2 + tau^2)`` mixed over the spread's
+    posterior (``diff`` / ``sd`` what the rest of the ledger says of the two: their ratings fitted without the
+    pair's games and that fit's uncertainty), then updated by its own record, ``met_points`` of ``met_games``."""
+    if not (math.isfinite(diff) and math.isfinite(sd) and sd >= 0):
+        raise ValueError(f"the difference and its sd must be finite (sd >= 0), not {diff} / {sd}")
+    if met_games < 0 or not 0 <= met_points <= met_games:
+        raise ValueError(f"a pair's record must have 0 <= points <= games, not {met_points} / {met_games}")
+    spread = spread if isinstance(spread, Spread) else Spread.known(float(spread))
+    if sd == 0.0 and float(spread.taus.max()) == 0.0:  # nothing uncertain: one point
+        return Belief(np.array([float(diff)]), np.ones(1), float(met_games), float(met_points))
+    nodes, w = _beliefs(np.array([float(diff)]), np.array([max(float(sd), 1e-6)]), spread,
+                        np.array([float(met_points)]), np.array([float(met_games)]))
+    return Belief(nodes[0], w[0], float(met_games), float(met_points))
+
+
+class PairModel:
+    """A fitted population's pairs (:func:`belief` for any two, by index), from the fit itself: the ratings (Elo)
+    and the standard deviations of their differences (the Laplace covariance of the fit under BayesElo's prior of
+    ``prior`` virtual draws, anchored at ``anchor``), which players' ratings are linked to the anchor, and every
+    pair's points and games.
+
+    For a pair that met, "what the rest of the ledger says" is the fit without its games. Mostly one Newton step from
+    the full one, in closed form: without pair (i, j) the log-posterior's Hessian loses ``c (e_i - e_j)(e_i - e_j)^T``
+    with ``c = (N_ij + V_ij) p q`` (its games and its virtual draws), so the variance of the difference ``v =
+    sd_ij^2`` becomes ``v' = v / (1 - c v)`` (Sherman-Morrison), and its gradient loses the pair's residual ``r = W_ij
+    + V_ij / 2 - (N_ij + V_ij) p``, so the difference moves to ``d - r v'``. No refit: a league of 500 players is
+    measured in a fraction of a second. Where the pair carries much of what links the two (``c v`` above
+    :data:`_LEVERAGE`: one step from the full fit would be a long, unreliable extrapolation, thousands of Elo where
+    every game was won), the fit without the pair is refitted outright (at most :data:`_REFITS` of them, the most
+    leveraged first); a pair whose games alone link the two has no such fit: the rest says nothing of it (a prior of
+    sd :data:`FREE_SD` around its rated difference), and it is left out of the spread's measure, as are pairs left
+    unrefitted."""
+
+    def __init__(self, ratings: npt.ArrayLike, diff_sd: npt.ArrayLike, linked: npt.ArrayLike, points: npt.ArrayLike,
+                 games: npt.ArrayLike, prior: float, spread: Spread | None = None, anchor: int | None = None) -> None:
+        self.ratings = np.asarray(ratings, dtype=np.float64)
+        self.diff_sd = np.asarray(diff_sd, dtype=np.float64)
+        self.linked = np.asarray(linked, dtype=bool)
+        self.points = np.asarray(points, dtype=np.float64)
+        self.games = np.asarray(games, dtype=np.float64)
+        self.prior = float(prior)
+        n = self.ratings.size
+        # the gauge of a refit (differences do not depend on it): the fit's anchor, or any linked player
+        self.anchor = int(anchor) if anchor is not None else int(np.argmax(self.linked)) if n else 0
+        self.out_diff = np.subtract.outer(self.ratings, self.ratings)  # what the rest says of each pair (Elo)
+        self.out_sd = self.diff_sd.copy()
+        iu = np.triu_indices(n, 1)
+        met = (self.games[iu] > 0) & self.linked[iu[0]] & self.linked[iu[1]]
+        i, j = iu[0][met], iu[1][met]
+        keep = np.zeros(i.size, dtype=bool)
+        if i.size:
+            theta = self.ratings / NAT_TO_ELO
+            virtual = prior_draws(self.games, prior)[i, j]
+            n_ij, w_ij = self.games[i, j] + virtual, self.points[i, j] + 0.5 * virtual
+            p = 1.0 / (1.0 + np.exp(-(theta[i] - theta[j])))
+            c = n_ij * p * (1.0 - p)
+            v = (self.diff_sd[i, j] / NAT_TO_ELO) ** 2
+            leverage = c * v
+            keep = leverage <= _LEVERAGE
+            v_out = v / (1.0 - np.minimum(leverage, _LEVERAGE))
+            d_out = ((theta[i] - theta[j]) - (w_ij - n_ij * p) * v_out) * NAT_TO_ELO
+            sd_out = np.sqrt(v_out) * NAT_TO_ELO
+            for k in np.argsort(-leverage)[: _REFITS]:
+                if keep[k]:
+                    break
+                refit = self._refit_without(int(i[k]), int(j[k]))
+                if refit is not None:
+                    (d_out[k], sd_out[k]), keep[k] = refit, True
+            d_out = np.where(keep, d_out, (theta[i] - theta[j]) * NAT_TO_ELO)
+            sd_out = np.where(keep, sd_out, FREE_SD)
+            self.out_diff[i, j], self.out_diff[j, i] = d_out, -d_out
+            self.out_sd[i, j] = self.out_sd[j, i] = sd_out
+        self._held_out = (i[keep], j[keep])  # the pairs the spread is measured from
+        if spread is not None:
+            self.spread = spread
+
+    def _refit_without(self, i: int, j: int) -> tuple[float, float] | None:
+        """The difference of i over j and its sd (Elo) in the population fitted without their games; None when
+        nothing else links the two."""
+        w, n = self.points.copy(), self.games.copy()
+        w[i, j] = w[j, i] = n[i, j] = n[j, i] = 0.0
+        ratings, flags, _, _ = _fit_matrices(w, n, self.anchor, 0.0, self.prior, self.ratings, 1e-3, 100)
+        if flags[i] is not None or flags[j] is not None or not reachable(n > 0, i)[j]:
+            return None
+        theta = ratings / NAT_TO_ELO
+        nn = n + prior_draws(n, self.prior)
+        p = 1.0 / (1.0 + np.exp(-(theta[:, None] - theta[None, :])))
+        c = nn * p * (1.0 - p)
+        idx = np.flatnonzero(reachable(nn > 0, self.anchor) & (np.arange(n.shape[0]) != self.anchor))
+        lap = -c[np.ix_(idx, idx)]
+        lap[np.diag_indices_from(lap)] += c[idx].sum(axis=1)
+        e = np.zeros(idx.size)
+        for player, sign in ((i, 1.0), (j, -1.0)):
+            if player != self.anchor:
+                e[int(np.searchsorted(idx, player))] = sign
+        try:
+            var = float(e @ np.linalg.solve(lap, e))
+        except np.linalg.LinAlgError:
+            return None
+        return float(theta[i] - theta[j]) * NAT_TO_ELO, math.sqrt(max(var, 0.0)) * NAT_TO_ELO
+
+    @functools.cached_property
+    def spread(self) -> Spread:
+        """The pairs' spread around their ratings (:func:`measure_spread` of the pairs that met, each against the
+        fit without its games); measured when first asked for."""
+        i, j = self._held_out
+        return measure_spread(self.points[i, j], self.games[i, j], self.out_diff[i, j], self.out_sd[i, j])
+
+    def belief(self, i: int, j: int) -> Belief:
+        """Player i's difference over player j (both linked to the anchor)."""
+        return self.beliefs([i], [j])[0]
+
+    def beliefs(self, i: npt.ArrayLike, j: npt.ArrayLike) -> list[Belief]:
+        """:meth:`belief` of many pairs ``(i[k], j[k])`` at once."""
+        i, j = np.asarray(i, dtype=np.int64).ravel(), np.asarray(j, dtype=np.int64).ravel()
+        if not i.size:
+            return []
+        met_points, met_games = self.points[i, j], self.games[i, j]
+        nodes, w = _beliefs(self.out_diff[i, j], np.maximum(self.out_sd[i, j], 1e-6), self.spread, met_points,
+                            met_games)
+        return [Belief(nodes[k], w[k], float(met_games[k]), float(met_points[k])) for k in range(i.size)]
+
+    def below(self, order: npt.ArrayLike) -> np.ndarray:
+        """``P(T_ab <= 0)`` for every two players of ``order`` (indices; linked players), as an ``(m, m)`` matrix:
+        the chance that ``order[a]`` is not above ``order[b]``. Pairs that never met in closed form (a mixture of
+        normals), pairs that met on their grids."""
+        idx = np.asarray(order, dtype=np.int64)
+        m = idx.size
+        if not m:
+            return np.zeros((0, 0))
+        d = self.out_diff[np.ix_(idx, idx)]
+        s = self.out_sd[np.ix_(idx, idx)]
+        taus, tw = self.spread.mixture
+        scale = np.sqrt(s[:, :, None] ** 2 + taus[None, None, :] ** 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            p = ndtr(np.where(scale > 0, -d[:, :, None] / np.where(scale > 0, scale, 1.0),
+                              np.where(d[:, :, None] > 0, -np.inf, np.inf))) @ tw
+        g = self.games[np.ix_(idx, idx)]
+        a, b = np.nonzero(np.triu(g > 0, 1))
+        if a.size:
+            pts = self.points[idx[a], idx[b]]
+            clear, rough = _clear_cut(d[a, b], s[a, b], self.spread, pts, g[a, b])
+            p[a[clear], b[clear]] = rough[clear]
+            p[b[clear], a[clear]] = 1.0 - rough[clear]
+            a, b, pts = a[~clear], b[~clear], pts[~clear]
+            for start in range(0, a.size, 512):  # a few hundred pairs' grids at a time
+                sa, sb = a[start:start + 512], b[start:start + 512]
+                nodes, w = _beliefs(d[sa, sb], np.maximum(s[sa, sb], 1e-6), self.spread, pts[start:start + 512],
+                                    g[sa, sb])
+                p[sa, sb] = _cdf_at(nodes, w, 0.0)
+                p[sb, sa] = 1.0 - p[sa, sb]
+        np.fill_diagonal(p, 1.0)
+        return p
+
+
+def _cdf_at(nodes: np.ndarray, w: np.ndarray, x: float) -> np.ndarray:
+    """``P(T <= x)`` of beliefs on grids (pairs, nodes), each node's mass centred on it, linear between nodes."""
+    cdf = np.cumsum(w, axis=1) - 0.5 * w
+    k = np.clip((nodes <= x).sum(axis=1), 1, nodes.shape[1] - 1)  # x lies between nodes k-1 and k
+    rows = np.arange(nodes.shape[0])
+    x0, x1, c0, c1 = nodes[rows, k - 1], nodes[rows, k], cdf[rows, k - 1], cdf[rows, k]
+    t = np.clip((x - x0) / np.where(x1 > x0, x1 - x0, 1.0), 0.0, 1.0)
+    return np.where(x < nodes[:, 0], 0.0, np.where(x >= nodes[:, -1], 1.0, c0 + t * (c1 - c0)))
+
+
+def _clear_cut(diff: np.ndarray, sd: np.ndarray, spread: Spread, met_points: np.ndarray,
+               met_games: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which pairs' ``P(T <= 0)`` is far from any threshold a ladder uses (below 1e-4 or above 0.3 under every
+    component of the spread's mixture, each a normal prior times the normal approximation of the games), and that
+    rough figure: the pairs a grid need not settle."""
+    taus, tw = spread.mixture
+    s = (met_points + 0.5) / (met_games + 1.0)
+    mode = NAT_TO_ELO * np.log(s / (1.0 - s))
+    lik_var = NAT_TO_ELO**2 / ((met_games + 1.0) * s * (1.0 - s))
+    prior_var = sd[:, None] ** 2 + taus[None, :] ** 2
+    var = 1.0 / (1.0 / prior_var + 1.0 / lik_var[:, None])
+    mean = var * (diff[:, None] / prior_var + mode[:, None] / lik_var[:, None])
+    p = ndtr(-mean / np.sqrt(var))
+    clear = (p.max(axis=1) < 1e-4) | (p.min(axis=1) > 0.3)
+    return clear, p @ tw
