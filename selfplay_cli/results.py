@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["COOPERATIVE", "FREE_FOR_ALL", "KINDS", "TWO_SIDES", "GameResult", "Rules", "compare", "format_score",
-           "game_results", "pairwise", "points_between"]
+           "game_results", "pairwise", "points_between", "truncated_rule"]
 
 TWO_SIDES = "two-sides"
 COOPERATIVE = "cooperative"
@@ -251,6 +251,20 @@ def pairwise(rules: Rules, players: Sequence[Any], scores: Sequence[float],
             pts = rules._cmp(s[seats[a]][:, None], s[seats[b]][None, :])
             out.append((a, b, float(pts.mean())))
     return out
+
+
+def truncated_rule(kind: str, tie_tolerance: float = 0.0) -> str:
+    """What a truncated game counts as, in words, by the game's kind. A game cut short is scored like any other
+    (:func:`game_results`, :meth:`Rules.outcome`, :func:`compare`), from the scores it had at the cut: two-sides,
+    the side ahead wins; free-for-all, the scores' order; cooperative, the team return summed up to the cut is
+    compared. Scores within ``tie_tolerance`` are level: a draw."""
+    level = "level is a draw" if not tie_tolerance else f"within {format_score(tie_tolerance)} is a draw"
+    if kind == COOPERATIVE:
+        return (f"a truncated episode's team return is what it scored up to the cut, compared like any other: the "
+                f"higher wins, {level}")
+    if kind == FREE_FOR_ALL:
+        return f"each truncated game is ordered by the scores at the cut: the higher beats the lower, {level}"
+    return f"each truncated game is decided by the score at the cut: the side ahead wins it, {level}"
 
 
 def compare(return_a: float, return_b: float, tie_tolerance: float = 0.0) -> float:

@@ -63,6 +63,7 @@ def test_a_match_cut_into_jobs_plays_the_seeds_of_the_whole_match(league):
     assert merged is not None and merged.games == 40 and len(merged.round_points) == 20
     assert merged.wins + merged.draws + merged.losses == 40
     assert sum(merged.pentanomial) == 20
+    assert merged.step_limit == 18_000  # pong's own limit, which `marl match --queue` states beside its truncated games
     # The same games as one local match on the same seeds (scripted players: the seeds decide everything).
     from selfplay_cli.policies import ScriptedPolicy
     from selfplay_cli.rated.match import run_match

@@ -106,8 +106,8 @@ def test_match_stats_trinomial_interval_by_hand() -> None:
     assert st.elo_high == pytest.approx(400 * math.log10(hi_s / (1 - hi_s)), abs=1e-9)
     assert st.elo_low == pytest.approx(86.23, abs=0.01) and st.elo_high == pytest.approx(218.25, abs=0.01)
     assert not st.bounded and not st.used_pentanomial
-    # LOS with W=60, L=20: 0.5 (1 + erf(40 / sqrt(160)))
-    assert st.los == pytest.approx(0.5 * (1 + math.erf(40 / math.sqrt(160))))
+    # LOS = Phi((0.7 - 0.5) / 0.04) = Phi(5) = 0.99999971
+    assert st.los == pytest.approx(0.99999971, abs=1e-8)
 
 
 def test_match_stats_pentanomial_interval_by_hand() -> None:
@@ -128,11 +128,66 @@ def test_match_stats_pentanomial_interval_by_hand() -> None:
 
 
 def test_los_value() -> None:
+    # LOS = Phi((s - 1/2) / se), the se of the interval. W=10, D=7, L=5 (trinomial): s = 13.5 / 22 = 0.613636,
+    # var_g = [10 (0.386364)^2 + 7 (0.113636)^2 + 5 (0.613636)^2] / 22 = 3.465909 / 22 = 0.157541,
+    # se = sqrt(0.157541 / 22) = 0.084623, t = 0.113636 / 0.084623 = 1.342862 -> Phi(t) = 0.91034
+    # (the interval, [-36.4, +219.4], holds 0 and the LOS is below 97.5 %)
     st = match_stats(10, 7, 5)
-    assert st.los == pytest.approx(0.5 * (1 + math.erf(5 / math.sqrt(30))))
-    assert st.los == pytest.approx(0.9016, abs=1e-4)
+    assert st.los == pytest.approx(NormalDist().cdf(1.342862), abs=1e-6)
+    assert st.los == pytest.approx(0.91034, abs=1e-5)
+    assert st.elo_low == pytest.approx(-36.42, abs=0.01) and st.elo_high == pytest.approx(219.36, abs=0.01)
     assert match_stats(3, 4, 3).los == 0.5
     assert match_stats(0, 5, 0).los == 0.5
+
+
+def test_los_trinomial_agrees_with_its_interval() -> None:
+    # W=5, D=0, L=1: s = 5/6, var_g = [5 (1/6)^2 + (5/6)^2] / 6 = 5/36, se = sqrt(5/216) = 0.152145,
+    # t = (1/3) / 0.152145 = 2.190890 -> LOS = Phi(t) = 0.985770; the interval's low end s - 1.96 se = 0.535134
+    # -> 400 log10(0.535134 / 0.464866) = +24.45 Elo: it excludes 0, and the LOS is beyond 97.5 %.
+    # (The W/L-only formula said Phi(4 / sqrt 6) = 94.9 %, beside an interval excluding 0.)
+    st = match_stats(5, 0, 1)
+    assert not st.used_pentanomial
+    assert st.elo_low == pytest.approx(24.45, abs=0.01)
+    assert st.los == pytest.approx(0.985770, abs=1e-6)
+
+
+def test_los_pentanomial_by_hand() -> None:
+    """A tennis-like match: 96 pairs won and lost (the server wins) and 4 pairs won twice, W=104 D=0 L=96."""
+    # s = 104 / 200 = 0.52; pair means: 96 x 0.5 and 4 x 1.0, mu = 0.52,
+    # var_p = 0.96 (0.02)^2 + 0.04 (0.48)^2 = 0.000384 + 0.009216 = 0.0096, se = sqrt(0.0096 / 100) = 0.0097980
+    # interval 0.52 -+ 1.959964 * 0.0097980 = [0.5007964, 0.5392036] -> Elo [+0.553, +27.298], Elo +13.905
+    # LOS = Phi(0.02 / 0.0097980) = Phi(2.041241) = 0.979387 (W/L alone said Phi(8 / sqrt 200) = 0.7142)
+    st = match_stats(104, 0, 96, pentanomial=(0, 0, 96, 0, 4))
+    assert st.used_pentanomial and st.score == pytest.approx(0.52)
+    assert st.elo == pytest.approx(13.905, abs=1e-3)
+    assert st.elo_low == pytest.approx(0.553, abs=1e-3) and st.elo_high == pytest.approx(27.298, abs=1e-3)
+    assert st.los == pytest.approx(0.979387, abs=1e-6)
+
+
+@pytest.mark.parametrize("confidence", [0.8, 0.9, 0.95, 0.99])
+def test_the_interval_excludes_0_exactly_when_the_los_is_beyond_its_confidence(confidence) -> None:
+    """Over many random records, paired (pentanomial) or not, small or large, lopsided or level, 0 % / 100 %: the
+    interval excludes 0 iff the LOS is above (1 + c) / 2 or below (1 - c) / 2 - one claim, not two."""
+    rng = np.random.default_rng(48)
+    # a pair's games for A: LL, LD, WL, DD, WD, WW -> (wins, draws, losses) and the pentanomial bin
+    kinds = np.array([[0, 0, 2], [0, 1, 1], [1, 0, 1], [0, 2, 0], [1, 1, 0], [2, 0, 0]])
+    bins = np.array([0, 1, 2, 2, 3, 4])
+    records = [((104, 0, 96), (0, 0, 96, 0, 4)), ((5, 0, 1), None)]  # the two cases above
+    for _ in range(3000):
+        n = int(rng.choice([1, 2, 3, 5, 10, 30, 100, 400]))
+        p = rng.dirichlet(np.full(6, rng.choice([0.2, 1.0, 5.0])))
+        counts = rng.multinomial(n, p)
+        wdl = tuple(int(x) for x in counts @ kinds)
+        penta = tuple(int(x) for x in np.bincount(bins, weights=counts, minlength=5).astype(int))
+        records.append((wdl, penta if rng.random() < 0.5 else None))
+    disagreements = []
+    for (w, d, lo), penta in records:
+        st = match_stats(w, d, lo, pentanomial=penta, confidence=confidence)
+        excludes = st.elo_low > 0 or st.elo_high < 0
+        beyond = st.los > (1 + confidence) / 2 or st.los < (1 - confidence) / 2
+        if excludes != beyond:
+            disagreements.append(((w, d, lo), penta, round(st.elo_low, 2), round(st.elo_high, 2), round(st.los, 4)))
+    assert not disagreements, f"{len(disagreements)} of {len(records)}, e.g. {disagreements[:3]}"
 
 
 def test_match_stats_extreme_scores_are_finite_and_flagged() -> None:

@@ -58,11 +58,24 @@ def played(r: MatchReport) -> str:
         "scores)"
 
 
+def truncated(r: MatchReport, of: str = "") -> str:
+    """How many of the games were cut short: ``all 200 truncated (cut unfinished; step limit 300)``, ``150 of 200
+    truncated (...)``, with ``of="games"`` ``3 of 200 games truncated (...)`` (the limit where the game declares
+    one)."""
+    limit = f"; step limit {r.step_limit:,}" if r.step_limit else ""
+    share = f"all {r.games}" if r.truncated >= r.games else f"{r.truncated} of {r.games}"
+    return f"{share}{' ' + of if of else ''} truncated (cut unfinished{limit})"
+
+
 def render_report(r: MatchReport) -> None:
-    from ..results import COOPERATIVE
+    from ..results import COOPERATIVE, truncated_rule
 
     s = r.stats
-    console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {played(r)}, {r.games_per_second:,.1f} games/s")
+    mostly_cut = 2 * r.truncated > r.games  # the results are mostly scores at a cut: the headline says so first
+    cut = f", {truncated(r)}" if mostly_cut else ""
+    console.print(f"[bold]{r.env}[/]: {r.a} vs {r.b}, {played(r)}{cut}, {r.games_per_second:,.1f} games/s")
+    if mostly_cut:
+        console.print(f"  {truncated_rule(r.kind, r.tie_tolerance)}", markup=False, highlight=False)
     if r.kind == COOPERATIVE:  # a result is one comparison of team returns on one seed; returns read best as means
         half = max(r.games // 2, 1)  # A flies half the episodes
         shown = f"mean team return {r.points_for / half:.2f} against {r.points_against / half:.2f}"
@@ -78,10 +91,10 @@ def render_report(r: MatchReport) -> None:
     console.print(f"  Elo difference {s.elo:+.1f}  [{100 * s.confidence:g}% CI {s.elo_low:+.1f}, {s.elo_high:+.1f}]"
                   f"{bound}   LOS {100 * s.los:.1f}%")
     if sum(r.pentanomial):  # game pairs: two-sides games only
-        console.print(f"  pairs (LL LD WL+DD WD WW): {' '.join(map(str, r.pentanomial))}"
-                      + (f"   truncated games: {r.truncated}" if r.truncated else ""))
-    elif r.truncated:
-        console.print(f"  truncated games: {r.truncated} (cut by the game's time limit, decided by the score)")
+        console.print(f"  pairs (LL LD WL+DD WD WW): {' '.join(map(str, r.pentanomial))}")
+    if r.truncated and not mostly_cut:  # a few: said below, with what they count as
+        console.print(f"  {truncated(r, 'games')}; {truncated_rule(r.kind, r.tie_tolerance)}", markup=False,
+                      highlight=False)
     if r.sprt:
         t = r.sprt
         verdict = {"H1": "H1 accepted", "H0": "H0 accepted"}.get(t["decision"], "undecided (--max-games reached)")

@@ -86,7 +86,8 @@ def summary(report: MatchReport) -> dict[str, Any]:
             "pentanomial": list(report.pentanomial), "points_for": report.points_for,
             "points_against": report.points_against, "truncated": report.truncated, "paired": report.paired,
             "kind": report.kind, "a": report.a, "b": report.b, "variant": report.variant,
-            "round_points": report.round_points, "seconds": round(report.seconds, 3)}
+            "round_points": report.round_points, "seconds": round(report.seconds, 3),
+            "step_limit": report.step_limit, "tie_tolerance": report.tie_tolerance}
 
 
 def combine(jobs: Sequence[JobRow], *, confidence: float = 0.95) -> MatchReport | None:
@@ -109,7 +110,18 @@ def combine(jobs: Sequence[JobRow], *, confidence: float = 0.95) -> MatchReport 
                        pentanomial=penta, stats=stats, seconds=sum(float(p.result["seconds"]) for p in parts),  # type: ignore[index]
                        match_id=None, first_seed=int(parts[0].spec.get("match_seed", parts[0].spec["first_seed"])),
                        truncated=total["truncated"], kind=r0["kind"], variant=r0.get("variant", ""), paired=paired,
-                       round_points=rounds)
+                       round_points=rounds, step_limit=_whole(r0.get("step_limit")),
+                       tie_tolerance=_tolerance(r0.get("tie_tolerance")))
+
+
+def _whole(x: Any) -> int | None:
+    """A job row's step limit: a whole number >= 1, else None (an older row has none)."""
+    return x if isinstance(x, int) and not isinstance(x, bool) and x >= 1 else None
+
+
+def _tolerance(x: Any) -> float:
+    """A job row's tie tolerance: a finite number >= 0, else 0 (an older row has none)."""
+    return float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) and 0 <= x < float("inf") else 0.0
 
 
 def _number(x: float) -> int | float:

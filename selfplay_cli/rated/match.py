@@ -200,6 +200,8 @@ class MatchReport:
     predicted: Any = None  # what the ladder predicted of these games before they were played (a ScorePrediction)
     round_points: list[list[float]] = field(default_factory=list, repr=False)  # A's points in each round, in order
     seating: tuple[str, ...] | None = None  # a team flown at another size: its member on each seat
+    step_limit: int | None = None  # the most steps a game lasts, as the game declares it for these options
+    tie_tolerance: float = 0.0  # scores closer than this are level (a draw), as the game declares it
 
     @property
     def held(self) -> bool | None:
@@ -240,7 +242,7 @@ class MatchReport:
             "score": round(s.score, 4), "points_for": self.points_for, "points_against": self.points_against,
             "elo": round(s.elo, 1), "elo_low": round(s.elo_low, 1), "elo_high": round(s.elo_high, 1),
             "confidence": s.confidence, "bounded": s.bounded, "los": round(s.los, 4),
-            "pentanomial": list(self.pentanomial), "truncated_games": self.truncated,
+            "pentanomial": list(self.pentanomial), "truncated_games": self.truncated, "step_limit": self.step_limit,
             "seconds": round(self.seconds, 3), "games_per_second": round(self.games_per_second, 1),
             "match_id": self.match_id, "first_seed": self.first_seed, "sprt": self.sprt,
             "game_ids": self.game_ids, "interrupted": self.interrupted, "kind": self.kind,
@@ -515,6 +517,7 @@ class _Match:
                       self.round_points, time.perf_counter() - self.start, self.match_id, self.first_seed,
                       self.confidence, self.game_ids)
         out.variant = variant_key(self.spec.name, self.options)
+        out.step_limit = self.spec.max_steps(self.spec.config(**self.options))
         if self.team_seats is not None and len(self.team_seats) != len(self.roster) - 1:  # a team resized
             out.seating = tuple(self.roster[i].id for i in self.team_seats)
         return out
@@ -543,6 +546,7 @@ def _report(env: str, rules: Rules, paired: bool, a_name: str, a_key: Any, b: Po
                                              confidence=confidence),
         seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
         results=kept, game_ids=game_ids, kind=rules.kind, paired=paired, round_points=round_points,
+        tie_tolerance=rules.tie_tolerance,
     )
 
 
