@@ -10,7 +10,7 @@ from scipy.stats import binom
 
 from selfplay_cli.league.forecast import Forecaster
 from selfplay_cli.league.store import LeagueError
-from selfplay_cli.stats.predict import Spread, belief, measure_spread
+from selfplay_cli.stats.predict import belief, measure_spread
 
 
 def _expected(d):

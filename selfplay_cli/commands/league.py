@@ -119,7 +119,8 @@ def ladder_cmd(
                                                                   if variant else "")
     verdicts = [line for line in verdict_lines(rows) if run is None or f"best of {run}:" in line]
     render_ladder(shown, title, json_out=json_out, csv_out=csv_out, online=online, confidence=confidence,
-                  caption=prior_caption(prior, confidence), variant=variant_options(variant), verdicts=verdicts, flown=flown)
+                  caption=prior_caption(prior, confidence), variant=variant_options(variant), verdicts=verdicts,
+                  flown=flown)
     if run is not None and not json_out and not csv_out and not any(r.run == run for r in rows):
         console.print(f"run {run} has no snapshot with rated games yet")
     if note and not json_out and not csv_out:
