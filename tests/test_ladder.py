@@ -13,7 +13,16 @@ import pytest
 
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.forecast import Forecaster
-from selfplay_cli.league.ladder import Fitted, LadderRow, _ranks_and_tiers, fit_table, ladder, select_rows
+from selfplay_cli.league.ladder import (
+    Fitted,
+    LadderRow,
+    _fit_rows,
+    _mark_best,
+    _ranks_and_tiers,
+    fit_table,
+    ladder,
+    select_rows,
+)
 from selfplay_cli.league.pairs import PairPlan, head_to_head, plan_tournament
 from selfplay_cli.league.results_csv import fit_csv, read_results_csv
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
@@ -745,3 +754,44 @@ def test_the_same_weights_under_two_names_are_one_player(league: League) -> None
     # the run of the copy has its best, the first name's rating, over its next
     assert two.best and two.best_margin.over == "r2/s5M"
     assert "copy_of" in two.to_json() and two.to_json()["copy_of"] == "r1/s6M"
+
+
+def test_the_best_of_a_run_is_not_compared_with_its_own_weights_nor_its_teammates(league: League) -> None:
+    """A run whose final snapshot holds the weights of an earlier one (training left them unchanged): the best's
+    margin is over the run's next *other* player, not "+0 ... (they never met)" over its own copy. A cooperative
+    game's team of per-seat snapshots flies as one: the best member's margin is over another moment's team, not
+    over its own teammate."""
+    league.ensure_bots(ENV, ["random", "cpu"])
+    league.create_run("k", ENV, {})
+    rnd, cpu = (league.find_players(n, ENV)[0].id for n in ("random", "cpu"))
+    early = league.add_snapshot(env=ENV, run="k", name="s50k", path="k/s50k", sha256="1" * 64, step=50_000,
+                                meta={"weights_sha256": "f" * 64})
+    same = league.add_snapshot(env=ENV, run="k", name="s100k", path="k/s100k", sha256="2" * 64, step=100_000,
+                               meta={"weights_sha256": "f" * 64})
+    first = league.add_snapshot(env=ENV, run="k", name="s0", path="k/s0", sha256="3" * 64, step=0,
+                                meta={"weights_sha256": "e" * 64})
+    _record(league, _results(cpu, rnd, 7, 0, 3) + _results(early.id, cpu, 8, 0, 2)
+            + _results(same.id, first.id, 9, 0, 1) + _results(first.id, rnd, 5, 0, 5))
+    by = _by_name(ladder(league, bootstrap=0))
+    best = next(r for r in by.values() if r.best and r.run == "k")
+    assert best.policy == "k/s50k" and by["k/s100k"].copy_of == "k/s50k"
+    assert best.best_margin.over == "k/s0" and best.best_margin.record == (9, 0, 1) and "k/s100k" not in best.tied
+
+
+def test_a_cooperative_teams_best_member_is_not_compared_with_its_teammate() -> None:
+    """Each moment of a NoPS lander run is a team of two per-seat snapshots whose comparisons count for both: the
+    best member's margin is over the other moment's team, never over its own teammate."""
+    names = ["heuristic", "l/s1-lander_0", "l/s1-lander_1", "l/s2-lander_0", "l/s2-lander_1"]
+    a, b, s = [], [], []
+    for x, y, wins, losses in ((3, 0, 8, 2), (4, 0, 8, 2), (1, 0, 3, 7), (2, 0, 3, 7), (3, 1, 9, 1), (4, 2, 9, 1)):
+        a += [x] * (wins + losses)
+        b += [y] * (wins + losses)
+        s += [1.0] * wins + [0.0] * losses
+    rows, fitted = _fit_rows(names, a, b, s, "heuristic", 1000.0, 0, 0.95, 0, None, None, None, prior=DEFAULT_PRIOR,
+                             hidden=())
+    rows = [replace(r, kind="snapshot", run="l", step=int(r.policy[3])) if r.policy.startswith("l/") else r
+            for r in rows]
+    best = next(r for r in _mark_best(rows, set(), fitted, teams=True) if r.best)
+    assert best.step == 2 and best.best_margin.over.startswith("l/s1-") and "l/s2-lander_1" not in best.tied
+    alone = next(r for r in _mark_best(rows, set(), fitted, teams=False) if r.best)  # (a two-sides game's seats)
+    assert alone.best_margin.over.startswith("l/s2-")

@@ -16,6 +16,7 @@ import pytest
 from cli_helpers import run
 from league_helpers import record_plan
 
+from selfplay_cli.league.forecast import Forecaster
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
@@ -211,7 +212,9 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
                              "variant"]
     assert all(r["league_role"] is None and r["exploitability"] is None for r in rows)  # none measured, no role
     assert all(r["variant"] == {} for r in rows)  # the default variant: the game as declared
-    assert [r["rank"] for r in rows] == list(range(1, len(rows) + 1))  # the place by Elo, no gaps
+    # rank: 1 + the players above beyond doubt, so never decreasing down the order, and the first is 1
+    assert [r["rank"] for r in rows] == sorted(r["rank"] for r in rows) and rows[0]["rank"] == 1
+    assert all(r["rank"] <= place + 1 for place, r in enumerate(rows))
     assert [r["elo"] for r in rows] == sorted((r["elo"] for r in rows), reverse=True)
     by = {r["policy"]: r for r in rows}
     assert set(by) == {"random", "cpu", "r1/ep1", "r1/ep2", "r2/ep1"}
@@ -257,7 +260,10 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
     assert "r1/ep2 (best" in out and "r2/ep1 (best)" in out and "r1/ep1 (best" not in out
     best = next(r for r in rows if r["policy"] == "r1/ep2")
     m = best["best_margin"]
-    assert m["over"] == "r1/ep1" and m["elo"] == round(best["elo"] - by["r1/ep1"]["elo"], 1)
+    with League.open(home) as league:  # the pair's own figure, as marl league predict reads it
+        pair = Forecaster.of_league(league, "pong").belief("r1/ep2", "r1/ep1")
+    assert m["over"] == "r1/ep1" and m["elo"] == round(pair.mean, 1)
+    assert (m["low"], m["high"]) == tuple(round(x, 1) for x in pair.interval())
     said = "" if m["separated"] else " by Elo, not separated from r1/ep1"
     assert f"best of r1: r1/ep2{said}" in " ".join(out.split())  # who is best, and by how much, under the table
     assert "best of r2: r2/ep1 (the run's only rated snapshot)" in " ".join(out.split())

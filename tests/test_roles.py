@@ -248,7 +248,7 @@ def test_the_ladder_of_a_game_whose_sides_differ_has_one_table_per_side(chased, 
     assert sides == {"hunter", "runner"}
     for side in sides:
         mine = [r for r in rows if r["side"] == side]
-        assert [r["rank"] for r in mine] == list(range(1, len(mine) + 1))  # ranked within the side
+        assert mine[0]["rank"] == 1 and [r["rank"] for r in mine] == sorted(r["rank"] for r in mine)  # within the side
         anchor = [r for r in mine if r["anchor"]]
         assert [(a["policy"], a["elo"]) for a in anchor] == [("random", 1000.0)]  # its own anchor: random there
         snaps = [r["policy"] for r in mine if r["kind"] == "snapshot"]

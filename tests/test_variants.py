@@ -245,3 +245,37 @@ def test_a_league_written_before_variants_reads_per_variant(tmp_path, capsys):
     assert rep["variant"] == {"points_to_win": 3}
     with League.open(home) as league:
         assert league.variants("pong") == {"": 6, TO_3: 8}
+
+
+def test_the_ladder_without_options_shows_the_games_the_newest_run_played(home, capsys):
+    """`marl train tennis` plays serve_mode=mixed, not the game's default: the ladder a user gets without options is
+    the variant the game's newest run played (a run of the default game after it brings the default back); with no
+    run, the only variant with games, whichever it is; --env-option still picks any."""
+    seed_two_variants(home)
+    assert games_of(ladder_json(capsys, "--env", "pong"))["r/a"] == 12  # run r: the default game
+    with League.open(home) as lg:
+        lg.create_run("t", "pong", {"env_options": {"points_to_win": 3}})
+    rows = ladder_json(capsys, "--env", "pong")
+    assert rows[0]["variant"] == {"points_to_win": 3} and games_of(rows)["r/a"] == 12
+    assert {r["policy"] for r in rows if r["best"]} == {"r/b"}  # b wins the variant's games
+    assert ladder_json(capsys, "--env", "pong", "--env-option", "points_to_win=21")[0]["variant"] == {}
+    with League.open(home) as lg:
+        lg.create_run("u", "pong", {"env_options": {}})
+    assert ladder_json(capsys, "--env", "pong")[0]["variant"] == {}
+    # no run at all, one variant with games: that one
+    other = home.parent / "other"
+    with League.open(other) as lg:
+        lg.ensure_bots("pong", ["random", "cpu"])
+        bots = {p.name: p.id for p in lg.players("pong", kind="bot")}
+        match = lg.create_match("pong", "match", {"env_options": {"points_to_win": 3}})
+        lg.record_games(match, [GameResult(env="pong", players=(bots["cpu"], bots["random"]), seed=k,
+                                           scores=(3.0, 1.0), outcome=(1.0, 0.0), length=100, truncated=False)
+                                for k in range(4)])
+    rows = ladder_json(capsys, "--env", "pong", "--home", str(other))
+    assert rows[0]["variant"] == {"points_to_win": 3} and games_of(rows) == {"cpu": 4, "random": 4}
+
+
+def test_an_empty_league_names_commands_that_exist(home, capsys):
+    code, out, err = run(capsys, "league", "ladder")
+    assert code == 2 and err.count("\n") == 1 and "marl tournament" not in err
+    assert "marl train" in err and "marl league tournament" in err

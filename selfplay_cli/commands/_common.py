@@ -132,7 +132,9 @@ def shown_variant(league: League, env: str | None, env_option: list[str] | None,
                   run: str | None = None) -> tuple[str, str]:
     """The game and the variant (its key) a command that reads ratings shows: the one ``--env-option`` asks for (over
     the game's defaults); without, the run's own (``--run``: the options its snapshots were made for); else the
-    default. The game is ``env``, the run's, or the league's only one."""
+    variant the game's newest run with rated games played (``marl train tennis`` plays ``serve_mode=mixed``: its
+    ladder is what a user asks for first), else the default one where it has games, else the one with the most. The
+    game is ``env``, the run's, or the league's only one."""
     from ..league.ladder import pick_env
     from ..league.variants import variant_key
     from ..rated.snapshots import run_options
@@ -145,7 +147,14 @@ def shown_variant(league: League, env: str | None, env_option: list[str] | None,
         return env, variant_key(env, parse_env_options(env, env_option))
     if run is not None and league.get_run(run) is not None:
         return env, variant_key(env, run_options(league, run))
-    return env, ""
+    played = league.variants(env)
+    if len(played) <= 1:
+        return env, next(iter(played), "")
+    for r in reversed(league.list_runs(env)):
+        key = variant_key(env, run_options(league, r.name))
+        if played.get(key):
+            return env, key
+    return env, "" if played.get("") else max(played, key=lambda k: (played[k], k))
 
 
 def resolve_players(league: League, names: list[str], env: str | None, teams: bool = False,

@@ -12,6 +12,7 @@ from ..errors import MarlError
 from ..league.variants import describe_variant, other_variants_note, variant_options
 from ..rated.gate import gate_check
 from ..stats.bradley_terry import DEFAULT_PRIOR
+from ..stats.intervals import DEFAULT_BOOTSTRAP
 from ._common import (
     MAX_GAMES,
     MAX_PARALLEL,
@@ -87,7 +88,7 @@ def fit(
     env: EnvOpt = None,
     env_option: VariantOpt = None,
     anchor: AnchorOpt = None,
-    bootstrap: BootstrapOpt = 200,
+    bootstrap: BootstrapOpt = DEFAULT_BOOTSTRAP,
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the intervals.")] = 0.95,
     results: Annotated[Path | None, typer.Option("--results", help="Rate the games of a CSV file "
                                                  "(player_a,player_b,result) instead of the league.")] = None,

@@ -9,6 +9,7 @@ import typer
 from ..errors import MarlError
 from ..league.variants import describe_variant, other_variants_note, variant_options
 from ..stats.bradley_terry import DEFAULT_PRIOR
+from ..stats.intervals import DEFAULT_BOOTSTRAP
 from ._common import (
     MAX_GAMES,
     MAX_PARALLEL,
@@ -76,7 +77,7 @@ def ladder_cmd(
                                             "unchanged).")] = None,
     anchor: AnchorOpt = None,
     prior: PriorOpt = DEFAULT_PRIOR,
-    bootstrap: BootstrapOpt = 200,
+    bootstrap: BootstrapOpt = DEFAULT_BOOTSTRAP,
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the intervals.")] = 0.95,
     include_removed: Annotated[bool, typer.Option("--all", help="Also list removed snapshots.")] = False,
     home: HomeOpt = None,
@@ -195,7 +196,7 @@ def tournament(
                                              "played, so no stored game is played and counted again).")] = None,
     parallel: Annotated[int, typer.Option("--parallel", min=2, max=MAX_PARALLEL, help="Games played at once.")]
     = 1024,
-    bootstrap: BootstrapOpt = 200,
+    bootstrap: BootstrapOpt = DEFAULT_BOOTSTRAP,
     queue: Annotated[bool, typer.Option("--queue", help="Put the missing games on the league's work queue as jobs "
                                         "of a few minutes: every marl worker attached plays them, and so does this "
                                         "command.")] = False,

@@ -95,10 +95,11 @@ from selfplay_cli.stats.bradley_terry import (
     pair_matrices,
 )
 from selfplay_cli.stats.elo import MAX_ELO
-from selfplay_cli.stats.intervals import bootstrap_intervals, laplace_intervals
+from selfplay_cli.stats.intervals import DEFAULT_BOOTSTRAP, bootstrap_intervals, laplace_intervals
 from selfplay_cli.stats.predict import PairModel, Spread
 
 __all__ = [
+    "DEFAULT_BOOTSTRAP",
     "DEFAULT_PRIOR",
     "BotRecord",
     "Fitted",
@@ -520,7 +521,8 @@ def pick_env(league: League, env: str | None) -> str:
         return env
     envs = _envs_in_order(league)
     if not envs:
-        raise LeagueError("the league has no games yet: play some first (marl match / marl tournament)")
+        raise LeagueError("the league has no rated games yet: train a run (marl train GAME) or play some (marl match "
+                          "A B --env GAME, marl league tournament)")
     if len(envs) > 1:
         raise LeagueError(f"several envs in the league ({', '.join(envs)}): pass --env")
     return envs[0]

@@ -39,7 +39,12 @@ from .bradley_terry import (
 )
 from .elo import MAX_ELO, NAT_TO_ELO, normal_quantile
 
-__all__ = ["bootstrap_ci", "bootstrap_intervals", "laplace_ci", "laplace_intervals"]
+__all__ = ["DEFAULT_BOOTSTRAP", "bootstrap_ci", "bootstrap_intervals", "laplace_ci", "laplace_intervals"]
+
+DEFAULT_BOOTSTRAP = 200
+"""Replicates of the percentile bootstrap behind a ladder's rating intervals unless told otherwise: ``marl league
+ladder``, ``marl elo fit`` and the summary of ``marl train`` all use it, so a rating's interval reads the same in
+each."""
 
 
 def _difference_sd(cov: FloatArray) -> FloatArray:

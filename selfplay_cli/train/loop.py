@@ -35,6 +35,7 @@ from ..algos.joint import JointLearner
 from ..arena.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces
 from ..envs.team import team_spec
 from ..errors import MarlError, NonFiniteError
+from ..league.ladder import DEFAULT_BOOTSTRAP, LadderRow
 from ..league.ledger import KIND_CODES
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
@@ -271,14 +272,20 @@ class Trainer:
             if self.on_progress:
                 self.on_progress({"event": "snapshot", "records": self.records, "standing": self.standing()})
 
-    def _records(self, new: list[PlayerRow]) -> list[SnapshotRecord]:
-        """Each new snapshot's record against the scripted players and its fitted rating, from the ledger."""
+    def _ladder(self, bootstrap: int = 0) -> list[LadderRow]:
+        """The ladder of the run's game and variant as the ledger has it now (empty without rating games)."""
         from ..league.ladder import ladder
+
+        if not self.cfg.eval_games:
+            return []
+        return ladder(self.league, self.spec.name, bootstrap=bootstrap, variant=self.variant)
+
+    def _records(self, new: list[PlayerRow], rows: list[LadderRow] | None = None) -> list[SnapshotRecord]:
+        """Each new snapshot's record against the scripted players and its fitted rating, from the ledger (its row
+        of ``rows``, a ladder fitted now, or of a quick fit)."""
         from ..league.pairs import head_to_head
 
-        rated = {}
-        if self.cfg.eval_games:
-            rated = {r.player_id: r for r in ladder(self.league, self.spec.name, bootstrap=0, variant=self.variant)}
+        rated = {r.player_id: r for r in (self._ladder() if rows is None else rows)}
         out = []
         for p in new:
             vs = {}
@@ -380,9 +387,10 @@ class Trainer:
         t1 = time.perf_counter()
         self._collect(self.evaluator.wait(on_wait=self._waiting))  # type: ignore[union-attr]
         waited = time.perf_counter() - t1
-        if not self.records or state.jobs:  # no rating games, or not all played yet (--no-wait): the final
-            # snapshots as the ledger has them now
-            self.records = self._records([self.league.get_player(i) for i in state.latest])
+        # the final snapshots and the best as the ledger has them now, as `marl league ladder` shows them (its default
+        # intervals: one claim, one figure)
+        final = self._ladder(DEFAULT_BOOTSTRAP)
+        self.records = self._records([self.league.get_player(i) for i in state.latest], final)
         plot = self._plot()
         session = time.perf_counter() - t0
         return TrainReport(cfg.run, state.steps, state.episodes, seconds=elapsed0 + session,
@@ -391,7 +399,7 @@ class Trainer:
                            session_seconds=session, train_seconds=self._train_seconds(),
                            session_eval_games=self.eval_games,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
-                           rating_left=len(state.jobs), nash=self._nash(), **self._best())
+                           rating_left=len(state.jobs), nash=self._nash(), **self._best(final))
 
     def _start_from(self) -> None:
         """``--init-from``: each learner starts from its snapshot of the run's ``init_plan`` (which is then its first
@@ -529,16 +537,13 @@ class Trainer:
             return self._trained
         return max(time.perf_counter() - self._t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0), 0.0)
 
-    def _best(self) -> dict[str, Any]:
-        """The report's ``best``: the run's best snapshot in the ladder fitted now (its margin over the run's next,
-        or the snapshots it is tied with), and ``side_bests``: in a game rated per side, the best of each side. None
-        of them without rating games."""
-        from ..league.ladder import ladder
-
+    def _best(self, rows: list[LadderRow]) -> dict[str, Any]:
+        """The report's ``best``: the run's best snapshot in the ladder ``rows`` (its margin over the run's next, or
+        the snapshots it is tied with), and ``side_bests``: in a game rated per side, the best of each side. None of
+        them without rating games."""
         if not self.cfg.eval_games:
             return {}
-        bests = [r for r in ladder(self.league, self.spec.name, bootstrap=0, variant=self.variant)
-                 if r.best and r.run == self.cfg.run]
+        bests = [r for r in rows if r.best and r.run == self.cfg.run]
         return {"best": bests[0] if bests else None, "side_bests": [r for r in bests if r.side is not None]}
 
     def _plot(self) -> Path | str | None:
