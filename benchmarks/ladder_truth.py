@@ -1,18 +1,32 @@
-"""Does the ladder tell the truth? Its predictions of pairs, checked by 200-game matches (issue 29).
+"""Does the ladder tell the truth, on every game? Each of its claims about a pair, checked by a 200-game match.
 
-For each seed it trains the README's default run (`marl train pong --agents 2`, its gauntlets and playoff as a user
-gets them), takes the ladder's forecaster (`marl league predict`: the fitted difference with its uncertainty, how far
-the league's pairs scatter around their ratings, the pair's own games), predicts the score of every pair of the run's
-snapshots and the scripted players over 200 games with a 95% interval, then plays each pair 200 fresh games (not
-stored) and counts how often the measured score fell inside. Target: at least 90% for the 95% intervals. It also
-checks the run's best: is it separated, and does a 200-game match against the next agree?
+For each game it runs README's own command for that game (kept if a finished run is in ``--keep``), reads what the
+ladder and the run's summary claim, and plays each pair those claims are about 200 fresh games (not stored):
 
-The same check runs on simulated leagues drawn from the model itself (a run's schedule of gauntlets, its ratings
-rising with the steps), with and without pairs that scatter around their ratings (rock-paper-scissors between
-snapshots), so the real figure can be read against what the method gives where the model holds.
+* **order**: every pair of the run's snapshots and the game's scripted players whose order the ladder claims (one
+  above the other beyond doubt: what its ranks and tier boundaries say). The claim survives when the 200-game match
+  goes the same way (a score above 50%);
+* **margins**: every "A over B by +M [lo, hi]" the ladder prints under its table (the top over the next, each run's
+  best over the run's next best; the run's summary prints the same one) and each row's margin over the next row in
+  its JSON: held when the 200-game Elo difference lies inside [lo, hi] (a 0% or 100% result, whose Elo is only a
+  bound, holds when the interval reaches the bound);
+* **summary**: each final snapshot against each scripted player, whose scores the run's summary prints;
+* **predictions**: for every pair above, what ``marl league predict`` says of a 200-game match (95% interval), held
+  when the measured score lies inside. Reported: the share held, and the median width of the open predictions (5 to
+  95%) of pairs that met in rated games and of pairs that never met.
 
-Run: python benchmarks/ladder_truth.py [--seeds 0 1] [--games 200] [--pairs N] [--keep DIR] [--simulated 20]
-     [--out pairs.json]
+The same checks run on simulated leagues drawn from a run-like schedule (each snapshot against its predecessor, the
+other learner, the best, older ones and two bots, 8 games a pair; 32 for the finals against the bots), with pairs
+scattered around their ratings by 0, 150 and 300 Elo (rock-paper-scissors between snapshots), where the truth is
+known.
+
+Games (README's commands): pong (the main job), tennis (against serve-bot too), the lander (FuPS teams, against the
+heuristic), Kuhn poker (scored in chips), connect four (a PettingZoo AEC board game) and three-player Leduc poker (a
+free-for-all). Targets per game: at least 90% of the 95% predictions held; median width of open predictions at most
+30 points where the pair met and 45 where it did not; at least 90% of margins held.
+
+Run: python benchmarks/ladder_truth.py [--games pong tennis ...] [--keep DIR] [--checks 200] [--max-pairs N]
+     [--budget GAME=ARGS] [--simulated 20] [--out results.json]
 """
 
 from __future__ import annotations
@@ -21,97 +35,194 @@ import argparse
 import itertools
 import json
 import os
+import platform
+import shlex
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from selfplay_cli.league.forecast import Forecaster
-from selfplay_cli.league.ladder import ladder
-from selfplay_cli.league.store import League
-from selfplay_cli.rated.match import load_player, mix_seed, run_match
+from selfplay_cli.league.ladder import fit_table, ladder
+from selfplay_cli.league.store import League, LeagueError
+from selfplay_cli.league.variants import variant_key, variant_options
+from selfplay_cli.rated.match import run_match
+from selfplay_cli.rated.match_jobs import MatchJob
+from selfplay_cli.rated.snapshots import run_options
+from selfplay_cli.stats.elo import score_to_elo
 
 CHECK_SEEDS = 50_000_000  # the checking matches' seeds: far from every seed a run or a match of marl uses
 
+GAMES: dict[str, list[str]] = {  # README's command for each game (after `marl train`)
+    "pong": ["pong", "--agents", "2"],
+    "tennis": ["tennis", "--agents", "2", "--minutes", "30"],
+    "lander": ["lander", "--agents", "2", "--sharing", "fups"],
+    "kuhn": ["openspiel:kuhn_poker", "--agents", "1", "--bots", "random=1", "--steps", "40000", "--games", "16"],
+    "connect4": ["pettingzoo.classic.connect_four_v3", "--sharing", "fups", "--league-games", "0.5", "--bots",
+                 "random=0.5", "--steps", "2000000"],
+    "leduc3": ["openspiel:leduc_poker(players=3)", "--steps", "200000"],
+}
 
-def train(home: Path, seed: int) -> str:
-    """The default run of ``seed`` in ``home`` (kept if it finished there before); its name."""
-    if (home / "league.db").exists():
-        with League.open(home) as league:
-            runs = [r for r in league.list_runs() if r.status == "finished"]
-        if runs:
-            return runs[0].name
-    env = dict(os.environ, MARL_HOME=str(home))
+
+@dataclass
+class Claim:
+    """A pair the ladder or the summary says something about (``a`` and ``b`` by full name) and what it says."""
+
+    a: str
+    b: str
+    kinds: set[str] = field(default_factory=set)  # order, margin, summary
+    margins: list[tuple[str, float, float, float]] = field(default_factory=list)  # (where, elo, low, high)
+
+
+def train(home: Path, args: list[str], seed: int) -> tuple[str, dict]:
+    """README's run of a game in ``home`` (kept if it finished there before): its name and its JSON report."""
+    report = home / "train.json"
+    if report.exists():
+        data = json.loads(report.read_text())
+        return data["run"], data
+    home.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, MARL_HOME=str(home), SDL_VIDEODRIVER="dummy")
     t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, "-m", "selfplay_cli", "train", "pong", "--agents", "2", "--seed", str(seed),
-                          "--quiet", "--json"], env=env, capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-m", "selfplay_cli", "train", *args, "--seed", str(seed), "--quiet",
+                          "--json"], env=env, capture_output=True, text=True)
     if out.returncode != 0:
-        raise SystemExit(f"marl train failed ({out.returncode}): {out.stderr.strip()}")
-    report = json.loads(out.stdout)
-    print(f"seed {seed}: run {report['run']} trained and rated in {time.perf_counter() - t0:.0f} s, "
-          f"{report['rating_games']} rating games", flush=True)
-    return report["run"]
+        raise SystemExit(f"marl train {shlex.join(args)} failed ({out.returncode}): {out.stderr.strip()}")
+    data = json.loads(out.stdout)
+    report.write_text(json.dumps(data))
+    print(f"  marl train {shlex.join(args)}: run {data['run']} in {time.perf_counter() - t0:.0f} s, "
+          f"{data['steps']:,} steps, {data['rating_games']} rating games", flush=True)
+    return data["run"], data
 
 
-def check_run(home: Path, run: str, games: int, max_pairs: int | None, rng: np.random.Generator) -> list[dict]:
-    """Predict, then play, every pair (or ``max_pairs`` of them, drawn at random) of the run's snapshots and the
-    scripted players; one record per pair."""
-    with League.open(home) as league:
-        forecast = Forecaster.of_league(league, "pong")
-        rows = {r.policy: r for r in ladder(league, "pong")}
-        players = [p for p in league.players("pong") if p.is_bot or p.run == run]
-        last = max(p.step for p in players if not p.is_bot)
-        finals = {p.id for p in players if not p.is_bot and p.step == last}
-        pairs = list(itertools.combinations(players, 2))
-        if max_pairs is not None and len(pairs) > max_pairs:
-            pairs = [pairs[i] for i in sorted(rng.choice(len(pairs), max_pairs, replace=False))]
-        out = []
-        for k, (a, b) in enumerate(pairs):
-            pred = forecast.predict(a.full_name, b.full_name, games)
-            first = CHECK_SEEDS + 10_000 * k
-            pa = load_player(league, a, seed=mix_seed(first, 0))
-            pb = load_player(league, b, seed=mix_seed(first, 1))
-            r = run_match(pa, pb, games=games, first_seed=first)
-            score = (r.wins + 0.5 * r.draws) / max(r.wins + r.draws + r.losses, 1)
-            met_points, met = forecast.met(a.full_name, b.full_name)
-            out.append({"a": a.full_name, "b": b.full_name, "final": a.id in finals or b.id in finals,
-                        "measured_wdl": [r.wins, r.draws, r.losses], "predicted": pred.score, "low": pred.low,
-                        "high": pred.high, "measured": score, "held": pred.holds(score), "met": met,
-                        "ladder_diff": rows[a.full_name].elo - rows[b.full_name].elo})
-            if not out[-1]["held"]:
-                print(f"  did not hold: {a.full_name} vs {b.full_name}: predicted {100 * pred.score:.1f}% "
-                      f"[{100 * pred.low:.1f}, {100 * pred.high:.1f}], measured {100 * score:.1f}% "
-                      f"(met before: {met})", flush=True)
-        print(f"  pairs' spread around their ratings (fitted from the ledger): {forecast.spread:.0f} Elo")
-        best = next((r for r in rows.values() if r.best and r.run == run), None)
-        if best is not None and best.best_margin is not None:
-            m = best.best_margin
-            b_row = next(p for p in players if p.full_name == m.over)
-            a_row = next(p for p in players if p.full_name == best.policy)
-            r = run_match(load_player(league, a_row, seed=1), load_player(league, b_row, seed=2), games=games,
-                          first_seed=CHECK_SEEDS - 10_000)
-            s = r.stats
-            verdict = "separated" if m.separated else f"tied with {', '.join(best.tied)}"
-            print(f"  best: {best.policy} ({verdict}), ladder {m.elo:+.0f} [{m.low:+.0f}, {m.high:+.0f}] over "
-                  f"{m.over}; 200 games: {100 * s.score:.1f}%, Elo {s.elo:+.0f} [{s.elo_low:+.0f}, "
-                  f"{s.elo_high:+.0f}]: the ladder's order " + ("held" if (s.score >= 0.5) == (m.elo >= 0) or
-                                                                  not m.separated else "DID NOT hold"), flush=True)
+def claims_of(league: League, env: str, variant: str, run: str, report: dict,
+              forecast: Forecaster) -> dict[frozenset[str], Claim]:
+    """Every pair the ladder and the run's summary make a claim about, with what they claim."""
+    rows = ladder(league, env, variant=variant)
+    mine = [r for r in rows if (r.run == run or r.kind == "bot") and r.copy_of is None and r.tier is not None]
+    names = [r.policy for r in mine]
+    out: dict[frozenset[str], Claim] = {}
+
+    def claim(a: str, b: str, kind: str, margin: tuple[str, float, float, float] | None = None) -> None:
+        c = out.setdefault(frozenset((a, b)), Claim(a, b))
+        c.kinds.add(kind)
+        if margin is not None:
+            where, elo, lo, hi = margin
+            if (c.a, c.b) != (a, b):  # the claim as the pair's first names it
+                elo, lo, hi = -elo, -hi, -lo
+            c.margins.append((where, elo, lo, hi))
+
+    idx = [forecast.names.index(forecast.aliases.get(n, n)) for n in names]
+    below = forecast.model.below(idx)
+    for i, j in itertools.permutations(range(len(names)), 2):
+        if below[i, j] < 0.025:  # i above j beyond doubt: a rank, a tier boundary
+            claim(names[i], names[j], "order")
+    ranked = [r for r in rows if r.tier is not None and r.copy_of is None]
+    if len(ranked) >= 2 and ranked[0].margin is not None:  # "top: A, +M [lo, hi] Elo over B"
+        m = ranked[0].margin
+        claim(ranked[0].policy, m.over, "margin", ("top", m.elo, m.low, m.high))
+    for r in rows:
+        if r.best and r.run == run and r.best_margin is not None:  # "best of RUN: A, +M [lo, hi] over B"
+            m = r.best_margin
+            claim(r.policy, m.over, "margin", ("best", m.elo, m.low, m.high))
+    for r in mine:  # each row's margin over the next (JSON)
+        if r.margin is not None and r.margin.over in names:
+            claim(r.policy, r.margin.over, "margin", ("row", r.margin.elo, r.margin.low, r.margin.high))
+    for final in report.get("final", []):  # the summary: each final snapshot against each scripted player
+        for bot in final.get("vs", {}):
+            if final["snapshot"] in names and bot in names:
+                claim(final["snapshot"], bot, "summary")
     return out
 
 
-def summary(label: str, records: list[dict]) -> None:
-    def rate(rs: list[dict]) -> str:
-        return f"{sum(r['held'] for r in rs)}/{len(rs)} = {100 * np.mean([r['held'] for r in rs]):.1f}%" if rs else "-"
+def measured(round_points: list[list[float]]) -> tuple[float, float, int]:
+    """A's score over the match (points per result), its Elo (a 0% or 100% score: the bound with one virtual draw)
+    and whether it is a bound (+1 above, -1 below, 0 an estimate)."""
+    pts = np.array([x for p in round_points for x in p])
+    n = pts.size
+    score = float(pts.mean()) if n else 0.5
+    if score >= 1.0:
+        return score, score_to_elo((n + 0.5) / (n + 1)), 1
+    if score <= 0.0:
+        return score, score_to_elo(0.5 / (n + 1)), -1
+    return score, score_to_elo(score), 0
 
-    informative = [r for r in records if 0.05 < r["predicted"] < 0.95]
-    widths = [r["high"] - r["low"] for r in informative]
-    print(f"{label}: 95% predictions held for {rate(records)} of pairs; where the outcome was open (predicted "
-          f"5-95%) {rate(informative)} (median width {100 * np.median(widths) if widths else 0:.0f} points); "
-          f"pairs that met before {rate([r for r in records if r['met']])}, never met "
-          f"{rate([r for r in records if not r['met']])}")
+
+def check_game(name: str, home: Path, args: list[str], games: int, max_pairs: int | None, seed: int,
+               rng: np.random.Generator) -> list[dict]:
+    run, report = train(home, args, seed)
+    records = []
+    with League.open(home) as league:
+        env = league.get_run(run).env
+        variant = variant_key(env, run_options(league, run))
+        forecast = Forecaster.of_league(league, env, variant=variant)
+        claims = list(claims_of(league, env, variant, run, report, forecast).values())
+        if max_pairs is not None and len(claims) > max_pairs:  # the margins and the summary first, then a draw
+            first = [c for c in claims if c.kinds - {"order"}]
+            rest = [c for c in claims if not c.kinds - {"order"}]
+            pick = rng.choice(len(rest), max(max_pairs - len(first), 0), replace=False) if rest else []
+            claims = first + [rest[i] for i in sorted(pick)]
+        rows = {p.full_name: p for p in league.players(env=env, include_removed=True)}
+        options = variant_options(variant)
+        print(f"{name}: run {run} ({env}{', ' + variant if variant else ''}), {report['rating_games']} rating games; "
+              f"spread around the ratings {forecast.spread:.0f} Elo; {len(claims)} pairs claimed about", flush=True)
+        t0 = time.perf_counter()
+        for k, c in enumerate(claims):
+            pred = forecast.predict(c.a, c.b, games)
+            _, met = forecast.met(c.a, c.b)
+            first_seed = CHECK_SEEDS + 10_000 * k
+            pa, pb, _ = MatchJob((rows[c.a],), rows[c.b]).load(league, first_seed, "cpu")
+            r = run_match(pa[0], pb, games=games, first_seed=first_seed, env_options=options)
+            score, elo, bound = measured(r.round_points)
+            margins = []
+            for where, m_elo, lo, hi in c.margins:
+                held = (hi >= elo if bound > 0 else lo <= elo if bound < 0 else lo <= elo <= hi)
+                margins.append({"where": where, "elo": m_elo, "low": lo, "high": hi, "held": bool(held)})
+                if not held:
+                    print(f"  margin did not hold: {c.a} over {c.b} {m_elo:+.0f} [{lo:+.0f}, {hi:+.0f}] ({where}); "
+                          f"{r.n_results} results: {100 * score:.1f}%, {elo:+.0f} Elo", flush=True)
+            rec = {"game": name, "a": c.a, "b": c.b, "kinds": sorted(c.kinds), "met": met, "results": r.n_results,
+                   "predicted": pred.score, "low": pred.low, "high": pred.high, "measured": score,
+                   "measured_elo": elo, "held": pred.holds(score), "margins": margins,
+                   "order_held": score > 0.5 if "order" in c.kinds else None,
+                   "truncated": r.truncated}
+            records.append(rec)
+            if not rec["held"]:
+                print(f"  prediction did not hold: {c.a} vs {c.b}: {100 * pred.score:.1f}% [{100 * pred.low:.1f}, "
+                      f"{100 * pred.high:.1f}], measured {100 * score:.1f}% (met before in {met})", flush=True)
+            if rec["order_held"] is False:
+                print(f"  order did not hold: {c.a} above {c.b}, measured {100 * score:.1f}%", flush=True)
+        print(f"  {len(claims)} matches of {games} games in {time.perf_counter() - t0:.0f} s", flush=True)
+    return records
+
+
+def rate(flags: list[bool]) -> str:
+    return f"{sum(flags)}/{len(flags)} = {100 * np.mean(flags):.1f}%" if flags else "-"
+
+
+def summary(label: str, records: list[dict]) -> dict:
+    """One game's figures (printed, and returned for the table)."""
+    held = [r["held"] for r in records]
+    open_ = [r for r in records if 0.05 < r["predicted"] < 0.95]
+    met_w = [100 * (r["high"] - r["low"]) for r in open_ if r["met"]]
+    new_w = [100 * (r["high"] - r["low"]) for r in open_ if not r["met"]]
+    margins = [m["held"] for r in records for m in r["margins"]]
+    printed = [m["held"] for r in records for m in r["margins"] if m["where"] != "row"]
+    order = [r["order_held"] for r in records if r["order_held"] is not None]
+    out = {"label": label, "pairs": len(records), "held": rate(held),
+           "held_share": float(np.mean(held)) if held else None,
+           "open_met": len(met_w), "width_met": float(np.median(met_w)) if met_w else None,
+           "open_new": len(new_w), "width_new": float(np.median(new_w)) if new_w else None,
+           "margins": rate(margins), "printed_margins": rate(printed), "order": rate(order)}
+    w = (f"median width {out['width_met']:.0f} points of {len(met_w)} that met" if met_w else "none that met")
+    w += f", {out['width_new']:.0f} of {len(new_w)} that never met" if new_w else ", none that never met"
+    print(f"{label}: predictions held {out['held']}; open predictions: {w}; margins held {out['margins']} (printed "
+          f"under the ladder and in the summary: {out['printed_margins']}); order claims held {out['order']}",
+          flush=True)
+    return out
 
 
 def _expected(d: np.ndarray | float) -> np.ndarray:
@@ -122,7 +233,7 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
     """One league drawn from the model: two learners whose ratings rise with the step, two bots, the run's schedule
     (each moment against its predecessors, the other learner, the best so far, two older snapshots and the bots,
     ``per_pair`` games each; the finals 32 against the bots), pairs scattered around their ratings by ``tau``; then
-    every pair predicted and checked by ``games`` simulated games."""
+    every claim checked against ``games`` simulated games."""
     bots = [1000.0, 1000.0 + rng.uniform(300, 600)]
     true = list(bots)
     names = ["random", "cpu"]
@@ -156,43 +267,87 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
             for j in (0, 1):
                 play(i, j, 32 if final else per_pair)
     f = Forecaster.of_games(names, np.array(a), np.array(b), np.array(s), anchor="random")
+    rows = fit_table(names, a, b, s, "random", bootstrap=0)
+    below = f.model.below(list(range(n)))
+    claims: dict[tuple[int, int], list] = {}
+    for i, j in itertools.permutations(range(n), 2):
+        if below[i, j] < 0.025:
+            claims.setdefault((min(i, j), max(i, j)), []).append(("order", i, j))
+    for r in rows:
+        if r.margin is not None:
+            i, j = names.index(r.policy), names.index(r.margin.over)
+            claims.setdefault((min(i, j), max(i, j)), []).append(("margin", i, j, r.margin))
+    for i in (n - 2, n - 1):
+        for j in (0, 1):
+            claims.setdefault((j, i), []).append(("summary", i, j))
     out = []
-    for i in range(n):
-        for j in range(i + 1, n):
-            pred = f.predict(names[i], names[j], games)
-            score = rng.binomial(games, p[i, j]) / games
-            out.append({"predicted": pred.score, "low": pred.low, "high": pred.high, "measured": score,
-                        "held": pred.holds(score), "met": f.met(names[i], names[j])[1]})
+    for (i, j), said in claims.items():
+        pred = f.predict(names[i], names[j], games)
+        k = rng.binomial(games, p[i, j])
+        score, elo, bound = measured([[1.0] * k + [0.0] * (games - k)])
+        margins = []
+        for c in said:
+            if c[0] == "margin":
+                m = c[3]
+                sign = 1.0 if c[1] == i else -1.0
+                lo, hi = (m.low, m.high) if sign > 0 else (-m.high, -m.low)
+                margins.append({"where": "row", "elo": sign * m.elo, "low": lo, "high": hi,
+                                "held": bool(hi >= elo if bound > 0 else lo <= elo if bound < 0 else lo <= elo <= hi)})
+        order = [c for c in said if c[0] == "order"]
+        out.append({"predicted": pred.score, "low": pred.low, "high": pred.high, "measured": score,
+                    "held": pred.holds(score), "met": f.met(names[i], names[j])[1], "margins": margins,
+                    "order_held": ((score > 0.5) == (order[0][1] == i)) if order else None})
     return out
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1])
-    ap.add_argument("--games", type=int, default=200)
-    ap.add_argument("--pairs", type=int, default=None, help="pairs to check per run (default: all)")
+    ap.add_argument("--games", nargs="*", default=list(GAMES), choices=list(GAMES))
+    ap.add_argument("--checks", type=int, default=200, help="games of each checking match")
+    ap.add_argument("--max-pairs", type=int, default=None, help="pairs to check per game (default: all claimed)")
+    ap.add_argument("--budget", action="append", default=[], metavar="GAME=ARGS",
+                    help="replace the budget of a game's README command, e.g. tennis='--minutes 5'")
+    ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--keep", type=Path, help="folder of the runs' leagues (kept; a finished run is reused)")
     ap.add_argument("--simulated", type=int, default=20, help="simulated leagues per spread")
-    ap.add_argument("--out", type=Path, help="write every checked pair (prediction and measured score) as JSON")
+    ap.add_argument("--out", type=Path, help="write every checked pair and the table as JSON")
     args = ap.parse_args()
     rng = np.random.default_rng(0)
+    budgets = dict(b.split("=", 1) for b in args.budget)
+    table, real = [], []
+    print(f"ladder_truth: {time.strftime('%Y-%m-%d %H:%M')}, {platform.node()}, {os.cpu_count()} cores, "
+          f"python {platform.python_version()}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         root = args.keep or Path(tmp)
-        real: list[dict] = []
-        for seed in args.seeds:
-            home = root / f"seed{seed}"
-            run = train(home, seed)
-            records = check_run(home, run, args.games, args.pairs, rng)
-            summary(f"seed {seed} ({run})", records)
+        for game in args.games:
+            cmd = list(GAMES[game])
+            if game in budgets:  # the budget flags replaced
+                for flag in ("--minutes", "--steps"):
+                    if flag in cmd:
+                        k = cmd.index(flag)
+                        del cmd[k:k + 2]
+                cmd += shlex.split(budgets[game])
+            try:
+                records = check_game(game, root / game, cmd, args.checks, args.max_pairs, args.seed, rng)
+            except LeagueError as e:
+                print(f"{game}: {e}", flush=True)
+                continue
+            table.append(summary(game, records))
             real += records
-        if args.seeds:
-            summary("all runs", real)
-            summary("all runs, pairs with a run's final snapshot", [r for r in real if r["final"]])
-        if args.out:
-            args.out.write_text(json.dumps(real, indent=1))
-    for tau in (0.0, 150.0):
-        sim = [r for _ in range(args.simulated) for r in simulated(rng, tau, args.games)]
-        summary(f"simulated leagues ({args.simulated}, pairs' true spread {tau:.0f} Elo)", sim)
+    for tau in (0.0, 150.0, 300.0):
+        sim = [r for _ in range(args.simulated) for r in simulated(rng, tau, args.checks)]
+        table.append(summary(f"simulated, spread {tau:.0f}", sim))
+    print("\n| game | pairs | 95% predictions held | open, met: median width | open, never met: median width | "
+          "margins held (printed) | order claims held |")
+    print("|---|---|---|---|---|---|---|")
+    for t in table:
+        wm = f"{t['width_met']:.0f} ({t['open_met']})" if t["width_met"] is not None else "-"
+        wn = f"{t['width_new']:.0f} ({t['open_new']})" if t["width_new"] is not None else "-"
+        print(f"| {t['label']} | {t['pairs']} | {t['held']} | {wm} | {wn} | {t['margins']} ({t['printed_margins']})"
+              f" | {t['order']} |")
+    if args.out:
+        args.out.write_text(json.dumps({"date": time.strftime("%Y-%m-%d"), "machine": platform.node(),
+                                        "table": table, "pairs": real}, indent=1))
 
 
 if __name__ == "__main__":
