@@ -86,8 +86,8 @@ def envs(
                                            "included).")] = False,
 ) -> None:
     """List the registered games with their agents, kind, turns, per-seat spaces and scripted players; name GAMES
-    to see those alone, with their options (--env-option NAME=VALUE): type, default, and which a training
-    curriculum may drive.
+    to see those alone, with their options (what marl train's and marl match's --env-option NAME=VALUE set): type,
+    default, and which a training curriculum may drive.
 
     Games come from marl itself, from installed packages (entry-point group selfplay_cli.envs) and, named on the
     command line, from your own PettingZoo environments: `marl envs mypkg.mygame:env`.

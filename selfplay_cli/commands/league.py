@@ -19,6 +19,7 @@ from ._common import (
     EnvOptionOpt,
     HomeOpt,
     JsonOpt,
+    LeagueEnvOpt,
     QuietOpt,
     VariantOpt,
     check_env,
@@ -41,15 +42,15 @@ LADDER_HELP = "\n\n".join((
     "The ladder of one game: every player's Elo, fitted from all its stored rated games of one variant: the game's "
     "default options, or those --env-option asks for (with --run: the options the run trained under). Games under "
     "other options are rated apart; a line below the table names them and the command that shows them.",
-    "Columns: rank; tier; policy, marked (anchor) for the player whose rating is fixed (--anchor, default the random "
-    "bot at 1000), (best) in bold for the best snapshot of each run ((best, tied) when it is the best by Elo but not "
-    "beyond doubt) and (= NAME) for another name of a player's weights; kind (bot or snapshot); "
+    "Columns: rank; tier; policy, marked (anchor) for the player whose rating is fixed (--anchor, default the game's "
+    "declared anchor at 1000), (best) in bold for the best snapshot of each run ((best, tied) when it is the best by "
+    "Elo but not beyond doubt) and (= NAME) for another name of a player's weights; kind (bot or snapshot); "
     "training step; Elo, the Bradley-Terry fit (a draw is half a point); its confidence interval (--confidence, "
     "--bootstrap), relative to the anchor; games and W-D-L; score (points per game); online Elo (the live estimate "
     "updated after every game of the default options; in their ladder only); vs BOT, one column per scripted "
     "player of the game: the score against it and the number of games (blank when none). Only when some row has "
-    "one: league role (main, main_exploiter, league_exploiter of a --league alphastar run; exploiter, a best "
-    "response marl exploit filed) and exploitability (what a best response wins against the player, in the game's "
+    "one: league role (main, main_exploiter, league_exploiter of a marl train --league alphastar run; exploiter, a "
+    "best response marl exploit filed) and exploitability (what a best response wins against the player, in the game's "
     "returns: exact, from marl exploit --exact, or >= a trained best response's lower bound [its 95% interval]).",
     "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
     "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
@@ -68,7 +69,7 @@ LADDER_HELP = "\n\n".join((
 
 @app.command("ladder", help=LADDER_HELP)
 def ladder_cmd(
-    env: EnvOpt = None,
+    env: LeagueEnvOpt = None,
     env_option: VariantOpt = None,
     run: Annotated[str | None, typer.Option("--run", help="Show only this run's snapshots, plus the scripted "
                                             "players for reference (ranks unchanged).")] = None,
