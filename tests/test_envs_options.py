@@ -7,6 +7,7 @@ import json
 import sys
 from pathlib import Path
 
+import pytest
 from cli_helpers import run, run_json
 
 from selfplay_cli.envs import game_options, get_env
@@ -83,3 +84,66 @@ def test_pettingzoos_own_games_show_their_raw_env_options(capsys):
 def test_train_help_points_at_the_listing_that_exists(capsys):
     code, out, err = run(capsys, "train", "--help")
     assert code == 0 and "marl envs NAME lists" in " ".join(out.split())
+
+
+WRAPPER = '''
+def wrapper_fn(env_fn):  # as pettingzoo.utils.conversions.parallel_wrapper_fn: a closure in another module
+    def par_fn(**kwargs):
+        return env_fn(**kwargs)
+
+    return par_fn
+'''
+
+CONVENTION_GAME = '''
+from convention_pkg.wrappers import wrapper_fn as parallel_wrapper_fn
+
+from tests.games.tictactoe import TicTacToe
+
+
+class raw_env(TicTacToe):
+    def __init__(self, size: int = 3, swap: bool = False, render_mode=None):
+        super().__init__(render_mode=render_mode)
+
+
+def env(**kwargs):
+    return raw_env(**kwargs)
+
+
+parallel_env = parallel_wrapper_fn(env)
+'''
+
+
+def _options(capsys, name: str) -> list[tuple[str, object]]:
+    (row,) = run_json(capsys, "envs", name)
+    return [(o["name"], o["default"]) for o in row["options"]]
+
+
+def test_a_module_lists_the_options_its_env_form_lists(tmp_path, monkeypatch, capsys):
+    """Issue 48: `marl envs MODULE` reads the module's parallel_env, PettingZoo's wrapper of env (**kwargs, a
+    closure of pettingzoo.utils.conversions; here one of the same shape), and listed no option where `marl envs
+    MODULE:env` listed raw_env's: both forms name the same game, and list the same options."""
+    (tmp_path / "convention_pkg").mkdir()
+    (tmp_path / "convention_pkg" / "__init__.py").write_text("")
+    (tmp_path / "convention_pkg" / "game_v1.py").write_text(CONVENTION_GAME)
+    (tmp_path / "convention_pkg" / "wrappers.py").write_text(WRAPPER)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    expected = [("size", 3), ("swap", False)]  # (tic-tac-toe declares its kind: no kind option)
+    assert _options(capsys, "convention_pkg.game_v1:env") == expected  # the premise: raw_env's, as before
+    assert _options(capsys, "convention_pkg.game_v1") == expected
+    assert _options(capsys, "convention_pkg.game_v1:parallel_env") == expected
+
+
+def test_pursuit_lists_its_options_as_the_readme_uses_them(capsys):
+    """README: `marl envs pettingzoo.sisl.pursuit_v5`, then `--env-option n_pursuers=3`: its raw_env(*args,
+    **kwargs) hands them on to the SISL Pursuit class, whose keyword arguments they are."""
+    for name in ("pettingzoo.sisl.pursuit_v5", "pettingzoo.sisl.pursuit_v5:env",
+                 "pettingzoo.sisl.pursuit_v5:parallel_env"):
+        options = dict(_options(capsys, name))
+        assert {"n_pursuers": 8, "n_evaders": 30, "x_size": 16, "max_cycles": 500}.items() <= options.items(), name
+        assert "render_mode" not in options and "kind" in options
+
+
+def test_pistonball_lists_the_same_options_in_either_form(capsys):
+    pytest.importorskip("pymunk")
+    module = _options(capsys, "pettingzoo.butterfly.pistonball_v6")
+    assert ("n_pistons", 20) in module and module == _options(capsys, "pettingzoo.butterfly.pistonball_v6:env")

@@ -46,9 +46,9 @@ def test_resize_members_keeps_the_first_seats_and_draws_from_the_third_on():
     assert resize_members(1, 3, 0) == [0, 0, 0]
     with pytest.raises(ValueError):
         resize_members(0, 2, 0)
-    assert "1 member from the third on dropped" in describe_resize(4, 3)
-    assert "2 more seats copy members from the third on" in describe_resize(3, 5)
-    assert "all its members" in describe_resize(2, 3)
+    assert "1 of the third and the fourth members is dropped" in describe_resize(4, 3)
+    assert "2 more seats fly copies of the third member" in describe_resize(3, 5)
+    assert "copy of the first or the second member" in describe_resize(2, 3)
 
 
 # -- the parents, trained once ----------------------------------------------------------------------------------
@@ -157,7 +157,7 @@ def test_init_from_across_team_sizes_nops_4_to_3_and_3_to_5_by_the_rule(home, ca
                  "--seed", "4", "--run", "g5", "--config", ppo_toml, *TINY)
     took = [e["member"] for e in r["init_from"]["learners"].values()]
     assert took == [0, 1, 2, 2, 2] == resize_members(3, 5, 4)
-    assert "2 more seats copy members from the third on" in r["init_from"]["rule"]
+    assert "2 more seats fly copies of the third member" in r["init_from"]["rule"]
     for i, k in enumerate(took):
         assert same(weights(home, f"g5/s0-lander_{i}"), weights(home, f"l3/s1k-lander_{k}")), i
 

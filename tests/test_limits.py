@@ -203,3 +203,39 @@ def test_a_file_size_limit_under_marl_record_is_an_io_error(home, tmp_path, caps
     assert p.returncode == EXIT_IO, p.stderr
     assert p.stderr.count("\n") == 1 and str(out) in p.stderr and "File too large" in p.stderr, p.stderr
     assert list(out.parent.iterdir()) == []  # no video, no partial file
+
+
+# --- memory is counted for the run's own settings (issue 48) -------------------------------------------------------
+
+SPOT = "tests.games.spot:parallel_env"  # two seats of 16x16x3 uint8 images: 768 bytes an observation
+
+
+def test_the_memory_check_counts_the_games_and_rollout_the_run_will_use(monkeypatch, tmp_path):
+    """Issue 48: an image game was refused at any --games, its check made on the defaults (256 games) before the
+    options typed and the config file's were applied."""
+    from selfplay_cli.errors import MarlError
+    from selfplay_cli.train import config
+    from selfplay_cli.train.settings import new_settings
+
+    monkeypatch.setattr(config, "_machine_memory", lambda: 3 * 2**20)  # 3 MB: 0.8 of it may be taken
+    with pytest.raises(MarlError, match="256 games at once would take"):  # the defaults: 256 x 2 x ~12 kB > 2.4 MB
+        new_settings(SPOT, {})
+    assert new_settings(SPOT, {"games": 4})["games"] == 4  # 8 seats x 128 steps x 768 B = 0.8 MB
+    rollout = tmp_path / "rollout.toml"
+    rollout.write_text("games = 8\n[ppo]\nrollout_steps = 16\n")
+    assert new_settings(SPOT, {}, config=rollout)["games"] == 8  # the file's games and rollout
+    # where the real settings are too big, the refusal names them: 64 games, 32-step rollouts, 3 MB > 2.4 MB
+    rollout.write_text("[ppo]\nrollout_steps = 32\n")
+    with pytest.raises(MarlError, match=r"PPO's rollouts \(32 steps of 128 seats\) of 16x16x3 observations"):
+        new_settings(SPOT, {"games": 64}, config=rollout)
+
+
+def test_an_image_game_trains_with_few_games_where_its_defaults_would_not_fit(home, capsys, monkeypatch):
+    from selfplay_cli.train import config
+
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    monkeypatch.setattr(config, "_machine_memory", lambda: 3 * 2**20)
+    code, _, err = run(capsys, "train", SPOT, "--games", "4", "--steps", "64", "--eval-games", "0", "--quiet")
+    assert code == 0, err
+    code, _, err = run(capsys, "train", SPOT, "--steps", "64", "--eval-games", "0", "--quiet", "--run", "big")
+    assert code == EXIT_USAGE and err.count("\n") == 1 and "256 games at once" in err, err  # the defaults: too many

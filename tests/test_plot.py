@@ -325,6 +325,26 @@ def test_a_teams_equal_curves_are_both_drawn_and_both_named(league: League) -> N
     assert "= left = right (same point)" in braille
 
 
+def test_curves_that_fall_near_each_other_are_not_called_the_same_elo() -> None:
+    """Issue 48: left at 1998 and right at 2007 (3M steps) fall within the chart's 1% of each other and were said
+    to have the 'same Elo'; the legend says how close they are instead, and 'same' only where the values printed
+    are the same."""
+    from selfplay_cli.report.plots import BotLevel, CurvePoint, LearnerCurve, RunCurves
+
+    def curve(name: str, elos: tuple[float, ...]) -> LearnerCurve:
+        return LearnerCurve(name, tuple(CurvePoint(f"r/s{k + 1}M-{name}", (k + 1) * 1_000_000, e, e - 40, e + 40,
+                                                   None) for k, e in enumerate(elos)))
+
+    near = RunCurves(ENV, "r", (curve("left", (1000.0, 1500.0, 1998.0)), curve("right", (1200.0, 1700.0, 2007.0))),
+                     (BotLevel("random", 1000.0, 1000.0, 1000.0),), ("random", 1000.0))
+    legend = _legend(_figure(near))
+    assert not any("same Elo" in t for t in legend), legend
+    assert "left (within 9 Elo of right at 1 of 3 snapshots; drawn -15k steps aside)" in legend, legend
+    assert "right (within 9 Elo of left at 1 of 3 snapshots; drawn +15k steps aside)" in legend, legend
+    equal = replace(near, curves=(curve("left", (1000.0, 1500.0, 2007.2)), curve("right", (1200.0, 1700.0, 2006.9))))
+    assert "left (same Elo as right at 1 of 3 snapshots; drawn -15k steps aside)" in _legend(_figure(equal))
+
+
 # --------------------------------------------------------------------------------------------------
 # CLI
 # --------------------------------------------------------------------------------------------------

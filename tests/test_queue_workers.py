@@ -316,3 +316,40 @@ def test_a_training_run_and_its_worker_go_on_through_a_postgresql_restart(pg_url
         rated = set(s.execute(select(GameSeat.player_id).distinct()).scalars())
     assert {p.id for p in snaps} <= rated  # every snapshot played its gauntlet
     league.close()
+
+
+def _ctrl_c(*_args, **_kwargs):
+    raise KeyboardInterrupt
+
+
+def test_an_idle_worker_stopped_by_ctrl_c_says_no_job_was_in_play(tmp_path, capsys, monkeypatch):
+    """Issue 48: an idle worker stopped by Ctrl-C said 'the job in play went back to the queue'."""
+    import types
+
+    from selfplay_cli.work import worker as worker_module
+
+    home = tmp_path / "h"
+    League.open(home=home).close()
+    monkeypatch.delenv("MARL_DB", raising=False)
+    monkeypatch.setattr(worker_module, "time", types.SimpleNamespace(sleep=_ctrl_c))  # Ctrl-C while it waits idle
+    code, out, err = run(capsys, "worker", "--home", str(home), "--quiet")
+    assert code == 130 and err.count("\n") == 1, err
+    assert "went back" not in err and "no job was in play" in err, err
+
+
+def test_a_worker_stopped_by_ctrl_c_in_play_names_the_job_it_gave_back(tmp_path, capsys, monkeypatch):
+    from selfplay_cli.work import worker as worker_module
+
+    home = tmp_path / "h"
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    monkeypatch.delenv("MARL_DB", raising=False)
+    code, _, err = run(capsys, "league", "tournament", "cpu", "random", "--env", "pong", "--env-option",
+                       "points_to_win=1", "--games-per-pair", "100", "--queue", "--no-wait", "--home", str(home))
+    assert code == 0, err
+    (job,) = run_json(capsys, "queue", "--home", str(home))["jobs"]
+    monkeypatch.setattr(worker_module, "play_leased", _ctrl_c)  # Ctrl-C while the leased job plays
+    code, out, err = run(capsys, "worker", "--home", str(home), "--quiet")
+    assert code == 130 and err.count("\n") == 1, err
+    assert f"job {job['id']}" in err and "went back to the queue" in err, err
+    (back,) = run_json(capsys, "queue", "--home", str(home))["jobs"]
+    assert back["id"] == job["id"] and back["state"] == "queued" and back["tries"] == 0  # it did, not counted

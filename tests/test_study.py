@@ -107,3 +107,26 @@ def test_refusals_are_one_line(home, capsys):
     code, _, err = run(capsys, "study", "team-size", "lander", "--steps", "100", "--sharing", "sa")
     assert code == 2 and "fups or nops" in err and err.count("\n") == 1, err
     assert not (home / "runs").exists() or not any((home / "runs").iterdir())
+
+
+def test_the_returns_figure_shows_only_the_team_sizes_studied(tmp_path, monkeypatch):
+    """Issue 48: returns.png had team sizes 1.2, 1.4, ... on its x axis; a team size is a whole number of seats,
+    and the axis shows the sizes flown, each labelled, and nothing between them."""
+    from selfplay_cli.study import plots
+
+    def cell(trained: int, flown: int, mean: float) -> dict:
+        return {"trained": trained, "evaluated": flown, "games": 4, "mean": mean, "low": mean - 1, "high": mean + 1,
+                "seating": None, "team": f"n{trained}/s1k", "vs": {"games": 4, "mean": 0.0, "low": -1, "high": 1,
+                                                                  "player": "random"}}
+
+    report = {"study": "t", "env": "pursuit", "size_option": "n_pursuers", "train": [1, 2], "eval": [1, 2, 3],
+              "vs": "random", "returns": [cell(n, m, 10.0 * n + m) for n in (1, 2) for m in (1, 2, 3)]}
+    figures = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: figures.append(fig) or path)
+    plots.plot_returns(report, tmp_path / "returns.png")
+    (ax,) = figures[0].axes
+    lo, hi = ax.get_xlim()
+    shown = [t for t in ax.get_xticks() if lo <= t <= hi]
+    assert shown == [1, 2, 3], shown
+    assert [t.get_text() for t in ax.get_xticklabels() if lo <= t.get_position()[0] <= hi] == ["1", "2", "3"]
+    assert list(ax.get_xticks(minor=True)) == []

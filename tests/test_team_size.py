@@ -11,7 +11,7 @@ from cli_helpers import run, run_json
 
 from selfplay_cli.envs import get_env
 from selfplay_cli.league.store import League
-from selfplay_cli.policies.resize import resize_members
+from selfplay_cli.policies.resize import describe_resize, resize_members
 
 PURSUIT = "pettingzoo.sisl.pursuit_v5"
 
@@ -41,6 +41,50 @@ def test_seed_001s_rule_keeps_the_first_two_and_draws_from_the_third_on():
     assert set(resize_team(2, 4, 0)[2:]) <= {0, 1} and resize_team(1, 3, 0) == (0, 0, 0)  # no third: any member
     with pytest.raises(ValueError):
         resize_team(3, 0, 0)
+
+
+# (members, seats) -> the members (indices) the draw can give the extra seats, or drop, and how the words say it
+GROWN = {(1, 3): ({0}, "it keeps its place; 2 more seats fly copies of it"),
+         (2, 3): ({0, 1}, "both keep their places; 1 more seat flies a copy of the first or the second member, "
+                          "drawn at random from S"),
+         (2, 4): ({0, 1}, "both keep their places; 2 more seats fly copies of the first or the second member, "
+                          "each drawn at random from S"),
+         (3, 5): ({2}, "the 3 keep their places; 2 more seats fly copies of the third member"),
+         (4, 7): ({2, 3}, "the 4 keep their places; 3 more seats fly copies of the third or the fourth member, "
+                          "each drawn at random from S"),
+         (6, 8): ({2, 3, 4, 5}, "the 6 keep their places; 2 more seats fly copies of members from the third to the "
+                                "sixth, each drawn at random from S")}
+SHRUNK = {(2, 1): ({1}, "the first member flies alone; the second is dropped"),
+          (4, 1): ({1, 2, 3}, "the first member flies alone; the other 3 are dropped"),
+          (3, 2): ({2}, "the first 2 keep their places; the third member is dropped"),
+          (4, 2): ({2, 3}, "the first 2 keep their places; the third and the fourth members are dropped"),
+          (4, 3): ({2, 3}, "the first 2 keep their places; 1 of the third and the fourth members is dropped, drawn "
+                           "at random from S; the others keep their order"),
+          (6, 4): ({2, 3, 4, 5}, "the first 2 keep their places; 2 of the members from the third to the sixth are "
+                                 "dropped, drawn at random from S; the others keep their order")}
+
+
+@pytest.mark.parametrize("have, want", [*GROWN, *SHRUNK, (1, 1), (3, 3)])
+def test_the_rule_in_words_names_the_members_the_draw_gives(have, want):
+    """describe_resize says what resize_members does for every team size (issue 48: a team of 2 flown as 4 was said
+    to draw from 'the third on', a member it does not have)."""
+    words = describe_resize(have, want, "S")
+    drawn = [resize_team(have, want, seed) for seed in range(40)]
+    if want == have:
+        assert drawn == [tuple(range(have))] * 40 and words.endswith("keeps its place")
+        return
+    assert words.startswith(f"{have} member{'s' * (have > 1)}, {want} seat{'s' * (want > 1)}: "), words
+    if want > have:
+        pool, said = GROWN[have, want]
+        assert all(d[:have] == tuple(range(have)) for d in drawn)  # the team keeps its places
+        assert {m for d in drawn for m in d[have:]} == pool  # the extra seats copy exactly these
+    else:
+        pool, said = SHRUNK[have, want]
+        assert {m for d in drawn for m in set(range(have)) - set(d)} == pool  # the dropped come from these
+        assert all(list(d) == sorted(d) for d in drawn)
+    assert words.endswith(said), words
+    if have < 3:
+        assert "third" not in words  # no member a team of 1 or 2 does not have
 
 
 def test_pursuits_agents_follow_its_option_and_its_kind_follows_the_kind_option():
@@ -73,13 +117,13 @@ def test_a_pursuit_team_trained_with_3_flies_2_and_5(home, capsys):
             league.close()
         assert [s for s in seated if "random" not in s] == [r["seating"]] * 2  # what flew is what it says
     code, out, _ = run(capsys, "match", "p3/s400", "random", "--games", "2", "--env-option", "n_pursuers=5")
-    assert code == 0 and "p3/s400 flew 5 seats" in out and "drawn from the third on" in out
+    assert code == 0 and "p3/s400 flew 5 seats" in out and "2 more seats fly copies of the third member" in out
     rows = run_json(capsys, "league", "ladder", "--env", PURSUIT, "--env-option", "kind=cooperative",
                     "--env-option", "n_pursuers=5", *SMALL)
     assert {m for m in members} <= {x["policy"] for x in rows}  # the members, rated in the 5-pursuer ladder
     flown = [x["flown"] for x in rows if x["policy"] in members]
     assert flown and all(f["trained_seats"] == 3 and f["seats"] == 5 and f["team"] == "p3/s400" for f in flown)
-    assert "from the third on" in flown[0]["rule"]  # the ladder states the rule that seated them
+    assert "copies of the third member" in flown[0]["rule"]  # the ladder states the rule that seated them
     code, out, _ = run(capsys, "league", "ladder", "--env", PURSUIT, "--env-option", "kind=cooperative",
                        "--env-option", "n_pursuers=5", *SMALL)
     assert code == 0 and "p3/s400: trained with 3 seats, flown here with 5" in out
@@ -123,3 +167,18 @@ def test_the_kind_from_a_config_file_and_from_the_flag(tmp_path):
     assert settings["env_options"] == {"kind": "cooperative", "n_pursuers": 3} and "kind" not in settings
     flagged = new_settings(PURSUIT, {"kind": "free-for-all"}, config=toml)  # the flag over the file
     assert flagged["env_options"]["kind"] == "free-for-all"
+
+
+def test_a_lander_team_of_2_flown_as_4_says_what_seats_it(home, capsys):
+    """Issue 48: `marl match lander-2/s... heuristic --env-option landers=4` said the copies were 'drawn from the
+    third on' of a team of 2; the match says the rule as the team at hand has it."""
+    run_json(capsys, "train", "lander", "--agents", "2", "--sharing", "nops", "--steps", "400", "--snapshot-steps",
+             "400", "--games", "4", "--eval-games", "0", "--run", "l2")
+    code, out, _ = run(capsys, "match", "l2/s400", "heuristic", "--games", "2", "--env-option", "landers=4")
+    (line,) = [x for x in out.splitlines() if "flew 4 seats" in x]
+    assert code == 0 and "third" not in line, line
+    assert "2 more seats fly copies of the first or the second member" in line, line
+    r = run_json(capsys, "match", "l2/s400", "heuristic", "--games", "2", "--env-option", "landers=4")
+    assert r["seating"][:2] == ["l2/s400-lander_0", "l2/s400-lander_1"] and len(r["seating"]) == 4
+    assert set(r["seating"][2:]) <= {"l2/s400-lander_0", "l2/s400-lander_1"}
+    assert r["seating_rule"] == describe_resize(2, 4, f"the match's first seed ({r['first_seed']})")

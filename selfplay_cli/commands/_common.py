@@ -91,11 +91,18 @@ EnvOptionOpt = Annotated[list[str] | None, typer.Option(
     "landers=4 flies a lander team as 4; marl envs NAME lists a game's options).")]
 
 
+_VARIANT_HELP = ("The variant of the game to rate: its games played under this option (as marl match / marl train "
+                 "take it), repeatable, e.g. points_to_win=3. Default: the game's default options{run}. Options a game "
+                 "declares neutral (pong's frame_stack) split nothing.")
 VariantOpt = Annotated[list[str] | None, typer.Option(
-    "--env-option", metavar="KEY=VALUE", help="The variant of the game to rate: its games played under this option "
-    "(as marl match / marl train take it), repeatable, e.g. points_to_win=3. Default: the game's default options "
-    "(with --run: the options the run trained under). Options a game declares neutral (pong's frame_stack) split "
-    "nothing.")]
+    "--env-option", metavar="KEY=VALUE", help=_VARIANT_HELP.format(run=" (with --run: the options the run trained "
+                                                                          "under)"))]
+LedgerVariantOpt = Annotated[list[str] | None, typer.Option(
+    "--env-option", metavar="KEY=VALUE", help=_VARIANT_HELP.format(run=""))]
+"""--env-option of a command that rates the league's games without a --run (marl elo fit)."""
+LeagueEnvOpt = Annotated[str | None, typer.Option("--env", help="The game (default: the league's only game; with "
+                                                  "--run, the run's).")]
+"""--env of a command given no policies, that shows one game of the league."""
 
 
 def parse_env_options(env: str, items: list[str] | None) -> dict:

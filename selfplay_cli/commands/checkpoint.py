@@ -27,7 +27,8 @@ def _row_json(p) -> dict:
 
 @app.command("list")
 def list_cmd(
-    env: EnvOpt = None,
+    env: Annotated[str | None, typer.Option("--env", help="Only this game's snapshots (default: every "
+                                            "game's).")] = None,
     run: Annotated[str | None, typer.Option("--run", help="Only this run's snapshots.")] = None,
     bots: Annotated[bool, typer.Option("--bots", help="Also list the scripted players.")] = False,
     include_removed: Annotated[bool, typer.Option("--all", help="Also list removed snapshots.")] = False,

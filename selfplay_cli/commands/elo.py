@@ -23,7 +23,7 @@ from ._common import (
     EnvOptionOpt,
     HomeOpt,
     JsonOpt,
-    VariantOpt,
+    LedgerVariantOpt,
     check_env,
     open_league,
     parse_env_options,
@@ -38,8 +38,12 @@ app = typer.Typer(help="Fit ratings with confidence intervals; gate a model on i
 
 BootstrapOpt = Annotated[int, typer.Option("--bootstrap", max=100_000, help="Bootstrap resamples for the "
                                            "intervals: 0 (the normal approximation) or at least 20.")]
-AnchorOpt = Annotated[str | None, typer.Option("--anchor", metavar="NAME=RATING", help="Fix one player's rating, "
-                                               "e.g. cpu=1200 (default: the random bot at 1000).")]
+ANCHOR_HELP = ("Fix one player's rating, e.g. cpu=1200 (default: the anchor the game declares, at 1000: a scripted "
+               "player, random unless the game declares another, as marl envs GAME --json says; where it has no "
+               "games, random, else the first scripted player with games, else the player with the most games{more})")
+AnchorOpt = Annotated[str | None, typer.Option("--anchor", metavar="NAME=RATING", help=ANCHOR_HELP.format(more=""))]
+FitAnchorOpt = Annotated[str | None, typer.Option("--anchor", metavar="NAME=RATING", help=ANCHOR_HELP.format(
+    more="; with --results: the file's first player"))]
 PriorOpt = Annotated[float, typer.Option(
     "--prior", help="BayesElo's prior: N virtual draws spread over the games of each player, so that a perfect "
     "score gets a finite rating (MAP). The default 2 is BayesElo's. 0 gives the plain maximum-likelihood fit.")]
@@ -85,9 +89,10 @@ def check_bootstrap(n: int) -> int:
 
 @app.command("fit")
 def fit(
-    env: EnvOpt = None,
-    env_option: VariantOpt = None,
-    anchor: AnchorOpt = None,
+    env: Annotated[str | None, typer.Option("--env", help="The game to rate (default: the league's only game).")]
+    = None,
+    env_option: LedgerVariantOpt = None,
+    anchor: FitAnchorOpt = None,
     bootstrap: BootstrapOpt = DEFAULT_BOOTSTRAP,
     confidence: Annotated[float, typer.Option("--confidence", help="Level of the intervals.")] = 0.95,
     results: Annotated[Path | None, typer.Option("--results", help="Rate the games of a CSV file "

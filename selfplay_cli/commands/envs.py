@@ -53,7 +53,7 @@ def env_row(name: str) -> dict[str, Any]:
         # --env-option NAME=VALUE: type, default, whether a curriculum may drive it, and what `marl train` sets
         "options": [{**o.to_json(), **({"train_default": trained[o.name]} if o.name in trained else {})}
                     for o in options.options],
-        "options_from": options.source,  # config (a dataclass), factory (its signature), raw_env (PettingZoo's)
+        "options_from": options.source,  # config, factory, raw_env (PettingZoo's), or what the factory passes on to
         "options_open": options.open,  # it also takes keyword options it does not name (**kwargs)
     }
 
@@ -86,8 +86,8 @@ def envs(
                                            "included).")] = False,
 ) -> None:
     """List the registered games with their agents, kind, turns, per-seat spaces and scripted players; name GAMES
-    to see those alone, with their options (--env-option NAME=VALUE): type, default, and which a training
-    curriculum may drive.
+    to see those alone, with their options (what marl train's and marl match's --env-option NAME=VALUE set): type,
+    default, and which a training curriculum may drive.
 
     Games come from marl itself, from installed packages (entry-point group selfplay_cli.envs) and, named on the
     command line, from your own PettingZoo environments: `marl envs mypkg.mygame:env`.
@@ -165,7 +165,9 @@ def _print_options(row: dict[str, Any]) -> None:
     trained = any("train_default" in o for o in options)
     where = {"config": "", "factory": " (its factory's keyword arguments)",
              "raw_env": " (raw_env's keyword arguments: PettingZoo's env and parallel_env pass theirs on to it)"}
-    table = Table(title=f"{name}: options, --env-option NAME=VALUE{where.get(row['options_from'], '')}")
+    source = where.get(row["options_from"], f" (the keyword arguments of {row['options_from']}, to which its factory "
+                                            "passes its own)")
+    table = Table(title=f"{name}: options, --env-option NAME=VALUE{source}")
     for col in ("option", "type", "default") + (("live",) if live else ()) + (("marl train sets",) if trained else ()):
         table.add_column(col)
     for o in options:

@@ -20,6 +20,7 @@ from ._common import (
     EnvOptionOpt,
     HomeOpt,
     JsonOpt,
+    LeagueEnvOpt,
     QuietOpt,
     VariantOpt,
     check_env,
@@ -42,25 +43,27 @@ LADDER_HELP = "\n\n".join((
     "The ladder of one game: every player's Elo, fitted from all its stored rated games of one variant: the game's "
     "default options, or those --env-option asks for (with --run: the options the run trained under). Games under "
     "other options are rated apart; a line below the table names them and the command that shows them.",
-    "Columns: rank; tier; policy, marked (anchor) for the player whose rating is fixed (--anchor, default the random "
-    "bot at 1000), (best) in bold for the best snapshot of each run ((best, tied) when it is the best by Elo but not "
-    "beyond doubt) and (= NAME) for another name of a player's weights; kind (bot or snapshot); "
+    "Columns: rank; tier; policy, marked (anchor) for the player whose rating is fixed (--anchor, default the game's "
+    "declared anchor at 1000), (best) in bold for the best snapshot of each run ((best, tied) when it is the best by "
+    "Elo but not beyond doubt) and (= NAME) for another name of a player's weights; kind (bot or snapshot); "
     "training step; Elo, the Bradley-Terry fit (a draw is half a point); its confidence interval (--confidence, "
     "--bootstrap), relative to the anchor; games and W-D-L; score (points per game); online Elo (the live estimate "
     "updated after every game of the default options; in their ladder only); vs BOT, one column per scripted "
     "player of the game: the score against it and the number of games (blank when none). Only when some row has "
-    "one: league role (main, main_exploiter, league_exploiter of a --league alphastar run; exploiter, a best "
-    "response marl exploit filed) and exploitability (what a best response wins against the player, in the game's "
+    "one: league role (main, main_exploiter, league_exploiter of a marl train --league alphastar run; exploiter, a "
+    "best response marl exploit filed) and exploitability (what a best response wins against the player, in the game's "
     "returns: exact, from marl exploit --exact, or >= a trained best response's lower bound [its 95% interval]).",
     "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
     "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
     "--prior 0 gives the plain maximum-likelihood fit.",
-    "Rank: the place in the order of Elo (1, 2, 3, ...). Tier: players that cannot be told apart; a new tier starts "
-    "at the first player below the current tier's first beyond doubt (the confidence interval of their difference "
-    "lies wholly above zero; comparing two players directly keeps out the uncertainty they share through the "
-    "anchor). Under the table: the top's margin over the next and each run's best's over the run's next best, with "
-    "the intervals of the differences, or the snapshots the best cannot be told apart from. --run and --top only "
-    "choose the rows shown: ranks and tiers stay those of the whole ladder.",
+    "Rows are in order of Elo. Rank and tier are claims about pairs: one player is above another beyond doubt when "
+    "the confidence interval of that pair's difference lies wholly above zero, the pair judged as marl league "
+    "predict judges it (what the rest of the ladder says of the two, widened by how far the game's pairs scatter "
+    "around their ratings, then their own games). Rank: 1 + the players above it beyond doubt, so players the games "
+    "cannot order share one. Tier: a boundary falls only where everyone above it is above everyone below it beyond "
+    "doubt. Under the table: the top's margin over the next and each run's best's over the run's next best (the "
+    "pair's own figure, as marl league predict and the run's summary give it), or the snapshots the best cannot be "
+    "told apart from. --run and --top only choose the rows shown: ranks and tiers stay those of the whole ladder.",
     "Flags next to the Elo: perfect or zero, only with --prior 0: the maximum-likelihood rating is infinite (all "
     "games won or lost against the rest), the Elo shown is a bound and the interval is open on that side; "
     "disconnected: no chain of games links the player to the anchor, so its offset is unknown; unrated: no games.",
@@ -69,7 +72,7 @@ LADDER_HELP = "\n\n".join((
 
 @app.command("ladder", help=LADDER_HELP)
 def ladder_cmd(
-    env: EnvOpt = None,
+    env: LeagueEnvOpt = None,
     env_option: VariantOpt = None,
     run: Annotated[str | None, typer.Option("--run", help="Show only this run's snapshots, plus the scripted "
                                             "players for reference (ranks unchanged).")] = None,

@@ -15,9 +15,9 @@ from ._common import (
     MAX_GAMES,
     DbOpt,
     DeviceOpt,
-    EnvOpt,
     HomeOpt,
     JsonOpt,
+    LeagueEnvOpt,
     VariantOpt,
     check_env,
     open_league,
@@ -47,7 +47,8 @@ def _width() -> int:
 
 
 def plot_cmd(
-    env: EnvOpt = None,
+    env: Annotated[str | None, typer.Option("--env", help="Plot the newest run of this game (default: the newest "
+                                            "run; with --run, that run).")] = None,
     env_option: VariantOpt = None,
     run: RunOpt = None,
     out: OutOpt = None,
@@ -112,7 +113,7 @@ def plot_cmd(
 
 
 def matrix_cmd(
-    env: EnvOpt = None,
+    env: LeagueEnvOpt = None,
     env_option: VariantOpt = None,
     top: Annotated[int, typer.Option("--top", min=2, max=100, help="Players in the matrix: the N best by fitted "
                                      "Elo.")] = 10,

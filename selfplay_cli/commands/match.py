@@ -84,9 +84,8 @@ def render_report(r: MatchReport) -> None:
     console.print(f"  {r.a}: {r.wins} W  {r.draws} D  {r.losses} L of {r.n_results} {r.result_unit}s   score "
                   f"{100 * s.score:.1f}%   {shown}")
     if r.seating is not None and len(set(r.seating)) > 1:  # a team of distinct members at another size
-        console.print(f"  {r.a} flew {len(r.seating)} seats: " + ", ".join(r.seating)
-                      + " (a team at another size: the first two keep their seats, the others drawn from the third "
-                      "on)", markup=False, highlight=False)
+        console.print(f"  {r.a} flew {len(r.seating)} seats: " + ", ".join(r.seating) + f" ({r.seating_rule})",
+                      markup=False, highlight=False)
     bound = " (bound: no game lost or none won)" if s.bounded else ""
     console.print(f"  Elo difference {s.elo:+.1f}  [{100 * s.confidence:g}% CI {s.elo_low:+.1f}, {s.elo_high:+.1f}]"
                   f"{bound}   LOS {100 * s.los:.1f}%")

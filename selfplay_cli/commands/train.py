@@ -149,9 +149,10 @@ def train(
                                                   "first snapshots' parent), also of another variant of the game "
                                                   "(another team size): one snapshot starts every learner; a team "
                                                   "(run/s4k of s4k-lander_0, ...) gives learner i its member i, "
-                                                  "extra learners copies of members from the third on, fewer "
-                                                  "learners dropping members from the third on, drawn from --seed "
-                                                  "(a shared network: the first member).")] = None,
+                                                  "extra learners copies of members from the third on (of a team "
+                                                  "of 2: either member), fewer learners dropping members from the "
+                                                  "third on, drawn from --seed (a shared network: the first "
+                                                  "member).")] = None,
     teacher: Annotated[str | None, typer.Option("--teacher", metavar="PLAYER", help="Kickstart the learners: they "
                                                 "also imitate this player (a scripted player such as serve-bot, or a "
                                                 "snapshot) on the states they visit, the imitation's weight fading "

@@ -20,7 +20,8 @@ WORKER_HELP = "\n\n".join((
     "postgresql+psycopg://USER@HOST/DB. Snapshots are fetched from the league by their sha256 (checked, cached).",
     "A job whose worker goes silent for --scavenge seconds is taken by another; a job that fails is tried again after "
     "a wait, and marked dead after its tries (marl queue shows them). Ctrl-C or SIGTERM gives the job in play back "
-    "at once. A database that goes away is waited for (said once), and the worker goes on when it is back.",
+    "at once (and says which). A database that goes away is waited for (said once), and the worker goes on when it "
+    "is back.",
     "Without --until-empty or --jobs the worker runs until stopped. Exit codes: 0 done, 2 a bad option or a league it "
     "cannot use, 4 the database cannot be reached at the start, 130 Ctrl-C, 143 SIGTERM.",
 ))
@@ -47,7 +48,7 @@ def worker(
 ) -> None:
     """Lease and play the league's queued rating games (see marl worker --help)."""
     from ..rated.jobs import Outcome
-    from ..work import WorkerOptions, run_worker
+    from ..work import Leaving, WorkerOptions, run_worker
 
     if beat >= scavenge:
         raise MarlError(f"--beat ({beat:g} s) must be shorter than --scavenge ({scavenge:g} s), or a working worker's "
@@ -77,14 +78,15 @@ def worker(
 
     if not (quiet or json_out):
         said(f"leasing jobs from {league!r}" + (f", batches {', '.join(batch)}" if batch else ""))
+    left: list[Leaving] = []
     try:
         with stop_on_sigterm():
-            report = run_worker(league, options, say=said, on_job=on_job)
+            report = run_worker(league, options, say=said, on_job=on_job, on_leave=left.append)
     except Terminated:
-        said("stopped by SIGTERM; the job in play went back to the queue")
+        said("stopped by SIGTERM; " + (left[0].describe() if left else "no job was in play"))
         raise typer.Exit(EXIT_TERMINATED) from None
     except KeyboardInterrupt:
-        said("interrupted; the job in play went back to the queue")
+        said("interrupted; " + (left[0].describe() if left else "no job was in play"))
         raise typer.Exit(EXIT_INTERRUPTED) from None
     finally:
         league.close()

@@ -4,14 +4,18 @@ and whether a training curriculum may drive it, read from what the game declares
 * A game whose config is a dataclass (the built-in games): its fields, their declared types and defaults.
 * A user's PettingZoo game: its factory's keyword arguments (``spec.option_source``), with the defaults and the
   types of the signature (an annotation, else the default's type). A factory that takes only ``**kwargs`` says
-  nothing of its options; where its module follows PettingZoo's convention of a ``raw_env`` that ``env`` and
-  ``parallel_env`` pass their options to, ``raw_env``'s signature is read instead, and the listing says so.
-  ``render_mode`` is marl's to set, not an option.
+  nothing of its options; it is followed to where it passes them on, by PettingZoo's conventions (:func:`_passed_on`:
+  ``parallel_env``, a closure of ``parallel_wrapper_fn``, to the ``env`` it wraps; ``env`` to its module's
+  ``raw_env``; SISL's ``raw_env(*args, **kwargs)`` to the class it builds), and the first signature that names
+  options is read instead, and the listing says whose it is. So ``marl envs pettingzoo.sisl.pursuit_v5`` (whose
+  ``parallel_env`` marl flies) lists the options ``pursuit_v5:env`` does. ``render_mode`` is marl's to set, not an
+  option.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import dis
 import inspect
 import sys
 import types
@@ -45,7 +49,8 @@ class GameOption:
 @dataclass(frozen=True)
 class GameOptions:
     """What a game says of its options: ``options`` as declared, ``source`` where they were read (``config``, a
-    dataclass; ``factory``: its keyword arguments; ``raw_env``: the module's raw_env, PettingZoo's convention), and
+    dataclass; ``factory``: its keyword arguments; ``raw_env``: the module's raw_env, PettingZoo's convention;
+    else the module and name of the callable the factory passes them on to, :func:`_named`), and
     ``open``: it also takes keyword options it does not name (``**kwargs``), so the list may be incomplete."""
 
     options: tuple[GameOption, ...]
@@ -111,6 +116,73 @@ def _from_signature(sig: inspect.Signature, source: str, live: set[str]) -> Game
     return GameOptions(tuple(out), source, open_)
 
 
+_HOPS = 4
+"""How many times a factory is followed to where it passes its options on (parallel_env, env, raw_env, a class)."""
+
+
+def _passed_on(fn: Any) -> list[Any]:
+    """Where ``fn``, which names no option of its own (``**kwargs``), may pass its keyword arguments on, in the order
+    tried: the function it wraps (``__wrapped__``), the callables its closure holds (PettingZoo's
+    ``parallel_wrapper_fn(env)``: ``env``), its module's ``raw_env`` (PettingZoo's ``env(**kwargs)``), and, for a
+    class, the one class or function of its own package that its ``__init__`` calls by a global name (SISL's
+    ``raw_env(*args, **kwargs)``: ``Pursuit``)."""
+    out: list[Any] = []
+    wrapped = getattr(fn, "__wrapped__", None)
+    if callable(wrapped):
+        out.append(wrapped)
+    for cell in getattr(fn, "__closure__", None) or ():
+        try:
+            held = cell.cell_contents
+        except ValueError:  # an empty cell
+            continue
+        if inspect.isfunction(held) or inspect.isclass(held):
+            out.append(held)
+    module = getattr(fn, "__module__", None) or ""
+    raw = getattr(sys.modules.get(module), "raw_env", None)
+    if callable(raw):
+        out.append(raw)
+    init = getattr(fn, "__init__", None) if inspect.isclass(fn) else None
+    code, names = getattr(init, "__code__", None), getattr(init, "__globals__", None)
+    package = module.rpartition(".")[0]
+    if code is not None and isinstance(names, dict) and package:
+        called = {i.argval for i in dis.get_instructions(code) if i.opname == "LOAD_GLOBAL"}
+        own = [names[n] for n in sorted(called) if n in names and (inspect.isclass(names[n])
+                                                                  or inspect.isfunction(names[n]))
+               and (getattr(names[n], "__module__", "") or "").startswith(package + ".")]
+        if len(own) == 1:
+            out.append(own[0])
+    return [f for f in out if f is not fn]
+
+
+def _named(fn: Any, live: set[str]) -> tuple[Any, GameOptions] | None:
+    """The first callable from ``fn`` on (``fn``, then where it passes its options on, :func:`_passed_on`, up to
+    :data:`_HOPS` times) whose signature names options or takes no others, and what it says; None where none
+    does."""
+    seen: set[int] = set()
+    todo = [(fn, 0)]
+    while todo:  # depth first, in the order _passed_on tries them
+        f, hops = todo.pop()
+        if id(f) in seen:
+            continue
+        seen.add(id(f))
+        sig = _signature(f)
+        if sig is None:
+            continue
+        found = _from_signature(sig, "factory", live)
+        if found.options or not found.open:
+            return f, found
+        if hops < _HOPS:
+            todo += [(g, hops + 1) for g in reversed(_passed_on(f))]
+    return None
+
+
+def _source_name(fn: Any) -> str:
+    """How a listing names where its options were read: ``raw_env`` (PettingZoo's convention), else the callable's
+    module and name."""
+    name = getattr(fn, "__qualname__", None) or getattr(fn, "__name__", None) or repr(fn)
+    return "raw_env" if name == "raw_env" else f"{getattr(fn, '__module__', '?')}.{name}"
+
+
 def game_options(spec: EnvSpec) -> GameOptions:
     """The options of ``spec`` (see the module docstring); ``GameOptions((), "none", open=True)`` where nothing
     can be read."""
@@ -123,11 +195,10 @@ def game_options(spec: EnvSpec) -> GameOptions:
     if sig is None:
         return _with_kind(spec, GameOptions((), "none", open=True))
     found = _from_signature(sig, "factory", live)
-    if found.open and not found.options:  # env(**kwargs): PettingZoo's convention passes them to raw_env
-        raw = getattr(sys.modules.get(getattr(source, "__module__", "") or ""), "raw_env", None)
-        raw_sig = _signature(raw) if callable(raw) and raw is not source else None
-        if raw_sig is not None:
-            found = _from_signature(raw_sig, "raw_env", live)
+    if found.open and not found.options:  # env(**kwargs): followed to where it passes them on
+        named = _named(source, live)
+        if named is not None and named[0] is not source:
+            found = dataclasses.replace(named[1], source=_source_name(named[0]))
     return _with_kind(spec, found)
 
 

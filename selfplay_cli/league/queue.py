@@ -232,18 +232,21 @@ class Queue:
 
         return self._unit(work)  # type: ignore[attr-defined,no-any-return]
 
-    def stop_worker(self, worker_id: int, give_back: bool = True) -> None:
+    def stop_worker(self, worker_id: int, give_back: bool = True) -> tuple[int, ...]:
         """Mark a worker stopped; with ``give_back``, the jobs it still holds go back to the queue at once (not
-        counted as a try)."""
+        counted as a try): their ids."""
 
-        def work(s: Session) -> None:
+        def work(s: Session) -> tuple[int, ...]:
             now = utcnow()
             s.execute(update(Worker).where(Worker.id == worker_id).values(stopped_at=now, beat_at=now))
+            back: list[int] = []
             if give_back:
                 for j in s.execute(select(Job).where(Job.worker_id == worker_id, Job.state == "leased")).scalars():
                     j.state, j.tries, j.leased_at, j.beat_at = "queued", max(j.tries - 1, 0), None, None
+                    back.append(int(j.id))
+            return tuple(back)
 
-        self._unit(work)  # type: ignore[attr-defined]
+        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
 
     def workers(self, alive_within: float | None = None, taking: str | None = None) -> list[WorkerRow]:
         """Every worker (or those whose heart beat within ``alive_within`` seconds and that have not stopped; that

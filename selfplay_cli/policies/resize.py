@@ -41,19 +41,60 @@ def resize_members(n_have: int, n_want: int, seed: int) -> list[int]:
     return [i for i in range(n_have) if i not in dropped][:n_want]
 
 
+_ORDINALS = ("first", "second", "third", "fourth", "fifth", "sixth", "seventh", "eighth", "ninth", "tenth")
+
+
+def _ordinal(i: int) -> str:
+    """``0`` -> ``first``, ``10`` -> ``11th``: member ``i`` (from 0) in words."""
+    n = i + 1
+    if n <= len(_ORDINALS):
+        return _ORDINALS[i]
+    return f"{n}{'th' if 10 <= n % 100 <= 20 else {1: 'st', 2: 'nd', 3: 'rd'}.get(n % 10, 'th')}"
+
+
+def _some_of(low: int, high: int) -> str:
+    """One of the members ``low .. high - 1``, in words: ``the third member``, ``the third or the fourth member``,
+    ``members from the third to the sixth``."""
+    if high - low == 1:
+        return f"the {_ordinal(low)} member"
+    if high - low == 2:
+        return f"the {_ordinal(low)} or the {_ordinal(low + 1)} member"
+    return f"members from the {_ordinal(low)} to the {_ordinal(high - 1)}"
+
+
+def _all_of(low: int, high: int) -> str:
+    """All the members ``low .. high - 1``, in words."""
+    if high - low == 1:
+        return f"the {_ordinal(low)} member"
+    if high - low == 2:
+        return f"the {_ordinal(low)} and the {_ordinal(low + 1)} members"
+    return f"the members from the {_ordinal(low)} to the {_ordinal(high - 1)}"
+
+
 def describe_resize(n_have: int, n_want: int, drawn_from: str = "the run's seed") -> str:
-    """The rule :func:`resize_members` applied to a team of ``n_have`` flown as ``n_want``, in words (the draw comes
-    from ``drawn_from``)."""
+    """The rule :func:`resize_members` applied to a team of ``n_have`` flown as ``n_want``, in words that name the
+    members the draw takes from for this team (a team of 2 has no third member); the draw comes from
+    ``drawn_from``."""
+    head = f"{n_have} member{'s' * (n_have > 1)}, {n_want} seat{'s' * (n_want > 1)}: "
     if n_want == n_have:
-        return f"{n_have} members, {n_want} seats: each member keeps its place"
+        return head + ("each member keeps its place" if n_have > 1 else "the member keeps its place")
     if n_want > n_have:
-        pool = "members from the third on" if n_have > KEPT else "all its members"
         extra = n_want - n_have
-        seats = f"{extra} more seat{'s' * (extra > 1)}"
-        return (f"{n_have} members, {n_want} seats: the {n_have} keep their places; {seats} copy {pool}, drawn at "
-                f"random from {drawn_from}")
-    if n_want >= KEPT:
-        dropped = n_have - n_want
-        return (f"{n_have} members, {n_want} seats: {dropped} member{'s' * (dropped > 1)} from the third on "
-                f"dropped, drawn at random from {drawn_from}; the others keep their order")
-    return f"{n_have} members, {n_want} seat{'s' * (n_want > 1)}: the first {n_want} keep their places"
+        seats = f"{extra} more seat{'s' * (extra > 1)} " + ("flies a copy of " if extra == 1 else "fly copies of ")
+        if n_have == 1:
+            return head + f"it keeps its place; {seats}it"
+        low = KEPT if n_have > KEPT else 0  # as resize_members draws
+        kept = "both keep their places" if n_have == 2 else f"the {n_have} keep their places"
+        draw = "" if n_have - low == 1 else f", {'drawn' if extra == 1 else 'each drawn'} at random from {drawn_from}"
+        return head + f"{kept}; {seats}{_some_of(low, n_have)}{draw}"
+    if n_want < KEPT:  # the first n_want keep their places, whatever the draw dropped
+        others = n_have - n_want
+        gone = f"the {_ordinal(1)} is dropped" if n_have == 2 else f"the other {others} are dropped"
+        return head + f"the first member flies alone; {gone}"
+    dropped, droppable = n_have - n_want, n_have - KEPT
+    if dropped == droppable:  # all of them: nothing to draw
+        return head + (f"the first {KEPT} keep their places; {_all_of(KEPT, n_have)} "
+                       f"{'is' if dropped == 1 else 'are'} dropped")
+    return head + (f"the first {KEPT} keep their places; {dropped} of {_all_of(KEPT, n_have)} "
+                   f"{'is' if dropped == 1 else 'are'} dropped, drawn at random from {drawn_from}; the others keep "
+                   "their order")

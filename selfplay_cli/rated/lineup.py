@@ -72,8 +72,8 @@ class Lineup:
 def refit(lu: Lineup, n_seats: int, seed: int = 0) -> Lineup:
     """The lineup for a game of ``n_seats`` seats when options change the number (a lander team trained with N
     landers flown as M), by seed 001's rule (:func:`~selfplay_cli.policies.resize.resize_members`, a fixed draw from
-    ``seed``): the first members keep their places, extra seats copy members from the third on, fewer seats drop
-    members from the third on."""
+    ``seed``): the first members keep their places, extra seats copy members from the third on (a team of 1 or 2:
+    any member), fewer seats drop members from the third on."""
     if n_seats == len(lu.players):
         return lu
     players = tuple(lu.players[i] for i in resize_members(len(lu.players), n_seats, seed))

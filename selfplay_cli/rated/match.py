@@ -40,7 +40,7 @@ from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key, variant_options
 from ..policies import Policy, ScriptedPolicy
-from ..policies.resize import resize_members
+from ..policies.resize import describe_resize, resize_members
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, crew, points_between
 from ..signals import signals_held
 from ..stats.match import MatchStats, match_stats
@@ -200,6 +200,7 @@ class MatchReport:
     predicted: Any = None  # what the ladder predicted of these games before they were played (a ScorePrediction)
     round_points: list[list[float]] = field(default_factory=list, repr=False)  # A's points in each round, in order
     seating: tuple[str, ...] | None = None  # a team flown at another size: its member on each seat
+    seating_rule: str = ""  # and the rule that seated them, in words (describe_resize)
     step_limit: int | None = None  # the most steps a game lasts, as the game declares it for these options
     tie_tolerance: float = 0.0  # scores closer than this are level (a draw), as the game declares it
 
@@ -252,6 +253,7 @@ class MatchReport:
         }
         if self.seating is not None:
             out["seating"] = list(self.seating)
+            out["seating_rule"] = self.seating_rule
         if self.mean_returns is not None:
             out["mean_return"] = {"a": round(self.mean_returns[0], 4), "b": round(self.mean_returns[1], 4)}
         return out
@@ -520,6 +522,8 @@ class _Match:
         out.step_limit = self.spec.max_steps(self.spec.config(**self.options))
         if self.team_seats is not None and len(self.team_seats) != len(self.roster) - 1:  # a team resized
             out.seating = tuple(self.roster[i].id for i in self.team_seats)
+            out.seating_rule = describe_resize(len(self.roster) - 1, len(self.team_seats),
+                                               f"the match's first seed ({self.first_seed})")
         return out
 
 

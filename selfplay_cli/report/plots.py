@@ -223,6 +223,21 @@ def _shared(a: LearnerCurve, b: LearnerCurve, tol: float) -> int:
     return sum(1 for p in a.points if p.step in at and abs(at[p.step] - p.elo) <= tol)
 
 
+def _nearness(a: LearnerCurve, b: LearnerCurve, tol: float) -> str | None:
+    """How ``a`` falls on ``b``, for ``a``'s legend: ``same Elo as b at 3 of 3 snapshots`` where every rating of
+    ``a`` within ``tol`` of ``b``'s at the same step prints (to the unit, as the figure prints them) as ``b``'s,
+    ``within 9 Elo of b at 1 of 3 snapshots`` (the widest gap, rounded up) otherwise; None where none is."""
+    at = {p.step: p.elo for p in b.points}
+    pairs = [(p.elo, at[p.step]) for p in a.points if p.step in at and abs(at[p.step] - p.elo) <= tol]
+    if not pairs:
+        return None
+    where = f"at {len(pairs)} of {len(a.points)} snapshot{'s' if len(a.points) != 1 else ''}"
+    if all(f"{x:.0f}" == f"{y:.0f}" for x, y in pairs):
+        return f"same Elo as {b.learner} {where}"
+    gap = max(1, math.ceil(max(abs(x - y) for x, y in pairs)))
+    return f"within {gap} Elo of {b.learner} {where}"
+
+
 def coinciding(curves: RunCurves) -> list[tuple[int, ...]]:
     """Groups (two or more, by index into ``curves.curves``) of learners whose curves fall on each other: linked by
     at least one point at the same step within :data:`COINCIDE` of the chart's Elo range. Drawn as they are, the
@@ -370,12 +385,10 @@ def _draw_learner(ax: Any, curves: RunCurves, k: int, shift: float, group: tuple
                     color=color, markersize=4.5)
     dots.set_gid(f"points:{curve.learner}")
     label = curve.learner
-    if group:
-        others = [curves.curves[i].learner for i in group if i != k]
-        same = max(_shared(curve, curves.curves[i], tol) for i in group if i != k)
-        label += (f" (same Elo as {', '.join(others)} at {same} of {len(curve.points)} snapshot"
-                  f"{'s' if len(curve.points) != 1 else ''}; drawn {'+' if shift >= 0 else '-'}"
-                  f"{format_steps(abs(shift))} steps aside)")
+    if group:  # each learner of its group it falls on, and how close (a group links through its members)
+        near = [n for i in group if i != k and (n := _nearness(curve, curves.curves[i], tol)) is not None]
+        label += (f" ({'; '.join(near)}; drawn {'+' if shift >= 0 else '-'}{format_steps(abs(shift))} steps "
+                  "aside)")
     ax.plot([], [], color=color, linestyle=dash, linewidth=1.6, marker=marker, markersize=4.5, label=label)
     bound = [(x, p) for x, p in zip(steps, curve.points, strict=True) if p.bound]
     if bound:

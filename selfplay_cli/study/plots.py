@@ -28,7 +28,8 @@ def _save(fig: Any, path: Path) -> Path:
 
 
 def plot_returns(report: dict[str, Any], path: Path) -> Path:
-    """Mean team return (95% interval) against the team size flown, one line per size trained at."""
+    """Mean team return (95% interval) against the team size flown, one line per size trained at; the x axis is
+    ticked at the sizes studied only."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for n in report["train"]:
@@ -43,6 +44,9 @@ def plot_returns(report: dict[str, Any], path: Path) -> Path:
         vs = sorted(vs, key=lambda c: c["evaluated"])
         ax.plot([c["evaluated"] for c in vs], [c["vs"]["mean"] for c in vs], color="grey", linestyle=":",
                 label=f"{report['vs']}")
+    sizes = sorted({int(c["evaluated"]) for c in report["returns"]} | {int(m) for m in report.get("eval", ())})
+    ax.set_xticks(sizes, [str(m) for m in sizes])  # whole seats: the sizes studied, nothing between them
+    ax.set_xticks([], minor=True)
     ax.set_xlabel(f"team size flown ({report['size_option']})")
     ax.set_ylabel("mean team return per game")
     ax.set_title(f"{report['env']}: team size (study {report['study']})")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -330,6 +330,21 @@ class TrainConfig:
         d["teacher"] = asdict(self.teacher)
         d["league"] = asdict(self.league) if self.league is not None else None
         return d
+
+    @classmethod
+    def defaults(cls, env: str, run: str = "new") -> dict[str, Any]:
+        """Every setting at its default for a run on ``env``, in :meth:`to_dict`'s layout, unchecked: the first
+        layer of a new run's settings (:func:`~selfplay_cli.train.settings.new_settings`). The defaults alone are
+        no run, and are not checked as one (256 games of an image game would not fit in memory where the 4 the
+        user types do): the settings are checked once every layer is applied (:meth:`from_dict`)."""
+        cfg = object.__new__(cls)  # no __post_init__: nothing is checked here
+        for f in fields(cls):
+            if f.default is not MISSING:
+                setattr(cfg, f.name, f.default)
+            elif f.default_factory is not MISSING:
+                setattr(cfg, f.name, f.default_factory())
+        cfg.env, cfg.run = env, run
+        return cfg.to_dict()
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrainConfig:

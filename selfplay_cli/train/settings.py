@@ -114,7 +114,7 @@ def new_settings(env: str | None, flags: Mapping[str, Any], *, config: Path | No
     spec = get_env(env)
     if preset not in (None, *PRESETS):
         raise MarlError(f"unknown --preset '{preset}'; available: {', '.join(PRESETS)}")
-    settings = TrainConfig(env=spec.name, run="new").to_dict()  # the defaults
+    settings = TrainConfig.defaults(spec.name)  # the defaults, checked only with the layers over them (below)
     merge_settings(settings, game_defaults(spec))  # the game's own (marl envs NAME shows them)
     if preset == "seed000":
         from ..algos.dqn import seed000_config

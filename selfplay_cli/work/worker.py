@@ -24,7 +24,7 @@ from ..league.queue import BEAT_SECONDS, SCAVENGE_SECONDS, JobRow
 from ..league.store import League
 from ..rated.jobs import Outcome, play_leased, worker_name
 
-__all__ = ["WorkerOptions", "WorkerReport", "run_worker"]
+__all__ = ["Leaving", "WorkerOptions", "WorkerReport", "run_worker"]
 
 _IDLE_MAX = 2.0  # the longest wait between two looks at an empty queue (a claim is one cheap query)
 _AWAY_MAX = 30.0  # the longest wait between two tries of a database that cannot be reached
@@ -72,6 +72,28 @@ class WorkerReport:
                 "jobs": self.outcomes}
 
 
+@dataclass(frozen=True)
+class Leaving:
+    """How a worker left: the job it had in play (None: it was idle) and the jobs the league took back from it
+    (None: the league could not be reached; their leases lapse instead)."""
+
+    in_play: JobRow | None
+    given_back: tuple[int, ...] | None
+
+    def describe(self) -> str:
+        """What became of the job in play, in words (``no job was in play`` when idle)."""
+        if self.in_play is None:
+            return "no job was in play"
+        j = self.in_play
+        what = f"job {j.id} ({j.batch}, {j.kind})"
+        if self.given_back is None:
+            return (f"{what} was in play; the league could not be reached: it goes back to the queue when its lease "
+                    "lapses")
+        if j.id in self.given_back:
+            return f"{what}, in play, went back to the queue"
+        return f"{what} was in play but no longer leased to this worker (cancelled or taken over): nothing given back"
+
+
 def _retrying(fn: Callable[[], Any], say: Callable[[str], None], what: str) -> Any:
     """``fn()``, tried again with a growing wait while the database cannot be reached (said once)."""
     wait, said = 1.0, False
@@ -89,10 +111,12 @@ def _retrying(fn: Callable[[], Any], say: Callable[[str], None], what: str) -> A
 def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], None] = lambda _: None,
                on_job: Callable[[Outcome], None] | None = None,
                on_games: Callable[[int], None] | None = None,
-               stop: Callable[[], bool] | None = None) -> WorkerReport:
+               stop: Callable[[], bool] | None = None,
+               on_leave: Callable[[Leaving], None] | None = None) -> WorkerReport:
     """Work the queue of ``league`` as ``options`` say (see the module docstring); what was done. ``stop()`` is asked
     before each claim, at each look at an empty queue and at each game report of the job in play: once it is true
-    the worker leaves, the job in play given back to the queue at once."""
+    the worker leaves, the job in play given back to the queue at once. ``on_leave`` is told how it left, however
+    it left (Ctrl-C and SIGTERM too, before they go on): the job in play, if any, and what was given back."""
     stopped = stop or (lambda: False)
 
     def counted(n: int) -> None:
@@ -132,8 +156,11 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
             if on_job is not None:
                 on_job(out)
     finally:  # Ctrl-C, SIGTERM, an error: the job in play goes back to the queue now, not when its lease lapses
+        back: tuple[int, ...] | None = None
         with contextlib.suppress(Exception):  # (the database away: the lease lapses instead)
-            league.stop_worker(wid, give_back=True)
+            back = league.stop_worker(wid, give_back=True)
+        if on_leave is not None:
+            on_leave(Leaving(job, back))
     return report
 
 
