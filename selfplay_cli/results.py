@@ -11,7 +11,10 @@ its tie tolerance and, where its seats differ, each seat's role (a policy plays 
 
 * ``two-sides``: zero-sum between two sides (``sides``: the seats of each; by default seat 0 against seat 1). The
   side with the higher total score wins; a difference of at most ``tie_tolerance`` is a draw. Every seat of a side
-  gets the side's points (1, 0.5, 0).
+  gets the side's points (1, 0.5, 0). A game played for ``stakes`` (poker: a hand is won by some chips, up to the
+  stakes) scores by what was won instead: ``1/2 + (the side's total - the other's) / (4 stakes)``, so a hand won
+  by all the stakes is 1, one won by a quarter of them 0.625, and the points of a match are the chips won, not the
+  hands (a player that wins many small pots and loses the big ones is behind).
 * ``cooperative``: every seat plays for one team. One game has no winner (every seat gets 0.5 points); two policies
   are compared by flying the same seed each, the higher team return (the sum of the seats' scores) winning
   (:func:`compare`), a difference of at most ``tie_tolerance`` being a draw.
@@ -117,8 +120,15 @@ class Rules:
     sides: tuple[tuple[int, ...], ...] | None = None
     tie_tolerance: float = 0.0
     roles: tuple[str, ...] | None = None
+    stakes: float | None = None  # two-sides only: the most a side can win (points follow the margin, see above)
 
     def __post_init__(self) -> None:
+        if self.stakes is not None:
+            if self.kind != TWO_SIDES:
+                raise ValueError(f"a {self.kind} game is not played for stakes (two-sides games only)")
+            if not (np.isfinite(self.stakes) and self.stakes > 0):
+                raise ValueError(f"the stakes must be a finite number > 0, not {self.stakes}")
+            object.__setattr__(self, "stakes", float(self.stakes))
         if self.kind not in KINDS:
             raise ValueError(f"unknown game kind {self.kind!r} (expected one of {', '.join(KINDS)})")
         if not self.n_seats >= 1:
@@ -151,7 +161,7 @@ class Rules:
         roles = spec.seat_roles() if callable(getattr(spec, "seat_roles", None)) else None
         return cls(n_seats=len(spec.agents), kind=getattr(spec, "kind", TWO_SIDES) or TWO_SIDES,
                    sides=getattr(spec, "sides", None), tie_tolerance=float(getattr(spec, "tie_tolerance", 0.0) or 0.0),
-                   roles=roles)
+                   roles=roles, stakes=getattr(spec, "stakes", None))
 
     @property
     def is_default(self) -> bool:
@@ -181,6 +191,8 @@ class Rules:
                "tie_tolerance": self.tie_tolerance}
         if self.roles is not None:
             out["roles"] = list(self.roles)
+        if self.stakes is not None:
+            out["stakes"] = self.stakes
         return out
 
     @classmethod
@@ -188,11 +200,11 @@ class Rules:
         """Rules stored with :meth:`to_json`; none stored: the default (:attr:`is_default`)."""
         if not data:
             return cls()
-        sides, roles = data.get("sides"), data.get("roles")
+        sides, roles, stakes = data.get("sides"), data.get("roles"), data.get("stakes")
         return cls(n_seats=int(data.get("n_seats", 2)), kind=str(data.get("kind", TWO_SIDES)),
                    sides=None if sides is None else tuple(tuple(s) for s in sides),
                    tie_tolerance=float(data.get("tie_tolerance", 0.0)),
-                   roles=None if roles is None else tuple(roles))
+                   roles=None if roles is None else tuple(roles), stakes=None if stakes is None else float(stakes))
 
     def _cmp(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Points of ``x`` against ``y``: 1 above, 0 below, 0.5 within the tie tolerance."""
@@ -206,7 +218,11 @@ class Rules:
             raise ValueError(f"scores of {s.shape[0]} seats for a game of {self.n_seats}")
         if self.kind == TWO_SIDES:
             assert self.sides is not None
-            first = self._cmp(s[list(self.sides[0])].sum(axis=0), s[list(self.sides[1])].sum(axis=0))
+            mine, theirs = s[list(self.sides[0])].sum(axis=0), s[list(self.sides[1])].sum(axis=0)
+            first = self._cmp(mine, theirs)
+            if self.stakes is not None:  # by what was won
+                won = np.clip(0.5 + (mine - theirs) / (4.0 * self.stakes), 0.0, 1.0)
+                first = np.where(first == 0.5, 0.5, won)
             out = np.empty_like(s)
             out[list(self.sides[0])] = first
             out[list(self.sides[1])] = 1.0 - first

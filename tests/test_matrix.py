@@ -305,7 +305,7 @@ def test_cli_matrix_command_plays_the_missing_games(home: Path, capsys) -> None:
 
 
 def test_cli_matrix_errors_are_one_line(home: Path, capsys, tmp_path: Path) -> None:
-    _one_line_error(*run(capsys, "league", "matrix"), "no games")
+    _one_line_error(*run(capsys, "league", "matrix"), "no rated games")
     with League.open(home=home) as lg:
         a, b = _snap(lg, "a"), _snap(lg, "b")
         _play(lg, a, b, 5, 0, 5)

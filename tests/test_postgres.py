@@ -235,7 +235,7 @@ def test_a_new_empty_database_reads_as_an_empty_league(pg_url: str, capsys: pyte
     code, out, err = run(capsys, "checkpoint", "list", "--db", pg_url, "--json")
     assert code == 0 and json.loads(out) == [], err
     err = _one_line(*run(capsys, "league", "ladder", "--db", pg_url), exit_code=2)
-    assert "no games yet" in err
+    assert "no rated games yet" in err
     assert _tables(pg_url) == set()
     assert run(capsys, "checkpoint", "tag", "x", "y", "--db", pg_url)[0] == 2  # no snapshot x: but the league is made
     assert "alembic_version" in _tables(pg_url)

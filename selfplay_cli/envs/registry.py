@@ -270,6 +270,8 @@ class EnvSpec:
     sides' total score; ``sides`` lists the seats of each side, default seat i is side i for 2 seats),
     ``"cooperative"`` (all seats one team; two policies compared by team return on the same seeds, a difference
     within ``tie_tolerance`` a draw) or ``"free-for-all"`` (pairwise results from the final order of scores).
+    ``stakes``: a two-sides game played for stakes (poker's chips), the most a side can win: a result is then worth
+    what was won (:class:`~selfplay_cli.results.Rules`), not only who won.
 
     ``make_parallel(**options)`` makes the game's PettingZoo env (a ParallelEnv for pong). ``make_seat_spaces``
     gives each seat's :class:`SeatSpace` for a config; without it every seat has ``observation_space(cfg)`` and
@@ -319,6 +321,7 @@ class EnvSpec:
     kind: str = "two-sides"
     sides: tuple[tuple[int, ...], ...] | None = None
     tie_tolerance: float = 0.0
+    stakes: float | None = None  # a two-sides game played for stakes: the most a side can win (results by margin)
     make_seat_spaces: Callable[[Any], tuple[SeatSpace, ...]] | None = None
     time_limit: Callable[[Any], int | None] | None = None
     render_fps: int | None = None  # frames per second a recording of it plays at by default (None: one per step at 60)
@@ -356,6 +359,10 @@ class EnvSpec:
                 and self.tie_tolerance >= 0):
             raise ValueError(f"game {self.name!r}: tie_tolerance must be a finite number >= 0, "
                              f"not {self.tie_tolerance!r}")
+        if self.stakes is not None and not (self.kind == "two-sides" and math.isfinite(self.stakes)
+                                            and self.stakes > 0):
+            raise ValueError(f"game {self.name!r}: stakes are for two-sides games, a finite number > 0, not "
+                             f"{self.stakes!r} ({self.kind})")
         if self.sides is not None:
             if self.kind != "two-sides":
                 raise ValueError(f"game {self.name!r}: sides are for two-sides games, not {self.kind}")

@@ -96,12 +96,14 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
     unless given; training games left out, as in every rating).
 
     Returns a dict with ``a_id, b_id, games, results, wins, draws, losses, score`` (A's mean points, 0.5 without
-    results), ``pentanomial`` and ``pairs``, ``unpaired``. ``games`` counts the ledger's games (a cooperative
-    comparison is two episodes), ``results`` the pairwise results W + D + L. Game pairs (two-sides games only):
-    within one match, games with the same seed, one with A on the first side and one with A on the second (matched
-    in game-id order). A pair's score is A's points in both games; ``pentanomial`` counts pairs scoring ``0, 0.5,
-    1, 1.5, 2``, i.e. ``[LL, LD, WL+DD, WD, WW]`` as :func:`~selfplay_cli.stats.sprt.sprt_llr` expects. Results
-    outside pairs (cooperative comparisons, free-for-all results, unpaired games) count in W/D/L only.
+    results), ``pentanomial`` and ``pairs``, ``unpaired``, and ``rounds``: A's points in each pair, then in each
+    result outside a pair (what a game played for stakes, whose results are worth any points, is measured from).
+    ``games`` counts the ledger's games (a cooperative comparison is two episodes), ``results`` the pairwise results
+    W + D + L. Game pairs (two-sides games only): within one match, games with the same seed, one with A on the first
+    side and one with A on the second (matched in game-id order). A pair's score is A's points in both games;
+    ``pentanomial`` counts pairs scoring ``0, 0.5, 1, 1.5, 2``, i.e. ``[LL, LD, WL+DD, WD, WW]`` as
+    :func:`~selfplay_cli.stats.sprt.sprt_llr` expects. Results outside pairs (cooperative comparisons, free-for-all
+    results, unpaired games) count in W/D/L only.
     """
     a_id, b_id = int(a_id), int(b_id)
     if a_id == b_id:
@@ -123,10 +125,15 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
             groups[(m, sd)][0 if first else 1].append(p)
     penta = [0, 0, 0, 0, 0]
     pairs = 0
+    rounds: list[list[float]] = []
     for as_first, as_second in groups.values():
         for p1, p2 in zip(as_first, as_second, strict=False):
             penta[min(max(int(round(2 * (p1 + p2))), 0), 4)] += 1
             pairs += 1
+            rounds.append([p1, p2])
+        k = min(len(as_first), len(as_second))
+        rounds += [[p] for p in as_first[k:] + as_second[k:]]
+    rounds += [[p] for p, paired in zip(pts.tolist(), two_sides.tolist(), strict=True) if not paired]
     n = len(table)
     return {
         "a_id": a_id,
@@ -140,6 +147,7 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
         "pentanomial": penta,
         "pairs": pairs,
         "unpaired": n - 2 * pairs,
+        "rounds": rounds,
     }
 
 

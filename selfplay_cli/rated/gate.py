@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..league.store import League, PlayerRow
-from ..stats.match import MatchStats, match_stats
+from ..stats.match import MatchStats, match_stats, points_stats
 from .match import load_player, mix_seed, run_match
 from .snapshots import players_variant
 
@@ -83,7 +83,11 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
         played = report.games
         wins, draws, losses = wins + report.wins, draws + report.draws, losses + report.losses
         penta = [x + y for x, y in zip(penta, report.pentanomial, strict=True)]
-    stats = match_stats(wins, draws, losses, pentanomial=tuple(penta) if sum(penta) else None,
-                        confidence=2 * confidence - 1)
+    rounds = h2h["rounds"] + (report.round_points if played else [])
+    if any(x not in (0.0, 0.5, 1.0) for r in rounds for x in r):  # a game played for stakes: by the points won
+        stats = points_stats(rounds, paired=True, confidence=2 * confidence - 1)
+    else:
+        stats = match_stats(wins, draws, losses, pentanomial=tuple(penta) if sum(penta) else None,
+                            confidence=2 * confidence - 1)
     return GateVerdict(cand.full_name, base.full_name, min_diff, confidence, stats, stored, played,
                        passed=stats.elo_low >= min_diff)

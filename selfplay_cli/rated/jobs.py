@@ -22,6 +22,7 @@ from typing import Any
 from ..errors import MarlError
 from ..league.queue import BEAT_SECONDS, ENDED, SCAVENGE_SECONDS, JobRow
 from ..league.store import League
+from ..stats.sprt import LEVELS, categories, count_model
 from . import games_jobs, gauntlet_jobs
 from .played import Played
 
@@ -169,15 +170,13 @@ def sprt_verdict(jobs: Sequence[JobRow], test: Any, paired: bool) -> tuple[float
             break
         rounds += j.result["round_points"]
     llr, decision, n = 0.0, None, 0
-    counts = [0] * (5 if paired else 3)
+    model = count_model(rounds, paired)
+    counts = [0] * {"categorical": LEVELS, "pentanomial": 5, "trinomial": 3}[model]
     for pts in rounds:
         n += 1
-        if paired:  # the pair's points 0, 0.5, 1, 1.5, 2: LL, LD, WL+DD, WD, WW
-            counts[int(round(2 * sum(pts)))] += 1
-        else:
-            for x in pts:
-                counts[0 if x < 0.5 else 1 if x == 0.5 else 2] += 1
-        llr = test.llr(counts, "pentanomial" if paired else "trinomial")
+        for k in categories(pts, model):
+            counts[k] += 1
+        llr = test.llr(counts, model)
         decision = test.decide(llr)
         if decision is not None:
             break

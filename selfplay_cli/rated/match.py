@@ -43,8 +43,8 @@ from ..policies import Policy, ScriptedPolicy
 from ..policies.resize import describe_resize, resize_members
 from ..results import COOPERATIVE, TWO_SIDES, GameResult, Rules, crew, points_between
 from ..signals import signals_held
-from ..stats.match import MatchStats, match_stats
-from ..stats.sprt import SPRT
+from ..stats.match import MatchStats, points_stats
+from ..stats.sprt import SPRT, round_counts
 from .roles import cannot_meet_message, policy_roles
 
 
@@ -490,7 +490,7 @@ class _Match:
             new += got  # type: ignore[arg-type]
             self.round_points.append(points_between(self.rules, got, self.a_key, self.b.id))  # type: ignore[arg-type]
             if self.test is not None:
-                self.llr = self.test.llr(*_counts(self.paired, self.round_points))
+                self.llr = self.test.llr(*round_counts(self.round_points, self.paired))
                 self.decision = self.test.decide(self.llr)
                 if self.decision is not None:
                     break
@@ -527,15 +527,6 @@ class _Match:
         return out
 
 
-def _counts(paired: bool, round_points: list[list[float]]) -> tuple[list[int], str]:
-    """What the SPRT counts: game pairs by A's points (pentanomial) where rounds are seat-swapped pairs, else A's
-    results (trinomial: losses, draws, wins)."""
-    if paired:
-        return list(pentanomial(np.array([sum(p) for p in round_points]))), "pentanomial"
-    pts = np.array([x for p in round_points for x in p])
-    return [int((pts < 0.5).sum()), int((pts == 0.5).sum()), int((pts > 0.5).sum())], "trinomial"
-
-
 def _report(env: str, rules: Rules, paired: bool, a_name: str, a_key: Any, b: Policy, kept: list[GameResult],
             round_points: list[list[float]], seconds: float, match_id: int | None, first_seed: int, confidence: float,
             game_ids: list[int]) -> MatchReport:
@@ -546,8 +537,7 @@ def _report(env: str, rules: Rules, paired: bool, a_name: str, a_key: Any, b: Po
         env=env, a=a_name, b=b.id, games=len(kept), wins=wins, draws=draws, losses=losses,
         points_for=_number(sum(_score_of(r, a_key) for r in kept)),
         points_against=_number(sum(r.score_of(b.id) for r in kept)),
-        pentanomial=penta, stats=match_stats(wins, draws, losses, pentanomial=penta if paired else None,
-                                             confidence=confidence),
+        pentanomial=penta, stats=points_stats(round_points, paired, confidence),
         seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
         results=kept, game_ids=game_ids, kind=rules.kind, paired=paired, round_points=round_points,
         tie_tolerance=rules.tie_tolerance,

@@ -7,13 +7,14 @@ numpy and the standard library only.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from .elo import MAX_ELO, SCORE_CLIP, normal_quantile, score_to_elo
 
-__all__ = ["MatchStats", "match_stats", "score_interval"]
+__all__ = ["MatchStats", "match_stats", "points_stats", "score_interval"]
 
 
 @dataclass(frozen=True)
@@ -173,6 +174,54 @@ def match_stats(
         used_pentanomial=use_penta,
     )
 
+
+def points_stats(round_points: Sequence[Sequence[float]], paired: bool, confidence: float = 0.95) -> MatchStats:
+    """:func:`match_stats` of a match whose results are any points in [0, 1] (a game played for stakes: poker's hands
+    are worth the chips they win, :class:`~selfplay_cli.results.Rules`), from A's points in each result, grouped in
+    rounds (``paired``: each round a seat-swapped pair of games, whose mean is the unit of the variance, as the
+    pentanomial's). Where every point is a win, a draw or a loss this is :func:`match_stats` of the record exactly;
+    otherwise the score is the mean point, its standard error the spread of the rounds' means (of the results'
+    without pairs), the interval and LOS drawn from them as :func:`match_stats` draws its own. W / D / L count the
+    results above, at and below 1/2."""
+    rounds = [np.asarray(r, dtype=np.float64) for r in round_points if len(r)]
+    pts = np.concatenate(rounds) if rounds else np.zeros(0)
+    w, d, lo = int((pts > 0.5).sum()), int((pts == 0.5).sum()), int((pts < 0.5).sum())
+    whole = bool(np.all(np.isin(pts, (0.0, 0.5, 1.0))))
+    if whole or not pts.size:
+        penta = None
+        if paired and rounds:  # (LL, LD, WL+DD, WD, WW): the pairs by A's points in them
+            idx = np.rint(np.array([r.sum() for r in rounds]) * 2).astype(np.int64)
+            penta = tuple(int(c) for c in np.bincount(idx, minlength=5)[:5])
+        return match_stats(w, d, lo, pentanomial=penta, confidence=confidence)  # type: ignore[arg-type]
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"points_stats: confidence must be in (0, 1), got {confidence}")
+    if np.any((pts < 0.0) | (pts > 1.0)):
+        raise ValueError("points_stats: points must lie in [0, 1]")
+    n = pts.size
+    score = float(pts.mean())
+    bounded = score >= 1.0 or score <= 0.0
+    if bounded:  # one virtual draw, as match_stats
+        s_est = (float(pts.sum()) + 0.5) / (n + 1)
+        se = math.sqrt(float(np.mean(np.append(pts, 0.5) ** 2) - s_est**2) / (n + 1))
+    else:
+        s_est = score
+        units = np.array([r.mean() for r in rounds]) if paired else pts
+        se = float(units.std()) / math.sqrt(units.size)
+        if se == 0.0:
+            se = _degenerate_se(n, units.size if paired else 0)
+    z = normal_quantile(0.5 + 0.5 * confidence)
+    lo_s = min(max(s_est - z * se, SCORE_CLIP), 1.0 - SCORE_CLIP)
+    hi_s = min(max(s_est + z * se, SCORE_CLIP), 1.0 - SCORE_CLIP)
+    elo = score_to_elo(s_est)
+    elo_low, elo_high = score_to_elo(lo_s), score_to_elo(hi_s)
+    if bounded:
+        if score >= 1.0:
+            elo_high = MAX_ELO
+        else:
+            elo_low = -MAX_ELO
+    return MatchStats(games=n, wins=w, draws=d, losses=lo, score=score, elo=elo, elo_low=min(elo_low, elo),
+                      elo_high=max(elo_high, elo), los=_likelihood_of_superiority(s_est, se), bounded=bounded,
+                      confidence=confidence, used_pentanomial=paired)
 
 
 def score_interval(wins: int, draws: int, losses: int, confidence: float = 0.95) -> tuple[float, float]:

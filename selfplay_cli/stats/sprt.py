@@ -23,7 +23,8 @@ FloatArray = npt.NDArray[np.float64]
 
 # Elo-model names accepted by the SPRT functions.
 EloModel = Literal["logistic", "normalized"]
-CountModel = Literal["pentanomial", "trinomial"]
+CountModel = Literal["pentanomial", "trinomial", "categorical"]
+LEVELS = 17  # a categorical count's levels of a round's mean points: 0, 1/16, ..., 1
 
 # Normalized Elo per unit of t-value: nElo = t * 800 / ln(10) (fishtest's ``nelo_divided_by_nt``).
 _NELO_PER_T: float = 800.0 / math.log(10.0)
@@ -198,7 +199,9 @@ def sprt_llr(
     Args:
         counts: ``model="pentanomial"``: 5 game-pair counts ``(LL, LD+DL, WL+LW+DD, WD+DW, WW)``, i.e.
             pairs whose two-game score is 0, 1/2, 1, 3/2, 2 (pair-mean scores ``a = 0, 1/4, 1/2, 3/4, 1``);
-            ``model="trinomial"``: ``(losses, draws, wins)`` with ``a = 0, 1/2, 1``.
+            ``model="trinomial"``: ``(losses, draws, wins)`` with ``a = 0, 1/2, 1``; ``model="categorical"``
+            (results worth any points, a game played for stakes: :func:`round_counts`): counts of rounds by their
+            mean points at ``a = 0, 1/(k-1), ..., 1``, logistic Elo only.
         elo0, elo1: the hypotheses, in logistic Elo (``elo_model="logistic"``, the 400-scale Elo) or in
             normalized Elo (``elo_model="normalized"``, fishtest's / fastchess's "nElo").
         model: ``"pentanomial"`` or ``"trinomial"``; ``None`` infers it from ``len(counts)`` (5 or 3).
@@ -227,6 +230,16 @@ def sprt_llr(
     vals = np.asarray(counts, dtype=float)
     if vals.ndim != 1:
         raise ValueError("sprt_llr: counts must be a flat sequence")
+    if model == "categorical":
+        if vals.size < 2 or np.any(vals < 0) or not np.all(np.isfinite(vals)) or elo_model != "logistic":
+            raise ValueError("sprt_llr: categorical counts are 2 or more finite counts >= 0, in logistic Elo")
+        if vals.sum() <= 0:
+            return 0.0
+        vals = np.where(vals == 0.0, _SPRT_EMPTY_BIN, vals)
+        total = float(vals.sum())
+        phat, a = vals / total, np.linspace(0.0, 1.0, vals.size)
+        p0, p1 = _mle_expected(phat, a, elo_to_score(elo0)), _mle_expected(phat, a, elo_to_score(elo1))
+        return float(total * np.sum(phat * (np.log(p1) - np.log(p0))))
     if model is None:
         model = "pentanomial" if vals.size == 5 else "trinomial" if vals.size == 3 else None
         if model is None:
@@ -257,6 +270,35 @@ def sprt_llr(
         except ValueError:
             return _llr_normalized_approx(phat, a, total, model == "pentanomial", elo0, elo1)
     return float(total * np.sum(phat * (np.log(p1) - np.log(p0))))
+
+
+def round_counts(round_points: Sequence[Sequence[float]], paired: bool) -> tuple[list[int], CountModel]:
+    """What a GSPRT counts of a match's rounds (A's points in each result of each round): game pairs by A's points
+    in them, ``(LL, LD, WL+DD, WD, WW)``, where the rounds are seat-swapped pairs of wins, draws and losses; A's
+    results ``(losses, draws, wins)`` where they are not paired; where results are worth any points (a game played
+    for stakes), the rounds by their mean points at :data:`LEVELS` levels (``categorical``)."""
+    model = count_model(round_points, paired)
+    counts = [0] * {"categorical": LEVELS, "pentanomial": 5, "trinomial": 3}[model]
+    for r in round_points:
+        for k in categories(r, model):
+            counts[k] += 1
+    return counts, model
+
+
+def count_model(round_points: Sequence[Sequence[float]], paired: bool) -> CountModel:
+    """The :func:`round_counts` model of these rounds."""
+    if any(float(x) not in (0.0, 0.5, 1.0) for r in round_points for x in r):
+        return "categorical"
+    return "pentanomial" if paired else "trinomial"
+
+
+def categories(points: Sequence[float], model: CountModel) -> list[int]:
+    """The count(s) one round adds to, under ``model`` (a trinomial round: one per result)."""
+    if model == "categorical":
+        return [int(round((LEVELS - 1) * sum(points) / len(points)))] if len(points) else []
+    if model == "pentanomial":
+        return [min(max(int(round(2 * sum(points))), 0), 4)]
+    return [0 if x < 0.5 else 1 if x == 0.5 else 2 for x in points]
 
 
 @dataclass(frozen=True)

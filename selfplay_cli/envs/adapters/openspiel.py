@@ -143,6 +143,15 @@ class OpenSpielConfig:
             return "two-sides"
         return "free-for-all"
 
+    def stakes(self) -> float | None:
+        """A two-player zero-sum game is played for its stakes, the most a player can win (``max_utility()``: poker's
+        pot, 2 chips in Kuhn poker, 13 in Leduc; 1 in a board game, whose results are then the usual win, draw or
+        loss): a result is worth what was won, so a player is rated by the chips it wins, not the hands."""
+        if self.kind() != "two-sides":
+            return None
+        top = float(self.game.max_utility())
+        return top if np.isfinite(top) and top > 0 else None
+
     def __repr__(self) -> str:
         return f"OpenSpielConfig({self.name})"
 
@@ -201,6 +210,7 @@ def openspiel_game(name: str) -> EnvSpec:
         bots={"random": random_bot(seat.action, "uniformly random legal moves")},
         turns="simultaneous" if cfg.simultaneous else "sequential",
         kind=cfg.kind(),
+        stakes=cfg.stakes(),
         make_seat_spaces=lambda c: (seat,) * c.n_players,
         time_limit=lambda c: c.max_steps,
         render_fps=2,
