@@ -73,3 +73,20 @@ def test_ci_runs_the_readme_install_and_test_commands():
     readme = (ROOT / "README.md").read_text()
     assert re.search(r"<!-- ci:install -->\n```sh\npython3 -m venv \.venv && .*pip install", readme)
     assert re.search(r"<!-- ci:test -->\n```sh\n\.venv/bin/pytest", readme)
+
+
+def test_readme_shows_what_marl_envs_prints_and_claims_no_missing_feature_that_exists(capsys):
+    """README's sample of `marl envs` (the lines under the table: each game's training defaults) is what the command
+    prints today; and README calls nothing "not built yet" that a command offers (league roles and Nash opponents
+    are `marl train --league alphastar` and `--opponents nash`)."""
+    from cli_helpers import run
+
+    readme = (ROOT / "README.md").read_text()
+    code, out, _ = run(capsys, "envs")
+    assert code == 0
+    for line in out.splitlines():
+        if " trains with its own defaults " in line:
+            game = line.split(" ", 1)[0]
+            shown = [x for x in readme.splitlines() if x.startswith(f"{game} trains with its own defaults ")]
+            assert shown and all(x == line for x in shown), (game, shown, line)
+    assert "not built yet" not in readme.lower()
