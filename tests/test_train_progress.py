@@ -190,6 +190,29 @@ def test_a_resumed_run_reports_the_whole_run_and_this_sessions_rate(tmp_path, ca
     assert lines and not any(re.search(r"\b0(/s| steps/s)", ln) for ln in lines), lines
 
 
+@pytest.mark.slow
+def test_a_resumed_session_counts_only_the_rating_games_it_stored(tmp_path, capsys, monkeypatch):
+    """Ctrl-C as a moment's gauntlet has just finished: the run state saved with that moment still owes it, so the
+    resumed session plays it again, stores nothing of it (its matchups are in the ledger) and must not count its
+    games as its own. The session's figure is what the ledger gained while it ran."""
+    home = str(tmp_path / "h")
+    variant = variant_key("pong", {"points_to_win": 1})
+    args = [*RESUMABLE[:RESUMABLE.index("--steps")], "--steps", "8192", *RESUMABLE[RESUMABLE.index("--steps") + 2:]]
+    with monkeypatch.context() as m:
+        _stop_after(m, 2048)
+        code, out, err = run(capsys, *args, "--home", home)
+    assert code == 130, err
+    with League.open(home) as league:
+        before = len(league.games("pong", variant=variant))
+    assert before > 0  # the first session's gauntlets: stored before the Ctrl-C
+
+    data = json.loads(run(capsys, "train", "--resume", "r", "--home", home, "--json")[1])
+    with League.open(home) as league:
+        after = len(league.games("pong", variant=variant))
+    assert data["sessions"] == 2 and data["rating_games"] == after
+    assert data["session_rating_games"] == after - before > 0
+
+
 def test_the_summary_of_a_resumed_run_states_the_whole_run():
     report = TrainReport("pong-1", 6_000_128, 256, seconds=95.4, eval_games=444, snapshots=["a"] * 14, finals=[],
                          sessions=2, session_steps=524_288, session_seconds=13.2, train_seconds=10.0,

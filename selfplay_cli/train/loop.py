@@ -147,7 +147,7 @@ class Trainer:
                                        device=self.device, roles=self.roles, first=first)
         self.evaluator: Evaluator | RemoteEvaluator | None = None  # set while training
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
-        self.eval_games = 0  # games they played
+        self._rating_games0 = 0  # the run's rating games in the ledger when this session began (rating_games())
         self.eval_events = 0  # gauntlets finished in this process
         self._t0 = 0.0  # when this process began training (perf_counter)
         self._steps0 = 0  # the run's steps then
@@ -265,7 +265,6 @@ class Trainer:
             names = tuple(self.league.get_player(i).full_name for i in d.job.snapshot_ids)
             self.state.jobs = [j for j in self.state.jobs if j[0] != names]
             self.eval_seconds += d.seconds
-            self.eval_games += d.games
             self.eval_events += 1
             self.records = self._records([self.league.get_player(i) for i in d.job.snapshot_ids])
             if self.on_progress:
@@ -361,6 +360,8 @@ class Trainer:
         start = t0 - state.elapsed
         self._deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
         self._steps0 = state.steps
+        # (before the gauntlets it owes: a killed session's finished one is played again, storing nothing new)
+        self._rating_games0 = self.rating_games()
         if self.on_progress:  # at once: a resumed run shows where it stands before its first update
             self.on_progress({"event": "training", "standing": self.standing()})
         for job in state.jobs:  # gauntlets a killed run had asked for (a finished one is not played again)
@@ -385,11 +386,12 @@ class Trainer:
             self.records = self._records([self.league.get_player(i) for i in state.latest])
         plot = self._plot()
         session = time.perf_counter() - t0
+        rating_games = self.rating_games()
         return TrainReport(cfg.run, state.steps, state.episodes, seconds=elapsed0 + session,
-                           eval_games=self.rating_games(), snapshots=state.snapshots, finals=list(self.records),
+                           eval_games=rating_games, snapshots=state.snapshots, finals=list(self.records),
                            sessions=state.resumes + 1, session_steps=state.steps - self._steps0,
                            session_seconds=session, train_seconds=self._train_seconds(),
-                           session_eval_games=self.eval_games,
+                           session_eval_games=rating_games - self._rating_games0,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
                            rating_left=len(state.jobs), nash=self._nash(), **self._best())
 

@@ -86,7 +86,9 @@ class TrainReport:
     session_steps: int  # game steps this session played
     session_seconds: float  # wall time of this session, rating games and the wait for the last ones included
     train_seconds: float  # of it, training: the loop of games and updates (rating games played inline left out)
-    session_eval_games: int  # games this session's gauntlets played
+    session_eval_games: int  # rating games this session stored: the ledger's count of the run's (``eval_games``)
+    # now, less its count when the session began (a gauntlet a killed session had finished is played again on
+    # resume and stores nothing: it adds none)
     eval_seconds: float  # this session: time the gauntlets took (beside training, unless inline)
     wait_seconds: float  # this session: time spent after training waiting for the last gauntlets
     plot: Path | str | None = None  # the rating curves' PNG, or why there is none
