@@ -19,6 +19,7 @@ from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer
+from selfplay_cli.train.matchmaking import MatchmakerConfig
 from selfplay_cli.train.progress import SnapshotRecord, Standing, TrainReport
 
 FAST_PPO = PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1)
@@ -224,6 +225,55 @@ def test_the_summary_of_a_resumed_run_states_the_whole_run():
     assert "10 s of training at 52,429 steps/s on 2 Ray actors)" in describe_run(report, actors=2)  # --executor ray
     report.session_steps, report.train_seconds = 0, 0.0  # resumed after its budget was spent: nothing to train
     assert "(this session: 0 steps in 13 s, no training left to do)" in describe_run(report)
+
+
+@pytest.mark.slow
+def test_a_repeated_run_says_its_snapshots_are_another_runs_weights_not_that_it_waited_for_games(tmp_path):
+    """The same command and seed twice in one league (every opponent a bot): the second run's snapshots are the
+    first's weights, already rated, so it needs no rating games; its summary says so, and says no time was waited
+    for games that were never played."""
+    cfg = TrainConfig(env="pong", run="a", steps=1024, games=8, agents=1, eval_games=2, eval="inline",
+                      eval_playoff=0, ppo=FAST_PPO, env_options={"points_to_win": 1},
+                      opponents=MatchmakerConfig(bots={"random": 1.0}))
+    reports = []
+    with League.open(tmp_path / "league") as league:
+        for name in ("a", "b"):
+            run_cfg = TrainConfig.from_dict({**cfg.to_dict(), "run": name})
+            league.create_run(name, "pong", run_cfg.to_dict(), algo="ppo")
+            reports.append(Trainer(league, run_cfg).train())
+    first, second = reports
+    assert first.eval_games > 0 and first.same_weights == {}
+    assert second.eval_games == second.session_eval_games == 0
+    assert second.same_weights == {f"b/{n.split('/')[1]}": n for n in first.snapshots}
+    line = describe_run(second, "inline")
+    assert "; 0 rating games (none needed: its snapshots are the same weights as run a's, already rated" in line
+    assert "waited for" not in line
+
+
+def _zero(**kw) -> TrainReport:
+    base = dict(run="k-2", steps=20_000, episodes=8_904, seconds=8.0, eval_games=0, snapshots=["k-2/s0", "k-2/s20k"],
+                finals=[], sessions=1, session_steps=20_000, session_seconds=8.0, train_seconds=6.0,
+                session_eval_games=0, eval_seconds=1.0, wait_seconds=3.0,
+                same_weights={"k-2/s0": "k-1/s0", "k-2/s20k": "k-1/s20k"})
+    base.update(kw)
+    return TrainReport(**base)
+
+
+def test_a_session_without_rating_games_says_why_and_what_its_time_went_to():
+    """Issue 48: '0 rating games (beside training: 1 s, 3 s of it waited for at the end)'."""
+    assert describe_run(_zero()).endswith(
+        "; 0 rating games (none needed: its snapshots are the same weights as run k-1's, already rated; 3 s at the "
+        "end waiting for the rating worker to find that)")
+    assert describe_run(_zero(wait_seconds=0.2)).endswith(
+        "; 0 rating games (none needed: its snapshots are the same weights as run k-1's, already rated)")
+    assert describe_run(_zero(eval_seconds=1.4, wait_seconds=0.0), "inline").endswith(
+        "(none needed: its snapshots are the same weights as run k-1's, already rated; 1 s inline to find that)")
+    # a resumed session whose gauntlets had all been stored by the session before it
+    resumed = _zero(eval_games=470, sessions=2, same_weights={}, wait_seconds=2.0)
+    assert describe_run(resumed).endswith("; 470 rating games (none of them this session: its gauntlets had nothing "
+                                          "left to play; 2 s at the end waiting for the rating worker to find that)")
+    off = describe_run(_zero(rating=False, eval_seconds=0.0, wait_seconds=0.0, same_weights={}))
+    assert off.endswith("; 0 rating games (--eval-games 0)")
 
 
 @pytest.mark.parametrize("ended, text", [(False, "16 under way"), (True, "16 left unfinished")])

@@ -393,7 +393,8 @@ class Trainer:
                            session_seconds=session, train_seconds=self._train_seconds(),
                            session_eval_games=rating_games - self._rating_games0,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
-                           rating_left=len(state.jobs), nash=self._nash(), **self._best())
+                           rating_left=len(state.jobs), nash=self._nash(), rating=bool(cfg.eval_games),
+                           same_weights=self._same_weights(), **self._best())
 
     def _start_from(self) -> None:
         """``--init-from``: each learner starts from its snapshot of the run's ``init_plan`` (which is then its first
@@ -499,6 +500,20 @@ class Trainer:
         mine = table.select(np.isin(table.match_id, gauntlets))
         coop = mine.kind == KIND_CODES[COOPERATIVE]
         return int(np.unique(mine.game_id[~coop]).size + 2 * np.unique(mine.game_id[coop]).size)
+
+    def _same_weights(self) -> dict[str, str]:
+        """The run's snapshots whose weights a snapshot of another run holds (the same command and seed run again),
+        by full name -> the other's full name: rated there, they need no rating games of their own."""
+        if not self.cfg.eval_games:
+            return {}
+        same = self.league.same_weights(self.spec.name)
+        out = {}
+        for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True):
+            if p.run == self.cfg.run and p.id in same:
+                other = self.league.get_player(same[p.id])
+                if other.run != self.cfg.run:
+                    out[p.full_name] = other.full_name
+        return out
 
     def standing(self) -> Standing:
         """Where the run stands now (see :class:`Standing`); meaningful once training has begun."""

@@ -97,6 +97,10 @@ class TrainReport:
     nash: dict[str, float] | None = None  # --opponents nash: the run's Nash mixture at the end (name -> weight)
     rating_left: int = 0  # gauntlets not played yet (--eval remote --no-wait: the league's workers play them
     # later); while any is left the ratings above are not the run's last, and its best is not decided
+    rating: bool = True  # the run plays rating games (False: --eval-games 0)
+    same_weights: dict[str, str] = field(default_factory=dict)  # the run's snapshots whose weights another run's
+    # snapshot holds too (a repeated command and seed): name -> the other's name; one set of weights is one player,
+    # rated once, so such a snapshot's gauntlet finds its games already played
 
     @property
     def steps_per_second(self) -> float:
