@@ -248,16 +248,18 @@ class TrainProgress:
                                  info=f"{standing.steps:,} steps  {describe_rate(standing)}")
             if self._due(standing.progress):
                 self._print(self._where(standing))
-        elif kind == "evaluating":
+        elif kind == "evaluating":  # training is over: no time is estimated, the gauntlets left are counted
             short = [n.split("/", 1)[-1] for n in event["snapshots"]]
             names = ", ".join(short) if len(short) <= 2 else f"{short[0]} and {len(short) - 1} more snapshots"
             queued = event.get("queue")
             info = f"{event['games']} games played" if queued is None else describe_queue(queued, event["games"])
-            self.progress.update(self.task, description=f"rating {names}", eta=eta, info=info)
+            left = event["gauntlets"] if queued is None else queued.left
+            waiting = f"waiting for its rating games: {left} gauntlet{'s' * (left != 1)} left"
+            self.progress.update(self.task, description=f"rating {names}", eta=waiting, info=info)
             if self._due(None):
-                played = (f"{event['games']:,} rating games played in this session so far" if queued is None
-                          else info)
-                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); rating {names} ({played}); "
+                where = (f"{waiting} ({names}), {event['games']:,} played in this session so far" if queued is None
+                         else f"rating {names} ({info})")  # (the queue's standing counts the gauntlets left)
+                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); {where}; "
                             f"{self._elapsed()} elapsed")
         elif kind == "note":  # something the run met and went on from (a rollout actor restarted)
             self._print(f"{self.cfg.run}: {event['line']}")
