@@ -1,11 +1,16 @@
 """Ctrl-C and a polite kill held off a block that must finish whole (a database transaction, a snapshot moment),
-and long work told to stop when they come.
+and long work told to stop when they come, or to end early when a deadline passes.
 
 A signal's handler runs in the main thread, between two of its bytecodes. Work that other threads do (a run's
 learners update side by side in threads) does not see it, and the main thread, unwinding, waits for them: with
 ``update_epochs = 1e9`` that was an hour. So whoever stops on a signal calls :func:`request_stop`, and long loops
 in any thread ask :func:`stop_requested` between their steps (a learner's minibatches and gradient steps) and end
 early; the work they leave is thrown away with the process (a run resumes from its last snapshot moment).
+
+A deadline (:func:`deadline`: a run's ``--minutes`` budget) is asked the same way, :func:`past_deadline`, by the
+same loops; there the work done so far is kept (a learner's update that has done some of its minibatches when the
+budget runs out ends there, an update of fewer minibatches), so a run ends within one minibatch of its budget,
+however long its updates are.
 
 Nothing here imports from the rest of marl, so every room can use it.
 """
@@ -14,13 +19,15 @@ from __future__ import annotations
 
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["Terminated", "clear_stop", "request_stop", "signals_held", "stop_on_sigterm", "stop_requested", "stoppable"]
+__all__ = ["Terminated", "clear_stop", "deadline", "past_deadline", "request_stop", "signals_held", "stop_on_sigterm",
+           "stop_requested", "stoppable"]
 
 _stop = threading.Event()
+_deadline: tuple[Callable[[], float], float] | None = None  # (clock, the time on it that work ends at)
 
 
 def request_stop() -> None:
@@ -51,6 +58,24 @@ def stoppable() -> Iterator[None]:
 def clear_stop() -> None:
     """The threads a stop was for have ended: long loops run to their end again."""
     _stop.clear()
+
+
+@contextmanager
+def deadline(at: float | None, clock: Callable[[], float]) -> Iterator[None]:
+    """While the block runs, :func:`past_deadline` is True once ``clock()`` reaches ``at`` (None: no deadline); long
+    loops in any thread that ask it end early, keeping what they did."""
+    global _deadline
+    before, _deadline = _deadline, (None if at is None else (clock, at))
+    try:
+        yield
+    finally:
+        _deadline = before
+
+
+def past_deadline() -> bool:
+    """Whether the deadline of the :func:`deadline` block under way has passed (False outside one)."""
+    set_at = _deadline
+    return set_at is not None and set_at[0]() >= set_at[1]
 
 
 @contextmanager

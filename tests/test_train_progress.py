@@ -6,6 +6,8 @@ from __future__ import annotations
 import io
 import json
 import re
+import sys
+import threading
 from pathlib import Path
 
 import pytest
@@ -13,15 +15,20 @@ from cli_helpers import run
 from rich.console import Console
 
 import selfplay_cli.commands.train_view as train_view
-from selfplay_cli.algos.ppo import PPOConfig
+import selfplay_cli.train.progress as train_progress
+from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
 from selfplay_cli.commands.train_view import TrainProgress, describe_games, describe_run
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer
+from selfplay_cli.train.matchmaking import MatchmakerConfig
 from selfplay_cli.train.progress import SnapshotRecord, Standing, TrainReport
 
 FAST_PPO = PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1)
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:  # the suite's games are tests.games.*
+    sys.path.insert(0, str(ROOT))
 
 
 def standing(**kw) -> Standing:
@@ -190,6 +197,29 @@ def test_a_resumed_run_reports_the_whole_run_and_this_sessions_rate(tmp_path, ca
     assert lines and not any(re.search(r"\b0(/s| steps/s)", ln) for ln in lines), lines
 
 
+@pytest.mark.slow
+def test_a_resumed_session_counts_only_the_rating_games_it_stored(tmp_path, capsys, monkeypatch):
+    """Ctrl-C as a moment's gauntlet has just finished: the run state saved with that moment still owes it, so the
+    resumed session plays it again, stores nothing of it (its matchups are in the ledger) and must not count its
+    games as its own. The session's figure is what the ledger gained while it ran."""
+    home = str(tmp_path / "h")
+    variant = variant_key("pong", {"points_to_win": 1})
+    args = [*RESUMABLE[:RESUMABLE.index("--steps")], "--steps", "8192", *RESUMABLE[RESUMABLE.index("--steps") + 2:]]
+    with monkeypatch.context() as m:
+        _stop_after(m, 2048)
+        code, out, err = run(capsys, *args, "--home", home)
+    assert code == 130, err
+    with League.open(home) as league:
+        before = len(league.games("pong", variant=variant))
+    assert before > 0  # the first session's gauntlets: stored before the Ctrl-C
+
+    data = json.loads(run(capsys, "train", "--resume", "r", "--home", home, "--json")[1])
+    with League.open(home) as league:
+        after = len(league.games("pong", variant=variant))
+    assert data["sessions"] == 2 and data["rating_games"] == after
+    assert data["session_rating_games"] == after - before > 0
+
+
 def test_the_summary_of_a_resumed_run_states_the_whole_run():
     report = TrainReport("pong-1", 6_000_128, 256, seconds=95.4, eval_games=444, snapshots=["a"] * 14, finals=[],
                          sessions=2, session_steps=524_288, session_seconds=13.2, train_seconds=10.0,
@@ -201,6 +231,55 @@ def test_the_summary_of_a_resumed_run_states_the_whole_run():
     assert "10 s of training at 52,429 steps/s on 2 Ray actors)" in describe_run(report, actors=2)  # --executor ray
     report.session_steps, report.train_seconds = 0, 0.0  # resumed after its budget was spent: nothing to train
     assert "(this session: 0 steps in 13 s, no training left to do)" in describe_run(report)
+
+
+@pytest.mark.slow
+def test_a_repeated_run_says_its_snapshots_are_another_runs_weights_not_that_it_waited_for_games(tmp_path):
+    """The same command and seed twice in one league (every opponent a bot): the second run's snapshots are the
+    first's weights, already rated, so it needs no rating games; its summary says so, and says no time was waited
+    for games that were never played."""
+    cfg = TrainConfig(env="pong", run="a", steps=1024, games=8, agents=1, eval_games=2, eval="inline",
+                      eval_playoff=0, ppo=FAST_PPO, env_options={"points_to_win": 1},
+                      opponents=MatchmakerConfig(bots={"random": 1.0}))
+    reports = []
+    with League.open(tmp_path / "league") as league:
+        for name in ("a", "b"):
+            run_cfg = TrainConfig.from_dict({**cfg.to_dict(), "run": name})
+            league.create_run(name, "pong", run_cfg.to_dict(), algo="ppo")
+            reports.append(Trainer(league, run_cfg).train())
+    first, second = reports
+    assert first.eval_games > 0 and first.same_weights == {}
+    assert second.eval_games == second.session_eval_games == 0
+    assert second.same_weights == {f"b/{n.split('/')[1]}": n for n in first.snapshots}
+    line = describe_run(second, "inline")
+    assert "; 0 rating games (none needed: its snapshots are the same weights as run a's, already rated" in line
+    assert "waited for" not in line
+
+
+def _zero(**kw) -> TrainReport:
+    base = dict(run="k-2", steps=20_000, episodes=8_904, seconds=8.0, eval_games=0, snapshots=["k-2/s0", "k-2/s20k"],
+                finals=[], sessions=1, session_steps=20_000, session_seconds=8.0, train_seconds=6.0,
+                session_eval_games=0, eval_seconds=1.0, wait_seconds=3.0,
+                same_weights={"k-2/s0": "k-1/s0", "k-2/s20k": "k-1/s20k"})
+    base.update(kw)
+    return TrainReport(**base)
+
+
+def test_a_session_without_rating_games_says_why_and_what_its_time_went_to():
+    """Issue 48: '0 rating games (beside training: 1 s, 3 s of it waited for at the end)'."""
+    assert describe_run(_zero()).endswith(
+        "; 0 rating games (none needed: its snapshots are the same weights as run k-1's, already rated; 3 s at the "
+        "end waiting for the rating worker to find that)")
+    assert describe_run(_zero(wait_seconds=0.2)).endswith(
+        "; 0 rating games (none needed: its snapshots are the same weights as run k-1's, already rated)")
+    assert describe_run(_zero(eval_seconds=1.4, wait_seconds=0.0), "inline").endswith(
+        "(none needed: its snapshots are the same weights as run k-1's, already rated; 1 s inline to find that)")
+    # a resumed session whose gauntlets had all been stored by the session before it
+    resumed = _zero(eval_games=470, sessions=2, same_weights={}, wait_seconds=2.0)
+    assert describe_run(resumed).endswith("; 470 rating games (none of them this session: its gauntlets had nothing "
+                                          "left to play; 2 s at the end waiting for the rating worker to find that)")
+    off = describe_run(_zero(rating=False, eval_seconds=0.0, wait_seconds=0.0, same_weights={}))
+    assert off.endswith("; 0 rating games (--eval-games 0)")
 
 
 @pytest.mark.parametrize("ended, text", [(False, "16 under way"), (True, "16 left unfinished")])
@@ -264,3 +343,122 @@ def test_a_seat_suffix_on_a_shared_networks_snapshot_is_answered_with_its_name(t
             assert f"t/s0 is one network for every seat (its run shares one), so its name has no seat: {hint}" \
                 in str(e.value)
             assert str(e.value).count("random") == 1  # every game's random player, named once
+
+
+# -- a --minutes budget on a slow game: the test's clock (tests.games.slow.CLOCK), moved on by the game's steps and
+# by the learner's minibatches, never by waiting
+
+SLOW = "tests.games.slow:parallel_env"
+LONG_UPDATE = PPOConfig(rollout_steps=16, minibatches=4, update_epochs=4)  # 16 minibatches an update
+
+
+def _slow_run(tmp_path, monkeypatch, *, step: float, minibatch: float, on_progress=None, during=None):
+    """A one-minute run of the slow game, 4 games at once (a step of all of them: ``4 * step`` seconds on the
+    clock), each minibatch of an update taking ``minibatch`` seconds (``during(clock)`` called in each); its
+    report and the clock's time when training began."""
+    from tests.games.slow import CLOCK
+
+    real = PPOLearner._minibatch_step
+
+    def slow_minibatch(self, *args, **kwargs):
+        CLOCK.advance(minibatch)
+        if during is not None:
+            during(CLOCK)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(PPOLearner, "_minibatch_step", slow_minibatch)
+    cfg = TrainConfig(env=SLOW, run="s", minutes=1, games=4, sharing="fups", eval_games=0, ppo=LONG_UPDATE,
+                      env_options={"seconds": step})
+    with League.open(tmp_path / "league") as league:
+        league.create_run("s", SLOW, cfg.to_dict(), algo="ppo")
+        began = CLOCK()
+        report = Trainer(league, cfg, on_progress=on_progress, clock=CLOCK).train()
+    return report, began
+
+
+@pytest.mark.parametrize(("step", "minibatch", "most"), [
+    (0.25, 5.0, 5.0),  # rollouts of 16 s, updates of 80 s: the update under way at the deadline ends at its next
+    # minibatch (issue 48: a POCA lander trained 85 s of a minute, a pistonball 255 s)
+    (5.0, 0.0, 20.0),  # a rollout of 320 s: it ends at the step under way at the deadline
+])
+def test_a_minutes_budget_ends_within_one_minibatch_or_step_of_its_deadline(tmp_path, monkeypatch, step, minibatch,
+                                                                           most):
+    report, _ = _slow_run(tmp_path, monkeypatch, step=step, minibatch=minibatch)
+    assert 60.0 <= report.train_seconds <= 60.0 + most, report.train_seconds
+    assert report.steps > 0 and report.snapshots == ["s/s0", f"s/s{report.steps}"]
+
+
+def test_progress_is_told_while_a_long_update_runs_and_a_log_line_comes_on_time(tmp_path, monkeypatch):
+    """Every minibatch of an update waits until progress events have come in while it ran (the run's heartbeat,
+    told to beat every 10 ms here): a display hears of the run while the main thread is busy in one long update,
+    its percentage is the time spent over the budget, and a log's plain line comes 30 s in (within the minibatch
+    under way then), not at the next rollout's end (issue 48: 4:16 in, reading '53% ... ~0:00:00 left')."""
+    from tests.games.slow import CLOCK
+
+    monkeypatch.setattr(train_progress, "HEARTBEAT_SECONDS", 0.01)
+    buf = io.StringIO()
+    monkeypatch.setattr(train_view, "err_console", Console(file=buf, width=400))  # a log, not a terminal
+    display = TrainProgress(TrainConfig(env=SLOW, run="s", minutes=1), bar=False, lines=True, clock=CLOCK)
+    told: list[Standing] = []
+    came = threading.Condition()
+
+    def on_progress(event):
+        display.update(event)
+        if event["event"] == "training":
+            with came:
+                told.append(event["standing"])
+                came.notify_all()
+
+    heard = []  # per minibatch: (the clock, the standing told while it waited; None: none came)
+
+    def during(clock):
+        with came:  # the second event from now was made while this minibatch waits (the first may be older)
+            mark = len(told)
+            ok = came.wait_for(lambda: len(told) >= mark + 2, timeout=30)  # (a guard: it takes milliseconds)
+            heard.append((clock(), told[-1] if ok else None))
+
+    report, began = _slow_run(tmp_path, monkeypatch, step=0.25, minibatch=5.0, on_progress=on_progress,
+                              during=during)
+    assert heard and all(s is not None for _, s in heard), f"{sum(s is None for _, s in heard)} of {len(heard)} " \
+        "minibatches heard nothing"
+    for at, standing in heard:  # the share of the budget told: the time spent at that moment
+        assert standing.progress == pytest.approx(min((at - began) / 60.0, 1.0)), (at - began, standing.progress)
+    first = buf.getvalue().splitlines()[0]
+    m = re.fullmatch(r"s: (\d+)% \(.*; 0:00:(\d\d) elapsed, ~0:00:(\d\d) left", first)
+    assert m and 30 <= int(m[2]) <= 35, first  # 30 s in, at the minibatch under way then
+    # its share and time left as the clock had them when its standing was taken: then, or one minibatch before
+    assert abs(int(m[1]) - 100 * int(m[2]) / 60) <= 100 * 5 / 60 + 1 and abs(60 - int(m[2]) - int(m[3])) <= 5, first
+
+
+def test_while_the_last_gauntlets_are_played_the_eta_says_how_many_are_left(monkeypatch):
+    """Training is over: the ETA of the bar does not stand at a figure, it says the run waits for its rating
+    games and how many gauntlets are left; a log says the same."""
+    buf = io.StringIO()
+    monkeypatch.setattr(train_view, "err_console", Console(file=buf, width=300))
+    clock = Clock()
+    cfg = TrainConfig(env="pong", run="r", minutes=1)
+    waiting = {"event": "evaluating", "snapshots": ["r/s1k-left", "r/s1k-right"], "gauntlets": 1, "games": 19,
+               "queue": None, "standing": standing(progress=1.0, steps=1000, ended=True, remaining=None)}
+    with TrainProgress(cfg, bar=True, lines=True, clock=clock) as progress:
+        progress.update(waiting)
+        assert progress.progress.tasks[0].fields["eta"] == "waiting for its rating games: 1 gauntlet left"
+    plain = TrainProgress(cfg, bar=False, lines=True, clock=clock)
+    clock.t += 31
+    plain.update({**waiting, "snapshots": ["r/s1k", "r/s2k"], "gauntlets": 2})
+    assert buf.getvalue().splitlines()[-1] == (
+        "r: training done (1,000 steps); waiting for its rating games: 2 gauntlets left (s1k, s2k), 19 played in "
+        "this session so far; 0:00:31 elapsed")
+
+
+@pytest.mark.slow
+def test_once_training_has_ended_no_time_left_is_claimed(tmp_path):
+    """The standing of a run whose training has ended (its final gauntlets still to come) estimates no time left:
+    a figure there would stand still while the gauntlets are played."""
+    events = []
+    cfg = TrainConfig(env="pong", run="t", steps=2048, games=16, eval_games=2, eval="inline", eval_playoff=0,
+                      ppo=FAST_PPO, env_options={"points_to_win": 1})
+    with League.open(tmp_path / "league") as league:
+        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        Trainer(league, cfg, on_progress=events.append).train()
+    ended = [e["standing"] for e in events if e["standing"].ended]
+    assert ended and all(s.remaining is None for s in ended)

@@ -12,6 +12,9 @@ come from GAE(lambda) over the rollout, and ``update_epochs`` passes of ``miniba
 with r the probability ratio of the new to the old policy; with a teacher (kickstarting,
 :mod:`selfplay_cli.algos.kickstart`) each minibatch's loss also has ``teacher_weight`` times the imitation loss on
 as many states the teacher labelled.
+An update under way when a run's time is up (:func:`~selfplay_cli.signals.past_deadline`: a ``--minutes`` budget)
+ends after the minibatch it is in, keeping the minibatches it did: a run of updates that take minutes ends within
+one minibatch of its budget.
 
 Action spaces (the policy's distribution; :mod:`selfplay_cli.policies.heads`):
 * Discrete: a categorical over the logits; masked actions get a logit of -1e9 (probability exactly 0), when acting
@@ -46,7 +49,7 @@ from ..errors import NonFiniteError
 from ..policies.heads import MASKED, HeadMath, to_numpy_actions
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead
-from ..signals import stop_requested
+from ..signals import past_deadline, stop_requested
 from .base import Share, action_head, as_bool, check_steps, fix_mask, learner_args, padded, unpadded, values_of
 from .kickstart import Imitation
 from .optim import FlatAdam
@@ -484,11 +487,13 @@ class PPOLearner:
         rows: list[torch.Tensor] = []  # per minibatch: its figures (STEP_FIGURES)
         teaching = self.teacher_weight > 0 and self.imitation is not None and len(self.imitation) > 0
         for _ in range(cfg.update_epochs if n else 0):
-            if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
+            # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away; the run's time is up (a
+            # --minutes budget): the minibatches done so far, at least one, are the update
+            if stop_requested() or (rows and past_deadline()):
                 break
             order = torch.randperm(n, generator=self.gen, device=self.device)
             for start in range(0, n, mb):
-                if stop_requested():
+                if stop_requested() or (rows and past_deadline()):
                     break
                 rows.append(self._minibatch_step(batch, order[start:start + mb], teaching))
         count, per_epoch = len(rows), -(-n // mb)

@@ -76,15 +76,39 @@ def describe_run(report: TrainReport, eval: str = "local", actors: int = 0) -> s
     else:
         when = (f"in {report.sessions} sessions, {report.seconds:.0f} s in all (this session: "
                 f"{report.session_steps:,} steps in {report.session_seconds:.0f} s, {rate})")
+    head = (f"run {report.run}: {report.steps:,} game steps {when}, {report.episodes:,} episodes, "
+            f"{len(report.snapshots)} snapshots; {report.eval_games:,} rating games")
+    if not report.session_eval_games and not report.rating_left:
+        return f"{head} ({describe_no_rating_games(report, eval)})"
     where = {"inline": "inline", "remote": "through the league's queue",
              "ray": "on Ray actors, through the league's queue"}.get(eval, "beside training")
     this = f"{report.session_eval_games:,} of them this session, " if report.sessions > 1 else ""
-    games = f"{report.eval_games:,} rating games"
     if report.rating_left:
-        games += f" so far, {report.rating_left} gauntlet{'s' * (report.rating_left > 1)} still queued"
-    return (f"run {report.run}: {report.steps:,} game steps {when}, {report.episodes:,} episodes, "
-            f"{len(report.snapshots)} snapshots; {games} ({this}{where}: "
-            f"{report.eval_seconds:.0f} s, {report.wait_seconds:.0f} s of it waited for at the end)")
+        head += f" so far, {report.rating_left} gauntlet{'s' * (report.rating_left > 1)} still queued"
+    return (f"{head} ({this}{where}: {report.eval_seconds:.0f} s, {report.wait_seconds:.0f} s of it waited for at "
+            "the end)")
+
+
+def describe_no_rating_games(report: TrainReport, eval: str = "local") -> str:
+    """Why a session played no rating games, and what the time its gauntlets took went to (no game was waited
+    for): ``none needed: its snapshots are the same weights as run kuhn_poker-1's, already rated; 3 s at the end
+    waiting for the rating worker to find that``. Rating games off: ``--eval-games 0``."""
+    if not report.rating:
+        return "--eval-games 0"
+    others = sorted({name.split("/", 1)[0] for name in report.same_weights.values()})
+    if others and len(report.same_weights) == len(report.snapshots):
+        runs = " and ".join(f"run {r}'s" for r in others)
+        why = f"its snapshots are the same weights as {runs}, already rated"
+    else:
+        why = "its gauntlets had nothing left to play"
+    why = f"none of them this session: {why}" if report.sessions > 1 else f"none needed: {why}"
+    if eval == "inline":  # the gauntlets' checks, in the training process
+        seconds, who = report.eval_seconds, "inline"
+    else:
+        who = {"remote": "at the end waiting for the league's queue",
+               "ray": "at the end waiting for the league's queue"}.get(eval, "at the end waiting for the rating worker")
+        seconds = report.wait_seconds
+    return why if round(seconds) < 1 else f"{why}; {seconds:.0f} s {who} to find that"
 
 
 def still_coming(report: TrainReport) -> list[str]:
@@ -224,16 +248,18 @@ class TrainProgress:
                                  info=f"{standing.steps:,} steps  {describe_rate(standing)}")
             if self._due(standing.progress):
                 self._print(self._where(standing))
-        elif kind == "evaluating":
+        elif kind == "evaluating":  # training is over: no time is estimated, the gauntlets left are counted
             short = [n.split("/", 1)[-1] for n in event["snapshots"]]
             names = ", ".join(short) if len(short) <= 2 else f"{short[0]} and {len(short) - 1} more snapshots"
             queued = event.get("queue")
             info = f"{event['games']} games played" if queued is None else describe_queue(queued, event["games"])
-            self.progress.update(self.task, description=f"rating {names}", eta=eta, info=info)
+            left = event["gauntlets"] if queued is None else queued.left
+            waiting = f"waiting for its rating games: {left} gauntlet{'s' * (left != 1)} left"
+            self.progress.update(self.task, description=f"rating {names}", eta=waiting, info=info)
             if self._due(None):
-                played = (f"{event['games']:,} rating games played in this session so far" if queued is None
-                          else info)
-                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); rating {names} ({played}); "
+                where = (f"{waiting} ({names}), {event['games']:,} played in this session so far" if queued is None
+                         else f"rating {names} ({info})")  # (the queue's standing counts the gauntlets left)
+                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); {where}; "
                             f"{self._elapsed()} elapsed")
         elif kind == "note":  # something the run met and went on from (a rollout actor restarted)
             self._print(f"{self.cfg.run}: {event['line']}")

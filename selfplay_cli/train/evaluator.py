@@ -189,6 +189,11 @@ class Evaluator:
             self._on_worker(self._proc.pid)
 
     @property
+    def left(self) -> int:
+        """Gauntlets submitted and not finished yet (as far as this process has heard)."""
+        return len(self.pending) - len(self._done)
+
+    @property
     def worker_pid(self) -> int | None:
         """The live worker's process id (None inline)."""
         return None if self._proc is None else self._proc.pid

@@ -20,10 +20,11 @@ Elo, a live view, counts them). The ratings come from the gauntlet games, which 
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TextIO
 
@@ -43,14 +44,14 @@ from ..policies.bots import league_bots
 from ..policies.network import resolve_device
 from ..rated.gauntlet import ALL_OLDER
 from ..results import COOPERATIVE, GameResult
-from ..signals import clear_stop, signals_held, stoppable
+from ..signals import clear_stop, deadline, signals_held, stoppable
 from .config import TrainConfig, learner_names, learner_setup, tensorboard_writer
 from .curriculum import Curriculum
 from .evaluator import Evaluator, GauntletJob, JobDone
 from .league_roles import LeagueRoles
 from .lock import claim, write_lock
 from .opponents import Opponents, fixed_opponents
-from .progress import SnapshotRecord, Standing, TrainReport
+from .progress import Heartbeat, SnapshotRecord, Standing, TrainReport
 from .ray_rollouts import OFF_POLICY_FRAGMENT, RayRollouts
 from .remote import RemoteEvaluator
 from .rollouts import Rollouts, load_teacher
@@ -81,9 +82,11 @@ class Trainer:
     while training, the rating worker (:attr:`evaluator`); it keeps the budget, the clock and the metrics."""
 
     def __init__(self, league: League, cfg: TrainConfig,
-                 on_progress: Callable[[dict[str, Any]], None] | None = None) -> None:
+                 on_progress: Callable[[dict[str, Any]], None] | None = None,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
         self.league, self.cfg = league, cfg
         self.on_progress = on_progress
+        self.clock = clock  # seconds, for the budget, the rate and the report (tests pass their own)
         self.spec = spec = cfg.game()
         self.device = resolve_device(cfg.device)
         if self.device.type == "cpu":
@@ -148,11 +151,13 @@ class Trainer:
                                        device=self.device, roles=self.roles, first=first)
         self.evaluator: Evaluator | RemoteEvaluator | None = None  # set while training
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
-        self.eval_games = 0  # games they played
+        self._rating_games0 = 0  # the run's rating games in the ledger when this session began (rating_games())
         self.eval_events = 0  # gauntlets finished in this process
-        self._t0 = 0.0  # when this process began training (perf_counter)
+        self._t0 = 0.0  # when this process began training (its clock)
+        self._start = 0.0  # when the run would have begun had it trained in this process alone (its clock)
+        self._heart: Heartbeat | None = None  # tells the progress at least every second, while this process trains
         self._steps0 = 0  # the run's steps then
-        self._deadline: float | None = None  # when a budget in minutes runs out (perf_counter)
+        self._deadline: float | None = None  # when a budget in minutes runs out (its clock)
         self._trained: float | None = None  # seconds this process trained, once its training has ended
         self._next_episodes: int | None = None  # the episodes and steps the next snapshot moment is due at
         self._next_steps: int | None = None
@@ -202,8 +207,36 @@ class Trainer:
 
     def _note(self, line: str) -> None:
         """One line about the run (a rollout actor restarted) to whoever follows its progress."""
-        if self.on_progress:
-            self.on_progress({"event": "note", "line": line, "standing": self.standing()})
+        self._tell({"event": "note", "line": line, "standing": self.standing()})
+
+    def _tell(self, event: dict[str, Any]) -> None:
+        """One progress event to ``on_progress``: through the heartbeat while it beats (one event at a time)."""
+        if self._heart is not None:
+            self._heart.tell(event)
+        elif self.on_progress is not None:
+            self.on_progress(event)
+
+    @contextlib.contextmanager
+    def _heartbeat(self) -> Iterator[None]:
+        """While the block runs, ``on_progress`` hears where the run stands at least every second
+        (:class:`~.progress.Heartbeat`), however long a step, an update or a gauntlet played inline takes."""
+        if self.on_progress is None:
+            yield
+            return
+        with Heartbeat(self.on_progress, self._beat) as self._heart:
+            try:
+                yield
+            finally:
+                self._heart = None
+
+    def _beat(self) -> dict[str, Any] | None:
+        """The heartbeat's event: the standing while training; then, while a local worker or this process plays the
+        last gauntlets, the wait for them (a queue's is told by the wait itself: reading it takes the database)."""
+        if self._trained is None:
+            return {"event": "training", "standing": self.standing()}
+        if isinstance(self.evaluator, Evaluator) and self.evaluator.left:
+            return self._waiting_event()
+        return None
 
     def _choose(self, slots: np.ndarray) -> list[Any]:
         """Opponents for the opponent ``slots`` of the games starting now (:meth:`Opponents.choose`)."""
@@ -239,7 +272,7 @@ class Trainer:
         """The trigger of the snapshot moment due now (``steps`` or ``episodes``), None when none is: the budget's
         end takes the final one instead."""
         state = self.state
-        spent = (time.perf_counter() >= self._deadline) if self._deadline else state.steps >= self.cfg.steps
+        spent = (self.clock() >= self._deadline) if self._deadline else state.steps >= self.cfg.steps
         if spent:
             return None
         if self._next_steps is not None and state.steps >= self._next_steps:
@@ -266,11 +299,9 @@ class Trainer:
             names = tuple(self.league.get_player(i).full_name for i in d.job.snapshot_ids)
             self.state.jobs = [j for j in self.state.jobs if j[0] != names]
             self.eval_seconds += d.seconds
-            self.eval_games += d.games
             self.eval_events += 1
             self.records = self._records([self.league.get_player(i) for i in d.job.snapshot_ids])
-            if self.on_progress:
-                self.on_progress({"event": "snapshot", "records": self.records, "standing": self.standing()})
+            self._tell({"event": "snapshot", "records": self.records, "standing": self.standing()})
 
     def _ladder(self, bootstrap: int = 0) -> list[LadderRow]:
         """The ladder of the run's game and variant as the ledger has it now (empty without rating games)."""
@@ -363,13 +394,22 @@ class Trainer:
         """Begin (the gauntlets a killed session asked for, the first snapshot), play until the budget is spent,
         take the final snapshot, wait for the last gauntlets, and report."""
         cfg, state = self.cfg, self.state
-        t0 = self._t0 = time.perf_counter()
+        t0 = self._t0 = self.clock()
         elapsed0 = state.elapsed  # the earlier sessions' time
-        start = t0 - state.elapsed
+        start = self._start = t0 - state.elapsed
         self._deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
         self._steps0 = state.steps
-        if self.on_progress:  # at once: a resumed run shows where it stands before its first update
-            self.on_progress({"event": "training", "standing": self.standing()})
+        # (before the gauntlets it owes: a killed session's finished one is played again, storing nothing new)
+        self._rating_games0 = self.rating_games()
+        with self._heartbeat():
+            return self._session(start, elapsed0)
+
+    def _session(self, start: float, elapsed0: float) -> TrainReport:
+        """:meth:`_train` from its first progress event on (the run's clock started at ``start``; ``elapsed0``: the
+        earlier sessions' time)."""
+        cfg, state, t0 = self.cfg, self.state, self._t0
+        self._tell({"event": "training", "standing": self.standing()})  # at once: a resumed run shows where it
+        # stands before its first update
         for job in state.jobs:  # gauntlets a killed run had asked for (a finished one is not played again)
             self.evaluator.submit(self._job(job))  # type: ignore[union-attr]
         if not state.snapshots:
@@ -379,27 +419,33 @@ class Trainer:
         self._plan_snapshots()
         board = tensorboard_writer(self.run_dir / "tensorboard") if cfg.tensorboard else None
         with open(self.run_dir / "metrics.jsonl", "a", buffering=1) as metrics:
-            self._play(start, metrics, board)
+            with deadline(self._deadline, self.clock):  # (an update under way at it ends at its next minibatch)
+                self._play(start, metrics, board)
+            state.elapsed = self.clock() - start
             self._trained = self._train_seconds()
+            self._check_heart()
             self.snapshot("final")
         if board is not None:
             board.close()
-        t1 = time.perf_counter()
+        t1 = self.clock()
         self._collect(self.evaluator.wait(on_wait=self._waiting))  # type: ignore[union-attr]
-        waited = time.perf_counter() - t1
+        waited = self.clock() - t1
+        self._check_heart()
         # the final snapshots and the best as the ledger has them now, as `marl league ladder` shows them (its default
         # intervals: one claim, one figure)
         final = self._ladder(DEFAULT_BOOTSTRAP)
         self.records = self._records([self.league.get_player(i) for i in state.latest], final)
         plot = self._plot()
-        session = time.perf_counter() - t0
+        session = self.clock() - t0
+        rating_games = self.rating_games()
         return TrainReport(cfg.run, state.steps, state.episodes, seconds=elapsed0 + session,
-                           eval_games=self.rating_games(), snapshots=state.snapshots, finals=list(self.records),
+                           eval_games=rating_games, snapshots=state.snapshots, finals=list(self.records),
                            sessions=state.resumes + 1, session_steps=state.steps - self._steps0,
                            session_seconds=session, train_seconds=self._train_seconds(),
-                           session_eval_games=self.eval_games,
+                           session_eval_games=rating_games - self._rating_games0,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
-                           rating_left=len(state.jobs), nash=self._nash(), **self._best(final))
+                           rating_left=len(state.jobs), nash=self._nash(), rating=bool(cfg.eval_games),
+                           same_weights=self._same_weights(), **self._best(final))
 
     def _start_from(self) -> None:
         """``--init-from``: each learner starts from its snapshot of the run's ``init_plan`` (which is then its first
@@ -426,7 +472,7 @@ class Trainer:
         stats: list[dict[str, float]] = []  # the learners' figures from their last update
         pending: list[GameResult] = []
         while True:
-            elapsed = state.elapsed = time.perf_counter() - start
+            elapsed = state.elapsed = self.clock() - start
             progress = elapsed / (self._deadline - start) if self._deadline else state.steps / cfg.steps
             if progress >= 1.0:
                 break
@@ -446,14 +492,14 @@ class Trainer:
                 continue
             self._updated_step = state.steps
             stats = updated
+            self._check_heart()
             if state.steps - line_step >= METRICS_STEPS:  # off-policy learners update every step: a line and a
                 line_step = state.steps  # ledger write per update would be megabytes a minute
                 self._file_games(pending)
                 pending = []
                 self._report(metrics, board, stats, elapsed)
                 self._collect(self.evaluator.poll())  # type: ignore[union-attr]
-                if self.on_progress:
-                    self.on_progress({"event": "training", "standing": self.standing()})
+                self._tell({"event": "training", "standing": self.standing()})
             trigger = self._snapshot_due()
             if trigger is not None:
                 self._file_games(pending)  # the games played before the snapshot are filed before it
@@ -465,6 +511,11 @@ class Trainer:
         self._file_games(pending)
         if stats and state.steps > line_step:  # the run's last figures, whatever the spacing of the lines
             self._report(metrics, board, stats, state.elapsed)
+
+    def _check_heart(self) -> None:
+        """Raise here what the heartbeat's thread met telling the progress (a display that failed)."""
+        if self._heart is not None:
+            self._heart.check()
 
     def _learning(self, progress: float) -> float:
         """The learners' progress (their learning rate's schedule): the run's, or with ``--restart-at-snapshot`` the
@@ -506,13 +557,31 @@ class Trainer:
         coop = mine.kind == KIND_CODES[COOPERATIVE]
         return int(np.unique(mine.game_id[~coop]).size + 2 * np.unique(mine.game_id[coop]).size)
 
+    def _same_weights(self) -> dict[str, str]:
+        """The run's snapshots whose weights a snapshot of another run holds (the same command and seed run again),
+        by full name -> the other's full name: rated there, they need no rating games of their own."""
+        if not self.cfg.eval_games:
+            return {}
+        same = self.league.same_weights(self.spec.name)
+        out = {}
+        for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True):
+            if p.run == self.cfg.run and p.id in same:
+                other = self.league.get_player(same[p.id])
+                if other.run != self.cfg.run:
+                    out[p.full_name] = other.full_name
+        return out
+
     def standing(self) -> Standing:
         """Where the run stands now (see :class:`Standing`); meaningful once training has begun."""
         cfg = self.cfg
         session_steps = self.state.steps - self._steps0
         seconds = self._train_seconds()
         rate = session_steps / seconds if session_steps > 0 and seconds > 0 else None
-        done = self.state.elapsed / (cfg.minutes * 60) if cfg.minutes is not None else self.state.steps / cfg.steps
+        if cfg.minutes is not None:  # the time spent, as the clock has it now while training
+            elapsed = self.clock() - self._start if self._t0 and self._trained is None else self.state.elapsed
+            done = elapsed / (cfg.minutes * 60)
+        else:
+            done = self.state.steps / cfg.steps
         pending = sum(len(names) for names, _, _ in self.state.jobs)
         core_steps = self.rollouts.game_steps()
         return Standing(
@@ -535,7 +604,7 @@ class Trainer:
         out."""
         if self._trained is not None:
             return self._trained
-        return max(time.perf_counter() - self._t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0), 0.0)
+        return max(self.clock() - self._t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0), 0.0)
 
     def _best(self, rows: list[LadderRow]) -> dict[str, Any]:
         """The report's ``best``: the run's best snapshot in the ladder ``rows`` (its margin over the run's next, or
@@ -560,17 +629,25 @@ class Trainer:
 
     def _waiting(self) -> None:
         if self.on_progress:
-            self.on_progress({"event": "evaluating", "snapshots": [n for j in self.state.jobs for n in j[0]],
-                              "games": self.evaluator.games_played,  # type: ignore[union-attr]
-                              "queue": self.evaluator.queue_standing(),  # type: ignore[union-attr]
-                              "standing": self.standing()})
+            self._tell(self._waiting_event())
+
+    def _waiting_event(self) -> dict[str, Any]:
+        """The wait for the last gauntlets: the snapshots they rate, how many are left, the games played so far."""
+        evaluator = self.evaluator
+        assert evaluator is not None
+        return {"event": "evaluating", "snapshots": [n for j in self.state.jobs for n in j[0]],
+                "gauntlets": evaluator.left, "games": evaluator.games_played, "queue": evaluator.queue_standing(),
+                "standing": self.standing()}
 
     def _remaining(self, rate: float | None) -> float | None:
         """Seconds left: training at the measured rate for the steps left, then the final gauntlet (at the mean time
         one took so far); inline, a gauntlet for every snapshot still to come. With --minutes: to the deadline.
-        None before the rate is known."""
+        None before the rate is known, and once training has ended (what is left then is the wait for gauntlets, whose
+        length is not known: the progress says how many are left)."""
+        if self._trained is not None:
+            return None
         if self._deadline is not None:
-            return max(self._deadline - time.perf_counter(), 0.0)
+            return max(self._deadline - self.clock(), 0.0)
         if not rate:
             return None
         left = max(self.cfg.steps - self.state.steps, 0)

@@ -1,12 +1,19 @@
 """What a run says of itself: where it stands while it trains (:class:`Standing`), what the ledger says of its
-newest snapshots (:class:`SnapshotRecord`), and its report at the end (:class:`TrainReport`). `marl train` shows them
-(:mod:`selfplay_cli.commands.train_view`)."""
+newest snapshots (:class:`SnapshotRecord`), and its report at the end (:class:`TrainReport`); its :class:`Heartbeat`
+says where it stands at least every :data:`HEARTBEAT_SECONDS`, however long one step, update or gauntlet takes.
+`marl train` shows them (:mod:`selfplay_cli.commands.train_view`)."""
 
 from __future__ import annotations
 
+import threading
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+HEARTBEAT_SECONDS = 1.0
+"""A run's progress is told at least this often (real seconds), whatever its main thread is busy with."""
 
 
 @dataclass(frozen=True)
@@ -86,7 +93,9 @@ class TrainReport:
     session_steps: int  # game steps this session played
     session_seconds: float  # wall time of this session, rating games and the wait for the last ones included
     train_seconds: float  # of it, training: the loop of games and updates (rating games played inline left out)
-    session_eval_games: int  # games this session's gauntlets played
+    session_eval_games: int  # rating games this session stored: the ledger's count of the run's (``eval_games``)
+    # now, less its count when the session began (a gauntlet a killed session had finished is played again on
+    # resume and stores nothing: it adds none)
     eval_seconds: float  # this session: time the gauntlets took (beside training, unless inline)
     wait_seconds: float  # this session: time spent after training waiting for the last gauntlets
     plot: Path | str | None = None  # the rating curves' PNG, or why there is none
@@ -95,8 +104,67 @@ class TrainReport:
     nash: dict[str, float] | None = None  # --opponents nash: the run's Nash mixture at the end (name -> weight)
     rating_left: int = 0  # gauntlets not played yet (--eval remote --no-wait: the league's workers play them
     # later); while any is left the ratings above are not the run's last, and its best is not decided
+    rating: bool = True  # the run plays rating games (False: --eval-games 0)
+    same_weights: dict[str, str] = field(default_factory=dict)  # the run's snapshots whose weights another run's
+    # snapshot holds too (a repeated command and seed): name -> the other's name; one set of weights is one player,
+    # rated once, so such a snapshot's gauntlet finds its games already played
 
     @property
     def steps_per_second(self) -> float:
         """This session's training rate: its game steps over its training time."""
         return self.session_steps / self.train_seconds if self.train_seconds > 0 else 0.0
+
+
+class Heartbeat:
+    """Tells a run's progress events to ``tell``, one at a time (:meth:`tell`, from the run's thread), and, from a
+    thread of its own, the event ``make()`` returns (None: nothing to tell) whenever none was told for
+    :data:`HEARTBEAT_SECONDS`: a display hears of the run while its thread is busy in one long piece of work (a
+    game's slow step, an update of minutes, a gauntlet played inline), and a log's line comes on time. An error
+    ``tell`` raises in the heartbeat's thread stops the heartbeat and is raised in the run's thread by
+    :meth:`check`."""
+
+    def __init__(self, tell: Callable[[dict[str, Any]], None], make: Callable[[], dict[str, Any] | None]) -> None:
+        self._tell, self._make = tell, make
+        self._lock = threading.Lock()
+        self._last = time.monotonic()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.error: BaseException | None = None
+
+    def tell(self, event: dict[str, Any]) -> None:
+        with self._lock:
+            self._last = time.monotonic()
+            self._tell(event)
+
+    def beat(self) -> None:
+        """Tell ``make()``'s event if none was told for :data:`HEARTBEAT_SECONDS`."""
+        if time.monotonic() - self._last >= HEARTBEAT_SECONDS:
+            event = self._make()
+            if event is not None:
+                self.tell(event)
+
+    def check(self) -> None:
+        """Raise the error that stopped the heartbeat, if one did."""
+        if self.error is not None:
+            error, self.error = self.error, None
+            raise error
+
+    def _run(self) -> None:
+        while not self._stop.wait(HEARTBEAT_SECONDS / 4):
+            try:
+                self.beat()
+            except BaseException as e:  # (raised in the run's thread by check())
+                self.error = e
+                return
+
+    def __enter__(self) -> Heartbeat:
+        self._last = time.monotonic()
+        self._thread = threading.Thread(target=self._run, name="marl-progress", daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None

@@ -76,6 +76,11 @@ class RemoteEvaluator:
         self._note = note or (lambda line: print(line, file=sys.stderr, flush=True))
         self._ticked = 0.0
 
+    @property
+    def left(self) -> int:
+        """Gauntlets submitted and not done yet (as the last :meth:`poll` found them)."""
+        return len(self.pending)
+
     def submit(self, job: GauntletJob) -> None:
         """Queue ``job`` after the run's previous gauntlet, unless the batch already holds it (a resumed run)."""
         from ..rated.gauntlet_jobs import GAUNTLET, gauntlet_job

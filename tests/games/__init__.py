@@ -8,4 +8,6 @@
   every agent names its own target, plus luck each agent alone sees: a team critic's game (MAPPO, MA-POCA).
 - ``tests.games.relay:parallel_env``: simultaneous, 2 seats, cooperative, Discrete(2); the scout answers and leaves,
   the runner is paid for its answer later: credit after leaving (MA-POCA).
+- ``tests.games.slow:parallel_env``: simultaneous, 2 seats, cooperative, Discrete(2); every step moves the test's
+  clock (``tests.games.slow.CLOCK``) on, so a trainer on that clock meets a slow game without waiting for one.
 """
