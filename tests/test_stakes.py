@@ -120,3 +120,15 @@ def test_the_sprt_counts_chips_in_17_levels_and_hands_as_ever():
     assert sprt_llr(down, 0.0, 10.0, model="categorical") < 0.0
     with pytest.raises(ValueError):
         sprt_llr(up, 0.0, 10.0, model="categorical", elo_model="normalized")
+
+
+def test_a_runs_summary_gives_the_chips_against_each_bot():
+    """The summary's score against a scripted player is its points (3 hands won and 1 lost, worth 2.75 points: 69%),
+    not its hands (75%), with an interval around it."""
+    from selfplay_cli.train.progress import SnapshotRecord
+
+    rec = SnapshotRecord("k/s1", "learner", 1, {"random": (3, 0, 1), "other": (3, 0, 1)}, points={"random": 2.75})
+    assert rec.score("random") == pytest.approx(0.6875) and rec.score("other") == pytest.approx(0.75)
+    low, high = rec.interval("random")
+    assert low < 0.6875 < high
+    assert rec.to_json()["vs"]["random"]["score"] == 0.6875

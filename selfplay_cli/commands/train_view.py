@@ -133,11 +133,11 @@ def describe_record(rec: Any, pending: bool = False) -> str:
     still queued (``--no-wait``), so the figures, if any, are not its last."""
     parts = [elo_text(rec)] if rec.elo is not None else []
 
-    def score(wdl: tuple[int, int, int]) -> str:
-        low, high = rec.interval(wdl)
-        return f"{100 * rec.score(wdl):.0f}% [{100 * low:.0f}%, {100 * high:.0f}%] of {sum(wdl)} {rec.unit}"
+    def score(bot: str) -> str:
+        low, high = rec.interval(bot)
+        return f"{100 * rec.score(bot):.0f}% [{100 * low:.0f}%, {100 * high:.0f}%] of {sum(rec.vs[bot])} {rec.unit}"
 
-    vs = ", ".join(f"vs {bot} {score(wdl)}" for bot, wdl in rec.vs.items())
+    vs = ", ".join(f"vs {bot} {score(bot)}" for bot in rec.vs)
     if vs:
         parts.append(vs)
     if pending:
@@ -266,7 +266,7 @@ class TrainProgress:
         elif kind == "snapshot":
             recs = "; ".join(
                 f"{r.name.split('/', 1)[-1]} (step {r.step:,}): "
-                + ", ".join([f"{bot} {100 * r.score(wdl):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()]
+                + ", ".join([f"{bot} {100 * r.score(bot):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()]
                             + ([elo_text(r)] if r.elo is not None else []))
                 or "unrated" for r in event["records"])
             self._print(self._where(standing, f"; rated {recs}"))

@@ -319,15 +319,17 @@ class Trainer:
         rated = {r.player_id: r for r in (self._ladder() if rows is None else rows)}
         out = []
         for p in new:
-            vs = {}
+            vs, points = {}, {}
             for bot, bot_id in self.bot_ids.items():
                 h = head_to_head(self.league, p.id, bot_id, variant=self.variant)
                 if h["games"]:
                     vs[bot] = (h["wins"], h["draws"], h["losses"])
+                    if any(x not in (0.0, 0.5, 1.0) for r in h["rounds"] for x in r):  # (played for stakes)
+                        points[bot] = h["score"] * h["results"]
             r = rated.get(p.id)
             out.append(SnapshotRecord(p.full_name, p.meta.get("learner", ""), p.step, vs,
                                       r.elo if r else None, r.ci_low if r else None, r.ci_high if r else None,
-                                      "comparisons" if self.spec.kind == COOPERATIVE else "games"))
+                                      "comparisons" if self.spec.kind == COOPERATIVE else "games", points))
         return out
 
     # -- one process per run ---------------------------------------------------------------------------------
@@ -362,7 +364,7 @@ class Trainer:
                 **{f"curriculum/{k}": round(v, 5) for k, v in self.rollouts.lesson.items()},
                 **{f"{self.names[i]}/{k}": round(v, 5) for i, s in enumerate(stats) for k, v in s.items()}}
         for rec in self.records:
-            line.update({f"eval/{rec.learner}/{bot}": round(rec.score(wdl), 4) for bot, wdl in rec.vs.items()})
+            line.update({f"eval/{rec.learner}/{bot}": round(rec.score(bot), 4) for bot in rec.vs})
         line.update(self.opponents.nash_metrics())
         metrics.write(json.dumps(line) + "\n")
         if board is not None:

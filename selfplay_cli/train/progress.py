@@ -30,26 +30,32 @@ class SnapshotRecord:
     ci_low: float | None = None
     ci_high: float | None = None
     unit: str = "games"  # what a result against a bot is: a game, or a cooperative game's comparison of two
+    points: dict[str, float] = field(default_factory=dict)  # its points against each bot, where results are worth
+    # more than a win, a draw or a loss (a game played for stakes: poker's chips); else from the record
 
-    @staticmethod
-    def score(wdl: tuple[int, int, int]) -> float:
-        w, d, lo = wdl
-        return (w + 0.5 * d) / max(w + d + lo, 1)
+    def score(self, bot: str) -> float:
+        """Its mean points against ``bot`` (a draw half a point; a hand of poker what its chips are worth)."""
+        w, d, lo = self.vs[bot]
+        n = max(w + d + lo, 1)
+        return self.points[bot] / n if bot in self.points else (w + 0.5 * d) / n
 
-    @staticmethod
-    def interval(wdl: tuple[int, int, int]) -> tuple[float, float]:
-        """The score's 95% interval (Wilson: honest with a handful of results and at 0 % or 100 %)."""
+    def interval(self, bot: str) -> tuple[float, float]:
+        """The score's 95% interval (Wilson: honest with a handful of results and at 0 % or 100 %; for points worth
+        any value in [0, 1] it errs wide, their variance being at most a coin's of the same mean)."""
         from ..stats.match import score_interval
 
-        return score_interval(*wdl)
+        w, d, lo = self.vs[bot]
+        n = w + d + lo
+        s = self.score(bot)
+        return score_interval(s * n, 0, n - s * n) if bot in self.points else score_interval(w, d, lo)
 
     def to_json(self) -> dict[str, Any]:
         return {"snapshot": self.name, "learner": self.learner, "step": self.step,
                 "elo": None if self.elo is None else round(self.elo, 1),
                 "ci_low": None if self.ci_low is None else round(self.ci_low, 1),
                 "ci_high": None if self.ci_high is None else round(self.ci_high, 1),
-                "vs": {bot: {"score": round(self.score(wdl), 4), "score_low": round(self.interval(wdl)[0], 4),
-                             "score_high": round(self.interval(wdl)[1], 4), self.unit: sum(wdl), "wins": wdl[0],
+                "vs": {bot: {"score": round(self.score(bot), 4), "score_low": round(self.interval(bot)[0], 4),
+                             "score_high": round(self.interval(bot)[1], 4), self.unit: sum(wdl), "wins": wdl[0],
                              "draws": wdl[1], "losses": wdl[2]} for bot, wdl in self.vs.items()}}
 
 
