@@ -144,6 +144,5 @@ def test_pursuit_lists_its_options_as_the_readme_uses_them(capsys):
 
 
 def test_pistonball_lists_the_same_options_in_either_form(capsys):
-    pytest.importorskip("pymunk")
     module = _options(capsys, "pettingzoo.butterfly.pistonball_v6")
     assert ("n_pistons", 20) in module and module == _options(capsys, "pettingzoo.butterfly.pistonball_v6:env")
