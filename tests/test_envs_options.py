@@ -7,7 +7,6 @@ import json
 import sys
 from pathlib import Path
 
-import pytest
 from cli_helpers import run, run_json
 
 from selfplay_cli.envs import game_options, get_env
