@@ -188,15 +188,16 @@ def test_ranks_count_the_players_above_beyond_doubt_and_tiers_part_only_where_ev
     pairs = PairModel(ratings, sd, [True] * 4, none, none, 2.0, spread=Spread.known(0.0), anchor=3)
     fitted = Fitted(["a", "b", "c", "d"], ratings, low, high, [None, None, None, None], 0.95, pairs)
     assert 100 - z * 40 > 0 and 100 - z * 80 < 0 and 150 - z * 50 > 0 and 50 - z * 50 < 0
-    ranks, tiers = _ranks_and_tiers(fitted, [0, 1, 2, 3])
-    assert ranks == {0: 1, 1: 2, 2: 2, 3: 3} and tiers == {0: 1, 1: 2, 2: 2, 3: 2}
+    order, ranks, tiers = _ranks_and_tiers(fitted, [0, 1, 2, 3])
+    assert ranks == {0: 1, 1: 2, 2: 2, 3: 3} and tiers == {0: 1, 1: 2, 2: 2, 3: 2} and order == [0, 1, 2, 3]
     m = fitted.margin(1, 2)
     assert m.over == "c" and m.elo == pytest.approx(100.0, abs=0.5) and not m.separated
     assert (m.low, m.high) == pytest.approx((100 - z * 80, 100 + z * 80), abs=2.0)
     # d flagged (a bound): only whole intervals count, and they all overlap d's: nobody is above it
     flagged = replace(fitted, flags=[None, None, None, FLAG_PERFECT])
-    ranks, tiers = _ranks_and_tiers(flagged, [0, 1, 2, 3])
+    order, ranks, tiers = _ranks_and_tiers(flagged, [0, 1, 2, 3])
     assert ranks == {0: 1, 1: 2, 2: 2, 3: 1} and tiers == {0: 1, 1: 1, 2: 1, 3: 1}
+    assert order == [0, 3, 1, 2]  # by rank, then Elo: nobody is above d beyond doubt
     assert flagged.margin(1, 3).low == pytest.approx(low[1] - high[3])
 
 

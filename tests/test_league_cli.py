@@ -305,7 +305,7 @@ def test_ladder_and_fit_help_explain_without_losing_brackets(capsys):
     assert code == 0
     text = " ".join(out.split())
     for words in ("--prior 0 gives the plain maximum-likelihood fit", "default 2, BayesElo's default",
-                  "Rank: the place in the order of Elo", "Tier: players that cannot be told apart",
+                  "Rank: 1 + the players above it beyond doubt", "Tier: a boundary falls only where",
                   "ranks and tiers stay those of the whole ladder",
                   "perfect or zero, only with --prior 0", "disconnected: no chain of games", "unrated: no games",
                   "(best) in bold for the best snapshot of each run", "vs BOT", "[default: 2.0]", "--run", "--top"):

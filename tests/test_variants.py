@@ -79,8 +79,9 @@ def test_a_match_under_an_option_is_rated_apart_from_the_default_ladder(home, ca
     rep = run_json(capsys, "match", "cpu", "random", "--env", "pong", "--env-option", "points_to_win=3",
                    "--games", "20", "-q")
     assert rep["games"] == 20 and rep["variant"] == {"points_to_win": 3}
-    # the default ladder has none of its games ...
-    assert ladder_json(capsys, "--env", "pong") == []
+    # the default ladder has none of its games: without options the ladder shows the only variant with games ...
+    assert ladder_json(capsys, "--env", "pong", "--env-option", "points_to_win=21") == []
+    assert all(r["variant"] == {"points_to_win": 3} for r in ladder_json(capsys, "--env", "pong"))
     # ... its own ladder has all of them, and says which variant it fitted
     rows = ladder_json(capsys, "--env", "pong", "--env-option", "points_to_win=3")
     assert games_of(rows) == {"cpu": 20, "random": 20} and all(r["variant"] == {"points_to_win": 3} for r in rows)
@@ -108,7 +109,7 @@ def test_a_lander_match_with_more_landers_is_rated_apart(home, capsys):
     rep = run_json(capsys, "match", "heuristic", "random", "--env", "lander", "--env-option", "landers=4",
                    "--games", "4", "-q")
     assert rep["variant"] == {"landers": 4} and rep["wins"] + rep["draws"] + rep["losses"] == 2
-    assert ladder_json(capsys, "--env", "lander") == []
+    assert ladder_json(capsys, "--env", "lander", "--env-option", "landers=2") == []
     rows = ladder_json(capsys, "--env", "lander", "--env-option", "landers=4")
     assert games_of(rows) == {"heuristic": 2, "random": 2}  # two comparisons, each of two episodes
     assert all(r["variant"] == {"landers": 4} for r in rows) and all(r["mean_return"] is not None for r in rows)
@@ -236,7 +237,7 @@ def test_a_league_written_before_variants_reads_per_variant(tmp_path, capsys):
     assert games_of(rows) == {"cpu": 6, "random": 6}  # 4 default games + 2 under the neutral frame_stack=4
     rows = ladder_json(capsys, "--home", str(home), "--env", "pong", "--env-option", "points_to_win=3")
     assert games_of(rows) == {"cpu": 6, "random": 6}
-    assert ladder_json(capsys, "--home", str(home), "--env", "lander") == []
+    assert ladder_json(capsys, "--home", str(home), "--env", "lander", "--env-option", "landers=2") == []
     rows = ladder_json(capsys, "--home", str(home), "--env", "lander", "--env-option", "landers=4")
     assert games_of(rows) == {"heuristic": 1, "random": 1}  # one comparison of two episodes
     # and it takes new games as any league does

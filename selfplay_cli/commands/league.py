@@ -56,11 +56,11 @@ LADDER_HELP = "\n\n".join((
     "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
     "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
     "--prior 0 gives the plain maximum-likelihood fit.",
-    "Rows are in order of Elo. Rank and tier are claims about pairs: one player is above another beyond doubt when "
+    "Rank and tier are claims about pairs: one player is above another beyond doubt when "
     "the confidence interval of that pair's difference lies wholly above zero, the pair judged as marl league "
     "predict judges it (what the rest of the ladder says of the two, widened by how far the game's pairs scatter "
     "around their ratings, then their own games). Rank: 1 + the players above it beyond doubt, so players the games "
-    "cannot order share one. Tier: a boundary falls only where everyone above it is above everyone below it beyond "
+    "cannot order share one; rows go by rank, then Elo. Tier: a boundary falls only where everyone above it is above everyone below it beyond "
     "doubt. Under the table: the top's margin over the next and each run's best's over the run's next best (the "
     "pair's own figure, as marl league predict and the run's summary give it), or the snapshots the best cannot be "
     "told apart from. --run and --top only choose the rows shown: ranks and tiers stay those of the whole ladder.",
@@ -165,20 +165,24 @@ def predict_cmd(
         options = parse_env_options(row_a.env, env_option) if env_option else None
         variant = players_variant(league, row_a.env, [row_a, row_b], options)  # the ladder a match of them is in
         forecast = Forecaster.of_league(league, row_a.env, variant=variant)
-        p = forecast.predict(row_a.full_name, row_b.full_name, games, confidence)
+        pair = forecast.belief(row_a.full_name, row_b.full_name)
+        p = pair.predict(games, confidence)
+        low, high = pair.interval(confidence)
         met_points, met = forecast.met(row_a.full_name, row_b.full_name)
     finally:
         league.close()
     if json_out:
-        print_json({"a": row_a.full_name, "b": row_b.full_name, **p.to_json(), "spread": round(forecast.spread, 1),
-                    "met": met, "met_score": round(met_points / met, 4) if met else None})
+        print_json({"a": row_a.full_name, "b": row_b.full_name, **p.to_json(), "elo_low": round(low, 1),
+                    "elo_high": round(high, 1), "spread": round(forecast.spread, 1), "met": met,
+                    "met_score": round(met_points / met, 4) if met else None})
         return
     console.print(f"{row_a.full_name} against {row_b.full_name} over {games} games: {100 * p.score:.1f}% "
                   f"[{100 * p.low:.1f}%, {100 * p.high:.1f}%] ({100 * confidence:g}% of such matches fall in it)",
                   markup=False, highlight=False)
-    console.print(f"  Elo difference {p.diff:+.0f} (sd {p.sd:.0f}, pairs' spread around their ratings "
-                  f"{forecast.spread:.0f}); " + (f"they met in {met} rated results: {100 * met_points / met:.0f}%"
-                                                  if met else "they never met"), markup=False, highlight=False)
+    console.print(f"  the pair's Elo difference {p.diff:+.0f} [{low:+.0f}, {high:+.0f}] (the ladder's margin; pairs' "
+                  f"spread around their ratings {forecast.spread:.0f}); "
+                  + (f"they met in {met} rated results: {100 * met_points / met:.0f}%" if met else "they never met"),
+                  markup=False, highlight=False)
 
 
 @app.command("tournament")

@@ -48,8 +48,7 @@ and a ``zero`` player's lower end are ``rating +- MAX_ELO``; disconnected and un
 
 Order, ranks and tiers
 ----------------------
-Rows are in order of Elo, highest first (players whose offset to the anchor is unknown, ``disconnected``, and
-players without games, ``unrated``, last). Ranks and tiers are claims about pairs, and every claim about two players
+Ranks and tiers are claims about pairs, and every claim about two players
 comes from one model of the pair (:class:`~selfplay_cli.stats.predict.PairModel`): what the rest of the ledger says
 of their difference (their ratings fitted without their own games, with that fit's uncertainty), widened by how far
 the game's pairs scatter around their ratings (the spread, measured from the ledger), then updated by their own
@@ -58,9 +57,13 @@ apart. One player is *above another beyond doubt* when the ``confidence`` interv
 wholly above 0.
 
 A player's *rank* is one more than the number of players above it beyond doubt (as Chatbot Arena ranks): players
-the games cannot order share a rank, and a rank never claims an order nobody measured. Its *tier*: walking down the
-order, a tier boundary falls between two places only where every player above it (in the tier it closes) is above
-every player below it beyond doubt, so a boundary reads "everyone above is stronger than everyone below".
+the games cannot order share a rank, and a rank never claims an order nobody measured. Rows are in order of rank,
+then Elo (players whose offset to the anchor is unknown, ``disconnected``, and players without games, ``unrated``,
+last): a player another is above beyond doubt never stands over it, whatever the ratings say (self-play's
+rock-paper-scissors: the ratings put a snapshot first through its games against the rest, while one below it beats it
+head to head). Its *tier*: walking down the rows, a tier boundary falls between two places only where every player
+above it (in the tier it closes) is above every player below it beyond doubt, so a boundary reads "everyone above is
+stronger than everyone below".
 
 Each row's ``margin`` is its difference over the next row, with its interval, from the same pair model; the best
 snapshot of each run carries its margin over the run's next best (another name of its own weights, or a teammate of
@@ -365,24 +368,28 @@ def _order(fitted: Fitted, shown: list[int]) -> list[int]:
     return sorted(shown, key=lambda i: (_group(fitted.flags[i]), -fitted.ratings[i], fitted.names[i]))
 
 
-def _ranks_and_tiers(fitted: Fitted, order: list[int]) -> tuple[dict[int, int], dict[int, int | None]]:
-    """Each player's rank and tier (see the module docstring). Rank: one more than the players above it beyond
-    doubt. Tier: walking down the order, a boundary falls between two places only where every player of the tier
-    above it is above every player below it beyond doubt. Players whose offset to the anchor is unknown keep their
-    place as rank and have no tier."""
+def _ranks_and_tiers(fitted: Fitted, order: list[int]) -> tuple[list[int], dict[int, int], dict[int, int | None]]:
+    """The rows' order, and each player's rank and tier (see the module docstring). Rank: one more than the players
+    above it beyond doubt. The rows go by rank, then Elo (a player another is above beyond doubt never stands over
+    it, whatever the ratings say: self-play's rock-paper-scissors). Tier: walking down the rows, a boundary falls
+    between two places only where every player of the tier above it is above every player below it beyond doubt.
+    Players whose offset to the anchor is unknown keep their place (last) as rank and have no tier."""
     placed = [i for i in order if not _group(fitted.flags[i])]
     above = fitted.above(placed)
     ranks = {i: 1 + int(above[:, a].sum()) for a, i in enumerate(placed)}
+    by_rank = sorted(range(len(placed)), key=lambda a: (ranks[placed[a]], a))  # (stable: then by Elo)
+    above = above[np.ix_(by_rank, by_rank)]
+    placed = [placed[a] for a in by_rank]
     tiers: dict[int, int | None] = {}
     start, tier = 0, 1
     for a, i in enumerate(placed):
         tiers[i] = tier
         if a + 1 < len(placed) and above[start:a + 1, a + 1:].all():
             start, tier = a + 1, tier + 1
-    for place, i in enumerate(order):
-        if _group(fitted.flags[i]):
-            ranks[i], tiers[i] = place + 1, None
-    return ranks, tiers
+    rest = [i for i in order if _group(fitted.flags[i])]
+    for place, i in enumerate(rest, start=len(placed)):
+        ranks[i], tiers[i] = place + 1, None
+    return placed + rest, ranks, tiers
 
 
 def check_prior(prior: float) -> float:
@@ -478,8 +485,8 @@ def _fit_rows(
     points, games = pair_matrices(ai, bi, sc, n)
     pairs = PairModel(ratings, diff_sd, [f is None for f in fit.flags], points, games, prior, spread, anchor=k)
     fitted = Fitted(names, ratings, low, high, list(fit.flags), confidence, pairs, wdl)
-    order = _order(fitted, [i for i, name in enumerate(names) if name not in hidden])
-    ranks, tiers = _ranks_and_tiers(fitted, order)
+    order, ranks, tiers = _ranks_and_tiers(fitted, _order(fitted, [i for i, name in enumerate(names)
+                                                                    if name not in hidden]))
     kinds, steps, player_ids = kinds or {}, steps or {}, player_ids or {}
     adjacent = [(i, j) for i, j in zip(order, order[1:], strict=False) if not _group(fit.flags[i])
                 and not _group(fit.flags[j])]
