@@ -56,12 +56,12 @@ LADDER_HELP = "\n\n".join((
     "Ratings are MAP estimates under BayesElo's prior of --prior virtual draws (default 2, BayesElo's default): a "
     "perfect score gets a finite rating, and no interval is narrower than the curvature of the posterior allows. "
     "--prior 0 gives the plain maximum-likelihood fit.",
-    "Rank and tier are claims about pairs: one player is above another beyond doubt when "
-    "the confidence interval of that pair's difference lies wholly above zero, the pair judged as marl league "
-    "predict judges it (what the rest of the ladder says of the two, widened by how far the game's pairs scatter "
-    "around their ratings, then their own games). Rank: 1 + the players above it beyond doubt, so players the games "
-    "cannot order share one; rows go by rank, then Elo. Tier: a boundary falls only where everyone above it is above everyone below it beyond "
-    "doubt. Under the table: the top's margin over the next and each run's best's over the run's next best (the "
+    "Rank and tier are claims about pairs: one player is above another beyond doubt when the confidence interval of "
+    "that pair's difference lies wholly above zero, the pair judged as marl league predict judges it (what the rest "
+    "of the ladder says of the two, widened by how far the game's pairs scatter around their ratings, then their own "
+    "games). Rank: 1 + the players above it beyond doubt, so players the games cannot order share one; rows go by "
+    "rank, then Elo. Tier: a boundary falls only where everyone above it is above everyone below it beyond doubt. "
+    "Under the table: the top's margin over the next and each run's best's over the run's next best (the "
     "pair's own figure, as marl league predict and the run's summary give it), or the snapshots the best cannot be "
     "told apart from. --run and --top only choose the rows shown: ranks and tiers stay those of the whole ladder.",
     "Flags next to the Elo: perfect or zero, only with --prior 0: the maximum-likelihood rating is infinite (all "
