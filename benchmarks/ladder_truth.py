@@ -130,7 +130,7 @@ def claims_of(league: League, env: str, variant: str, run: str, report: dict,
             claim(r.policy, m.over, "margin", ("best", m.elo, m.low, m.high))
     for r in mine:  # each row's margin over the next (JSON)
         if r.margin is not None and r.margin.over in names:
-            claim(r.policy, r.margin.over, "margin", ("row", r.margin.elo, r.margin.low, r.margin.high))
+            claim(r.policy, r.margin.over, "row", ("row", r.margin.elo, r.margin.low, r.margin.high))
     for final in report.get("final", []):  # the summary: each final snapshot against each scripted player
         for bot in final.get("vs", {}):
             if final["snapshot"] in names and bot in names:
@@ -139,16 +139,22 @@ def claims_of(league: League, env: str, variant: str, run: str, report: dict,
 
 
 def measured(round_points: list[list[float]]) -> tuple[float, float, int]:
-    """A's score over the match (points per result), its Elo (a 0% or 100% score: the bound with one virtual draw)
-    and whether it is a bound (+1 above, -1 below, 0 an estimate)."""
+    """A's score over the match (points per result), its Elo difference, and whether that is only a bound: a 0% or
+    100% score (+1 above, -1 below, 0 an estimate) says the difference is beyond the one it would take to lose (win)
+    every result with 2.5% chance, ``E(d)^n = 0.025``; that bound is the Elo returned."""
     pts = np.array([x for p in round_points for x in p])
     n = pts.size
     score = float(pts.mean()) if n else 0.5
-    if score >= 1.0:
-        return score, score_to_elo((n + 0.5) / (n + 1)), 1
-    if score <= 0.0:
-        return score, score_to_elo(0.5 / (n + 1)), -1
+    if n and score >= 1.0:
+        return score, score_to_elo(0.025 ** (1.0 / n)), 1
+    if n and score <= 0.0:
+        return score, -score_to_elo(0.025 ** (1.0 / n)), -1
     return score, score_to_elo(score), 0
+
+
+def margin_held(low: float, high: float, elo: float, bound: int) -> bool:
+    """Whether a margin's interval holds the 200-game difference (or, for a 0% or 100% score, reaches its bound)."""
+    return bool(high >= elo if bound > 0 else low <= elo if bound < 0 else low <= elo <= high)
 
 
 def check_game(name: str, home: Path, args: list[str], games: int, max_pairs: int | None, seed: int,
@@ -179,8 +185,8 @@ def check_game(name: str, home: Path, args: list[str], games: int, max_pairs: in
             score, elo, bound = measured(r.round_points)
             margins = []
             for where, m_elo, lo, hi in c.margins:
-                held = (hi >= elo if bound > 0 else lo <= elo if bound < 0 else lo <= elo <= hi)
-                margins.append({"where": where, "elo": m_elo, "low": lo, "high": hi, "held": bool(held)})
+                held = margin_held(lo, hi, elo, bound)
+                margins.append({"where": where, "elo": m_elo, "low": lo, "high": hi, "held": held})
                 if not held:
                     print(f"  margin did not hold: {c.a} over {c.b} {m_elo:+.0f} [{lo:+.0f}, {hi:+.0f}] ({where}); "
                           f"{r.n_results} results: {100 * score:.1f}%, {elo:+.0f} Elo", flush=True)
@@ -204,24 +210,28 @@ def rate(flags: list[bool]) -> str:
 
 
 def summary(label: str, records: list[dict]) -> dict:
-    """One game's figures (printed, and returned for the table)."""
-    held = [r["held"] for r in records]
-    open_ = [r for r in records if 0.05 < r["predicted"] < 0.95]
+    """One game's figures (printed, and returned for the table). The claims a reader meets, the ranks and tiers
+    (order), the margins printed under the ladder and in the run's summary, the summary's scores against the bots,
+    make the main figures; the JSON's margin of each row over the next is reported beside them."""
+    shown = [r for r in records if set(r["kinds"]) - {"row"}]
+    held = [r["held"] for r in shown]
+    open_ = [r for r in shown if 0.05 < r["predicted"] < 0.95]
     met_w = [100 * (r["high"] - r["low"]) for r in open_ if r["met"]]
     new_w = [100 * (r["high"] - r["low"]) for r in open_ if not r["met"]]
-    margins = [m["held"] for r in records for m in r["margins"]]
     printed = [m["held"] for r in records for m in r["margins"] if m["where"] != "row"]
+    rows = [m["held"] for r in records for m in r["margins"] if m["where"] == "row"]
     order = [r["order_held"] for r in records if r["order_held"] is not None]
-    out = {"label": label, "pairs": len(records), "held": rate(held),
+    out = {"label": label, "pairs": len(shown), "held": rate(held),
            "held_share": float(np.mean(held)) if held else None,
            "open_met": len(met_w), "width_met": float(np.median(met_w)) if met_w else None,
            "open_new": len(new_w), "width_new": float(np.median(new_w)) if new_w else None,
-           "margins": rate(margins), "printed_margins": rate(printed), "order": rate(order)}
+           "printed_margins": rate(printed), "row_margins": rate(rows), "order": rate(order),
+           "rows_predictions": rate([r["held"] for r in records if "row" in r["kinds"]])}
     w = (f"median width {out['width_met']:.0f} points of {len(met_w)} that met" if met_w else "none that met")
     w += f", {out['width_new']:.0f} of {len(new_w)} that never met" if new_w else ", none that never met"
-    print(f"{label}: predictions held {out['held']}; open predictions: {w}; margins held {out['margins']} (printed "
-          f"under the ladder and in the summary: {out['printed_margins']}); order claims held {out['order']}",
-          flush=True)
+    print(f"{label}: predictions held {out['held']}; open predictions: {w}; margins printed under the ladder and in "
+          f"the summary held {out['printed_margins']}; order claims held {out['order']}; each row's margin over the "
+          f"next (JSON) held {out['row_margins']}, its pair's prediction {out['rows_predictions']}", flush=True)
     return out
 
 
@@ -292,9 +302,10 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
                 sign = 1.0 if c[1] == i else -1.0
                 lo, hi = (m.low, m.high) if sign > 0 else (-m.high, -m.low)
                 margins.append({"where": "row", "elo": sign * m.elo, "low": lo, "high": hi,
-                                "held": bool(hi >= elo if bound > 0 else lo <= elo if bound < 0 else lo <= elo <= hi)})
+                                "held": margin_held(lo, hi, elo, bound)})
         order = [c for c in said if c[0] == "order"]
-        out.append({"predicted": pred.score, "low": pred.low, "high": pred.high, "measured": score,
+        out.append({"kinds": sorted({"row" if c[0] == "margin" else c[0] for c in said}),
+                    "predicted": pred.score, "low": pred.low, "high": pred.high, "measured": score,
                     "held": pred.holds(score), "met": f.met(names[i], names[j])[1], "margins": margins,
                     "order_held": ((score > 0.5) == (order[0][1] == i)) if order else None})
     return out
@@ -337,14 +348,14 @@ def main() -> None:
     for tau in (0.0, 150.0, 300.0):
         sim = [r for _ in range(args.simulated) for r in simulated(rng, tau, args.checks)]
         table.append(summary(f"simulated, spread {tau:.0f}", sim))
-    print("\n| game | pairs | 95% predictions held | open, met: median width | open, never met: median width | "
-          "margins held (printed) | order claims held |")
-    print("|---|---|---|---|---|---|---|")
+    print("\n| game | pairs | 95% predictions held | open, met: median width (pairs) | open, never met | "
+          "printed margins held | order claims held | row margins (JSON) held |")
+    print("|---|---|---|---|---|---|---|---|")
     for t in table:
         wm = f"{t['width_met']:.0f} ({t['open_met']})" if t["width_met"] is not None else "-"
         wn = f"{t['width_new']:.0f} ({t['open_new']})" if t["width_new"] is not None else "-"
-        print(f"| {t['label']} | {t['pairs']} | {t['held']} | {wm} | {wn} | {t['margins']} ({t['printed_margins']})"
-              f" | {t['order']} |")
+        print(f"| {t['label']} | {t['pairs']} | {t['held']} | {wm} | {wn} | {t['printed_margins']} | {t['order']} | "
+              f"{t['row_margins']} |")
     if args.out:
         args.out.write_text(json.dumps({"date": time.strftime("%Y-%m-%d"), "machine": platform.node(),
                                         "table": table, "pairs": real}, indent=1))

@@ -76,6 +76,9 @@ class GauntletConfig:
     # their figures against the bots are what the run reports)
     clear: float = 0.95  # a matchup is settled once the likelihood of superiority leaves [1 - clear, clear]
     parallel: int = 1024  # games at once
+    precision: float = 0.0  # a matchup of two snapshots plays on (doubling, up to max_pairs) while its own record
+    # cannot predict a 200-game match of the two to within this many score points (0: it stops once clear): the
+    # ladder's claims about a pair rest on the pair's games
 
     def __post_init__(self) -> None:
         if not 1 <= self.clear_pairs <= self.pairs <= self.max_pairs:
@@ -85,6 +88,8 @@ class GauntletConfig:
             raise MarlError(f"older snapshots must not be negative, not {self.older}")
         if not 0.5 < self.clear < 1.0:
             raise MarlError(f"clear must lie in (0.5, 1), not {self.clear}")
+        if not 0.0 <= self.precision < 1.0:
+            raise MarlError(f"precision must lie in [0, 1), not {self.precision}")
 
 
 @dataclass
@@ -110,18 +115,33 @@ class Matchup:
     def score(self) -> float:
         return (self.wins + 0.5 * self.draws) / self.games if self.games else 0.5
 
-    def more(self, z: float, pairs: int, max_pairs: int) -> int:
+    def more(self, z: float, pairs: int, max_pairs: int, precision: float = 0.0) -> int:
         """Pairs to add now that every game so far is in (0: settled).
 
         A matchup started small on a clear history goes on to ``pairs`` at once when its games go against that
         history (the snapshot changed: exactly where games are worth playing), and stops when they agree. Any other
-        matchup doubles its pairs up to ``max_pairs`` while its result is open."""
+        matchup doubles its pairs up to ``max_pairs`` while its result is open; with ``precision``, a matchup of two
+        snapshots while its record cannot yet predict a 200-game match of the two to within ``precision`` score
+        points (:func:`prediction_width`)."""
         if self.expect is not None:
             agrees = (self.score - 0.5) * (self.expect - 0.5) > 0
             return 0 if agrees else max(pairs - self.pairs, 0)
-        if self.pairs >= max_pairs or clear(self.wins, self.losses, z):
+        if precision and not (self.a.is_bot or self.b.is_bot):
+            settled = prediction_width(self.wins, self.draws, self.losses) <= precision
+        else:
+            settled = clear(self.wins, self.losses, z)
+        if self.pairs >= max_pairs or settled:
             return 0
         return min(2 * self.pairs, max_pairs) - self.pairs
+
+
+def prediction_width(wins: int, draws: int, losses: int, games: int = 200) -> float:
+    """How wide (score points, 0 to 1) the 95% interval of a ``games``-game match's score is, predicted from this
+    record alone: ``2 z sqrt(p (1 - p) (1 / (n + 1) + 1 / games))`` with ``p`` the score with one virtual draw (the
+    uncertainty of the pair's expected score, then the luck of the match)."""
+    n = wins + draws + losses
+    p = (wins + 0.5 * draws + 0.5) / (n + 1)
+    return 2.0 * 1.959964 * math.sqrt(p * (1.0 - p) * (1.0 / (n + 1) + 1.0 / games))
 
 
 def clear(wins: int, losses: int, z: float) -> bool:
@@ -369,7 +389,7 @@ class _Gauntlet:
         if on_games:
             on_games(1)
         if self.in_flight[k] == 0:  # every game scheduled so far is in: go on while still open, else store them all
-            extra = m.more(self.z, self.cfg.pairs, self.cfg.max_pairs)
+            extra = m.more(self.z, self.cfg.pairs, self.cfg.max_pairs, self.cfg.precision)
             key = self.keys[k]
             if extra:
                 self.schedule_pairs(k, extra)

@@ -31,12 +31,17 @@ from .gauntlet import GauntletConfig, rate_snapshots
 from .played import Played
 from .snapshots import share_snapshots
 
-__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "gauntlet_job", "play",
+__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "PRECISE_PAIRS", "PRECISION", "gauntlet_job",
+           "play",
            "play_gauntlet_spec"]
 
 GAUNTLET = "gauntlet"
-FINAL_BOT_GAMES = 4  # a run's final snapshots play this many times --eval-games against each scripted player (32
-# at the default 8): the run's summary reports their scores against the bots, and each score's interval
+FINAL_BOT_GAMES = 8  # a run's final snapshots play this many times --eval-games against each scripted player (64
+# at the default 8): the run's summary reports their scores against the bots, and each score's interval (within
+# about 28 points for a 200-game match at 50%)
+PRECISION = 0.30  # a matchup of two snapshots plays on (up to PRECISE_PAIRS times its pairs) until its record
+# predicts a 200-game match of the two to within 30 score points: the ladder's claims about a pair rest on its games
+PRECISE_PAIRS = 4
 FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapshots (all of a default run's), spread
 # over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
 # rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
@@ -72,9 +77,9 @@ def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "c
     n = max(games // per, 1)
     # (a payoff matrix's cell of 2 games would weigh as much as one of 400 in its Nash mixture: none cut short)
     whole = full or bool(spec.get("whole", False))
-    cfg = GauntletConfig(pairs=n, clear_pairs=n if whole else 1, max_pairs=n,
+    cfg = GauntletConfig(pairs=n, clear_pairs=n if whole else 1, max_pairs=PRECISE_PAIRS * n,
                          older=max(older, FINAL_OLDER) if full else older,
-                         bot_pairs=max(n, FINAL_BOT_GAMES * games // per) if full else 0)
+                         bot_pairs=max(n, FINAL_BOT_GAMES * games // per) if full else 0, precision=PRECISION)
     matchups = rate_snapshots(league, ids, first_seed=first_seed, config=cfg, device=device, on_games=on_games)
     played = sum(m.games for m in matchups)
     if int(spec.get("playoff", 0)):
