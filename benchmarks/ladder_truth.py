@@ -16,7 +16,8 @@ ladder and the run's summary claim, and plays each pair those claims are about 2
   95%) of pairs that met in rated games and of pairs that never met.
 
 The same checks run on simulated leagues drawn from a run-like schedule (each snapshot against its predecessor, the
-other learner, the best, older ones and two bots, 8 games a pair; 32 for the finals against the bots), with pairs
+other learner, the best, older ones and two bots, 8 games a pair, up to 32 between snapshots whose record is still
+imprecise, as training's gauntlets; 64 for the finals against the bots), with pairs
 scattered around their ratings by 0, 150 and 300 Elo (rock-paper-scissors between snapshots), where the truth is
 known.
 
@@ -50,6 +51,7 @@ from selfplay_cli.league.forecast import Forecaster
 from selfplay_cli.league.ladder import fit_table, ladder
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.league.variants import variant_key, variant_options
+from selfplay_cli.rated.gauntlet import prediction_width
 from selfplay_cli.rated.match import run_match
 from selfplay_cli.rated.match_jobs import MatchJob
 from selfplay_cli.rated.snapshots import run_options
@@ -242,8 +244,8 @@ def _expected(d: np.ndarray | float) -> np.ndarray:
 def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7, per_pair: int = 8) -> list[dict]:
     """One league drawn from the model: two learners whose ratings rise with the step, two bots, the run's schedule
     (each moment against its predecessors, the other learner, the best so far, two older snapshots and the bots,
-    ``per_pair`` games each; the finals 32 against the bots), pairs scattered around their ratings by ``tau``; then
-    every claim checked against ``games`` simulated games."""
+    ``per_pair`` games each, more between snapshots whose record is still imprecise; the finals 64 against the bots),
+    pairs scattered around their ratings by ``tau``; then every claim checked against ``games`` simulated games."""
     bots = [1000.0, 1000.0 + rng.uniform(300, 600)]
     true = list(bots)
     names = ["random", "cpu"]
@@ -258,10 +260,19 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
     a, b, s = [], [], []
 
     def play(i: int, j: int, k: int) -> None:
-        wins = rng.random(k) < p[i, j]
-        a.extend([i] * k)
-        b.extend([j] * k)
-        s.extend(wins.astype(float).tolist())
+        """k games of i against j; two snapshots play on (doubling, up to 4 times) until their record predicts a
+        200-game match within 30 points, as training's gauntlets do."""
+        won = lost = played = 0
+        while True:
+            wins = rng.random(k - played) < p[i, j]
+            a.extend([i] * (k - played))
+            b.extend([j] * (k - played))
+            s.extend(wins.astype(float).tolist())
+            won, played = won + int(wins.sum()), k
+            lost = played - won
+            if i < 2 or j < 2 or k >= 4 * per_pair or prediction_width(won, 0, lost) <= 0.30:
+                return
+            k *= 2
 
     for t in range(moments):
         new = [2 + 2 * t, 3 + 2 * t]
@@ -275,7 +286,7 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
             for j in sorted(opponents):
                 play(i, j, per_pair)
             for j in (0, 1):
-                play(i, j, 32 if final else per_pair)
+                play(i, j, 64 if final else per_pair)
     f = Forecaster.of_games(names, np.array(a), np.array(b), np.array(s), anchor="random")
     rows = fit_table(names, a, b, s, "random", bootstrap=0)
     below = f.model.below(list(range(n)))
