@@ -442,8 +442,14 @@ class HistoryFit:
     def separated(self, top: int, other: int, confidence: float) -> bool:
         """Whether ``top`` is above ``other`` beyond doubt: the ``confidence`` interval of their difference lies above
         0, as the ladder would say it."""
-        below = self.pairs.below([self.index[top], self.index[other]])
-        return bool(below[0, 1] < 0.5 * (1.0 - confidence))
+        return bool(self.above([top, other], confidence)[0, 1])
+
+    def above(self, ids: Sequence[int], confidence: float) -> np.ndarray:
+        """``[a, b]``: player ``ids[a]`` is above ``ids[b]`` beyond doubt (all linked players)."""
+        below = self.pairs.below([self.index[i] for i in ids])
+        out = below < 0.5 * (1.0 - confidence)
+        np.fill_diagonal(out, False)
+        return out
 
 
 def fit_history(history: History, anchor: str = "random") -> HistoryFit | None:

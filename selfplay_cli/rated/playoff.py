@@ -7,8 +7,9 @@ well reverse it. So after the run's final gauntlet, the playoff:
 
 1. fits the run's snapshots from the run's own rating games (its gauntlets and this playoff, nothing else: the
    history of the moment after the last, so the playoff repeats with the run's seed);
-2. takes the top snapshot and every snapshot of the run it is not separated from (the confidence interval of their
-   difference covers 0), the closest ``rivals`` of them;
+2. takes the top snapshot (as the ladder orders them: by rank, then Elo) and every snapshot of the run it is not
+   separated from (the confidence interval of their difference, as the ladder judges the pair, covers 0), the closest
+   ``rivals`` of them;
 3. plays the top against each rival one round of ``round_games`` games (seat-swapped pairs, or the game kind's
    rounds), and goes back to 1, until the top is separated from every snapshot of the run, or every pair of
    top and rival has ``max_games`` games between them.
@@ -91,6 +92,9 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
         players.sort(key=lambda p: (-fit.rating(p.id), p.id))
         by_rounds: dict[int, dict[frozenset[int], tuple]] = {}  # the pairs by the rounds each plays now
         for group in _comparable(book, players, history.sided):
+            above = fit.above([p.id for p in group], cfg.confidence)  # as the ladder orders them: by rank, then Elo
+            rank = {p.id: 1 + int(above[:, k].sum()) for k, p in enumerate(group)}
+            group = sorted(group, key=lambda p: (rank[p.id], -fit.rating(p.id), p.id))
             top, taken = group[0], 0
             for rival in group[1:]:
                 if taken == cfg.rivals:
