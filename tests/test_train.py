@@ -465,3 +465,20 @@ def test_a_new_runs_settings_resolve_without_the_cli(tmp_path):
         assert (critic[algo]["gamma"], critic[algo]["reward_scale"], critic[algo]["rollout_steps"]) == (0.999, 0.01,
                                                                                                          256)
     assert (critic["mappo"]["lr"], critic["poca"]["lr"]) == (1e-3, 3e-4)  # the file's [poca] over the game's [ppo]
+
+
+def test_the_gauntlets_precision_is_a_setting_each_job_carries(tmp_path, capsys):
+    """--eval-precision (0.3 by default: a matchup of two snapshots plays on until its record predicts a 200-game
+    match within 30 points) is a setting of the run that its gauntlet jobs carry to whoever plays them (a worker
+    beside training, the league's queue); a job without one (queued by an older marl) plays its games exactly;
+    outside [0, 1) the flag is refused in one line."""
+    from selfplay_cli.train.evaluator import GauntletJob, _spec
+    from selfplay_cli.train.settings import new_settings
+
+    assert TrainConfig("pong", run="x").eval_precision == 0.3
+    assert new_settings("pong", {"eval_precision": 0.0})["eval_precision"] == 0.0
+    for bad in ("1.5", "-0.1"):
+        code = main(["train", "pong", "--eval-precision", bad, "--steps", "10", "--home", str(tmp_path)])
+        assert code == 2 and capsys.readouterr().err.count("\n") == 1
+    assert _spec(GauntletJob((1,), 0, 8, 2, precision=0.2))["precision"] == 0.2
+    assert GauntletJob((1,), 0, 8, 2).precision == 0.0

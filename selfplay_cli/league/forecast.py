@@ -40,9 +40,10 @@ class Forecaster:
 
     @classmethod
     def of_games(cls, names: list[str], a: npt.ArrayLike, b: npt.ArrayLike, score_a: npt.ArrayLike, anchor: str,
-                 prior: float = DEFAULT_PRIOR, spread: Spread | None = None) -> Forecaster:
+                 prior: float = DEFAULT_PRIOR, spread: Spread | None = None, deff: float = 1.0) -> Forecaster:
         """Fit the population ``names`` from games given as index arrays (``a`` scored ``score_a`` against ``b``);
-        ``spread`` taken as given instead of measured (a simulation's truth)."""
+        ``spread`` taken as given instead of measured (a simulation's truth); ``deff``: the games' design effect
+        (:func:`~selfplay_cli.league.pairs.design_effect`)."""
         n = len(names)
         ai, bi = np.asarray(a, dtype=np.int64).ravel(), np.asarray(b, dtype=np.int64).ravel()
         sc = np.asarray(score_a, dtype=np.float64).ravel()
@@ -53,13 +54,15 @@ class Forecaster:
         _, _, diff_sd = laplace_intervals(ai, bi, n, fit.ratings, k, 0.95, prior)
         points, games = pair_matrices(ai, bi, sc, n)
         linked = np.array([f is None for f in fit.flags])
-        return cls(list(names), PairModel(fit.ratings, diff_sd, linked, points, games, prior, spread, anchor=k))
+        return cls(list(names), PairModel(fit.ratings, diff_sd, linked, points, games, prior, spread, anchor=k,
+                                          deff=deff))
 
     @classmethod
     def of_league(cls, league: League, env: str, prior: float = DEFAULT_PRIOR, variant: str = "") -> Forecaster:
         """The forecaster of ``env``'s rated games in ``variant`` (the default unless given; players by full name),
         anchored at the game's anchor bot."""
         from selfplay_cli.league.ladder import declared_anchor, default_anchor
+        from selfplay_cli.league.pairs import design_effect
 
         table = league.games(env=env, variant=variant)
         if not len(table):
@@ -69,7 +72,8 @@ class Forecaster:
         population = [known[int(i)] for i in ids.tolist()]
         counts = (np.bincount(a, minlength=ids.size) + np.bincount(b, minlength=ids.size)).tolist()
         anchor = default_anchor(population, dict(zip(ids.tolist(), counts, strict=True)), declared_anchor(env))
-        fitted = cls.of_games([p.full_name for p in population], a, b, table.score_a, anchor.full_name, prior)
+        fitted = cls.of_games([p.full_name for p in population], a, b, table.score_a, anchor.full_name, prior,
+                              deff=design_effect(table))
         lead = {p.id: p.full_name for p in population}
         aliases = {known[pid].full_name: lead[first] for pid, first in league.same_weights(env).items()
                    if first in lead}
@@ -100,4 +104,4 @@ class Forecaster:
     def met(self, a: str, b: str) -> tuple[float, int]:
         """A's points and the results between A and B in the fitted games."""
         i, j = self.names.index(self.aliases.get(a, a)), self.names.index(self.aliases.get(b, b))
-        return float(self.model.points[i, j]), int(self.model.games[i, j])
+        return float(self.model.met_points[i, j]), int(self.model.met_games[i, j])

@@ -85,6 +85,7 @@ import numpy.typing as npt
 
 from selfplay_cli.league.games import declaration
 from selfplay_cli.league.ledger import GameTable, rules_for_env
+from selfplay_cli.league.pairs import design_effect
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.league.variants import variant_options
 from selfplay_cli.results import COOPERATIVE
@@ -443,7 +444,7 @@ def _fit_rows(
     names: list[str], a: npt.ArrayLike, b: npt.ArrayLike, score_a: npt.ArrayLike, anchor: str,
     anchor_rating: float, bootstrap: int, confidence: float, seed: int, kinds: dict[str, str] | None,
     steps: dict[str, int] | None, player_ids: dict[str, int] | None, *, prior: float, hidden: Collection[str],
-    spread: Spread | None = None,
+    spread: Spread | None = None, deff: float = 1.0,
 ) -> tuple[list[LadderRow], Fitted]:
     """:func:`fit_table`'s rows and the :class:`Fitted` population they come from."""
     names = [str(n) for n in names]
@@ -473,8 +474,9 @@ def _fit_rows(
     except ValueError as exc:
         raise LeagueError(f"cannot fit ratings: {exc}") from exc
     ratings = np.asarray(fit.ratings, dtype=np.float64)
-    low = np.minimum(np.asarray(low, dtype=np.float64), ratings)
-    high = np.maximum(np.asarray(high, dtype=np.float64), ratings)
+    widen = math.sqrt(deff)  # results of one round that go together are worth fewer independent ones
+    low = ratings - widen * np.maximum(ratings - np.asarray(low, dtype=np.float64), 0.0)
+    high = ratings + widen * np.maximum(np.asarray(high, dtype=np.float64) - ratings, 0.0)
     _open_flagged_sides(ratings, list(fit.flags), low, high, k)
     if not (np.all(np.isfinite(ratings)) and np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
         raise AssertionError("rating fit produced a non-finite value")  # pragma: no cover
@@ -483,7 +485,8 @@ def _fit_rows(
         np.add.at(wdl[result], (ai[x], bi[x]), 1)  # a's win, draw or loss against b, and b's against a
         np.add.at(wdl[result], (bi[y], ai[y]), 1)
     points, games = pair_matrices(ai, bi, sc, n)
-    pairs = PairModel(ratings, diff_sd, [f is None for f in fit.flags], points, games, prior, spread, anchor=k)
+    pairs = PairModel(ratings, diff_sd, [f is None for f in fit.flags], points, games, prior, spread, anchor=k,
+                      deff=deff)
     fitted = Fitted(names, ratings, low, high, list(fit.flags), confidence, pairs, wdl)
     order, ranks, tiers = _ranks_and_tiers(fitted, _order(fitted, [i for i, name in enumerate(names)
                                                                     if name not in hidden]))
@@ -680,7 +683,7 @@ def ladder(
     rows, fitted = _fit_rows(
         names, a, b, table.score_a, anchor_player.full_name, anchor_rating, bootstrap, confidence, seed,
         {p.full_name: p.kind for p in population}, {p.full_name: p.step for p in population if not p.is_bot},
-        {p.full_name: p.id for p in population}, prior=prior, hidden=hidden,
+        {p.full_name: p.id for p in population}, prior=prior, hidden=hidden, deff=design_effect(table),
     )
     bots = league.players(env=env, kind="bot", include_removed=True)
     records = _bot_records(ids, a, b, table.score_a, bots)
@@ -777,7 +780,7 @@ def _ladder_by_side(league: League, env: str, table: GameTable, labels: tuple[st
         rows, fitted = _fit_rows(
             names, a, b, sided.score_a, lead.full_name, anchor_rating, bootstrap, confidence, seed,
             {p.full_name: p.kind for p in population}, {p.full_name: p.step for p in population if not p.is_bot},
-            {p.full_name: p.id for p in population}, prior=prior, hidden=hidden,
+            {p.full_name: p.id for p in population}, prior=prior, hidden=hidden, deff=design_effect(table),
         )
         key_of = {row_of[k].id: k for k in mine}
         # each row's record against the scripted players, as they played the other side

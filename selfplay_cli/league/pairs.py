@@ -19,7 +19,7 @@ import numpy.typing as npt
 from selfplay_cli.league.store import KIND_CODES, GameTable, League, LeagueError
 from selfplay_cli.results import TWO_SIDES
 
-__all__ = ["PAYOFFS", "PairPlan", "head_to_head", "pair_payoffs", "pair_records", "plan_tournament"]
+__all__ = ["PAYOFFS", "PairPlan", "design_effect", "head_to_head", "pair_payoffs", "pair_records", "plan_tournament"]
 
 
 @dataclass
@@ -149,6 +149,38 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
         "unpaired": n - 2 * pairs,
         "rounds": rounds,
     }
+
+
+def design_effect(table: GameTable) -> float:
+    """How many independent results one result of the ledger is worth, inverted: ``1 + (m - 1) rho``, Kish's design
+    effect of results played in rounds (a seat-swapped pair on one seed, a free-for-all's rotations), with ``m`` the
+    mean size of a round and ``rho`` the correlation of the results within a round, pooled over every pair of
+    players (each result taken from its pair's mean; clipped to [0, 1)). Two games of one seed share its serve, its
+    deal, its terrain: where a policy that wins one wins the other, 200 games say what 100 independent ones would, and
+    every claim read from them as independent would be too sure. 1 where nothing is played in rounds (a cooperative
+    comparison is one result of its seed) or the rounds show no such correlation."""
+    if not len(table):
+        return 1.0
+    lo = np.minimum(table.player_a, table.player_b)
+    hi = np.maximum(table.player_a, table.player_b)
+    x = np.where(table.player_a == lo, table.score_a, 1.0 - table.score_a)  # the lower id's points
+    pair = lo * (int(hi.max()) + 1) + hi
+    _, pair_ix = np.unique(pair, return_inverse=True)
+    mean = np.bincount(pair_ix, weights=x) / np.bincount(pair_ix)
+    dev = x - mean[pair_ix]
+    _, round_ix = np.unique(np.stack([pair, table.match_id, table.seed]), axis=1, return_inverse=True)
+    round_ix = round_ix.ravel()
+    size = np.bincount(round_ix)
+    total = np.bincount(round_ix, weights=dev)
+    squares = np.bincount(round_ix, weights=dev * dev)
+    within = float(np.sum(total**2 - squares))  # sum over each round of its cross products, both orders
+    var = float(np.sum(squares))
+    pairs_in_rounds = float(np.sum(size * (size - 1)))
+    if var <= 0.0 or pairs_in_rounds <= 0.0:
+        return 1.0
+    rho = (within / pairs_in_rounds) / (var / len(table))
+    m = float(np.sum(size * size) / np.sum(size))  # the mean round size a result sits in
+    return 1.0 + (m - 1.0) * min(max(rho, 0.0), 0.99)
 
 
 def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64], ...]:

@@ -47,6 +47,7 @@ from ..arena.schedule import CannotMeet, round_of
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
 from ..league.ledger import GameTable
+from ..league.pairs import design_effect
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
 from ..policies import Policy
@@ -471,7 +472,8 @@ def fit_history(history: History, anchor: str = "random") -> HistoryFit | None:
     fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k, prior_games=DEFAULT_PRIOR)
     _, _, diff_sd = laplace_intervals(a, b, ids.size, fit.ratings, k, 0.95, DEFAULT_PRIOR)
     points, games = pair_matrices(a, b, table.score_a, ids.size)
-    pairs = PairModel(fit.ratings, diff_sd, [f is None for f in fit.flags], points, games, DEFAULT_PRIOR, anchor=k)
+    pairs = PairModel(fit.ratings, diff_sd, [f is None for f in fit.flags], points, games, DEFAULT_PRIOR, anchor=k,
+                      deff=design_effect(table))
     return HistoryFit(index, fit.ratings, list(fit.flags), pairs)
 
 

@@ -31,7 +31,7 @@ from .gauntlet import GauntletConfig, rate_snapshots
 from .played import Played
 from .snapshots import share_snapshots
 
-__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "PRECISE_PAIRS", "PRECISION", "gauntlet_job",
+__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "PRECISE_PAIRS", "gauntlet_job",
            "play",
            "play_gauntlet_spec"]
 
@@ -39,9 +39,9 @@ GAUNTLET = "gauntlet"
 FINAL_BOT_GAMES = 8  # a run's final snapshots play this many times --eval-games against each scripted player (64
 # at the default 8): the run's summary reports their scores against the bots, and each score's interval (within
 # about 28 points for a 200-game match at 50%)
-PRECISION = 0.30  # a matchup of two snapshots plays on (up to PRECISE_PAIRS times its pairs) until its record
-# predicts a 200-game match of the two to within 30 score points: the ladder's claims about a pair rest on its games
-PRECISE_PAIRS = 4
+PRECISE_PAIRS = 4  # with a precision (marl train --eval-precision), a matchup of two snapshots plays on, up to this
+# many times its pairs, until its record predicts a 200-game match of the two that closely: the ladder's claims about
+# a pair rest on its games
 FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapshots (all of a default run's), spread
 # over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
 # rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
@@ -49,7 +49,7 @@ PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its ga
 
 
 def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int, games: int, older: int,
-                 full: bool = False, playoff: int = 0, whole: bool = False) -> NewJob:
+                 full: bool = False, playoff: int = 0, whole: bool = False, precision: float = 0.0) -> NewJob:
     """The queue's job of one moment's gauntlet (``full``: the final moment's, with a ``playoff`` of up to that many
     games a pair; ``whole``: every matchup plays all its games, none cut short by a clear history, as the cells of a
     payoff matrix need). The snapshots' bytes are put in the league where it keeps them, so a worker on another
@@ -59,6 +59,7 @@ def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int
     return NewJob(kind=GAUNTLET, env=rows[0].env, spec={
         "snapshot_ids": [int(i) for i in snapshot_ids], "first_seed": int(first_seed), "games": int(games),
         "older": int(older), "full": bool(full), "playoff": int(playoff), "whole": bool(whole),
+        "precision": float(precision),
         "snapshots": [r.full_name for r in rows]})
 
 
@@ -77,9 +78,10 @@ def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "c
     n = max(games // per, 1)
     # (a payoff matrix's cell of 2 games would weigh as much as one of 400 in its Nash mixture: none cut short)
     whole = full or bool(spec.get("whole", False))
-    cfg = GauntletConfig(pairs=n, clear_pairs=n if whole else 1, max_pairs=PRECISE_PAIRS * n,
+    precision = float(spec.get("precision", 0.0))  # (a job queued before it: eval_games exactly)
+    cfg = GauntletConfig(pairs=n, clear_pairs=n if whole else 1, max_pairs=PRECISE_PAIRS * n if precision else n,
                          older=max(older, FINAL_OLDER) if full else older,
-                         bot_pairs=max(n, FINAL_BOT_GAMES * games // per) if full else 0, precision=PRECISION)
+                         bot_pairs=max(n, FINAL_BOT_GAMES * games // per) if full else 0, precision=precision)
     matchups = rate_snapshots(league, ids, first_seed=first_seed, config=cfg, device=device, on_games=on_games)
     played = sum(m.games for m in matchups)
     if int(spec.get("playoff", 0)):

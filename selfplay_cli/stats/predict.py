@@ -24,8 +24,11 @@ stand between the fitted difference and ``T``, and a fourth between ``T`` and th
 margin ("A over B by +M [lo, hi]"), its lower tail says whether A is above B beyond doubt, and
 :meth:`Belief.predict` adds (4) for a match of ``n`` games (exact binomials, mixed over ``T``). Draws count as half a
 point and are modelled as a coin of the same mean, which overstates the spread of a score with draws: the intervals
-err wide, never narrow. Games played in seat-swapped pairs on one seed are correlated (a serve that wins either
-way); treating them as independent errs wide too.
+err wide, never narrow. Games played in rounds on one seed (a seat-swapped pair) may be correlated: where a policy
+that wins one game of a seed tends to win the other, 200 games say what fewer independent ones would. The caller
+measures that from the ledger (:func:`~selfplay_cli.league.pairs.design_effect`) and :class:`PairModel` tempers
+every record by it, widens the fit's uncertainty and predicts a match from the independent results it is worth
+(where the games of a round are anti-correlated, a serve that wins either way, the binomial errs wide: left so).
 
 numpy and scipy only.
 """
@@ -176,6 +179,7 @@ class Belief:
     weights: np.ndarray
     met: float = 0.0
     met_points: float = 0.0
+    deff: float = 1.0  # the design effect of the game's rounds: one result is worth 1 / deff independent ones
 
     @property
     def mean(self) -> float:
@@ -201,10 +205,11 @@ class Belief:
 
     def flipped(self) -> Belief:
         """B's difference over A's."""
-        return Belief(-self.nodes[::-1], self.weights[::-1], self.met, self.met - self.met_points)
+        return Belief(-self.nodes[::-1], self.weights[::-1], self.met, self.met - self.met_points, self.deff)
 
     def predict(self, games: int, confidence: float = 0.95) -> ScorePrediction:
-        """A's score over ``games`` games: ``K / games`` with ``K ~ Binomial(games, E(T))``, mixed over ``T``; the
+        """A's score over ``games`` games: ``K / n`` with ``K ~ Binomial(n, E(T))``, mixed over ``T``, where ``n =
+        games / deff`` are the independent results those games are worth (all of them unless rounds correlate); the
         smallest and largest scores that leave at most ``(1 - confidence) / 2`` outside on either side."""
         if games < 1:
             raise ValueError(f"games must be at least 1, not {games}")
@@ -220,13 +225,14 @@ class Belief:
             mass = np.bincount(where, weights=post, minlength=256)
             level = np.bincount(where, weights=post * p, minlength=256) / np.maximum(mass, 1e-300)
             p, post = level[mass > 0], mass[mass > 0]
-        k = np.arange(games + 1)
-        pmf = post @ binom.pmf(k[None, :], games, p[:, None])
+        n = max(1, int(round(games / self.deff)))
+        k = np.arange(n + 1)
+        pmf = post @ binom.pmf(k[None, :], n, p[:, None])
         tail = 0.5 * (1.0 - confidence)
         lo_k = int(np.searchsorted(np.cumsum(pmf), tail - 1e-12))  # the smallest k with P(K <= k) >= tail
         upper = np.cumsum(pmf[::-1])[::-1]  # P(K >= k)
         hi_k = int(np.flatnonzero(upper >= tail - 1e-12)[-1])  # the largest k with P(K >= k) >= tail
-        return ScorePrediction(expected, lo_k / games, hi_k / games, games, confidence, self.mean, self.sd)
+        return ScorePrediction(expected, lo_k / n, hi_k / n, games, confidence, self.mean, self.sd)
 
 
 def _logsumexp(x: np.ndarray, axis: int) -> np.ndarray:
@@ -308,12 +314,17 @@ class PairModel:
     unrefitted."""
 
     def __init__(self, ratings: npt.ArrayLike, diff_sd: npt.ArrayLike, linked: npt.ArrayLike, points: npt.ArrayLike,
-                 games: npt.ArrayLike, prior: float, spread: Spread | None = None, anchor: int | None = None) -> None:
+                 games: npt.ArrayLike, prior: float, spread: Spread | None = None, anchor: int | None = None,
+                 deff: float = 1.0) -> None:
+        if not (math.isfinite(deff) and deff >= 1.0):
+            raise ValueError(f"the design effect must be a finite number >= 1, not {deff}")
+        self.deff = float(deff)  # one result is worth 1 / deff independent ones: every record and the fit tempered
         self.ratings = np.asarray(ratings, dtype=np.float64)
-        self.diff_sd = np.asarray(diff_sd, dtype=np.float64)
+        self.diff_sd = np.asarray(diff_sd, dtype=np.float64) * math.sqrt(self.deff)
         self.linked = np.asarray(linked, dtype=bool)
-        self.points = np.asarray(points, dtype=np.float64)
-        self.games = np.asarray(games, dtype=np.float64)
+        self.met_points = np.asarray(points, dtype=np.float64)
+        self.met_games = np.asarray(games, dtype=np.float64)
+        self.points, self.games = self.met_points / self.deff, self.met_games / self.deff
         self.prior = float(prior)
         n = self.ratings.size
         # the gauge of a refit (differences do not depend on it): the fit's anchor, or any linked player
@@ -394,7 +405,8 @@ class PairModel:
         met_points, met_games = self.points[i, j], self.games[i, j]
         nodes, w = _beliefs(self.out_diff[i, j], np.maximum(self.out_sd[i, j], 1e-6), self.spread, met_points,
                             met_games)
-        return [Belief(nodes[k], w[k], float(met_games[k]), float(met_points[k])) for k in range(i.size)]
+        raw_points, raw_games = self.met_points[i, j], self.met_games[i, j]
+        return [Belief(nodes[k], w[k], float(raw_games[k]), float(raw_points[k]), self.deff) for k in range(i.size)]
 
     def below(self, order: npt.ArrayLike) -> np.ndarray:
         """``P(T_ab <= 0)`` for every two players of ``order`` (indices; linked players), as an ``(m, m)`` matrix:

@@ -159,6 +159,8 @@ class TrainConfig:
     # rollout, always; SAC and DQN: 0 means 16)
     frame_stack: int = 1  # observations each learner reads at once: its seat's last K (images on the channel axis)
     eval_playoff: int = 100  # after the final gauntlet the run's best candidates meet, up to this many games a pair
+    eval_precision: float = 0.3  # a gauntlet matchup of two snapshots plays on (up to 4 x eval_games) until its
+    # record predicts a 200-game match of the two within this many score points (0: eval_games exactly)
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
     curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)
@@ -206,6 +208,9 @@ class TrainConfig:
                             "--eval-games above 0")
         if self.eval_playoff < 0:
             raise MarlError(f"--eval-playoff must not be negative, not {self.eval_playoff}")
+        if not 0.0 <= self.eval_precision < 1.0:
+            raise MarlError(f"--eval-precision is a share of the score, at least 0 and below 1, not "
+                            f"{self.eval_precision}")
         if self.eval not in EVAL_MODES:
             raise MarlError(f"--eval must be one of {', '.join(EVAL_MODES)}, not '{self.eval}'")
         if self.executor not in EXECUTORS:

@@ -61,6 +61,8 @@ class GauntletJob:
     full: bool = False  # every opponent gets ``games``, even where the lineage's result is already clear
     playoff: int = 0  # after the gauntlet, the run's best candidates meet, up to this many games a pair (the final)
     whole: bool = False  # every matchup plays all its ``games`` (cells of a payoff matrix: --opponents nash)
+    precision: float = 0.0  # a matchup of two snapshots plays on until its record predicts a 200-game match within
+    # this many score points (up to 4 times ``games``; 0: ``games`` exactly)
 
 
 @dataclass(frozen=True)
@@ -86,7 +88,7 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
 def _spec(job: GauntletJob) -> dict[str, Any]:
     return {"snapshot_ids": list(job.snapshot_ids), "first_seed": job.first_seed, "games": job.games,
             "older": job.older, "full": job.full, "playoff": job.playoff,
-            "whole": job.whole}
+            "whole": job.whole, "precision": job.precision}
 
 
 def die_with_parent(parent: int) -> None:

@@ -30,6 +30,7 @@ batch, buffer, target period and epsilon schedule; docs/history/training.md says
 
 FLAG_SETTINGS = ("agents", "algo", "sharing", "steps", "minutes", "seed", "device", "games", "snapshot_every",
                  "snapshot_steps", "eval_games", "eval_older", "eval", "eval_wait", "eval_actors", "eval_playoff",
+                 "eval_precision",
                  "swap_every", "tensorboard", "league_games", "seats", "executor", "actors", "ray_address",
                  "fragment_steps", "frame_stack", "restart_at_snapshot", "init_from")
 """Options whose value is a top-level setting of the same name."""
