@@ -57,13 +57,13 @@ apart. One player is *above another beyond doubt* when the ``confidence`` interv
 wholly above 0.
 
 A player's *rank* is one more than the number of players above it beyond doubt (as Chatbot Arena ranks): players
-the games cannot order share a rank, and a rank never claims an order nobody measured. Rows are in order of rank,
-then Elo (players whose offset to the anchor is unknown, ``disconnected``, and players without games, ``unrated``,
-last): a player another is above beyond doubt never stands over it, whatever the ratings say (self-play's
-rock-paper-scissors: the ratings put a snapshot first through its games against the rest, while one below it beats it
-head to head). Its *tier*: walking down the rows, a tier boundary falls between two places only where every player
-above it (in the tier it closes) is above every player below it beyond doubt, so a boundary reads "everyone above is
-stronger than everyone below".
+the games cannot order share a rank, and a rank never claims an order nobody measured. The rows go so that a
+player another is above beyond doubt never stands over it, whatever the ratings say (self-play's rock-paper-scissors:
+the ratings put a snapshot first through its games against the rest, while one below it beats it head to head), by
+rank and Elo otherwise (:func:`~selfplay_cli.stats.ranks.claims_order`; players whose offset to the anchor is
+unknown, ``disconnected``, and players without games, ``unrated``, last). Its *tier*: walking down the rows, a tier
+boundary falls between two places only where every player above it (in the tier it closes) is above every player
+below it beyond doubt, so a boundary reads "everyone above is stronger than everyone below".
 
 Each row's ``margin`` is its difference over the next row, with its interval, from the same pair model; the best
 snapshot of each run carries its margin over the run's next best (another name of its own weights, or a teammate of
@@ -101,6 +101,8 @@ from selfplay_cli.stats.bradley_terry import (
 from selfplay_cli.stats.elo import MAX_ELO
 from selfplay_cli.stats.intervals import DEFAULT_BOOTSTRAP, bootstrap_intervals, laplace_intervals
 from selfplay_cli.stats.predict import PairModel, Spread
+from selfplay_cli.stats.ranks import claims_order
+from selfplay_cli.stats.ranks import tiers as claims_tiers
 
 __all__ = [
     "DEFAULT_BOOTSTRAP",
@@ -370,27 +372,21 @@ def _order(fitted: Fitted, shown: list[int]) -> list[int]:
 
 
 def _ranks_and_tiers(fitted: Fitted, order: list[int]) -> tuple[list[int], dict[int, int], dict[int, int | None]]:
-    """The rows' order, and each player's rank and tier (see the module docstring). Rank: one more than the players
-    above it beyond doubt. The rows go by rank, then Elo (a player another is above beyond doubt never stands over
-    it, whatever the ratings say: self-play's rock-paper-scissors). Tier: walking down the rows, a boundary falls
-    between two places only where every player of the tier above it is above every player below it beyond doubt.
-    Players whose offset to the anchor is unknown keep their place (last) as rank and have no tier."""
+    """The rows' order, and each player's rank and tier, from the pairs' claims
+    (:func:`~selfplay_cli.stats.ranks.claims_order`, :func:`~selfplay_cli.stats.ranks.tiers`): rank, one more than
+    the players above it beyond doubt; rows in which nobody stands over a player above it beyond doubt, by rank
+    and Elo otherwise (``order``: the players by Elo); tiers, boundaries where everyone above is above everyone
+    below. Players whose offset to the anchor is unknown keep their place (last) as rank and have no tier."""
     placed = [i for i in order if not _group(fitted.flags[i])]
     above = fitted.above(placed)
-    ranks = {i: 1 + int(above[:, a].sum()) for a, i in enumerate(placed)}
-    by_rank = sorted(range(len(placed)), key=lambda a: (ranks[placed[a]], a))  # (stable: then by Elo)
-    above = above[np.ix_(by_rank, by_rank)]
-    placed = [placed[a] for a in by_rank]
-    tiers: dict[int, int | None] = {}
-    start, tier = 0, 1
-    for a, i in enumerate(placed):
-        tiers[i] = tier
-        if a + 1 < len(placed) and above[start:a + 1, a + 1:].all():
-            start, tier = a + 1, tier + 1
+    rows, ranks = claims_order(above, fitted.ratings[placed])
+    tier_of = claims_tiers(above, rows)
+    rank = {placed[a]: ranks[a] for a in range(len(placed))}
+    tier: dict[int, int | None] = {placed[a]: t for a, t in zip(rows, tier_of, strict=True)}
     rest = [i for i in order if _group(fitted.flags[i])]
     for place, i in enumerate(rest, start=len(placed)):
-        ranks[i], tiers[i] = place + 1, None
-    return placed + rest, ranks, tiers
+        rank[i], tier[i] = place + 1, None
+    return [placed[a] for a in rows] + rest, rank, tier
 
 
 def check_prior(prior: float) -> float:

@@ -39,6 +39,7 @@ from ..envs import get_env
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
 from ..results import COOPERATIVE, Rules
+from ..stats.ranks import claims_order
 from .gauntlet import GauntletConfig, History, crews_of, fit_history, play_gauntlet, record_between, run_history
 from .roles import RoleBook
 
@@ -92,9 +93,9 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
         players.sort(key=lambda p: (-fit.rating(p.id), p.id))
         by_rounds: dict[int, dict[frozenset[int], tuple]] = {}  # the pairs by the rounds each plays now
         for group in _comparable(book, players, history.sided):
-            above = fit.above([p.id for p in group], cfg.confidence)  # as the ladder orders them: by rank, then Elo
-            rank = {p.id: 1 + int(above[:, k].sum()) for k, p in enumerate(group)}
-            group = sorted(group, key=lambda p: (rank[p.id], -fit.rating(p.id), p.id))
+            above = fit.above([p.id for p in group], cfg.confidence)  # as the ladder orders them (claims_order)
+            order, _ = claims_order(above, [fit.rating(p.id) for p in group])
+            group = [group[k] for k in order]
             top, taken = group[0], 0
             for rival in group[1:]:
                 if taken == cfg.rivals:
