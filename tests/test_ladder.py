@@ -22,6 +22,7 @@ from selfplay_cli.league.ladder import (
     fit_table,
     ladder,
     select_rows,
+    verdict_lines,
 )
 from selfplay_cli.league.pairs import PairPlan, head_to_head, plan_tournament
 from selfplay_cli.league.results_csv import fit_csv, read_results_csv
@@ -37,7 +38,7 @@ from selfplay_cli.stats.sprt import sprt_llr
 ENV = "pong"
 JSON_KEYS = ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
              "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "copy_of",
-             "copies", "vs", "league_role", "exploitability"]
+             "copies", "vs", "league_role", "exploitability", "circle"]
 D_7_OF_10 = 400.0 * math.log10(7.0 / 3.0)  # +147.2: the ML Elo difference of a 7/10 score
 
 
@@ -188,14 +189,14 @@ def test_ranks_count_the_players_above_beyond_doubt_and_tiers_part_only_where_ev
     pairs = PairModel(ratings, sd, [True] * 4, none, none, 2.0, spread=Spread.known(0.0), anchor=3)
     fitted = Fitted(["a", "b", "c", "d"], ratings, low, high, [None, None, None, None], 0.95, pairs)
     assert 100 - z * 40 > 0 and 100 - z * 80 < 0 and 150 - z * 50 > 0 and 50 - z * 50 < 0
-    order, ranks, tiers = _ranks_and_tiers(fitted, [0, 1, 2, 3])
+    order, ranks, tiers, _ = _ranks_and_tiers(fitted, [0, 1, 2, 3])
     assert ranks == {0: 1, 1: 2, 2: 2, 3: 3} and tiers == {0: 1, 1: 2, 2: 2, 3: 2} and order == [0, 1, 2, 3]
     m = fitted.margin(1, 2)
     assert m.over == "c" and m.elo == pytest.approx(100.0, abs=0.5) and not m.separated
     assert (m.low, m.high) == pytest.approx((100 - z * 80, 100 + z * 80), abs=2.0)
     # d flagged (a bound): only whole intervals count, and they all overlap d's: nobody is above it
     flagged = replace(fitted, flags=[None, None, None, FLAG_PERFECT])
-    order, ranks, tiers = _ranks_and_tiers(flagged, [0, 1, 2, 3])
+    order, ranks, tiers, _ = _ranks_and_tiers(flagged, [0, 1, 2, 3])
     assert ranks == {0: 1, 1: 2, 2: 2, 3: 1} and tiers == {0: 1, 1: 1, 2: 1, 3: 1}
     assert order == [0, 3, 1, 2]  # by rank, then Elo: nobody is above d beyond doubt
     assert flagged.margin(1, 3).low == pytest.approx(low[1] - high[3])
@@ -796,3 +797,29 @@ def test_a_cooperative_teams_best_member_is_not_compared_with_its_teammate() -> 
     assert best.step == 2 and best.best_margin.over.startswith("l/s1-") and "l/s2-lander_1" not in best.tied
     alone = next(r for r in _mark_best(rows, set(), fitted, teams=False) if r.best)  # (a two-sides game's seats)
     assert alone.best_margin.over.startswith("l/s2-")
+
+
+def test_a_circle_of_claims_is_said_and_no_claim_across_it_is_broken() -> None:
+    """Rock, paper and scissors as snapshots, each winning 36-4 against the next, all 20-20 with a bot: each above
+    the next beyond doubt, so no order keeps all three claims. They stand together by rank and Elo, each row carries a
+    shortest circle through it, and the verdict under the table says the circle."""
+    names = ["bot", "rock", "paper", "scissors"]
+    a, b, s = [], [], []
+    for x, y in ((2, 1), (3, 2), (1, 3)):  # paper beats rock, scissors paper, rock scissors
+        a += [x] * 40
+        b += [y] * 40
+        s += [1.0] * 36 + [0.0] * 4
+    for x in (1, 2, 3):
+        a += [x] * 40
+        b += [0] * 40
+        s += [1.0, 0.0] * 20
+    rows = {r.policy: r for r in fit_table(names, a, b, s, anchor="bot", bootstrap=0)}
+    for name in ("rock", "paper", "scissors"):
+        c = rows[name].circle
+        assert c[0] == name and set(c) == {"rock", "paper", "scissors"} and len(c) == 3
+        assert rows[name].rank == 2  # one of the circle is above it beyond doubt
+    assert rows["paper"].circle == ("paper", "rock", "scissors")  # paper above rock above scissors above paper
+    table = fit_table(names, a, b, s, anchor="bot", bootstrap=0)
+    lines = verdict_lines(table)
+    circle = [line for line in lines if line.startswith("a circle beyond doubt: ")]
+    assert len(circle) == 1 and circle[0].count(" above ") == 3, lines

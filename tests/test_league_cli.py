@@ -209,7 +209,7 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
     assert list(rows[0]) == ["policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses",
                              "rank", "tier", "score", "step", "flag", "anchor", "run", "best", "margin",
                              "best_margin", "tied", "copy_of", "copies", "vs", "league_role", "exploitability",
-                             "variant"]
+                             "circle", "variant"]
     assert all(r["league_role"] is None and r["exploitability"] is None for r in rows)  # none measured, no role
     assert all(r["variant"] == {} for r in rows)  # the default variant: the game as declared
     # rank: 1 + the players above beyond doubt, so never decreasing down the order, and the first is 1

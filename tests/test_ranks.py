@@ -20,17 +20,24 @@ def test_nobody_stands_over_a_player_that_is_above_it_beyond_doubt():
     which is above it beyond doubt: the rows go 2, 1, 0, 3 instead. The one tier boundary falls over 3, above which
     everyone is above it."""
     above = _above(4, [(1, 0), (2, 1), (0, 3), (1, 3), (2, 3)])
-    order, ranks = claims_order(above, [2211.0, 2200.0, 2100.0, 1800.0])
-    assert ranks == [2, 2, 1, 4] and order == [2, 1, 0, 3]
+    order, ranks, circles = claims_order(above, [2211.0, 2200.0, 2100.0, 1800.0])
+    assert ranks == [2, 2, 1, 4] and order == [2, 1, 0, 3] and circles == {}
     assert tiers(above, order) == [1, 1, 1, 2]
 
 
-def test_without_claims_the_rows_go_by_rating_and_a_circle_of_claims_is_broken_at_its_best_rated():
-    order, ranks = claims_order(np.zeros((3, 3), dtype=bool), [1.0, 3.0, 2.0])
-    assert order == [1, 2, 0] and ranks == [1, 1, 1]
-    circle = _above(3, [(0, 1), (1, 2), (2, 0)])  # rock, paper, scissors, each beyond doubt
-    order, ranks = claims_order(circle, [1100.0, 1000.0, 1200.0])
-    assert ranks == [2, 2, 2] and order == [2, 0, 1]  # 2 first (the best rated); then 0, above 1
-    assert tiers(circle, order) == [1, 1, 1]
+def test_without_claims_the_rows_go_by_rating_and_a_circle_stands_together_and_is_said():
+    """No claims: by rating. A circle beyond doubt (0 above 1 above 2 above 0: rock, paper, scissors, measured) and
+    2 above 3: no order keeps every claim of the circle, so its players stand together by rating, over 3 (every claim
+    between the circle and 3 is kept), each with a shortest circle through it; no tier boundary inside the circle."""
+    order, ranks, circles = claims_order(np.zeros((3, 3), dtype=bool), [1.0, 3.0, 2.0])
+    assert order == [1, 2, 0] and ranks == [1, 1, 1] and circles == {}
+    circle = _above(4, [(0, 1), (1, 2), (2, 0), (2, 3)])
+    order, ranks, circles = claims_order(circle, [1100.0, 1000.0, 1200.0, 1500.0])
+    assert ranks == [2, 2, 2, 2] and order == [2, 0, 1, 3]  # 3, rated highest, is below 2 beyond doubt
+    assert circles == {0: (0, 1, 2), 1: (1, 2, 0), 2: (2, 0, 1)}
+    assert tiers(circle, order) == [1, 1, 1, 1]
     chain = _above(3, [(0, 1), (0, 2), (1, 2)])
     assert tiers(chain, claims_order(chain, [3.0, 2.0, 1.0])[0]) == [1, 2, 3]
+    # two circles, one above the other (every claim across them kept): 0-1 go round, 2-3 go round, 1 above 2
+    two = _above(4, [(0, 1), (1, 0), (2, 3), (3, 2), (1, 2)])
+    assert claims_order(two, [1.0, 2.0, 3.0, 4.0])[0] == [1, 0, 3, 2]

@@ -61,7 +61,9 @@ the games cannot order share a rank, and a rank never claims an order nobody mea
 player another is above beyond doubt never stands over it, whatever the ratings say (self-play's rock-paper-scissors:
 the ratings put a snapshot first through its games against the rest, while one below it beats it head to head), by
 rank and Elo otherwise (:func:`~selfplay_cli.stats.ranks.claims_order`; players whose offset to the anchor is
-unknown, ``disconnected``, and players without games, ``unrated``, last). Its *tier*: walking down the rows, a tier
+unknown, ``disconnected``, and players without games, ``unrated``, last). Where the claims go round in a circle (A
+above B above C above A, each beyond doubt), no order keeps them all: the players of the circle stand together, by
+rank and Elo, and the verdicts under the table say the circle. Its *tier*: walking down the rows, a tier
 boundary falls between two places only where every player above it (in the tier it closes) is above every player
 below it beyond doubt, so a boundary reads "everyone above is stronger than everyone below".
 
@@ -121,7 +123,7 @@ __all__ = [
 
 _JSON_KEYS = ("policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
               "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "copy_of",
-              "copies", "vs", "league_role", "exploitability")
+              "copies", "vs", "league_role", "exploitability", "circle")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -194,8 +196,8 @@ class LadderRow:
         margin: the difference over the next row of the ladder, with its interval (None for the last row and for
             players without a comparable rating).
         best_margin: for a run's best snapshot, its difference over the run's next best (None alone in its run).
-        tied: for a run's best snapshot, the run's snapshots it is not separated from (empty: the best beyond
-            doubt).
+        tied: for a run's best snapshot, the run's snapshots it is not separated from, neither above it nor below it
+            beyond doubt (empty: the best beyond doubt, save the snapshots a circle of claims puts above it).
         copy_of / copies: one set of weights is one player: its other names (a run repeated with its seed) get a
             row each, with its rating, right under it (``copy_of`` it), and it lists them (``copies``).
         vs: the record against each scripted player of the env, in the league's bot order (empty for CSV
@@ -238,6 +240,8 @@ class LadderRow:
     side: str | None = None
     league_role: str | None = None
     exploitability: dict[str, Any] | None = None
+    circle: tuple[str, ...] = ()  # a circle of claims beyond doubt it is in: itself, above the next, ..., the last
+    # above it (self-play's rock-paper-scissors, measured); empty where there is none
 
     def to_json(self) -> dict[str, Any]:
         """JSON-ready dict: ``policy, kind, elo, ci_low, ci_high, games, wins, draws, losses, rank`` then
@@ -274,6 +278,7 @@ class LadderRow:
                    for v in self.vs},
             "league_role": self.league_role,
             "exploitability": None if self.exploitability is None else dict(self.exploitability),
+            "circle": list(self.circle),
         }
         assert tuple(out) == _JSON_KEYS
         if self.mean_return is not None:
@@ -345,20 +350,25 @@ class Fitted:
                                   float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]), (w, dr, lo)))
         return out
 
-    def above(self, order: list[int]) -> np.ndarray:
-        """``(m, m)`` bool over the players of ``order``: ``[a, b]`` when ``order[a]`` is above ``order[b]`` beyond
-        doubt (the interval of their difference lies wholly above 0), as :meth:`margin` would say of each pair."""
-        tail = 0.5 * (1.0 - self.confidence)
+    def doubt(self, order: list[int]) -> np.ndarray:
+        """``(m, m)`` over the players of ``order``: ``[a, b]`` the chance ``order[a]`` is not above ``order[b]``, as
+        the pair model says it (:meth:`PairModel.below`); a flagged bound, which compares by its whole interval: 0
+        where its interval lies wholly above the other's, else 1."""
         idx = np.asarray(order, dtype=np.int64)
-        out = np.zeros((idx.size, idx.size), dtype=bool)
+        out = np.ones((idx.size, idx.size))
         est = np.array([self.comparable(int(i)) for i in idx], dtype=bool)
         if est.any():
             sub = np.flatnonzero(est)
-            out[np.ix_(sub, sub)] = self.pairs.below(idx[sub]) < tail
-        bound = ~est[:, None] | ~est[None, :]  # a flagged bound compares by its whole interval
-        out |= bound & (self.low[idx][:, None] > self.high[idx][None, :])
-        np.fill_diagonal(out, False)
+            out[np.ix_(sub, sub)] = self.pairs.below(idx[sub])
+        bound = ~est[:, None] | ~est[None, :]
+        out = np.where(bound, np.where(self.low[idx][:, None] > self.high[idx][None, :], 0.0, 1.0), out)
+        np.fill_diagonal(out, 1.0)
         return out
+
+    def above(self, order: list[int]) -> np.ndarray:
+        """``(m, m)`` bool over the players of ``order``: ``[a, b]`` when ``order[a]`` is above ``order[b]`` beyond
+        doubt (the interval of their difference lies wholly above 0), as :meth:`margin` would say of each pair."""
+        return self.doubt(order) < 0.5 * (1.0 - self.confidence)
 
 
 def _group(flag: str | None) -> int:
@@ -371,22 +381,26 @@ def _order(fitted: Fitted, shown: list[int]) -> list[int]:
     return sorted(shown, key=lambda i: (_group(fitted.flags[i]), -fitted.ratings[i], fitted.names[i]))
 
 
-def _ranks_and_tiers(fitted: Fitted, order: list[int]) -> tuple[list[int], dict[int, int], dict[int, int | None]]:
-    """The rows' order, and each player's rank and tier, from the pairs' claims
+def _ranks_and_tiers(fitted: Fitted, order: list[int]
+                     ) -> tuple[list[int], dict[int, int], dict[int, int | None], dict[int, tuple[int, ...]]]:
+    """The rows' order, and each player's rank, tier and circle, from the pairs' claims
     (:func:`~selfplay_cli.stats.ranks.claims_order`, :func:`~selfplay_cli.stats.ranks.tiers`): rank, one more than
     the players above it beyond doubt; rows in which nobody stands over a player above it beyond doubt, by rank
-    and Elo otherwise (``order``: the players by Elo); tiers, boundaries where everyone above is above everyone
-    below. Players whose offset to the anchor is unknown keep their place (last) as rank and have no tier."""
+    and Elo otherwise (``order``: the players by Elo), save within a circle of claims; tiers, boundaries where
+    everyone above is above everyone below; a player's circle, a shortest circle of claims through it (itself first,
+    each above the next, the last above it). Players whose offset to the anchor is unknown keep their
+    place (last) as rank and have no tier."""
     placed = [i for i in order if not _group(fitted.flags[i])]
     above = fitted.above(placed)
-    rows, ranks = claims_order(above, fitted.ratings[placed])
+    rows, ranks, circles = claims_order(above, fitted.ratings[placed])
     tier_of = claims_tiers(above, rows)
     rank = {placed[a]: ranks[a] for a in range(len(placed))}
     tier: dict[int, int | None] = {placed[a]: t for a, t in zip(rows, tier_of, strict=True)}
+    circle = {placed[a]: tuple(placed[x] for x in c) for a, c in circles.items()}
     rest = [i for i in order if _group(fitted.flags[i])]
     for place, i in enumerate(rest, start=len(placed)):
         rank[i], tier[i] = place + 1, None
-    return [placed[a] for a in rows] + rest, rank, tier
+    return [placed[a] for a in rows] + rest, rank, tier, circle
 
 
 def check_prior(prior: float) -> float:
@@ -484,8 +498,8 @@ def _fit_rows(
     pairs = PairModel(ratings, diff_sd, [f is None for f in fit.flags], points, games, prior, spread, anchor=k,
                       deff=deff)
     fitted = Fitted(names, ratings, low, high, list(fit.flags), confidence, pairs, wdl)
-    order, ranks, tiers = _ranks_and_tiers(fitted, _order(fitted, [i for i, name in enumerate(names)
-                                                                    if name not in hidden]))
+    order, ranks, tiers, circles = _ranks_and_tiers(fitted, _order(fitted, [i for i, name in enumerate(names)
+                                                                             if name not in hidden]))
     kinds, steps, player_ids = kinds or {}, steps or {}, player_ids or {}
     adjacent = [(i, j) for i, j in zip(order, order[1:], strict=False) if not _group(fit.flags[i])
                 and not _group(fit.flags[j])]
@@ -498,6 +512,7 @@ def _fit_rows(
             elo=float(ratings[i]), ci_low=float(low[i]), ci_high=float(high[i]), games=int(fit.games[i]),
             wins=int(fit.wins[i]), draws=int(fit.draws[i]), losses=int(fit.losses[i]), score=float(fit.score[i]),
             rank=ranks[i], flag=fit.flags[i], anchor=i == k, tier=tiers[i], margin=margins.get(i),
+            circle=tuple(names[x] for x in circles.get(i, ())),
         ))
     return rows, fitted
 
@@ -619,9 +634,9 @@ def _mark_best(rows: list[LadderRow], removed: set[int], fitted: Fitted, teams: 
                 and not (teams and r.step == best.step)]
         margin = replace(fitted.margin(i, index[rest[0].copy_of or rest[0].policy]), over=rest[0].policy) \
             if rest else None
-        above = fitted.above([i] + [index[r.copy_of or r.policy] for r in rest])[0, 1:] if rest else []
-        marked[best.policy] = replace(best, best=True, best_margin=margin,
-                                      tied=tuple(r.policy for r, sure in zip(rest, above, strict=True) if not sure))
+        sure = fitted.above([i] + [index[r.copy_of or r.policy] for r in rest]) if rest else np.zeros((1, 1), bool)
+        tied = tuple(r.policy for k, r in enumerate(rest, start=1) if not sure[0, k] and not sure[k, 0])
+        marked[best.policy] = replace(best, best=True, best_margin=margin, tied=tied)
     return [marked.get(r.policy, r) for r in rows]
 
 
@@ -810,21 +825,40 @@ def _verdicts(rows: list[LadderRow]) -> list[str]:
     if len(ranked) >= 2 and ranked[0].margin is not None:
         top, m = ranked[0], ranked[0].margin
         shared = sum(1 for r in ranked if r.tier == top.tier) - 1
-        lines.append(f"top: {top.policy}, {m.text()}" + (
+        though = f", though {m.over} is above it beyond doubt" if m.high < 0.0 else ""  # (a circle of claims)
+        lines.append(f"top: {top.policy}{though}, {m.text()}" + (
             "" if m.separated and not shared else
-            f"; not separated from {shared} player{'s' if shared != 1 else ''} of its tier"))
+            f"; {shared} more player{'s' if shared != 1 else ''} in its tier") + _circle_text(top))
     for r in rows:
         if not r.best:
             continue
         m = r.best_margin
         if m is None:
             lines.append(f"best of {r.run}: {r.policy} (the run's only rated snapshot)")
+        elif m.high < 0.0:  # the next is above it beyond doubt: only where the claims go round in a circle
+            lines.append(f"best of {r.run}: {r.policy} by Elo, though {m.over} is above it beyond doubt: {m.text()}"
+                         + _circle_text(r))
         elif not r.tied:
-            lines.append(f"best of {r.run}: {r.policy}, {m.text()}")
+            lines.append(f"best of {r.run}: {r.policy}, {m.text()}" + _circle_text(r))
         else:
             names = ", ".join(r.tied[:3]) + (f" and {len(r.tied) - 3} more" if len(r.tied) > 3 else "")
-            lines.append(f"best of {r.run}: {r.policy} by Elo, not separated from {names}: {m.text()}")
+            lines.append(f"best of {r.run}: {r.policy} by Elo, not separated from {names}: {m.text()}"
+                         + _circle_text(r))
+    said = {frozenset(r.circle) for r in ranked[:1] if r.circle} | {frozenset(r.circle) for r in rows if r.best}
+    circles = {frozenset(r.circle): r.circle for r in ranked if r.circle and frozenset(r.circle) not in said}
+    for c in list(circles.values())[:3]:
+        lines.append("a circle beyond doubt: " + " above ".join((*c, c[0])))
+    if len(circles) > 3:
+        more = len(circles) - 3
+        lines.append(f"and {more} more circle{'s' * (more > 1)} (each row's own in --json)")
     return lines
+
+
+def _circle_text(row: LadderRow) -> str:
+    """``; in a circle beyond doubt: A above B above C above A`` where the row is in one, else ''."""
+    if not row.circle:
+        return ""
+    return "; in a circle beyond doubt: " + " above ".join((*row.circle, row.circle[0]))
 
 
 def select_rows(rows: list[LadderRow], run: str | None = None, top: int | None = None) -> list[LadderRow]:

@@ -445,12 +445,15 @@ class HistoryFit:
         0, as the ladder would say it."""
         return bool(self.above([top, other], confidence)[0, 1])
 
+    def doubt(self, ids: Sequence[int]) -> np.ndarray:
+        """``[a, b]``: the chance player ``ids[a]`` is not above ``ids[b]`` (all linked players; 1 on the diagonal)."""
+        out = self.pairs.below([self.index[i] for i in ids])
+        np.fill_diagonal(out, 1.0)
+        return out
+
     def above(self, ids: Sequence[int], confidence: float) -> np.ndarray:
         """``[a, b]``: player ``ids[a]`` is above ``ids[b]`` beyond doubt (all linked players)."""
-        below = self.pairs.below([self.index[i] for i in ids])
-        out = below < 0.5 * (1.0 - confidence)
-        np.fill_diagonal(out, False)
-        return out
+        return self.doubt(ids) < 0.5 * (1.0 - confidence)
 
 
 def fit_history(history: History, anchor: str = "random") -> HistoryFit | None:

@@ -93,8 +93,8 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
         players.sort(key=lambda p: (-fit.rating(p.id), p.id))
         by_rounds: dict[int, dict[frozenset[int], tuple]] = {}  # the pairs by the rounds each plays now
         for group in _comparable(book, players, history.sided):
-            above = fit.above([p.id for p in group], cfg.confidence)  # as the ladder orders them (claims_order)
-            order, _ = claims_order(above, [fit.rating(p.id) for p in group])
+            sure = fit.above([p.id for p in group], cfg.confidence)  # as the ladder orders them (claims_order)
+            order, _, _ = claims_order(sure, [fit.rating(p.id) for p in group])
             group = [group[k] for k in order]
             top, taken = group[0], 0
             for rival in group[1:]:
