@@ -463,17 +463,21 @@ def test_the_rating_games_repeat_with_the_seed_whatever_the_timing(tmp_path, cap
 
 
 def test_a_pair_of_snapshots_plays_on_until_its_record_predicts_a_match_within_the_precision():
-    """The width by hand: 5-0-3 is 5.5 / 9 with one virtual draw, 2 * 1.96 * sqrt(p q (1/9 + 1/200)) = 0.651 points;
-    48-0-16 (p = 48.5 / 65) 0.244. A matchup of two snapshots at 5-3 doubles its pairs (4 to 8) while the width is
-    above the precision, and stops at its cap; against a bot it stops once clear, as before."""
+    """The width by hand: 5-0-3 with one virtual draw has mean 5.5 / 9 and mean square (5 + 0.25) / 9, a spread of
+    0.0494, so 2 * 1.96 * sqrt(0.0494 * (1/9 + 1/200)) = 0.612 points; 48-0-16 0.241; 8-0-0 0.210; draws narrow it:
+    16-16-0 is 0.184. A matchup of two snapshots at 5-3 doubles its pairs (4 to 8) while the width is above the
+    precision, and stops at its cap; against a bot it stops once clear, as before."""
     from types import SimpleNamespace
 
     from selfplay_cli.rated.gauntlet import Matchup, prediction_width
 
-    p = 5.5 / 9
-    assert prediction_width(5, 0, 3) == pytest.approx(2 * 1.959964 * (p * (1 - p) * (1 / 9 + 1 / 200)) ** 0.5)
-    assert prediction_width(5, 0, 3) == pytest.approx(0.651, abs=0.001)
-    assert prediction_width(48, 0, 16) == pytest.approx(0.244, abs=0.001)
+    mean, square = 5.5 / 9, 5.25 / 9
+    assert prediction_width(5, 0, 3) == pytest.approx(2 * 1.959964 * ((square - mean**2) * (1 / 9 + 1 / 200)) ** 0.5)
+    assert prediction_width(5, 0, 3) == pytest.approx(0.612, abs=0.001)
+    assert prediction_width(48, 0, 16) == pytest.approx(0.241, abs=0.001)
+    assert prediction_width(8, 0, 0) == pytest.approx(0.210, abs=0.001)
+    assert prediction_width(16, 16, 0) == pytest.approx(0.184, abs=0.001)
+    assert prediction_width(16, 16, 0) < prediction_width(24, 0, 8)  # the same mean, without draws
 
     a, b, bot = (SimpleNamespace(id=i, is_bot=i == 3) for i in (1, 2, 3))
     open_pair = Matchup(a, b, 0, wins=5, draws=0, losses=3, pairs=4)
@@ -481,5 +485,6 @@ def test_a_pair_of_snapshots_plays_on_until_its_record_predicts_a_match_within_t
     assert Matchup(a, b, 0, wins=5, draws=0, losses=3, pairs=16).more(1.645, 4, 16, precision=0.30) == 0  # capped
     assert Matchup(a, b, 0, wins=48, draws=0, losses=16, pairs=32).more(1.645, 4, 64, precision=0.30) == 0
     assert open_pair.more(1.645, 4, 16) == 4 and Matchup(a, b, 0, wins=8, pairs=4).more(1.645, 4, 16) == 0
-    assert Matchup(a, b, 0, wins=8, pairs=4).more(1.645, 4, 16, precision=0.30) == 4  # 8-0 alone: 0.31 wide
+    assert Matchup(a, b, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.70) == 0  # 0.61 is enough
+    assert Matchup(a, bot, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.30) == 4  # a bot: open
     assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16, precision=0.30) == 0  # a bot: clear is enough

@@ -28,6 +28,33 @@ def test_a_sure_difference_predicts_the_binomial_interval_of_its_score():
     assert (belief(0.0, 0.0).predict(200).low, belief(0.0, 0.0).predict(200).high) == (0.43, 0.57)
 
 
+def test_draws_narrow_a_prediction_as_the_trinomial_of_half_points_says():
+    """An even pair (no uncertainty) drawing half its games: each result is 0, 1/2 or 1 with chances 1/4, 1/2, 1/4,
+    a spread of 1/8 against a coin's 1/4. The score of 200 games is (half-points of 200 results) / 400, its central
+    95% interval by the exact convolution computed here by hand; a pair that always draws scores exactly 50%; a pair
+    expected at 90% cannot draw more than 20% of its games (the rest of its mean would not fit)."""
+    import dataclasses
+
+    even = belief(0.0, 0.0)
+    half = dataclasses.replace(even, draw=0.5).predict(200)
+    pmf = np.array([1.0])
+    for _ in range(200):
+        pmf = np.convolve(pmf, [0.25, 0.5, 0.25])
+    cdf = np.cumsum(pmf)
+    low = int(np.searchsorted(cdf, 0.025 - 1e-12)) / 400
+    high = int(np.flatnonzero(np.cumsum(pmf[::-1])[::-1] >= 0.025 - 1e-12)[-1]) / 400
+    assert (half.low, half.high) == pytest.approx((low, high), abs=1e-9)
+    assert (half.low, half.high) == pytest.approx((0.4525, 0.5475), abs=0.003)  # 1.96 sqrt(1/8 / 200) = 0.049
+    coin = even.predict(200)
+    assert coin.high - coin.low > 1.3 * (half.high - half.low)
+    always = dataclasses.replace(even, draw=1.0).predict(200)
+    assert (always.low, always.high) == pytest.approx((0.5, 0.5))
+    strong = belief(400.0 * np.log10(9.0), 0.0)  # 90%
+    capped = dataclasses.replace(strong, draw=0.9).predict(200)
+    alone = dataclasses.replace(strong, draw=0.2).predict(200)
+    assert (capped.low, capped.high) == (alone.low, alone.high)
+
+
 def test_uncertain_ratings_and_a_spread_widen_the_interval_and_met_games_narrow_it():
     base = belief(100.0, 0.0).predict(200)
     wide = belief(100.0, 80.0).predict(200)

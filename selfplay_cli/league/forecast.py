@@ -54,8 +54,14 @@ class Forecaster:
         _, _, diff_sd = laplace_intervals(ai, bi, n, fit.ratings, k, 0.95, prior)
         points, games = pair_matrices(ai, bi, sc, n)
         linked = np.array([f is None for f in fit.flags])
+        draws = None
+        if np.all(np.isin(sc, (0.0, 0.5, 1.0))):  # wins, draws and losses (not a game played for stakes)
+            draws = np.zeros((n, n))
+            level = sc == 0.5
+            np.add.at(draws, (ai[level], bi[level]), 1.0)
+            np.add.at(draws, (bi[level], ai[level]), 1.0)
         return cls(list(names), PairModel(fit.ratings, diff_sd, linked, points, games, prior, spread, anchor=k,
-                                          deff=deff))
+                                          deff=deff, draws=draws))
 
     @classmethod
     def of_league(cls, league: League, env: str, prior: float = DEFAULT_PRIOR, variant: str = "") -> Forecaster:

@@ -495,8 +495,9 @@ def _fit_rows(
         np.add.at(wdl[result], (ai[x], bi[x]), 1)  # a's win, draw or loss against b, and b's against a
         np.add.at(wdl[result], (bi[y], ai[y]), 1)
     points, games = pair_matrices(ai, bi, sc, n)
+    whole = bool(np.all(np.isin(sc, (0.0, 0.5, 1.0))))  # wins, draws and losses (not a game played for stakes)
     pairs = PairModel(ratings, diff_sd, [f is None for f in fit.flags], points, games, prior, spread, anchor=k,
-                      deff=deff)
+                      deff=deff, draws=wdl[1] if whole else None)
     fitted = Fitted(names, ratings, low, high, list(fit.flags), confidence, pairs, wdl)
     order, ranks, tiers, circles = _ranks_and_tiers(fitted, _order(fitted, [i for i, name in enumerate(names)
                                                                              if name not in hidden]))

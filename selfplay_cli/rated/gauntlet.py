@@ -6,7 +6,8 @@ When a run takes its snapshots (one per learner), each new snapshot meets
 * the other learners' new snapshots (taken at the same moment): the two paddles against each other;
 * the run's best snapshot so far (by fitted rating), a few older snapshots spread over the run: progress
   against the whole history, and the links that let the ladder separate players that never met;
-* every scripted player of the game: fixed anchors.
+* every scripted player of the game: fixed anchors (at the run's first moment the scripted players also meet each
+  other, where no gauntlet of the league has had them meet yet).
 
 Every matchup is played in rounds on shared seeds, as its game's kind asks (:mod:`selfplay_cli.arena.schedule`):
 seat-swapped pairs of a two-sides game (each seed once with either player on each side, so the serve luck and the
@@ -138,11 +139,13 @@ class Matchup:
 
 def prediction_width(wins: int, draws: int, losses: int, games: int = 200) -> float:
     """How wide (score points, 0 to 1) the 95% interval of a ``games``-game match's score is, predicted from this
-    record alone: ``2 z sqrt(p (1 - p) (1 / (n + 1) + 1 / games))`` with ``p`` the score with one virtual draw (the
-    uncertainty of the pair's expected score, then the luck of the match)."""
+    record alone: ``2 z sqrt(v (1 / (n + 1) + 1 / games))``, ``v`` the spread of one result's points (a win 1, a draw
+    1/2) in the record with one virtual draw: the uncertainty of the pair's expected score, then the luck of the
+    match. Draws, half a point between the two, make it narrower than a coin's of the same mean."""
     n = wins + draws + losses
-    p = (wins + 0.5 * draws + 0.5) / (n + 1)
-    return 2.0 * 1.959964 * math.sqrt(p * (1.0 - p) * (1.0 / (n + 1) + 1.0 / games))
+    mean = (wins + 0.5 * draws + 0.5) / (n + 1)
+    square = (wins + 0.25 * (draws + 1)) / (n + 1)
+    return 2.0 * 1.959964 * math.sqrt(max(square - mean * mean, 0.0) * (1.0 / (n + 1) + 1.0 / games))
 
 
 def clear(wins: int, losses: int, z: float) -> bool:
@@ -526,6 +529,10 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
             if a.id != b.id:
                 unique.setdefault(frozenset((a.id, b.id)), (a, b))
         pairs = list(unique.values())
+    if not history.snapshots:  # the run's first moment: its scripted players meet each other once, so what the ladder
+        # says of them rests on their own games too (a league's earlier gauntlets may have played them already)
+        pairs += [(x, y) for k, x in enumerate(history.bots) for y in history.bots[k + 1:]
+                  if meets is None or meets(x, y)]
     key = f"gauntlet/{min(p.id for p in new)}"
     mine = {match_id for match_id, _ in league.keyed_matches(f"{key}/").values()}  # (this unit's, played before)
     pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant, ignore=mine)]

@@ -64,6 +64,7 @@ _NODES = 121  # grid points of a pair's difference, in each of two passes (the w
 _HERMITE = np.polynomial.hermite_e.hermegauss(12)  # nodes and weights of E[f(x)], x ~ N(0, 1), up to sqrt(2 pi)
 _LEVERAGE = 0.3  # a pair carrying more of its two players' link than this is left out by a refit, not one step
 _REFITS = 64  # refits at most in one population (the most leveraged pairs; the others say nothing)
+_DRAW_PRIOR = 8.0  # results of the population's draw rate a pair's own draws are mixed with
 
 
 @dataclass(frozen=True)
@@ -180,6 +181,7 @@ class Belief:
     met: float = 0.0
     met_points: float = 0.0
     deff: float = 1.0  # the design effect of the game's rounds: one result is worth 1 / deff independent ones
+    draw: float = 0.0  # the share of the pair's results that are draws, as a match of the two is predicted to have
 
     @property
     def mean(self) -> float:
@@ -205,12 +207,15 @@ class Belief:
 
     def flipped(self) -> Belief:
         """B's difference over A's."""
-        return Belief(-self.nodes[::-1], self.weights[::-1], self.met, self.met - self.met_points, self.deff)
+        return Belief(-self.nodes[::-1], self.weights[::-1], self.met, self.met - self.met_points, self.deff,
+                      self.draw)
 
     def predict(self, games: int, confidence: float = 0.95) -> ScorePrediction:
-        """A's score over ``games`` games: ``K / n`` with ``K ~ Binomial(n, E(T))``, mixed over ``T``, where ``n =
-        games / deff`` are the independent results those games are worth (all of them unless rounds correlate); the
-        smallest and largest scores that leave at most ``(1 - confidence) / 2`` outside on either side."""
+        """A's score over ``games`` games, mixed over ``T``: the ``n = games / deff`` independent results those
+        games are worth (all of them unless rounds correlate), each a win, a draw (at the pair's :attr:`draw` rate)
+        or a loss of mean ``E(T)``; the smallest and largest scores that leave at most ``(1 - confidence) / 2``
+        outside on either side. Without draws the count of wins is binomial; with them, the half-points of the
+        ``n`` results are the trinomial's, whose spread is the smaller a coin's of the same mean would overstate."""
         if games < 1:
             raise ValueError(f"games must be at least 1, not {games}")
         if not 0.0 < confidence < 1.0:
@@ -219,20 +224,35 @@ class Belief:
         p = 1.0 / (1.0 + np.exp(-self.nodes[keep] / NAT_TO_ELO))
         post = self.weights[keep] / self.weights[keep].sum()
         expected = float(post @ p)
-        if p.size > 256:  # the mixture's binomials at 256 levels of p, each weighted by the nodes it gathers
+        if p.size > 256:  # the mixture at 256 levels of p, each weighted by the nodes it gathers
             edges = np.linspace(p.min(), p.max(), 257)
             where = np.clip(np.searchsorted(edges, p, side="right") - 1, 0, 255)
             mass = np.bincount(where, weights=post, minlength=256)
             level = np.bincount(where, weights=post * p, minlength=256) / np.maximum(mass, 1e-300)
             p, post = level[mass > 0], mass[mass > 0]
         n = max(1, int(round(games / self.deff)))
-        k = np.arange(n + 1)
-        pmf = post @ binom.pmf(k[None, :], n, p[:, None])
+        if self.draw > 0.0:
+            pmf, halves = post @ _trinomial(n, p, self.draw), 2 * n  # over half-points 0 .. 2n
+        else:
+            pmf, halves = post @ binom.pmf(np.arange(n + 1)[None, :], n, p[:, None]), n
         tail = 0.5 * (1.0 - confidence)
         lo_k = int(np.searchsorted(np.cumsum(pmf), tail - 1e-12))  # the smallest k with P(K <= k) >= tail
         upper = np.cumsum(pmf[::-1])[::-1]  # P(K >= k)
         hi_k = int(np.flatnonzero(upper >= tail - 1e-12)[-1])  # the largest k with P(K >= k) >= tail
-        return ScorePrediction(expected, lo_k / n, hi_k / n, games, confidence, self.mean, self.sd)
+        return ScorePrediction(expected, lo_k / halves, hi_k / halves, games, confidence, self.mean, self.sd)
+
+
+def _trinomial(n: int, p: np.ndarray, draw: float) -> np.ndarray:
+    """``(levels, 2n + 1)``: the chance of each count of half-points in ``n`` results, each a loss, a draw or a win
+    with mean points ``p`` (one row per level) and draws at ``draw`` where the mean allows (a mean of 0.9 leaves
+    room for 20% of draws at most): the coefficients of ``(l + d x + w x^2)^n``, by FFT."""
+    d = np.minimum(draw, 2.0 * np.minimum(p, 1.0 - p))
+    size = 1 << int(np.ceil(np.log2(2 * n + 1)))
+    poly = np.zeros((p.size, size))
+    poly[:, 0], poly[:, 1], poly[:, 2] = 1.0 - p - 0.5 * d, d, p - 0.5 * d
+    out = np.fft.irfft(np.fft.rfft(poly, axis=1) ** n, size, axis=1)[:, : 2 * n + 1]
+    out = np.maximum(out, 0.0)
+    return out / out.sum(axis=1, keepdims=True)
 
 
 def _logsumexp(x: np.ndarray, axis: int) -> np.ndarray:
@@ -315,7 +335,7 @@ class PairModel:
 
     def __init__(self, ratings: npt.ArrayLike, diff_sd: npt.ArrayLike, linked: npt.ArrayLike, points: npt.ArrayLike,
                  games: npt.ArrayLike, prior: float, spread: Spread | None = None, anchor: int | None = None,
-                 deff: float = 1.0) -> None:
+                 deff: float = 1.0, draws: npt.ArrayLike | None = None) -> None:
         if not (math.isfinite(deff) and deff >= 1.0):
             raise ValueError(f"the design effect must be a finite number >= 1, not {deff}")
         self.deff = float(deff)  # one result is worth 1 / deff independent ones: every record and the fit tempered
@@ -325,6 +345,14 @@ class PairModel:
         self.met_points = np.asarray(points, dtype=np.float64)
         self.met_games = np.asarray(games, dtype=np.float64)
         self.points, self.games = self.met_points / self.deff, self.met_games / self.deff
+        # each pair's draw rate for its predictions: its own draws, shrunk toward the population's by _DRAW_PRIOR
+        # results (none where results are worth any points: a game played for stakes)
+        if draws is None:
+            self.draw = np.zeros_like(self.met_games)
+        else:
+            d = np.asarray(draws, dtype=np.float64)
+            base = float(d.sum() / self.met_games.sum()) if self.met_games.sum() > 0 else 0.0
+            self.draw = (d + _DRAW_PRIOR * base) / (self.met_games + _DRAW_PRIOR)
         self.prior = float(prior)
         n = self.ratings.size
         # the gauge of a refit (differences do not depend on it): the fit's anchor, or any linked player
@@ -405,8 +433,9 @@ class PairModel:
         met_points, met_games = self.points[i, j], self.games[i, j]
         nodes, w = _beliefs(self.out_diff[i, j], np.maximum(self.out_sd[i, j], 1e-6), self.spread, met_points,
                             met_games)
-        raw_points, raw_games = self.met_points[i, j], self.met_games[i, j]
-        return [Belief(nodes[k], w[k], float(raw_games[k]), float(raw_points[k]), self.deff) for k in range(i.size)]
+        raw_points, raw_games, draw = self.met_points[i, j], self.met_games[i, j], self.draw[i, j]
+        return [Belief(nodes[k], w[k], float(raw_games[k]), float(raw_points[k]), self.deff, float(draw[k]))
+                for k in range(i.size)]
 
     def below(self, order: npt.ArrayLike) -> np.ndarray:
         """``P(T_ab <= 0)`` for every two players of ``order`` (indices; linked players), as an ``(m, m)`` matrix:
