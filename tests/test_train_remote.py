@@ -203,7 +203,8 @@ def test_the_wait_shows_which_worker_plays_and_a_dead_job_is_one_error(rated_lea
     finisher.start()
     (done,) = ev.wait(on_wait=lambda: seen.append(ev.queue_standing()))
     finisher.join()
-    assert done.games == 4 and ev.pending == [] and ev.games_played == 0  # all of it played by the worker
+    # s0 against random and cpu (2 games each), and at the run's first moment the two bots against each other
+    assert done.games == 6 and ev.pending == [] and ev.games_played == 0  # all of it played by the worker
     assert seen and seen[0].workers == ("w9",)
     ev.submit(GauntletJob((snap.id, snap.id), 100, 2, 0))
     (jid,) = [j.id for j in league.jobs(batch=run_batch("w"), states=["queued"])]
@@ -315,7 +316,7 @@ def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     waiting.join(timeout=60)
     assert out, "the run waited on for a worker that never took its gauntlet"
     (done,) = out[0]
-    assert done.games == 4 and ev.games_played == 4
+    assert done.games == 6 and ev.games_played == 6  # s0 against each bot, and the bots against each other
     (job,) = league.jobs(batch=run_batch("w"))
     assert job.state == "done" and job.worker.startswith("train@")
     assert seen[0] == QueueStanding(left=1, workers=(), here=False, attached=1)

@@ -558,7 +558,13 @@ class Trainer:
                 gauntlets.append(match_id)
         mine = table.select(np.isin(table.match_id, gauntlets))
         coop = mine.kind == KIND_CODES[COOPERATIVE]
-        return int(np.unique(mine.game_id[~coop]).size + 2 * np.unique(mine.game_id[coop]).size)
+        played = int(np.unique(mine.game_id[~coop]).size + 2 * np.unique(mine.game_id[coop]).size)
+        if ids:  # and the games its first moment had the scripted players play each other (keyed under it)
+            bots = {p.full_name for p in self.league.players(env=self.spec.name, kind="bot")}  # (as the match names)
+            for _, params in self.league.keyed_matches(f"gauntlet/{min(ids)}/").values():
+                if params.get("a") in bots and params.get("b") in bots:
+                    played += sum(int(x) for x in params.get("record", [0, 0, 0])[:3])
+        return played
 
     def _same_weights(self) -> dict[str, str]:
         """The run's snapshots whose weights a snapshot of another run holds (the same command and seed run again),
