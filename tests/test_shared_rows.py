@@ -238,7 +238,7 @@ def _snapshots(db_url: str, tmp_path, n: int = 3) -> tuple[League, list[int]]:
 def test_rows_whose_json_cannot_be_read_are_one_line_each_never_the_command(db_url, tmp_path, capsys, monkeypatch):
     """players.meta 5,000 deep and 10 MB, a run's config 5,000 deep, a match's params 5,000 deep: the ladder, the
     checkpoint list, another snapshot's page and the matrix exit 0, each bad row said in one line on stderr; a bad
-    row is never played (`marl match` refuses it in one line)."""
+    row is never played (`marl match` refuses it in one line), a bad run never resumed."""
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
     monkeypatch.delenv("MARL_DB", raising=False)
     lg, (deep, huge, fine) = _snapshots(db_url, tmp_path)
@@ -273,4 +273,7 @@ def test_rows_whose_json_cannot_be_read_are_one_line_each_never_the_command(db_u
     code, out, err = run(capsys, "match", "w/s0", "cpu", "--games", "2", *where)
     assert code == 2 and err.splitlines()[-1].startswith("marl: error: w/s0: its row in the league cannot be read")
     assert bounded_json.unreadable(lg.get_player(deep).meta) is None and lg.get_player(deep).unusable
+    code, out, err = run(capsys, "train", "--resume", "w", *where)
+    assert code == 2 and err.splitlines()[-1] == ("marl: error: run 'w': its configuration in the league cannot be "
+                                                  "read (nested deeper than 32 levels): start a new run"), err
     lg.close()
