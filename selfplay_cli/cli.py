@@ -401,6 +401,9 @@ def main(argv: list[str] | None = None) -> int:
     a traceback on the terminal."""
     args = list(sys.argv[1:] if argv is None else argv)
     _watch_databases()
+    from .league.bounded_json import forget_said  # (light: no database code)
+
+    forget_said()  # a row that cannot be read is said once per command
     command = build_command()
     try:
         rv = command.main(args=args, prog_name="marl", standalone_mode=False)

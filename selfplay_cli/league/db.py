@@ -63,7 +63,7 @@ from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
 
 from selfplay_cli.errors import EXIT_IO, MarlError, MarlIOError
-from selfplay_cli.league import migrations
+from selfplay_cli.league import bounded_json, migrations
 from selfplay_cli.league.models import Base, Meta, utcnow
 from selfplay_cli.signals import signals_held
 
@@ -313,11 +313,14 @@ class Database:
         if empty:
             engine_url = URL.create("sqlite", database=":memory:")
         try:
+            # (JSON columns get their stored text and parse it with their bounds: models.BoundedJSON)
             if self._empty:  # an empty league to read: one connection (every thread sees the same tables)
                 self.engine: Engine = create_engine(engine_url, poolclass=StaticPool,
+                                                    json_deserializer=bounded_json.raw,
                                                     connect_args={"check_same_thread": False})
             else:  # a connection the server dropped (restarted) is found out before use, not by the unit of work
-                self.engine = create_engine(engine_url, pool_pre_ping=not self.is_sqlite)
+                self.engine = create_engine(engine_url, pool_pre_ping=not self.is_sqlite,
+                                            json_deserializer=bounded_json.raw)
         except (NoSuchModuleError, ImportError) as exc:
             extra = ' (pip install "selfplay-cli[postgres]")' if self.is_postgres else ""
             raise LeagueError(f"cannot use database {self._where}: no driver{extra} ({exc})") from exc

@@ -41,6 +41,7 @@ from sqlalchemy import and_, func, or_, select
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, aliased, raiseload
 
+from selfplay_cli.league.bounded_json import say_unusable, unreadable
 from selfplay_cli.league.db import Database, LeagueError
 from selfplay_cli.league.games import declaration
 from selfplay_cli.league.models import Game, GameSeat, Match, Player, utcnow
@@ -67,14 +68,30 @@ def rules_for_env(env: str, env_options: dict[str, Any] | None = None) -> Rules:
     return Rules.of(spec)
 
 
+UNREADABLE_VARIANT = "(unreadable)"
+"""The variant of the games of a match whose parameters cannot be read (too large, nested too deep, not JSON): no
+variant a ladder is asked for (a real key is ``""`` or JSON), so its games stay out of every ladder."""
+
+
 def _rules_of(params: dict[str, Any] | None) -> Rules:
     return Rules.from_json((params or {}).get("rules"))
 
 
 def _variant_of(env: str, params: dict[str, Any] | None) -> str:
-    """The variant a match's games belong to, from the options its row records (none: the default)."""
+    """The variant a match's games belong to, from the options its row records (none: the default;
+    :data:`UNREADABLE_VARIANT` when they cannot be read)."""
+    if unreadable(params) is not None:
+        return UNREADABLE_VARIANT
     options = (params or {}).get("env_options")
     return variant_key(env, options if isinstance(options, dict) else None)
+
+
+def _said(match_id: int, params: Any) -> Any:
+    """``params`` of a match, said once on stderr when they cannot be read (its games then count in no ladder)."""
+    bad = unreadable(params)
+    if bad is not None:
+        say_unusable(f"match {match_id}", "params", bad, "its games count in no ladder")
+    return params
 
 
 @dataclass(frozen=True)
@@ -523,8 +540,9 @@ class Ledger(Database):
             out: dict[str, int] = defaultdict(int)
             for mid, params in s.execute(select(Match.id, Match.params).where(Match.env == env,
                                                                              Match.kind != "training")):
-                if counts.get(mid):
-                    out[_variant_of(env, params)] += int(counts[mid])
+                variant = _variant_of(env, _said(mid, params))
+                if counts.get(mid) and variant != UNREADABLE_VARIANT:  # (in no variant: said)
+                    out[variant] += int(counts[mid])
             return dict(sorted(out.items()))
 
         return self._read(work)
@@ -674,7 +692,7 @@ def _match_rules(s: Session, env: str | None, rated: bool, variant: str | None =
     if rated:
         q = q.where(Match.kind != "training")
     return {int(mid): _rules_of(params) for mid, menv, params in s.execute(q)
-            if variant is None or _variant_of(menv, params) == variant}
+            if variant is None or _variant_of(menv, _said(mid, params)) == variant}
 
 
 PLAYER_FILTER_MAX = 5_000

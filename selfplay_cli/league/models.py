@@ -25,6 +25,9 @@ Tables
   whose heart stopped goes back to the queue, one that failed is tried again later, and its games are stored with
   the job marked done in one transaction under the match key ``job:<id>``, so a job finished twice counts once.
 
+Every JSON column is a :class:`BoundedJSON`: read within a size of its own and a depth, a bad value one unusable row
+(:mod:`selfplay_cli.league.bounded_json`), never a failed command.
+
 All timestamps are stored as naive UTC and returned as timezone-aware UTC datetimes.
 """
 
@@ -52,8 +55,10 @@ from sqlalchemy import (
 from sqlalchemy.orm import DeclarativeBase, Mapped, mapped_column, relationship
 from sqlalchemy.types import TypeDecorator
 
-__all__ = ["Base", "Blob", "Game", "GameSeat", "Job", "Match", "Meta", "Player", "Run", "Tag", "UTCDateTime", "Worker",
-           "utcnow"]
+from selfplay_cli.league.bounded_json import read_column
+
+__all__ = ["Base", "Blob", "BoundedJSON", "Game", "GameSeat", "Job", "Match", "Meta", "Player", "Run", "Tag",
+           "UTCDateTime", "Worker", "utcnow"]
 
 
 def utcnow() -> datetime:
@@ -86,10 +91,42 @@ class UTCDateTime(TypeDecorator[datetime]):
         return value.astimezone(timezone.utc)
 
 
+class BoundedJSON(TypeDecorator[Any]):
+    """A JSON column read with bounds (:mod:`selfplay_cli.league.bounded_json`): a value over ``max_bytes``, nested too
+    deep, not JSON, or not of the column's ``kind`` (dict or list) reads as an
+    :class:`~selfplay_cli.league.bounded_json.Unreadable` saying why, never as an error of the whole query. The
+    engine hands the column's stored text over unparsed (:func:`~selfplay_cli.league.bounded_json.raw`); a value a
+    driver parsed anyway is only checked for its kind. Stored as JSON, as before: no migration."""
+
+    impl = JSON
+    cache_ok = True
+
+    def __init__(self, max_bytes: int, kind: type = dict) -> None:
+        super().__init__()
+        self.max_bytes, self.kind = int(max_bytes), kind
+
+    def process_result_value(self, value: Any, dialect: Dialect) -> Any:
+        return read_column(value, max_bytes=self.max_bytes, kind=self.kind)
+
+
+META_BYTES = 256 * 1024
+"""A player's ``meta`` (its learner, role, league role, exploitability: a few hundred bytes)."""
+CONFIG_BYTES = 1024 * 1024
+"""A run's ``config`` (its resolved settings: a few kilobytes)."""
+PARAMS_BYTES = 1024 * 1024
+"""A match's ``params`` (how it was played, the game's options and rules)."""
+SPEC_BYTES = 256 * 1024
+"""A job's ``spec`` (player ids, seeds, counts; a gauntlet's snapshot names)."""
+RESULT_BYTES = 1024 * 1024
+"""A job's ``result`` (counts, and a games job's points round by round)."""
+SERVES_BYTES = 64 * 1024
+"""A worker's ``serves`` (the batches it takes jobs from)."""
+
+
 class Base(DeclarativeBase):
     """Declarative base of the league schema."""
 
-    type_annotation_map = {dict[str, Any]: JSON, datetime: UTCDateTime}
+    type_annotation_map = {dict[str, Any]: BoundedJSON(1024 * 1024), datetime: UTCDateTime}
 
 
 class Meta(Base):
@@ -110,7 +147,7 @@ class Run(Base):
     name: Mapped[str] = mapped_column(String(200), unique=True)
     env: Mapped[str] = mapped_column(String(100), index=True)
     algo: Mapped[str | None] = mapped_column(String(100))
-    config: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    config: Mapped[dict[str, Any]] = mapped_column(BoundedJSON(CONFIG_BYTES), default=dict)
     status: Mapped[str] = mapped_column(String(32))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     updated_at: Mapped[datetime] = mapped_column(default=utcnow, onupdate=utcnow)
@@ -147,7 +184,7 @@ class Player(Base):
     removed: Mapped[bool] = mapped_column(Boolean, default=False)
     removed_at: Mapped[datetime | None] = mapped_column()
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
-    meta: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    meta: Mapped[dict[str, Any]] = mapped_column(BoundedJSON(META_BYTES), default=dict)
 
     run: Mapped[Run | None] = relationship(lazy="joined")
     tags: Mapped[list[Tag]] = relationship(back_populates="player", lazy="selectin", order_by="Tag.tag")
@@ -191,7 +228,7 @@ class Match(Base):
     id: Mapped[int] = mapped_column(Integer, primary_key=True)
     env: Mapped[str] = mapped_column(String(100), index=True)
     kind: Mapped[str] = mapped_column(String(32))
-    params: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    params: Mapped[dict[str, Any]] = mapped_column(BoundedJSON(PARAMS_BYTES), default=dict)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     work_key: Mapped[str | None] = mapped_column(String(200), deferred=True)  # (only writers read it)
     """The unit of work whose games the match holds, where a unit may be done twice (a training run's gauntlet
@@ -258,7 +295,7 @@ class Worker(Base):
     games: Mapped[int] = mapped_column(BigInteger, default=0)
     seconds: Mapped[float] = mapped_column(Float, default=0.0)
     """Seconds spent playing the jobs it finished (its games/s is ``games / seconds``)."""
-    serves: Mapped[list[str] | None] = mapped_column(JSON)
+    serves: Mapped[list[str] | None] = mapped_column(BoundedJSON(SERVES_BYTES, kind=list))
     """The batches it takes jobs from (``marl worker --batch``; a command playing its own batch), None: every batch."""
 
 
@@ -274,7 +311,7 @@ class Job(Base):
     batch: Mapped[str] = mapped_column(String(200), index=True)
     kind: Mapped[str] = mapped_column(String(32))
     env: Mapped[str] = mapped_column(String(100))
-    spec: Mapped[dict[str, Any]] = mapped_column(default=dict)
+    spec: Mapped[dict[str, Any]] = mapped_column(BoundedJSON(SPEC_BYTES), default=dict)
     priority: Mapped[int] = mapped_column(Integer, default=0)
     state: Mapped[str] = mapped_column(String(16), default="queued")
     after: Mapped[int | None] = mapped_column(ForeignKey("jobs.id"))
@@ -284,6 +321,6 @@ class Job(Base):
     beat_at: Mapped[datetime | None] = mapped_column()
     not_before: Mapped[datetime | None] = mapped_column()
     error: Mapped[str | None] = mapped_column(Text)
-    result: Mapped[dict[str, Any] | None] = mapped_column(JSON)
+    result: Mapped[dict[str, Any] | None] = mapped_column(BoundedJSON(RESULT_BYTES))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     finished_at: Mapped[datetime | None] = mapped_column()

@@ -14,8 +14,9 @@ and store its games together with the job's end in one transaction.
   done in one transaction, with the job's row locked: a job finished twice (a worker thought dead that comes back
   after another took its job) stores its games once; the second finish stores nothing.
 * **Failing** (:meth:`Queue.fail_job`) puts the job back with a growing wait (backoff), or, after ``max_tries``
-  leases, marks it ``dead`` with its error. A job leased that many times whose workers all went silent is marked dead
-  too, when the next claim finds it lapsed.
+  leases (at most :data:`TRIES_LIMIT`), marks it ``dead`` with its error; a job that cannot be played at all (a spec
+  its kind refuses, or one that cannot be read) is marked dead at once (``final``). A job leased that many times whose
+  workers all went silent is marked dead too, when the next claim finds it lapsed.
 * **Cancelling** (:meth:`Queue.cancel_jobs`) ends queued and leased jobs (a decided SPRT's remaining batches); a
   worker holding one learns it at its next heartbeat and stops, and a finish of a cancelled job stores nothing.
 
@@ -33,12 +34,13 @@ from typing import Any
 from sqlalchemy import and_, bindparam, exists, func, inspect, or_, select, text, update
 from sqlalchemy.orm import Session, aliased
 
+from selfplay_cli.league.bounded_json import JSONBoundsError, check_value, say_unusable, unreadable
 from selfplay_cli.league.db import LeagueError
-from selfplay_cli.league.models import Job, Worker, utcnow
+from selfplay_cli.league.models import SPEC_BYTES, Job, Worker, utcnow
 from selfplay_cli.results import GameResult
 
-__all__ = ["BACKOFF_SECONDS", "BEAT_SECONDS", "ENDED", "JOB_STATES", "MAX_TRIES", "SCAVENGE_SECONDS", "JobRow",
-           "NewJob", "Queue", "WorkerRow"]
+__all__ = ["BACKOFF_SECONDS", "BEAT_SECONDS", "ENDED", "JOB_STATES", "MAX_TRIES", "SCAVENGE_SECONDS", "TRIES_LIMIT",
+           "JobRow", "NewJob", "Queue", "WorkerRow", "max_tries_of"]
 
 JOB_STATES = ("queued", "leased", "done", "dead", "cancelled")
 ENDED = frozenset({"done", "dead", "cancelled"})
@@ -48,6 +50,9 @@ SCAVENGE_SECONDS = 360.0
 """A leased job whose heart has not beaten for this long goes back to the queue (fishtest's 360 s)."""
 MAX_TRIES = 5
 """Leases of one job before a failure (or a silent worker) marks it dead."""
+TRIES_LIMIT = 20
+"""The most leases a job may ask for (``max_tries``): past it, a job that fails everywhere would hold workers for days
+of backoff (its waits double up to 10 minutes)."""
 BACKOFF_SECONDS = 10.0
 """A job that failed waits this long before it is leased again, doubling with each failure (at most 10 minutes)."""
 _BACKOFF_CAP = 600.0
@@ -89,13 +94,19 @@ class JobRow:
     created_at: datetime
     finished_at: datetime | None
 
+    bad_spec: str | None = None
+    """Why the stored spec cannot be read (too large, nested too deep, not JSON), or None: such a job is marked dead
+    with it when a worker takes it."""
+
     @property
     def max_tries(self) -> int:
-        return int(self.spec.get("max_tries", MAX_TRIES))
+        return max_tries_of(self.spec)
 
     def to_json(self) -> dict[str, Any]:
         out = {k: getattr(self, k) for k in ("id", "batch", "kind", "env", "state", "after", "tries", "worker",
                                              "error", "result", "priority")}
+        if out["error"] is None and self.bad_spec is not None:
+            out["error"] = f"bad job spec: unreadable JSON ({self.bad_spec})"
         for k in ("leased_at", "beat_at", "not_before", "created_at", "finished_at"):
             v = getattr(self, k)
             out[k] = v.isoformat() if v is not None else None
@@ -142,12 +153,24 @@ class WorkerRow:
                 "games_per_second": round(gps, 2) if gps is not None else None, "holding": list(self.holding)}
 
 
+def max_tries_of(spec: Any) -> int:
+    """The leases a job's ``spec`` allows (``max_tries``; :data:`MAX_TRIES` when it says none), never more than
+    :data:`TRIES_LIMIT`; a value that is not a whole number reads as the default (its kind's check refuses it)."""
+    n = spec.get("max_tries", MAX_TRIES) if isinstance(spec, dict) else MAX_TRIES
+    if not isinstance(n, int) or isinstance(n, bool):
+        n = MAX_TRIES
+    return min(max(n, 1), TRIES_LIMIT)
+
+
 def _job_row(j: Job, worker: str | None) -> JobRow:
+    bad_result = unreadable(j.result)
+    if bad_result is not None:
+        say_unusable(f"job {j.id}", "result", bad_result, "its summary is left out")
     return JobRow(id=j.id, batch=j.batch, kind=j.kind, env=j.env, spec=dict(j.spec or {}), priority=j.priority,
                   state=j.state, after=j.after, tries=j.tries, worker_id=j.worker_id, worker=worker,
                   leased_at=j.leased_at, beat_at=j.beat_at, not_before=j.not_before, error=j.error,
-                  result=dict(j.result) if j.result is not None else None, created_at=j.created_at,
-                  finished_at=j.finished_at)
+                  result=dict(j.result) if j.result is not None and bad_result is None else None,
+                  created_at=j.created_at, finished_at=j.finished_at, bad_spec=unreadable(j.spec))
 
 
 def _worker_row(w: Worker, holding: tuple[int, ...] = ()) -> WorkerRow:
@@ -182,6 +205,22 @@ def _claim_query(by_batch: bool, by_kind: bool, sqlite: bool) -> Any:
     if not sqlite:  # workers never wait for each other's claims
         q = q.with_for_update(skip_locked=True, of=Job.__table__)
     return q
+
+
+def _check_new_job(nj: NewJob) -> None:
+    """Refuse, in one line, a job no reader would take: ``max_tries`` out of 1..:data:`TRIES_LIMIT`, a spec that is
+    not a JSON object within the bounds its column is read with, a kind or game name too long for its column."""
+    n = nj.max_tries
+    if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= TRIES_LIMIT:
+        raise LeagueError(f"a job's max_tries must be a whole number from 1 to {TRIES_LIMIT}, not {n!r}")
+    if not isinstance(nj.spec, dict):
+        raise LeagueError(f"a job's spec must be a table of settings, not {type(nj.spec).__name__}")
+    if not nj.kind or len(nj.kind) > 32 or not nj.env or len(nj.env) > 100:
+        raise LeagueError("a job's kind (1 to 32 characters) and game (1 to 100) must be named")
+    try:
+        check_value(nj.spec, max_bytes=SPEC_BYTES, what=f"the spec of a {nj.kind} job")
+    except JSONBoundsError as exc:
+        raise LeagueError(str(exc)) from None
 
 
 def backoff(tries: int, base: float = BACKOFF_SECONDS) -> float:
@@ -275,6 +314,8 @@ class Queue:
         before it (the first for ``after``, when given)."""
         if not batch or len(batch) > 200:
             raise LeagueError(f"a batch name must have 1 to 200 characters, not {len(batch)}")
+        for nj in jobs:
+            _check_new_job(nj)
 
         def work(s: Session) -> list[int]:
             ids: list[int] = []
@@ -314,7 +355,7 @@ class Queue:
                 j = s.execute(q, params).first()
                 if j is None:
                     return None
-                if j.state == "queued" or j.tries < int((j.spec or {}).get("max_tries", MAX_TRIES)):
+                if j.state == "queued" or j.tries < max_tries_of(j.spec):
                     break
                 s.execute(jobs.update().where(jobs.c.id == j.id).values(  # silent on every lease it may have
                     state="dead", finished_at=now,
@@ -368,9 +409,11 @@ class Queue:
 
         return self._unit(work)  # type: ignore[attr-defined,no-any-return]
 
-    def fail_job(self, job_id: int, worker_id: int, error: str, *, base_backoff: float = BACKOFF_SECONDS) -> str:
+    def fail_job(self, job_id: int, worker_id: int, error: str, *, base_backoff: float = BACKOFF_SECONDS,
+                 final: bool = False) -> str:
         """A job that ``worker_id`` could not play: back to the queue after :func:`backoff`, or ``dead`` with
-        ``error`` once it was leased ``max_tries`` times. Its new state (unchanged when it was not this worker's)."""
+        ``error`` once it was leased ``max_tries`` times, or at once when ``final`` (a job no worker can play: a spec
+        its kind refuses). Its new state (unchanged when it was not this worker's)."""
 
         def work(s: Session) -> str:
             j = s.get(Job, job_id)
@@ -380,7 +423,7 @@ class Queue:
                 return j.state
             now = utcnow()
             j.error = error[:2000]
-            if j.tries >= int((j.spec or {}).get("max_tries", MAX_TRIES)):
+            if final or j.tries >= max_tries_of(j.spec):
                 j.state, j.finished_at = "dead", now
             else:
                 j.state, j.not_before = "queued", now + timedelta(seconds=backoff(j.tries, base_backoff))

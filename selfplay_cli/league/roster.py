@@ -27,6 +27,7 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from selfplay_cli.league.blobs import store_blob
+from selfplay_cli.league.bounded_json import say_unusable, unreadable
 from selfplay_cli.league.db import Database, LeagueError, shown
 from selfplay_cli.league.models import Player, Run, Tag, utcnow
 
@@ -65,7 +66,8 @@ _MAX_NAME = 200
 
 @dataclass(frozen=True)
 class RunRow:
-    """A training run."""
+    """A training run. ``unusable``: why its ``config`` cannot be read (too large, nested too deep, not JSON), or
+    None; such a run is listed but cannot be resumed."""
 
     id: int
     name: str
@@ -74,11 +76,14 @@ class RunRow:
     config: dict[str, Any]
     status: str
     created_at: datetime
+    unusable: str | None = None
 
 
 @dataclass(frozen=True)
 class PlayerRow:
-    """A bot or snapshot. ``elo`` / ``games`` are the online Elo and the number of games played."""
+    """A bot or snapshot. ``elo`` / ``games`` are the online Elo and the number of games played. ``unusable``: why
+    the row cannot be used (its ``meta`` cannot be read: too large, nested too deep, not JSON), or None; such a row is
+    listed (its games are in the ledger) but never played."""
 
     id: int
     env: str
@@ -97,6 +102,7 @@ class PlayerRow:
     removed: bool
     created_at: datetime
     meta: dict[str, Any] = field(default_factory=dict)
+    unusable: str | None = None
 
     @property
     def full_name(self) -> str:
@@ -167,12 +173,18 @@ def _run_status(status: RunStatus | str) -> str:
 
 
 def _player_row(p: Player) -> PlayerRow:
-    """Copy an ORM player (with its run and tags loaded) into a :class:`PlayerRow`."""
+    """Copy an ORM player (with its run and tags loaded) into a :class:`PlayerRow`; a row whose ``meta`` cannot be
+    read is unusable, said once on stderr."""
+    run = p.run.name if p.run is not None else None
+    bad = unreadable(p.meta)
+    if bad is not None:
+        say_unusable(f"player {p.id} ({shown(f'{run}/{p.name}' if run else p.name)} of {shown(p.env)})", "meta",
+                     bad, "it is listed, never played")
     return PlayerRow(
-        id=p.id, env=p.env, kind=p.kind, name=p.name, run=p.run.name if p.run is not None else None,
+        id=p.id, env=p.env, kind=p.kind, name=p.name, run=run,
         step=int(p.step or 0), episode=int(p.episode or 0), algo=p.algo, path=p.path, sha256=p.sha256,
         parent_id=p.parent_id, tags=tuple(t.tag for t in p.tags), elo=float(p.elo), games=int(p.games),
-        removed=bool(p.removed), created_at=p.created_at, meta=dict(p.meta or {}),
+        removed=bool(p.removed), created_at=p.created_at, meta=dict(p.meta or {}), unusable=bad,
     )
 
 
@@ -183,9 +195,13 @@ def _bound_of(record: dict[str, Any]) -> float:
 
 
 def _run_row(r: Run) -> RunRow:
-    """Copy an ORM run into a :class:`RunRow`."""
+    """Copy an ORM run into a :class:`RunRow`; a run whose ``config`` cannot be read is unusable, said once on
+    stderr."""
+    bad = unreadable(r.config)
+    if bad is not None:
+        say_unusable(f"run {r.id} ({shown(r.name)})", "config", bad, "it is listed, never resumed")
     return RunRow(id=r.id, name=r.name, env=r.env, algo=r.algo, config=dict(r.config or {}), status=r.status,
-                  created_at=r.created_at)
+                  created_at=r.created_at, unusable=bad)
 
 
 class Roster(Database):

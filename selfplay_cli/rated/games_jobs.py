@@ -6,7 +6,8 @@ player B from ``first_seed``. Round ``r`` of a match is always played on seed ``
 would, whichever worker plays which job, in whatever order. Each job's players are loaded afresh, seeded from the
 job's own first seed, so a job played twice (by a worker thought dead, and by the one that took it over) plays the
 same games; they are stored once, under the job's key (``job:<id>``), with the job's end. :func:`combine` makes the
-one report of a match's jobs.
+one report of a match's jobs. :func:`check_spec` says what a spec must hold, checked when the jobs are made and
+before a worker plays one.
 """
 
 from __future__ import annotations
@@ -16,18 +17,42 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from ..errors import MarlError
+from ..league.ledger import MATCH_KINDS
 from ..league.queue import JobRow, NewJob
 from ..league.store import League, PlayerRow
 from ..stats.match import match_stats
+from . import job_spec
 from .match import MatchReport, env_options_of, load_player, mix_seed, round_size, run_match
 from .played import Played
 from .snapshots import share_snapshots
 
-__all__ = ["GAMES", "JOB_ROUNDS", "combine", "games_jobs", "play", "summary"]
+__all__ = ["GAMES", "JOB_ROUNDS", "MAX_JOB_ROUNDS", "MAX_TEAM", "check_spec", "combine", "games_jobs", "play",
+           "summary"]
 
 GAMES = "games"
 JOB_ROUNDS = 64
 """Rounds per ``games`` job by default: 128 games of a two-sides game, seconds to a few minutes of play."""
+MAX_JOB_ROUNDS = 64 * JOB_ROUNDS
+"""Rounds one ``games`` job may hold: 64 times what marl queues in one (a job is minutes of play, so a lease lapsing
+and a job played again cost little; a whole match of up to ``MAX_GAMES``, 10 million games, is many jobs)."""
+MAX_TEAM = 64
+"""Players of side A flying together in one job (a team of a cooperative game: a lander has at most 8)."""
+
+
+def check_spec(spec: dict[str, Any]) -> None:
+    """Refuse (:class:`~selfplay_cli.rated.job_spec.BadSpec`) a ``games`` spec a worker cannot play as it stands: the
+    keys :func:`games_jobs` writes, each of its type, counts within bounds."""
+    job_spec.ids(spec, "a", MAX_TEAM)
+    job_spec.whole(spec, "b", 1, job_spec.MAX_PLAYER_ID)
+    job_spec.whole(spec, "rounds", 1, MAX_JOB_ROUNDS)
+    job_spec.whole(spec, "first_seed", 0, job_spec.MAX_SEED)
+    job_spec.text(spec, "match_kind", choices=MATCH_KINDS)
+    job_spec.whole(spec, "round", 0, job_spec.MAX_SEED, required=False)
+    job_spec.whole(spec, "match_seed", 0, job_spec.MAX_SEED, required=False)
+    job_spec.table(spec, "env_options")
+    job_spec.table(spec, "params")
+    job_spec.text(spec, "team_name", required=False, none=True)
+    job_spec.tries(spec)
 
 
 def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *, games: int, first_seed: int,
@@ -47,10 +72,11 @@ def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *,
     out = []
     for start in range(0, total, job_rounds):
         n = min(job_rounds, total - start)
-        out.append(NewJob(kind=GAMES, env=row_b.env, spec={
-            "a": [r.id for r in rows_a], "b": row_b.id, "rounds": n, "first_seed": first_seed + start,
-            "round": start, "match_seed": first_seed, "env_options": dict(env_options or {}),
-            "match_kind": match_kind, "params": dict(params or {}), "team_name": team_name}))
+        spec = {"a": [r.id for r in rows_a], "b": row_b.id, "rounds": n, "first_seed": first_seed + start,
+                "round": start, "match_seed": first_seed, "env_options": dict(env_options or {}),
+                "match_kind": match_kind, "params": dict(params or {}), "team_name": team_name}
+        check_spec(spec)  # (what a worker would refuse is refused here, before anything is queued)
+        out.append(NewJob(kind=GAMES, env=row_b.env, spec=spec))
     return out
 
 

@@ -178,7 +178,8 @@ def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = F
     env, run = new[0].env, new[0].run
     # ids grow in registration order: the moment's own are its newest
     last = max(p.id for p in new) if including else min(p.id for p in new) - 1
-    snapshots = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id <= last]
+    snapshots = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id <= last
+                 and p.unusable is None]  # (a row that cannot be read is never played: said once)
     bots = league.players(env=env, kind="bot")
     gauntlets = [mid for mid, params in league.match_params(env, kind="eval").items() if params.get("gauntlet")]
     variant = variant_key(env, run_options(league, run or ""))  # the options the run plays: its ladder

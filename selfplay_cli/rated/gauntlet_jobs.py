@@ -27,13 +27,13 @@ from ..envs import get_env
 from ..league.queue import JobRow, NewJob
 from ..league.store import League
 from ..results import Rules
-from .gauntlet import GauntletConfig, rate_snapshots
+from . import job_spec
+from .gauntlet import ALL_OLDER, GauntletConfig, rate_snapshots
 from .played import Played
 from .snapshots import share_snapshots
 
-__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "PLAYOFF_SEEDS", "PRECISE_PAIRS", "gauntlet_job",
-           "play",
-           "play_gauntlet_spec"]
+__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "MAX_EVAL_GAMES", "MAX_MOMENT", "MAX_OLDER", "MAX_PLAYOFF",
+           "PLAYOFF_SEEDS", "PRECISE_PAIRS", "check_spec", "gauntlet_job", "play", "play_gauntlet_spec"]
 
 GAUNTLET = "gauntlet"
 FINAL_BOT_GAMES = 8  # a run's final snapshots play this many times --eval-games against each scripted player (64
@@ -46,6 +46,29 @@ FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapsh
 # over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
 # rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
 PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
+# A gauntlet job's counts at most: marl train's own limits (--eval-games, --eval-playoff), the snapshots of one
+# moment (one per learner); older snapshots met: a run's own (ALL_OLDER, all of them, for --opponents nash), so no
+# more than the run has whatever the number.
+MAX_EVAL_GAMES = 10_000
+MAX_OLDER = ALL_OLDER
+MAX_PLAYOFF = 100_000
+MAX_MOMENT = 256
+
+
+def check_spec(spec: dict[str, Any]) -> None:
+    """Refuse (:class:`~selfplay_cli.rated.job_spec.BadSpec`) a ``gauntlet`` spec a worker cannot play as it stands:
+    the keys :func:`gauntlet_job` writes (those it added later may be absent: a job queued before them), each of its
+    type, counts within ``marl train``'s own limits."""
+    job_spec.ids(spec, "snapshot_ids", MAX_MOMENT)
+    job_spec.whole(spec, "first_seed", 0, job_spec.MAX_SEED)
+    job_spec.whole(spec, "games", 0, MAX_EVAL_GAMES)
+    job_spec.whole(spec, "older", 0, MAX_OLDER)
+    job_spec.flag(spec, "full")
+    job_spec.whole(spec, "playoff", 0, MAX_PLAYOFF, required=False)
+    job_spec.flag(spec, "whole")
+    job_spec.number(spec, "precision", 0.0, 1.0, required=False)
+    job_spec.names(spec, "snapshots", MAX_MOMENT, required=False)
+    job_spec.tries(spec)
 
 
 def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int, games: int, older: int,
@@ -55,12 +78,12 @@ def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int
     payoff matrix need). The snapshots' bytes are put in the league where it keeps them, so a worker on another
     machine can fetch them."""
     rows = [league.get_player(int(i)) for i in snapshot_ids]
+    spec = {"snapshot_ids": [int(i) for i in snapshot_ids], "first_seed": int(first_seed), "games": int(games),
+            "older": int(older), "full": bool(full), "playoff": int(playoff), "whole": bool(whole),
+            "precision": float(precision), "snapshots": [r.full_name for r in rows]}
+    check_spec(spec)  # (what a worker would refuse is refused here, before anything is queued)
     share_snapshots(league, rows)
-    return NewJob(kind=GAUNTLET, env=rows[0].env, spec={
-        "snapshot_ids": [int(i) for i in snapshot_ids], "first_seed": int(first_seed), "games": int(games),
-        "older": int(older), "full": bool(full), "playoff": int(playoff), "whole": bool(whole),
-        "precision": float(precision),
-        "snapshots": [r.full_name for r in rows]})
+    return NewJob(kind=GAUNTLET, env=rows[0].env, spec=spec)
 
 
 def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "cpu",

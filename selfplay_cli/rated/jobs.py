@@ -2,11 +2,13 @@
 its heart beating, and seeing a queued batch through.
 
 The kinds of job are :mod:`.games_jobs` (a few minutes of one match) and :mod:`.gauntlet_jobs` (a training run's
-gauntlet of one snapshot moment); :data:`KINDS` finds each one's player. :func:`play_leased` plays one leased job
-while a thread beats its heart, then finishes it (or fails it, with the error's first line, to be tried again after a
-backoff). The worker (:mod:`selfplay_cli.work`) and :func:`see_through` both use it: a command that queued a batch
-plays the batch's jobs that no worker has taken, and waits for those that workers play, so queued work is done even
-with no worker attached.
+gauntlet of one snapshot moment); :data:`KINDS` finds each one's player, :data:`CHECKS` the check of its spec.
+:func:`play_leased` plays one leased job while a thread beats its heart, then finishes it, or fails it with a short
+line saying what failed: tried again after a backoff, dead after its tries; a spec its kind refuses, or one that
+cannot be read, is dead at once. Whatever a job raises (a bot this marl does not know, a missing key, a recursion or
+memory error) ends that job, never the worker; only Ctrl-C and SIGTERM stop it. The worker (:mod:`selfplay_cli.work`)
+and :func:`see_through` both use it: a command that queued a batch plays the batch's jobs that no worker has taken,
+and waits for those that workers play, so queued work is done even with no worker attached.
 """
 
 from __future__ import annotations
@@ -24,13 +26,20 @@ from ..league.queue import BEAT_SECONDS, ENDED, SCAVENGE_SECONDS, JobRow
 from ..league.store import League
 from ..stats.sprt import LEVELS, categories, count_model
 from . import games_jobs, gauntlet_jobs
+from .job_spec import BadSpec
 from .played import Played
 
-__all__ = ["KINDS", "JobLost", "Outcome", "play_job", "play_leased", "see_through", "sprt_verdict", "worker_name"]
+__all__ = ["CHECKS", "KINDS", "MAX_ERROR", "BadSpec", "JobLost", "Outcome", "check_job", "error_line", "play_job",
+           "play_leased", "see_through", "sprt_verdict", "worker_name"]
 
 KINDS: dict[str, Callable[..., Played]] = {games_jobs.GAMES: games_jobs.play,
                                            gauntlet_jobs.GAUNTLET: gauntlet_jobs.play}
 """The player of each kind of job: ``player(league, job, device=, parallel=, on_games=) -> Played``."""
+CHECKS: dict[str, Callable[[dict[str, Any]], None]] = {games_jobs.GAMES: games_jobs.check_spec,
+                                                       gauntlet_jobs.GAUNTLET: gauntlet_jobs.check_spec}
+"""The check of each kind's spec: ``check(spec)`` raises :class:`BadSpec` saying what is wrong."""
+MAX_ERROR = 300
+"""Characters of a failed job's error as its row keeps it (every member of a league reads it)."""
 
 
 class JobLost(Exception):
@@ -42,13 +51,37 @@ def worker_name(role: str = "worker") -> str:
     return f"{role}@{socket.gethostname()}:{os.getpid()}"
 
 
+def check_job(job: JobRow) -> None:
+    """Refuse (:class:`BadSpec`) a job whose spec no worker can play: one that cannot be read (too large, nested too
+    deep, not JSON), or one its kind's check refuses. A kind this marl does not know is left to :func:`play_job`
+    (a newer marl's worker may play it)."""
+    if job.bad_spec is not None:
+        raise BadSpec(f"unreadable JSON ({job.bad_spec})")
+    check = CHECKS.get(job.kind)
+    if check is not None:
+        check(job.spec)
+
+
 def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int = 1024,
              on_games: Callable[[int], None] | None = None) -> Played:
-    """Play ``job`` in this process (nothing stored) by the player of its kind (:data:`KINDS`)."""
+    """Play ``job`` in this process (nothing stored) by the player of its kind (:data:`KINDS`), its spec checked
+    first (:func:`check_job`)."""
     player = KINDS.get(job.kind)
     if player is None:
         raise MarlError(f"job {job.id} is of kind {job.kind!r}, which this marl does not play: upgrade marl")
+    check_job(job)
     return player(league, job, device=device, parallel=parallel, on_games=on_games)
+
+
+def error_line(exc: BaseException) -> str:
+    """What failed, in one short line for a job's row: the error's kind and its first line, cut at
+    :data:`MAX_ERROR` characters."""
+    try:
+        first = (str(exc).strip().splitlines() or [""])[0]
+    except Exception:  # (an error whose message itself fails)
+        first = ""
+    line = f"{type(exc).__name__}: {first}" if first else type(exc).__name__
+    return line if len(line) <= MAX_ERROR else line[:MAX_ERROR - 3] + "..."
 
 
 class _Heart:
@@ -98,11 +131,26 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
                 base_backoff: float | None = None, retry: Callable[[Callable[[], Any]], Any] = lambda fn: fn()
                 ) -> Outcome:
     """Play a job this worker leased while its heart beats, then store it (:meth:`League.finish_job`), or put it back
-    as failed with its error's first line; ``retry`` runs each write (a worker tries again while the database is
-    away, so games played are not played again). A :class:`KeyboardInterrupt` (Ctrl-C, SIGTERM) propagates: the
-    caller gives the job back."""
+    as failed with a short line saying what failed (:func:`error_line`), whatever the error (a recursion or memory
+    error too): tried again after a backoff, dead after its tries. A spec that cannot be played (:func:`check_job`)
+    makes the job dead at once, with ``bad job spec: ...``. ``retry`` runs each write (a worker tries again while the
+    database is away, so games played are not played again). A :class:`KeyboardInterrupt` (Ctrl-C, SIGTERM) and any
+    other ``BaseException`` propagate: the caller gives the job back."""
     from ..errors import MarlIOError
 
+    kwargs = {} if base_backoff is None else {"base_backoff": base_backoff}
+
+    def failed(exc: BaseException, final: bool = False) -> Outcome:
+        kind = "io" if isinstance(exc, MarlIOError | OSError) else "usage" if isinstance(exc, MarlError) else \
+            "internal"
+        error = f"bad job spec: {exc}"[:MAX_ERROR] if final else error_line(exc)
+        state = retry(lambda: league.fail_job(job.id, worker_id, error, final=final, **kwargs))
+        return Outcome(job, "failed", error=error, error_kind=kind, extra={"state": state})
+
+    try:
+        check_job(job)
+    except BadSpec as exc:
+        return failed(exc, final=True)
     with _Heart(league, worker_id, job.id, beat) as heart:
         def counted(n: int) -> None:
             if heart.lost.is_set():
@@ -114,17 +162,16 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
             played = play_job(league, job, device=device, parallel=parallel, on_games=counted)
         except JobLost:
             return Outcome(job, "lost")
-        except (MarlError, OSError, ValueError, RuntimeError) as exc:
-            kind = "io" if isinstance(exc, MarlIOError | OSError) else "usage" if isinstance(exc, MarlError) else \
-                "internal"
-            line = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-            kwargs = {} if base_backoff is None else {"base_backoff": base_backoff}
-            error = f"{type(exc).__name__}: {line}"
-            state = retry(lambda: league.fail_job(job.id, worker_id, error, **kwargs))
-            return Outcome(job, "failed", error=line, error_kind=kind, extra={"state": state})
-    stored = retry(lambda: league.finish_job(job.id, worker_id, games=played.games, match_kind=played.match_kind,
-                                             params=played.params, result=played.result, seconds=played.seconds,
-                                             played=played.count))
+        except Exception as exc:  # (RecursionError and MemoryError are Exceptions: they end the job, not the worker)
+            return failed(exc)
+    try:
+        stored = retry(lambda: league.finish_job(job.id, worker_id, games=played.games, match_kind=played.match_kind,
+                                                 params=played.params, result=played.result, seconds=played.seconds,
+                                                 played=played.count))
+    except MarlIOError:  # (the database away, and no retry here: the lease lapses, another worker plays it)
+        raise
+    except Exception as exc:  # games or a result the league refuses: the job failed, the worker goes on
+        return failed(exc)
     return Outcome(job, "done" if stored else "counted", games=played.count, seconds=played.seconds)
 
 

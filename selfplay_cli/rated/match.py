@@ -86,7 +86,10 @@ def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: boo
     (:func:`~selfplay_cli.rated.snapshots.snapshot_path`). It is validated in full before anything is built from it
     (:func:`~selfplay_cli.policies.snapshot_reader.read_snapshot`) and must be the file the row registered
     (:func:`~selfplay_cli.rated.snapshots.check_file`): a file copied over it, or edited, is refused with an error
-    naming it, so no game is ever played or stored under the wrong identity."""
+    naming it, so no game is ever played or stored under the wrong identity. A row whose ``meta`` cannot be read
+    (:attr:`~selfplay_cli.league.roster.PlayerRow.unusable`) is refused in one line."""
+    if row.unusable is not None:
+        raise MarlError(f"{row.full_name}: its row in the league cannot be read ({row.unusable}): it is not played")
     if row.is_bot:
         return ScriptedPolicy(row.env, row.name, seed=seed)
     from ..policies.snapshot_policy import policy_of  # torch is imported only when a network is needed

@@ -207,7 +207,8 @@ class Opponents:
         """The matchmaker's pool: the run's snapshots, oldest first; in a game whose seats hold different roles,
         also which of them can play each role (a snapshot only its own). ``steps``: the run's step now (the Nash
         mixture's, which is solved again here)."""
-        pool = [p for p in self.league.players(env=env, kind="snapshot") if p.run == self.cfg.run]
+        pool = [p for p in self.league.players(env=env, kind="snapshot") if p.run == self.cfg.run
+                and p.unusable is None]  # (a row that cannot be read is never played: said once)
         self.matchmaker.set_pool([p.id for p in pool])
         if self.roles is not None:
             self.roles.set_pool([Past(p.id, self.names.index(p.meta["learner"])) for p in pool  # type: ignore[union-attr]

@@ -297,6 +297,9 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
     old = league.get_run(resume)
     if old is None:
         raise MarlError(f"no run named '{resume}' to resume")
+    if old.unusable is not None:  # (said once above it on stderr too)
+        raise MarlError(f"run '{resume}': its configuration in the league cannot be read ({old.unusable}): start a "
+                        "new run")
     if env is not None and env != old.env:
         raise MarlError(f"run '{resume}' trains {old.env}, not {env}")
     check_resumable(league, old)  # a run a removed snapshot has ended: one line saying which

@@ -1,6 +1,9 @@
 """The worker loop: lease a job, play it while a heart beats, store it, again; wait (backing off) when the queue is
 empty, and keep going through a database that went away for a while.
 
+A job that fails, for whatever reason (a bot this marl does not know, a spec its kind refuses, an error of any kind in
+its play), is that job's failure: it counts a try (a refused spec ends it at once) and the worker takes the next.
+
 Stopping: Ctrl-C or SIGTERM gives the job in play back to the queue at once (it is not counted as a try) and the
 worker leaves (exit 130 or 143), and so does ``stop()`` turning true (a worker run by another program: ``marl train
 --eval ray``'s actors, :mod:`selfplay_cli.train.ray_eval`); SIGKILL leaves the job leased until its lease lapses
@@ -20,7 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import MarlIOError
-from ..league.queue import BEAT_SECONDS, SCAVENGE_SECONDS, JobRow
+from ..league.queue import BACKOFF_SECONDS, BEAT_SECONDS, SCAVENGE_SECONDS, JobRow
 from ..league.store import League
 from ..rated.jobs import Outcome, play_leased, worker_name
 
@@ -33,7 +36,8 @@ _AWAY_MAX = 30.0  # the longest wait between two tries of a database that cannot
 @dataclass(frozen=True)
 class WorkerOptions:
     """How a worker works: which batches (None: all), how many jobs before it leaves (None: no limit), whether it
-    leaves when the queue is empty (``until_empty``), its heartbeat and the lease it lets lapse, where networks run."""
+    leaves when the queue is empty (``until_empty``), its heartbeat and the lease it lets lapse, where networks run,
+    the first wait of a job that failed before it is tried again (``backoff``, doubling with each failure)."""
 
     batches: tuple[str, ...] | None = None
     max_jobs: int | None = None
@@ -44,6 +48,7 @@ class WorkerOptions:
     parallel: int = 1024
     name: str | None = None
     poll: float = 1.0
+    backoff: float = BACKOFF_SECONDS
 
 
 class _Stopped(BaseException):
@@ -147,7 +152,7 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
             idle = options.poll
             try:
                 out = play_leased(league, wid, job, beat=options.beat, device=options.device,
-                                  parallel=options.parallel, on_games=counted,
+                                  parallel=options.parallel, on_games=counted, base_backoff=options.backoff,
                                   retry=lambda fn: _retrying(fn, say, "league unreachable"))
             except _Stopped:
                 break
