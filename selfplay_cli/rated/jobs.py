@@ -19,6 +19,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..envs import UnknownEnvError
 from ..errors import MarlError
 from ..league.queue import BEAT_SECONDS, ENDED, SCAVENGE_SECONDS, JobRow
 from ..league.store import League
@@ -114,9 +115,11 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
             played = play_job(league, job, device=device, parallel=parallel, on_games=counted)
         except JobLost:
             return Outcome(job, "lost")
-        except (MarlError, OSError, ValueError, RuntimeError) as exc:
-            kind = "io" if isinstance(exc, MarlIOError | OSError) else "usage" if isinstance(exc, MarlError) else \
-                "internal"
+        except (MarlError, OSError, ValueError, RuntimeError, UnknownEnvError) as exc:
+            # (UnknownEnvError: a game this machine does not have or will not import, e.g. a job naming a module
+            # nobody here named: the job's failure, not the worker's)
+            kind = "io" if isinstance(exc, MarlIOError | OSError) else "usage" if isinstance(exc, MarlError | \
+                UnknownEnvError) else "internal"
             line = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
             kwargs = {} if base_backoff is None else {"base_backoff": base_backoff}
             error = f"{type(exc).__name__}: {line}"
