@@ -156,9 +156,10 @@ def admit(name: str) -> None:
 
 
 def admitted() -> tuple[str, ...]:
-    """The games of your own this process was told to import (by :func:`admit`; ``MARL_GAMES`` aside), to pass on to
-    a process it starts for the same work (a rating worker, a Ray actor), which admits them again."""
-    return tuple(sorted(_ADMITTED))
+    """The games of your own this process may import (by :func:`admit`, and ``MARL_GAMES`` now), to pass on to a
+    process it starts for the same work (a rating worker, a Ray actor, perhaps on another machine of a cluster),
+    which admits them again."""
+    return tuple(sorted(_ADMITTED | _from_variable()))
 
 
 def is_admitted(name: str) -> bool:
