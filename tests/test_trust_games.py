@@ -185,7 +185,8 @@ def test_a_row_naming_os_abort_neither_aborts_nor_hangs(tmp_path, named):
 @pytest.mark.slow
 def test_a_game_you_name_is_imported_and_played(tmp_path):
     """`marl train mygame:env` (typed) imports and trains it, its rating worker too; later commands play it once
-    named again (--env, or MARL_GAMES, which `marl worker` and `marl train --resume` read as well)."""
+    named again (--env, or MARL_GAMES, which `marl worker` and `marl train --resume` read as well; `marl record
+    --game ID --env mygame:env` replays one of its stored games)."""
     marker = tmp_path / "MINE_RAN"
     (tmp_path / "mygame.py").write_text(_module(marker))
     home = ("--home", str(tmp_path / "league"))
@@ -208,6 +209,11 @@ def test_a_game_you_name_is_imported_and_played(tmp_path):
     assert p.returncode == 0 and json.loads(p.stdout)["games"] == 4, p.stderr
     p = _marl(tmp_path, "train", "mygame:env", "--resume", "mine", "-q", *home)
     assert p.returncode == 0, p.stderr
+    gif = str(tmp_path / "game1.gif")  # a stored game replayed: its game named with --env
+    p = _marl(tmp_path, "record", "--game", "1", "--out", gif, *home)
+    assert p.returncode == 2 and "MARL_GAMES=mygame:env" in p.stderr, p.stderr
+    p = _marl(tmp_path, "record", "--game", "1", "--out", gif, "--env", "mygame:env", *home)
+    assert p.returncode == 0 and Path(gif).stat().st_size > 0, p.stderr
 
     league = League.open(tmp_path / "league")
     (snap,) = league.find_players("mine/s200-x")
