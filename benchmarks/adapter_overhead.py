@@ -27,7 +27,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the test games live in tests/games
 
-from selfplay_cli.envs import get_env  # noqa: E402
+from selfplay_cli.envs import admit, get_env  # noqa: E402
 from selfplay_cli.envs.adapters.pettingzoo import PettingZooCore, adapt  # noqa: E402
 
 GAMES = {
@@ -146,6 +146,7 @@ def main() -> None:
           f"speed drifting cancels in each round's ratio), {args.copies} copies through the adapter; medians")
     worst = 0.0
     for label, name in GAMES.items():
+        admit(name)  # a game of your own: named here, as marl's --env names it
         d, a = [], []
         for _ in range(args.rounds):
             d.append(direct(name, args.seconds))

@@ -26,7 +26,7 @@ TRAIN = ["--sharing", "fups", "--league-games", "0.5", "--bots", "random=0.5", "
 
 
 def marl(home: Path, *args: str) -> str:
-    env = dict(os.environ, MARL_HOME=str(home), COLUMNS="140", SDL_VIDEODRIVER="dummy")
+    env = dict(os.environ, MARL_HOME=str(home), COLUMNS="140", SDL_VIDEODRIVER="dummy", MARL_GAMES=GAME)  # named
     out = subprocess.run([sys.executable, "-m", "selfplay_cli", *args], env=env, capture_output=True, text=True,
                          cwd=ROOT)  # the suite's games are tests.games.*, importable from the repository's root
     if out.returncode != 0:

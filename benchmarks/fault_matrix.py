@@ -922,7 +922,7 @@ def nan_observations(scratch: Path) -> tuple[bool, str]:
     home = scratch / "league"
     r = marl(*NAN_TRAIN, "--home", str(home))
     status, names, sound = _train_state(home)
-    again = marl("train", "--resume", "r", "--home", str(home), "-q")
+    again = marl("train", NAN_TRAIN[1], "--resume", "r", "--home", str(home), "-q")  # (the game named: a user's)
     status2 = _train_state(home)[0]
     held = (r.code == again.code == 2 and r.one_line and "observation of seat 1 (player_1)" in r.line
             and "NaN" in r.line and status == status2 == "failed" and sound and len(names) == 6)

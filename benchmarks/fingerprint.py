@@ -52,7 +52,8 @@ RUNS = {
 
 
 def marl(home: Path, *args: str, check: bool = True) -> str:
-    env = dict(os.environ, MARL_HOME=str(home), COLUMNS="140", SDL_VIDEODRIVER="dummy")
+    env = dict(os.environ, MARL_HOME=str(home), COLUMNS="140", SDL_VIDEODRIVER="dummy",
+               MARL_GAMES=",".join(a[0] for a in RUNS.values() if ":" in a[0]))  # the users' games, named
     out = subprocess.run([sys.executable, "-m", "selfplay_cli", *args], env=env, capture_output=True, text=True)
     if check and out.returncode != 0:
         raise SystemExit(f"marl {' '.join(args)} failed ({out.returncode}): {out.stderr.strip()}")

@@ -91,7 +91,8 @@ def cooperative_pong(stride: int = 4, max_cycles: int = 900, render_mode: str | 
 
 
 def marl(home: Path, *args: str) -> str:
-    env = dict(os.environ, MARL_HOME=str(home), COLUMNS="140", SDL_VIDEODRIVER="dummy", SDL_AUDIODRIVER="dummy")
+    env = dict(os.environ, MARL_HOME=str(home), COLUMNS="140", SDL_VIDEODRIVER="dummy", SDL_AUDIODRIVER="dummy",
+               MARL_GAMES=GAME)  # the game named, for the commands after marl train
     out = subprocess.run([sys.executable, "-m", "selfplay_cli", *args], env=env, capture_output=True, text=True,
                          cwd=ROOT)  # this module is benchmarks.image_games, importable from the repository's root
     if out.returncode != 0:
@@ -102,8 +103,9 @@ def marl(home: Path, *args: str) -> str:
 def env_speed(stride: int, games: int, seconds: float = 10.0) -> float:
     """Game steps a second through marl's adapter (its batched core), both paddles acting at random."""
     sys.path.insert(0, str(ROOT))
-    from selfplay_cli.envs import get_env
+    from selfplay_cli.envs import admit, get_env
 
+    admit(GAME)
     spec = get_env(f"{GAME}")
     core = spec.core(games, stride=stride)
     rng = np.random.default_rng(0)

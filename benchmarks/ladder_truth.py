@@ -47,6 +47,7 @@ from pathlib import Path
 
 import numpy as np
 
+from selfplay_cli.envs import admit
 from selfplay_cli.league.forecast import Forecaster
 from selfplay_cli.league.ladder import fit_table, ladder
 from selfplay_cli.league.store import League, LeagueError
@@ -343,6 +344,7 @@ def main() -> None:
         root = args.keep or Path(tmp)
         for game in args.games:
             cmd = list(GAMES[game])
+            admit(cmd[0])  # its game named here, for the ladder and the checking matches (a user's game: connect four)
             if game in budgets:  # the budget flags replaced
                 for flag in ("--minutes", "--steps"):
                     if flag in cmd:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import itertools
 import os
 import tempfile
@@ -15,6 +16,24 @@ import pytest
 from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.envs import get_env
 from selfplay_cli.policies import ScriptedPolicy
+
+
+def _suite_games() -> list[str]:
+    """The suite's own games, as their user names them: each module of ``tests/games`` and each of its top-level
+    functions as ``module:factory`` (read from the source, nothing imported)."""
+    names = []
+    for path in sorted((Path(__file__).parent / "games").glob("*.py")):
+        module = "tests.games" if path.stem == "__init__" else f"tests.games.{path.stem}"
+        names.append(module)
+        names += [f"{module}:{node.name}" for node in ast.parse(path.read_text()).body
+                  if isinstance(node, ast.FunctionDef)]
+    return names
+
+
+# A game of your own is imported only once its user names it (selfplay_cli.envs.loading): the suite names its games
+# as a user of this machine would, in MARL_GAMES, for itself and every marl process it starts. (Tests of that rule
+# use modules of their own, not listed here, and a MARL_GAMES of their own.)
+os.environ["MARL_GAMES"] = ",".join(filter(None, [os.environ.get("MARL_GAMES", ""), *_suite_games()]))
 
 
 @pytest.hookimpl(tryfirst=True)

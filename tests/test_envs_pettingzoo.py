@@ -13,7 +13,7 @@ import pytest
 from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 
-from selfplay_cli.envs import EnvError, IllegalActionError, UnknownEnvError, env_names, get_env, loading
+from selfplay_cli.envs import EnvError, IllegalActionError, UnknownEnvError, admit, env_names, get_env, loading
 from selfplay_cli.envs.adapters.pettingzoo import PettingZooCore, adapt
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -372,10 +372,13 @@ def test_names_that_are_not_games_each_get_one_clear_error():
         "bad name!:x": "a game of your own is named module:factory",
     }
     for name, why in cases.items():
+        admit(name)  # each named by the user, as the CLI's game argument and --env are
         with pytest.raises(EnvError) as e:
             get_env(name)
         assert why in str(e.value), (name, str(e.value))
         assert "\n" not in str(e.value)
+    with pytest.raises(EnvError, match="game 'not_named_xyz:env' is not imported: .*MARL_GAMES=not_named_xyz:env"):
+        get_env("not_named_xyz:env")  # named by no one here (a league's row): refused, nothing imported
     with pytest.raises(UnknownEnvError, match="unknown env 'pongg'; registered: lander, pong"):
         get_env("pongg")
 
@@ -383,6 +386,7 @@ def test_names_that_are_not_games_each_get_one_clear_error():
 def test_an_import_error_inside_the_users_module_is_named(tmp_path, monkeypatch):
     (tmp_path / "broken_game_mod.py").write_text("import not_installed_dependency_xyz\n")
     monkeypatch.syspath_prepend(str(tmp_path))
+    admit("broken_game_mod:env")
     with pytest.raises(EnvError, match="importing broken_game_mod failed: No module named "
                                        "'not_installed_dependency_xyz'"):
         get_env("broken_game_mod:env")

@@ -665,10 +665,11 @@ def test_a_game_named_by_a_file_is_never_imported(tmp_path, named):
 
 
 @pytest.mark.slow
-def test_a_users_game_is_imported_when_the_user_names_it_or_the_league_plays_it(tmp_path):
-    """The same module is loaded when the user names the game (--env mygame:env); after that the league plays
-    mygame:env, so a second file of it imports without --env (the name was the user's); a file of another module in
-    the same folder still does not."""
+def test_a_users_game_is_imported_when_the_user_names_it(tmp_path, monkeypatch):
+    """The same module is loaded when the user names the game (--env mygame:env). That the league then plays
+    mygame:env names nothing (any member of a shared league writes its rows, issue 49): a second file of it imports
+    without --env only where this machine's MARL_GAMES names the game; a file of another module in the same folder
+    still does not, and the league's snapshots of mygame:env play once the game is named."""
     (tmp_path / "mygame.py").write_text(GAME_MODULE)
     (tmp_path / "othergame.py").write_text(GAME_MODULE.replace("IMPORTED", "OTHER"))
     home = ["--home", str(tmp_path / "league")]
@@ -680,6 +681,12 @@ def test_a_users_game_is_imported_when_the_user_names_it_or_the_league_plays_it(
     assert (tmp_path / "IMPORTED").exists()
     (tmp_path / "IMPORTED").unlink()
     second = _tictactoe_file(tmp_path / "second.safetensors", "mygame:env", seed=2)
+    r = cli("checkpoint", "import", str(second), *home, "--json", cwd=tmp_path)
+    assert r.returncode == 2 and "MARL_GAMES=mygame:env" in r.stderr, r.stderr
+    assert not (tmp_path / "IMPORTED").exists()
+    r = cli("match", "contrib/c1", "random", "--games", "2", *home, cwd=tmp_path)
+    assert r.returncode == 2 and not (tmp_path / "IMPORTED").exists(), r.stderr
+    monkeypatch.setenv("MARL_GAMES", os.environ.get("MARL_GAMES", "") + ",mygame:env")  # the suite's games, and this
     r = cli("checkpoint", "import", str(second), *home, "--json", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout)["env"] == "mygame:env" and (tmp_path / "IMPORTED").exists()

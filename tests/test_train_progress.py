@@ -310,9 +310,11 @@ def _learners_of(env: str, flags: dict) -> list[str]:
 def test_readme_names_only_snapshots_its_runs_make():
     """A shared network's snapshots have no seat suffix (tennis's default run: s0, not s0-player_0); a run of one
     network per seat names a moment's team (s6M) or one member (s6M-left)."""
-    from selfplay_cli.envs import get_env
+    from selfplay_cli.envs import admit, get_env
 
     text = README.read_text()
+    for env, _ in README_RUNS.values():
+        admit(env)  # the README's games (connect four: a game of your own, named by its commands)
     named = re.findall(r"marl \w+(?: \w+)? .*?\b((?:pong|tennis|lander|connect_four_v3)-\d+)/([\w.-]+)", text)
     assert len(named) >= 8
     for run_name, snap in named:

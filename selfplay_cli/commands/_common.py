@@ -21,11 +21,22 @@ from rich.progress import (
 )
 from rich.text import Text
 
-from ..envs import env_names, get_env
+from ..envs import admit, env_names, get_env
 from ..errors import MarlError
 from ..league.store import League
 from ..policies.bots import league_bots
 from ._output import err_console
+
+
+def typed_game(value: Any) -> Any:
+    """The callback of every option and argument that names a game (the game argument, ``--env``): a game the user
+    typed is admitted, so that a game of your own (``mygame:env``) is imported when the command asks for it; a game
+    named only by the league, a job or a stored config never is (:mod:`selfplay_cli.envs.loading`)."""
+    for name in value if isinstance(value, list | tuple) else [value]:
+        if isinstance(name, str) and name:
+            admit(name)
+    return value
+
 
 HomeOpt = Annotated[
     Path | None,
@@ -36,7 +47,9 @@ DbOpt = Annotated[
     typer.Option("--db", envvar="MARL_DB", help="Any SQLAlchemy URL for the league (default <home>/league.db)."),
 ]
 JsonOpt = Annotated[bool, typer.Option("--json", help="Print JSON alone on stdout.")]
-EnvOpt = Annotated[str | None, typer.Option("--env", help="Game, where the policies do not imply it.")]
+EnvOpt = Annotated[str | None, typer.Option("--env", callback=typed_game, help="Game, where the policies do not imply "
+                                            "it (a game of your own, module:factory, is imported because you name it "
+                                            "here or in MARL_GAMES).")]
 DeviceOpt = Annotated[str, typer.Option("--device", help="Where networks run: auto, cpu or cuda.")]
 QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")]
 
@@ -100,8 +113,8 @@ VariantOpt = Annotated[list[str] | None, typer.Option(
 LedgerVariantOpt = Annotated[list[str] | None, typer.Option(
     "--env-option", metavar="KEY=VALUE", help=_VARIANT_HELP.format(run=""))]
 """--env-option of a command that rates the league's games without a --run (marl elo fit)."""
-LeagueEnvOpt = Annotated[str | None, typer.Option("--env", help="The game (default: the league's only game; with "
-                                                  "--run, the run's).")]
+LeagueEnvOpt = Annotated[str | None, typer.Option("--env", callback=typed_game, help="The game (default: the "
+                                                  "league's only game; with --run, the run's).")]
 """--env of a command given no policies, that shows one game of the league."""
 
 

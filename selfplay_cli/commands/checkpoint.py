@@ -9,8 +9,19 @@ import typer
 from rich.table import Table
 
 from ..errors import MarlError, MarlIOError
-from ._common import DbOpt, EnvOpt, HomeOpt, JsonOpt, QuietOpt, check_env, open_league, progress_bar, progress_enabled
-from ._output import console, print_json
+from ._common import (
+    DbOpt,
+    EnvOpt,
+    HomeOpt,
+    JsonOpt,
+    QuietOpt,
+    check_env,
+    open_league,
+    progress_bar,
+    progress_enabled,
+    typed_game,
+)
+from ._output import console, err_console, print_json
 
 app = typer.Typer(help="List, inspect, tag, remove, export, import and push snapshots.", no_args_is_help=True,
                   rich_markup_mode=None)
@@ -19,16 +30,19 @@ NameArg = Annotated[str, typer.Argument(metavar="NAME", help="A snapshot: s6M-le
 
 
 def _row_json(p) -> dict:
+    from ..envs.loading import not_named_here
+
     return {"id": p.id, "policy": p.full_name, "kind": p.kind, "env": p.env, "run": p.run, "name": p.name,
             "step": p.step, "episode": p.episode, "algo": p.algo, "tags": list(p.tags), "elo_online": round(p.elo, 1),
             "games": p.games, "path": p.path, "sha256": p.sha256, "parent_id": p.parent_id, "removed": p.removed,
-            "created": p.created_at.isoformat()}
+            "created": p.created_at.isoformat(),
+            "playable_here": not not_named_here(p.env)}  # False: a game of someone's own nobody here named
 
 
 @app.command("list")
 def list_cmd(
-    env: Annotated[str | None, typer.Option("--env", help="Only this game's snapshots (default: every "
-                                            "game's).")] = None,
+    env: Annotated[str | None, typer.Option("--env", callback=typed_game, help="Only this game's snapshots "
+                                            "(default: every game's).")] = None,
     run: Annotated[str | None, typer.Option("--run", help="Only this run's snapshots.")] = None,
     bots: Annotated[bool, typer.Option("--bots", help="Also list the scripted players.")] = False,
     include_removed: Annotated[bool, typer.Option("--all", help="Also list removed snapshots.")] = False,
@@ -44,6 +58,11 @@ def list_cmd(
         league.close()
     if run is not None:
         rows = [p for p in rows if p.run == run]
+    from ..envs.loading import not_named_here, not_named_note
+
+    note = not_named_note([p.env for p in rows])
+    if note:
+        err_console.print(note, markup=False, highlight=False)
     if json_out:
         print_json([_row_json(p) for p in rows])
         return
@@ -51,7 +70,8 @@ def list_cmd(
     for col in ("id", "policy", "env", "kind", "step", "episode", "algo", "tags", "online Elo", "games", "created"):
         table.add_column(col)
     for p in rows:
-        table.add_row(str(p.id), p.full_name + (" (removed)" if p.removed else ""), p.env, p.kind, f"{p.step:,}",
+        env_cell = p.env + (" (not imported)" if not_named_here(p.env) else "")
+        table.add_row(str(p.id), p.full_name + (" (removed)" if p.removed else ""), env_cell, p.kind, f"{p.step:,}",
                       str(p.episode), p.algo or "", ", ".join(p.tags), f"{p.elo:.0f}", str(p.games),
                       p.created_at.strftime("%Y-%m-%d %H:%M"))
     console.print(table)

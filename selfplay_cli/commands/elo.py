@@ -29,6 +29,7 @@ from ._common import (
     parse_env_options,
     resolve_players,
     shown_variant,
+    typed_game,
 )
 from ._output import console, print_json
 from .ladder_view import prior_caption, render_ladder
@@ -89,8 +90,8 @@ def check_bootstrap(n: int) -> int:
 
 @app.command("fit")
 def fit(
-    env: Annotated[str | None, typer.Option("--env", help="The game to rate (default: the league's only game).")]
-    = None,
+    env: Annotated[str | None, typer.Option("--env", callback=typed_game, help="The game to rate (default: the "
+                                            "league's only game).")] = None,
     env_option: LedgerVariantOpt = None,
     anchor: FitAnchorOpt = None,
     bootstrap: BootstrapOpt = DEFAULT_BOOTSTRAP,

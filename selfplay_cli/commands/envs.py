@@ -12,6 +12,7 @@ from ..envs import describe_space, env_names, game_options, get_env
 from ..envs.loading import plugin_errors
 from ..policies.bots import league_bots
 from ..results import Rules
+from ._common import typed_game
 from ._output import console, print_json
 
 __all__ = ["describe_space", "env_row", "env_rows", "envs"]
@@ -79,6 +80,7 @@ def _per_seat(row: dict[str, Any], key: str) -> str:
 
 def envs(
     games: Annotated[list[str] | None, typer.Argument(
+        callback=typed_game,
         help="Show only these games, with their options: registered ones (pong) or games of your own, "
              "module:factory (e.g. mypkg.mygame:env) or a module with a function env or parallel_env.",
         show_default=False)] = None,

@@ -88,6 +88,7 @@ def ladder_cmd(
     json_out: JsonOpt = False,
     csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
 ) -> None:
+    from ..envs.loading import not_named_note
     from ..league.ladder import ladder, select_rows, verdict_lines
     from ..rated.lineup import resized_in_variant
 
@@ -129,6 +130,9 @@ def ladder_cmd(
         console.print(f"run {run} has no snapshot with rated games yet")
     if note and not json_out and not csv_out:
         console.print(note, markup=False)
+    unnamed = not_named_note([env] if env is not None else [])
+    if unnamed:  # a game nobody here named: its ladder is read from the ledger, its players cannot play here
+        err_console.print(unnamed, markup=False, highlight=False)
 
 
 @app.command("predict")

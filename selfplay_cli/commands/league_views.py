@@ -24,6 +24,7 @@ from ._common import (
     progress_bar,
     progress_enabled,
     shown_variant,
+    typed_game,
 )
 from ._output import console, err_console, print_json
 from .elo import PriorOpt, check_prior
@@ -47,8 +48,8 @@ def _width() -> int:
 
 
 def plot_cmd(
-    env: Annotated[str | None, typer.Option("--env", help="Plot the newest run of this game (default: the newest "
-                                            "run; with --run, that run).")] = None,
+    env: Annotated[str | None, typer.Option("--env", callback=typed_game, help="Plot the newest run of this game "
+                                            "(default: the newest run; with --run, that run).")] = None,
     env_option: VariantOpt = None,
     run: RunOpt = None,
     out: OutOpt = None,

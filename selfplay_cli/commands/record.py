@@ -128,7 +128,7 @@ def record(
     if (ckpt is None) == (game_id is None):
         raise MarlError("say what to record: --ckpt POLICY (new games) or --game ID (a stored game)")
     if game_id is not None:
-        _refuse_with_game(vs=vs, env=env, max_steps=max_steps, max_rallies=max_rallies, seconds=seconds, games=games,
+        _refuse_with_game(vs=vs, max_steps=max_steps, max_rallies=max_rallies, seconds=seconds, games=games,
                           seed=seed, env_option=env_option)
     fmt = video_format(fmt, out)
     league = open_league(home, db)
@@ -139,6 +139,8 @@ def record(
         # the players seated once (one lineup, or one per member of a team recorded against --vs)
         ups = lineups(league, ckpt, vs, env) if game_id is None else []  # type: ignore[arg-type]
         game = league.game(game_id).env if game_id is not None else ups[0].env
+        if game_id is not None and env is not None and env != game:  # (--env names a game of your own to replay)
+            raise MarlError(f"game {game_id} was played in {game}, not {env}")
         settings = video_settings(game, fps, size, fmt, hold, max_width)
         max_steps, max_rallies, stop_label, default_cap = limits(seconds, max_steps, max_rallies, settings.fps)
         if game_id is not None:

@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from ..envs import get_env
-from ._common import DbOpt, HomeOpt, JsonOpt, QuietOpt, open_league, parse_env_options
+from ._common import DbOpt, HomeOpt, JsonOpt, QuietOpt, open_league, parse_env_options, typed_game
 from ._output import console, err_console, print_json
 
 app = typer.Typer(no_args_is_help=True)
@@ -17,8 +17,8 @@ app = typer.Typer(no_args_is_help=True)
 
 @app.command("team-size")
 def team_size(
-    env: Annotated[str, typer.Argument(help="The game (its team size must be an option: the lander's landers, "
-                                            "pursuit's n_pursuers).")],
+    env: Annotated[str, typer.Argument(callback=typed_game, help="The game (its team size must be an option: the "
+                                       "lander's landers, pursuit's n_pursuers).")],
     train: Annotated[str, typer.Option("--train", metavar="SIZES", help="The team sizes to train, e.g. 2,3,4 or "
                                        "2-4: one run each, then each adapted to each other.")] = "2,3",
     eval_sizes: Annotated[str, typer.Option("--eval", metavar="SIZES", help="The team sizes each trained team "

@@ -21,6 +21,7 @@ from ._common import (
     open_league,
     parse_env_options,
     progress_enabled,
+    typed_game,
 )
 from ._output import console, err_console, print_json
 from .train_view import TrainProgress, describe_init, describe_record, describe_run, report_json, still_coming
@@ -31,7 +32,9 @@ from .train_view import TrainProgress, describe_init, describe_record, describe_
 # `marl train --help`'s text.
 def train(
     ctx: typer.Context,
-    env: Annotated[str | None, typer.Argument(help="The game to train on (see `marl envs`).")] = None,
+    env: Annotated[str | None, typer.Argument(callback=typed_game, help="The game to train on (see `marl envs`; a "
+                                              "game of your own, module:factory, is imported because you name it "
+                                              "here).")] = None,
     config: Annotated[Path | None, typer.Option("--config", metavar="FILE", help="TOML file of settings (top-level "
                                                 "options, [ppo], [dqn], [sac], [mappo], [poca], [opponents], "
                                                 "[env_options], [curriculum], [teacher], [league]); options typed on "

@@ -3,7 +3,9 @@
 - :mod:`.registry`: the game contract (:class:`EnvSpec`: seats, spaces, turns, kind, options; the
   :class:`BatchedCore` protocol every game is stepped through; scripted players' :class:`BotSpec`) and the registry.
 - :mod:`.loading`: finding a game by name (``get_env``): the registered games, games of installed packages
-  (entry-point group ``selfplay_cli.envs``), a user's PettingZoo game named ``module:factory`` or ``module``.
+  (entry-point group ``selfplay_cli.envs``), a user's PettingZoo game named ``module:factory`` or ``module``, which
+  is imported only once the user of this machine names it (``admit``, ``MARL_GAMES``), never because a league row
+  or a file names it.
 - :mod:`.options`: a game's options as a user sets them (``--env-option``), read from its declaration.
 - The built-in games, one package each, registered when this package is imported: :mod:`.pong`, :mod:`.lander`,
   :mod:`.tennis`. Each holds its declaration (the ``EnvSpec``) in its ``__init__`` and modules by concern: ``config``
@@ -19,7 +21,7 @@ The arena steps every game, built in or adapted, through its batched core.
 from __future__ import annotations
 
 from .lander import LANDER
-from .loading import env_names, get_env, known_env
+from .loading import GameNotAdmittedError, admit, env_names, get_env, known_env
 from .options import GameOption, GameOptions, game_options
 from .pong import PONG
 from .registry import (
@@ -44,6 +46,7 @@ register(PONG)
 register(LANDER)
 register(TENNIS)
 
-__all__ = ["KINDS", "TURNS", "BatchedCore", "BotSpec", "EnvError", "EnvSpec", "GameOption", "GameOptions",
-           "IllegalActionError", "SeatSpace", "UnknownEnvError", "check_spaces", "describe_space", "env_names",
-           "game_options", "get_env", "known_env", "random_bot", "random_rule", "register"]
+__all__ = ["KINDS", "TURNS", "BatchedCore", "BotSpec", "EnvError", "EnvSpec", "GameNotAdmittedError", "GameOption",
+           "GameOptions", "IllegalActionError", "SeatSpace", "UnknownEnvError", "admit", "check_spaces",
+           "describe_space", "env_names", "game_options", "get_env", "known_env", "random_bot", "random_rule",
+           "register"]

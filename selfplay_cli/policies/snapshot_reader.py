@@ -254,8 +254,9 @@ def _check_env(path: Any, meta: SnapshotMeta, expect_env: str | None) -> None:
     """The game must exist, take the snapshot's options, and have a seat with the snapshot's spaces (the seat the
     snapshot names, when it names one of the game's): the observation's shape and the action space exactly.
 
-    The game is the one the caller expects (a name a user gave, or the league row's), which may be loaded; without
-    one, the file's own name is looked up among the games already known and never imported
+    The game is the one the caller expects (a name a user gave, or the league row's), which is loaded only if it is
+    registered or this machine names it (:func:`~selfplay_cli.envs.loading.get_env`: a row's name alone imports
+    nothing); without one, the file's own name is looked up among the games already known and never imported
     (:func:`~selfplay_cli.envs.loading.known_env`): a file must not run the module it names."""
     if expect_env is not None and meta.env != expect_env:
         raise SnapshotError(f"{path}: snapshot plays {printable(meta.env, 80)!r}, not {printable(expect_env, 80)!r}")

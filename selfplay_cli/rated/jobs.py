@@ -21,6 +21,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..envs import UnknownEnvError
 from ..errors import MarlError
 from ..league.queue import BEAT_SECONDS, ENDED, SCAVENGE_SECONDS, JobRow
 from ..league.store import League
@@ -141,8 +142,8 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
     kwargs = {} if base_backoff is None else {"base_backoff": base_backoff}
 
     def failed(exc: BaseException, final: bool = False) -> Outcome:
-        kind = "io" if isinstance(exc, MarlIOError | OSError) else "usage" if isinstance(exc, MarlError) else \
-            "internal"
+        usage = isinstance(exc, MarlError | UnknownEnvError)  # (a game not here, or not named here: the job's fault)
+        kind = "io" if isinstance(exc, MarlIOError | OSError) else "usage" if usage else "internal"
         error = f"bad job spec: {exc}"[:MAX_ERROR] if final else error_line(exc)
         state = retry(lambda: league.fail_job(job.id, worker_id, error, final=final, **kwargs))
         return Outcome(job, "failed", error=error, error_kind=kind, extra={"state": state})

@@ -163,8 +163,9 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
     already in the league are refused.
 
     Names are checked before anything is created, so a refused import writes nothing anywhere: no folder, no file,
-    no row. The game is ``env`` when given (a name the user typed), else the one the file names if it is registered
-    or this league already plays it (:func:`_league_game`); a module a file names is never imported.
+    no row. The game is ``env`` when given (a name the user typed), else the one the file names if this league
+    already plays it (:func:`_league_game`) or it is known here; a module a file or a row names is never imported
+    unless this machine names it.
     """
     from ..policies.snapshot_reader import read_snapshot
 
@@ -211,10 +212,12 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
 
 
 def _league_game(league: League, file: Path) -> str | None:
-    """The game ``file`` names when this league already plays it (a run of it exists: a user named that game to
-    train or import it here), so a file of a user's game that the league rates imports without ``--env``. None for
-    any other name, which :func:`~selfplay_cli.policies.snapshot_reader.read_snapshot` then only looks up among the
-    games already known, never importing the module a file names."""
+    """The game ``file`` names when this league already plays it (a run of it exists), so a file of a game the
+    league rates imports without ``--env``: a registered one, or a game of your own this machine names
+    (``MARL_GAMES``; the league's row alone, which any member may have written, imports nothing:
+    :func:`~selfplay_cli.envs.loading.get_env` refuses it). None for any other name, which
+    :func:`~selfplay_cli.policies.snapshot_reader.read_snapshot` then only looks up among the games already known,
+    never importing the module a file names."""
     from ..policies.snapshot_reader import read_meta
 
     named = read_meta(file).env

@@ -215,7 +215,7 @@ class Study:
             self._save()
             return
         if existing is not None:
-            args = ["train", "--resume", run, "--quiet", "--json"]
+            args = ["train", self.plan.env, "--resume", run, "--quiet", "--json"]  # the game named, as typed
         else:
             parent = None
             if parent_size is not None:

@@ -121,15 +121,20 @@ def _error_kind(e: BaseException) -> str:
     return "usage" if isinstance(e, MarlError) else "internal"
 
 
-def _worker(url: str, home: str | None, device: str, jobs: Any, done: Any, parent: int) -> None:
-    """The worker process: jobs in order until told to stop (None) or a job fails; it dies with its parent."""
+def _worker(url: str, home: str | None, device: str, jobs: Any, done: Any, parent: int,
+            games: tuple[str, ...] = ()) -> None:
+    """The worker process: jobs in order until told to stop (None) or a job fails; it dies with its parent.
+    ``games``: the games of your own the trainer may import (those its user named), admitted here too."""
     die_with_parent(parent)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the trainer's to handle; it stops the worker
 
     import torch
 
+    from ..envs import admit
     from ..league.store import League
 
+    for game in games:
+        admit(game)
     torch.set_num_threads(1)
     league = League(url, home=home)
     try:
@@ -177,12 +182,14 @@ class Evaluator:
     def _start(self) -> None:
         """Start a worker on fresh queues (a killed worker may have died holding a lock of the old ones) and hand
         it every unfinished job, in order."""
+        from ..envs.loading import admitted
+
         ctx = mp.get_context("spawn")  # no fork: the trainer holds threads, a database engine and torch state
         self._jobs, self._results = ctx.Queue(), ctx.Queue()
         home = None if self.league.home is None else str(Path(self.league.home))
         self._proc = ctx.Process(target=_worker, name="marl-rating",
                                  args=(self.league.url.render_as_string(hide_password=False), home, self.device,
-                                       self._jobs, self._results, os.getpid()), daemon=True)
+                                       self._jobs, self._results, os.getpid(), admitted()), daemon=True)
         self._proc.start()
         self._progress = time.monotonic()
         for job in self.pending:

@@ -61,14 +61,17 @@ START_SECONDS = 120.0  # the run's end waits this long for its actors to join th
 class RatingActor:
     """One queue worker on a Ray actor (made remote by :class:`RayEvaluator`): ``marl worker`` serving one batch."""
 
-    def __init__(self, url: str, home: str | None, batch: str) -> None:
+    def __init__(self, url: str, home: str | None, batch: str, games: tuple[str, ...] = ()) -> None:
         os.dup2(2, 1)  # nothing on stdout, even where the driver forwards its workers' output (a Ray started with
         sys.stdout = sys.stderr  # log_to_driver): a --json run's stdout is its JSON alone
         import torch
 
+        from ..envs import admit
         from ..league.store import League
         from ..rated.jobs import worker_name
 
+        for game in games:  # the games of your own the trainer's user named (a job's own names are not admitted)
+            admit(game)
         torch.set_num_threads(1)  # one core's worth, beside training (as the local rating worker)
         self.league = League(url, home=home)
         self.batch = batch
@@ -144,7 +147,9 @@ class RayEvaluator(RemoteEvaluator):
     def _spawn(self) -> None:
         """Start one actor and its worker loop."""
         home = None if self.league.home is None else str(self.league.home)
-        actor = self._cls.remote(self.league.url.render_as_string(hide_password=False), home, self.batch)
+        from ..envs.loading import admitted
+
+        actor = self._cls.remote(self.league.url.render_as_string(hide_password=False), home, self.batch, admitted())
         self._actors.append(actor)
         self._names.append(actor.name.remote())
         self._loops.append(actor.work.remote())

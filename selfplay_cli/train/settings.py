@@ -285,7 +285,12 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
     """The configuration a stopped or killed run was started with, to continue it (``--resume``): ``typed``, the
     options the user typed, may not change it (only the device, whether this session's end ``wait``s for the
     league's workers, ``executor``: the :data:`EXECUTOR_OPTIONS` typed, and what is not a setting); ``env``, when
-    given, must be the run's game."""
+    given, must be the run's game.
+
+    The run's game is read from the league (its row and saved configuration, which any member of a shared league may
+    have written): a game of your own is imported only when you name it again (``env``, the command's game argument,
+    or ``MARL_GAMES``), never because the run's record names it (:mod:`selfplay_cli.envs.loading`)."""
+    from ..envs.loading import GameNotAdmittedError, get_env
     from .needs import check_resumable
 
     ignored = sorted(set(typed) - RESUME_OPTIONS)
@@ -303,6 +308,15 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
     if env is not None and env != old.env:
         raise MarlError(f"run '{resume}' trains {old.env}, not {env}")
     check_resumable(league, old)  # a run a removed snapshot has ended: one line saying which
+    saved = old.config.get("env") if isinstance(old.config, dict) else old.env
+    if saved != old.env:  # the game the saved configuration would load is the run's, or none
+        raise MarlError(f"run '{resume}': its saved configuration names another game ({shown(saved)}) than the run "
+                        f"plays ({shown(old.env)}); the league's record of it was changed: start a new run")
+    try:
+        get_env(old.env)
+    except GameNotAdmittedError:
+        raise MarlError(f"run '{resume}' trains {shown(old.env)}, a game of your own, which is imported only when you "
+                        f"name it: marl train {shown(old.env)} --resume {resume} (or list it in MARL_GAMES)") from None
     cfg = TrainConfig.from_dict(old.config)
     if cfg.run != old.name:  # its folder: runs/<run> of the run's own name, never a name read elsewhere
         raise MarlError(f"run '{resume}': its saved configuration names another run ({shown(cfg.run)}); "

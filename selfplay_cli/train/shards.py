@@ -171,9 +171,11 @@ class RolloutShard:
     def __init__(self, setup: ShardSetup) -> None:
         import torch
 
+        from ..envs import admit
         from .config import TrainConfig
 
         torch.set_num_threads(1)  # small networks: one thread each; the actors are the parallelism
+        admit(str(setup.config.get("env", "")))  # the trainer's game, which its user named (the trainer loaded it)
         self.setup = setup
         # (an actor acts on the CPU and writes no metrics, whatever device and TensorBoard the trainer has)
         self.cfg = cfg = TrainConfig.from_dict({**setup.config, "device": "cpu", "tensorboard": False})
