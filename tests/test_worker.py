@@ -168,8 +168,9 @@ def test_a_dead_worker_is_noticed_by_poll_and_replaced_and_its_job_done(rated_le
         assert ev.restarts == 1 and ev.worker_pid != first
         assert "ended unexpectedly (killed by SIGKILL)" in notes[0] and "played again" in notes[0]
         (done,) = ev.wait()
-        assert done.job.snapshot_ids == (snap.id,) and done.games == 4 and done.error is None
-    assert _eval_games(league.db_path) == 4
+        # s0 against random and cpu, 2 games each, and (the run's first moment) the two bots against each other
+        assert done.job.snapshot_ids == (snap.id,) and done.games == 6 and done.error is None
+    assert _eval_games(league.db_path) == 6
 
 
 def test_a_worker_that_keeps_dying_stops_the_run_as_an_internal_error(rated_league):
@@ -204,8 +205,8 @@ def test_a_stopped_worker_is_reported_and_replaced(rated_league):
         assert _gone(stopped)
         ev.stall_seconds = 300.0  # the new worker's start-up (spawn, torch) is no stall
         (done,) = ev.wait()
-        assert done.games == 4
-    assert _eval_games(league.db_path) == 4
+        assert done.games == 6  # s0 against each bot, and the bots against each other
+    assert _eval_games(league.db_path) == 6
 
 
 def test_an_idle_worker_given_work_is_not_taken_for_stalled(rated_league):
