@@ -90,3 +90,28 @@ def test_readme_shows_what_marl_envs_prints_and_claims_no_missing_feature_that_e
             shown = [x for x in readme.splitlines() if x.startswith(f"{game} trains with its own defaults ")]
             assert shown and all(x == line for x in shown), (game, shown, line)
     assert "not built yet" not in readme.lower()
+
+
+def test_a_refused_command_leaves_no_league_behind(tmp_path, monkeypatch, capsys):
+    """`marl match nosuch cpu` or `marl train --init-from ../../etc/passwd` in an empty folder is refused (exit 2)
+    and creates no ./league; a command that plays creates it, and a later refused command leaves it, games and
+    all; a refused command in a league that was there keeps it too."""
+    from selfplay_cli.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("MARL_HOME", raising=False)
+    monkeypatch.delenv("MARL_DB", raising=False)
+    assert main(["match", "nosuch", "cpu"]) == 2
+    assert "no policy named 'nosuch'" in capsys.readouterr().err
+    assert main(["train", "pong", "--init-from", "../../etc/passwd", "--steps", "100"]) == 2
+    assert "no policy named '../../etc/passwd'" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    assert main(["match", "cpu", "random", "--games", "2", "--quiet"]) == 0
+    assert main(["match", "nosuch", "cpu"]) == 2
+    import sqlite3
+
+    con = sqlite3.connect(tmp_path / "league" / "league.db")
+    try:
+        assert con.execute("select count(*) from games").fetchone()[0] == 2  # the games the first match stored
+    finally:
+        con.close()

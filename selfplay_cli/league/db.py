@@ -72,6 +72,7 @@ __all__ = ["ALLOW_NETWORK_SQLITE", "DB_FILENAME", "DEFAULT_HOME", "Database", "L
 
 DEFAULT_HOME = "./league"
 DB_FILENAME = "league.db"
+_NEW_HOMES: list[Path] = []  # league homes this process created (undo_new_homes: a refused command leaves none)
 
 ALLOW_NETWORK_SQLITE = "MARL_ALLOW_NETWORK_SQLITE"
 """The environment variable that, set to 1, lets a SQLite league lie on a network file system (for users who know
@@ -357,6 +358,8 @@ class Database:
                     return cls(URL.create("sqlite", database=":memory:"), home=home_path, readonly=True, **kwargs)
             else:
                 _refuse_network_sqlite(home_path / DB_FILENAME)  # before the home is made there
+                if not home_path.exists():
+                    _NEW_HOMES.append(home_path)
                 try:
                     home_path.mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
@@ -600,3 +603,42 @@ class Database:
     def _read(self, fn: Callable[[Session], T]) -> T:
         return self._unit(fn, readonly=True)
 
+
+
+def forget_new_homes() -> None:
+    """Start a command afresh: the homes earlier commands of this process created are theirs (tests run many)."""
+    _NEW_HOMES.clear()
+
+
+def undo_new_homes() -> list[Path]:
+    """Remove the league homes this process created that hold nothing of anyone's: only the database's own files
+    (``league.db`` and its journal) with no run, snapshot, match or job in it (the scripted players a command may have
+    entered are not anyone's). What a refused command calls, so that it leaves no ``./league`` behind; a home with
+    anything else in it is left as it is. The homes removed."""
+    removed = []
+    database_files = {DB_FILENAME, DB_FILENAME + "-wal", DB_FILENAME + "-shm", DB_FILENAME + "-journal"}
+    while _NEW_HOMES:
+        home = _NEW_HOMES.pop()
+        try:
+            if not home.is_dir() or home.is_symlink() or not {p.name for p in home.iterdir()} <= database_files:
+                continue
+            db = home / DB_FILENAME
+            if db.exists():
+                con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+                try:
+                    tables = {r[0] for r in con.execute("select name from sqlite_master where type = 'table'")}
+                    if any(con.execute(f"select 1 from {t} limit 1").fetchone() is not None
+                           for t in ("runs", "matches", "games", "jobs", "tags", "blobs", "workers") if t in tables):
+                        continue
+                    if "players" in tables and con.execute(
+                            "select 1 from players where kind != 'bot' limit 1").fetchone() is not None:
+                        continue
+                finally:
+                    con.close()
+            for name in database_files:
+                (home / name).unlink(missing_ok=True)
+            home.rmdir()
+            removed.append(home)
+        except (OSError, sqlite3.Error):
+            continue
+    return removed
