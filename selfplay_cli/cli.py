@@ -396,12 +396,15 @@ def _err(line: str) -> None:
     sys.stderr.flush()
 
 
-def _undo_new_homes() -> None:
-    """A refused command leaves no league behind: the homes it created that hold nothing (see
-    :func:`selfplay_cli.league.db.undo_new_homes`) are removed. Nothing is imported for a command that opened none."""
+def _new_homes(undo: bool) -> None:
+    """The league homes a command created (:mod:`selfplay_cli.league.db`): forgotten as a command starts (an earlier
+    command of this process made them), removed while they hold nothing when it is refused (``undo``: a refused
+    command leaves no league behind). Nothing is imported for a command that opened no league."""
     db = sys.modules.get("selfplay_cli.league.db")
-    if db is not None:
+    if db is not None and undo:
         db.undo_new_homes()
+    elif db is not None:
+        db.forget_new_homes()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -412,9 +415,7 @@ def main(argv: list[str] | None = None) -> int:
     from .league.bounded_json import forget_said  # (light: no database code)
 
     forget_said()  # a row that cannot be read is said once per command
-    db = sys.modules.get("selfplay_cli.league.db")
-    if db is not None:  # (homes made by an earlier command of this process are not this one's to undo)
-        db.forget_new_homes()
+    _new_homes(undo=False)
     command = build_command()
     try:
         rv = command.main(args=args, prog_name="marl", standalone_mode=False)
@@ -422,11 +423,11 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.write(e.ctx.get_help() + "\n")
         return 0
     except click_exc.UsageError as e:
-        _undo_new_homes()
+        _new_homes(undo=True)
         _err(f"marl: error: {_usage_error(e, args)}")
         return EXIT_USAGE
     except click_exc.ClickException as e:
-        _undo_new_homes()
+        _new_homes(undo=True)
         _err(f"marl: error: {_one_line(e.format_message())}")
         return e.exit_code or EXIT_USAGE
     except (typer.Abort, KeyboardInterrupt):
@@ -434,11 +435,11 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_INTERRUPTED
     except MarlError as e:
         if e.exit_code == EXIT_USAGE:
-            _undo_new_homes()
+            _new_homes(undo=True)
         _err(f"marl: {'I/O error' if e.exit_code == EXIT_IO else 'error'}: {_one_line(str(e))}")
         return e.exit_code
     except UnknownEnvError as e:  # the envs room raises its own error (it imports nothing from the project)
-        _undo_new_homes()
+        _new_homes(undo=True)
         _err(f"marl: error: {e}")
         return EXIT_USAGE
     except SystemExit as e:

@@ -604,7 +604,6 @@ class Database:
         return self._unit(fn, readonly=True)
 
 
-
 def forget_new_homes() -> None:
     """Start a command afresh: the homes earlier commands of this process created are theirs (tests run many)."""
     _NEW_HOMES.clear()

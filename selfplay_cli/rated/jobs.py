@@ -65,12 +65,11 @@ def check_job(job: JobRow) -> None:
 
 def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int = 1024,
              on_games: Callable[[int], None] | None = None) -> Played:
-    """Play ``job`` in this process (nothing stored) by the player of its kind (:data:`KINDS`), its spec checked
-    first (:func:`check_job`)."""
+    """Play ``job`` in this process (nothing stored) by the player of its kind (:data:`KINDS`); its spec as
+    :func:`check_job` passed it (:func:`play_leased` checks it before the job's heart starts)."""
     player = KINDS.get(job.kind)
     if player is None:
         raise MarlError(f"job {job.id} is of kind {job.kind!r}, which this marl does not play: upgrade marl")
-    check_job(job)
     return player(league, job, device=device, parallel=parallel, on_games=on_games)
 
 
