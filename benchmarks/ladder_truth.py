@@ -16,8 +16,8 @@ ladder and the run's summary claim, and plays each pair those claims are about 2
   95%) of pairs that met in rated games and of pairs that never met.
 
 The same checks run on simulated leagues drawn from a run-like schedule (each snapshot against its predecessor, the
-other learner, the best, older ones and two bots, 8 games a pair, up to 32 between snapshots whose record is still
-imprecise, as training's gauntlets; 64 for the finals against the bots), with pairs
+other learner, the best, older ones and two bots, which meet each other once; 8 games a pair, up to 32 where the
+pair's record is still imprecise, as training's gauntlets; 64 for the finals against the bots), with pairs
 scattered around their ratings by 0, 150 and 300 Elo (rock-paper-scissors between snapshots), where the truth is
 known.
 
@@ -261,8 +261,8 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
     a, b, s = [], [], []
 
     def play(i: int, j: int, k: int) -> None:
-        """k games of i against j; two snapshots play on (doubling, up to 4 times) until their record predicts a
-        200-game match within 30 points, as training's gauntlets do."""
+        """k games of i against j, who play on (doubling, up to 4 times) until their record predicts a 200-game
+        match within 30 points, as training's gauntlets do."""
         won = lost = played = 0
         while True:
             wins = rng.random(k - played) < p[i, j]
@@ -271,10 +271,11 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
             s.extend(wins.astype(float).tolist())
             won, played = won + int(wins.sum()), k
             lost = played - won
-            if i < 2 or j < 2 or k >= 4 * per_pair or prediction_width(won, 0, lost) <= 0.30:
+            if k >= 4 * per_pair or prediction_width(won, 0, lost) <= 0.30:
                 return
             k *= 2
 
+    play(0, 1, per_pair)  # the run's first moment: its scripted players meet each other
     for t in range(moments):
         new = [2 + 2 * t, 3 + 2 * t]
         older = list(range(2, 2 + 2 * t))

@@ -462,22 +462,26 @@ def test_the_rating_games_repeat_with_the_seed_whatever_the_timing(tmp_path, cap
     assert worker["best"] == inline["best"]
 
 
-def test_a_pair_of_snapshots_plays_on_until_its_record_predicts_a_match_within_the_precision():
-    """The width by hand: 5-0-3 with one virtual draw has mean 5.5 / 9 and mean square (5 + 0.25) / 9, a spread of
-    0.0494, so 2 * 1.96 * sqrt(0.0494 * (1/9 + 1/200)) = 0.612 points; 48-0-16 0.241; 8-0-0 0.210; draws narrow it:
-    16-16-0 is 0.184. A matchup of two snapshots at 5-3 doubles its pairs (4 to 8) while the width is above the
-    precision, and stops at its cap; against a bot it stops once clear, as before."""
+def test_a_matchup_plays_on_until_its_record_predicts_a_match_within_the_precision():
+    """The width of a record's prediction against scipy's beta-binomial (the pair's score under a uniform prior,
+    ``Beta(1 + W, 1 + L)``, then a 200-game match): 8-0 predicts [66%, 100%] (0.34 wide: ``Beta(9, 1)`` leaves the
+    score anywhere above ``0.025 ** (1 / 9)``), 16-0 [80%, 100%], 5-3 [29%, 87%]. Draws narrow it: 16-16-0 is
+    narrower than 24-0-8 of the same mean, and 8 draws of 8 do not predict a certain 50%. A matchup at 5-3
+    doubles its pairs (4 to 8) while the width is above the precision, and stops at its cap; a matchup with a
+    scripted player too (8-0 against a bot plays on; 16-0 stops); without a precision, it stops once clear."""
     from types import SimpleNamespace
+
+    from scipy.stats import betabinom
 
     from selfplay_cli.rated.gauntlet import Matchup, prediction_width
 
-    mean, square = 5.5 / 9, 5.25 / 9
-    assert prediction_width(5, 0, 3) == pytest.approx(2 * 1.959964 * ((square - mean**2) * (1 / 9 + 1 / 200)) ** 0.5)
-    assert prediction_width(5, 0, 3) == pytest.approx(0.612, abs=0.001)
-    assert prediction_width(48, 0, 16) == pytest.approx(0.241, abs=0.001)
-    assert prediction_width(8, 0, 0) == pytest.approx(0.210, abs=0.001)
-    assert prediction_width(16, 16, 0) == pytest.approx(0.184, abs=0.001)
-    assert prediction_width(16, 16, 0) < prediction_width(24, 0, 8)  # the same mean, without draws
+    for w, lost in ((8, 0), (16, 0), (5, 3), (14, 2), (48, 16)):
+        exact = betabinom(200, 1 + w, 1 + lost)
+        assert prediction_width(w, 0, lost) == pytest.approx((exact.ppf(0.975) - exact.ppf(0.025)) / 200, abs=0.006)
+    assert prediction_width(8, 0, 0) == pytest.approx(1.0 - 0.66, abs=0.006)
+    assert prediction_width(16, 0, 0) == pytest.approx(0.20, abs=0.006)
+    assert prediction_width(16, 16, 0) < prediction_width(24, 0, 8) - 0.05  # the same mean, without draws
+    assert 0.2 < prediction_width(0, 8, 0) < prediction_width(4, 0, 4)  # all draws: narrower, not certain
 
     a, b, bot = (SimpleNamespace(id=i, is_bot=i == 3) for i in (1, 2, 3))
     open_pair = Matchup(a, b, 0, wins=5, draws=0, losses=3, pairs=4)
@@ -485,6 +489,8 @@ def test_a_pair_of_snapshots_plays_on_until_its_record_predicts_a_match_within_t
     assert Matchup(a, b, 0, wins=5, draws=0, losses=3, pairs=16).more(1.645, 4, 16, precision=0.30) == 0  # capped
     assert Matchup(a, b, 0, wins=48, draws=0, losses=16, pairs=32).more(1.645, 4, 64, precision=0.30) == 0
     assert open_pair.more(1.645, 4, 16) == 4 and Matchup(a, b, 0, wins=8, pairs=4).more(1.645, 4, 16) == 0
-    assert Matchup(a, b, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.70) == 0  # 0.61 is enough
+    assert Matchup(a, b, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.70) == 0  # 0.58 is enough
     assert Matchup(a, bot, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.30) == 4  # a bot: open
-    assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16, precision=0.30) == 0  # a bot: clear is enough
+    assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16, precision=0.30) == 4  # 8-0: 0.34 wide, plays on
+    assert Matchup(a, bot, 0, wins=16, pairs=8).more(1.645, 4, 16, precision=0.30) == 0  # 16-0: 0.20, settled
+    assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16) == 0  # no precision: clear is enough

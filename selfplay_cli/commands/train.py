@@ -101,9 +101,10 @@ def train(
     eval_playoff: Annotated[int, typer.Option("--eval-playoff", min=0, max=100_000, help="After the final "
                                               "gauntlet the run's best candidates meet, up to this many games a "
                                               "pair, until the best is separated (0: no playoff).")] = 100,
-    eval_precision: Annotated[float, typer.Option("--eval-precision", min=0.0, max=0.99, help="A gauntlet matchup of "
-                                                  "two snapshots plays on (up to 4 x --eval-games) until its record "
-                                                  "predicts a 200-game match of the two within this share of the "
+    eval_precision: Annotated[float, typer.Option("--eval-precision", min=0.0, max=0.99, help="A gauntlet matchup (of "
+                                                  "snapshots or scripted players) plays on (up to 4 x --eval-games) "
+                                                  "until its record predicts a 200-game match of the two within this "
+                                                  "share of the "
                                                   "score (0.3: 30 points), so the ladder's claims about the pair rest "
                                                   "on its games; 0: --eval-games exactly.")] = 0.3,
     executor: Annotated[str, typer.Option("--executor", metavar="local|ray", help="Where the training games are "

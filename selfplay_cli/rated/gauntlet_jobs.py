@@ -39,7 +39,7 @@ GAUNTLET = "gauntlet"
 FINAL_BOT_GAMES = 8  # a run's final snapshots play this many times --eval-games against each scripted player (64
 # at the default 8): the run's summary reports their scores against the bots, and each score's interval (within
 # about 28 points for a 200-game match at 50%)
-PRECISE_PAIRS = 4  # with a precision (marl train --eval-precision), a matchup of two snapshots plays on, up to this
+PRECISE_PAIRS = 4  # with a precision (marl train --eval-precision), a matchup (bots too) plays on, up to this
 # many times its pairs, until its record predicts a 200-game match of the two that closely: the ladder's claims about
 # a pair rest on its games
 FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapshots (all of a default run's), spread

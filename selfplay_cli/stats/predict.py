@@ -47,7 +47,8 @@ from scipy.stats import binom
 from .bradley_terry import _fit_matrices, prior_draws, reachable
 from .elo import MAX_ELO, NAT_TO_ELO
 
-__all__ = ["FREE_SD", "SPREAD_PRIOR", "Belief", "PairModel", "ScorePrediction", "Spread", "belief", "measure_spread"]
+__all__ = ["FREE_SD", "SPREAD_PRIOR", "Belief", "PairModel", "ScorePrediction", "Spread", "belief", "measure_spread",
+           "record_prediction"]
 
 SPREAD_PRIOR: float = 200.0
 """Scale (Elo) of the half-normal prior on the pairs' spread ``tau``: before any pair has met, a pair is believed to
@@ -240,6 +241,35 @@ class Belief:
         upper = np.cumsum(pmf[::-1])[::-1]  # P(K >= k)
         hi_k = int(np.flatnonzero(upper >= tail - 1e-12)[-1])  # the largest k with P(K >= k) >= tail
         return ScorePrediction(expected, lo_k / halves, hi_k / halves, games, confidence, self.mean, self.sd)
+
+
+def record_prediction(wins: int, draws: int, losses: int, games: int = 200,
+                      confidence: float = 0.95) -> ScorePrediction:
+    """What a pair's own record alone says of a ``games``-game match between the two: the pair's expected score
+    ``p`` has the posterior of a uniform prior (one virtual win and one virtual loss) updated by the record, and
+    the match is ``games`` results of mean ``p`` drawn at the record's draw rate (``D / (n + 1)``), mixed over ``p``
+    (:meth:`Belief.predict`). Exact where a normal approximation is worst, at one-sided records: 8-0 leaves ``p``
+    anywhere above 0.66 (``Beta(9, 1)``'s 2.5% quantile, ``0.025 ** (1 / 9)``), so a 200-game match is predicted no
+    better than [66%, 100%].
+
+    Without draws the posterior is ``Beta(1 + W, 1 + L)`` and the prediction the beta-binomial's. A draw, half a
+    point, tells more of ``p`` than a coin's toss of the same mean (the points of a record with draws spread less):
+    the posterior is the beta of the same mean ``m = (1 + W + D/2) / (n + 2)`` whose variance is the record's
+    points' variance ``v`` (virtual results included) over ``n + 2`` results, i.e. of concentration
+    ``(n + 2) m (1 - m) / v`` (``n + 2`` without draws)."""
+    from scipy.stats import beta as beta_dist
+
+    if min(wins, draws, losses) < 0:
+        raise ValueError(f"a record counts no negative results, not {wins}-{draws}-{losses}")
+    n = wins + draws + losses
+    m = (1.0 + wins + 0.5 * draws) / (n + 2.0)
+    v = (1.0 + wins + 0.25 * draws) / (n + 2.0) - m * m  # > 0: the virtual loss and win are always there
+    concentration = (n + 2.0) * m * (1.0 - m) / v
+    q = (np.arange(_NODES) + 0.5) / _NODES  # the posterior's quantiles, each with an equal share of its mass
+    p = np.clip(beta_dist.ppf(q, m * concentration, (1.0 - m) * concentration), 1e-12, 1.0 - 1e-12)
+    nodes = NAT_TO_ELO * np.log(p / (1.0 - p))
+    return Belief(nodes, np.full(_NODES, 1.0 / _NODES), float(n), wins + 0.5 * draws,
+                  draw=draws / (n + 1.0)).predict(games, confidence)
 
 
 def _trinomial(n: int, p: np.ndarray, draw: float) -> np.ndarray:

@@ -159,8 +159,8 @@ class TrainConfig:
     # rollout, always; SAC and DQN: 0 means 16)
     frame_stack: int = 1  # observations each learner reads at once: its seat's last K (images on the channel axis)
     eval_playoff: int = 100  # after the final gauntlet the run's best candidates meet, up to this many games a pair
-    eval_precision: float = 0.3  # a gauntlet matchup of two snapshots plays on (up to 4 x eval_games) until its
-    # record predicts a 200-game match of the two within this many score points (0: eval_games exactly)
+    eval_precision: float = 0.3  # a gauntlet matchup (snapshots or bots) plays on (up to 4 x eval_games) until its
+    # record predicts a 200-game match of the two within this many score points (0: eval_games exactly), bots too
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
     curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)

@@ -61,7 +61,7 @@ class GauntletJob:
     full: bool = False  # every opponent gets ``games``, even where the lineage's result is already clear
     playoff: int = 0  # after the gauntlet, the run's best candidates meet, up to this many games a pair (the final)
     whole: bool = False  # every matchup plays all its ``games`` (cells of a payoff matrix: --opponents nash)
-    precision: float = 0.0  # a matchup of two snapshots plays on until its record predicts a 200-game match within
+    precision: float = 0.0  # a matchup (bots too) plays on until its record predicts a 200-game match within
     # this many score points (up to 4 times ``games``; 0: ``games`` exactly)
 
 
