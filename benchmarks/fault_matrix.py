@@ -13,7 +13,10 @@ writers storing games, leftovers of killed processes, an interrupted match, and 
 snapshot moment. Issue 30's rows: snapshot files naming modules as their game, the rating worker killed, stopped
 or orphaned and its games counted once, SIGTERM in an endless update, rows whose paths leave the league, removing
 what a run needs, games and settings that turn numbers NaN, configs past every limit, games that never end or
-whose agents come and go, and a full disk under `marl record`. More faults can be added with :func:`fault`.
+whose agents come and go, and a full disk under `marl record`. Issue 49's rows (``--only blob``): rows naming blob
+locations (a private file, /dev/zero, link-local and loopback URLs, a redirecting, an endless and a dripping
+server, another folder for new blobs) and a cache folder linked elsewhere. More faults can be added with
+:func:`fault`.
 
 Run with ``python benchmarks/fault_matrix.py`` (``--only NAME`` runs the faults whose name contains NAME).
 """
