@@ -195,6 +195,8 @@ def test_http_locations_not_allowed_are_never_requested(sqlite_url, tmp_path, mo
                     f"http://localhost:{server.port}/marl/{s1.sha256}",
                     f"https://127.0.0.1:{server.port}/marl/{s1.sha256}",
                     f"http://me@127.0.0.1:{server.port}/marl/{s1.sha256}",
+                    f"http://127.0.0.1:99999999/marl/{s1.sha256}", f"http://127.0.0.1:x/marl/{s1.sha256}",
+                    f"http://[::1/marl/{s1.sha256}",
                     f"ftp://127.0.0.1:{server.port}/marl/{s1.sha256}",
                     f"http://169.254.169.254/marl/{s1.sha256}"):
             kept_at(a, s1.sha256, url)

@@ -189,7 +189,10 @@ def _http_allowed(parts: SplitResult, allowed: tuple[Allowed, ...]) -> bool:
     if (not parts.hostname or parts.username is not None or parts.password is not None or parts.fragment
             or not path.startswith("/") or {".", ".."} & set(path.split("/"))):
         return False
-    port = parts.port or _default_port(parts.scheme)
+    try:
+        port = parts.port or _default_port(parts.scheme)
+    except ValueError:  # (a port that is not one)
+        return False
     return any(a.scheme == parts.scheme and a.host == parts.hostname and a.port == port and path.startswith(a.path)
                for a in allowed)
 
