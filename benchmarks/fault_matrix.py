@@ -13,7 +13,10 @@ writers storing games, leftovers of killed processes, an interrupted match, and 
 snapshot moment. Issue 30's rows: snapshot files naming modules as their game, the rating worker killed, stopped
 or orphaned and its games counted once, SIGTERM in an endless update, rows whose paths leave the league, removing
 what a run needs, games and settings that turn numbers NaN, configs past every limit, games that never end or
-whose agents come and go, and a full disk under `marl record`. More faults can be added with :func:`fault`.
+whose agents come and go, and a full disk under `marl record`. Issue 49's rows (``--only blob``): rows naming blob
+locations (a private file, /dev/zero, link-local and loopback URLs, a redirecting, an endless and a dripping
+server, another folder for new blobs) and a cache folder linked elsewhere. More faults can be added with
+:func:`fault`.
 
 Run with ``python benchmarks/fault_matrix.py`` (``--only NAME`` runs the faults whose name contains NAME).
 """
@@ -21,9 +24,11 @@ Run with ``python benchmarks/fault_matrix.py`` (``--only NAME`` runs the faults 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import os
+import re
 import resource
 import shutil
 import signal
@@ -76,19 +81,20 @@ class Run:
         return self.err.count("\n") == 1 and "Traceback" not in self.err and "\x1b" not in self.err
 
 
-def _env() -> dict[str, str]:
+def _env(extra: dict[str, str] | None = None) -> dict[str, str]:
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    env.pop("MARL_HOME", None)
-    env.pop("MARL_DB", None)
-    return env
+    for name in ("MARL_HOME", "MARL_DB", "MARL_BLOB_LOCATIONS", "MARL_BLOB_DEADLINE"):
+        env.pop(name, None)
+    return {**env, **(extra or {})}
 
 
 def marl(*args: str, limits: dict[int, int] | None = None, prefix: list[str] | None = None,
          timeout: float = 600, signal_after: tuple[Callable[[], bool], int] | None = None,
-         cwd: Path | None = None) -> Run:
+         cwd: Path | None = None, env: dict[str, str] | None = None) -> Run:
     """Run ``marl *args`` (optionally under resource ``limits`` or after a ``prefix`` command such as unshare, in
-    folder ``cwd``), wait for it and measure it. ``signal_after=(ready, sig)`` sends ``sig`` once ``ready()`` is
-    true; a process still running after ``timeout`` seconds is killed (exit -9)."""
+    folder ``cwd``, with ``env`` added to its environment), wait for it and measure it. ``signal_after=(ready,
+    sig)`` sends ``sig`` once ``ready()`` is true; a process still running after ``timeout`` seconds is killed
+    (exit -9)."""
 
     def preexec() -> None:
         for which, value in (limits or {}).items():
@@ -97,7 +103,7 @@ def marl(*args: str, limits: dict[int, int] | None = None, prefix: list[str] | N
     cmd = [*(prefix or []), sys.executable, "-m", "selfplay_cli", *args]
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         t = time.perf_counter()
-        p = subprocess.Popen(cmd, stdout=out, stderr=err, env=_env(), preexec_fn=preexec if limits else None,
+        p = subprocess.Popen(cmd, stdout=out, stderr=err, env=_env(env), preexec_fn=preexec if limits else None,
                              cwd=cwd)
         deadline = time.time() + timeout
         ready, sig = signal_after or (None, 0)
@@ -1358,6 +1364,295 @@ def shared_deep_json(scratch: Path) -> tuple[bool, str]:
     r = shared.owner_marl("match", "r/s0", "cpu", "--games", "2")
     outcomes.append((r.code == 2 and r.one_line and "cannot be read" in r.err, f"match r/s0: exit {r.code}"))
     return all(ok for ok, _ in outcomes), "; ".join(w for _, w in outcomes)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Issue 49 section 2: blob locations
+#
+# Where a blob is read from or written to is this machine's setting (MARL_BLOB_LOCATIONS), never a row's. Each row
+# below is one finding of the issue, replayed through real `marl` processes on a SQLite league whose rows another
+# member rewrote.
+
+
+def _blob_league(scratch: Path) -> tuple[Path, dict[str, tuple[str, int]]]:
+    """A league (run r: s0-left, s1M-left, their blobs in the database): its home and each snapshot's (sha256,
+    size)."""
+    home = scratch / "league"
+    make_league(home, games=False)
+    rows = db(home, "select p.name, p.sha256, b.size from players p join blobs b on b.sha256 = p.sha256")
+    return home, {name: (sha, size) for name, sha, size in rows}
+
+
+def _keep_at(home: Path, sha: str, url: str, size: int | None = None) -> None:
+    """Another member's edit: the blob ``sha`` now kept at ``url`` (its bytes out of the row), ``size`` claimed."""
+    with sqlite3.connect(home / "league.db") as con:
+        con.execute("update blobs set data = NULL, url = ? where sha256 = ?", (url, sha))
+        if size is not None:
+            con.execute("update blobs set size = ? where sha256 = ?", (size, sha))
+
+
+def _play_elsewhere(scratch: Path, home: Path, env: dict[str, str] | None = None, timeout: float = 300) -> Run:
+    """`marl match r/s0-left cpu` on another machine: the league's database, an empty home, an empty cache."""
+    return marl("match", "r/s0-left", "cpu", "--games", "2", "--env-option", "points_to_win=1", "-q", "--db",
+                f"sqlite:///{home / 'league.db'}", "--home", str(scratch / "elsewhere"),
+                env={"MARL_CACHE": str(scratch / "cache"), **(env or {})}, timeout=timeout)
+
+
+class _Server:
+    """A local HTTP server (127.0.0.1, an ephemeral port) in threads of this process: the first line of each
+    request kept in ``requests``, answered by ``answer(connection)``; ``sent`` counts the bytes it sent."""
+
+    def __init__(self, answer: Callable) -> None:
+        import socket
+        import threading
+
+        self.sock = socket.create_server(("127.0.0.1", 0))
+        self.port = self.sock.getsockname()[1]
+        self.url = f"http://127.0.0.1:{self.port}/"
+        self.requests: list[str] = []
+        self.sent = 0
+        self.answer = answer
+
+        def serve(conn) -> None:
+            with conn:
+                head = b""
+                while b"\r\n\r\n" not in head:
+                    chunk = conn.recv(4096)
+                    if not chunk:
+                        return
+                    head += chunk
+                self.requests.append(head.split(b"\r\n", 1)[0].decode())
+                with contextlib.suppress(OSError):  # (the client went away)
+                    self.answer(self, conn)
+
+        def accept() -> None:
+            while True:
+                try:
+                    conn, _ = self.sock.accept()
+                except OSError:
+                    return
+                threading.Thread(target=serve, args=(conn,), daemon=True).start()
+
+        threading.Thread(target=accept, daemon=True).start()
+
+    def send(self, conn, data: bytes) -> None:
+        conn.sendall(data)
+        self.sent += len(data)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def _atime_watch(path: Path) -> Callable[[], str]:
+    """Sets ``path``'s access time far back (older than its change time: relatime then records a read); the
+    returned function says whether it was read, if this file system tells."""
+    control = path.with_name(path.name + ".control")
+    control.write_bytes(b"x")
+    for p in (path, control):
+        os.utime(p, (0, p.stat().st_mtime))
+    control.read_bytes()
+    tells = control.stat().st_atime != 0
+    return lambda: ("read" if path.stat().st_atime != 0 else "never read") if tells else "atime not kept here"
+
+
+def _what_failed(text: str) -> str:
+    """What a blob's error says failed: the text after ``snapshot blob <sha256>: ``."""
+    return re.split(r"snapshot blob [0-9a-f]{64}: ", text, maxsplit=1)[-1]
+
+
+@fault("blob locations: blobs.url = file:///etc/shadow (a private file; an absent one) on a snapshot a worker plays")
+def blob_private_file(scratch: Path) -> tuple[bool, str]:
+    from selfplay_cli.league.store import League
+    from selfplay_cli.rated.games_jobs import games_jobs
+
+    home, rows = _blob_league(scratch)
+    with League.open(home) as league:
+        row, cpu = league.find_players("r/s0-left")[0], league.find_players("cpu")[0]
+        for batch in ("b1", "b2"):
+            league.enqueue(batch, games_jobs(league, [row], cpu, games=2, first_seed=0, match_kind="match",
+                                             env_options={"points_to_win": 1}, job_rounds=1))
+    secret = scratch / "shadow"
+    secret.write_bytes(b"root:$6$saltsalt$" + b"h" * 86 + b":19000:0:99999:7:::\n" * 5 + b"x" * 455)
+    size, digest = len(secret.read_bytes()), hashlib.sha256(secret.read_bytes()).hexdigest()
+    was_read = _atime_watch(secret)
+    runs = []
+    for batch, target in (("b1", secret), ("b2", scratch / "absnt")):  # (the same length: cut alike)
+        _keep_at(home, rows["s0-left"][0], target.as_uri(), size)
+        runs.append(marl("worker", "--db", f"sqlite:///{home / 'league.db'}", "--home", str(scratch / "worker-home"),
+                         "--batch", batch, "--jobs", "1", "-q", env={"MARL_CACHE": str(scratch / "cache")},
+                         timeout=300))
+    errors = [e or "" for (e,) in db(home, "select error from jobs order by id")]
+    same = len({e.replace(secret.as_uri(), "URL").replace((scratch / "absnt").as_uri(), "URL") for e in errors}) == 1
+    told = [e for e in errors if str(size) in e or f"{size:,}" in e or digest[:6] in e]
+    held = (all(r.code == 0 for r in runs) and len(errors) == 2 and same and not told and was_read() != "read"
+            and all("not a location this machine reads" in e for e in errors))
+    return held, (f"worker exit {[r.code for r in runs]}; the jobs' errors {'identical' if same else 'DIFFER'} but "
+                  f"for the URL, {'no' if not told else 'WITH'} size or hash; the file {was_read()}: "
+                  f"{_what_failed(errors[0])[:90]}")
+
+
+@fault("blob locations: http:// rows naming 169.254.169.254 and 127.0.0.1, none allowed (nothing requested)")
+def blob_http_not_allowed(scratch: Path) -> tuple[bool, str]:
+    home, rows = _blob_league(scratch)
+    server = _Server(lambda srv, conn: srv.send(conn, b"HTTP/1.1 200 OK\r\nContent-Length: 0\r\n\r\n"))
+    runs = []
+    try:
+        for url in (f"http://169.254.169.254/latest/meta-data/{rows['s0-left'][0]}", server.url + rows["s0-left"][0]):
+            _keep_at(home, rows["s0-left"][0], url)
+            runs.append(_play_elsewhere(scratch, home))
+    finally:
+        server.close()
+    held = (all(r.code == 2 and r.one_line and "not a location this machine reads" in r.err and r.seconds < 60
+                for r in runs) and server.requests == [])
+    return held, (f"exit {[r.code for r in runs]} in {max(r.seconds for r in runs):.1f} s at most, "
+                  f"{len(server.requests)} requests to 127.0.0.1: {_what_failed(runs[-1].err.strip())[:90]}")
+
+
+@fault("blob locations: an allowed http:// server redirecting to ftp:// (no redirect followed)")
+def blob_http_redirect(scratch: Path) -> tuple[bool, str]:
+    home, rows = _blob_league(scratch)
+    server = _Server(lambda srv, conn: srv.send(conn, b"HTTP/1.1 302 Found\r\nLocation: ftp://127.0.0.1/blob\r\n"
+                                                      b"Content-Length: 0\r\n\r\n"))
+    try:
+        _keep_at(home, rows["s0-left"][0], server.url + rows["s0-left"][0])
+        r = _play_elsewhere(scratch, home, {"MARL_BLOB_LOCATIONS": server.url})
+    finally:
+        server.close()
+    held = r.code == 2 and r.one_line and "redirect" in r.err and "follows none" in r.err and len(server.requests) == 1
+    return held, f"exit {r.code}, {len(server.requests)} request: {_what_failed(r.err.strip())[:110]}"
+
+
+@fault("blob locations: an allowed http:// server streaming forever, the row claiming size=1e9 / the true size")
+def blob_http_endless(scratch: Path) -> tuple[bool, str]:
+    home, rows = _blob_league(scratch)
+    sha, size = rows["s0-left"]
+
+    def endless(srv: _Server, conn) -> None:
+        srv.send(conn, b"HTTP/1.1 200 OK\r\n\r\n")
+        while True:
+            srv.send(conn, bytes(1 << 16))
+
+    server = _Server(endless)
+    try:
+        _keep_at(home, sha, server.url + sha, 10**9)
+        claimed = _play_elsewhere(scratch, home, {"MARL_BLOB_LOCATIONS": server.url})
+        asked = len(server.requests)
+        _keep_at(home, sha, server.url + sha, size)
+        true = _play_elsewhere(scratch, home, {"MARL_BLOB_LOCATIONS": server.url})
+    finally:
+        server.close()
+    held = (claimed.code == 2 and claimed.one_line and "not a size of a snapshot" in claimed.err and asked == 0
+            and true.code == 2 and true.one_line and "altered" in true.err and server.sent < 64 * 2**20)
+    return held, (f"size=1e9: exit {claimed.code}, {asked} requests; true size: exit {true.code} after the server "
+                  f"sent {server.sent / 2**20:.1f} MB (peak {true.rss_mb:.0f} MB resident): "
+                  f"{_what_failed(true.err.strip())[:90]}")
+
+
+@fault("blob locations: an allowed http:// server sending 1 byte every 10 s to a worker (MARL_BLOB_DEADLINE=15)")
+def blob_http_drip(scratch: Path) -> tuple[bool, str]:
+    from selfplay_cli.league.store import League
+    from selfplay_cli.rated.games_jobs import games_jobs
+
+    home, rows = _blob_league(scratch)
+    sha, size = rows["s0-left"]
+    with League.open(home) as league:
+        row, cpu = league.find_players("r/s0-left")[0], league.find_players("cpu")[0]
+        league.enqueue("drip", games_jobs(league, [row], cpu, games=2, first_seed=0, match_kind="match",
+                                          env_options={"points_to_win": 1}, job_rounds=1))
+
+    def drip(srv: _Server, conn) -> None:
+        conn.sendall(b"HTTP/1.1 200 OK\r\nContent-Length: %d\r\n\r\n" % size)
+        while True:
+            srv.send(conn, b"\0")
+            time.sleep(10)
+
+    server = _Server(drip)
+    try:
+        _keep_at(home, sha, server.url + sha)
+        r = marl("worker", "--db", f"sqlite:///{home / 'league.db'}", "--home", str(scratch / "worker-home"),
+                 "--jobs", "1", "-q", env={"MARL_CACHE": str(scratch / "cache"), "MARL_BLOB_LOCATIONS": server.url,
+                                           "MARL_BLOB_DEADLINE": "15"}, timeout=300)
+    finally:
+        server.close()
+    (error,) = db(home, "select error from jobs")[0]
+    held = r.code == 0 and error is not None and "not read within 15 s" in error and r.seconds < 45
+    return held, (f"worker exit {r.code} after {r.seconds:.0f} s, {server.sent} bytes dripped; the job's error: "
+                  f"{_what_failed(error or 'none')[:90]}")
+
+
+@fault("blob locations: file:///dev/zero with size=2e9 and size=1e14 (allowed: file:///dev; and not allowed)")
+def blob_dev_zero(scratch: Path) -> tuple[bool, str]:
+    home, rows = _blob_league(scratch)
+    sha = rows["s0-left"][0]
+    base = _play_elsewhere(scratch, home)  # (from the database's bytes: the resident size of a normal match)
+    shutil.rmtree(scratch / "cache", ignore_errors=True)
+    seen = []
+    for allowed, size, said in (("", 2 * 10**9, "not a location"), ("file:///dev", 2 * 10**9, "not a size"),
+                                ("file:///dev", 10**14, "not a size"), ("file:///dev", 400_000_000, "regular file")):
+        _keep_at(home, sha, "file:///dev/zero", size)
+        r = _play_elsewhere(scratch, home, {"MARL_BLOB_LOCATIONS": allowed} if allowed else None)
+        seen.append((r, r.code == 2 and r.one_line and said in r.err and r.rss_mb < base.rss_mb + 100
+                     and r.seconds < 60))
+    held = base.code == 0 and all(ok for _, ok in seen)
+    return held, (f"exit {[r.code for r, _ in seen]}, at most {max(r.seconds for r, _ in seen):.1f} s and "
+                  f"{max(r.rss_mb for r, _ in seen):.0f} MB resident (a normal match: {base.rss_mb:.0f} MB): "
+                  f"{_what_failed(seen[2][0].err.strip())[:90]}")
+
+
+@fault("blob locations: meta.blob_url = file:///some/other/folder, then file:///proc/sys, under marl train")
+def blob_meta_folder(scratch: Path) -> tuple[bool, str]:
+    home, _ = _blob_league(scratch)
+    other = scratch / "someone else's folder"
+    other.mkdir()
+    results = []
+    for i, url in enumerate((other.as_uri(), "file:///proc/sys")):
+        with sqlite3.connect(home / "league.db") as con:
+            con.execute("insert or replace into meta (key, value) values ('blob_url', ?)", (url,))
+        r = marl("train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1",
+                 "--snapshot-steps", "2048", "--steps", "4096", "--eval-games", "0", "--run", f"t{i}", "-q",
+                 "--home", str(home), timeout=600)
+        in_db = db(home, f"select count(*) from players p join blobs b on b.sha256 = p.sha256 join runs r on "
+                         f"r.id = p.run_id where r.name = 't{i}' and b.data is not null and b.url is null")[0][0]
+        snaps = db(home, f"select count(*) from players p join runs r on r.id = p.run_id where r.name = 't{i}'")[0][0]
+        warned = [ln for ln in r.err.splitlines() if ln.startswith("marl: warning:")]
+        results.append((r, snaps, in_db, warned))
+    written = sorted(p.name for p in other.iterdir())
+    held = (not written and all(r.code == 0 and snaps > 0 and in_db == snaps and len(warned) == 1
+                                and "MARL_BLOB_LOCATIONS" in warned[0] for r, snaps, in_db, warned in results))
+    warning = results[0][3][0][len("marl: warning: "):].replace(str(scratch), "") if results[0][3] else "none"
+    return held, (f"train exit {[r.code for r, *_ in results]}; {[f'{d}/{n}' for _, n, d, _ in results]} snapshot "
+                  f"blobs in the database, {len(written)} files in the other folder; {len(results[0][3])} warning "
+                  f"line: {warning[:110]}")
+
+
+@fault("blob locations: marl checkpoint push --to a folder this machine does not allow, then allowed")
+def blob_push_to(scratch: Path) -> tuple[bool, str]:
+    home, _ = _blob_league(scratch)
+    shared = scratch / "shared"
+    shared.mkdir()
+    refused = marl("checkpoint", "push", "--to", shared.as_uri(), "--home", str(home))
+    allowed = marl("checkpoint", "push", "--to", shared.as_uri(), "--home", str(home),
+                   env={"MARL_BLOB_LOCATIONS": shared.as_uri()})
+    url = db(home, "select value from meta where key = 'blob_url'")
+    held = (refused.code == 2 and refused.one_line and "add it to MARL_BLOB_LOCATIONS first" in refused.err
+            and allowed.code == 0 and url == [(shared.as_uri(),)])
+    return held, (f"not allowed: exit {refused.code}; allowed: exit {allowed.code}: "
+                  f"{refused.line.split('error: ', 1)[-1].replace(str(scratch), '')[:100]}")
+
+
+@fault("blob locations: a symlinked folder inside $MARL_CACHE (blobs/ab -> /elsewhere)")
+def blob_cache_symlink(scratch: Path) -> tuple[bool, str]:
+    home, rows = _blob_league(scratch)
+    sha = rows["s0-left"][0]
+    outside = scratch / "elsewhere-disk"
+    outside.mkdir()
+    (scratch / "cache" / "blobs").mkdir(parents=True)
+    (scratch / "cache" / "blobs" / sha[:2]).symlink_to(outside)
+    r = _play_elsewhere(scratch, home)
+    written = sorted(p.name for p in outside.iterdir())
+    held = r.code == 2 and r.one_line and "outside" in r.err and not written
+    return held, (f"exit {r.code}, {len(written)} files outside: "
+                  f"{r.line.split('error: ', 1)[-1].replace(str(scratch), '')[:100]}")
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -10,9 +10,15 @@ so a destination never holds half a file. The temporary names carry the writer's
 A process killed with SIGKILL (or a power cut) leaves its temporary file behind. :func:`sweep` removes, from one
 folder, the temporary files whose process is gone; commands that write into a folder sweep it when they start.
 A process id names a process of this machine: a league home is written by the processes of one machine (another
-machine sharing the folder would see our live processes as gone).
+machine sharing the folder would see our live processes as gone). A temporary file is always made anew (``O_EXCL``:
+a symbolic link planted under its name is removed, never followed), so a write lands in its own folder.
 
-Nothing here imports from the rest of marl, so every room can use it.
+Folders that others may reach into (marl's cache, a shared folder of snapshot files) are written through an open
+descriptor of the folder (:func:`folder_inside`, :func:`write_atomic_at`, :func:`sha256_at`): its real path is
+checked to lie inside the root it belongs to, and nothing below is created or written when a level leads out (a
+symbolic link to somewhere else).
+
+Nothing here imports from the rest of marl but :mod:`selfplay_cli.errors`, so every room can use it.
 """
 
 from __future__ import annotations
@@ -21,12 +27,22 @@ import contextlib
 import hashlib
 import os
 import re
+import secrets
+import stat
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import IO
 
-__all__ = ["STALE_PATTERNS", "atomic_write", "cache_home", "describe_removed", "file_sha256", "pid_alive", "publish",
-           "sweep", "sweep_home", "temp_path", "write_atomic"]
+from .errors import MarlError
+
+__all__ = ["STALE_PATTERNS", "atomic_write", "cache_home", "describe_removed", "file_sha256", "folder_inside",
+           "is_inside", "opened_path", "pid_alive", "publish", "sha256_at", "sweep", "sweep_home", "temp_path",
+           "write_atomic", "write_atomic_at"]
+
+_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+_CLOEXEC = getattr(os, "O_CLOEXEC", 0)
+_NONBLOCK = getattr(os, "O_NONBLOCK", 0)
+_DIRECTORY = getattr(os, "O_DIRECTORY", 0)
 
 STALE_PATTERNS = (
     re.compile(r"^.+\.tmp-(?P<pid>\d{1,10})$"),
@@ -68,11 +84,14 @@ def publish(tmp: str | os.PathLike[str], path: str | os.PathLike[str]) -> None:
 def atomic_write(path: str | os.PathLike[str], mode: str = "wb") -> Iterator[IO]:
     """Open :func:`temp_path` of ``path`` for writing; once the block ends, flush, fsync and rename it over
     ``path``. On any exception (Ctrl-C included) the temporary file is removed and ``path`` is untouched.
-    Parent folders are not made: a missing folder is the caller's ``OSError``."""
+    Parent folders are not made: a missing folder is the caller's ``OSError``. The temporary file is made anew
+    (whatever had its name, a symbolic link included, is removed first, never followed)."""
     p = Path(path)
     tmp = temp_path(p)
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(tmp)
     try:
-        with open(tmp, mode) as f:
+        with open(tmp, mode.replace("w", "x")) as f:
             yield f
             f.flush()
             os.fsync(f.fileno())
@@ -96,6 +115,101 @@ def file_sha256(path: str | os.PathLike[str]) -> str:
         while chunk := f.read(1 << 20):
             h.update(chunk)
     return h.hexdigest()
+
+
+def is_inside(path: str | os.PathLike[str], root: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` is the folder ``root`` or lies below it (both absolute and already resolved: compared as
+    text, nothing is touched)."""
+    path, root = os.fspath(path), os.fspath(root).rstrip(os.sep)
+    return path == root or path.startswith(root + os.sep)
+
+
+def opened_path(fd: int) -> str | None:
+    """The real path of the open file or folder ``fd`` (Linux: ``/proc/self/fd``); None where it cannot be told."""
+    try:
+        return os.readlink(f"/proc/self/fd/{fd}")
+    except OSError:
+        return None
+
+
+@contextlib.contextmanager
+def folder_inside(root: str | os.PathLike[str], *parts: str, make: bool = True) -> Iterator[int]:
+    """An open descriptor of the folder ``root/parts...`` for :func:`write_atomic_at` and :func:`sha256_at`.
+
+    Each level is opened from the one above it and its real path checked to lie inside ``root``'s real path before
+    anything is made or opened below it: a level that leads out of the root (a symbolic link to another folder) is
+    a :class:`MarlError` in one line, and nothing was created or written there. With ``make`` the root and missing
+    levels are created (only ever inside the root); without, a missing one is the caller's ``OSError``."""
+    root = Path(root)
+    if make:
+        root.mkdir(parents=True, exist_ok=True)
+    real_root = os.path.realpath(root)
+    fd = os.open(real_root, os.O_RDONLY | _DIRECTORY | _CLOEXEC)
+    try:
+        where = root
+        for part in parts:
+            if part in ("", ".", "..") or os.sep in part:
+                raise MarlError(f"{where / part}: not a plain folder name")
+            where = where / part
+            if make:
+                with contextlib.suppress(FileExistsError):
+                    os.mkdir(part, dir_fd=fd)
+            sub = os.open(part, os.O_RDONLY | _DIRECTORY | _CLOEXEC, dir_fd=fd)
+            os.close(fd)
+            fd = sub
+            real = opened_path(fd) or os.path.realpath(where)
+            if not is_inside(real, real_root):
+                raise MarlError(f"{where} leads to {real}, outside {root}: nothing is written there (remove the "
+                                "link)")
+        yield fd
+    finally:
+        os.close(fd)
+
+
+def write_atomic_at(folder: int, name: str, data: bytes) -> None:
+    """Write ``data`` as the file ``name`` of the open folder ``folder`` (:func:`folder_inside`): to a temporary name
+    made anew (``<name>.<random>.tmp-<pid>``, ``O_EXCL``: a symbolic link never followed; its own for each writer, so
+    two threads fetching the same file never share one), flushed, fsynced and renamed over ``name`` in the same
+    folder (a symbolic link named ``name`` is replaced, not followed). On any exception the temporary file is
+    removed."""
+    tmp = f"{name}.{secrets.token_hex(4)}.tmp-{os.getpid()}"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | _NOFOLLOW | _CLOEXEC, 0o666, dir_fd=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, name, src_dir_fd=folder, dst_dir_fd=folder)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp, dir_fd=folder)
+        raise
+    with contextlib.suppress(OSError):
+        os.fsync(folder)
+
+
+def sha256_at(folder: int, name: str, limit: int) -> str | None:
+    """The sha256 of the regular file ``name`` of the open folder ``folder``, streamed; None when there is no such
+    file (absent, a symbolic link, not a regular file, more than ``limit`` bytes) or it cannot be read."""
+    try:
+        fd = os.open(name, os.O_RDONLY | _NOFOLLOW | _NONBLOCK | _CLOEXEC, dir_fd=folder)
+    except OSError:
+        return None
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode) or st.st_size > limit:
+            return None
+        h, total = hashlib.sha256(), 0
+        while chunk := os.read(fd, 1 << 20):
+            total += len(chunk)
+            if total > limit:
+                return None
+            h.update(chunk)
+        return h.hexdigest()
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
 
 
 def cache_home() -> Path:

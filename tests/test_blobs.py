@@ -20,7 +20,7 @@ from sqlalchemy import func, select, text
 from selfplay_cli.league.models import Blob
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.policies.network import Arch, SnapshotError, build_network
-from selfplay_cli.policies.snapshot_format import SnapshotMeta, file_sha256, save_snapshot
+from selfplay_cli.policies.snapshot_format import MAX_FILE_BYTES, SnapshotMeta, file_sha256, save_snapshot
 from selfplay_cli.rated.match import load_player, run_match
 from selfplay_cli.rated.snapshots import blob_cache_file, check_legacy_file, snapshot_relpath
 
@@ -88,7 +88,7 @@ def test_a_snapshot_is_played_from_the_database_alone_with_the_files_results(db_
     row = a.find_players("r/s1")[0]
     data = (home / row.path).read_bytes()
     assert row.sha256 == hashlib.sha256(data).hexdigest()
-    assert a.blob_bytes(row.sha256) == data  # stored with the row, keyed by the file's hash
+    assert a.blob_bytes(row.sha256, limit=MAX_FILE_BYTES) == data  # stored with the row, keyed by the file's hash
     from_file = results(a, "s1")
     assert not cache.exists()  # the home's file was played: nothing fetched
     elsewhere = League.open(tmp_path / "other-machine", url=db_url)  # another, empty home
@@ -196,12 +196,12 @@ def test_put_blob_is_idempotent_and_two_writers_racing_both_succeed(db_url, tmp_
     path = tmp_path / "f"
     path.write_bytes(b"other bytes")
     assert a.put_blob(path) == file_sha256(path) and blob_count(a) == 2
-    assert a.blob_bytes(file_sha256(path)) == b"other bytes"
+    assert a.blob_bytes(file_sha256(path), limit=MAX_FILE_BYTES) == b"other bytes"
     a.close()
     b.close()
 
 
-def test_blobs_kept_at_a_file_url_or_an_http_url_are_read_and_checked(db_url, tmp_path):
+def test_blobs_kept_at_a_file_url_or_an_http_url_are_read_and_checked(db_url, tmp_path, monkeypatch):
     home = tmp_path / "home"
     a = trained(db_url, home)
     s1, s2 = a.find_players("r/s1")[0], a.find_players("r/s2")[0]
@@ -215,6 +215,7 @@ def test_blobs_kept_at_a_file_url_or_an_http_url_are_read_and_checked(db_url, tm
     handler.log_message = lambda *args: None  # type: ignore[attr-defined]
     server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
     threading.Thread(target=server.serve_forever, daemon=True).start()
+    monkeypatch.setenv("MARL_BLOB_LOCATIONS", f"{shared.as_uri()} http://127.0.0.1:{server.server_address[1]}/")
     try:
         execute(a, "update blobs set data = NULL, url = :url where sha256 = :sha",
                 url=f"http://127.0.0.1:{server.server_address[1]}/{s2.sha256}", sha=s2.sha256)
@@ -223,7 +224,7 @@ def test_blobs_kept_at_a_file_url_or_an_http_url_are_read_and_checked(db_url, tm
         assert blob_cache_file(s2.sha256).read_bytes() == (home / s2.path).read_bytes()
         shutil.copyfile(home / s1.path, shared / s2.sha256)  # the server now serves s1's bytes under s2's hash
         with pytest.raises(LeagueError) as e:
-            elsewhere.blob_bytes(s2.sha256)
+            elsewhere.blob_bytes(s2.sha256, limit=MAX_FILE_BYTES)
         assert s2.sha256 in one_line(e.value) and "altered" in str(e.value)
         (shared / s1.sha256).unlink()
         blob_cache_file(s1.sha256).unlink()
@@ -325,9 +326,10 @@ def test_a_swapped_file_in_the_home_is_refused_not_replaced_by_the_blob(db_url, 
     a.close()
 
 
-def test_a_league_can_keep_its_blobs_in_a_shared_folder(db_url, tmp_path, capsys):
+def test_a_league_can_keep_its_blobs_in_a_shared_folder(db_url, tmp_path, capsys, monkeypatch):
     home, shared = tmp_path / "home", tmp_path / "shared disk"
     shared.mkdir()
+    monkeypatch.setenv("MARL_BLOB_LOCATIONS", shared.as_uri())
     a = trained(db_url, home, names=("s1",))  # stored in the database, the default
     assert a.blob_location() is None
     for bad, why in (("http://host/blobs", "file://"), ("file://relative", "file://"),
@@ -356,7 +358,8 @@ def test_a_league_can_keep_its_blobs_in_a_shared_folder(db_url, tmp_path, capsys
     assert "stored 2 snapshot files" in out
     with League.open(home, url=db_url) as league:
         s1 = league.find_players("r/s1")[0]
-        assert league.blob_bytes(s1.sha256) == (shared / s1.sha256).read_bytes() == (home / s1.path).read_bytes()
+        stored = league.blob_bytes(s1.sha256, limit=MAX_FILE_BYTES)
+        assert stored == (shared / s1.sha256).read_bytes() == (home / s1.path).read_bytes()
 
 
 def test_show_and_export_work_with_only_the_database_url(db_url, tmp_path, capsys):

@@ -53,6 +53,7 @@ def worker(
     if beat >= scavenge:
         raise MarlError(f"--beat ({beat:g} s) must be shorter than --scavenge ({scavenge:g} s), or a working worker's "
                         "jobs would be taken from it")
+    _check_blob_settings()
     _check_league_here(home, db)
     league = open_league(home, db)
     options = WorkerOptions(batches=tuple(batch) if batch else None, max_jobs=jobs, until_empty=until_empty,
@@ -99,6 +100,15 @@ def worker(
 
 
 worker.__doc__ = WORKER_HELP
+
+
+def _check_blob_settings() -> None:
+    """This machine's blob settings (MARL_BLOB_LOCATIONS, MARL_BLOB_DEADLINE) read once before any job: one that is
+    wrong is one line now, not every job's error."""
+    from ..league.locations import allowed_locations, fetch_deadline
+
+    allowed_locations()
+    fetch_deadline()
 
 
 def _check_league_here(home: Path | None, db: str | None) -> None:

@@ -5,11 +5,21 @@ A blob is the whole file of a snapshot, keyed by the sha256 of its bytes (the ``
 :attr:`selfplay_cli.league.models.Player.sha256`). Its bytes are in the row (``data``, the default), or at a ``url``
 the row names (``file://`` on a shared disk, ``http(s)://``). Whoever reads a blob hashes what it read and refuses
 bytes that do not hash to the key (:meth:`Blobs.blob_bytes`): a blob is never trusted by its name, wherever it comes
-from.
+from. Nor is it read past a size: the caller gives the limit (the largest snapshot file marl reads), and a blob
+whose row says more is refused before any of it is read.
+
+Where a blob may be read from or written to is this machine's setting, never a row's: ``MARL_BLOB_LOCATIONS``, the
+folders and ``http(s)://`` prefixes this machine allows (:mod:`selfplay_cli.league.locations`; none by default). A
+row whose ``url`` lies elsewhere is refused without that location being touched, and an allowed one is read as a
+stream, within a deadline, following no redirect; errors say what failed, never what a location holds.
 
 A league may keep its new blobs in a folder instead of the database (:meth:`Blobs.set_blob_location`, ``meta``
-key ``blob_url``): a ``file://`` URL of a disk that every machine of the league mounts at the same path. A blob is
-then written there as ``<sha256>`` (through a temporary name) before its row, which names it by URL, is inserted.
+key ``blob_url``): a ``file://`` URL of a disk that every machine of the league mounts at the same path, and lists
+in its ``MARL_BLOB_LOCATIONS``. A blob is then written there as ``<sha256>`` (through a temporary name, inside the
+allowed folder: a level that leads out by a symbolic link is never written through) before its row, which names it
+by URL, is inserted. A machine that does not allow the folder (or cannot write it) stores the blob in the database
+instead, with one warning line per command: a snapshot is never lost over it, and a row never makes a machine write
+where its user did not say.
 
 Training and ``marl checkpoint import`` store a snapshot's blob in the same transaction as its row
 (:meth:`~selfplay_cli.league.roster.Roster.add_snapshots`); leagues made before blobs existed get theirs from the
@@ -23,35 +33,35 @@ kept.
 from __future__ import annotations
 
 import hashlib
-import http.client
 import os
-import urllib.error
-import urllib.request
+import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 from urllib.parse import unquote, urlparse
 
-from sqlalchemy import insert, select, update
+from sqlalchemy import func, insert, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.files import file_sha256, write_atomic
+from selfplay_cli.files import folder_inside, sha256_at, write_atomic_at
+from selfplay_cli.league.bounded_json import say_once
 from selfplay_cli.league.db import Database, LeagueError, LeagueIOError, shown
+from selfplay_cli.league.locations import LOCATIONS_VARIABLE, altered, read_location, writable_folder
 from selfplay_cli.league.models import Blob, Meta, Player, utcnow
 
 if TYPE_CHECKING:
     from selfplay_cli.league.roster import PlayerRow
 
-__all__ = ["BLOB_URL", "FETCH_TIMEOUT", "Blobs", "BlobsReport", "blob_folder", "check_sha", "store_blob"]
+__all__ = ["BLOB_URL", "Blobs", "BlobsReport", "blob_folder", "check_sha", "store_blob"]
 
 BLOB_URL = "blob_url"
 """The ``meta`` key of the folder (a ``file://`` URL) a league keeps its new blobs in; none: in the database."""
 
-FETCH_TIMEOUT = 30.0
-"""Seconds an ``http(s)://`` blob may take to answer (and between reads)."""
+FAILED_FOR = 60.0
+"""Seconds a blob that could not be fetched from its location is not asked for there again (the same error)."""
 
 SHA256_HEX = frozenset("0123456789abcdef")
 
@@ -66,21 +76,18 @@ def check_sha(sha: object) -> str:
 def store_blob(s: Session, sha: str, data: bytes) -> bool:
     """Store ``data`` under ``sha`` (its sha256, which the caller computed from these very bytes) in the unit of work
     ``s``; True if it was stored, False if the league had it already. A blob already there is not sent again; two
-    writers racing for the same key both succeed (the second insert does nothing)."""
+    writers racing for the same key both succeed (the second insert does nothing). Where the league keeps its blobs
+    in a folder this machine allows, the file is written there first (:func:`_into_folder`); anywhere else, the bytes
+    go into the row."""
     if s.execute(select(Blob.sha256).where(Blob.sha256 == sha)).first() is not None:
         return False
     table = Blob.__table__
     values = dict(sha256=sha, size=len(data), data=data, url=None, created_at=utcnow())
     location = s.execute(select(Meta.value).where(Meta.key == BLOB_URL)).scalar()
     if location:  # the league keeps its blobs in a folder: the file first, then the row that names it
-        path = blob_folder(location) / sha
-        try:
-            if not (path.is_file() and file_sha256(path) == sha):  # (a file left by a unit that was rolled back)
-                write_atomic(path, data)
-        except OSError as exc:
-            raise LeagueIOError(f"cannot write {path}, in the folder the league keeps its snapshot files in "
-                                f"({location}): {exc.strerror or exc}") from None
-        values.update(data=None, url=path.as_uri())
+        url = _into_folder(str(location), sha, data)
+        if url is not None:
+            values.update(data=None, url=url)
     dialect = s.get_bind().dialect.name
     if dialect == "postgresql":  # (psycopg reports no row count here: the row it returns says it was stored)
         from sqlalchemy.dialects.postgresql import insert as pg_insert
@@ -111,25 +118,32 @@ def blob_folder(url: str) -> Path:
     return folder
 
 
-def _read_url(url: str, size: int, sha: str, of: str = "") -> bytes:
-    """The bytes at a blob's ``url`` (``file://``, ``http(s)://``), at most ``size + 1`` of them (more than the row
-    says is refused by the caller without reading a giant file); a :class:`LeagueIOError` naming the blob and the
-    URL when they cannot be read."""
-    where = f"{of}snapshot blob {sha} at {shown(url, 200)}"
-    parsed = urlparse(url)
+def _into_folder(location: str, sha: str, data: bytes) -> str | None:
+    """Write ``data`` as ``<sha>`` into the league's blob folder ``location`` when this machine allows it (and the
+    file is not there already) and return the URL its row names it by; None when the folder is not allowed here
+    (then it is not touched) or cannot be written: the blob goes into the database, said once per command."""
     try:
-        if parsed.scheme == "file":
-            if parsed.netloc not in ("", "localhost"):
-                raise LeagueError(f"{where}: a file:// URL names a file of this machine (file:///path)")
-            with open(unquote(parsed.path), "rb") as f:
-                return f.read(size + 1)
-        if parsed.scheme in ("http", "https"):
-            with urllib.request.urlopen(url, timeout=FETCH_TIMEOUT) as response:  # noqa: S310 (scheme checked)
-                return response.read(size + 1)
-    except (OSError, urllib.error.URLError, http.client.HTTPException, ValueError) as exc:
-        reason = getattr(exc, "reason", None) or getattr(exc, "strerror", None) or exc
-        raise LeagueIOError(f"{where}: cannot read it ({reason})") from None
-    raise LeagueError(f"{where}: not a file://, http:// or https:// URL")
+        where = writable_folder(location)
+    except LeagueError as exc:  # (this machine's MARL_BLOB_LOCATIONS is not a list of locations)
+        say_once(f"{BLOB_URL}\0{exc}", f"{exc}; new snapshot files are stored in the league's database")
+        return None
+    if where is None:
+        say_once(f"{BLOB_URL}\0{location}",
+                 f"the league keeps its snapshot files in {shown(location, 200)}, which this machine does not allow "
+                 f"({LOCATIONS_VARIABLE}); new ones are stored in the league's database instead")
+        return None
+    root, below, named = where
+    try:
+        with folder_inside(root, *below, make=False) as folder:
+            if sha256_at(folder, sha, len(data)) != sha:  # (a file left by a unit that was rolled back is kept)
+                write_atomic_at(folder, sha, data)
+    except (OSError, MarlError) as exc:
+        reason = getattr(exc, "strerror", None) or exc
+        say_once(f"{BLOB_URL}\0{location}",
+                 f"cannot write {named / sha}, in the folder the league keeps its snapshot files in ({reason}); new "
+                 "ones are stored in the league's database instead")
+        return None
+    return (named / sha).as_uri()
 
 
 @dataclass
@@ -182,10 +196,15 @@ class Blobs(Database):
 
     def set_blob_location(self, url: str | None) -> str | None:
         """Keep the league's new blobs in the folder ``url`` names (``file:///path``: a disk every machine of the
-        league mounts at the same path, which must exist and be writable here), or, with None, in the database
-        again; blobs stored before stay where they are (each row says where). Returns the URL stored."""
+        league mounts at the same path, which this machine's ``MARL_BLOB_LOCATIONS`` allows and which must exist and
+        be writable here), or, with None, in the database again; blobs stored before stay where they are (each row
+        says where). Returns the URL stored."""
         if url is not None:
             folder = blob_folder(url)
+            if writable_folder(folder.as_uri()) is None:
+                raise LeagueError(f"{folder} is not a folder this machine allows for snapshot files: add it to "
+                                  f"{LOCATIONS_VARIABLE} first (export {LOCATIONS_VARIABLE}={folder.as_uri()}), on "
+                                  "every machine of the league that reads or writes it")
             if not folder.is_dir() or not os.access(folder, os.W_OK | os.X_OK):
                 raise LeagueError(f"{folder} is not a folder this machine can write (make it, or mount the shared "
                                   "disk, first)")
@@ -217,34 +236,61 @@ class Blobs(Database):
 
         return self._read(work)
 
-    def blob_bytes(self, sha: str, name: str | None = None) -> bytes:
+    def blob_bytes(self, sha: str, name: str | None = None, *, limit: int, deadline: float | None = None) -> bytes:
         """The bytes of the blob ``sha``, read from its row or its URL and hashed: bytes that do not hash to ``sha``
         are refused (:class:`LeagueError` naming the blob), so a blob altered in the database or at its URL never
-        plays. A :class:`LeagueError` too when the league has no such blob. ``name`` (the snapshot whose file it
-        is) starts the messages."""
+        plays. A :class:`LeagueError` too when the league has no such blob, when it holds more than ``limit`` bytes
+        (the largest file the caller reads: refused before they are read), and when its URL is not a location this
+        machine allows (:func:`~selfplay_cli.league.locations.read_location`, which reads it, ``deadline`` seconds
+        at most). ``name`` (the snapshot whose file it is) starts the messages."""
         check_sha(sha)
-        of = f"{name}: " if name else ""
+        where = f"{name}: snapshot blob {sha}" if name else f"snapshot blob {sha}"
 
-        def work(s: Session) -> tuple[int, str | None, bytes | None] | None:
-            row = s.execute(select(Blob.size, Blob.url, Blob.data).where(Blob.sha256 == sha)).first()
-            return None if row is None else (int(row.size), row.url, row.data)
+        def work(s: Session) -> tuple[int, str | None, int | None, bytes | None] | None:
+            row = s.execute(select(Blob.size, Blob.url, func.length(Blob.data).label("held"))
+                            .where(Blob.sha256 == sha)).first()
+            if row is None:
+                return None
+            held = None if row.held is None else int(row.held)
+            data = None
+            if held is not None and held <= limit:
+                data = s.execute(select(Blob.data).where(Blob.sha256 == sha)).scalar()
+            return int(row.size), row.url, held, data
 
         found = self._read(work)
         if found is None:
-            raise LeagueError(f"{of}snapshot blob {sha} is not in the league: run `marl checkpoint push` where its "
-                              "file is (the machine that trained or imported it)")
-        size, url, data = found
+            raise LeagueError(f"{where} is not in the league: run `marl checkpoint push` where its file is (the "
+                              "machine that trained or imported it)")
+        size, url, held, data = found
+        if held is not None and held > limit:
+            raise LeagueError(f"{where}: {held:,} bytes, more than any snapshot file marl reads ({limit:,}), nothing "
+                              "was loaded from it")
         if data is None:
             if not url:
-                raise LeagueError(f"{of}snapshot blob {sha} has neither bytes nor a URL: the row was not written by "
-                                  "marl")
-            data = _read_url(url, size, sha, of)
+                raise LeagueError(f"{where} has neither bytes nor a URL: the row was not written by marl")
+            return self._fetch(url, sha=sha, size=size, limit=limit, deadline=deadline, where=where)
         data = bytes(data)
-        actual = hashlib.sha256(data).hexdigest()
-        if actual != sha:
-            raise LeagueError(f"{of}snapshot blob {sha} is not the file it names ({len(data):,} bytes hashing to "
-                              f"{actual[:12]}...): it was altered; nothing was loaded from it")
+        if hashlib.sha256(data).hexdigest() != sha:
+            raise altered(where)
         return data
+
+    def _fetch(self, url: str, **how: Any) -> bytes:
+        """:func:`read_location`, a failure remembered for :data:`FAILED_FOR` seconds: asked again for the same
+        blob at the same location meanwhile (a command whose first look at a snapshot only wanted its roles, then
+        loads it), the same error is raised again at once, and a location that holds a worker until its deadline
+        holds it once. (This machine's settings are part of the key: changed, the location is asked again.)"""
+        key = (url, how["sha"], how["size"], how["limit"], os.environ.get(LOCATIONS_VARIABLE, ""))
+        failed = getattr(self, "_failed_fetches", None)
+        if failed is None:
+            failed = self._failed_fetches = {}
+        seen = failed.get(key)
+        if seen is not None and time.monotonic() - seen[0] < FAILED_FOR:
+            raise type(seen[1])(str(seen[1]))
+        try:
+            return read_location(url, **how)
+        except LeagueError as exc:
+            failed[key] = (time.monotonic(), exc)
+            raise
 
     def ensure_blobs(self, rows: Iterable[PlayerRow], check_legacy: LegacyCheck | None = None,
                      advance: Callable[[int], None] | None = None) -> BlobsReport:

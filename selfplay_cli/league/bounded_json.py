@@ -19,7 +19,7 @@ import sys
 from typing import Any
 
 __all__ = ["MAX_DEPTH", "JSONBoundsError", "Unreadable", "UnreadableList", "check_value", "depth_of", "forget_said",
-           "loads", "raw", "read_column", "say_unusable", "unreadable"]
+           "loads", "raw", "read_column", "say_once", "say_unusable", "unreadable"]
 
 MAX_DEPTH = 32
 """Arrays and objects nested in one value, at most (marl's own values nest four or five deep)."""
@@ -171,11 +171,16 @@ _said: set[str] = set()
 def say_unusable(row: str, column: str, reason: str, consequence: str = "the row is left unusable") -> None:
     """One line on stderr: ``row``'s ``column`` could not be read (``reason``), and what follows; said once per row and
     column in a command."""
-    key = f"{row}\0{column}"
+    say_once(f"{row}\0{column}", f"{row}: its {column} cannot be read ({reason}); {consequence}")
+
+
+def say_once(key: str, line: str) -> None:
+    """``marl: warning: <line>`` on stderr, once per ``key`` in a command (a warning about a row, or about a
+    setting, that many calls meet)."""
     if key in _said:
         return
     _said.add(key)
-    sys.stderr.write(f"marl: warning: {row}: its {column} cannot be read ({reason}); {consequence}\n")
+    sys.stderr.write(f"marl: warning: {line}\n")
     sys.stderr.flush()
 
 

@@ -9,7 +9,10 @@ Where a snapshot is read from (:func:`snapshot_path`): its file in the league ho
 the file is there (where a row's file lies is :meth:`League.snapshot_file`'s to say); otherwise (a database opened
 on another machine, or without a home) its blob, fetched from the league by the row's sha256 into this machine's
 cache (``$MARL_CACHE`` or ``~/.cache/marl``, ``blobs/<sha256[:2]>/<sha256>.safetensors``). A cached file is hashed
-again before every use and fetched anew when it does not hash to its name: nothing is trusted by name.
+again before every use and fetched anew when it does not hash to its name: nothing is trusted by name. A blob is
+fetched no larger than the largest snapshot file marl reads, from the locations this machine allows
+(``MARL_BLOB_LOCATIONS``: :mod:`selfplay_cli.league.locations`), and written only inside the cache: a folder of it
+that leads out (a symbolic link to another folder) is refused in one line, nothing written through it.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import MarlError, MarlIOError
-from ..files import cache_home, file_sha256, write_atomic
+from ..files import cache_home, folder_inside, sha256_at, write_atomic, write_atomic_at
 from ..league.blobs import check_sha
 from ..league.store import SNAPSHOTS, League, LeagueIOError, PlayerRow, check_existing_name, check_name
 from ..league.variants import describe_variant, variant_key
@@ -62,17 +65,18 @@ def blob_cache_file(sha: str) -> Path:
 
 def cached_blob(league: League, sha: str, name: str) -> Path:
     """The blob ``sha`` as a file of this machine's cache: the cached file when it hashes to ``sha``, else fetched
-    from the league (:meth:`League.blob_bytes`, which refuses bytes that do not hash to it) and written through a
-    temporary name. ``name`` (the snapshot) is for messages."""
+    from the league (:meth:`League.blob_bytes`, which refuses bytes that do not hash to it, or more of them than a
+    snapshot file may hold) and written through a temporary name. The cache's folders are made and written only
+    inside the cache (:func:`~selfplay_cli.files.folder_inside`). ``name`` (the snapshot) is for messages."""
+    from ..policies.snapshot_format import MAX_FILE_BYTES
+
     path = blob_cache_file(sha)
-    if path.is_file():
-        with contextlib.suppress(OSError):
-            if file_sha256(path) == sha:
-                return path
-    data = league.blob_bytes(sha, name)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(path, data)
+        with folder_inside(cache_home(), "blobs", sha[:2]) as folder:
+            if sha256_at(folder, path.name, MAX_FILE_BYTES) == sha:
+                return path
+            data = league.blob_bytes(sha, name, limit=MAX_FILE_BYTES)
+            write_atomic_at(folder, path.name, data)
     except OSError as e:
         raise MarlIOError(f"cannot write {path}: {e.strerror or e} (MARL_CACHE names the folder of marl's cache)"
                           ) from None
