@@ -1656,6 +1656,133 @@ def blob_cache_symlink(scratch: Path) -> tuple[bool, str]:
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# Issue 49 section 4: the same work queued twice
+
+_TWICE = ["league", "tournament", "--run", "p1", "--vs", "cpu", "--games-per-pair", "228", "--env-option",
+          "points_to_win=1"]
+
+
+def _p1_league(scratch: Path) -> Path:
+    """A league whose run p1 has two snapshots (two different networks), and the scripted players."""
+    home = scratch / "league"
+    for i, name in enumerate(("s1", "s2")):
+        r = marl("checkpoint", "import", str(plain_snapshot(scratch / f"{name}.safetensors", seed=11 + i, name=name,
+                                                            run="p1")), "--home", str(home))
+        assert r.code == 0, r.err
+    return home
+
+
+def _each_game(home: Path) -> tuple[int, int]:
+    """Games stored, and games stored more than once (the same players on the same seats and seed)."""
+    rows = db(home, "select g.seed, (select group_concat(player_id, ',') from (select player_id from game_seats "
+                    "where game_id = g.id order by seat)) from games g")
+    return len(rows), len(rows) - len(set(rows))
+
+
+def _batches(home: Path) -> list[tuple[str, int]]:
+    return db(home, "select batch, count(*) from jobs group by batch order by min(id)")
+
+
+@fault("twice: the issue's reproduction, tournament --run p1 --vs cpu --games-per-pair 228 --queue --no-wait typed "
+       "twice, then marl worker --until-empty")
+def queued_twice(scratch: Path) -> tuple[bool, str]:
+    home = _p1_league(scratch)
+    first = marl(*_TWICE, "--queue", "--no-wait", "--home", str(home))
+    second = marl(*_TWICE, "--queue", "--no-wait", "--home", str(home))
+    said = marl(*_TWICE, "--queue", "--no-wait", "--home", str(home), "--json")
+    joined = json.loads(said.out) if said.code == 0 else {}
+    worker = marl("worker", "--until-empty", "--home", str(home), "--quiet")
+    games, twice = _each_game(home)
+    batches = _batches(home)
+    held = (first.code == second.code == said.code == worker.code == 0 and len(batches) == 1
+            and second.out.startswith("nothing queued twice: joined 456 games") and joined.get("jobs") == 0
+            and [j["games"] for j in joined.get("joined", [])] == [456] and games == 456 and twice == 0)
+    return held, (f"{len(batches)} batch of {batches[0][1] if batches else 0} jobs; {games} games stored, {twice} "
+                  f"twice; the second says: {second.out.strip()[:72]}...")
+
+
+@fault("twice: two users queue that tournament at the same moment (two processes), then a worker")
+def queued_twice_at_once(scratch: Path) -> tuple[bool, str]:
+    home = _p1_league(scratch)
+    cmd = [sys.executable, "-m", "selfplay_cli", *_TWICE, "--queue", "--no-wait", "--home", str(home), "--json"]
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+             for _ in range(2)]
+    outs = [p.communicate(timeout=600) for p in procs]
+    said = [json.loads(o) if p.returncode == 0 else {} for p, (o, _) in zip(procs, outs, strict=True)]
+    worker = marl("worker", "--until-empty", "--home", str(home), "--quiet")
+    games, twice = _each_game(home)
+    queued = sorted(d.get("games", -1) for d in said)
+    held = (all(p.returncode == 0 for p in procs) and worker.code == 0 and queued == [0, 456]
+            and len(_batches(home)) == 1 and games == 456 and twice == 0)
+    return held, (f"games queued by each: {queued}, the other joined; {len(_batches(home))} batch; {games} games "
+                  f"stored, {twice} twice")
+
+
+@fault("twice: queued with --no-wait, then typed without --queue (no worker): joins the queued jobs and plays them")
+def queued_then_here(scratch: Path) -> tuple[bool, str]:
+    home = _p1_league(scratch)
+    marl(*_TWICE, "--queue", "--no-wait", "--home", str(home))
+    here = marl(*_TWICE, "--home", str(home))
+    games, twice = _each_game(home)
+    states = db(home, "select state, count(*) from jobs group by state")
+    held = (here.code == 0 and "joined 456 games already queued in batch" in here.err and states == [("done", 4)]
+            and games == 456 and twice == 0)
+    line = next((ln for ln in here.out.splitlines() if "pairs needed games" in ln), "")
+    return held, f"exit {here.code}, jobs {states}; {games} games stored, {twice} twice: {line.strip()}"
+
+
+@fault("twice: marl match while the pair's games are queued: new seeds after them; --seed into them refused")
+def match_after_queued(scratch: Path) -> tuple[bool, str]:
+    home = _p1_league(scratch)
+    marl(*_TWICE, "--queue", "--no-wait", "--home", str(home))
+    match = ["match", "p1/s1", "cpu", "--games", "100", "--env-option", "points_to_win=1", "--home", str(home)]
+    refused = marl(*match, "--seed", "0")
+    played = marl(*match, "--json")
+    report = json.loads(played.out) if played.code == 0 else {}
+    worker = marl("worker", "--until-empty", "--home", str(home), "--quiet")
+    games, twice = _each_game(home)
+    held = (refused.code == 2 and refused.one_line and "queued already" in refused.err and played.code == 0
+            and report.get("first_seed") == 114 and worker.code == 0 and games == 556 and twice == 0)
+    return held, (f"--seed 0: exit {refused.code} ({refused.line[:60]}...); without: from seed "
+                  f"{report.get('first_seed')}; {games} games stored, {twice} twice")
+
+
+@fault("twice: two marl elo gate --queue of one pair at the same moment: one set of games, both verdicts on it")
+def gate_twice_at_once(scratch: Path) -> tuple[bool, str]:
+    home = _p1_league(scratch)
+    cmd = [sys.executable, "-m", "selfplay_cli", "elo", "gate", "p1/s1", "--vs", "cpu", "--games", "200",
+           "--env-option", "points_to_win=1", "--queue", "--home", str(home), "--json"]
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+             for _ in range(2)]
+    outs = [p.communicate(timeout=600) for p in procs]
+    said = [json.loads(o) if p.returncode in (0, 1) else {} for p, (o, _) in zip(procs, outs, strict=True)]
+    games, twice = _each_game(home)
+    verdicts = [(d.get("games"), d.get("passed")) for d in said]
+    held = (all(p.returncode in (0, 1) for p in procs) and games == 200 and twice == 0
+            and verdicts[0] == verdicts[1] and verdicts[0][0] == 200)
+    return held, f"verdicts (games, passed): {verdicts}; {games} games stored, {twice} twice"
+
+
+@fault("twice: the same gauntlet job queued in two batches, both played by a worker: its games stored once")
+def gauntlet_twice(scratch: Path) -> tuple[bool, str]:
+    home = _p1_league(scratch)
+    code = ("import sys; from selfplay_cli.league.store import League; "
+            "from selfplay_cli.rated.gauntlet_jobs import gauntlet_job\n"
+            "lg = League.open(sys.argv[1]); ids = [p.id for p in lg.players('pong', kind='snapshot')]\n"
+            "for b in ('run:p1', 'run:p1-again'): lg.enqueue(b, [gauntlet_job(lg, ids, first_seed=0, games=8, "
+            "older=0)])\nlg.close()")
+    queued = subprocess.run([sys.executable, "-c", code, str(home)], capture_output=True, text=True, env=_env(),
+                            timeout=300)
+    worker = marl("worker", "--until-empty", "--home", str(home), "--json")
+    report = json.loads(worker.out) if worker.code == 0 else {}
+    games, twice = _each_game(home)
+    done = db(home, "select count(*) from jobs where state = 'done'")[0][0]
+    held = queued.returncode == 0 and worker.code == 0 and done == 2 and games > 0 and twice == 0
+    return held, (f"2 jobs queued, {done} done ({report.get('games', '?')} games played); {games} games stored, "
+                  f"{twice} twice")
+
+
+# ---------------------------------------------------------------------------------------------------------------
 
 
 def main() -> int:

@@ -226,6 +226,7 @@ def tournament(
     The games are played under the options the players were made for, with --env-option over them, and count in
     that variant of the game: its stored games are the ones reused, its ladder is the one printed."""
     from ..league.ladder import ladder, verdict_lines
+    from ..rated.seeds import joined_text
     from ..rated.tournament import TournamentPlan
 
     if games_per_pair < 2:
@@ -238,19 +239,29 @@ def tournament(
         if not wait and not queue:
             raise MarlError("--no-wait leaves queued games to the workers: add --queue")
         if queue:
-            batch = _queued_tournament(league, plan, seed, parallel, device, wait, quiet or json_out)
+            sub = plan.enqueue(league, seed, device)
             if not wait:
                 if json_out:
-                    print_json({"batch": batch, "jobs": len(league.jobs(batch=batch)), "games": plan.total})
+                    print_json(sub.to_json())
                 else:
-                    console.print(f"queued {plan.total} games of {len(plan.pairs)} pairs as batch {batch}: marl "
-                                  f"worker plays them, marl queue --batch {batch} follows them", markup=False)
+                    console.print(_queued_line(sub), markup=False)
                 return
+            if not quiet and (not json_out or sub.joined_games):  # (--json: stdout holds the ladder alone)
+                err_console.print(_queued_line(sub, waiting=True), markup=False)
         else:
-            with progress_bar("tournament", plan.total, "games", progress_enabled(quiet or json_out)) as tick:
-                plan.play(league, seed, parallel, device, on_games=tick)
+            sub = plan.take(league, seed, device)
+            with progress_bar("tournament", sub.games, "games", progress_enabled(quiet or json_out)) as tick:
+                plan.play_taken(league, sub, parallel, device, on_games=tick)
+            if sub.joined_games and not quiet:
+                err_console.print(f"joined {joined_text(sub.joined, sub.playing)} (of these pairs: not played "
+                                  "again)" + ("; playing them with the workers attached" if sub.joined else ""),
+                                  markup=False)
+        _see_through(league, sub.batch, sub.joined_jobs, (sub.games if queue else 0) + sum(sub.joined.values()),
+                     parallel, device, quiet or json_out)
         if not json_out:
-            console.print(f"{len(plan.pairs)} pairs needed games, {plan.total} played")
+            joined = f"; {sub.joined_games} on their way already were joined" if sub.joined_games else ""
+            console.print(f"{len(plan.pairs)} pairs needed games, {sub.games} played{joined}" if plan.pairs else
+                          f"every pair has its {games_per_pair} games already: nothing played", markup=False)
             if plan.apart:
                 console.print(f"{len(plan.apart)} pair{'s' * (len(plan.apart) != 1)} cannot meet and were left out "
                               f"(in {env} a snapshot plays only seats of its own role: two of one role are rated "
@@ -264,38 +275,58 @@ def tournament(
                   variant=variant_options(variant), verdicts=verdict_lines(rows))
 
 
-def _queued_tournament(league: Any, plan: Any, seed: int | None, parallel: int, device: str, wait: bool,
-                       quiet: bool) -> str:
-    """The tournament's missing games queued as a batch; with ``wait`` played by the workers and this command until
-    every job has ended (a job that died: one line, exit 2, after the games that were played are stored)."""
+def _queued_line(sub: Any, waiting: bool = False) -> str:
+    """What ``--queue`` did: the games it queued, and those of its pairs on their way already that it joined."""
+    from ..rated.seeds import joined_text
+
+    if not sub.games and not sub.joined_games:
+        return "every pair has its games already: nothing queued"
+    said = []
+    if sub.games:
+        said.append(f"queued {sub.games} games of {sub.pairs} pairs as batch {sub.batch}")
+    if sub.joined_games:
+        said.append(("and joined " if said else "nothing queued twice: joined ") + joined_text(sub.joined, sub.playing)
+                    + " (of these pairs)")
+    follow = [b for b in (sub.batch, *sub.joined) if b]
+    tail = ("; playing them with the workers attached" if waiting else
+            ": marl worker plays them, " + ", ".join(f"marl queue --batch {b}" for b in follow) + " follows them"
+            if follow else "")
+    return " ".join(said) + tail
+
+
+def _see_through(league: Any, own: str | None, joined: dict[str, list[int]], total: int, parallel: int,
+                 device: str, quiet: bool) -> None:
+    """See the command's own batch and the jobs it joined (by batch) through, one batch after the other: play the
+    jobs that no worker has taken, with the workers attached, until every one has ended (a job that died: one line,
+    exit 2, after the games that were played are stored). ``total``: the games the progress bar waits for. Ctrl-C
+    cancels the command's own batch; a joined job is someone else's, and goes back to the queue if in play here."""
     from ..rated.jobs import see_through
     from ..rated.queued import dead_jobs_error
 
-    batch = plan.enqueue(league, seed, device)
-    if not wait:
-        return batch
-    if not quiet:
-        err_console.print(f"queued {len(league.jobs(batch=batch))} jobs as batch {batch}; playing them with the "
-                          "workers attached", markup=False)
-    done = [0]
-    with progress_bar("tournament (queued)", plan.total, "games", progress_enabled(quiet)) as tick:
-        def on_change(jobs: list[Any]) -> bool:
-            n = sum(int((j.result or {}).get("games", 0)) for j in jobs if j.state == "done")
-            tick(n - done[0])
-            done[0] = n
-            return False
+    work: list[tuple[str, list[int] | None]] = [(own, None)] if own else []
+    work += [(b, ids) for b, ids in joined.items() if b != own]
+    if not work:
+        return
+    done: dict[str, int] = {}
+    with progress_bar("tournament (queued)", total, "games", progress_enabled(quiet)) as tick:
+        for batch, ids in work:
+            def on_change(jobs: list[Any], batch: str = batch) -> bool:
+                n = sum(int((j.result or {}).get("games", 0)) for j in jobs if j.state == "done")
+                tick(n - done.get(batch, 0))
+                done[batch] = n
+                return False
 
-        try:
-            jobs = see_through(league, batch, device=device, parallel=parallel, on_change=on_change)
-        except KeyboardInterrupt:
-            n = league.cancel_jobs(batch=batch)
-            err_console.print(f"interrupted: {n} jobs of {batch} cancelled; the games of the jobs done are stored",
-                              markup=False)
-            raise
-    dead = dead_jobs_error(jobs)
-    if dead is not None:
-        raise dead
-    return batch
+            try:
+                jobs = see_through(league, batch, device=device, parallel=parallel, on_change=on_change, ids=ids)
+            except KeyboardInterrupt:
+                if ids is None:
+                    n = league.cancel_jobs(batch=batch)
+                    err_console.print(f"interrupted: {n} jobs of {batch} cancelled; the games of the jobs done are "
+                                      "stored", markup=False)
+                raise
+            dead = dead_jobs_error(jobs)
+            if dead is not None:
+                raise dead
 
 
 def _field(league: Any, players: list[str] | None, env: str | None, env_option: list[str] | None, run: str | None,

@@ -186,11 +186,18 @@ def match(
         forecast = forecaster(league, jobs[0].row_b.env, [r for job in jobs for r in (*job.rows_a, job.row_b)],
                               options)
         for job in jobs:
-            first = league.fresh_seed(job.rows_a[0].id, job.row_b.id) if seed is None else seed
             if queue:
-                report, batch = _queued(league, job, budget, first, options, settings, confidence, device, parallel,
+                report, batch = _queued(league, job, budget, seed, options, settings, confidence, device, parallel,
                                         quiet or json_out)
+            elif store:  # (its seeds taken first: after every seed the pair has, queued ones too)
+                taken = job.take_here(league, budget, seed, options, device)
+                _said_after(taken, quiet or json_out)
+                report, batch = _local(league, store, job, budget, taken.first_seed, options, settings, confidence,
+                                       device, parallel, quiet, loaded=taken.loaded), None
+                report.after_queued = taken.after
+                job.settle_here(league, taken, report)
             else:
+                first = league.fresh_seed(job.rows_a[0].id, job.row_b.id) if seed is None else seed
                 report, batch = _local(league, store, job, budget, first, options, settings, confidence, device,
                                        parallel, quiet), None
             if forecast is not None and job.team_name is None:
@@ -210,10 +217,20 @@ def match(
         raise typer.Exit(sprt_exit_code(reports[0]))
 
 
+def _said_after(taken, quiet: bool) -> None:
+    """One line on stderr when the pair's games queued already made the match start after them."""
+    if taken.after and not quiet:
+        from ..rated.seeds import joined_text
+
+        err_console.print(f"{joined_text(taken.after, {})} for these players: this match plays new seeds, from "
+                          f"{taken.first_seed}", markup=False)
+
+
 def _local(league, store: bool, job, games: int, first: int, options, settings, confidence: float, device: str,
-           parallel: int, quiet: bool) -> MatchReport:
-    """One match of ``marl match``, played here (and stored, with ``store``); Ctrl-C: what was kept, exit 130."""
-    pa, pb, ids = job.load(league, first, device)
+           parallel: int, quiet: bool, loaded=None) -> MatchReport:
+    """One match of ``marl match``, played here (and stored, with ``store``); Ctrl-C: what was kept, exit 130.
+    ``loaded``: its players, loaded from ``first`` already."""
+    pa, pb, ids = loaded or job.load(league, first, device)
     try:
         with progress_bar(f"{job.team_name or pa[0].id} vs {pb.id}", games + games % 2, "games",
                           progress_enabled(quiet)) as tick:
@@ -226,13 +243,12 @@ def _local(league, store: bool, job, games: int, first: int, options, settings, 
         raise typer.Exit(130) from None
 
 
-def _queued(league, job, games: int, first: int, options, settings, confidence: float, device: str, parallel: int,
-            quiet: bool) -> tuple[MatchReport, str]:
-    """One match of ``marl match --queue``: queued as jobs, played by the workers and this command, reported as one."""
-    from ..rated.queued import queue_match
-
-    queued = queue_match(league, job.rows_a, job.row_b, games=games, first_seed=first, env_options=options,
-                         team_name=job.team_name, sprt=settings, confidence=confidence, device=device)
+def _queued(league, job, games: int, seed: int | None, options, settings, confidence: float, device: str,
+            parallel: int, quiet: bool) -> tuple[MatchReport, str]:
+    """One match of ``marl match --queue``: queued as jobs (on seeds after every seed the pair has, queued ones too),
+    played by the workers and this command, reported as one."""
+    queued, taken = job.take_queued(league, games, seed, options, sprt=settings, confidence=confidence, device=device)
+    _said_after(taken, quiet)
     if not quiet:
         err_console.print(f"queued {len(league.jobs(batch=queued.batch))} jobs as batch {queued.batch} (marl queue "
                           f"--batch {queued.batch}); playing them with the workers attached", markup=False)
@@ -246,7 +262,9 @@ def _queued(league, job, games: int, first: int, options, settings, confidence: 
                 tick(n - done[0])
                 done[0] = n
 
-            return queued.see_through(device=device, parallel=parallel, on_jobs=on_jobs), queued.batch
+            report = queued.see_through(device=device, parallel=parallel, on_jobs=on_jobs)
+            report.after_queued = taken.after
+            return report, queued.batch
     except KeyboardInterrupt:
         n = league.cancel_jobs(batch=queued.batch)
         err_console.print(f"interrupted: {n} jobs of {queued.batch} cancelled; the games of the jobs done are stored "

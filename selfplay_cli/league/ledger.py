@@ -602,9 +602,15 @@ class Ledger(Database):
         return self._read(work)
 
     def fresh_seed(self, a: int, b: int) -> int:
-        """The first seed above every stored game between players ``a`` and ``b``, in any variant (0 when they never
-        met): where a new match of the two starts by default, so that it never plays, and stores, games it already
-        has (two deterministic players on the same seeds play the same games: stored twice, they would count twice)."""
+        """The first seed above every stored game between players ``a`` and ``b``, in any variant, and above every
+        seed taken for their games still to come (queued, or in play: :mod:`selfplay_cli.league.seeds`); 0 when they
+        never met: where a new match of the two starts by default, so that it never plays, and stores, games it
+        already has or will have (two deterministic players on the same seeds play the same games: stored twice,
+        they would count twice)."""
+        return max(self.played_seed_end(a, b), self.seeds_end(a, b))  # type: ignore[attr-defined]
+
+    def played_seed_end(self, a: int, b: int) -> int:
+        """The first seed above every stored game between players ``a`` and ``b``, in any variant (0: none)."""
         t = self.games(players=[int(a), int(b)], rated=False, variant=None)
         return int(t.seed.max()) + 1 if len(t) else 0
 

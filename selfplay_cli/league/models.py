@@ -24,6 +24,10 @@ Tables
   ``batch`` (a tournament, an SPRT, a run's gauntlets), leased by one worker at a time that beats a heart on it; a job
   whose heart stopped goes back to the queue, one that failed is tried again later, and its games are stored with
   the job marked done in one transaction under the match key ``job:<id>``, so a job finished twice counts once.
+* ``seed_ranges``: the seeds games between two players were taken for before they were played, a range of rounds at a
+  time (a queued job's, or a command's playing them itself), each the pair's ``seq``-th: ``(lo, hi, seq)`` is unique,
+  so two commands that planned new games of one pair from the same look both write its next range and the database
+  keeps one (schema revision 0004; :mod:`selfplay_cli.league.seeds`).
 
 Every JSON column is a :class:`BoundedJSON`: read within a size of its own and a depth, a bad value one unusable row
 (:mod:`selfplay_cli.league.bounded_json`), never a failed command.
@@ -57,8 +61,8 @@ from sqlalchemy.types import TypeDecorator
 
 from selfplay_cli.league.bounded_json import read_column
 
-__all__ = ["Base", "Blob", "BoundedJSON", "Game", "GameSeat", "Job", "Match", "Meta", "Player", "Run", "Tag",
-           "UTCDateTime", "Worker", "utcnow"]
+__all__ = ["Base", "Blob", "BoundedJSON", "Game", "GameSeat", "Job", "Match", "Meta", "Player", "Run", "SeedRange",
+           "Tag", "UTCDateTime", "Worker", "utcnow"]
 
 
 def utcnow() -> datetime:
@@ -324,3 +328,29 @@ class Job(Base):
     result: Mapped[dict[str, Any] | None] = mapped_column(BoundedJSON(RESULT_BYTES))
     created_at: Mapped[datetime] = mapped_column(default=utcnow)
     finished_at: Mapped[datetime | None] = mapped_column()
+
+
+class SeedRange(Base):
+    """Seeds ``[first_seed, first_seed + rounds)`` taken for ``games`` games between players ``lo`` and ``hi``
+    (``lo < hi``; which one sat where is the games' business) in the variant ``variant`` names, before they are
+    played: by a queued job (``job_id``), or by a command that plays them itself (``job_id`` None, ``owner`` naming it).
+    The pair's ``seq``-th range: ``(lo, hi, seq)`` is unique, so of two commands that planned the pair's next games
+    from the same look, the database keeps one range and the other looks again (:mod:`selfplay_cli.league.seeds`)."""
+
+    __tablename__ = "seed_ranges"
+    __table_args__ = (UniqueConstraint("lo", "hi", "seq", name="uq_seed_ranges_pair_seq"),)
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    lo: Mapped[int] = mapped_column(ForeignKey("players.id"))
+    hi: Mapped[int] = mapped_column(ForeignKey("players.id"))
+    seq: Mapped[int] = mapped_column(Integer)
+    first_seed: Mapped[int] = mapped_column(BigInteger)
+    rounds: Mapped[int] = mapped_column(BigInteger)
+    games: Mapped[int] = mapped_column(BigInteger)
+    variant: Mapped[str] = mapped_column(String(64), default="")
+    """The variant the games count in: ``""`` for the game's default, else the sha256 of its key (a key is JSON of any
+    length)."""
+    owner: Mapped[str] = mapped_column(String(200))
+    """The batch of the range's job, or the command playing the range itself (``marl@host:pid``)."""
+    job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id"), index=True)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)

@@ -5,6 +5,9 @@ to play (a tournament, an SPRT, the games a gate still needs, a run's gauntlets)
 each, in a ``batch``; ``marl worker`` processes anywhere lease one job at a time, beat a heart on it while they play,
 and store its games together with the job's end in one transaction.
 
+* **Queuing** (:meth:`Queue.enqueue`) writes a batch's jobs in one transaction, each with the seeds its games are
+  played on (:mod:`selfplay_cli.league.seeds`): a pair's seeds are taken under a unique key, so the same games queued
+  twice, by one user or two at the same moment, are queued once (the second command joins the first's jobs).
 * **Leasing** (:meth:`Queue.claim`) takes the first job by priority then age that is queued (and past its backoff),
   or leased by a worker whose heart has not beaten on it for ``scavenge`` seconds (fishtest's 360 s): the job goes
   back to the pool by being taken again. On PostgreSQL the row is taken with ``FOR UPDATE SKIP LOCKED``, so workers
@@ -26,7 +29,7 @@ Times are the workers' own clocks in UTC; a lease lapses after minutes, so clock
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timedelta
 from typing import Any
@@ -37,6 +40,7 @@ from sqlalchemy.orm import Session, aliased
 from selfplay_cli.league.bounded_json import JSONBoundsError, check_value, say_unusable, unreadable
 from selfplay_cli.league.db import LeagueError
 from selfplay_cli.league.models import SPEC_BYTES, Job, Worker, utcnow
+from selfplay_cli.league.seeds import Pair, SeedClaim
 from selfplay_cli.results import GameResult
 
 __all__ = ["BACKOFF_SECONDS", "BEAT_SECONDS", "ENDED", "JOB_STATES", "MAX_TRIES", "SCAVENGE_SECONDS", "TRIES_LIMIT",
@@ -68,6 +72,8 @@ class NewJob:
     spec: dict[str, Any]
     priority: int = 0
     max_tries: int = MAX_TRIES
+    claim: SeedClaim | None = None
+    """The seeds its games are played on, taken with it (:mod:`selfplay_cli.league.seeds`), or None."""
 
 
 @dataclass(frozen=True)
@@ -189,9 +195,9 @@ def _lazy_commit(s: Session, sqlite: bool) -> None:
 
 
 @functools.lru_cache(maxsize=16)
-def _claim_query(by_batch: bool, by_kind: bool, sqlite: bool) -> Any:
+def _claim_query(by_batch: bool, by_kind: bool, sqlite: bool, by_id: bool = False) -> Any:
     """The next job to lease (see :meth:`Queue.claim`), built once: with bound ``now`` and ``lapsed`` (and
-    ``batches``, ``kinds``)."""
+    ``batches``, ``kinds``, ``ids``)."""
     before = aliased(Job)
     now, lapsed = bindparam("now"), bindparam("lapsed")
     ready = or_(Job.after.is_(None), exists().where(before.id == Job.after, before.state.in_(tuple(ENDED))))
@@ -202,6 +208,8 @@ def _claim_query(by_batch: bool, by_kind: bool, sqlite: bool) -> Any:
         q = q.where(Job.batch.in_(bindparam("batches", expanding=True)))
     if by_kind:
         q = q.where(Job.kind.in_(bindparam("kinds", expanding=True)))
+    if by_id:
+        q = q.where(Job.id.in_(bindparam("ids", expanding=True)))
     if not sqlite:  # workers never wait for each other's claims
         q = q.with_for_update(skip_locked=True, of=Job.__table__)
     return q
@@ -308,10 +316,13 @@ class Queue:
 
     # -- jobs
 
-    def enqueue(self, batch: str, jobs: Sequence[NewJob], *, chain: bool = False, after: int | None = None
-                ) -> list[int]:
+    def enqueue(self, batch: str, jobs: Sequence[NewJob], *, chain: bool = False, after: int | None = None,
+                seen: Mapping[Pair, int] | None = None) -> list[int]:
         """Queue ``jobs`` in ``batch`` in one transaction; their ids, in order. ``chain``: each job waits for the one
-        before it (the first for ``after``, when given)."""
+        before it (the first for ``after``, when given). The seeds the jobs claim (:attr:`NewJob.claim`) are taken
+        with them, each pair's after the ``seq`` the look they were planned from found (``seen``): when another
+        command took seeds of one of the pairs since, nothing is queued
+        (:class:`~selfplay_cli.league.seeds.SeedsTaken`)."""
         if not batch or len(batch) > 200:
             raise LeagueError(f"a batch name must have 1 to 200 characters, not {len(batch)}")
         for nj in jobs:
@@ -331,14 +342,18 @@ class Queue:
                 ids.append(j.id)
                 if chain:
                     prev = j.id
+            claimed = [(nj.claim, i) for nj, i in zip(jobs, ids, strict=True) if nj.claim is not None]
+            self._write_ranges(s, [c for c, _ in claimed], seen or {}, batch,  # type: ignore[attr-defined]
+                               [i for _, i in claimed])
             return ids
 
-        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+        return self._taking(work)  # type: ignore[attr-defined,no-any-return]
 
     def claim(self, worker_id: int, *, batches: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
-              scavenge: float = SCAVENGE_SECONDS) -> JobRow | None:
-        """Lease the next job for ``worker_id`` (of ``batches`` / ``kinds`` only, when given), or None if none is
-        ready. A job leased as many times as it may be whose lease lapsed again is marked dead when it comes up."""
+              scavenge: float = SCAVENGE_SECONDS, ids: Sequence[int] | None = None) -> JobRow | None:
+        """Lease the next job for ``worker_id`` (of ``batches`` / ``kinds`` / with ``ids`` only, when given), or None
+        if none is ready. A job leased as many times as it may be whose lease lapsed again is marked dead when it
+        comes up."""
 
         def work(s: Session) -> JobRow | None:
             _lazy_commit(s, self.is_sqlite)  # type: ignore[attr-defined]
@@ -349,7 +364,10 @@ class Queue:
                 params["batches"] = list(batches)
             if kinds is not None:
                 params["kinds"] = list(kinds)
-            q = _claim_query(batches is not None, kinds is not None, self.is_sqlite)  # type: ignore[attr-defined]
+            if ids is not None:
+                params["ids"] = [int(i) for i in ids]
+            q = _claim_query(batches is not None, kinds is not None, self.is_sqlite,  # type: ignore[attr-defined]
+                             ids is not None)
             jobs = Job.__table__
             while True:  # (Core statements: the ORM's bookkeeping would double the time a lease takes)
                 j = s.execute(q, params).first()

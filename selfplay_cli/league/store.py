@@ -53,6 +53,7 @@ from selfplay_cli.league.roster import (
     check_existing_name,
     check_name,
 )
+from selfplay_cli.league.seeds import Seeds
 from selfplay_cli.results import GameResult
 
 SNAPSHOTS = "snapshots"
@@ -86,7 +87,7 @@ __all__ = [
 ]
 
 
-class League(Queue, Ledger, Roster, Blobs, Database):
+class League(Queue, Seeds, Ledger, Roster, Blobs, Database):
     """The league database: players, runs, matches and the game ledger (see the module docstring)."""
 
     def snapshot_file(self, row: PlayerRow) -> Path:

@@ -24,6 +24,7 @@ from ..stats.match import match_stats
 from . import job_spec
 from .match import MatchReport, env_options_of, load_player, mix_seed, round_size, run_match
 from .played import Played
+from .seeds import Settled
 from .snapshots import share_snapshots
 
 __all__ = ["GAMES", "JOB_ROUNDS", "MAX_JOB_ROUNDS", "MAX_TEAM", "check_spec", "combine", "games_jobs", "play",
@@ -57,10 +58,13 @@ def check_spec(spec: dict[str, Any]) -> None:
 
 def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *, games: int, first_seed: int,
                match_kind: str, env_options: dict[str, Any] | None = None, params: dict[str, Any] | None = None,
-               team_name: str | None = None, job_rounds: int = JOB_ROUNDS, device: str = "cpu") -> list[NewJob]:
+               team_name: str | None = None, job_rounds: int = JOB_ROUNDS, device: str = "cpu",
+               seeds: Settled | None = None) -> list[NewJob]:
     """The jobs of a match of ``games`` games (rounded up to whole rounds) from ``first_seed``: ``job_rounds`` rounds
     each, the last the rest. The players are loaded once here to know a round's size (and to refuse, in one line, a
-    match that cannot be played) and their snapshots' bytes are put in the league, so any worker can fetch them."""
+    match that cannot be played) and their snapshots' bytes are put in the league, so any worker can fetch them.
+    ``seeds``: what :func:`~selfplay_cli.rated.seeds.settle` decided for the match; each job then claims its seeds
+    (:attr:`~selfplay_cli.league.queue.NewJob.claim`), taken when it is queued."""
     if games < 1:
         raise MarlError(f"--games must be at least 1, not {games}")
     pa = [load_player(league, r, device=device, seed=mix_seed(first_seed, i)) for i, r in enumerate(rows_a)]
@@ -76,7 +80,8 @@ def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *,
                 "round": start, "match_seed": first_seed, "env_options": dict(env_options or {}),
                 "match_kind": match_kind, "params": dict(params or {}), "team_name": team_name}
         check_spec(spec)  # (what a worker would refuse is refused here, before anything is queued)
-        out.append(NewJob(kind=GAMES, env=row_b.env, spec=spec))
+        claim = seeds.claim(first_seed + start, n, n * per) if seeds is not None else None
+        out.append(NewJob(kind=GAMES, env=row_b.env, spec=spec, claim=claim))
     return out
 
 

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from ..league.seeds import Pair
 from ..league.store import League, PlayerRow
 from ..stats.match import MatchStats, match_stats, points_stats
-from .match import load_player, mix_seed, run_match
+from .match import load_player, mix_seed, round_size, run_match
+from .seeds import Settled
 from .snapshots import players_variant
 
 
@@ -62,28 +65,22 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
 
         raise MarlError(f"{cand.full_name} and {base.full_name} hold the same weights: one player, not stronger "
                         "than itself")
-    h2h = head_to_head(league, cand.id, base.id, variant=players_variant(league, cand.env, [cand, base], env_options))
+    variant = players_variant(league, cand.env, [cand, base], env_options)
+    h2h = head_to_head(league, cand.id, base.id, variant=variant)
     stored = h2h["games"]  # ledger games (a cooperative comparison is two episodes)
+    report, played = None, 0
+    if stored < games:
+        joined, report = _play(league, cand, base, games - stored, variant, env_options, queue, device, parallel)
+        if joined:  # the pair's games another command queued, seen through: in the ledger now, with ours
+            h2h, report = head_to_head(league, cand.id, base.id, variant=variant), None
+        played = h2h["games"] - stored + (report.games if report is not None else 0)
     wins, draws, losses = h2h["wins"], h2h["draws"], h2h["losses"]
     penta = list(h2h["pentanomial"])
-    played = 0
-    if stored < games:
-        first = league.fresh_seed(cand.id, base.id)  # never the seeds of the stored games again
-        if queue:
-            from .queued import queue_match
-
-            report = queue_match(league, [cand], base, games=games - stored, first_seed=first, match_kind="gate",
-                                 env_options=env_options, device=device).see_through(device=device, parallel=parallel)
-        else:
-            pa = load_player(league, cand, device=device, seed=mix_seed(first, 0))
-            pb = load_player(league, base, device=device, seed=mix_seed(first, 1))
-            report = run_match(pa, pb, games=games - stored, first_seed=first, parallel=parallel,
-                               league=league, player_ids={pa.id: cand.id, pb.id: base.id}, kind="gate",
-                               env_options=env_options)
-        played = report.games
+    rounds = list(h2h["rounds"])
+    if report is not None:
         wins, draws, losses = wins + report.wins, draws + report.draws, losses + report.losses
         penta = [x + y for x, y in zip(penta, report.pentanomial, strict=True)]
-    rounds = h2h["rounds"] + (report.round_points if played else [])
+        rounds += report.round_points
     if any(x not in (0.0, 0.5, 1.0) for r in rounds for x in r):  # a game played for stakes: by the points won
         stats = points_stats(rounds, paired=True, confidence=2 * confidence - 1)
     else:
@@ -91,3 +88,48 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
                             confidence=2 * confidence - 1)
     return GateVerdict(cand.full_name, base.full_name, min_diff, confidence, stats, stored, played,
                        passed=stats.elo_low >= min_diff)
+
+
+def _play(league: League, cand: PlayerRow, base: PlayerRow, games: int, variant: str,
+          env_options: dict[str, Any] | None, queue: bool, device: str, parallel: int) -> tuple[bool, Any]:
+    """The ``games`` the pair misses (:mod:`.seeds`): those on their way in the queue already (another gate of the pair
+    queued at the same moment, a tournament) joined and seen through, played here with the workers attached; the
+    rest played and stored on seeds after every seed the pair has, queued or here. Whether any were joined, and the
+    report of the new games (None: none)."""
+    from .jobs import see_through, worker_name
+    from .queued import dead_jobs_error, queue_match
+    from .seeds import Ask, settle
+
+    def write(settled: list[Settled], seen: Mapping[Pair, int]) -> Any:
+        (d,) = settled
+        if not d.games:
+            return None
+        first = int(d.first_seed)  # type: ignore[arg-type]
+        if queue:
+            return queue_match(league, [cand], base, games=d.games, first_seed=first, match_kind="gate",
+                               env_options=env_options, device=device, seeds=d, seen=seen)
+        pa = load_player(league, cand, device=device, seed=mix_seed(first, 0))
+        pb = load_player(league, base, device=device, seed=mix_seed(first, 1))
+        per = round_size(pa, pb, first_seed=first, env_options=env_options)
+        rounds = -(-d.games // per)
+        league.take_seeds([d.claim(first, rounds, rounds * per)], seen, worker_name("marl"))
+        return first, d.games, pa, pb
+
+    (d,), new = settle(league, [Ask(cand.id, base.id, games, variant, joins=True)], write)
+    by_batch: dict[str, list[int]] = {}
+    for r in d.joined:
+        if r.job_id is not None:
+            by_batch.setdefault(r.owner, []).append(r.job_id)
+    for batch, ids in by_batch.items():
+        dead = dead_jobs_error(see_through(league, batch, device=device, parallel=parallel, ids=ids))
+        if dead is not None:
+            raise dead
+    if new is None:
+        report = None
+    elif queue:
+        report = new.see_through(device=device, parallel=parallel)
+    else:
+        first, n, pa, pb = new
+        report = run_match(pa, pb, games=n, first_seed=first, parallel=parallel, league=league,
+                           player_ids={pa.id: cand.id, pb.id: base.id}, kind="gate", env_options=env_options)
+    return bool(d.joined), report

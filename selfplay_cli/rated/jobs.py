@@ -178,23 +178,25 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
 def see_through(league: League, batch: str, *, device: str = "cpu", parallel: int = 1024, play: bool = True,
                 beat: float = BEAT_SECONDS, scavenge: float = SCAVENGE_SECONDS, poll: float = 0.5,
                 on_games: Callable[[int], None] | None = None,
-                on_change: Callable[[list[JobRow]], bool] | None = None, role: str = "marl") -> list[JobRow]:
-    """See a queued batch through: play its jobs that no worker has taken (``play``), wait for those that workers
-    play, until every job has ended; the batch's jobs then. ``on_change(jobs)`` is called at every look at the batch
-    (before each job this process plays, and each ``poll`` seconds while it waits: a progress display follows it);
-    when it returns True the batch's remaining jobs are cancelled (a decided SPRT) and this returns. Ctrl-C gives a
-    job in play back to the queue."""
+                on_change: Callable[[list[JobRow]], bool] | None = None, role: str = "marl",
+                ids: Sequence[int] | None = None) -> list[JobRow]:
+    """See a queued batch (its jobs with ``ids``, when given) through: play its jobs that no worker has taken
+    (``play``), wait for those that workers play, until every job has ended; the batch's jobs then.
+    ``on_change(jobs)`` is called at every look at the batch (before each job this process plays, and each ``poll``
+    seconds while it waits: a progress display follows it); when it returns True the batch's remaining jobs are
+    cancelled (a decided SPRT) and this returns. Ctrl-C gives a job in play back to the queue."""
     worker_id = league.add_worker(worker_name(role), socket.gethostname(), os.getpid(), serves=[batch]) if play \
         else None
     try:
         while True:
-            jobs = league.jobs(batch=batch)
+            jobs = league.jobs(batch=batch, ids=ids)
             if on_change is not None and on_change(jobs):
-                league.cancel_jobs(batch=batch)
-                return league.jobs(batch=batch)
+                league.cancel_jobs(batch=batch, ids=ids)
+                return league.jobs(batch=batch, ids=ids)
             if all(j.state in ENDED for j in jobs):
                 return jobs
-            job = league.claim(worker_id, batches=[batch], scavenge=scavenge) if worker_id is not None else None
+            job = league.claim(worker_id, batches=[batch], scavenge=scavenge, ids=ids) \
+                if worker_id is not None else None
             if job is None:
                 time.sleep(poll)
                 if worker_id is not None:

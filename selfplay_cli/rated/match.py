@@ -206,6 +206,8 @@ class MatchReport:
     seating_rule: str = ""  # and the rule that seated them, in words (describe_resize)
     step_limit: int | None = None  # the most steps a game lasts, as the game declares it for these options
     tie_tolerance: float = 0.0  # scores closer than this are level (a draw), as the game declares it
+    after_queued: dict[str, int] = field(default_factory=dict)  # games of the pair queued already when it started,
+    # by batch: it played new seeds after theirs
 
     @property
     def held(self) -> bool | None:
@@ -253,6 +255,7 @@ class MatchReport:
             "variant": variant_options(self.variant),
             "predicted": None if self.predicted is None else {**self.predicted.to_json(), "held": self.held},
             "paired": self.paired,
+            "after_queued": [{"batch": b, "games": n} for b, n in self.after_queued.items()],
         }
         if self.seating is not None:
             out["seating"] = list(self.seating)

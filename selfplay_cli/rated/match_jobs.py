@@ -4,16 +4,20 @@ of each. The command parses and prints; this holds what a test would call withou
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
 from ..errors import MarlError
+from ..league.seeds import Pair
 from ..league.store import League, PlayerRow
 from ..policies import Policy
-from .match import MatchReport, load_player, mix_seed
+from .match import MatchReport, load_player, mix_seed, round_size
 from .names import Team
+from .seeds import Ask, Settled, settle
 
-__all__ = ["MatchJob", "check_distinct_weights", "forecaster", "match_jobs", "pairings", "predict"]
+__all__ = ["MatchJob", "Taken", "check_distinct_weights", "forecaster", "match_jobs", "on_their_way", "pairings",
+           "predict"]
 
 
 @dataclass(frozen=True)
@@ -32,6 +36,80 @@ class MatchJob:
         pb = load_player(league, self.row_b, device=device, seed=mix_seed(first_seed, 1))
         ids = {**{p.id: r.id for p, r in zip(pa, self.rows_a, strict=True)}, pb.id: self.row_b.id}
         return pa, pb, ids
+
+    def ask(self, league: League, games: int, seed: int | None, options: dict[str, Any] | None) -> Ask:
+        """The match's games as :func:`~selfplay_cli.rated.seeds.settle` takes them: ``games`` more, after every seed
+        the pair has (or from the user's ``seed``), in the variant the players and ``options`` make."""
+        from .snapshots import players_variant
+
+        variant = players_variant(league, self.row_b.env, [*self.rows_a, self.row_b], options)
+        return Ask(self.rows_a[0].id, self.row_b.id, games, variant, seed=seed)
+
+    def take_here(self, league: League, games: int, seed: int | None, options: dict[str, Any] | None,
+                  device: str, looked: Callable[[], None] | None = None) -> Taken:
+        """Take the seeds of the match's ``games`` to play them in this process (:mod:`selfplay_cli.rated.seeds`;
+        ``looked``: see :func:`~selfplay_cli.rated.seeds.settle`), its players loaded from the first of them."""
+        from .jobs import worker_name
+
+        def write(settled: list[Settled], seen: Mapping[Pair, int]) -> Taken:
+            (d,) = settled
+            first = int(d.first_seed)  # type: ignore[arg-type]
+            pa, pb, ids = self.load(league, first, device)
+            per = round_size(pa[0], pb, first_seed=first, env_options=options,
+                             team=pa if self.team_name else None)
+            rounds = -(-games // per)
+            (rid,) = league.take_seeds([d.claim(first, rounds, rounds * per)], seen, worker_name("marl"))
+            return Taken(first, rounds, on_their_way(d), rid, (pa, pb, ids))
+
+        return settle(league, [self.ask(league, games, seed, options)], write, looked=looked)[1]
+
+    def take_queued(self, league: League, games: int, seed: int | None, options: dict[str, Any] | None, *,
+                    sprt: Any = None, confidence: float = 0.95, device: str = "cpu") -> tuple[Any, Taken]:
+        """Queue the match's ``games`` as jobs that take their seeds as they are queued
+        (:func:`~selfplay_cli.rated.queued.queue_match`); the :class:`~selfplay_cli.rated.queued.QueuedMatch` and its
+        seeds."""
+        from .queued import queue_match
+
+        def write(settled: list[Settled], seen: Mapping[Pair, int]) -> Any:
+            (d,) = settled
+            first = int(d.first_seed)  # type: ignore[arg-type]
+            return queue_match(league, list(self.rows_a), self.row_b, games=games, first_seed=first,
+                               env_options=options, team_name=self.team_name, sprt=sprt, confidence=confidence,
+                               device=device, seeds=d, seen=seen)
+
+        (d,), queued = settle(league, [self.ask(league, games, seed, options)], write)
+        rounds = sum(int(j.spec["rounds"]) for j in league.jobs(batch=queued.batch))
+        return queued, Taken(int(d.first_seed), rounds, on_their_way(d))  # type: ignore[arg-type]
+
+    def settle_here(self, league: League, taken: Taken, report: MatchReport) -> None:
+        """After the match ended of itself (an SPRT decided before its last game), cut its seeds to the rounds it
+        played: the pair's next games start right after them."""
+        played = len(report.round_points)
+        if taken.range_id is not None and not report.interrupted and 0 < played < taken.rounds:
+            league.settle_seeds(taken.range_id, played, report.games)
+
+
+@dataclass(frozen=True)
+class Taken:
+    """The seeds a match took: ``rounds`` rounds from ``first_seed`` (the range ``range_id``, when taken to be played
+    here, and its players loaded from it: ``loaded``); ``after``: the games of the pair on their way already, that it
+    starts after (batch or command -> games)."""
+
+    first_seed: int
+    rounds: int
+    after: dict[str, int]
+    range_id: int | None = None
+    loaded: tuple[list[Policy], Policy, dict[str, int]] | None = None
+
+
+def on_their_way(settled: Settled) -> dict[str, int]:
+    """The games of the pair on their way in queued jobs, whatever their variant, that ``settled``'s new games start
+    after: batch -> games."""
+    out: dict[str, int] = {}
+    for r in settled.look.ranges:
+        if r.queued:
+            out[r.owner] = out.get(r.owner, 0) + r.games
+    return out
 
 
 def match_jobs(league: League, a: str, side_a: PlayerRow | Team, b: str, side_b: PlayerRow | Team,

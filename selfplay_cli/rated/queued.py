@@ -5,27 +5,36 @@ single match would take it, and the batch's remaining jobs are cancelled once it
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from datetime import datetime, timezone
 from typing import Any
 
 from ..errors import MarlError
 from ..league.queue import JobRow
+from ..league.seeds import Pair
 from ..league.store import League, PlayerRow
 from ..stats.sprt import SPRT
 from .games_jobs import JOB_ROUNDS, combine, games_jobs
 from .jobs import see_through, sprt_verdict
 from .match import MatchReport, SPRTSettings
+from .seeds import Settled
 
 __all__ = ["QueuedMatch", "batch_name", "dead_jobs_error", "queue_match"]
 
 
+_BATCHES = itertools.count(1)
+
+
 def batch_name(kind: str, *parts: str) -> str:
-    """A batch's name: ``kind:part:...:YYYYmmddTHHMMSS-PID``, unique enough and readable in ``marl queue``."""
+    """A batch's name: ``kind:part:...:YYYYmmddTHHMMSS-PID``, readable in ``marl queue``; a process's later batches
+    end in ``-PID-N`` (N = 2, 3, ...), so two of one process in one second are two batches."""
     stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S")
-    return ":".join([kind, *parts, f"{stamp}-{os.getpid()}"])[:200]
+    n = next(_BATCHES)
+    tail = f"{stamp}-{os.getpid()}" + (f"-{n}" if n > 1 else "")
+    return ":".join([kind, *parts])[:200 - len(tail) - 1] + ":" + tail
 
 
 class QueuedMatch:
@@ -87,15 +96,18 @@ class QueuedMatch:
 def queue_match(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *, games: int, first_seed: int,
                 match_kind: str = "match", env_options: dict[str, Any] | None = None, team_name: str | None = None,
                 sprt: SPRTSettings | None = None, confidence: float = 0.95, job_rounds: int = JOB_ROUNDS,
-                device: str = "cpu", params: dict[str, Any] | None = None) -> QueuedMatch:
-    """Queue a match of ``games`` games from ``first_seed`` as jobs of ``job_rounds`` rounds in a new batch."""
+                device: str = "cpu", params: dict[str, Any] | None = None, seeds: Settled | None = None,
+                seen: Mapping[Pair, int] | None = None) -> QueuedMatch:
+    """Queue a match of ``games`` games from ``first_seed`` as jobs of ``job_rounds`` rounds in a new batch; with
+    ``seeds`` (what :func:`~selfplay_cli.rated.seeds.settle` decided, from a look that found ``seen``) the jobs take
+    their seeds as they are queued."""
     who = team_name or rows_a[0].full_name
     batch = batch_name("sprt" if sprt else match_kind, f"{who}-vs-{row_b.full_name}")
     extra = {**(params or {}), **({"sprt": vars(sprt).copy()} if sprt else {})}
     jobs = games_jobs(league, rows_a, row_b, games=games, first_seed=first_seed, match_kind=match_kind,
                       env_options=env_options, params=extra, team_name=team_name, job_rounds=job_rounds,
-                      device=device)
-    league.enqueue(batch, jobs)
+                      device=device, seeds=seeds)
+    league.enqueue(batch, jobs, seen=seen)
     return QueuedMatch(league, batch, sprt=sprt, confidence=confidence)
 
 
