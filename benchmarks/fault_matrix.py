@@ -1362,7 +1362,8 @@ def shared_deep_json(scratch: Path) -> tuple[bool, str]:
         outcomes.append((r.code == 0 and warned, f"{' '.join(args[:2])}: exit {r.code} ({r.seconds:.0f} s)"
                          + ("" if r.code == 0 and warned else f" {r.line[:80]}")))
     r = shared.owner_marl("match", "r/s0", "cpu", "--games", "2")
-    outcomes.append((r.code == 2 and r.one_line and "cannot be read" in r.err, f"match r/s0: exit {r.code}"))
+    ok = r.code == 2 and r.err.splitlines()[-1].startswith("marl: error: ") and "cannot be read" in r.err
+    outcomes.append((ok, f"match r/s0: exit {r.code}" + ("" if ok else f" {r.err[-300:]!r}")))
     return all(ok for ok, _ in outcomes), "; ".join(w for _, w in outcomes)
 
 
