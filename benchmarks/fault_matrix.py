@@ -1368,6 +1368,65 @@ def shared_deep_json(scratch: Path) -> tuple[bool, str]:
 
 
 # ---------------------------------------------------------------------------------------------------------------
+@fault("shared PostgreSQL: a member points the owner's snapshot blob at a private file of the worker's machine and "
+       "the league's blob folder at another user's folder")
+def shared_blob_locations(scratch: Path) -> tuple[bool, str]:
+    shared = SharedLeague(scratch)
+    ids = _owner_league(shared)
+    secret = scratch / "private"
+    secret.write_bytes(b"the worker's private file " * 40)
+    size, digest = secret.stat().st_size, hashlib.sha256(secret.read_bytes()).hexdigest()
+    other = scratch / "another user's folder"
+    other.mkdir()
+    shared.member_sql("UPDATE blobs SET data = NULL, url = %(u)s, size = %(n)s WHERE sha256 = "
+                      "(SELECT sha256 FROM players WHERE id = %(i)s)",
+                      {"u": secret.as_uri(), "n": size, "i": ids["s0"]})
+    shared.member_sql("INSERT INTO meta (key, value) VALUES ('blob_url', %(u)s)", {"u": other.as_uri()})
+    _member_job(shared, json.dumps(_games_spec(ids["s0"], ids["cpu"])))
+    worker = marl("worker", "--until-empty", "--db", shared.owner_url, "--home", str(scratch / "worker-home"),
+                  env={"MARL_CACHE": str(scratch / "worker-cache")}, timeout=600)  # another machine: empty cache
+    (error,) = shared.member_sql("SELECT error FROM jobs")[0]
+    told = error is None or str(size) in error or f"{size:,}" in error or digest[:8] in error
+    train = shared.owner_marl("train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1",
+                              "--snapshot-steps", "2048", "--steps", "4096", "--eval-games", "0", "--run", "t", "-q",
+                              timeout=900)
+    (in_db,) = shared.member_sql("SELECT count(*) FROM players p JOIN blobs b ON b.sha256 = p.sha256 JOIN runs r ON "
+                                 "r.id = p.run_id WHERE r.name = 't' AND b.data IS NOT NULL")[0]
+    written = sorted(p.name for p in other.iterdir())
+    held = (worker.code == 0 and not told and "not a location this machine reads" in error and train.code == 0
+            and in_db > 0 and not written)
+    return held, (f"worker exit {worker.code}, the job's error {'tells' if told else 'tells nothing of the file'}: "
+                  f"{_what_failed(error or '')[:60]}...; train exit {train.code}, {in_db} snapshot blobs in the "
+                  f"database, {len(written)} files in the other user's folder")
+
+
+@fault("shared PostgreSQL: the owner and a member queue the same tournament at the same moment, then a worker")
+def shared_queued_twice(scratch: Path) -> tuple[bool, str]:
+    shared = SharedLeague(scratch)
+    _owner_league(shared)
+    args = ["league", "tournament", "--run", "r", "--vs", "cpu", "--games-per-pair", "40", "--env-option",
+            "points_to_win=1", "--queue", "--no-wait", "--json"]
+    member_url = shared._member_dsn.replace("postgresql://", "postgresql+psycopg://", 1)
+    cmds = [[*args, "--db", shared.owner_url, "--home", str(shared.home)],
+            [*args, "--db", member_url, "--home", str(scratch / "member-home")]]
+    procs = [subprocess.Popen([sys.executable, "-m", "selfplay_cli", *cmd], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True, env=_env(), cwd=scratch) for cmd in cmds]
+    outs = [p.communicate(timeout=600) for p in procs]
+    said = [json.loads(o) if p.returncode == 0 else {} for p, (o, _) in zip(procs, outs, strict=True)]
+    worker = shared.owner_marl("worker", "--until-empty", "--quiet", timeout=900)
+    rows = shared.member_sql("SELECT g.seed, (SELECT string_agg(player_id::text, ',' ORDER BY seat) FROM game_seats "
+                             "WHERE game_id = g.id) FROM games g JOIN matches m ON m.id = g.match_id "
+                             "WHERE m.kind <> 'eval' AND m.params::text NOT LIKE '%%\"gauntlet\"%%'")
+    before = 2 * 2 * 4  # the owner's league: 4 games of each snapshot against each bot
+    games, twice = len(rows) - before, len(rows) - len(set(rows))
+    queued = sorted(d.get("games", -1) for d in said)
+    held = all(p.returncode == 0 for p in procs) and worker.code == 0 and queued == [0, 80] and twice == 0 \
+        and games == 80
+    return held, (f"games queued by the owner and the member: {queued} (the other joined); worker exit "
+                  f"{worker.code}; {games} new games stored, {twice} twice"
+                  + ("" if held else f"; {outs[0][1][-150:]!r} {outs[1][1][-150:]!r}"))
+
+
 # Issue 49 section 2: blob locations
 #
 # Where a blob is read from or written to is this machine's setting (MARL_BLOB_LOCATIONS), never a row's. Each row
