@@ -21,6 +21,7 @@ Run with ``python benchmarks/fault_matrix.py`` (``--only NAME`` runs the faults 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import os
@@ -1132,6 +1133,74 @@ def record_full_disk(scratch: Path) -> tuple[bool, str]:
             outcomes.append((ok, f"tmpfs {fmt}: exit {code}, {left_n} files left"))
     said = r.line[len("marl: I/O error: "):][-80:]
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes) + f"; says: {said}"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Issue 49, smaller points
+
+_STUDY = ["study", "team-size", "lander", "--train", "1", "--eval", "1", "--games", "2", "--eval-games", "2",
+          "--snapshots", "1", "--name", "t", "--quiet"]
+
+
+def _study_trainer(home: Path, study: subprocess.Popen, timeout: float = 300) -> int | None:
+    """The live `marl train` of a study's run t-n1, once it has claimed the run (None if the study ended first)."""
+    from selfplay_cli.train.lock import live_trainer
+
+    deadline = time.time() + timeout
+    while time.time() < deadline and study.poll() is None:
+        pid = live_trainer(home / "runs" / "t-n1" / "lock")
+        if pid is not None:
+            return pid
+        time.sleep(0.1)
+    return None
+
+
+def _run_status(home: Path, run: str) -> str:
+    try:
+        rows = db(home, f"select status from runs where name = '{run}'")
+    except sqlite3.Error:
+        return "?"
+    return rows[0][0] if rows else "none"
+
+
+@fault("marl study team-size: SIGTERM, then SIGKILL mid-run: its marl train ends with it; typed again, it resumes")
+def study_child(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    env = {**_env(), "MARL_HOME": str(home), "SDL_VIDEODRIVER": "dummy"}
+    outcomes = []
+    for sig, minutes in ((signal.SIGTERM, "0.15"), (signal.SIGKILL, "0.15")):
+        study = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *_STUDY, "--minutes", minutes], env=env,
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        trainer = _study_trainer(home, study)
+        if trainer is None:
+            study.kill()
+            return False, f"{sig.name}: the study's run never started (exit {study.wait()})"
+        study.send_signal(sig)
+        _, err = study.communicate(timeout=300)
+        alive = not _proc_gone(trainer)  # at the moment the study has exited
+        lines = [x for x in err.splitlines() if x.strip()]
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(study.pid, signal.SIGKILL)  # whatever is left of the study's session (nothing, if it held)
+        if sig == signal.SIGTERM:  # handed on and waited for: the child had ended before the study did
+            held = study.returncode == 143 and not alive and len(lines) == 1 and "Traceback" not in err
+            outcomes.append((held, f"SIGTERM: study exit {study.returncode}, its marl train "
+                                   f"{'STILL RUNNING' if alive else 'ended first'}, run {_run_status(home, 't-n1')}; "
+                                   f"says: {lines[-1][len('marl: '):][:60] if lines else ''}"))
+            continue
+        # SIGKILL: the kernel tells the child, which stops its run itself; the study typed again at once
+        again = marl(*_STUDY, "--minutes", minutes, "--home", str(home), cwd=scratch)
+        waited = "waiting up to" in again.err
+        log = (home / "studies" / "t" / "logs" / "t-n1.log").read_text(errors="replace")
+        stops = log.count("(SIGTERM); its last snapshot is kept")
+        runs = db(home, "select name, status from runs")
+        held = (study.returncode == -signal.SIGKILL and _proc_gone(trainer) and again.code == 0
+                and runs == [("t-n1", "finished")] and stops == 2)
+        now = "ended" if _proc_gone(trainer) else "ALIVE"
+        outcomes.append((held, f"SIGKILL: study exit {study.returncode}, its marl train "
+                               f"{'still stopping' if alive else 'gone'} then, {now} now, stopped its run itself "
+                               f"({stops} SIGTERM stops in its log); typed again at once "
+                               f"({'waited for it' if waited else 'it was gone'}): exit {again.code}, runs {runs}"))
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
 
 
 # ---------------------------------------------------------------------------------------------------------------
