@@ -1203,6 +1203,75 @@ def study_child(scratch: Path) -> tuple[bool, str]:
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
 
 
+def _session_left(sid: int) -> list[str]:
+    """The live processes of session ``sid`` (a process started in a session of its own, and all it started that
+    kept it: Ray's), and its Ray keeper (a session of its own, named by the pid it keeps): their names."""
+    out = []
+    for d in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (d / "stat").read_text()
+            line = (d / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        fields = stat[stat.rfind(")") + 2:].split()
+        keeper = len(line) > 3 and line[1] == b"-c" and b"select.select" in line[2] and line[3] == str(sid).encode()
+        if fields[0] != "Z" and (int(fields[3]) == sid or keeper):
+            name = line[0].decode(errors="replace")
+            out.append("keeper" if keeper else name if name.startswith("ray::") else name.rsplit("/", 1)[-1][:24])
+    return out
+
+
+def _until(what: Callable[[], bool], seconds: float) -> bool:
+    deadline = time.time() + seconds
+    while time.time() < deadline and not what():
+        time.sleep(0.05)
+    return what()
+
+
+@fault("marl train --executor ray: --actors 100 x cores refused; SIGTERM while Ray starts, SIGKILL mid-run: no Ray "
+       "process left")
+def ray_actors(scratch: Path) -> tuple[bool, str]:
+    from selfplay_cli.train.ray_support import machine_cores
+
+    home = scratch / "league"
+    cores = machine_cores()
+    env = {**_env(), "RAY_ADDRESS": ""}
+    r = marl("train", "pong", "--executor", "ray", "--actors", str(100 * cores), "--games", str(128 * cores),
+             "--home", str(home))
+    written = "A LEAGUE WRITTEN" if home.exists() else "nothing written"
+    outcomes = [(r.code == 2 and r.one_line and not home.exists() and r.rss_mb < 1000,
+                 f"--actors {100 * cores} on {cores} cores: exit {r.code} in {r.seconds:.1f} s, {r.rss_mb:.0f} MB, "
+                 f"{written}: {r.line[len('marl: error: '):][:70]}")]
+    base = ["train", "pong", "--games", "16", "--steps", "60000", "--snapshot-steps", "1024", "--eval-games", "0",
+            "--env-option", "points_to_win=1", "--executor", "ray", "--actors", str(min(2, cores)), "--home",
+            str(home), "--quiet"]
+    for sig, when in ((signal.SIGTERM, "starting"), (signal.SIGKILL, "training")):
+        p = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *base], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+        if when == "starting":  # Ray's core is up (its GCS started), the run not begun
+            ready = _until(lambda sid=p.pid: any("gcs_server" in c for c in _session_left(sid)), 300)
+        else:
+            ready = _until(lambda sid=p.pid: len(list(home.glob("snapshots/*/*.safetensors"))) >= 4 and any(
+                c.startswith("ray::RolloutShard") for c in _session_left(sid)), 300)
+        during = len(_session_left(p.pid))
+        p.send_signal(sig)
+        _, err = p.communicate(timeout=300)
+        t = time.time()
+        gone = _until(lambda sid=p.pid: not _session_left(sid), 30)
+        took, left = time.time() - t, _session_left(p.pid)
+        for pid in [int(d.name) for d in Path("/proc").glob("[0-9]*") if d.name.isdigit()]:
+            with contextlib.suppress(OSError, ValueError):  # whatever it left (nothing, when it held)
+                stat = Path(f"/proc/{pid}/stat").read_text()
+                if int(stat[stat.rfind(")") + 2:].split()[3]) == p.pid:
+                    os.kill(pid, signal.SIGKILL)
+        lines = [x for x in err.splitlines() if x.strip()]
+        said = f", says: {lines[-1][len('marl: '):][:60]}" if sig == signal.SIGTERM and lines else ""
+        ok = ready and gone and (p.returncode == 143 and len(lines) == 1 if sig == signal.SIGTERM else True)
+        outcomes.append((ok, f"{sig.name} while {when} ({during} processes): exit {p.returncode}{said}; "
+                             f"{'all gone' if gone else 'LEFT ' + ', '.join(left)} {took:.1f} s after"))
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
+
+
 # ---------------------------------------------------------------------------------------------------------------
 
 
