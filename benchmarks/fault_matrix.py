@@ -13,7 +13,10 @@ writers storing games, leftovers of killed processes, an interrupted match, and 
 snapshot moment. Issue 30's rows: snapshot files naming modules as their game, the rating worker killed, stopped
 or orphaned and its games counted once, SIGTERM in an endless update, rows whose paths leave the league, removing
 what a run needs, games and settings that turn numbers NaN, configs past every limit, games that never end or
-whose agents come and go, and a full disk under `marl record`. More faults can be added with :func:`fault`.
+whose agents come and go, and a full disk under `marl record`. Issue 49's: a team-size study stopped or killed
+with its training child, Ray given more actors than cores and killed at its start or mid-run, a worker started
+while PostgreSQL is down, and a disk that fills during a run's snapshot moments. More faults can be added with
+:func:`fault`.
 
 Run with ``python benchmarks/fault_matrix.py`` (``--only NAME`` runs the faults whose name contains NAME).
 """
@@ -25,6 +28,7 @@ import contextlib
 import hashlib
 import json
 import os
+import re
 import resource
 import shutil
 import signal
@@ -1324,8 +1328,6 @@ def worker_db_down(scratch: Path) -> tuple[bool, str]:
     lines = [x for x in gave_up.err.splitlines() if x.strip()]
     gone = (gave_up.code == 4 and len(lines) == 2 and "Traceback" not in gave_up.err
             and "unreachable for 5 s at the worker's start" in lines[-1])
-    import re
-
     def short(line: str) -> str:
         return re.sub(r"postgresql\+psycopg://\S+", "URL", line)
 
@@ -1334,6 +1336,86 @@ def worker_db_down(scratch: Path) -> tuple[bool, str]:
     return came and gone, (f"said '{said}'; server started: worker exit {p.returncode} {took:.1f} s later; server "
                            f"never back (--wait-db 5): exit {gave_up.code} after {gave_up.seconds:.1f} s, "
                            f"{len(lines)} lines: {last}")
+
+
+TRAIN_LEFT = textwrap.dedent("""
+    import json, sqlite3, sys
+    from pathlib import Path
+    home = Path(sys.argv[1])
+    con = sqlite3.connect("file:" + str(home / "league.db") + "?mode=ro", uri=True)
+    rows = sorted(Path(p).name for (p,) in con.execute("select path from players where kind = 'snapshot'"))
+    folder = home / "snapshots" / "r"
+    files = sorted(f.name for f in folder.iterdir()) if folder.is_dir() else []
+    run = home / "runs" / "r"
+    print(json.dumps({"rows": rows, "orphans": sorted(set(files) - set(rows)),
+                      "missing": sorted(set(rows) - set(files)),
+                      "pending": (run / "state.pt.pending").exists(), "tmp": len(list(run.glob("*.tmp-*"))),
+                      "status": con.execute("select status from runs where name = 'r'").fetchone(),
+                      "integrity": con.execute("pragma integrity_check").fetchone()[0]}))
+""")
+
+
+def _train_left(home: Path) -> dict:
+    p = subprocess.run([sys.executable, "-c", TRAIN_LEFT, str(home)], capture_output=True, text=True, env=_env())
+    return json.loads(p.stdout) if p.returncode == 0 else {"error": p.stderr.strip()[-100:]}
+
+
+def _whole(left: dict) -> bool:
+    return (not left.get("error") and not left["orphans"] and not left["missing"] and not left["pending"]
+            and not left["tmp"] and left["integrity"] == "ok")
+
+
+TMPFS_KB = (700, 900)  # tmpfs sizes whose disk fills at the second moment's pending state, at its rows
+
+
+@fault("disk full during marl train's snapshot moments: file size limit 400 KB; 700, 900 KB tmpfs (root); then "
+       "--resume")
+def train_full_disk(scratch: Path) -> tuple[bool, str]:
+    args = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
+            "2048", "--steps", "16384", "--eval-games", "0", "--run", "r", "--quiet"]
+    outcomes = []
+    home = scratch / "fsize" / "league"
+    r = marl(*args, "--home", str(home), limits={resource.RLIMIT_FSIZE: 400_000})
+    cut = _train_left(home)
+    again = marl("train", "--resume", "r", "--home", str(home), "--quiet")
+    after = _train_left(home)
+    held = (r.code == 4 and r.one_line and _whole(cut) and again.code == 0 and _whole(after)
+            and set(cut["rows"]) <= set(after["rows"]) and after["status"] == ["finished"])
+    outcomes.append((held, f"RLIMIT_FSIZE: exit {r.code} ({r.line[len('marl: I/O error: '):][-40:]}), "
+                           f"{len(cut.get('rows', []))} snapshots kept, {len(cut.get('orphans', []))} files without "
+                           f"a row, pending state {'LEFT' if cut.get('pending') else 'none'}; resumed: exit "
+                           f"{again.code}, {len(after.get('rows', []))} snapshots, {after.get('status')}"))
+    for kb in TMPFS_KB if can_mount() else ():  # a disk that fills at the moment's pending state, at its rows
+        mnt = scratch / f"mnt{kb}"
+        mnt.mkdir()
+        lh = mnt / "league"
+        cmd = " ".join(f'"{a}"' for a in (sys.executable, "-m", "selfplay_cli", *args, "--home", str(lh)))
+        resume = " ".join(f'"{a}"' for a in (sys.executable, "-m", "selfplay_cli", "train", "--resume", "r", "--home",
+                                             str(lh), "--quiet"))
+        (scratch / "left.py").write_text(TRAIN_LEFT)
+        check = " ".join(f'"{a}"' for a in (sys.executable, str(scratch / "left.py"), str(lh)))
+        err1, err2 = scratch / "err.txt", scratch / "err2.txt"
+        script = (f'mount -t tmpfs -o size={kb}k tmpfs "{mnt}" && {cmd} >/dev/null 2>"{err1}"; echo "$?"; '
+                  f'{check}; mount -o remount,size=64m "{mnt}" && {resume} >/dev/null 2>"{err2}"; echo "$?"; '
+                  f'{check}')
+        p = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, env=_env(),
+                           timeout=900)
+        lines = p.stdout.strip().splitlines()
+        err = err1.read_text()
+        try:
+            code, cut, code2, after = int(lines[0]), json.loads(lines[1]), int(lines[2]), json.loads(lines[3])
+        except (IndexError, ValueError):
+            return False, f"the tmpfs run broke: {p.stdout[-200:]} {p.stderr[-200:]}"
+        one = err.count("\n") == 1 and "Traceback" not in err
+        held = (code == 4 and one and _whole(cut) and code2 == 0 and _whole(after)
+                and set(cut["rows"]) <= set(after["rows"]) and after["status"] == ["finished"])
+        where = Path(next(iter(re.findall(r"(?<!\S)(/[^\s:]+)", err)), "?")).name  # the file that could not be written
+        outcomes.append((held, f"tmpfs {kb}k: exit {code} ({'one line' if one else 'NOT one line'}, at {where}), "
+                               f"{len(cut['rows'])} snapshots kept, {len(cut['orphans'])} files without a row; "
+                               f"resumed with room: exit {code2}, {len(after['rows'])} snapshots"))
+    if not can_mount():
+        outcomes.append((True, "tmpfs: skipped (needs root and unshare)"))
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
 
 
 # ---------------------------------------------------------------------------------------------------------------
