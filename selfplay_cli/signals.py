@@ -12,19 +12,27 @@ same loops; there the work done so far is kept (a learner's update that has done
 budget runs out ends there, an update of fewer minibatches), so a run ends within one minibatch of its budget,
 however long its updates are.
 
+A process that starts a long-lived child of its own (a study's ``marl train``) makes the child die with it
+(:func:`dies_with_parent`: the kernel sends the child SIGTERM when the parent dies, SIGKILL included) and hands the
+signals it is stopped by to the child, waiting for it (:func:`stop_child`).
+
 Nothing here imports from the rest of marl, so every room can use it.
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
 import signal
+import subprocess
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-__all__ = ["Terminated", "clear_stop", "deadline", "past_deadline", "request_stop", "signals_held", "stop_on_sigterm",
-           "stop_requested", "stoppable"]
+__all__ = ["Terminated", "clear_stop", "deadline", "dies_with_parent", "past_deadline", "request_stop", "signals_held",
+           "stop_child", "stop_on_sigterm", "stop_requested", "stoppable"]
 
 _stop = threading.Event()
 _deadline: tuple[Callable[[], float], float] | None = None  # (clock, the time on it that work ends at)
@@ -130,3 +138,50 @@ def stop_on_sigterm() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+PR_SET_PDEATHSIG = 1  # <linux/prctl.h>
+
+
+def dies_with_parent(sig: int = signal.SIGTERM) -> Callable[[], None] | None:
+    """A ``preexec_fn`` for :class:`subprocess.Popen` under which the child is sent ``sig`` when this process dies,
+    however it dies (SIGKILL too): Linux's ``prctl(PR_SET_PDEATHSIG)``, set in the child between fork and exec. A
+    parent that died before that (the child would never be told) ends the child there. None where there is no such
+    call (not Linux): the child then outlives a parent killed with SIGKILL.
+
+    The kernel sends the signal when the *thread* that started the child ends: start it from the main thread."""
+    if not sys.platform.startswith("linux"):
+        return None
+    import ctypes
+
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl  # looked up now: between fork and exec, only the call
+    except (OSError, AttributeError):
+        return None
+    prctl.argtypes = [ctypes.c_int, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong, ctypes.c_ulong]
+    parent = os.getpid()
+
+    def preexec() -> None:
+        prctl(PR_SET_PDEATHSIG, sig, 0, 0, 0)
+        if os.getppid() != parent:  # the parent died before the call: nobody is left to send it
+            os._exit(128 + sig)
+
+    return preexec
+
+
+def stop_child(proc: subprocess.Popen, sig: int, patience: float) -> None:
+    """Hand ``sig`` (SIGINT or SIGTERM: what this process was stopped by) to child ``proc`` and wait for it to end,
+    up to ``patience`` seconds; a child still running then, or another signal while waiting (the user insists), is
+    killed (SIGKILL) and waited for. Used by a process whose stop must not leave its child running on."""
+    with contextlib.suppress(OSError):
+        proc.send_signal(sig)
+    try:
+        proc.wait(timeout=patience)
+        return
+    except BaseException:  # noqa: BLE001 (patience ran out, or a second Ctrl-C / SIGTERM: either way, end it now)
+        pass
+    while proc.returncode is None:
+        with contextlib.suppress(OSError):
+            proc.kill()
+        with contextlib.suppress(BaseException):  # a killed child is collected at once; a third signal changes nothing
+            proc.wait()

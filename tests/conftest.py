@@ -124,12 +124,12 @@ def pg_server():
 def ray_local():
     """Ray started once in this test process (4 CPUs as Ray counts them: two rollout actors and rating workers fit
     on this machine's two cores), shared by its Ray tests; a run finds it running and leaves it running."""
-    from selfplay_cli.train.ray_support import connect, ray_module
+    from selfplay_cli.train.ray_support import connect, ray_module, shutdown
 
     connect(num_cpus=4)
     ray = ray_module()
     yield ray
-    ray.shutdown()
+    shutdown()
 
 
 def _fresh_database(server) -> str:

@@ -115,3 +115,66 @@ def test_sigterm_stops_a_run_cleanly_and_it_resumes(tmp_path, capsys, request, m
     check_league(home)
     with League.open(home) as league:
         assert league.get_run("r").status == "finished"
+
+
+# --- issue 49: a disk that fills during a snapshot moment leaves no file that no row names ---
+
+DISK_FULL = """
+import resource, sys
+import torch
+import selfplay_cli.train.state as run_state
+from selfplay_cli.cli import main
+from selfplay_cli.league.store import League
+
+point, home, args = sys.argv[1], sys.argv[2], sys.argv[3:]
+calls = {}
+
+def full():  # from here on no file of this process may grow: the disk is full
+    resource.setrlimit(resource.RLIMIT_FSIZE, (1, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+
+def nth(what):
+    calls[what] = calls.get(what, 0) + 1
+    return calls[what]
+
+real_file, real_state, real_rows = run_state.save_snapshot, torch.save, League.add_snapshots
+
+def save_file(*a, **k):
+    if point == "second-file" and nth("file") == 4:  # the second moment's second file (its first is written)
+        full()
+    return real_file(*a, **k)
+
+def save_state(*a, **k):
+    if point == "pending-state" and nth("state") == 2:  # the second moment's pending state (its files written)
+        full()
+    return real_state(*a, **k)
+
+def add_rows(self, *a, **k):
+    if point == "rows" and nth("rows") == 2:  # the second moment's rows (its files and pending state written)
+        full()
+    return real_rows(self, *a, **k)
+
+run_state.save_snapshot, torch.save, League.add_snapshots = save_file, save_state, add_rows
+sys.exit(main([*args, "--home", home]))
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("point", ["second-file", "pending-state", "rows"])
+def test_a_snapshot_moment_cut_by_a_full_disk_leaves_no_file_without_its_row(tmp_path, capsys, point):
+    """Issue 49: a run whose disk filled left two snapshot files with no rows (the files written, the rows' insert
+    failed). The disk fills (RLIMIT_FSIZE 1: no file may grow) at each write of the second snapshot moment after its
+    first file; the run ends in one line (exit 4), the first moment whole and nothing of the second left; resumed
+    with room again, it runs to its end."""
+    home = tmp_path / "h"
+    child = subprocess.run([sys.executable, "-c", DISK_FULL, point, str(home), *ARGS], capture_output=True, text=True,
+                           timeout=300)
+    lines = child.stderr.splitlines()
+    assert child.returncode == 4 and len(lines) == 1 and "Traceback" not in child.stderr, child.stderr[-2000:]
+    snaps = check_league(home)  # every file named by a row, no pending state, no temporary file
+    assert [p.name for p in snaps] == ["s0-left", "s0-right"]  # the first moment, committed, kept
+    code = main(["train", "--resume", "r", "--home", str(home), "--json"])
+    assert code == 0, capsys.readouterr().err
+    snaps = check_league(home)
+    assert len(snaps) == 10 and snaps[-1].name == "s8.19k-right"
+    with League.open(home) as league:
+        assert league.get_run("r").status == "finished"

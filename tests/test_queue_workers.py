@@ -353,3 +353,105 @@ def test_a_worker_stopped_by_ctrl_c_in_play_names_the_job_it_gave_back(tmp_path,
     assert f"job {job['id']}" in err and "went back to the queue" in err, err
     (back,) = run_json(capsys, "queue", "--home", str(home))["jobs"]
     assert back["id"] == job["id"] and back["state"] == "queued" and back["tries"] == 0  # it did, not counted
+
+
+# --- issue 49: a worker started while its PostgreSQL server is down waits for it, bounded ---
+
+
+class _Clock:
+    """A clock that the waits of :func:`reach_league` move (no real waiting), with ``then(n, fn)``: ``fn()`` at the
+    n-th wait."""
+
+    def __init__(self) -> None:
+        self.now, self.waits, self.at = 1000.0, [], {}
+
+    def __call__(self) -> float:
+        return self.now
+
+    def sleep(self, seconds: float) -> None:
+        self.waits.append(seconds)
+        self.now += seconds
+        if len(self.waits) in self.at:
+            self.at[len(self.waits)]()
+
+
+def test_a_worker_starting_while_postgresql_is_down_retries_until_it_is_up(pg_server, pg_url, tmp_path):
+    """Issue 49: `marl worker` with PostgreSQL down exited 4 at once. Now it retries as a running worker does
+    (1 s, doubling), said once, and goes to work with the server up: here after its third wait."""
+    from conftest import start_postgres, stop_postgres
+
+    from selfplay_cli.work import reach_league
+
+    League(pg_url, home=tmp_path / "h").close()  # a league there
+    said, clock = [], _Clock()
+    stop_postgres(pg_server)
+    try:
+        clock.at[3] = lambda: start_postgres(pg_server)
+        league = reach_league(lambda: League.open(home=tmp_path / "h", url=pg_url), said.append, 60.0, clock=clock,
+                              sleep=clock.sleep)
+    finally:
+        if not pg_server.get_postmaster_info().is_running():
+            start_postgres(pg_server)
+    try:
+        assert league.batches() == [] and league.add_worker("w", "here", 1) > 0  # the league, reached
+    finally:
+        league.close()
+    assert clock.waits == [1.0, 2.0, 4.0]
+    assert len(said) == 1 and said[0].startswith("league database postgresql+psycopg://")
+    assert "unreachable, retrying for up to 60 s" in said[0]
+
+
+def test_a_worker_whose_postgresql_never_comes_leaves_after_its_wait_in_one_line(pg_server, pg_url, tmp_path):
+    from conftest import start_postgres, stop_postgres
+
+    from selfplay_cli.league.store import LeagueUnreachable
+    from selfplay_cli.work import reach_league
+
+    said, clock, tries = [], _Clock(), []
+
+    def open_it():
+        tries.append(clock())
+        return League.open(home=tmp_path / "h", url=pg_url)
+
+    stop_postgres(pg_server)
+    try:
+        with pytest.raises(LeagueUnreachable) as failed:
+            reach_league(open_it, said.append, 60.0, clock=clock, sleep=clock.sleep)
+        with pytest.raises(LeagueUnreachable, match="cannot reach league database"):  # --wait-db 0: at once
+            reach_league(open_it, said.append, 0.0, clock=clock, sleep=clock.sleep)
+    finally:
+        start_postgres(pg_server)
+    assert clock.waits == [1.0, 2.0, 4.0, 8.0, 16.0, 29.0] and tries[-2] - tries[0] == 60.0  # the last wait cut
+    assert len(said) == 1 and "unreachable for 60 s at the worker's start" in str(failed.value)
+    assert "\n" not in str(failed.value) and failed.value.exit_code == 4
+
+
+@pytest.mark.slow
+def test_marl_worker_started_before_its_postgresql_goes_to_work_when_it_comes(pg_server, pg_url, tmp_path):
+    """The command as a user runs it: started while the server is down, it says so once and waits; the server
+    started when it has said so, it works (an empty queue here: --until-empty leaves, exit 0). With a server that
+    does not come within --wait-db, one more line and exit 4."""
+    from conftest import start_postgres, stop_postgres
+
+    League(pg_url, home=tmp_path / "h").close()
+    env = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
+    stop_postgres(pg_server)
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "worker", "--db", pg_url, "--until-empty",
+                                 "--wait-db", "600", "--json"], env=env, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        first = proc.stderr.readline()  # it has tried, failed, and waits
+        assert "unreachable, retrying for up to 600 s" in first, first
+        start_postgres(pg_server)
+        out, err = proc.communicate(timeout=300)
+        assert proc.returncode == 0 and "unreachable" not in err, err
+        assert json.loads(out)["done"] == 0
+        stop_postgres(pg_server)
+        gave_up = subprocess.run([sys.executable, "-m", "selfplay_cli", "worker", "--db", pg_url, "--wait-db", "1"],
+                                 env=env, capture_output=True, text=True, timeout=300)
+    finally:
+        if not pg_server.get_postmaster_info().is_running():
+            start_postgres(pg_server)
+    lines = gave_up.stderr.splitlines()
+    assert gave_up.returncode == 4 and len(lines) == 2 and "Traceback" not in gave_up.stderr, gave_up.stderr
+    assert "retrying for up to 1 s" in lines[0] and "unreachable for 1 s at the worker's start (--wait-db)" in lines[1]

@@ -314,3 +314,96 @@ def test_a_trainer_killed_with_sigkill_resumes_on_actors(ray_local, tmp_path, ca
     with League.open(home) as league:
         assert league.get_run("r").status == "finished"
         assert {"s0-left", "s60k-left"} <= {p.name for p in league.players("pong", kind="snapshot")}
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Issue 49: no more actors than cores on this machine; nothing of Ray left behind
+
+
+def _marl(*args: str, env: dict | None = None, **kw):
+    import subprocess
+
+    return subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})}, **kw)
+
+
+def test_more_actors_than_cores_is_refused_in_one_line_unless_a_cluster_is_given(tmp_path):
+    """Issue 49: --actors 200 on 2 cores started Ray with 201 CPUs it did not have (5 GB in 25 s)."""
+    from selfplay_cli.train.ray_support import machine_cores
+
+    over = str(machine_cores() + 1)
+    home = tmp_path / "h"
+    env = {"RAY_ADDRESS": ""}
+    for flags, needle in ((["--executor", "ray", "--actors", over], f"--actors {over} is more Ray actors than"),
+                          (["--eval", "ray", "--eval-actors", over], f"--eval-actors {over} is more Ray actors than")):
+        _, err = (p := _marl("train", "pong", "--games", "256", *flags, "--home", str(home), env=env)).communicate(
+            timeout=300)
+        assert p.returncode == 2 and needle in err and f"this machine has cores ({machine_cores()})" in err, err
+        assert err.count("\n") == 1 and "--ray-address" in err and not home.exists()
+    # a cluster is where more actors go: not refused for this machine's cores (this one cannot be reached)
+    for flags, extra in ((["--ray-address", "127.0.0.1:1"], {}), ([], {"RAY_ADDRESS": "127.0.0.1:1"})):
+        _, err = (p := _marl("train", "pong", "--games", "256", "--executor", "ray", "--actors", over, *flags,
+                             "--home", str(home), env=env | extra)).communicate(timeout=300)
+        assert p.returncode == 4 and "cannot reach the Ray cluster at 127.0.0.1:1" in err and not home.exists(), err
+
+
+def _session(sid: int) -> list[tuple[int, str]]:
+    """The live processes of session ``sid`` (a trainer started in a session of its own, and all it started: Ray's
+    processes keep it), and the trainer's Ray keeper (in a session of its own), with their command lines."""
+    from pathlib import Path
+
+    out = []
+    for d in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (d / "stat").read_text()
+            line = (d / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        fields = stat[stat.rfind(")") + 2:].split()
+        keeper = len(line) > 3 and line[1] == b"-c" and b"select.select" in line[2] and line[3] == str(sid).encode()
+        if fields[0] != "Z" and (int(fields[3]) == sid or keeper):
+            out.append((int(d.name), b" ".join(line)[:80].decode(errors="replace")))
+    return out
+
+
+def _wait_for(what, seconds: float):
+    import time
+
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and not what():
+        time.sleep(0.05)
+    return what()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("sig, when", [(signal.SIGTERM, "starting"), (signal.SIGINT, "starting"),
+                                       (signal.SIGKILL, "training"), (None, "finished")])
+def test_no_ray_process_outlives_its_run(tmp_path, sig, when):
+    """Issue 49: a run on Ray actors leaves no Ray process behind, whichever way it ends: stopped while Ray starts
+    (Ray's own SIGTERM handler made that exit 15, unsaid, and left Ray's agents running for a minute), killed
+    outright while training (Ray's agents waited a minute for a dead GCS), or finished."""
+    home = tmp_path / "h"
+    proc = _marl("train", "pong", "--games", "16", "--steps", "40000" if sig else "2048", "--snapshot-steps", "1024",
+                 "--eval-games", "0", "--env-option", "points_to_win=1", "--executor", "ray", "--actors", "2",
+                 "--home", str(home), "--quiet", env={"RAY_ADDRESS": ""}, start_new_session=True)
+    try:
+        if when == "starting":  # Ray's core is up (its GCS started), the run not begun
+            assert _wait_for(lambda: any("gcs_server" in c for _, c in _session(proc.pid)), 120)
+        elif when == "training":
+            assert _wait_for(lambda: len(list(home.glob("snapshots/*/*.safetensors"))) >= 4, 300)
+            assert any(c.startswith("ray::RolloutShard") for _, c in _session(proc.pid))
+        if sig is not None:
+            proc.send_signal(sig)
+        _, err = proc.communicate(timeout=300)
+        left = _wait_for(lambda: not _session(proc.pid), 15) or _session(proc.pid)
+    finally:
+        for pid, _ in _session(proc.pid):  # (nothing, when it held)
+            with __import__("contextlib").suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+    assert left is True, left
+    if when == "starting":
+        assert proc.returncode == (143 if sig == signal.SIGTERM else 130)
+        assert err.count("\n") == 1 and "while starting: no training was under way" in err, err
+    else:
+        assert proc.returncode == (-signal.SIGKILL if sig else 0), err

@@ -339,6 +339,7 @@ def test_failed_save_keeps_old_file(saved, monkeypatch):
     with pytest.raises(SnapshotError, match="cannot write") as e:
         save_snapshot(path, make_net(seed=5), make_meta())
     assert str(path) in str(e.value)
+    assert e.value.exit_code == 4  # a full disk is an I/O error, not a mistake in the snapshot (issue 49: it was 2)
     assert path.read_bytes() == before
     assert not list(path.parent.glob("*.tmp-*"))
 

@@ -3,14 +3,17 @@ goes on where it stopped, and the refusals."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import imageio.v3 as iio
+import pytest
 from cli_helpers import run, run_json
 
 from selfplay_cli.league.store import League
@@ -130,3 +133,144 @@ def test_the_returns_figure_shows_only_the_team_sizes_studied(tmp_path, monkeypa
     assert shown == [1, 2, 3], shown
     assert [t.get_text() for t in ax.get_xticklabels() if lo <= t.get_position()[0] <= hi] == ["1", "2", "3"]
     assert list(ax.get_xticks(minor=True)) == []
+
+
+# --- issue 49: a study's training child dies with it ---
+
+CHILD = """
+import os, signal, sys
+from pathlib import Path
+out = Path(sys.argv[1])
+def stop(sig, frame):
+    out.write_text(signal.Signals(sig).name)
+    sys.exit(0)
+signal.signal(signal.SIGTERM, stop)
+signal.signal(signal.SIGINT, stop)
+(out.parent / "ready").write_text(str(os.getpid()))
+while True:
+    signal.pause()
+"""
+
+PARENT = """
+import os, sys
+from pathlib import Path
+from selfplay_cli.signals import Terminated, stop_on_sigterm
+from selfplay_cli.study.measure import train_process
+here = Path(sys.argv[1])
+try:
+    with stop_on_sigterm():
+        train_process([str(here / "got")], dict(os.environ), here / "log", program=[sys.executable, sys.argv[2]])
+except Terminated:
+    sys.exit(143)
+except KeyboardInterrupt:
+    sys.exit(130)
+"""
+
+
+def _gone(pid: int) -> bool:
+    """No such process, or a zombie (dead, its exit not collected)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return True
+    return stat[stat.rfind(")") + 2:].split()[0] == "Z"
+
+
+def _wait_for(what, seconds: float = 120.0):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        got = what()
+        if got:
+            return got
+        time.sleep(0.05)
+    return what()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGKILL])
+def test_the_training_child_of_a_study_ends_with_it(tmp_path, sig):
+    """SIGTERM or Ctrl-C of the study are handed to its child, which the study waits for before it exits; a study
+    killed outright (SIGKILL: nothing of it runs) has the kernel send its child SIGTERM. The child here is a stand-in
+    for marl train that writes the signal it got."""
+    child = tmp_path / "child.py"
+    child.write_text(CHILD)
+    parent = subprocess.Popen([sys.executable, "-c", PARENT, str(tmp_path), str(child)])
+    pid = int(_wait_for(lambda: (tmp_path / "ready").exists() and (tmp_path / "ready").read_text() or None))
+    assert not _gone(pid) and os.getpgid(pid) == pid  # in a group of its own: a terminal's Ctrl-C reaches it once
+    parent.send_signal(sig)
+    code = parent.wait(timeout=120)
+    if sig == signal.SIGKILL:
+        assert code == -signal.SIGKILL
+        assert _wait_for(lambda: (tmp_path / "got").exists()) and _wait_for(lambda: _gone(pid))
+    else:  # the study waited for it: it had ended when the study did
+        assert code == (143 if sig == signal.SIGTERM else 130) and _gone(pid)
+    assert (tmp_path / "got").read_text() == ("SIGINT" if sig == signal.SIGINT else "SIGTERM")
+
+
+LANDER = ["study", "team-size", "lander", "--train", "1", "--eval", "1", "--games", "2", "--eval-games", "2",
+          "--snapshots", "1", "--name", "t"]
+
+
+def _trainer(home) -> int | None:
+    """The live process training the study's run, once it has claimed the run."""
+    from selfplay_cli.train.lock import live_trainer
+
+    return live_trainer(home / "runs" / "t-n1" / "lock")
+
+
+def _study(home, *args: str) -> subprocess.Popen:
+    env = dict(os.environ, MARL_HOME=str(home), SDL_VIDEODRIVER="dummy")
+    return subprocess.Popen([sys.executable, "-m", "selfplay_cli", *LANDER, *args, "--quiet"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+
+
+def _end_session(study: subprocess.Popen) -> None:
+    """Whatever is left of the study's session (nothing, when it held)."""
+    with contextlib.suppress(ProcessLookupError):
+        os.killpg(study.pid, signal.SIGKILL)
+
+
+@pytest.mark.slow
+def test_sigterm_stops_a_study_and_its_training_run(home):
+    """Issue 49: SIGTERM ended the study (143) while its marl train ran on for its whole budget."""
+    study = _study(home, "--minutes", "30")
+    try:
+        trainer = _wait_for(lambda: _trainer(home))
+        assert trainer is not None
+        study.send_signal(signal.SIGTERM)
+        _, err = study.communicate(timeout=300)
+    finally:
+        _end_session(study)
+    assert study.returncode == 143 and _gone(trainer)
+    assert err.count("\n") == 1 and "study t stopped (SIGTERM)" in err and "type the same command again" in err, err
+    log = (home / "studies" / "t" / "logs" / "t-n1.log").read_text()
+    assert "stopped t-n1 at step" in log and "(SIGTERM)" in log  # the run stopped itself, kept to be resumed
+    league = League.open(home=home)
+    try:
+        assert league.get_run("t-n1").status == "stopped"
+    finally:
+        league.close()
+
+
+@pytest.mark.slow
+def test_a_study_killed_outright_takes_its_run_down_and_resumes_when_typed_again(home, capsys):
+    """Issue 49: SIGKILL of the study left its marl train running, and the study typed again was refused while that
+    orphan lived. Now the kernel stops the child with its study, and the study typed again at once waits for it to
+    end, then resumes the run."""
+    study = _study(home, "--minutes", "0.1")
+    try:
+        trainer = _wait_for(lambda: _trainer(home))
+        assert trainer is not None
+        study.kill()
+        study.wait(timeout=60)
+        r = run_json(capsys, *LANDER, "--minutes", "0.1", "--json")  # at once: the child may still be stopping
+    finally:
+        _end_session(study)
+    assert _gone(trainer) and [x["run"] for x in r["runs"]] == ["t-n1"]
+    log = (home / "studies" / "t" / "logs" / "t-n1.log").read_text()
+    assert "stopped t-n1 at step" in log and "(SIGTERM)" in log  # told by the kernel, it stopped its run itself
+    league = League.open(home=home)
+    try:
+        runs = league.list_runs()
+        assert [x.name for x in runs] == ["t-n1"] and runs[0].status == "finished"  # resumed, not begun again
+    finally:
+        league.close()

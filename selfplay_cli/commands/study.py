@@ -9,6 +9,8 @@ import typer
 from rich.table import Table
 
 from ..envs import get_env
+from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED
+from ..signals import Terminated, stop_on_sigterm
 from ._common import DbOpt, HomeOpt, JsonOpt, QuietOpt, open_league, parse_env_options, typed_game
 from ._output import console, err_console, print_json
 
@@ -62,8 +64,9 @@ def team_size(
     snapshot against training that size afresh (seed 001's method); a table of returns by size, the comparison, and
     each run's wall time, CPU use and peak memory.
 
-    Each run is a marl train run of the league (NAME-nN, NAME-nN-toM), in its own process. A study killed midway
-    goes on where it stopped when the same command is typed again."""
+    Each run is a marl train run of the league (NAME-nN, NAME-nN-toM), in its own process, which stops with the
+    study (Ctrl-C, SIGTERM, or the study killed). A study stopped midway goes on where it stopped when the same
+    command is typed again."""
     from ..league.store import check_name
     from ..study import TeamSizePlan, parse_sizes, run_study
     from ..train.settings import check_kind
@@ -92,8 +95,14 @@ def team_size(
             raise typer.BadParameter(f"{env} at {option}={size}: {e}", param_hint="--train/--eval") from None
     league = open_league(home, db)
     try:
-        with _progress(quiet or json_out, len(plan.runs())) as on_progress:
-            report = run_study(league, plan, on_progress)
+        with _progress(quiet or json_out, len(plan.runs())) as on_progress, stop_on_sigterm():
+            report = run_study(league, plan, on_progress,
+                               on_note=lambda line: err_console.print(f"marl study: {line}", markup=False))
+    except (Terminated, KeyboardInterrupt) as stop:  # its training child has stopped too (and was waited for)
+        why = "SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C"
+        err_console.print(f"marl: study {plan.name} stopped ({why}); what it did is kept: type the same command "
+                          "again to go on", markup=False)
+        raise typer.Exit(EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED) from None
     finally:
         league.close()
     if json_out:

@@ -9,7 +9,7 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED
-from ..signals import stop_on_sigterm
+from ..signals import Terminated, stop_on_sigterm
 from ._common import (
     MAX_PARALLEL,
     MAX_SEED,
@@ -214,31 +214,39 @@ def train(
     if resume is None:  # the whole configuration is checked before the league is opened (or created)
         settings = new_settings(env, {name: ctx.params[name] for name in typed}, config=config, preset=preset,
                                 env_options=lambda game: parse_env_options(game, env_option))
-    with contextlib.ExitStack() as ray_here:
-        if resume is None:  # --executor/--eval ray: joined first, so a cluster out of reach leaves nothing behind
-            ray_here.enter_context(ray_for(settings))
-        league = open_league(home, db)
-        try:
-            if resume is not None:
-                cfg = resumed_config(league, resume, env, typed, device,
-                                     wait=eval_wait if "eval_wait" in typed else None,
-                                     executor={k: ctx.params[k] for k in EXECUTOR_OPTIONS if k in typed})
-                ray_here.enter_context(ray_for(cfg.to_dict()))
-            else:
-                cfg = start_run(league, settings, run)
-            reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
-            with reporter, stop_on_sigterm():
-                try:
-                    report = run_training(league, cfg, resumed=resume is not None, on_progress=reporter.update,
-                                          on_note=None if quiet else lambda note: err_console.print(note,
-                                                                                                   markup=False))
-                except RunStopped as stop:  # stderr: --json keeps stdout for the JSON alone
-                    at = f" at step {stop.steps:,}" if stop.steps is not None else ""
-                    err_console.print(f"stopped {cfg.run}{at} ({stop.why}); its last snapshot is kept: continue it "
-                                      f"with: marl train --resume {cfg.run}", markup=False)
-                    raise typer.Exit(EXIT_TERMINATED if stop.why == "SIGTERM" else EXIT_INTERRUPTED) from None
-        finally:
-            league.close()
+    phase = "starting"  # where a Ctrl-C or SIGTERM outside the run's own training finds the command
+    try:  # SIGTERM is this command's throughout: Ray's start sets a handler of its own (sys.exit(15)), not kept
+        with stop_on_sigterm(), contextlib.ExitStack() as ray_here:
+            if resume is None:  # --executor/--eval ray: joined first, so a cluster out of reach leaves nothing behind
+                ray_here.enter_context(ray_for(settings))
+            league = open_league(home, db)
+            try:
+                if resume is not None:
+                    cfg = resumed_config(league, resume, env, typed, device,
+                                         wait=eval_wait if "eval_wait" in typed else None,
+                                         executor={k: ctx.params[k] for k in EXECUTOR_OPTIONS if k in typed})
+                    ray_here.enter_context(ray_for(cfg.to_dict()))
+                else:
+                    cfg = start_run(league, settings, run)
+                reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
+                with reporter, stop_on_sigterm():
+                    try:
+                        report = run_training(league, cfg, resumed=resume is not None, on_progress=reporter.update,
+                                              on_note=None if quiet else lambda note: err_console.print(note,
+                                                                                                       markup=False))
+                    except RunStopped as stop:  # stderr: --json keeps stdout for the JSON alone
+                        at = f" at step {stop.steps:,}" if stop.steps is not None else ""
+                        err_console.print(f"stopped {cfg.run}{at} ({stop.why}); its last snapshot is kept: continue "
+                                          f"it with: marl train --resume {cfg.run}", markup=False)
+                        raise typer.Exit(EXIT_TERMINATED if stop.why == "SIGTERM" else EXIT_INTERRUPTED) from None
+                phase = "ending"
+            finally:
+                league.close()
+    except (Terminated, KeyboardInterrupt) as stop:  # Ray (when started here) is shut down, the league closed
+        why = "SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C"
+        err_console.print(f"marl: stopped ({why}) while {phase}: " + ("no training was under way"
+                          if phase == "starting" else "the run had finished"), markup=False)
+        raise typer.Exit(EXIT_TERMINATED if isinstance(stop, Terminated) else EXIT_INTERRUPTED) from None
     if json_out:
         print_json({**report_json(report, cfg.eval, _actors(cfg)),
                     **({"init_from": cfg.init_plan} if cfg.init_plan else {})})

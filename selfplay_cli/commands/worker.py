@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError
-from ..league.queue import BEAT_SECONDS, SCAVENGE_SECONDS
+from ..league.queue import BEAT_SECONDS, REACH_SECONDS, SCAVENGE_SECONDS
 from ..signals import Terminated, stop_on_sigterm
 from ._common import MAX_PARALLEL, DbOpt, DeviceOpt, HomeOpt, JsonOpt, QuietOpt, open_league
 from ._output import console, err_console, print_json
@@ -21,9 +21,9 @@ WORKER_HELP = "\n\n".join((
     "A job whose worker goes silent for --scavenge seconds is taken by another; a job that fails is tried again after "
     "a wait, and marked dead after its tries (marl queue shows them). Ctrl-C or SIGTERM gives the job in play back "
     "at once (and says which). A database that goes away is waited for (said once), and the worker goes on when it "
-    "is back.",
+    "is back; one that cannot be reached when the worker starts is waited for the same way, up to --wait-db seconds.",
     "Without --until-empty or --jobs the worker runs until stopped. Exit codes: 0 done, 2 a bad option or a league it "
-    "cannot use, 4 the database cannot be reached at the start, 130 Ctrl-C, 143 SIGTERM.",
+    "cannot use, 4 the database cannot be reached within --wait-db seconds of the start, 130 Ctrl-C, 143 SIGTERM.",
 ))
 
 
@@ -40,6 +40,10 @@ def worker(
                                             "many seconds is taken over from its silent worker.")] = SCAVENGE_SECONDS,
     name: Annotated[str | None, typer.Option("--name", help="How marl queue lists this worker (default "
                                              "worker@HOST:PID).")] = None,
+    wait_db: Annotated[float, typer.Option("--wait-db", min=0.0, max=86_400.0, help="Seconds a worker that starts "
+                                           "while its database server cannot be reached waits for it (trying again "
+                                           "with a growing wait) before it leaves (exit 4); 0: not at all.")
+                       ] = REACH_SECONDS,
     device: DeviceOpt = "cpu",
     parallel: Annotated[int, typer.Option("--parallel", min=1, max=MAX_PARALLEL, help="Games played at once.")
                         ] = 1024,
@@ -48,19 +52,20 @@ def worker(
 ) -> None:
     """Lease and play the league's queued rating games (see marl worker --help)."""
     from ..rated.jobs import Outcome
-    from ..work import Leaving, WorkerOptions, run_worker
+    from ..work import Leaving, WorkerOptions, reach_league, run_worker
 
     if beat >= scavenge:
         raise MarlError(f"--beat ({beat:g} s) must be shorter than --scavenge ({scavenge:g} s), or a working worker's "
                         "jobs would be taken from it")
     _check_blob_settings()
     _check_league_here(home, db)
-    league = open_league(home, db)
-    options = WorkerOptions(batches=tuple(batch) if batch else None, max_jobs=jobs, until_empty=until_empty,
-                            beat=beat, scavenge=scavenge, device=device, parallel=parallel, name=name)
 
     def said(line: str) -> None:
         err_console.print(f"marl worker: {line}", markup=False)
+
+    league = reach_league(lambda: open_league(home, db), said, wait_db)
+    options = WorkerOptions(batches=tuple(batch) if batch else None, max_jobs=jobs, until_empty=until_empty,
+                            beat=beat, scavenge=scavenge, device=device, parallel=parallel, name=name)
 
     def on_job(out: Outcome) -> None:
         if quiet or json_out:

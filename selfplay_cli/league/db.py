@@ -68,7 +68,7 @@ from selfplay_cli.league.models import Base, Meta, utcnow
 from selfplay_cli.signals import signals_held
 
 __all__ = ["ALLOW_NETWORK_SQLITE", "DB_FILENAME", "DEFAULT_HOME", "Database", "LeagueError", "LeagueIOError",
-           "network_filesystem", "shown"]
+           "LeagueUnreachable", "network_filesystem", "shown"]
 
 DEFAULT_HOME = "./league"
 DB_FILENAME = "league.db"
@@ -98,6 +98,16 @@ class LeagueIOError(LeagueError, MarlIOError):
     file size limit, read-only file system, permissions); the message names the path and the cause."""
 
     exit_code = EXIT_IO
+
+
+class LeagueUnreachable(LeagueIOError):
+    """The league's PostgreSQL server cannot be reached (none answers at the URL, it is starting or shutting down,
+    the connection broke): what waiting may cure, unlike a refused user or a full disk. ``where`` names the
+    database, ``reason`` the driver's words."""
+
+    def __init__(self, message: str, where: str = "", reason: str = "") -> None:
+        super().__init__(message)
+        self.where, self.reason = where, reason
 
 
 _IO_REASONS = ("disk i/o error", "database or disk is full", "readonly database", "unable to open database file",
@@ -297,7 +307,8 @@ class Database:
                 if self.is_postgres and self._refused(exc):
                     raise LeagueError(f"cannot open league database {self._where}: {reason}") from exc
                 if self.is_postgres and self._unreachable(exc):
-                    raise LeagueIOError(f"cannot reach league database {self._where}: {reason}") from exc
+                    raise LeagueUnreachable(f"cannot reach league database {self._where}: {reason}", self._where,
+                                            reason) from exc
                 error = LeagueIOError if any(w in reason.lower() for w in _IO_REASONS) else LeagueError
                 raise error(f"cannot open league database {self._where}: {reason}") from exc
 
@@ -582,8 +593,8 @@ class Database:
                         self.note(f"marl: league database {self._where} unreachable, retrying for up to "
                                   f"{self.reconnect_for:.0f} s ({_reason(exc)})")
                 if now - lost_since >= self.reconnect_for:
-                    raise LeagueIOError(f"league database {self._where} unreachable for {self.reconnect_for:.0f} s: "
-                                        f"{_reason(exc)}") from exc
+                    raise LeagueUnreachable(f"league database {self._where} unreachable for {self.reconnect_for:.0f} "
+                                            f"s: {_reason(exc)}", self._where, _reason(exc)) from exc
                 self.reconnects += 1
                 tries += 1
                 time.sleep(min(0.25 * 2 ** min(tries, 5), 5.0, lost_since + self.reconnect_for - now))

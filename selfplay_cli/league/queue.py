@@ -52,6 +52,9 @@ BEAT_SECONDS = 120.0
 """How often a worker beats its heart on the job it plays (fishtest's 120 s)."""
 SCAVENGE_SECONDS = 360.0
 """A leased job whose heart has not beaten for this long goes back to the queue (fishtest's 360 s)."""
+REACH_SECONDS = 60.0
+"""How long a worker that starts while its database server cannot be reached waits for it (``marl worker
+--wait-db``): the time a running command waits for a lost server."""
 MAX_TRIES = 5
 """Leases of one job before a failure (or a silent worker) marks it dead."""
 TRIES_LIMIT = 20

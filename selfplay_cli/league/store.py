@@ -36,6 +36,7 @@ from selfplay_cli.league.db import (
     Database,
     LeagueError,
     LeagueIOError,
+    LeagueUnreachable,
     shown,
 )
 from selfplay_cli.league.ledger import KIND_CODES, MATCH_KINDS, GameRow, GameTable, Ledger, rules_for_env
@@ -76,6 +77,7 @@ __all__ = [
     "League",
     "LeagueError",
     "LeagueIOError",
+    "LeagueUnreachable",
     "PlayerRow",
     "RunRow",
     "RunStatus",

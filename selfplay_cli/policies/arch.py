@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from ..errors import MarlError
+from ..errors import MarlError, MarlIOError
 
 KINDS = ("mlp", "cnn")
 LAYOUTS = ("hwc", "chw")  # where an image's channels are: last (HxWxC) or first (CxHxW)
@@ -29,6 +29,11 @@ class SnapshotError(MarlError):
     Messages about a file always start with the file's path. Defined here, the lowest of the modules that raise it
     (a network's arch; the network; the snapshot format, reader and policy building).
     """
+
+
+class SnapshotWriteError(SnapshotError, MarlIOError):
+    """A snapshot file that could not be written for a reason outside marl (a full disk, a quota, permissions, a file
+    size limit): an I/O error (exit 4), not a mistake in the snapshot."""
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,7 @@ from safetensors.torch import save as st_save
 from .. import files
 from ..envs.obs_spaces import stacked_space
 from ..typecheck import MAX_INT
-from .arch import Arch, SnapshotError, conv_shapes
+from .arch import Arch, SnapshotError, SnapshotWriteError, conv_shapes
 from .joint import MAX_JOINT_ACTIONS
 from .spaces import ActionHead, SpaceError, canonical_space, space_from_dict
 
@@ -442,5 +442,5 @@ def save_snapshot(
         path.parent.mkdir(parents=True, exist_ok=True)
         files.write_atomic(path, data)
     except OSError as e:
-        raise SnapshotError(f"{path}: cannot write ({e.strerror or e})") from None
+        raise SnapshotWriteError(f"{path}: cannot write ({e.strerror or e})") from None
     return meta

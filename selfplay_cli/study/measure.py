@@ -6,6 +6,11 @@ usage), the peak memory the largest resident size its process tree reached (``/p
 tree and sampled every half second; where there is no ``/proc``, the child's own ``ru_maxrss``). The run's progress
 is read from its ``metrics.jsonl`` as it grows. A run killed with its study is resumed with ``marl train --resume``:
 each piece of a run is a :class:`Segment`, and a run's figures add its segments up (peak memory: their largest).
+
+The child dies with its study: Ctrl-C or SIGTERM of the study is handed to the child, which stops its run (kept,
+resumable) and is waited for; the child runs in a process group of its own, so a Ctrl-C at the terminal reaches it
+once, through the study. A study killed outright (SIGKILL) cannot hand anything on: on Linux the kernel sends the
+child SIGTERM when its study dies (:func:`~selfplay_cli.signals.dies_with_parent`), so no training outlives it.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import signal
 import subprocess
 import sys
 import time
@@ -22,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import MarlError
+from ..signals import dies_with_parent, stop_child
 
 __all__ = ["Segment", "last_line", "summed", "train_process", "tree_rss_kb"]
 
@@ -65,17 +72,21 @@ def tree_rss_kb(pid: int) -> int:
 
 
 def train_process(args: Sequence[str], env: dict[str, str], log: Path,
-                  on_tick: Callable[[], None] | None = None) -> tuple[int, Segment]:
-    """Run ``python -m selfplay_cli`` with ``args`` (stdout and stderr to ``log``), measured; returns its exit code
-    and its :class:`Segment`. ``on_tick`` is called about every half second while it runs. Ctrl-C stops the child
-    too (it saves its run, which the study resumes next time)."""
+                  on_tick: Callable[[], None] | None = None, *, program: Sequence[str] | None = None,
+                  patience: float = 120.0) -> tuple[int, Segment]:
+    """Run ``python -m selfplay_cli`` (or ``program``) with ``args`` (stdout and stderr to ``log``), measured;
+    returns its exit code and its :class:`Segment`. ``on_tick`` is called about every half second while it runs.
+    Ctrl-C or SIGTERM (:class:`~selfplay_cli.signals.Terminated`) stops the child too, with the same signal (it
+    saves its run, which the study resumes next time), and waits for it up to ``patience`` seconds (then, or on a
+    second signal, kills it) before going on; the child dies with this process even when that is killed outright."""
     log.parent.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     peak = 0
     with open(log, "ab") as out:
         try:
-            proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], env=env, stdout=out,
-                                    stderr=subprocess.STDOUT)
+            proc = subprocess.Popen([*(program or (sys.executable, "-m", "selfplay_cli")), *args], env=env,
+                                    stdin=subprocess.DEVNULL, stdout=out, stderr=subprocess.STDOUT,
+                                    process_group=0, preexec_fn=dies_with_parent())
         except OSError as e:
             raise MarlError(f"cannot start marl train: {e}") from None
         try:
@@ -87,11 +98,8 @@ def train_process(args: Sequence[str], env: dict[str, str], log: Path,
                 if on_tick is not None:
                     on_tick()
                 time.sleep(0.5)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                proc.terminate()
-            with contextlib.suppress(Exception):
-                proc.wait(timeout=60)
+        except BaseException as stop:
+            stop_child(proc, signal.SIGINT if isinstance(stop, KeyboardInterrupt) else signal.SIGTERM, patience)
             raise
     _, status, usage = waited
     proc.returncode = os.waitstatus_to_exitcode(status)  # so Popen does not wait for it again

@@ -15,9 +15,12 @@
 Every run is trained in its own process, measured (:mod:`.measure`): wall time, CPU time (mean cores busy) and peak
 memory. The study's state is ``<home>/studies/<study>/study.json`` (written to a temporary name, then renamed):
 a study killed midway goes on where it stopped when the same command is typed again (a run cut short resumes with
-``marl train --resume``; finished runs and evaluations are kept). A study of that name with other settings is
-refused. The report (:func:`report`) is a table of returns by trained x evaluated size, the adaptive-vs-fresh
-comparison, and each run's figures; PNGs of return against team size and of the adapted and fresh runs' curves.
+``marl train --resume``; finished runs and evaluations are kept). Its training child dies with it (Ctrl-C and
+SIGTERM are handed on and waited for; a study killed outright has the kernel stop its child), and a study typed
+again while that child is still stopping waits for it (:attr:`Study.holder_wait` seconds) before resuming the run.
+A study of that name with other settings is refused. The report (:func:`report`) is a table of returns by trained x
+evaluated size, the adaptive-vs-fresh comparison, and each run's figures; PNGs of return against team size and of
+the adapted and fresh runs' curves.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from typing import Any
 from ..errors import MarlError
 from ..files import write_atomic
 from ..league.store import League
+from ..train.lock import live_trainer
 from .evaluate import fly, snapshot_returns
 from .measure import last_line, summed, train_process
 
@@ -154,8 +158,12 @@ def _option_text(value: Any) -> str:
 class Study:
     """A team-size study in a league: its plan, its state file, and the stages that fill it."""
 
+    holder_wait = 120.0
+    """Seconds a study waits for a process still training one of its runs (the child of a study killed just before,
+    stopping) before it refuses to go on."""
+
     def __init__(self, league: League, plan: TeamSizePlan,
-                 on_progress: Callable[..., None] | None = None) -> None:
+                 on_progress: Callable[..., None] | None = None, on_note: Callable[[str], None] | None = None) -> None:
         if league.home is None:
             raise MarlError("a study needs a league home for its runs and its files: pass --home")
         self.league, self.plan = league, plan
@@ -163,6 +171,7 @@ class Study:
         self.path = self.dir / "study.json"
         # on_progress(key, share done, detail): a run's name (its share of its budget), or "eval RUN at SIZE"
         self.on_progress = on_progress or (lambda key, done, detail="": None)
+        self.on_note = on_note or (lambda line: None)  # a line for the user (stderr), e.g. what the study waits for
         self.state = self._load()
         self._curves: dict[tuple[str, int], list[tuple[int, float, float]]] = {}
         self._moments: dict[str, list[tuple[int, str]]] = {}  # a finished run's moments (read once)
@@ -209,6 +218,7 @@ class Study:
         if entry.get("done"):
             self.on_progress(run, 1.0, "done")
             return
+        self._wait_for_holder(run)
         existing = self.league.get_run(run)
         if existing is not None and existing.status == "finished":
             entry["done"], entry["steps"] = True, self._final_step(run)
@@ -245,6 +255,23 @@ class Study:
         entry["steps"] = self._final_step(run)
         self._save()
         self.on_progress(run, 1.0)
+
+    def _wait_for_holder(self, run: str) -> None:
+        """A process still training ``run`` (the child of a study killed a moment ago, stopping its run since the
+        kernel told it) is waited for, up to :attr:`holder_wait` seconds; one that is still at it then is not this
+        study's to end: refused."""
+        lock = self.league.home_path("runs", run) / "lock"
+        pid = live_trainer(lock)
+        if pid is None:
+            return
+        self.on_note(f"run {run} is still being trained by process {pid} (a study stopped a moment ago?); waiting "
+                     f"up to {self.holder_wait:.0f} s for it to end")
+        until = time.monotonic() + self.holder_wait
+        while (pid := live_trainer(lock)) is not None and time.monotonic() < until:
+            time.sleep(0.2)
+        if pid is not None:
+            raise MarlError(f"study {self.plan.name}: run {run} is being trained by process {pid}, not by this study: "
+                            "stop it, then type the study again")
 
     def _snapshots(self, run: str) -> list[Any]:
         rows = [p for p in self.league.players(kind="snapshot") if p.run == run and not p.removed]
@@ -406,9 +433,9 @@ def _tail(log: Path) -> str:
 
 
 def run_study(league: League, plan: TeamSizePlan, on_progress: Callable[..., None] | None = None,
-              plots: bool = True) -> dict[str, Any]:
+              plots: bool = True, on_note: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Every stage of the study (each skipped where the state has it), then its report (and PNGs)."""
-    study = Study(league, plan, on_progress)
+    study = Study(league, plan, on_progress, on_note)
     study.train_all()
     study.evaluate_all()
     out = study.report()

@@ -40,7 +40,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from .ray_support import RayConnection, ray_module
+from .ray_support import RayConnection, check_local_actors, ray_module
 from .remote import RemoteEvaluator
 
 __all__ = ["ACTOR_ROLE", "MAX_REPLACED", "RATING_ACTOR_CPUS", "START_SECONDS", "STOP_SECONDS", "RatingActor",
@@ -113,6 +113,7 @@ class RayEvaluator(RemoteEvaluator):
         self._actors: list[Any] = []
         self._names: list[Any] = []  # each actor's worker name (an object ref, answered at once)
         self._loops: list[Any] = []  # each actor's worker loop (an object ref, ready once the loop has ended)
+        check_local_actors(actors, "--eval-actors", address)
         self._take_back()
         self._ray = RayConnection(address)
         self._ray.__enter__()

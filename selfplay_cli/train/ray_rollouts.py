@@ -21,7 +21,6 @@ ledger are the local run's.
 from __future__ import annotations
 
 import contextlib
-import os
 import time
 from collections.abc import Callable
 from typing import Any
@@ -54,10 +53,11 @@ class RayRollouts(Rollouts):
                  teacher: Policy | None, teacher_schedule: Schedule | None, opponents: Opponents | None, *,
                  seed: int, first_seed: int, steps_of: Callable[[], int], fragment_steps: int,
                  address: str = "", note: Callable[[str], None] | None = None) -> None:
-        from .ray_support import connect, ray_module
+        from .ray_support import check_local_actors, connect, machine_cores, ray_module
 
         super().__init__(None, learners, curriculum, teacher, teacher_schedule)
-        self._started = connect(address, num_cpus=max(os.cpu_count() or 1, len(setups) + 1))
+        check_local_actors(len(setups), "--actors", address)
+        self._started = connect(address, num_cpus=max(machine_cores(), len(setups) + 1))
         self.ray = ray = ray_module()
         self.plan, self.opponents, self.seed = plan, opponents, seed
         self.steps_of = steps_of  # the run's steps now (--swap-every draws by them)
@@ -69,8 +69,14 @@ class RayRollouts(Rollouts):
                                               for learner in learners)
         self.fragment_steps = fragment_steps
         actor = ray.remote(num_cpus=1, max_restarts=MAX_RESTARTS, max_task_retries=0)(RolloutShard)
-        self.actors = [actor.remote(setup) for setup in setups]
-        self._ready(address)
+        self.actors = []
+        try:  # whatever stops the start (Ctrl-C, SIGTERM while the actors are placed), the actors end with it
+            for setup in setups:
+                self.actors.append(actor.remote(setup))
+            self._ready(address)
+        except BaseException:
+            self.close()
+            raise
         self._next_seed = first_seed
         self._restart: list[int | None] = [first_seed] * len(self.actors)  # each actor's next (re)start, if due
         self._restarts = 0
@@ -126,21 +132,23 @@ class RayRollouts(Rollouts):
     def close(self) -> None:
         """End the actors (and Ray, when this run started it), their peak memory read first."""
         if self.actors:
-            with contextlib.suppress(Exception):  # (an actor that cannot answer any more has no figure)
-                self.actor_peaks = self.peak_memory()
+            with contextlib.suppress(Exception):  # (an actor that cannot answer, or not yet placed, has no figure)
+                self.actor_peaks = self.peak_memory(timeout=10.0)
         for actor in self.actors:
             self.ray.kill(actor)
         self.actors = []
         if self._started:
-            self.ray.shutdown()
+            from .ray_support import shutdown
+
+            shutdown()
             self._started = False
 
     def actor_pids(self) -> list[int]:
         return [int(pid) for pid in self.ray.get([a.pid.remote() for a in self.actors])]
 
-    def peak_memory(self) -> list[int]:
-        """Each actor's peak resident memory in bytes."""
-        return [int(m) for m in self.ray.get([a.peak_memory.remote() for a in self.actors])]
+    def peak_memory(self, timeout: float | None = None) -> list[int]:
+        """Each actor's peak resident memory in bytes (Ray's ``GetTimeoutError`` past ``timeout`` seconds)."""
+        return [int(m) for m in self.ray.get([a.peak_memory.remote() for a in self.actors], timeout=timeout)]
 
     def _await_restart(self, k: int) -> None:
         """Wait until Ray has restarted actor ``k`` (a new process: it imports marl and torch again); one line when

@@ -127,13 +127,42 @@ class SnapshotMoments:
         name, then renamed), then the run state as it will be once they are registered (``state.pt.pending``),
         then all the rows in one transaction, which is the moment the snapshots exist; then the pending state
         becomes ``state.pt``. Killed before the transaction, the moment never happened (:meth:`restore` removes its
-        files and pending state); killed after it, the pending state is the moment's, complete.
+        files and pending state); killed after it, the pending state is the moment's, complete. A moment that fails
+        before its rows are committed (a full disk: a file, the pending state or the rows cannot be written) removes
+        what it wrote before the error goes on (:meth:`_undo`), so a failed run leaves no file that no row names.
         """
-        cfg, state = self.cfg, self.state
+        cfg = self.cfg
         which = list(range(len(self.learners))) if which is None else list(which)
         names = self.moment_names(self.base_name(trigger, which), which)
-        rows = [self._save(i, self.learners[i], name) for i, name in zip(which, names, strict=True)]
         full = [f"{cfg.run}/{n}" for n in names]
+        try:
+            self._write(trigger, which, names, full)
+        except BaseException:
+            self._undo(names, full)
+            raise
+
+    def _undo(self, names: list[str], full: list[str]) -> None:
+        """After a moment failed: unless its rows were committed (then the moment happened and its pending state is
+        the run's, as :meth:`restore` finds it), remove its snapshot files and its pending state. Where the league
+        cannot tell (its database gone), nothing is touched: the resume asks the league again."""
+        try:
+            for n in full:
+                run, _, name = n.partition("/")
+                if any(p.run == run and p.name == name
+                       for p in self.league.find_players(n, env=self.spec.name, include_removed=True)):
+                    return
+        except Exception:  # (the league cannot be asked now)
+            return
+        for name in names:
+            with contextlib.suppress(OSError):
+                (self.league.home / snapshot_relpath(self.cfg.run, name)).unlink(missing_ok=True)  # type: ignore[operator]
+        with contextlib.suppress(OSError):
+            self.pending_path.unlink(missing_ok=True)
+
+    def _write(self, trigger: str, which: list[int], names: list[str], full: list[str]) -> None:
+        """:meth:`write`'s work: files, pending state, rows, state."""
+        cfg, state = self.cfg, self.state
+        rows = [self._save(i, self.learners[i], name) for i, name in zip(which, names, strict=True)]
         latest = [self.league.get_player(p).full_name if p else "" for p in state.latest]
         for i, name in zip(which, full, strict=True):
             latest[i] = name

@@ -10,6 +10,10 @@ worker leaves (exit 130 or 143), and so does ``stop()`` turning true (a worker r
 (``scavenge``), when another worker takes it. A database that cannot be reached stops nothing: the worker says so
 once and tries again with a growing wait; games played while it was away are stored when it is back (the job's key
 keeps them from counting twice if another worker took the job meanwhile).
+
+A worker that starts while its database cannot be reached (:func:`reach_league`) waits for it the same way, said
+once, but for a bounded time: a worker started with its database server (a machine booting, a service restarted)
+goes to work when the server is up; one given a server that never comes leaves with one line (exit 4).
 """
 
 from __future__ import annotations
@@ -23,13 +27,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import MarlIOError
-from ..league.queue import BACKOFF_SECONDS, BEAT_SECONDS, SCAVENGE_SECONDS, JobRow
-from ..league.store import League
+from ..league.queue import BACKOFF_SECONDS, BEAT_SECONDS, REACH_SECONDS, SCAVENGE_SECONDS, JobRow
+from ..league.store import League, LeagueUnreachable
 from ..rated.jobs import Outcome, play_leased, worker_name
 
-__all__ = ["Leaving", "WorkerOptions", "WorkerReport", "run_worker"]
+__all__ = ["Leaving", "WorkerOptions", "WorkerReport", "reach_league", "run_worker"]
 
 _IDLE_MAX = 2.0  # the longest wait between two looks at an empty queue (a claim is one cheap query)
+_AWAY_FIRST = 1.0  # the first wait before another try of a database that cannot be reached (doubling each time)
 _AWAY_MAX = 30.0  # the longest wait between two tries of a database that cannot be reached
 
 
@@ -101,7 +106,7 @@ class Leaving:
 
 def _retrying(fn: Callable[[], Any], say: Callable[[str], None], what: str) -> Any:
     """``fn()``, tried again with a growing wait while the database cannot be reached (said once)."""
-    wait, said = 1.0, False
+    wait, said = _AWAY_FIRST, False
     while True:
         try:
             return fn()
@@ -110,6 +115,31 @@ def _retrying(fn: Callable[[], Any], say: Callable[[str], None], what: str) -> A
                 say(f"{what}: {exc}; trying again until it is back")
                 said = True
             time.sleep(wait)
+            wait = min(wait * 2, _AWAY_MAX)
+
+
+def reach_league(open_league: Callable[[], League], say: Callable[[str], None], wait_for: float = REACH_SECONDS, *,
+                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep) -> League:
+    """``open_league()`` at a worker's start, tried again while its database server cannot be reached
+    (:class:`~selfplay_cli.league.store.LeagueUnreachable`) with a running worker's growing wait (1 s, doubling, at
+    most 30 s), for up to ``wait_for`` seconds by ``clock`` (said once through ``say``); after that, one
+    :class:`LeagueUnreachable` (exit 4). Anything else (a refused user, a missing driver, a full disk) is raised at
+    once: waiting cures none of them. ``clock`` and ``sleep`` are what a test replaces."""
+    wait, deadline = _AWAY_FIRST, None
+    while True:
+        try:
+            return open_league()
+        except LeagueUnreachable as exc:
+            if wait_for <= 0:
+                raise
+            now = clock()
+            if deadline is None:
+                deadline = now + wait_for
+                say(f"league database {exc.where} unreachable, retrying for up to {wait_for:g} s ({exc.reason})")
+            if now >= deadline:
+                raise LeagueUnreachable(f"league database {exc.where} unreachable for {wait_for:g} s at the worker's "
+                                        f"start (--wait-db): {exc.reason}", exc.where, exc.reason) from None
+            sleep(min(wait, deadline - now))
             wait = min(wait * 2, _AWAY_MAX)
 
 
