@@ -1144,6 +1144,20 @@ def record_full_disk(scratch: Path) -> tuple[bool, str]:
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes) + f"; says: {said}"
 
 
+@fault("a refused command in an empty folder: marl match nosuch cpu, train --init-from ../../etc/passwd, record of "
+       "a missing snapshot: nothing written")
+def refused_writes_nothing(scratch: Path) -> tuple[bool, str]:
+    outcomes = []
+    for args in (("match", "nosuch", "cpu"), ("train", "pong", "--init-from", "../../etc/passwd", "--steps", "100"),
+                 ("record", "--ckpt", "nosuch", "--env", "pong")):
+        folder = scratch / args[0]
+        folder.mkdir()
+        r = marl(*args, cwd=folder, timeout=300)
+        left = sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+        outcomes.append((r.code == 2 and r.one_line and not left, f"{args[0]}: exit {r.code}, {len(left)} paths left"))
+    return all(ok for ok, _ in outcomes), "; ".join(w for _, w in outcomes)
+
+
 # --- issue 49: a shared PostgreSQL league, written by a second database user ---
 
 EVIL_GAME_MODULE = textwrap.dedent("""
