@@ -107,28 +107,35 @@ def test_a_second_tournament_asking_more_games_queues_only_the_rest_on_new_seeds
     assert len(games) == 30 and sorted({s for s, _ in games}) == list(range(15))
 
 
-def test_two_submitters_at_the_same_moment_end_with_one_set_of_games(where, db_url):
-    """Two users queue the same tournament at the same moment (two connections; both look at the pair before either
-    writes): the database keeps one's jobs, the other looks again and joins them. One set of games is stored."""
-    _, league = where
+def _twice_at_once(db_url: str, home, work) -> list:
+    """``work(league, looked)`` in two threads at once, each on its own connection to the league; ``looked`` is the
+    barrier both reach after their first look at the pair (so each looks before either writes). Their results."""
     looked = threading.Barrier(2, timeout=120)
     out, errors = [], []
 
-    def submit() -> None:
-        lg = League(db_url, home=league.home)
+    def one() -> None:
+        lg = League(db_url, home=home)
         try:
-            out.append(_plan(lg, 20).enqueue(lg, None, "cpu", looked=looked.wait))
+            out.append(work(lg, looked.wait))
         except Exception as exc:
             errors.append(exc)
         finally:
             lg.close()
 
-    threads = [threading.Thread(target=submit) for _ in range(2)]
+    threads = [threading.Thread(target=one) for _ in range(2)]
     for t in threads:
         t.start()
     for t in threads:
         t.join(timeout=300)
     assert errors == []
+    return out
+
+
+def test_two_submitters_at_the_same_moment_end_with_one_set_of_games(where, db_url):
+    """Two users queue the same tournament at the same moment (two connections; both look at the pair before either
+    writes): the database keeps one's jobs, the other looks again and joins them. One set of games is stored."""
+    _, league = where
+    out = _twice_at_once(db_url, league.home, lambda lg, looked: _plan(lg, 20).enqueue(lg, None, "cpu", looked=looked))
     queued = [s for s in out if s.batch is not None]
     joined = [s for s in out if s.batch is None]
     assert len(queued) == len(joined) == 1, out
@@ -142,27 +149,14 @@ def test_two_commands_playing_the_same_tournament_here_at_once_play_it_once(wher
     """The same at once, each to play the games itself (no --queue): one takes the pair's seeds and plays them; the
     other finds them taken by the first (being played) and plays nothing."""
     _, league = where
-    looked = threading.Barrier(2, timeout=120)
-    taken, errors = [], []
 
-    def take() -> None:
-        lg = League(db_url, home=league.home)
-        try:
-            plan = _plan(lg, 20)
-            sub = plan.take(lg, None, "cpu", looked=looked.wait)
-            taken.append(sub)
-            plan.play_taken(lg, sub, 256, "cpu")
-        except Exception as exc:
-            errors.append(exc)
-        finally:
-            lg.close()
+    def take(lg: League, looked) -> object:
+        plan = _plan(lg, 20)
+        sub = plan.take(lg, None, "cpu", looked=looked)
+        plan.play_taken(lg, sub, 256, "cpu")
+        return sub
 
-    threads = [threading.Thread(target=take) for _ in range(2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(timeout=300)
-    assert errors == []
+    taken = _twice_at_once(db_url, league.home, take)
     assert sorted(len(s.here) for s in taken) == [0, 1]
     (idle,) = [s for s in taken if not s.here]
     assert sum(idle.playing.values()) == 20 and idle.games == 0
@@ -215,25 +209,9 @@ def test_two_matches_taking_seeds_at_the_same_moment_get_seeds_of_their_own(wher
     """Matches add games: two started at the same moment both play, on seeds that do not meet."""
     _, league = where
     cpu, rnd = (league.find_players(n, "pong")[0] for n in ("cpu", "random"))
-    looked = threading.Barrier(2, timeout=120)
-    taken, errors = [], []
     job = MatchJob((cpu,), rnd)
-
-    def take() -> None:
-        lg = League(db_url, home=league.home)
-        try:
-            taken.append(job.take_here(lg, 10, None, {"points_to_win": 1}, "cpu", looked=looked.wait))
-        except Exception as exc:
-            errors.append(exc)
-        finally:
-            lg.close()
-
-    threads = [threading.Thread(target=take) for _ in range(2)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(timeout=300)
-    assert errors == []
+    taken = _twice_at_once(db_url, league.home,
+                           lambda lg, looked: job.take_here(lg, 10, None, {"points_to_win": 1}, "cpu", looked=looked))
     assert sorted(t.first_seed for t in taken) == [0, 5] and all(t.rounds == 5 for t in taken)
     with league.session(readonly=True) as s:
         assert sorted(s.execute(select(SeedRange.seq, SeedRange.first_seed))) == [(1, 0), (2, 5)]
