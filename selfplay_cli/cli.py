@@ -187,10 +187,24 @@ def _harden(command: Any) -> None:
         _harden(sub)
 
 
+class _Interrupted(Exception):
+    """Ctrl-C that no command caught, carried past typer (which would turn it into a silent exit 130) to
+    :func:`main`, which says so."""
+
+
 def build_command() -> Any:
     """The click command tree of `marl` (what :func:`main` runs; tests walk it)."""
     command = typer.main.get_command(app)
     _harden(command)
+    invoke = command.invoke
+
+    def invoke_saying_ctrl_c(ctx: Any) -> Any:
+        try:
+            return invoke(ctx)
+        except KeyboardInterrupt:
+            raise _Interrupted from None
+
+    command.invoke = invoke_saying_ctrl_c
     return command
 
 
@@ -430,7 +444,7 @@ def main(argv: list[str] | None = None) -> int:
         _new_homes(undo=True)
         _err(f"marl: error: {_one_line(e.format_message())}")
         return e.exit_code or EXIT_USAGE
-    except (typer.Abort, KeyboardInterrupt):
+    except (typer.Abort, KeyboardInterrupt, _Interrupted):
         _err("marl: interrupted")
         return EXIT_INTERRUPTED
     except MarlError as e:

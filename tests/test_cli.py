@@ -115,3 +115,17 @@ def test_a_refused_command_leaves_no_league_behind(tmp_path, monkeypatch, capsys
         assert con.execute("select count(*) from games").fetchone()[0] == 2  # the games the first match stored
     finally:
         con.close()
+
+
+def test_ctrl_c_that_no_command_catches_says_interrupted_and_exits_130(monkeypatch, capsys):
+    """typer turns an uncaught Ctrl-C into a silent exit 130 (an empty line on stderr); marl says what happened."""
+    from selfplay_cli.cli import main
+    from selfplay_cli.commands import envs
+
+    def ctrl_c(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(envs, "env_names", ctrl_c)
+    assert main(["envs"]) == 130
+    captured = capsys.readouterr()
+    assert captured.err == "marl: interrupted\n" and captured.out == ""
