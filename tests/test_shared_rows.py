@@ -277,3 +277,18 @@ def test_rows_whose_json_cannot_be_read_are_one_line_each_never_the_command(db_u
     assert code == 2 and err.splitlines()[-1] == ("marl: error: run 'w': its configuration in the league cannot be "
                                                   "read (nested deeper than 32 levels): start a new run"), err
     lg.close()
+
+
+def test_a_jobs_error_line_shows_no_folder_of_the_workers_machine(tmp_path):
+    """A job's error is read by every member: the worker's home, cache and user folder are shown by name, a
+    KeyError's message without its quotes, and the line is cut at MAX_ERROR."""
+    from selfplay_cli.rated.jobs import error_line
+
+    home, cache = tmp_path / "home", tmp_path / "home-cache"
+    private = {str(home): "$MARL_HOME", str(cache): "$MARL_CACHE", str(tmp_path): "~"}
+    exc = LeagueError(f"r/s1 (no file at {home}/snapshots/r/s1.safetensors), cached at {cache}/blobs, in {tmp_path}")
+    assert error_line(exc, private) == ("LeagueError: r/s1 (no file at $MARL_HOME/snapshots/r/s1.safetensors), "
+                                        "cached at $MARL_CACHE/blobs, in ~")
+    assert error_line(KeyError("pong has no scripted player 'superbot'")) == (
+        "KeyError: pong has no scripted player 'superbot'")
+    assert len(error_line(ValueError("x" * 1000))) == MAX_ERROR

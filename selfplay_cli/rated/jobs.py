@@ -73,13 +73,18 @@ def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int 
     return player(league, job, device=device, parallel=parallel, on_games=on_games)
 
 
-def error_line(exc: BaseException) -> str:
+def error_line(exc: BaseException, private: dict[str, str] | None = None) -> str:
     """What failed, in one short line for a job's row: the error's kind and its first line, cut at
-    :data:`MAX_ERROR` characters."""
+    :data:`MAX_ERROR` characters. A job's row is read by every member of a shared league: the folders of this
+    machine in ``private`` (a path: the name shown instead, such as ``$MARL_HOME``) are not shown."""
     try:
-        first = (str(exc).strip().splitlines() or [""])[0]
+        first = (str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)).strip()
+        first = (first.splitlines() or [""])[0]
     except Exception:  # (an error whose message itself fails)
         first = ""
+    for path, name in sorted((private or {}).items(), key=lambda kv: -len(kv[0])):  # (the longest first)
+        if len(path) > 1:
+            first = first.replace(path, name)
     line = f"{type(exc).__name__}: {first}" if first else type(exc).__name__
     return line if len(line) <= MAX_ERROR else line[:MAX_ERROR - 3] + "..."
 
@@ -137,13 +142,15 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
     database is away, so games played are not played again). A :class:`KeyboardInterrupt` (Ctrl-C, SIGTERM) and any
     other ``BaseException`` propagate: the caller gives the job back."""
     from ..errors import MarlIOError
+    from ..files import cache_home
 
     kwargs = {} if base_backoff is None else {"base_backoff": base_backoff}
+    private = {str(league.home): "$MARL_HOME", str(cache_home()): "$MARL_CACHE", os.path.expanduser("~"): "~"}
 
     def failed(exc: BaseException, final: bool = False) -> Outcome:
         usage = isinstance(exc, MarlError | UnknownEnvError)  # (a game not here, or not named here: the job's fault)
         kind = "io" if isinstance(exc, MarlIOError | OSError) else "usage" if usage else "internal"
-        error = f"bad job spec: {exc}"[:MAX_ERROR] if final else error_line(exc)
+        error = f"bad job spec: {exc}"[:MAX_ERROR] if final else error_line(exc, private)
         state = retry(lambda: league.fail_job(job.id, worker_id, error, final=final, **kwargs))
         return Outcome(job, "failed", error=error, error_kind=kind, extra={"state": state})
 
