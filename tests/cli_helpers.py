@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import signal
 from typing import Any
 
 from selfplay_cli.cli import main
@@ -20,3 +21,10 @@ def run_json(capsys: Any, *args: str) -> Any:
     code, out, err = run(capsys, *args, "--json")
     assert code == 0, err
     return json.loads(out)
+
+
+def ctrl_c_enabled() -> None:
+    """In a child before it runs (``preexec_fn``): SIGINT back to its default. A suite started in the background by
+    a shell without job control, or in a pytest-xdist worker, inherits SIGINT ignored, and so would the child:
+    Python then never raises KeyboardInterrupt (a test of Ctrl-C timed out that way, taken for a hang)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

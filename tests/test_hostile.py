@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from cli_helpers import run
+from cli_helpers import ctrl_c_enabled, run
 from safetensors.torch import save_file
 
 from selfplay_cli.files import sweep, sweep_home
@@ -540,13 +540,6 @@ def test_killed_recording_leaves_a_part_file_that_the_next_one_removes(tmp_path)
     assert q.returncode == 0, q.stderr
     assert not parts[0].exists()
     assert "removed 1 temporary file left by killed processes" in q.stderr
-
-
-def ctrl_c_enabled() -> None:
-    """In a child before it runs: SIGINT back to its default. A suite started in the background by a shell without
-    job control inherits SIGINT ignored, and so would the child: Python then never raises KeyboardInterrupt (this
-    test timed out that way, taken for a hang)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def test_interrupted_match_stores_whole_pairs_and_says_so(tmp_path):

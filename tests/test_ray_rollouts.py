@@ -12,6 +12,7 @@ import sys
 import numpy as np
 import pytest
 import torch
+from cli_helpers import ctrl_c_enabled
 from cli_helpers import run as run_cli
 from gymnasium import spaces
 
@@ -324,7 +325,8 @@ def _marl(*args: str, env: dict | None = None, **kw):
     import subprocess
 
     return subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})}, **kw)
+                            stderr=subprocess.PIPE, text=True, env={**os.environ, **(env or {})},
+                            preexec_fn=ctrl_c_enabled, **kw)
 
 
 def test_more_actors_than_cores_is_refused_in_one_line_unless_a_cluster_is_given(tmp_path):

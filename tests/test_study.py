@@ -14,7 +14,7 @@ from pathlib import Path
 
 import imageio.v3 as iio
 import pytest
-from cli_helpers import run, run_json
+from cli_helpers import ctrl_c_enabled, run, run_json
 
 from selfplay_cli.league.store import League
 
@@ -193,7 +193,7 @@ def test_the_training_child_of_a_study_ends_with_it(tmp_path, sig):
     for marl train that writes the signal it got."""
     child = tmp_path / "child.py"
     child.write_text(CHILD)
-    parent = subprocess.Popen([sys.executable, "-c", PARENT, str(tmp_path), str(child)])
+    parent = subprocess.Popen([sys.executable, "-c", PARENT, str(tmp_path), str(child)], preexec_fn=ctrl_c_enabled)
     pid = int(_wait_for(lambda: (tmp_path / "ready").exists() and (tmp_path / "ready").read_text() or None))
     assert not _gone(pid) and os.getpgid(pid) == pid  # in a group of its own: a terminal's Ctrl-C reaches it once
     parent.send_signal(sig)
