@@ -292,3 +292,7 @@ def test_a_jobs_error_line_shows_no_folder_of_the_workers_machine(tmp_path):
     assert error_line(KeyError("pong has no scripted player 'superbot'")) == (
         "KeyError: pong has no scripted player 'superbot'")
     assert len(error_line(ValueError("x" * 1000))) == MAX_ERROR
+    from selfplay_cli.envs import GameNotAdmittedError
+
+    admitted = GameNotAdmittedError("evilmod:env")  # (a KeyError whose own str is its message)
+    assert error_line(admitted) == f"GameNotAdmittedError: {admitted}" and "is not imported" in str(admitted)

@@ -78,7 +78,8 @@ def error_line(exc: BaseException, private: dict[str, str] | None = None) -> str
     :data:`MAX_ERROR` characters. A job's row is read by every member of a shared league: the folders of this
     machine in ``private`` (a path: the name shown instead, such as ``$MARL_HOME``) are not shown."""
     try:
-        first = (str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc)).strip()
+        quoted = isinstance(exc, KeyError) and type(exc).__str__ is KeyError.__str__ and len(exc.args) == 1
+        first = (str(exc.args[0]) if quoted else str(exc)).strip()  # (a KeyError's own str is its key's repr)
         first = (first.splitlines() or [""])[0]
     except Exception:  # (an error whose message itself fails)
         first = ""
