@@ -37,6 +37,7 @@ the longest game of the batch. A matchup's games are stored in the ledger togeth
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -138,6 +139,7 @@ class Matchup:
         return min(2 * self.pairs, max_pairs) - self.pairs
 
 
+@functools.lru_cache(maxsize=4096)  # (a few ms each; a run's matchups repeat the same records: 8-0, 16-0, ...)
 def prediction_width(wins: int, draws: int, losses: int, games: int = 200) -> float:
     """How wide (score points, 0 to 1) the 95% interval of a ``games``-game match's score is, predicted from this
     record alone (:func:`~selfplay_cli.stats.predict.record_prediction`: the pair's expected score under a uniform
