@@ -364,7 +364,7 @@ def _session(sid: int) -> list[tuple[int, str]]:
         fields = stat[stat.rfind(")") + 2:].split()
         keeper = len(line) > 3 and line[1] == b"-c" and b"select.select" in line[2] and line[3] == str(sid).encode()
         if fields[0] != "Z" and (int(fields[3]) == sid or keeper):
-            out.append((int(d.name), b" ".join(line)[:80].decode(errors="replace")))
+            out.append((int(d.name), b" ".join(line).decode(errors="replace")))  # whole: a deep clone's paths pass 80
     return out
 
 
