@@ -2139,6 +2139,48 @@ def train_full_disk(scratch: Path) -> tuple[bool, str]:
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
 
 
+@fault("--eval remote with 3 marl workers attached: a moment's independent matchups go to whoever is free")
+def remote_gauntlets_shared(scratch: Path) -> tuple[bool, str]:
+    """Issue 49: a run's gauntlet of one moment was one job: one worker played it, the others sat idle. Three workers
+    (processes) attached to a SQLite league, a run with --eval remote: which workers played the moments' matchups,
+    and every matchup stored once."""
+    home = scratch / "league"
+    url = f"sqlite:///{home / 'league.db'}"
+    train = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "train", "pong", "--agents", "2", "--games", "16",
+                              "--env-option", "points_to_win=1", "--snapshot-steps", "2048", "--steps", "6144",
+                              "--eval-games", "8", "--eval-playoff", "8", "--eval", "remote", "--db", url, "--home",
+                              str(home), "--run", "r", "--quiet", "--json"], stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, env=_env(), cwd=scratch)
+    workers = []
+    try:
+        if _until(lambda: (home / "league.db").exists() or train.poll() is not None, 300):  # (a worker needs it)
+            workers = [subprocess.Popen([sys.executable, "-m", "selfplay_cli", "worker", "--db", url, "--home",
+                                         str(home), "--name", f"w{k}", "--beat", "1", "--quiet"],
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=_env(),
+                                        cwd=scratch) for k in range(3)]
+        out, err = train.communicate(timeout=1200)
+    finally:
+        train.kill()
+        for w in workers:
+            w.send_signal(signal.SIGINT)
+        for w in workers:
+            w.wait(timeout=120)
+    r = Run(train.returncode, out, err, 0.0, 0.0)
+    jobs = db(home, "select j.kind, j.state, w.name from jobs j left join workers w on w.id = j.worker_id "
+                    "where j.batch = 'run:r'")
+    keys = db(home, "select work_key from matches where work_key like 'gauntlet/%'")
+    matchups = [(state, name) for kind, state, name in jobs if kind == "matchup"]
+    by = sorted({name.split("@")[0] if "@" in name else name for _, name in matchups if name})
+    data = json.loads(r.out) if r.code == 0 else {}
+    held = (r.code == 0 and data.get("rating_jobs_left") == 0 and {state for _, state, _ in jobs} == {"done"}
+            and len(matchups) > 0 and len([b for b in by if b.startswith("w")]) >= 2
+            and len(keys) == len(set(keys)))
+    return held, (f"exit {r.code}; {sum(1 for k, _, _ in jobs if k == 'gauntlet')} moments, {len(matchups)} matchup "
+                  f"jobs, played by {', '.join(by) or 'nobody'}; {len(keys)} matchups stored, "
+                  f"{len(keys) - len(set(keys))} twice; the run waited {data.get('rating_wait_seconds', '?')} s at "
+                  f"its end" + ("" if r.code == 0 else f": {r.line}"))
+
+
 # ---------------------------------------------------------------------------------------------------------------
 
 

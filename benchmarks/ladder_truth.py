@@ -6,10 +6,12 @@ ladder and the run's summary claim, and plays each pair those claims are about 2
 * **order**: every pair of the run's snapshots and the game's scripted players whose order the ladder claims (one
   above the other beyond doubt: what its ranks and tier boundaries say). The claim survives when the 200-game match
   goes the same way (a score above 50%);
-* **margins**: every "A over B by +M [lo, hi]" the ladder prints under its table (the top over the next, each run's
-  best over the run's next best; the run's summary prints the same one) and each row's margin over the next row in
-  its JSON: held when the 200-game Elo difference lies inside [lo, hi] (a 0% or 100% result, whose Elo is only a
-  bound, holds when the interval reaches the bound);
+* **margins**: every "A over B by +M [lo, hi] (...; 200 games would measure X to Y)" the ladder prints under its
+  table (the top over the next, each run's best over the run's next best; the run's summary prints the same one)
+  and each row's margin over the next row in its JSON: held when the 200-game Elo difference lies inside the range
+  the margin says such a match measures, X to Y (a 0% or 100% result, whose Elo is only a bound, holds when the
+  range reaches the bound). Reported beside it: how often [lo, hi], the interval of the pair's *expected*
+  difference, holds the match's noisy measure of it;
 * **summary**: each final snapshot against each scripted player, whose scores the run's summary prints;
 * **predictions**: for every pair above, what ``marl league predict`` says of a 200-game match (95% interval), held
   when the measured score lies inside. Reported: the share held, and the median width of the open predictions (5 to
@@ -35,6 +37,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import math
 import os
 import platform
 import shlex
@@ -49,7 +52,7 @@ import numpy as np
 
 from selfplay_cli.envs import admit
 from selfplay_cli.league.forecast import Forecaster
-from selfplay_cli.league.ladder import fit_table, ladder
+from selfplay_cli.league.ladder import Margin, fit_table, ladder
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.league.variants import variant_key, variant_options
 from selfplay_cli.rated.gauntlet import prediction_width
@@ -78,7 +81,7 @@ class Claim:
     a: str
     b: str
     kinds: set[str] = field(default_factory=set)  # order, margin, summary
-    margins: list[tuple[str, float, float, float]] = field(default_factory=list)  # (where, elo, low, high)
+    margins: list[tuple[str, Margin, float]] = field(default_factory=list)  # (where, margin, sign: +1 as a over b)
 
 
 def train(home: Path, args: list[str], seed: int) -> tuple[str, dict]:
@@ -109,14 +112,11 @@ def claims_of(league: League, env: str, variant: str, run: str, report: dict,
     names = [r.policy for r in mine]
     out: dict[frozenset[str], Claim] = {}
 
-    def claim(a: str, b: str, kind: str, margin: tuple[str, float, float, float] | None = None) -> None:
+    def claim(a: str, b: str, kind: str, margin: tuple[str, Margin] | None = None) -> None:
         c = out.setdefault(frozenset((a, b)), Claim(a, b))
         c.kinds.add(kind)
-        if margin is not None:
-            where, elo, lo, hi = margin
-            if (c.a, c.b) != (a, b):  # the claim as the pair's first names it
-                elo, lo, hi = -elo, -hi, -lo
-            c.margins.append((where, elo, lo, hi))
+        if margin is not None:  # the claim as the pair's first names it
+            c.margins.append((*margin, 1.0 if (c.a, c.b) == (a, b) else -1.0))
 
     idx = [forecast.names.index(forecast.aliases.get(n, n)) for n in names]
     below = forecast.model.below(idx)
@@ -125,15 +125,13 @@ def claims_of(league: League, env: str, variant: str, run: str, report: dict,
             claim(names[i], names[j], "order")
     ranked = [r for r in rows if r.tier is not None and r.copy_of is None]
     if len(ranked) >= 2 and ranked[0].margin is not None:  # "top: A, +M [lo, hi] Elo over B"
-        m = ranked[0].margin
-        claim(ranked[0].policy, m.over, "margin", ("top", m.elo, m.low, m.high))
+        claim(ranked[0].policy, ranked[0].margin.over, "margin", ("top", ranked[0].margin))
     for r in rows:
         if r.best and r.run == run and r.best_margin is not None:  # "best of RUN: A, +M [lo, hi] over B"
-            m = r.best_margin
-            claim(r.policy, m.over, "margin", ("best", m.elo, m.low, m.high))
+            claim(r.policy, r.best_margin.over, "margin", ("best", r.best_margin))
     for r in mine:  # each row's margin over the next (JSON)
         if r.margin is not None and r.margin.over in names:
-            claim(r.policy, r.margin.over, "row", ("row", r.margin.elo, r.margin.low, r.margin.high))
+            claim(r.policy, r.margin.over, "row", ("row", r.margin))
     for final in report.get("final", []):  # the summary: each final snapshot against each scripted player
         for bot in final.get("vs", {}):
             if final["snapshot"] in names and bot in names:
@@ -156,8 +154,20 @@ def measured(round_points: list[list[float]]) -> tuple[float, float, int]:
 
 
 def margin_held(low: float, high: float, elo: float, bound: int) -> bool:
-    """Whether a margin's interval holds the 200-game difference (or, for a 0% or 100% score, reaches its bound)."""
+    """Whether an interval holds the 200-game difference (or, for a 0% or 100% score, reaches its bound)."""
     return bool(high >= elo if bound > 0 else low <= elo if bound < 0 else low <= elo <= high)
+
+
+def check_margin(where: str, m: Margin, sign: float, elo: float, bound: int) -> dict:
+    """One printed (or JSON) margin against the measured difference, oriented by ``sign``: ``held``, the range it
+    says a 200-game match measures holds it; ``held_expected``, its interval of the expected difference does."""
+    lo, hi = (m.low, m.high) if sign > 0 else (-m.high, -m.low)
+    match = m.match or (None, None)  # (a flagged bound's margin has no range: unbounded)
+    m_lo, m_hi = (match[0], match[1]) if sign > 0 else (
+        None if match[1] is None else -match[1], None if match[0] is None else -match[0])
+    m_lo, m_hi = -math.inf if m_lo is None else m_lo, math.inf if m_hi is None else m_hi
+    return {"where": where, "elo": sign * m.elo, "low": lo, "high": hi, "match_low": m_lo, "match_high": m_hi,
+            "held": margin_held(m_lo, m_hi, elo, bound), "held_expected": margin_held(lo, hi, elo, bound)}
 
 
 def check_game(name: str, home: Path, args: list[str], games: int, max_pairs: int | None, seed: int,
@@ -186,13 +196,13 @@ def check_game(name: str, home: Path, args: list[str], games: int, max_pairs: in
             pa, pb, _ = MatchJob((rows[c.a],), rows[c.b]).load(league, first_seed, "cpu")
             r = run_match(pa[0], pb, games=games, first_seed=first_seed, env_options=options)
             score, elo, bound = measured(r.round_points)
-            margins = []
-            for where, m_elo, lo, hi in c.margins:
-                held = margin_held(lo, hi, elo, bound)
-                margins.append({"where": where, "elo": m_elo, "low": lo, "high": hi, "held": held})
-                if not held:
-                    print(f"  margin did not hold: {c.a} over {c.b} {m_elo:+.0f} [{lo:+.0f}, {hi:+.0f}] ({where}); "
-                          f"{r.n_results} results: {100 * score:.1f}%, {elo:+.0f} Elo", flush=True)
+            margins = [check_margin(where, m, sign, elo, bound) for where, m, sign in c.margins]
+            for m in margins:
+                if not m["held"]:
+                    print(f"  margin did not hold: {c.a} over {c.b} {m['elo']:+.0f} [{m['low']:+.0f}, "
+                          f"{m['high']:+.0f}], 200 games would measure {m['match_low']:+.0f} to "
+                          f"{m['match_high']:+.0f} ({m['where']}); {r.n_results} results: {100 * score:.1f}%, "
+                          f"{elo:+.0f} Elo", flush=True)
             rec = {"game": name, "a": c.a, "b": c.b, "kinds": sorted(c.kinds), "met": met, "results": r.n_results,
                    "predicted": pred.score, "low": pred.low, "high": pred.high, "measured": score,
                    "measured_elo": elo, "held": pred.holds(score), "margins": margins,
@@ -222,19 +232,24 @@ def summary(label: str, records: list[dict]) -> dict:
     met_w = [100 * (r["high"] - r["low"]) for r in open_ if r["met"]]
     new_w = [100 * (r["high"] - r["low"]) for r in open_ if not r["met"]]
     printed = [m["held"] for r in records for m in r["margins"] if m["where"] != "row"]
+    expected = [m["held_expected"] for r in records for m in r["margins"] if m["where"] != "row"]
     rows = [m["held"] for r in records for m in r["margins"] if m["where"] == "row"]
+    rows_expected = [m["held_expected"] for r in records for m in r["margins"] if m["where"] == "row"]
     order = [r["order_held"] for r in records if r["order_held"] is not None]
     out = {"label": label, "pairs": len(shown), "held": rate(held),
            "held_share": float(np.mean(held)) if held else None,
            "open_met": len(met_w), "width_met": float(np.median(met_w)) if met_w else None,
            "open_new": len(new_w), "width_new": float(np.median(new_w)) if new_w else None,
            "printed_margins": rate(printed), "row_margins": rate(rows), "order": rate(order),
+           "printed_expected": rate(expected), "rows_expected": rate(rows_expected),
            "rows_predictions": rate([r["held"] for r in records if "row" in r["kinds"]])}
     w = (f"median width {out['width_met']:.0f} points of {len(met_w)} that met" if met_w else "none that met")
     w += f", {out['width_new']:.0f} of {len(new_w)} that never met" if new_w else ", none that never met"
     print(f"{label}: predictions held {out['held']}; open predictions: {w}; margins printed under the ladder and in "
-          f"the summary held {out['printed_margins']}; order claims held {out['order']}; each row's margin over the "
-          f"next (JSON) held {out['row_margins']}, its pair's prediction {out['rows_predictions']}", flush=True)
+          f"the summary held {out['printed_margins']} (their intervals of the expected difference "
+          f"{out['printed_expected']}); order claims held {out['order']}; each row's margin over the next (JSON) held "
+          f"{out['row_margins']} ({out['rows_expected']}), its pair's prediction {out['rows_predictions']}",
+          flush=True)
     return out
 
 
@@ -308,14 +323,8 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
         pred = f.predict(names[i], names[j], games)
         k = rng.binomial(games, p[i, j])
         score, elo, bound = measured([[1.0] * k + [0.0] * (games - k)])
-        margins = []
-        for c in said:
-            if c[0] == "margin":
-                m = c[3]
-                sign = 1.0 if c[1] == i else -1.0
-                lo, hi = (m.low, m.high) if sign > 0 else (-m.high, -m.low)
-                margins.append({"where": "row", "elo": sign * m.elo, "low": lo, "high": hi,
-                                "held": margin_held(lo, hi, elo, bound)})
+        margins = [check_margin("row", c[3], 1.0 if c[1] == i else -1.0, elo, bound) for c in said
+                   if c[0] == "margin"]
         order = [c for c in said if c[0] == "order"]
         out.append({"kinds": sorted({"row" if c[0] == "margin" else c[0] for c in said}),
                     "predicted": pred.score, "low": pred.low, "high": pred.high, "measured": score,
@@ -327,7 +336,8 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--games", nargs="*", default=list(GAMES), choices=list(GAMES))
-    ap.add_argument("--checks", type=int, default=200, help="games of each checking match")
+    ap.add_argument("--checks", type=int, default=200,
+                    help="games of each checking match (the ranges the margins print are for 200)")
     ap.add_argument("--max-pairs", type=int, default=None, help="pairs to check per game (default: all claimed)")
     ap.add_argument("--budget", action="append", default=[], metavar="GAME=ARGS",
                     help="replace the budget of a game's README command, e.g. tennis='--minutes 5'")
@@ -359,17 +369,18 @@ def main() -> None:
                 continue
             table.append(summary(game, records))
             real += records
-    for tau in (0.0, 150.0, 300.0):
+    for tau in (0.0, 150.0, 300.0) if args.simulated else ():
         sim = [r for _ in range(args.simulated) for r in simulated(rng, tau, args.checks)]
         table.append(summary(f"simulated, spread {tau:.0f}", sim))
     print("\n| game | pairs | 95% predictions held | open, met: median width (pairs) | open, never met | "
-          "printed margins held | order claims held | row margins (JSON) held |")
+          "printed margins held (their expected-difference intervals) | order claims held | row margins (JSON) held "
+          "(intervals) |")
     print("|---|---|---|---|---|---|---|---|")
     for t in table:
         wm = f"{t['width_met']:.0f} ({t['open_met']})" if t["width_met"] is not None else "-"
         wn = f"{t['width_new']:.0f} ({t['open_new']})" if t["width_new"] is not None else "-"
-        print(f"| {t['label']} | {t['pairs']} | {t['held']} | {wm} | {wn} | {t['printed_margins']} | {t['order']} | "
-              f"{t['row_margins']} |")
+        print(f"| {t['label']} | {t['pairs']} | {t['held']} | {wm} | {wn} | {t['printed_margins']} "
+              f"({t['printed_expected']}) | {t['order']} | {t['row_margins']} ({t['rows_expected']}) |")
     if args.out:
         args.out.write_text(json.dumps({"date": time.strftime("%Y-%m-%d"), "machine": platform.node(),
                                         "table": table, "pairs": real}, indent=1))

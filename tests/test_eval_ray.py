@@ -140,17 +140,16 @@ def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rate
 @pytest.mark.slow
 def test_a_run_that_ends_before_its_actors_have_started_stops_them_at_once(ray_local, rated_league):
     """Ctrl-C as the run begins: its actor, still starting, is told to stop all the same and leaves as soon as it is
-    up (a cancelled call once kept it waiting, and the run with it, for the 30 s before the kill)."""
-    from selfplay_cli.train.ray_eval import STOP_SECONDS, RayEvaluator
+    up (a cancelled call once kept it waiting, and the run with it, until the kill after the stop time). The stop
+    time is long here (a loaded machine took 16 s and more to start an actor): an actor that waits for it is killed,
+    and says so, however fast the machine."""
+    from selfplay_cli.train.ray_eval import RayEvaluator
 
     league, _ = rated_league
     notes: list[str] = []
-    ev = RayEvaluator(league, "w", "cpu", actors=2, note=notes.append)
-    t0 = time.monotonic()
+    ev = RayEvaluator(league, "w", "cpu", actors=2, note=notes.append, stop_seconds=300.0)
     ev.close()
-    # as soon as the actor is up (about 4 s here; 16 s once on a machine busy with other work), well before the
-    # STOP_SECONDS (30 s) after which an actor that did not leave is killed
-    assert time.monotonic() - t0 < STOP_SECONDS - 5 and notes == []
+    assert notes == []  # each left on its own: none was killed
     workers = league.workers()
     assert len(workers) == 2 and all(w.stopped_at is not None and _gone(w.pid) for w in workers)
 

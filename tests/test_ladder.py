@@ -236,10 +236,17 @@ def test_the_best_of_a_run_says_by_how_much_and_when_it_cannot_tell(league: Leag
     best = by["r1/ep90"]
     assert best.best and best.best_margin.over == "r1/ep10" and not best.best_margin.separated
     assert best.tied == ("r1/ep10",)  # 11-9: the run's best by Elo, not beyond doubt
-    assert best.best_margin.record == (11, 0, 9) and "(head to head 11-0-9)" in best.best_margin.text()
-    belief = Forecaster.of_league(league, "pong").belief("r1/ep90", "r1/ep10")  # the same claim, the same figure
+    assert best.best_margin.record == (11, 0, 9) and "(head to head 11-0-9; " in best.best_margin.text()
+    forecast = Forecaster.of_league(league, "pong")
+    belief = forecast.belief("r1/ep90", "r1/ep10")  # the same claim, the same figure
     assert (best.best_margin.elo, best.best_margin.low, best.best_margin.high) == pytest.approx(
         (belief.mean, *belief.interval()))
+    # what a 200-game match of the two would measure: `marl league predict`'s score range, in Elo
+    pred = forecast.predict("r1/ep90", "r1/ep10", 200)
+    low, high = best.best_margin.match
+    assert (elo_to_score(low), elo_to_score(high)) == pytest.approx((pred.low, pred.high))
+    assert low < best.best_margin.low and high > best.best_margin.high  # the match's luck on top
+    assert f"200 games would measure {low:+.0f} to {high:+.0f})" in best.best_margin.text()
     assert by["r2/ep90"].best and by["r2/ep90"].best_margin is None and by["r2/ep90"].tied == ()
     _record(league, _results(e90, e10, 60, 0, 10))
     best = _by_name(ladder(league, bootstrap=0))["r1/ep90"]
@@ -247,6 +254,24 @@ def test_the_best_of_a_run_says_by_how_much_and_when_it_cannot_tell(league: Leag
     d = best.to_json()
     assert d["best_margin"]["over"] == "r1/ep10" and d["best_margin"]["separated"] is True and d["tied"] == []
     assert d["best_margin"]["head_to_head"] == [71, 0, 19]
+    assert d["best_margin"]["match"]["games"] == 200 and d["best_margin"]["match"]["low"] < d["best_margin"]["low"]
+
+
+def test_a_margin_says_what_a_200_game_match_would_measure() -> None:
+    """Issue 48: a margin's interval is about the pair's expected difference; the 200-game match a user checks it
+    with adds its own luck. Known exactly (no uncertainty, no spread) at an even pair, the match is 200 coin tosses:
+    95% of them score 86 to 114 wins (binomial quantiles), 43% to 57%, -49 to +49 Elo."""
+    from selfplay_cli.league.ladder import Margin
+    from selfplay_cli.stats.elo import score_to_elo
+    from selfplay_cli.stats.predict import belief
+
+    m = Margin("b", 0.0, 0.0, 0.0, (0, 0, 0), belief(0.0, 0.0))
+    assert m.match == pytest.approx((score_to_elo(0.43), score_to_elo(0.57)))
+    assert m.match[1] == pytest.approx(48.9, abs=0.1)
+    assert "(they never met; 200 games would measure -49 to +49)" in m.text()
+    sure = Margin("b", 1500.0, 1400.0, 1600.0, (0, 0, 0), belief(1500.0, 50.0))  # 200 of 200 is in the range
+    assert sure.match[1] is None and "would measure +" in sure.text() and " or more)" in sure.text()
+    assert Margin("b", 10.0, -5.0, 25.0).match is None and Margin("b", 10.0, -5.0, 25.0).to_json()["match"] is None
 
 
 def test_bootstrap_is_seeded(tmp_path: Path) -> None:

@@ -300,8 +300,12 @@ def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
 def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     """A worker is attached (its heart beats) but never takes the run's gauntlet (busy with other work, or serving
     other batches): after ``untaken`` seconds the run's end plays it itself, and says so while it does."""
+    from selfplay_cli.league.queue import NewJob
+
     league, snap = rated_league
     busy = league.add_worker("busy", "elsewhere", 1)
+    league.enqueue("other", [NewJob(kind="games", env="pong", spec={})])
+    assert league.claim(busy, batches=["other"]) is not None  # busy with another batch's job
     ev = RemoteEvaluator(league, "w", "cpu", untaken=0.5, poll_seconds=0.05)
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))
     seen: list[QueueStanding] = []
@@ -321,3 +325,96 @@ def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     assert job.state == "done" and job.worker.startswith("train@")
     assert seen[0] == QueueStanding(left=1, workers=(), here=False, attached=1)
     assert any(s.here for s in seen)
+
+
+# -- a moment's matchups shared among the workers ---------------------------------------------------------------------
+def _claim_matchup(league: League, worker: int):
+    """The first ``matchup`` job this worker can lease, once the moment's worker has queued them (waited for by
+    looking again, at most a minute)."""
+    import time
+
+    from selfplay_cli.rated.gauntlet_jobs import MATCHUP
+
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        job = league.claim(worker, kinds=[MATCHUP])
+        if job is not None:
+            return job
+        time.sleep(0.02)
+    raise AssertionError("the moment's worker queued no matchup")
+
+
+def _seeds(league: League, match_id: int) -> list[int]:
+    with league.session(readonly=True) as s:
+        return sorted(s.execute(select(Game.seed).where(Game.match_id == match_id)).scalars())
+
+
+def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
+    """Issue 49: with --eval remote a moment's gauntlet was one job: one worker played it while the others sat idle.
+    Now the worker that leases a moment queues its matchups as jobs of their own when another worker of the batch is
+    free: the free one takes one, the moment's worker plays the rest and waits for it, and the moment ends with all
+    of its games stored once, on the seeds and under the keys the whole moment plays them."""
+    import shutil
+
+    from selfplay_cli.rated.gauntlet_jobs import MATCHUP
+
+    league, snap = rated_league
+    ev = RemoteEvaluator(league, "w", "cpu")
+    ev.submit(GauntletJob((snap.id,), 0, 2, 0))
+    whole_home = tmp_path / "whole"
+    shutil.copytree(league.home, whole_home)  # the same league, to play the moment whole for comparison
+    mover = league.add_worker("mover", "here", 1)
+    free = league.add_worker("free", "elsewhere", 2)  # attached, heart beating, holding nothing
+    moment = league.claim(mover, kinds=["gauntlet"])
+    outcome: list = []
+    playing = threading.Thread(target=lambda: outcome.append(play_leased(league, mover, moment)), daemon=True)
+    playing.start()
+    taken = _claim_matchup(league, free)
+    assert taken.batch == run_batch("w") and taken.after is None  # not chained: whoever is free takes it
+    assert play_leased(league, free, taken).state == "done"
+    playing.join(timeout=120)
+    assert outcome and outcome[0].state == "done", outcome
+    jobs = league.jobs(batch=run_batch("w"))
+    matchups = [j for j in jobs if j.kind == MATCHUP]
+    # s0 against random and cpu, and at the run's first moment the two bots against each other
+    assert len(matchups) == 3 and {j.state for j in jobs} == {"done"}
+    assert sorted(tuple(j.spec["snapshots"]) for j in matchups) == [("random", "cpu"), ("w/s0", "cpu"),
+                                                                     ("w/s0", "random")]
+    by = Counter(j.worker for j in matchups)
+    assert by["free"] == 1 and sum(n for w, n in by.items() if w.startswith("gauntlet@")) == 2, by
+    (done,) = ev.poll()
+    assert done.games == 6  # the moment counts every game of its matchups, whoever played them
+    split = league.keyed_matches("gauntlet/")
+    with League.open(whole_home) as alone:  # the same moment played whole by one worker
+        only = alone.add_worker("only", "here", 3)
+        job = alone.claim(only, kinds=["gauntlet"])
+        assert play_leased(alone, only, job).state == "done"
+        assert [j.kind for j in alone.jobs(batch=run_batch("w"))] == ["gauntlet"]  # nobody free: played whole
+        whole = alone.keyed_matches("gauntlet/")
+        seeds = {k: _seeds(alone, mid) for k, (mid, _) in whole.items()}
+    assert set(split) == set(whole) and len(split) == 3  # the same matchups, stored once each, under the same keys
+    assert {k: _seeds(league, mid) for k, (mid, _) in split.items()} == seeds
+
+
+def test_a_moment_played_again_queues_none_of_its_matchups_twice(rated_league):
+    """A moment's worker that died after queueing its matchups: the moment's next worker finds them queued (or
+    stored) and queues nothing twice; a matchup spec a worker cannot play is refused, in one line."""
+    from selfplay_cli.rated.gauntlet_jobs import check_matchup_spec, queue_matchups
+    from selfplay_cli.rated.job_spec import BadSpec
+
+    league, snap = rated_league
+    RemoteEvaluator(league, "w", "cpu").submit(GauntletJob((snap.id,), 0, 2, 0))
+    first = league.add_worker("first", "here", 1)
+    moment = league.claim(first, kinds=["gauntlet"])
+    ids = queue_matchups(league, moment)
+    assert len(ids) == 3 and queue_matchups(league, moment) == ids
+    one = league.claim(first, kinds=["matchup"])
+    assert play_leased(league, first, one).state == "done"
+    assert sorted(queue_matchups(league, moment)) == sorted(i for i in ids if i != one.id)  # stored: not again
+    spec = dict(one.spec)
+    check_matchup_spec(spec)
+    for key, bad, needle in (("expect", 1.5, "expect must be a number from 0 up to"),
+                             ("a", "evilmod:env", "a must be a whole number"),
+                             ("snapshot_ids", [], "snapshot_ids must be a list of 1 to")):
+        with pytest.raises(BadSpec, match=needle):
+            check_matchup_spec({**spec, key: bad})

@@ -79,7 +79,8 @@ from __future__ import annotations
 import math
 from collections import defaultdict
 from collections.abc import Collection
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -100,9 +101,9 @@ from selfplay_cli.stats.bradley_terry import (
     fit_bradley_terry,
     pair_matrices,
 )
-from selfplay_cli.stats.elo import MAX_ELO
+from selfplay_cli.stats.elo import MAX_ELO, score_to_elo
 from selfplay_cli.stats.intervals import DEFAULT_BOOTSTRAP, bootstrap_intervals, laplace_intervals
-from selfplay_cli.stats.predict import PairModel, Spread
+from selfplay_cli.stats.predict import Belief, PairModel, Spread
 from selfplay_cli.stats.ranks import claims_order
 from selfplay_cli.stats.ranks import tiers as claims_tiers
 
@@ -111,6 +112,7 @@ __all__ = [
     "DEFAULT_PRIOR",
     "BotRecord",
     "Fitted",
+    "MATCH_GAMES",
     "LadderRow",
     "Margin",
     "fit_table",
@@ -124,6 +126,8 @@ __all__ = [
 _JSON_KEYS = ("policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
               "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "copy_of",
               "copies", "vs", "league_role", "exploitability", "circle")
+
+MATCH_GAMES = 200  # a margin says what a match of this many games between the two would measure
 
 
 # --------------------------------------------------------------------------------------------------
@@ -149,26 +153,54 @@ class BotRecord:
 class Margin:
     """How far a player stands above another (``over``): the rating difference ``elo`` with its confidence interval
     ``low .. high`` (from the same covariance as the ladder's intervals, so what the two share through the anchor
-    cancels). ``separated``: the whole interval lies above 0."""
+    cancels). ``separated``: the whole interval lies above 0.
+
+    That interval is about the pair's expected difference; a match of the two measures it with its own luck. So a
+    margin also says what a match of :data:`MATCH_GAMES` games would measure (:attr:`match`, from the pair's belief:
+    :meth:`~selfplay_cli.stats.predict.Belief.predict`), the figure a user checks the claim with."""
 
     over: str
     elo: float
     low: float
     high: float
     record: tuple[int, int, int] = (0, 0, 0)  # the two's own results: wins, draws, losses of the first
+    belief: Belief | None = field(default=None, repr=False, compare=False)  # None: a flagged bound's margin
 
     @property
     def separated(self) -> bool:
         return self.low > 0.0
 
+    @cached_property
+    def match(self) -> tuple[float | None, float | None] | None:
+        """The central 95% range of the Elo difference a :data:`MATCH_GAMES`-game match of the two measures (the
+        range of its score, turned into Elo); an end is None where the score's range reaches 0% or 100% (no finite
+        Elo). None for a flagged bound's margin (no pair belief)."""
+        if self.belief is None:
+            return None
+        pred = self.belief.predict(MATCH_GAMES)
+        return (None if pred.low <= 0.0 else score_to_elo(pred.low),
+                None if pred.high >= 1.0 else score_to_elo(pred.high))
+
     def to_json(self) -> dict[str, Any]:
+        m = self.match
         return {"over": self.over, "elo": round(float(self.elo), 1), "low": round(float(self.low), 1),
-                "high": round(float(self.high), 1), "separated": self.separated, "head_to_head": list(self.record)}
+                "high": round(float(self.high), 1), "separated": self.separated, "head_to_head": list(self.record),
+                "match": None if m is None else {"games": MATCH_GAMES,
+                                                 "low": None if m[0] is None else round(m[0], 1),
+                                                 "high": None if m[1] is None else round(m[1], 1)}}
 
     def text(self) -> str:
-        """``+97 [+12, +182] Elo over NAME (head to head 40-3-17)``: the two's own record where they met."""
+        """``+97 [+12, +182] Elo over NAME (head to head 40-3-17; 200 games would measure +40 to +160)``: the
+        two's own record where they met, and the range a 200-game match of the two lands in 95% of the time."""
         w, d, lo = self.record
         met = f"head to head {w}-{d}-{lo}" if w + d + lo else "they never met"
+        m = self.match
+        if m is not None:
+            low, high = m
+            span = (f"{low:+.0f} to {high:+.0f}" if low is not None and high is not None else
+                    f"{low:+.0f} or more" if low is not None else f"{high:+.0f} or less" if high is not None else
+                    "anything")
+            met += f"; {MATCH_GAMES} games would measure {span}"
         return f"{self.elo:+.0f} [{self.low:+.0f}, {self.high:+.0f}] Elo over {self.over} ({met})"
 
 
@@ -344,7 +376,7 @@ class Fitted:
             w, dr, lo = (0, 0, 0) if self.wdl is None else (int(x) for x in self.wdl[:, i, j])
             if k in beliefs:
                 low, high = beliefs[k].interval(self.confidence)
-                out.append(Margin(self.names[j], beliefs[k].mean, low, high, (w, dr, lo)))
+                out.append(Margin(self.names[j], beliefs[k].mean, low, high, (w, dr, lo), beliefs[k]))
             else:
                 out.append(Margin(self.names[j], float(self.ratings[i] - self.ratings[j]),
                                   float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]), (w, dr, lo)))

@@ -15,7 +15,8 @@ seat cancel within a pair), one episode of each player on each seed of a coopera
 return), every rotation of the seating of a free-for-all game. In a cooperative game the per-seat snapshots of one
 moment (a run with one network per lander) are one player, a crew: they fly together, each on its own seat, and a
 comparison counts for every member (:func:`crews_of`). A "pair" below is one such round. All matchups of
-one snapshot moment are played together, in one batched call of :func:`selfplay_cli.arena.play`.
+one snapshot moment are played together, in one batched call of :func:`selfplay_cli.arena.play` (or, on a league's
+workers, each matchup as a job of its own: :func:`open_matchups`, :mod:`.gauntlet_jobs`).
 
 In a game whose seats hold different roles (:mod:`.roles`) a snapshot meets only players it can be seated against:
 a new ``adversary`` snapshot of a game of one adversary against one agent meets the run's ``agent`` snapshots (the
@@ -265,6 +266,7 @@ def play_gauntlet(
     history: History | None = None,
     label: str | None = None,
     key: str | None = None,
+    expects: Sequence[float | None] | None = None,
 ) -> list[Matchup]:
     """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
 
@@ -272,8 +274,9 @@ def play_gauntlet(
     seeds start at ``first_seed``, a disjoint range per matchup. ``on_games(n)`` is told of finished games.
     ``crews`` (cooperative games): the per-seat members a player flies with (:func:`crews_of`), by player id; a
     player without one flies every seat itself. ``history``: the moment's :class:`History`, whose games say which
-    matchups are already clear (without one, none is). ``label``: a flag set in the matches' parameters besides
-    ``gauntlet`` (``playoff``).
+    matchups are already clear (without one, none is); ``expects``: what a plan of the matchups found instead
+    (:func:`open_matchups`: a matchup played as a job of its own). ``label``: a flag set in the matches' parameters
+    besides ``gauntlet`` (``playoff``).
 
     ``key``: the unit of work these matchups are (a run's gauntlet of one moment, a round of its playoff), where it
     may be played twice (its process killed, then the run resumed; a rating worker replaced): each matchup is
@@ -297,9 +300,7 @@ def play_gauntlet(
             if row.id not in loaded:
                 loaded[row.id] = load_player(league, row, device=device, seed=mix_seed(first_seed, row.id))
     gauntlet = _Gauntlet(league, cfg, loaded, crews, label, spec)
-    span = max(cfg.max_pairs, cfg.bot_pairs)  # seeds reserved per matchup: one per round
-    matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
-    keys = [None if key is None else f"{key}/{m.first_seed}/{m.a.id}/{m.b.id}" for m in matchups]
+    matchups, keys = _matchups(pairs, first_seed, cfg, key)
     stored = league.keyed_matches(f"{key}/") if key is not None else {}
     if key is not None and all(k in stored for k in keys):  # done before: what the ledger holds of it
         for m, k in zip(matchups, keys, strict=True):
@@ -308,12 +309,13 @@ def play_gauntlet(
         return matchups
     gauntlet.plan(matchups, keys, stored)
     for k, m in enumerate(matchups):
-        m.expect = None if history is None else _clear_history(league, history, m, gauntlet.z, 2 * cfg.pairs)
+        m.expect = (expects[k] if expects is not None else
+                    None if history is None else _clear_history(league, history, m, gauntlet.z, 2 * cfg.pairs))
         if cfg.bot_pairs and m.b.is_bot:  # the final's figures against the bots: in full, whatever the history
             gauntlet.schedule_pairs(k, max(cfg.pairs, cfg.bot_pairs))
         else:
             gauntlet.schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
-    most = 2 * span * len(matchups)
+    most = 2 * max(cfg.max_pairs, cfg.bot_pairs) * len(matchups)
     play(gauntlet.spec, gauntlet.roster, gauntlet.schedule, parallel=cfg.parallel, env_options=gauntlet.options,
          record_actions=True, on_result=lambda r: gauntlet.finished(r, on_games), slots=min(cfg.parallel, most))
     return matchups
@@ -496,19 +498,25 @@ def best_snapshot(history: History, anchor: str = "random",
     return max(linked, key=lambda p: (fit.rating(p.id), -p.id))
 
 
-def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: int, config: GauntletConfig,
-                   device: str = "cpu", on_games: Callable[[int], None] | None = None) -> list[Matchup]:
-    """The whole gauntlet of one snapshot moment: the run's best so far, the opponents, the games, all chosen from
-    the moment's :class:`History`.
+@dataclass(frozen=True)
+class Moment:
+    """What one snapshot moment's gauntlet plays (:func:`plan_moment`): its pairs (a cooperative game's crews by
+    their first member), the crews by that member's id, the moment's :class:`History` and the unit's key."""
 
-    Idempotent: the gauntlet is one unit of work keyed by the moment (``gauntlet/<its first snapshot id>``,
-    :func:`play_gauntlet`'s ``key``): played again (cut short by a kill, then run again on resume), it stores what is
-    missing and nothing twice, with the same choices. A pair whose players, or copies of them (the same weights,
-    :meth:`League.same_weights`: another run with the same seed), already met in another gauntlet is left out.
-    """
+    pairs: list[tuple[PlayerRow, PlayerRow]]
+    crews: dict[int, tuple[PlayerRow, ...]]
+    history: History
+    key: str
+
+
+def plan_moment(league: League, snapshot_ids: Sequence[int], older: int) -> Moment | None:
+    """The gauntlet of one snapshot moment (``older``: earlier snapshots it meets besides the predecessor and the
+    best), chosen from the moment's :class:`History` alone, so planned again it is the same: the run's best so
+    far, the opponents, the pairs (those whose players, or copies of them, already met in another gauntlet left
+    out). None without snapshots."""
     new = [league.get_player(int(i)) for i in snapshot_ids]
     if not new:
-        return []
+        return None
     history = run_history(league, new)
     anchor = get_env(new[0].env).anchor
     book = RoleBook(league, new[0].env)
@@ -519,7 +527,7 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
         best = best_snapshot(history, anchor)
     # a cooperative game's per-seat snapshots fly as crews (below), each member on its own seat: paired as crews
     meets = book.meets if book.differ and book.rules.kind != COOPERATIVE else None
-    pairs = choose_opponents(league, new, older=config.older, best=best, history=history, meets=meets)
+    pairs = choose_opponents(league, new, older=older, best=best, history=history, meets=meets)
     crews = crews_of(league, [p for pair in pairs for p in pair])
     if crews:  # a cooperative game's per-lander snapshots fly as their moment's team: one matchup per two teams
         lead = {pid: crew[0] for pid, crew in crews.items()}
@@ -536,8 +544,49 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     key = f"gauntlet/{min(p.id for p in new)}"
     mine = {match_id for match_id, _ in league.keyed_matches(f"{key}/").values()}  # (this unit's, played before)
     pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant, ignore=mine)]
-    return play_gauntlet(league, pairs, first_seed=first_seed, config=config, device=device, on_games=on_games,
-                         crews={m.id: crew for crew in crews.values() for m in crew[:1]}, history=history, key=key)
+    return Moment(pairs, {m.id: crew for crew in crews.values() for m in crew[:1]}, history, key)
+
+
+def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: int, config: GauntletConfig,
+                   device: str = "cpu", on_games: Callable[[int], None] | None = None) -> list[Matchup]:
+    """The whole gauntlet of one snapshot moment (:func:`plan_moment`), played.
+
+    Idempotent: the gauntlet is one unit of work keyed by the moment (``gauntlet/<its first snapshot id>``,
+    :func:`play_gauntlet`'s ``key``): played again (cut short by a kill, then run again on resume; its matchups
+    played as jobs of their own, :func:`open_matchups`), it stores what is missing and nothing twice, with the same
+    choices. A pair whose players, or copies of them (the same weights, :meth:`League.same_weights`: another run
+    with the same seed), already met in another gauntlet is left out.
+    """
+    moment = plan_moment(league, snapshot_ids, config.older)
+    if moment is None:
+        return []
+    return play_gauntlet(league, moment.pairs, first_seed=first_seed, config=config, device=device,
+                         on_games=on_games, crews=moment.crews, history=moment.history, key=moment.key)
+
+
+def open_matchups(league: League, moment: Moment, *, first_seed: int, config: GauntletConfig) -> list[Matchup]:
+    """The matchups of a planned moment not in the ledger yet, each with its seeds and its expectation
+    (:attr:`Matchup.expect`) as :func:`play_gauntlet` would give them: what a matchup played on its own
+    (``play_gauntlet([(a, b)], first_seed=m.first_seed, expects=[m.expect], key=moment.key)``) plays, with the
+    same seeds and under the same key as the whole moment's call."""
+    matchups, keys = _matchups(moment.pairs, first_seed, config, moment.key)
+    stored = league.keyed_matches(f"{moment.key}/")
+    z = normal_quantile(config.clear)
+    out = []
+    for m, k in zip(matchups, keys, strict=True):
+        if k not in stored:
+            m.expect = _clear_history(league, moment.history, m, z, 2 * config.pairs)
+            out.append(m)
+    return out
+
+
+def _matchups(pairs: Sequence[tuple[PlayerRow, PlayerRow]], first_seed: int, cfg: GauntletConfig,
+              key: str | None) -> tuple[list[Matchup], list[str | None]]:
+    """The matchups of ``pairs``, each with its own range of seeds (one per round it may reach), and their keys
+    under ``key`` (``<key>/<first seed>/<a>/<b>``)."""
+    span = max(cfg.max_pairs, cfg.bot_pairs)  # seeds reserved per matchup: one per round
+    matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
+    return matchups, [None if key is None else f"{key}/{m.first_seed}/{m.a.id}/{m.b.id}" for m in matchups]
 
 
 def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[PlayerRow, ...]]:

@@ -2,7 +2,8 @@
 its heart beating, and seeing a queued batch through.
 
 The kinds of job are :mod:`.games_jobs` (a few minutes of one match) and :mod:`.gauntlet_jobs` (a training run's
-gauntlet of one snapshot moment); :data:`KINDS` finds each one's player, :data:`CHECKS` the check of its spec.
+gauntlet of one snapshot moment, and one matchup of it); :data:`KINDS` finds each one's player, :data:`CHECKS` the
+check of its spec.
 :func:`play_leased` plays one leased job while a thread beats its heart, then finishes it, or fails it with a short
 line saying what failed: tried again after a backoff, dead after its tries; a spec its kind refuses, or one that
 cannot be read, is dead at once. Whatever a job raises (a bot this marl does not know, a missing key, a recursion or
@@ -34,10 +35,12 @@ __all__ = ["CHECKS", "KINDS", "MAX_ERROR", "BadSpec", "JobLost", "Outcome", "che
            "play_leased", "see_through", "sprt_verdict", "worker_name"]
 
 KINDS: dict[str, Callable[..., Played]] = {games_jobs.GAMES: games_jobs.play,
-                                           gauntlet_jobs.GAUNTLET: gauntlet_jobs.play}
+                                           gauntlet_jobs.GAUNTLET: gauntlet_jobs.play,
+                                           gauntlet_jobs.MATCHUP: gauntlet_jobs.play_matchup}
 """The player of each kind of job: ``player(league, job, device=, parallel=, on_games=) -> Played``."""
 CHECKS: dict[str, Callable[[dict[str, Any]], None]] = {games_jobs.GAMES: games_jobs.check_spec,
-                                                       gauntlet_jobs.GAUNTLET: gauntlet_jobs.check_spec}
+                                                       gauntlet_jobs.GAUNTLET: gauntlet_jobs.check_spec,
+                                                       gauntlet_jobs.MATCHUP: gauntlet_jobs.check_matchup_spec}
 """The check of each kind's spec: ``check(spec)`` raises :class:`BadSpec` saying what is wrong."""
 MAX_ERROR = 300
 """Characters of a failed job's error as its row keeps it (every member of a league reads it)."""

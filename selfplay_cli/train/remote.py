@@ -1,8 +1,8 @@
 """A run's gauntlets on the league's workers (``marl train --eval remote``): each moment's gauntlet a job of the
 league's work queue, played by ``marl worker`` processes on any machine, and by the run itself at its end when no
 worker takes them (see :class:`RemoteEvaluator`). The same function plays a gauntlet wherever it is played
-(:func:`selfplay_cli.rated.gauntlet_jobs.play_gauntlet_spec`), so the games are the local rating worker's
-(:mod:`.evaluator`)."""
+(:func:`selfplay_cli.rated.gauntlet_jobs.play_gauntlet_spec`), so it plays the local rating worker's matchups
+(:mod:`.evaluator`) on the same seeds; shared among several workers, a moment's matchups are played apart."""
 
 from __future__ import annotations
 
@@ -45,7 +45,9 @@ class RemoteEvaluator:
 
     Each moment's gauntlet is one job of the run's batch (:func:`run_batch`), chained after the one before it, so the
     workers play them in the order the snapshots were taken and each picks the run's best from the games of the jobs
-    before it, as the local worker does: the same games. A resumed run finds a moment's job already queued (by its
+    before it, as the local worker does. The worker that takes a moment shares its matchups with the other workers
+    of the batch, each a job of its own (:mod:`selfplay_cli.rated.gauntlet_jobs`): a moment's independent matchups go
+    to whoever is free. A resumed run finds a moment's job already queued (by its
     snapshot ids) and waits for that one instead of queueing it twice.
 
     :meth:`poll` reports the jobs done, so the run's progress and ladder fill in as their games arrive. :meth:`wait`
@@ -85,8 +87,8 @@ class RemoteEvaluator:
         """Queue ``job`` after the run's previous gauntlet, unless the batch already holds it (a resumed run)."""
         from ..rated.gauntlet_jobs import GAUNTLET, gauntlet_job
 
-        mine = self.league.jobs(batch=self.batch)
-        found = [j for j in mine if j.kind == GAUNTLET and j.state != "dead"
+        mine = [j for j in self.league.jobs(batch=self.batch) if j.kind == GAUNTLET]  # (not their matchups' jobs)
+        found = [j for j in mine if j.state != "dead"
                  and [int(i) for i in j.spec.get("snapshot_ids", ())] == list(job.snapshot_ids)]
         if found:
             jid = found[-1].id
@@ -189,7 +191,9 @@ class RemoteEvaluator:
 
         rows = self.league.jobs(ids=list(self._ids.values())) if self._ids else []
         left = [r for r in rows if r.state not in ENDED]
-        who = sorted({r.worker for r in left if r.state == "leased" and r.worker and not self._is_me(r.worker)})
+        playing = self.league.jobs(batch=self.batch, states=["leased"]) if left else []  # (its matchups' too)
+        who = sorted({r.worker for r in playing if r.worker and not self._is_me(r.worker)
+                      and not r.worker.startswith("gauntlet@")})
         return QueueStanding(left=len(left), workers=tuple(who), here=self.here, attached=len(self.serving()))
 
     def close(self) -> None:
