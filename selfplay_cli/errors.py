@@ -1,4 +1,4 @@
-"""User-facing errors and the exit codes of `marl` (README: "Exit codes").
+"""User-facing errors and the exit codes of `marl` (docs/getting-started.md: "Exit codes").
 
 The CLI prints an error as one line on stderr and exits with a code a script or CI job can act on:
 

@@ -28,3 +28,12 @@ def ctrl_c_enabled() -> None:
     a shell without job control, or in a pytest-xdist worker, inherits SIGINT ignored, and so would the child:
     Python then never raises KeyboardInterrupt (a test of Ctrl-C timed out that way, taken for a hang)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def docs_text() -> str:
+    """README and every page of the docs site (``docs/``), as one text: what a user can read."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    pages = sorted((root / "docs").rglob("*.md"))
+    return "\n".join(p.read_text() for p in [root / "README.md", *pages])

@@ -61,10 +61,15 @@ def test_unknown_command_and_bad_flag_fail_without_traceback():
         assert "Traceback" not in out.stderr + out.stdout
 
 
-def test_readme_documents_exactly_the_registered_commands():
+def test_readme_and_the_docs_document_exactly_the_registered_commands():
+    """README's tour names every command, and the docs site has a section (a page, or a part of one) for each."""
+    from cli_helpers import docs_text
+
     readme = (ROOT / "README.md").read_text()
-    documented = set(re.findall(r"^### `marl (\w+)", readme, flags=re.M))
-    assert documented == registered_commands()
+    assert set(re.findall(r"\*\*`marl (\w+)`\*\*", readme)) == registered_commands()
+    pages = "\n".join(p.read_text() for p in (ROOT / "docs").rglob("*.md") if p.parent.name != "reference")
+    assert set(re.findall(r"^#{1,3} `marl (\w+)", pages, flags=re.M)) == registered_commands()
+    assert "not built yet" not in docs_text().lower()
 
 
 def test_ci_runs_the_readme_install_and_test_commands():
@@ -76,12 +81,12 @@ def test_ci_runs_the_readme_install_and_test_commands():
 
 
 def test_readme_shows_what_marl_envs_prints_and_claims_no_missing_feature_that_exists(capsys):
-    """README's sample of `marl envs` (the lines under the table: each game's training defaults) is what the command
-    prints today; and README calls nothing "not built yet" that a command offers (league roles and Nash opponents
+    """The docs' sample of `marl envs` (the lines under the table: each game's training defaults) is what the command
+    prints today; and the docs call nothing "not built yet" that a command offers (league roles and Nash opponents
     are `marl train --league alphastar` and `--opponents nash`)."""
     from cli_helpers import run
 
-    readme = (ROOT / "README.md").read_text()
+    readme = (ROOT / "docs" / "commands" / "envs.md").read_text()
     code, out, _ = run(capsys, "envs")
     assert code == 0
     for line in out.splitlines():
@@ -89,7 +94,6 @@ def test_readme_shows_what_marl_envs_prints_and_claims_no_missing_feature_that_e
             game = line.split(" ", 1)[0]
             shown = [x for x in readme.splitlines() if x.startswith(f"{game} trains with its own defaults ")]
             assert shown and all(x == line for x in shown), (game, shown, line)
-    assert "not built yet" not in readme.lower()
 
 
 def test_a_refused_command_leaves_no_league_behind(tmp_path, monkeypatch, capsys):

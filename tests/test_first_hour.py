@@ -214,7 +214,7 @@ def test_tensorboard_hint_names_the_extra(monkeypatch):
         tensorboard_writer(None)
     extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
     assert any(dep.startswith("tensorboard") for dep in extras["tensorboard"])
-    assert 'pip install -e ".[tensorboard]"' in (ROOT / "README.md").read_text()
+    assert 'pip install -e ".[tensorboard]"' in (ROOT / "docs" / "commands" / "train.md").read_text()
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -409,8 +409,8 @@ def test_an_interrupt_exits_130(capsys, monkeypatch):
     assert code == EXIT_INTERRUPTED and "Traceback" not in err
 
 
-def test_readme_documents_the_exit_codes():
-    readme = (ROOT / "README.md").read_text()
+def test_the_docs_document_the_exit_codes():
+    readme = (ROOT / "docs" / "getting-started.md").read_text()
     table = dict(re.findall(r"^\| (\d+) \| ([^|]+) \|$", readme, flags=re.M))
     assert set(map(int, table)) == set(EXIT_CODES)
 

@@ -287,8 +287,7 @@ def test_games_under_way_are_named_as_they_are(ended, text):
     assert text in describe_games(standing(ended=ended, game_steps=12.5))
 
 
-README = Path(__file__).resolve().parents[1] / "README.md"
-# the run each README section's commands name, and the `marl train` command that makes it (flags that change names)
+# the run each docs page's commands name, and the `marl train` command that makes it (flags that change names)
 README_RUNS = {"pong-1": ("pong", {"agents": 2}), "tennis-1": ("tennis", {"agents": 2}),
                "lander-1": ("lander", {"agents": 2, "sharing": "fups"}),
                "lander-2": ("lander", {"agents": 2, "sharing": "nops", "algo": "dqn"}),
@@ -310,9 +309,11 @@ def _learners_of(env: str, flags: dict) -> list[str]:
 def test_readme_names_only_snapshots_its_runs_make():
     """A shared network's snapshots have no seat suffix (tennis's default run: s0, not s0-player_0); a run of one
     network per seat names a moment's team (s6M) or one member (s6M-left)."""
+    from cli_helpers import docs_text
+
     from selfplay_cli.envs import admit, get_env
 
-    text = README.read_text()
+    text = docs_text()
     for env, _ in README_RUNS.values():
         admit(env)  # the README's games (connect four: a game of your own, named by its commands)
     named = re.findall(r"marl \w+(?: \w+)? .*?\b((?:pong|tennis|lander|connect_four_v3)-\d+)/([\w.-]+)", text)

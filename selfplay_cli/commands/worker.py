@@ -140,4 +140,4 @@ def _check_league_here(home: Path | None, db: str | None) -> None:
     if not path.is_file():
         raise MarlError(f"no league database at {path} on this machine: SQLite leagues live in one file on one "
                         "machine; for workers on other machines put the league on PostgreSQL (--db "
-                        "postgresql+psycopg://USER@HOST/DB, README: Many machines)")
+                        "postgresql+psycopg://USER@HOST/DB, docs: Many machines)")

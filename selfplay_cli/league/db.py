@@ -186,7 +186,7 @@ def _refuse_network_sqlite(db_file: Path) -> None:
         raise LeagueError(
             f"{db_file} is on a network file system ({fstype}), where SQLite's locks cannot be trusted and a "
             f"league gets corrupted: use a PostgreSQL league for several machines (--db postgresql://user@host/db; "
-            f"README: A league on PostgreSQL), or set {ALLOW_NETWORK_SQLITE}=1")
+            f"docs: A league on PostgreSQL), or set {ALLOW_NETWORK_SQLITE}=1")
 
 
 def _driver_url(url: URL) -> URL:

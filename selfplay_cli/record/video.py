@@ -10,7 +10,7 @@ so a failed encode would pass silently; here ffmpeg's messages go to a temporary
   at its fastest, and the encoder is the slowest stage of a recording (see ``benchmarks/record_speed.py``: ffmpeg
   spends about 3 ms of CPU on a frame that Python draws in 0.25 ms).
 * gif: two passes, so that the file is small (a minute of pong, 3,000 steps: 12.3 MB stored a frame per step with a
-  palette each, 1.36 MB so; see README):
+  palette each, 1.36 MB so; see docs/commands/record.md):
 
   - at most :data:`GIF_FPS` frames a second: frames are one per game step (60 a second for pong), and those that
     fall between two stored ones are dropped, so the game still plays at its own speed;

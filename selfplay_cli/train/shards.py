@@ -14,7 +14,7 @@ Why a split run is the run: a game's seed is a function of its slot and count (:
 training_games.SelfPlayGames`), and a learner copy draws its noise for the whole batch and keeps its own rows
 (:func:`~selfplay_cli.algos.base.padded`), so every actor draws what the trainer alone would have drawn, and the
 trainer's PPO adopts the generator state the actors end with. What can still differ from a local run is written in
-README ("Training on many cores and machines").
+docs/many-machines.md ("Training on many cores and machines").
 """
 
 from __future__ import annotations
