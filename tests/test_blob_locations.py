@@ -386,15 +386,13 @@ def test_a_server_that_drips_is_let_go_at_the_deadline(sqlite_url, tmp_path, mon
     allow(monkeypatch, f"http://127.0.0.1:{server.port}/")
     kept_at(a, s1.sha256, f"http://127.0.0.1:{server.port}/{s1.sha256}")
     elsewhere = League.open(tmp_path / "elsewhere", url=sqlite_url)
-    t = time.perf_counter()
     try:
         with pytest.raises(LeagueError) as e:
             elsewhere.blob_bytes(s1.sha256, "r/s1", limit=MAX_FILE_BYTES, deadline=1.0)
     finally:
         server.close()
     assert "not read within 1 s" in one_line(e.value) and "MARL_BLOB_DEADLINE" in str(e.value)
-    assert time.perf_counter() - t < 10
-    assert server.sent < 100  # a handful of drops, not the snapshot
+    assert server.sent < 100  # a handful of drops, not the snapshot (without the deadline: drops until closed)
     elsewhere.close()
     a.close()
 

@@ -9,13 +9,12 @@ import http.server
 import json
 import shutil
 import threading
-import time
 from functools import partial
 from pathlib import Path
 
 import pytest
 from cli_helpers import run
-from sqlalchemy import func, select, text
+from sqlalchemy import event, func, select, text
 
 from selfplay_cli.league.models import Blob
 from selfplay_cli.league.store import League, LeagueError
@@ -184,12 +183,14 @@ def test_put_blob_is_idempotent_and_two_writers_racing_both_succeed(db_url, tmp_
     data = b"the same bytes"
     sha = hashlib.sha256(data).hexdigest()
     done: list[str] = []
+    reached = threading.Event()
+    event.listen(b.engine, "before_cursor_execute", lambda *_: reached.set())  # B at the database
     with a.session() as s:  # A stores the blob and has not committed yet when B stores it too
         assert store_blob(s, sha, data)
         writer = threading.Thread(target=lambda: done.append(b.put_blob(data)))
         writer.start()
-        time.sleep(0.5)  # B is waiting for A's transaction (PostgreSQL: its row; SQLite: the write lock)
-        assert not done
+        assert reached.wait(30)
+        assert not done  # B cannot be through while A's transaction holds the row (or SQLite's write lock)
     writer.join(30)
     assert done == [sha] and blob_count(a) == 1
     assert a.put_blob(data) == sha and blob_count(a) == 1

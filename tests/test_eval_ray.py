@@ -122,15 +122,13 @@ def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rate
         assert notes[0].endswith("its gauntlet went back to the queue and another is started")
         time.sleep(0.5)  # (games under way)
     finally:
-        t0 = time.monotonic()
         ev.close()
-        took = time.monotonic() - t0
     (row,) = league.jobs(batch=batch)
     assert (row.state, row.tries) == ("queued", 0)
     workers = {w.name: w for w in league.workers()}
     assert list(workers) == ["ray@elsewhere:1", first, second]
     assert all(w.stopped_at is not None and w.holding == () for w in workers.values())
-    assert took < 10 and len(notes) == 1  # the second left by itself: not killed
+    assert len(notes) == 1  # the second left by itself: not killed (that is said, after the stop time)
     assert _gone(workers[second].pid)
     out, err = capsys.readouterr()
     assert "A worker died or was killed" in err and out == ""

@@ -300,6 +300,17 @@ def random_ledger(n: int, seed: int = 0) -> SimpleNamespace:
     return SimpleNamespace(player_a=pa, player_b=pb, score_a=rng.choice([0.0, 0.5, 1.0], size=n))
 
 
+def test_from_ledger_on_a_hand_computed_ledger() -> None:
+    """Learner 0 against 5: a win, a draw, a loss, in that order, decay 0.5. By hand: wins 0.5*(0.5*1 + 0.5) + 0
+    = 0.5, games 0.5*(0.5*1 + 1) + 1 = 1.75; p_win with a prior of 2 games: (0.5 + 1) / (1.75 + 2) = 0.4. The same
+    games from 5's side (it is no learner here) are not recorded; 0's game against 6 (as player b, a loss of 6's) is
+    0's win."""
+    table = SimpleNamespace(player_a=[0, 5, 0, 6], player_b=[5, 0, 5, 0], score_a=[1.0, 0.5, 0.0, 0.0])
+    got = WinRates.from_ledger(table, [0], decay=0.5, prior=2.0)
+    assert got.record(0, 5) == pytest.approx((0.5, 1.75)) and got.p_win(0, 5) == pytest.approx(0.4)
+    assert got.record(0, 6) == pytest.approx((1.0, 1.0)) and got.record(5, 0) == (0.0, 0.0)
+
+
 def test_from_ledger_equals_incremental() -> None:
     table = random_ledger(2000)
     learners = [0, 1, 2]  # games 0-vs-1 etc. update both learners

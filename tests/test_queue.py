@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 
 import pytest
 from sqlalchemy import func, select
@@ -73,15 +72,40 @@ def test_a_match_cut_into_jobs_plays_the_seeds_of_the_whole_match(league):
     assert local.round_points != [] and len(local.round_points) == len(merged.round_points)
 
 
+class _Clock:
+    """The queue's clock, stopped: it moves when the test moves it (no sleeping, no race with a slow machine)."""
+
+    def __init__(self) -> None:
+        from selfplay_cli.league.models import utcnow
+
+        self.now = utcnow()
+
+    def __call__(self):
+        return self.now
+
+    def advance(self, seconds: float) -> None:
+        from datetime import timedelta
+
+        self.now += timedelta(seconds=seconds)
+
+
+def _clock(league) -> _Clock:
+    league.clock = clock = _Clock()
+    return clock
+
+
 def test_a_job_finished_twice_counts_once(league):
     """Worker A's lease lapses, B takes the job over and stores it; A comes back and finishes too: nothing more is
     stored, and A learns it lost the job at its next heartbeat."""
     (jid,) = _queue_match(league, games=8, job_rounds=4)
+    clock = _clock(league)
     wa, wb = league.add_worker("a", "h", 1), league.add_worker("b", "h", 2)
     ja = league.claim(wa)
     assert ja is not None and ja.id == jid and ja.tries == 1
     assert league.claim(wb) is None  # leased and alive: not for B
-    time.sleep(0.3)
+    clock.advance(0.19)
+    assert league.claim(wb, scavenge=0.2) is None  # A silent for 0.19 s < 0.2 s: still A's
+    clock.advance(0.11)
     jb = league.claim(wb, scavenge=0.2)  # A silent for 0.3 s > 0.2 s: the lease lapsed
     assert jb is not None and jb.id == jid and jb.tries == 2 and jb.worker == "b"
     assert league.worker_beat(wa, jid) is False and league.worker_beat(wb, jid) is True
@@ -102,6 +126,7 @@ def test_a_failing_job_backs_off_then_dies_with_its_error(league):
     a, b = _bots(league)
     (jid,) = league.enqueue("bad", [NewJob(GAMES, "pong", {"a": [a.id], "b": 999_999, "rounds": 1, "first_seed": 0,
                                                            "match_kind": "match"}, max_tries=2)])
+    clock = _clock(league)
     w = league.add_worker("w", "h", 1)
     job = league.claim(w)
     out = play_leased(league, w, job, base_backoff=0.2)
@@ -109,7 +134,9 @@ def test_a_failing_job_backs_off_then_dies_with_its_error(league):
     (row,) = league.jobs(ids=[jid])
     assert row.state == "queued" and row.not_before is not None and row.error
     assert league.claim(w) is None  # waiting out its backoff
-    time.sleep(0.25)
+    clock.advance(0.19)
+    assert league.claim(w) is None  # (0.2 s)
+    clock.advance(0.02)
     job = league.claim(w)
     assert job is not None and job.tries == 2
     out = play_leased(league, w, job, base_backoff=0.2)
@@ -123,9 +150,10 @@ def test_silent_workers_kill_a_job_after_its_tries(league):
     a, b = _bots(league)
     (jid,) = league.enqueue("x", [NewJob(GAMES, "pong", {"a": [a.id], "b": b.id, "rounds": 1, "first_seed": 0,
                                                          "match_kind": "match"}, max_tries=1)])
+    clock = _clock(league)
     w = league.add_worker("w", "h", 1)
     assert league.claim(w).id == jid
-    time.sleep(0.15)
+    clock.advance(0.15)
     assert league.claim(w, scavenge=0.1) is None
     (row,) = league.jobs(ids=[jid])
     assert row.state == "dead" and "silent" in row.error

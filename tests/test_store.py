@@ -288,9 +288,11 @@ def test_a_league_without_a_valid_version_is_refused(db_url: str) -> None:
     _one_line(exc)
 
 
-def _open_at_once(url: str, start: object, out: str) -> None:
-    """Child process: open the league at ``url`` when ``start`` is set; write the lines it said."""
+def _open_at_once(url: str, start: object, out: str, ready: object) -> None:
+    """Child process: say it is ``ready`` (its imports done), open the league at ``url`` when ``start`` is set; write
+    the lines it said."""
     notes: list[str] = []
+    ready.release()  # type: ignore[attr-defined]
     start.wait(60)  # type: ignore[attr-defined]
     try:
         League(url, note=notes.append).close()
@@ -307,12 +309,13 @@ def test_two_processes_opening_a_new_or_old_league_at_once(db_url: str, tmp_path
         League(db_url).close()
         _make_legacy(db_url, 2)
     ctx = mp.get_context("spawn")
-    start = ctx.Event()
+    start, ready = ctx.Event(), ctx.Semaphore(0)
     outs = [tmp_path / f"open{i}.json" for i in range(3)]
-    procs = [ctx.Process(target=_open_at_once, args=(db_url, start, str(o))) for o in outs]
+    procs = [ctx.Process(target=_open_at_once, args=(db_url, start, str(o), ready)) for o in outs]
     for p in procs:
         p.start()
-    time.sleep(1.5)  # all three waiting on the event (spawn imports marl first)
+    for _ in procs:  # all three at the start line (spawn imports marl first)
+        assert ready.acquire(timeout=120)
     start.set()
     for p in procs:
         p.join(60)
@@ -759,8 +762,7 @@ def test_sigkill_mid_run_leaves_consistent_ledger(tmp_path: Path, db_url: str) -
         time.sleep(0.02)
         count = _count_games(url)
     assert count >= 200, "writer made no progress"
-    time.sleep(random.uniform(0.0, 0.05))
-    os.kill(proc.pid, signal.SIGKILL)
+    os.kill(proc.pid, signal.SIGKILL)  # (wherever it is: mid-transaction, between two)
     proc.join(10)
     assert proc.exitcode == -signal.SIGKILL
 

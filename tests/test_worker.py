@@ -77,6 +77,18 @@ def _stored_any(db: Path) -> bool:
 
 # -- 1. the worker dies with its trainer ----------------------------------------------------------------------
 @pytest.mark.slow
+def _holding(path: Path) -> list[int]:
+    """The processes that have ``path`` open (SQLite's database file), read from /proc."""
+    out = []
+    for fd_dir in Path("/proc").glob("[0-9]*/fd"):
+        try:
+            if any(os.readlink(fd) == str(path) for fd in fd_dir.iterdir()):
+                out.append(int(fd_dir.parent.name))
+        except OSError:
+            continue
+    return out
+
+
 def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
     """SIGKILL of `marl train` while its worker is in the middle of a gauntlet (64 games a matchup): the worker is
     gone, not playing on, and stores nothing more (it used to play on for minutes, then hang with init as parent).
@@ -98,10 +110,9 @@ def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
         deadline = time.time() + 30  # a hang guard: a worker playing on lives for minutes
         while time.time() < deadline and not all(_gone(w) for w in workers):
             time.sleep(0.05)
-        stored = _eval_games(home / "league.db")
         assert all(_gone(w) for w in workers), "worker alive 30 s after its trainer died"
-        time.sleep(2.0)  # a quiet spell: nothing of the run (a grandchild, say) stores a game
-        assert _eval_games(home / "league.db") == stored, "games stored after the trainer died"
+        # nothing of the run (a grandchild, say) is left to store a game: no process holds the league open
+        assert not _holding(home / "league.db"), "a process still has the league open after the trainer died"
         named = json.loads(lock)
         assert named["trainer"][0] == trainer.pid and named["worker"][0] in workers
     finally:
@@ -188,20 +199,33 @@ def test_a_worker_that_keeps_dying_stops_the_run_as_an_internal_error(rated_leag
         assert not isinstance(e.value, MarlError)  # exit 5 (internal), not 2 (a user's mistake)
 
 
+class _Clock:
+    """A stall's clock that moves only when the test moves it."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
 @pytest.mark.slow
 def test_a_stopped_worker_is_reported_and_replaced(rated_league):
     league, snap = rated_league
     notes: list[str] = []
-    with Evaluator(league, "cpu", background=True, note=notes.append, stall_seconds=3.0) as ev:
+    clock = _Clock()
+    with Evaluator(league, "cpu", background=True, note=notes.append, stall_seconds=3.0, clock=clock) as ev:
         ev.submit(GauntletJob((snap.id,), 0, 2, 0))
         stopped = ev.worker_pid
         os.kill(stopped, signal.SIGSTOP)
-        t0 = time.time()
-        while time.time() - t0 < 60 and ev.restarts == 0:
-            ev.poll()
-            time.sleep(0.1)
-        assert ev.restarts == 1 and time.time() - t0 >= 3.0  # not before its stall time (a slow machine: later)
-        assert f"(process {stopped}) finished no game for" in notes[0] and "replacing it" in notes[0]
+        ev.poll()  # (what it said before it stopped)
+        clock.now += 2.9
+        ev.poll()
+        assert ev.restarts == 0 and notes == []  # not before its stall time
+        clock.now += 0.2
+        ev.poll()
+        assert ev.restarts == 1
+        assert f"(process {stopped}) finished no game for 3 s" in notes[0] and "replacing it" in notes[0]
         assert _gone(stopped)
         ev.stall_seconds = 300.0  # the new worker's start-up (spawn, torch) is no stall
         (done,) = ev.wait()
@@ -212,8 +236,10 @@ def test_a_stopped_worker_is_reported_and_replaced(rated_league):
 def test_an_idle_worker_given_work_is_not_taken_for_stalled(rated_league):
     league, snap = rated_league
     notes: list[str] = []
-    with Evaluator(league, "cpu", background=True, note=notes.append, stall_seconds=2.0) as ev:
-        time.sleep(2.5)  # nothing to do for longer than the stall time
+    clock = _Clock()
+    with Evaluator(league, "cpu", background=True, note=notes.append, stall_seconds=2.0, clock=clock) as ev:
+        clock.now += 2.5  # nothing to do for longer than the stall time
+        ev.poll()
         ev.submit(GauntletJob((snap.id,), 0, 2, 0))
         ev.poll()
         assert ev.restarts == 0 and notes == []

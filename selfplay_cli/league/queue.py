@@ -29,7 +29,7 @@ Times are the workers' own clocks in UTC; a lease lapses after minutes, so clock
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime, timedelta
 from typing import Any
@@ -241,7 +241,11 @@ def backoff(tries: int, base: float = BACKOFF_SECONDS) -> float:
 
 class Queue:
     """The work queue of a league (a part of :class:`~selfplay_cli.league.store.League`; see the module docstring).
-    """
+
+    ``clock``: what "now" is to the queue (leases, heartbeats, backoffs, who is alive), UTC; a test moves it on
+    instead of sleeping."""
+
+    clock: Callable[[], datetime] = staticmethod(utcnow)
 
     def _has_queue(self) -> bool:
         """Whether the database has the queue's tables: always once a command that writes has opened it; a league from
@@ -272,7 +276,7 @@ class Queue:
 
         def work(s: Session) -> bool:
             _lazy_commit(s, self.is_sqlite)  # type: ignore[attr-defined]
-            now = utcnow()
+            now = self.clock()
             s.execute(update(Worker).where(Worker.id == worker_id).values(beat_at=now))
             if job_id is None:
                 return True
@@ -287,7 +291,7 @@ class Queue:
         counted as a try): their ids."""
 
         def work(s: Session) -> tuple[int, ...]:
-            now = utcnow()
+            now = self.clock()
             s.execute(update(Worker).where(Worker.id == worker_id).values(stopped_at=now, beat_at=now))
             back: list[int] = []
             if give_back:
@@ -308,7 +312,8 @@ class Queue:
         def work(s: Session) -> list[WorkerRow]:
             q = select(Worker).order_by(Worker.id)
             if alive_within is not None:
-                q = q.where(Worker.stopped_at.is_(None), Worker.beat_at >= utcnow() - timedelta(seconds=alive_within))
+                since = self.clock() - timedelta(seconds=alive_within)
+                q = q.where(Worker.stopped_at.is_(None), Worker.beat_at >= since)
             held: dict[int, list[int]] = {}
             for jid, wid in s.execute(select(Job.id, Job.worker_id).where(Job.state == "leased").order_by(Job.id)):
                 held.setdefault(int(wid), []).append(int(jid))
@@ -360,7 +365,7 @@ class Queue:
 
         def work(s: Session) -> JobRow | None:
             _lazy_commit(s, self.is_sqlite)  # type: ignore[attr-defined]
-            now = utcnow()
+            now = self.clock()
             lapsed = now - timedelta(seconds=scavenge)
             params: dict[str, Any] = {"now": now, "lapsed": lapsed}
             if batches is not None:
@@ -419,7 +424,7 @@ class Queue:
                 match_id, ids = self._store_match(s, j.env, match_kind, mp, games, pids,  # type: ignore[attr-defined]
                                                   f"job:{job_id}", look=False)
                 out.update(match_id=match_id, games_stored=len(ids))
-            now = utcnow()
+            now = self.clock()
             s.execute(jobs.update().where(jobs.c.id == job_id).values(state="done", result=out, finished_at=now,
                                                                       worker_id=worker_id, error=None))
             s.execute(workers.update().where(workers.c.id == worker_id).values(
@@ -442,7 +447,7 @@ class Queue:
                 raise LeagueError(f"no job with id {job_id}")
             if j.state != "leased" or j.worker_id != worker_id:
                 return j.state
-            now = utcnow()
+            now = self.clock()
             j.error = error[:2000]
             if final or j.tries >= max_tries_of(j.spec):
                 j.state, j.finished_at = "dead", now
@@ -464,7 +469,7 @@ class Queue:
                 q = q.where(Job.batch == batch)
             if ids is not None:
                 q = q.where(Job.id.in_([int(i) for i in ids]))
-            hit = s.execute(q.values(state="cancelled", finished_at=utcnow()))
+            hit = s.execute(q.values(state="cancelled", finished_at=self.clock()))
             return int(hit.rowcount)  # type: ignore[attr-defined]
 
         return self._unit(work)  # type: ignore[attr-defined,no-any-return]

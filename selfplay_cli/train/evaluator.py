@@ -160,11 +160,13 @@ class Evaluator:
     """Gauntlet jobs, played in a worker process (``background``) or inline; see the module docstring.
 
     ``on_worker(pid)`` is told of every worker process started (the run's lock records it); ``note(line)`` says
-    on stderr that a worker died or stalled and was replaced."""
+    on stderr that a worker died or stalled and was replaced; ``clock()`` is the time a stall is measured in
+    (seconds; a test moves it on instead of sleeping)."""
 
     def __init__(self, league: Any, device: str, background: bool = True,
                  on_worker: Callable[[int], None] | None = None, note: Callable[[str], None] | None = None,
-                 stall_seconds: float | None = None) -> None:
+                 stall_seconds: float | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
         self.league, self.device, self.background = league, device, background
         self.pending: list[GauntletJob] = []
         self.games_played = 0  # games the worker reported since the last poll
@@ -175,7 +177,7 @@ class Evaluator:
         self._done: list[JobDone] = []
         self._proc: Any = None
         self._failures = 0  # workers lost since a job last finished
-        self._progress = time.monotonic()  # when the worker last reported a game or a job
+        self._progress = self._clock()  # when the worker last reported a game or a job
         if background:
             self._start()
 
@@ -191,7 +193,7 @@ class Evaluator:
                                  args=(self.league.url.render_as_string(hide_password=False), home, self.device,
                                        self._jobs, self._results, os.getpid(), admitted()), daemon=True)
         self._proc.start()
-        self._progress = time.monotonic()
+        self._progress = self._clock()
         for job in self.pending:
             self._jobs.put(job)
         if self._on_worker is not None:
@@ -209,7 +211,7 @@ class Evaluator:
 
     def submit(self, job: GauntletJob) -> None:
         if not self.pending:
-            self._progress = time.monotonic()  # an idle worker was not stalled: the clock starts with its work
+            self._progress = self._clock()  # an idle worker was not stalled: the clock starts with its work
         self.pending.append(job)
         if self.background:
             self._jobs.put(job)
@@ -259,7 +261,7 @@ class Evaluator:
         if any(d.error for d in self._done):
             return  # a job failed: its error, not a restart
         if self._proc.is_alive():
-            waited = time.monotonic() - self._progress
+            waited = self._clock() - self._progress
             if not self.pending or waited < self.stall_seconds:
                 return
             why = (f"the rating worker (process {self._proc.pid}) finished no game for {waited:.0f} s "
@@ -281,7 +283,7 @@ class Evaluator:
         self._start()
 
     def _take(self, item: Any) -> None:
-        self._progress = time.monotonic()
+        self._progress = self._clock()
         if isinstance(item, tuple):
             self.games_played += int(item[1])
         else:
