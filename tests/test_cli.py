@@ -77,7 +77,9 @@ def test_ci_runs_the_readme_install_and_test_commands():
     assert "ci:install" in ci and "ci:test" in ci and "rm -rf .venv" in ci
     readme = (ROOT / "README.md").read_text()
     assert re.search(r"<!-- ci:install -->\n```sh\npython3 -m venv \.venv && .*pip install", readme)
-    assert re.search(r"<!-- ci:test -->\n```sh\n\.venv/bin/pytest", readme)
+    assert re.search(r"<!-- ci:test -->\n```sh\n\.venv/bin/pytest -n 2 -m \"not slow\"\n", readme)
+    assert re.search(r"<!-- ci:test-slow -->\n```sh\n\.venv/bin/pytest -n 2 -m slow\n", readme)
+    assert "test-slow" in ci
 
 
 def test_readme_shows_what_marl_envs_prints_and_claims_no_missing_feature_that_exists(capsys):
@@ -133,3 +135,12 @@ def test_ctrl_c_that_no_command_catches_says_interrupted_and_exits_130(monkeypat
     assert main(["envs"]) == 130
     captured = capsys.readouterr()
     assert captured.err == "marl: interrupted\n" and captured.out == ""
+
+
+def test_the_cli_imports_no_heavy_library_until_a_command_needs_it():
+    """`marl --help`, `--version` and the CLI's building import neither torch nor scipy (1.3 s and more of every
+    command's start): a command imports what it needs when it runs."""
+    code = ("import sys; from selfplay_cli.cli import build_command; build_command(); "
+            "print(sorted(m for m in ('torch', 'scipy', 'scipy.stats', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr[-500:]

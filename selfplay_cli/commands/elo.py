@@ -10,7 +10,6 @@ import typer
 
 from ..errors import MarlError
 from ..league.variants import describe_variant, other_variants_note, variant_options
-from ..rated.gate import gate_check
 from ..stats.bradley_terry import DEFAULT_PRIOR
 from ..stats.intervals import DEFAULT_BOOTSTRAP
 from ._common import (
@@ -174,6 +173,8 @@ def gate(
     try:
         cand, base = resolve_players(league, [candidate, vs], env, env_option=env_option)
         options = parse_env_options(cand.env, env_option) if env_option else None
+        from ..rated.gate import gate_check  # (torch: imported when a gate plays, not for every command)
+
         verdict = gate_check(league, cand, base, min_diff=min_diff, games=games, confidence=confidence,
                              parallel=parallel, device=device, env_options=options, queue=queue)
     finally:

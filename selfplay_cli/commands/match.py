@@ -2,16 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.markup import escape
 
 from ..errors import MarlError
 from ..league.variants import describe_variant, variant_flags
-from ..rated.match import MatchInterrupted, MatchReport, SPRTSettings, run_match, sprt_exit_code
-from ..rated.match_jobs import forecaster, match_jobs, predict
-from ..rated.names import Team
 from ._common import (
     MAX_GAMES,
     MAX_PARALLEL,
@@ -30,6 +27,9 @@ from ._common import (
     resolve_players,
 )
 from ._output import console, err_console, print_json
+
+if TYPE_CHECKING:  # (the match's library is imported when a match plays: torch, for every command, cost 1.3 s)
+    from ..rated.match import MatchReport
 
 
 def _points(mine: float, theirs: float) -> str:
@@ -173,6 +173,10 @@ def match(
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
     if queue and not store:
         raise MarlError("--queue stores every game (its workers write them to the league): drop --no-store")
+    from ..rated.match import SPRTSettings, sprt_exit_code
+    from ..rated.match_jobs import forecaster, match_jobs, predict
+    from ..rated.names import Team
+
     settings = SPRTSettings(elo0, elo1, alpha, beta) if sprt else None
     budget = (max_games or games) if sprt else games
     league = open_league(home, db)
@@ -230,6 +234,8 @@ def _local(league, store: bool, job, games: int, first: int, options, settings, 
            parallel: int, quiet: bool, loaded=None) -> MatchReport:
     """One match of ``marl match``, played here (and stored, with ``store``); Ctrl-C: what was kept, exit 130.
     ``loaded``: its players, loaded from ``first`` already."""
+    from ..rated.match import MatchInterrupted, run_match
+
     pa, pb, ids = loaded or job.load(league, first, device)
     try:
         with progress_bar(f"{job.team_name or pa[0].id} vs {pb.id}", games + games % 2, "games",

@@ -3,21 +3,23 @@ command and group with its help, every argument and option with its flags, value
 and help, as ``marl COMMAND --help`` has them. Nothing is typed by hand, so it cannot drift: ``tests/test_docs.py``
 renders it again and fails where the file and the CLI differ.
 
-Write it with ``python -m selfplay_cli.commands.reference > docs/reference/cli.md``.
+The site's home page (``docs/index.md``) is README's text (:func:`home_page`), checked the same way.
+``python -m selfplay_cli.commands.reference --write`` (in the repository) writes both.
 """
 
 from __future__ import annotations
 
 import inspect
+import re
 from typing import Any
 
-__all__ = ["render"]
+__all__ = ["home_page", "render"]
 
 _HEAD = """# Command reference
 
 Every command of `marl`, with its arguments and options, generated from the CLI itself
-(`python -m selfplay_cli.commands.reference > docs/reference/cli.md`; a test fails when this page and the CLI
-differ). `marl COMMAND --help` prints the same. The pages under *Commands* explain each with examples.
+(`python -m selfplay_cli.commands.reference --write`; a test fails when this page and the CLI differ).
+`marl COMMAND --help` prints the same. The pages under *Commands* explain each with examples.
 """
 
 
@@ -65,7 +67,18 @@ def _escape_text(text: str) -> str:
     return "\n".join(("\\" + line if line.startswith("#") else line).replace("<", "&lt;") for line in text.splitlines())
 
 
+def home_page(readme: str) -> str:
+    """The site's home page: README, its links into ``docs/`` made the site's own, without CI's markers."""
+    text = re.sub(r"<!-- ci:[\w-]+ -->\n", "", readme)
+    return re.sub(r"\]\(docs/([^)]*)\)", r"](\1)", text)
+
+
 if __name__ == "__main__":
     import sys
+    from pathlib import Path
 
-    sys.stdout.write(render())
+    if sys.argv[1:] == ["--write"]:
+        Path("docs/reference/cli.md").write_text(render())
+        Path("docs/index.md").write_text(home_page(Path("README.md").read_text()))
+    else:
+        sys.stdout.write(render())
