@@ -194,6 +194,7 @@ def test_fups_on_seats_that_differ_names_the_seats_and_their_spaces(home, capsys
             "runner: observation (5,), actions Discrete(5))") in err, err
 
 
+@pytest.mark.slow
 def test_the_race_trains_beats_random_rates_and_records(home, capsys, tmp_path):
     report = run_json(capsys, "train", RACE, "--steps", "6000", "--games", "16", "--eval-games", "20",
                       "--eval-inline", "--run", "r", "--seed", "1")

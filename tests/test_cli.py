@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from selfplay_cli import __version__
 from selfplay_cli.cli import app
 
@@ -25,6 +27,7 @@ def registered_commands() -> set[str]:
     return names
 
 
+@pytest.mark.slow
 def test_version_and_help_list_every_command_with_a_description():
     out = marl("--version")
     assert out.returncode == 0 and out.stdout.strip() == f"marl {__version__}"
@@ -47,6 +50,7 @@ def test_envs_json_is_json_alone_on_stdout():
     assert out.stderr == ""
 
 
+@pytest.mark.slow
 def test_envs_table_is_plain_when_not_a_tty():
     out = marl("envs")
     assert out.returncode == 0
@@ -54,6 +58,7 @@ def test_envs_table_is_plain_when_not_a_tty():
     assert "\x1b[" not in out.stdout, "no colour codes in piped output"
 
 
+@pytest.mark.slow
 def test_unknown_command_and_bad_flag_fail_without_traceback():
     for args in (["frobnicate"], ["envs", "--no-such-flag"]):
         out = marl(*args)

@@ -179,6 +179,7 @@ def check_game(spec: EnvSpec, n: int = 6, max_play: int = 20_000) -> None:
     assert _same(a, b), "same seeds and actions must give the same observations, masks and scores"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", GAMES + OPENSPIEL_GAMES)
 def test_every_game_keeps_its_declaration(name):
     check_game(get_env(name))

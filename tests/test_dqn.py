@@ -228,6 +228,7 @@ def test_state_round_trip_resumes_identically():
     assert not b.record(np.zeros(8), np.zeros(8))  # and updates wait until it holds learning_starts again
 
 
+@pytest.mark.slow
 def test_dqn_learns_to_beat_random_at_pong(one_thread, learn_against_random):
     """A real learning assertion: from an even game to a clear win against the random player.
 

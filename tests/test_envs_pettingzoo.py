@@ -446,6 +446,7 @@ def _marl(*args):
                           cwd=ROOT, timeout=120)
 
 
+@pytest.mark.slow
 def test_marl_envs_shows_kind_turns_and_per_seat_spaces_of_named_games():
     out = _marl("envs", "--json", "pong", TTT, RDV)
     assert out.returncode == 0, out.stderr
@@ -462,6 +463,7 @@ def test_marl_envs_shows_kind_turns_and_per_seat_spaces_of_named_games():
     assert table.returncode == 0 and "sequential" in table.stdout and "Discrete(9) masked" in table.stdout
 
 
+@pytest.mark.slow
 def test_marl_envs_refuses_a_bad_game_in_one_line_with_exit_2():
     out = _marl("envs", "no_such_module_xyz:env")
     assert out.returncode == 2

@@ -221,6 +221,7 @@ def test_tensorboard_hint_names_the_extra(monkeypatch):
 # Names: the same in every command
 
 
+@pytest.mark.slow
 def test_a_team_name_means_its_members_in_every_command(team_home, tmp_path, capsys):
     members = ["r2/s6M-left", "r2/s6M-right"]
     code, out, err = run(capsys, "checkpoint", "show", "s6M", "--json")
@@ -314,6 +315,7 @@ def test_only_a_limit_of_the_recording_is_called_stopped(tmp_path):
 # Exit codes: one per kind of outcome
 
 
+@pytest.mark.slow
 def test_exit_codes_of_verdicts(home, capsys):
     assert run(capsys, "envs")[0] == 0
     code, out, err = run(capsys, "elo", "gate", "cpu", "--vs", "random", "--env", "pong", "-n", "20")

@@ -108,6 +108,7 @@ def test_clear_rule():
     assert clear(4, 0, 1.645) and not clear(3, 1, 1.645) and not clear(0, 0, 1.645) and clear(0, 9, 1.645)
 
 
+@pytest.mark.slow
 def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_path, monkeypatch):
     """Scripted players stand in for the snapshots (same league rows, no files): every matchup is stored in pairs,
     each seed once with either player on the left; a matchup the predecessor already won clearly plays one pair."""
@@ -148,6 +149,7 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
     league.close()
 
 
+@pytest.mark.slow
 def test_open_matchups_go_on_in_the_same_batch(tmp_path, monkeypatch):
     """With max_pairs above pairs, a matchup whose result is still open gets more pairs, played in the same call of
     the runner (the schedule grows while it plays); a clear one stops."""

@@ -135,6 +135,7 @@ BOUNDED = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("hidden", [(100_000_000, 100_000_000), (30_000, 30_000), [64] * 10_000, (64, 0)])
 def test_crafted_arch_refused_before_building_and_within_200mb(tmp_path, hidden):
     """The issue's 31 KB file (OOM before), its 10-minute cousin, a 10,000-layer arch and a zero-width layer: each
@@ -466,6 +467,7 @@ def _read_only_mount(home: Path, command: list[str]) -> subprocess.CompletedProc
             p.chmod(p.stat().st_mode | 0o200)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args", [["league", "ladder"], ["checkpoint", "list"], ["checkpoint", "show", "r/s0-left"]])
 def test_readonly_league_can_be_listed(tmp_path, args):
     home = tmp_path / "league"
@@ -514,6 +516,7 @@ def test_sweep_never_touches_folders_or_symlink_targets(tmp_path):
     assert sweep_home(tmp_path / "nowhere") == []
 
 
+@pytest.mark.slow
 def test_killed_recording_leaves_a_part_file_that_the_next_one_removes(tmp_path):
     home = tmp_path / "league"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -542,6 +545,7 @@ def test_killed_recording_leaves_a_part_file_that_the_next_one_removes(tmp_path)
     assert "removed 1 temporary file left by killed processes" in q.stderr
 
 
+@pytest.mark.slow
 def test_interrupted_match_stores_whole_pairs_and_says_so(tmp_path):
     home = tmp_path / "league"
     League.open(home).close()
@@ -595,6 +599,7 @@ def test_import_under_a_file_size_limit_leaves_nothing(tmp_path):
     assert tree(home) == before
 
 
+@pytest.mark.slow
 def test_full_database_is_one_line_and_the_ledger_keeps_whole_batches(tmp_path):
     home = tmp_path / "league"
     make_league(home).close()
@@ -642,6 +647,7 @@ def _tictactoe_file(path: Path, env: str, seed: int = 0) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("named", ["mygame:env", "mygame", "os:abort", "sys:exit", "signal:pause", "os.path:join"])
 def test_a_game_named_by_a_file_is_never_imported(tmp_path, named):
     """A contributed file naming its game `mygame:env`, imported without --env in a folder holding mygame.py: that

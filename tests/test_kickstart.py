@@ -93,6 +93,7 @@ def test_the_ring_keeps_the_newest_states():
     assert sorted(im.obs[:, 0].tolist()) == [5.0, 6.0, 7.0, 8.0]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("learner_cls", [SACLearner, PPOLearner])
 def test_a_learner_taught_comes_to_act_as_its_teacher(learner_cls, one_thread):
     """A teacher's rule a = clip(2 s0 - s1) on random states: with the imitation term weighted and no reward, the
@@ -200,6 +201,7 @@ def agreement_with_cpu(league, snapshot: str) -> float:
     return same / total
 
 
+@pytest.mark.slow
 def test_pong_learners_kickstarted_by_the_cpu_player_choose_its_moves(tmp_path, capsys):
     """PPO on pong taught by the scripted cpu player (its weight held at 2), on three seeds: the imitation loss falls
     and the final snapshot chooses the cpu player's move in most states of games between cpu and random players.

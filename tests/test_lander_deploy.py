@@ -46,6 +46,7 @@ def test_a_team_grows_with_copies_of_its_members_and_shrinks_to_its_first_seats(
     assert refit(team, 1).players == (a,) and refit(team, 2) is team
 
 
+@pytest.mark.slow
 def test_a_fups_team_trained_with_two_landers_flies_one_to_four(home, tmp_path, capsys):
     run_json(capsys, "train", "lander", "--agents", "2", "--sharing", "fups", "--steps", "4000",
              "--snapshot-steps", "4000", "--games", "8", "--eval-games", "0", "--run", "l2")

@@ -38,6 +38,7 @@ def run_json(capsys, *args: str):
 
 
 # ---------------------------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_checkpoint_import_list_show_tag_export_rm_round_trip(home, tmp_path, capsys):
     f1 = make_snapshot(tmp_path / "a.safetensors", "ep10", seed=1)
     f2 = make_snapshot(tmp_path / "b.safetensors", "ep20", seed=2)

@@ -167,6 +167,7 @@ def stopped(trained, tmp_path) -> Path:
     return home
 
 
+@pytest.mark.slow
 def test_rm_refuses_the_snapshot_a_stopped_run_resumes_from_and_force_ends_it(stopped, capsys):
     home = stopped
     err = one_line_error(*run(capsys, "checkpoint", "rm", "r/s2k-left", "--home", str(home))[::2])
@@ -182,6 +183,7 @@ def test_rm_refuses_the_snapshot_a_stopped_run_resumes_from_and_force_ends_it(st
     assert status(home, "r") == "ended"
 
 
+@pytest.mark.slow
 def test_rm_of_a_snapshot_no_run_needs_lets_the_run_go_on(stopped, capsys):
     home = stopped
     code, _, err = run(capsys, "checkpoint", "rm", "r/s0-left", "--home", str(home))
@@ -192,6 +194,7 @@ def test_rm_of_a_snapshot_no_run_needs_lets_the_run_go_on(stopped, capsys):
     assert status(home, "r") == "finished"
 
 
+@pytest.mark.slow
 def test_rm_refuses_a_snapshot_whose_gauntlet_a_run_owes(stopped, capsys):
     home = stopped
     state = torch.load(home / "runs" / "r" / "state.pt", weights_only=True)
@@ -220,6 +223,7 @@ def test_rm_refuses_a_stopped_runs_teacher(tmp_path, capsys, league_db):
     assert status(home, "pupil") == "ended" and status(home, "done") == "finished"
 
 
+@pytest.mark.slow
 def test_rm_is_refused_even_with_force_while_the_runs_trainer_lives(stopped, capsys):
     home = stopped
     set_sql(home, "update runs set status = 'running'")
@@ -230,6 +234,7 @@ def test_rm_is_refused_even_with_force_while_the_runs_trainer_lives(stopped, cap
     assert not removed(home, "s0-left") and status(home, "r") == "running"
 
 
+@pytest.mark.slow
 def test_a_run_whose_needed_snapshot_was_removed_before_is_ended_at_resume(stopped, capsys):
     """A league where an older marl removed the snapshot a run resumes from: --resume says so in one line and the
     run is no longer left 'stopped' or 'running'."""
@@ -240,6 +245,7 @@ def test_a_run_whose_needed_snapshot_was_removed_before_is_ended_at_resume(stopp
     assert status(home, "r") == "ended"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("failure", [MarlError("a snapshot went missing"), SystemExit(3)])
 def test_a_resumed_trainer_that_dies_is_not_left_running(stopped, capsys, monkeypatch, failure):
     home = stopped

@@ -217,6 +217,7 @@ def league_rows(home) -> list:
         return league.players(kind="snapshot")
 
 
+@pytest.mark.slow
 def test_marl_train_league_alphastar_end_to_end_killed_and_resumed(tmp_path, capsys, monkeypatch):
     home = str(tmp_path / "h")
     config = tmp_path / "league.toml"

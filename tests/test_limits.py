@@ -188,6 +188,7 @@ def test_an_agent_that_is_not_one_of_possible_agents_is_refused_in_one_line(home
 
 # --- 5. a full disk under marl record ------------------------------------------------------------------------------
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fmt", ["mp4", "gif"])
 def test_a_file_size_limit_under_marl_record_is_an_io_error(home, tmp_path, capsys, fmt):
     League.open(home=home).close()  # the league exists before the limit

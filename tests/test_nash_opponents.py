@@ -159,6 +159,7 @@ def test_payoff_in_score_units_gives_another_mixture(league: League, tmp_path: P
     assert NASH_PAYOFFS == PAYOFFS  # (the matchmaker's names of them, which imports nothing of the league)
 
 
+@pytest.mark.slow
 def test_a_nash_run_through_the_cli_measures_every_pair_and_shows_its_mixture(tmp_path: Path, capsys) -> None:
     home = tmp_path / "league"
     for game, wrong, says in (

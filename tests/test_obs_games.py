@@ -46,6 +46,7 @@ def test_dash_observation_is_read_in_the_stated_order_and_its_mask_is_the_seats(
     assert core.action_masks()[0][0].tolist() == [True, True, False]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("game", "steps", "seat"), [(CUE, 12000, "p0"), (DASH, 16000, "red")], ids=["cue", "dash"])
 def test_a_game_with_discrete_or_dict_observations_learns_matches_rates_and_records(home, tmp_path, capsys, game,
                                                                                       steps, seat):

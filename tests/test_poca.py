@@ -63,6 +63,7 @@ def test_the_baseline_reads_the_others_actions_and_not_its_own():
     assert torch.isfinite(values).all() and np.isfinite(base.detach().numpy()).all()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["mappo", "poca"])
 def test_three_agents_with_box_actions_no_state_and_a_time_limit_train(home, capsys, algo):
     report = run_json(capsys, "train", "tests.games.rendezvous:parallel_env", "--algo", algo, "--agents", "3",

@@ -406,6 +406,7 @@ def test_two_trackers_never_score_under_seed_rules_but_do_under_classic():
     assert points("classic") >= 40  # about 1.4 points per 1000 steps
 
 
+@pytest.mark.slow
 def test_an_aiming_player_beats_the_tracker_under_classic_rules():
     """Skill decides points: a player that meets the ball with its paddle's edge beats the plain tracker."""
 

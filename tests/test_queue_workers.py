@@ -85,6 +85,7 @@ def test_a_worker_killed_mid_lease_its_job_played_again_once_and_counted_once(db
     league.close()
 
 
+@pytest.mark.slow
 def test_many_workers_at_once_play_every_job_once(db_url, tmp_path):
     """Eight workers (threads, each with its own connection to the league) on 48 small jobs: every job done once by
     one worker, every game stored once, no lock error anywhere."""
@@ -195,6 +196,7 @@ def test_a_worker_refuses_a_league_that_is_not_on_this_machine(tmp_path, capsys)
     assert code == 2 and err.count("\n") == 1 and not (tmp_path / "none").exists()
 
 
+@pytest.mark.slow
 def test_a_worker_with_only_the_url_plays_network_snapshots_from_the_league(db_url, tmp_path):
     """Two network snapshots registered in home H; a worker with another, empty home (another machine) fetches their
     files from the league by sha256 into its cache and plays the queued match: the games equal the ones played in

@@ -329,6 +329,7 @@ def _marl(*args: str, env: dict | None = None, **kw):
                             preexec_fn=ctrl_c_enabled, **kw)
 
 
+@pytest.mark.slow
 def test_more_actors_than_cores_is_refused_in_one_line_unless_a_cluster_is_given(tmp_path):
     """Issue 49: --actors 200 on 2 cores started Ray with 201 CPUs it did not have (5 GB in 25 s)."""
     from selfplay_cli.train.ray_support import machine_cores

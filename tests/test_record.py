@@ -335,6 +335,7 @@ def test_games_without_actions_or_that_no_longer_replay_are_refused(home, tmp_pa
     assert list(tmp_path.iterdir()) == [], "the rejected replay left no file, partial or whole"
 
 
+@pytest.mark.slow
 def test_nothing_but_the_tool_reaches_the_terminal(home, tmp_path):
     """pygame's audio start-up (ALSA errors) and its banner, ffmpeg's chatter: none of it may show."""
     env = {"PATH": os.environ.get("PATH", "/usr/bin:/bin"), "TERM": "dumb", "HOME": str(tmp_path)}

@@ -160,6 +160,7 @@ def _league(home: Path) -> League:
     return League.open(home=home)
 
 
+@pytest.mark.slow
 def test_training_rates_every_snapshot_each_on_its_own_side_only(chased):
     home, report = chased
     assert [f["snapshot"] for f in report["final"]] == ["ch/s3k-hunter", "ch/s3k-runner"]
@@ -184,6 +185,7 @@ def test_training_rates_every_snapshot_each_on_its_own_side_only(chased):
         league.close()
 
 
+@pytest.mark.slow
 def test_a_snapshot_plays_random_on_its_own_side(chased, capsys):
     home, _ = chased
     code, out, err = run(capsys, "match", "ch/s3k-runner", "random", "--games", "10", "--home", str(home), "--json")
@@ -202,6 +204,7 @@ def test_a_snapshot_plays_random_on_its_own_side(chased, capsys):
     assert "4 games, one a seed: each plays only its own side" in out
 
 
+@pytest.mark.slow
 def test_two_snapshots_of_one_role_cannot_meet_one_line_exit_2(chased, capsys):
     home, _ = chased
     code, out, err = run(capsys, "match", "ch/s3k-hunter", "ch/s1k-hunter", "--home", str(home))
@@ -211,6 +214,7 @@ def test_two_snapshots_of_one_role_cannot_meet_one_line_exit_2(chased, capsys):
     assert code == 2 and err.count("\n") == 1 and "cannot meet" in err, err
 
 
+@pytest.mark.slow
 def test_a_tournament_plays_only_the_pairs_that_can_meet(chased, capsys):
     home, _ = chased
     code, out, err = run(capsys, "league", "tournament", "ch/s3k-hunter", "ch/s0-hunter", "ch/s3k-runner",
@@ -229,6 +233,7 @@ def test_a_tournament_plays_only_the_pairs_that_can_meet(chased, capsys):
         league.close()
 
 
+@pytest.mark.slow
 def test_a_recording_seats_each_snapshot_on_its_own_seat(chased, capsys, tmp_path):
     home, _ = chased
     out = tmp_path / "runner.mp4"
@@ -241,6 +246,7 @@ def test_a_recording_seats_each_snapshot_on_its_own_seat(chased, capsys, tmp_pat
     assert frames.shape[0] >= 2 and frames.shape[-1] == 3
 
 
+@pytest.mark.slow
 def test_the_ladder_of_a_game_whose_sides_differ_has_one_table_per_side(chased, capsys):
     home, _ = chased
     rows = run_json(capsys, "league", "ladder", "--home", str(home), "--bootstrap", "0")
@@ -279,6 +285,7 @@ def test_marl_envs_shows_each_seats_role(home, capsys):
            "rated per side" in " ".join(out.split())
 
 
+@pytest.mark.slow
 def test_best_is_per_side_where_the_sides_differ(chased, capsys):
     home, _ = chased
     code, out, err = run(capsys, "match", "best", "random", "--env", CHASE, "--home", str(home), "--no-store")
@@ -301,6 +308,7 @@ def test_a_cooperative_crew_of_different_seats_flies_each_member_on_its_own_seat
     assert seatings == {("hunter", "runner"), ("random", "random")}, seatings
 
 
+@pytest.mark.slow
 def test_an_older_file_without_a_role_plays_the_role_its_spaces_fit(chased, home, capsys, tmp_path):
     from selfplay_cli.policies.snapshot_reader import export_snapshot, read_meta
 

@@ -87,6 +87,7 @@ REACH_SEAT = SeatSpace(spaces.Box(-3.0, 3.0, (4,), np.float32), BOX2)
 # Learning
 
 
+@pytest.mark.slow
 def test_sac_learns_to_reach_a_goal_it_must_see(one_thread):
     learner = SACLearner(REACH_SEAT, 16, small(batch_size=128, learning_starts=500, replay_ratio=1 / 8), seed=0)
     before = final_distance(learner.policy("sac", "reach", greedy=True).act)

@@ -235,6 +235,7 @@ def _snapshots(db_url: str, tmp_path, n: int = 3) -> tuple[League, list[int]]:
     return lg, [p.id for p in lg.players("pong", kind="snapshot")]
 
 
+@pytest.mark.slow
 def test_rows_whose_json_cannot_be_read_are_one_line_each_never_the_command(db_url, tmp_path, capsys, monkeypatch):
     """players.meta 5,000 deep and 10 MB, a run's config 5,000 deep, a match's params 5,000 deep: the ladder, the
     checkpoint list, another snapshot's page and the matrix exit 0, each bad row said in one line on stderr; a bad

@@ -26,6 +26,7 @@ PLAN = ["study", "team-size", PURSUIT, "--size-option", "n_pursuers", "--kind", 
 RUNS = {"ts-n1", "ts-n2", "ts-n1-to2", "ts-n2-to1"}
 
 
+@pytest.mark.slow
 def test_a_study_trains_flies_adapts_and_measures(home, capsys):
     r = run_json(capsys, *PLAN, "--json")
     assert (r["train"], r["eval"], r["size_option"]) == ([1, 2], [1, 2, 3], "n_pursuers")
@@ -75,6 +76,7 @@ def test_a_study_trains_flies_adapts_and_measures(home, capsys):
     assert code == 2 and "exists with other settings" in err and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_a_killed_study_goes_on_where_it_stopped(home, capsys):
     plan = [*PLAN[:PLAN.index("--train")], "--train", "1", "--eval", "1-2",
             *PLAN[PLAN.index("--steps"):]]  # one run, killed while it trains
@@ -186,6 +188,7 @@ def _wait_for(what, seconds: float = 120.0):
     return what()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGKILL])
 def test_the_training_child_of_a_study_ends_with_it(tmp_path, sig):
     """SIGTERM or Ctrl-C of the study are handed to its child, which the study waits for before it exits; a study

@@ -96,6 +96,7 @@ def test_pursuits_agents_follow_its_option_and_its_kind_follows_the_kind_option(
     assert spec.variant_options({"n_pursuers": 3, "kind": "cooperative"}) == {"kind": "cooperative", "n_pursuers": 3}
 
 
+@pytest.mark.slow
 def test_a_pursuit_team_trained_with_3_flies_2_and_5(home, capsys):
     run_json(capsys, "train", PURSUIT, "--kind", "cooperative", "--env-option", "n_pursuers=3", *SMALL,
              "--agents", "3", "--sharing", "nops", "--steps", "400", "--snapshot-steps", "400", "--games", "2",

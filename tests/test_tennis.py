@@ -797,6 +797,7 @@ def test_view_is_the_cores_game():
     assert info["player_1"]["score"] == tuple(int(s) for s in c.score[::-1, 0])
 
 
+@pytest.mark.slow
 def test_the_game_keeps_the_game_contract():
     """The conformance test's check, on tennis and on its discrete form."""
     import dataclasses

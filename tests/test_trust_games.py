@@ -109,6 +109,7 @@ def test_names_that_resolve_two_ways_say_so_without_importing_either(evil, capsy
         assert "'s146k' is ambiguous: r/s146k, evil1/s146k" in one_line(code, err)
 
 
+@pytest.mark.slow
 def test_the_rows_of_a_module_nobody_here_named_cannot_play_and_the_rest_goes_on(evil, capsys):
     code, _, err = run(capsys, "match", "evil1/s146k", "random", "--games", "2", *evil.args)
     assert "game 'evilmod:env' is not imported" in one_line(code, err)
@@ -137,6 +138,7 @@ def test_the_rows_of_a_module_nobody_here_named_cannot_play_and_the_rest_goes_on
     assert err.startswith("not imported here: evilmod:env") and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_a_worker_fails_the_jobs_of_a_module_nobody_here_named_and_plays_the_rest(evil, capsys):
     code, out, err = run(capsys, "worker", "--until-empty", "--json", *evil.args)
     assert code == 0, err
@@ -169,6 +171,7 @@ def _marl(cwd: Path, *args: str, games: str | None = None) -> subprocess.Complet
                           env=env, timeout=600)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("named", ["os:abort", "signal:pause"])
 def test_a_row_naming_os_abort_neither_aborts_nor_hangs(tmp_path, named):
     home = tmp_path / "league"
