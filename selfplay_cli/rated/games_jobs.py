@@ -23,7 +23,7 @@ from ..league.store import League, PlayerRow
 from ..stats.match import match_stats
 from . import job_spec
 from .match import MatchReport, env_options_of, load_player, mix_seed, round_size, run_match
-from .played import Played
+from .played import Played, See
 from .seeds import Settled
 from .snapshots import share_snapshots
 
@@ -86,8 +86,9 @@ def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *,
 
 
 def play(league: League, job: JobRow, *, device: str, parallel: int,
-                on_games: Callable[[int], None] | None) -> Played:
-    """A ``games`` job: its rounds of one match."""
+         on_games: Callable[[int], None] | None, see: See | None = None) -> Played:
+    """A ``games`` job: its rounds of one match (handing nothing on: ``see`` unused)."""
+    del see
     spec = job.spec
     first = int(spec["first_seed"])
     rows_a = [league.get_player(int(i)) for i in spec["a"]]

@@ -42,7 +42,7 @@ from ..league.store import League
 from ..results import Rules
 from . import job_spec
 from .gauntlet import ALL_OLDER, GauntletConfig, crews_of, open_matchups, plan_moment, play_gauntlet, rate_snapshots
-from .played import Played
+from .played import JobLost, Played, See
 from .snapshots import share_snapshots
 
 __all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "MATCHUP", "MAX_EVAL_GAMES", "MAX_MOMENT", "MAX_OLDER",
@@ -136,12 +136,12 @@ def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "c
 
 
 def play(league: League, job: JobRow, *, device: str, parallel: int,
-         on_games: Callable[[int], None] | None) -> Played:
+         on_games: Callable[[int], None] | None, see: See | None = None) -> Played:
     """A ``gauntlet`` job: its games are stored as it plays them (keyed: once), so the job's end stores none. Where
-    other workers take the job's batch, its matchups go to them first (:func:`_share`)."""
+    other workers take the job's batch, its matchups go to them first (:func:`_share`, through ``see``)."""
     del parallel  # a gauntlet plays all its matchups in one batch of its own size
-    if _helpers(league, job):
-        _share(league, job, device, on_games)
+    if see is not None and _helpers(league, job):
+        _share(league, job, see, on_games)
     games, seconds = play_gauntlet_spec(league, job.spec, device=device, on_games=on_games)
     return Played(games=[], match_kind="eval", params={}, seconds=seconds, played=games,
                   result={"games": games, "seconds": round(seconds, 3), "snapshots": job.spec.get("snapshots", [])})
@@ -156,11 +156,9 @@ def _helpers(league: League, job: JobRow) -> int:
                if w.id != job.worker_id and not w.holding)
 
 
-def _share(league: League, job: JobRow, device: str, on_games: Callable[[int], None] | None) -> None:
+def _share(league: League, job: JobRow, see: See, on_games: Callable[[int], None] | None) -> None:
     """Queue the moment's open matchups as jobs (:func:`queue_matchups`), play those no worker takes and wait for the
-    rest; a matchup's job that died fails the moment with its error."""
-    from .jobs import JobLost, see_through
-
+    rest (``see``); a matchup's job that died fails the moment with its error."""
     ids = queue_matchups(league, job)
     if not ids:
         return
@@ -179,8 +177,7 @@ def _share(league: League, job: JobRow, device: str, on_games: Callable[[int], N
             raise JobLost
         return False
 
-    ended = see_through(league, job.batch, device=device, role="gauntlet", ids=ids, on_games=counted,
-                        on_change=looked)
+    ended = see(job.batch, ids, on_games=counted, on_change=looked)
     dead = [j for j in ended if j.state == "dead"]
     if dead:
         raise MarlError(f"matchup job {dead[0].id} ({' against '.join(dead[0].spec.get('snapshots', []))}) of this "
@@ -232,11 +229,11 @@ def check_matchup_spec(spec: dict[str, Any]) -> None:
 
 
 def play_matchup(league: League, job: JobRow, *, device: str, parallel: int,
-                 on_games: Callable[[int], None] | None) -> Played:
+                 on_games: Callable[[int], None] | None, see: See | None = None) -> Played:
     """A ``matchup`` job: one matchup of a moment's gauntlet, played and stored as the whole moment's call would
     (:func:`~selfplay_cli.rated.gauntlet.open_matchups`): its seeds, its expectation, under the moment's key (so
     once, whoever plays it)."""
-    del parallel
+    del parallel, see
     spec = job.spec
     t0 = time.perf_counter()
     a, b = league.get_player(int(spec["a"])), league.get_player(int(spec["b"]))

@@ -29,7 +29,7 @@ from ..league.store import League
 from ..stats.sprt import LEVELS, categories, count_model
 from . import games_jobs, gauntlet_jobs
 from .job_spec import BadSpec
-from .played import Played
+from .played import JobLost, Played
 
 __all__ = ["CHECKS", "KINDS", "MAX_ERROR", "BadSpec", "JobLost", "Outcome", "check_job", "error_line", "play_job",
            "play_leased", "see_through", "sprt_verdict", "worker_name"]
@@ -37,17 +37,14 @@ __all__ = ["CHECKS", "KINDS", "MAX_ERROR", "BadSpec", "JobLost", "Outcome", "che
 KINDS: dict[str, Callable[..., Played]] = {games_jobs.GAMES: games_jobs.play,
                                            gauntlet_jobs.GAUNTLET: gauntlet_jobs.play,
                                            gauntlet_jobs.MATCHUP: gauntlet_jobs.play_matchup}
-"""The player of each kind of job: ``player(league, job, device=, parallel=, on_games=) -> Played``."""
+"""The player of each kind of job: ``player(league, job, device=, parallel=, on_games=, see=) -> Played``
+(``see``: :data:`~selfplay_cli.rated.played.See`, for a job that hands work on to other workers)."""
 CHECKS: dict[str, Callable[[dict[str, Any]], None]] = {games_jobs.GAMES: games_jobs.check_spec,
                                                        gauntlet_jobs.GAUNTLET: gauntlet_jobs.check_spec,
                                                        gauntlet_jobs.MATCHUP: gauntlet_jobs.check_matchup_spec}
 """The check of each kind's spec: ``check(spec)`` raises :class:`BadSpec` saying what is wrong."""
 MAX_ERROR = 300
 """Characters of a failed job's error as its row keeps it (every member of a league reads it)."""
-
-
-class JobLost(Exception):
-    """The job in play is no longer this worker's (cancelled, or taken over after its lease lapsed)."""
 
 
 def worker_name(role: str = "worker") -> str:
@@ -73,7 +70,11 @@ def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int 
     player = KINDS.get(job.kind)
     if player is None:
         raise MarlError(f"job {job.id} is of kind {job.kind!r}, which this marl does not play: upgrade marl")
-    return player(league, job, device=device, parallel=parallel, on_games=on_games)
+
+    def see(batch: str, ids: Sequence[int], **kwargs: Any) -> list[JobRow]:  # (a moment's matchups: see gauntlet_jobs)
+        return see_through(league, batch, device=device, parallel=parallel, ids=ids, role="gauntlet", **kwargs)
+
+    return player(league, job, device=device, parallel=parallel, on_games=on_games, see=see)
 
 
 def error_line(exc: BaseException, private: dict[str, str] | None = None) -> str:

@@ -1,11 +1,22 @@
-"""What playing one queued job gave (:class:`Played`): the one type every kind of job returns."""
+"""What playing one queued job gave (:class:`Played`): the one type every kind of job returns; what a job's player
+may be told (:class:`JobLost`) and given (:data:`See`)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["Played"]
+__all__ = ["JobLost", "Played", "See"]
+
+See = Callable[..., list[Any]]
+"""What a job's player is given to hand work on: ``see(batch, ids, on_games=..., on_change=...)`` sees the jobs
+``ids`` of ``batch`` through (plays those no worker has taken, waits for the rest; their rows once all ended):
+:func:`selfplay_cli.rated.jobs.see_through` of the league and device the job plays with."""
+
+
+class JobLost(Exception):
+    """The job in play is no longer this worker's (cancelled, or taken over after its lease lapsed)."""
 
 
 @dataclass
