@@ -53,7 +53,7 @@ from selfplay_cli.league.locations import LOCATIONS_VARIABLE, altered, read_loca
 from selfplay_cli.league.models import Blob, Meta, Player, utcnow
 
 if TYPE_CHECKING:
-    from selfplay_cli.league.roster import PlayerRow
+    from selfplay_cli.league.rows import PlayerRow
 
 __all__ = ["BLOB_URL", "Blobs", "BlobsReport", "blob_folder", "check_sha", "store_blob"]
 
