@@ -17,13 +17,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def test_the_command_reference_is_the_clis_own():
     """docs/reference/cli.md is generated from typer's metadata (every command, argument, option and default): the
-    file and the CLI differ nowhere. Regenerate it with `python -m selfplay_cli.commands.reference --write`."""
+    file and the CLI differ nowhere. Regenerate it with `python -m selfplay_cli.reference --write`."""
     from selfplay_cli.cli import build_command
-    from selfplay_cli.commands.reference import render
+    from selfplay_cli.reference import render
 
     text = render()
     assert (ROOT / "docs" / "reference" / "cli.md").read_text() == text, \
-        "regenerate: python -m selfplay_cli.commands.reference --write"
+        "regenerate: python -m selfplay_cli.reference --write"
 
     def walk(command, path):
         for name, sub in command.commands.items():
@@ -41,10 +41,10 @@ def test_the_command_reference_is_the_clis_own():
 
 
 def test_the_sites_home_is_the_readme():
-    from selfplay_cli.commands.reference import home_page
+    from selfplay_cli.reference import home_page
 
     assert (ROOT / "docs" / "index.md").read_text() == home_page((ROOT / "README.md").read_text()), \
-        "regenerate: python -m selfplay_cli.commands.reference --write"
+        "regenerate: python -m selfplay_cli.reference --write"
 
 
 def test_readme_is_a_front_door_whose_links_land():

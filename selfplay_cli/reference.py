@@ -4,7 +4,7 @@ and help, as ``marl COMMAND --help`` has them. Nothing is typed by hand, so it c
 renders it again and fails where the file and the CLI differ.
 
 The site's home page (``docs/index.md``) is README's text (:func:`home_page`), checked the same way.
-``python -m selfplay_cli.commands.reference --write`` (in the repository) writes both.
+``python -m selfplay_cli.reference --write`` (in the repository) writes both.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ __all__ = ["home_page", "render"]
 _HEAD = """# Command reference
 
 Every command of `marl`, with its arguments and options, generated from the CLI itself
-(`python -m selfplay_cli.commands.reference --write`; a test fails when this page and the CLI differ).
+(`python -m selfplay_cli.reference --write`; a test fails when this page and the CLI differ).
 `marl COMMAND --help` prints the same. The pages under *Commands* explain each with examples.
 """
 
@@ -27,7 +27,7 @@ def render() -> str:
     """The whole reference, as Markdown."""
     from typer._click import Context
 
-    from ..cli import build_command
+    from .cli import build_command
 
     root = build_command()
     out = [_HEAD]
