@@ -155,9 +155,9 @@ def integrity(home: Path) -> str:
 def make_league(home: Path, names: tuple[str, ...] = ("s0-left", "s1M-left"), games: bool = True) -> None:
     """A league with run ``r`` and a small snapshot per name, registered as training registers them."""
     from selfplay_cli.league.store import League
+    from selfplay_cli.players.files import snapshot_relpath
     from selfplay_cli.policies.network import Arch, build_network
     from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
-    from selfplay_cli.rated.snapshots import snapshot_relpath
     from selfplay_cli.results import GameResult
 
     league = League.open(home)

@@ -36,7 +36,7 @@ import numpy as np
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.tennis.config import LIVE_OPTIONS, MISSED_SERVE, REASON_NAMES
 from selfplay_cli.league.store import League
-from selfplay_cli.rated.match import load_player
+from selfplay_cli.players.load import load_player
 
 
 def marl(home: Path, *args: str) -> str:

@@ -26,10 +26,10 @@ from sqlalchemy import select, text
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.models import Blob
 from selfplay_cli.league.store import League, LeagueError
+from selfplay_cli.players.files import blob_cache_file, snapshot_relpath
+from selfplay_cli.players.load import load_player
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import MAX_FILE_BYTES, SnapshotMeta, save_snapshot
-from selfplay_cli.rated.match import load_player
-from selfplay_cli.rated.snapshots import blob_cache_file, snapshot_relpath
 from selfplay_cli.work import WorkerOptions, run_worker
 
 SHORT = {"points_to_win": 1}

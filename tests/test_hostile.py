@@ -22,6 +22,8 @@ from safetensors.torch import save_file
 
 from selfplay_cli.files import sweep, sweep_home
 from selfplay_cli.league.store import League, LeagueError, check_name
+from selfplay_cli.players.files import snapshot_relpath
+from selfplay_cli.players.load import load_player
 from selfplay_cli.policies.network import Arch, SnapshotError, build_network
 from selfplay_cli.policies.snapshot_format import (
     FORMAT,
@@ -32,8 +34,6 @@ from selfplay_cli.policies.snapshot_format import (
     weights_sha256,
 )
 from selfplay_cli.policies.snapshot_reader import import_check, read_snapshot
-from selfplay_cli.rated.match import load_player
-from selfplay_cli.rated.snapshots import snapshot_relpath
 from selfplay_cli.results import GameResult
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -17,8 +17,8 @@ from selfplay_cli.algos.kickstart import SQUASH_EDGE, Imitation
 from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League
+from selfplay_cli.players.load import load_player
 from selfplay_cli.policies.spaces import ActionHead
-from selfplay_cli.rated.match import load_player
 from selfplay_cli.rated.names import resolve
 from selfplay_cli.train.config import TeacherConfig, TrainConfig
 

@@ -164,7 +164,7 @@ def test_how_a_snapshot_plays_in_rated_games(env, algo, greedy):
     from datetime import datetime
 
     from selfplay_cli.league.roster import PlayerRow
-    from selfplay_cli.rated.match import plays_greedy
+    from selfplay_cli.players.load import plays_greedy
 
     row = PlayerRow(1, env, "snapshot", "s1M", "r", 1, 0, algo, None, None, None, (), 1000.0, 0, False,
                     datetime.now())

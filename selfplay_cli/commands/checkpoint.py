@@ -79,8 +79,8 @@ def list_cmd(
 
 def _details(league, p) -> dict:
     """A player's league record, its lineage (parent, grandparent, ...) and its file's metadata."""
+    from ..players.files import snapshot_path
     from ..policies.snapshot_reader import read_meta
-    from ..rated.snapshots import snapshot_path
 
     data = _row_json(p)
     lineage, parent = [], p.parent_id
@@ -203,9 +203,9 @@ def _runs(needs) -> str:
 def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination file (.safetensors).")],
            env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
     """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
+    from ..players.files import check_file, snapshot_path
     from ..policies.snapshot_reader import export_snapshot, read_snapshot
     from ..rated.names import resolve
-    from ..rated.snapshots import check_file, snapshot_path
 
     league = open_league(home, db, readonly=True)
     try:
@@ -269,8 +269,8 @@ def push(
     how many were there already, whose file is not on this machine and whose file is not the one registered;
     exits 1 if any snapshot asked for is still not in the database. With --to alone, only sets where the league
     keeps them."""
+    from ..players.files import check_legacy_file
     from ..rated.names import Team, resolve_or_team
-    from ..rated.snapshots import check_legacy_file
 
     if names and every:
         raise MarlError("name the snapshots to push, or pass --all for every snapshot of the league, not both")

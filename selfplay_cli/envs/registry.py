@@ -295,7 +295,7 @@ class EnvSpec:
     own, because a result under it means something else (a game to 3 points, four landers, a serve bot serving
     otherwise). An option that changes how a scripted player plays is never neutral: the bots anchor every ladder.
     Observation options (pong's frame stack) are neutral although two networks made for different ones cannot meet
-    (:func:`~selfplay_cli.rated.match.env_options_of` refuses the match): the game and its bots are the same, so
+    (:func:`~selfplay_cli.players.load.env_options_of` refuses the match): the game and its bots are the same, so
     ratings through the bots compare them, which is what a user who tries 4 frames against 8 asks of the ladder.
 
     ``make_state_space(cfg)``: the space of the game's global state for a config (a float32 Box), where the game

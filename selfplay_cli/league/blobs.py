@@ -169,7 +169,7 @@ LegacyCheck = Callable[["PlayerRow", Path], str]
 """Accepts the file of a row whose ``sha256`` is not the file's (a row written before it meant the file: it holds the
 weights' checksum) when the file is that snapshot, returning the sha256 of the bytes it checked, and raises
 otherwise. Reading a snapshot file is the policies' business, so the check is given by the caller
-(:func:`selfplay_cli.rated.snapshots.check_legacy_file`)."""
+(:func:`selfplay_cli.players.files.check_legacy_file`)."""
 
 
 class Blobs(Database):

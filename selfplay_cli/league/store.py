@@ -18,7 +18,7 @@ The league is made of four concerns, each in its own module:
 
 A snapshot row's path becomes a file only through :meth:`League.snapshot_file`, which keeps it inside the home's
 ``snapshots`` folder whatever the database says; where this machine has no such file, the snapshot is played from
-its blob (:func:`selfplay_cli.rated.snapshots.snapshot_path`).
+its blob (:func:`selfplay_cli.players.files.snapshot_path`).
 
 Objects returned to callers are frozen dataclasses (:class:`RunRow`, :class:`PlayerRow`, :class:`GameTable`,
 :class:`GameRow`), never ORM instances, so nothing lazy-loads after a session has closed. A :class:`League` must not
@@ -97,7 +97,7 @@ class League(Queue, Seeds, Ledger, Roster, Blobs, Database):
         database into a file it reads or deletes.
 
         A row's path is relative to the home and lies under its ``snapshots`` folder (``snapshots/<run>/<name>
-        .safetensors``, as :func:`~selfplay_cli.rated.snapshots.snapshot_relpath` writes it): plain names only (no
+        .safetensors``, as :func:`~selfplay_cli.players.files.snapshot_relpath` writes it): plain names only (no
         ``..``, no NUL byte), and, symlinks followed, still under ``snapshots`` (which may itself be a symlink to
         another disk). A path that is absolute, climbs out, or ends outside through a symlink is a row that was
         written by something else than marl or edited: a :class:`LeagueError` naming the snapshot, before anything

@@ -20,9 +20,10 @@ from ..errors import MarlError
 from ..league.ledger import MATCH_KINDS
 from ..league.queue import JobRow, NewJob
 from ..league.store import League, PlayerRow
+from ..players.load import env_options_of, load_player, mix_seed
 from ..stats.match import match_stats
 from . import job_spec
-from .match import MatchReport, env_options_of, load_player, mix_seed, round_size, run_match
+from .match import MatchReport, round_size, run_match
 from .played import Played, See
 from .seeds import Settled
 from .snapshots import share_snapshots

@@ -8,8 +8,9 @@ from typing import Any
 
 from ..league.seeds import Pair
 from ..league.store import League, PlayerRow
+from ..players.load import load_player, mix_seed
 from ..stats.match import MatchStats, match_stats, points_stats
-from .match import load_player, mix_seed, round_size, run_match
+from .match import round_size, run_match
 from .seeds import Settled
 from .snapshots import players_variant
 

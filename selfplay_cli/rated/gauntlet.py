@@ -53,13 +53,13 @@ from ..league.ledger import GameTable
 from ..league.pairs import design_effect
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
+from ..players.load import env_options_of, load_player, mix_seed
 from ..policies import Policy
 from ..results import COOPERATIVE, GameResult, Rules, points_between
 from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry, pair_matrices
 from ..stats.elo import normal_quantile
 from ..stats.intervals import laplace_intervals
 from ..stats.predict import PairModel, record_prediction
-from .match import env_options_of, load_player, mix_seed
 from .roles import RoleBook, cannot_meet_message, policy_roles
 from .snapshots import run_options
 

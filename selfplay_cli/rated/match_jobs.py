@@ -11,8 +11,9 @@ from typing import Any
 from ..errors import MarlError
 from ..league.seeds import Pair
 from ..league.store import League, PlayerRow
+from ..players.load import load_player, mix_seed
 from ..policies import Policy
-from .match import MatchReport, load_player, mix_seed, round_size
+from .match import MatchReport, round_size
 from .names import Team
 from .seeds import Ask, Settled, settle
 

@@ -68,9 +68,9 @@ class RoleBook:
         role = row.meta.get("role")
         if isinstance(role, str) and role in self.rules.roles:  # type: ignore[operator]
             return frozenset((role,))
+        from ..players.files import snapshot_path
         from ..policies.snapshot_format import snapshot_roles
         from ..policies.snapshot_reader import read_meta
-        from .snapshots import snapshot_path
 
         try:
             meta = read_meta(snapshot_path(self.league, row))

@@ -13,8 +13,9 @@ from typing import Any
 from ..league.pairs import PairPlan, plan_tournament
 from ..league.seeds import Pair
 from ..league.store import League, PlayerRow
+from ..players.load import load_player, mix_seed
 from .games_jobs import JOB_ROUNDS, games_jobs
-from .match import load_player, mix_seed, round_size, run_match
+from .match import round_size, run_match
 from .roles import RoleBook
 from .seeds import Ask, Settled, settle
 from .snapshots import players_variant

@@ -131,9 +131,9 @@ def play_job(league: Any, ups: list[Any], games: int, seed: int, max_steps: int 
     """For the lineups ``ups``: load the networks once, and play game i with seed ``seed + i``."""
     from ..arena import Game
     from ..envs import get_env
+    from ..players.load import check_fits, env_options_of, load_player
     from ..policies import ScriptedPolicy
     from ..rated.lineup import refit
-    from ..rated.match import check_fits, env_options_of, load_player
     from .recorder import record_game, renderer_of, stop_rule
 
     spec = get_env(ups[0].env)

@@ -99,8 +99,8 @@ def _source(league: League, cfg: TrainConfig) -> tuple[str, list[PlayerRow]]:
 def _read(league: League, row: PlayerRow) -> Any:
     """The snapshot file of ``row``, validated in full (the hostile-file reader) and checked to be the one its row
     registered."""
+    from ..players.files import check_file, snapshot_path
     from ..policies.snapshot_reader import read_snapshot
-    from ..rated.snapshots import check_file, snapshot_path
 
     if row.removed:
         raise MarlError(f"--init-from: {row.full_name} was removed from the league")

@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 
 from ..league.store import League, LeagueError
+from ..players.load import load_player
 from ..policies import Policy
-from ..rated.match import load_player
 from ..rated.meta_nash import RunNash, run_nash
 from ..rated.roles import RoleBook
 from ..results import GameResult

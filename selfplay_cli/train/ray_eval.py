@@ -8,7 +8,7 @@ games are those any worker, or the local rating worker, plays (one function play
 Where the actors run: a SQLite league is a file on this machine, so they are placed on this machine's Ray node; any
 other database (PostgreSQL) is reached by its URL from every node, so they are spread over the cluster, and the
 snapshots they play come from the league by their sha256 where the node has no copy of the league home
-(:func:`selfplay_cli.rated.snapshots.snapshot_path`), as every worker's do. They play on the CPU.
+(:func:`selfplay_cli.players.files.snapshot_path`), as every worker's do. They play on the CPU.
 
 How they end: when the run's gauntlets are all done, and however the run ends (finished, Ctrl-C or SIGTERM, an
 error), each actor is told to stop (:meth:`RatingActor.stop`, answered on the actor's second thread while its loop

@@ -32,8 +32,8 @@ from ..arena.training_games import SelfPlayGames
 from ..errors import MarlError
 from ..league.store import League
 from ..league.variants import variant_key
+from ..players.load import load_player
 from ..policies import Policy
-from ..rated.match import load_player
 from ..results import GameResult
 from .config import TrainConfig
 from .curriculum import Curriculum, Schedule

@@ -86,7 +86,7 @@ class ShardOpponents:
     """The opponents of an actor's games, drawn from the trainer's table (:meth:`Opponents.shard_table`): per
     learner and role, probabilities over opponent ids, or with --swap-every the id assigned to each slot. League
     players are loaded from the league by id (a snapshot's file checked against its sha256, or its blob fetched by
-    hash, as :func:`~selfplay_cli.rated.match.load_player` does) and kept in a bounded cache; 'latest' is the actor's
+    hash, as :func:`~selfplay_cli.players.load.load_player` does) and kept in a bounded cache; 'latest' is the actor's
     live copy of the learner."""
 
     def __init__(self, setup: ShardSetup, live: list[Any], seed: int) -> None:
@@ -102,7 +102,7 @@ class ShardOpponents:
 
     def _load(self, pid: int) -> Any:
         from ..league.store import League
-        from ..rated.match import load_player
+        from ..players.load import load_player
 
         if self._league is None:
             self._league = League(self.setup.league_url, home=self.setup.league_home, readonly=True)

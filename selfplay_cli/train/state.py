@@ -20,8 +20,8 @@ from ..envs import EnvSpec
 from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
 from ..league.store import League
+from ..players.files import snapshot_relpath
 from ..policies.snapshot_format import SnapshotMeta, save_snapshot
-from ..rated.snapshots import snapshot_relpath
 from .config import TrainConfig
 from .league_roles import LeagueRoles
 from .opponents import Opponents
