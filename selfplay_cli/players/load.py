@@ -67,7 +67,7 @@ def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: boo
         return ScriptedPolicy(row.env, row.name, seed=seed)
     from ..policies.snapshot_policy import policy_of  # torch is imported only when a network is needed
     from ..policies.snapshot_reader import read_snapshot
-    from .snapshots import check_file, snapshot_path
+    from .files import check_file, snapshot_path
 
     _inference_threads(device)
     if row.removed:
