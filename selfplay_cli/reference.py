@@ -3,8 +3,10 @@ command and group with its help, every argument and option with its flags, value
 and help, as ``marl COMMAND --help`` has them. Nothing is typed by hand, so it cannot drift: ``tests/test_docs.py``
 renders it again and fails where the file and the CLI differ.
 
-The site's home page (``docs/index.md``) is README's text (:func:`home_page`), checked the same way.
-``python -m selfplay_cli.reference --write`` (in the repository) writes both.
+The site's home page (``docs/index.md``) is README's text (:func:`home_page`), and the figures a page quotes from a
+benchmark are rendered from that benchmark's output file, with its date and machine (:func:`figures`, between
+``<!-- figures:NAME -->`` and ``<!-- /figures -->`` in a page): each checked the same way.
+``python -m selfplay_cli.reference --write`` (in the repository) writes them all.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ import inspect
 import re
 from typing import Any
 
-__all__ = ["home_page", "render"]
+__all__ = ["FIGURES", "figures", "home_page", "render", "with_figures"]
 
 _HEAD = """# Command reference
 
@@ -73,6 +75,45 @@ def home_page(readme: str) -> str:
     return re.sub(r"\]\(docs/([^)]*)\)", r"](\1)", text)
 
 
+def _ladder_truth(data: dict[str, Any]) -> str:
+    """``benchmarks/results/ladder_truth.json`` as the table the league page quotes."""
+    head = (f"Measured {data['date']} on `{data['machine']}` ({data.get('how', '')}); every checked pair in "
+            "`benchmarks/results/ladder_truth.json`.\n\n"
+            "| game | pairs checked | 95% predictions held | open, met: median width (pairs) | open, never met | "
+            "printed margins held: the 200-game range (the expected-difference interval) | order claims held | "
+            "row margins (JSON) held: range (interval) |\n|---|---|---|---|---|---|---|---|\n")
+    rows = []
+    for t in data["table"]:
+        met = f"{t['width_met']:.0f} ({t['open_met']})" if t.get("width_met") is not None else "-"
+        new = f"{t['width_new']:.0f} ({t['open_new']})" if t.get("width_new") is not None else "-"
+        rows.append(f"| {t['label']} | {t['pairs']:,} | {t['held']} | {met} | {new} | {t['printed_margins']} "
+                    f"({t.get('printed_expected', '-')}) | {t['order']} | {t['row_margins']} "
+                    f"({t.get('rows_expected', '-')}) |")
+    return head + "\n".join(rows) + "\n"
+
+
+FIGURES: dict[str, tuple[str, Any]] = {"ladder_truth": ("benchmarks/results/ladder_truth.json", _ladder_truth)}
+"""Each block of figures a docs page may quote: the benchmark output it is rendered from, and how."""
+
+
+def figures(name: str, root: Any) -> str:
+    """The figures block ``name`` (:data:`FIGURES`), rendered from its output file under the repository ``root``."""
+    import json
+    from pathlib import Path
+
+    source, make = FIGURES[name]
+    return make(json.loads((Path(root) / source).read_text()))
+
+
+def with_figures(page: str, root: Any) -> str:
+    """``page`` with every ``<!-- figures:NAME -->`` ... ``<!-- /figures -->`` block rendered anew."""
+
+    def block(m: re.Match[str]) -> str:
+        return f"<!-- figures:{m.group(1)} -->\n{figures(m.group(1), root)}<!-- /figures -->"
+
+    return re.sub(r"<!-- figures:(\w+) -->\n.*?<!-- /figures -->", block, page, flags=re.S)
+
+
 if __name__ == "__main__":
     import sys
     from pathlib import Path
@@ -80,5 +121,9 @@ if __name__ == "__main__":
     if sys.argv[1:] == ["--write"]:
         Path("docs/reference/cli.md").write_text(render())
         Path("docs/index.md").write_text(home_page(Path("README.md").read_text()))
+        for page in Path("docs").rglob("*.md"):
+            text = page.read_text()
+            if "<!-- figures:" in text:
+                page.write_text(with_figures(text, "."))
     else:
         sys.stdout.write(render())

@@ -40,6 +40,19 @@ def test_the_command_reference_is_the_clis_own():
     assert "| `--steps N` | Budget in game steps. [default: 6,000,000; 1 to 1,000,000,000,000] |" in text
 
 
+def test_figures_quoted_in_the_docs_are_their_benchmarks_output():
+    """A block of figures in a page (`<!-- figures:NAME -->`) is rendered from its benchmark's output file, with the
+    date and machine it was measured on: typed by hand nowhere."""
+    from selfplay_cli.reference import FIGURES, with_figures
+
+    quoted = set()
+    for page in (ROOT / "docs").rglob("*.md"):
+        text = page.read_text()
+        quoted |= set(re.findall(r"<!-- figures:(\w+) -->", text))
+        assert with_figures(text, ROOT) == text, f"{page}: regenerate: python -m selfplay_cli.reference --write"
+    assert quoted == set(FIGURES)
+
+
 def test_the_sites_home_is_the_readme():
     from selfplay_cli.reference import home_page
 
