@@ -119,11 +119,14 @@ if __name__ == "__main__":
     from pathlib import Path
 
     if sys.argv[1:] == ["--write"]:
-        Path("docs/reference/cli.md").write_text(render())
-        Path("docs/index.md").write_text(home_page(Path("README.md").read_text()))
-        for page in Path("docs").rglob("*.md"):
-            text = page.read_text()
-            if "<!-- figures:" in text:
-                page.write_text(with_figures(text, "."))
+        try:
+            Path("docs/reference/cli.md").write_text(render())
+            Path("docs/index.md").write_text(home_page(Path("README.md").read_text()))
+            for page in Path("docs").rglob("*.md"):
+                text = page.read_text()
+                if "<!-- figures:" in text:
+                    page.write_text(with_figures(text, "."))
+        except OSError as e:
+            sys.exit(f"reference: {e.filename}: {e.strerror} (run it in the repository: it writes docs/)")
     else:
         sys.stdout.write(render())

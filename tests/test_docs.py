@@ -18,6 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_the_command_reference_is_the_clis_own():
     """docs/reference/cli.md is generated from typer's metadata (every command, argument, option and default): the
     file and the CLI differ nowhere. Regenerate it with `python -m selfplay_cli.reference --write`."""
+    from typer._click import Context
+
     from selfplay_cli.cli import build_command
     from selfplay_cli.reference import render
 
@@ -34,7 +36,7 @@ def test_the_command_reference_is_the_clis_own():
     for path, command in walk(build_command(), ["marl"]):
         assert f"`{' '.join(path)}`" in text
         for p in command.params:
-            record = p.get_help_record(__import__("typer._click", fromlist=["Context"]).Context(command))
+            record = p.get_help_record(Context(command))
             if record is not None:
                 assert f"| `{record[0]}` |" in text, (path, record[0])
     assert "| `--steps N` | Budget in game steps. [default: 6,000,000; 1 to 1,000,000,000,000] |" in text

@@ -173,3 +173,18 @@ def test_marl_league_predict_and_marl_match_say_what_the_ladder_expects(tmp_path
     assert report["predicted"]["games"] == 40 and report["predicted"]["held"] == (
         report["predicted"]["low"] <= report["score"] <= report["predicted"]["high"])
     assert report["first_seed"] == 20  # after the 20 stored games' seeds: none of them played again
+
+
+def test_the_binomial_of_a_match_is_scipys_at_every_rate_and_length():
+    """The match's luck in closed form (log-gamma) against scipy's binomial, rates 0 and 1 (certain counts) and
+    200 rates between, matches of 1 to 2,000 results."""
+    from scipy.stats import binom
+
+    from selfplay_cli.stats.predict import _binomial
+
+    p = np.concatenate([[0.0, 1.0, 1e-9, 1 - 1e-9], np.random.default_rng(0).uniform(size=200)])
+    for n in (1, 8, 200, 2000):
+        got = _binomial(n, p)
+        assert got.shape == (p.size, n + 1)
+        assert np.allclose(got, binom.pmf(np.arange(n + 1)[None, :], n, p[:, None]), rtol=0, atol=1e-12)
+    assert _binomial(5, np.array([0.0]))[0, 0] == 1.0 and _binomial(5, np.array([1.0]))[0, 5] == 1.0

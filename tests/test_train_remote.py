@@ -399,18 +399,24 @@ def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
 def test_a_moment_played_again_queues_none_of_its_matchups_twice(rated_league):
     """A moment's worker that died after queueing its matchups: the moment's next worker finds them queued (or
     stored) and queues nothing twice; a matchup spec a worker cannot play is refused, in one line."""
-    from selfplay_cli.rated.gauntlet_jobs import check_matchup_spec, queue_matchups
+    from selfplay_cli.rated.gauntlet import plan_moment
+    from selfplay_cli.rated.gauntlet_jobs import _config, check_matchup_spec, queue_matchups
     from selfplay_cli.rated.job_spec import BadSpec
 
     league, snap = rated_league
     RemoteEvaluator(league, "w", "cpu").submit(GauntletJob((snap.id,), 0, 2, 0))
     first = league.add_worker("first", "here", 1)
-    moment = league.claim(first, kinds=["gauntlet"])
-    ids = queue_matchups(league, moment)
-    assert len(ids) == 3 and queue_matchups(league, moment) == ids
+    job = league.claim(first, kinds=["gauntlet"])
+    cfg = _config(league, job.spec)
+
+    def queued() -> list[int]:  # (each time planned anew, as a worker that takes the moment over plans it)
+        return queue_matchups(league, job, plan_moment(league, job.spec["snapshot_ids"], cfg.older), cfg)
+
+    ids = queued()
+    assert len(ids) == 3 and queued() == ids
     one = league.claim(first, kinds=["matchup"])
     assert play_leased(league, first, one).state == "done"
-    assert sorted(queue_matchups(league, moment)) == sorted(i for i in ids if i != one.id)  # stored: not again
+    assert sorted(queued()) == sorted(i for i in ids if i != one.id)  # stored: not again
     spec = dict(one.spec)
     check_matchup_spec(spec)
     for key, bad, needle in (("expect", 1.5, "expect must be a number from 0 up to"),

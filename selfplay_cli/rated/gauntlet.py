@@ -548,8 +548,10 @@ def plan_moment(league: League, snapshot_ids: Sequence[int], older: int) -> Mome
 
 
 def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: int, config: GauntletConfig,
-                   device: str = "cpu", on_games: Callable[[int], None] | None = None) -> list[Matchup]:
-    """The whole gauntlet of one snapshot moment (:func:`plan_moment`), played.
+                   device: str = "cpu", on_games: Callable[[int], None] | None = None,
+                   moment: Moment | None = None) -> list[Matchup]:
+    """The whole gauntlet of one snapshot moment (:func:`plan_moment`, or ``moment`` where the caller planned it
+    already), played.
 
     Idempotent: the gauntlet is one unit of work keyed by the moment (``gauntlet/<its first snapshot id>``,
     :func:`play_gauntlet`'s ``key``): played again (cut short by a kill, then run again on resume; its matchups
@@ -557,7 +559,7 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     choices. A pair whose players, or copies of them (the same weights, :meth:`League.same_weights`: another run
     with the same seed), already met in another gauntlet is left out.
     """
-    moment = plan_moment(league, snapshot_ids, config.older)
+    moment = moment or plan_moment(league, snapshot_ids, config.older)
     if moment is None:
         return []
     return play_gauntlet(league, moment.pairs, first_seed=first_seed, config=config, device=device,

@@ -41,7 +41,16 @@ from ..league.queue import JobRow, NewJob
 from ..league.store import League
 from ..results import Rules
 from . import job_spec
-from .gauntlet import ALL_OLDER, GauntletConfig, crews_of, open_matchups, plan_moment, play_gauntlet, rate_snapshots
+from .gauntlet import (
+    ALL_OLDER,
+    GauntletConfig,
+    Moment,
+    crews_of,
+    open_matchups,
+    plan_moment,
+    play_gauntlet,
+    rate_snapshots,
+)
 from .played import JobLost, Played, See
 from .snapshots import share_snapshots
 
@@ -74,15 +83,20 @@ def check_spec(spec: dict[str, Any]) -> None:
     """Refuse (:class:`~selfplay_cli.rated.job_spec.BadSpec`) a ``gauntlet`` spec a worker cannot play as it stands:
     the keys :func:`gauntlet_job` writes (those it added later may be absent: a job queued before them), each of its
     type, counts within ``marl train``'s own limits."""
-    job_spec.ids(spec, "snapshot_ids", MAX_MOMENT)
+    _check_moment(spec)
     job_spec.whole(spec, "first_seed", 0, job_spec.MAX_SEED)
+    job_spec.whole(spec, "playoff", 0, MAX_PLAYOFF, required=False)
+    job_spec.names(spec, "snapshots", MAX_MOMENT, required=False)
+
+
+def _check_moment(spec: dict[str, Any]) -> None:
+    """The fields of a moment's gauntlet that its spec and each of its matchups' specs carry (:func:`_config`'s)."""
+    job_spec.ids(spec, "snapshot_ids", MAX_MOMENT)
     job_spec.whole(spec, "games", 0, MAX_EVAL_GAMES)
     job_spec.whole(spec, "older", 0, MAX_OLDER)
     job_spec.flag(spec, "full")
-    job_spec.whole(spec, "playoff", 0, MAX_PLAYOFF, required=False)
     job_spec.flag(spec, "whole")
     job_spec.number(spec, "precision", 0.0, 1.0, required=False)
-    job_spec.names(spec, "snapshots", MAX_MOMENT, required=False)
     job_spec.tries(spec)
 
 
@@ -105,8 +119,7 @@ def _config(league: League, spec: dict[str, Any]) -> GauntletConfig:
     """The gauntlet's settings a moment's spec (or one of its matchups', which carries the moment's) asks for."""
     games, older, full = int(spec["games"]), int(spec["older"]), bool(spec.get("full", False))
     # games in a round of two players: a seat-swapped pair, or one game where each plays only its own side
-    ids = spec.get("snapshot_ids") or spec["moment_ids"]
-    per = 1 if Rules.of(get_env(league.get_player(int(ids[0])).env)).sides_differ else 2
+    per = 1 if Rules.of(get_env(league.get_player(int(spec["snapshot_ids"][0])).env)).sides_differ else 2
     n = max(games // per, 1)
     # (a payoff matrix's cell of 2 games would weigh as much as one of 400 in its Nash mixture: none cut short)
     whole = full or bool(spec.get("whole", False))
@@ -117,17 +130,18 @@ def _config(league: League, spec: dict[str, Any]) -> GauntletConfig:
 
 
 def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "cpu",
-                       on_games: Callable[[int], None] | None = None) -> tuple[int, float]:
+                       on_games: Callable[[int], None] | None = None, moment: Moment | None = None
+                       ) -> tuple[int, float]:
     """Play one moment's gauntlet (and, for the final one, the playoff) as ``spec`` says (:func:`gauntlet_job`'s
     fields), storing its games; the games played and the seconds they took (its matchups stored before, by jobs of
-    their own, count with their games, played nothing here)."""
+    their own, count with their games, played nothing here). ``moment``: its plan, where the caller made it."""
     from .playoff import PlayoffConfig, playoff
 
     ids = [int(i) for i in spec["snapshot_ids"]]
     first_seed = int(spec["first_seed"])
     t0 = time.perf_counter()
     matchups = rate_snapshots(league, ids, first_seed=first_seed, config=_config(league, spec), device=device,
-                              on_games=on_games)
+                              on_games=on_games, moment=moment)
     played = sum(m.games for m in matchups)
     if int(spec.get("playoff", 0)):
         played += playoff(league, ids, first_seed=first_seed + PLAYOFF_SEEDS,
@@ -140,9 +154,13 @@ def play(league: League, job: JobRow, *, device: str, parallel: int,
     """A ``gauntlet`` job: its games are stored as it plays them (keyed: once), so the job's end stores none. Where
     other workers take the job's batch, its matchups go to them first (:func:`_share`, through ``see``)."""
     del parallel  # a gauntlet plays all its matchups in one batch of its own size
+    moment = None
     if see is not None and _helpers(league, job):
-        _share(league, job, see, on_games)
-    games, seconds = play_gauntlet_spec(league, job.spec, device=device, on_games=on_games)
+        cfg = _config(league, job.spec)
+        moment = plan_moment(league, [int(i) for i in job.spec["snapshot_ids"]], cfg.older)
+        if moment is not None:
+            _share(league, job, queue_matchups(league, job, moment, cfg), see, on_games)
+    games, seconds = play_gauntlet_spec(league, job.spec, device=device, on_games=on_games, moment=moment)
     return Played(games=[], match_kind="eval", params={}, seconds=seconds, played=games,
                   result={"games": games, "seconds": round(seconds, 3), "snapshots": job.spec.get("snapshots", [])})
 
@@ -156,10 +174,9 @@ def _helpers(league: League, job: JobRow) -> int:
                if w.id != job.worker_id and not w.holding)
 
 
-def _share(league: League, job: JobRow, see: See, on_games: Callable[[int], None] | None) -> None:
-    """Queue the moment's open matchups as jobs (:func:`queue_matchups`), play those no worker takes and wait for the
-    rest (``see``); a matchup's job that died fails the moment with its error."""
-    ids = queue_matchups(league, job)
+def _share(league: League, job: JobRow, ids: list[int], see: See, on_games: Callable[[int], None] | None) -> None:
+    """See the moment's matchup jobs ``ids`` (:func:`queue_matchups`) through: play those no worker takes and wait
+    for the rest (``see``); a matchup's job that died fails the moment with its error."""
     if not ids:
         return
     lost = False
@@ -184,14 +201,12 @@ def _share(league: League, job: JobRow, see: See, on_games: Callable[[int], None
                         f"gauntlet failed: {dead[0].error or 'no error recorded'}")
 
 
-def queue_matchups(league: League, job: JobRow) -> list[int]:
-    """The moment's matchups that are not in the ledger yet (:func:`~selfplay_cli.rated.gauntlet.open_matchups`) as
-    ``matchup`` jobs of the moment's batch: those already queued (by an earlier playing of the moment whose worker
-    died) as they are, the others queued now; their ids."""
+def queue_matchups(league: League, job: JobRow, moment: Moment, cfg: GauntletConfig) -> list[int]:
+    """The matchups of the moment job ``job`` (planned: ``moment``, ``cfg``) that are not in the ledger yet
+    (:func:`~selfplay_cli.rated.gauntlet.open_matchups`) as ``matchup`` jobs of its batch: those already queued (by
+    an earlier playing of the moment whose worker died) as they are, the others queued now; their ids."""
     spec = job.spec
-    cfg = _config(league, spec)
-    moment = plan_moment(league, [int(i) for i in spec["snapshot_ids"]], cfg.older)
-    todo = [] if moment is None else open_matchups(league, moment, first_seed=int(spec["first_seed"]), config=cfg)
+    todo = open_matchups(league, moment, first_seed=int(spec["first_seed"]), config=cfg)
     if not todo:
         return []
     base = {k: spec[k] for k in ("snapshot_ids", "games", "older", "full", "whole", "precision") if k in spec}
@@ -214,18 +229,12 @@ def check_matchup_spec(spec: dict[str, Any]) -> None:
     """Refuse (:class:`~selfplay_cli.rated.job_spec.BadSpec`) a ``matchup`` spec a worker cannot play as it stands:
     its moment's gauntlet fields (:func:`check_spec`'s), the two players, the matchup's first seed and what the
     moment's history expects of it (a score, or null)."""
-    job_spec.ids(spec, "snapshot_ids", MAX_MOMENT)
-    job_spec.whole(spec, "games", 0, MAX_EVAL_GAMES)
-    job_spec.whole(spec, "older", 0, MAX_OLDER)
-    job_spec.flag(spec, "full")
-    job_spec.flag(spec, "whole")
-    job_spec.number(spec, "precision", 0.0, 1.0, required=False)
+    _check_moment(spec)
     job_spec.whole(spec, "a", 1, job_spec.MAX_PLAYER_ID)
     job_spec.whole(spec, "b", 1, job_spec.MAX_PLAYER_ID)
     job_spec.whole(spec, "first_seed", 0, job_spec.MAX_SEED)
     job_spec.number(spec, "expect", 0.0, math.nextafter(1.0, 2.0), required=False)
     job_spec.names(spec, "snapshots", 2, required=False)
-    job_spec.tries(spec)
 
 
 def play_matchup(league: League, job: JobRow, *, device: str, parallel: int,

@@ -32,7 +32,7 @@ from .job_spec import BadSpec
 from .played import JobLost, Played
 
 __all__ = ["CHECKS", "KINDS", "MAX_ERROR", "BadSpec", "JobLost", "Outcome", "check_job", "error_line", "play_job",
-           "play_leased", "see_through", "sprt_verdict", "worker_name"]
+           "SHARING_ROLE", "play_leased", "see_through", "sprt_verdict", "worker_name"]
 
 KINDS: dict[str, Callable[..., Played]] = {games_jobs.GAMES: games_jobs.play,
                                            gauntlet_jobs.GAUNTLET: gauntlet_jobs.play,
@@ -43,6 +43,9 @@ CHECKS: dict[str, Callable[[dict[str, Any]], None]] = {games_jobs.GAMES: games_j
                                                        gauntlet_jobs.GAUNTLET: gauntlet_jobs.check_spec,
                                                        gauntlet_jobs.MATCHUP: gauntlet_jobs.check_matchup_spec}
 """The check of each kind's spec: ``check(spec)`` raises :class:`BadSpec` saying what is wrong."""
+SHARING_ROLE = "gauntlet"
+"""How a worker that shares out a moment's matchups lists itself while it plays and waits for them
+(``gauntlet@host:pid``: the same process as the worker holding the moment)."""
 MAX_ERROR = 300
 """Characters of a failed job's error as its row keeps it (every member of a league reads it)."""
 
@@ -72,7 +75,7 @@ def play_job(league: League, job: JobRow, *, device: str = "cpu", parallel: int 
         raise MarlError(f"job {job.id} is of kind {job.kind!r}, which this marl does not play: upgrade marl")
 
     def see(batch: str, ids: Sequence[int], **kwargs: Any) -> list[JobRow]:  # (a moment's matchups: see gauntlet_jobs)
-        return see_through(league, batch, device=device, parallel=parallel, ids=ids, role="gauntlet", **kwargs)
+        return see_through(league, batch, device=device, parallel=parallel, ids=ids, role=SHARING_ROLE, **kwargs)
 
     return player(league, job, device=device, parallel=parallel, on_games=on_games, see=see)
 

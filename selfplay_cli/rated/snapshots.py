@@ -8,16 +8,13 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from ..errors import MarlError
 from ..files import write_atomic
 from ..league.store import League, LeagueIOError, PlayerRow, check_name
 from ..league.variants import describe_variant, variant_key
 from ..players.files import check_legacy_file, snapshot_path, snapshot_relpath
-
-if TYPE_CHECKING:
-    pass
 
 
 def player_options(league: League, row: PlayerRow) -> dict[str, Any]:

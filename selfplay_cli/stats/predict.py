@@ -41,8 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.special import ndtr
-from scipy.stats import binom
+from scipy.special import gammaln, ndtr, xlog1py, xlogy
 
 from .bradley_terry import _fit_matrices, prior_draws, reachable
 from .elo import MAX_ELO, NAT_TO_ELO
@@ -235,7 +234,7 @@ class Belief:
         if self.draw > 0.0:
             pmf, halves = post @ _trinomial(n, p, self.draw), 2 * n  # over half-points 0 .. 2n
         else:
-            pmf, halves = post @ binom.pmf(np.arange(n + 1)[None, :], n, p[:, None]), n
+            pmf, halves = post @ _binomial(n, p), n
         tail = 0.5 * (1.0 - confidence)
         lo_k = int(np.searchsorted(np.cumsum(pmf), tail - 1e-12))  # the smallest k with P(K <= k) >= tail
         upper = np.cumsum(pmf[::-1])[::-1]  # P(K >= k)
@@ -270,6 +269,16 @@ def record_prediction(wins: int, draws: int, losses: int, games: int = 200,
     nodes = NAT_TO_ELO * np.log(p / (1.0 - p))
     return Belief(nodes, np.full(_NODES, 1.0 / _NODES), float(n), wins + 0.5 * draws,
                   draw=draws / (n + 1.0)).predict(games, confidence)
+
+
+def _binomial(n: int, p: np.ndarray) -> np.ndarray:
+    """``(levels, n + 1)``: the binomial pmf of ``n`` trials at each success rate of ``p`` (one row per level), from
+    log-gamma in closed form (scipy's ``binom.pmf`` evaluates each cell apart: 2.4 ms for 121 x 201 against 0.3);
+    a rate of 0 or 1 gives its certain count exactly."""
+    k = np.arange(n + 1, dtype=np.float64)
+    log_choose = gammaln(n + 1.0) - gammaln(k + 1.0) - gammaln(n - k + 1.0)
+    q = p[:, None]
+    return np.exp(log_choose[None, :] + xlogy(k[None, :], q) + xlog1py(n - k[None, :], -q))
 
 
 def _trinomial(n: int, p: np.ndarray, draw: float) -> np.ndarray:

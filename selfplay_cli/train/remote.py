@@ -191,9 +191,11 @@ class RemoteEvaluator:
 
         rows = self.league.jobs(ids=list(self._ids.values())) if self._ids else []
         left = [r for r in rows if r.state not in ENDED]
+        from ..rated.jobs import SHARING_ROLE
+
         playing = self.league.jobs(batch=self.batch, states=["leased"]) if left else []  # (its matchups' too)
         who = sorted({r.worker for r in playing if r.worker and not self._is_me(r.worker)
-                      and not r.worker.startswith("gauntlet@")})
+                      and not r.worker.startswith(f"{SHARING_ROLE}@")})  # (the moment's worker, named already)
         return QueueStanding(left=len(left), workers=tuple(who), here=self.here, attached=len(self.serving()))
 
     def close(self) -> None:
