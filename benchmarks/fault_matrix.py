@@ -161,7 +161,7 @@ def make_league(home: Path, names: tuple[str, ...] = ("s0-left", "s1M-left"), ga
     from selfplay_cli.results import GameResult
 
     league = League.open(home)
-    league.create_run("r", "pong", {})
+    league.roster.create_run("r", "pong", {})
     rows = []
     for i, name in enumerate(names):
         rel = snapshot_relpath("r", name)
@@ -170,11 +170,11 @@ def make_league(home: Path, names: tuple[str, ...] = ("s0-left", "s1M-left"), ga
                                           algo="ppo", run="r", name=name, step=1_000_000 * i))
         rows.append(dict(env="pong", run="r", name=name, path=rel, sha256=meta.weights_sha256, step=meta.step,
                          algo="ppo", meta={"weights_sha256": meta.weights_sha256}))
-    snaps = league.add_snapshots(rows)
-    league.ensure_bots("pong", ["cpu", "random"])
+    snaps = league.roster.add_snapshots(rows)
+    league.roster.ensure_bots("pong", ["cpu", "random"])
     if games:
-        cpu = next(p for p in league.players(kind="bot") if p.name == "cpu")
-        league.create_match_with_games("pong", "match", {}, [
+        cpu = next(p for p in league.roster.players(kind="bot") if p.name == "cpu")
+        league.ledger.create_match_with_games("pong", "match", {}, [
             GameResult(env="pong", players=(p.id, cpu.id), seed=k, scores=(0, 21), outcome=(0.0, 1.0), length=900,
                        truncated=False) for p in snaps for k in range(4)])
     league.close()
@@ -556,8 +556,8 @@ def _kill_then_resume(scratch: Path, point: str) -> tuple[bool, str]:
     before = db(home, "select name from players where kind = 'snapshot' order by id")
     r = marl("train", "--resume", "r", "--home", str(home), "--quiet")
     with League.open(home, readonly=True) as league:
-        snaps = league.players("pong", kind="snapshot")
-        status = league.get_run("r").status
+        snaps = league.roster.players("pong", kind="snapshot")
+        status = league.roster.get_run("r").status
         good = 0
         for s in snaps:
             tensors, meta = load_snapshot(home / s.path, expect_env="pong")
@@ -914,8 +914,8 @@ def _train_state(home: Path) -> tuple[str, list[str], bool]:
     from selfplay_cli.policies.snapshot_reader import load_snapshot
 
     with League.open(home, readonly=True) as league:
-        run = league.get_run("r")
-        snaps = league.players(kind="snapshot")
+        run = league.roster.get_run("r")
+        snaps = league.roster.players(kind="snapshot")
         finite = all(bool(torch.isfinite(t).all()) for s in snaps
                      for t in load_snapshot(home / s.path, expect_env=s.env)[0].values())
     files = sorted(p.name for p in (home / "snapshots" / "r").iterdir())
@@ -1250,19 +1250,19 @@ def _owner_league(shared: SharedLeague) -> dict[str, int]:
     lg = League.open(shared.home, url=shared.owner_url)
     lite = League.open(shared.home)
     rows = [dict(env="pong", run="r", name=p.name, path=p.path, sha256=p.sha256, step=p.step, algo="ppo",
-                 meta=p.meta) for p in lite.players(kind="snapshot")]
+                 meta=p.meta) for p in lite.roster.players(kind="snapshot")]
     lite.close()
-    lg.create_run("r", "pong", {})
-    snaps = lg.add_snapshots(rows)
-    lg.ensure_blobs(snaps)
-    lg.ensure_bots("pong", ["cpu", "random"])
+    lg.roster.create_run("r", "pong", {})
+    snaps = lg.roster.add_snapshots(rows)
+    lg.blobs.ensure_blobs(snaps)
+    lg.roster.ensure_bots("pong", ["cpu", "random"])
     from selfplay_cli.results import GameResult
 
-    for bot in lg.players(kind="bot"):  # a match against each bot
-        lg.create_match_with_games("pong", "match", {}, [
+    for bot in lg.roster.players(kind="bot"):  # a match against each bot
+        lg.ledger.create_match_with_games("pong", "match", {}, [
             GameResult(env="pong", players=(p.id, bot.id)[::1 - 2 * (k % 2)], seed=k, scores=(0, 21),
                        outcome=(0.0, 1.0), length=900, truncated=False) for p in snaps for k in range(4)])
-    ids = {p.name: p.id for p in lg.players(env="pong")}
+    ids = {p.name: p.id for p in lg.roster.players(env="pong")}
     lg.close()
     (shared.home / "league.db").unlink()  # the owner's league is the PostgreSQL one alone
     shared.grant_member()
@@ -1288,9 +1288,9 @@ def shared_rows_name_a_module(scratch: Path) -> tuple[bool, str]:
     (scratch / "evilmod.py").write_text(EVIL_GAME_MODULE)
     evil = "evilmod:env"
     member = shared.member_league()  # the member's marl writes the run and a bot (it names the game, imports nothing)
-    member.create_run("evil1", evil, {"env": evil, "run": "evil1"})
-    member.ensure_bots(evil, ["random"])
-    bot = next(p.id for p in member.players(kind="bot") if p.env == evil)
+    member.roster.create_run("evil1", evil, {"env": evil, "run": "evil1"})
+    member.roster.ensure_bots(evil, ["random"])
+    bot = next(p.id for p in member.roster.players(kind="bot") if p.env == evil)
     member.close()
     (snap,) = shared.member_sql(  # a snapshot row named like the owner's, of the run, written by hand
         "INSERT INTO players (env, kind, name, run_id, step, episode, algo, path, sha256, elo, games, removed, meta, "
@@ -1333,8 +1333,8 @@ def shared_poison_jobs(scratch: Path) -> tuple[bool, str]:
     shared = SharedLeague(scratch)
     ids = _owner_league(shared)
     member = shared.member_league()
-    member.ensure_bots("pong", ["superbot"])  # a newer marl's bot, unknown to this one
-    superbot = member.find_players("superbot", env="pong")[0].id
+    member.roster.ensure_bots("pong", ["superbot"])  # a newer marl's bot, unknown to this one
+    superbot = member.roster.find_players("superbot", env="pong")[0].id
     member.close()
     missing = _games_spec(ids["cpu"], ids["random"])
     del missing["rounds"]
@@ -1545,10 +1545,10 @@ def blob_private_file(scratch: Path) -> tuple[bool, str]:
 
     home, rows = _blob_league(scratch)
     with League.open(home) as league:
-        row, cpu = league.find_players("r/s0-left")[0], league.find_players("cpu")[0]
+        row, cpu = league.roster.find_players("r/s0-left")[0], league.roster.find_players("cpu")[0]
         for batch in ("b1", "b2"):
-            league.enqueue(batch, games_jobs(league, [row], cpu, games=2, first_seed=0, match_kind="match",
-                                             env_options={"points_to_win": 1}, job_rounds=1))
+            league.queue.enqueue(batch, games_jobs(league, [row], cpu, games=2, first_seed=0, match_kind="match",
+                                                   env_options={"points_to_win": 1}, job_rounds=1))
     secret = scratch / "shadow"
     secret.write_bytes(b"root:$6$saltsalt$" + b"h" * 86 + b":19000:0:99999:7:::\n" * 5 + b"x" * 455)
     size, digest = len(secret.read_bytes()), hashlib.sha256(secret.read_bytes()).hexdigest()
@@ -1634,9 +1634,9 @@ def blob_http_drip(scratch: Path) -> tuple[bool, str]:
     home, rows = _blob_league(scratch)
     sha, size = rows["s0-left"]
     with League.open(home) as league:
-        row, cpu = league.find_players("r/s0-left")[0], league.find_players("cpu")[0]
-        league.enqueue("drip", games_jobs(league, [row], cpu, games=2, first_seed=0, match_kind="match",
-                                          env_options={"points_to_win": 1}, job_rounds=1))
+        row, cpu = league.roster.find_players("r/s0-left")[0], league.roster.find_players("cpu")[0]
+        league.queue.enqueue("drip", games_jobs(league, [row], cpu, games=2, first_seed=0, match_kind="match",
+                                                env_options={"points_to_win": 1}, job_rounds=1))
 
     def drip(srv: _Server, conn) -> None:
         conn.sendall(b"HTTP/1.1 200 OK\r\nContent-Length: %d\r\n\r\n" % size)
@@ -1846,8 +1846,8 @@ def gauntlet_twice(scratch: Path) -> tuple[bool, str]:
     home = _p1_league(scratch)
     code = ("import sys; from selfplay_cli.league.store import League; "
             "from selfplay_cli.rated.gauntlet_jobs import gauntlet_job\n"
-            "lg = League.open(sys.argv[1]); ids = [p.id for p in lg.players('pong', kind='snapshot')]\n"
-            "for b in ('run:p1', 'run:p1-again'): lg.enqueue(b, [gauntlet_job(lg, ids, first_seed=0, games=8, "
+            "lg = League.open(sys.argv[1]); ids = [p.id for p in lg.roster.players('pong', kind='snapshot')]\n"
+            "for b in ('run:p1', 'run:p1-again'): lg.queue.enqueue(b, [gauntlet_job(lg, ids, first_seed=0, games=8, "
             "older=0)])\nlg.close()")
     queued = subprocess.run([sys.executable, "-c", code, str(home)], capture_output=True, text=True, env=_env(),
                             timeout=300)

@@ -175,7 +175,7 @@ def check_game(name: str, home: Path, args: list[str], games: int, max_pairs: in
     run, report = train(home, args, seed)
     records = []
     with League.open(home) as league:
-        env = league.get_run(run).env
+        env = league.roster.get_run(run).env
         variant = variant_key(env, run_options(league, run))
         forecast = Forecaster.of_league(league, env, variant=variant)
         claims = list(claims_of(league, env, variant, run, report, forecast).values())
@@ -184,7 +184,7 @@ def check_game(name: str, home: Path, args: list[str], games: int, max_pairs: in
             rest = [c for c in claims if not c.kinds - {"order"}]
             pick = rng.choice(len(rest), max(max_pairs - len(first), 0), replace=False) if rest else []
             claims = first + [rest[i] for i in sorted(pick)]
-        rows = {p.full_name: p for p in league.players(env=env, include_removed=True)}
+        rows = {p.full_name: p for p in league.roster.players(env=env, include_removed=True)}
         options = variant_options(variant)
         print(f"{name}: run {run} ({env}{', ' + variant if variant else ''}), {report['rating_games']} rating games; "
               f"spread around the ratings {forecast.spread:.0f} Elo; {len(claims)} pairs claimed about", flush=True)

@@ -64,8 +64,8 @@ def make_league(url: str, home: Path, players: int, points: int):
     from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 
     league = League(url, home=home)
-    league.ensure_bots("pong", ["random"])
-    league.create_run("bench", "pong", {}, algo="ppo")
+    league.roster.ensure_bots("pong", ["random"])
+    league.roster.create_run("bench", "pong", {}, algo="ppo")
     folder = home / "snapshots" / "bench"
     folder.mkdir(parents=True, exist_ok=True)
     arch = Arch(hidden=(64, 64))
@@ -74,15 +74,15 @@ def make_league(url: str, home: Path, players: int, points: int):
         save_snapshot(path, build_network((8, 6), 3, arch, seed=i + 1),
                       SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="bench", name=f"p{i}",
                                    algo="ppo", step=1000 * (i + 1), episode=i + 1))
-        league.add_snapshot(env="pong", run="bench", name=f"p{i}", path=str(path.relative_to(home)),
-                            step=1000 * (i + 1))
+        league.roster.add_snapshot(env="pong", run="bench", name=f"p{i}", path=str(path.relative_to(home)),
+                                   step=1000 * (i + 1))
     return league
 
 
 def plan_of(league, games: int, points: int):
     from selfplay_cli.rated.tournament import TournamentPlan
 
-    players = {p.id: p for p in league.players("pong", kind="snapshot")}
+    players = {p.id: p for p in league.roster.players("pong", kind="snapshot")}
     return TournamentPlan.of(league, "pong", players, None, games, {"points_to_win": points})
 
 
@@ -111,7 +111,7 @@ def round_robin(db: str, n: int, players: int, games: int, points: int) -> tuple
             seconds = time.perf_counter() - start
             bad = [p.stderr for p in done if p.returncode != 0]
             assert not bad, bad[0]
-        stored = league.count_games("pong")
+        stored = league.ledger.count_games("pong")
         league.close()
         return seconds, stored
 
@@ -128,22 +128,22 @@ def queue_cost(db: str, jobs: int = 200) -> tuple[float, float]:
         url = pg_url() if db == "postgresql" else f"sqlite:///{home}/league.db"
         home.mkdir(parents=True)
         league = League(url, home=home)
-        league.ensure_bots("pong", ["random", "cpu"])
-        a, b = (league.find_players(n, env="pong")[0].id for n in ("cpu", "random"))
-        league.enqueue("cost", [NewJob("games", "pong", {"i": i}) for i in range(jobs)])
-        w = league.add_worker("bench", "here", os.getpid())
+        league.roster.ensure_bots("pong", ["random", "cpu"])
+        a, b = (league.roster.find_players(n, env="pong")[0].id for n in ("cpu", "random"))
+        league.queue.enqueue("cost", [NewJob("games", "pong", {"i": i}) for i in range(jobs)])
+        w = league.queue.add_worker("bench", "here", os.getpid())
         games = [GameResult(env="pong", players=(a, b), scores=(21.0, 3.0), outcome=(1.0, 0.0), seed=0, length=900,
                             truncated=False),
                  GameResult(env="pong", players=(b, a), scores=(5.0, 21.0), outcome=(0.0, 1.0), seed=0, length=950,
                             truncated=False)]
         start = time.perf_counter()
         for _ in range(jobs):
-            job = league.claim(w)
-            assert league.finish_job(job.id, w, games=games, match_kind="tournament", result={"games": 2})
+            job = league.queue.claim(w)
+            assert league.queue.finish_job(job.id, w, games=games, match_kind="tournament", result={"games": 2})
         queued = (time.perf_counter() - start) * 1000 / jobs
         start = time.perf_counter()
         for _ in range(jobs):
-            league.create_match_with_games("pong", "tournament", {}, games)
+            league.ledger.create_match_with_games("pong", "tournament", {}, games)
         plain = (time.perf_counter() - start) * 1000 / jobs
         league.close()
         return queued, plain
@@ -162,13 +162,13 @@ def eight_workers(jobs: int = 96) -> dict[str, int]:
         home = Path(tmp) / "league"
         url = pg_url()
         league = League(url, home=home)
-        league.ensure_bots("pong", ["random", "cpu"])
-        cpu, rnd = (league.find_players(n, env="pong")[0] for n in ("cpu", "random"))
-        league.enqueue("eight", games_jobs(league, [cpu], rnd, games=4 * jobs, first_seed=0, match_kind="match",
-                                           env_options={"points_to_win": 3}, job_rounds=2))
+        league.roster.ensure_bots("pong", ["random", "cpu"])
+        cpu, rnd = (league.roster.find_players(n, env="pong")[0] for n in ("cpu", "random"))
+        league.queue.enqueue("eight", games_jobs(league, [cpu], rnd, games=4 * jobs, first_seed=0, match_kind="match",
+                                                 env_options={"points_to_win": 3}, job_rounds=2))
         done = workers(url, home, 8)
         text = "".join(p.stdout + p.stderr for p in done).lower()
-        counts = league.job_counts("eight")
+        counts = league.queue.job_counts("eight")
         with league.session(readonly=True) as s:
             q = select(Game.seed, GameSeat.seat).join(GameSeat, GameSeat.game_id == Game.id).where(
                 GameSeat.player_id == cpu.id)

@@ -25,7 +25,7 @@ def steps_per_second(algo: str, steps: int, games: int) -> tuple[float, int]:
         league = League.open(Path(tmp) / "league")
         cfg = TrainConfig(env="pong", agents=2, algo=algo, steps=steps, games=games, eval_games=0, run=f"bench-{algo}",
                           device="cpu")
-        league.create_run(cfg.run, "pong", cfg.to_dict(), algo=algo)
+        league.roster.create_run(cfg.run, "pong", cfg.to_dict(), algo=algo)
         report = Trainer(league, cfg).train()
         league.close()
     return report.steps_per_second, report.steps

@@ -253,7 +253,7 @@ def rated_league(tmp_path):
     save_snapshot(tmp_path / "s0.safetensors", build_network((8, 6), 3, arch, seed=1), meta)
     assert main(["checkpoint", "import", str(tmp_path / "s0.safetensors"), "--home", str(home)]) == 0
     league = League.open(home)
-    league.ensure_bots("pong", ["random", "cpu"])
-    (snap,) = league.players("pong", kind="snapshot")
+    league.roster.ensure_bots("pong", ["random", "cpu"])
+    (snap,) = league.roster.players("pong", kind="snapshot")
     yield league, snap
     league.close()

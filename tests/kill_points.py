@@ -27,7 +27,7 @@ import torch
 
 import selfplay_cli.train.state as run_state
 from selfplay_cli.cli import main
-from selfplay_cli.league.store import League
+from selfplay_cli.league.roster import Roster
 
 POINTS = ("after-first-file", "after-pending-state", "during-state-file", "after-rows", "worker-mid-job")
 SECOND_MOMENT = range(10_010_000, 10_030_000)  # the seeds of the second snapshot moment's gauntlet (state.py: a
@@ -63,7 +63,7 @@ def arm(point: str) -> None:
     def die() -> None:
         os.kill(os.getpid(), signal.SIGKILL)
 
-    real_file, real_state, real_rows = run_state.save_snapshot, torch.save, League.add_snapshots
+    real_file, real_state, real_rows = run_state.save_snapshot, torch.save, Roster.add_snapshots
 
     def save_file(*args, **kwargs):
         out = real_file(*args, **kwargs)
@@ -98,9 +98,9 @@ def arm(point: str) -> None:
     elif point == "during-state-file":
         torch.save = save_state
     elif point == "after-pending-state":
-        League.add_snapshots = rows_first
+        Roster.add_snapshots = rows_first
     else:
-        League.add_snapshots = rows_then
+        Roster.add_snapshots = rows_then
 
 
 if __name__ == "__mp_main__" and sys.argv[1:2] == ["worker-mid-job"]:  # this file, imported by the worker

@@ -17,4 +17,4 @@ def record_plan(lg: Any, ids: dict[str, int], plan: list[tuple[str, str, int, in
             games.append(GameResult(env=env, players=(a, b), seed=k, scores=(sa * 21, (1 - sa) * 21),
                                     outcome=(sa, 1.0 - sa), length=100, truncated=False))
             k += 1
-    lg.record_games(lg.create_match(env, "match"), games)
+    lg.ledger.record_games(lg.ledger.create_match(env, "match"), games)

@@ -38,8 +38,8 @@ def league(tmp_path: Path) -> League:
 
 
 def _players(league: League, env: str, names: list[str]) -> list[int]:
-    league.ensure_bots(env, names)
-    by_name = {p.name: p.id for p in league.players(env=env)}
+    league.roster.ensure_bots(env, names)
+    by_name = {p.name: p.id for p in league.roster.players(env=env)}
     return [by_name[n] for n in names]
 
 
@@ -70,29 +70,30 @@ def test_both_game_loops_make_results_by_one_function():
 
 def test_free_for_all_gives_every_two_players_one_result_and_moves_elo_together(league):
     a, b, c = _players(league, FFA, ["a", "b", "c"])
-    m = league.create_match(FFA, "match")
-    assert league.match_info(m)[1]["rules"]["kind"] == "free-for-all", "the rules are kept with the match"
-    (gid,) = league.record_games(m, [GameResult(FFA, (a, b, c), 0, (30.0, 6.0, 6.0), (1.0, 0.25, 0.25), 4, False)])
-    t = league.games(FFA)
+    m = league.ledger.create_match(FFA, "match")
+    assert league.ledger.match_info(m)[1]["rules"]["kind"] == "free-for-all", "the rules are kept with the match"
+    (gid,) = league.ledger.record_games(m, [GameResult(FFA, (a, b, c), 0, (30.0, 6.0, 6.0), (1.0, 0.25, 0.25), 4,
+                                                       False)])
+    t = league.ledger.games(FFA)
     assert t.game_id.tolist() == [gid] * 3 and t.kind.tolist() == [2, 2, 2]
     assert list(zip(t.player_a.tolist(), t.player_b.tolist(), t.score_a.tolist(), strict=True)) == [
         (a, b, 1.0), (a, c, 1.0), (b, c, 0.5)]
     # From 1000 each, all three results at once: a +8 +8, b -8 +0, c -8 +0 (a draw between equals moves nothing).
-    assert [league.get_player(p).elo for p in (a, b, c)] == [1016.0, 992.0, 992.0]
-    assert all(league.get_player(p).games == 1 for p in (a, b, c))
-    league.recompute_online_elo(FFA)
-    assert [league.get_player(p).elo for p in (a, b, c)] == [1016.0, 992.0, 992.0]
+    assert [league.roster.get_player(p).elo for p in (a, b, c)] == [1016.0, 992.0, 992.0]
+    assert all(league.roster.get_player(p).games == 1 for p in (a, b, c))
+    league.ledger.recompute_online_elo(FFA)
+    assert [league.roster.get_player(p).elo for p in (a, b, c)] == [1016.0, 992.0, 992.0]
 
 
 def test_free_for_all_ladder_is_the_hand_computed_fit(league):
     a, b = _players(league, FFA, ["a", "b"])
-    m = league.create_match(FFA, "match")
+    m = league.ledger.create_match(FFA, "match")
     # a holds two of the three seats: it beats b when both its seats end above b's, loses when both end below.
     won = [GameResult(FFA, (a, b, a), s, (3.0, 1.0, 2.0), (1.0, 0.0, 0.5), 4, False) for s in range(7)]
     lost = [GameResult(FFA, (b, a, a), s, (3.0, 1.0, 2.0), (1.0, 0.0, 0.5), 4, False) for s in range(3)]
     split = [GameResult(FFA, (a, b, a), 9, (3.0, 2.0, 1.0), (1.0, 0.5, 0.0), 4, False)]  # one above, one below
-    league.record_games(m, won + lost + split)
-    t = league.games(FFA)
+    league.ledger.record_games(m, won + lost + split)
+    t = league.ledger.games(FFA)
     assert t.player_a.tolist() == [a] * 7 + [b] * 3 + [a], "player_a: the player of the lower first seat"
     assert np.where(t.player_a == a, t.score_a, 1 - t.score_a).tolist() == [1.0] * 7 + [0.0] * 3 + [0.5]
     rows = {r.policy: r for r in ladder(league, FFA, anchor="b", bootstrap=0, prior=0)}
@@ -104,19 +105,19 @@ def test_free_for_all_ladder_is_the_hand_computed_fit(league):
 
 def test_cooperative_comparisons_pair_episodes_on_one_seed_within_one_match(league):
     a, b = _players(league, COOP, ["a", "b"])
-    m = league.create_match(COOP, "match")
-    assert league.match_info(m)[1]["rules"] == {"n_seats": 2, "kind": "cooperative", "sides": None,
+    m = league.ledger.create_match(COOP, "match")
+    assert league.ledger.match_info(m)[1]["rules"] == {"n_seats": 2, "kind": "cooperative", "sides": None,
                                                   "tie_tolerance": 0.5}
-    ids = league.record_games(m, [
+    ids = league.ledger.record_games(m, [
         _episode(COOP, a, 0, 5.0), _episode(COOP, b, 0, 4.8),  # 10 against 9.6: within 0.5, a draw
         _episode(COOP, a, 1, 5.0), _episode(COOP, b, 1, 4.5, truncated=True),  # 10 against 9: a wins
         _episode(COOP, b, 2, 1.5), _episode(COOP, a, 2, 0.5),  # b first, 3 against 1: b wins
         _episode(COOP, a, 3, 2.0),  # no partner in this match
         GameResult(COOP, (a, b), 4, (1.0, 1.0), (0.5, 0.5), 5, False),  # flown by both together: no comparison
     ])
-    later = league.create_match(COOP, "match")
-    league.record_games(later, [_episode(COOP, b, 3, 0.0)])  # seed 3 again, but in another match
-    t = league.games(COOP)
+    later = league.ledger.create_match(COOP, "match")
+    league.ledger.record_games(later, [_episode(COOP, b, 3, 0.0)])  # seed 3 again, but in another match
+    t = league.ledger.games(COOP)
     assert t.game_id.tolist() == [ids[1], ids[3], ids[5]], "a comparison is filed under its later episode"
     assert list(zip(t.player_a.tolist(), t.player_b.tolist(), t.score_a.tolist(), strict=True)) == [
         (a, b, 0.5), (a, b, 1.0), (b, a, 1.0)]
@@ -125,23 +126,23 @@ def test_cooperative_comparisons_pair_episodes_on_one_seed_within_one_match(leag
     ra, rb = elo_update(1000.0, 1000.0, 0.5)
     ra, rb = elo_update(ra, rb, 1.0)
     rb, ra = elo_update(rb, ra, 1.0)
-    assert (league.get_player(a).elo, league.get_player(b).elo) == (ra, rb)
-    league.recompute_online_elo()
-    assert (league.get_player(a).elo, league.get_player(b).elo) == (ra, rb)
+    assert (league.roster.get_player(a).elo, league.roster.get_player(b).elo) == (ra, rb)
+    league.ledger.recompute_online_elo()
+    assert (league.roster.get_player(a).elo, league.roster.get_player(b).elo) == (ra, rb)
     h = head_to_head(league, a, b)
     assert (h["wins"], h["draws"], h["losses"], h["results"], h["games"]) == (1, 1, 1, 3, 6)
     assert h["pentanomial"] == [0, 0, 0, 0, 0] and h["pairs"] == 0
-    returns = league.mean_returns(COOP)
+    returns = league.ledger.mean_returns(COOP)
     assert returns[a] == (5, pytest.approx((10 + 10 + 1 + 4 + 2) / 5)) and returns[b][0] == 5
     assert plan_tournament(league, COOP, [a, b], 6) == [], "3 comparisons are the 6 games asked for"
 
 
 def test_cooperative_ladder_shows_the_mean_return(league):
     a, b = _players(league, COOP, ["a", "b"])
-    m = league.create_match(COOP, "match")
+    m = league.ledger.create_match(COOP, "match")
     outcomes = [(5.0, 1.0)] * 7 + [(1.0, 5.0)] * 3 + [(2.0, 2.2)] * 2  # 7 wins, 3 losses, 2 draws for a
-    league.record_games(m, [g for s, (x, y) in enumerate(outcomes)
-                            for g in (_episode(COOP, a, s, x), _episode(COOP, b, s, y))])
+    league.ledger.record_games(m, [g for s, (x, y) in enumerate(outcomes)
+                                   for g in (_episode(COOP, a, s, x), _episode(COOP, b, s, y))])
     rows = {r.policy: r for r in ladder(league, COOP, anchor="b", bootstrap=0, prior=0)}
     # a scores (7 + 1) / 12 = 2/3: ML difference 400 log10 2.
     assert rows["a"].elo == pytest.approx(1000.0 + 400.0 * math.log10(2.0), abs=1e-6)
@@ -153,11 +154,14 @@ def test_cooperative_ladder_shows_the_mean_return(league):
 
 def test_two_sides_of_several_seats_give_one_result_per_game(league):
     a, b, c = _players(league, SIDES, ["a", "b", "c"])
-    m = league.create_match(SIDES, "match")
-    league.record_games(m, [GameResult(SIDES, (a, a, b, b), 0, (2.0, 2.0, 0.0, 0.0), (1.0, 1.0, 0.0, 0.0), 3, False),
-                            GameResult(SIDES, (b, b, a, a), 0, (2.0, 2.0, 0.0, 0.0), (1.0, 1.0, 0.0, 0.0), 3, False),
-                            GameResult(SIDES, (a, a, b, c), 1, (1.0, 1.0, 1.0, 1.0), (0.5, 0.5, 0.5, 0.5), 3, False)])
-    t = league.games(SIDES)
+    m = league.ledger.create_match(SIDES, "match")
+    league.ledger.record_games(m, [GameResult(SIDES, (a, a, b, b), 0, (2.0, 2.0, 0.0, 0.0), (1.0, 1.0, 0.0, 0.0), 3,
+                                              False),
+                                   GameResult(SIDES, (b, b, a, a), 0, (2.0, 2.0, 0.0, 0.0), (1.0, 1.0, 0.0, 0.0), 3,
+                                              False),
+                                   GameResult(SIDES, (a, a, b, c), 1, (1.0, 1.0, 1.0, 1.0), (0.5, 0.5, 0.5, 0.5), 3,
+                                              False)])
+    t = league.ledger.games(SIDES)
     assert list(zip(t.player_a.tolist(), t.player_b.tolist(), t.score_a.tolist(), strict=True)) == [
         (a, b, 1.0), (b, a, 1.0), (a, b, 0.5), (a, c, 0.5)]
     h = head_to_head(league, a, b)
@@ -166,14 +170,14 @@ def test_two_sides_of_several_seats_give_one_result_per_game(league):
 
 def test_a_ledger_refuses_what_it_cannot_rate(league):
     (a,) = _players(league, COOP, ["a"])
-    m = league.create_match(COOP, "match")
+    m = league.ledger.create_match(COOP, "match")
     for bad in (GameResult(COOP, ("a", "a"), 0, (1.0, 1.0), (0.5, 0.5), 5, False),
                 GameResult(COOP, (a, a), 0, (math.nan, 1.0), (0.5, 0.5), 5, False)):
         with pytest.raises(LeagueError) as e:
-            league.record_games(m, [bad])
+            league.ledger.record_games(m, [bad])
         assert "\n" not in str(e.value)
     with pytest.raises(LeagueError, match="rules are malformed"):
-        league.create_match(COOP, "match", {"rules": {"kind": "tug-of-war"}})
+        league.ledger.create_match(COOP, "match", {"rules": {"kind": "tug-of-war"}})
 
 
 # --------------------------------------------------------------------------------------------------- rated play
@@ -208,7 +212,7 @@ def test_free_for_all_match_plays_every_rotation(league):
                                                     ("high", "high", "low")]
     assert (rep.games, rep.wins, rep.losses, rep.kind) == (6, 6, 0, "free-for-all")
     assert rep.points_for == 6 * 2 * 30 and rep.points_against == 6 * 18
-    assert len(league.games(FFA)) == 6 and head_to_head(league, hi, lo)["wins"] == 6
+    assert len(league.ledger.games(FFA)) == 6 and head_to_head(league, hi, lo)["wins"] == 6
 
 
 def test_turn_based_match_is_played_in_seat_swapped_pairs(league):
@@ -217,12 +221,12 @@ def test_turn_based_match_is_played_in_seat_swapped_pairs(league):
                     player_ids={"high": hi, "low": lo})
     assert (rep.wins, rep.losses, rep.pentanomial) == (8, 0, (0, 0, 0, 0, 4)) and rep.kind == "two-sides"
     assert head_to_head(league, hi, lo)["pentanomial"] == [0, 0, 0, 0, 4]
-    assert all(league.game(g).actions[:3] == b"MA\x01" for g in rep.game_ids)
+    assert all(league.ledger.game(g).actions[:3] == b"MA\x01" for g in rep.game_ids)
 
 
 def test_gate_and_tournament_work_for_cooperative_games(league):
-    league.ensure_bots(COOP, ["high", "mid", "low"])
-    rows = {p.name: p for p in league.players(env=COOP)}
+    league.roster.ensure_bots(COOP, ["high", "mid", "low"])
+    rows = {p.name: p for p in league.roster.players(env=COOP)}
     verdict = gate_check(league, rows["high"], rows["low"], min_diff=0.0, games=20)
     assert verdict.passed and verdict.played_games == 20 and verdict.stats.wins == 10
     again = gate_check(league, rows["high"], rows["low"], min_diff=0.0, games=20)
@@ -233,9 +237,9 @@ def test_gate_and_tournament_work_for_cooperative_games(league):
 
 
 def test_lineups_follow_the_kind(league):
-    league.ensure_bots(COOP, ["high", "mid", "low"])
-    league.ensure_bots(SIDES, ["high", "low"])
-    league.ensure_bots(FFA, ["high", "low"])
+    league.roster.ensure_bots(COOP, ["high", "mid", "low"])
+    league.roster.ensure_bots(SIDES, ["high", "low"])
+    league.roster.ensure_bots(FFA, ["high", "low"])
     assert lineup(league, "mid", env=COOP).names == ("mid", "mid"), "a team flies every seat, no opponent"
     assert lineup(league, "low", env=SIDES).names == ("low", "low", "high", "high"), "a side each"
     assert lineup(league, "low", vs="high", env=FFA).names == ("low", "high", "high")

@@ -61,10 +61,10 @@ def save(home: Path, name: str, seed: int) -> str:
 
 def trained(url: str, home: Path, names=("s1",)) -> League:
     league = League.open(home, url=url)
-    league.create_run("r", "pong", {})
-    league.add_snapshots([dict(env="pong", run="r", name=n, path=save(home, n, seed=i + 1), step=1000 * (i + 1),
-                               algo="ppo") for i, n in enumerate(names)])
-    league.ensure_bots("pong", ["cpu"])
+    league.roster.create_run("r", "pong", {})
+    league.roster.add_snapshots([dict(env="pong", run="r", name=n, path=save(home, n, seed=i + 1), step=1000 * (i + 1),
+                                      algo="ppo") for i, n in enumerate(names)])
+    league.roster.ensure_bots("pong", ["cpu"])
     return league
 
 
@@ -126,7 +126,7 @@ def test_a_location_outside_the_allow_list_is_never_touched_and_its_error_tells_
                                                                                           monkeypatch):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     allowed = tmp_path / "allowed"
     allowed.mkdir()
     secret = tmp_path / "secret.txt"
@@ -165,15 +165,15 @@ def test_a_worker_fails_the_job_of_such_a_row_and_the_jobs_error_tells_nothing(s
 
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1, cpu = a.find_players("r/s1")[0], a.find_players("cpu")[0]
+    s1, cpu = a.roster.find_players("r/s1")[0], a.roster.find_players("cpu")[0]
     secret = tmp_path / "shadow"
     secret.write_bytes(b"x" * 670)
     kept_at(a, s1.sha256, secret.as_uri())
-    (jid,) = a.enqueue("b", games_jobs(a, [s1], cpu, games=2, first_seed=0, match_kind="match", env_options=SHORT,
-                                       job_rounds=1))
+    (jid,) = a.queue.enqueue("b", games_jobs(a, [s1], cpu, games=2, first_seed=0, match_kind="match", env_options=SHORT,
+                                             job_rounds=1))
     worker = League.open(tmp_path / "worker-home", url=sqlite_url)
     report = run_worker(worker, WorkerOptions(max_jobs=1, poll=0.01))
-    (job,) = a.jobs(ids=[jid])
+    (job,) = a.queue.jobs(ids=[jid])
     assert report.failed == 1 and job.error is not None
     assert "not a location this machine reads blobs from" in job.error
     assert "670" not in job.error and hashlib.sha256(b"x" * 670).hexdigest()[:6] not in job.error
@@ -184,7 +184,7 @@ def test_a_worker_fails_the_job_of_such_a_row_and_the_jobs_error_tells_nothing(s
 def test_http_locations_not_allowed_are_never_requested(sqlite_url, tmp_path, monkeypatch):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     server = Server(lambda conn, request: conn.sendall(b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\n\r\n"))
     allow(monkeypatch, f"http://127.0.0.1:{server.port}/marl/")
     elsewhere = League.open(tmp_path / "elsewhere", url=sqlite_url)
@@ -217,7 +217,7 @@ def test_the_cli_refuses_such_a_row_in_one_line_and_plays_it_once_the_folder_is_
                                                                                       capsys, monkeypatch):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     shared = tmp_path / "shared disk"
     shared.mkdir()
     (shared / s1.sha256).write_bytes((home / s1.path).read_bytes())
@@ -250,7 +250,7 @@ def test_a_bad_setting_is_one_line_before_any_job(tmp_path, capsys, monkeypatch)
 def test_a_blob_is_never_read_past_the_limit_dev_zero_and_sparse_giants(sqlite_url, tmp_path, monkeypatch):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     shared = tmp_path / "shared"
     shared.mkdir()
     giant = shared / "giant"
@@ -269,7 +269,7 @@ def test_a_blob_is_never_read_past_the_limit_dev_zero_and_sparse_giants(sqlite_u
             kept_at(a, s1.sha256, url, size)
             t = time.perf_counter()
             with pytest.raises(LeagueError) as e:
-                elsewhere.blob_bytes(s1.sha256, "r/s1", limit=MAX_FILE_BYTES)
+                elsewhere.blobs.blob_bytes(s1.sha256, "r/s1", limit=MAX_FILE_BYTES)
             assert said in one_line(e.value) and time.perf_counter() - t < 5
         peak = tracemalloc.get_traced_memory()[1]
     finally:
@@ -282,11 +282,11 @@ def test_a_blob_is_never_read_past_the_limit_dev_zero_and_sparse_giants(sqlite_u
 def test_bytes_in_the_row_past_the_limit_are_not_loaded(db_url, tmp_path):
     home = tmp_path / "home"
     a = trained(db_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     size = (home / s1.path).stat().st_size
-    assert a.blob_bytes(s1.sha256, limit=size) == (home / s1.path).read_bytes()
+    assert a.blobs.blob_bytes(s1.sha256, limit=size) == (home / s1.path).read_bytes()
     with pytest.raises(LeagueError) as e:
-        a.blob_bytes(s1.sha256, "r/s1", limit=size - 1)
+        a.blobs.blob_bytes(s1.sha256, "r/s1", limit=size - 1)
     assert f"{size:,} bytes, more than any snapshot file marl reads ({size - 1:,})" in one_line(e.value)
     a.close()
 
@@ -336,7 +336,7 @@ class Server:
 def test_redirects_are_refused_not_followed(sqlite_url, tmp_path, monkeypatch):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     data = (home / s1.path).read_bytes()
 
     def answer(conn, line):
@@ -354,14 +354,14 @@ def test_redirects_are_refused_not_followed(sqlite_url, tmp_path, monkeypatch):
         for path in ("to-ftp", "to-same-host"):
             kept_at(a, s1.sha256, f"http://127.0.0.1:{server.port}/{path}")
             with pytest.raises(LeagueError) as e:
-                elsewhere.blob_bytes(s1.sha256, limit=MAX_FILE_BYTES)
+                elsewhere.blobs.blob_bytes(s1.sha256, limit=MAX_FILE_BYTES)
             assert "redirect" in one_line(e.value) and "follows none" in str(e.value)
         assert server.requests == ["GET /to-ftp HTTP/1.1", "GET /to-same-host HTTP/1.1"]  # not one request more
         with pytest.raises(LeagueError, match="redirect"):  # asked again at once: the same answer, not asked again
-            elsewhere.blob_bytes(s1.sha256, limit=MAX_FILE_BYTES)
+            elsewhere.blobs.blob_bytes(s1.sha256, limit=MAX_FILE_BYTES)
         assert len(server.requests) == 2
         kept_at(a, s1.sha256, f"http://127.0.0.1:{server.port}/blob")
-        assert elsewhere.blob_bytes(s1.sha256, limit=MAX_FILE_BYTES) == data
+        assert elsewhere.blobs.blob_bytes(s1.sha256, limit=MAX_FILE_BYTES) == data
     finally:
         server.close()
     elsewhere.close()
@@ -372,7 +372,7 @@ def test_redirects_are_refused_not_followed(sqlite_url, tmp_path, monkeypatch):
 def test_a_server_that_drips_is_let_go_at_the_deadline(sqlite_url, tmp_path, monkeypatch, where):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     size = (home / s1.path).stat().st_size
 
     def drip(conn, line):
@@ -388,7 +388,7 @@ def test_a_server_that_drips_is_let_go_at_the_deadline(sqlite_url, tmp_path, mon
     elsewhere = League.open(tmp_path / "elsewhere", url=sqlite_url)
     try:
         with pytest.raises(LeagueError) as e:
-            elsewhere.blob_bytes(s1.sha256, "r/s1", limit=MAX_FILE_BYTES, deadline=1.0)
+            elsewhere.blobs.blob_bytes(s1.sha256, "r/s1", limit=MAX_FILE_BYTES, deadline=1.0)
     finally:
         server.close()
     assert "not read within 1 s" in one_line(e.value) and "MARL_BLOB_DEADLINE" in str(e.value)
@@ -401,7 +401,7 @@ def test_a_server_that_drips_is_let_go_at_the_deadline(sqlite_url, tmp_path, mon
 def test_a_server_that_streams_past_the_size_is_cut_after_it(sqlite_url, tmp_path, monkeypatch, announced):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
 
     def endless(conn, line):
         server.send(conn, b"HTTP/1.1 200 OK\r\n" + (b"Content-Length: 1000000000\r\n" if announced else b"")
@@ -416,7 +416,7 @@ def test_a_server_that_streams_past_the_size_is_cut_after_it(sqlite_url, tmp_pat
     tracemalloc.start()
     try:
         with pytest.raises(LeagueError) as e:
-            elsewhere.blob_bytes(s1.sha256, "r/s1", limit=MAX_FILE_BYTES)
+            elsewhere.blobs.blob_bytes(s1.sha256, "r/s1", limit=MAX_FILE_BYTES)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()
@@ -430,7 +430,7 @@ def test_a_server_that_streams_past_the_size_is_cut_after_it(sqlite_url, tmp_pat
 def test_allowed_http_and_file_locations_play_end_to_end(sqlite_url, tmp_path, monkeypatch):
     home = tmp_path / "home"
     a = trained(sqlite_url, home, names=("s1", "s2"))
-    s1, s2 = a.find_players("r/s1")[0], a.find_players("r/s2")[0]
+    s1, s2 = a.roster.find_players("r/s1")[0], a.roster.find_players("r/s2")[0]
     shared = tmp_path / "shared"
     shared.mkdir()
     for row in (s1, s2):
@@ -462,7 +462,7 @@ def test_allowed_http_and_file_locations_play_end_to_end(sqlite_url, tmp_path, m
 def test_a_link_inside_an_allowed_folder_that_leads_out_is_refused_untouched(sqlite_url, tmp_path, monkeypatch):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     shared, outside = tmp_path / "shared", tmp_path / "outside"
     shared.mkdir()
     outside.mkdir()
@@ -507,17 +507,17 @@ def test_a_blob_folder_this_machine_does_not_allow_gets_nothing_the_database_get
     assert "in the league's database instead" in err
     assert list(other.iterdir()) == []
     with League.open(home) as league:
-        c0 = league.find_players("c/c0")[0]
+        c0 = league.roster.find_players("c/c0")[0]
         assert stored(league, c0.sha256) == (None, True)
     for i, url in enumerate(("file:///proc/sys", "http://host/x", "file://relative", "nonsense")):  # none fails
         with League.open(home) as league:
             execute(league, "update meta set value = :url where key = 'blob_url'", url=url)
-            row = league.add_snapshot(env="pong", run="r", name=f"x{i}", path=save(home, f"x{i}", seed=20 + i))
+            row = league.roster.add_snapshot(env="pong", run="r", name=f"x{i}", path=save(home, f"x{i}", seed=20 + i))
             assert stored(league, row.sha256) == (None, True)
     allow(monkeypatch, other.as_uri())  # allowed now: written there
     with League.open(home) as league:
         execute(league, "update meta set value = :url where key = 'blob_url'", url=other.as_uri())
-        row = league.add_snapshot(env="pong", run="r", name="s9", path=save(home, "s9", seed=9))
+        row = league.roster.add_snapshot(env="pong", run="r", name="s9", path=save(home, "s9", seed=9))
         assert stored(league, row.sha256) == ((other / row.sha256).as_uri(), False)
         assert (other / row.sha256).read_bytes() == (home / row.path).read_bytes()
 
@@ -532,7 +532,7 @@ def test_an_allowed_blob_folder_that_cannot_be_written_gets_the_blob_into_the_da
     (tmp_path / "outside").mkdir()
     for i, folder in enumerate(("not made", "leads-out")):
         execute(a, "update meta set value = :url where key = 'blob_url'", url=(shared / folder).as_uri())
-        row = a.add_snapshot(env="pong", run="r", name=f"w{i}", path=save(home, f"w{i}", seed=30 + i))
+        row = a.roster.add_snapshot(env="pong", run="r", name=f"w{i}", path=save(home, f"w{i}", seed=30 + i))
         assert stored(a, row.sha256) == (None, True)
     err = capsys.readouterr().err
     assert err.count("marl: warning: cannot write") == 2 and "new ones are stored in the league's database" in err
@@ -559,14 +559,14 @@ def test_a_link_planted_at_a_temporary_name_is_never_followed(tmp_path, capsys, 
     shared.mkdir()
     a = trained(f"sqlite:///{home / 'league.db'}", home)
     allow(monkeypatch, shared.as_uri())
-    a.set_blob_location(shared.as_uri())
+    a.blobs.set_blob_location(shared.as_uri())
     victim = tmp_path / "victim"
     victim.write_bytes(b"mine")
     rel = save(home, "s5", seed=5)
     sha = hashlib.sha256((home / rel).read_bytes()).hexdigest()
     (shared / f"{sha}.tmp-{os.getpid()}").symlink_to(victim)  # the name a writer of this pid once used
     (shared / sha).symlink_to(victim)  # and the blob's own name
-    row = a.add_snapshot(env="pong", run="r", name="s5", path=rel)
+    row = a.roster.add_snapshot(env="pong", run="r", name="s5", path=rel)
     assert victim.read_bytes() == b"mine"
     assert not (shared / sha).is_symlink() and (shared / sha).read_bytes() == (home / rel).read_bytes()
     assert stored(a, row.sha256) == ((shared / sha).as_uri(), False)
@@ -574,7 +574,7 @@ def test_a_link_planted_at_a_temporary_name_is_never_followed(tmp_path, capsys, 
     sha = hashlib.sha256((home / rel).read_bytes()).hexdigest()
     monkeypatch.setattr(files.secrets, "token_hex", lambda n: "guessed")
     (shared / f"{sha}.guessed.tmp-{os.getpid()}").symlink_to(victim)
-    row = a.add_snapshot(env="pong", run="r", name="s6", path=rel)
+    row = a.roster.add_snapshot(env="pong", run="r", name="s6", path=rel)
     assert victim.read_bytes() == b"mine" and not (shared / sha).exists()
     assert stored(a, row.sha256) == (None, True) and "cannot write" in capsys.readouterr().err
     a.close()
@@ -589,7 +589,7 @@ def test_a_cache_folder_that_leads_out_of_the_cache_is_refused_nothing_written_o
                                                                                       capsys, link):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     a.close()
     outside = tmp_path / "elsewhere-disk"
     outside.mkdir()
@@ -613,7 +613,7 @@ def test_a_link_inside_the_cache_to_the_cache_itself_is_fine_and_a_cached_link_i
                                                                                            cache):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     (cache / "store").mkdir(parents=True)
     (cache / "blobs").symlink_to(cache / "store")  # a link that stays inside the cache
     (cache / "store" / s1.sha256[:2]).mkdir()
@@ -632,7 +632,7 @@ def test_the_error_of_an_allowed_location_that_is_not_the_blob_tells_nothing_of_
                                                                                   monkeypatch):
     home = tmp_path / "home"
     a = trained(sqlite_url, home)
-    s1 = a.find_players("r/s1")[0]
+    s1 = a.roster.find_players("r/s1")[0]
     shared = tmp_path / "shared"
     shared.mkdir()
     other = bytes(range(256)) * 40

@@ -96,14 +96,14 @@ def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rate
     batch = run_batch("w")
     job = GauntletJob((snap.id,), 0, 2000, 0, full=True)  # minutes of games: still in play when stopped
     RemoteEvaluator(league, "w", "cpu").submit(job)
-    dead = league.add_worker("ray@elsewhere:1", "elsewhere", 1, serves=[batch])
-    assert league.claim(dead) is not None
+    dead = league.queue.add_worker("ray@elsewhere:1", "elsewhere", 1, serves=[batch])
+    assert league.queue.claim(dead) is not None
 
     def held_by_another(than: set[str]) -> str:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
             ev.poll()
-            (row,) = league.jobs(batch=batch)
+            (row,) = league.queue.jobs(batch=batch)
             if row.state == "leased" and row.worker not in than:
                 return row.worker
             time.sleep(0.1)
@@ -123,9 +123,9 @@ def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rate
         time.sleep(0.5)  # (games under way)
     finally:
         ev.close()
-    (row,) = league.jobs(batch=batch)
+    (row,) = league.queue.jobs(batch=batch)
     assert (row.state, row.tries) == ("queued", 0)
-    workers = {w.name: w for w in league.workers()}
+    workers = {w.name: w for w in league.queue.workers()}
     assert list(workers) == ["ray@elsewhere:1", first, second]
     assert all(w.stopped_at is not None and w.holding == () for w in workers.values())
     assert len(notes) == 1  # the second left by itself: not killed (that is said, after the stop time)
@@ -148,7 +148,7 @@ def test_a_run_that_ends_before_its_actors_have_started_stops_them_at_once(ray_l
     ev = RayEvaluator(league, "w", "cpu", actors=2, note=notes.append, stop_seconds=300.0)
     ev.close()
     assert notes == []  # each left on its own: none was killed
-    workers = league.workers()
+    workers = league.queue.workers()
     assert len(workers) == 2 and all(w.stopped_at is not None and _gone(w.pid) for w in workers)
 
 def _descendants(root: int) -> list[tuple[int, str | None]]:
@@ -185,7 +185,7 @@ def test_a_trainer_killed_with_sigkill_takes_its_ray_actors_with_it(tmp_path):
         while time.monotonic() < deadline and not workers and trainer.poll() is None:
             time.sleep(0.5)
             with contextlib.suppress(LeagueError), League.open(home, readonly=True) as league:  # (none yet, or
-                workers = [w for w in league.workers() if w.name.startswith("ray@")]  # its tables being made)
+                workers = [w for w in league.queue.workers() if w.name.startswith("ray@")]  # its tables being made)
         assert workers, trainer.stderr.read().decode()[-2000:] if trainer.poll() is not None else "no actor"
         ray_processes = _descendants(trainer.pid)
         assert workers[0].pid in {pid for pid, _ in ray_processes}
@@ -210,18 +210,18 @@ def test_a_worker_told_to_stop_gives_its_job_in_play_back_and_leaves(rated_leagu
     asked = []
 
     def stop() -> bool:
-        asked.append(len(league.jobs(batch=run_batch("w"), states=["leased"])))
+        asked.append(len(league.queue.jobs(batch=run_batch("w"), states=["leased"])))
         return len(asked) > 3  # the claim, then two games of the job; the third game stops it
 
     report = run_worker(league, WorkerOptions(batches=(run_batch("w"),), poll=0.05, name="w1"), stop=stop)
     assert asked == [0, 1, 1, 1] and (report.done, report.failed, report.games) == (0, 0, 0)
-    (job,) = league.jobs(batch=run_batch("w"))
+    (job,) = league.queue.jobs(batch=run_batch("w"))
     assert (job.state, job.tries) == ("queued", 0)
-    assert [(w.name, w.stopped_at is not None) for w in league.workers()] == [("w1", True)]
+    assert [(w.name, w.stopped_at is not None) for w in league.queue.workers()] == [("w1", True)]
     idle = threading.Event()
     idle.set()
     assert run_worker(league, WorkerOptions(name="w2"), stop=idle.is_set).done == 0  # stopped before any claim
-    assert league.jobs(batch=run_batch("w"))[0].state == "queued"
+    assert league.queue.jobs(batch=run_batch("w"))[0].state == "queued"
 
 
 # -- the option -------------------------------------------------------------------------------------------------------

@@ -56,8 +56,8 @@ def _one_line(err: str) -> str:
 def _run_state(home: Path) -> tuple[str, list[str]]:
     """The run's status and its snapshots, each checked to load (finite weights) from the file its row names."""
     with League.open(home, readonly=True) as league:
-        status = league.get_run("r").status
-        snaps = league.players(kind="snapshot")
+        status = league.roster.get_run("r").status
+        snaps = league.roster.players(kind="snapshot")
         for s in snaps:
             tensors, _ = load_snapshot(home / s.path)
             assert all(bool(torch.isfinite(t).all()) for t in tensors.values())
@@ -96,7 +96,7 @@ def test_reward_scale_float32_cannot_hold_is_refused_before_the_run_exists(home,
     assert code == 2 and "[ppo] reward_scale must be more than 0 and at most 1e+06, not 1e+308" in _one_line(err), err
     if (home / "league.db").exists():
         with League.open(home, readonly=True) as league:
-            assert league.list_runs() == []
+            assert league.roster.list_runs() == []
 
 
 def test_a_loss_that_overflows_stops_training_naming_the_learner_and_the_loss(home, tmp_path, capsys):
@@ -120,14 +120,14 @@ def test_a_rated_game_that_turns_nan_stores_nothing(home, capsys, nan_in, said):
                        "--eval-games", "0", "--run", "r", "-q")
     assert code == 0, err
     with League.open(home, readonly=True) as league:
-        before = len(league.games())
+        before = len(league.ledger.games())
     code, _, err = run(capsys, "match", "r/s0-player_0", "random", "--games", "20", "--env-option", "nan_after=5",
                        "--env-option", f"nan_in={nan_in}")
     line = _one_line(err)
     assert code == 2 and said in line and ("is NaN at its step 5" in line if nan_in == "observation"
                                            else line.endswith(" is NaN")), line
     with League.open(home, readonly=True) as league:
-        assert len(league.games()) == before
+        assert len(league.ledger.games()) == before
 
 
 def _games(env: str, n: int = 4) -> SelfPlayGames:

@@ -29,13 +29,14 @@ from selfplay_cli.results import GameResult
 
 def snapshot_rows(league: League, run: str, n: int, learners=("left", "right")) -> list:
     """n snapshot moments of a two-learner run (files are never read: the tests below seat bots only)."""
-    league.create_run(run, "pong", {}, algo="ppo")
+    league.roster.create_run(run, "pong", {}, algo="ppo")
     latest = {name: None for name in learners}
     rows = []
     for k in range(n):
         for name in learners:
-            row = league.add_snapshot(env="pong", run=run, name=f"ep{k}-{name}", path=f"x/{k}{name}", sha256="0" * 64,
-                                      step=1000 * k, parent_id=latest[name], meta={"learner": name})
+            row = league.roster.add_snapshot(env="pong", run=run, name=f"ep{k}-{name}", path=f"x/{k}{name}",
+                                             sha256="0" * 64,
+                                             step=1000 * k, parent_id=latest[name], meta={"learner": name})
             latest[name] = row.id
             rows.append(row)
     return rows
@@ -43,7 +44,7 @@ def snapshot_rows(league: League, run: str, n: int, learners=("left", "right")) 
 
 def test_gauntlet_opponents_predecessor_partner_best_older_and_bots(tmp_path):
     league = League.open(tmp_path / "league")
-    league.ensure_bots("pong", ["random", "cpu"])
+    league.roster.ensure_bots("pong", ["random", "cpu"])
     rows = snapshot_rows(league, "r", 6)
     by_name = {r.name: r for r in rows}
     new = [by_name["ep5-left"], by_name["ep5-right"]]
@@ -71,17 +72,17 @@ def test_a_moments_gauntlet_knows_only_what_came_before_it(tmp_path):
     are the snapshots taken before it and the bots, its 'best so far' is fitted from the run's earlier gauntlets
     alone."""
     league = League.open(tmp_path / "league")
-    league.ensure_bots("pong", ["random", "cpu"])
+    league.roster.ensure_bots("pong", ["random", "cpu"])
     rows = snapshot_rows(league, "r", 4)
     other = snapshot_rows(league, "q", 1)
     by = {r.name: r for r in rows}
-    bots = {p.name: p for p in league.players("pong", kind="bot")}
+    bots = {p.name: p for p in league.roster.players("pong", kind="bot")}
 
     def games(kind, params, a, b, n, a_wins=True):
-        mid = league.create_match("pong", kind, params)
-        league.record_games(mid, [GameResult("pong", (a.id, b.id), seed=i, scores=(1, 0) if a_wins else (0, 1),
-                                             outcome=(1.0, 0.0) if a_wins else (0.0, 1.0), length=10,
-                                             truncated=False) for i in range(n)])
+        mid = league.ledger.create_match("pong", kind, params)
+        league.ledger.record_games(mid, [GameResult("pong", (a.id, b.id), seed=i, scores=(1, 0) if a_wins else (0, 1),
+                                                    outcome=(1.0, 0.0) if a_wins else (0.0, 1.0), length=10,
+                                                    truncated=False) for i in range(n)])
 
     gauntlet = {"gauntlet": True}
     games("eval", gauntlet, by["ep0-left"], bots["random"], 8)
@@ -115,14 +116,14 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
     import selfplay_cli.rated.gauntlet as gauntlet_mod
 
     league = League.open(tmp_path / "league")
-    league.ensure_bots("pong", ["random", "cpu"])
+    league.roster.ensure_bots("pong", ["random", "cpu"])
     rows = snapshot_rows(league, "r", 2, learners=("left",))
     old, new = rows
-    bots = {p.name: p for p in league.players("pong", kind="bot")}
+    bots = {p.name: p for p in league.roster.players("pong", kind="bot")}
     # the predecessor beat random 8-0 in its gauntlet, so random is clear; cpu is not
-    mid = league.create_match("pong", "eval", {"gauntlet": True})
-    league.record_games(mid, [GameResult("pong", (old.id, bots["random"].id), seed=i, scores=(1, 0),
-                                         outcome=(1.0, 0.0), length=10, truncated=False) for i in range(8)])
+    mid = league.ledger.create_match("pong", "eval", {"gauntlet": True})
+    league.ledger.record_games(mid, [GameResult("pong", (old.id, bots["random"].id), seed=i, scores=(1, 0),
+                                                outcome=(1.0, 0.0), length=10, truncated=False) for i in range(8)])
     stand_in = {old.id: "cpu", new.id: "cpu"}
 
     def fake_load(lg, row, device="cpu", greedy=None, seed=0):
@@ -135,7 +136,7 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
     cfg = GauntletConfig(pairs=2, clear_pairs=1, max_pairs=2)
     ms = play_gauntlet(league, pairs, first_seed=500, config=cfg, policies=None, history=run_history(league, [new]))
     assert [m.pairs for m in ms] == [2, 1, 2]
-    table = league.games("pong")
+    table = league.ledger.games("pong")
     for m in ms:
         sub = table.select(np.isin(table.match_id, [m.match_id]))
         assert len(sub) == 2 * m.pairs == m.games
@@ -164,8 +165,8 @@ def test_open_matchups_go_on_in_the_same_batch(tmp_path, monkeypatch):
 
     monkeypatch.setattr(gauntlet_mod, "play", counting_play)
     league = League.open(tmp_path / "league")
-    league.ensure_bots("pong", ["random", "cpu"])
-    bots = {p.name: p for p in league.players("pong", kind="bot")}
+    league.roster.ensure_bots("pong", ["random", "cpu"])
+    bots = {p.name: p for p in league.roster.players("pong", kind="bot")}
     (snap,) = snapshot_rows(league, "r", 1, learners=("left",))
 
     def fake_load(lg, row, device="cpu", greedy=None, seed=0):
@@ -180,7 +181,7 @@ def test_open_matchups_go_on_in_the_same_batch(tmp_path, monkeypatch):
     assert len(calls) == 1
     assert vs_cpu.pairs == 2 and vs_cpu.losses == 4  # random against cpu: lost 4-0, clear after the first batch
     assert vs_random.pairs > 2 or clear(vs_random.wins, vs_random.losses, 1.645)  # random vs random: usually open
-    assert len(league.games("pong")) == sum(m.games for m in ms)
+    assert len(league.ledger.games("pong")) == sum(m.games for m in ms)
     league.close()
 
 
@@ -217,8 +218,8 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     assert len(lines) == 3 and "rated s0-left (step 0): random " in lines[0] and "elapsed" in lines[-1], err
     variant = variant_key("pong", {"points_to_win": 1})  # the run's options: its games are rated in that variant
     with League.open(home) as league:
-        snaps = league.players("pong", kind="snapshot")
-        bots = {p.name: p.id for p in league.players("pong", kind="bot")}
+        snaps = league.roster.players("pong", kind="snapshot")
+        bots = {p.name: p.id for p in league.roster.players("pong", kind="bot")}
         assert len(snaps) == 6
         for s in snaps:
             for bot_id in bots.values():
@@ -232,7 +233,7 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
         assert [f["snapshot"] for f in finals] == data["snapshots"][-2:]
         assert [f["learner"] for f in finals] == ["left", "right"]
         for f in finals:
-            p = league.find_players(f["snapshot"], "pong")[0]
+            p = league.roster.find_players(f["snapshot"], "pong")[0]
             for bot, rec in f["vs"].items():
                 h = head_to_head(league, p.id, bots[bot], variant=variant)
                 assert (rec["wins"], rec["draws"], rec["losses"], rec["games"]) == (
@@ -276,12 +277,12 @@ def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monk
     import selfplay_cli.rated.gauntlet as gauntlet_mod
 
     league = League.open(tmp_path / "league")
-    league.ensure_bots("pong", ["random", "cpu"])
+    league.roster.ensure_bots("pong", ["random", "cpu"])
     old, new = snapshot_rows(league, "r", 2, learners=("left",))
-    rnd = league.find_players("random", "pong")[0]
-    mid = league.create_match("pong", "eval", {"gauntlet": True})
-    league.record_games(mid, [GameResult("pong", (rnd.id, old.id), seed=i, scores=(1, 0), outcome=(1.0, 0.0),
-                                         length=10, truncated=False) for i in range(8)])
+    rnd = league.roster.find_players("random", "pong")[0]
+    mid = league.ledger.create_match("pong", "eval", {"gauntlet": True})
+    league.ledger.record_games(mid, [GameResult("pong", (rnd.id, old.id), seed=i, scores=(1, 0), outcome=(1.0, 0.0),
+                                                length=10, truncated=False) for i in range(8)])
 
     def fake_load(lg, row, device="cpu", greedy=None, seed=0):
         p = ScriptedPolicy("pong", "cpu" if row.id == new.id else row.name, seed=seed)
@@ -330,9 +331,9 @@ def _stand_ins(monkeypatch, module, league, who):
 
 def _gauntlet_games(league, a, b, a_points):
     """Gauntlet games of A against B, one per entry of ``a_points`` (1, 0.5, 0)."""
-    mid = league.create_match("pong", "eval", {"gauntlet": True})
-    league.record_games(mid, [GameResult("pong", (a.id, b.id), seed=i, scores=(p, 1 - p), outcome=(p, 1 - p),
-                                         length=10, truncated=False) for i, p in enumerate(a_points)])
+    mid = league.ledger.create_match("pong", "eval", {"gauntlet": True})
+    league.ledger.record_games(mid, [GameResult("pong", (a.id, b.id), seed=i, scores=(p, 1 - p), outcome=(p, 1 - p),
+                                                length=10, truncated=False) for i, p in enumerate(a_points)])
 
 
 def test_the_playoff_separates_the_best_and_stops_there(tmp_path, monkeypatch):
@@ -342,9 +343,9 @@ def test_the_playoff_separates_the_best_and_stops_there(tmp_path, monkeypatch):
     from selfplay_cli.rated.playoff import PlayoffConfig, playoff
 
     league = League.open(tmp_path / "league")
-    league.ensure_bots("pong", ["random", "cpu"])
+    league.roster.ensure_bots("pong", ["random", "cpu"])
     old, new = snapshot_rows(league, "r", 2, learners=("left",))
-    bots = {p.name: p for p in league.players("pong", kind="bot")}
+    bots = {p.name: p for p in league.roster.players("pong", kind="bot")}
     _gauntlet_games(league, new, old, [1, 1, 1, 0])
     _gauntlet_games(league, new, bots["random"], [1] * 4)
     _gauntlet_games(league, old, bots["random"], [1] * 4)
@@ -357,11 +358,11 @@ def test_the_playoff_separates_the_best_and_stops_there(tmp_path, monkeypatch):
     assert best.policy == "r/ep1-left" and best.best_margin.separated and best.tied == ()
     h = head_to_head(league, new.id, old.id)
     assert h["games"] == 4 + played and h["pairs"] >= played // 2  # seat-swapped pairs, on fresh seeds
-    table = league.games("pong")
-    playoff_matches = [m for m, p in league.match_params("pong").items() if p.get("playoff")]
-    assert playoff_matches and all(league.match_info(m)[1]["gauntlet"] for m in playoff_matches)
+    table = league.ledger.games("pong")
+    playoff_matches = [m for m, p in league.ledger.match_params("pong").items() if p.get("playoff")]
+    assert playoff_matches and all(league.ledger.match_info(m)[1]["gauntlet"] for m in playoff_matches)
     assert playoff(league, [new.id], first_seed=5000, config=PlayoffConfig(max_games=200, round_games=10)) == 0
-    assert len(league.games("pong")) == len(table)
+    assert len(league.ledger.games("pong")) == len(table)
     league.close()
 
 
@@ -370,9 +371,9 @@ def test_a_playoff_between_equals_stops_at_its_cap_and_the_ladder_says_tied(tmp_
     from selfplay_cli.rated.playoff import PlayoffConfig, playoff
 
     league = League.open(tmp_path / "league")
-    league.ensure_bots("pong", ["random", "cpu"])
+    league.roster.ensure_bots("pong", ["random", "cpu"])
     a, b = snapshot_rows(league, "r", 1)
-    rnd = league.find_players("random", "pong")[0]
+    rnd = league.roster.find_players("random", "pong")[0]
     _gauntlet_games(league, a, b, [1, 0, 1, 0])
     _gauntlet_games(league, a, rnd, [1] * 4)
     _gauntlet_games(league, b, rnd, [1] * 4)
@@ -394,16 +395,16 @@ def test_a_final_gauntlet_plays_the_bots_in_full_whatever_the_history(tmp_path, 
     import selfplay_cli.rated.gauntlet as gauntlet_mod
 
     league = League.open(tmp_path / "league")
-    league.ensure_bots("pong", ["random", "cpu"])
+    league.roster.ensure_bots("pong", ["random", "cpu"])
     old, new = snapshot_rows(league, "r", 2, learners=("left",))
-    bots = {p.name: p for p in league.players("pong", kind="bot")}
+    bots = {p.name: p for p in league.roster.players("pong", kind="bot")}
     _gauntlet_games(league, old, bots["random"], [1] * 8)  # clear: a non-final gauntlet would play 1 pair
     _stand_ins(monkeypatch, gauntlet_mod, league, {old.id: "cpu", new.id: "cpu"})
     pairs = [(new, old), (new, bots["random"]), (new, bots["cpu"])]
     cfg = GauntletConfig(pairs=2, clear_pairs=2, max_pairs=2, bot_pairs=16)
     ms = play_gauntlet(league, pairs, first_seed=0, config=cfg, history=run_history(league, [new]))
     assert [m.games for m in ms] == [4, 32, 32]
-    assert len({s for s in league.games("pong").seed.tolist()}) >= 16 + 16 + 2  # disjoint seed ranges
+    assert len({s for s in league.ledger.games("pong").seed.tolist()}) >= 16 + 16 + 2  # disjoint seed ranges
     league.close()
 
 
@@ -423,8 +424,8 @@ def test_a_run_repeated_with_its_seed_is_the_same_players_rated_once(tmp_path, c
     second = json.loads(out)
     assert (first["run"], second["run"]) == ("pong-1", "pong-2")
     with League.open(home) as league:
-        same = league.same_weights("pong")
-        snaps = {p.full_name: p for p in league.players("pong", kind="snapshot")}
+        same = league.ledger.same_weights("pong")
+        snaps = {p.full_name: p for p in league.roster.players("pong", kind="snapshot")}
         assert {snaps[n].id for n in second["snapshots"]} == set(same)  # every snapshot of pong-2 is a copy
         assert {same[snaps[n].id] for n in second["snapshots"]} == {snaps[n].id for n in first["snapshots"]}
     assert second["rating_games"] == 0 and first["rating_games"] > 0
@@ -438,8 +439,8 @@ def _rating_games(home):
     """Every rated game of a league, by the names of its players: what a run's gauntlets played, comparable across
     leagues (player ids and game ids are the league's own)."""
     with League.open(home) as league:
-        names = {p.id: p.full_name for p in league.players(include_removed=True)}
-        t = league.games(variant=None, pooled=False)
+        names = {p.id: p.full_name for p in league.roster.players(include_removed=True)}
+        t = league.ledger.games(variant=None, pooled=False)
         return sorted(zip((names[int(a)] for a in t.player_a), (names[int(b)] for b in t.player_b),
                           t.seed.tolist(), t.score_a.tolist(), t.length.tolist(), strict=True))
 

@@ -71,7 +71,7 @@ def meta_of(name: str, run: str | None = "r", step: int = 0, arch: Arch | None =
 def make_league(home: Path, names=("s0-left", "s1M-left")) -> League:
     """A league with run ``r`` and one snapshot per name, files in place, registered as training registers them."""
     league = League.open(home)
-    league.create_run("r", "pong", {})
+    league.roster.create_run("r", "pong", {})
     rows = []
     for i, name in enumerate(names):
         rel = snapshot_relpath("r", name)
@@ -79,12 +79,12 @@ def make_league(home: Path, names=("s0-left", "s1M-left")) -> League:
                              meta_of(name, step=1_000_000 * i))
         rows.append(dict(env="pong", run="r", name=name, path=rel, sha256=meta.weights_sha256, step=meta.step,
                          algo="ppo", meta={"weights_sha256": meta.weights_sha256}))
-    snaps = league.add_snapshots(rows)
-    league.ensure_bots("pong", ["cpu", "random"])
-    cpu = next(p for p in league.players(kind="bot") if p.name == "cpu")
+    snaps = league.roster.add_snapshots(rows)
+    league.roster.ensure_bots("pong", ["cpu", "random"])
+    cpu = next(p for p in league.roster.players(kind="bot") if p.name == "cpu")
     games = [GameResult(env="pong", players=(p.id, cpu.id)[::1 - 2 * (k % 2)], seed=k, scores=(1, 0),
                         outcome=(1.0, 0.0), length=10, truncated=False) for p in snaps for k in range(4)]
-    league.create_match_with_games("pong", "match", {}, games)
+    league.ledger.create_match_with_games("pong", "match", {}, games)
     return league
 
 
@@ -254,13 +254,13 @@ def test_saved_files_are_hashed_from_the_same_bytes_that_are_loaded(tmp_path):
 
 def test_row_sha256_is_the_files_hash_even_when_given_the_weights_checksum(tmp_path):
     league = make_league(tmp_path / "league")
-    for p in league.players(kind="snapshot"):
+    for p in league.roster.players(kind="snapshot"):
         assert p.sha256 == file_sha256(tmp_path / "league" / p.path) != p.meta["weights_sha256"]
     rel = snapshot_relpath("r", "other")
     save_snapshot(tmp_path / "league" / rel, build_network((8, 6), 3, Arch(hidden=(16,)), seed=9), meta_of("other"))
     with pytest.raises(LeagueError, match="sha256"):
-        league.add_snapshot(env="pong", run="r", name="other", path=rel, sha256="f" * 64)
-    assert league.add_snapshot(env="pong", run="r", name="other", path=rel).sha256 == file_sha256(
+        league.roster.add_snapshot(env="pong", run="r", name="other", path=rel, sha256="f" * 64)
+    assert league.roster.add_snapshot(env="pong", run="r", name="other", path=rel).sha256 == file_sha256(
         tmp_path / "league" / rel)
 
 
@@ -269,7 +269,7 @@ def test_swapped_snapshot_file_is_refused_and_nothing_is_played(tmp_path, capsys
     league = make_league(home)
     s0, s1 = (home / snapshot_relpath("r", n) for n in ("s0-left", "s1M-left"))
     shutil.copyfile(s0, s1)
-    row = next(p for p in league.players(kind="snapshot") if p.name == "s1M-left")
+    row = next(p for p in league.roster.players(kind="snapshot") if p.name == "s1M-left")
     with pytest.raises(SnapshotError) as e:
         load_player(league, row)
     assert str(s1) in str(e.value) and "r/s1M-left" in str(e.value)
@@ -277,7 +277,7 @@ def test_swapped_snapshot_file_is_refused_and_nothing_is_played(tmp_path, capsys
     err = one_line_error(*run(capsys, "match", "r/s1M-left", "cpu", "--games", "2", "--home", str(home))[::2])
     assert str(s1) in err and "not the snapshot r/s1M-left" in err
     with League.open(home, readonly=True) as lg:
-        assert lg.count_games() == 8  # make_league's, no more
+        assert lg.ledger.count_games() == 8  # make_league's, no more
     assert sqlite3.connect(home / "league.db").execute("select count(*) from matches").fetchone() == (1,)
 
 
@@ -290,7 +290,7 @@ def test_older_rows_holding_the_weights_checksum_still_load_and_are_still_checke
     db.commit()
     db.close()
     league = League.open(home)
-    rows = {p.name: p for p in league.players(kind="snapshot")}
+    rows = {p.name: p for p in league.roster.players(kind="snapshot")}
     assert rows["s1M-left"].sha256 == rows["s1M-left"].meta["weights_sha256"]
     assert load_player(league, rows["s1M-left"]).id == "r/s1M-left"  # intact: plays
     shutil.copyfile(home / rows["s0-left"].path, home / rows["s1M-left"].path)
@@ -309,7 +309,7 @@ def test_imported_file_is_checked_too(tmp_path, capsys):
     save_snapshot(src, build_network((8, 6), 3, Arch(hidden=(16,)), seed=3), meta_of("champ", run="contrib"))
     assert run(capsys, "checkpoint", "import", str(src), "--home", str(home))[0] == 0
     with League.open(home) as league:
-        (row,) = league.players(kind="snapshot")
+        (row,) = league.roster.players(kind="snapshot")
         assert row.sha256 == file_sha256(src) == file_sha256(home / row.path)
         load_player(league, row)
         with open(home / row.path, "r+b") as f:  # one metadata byte changed: same weights, different file
@@ -352,9 +352,9 @@ def test_runs_of_older_leagues_with_looser_names_keep_working(tmp_path):
     with League.open(home) as league:
         rel = snapshot_relpath("my run", "s1M")
         save_snapshot(home / rel, build_network((8, 6), 3, Arch(hidden=(16,)), seed=4), meta_of("s1M", run="my run"))
-        assert league.add_snapshot(env="pong", run="my run", name="s1M", path=rel).full_name == "my run/s1M"
+        assert league.roster.add_snapshot(env="pong", run="my run", name="s1M", path=rel).full_name == "my run/s1M"
         with pytest.raises(LeagueError, match="invalid run name"):
-            league.create_run("my other run", "pong", {})
+            league.roster.create_run("my other run", "pong", {})
         for bad in ("..", "a/b", "x\x1b[0m"):
             with pytest.raises(LeagueError):
                 snapshot_relpath(bad, "s1M")
@@ -373,7 +373,7 @@ def test_traversal_in_import_name_writes_nothing_anywhere(tmp_path, capsys):
         assert tree(tmp_path) == before, args
     assert not (tmp_path / "escape").exists()
     with League.open(home, readonly=True) as league:
-        assert [r.name for r in league.list_runs()] == ["r"]
+        assert [r.name for r in league.roster.list_runs()] == ["r"]
 
 
 def test_crafted_file_names_refused_at_import(tmp_path, capsys):
@@ -434,14 +434,14 @@ def test_readonly_league_refuses_writes_and_leaves_no_files(tmp_path):
     make_league(home).close()
     before = sorted(p.name for p in home.iterdir())
     with League.open(home, readonly=True) as league:
-        assert [p.name for p in league.players(kind="snapshot")] == ["s0-left", "s1M-left"]
+        assert [p.name for p in league.roster.players(kind="snapshot")] == ["s0-left", "s1M-left"]
         with pytest.raises(LeagueError, match="read-only"):
-            league.create_run("x", "pong", {})
+            league.roster.create_run("x", "pong", {})
         with pytest.raises(LeagueError, match="read-only"):
-            league.ensure_bots("pong", ["other"])
+            league.roster.ensure_bots("pong", ["other"])
         writer = League.open(home)  # a live writer beside it: its commits are seen
-        writer.create_run("w", "pong", {})
-        assert "w" in [r.name for r in league.list_runs()]
+        writer.roster.create_run("w", "pong", {})
+        assert "w" in [r.name for r in league.roster.list_runs()]
         writer.close()
     assert sorted(p.name for p in home.iterdir()) == before
 

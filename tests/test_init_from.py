@@ -95,7 +95,7 @@ def same(a: dict[str, torch.Tensor], b: dict[str, torch.Tensor]) -> bool:
 
 def rows(home: Path, run: str) -> dict[str, object]:
     with League.open(home) as league:
-        return {p.name: p for p in league.players(env="lander", kind="snapshot") if p.run == run}
+        return {p.name: p for p in league.roster.players(env="lander", kind="snapshot") if p.run == run}
 
 
 def fresh_optimisers(monkeypatch) -> list:
@@ -206,7 +206,7 @@ def test_refusals_are_one_line_and_leave_no_run(home, capsys, tmp_path, extra, t
                          *extra, *TINY)
     assert code == 2 and needle in err and err.count("\n") == 1 and "Traceback" not in err, err
     with League.open(home) as league:
-        assert league.get_run("bad") is None
+        assert league.roster.get_run("bad") is None
 
 
 def test_resume_cannot_change_init_from(home, capsys):
@@ -239,7 +239,7 @@ def test_a_resumed_run_keeps_its_own_weights(home, capsys, monkeypatch, ppo_toml
 
     monkeypatch.setattr(init_from, "load_init", never)
     with League.open(home) as league:  # restored: the learners are the run's own s1k
-        trainer = Trainer(league, TrainConfig.from_dict(league.get_run("k").config))
+        trainer = Trainer(league, TrainConfig.from_dict(league.roster.get_run("k").config))
         trainer.restore()
         trainer._unlock()
         for learner, mine in zip(trainer.learners, own, strict=True):

@@ -176,7 +176,7 @@ def test_a_teacher_the_run_cannot_have_is_one_line_and_no_run(tmp_path, capsys):
                          "--home", home)
     assert code != 0 and err.count("\n") == 1 and "dqn learners cannot imitate" in err, err
     league = League.open(home=tmp_path / "league")
-    assert league.list_runs() == []  # refused before the run was created
+    assert league.roster.list_runs() == []  # refused before the run was created
     league.close()
 
 

@@ -31,7 +31,7 @@ KILL_POINTS = Path(__file__).with_name("kill_points.py")
 def check_league(home: Path) -> list:
     """Every row names a file holding exactly its weights; nothing else is left in the run's folder."""
     with League.open(home) as league:
-        snaps = league.players("pong", kind="snapshot")
+        snaps = league.roster.players("pong", kind="snapshot")
         for p in snaps:
             tensors, meta = load_snapshot(home / p.path, expect_env="pong")
             assert weights_sha256(tensors) == p.meta["weights_sha256"] == meta.weights_sha256, p.name
@@ -66,8 +66,8 @@ def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path,
                            text=True, timeout=300, env=env)
     assert child.returncode == -signal.SIGKILL, (child.returncode, child.stderr[-2000:])
     with League.open(home) as league:
-        before = {p.name: p.sha256 for p in league.players("pong", kind="snapshot")}
-        assert league.get_run("r").status == "running"
+        before = {p.name: p.sha256 for p in league.roster.players("pong", kind="snapshot")}
+        assert league.roster.get_run("r").status == "running"
     assert (home / "league.db").exists() == (db == "sqlite")  # the league is where MARL_DB says
     committed = point == "after-rows"
     assert sorted(before) == (["s0-left", "s0-right", "s2.05k-left", "s2.05k-right"] if committed
@@ -88,7 +88,7 @@ def test_killed_at_any_step_of_a_snapshot_moment_resumes_to_completion(tmp_path,
     if committed:
         assert "registered as it was killed" in err
     with League.open(home) as league:
-        assert league.get_run("r").status == "finished"
+        assert league.roster.get_run("r").status == "finished"
 
 
 @pytest.mark.slow
@@ -108,13 +108,13 @@ def test_sigterm_stops_a_run_cleanly_and_it_resumes(tmp_path, capsys, request, m
     assert proc.returncode == 143, (proc.returncode, err[-2000:])
     assert "stopped r at step" in err and "marl train --resume r" in err and "Traceback" not in err
     with League.open(home) as league:
-        assert league.get_run("r").status == "stopped"
+        assert league.roster.get_run("r").status == "stopped"
     check_league(home)
     code = main(["train", "--resume", "r", "--home", str(home), "--json"])
     assert code == 0, capsys.readouterr().err
     check_league(home)
     with League.open(home) as league:
-        assert league.get_run("r").status == "finished"
+        assert league.roster.get_run("r").status == "finished"
 
 
 # --- issue 49: a disk that fills during a snapshot moment leaves no file that no row names ---
@@ -124,7 +124,7 @@ import resource, sys
 import torch
 import selfplay_cli.train.state as run_state
 from selfplay_cli.cli import main
-from selfplay_cli.league.store import League
+from selfplay_cli.league.roster import Roster
 
 point, home, args = sys.argv[1], sys.argv[2], sys.argv[3:]
 calls = {}
@@ -136,7 +136,7 @@ def nth(what):
     calls[what] = calls.get(what, 0) + 1
     return calls[what]
 
-real_file, real_state, real_rows = run_state.save_snapshot, torch.save, League.add_snapshots
+real_file, real_state, real_rows = run_state.save_snapshot, torch.save, Roster.add_snapshots
 
 def save_file(*a, **k):
     if point == "second-file" and nth("file") == 4:  # the second moment's second file (its first is written)
@@ -153,7 +153,7 @@ def add_rows(self, *a, **k):
         full()
     return real_rows(self, *a, **k)
 
-run_state.save_snapshot, torch.save, League.add_snapshots = save_file, save_state, add_rows
+run_state.save_snapshot, torch.save, Roster.add_snapshots = save_file, save_state, add_rows
 sys.exit(main([*args, "--home", home]))
 """
 
@@ -177,4 +177,4 @@ def test_a_snapshot_moment_cut_by_a_full_disk_leaves_no_file_without_its_row(tmp
     snaps = check_league(home)
     assert len(snaps) == 10 and snaps[-1].name == "s8.19k-right"
     with League.open(home) as league:
-        assert league.get_run("r").status == "finished"
+        assert league.roster.get_run("r").status == "finished"

@@ -62,16 +62,17 @@ def _game(a: int, b: int, score_a: float, seed: int = 0, env: str = ENV) -> Game
 
 
 def _snap(lg: League, run: str | None, name: str, env: str = ENV, step: int = 0) -> PlayerRow:
-    return lg.add_snapshot(env=env, run=run, name=name, path=f"/snaps/{run}/{name}.pt", sha256="0" * 64, step=step)
+    return lg.roster.add_snapshot(env=env, run=run, name=name, path=f"/snaps/{run}/{name}.pt", sha256="0" * 64,
+                                  step=step)
 
 
 def _record(lg: League, results: list[tuple[int, int, float]], env: str = ENV) -> None:
     """Record games ``(a, b, score_a)`` alternating the seat order of each game."""
-    m = lg.create_match(env, "match")
+    m = lg.ledger.create_match(env, "match")
     games = []
     for k, (a, b, s) in enumerate(results):
         games.append(_game(a, b, s, k, env) if k % 2 == 0 else _game(b, a, 1.0 - s, k, env))
-    lg.record_games(m, games)
+    lg.ledger.record_games(m, games)
 
 
 def _results(a: int, b: int, wins: int, draws: int, losses: int) -> list[tuple[int, int, float]]:
@@ -374,10 +375,10 @@ def test_csv_empty_or_missing(tmp_path: Path) -> None:
 
 
 def _population(lg: League) -> dict[str, PlayerRow]:
-    lg.ensure_bots(ENV, ["random", "cpu"])
-    lg.create_run("r1", ENV, {})
-    lg.create_run("r2", ENV, {})
-    bots = {p.name: p for p in lg.players(ENV, kind="bot")}
+    lg.roster.ensure_bots(ENV, ["random", "cpu"])
+    lg.roster.create_run("r1", ENV, {})
+    lg.roster.create_run("r2", ENV, {})
+    bots = {p.name: p for p in lg.roster.players(ENV, kind="bot")}
     return {
         "random": bots["random"],
         "cpu": bots["cpu"],
@@ -400,7 +401,7 @@ def test_ladder_from_the_ledger(league: League) -> None:
     assert by["r1/ep90"].kind == "snapshot" and by["r1/ep90"].step == 9000 and by["r1/ep90"].player_id == e90
     assert by["cpu"].step is None
     # Same numbers as a direct fit of the ledger.
-    table = league.games(env=ENV)
+    table = league.ledger.games(env=ENV)
     ids, a, b = table.indexed()
     k = int(np.flatnonzero(ids == rnd)[0])
     fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k, prior_games=DEFAULT_PRIOR)
@@ -434,7 +435,7 @@ def test_ladder_removed_snapshots_still_count(league: League) -> None:
     rnd, cpu, e10 = p["random"].id, p["cpu"].id, p["ep10"].id
     _record(league, _results(cpu, rnd, 6, 0, 4) + _results(e10, cpu, 5, 0, 5) + _results(e10, rnd, 2, 0, 8))
     before = _by_name(ladder(league, bootstrap=0))
-    league.remove_snapshot(e10)
+    league.roster.remove_snapshot(e10)
     after = _by_name(ladder(league, bootstrap=0))
     assert set(after) == {"random", "cpu"}
     assert after["cpu"].elo == pytest.approx(before["cpu"].elo)  # e10's games are still in the fit
@@ -450,8 +451,8 @@ def test_ladder_env_choice_and_default_anchor(league: League) -> None:
     with pytest.raises(LeagueError):
         ladder(league)  # no games at all
     # No random bot: the first bot with games anchors; no bots at all: the most active player.
-    league.ensure_bots(ENV, ["cpu"])
-    cpu = league.players(ENV, kind="bot")[0]
+    league.roster.ensure_bots(ENV, ["cpu"])
+    cpu = league.roster.players(ENV, kind="bot")[0]
     s1, s2 = _snap(league, None, "a"), _snap(league, None, "b")
     _snap(league, None, "c")  # no games
     _record(league, _results(s1.id, cpu.id, 3, 0, 1) + _results(s1.id, s2.id, 2, 0, 2))
@@ -477,7 +478,7 @@ def test_ladder_env_choice_and_default_anchor(league: League) -> None:
 def test_resolve_names(league: League) -> None:
     p = _population(league)
     rnd, cpu, e10, e90, r2 = (p[k].id for k in ("random", "cpu", "ep10", "ep90", "r2ep90"))
-    league.tag(e10, "champ")
+    league.roster.tag(e10, "champ")
     _record(league, _results(cpu, rnd, 6, 0, 4) + _results(e10, cpu, 8, 0, 2) + _results(e90, e10, 3, 0, 7)
             + _results(r2, rnd, 7, 1, 2))
     assert resolve(league, "ep10").id == e10
@@ -515,7 +516,7 @@ def test_resolve_names(league: League) -> None:
     assert "belongs to env pong" in _one_line(exc)
 
     # Removed snapshots: named -> error saying so; the other ep90 becomes unambiguous; ids need include_removed.
-    league.remove_snapshot(r2)
+    league.roster.remove_snapshot(r2)
     assert resolve(league, "ep90").id == e90
     assert resolve(league, "latest").id == e90
     with pytest.raises(LeagueError) as exc:
@@ -530,10 +531,10 @@ def test_resolve_names(league: League) -> None:
 
 
 def test_resolve_tag_and_bot_ambiguous_across_envs(league: League) -> None:
-    league.ensure_bots(ENV, ["cpu"])
-    league.create_run("r3", "lander", {})
+    league.roster.ensure_bots(ENV, ["cpu"])
+    league.roster.create_run("r3", "lander", {})
     snap = _snap(league, "r3", "x", env="lander")
-    league.tag(snap.id, "cpu")  # allowed: lander has no cpu bot
+    league.roster.tag(snap.id, "cpu")  # allowed: lander has no cpu bot
     with pytest.raises(LeagueError) as exc:
         resolve(league, "cpu")
     assert _one_line(exc) == "'cpu' is ambiguous: cpu, r3/x — use run/name or an id"
@@ -553,13 +554,13 @@ def test_resolve_tag_and_bot_ambiguous_across_envs(league: League) -> None:
 
 
 def test_plan_tournament_counts_existing_games(league: League) -> None:
-    league.ensure_bots(ENV, ["random", "cpu"])
-    bots = {p.name: p.id for p in league.players(ENV, kind="bot")}
+    league.roster.ensure_bots(ENV, ["random", "cpu"])
+    bots = {p.name: p.id for p in league.roster.players(ENV, kind="bot")}
     p1, p2, p3, p4 = bots["random"], bots["cpu"], _snap(league, None, "a").id, _snap(league, None, "b").id
-    m = league.create_match(ENV, "tournament")
-    league.record_games(m, [_game(p1, p2, 1.0), _game(p1, p2, 0.0), _game(p2, p1, 0.5)]  # 3 games, both orders
-                        + [_game(p3, p1, 1.0, seed=s) for s in range(5)]
-                        + [_game(p4, p2, 1.0)] * 2)  # p4 is not in the tournament
+    m = league.ledger.create_match(ENV, "tournament")
+    league.ledger.record_games(m, [_game(p1, p2, 1.0), _game(p1, p2, 0.0), _game(p2, p1, 0.5)]  # 3 games, both orders
+                               + [_game(p3, p1, 1.0, seed=s) for s in range(5)]
+                               + [_game(p4, p2, 1.0)] * 2)  # p4 is not in the tournament
     plan = plan_tournament(league, ENV, [p1, p2, p3], games_per_pair=4)
     assert plan == [PairPlan(p1, p2, 3, 1), PairPlan(p2, p3, 0, 4)]  # p1-p3 already has 5
     assert plan_tournament(league, ENV, [p1, p2, p3], games_per_pair=2) == [PairPlan(p2, p3, 0, 2)]
@@ -577,15 +578,15 @@ def test_plan_tournament_counts_existing_games(league: League) -> None:
 
 
 def test_head_to_head_pentanomial(league: League) -> None:
-    league.ensure_bots(ENV, ["random", "cpu"])
-    bots = {p.name: p.id for p in league.players(ENV, kind="bot")}
+    league.roster.ensure_bots(ENV, ["random", "cpu"])
+    bots = {p.name: p.id for p in league.roster.players(ENV, kind="bot")}
     a, b, c = bots["cpu"], bots["random"], _snap(league, None, "other").id
 
     def pair(seed: int, first: float, second: float) -> list[GameResult]:
         """Two games of one seed: a in seat 0 scoring ``first``, then a in seat 1 scoring ``second``."""
         return [_game(a, b, first, seed), _game(b, a, 1.0 - second, seed)]
 
-    m1, m2 = league.create_match(ENV, "match"), league.create_match(ENV, "match")
+    m1, m2 = league.ledger.create_match(ENV, "match"), league.ledger.create_match(ENV, "match")
     games = (pair(1, 1.0, 1.0)  # WW
              + pair(2, 1.0, 0.0)  # WL
              + pair(3, 0.5, 0.5)  # DD
@@ -595,14 +596,14 @@ def test_head_to_head_pentanomial(league: League) -> None:
              + [_game(a, b, 1.0, 6)]  # unpaired: no reversed game
              + [_game(a, b, 1.0, 7), _game(a, b, 0.5, 7)]  # same seed, same seat order: unpaired
              + [_game(a, c, 1.0, 9), _game(c, a, 1.0, 9)])  # another opponent: ignored
-    league.record_games(m1, games)
-    league.record_games(m2, [_game(b, a, 1.0, 1)])  # seed 1 again, but another match: unpaired
+    league.ledger.record_games(m1, games)
+    league.ledger.record_games(m2, [_game(b, a, 1.0, 1)])  # seed 1 again, but another match: unpaired
     h = head_to_head(league, a, b)
     assert h["pentanomial"] == [1, 1, 2, 1, 1]  # LL, LD, WL+DD, WD, WW
     assert h["pairs"] == 6 and h["unpaired"] == 4 and h["games"] == 16
     assert (h["wins"], h["draws"], h["losses"]) == (6, 5, 5)
     assert h["score"] == pytest.approx(8.5 / 16.0)
-    assert (h["wins"], h["draws"], h["losses"]) == league.pair_counts(a, b)
+    assert (h["wins"], h["draws"], h["losses"]) == league.ledger.pair_counts(a, b)
     mirror = head_to_head(league, b, a)
     assert mirror["pentanomial"] == h["pentanomial"][::-1]
     assert (mirror["wins"], mirror["losses"]) == (h["losses"], h["wins"])
@@ -746,19 +747,19 @@ def test_the_same_weights_under_two_names_are_one_player(league: League) -> None
     """A run repeated with its seed in the same league makes bit-identical snapshots under new names: one player,
     whose games under either name count for one rating; the other name gets its row right under it, with that
     rating and place; head-to-head and tournaments see one player."""
-    league.ensure_bots(ENV, ["random", "cpu"])
-    league.create_run("r1", ENV, {})
-    league.create_run("r2", ENV, {})
-    rnd, cpu = (league.find_players(n, ENV)[0].id for n in ("random", "cpu"))
-    first = league.add_snapshot(env=ENV, run="r1", name="s6M", path="r1/s6M", sha256="1" * 64,
-                                meta={"weights_sha256": "f" * 64})
-    copy = league.add_snapshot(env=ENV, run="r2", name="s6M", path="r2/s6M", sha256="2" * 64,
-                               meta={"weights_sha256": "f" * 64})
-    other = league.add_snapshot(env=ENV, run="r2", name="s5M", path="r2/s5M", sha256="3" * 64,
-                                meta={"weights_sha256": "e" * 64})
+    league.roster.ensure_bots(ENV, ["random", "cpu"])
+    league.roster.create_run("r1", ENV, {})
+    league.roster.create_run("r2", ENV, {})
+    rnd, cpu = (league.roster.find_players(n, ENV)[0].id for n in ("random", "cpu"))
+    first = league.roster.add_snapshot(env=ENV, run="r1", name="s6M", path="r1/s6M", sha256="1" * 64,
+                                       meta={"weights_sha256": "f" * 64})
+    copy = league.roster.add_snapshot(env=ENV, run="r2", name="s6M", path="r2/s6M", sha256="2" * 64,
+                                      meta={"weights_sha256": "f" * 64})
+    other = league.roster.add_snapshot(env=ENV, run="r2", name="s5M", path="r2/s5M", sha256="3" * 64,
+                                       meta={"weights_sha256": "e" * 64})
     _record(league, _results(cpu, rnd, 7, 0, 3) + _results(first.id, cpu, 6, 0, 4) + _results(copy.id, cpu, 8, 0, 2)
             + _results(other.id, copy.id, 3, 0, 7))
-    assert league.same_weights(ENV) == {copy.id: first.id}
+    assert league.ledger.same_weights(ENV) == {copy.id: first.id}
     rows = ladder(league, bootstrap=0)
     by = _by_name(rows)
     one, two = by["r1/s6M"], by["r2/s6M"]
@@ -767,9 +768,9 @@ def test_the_same_weights_under_two_names_are_one_player(league: League) -> None
     assert one.games == 30 and (one.wins, one.losses) == (21, 9)  # 6-4 and 8-2 against cpu, 7-3 against r2/s5M
     assert rows.index(two) == rows.index(one) + 1
     # the rating is the fit of every game filed under the first name
-    table = league.games(ENV)
+    table = league.ledger.games(ENV)
     assert copy.id not in set(table.player_a.tolist()) | set(table.player_b.tolist())
-    assert len(league.games(ENV, pooled=False)) == len(table)
+    assert len(league.ledger.games(ENV, pooled=False)) == len(table)
     h = head_to_head(league, copy.id, cpu)
     assert (h["games"], h["wins"], h["losses"]) == (20, 14, 6) == (head_to_head(league, first.id, cpu)["games"],
                                                                     14, 6)
@@ -788,15 +789,15 @@ def test_the_best_of_a_run_is_not_compared_with_its_own_weights_nor_its_teammate
     margin is over the run's next *other* player, not "+0 ... (they never met)" over its own copy. A cooperative
     game's team of per-seat snapshots flies as one: the best member's margin is over another moment's team, not
     over its own teammate."""
-    league.ensure_bots(ENV, ["random", "cpu"])
-    league.create_run("k", ENV, {})
-    rnd, cpu = (league.find_players(n, ENV)[0].id for n in ("random", "cpu"))
-    early = league.add_snapshot(env=ENV, run="k", name="s50k", path="k/s50k", sha256="1" * 64, step=50_000,
-                                meta={"weights_sha256": "f" * 64})
-    same = league.add_snapshot(env=ENV, run="k", name="s100k", path="k/s100k", sha256="2" * 64, step=100_000,
-                               meta={"weights_sha256": "f" * 64})
-    first = league.add_snapshot(env=ENV, run="k", name="s0", path="k/s0", sha256="3" * 64, step=0,
-                                meta={"weights_sha256": "e" * 64})
+    league.roster.ensure_bots(ENV, ["random", "cpu"])
+    league.roster.create_run("k", ENV, {})
+    rnd, cpu = (league.roster.find_players(n, ENV)[0].id for n in ("random", "cpu"))
+    early = league.roster.add_snapshot(env=ENV, run="k", name="s50k", path="k/s50k", sha256="1" * 64, step=50_000,
+                                       meta={"weights_sha256": "f" * 64})
+    same = league.roster.add_snapshot(env=ENV, run="k", name="s100k", path="k/s100k", sha256="2" * 64, step=100_000,
+                                      meta={"weights_sha256": "f" * 64})
+    first = league.roster.add_snapshot(env=ENV, run="k", name="s0", path="k/s0", sha256="3" * 64, step=0,
+                                       meta={"weights_sha256": "e" * 64})
     _record(league, _results(cpu, rnd, 7, 0, 3) + _results(early.id, cpu, 8, 0, 2)
             + _results(same.id, first.id, 9, 0, 1) + _results(first.id, rnd, 5, 0, 5))
     by = _by_name(ladder(league, bootstrap=0))

@@ -56,9 +56,9 @@ def test_a_fups_team_trained_with_two_landers_flies_one_to_four(home, tmp_path, 
         assert r["games"] == 4 and r["kind"] == "cooperative"
         league = League.open(home=home)
         try:
-            g = league.game(r["game_ids"][0])
+            g = league.ledger.game(r["game_ids"][0])
             assert len(g.players) == m  # the stored game has M seats
-            assert league.match_info(r["match_id"])[1]["env_options"]["landers"] == m
+            assert league.ledger.match_info(r["match_id"])[1]["env_options"]["landers"] == m
         finally:
             league.close()
         returns[m] = r["points_against"] / 2  # the heuristic's mean team return over its 2 episodes
@@ -130,7 +130,7 @@ def test_a_team_of_per_lander_networks_flies_together_and_grows_by_copies(home, 
     assert r["a"] == "np/s4k" and r["games"] == 6 and r["wins"] + r["draws"] + r["losses"] == 3  # 3 comparisons
     league = League.open(home=home)
     try:
-        names = [[league.get_player(p).full_name for p in league.game(i).players] for i in r["game_ids"]]
+        names = [[league.roster.get_player(p).full_name for p in league.ledger.game(i).players] for i in r["game_ids"]]
     finally:
         league.close()
     team = [n for n in names if "heuristic" not in n]
@@ -193,8 +193,8 @@ def test_a_nops_runs_gauntlet_rates_each_moment_as_the_team_it_flies_as(home, ca
              "2000", "--games", "8", "--eval-games", "2", "--eval-inline", "--run", "np")
     league = League.open(home=home)
     try:
-        games = [league.game(i) for i in range(1, league.count_games() + 1)]
-        names = {p.id: p.full_name for p in league.players(env="lander")}
+        games = [league.ledger.game(i) for i in range(1, league.ledger.count_games() + 1)]
+        names = {p.id: p.full_name for p in league.roster.players(env="lander")}
     finally:
         league.close()
     rated = [[names[p] for p in g.players] for g in games if g.match_kind == "eval"]

@@ -71,7 +71,7 @@ def test_checkpoint_import_list_show_tag_export_rm_round_trip(home, tmp_path, ca
     assert code == 0 and "4 games stay in the ledger" in out
     assert not (home / "snapshots" / "r1" / "ep10.safetensors").exists()
     with League.open(home) as league:
-        assert league.count_games("pong") == 4
+        assert league.ledger.count_games("pong") == 4
     code, rows = run_json(capsys, "checkpoint", "list")
     assert [r["policy"] for r in rows] == ["r1/ep20"]
 
@@ -104,14 +104,14 @@ def test_match_plays_pairs_stores_games_and_reports(home, capsys):
     assert rep["pentanomial"] == [0, 0, 0, 0, 10]
     assert rep["elo_low"] > 400 and rep["los"] > 0.999 and rep["match_id"] == 1
     with League.open(home) as league:
-        table = league.games("pong")
+        table = league.ledger.games("pong")
         assert len(table) == 20
         assert sorted(table.seed.tolist()) == sorted([5 + i // 2 for i in range(20)])
-        cpu = league.find_players("cpu", "pong")[0]
+        cpu = league.roster.find_players("cpu", "pong")[0]
         assert (table.player_a == cpu.id).sum() == 10, "each seed once in each seat order"
     code, rep = run_json(capsys, "match", "cpu", "random", "--games", "6", "--no-store")
     with League.open(home) as league:
-        assert league.count_games("pong") == 20 and rep["match_id"] is None
+        assert league.ledger.count_games("pong") == 20 and rep["match_id"] is None
 
 
 @pytest.mark.slow
@@ -156,14 +156,14 @@ def test_ladder_gate_and_tournament(home, tmp_path, capsys):
                           "--bootstrap", "50")
     assert code == 0
     with League.open(home) as league:
-        assert league.count_games("pong") == 30
+        assert league.ledger.count_games("pong") == 30
     assert rows[0]["policy"] == "cpu" and rows[0]["rank"] == 1
     assert {r["policy"] for r in rows} == {"cpu", "random", "r1/ep10"}
     assert all(r["games"] == 20 for r in rows)
     # A second run finds nothing missing and plays nothing.
     run_json(capsys, "league", "tournament", "cpu", "random", "ep10", "--games-per-pair", "10")
     with League.open(home) as league:
-        assert league.count_games("pong") == 30
+        assert league.ledger.count_games("pong") == 30
 
     code, ladder = run_json(capsys, "league", "ladder", "--bootstrap", "50")
     assert code == 0 and [r["policy"] for r in ladder][0] == "cpu"
@@ -188,14 +188,14 @@ def seed_ladder(home: Path) -> dict[str, int]:
     Returns the player ids by name."""
 
     with League.open(home) as lg:
-        lg.ensure_bots("pong", ["random", "cpu"])
+        lg.roster.ensure_bots("pong", ["random", "cpu"])
         for run in ("r1", "r2"):
-            lg.create_run(run, "pong", {})
-        bots = {p.name: p.id for p in lg.players("pong", kind="bot")}
+            lg.roster.create_run(run, "pong", {})
+        bots = {p.name: p.id for p in lg.roster.players("pong", kind="bot")}
         ids = dict(bots)
         for run, name, step in (("r1", "ep1", 1000), ("r1", "ep2", 2000), ("r2", "ep1", 1000)):
-            p = lg.add_snapshot(env="pong", run=run, name=name, path=f"/x/{run}/{name}.safetensors",
-                                sha256="0" * 64, step=step)
+            p = lg.roster.add_snapshot(env="pong", run=run, name=name, path=f"/x/{run}/{name}.safetensors",
+                                       sha256="0" * 64, step=step)
             ids[f"{run}/{name}"] = p.id
         plan = [("cpu", "random", 14, 2), ("r1/ep1", "random", 16, 0), ("r1/ep1", "cpu", 10, 6),
                 ("r1/ep2", "cpu", 14, 2), ("r1/ep2", "r1/ep1", 12, 4), ("r2/ep1", "random", 16, 0)]
@@ -247,9 +247,9 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
     from selfplay_cli.stats.bradley_terry import fit_bradley_terry
 
     with League.open(home) as league:
-        table = league.games("pong")
+        table = league.ledger.games("pong")
         ids, a, b = table.indexed()
-        name_of = {p.id: p.full_name for p in league.players("pong")}
+        name_of = {p.id: p.full_name for p in league.roster.players("pong")}
     anchor = [name_of[int(i)] for i in ids].index("random")
     exact = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=anchor, anchor_rating=1000.0)
     for i, pid in enumerate(ids.tolist()):
@@ -286,7 +286,7 @@ def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
 def test_ladder_option_errors_are_one_line(home, capsys):
     seed_ladder(home)
     with League.open(home) as lg:
-        lg.create_run("r9", "lander", {})
+        lg.roster.create_run("r9", "lander", {})
     for args, needle in (
         (["league", "ladder", "--run", "nope"], "no run named 'nope'"),
         (["league", "ladder", "--run", "r9", "--env", "pong"], "run 'r9' plays lander, not pong"),
@@ -349,8 +349,8 @@ def test_two_match_processes_share_one_sqlite_league(home):
         assert "locked" not in err
         assert json.loads(out)["games"] == 200
     with League.open(home) as league:
-        assert league.count_games("pong") == 400
-        assert len({m for m in league.games("pong", variant=None).match_id.tolist()}) == 2
+        assert league.ledger.count_games("pong") == 400
+        assert len({m for m in league.ledger.games("pong", variant=None).match_id.tolist()}) == 2
 
 
 @pytest.mark.slow
@@ -377,8 +377,8 @@ def test_a_match_killed_midway_leaves_a_consistent_ledger(home):
     assert games % 32 == 0, "only whole chunks of games are stored"
     assert seats == 2 * games
     with League.open(home) as league:
-        table = league.games("pong")
+        table = league.ledger.games("pong")
         assert len(table) == games
-        before = {p.name: p.elo for p in league.players("pong")}
-        league.recompute_online_elo("pong")
-        assert {p.name: p.elo for p in league.players("pong")} == pytest.approx(before)
+        before = {p.name: p.elo for p in league.roster.players("pong")}
+        league.ledger.recompute_online_elo("pong")
+        assert {p.name: p.elo for p in league.roster.players("pong")} == pytest.approx(before)

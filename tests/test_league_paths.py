@@ -40,8 +40,8 @@ def make_league(home: Path, names=("s0-left", "s1M-left"), run_name: str = "r") 
                           SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=Arch(hidden=(16,)),
                                        algo="ppo", run=run_name, name=name, step=1_000_000 * i))
             rows.append(dict(env="pong", run=run_name, name=name, path=rel, step=1_000_000 * i, algo="ppo"))
-        league.add_snapshots(rows, run_config={})
-        league.ensure_bots("pong", ["cpu", "random"])
+        league.roster.add_snapshots(rows, run_config={})
+        league.roster.ensure_bots("pong", ["cpu", "random"])
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
@@ -65,12 +65,12 @@ def set_sql(home: Path, sql: str, **params) -> None:
 
 def status(home: Path, run_name: str) -> str:
     with League.open(home, readonly=True) as league:
-        return league.get_run(run_name).status
+        return league.roster.get_run(run_name).status
 
 
 def removed(home: Path, name: str) -> bool:
     with League.open(home, readonly=True) as league:
-        return next(p for p in league.players(env="pong", include_removed=True) if p.name == name).removed
+        return next(p for p in league.roster.players(env="pong", include_removed=True) if p.name == name).removed
 
 
 # -- 1. a row's path never leads outside the league ------------------------------------------------------------------
@@ -131,7 +131,7 @@ def test_snapshot_file_is_the_one_check(tmp_path, league_db):
     home = tmp_path / "home"
     make_league(home)
     with League.open(home) as league:
-        row = next(p for p in league.players(env="pong", kind="snapshot") if p.name == "s1M-left")
+        row = next(p for p in league.roster.players(env="pong", kind="snapshot") if p.name == "s1M-left")
         assert league.snapshot_file(row) == home.resolve() / "snapshots" / "r" / "s1M-left.safetensors"
         snapshots_elsewhere = tmp_path / "disk2"  # snapshots/ itself a symlink to another disk: still the league's
         shutil.move(home / "snapshots", snapshots_elsewhere)
@@ -210,10 +210,10 @@ def test_rm_refuses_a_stopped_runs_teacher(tmp_path, capsys, league_db):
     home = tmp_path / "home"
     make_league(home, run_name="t")
     with League.open(home) as league:
-        league.create_run("pupil", "pong", {"env": "pong", "run": "pupil", "teacher": {"player": "t/s1M-left"}},
-                          status="stopped")
-        league.create_run("done", "pong", {"env": "pong", "run": "done", "teacher": {"player": "t/s0-left"}},
-                          status="finished")
+        league.roster.create_run("pupil", "pong", {"env": "pong", "run": "pupil", "teacher": {"player": "t/s1M-left"}},
+                                 status="stopped")
+        league.roster.create_run("done", "pong", {"env": "pong", "run": "done", "teacher": {"player": "t/s0-left"}},
+                                 status="finished")
     err = one_line_error(*run(capsys, "checkpoint", "rm", "t/s1M-left", "--home", str(home))[::2])
     assert "run 'pupil'" in err and "teacher" in err
     code, _, err = run(capsys, "checkpoint", "rm", "t/s0-left", "--home", str(home))  # a finished run needs nothing

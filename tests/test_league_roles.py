@@ -139,7 +139,7 @@ def tictactoe_trainer(tmp_path):
     """A league run of tic-tac-toe built (not trained), its first moment taken."""
     league = League.open(tmp_path / "h")
     cfg = TrainConfig.from_dict({"env": TTT, "run": "r", "games": 8, "eval_games": 0, "league": {}})
-    league.create_run("r", cfg.env, cfg.to_dict(), algo=cfg.algo)
+    league.roster.create_run("r", cfg.env, cfg.to_dict(), algo=cfg.algo)
     trainer = Trainer(league, cfg)
     trainer.moments.write("start")
     yield trainer, league
@@ -159,7 +159,7 @@ def trained(learner) -> dict[str, torch.Tensor]:
 
 
 def saved_weights(league: League, name: str) -> dict[str, torch.Tensor]:
-    (row,) = [p for p in league.players(kind="snapshot") if p.name == name]
+    (row,) = [p for p in league.roster.players(kind="snapshot") if p.name == name]
     tensors, _ = load_snapshot(league.home / row.path)
     return tensors
 
@@ -177,7 +177,7 @@ def test_a_main_exploiter_restarts_from_its_first_weights_at_its_snapshot(tictac
         assert torch.equal(v, first[k]), k
     for k, v in weights(main.net).items():  # a main agent keeps learning from where it stands
         assert torch.equal(v, main_taught[k]), k
-    rows = {p.name: p for p in league.players(kind="snapshot")}
+    rows = {p.name: p for p in league.roster.players(kind="snapshot")}
     assert rows["s3k-mainx"].meta["league_role"] == "main_exploiter" and rows["s3k-main"].meta["league_role"] == "main"
     assert "s3k-leaguex1" not in rows, "only the learners whose snapshot was due"
     assert trainer.roles.since == [3000, 3000, 0, 0]
@@ -214,7 +214,7 @@ def test_the_league_layout_gives_each_learner_its_games_one_seat_each_alternatin
 
 def league_rows(home) -> list:
     with League.open(home) as league:
-        return league.players(kind="snapshot")
+        return league.roster.players(kind="snapshot")
 
 
 @pytest.mark.slow
@@ -248,7 +248,7 @@ def test_marl_train_league_alphastar_end_to_end_killed_and_resumed(tmp_path, cap
     state["first"][1]["net"] = {k: v + 1.0 for k, v in state["first"][1]["net"].items()}
     torch.save(state, tmp_path / "h" / "runs" / "r" / "state.pt")
     with League.open(home) as league:
-        cfg = TrainConfig.from_dict(league.get_run("r").config)
+        cfg = TrainConfig.from_dict(league.roster.get_run("r").config)
         trainer = Trainer(league, cfg)
         trainer.restore()
         trainer._unlock()

@@ -140,7 +140,7 @@ def test_a_killed_mappo_run_resumes_with_its_trained_critic(tmp_path, capsys, mo
     assert code == 0, err
     assert loaded and all(torch.equal(v, loaded[0][k]) for k, v in critic.items())
     with League.open(home) as league:
-        assert league.get_run("r").status == "finished"
+        assert league.roster.get_run("r").status == "finished"
 
 
 @pytest.mark.parametrize("algo", ["mappo", "poca"])

@@ -346,17 +346,18 @@ def test_load_win_rates_from_league(tmp_path: Path) -> None:
 
     lg = League.open(home=tmp_path / "league")
     try:
-        lg.create_run("r1", "pong", {})
-        lg.ensure_bots("pong", ["cpu"])
-        cpu = next(p.id for p in lg.players("pong", kind="bot"))
-        snaps = [lg.add_snapshot(env="pong", run="r1", name=f"s{i}", path=f"/x/s{i}.pt", sha256="0" * 64).id
+        lg.roster.create_run("r1", "pong", {})
+        lg.roster.ensure_bots("pong", ["cpu"])
+        cpu = next(p.id for p in lg.roster.players("pong", kind="bot"))
+        snaps = [lg.roster.add_snapshot(env="pong", run="r1", name=f"s{i}", path=f"/x/s{i}.pt", sha256="0" * 64).id
                  for i in range(3)]
         learner = snaps[-1]
         games = [(learner, snaps[0], 1.0), (snaps[1], learner, 1.0), (learner, cpu, 0.5), (snaps[0], snaps[1], 0.0),
                  (learner, snaps[0], 0.0)]
-        match = lg.create_match("pong", "training")
-        lg.record_games(match, [GameResult(env="pong", players=(a, b), seed=i, scores=(s, 1 - s), outcome=(s, 1 - s),
-                                           length=10, truncated=False) for i, (a, b, s) in enumerate(games)])
+        match = lg.ledger.create_match("pong", "training")
+        lg.ledger.record_games(match, [GameResult(env="pong", players=(a, b), seed=i, scores=(s, 1 - s),
+                                                  outcome=(s, 1 - s), length=10, truncated=False)
+                                       for i, (a, b, s) in enumerate(games)])
         got = load_win_rates(lg, "pong", [learner])
     finally:
         lg.close()

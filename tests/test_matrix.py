@@ -134,7 +134,8 @@ def league(tmp_path: Path) -> League:
 
 
 def _snap(lg: League, name: str, run: str | None = None, step: int = 0) -> PlayerRow:
-    return lg.add_snapshot(env=ENV, run=run, name=name, path=f"/snaps/{name}.safetensors", sha256="0" * 64, step=step)
+    return lg.roster.add_snapshot(env=ENV, run=run, name=name, path=f"/snaps/{name}.safetensors", sha256="0" * 64,
+                                  step=step)
 
 
 def _game(a: int, b: int, score_a: float, seed: int) -> GameResult:
@@ -145,22 +146,22 @@ def _game(a: int, b: int, score_a: float, seed: int) -> GameResult:
 def _play(lg: League, a: PlayerRow, b: PlayerRow, wins: int, draws: int, losses: int) -> None:
     """Record A's wins, draws and losses against B: single games on distinct seeds, seats alternating."""
     results = [1.0] * wins + [0.5] * draws + [0.0] * losses
-    m = lg.create_match(ENV, "match")
-    lg.record_games(m, [_game(a.id, b.id, s, k) if k % 2 == 0 else _game(b.id, a.id, 1.0 - s, k)
-                        for k, s in enumerate(results)])
+    m = lg.ledger.create_match(ENV, "match")
+    lg.ledger.record_games(m, [_game(a.id, b.id, s, k) if k % 2 == 0 else _game(b.id, a.id, 1.0 - s, k)
+                               for k, s in enumerate(results)])
 
 
 def test_pair_records_count_game_pairs_as_one_unit(league: League) -> None:
     a, b = _snap(league, "a"), _snap(league, "b")
-    m = league.create_match(ENV, "match")
-    league.record_games(m, [
+    m = league.ledger.create_match(ENV, "match")
+    league.ledger.record_games(m, [
         _game(a.id, b.id, 1.0, 0), _game(b.id, a.id, 0.0, 0),  # seed 0: A wins both -> one unit for A
         _game(a.id, b.id, 1.0, 1), _game(b.id, a.id, 1.0, 1),  # seed 1: the seat decides -> level, no unit
         _game(a.id, b.id, 0.0, 2), _game(b.id, a.id, 0.5, 2),  # seed 2: 0.5 of 2 for A -> unit for B
         _game(a.id, b.id, 0.5, 3),                             # unpaired draw: no unit
         _game(b.id, a.id, 0.0, 4),                             # unpaired A win: a unit
     ])
-    games, wins, draws, losses, units = pair_records(league.games(env=ENV), [a.id, b.id])
+    games, wins, draws, losses, units = pair_records(league.ledger.games(env=ENV), [a.id, b.id])
     assert games[0, 1] == games[1, 0] == 8
     assert (wins[0, 1], draws[0, 1], losses[0, 1]) == (4, 2, 2)
     assert (wins[1, 0], losses[1, 0]) == (2, 4)
@@ -287,8 +288,8 @@ def test_cli_matrix_table_json_and_png(home: Path, capsys, tmp_path: Path) -> No
 
 def test_cli_matrix_command_plays_the_missing_games(home: Path, capsys) -> None:
     with League.open(home=home) as lg:
-        lg.ensure_bots(ENV, ["random", "cpu"])
-        cpu, rnd = (p for p in sorted(lg.players(env=ENV), key=lambda p: p.name))
+        lg.roster.ensure_bots(ENV, ["random", "cpu"])
+        cpu, rnd = (p for p in sorted(lg.roster.players(env=ENV), key=lambda p: p.name))
         _play(lg, cpu, rnd, 3, 0, 0)
     code, out, err = run(capsys, "league", "matrix", "--min-games", "6", "--json")
     data = json.loads(out)
@@ -320,10 +321,10 @@ def test_cli_matrix_errors_are_one_line(home: Path, capsys, tmp_path: Path) -> N
 
 
 def test_matrix_of_a_run_keeps_its_snapshots_and_the_bots(league: League) -> None:
-    league.create_run("r1", ENV, {})
-    league.create_run("r2", ENV, {})
-    league.ensure_bots(ENV, ["random"])
-    rnd = league.players(env=ENV, kind="bot")[0]
+    league.roster.create_run("r1", ENV, {})
+    league.roster.create_run("r2", ENV, {})
+    league.roster.ensure_bots(ENV, ["random"])
+    rnd = league.roster.players(env=ENV, kind="bot")[0]
     x1, x2, y1 = _snap(league, "x1", "r1", 10), _snap(league, "x2", "r1", 20), _snap(league, "y1", "r2", 10)
     for s in (x1, x2, y1):
         _play(league, s, rnd, 8, 0, 4)

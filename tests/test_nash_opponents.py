@@ -26,13 +26,13 @@ KUHN = "openspiel:kuhn_poker"
 @pytest.fixture
 def league(tmp_path: Path) -> League:
     lg = League(f"sqlite:///{tmp_path}/league.db")
-    lg.create_run("r", ENV, {})
+    lg.roster.create_run("r", ENV, {})
     yield lg
     lg.close()
 
 
 def _snap(lg: League, name: str) -> PlayerRow:
-    return lg.add_snapshot(env=ENV, run="r", name=name, path=f"/snaps/{name}.safetensors", sha256="0" * 64)
+    return lg.roster.add_snapshot(env=ENV, run="r", name=name, path=f"/snaps/{name}.safetensors", sha256="0" * 64)
 
 
 def _play(lg: League, a: PlayerRow, b: PlayerRow, results: list[tuple[float, float]]) -> None:
@@ -44,7 +44,7 @@ def _play(lg: League, a: PlayerRow, b: PlayerRow, results: list[tuple[float, flo
             ((b.id, a.id), (1 - pts, pts), (-score, score))
         games.append(GameResult(env=ENV, players=players, seed=k, scores=scores, outcome=outcome, length=10,
                                 truncated=False))
-    lg.record_games(lg.create_match(ENV, "match"), games)
+    lg.ledger.record_games(lg.ledger.create_match(ENV, "match"), games)
 
 
 def _wins(n: int, losses: int = 0) -> list[tuple[float, float]]:
@@ -87,8 +87,8 @@ def test_nash_opponents_follow_a_hand_solved_matrix(league: League) -> None:
 
 
 def test_the_mixture_a_run_had_at_an_earlier_step(league: League) -> None:
-    a, b, c = (league.add_snapshot(env=ENV, run="r", name=n, path=f"/snaps/{n}.safetensors", sha256="0" * 64,
-                                   step=step) for n, step in (("a", 0), ("b", 10), ("c", 20)))
+    a, b, c = (league.roster.add_snapshot(env=ENV, run="r", name=n, path=f"/snaps/{n}.safetensors", sha256="0" * 64,
+                                          step=step) for n, step in (("a", 0), ("b", 10), ("c", 20)))
     _play(league, a, b, _wins(3, 1))  # the cycle of _rps_league: (1/2, 1/4, 1/4) over all three
     _play(league, a, c, _wins(1, 3))
     _play(league, b, c, _wins(4))
@@ -117,7 +117,7 @@ def test_a_snapshot_not_measured_yet_weighs_nothing_and_no_games_means_no_mixtur
     assert found.over == (a.id, b.id) and found.weights == {a.id: 1.0, b.id: 0.0, c.id: 0.0}
     with pytest.raises(LeagueError, match="no run named"):
         run_nash(league, "nope")
-    league.create_run("empty", ENV, {})
+    league.roster.create_run("empty", ENV, {})
     with pytest.raises(LeagueError, match="no Nash mixture yet"):
         nash_mixture(league, "empty")
 
@@ -126,7 +126,7 @@ def test_payoff_in_score_units_gives_another_mixture(league: League, tmp_path: P
     # A wins 3 small pots (+1) and loses 1 big one (-5): 3 of 4 in points, -0.5 a game in score
     a, b = _snap(league, "a"), _snap(league, "b")
     _play(league, a, b, [(1.0, 1.0)] * 3 + [(0.0, -5.0)])
-    table = league.games(env=ENV)
+    table = league.ledger.games(env=ENV)
     np.testing.assert_allclose(pair_payoffs(table, [a.id, b.id], "points"), [[0.0, 0.25], [-0.25, 0.0]])
     np.testing.assert_allclose(pair_payoffs(table, [a.id, b.id], "score"), [[0.0, -0.5], [0.5, 0.0]])
     assert nash_mixture(league, "r") == {"r/a": 1.0}
@@ -181,9 +181,9 @@ def test_a_nash_run_through_the_cli_measures_every_pair_and_shows_its_mixture(tm
     assert set(report["nash"]) <= set(report["snapshots"])
     league = League.open(home=home, readonly=True)
     try:
-        same = league.same_weights(KUHN)
-        ids = sorted({same.get(p.id, p.id) for p in league.players(env=KUHN, kind="snapshot")})
-        table = league.games(env=KUHN, players=ids)
+        same = league.ledger.same_weights(KUHN)
+        ids = sorted({same.get(p.id, p.id) for p in league.roster.players(env=KUHN, kind="snapshot")})
+        table = league.ledger.games(env=KUHN, players=ids)
         met = {frozenset(pair) for pair in zip(table.player_a.tolist(), table.player_b.tolist(), strict=True)}
         missing = [(x, y) for i, x in enumerate(ids) for y in ids[i + 1:] if frozenset((x, y)) not in met]
         assert len(ids) >= 3 and missing == []  # the matrix of the run's snapshots is whole
@@ -225,7 +225,7 @@ def test_a_psro_oracle_restarts_from_its_first_weights_after_each_snapshot_but_t
         cfg = TrainConfig.from_dict({"env": KUHN, "run": "r", "agents": 1, "games": 8, "eval_games": 2,
                                      "restart_at_snapshot": True, "snapshot_steps": 1000,
                                      "opponents": {"mode": "nash", "nash_payoff": "score"}})
-        league.create_run("r", cfg.env, cfg.to_dict(), algo=cfg.algo)
+        league.roster.create_run("r", cfg.env, cfg.to_dict(), algo=cfg.algo)
         trainer = Trainer(league, cfg)
         trainer.moments.write("start")
         learner = trainer.learners[0]
@@ -241,7 +241,7 @@ def test_a_psro_oracle_restarts_from_its_first_weights_after_each_snapshot_but_t
         taught = teach()
         trainer.state.steps = 1000
         trainer.moments.write("steps")
-        (row,) = [p for p in league.players(kind="snapshot") if p.name == "s1k"]
+        (row,) = [p for p in league.roster.players(kind="snapshot") if p.name == "s1k"]
         tensors, _ = load_snapshot(league.home / row.path)
         assert all(torch.equal(tensors[k], taught[k]) for k in taught)  # the snapshot holds what it learned
         assert all(torch.equal(v, first[k]) for k, v in _weights(learner.net).items())  # then the restart
@@ -276,8 +276,8 @@ def test_a_restarted_oracle_learns_at_the_full_rate_even_when_its_interval_is_sh
     assert lines and all(line["learner/lr"] == pytest.approx(2e-3) for line in lines)  # each update: a restart's
     league = League.open(home=home, readonly=True)
     try:
-        rows = [p for p in league.players(env=KUHN, kind="snapshot") if p.run == report["run"]]
-        same = league.same_weights(KUHN)
+        rows = [p for p in league.roster.players(env=KUHN, kind="snapshot") if p.run == report["run"]]
+        same = league.ledger.same_weights(KUHN)
         assert len(rows) >= 3 and not same  # each snapshot learned something of its own from the first weights
     finally:
         league.close()

@@ -27,26 +27,26 @@ def _game(a: int, b: int, score_a: float, seed: int) -> GameResult:
 
 def _play(lg: League, a: PlayerRow, b: PlayerRow, wins: int, losses: int) -> None:
     results = [1.0] * wins + [0.0] * losses
-    m = lg.create_match(ENV, "match")
-    lg.record_games(m, [_game(a.id, b.id, s, k) if k % 2 == 0 else _game(b.id, a.id, 1.0 - s, k)
-                        for k, s in enumerate(results)])
+    m = lg.ledger.create_match(ENV, "match")
+    lg.ledger.record_games(m, [_game(a.id, b.id, s, k) if k % 2 == 0 else _game(b.id, a.id, 1.0 - s, k)
+                               for k, s in enumerate(results)])
 
 
 def _snap(lg: League, run: str, name: str, step: int, learner: str | None) -> PlayerRow:
-    return lg.add_snapshot(env=ENV, run=run, name=name, path=f"/snaps/{run}/{name}.safetensors", sha256="0" * 64,
-                           step=step, meta={"learner": learner} if learner else {})
+    return lg.roster.add_snapshot(env=ENV, run=run, name=name, path=f"/snaps/{run}/{name}.safetensors", sha256="0" * 64,
+                                  step=step, meta={"learner": learner} if learner else {})
 
 
 def _bots(lg: League) -> tuple[PlayerRow, PlayerRow]:
-    lg.ensure_bots(ENV, ["random", "cpu"])
-    by_name = {p.name: p for p in lg.players(env=ENV, kind="bot")}
+    lg.roster.ensure_bots(ENV, ["random", "cpu"])
+    by_name = {p.name: p for p in lg.roster.players(env=ENV, kind="bot")}
     return by_name["random"], by_name["cpu"]
 
 
 def _two_learner_run(lg: League, run: str = "r1") -> None:
     """``left`` gets better with training (10-10, 14-6, 18-2 against random), ``right`` worse (13-7, 10-10, 7-13);
     cpu beats random."""
-    lg.create_run(run, ENV, {})
+    lg.roster.create_run(run, ENV, {})
     rnd, cpu = _bots(lg)
     _play(lg, cpu, rnd, 16, 4)
     for k, step in enumerate((100_000, 200_000, 300_000)):
@@ -89,7 +89,7 @@ def test_run_curves_a_line_per_learner_and_the_bots(league: League) -> None:
 
 
 def test_one_network_run_is_one_line_named_after_the_run(league: League) -> None:
-    league.create_run("solo", ENV, {})
+    league.roster.create_run("solo", ENV, {})
     rnd, _ = _bots(league)
     for k in range(2):
         _play(league, _snap(league, "solo", f"ep{k}", 1000 * (k + 1), None), rnd, 6 + k, 4 - k)
@@ -114,7 +114,7 @@ def test_write_run_plot_writes_a_valid_png(league: League, tmp_path: Path) -> No
 
 def test_write_run_plot_errors(league: League, tmp_path: Path) -> None:
     _two_learner_run(league)
-    league.create_run("empty", ENV, {})
+    league.roster.create_run("empty", ENV, {})
     with pytest.raises(MarlError, match="no run named 'nope' \\(runs: r1, empty\\)"):
         write_run_plot(league, "nope", tmp_path / "x.png")
     with pytest.raises(MarlError, match="run 'empty' has no rated snapshots yet"):
@@ -189,7 +189,7 @@ def test_braille_chart_fits_its_width(league: League) -> None:
 def _twin_run(lg: League, run: str = "twin") -> None:
     """A team of two learners with the same record at every moment (as a team's members rated by the same team
     games): their curves are equal."""
-    lg.create_run(run, ENV, {})
+    lg.roster.create_run(run, ENV, {})
     rnd, cpu = _bots(lg)
     _play(lg, cpu, rnd, 16, 4)
     for k, step in enumerate((100_000, 200_000, 300_000)):
@@ -202,7 +202,7 @@ def _twin_run(lg: League, run: str = "twin") -> None:
 def _bounded_run(lg: League, run: str = "clean") -> None:
     """ep0 scores 10-10 against random; ep1 wins every game (perfect), ep2 loses every game (zero): under --prior 0
     their maximum-likelihood ratings are infinite and the ones shown are bounds."""
-    lg.create_run(run, ENV, {})
+    lg.roster.create_run(run, ENV, {})
     rnd, cpu = _bots(lg)
     _play(lg, cpu, rnd, 16, 4)
     for k, (wins, losses) in enumerate(((10, 10), (10, 0), (0, 10))):
@@ -408,7 +408,7 @@ def test_cli_plot_errors_are_one_line(home: Path, capsys, tmp_path: Path) -> Non
     _one_line_error(*run(capsys, "league", "plot"), "no training runs in the league yet")
     with League.open(home=home) as lg:
         _two_learner_run(lg)
-        lg.create_run("fresh", ENV, {})
+        lg.roster.create_run("fresh", ENV, {})
     _one_line_error(*run(capsys, "league", "plot"), "run 'fresh' has no rated snapshots yet")
     _one_line_error(*run(capsys, "league", "plot", "--run", "nope"), "no run named 'nope'")
     _one_line_error(*run(capsys, "league", "plot", "--run", "r1", "--out", str(tmp_path / "x" / "p.png")),

@@ -55,7 +55,7 @@ def test_a_plain_postgresql_url_means_psycopg_3(pg_url: str, capsys: pytest.Capt
         plain = pg_url.replace("postgresql+psycopg://", f"{scheme}://")
         with League(plain) as lg:
             assert lg.url.drivername == "postgresql+psycopg" and lg.is_postgres and not lg.is_sqlite
-            lg.ensure_bots(ENV, ["random"])
+            lg.roster.ensure_bots(ENV, ["random"])
     code, out, err = run(capsys, "checkpoint", "list", "--db", pg_url.replace("+psycopg", ""), "--json")
     assert code == 0 and out.strip() == "[]", err
 
@@ -74,7 +74,7 @@ def test_every_command_takes_the_url_from_marl_db(pg_url: str, tmp_path, monkeyp
     assert sorted(r["policy"] for r in json.loads(out)) == ["cpu", "random"]
     assert not (tmp_path / "home" / "league.db").exists()
     with League(pg_url, readonly=True) as lg:
-        assert lg.count_games("pong") == 4
+        assert lg.ledger.count_games("pong") == 4
 
 
 def test_a_read_only_league_cannot_write_even_by_hand(pg_url: str) -> None:
@@ -149,8 +149,8 @@ def test_writes_go_on_across_a_server_restart(pg_server, pg_url: str, pg_restart
     (test_a_write_whose_commit_is_cut_off_is_not_retried): the stop lands in one now and then under load."""
     notes: list[str] = []
     lg = League(pg_url, note=notes.append)
-    lg.ensure_bots(ENV, ["a", "b", "c"])
-    a, b, c = (p.id for p in lg.players())
+    lg.roster.ensure_bots(ENV, ["a", "b", "c"])
+    a, b, c = (p.id for p in lg.roster.players())
     written = threading.Event()
     times: dict[str, float] = {}
 
@@ -170,8 +170,9 @@ def test_writes_go_on_across_a_server_restart(pg_server, pg_url: str, pg_restart
     batches = 0
     deadline = time.monotonic() + 60
     while (not times.get("up") or stamps[-1] < times["up"] + 1.0) and time.monotonic() < deadline:
-        ids += lg.create_match_with_games(ENV, "tournament", None, _games(a if batches % 2 else c, b, 10, 10 * batches),
-                                          key=f"restart-batch-{batches}")[1]
+        ids += lg.ledger.create_match_with_games(ENV, "tournament", None, _games(a if batches % 2 else c, b, 10,
+                                                                                 10 * batches),
+                                                 key=f"restart-batch-{batches}")[1]
         stamps.append(time.monotonic())
         batches += 1
         if batches == 20:
@@ -180,12 +181,12 @@ def test_writes_go_on_across_a_server_restart(pg_server, pg_url: str, pg_restart
     thread.join(30)
     assert "up" in times and stamps[-1] > times["up"], "the writes never went on after the restart"
     assert len(ids) == len(set(ids)) >= 10 * (batches - 1)  # (a batch done again after a cut COMMIT: stored once)
-    assert lg.count_games() == 10 * batches
-    assert sorted(lg.games().seed.tolist()) == list(range(10 * batches))  # every batch once, none lost
-    stored = {p.id: (p.elo, p.games) for p in lg.players()}
+    assert lg.ledger.count_games() == 10 * batches
+    assert sorted(lg.ledger.games().seed.tolist()) == list(range(10 * batches))  # every batch once, none lost
+    stored = {p.id: (p.elo, p.games) for p in lg.roster.players()}
     assert sum(g for _, g in stored.values()) == 20 * batches
-    lg.recompute_online_elo()
-    assert {p.id: (p.elo, p.games) for p in lg.players()} == stored
+    lg.ledger.recompute_online_elo()
+    assert {p.id: (p.elo, p.games) for p in lg.roster.players()} == stored
     assert len(notes) == 1 and "unreachable, retrying" in notes[0], notes
     gap = max(t1 - t0 for t0, t1 in zip(stamps, stamps[1:], strict=False))
     after = min(t for t in stamps if t > times["up"]) - times["up"]
@@ -198,14 +199,14 @@ def test_writes_go_on_across_a_server_restart(pg_server, pg_url: str, pg_restart
 def test_a_server_that_stays_away_ends_the_command_with_exit_4(pg_server, pg_url: str, pg_restart) -> None:
     notes: list[str] = []
     lg = League(pg_url, note=notes.append, reconnect_for=1.5)
-    lg.ensure_bots(ENV, ["a", "b"])
-    a, b = (p.id for p in lg.players())
-    match = lg.create_match(ENV, "match")
+    lg.roster.ensure_bots(ENV, ["a", "b"])
+    a, b = (p.id for p in lg.roster.players())
+    match = lg.ledger.create_match(ENV, "match")
     stop_postgres(pg_server)
     try:
         began = time.monotonic()
         with pytest.raises(LeagueIOError) as exc:
-            lg.record_games(match, _games(a, b, 4, 0))
+            lg.ledger.record_games(match, _games(a, b, 4, 0))
         waited = time.monotonic() - began
     finally:
         start_postgres(pg_server)
@@ -213,19 +214,19 @@ def test_a_server_that_stays_away_ends_the_command_with_exit_4(pg_server, pg_url
     assert exc.value.exit_code == 4 and "\n" not in msg and "unreachable for 2 s" in msg, msg
     assert waited >= 1.5  # it retried for its reconnect time before it gave up
     assert len(notes) == 1 and "unreachable, retrying for up to 2 s" in notes[0]
-    assert lg.count_games() == 0  # nothing half-written; the league works again
-    lg.record_games(match, _games(a, b, 4, 0))
-    assert lg.count_games() == 4
+    assert lg.ledger.count_games() == 0  # nothing half-written; the league works again
+    lg.ledger.record_games(match, _games(a, b, 4, 0))
+    assert lg.ledger.count_games() == 4
     lg.close()
 
 
 def test_a_league_error_is_not_mistaken_for_a_lost_server(pg_url: str) -> None:
     """A unique clash or a bad name is an error at once, not a wait for the server."""
     with League(pg_url, reconnect_for=30) as lg:
-        lg.create_run("r", ENV, {})
+        lg.roster.create_run("r", ENV, {})
         began = time.monotonic()
         with pytest.raises(LeagueError, match="already exists"):
-            lg.create_run("r", ENV, {})
+            lg.roster.create_run("r", ENV, {})
         assert time.monotonic() - began < 5 and lg.reconnects == 0
 
 
@@ -245,9 +246,9 @@ def test_a_write_whose_commit_is_cut_off_is_not_retried(pg_url: str) -> None:
     """The connection dies as COMMIT goes out: whether it was stored cannot be known from here, so the unit is not
     played again (it could count twice); one line, exit 4. (Here the server had not committed it: nothing stored.)"""
     lg = League(pg_url, reconnect_for=30)
-    lg.ensure_bots(ENV, ["a", "b"])
-    a, b = (p.id for p in lg.players())
-    match = lg.create_match(ENV, "match")
+    lg.roster.ensure_bots(ENV, ["a", "b"])
+    a, b = (p.id for p in lg.roster.players())
+    match = lg.ledger.create_match(ENV, "match")
     killer = create_engine(pg_url)
 
     def cut(session) -> None:  # the server drops this very connection just before COMMIT is sent
@@ -257,14 +258,14 @@ def test_a_write_whose_commit_is_cut_off_is_not_retried(pg_url: str) -> None:
 
     event.listen(lg._sessions, "before_commit", cut)
     with pytest.raises(LeagueIOError) as exc:
-        lg.record_games(match, _games(a, b, 4, 0))
+        lg.ledger.record_games(match, _games(a, b, 4, 0))
     event.remove(lg._sessions, "before_commit", cut)
     killer.dispose()
     msg = str(exc.value)
     assert "\n" not in msg and "while committing" in msg and "may or may not be stored" in msg, msg
-    assert lg.reconnects == 0 and lg.count_games() == 0
-    lg.record_games(match, _games(a, b, 4, 0))  # the league goes on
-    assert lg.count_games() == 4
+    assert lg.reconnects == 0 and lg.ledger.count_games() == 0
+    lg.ledger.record_games(match, _games(a, b, 4, 0))  # the league goes on
+    assert lg.ledger.count_games() == 4
     lg.close()
 
 
@@ -273,8 +274,8 @@ def test_a_keyed_write_whose_commit_is_cut_off_is_done_again_once(pg_url: str) -
     its games are stored once."""
     notes: list[str] = []
     lg = League(pg_url, reconnect_for=30, note=notes.append)
-    lg.ensure_bots(ENV, ["a", "b"])
-    a, b = (p.id for p in lg.players())
+    lg.roster.ensure_bots(ENV, ["a", "b"])
+    a, b = (p.id for p in lg.roster.players())
     killer = create_engine(pg_url)
     cuts: list[int] = []
 
@@ -285,9 +286,9 @@ def test_a_keyed_write_whose_commit_is_cut_off_is_done_again_once(pg_url: str) -
                 conn.execute(text("SELECT pg_terminate_backend(:pid)"), {"pid": cuts[0]})
 
     event.listen(lg._sessions, "before_commit", cut)
-    match, ids = lg.create_match_with_games(ENV, "eval", {}, _games(a, b, 4, 0), key="gauntlet/r/1")
+    match, ids = lg.ledger.create_match_with_games(ENV, "eval", {}, _games(a, b, 4, 0), key="gauntlet/r/1")
     event.remove(lg._sessions, "before_commit", cut)
     killer.dispose()
     assert len(cuts) == 1 and len(ids) == 4 and lg.reconnects == 1 and len(notes) == 1
-    assert lg.count_games() == 4 and set(lg.keyed_matches("gauntlet/r/")) == {"gauntlet/r/1"}
+    assert lg.ledger.count_games() == 4 and set(lg.ledger.keyed_matches("gauntlet/r/")) == {"gauntlet/r/1"}
     lg.close()

@@ -157,13 +157,13 @@ def test_marl_league_predict_and_marl_match_say_what_the_ladder_expects(tmp_path
     code, out, err = run(capsys, "league", "predict", "cpu", "random", "--env", "pong", "--home", home)
     assert code == 2 and err.count("\n") == 1 and "no rated games" in err
     with League.open(home) as league:
-        league.ensure_bots("pong", ["random", "cpu"])
-        rnd, cpu = (league.find_players(n, "pong")[0].id for n in ("random", "cpu"))
-        mid = league.create_match("pong", "match")
-        league.record_games(mid, [GameResult("pong", (cpu, rnd) if i % 2 else (rnd, cpu), seed=i,
-                                             scores=(21, 3) if i % 2 else (3, 21),
-                                             outcome=(1.0, 0.0) if i % 2 else (0.0, 1.0), length=100,
-                                             truncated=False) for i in range(20)])
+        league.roster.ensure_bots("pong", ["random", "cpu"])
+        rnd, cpu = (league.roster.find_players(n, "pong")[0].id for n in ("random", "cpu"))
+        mid = league.ledger.create_match("pong", "match")
+        league.ledger.record_games(mid, [GameResult("pong", (cpu, rnd) if i % 2 else (rnd, cpu), seed=i,
+                                                    scores=(21, 3) if i % 2 else (3, 21),
+                                                    outcome=(1.0, 0.0) if i % 2 else (0.0, 1.0), length=100,
+                                                    truncated=False) for i in range(20)])
         expect = Forecaster.of_league(league, "pong").predict("cpu", "random", 50)
     data = run_json(capsys, "league", "predict", "cpu", "random", "--env", "pong", "--games", "50", "--home", home)
     assert (data["score"], data["low"], data["high"]) == (round(expect.score, 4), round(expect.low, 4),

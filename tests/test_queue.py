@@ -20,13 +20,13 @@ SHORT = {"points_to_win": 1}
 @pytest.fixture
 def league(db_url, tmp_path):
     lg = League(db_url, home=tmp_path / "home")
-    lg.ensure_bots("pong", ["random", "cpu"])
+    lg.roster.ensure_bots("pong", ["random", "cpu"])
     yield lg
     lg.close()
 
 
 def _bots(league):
-    return league.find_players("cpu", env="pong")[0], league.find_players("random", env="pong")[0]
+    return league.roster.find_players("cpu", env="pong")[0], league.roster.find_players("random", env="pong")[0]
 
 
 def _games(league) -> int:
@@ -38,7 +38,7 @@ def _queue_match(league, games=40, job_rounds=4, batch="m1", first_seed=100):
     a, b = _bots(league)
     jobs = games_jobs(league, [a], b, games=games, first_seed=first_seed, match_kind="match", env_options=SHORT,
                       job_rounds=job_rounds)
-    return league.enqueue(batch, jobs)
+    return league.queue.enqueue(batch, jobs)
 
 
 def test_a_match_cut_into_jobs_plays_the_seeds_of_the_whole_match(league):
@@ -46,12 +46,12 @@ def test_a_match_cut_into_jobs_plays_the_seeds_of_the_whole_match(league):
     job's games stored under its key in one match; the combined report is the one match's."""
     ids = _queue_match(league)
     assert len(ids) == 5
-    jobs = league.jobs(batch="m1")
+    jobs = league.queue.jobs(batch="m1")
     assert [j.spec["first_seed"] for j in jobs] == [100, 104, 108, 112, 116]
     assert all(j.spec["rounds"] == 4 and j.state == "queued" for j in jobs)
     report = run_worker(league, WorkerOptions(until_empty=True, poll=0.01))
     assert (report.done, report.failed, report.games) == (5, 0, 40)
-    jobs = league.jobs(batch="m1")
+    jobs = league.queue.jobs(batch="m1")
     assert {j.state for j in jobs} == {"done"}
     with league.session(readonly=True) as s:
         keys = sorted(s.execute(select(Match.work_key).where(Match.work_key.like("job:%"))).scalars())
@@ -90,7 +90,7 @@ class _Clock:
 
 
 def _clock(league) -> _Clock:
-    league.clock = clock = _Clock()
+    league.queue.clock = clock = _Clock()
     return clock
 
 
@@ -99,94 +99,96 @@ def test_a_job_finished_twice_counts_once(league):
     stored, and A learns it lost the job at its next heartbeat."""
     (jid,) = _queue_match(league, games=8, job_rounds=4)
     clock = _clock(league)
-    wa, wb = league.add_worker("a", "h", 1), league.add_worker("b", "h", 2)
-    ja = league.claim(wa)
+    wa, wb = league.queue.add_worker("a", "h", 1), league.queue.add_worker("b", "h", 2)
+    ja = league.queue.claim(wa)
     assert ja is not None and ja.id == jid and ja.tries == 1
-    assert league.claim(wb) is None  # leased and alive: not for B
+    assert league.queue.claim(wb) is None  # leased and alive: not for B
     clock.advance(0.19)
-    assert league.claim(wb, scavenge=0.2) is None  # A silent for 0.19 s < 0.2 s: still A's
+    assert league.queue.claim(wb, scavenge=0.2) is None  # A silent for 0.19 s < 0.2 s: still A's
     clock.advance(0.11)
-    jb = league.claim(wb, scavenge=0.2)  # A silent for 0.3 s > 0.2 s: the lease lapsed
+    jb = league.queue.claim(wb, scavenge=0.2)  # A silent for 0.3 s > 0.2 s: the lease lapsed
     assert jb is not None and jb.id == jid and jb.tries == 2 and jb.worker == "b"
-    assert league.worker_beat(wa, jid) is False and league.worker_beat(wb, jid) is True
+    assert league.queue.worker_beat(wa, jid) is False and league.queue.worker_beat(wb, jid) is True
     played = play_job(league, jb)
-    assert league.finish_job(jid, wb, games=played.games, match_kind="match", params=played.params,
-                             result=played.result, seconds=played.seconds)
+    assert league.queue.finish_job(jid, wb, games=played.games, match_kind="match", params=played.params,
+                                   result=played.result, seconds=played.seconds)
     assert _games(league) == 8
     again = play_job(league, ja)
     assert again.games == played.games  # the same job plays the same games, whoever plays it
-    assert not league.finish_job(jid, wa, games=again.games, match_kind="match", params=again.params,
-                                 result=again.result)
+    assert not league.queue.finish_job(jid, wa, games=again.games, match_kind="match", params=again.params,
+                                       result=again.result)
     assert _games(league) == 8
-    (w_b,) = [w for w in league.workers() if w.name == "b"]
+    (w_b,) = [w for w in league.queue.workers() if w.name == "b"]
     assert (w_b.jobs_done, w_b.games) == (1, 8)
 
 
 def test_a_failing_job_backs_off_then_dies_with_its_error(league):
     a, b = _bots(league)
-    (jid,) = league.enqueue("bad", [NewJob(GAMES, "pong", {"a": [a.id], "b": 999_999, "rounds": 1, "first_seed": 0,
-                                                           "match_kind": "match"}, max_tries=2)])
+    (jid,) = league.queue.enqueue("bad", [NewJob(GAMES, "pong", {"a": [a.id], "b": 999_999, "rounds": 1,
+                                                                 "first_seed": 0,
+                                                                 "match_kind": "match"}, max_tries=2)])
     clock = _clock(league)
-    w = league.add_worker("w", "h", 1)
-    job = league.claim(w)
+    w = league.queue.add_worker("w", "h", 1)
+    job = league.queue.claim(w)
     out = play_leased(league, w, job, base_backoff=0.2)
     assert out.state == "failed" and "999999" in (out.error or "")
-    (row,) = league.jobs(ids=[jid])
+    (row,) = league.queue.jobs(ids=[jid])
     assert row.state == "queued" and row.not_before is not None and row.error
-    assert league.claim(w) is None  # waiting out its backoff
+    assert league.queue.claim(w) is None  # waiting out its backoff
     clock.advance(0.19)
-    assert league.claim(w) is None  # (0.2 s)
+    assert league.queue.claim(w) is None  # (0.2 s)
     clock.advance(0.02)
-    job = league.claim(w)
+    job = league.queue.claim(w)
     assert job is not None and job.tries == 2
     out = play_leased(league, w, job, base_backoff=0.2)
-    (row,) = league.jobs(ids=[jid])
+    (row,) = league.queue.jobs(ids=[jid])
     assert row.state == "dead" and "999999" in row.error and row.tries == 2
-    assert league.claim(w) is None
+    assert league.queue.claim(w) is None
     assert [backoff(t) for t in (1, 2, 3, 10)] == [10.0, 20.0, 40.0, 600.0]
 
 
 def test_silent_workers_kill_a_job_after_its_tries(league):
     a, b = _bots(league)
-    (jid,) = league.enqueue("x", [NewJob(GAMES, "pong", {"a": [a.id], "b": b.id, "rounds": 1, "first_seed": 0,
-                                                         "match_kind": "match"}, max_tries=1)])
+    (jid,) = league.queue.enqueue("x", [NewJob(GAMES, "pong", {"a": [a.id], "b": b.id, "rounds": 1, "first_seed": 0,
+                                                               "match_kind": "match"}, max_tries=1)])
     clock = _clock(league)
-    w = league.add_worker("w", "h", 1)
-    assert league.claim(w).id == jid
+    w = league.queue.add_worker("w", "h", 1)
+    assert league.queue.claim(w).id == jid
     clock.advance(0.15)
-    assert league.claim(w, scavenge=0.1) is None
-    (row,) = league.jobs(ids=[jid])
+    assert league.queue.claim(w, scavenge=0.1) is None
+    (row,) = league.queue.jobs(ids=[jid])
     assert row.state == "dead" and "silent" in row.error
 
 
 def test_jobs_wait_for_the_job_they_come_after(league):
     a, b = _bots(league)
     spec = {"a": [a.id], "b": b.id, "rounds": 1, "first_seed": 0, "match_kind": "match"}
-    first, second = league.enqueue("chain", [NewJob(GAMES, "pong", spec), NewJob(GAMES, "pong", spec)], chain=True)
-    w1, w2 = league.add_worker("1", "h", 1), league.add_worker("2", "h", 2)
-    assert league.claim(w1).id == first
-    assert league.claim(w2) is None  # the second waits for the first
-    league.cancel_jobs(ids=[first])
-    assert league.claim(w2).id == second  # an ended job (cancelled too) releases the next
+    first, second = league.queue.enqueue("chain", [NewJob(GAMES, "pong", spec), NewJob(GAMES, "pong", spec)],
+                                         chain=True)
+    w1, w2 = league.queue.add_worker("1", "h", 1), league.queue.add_worker("2", "h", 2)
+    assert league.queue.claim(w1).id == first
+    assert league.queue.claim(w2) is None  # the second waits for the first
+    league.queue.cancel_jobs(ids=[first])
+    assert league.queue.claim(w2).id == second  # an ended job (cancelled too) releases the next
 
 
 def test_cancel_stops_a_job_in_play_and_stores_nothing(league):
     (jid,) = _queue_match(league, games=8, job_rounds=4)
-    w = league.add_worker("w", "h", 1)
-    job = league.claim(w)
-    assert league.cancel_jobs(batch="m1") == 1
-    assert league.worker_beat(w, jid) is False
+    w = league.queue.add_worker("w", "h", 1)
+    job = league.queue.claim(w)
+    assert league.queue.cancel_jobs(batch="m1") == 1
+    assert league.queue.worker_beat(w, jid) is False
     played = play_job(league, job)
-    assert not league.finish_job(jid, w, games=played.games, match_kind="match", params=played.params)
-    assert _games(league) == 0 and league.job_counts("m1")["cancelled"] == 1
+    assert not league.queue.finish_job(jid, w, games=played.games, match_kind="match", params=played.params)
+    assert _games(league) == 0 and league.queue.job_counts("m1")["cancelled"] == 1
 
 
 def test_a_stopped_worker_gives_its_job_back_untried(league):
     (jid,) = _queue_match(league, games=8, job_rounds=4)
-    w = league.add_worker("w", "h", 1)
-    assert league.claim(w).tries == 1
-    league.stop_worker(w)
-    (row,) = league.jobs(ids=[jid])
+    w = league.queue.add_worker("w", "h", 1)
+    assert league.queue.claim(w).tries == 1
+    league.queue.stop_worker(w)
+    (row,) = league.queue.jobs(ids=[jid])
     assert (row.state, row.tries) == ("queued", 0)
 
 

@@ -30,12 +30,12 @@ SHORT = {"points_to_win": 1}
 
 def _league(url, home):
     lg = League(url, home=home)
-    lg.ensure_bots("pong", ["random", "cpu"])
+    lg.roster.ensure_bots("pong", ["random", "cpu"])
     return lg
 
 
 def _bots(league):
-    return league.find_players("cpu", env="pong")[0], league.find_players("random", env="pong")[0]
+    return league.roster.find_players("cpu", env="pong")[0], league.roster.find_players("random", env="pong")[0]
 
 
 def _stored(league) -> list[tuple[int, int]]:
@@ -66,19 +66,19 @@ def test_a_worker_killed_mid_lease_its_job_played_again_once_and_counted_once(db
     plays it again (its second try) and stores it once; every seed's pair of games is there exactly once."""
     league = _league(db_url, tmp_path / "h")
     cpu, rnd = _bots(league)
-    (jid,) = league.enqueue("k", games_jobs(league, [cpu], rnd, games=3000, first_seed=0, match_kind="match",
-                                            env_options=SHORT, job_rounds=1500))
+    (jid,) = league.queue.enqueue("k", games_jobs(league, [cpu], rnd, games=3000, first_seed=0, match_kind="match",
+                                                  env_options=SHORT, job_rounds=1500))
     first = _worker(db_url, tmp_path / "h", "--beat", "0.2", "--scavenge", "1")
-    _wait(lambda: league.jobs(ids=[jid])[0].state == "leased")
+    _wait(lambda: league.queue.jobs(ids=[jid])[0].state == "leased")
     os.kill(first.pid, signal.SIGKILL)
     first.wait()
-    assert league.jobs(ids=[jid])[0].state == "leased" and _stored(league) == []
+    assert league.queue.jobs(ids=[jid])[0].state == "leased" and _stored(league) == []
     second = _worker(db_url, tmp_path / "h", "--beat", "0.2", "--scavenge", "1", "--until-empty", "--json")
     out, err = second.communicate(timeout=180)
     assert second.returncode == 0, err
     report = json.loads(out)
     assert report["done"] == 1 and report["games"] == 3000
-    (job,) = league.jobs(ids=[jid])
+    (job,) = league.queue.jobs(ids=[jid])
     assert job.state == "done" and job.tries == 2 and job.worker.startswith("worker@")
     games = _stored(league)
     assert len(games) == 3000 and Counter(games) == Counter((s, k) for s in range(1500) for k in (0, 1))
@@ -91,8 +91,8 @@ def test_many_workers_at_once_play_every_job_once(db_url, tmp_path):
     one worker, every game stored once, no lock error anywhere."""
     league = _league(db_url, tmp_path / "h")
     cpu, rnd = _bots(league)
-    league.enqueue("many", games_jobs(league, [cpu], rnd, games=192, first_seed=0, match_kind="tournament",
-                                      env_options=SHORT, job_rounds=2))
+    league.queue.enqueue("many", games_jobs(league, [cpu], rnd, games=192, first_seed=0, match_kind="tournament",
+                                            env_options=SHORT, job_rounds=2))
     reports, errors = [], []
 
     def work(i: int) -> None:
@@ -112,7 +112,7 @@ def test_many_workers_at_once_play_every_job_once(db_url, tmp_path):
     assert errors == []
     assert sum(r.done for r in reports) == 48 and sum(r.failed + r.lost + r.counted for r in reports) == 0
     assert sum(r.games for r in reports) == 192
-    jobs = league.jobs(batch="many")
+    jobs = league.queue.jobs(batch="many")
     assert {j.state for j in jobs} == {"done"} and all(j.tries == 1 for j in jobs)
     games = _stored(league)
     assert Counter(games) == Counter((s, k) for s in range(96) for k in (0, 1))
@@ -151,7 +151,7 @@ def test_an_sprt_decided_across_two_workers_cancels_its_remaining_jobs(db_url, t
                       env_options=SHORT, sprt=settings)
     assert report.sprt["decision"] == local.sprt["decision"] == "H1"
     assert report.sprt["pairs"] == local.sprt["pairs"]
-    jobs = league.jobs(batch=queued.batch)
+    jobs = league.queue.jobs(batch=queued.batch)
     counts = Counter(j.state for j in jobs)
     assert counts["queued"] == counts["leased"] == counts["dead"] == 0
     assert counts["cancelled"] >= 90 and counts["done"] >= -(-local.sprt["pairs"] // 2)
@@ -206,7 +206,7 @@ def test_a_worker_with_only_the_url_plays_network_snapshots_from_the_league(db_u
 
     home = tmp_path / "h"
     league = _league(db_url, home)
-    league.create_run("r", "pong", {}, algo="ppo")
+    league.roster.create_run("r", "pong", {}, algo="ppo")
     arch = Arch(hidden=(16, 16))
     rows = []
     for i in (1, 2):
@@ -214,10 +214,11 @@ def test_a_worker_with_only_the_url_plays_network_snapshots_from_the_league(db_u
         path.parent.mkdir(parents=True, exist_ok=True)
         save_snapshot(path, build_network((8, 6), 3, arch, seed=i), SnapshotMeta(
             env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="r", name=f"s{i}", algo="ppo", step=i))
-        rows.append(league.add_snapshot(env="pong", run="r", name=f"s{i}", path=str(path.relative_to(home)), step=i))
+        rows.append(league.roster.add_snapshot(env="pong", run="r", name=f"s{i}", path=str(path.relative_to(home)),
+                                               step=i))
     jobs = games_jobs(league, [rows[0]], rows[1], games=8, first_seed=7, match_kind="match", env_options=SHORT,
                       job_rounds=2)
-    league.enqueue("far", jobs)
+    league.queue.enqueue("far", jobs)
     env = {**os.environ, "SDL_VIDEODRIVER": "dummy", "MARL_CACHE": str(tmp_path / "cache")}
     out = subprocess.run([sys.executable, "-m", "selfplay_cli", "worker", "--db", db_url, "--home",
                           str(tmp_path / "elsewhere"), "--until-empty", "--json"], env=env, capture_output=True,
@@ -226,7 +227,7 @@ def test_a_worker_with_only_the_url_plays_network_snapshots_from_the_league(db_u
     assert json.loads(out.stdout)["done"] == 2
     assert len(list((tmp_path / "cache").rglob("*.safetensors"))) == 2  # fetched, cached
     assert not (tmp_path / "elsewhere" / "snapshots").exists()
-    here = [g for job in league.jobs(batch="far") for g in play_job(league, job).games]  # from H's files
+    here = [g for job in league.queue.jobs(batch="far") for g in play_job(league, job).games]  # from H's files
     with league.session(readonly=True) as s:
         stored = sorted((int(g.seed), int(g.length)) for g in s.execute(select(Game)).scalars())
     assert len(stored) == 8 and stored == sorted((r.seed, r.length) for r in here)
@@ -238,14 +239,14 @@ def _network_league(url: str, home, players: int) -> League:
     from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
 
     league = _league(url, home)
-    league.create_run("r", "pong", {}, algo="ppo")
+    league.roster.create_run("r", "pong", {}, algo="ppo")
     arch = Arch(hidden=(16, 16))
     for i in range(players):
         path = home / "snapshots" / "r" / f"s{i}.safetensors"
         path.parent.mkdir(parents=True, exist_ok=True)
         save_snapshot(path, build_network((8, 6), 3, arch, seed=i + 1), SnapshotMeta(
             env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="r", name=f"s{i}", algo="ppo", step=i + 1))
-        league.add_snapshot(env="pong", run="r", name=f"s{i}", path=str(path.relative_to(home)), step=i + 1)
+        league.roster.add_snapshot(env="pong", run="r", name=f"s{i}", path=str(path.relative_to(home)), step=i + 1)
     return league
 
 
@@ -260,7 +261,7 @@ def test_a_tournament_goes_on_through_a_postgresql_restart(pg_url, pg_restart, t
     proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "league", "tournament", "--run", "r",
                              "--games-per-pair", "30", "--env-option", "points_to_win=2", "--db", pg_url, "--home",
                              str(home), "--json"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    _wait(lambda: league.count_games("pong") > 0, timeout=120)
+    _wait(lambda: league.ledger.count_games("pong") > 0, timeout=120)
     league.close()
     pg_restart(down=1.5)
     out, err = proc.communicate(timeout=300)
@@ -288,14 +289,14 @@ def test_a_training_run_and_its_worker_go_on_through_a_postgresql_restart(pg_url
     home = tmp_path / "h"
     league = League(pg_url, home=home)
     worker = _worker(pg_url, tmp_path / "elsewhere", "--beat", "0.5", "--batch", "run:r", "--name", "far")
-    _wait(lambda: any(w.name == "far" for w in league.workers()), timeout=60, every=0.05)
+    _wait(lambda: any(w.name == "far" for w in league.queue.workers()), timeout=60, every=0.05)
     env = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
     proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "train", "pong", "--agents", "2", "--games", "16",
                              "--env-option", "points_to_win=1", "--snapshot-steps", "2048", "--steps", "8192",
                              "--eval-games", "4", "--eval-playoff", "0", "--eval", "remote", "--run", "r", "--quiet",
                              "--json", "--db", pg_url, "--home", str(home)], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
-    _wait(lambda: len(league.players("pong", kind="snapshot")) >= 4, timeout=180, every=0.05)
+    _wait(lambda: len(league.roster.players("pong", kind="snapshot")) >= 4, timeout=180, every=0.05)
     league.close()
     pg_restart(down=3.0)
     out, err = proc.communicate(timeout=600)
@@ -307,10 +308,10 @@ def test_a_training_run_and_its_worker_go_on_through_a_postgresql_restart(pg_url
     assert w_err.count("unreachable") == 1
     report = json.loads(out)
     league = League(pg_url, home=home)
-    snaps = league.players("pong", kind="snapshot")
-    assert league.get_run("r").status == "finished" and report["rating_jobs_left"] == 0
+    snaps = league.roster.players("pong", kind="snapshot")
+    assert league.roster.get_run("r").status == "finished" and report["rating_jobs_left"] == 0
     assert len(snaps) == len(report["snapshots"]) == 10  # s0 and every 2,048 steps to 8,192, both paddles
-    jobs = league.jobs(batch="run:r")
+    jobs = league.queue.jobs(batch="run:r")
     assert [j.state for j in jobs] == ["done"] * 5
     assert "far" in {j.worker for j in jobs} <= {"far", f"train@{socket.gethostname()}:{proc.pid}"}
     with league.session(readonly=True) as s:
@@ -394,7 +395,7 @@ def test_a_worker_starting_while_postgresql_is_down_retries_until_it_is_up(pg_se
         if not pg_server.get_postmaster_info().is_running():
             start_postgres(pg_server)
     try:
-        assert league.batches() == [] and league.add_worker("w", "here", 1) > 0  # the league, reached
+        assert league.queue.batches() == [] and league.queue.add_worker("w", "here", 1) > 0  # the league, reached
     finally:
         league.close()
     assert clock.waits == [1.0, 2.0, 4.0]

@@ -34,7 +34,7 @@ def where(db_url, tmp_path, monkeypatch):
     home = tmp_path / "h"
     opts = ("--db", db_url, "--home", str(home))
     lg = League(db_url, home=home)
-    lg.ensure_bots("pong", ["random", "cpu"])
+    lg.roster.ensure_bots("pong", ["random", "cpu"])
     yield opts, lg
     lg.close()
 
@@ -65,7 +65,7 @@ def _work(league) -> None:
 
 
 def _plan(league, games: int) -> TournamentPlan:
-    players = {p.id: p for p in league.players("pong") if p.name in ("cpu", "random")}
+    players = {p.id: p for p in league.roster.players("pong") if p.name in ("cpu", "random")}
     return TournamentPlan.of(league, "pong", players, None, games, {"points_to_win": 1})
 
 
@@ -77,21 +77,21 @@ def test_the_same_tournament_queued_twice_joins_the_first_and_stores_each_game_o
     code, out, err = run(capsys, *FIELD, "--games-per-pair", "20", "--queue", "--no-wait", *opts)
     assert code == 0, err
     assert "queued 20 games of 1 pairs as batch tournament:pong:" in out
-    (first,) = [b for b, _ in league.batches()]
+    (first,) = [b for b, _ in league.queue.batches()]
     code, out, err = run(capsys, *FIELD, "--games-per-pair", "20", "--queue", "--no-wait", *opts)
     assert code == 0, err
     assert out.startswith(f"nothing queued twice: joined 20 games already queued in batch {first}"), out
     again = run_json(capsys, *FIELD, "--games-per-pair", "20", "--queue", "--no-wait", *opts)
-    jobs = [j.id for j in league.jobs(batch=first)]
+    jobs = [j.id for j in league.queue.jobs(batch=first)]
     assert again == {"batch": None, "jobs": 0, "games": 0, "pairs": 0, "playing": [],
                      "joined": [{"batch": first, "games": 20, "jobs": jobs}]}
-    assert [b for b, _ in league.batches()] == [first] and len(league.jobs()) == len(jobs)
+    assert [b for b, _ in league.queue.batches()] == [first] and len(league.queue.jobs()) == len(jobs)
     _work(league)
     games = _once(league)
     assert len(games) == 20 and sorted({s for s, _ in games}) == list(range(10))
     code, out, err = run(capsys, *FIELD, "--games-per-pair", "20", "--queue", "--no-wait", *opts)
     assert code == 0 and out.startswith("every pair has its games already: nothing queued"), out
-    assert len(league.jobs()) == len(jobs)
+    assert len(league.queue.jobs()) == len(jobs)
 
 
 def test_a_second_tournament_asking_more_games_queues_only_the_rest_on_new_seeds(where, capsys):
@@ -100,7 +100,7 @@ def test_a_second_tournament_asking_more_games_queues_only_the_rest_on_new_seeds
     run_json(capsys, *FIELD, "--games-per-pair", "20", "--queue", "--no-wait", *opts)
     more = run_json(capsys, *FIELD, "--games-per-pair", "30", "--queue", "--no-wait", *opts)
     assert (more["games"], more["pairs"]) == (10, 1) and [j["games"] for j in more["joined"]] == [20]
-    (job,) = league.jobs(batch=more["batch"])
+    (job,) = league.queue.jobs(batch=more["batch"])
     assert (job.spec["first_seed"], job.spec["rounds"]) == (10, 5)
     _work(league)
     games = _once(league)
@@ -140,7 +140,7 @@ def test_two_submitters_at_the_same_moment_end_with_one_set_of_games(where, db_u
     joined = [s for s in out if s.batch is None]
     assert len(queued) == len(joined) == 1, out
     assert queued[0].games == 20 and joined[0].joined == {queued[0].batch: 20} and joined[0].jobs == 0
-    assert len(league.jobs()) == queued[0].jobs
+    assert len(league.queue.jobs()) == queued[0].jobs
     _work(league)
     assert len(_once(league)) == 20
 
@@ -177,12 +177,12 @@ def test_a_tournament_played_here_joins_the_same_games_queued_and_plays_them(whe
     plays them itself (it queues or plays nothing twice), then prints the ladder."""
     opts, league = where
     run_json(capsys, *FIELD, "--games-per-pair", "20", "--queue", "--no-wait", *opts)
-    (first,) = [b for b, _ in league.batches()]
+    (first,) = [b for b, _ in league.queue.batches()]
     code, out, err = run(capsys, *FIELD, "--games-per-pair", "20", *opts)
     assert code == 0, err
     assert f"joined 20 games already queued in batch {first}" in err
     assert "1 pairs needed games, 0 played; 20 on their way already were joined" in out
-    assert {j.state for j in league.jobs()} == {"done"} and len(_once(league)) == 20
+    assert {j.state for j in league.queue.jobs()} == {"done"} and len(_once(league)) == 20
 
 
 def test_a_match_started_while_the_pairs_games_are_queued_plays_new_seeds_after_them(where, capsys):
@@ -190,7 +190,7 @@ def test_a_match_started_while_the_pairs_games_are_queued_plays_new_seeds_after_
     starts after their seeds and says so; `--seed` into those seeds is refused in one line."""
     opts, league = where
     run_json(capsys, *FIELD, "--games-per-pair", "20", "--queue", "--no-wait", *opts)
-    (first,) = [b for b, _ in league.batches()]
+    (first,) = [b for b, _ in league.queue.batches()]
     match = ("match", "cpu", "random", "--env", "pong", *SHORT, "--games", "10", *opts)
     code, out, err = run(capsys, *match, "--seed", "4")
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
@@ -208,7 +208,7 @@ def test_a_match_started_while_the_pairs_games_are_queued_plays_new_seeds_after_
 def test_two_matches_taking_seeds_at_the_same_moment_get_seeds_of_their_own(where, db_url):
     """Matches add games: two started at the same moment both play, on seeds that do not meet."""
     _, league = where
-    cpu, rnd = (league.find_players(n, "pong")[0] for n in ("cpu", "random"))
+    cpu, rnd = (league.roster.find_players(n, "pong")[0] for n in ("cpu", "random"))
     job = MatchJob((cpu,), rnd)
     taken = _twice_at_once(db_url, league.home,
                            lambda lg, looked: job.take_here(lg, 10, None, {"points_to_win": 1}, "cpu", looked=looked))
@@ -225,7 +225,7 @@ def test_a_gate_joins_the_pairs_games_on_their_way_instead_of_playing_them_again
     assert code in (0, 1), err
     verdict = json.loads(out)
     assert (verdict["games"], verdict["stored_games"], verdict["played_games"]) == (20, 0, 20)
-    assert {j.state for j in league.jobs()} == {"done"} and len(league.batches()) == 1
+    assert {j.state for j in league.queue.jobs()} == {"done"} and len(league.queue.batches()) == 1
     assert len(_once(league)) == 20
 
 
@@ -234,7 +234,7 @@ def test_the_same_gauntlet_queued_twice_stores_its_games_once(rated_league):
     stored once."""
     league, snap = rated_league
     for batch in ("run:a", "run:b"):
-        league.enqueue(batch, [gauntlet_job(league, [snap.id], first_seed=0, games=2, older=0)])
+        league.queue.enqueue(batch, [gauntlet_job(league, [snap.id], first_seed=0, games=2, older=0)])
     report = run_worker(league, WorkerOptions(until_empty=True, poll=0.01))
     assert (report.done, report.failed) == (2, 0)
     games = _once(league)

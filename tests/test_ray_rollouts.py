@@ -169,12 +169,12 @@ def _train(where, **kw):
     base = dict(env="pong", steps=4096, games=16, snapshot_steps=2048, snapshot_every=0, eval_games=0, run="t",
                 env_options={"points_to_win": 1}, ppo=PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1))
     cfg = TrainConfig(**{**base, **kw})
-    league.create_run("t", cfg.env, cfg.to_dict(), algo=cfg.algo)
+    league.roster.create_run("t", cfg.env, cfg.to_dict(), algo=cfg.algo)
     trainer = Trainer(league, cfg)
     report = trainer.train()
-    snaps = sorted((p.name, _weights(league.snapshot_file(p))) for p in league.players(cfg.game().name,
+    snaps = sorted((p.name, _weights(league.snapshot_file(p))) for p in league.roster.players(cfg.game().name,
                                                                                          kind="snapshot"))
-    games = league.games(cfg.game().name)
+    games = league.ledger.games(cfg.game().name)
     played = sorted(zip(games.seed.tolist(), games.game_id.tolist(), strict=True))
     return trainer, report, snaps, len(played), league
 
@@ -215,7 +215,7 @@ def test_an_actor_killed_mid_run_is_restarted_and_the_run_loses_nothing(ray_loca
     cfg = TrainConfig(env="pong", steps=24_576, games=16, snapshot_steps=8192, snapshot_every=0, eval_games=0,
                       run="k", env_options={"points_to_win": 1}, executor="ray", actors=2,
                       ppo=PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1))
-    league.create_run("k", "pong", cfg.to_dict(), algo="ppo")
+    league.roster.create_run("k", "pong", cfg.to_dict(), algo="ppo")
     notes, killed = [], []
 
     def watch(event):
@@ -229,7 +229,7 @@ def test_an_actor_killed_mid_run_is_restarted_and_the_run_loses_nothing(ray_loca
     report = trainer.train()
     assert killed and len(notes) == 1 and "rollout actor 2 of 2 died" in notes[0], notes
     assert report.steps == 24_576
-    rows = league.players("pong", kind="snapshot")
+    rows = league.roster.players("pong", kind="snapshot")
     moments = {p.name.rsplit("-", 1)[0] for p in rows}  # every 8,192 steps (at an update), from s0 to the final one
     assert len(rows) == 8 and len(moments) == 4 and "s0" in moments, sorted(moments)
     assert [p.step for p in rows if p.name.endswith("-left")] == [0, 8192, 16384, 24576]
@@ -282,8 +282,8 @@ def test_one_learner_meets_league_snapshots_loaded_by_the_actors_and_repeats(ray
     first, report, _, _, league = _train(tmp_path / "a", **kw)
     again, _, _, _, _ = _train(tmp_path / "b", **kw)
     assert _digest(first.learners) == _digest(again.learners)  # the same seed and actors: the same run
-    snapshots = {p.id for p in league.players(first.spec.name, kind="snapshot")}
-    games = league.games(first.spec.name, rated=False, variant=None, pooled=False)
+    snapshots = {p.id for p in league.roster.players(first.spec.name, kind="snapshot")}
+    games = league.ledger.games(first.spec.name, rated=False, variant=None, pooled=False)
     # the learner (filed as its latest snapshot) against a snapshot of the pool the actors loaded from the league
     against = np.isin(games.player_a, list(snapshots)) & np.isin(games.player_b, list(snapshots))
     assert report.episodes > 300 and int(against.sum()) > 20
@@ -313,8 +313,8 @@ def test_a_trainer_killed_with_sigkill_resumes_on_actors(ray_local, tmp_path, ca
     assert report["steps"] == 60_000 and report["sessions"] == 2
     assert (report["executor"], report["actors"]) == ("ray", 1)  # this session: moved to one actor
     with League.open(home) as league:
-        assert league.get_run("r").status == "finished"
-        assert {"s0-left", "s60k-left"} <= {p.name for p in league.players("pong", kind="snapshot")}
+        assert league.roster.get_run("r").status == "finished"
+        assert {"s0-left", "s60k-left"} <= {p.name for p in league.roster.players("pong", kind="snapshot")}
 
 
 # ---------------------------------------------------------------------------------------------------------------

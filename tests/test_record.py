@@ -107,7 +107,7 @@ def test_game_id_replays_the_stored_game_exactly(home, tmp_path, capsys):
     assert code == 0 and len(report["game_ids"]) == 2
     gid = report["game_ids"][1]
     with League.open(home) as league:
-        stored = league.game(gid)
+        stored = league.ledger.game(gid)
     assert stored.actions is not None and stored.match_params["env_options"] == {"points_to_win": 2}
     (rec,) = run_json(capsys, home, "--game", str(gid), "--size", "96x48", "--hold", "0")
     assert rec["game_id"] == gid and rec["seed"] == stored.seed
@@ -275,11 +275,11 @@ def test_a_two_learner_snapshot_faces_its_partner_by_default(home, capsys):
 
 def test_lineup_seats_teams_singles_and_opponents(tmp_path):
     with League.open(tmp_path / "lg") as league:
-        league.create_run("t", "pong", {})
+        league.roster.create_run("t", "pong", {})
         for seat in ("left", "right"):  # as `marl train --agents 2` files them
-            league.add_snapshot(env="pong", run="t", name=f"ep90-{seat}", path="x", sha256="0",
-                                meta={"learner": seat})
-        league.add_snapshot(env="pong", run="t", name="solo", path="x", sha256="0", meta={"learner": "learner"})
+            league.roster.add_snapshot(env="pong", run="t", name=f"ep90-{seat}", path="x", sha256="0",
+                                       meta={"learner": seat})
+        league.roster.add_snapshot(env="pong", run="t", name="solo", path="x", sha256="0", meta={"learner": "learner"})
         names = lambda lu: [p.full_name for p in lu.players]  # noqa: E731
         assert names(lineup(league, "ep90")) == ["t/ep90-left", "t/ep90-right"]
         assert lineup(league, "t/ep90-right").focus == 1
@@ -318,11 +318,11 @@ def test_games_without_actions_or_that_no_longer_replay_are_refused(home, tmp_pa
     assert main(["match", "ep10", "random", "--games", "2", "--home", str(home), "--quiet"]) == 0
     capsys.readouterr()
     with League.open(home) as league:
-        played = league.game(league.games(variant=None).game_id[-1])  # (ep10 plays to 2 points)
-        training = league.create_match("pong", "training", {"run": "r1"})
+        played = league.ledger.game(league.ledger.games(variant=None).game_id[-1])  # (ep10 plays to 2 points)
+        training = league.ledger.create_match("pong", "training", {"run": "r1"})
         tampered = decode_actions(played.actions, 2).copy()
         tampered[:, 0] = (tampered[:, 0] + 1) % 3  # seat 0 never moves as it did
-        bare, wrong = league.record_games(training, [
+        bare, wrong = league.ledger.record_games(training, [
             GameResult("pong", played.players, played.seed, played.scores, played.outcome, played.length, False),
             GameResult("pong", played.players, played.seed, played.scores, played.outcome, played.length, False,
                        actions=encode_actions(tampered)),

@@ -167,19 +167,19 @@ def test_training_rates_every_snapshot_each_on_its_own_side_only(chased):
     assert isinstance(report["best"], list) and {b["side"] for b in report["best"]} == {"hunter", "runner"}
     league = _league(home)
     try:
-        snaps = [p for p in league.players(env=CHASE, kind="snapshot")]
+        snaps = [p for p in league.roster.players(env=CHASE, kind="snapshot")]
         assert len(snaps) == 8  # s0, s1k, s2k, s3k of each learner
         assert {p.meta.get("role") for p in snaps if p.name.endswith("-hunter")} == {"hunter"}
-        table = league.games(env=CHASE)  # every rated result: player_a sat on the hunter's side
-        names = {p.id: p.name for p in league.players(env=CHASE)}
+        table = league.ledger.games(env=CHASE)  # every rated result: player_a sat on the hunter's side
+        names = {p.id: p.name for p in league.roster.players(env=CHASE)}
         firsts = {names[int(i)] for i in table.player_a}
         seconds = {names[int(i)] for i in table.player_b}
         assert all(n.endswith("-hunter") or n == "random" for n in firsts), firsts
         assert all(n.endswith("-runner") or n == "random" for n in seconds), seconds
         rated = set(table.player_a.tolist()) | set(table.player_b.tolist())
-        same = league.same_weights(CHASE)  # (a snapshot no update changed is its predecessor's weights: one player)
+        same = league.ledger.same_weights(CHASE)  # (a snapshot no update changed is its predecessor's weights)
         assert {same.get(p.id, p.id) for p in snaps} <= rated  # every snapshot has rated games
-        training = league.match_params(CHASE, kind="training")
+        training = league.ledger.match_params(CHASE, kind="training")
         assert training  # the training games (half of them against the run's own snapshots) went fine too
     finally:
         league.close()
@@ -195,8 +195,8 @@ def test_a_snapshot_plays_random_on_its_own_side(chased, capsys):
     assert m["wins"] + m["draws"] + m["losses"] == 10  # one result a game: chase always has a winner
     league = _league(home)
     try:
-        runner = next(p.id for p in league.players(env=CHASE) if p.name == "s3k-runner")
-        assert all(league.game(g).players[1] == runner for g in m["game_ids"])  # always the runner's seat
+        runner = next(p.id for p in league.roster.players(env=CHASE) if p.name == "s3k-runner")
+        assert all(league.ledger.game(g).players[1] == runner for g in m["game_ids"])  # always the runner's seat
     finally:
         league.close()
     code, out, err = run(capsys, "match", "random", "ch/s3k-hunter", "--games", "4", "--home", str(home), "--no-store")
@@ -223,11 +223,11 @@ def test_a_tournament_plays_only_the_pairs_that_can_meet(chased, capsys):
     assert "1 pair cannot meet and were left out" in out
     league = _league(home)
     try:
-        ids = {p.name: p.id for p in league.players(env=CHASE)}
+        ids = {p.name: p.id for p in league.roster.players(env=CHASE)}
         hunters = [ids["s3k-hunter"], ids["s0-hunter"]]
-        table = league.games(env=CHASE, players=hunters)
+        table = league.ledger.games(env=CHASE, players=hunters)
         assert not (np.isin(table.player_a, hunters) & np.isin(table.player_b, hunters)).any()  # they never met
-        both = league.games(env=CHASE, players=[ids["s0-hunter"], ids["s3k-runner"]])
+        both = league.ledger.games(env=CHASE, players=[ids["s0-hunter"], ids["s3k-runner"]])
         assert len(both) >= 6  # the pairs that can meet have their games
     finally:
         league.close()
@@ -299,8 +299,9 @@ def test_a_cooperative_crew_of_different_seats_flies_each_member_on_its_own_seat
     assert [f["snapshot"] for f in report["final"]] == ["crew/s1k-hunter", "crew/s1k-runner"]
     league = League.open(home=home)
     try:
-        names = {p.id: p.name for p in league.players(env="tests.games.chase:cooperative_env")}
-        rated = [g for g in (league.game(i) for i in range(1, league.count_games() + 1)) if g.match_kind == "eval"]
+        names = {p.id: p.name for p in league.roster.players(env="tests.games.chase:cooperative_env")}
+        played = (league.ledger.game(i) for i in range(1, league.ledger.count_games() + 1))
+        rated = [g for g in played if g.match_kind == "eval"]
         seatings = {tuple(names[p].rsplit("-", 1)[-1] for p in g.players) for g in rated}
     finally:
         league.close()
@@ -322,7 +323,8 @@ def test_an_older_file_without_a_role_plays_the_role_its_spaces_fit(chased, home
     assert m["games"] == 6 and m["paired"] is False
     league = League.open(home=home)
     try:
-        me = next(p.id for p in league.players(env=CHASE) if p.run == "before")
-        assert all(league.game(g).players == (league.game(g).players[0], me) for g in m["game_ids"])  # runner's seat
+        me = next(p.id for p in league.roster.players(env=CHASE) if p.run == "before")
+        assert all(league.ledger.game(g).players == (league.ledger.game(g).players[0],
+                                                     me) for g in m["game_ids"])  # runner's seat
     finally:
         league.close()

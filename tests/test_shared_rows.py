@@ -27,12 +27,12 @@ HUGE = json.dumps({"x": "a" * 10_000_000})
 
 def _league(url: str, home) -> League:
     lg = League(url, home=home)
-    lg.ensure_bots("pong", ["random", "cpu", "superbot"])  # superbot: a newer marl's bot, unknown to this one
+    lg.roster.ensure_bots("pong", ["random", "cpu", "superbot"])  # superbot: a newer marl's bot, unknown to this one
     return lg
 
 
 def _ids(lg: League) -> dict[str, int]:
-    return {name: lg.find_players(name, env="pong")[0].id for name in ("cpu", "random", "superbot")}
+    return {name: lg.roster.find_players(name, env="pong")[0].id for name in ("cpu", "random", "superbot")}
 
 
 def _spec(ids: dict[str, int], **over) -> dict:
@@ -92,13 +92,13 @@ def test_poison_jobs_die_with_their_reasons_and_the_worker_plays_the_good_one(db
     home = tmp_path / "h"
     lg = _league(db_url, home)
     ids = _ids(lg)
-    (unknown,) = lg.enqueue("bad", [NewJob(GAMES, "pong", _spec(ids, b=ids["superbot"]), max_tries=1)])
+    (unknown,) = lg.queue.enqueue("bad", [NewJob(GAMES, "pong", _spec(ids, b=ids["superbot"]), max_tries=1)])
     spec = _spec(ids)
     del spec["rounds"]
     _raw_json(lg, "jobs", "spec", json.dumps(spec))
     _raw_json(lg, "jobs", "spec", json.dumps(_spec(ids, rounds=10**8, max_tries=10**6)))
     _raw_json(lg, "jobs", "spec", DEEP)
-    (good,) = lg.enqueue("good", [NewJob(GAMES, "pong", _spec(ids, first_seed=7))])
+    (good,) = lg.queue.enqueue("good", [NewJob(GAMES, "pong", _spec(ids, first_seed=7))])
     missing, unbounded, deep = unknown + 1, unknown + 2, unknown + 3
     assert good == deep + 1
 
@@ -133,13 +133,13 @@ def test_a_job_that_fails_everywhere_counts_its_tries_then_dies(tmp_path):
     job."""
     lg = _league(f"sqlite:///{tmp_path / 'league.db'}", tmp_path / "h")
     ids = _ids(lg)
-    (jid,) = lg.enqueue("bad", [NewJob(GAMES, "pong", _spec(ids, b=ids["superbot"]), max_tries=3)])
-    (good,) = lg.enqueue("good", [NewJob(GAMES, "pong", _spec(ids))])
+    (jid,) = lg.queue.enqueue("bad", [NewJob(GAMES, "pong", _spec(ids, b=ids["superbot"]), max_tries=3)])
+    (good,) = lg.queue.enqueue("good", [NewJob(GAMES, "pong", _spec(ids))])
     report = run_worker(lg, WorkerOptions(until_empty=True, poll=0.01, backoff=0.01))
     assert (report.done, report.failed) == (1, 3)
-    (row,) = lg.jobs(ids=[jid])
+    (row,) = lg.queue.jobs(ids=[jid])
     assert (row.state, row.tries) == ("dead", 3) and "superbot" in row.error
-    assert lg.jobs(ids=[good])[0].state == "done"
+    assert lg.queue.jobs(ids=[good])[0].state == "done"
     lg.close()
 
 
@@ -157,13 +157,13 @@ def test_any_error_of_a_job_ends_that_job_and_not_the_worker(tmp_path, monkeypat
 
     played = jobs_module.KINDS[GAMES]
     monkeypatch.setitem(jobs_module.KINDS, GAMES, poison)
-    (bad,) = lg.enqueue("bad", [NewJob(GAMES, "pong", _spec(ids), max_tries=1)])
-    (good,) = lg.enqueue("good", [NewJob(GAMES, "pong", _spec(ids, first_seed=5))])
+    (bad,) = lg.queue.enqueue("bad", [NewJob(GAMES, "pong", _spec(ids), max_tries=1)])
+    (good,) = lg.queue.enqueue("good", [NewJob(GAMES, "pong", _spec(ids, first_seed=5))])
     report = run_worker(lg, WorkerOptions(until_empty=True, poll=0.01))
     assert (report.done, report.failed) == (1, 1)
-    (row,) = lg.jobs(ids=[bad])
+    (row,) = lg.queue.jobs(ids=[bad])
     assert row.state == "dead" and row.error.startswith(error.__name__) and len(row.error) <= MAX_ERROR
-    assert lg.jobs(ids=[good])[0].state == "done"
+    assert lg.queue.jobs(ids=[good])[0].state == "done"
     lg.close()
 
 
@@ -176,10 +176,10 @@ def test_ctrl_c_in_a_job_still_stops_the_worker_and_gives_the_job_back_untried(t
         raise stop
 
     monkeypatch.setitem(jobs_module.KINDS, GAMES, interrupted)
-    (jid,) = lg.enqueue("k", [NewJob(GAMES, "pong", _spec(ids))])
+    (jid,) = lg.queue.enqueue("k", [NewJob(GAMES, "pong", _spec(ids))])
     with pytest.raises(stop):
         run_worker(lg, WorkerOptions(until_empty=True, poll=0.01))
-    (row,) = lg.jobs(ids=[jid])
+    (row,) = lg.queue.jobs(ids=[jid])
     assert (row.state, row.tries, row.error) == ("queued", 0, None)
     lg.close()
 
@@ -189,17 +189,17 @@ def test_specs_are_checked_when_marl_queues_them(tmp_path):
     its limit, a spec nested too deep for its column."""
     lg = _league(f"sqlite:///{tmp_path / 'league.db'}", tmp_path / "h")
     ids = _ids(lg)
-    cpu, rnd = lg.get_player(ids["cpu"]), lg.get_player(ids["random"])
+    cpu, rnd = lg.roster.get_player(ids["cpu"]), lg.roster.get_player(ids["random"])
     with pytest.raises(LeagueError, match=f"max_tries must be a whole number from 1 to {TRIES_LIMIT}"):
-        lg.enqueue("x", [NewJob(GAMES, "pong", _spec(ids), max_tries=10**6)])
+        lg.queue.enqueue("x", [NewJob(GAMES, "pong", _spec(ids), max_tries=10**6)])
     with pytest.raises(LeagueError, match="nested deeper than 32"):
-        lg.enqueue("x", [NewJob(GAMES, "pong", {**_spec(ids), "params": json.loads("[" * 40 + "]" * 40)})])
+        lg.queue.enqueue("x", [NewJob(GAMES, "pong", {**_spec(ids), "params": json.loads("[" * 40 + "]" * 40)})])
     with pytest.raises(LeagueError, match="over the 262,144"):
-        lg.enqueue("x", [NewJob(GAMES, "pong", {**_spec(ids), "params": {"x": "a" * 300_000}})])
+        lg.queue.enqueue("x", [NewJob(GAMES, "pong", {**_spec(ids), "params": {"x": "a" * 300_000}})])
     with pytest.raises(jobs_module.BadSpec, match="rounds must be from 1 to"):
         games_jobs(lg, [cpu], rnd, games=2 * (MAX_JOB_ROUNDS + 1), first_seed=0, match_kind="match",
                    env_options=SHORT, job_rounds=MAX_JOB_ROUNDS + 1)
-    assert lg.jobs() == []
+    assert lg.queue.jobs() == []
     lg.close()
 
 
@@ -209,8 +209,8 @@ def test_a_spec_its_kind_refuses_is_dead_at_once_in_a_command_playing_its_own_ba
     lg = _league(f"sqlite:///{tmp_path / 'league.db'}", tmp_path / "h")
     ids = _ids(lg)
     _raw_json(lg, "jobs", "spec", json.dumps(_spec(ids, a="cpu", max_tries=5)))
-    w = lg.add_worker("w", "h", 1)
-    out = play_leased(lg, w, lg.claim(w), base_backoff=0.01)
+    w = lg.queue.add_worker("w", "h", 1)
+    out = play_leased(lg, w, lg.queue.claim(w), base_backoff=0.01)
     assert out.state == "failed" and out.extra["state"] == "dead" and out.error.startswith("bad job spec: a must be")
     lg.close()
 
@@ -232,7 +232,7 @@ def _snapshots(db_url: str, tmp_path, n: int = 3) -> tuple[League, list[int]]:
     assert main(["league", "tournament", *(f"w/s{i}" for i in range(n)), "cpu", "--env", "pong", "--games-per-pair",
                  "2", "--db", db_url, "--home", str(home), "--quiet"]) == 0
     lg = League(db_url, home=home)
-    return lg, [p.id for p in lg.players("pong", kind="snapshot")]
+    return lg, [p.id for p in lg.roster.players("pong", kind="snapshot")]
 
 
 @pytest.mark.slow
@@ -273,7 +273,7 @@ def test_rows_whose_json_cannot_be_read_are_one_line_each_never_the_command(db_u
                for line in said["league ladder --run w"])
     code, out, err = run(capsys, "match", "w/s0", "cpu", "--games", "2", *where)
     assert code == 2 and err.splitlines()[-1].startswith("marl: error: w/s0: its row in the league cannot be read")
-    assert bounded_json.unreadable(lg.get_player(deep).meta) is None and lg.get_player(deep).unusable
+    assert bounded_json.unreadable(lg.roster.get_player(deep).meta) is None and lg.roster.get_player(deep).unusable
     code, out, err = run(capsys, "train", "--resume", "w", *where)
     assert code == 2 and err.splitlines()[-1] == ("marl: error: run 'w': its configuration in the league cannot be "
                                                   "read (nested deeper than 32 levels): start a new run"), err

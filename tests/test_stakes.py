@@ -50,7 +50,7 @@ def _hands(lg: League, a: int, b: int, chips: list[float]) -> None:
         players = (a, b) if k % 2 == 0 else (b, a)
         out = rules.outcome(scores)[:, 0]
         games.append(GameResult(KUHN, players, k // 2, tuple(scores[:, 0]), tuple(out), 3, False))
-    lg.record_games(lg.create_match(KUHN, "match", {"rules": rules.to_json()}), games)
+    lg.ledger.record_games(lg.ledger.create_match(KUHN, "match", {"rules": rules.to_json()}), games)
 
 
 def test_the_ladder_rates_chips_not_hands(tmp_path):
@@ -58,11 +58,11 @@ def test_the_ladder_rates_chips_not_hands(tmp_path):
     chips (-0.2 a hand). The ladder puts it below, its score is its chips (0.6 * 0.75 + 0.4 * 0 = 0.45), its W-D-L
     still counts the hands."""
     with League(f"sqlite:///{tmp_path / 'l.db'}") as lg:
-        lg.ensure_bots(KUHN, ["random"])
-        lg.create_run("r", KUHN, {})
-        small = lg.add_snapshot(env=KUHN, run="r", name="small", path="r/small", sha256="1" * 64, step=1).id
-        big = lg.add_snapshot(env=KUHN, run="r", name="big", path="r/big", sha256="2" * 64, step=2).id
-        rnd = lg.find_players("random", KUHN)[0].id
+        lg.roster.ensure_bots(KUHN, ["random"])
+        lg.roster.create_run("r", KUHN, {})
+        small = lg.roster.add_snapshot(env=KUHN, run="r", name="small", path="r/small", sha256="1" * 64, step=1).id
+        big = lg.roster.add_snapshot(env=KUHN, run="r", name="big", path="r/big", sha256="2" * 64, step=2).id
+        rnd = lg.roster.find_players("random", KUHN)[0].id
         _hands(lg, small, big, [1.0, -2.0, 1.0, -2.0, 1.0, 1.0, 1.0, -2.0, 1.0, -2.0] * 10)
         _hands(lg, small, rnd, [1.0, -1.0] * 10)
         _hands(lg, big, rnd, [1.0, -1.0] * 10)

@@ -82,7 +82,7 @@ def _game(a: int, b: int, score_a: float, seed: int = 0, env: str = ENV, actions
 
 
 def _snap(lg: League, name: str, run: str | None = "r1", env: str = ENV, **kw: object) -> PlayerRow:
-    return lg.add_snapshot(env=env, run=run, name=name, path=f"/snaps/{run}/{name}.pt", sha256="0" * 64, **kw)
+    return lg.roster.add_snapshot(env=env, run=run, name=name, path=f"/snaps/{run}/{name}.pt", sha256="0" * 64, **kw)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -181,21 +181,21 @@ def _make_legacy(url: str, version: int) -> None:
 def test_a_league_of_the_previous_release_is_upgraded_in_place_once(db_url: str, pg_url: str, tmp_path: Path,
                                                                      legacy: int) -> None:
     with League(db_url) as lg:
-        lg.ensure_bots(ENV, ["a", "b"])
-        a, b = (p.id for p in lg.players())
-        lg.record_games(lg.create_match(ENV, "match"), [_game(a, b, 1.0, 1), _game(b, a, 0.5, 2)])
-        before = {p.id: (p.elo, p.games) for p in lg.players()}
+        lg.roster.ensure_bots(ENV, ["a", "b"])
+        a, b = (p.id for p in lg.roster.players())
+        lg.ledger.record_games(lg.ledger.create_match(ENV, "match"), [_game(a, b, 1.0, 1), _game(b, a, 0.5, 2)])
+        before = {p.id: (p.elo, p.games) for p in lg.roster.players()}
     _make_legacy(db_url, legacy)
     notes: list[str] = []
     with League(db_url, readonly=True, note=notes.append) as lg:  # a command that only reads reads it as it is
         assert lg.schema_revision() == f"legacy {legacy}"
-        assert {p.id: (p.elo, p.games) for p in lg.players()} == before and lg.count_games() == 2
+        assert {p.id: (p.elo, p.games) for p in lg.roster.players()} == before and lg.ledger.count_games() == 2
     assert notes == [] and ("alembic_version",) not in _tables(db_url)
     with League(db_url, note=notes.append) as lg:  # a command that writes upgrades it, and says so once
         assert lg.schema_revision() == "0004"
-        assert {p.id: (p.elo, p.games) for p in lg.players()} == before and lg.count_games() == 2
-        lg.create_match_with_games(ENV, "eval", {}, [_game(a, b, 1.0, 3)], key="k")  # what the upgrade brought
-        assert set(lg.keyed_matches("k")) == {"k"} and lg.count_games() == 3
+        assert {p.id: (p.elo, p.games) for p in lg.roster.players()} == before and lg.ledger.count_games() == 2
+        lg.ledger.create_match_with_games(ENV, "eval", {}, [_game(a, b, 1.0, 3)], key="k")  # what the upgrade brought
+        assert set(lg.ledger.keyed_matches("k")) == {"k"} and lg.ledger.count_games() == 3
     where = str(tmp_path / "league.db") if db_url.startswith("sqlite") else make_url(db_url).render_as_string()
     brought = {1: "match work keys; snapshot blobs, work queue; seed ranges",
                2: "snapshot blobs, work queue; seed ranges", 3: "seed ranges"}[legacy]
@@ -213,13 +213,13 @@ def test_a_league_of_revision_0003_gets_its_seed_ranges(db_url: str, pg_url: str
     """The release before seed ranges (Alembic's 0003, jobs queued in it) is upgraded by the first command that
     writes, in one line; its queued jobs stay, and the schema is a new league's."""
     with League(db_url) as lg:
-        lg.ensure_bots(ENV, ["a", "b"])
-        lg.enqueue("b1", [NewJob("games", ENV, {"x": 1})])
+        lg.roster.ensure_bots(ENV, ["a", "b"])
+        lg.queue.enqueue("b1", [NewJob("games", ENV, {"x": 1})])
     _sql(db_url, "DROP TABLE seed_ranges")
     _sql(db_url, "UPDATE alembic_version SET version_num = '0003'")
     notes: list[str] = []
     with League(db_url, note=notes.append) as lg:
-        assert lg.schema_revision() == "0004" and [j.batch for j in lg.jobs()] == ["b1"]
+        assert lg.schema_revision() == "0004" and [j.batch for j in lg.queue.jobs()] == ["b1"]
     where = str(tmp_path / "league.db") if db_url.startswith("sqlite") else make_url(db_url).render_as_string()
     assert notes == [f"marl: upgraded league database {where} from schema 0003 to 0004 (seed ranges)"]
     other = pg_url if db_url.startswith("postgresql") else f"sqlite:///{tmp_path / 'new.db'}"
@@ -255,7 +255,7 @@ def test_the_league_file_of_the_previous_release_upgrades(tmp_path: Path, capsys
     code, out, err = run(capsys, *match)
     assert code == 0 and err == ""  # once
     with League.open(home, readonly=True) as lg:
-        assert lg.schema_revision() == "0004" and lg.count_games("pong") == 12 + 4  # 12 pong games before
+        assert lg.schema_revision() == "0004" and lg.ledger.count_games("pong") == 12 + 4  # 12 pong games before
     engine = create_engine(f"sqlite:///{home / 'league.db'}")
     with engine.connect() as conn:
         assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
@@ -387,8 +387,8 @@ def test_open_defaults_from_environment(tmp_path: Path, monkeypatch: pytest.Monk
     with League.open() as lg:  # the URL wins; home is still the resolved home
         assert lg.db_path == tmp_path / "elsewhere" / "x.db" and lg.home == (tmp_path / "envhome").resolve()
     with League.open(url="sqlite://") as lg:  # any URL works, e.g. in-memory SQLite
-        lg.ensure_bots(ENV, ["random"])
-        assert [p.name for p in lg.players()] == ["random"]
+        lg.roster.ensure_bots(ENV, ["random"])
+        assert [p.name for p in lg.roster.players()] == ["random"]
 
 
 # --------------------------------------------------------------------------------------------------
@@ -397,40 +397,40 @@ def test_open_defaults_from_environment(tmp_path: Path, monkeypatch: pytest.Monk
 
 
 def test_runs_crud(league: League) -> None:
-    r = league.create_run("r1", ENV, {"lr": 3e-4, "net": [64, 64]}, algo="ppo")
+    r = league.roster.create_run("r1", ENV, {"lr": 3e-4, "net": [64, 64]}, algo="ppo")
     assert (r.name, r.env, r.algo, r.config, r.status) == ("r1", ENV, "ppo", {"lr": 3e-4, "net": [64, 64]}, "running")
     assert r.created_at.tzinfo is not None
     with pytest.raises(LeagueError) as exc:
-        league.create_run("r1", ENV, {})
+        league.roster.create_run("r1", ENV, {})
     assert "already exists" in _one_line(exc)
-    league.create_run("r2", "other_env", {})
-    league.set_run_status("r1", "finished")
-    assert league.get_run("r1").status == "finished"
-    assert league.get_run("nope") is None
-    assert [x.name for x in league.list_runs()] == ["r1", "r2"]
-    assert [x.name for x in league.list_runs(env=ENV)] == ["r1"]
+    league.roster.create_run("r2", "other_env", {})
+    league.roster.set_run_status("r1", "finished")
+    assert league.roster.get_run("r1").status == "finished"
+    assert league.roster.get_run("nope") is None
+    assert [x.name for x in league.roster.list_runs()] == ["r1", "r2"]
+    assert [x.name for x in league.roster.list_runs(env=ENV)] == ["r1"]
     with pytest.raises(LeagueError):
-        league.set_run_status("nope", "killed")
-    league.set_run_status("r1", store.RunStatus.STOPPED)  # stored as its word, read back equal to it
-    assert league.get_run("r1").status == "stopped" == store.RunStatus.STOPPED
+        league.roster.set_run_status("nope", "killed")
+    league.roster.set_run_status("r1", store.RunStatus.STOPPED)  # stored as its word, read back equal to it
+    assert league.roster.get_run("r1").status == "stopped" == store.RunStatus.STOPPED
     with pytest.raises(LeagueError, match="unknown run status 'paused': one of running, stopped, finished"):
-        league.set_run_status("r1", "paused")  # the docstring's promise: a status is one of RunStatus's words
-    assert league.get_run("r1").status == "stopped"
+        league.roster.set_run_status("r1", "paused")  # the docstring's promise: a status is one of RunStatus's words
+    assert league.roster.get_run("r1").status == "stopped"
     with pytest.raises(LeagueError):
-        league.create_run("a/b", ENV, {})
+        league.roster.create_run("a/b", ENV, {})
 
 
 def test_bots_and_snapshots(league: League) -> None:
-    league.ensure_bots(ENV, ["random", "chaser"])
-    league.ensure_bots(ENV, ["chaser", "random"])  # idempotent
-    league.ensure_bots("other_env", ["random"])
-    bots = league.players(env=ENV, kind="bot")
+    league.roster.ensure_bots(ENV, ["random", "chaser"])
+    league.roster.ensure_bots(ENV, ["chaser", "random"])  # idempotent
+    league.roster.ensure_bots("other_env", ["random"])
+    bots = league.roster.players(env=ENV, kind="bot")
     assert [(b.name, b.kind, b.run, b.full_name, b.elo, b.games) for b in bots] == [
         ("random", "bot", None, "random", 1000.0, 0), ("chaser", "bot", None, "chaser", 1000.0, 0)]
-    assert len(league.players(kind="bot")) == 3
+    assert len(league.roster.players(kind="bot")) == 3
 
-    league.create_run("r1", ENV, {})
-    league.create_run("r2", ENV, {})
+    league.roster.create_run("r1", ENV, {})
+    league.roster.create_run("r2", ENV, {})
     s1 = _snap(league, "ep90", step=9000, episode=90, algo="ppo", meta={"note": "x"})
     assert (s1.full_name, s1.step, s1.episode, s1.algo, s1.meta, s1.kind) == ("r1/ep90", 9000, 90, "ppo", {"note": "x"},
                                                                               "snapshot")
@@ -449,28 +449,28 @@ def test_bots_and_snapshots(league: League) -> None:
         _snap(league, "x", run="r1", env="other_env")  # r1 trains pong
     with pytest.raises(LeagueError):
         _snap(league, "x", parent_id=12345)
-    assert league.get_player(s1.id) == s1
+    assert league.roster.get_player(s1.id) == s1
     with pytest.raises(LeagueError) as exc:
-        league.get_player(12345)
+        league.roster.get_player(12345)
     _one_line(exc)
-    assert [p.id for p in league.players(env=ENV, kind="snapshot")] == [s1.id, s2.id, loose.id]
-    assert league.latest(env=ENV) == loose
-    assert league.latest(run="r1") == s1
-    assert league.latest(env="other_env") is None
+    assert [p.id for p in league.roster.players(env=ENV, kind="snapshot")] == [s1.id, s2.id, loose.id]
+    assert league.roster.latest(env=ENV) == loose
+    assert league.roster.latest(run="r1") == s1
+    assert league.roster.latest(env="other_env") is None
 
 
 def test_find_players(league: League) -> None:
-    league.ensure_bots(ENV, ["random"])
-    league.create_run("r1", ENV, {})
-    league.create_run("r2", ENV, {})
+    league.roster.ensure_bots(ENV, ["random"])
+    league.roster.create_run("r1", ENV, {})
+    league.roster.create_run("r2", ENV, {})
     a = _snap(league, "ep90")
     b = _snap(league, "ep90", run="r2")
     c = _snap(league, "ep100")
-    bot = league.players(kind="bot")[0]
-    league.tag(c.id, "champion")
+    bot = league.roster.players(kind="bot")[0]
+    league.roster.tag(c.id, "champion")
 
     def ids(name: str, **kw: object) -> list[int]:
-        return [p.id for p in league.find_players(name, **kw)]
+        return [p.id for p in league.roster.find_players(name, **kw)]
 
     assert ids("ep90") == [a.id, b.id]  # ambiguous: both candidates
     assert ids("r1/ep90") == [a.id]
@@ -480,78 +480,80 @@ def test_find_players(league: League) -> None:
     assert ids("random") == [bot.id]
     assert ids("ep100", env="other_env") == []
     assert ids("nothing") == [] and ids("r3/ep90") == []
-    assert league.find_players("champion")[0].tags == ("champion",)
+    assert league.roster.find_players("champion")[0].tags == ("champion",)
 
 
 def test_exploitability_is_filed_in_the_row_exact_replaced_lower_bound_only_by_a_tighter_one(
         sqlite_league: League) -> None:
     lg = sqlite_league
-    lg.create_run("r1", ENV, {})
+    lg.roster.create_run("r1", ENV, {})
     p = _snap(lg, "s1", meta={"league_role": "main"})
-    lg.set_exploitability(p.id, {"kind": "exact", "value": 0.3, "nash_conv": 0.6})
-    lg.set_exploitability(p.id, {"kind": "exact", "value": 0.2, "nash_conv": 0.4})  # a newer exact figure replaces
-    lg.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.1, "low": 0.05, "high": 0.15, "by": "x/s1"})
-    lg.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.2, "low": 0.01, "high": 0.4})  # looser: kept out
-    row = lg.get_player(p.id)
+    lg.roster.set_exploitability(p.id, {"kind": "exact", "value": 0.3, "nash_conv": 0.6})
+    lg.roster.set_exploitability(p.id, {"kind": "exact", "value": 0.2,
+                                        "nash_conv": 0.4})  # a newer exact figure replaces
+    lg.roster.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.1, "low": 0.05, "high": 0.15, "by": "x/s1"})
+    lg.roster.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.2, "low": 0.01,
+                                        "high": 0.4})  # looser: kept out
+    row = lg.roster.get_player(p.id)
     book = row.meta["exploitability"]
     assert row.meta["league_role"] == "main"
     assert (book["exact"]["value"], book["exact"]["nash_conv"]) == (0.2, 0.4)
     assert (book["lower_bound"]["low"], book["lower_bound"]["by"]) == (0.05, "x/s1")
-    lg.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.12, "low": 0.08, "high": 0.16})
-    assert lg.get_player(p.id).meta["exploitability"]["lower_bound"]["low"] == 0.08
+    lg.roster.set_exploitability(p.id, {"kind": "lower_bound", "value": 0.12, "low": 0.08, "high": 0.16})
+    assert lg.roster.get_player(p.id).meta["exploitability"]["lower_bound"]["low"] == 0.08
     for bad in ({"kind": "guess", "value": 0.1}, {"kind": "exact", "value": float("nan")}):
         with pytest.raises(LeagueError) as exc:
-            lg.set_exploitability(p.id, bad)
+            lg.roster.set_exploitability(p.id, bad)
         _one_line(exc)
     with pytest.raises(LeagueError):
-        lg.set_exploitability(10**6, {"kind": "exact", "value": 0.1})
+        lg.roster.set_exploitability(10**6, {"kind": "exact", "value": 0.1})
 
 
 def test_tags(league: League) -> None:
-    league.ensure_bots(ENV, ["random"])
-    league.create_run("r1", ENV, {})
+    league.roster.ensure_bots(ENV, ["random"])
+    league.roster.create_run("r1", ENV, {})
     a, b = _snap(league, "ep1"), _snap(league, "ep2")
-    league.tag(a.id, "best_so_far")
-    league.tag(a.id, "gold")
-    assert league.get_player(a.id).tags == ("best_so_far", "gold")
-    league.tag(b.id, "gold")  # re-tagging moves the tag
-    assert league.get_player(a.id).tags == ("best_so_far",)
-    assert league.get_player(b.id).tags == ("gold",)
+    league.roster.tag(a.id, "best_so_far")
+    league.roster.tag(a.id, "gold")
+    assert league.roster.get_player(a.id).tags == ("best_so_far", "gold")
+    league.roster.tag(b.id, "gold")  # re-tagging moves the tag
+    assert league.roster.get_player(a.id).tags == ("best_so_far",)
+    assert league.roster.get_player(b.id).tags == ("gold",)
     for bad in ("random", "latest", "123", "a/b", ""):
         with pytest.raises(LeagueError) as exc:
-            league.tag(a.id, bad)
+            league.roster.tag(a.id, bad)
         _one_line(exc)
     with pytest.raises(LeagueError):
-        league.tag(999, "x")
+        league.roster.tag(999, "x")
 
 
 def test_remove_snapshot_keeps_games(league: League) -> None:
-    league.ensure_bots(ENV, ["random"])
-    league.create_run("r1", ENV, {})
+    league.roster.ensure_bots(ENV, ["random"])
+    league.roster.create_run("r1", ENV, {})
     snap, other = _snap(league, "ep90"), _snap(league, "ep91")
-    bot = league.players(kind="bot")[0]
-    league.tag(snap.id, "gold")
-    m = league.create_match(ENV, "match")
-    ids = league.record_games(m, [_game(snap.id, bot.id, 1.0, 1), _game(bot.id, snap.id, 0.5, 2)])
-    removed = league.remove_snapshot(snap.id)
+    bot = league.roster.players(kind="bot")[0]
+    league.roster.tag(snap.id, "gold")
+    m = league.ledger.create_match(ENV, "match")
+    ids = league.ledger.record_games(m, [_game(snap.id, bot.id, 1.0, 1), _game(bot.id, snap.id, 0.5, 2)])
+    removed = league.roster.remove_snapshot(snap.id)
     assert removed.removed and removed.path == "/snaps/r1/ep90.pt" and removed.tags == ("gold",)
-    after = league.get_player(snap.id)
+    after = league.roster.get_player(snap.id)
     assert after.removed and after.tags == () and after.games == 2
-    assert [p.id for p in league.players(kind="snapshot")] == [other.id]
-    assert [p.id for p in league.players(kind="snapshot", include_removed=True)] == [snap.id, other.id]
-    assert league.find_players("ep90") == [] and league.find_players("gold") == []
-    assert [p.id for p in league.find_players("ep90", include_removed=True)] == [snap.id]
-    assert league.latest() == league.get_player(other.id)
-    table = league.games()
+    assert [p.id for p in league.roster.players(kind="snapshot")] == [other.id]
+    assert [p.id for p in league.roster.players(kind="snapshot", include_removed=True)] == [snap.id, other.id]
+    assert league.roster.find_players("ep90") == [] and league.roster.find_players("gold") == []
+    assert [p.id for p in league.roster.find_players("ep90", include_removed=True)] == [snap.id]
+    assert league.roster.latest() == league.roster.get_player(other.id)
+    table = league.ledger.games()
     assert table.game_id.tolist() == ids and snap.id in table.player_ids()
-    assert league.pair_counts(snap.id, bot.id) == (1, 1, 0)
+    assert league.ledger.pair_counts(snap.id, bot.id) == (1, 1, 0)
     with league.session(readonly=True) as s:
         assert s.execute(text("SELECT count(*) FROM game_seats WHERE player_id = :p"), {"p": snap.id}).all() == [(2,)]
     with pytest.raises(LeagueError):
-        league.remove_snapshot(snap.id)  # already removed
+        league.roster.remove_snapshot(snap.id)  # already removed
     with pytest.raises(LeagueError):
-        league.remove_snapshot(bot.id)  # bots are not snapshots
-    league.record_games(m, [_game(snap.id, bot.id, 0.0)])  # the ledger stays append-only and usable
+        league.roster.remove_snapshot(bot.id)  # bots are not snapshots
+    league.ledger.record_games(m, [_game(snap.id, bot.id, 0.0)])  # the ledger stays append-only and usable
 
 
 # --------------------------------------------------------------------------------------------------
@@ -560,33 +562,33 @@ def test_remove_snapshot_keeps_games(league: League) -> None:
 
 
 def test_record_games_online_elo_hand_computed(league: League) -> None:
-    league.ensure_bots(ENV, ["a", "b"])
-    a, b = (p.id for p in league.players())
-    m = league.create_match(ENV, "match", {"games": 3})
-    league.record_games(m, [_game(a, b, 1.0)])  # equal players, A wins: +-K/2
-    assert (league.get_player(a).elo, league.get_player(b).elo) == (1008.0, 992.0)
+    league.roster.ensure_bots(ENV, ["a", "b"])
+    a, b = (p.id for p in league.roster.players())
+    m = league.ledger.create_match(ENV, "match", {"games": 3})
+    league.ledger.record_games(m, [_game(a, b, 1.0)])  # equal players, A wins: +-K/2
+    assert (league.roster.get_player(a).elo, league.roster.get_player(b).elo) == (1008.0, 992.0)
     # Draw at 1008 vs 992: E_A = 1 / (1 + 10^(-16/400)) = 0.5230095873, delta = 16 (0.5 - E_A) = -0.3681533968.
-    league.record_games(m, [_game(a, b, 0.5)])
-    ra, rb = league.get_player(a).elo, league.get_player(b).elo
+    league.ledger.record_games(m, [_game(a, b, 0.5)])
+    ra, rb = league.roster.get_player(a).elo, league.roster.get_player(b).elo
     assert ra == pytest.approx(1007.6318466032, abs=1e-9) and rb == pytest.approx(992.3681533968, abs=1e-9)
     # B wins from seat 0, then A wins from seat 1, within one batch: applied in game order.
-    league.record_games(m, [_game(b, a, 1.0), _game(b, a, 0.0)])
+    league.ledger.record_games(m, [_game(b, a, 1.0), _game(b, a, 0.0)])
     rb2, ra2 = elo_update(rb, ra, 1.0)
     rb3, ra3 = elo_update(rb2, ra2, 0.0)
-    assert (league.get_player(a).elo, league.get_player(b).elo) == (ra3, rb3)
-    assert league.get_player(a).games == league.get_player(b).games == 4
-    assert league.pair_counts(a, b) == (2, 1, 1) and league.pair_counts(b, a) == (1, 1, 2)
+    assert (league.roster.get_player(a).elo, league.roster.get_player(b).elo) == (ra3, rb3)
+    assert league.roster.get_player(a).games == league.roster.get_player(b).games == 4
+    assert league.ledger.pair_counts(a, b) == (2, 1, 1) and league.ledger.pair_counts(b, a) == (1, 1, 2)
 
     league.elo_k = 32.0
-    league.record_games(m, [_game(a, b, 1.0)])
-    assert league.get_player(a).elo == elo_update(ra3, rb3, 1.0, k=32.0)[0]
+    league.ledger.record_games(m, [_game(a, b, 1.0)])
+    assert league.roster.get_player(a).elo == elo_update(ra3, rb3, 1.0, k=32.0)[0]
 
 
 def test_record_games_is_atomic_and_validated(league: League) -> None:
-    league.ensure_bots(ENV, ["a", "b"])
-    league.ensure_bots("other_env", ["c"])
-    a, b, c = (p.id for p in league.players())
-    m = league.create_match(ENV, "tournament")
+    league.roster.ensure_bots(ENV, ["a", "b"])
+    league.roster.ensure_bots("other_env", ["c"])
+    a, b, c = (p.id for p in league.roster.players())
+    m = league.ledger.create_match(ENV, "tournament")
     bad_batches = [
         [_game(a, b, 1.0), _game(a, 999, 1.0)],  # unknown player in the last game
         [_game(a, b, 1.0), _game(a, c, 1.0)],  # player of another env
@@ -596,30 +598,32 @@ def test_record_games_is_atomic_and_validated(league: League) -> None:
     ]
     for batch in bad_batches:
         with pytest.raises(LeagueError) as exc:
-            league.record_games(m, batch)
+            league.ledger.record_games(m, batch)
         _one_line(exc)
     with pytest.raises(LeagueError):
-        league.record_games(12345, [_game(a, b, 1.0)])
+        league.ledger.record_games(12345, [_game(a, b, 1.0)])
     with pytest.raises(LeagueError):
-        league.create_match(ENV, "friendly")
-    assert league.count_games() == 0 and league.get_player(a).elo == 1000.0 and league.get_player(a).games == 0
-    assert league.record_games(m, []) == []
+        league.ledger.create_match(ENV, "friendly")
+    row = league.roster.get_player(a)
+    assert league.ledger.count_games() == 0 and row.elo == 1000.0 and row.games == 0
+    assert league.ledger.record_games(m, []) == []
 
 
 def test_games_table(league: League) -> None:
-    league.ensure_bots(ENV, ["a", "b", "c"])
-    league.ensure_bots("other_env", ["z"])
-    a, b, c, z = (p.id for p in league.players())
-    m = league.create_match(ENV, "match")
-    ids = league.record_games(m, [_game(a, b, 1.0, 7, actions=b"\x01\x02"), _game(c, a, 0.5, 8), _game(b, c, 0.0, 9)])
+    league.roster.ensure_bots(ENV, ["a", "b", "c"])
+    league.roster.ensure_bots("other_env", ["z"])
+    a, b, c, z = (p.id for p in league.roster.players())
+    m = league.ledger.create_match(ENV, "match")
+    ids = league.ledger.record_games(m, [_game(a, b, 1.0, 7, actions=b"\x01\x02"), _game(c, a, 0.5, 8), _game(b, c,
+                                                                                                              0.0, 9)])
     three_seats = GameResult(ENV, (a, b, c), 10, (3, 2, 1), (1.0, 0.0, 0.0), 50, False)
     self_play = _game(a, a, 1.0, 11)
-    extra = league.record_games(m, [three_seats, self_play])
-    m2 = league.create_match("other_env", "eval")
-    league.record_games(m2, [GameResult("other_env", (z,), 1, (5,), (1.0,), 10, False)])
-    assert league.count_games() == 6 and league.count_games(ENV) == 5
+    extra = league.ledger.record_games(m, [three_seats, self_play])
+    m2 = league.ledger.create_match("other_env", "eval")
+    league.ledger.record_games(m2, [GameResult("other_env", (z,), 1, (5,), (1.0,), 10, False)])
+    assert league.ledger.count_games() == 6 and league.ledger.count_games(ENV) == 5
 
-    t = league.games(env=ENV)
+    t = league.ledger.games(env=ENV)
     assert len(t) == 3  # only 2-seat games between two different players
     assert t.game_id.tolist() == ids and t.match_id.tolist() == [m] * 3
     assert t.player_a.tolist() == [a, c, b] and t.player_b.tolist() == [b, a, c]
@@ -629,36 +633,36 @@ def test_games_table(league: League) -> None:
     assert t.player_ids().tolist() == [a, b, c] and t.game_id.dtype == np.int64
     pop, ia, ib = t.indexed()
     assert (pop[ia] == t.player_a).all() and (pop[ib] == t.player_b).all()
-    assert league.games(players=[a, b]).game_id.tolist() == [ids[0]]
-    assert league.games(players=[a], any_seat=True).game_id.tolist() == ids[:2]
-    assert len(league.games(env="nope")) == 0 and league.games(env="nope").player_ids().size == 0
+    assert league.ledger.games(players=[a, b]).game_id.tolist() == [ids[0]]
+    assert league.ledger.games(players=[a], any_seat=True).game_id.tolist() == ids[:2]
+    assert len(league.ledger.games(env="nope")) == 0 and league.ledger.games(env="nope").player_ids().size == 0
     # Elo ignores the 3-seat and the self-play game, the game counters do not.
-    assert league.get_player(a).games == 4 and league.get_player(c).games == 3
+    assert league.roster.get_player(a).games == 4 and league.roster.get_player(c).games == 3
     assert extra == [ids[-1] + 1, ids[-1] + 2]
 
 
 def test_recompute_online_elo_reproduces_stored_values(league: League) -> None:
-    league.ensure_bots(ENV, ["a", "b", "c", "d"])
-    league.ensure_bots("other_env", ["x", "y"])
-    ids = [p.id for p in league.players(env=ENV)]
-    x, y = (p.id for p in league.players(env="other_env"))
+    league.roster.ensure_bots(ENV, ["a", "b", "c", "d"])
+    league.roster.ensure_bots("other_env", ["x", "y"])
+    ids = [p.id for p in league.roster.players(env=ENV)]
+    x, y = (p.id for p in league.roster.players(env="other_env"))
     rng = random.Random(3)
-    m = league.create_match(ENV, "tournament")
-    mo = league.create_match("other_env", "match")
+    m = league.ledger.create_match(ENV, "tournament")
+    mo = league.ledger.create_match("other_env", "match")
     for _ in range(8):
         batch = [_game(*rng.sample(ids, 2), rng.choice([0.0, 0.5, 1.0]), seed=rng.randrange(10**6)) for _ in range(15)]
-        league.record_games(m, batch)
-        league.record_games(mo, [_game(x, y, rng.choice([0.0, 1.0]), env="other_env")])
-    stored = {p.id: (p.elo, p.games) for p in league.players()}
+        league.ledger.record_games(m, batch)
+        league.ledger.record_games(mo, [_game(x, y, rng.choice([0.0, 1.0]), env="other_env")])
+    stored = {p.id: (p.elo, p.games) for p in league.roster.players()}
     assert len({e for e, _ in stored.values()}) > 2
     with league.session() as s:  # scramble the cached ratings
         for p in s.scalars(select(Player)):
             p.elo, p.games = 1234.5, 77
-    league.recompute_online_elo(env=ENV)
-    assert {p.id: (p.elo, p.games) for p in league.players(env=ENV)} == {i: stored[i] for i in ids}
-    assert league.get_player(x).elo == 1234.5  # other envs untouched
-    league.recompute_online_elo()
-    assert {p.id: (p.elo, p.games) for p in league.players()} == stored
+    league.ledger.recompute_online_elo(env=ENV)
+    assert {p.id: (p.elo, p.games) for p in league.roster.players(env=ENV)} == {i: stored[i] for i in ids}
+    assert league.roster.get_player(x).elo == 1234.5  # other envs untouched
+    league.ledger.recompute_online_elo()
+    assert {p.id: (p.elo, p.games) for p in league.roster.players()} == stored
 
 
 # --------------------------------------------------------------------------------------------------
@@ -686,7 +690,7 @@ def _writer(url: str, match_id: int, players: list[int], n_games: int, batch: in
         while n_games < 0 or done < n_games:
             games = [_game(*rng.sample(players, 2), rng.choice([0.0, 0.5, 1.0]), seed=rng.randrange(10**6),
                            actions=blob) for _ in range(batch)]
-            ids += lg.record_games(match_id, games)
+            ids += lg.ledger.record_games(match_id, games)
             done += batch
             time.sleep(pause)
         result = {"ids": ids, "retries": lg.lock_retries}
@@ -700,9 +704,9 @@ def _writer(url: str, match_id: int, players: list[int], n_games: int, batch: in
 
 def _setup_league(url: str) -> tuple[int, list[int]]:
     with League(url) as lg:
-        lg.ensure_bots(ENV, ["a", "b", "c", "d"])
-        players = [p.id for p in lg.players()]
-        match_id = lg.create_match(ENV, "tournament")
+        lg.roster.ensure_bots(ENV, ["a", "b", "c", "d"])
+        players = [p.id for p in lg.roster.players()]
+        match_id = lg.ledger.create_match(ENV, "tournament")
         return match_id, players
 
 
@@ -735,12 +739,12 @@ def test_two_processes_write_concurrently(tmp_path: Path, db_url: str) -> None:
     first, second = results[0]["ids"], results[1]["ids"]
     assert min(first) < max(second) and min(second) < max(first)
     with League(url) as lg:
-        assert lg.count_games() == 600
-        assert sorted(lg.games().game_id.tolist()) == sorted(ids)
-        assert sum(p.games for p in lg.players()) == 1200
-        stored = {p.id: p.elo for p in lg.players()}
-        lg.recompute_online_elo()  # online updates were serialized in game-id order
-        assert {p.id: p.elo for p in lg.players()} == stored
+        assert lg.ledger.count_games() == 600
+        assert sorted(lg.ledger.games().game_id.tolist()) == sorted(ids)
+        assert sum(p.games for p in lg.roster.players()) == 1200
+        stored = {p.id: p.elo for p in lg.roster.players()}
+        lg.ledger.recompute_online_elo()  # online updates were serialized in game-id order
+        assert {p.id: p.elo for p in lg.roster.players()} == stored
     # SQLite: BEGIN IMMEDIATE + busy_timeout suffice; PostgreSQL: the players' rows are locked in one order, so the
     # writers never deadlock. The retry is only a safety net.
     assert results[0]["retries"] == results[1]["retries"] == 0
@@ -781,11 +785,11 @@ def test_sigkill_mid_run_leaves_consistent_ledger(tmp_path: Path, db_url: str) -
         if lg.is_sqlite:
             assert s.execute(text("PRAGMA foreign_key_check")).all() == []
     with League(url) as lg:
-        stored = {p.id: p.elo for p in lg.players()}
-        lg.recompute_online_elo()
-        assert {p.id: p.elo for p in lg.players()} == stored
-        lg.record_games(match_id, [_game(players[0], players[1], 1.0)])  # still writable
-        assert lg.count_games() == n + 1
+        stored = {p.id: p.elo for p in lg.roster.players()}
+        lg.ledger.recompute_online_elo()
+        assert {p.id: p.elo for p in lg.roster.players()} == stored
+        lg.ledger.record_games(match_id, [_game(players[0], players[1], 1.0)])  # still writable
+        assert lg.ledger.count_games() == n + 1
 
 
 # --------------------------------------------------------------------------------------------------

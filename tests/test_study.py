@@ -59,10 +59,10 @@ def test_a_study_trains_flies_adapts_and_measures(home, capsys):
         assert iio.imread(png).ndim == 3  # a picture that decodes
     league = League.open(home=home)
     try:
-        runs = {x.name: x for x in league.list_runs()}
+        runs = {x.name: x for x in league.roster.list_runs()}
         assert set(runs) == RUNS and all(x.status == "finished" for x in runs.values())
-        parent = league.get_player(next(p for p in league.players(kind="snapshot")
-                                        if p.run == "ts-n1-to2" and p.step == 0).parent_id)
+        parent = league.roster.get_player(next(p for p in league.roster.players(kind="snapshot")
+                                               if p.run == "ts-n1-to2" and p.step == 0).parent_id)
         assert parent.full_name == "ts-n1/s160"  # the adapted run started from the 1-team's final snapshot
     finally:
         league.close()
@@ -94,7 +94,7 @@ def test_a_killed_study_goes_on_where_it_stopped(home, capsys):
     assert {(c["trained"], c["evaluated"]) for c in r["returns"]} == {(1, 1), (1, 2)}
     league = League.open(home=home)
     try:
-        runs = league.list_runs()
+        runs = league.roster.list_runs()
         assert [x.name for x in runs] == ["ts-n1"] and runs[0].status == "finished"  # resumed, not begun twice
     finally:
         league.close()
@@ -249,7 +249,7 @@ def test_sigterm_stops_a_study_and_its_training_run(home):
     assert "stopped t-n1 at step" in log and "(SIGTERM)" in log  # the run stopped itself, kept to be resumed
     league = League.open(home=home)
     try:
-        assert league.get_run("t-n1").status == "stopped"
+        assert league.roster.get_run("t-n1").status == "stopped"
     finally:
         league.close()
 
@@ -273,7 +273,7 @@ def test_a_study_killed_outright_takes_its_run_down_and_resumes_when_typed_again
     assert "stopped t-n1 at step" in log and "(SIGTERM)" in log  # told by the kernel, it stopped its run itself
     league = League.open(home=home)
     try:
-        runs = league.list_runs()
+        runs = league.roster.list_runs()
         assert [x.name for x in runs] == ["t-n1"] and runs[0].status == "finished"  # resumed, not begun again
     finally:
         league.close()

@@ -113,7 +113,8 @@ def test_a_pursuit_team_trained_with_3_flies_2_and_5(home, capsys):
         assert r["seating"] == ([*members, members[2], members[2]] if m == 5 else members[:2])  # seed 001's rule
         league = League.open(home=home)
         try:
-            seated = [[league.get_player(p).full_name for p in league.game(i).players] for i in r["game_ids"]]
+            seated = [[league.roster.get_player(p).full_name for p in league.ledger.game(i).players]
+                      for i in r["game_ids"]]
         finally:
             league.close()
         assert [s for s in seated if "random" not in s] == [r["seating"]] * 2  # what flew is what it says

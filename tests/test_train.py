@@ -33,10 +33,10 @@ def tiny(**kw) -> TrainConfig:
 def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     league = League.open(tmp_path / "league")
     cfg = tiny(agents=2, sharing="nops")
-    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     report = Trainer(league, cfg).train()
     assert report.steps >= 12_288 and report.episodes > 16  # 60-70 measured on seeds 0-5: one-point games end fast
-    snaps = [p for p in league.players("pong", kind="snapshot")]
+    snaps = [p for p in league.roster.players("pong", kind="snapshot")]
     names = [p.name for p in snaps]
     assert names[:2] == ["s0-left", "s0-right"]
     assert all(n.startswith(("ep", "s")) and n.endswith(("-left", "-right")) for n in names)
@@ -53,7 +53,8 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
     policy = load_policy(league.home / last.path, expect_env="pong")
     assert policy.meta.seat == "right" and policy.meta.env_options == {"points_to_win": 1}
     # the ledger keeps the training games between the learners, but rates only games the snapshots played themselves
-    everything, rated = league.games("pong", rated=False, variant=TINY), league.games("pong", variant=TINY)
+    everything, rated = league.ledger.games("pong", rated=False, variant=TINY), league.ledger.games("pong",
+                                                                                                    variant=TINY)
     assert len(everything) > len(rated) > 0
     with league.session() as s:
         from selfplay_cli.league.models import Match
@@ -61,10 +62,10 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
         kinds = {m.id: m.kind for m in s.query(Match).all()}
     assert {kinds[m] for m in rated.match_id.tolist()} == {"eval"}
     assert "training" in {kinds[m] for m in everything.match_id.tolist()}
-    bots = {p.id for p in league.players("pong", kind="bot")}
+    bots = {p.id for p in league.roster.players("pong", kind="bot")}
     for snap in snaps:  # every snapshot of both learners was rated against both scripted players
         for bot in bots:
-            assert league.games("pong", players=[snap.id, bot], variant=TINY).game_id.size >= 2, (snap.name, bot)
+            assert league.ledger.games("pong", players=[snap.id, bot], variant=TINY).game_id.size >= 2, (snap.name, bot)
     lines = (league.home / "runs" / "t" / "metrics.jsonl").read_text().splitlines()
     assert len(lines) >= 3 and "left/entropy" in json.loads(lines[-1])
     league.close()
@@ -74,9 +75,9 @@ def test_two_learners_snapshot_into_the_league_with_lineage(tmp_path):
 def test_one_learner_meets_league_opponents_and_bots(tmp_path):
     league = League.open(tmp_path / "league")
     cfg = tiny(agents=1, opponents=MatchmakerConfig(mode="pfsp", bots={"cpu": 0.5}, latest_ratio=0.2))
-    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     Trainer(league, cfg).train()
-    snaps = league.players("pong", kind="snapshot")
+    snaps = league.roster.players("pong", kind="snapshot")
     assert [p.name for p in snaps][0] == "s0" and all("-" not in p.name for p in snaps)
     matches = {}
     with league.session() as s:
@@ -84,8 +85,8 @@ def test_one_learner_meets_league_opponents_and_bots(tmp_path):
 
         for m in s.query(Match).all():
             matches[m.id] = m.kind
-    table = league.games("pong", rated=False, variant=TINY)
-    cpu = league.find_players("cpu", "pong")[0].id
+    table = league.ledger.games("pong", rated=False, variant=TINY)
+    cpu = league.roster.find_players("cpu", "pong")[0].id
     training = [i for i, m in enumerate(table.match_id.tolist()) if matches[m] == "training"]
     assert any(cpu in (table.player_a[i], table.player_b[i]) for i in training), "games vs cpu from the mix"
     league.close()
@@ -98,7 +99,7 @@ def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats
     league = League.open(tmp_path / "league")
     cfg = tiny(agents=2, sharing="nops", league_games=0.5, steps=8192,
                opponents=MatchmakerConfig(mode="pfsp", bots={"cpu": 1.0}))
-    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     trainer = Trainer(league, cfg)
     layout = trainer.games.layout
     assert (layout == OPPONENT).sum() == cfg.games // 2, "half the games have one opponent seat"
@@ -108,13 +109,13 @@ def test_two_learners_with_league_games_meet_league_opponents_on_their_own_seats
         assert layout[learner, g] == learner and layout[1 - learner, g] == OPPONENT
     assert sorted(set(layout.max(axis=0)[league_games].tolist())) == [0, 1]
     trainer.train()
-    cpu = league.find_players("cpu", "pong")[0].id
+    cpu = league.roster.find_players("cpu", "pong")[0].id
     with league.session() as s:
         from selfplay_cli.league.models import Match
 
         training = {m.id for m in s.query(Match).all() if m.kind == "training"}
-    snaps = {p.id: p for p in league.players("pong", kind="snapshot")}
-    table = league.games("pong", rated=False, variant=TINY)
+    snaps = {p.id: p for p in league.roster.players("pong", kind="snapshot")}
+    table = league.ledger.games("pong", rated=False, variant=TINY)
     seen = set()
     for m, a, b in zip(table.match_id.tolist(), table.player_a.tolist(), table.player_b.tolist(), strict=True):
         if m in training and cpu in (a, b):
@@ -139,7 +140,7 @@ def test_training_games_keep_their_actions_and_replay_exactly(tmp_path, capsys):
             training = s.query(Game).join(Match, Game.match_id == Match.id).filter(Match.kind == "training").all()
             assert training and all(g.actions for g in training)
             gid = training[-1].id
-        stored = league.game(gid)
+        stored = league.ledger.game(gid)
     assert stored.match_params["env_options"] == {"points_to_win": 1}
     code, out, err = run(capsys, "record", "--game", str(gid), "--size", "96x48", "--hold", "0", "--home", str(home),
                          "--json")
@@ -154,9 +155,9 @@ def test_snapshots_by_steps_when_games_are_long(tmp_path):
     league = League.open(tmp_path / "league")
     cfg = tiny(agents=1, snapshot_every=10**6, snapshot_steps=4096, steps=12_288, eval_games=0,
                env_options={"points_to_win": 21})
-    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     Trainer(league, cfg).train()
-    snaps = sorted(league.players("pong", kind="snapshot"), key=lambda p: p.id)
+    snaps = sorted(league.roster.players("pong", kind="snapshot"), key=lambda p: p.id)
     assert [p.step for p in snaps] == [0, 4096, 8192, 12_288]
     assert [p.name for p in snaps] == ["s0", "s4.1k", "s8.19k", "s12.3k"]
     assert [p.parent_id for p in snaps] == [None] + [p.id for p in snaps[:-1]]
@@ -173,9 +174,9 @@ def test_a_run_repeats_exactly_with_learners_updating_in_threads(tmp_path, monke
         monkeypatch.setattr(loop, "LearnerTeam", lambda learners: LearnerTeam(learners, threads=threads))
         league = League.open(home)
         cfg = tiny(agents=2, sharing="nops", steps=4096, eval_games=0)
-        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
         Trainer(league, cfg).train()
-        out = {p.name: p.meta["weights_sha256"] for p in league.players("pong", kind="snapshot")}
+        out = {p.name: p.meta["weights_sha256"] for p in league.roster.players("pong", kind="snapshot")}
         league.close()
         return out
 
@@ -214,7 +215,7 @@ def test_train_command_runs_and_reports(tmp_path, capsys):
     config = json.loads((tmp_path / "h" / "runs" / "pong-1" / "config.json").read_text())
     assert config["agents"] == 2 and config["env_options"] == {"points_to_win": 1}
     with League.open(tmp_path / "h") as league:
-        assert league.get_run("pong-1").status == "finished"
+        assert league.roster.get_run("pong-1").status == "finished"
 
 
 @pytest.mark.parametrize("args, needle", [
@@ -262,8 +263,8 @@ def test_a_run_killed_with_sigkill_resumes_from_its_last_snapshot(tmp_path, caps
     proc.wait(timeout=30)
     assert snapshots >= 6, proc.stderr.read().decode()
     with League.open(home) as league:
-        assert league.get_run("r").status == "running", "killed, not finished"
-        before = [p.name for p in league.players("pong", kind="snapshot")]
+        assert league.roster.get_run("r").status == "running", "killed, not finished"
+        before = [p.name for p in league.roster.players("pong", kind="snapshot")]
 
     code = main(["train", "--resume", "r", "--home", str(home), "--json"])
     out = capsys.readouterr()
@@ -271,8 +272,8 @@ def test_a_run_killed_with_sigkill_resumes_from_its_last_snapshot(tmp_path, caps
     report = json.loads(out.out)
     assert report["steps"] >= 60_000
     with League.open(home) as league:
-        assert league.get_run("r").status == "finished"
-        snaps = league.players("pong", kind="snapshot")
+        assert league.roster.get_run("r").status == "finished"
+        snaps = league.roster.players("pong", kind="snapshot")
         names = [p.name for p in snaps]
         assert names[: len(before)] == before and len(names) == len(set(names)) > len(before)
         for seat in ("left", "right"):
@@ -305,9 +306,9 @@ def test_dqn_and_the_seed000_preset_train_through_the_same_loop(tmp_path, capsys
     assert code == 0, err
     snap = json.loads(out)["snapshots"][-1]
     with League.open(home) as league:
-        run_cfg = league.get_run("pong-2").config
+        run_cfg = league.roster.get_run("pong-2").config
         assert run_cfg["algo"] == "dqn" and run_cfg["dqn"]["lr"] == 1e-3 and run_cfg["dqn"]["batch_size"] == 64
-        row = [p for p in league.players("pong", kind="snapshot") if p.full_name == snap][0]
+        row = [p for p in league.roster.players("pong", kind="snapshot") if p.full_name == snap][0]
         policy = load_policy(league.home / row.path)
     assert policy.meta.algo == "dqn" and list(policy.meta.arch.hidden) == [512, 512, 256, 128, 64]
     code, out, err = run(capsys, "train", "pong", "--preset", "seed001", "--home", home)
@@ -343,7 +344,7 @@ def test_swap_every_keeps_each_slot_on_its_opponent_until_the_swap(tmp_path):
     league = League.open(tmp_path / "league")
     cfg = tiny(agents=1, steps=8192, eval_games=0, swap_every=10**9,
                opponents=MatchmakerConfig(mode="self", latest_ratio=0.0, bots={"cpu": 0.5, "random": 0.5}))
-    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     trainer = Trainer(league, cfg)
     first = [trainer.games.policies[k].id for k in trainer.games.opponent_of.tolist()]
     assert set(first) == {"cpu", "random"}, "both bots drawn across the slots"
@@ -364,7 +365,7 @@ def test_tensorboard_gets_the_metrics_or_a_clear_install_hint(tmp_path, capsys, 
     code, out, err = run(capsys, *args)
     assert code == 2 and "pip install tensorboard" in err and err.count("\n") == 1
     with League.open(home) as league:
-        assert league.list_runs() == [], "refused before the run was created"
+        assert league.roster.list_runs() == [], "refused before the run was created"
 
     written = []
 
@@ -413,7 +414,7 @@ def test_run_status_after_a_refused_device_an_interrupt_and_a_crash(tmp_path, ca
     code, out, err = run(capsys, "train", "pong", "--device", "tpu", "--home", home)
     assert code == 2 and "unknown device 'tpu'" in err
     with League.open(home) as league:
-        assert league.list_runs() == [], "refused before the run was created"
+        assert league.roster.list_runs() == [], "refused before the run was created"
 
     def interrupted(self):
         raise KeyboardInterrupt
@@ -432,8 +433,8 @@ def test_run_status_after_a_refused_device_an_interrupt_and_a_crash(tmp_path, ca
     assert code == 5 and "internal error" in err and "RuntimeError: boom" in err and err.count("\n") == 1
     assert len(list(tmp_path.glob("marl-crash-*.txt"))) == 1
     with League.open(home) as league:
-        assert league.get_run("a").status == "stopped"
-        assert league.get_run("b").status == "failed"
+        assert league.roster.get_run("a").status == "stopped"
+        assert league.roster.get_run("b").status == "failed"
 
 
 def test_a_new_runs_settings_resolve_without_the_cli(tmp_path):

@@ -55,7 +55,7 @@ def test_progress_counts_what_moves_while_every_game_is_still_under_way(tmp_path
     cfg = TrainConfig(env="pong", run="t", steps=8192, games=16, snapshot_steps=2048, eval_games=2, eval="inline",
                       eval_playoff=0, ppo=FAST_PPO, env_options={"max_steps": 2000})
     with League.open(tmp_path / "league") as league:
-        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
         Trainer(league, cfg, on_progress=events.append).train()
     training = [e["standing"] for e in events if e["event"] == "training"]
     assert len(training) >= 2
@@ -176,17 +176,17 @@ def test_a_resumed_run_reports_the_whole_run_and_this_sessions_rate(tmp_path, ca
         code, out, err = run(capsys, *RESUMABLE, "--home", home)
     assert code == 130 and "marl train --resume r" in err
     with League.open(home) as league:
-        before = [p.full_name for p in league.players("pong", kind="snapshot")]
-        games_before = league.count_games("pong")
+        before = [p.full_name for p in league.roster.players("pong", kind="snapshot")]
+        games_before = league.ledger.count_games("pong")
     assert 4 <= len(before) < 12
 
     code, out, err = run(capsys, "train", "--resume", "r", "--home", home, "--json")
     assert code == 0, err
     data = json.loads(out)
     with League.open(home) as league:
-        snapshots = [p.full_name for p in league.players("pong", kind="snapshot")]
+        snapshots = [p.full_name for p in league.roster.players("pong", kind="snapshot")]
         # the gauntlets' games, rated in the run's variant (training games are not rated)
-        rating_games = len(league.games("pong", variant=variant_key("pong", {"points_to_win": 1})))
+        rating_games = len(league.ledger.games("pong", variant=variant_key("pong", {"points_to_win": 1})))
     assert data["sessions"] == 2 and data["snapshots"] == snapshots and len(snapshots) > len(before)
     assert data["steps"] >= 12_288 and 0 < data["session_steps"] <= 12_288 - 4096
     assert data["seconds"] > data["session_seconds"] > 0
@@ -210,12 +210,12 @@ def test_a_resumed_session_counts_only_the_rating_games_it_stored(tmp_path, caps
         code, out, err = run(capsys, *args, "--home", home)
     assert code == 130, err
     with League.open(home) as league:
-        before = len(league.games("pong", variant=variant))
+        before = len(league.ledger.games("pong", variant=variant))
     assert before > 0  # the first session's gauntlets: stored before the Ctrl-C
 
     data = json.loads(run(capsys, "train", "--resume", "r", "--home", home, "--json")[1])
     with League.open(home) as league:
-        after = len(league.games("pong", variant=variant))
+        after = len(league.ledger.games("pong", variant=variant))
     assert data["sessions"] == 2 and data["rating_games"] == after
     assert data["session_rating_games"] == after - before > 0
 
@@ -245,7 +245,7 @@ def test_a_repeated_run_says_its_snapshots_are_another_runs_weights_not_that_it_
     with League.open(tmp_path / "league") as league:
         for name in ("a", "b"):
             run_cfg = TrainConfig.from_dict({**cfg.to_dict(), "run": name})
-            league.create_run(name, "pong", run_cfg.to_dict(), algo="ppo")
+            league.roster.create_run(name, "pong", run_cfg.to_dict(), algo="ppo")
             reports.append(Trainer(league, run_cfg).train())
     first, second = reports
     assert first.eval_games > 0 and first.same_weights == {}
@@ -336,9 +336,9 @@ def test_a_seat_suffix_on_a_shared_networks_snapshot_is_answered_with_its_name(t
 
     cfg = TrainConfig(env="pong", run="t", steps=1024, games=8, sharing="fups", eval_games=0, ppo=FAST_PPO)
     with League.open(tmp_path / "league") as league:
-        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
         Trainer(league, cfg).train()
-        league.ensure_bots("lander", ["heuristic", "random"])  # a second game's players: its own random
+        league.roster.ensure_bots("lander", ["heuristic", "random"])  # a second game's players: its own random
         assert resolve(league, "t/s0").name == "s0"
         for typed, hint in (("t/s0-left", "name it t/s0"), ("s0-right", "name it s0")):
             with pytest.raises(MarlError) as e:
@@ -373,7 +373,7 @@ def _slow_run(tmp_path, monkeypatch, *, step: float, minibatch: float, on_progre
     cfg = TrainConfig(env=SLOW, run="s", minutes=1, games=4, sharing="fups", eval_games=0, ppo=LONG_UPDATE,
                       env_options={"seconds": step})
     with League.open(tmp_path / "league") as league:
-        league.create_run("s", SLOW, cfg.to_dict(), algo="ppo")
+        league.roster.create_run("s", SLOW, cfg.to_dict(), algo="ppo")
         began = CLOCK()
         report = Trainer(league, cfg, on_progress=on_progress, clock=CLOCK).train()
     return report, began
@@ -461,7 +461,7 @@ def test_once_training_has_ended_no_time_left_is_claimed(tmp_path):
     cfg = TrainConfig(env="pong", run="t", steps=2048, games=16, eval_games=2, eval="inline", eval_playoff=0,
                       ppo=FAST_PPO, env_options={"points_to_win": 1})
     with League.open(tmp_path / "league") as league:
-        league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+        league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
         Trainer(league, cfg, on_progress=events.append).train()
     ended = [e["standing"] for e in events if e["standing"].ended]
     assert ended and all(s.remaining is None for s in ended)

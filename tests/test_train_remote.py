@@ -89,7 +89,7 @@ def test_workers_play_a_runs_gauntlets_and_the_games_are_the_local_workers(db_ur
     assert data["rating_jobs_left"] == 0 and data["best"] is not None
     assert reports[0].done == 3 and reports[0].failed == 0
     with League(db_url, home=home) as league:
-        jobs = league.jobs(batch=BATCH)
+        jobs = league.queue.jobs(batch=BATCH)
         assert [(j.kind, j.state, j.worker) for j in jobs] == [("gauntlet", "done", "w1")] * 3
         assert [j.spec["snapshots"] for j in jobs] == [["r/s0-left", "r/s0-right"], ["r/s2.05k-left",
                                                        "r/s2.05k-right"], ["r/s4.1k-left", "r/s4.1k-right"]]
@@ -107,7 +107,7 @@ def test_with_no_worker_attached_the_run_plays_its_gauntlets_itself(tmp_path, ca
     data = _train_json(capsys, f"sqlite:///{home / 'league.db'}", home)
     assert data["rating_jobs_left"] == 0 and data["best"] is not None
     with League.open(home) as league:
-        jobs = league.jobs(batch=BATCH)
+        jobs = league.queue.jobs(batch=BATCH)
         assert len(jobs) == 3 and {j.state for j in jobs} == {"done"}
         assert all(j.worker.startswith("train@") for j in jobs)
         assert _record(league) == local_record
@@ -122,11 +122,11 @@ def test_no_wait_leaves_the_gauntlets_to_workers_and_the_ladder_fills_in_later(d
     data = _train_json(capsys, db_url, home, "--no-wait")
     assert data["rating_jobs_left"] == 3 and data["best"] is None and data["rating_games"] == 0
     with League(db_url, home=home) as league:
-        assert league.job_counts(BATCH)["queued"] == 3
+        assert league.queue.job_counts(BATCH)["queued"] == 3
         assert _record(league) == Counter()
         report = run_worker(league, WorkerOptions(until_empty=True, poll=0.05, name="later"))
         assert (report.done, report.failed) == (3, 0)
-        assert [j.worker for j in league.jobs(batch=BATCH)] == ["later"] * 3
+        assert [j.worker for j in league.queue.jobs(batch=BATCH)] == ["later"] * 3
         assert _record(league) == local_record
     code, out, err = run(capsys, "league", "ladder", "--run", "r", "--db", db_url, "--home", str(home), "--json")
     assert code == 0, err
@@ -159,12 +159,12 @@ def test_a_run_killed_and_resumed_queues_no_gauntlet_twice(tmp_path, capsys):
                            capture_output=True, text=True, timeout=600, env=env)
     assert child.returncode == -signal.SIGKILL, child.stderr[-2000:]
     with League.open(home) as league:
-        before = league.jobs(batch=BATCH)
+        before = league.queue.jobs(batch=BATCH)
     assert [j.spec["snapshots"] for j in before] == [["r/s0-left", "r/s0-right"]]
     code, out, err = run(capsys, "train", "--resume", "r", "--home", str(home), "--json")
     assert code == 0, err
     with League.open(home) as league:
-        jobs = league.jobs(batch=BATCH)
+        jobs = league.queue.jobs(batch=BATCH)
     names = [tuple(j.spec["snapshots"]) for j in jobs]
     assert jobs[0].id == before[0].id and len(names) == len(set(names)) == 3
     assert names[1] == ("r/s2.05k-left", "r/s2.05k-right")
@@ -178,11 +178,11 @@ def test_a_gauntlet_already_queued_is_not_queued_again(rated_league):
     league, snap = rated_league
     first = RemoteEvaluator(league, "w", "cpu")
     first.submit(GauntletJob((snap.id,), 0, 2, 0))
-    (queued,) = league.jobs(batch=run_batch("w"))
+    (queued,) = league.queue.jobs(batch=run_batch("w"))
     again = RemoteEvaluator(league, "w", "cpu")
     again.submit(GauntletJob((snap.id,), 0, 2, 0))
     again.submit(GauntletJob((snap.id, snap.id), 100, 2, 0))
-    jobs = league.jobs(batch=run_batch("w"))
+    jobs = league.queue.jobs(batch=run_batch("w"))
     assert [j.id for j in jobs[:1]] == [queued.id] and len(jobs) == 2 and jobs[1].after == queued.id
     assert again.poll() == [] and len(again.pending) == 2
 
@@ -194,8 +194,8 @@ def test_the_wait_shows_which_worker_plays_and_a_dead_job_is_one_error(rated_lea
     ev = RemoteEvaluator(league, "w", "cpu", poll_seconds=0.05)
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))
     assert ev.queue_standing() == QueueStanding(left=1, workers=(), here=False, attached=0)
-    wid = league.add_worker("w9", "elsewhere", 1)
-    job = league.claim(wid)
+    wid = league.queue.add_worker("w9", "elsewhere", 1)
+    job = league.queue.claim(wid)
     assert ev.queue_standing() == QueueStanding(left=1, workers=("w9",), here=False, attached=1)
     assert describe_queue(ev.queue_standing(), 0) == "1 gauntlet left in the queue, played by w9"
     seen: list[QueueStanding] = []
@@ -207,7 +207,7 @@ def test_the_wait_shows_which_worker_plays_and_a_dead_job_is_one_error(rated_lea
     assert done.games == 6 and ev.pending == [] and ev.games_played == 0  # all of it played by the worker
     assert seen and seen[0].workers == ("w9",)
     ev.submit(GauntletJob((snap.id, snap.id), 100, 2, 0))
-    (jid,) = [j.id for j in league.jobs(batch=run_batch("w"), states=["queued"])]
+    (jid,) = [j.id for j in league.queue.jobs(batch=run_batch("w"), states=["queued"])]
     with league.session() as s:
         s.execute(update(Job).where(Job.id == jid).values(state="dead", tries=5,
                                                            error="MarlError: s0: snapshot file missing"))
@@ -221,10 +221,10 @@ def test_a_cancelled_gauntlet_leaves_its_snapshots_unrated_in_one_line(rated_lea
     notes: list[str] = []
     ev = RemoteEvaluator(league, "w", "cpu", note=notes.append)
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))
-    assert league.cancel_jobs(batch=run_batch("w")) == 1
+    assert league.queue.cancel_jobs(batch=run_batch("w")) == 1
     (done,) = ev.wait()
     assert done.games == 0 and ev.pending == []
-    assert notes == [f"job {league.jobs(batch=run_batch('w'))[0].id} (the gauntlet of w/s0) was cancelled in the "
+    assert notes == [f"job {league.queue.jobs(batch=run_batch('w'))[0].id} (the gauntlet of w/s0) was cancelled in the "
                      "queue: those snapshots stay unrated"]
 
 
@@ -288,7 +288,7 @@ def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
 
     with League.open(tmp_path / "h") as league:
         for name, mode in (("a", "remote"), ("b", "local")):
-            league.create_run(name, "pong", TrainConfig(env="pong", run=name, eval=mode).to_dict(), algo="ppo")
+            league.roster.create_run(name, "pong", TrainConfig(env="pong", run=name, eval=mode).to_dict(), algo="ppo")
         assert resumed_config(league, "a", None, {"resume", "eval_wait"}, wait=False).eval_wait is False
         assert resumed_config(league, "a", None, {"resume"}).eval_wait is True
         with pytest.raises(MarlError, match="--no-wait is for --eval remote"):
@@ -303,15 +303,15 @@ def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     from selfplay_cli.league.queue import NewJob
 
     league, snap = rated_league
-    busy = league.add_worker("busy", "elsewhere", 1)
-    league.enqueue("other", [NewJob(kind="games", env="pong", spec={})])
-    assert league.claim(busy, batches=["other"]) is not None  # busy with another batch's job
+    busy = league.queue.add_worker("busy", "elsewhere", 1)
+    league.queue.enqueue("other", [NewJob(kind="games", env="pong", spec={})])
+    assert league.queue.claim(busy, batches=["other"]) is not None  # busy with another batch's job
     ev = RemoteEvaluator(league, "w", "cpu", untaken=0.5, poll_seconds=0.05)
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))
     seen: list[QueueStanding] = []
 
     def looked() -> None:
-        league.worker_beat(busy)
+        league.queue.worker_beat(busy)
         seen.append(ev.queue_standing())
 
     out: list = []
@@ -321,7 +321,7 @@ def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     assert out, "the run waited on for a worker that never took its gauntlet"
     (done,) = out[0]
     assert done.games == 6 and ev.games_played == 6  # s0 against each bot, and the bots against each other
-    (job,) = league.jobs(batch=run_batch("w"))
+    (job,) = league.queue.jobs(batch=run_batch("w"))
     assert job.state == "done" and job.worker.startswith("train@")
     assert seen[0] == QueueStanding(left=1, workers=(), here=False, attached=1)
     assert any(s.here for s in seen)
@@ -337,7 +337,7 @@ def _claim_matchup(league: League, worker: int):
 
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
-        job = league.claim(worker, kinds=[MATCHUP])
+        job = league.queue.claim(worker, kinds=[MATCHUP])
         if job is not None:
             return job
         time.sleep(0.02)
@@ -363,9 +363,9 @@ def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))
     whole_home = tmp_path / "whole"
     shutil.copytree(league.home, whole_home)  # the same league, to play the moment whole for comparison
-    mover = league.add_worker("mover", "here", 1)
-    free = league.add_worker("free", "elsewhere", 2)  # attached, heart beating, holding nothing
-    moment = league.claim(mover, kinds=["gauntlet"])
+    mover = league.queue.add_worker("mover", "here", 1)
+    free = league.queue.add_worker("free", "elsewhere", 2)  # attached, heart beating, holding nothing
+    moment = league.queue.claim(mover, kinds=["gauntlet"])
     outcome: list = []
     playing = threading.Thread(target=lambda: outcome.append(play_leased(league, mover, moment)), daemon=True)
     playing.start()
@@ -374,7 +374,7 @@ def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
     assert play_leased(league, free, taken).state == "done"
     playing.join(timeout=120)
     assert outcome and outcome[0].state == "done", outcome
-    jobs = league.jobs(batch=run_batch("w"))
+    jobs = league.queue.jobs(batch=run_batch("w"))
     matchups = [j for j in jobs if j.kind == MATCHUP]
     # s0 against random and cpu, and at the run's first moment the two bots against each other
     assert len(matchups) == 3 and {j.state for j in jobs} == {"done"}
@@ -384,13 +384,13 @@ def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
     assert by["free"] == 1 and sum(n for w, n in by.items() if w.startswith("gauntlet@")) == 2, by
     (done,) = ev.poll()
     assert done.games == 6  # the moment counts every game of its matchups, whoever played them
-    split = league.keyed_matches("gauntlet/")
+    split = league.ledger.keyed_matches("gauntlet/")
     with League.open(whole_home) as alone:  # the same moment played whole by one worker
-        only = alone.add_worker("only", "here", 3)
-        job = alone.claim(only, kinds=["gauntlet"])
+        only = alone.queue.add_worker("only", "here", 3)
+        job = alone.queue.claim(only, kinds=["gauntlet"])
         assert play_leased(alone, only, job).state == "done"
-        assert [j.kind for j in alone.jobs(batch=run_batch("w"))] == ["gauntlet"]  # nobody free: played whole
-        whole = alone.keyed_matches("gauntlet/")
+        assert [j.kind for j in alone.queue.jobs(batch=run_batch("w"))] == ["gauntlet"]  # nobody free: played whole
+        whole = alone.ledger.keyed_matches("gauntlet/")
         seeds = {k: _seeds(alone, mid) for k, (mid, _) in whole.items()}
     assert set(split) == set(whole) and len(split) == 3  # the same matchups, stored once each, under the same keys
     assert {k: _seeds(league, mid) for k, (mid, _) in split.items()} == seeds
@@ -405,8 +405,8 @@ def test_a_moment_played_again_queues_none_of_its_matchups_twice(rated_league):
 
     league, snap = rated_league
     RemoteEvaluator(league, "w", "cpu").submit(GauntletJob((snap.id,), 0, 2, 0))
-    first = league.add_worker("first", "here", 1)
-    job = league.claim(first, kinds=["gauntlet"])
+    first = league.queue.add_worker("first", "here", 1)
+    job = league.queue.claim(first, kinds=["gauntlet"])
     cfg = _config(league, job.spec)
 
     def queued() -> list[int]:  # (each time planned anew, as a worker that takes the moment over plans it)
@@ -414,7 +414,7 @@ def test_a_moment_played_again_queues_none_of_its_matchups_twice(rated_league):
 
     ids = queued()
     assert len(ids) == 3 and queued() == ids
-    one = league.claim(first, kinds=["matchup"])
+    one = league.queue.claim(first, kinds=["matchup"])
     assert play_leased(league, first, one).state == "done"
     assert sorted(queued()) == sorted(i for i in ids if i != one.id)  # stored: not again
     spec = dict(one.spec)

@@ -71,22 +71,22 @@ def evil(tmp_path, monkeypatch):
     admit("tests.games.tictactoe:env")  # (the test's own game, to write a valid file that says it plays evilmod)
     _tictactoe_file(tmp_path / "evil.safetensors", EVIL, seed=5)
     config = TrainConfig.defaults("pong", run="evil1") | {"env": EVIL}
-    league.create_run("evil1", EVIL, config)
+    league.roster.create_run("evil1", EVIL, config)
     rel = "snapshots/evil1/s146k.safetensors"
     (home / "snapshots" / "evil1").mkdir(parents=True)
     (home / rel).write_bytes((tmp_path / "evil.safetensors").read_bytes())
-    snap = league.add_snapshot(env=EVIL, run="evil1", name="s146k", path=rel, step=146_000, algo="ppo")
-    league.ensure_bots(EVIL, ["random"])
-    bot = next(p for p in league.players(kind="bot") if p.env == EVIL)
-    league.create_match_with_games(EVIL, "match", {}, [
+    snap = league.roster.add_snapshot(env=EVIL, run="evil1", name="s146k", path=rel, step=146_000, algo="ppo")
+    league.roster.ensure_bots(EVIL, ["random"])
+    bot = next(p for p in league.roster.players(kind="bot") if p.env == EVIL)
+    league.ledger.create_match_with_games(EVIL, "match", {}, [
         GameResult(env=EVIL, players=(snap.id, bot.id)[::1 - 2 * (k % 2)], seed=k, scores=(1, -1),
                    outcome=(1.0, 0.0), length=9, truncated=False) for k in range(4)])
     (home / "runs" / "evil1").mkdir(parents=True)
     (home / "runs" / "evil1" / "config.json").write_text(json.dumps(config))
-    mine = league.find_players("s146k", env="pong")[0]
-    cpu = next(p for p in league.players(kind="bot") if p.env == "pong" and p.name == "cpu")
-    league.enqueue("evil", [_games_job(EVIL, [snap.id], bot.id), _games_job(EVIL, [bot.id], bot.id)])
-    league.enqueue("mine", [_games_job("pong", [mine.id], cpu.id)])
+    mine = league.roster.find_players("s146k", env="pong")[0]
+    cpu = next(p for p in league.roster.players(kind="bot") if p.env == "pong" and p.name == "cpu")
+    league.queue.enqueue("evil", [_games_job(EVIL, [snap.id], bot.id), _games_job(EVIL, [bot.id], bot.id)])
+    league.queue.enqueue("mine", [_games_job("pong", [mine.id], cpu.id)])
     league.close()
     assert not is_admitted(EVIL)
     yield type("Evil", (), {"root": tmp_path, "home": home, "marker": marker, "args": ("--home", str(home))})
@@ -158,7 +158,7 @@ def test_resuming_a_run_whose_record_names_a_module_is_refused_in_one_line(evil,
     assert "marl train 'evilmod:env' --resume evil1" in line and "MARL_GAMES" in line
     # a run of pong whose saved configuration was changed to name the module: refused by the run's own game
     league = League.open(evil.home)
-    league.create_run("tampered", "pong", TrainConfig.defaults("pong", run="tampered") | {"env": EVIL})
+    league.roster.create_run("tampered", "pong", TrainConfig.defaults("pong", run="tampered") | {"env": EVIL})
     league.close()
     code, _, err = run(capsys, "train", "--resume", "tampered", *evil.args)
     assert "its saved configuration names another game ('evilmod:env')" in one_line(code, err)
@@ -176,8 +176,8 @@ def _marl(cwd: Path, *args: str, games: str | None = None) -> subprocess.Complet
 def test_a_row_naming_os_abort_neither_aborts_nor_hangs(tmp_path, named):
     home = tmp_path / "league"
     league = League.open(home)
-    league.create_run("boom", named, {})
-    league.add_snapshot(env=named, run="boom", name="x", path="snapshots/boom/x.safetensors", sha256="0" * 64)
+    league.roster.create_run("boom", named, {})
+    league.roster.add_snapshot(env=named, run="boom", name="x", path="snapshots/boom/x.safetensors", sha256="0" * 64)
     league.close()
     for args in (("match", "boom/x", "random", "--games", "2"), ("checkpoint", "show", "boom/x"),
                  ("train", "--resume", "boom")):
@@ -219,9 +219,9 @@ def test_a_game_you_name_is_imported_and_played(tmp_path):
     assert p.returncode == 0 and Path(gif).stat().st_size > 0, p.stderr
 
     league = League.open(tmp_path / "league")
-    (snap,) = league.find_players("mine/s200-x")
-    rnd = next(q for q in league.players(kind="bot") if q.env == "mygame:env" and q.name == "random")
-    league.enqueue("mine", [_games_job("mygame:env", [snap.id], rnd.id)])
+    (snap,) = league.roster.find_players("mine/s200-x")
+    rnd = next(q for q in league.roster.players(kind="bot") if q.env == "mygame:env" and q.name == "random")
+    league.queue.enqueue("mine", [_games_job("mygame:env", [snap.id], rnd.id)])
     league.close()
     p = _marl(tmp_path, "worker", "--until-empty", "--json", *home, games="mygame:env")
     assert p.returncode == 0 and json.loads(p.stdout)["done"] == 1, p.stderr

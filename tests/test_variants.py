@@ -138,7 +138,7 @@ def test_tournament_gate_and_matrix_work_in_one_variant(home, capsys):
     assert games_of(rows) == {"cpu": 10, "random": 10} and rows[0]["variant"] == {}
     run_json(capsys, "match", "cpu", "random", "--env", "pong", "--games", "10", "-q")
     with League.open(home) as league:
-        assert league.variants("pong") == {"": 20, TO_3: 10}
+        assert league.ledger.variants("pong") == {"": 20, TO_3: 10}
     # the gate reuses the stored games of the variant it plays in, and only those
     verdict = run_json(capsys, "elo", "gate", "cpu", "--vs", "random", "--env", "pong", "--env-option",
                        "points_to_win=3", "--games", "10")
@@ -178,20 +178,20 @@ def seed_two_variants(home: Path) -> dict[str, int]:
     """Two snapshots and the pong bots: ``r/a`` beats both bots in the default game and loses in the variant
     points_to_win=3, ``r/b`` the other way round. Games written straight to the ledger (results chosen by hand)."""
     with League.open(home) as lg:
-        lg.ensure_bots("pong", ["random", "cpu"])
-        lg.create_run("r", "pong", {})
-        ids = {p.name: p.id for p in lg.players("pong", kind="bot")}
+        lg.roster.ensure_bots("pong", ["random", "cpu"])
+        lg.roster.create_run("r", "pong", {})
+        ids = {p.name: p.id for p in lg.roster.players("pong", kind="bot")}
         for name in ("a", "b"):
-            ids[name] = lg.add_snapshot(env="pong", run="r", name=name, path=f"/x/r/{name}.safetensors",
-                                        sha256="0" * 64, step=1).id
+            ids[name] = lg.roster.add_snapshot(env="pong", run="r", name=name, path=f"/x/r/{name}.safetensors",
+                                               sha256="0" * 64, step=1).id
         for options, winner, loser in (({}, "a", "b"), ({"points_to_win": 3}, "b", "a")):
             games = []
             for k, (x, y) in enumerate([(winner, bot) for bot in ("random", "cpu")] * 6
                                        + [(bot, loser) for bot in ("random", "cpu")] * 6 + [("cpu", "random")] * 4):
                 games.append(GameResult(env="pong", players=(ids[x], ids[y]), seed=k, scores=(3.0, 1.0),
                                         outcome=(1.0, 0.0), length=100, truncated=False))
-            match = lg.create_match("pong", "match", {"env_options": options})
-            lg.record_games(match, games)
+            match = lg.ledger.create_match("pong", "match", {"env_options": options})
+            lg.ledger.record_games(match, games)
     return ids
 
 
@@ -211,17 +211,18 @@ def test_best_and_the_anchor_are_read_from_the_variant_asked_for(home, capsys):
 def test_only_the_default_variant_moves_the_online_elo(home):
     ids = seed_two_variants(home)
     with League.open(home) as league:
-        online = {p.name: (round(p.elo, 6), p.games) for p in league.players("pong")}
+        online = {p.name: (round(p.elo, 6), p.games) for p in league.roster.players("pong")}
         assert online["b"][0] < 1000 < online["a"][0]  # the default games moved them (b lost there) ...
         assert online["a"][1] == online["b"][1] == 24  # ... and every game counts in the game counts
-        league.recompute_online_elo("pong")
-        assert {p.name: (round(p.elo, 6), p.games) for p in league.players("pong")} == online
+        league.ledger.recompute_online_elo("pong")
+        assert {p.name: (round(p.elo, 6), p.games) for p in league.roster.players("pong")} == online
         # a variant's match alone moves no online Elo
-        before = {p.id: p.elo for p in league.players("pong")}
-        match = league.create_match("pong", "match", {"env_options": {"points_to_win": 3}})
-        league.record_games(match, [GameResult(env="pong", players=(ids["random"], ids["a"]), seed=99,
-                                               scores=(3.0, 0.0), outcome=(1.0, 0.0), length=10, truncated=False)])
-        assert {p.id: p.elo for p in league.players("pong")} == before
+        before = {p.id: p.elo for p in league.roster.players("pong")}
+        match = league.ledger.create_match("pong", "match", {"env_options": {"points_to_win": 3}})
+        league.ledger.record_games(match, [GameResult(env="pong", players=(ids["random"], ids["a"]), seed=99,
+                                                      scores=(3.0, 0.0), outcome=(1.0,
+                                                                                  0.0), length=10, truncated=False)])
+        assert {p.id: p.elo for p in league.roster.players("pong")} == before
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -245,7 +246,7 @@ def test_a_league_written_before_variants_reads_per_variant(tmp_path, capsys):
                    "--games", "2", "-q", "--home", str(home))
     assert rep["variant"] == {"points_to_win": 3}
     with League.open(home) as league:
-        assert league.variants("pong") == {"": 6, TO_3: 8}
+        assert league.ledger.variants("pong") == {"": 6, TO_3: 8}
 
 
 def test_the_ladder_without_options_shows_the_games_the_newest_run_played(home, capsys):
@@ -255,22 +256,22 @@ def test_the_ladder_without_options_shows_the_games_the_newest_run_played(home, 
     seed_two_variants(home)
     assert games_of(ladder_json(capsys, "--env", "pong"))["r/a"] == 12  # run r: the default game
     with League.open(home) as lg:
-        lg.create_run("t", "pong", {"env_options": {"points_to_win": 3}})
+        lg.roster.create_run("t", "pong", {"env_options": {"points_to_win": 3}})
     rows = ladder_json(capsys, "--env", "pong")
     assert rows[0]["variant"] == {"points_to_win": 3} and games_of(rows)["r/a"] == 12
     assert {r["policy"] for r in rows if r["best"]} == {"r/b"}  # b wins the variant's games
     assert ladder_json(capsys, "--env", "pong", "--env-option", "points_to_win=21")[0]["variant"] == {}
     with League.open(home) as lg:
-        lg.create_run("u", "pong", {"env_options": {}})
+        lg.roster.create_run("u", "pong", {"env_options": {}})
     assert ladder_json(capsys, "--env", "pong")[0]["variant"] == {}
     # no run at all, one variant with games: that one
     other = home.parent / "other"
     with League.open(other) as lg:
-        lg.ensure_bots("pong", ["random", "cpu"])
-        bots = {p.name: p.id for p in lg.players("pong", kind="bot")}
-        match = lg.create_match("pong", "match", {"env_options": {"points_to_win": 3}})
-        lg.record_games(match, [GameResult(env="pong", players=(bots["cpu"], bots["random"]), seed=k,
-                                           scores=(3.0, 1.0), outcome=(1.0, 0.0), length=100, truncated=False)
+        lg.roster.ensure_bots("pong", ["random", "cpu"])
+        bots = {p.name: p.id for p in lg.roster.players("pong", kind="bot")}
+        match = lg.ledger.create_match("pong", "match", {"env_options": {"points_to_win": 3}})
+        lg.ledger.record_games(match, [GameResult(env="pong", players=(bots["cpu"], bots["random"]), seed=k,
+                                                  scores=(3.0, 1.0), outcome=(1.0, 0.0), length=100, truncated=False)
                                 for k in range(4)])
     rows = ladder_json(capsys, "--env", "pong", "--home", str(other))
     assert rows[0]["variant"] == {"points_to_win": 3} and games_of(rows) == {"cpu": 4, "random": 4}

@@ -289,14 +289,17 @@ def test_a_matchup_is_stored_once_whatever_the_number_of_writers(tmp_path):
     from selfplay_cli.results import GameResult
 
     league = League.open(tmp_path / "h")
-    league.ensure_bots("pong", ["random", "cpu"])
-    a, b = (p.id for p in league.players("pong", kind="bot"))
+    league.roster.ensure_bots("pong", ["random", "cpu"])
+    a, b = (p.id for p in league.roster.players("pong", kind="bot"))
     games = [GameResult("pong", (a, b), seed=i, scores=(1, 0), outcome=(1.0, 0.0), length=5, truncated=False)
              for i in range(3)]
-    first, ids = league.create_match_with_games("pong", "eval", {"gauntlet": True}, games, key="gauntlet/7/0/1/2")
-    again, none = league.create_match_with_games("pong", "eval", {"gauntlet": True}, games, key="gauntlet/7/0/1/2")
-    assert (again, none, len(ids)) == (first, [], 3) and league.count_games("pong") == 3
-    assert set(league.keyed_matches("gauntlet/7/")) == {"gauntlet/7/0/1/2"} and not league.keyed_matches("gauntlet/70")
+    first, ids = league.ledger.create_match_with_games("pong", "eval", {"gauntlet": True}, games,
+                                                       key="gauntlet/7/0/1/2")
+    again, none = league.ledger.create_match_with_games("pong", "eval", {"gauntlet": True}, games,
+                                                        key="gauntlet/7/0/1/2")
+    assert (again, none, len(ids)) == (first, [], 3) and league.ledger.count_games("pong") == 3
+    assert set(league.ledger.keyed_matches("gauntlet/7/")) == {"gauntlet/7/0/1/2"}
+    assert not league.ledger.keyed_matches("gauntlet/70")
     league.close()
 
 
@@ -313,12 +316,12 @@ def test_a_league_of_schema_1_gets_its_work_keys(tmp_path):
     con.commit()
     con.close()
     with League.open(tmp_path / "h", readonly=True) as league:  # a command that only reads reads it as it is
-        assert league.schema_revision() == "legacy 1" and league.count_games("pong") == 0
+        assert league.schema_revision() == "legacy 1" and league.ledger.count_games("pong") == 0
     with League.open(tmp_path / "h") as league:
         assert league.schema_revision() == migrations.head()
-        league.ensure_bots("pong", ["random"])
-        league.create_match_with_games("pong", "eval", {}, [], key="k")
-        assert set(league.keyed_matches("k")) == {"k"}
+        league.roster.ensure_bots("pong", ["random"])
+        league.ledger.create_match_with_games("pong", "eval", {}, [], key="k")
+        assert set(league.ledger.keyed_matches("k")) == {"k"}
 
 
 # -- 5. SIGTERM within seconds, whatever the settings --------------------------------------------------------
@@ -344,7 +347,7 @@ def test_sigterm_stops_a_run_within_seconds_even_in_an_endless_update(tmp_path):
     assert proc.returncode == 143, (proc.returncode, err[-1000:])
     assert "stopped r at step" in err and "Traceback" not in err
     with League.open(home) as league:
-        assert league.get_run("r").status == "stopped"
+        assert league.roster.get_run("r").status == "stopped"
 
 
 def test_a_stopped_run_leaves_no_stop_standing_for_later_learning(tmp_path, monkeypatch):
@@ -357,7 +360,7 @@ def test_a_stopped_run_leaves_no_stop_standing_for_later_learning(tmp_path, monk
     league = League.open(tmp_path / "league")
     cfg = TrainConfig(env="pong", steps=4096, games=16, eval_games=0, run="t", env_options={"points_to_win": 1},
                       ppo=PPOConfig(rollout_steps=32, minibatches=2, update_epochs=1))
-    league.create_run("t", "pong", cfg.to_dict(), algo="ppo")
+    league.roster.create_run("t", "pong", cfg.to_dict(), algo="ppo")
     seen = []
 
     def broken(self):

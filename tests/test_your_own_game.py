@@ -176,7 +176,7 @@ def test_new_match_seeds_give_new_games_of_a_deterministic_board_game(home, caps
         ids = run_json(capsys, "match", "d/s3k", "random", "--games", "20", "--seed", seed)["game_ids"]
         league = League.open(home=home)
         try:
-            return [league.game(i).actions for i in ids]
+            return [league.ledger.game(i).actions for i in ids]
         finally:
             league.close()
 
@@ -233,12 +233,12 @@ def test_every_opponent_seat_draws_its_own_opponent(home, capsys):
     league = League.open(home=home)
     try:
         seen = 0
-        for gid in range(1, league.count_games() + 1):
-            g = league.game(gid)
+        for gid in range(1, league.ledger.count_games() + 1):
+            g = league.ledger.game(gid)
             if g.match_kind == "training":  # the learner and two opponents: random, or a snapshot, or itself
-                seen += [league.get_player(p).name for p in g.players].count("random") == 1
+                seen += [league.roster.get_player(p).name for p in g.players].count("random") == 1
         # with one opponent a game, both opponent seats would be random or neither
         assert seen > 0, "two opponent seats of one game drawn apart"
-        assert league.games(env="tests.test_your_own_game:race").games_played() > 0  # pairwise rated results
+        assert league.ledger.games(env="tests.test_your_own_game:race").games_played() > 0  # pairwise rated results
     finally:
         league.close()

@@ -160,17 +160,17 @@ def shown_variant(league: League, env: str | None, env_option: list[str] | None,
     from ..rated.snapshots import run_options
 
     if run is not None:
-        info = league.get_run(run)
+        info = league.roster.get_run(run)
         env = env or (info.env if info is not None else None)
     env = pick_env(league, env)
     if env_option:
         return env, variant_key(env, parse_env_options(env, env_option))
-    if run is not None and league.get_run(run) is not None:
+    if run is not None and league.roster.get_run(run) is not None:
         return env, variant_key(env, run_options(league, run))
-    played = league.variants(env)
+    played = league.ledger.variants(env)
     if len(played) <= 1:
         return env, next(iter(played), "")
-    for r in reversed(league.list_runs(env)):
+    for r in reversed(league.roster.list_runs(env)):
         key = variant_key(env, run_options(league, r.name))
         if played.get(key):
             return env, key
@@ -205,7 +205,7 @@ def resolve_players(league: League, names: list[str], env: str | None, teams: bo
             env = _game_of_bots(league, [names[i] for i in named])
             pending = named if env is not None else pending
         if env is not None:
-            league.ensure_bots(env, league_bots(get_env(env)))
+            league.roster.ensure_bots(env, league_bots(get_env(env)))
         for i in pending:
             rows[i] = find(league, names[i], env)  # raises the precise error (unknown, ambiguous, team...)
     if best:  # the best of the variant the options make
@@ -229,7 +229,7 @@ def _game_of_bots(league: League, names: list[str]) -> str | None:
     having = [g for g in games if all(n in league_bots(get_env(g)) for n in names)]
     if len(having) == 1:
         return having[0]
-    held = {p.env for p in league.players()} & set(having)
+    held = {p.env for p in league.roster.players()} & set(having)
     if len(held) == 1:
         return held.pop()
     if len(having) > 1:

@@ -53,7 +53,8 @@ def list_cmd(
     """The snapshots in the league, oldest first."""
     league = open_league(home, db, readonly=True)
     try:
-        rows = league.players(env=check_env(env), kind=None if bots else "snapshot", include_removed=include_removed)
+        rows = league.roster.players(env=check_env(env), kind=None if bots else "snapshot",
+                                     include_removed=include_removed)
     finally:
         league.close()
     if run is not None:
@@ -85,7 +86,7 @@ def _details(league, p) -> dict:
     data = _row_json(p)
     lineage, parent = [], p.parent_id
     while parent is not None and len(lineage) < 50:
-        q = league.get_player(parent)
+        q = league.roster.get_player(parent)
         lineage.append(q.full_name)
         parent = q.parent_id
     data["lineage"] = lineage
@@ -141,7 +142,7 @@ def tag(name: NameArg, tag_name: Annotated[str, typer.Argument(metavar="TAG", he
     league = open_league(home, db)
     try:
         p = resolve(league, name, check_env(env))
-        league.tag(p.id, tag_name)
+        league.roster.tag(p.id, tag_name)
     finally:
         league.close()
     console.print(f"tagged {p.full_name} as {tag_name}", markup=False)
@@ -181,7 +182,7 @@ def rm(name: NameArg, env: EnvOpt = None,
         if needs and not force:
             raise MarlError(f"{p.full_name} is needed by {'; by '.join(n.describe() for n in needs)}; marl "
                             f"checkpoint rm --force {name} removes it and ends {_runs(needs)} for good")
-        league.remove_snapshot(p.id, end_runs=[n.run for n in needs])
+        league.roster.remove_snapshot(p.id, end_runs=[n.run for n in needs])
     finally:
         league.close()
     if path is not None and path.is_file():
@@ -279,8 +280,8 @@ def push(
     league = open_league(home, db)
     try:
         if to is not None:
-            league.set_blob_location(None if to == "db" else to)
-        location = league.blob_location()
+            league.blobs.set_blob_location(None if to == "db" else to)
+        location = league.blobs.blob_location()
         if to is not None and not json_out:
             console.print(f"the league keeps its snapshot files in {location or 'the database'} from now on",
                           markup=False)
@@ -289,7 +290,7 @@ def push(
                 print_json({"blob_url": location})
             return
         if every:
-            rows = league.players(env=check_env(env), kind="snapshot")
+            rows = league.roster.players(env=check_env(env), kind="snapshot")
         else:
             rows = []
             for name in names or []:
@@ -297,7 +298,7 @@ def push(
                 rows += found.members if isinstance(found, Team) else [found]
             rows = list({p.id: p for p in rows if not p.is_bot}.values())
         with progress_bar("storing snapshot files", len(rows), "files", progress_enabled(quiet or json_out)) as bar:
-            report = league.ensure_blobs(rows, check_legacy=check_legacy_file, advance=bar)
+            report = league.blobs.ensure_blobs(rows, check_legacy=check_legacy_file, advance=bar)
     finally:
         league.close()
     if json_out:

@@ -127,7 +127,7 @@ def fit(
             env, variant = shown_variant(league, check_env(env), env_option)
             rows = ladder(league, env, anchor=resolve_anchor(league, name, env, variant), anchor_rating=rating,
                           bootstrap=bootstrap, confidence=confidence, seed=seed, prior=prior, variant=variant)
-            note = other_variants_note(env, league.variants(env), variant, "marl elo fit")
+            note = other_variants_note(env, league.ledger.variants(env), variant, "marl elo fit")
         finally:
             league.close()
         title = "ratings fitted over the ledger" + (f" ({env}: {describe_variant(variant)})" if variant else "")

@@ -102,9 +102,9 @@ def ladder_cmd(
     try:
         env = check_env(env)
         if run is not None:
-            r = league.get_run(run)
+            r = league.roster.get_run(run)
             if r is None:
-                known = ", ".join(x.name for x in league.list_runs()[:10])
+                known = ", ".join(x.name for x in league.roster.list_runs()[:10])
                 raise MarlError(f"no run named '{run}'" + (f"; runs: {known}" if known else ""))
             if env is not None and r.env != env:
                 raise MarlError(f"run '{run}' plays {r.env}, not {env}")
@@ -114,8 +114,8 @@ def ladder_cmd(
                       bootstrap=check_bootstrap(bootstrap), confidence=confidence, include_removed=include_removed,
                       prior=prior, variant=variant)
         # A player has one online Elo, moved by the default variant's games only: no column beside another's.
-        online = {p.id: p.elo for p in league.players(include_removed=True)} if not variant else None
-        note = other_variants_note(env, league.variants(env), variant, "marl league ladder")
+        online = {p.id: p.elo for p in league.roster.players(include_removed=True)} if not variant else None
+        note = other_variants_note(env, league.ledger.variants(env), variant, "marl league ladder")
         shown = select_rows(rows, run=run, top=top)
         flown = resized_in_variant(league, env, shown, variant_options(variant)) if env is not None else {}
     finally:
@@ -160,7 +160,7 @@ def predict_cmd(
     league = open_league(home, db, readonly=True)
     try:
         env = check_env(env)
-        if env is not None and not league.count_games(env):  # (nothing to predict from, nor bots to name)
+        if env is not None and not league.ledger.count_games(env):  # (nothing to predict from, nor bots to name)
             raise MarlError(f"{env} has no rated games in this league yet: nothing to predict from (marl match or "
                             "marl train first)")
         row_a, row_b = resolve_players(league, [a, b], env, env_option=env_option)
@@ -320,7 +320,7 @@ def _see_through(league: Any, own: str | None, joined: dict[str, list[int]], tot
                 jobs = see_through(league, batch, device=device, parallel=parallel, on_change=on_change, ids=ids)
             except KeyboardInterrupt:
                 if ids is None:
-                    n = league.cancel_jobs(batch=batch)
+                    n = league.queue.cancel_jobs(batch=batch)
                     err_console.print(f"interrupted: {n} jobs of {batch} cancelled; the games of the jobs done are "
                                       "stored", markup=False)
                 raise
@@ -341,18 +341,18 @@ def _field(league: Any, players: list[str] | None, env: str | None, env_option: 
     chosen = [m for f in found for m in (f.members if isinstance(f, Team) else (f,))]  # a team: its members
     env = env or (chosen[0].env if chosen else None)
     if run is not None:
-        r = league.get_run(run)
+        r = league.roster.get_run(run)
         if r is None:
             raise MarlError(f"no run named '{run}'")
         env = env or r.env
-        chosen += [p for p in league.players(env=r.env, kind="snapshot") if p.run == run]
+        chosen += [p for p in league.roster.players(env=r.env, kind="snapshot") if p.run == run]
     if top is not None:
         if top < 2:
             raise MarlError(f"--top must be at least 2, not {top}")
         top_env, top_variant = shown_variant(league, env, env_option)  # the top of the variant asked for
         rows = ladder(league, top_env, bootstrap=0, variant=top_variant)
         env = env or top_env
-        chosen += [league.get_player(r.player_id) for r in rows[:top] if r.player_id is not None]
+        chosen += [league.roster.get_player(r.player_id) for r in rows[:top] if r.player_id is not None]
     anchor = resolve_players(league, [vs], env, env_option=env_option)[0] if vs else None
     unique = {p.id: p for p in chosen if anchor is None or p.id != anchor.id}
     if len(unique) + (anchor is not None) < 2:

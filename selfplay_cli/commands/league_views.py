@@ -81,12 +81,12 @@ def plot_cmd(
     league = open_league(home, db, readonly=True)
     try:
         if run is None:
-            runs = league.list_runs(env)
+            runs = league.roster.list_runs(env)
             if not runs:
                 raise MarlError(f"no training runs{f' of {env}' if env else ''} in the league yet (marl train ...)")
             run = runs[-1].name
         else:
-            info = league.get_run(run)
+            info = league.roster.get_run(run)
             if info is not None and env is not None and info.env != env:
                 raise MarlError(f"run '{run}' trains {info.env}, not {env}")
         variant = shown_variant(league, env, env_option, run)[1] if env_option else None  # None: the run's own
@@ -143,7 +143,7 @@ def matrix_cmd(
         out = check_png_path(out)
     league = open_league(home, db, readonly=True)
     try:
-        if run is not None and league.get_run(run) is None:
+        if run is not None and league.roster.get_run(run) is None:
             variant = ""  # build_matrix says the run is unknown, listing the runs
         else:
             env, variant = shown_variant(league, env, env_option, run)

@@ -201,7 +201,7 @@ def match(
                 report.after_queued = taken.after
                 job.settle_here(league, taken, report)
             else:
-                first = league.fresh_seed(job.rows_a[0].id, job.row_b.id) if seed is None else seed
+                first = league.ledger.fresh_seed(job.rows_a[0].id, job.row_b.id) if seed is None else seed
                 report, batch = _local(league, store, job, budget, first, options, settings, confidence, device,
                                        parallel, quiet), None
             if forecast is not None and job.team_name is None:
@@ -256,8 +256,9 @@ def _queued(league, job, games: int, seed: int | None, options, settings, confid
     queued, taken = job.take_queued(league, games, seed, options, sprt=settings, confidence=confidence, device=device)
     _said_after(taken, quiet)
     if not quiet:
-        err_console.print(f"queued {len(league.jobs(batch=queued.batch))} jobs as batch {queued.batch} (marl queue "
-                          f"--batch {queued.batch}); playing them with the workers attached", markup=False)
+        n = len(league.queue.jobs(batch=queued.batch))
+        err_console.print(f"queued {n} jobs as batch {queued.batch} (marl queue --batch {queued.batch}); playing them "
+                          "with the workers attached", markup=False)
     try:
         done = [0]
 
@@ -272,7 +273,7 @@ def _queued(league, job, games: int, seed: int | None, options, settings, confid
             report.after_queued = taken.after
             return report, queued.batch
     except KeyboardInterrupt:
-        n = league.cancel_jobs(batch=queued.batch)
+        n = league.queue.cancel_jobs(batch=queued.batch)
         err_console.print(f"interrupted: {n} jobs of {queued.batch} cancelled; the games of the jobs done are stored "
                           "and count in the ratings", markup=False)
         raise typer.Exit(130) from None

@@ -41,9 +41,9 @@ def show(
             raise MarlError(f"--state {s!r}: a job's state is one of {', '.join(JOB_STATES)}")
     league = open_league(home, db, readonly=True)
     try:
-        batches = league.batches()
-        workers = league.workers()
-        jobs = league.jobs(batch=batch, states=state, limit=last)
+        batches = league.queue.batches()
+        workers = league.queue.workers()
+        jobs = league.queue.jobs(batch=batch, states=state, limit=last)
     finally:
         league.close()
     if batch is not None and batch not in dict(batches):
@@ -73,13 +73,13 @@ def cancel(
         raise MarlError("say what to cancel: job ids, or --batch NAME (marl queue lists them)")
     league = open_league(home, db)
     try:
-        if batch is not None and batch not in dict(league.batches()):
+        if batch is not None and batch not in dict(league.queue.batches()):
             raise MarlError(f"no batch {batch!r} in the queue (marl queue lists them)")
-        known = {j.id for j in league.jobs(ids=job_ids)} if job_ids else set()
+        known = {j.id for j in league.queue.jobs(ids=job_ids)} if job_ids else set()
         missing = sorted(set(job_ids or []) - known)
         if missing:
             raise MarlError(f"no job {missing[0]} in the queue (marl queue lists them)")
-        n = league.cancel_jobs(batch=batch, ids=job_ids)
+        n = league.queue.cancel_jobs(batch=batch, ids=job_ids)
     finally:
         league.close()
     if json_out:

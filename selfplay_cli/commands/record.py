@@ -138,7 +138,7 @@ def record(
 
         # the players seated once (one lineup, or one per member of a team recorded against --vs)
         ups = lineups(league, ckpt, vs, env) if game_id is None else []  # type: ignore[arg-type]
-        game = league.game(game_id).env if game_id is not None else ups[0].env
+        game = league.ledger.game(game_id).env if game_id is not None else ups[0].env
         if game_id is not None and env is not None and env != game:  # (--env names a game of your own to replay)
             raise MarlError(f"game {game_id} was played in {game}, not {env}")
         settings = video_settings(game, fps, size, fmt, hold, max_width)

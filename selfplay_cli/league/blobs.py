@@ -48,7 +48,7 @@ from sqlalchemy.orm import Session
 from selfplay_cli.errors import MarlError
 from selfplay_cli.files import folder_inside, sha256_at, write_atomic_at
 from selfplay_cli.league.bounded_json import say_once
-from selfplay_cli.league.db import Database, LeagueError, LeagueIOError, shown
+from selfplay_cli.league.db import LeagueError, LeagueIOError, Part, shown
 from selfplay_cli.league.locations import LOCATIONS_VARIABLE, altered, read_location, writable_folder
 from selfplay_cli.league.models import Blob, Meta, Player, utcnow
 
@@ -172,8 +172,9 @@ otherwise. Reading a snapshot file is the policies' business, so the check is gi
 (:func:`selfplay_cli.players.files.check_legacy_file`)."""
 
 
-class Blobs(Database):
-    """Snapshot blobs of the league (see the module docstring)."""
+class Blobs(Part):
+    """Snapshot blobs of the league (``league.blobs``; see the module docstring)."""
+
 
     def put_blob(self, source: bytes | str | os.PathLike[str]) -> str:
         """Store a snapshot file's bytes (``source``: the bytes, or a file) in the league and return their sha256.
@@ -320,7 +321,7 @@ class Blobs(Database):
             report.present.append(name)
             return
         try:
-            path = self.snapshot_file(row)  # type: ignore[attr-defined]  # (League's: paths kept inside the home)
+            path = self.db.snapshot_file(row)  # (paths kept inside the home)
             data = path.read_bytes() if path.is_file() else None
         except (LeagueError, OSError) as exc:
             report.missing.append(name)

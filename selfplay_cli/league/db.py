@@ -65,10 +65,14 @@ from sqlalchemy.pool import StaticPool
 from selfplay_cli.errors import EXIT_IO, MarlError, MarlIOError
 from selfplay_cli.league import bounded_json, migrations
 from selfplay_cli.league.models import Base, Meta, utcnow
+from selfplay_cli.league.rows import PlayerRow
 from selfplay_cli.signals import signals_held
 
-__all__ = ["ALLOW_NETWORK_SQLITE", "DB_FILENAME", "DEFAULT_HOME", "Database", "LeagueError", "LeagueIOError",
-           "LeagueUnreachable", "network_filesystem", "shown"]
+__all__ = ["ALLOW_NETWORK_SQLITE", "DB_FILENAME", "DEFAULT_HOME", "SNAPSHOTS", "Database", "LeagueError",
+           "LeagueIOError", "LeagueUnreachable", "Part", "network_filesystem", "shown"]
+
+SNAPSHOTS = "snapshots"
+"""The folder of the league home that holds every snapshot file (``snapshots/<run>/<name>.safetensors``)."""
 
 DEFAULT_HOME = "./league"
 DB_FILENAME = "league.db"
@@ -526,6 +530,32 @@ class Database:
         with maker.begin() as s:
             yield s
 
+    def snapshot_file(self, row: PlayerRow) -> Path:
+        """The file of a snapshot row, checked to stay inside the league: the one way marl turns a path read from the
+        database into a file it reads or deletes.
+
+        A row's path is relative to the home and lies under its ``snapshots`` folder (``snapshots/<run>/<name>
+        .safetensors``, as :func:`~selfplay_cli.players.files.snapshot_relpath` writes it): plain names only (no
+        ``..``, no NUL byte), and, symlinks followed, still under ``snapshots`` (which may itself be a symlink to
+        another disk). A path that is absolute, climbs out, or ends outside through a symlink is a row that was
+        written by something else than marl or edited: a :class:`LeagueError` naming the snapshot, before anything
+        is read or deleted. A league without a home (a database URL opened without ``--home``) has no files."""
+        if not row.path:
+            raise LeagueError(f"{row.full_name} has no snapshot file")
+        if self.home is None:
+            raise LeagueError(f"{row.full_name}: this league has no home directory for its snapshot files: pass "
+                              "--home")
+        leaves = LeagueError(f"{row.full_name}: its file path {shown(row.path)} leaves the league (snapshot files "
+                             f"lie under {self.home / SNAPSHOTS}): the row was not written by marl; nothing was read "
+                             "or deleted")
+        parts = Path(row.path).parts if "\0" not in row.path else ()
+        if len(parts) < 2 or parts[0] != SNAPSHOTS:  # absolute ('/' first), another folder, or a bare name
+            raise leaves
+        try:
+            return self.home_path(*parts)  # plain names; symlinks followed, still under snapshots/
+        except LeagueError:
+            raise leaves from None
+
     def _backoff(self, attempt: int) -> None:
         self.lock_retries += 1
         time.sleep(min(0.05 * 2**attempt, 2.0) * (0.5 + random.random()))
@@ -613,6 +643,21 @@ class Database:
 
     def _read(self, fn: Callable[[Session], T]) -> T:
         return self._unit(fn, readonly=True)
+
+
+class Part:
+    """One concern of a league (its roster, ledger, seed ranges, blobs or work queue) over the database the league's
+    parts share: every unit of work runs through :attr:`db` (one transaction, retried as :meth:`Database._unit`
+    says)."""
+
+    def __init__(self, db: Database) -> None:
+        self.db = db
+
+    def _unit(self, fn: Callable[[Session], T], readonly: bool = False, idempotent: bool = False) -> T:
+        return self.db._unit(fn, readonly=readonly, idempotent=idempotent)
+
+    def _read(self, fn: Callable[[Session], T]) -> T:
+        return self.db._read(fn)
 
 
 def forget_new_homes() -> None:

@@ -70,18 +70,18 @@ class Forecaster:
         from selfplay_cli.league.ladder import declared_anchor, default_anchor
         from selfplay_cli.league.pairs import design_effect
 
-        table = league.games(env=env, variant=variant)
+        table = league.ledger.games(env=env, variant=variant)
         if not len(table):
             raise LeagueError(f"{env} has no rated games yet: nothing to predict from")
         ids, a, b = table.indexed()
-        known = {p.id: p for p in league.players(env=env, include_removed=True)}
+        known = {p.id: p for p in league.roster.players(env=env, include_removed=True)}
         population = [known[int(i)] for i in ids.tolist()]
         counts = (np.bincount(a, minlength=ids.size) + np.bincount(b, minlength=ids.size)).tolist()
         anchor = default_anchor(population, dict(zip(ids.tolist(), counts, strict=True)), declared_anchor(env))
         fitted = cls.of_games([p.full_name for p in population], a, b, table.score_a, anchor.full_name, prior,
                               deff=design_effect(table))
         lead = {p.id: p.full_name for p in population}
-        aliases = {known[pid].full_name: lead[first] for pid, first in league.same_weights(env).items()
+        aliases = {known[pid].full_name: lead[first] for pid, first in league.ledger.same_weights(env).items()
                    if first in lead}
         return replace(fitted, aliases=aliases)
 

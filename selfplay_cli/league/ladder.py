@@ -557,10 +557,10 @@ def _fit_rows(
 
 def _envs_in_order(league: League) -> list[str]:
     """Envs that have rated results in the ledger (in any variant), in order of their first one."""
-    table = league.games(variant=None)
+    table = league.ledger.games(variant=None)
     if len(table) == 0:
         return []
-    env_of = {p.id: p.env for p in league.players(include_removed=True)}
+    env_of = {p.id: p.env for p in league.roster.players(include_removed=True)}
     envs: dict[str, None] = {}
     for pid in table.player_a.tolist():
         e = env_of.get(int(pid))
@@ -701,11 +701,11 @@ def ladder(
     ranks unless ``include_removed``.
 
     Each row also carries its ``run``, ``best`` (the best snapshot of its run) and ``vs`` (its record
-    against each scripted player of the env: ``league.players(env=env, kind="bot")``) and, in a cooperative game,
+    against each scripted player of the env: ``league.roster.players(env=env, kind="bot")``) and, in a cooperative game,
     ``mean_return`` (its mean team return over its episodes).
     """
     env = pick_env(league, env)
-    table = league.games(env=env, variant=variant)
+    table = league.ledger.games(env=env, variant=variant)
     if len(table) == 0:
         return []
     rules = rules_for_env(env, variant_options(variant))
@@ -713,8 +713,8 @@ def ladder(
         return _ladder_by_side(league, env, table, rules.side_roles(), anchor, anchor_rating, bootstrap, confidence,
                                seed, include_removed, prior, variant)
     ids, a, b = table.indexed()
-    known = {p.id: p for p in league.players(env=env, include_removed=True)}
-    population = [known[int(i)] if int(i) in known else league.get_player(int(i)) for i in ids.tolist()]
+    known = {p.id: p for p in league.roster.players(env=env, include_removed=True)}
+    population = [known[int(i)] if int(i) in known else league.roster.get_player(int(i)) for i in ids.tolist()]
     games = dict(zip(ids.tolist(), (np.bincount(a, minlength=ids.size) + np.bincount(b, minlength=ids.size))
                      .tolist(), strict=True))
     anchor_player = (default_anchor(population, games, declared_anchor(env)) if anchor is None
@@ -729,10 +729,10 @@ def ladder(
         {p.full_name: p.kind for p in population}, {p.full_name: p.step for p in population if not p.is_bot},
         {p.full_name: p.id for p in population}, prior=prior, hidden=hidden, deff=design_effect(table),
     )
-    bots = league.players(env=env, kind="bot", include_removed=True)
+    bots = league.roster.players(env=env, kind="bot", include_removed=True)
     records = _bot_records(ids, a, b, table.score_a, bots)
     run_of = {p.id: p.run for p in population if not p.is_bot}
-    returns = league.mean_returns(env, variant=variant)
+    returns = league.ledger.mean_returns(env, variant=variant)
     rows = [replace(r, run=run_of.get(int(r.player_id)), vs=records.get(int(r.player_id), ()),
                     mean_return=returns[int(r.player_id)][1] if int(r.player_id) in returns else None)
             if r.player_id is not None else r for r in rows]
@@ -769,11 +769,11 @@ def _with_copies(league: League, env: str, rows: list[LadderRow], include_remove
     """Every other name of a rated player's weights (a run repeated with its seed, in the same league), as a row of
     its own right under the player's: the same rating, rank and tier, ``copy_of`` the player; the player's row
     lists them in ``copies``."""
-    same = league.same_weights(env)
+    same = league.ledger.same_weights(env)
     if not same:
         return rows
     by_lead: dict[int, list[PlayerRow]] = defaultdict(list)
-    known = {p.id: p for p in league.players(env=env, kind="snapshot", include_removed=True)}
+    known = {p.id: p for p in league.roster.players(env=env, kind="snapshot", include_removed=True)}
     for pid, lead in same.items():
         p = known[pid]
         if include_removed or not p.removed:
@@ -799,12 +799,12 @@ def _ladder_by_side(league: League, env: str, table: GameTable, labels: tuple[st
     ranks, tiers, margins, each run's best and the records against the scripted players (on the other side)."""
     sided, sides = table.by_side()
     keys, a, b = sided.indexed()
-    known = {p.id: p for p in league.players(env=env, include_removed=True)}
-    row_of = {int(k): known.get(sides[int(k)][0]) or league.get_player(sides[int(k)][0]) for k in keys.tolist()}
+    known = {p.id: p for p in league.roster.players(env=env, include_removed=True)}
+    row_of = {int(k): known.get(sides[int(k)][0]) or league.roster.get_player(sides[int(k)][0]) for k in keys.tolist()}
     side_of = {int(k): sides[int(k)][1] for k in keys.tolist()}
     counts = np.bincount(a, minlength=keys.size) + np.bincount(b, minlength=keys.size)
-    bots = league.players(env=env, kind="bot", include_removed=True)
-    returns = league.mean_returns(env, variant=variant)
+    bots = league.roster.players(env=env, kind="bot", include_removed=True)
+    returns = league.ledger.mean_returns(env, variant=variant)
     chosen = None if anchor is None else _find_anchor(list({p.id: p for p in row_of.values()}.values()), anchor, env)
     out: list[LadderRow] = []
     for side, label in enumerate(labels):

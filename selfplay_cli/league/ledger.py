@@ -42,10 +42,11 @@ from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session, aliased, raiseload
 
 from selfplay_cli.league.bounded_json import say_unusable, unreadable
-from selfplay_cli.league.db import Database, LeagueError
+from selfplay_cli.league.db import Database, LeagueError, Part
 from selfplay_cli.league.games import declaration
 from selfplay_cli.league.models import Game, GameSeat, Match, Player, utcnow
 from selfplay_cli.league.roster import DEFAULT_ELO, check_env_name
+from selfplay_cli.league.seeds import Seeds
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.results import COOPERATIVE, FREE_FOR_ALL, TWO_SIDES, GameResult, Rules, compare, pairwise
 from selfplay_cli.stats.elo import elo_update
@@ -305,8 +306,12 @@ def _count_game(players: dict[int, Player], seats: Iterable[int]) -> None:
             p.games = int(p.games or 0) + 1
 
 
-class Ledger(Database):
-    """Matches and the game ledger, the online Elo, and the derived rating table."""
+class Ledger(Part):
+    """Matches and the game ledger, the online Elo, and the derived rating table (``league.ledger``)."""
+
+    def __init__(self, db: Database, seeds: Seeds) -> None:
+        super().__init__(db)
+        self.seeds = seeds
 
     def create_match(self, env: str, kind: str, params: dict[str, Any] | None = None) -> int:
         """Open a match record (kind: match, tournament, gate, training, eval) and return its id.
@@ -363,7 +368,7 @@ class Ledger(Database):
         pids = _check_games(games)
 
         def work(s: Session) -> tuple[int, list[int]]:
-            return self._store_match(s, env, kind, params, games, pids, key)
+            return self.store_match(s, env, kind, params, games, pids, key)
 
         try:  # a keyed unit may be done again after its COMMIT was cut off: stored then, it stores nothing now
             return self._unit(work, idempotent=key is not None)
@@ -372,7 +377,7 @@ class Ledger(Database):
                 raise
             return self._unit(work, idempotent=True)
 
-    def _store_match(self, s: Session, env: str, kind: str, params: dict[str, Any], games: list[GameResult],
+    def store_match(self, s: Session, env: str, kind: str, params: dict[str, Any], games: list[GameResult],
                      pids: set[int], key: str | None, look: bool = True) -> tuple[int, list[int]]:
         """:meth:`create_match_with_games` inside the caller's transaction (``params`` and ``games`` checked).
         ``look=False``: the caller knows no match holds ``key`` yet (its unique index still says so if one does)."""
@@ -451,7 +456,7 @@ class Ledger(Database):
                              [float(x) for x in g.scores], [float(x) for x in g.outcome])
             _count_game(players, stored.players)
             if online:
-                _apply_elo(players, _results(stored, rules, episodes), self.elo_k)
+                _apply_elo(players, _results(stored, rules, episodes), self.db.elo_k)
         return ids
 
     def games(self, env: str | None = None, players: Iterable[int] | None = None,
@@ -607,7 +612,7 @@ class Ledger(Database):
         never met: where a new match of the two starts by default, so that it never plays, and stores, games it
         already has or will have (two deterministic players on the same seeds play the same games: stored twice,
         they would count twice)."""
-        return max(self.played_seed_end(a, b), self.seeds_end(a, b))  # type: ignore[attr-defined]
+        return max(self.played_seed_end(a, b), self.seeds.seeds_end(a, b))
 
     def played_seed_end(self, a: int, b: int) -> int:
         """The first seed above every stored game between players ``a`` and ``b``, in any variant (0: none)."""
@@ -646,7 +651,7 @@ class Ledger(Database):
             for g in _stored(s, _games_query(env, rated=False)):
                 _count_game(players, g.players)
                 if g.match_id in online:
-                    _apply_elo(players, _results(g, rules.get(g.match_id, Rules()), episodes), self.elo_k)
+                    _apply_elo(players, _results(g, rules.get(g.match_id, Rules()), episodes), self.db.elo_k)
 
         self._unit(work)
 

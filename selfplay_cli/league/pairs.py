@@ -55,7 +55,7 @@ def plan_tournament(
     ids = list(dict.fromkeys(int(p) for p in player_ids))
     check = ids + ([int(vs)] if vs is not None and int(vs) not in ids else [])
     for pid in check:
-        p = league.get_player(pid)
+        p = league.roster.get_player(pid)
         if p.env != env:
             raise LeagueError(f"player {pid} ({p.full_name}) belongs to env {p.env}, not {env}")
     if vs is not None:
@@ -67,13 +67,13 @@ def plan_tournament(
         if len(ids) < 2:
             raise LeagueError("a round robin needs at least two players")
         pairs = [(ids[i], ids[j]) for i in range(len(ids)) for j in range(i + 1, len(ids))]
-    same = league.same_weights(env)  # names of one set of weights: one player, whose games count under each
+    same = league.ledger.same_weights(env)  # names of one set of weights: one player, whose games count under each
     unique: dict[frozenset[int], tuple[int, int]] = {}
     for x, y in pairs:
         if same.get(x, x) != same.get(y, y):
             unique.setdefault(frozenset((same.get(x, x), same.get(y, y))), (x, y))
     pairs = list(unique.values())
-    table = league.games(env=env, players=check, variant=variant, pooled=same)
+    table = league.ledger.games(env=env, players=check, variant=variant, pooled=same)
     counts: dict[tuple[int, int], int] = defaultdict(int)
     weight = np.where(table.kind == KIND_CODES["cooperative"], 2, 1).tolist()  # a comparison: two episodes
     for x, y, w in zip(table.player_a.tolist(), table.player_b.tolist(), weight, strict=True):
@@ -108,12 +108,13 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
     a_id, b_id = int(a_id), int(b_id)
     if a_id == b_id:
         raise LeagueError(f"player {a_id} cannot be paired with itself")
-    league.get_player(a_id)
-    league.get_player(b_id)
-    same = league.same_weights()  # a name of weights another snapshot holds: its games are the player's
+    league.roster.get_player(a_id)
+    league.roster.get_player(b_id)
+    same = league.ledger.same_weights()  # a name of weights another snapshot holds: its games are the player's
     if same.get(a_id, a_id) == same.get(b_id, b_id):
         raise LeagueError(f"players {a_id} and {b_id} hold the same weights: one player, no record against itself")
-    table = league.games(players=[a_id, b_id], variant=variant, pooled=same)  # (filed under each one's first name)
+    table = league.ledger.games(players=[a_id, b_id], variant=variant,
+                                pooled=same)  # (filed under each one's first name)
     first_side = table.player_a == same.get(a_id, a_id)
     pts = np.where(first_side, table.score_a, 1.0 - table.score_a)
     wins, draws, losses = int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))

@@ -38,9 +38,10 @@ from sqlalchemy import and_, bindparam, exists, func, inspect, or_, select, text
 from sqlalchemy.orm import Session, aliased
 
 from selfplay_cli.league.bounded_json import JSONBoundsError, check_value, say_unusable, unreadable
-from selfplay_cli.league.db import LeagueError
+from selfplay_cli.league.db import Database, LeagueError, Part
+from selfplay_cli.league.ledger import Ledger
 from selfplay_cli.league.models import SPEC_BYTES, Job, Worker, utcnow
-from selfplay_cli.league.seeds import Pair, SeedClaim
+from selfplay_cli.league.seeds import Pair, SeedClaim, Seeds
 from selfplay_cli.results import GameResult
 
 __all__ = ["BACKOFF_SECONDS", "BEAT_SECONDS", "ENDED", "JOB_STATES", "MAX_TRIES", "SCAVENGE_SECONDS", "TRIES_LIMIT",
@@ -239,22 +240,25 @@ def backoff(tries: int, base: float = BACKOFF_SECONDS) -> float:
     return min(base * 2.0 ** max(tries - 1, 0), _BACKOFF_CAP)
 
 
-class Queue:
+class Queue(Part):
     """The work queue of a league (a part of :class:`~selfplay_cli.league.store.League`; see the module docstring).
 
     ``clock``: what "now" is to the queue (leases, heartbeats, backoffs, who is alive), UTC; a test moves it on
     instead of sleeping."""
 
-    clock: Callable[[], datetime] = staticmethod(utcnow)
+    def __init__(self, db: Database, ledger: Ledger, seeds: Seeds) -> None:
+        super().__init__(db)
+        self.ledger, self.seeds = ledger, seeds
+        self.clock: Callable[[], datetime] = utcnow
 
     def _has_queue(self) -> bool:
         """Whether the database has the queue's tables: always once a command that writes has opened it; a league from
         before the queue, opened only to read, has none (and so an empty queue)."""
-        if not self.readonly:  # type: ignore[attr-defined]
+        if not self.db.readonly:
             return True
         known = getattr(self, "_queue_tables", None)
         if known is None:
-            known = self._queue_tables = inspect(self.engine).has_table("jobs")  # type: ignore[attr-defined]
+            known = self._queue_tables = inspect(self.db.engine).has_table("jobs")
         return bool(known)
 
     # -- workers
@@ -268,14 +272,14 @@ class Queue:
             s.flush()
             return w.id
 
-        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+        return self._unit(work)
 
     def worker_beat(self, worker_id: int, job_id: int | None = None) -> bool:
         """Beat ``worker_id``'s heart (and its lease on ``job_id``). False when the job is no longer this worker's to
         play: cancelled, dead, done by another, or taken by another after this worker's lease lapsed."""
 
         def work(s: Session) -> bool:
-            _lazy_commit(s, self.is_sqlite)  # type: ignore[attr-defined]
+            _lazy_commit(s, self.db.is_sqlite)
             now = self.clock()
             s.execute(update(Worker).where(Worker.id == worker_id).values(beat_at=now))
             if job_id is None:
@@ -284,7 +288,7 @@ class Queue:
                             .values(beat_at=now))
             return bool(hit.rowcount)  # type: ignore[attr-defined]
 
-        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+        return self._unit(work)
 
     def stop_worker(self, worker_id: int, give_back: bool = True) -> tuple[int, ...]:
         """Mark a worker stopped; with ``give_back``, the jobs it still holds go back to the queue at once (not
@@ -300,7 +304,7 @@ class Queue:
                     back.append(int(j.id))
             return tuple(back)
 
-        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+        return self._unit(work)
 
     def workers(self, alive_within: float | None = None, taking: str | None = None) -> list[WorkerRow]:
         """Every worker (or those whose heart beat within ``alive_within`` seconds and that have not stopped; that
@@ -320,7 +324,7 @@ class Queue:
             rows = [_worker_row(w, tuple(held.get(w.id, ()))) for w in s.execute(q).scalars()]
             return [w for w in rows if taking is None or w.takes(taking)]
 
-        return self._read(work)  # type: ignore[attr-defined,no-any-return]
+        return self._read(work)
 
     # -- jobs
 
@@ -351,11 +355,11 @@ class Queue:
                 if chain:
                     prev = j.id
             claimed = [(nj.claim, i) for nj, i in zip(jobs, ids, strict=True) if nj.claim is not None]
-            self._write_ranges(s, [c for c, _ in claimed], seen or {}, batch,  # type: ignore[attr-defined]
+            self.seeds.write_ranges(s, [c for c, _ in claimed], seen or {}, batch,
                                [i for _, i in claimed])
             return ids
 
-        return self._taking(work)  # type: ignore[attr-defined,no-any-return]
+        return self.seeds.taking(work)
 
     def claim(self, worker_id: int, *, batches: Sequence[str] | None = None, kinds: Sequence[str] | None = None,
               scavenge: float = SCAVENGE_SECONDS, ids: Sequence[int] | None = None) -> JobRow | None:
@@ -364,7 +368,7 @@ class Queue:
         comes up."""
 
         def work(s: Session) -> JobRow | None:
-            _lazy_commit(s, self.is_sqlite)  # type: ignore[attr-defined]
+            _lazy_commit(s, self.db.is_sqlite)
             now = self.clock()
             lapsed = now - timedelta(seconds=scavenge)
             params: dict[str, Any] = {"now": now, "lapsed": lapsed}
@@ -374,7 +378,7 @@ class Queue:
                 params["kinds"] = list(kinds)
             if ids is not None:
                 params["ids"] = [int(i) for i in ids]
-            q = _claim_query(batches is not None, kinds is not None, self.is_sqlite,  # type: ignore[attr-defined]
+            q = _claim_query(batches is not None, kinds is not None, self.db.is_sqlite,
                              ids is not None)
             jobs = Job.__table__
             while True:  # (Core statements: the ORM's bookkeeping would double the time a lease takes)
@@ -393,7 +397,7 @@ class Queue:
             return replace(_job_row(j, name), state="leased", worker_id=worker_id, leased_at=now, beat_at=now,
                            tries=j.tries + 1)
 
-        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+        return self._unit(work)
 
     def finish_job(self, job_id: int, worker_id: int, *, games: Sequence[GameResult] = (), match_kind: str = "match",
                    params: dict[str, Any] | None = None, result: dict[str, Any] | None = None,
@@ -410,7 +414,7 @@ class Queue:
         def work(s: Session) -> bool:
             jobs, workers = Job.__table__, Worker.__table__
             q = select(jobs.c.state, jobs.c.env, jobs.c.batch).where(jobs.c.id == job_id)
-            if not self.is_sqlite:  # type: ignore[attr-defined]
+            if not self.db.is_sqlite:
                 q = q.with_for_update()
             j = s.execute(q).first()
             if j is None:
@@ -421,7 +425,7 @@ class Queue:
             if games:
                 mp = _match_params(j.env, match_kind, {**(params or {}), "job": job_id, "batch": j.batch})
                 # (a job not ended has stored no games: they go in with its end, and its row is locked)
-                match_id, ids = self._store_match(s, j.env, match_kind, mp, games, pids,  # type: ignore[attr-defined]
+                match_id, ids = self.ledger.store_match(s, j.env, match_kind, mp, games, pids,
                                                   f"job:{job_id}", look=False)
                 out.update(match_id=match_id, games_stored=len(ids))
             now = self.clock()
@@ -433,7 +437,7 @@ class Queue:
                 seconds=workers.c.seconds + float(seconds)))
             return True
 
-        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+        return self._unit(work)
 
     def fail_job(self, job_id: int, worker_id: int, error: str, *, base_backoff: float = BACKOFF_SECONDS,
                  final: bool = False) -> str:
@@ -456,7 +460,7 @@ class Queue:
                 j.leased_at = j.beat_at = None
             return j.state
 
-        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+        return self._unit(work)
 
     def cancel_jobs(self, *, batch: str | None = None, ids: Sequence[int] | None = None) -> int:
         """Cancel the queued and leased jobs of ``batch`` and/or with ``ids``; how many were cancelled."""
@@ -472,7 +476,7 @@ class Queue:
             hit = s.execute(q.values(state="cancelled", finished_at=self.clock()))
             return int(hit.rowcount)  # type: ignore[attr-defined]
 
-        return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+        return self._unit(work)
 
     def jobs(self, *, batch: str | None = None, ids: Sequence[int] | None = None, states: Sequence[str] | None = None,
              limit: int | None = None) -> list[JobRow]:
@@ -495,7 +499,7 @@ class Queue:
             rows = [_job_row(j, name) for j, name in s.execute(q)]
             return rows[::-1]
 
-        return self._read(work)  # type: ignore[attr-defined,no-any-return]
+        return self._read(work)
 
     def job_counts(self, batch: str | None = None) -> dict[str, int]:
         """How many jobs (of ``batch``) are in each state (every state listed, zeros included)."""
@@ -511,7 +515,7 @@ class Queue:
             counts.update({str(k): int(n) for k, n in s.execute(q)})
             return counts
 
-        return self._read(work)  # type: ignore[attr-defined,no-any-return]
+        return self._read(work)
 
     def batches(self) -> list[tuple[str, dict[str, int]]]:
         """Every batch with its job counts by state, oldest first."""
@@ -528,4 +532,4 @@ class Queue:
                 first[b] = min(first.get(b, lo), lo)
             return sorted(out.items(), key=lambda kv: first[kv[0]])
 
-        return self._read(work)  # type: ignore[attr-defined,no-any-return]
+        return self._read(work)

@@ -26,7 +26,7 @@ from sqlalchemy.orm import Session
 
 from selfplay_cli.league.blobs import store_blob
 from selfplay_cli.league.bounded_json import say_unusable, unreadable
-from selfplay_cli.league.db import Database, LeagueError, shown
+from selfplay_cli.league.db import LeagueError, Part, shown
 from selfplay_cli.league.models import Player, Run, Tag, utcnow
 from selfplay_cli.league.rows import PlayerRow, RunRow, RunStatus
 
@@ -133,7 +133,7 @@ def _run_row(r: Run) -> RunRow:
                   created_at=r.created_at, unusable=bad)
 
 
-class Roster(Database):
+class Roster(Part):
     """Runs, players (bots and snapshots) and tags."""
 
     # ---------------------------------------------------------------- runs
@@ -310,10 +310,10 @@ class Roster(Database):
         given, where = item.get("sha256"), item["path"]
         file = Path(where)
         if not file.is_absolute():
-            if self.home is None:
+            if self.db.home is None:
                 file = None  # type: ignore[assignment]
             else:
-                file = self.home_path(*Path(where).parts)
+                file = self.db.home_path(*Path(where).parts)
         if file is not None and file.is_file():
             try:
                 data = file.read_bytes()

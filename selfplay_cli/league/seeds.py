@@ -32,7 +32,7 @@ from sqlalchemy import inspect, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from selfplay_cli.league.db import LeagueError
+from selfplay_cli.league.db import LeagueError, Part
 from selfplay_cli.league.models import Job, SeedRange, utcnow
 
 __all__ = ["IN_FLIGHT", "Pair", "PairSeeds", "SeedClaim", "SeedRangeRow", "Seeds", "SeedsTaken", "pair_of",
@@ -127,18 +127,18 @@ class SeedsTaken(LeagueError):
     written; look again."""
 
 
-class Seeds:
+class Seeds(Part):
     """The seed ranges of a league (a part of :class:`~selfplay_cli.league.store.League`; see the module
     docstring)."""
 
     def _has_seeds(self) -> bool:
         """Whether the database has the ``seed_ranges`` table: always once a command that writes has opened it; a
         league from before it, opened only to read, has none (and so no ranges)."""
-        if not self.readonly:  # type: ignore[attr-defined]
+        if not self.db.readonly:
             return True
         known = getattr(self, "_seed_table", None)
         if known is None:
-            known = self._seed_table = inspect(self.engine).has_table("seed_ranges")  # type: ignore[attr-defined]
+            known = self._seed_table = inspect(self.db.engine).has_table("seed_ranges")
         return bool(known)
 
     def pair_seeds(self, pairs: Iterable[tuple[int, int]]) -> dict[Pair, PairSeeds]:
@@ -160,7 +160,7 @@ class Seeds:
                                                     r.created_at))
             return {p: PairSeeds(p, max((r.seq for r in rows), default=0), tuple(rows)) for p, rows in found.items()}
 
-        return self._read(work)  # type: ignore[attr-defined,no-any-return]
+        return self._read(work)
 
     def seeds_end(self, a: int, b: int) -> int:
         """The first seed after every range of players ``a`` and ``b`` (0: none)."""
@@ -170,19 +170,19 @@ class Seeds:
         """Take ``claims`` for ``owner`` (the command that plays them itself) in one transaction, each pair's ranges
         after the ``seq`` that the look they were planned from found (``seen``; a pair missing: none); their ids.
         :class:`SeedsTaken` (nothing written) when another command took a range of one of the pairs since."""
-        return self._taking(lambda s: self._write_ranges(s, claims, seen, owner))
+        return self.taking(lambda s: self.write_ranges(s, claims, seen, owner))
 
-    def _taking(self, work: Callable[[Session], T]) -> T:
+    def taking(self, work: Callable[[Session], T]) -> T:
         """``work`` as one unit of work, a range refused by the pairs' unique key said as :class:`SeedsTaken`."""
         try:
-            return self._unit(work)  # type: ignore[attr-defined,no-any-return]
+            return self._unit(work)
         except IntegrityError as exc:
             if "seed_ranges" not in str(exc.orig):
                 raise
             raise SeedsTaken("another command took seeds of the same players at the same time: look again") from None
 
-    def _write_ranges(self, s: Session, claims: Sequence[SeedClaim], seen: Mapping[Pair, int], owner: str,
-                      job_ids: Sequence[int | None] | None = None) -> list[int]:
+    def write_ranges(self, s: Session, claims: Sequence[SeedClaim], seen: Mapping[Pair, int], owner: str,
+                     job_ids: Sequence[int | None] | None = None) -> list[int]:
         """Insert ``claims`` inside the caller's transaction (``job_ids``: the job of each, queued in it)."""
         if not claims:
             return []
@@ -208,4 +208,4 @@ class Seeds:
             s.execute(update(SeedRange).where(SeedRange.id == int(range_id), SeedRange.rounds >= int(rounds))
                       .values(rounds=max(int(rounds), 1), games=max(int(games), 1)))
 
-        self._unit(work)  # type: ignore[attr-defined]
+        self._unit(work)

@@ -73,7 +73,7 @@ def cached_blob(league: League, sha: str, name: str) -> Path:
         with folder_inside(cache_home(), "blobs", sha[:2]) as folder:
             if sha256_at(folder, path.name, MAX_FILE_BYTES) == sha:
                 return path
-            data = league.blob_bytes(sha, name, limit=MAX_FILE_BYTES)
+            data = league.blobs.blob_bytes(sha, name, limit=MAX_FILE_BYTES)
             write_atomic_at(folder, path.name, data)
     except OSError as e:
         raise MarlIOError(f"cannot write {path}: {e.strerror or e} (MARL_CACHE names the folder of marl's cache)"

@@ -92,8 +92,8 @@ def play(league: League, job: JobRow, *, device: str, parallel: int,
     del see
     spec = job.spec
     first = int(spec["first_seed"])
-    rows_a = [league.get_player(int(i)) for i in spec["a"]]
-    row_b = league.get_player(int(spec["b"]))
+    rows_a = [league.roster.get_player(int(i)) for i in spec["a"]]
+    row_b = league.roster.get_player(int(spec["b"]))
     pa = [load_player(league, r, device=device, seed=mix_seed(first, 0 if i == 0 else 1 + i))
           for i, r in enumerate(rows_a)]
     pb = load_player(league, row_b, device=device, seed=mix_seed(first, 1))

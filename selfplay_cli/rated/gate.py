@@ -60,7 +60,7 @@ def gate_check(league: League, cand: PlayerRow, base: PlayerRow, *, min_diff: fl
         from ..errors import MarlError
 
         raise MarlError(f"the candidate and the baseline are the same player ({cand.full_name})")
-    same = league.same_weights(cand.env)
+    same = league.ledger.same_weights(cand.env)
     if same.get(cand.id, cand.id) == same.get(base.id, base.id):
         from ..errors import MarlError
 
@@ -113,7 +113,7 @@ def _play(league: League, cand: PlayerRow, base: PlayerRow, games: int, variant:
         pb = load_player(league, base, device=device, seed=mix_seed(first, 1))
         per = round_size(pa, pb, first_seed=first, env_options=env_options)
         rounds = -(-d.games // per)
-        league.take_seeds([d.claim(first, rounds, rounds * per)], seen, worker_name("marl"))
+        league.seeds.take_seeds([d.claim(first, rounds, rounds * per)], seen, worker_name("marl"))
         return first, d.games, pa, pb
 
     (d,), new = settle(league, [Ask(cand.id, base.id, games, variant, joins=True)], write)

@@ -178,12 +178,12 @@ def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = F
     env, run = new[0].env, new[0].run
     # ids grow in registration order: the moment's own are its newest
     last = max(p.id for p in new) if including else min(p.id for p in new) - 1
-    snapshots = [p for p in league.players(env=env, kind="snapshot") if p.run == run and p.id <= last
+    snapshots = [p for p in league.roster.players(env=env, kind="snapshot") if p.run == run and p.id <= last
                  and p.unusable is None]  # (a row that cannot be read is never played: said once)
-    bots = league.players(env=env, kind="bot")
-    gauntlets = [mid for mid, params in league.match_params(env, kind="eval").items() if params.get("gauntlet")]
+    bots = league.roster.players(env=env, kind="bot")
+    gauntlets = [mid for mid, params in league.ledger.match_params(env, kind="eval").items() if params.get("gauntlet")]
     variant = variant_key(env, run_options(league, run or ""))  # the options the run plays: its ladder
-    table = league.games(env=env, players=[p.id for p in snapshots + bots], variant=variant, pooled=False)
+    table = league.ledger.games(env=env, players=[p.id for p in snapshots + bots], variant=variant, pooled=False)
     return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)), variant,
                    sided=Rules.of(get_env(env)).sides_differ)
 
@@ -203,7 +203,7 @@ def _clear_history(league: League, history: History, m: Matchup, z: float, enoug
     while pid is not None and pid != m.b.id and wins + draws + losses < enough:
         w, d, lo = record_between(history.table, pid, m.b.id)
         wins, draws, losses = wins + w, draws + d, losses + lo
-        pid = league.get_player(pid).parent_id
+        pid = league.roster.get_player(pid).parent_id
     games = wins + draws + losses
     if games < enough or not clear(wins, losses, z):
         return None
@@ -301,7 +301,7 @@ def play_gauntlet(
                 loaded[row.id] = load_player(league, row, device=device, seed=mix_seed(first_seed, row.id))
     gauntlet = _Gauntlet(league, cfg, loaded, crews, label, spec)
     matchups, keys = _matchups(pairs, first_seed, cfg, key)
-    stored = league.keyed_matches(f"{key}/") if key is not None else {}
+    stored = league.ledger.keyed_matches(f"{key}/") if key is not None else {}
     if key is not None and all(k in stored for k in keys):  # done before: what the ledger holds of it
         for m, k in zip(matchups, keys, strict=True):
             m.match_id, params = stored[k]
@@ -422,8 +422,8 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
         if row.id in crews:
             info[side] = [loaded[c.id].id for c in crews[row.id]]
     player = {loaded[r.id].id: r.id for r in (m.a, m.b, *crews.get(m.a.id, ()), *crews.get(m.b.id, ()))}
-    m.match_id, ids = league.create_match_with_games(m.a.env, "eval", info,
-                                                     [r.with_players(player) for r in results], key=key)
+    m.match_id, ids = league.ledger.create_match_with_games(m.a.env, "eval", info,
+                                                            [r.with_players(player) for r in results], key=key)
     m.game_ids += ids
 
 
@@ -514,7 +514,7 @@ def plan_moment(league: League, snapshot_ids: Sequence[int], older: int) -> Mome
     best), chosen from the moment's :class:`History` alone, so planned again it is the same: the run's best so
     far, the opponents, the pairs (those whose players, or copies of them, already met in another gauntlet left
     out). None without snapshots."""
-    new = [league.get_player(int(i)) for i in snapshot_ids]
+    new = [league.roster.get_player(int(i)) for i in snapshot_ids]
     if not new:
         return None
     history = run_history(league, new)
@@ -542,7 +542,7 @@ def plan_moment(league: League, snapshot_ids: Sequence[int], older: int) -> Mome
         pairs += [(x, y) for k, x in enumerate(history.bots) for y in history.bots[k + 1:]
                   if meets is None or meets(x, y)]
     key = f"gauntlet/{min(p.id for p in new)}"
-    mine = {match_id for match_id, _ in league.keyed_matches(f"{key}/").values()}  # (this unit's, played before)
+    mine = {match_id for match_id, _ in league.ledger.keyed_matches(f"{key}/").values()}  # (this unit's, played before)
     pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant, ignore=mine)]
     return Moment(pairs, {m.id: crew for crew in crews.values() for m in crew[:1]}, history, key)
 
@@ -572,7 +572,7 @@ def open_matchups(league: League, moment: Moment, *, first_seed: int, config: Ga
     (``play_gauntlet([(a, b)], first_seed=m.first_seed, expects=[m.expect], key=moment.key)``) plays, with the
     same seeds and under the same key as the whole moment's call."""
     matchups, keys = _matchups(moment.pairs, first_seed, config, moment.key)
-    stored = league.keyed_matches(f"{moment.key}/")
+    stored = league.ledger.keyed_matches(f"{moment.key}/")
     z = normal_quantile(config.clear)
     out = []
     for m, k in zip(matchups, keys, strict=True):
@@ -626,6 +626,6 @@ def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow, variant: str = "
                     ignore: set[int] | frozenset[int] = frozenset()) -> bool:
     """Whether the ledger holds gauntlet games between ``a`` and ``b``, or copies of them (in ``variant``), in
     matches other than ``ignore``."""
-    table = league.games(a.env, players=[a.id, b.id], variant=variant)
-    return any(league.match_info(int(m))[1].get("gauntlet") for m in np.unique(table.match_id).tolist()
+    table = league.ledger.games(a.env, players=[a.id, b.id], variant=variant)
+    return any(league.ledger.match_info(int(m))[1].get("gauntlet") for m in np.unique(table.match_id).tolist()
                if int(m) not in ignore)

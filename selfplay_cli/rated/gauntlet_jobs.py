@@ -106,7 +106,7 @@ def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int
     games a pair; ``whole``: every matchup plays all its games, none cut short by a clear history, as the cells of a
     payoff matrix need). The snapshots' bytes are put in the league where it keeps them, so a worker on another
     machine can fetch them."""
-    rows = [league.get_player(int(i)) for i in snapshot_ids]
+    rows = [league.roster.get_player(int(i)) for i in snapshot_ids]
     spec = {"snapshot_ids": [int(i) for i in snapshot_ids], "first_seed": int(first_seed), "games": int(games),
             "older": int(older), "full": bool(full), "playoff": int(playoff), "whole": bool(whole),
             "precision": float(precision), "snapshots": [r.full_name for r in rows]}
@@ -119,7 +119,7 @@ def _config(league: League, spec: dict[str, Any]) -> GauntletConfig:
     """The gauntlet's settings a moment's spec (or one of its matchups', which carries the moment's) asks for."""
     games, older, full = int(spec["games"]), int(spec["older"]), bool(spec.get("full", False))
     # games in a round of two players: a seat-swapped pair, or one game where each plays only its own side
-    per = 1 if Rules.of(get_env(league.get_player(int(spec["snapshot_ids"][0])).env)).sides_differ else 2
+    per = 1 if Rules.of(get_env(league.roster.get_player(int(spec["snapshot_ids"][0])).env)).sides_differ else 2
     n = max(games // per, 1)
     # (a payoff matrix's cell of 2 games would weigh as much as one of 400 in its Nash mixture: none cut short)
     whole = full or bool(spec.get("whole", False))
@@ -170,7 +170,7 @@ def _helpers(league: League, job: JobRow) -> int:
     job in hand): where a moment's matchups would wait for none of them, the moment plays whole."""
     from ..league.queue import SCAVENGE_SECONDS
 
-    return sum(1 for w in league.workers(alive_within=SCAVENGE_SECONDS, taking=job.batch)
+    return sum(1 for w in league.queue.workers(alive_within=SCAVENGE_SECONDS, taking=job.batch)
                if w.id != job.worker_id and not w.holding)
 
 
@@ -211,7 +211,7 @@ def queue_matchups(league: League, job: JobRow, moment: Moment, cfg: GauntletCon
         return []
     base = {k: spec[k] for k in ("snapshot_ids", "games", "older", "full", "whole", "precision") if k in spec}
     queued = {(j.spec.get("a"), j.spec.get("b"), j.spec.get("first_seed")): j.id
-              for j in league.jobs(batch=job.batch) if j.kind == MATCHUP and j.state not in ("dead", "cancelled")
+              for j in league.queue.jobs(batch=job.batch) if j.kind == MATCHUP and j.state not in ("dead", "cancelled")
               and j.spec.get("snapshot_ids") == spec["snapshot_ids"]}
     ids, new = [], []
     for m in todo:
@@ -222,7 +222,7 @@ def queue_matchups(league: League, job: JobRow, moment: Moment, cfg: GauntletCon
             new.append(NewJob(kind=MATCHUP, env=m.a.env, spec={
                 **base, "a": m.a.id, "b": m.b.id, "first_seed": m.first_seed, "expect": m.expect,
                 "snapshots": [m.a.full_name, m.b.full_name]}))
-    return ids + (league.enqueue(job.batch, new) if new else [])
+    return ids + (league.queue.enqueue(job.batch, new) if new else [])
 
 
 def check_matchup_spec(spec: dict[str, Any]) -> None:
@@ -245,7 +245,7 @@ def play_matchup(league: League, job: JobRow, *, device: str, parallel: int,
     del parallel, see
     spec = job.spec
     t0 = time.perf_counter()
-    a, b = league.get_player(int(spec["a"])), league.get_player(int(spec["b"]))
+    a, b = league.roster.get_player(int(spec["a"])), league.roster.get_player(int(spec["b"]))
     crews = {crew[0].id: crew for crew in crews_of(league, [a, b]).values()}
     expect = spec.get("expect")
     (m,) = play_gauntlet(league, [(a, b)], first_seed=int(spec["first_seed"]), config=_config(league, spec),

@@ -110,7 +110,7 @@ class _Heart:
     def _run(self) -> None:
         while not self._stop.wait(self.beat):
             try:
-                if not self.league.worker_beat(self.worker_id, self.job_id):
+                if not self.league.queue.worker_beat(self.worker_id, self.job_id):
                     self.lost.set()
                     return
             except Exception:  # the database away for a moment: the next beat tries again (the lease lapses late)
@@ -159,7 +159,7 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
         usage = isinstance(exc, MarlError | UnknownEnvError)  # (a game not here, or not named here: the job's fault)
         kind = "io" if isinstance(exc, MarlIOError | OSError) else "usage" if usage else "internal"
         error = f"bad job spec: {exc}"[:MAX_ERROR] if final else error_line(exc, private)
-        state = retry(lambda: league.fail_job(job.id, worker_id, error, final=final, **kwargs))
+        state = retry(lambda: league.queue.fail_job(job.id, worker_id, error, final=final, **kwargs))
         return Outcome(job, "failed", error=error, error_kind=kind, extra={"state": state})
 
     try:
@@ -180,9 +180,11 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
         except Exception as exc:  # (RecursionError and MemoryError are Exceptions: they end the job, not the worker)
             return failed(exc)
     try:
-        stored = retry(lambda: league.finish_job(job.id, worker_id, games=played.games, match_kind=played.match_kind,
-                                                 params=played.params, result=played.result, seconds=played.seconds,
-                                                 played=played.count))
+        stored = retry(lambda: league.queue.finish_job(job.id, worker_id, games=played.games,
+                                                       match_kind=played.match_kind,
+                                                       params=played.params, result=played.result,
+                                                       seconds=played.seconds,
+                                                       played=played.count))
     except MarlIOError:  # (the database away, and no retry here: the lease lapses, another worker plays it)
         raise
     except Exception as exc:  # games or a result the league refuses: the job failed, the worker goes on
@@ -200,28 +202,28 @@ def see_through(league: League, batch: str, *, device: str = "cpu", parallel: in
     ``on_change(jobs)`` is called at every look at the batch (before each job this process plays, and each ``poll``
     seconds while it waits: a progress display follows it); when it returns True the batch's remaining jobs are
     cancelled (a decided SPRT) and this returns. Ctrl-C gives a job in play back to the queue."""
-    worker_id = league.add_worker(worker_name(role), socket.gethostname(), os.getpid(), serves=[batch]) if play \
+    worker_id = league.queue.add_worker(worker_name(role), socket.gethostname(), os.getpid(), serves=[batch]) if play \
         else None
     try:
         while True:
-            jobs = league.jobs(batch=batch, ids=ids)
+            jobs = league.queue.jobs(batch=batch, ids=ids)
             if on_change is not None and on_change(jobs):
-                league.cancel_jobs(batch=batch, ids=ids)
-                return league.jobs(batch=batch, ids=ids)
+                league.queue.cancel_jobs(batch=batch, ids=ids)
+                return league.queue.jobs(batch=batch, ids=ids)
             if all(j.state in ENDED for j in jobs):
                 return jobs
-            job = league.claim(worker_id, batches=[batch], scavenge=scavenge, ids=ids) \
+            job = league.queue.claim(worker_id, batches=[batch], scavenge=scavenge, ids=ids) \
                 if worker_id is not None else None
             if job is None:
                 time.sleep(poll)
                 if worker_id is not None:
-                    league.worker_beat(worker_id)
+                    league.queue.worker_beat(worker_id)
                 continue
             play_leased(league, worker_id, job, beat=beat, device=device, parallel=parallel,  # type: ignore[arg-type]
                         on_games=on_games)
     finally:
         if worker_id is not None:
-            league.stop_worker(worker_id)
+            league.queue.stop_worker(worker_id)
 
 
 def sprt_verdict(jobs: Sequence[JobRow], test: Any, paired: bool) -> tuple[float, str | None, int]:

@@ -94,7 +94,7 @@ def _player_or_team(league: League, name: str, env: str | None) -> PlayerRow | l
 def _bots_ready(league: League, env: str | None) -> None:
     """Scripted players are league players once a game has used them: make sure they exist for ``env``."""
     for e in [env] if env else env_names():
-        league.ensure_bots(e, league_bots(get_env(e)))
+        league.roster.ensure_bots(e, league_bots(get_env(e)))
 
 
 def lineup(league: League, ckpt: str, vs: str | None = None, env: str | None = None) -> Lineup:
@@ -184,7 +184,7 @@ def resized_in_variant(league: League, env: str, rows: Any, variant: dict[str, A
         if r.kind != "snapshot" or r.player_id is None:
             continue
         try:
-            row = league.get_player(int(r.player_id))
+            row = league.roster.get_player(int(r.player_id))
             trained = spec.for_options(**player_options(league, row))
         except (MarlError, OSError, TypeError, ValueError):
             continue

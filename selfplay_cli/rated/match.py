@@ -405,16 +405,16 @@ class _Match:
         records = [r.with_players(self.player_ids) for r in new]  # type: ignore[arg-type]
         with signals_held():  # a Ctrl-C now waits until the games are stored and counted
             if self.match_id is None:
-                self.match_id, ids = self.league.create_match_with_games(self.spec.name, self.kind, self.params,
-                                                                         records)
+                self.match_id, ids = self.league.ledger.create_match_with_games(self.spec.name, self.kind, self.params,
+                                                                                records)
             else:
-                ids = self.league.record_games(self.match_id, records)
+                ids = self.league.ledger.record_games(self.match_id, records)
             self.game_ids.extend(ids)
 
     def set_status(self, status: str) -> None:
         if self.match_id is not None:
-            self.league.update_match(self.match_id, status=status,  # type: ignore[union-attr]
-                                     games_stored=len(self.game_ids))
+            self.league.ledger.update_match(self.match_id, status=status,  # type: ignore[union-attr]
+                                            games_stored=len(self.game_ids))
 
     def report(self) -> MatchReport:
         out = _report(self.spec.name, self.rules, self.paired, self.a_name, self.a_key, self.b, self.kept,

@@ -59,7 +59,7 @@ class MatchJob:
             per = round_size(pa[0], pb, first_seed=first, env_options=options,
                              team=pa if self.team_name else None)
             rounds = -(-games // per)
-            (rid,) = league.take_seeds([d.claim(first, rounds, rounds * per)], seen, worker_name("marl"))
+            (rid,) = league.seeds.take_seeds([d.claim(first, rounds, rounds * per)], seen, worker_name("marl"))
             return Taken(first, rounds, on_their_way(d), rid, (pa, pb, ids))
 
         return settle(league, [self.ask(league, games, seed, options)], write, looked=looked)[1]
@@ -79,7 +79,7 @@ class MatchJob:
                                device=device, seeds=d, seen=seen)
 
         (d,), queued = settle(league, [self.ask(league, games, seed, options)], write)
-        rounds = sum(int(j.spec["rounds"]) for j in league.jobs(batch=queued.batch))
+        rounds = sum(int(j.spec["rounds"]) for j in league.queue.jobs(batch=queued.batch))
         return queued, Taken(int(d.first_seed), rounds, on_their_way(d))  # type: ignore[arg-type]
 
     def settle_here(self, league: League, taken: Taken, report: MatchReport) -> None:
@@ -87,7 +87,7 @@ class MatchJob:
         played: the pair's next games start right after them."""
         played = len(report.round_points)
         if taken.range_id is not None and not report.interrupted and 0 < played < taken.rounds:
-            league.settle_seeds(taken.range_id, played, report.games)
+            league.seeds.settle_seeds(taken.range_id, played, report.games)
 
 
 @dataclass(frozen=True)
@@ -180,7 +180,7 @@ def _flying_team(league: League, side_a: Any, side_b: Any, a: str, b: str,
 def check_distinct_weights(league: Any, pairs: list[tuple[PlayerRow, PlayerRow]]) -> None:
     """Refuse, in one line, a match between two names of the same weights: one player (a run repeated with its
     seed), whose games against itself would say nothing."""
-    same = league.same_weights()
+    same = league.ledger.same_weights()
     for x, y in pairs:
         if same.get(x.id, x.id) == same.get(y.id, y.id):
             raise MarlError(f"{x.full_name} and {y.full_name} hold the same weights: they are one player, rated as one "

@@ -81,10 +81,10 @@ def run_nash(league: League, run: str, payoff: str = "points", min_games: int = 
         raise LeagueError(f"unknown payoff {payoff!r} (expected one of {', '.join(PAYOFFS)})")
     if min_games < 1:
         raise LeagueError(f"min_games must be at least 1, not {min_games}")
-    info = league.get_run(run)
+    info = league.roster.get_run(run)
     if info is None:
         raise LeagueError(f"no run named '{run}'")
-    snapshots = tuple(p for p in league.players(env=info.env, kind="snapshot")
+    snapshots = tuple(p for p in league.roster.players(env=info.env, kind="snapshot")
                       if p.run == run and (until_step is None or p.step <= until_step))
     if not snapshots:
         return None
@@ -92,7 +92,7 @@ def run_nash(league: League, run: str, payoff: str = "points", min_games: int = 
     if len(ids) == 1:
         return RunNash(run, payoff, snapshots, {ids[0]: 1.0}, (ids[0],), 0.0, 0)
     newest_first = ids[::-1]  # (the sub-game's ties go to the set whose indices come first: the newer snapshots)
-    table = league.games(env=info.env, players=ids, variant=variant_key(info.env, run_options(league, run)))
+    table = league.ledger.games(env=info.env, players=ids, variant=variant_key(info.env, run_options(league, run)))
     records = pair_records(table, newest_first)
     sub = measured_subgame((records[0] >= min_games) & ~np.eye(len(ids), dtype=bool))
     if len(sub) < 2:

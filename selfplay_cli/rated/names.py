@@ -90,7 +90,7 @@ def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | N
     the seats, ``landers=3``, ``n_pursuers=3``: those seats), all from one run, in seat order; None if there are
     none. Raises LeagueError if several runs have such a team (``run/name`` chooses)."""
     teams: dict[tuple[str, str], list[PlayerRow]] = {}
-    runs = league.list_runs(env)
+    runs = league.roster.list_runs(env)
     # the registered games, and the users' games the league's runs play (mpe2.simple_push_v3, a module:factory)
     for e in [env] if env else dict.fromkeys([*env_names(), *(r.env for r in runs)]):
         try:
@@ -105,7 +105,7 @@ def find_team(league: League, name: str, env: str | None) -> list[PlayerRow] | N
         seatings = {agents: None for agents in seatings if len(agents) > 1}  # in order: the game's own first
         found: dict[str, list[PlayerRow]] = {}  # each seat's snapshots, asked for once whatever seatings share it
         for agent in dict.fromkeys(a for agents in seatings for a in agents):
-            found[agent] = [p for p in league.find_players(f"{name}-{agent}", env=e)
+            found[agent] = [p for p in league.roster.find_players(f"{name}-{agent}", env=e)
                             if p.kind == "snapshot" and p.run is not None
                             and ("/" not in name or p.full_name == f"{name}-{agent}")]
         for agents in seatings:
@@ -175,7 +175,7 @@ def _team_names(players: list[PlayerRow]) -> list[str]:
 
 def _unknown(league: League, name: str, env: str | None) -> LeagueError:
     """An unknown name: the closest names first, then the newest snapshots, then what else can be typed."""
-    players = league.players(env=env)
+    players = league.roster.players(env=env)
     snapshots = sorted((p for p in players if p.kind == "snapshot"), key=lambda p: -p.id)
     pool = [p.full_name for p in players] + [t for p in players for t in p.tags]
     pool += [p.name for p in snapshots] + _team_names(snapshots) + ["latest", "best"]
@@ -221,7 +221,7 @@ def _by_id(league: League, name: str, pid: int, env: str | None, include_removed
     try:
         if pid > MAX_ID:
             raise LeagueError(str(pid))
-        p = league.get_player(pid)
+        p = league.roster.get_player(pid)
     except LeagueError:
         raise LeagueError(f"no player with id {pid} in {_where(env)}") from None
     if env is not None and p.env != env:
@@ -241,7 +241,7 @@ def _best(league: League, env: str | None, ladder_fn: LadderFn, variant: str = "
         raise LeagueError(f"'best' is per side in {_where(env)}, whose sides differ: name one ("
                           + "; ".join(f"{side} side: {top}" for side, top in zip(sides, tops, strict=True)) + ")")
     for r in sorted(comparable or rows, key=lambda r: (-r.elo, r.player_id)):
-        p = league.get_player(int(r.player_id))  # type: ignore[arg-type]
+        p = league.roster.get_player(int(r.player_id))  # type: ignore[arg-type]
         if not p.removed:
             return p
     where = _where(env) + (f" with {describe_variant(variant)}" if variant else "")
@@ -272,13 +272,13 @@ def resolve(
     if digits.isascii() and digits.isdigit():
         return _by_id(league, text, int(digits), env, include_removed)
     if text == "latest":
-        p = league.latest(env=env)
+        p = league.roster.latest(env=env)
         if p is None:
             raise LeagueError(f"no snapshot in {_where(env)} yet: 'latest' needs one")
         return p
     if text == "best":
         return _best(league, env, ladder_fn or functools.partial(_default_ladder, variant=variant), variant)
-    found = league.find_players(text, env=env, include_removed=True)
+    found = league.roster.find_players(text, env=env, include_removed=True)
     if "/" in text:  # only run/name matches can contain a slash; keep exactly those
         run, _, snap = text.partition("/")
         found = [p for p in found if p.run == run and p.name == snap]

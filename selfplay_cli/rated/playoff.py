@@ -68,7 +68,7 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
     """Play the playoff of the run whose final snapshots are ``final_ids`` (see the module docstring); returns the
     number of games played. Seeds start at ``first_seed``, one range per round."""
     cfg = config or PlayoffConfig()
-    final = [league.get_player(int(i)) for i in final_ids]
+    final = [league.roster.get_player(int(i)) for i in final_ids]
     if not final or cfg.max_games == 0:
         return 0
     spec = get_env(final[0].env)
@@ -125,7 +125,7 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
 def _before(league: League, history: History, key: str, seed: int) -> History:
     """The history as the round starting at ``seed`` saw it the first time: without the games of that round and
     later ones (stored before the process playing them was killed; played again now, see :func:`play_gauntlet`)."""
-    later = [mid for k, (mid, _) in league.keyed_matches(f"{key}/").items() if int(k.split("/")[2]) >= seed]
+    later = [mid for k, (mid, _) in league.ledger.keyed_matches(f"{key}/").items() if int(k.split("/")[2]) >= seed]
     if not later:
         return history
     return replace(history, table=history.table.select(~np.isin(history.table.match_id, later)))

@@ -107,7 +107,7 @@ def queue_match(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *
     jobs = games_jobs(league, rows_a, row_b, games=games, first_seed=first_seed, match_kind=match_kind,
                       env_options=env_options, params=extra, team_name=team_name, job_rounds=job_rounds,
                       device=device, seeds=seeds)
-    league.enqueue(batch, jobs, seen=seen)
+    league.queue.enqueue(batch, jobs, seen=seen)
     return QueuedMatch(league, batch, sprt=sprt, confidence=confidence)
 
 

@@ -86,10 +86,10 @@ def settle(league: Any, asks: Sequence[Ask], write: Callable[[list[Settled], Map
     of the pairs in between. ``looked()`` is called after the first look (a test makes two commands look before
     either writes)."""
     pairs = list(dict.fromkeys(a.pair for a in asks))
-    played = {p: int(league.played_seed_end(*p)) for p in pairs}  # (stored games lie in ranges, or before them)
+    played = {p: int(league.ledger.played_seed_end(*p)) for p in pairs}  # (stored games lie in ranges, or before them)
     first: dict[Pair, int] | None = None
     for _ in range(MAX_LOOKS):
-        looks = league.pair_seeds(pairs)
+        looks = league.seeds.pair_seeds(pairs)
         if first is None:
             first = {p: looks[p].seq for p in pairs}
             if looked is not None:

@@ -48,12 +48,12 @@ def players_variant(league: League, env: str, rows: Iterable[PlayerRow], overrid
 def run_options(league: League, run: str) -> dict[str, Any]:
     """The game options a run's snapshots were made for: a trained run's ``[env_options]`` (its config), else (a run
     of imported files) its newest readable snapshot's metadata; none when neither says."""
-    info = league.get_run(run)
+    info = league.roster.get_run(run)
     if info is None:
         raise MarlError(f"no run named '{run}'")
     if isinstance((info.config or {}).get("env_options"), dict):
         return dict(info.config["env_options"])
-    for p in reversed(league.players(env=info.env, kind="snapshot")):
+    for p in reversed(league.roster.players(env=info.env, kind="snapshot")):
         if p.run == run:
             with contextlib.suppress(MarlError, OSError):
                 return player_options(league, p)
@@ -80,14 +80,14 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
     meta = snap.meta
     run = run or meta.run or "imported"
     name = name or meta.name
-    if league.get_run(run) is None:
+    if league.roster.get_run(run) is None:
         check_name("run name", run)  # a new run: a league name in full
     rel = snapshot_relpath(run, name)  # refuses names that are not league names (/, .., control characters)
     dest = league.home_path(*Path(rel).parts)  # and a run folder that is a symlink leading out of the home
-    for p in league.players(env=meta.env, kind="snapshot"):
+    for p in league.roster.players(env=meta.env, kind="snapshot"):
         if p.meta.get("weights_sha256") == meta.weights_sha256:
             raise MarlError(f"{file}: these weights are already in the league as {p.full_name}")
-    existing = league.get_run(run)
+    existing = league.roster.get_run(run)
     if existing is not None and existing.env != meta.env:
         raise MarlError(f"{file}: run '{run}' plays {existing.env}, the snapshot plays {meta.env}")
     if dest.exists():
@@ -105,10 +105,10 @@ def import_snapshot(league: League, file: Path, run: str | None = None, name: st
             raise LeagueIOError(f"cannot write {dest}: {e.strerror or e}") from None
         raise
     try:
-        return league.add_snapshot(env=meta.env, run=run, name=name, path=rel, sha256=snap.sha256,
-                                   step=meta.step, episode=meta.episode, algo=meta.algo,
-                                   meta={"weights_sha256": meta.weights_sha256, "imported_from": str(file)},
-                                   run_config={"imported_from": str(file)})
+        return league.roster.add_snapshot(env=meta.env, run=run, name=name, path=rel, sha256=snap.sha256,
+                                          step=meta.step, episode=meta.episode, algo=meta.algo,
+                                          meta={"weights_sha256": meta.weights_sha256, "imported_from": str(file)},
+                                          run_config={"imported_from": str(file)})
     except BaseException:
         dest.unlink(missing_ok=True)
         _remove_empty(made)
@@ -125,7 +125,7 @@ def _league_game(league: League, file: Path) -> str | None:
     from ..policies.snapshot_reader import read_meta
 
     named = read_meta(file).env
-    return named if league.list_runs(env=named) else None
+    return named if league.roster.list_runs(env=named) else None
 
 
 def _file_bytes(file: Path, sha256: str) -> bytes:
@@ -153,7 +153,7 @@ def _remove_empty(folders: list[Path]) -> None:
 def share_snapshots(league: League, rows: Sequence[PlayerRow]) -> None:
     """Put the snapshot files of ``rows`` in the league (by their sha256) where it has them not yet, so a worker on
     any machine can fetch them; a :class:`MarlError` naming the first that cannot be (its file not here)."""
-    report = league.ensure_blobs([r for r in rows if not r.is_bot], check_legacy=check_legacy_file)
+    report = league.blobs.ensure_blobs([r for r in rows if not r.is_bot], check_legacy=check_legacy_file)
     for name in (*report.missing, *report.refused):
         raise MarlError(f"{name}: {report.reasons.get(name, 'its file is not on this machine')}; workers elsewhere "
                         "could not play it")

@@ -47,8 +47,8 @@ class TournamentPlan:
         variant = players_variant(league, env, everyone, options)  # where the games are filed
         book = RoleBook(league, env)  # a game whose seats hold different roles: who can meet whom
         plan = plan_tournament(league, env, list(players), games_per_pair, vs=anchor.id if anchor else None,
-                               variant=variant, meets=(lambda x, y: book.meets(league.get_player(x),
-                                                                              league.get_player(y)))
+                               variant=variant, meets=(lambda x, y: book.meets(league.roster.get_player(x),
+                                                                              league.roster.get_player(y)))
                                if book.differ else None)
         return cls(env, variant, options, [p for p in plan if p.meets], [p for p in plan if not p.meets])
 
@@ -71,11 +71,11 @@ class TournamentPlan:
             jobs = []
             for d in settled:
                 if d.games and d.first_seed is not None:
-                    jobs += games_jobs(league, [league.get_player(d.ask.a)], league.get_player(d.ask.b),
+                    jobs += games_jobs(league, [league.roster.get_player(d.ask.a)], league.roster.get_player(d.ask.b),
                                        games=d.games, first_seed=d.first_seed, match_kind="tournament",
                                        env_options=self.options, job_rounds=job_rounds, device=device, seeds=d)
             if jobs:
-                league.enqueue(batch, jobs, seen=seen)
+                league.queue.enqueue(batch, jobs, seen=seen)
             return len(jobs)
 
         settled, n = settle(league, self.asks(seed), write, looked=looked)
@@ -97,14 +97,14 @@ class TournamentPlan:
                     continue
                 for pid in (d.ask.a, d.ask.b):
                     if pid not in policies:
-                        policies[pid] = load_player(league, league.get_player(pid), device=device,
+                        policies[pid] = load_player(league, league.roster.get_player(pid), device=device,
                                                     seed=mix_seed(d.first_seed, pid))
                 per = round_size(policies[d.ask.a], policies[d.ask.b], first_seed=d.first_seed,
                                  env_options=self.options)
                 rounds = -(-d.games // per)
                 claims.append(d.claim(d.first_seed, rounds, rounds * per))
                 todo.append(d)
-            ids = league.take_seeds(claims, seen, worker_name("marl"))
+            ids = league.seeds.take_seeds(claims, seen, worker_name("marl"))
             return list(zip(todo, ids, strict=True))
 
         settled, todo = settle(league, self.asks(seed), write, looked=looked)
@@ -120,7 +120,7 @@ class TournamentPlan:
         for a, b, first, games in taken.here:
             for pid in (a, b):
                 if pid not in policies:
-                    policies[pid] = load_player(league, league.get_player(pid), device=device,
+                    policies[pid] = load_player(league, league.roster.get_player(pid), device=device,
                                                 seed=mix_seed(first, pid))
             pa, pb = policies[a], policies[b]
             run_match(pa, pb, games=games, first_seed=first, parallel=parallel, league=league,

@@ -106,13 +106,13 @@ def replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> RecordJ
     from ..rated.lineup import safe_filename
     from .recorder import record_replay, renderer_of
 
-    row = league.game(game_id)
+    row = league.ledger.game(game_id)
     if row.actions is None:
         raise MarlError(f"game {row.id} ({row.match_kind} #{row.match_id}) was stored without its actions, so it "
                         "cannot be replayed exactly (games stored by an older marl have none)")
     spec = get_env(row.env)
     renderer_of(spec)  # no renderer: say so before anything else
-    names = [league.get_player(pid).full_name for pid in row.players]
+    names = [league.roster.get_player(pid).full_name for pid in row.players]
     stem = safe_filename(f"game{row.id}-{'-vs-'.join(names)}-s{row.seed}")
     env_options = dict(row.match_params.get("env_options") or {})
 

@@ -211,9 +211,9 @@ def build_matrix(
     if payoff not in PAYOFFS:
         raise LeagueError(f"--payoff must be one of {', '.join(PAYOFFS)}, not {payoff!r}")
     if run is not None:
-        info = league.get_run(run)
+        info = league.roster.get_run(run)
         if info is None:
-            runs = [r.name for r in league.list_runs(env)]
+            runs = [r.name for r in league.roster.list_runs(env)]
             raise LeagueError(f"no run named '{run}' (runs: {', '.join(runs[-10:]) if runs else 'none yet'})")
         if env is not None and env != info.env:
             raise LeagueError(f"run '{run}' trains {info.env}, not {env}")
@@ -221,7 +221,7 @@ def build_matrix(
     rows = ladder(league, env, bootstrap=0, variant=variant)
     if not rows:
         raise LeagueError(f"no rated games in {env} yet: play some first (marl match / marl league tournament)")
-    pool = {p.id: p for p in league.players(include_removed=True) if p.id in {r.player_id for r in rows}}
+    pool = {p.id: p for p in league.roster.players(include_removed=True) if p.id in {r.player_id for r in rows}}
     env = pool[rows[0].player_id].env if rows[0].player_id in pool else str(env)
     if run is not None:  # (a player of the same weights as one of the run's is shown under its first name)
         rows = [r for r in rows if r.kind == "bot" or (r.player_id in pool and pool[r.player_id].run == run)
@@ -238,7 +238,7 @@ def build_matrix(
     players = tuple(MatrixPlayer(r.policy, int(r.player_id), r.kind, r.elo, r.ci_low, r.ci_high)
                     for r in rows if r.player_id is not None)
     ids = [p.player_id for p in players]
-    table = league.games(env=env, players=ids, variant=variant)
+    table = league.ledger.games(env=env, players=ids, variant=variant)
     records = pair_records(table, ids)
     games, wins, draws, losses, units = records
     measured = (games >= min_games) & ~np.eye(len(ids), dtype=bool)

@@ -22,22 +22,47 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from ..league.ladder import LadderRow, ladder
 from ..league.store import League, LeagueError
-from ..rated.exploit import RunPoint
 from ..stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, FLAG_ZERO
 from .png import check_png_path, new_figure, save_png
 
-__all__ = ["BOUND_FLAGS", "BotLevel", "CurvePoint", "LearnerCurve", "RunCurves", "coinciding", "dodge_steps",
-           "format_steps", "run_curves", "run_figure", "save_run_png", "write_run_plot", "x_limits", "y_limits"]
+__all__ = ["BOUND_FLAGS", "BotLevel", "CurvePoint", "ExploitPoint", "LearnerCurve", "RunCurves", "coinciding",
+           "dodge_steps", "format_steps", "run_curves", "run_figure", "save_run_png", "write_run_plot", "x_limits",
+           "y_limits"]
 
 BOUND_FLAGS = (FLAG_PERFECT, FLAG_ZERO)
 """Flags whose rating is a bound: ``perfect`` (the true rating is higher) and ``zero`` (lower); ``--prior 0`` only."""
 
 COINCIDE = 0.01
 """Two learners' points closer than this share of the chart's Elo range (and at the same step) fall on each other."""
+
+
+
+class ExploitPoint(Protocol):
+    """What the chart and the table read of one moment's exact exploitability (the exact exploitability's ``RunPoint``
+    is one): the report draws the figures; it does not compute them."""
+
+    @property
+    def policy(self) -> str: ...
+    @property
+    def step(self) -> int: ...
+    @property
+    def learner(self) -> str: ...
+    @property
+    def league_role(self) -> str | None: ...
+    @property
+    def exploitability(self) -> float: ...
+    @property
+    def nash_conv(self) -> float | None: ...
+    @property
+    def computed(self) -> bool: ...
+    @property
+    def filed(self) -> bool: ...
+    @property
+    def team(self) -> bool: ...
 
 
 @dataclass(frozen=True)
@@ -106,7 +131,7 @@ class RunCurves:
     anchor: tuple[str, float] | None
     confidence: float = 0.95
     prior: float = DEFAULT_PRIOR
-    exploitability: tuple[RunPoint, ...] | None = None
+    exploitability: tuple[ExploitPoint, ...] | None = None
 
     @property
     def best(self) -> CurvePoint | None:
@@ -156,9 +181,9 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
     Raises:
         LeagueError: unknown run, or a run without rated snapshots.
     """
-    info = league.get_run(run)
+    info = league.roster.get_run(run)
     if info is None:
-        runs = [r.name for r in league.list_runs()]
+        runs = [r.name for r in league.roster.list_runs()]
         shown = ", ".join(runs[-10:]) if runs else "none yet"
         raise LeagueError(f"no run named '{run}' (runs: {shown})")
     env = info.env
@@ -171,7 +196,7 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
         rows = ladder(league, env, prior=prior, variant=variant)
     by_id = {r.player_id: r for r in rows if r.player_id is not None}
     groups: dict[tuple[str | None, str], list[CurvePoint]] = {}
-    for p in league.players(env=env, kind="snapshot"):
+    for p in league.roster.players(env=env, kind="snapshot"):
         if p.run != run or p.id not in by_id:
             continue
         r = by_id[p.id]
@@ -337,7 +362,7 @@ def _draw_exploitability(ax: Any, curves: RunCurves) -> None:
     points = curves.exploitability or ()
     colors = {c.learner: f"C{k % 10}" for k, c in enumerate(curves.curves)}
     roles = [role for role, _ in dict.fromkeys((p.league_role, p.learner) for p in points)]
-    lines: dict[str, list[RunPoint]] = {}
+    lines: dict[str, list[ExploitPoint]] = {}
     for p in points:
         label = line_label(p.league_role, p.learner, roles.count(p.league_role) > 1)
         lines.setdefault(label + (" (teams)" if p.team else ""), []).append(p)

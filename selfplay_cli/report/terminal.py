@@ -24,10 +24,9 @@ from rich.style import Style
 from rich.table import Table
 from rich.text import Text
 
-from ..rated.exploit import RunPoint
 from ..stats.bradley_terry import FLAG_PERFECT
 from .matrix import CYCLE_TEST, MatrixReport
-from .plots import BOUND_FLAGS, CurvePoint, RunCurves, format_steps, x_limits, y_limits
+from .plots import BOUND_FLAGS, CurvePoint, ExploitPoint, RunCurves, format_steps, x_limits, y_limits
 
 __all__ = ["curves_chart", "curves_summary", "matrix_summary", "matrix_table", "nice_ticks"]
 
@@ -418,7 +417,7 @@ def matrix_summary(report: MatrixReport, home: str | Path | None = None, unicode
     return Group(out)
 
 
-def exploitability_table(points: tuple[RunPoint, ...]) -> Table:
+def exploitability_table(points: tuple[ExploitPoint, ...]) -> Table:
     """The exact exploitability of a run's snapshots (``marl league plot --exploitability``), one row each, in step
     order: its name, step, league role (a column only when some snapshot has one), exploitability and NashConv, and
     whether it was computed now or read from the figure filed earlier."""

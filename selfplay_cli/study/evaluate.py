@@ -26,7 +26,7 @@ def fly(league: League, team: str, vs: str, options: dict[str, Any], games: int,
     found = resolve_or_team(league, team)
     rows = list(found.members) if isinstance(found, Team) else [found]
     env = rows[0].env
-    league.ensure_bots(env, league_bots(_spec(env)))
+    league.roster.ensure_bots(env, league_bots(_spec(env)))
     try:
         opponent = resolve(league, vs, env)
     except LeagueError as e:
@@ -52,9 +52,9 @@ def snapshot_returns(league: League, env: str, run: str, options: dict[str, Any]
     """(step, mean team return) of each snapshot moment of ``run`` in the variant ``options`` make, from the
     league's cooperative games of its snapshots (its training gauntlets): a team's members, which fly together, the
     mean of theirs. Moments without such games are left out."""
-    returns = league.mean_returns(env, variant=variant_key(env, options))
+    returns = league.ledger.mean_returns(env, variant=variant_key(env, options))
     by_step: dict[int, list[float]] = defaultdict(list)
-    for p in league.players(env=env, kind="snapshot"):
+    for p in league.roster.players(env=env, kind="snapshot"):
         if p.run == run and not p.removed and p.id in returns:
             by_step[int(p.step or 0)].append(returns[p.id][1])
     return [(step, sum(v) / len(v)) for step, v in sorted(by_step.items())]

@@ -219,7 +219,7 @@ class Study:
             self.on_progress(run, 1.0, "done")
             return
         self._wait_for_holder(run)
-        existing = self.league.get_run(run)
+        existing = self.league.roster.get_run(run)
         if existing is not None and existing.status == "finished":
             entry["done"], entry["steps"] = True, self._final_step(run)
             self._save()
@@ -274,7 +274,7 @@ class Study:
                             "stop it, then type the study again")
 
     def _snapshots(self, run: str) -> list[Any]:
-        rows = [p for p in self.league.players(kind="snapshot") if p.run == run and not p.removed]
+        rows = [p for p in self.league.roster.players(kind="snapshot") if p.run == run and not p.removed]
         if not rows:
             raise MarlError(f"study {self.plan.name}: run {run} has no snapshots")
         return rows

@@ -48,7 +48,7 @@ def _team(league: League, text: str, env: str) -> list[PlayerRow] | None:
     seats); None if there are none. Several runs with such a team: one line asking for ``run/name``."""
     run, _, base = text.rpartition("/")
     by_run: dict[str, list[PlayerRow]] = {}
-    for p in league.players(env=env, kind="snapshot"):
+    for p in league.roster.players(env=env, kind="snapshot"):
         learner = p.meta.get("learner")
         if (p.run is None or (run and p.run != run) or not isinstance(learner, str)
                 or p.name != f"{base}-{learner}"):
@@ -179,7 +179,7 @@ def load_init(league: League, cfg: TrainConfig, learners: list[Any], names: list
         if not isinstance(entry, dict):
             raise MarlError(f"run '{cfg.run}': its init_plan names no snapshot for learner {name}")
         try:
-            row = league.get_player(int(entry["id"]))
+            row = league.roster.get_player(int(entry["id"]))
         except (MarlError, KeyError, TypeError, ValueError):
             raise MarlError(f"--init-from: snapshot {entry.get('snapshot')} is no longer in the league") from None
         if row.full_name != entry.get("snapshot"):

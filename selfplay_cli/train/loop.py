@@ -96,8 +96,8 @@ class Trainer:
         self.run_dir = league.home_path("runs", cfg.run)
         game_cfg = spec.config(**cfg.env_options)
         self.variant = variant_key(spec.name, cfg.env_options)  # where its games are rated: the run's own variant
-        league.ensure_bots(spec.name, league_bots(spec))
-        self.bot_ids = {p.name: p.id for p in league.players(env=spec.name, kind="bot")}
+        league.roster.ensure_bots(spec.name, league_bots(spec))
+        self.bot_ids = {p.name: p.id for p in league.roster.players(env=spec.name, kind="bot")}
         self.bot_ids.update(fixed_opponents(league, spec.name, cfg.opponents.bots, self.bot_ids))
         self.time_limit = spec.max_steps(game_cfg)  # the most steps a training game lasts (None: not declared)
 
@@ -145,7 +145,8 @@ class Trainer:
                                   choose_opponents=self._choose if (layout == OPPONENT).any() else None,
                                   env_options=cfg.env_options, first_seed=first_seed, frame_stack=cfg.frame_stack)
             self.rollouts = Rollouts(games, self.learners, curriculum, teacher, schedule)
-        self.match_id = league.create_match(spec.name, "training", {"run": cfg.run, "env_options": cfg.env_options})
+        self.match_id = league.ledger.create_match(spec.name, "training", {"run": cfg.run,
+                                                                           "env_options": cfg.env_options})
         self.moments = SnapshotMoments(league, cfg, spec, self.run_dir, learners=self.learners, names=self.names,
                                        saved=saved, state=self.state, games=self.rollouts, opponents=self.opponents,
                                        device=self.device, roles=self.roles, first=first)
@@ -297,11 +298,11 @@ class Trainer:
     def _collect(self, done: list[JobDone]) -> None:
         """Take note of finished gauntlets: each snapshot's record as the ledger has it now, to ``on_progress``."""
         for d in done:
-            names = tuple(self.league.get_player(i).full_name for i in d.job.snapshot_ids)
+            names = tuple(self.league.roster.get_player(i).full_name for i in d.job.snapshot_ids)
             self.state.jobs = [j for j in self.state.jobs if j[0] != names]
             self.eval_seconds += d.seconds
             self.eval_events += 1
-            self.records = self._records([self.league.get_player(i) for i in d.job.snapshot_ids])
+            self.records = self._records([self.league.roster.get_player(i) for i in d.job.snapshot_ids])
             self._tell({"event": "snapshot", "records": self.records, "standing": self.standing()})
 
     def _ladder(self, bootstrap: int = 0) -> list[LadderRow]:
@@ -437,7 +438,7 @@ class Trainer:
         # the final snapshots and the best as the ledger has them now, as `marl league ladder` shows them (its default
         # intervals: one claim, one figure)
         final = self._ladder(DEFAULT_BOOTSTRAP)
-        self.records = self._records([self.league.get_player(i) for i in state.latest], final)
+        self.records = self._records([self.league.roster.get_player(i) for i in state.latest], final)
         plot = self._plot()
         session = self.clock() - t0
         rating_games = self.rating_games()
@@ -548,20 +549,21 @@ class Trainer:
         if not self.cfg.eval_games:
             return 0
         run = self.cfg.run
-        ids = [p.id for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True)
+        ids = [p.id for p in self.league.roster.players(env=self.spec.name, kind="snapshot", include_removed=True)
                if p.run == run]
-        table = self.league.games(self.spec.name, players=ids, any_seat=True, variant=self.variant, pooled=False)
+        table = self.league.ledger.games(self.spec.name, players=ids, any_seat=True, variant=self.variant, pooled=False)
         gauntlets = []
         for match_id in np.unique(table.match_id).tolist():
-            kind, params = self.league.match_info(match_id)
+            kind, params = self.league.ledger.match_info(match_id)
             if kind == "eval" and params.get("gauntlet"):
                 gauntlets.append(match_id)
         mine = table.select(np.isin(table.match_id, gauntlets))
         coop = mine.kind == KIND_CODES[COOPERATIVE]
         played = int(np.unique(mine.game_id[~coop]).size + 2 * np.unique(mine.game_id[coop]).size)
         if ids:  # and the games its first moment had the scripted players play each other (keyed under it)
-            bots = {p.full_name for p in self.league.players(env=self.spec.name, kind="bot")}  # (as the match names)
-            for _, params in self.league.keyed_matches(f"gauntlet/{min(ids)}/").values():
+            bots = {p.full_name for p in self.league.roster.players(env=self.spec.name,
+                                                                    kind="bot")}  # (as the match names)
+            for _, params in self.league.ledger.keyed_matches(f"gauntlet/{min(ids)}/").values():
                 if params.get("a") in bots and params.get("b") in bots:
                     played += sum(int(x) for x in params.get("record", [0, 0, 0])[:3])
         return played
@@ -571,11 +573,11 @@ class Trainer:
         by full name -> the other's full name: rated there, they need no rating games of their own."""
         if not self.cfg.eval_games:
             return {}
-        same = self.league.same_weights(self.spec.name)
+        same = self.league.ledger.same_weights(self.spec.name)
         out = {}
-        for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True):
+        for p in self.league.roster.players(env=self.spec.name, kind="snapshot", include_removed=True):
             if p.run == self.cfg.run and p.id in same:
-                other = self.league.get_player(same[p.id])
+                other = self.league.roster.get_player(same[p.id])
                 if other.run != self.cfg.run:
                     out[p.full_name] = other.full_name
         return out

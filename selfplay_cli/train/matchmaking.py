@@ -377,7 +377,7 @@ def load_win_rates(league: League, env: str, learner_ids: Iterable[int], decay: 
     in which a learner sat, then :meth:`WinRates.from_ledger`.
     """
     ids = [int(x) for x in learner_ids]
-    table = league.games(env, players=ids, any_seat=True, rated=False, variant=variant, pooled=False)
+    table = league.ledger.games(env, players=ids, any_seat=True, rated=False, variant=variant, pooled=False)
     return WinRates.from_ledger(table, ids, decay=decay, prior=prior)
 
 

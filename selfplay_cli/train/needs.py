@@ -54,7 +54,7 @@ def needs_of(league: League, row: PlayerRow) -> list[Need]:
     """The runs (not over) that need snapshot ``row``: its own run while a live trainer plays its snapshots, or
     whose resume state names it; any run of its game whose teacher it is."""
     needs = []
-    for run in league.list_runs(env=row.env):
+    for run in league.roster.list_runs(env=row.env):
         if run.status in OVER:
             continue
         pid = trainer_pid(league, run.name)
@@ -88,7 +88,7 @@ def check_resumable(league: League, run: RunRow) -> None:
     if run.status != ENDED and not missing:
         return
     if run.status != ENDED and not league.readonly and trainer_pid(league, run.name) is None:
-        league.set_run_status(run.name, ENDED)
+        league.roster.set_run_status(run.name, ENDED)
     what = (f"{', '.join(missing)}, which it needed, " if missing else "a snapshot it needed ") + "was removed"
     raise MarlError(f"run '{run.name}' was ended: {what} (marl checkpoint rm --force), so it cannot be resumed; its "
                     f"snapshots and games stay in the league: train a new run (marl train {run.env})")
@@ -142,7 +142,7 @@ def _state_need(league: League, run: RunRow, full_name: str) -> str | None:
 
 def _registered(league: League, full_name: str, env: str) -> bool:
     run, _, name = full_name.partition("/")
-    return any(p.run == run and p.name == name for p in league.find_players(full_name, env=env))
+    return any(p.run == run and p.name == name for p in league.roster.find_players(full_name, env=env))
 
 
 def _missing(league: League, run: RunRow) -> list[str]:

@@ -64,7 +64,7 @@ def fixed_teams(league: League, cfg: TrainConfig, bot_ids: dict[str, int]) -> di
     out: dict[int, tuple[int, ...]] = {}
     fixed = {bot_ids[name] for name in cfg.opponents.bots if name in bot_ids}
     for pid in fixed:
-        row = league.get_player(pid)
+        row = league.roster.get_player(pid)
         team = teammates(league, row, agents) if row.kind == "snapshot" else None
         if team is not None and all(m.id in fixed for m in team):
             out[pid] = tuple(m.id for m in team)
@@ -132,7 +132,7 @@ class Opponents:
         config names in ``bots`` (a scripted player, or a fixed league player: ``marl exploit``'s target) as it
         plays when rated."""
         named = pid in self.matchmaker.bot_ids.values()
-        policy = load_player(self.league, self.league.get_player(pid), device=self.device,
+        policy = load_player(self.league, self.league.roster.get_player(pid), device=self.device,
                              greedy=None if named else False, seed=pid)
         self._player_of[policy.id] = pid
         return policy
@@ -207,7 +207,7 @@ class Opponents:
         """The matchmaker's pool: the run's snapshots, oldest first; in a game whose seats hold different roles,
         also which of them can play each role (a snapshot only its own). ``steps``: the run's step now (the Nash
         mixture's, which is solved again here)."""
-        pool = [p for p in self.league.players(env=env, kind="snapshot") if p.run == self.cfg.run
+        pool = [p for p in self.league.roster.players(env=env, kind="snapshot") if p.run == self.cfg.run
                 and p.unusable is None]  # (a row that cannot be read is never played: said once)
         self.matchmaker.set_pool([p.id for p in pool])
         if self.roles is not None:
@@ -266,7 +266,7 @@ class Opponents:
                 for opponent in dict.fromkeys(q for p, q in zip(r.players, ids, strict=True) if p != mine):
                     self.rates.update(i, opponent, points)
         if records:
-            self.league.record_games(match_id, records)
+            self.league.ledger.record_games(match_id, records)
 
     def _league_rates(self, r: GameResult, ids: list[int], learner_ids: list[str]) -> None:
         """A league game into the win-rate book of the learner whose game it is: against each opponent, a snapshot

@@ -141,9 +141,9 @@ class RayEvaluator(RemoteEvaluator):
         """The jobs that the actors of an earlier session of this run still hold, back to the queue now rather than
         when their leases lapse (minutes): those actors ended with their driver (killed), since the run's lock lets
         one process train it at a time, and a run's actors take jobs of its batch alone."""
-        for w in self.league.workers(taking=self.batch):
+        for w in self.league.queue.workers(taking=self.batch):
             if w.stopped_at is None and w.serves == (self.batch,) and w.name.startswith(f"{ACTOR_ROLE}@"):
-                self.league.stop_worker(w.id, give_back=True)
+                self.league.queue.stop_worker(w.id, give_back=True)
 
     def _spawn(self) -> None:
         """Start one actor and its worker loop."""
@@ -228,9 +228,9 @@ class RayEvaluator(RemoteEvaluator):
         for ref in ready:  # (an actor that never answered never joined the queue)
             with contextlib.suppress(Exception):
                 gone.add(ray.get(ref))
-        for w in self.league.workers(taking=self.batch):
+        for w in self.league.queue.workers(taking=self.batch):
             if w.name in gone and w.stopped_at is None:
-                self.league.stop_worker(w.id, give_back=True)
+                self.league.queue.stop_worker(w.id, give_back=True)
 
     def close(self) -> None:
         """Stop the actors (if the wait has not), then leave Ray as it was found."""

@@ -87,7 +87,7 @@ class RemoteEvaluator:
         """Queue ``job`` after the run's previous gauntlet, unless the batch already holds it (a resumed run)."""
         from ..rated.gauntlet_jobs import GAUNTLET, gauntlet_job
 
-        mine = [j for j in self.league.jobs(batch=self.batch) if j.kind == GAUNTLET]  # (not their matchups' jobs)
+        mine = [j for j in self.league.queue.jobs(batch=self.batch) if j.kind == GAUNTLET]  # (not their matchups' jobs)
         found = [j for j in mine if j.state != "dead"
                  and [int(i) for i in j.spec.get("snapshot_ids", ())] == list(job.snapshot_ids)]
         if found:
@@ -97,7 +97,7 @@ class RemoteEvaluator:
             new = gauntlet_job(self.league, job.snapshot_ids, first_seed=job.first_seed, games=job.games,
                                older=job.older, full=job.full, playoff=job.playoff, whole=job.whole,
                                precision=job.precision)
-            (jid,) = self.league.enqueue(self.batch, [new], chain=True, after=after)
+            (jid,) = self.league.queue.enqueue(self.batch, [new], chain=True, after=after)
         self._ids[job], self._last = jid, jid
         self.pending.append(job)
 
@@ -105,7 +105,7 @@ class RemoteEvaluator:
         """The jobs done since the last call, in the order they were asked for; a dead one raises its error."""
         if not self.pending:
             return []
-        rows = {r.id: r for r in self.league.jobs(ids=list(self._ids.values()))}
+        rows = {r.id: r for r in self.league.queue.jobs(ids=list(self._ids.values()))}
         out = []
         for job in self.pending:
             row = rows[self._ids[job]]
@@ -148,12 +148,12 @@ class RemoteEvaluator:
 
         now = utcnow()
         return any(r.state == "leased" and r.beat_at is not None and (now - r.beat_at).total_seconds() < self.scavenge
-                   for r in self.league.jobs(ids=list(self._ids.values())))
+                   for r in self.league.queue.jobs(ids=list(self._ids.values())))
 
     def serving(self) -> list[str]:
         """The workers attached to the league that take the run's jobs now: not stopped, heart beaten within
         ``alive_within`` seconds (this process, playing them itself, left out)."""
-        return [w.name for w in self.league.workers(alive_within=self.alive_within, taking=self.batch)
+        return [w.name for w in self.league.queue.workers(alive_within=self.alive_within, taking=self.batch)
                 if not self._is_me(w.name)]
 
     @staticmethod
@@ -189,11 +189,11 @@ class RemoteEvaluator:
         """Where the run's owed gauntlets stand now (for the wait's display)."""
         from ..league.queue import ENDED
 
-        rows = self.league.jobs(ids=list(self._ids.values())) if self._ids else []
+        rows = self.league.queue.jobs(ids=list(self._ids.values())) if self._ids else []
         left = [r for r in rows if r.state not in ENDED]
         from ..rated.jobs import SHARING_ROLE
 
-        playing = self.league.jobs(batch=self.batch, states=["leased"]) if left else []  # (its matchups' too)
+        playing = self.league.queue.jobs(batch=self.batch, states=["leased"]) if left else []  # (its matchups' too)
         who = sorted({r.worker for r in playing if r.worker and not self._is_me(r.worker)
                       and not r.worker.startswith(f"{SHARING_ROLE}@")})  # (the moment's worker, named already)
         return QueueStanding(left=len(left), workers=tuple(who), here=self.here, attached=len(self.serving()))

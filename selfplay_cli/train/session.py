@@ -44,20 +44,20 @@ def run_training(league: League, cfg: TrainConfig, *, resumed: bool,
         if resumed:
             note = trainer.restore()
             claimed = True
-            league.set_run_status(cfg.run, RunStatus.RUNNING)
+            league.roster.set_run_status(cfg.run, RunStatus.RUNNING)
             if on_note is not None:
                 on_note(note)
         report = trainer.train()
     except (KeyboardInterrupt, Terminated) as stop:
-        league.set_run_status(cfg.run, RunStatus.STOPPED)
+        league.roster.set_run_status(cfg.run, RunStatus.STOPPED)
         raise RunStopped("SIGTERM" if isinstance(stop, Terminated) else "Ctrl-C",
                          trainer.state.steps if trainer is not None else None) from None
     except MarlError:
         if claimed:  # a refused resume (e.g. another process trains it) leaves the run as it is
-            league.set_run_status(cfg.run, RunStatus.FAILED)
+            league.roster.set_run_status(cfg.run, RunStatus.FAILED)
         raise
     except BaseException:  # whatever else ends it, the run is not left 'running'
-        league.set_run_status(cfg.run, RunStatus.FAILED)
+        league.roster.set_run_status(cfg.run, RunStatus.FAILED)
         raise
-    league.set_run_status(cfg.run, RunStatus.FINISHED)
+    league.roster.set_run_status(cfg.run, RunStatus.FINISHED)
     return report

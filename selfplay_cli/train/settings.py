@@ -246,10 +246,10 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
     from ..policies.bots import bot_names
 
     if run is None:
-        taken = {r.name for r in league.list_runs()}
+        taken = {r.name for r in league.roster.list_runs()}
         stem = run_stem(settings["env"])
         run = next(f"{stem}-{i}" for i in range(1, 10_000) if f"{stem}-{i}" not in taken)
-    elif league.get_run(run) is not None:
+    elif league.roster.get_run(run) is not None:
         raise MarlError(f"a run named '{run}' already exists: choose another --run (or --resume it)")
     settings["run"] = run
     cfg = TrainConfig.from_dict(settings)
@@ -274,7 +274,7 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
         from .init_from import plan_init
 
         cfg = replace(cfg, init_plan=plan_init(league, cfg))
-    league.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
+    league.roster.create_run(run, cfg.env, cfg.to_dict(), algo=cfg.algo)
     save_run_config(league, cfg)
     return cfg
 
@@ -299,7 +299,7 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
         raise MarlError(f"--resume continues run '{resume}' under the configuration it was started with: "
                         f"{flags} cannot change it (only --device, --wait/--no-wait, --executor, --actors, "
                         "--ray-address, --fragment-steps, --quiet, --json, --home, --db apply)")
-    old = league.get_run(resume)
+    old = league.roster.get_run(resume)
     if old is None:
         raise MarlError(f"no run named '{resume}' to resume")
     if old.unusable is not None:  # (said once above it on stderr too)

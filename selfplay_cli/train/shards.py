@@ -106,7 +106,7 @@ class ShardOpponents:
 
         if self._league is None:
             self._league = League(self.setup.league_url, home=self.setup.league_home, readonly=True)
-        policy = load_player(self._league, self._league.get_player(pid), device="cpu", greedy=False, seed=pid)
+        policy = load_player(self._league, self._league.roster.get_player(pid), device="cpu", greedy=False, seed=pid)
         self.players[policy.id] = pid
         return policy
 

@@ -149,7 +149,7 @@ class SnapshotMoments:
             for n in full:
                 run, _, name = n.partition("/")
                 if any(p.run == run and p.name == name
-                       for p in self.league.find_players(n, env=self.spec.name, include_removed=True)):
+                       for p in self.league.roster.find_players(n, env=self.spec.name, include_removed=True)):
                     return
         except Exception:  # (the league cannot be asked now)
             return
@@ -163,7 +163,7 @@ class SnapshotMoments:
         """:meth:`write`'s work: files, pending state, rows, state."""
         cfg, state = self.cfg, self.state
         rows = [self._save(i, self.learners[i], name) for i, name in zip(which, names, strict=True)]
-        latest = [self.league.get_player(p).full_name if p else "" for p in state.latest]
+        latest = [self.league.roster.get_player(p).full_name if p else "" for p in state.latest]
         for i, name in zip(which, full, strict=True):
             latest[i] = name
         jobs = list(state.jobs)
@@ -177,7 +177,7 @@ class SnapshotMoments:
                 self.learners[i].load_state_dict(self.first[i])  # type: ignore[index]
         self.write_state(self.pending_path, latest=latest, snapshots=state.snapshots + full, jobs=jobs,
                          snapshot_step=state.steps, snapshot_episode=state.episodes)
-        registered = self.league.add_snapshots(rows)  # the moment exists from here on
+        registered = self.league.roster.add_snapshots(rows)  # the moment exists from here on
         files.publish(self.pending_path, self.state_path)
         state.snapshot_episode, state.snapshot_step = state.episodes, state.steps
         for i, row in zip(which, registered, strict=True):
@@ -193,7 +193,7 @@ class SnapshotMoments:
         latest = state.latest[i]
         if not latest and self.parents is not None:  # its first snapshot: the one it started from (--init-from)
             latest = self.parents[i]
-        parent = self.league.get_player(latest).full_name if latest else None
+        parent = self.league.roster.get_player(latest).full_name if latest else None
         meta = SnapshotMeta(env=self.spec.name, env_options=cfg.env_options,
                             obs_space=stacked_space(saved.spaces[i].observation, cfg.frame_stack),
                             act_space=saved.spaces[i].action, arch=learner.net.arch, algo=cfg.algo, step=state.steps,
@@ -263,7 +263,7 @@ class SnapshotMoments:
             else:
                 self.pending_path.unlink()
         if not self.state_path.exists():
-            if any(p.run == self.cfg.run for p in self.league.players(env=self.spec.name, kind="snapshot")):
+            if any(p.run == self.cfg.run for p in self.league.roster.players(env=self.spec.name, kind="snapshot")):
                 raise MarlError(f"run '{self.cfg.run}' has snapshots but no resume state ({self.state_path})")
             self._remove_strays()  # killed before its first snapshot: nothing to continue, start it again
             return f"restarted {self.cfg.run} from the beginning (it was stopped before its first snapshot)"
@@ -305,7 +305,8 @@ class SnapshotMoments:
     def player_id(self, full_name: str) -> int:
         """The league player of one of the run's snapshots, by its full name (``run/name``)."""
         run, _, name = full_name.partition("/")
-        found = [p for p in self.league.find_players(full_name, env=self.spec.name) if p.run == run and p.name == name]
+        found = [p for p in self.league.roster.find_players(full_name,
+                                                            env=self.spec.name) if p.run == run and p.name == name]
         if not found:
             raise MarlError(f"run '{self.cfg.run}': snapshot {full_name} of its resume state is not in the league")
         return found[0].id
@@ -323,7 +324,7 @@ class SnapshotMoments:
         if not folder.is_dir():
             return 0
         known = set()
-        for p in self.league.players(env=self.spec.name, kind="snapshot", include_removed=True):
+        for p in self.league.roster.players(env=self.spec.name, kind="snapshot", include_removed=True):
             if p.run == self.cfg.run:
                 with contextlib.suppress(MarlError):  # a row whose path leaves the league names no file here
                     known.add(self.league.snapshot_file(p))

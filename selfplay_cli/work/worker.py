@@ -161,7 +161,8 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
             on_games(n)
 
     name = options.name or worker_name()
-    wid = _retrying(lambda: league.add_worker(name, socket.gethostname(), os.getpid(), serves=options.batches), say,
+    wid = _retrying(lambda: league.queue.add_worker(name, socket.gethostname(), os.getpid(), serves=options.batches),
+                    say,
                     "league unreachable")
     report = WorkerReport(wid, name)
     idle = options.poll
@@ -169,7 +170,7 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
     try:
         while (options.max_jobs is None or report.done + report.counted + report.failed < options.max_jobs) \
                 and not stopped():
-            job = _retrying(lambda: league.claim(wid, batches=options.batches, scavenge=options.scavenge), say,
+            job = _retrying(lambda: league.queue.claim(wid, batches=options.batches, scavenge=options.scavenge), say,
                             "league unreachable")
             if job is None:
                 if options.until_empty and not _retrying(lambda: _open_work(league, options), say,
@@ -177,7 +178,7 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
                     break
                 time.sleep(idle)
                 idle = min(idle * 1.5, _IDLE_MAX)
-                _retrying(lambda: league.worker_beat(wid), say, "league unreachable")
+                _retrying(lambda: league.queue.worker_beat(wid), say, "league unreachable")
                 continue
             idle = options.poll
             try:
@@ -193,7 +194,7 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
     finally:  # Ctrl-C, SIGTERM, an error: the job in play goes back to the queue now, not when its lease lapses
         back: tuple[int, ...] | None = None
         with contextlib.suppress(Exception):  # (the database away: the lease lapses instead)
-            back = league.stop_worker(wid, give_back=True)
+            back = league.queue.stop_worker(wid, give_back=True)
         if on_leave is not None:
             on_leave(Leaving(job, back))
     return report
@@ -201,7 +202,7 @@ def run_worker(league: League, options: WorkerOptions, *, say: Callable[[str], N
 
 def _open_work(league: League, options: WorkerOptions) -> bool:
     """Whether the batches this worker serves still have jobs not ended (queued, waiting, or leased by others)."""
-    return any(counts["queued"] + counts["leased"] > 0 for batch, counts in league.batches()
+    return any(counts["queued"] + counts["leased"] > 0 for batch, counts in league.queue.batches()
                if options.batches is None or batch in options.batches)
 
 
