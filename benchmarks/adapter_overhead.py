@@ -28,7 +28,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the test games live in tests/games
 
 from selfplay_cli.envs import admit, get_env  # noqa: E402
-from selfplay_cli.envs.adapters.pettingzoo import PettingZooCore, adapt  # noqa: E402
+from selfplay_cli.envs.adapters.pettingzoo import adapt  # noqa: E402
+from selfplay_cli.envs.adapters.pettingzoo_core import PettingZooCore  # noqa: E402
 
 GAMES = {
     "pong (parallel)": "pong",

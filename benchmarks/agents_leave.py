@@ -52,7 +52,7 @@ class Departures:
 
     @contextlib.contextmanager
     def counting(self):
-        from selfplay_cli.envs.adapters.pettingzoo import PettingZooCore
+        from selfplay_cli.envs.adapters.pettingzoo_core import PettingZooCore
 
         step = PettingZooCore.step
 

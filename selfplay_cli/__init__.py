@@ -8,7 +8,7 @@ __version__ = "0.1.0"
 
 def _declaration(name: str) -> object | None:
     from .envs import get_env
-    from .envs.registry import UnknownEnvError
+    from .envs.contract import UnknownEnvError
 
     try:
         return get_env(name)
@@ -17,7 +17,7 @@ def _declaration(name: str) -> object | None:
 
 
 def _canonical_option(value: object) -> object:
-    from .envs.registry import canonical_option
+    from .envs.contract import canonical_option
 
     return canonical_option(value)
 

@@ -7,7 +7,7 @@ for whole games, :class:`~selfplay_cli.arena.training_games.SelfPlayGames` for t
 
 :class:`Rules` are the part of a game's declaration that decides results and who may sit where: its kind, its sides,
 its tie tolerance and, where its seats differ, each seat's role (a policy plays only seats of its own role; see
-:meth:`~selfplay_cli.envs.registry.EnvSpec.seat_roles`).
+:meth:`~selfplay_cli.envs.contract.EnvSpec.seat_roles`).
 
 * ``two-sides``: zero-sum between two sides (``sides``: the seats of each; by default seat 0 against seat 1). The
   side with the higher total score wins; a difference of at most ``tie_tolerance`` is a draw. Every seat of a side
@@ -156,7 +156,7 @@ class Rules:
 
     @classmethod
     def of(cls, spec: Any) -> Rules:
-        """The rules a game's declaration (an :class:`~selfplay_cli.envs.registry.EnvSpec`) states; a declaration
+        """The rules a game's declaration (an :class:`~selfplay_cli.envs.contract.EnvSpec`) states; a declaration
         without ``kind`` is a two-sides game."""
         roles = spec.seat_roles() if callable(getattr(spec, "seat_roles", None)) else None
         return cls(n_seats=len(spec.agents), kind=getattr(spec, "kind", TWO_SIDES) or TWO_SIDES,

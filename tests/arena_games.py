@@ -32,7 +32,7 @@ import numpy as np
 from gymnasium import spaces
 
 from selfplay_cli.envs import BotSpec, EnvSpec, IllegalActionError, SeatSpace, UnknownEnvError, get_env, register
-from selfplay_cli.envs.registry import _REGISTRY
+from selfplay_cli.envs.loading import _REGISTRY
 from selfplay_cli.policies import Policy
 
 

@@ -24,8 +24,8 @@ from pettingzoo.test import api_test, parallel_api_test
 
 from selfplay_cli.envs import EnvSpec, env_names, get_env
 from selfplay_cli.envs.adapters.pettingzoo import adapt
+from selfplay_cli.envs.bots import random_rule
 from selfplay_cli.envs.obs_spaces import image_layout
-from selfplay_cli.envs.registry import random_rule
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the suite's games are tests.games.*

@@ -1,5 +1,5 @@
-"""The game contract of selfplay_cli/envs/registry.py: what an EnvSpec may declare, the seat spaces it gives, the
-space rules, and the random player defined for every action space."""
+"""The game contract of selfplay_cli/envs/contract.py, seat_spaces.py and bots.py: what an EnvSpec may declare, the
+seat spaces it gives, the space rules, and the random player defined for every action space."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from selfplay_cli.envs import (
     get_env,
     random_rule,
 )
-from selfplay_cli.envs.registry import SpaceError, seat_space_of
+from selfplay_cli.envs.seat_spaces import SpaceError, seat_space_of
 
 BOX = spaces.Box(-1.0, 1.0, (4,), dtype=np.float32)
 

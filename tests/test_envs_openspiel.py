@@ -16,7 +16,8 @@ import pytest
 
 from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
-from selfplay_cli.envs.registry import IllegalActionError, random_rule
+from selfplay_cli.envs.bots import random_rule
+from selfplay_cli.envs.contract import IllegalActionError
 from selfplay_cli.envs.rng import game_key_int, uniform_int
 from selfplay_cli.league.roster import check_env_name
 

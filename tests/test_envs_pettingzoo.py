@@ -14,7 +14,8 @@ from gymnasium import spaces
 from pettingzoo import AECEnv, ParallelEnv
 
 from selfplay_cli.envs import EnvError, IllegalActionError, UnknownEnvError, admit, env_names, get_env, loading
-from selfplay_cli.envs.adapters.pettingzoo import PettingZooCore, adapt
+from selfplay_cli.envs.adapters.pettingzoo import adapt
+from selfplay_cli.envs.adapters.pettingzoo_core import PettingZooCore
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the suite's games are tests.games.*

@@ -11,7 +11,7 @@ from cli_helpers import run, run_json
 from gymnasium import spaces
 
 from selfplay_cli.envs import register
-from selfplay_cli.envs.registry import _REGISTRY
+from selfplay_cli.envs.loading import _REGISTRY
 
 TWO_SIDES_RULE = "each truncated game is decided by the score at the cut: the side ahead wins it, level is a draw"
 

@@ -26,7 +26,7 @@ from selfplay_cli.arena.schedule import CannotMeet, can_meet, round_of
 from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.adapters.pettingzoo import adapt
-from selfplay_cli.envs.registry import EnvError
+from selfplay_cli.envs.contract import EnvError
 from selfplay_cli.league.ledger import GameTable
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy

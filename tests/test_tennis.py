@@ -590,7 +590,7 @@ def test_discrete_option():
     y = c.bat[1, :, 0].copy()
     c.step(up)
     assert np.allclose(c.bat[1, :, 0] - y, 6.0 * 0.02) and np.allclose(c.bat[0, :, 0], [-1.8, 1.8])
-    from selfplay_cli.envs.registry import IllegalActionError
+    from selfplay_cli.envs.contract import IllegalActionError
 
     with pytest.raises(IllegalActionError):
         c.step(np.full((2, 1, 3), 3))

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..envs import EnvSpec, get_env
-from ..envs.registry import BatchedCore, IllegalActionError
+from ..envs.contract import BatchedCore, IllegalActionError
 from ..errors import MarlError, NonFiniteError
 from ..policies import Policy
 from ..results import GameResult, Rules, game_results

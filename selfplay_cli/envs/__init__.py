@@ -1,11 +1,13 @@
 """Games: the game contract, the built-in games, and what makes a user's game one.
 
-- :mod:`.registry`: the game contract (:class:`EnvSpec`: seats, spaces, turns, kind, options; the
-  :class:`BatchedCore` protocol every game is stepped through; scripted players' :class:`BotSpec`) and the registry.
-- :mod:`.loading`: finding a game by name (``get_env``): the registered games, games of installed packages
-  (entry-point group ``selfplay_cli.envs``), a user's PettingZoo game named ``module:factory`` or ``module``, which
-  is imported only once the user of this machine names it (``admit``, ``MARL_GAMES``), never because a league row
-  or a file names it.
+- :mod:`.contract`: the game contract (:class:`EnvSpec`: seats, spaces, turns, kind, options; the
+  :class:`BatchedCore` protocol every game is stepped through; the errors a game gives).
+- :mod:`.seat_spaces`: what a seat is to a policy (:class:`SeatSpace`) and which spaces `marl` plays;
+  :mod:`.bots`: scripted players (:class:`BotSpec`) and the random player any game can have.
+- :mod:`.loading`: the registry (``register``) and finding a game by name (``get_env``): the registered games,
+  games of installed packages (entry-point group ``selfplay_cli.envs``), a user's PettingZoo game named
+  ``module:factory`` or ``module``, which is imported only once the user of this machine names it (``admit``,
+  ``MARL_GAMES``), never because a league row or a file names it.
 - :mod:`.options`: a game's options as a user sets them (``--env-option``), read from its declaration.
 - The built-in games, one package each, registered when this package is imported: :mod:`.pong`, :mod:`.lander`,
   :mod:`.tennis`. Each holds its declaration (the ``EnvSpec``) in its ``__init__`` and modules by concern: ``config``
@@ -20,26 +22,13 @@ The arena steps every game, built in or adapted, through its batched core.
 
 from __future__ import annotations
 
+from .bots import BotSpec, random_bot, random_rule
+from .contract import KINDS, TURNS, BatchedCore, EnvError, EnvSpec, IllegalActionError, UnknownEnvError, check_spaces
 from .lander import LANDER
-from .loading import GameNotAdmittedError, admit, env_names, get_env, known_env
+from .loading import GameNotAdmittedError, admit, env_names, get_env, known_env, register
 from .options import GameOption, GameOptions, game_options
 from .pong import PONG
-from .registry import (
-    KINDS,
-    TURNS,
-    BatchedCore,
-    BotSpec,
-    EnvError,
-    EnvSpec,
-    IllegalActionError,
-    SeatSpace,
-    UnknownEnvError,
-    check_spaces,
-    describe_space,
-    random_bot,
-    random_rule,
-    register,
-)
+from .seat_spaces import SeatSpace, describe_space
 from .tennis import TENNIS
 
 register(PONG)

@@ -1,5 +1,8 @@
 """Finding a game by name: the registered games, installed packages' entry points, OpenSpiel games, and the games
-of your own you name (``module:factory`` / ``module``).
+of your own you name (``module:factory`` / ``module``), tried in that order.
+
+- The registered games are those :func:`register` was given: the built-in games, registered when
+  :mod:`selfplay_cli.envs` is imported, and any a program using marl as a library registers.
 
 - An installed package registers games under the entry-point group ``selfplay_cli.envs``; the entry point's name
   is the game's name and it loads an :class:`EnvSpec` or a factory of PettingZoo envs, e.g. in pyproject.toml::
@@ -43,7 +46,7 @@ from typing import Any
 from .adapters.openspiel import PREFIX as OPENSPIEL_PREFIX
 from .adapters.openspiel import openspiel_game
 from .adapters.pettingzoo import adapt
-from .registry import _REGISTRY, EnvError, EnvSpec, UnknownEnvError
+from .contract import EnvError, EnvSpec, UnknownEnvError
 
 ENTRY_POINT_GROUP = "selfplay_cli.envs"
 
@@ -56,6 +59,15 @@ _VARIABLE: tuple[str, frozenset[str]] = ("", frozenset())  # MARL_GAMES as last 
 _PLUGINS: dict[str, EnvSpec] | None = None
 _PLUGIN_ERRORS: dict[str, EnvError] = {}
 _MODULE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*$")
+_REGISTRY: dict[str, EnvSpec] = {}
+
+
+def register(spec: EnvSpec) -> EnvSpec:
+    """Add ``spec`` to the registered games under its name (a ValueError if a game of that name is registered)."""
+    if spec.name in _REGISTRY:
+        raise ValueError(f"env {spec.name!r} is already registered")
+    _REGISTRY[spec.name] = spec
+    return spec
 
 
 def _as_spec(name: str, obj: Any, where: str) -> EnvSpec:

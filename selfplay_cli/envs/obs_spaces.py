@@ -11,7 +11,7 @@
 
 The bounds of the row (:meth:`FlatObs.box`) are the parts' bounds (0 and 1 for one-hots and binaries), so a policy's
 input is checked as any Box observation is. A game's ``action_mask`` is not read here: the adapter takes it out of
-a top-level Dict first (:func:`~selfplay_cli.envs.registry.seat_space_of`).
+a top-level Dict first (:func:`~selfplay_cli.envs.seat_spaces.seat_space_of`).
 
 **Images** are the one exception to the flat float32 row (:func:`image_layout`): a Box of three axes whose numbers
 lie in 0..255 (uint8, or any dtype with those bounds) and whose channel axis holds 1 to 4 channels is read as it is,

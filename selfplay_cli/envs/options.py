@@ -23,7 +23,7 @@ import typing
 from dataclasses import dataclass
 from typing import Any, Literal, Union
 
-from .registry import KINDS, EnvSpec
+from .contract import KINDS, EnvSpec
 
 __all__ = ["GameOption", "GameOptions", "game_options"]
 

@@ -31,7 +31,8 @@ import numpy as np
 from gymnasium import spaces
 
 from ..errors import MarlError
-from .registry import EnvSpec, SeatSpace
+from .contract import EnvSpec
+from .seat_spaces import SeatSpace
 
 
 def action_width(space: spaces.Space) -> int:

@@ -22,7 +22,7 @@ _canonical: Callable[[Any], Any] = lambda value: value  # noqa: E731  (no catalo
 
 def use_catalog(lookup: Callable[[str], Any], canonical: Callable[[Any], Any]) -> None:
     """Where declarations come from: ``lookup(name)`` a game's declaration (an object with ``for_options``,
-    ``variant_options`` and ``anchor``, as :class:`selfplay_cli.envs.registry.EnvSpec` has) or None for a game it does
+    ``variant_options`` and ``anchor``, as :class:`selfplay_cli.envs.contract.EnvSpec` has) or None for a game it does
     not know; ``canonical(value)`` an option's value in the one form a variant records."""
     global _lookup, _canonical
     _lookup, _canonical = lookup, canonical

@@ -2,8 +2,8 @@
 
 A result means something only in the game it was played in: a win at pong to 3 points is not a win to 21, and a
 crew of four landers is not one of two. So the ledger's games are rated per *variant*: the options of the game that
-change it, those the game does not declare neutral (:attr:`~selfplay_cli.envs.registry.EnvSpec.neutral_options`)
-and that differ from its defaults (:meth:`~selfplay_cli.envs.registry.EnvSpec.variant_options`). Every ladder, fit,
+change it, those the game does not declare neutral (:attr:`~selfplay_cli.envs.contract.EnvSpec.neutral_options`)
+and that differ from its defaults (:meth:`~selfplay_cli.envs.contract.EnvSpec.variant_options`). Every ladder, fit,
 matrix, plot, gate, tournament and ``best`` reads the games of one variant, the default one (the game as declared)
 unless another is asked for.
 

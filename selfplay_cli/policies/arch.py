@@ -216,6 +216,6 @@ def conv_shapes(obs_shape: tuple[int, ...], arch: Arch) -> tuple[list[tuple[int,
 
 
 def _describe(space: spaces.Space) -> str:
-    from ..envs.registry import describe_space
+    from ..envs.seat_spaces import describe_space
 
     return describe_space(space)

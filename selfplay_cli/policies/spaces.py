@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from ..envs.registry import SpaceError, describe_space
+from ..envs.seat_spaces import SpaceError, describe_space
 
 KINDS = ("discrete", "multidiscrete", "box")
 MAX_BOUNDS = 65_536  # numbers of non-uniform bounds written out (larger observation bounds are written as unknown)

@@ -4,7 +4,7 @@ Every recording carries it, whatever the game: a band of text under the game's o
 as the game drew it). It is built from what every game declares and the game loop knows, so nothing here depends on
 one game's shape:
 
-* one entry per side (:meth:`~selfplay_cli.envs.registry.EnvSpec.side_seats`: each seat of a two-sides game or a
+* one entry per side (:meth:`~selfplay_cli.envs.contract.EnvSpec.side_seats`: each seat of a two-sides game or a
   free-for-all, the whole team of a cooperative one), with the names of the players on its seats and the side's
   running score (the sum of its seats' scores, which is what decides a result; a cooperative team's return);
 * a status line: the game's number (``game 2 of 3``), the step, and on the last frame how the game ended.

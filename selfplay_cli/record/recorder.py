@@ -22,7 +22,7 @@ import numpy as np
 from ..arena import Game, GameResult, play
 from ..arena.replay import check_replay, decode_actions, replay_policies
 from ..envs import EnvSpec, get_env
-from ..envs.registry import BatchedCore
+from ..envs.contract import BatchedCore
 from ..errors import MarlError
 from .overlay import CaptionBand
 from .video import GIF_MAX_WIDTH, MAX_SIDE, MIN_SIDE, VideoWriter, check_format

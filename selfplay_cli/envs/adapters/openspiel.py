@@ -43,8 +43,10 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from ..registry import EnvError, EnvSpec, IllegalActionError, SeatSpace, random_bot
+from ..bots import random_bot
+from ..contract import EnvError, EnvSpec, IllegalActionError
 from ..rng import game_key_int, uniform_int
+from ..seat_spaces import SeatSpace
 
 __all__ = ["EXTRA", "PREFIX", "OpenSpielConfig", "OpenSpielCore", "OpenSpielRenderer", "openspiel_game"]
 

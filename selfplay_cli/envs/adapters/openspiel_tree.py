@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import EnvError
+from ..contract import EnvError
 from .openspiel import PREFIX, _load, _playable
 
 __all__ = ["BATCH", "MAX_NODES", "ProbabilitiesFn", "TreeFigures", "check_walkable", "tree_figures"]

@@ -44,7 +44,8 @@ step and bit for bit (tests/test_lander.py compares them).
 
 from __future__ import annotations
 
-from ..registry import BotSpec, EnvSpec
+from ..bots import BotSpec
+from ..contract import EnvSpec
 from .bots import heuristic_continuous_rule, heuristic_rule
 from .config import AGENTS, FPS, action_space, agents, make_config, observation_space
 from .core import LanderCore

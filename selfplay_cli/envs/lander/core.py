@@ -22,7 +22,7 @@ import Box2D
 import numpy as np
 from Box2D.b2 import edgeShape, fixtureDef, polygonShape, revoluteJointDef
 
-from ..registry import IllegalActionError, reset_slots
+from ..contract import IllegalActionError, reset_slots
 from .config import (
     CHUNKS,
     CRASHED,
@@ -180,7 +180,7 @@ class LanderWorld:
 
 
 class LanderCore:
-    """N lander games stepped at once (the :class:`~selfplay_cli.envs.registry.BatchedCore` protocol).
+    """N lander games stepped at once (the :class:`~selfplay_cli.envs.contract.BatchedCore` protocol).
 
     ``actions[seat]``: ``(n,)`` ints in 0..3, or ``(n, 2)`` floats with ``continuous``. A lander that has ended
     and every lander of a finished game are ignored. ``result`` ``(n_seats, n)`` says how each lander ended

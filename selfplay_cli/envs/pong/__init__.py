@@ -37,7 +37,8 @@ policy trained on one side plays either side.
 
 from __future__ import annotations
 
-from ..registry import BotSpec, EnvSpec, random_rule
+from ..bots import BotSpec, random_rule
+from ..contract import EnvSpec
 from .bots import cpu_rule
 from .config import AGENTS, action_space, make_config, observation_space
 from .core import make_batched_core

@@ -115,7 +115,8 @@ restitution.
 
 from __future__ import annotations
 
-from ..registry import BotSpec, EnvSpec
+from ..bots import BotSpec
+from ..contract import EnvSpec
 from .bots import serve_bot_for, serve_bot_rule
 from .config import AGENTS, FPS, LIVE_OPTIONS, action_space, make_config, observation_space
 from .core import TennisCore

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from ..registry import IllegalActionError, reset_slots
+from ..contract import IllegalActionError, reset_slots
 from ..rng import game_key, uniform
 from .config import (
     ANGLE_MAX,
@@ -82,7 +82,7 @@ _PER_DT = 1.0 / DT
 
 
 class TennisCore:
-    """N tennis games stepped at once (the :class:`~selfplay_cli.envs.registry.BatchedCore` protocol).
+    """N tennis games stepped at once (the :class:`~selfplay_cli.envs.contract.BatchedCore` protocol).
 
     ``actions[seat]``: ``(n, 3)`` floats in [-1, 1], or ``(n, 3)`` ints in 0..2 with ``discrete``. Beyond the
     protocol's arrays the core exposes the rally for tests and statistics: ``server``, ``hitter`` (the last hitter,

@@ -1,17 +1,19 @@
-"""The game registry and the game contract: one :class:`EnvSpec` per game, everything the rest of `marl` needs to
-know about it, and the :class:`BatchedCore` protocol every game is played through.
+"""The game contract: one :class:`EnvSpec` per game, everything the rest of `marl` needs to know about it, and the
+:class:`BatchedCore` protocol every game is played through.
 
-A game declares, once: its seats (``agents``), each seat's spaces (:meth:`EnvSpec.seat_spaces`) and role
-(:meth:`EnvSpec.seat_roles`), whether seats act together or in turns (``turns``) and what a result is (``kind``,
-``sides``, ``tie_tolerance``).
+A game declares, once: its seats (``agents``), each seat's spaces (:meth:`EnvSpec.seat_spaces`, each a
+:class:`~selfplay_cli.envs.seat_spaces.SeatSpace`) and role (:meth:`EnvSpec.seat_roles`), whether seats act together
+or in turns (``turns``), what a result is (``kind``, ``sides``, ``tie_tolerance``) and its scripted players
+(``bots``, each a :class:`~selfplay_cli.envs.bots.BotSpec`).
 
 Roles: seats of one role are interchangeable, so one policy may play any of them (pong's left and right paddles see
 the court mirrored; a board game's two colours); a policy learned on one role plays only seats of that role. A game
 may declare its roles (``roles``, a name per seat); by default seats share a role when they have the same
-observation shape, action space and masks (a network that reads one can read the other). Names are
-found in this order: the registered games (pong, and games that installed packages register under the entry-point
-group ``selfplay_cli.envs``), then a user's PettingZoo game named ``module:factory`` or ``module`` (see
-:mod:`selfplay_cli.envs.loading`).
+observation shape, action space and masks (a network that reads one can read the other).
+
+The errors a game gives are here too: :class:`UnknownEnvError` and :class:`EnvError` (a game that cannot be found,
+loaded or played) and :class:`IllegalActionError` (an action a core refuses). Registering a game and finding one by
+name is :mod:`selfplay_cli.envs.loading`.
 """
 
 from __future__ import annotations
@@ -26,7 +28,8 @@ from typing import Any, Protocol
 import numpy as np
 from gymnasium import spaces
 
-from ..errors import MarlError
+from .bots import BotSpec
+from .seat_spaces import SeatSpace, SpaceError, check_seat_space, space_key
 
 TURNS = ("simultaneous", "sequential")
 KINDS = ("two-sides", "cooperative", "free-for-all")
@@ -83,50 +86,6 @@ def reset_slots(games: Any, seeds: Any) -> tuple[np.ndarray, np.ndarray]:
     return g, s
 
 
-BotRule = Callable[..., np.ndarray]
-
-
-@dataclass(frozen=True)
-class BotSpec:
-    """A scripted player: a rule from a batch of one seat's observations (and a generator) to actions.
-
-    With ``uses_mask`` the rule also takes the seat's action masks (``rule(obs, rng, mask)``, mask None when the
-    seat has none); without, ``rule(obs, rng)``. ``make_rule(cfg)``, where given, is the rule for a config whose
-    options change how the player must act (the lander's ``continuous=true``); ``rule`` is the default config's."""
-
-    name: str
-    description: str
-    rule: BotRule
-    uses_mask: bool = False
-    make_rule: Callable[[Any], BotRule] | None = None
-
-    def rule_for(self, cfg: Any) -> BotRule:
-        return self.rule if self.make_rule is None else self.make_rule(cfg)
-
-
-@dataclass(frozen=True)
-class SeatSpace:
-    """What one seat's policy sees and does.
-
-    ``observation``: the Box a policy reads (float32 arrays of its shape, or an image's own dtype, uint8; for a
-    Dict observation space, its ``observation`` part). ``action``: Discrete (actions ``0 .. n-1``), MultiDiscrete or
-    Box. ``mask``: whether the seat has action masks (Discrete only). ``given``: the observation space as the game
-    declares it, where the policy reads it otherwise (flattened, or its ``action_mask`` taken out); None where the
-    two are one."""
-
-    observation: spaces.Box
-    action: spaces.Space
-    mask: bool = False
-    given: spaces.Space | None = field(default=None, compare=False)
-
-    def to_json(self) -> dict[str, Any]:
-        out = {"observation": describe_space(self.observation), "action": describe_space(self.action),
-               "mask": self.mask}
-        if self.given is not None:
-            out["given"] = describe_space(self.given)
-        return out
-
-
 class UnknownEnvError(KeyError):
     def __init__(self, name: str, known: list[str]) -> None:
         super().__init__(name)
@@ -159,108 +118,6 @@ class IllegalActionError(ValueError):
         super().__init__(f"illegal action {action!r} for seat {seat} in game slot {game}: {reason}")
 
 
-# --------------------------------------------------------------------------------------------------------------
-# Spaces
-def describe_space(space: spaces.Space) -> str:
-    """A short text for a space: ``Discrete(3)``, ``Box(-1, 1, (8, 6), float32)``, ``MultiDiscrete([3 3])``."""
-    if isinstance(space, spaces.Discrete):
-        return f"Discrete({space.n})" if int(space.start) == 0 else f"Discrete({space.n}, start={space.start})"
-    if isinstance(space, spaces.Box) and space.low.size:
-        lo, hi = space.low.min(), space.high.max()
-        return f"Box({lo:g}, {hi:g}, {space.shape}, {space.dtype})"
-    if isinstance(space, spaces.MultiDiscrete):
-        return f"MultiDiscrete({space.nvec.tolist()})"
-    if isinstance(space, spaces.Dict):
-        return "Dict(" + ", ".join(f"{k}: {describe_space(v)}" for k, v in space.spaces.items()) + ")"
-    if isinstance(space, spaces.Tuple):
-        return "Tuple(" + ", ".join(describe_space(v) for v in space.spaces) + ")"
-    return str(space)
-
-
-class SpaceError(MarlError, ValueError):
-    """A space marl cannot play, or a space description that is not one (the message says which and why; the caller
-    adds the game and the seat). Both a user's mistake (:class:`~selfplay_cli.errors.MarlError`: exit code 2) and a
-    ValueError, as the checks of the game contract and of snapshot files (:mod:`selfplay_cli.policies.spaces`) raise
-    it."""
-
-
-def _check_action(space: spaces.Space) -> spaces.Space:
-    if isinstance(space, spaces.Discrete):
-        if int(space.n) < 1:
-            raise SpaceError(f"action space {describe_space(space)} has no actions")
-        return space
-    if isinstance(space, spaces.MultiDiscrete):
-        if space.nvec.ndim != 1 or space.nvec.size == 0:
-            raise SpaceError(f"action space {describe_space(space)}: MultiDiscrete actions must be one flat vector")
-        if (space.nvec < 1).any():
-            raise SpaceError(f"action space {describe_space(space)} has a dimension without actions")
-        return space
-    if isinstance(space, spaces.Box):
-        if not np.issubdtype(space.dtype, np.floating):
-            raise SpaceError(f"action space {describe_space(space)}: Box actions must be floating point")
-        if not (np.isfinite(space.low).all() and np.isfinite(space.high).all()):
-            raise SpaceError(f"action space {describe_space(space)}: Box actions need finite bounds (a policy "
-                             "samples within them)")
-        if space.shape == () or math.prod(space.shape) == 0:
-            raise SpaceError(f"action space {describe_space(space)}: Box actions need at least one dimension")
-        return space
-    raise SpaceError(f"action space {describe_space(space)} ({type(space).__name__}) is not supported: marl plays "
-                     "Discrete, MultiDiscrete and Box actions")
-
-
-def _check_observation(space: spaces.Space) -> spaces.Box:
-    if not isinstance(space, spaces.Box):
-        raise SpaceError(f"observation space {describe_space(space)} ({type(space).__name__}) is not supported: "
-                         "marl reads Box, Discrete, MultiDiscrete, MultiBinary, and Tuples and Dicts of them")
-    if space.shape is None or math.prod(space.shape) == 0:
-        raise SpaceError(f"observation space {describe_space(space)} is empty")
-    return space
-
-
-def seat_space_of(observation: spaces.Space, action: spaces.Space) -> SeatSpace:
-    """The :class:`SeatSpace` of a seat with these gymnasium spaces, or :class:`SpaceError` saying why not.
-
-    Any observation space of a fixed size is read (:class:`~selfplay_cli.envs.obs_spaces.SeatObs`): a Box as it is,
-    anything else (Discrete, MultiDiscrete, MultiBinary, Tuples and Dicts of them, nested) flattened in a stated
-    order. A top-level Dict's ``action_mask`` (MultiBinary(n) or a Box of n zeros and ones, for a Discrete(n) action
-    space) is the seat's action mask; a Dict of ``observation`` and ``action_mask`` (PettingZoo's classic games) is
-    read as its ``observation``. The observation a policy reads is a float32 Box, except an image
-    (:func:`~selfplay_cli.envs.obs_spaces.image_layout`), which keeps its shape and dtype (uint8 frames stay uint8)."""
-    from .obs_spaces import SeatObs, image_layout
-
-    try:
-        seat_obs = SeatObs(observation)
-    except ValueError as e:
-        raise SpaceError(f"observation space {describe_space(observation)}: {e}") from None
-    m = seat_obs.mask_space
-    if m is not None:
-        if not isinstance(action, spaces.Discrete):
-            raise SpaceError(f"an action_mask needs a Discrete action space, not {describe_space(action)}")
-        size = (int(m.n) if isinstance(m, spaces.MultiBinary) and np.ndim(m.n) == 0
-                else (m.shape[0] if isinstance(m, spaces.Box) and len(m.shape) == 1 else None))
-        if size != int(action.n):
-            raise SpaceError(f"action_mask {describe_space(m)} must be MultiBinary({action.n}) or a Box of "
-                             f"shape ({action.n},), one entry per action of {describe_space(action)}")
-    box = _check_observation(seat_obs.box)
-    _check_action(action)
-    if isinstance(action, spaces.Discrete) and int(action.start) != 0:  # policies play 0 .. n-1
-        action = spaces.Discrete(int(action.n))
-    elif isinstance(action, spaces.MultiDiscrete) and np.any(action.start != 0):
-        action = spaces.MultiDiscrete(action.nvec)
-    if box.dtype != np.float32 and image_layout(box) is None:
-        box = spaces.Box(box.low.astype(np.float32), box.high.astype(np.float32), dtype=np.float32)
-    return SeatSpace(box, action, seat_obs.mask, None if observation is box else observation)
-
-
-def check_seat_space(seat: SeatSpace) -> None:
-    """Raise :class:`SpaceError` if a declared seat does not keep the contract."""
-    _check_observation(seat.observation)
-    _check_action(seat.action)
-    if seat.mask and not isinstance(seat.action, spaces.Discrete):
-        raise SpaceError(f"action masks need a Discrete action space, not {describe_space(seat.action)}")
-
-
-# --------------------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class EnvSpec:
     """A game: its seats, spaces, turns and kind, and how to make its batched core.
@@ -459,7 +316,7 @@ class EnvSpec:
         first: dict[str, int] = {}
         for s, role in enumerate((self.roles or ()) if agents == self.agents else ()):
             k = first.setdefault(role, s)
-            if _space_key(seats[k]) != _space_key(seats[s]):
+            if space_key(seats[k]) != space_key(seats[s]):
                 raise EnvError(self.name, f"game {self.name!r}: seats {self.agents[k]!r} and {self.agents[s]!r} are "
                                           f"both of role {role!r} but their spaces differ (a role's seats must be "
                                           "interchangeable)")
@@ -528,9 +385,6 @@ def option_defaults(cfg: Any) -> dict[str, Any]:
     if dataclasses.is_dataclass(cfg) and not isinstance(cfg, type):
         return {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
     return dict(getattr(cfg, "defaults", None) or {})
-def _space_key(seat: SeatSpace) -> tuple[Any, ...]:
-    """What decides whether one network can play two seats: the observation's shape, the action space, the masks."""
-    return tuple(seat.observation.shape), describe_space(seat.action), seat.mask
 
 
 def infer_roles(agents: Sequence[str], seats: Sequence[SeatSpace]) -> tuple[str, ...]:
@@ -540,7 +394,7 @@ def infer_roles(agents: Sequence[str], seats: Sequence[SeatSpace]) -> tuple[str,
     ``left/right``); two roles never share a name (their seats' names then, ``player_0``, ``player_1``)."""
     members: dict[tuple[Any, ...], list[str]] = {}
     for agent, seat in zip(agents, seats, strict=True):
-        members.setdefault(_space_key(seat), []).append(agent)
+        members.setdefault(space_key(seat), []).append(agent)
 
     def name(group: list[str]) -> str:
         short = {re.sub(r"_\d+$", "", agent) or agent for agent in group}
@@ -549,64 +403,9 @@ def infer_roles(agents: Sequence[str], seats: Sequence[SeatSpace]) -> tuple[str,
     names = {key: name(group) for key, group in members.items()}
     if len(set(names.values())) < len(names):
         names = {key: "/".join(group) for key, group in members.items()}
-    return tuple(names[_space_key(seat)] for seat in seats)
+    return tuple(names[space_key(seat)] for seat in seats)
 
 
 def check_spaces(spec: EnvSpec, cfg: Any = None) -> tuple[SeatSpace, ...]:
     """``spec.seat_spaces(cfg)``: each seat's spaces, or an :class:`EnvError` naming the seat and why."""
     return spec.seat_spaces(cfg)
-
-
-# --------------------------------------------------------------------------------------------------------------
-_REGISTRY: dict[str, EnvSpec] = {}
-
-
-def register(spec: EnvSpec) -> EnvSpec:
-    if spec.name in _REGISTRY:
-        raise ValueError(f"env {spec.name!r} is already registered")
-    _REGISTRY[spec.name] = spec
-    return spec
-
-
-def random_rule(action_space: spaces.Space) -> BotRule:
-    """Uniformly random actions for any supported action space: Discrete (uniform over the actions the mask
-    allows, when given one), MultiDiscrete (each dimension uniform) and Box (uniform within its bounds).
-
-    The rule is ``rule(obs, rng, mask=None)``; without a mask a Discrete rule draws ``rng.integers(0, n)``."""
-    if isinstance(action_space, spaces.Discrete):
-        n = int(action_space.n)
-
-        def discrete(obs: np.ndarray, rng: np.random.Generator, mask: np.ndarray | None = None) -> np.ndarray:
-            if mask is None:
-                return rng.integers(0, n, size=len(obs))
-            allowed = np.asarray(mask, dtype=bool).reshape(len(obs), n)
-            counts = allowed.sum(axis=1)
-            if (counts == 0).any():
-                raise ValueError("the random player was given a mask that allows no action")
-            # The k-th allowed action, k uniform in [0, count): one draw per row.
-            k = np.floor(rng.random(len(obs)) * counts).astype(np.int64)
-            return (np.cumsum(allowed, axis=1) > k[:, None]).argmax(axis=1).astype(np.int64)
-
-        return discrete
-    if isinstance(action_space, spaces.MultiDiscrete):
-        nvec = action_space.nvec.astype(np.int64)
-
-        def multi(obs: np.ndarray, rng: np.random.Generator, mask: np.ndarray | None = None) -> np.ndarray:
-            return rng.integers(0, nvec, size=(len(obs), len(nvec)))
-
-        return multi
-    if isinstance(action_space, spaces.Box):
-        _check_action(action_space)
-        low, high = action_space.low.astype(np.float32), action_space.high.astype(np.float32)
-
-        def box(obs: np.ndarray, rng: np.random.Generator, mask: np.ndarray | None = None) -> np.ndarray:
-            u = rng.random((len(obs), *low.shape), dtype=np.float32)
-            return np.clip(low + u * (high - low), low, high)
-
-        return box
-    raise TypeError(f"the random player has no rule for action space {describe_space(action_space)}")
-
-
-def random_bot(action_space: spaces.Space, description: str = "uniformly random legal actions") -> BotSpec:
-    """The ``random`` scripted player of a game with this action space (mask-aware)."""
-    return BotSpec("random", description, random_rule(action_space), uses_mask=True)
