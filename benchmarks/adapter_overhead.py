@@ -1,5 +1,5 @@
 """The PettingZoo adapter's overhead: a PettingZoo game stepped directly in a loop, against the same game stepped as
-N copies through the adapter's batched core (what the arena's runner, training and recording play).
+N copies through the adapter's batched core (what rated play, training and recording play).
 
 Run: python benchmarks/adapter_overhead.py [--seconds 0.5] [--rounds 5] [--copies 16]. Pinned to one CPU core.
 For each game it prints game steps/s both ways and the ratio direct / adapter (the adapter's cost per game step as

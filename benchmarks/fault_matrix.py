@@ -223,7 +223,7 @@ BOUNDED = textwrap.dedent("""
     from pathlib import Path
     from selfplay_cli.errors import MarlError
     from selfplay_cli.league.store import League
-    from selfplay_cli.rated.snapshots import import_snapshot
+    from selfplay_cli.players.snapshots import import_snapshot
     import selfplay_cli.policies.snapshot_reader
 
     league = League.open(sys.argv[2])
@@ -734,7 +734,7 @@ def worker_replaced(scratch: Path) -> tuple[bool, str]:
 
 STALLED = textwrap.dedent("""
     import sys
-    import selfplay_cli.train.evaluator as evaluator
+    import selfplay_cli.evaluation.executors.local as evaluator
     from selfplay_cli.cli import main
     evaluator.STALL_SECONDS = 20.0  # (300 s in marl: a matrix row waits for 20)
     sys.exit(main(sys.argv[1:]))
@@ -1540,8 +1540,8 @@ def _what_failed(text: str) -> str:
 
 @fault("blob locations: blobs.url = file:///etc/shadow (a private file; an absent one) on a snapshot a worker plays")
 def blob_private_file(scratch: Path) -> tuple[bool, str]:
+    from selfplay_cli.evaluation.games_jobs import games_jobs
     from selfplay_cli.league.store import League
-    from selfplay_cli.rated.games_jobs import games_jobs
 
     home, rows = _blob_league(scratch)
     with League.open(home) as league:
@@ -1628,8 +1628,8 @@ def blob_http_endless(scratch: Path) -> tuple[bool, str]:
 
 @fault("blob locations: an allowed http:// server sending 1 byte every 10 s to a worker (MARL_BLOB_DEADLINE=15)")
 def blob_http_drip(scratch: Path) -> tuple[bool, str]:
+    from selfplay_cli.evaluation.games_jobs import games_jobs
     from selfplay_cli.league.store import League
-    from selfplay_cli.rated.games_jobs import games_jobs
 
     home, rows = _blob_league(scratch)
     sha, size = rows["s0-left"]
@@ -1845,7 +1845,7 @@ def gate_twice_at_once(scratch: Path) -> tuple[bool, str]:
 def gauntlet_twice(scratch: Path) -> tuple[bool, str]:
     home = _p1_league(scratch)
     code = ("import sys; from selfplay_cli.league.store import League; "
-            "from selfplay_cli.rated.gauntlet_jobs import gauntlet_job\n"
+            "from selfplay_cli.evaluation.gauntlet_jobs import gauntlet_job\n"
             "lg = League.open(sys.argv[1]); ids = [p.id for p in lg.roster.players('pong', kind='snapshot')]\n"
             "for b in ('run:p1', 'run:p1-again'): lg.queue.enqueue(b, [gauntlet_job(lg, ids, first_seed=0, games=8, "
             "older=0)])\nlg.close()")
@@ -1956,7 +1956,7 @@ def _until(what: Callable[[], bool], seconds: float) -> bool:
 @fault("marl train --executor ray: --actors 100 x cores refused; SIGTERM while Ray starts, SIGKILL mid-run: no Ray "
        "process left")
 def ray_actors(scratch: Path) -> tuple[bool, str]:
-    from selfplay_cli.train.ray_support import machine_cores
+    from selfplay_cli.ray_support import machine_cores
 
     home = scratch / "league"
     cores = machine_cores()

@@ -51,14 +51,14 @@ from pathlib import Path
 import numpy as np
 
 from selfplay_cli.envs import admit
-from selfplay_cli.league.forecast import Forecaster
-from selfplay_cli.league.ladder import Margin, fit_table, ladder
+from selfplay_cli.evaluation.gauntlet import prediction_width
+from selfplay_cli.evaluation.match import run_match
+from selfplay_cli.evaluation.match_jobs import MatchJob
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.league.variants import variant_key, variant_options
-from selfplay_cli.rated.gauntlet import prediction_width
-from selfplay_cli.rated.match import run_match
-from selfplay_cli.rated.match_jobs import MatchJob
-from selfplay_cli.rated.snapshots import run_options
+from selfplay_cli.players.snapshots import run_options
+from selfplay_cli.ratings.forecast import Forecaster
+from selfplay_cli.ratings.ladder import Margin, fit_table, ladder
 from selfplay_cli.stats.elo import score_to_elo
 
 CHECK_SEEDS = 50_000_000  # the checking matches' seeds: far from every seed a run or a match of marl uses

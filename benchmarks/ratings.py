@@ -140,7 +140,7 @@ def runner_throughput(n_games: int) -> tuple[float, list[int], int]:
     (wall seconds, game lengths, batched steps)."""
     import torch
 
-    from selfplay_cli.arena import Game, play
+    from selfplay_cli.play import Game, play
     from selfplay_cli.policies.network import NetworkPolicy
 
     torch.set_num_threads(1)  # as marl match and the gauntlet run networks

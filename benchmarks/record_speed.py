@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from selfplay_cli.arena import Game
 from selfplay_cli.envs import get_env
+from selfplay_cli.play import Game
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.record import VideoSettings, VideoWriter, record_game, stop_rule
 

@@ -80,7 +80,7 @@ def make_league(url: str, home: Path, players: int, points: int):
 
 
 def plan_of(league, games: int, points: int):
-    from selfplay_cli.rated.tournament import TournamentPlan
+    from selfplay_cli.evaluation.tournament import TournamentPlan
 
     players = {p.id: p for p in league.roster.players("pong", kind="snapshot")}
     return TournamentPlan.of(league, "pong", players, None, games, {"points_to_win": points})
@@ -154,9 +154,9 @@ def eight_workers(jobs: int = 96) -> dict[str, int]:
     games."""
     from sqlalchemy import select
 
+    from selfplay_cli.evaluation.games_jobs import games_jobs
     from selfplay_cli.league.models import Game, GameSeat
     from selfplay_cli.league.store import League
-    from selfplay_cli.rated.games_jobs import games_jobs
 
     with tempfile.TemporaryDirectory() as tmp:
         home = Path(tmp) / "league"

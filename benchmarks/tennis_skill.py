@@ -57,7 +57,7 @@ def train(home: Path, algo: str, minutes: float, extra: list[str]) -> dict:
 
 def policy(home: Path, name: str):
     league = League.open(home=home, readonly=True)
-    from selfplay_cli.rated.names import resolve
+    from selfplay_cli.ratings.names import resolve
 
     return load_player(league, resolve(league, name, "tennis"), seed=1)
 

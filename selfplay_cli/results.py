@@ -1,7 +1,7 @@
 """What a finished game is, from the runner to the ledger, and what it means by the game's kind.
 
-One record type, :class:`GameResult`, carries a game everywhere: both game loops (:func:`selfplay_cli.arena.play`
-for whole games, :class:`~selfplay_cli.arena.training_games.SelfPlayGames` for training's) make it, by
+One record type, :class:`GameResult`, carries a game everywhere: both game loops (:func:`selfplay_cli.play.play`
+for whole games, :class:`~selfplay_cli.play.training_games.SelfPlayGames` for training's) make it, by
 :func:`game_results`, with the players' ids per seat; rated play swaps policy ids for league player ids
 (:meth:`GameResult.with_players`) and the ledger stores it (:meth:`selfplay_cli.league.store.League.record_games`).
 
@@ -59,10 +59,10 @@ class GameResult:
         outcome: each seat's points by the game's :class:`Rules`: 1 win, 0.5 draw, 0 loss (two-sides); its mean
             pairwise result (free-for-all); 0.5 (cooperative: a single game has no winner).
         length: steps played.
-        truncated: the game was cut short (its time limit, or :func:`~selfplay_cli.arena.play`'s ``stop_when``) and
+        truncated: the game was cut short (its time limit, or :func:`~selfplay_cli.play.play`'s ``stop_when``) and
             decided by the score at that moment.
-        actions: the encoded actions of every step (:mod:`selfplay_cli.arena.replay`), when they were recorded.
-        index: the game's position in :func:`~selfplay_cli.arena.play`'s schedule (training's games: its slot).
+        actions: the encoded actions of every step (:mod:`selfplay_cli.play.replay`), when they were recorded.
+        index: the game's position in :func:`~selfplay_cli.play.play`'s schedule (training's games: its slot).
     """
 
     env: str
@@ -296,7 +296,7 @@ def crew(player: Any) -> frozenset:
 
 def points_between(rules: Rules, games: Sequence[GameResult], a: Any, b: Any) -> list[float]:
     """A's points in every result between players ``a`` and ``b`` that ``games`` give (one round of rated play, see
-    :mod:`selfplay_cli.arena.schedule`): two-sides and free-for-all, one per game (:func:`pairwise`); cooperative,
+    :mod:`selfplay_cli.play.schedule`): two-sides and free-for-all, one per game (:func:`pairwise`); cooperative,
     one per comparison of A's episode with B's (the i-th of each, in order)."""
     if rules.kind == COOPERATIVE:  # a or b may be a team flying together: a tuple of its members' ids
         mine = [sum(g.scores) for g in games if frozenset(g.players) == crew(a)]

@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.envs import get_env
+from selfplay_cli.play.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.policies import ScriptedPolicy
 
 
@@ -173,7 +173,7 @@ def pg_server():
 def ray_local():
     """Ray started once in this test process (4 CPUs as Ray counts them: two rollout actors and rating workers fit
     on this machine's two cores), shared by its Ray tests; a run finds it running and leaves it running."""
-    from selfplay_cli.train.ray_support import connect, ray_module, shutdown
+    from selfplay_cli.ray_support import connect, ray_module, shutdown
 
     connect(num_cpus=4)
     ray = ray_module()

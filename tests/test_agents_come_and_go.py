@@ -18,9 +18,9 @@ from cli_helpers import run, run_json
 
 from selfplay_cli.algos.dqn import DQNConfig, DQNLearner
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
-from selfplay_cli.arena.training_games import SelfPlayGames
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
+from selfplay_cli.play.training_games import SelfPlayGames
 from selfplay_cli.train.curriculum import Curriculum
 from selfplay_cli.train.rollouts import Rollouts
 from selfplay_cli.train.team import LearnerTeam

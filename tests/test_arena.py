@@ -7,11 +7,11 @@ import pytest
 from arena_games import Const, Random, Spy, registered
 from gymnasium import spaces
 
-from selfplay_cli.arena import Game, GameResult, play
-from selfplay_cli.arena.replay import ActionLog, SeatActions, decode_actions, encode_actions, replay_policies
-from selfplay_cli.arena.schedule import round_size, rounds
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
+from selfplay_cli.play import Game, GameResult, play
+from selfplay_cli.play.replay import ActionLog, SeatActions, decode_actions, encode_actions, replay_policies
+from selfplay_cli.play.schedule import round_size, rounds
 from selfplay_cli.policies import Policy
 from selfplay_cli.results import Rules, compare, pairwise, points_between
 

@@ -12,12 +12,12 @@ import pytest
 from arena_games import Const, Spy, registered
 
 from selfplay_cli.cli import main
-from selfplay_cli.league.ladder import ladder
-from selfplay_cli.league.pairs import head_to_head, plan_tournament
+from selfplay_cli.evaluation.gate import gate_check
+from selfplay_cli.evaluation.lineup import lineup
+from selfplay_cli.evaluation.match import SPRTSettings, run_match
 from selfplay_cli.league.store import League, LeagueError
-from selfplay_cli.rated.gate import gate_check
-from selfplay_cli.rated.lineup import lineup
-from selfplay_cli.rated.match import SPRTSettings, run_match
+from selfplay_cli.ratings.ladder import ladder
+from selfplay_cli.ratings.pairs import head_to_head, plan_tournament
 from selfplay_cli.results import FREE_FOR_ALL, GameResult, Rules, game_results
 from selfplay_cli.stats.elo import elo_update
 

@@ -16,13 +16,13 @@ import pytest
 from cli_helpers import run
 from sqlalchemy import event, func, select, text
 
+from selfplay_cli.evaluation.match import run_match
 from selfplay_cli.league.models import Blob
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.players.files import blob_cache_file, check_legacy_file, snapshot_relpath
 from selfplay_cli.players.load import load_player
 from selfplay_cli.policies.network import Arch, SnapshotError, build_network
 from selfplay_cli.policies.snapshot_format import MAX_FILE_BYTES, SnapshotMeta, file_sha256, save_snapshot
-from selfplay_cli.rated.match import run_match
 
 SHORT = {"points_to_win": 1}
 

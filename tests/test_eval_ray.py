@@ -20,14 +20,14 @@ import pytest
 from cli_helpers import run
 from sqlalchemy import select
 
+from selfplay_cli.evaluation.executors.base import GauntletJob
+from selfplay_cli.evaluation.executors.queue_workers import RemoteEvaluator, run_batch
+from selfplay_cli.evaluation.worker import WorkerOptions, run_worker
 from selfplay_cli.files import pid_alive
 from selfplay_cli.league.models import Game, GameSeat, Match, Player
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.train.config import TrainConfig
-from selfplay_cli.train.evaluator import GauntletJob
 from selfplay_cli.train.lock import process_start, same_process
-from selfplay_cli.train.remote import RemoteEvaluator, run_batch
-from selfplay_cli.work import WorkerOptions, run_worker
 
 RUN = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
        "2048", "--steps", "4096", "--eval-games", "2", "--eval-playoff", "2", "--seed", "3", "--run", "r", "--json"]
@@ -90,7 +90,7 @@ def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rate
     its loop is told to stop, gives the job back (not counted as a try) and leaves, its worker row stopped, its
     process gone: nothing plays on after the run, and the next session's actors take the job at once. Ray's news of
     the dead actor is on stderr: stdout is the JSON's under --json."""
-    from selfplay_cli.train.ray_eval import RayEvaluator
+    from selfplay_cli.evaluation.executors.ray_actors import RayEvaluator
 
     league, snap = rated_league
     batch = run_batch("w")
@@ -141,7 +141,7 @@ def test_a_run_that_ends_before_its_actors_have_started_stops_them_at_once(ray_l
     up (a cancelled call once kept it waiting, and the run with it, until the kill after the stop time). The stop
     time is long here (a loaded machine took 16 s and more to start an actor): an actor that waits for it is killed,
     and says so, however fast the machine."""
-    from selfplay_cli.train.ray_eval import RayEvaluator
+    from selfplay_cli.evaluation.executors.ray_actors import RayEvaluator
 
     league, _ = rated_league
     notes: list[str] = []

@@ -23,10 +23,10 @@ from safetensors.torch import save_file
 from selfplay_cli.algos.dqn import DQNConfig, DQNLearner
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
 from selfplay_cli.algos.sac import SACConfig, SACLearner
-from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import NonFiniteError
 from selfplay_cli.league.store import League
+from selfplay_cli.play.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.policies.joint import joint_spaces
 from selfplay_cli.policies.network import Arch, SnapshotError, build_network
 from selfplay_cli.policies.snapshot_format import (

@@ -293,7 +293,7 @@ def test_a_recording_stops_at_60_seconds_by_default_and_says_so(home, tmp_path, 
 
 
 def test_only_a_limit_of_the_recording_is_called_stopped(tmp_path):
-    from selfplay_cli.arena import Game
+    from selfplay_cli.play import Game
     from selfplay_cli.policies import ScriptedPolicy
     from selfplay_cli.record import VideoSettings, record_game, stop_rule
     from selfplay_cli.record.recorder import ENDED_RESULT, ENDED_STOPPED, ENDED_TIME_LIMIT

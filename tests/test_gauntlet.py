@@ -10,13 +10,7 @@ import numpy as np
 import pytest
 from cli_helpers import run
 
-from selfplay_cli.arena import Game, play
-from selfplay_cli.league.ladder import ladder, verdict_lines
-from selfplay_cli.league.pairs import head_to_head
-from selfplay_cli.league.store import League
-from selfplay_cli.league.variants import variant_key
-from selfplay_cli.policies import ScriptedPolicy
-from selfplay_cli.rated.gauntlet import (
+from selfplay_cli.evaluation.gauntlet import (
     GauntletConfig,
     best_snapshot,
     choose_opponents,
@@ -24,6 +18,12 @@ from selfplay_cli.rated.gauntlet import (
     play_gauntlet,
     run_history,
 )
+from selfplay_cli.league.store import League
+from selfplay_cli.league.variants import variant_key
+from selfplay_cli.play import Game, play
+from selfplay_cli.policies import ScriptedPolicy
+from selfplay_cli.ratings.ladder import ladder, verdict_lines
+from selfplay_cli.ratings.pairs import head_to_head
 from selfplay_cli.results import GameResult
 
 
@@ -113,7 +113,7 @@ def test_clear_rule():
 def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_path, monkeypatch):
     """Scripted players stand in for the snapshots (same league rows, no files): every matchup is stored in pairs,
     each seed once with either player on the left; a matchup the predecessor already won clearly plays one pair."""
-    import selfplay_cli.rated.gauntlet as gauntlet_mod
+    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
 
     league = League.open(tmp_path / "league")
     league.roster.ensure_bots("pong", ["random", "cpu"])
@@ -154,7 +154,7 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
 def test_open_matchups_go_on_in_the_same_batch(tmp_path, monkeypatch):
     """With max_pairs above pairs, a matchup whose result is still open gets more pairs, played in the same call of
     the runner (the schedule grows while it plays); a clear one stops."""
-    import selfplay_cli.rated.gauntlet as gauntlet_mod
+    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
 
     calls = []
     real_play = gauntlet_mod.play
@@ -274,7 +274,7 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
 def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monkeypatch):
     """The predecessor lost 0-8 to random; the new snapshot (cpu standing in) wins its first pair, against that
     history: the matchup goes on to the full number of pairs, in the same call of the runner."""
-    import selfplay_cli.rated.gauntlet as gauntlet_mod
+    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
 
     league = League.open(tmp_path / "league")
     league.roster.ensure_bots("pong", ["random", "cpu"])
@@ -303,7 +303,8 @@ def test_a_failing_gauntlet_in_the_worker_comes_back_as_one_error(tmp_path):
     import pytest
 
     from selfplay_cli.errors import MarlError
-    from selfplay_cli.train.evaluator import Evaluator, GauntletJob
+    from selfplay_cli.evaluation.executors.base import GauntletJob
+    from selfplay_cli.evaluation.executors.local import Evaluator
 
     league = League.open(tmp_path / "league")
     with Evaluator(league, "cpu", background=True) as ev:
@@ -339,8 +340,8 @@ def _gauntlet_games(league, a, b, a_points):
 def test_the_playoff_separates_the_best_and_stops_there(tmp_path, monkeypatch):
     """A 3-1 lead after the gauntlet names no best beyond doubt; the playoff plays the two (cpu against random
     standing in) round after round until the ladder separates them, well before its cap, and not again after."""
-    import selfplay_cli.rated.gauntlet as gauntlet_mod
-    from selfplay_cli.rated.playoff import PlayoffConfig, playoff
+    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
+    from selfplay_cli.evaluation.playoff import PlayoffConfig, playoff
 
     league = League.open(tmp_path / "league")
     league.roster.ensure_bots("pong", ["random", "cpu"])
@@ -367,8 +368,8 @@ def test_the_playoff_separates_the_best_and_stops_there(tmp_path, monkeypatch):
 
 
 def test_a_playoff_between_equals_stops_at_its_cap_and_the_ladder_says_tied(tmp_path, monkeypatch):
-    import selfplay_cli.rated.gauntlet as gauntlet_mod
-    from selfplay_cli.rated.playoff import PlayoffConfig, playoff
+    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
+    from selfplay_cli.evaluation.playoff import PlayoffConfig, playoff
 
     league = League.open(tmp_path / "league")
     league.roster.ensure_bots("pong", ["random", "cpu"])
@@ -392,7 +393,7 @@ def test_a_playoff_between_equals_stops_at_its_cap_and_the_ladder_says_tied(tmp_
 def test_a_final_gauntlet_plays_the_bots_in_full_whatever_the_history(tmp_path, monkeypatch):
     """A run reports its final snapshots' scores against the bots: those matchups get ``bot_pairs`` even where the
     predecessor's record made them clear; the others keep the usual pairs."""
-    import selfplay_cli.rated.gauntlet as gauntlet_mod
+    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
 
     league = League.open(tmp_path / "league")
     league.roster.ensure_bots("pong", ["random", "cpu"])
@@ -476,7 +477,7 @@ def test_a_matchup_plays_on_until_its_record_predicts_a_match_within_the_precisi
 
     from scipy.stats import betabinom
 
-    from selfplay_cli.rated.gauntlet import Matchup, prediction_width
+    from selfplay_cli.evaluation.gauntlet import Matchup, prediction_width
 
     for w, lost in ((8, 0), (16, 0), (5, 3), (14, 2), (48, 16)):
         exact = betabinom(200, 1 + w, 1 + lost)

@@ -109,7 +109,7 @@ BOUNDED = textwrap.dedent("""
     import torch
     from selfplay_cli.errors import MarlError
     from selfplay_cli.league.store import League
-    from selfplay_cli.rated.snapshots import import_snapshot
+    from selfplay_cli.players.snapshots import import_snapshot
     import selfplay_cli.policies.snapshot_reader  # torch and everything else loaded before the limit
 
     built = []

@@ -16,10 +16,10 @@ from cli_helpers import run, run_json
 from gymnasium import spaces
 
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
-from selfplay_cli.arena.matches import Game, play
-from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.seat_spaces import seat_space_of
+from selfplay_cli.play.matches import Game, play
+from selfplay_cli.play.training_games import SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.policies import Policy, ScriptedPolicy
 from selfplay_cli.policies.arch import NATURE_CNN, SMALL_CNN, Arch, SnapshotError
 from selfplay_cli.policies.network import build_network

@@ -19,7 +19,7 @@ from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League
 from selfplay_cli.players.load import load_player
 from selfplay_cli.policies.spaces import ActionHead
-from selfplay_cli.rated.names import resolve
+from selfplay_cli.ratings.names import resolve
 from selfplay_cli.train.config import TeacherConfig, TrainConfig
 
 

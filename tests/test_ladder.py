@@ -1,5 +1,5 @@
-"""Tests for selfplay_cli.league.ladder (ladders, results CSV, tournament plans, head-to-head) and
-selfplay_cli.rated.names (name resolution)."""
+"""Tests for selfplay_cli.ratings.ladder (ladders, results CSV, tournament plans, head-to-head) and
+selfplay_cli.ratings.names (name resolution)."""
 
 from __future__ import annotations
 
@@ -12,8 +12,9 @@ import numpy as np
 import pytest
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.forecast import Forecaster
-from selfplay_cli.league.ladder import (
+from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.ratings.forecast import Forecaster
+from selfplay_cli.ratings.ladder import (
     Fitted,
     LadderRow,
     _fit_rows,
@@ -24,10 +25,9 @@ from selfplay_cli.league.ladder import (
     select_rows,
     verdict_lines,
 )
-from selfplay_cli.league.pairs import PairPlan, head_to_head, plan_tournament
-from selfplay_cli.league.results_csv import fit_csv, read_results_csv
-from selfplay_cli.league.store import League, LeagueError, PlayerRow
-from selfplay_cli.rated.names import resolve, resolve_many
+from selfplay_cli.ratings.names import resolve, resolve_many
+from selfplay_cli.ratings.pairs import PairPlan, head_to_head, plan_tournament
+from selfplay_cli.ratings.results_csv import fit_csv, read_results_csv
 from selfplay_cli.results import GameResult
 from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, fit_bradley_terry
 from selfplay_cli.stats.elo import NAT_TO_ELO, elo_to_score, normal_quantile
@@ -262,7 +262,7 @@ def test_a_margin_says_what_a_200_game_match_would_measure() -> None:
     """Issue 48: a margin's interval is about the pair's expected difference; the 200-game match a user checks it
     with adds its own luck. Known exactly (no uncertainty, no spread) at an even pair, the match is 200 coin tosses:
     95% of them score 86 to 114 wins (binomial quantiles), 43% to 57%, -49 to +49 Elo."""
-    from selfplay_cli.league.ladder import Margin
+    from selfplay_cli.ratings.ladder import Margin
     from selfplay_cli.stats.elo import score_to_elo
     from selfplay_cli.stats.predict import belief
 

@@ -13,7 +13,6 @@ from gymnasium import spaces
 from gymnasium.envs.box2d.lunar_lander import heuristic as gym_heuristic
 from pettingzoo.test import api_test, parallel_api_test
 
-from selfplay_cli.arena import Game, play
 from selfplay_cli.envs.lander import LANDER
 from selfplay_cli.envs.lander.bots import heuristic_continuous_rule, heuristic_rule
 from selfplay_cli.envs.lander.config import (
@@ -27,6 +26,7 @@ from selfplay_cli.envs.lander.config import (
 )
 from selfplay_cli.envs.lander.core import LanderCore
 from selfplay_cli.envs.lander.view import LanderAECEnv, LanderParallelEnv
+from selfplay_cli.play import Game, play
 from selfplay_cli.policies import ScriptedPolicy
 
 

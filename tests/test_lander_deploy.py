@@ -10,9 +10,9 @@ import pytest
 from cli_helpers import run, run_json
 
 from selfplay_cli.envs import get_env
+from selfplay_cli.evaluation.lineup import Lineup, refit
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
-from selfplay_cli.rated.lineup import Lineup, refit
 
 
 def test_the_landers_option_makes_the_seats_and_pong_keeps_its_own():

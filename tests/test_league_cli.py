@@ -16,10 +16,10 @@ import pytest
 from cli_helpers import run
 from league_helpers import record_plan
 
-from selfplay_cli.league.forecast import Forecaster
 from selfplay_cli.league.store import League
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
+from selfplay_cli.ratings.forecast import Forecaster
 
 
 def make_snapshot(path: Path, name: str, seed: int, run: str = "r1", obs_shape=(8, 6)) -> Path:

@@ -12,9 +12,9 @@ import torch
 from cli_helpers import run
 from scipy.stats import chisquare
 
-from selfplay_cli.arena.training_games import OPPONENT, league_layout, plan_seats
 from selfplay_cli.envs import get_env
 from selfplay_cli.league.store import League
+from selfplay_cli.play.training_games import OPPONENT, league_layout, plan_seats
 from selfplay_cli.policies.snapshot_reader import load_snapshot
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.league_roles import LeagueConfig, LeagueRoles, Past, live

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 from cli_helpers import run
 
-from selfplay_cli.arena import Game, limits, play
-from selfplay_cli.arena.training_games import SelfPlayGames
 from selfplay_cli.cli import MAX_LINE, MAX_WORD
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import EXIT_IO, EXIT_USAGE
 from selfplay_cli.league.store import League
+from selfplay_cli.play import Game, limits, play
+from selfplay_cli.play.training_games import SelfPlayGames
 from selfplay_cli.policies.bots import ScriptedPolicy
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot

@@ -24,11 +24,11 @@ from cli_helpers import run, run_json
 from team_helpers import DUET, RELAY, duet_together, train_team
 
 from selfplay_cli.algos import MAPPOConfig, MAPPOLearner, POCAConfig, get_learner
-from selfplay_cli.arena.team_view import TeamViews
-from selfplay_cli.arena.training_games import SelfPlayGames
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.team import team_spec
 from selfplay_cli.league.store import League
+from selfplay_cli.play.team_view import TeamViews
+from selfplay_cli.play.training_games import SelfPlayGames
 from selfplay_cli.policies.snapshot_reader import read_snapshot
 
 ROOT = Path(__file__).resolve().parents[1]

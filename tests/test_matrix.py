@@ -13,8 +13,8 @@ import pytest
 from cli_helpers import run
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.pairs import pair_records
 from selfplay_cli.league.store import League, PlayerRow
+from selfplay_cli.ratings.pairs import pair_records
 from selfplay_cli.report.matrix import build_matrix, write_matrix_png
 from selfplay_cli.report.terminal import matrix_summary, matrix_table
 from selfplay_cli.results import GameResult

@@ -12,9 +12,9 @@ import pytest
 from cli_helpers import run, run_json
 from scipy.stats import chisquare
 
-from selfplay_cli.league.pairs import PAYOFFS, pair_payoffs
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
-from selfplay_cli.rated.meta_nash import nash_mixture, run_nash
+from selfplay_cli.ratings.meta_nash import nash_mixture, run_nash
+from selfplay_cli.ratings.pairs import PAYOFFS, pair_payoffs
 from selfplay_cli.report.matrix import build_matrix
 from selfplay_cli.results import GameResult
 from selfplay_cli.train.matchmaking import NASH_PAYOFFS, Matchmaker, MatchmakerConfig, WinRates

@@ -10,8 +10,8 @@ import pytest
 from cli_helpers import run
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league.ladder import ladder
 from selfplay_cli.league.store import League, PlayerRow
+from selfplay_cli.ratings.ladder import ladder
 from selfplay_cli.report.plots import format_steps, run_curves, write_run_plot
 from selfplay_cli.report.terminal import curves_chart, curves_summary, nice_ticks
 from selfplay_cli.results import GameResult

@@ -8,8 +8,6 @@ import numpy as np
 import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
-from selfplay_cli.arena import Game, play
-from selfplay_cli.arena.schedule import rounds
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.pong.bots import cpu_rule
 from selfplay_cli.envs.pong.config import (
@@ -25,6 +23,8 @@ from selfplay_cli.envs.pong.config import (
 )
 from selfplay_cli.envs.pong.core import PongCore
 from selfplay_cli.envs.pong.view import PongParallelEnv
+from selfplay_cli.play import Game, play
+from selfplay_cli.play.schedule import rounds
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.results import Rules
 

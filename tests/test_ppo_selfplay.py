@@ -8,9 +8,9 @@ import torch
 from gymnasium import spaces
 
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
-from selfplay_cli.arena.training_games import OPPONENT, SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import MarlError
+from selfplay_cli.play.training_games import OPPONENT, SelfPlayGames, plan_layout, plan_seats
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.policies.spaces import box_of_shape
 

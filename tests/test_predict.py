@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy.stats import binom
 
-from selfplay_cli.league.forecast import Forecaster
 from selfplay_cli.league.store import LeagueError
+from selfplay_cli.ratings.forecast import Forecaster
 from selfplay_cli.stats.predict import belief, measure_spread
 
 

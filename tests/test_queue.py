@@ -7,12 +7,12 @@ import threading
 import pytest
 from sqlalchemy import func, select
 
+from selfplay_cli.evaluation.games_jobs import GAMES, combine, games_jobs
+from selfplay_cli.evaluation.jobs import play_job, play_leased, see_through
+from selfplay_cli.evaluation.worker import WorkerOptions, run_worker
 from selfplay_cli.league.models import Game, Match
 from selfplay_cli.league.queue import NewJob, backoff
 from selfplay_cli.league.store import League
-from selfplay_cli.rated.games_jobs import GAMES, combine, games_jobs
-from selfplay_cli.rated.jobs import play_job, play_leased, see_through
-from selfplay_cli.work import WorkerOptions, run_worker
 
 SHORT = {"points_to_win": 1}
 
@@ -64,8 +64,8 @@ def test_a_match_cut_into_jobs_plays_the_seeds_of_the_whole_match(league):
     assert sum(merged.pentanomial) == 20
     assert merged.step_limit == 18_000  # pong's own limit, which `marl match --queue` states beside its truncated games
     # The same games as one local match on the same seeds (scripted players: the seeds decide everything).
+    from selfplay_cli.evaluation.match import run_match
     from selfplay_cli.policies import ScriptedPolicy
-    from selfplay_cli.rated.match import run_match
 
     local = run_match(ScriptedPolicy("pong", "cpu", seed=0), ScriptedPolicy("pong", "random", seed=0), games=40,
                       first_seed=100, env_options=SHORT)

@@ -17,13 +17,13 @@ import pytest
 from cli_helpers import run, run_json
 from sqlalchemy import select
 
+from selfplay_cli.evaluation.games_jobs import games_jobs
+from selfplay_cli.evaluation.jobs import play_job
+from selfplay_cli.evaluation.match import SPRTSettings, run_match
+from selfplay_cli.evaluation.queued import queue_match
+from selfplay_cli.evaluation.worker import WorkerOptions, run_worker
 from selfplay_cli.league.models import Game, GameSeat
 from selfplay_cli.league.store import League
-from selfplay_cli.rated.games_jobs import games_jobs
-from selfplay_cli.rated.jobs import play_job
-from selfplay_cli.rated.match import SPRTSettings, run_match
-from selfplay_cli.rated.queued import queue_match
-from selfplay_cli.work import WorkerOptions, run_worker
 
 SHORT = {"points_to_win": 1}
 
@@ -328,7 +328,7 @@ def test_an_idle_worker_stopped_by_ctrl_c_says_no_job_was_in_play(tmp_path, caps
     """Issue 48: an idle worker stopped by Ctrl-C said 'the job in play went back to the queue'."""
     import types
 
-    from selfplay_cli.work import worker as worker_module
+    from selfplay_cli.evaluation import worker as worker_module
 
     home = tmp_path / "h"
     League.open(home=home).close()
@@ -340,7 +340,7 @@ def test_an_idle_worker_stopped_by_ctrl_c_says_no_job_was_in_play(tmp_path, caps
 
 
 def test_a_worker_stopped_by_ctrl_c_in_play_names_the_job_it_gave_back(tmp_path, capsys, monkeypatch):
-    from selfplay_cli.work import worker as worker_module
+    from selfplay_cli.evaluation import worker as worker_module
 
     home = tmp_path / "h"
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
@@ -382,7 +382,7 @@ def test_a_worker_starting_while_postgresql_is_down_retries_until_it_is_up(pg_se
     (1 s, doubling), said once, and goes to work with the server up: here after its third wait."""
     from conftest import start_postgres, stop_postgres
 
-    from selfplay_cli.work import reach_league
+    from selfplay_cli.evaluation.worker import reach_league
 
     League(pg_url, home=tmp_path / "h").close()  # a league there
     said, clock = [], _Clock()
@@ -406,8 +406,8 @@ def test_a_worker_starting_while_postgresql_is_down_retries_until_it_is_up(pg_se
 def test_a_worker_whose_postgresql_never_comes_leaves_after_its_wait_in_one_line(pg_server, pg_url, tmp_path):
     from conftest import start_postgres, stop_postgres
 
+    from selfplay_cli.evaluation.worker import reach_league
     from selfplay_cli.league.store import LeagueUnreachable
-    from selfplay_cli.work import reach_league
 
     said, clock, tries = [], _Clock(), []
 

@@ -14,12 +14,12 @@ import pytest
 from cli_helpers import run, run_json
 from sqlalchemy import select
 
+from selfplay_cli.evaluation.gauntlet_jobs import gauntlet_job
+from selfplay_cli.evaluation.match_jobs import MatchJob
+from selfplay_cli.evaluation.tournament import TournamentPlan
+from selfplay_cli.evaluation.worker import WorkerOptions, run_worker
 from selfplay_cli.league.models import Game, GameSeat, SeedRange
 from selfplay_cli.league.store import League
-from selfplay_cli.rated.gauntlet_jobs import gauntlet_job
-from selfplay_cli.rated.match_jobs import MatchJob
-from selfplay_cli.rated.tournament import TournamentPlan
-from selfplay_cli.work import WorkerOptions, run_worker
 
 SHORT = ("--env-option", "points_to_win=1")
 FIELD = ("league", "tournament", "cpu", "random", "--env", "pong", *SHORT)

@@ -20,9 +20,9 @@ from selfplay_cli.algos import DQNConfig, PPOConfig, SACConfig
 from selfplay_cli.algos.dqn import DQNLearner
 from selfplay_cli.algos.ppo import PPOLearner
 from selfplay_cli.algos.sac import SACLearner
-from selfplay_cli.arena.training_games import SelfPlayGames
 from selfplay_cli.envs import SeatSpace
 from selfplay_cli.league.store import League
+from selfplay_cli.play.training_games import SelfPlayGames
 from selfplay_cli.policies.network import Arch
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer
@@ -332,7 +332,7 @@ def _marl(*args: str, env: dict | None = None, **kw):
 @pytest.mark.slow
 def test_more_actors_than_cores_is_refused_in_one_line_unless_a_cluster_is_given(tmp_path):
     """Issue 49: --actors 200 on 2 cores started Ray with 201 CPUs it did not have (5 GB in 25 s)."""
-    from selfplay_cli.train.ray_support import machine_cores
+    from selfplay_cli.ray_support import machine_cores
 
     over = str(machine_cores() + 1)
     home = tmp_path / "h"

@@ -14,17 +14,17 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from selfplay_cli.arena import Game, play
-from selfplay_cli.arena.replay import ReplayError, decode_actions, encode_actions, replay_policies
-from selfplay_cli.arena.schedule import rounds
 from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
+from selfplay_cli.evaluation.lineup import lineup
 from selfplay_cli.league.store import League
+from selfplay_cli.play import Game, play
+from selfplay_cli.play.replay import ReplayError, decode_actions, encode_actions, replay_policies
+from selfplay_cli.play.schedule import rounds
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
-from selfplay_cli.rated.lineup import lineup
 from selfplay_cli.record import VideoSettings, record_game, stop_rule
 from selfplay_cli.results import GameResult, Rules
 

@@ -20,15 +20,15 @@ import numpy as np
 import pytest
 from cli_helpers import run, run_json
 
-from selfplay_cli.arena import play
-from selfplay_cli.arena.replay import decode_actions
-from selfplay_cli.arena.schedule import CannotMeet, can_meet, round_of
 from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.adapters.pettingzoo import adapt
 from selfplay_cli.envs.contract import EnvError
 from selfplay_cli.league.ledger import GameTable
 from selfplay_cli.league.store import League
+from selfplay_cli.play import play
+from selfplay_cli.play.replay import decode_actions
+from selfplay_cli.play.schedule import CannotMeet, can_meet, round_of
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, snapshot_roles
 from selfplay_cli.results import Rules

@@ -11,14 +11,14 @@ import pytest
 from cli_helpers import run, run_json
 from sqlalchemy import text
 
+from selfplay_cli.evaluation import jobs as jobs_module
+from selfplay_cli.evaluation.games_jobs import GAMES, MAX_JOB_ROUNDS, games_jobs
+from selfplay_cli.evaluation.jobs import MAX_ERROR, play_leased
+from selfplay_cli.evaluation.worker import WorkerOptions, run_worker
 from selfplay_cli.league import bounded_json
 from selfplay_cli.league.bounded_json import JSONBoundsError, Unreadable, UnreadableList, loads, read_column
 from selfplay_cli.league.queue import TRIES_LIMIT, NewJob
 from selfplay_cli.league.store import League, LeagueError
-from selfplay_cli.rated import jobs as jobs_module
-from selfplay_cli.rated.games_jobs import GAMES, MAX_JOB_ROUNDS, games_jobs
-from selfplay_cli.rated.jobs import MAX_ERROR, play_leased
-from selfplay_cli.work import WorkerOptions, run_worker
 
 SHORT = {"points_to_win": 1}
 DEEP = "[" * 5000 + "]" * 5000
@@ -283,7 +283,7 @@ def test_rows_whose_json_cannot_be_read_are_one_line_each_never_the_command(db_u
 def test_a_jobs_error_line_shows_no_folder_of_the_workers_machine(tmp_path):
     """A job's error is read by every member: the worker's home, cache and user folder are shown by name, a
     KeyError's message without its quotes, and the line is cut at MAX_ERROR."""
-    from selfplay_cli.rated.jobs import error_line
+    from selfplay_cli.evaluation.jobs import error_line
 
     home, cache = tmp_path / "home", tmp_path / "home-cache"
     private = {str(home): "$MARL_HOME", str(cache): "$MARL_CACHE", str(tmp_path): "~"}

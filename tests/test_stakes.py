@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from selfplay_cli.envs import get_env
-from selfplay_cli.league.ladder import ladder
-from selfplay_cli.league.pairs import head_to_head
+from selfplay_cli.evaluation.match import run_match
 from selfplay_cli.league.store import League
 from selfplay_cli.policies import ScriptedPolicy
-from selfplay_cli.rated.match import run_match
+from selfplay_cli.ratings.ladder import ladder
+from selfplay_cli.ratings.pairs import head_to_head
 from selfplay_cli.results import GameResult, Rules
 from selfplay_cli.stats.elo import score_to_elo
 from selfplay_cli.stats.match import match_stats, points_stats

@@ -12,7 +12,6 @@ import pytest
 from gymnasium import spaces
 from pettingzoo.test import parallel_api_test
 
-from selfplay_cli.arena import Game, play
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.tennis import TENNIS
 from selfplay_cli.envs.tennis.bots import plan_launch, serve_bot_for, serve_bot_rule_for
@@ -57,6 +56,7 @@ from selfplay_cli.envs.tennis.config import (
 from selfplay_cli.envs.tennis.core import TennisCore, mirrored
 from selfplay_cli.envs.tennis.physics import game_won, server_of
 from selfplay_cli.envs.tennis.view import TennisParallelEnv
+from selfplay_cli.play import Game, play
 from selfplay_cli.policies import ScriptedPolicy
 
 STILL = np.zeros((2, 1, 3))

@@ -10,10 +10,10 @@ import pytest
 from cli_helpers import run
 
 from selfplay_cli.algos.ppo import PPOConfig
-from selfplay_cli.arena.training_games import OPPONENT
 from selfplay_cli.cli import main
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
+from selfplay_cli.play.training_games import OPPONENT
 from selfplay_cli.policies.snapshot_policy import load_policy
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer
@@ -473,7 +473,8 @@ def test_the_gauntlets_precision_is_a_setting_each_job_carries(tmp_path, capsys)
     match within 30 points) is a setting of the run that its gauntlet jobs carry to whoever plays them (a worker
     beside training, the league's queue); a job without one (queued by an older marl) plays its games exactly;
     outside [0, 1) the flag is refused in one line."""
-    from selfplay_cli.train.evaluator import GauntletJob, _spec
+    from selfplay_cli.evaluation.executors.base import GauntletJob
+    from selfplay_cli.evaluation.executors.local import _spec
     from selfplay_cli.train.settings import new_settings
 
     assert TrainConfig("pong", run="x").eval_precision == 0.3

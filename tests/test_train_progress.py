@@ -332,7 +332,7 @@ def test_readme_names_only_snapshots_its_runs_make():
 
 def test_a_seat_suffix_on_a_shared_networks_snapshot_is_answered_with_its_name(tmp_path):
     from selfplay_cli.errors import MarlError
-    from selfplay_cli.rated.names import resolve
+    from selfplay_cli.ratings.names import resolve
 
     cfg = TrainConfig(env="pong", run="t", steps=1024, games=8, sharing="fups", eval_games=0, ppo=FAST_PPO)
     with League.open(tmp_path / "league") as league:

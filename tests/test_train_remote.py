@@ -21,13 +21,13 @@ from sqlalchemy import select, update
 from selfplay_cli.cli import main
 from selfplay_cli.commands.train_view import describe_queue
 from selfplay_cli.errors import MarlError
+from selfplay_cli.evaluation.executors.base import GauntletJob, QueueStanding
+from selfplay_cli.evaluation.executors.queue_workers import RemoteEvaluator, run_batch
+from selfplay_cli.evaluation.jobs import play_leased
+from selfplay_cli.evaluation.worker import WorkerOptions, run_worker
 from selfplay_cli.league.models import Game, GameSeat, Job, Match, Player
 from selfplay_cli.league.store import League
-from selfplay_cli.rated.jobs import play_leased
 from selfplay_cli.train.config import TrainConfig
-from selfplay_cli.train.evaluator import GauntletJob
-from selfplay_cli.train.remote import QueueStanding, RemoteEvaluator, run_batch
-from selfplay_cli.work import WorkerOptions, run_worker
 
 KILL_POINTS = Path(__file__).with_name("kill_points.py")
 RUN = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
@@ -333,7 +333,7 @@ def _claim_matchup(league: League, worker: int):
     looking again, at most a minute)."""
     import time
 
-    from selfplay_cli.rated.gauntlet_jobs import MATCHUP
+    from selfplay_cli.evaluation.gauntlet_jobs import MATCHUP
 
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline:
@@ -356,7 +356,7 @@ def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
     of its games stored once, on the seeds and under the keys the whole moment plays them."""
     import shutil
 
-    from selfplay_cli.rated.gauntlet_jobs import MATCHUP
+    from selfplay_cli.evaluation.gauntlet_jobs import MATCHUP
 
     league, snap = rated_league
     ev = RemoteEvaluator(league, "w", "cpu")
@@ -399,9 +399,9 @@ def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
 def test_a_moment_played_again_queues_none_of_its_matchups_twice(rated_league):
     """A moment's worker that died after queueing its matchups: the moment's next worker finds them queued (or
     stored) and queues nothing twice; a matchup spec a worker cannot play is refused, in one line."""
-    from selfplay_cli.rated.gauntlet import plan_moment
-    from selfplay_cli.rated.gauntlet_jobs import _config, check_matchup_spec, queue_matchups
-    from selfplay_cli.rated.job_spec import BadSpec
+    from selfplay_cli.evaluation.gauntlet import plan_moment
+    from selfplay_cli.evaluation.gauntlet_jobs import _config, check_matchup_spec, queue_matchups
+    from selfplay_cli.evaluation.job_spec import BadSpec
 
     league, snap = rated_league
     RemoteEvaluator(league, "w", "cpu").submit(GauntletJob((snap.id,), 0, 2, 0))

@@ -16,7 +16,7 @@ from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import describe_variant, variant_flags, variant_key, variant_options
 from selfplay_cli.policies.network import Arch, build_network
 from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
-from selfplay_cli.rated.names import resolve
+from selfplay_cli.ratings.names import resolve
 from selfplay_cli.results import GameResult
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -21,10 +21,11 @@ import pytest
 
 from selfplay_cli.cli import main
 from selfplay_cli.errors import MarlError
+from selfplay_cli.evaluation.executors.base import GauntletJob, RatingWorkerError
+from selfplay_cli.evaluation.executors.local import MAX_RESTARTS, Evaluator
 from selfplay_cli.league import migrations
 from selfplay_cli.league.store import League
 from selfplay_cli.train import loop
-from selfplay_cli.train.evaluator import MAX_RESTARTS, Evaluator, GauntletJob, RatingWorkerError
 from selfplay_cli.train.lock import claim, process_start
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="SIGKILL, SIGSTOP and /proc")

@@ -2,7 +2,7 @@
 
 Reads top to bottom as CleanRL's ppo.py does: the hyperparameters with their meaning, the rollout buffer, the
 advantage estimate, the update. The learner does not own the games: the trainer steps the shared
-:class:`~selfplay_cli.arena.training_games.SelfPlayGames` and hands each learner its slots' observations (and action
+:class:`~selfplay_cli.play.training_games.SelfPlayGames` and hands each learner its slots' observations (and action
 masks), rewards and dones (see :mod:`selfplay_cli.algos.base`), so two learners (one network per paddle) and one
 shared network use the same code.
 

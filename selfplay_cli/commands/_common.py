@@ -155,9 +155,9 @@ def shown_variant(league: League, env: str | None, env_option: list[str] | None,
     variant the game's newest run with rated games played (``marl train tennis`` plays ``serve_mode=mixed``: its
     ladder is what a user asks for first), else the default one where it has games, else the one with the most. The
     game is ``env``, the run's, or the league's only one."""
-    from ..league.ladder import pick_env
     from ..league.variants import variant_key
-    from ..rated.snapshots import run_options
+    from ..players.snapshots import run_options
+    from ..ratings.ladder import pick_env
 
     if run is not None:
         info = league.roster.get_run(run)
@@ -179,12 +179,12 @@ def shown_variant(league: League, env: str | None, env_option: list[str] | None,
 
 def resolve_players(league: League, names: list[str], env: str | None, teams: bool = False,
                     env_option: list[str] | None = None) -> list:
-    """Resolve names to players (:mod:`selfplay_cli.rated.names`). Snapshots imply their game; bot names need the
+    """Resolve names to players (:mod:`selfplay_cli.ratings.names`). Snapshots imply their game; bot names need the
     game from them or --env. With ``teams`` a name may also stand for a team of per-seat snapshots (``s6M``:
-    ``s6M-left`` and ``s6M-right``), returned as a :class:`~selfplay_cli.rated.names.Team`; without, such a
+    ``s6M-left`` and ``s6M-right``), returned as a :class:`~selfplay_cli.ratings.names.Team`; without, such a
     name is refused in one line that names the members. ``best`` is the best of the variant ``env_option`` (the
     command's ``--env-option``) makes, the default one without."""
-    from ..rated.names import resolve, resolve_or_team
+    from ..ratings.names import resolve, resolve_or_team
 
     find = resolve_or_team if teams else resolve
     env = check_env(env)
@@ -209,8 +209,8 @@ def resolve_players(league: League, names: list[str], env: str | None, teams: bo
         for i in pending:
             rows[i] = find(league, names[i], env)  # raises the precise error (unknown, ambiguous, team...)
     if best:  # the best of the variant the options make
-        from ..league.ladder import pick_env
         from ..league.variants import variant_key
+        from ..ratings.ladder import pick_env
 
         game = env or next((r.env for r in rows.values()), None) or pick_env(league, None)
         variant = variant_key(game, parse_env_options(game, env_option))

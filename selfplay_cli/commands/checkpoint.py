@@ -112,7 +112,7 @@ def show(
 ) -> None:
     """Everything about one snapshot: league record, lineage and the file's metadata. A team name (s6M) shows each
     of its members (s6M-left, s6M-right)."""
-    from ..rated.names import Team, resolve_or_team
+    from ..ratings.names import Team, resolve_or_team
 
     league = open_league(home, db, readonly=True)
     try:
@@ -137,7 +137,7 @@ def show(
 def tag(name: NameArg, tag_name: Annotated[str, typer.Argument(metavar="TAG", help="The tag to give it.")],
         env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
     """Give a snapshot a name of your own (moves the tag if another snapshot had it)."""
-    from ..rated.names import resolve
+    from ..ratings.names import resolve
 
     league = open_league(home, db)
     try:
@@ -160,7 +160,7 @@ def rm(name: NameArg, env: EnvOpt = None,
        home: HomeOpt = None, db: DbOpt = None) -> None:
     """Remove a snapshot from the pool; its games stay in the ledger and keep counting in the ratings. A snapshot a
     run still needs is refused (which run, and why), unless --force."""
-    from ..rated.names import resolve
+    from ..ratings.names import resolve
     from ..train.needs import needs_of
 
     league = open_league(home, db)
@@ -206,7 +206,7 @@ def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination 
     """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
     from ..players.files import check_file, snapshot_path
     from ..policies.snapshot_reader import export_snapshot, read_snapshot
-    from ..rated.names import resolve
+    from ..ratings.names import resolve
 
     league = open_league(home, db, readonly=True)
     try:
@@ -233,7 +233,7 @@ def import_cmd(
     json_out: JsonOpt = False,
 ) -> None:
     """Register a snapshot file in the league, checking its game, its spaces and its weights' checksum."""
-    from ..rated.snapshots import import_snapshot
+    from ..players.snapshots import import_snapshot
 
     league = open_league(home, db)
     try:
@@ -271,7 +271,7 @@ def push(
     exits 1 if any snapshot asked for is still not in the database. With --to alone, only sets where the league
     keeps them."""
     from ..players.files import check_legacy_file
-    from ..rated.names import Team, resolve_or_team
+    from ..ratings.names import Team, resolve_or_team
 
     if names and every:
         raise MarlError("name the snapshots to push, or pass --all for every snapshot of the league, not both")

@@ -60,8 +60,8 @@ def resolve_anchor(league, name: str | None, env: str | None, variant: str = "")
     and variant the ladder will use; None for the default anchor."""
     if name is None:
         return None
-    from ..league.ladder import pick_env
-    from ..rated.names import resolve
+    from ..ratings.ladder import pick_env
+    from ..ratings.names import resolve
 
     return resolve(league, name, pick_env(league, env), variant=variant)
 
@@ -108,8 +108,8 @@ def fit(
 
     One variant of the game at a time: the games under its default options, or under those --env-option asks
     for; a line below the table names the other variants with games."""
-    from ..league.ladder import ladder, verdict_lines
-    from ..league.results_csv import fit_csv
+    from ..ratings.ladder import ladder, verdict_lines
+    from ..ratings.results_csv import fit_csv
 
     name, rating = parse_anchor(anchor)
     check_bootstrap(bootstrap)
@@ -173,7 +173,7 @@ def gate(
     try:
         cand, base = resolve_players(league, [candidate, vs], env, env_option=env_option)
         options = parse_env_options(cand.env, env_option) if env_option else None
-        from ..rated.gate import gate_check  # (torch: imported when a gate plays, not for every command)
+        from ..evaluation.gate import gate_check  # (torch: imported when a gate plays, not for every command)
 
         verdict = gate_check(league, cand, base, min_diff=min_diff, games=games, confidence=confidence,
                              parallel=parallel, device=device, env_options=options, queue=queue)

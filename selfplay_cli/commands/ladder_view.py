@@ -32,7 +32,7 @@ EXPLOITABILITY_NOTE = ("exploitability: how much a best response wins against th
 
 
 def exploitability_text(record: dict[str, Any] | None) -> str:
-    """A filed exploitability (:func:`~selfplay_cli.league.ladder.shown_exploitability`) as a ladder cell: ``0.183``
+    """A filed exploitability (:func:`~selfplay_cli.ratings.ladder.shown_exploitability`) as a ladder cell: ``0.183``
     for an exact figure, ``>= 0.120 [0.080, 0.160]`` for a lower bound with its interval; blank for none."""
     if record is None:
         return ""
@@ -77,7 +77,7 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
     ``online``: the online Elo by player id (an extra column). The table marks the anchor and the best snapshot
     of each run (bold, ``(best)``, or ``(best, tied)`` when it is not separated from the run's others), shows the
     tier, a flag next to the Elo, the mean team return of a cooperative game's players, and one ``vs BOT`` column
-    per scripted player (score and games, blank without games); ``verdicts`` (:func:`~selfplay_cli.league.ladder.
+    per scripted player (score and games, blank without games); ``verdicts`` (:func:`~selfplay_cli.ratings.ladder.
     verdict_lines`) follow the table. A ``league role`` column and an ``exploitability`` column
     (:func:`exploitability_text`) show only when some row has one.
     """

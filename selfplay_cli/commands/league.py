@@ -89,8 +89,8 @@ def ladder_cmd(
     csv_out: Annotated[bool, typer.Option("--csv", help="Print CSV on stdout.")] = False,
 ) -> None:
     from ..envs.loading import not_named_note
-    from ..league.ladder import ladder, select_rows, verdict_lines
-    from ..rated.lineup import resized_in_variant
+    from ..evaluation.lineup import resized_in_variant
+    from ..ratings.ladder import ladder, select_rows, verdict_lines
 
     if json_out and csv_out:
         raise MarlError("--json and --csv exclude each other")
@@ -152,8 +152,8 @@ def predict_cmd(
     a real match falls in with probability --confidence. It rests on their ratings' difference and its
     uncertainty, how far the league's pairs scatter around their ratings, and the two's own games; `marl match`
     prints the same prediction beside the games it plays."""
-    from ..league.forecast import Forecaster
-    from ..rated.snapshots import players_variant
+    from ..players.snapshots import players_variant
+    from ..ratings.forecast import Forecaster
 
     if not 0.5 < confidence < 1:
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
@@ -225,9 +225,9 @@ def tournament(
 
     The games are played under the options the players were made for, with --env-option over them, and count in
     that variant of the game: its stored games are the ones reused, its ladder is the one printed."""
-    from ..league.ladder import ladder, verdict_lines
-    from ..rated.seeds import joined_text
-    from ..rated.tournament import TournamentPlan
+    from ..evaluation.seeds import joined_text
+    from ..evaluation.tournament import TournamentPlan
+    from ..ratings.ladder import ladder, verdict_lines
 
     if games_per_pair < 2:
         raise MarlError(f"--games-per-pair must be at least 2, not {games_per_pair}")
@@ -277,7 +277,7 @@ def tournament(
 
 def _queued_line(sub: Any, waiting: bool = False) -> str:
     """What ``--queue`` did: the games it queued, and those of its pairs on their way already that it joined."""
-    from ..rated.seeds import joined_text
+    from ..evaluation.seeds import joined_text
 
     if not sub.games and not sub.joined_games:
         return "every pair has its games already: nothing queued"
@@ -300,8 +300,8 @@ def _see_through(league: Any, own: str | None, joined: dict[str, list[int]], tot
     jobs that no worker has taken, with the workers attached, until every one has ended (a job that died: one line,
     exit 2, after the games that were played are stored). ``total``: the games the progress bar waits for. Ctrl-C
     cancels the command's own batch; a joined job is someone else's, and goes back to the queue if in play here."""
-    from ..rated.jobs import see_through
-    from ..rated.queued import dead_jobs_error
+    from ..evaluation.jobs import see_through
+    from ..evaluation.queued import dead_jobs_error
 
     work: list[tuple[str, list[int] | None]] = [(own, None)] if own else []
     work += [(b, ids) for b, ids in joined.items() if b != own]
@@ -333,8 +333,8 @@ def _field(league: Any, players: list[str] | None, env: str | None, env_option: 
            top: int | None, vs: str | None) -> tuple[str, dict[int, Any], Any]:
     """The tournament's game, its players by id (named, a run's snapshots, the ladder's top) and the player every
     one meets (--vs), from what the user typed; refused in one line where they make no tournament."""
-    from ..league.ladder import ladder
-    from ..rated.names import Team
+    from ..ratings.ladder import ladder
+    from ..ratings.names import Team
 
     found = (resolve_players(league, list(players or []), check_env(env), teams=True, env_option=env_option)
              if players else [])

@@ -69,7 +69,7 @@ def plot_cmd(
     exploitability too. Draws in the terminal, or writes a PNG with --out."""
     from dataclasses import replace
 
-    from ..rated.exploit import run_exploitability, run_moments
+    from ..exploit.exact import run_exploitability, run_moments
     from ..report.plots import run_curves, save_run_png
     from ..report.png import check_png_path
     from ..report.terminal import curves_chart, curves_summary, exploitability_table

@@ -29,7 +29,7 @@ from ._common import (
 from ._output import console, err_console, print_json
 
 if TYPE_CHECKING:  # (the match's library is imported when a match plays: torch, for every command, cost 1.3 s)
-    from ..rated.match import MatchReport
+    from ..evaluation.match import MatchReport
 
 
 def _points(mine: float, theirs: float) -> str:
@@ -173,9 +173,9 @@ def match(
         raise MarlError(f"--confidence must lie in (0.5, 1), not {confidence}")
     if queue and not store:
         raise MarlError("--queue stores every game (its workers write them to the league): drop --no-store")
-    from ..rated.match import SPRTSettings, sprt_exit_code
-    from ..rated.match_jobs import forecaster, match_jobs, predict
-    from ..rated.names import Team
+    from ..evaluation.match import SPRTSettings, sprt_exit_code
+    from ..evaluation.match_jobs import forecaster, match_jobs, predict
+    from ..ratings.names import Team
 
     settings = SPRTSettings(elo0, elo1, alpha, beta) if sprt else None
     budget = (max_games or games) if sprt else games
@@ -224,7 +224,7 @@ def match(
 def _said_after(taken, quiet: bool) -> None:
     """One line on stderr when the pair's games queued already made the match start after them."""
     if taken.after and not quiet:
-        from ..rated.seeds import joined_text
+        from ..evaluation.seeds import joined_text
 
         err_console.print(f"{joined_text(taken.after, {})} for these players: this match plays new seeds, from "
                           f"{taken.first_seed}", markup=False)
@@ -234,7 +234,7 @@ def _local(league, store: bool, job, games: int, first: int, options, settings, 
            parallel: int, quiet: bool, loaded=None) -> MatchReport:
     """One match of ``marl match``, played here (and stored, with ``store``); Ctrl-C: what was kept, exit 130.
     ``loaded``: its players, loaded from ``first`` already."""
-    from ..rated.match import MatchInterrupted, run_match
+    from ..evaluation.match import MatchInterrupted, run_match
 
     pa, pb, ids = loaded or job.load(league, first, device)
     try:

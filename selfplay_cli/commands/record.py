@@ -133,7 +133,7 @@ def record(
     fmt = video_format(fmt, out)
     league = open_league(home, db)
     try:
-        from ..rated.lineup import lineups
+        from ..evaluation.lineup import lineups
         from ..record.jobs import limits, play_job, replay_job, video_settings
 
         # the players seated once (one lineup, or one per member of a team recorded against --vs)

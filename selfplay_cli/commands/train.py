@@ -201,7 +201,7 @@ def train(
 ) -> None:
     """Train agents by self-play (PPO, DQN or SAC); every snapshot joins the league and is rated in a gauntlet."""
     from ..league.store import check_name
-    from ..train.ray_support import ray_for
+    from ..ray_support import ray_for
     from ..train.session import RunStopped, run_training
     from ..train.settings import EXECUTOR_OPTIONS, new_settings, resumed_config, start_run
 
@@ -260,7 +260,7 @@ def train(
         for line in still_coming(report):
             console.print("  " + line, markup=False)
     elif report.best is not None:
-        from ..league.ladder import verdict_lines
+        from ..ratings.ladder import verdict_lines
 
         for line in verdict_lines(report.side_bests or [report.best]):
             console.print("  " + line, markup=False)

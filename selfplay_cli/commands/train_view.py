@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.text import Text
 
-from ..train.remote import run_batch
+from ..evaluation.executors.queue_workers import run_batch
 from ._output import err_console
 
 if TYPE_CHECKING:
@@ -146,9 +146,9 @@ def describe_record(rec: Any, pending: bool = False) -> str:
 
 
 def describe_queue(q: Any, games: int) -> str:
-    """Where a run's queued gauntlets stand (:class:`~selfplay_cli.train.remote.QueueStanding`): ``2 gauntlets
-    left in the queue, played by worker@a:12, worker@b:7``, or ``1 gauntlet left in the queue, played here: no
-    worker takes it (40 games so far)``."""
+    """Where a run's queued gauntlets stand (:class:`~selfplay_cli.evaluation.executors.queue_workers.QueueStanding`):
+    ``2 gauntlets left in the queue, played by worker@a:12, worker@b:7``, or ``1 gauntlet left in the queue, played
+    here: no worker takes it (40 games so far)``."""
     left = f"{q.left} gauntlet{'s' * (q.left != 1)} left in the queue"
     if q.here:
         return f"{left}, played here: no worker takes {'them' if q.left != 1 else 'it'} ({games:,} games so far)"

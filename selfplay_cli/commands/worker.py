@@ -51,8 +51,8 @@ def worker(
     quiet: QuietOpt = False,
 ) -> None:
     """Lease and play the league's queued rating games (see marl worker --help)."""
-    from ..rated.jobs import Outcome
-    from ..work import Leaving, WorkerOptions, reach_league, run_worker
+    from ..evaluation.jobs import Outcome
+    from ..evaluation.worker import Leaving, WorkerOptions, reach_league, run_worker
 
     if beat >= scavenge:
         raise MarlError(f"--beat ({beat:g} s) must be shorter than --scavenge ({scavenge:g} s), or a working worker's "

@@ -17,7 +17,7 @@
   :mod:`.canvas`: the offscreen surface their renderers draw on.
 - :mod:`.adapters`: users' games as `marl` games (:mod:`.adapters.pettingzoo`).
 
-The arena steps every game, built in or adapted, through its batched core.
+marl's game loops (``selfplay_cli.play``) step every game, built in or adapted, through its batched core.
 """
 
 from __future__ import annotations

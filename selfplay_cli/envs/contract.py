@@ -36,7 +36,7 @@ KINDS = ("two-sides", "cooperative", "free-for-all")
 
 
 class BatchedCore(Protocol):
-    """What the arena and the learners use: N games stepped at once, seats on the leading axis.
+    """What the game loops and the learners use: N games stepped at once, seats on the leading axis.
 
     A core never resets a game by itself: a finished game keeps its final score until :meth:`reset` is called for
     it. ``terminated`` / ``truncated`` say which games ended on the last step.

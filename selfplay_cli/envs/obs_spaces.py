@@ -156,7 +156,7 @@ def _paths(space: spaces.Space, at: tuple[Any, ...] = ()) -> list[tuple[Any, ...
 def stacked_space(box: spaces.Box, k: int) -> spaces.Box:
     """What a policy stacking ``k`` observations of ``box`` reads (``box`` itself for k = 1): an image's frames on
     its channel axis (HxWx(k*C), (k*C)xHxW), any other observation's k rows one after the other, flat (the oldest
-    first; :mod:`selfplay_cli.arena.frames` keeps them)."""
+    first; :mod:`selfplay_cli.play.frames` keeps them)."""
     if k == 1:
         return box
     layout = image_layout(box)

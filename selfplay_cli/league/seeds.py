@@ -17,7 +17,7 @@ played by the command itself) first takes their seeds: a range of rounds of the 
   to the rounds it played, so the pair's next games start right after them.
 
 What a command does with what it finds (joins the games on their way, or starts after them) is the caller's
-(:mod:`selfplay_cli.rated.seeds`).
+(:mod:`selfplay_cli.evaluation.seeds`).
 """
 
 from __future__ import annotations

@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 
-from ..arena.matches import frame_stack_of
 from ..envs import get_env
 from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
 from ..league.store import League, PlayerRow
+from ..play.matches import frame_stack_of
 from ..policies import Policy, ScriptedPolicy
 from ..results import COOPERATIVE
 

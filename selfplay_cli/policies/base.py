@@ -15,8 +15,8 @@ class Policy(ABC):
     ``kind`` is ``bot`` or ``snapshot``; ``obs_space`` and ``act_space`` are the gymnasium spaces of the seat it
     plays (None when a policy does not know them). A policy sees only observations (never the game's internal
     state), so anything that can play can be matched, rated and recorded like anything else. ``frame_stack`` is
-    how many of its seat's last observations it reads at once (1: the current one; the arena keeps the others, see
-    :mod:`selfplay_cli.arena.frames`).
+    how many of its seat's last observations it reads at once (1: the current one; the game loop keeps the others, see
+    :mod:`selfplay_cli.play.frames`).
     """
 
     kind: str = "policy"

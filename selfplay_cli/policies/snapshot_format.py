@@ -61,7 +61,7 @@ MAX_FILE_BYTES = 8 + MAX_HEADER + 4 * MAX_PARAMS
 # float32's normal range, and sampling (mean + std * eps) or a log-probability ((a - mean) / std) overflows. (A
 # squashed head's log-std is bounded by construction: heads.LOG_STD_MIN to LOG_STD_MAX from finite weights.)
 MAX_LOG_STD = 80.0
-MAX_FRAME_STACK = 16  # observations a policy reads at once (selfplay_cli.arena.frames keeps the same bound)
+MAX_FRAME_STACK = 16  # observations a policy reads at once (selfplay_cli.play.frames keeps the same bound)
 LIMITS = {"header_bytes": MAX_HEADER, "hidden_layers": MAX_LAYERS, "layer_width": MAX_WIDTH,
           "observation_axes": MAX_OBS_DIMS, "observation_size": MAX_OBS_SIZE, "actions": MAX_ACTIONS,
           "parameters": MAX_PARAMS, "file_bytes": MAX_FILE_BYTES, "log_std": MAX_LOG_STD}
@@ -91,7 +91,7 @@ class SnapshotMeta:
     of a per-seat learner (``"left"``), ``None`` when one network plays every seat; ``role`` the role of the seats
     it learned in a game whose seats hold several (``"adversary"``; see :func:`snapshot_roles`), else None;
     ``created`` is ISO UTC; ``frame_stack`` how many of its seat's last observations it reads at once (its
-    observation space is then the stacked one: :func:`~selfplay_cli.arena.frames.stacked_space`; written only when
+    observation space is then the stacked one: :func:`~selfplay_cli.play.frames.stacked_space`; written only when
     more than 1);
     ``weights_sha256`` is filled by :func:`save_snapshot`; ``extra`` is free-form JSON (hyperparameters...).
     ``env_options`` and ``extra`` go through JSON, so tuples in them come back as lists.

@@ -35,7 +35,7 @@ def policy_of(
         raise SnapshotError(f"{path}: weights do not fit the network ({str(e).splitlines()[0]})") from None
     policy = NetworkPolicy(net, id if id is not None else meta.id, meta.env, device=device, greedy=greedy,
                            seed=seed, meta=meta)
-    policy.frame_stack = meta.frame_stack  # the arena gives it the observations it learned on
+    policy.frame_stack = meta.frame_stack  # the game loop gives it the observations it learned on
     joint = joint_of(path, meta)
     if joint is None:
         return policy

@@ -103,7 +103,7 @@ def limits(seconds: float | None, max_steps: int | None, max_rallies: int | None
 def replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> RecordJob:
     """What replaying one stored game needs, read from the ledger (no network is loaded: the actions suffice)."""
     from ..envs import get_env
-    from ..rated.lineup import safe_filename
+    from ..evaluation.lineup import safe_filename
     from .recorder import record_replay, renderer_of
 
     row = league.ledger.game(game_id)
@@ -129,11 +129,11 @@ def play_job(league: Any, ups: list[Any], games: int, seed: int, max_steps: int 
               device: str, out: Path | None, fmt: str, stop_label: str | None = None,
               options: dict[str, Any] | None = None) -> RecordJob:
     """For the lineups ``ups``: load the networks once, and play game i with seed ``seed + i``."""
-    from ..arena import Game
     from ..envs import get_env
+    from ..evaluation.lineup import refit
+    from ..play import Game
     from ..players.load import check_fits, env_options_of, load_player
     from ..policies import ScriptedPolicy
-    from ..rated.lineup import refit
     from .recorder import record_game, renderer_of, stop_rule
 
     spec = get_env(ups[0].env)

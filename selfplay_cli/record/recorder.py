@@ -1,6 +1,6 @@
-"""A game to a video: the arena plays it, the env's renderer draws each state, the writer encodes it.
+"""A game to a video: the game loop plays it, the env's renderer draws each state, the writer encodes it.
 
-The game is played by the same game loop as every match (:func:`selfplay_cli.arena.play`), one game at a time, with
+The game is played by the same game loop as every match (:func:`selfplay_cli.play.play`), one game at a time, with
 a hook that renders every state it passes through and streams the frame to the encoder at once: one frame for the
 serve, one per step, then the final frame held for ``hold`` seconds so the result can be read. Nothing is kept
 but the latest frame, so memory does not grow with the game's length.
@@ -19,11 +19,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ..arena import Game, GameResult, play
-from ..arena.replay import check_replay, decode_actions, replay_policies
 from ..envs import EnvSpec, get_env
 from ..envs.contract import BatchedCore
 from ..errors import MarlError
+from ..play import Game, GameResult, play
+from ..play.replay import check_replay, decode_actions, replay_policies
 from .overlay import CaptionBand
 from .video import GIF_MAX_WIDTH, MAX_SIDE, MIN_SIDE, VideoWriter, check_format
 
@@ -107,7 +107,7 @@ class Recording:
 
 def stop_rule(spec: EnvSpec, env_options: dict[str, Any], max_steps: int | None = None,
               max_rallies: int | None = None) -> Callable[[BatchedCore], np.ndarray] | None:
-    """:func:`selfplay_cli.arena.play`'s ``stop_when`` for a recording cut short after ``max_steps`` steps or
+    """:func:`selfplay_cli.play.play`'s ``stop_when`` for a recording cut short after ``max_steps`` steps or
     ``max_rallies`` rallies (serves played out, whether they ended in a point, a re-serve or the rally cap; only
     cores that count serves)."""
     if max_steps is not None and max_rallies is not None:
@@ -219,7 +219,7 @@ def record_replay(
 
     ``players`` are the names per seat; ``length`` and ``scores`` are what the ledger says the game came to: a
     replay that ends otherwise (other game options, another version of the game's rules) raises
-    :class:`~selfplay_cli.arena.replay.ReplayError` and leaves no file.
+    :class:`~selfplay_cli.play.replay.ReplayError` and leaves no file.
     """
     spec = (get_env(env) if isinstance(env, str) else env).for_options(**(env_options or {}))
     moves = decode_actions(actions, len(spec.agents), length)

@@ -6,7 +6,7 @@ counts. A pair with fewer than ``min_games`` games is *not measured*: it shows a
 neither the Nash mixture nor the cycle tests.
 
 * Nash mixture (:func:`~selfplay_cli.stats.nash.symmetric_nash`, payoff ``score - 0.5``, or in the game's own
-  score units with ``payoff="score"``: :func:`~selfplay_cli.league.pairs.pair_payoffs`): solved over the
+  score units with ``payoff="score"``: :func:`~selfplay_cli.ratings.pairs.pair_payoffs`): solved over the
   measured sub-game of :func:`~selfplay_cli.stats.nash.measured_subgame`, the largest set of players whose pairs
   are all measured (ties: the better-rated set). A missing score is never guessed; the report names the players
   the mixture is over.
@@ -28,10 +28,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ..league.ladder import ladder
-from ..league.pairs import PAYOFFS, pair_payoffs, pair_records
 from ..league.store import League, LeagueError
 from ..league.variants import value_text, variant_options
+from ..ratings.ladder import ladder
+from ..ratings.pairs import PAYOFFS, pair_payoffs, pair_records
 from ..stats.cycles import DEFAULT_ALPHA, Cycle, EdgeTests, significant_three_cycles
 from ..stats.nash import NashResult, measured_subgame, symmetric_nash
 from .png import new_figure, save_png
@@ -82,7 +82,7 @@ class MatrixReport:
     edges: EdgeTests
     cycles: tuple[Cycle, ...]
     variant: str = ""  # the key of the variant whose games it holds (the default: "")
-    payoff: str = "points"  # the Nash meta-game's units (:data:`~selfplay_cli.league.pairs.PAYOFFS`)
+    payoff: str = "points"  # the Nash meta-game's units (:data:`~selfplay_cli.ratings.pairs.PAYOFFS`)
     payoffs: npt.NDArray[np.float64] | None = None  # payoff "score": the row player's mean payoff in the game's units
 
     @property
@@ -193,11 +193,11 @@ def build_matrix(
     """The score matrix of the ``top`` best-rated players of ``env`` (default: the ledger's only env), from the
     games of one ``variant`` (its key; the default variant unless given).
 
-    ``payoff``: the Nash meta-game's units (:func:`~selfplay_cli.league.pairs.pair_payoffs`): ``points`` (the
+    ``payoff``: the Nash meta-game's units (:func:`~selfplay_cli.ratings.pairs.pair_payoffs`): ``points`` (the
     default: the result, as the ladder rates it) or ``score`` (the game's own scores, e.g. poker's chips).
 
     ``run``: only that run's snapshots and the env's scripted players take part. Ratings come from
-    :func:`~selfplay_cli.league.ladder.ladder` (its defaults, normal-approximation intervals); the players are
+    :func:`~selfplay_cli.ratings.ladder.ladder` (its defaults, normal-approximation intervals); the players are
     ordered by fitted Elo, best first. See the module docstring for the Nash mixture and the cycles.
 
     Raises:

@@ -1,6 +1,6 @@
 """A run's fitted ratings against training steps: one curve per learner, the scripted players as levels.
 
-:func:`run_curves` collects them from the ladder (:func:`~selfplay_cli.league.ladder.ladder` with its defaults,
+:func:`run_curves` collects them from the ladder (:func:`~selfplay_cli.ratings.ladder.ladder` with its defaults,
 so the ratings are the ones ``marl league ladder`` shows), with the snapshot the ladder marks as the run's best;
 :func:`save_run_png` draws them with matplotlib (Agg, headless); :func:`write_run_plot` does both and is what the
 training loop calls when a run ends.
@@ -12,7 +12,7 @@ same team games have equal ratings) are told apart by :func:`coinciding`: each g
 and is drawn a little to the side, which its legend entry states.
 
 A league run (``--league alphastar``) has a line per league role (``meta["league_role"]``: main, main exploiter,
-league exploiter), labelled with it. With exact exploitabilities (:func:`~selfplay_cli.rated.exploit.
+league exploiter), labelled with it. With exact exploitabilities (:func:`~selfplay_cli.exploit.exact.
 run_exploitability`, a game with a known tree) the figure has a second panel: each snapshot's exact exploitability
 against training steps, a line per learner in its Elo line's colour, on a log scale.
 """
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
-from ..league.ladder import LadderRow, ladder
 from ..league.store import League, LeagueError
+from ..ratings.ladder import LadderRow, ladder
 from ..stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, FLAG_ZERO
 from .png import check_png_path, new_figure, save_png
 
@@ -121,7 +121,7 @@ class RunCurves:
         confidence: the level of the intervals.
         prior: the fit's prior in virtual draws (0: maximum likelihood, where bounds appear).
         exploitability: the exact exploitability of the run's snapshots, in step order, where it was asked for
-            (:func:`~selfplay_cli.rated.exploit.run_exploitability`); None otherwise.
+            (:func:`~selfplay_cli.exploit.exact.run_exploitability`); None otherwise.
     """
 
     env: str
@@ -190,7 +190,7 @@ def run_curves(league: League, run: str, rows: list[LadderRow] | None = None, *,
     if rows is None:
         if variant is None:
             from ..league.variants import variant_key
-            from ..rated.snapshots import run_options
+            from ..players.snapshots import run_options
 
             variant = variant_key(env, run_options(league, run))
         rows = ladder(league, env, prior=prior, variant=variant)

@@ -26,7 +26,7 @@ margin ("A over B by +M [lo, hi]"), its lower tail says whether A is above B bey
 point and are modelled as a coin of the same mean, which overstates the spread of a score with draws: the intervals
 err wide, never narrow. Games played in rounds on one seed (a seat-swapped pair) may be correlated: where a policy
 that wins one game of a seed tends to win the other, 200 games say what fewer independent ones would. The caller
-measures that from the ledger (:func:`~selfplay_cli.league.pairs.design_effect`) and :class:`PairModel` tempers
+measures that from the ledger (:func:`~selfplay_cli.ratings.pairs.design_effect`) and :class:`PairModel` tempers
 every record by it, widens the fit's uncertainty and predicts a match from the independent results it is worth
 (where the games of a round are anti-correlated, a serve that wins either way, the binomial errs wide: left so).
 

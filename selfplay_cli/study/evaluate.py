@@ -9,12 +9,12 @@ from typing import Any
 import numpy as np
 
 from ..errors import MarlError
+from ..evaluation.match import run_match
+from ..evaluation.match_jobs import MatchJob
 from ..league.store import League, LeagueError
 from ..league.variants import variant_key
 from ..policies.bots import league_bots
-from ..rated.match import run_match
-from ..rated.match_jobs import MatchJob
-from ..rated.names import Team, resolve, resolve_or_team
+from ..ratings.names import Team, resolve, resolve_or_team
 
 __all__ = ["fly", "mean_interval", "snapshot_returns"]
 

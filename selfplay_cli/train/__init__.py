@@ -11,7 +11,7 @@
 - :mod:`.rollouts`: stepping the self-play games and feeding the learners, with curricula (:mod:`.curriculum`)
   and a teacher; the learners side by side (:mod:`.team`).
 - :mod:`.progress`: what a run says of itself: its standing, its snapshots' records, its report.
-- :mod:`.evaluator`: the rating worker that plays each moment's gauntlet beside training; :mod:`.remote`: the
-  gauntlets on the league's work queue instead, for ``marl worker`` processes anywhere (``--eval remote``).
+- each moment's gauntlet is handed to a rating executor (:mod:`selfplay_cli.evaluation.executors`: a worker process
+  beside training, the league's queue workers, Ray actors).
 - :mod:`.lock`: one process per run; :mod:`.needs`: which runs still need a snapshot.
 """

@@ -13,8 +13,13 @@ import numpy as np
 
 from .. import files
 from ..algos import LEARNERS, DQNConfig, MAPPOConfig, POCAConfig, PPOConfig, SACConfig
-from ..arena.frames import check_frame_stack
-from ..arena.training_games import (
+from ..envs import EnvSpec, SeatSpace, get_env
+from ..envs.obs_spaces import stacked_space
+from ..errors import MarlError
+from ..evaluation.executors import EVAL_MODES
+from ..league.store import League
+from ..play.frames import check_frame_stack
+from ..play.training_games import (
     SHARING,
     SeatPlan,
     league_layout,
@@ -23,10 +28,6 @@ from ..arena.training_games import (
     plan_layout,
     plan_seats,
 )
-from ..envs import EnvSpec, SeatSpace, get_env
-from ..envs.obs_spaces import stacked_space
-from ..errors import MarlError
-from ..league.store import League
 from ..policies.joint import joint_spaces
 from ..policies.network import Arch, resolve_device
 from ..policies.snapshot_format import expected_tensors
@@ -38,10 +39,6 @@ ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum", "snapshot_meta", "init_plan")  # tables checked by the game (or their
 # owner), not by the type of a field
 ON_POLICY = ("ppo", "mappo", "poca")  # PPO and the learners built on it: one rollout an update, PPO's settings
-EVAL_MODES = ("local", "inline", "remote", "ray")
-"""Who plays a run's gauntlets (``--eval``): a worker process beside training, the training process itself, the
-league's workers (:mod:`selfplay_cli.train.evaluator`, :mod:`selfplay_cli.train.remote`), or queue workers on Ray
-actors started for the run."""
 EXECUTORS = ("local", "ray")
 """Where a run's training games are stepped (``--executor``): this process, or Ray actors
 (:mod:`selfplay_cli.train.ray_rollouts`)."""
@@ -220,7 +217,7 @@ class TrainConfig:
         if self.fragment_steps < 0:
             raise MarlError(f"--fragment-steps must not be negative, not {self.fragment_steps}")
         if "ray" in (self.executor, self.eval):
-            from .ray_support import ray_module
+            from ..ray_support import ray_module
 
             ray_module()  # Ray not installed: one line now, before anything is written
         if self.eval_actors < 1:
@@ -318,8 +315,8 @@ class TrainConfig:
         return seat_plan_of(self.game(), self.agents, self.sharing, self.seats)
 
     def layout(self, plan: SeatPlan) -> np.ndarray:
-        """The learner of every (seat, game) slot, -1 for an opponent's (:func:`~selfplay_cli.arena.training_games.
-        plan_layout`; a league's: :func:`~selfplay_cli.arena.training_games.league_layout`)."""
+        """The learner of every (seat, game) slot, -1 for an opponent's (:func:`~selfplay_cli.play.training_games.
+        plan_layout`; a league's: :func:`~selfplay_cli.play.training_games.league_layout`)."""
         if self.league is not None:
             return league_layout(plan, self.games, len(self.league.roles()))
         return plan_layout(plan, self.games, self.agents, self.league_games)

@@ -67,7 +67,7 @@ def _seat_order(league: League, run: str, env: str, p: PlayerRow) -> tuple[int, 
     """Where a team member sits in the run that trained it: its learner's seat in that run's variant of the game
     (a league's roles, which hold no seat of their own, after the seats in name order)."""
     from ..envs import get_env
-    from ..rated.snapshots import run_options
+    from ..players.snapshots import run_options
 
     try:
         agents = get_env(env).for_options(**run_options(league, run)).agents
@@ -80,7 +80,7 @@ def _seat_order(league: League, run: str, env: str, p: PlayerRow) -> tuple[int, 
 def _source(league: League, cfg: TrainConfig) -> tuple[str, list[PlayerRow]]:
     """What ``cfg.init_from`` names in the run's game: (its full name, its members in seat order): one snapshot (a
     list of one), or a team. One line for an unknown name, a scripted player, a removed snapshot."""
-    from ..rated.names import resolve
+    from ..ratings.names import resolve
 
     name = cfg.init_from
     try:

@@ -4,7 +4,8 @@
 time (JSON ``{"trainer": [pid, start], "worker": [pid, start]}``; an older marl's lock holds the trainer's pid
 alone). A process is recognised by both, so a pid the system has given to another process since is never taken
 for the run's, nor killed. A run killed with SIGKILL leaves a stale lock, which the next claim takes over. The Ray
-actors of ``--eval ray`` are not named: Ray ends them with the trainer that owns them (:mod:`.ray_eval`).
+actors of ``--eval ray`` are not named: Ray ends them with the trainer that owns them
+(:mod:`selfplay_cli.evaluation.executors.ray_actors`).
 """
 
 from __future__ import annotations

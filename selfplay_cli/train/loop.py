@@ -8,7 +8,8 @@ each learner takes its own when its role's rule says so, :mod:`.league_roles`):
 1. saves each learner as a snapshot file and registers it in the league (``epN``; ``epN-left``/``epN-right`` when
    each seat has its own network), with its parent (the learner's previous snapshot), with the run state that
    resumes from it;
-2. rates every new snapshot in a gauntlet (:mod:`selfplay_cli.rated.gauntlet`, played by :mod:`.evaluator`): its
+2. rates every new snapshot in a gauntlet (:mod:`selfplay_cli.evaluation.gauntlet`, played where ``--eval`` says,
+:mod:`selfplay_cli.evaluation.executors`): its
    predecessor, the other learners' new snapshots, the run's best, older snapshots and the scripted players, in
    seat-swapped pairs;
 3. refreshes the matchmaker's pool (:mod:`.opponents`: the run's snapshots).
@@ -33,27 +34,26 @@ import torch
 
 from ..algos import get_learner
 from ..algos.joint import JointLearner
-from ..arena.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces
 from ..envs.team import team_spec
 from ..errors import MarlError, NonFiniteError
-from ..league.ladder import DEFAULT_BOOTSTRAP, LadderRow
+from ..evaluation.executors import GauntletJob, JobDone, RatingExecutor, open_executor
+from ..evaluation.gauntlet import ALL_OLDER
 from ..league.ledger import KIND_CODES
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
+from ..play.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces
 from ..policies.bots import league_bots
 from ..policies.network import resolve_device
-from ..rated.gauntlet import ALL_OLDER
+from ..ratings.ladder import DEFAULT_BOOTSTRAP, LadderRow
 from ..results import COOPERATIVE, GameResult
 from ..signals import clear_stop, deadline, signals_held, stoppable
 from .config import TrainConfig, learner_names, learner_setup, tensorboard_writer
 from .curriculum import Curriculum
-from .evaluator import Evaluator, GauntletJob, JobDone
 from .league_roles import LeagueRoles
 from .lock import claim, write_lock
 from .opponents import Opponents, fixed_opponents
 from .progress import Heartbeat, SnapshotRecord, Standing, TrainReport
 from .ray_rollouts import OFF_POLICY_FRAGMENT, RayRollouts
-from .remote import RemoteEvaluator
 from .rollouts import Rollouts, load_teacher
 from .shards import ShardSetup, plan_shards
 from .state import Job, RunState, SavedAs, SnapshotMoments
@@ -61,20 +61,6 @@ from .team import LearnerTeam
 
 METRICS_STEPS = 8192  # game steps between metrics lines at least (PPO's rollouts are longer: a line an update)
 
-
-def make_evaluator(league: Any, cfg: Any, device: str, on_worker: Callable[[int], None] | None = None
-                   ) -> Evaluator | RemoteEvaluator:
-    """The run's rating worker as ``cfg.eval`` says: ``local`` (a process beside training), ``inline`` (in the
-    training process), ``remote`` (the league's workers, :mod:`.remote`), ``ray`` (queue workers on Ray actors
-    started for the run, :mod:`.ray_eval`); none plays anything with ``--eval-games 0``. ``on_worker(pid)`` is told
-    of a local worker process (the run's lock names it); Ray's actors end with the run's process by themselves."""
-    if cfg.eval_games and cfg.eval == "remote":
-        return RemoteEvaluator(league, cfg.run, device, wait=cfg.eval_wait)
-    if cfg.eval_games and cfg.eval == "ray":
-        from .ray_eval import RayEvaluator
-
-        return RayEvaluator(league, cfg.run, device, actors=cfg.eval_actors, address=cfg.ray_address)
-    return Evaluator(league, device, background=bool(cfg.eval_games) and cfg.eval == "local", on_worker=on_worker)
 
 class Trainer:
     """Runs one training run against one league (see the module docstring). It composes the run's state and
@@ -150,7 +136,7 @@ class Trainer:
         self.moments = SnapshotMoments(league, cfg, spec, self.run_dir, learners=self.learners, names=self.names,
                                        saved=saved, state=self.state, games=self.rollouts, opponents=self.opponents,
                                        device=self.device, roles=self.roles, first=first)
-        self.evaluator: Evaluator | RemoteEvaluator | None = None  # set while training
+        self.evaluator: RatingExecutor | None = None  # set while training
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
         self._rating_games0 = 0  # the run's rating games in the ledger when this session began (rating_games())
         self.eval_events = 0  # gauntlets finished in this process
@@ -235,7 +221,7 @@ class Trainer:
         last gauntlets, the wait for them (a queue's is told by the wait itself: reading it takes the database)."""
         if self._trained is None:
             return {"event": "training", "standing": self.standing()}
-        if isinstance(self.evaluator, Evaluator) and self.evaluator.left:
+        if self.evaluator is not None and not self.evaluator.queued and self.evaluator.left:
             return self._waiting_event()
         return None
 
@@ -253,12 +239,12 @@ class Trainer:
             return  # nothing played since the last snapshot
         if cfg.opponents.mode == "nash" and state.jobs:  # the earlier moments' gauntlets in first (rarely a wait:
             # they had a whole interval): the mixture the moment solves is then the same in every run of this seed
-            self._collect(self.evaluator.wait(on_wait=self._waiting))  # type: ignore[union-attr]
+            self._collect(self.evaluator.wait(on_wait=self._waiting))
         with signals_held():  # Ctrl-C or SIGTERM now would cut the moment: they wait until it is whole
             self.moments.write(trigger, which)
         if cfg.eval_games:
-            self.evaluator.submit(self._job(state.jobs[-1]))  # type: ignore[union-attr]
-        self._collect(self.evaluator.poll())  # type: ignore[union-attr]
+            self.evaluator.submit(self._job(state.jobs[-1]))
+        self._collect(self.evaluator.poll())
 
     def _plan_snapshots(self) -> None:
         """The episodes and steps the next snapshot moment is due at (None: not by that count)."""
@@ -307,7 +293,7 @@ class Trainer:
 
     def _ladder(self, bootstrap: int = 0) -> list[LadderRow]:
         """The ladder of the run's game and variant as the ledger has it now (empty without rating games)."""
-        from ..league.ladder import ladder
+        from ..ratings.ladder import ladder
 
         if not self.cfg.eval_games:
             return []
@@ -316,7 +302,7 @@ class Trainer:
     def _records(self, new: list[PlayerRow], rows: list[LadderRow] | None = None) -> list[SnapshotRecord]:
         """Each new snapshot's record against the scripted players and its fitted rating, from the ledger (its row
         of ``rows``, a ladder fitted now, or of a quick fit)."""
-        from ..league.pairs import head_to_head
+        from ..ratings.pairs import head_to_head
 
         rated = {r.player_id: r for r in (self._ladder() if rows is None else rows)}
         out = []
@@ -382,11 +368,13 @@ class Trainer:
     def train(self) -> TrainReport:
         """Train until the budget is spent (holding the run's lock), then take a final snapshot."""
         self._lock()
+        cfg = self.cfg
         try:
             # (stoppable() innermost: a stop tells the learners' update threads first, so nothing waits for them)
             with LearnerTeam(self.learners) as self.team, \
-                    make_evaluator(self.league, self.cfg, str(self.device),
-                                   on_worker=self._write_lock) as self.evaluator, stoppable():
+                    open_executor(self.league, cfg.eval, cfg.run, str(self.device), games=cfg.eval_games,
+                                  wait=cfg.eval_wait, actors=cfg.eval_actors, address=cfg.ray_address,
+                                  on_worker=self._write_lock) as self.evaluator, stoppable():
                 return self._train()
         finally:
             clear_stop()  # the learners' threads have ended (the team waited for them)
@@ -415,7 +403,7 @@ class Trainer:
         self._tell({"event": "training", "standing": self.standing()})  # at once: a resumed run shows where it
         # stands before its first update
         for job in state.jobs:  # gauntlets a killed run had asked for (a finished one is not played again)
-            self.evaluator.submit(self._job(job))  # type: ignore[union-attr]
+            self.evaluator.submit(self._job(job))
         if not state.snapshots:
             if cfg.init_plan:  # --init-from: a run starting (not a resumed one: its own state won)
                 self._start_from()
@@ -432,7 +420,7 @@ class Trainer:
         if board is not None:
             board.close()
         t1 = self.clock()
-        self._collect(self.evaluator.wait(on_wait=self._waiting))  # type: ignore[union-attr]
+        self._collect(self.evaluator.wait(on_wait=self._waiting))
         waited = self.clock() - t1
         self._check_heart()
         # the final snapshots and the best as the ledger has them now, as `marl league ladder` shows them (its default
@@ -502,7 +490,7 @@ class Trainer:
                 self._file_games(pending)
                 pending = []
                 self._report(metrics, board, stats, elapsed)
-                self._collect(self.evaluator.poll())  # type: ignore[union-attr]
+                self._collect(self.evaluator.poll())
                 self._tell({"event": "training", "standing": self.standing()})
             trigger = self._snapshot_due()
             if trigger is not None:

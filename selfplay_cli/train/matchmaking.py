@@ -24,7 +24,7 @@ For a learner, :meth:`Matchmaker.probabilities` builds the distribution in three
      ``f_var(x) = x * (1 - x)`` (focus on opponents of the learner's level), weights normalised.
 
    * ``nash``: PSRO's meta-strategy, the Nash mixture of the run's snapshots (:meth:`Matchmaker.set_mixture`, solved
-     from the ledger by :func:`~selfplay_cli.rated.meta_nash.run_nash`), restricted to the candidates and
+     from the ledger by :func:`~selfplay_cli.ratings.meta_nash.run_nash`), restricted to the candidates and
      renormalised; uniform over them while no mixture is known (or none of its support is a candidate). The
      ``window`` does not cut it: PSRO mixes over the whole population, so every snapshot of the pool is a candidate.
 
@@ -87,7 +87,7 @@ MODES = ("self", "latest", "uniform", "pfsp", "nash")
 """Opponent selection modes of :class:`MatchmakerConfig`."""
 
 NASH_PAYOFFS = ("points", "score")
-"""Units of the ``nash`` mode's meta-game: :data:`selfplay_cli.league.pairs.PAYOFFS` (named again here: this module
+"""Units of the ``nash`` mode's meta-game: :data:`selfplay_cli.ratings.pairs.PAYOFFS` (named again here: this module
 imports nothing of the league)."""
 
 _SUM_TOL = 1e-9
@@ -177,7 +177,7 @@ class MatchmakerConfig:
         decay: per-game decay of the win-rate book, in (0, 1].
         prior: weight (in games) of the 50 % prior of the win-rate book, >= 0.
         nash_payoff: ``nash``: the meta-game's units, ``points`` (win 1, draw 0.5) or ``score`` (the game's own
-            scores: a poker game's chips, PSRO's expected return); see :mod:`selfplay_cli.rated.meta_nash`.
+            scores: a poker game's chips, PSRO's expected return); see :mod:`selfplay_cli.ratings.meta_nash`.
     """
 
     mode: str = "pfsp"

@@ -187,7 +187,7 @@ def _teacher(run: RunRow) -> str | None:
 def _resolve_teacher(league: League, run: RunRow, name: str, include_removed: bool = False) -> PlayerRow:
     """The player ``name`` means as the run's teacher, found as the trainer finds it."""
     from ..league.variants import variant_key
-    from ..rated.names import resolve
+    from ..ratings.names import resolve
 
     options = (run.config or {}).get("env_options")
     return resolve(league, name, run.env, include_removed=include_removed,

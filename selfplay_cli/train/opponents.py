@@ -7,7 +7,7 @@ keeps the matchmaker's pool the run's snapshots, and reads each finished game in
 In a league (``--league alphastar``) each learner's role draws its opponents instead (:mod:`.league_roles`), and a
 learner's games against the learners as they are now go into its win-rate book too.
 With ``--opponents nash`` it also keeps the matchmaker's Nash mixture, solved again from the ledger
-(:func:`~selfplay_cli.rated.meta_nash.run_nash`) whenever the pool changes, at each snapshot moment, once the
+(:func:`~selfplay_cli.ratings.meta_nash.run_nash`) whenever the pool changes, at each snapshot moment, once the
 gauntlets of the moments before it are in (the trainer waits for them there): only rated games change the matrix, and
 solving it then, not whenever a gauntlet happens to finish, keeps a run with a fixed seed the same run.
 """
@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from ..evaluation.roles import RoleBook
 from ..league.store import League, LeagueError
 from ..players.load import load_player
 from ..policies import Policy
-from ..rated.meta_nash import RunNash, run_nash
-from ..rated.roles import RoleBook
+from ..ratings.meta_nash import RunNash, run_nash
 from ..results import GameResult
 from .config import TrainConfig
 from .league_roles import LeagueRoles, Past, live, live_learner
@@ -41,7 +41,7 @@ def fixed_opponents(league: League, env: str, names: Iterable[str], bot_ids: dic
     a snapshot named by its full name (``run/name``) is drawn with its probability as a bot is, and plays as it is
     rated (``marl exploit`` trains a best response against such a fixed target). A name the league does not hold
     is left to the matchmaker's one-line refusal."""
-    from ..rated.names import resolve
+    from ..ratings.names import resolve
 
     out = {}
     for name in names:
@@ -58,7 +58,7 @@ def fixed_opponents(league: League, env: str, names: Iterable[str], bot_ids: dic
 def fixed_teams(league: League, cfg: TrainConfig, bot_ids: dict[str, int]) -> dict[int, tuple[int, ...]]:
     """The fixed opponents of ``[opponents] bots`` that are per-seat learners' snapshots whose whole team is fixed
     too: each member's id -> its team's ids in seat order."""
-    from ..rated.names import teammates
+    from ..ratings.names import teammates
 
     agents = cfg.game().agents
     out: dict[int, tuple[int, ...]] = {}

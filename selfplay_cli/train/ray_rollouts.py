@@ -53,7 +53,7 @@ class RayRollouts(Rollouts):
                  teacher: Policy | None, teacher_schedule: Schedule | None, opponents: Opponents | None, *,
                  seed: int, first_seed: int, steps_of: Callable[[], int], fragment_steps: int,
                  address: str = "", note: Callable[[str], None] | None = None) -> None:
-        from .ray_support import check_local_actors, connect, machine_cores, ray_module
+        from ..ray_support import check_local_actors, connect, machine_cores, ray_module
 
         super().__init__(None, learners, curriculum, teacher, teacher_schedule)
         check_local_actors(len(setups), "--actors", address)
@@ -138,7 +138,7 @@ class RayRollouts(Rollouts):
             self.ray.kill(actor)
         self.actors = []
         if self._started:
-            from .ray_support import shutdown
+            from ..ray_support import shutdown
 
             shutdown()
             self._started = False

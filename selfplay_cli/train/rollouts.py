@@ -7,7 +7,7 @@ to its policy's loss; the learners act, the games step; then each learner record
 rollout is due, updates.
 
 Global state. A learner that declares ``wants_state = True`` (a centralised critic) is handed the global state of
-its slots' games (:meth:`~selfplay_cli.arena.training_games.SelfPlayGames.state`: one row a slot, in its slot order)
+its slots' games (:meth:`~selfplay_cli.play.training_games.SelfPlayGames.state`: one row a slot, in its slot order)
 with every observation it is handed: ``see_state(rows)`` right before it acts on a step's observations (the state
 they were made in) and right before an update that takes them as the next observations. A game that gives no state
 (:meth:`~selfplay_cli.envs.EnvSpec.state_space` None) is refused for such a learner in one line; when no learner
@@ -15,7 +15,7 @@ wants it, no state is read.
 
 The team's view. A learner that declares ``centralised = True`` (MAPPO, MA-POCA: a critic of the whole team) is
 handed, right before it records each step, its rows of the step as the whole team played it
-(:class:`~selfplay_cli.arena.team_view.TeamStep`: every seat's observations and actions, who was in each game, the
+(:class:`~selfplay_cli.play.team_view.TeamStep`: every seat's observations and actions, who was in each game, the
 global state where the game has one, the team's reward and end): ``see_team(step)``. Nothing of it is read when no
 learner is centralised.
 """
@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from ..arena.team_view import TeamStep, TeamView, TeamViews
-from ..arena.training_games import SelfPlayGames
 from ..errors import MarlError
 from ..league.store import League
 from ..league.variants import variant_key
+from ..play.team_view import TeamStep, TeamView, TeamViews
+from ..play.training_games import SelfPlayGames
 from ..players.load import load_player
 from ..policies import Policy
 from ..results import GameResult
@@ -47,7 +47,7 @@ def load_teacher(league: League, cfg: TrainConfig, spaces: list[Any], device: st
     if not name:
         return None
     from ..policies.spaces import describe_space
-    from ..rated.names import resolve
+    from ..ratings.names import resolve
 
     try:
         row = resolve(league, name, cfg.env, variant=variant_key(cfg.env, cfg.env_options))

@@ -255,7 +255,7 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
     cfg = TrainConfig.from_dict(settings)
     if cfg.teacher.player and cfg.teacher.player not in bot_names(cfg.game()):  # a snapshot the league does
         from ..league.variants import variant_key
-        from ..rated.names import resolve  # not know: one line, before the run exists
+        from ..ratings.names import resolve  # not know: one line, before the run exists
 
         try:  # (best: the best of the run's own variant, as the trainer reads it)
             resolve(league, cfg.teacher.player, cfg.env, variant=variant_key(cfg.env, cfg.env_options))

@@ -10,7 +10,7 @@ everything the trainer's learner needs to *take* each step as if it had acted it
 decisions, rewards, ends, the slots that acted, truncations with their final observations, and the games that
 finished. :class:`Fragment` puts the actors' pieces back in the learners' slot order.
 
-Why a split run is the run: a game's seed is a function of its slot and count (:class:`~selfplay_cli.arena.
+Why a split run is the run: a game's seed is a function of its slot and count (:class:`~selfplay_cli.play.
 training_games.SelfPlayGames`), and a learner copy draws its noise for the whole batch and keeps its own rows
 (:func:`~selfplay_cli.algos.base.padded`), so every actor draws what the trainer alone would have drawn, and the
 trainer's PPO adopts the generator state the actors end with. What can still differ from a local run is written in
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from ..arena.training_games import OPPONENT, SelfPlayGames
+from ..play.training_games import OPPONENT, SelfPlayGames
 from ..results import GameResult
 from .matchmaking import LATEST_LEARNER
 from .opponents import PolicyCache

@@ -252,7 +252,8 @@ class OpenSpielCore:
     """N OpenSpiel states stepped as one batched core (see the module's docstring for the rules).
 
     The hot loop stays in plain Python (each game's turn in a list; the tensors and legal-action masks OpenSpiel
-    gives, as lists, queued): the arrays the arena reads take the queued rows in one assignment a step, on demand."""
+    gives, as lists, queued): the arrays the game loop reads take the queued rows in one assignment a step, on
+    demand."""
 
     def __init__(self, n_games: int, config: OpenSpielConfig) -> None:
         if n_games < 1:

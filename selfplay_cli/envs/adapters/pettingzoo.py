@@ -1,5 +1,5 @@
 """Any PettingZoo game as a `marl` game: an :class:`EnvSpec` probed from one instance, and a batched core of N
-copies (:mod:`.pettingzoo_core`), which the arena steps as it steps the built-in games' cores.
+copies (:mod:`.pettingzoo_core`), which marl's game loops step as they step the built-in games' cores.
 
 ``adapt(name, factory)`` calls ``factory(**options)`` once and reads the game's declaration from it:
 

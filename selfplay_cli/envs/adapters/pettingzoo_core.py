@@ -1,5 +1,5 @@
 """The batched core of a user's PettingZoo game (:class:`PettingZooCore`): N copies stepped as one core, which the
-arena steps as it steps the built-in games' cores, and their frames for a recording (:class:`PettingZooRenderer`).
+game loops step as they step the built-in games' cores, and their frames for a recording (:class:`PettingZooRenderer`).
 
 ``reset(games, seeds)`` resets copies with ``reset(seed=...)``; ``step(actions)`` gives every acting agent its seat's
 action; ``score`` is each seat's summed rewards (a seat whose agent left keeps its score); a game is over when no
