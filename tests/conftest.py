@@ -14,6 +14,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import procs
 import pytest
 
 from selfplay_cli.arena.training_games import SelfPlayGames, plan_layout, plan_seats
@@ -56,16 +57,10 @@ def _pg_folders() -> set[str]:
 
 
 def _pg_processes(folders: set[str]) -> list[str]:
-    """Processes whose command line names one of ``folders`` (a PostgreSQL server of the suite), as ``pid command``."""
-    out = []
-    for d in Path("/proc").glob("[0-9]*"):
-        try:
-            line = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-        if any(f in line for f in folders):
-            out.append(f"{d.name} {line[:120]}")
-    return out
+    """Live processes whose command line names one of ``folders`` (a PostgreSQL server of the suite), as ``pid
+    command`` (the command cut to 120 characters for the report; the match is on the whole line)."""
+    return [f"{p.pid} {p.cmdline[:120]}" for p in procs.processes()
+            if not p.zombie and any(f in p.cmdline for f in folders)]
 
 
 def pytest_sessionstart(session):
