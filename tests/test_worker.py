@@ -17,6 +17,7 @@ import time
 from collections import Counter, defaultdict
 from pathlib import Path
 
+import procs
 import pytest
 
 from selfplay_cli.cli import main
@@ -31,6 +32,7 @@ from selfplay_cli.train.lock import claim, process_start
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="SIGKILL, SIGSTOP and /proc")
 
 KILL_POINTS = Path(__file__).with_name("kill_points.py")
+MARKS = Path(__file__).with_name("marks.py")
 FAST = ["--agents", "2", "--games", "16", "--env-option", "points_to_win=1", "--snapshot-steps", "2048", "--quiet"]
 
 
@@ -38,25 +40,20 @@ def _env() -> dict[str, str]:
     return {**os.environ, "SDL_VIDEODRIVER": "dummy", "SDL_AUDIODRIVER": "dummy"}
 
 
-def _children(pid: int) -> list[int]:
-    """The processes whose parent is ``pid`` (from /proc, whatever the lock says)."""
-    out = []
-    for stat in Path("/proc").glob("[0-9]*/stat"):
-        try:
-            text = stat.read_text()
-        except OSError:
-            continue
-        if int(text[text.rfind(")") + 2:].split()[1]) == pid:
-            out.append(int(stat.parent.name))
-    return out
+def _until(what, seconds: float) -> bool:
+    """Whether ``what()`` came true within ``seconds`` (looked at every 50 ms)."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and not what():
+        time.sleep(0.05)
+    return bool(what())
 
 
-def _gone(pid: int) -> bool:
+def _lines(path: Path) -> int:
+    """The lines written to ``path`` so far (0 before it exists)."""
     try:
-        text = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return True
-    return text[text.rfind(")") + 2:].split()[0] == "Z"
+        return path.read_text().count("\n")
+    except FileNotFoundError:
+        return 0
 
 
 def _eval_games(db: Path) -> int:
@@ -78,18 +75,6 @@ def _stored_any(db: Path) -> bool:
 
 # -- 1. the worker dies with its trainer ----------------------------------------------------------------------
 @pytest.mark.slow
-def _holding(path: Path) -> list[int]:
-    """The processes that have ``path`` open (SQLite's database file), read from /proc."""
-    out = []
-    for fd_dir in Path("/proc").glob("[0-9]*/fd"):
-        try:
-            if any(os.readlink(fd) == str(path) for fd in fd_dir.iterdir()):
-                out.append(int(fd_dir.parent.name))
-        except OSError:
-            continue
-    return out
-
-
 def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
     """SIGKILL of `marl train` while its worker is in the middle of a gauntlet (64 games a matchup): the worker is
     gone, not playing on, and stores nothing more (it used to play on for minutes, then hang with init as parent).
@@ -100,31 +85,43 @@ def test_the_rating_worker_dies_at_once_when_its_trainer_is_killed(tmp_path):
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=_env())
     workers: list[int] = []
     try:
-        deadline = time.time() + 240
-        while time.time() < deadline and not _stored_any(home / "league.db"):
-            time.sleep(0.2)  # the worker has stored its first games: it is at work
-        workers = _children(trainer.pid)
+        # the worker has stored its first games: it is at work
+        assert _until(lambda: _stored_any(home / "league.db") or trainer.poll() is not None, 240) \
+            and trainer.poll() is None, "no rating game stored" if trainer.poll() is None else trainer.stderr.read()
+        workers = procs.children(trainer.pid)
         assert len(workers) >= 1, "no rating worker found"
         lock = (home / "runs" / "r" / "lock").read_text()
         trainer.kill()
         trainer.wait(timeout=30)
-        deadline = time.time() + 30  # a hang guard: a worker playing on lives for minutes
-        while time.time() < deadline and not all(_gone(w) for w in workers):
-            time.sleep(0.05)
-        assert all(_gone(w) for w in workers), "worker alive 30 s after its trainer died"
+        # a hang guard: a worker playing on lives for minutes
+        assert _until(lambda: all(procs.gone(w) for w in workers), 30), "worker alive 30 s after its trainer died"
         # nothing of the run (a grandchild, say) is left to store a game: no process holds the league open
-        assert not _holding(home / "league.db"), "a process still has the league open after the trainer died"
+        assert not procs.holding(home / "league.db"), "a process still has the league open after the trainer died"
         named = json.loads(lock)
         assert named["trainer"][0] == trainer.pid and named["worker"][0] in workers
     finally:
-        for pid in [trainer.pid, *workers, *_children(trainer.pid)]:  # (an orphan, where the fix is missing)
+        for pid in [trainer.pid, *workers, *procs.children(trainer.pid)]:  # (an orphan, where the fix is missing)
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
 
 
 # -- 2. the run lock covers both processes ------------------------------------------------------------------
 def _sleeper() -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+    """A process that lives until it is killed (or this one ends, closing its stdin), answering each line it reads
+    with the same line (:func:`_answers`)."""
+    echo = "import sys\nfor line in sys.stdin: print(line, end='', flush=True)"
+    return subprocess.Popen([sys.executable, "-c", echo], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+
+
+def _answers(p: subprocess.Popen) -> bool:
+    """Whether ``p`` still runs: it answers a line. A process sent SIGKILL before this asks never answers (the kernel
+    runs none of its code after the kill), so no time has to pass first for the answer to be sure."""
+    try:
+        p.stdin.write(b"?\n")
+        p.stdin.flush()
+    except BrokenPipeError:
+        return False
+    return p.stdout.readline() == b"?\n"
 
 
 def _dead_pid() -> int:
@@ -148,8 +145,7 @@ def test_a_stale_lock_ends_the_old_runs_live_worker_and_only_it(tmp_path):
         # a pid given to another process since (another start time) is not the run's worker: left alone
         lock.write_text(json.dumps({"trainer": [_dead_pid(), None], "worker": [stranger.pid, "1"]}))
         claim(lock, "r")
-        time.sleep(0.3)
-        assert stranger.poll() is None
+        assert _answers(stranger)
         # a live trainer (the same process that wrote the lock) keeps its run
         lock.write_text(json.dumps({"trainer": [stranger.pid, process_start(stranger.pid)]}))
         with pytest.raises(MarlError, match=f"being trained by process {stranger.pid}"):
@@ -157,11 +153,11 @@ def test_a_stale_lock_ends_the_old_runs_live_worker_and_only_it(tmp_path):
         # ... but its pid, recycled by another process, does not
         lock.write_text(json.dumps({"trainer": [stranger.pid, "1"]}))
         claim(lock, "r")
-        assert stranger.poll() is None
+        assert _answers(stranger)
     finally:
         for p in (worker, stranger):
             p.kill()
-            p.wait()
+            p.communicate()
 
 
 # -- 4. a dead or stalled worker is noticed at once and replaced ----------------------------------------------
@@ -193,9 +189,7 @@ def test_a_worker_that_keeps_dying_stops_the_run_as_an_internal_error(rated_leag
             for _ in range(MAX_RESTARTS + 1):
                 pid = ev.worker_pid
                 os.kill(pid, signal.SIGKILL)
-                deadline = time.time() + 60
-                while time.time() < deadline and not _gone(pid):
-                    time.sleep(0.05)
+                assert _until(lambda pid=pid: procs.gone(pid), 60), f"worker {pid} alive 60 s after SIGKILL"
                 ev.poll()
         assert not isinstance(e.value, MarlError)  # exit 5 (internal), not 2 (a user's mistake)
 
@@ -219,7 +213,8 @@ def test_a_stopped_worker_is_reported_and_replaced(rated_league):
         ev.submit(GauntletJob((snap.id,), 0, 2, 0))
         stopped = ev.worker_pid
         os.kill(stopped, signal.SIGSTOP)
-        ev.poll()  # (what it said before it stopped)
+        assert _until(lambda: procs.stopped(stopped), 60), "the worker did not stop"  # (every thread of it)
+        ev.poll()  # (what it said before it stopped: it says nothing more)
         clock.now += 2.9
         ev.poll()
         assert ev.restarts == 0 and notes == []  # not before its stall time
@@ -227,7 +222,7 @@ def test_a_stopped_worker_is_reported_and_replaced(rated_league):
         ev.poll()
         assert ev.restarts == 1
         assert f"(process {stopped}) finished no game for 3 s" in notes[0] and "replacing it" in notes[0]
-        assert _gone(stopped)
+        assert procs.gone(stopped)
         ev.stall_seconds = 300.0  # the new worker's start-up (spawn, torch) is no stall
         (done,) = ev.wait()
         assert done.games == 6  # s0 against each bot, and the bots against each other
@@ -333,20 +328,21 @@ def test_sigterm_stops_a_run_within_seconds_even_in_an_endless_update(tmp_path):
     home = tmp_path / "h"
     config = tmp_path / "endless.toml"
     config.write_text("[ppo]\nupdate_epochs = 1_000_000_000\n")
-    proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", "train", "pong", *FAST, "--steps", "100000",
+    marks = tmp_path / "marks"  # a line each time a learner begins an update (tests/marks.py)
+    proc = subprocess.Popen([sys.executable, str(MARKS), str(marks), "train", "pong", *FAST, "--steps", "100000",
                              "--eval-games", "0", "--config", str(config), "--run", "r", "--home", str(home)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
     try:
-        deadline = time.time() + 120
-        while time.time() < deadline and not (home / "runs" / "r" / "state.pt").exists():
-            time.sleep(0.1)
-        time.sleep(3.0)  # into the first update: its rollout, 2,048 steps of 16 games, takes well under a second
+        # both learners in their first update (its rollout, 2,048 steps of 16 games, takes well under a second)
+        assert _until(lambda: _lines(marks) >= 2 or proc.poll() is not None, 120) and proc.poll() is None, \
+            proc.communicate()[1][-1000:] if proc.poll() is not None else "no update began"
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=120)  # the update alone would run for hours
     finally:
         proc.kill()
     assert proc.returncode == 143, (proc.returncode, err[-1000:])
     assert "stopped r at step" in err and "Traceback" not in err
+    assert _lines(marks) == 2  # the stop came in the learners' first update: no other began
     with League.open(home) as league:
         assert league.roster.get_run("r").status == "stopped"
 
