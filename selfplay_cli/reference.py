@@ -92,7 +92,86 @@ def _ladder_truth(data: dict[str, Any]) -> str:
     return head + "\n".join(rows) + "\n"
 
 
-FIGURES: dict[str, tuple[str, Any]] = {"ladder_truth": ("benchmarks/results/ladder_truth.json", _ladder_truth)}
+def _sizes(sizes: list[int]) -> str:
+    """[1, 2, 3, 4] as ``1-4``; [2, 3, 4] as ``2, 3 and 4`` (a run of three or more sizes, or a list)."""
+    if len(sizes) > 3 and sizes == list(range(sizes[0], sizes[-1] + 1)):
+        return f"{sizes[0]}-{sizes[-1]}"
+    return ", ".join(map(str, sizes[:-1])) + f" and {sizes[-1]}" if len(sizes) > 1 else str(sizes[0])
+
+
+def _above(cell: dict[str, Any] | None, others: list[dict[str, Any] | None]) -> bool:
+    """Whether ``cell``'s 95% interval lies wholly above each of ``others``' (beyond doubt the higher)."""
+    if not cell or cell.get("low") is None or not others:
+        return False
+    return all(o and o.get("high") is not None and cell["low"] > o["high"] for o in others)
+
+
+def _team_study(source: str) -> Any:
+    """A ``marl study team-size --json`` report (``benchmarks/team_study.py`` copies it to ``source``) as the two
+    tables the teams page quotes: the mean team return by size trained x flown, and each adapted run against the run
+    trained afresh at its size. Each cell is ``marl study team-size``'s own (its ``_ci``: the mean and its 95%
+    interval); a cell is bold where its interval lies wholly above every other's it is set against (the best at that
+    size, or the better of adapted and fresh, beyond doubt)."""
+
+    def render(r: dict[str, Any]) -> str:
+        from .commands.study import _ci
+
+        budget = r["budget"]
+        per_run = (f"{budget['minutes']:g} minutes" if budget.get("minutes") is not None
+                   else f"{budget['steps']:,} steps")
+        sharing = {"fups": "FuPS", "nops": "NoPS"}.get(r["sharing"], r["sharing"])
+        out = [f"From `{source}` (study `{r['study']}`, `marl study team-size --json`; the report records no date "
+               f"or machine): `{r['env']}`, teams of {_sizes(r['train'])} (`{r['size_option']}`) trained "
+               f"{per_run} a run ({sharing}, {(r['algo'] or 'ppo').upper()}), each flown with {_sizes(r['eval'])} "
+               f"against `{r['vs']}` for {r['eval_games']} episodes on the same seeds; 95% intervals in brackets.",
+               "",
+               "Mean team return by size trained (rows) and flown (columns); bold: the best at that size, its "
+               "interval above every other's:",
+               "",
+               "| trained \\ flown | " + " | ".join(map(str, r["eval"])) + " |",
+               "|---" * (len(r["eval"]) + 1) + "|"]
+        rows = {n: {c["evaluated"]: c for c in r["returns"] if c["trained"] == n} for n in r["train"]}
+        vs = {m: c["vs"] for m, c in rows[r["train"][0]].items()}
+        table = [(str(n), rows[n]) for n in r["train"]] + [(f"{r['vs']}", vs)]
+        for label, cells in table:
+            shown = []
+            for m in r["eval"]:
+                others = [c.get(m) for lab, c in table if lab != label]
+                text = _ci(cells.get(m))
+                shown.append(f"**{text}**" if _above(cells.get(m), others) else text)
+            out.append(f"| {label} | " + " | ".join(shown) + " |")
+        out += ["",
+                f"Adapted from another size against trained afresh ({per_run} each): the return each reached, and "
+                "when the adapted run's snapshots, flown in order on the same seeds, first scored at or above the "
+                "fresh run's final return (that snapshot's return in brackets); bold: the one whose interval lies "
+                "above the other's:",
+                "",
+                "| from -> to | adapted | fresh | adapted reached fresh's final at | fresh took |",
+                "|---|---|---|---|---|"]
+        for x in r["adaptive"]:
+            adapted, fresh = x["return"], x["fresh_return"]
+            if x["steps_to_reach"] is None:
+                reached = "not reached"
+            elif x["steps_to_reach"] == 0:
+                reached = f"0 steps ({x['reached_return']:.1f}: its parent flown at {x['to']})"
+            else:
+                reached = (f"{x['steps_to_reach']:,} steps, {x['minutes_to_reach']:.1f} min "
+                           f"({x['reached_return']:.1f})")
+            took = "-" if x["fresh_steps"] is None else f"{x['fresh_steps']:,} steps, {x['fresh_minutes']:.1f} min"
+            a_text, f_text = _ci(adapted), _ci(fresh)
+            a_text = f"**{a_text}**" if _above(adapted, [fresh]) else a_text
+            f_text = f"**{f_text}**" if _above(fresh, [adapted]) else f_text
+            out.append(f"| {x['from']} -> {x['to']} | {a_text} | {f_text} | {reached} | {took} |")
+        return "\n".join(out) + "\n"
+
+    return render
+
+
+FIGURES: dict[str, tuple[str, Any]] = {
+    "ladder_truth": ("benchmarks/results/ladder_truth.json", _ladder_truth),
+    "team_study_pursuit": ("docs/team-study-pursuit.json", _team_study("docs/team-study-pursuit.json")),
+    "team_study_lander": ("docs/team-study-lander.json", _team_study("docs/team-study-lander.json")),
+}
 """Each block of figures a docs page may quote: the benchmark output it is rendered from, and how."""
 
 
