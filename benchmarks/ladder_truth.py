@@ -57,8 +57,10 @@ from selfplay_cli.evaluation.match_jobs import MatchJob
 from selfplay_cli.league.store import League, LeagueError
 from selfplay_cli.league.variants import variant_key, variant_options
 from selfplay_cli.players.snapshots import run_options
+from selfplay_cli.ratings.fit import fit_table
 from selfplay_cli.ratings.forecast import Forecaster
-from selfplay_cli.ratings.ladder import Margin, fit_table, ladder
+from selfplay_cli.ratings.ladder import ladder
+from selfplay_cli.ratings.ladder_rows import Margin
 from selfplay_cli.stats.elo import score_to_elo
 
 CHECK_SEEDS = 50_000_000  # the checking matches' seeds: far from every seed a run or a match of marl uses

@@ -119,7 +119,7 @@ def round_robin(db: str, n: int, players: int, games: int, points: int) -> tuple
 def queue_cost(db: str, jobs: int = 200) -> tuple[float, float]:
     """Milliseconds per job of claim + finish (its 2 games written with it), and of writing the same 2 games without
     the queue (``create_match_with_games``, what a local match pays anyway): their difference is the queue's own."""
-    from selfplay_cli.league.queue import NewJob
+    from selfplay_cli.league.job_rows import NewJob
     from selfplay_cli.league.store import League
     from selfplay_cli.results import GameResult
 

@@ -411,14 +411,14 @@ def _err(line: str) -> None:
 
 
 def _new_homes(undo: bool) -> None:
-    """The league homes a command created (:mod:`selfplay_cli.league.db`): forgotten as a command starts (an earlier
+    """The league homes a command created (:mod:`selfplay_cli.league.home`): forgotten as a command starts (an earlier
     command of this process made them), removed while they hold nothing when it is refused (``undo``: a refused
     command leaves no league behind). Nothing is imported for a command that opened no league."""
-    db = sys.modules.get("selfplay_cli.league.db")
-    if db is not None and undo:
-        db.undo_new_homes()
-    elif db is not None:
-        db.forget_new_homes()
+    home = sys.modules.get("selfplay_cli.league.home")
+    if home is not None and undo:
+        home.undo_new_homes()
+    elif home is not None:
+        home.forget_new_homes()
 
 
 def main(argv: list[str] | None = None) -> int:

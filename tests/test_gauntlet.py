@@ -22,8 +22,9 @@ from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.play import Game, play
 from selfplay_cli.policies import ScriptedPolicy
-from selfplay_cli.ratings.ladder import ladder, verdict_lines
+from selfplay_cli.ratings.ladder import ladder
 from selfplay_cli.ratings.pairs import head_to_head
+from selfplay_cli.ratings.verdicts import verdict_lines
 from selfplay_cli.results import GameResult
 
 

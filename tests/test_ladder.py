@@ -1,5 +1,5 @@
-"""Tests for selfplay_cli.ratings.ladder (ladders, results CSV, tournament plans, head-to-head) and
-selfplay_cli.ratings.names (name resolution)."""
+"""Tests for selfplay_cli.ratings.ladder, .fit, .ladder_rows and .verdicts (ladders, results CSV, tournament plans,
+head-to-head) and selfplay_cli.ratings.names (name resolution)."""
 
 from __future__ import annotations
 
@@ -13,21 +13,14 @@ import pytest
 
 from selfplay_cli.errors import MarlError
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.ratings.fit import Fitted, _ranks_and_tiers, fit_rows, fit_table
 from selfplay_cli.ratings.forecast import Forecaster
-from selfplay_cli.ratings.ladder import (
-    Fitted,
-    LadderRow,
-    _fit_rows,
-    _mark_best,
-    _ranks_and_tiers,
-    fit_table,
-    ladder,
-    select_rows,
-    verdict_lines,
-)
+from selfplay_cli.ratings.ladder import _mark_best, ladder
+from selfplay_cli.ratings.ladder_rows import LadderRow
 from selfplay_cli.ratings.names import resolve, resolve_many
 from selfplay_cli.ratings.pairs import PairPlan, head_to_head, plan_tournament
 from selfplay_cli.ratings.results_csv import fit_csv, read_results_csv
+from selfplay_cli.ratings.verdicts import select_rows, verdict_lines
 from selfplay_cli.results import GameResult
 from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, fit_bradley_terry
 from selfplay_cli.stats.elo import NAT_TO_ELO, elo_to_score, normal_quantile
@@ -262,7 +255,7 @@ def test_a_margin_says_what_a_200_game_match_would_measure() -> None:
     """Issue 48: a margin's interval is about the pair's expected difference; the 200-game match a user checks it
     with adds its own luck. Known exactly (no uncertainty, no spread) at an even pair, the match is 200 coin tosses:
     95% of them score 86 to 114 wins (binomial quantiles), 43% to 57%, -49 to +49 Elo."""
-    from selfplay_cli.ratings.ladder import Margin
+    from selfplay_cli.ratings.ladder_rows import Margin
     from selfplay_cli.stats.elo import score_to_elo
     from selfplay_cli.stats.predict import belief
 
@@ -815,8 +808,8 @@ def test_a_cooperative_teams_best_member_is_not_compared_with_its_teammate() -> 
         a += [x] * (wins + losses)
         b += [y] * (wins + losses)
         s += [1.0] * wins + [0.0] * losses
-    rows, fitted = _fit_rows(names, a, b, s, "heuristic", 1000.0, 0, 0.95, 0, None, None, None, prior=DEFAULT_PRIOR,
-                             hidden=())
+    rows, fitted = fit_rows(names, a, b, s, "heuristic", 1000.0, 0, 0.95, 0, None, None, None, prior=DEFAULT_PRIOR,
+                            hidden=())
     rows = [replace(r, kind="snapshot", run="l", step=int(r.policy[3])) if r.policy.startswith("l/") else r
             for r in rows]
     best = next(r for r in _mark_best(rows, set(), fitted, teams=True) if r.best)

@@ -10,8 +10,8 @@ from sqlalchemy import func, select
 from selfplay_cli.evaluation.games_jobs import GAMES, combine, games_jobs
 from selfplay_cli.evaluation.jobs import play_job, play_leased, see_through
 from selfplay_cli.evaluation.worker import WorkerOptions, run_worker
+from selfplay_cli.league.job_rows import NewJob, backoff
 from selfplay_cli.league.models import Game, Match
-from selfplay_cli.league.queue import NewJob, backoff
 from selfplay_cli.league.store import League
 
 SHORT = {"points_to_win": 1}

@@ -24,7 +24,7 @@ from selfplay_cli.cli import main
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.adapters.pettingzoo import adapt
 from selfplay_cli.envs.contract import EnvError
-from selfplay_cli.league.ledger import GameTable
+from selfplay_cli.league.game_table import GameTable
 from selfplay_cli.league.store import League
 from selfplay_cli.play import play
 from selfplay_cli.play.replay import decode_actions

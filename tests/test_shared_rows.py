@@ -17,7 +17,7 @@ from selfplay_cli.evaluation.jobs import MAX_ERROR, play_leased
 from selfplay_cli.evaluation.worker import WorkerOptions, run_worker
 from selfplay_cli.league import bounded_json
 from selfplay_cli.league.bounded_json import JSONBoundsError, Unreadable, UnreadableList, loads, read_column
-from selfplay_cli.league.queue import TRIES_LIMIT, NewJob
+from selfplay_cli.league.job_rows import TRIES_LIMIT, NewJob
 from selfplay_cli.league.store import League, LeagueError
 
 SHORT = {"points_to_win": 1}

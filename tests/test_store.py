@@ -25,10 +25,10 @@ from sqlalchemy.engine import make_url
 from sqlalchemy.exc import OperationalError
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.league import db as league_db
 from selfplay_cli.league import migrations, store
+from selfplay_cli.league import url as league_url
+from selfplay_cli.league.job_rows import NewJob
 from selfplay_cli.league.models import Base, Player
-from selfplay_cli.league.queue import NewJob
 from selfplay_cli.league.store import (
     GameResult,
     League,
@@ -815,7 +815,7 @@ def _mountinfo(tmp_path: Path) -> str:
 
 def test_network_filesystem_is_told_by_the_longest_mount_point(tmp_path: Path) -> None:
     info = _mountinfo(tmp_path)
-    nfs = league_db.network_filesystem
+    nfs = league_url.network_filesystem
     assert nfs(tmp_path / "nfs", info) == "nfs4"
     assert nfs(tmp_path / "nfs" / "not" / "made" / "yet", info) == "nfs4"  # a league home still to be created
     assert nfs(tmp_path / "nfs" / "local", info) is None  # a local disk mounted inside the NFS share
@@ -835,8 +835,8 @@ def test_a_sqlite_league_on_a_network_file_system_is_refused(tmp_path: Path, mon
     info = _mountinfo(tmp_path)
     home = tmp_path / "nfs" / "league"
     League.open(home).close()  # made before the share was mounted over it, say
-    monkeypatch.setattr(league_db, "_read_mountinfo", lambda: info)
-    monkeypatch.delenv(league_db.ALLOW_NETWORK_SQLITE, raising=False)
+    monkeypatch.setattr(league_url, "_read_mountinfo", lambda: info)
+    monkeypatch.delenv(league_url.ALLOW_NETWORK_SQLITE, raising=False)
     before = (home / "league.db").read_bytes()
     for args in (("league", "ladder"), ("checkpoint", "list"), ("elo", "fit")):
         code, out, err = run(capsys, *args, "--home", str(home))
@@ -847,6 +847,6 @@ def test_a_sqlite_league_on_a_network_file_system_is_refused(tmp_path: Path, mon
     with pytest.raises(LeagueError, match="network file system"):
         League.open(tmp_path / "remote" / "new")
     assert not (tmp_path / "remote" / "new").exists()  # refused before anything is made
-    monkeypatch.setenv(league_db.ALLOW_NETWORK_SQLITE, "1")  # the user knows better
+    monkeypatch.setenv(league_url.ALLOW_NETWORK_SQLITE, "1")  # the user knows better
     code, _, err = run(capsys, "checkpoint", "list", "--home", str(home))
     assert code == 0, err

@@ -300,7 +300,7 @@ def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
 def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     """A worker is attached (its heart beats) but never takes the run's gauntlet (busy with other work, or serving
     other batches): after ``untaken`` seconds the run's end plays it itself, and says so while it does."""
-    from selfplay_cli.league.queue import NewJob
+    from selfplay_cli.league.job_rows import NewJob
 
     league, snap = rated_league
     busy = league.queue.add_worker("busy", "elsewhere", 1)

@@ -24,7 +24,7 @@ from test_hostile import _tictactoe_file, make_league
 
 from selfplay_cli.envs import GameNotAdmittedError, admit, get_env, known_env
 from selfplay_cli.envs.loading import is_admitted, not_named_here
-from selfplay_cli.league.queue import NewJob
+from selfplay_cli.league.job_rows import NewJob
 from selfplay_cli.league.store import League
 from selfplay_cli.results import GameResult
 from selfplay_cli.train.config import TrainConfig

@@ -108,8 +108,9 @@ def fit(
 
     One variant of the game at a time: the games under its default options, or under those --env-option asks
     for; a line below the table names the other variants with games."""
-    from ..ratings.ladder import ladder, verdict_lines
+    from ..ratings.ladder import ladder
     from ..ratings.results_csv import fit_csv
+    from ..ratings.verdicts import verdict_lines
 
     name, rating = parse_anchor(anchor)
     check_bootstrap(bootstrap)

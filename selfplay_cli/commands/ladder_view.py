@@ -77,7 +77,7 @@ def render_ladder(rows: list, title: str, json_out: bool = False, csv_out: bool 
     ``online``: the online Elo by player id (an extra column). The table marks the anchor and the best snapshot
     of each run (bold, ``(best)``, or ``(best, tied)`` when it is not separated from the run's others), shows the
     tier, a flag next to the Elo, the mean team return of a cooperative game's players, and one ``vs BOT`` column
-    per scripted player (score and games, blank without games); ``verdicts`` (:func:`~selfplay_cli.ratings.ladder.
+    per scripted player (score and games, blank without games); ``verdicts`` (:func:`~selfplay_cli.ratings.verdicts.
     verdict_lines`) follow the table. A ``league role`` column and an ``exploitability`` column
     (:func:`exploitability_text`) show only when some row has one.
     """

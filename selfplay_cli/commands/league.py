@@ -90,7 +90,8 @@ def ladder_cmd(
 ) -> None:
     from ..envs.loading import not_named_note
     from ..evaluation.lineup import resized_in_variant
-    from ..ratings.ladder import ladder, select_rows, verdict_lines
+    from ..ratings.ladder import ladder
+    from ..ratings.verdicts import select_rows, verdict_lines
 
     if json_out and csv_out:
         raise MarlError("--json and --csv exclude each other")
@@ -227,7 +228,8 @@ def tournament(
     that variant of the game: its stored games are the ones reused, its ladder is the one printed."""
     from ..evaluation.seeds import joined_text
     from ..evaluation.tournament import TournamentPlan
-    from ..ratings.ladder import ladder, verdict_lines
+    from ..ratings.ladder import ladder
+    from ..ratings.verdicts import verdict_lines
 
     if games_per_pair < 2:
         raise MarlError(f"--games-per-pair must be at least 2, not {games_per_pair}")

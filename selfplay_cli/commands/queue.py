@@ -8,8 +8,8 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import MarlError
+from ..league.job_rows import JOB_STATES, SCAVENGE_SECONDS, JobRow, WorkerRow
 from ..league.models import utcnow
-from ..league.queue import JOB_STATES, SCAVENGE_SECONDS, JobRow, WorkerRow
 from ._common import DbOpt, HomeOpt, JsonOpt, open_league
 from ._output import console, print_json
 

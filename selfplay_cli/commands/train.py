@@ -260,7 +260,7 @@ def train(
         for line in still_coming(report):
             console.print("  " + line, markup=False)
     elif report.best is not None:
-        from ..ratings.ladder import verdict_lines
+        from ..ratings.verdicts import verdict_lines
 
         for line in verdict_lines(report.side_bests or [report.best]):
             console.print("  " + line, markup=False)

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from ..errors import EXIT_INTERRUPTED, EXIT_TERMINATED, MarlError
-from ..league.queue import BEAT_SECONDS, REACH_SECONDS, SCAVENGE_SECONDS
+from ..league.job_rows import BEAT_SECONDS, REACH_SECONDS, SCAVENGE_SECONDS
 from ..signals import Terminated, stop_on_sigterm
 from ._common import MAX_PARALLEL, DbOpt, DeviceOpt, HomeOpt, JsonOpt, QuietOpt, open_league
 from ._output import console, err_console, print_json

@@ -17,8 +17,8 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from ..errors import MarlError
+from ..league.job_rows import JobRow, NewJob
 from ..league.ledger import MATCH_KINDS
-from ..league.queue import JobRow, NewJob
 from ..league.store import League, PlayerRow
 from ..players.load import env_options_of, load_player, mix_seed
 from ..players.snapshots import share_snapshots
@@ -65,7 +65,7 @@ def games_jobs(league: League, rows_a: Sequence[PlayerRow], row_b: PlayerRow, *,
     each, the last the rest. The players are loaded once here to know a round's size (and to refuse, in one line, a
     match that cannot be played) and their snapshots' bytes are put in the league, so any worker can fetch them.
     ``seeds``: what :func:`~selfplay_cli.evaluation.seeds.settle` decided for the match; each job then claims its seeds
-    (:attr:`~selfplay_cli.league.queue.NewJob.claim`), taken when it is queued."""
+    (:attr:`~selfplay_cli.league.job_rows.NewJob.claim`), taken when it is queued."""
     if games < 1:
         raise MarlError(f"--games must be at least 1, not {games}")
     pa = [load_player(league, r, device=device, seed=mix_seed(first_seed, i)) for i, r in enumerate(rows_a)]

@@ -47,7 +47,7 @@ import numpy as np
 
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
-from ..league.ledger import GameTable
+from ..league.game_table import GameTable
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
 from ..play import Game, play

@@ -37,7 +37,7 @@ from typing import Any
 
 from ..envs import get_env
 from ..errors import MarlError
-from ..league.queue import JobRow, NewJob
+from ..league.job_rows import JobRow, NewJob
 from ..league.store import League
 from ..players.snapshots import share_snapshots
 from ..results import Rules
@@ -168,7 +168,7 @@ def play(league: League, job: JobRow, *, device: str, parallel: int,
 def _helpers(league: League, job: JobRow) -> int:
     """How many workers besides the one that holds ``job`` take its batch and are free now (their heart beating, no
     job in hand): where a moment's matchups would wait for none of them, the moment plays whole."""
-    from ..league.queue import SCAVENGE_SECONDS
+    from ..league.job_rows import SCAVENGE_SECONDS
 
     return sum(1 for w in league.queue.workers(alive_within=SCAVENGE_SECONDS, taking=job.batch)
                if w.id != job.worker_id and not w.holding)

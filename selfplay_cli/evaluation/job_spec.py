@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from ..errors import MarlError
-from ..league.queue import TRIES_LIMIT
+from ..league.job_rows import TRIES_LIMIT
 
 __all__ = ["MAX_NAME", "MAX_PLAYER_ID", "MAX_SEED", "BadSpec", "flag", "ids", "names", "number", "table", "text",
            "tries", "whole"]
@@ -121,5 +121,5 @@ def table(spec: Mapping[str, Any], key: str, *, required: bool = False) -> None:
 
 
 def tries(spec: Mapping[str, Any]) -> None:
-    """``max_tries``, where the spec gives it, is from 1 to :data:`~selfplay_cli.league.queue.TRIES_LIMIT`."""
+    """``max_tries``, where the spec gives it, is from 1 to :data:`~selfplay_cli.league.job_rows.TRIES_LIMIT`."""
     whole(spec, "max_tries", 1, TRIES_LIMIT, required=False)

@@ -25,7 +25,7 @@ from typing import Any
 
 from ..envs import UnknownEnvError
 from ..errors import MarlError
-from ..league.queue import BEAT_SECONDS, ENDED, SCAVENGE_SECONDS, JobRow
+from ..league.job_rows import BEAT_SECONDS, ENDED, SCAVENGE_SECONDS, JobRow
 from ..league.store import League
 from ..stats.sprt import LEVELS, categories, count_model
 from . import games_jobs, gauntlet_jobs

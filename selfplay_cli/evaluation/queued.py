@@ -13,7 +13,7 @@ from datetime import datetime, timezone
 from typing import Any
 
 from ..errors import MarlError
-from ..league.queue import JobRow
+from ..league.job_rows import JobRow
 from ..league.seeds import Pair
 from ..league.store import League, PlayerRow
 from ..stats.sprt import SPRT

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import MarlIOError
-from ..league.queue import BACKOFF_SECONDS, BEAT_SECONDS, REACH_SECONDS, SCAVENGE_SECONDS, JobRow
+from ..league.job_rows import BACKOFF_SECONDS, BEAT_SECONDS, REACH_SECONDS, SCAVENGE_SECONDS, JobRow
 from ..league.store import League, LeagueUnreachable
 from .jobs import Outcome, play_leased, worker_name
 

@@ -48,7 +48,8 @@ from sqlalchemy.orm import Session
 from selfplay_cli.errors import MarlError
 from selfplay_cli.files import folder_inside, sha256_at, write_atomic_at
 from selfplay_cli.league.bounded_json import say_once
-from selfplay_cli.league.db import LeagueError, LeagueIOError, Part, shown
+from selfplay_cli.league.db import Part
+from selfplay_cli.league.failures import LeagueError, LeagueIOError, shown
 from selfplay_cli.league.locations import LOCATIONS_VARIABLE, altered, read_location, writable_folder
 from selfplay_cli.league.models import Blob, Meta, Player, utcnow
 

@@ -2,7 +2,8 @@
 
 :class:`Database` is the base of :class:`~selfplay_cli.league.store.League`: it opens any SQLAlchemy URL (the default
 is SQLite at ``<home>/league.db``), creates or checks the schema, and runs every unit of work in one transaction
-(:meth:`Database._unit`), retried when SQLite reports a lock (PostgreSQL: see below). What is stored is in
+(:meth:`Database._unit`), retried when SQLite reports a lock (PostgreSQL: see below; what each failure means:
+:mod:`selfplay_cli.league.failures`). The home's layout is :mod:`selfplay_cli.league.home`. What is stored is in
 :mod:`selfplay_cli.league.roster` (runs, players, tags) and :mod:`selfplay_cli.league.ledger` (matches and games).
 
 SQLite concurrency
@@ -19,7 +20,7 @@ locked" covers what is left. Each batch of games is one transaction, so a crash 
 Ctrl-C or SIGTERM during a unit of work waits until it has committed or rolled back (:mod:`selfplay_cli.signals`):
 an interrupt inside SQLAlchemy's own code could otherwise leave a connection in the middle of a transaction.
 SQLite's locks are not to be trusted on a network file system (NFS, SMB, sshfs, cluster file systems): a league file
-there is refused (:func:`network_filesystem`) with a line that says to use PostgreSQL.
+there is refused (:mod:`selfplay_cli.league.url`) with a line that says to use PostgreSQL.
 
 PostgreSQL
 ----------
@@ -47,7 +48,6 @@ from __future__ import annotations
 
 import os
 import random
-import re
 import sqlite3
 import sys
 import time
@@ -62,25 +62,28 @@ from sqlalchemy.exc import ArgumentError, DBAPIError, NoSuchModuleError, Operati
 from sqlalchemy.orm import Session, sessionmaker
 from sqlalchemy.pool import StaticPool
 
-from selfplay_cli.errors import EXIT_IO, MarlError, MarlIOError
 from selfplay_cli.league import bounded_json, migrations
+from selfplay_cli.league.failures import (
+    IO_REASONS,
+    PG_GONE,
+    PG_REFUSED,
+    PG_RETRY,
+    LeagueError,
+    LeagueIOError,
+    LeagueUnreachable,
+    NoLeagueYet,
+    driver_reason,
+    is_locked,
+    shown,
+    sqlstate,
+)
+from selfplay_cli.league.home import DB_FILENAME, DEFAULT_HOME, NEW_HOMES, SNAPSHOTS
 from selfplay_cli.league.models import Base, Meta, utcnow
 from selfplay_cli.league.rows import PlayerRow
+from selfplay_cli.league.url import driver_url, refuse_network_sqlite, sqlite_file
 from selfplay_cli.signals import signals_held
 
-__all__ = ["ALLOW_NETWORK_SQLITE", "DB_FILENAME", "DEFAULT_HOME", "SNAPSHOTS", "Database", "LeagueError",
-           "LeagueIOError", "LeagueUnreachable", "Part", "network_filesystem", "shown"]
-
-SNAPSHOTS = "snapshots"
-"""The folder of the league home that holds every snapshot file (``snapshots/<run>/<name>.safetensors``)."""
-
-DEFAULT_HOME = "./league"
-DB_FILENAME = "league.db"
-_NEW_HOMES: list[Path] = []  # league homes this process created (undo_new_homes: a refused command leaves none)
-
-ALLOW_NETWORK_SQLITE = "MARL_ALLOW_NETWORK_SQLITE"
-"""The environment variable that, set to 1, lets a SQLite league lie on a network file system (for users who know
-their file system's locks work)."""
+__all__ = ["Database", "Part"]
 
 _LOCK_RETRIES = 8
 _RECONNECT_FOR = 60.0
@@ -89,137 +92,10 @@ T = TypeVar("T")
 D = TypeVar("D", bound="Database")
 
 
-class LeagueError(MarlError):
-    """A user-facing league problem (unknown or duplicate name, bad database, version mismatch)."""
-
-
-class _NoLeagueYet(LeagueError):
-    """A database server's database with no tables yet, opened to read: read as an empty league instead."""
-
-
-class LeagueIOError(LeagueError, MarlIOError):
-    """The league's database or files could not be read or written for a reason outside marl (disk full, I/O error,
-    file size limit, read-only file system, permissions); the message names the path and the cause."""
-
-    exit_code = EXIT_IO
-
-
-class LeagueUnreachable(LeagueIOError):
-    """The league's PostgreSQL server cannot be reached (none answers at the URL, it is starting or shutting down,
-    the connection broke): what waiting may cure, unlike a refused user or a full disk. ``where`` names the
-    database, ``reason`` the driver's words."""
-
-    def __init__(self, message: str, where: str = "", reason: str = "") -> None:
-        super().__init__(message)
-        self.where, self.reason = where, reason
-
-
-_IO_REASONS = ("disk i/o error", "database or disk is full", "readonly database", "unable to open database file",
-               "read-only file system", "permission denied", "file too large", "no space left")
-
-
-def shown(value: object, limit: int = 60) -> str:
-    """``value`` for an error message: quoted, control characters escaped (never raw on a terminal), cut short."""
-    text = value if isinstance(value, str) else str(value)
-    cut = text[:limit]
-    return repr(cut)[:-1] + ("..." + repr(cut)[-1] if len(text) > limit else repr(cut)[-1])
-
-
 def _to_stderr(line: str) -> None:
     sys.stderr.write(line + "\n")
     sys.stderr.flush()
 
-
-def _is_locked(exc: BaseException) -> bool:
-    """True if a DB error is SQLite's transient "database is locked" / "busy"."""
-    msg = str(getattr(exc, "orig", exc)).lower()
-    return "database is locked" in msg or "database table is locked" in msg
-
-
-_PG_RETRY = ("40001", "40P01")  # serialization_failure, deadlock_detected: the unit is retried at once
-_PG_GONE = ("57P01", "57P02", "57P03")  # admin / crash shutdown, cannot connect now: the server is going or coming
-_PG_REFUSED = ("password authentication failed", "authentication failed", "does not exist", "no pg_hba.conf entry",
-               "permission denied for database")  # the URL's user, password or database is wrong: the user's to fix
-
-NETWORK_FILESYSTEMS = ("nfs", "nfs4", "cifs", "smb3", "smbfs", "ncpfs", "afs", "ceph", "glusterfs", "lustre", "gpfs",
-                       "beegfs", "ocfs2", "gfs2", "davfs", "fuse.sshfs", "fuse.s3fs", "fuse.gcsfuse", "fuse.rclone",
-                       "fuse.glusterfs", "fuse.juicefs", "fuse.davfs2", "fuse.cephfs", "fuse.beegfs")
-"""File systems whose locks SQLite cannot rely on (shared across machines, or over a network)."""
-
-
-def _read_mountinfo() -> str:
-    """The mounts of this process (Linux); empty where there is no such file."""
-    try:
-        return Path("/proc/self/mountinfo").read_text(errors="surrogateescape")
-    except OSError:
-        return ""
-
-
-def network_filesystem(path: Path, mountinfo: str | None = None) -> str | None:
-    """The type of the network file system ``path`` lies on (``nfs4``, ``cifs``, ``fuse.sshfs``...), or None.
-
-    Read from ``mountinfo`` (the text of ``/proc/self/mountinfo``; read here when None: off Linux there is none,
-    and the answer is None): the mount whose mount point is the longest prefix of the path, its nearest existing folder
-    resolved (symlinks followed)."""
-    if mountinfo is None:
-        mountinfo = _read_mountinfo()
-    where = Path(path).expanduser().absolute()
-    while not where.exists() and where != where.parent:
-        where = where.parent
-    where = where.resolve()
-    best, fstype = -1, None
-    for line in mountinfo.splitlines():
-        fields = line.split()
-        try:
-            kind = fields[fields.index("-", 6) + 1]  # after the optional fields and their "-": the type
-        except (ValueError, IndexError):
-            continue
-        point = Path(re.sub(r"\\([0-7]{3})", lambda m: chr(int(m[1], 8)), fields[4]))  # "\040" is a space
-        if (where == point or point in where.parents) and len(point.parts) > best:
-            best, fstype = len(point.parts), kind
-    return fstype if fstype in NETWORK_FILESYSTEMS else None
-
-
-def _refuse_network_sqlite(db_file: Path) -> None:
-    """A :class:`LeagueError` if the SQLite file ``db_file`` lies on a network file system (unless the user said
-    :data:`ALLOW_NETWORK_SQLITE`)."""
-    if os.environ.get(ALLOW_NETWORK_SQLITE) == "1":
-        return
-    fstype = network_filesystem(db_file.parent)
-    if fstype is not None:
-        raise LeagueError(
-            f"{db_file} is on a network file system ({fstype}), where SQLite's locks cannot be trusted and a "
-            f"league gets corrupted: use a PostgreSQL league for several machines (--db postgresql://user@host/db; "
-            f"docs: A league on PostgreSQL), or set {ALLOW_NETWORK_SQLITE}=1")
-
-
-def _driver_url(url: URL) -> URL:
-    """``postgresql://`` (which SQLAlchemy takes to mean psycopg2) and ``postgres://`` as psycopg 3, the driver that
-    ``pip install "selfplay-cli[postgres]"`` brings."""
-    if url.drivername in ("postgresql", "postgres"):
-        return url.set(drivername="postgresql+psycopg")
-    return url
-
-
-def _sqlstate(exc: BaseException) -> str | None:
-    return getattr(getattr(exc, "orig", None), "sqlstate", None)
-
-
-def _reason(exc: BaseException) -> str:
-    """The driver's first line of a database error (psycopg's ``connection failed: `` prefix dropped)."""
-    orig = getattr(exc, "orig", None)
-    text = str(orig if orig is not None else exc).strip().splitlines()
-    return (text[0] if text else type(exc).__name__).removeprefix("connection failed: ")
-
-
-def _sqlite_file(url: URL) -> Path | None:
-    """The database file of a SQLite URL, or None (other backends, in-memory or URI databases)."""
-    if url.get_backend_name() != "sqlite":
-        return None
-    db = url.database or ""
-    if db in ("", ":memory:") or db.startswith("file:"):
-        return None
-    return Path(db).expanduser()
 
 
 class Database:
@@ -261,10 +137,10 @@ class Database:
             LeagueIOError: the server cannot be reached, or the file cannot be read or written.
         """
         try:
-            self.url: URL = _driver_url(make_url(url))
+            self.url: URL = driver_url(make_url(url))
         except ArgumentError as exc:
             raise LeagueError(f"invalid database URL {shown(str(url))}") from exc
-        self.db_path: Path | None = _sqlite_file(self.url)
+        self.db_path: Path | None = sqlite_file(self.url)
         self.is_sqlite = self.url.get_backend_name() == "sqlite"
         self.is_postgres = self.url.get_backend_name() == "postgresql"
         self.readonly = bool(readonly)
@@ -283,7 +159,7 @@ class Database:
         if self.readonly and self.db_path is not None and not self.db_path.is_file():
             raise LeagueError(f"no league database at {self._where} (nothing trained or imported there yet)")
         if self.db_path is not None:
-            _refuse_network_sqlite(self.db_path)
+            refuse_network_sqlite(self.db_path)
         self._empty = False
         if self.db_path is not None and not self.readonly:
             try:
@@ -295,7 +171,7 @@ class Database:
             try:
                 self._connect(mode)
                 return
-            except _NoLeagueYet:  # (a database just made for the league): read an empty one, create nothing
+            except NoLeagueYet:  # (a database just made for the league): read an empty one, create nothing
                 self.engine.dispose()
                 self._connect(None, empty=True)
                 return
@@ -305,7 +181,7 @@ class Database:
                 raise
             except DBAPIError as exc:
                 self.engine.dispose()
-                reason = _reason(exc)
+                reason = driver_reason(exc)
                 if i + 1 < len(modes) and ("unable to open" in reason or "readonly" in reason):
                     continue  # read-only file, folder or medium: the next, more restricted way to read it
                 if self.is_postgres and self._refused(exc):
@@ -313,7 +189,7 @@ class Database:
                 if self.is_postgres and self._unreachable(exc):
                     raise LeagueUnreachable(f"cannot reach league database {self._where}: {reason}", self._where,
                                             reason) from exc
-                error = LeagueIOError if any(w in reason.lower() for w in _IO_REASONS) else LeagueError
+                error = LeagueIOError if any(w in reason.lower() for w in IO_REASONS) else LeagueError
                 raise error(f"cannot open league database {self._where}: {reason}") from exc
 
     def _connect(self, mode: str | None, empty: bool = False) -> None:
@@ -372,9 +248,9 @@ class Database:
                 if not (home_path / DB_FILENAME).exists():  # nothing there yet: read an empty league, create nothing
                     return cls(URL.create("sqlite", database=":memory:"), home=home_path, readonly=True, **kwargs)
             else:
-                _refuse_network_sqlite(home_path / DB_FILENAME)  # before the home is made there
+                refuse_network_sqlite(home_path / DB_FILENAME)  # before the home is made there
                 if not home_path.exists():
-                    _NEW_HOMES.append(home_path)
+                    NEW_HOMES.append(home_path)
                 try:
                     home_path.mkdir(parents=True, exist_ok=True)
                 except OSError as exc:
@@ -422,7 +298,7 @@ class Database:
                         cur.execute("PRAGMA journal_mode = WAL")
                         break
                     except sqlite3.OperationalError as exc:
-                        if not _is_locked(exc) or attempt == _LOCK_RETRIES - 1:
+                        if not is_locked(exc) or attempt == _LOCK_RETRIES - 1:
                             raise
                         time.sleep(0.05 * (attempt + 1))
                 cur.execute("PRAGMA synchronous = NORMAL")
@@ -460,7 +336,7 @@ class Database:
                                   f"{', '.join(sorted(tables)[:3])}{', ...' if len(tables) > 3 else ''})")
             if self.readonly and not self._empty:
                 if self.db_path is None:
-                    raise _NoLeagueYet(f"{self._where} holds no league yet")
+                    raise NoLeagueYet(f"{self._where} holds no league yet")
                 raise LeagueError(f"{self._where} holds no league yet (no tables)")
             Base.metadata.create_all(conn)
             migrations.stamp_head(conn)
@@ -563,19 +439,19 @@ class Database:
     def _transient(self, exc: OperationalError) -> bool:
         """True for a failure that retrying the unit at once cures: SQLite's lock, PostgreSQL's serialization
         failure or deadlock."""
-        return _is_locked(exc) if self.is_sqlite else _sqlstate(exc) in _PG_RETRY
+        return is_locked(exc) if self.is_sqlite else sqlstate(exc) in PG_RETRY
 
     def _refused(self, exc: DBAPIError) -> bool:
         """True if the PostgreSQL server refused the URL's user, password or database (the user's to fix)."""
-        return any(w in _reason(exc).lower() for w in _PG_REFUSED)
+        return any(w in driver_reason(exc).lower() for w in PG_REFUSED)
 
     def _unreachable(self, exc: DBAPIError) -> bool:
         """True if the PostgreSQL server was lost or cannot be reached: the connection broke, the server is
         shutting down or starting up, or no server answers at the URL."""
         if not self.is_postgres or self._refused(exc):
             return False
-        state = _sqlstate(exc)
-        return (bool(exc.connection_invalidated) or (state or "").startswith("08") or state in _PG_GONE
+        state = sqlstate(exc)
+        return (bool(exc.connection_invalidated) or (state or "").startswith("08") or state in PG_GONE
                 or (state is None and isinstance(exc, OperationalError)))
 
     def _unit(self, fn: Callable[[Session], T], readonly: bool = False, idempotent: bool = False) -> T:
@@ -614,17 +490,17 @@ class Database:
                     raise error from exc
                 if committing and not (readonly or idempotent):
                     raise LeagueIOError(f"lost league database {self._where} while committing (the last write may or "
-                                        f"may not be stored; run the command again): {_reason(exc)}") from exc
+                                        f"may not be stored; run the command again): {driver_reason(exc)}") from exc
                 now = time.monotonic()
                 if lost_since is None:
                     lost_since = now
                     if not self._lost_said:  # once for the process, whatever its threads that wait
                         self._lost_said = True
                         self.note(f"marl: league database {self._where} unreachable, retrying for up to "
-                                  f"{self.reconnect_for:.0f} s ({_reason(exc)})")
+                                  f"{self.reconnect_for:.0f} s ({driver_reason(exc)})")
                 if now - lost_since >= self.reconnect_for:
                     raise LeagueUnreachable(f"league database {self._where} unreachable for {self.reconnect_for:.0f} "
-                                            f"s: {_reason(exc)}", self._where, _reason(exc)) from exc
+                                            f"s: {driver_reason(exc)}", self._where, driver_reason(exc)) from exc
                 self.reconnects += 1
                 tries += 1
                 time.sleep(min(0.25 * 2 ** min(tries, 5), 5.0, lost_since + self.reconnect_for - now))
@@ -635,7 +511,7 @@ class Database:
         (:class:`LeagueError`), else the error itself."""
         reason = str(exc.orig).splitlines()[0] if exc.orig is not None else str(exc)
         low = reason.lower()
-        if any(w in low for w in _IO_REASONS):
+        if any(w in low for w in IO_REASONS):
             return LeagueIOError(f"league database {self._where}: {reason}")
         if "malformed" in low or "not a database" in low:
             return LeagueError(f"league database {self._where} is damaged ({reason})")
@@ -658,42 +534,3 @@ class Part:
 
     def _read(self, fn: Callable[[Session], T]) -> T:
         return self.db._read(fn)
-
-
-def forget_new_homes() -> None:
-    """Start a command afresh: the homes earlier commands of this process created are theirs (tests run many)."""
-    _NEW_HOMES.clear()
-
-
-def undo_new_homes() -> list[Path]:
-    """Remove the league homes this process created that hold nothing of anyone's: only the database's own files
-    (``league.db`` and its journal) with no run, snapshot, match or job in it (the scripted players a command may have
-    entered are not anyone's). What a refused command calls, so that it leaves no ``./league`` behind; a home with
-    anything else in it is left as it is. The homes removed."""
-    removed = []
-    database_files = {DB_FILENAME, DB_FILENAME + "-wal", DB_FILENAME + "-shm", DB_FILENAME + "-journal"}
-    while _NEW_HOMES:
-        home = _NEW_HOMES.pop()
-        try:
-            if not home.is_dir() or home.is_symlink() or not {p.name for p in home.iterdir()} <= database_files:
-                continue
-            db = home / DB_FILENAME
-            if db.exists():
-                con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
-                try:
-                    tables = {r[0] for r in con.execute("select name from sqlite_master where type = 'table'")}
-                    if any(con.execute(f"select 1 from {t} limit 1").fetchone() is not None
-                           for t in ("runs", "matches", "games", "jobs", "tags", "blobs", "workers") if t in tables):
-                        continue
-                    if "players" in tables and con.execute(
-                            "select 1 from players where kind != 'bot' limit 1").fetchone() is not None:
-                        continue
-                finally:
-                    con.close()
-            for name in database_files:
-                (home / name).unlink(missing_ok=True)
-            home.rmdir()
-            removed.append(home)
-        except (OSError, sqlite3.Error):
-            continue
-    return removed

@@ -1,12 +1,12 @@
 """What the league asks of the games it stores, without importing any game.
 
 The ledger stores games by name, of any kind. Three readings depend on what a game declares: the rules its results
-follow (:func:`.ledger.rules_for_env`), which of its options make a variant (:func:`.variants.variant_key`) and the
-player its ratings are anchored at (:func:`.ladder.declared_anchor`). The league finds a game's declaration through
-:func:`declaration`, in the catalog the package gives it when it is imported (:func:`use_catalog`, called by
-``selfplay_cli/__init__.py`` with the game registry), so the league imports no game itself. A game the catalog does
-not know (a user's game not installed here) reads as undeclared: default rules, every option given a variant, the
-``random`` anchor.
+follow (:func:`.derivation.rules_for_env`), which of its options make a variant (:func:`.variants.variant_key`) and
+the player its ratings are anchored at (:func:`selfplay_cli.ratings.ladder.declared_anchor`). The league finds a
+game's declaration through :func:`declaration`, in the catalog the package gives it when it is imported
+(:func:`use_catalog`, called by ``selfplay_cli/__init__.py`` with the game registry), so the league imports no game
+itself. A game the catalog does not know (a user's game not installed here) reads as undeclared: default rules, every
+option given a variant, the ``random`` anchor.
 """
 
 from __future__ import annotations

@@ -43,7 +43,7 @@ from pathlib import Path
 from urllib.parse import SplitResult, unquote, urlsplit
 
 from selfplay_cli.files import is_inside, opened_path
-from selfplay_cli.league.db import LeagueError, LeagueIOError, shown
+from selfplay_cli.league.failures import LeagueError, LeagueIOError, shown
 
 __all__ = ["CONNECT_TIMEOUT", "DEADLINE_VARIABLE", "FETCH_DEADLINE", "LOCATIONS_VARIABLE", "READ_TIMEOUT", "Allowed",
            "allowed_locations", "altered", "fetch_deadline", "read_location", "writable_folder"]

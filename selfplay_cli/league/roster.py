@@ -26,7 +26,8 @@ from sqlalchemy.orm import Session
 
 from selfplay_cli.league.blobs import store_blob
 from selfplay_cli.league.bounded_json import say_unusable, unreadable
-from selfplay_cli.league.db import LeagueError, Part, shown
+from selfplay_cli.league.db import Part
+from selfplay_cli.league.failures import LeagueError, shown
 from selfplay_cli.league.models import Player, Run, Tag, utcnow
 from selfplay_cli.league.rows import PlayerRow, RunRow, RunStatus
 

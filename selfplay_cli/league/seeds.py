@@ -32,7 +32,8 @@ from sqlalchemy import inspect, select, update
 from sqlalchemy.exc import IntegrityError
 from sqlalchemy.orm import Session
 
-from selfplay_cli.league.db import LeagueError, Part
+from selfplay_cli.league.db import Part
+from selfplay_cli.league.failures import LeagueError
 from selfplay_cli.league.models import Job, SeedRange, utcnow
 
 __all__ = ["IN_FLIGHT", "Pair", "PairSeeds", "SeedClaim", "SeedRangeRow", "Seeds", "SeedsTaken", "pair_of",

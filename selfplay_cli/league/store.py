@@ -10,15 +10,20 @@ player row is a cache updated in the same transaction as the games it counts, an
   "database is locked", PostgreSQL's conflicts and a lost server), the schema and its Alembic revision, the home
   folder and the rule that keeps a snapshot row's path inside it (:meth:`~selfplay_cli.league.db.Database
   .snapshot_file`: where this machine has no such file, the snapshot is played from its blob,
-  :func:`selfplay_cli.players.files.snapshot_path`);
+  :func:`selfplay_cli.players.files.snapshot_path`); the league's errors and what a driver's failure means
+  (:mod:`selfplay_cli.league.failures`), what a database URL names and the refusal of a SQLite file on a network file
+  system (:mod:`selfplay_cli.league.url`), and the home's layout with the homes a refused command leaves behind
+  (:mod:`selfplay_cli.league.home`);
 * ``league.roster`` (:mod:`selfplay_cli.league.roster`): runs, players and tags, and the rule every name follows;
 * ``league.ledger`` (:mod:`selfplay_cli.league.ledger`): matches, the games with their seats, the online Elo and the
-  rating table derived for every kind of game;
+  rating table (:mod:`selfplay_cli.league.game_table`) derived for every kind of game
+  (:mod:`selfplay_cli.league.derivation`);
 * ``league.seeds`` (:mod:`selfplay_cli.league.seeds`): the seed ranges a pair of players has played or taken, so
   that no two commands play the same games;
 * ``league.blobs`` (:mod:`selfplay_cli.league.blobs`): the snapshot files' bytes by their sha256, so that a machine
   that has only the database can play any snapshot;
-* ``league.queue`` (:mod:`selfplay_cli.league.queue`): the work queue's jobs, leases and workers.
+* ``league.queue`` (:mod:`selfplay_cli.league.queue`): the work queue's jobs, leases and workers (their records,
+  the queue's timings and limits: :mod:`selfplay_cli.league.job_rows`).
 
 Objects returned to callers are frozen dataclasses (:class:`RunRow`, :class:`PlayerRow`, :class:`GameTable`,
 :class:`GameRow`), never ORM instances, so nothing lazy-loads after a session has closed. A :class:`League` must not
@@ -32,17 +37,12 @@ from typing import Any
 from sqlalchemy.engine import URL
 
 from selfplay_cli.league.blobs import Blobs, BlobsReport
-from selfplay_cli.league.db import (
-    DB_FILENAME,
-    DEFAULT_HOME,
-    SNAPSHOTS,
-    Database,
-    LeagueError,
-    LeagueIOError,
-    LeagueUnreachable,
-    shown,
-)
-from selfplay_cli.league.ledger import KIND_CODES, MATCH_KINDS, GameRow, GameTable, Ledger, rules_for_env
+from selfplay_cli.league.db import Database
+from selfplay_cli.league.derivation import rules_for_env
+from selfplay_cli.league.failures import LeagueError, LeagueIOError, LeagueUnreachable, shown
+from selfplay_cli.league.game_table import KIND_CODES, GameRow, GameTable
+from selfplay_cli.league.home import DB_FILENAME, DEFAULT_HOME, SNAPSHOTS
+from selfplay_cli.league.ledger import MATCH_KINDS, Ledger
 from selfplay_cli.league.queue import Queue
 from selfplay_cli.league.roster import (
     DEFAULT_ELO,

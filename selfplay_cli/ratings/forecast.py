@@ -6,7 +6,7 @@ the differences: the fit of ``marl league ladder``), measures how far the pairs 
 ratings (the spread) and keeps each pair's own record (:class:`~selfplay_cli.stats.predict.PairModel`), so that any
 pair is judged at once: ``marl league predict``, ``marl match`` (which checks the prediction against the games it
 plays) and ``benchmarks/ladder_truth.py`` (which checks many). The ladder's margins, ranks and tiers come from the same
-model (:func:`selfplay_cli.ratings.ladder.fit_table`), so a claim about two players reads the same wherever it is
+model (:func:`selfplay_cli.ratings.fit.fit_table`), so a claim about two players reads the same wherever it is
 printed.
 """
 

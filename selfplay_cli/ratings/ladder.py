@@ -3,557 +3,56 @@
 
 Nothing here is stored: every ladder is refitted from the games, so it always agrees with the ledger.
 
-* :func:`fit_table` is the generic core: Bradley-Terry ratings anchored at one player
+* :func:`~selfplay_cli.ratings.fit.fit_table` is the generic core (:mod:`selfplay_cli.ratings.fit`: the prior, the
+  confidence intervals, the order, ranks, tiers and margins): Bradley-Terry ratings anchored at one player
   (:func:`~selfplay_cli.stats.bradley_terry.fit_bradley_terry`), MAP under BayesElo's prior of
   ``prior`` virtual draws (default :data:`~selfplay_cli.stats.bradley_terry.DEFAULT_PRIOR` = 2, as BayesElo;
   ``prior=0`` is the plain maximum-likelihood fit), a confidence interval per player and ranks.
-* :func:`ladder` fits the pairwise results of one env of the league (:meth:`~selfplay_cli.league.store.League.games`:
-  a two-sides game, a cooperative comparison of two episodes on one seed, each two players of a free-for-all game),
-  and adds what the league knows: each snapshot's run, the best snapshot of each run, every player's record against
-  the env's scripted players, and in cooperative games its mean team return.
-* :func:`select_rows` keeps one run's snapshots (plus the scripted players) and / or the first rows,
-  without changing any rank.
+* :func:`ladder` (this module) fits the pairwise results of one env of the league
+  (:meth:`~selfplay_cli.league.store.League.games`: a two-sides game, a cooperative comparison of two episodes on one
+  seed, each two players of a free-for-all game), and adds what the league knows: each snapshot's run, the best
+  snapshot of each run, every player's record against the env's scripted players, and in cooperative games its mean
+  team return.
+* :func:`~selfplay_cli.ratings.verdicts.select_rows` keeps one run's snapshots (plus the scripted players) and / or
+  the first rows, without changing any rank; :func:`~selfplay_cli.ratings.verdicts.verdict_lines` says who is best,
+  and by how much, under the table.
 
-Two players' record and the games a tournament still needs are in :mod:`selfplay_cli.ratings.pairs`.
+The rows (:class:`~selfplay_cli.ratings.ladder_rows.LadderRow`) are :mod:`selfplay_cli.ratings.ladder_rows`'. Two
+players' record and the games a tournament still needs are in :mod:`selfplay_cli.ratings.pairs`.
 
-The prior
----------
-See :mod:`selfplay_cli.stats.bradley_terry`: ``V_ij = (prior / 2) N_ij (1/N_i + 1/N_j)`` virtual draws are added
-between every pair that played (BayesElo's ``AddPrior``), so a perfectly separated ledger (A always beats B, B
-always beats C) still has finite MAP ratings, ordered as the results say. The flags ``perfect`` / ``zero`` mean
-"the maximum-likelihood rating is infinite" and only appear with ``prior=0`` (where the rating shown is a
-bound); ``disconnected`` (no chain of games to the anchor: the offset is unknown) and ``unrated`` (no games)
-appear either way.
-
-Confidence intervals
---------------------
-``bootstrap > 0``: the percentile bootstrap of :func:`~selfplay_cli.stats.intervals.bootstrap_intervals`
-(games resampled with replacement, ``bootstrap`` replicates, seeded, the prior's virtual draws added to every
-replicate). ``bootstrap == 0``: the Laplace (normal) approximation
-(:func:`~selfplay_cli.stats.intervals.laplace_intervals`): the negative Hessian of the log-posterior at the
-fit (with ``prior=0``: the observed Fisher information) is the weighted graph Laplacian
-``L_ii = sum_j c_ij, L_ij = -c_ij`` with ``c_ij = (N_ij + V_ij) p_ij (1 - p_ij)``; with the anchor's row and column
-removed it is invertible on the anchor's connected component, and ``se_i = sqrt((L^-1)_ii) * 400 / ln 10`` Elo,
-interval ``r_i -+ z se_i`` with ``z = Phi^-1((1 + confidence) / 2)``.
-
-Under a prior a percentile bootstrap alone would be dishonest for separated data: a player that won all its
-games wins all its games in every replicate, every replicate gives the same MAP and the interval would have
-zero width, a precision nobody measured. So under a prior the bootstrap interval is widened to contain the
-Laplace interval at the MAP: never narrower than the curvature of the log-posterior (the prior's virtual draws
-included) allows. Either way the intervals are relative to the anchor (whose interval is the single point
-``anchor_rating``). Without a prior, flagged players get an open side instead: a ``perfect`` player's upper end
-and a ``zero`` player's lower end are ``rating +- MAX_ELO``; disconnected and unrated players get
-``rating -+ MAX_ELO`` on both sides; standard errors are capped at ``MAX_ELO``. Every number in a
-:class:`LadderRow` is finite.
-
-Order, ranks and tiers
-----------------------
-Ranks and tiers are claims about pairs, and every claim about two players
-comes from one model of the pair (:class:`~selfplay_cli.stats.predict.PairModel`): what the rest of the ledger says
-of their difference (their ratings fitted without their own games, with that fit's uncertainty), widened by how far
-the game's pairs scatter around their ratings (the spread, measured from the ledger), then updated by their own
-games. Two ratings far apart through the scripted players, whose head-to-head games are even, are not claimed far
-apart. One player is *above another beyond doubt* when the ``confidence`` interval of that pair's difference lies
-wholly above 0.
-
-A player's *rank* is one more than the number of players above it beyond doubt (as Chatbot Arena ranks): players
-the games cannot order share a rank, and a rank never claims an order nobody measured. The rows go so that a
-player another is above beyond doubt never stands over it, whatever the ratings say (self-play's rock-paper-scissors:
-the ratings put a snapshot first through its games against the rest, while one below it beats it head to head), by
-rank and Elo otherwise (:func:`~selfplay_cli.stats.ranks.claims_order`; players whose offset to the anchor is
-unknown, ``disconnected``, and players without games, ``unrated``, last). Where the claims go round in a circle (A
-above B above C above A, each beyond doubt), no order keeps them all: the players of the circle stand together, by
-rank and Elo, and the verdicts under the table say the circle. Its *tier*: walking down the rows, a tier
-boundary falls between two places only where every player above it (in the tier it closes) is above every player
-below it beyond doubt, so a boundary reads "everyone above is stronger than everyone below".
-
-Each row's ``margin`` is its difference over the next row, with its interval, from the same pair model; the best
-snapshot of each run carries its margin over the run's next best (another name of its own weights, or a teammate of
-a cooperative game's team, is not its rival) and the run's snapshots it is not separated from (``tied``): the ladder
-says who is best, by how much, and when it cannot tell. The summary of ``marl train``, ``marl league predict`` and
-``marl match`` read the same model, so one claim has one figure wherever it is printed.
+The best snapshot of each run carries its margin over the run's next best (another name of its own weights, or a
+teammate of a cooperative game's team, is not its rival) and the run's snapshots it is not separated from (``tied``):
+the ladder says who is best, by how much, and when it cannot tell.
 """
 
 from __future__ import annotations
 
-import math
 from collections import defaultdict
-from collections.abc import Collection
-from dataclasses import dataclass, field, replace
-from functools import cached_property
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from selfplay_cli.league.derivation import rules_for_env
+from selfplay_cli.league.game_table import GameTable
 from selfplay_cli.league.games import declaration
-from selfplay_cli.league.ledger import GameTable, rules_for_env
 from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.league.variants import variant_options
+from selfplay_cli.ratings.fit import Fitted, fit_rows, order_group
+from selfplay_cli.ratings.ladder_rows import BotRecord, LadderRow
 from selfplay_cli.ratings.pairs import design_effect
 from selfplay_cli.results import COOPERATIVE
-from selfplay_cli.stats.bradley_terry import (
-    DEFAULT_PRIOR,
-    FLAG_DISCONNECTED,
-    FLAG_PERFECT,
-    FLAG_UNRATED,
-    FLAG_ZERO,
-    fit_bradley_terry,
-    pair_matrices,
-)
-from selfplay_cli.stats.elo import MAX_ELO, score_to_elo
-from selfplay_cli.stats.intervals import DEFAULT_BOOTSTRAP, bootstrap_intervals, laplace_intervals
-from selfplay_cli.stats.predict import Belief, PairModel, Spread
-from selfplay_cli.stats.ranks import claims_order
-from selfplay_cli.stats.ranks import tiers as claims_tiers
+from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR
+from selfplay_cli.stats.intervals import DEFAULT_BOOTSTRAP
 
 __all__ = [
     "DEFAULT_BOOTSTRAP",
     "DEFAULT_PRIOR",
-    "BotRecord",
-    "Fitted",
-    "MATCH_GAMES",
-    "LadderRow",
-    "Margin",
-    "fit_table",
     "ladder",
     "pick_env",
-    "select_rows",
     "shown_exploitability",
-    "verdict_lines",
 ]
-
-_JSON_KEYS = ("policy", "kind", "elo", "ci_low", "ci_high", "games", "wins", "draws", "losses", "rank",
-              "tier", "score", "step", "flag", "anchor", "run", "best", "margin", "best_margin", "tied", "copy_of",
-              "copies", "vs", "league_role", "exploitability", "circle")
-
-MATCH_GAMES = 200  # a margin says what a match of this many games between the two would measure
-
-
-# --------------------------------------------------------------------------------------------------
-# Rows
-# --------------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class BotRecord:
-    """A player's record against one scripted player: ``games`` played and ``points`` scored (draw = 1/2)."""
-
-    bot: str
-    games: int
-    points: float
-
-    @property
-    def score(self) -> float | None:
-        """Mean points per game, None without games."""
-        return self.points / self.games if self.games else None
-
-
-@dataclass(frozen=True)
-class Margin:
-    """How far a player stands above another (``over``): the rating difference ``elo`` with its confidence interval
-    ``low .. high`` (from the same covariance as the ladder's intervals, so what the two share through the anchor
-    cancels). ``separated``: the whole interval lies above 0.
-
-    That interval is about the pair's expected difference; a match of the two measures it with its own luck. So a
-    margin also says what a match of :data:`MATCH_GAMES` games would measure (:attr:`match`, from the pair's belief:
-    :meth:`~selfplay_cli.stats.predict.Belief.predict`), the figure a user checks the claim with."""
-
-    over: str
-    elo: float
-    low: float
-    high: float
-    record: tuple[int, int, int] = (0, 0, 0)  # the two's own results: wins, draws, losses of the first
-    belief: Belief | None = field(default=None, repr=False, compare=False)  # None: a flagged bound's margin
-
-    @property
-    def separated(self) -> bool:
-        return self.low > 0.0
-
-    @cached_property
-    def match(self) -> tuple[float | None, float | None] | None:
-        """The central 95% range of the Elo difference a :data:`MATCH_GAMES`-game match of the two measures (the
-        range of its score, turned into Elo); an end is None where the score's range reaches 0% or 100% (no finite
-        Elo). None for a flagged bound's margin (no pair belief)."""
-        if self.belief is None:
-            return None
-        pred = self.belief.predict(MATCH_GAMES)
-        return (None if pred.low <= 0.0 else score_to_elo(pred.low),
-                None if pred.high >= 1.0 else score_to_elo(pred.high))
-
-    def to_json(self) -> dict[str, Any]:
-        m = self.match
-        return {"over": self.over, "elo": round(float(self.elo), 1), "low": round(float(self.low), 1),
-                "high": round(float(self.high), 1), "separated": self.separated, "head_to_head": list(self.record),
-                "match": None if m is None else {"games": MATCH_GAMES,
-                                                 "low": None if m[0] is None else round(m[0], 1),
-                                                 "high": None if m[1] is None else round(m[1], 1)}}
-
-    def text(self) -> str:
-        """``+97 [+12, +182] Elo over NAME (head to head 40-3-17; 200 games would measure +40 to +160)``: the
-        two's own record where they met, and the range a 200-game match of the two lands in 95% of the time."""
-        w, d, lo = self.record
-        met = f"head to head {w}-{d}-{lo}" if w + d + lo else "they never met"
-        m = self.match
-        if m is not None:
-            low, high = m
-            span = (f"{low:+.0f} to {high:+.0f}" if low is not None and high is not None else
-                    f"{low:+.0f} or more" if low is not None else f"{high:+.0f} or less" if high is not None else
-                    "anything")
-            met += f"; {MATCH_GAMES} games would measure {span}"
-        return f"{self.elo:+.0f} [{self.low:+.0f}, {self.high:+.0f}] Elo over {self.over} ({met})"
-
-
-@dataclass(frozen=True)
-class LadderRow:
-    """One player of a ladder.
-
-    Attributes:
-        policy: display name (bot name, ``run/name`` of a snapshot, or the CSV name).
-        player_id: league player id (None for CSV players).
-        kind: ``"bot"``, ``"snapshot"`` or ``"player"`` (CSV).
-        step: training step of a snapshot (None for bots / CSV players).
-        elo: fitted Bradley-Terry rating (finite; MAP under a prior, a bound for ML-flagged players).
-        ci_low, ci_high: confidence interval of the rating, relative to the anchor.
-        games, wins, draws, losses: the player's record in the fitted games.
-        score: mean points per game.
-        rank: the place in the ladder's order (1, 2, 3, ...: see the module docstring).
-        tier: the group of players that cannot be told apart (1: the top's); None for players whose offset to the
-            anchor is unknown.
-        flag: None, or the fit's flag: ``perfect``, ``zero`` (prior 0 only), ``disconnected``, ``unrated``.
-        anchor: True for the anchor player.
-        run: the snapshot's run (None for bots, run-less snapshots and CSV players).
-        best: True for the best snapshot of its run (highest rating among the run's live snapshots that are
-            comparable with the anchor).
-        margin: the difference over the next row of the ladder, with its interval (None for the last row and for
-            players without a comparable rating).
-        best_margin: for a run's best snapshot, its difference over the run's next best (None alone in its run).
-        tied: for a run's best snapshot, the run's snapshots it is not separated from, neither above it nor below it
-            beyond doubt (empty: the best beyond doubt, save the snapshots a circle of claims puts above it).
-        copy_of / copies: one set of weights is one player: its other names (a run repeated with its seed) get a
-            row each, with its rating, right under it (``copy_of`` it), and it lists them (``copies``).
-        vs: the record against each scripted player of the env, in the league's bot order (empty for CSV
-            ladders); a bot's own entry has no games.
-        mean_return: the player's mean team return over its cooperative episodes (None in other games).
-        side: in a two-sides game whose sides differ (rated per side: see :func:`ladder`), the side's role(s)
-            this row is rated on (``adversary``); None in every other game.
-        league_role: the snapshot's role in its league (``meta["league_role"]``: ``main``, ``main_exploiter``,
-            ``league_exploiter``, ``exploiter``); None for ordinary snapshots, bots and CSV players.
-        exploitability: the exploitability filed for the player (:func:`shown_exploitability`): its exact figure
-            where there is one, else its lower bound, as filed (``kind``, ``value``, ``low``, ``high``, ...); None
-            where none was measured.
-    """
-
-    policy: str
-    player_id: int | None
-    kind: str
-    step: int | None
-    elo: float
-    ci_low: float
-    ci_high: float
-    games: int
-    wins: int
-    draws: int
-    losses: int
-    score: float
-    rank: int
-    flag: str | None
-    anchor: bool
-    run: str | None = None
-    best: bool = False
-    vs: tuple[BotRecord, ...] = ()
-    mean_return: float | None = None
-    tier: int | None = None
-    margin: Margin | None = None
-    best_margin: Margin | None = None
-    tied: tuple[str, ...] = ()
-    copy_of: str | None = None  # another name of the weights of this player (its row just above): one player
-    copies: tuple[str, ...] = ()  # the player's other names (the same weights under another run or name)
-    side: str | None = None
-    league_role: str | None = None
-    exploitability: dict[str, Any] | None = None
-    circle: tuple[str, ...] = ()  # a circle of claims beyond doubt it is in: itself, above the next, ..., the last
-    # above it (self-play's rock-paper-scissors, measured); empty where there is none
-
-    def to_json(self) -> dict[str, Any]:
-        """JSON-ready dict: ``policy, kind, elo, ci_low, ci_high, games, wins, draws, losses, rank`` then
-        ``score, step, flag, anchor, run, best, vs, league_role, exploitability`` (Elo values rounded to 0.1,
-        scores to 1e-4; never NaN / inf; ``league_role`` and ``exploitability`` null where the player has none),
-        and ``mean_return`` last for a player of a cooperative game, ``side`` for a row of a game rated per side.
-        ``vs`` maps each scripted player to ``{"score": s, "games": n}`` (``score`` null without games)."""
-        for value in (self.elo, self.ci_low, self.ci_high, self.score):
-            assert math.isfinite(value), f"non-finite value in ladder row {self.policy}: {value}"
-        out: dict[str, Any] = {
-            "policy": self.policy,
-            "kind": self.kind,
-            "elo": round(float(self.elo), 1),
-            "ci_low": round(float(self.ci_low), 1),
-            "ci_high": round(float(self.ci_high), 1),
-            "games": int(self.games),
-            "wins": int(self.wins),
-            "draws": int(self.draws),
-            "losses": int(self.losses),
-            "rank": int(self.rank),
-            "tier": self.tier,
-            "score": round(float(self.score), 4),
-            "step": None if self.step is None else int(self.step),
-            "flag": self.flag,
-            "anchor": bool(self.anchor),
-            "run": self.run,
-            "best": bool(self.best),
-            "margin": None if self.margin is None else self.margin.to_json(),
-            "best_margin": None if self.best_margin is None else self.best_margin.to_json(),
-            "tied": list(self.tied),
-            "copy_of": self.copy_of,
-            "copies": list(self.copies),
-            "vs": {v.bot: {"score": None if v.score is None else round(float(v.score), 4), "games": int(v.games)}
-                   for v in self.vs},
-            "league_role": self.league_role,
-            "exploitability": None if self.exploitability is None else dict(self.exploitability),
-            "circle": list(self.circle),
-        }
-        assert tuple(out) == _JSON_KEYS
-        if self.mean_return is not None:
-            assert math.isfinite(self.mean_return), f"non-finite mean return in ladder row {self.policy}"
-            out["mean_return"] = round(float(self.mean_return), 4)
-        if self.side is not None:
-            out["side"] = self.side
-        return out
-
-
-# --------------------------------------------------------------------------------------------------
-# Generic fit
-# --------------------------------------------------------------------------------------------------
-
-
-def _open_flagged_sides(ratings: np.ndarray, flags: list[str | None], low: np.ndarray, high: np.ndarray,
-                        anchor: int) -> None:
-    """Intervals of players without an estimate are open on the unknown side (whatever interval method was
-    used): a perfect score has no upper limit under maximum likelihood, a zero score no lower one, and a player
-    not connected to the anchor neither. The open side is drawn at +-MAX_ELO from the rating. The anchor's
-    rating is fixed by definition, so its interval stays a point."""
-    for i, flag in enumerate(flags):
-        if i == anchor:
-            continue
-        if flag in (FLAG_PERFECT, FLAG_DISCONNECTED, FLAG_UNRATED):
-            high[i] = max(high[i], ratings[i] + MAX_ELO)
-        if flag in (FLAG_ZERO, FLAG_DISCONNECTED, FLAG_UNRATED):
-            low[i] = min(low[i], ratings[i] - MAX_ELO)
-
-
-@dataclass(frozen=True)
-class Fitted:
-    """A fitted population: its ratings, intervals and flags, by index into ``names``, and its pairs
-    (:class:`~selfplay_cli.stats.predict.PairModel`: what the ladder says of any two players); what the rows are made
-    of, and what margins, ranks and tiers are read from."""
-
-    names: list[str]
-    ratings: np.ndarray
-    low: np.ndarray
-    high: np.ndarray
-    flags: list[str | None]
-    confidence: float
-    pairs: PairModel
-    wdl: np.ndarray | None = None  # (3, n, n): i's wins, draws and losses against j in the fitted games
-
-    def comparable(self, i: int) -> bool:
-        """Whether player ``i`` has an estimate (not a flagged bound, not an unknown offset)."""
-        return self.flags[i] is None
-
-    def margin(self, i: int, j: int) -> Margin:
-        """Player i's difference over player j, as the pair model says it (:meth:`PairModel.belief`: their ratings'
-        difference with its uncertainty and the pairs' spread, their own games taken in) where both have an
-        estimate; else from their whole intervals (the widest difference they allow)."""
-        return self.margins([(i, j)])[0]
-
-    def margins(self, pairs: list[tuple[int, int]]) -> list[Margin]:
-        """:meth:`margin` of many pairs at once."""
-        est = [k for k, (i, j) in enumerate(pairs) if self.comparable(i) and self.comparable(j)]
-        beliefs = dict(zip(est, self.pairs.beliefs([pairs[k][0] for k in est], [pairs[k][1] for k in est]),
-                           strict=True))
-        out = []
-        for k, (i, j) in enumerate(pairs):
-            w, dr, lo = (0, 0, 0) if self.wdl is None else (int(x) for x in self.wdl[:, i, j])
-            if k in beliefs:
-                low, high = beliefs[k].interval(self.confidence)
-                out.append(Margin(self.names[j], beliefs[k].mean, low, high, (w, dr, lo), beliefs[k]))
-            else:
-                out.append(Margin(self.names[j], float(self.ratings[i] - self.ratings[j]),
-                                  float(self.low[i] - self.high[j]), float(self.high[i] - self.low[j]), (w, dr, lo)))
-        return out
-
-    def doubt(self, order: list[int]) -> np.ndarray:
-        """``(m, m)`` over the players of ``order``: ``[a, b]`` the chance ``order[a]`` is not above ``order[b]``, as
-        the pair model says it (:meth:`PairModel.below`); a flagged bound, which compares by its whole interval: 0
-        where its interval lies wholly above the other's, else 1."""
-        idx = np.asarray(order, dtype=np.int64)
-        out = np.ones((idx.size, idx.size))
-        est = np.array([self.comparable(int(i)) for i in idx], dtype=bool)
-        if est.any():
-            sub = np.flatnonzero(est)
-            out[np.ix_(sub, sub)] = self.pairs.below(idx[sub])
-        bound = ~est[:, None] | ~est[None, :]
-        out = np.where(bound, np.where(self.low[idx][:, None] > self.high[idx][None, :], 0.0, 1.0), out)
-        np.fill_diagonal(out, 1.0)
-        return out
-
-    def above(self, order: list[int]) -> np.ndarray:
-        """``(m, m)`` bool over the players of ``order``: ``[a, b]`` when ``order[a]`` is above ``order[b]`` beyond
-        doubt (the interval of their difference lies wholly above 0), as :meth:`margin` would say of each pair."""
-        return self.doubt(order) < 0.5 * (1.0 - self.confidence)
-
-
-def _group(flag: str | None) -> int:
-    """Rows' order: players comparable with the anchor (estimates and flagged bounds) first, then those whose offset
-    is unknown, then those without games."""
-    return {FLAG_DISCONNECTED: 1, FLAG_UNRATED: 2}.get(flag or "", 0)
-
-
-def _order(fitted: Fitted, shown: list[int]) -> list[int]:
-    return sorted(shown, key=lambda i: (_group(fitted.flags[i]), -fitted.ratings[i], fitted.names[i]))
-
-
-def _ranks_and_tiers(fitted: Fitted, order: list[int]
-                     ) -> tuple[list[int], dict[int, int], dict[int, int | None], dict[int, tuple[int, ...]]]:
-    """The rows' order, and each player's rank, tier and circle, from the pairs' claims
-    (:func:`~selfplay_cli.stats.ranks.claims_order`, :func:`~selfplay_cli.stats.ranks.tiers`): rank, one more than
-    the players above it beyond doubt; rows in which nobody stands over a player above it beyond doubt, by rank
-    and Elo otherwise (``order``: the players by Elo), save within a circle of claims; tiers, boundaries where
-    everyone above is above everyone below; a player's circle, a shortest circle of claims through it (itself first,
-    each above the next, the last above it). Players whose offset to the anchor is unknown keep their
-    place (last) as rank and have no tier."""
-    placed = [i for i in order if not _group(fitted.flags[i])]
-    above = fitted.above(placed)
-    rows, ranks, circles = claims_order(above, fitted.ratings[placed])
-    tier_of = claims_tiers(above, rows)
-    rank = {placed[a]: ranks[a] for a in range(len(placed))}
-    tier: dict[int, int | None] = {placed[a]: t for a, t in zip(rows, tier_of, strict=True)}
-    circle = {placed[a]: tuple(placed[x] for x in c) for a, c in circles.items()}
-    rest = [i for i in order if _group(fitted.flags[i])]
-    for place, i in enumerate(rest, start=len(placed)):
-        rank[i], tier[i] = place + 1, None
-    return [placed[a] for a in rows] + rest, rank, tier, circle
-
-
-def check_prior(prior: float) -> float:
-    """``prior`` as a float; LeagueError unless it is a finite number >= 0."""
-    try:
-        value = float(prior)
-    except (TypeError, ValueError):
-        raise LeagueError(f"the prior must be a number of virtual draws >= 0, not {prior!r}") from None
-    if not math.isfinite(value) or value < 0:
-        raise LeagueError(f"the prior must be a number of virtual draws >= 0, not {prior}")
-    return value
-
-
-def fit_table(
-    names: list[str],
-    a: npt.ArrayLike,
-    b: npt.ArrayLike,
-    score_a: npt.ArrayLike,
-    anchor: str,
-    anchor_rating: float = 1000.0,
-    bootstrap: int = 200,
-    confidence: float = 0.95,
-    seed: int = 0,
-    kinds: dict[str, str] | None = None,
-    steps: dict[str, int] | None = None,
-    player_ids: dict[str, int] | None = None,
-    *,
-    prior: float = DEFAULT_PRIOR,
-    hidden: Collection[str] = (),
-    spread: Spread | None = None,
-) -> list[LadderRow]:
-    """Fit a ladder from games given as index arrays into ``names``.
-
-    Bradley-Terry MAP ratings under BayesElo's prior of ``prior`` virtual draws (``prior=0``: maximum
-    likelihood) anchored at ``anchor`` (its rating is ``anchor_rating``), intervals by a ``bootstrap``-replicate
-    percentile bootstrap (``bootstrap=0``: Laplace / normal approximation), order, ranks, tiers and margins as the
-    module docstring says. One row per name (players without games are flagged ``unrated``), in the ladder's
-    order. ``kinds`` / ``steps`` / ``player_ids`` (keyed by name) fill the corresponding columns (default kind
-    ``"player"``). Players in ``hidden`` are fitted (their games count) but get no row and take no part in the
-    order.
-
-    Raises:
-        LeagueError: anchor not among the names (or hidden), no games, bad indices or options.
-    """
-    rows, _ = _fit_rows(names, a, b, score_a, anchor, anchor_rating, bootstrap, confidence, seed, kinds, steps,
-                        player_ids, prior=prior, hidden=hidden, spread=spread)
-    return rows
-
-
-def _fit_rows(
-    names: list[str], a: npt.ArrayLike, b: npt.ArrayLike, score_a: npt.ArrayLike, anchor: str,
-    anchor_rating: float, bootstrap: int, confidence: float, seed: int, kinds: dict[str, str] | None,
-    steps: dict[str, int] | None, player_ids: dict[str, int] | None, *, prior: float, hidden: Collection[str],
-    spread: Spread | None = None, deff: float = 1.0,
-) -> tuple[list[LadderRow], Fitted]:
-    """:func:`fit_table`'s rows and the :class:`Fitted` population they come from."""
-    names = [str(n) for n in names]
-    if len(set(names)) != len(names):
-        raise LeagueError("duplicate player names in the rating table")
-    if anchor not in names:
-        shown_names = ", ".join(names[:20]) + (", ..." if len(names) > 20 else "")
-        raise LeagueError(f"anchor '{anchor}' is not a rated player; players: {shown_names or '(none)'}")
-    if bootstrap < 0:
-        raise LeagueError(f"bootstrap must be >= 0, got {bootstrap}")
-    if not 0.0 < confidence < 1.0:
-        raise LeagueError(f"confidence must be between 0 and 1, got {confidence}")
-    prior = check_prior(prior)
-    ai = np.asarray(a, dtype=np.int64).ravel()
-    bi = np.asarray(b, dtype=np.int64).ravel()
-    sc = np.asarray(score_a, dtype=np.float64).ravel()
-    if ai.size == 0:
-        raise LeagueError("no games to rate")
-    n = len(names)
-    k = names.index(anchor)
-    try:
-        fit = fit_bradley_terry(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating, prior_games=prior)
-        low, high, diff_sd = laplace_intervals(ai, bi, n, fit.ratings, k, confidence, prior)
-        if bootstrap > 0:
-            low, high, _ = bootstrap_intervals(ai, bi, sc, n, anchor=k, anchor_rating=anchor_rating,
-                                               n_boot=bootstrap, confidence=confidence, seed=seed, prior_games=prior)
-    except ValueError as exc:
-        raise LeagueError(f"cannot fit ratings: {exc}") from exc
-    ratings = np.asarray(fit.ratings, dtype=np.float64)
-    widen = math.sqrt(deff)  # results of one round that go together are worth fewer independent ones
-    low = ratings - widen * np.maximum(ratings - np.asarray(low, dtype=np.float64), 0.0)
-    high = ratings + widen * np.maximum(np.asarray(high, dtype=np.float64) - ratings, 0.0)
-    _open_flagged_sides(ratings, list(fit.flags), low, high, k)
-    if not (np.all(np.isfinite(ratings)) and np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
-        raise AssertionError("rating fit produced a non-finite value")  # pragma: no cover
-    wdl = np.zeros((3, n, n), dtype=np.int64)
-    for result, (x, y) in enumerate(((sc > 0.5, sc < 0.5), (sc == 0.5, sc == 0.5), (sc < 0.5, sc > 0.5))):
-        np.add.at(wdl[result], (ai[x], bi[x]), 1)  # a's win, draw or loss against b, and b's against a
-        np.add.at(wdl[result], (bi[y], ai[y]), 1)
-    points, games = pair_matrices(ai, bi, sc, n)
-    whole = bool(np.all(np.isin(sc, (0.0, 0.5, 1.0))))  # wins, draws and losses (not a game played for stakes)
-    pairs = PairModel(ratings, diff_sd, [f is None for f in fit.flags], points, games, prior, spread, anchor=k,
-                      deff=deff, draws=wdl[1] if whole else None)
-    fitted = Fitted(names, ratings, low, high, list(fit.flags), confidence, pairs, wdl)
-    order, ranks, tiers, circles = _ranks_and_tiers(fitted, _order(fitted, [i for i, name in enumerate(names)
-                                                                             if name not in hidden]))
-    kinds, steps, player_ids = kinds or {}, steps or {}, player_ids or {}
-    adjacent = [(i, j) for i, j in zip(order, order[1:], strict=False) if not _group(fit.flags[i])
-                and not _group(fit.flags[j])]
-    margins = dict(zip((i for i, _ in adjacent), fitted.margins(adjacent), strict=True))
-    rows = []
-    for i in order:
-        name = names[i]
-        rows.append(LadderRow(
-            policy=name, player_id=player_ids.get(name), kind=kinds.get(name, "player"), step=steps.get(name),
-            elo=float(ratings[i]), ci_low=float(low[i]), ci_high=float(high[i]), games=int(fit.games[i]),
-            wins=int(fit.wins[i]), draws=int(fit.draws[i]), losses=int(fit.losses[i]), score=float(fit.score[i]),
-            rank=ranks[i], flag=fit.flags[i], anchor=i == k, tier=tiers[i], margin=margins.get(i),
-            circle=tuple(names[x] for x in circles.get(i, ())),
-        ))
-    return rows, fitted
-
-
-# --------------------------------------------------------------------------------------------------
-# Ladder of the league
-# --------------------------------------------------------------------------------------------------
-
 
 def _envs_in_order(league: League) -> list[str]:
     """Envs that have rated results in the ledger (in any variant), in order of their first one."""
@@ -660,7 +159,7 @@ def _mark_best(rows: list[LadderRow], removed: set[int], fitted: Fitted, teams: 
     index = {name: i for i, name in enumerate(fitted.names)}
     marked: dict[str, LadderRow] = {}
     for members in by_run.values():
-        comparable = [r for r in members if not _group(r.flag)] or members
+        comparable = [r for r in members if not order_group(r.flag)] or members
         best = comparable[0]
         i = index[best.copy_of or best.policy]
         rest = [r for r in comparable[1:] if index[r.copy_of or r.policy] != i
@@ -686,8 +185,9 @@ def ladder(
     prior: float = DEFAULT_PRIOR,
     variant: str = "",
 ) -> list[LadderRow]:
-    """The ladder of ``env``: a :func:`fit_table` over all pairwise results of that env in the ledger, in one
-    ``variant`` (its key, :func:`~selfplay_cli.league.variants.variant_key`; the default variant unless given).
+    """The ladder of ``env``: a :func:`~selfplay_cli.ratings.fit.fit_table` over all pairwise results of that env in
+    the ledger, in one ``variant`` (its key, :func:`~selfplay_cli.league.variants.variant_key`; the default variant
+    unless given).
 
     ``env=None`` uses the ledger's only env (LeagueError if it has several, or no games at all); an env
     without games gives an empty list. Only players with games appear. ``prior``: BayesElo's prior in virtual
@@ -724,7 +224,7 @@ def ladder(
     if anchor_player.full_name in hidden:
         hidden.discard(anchor_player.full_name)  # an explicitly chosen removed anchor stays visible
     names = [p.full_name for p in population]
-    rows, fitted = _fit_rows(
+    rows, fitted = fit_rows(
         names, a, b, table.score_a, anchor_player.full_name, anchor_rating, bootstrap, confidence, seed,
         {p.full_name: p.kind for p in population}, {p.full_name: p.step for p in population if not p.is_bot},
         {p.full_name: p.id for p in population}, prior=prior, hidden=hidden, deff=design_effect(table),
@@ -821,7 +321,7 @@ def _ladder_by_side(league: League, env: str, table: GameTable, labels: tuple[st
         hidden = {n for n, k in zip(names, keys.tolist(), strict=True) if side_of[k] != side}
         if not include_removed:
             hidden |= {p.full_name for p in population if p.removed and p.id != lead.id}
-        rows, fitted = _fit_rows(
+        rows, fitted = fit_rows(
             names, a, b, sided.score_a, lead.full_name, anchor_rating, bootstrap, confidence, seed,
             {p.full_name: p.kind for p in population}, {p.full_name: p.step for p in population if not p.is_bot},
             {p.full_name: p.id for p in population}, prior=prior, hidden=hidden, deff=design_effect(table),
@@ -837,72 +337,3 @@ def _ladder_by_side(league: League, env: str, table: GameTable, labels: tuple[st
                 for r in rows]
         out += _mark_best(rows, removed, fitted)
     return _with_league_marks(out, known | {p.id: p for p in row_of.values()})
-
-
-def verdict_lines(rows: list[LadderRow]) -> list[str]:
-    """Who is best, and by how much, in plain lines: the ladder's top over the next player, then each run's best
-    over the run's next best (or the snapshots it cannot be told apart from); in a game rated per side, for each
-    side (its lines led by ``<side> side:``), since ratings compare only within a side."""
-    by_side: dict[str | None, list[LadderRow]] = {}
-    for r in rows:
-        by_side.setdefault(r.side, []).append(r)
-    if list(by_side) != [None] and by_side:
-        return [f"{side} side: {line}" for side, group in by_side.items() for line in _verdicts(group)]
-    return _verdicts(rows)
-
-
-def _verdicts(rows: list[LadderRow]) -> list[str]:
-    """:func:`verdict_lines` of one table."""
-    lines = []
-    ranked = [r for r in rows if r.tier is not None and r.copy_of is None]
-    if len(ranked) >= 2 and ranked[0].margin is not None:
-        top, m = ranked[0], ranked[0].margin
-        shared = sum(1 for r in ranked if r.tier == top.tier) - 1
-        though = f", though {m.over} is above it beyond doubt" if m.high < 0.0 else ""  # (a circle of claims)
-        lines.append(f"top: {top.policy}{though}, {m.text()}" + (
-            "" if m.separated and not shared else
-            f"; {shared} more player{'s' if shared != 1 else ''} in its tier") + _circle_text(top))
-    for r in rows:
-        if not r.best:
-            continue
-        m = r.best_margin
-        if m is None:
-            lines.append(f"best of {r.run}: {r.policy} (the run's only rated snapshot)")
-        elif m.high < 0.0:  # the next is above it beyond doubt: only where the claims go round in a circle
-            lines.append(f"best of {r.run}: {r.policy} by Elo, though {m.over} is above it beyond doubt: {m.text()}"
-                         + _circle_text(r))
-        elif not r.tied:
-            lines.append(f"best of {r.run}: {r.policy}, {m.text()}" + _circle_text(r))
-        else:
-            names = ", ".join(r.tied[:3]) + (f" and {len(r.tied) - 3} more" if len(r.tied) > 3 else "")
-            lines.append(f"best of {r.run}: {r.policy} by Elo, not separated from {names}: {m.text()}"
-                         + _circle_text(r))
-    said = {frozenset(r.circle) for r in ranked[:1] if r.circle} | {frozenset(r.circle) for r in rows if r.best}
-    circles = {frozenset(r.circle): r.circle for r in ranked if r.circle and frozenset(r.circle) not in said}
-    for c in list(circles.values())[:3]:
-        lines.append("a circle beyond doubt: " + " above ".join((*c, c[0])))
-    if len(circles) > 3:
-        more = len(circles) - 3
-        lines.append(f"and {more} more circle{'s' * (more > 1)} (each row's own in --json)")
-    return lines
-
-
-def _circle_text(row: LadderRow) -> str:
-    """``; in a circle beyond doubt: A above B above C above A`` where the row is in one, else ''."""
-    if not row.circle:
-        return ""
-    return "; in a circle beyond doubt: " + " above ".join((*row.circle, row.circle[0]))
-
-
-def select_rows(rows: list[LadderRow], run: str | None = None, top: int | None = None) -> list[LadderRow]:
-    """The rows to show: with ``run``, that run's snapshots plus the scripted players (for reference); with
-    ``top``, the first ``top`` of those. Order and ranks are kept: a rank is always the one in the whole ladder.
-
-    Raises:
-        LeagueError: ``top < 1``.
-    """
-    if top is not None and top < 1:
-        raise LeagueError(f"--top must be at least 1, not {top}")
-    if run is not None:
-        rows = [r for r in rows if r.run == run or r.kind == "bot"]
-    return rows if top is None else rows[:top]

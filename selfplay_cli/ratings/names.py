@@ -39,7 +39,8 @@ from ..envs import UnknownEnvError, env_names, get_env
 from ..league.store import League, LeagueError, PlayerRow
 from ..league.variants import describe_variant
 from ..stats.bradley_terry import FLAG_DISCONNECTED, FLAG_UNRATED
-from .ladder import LadderRow, ladder
+from .ladder import ladder
+from .ladder_rows import LadderRow
 
 __all__ = ["MAX_CANDIDATES", "LadderFn", "Team", "find_team", "resolve", "resolve_many", "resolve_or_team",
            "seat_of", "teammates"]

@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from selfplay_cli.league.store import LeagueError
-from selfplay_cli.ratings.ladder import DEFAULT_PRIOR, LadderRow, fit_table
+from selfplay_cli.ratings.fit import fit_table
+from selfplay_cli.ratings.ladder_rows import LadderRow
+from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR
 
 __all__ = ["CSV_HEADER", "fit_csv", "read_results_csv"]
 

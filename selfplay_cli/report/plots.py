@@ -25,7 +25,8 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from ..league.store import League, LeagueError
-from ..ratings.ladder import LadderRow, ladder
+from ..ratings.ladder import ladder
+from ..ratings.ladder_rows import LadderRow
 from ..stats.bradley_terry import DEFAULT_PRIOR, FLAG_PERFECT, FLAG_ZERO
 from .png import check_png_path, new_figure, save_png
 

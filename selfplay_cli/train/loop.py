@@ -38,13 +38,14 @@ from ..envs.team import team_spec
 from ..errors import MarlError, NonFiniteError
 from ..evaluation.executors import GauntletJob, JobDone, RatingExecutor, open_executor
 from ..evaluation.gauntlet import ALL_OLDER
-from ..league.ledger import KIND_CODES
+from ..league.game_table import KIND_CODES
 from ..league.store import League, PlayerRow
 from ..league.variants import variant_key
 from ..play.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces
 from ..policies.bots import league_bots
 from ..policies.network import resolve_device
-from ..ratings.ladder import DEFAULT_BOOTSTRAP, LadderRow
+from ..ratings.ladder import DEFAULT_BOOTSTRAP
+from ..ratings.ladder_rows import LadderRow
 from ..results import COOPERATIVE, GameResult
 from ..signals import clear_stop, deadline, signals_held, stoppable
 from .config import TrainConfig, learner_names, learner_setup, tensorboard_writer

@@ -49,7 +49,7 @@ class RemoteEvaluator:
     def __init__(self, league: Any, run: str, device: str, *, wait: bool = True, alive_within: float | None = None,
                  untaken: float = UNTAKEN_SECONDS, poll_seconds: float = 1.0, scavenge: float | None = None,
                  note: Callable[[str], None] | None = None) -> None:
-        from ...league.queue import SCAVENGE_SECONDS
+        from ...league.job_rows import SCAVENGE_SECONDS
 
         self.league, self.device, self.wait_for = league, device, wait
         self.batch = run_batch(run)
@@ -174,7 +174,7 @@ class RemoteEvaluator:
 
     def queue_standing(self) -> QueueStanding:
         """Where the run's owed gauntlets stand now (for the wait's display)."""
-        from ...league.queue import ENDED
+        from ...league.job_rows import ENDED
 
         rows = self.league.queue.jobs(ids=list(self._ids.values())) if self._ids else []
         left = [r for r in rows if r.state not in ENDED]
