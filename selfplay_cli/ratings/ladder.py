@@ -92,6 +92,7 @@ from selfplay_cli.league.store import League, LeagueError, PlayerRow
 from selfplay_cli.league.variants import variant_options
 from selfplay_cli.ratings.pairs import design_effect
 from selfplay_cli.results import COOPERATIVE
+from selfplay_cli.stats.belief import Belief
 from selfplay_cli.stats.bradley_terry import (
     DEFAULT_PRIOR,
     FLAG_DISCONNECTED,
@@ -103,7 +104,7 @@ from selfplay_cli.stats.bradley_terry import (
 )
 from selfplay_cli.stats.elo import MAX_ELO, score_to_elo
 from selfplay_cli.stats.intervals import DEFAULT_BOOTSTRAP, bootstrap_intervals, laplace_intervals
-from selfplay_cli.stats.predict import Belief, PairModel, Spread
+from selfplay_cli.stats.predict import PairModel, Spread
 from selfplay_cli.stats.ranks import claims_order
 from selfplay_cli.stats.ranks import tiers as claims_tiers
 
@@ -157,7 +158,7 @@ class Margin:
 
     That interval is about the pair's expected difference; a match of the two measures it with its own luck. So a
     margin also says what a match of :data:`MATCH_GAMES` games would measure (:attr:`match`, from the pair's belief:
-    :meth:`~selfplay_cli.stats.predict.Belief.predict`), the figure a user checks the claim with."""
+    :meth:`~selfplay_cli.stats.belief.Belief.predict`), the figure a user checks the claim with."""
 
     over: str
     elo: float
