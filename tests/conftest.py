@@ -18,7 +18,8 @@ import procs
 import pytest
 
 from selfplay_cli.envs import get_env
-from selfplay_cli.play.training_games import SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.play.seat_plan import plan_layout, plan_seats
+from selfplay_cli.play.training_games import SelfPlayGames
 from selfplay_cli.policies import ScriptedPolicy
 
 

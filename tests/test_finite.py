@@ -26,7 +26,8 @@ from selfplay_cli.algos.sac import SACConfig, SACLearner
 from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import NonFiniteError
 from selfplay_cli.league.store import League
-from selfplay_cli.play.training_games import SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.play.seat_plan import plan_layout, plan_seats
+from selfplay_cli.play.training_games import SelfPlayGames
 from selfplay_cli.policies.joint import joint_spaces
 from selfplay_cli.policies.network import Arch, SnapshotError, build_network
 from selfplay_cli.policies.snapshot_format import (

@@ -10,14 +10,8 @@ import numpy as np
 import pytest
 from cli_helpers import run
 
-from selfplay_cli.evaluation.gauntlet import (
-    GauntletConfig,
-    best_snapshot,
-    choose_opponents,
-    clear,
-    play_gauntlet,
-    run_history,
-)
+from selfplay_cli.evaluation.gauntlet import GauntletConfig, clear, play_gauntlet
+from selfplay_cli.evaluation.gauntlet_plan import best_snapshot, choose_opponents, run_history
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.play import Game, play

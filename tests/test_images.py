@@ -19,7 +19,8 @@ from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
 from selfplay_cli.envs import get_env
 from selfplay_cli.envs.seat_spaces import seat_space_of
 from selfplay_cli.play.matches import Game, play
-from selfplay_cli.play.training_games import SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.play.seat_plan import plan_layout, plan_seats
+from selfplay_cli.play.training_games import SelfPlayGames
 from selfplay_cli.policies import Policy, ScriptedPolicy
 from selfplay_cli.policies.arch import NATURE_CNN, SMALL_CNN, Arch, SnapshotError
 from selfplay_cli.policies.network import build_network

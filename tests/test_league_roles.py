@@ -14,13 +14,13 @@ from scipy.stats import chisquare
 
 from selfplay_cli.envs import get_env
 from selfplay_cli.league.store import League
-from selfplay_cli.play.training_games import OPPONENT, league_layout, plan_seats
+from selfplay_cli.play.seat_plan import OPPONENT, league_layout, plan_seats
 from selfplay_cli.policies.snapshot_reader import load_snapshot
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.league_roles import LeagueConfig, LeagueRoles, Past, live
 from selfplay_cli.train.loop import Trainer
-from selfplay_cli.train.matchmaking import WinRates
 from selfplay_cli.train.state import SnapshotMoments
+from selfplay_cli.train.win_rates import WinRates
 
 TTT = "tests.games.tictactoe:env"
 DRAWS = 20_000

@@ -77,9 +77,9 @@ def test_a_teachers_states_are_counted_against_memory(home, capsys):
 
 
 def test_more_games_at_once_than_memory_holds_are_refused_before_the_layout_is_built(home, capsys, monkeypatch):
-    from selfplay_cli.train import config
+    from selfplay_cli.train import bounds
 
-    monkeypatch.setattr(config, "_machine_memory", lambda: 2**30)  # 1 GB: pong's 2 seats of 48 numbers a game
+    monkeypatch.setattr(bounds, "_machine_memory", lambda: 2**30)  # 1 GB: pong's 2 seats of 48 numbers a game
     code, err = _train(capsys, home, "games = 2_000_000\n", "--algo", "dqn", games=None)  # ~3.2 GB of observations
     _refused_before_a_run(code, err, home, "2,000,000 games at once would take 3.", "GB", "use fewer --games")
 
@@ -100,7 +100,8 @@ def test_number_settings_outside_their_range_are_one_line(home, capsys, config, 
 
 
 def test_the_range_table_names_settings_that_exist():
-    from selfplay_cli.train.config import RANGES, TrainConfig
+    from selfplay_cli.train.bounds import RANGES
+    from selfplay_cli.train.config import TrainConfig
 
     cfg = TrainConfig(env="pong", run="x", steps=1000, games=2)
     for path in RANGES:  # a typo in the table would check nothing
@@ -215,10 +216,10 @@ def test_the_memory_check_counts_the_games_and_rollout_the_run_will_use(monkeypa
     """Issue 48: an image game was refused at any --games, its check made on the defaults (256 games) before the
     options typed and the config file's were applied."""
     from selfplay_cli.errors import MarlError
-    from selfplay_cli.train import config
+    from selfplay_cli.train import bounds
     from selfplay_cli.train.settings import new_settings
 
-    monkeypatch.setattr(config, "_machine_memory", lambda: 3 * 2**20)  # 3 MB: 0.8 of it may be taken
+    monkeypatch.setattr(bounds, "_machine_memory", lambda: 3 * 2**20)  # 3 MB: 0.8 of it may be taken
     with pytest.raises(MarlError, match="256 games at once would take"):  # the defaults: 256 x 2 x ~12 kB > 2.4 MB
         new_settings(SPOT, {})
     assert new_settings(SPOT, {"games": 4})["games"] == 4  # 8 seats x 128 steps x 768 B = 0.8 MB
@@ -232,10 +233,10 @@ def test_the_memory_check_counts_the_games_and_rollout_the_run_will_use(monkeypa
 
 
 def test_an_image_game_trains_with_few_games_where_its_defaults_would_not_fit(home, capsys, monkeypatch):
-    from selfplay_cli.train import config
+    from selfplay_cli.train import bounds
 
     monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
-    monkeypatch.setattr(config, "_machine_memory", lambda: 3 * 2**20)
+    monkeypatch.setattr(bounds, "_machine_memory", lambda: 3 * 2**20)
     code, _, err = run(capsys, "train", SPOT, "--games", "4", "--steps", "64", "--eval-games", "0", "--quiet")
     assert code == 0, err
     code, _, err = run(capsys, "train", SPOT, "--steps", "64", "--eval-games", "0", "--quiet", "--run", "big")

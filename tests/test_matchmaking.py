@@ -1,5 +1,6 @@
 """Tests for selfplay_cli.train.matchmaking: opponent distributions per mode, sampling proportions
-(chi-square goodness of fit), the decayed win-rate book, config / --bots validation and resume state."""
+(chi-square goodness of fit), the decayed win-rate book (selfplay_cli.train.win_rates), config / --bots validation
+and resume state."""
 
 from __future__ import annotations
 
@@ -13,16 +14,8 @@ import numpy as np
 import pytest
 
 from selfplay_cli.errors import MarlError
-from selfplay_cli.train.matchmaking import (
-    LATEST_LEARNER,
-    Matchmaker,
-    MatchmakerConfig,
-    WinRates,
-    f_hard,
-    f_var,
-    load_win_rates,
-    parse_bots,
-)
+from selfplay_cli.train.matchmaking import Matchmaker, MatchmakerConfig, f_hard, f_var, parse_bots
+from selfplay_cli.train.win_rates import LATEST_LEARNER, WinRates, load_win_rates
 
 LEARNER = 1
 BOTS = {"cpu": 900, "random": 901}
@@ -470,11 +463,12 @@ def test_load_state_dict_rejects_bad_state() -> None:
 
 def test_module_imports_no_torch_or_project_code() -> None:
     # Beyond what importing the package itself loads (its root hands the league the game catalog), matchmaking
-    # brings in errors.py alone: no torch, scipy or sqlalchemy, no other module of the project.
+    # brings in errors.py and its win-rate book alone: no torch, scipy or sqlalchemy, no other module of the project.
     code = ("import sys, selfplay_cli; root = set(sys.modules); import selfplay_cli.train.matchmaking; "
             "bad = [m for m in sys.modules if m.split('.')[0] in ('torch', 'scipy', 'sqlalchemy') or "
             "(m.startswith('selfplay_cli') and m not in root and m not in ('selfplay_cli.errors', "
-            "'selfplay_cli.train', 'selfplay_cli.train.matchmaking'))]; print(bad); sys.exit(1 if bad else 0)")
+            "'selfplay_cli.train', 'selfplay_cli.train.matchmaking', 'selfplay_cli.train.win_rates'))]; "
+            "print(bad); sys.exit(1 if bad else 0)")
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert res.returncode == 0, res.stdout + res.stderr
 

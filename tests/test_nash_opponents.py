@@ -17,7 +17,8 @@ from selfplay_cli.ratings.meta_nash import nash_mixture, run_nash
 from selfplay_cli.ratings.pairs import PAYOFFS, pair_payoffs
 from selfplay_cli.report.matrix import build_matrix
 from selfplay_cli.results import GameResult
-from selfplay_cli.train.matchmaking import NASH_PAYOFFS, Matchmaker, MatchmakerConfig, WinRates
+from selfplay_cli.train.matchmaking import NASH_PAYOFFS, Matchmaker, MatchmakerConfig
+from selfplay_cli.train.win_rates import WinRates
 
 ENV = "pong"
 KUHN = "openspiel:kuhn_poker"

@@ -10,7 +10,8 @@ from gymnasium import spaces
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
 from selfplay_cli.envs import SeatSpace, get_env
 from selfplay_cli.errors import MarlError
-from selfplay_cli.play.training_games import OPPONENT, SelfPlayGames, plan_layout, plan_seats
+from selfplay_cli.play.seat_plan import OPPONENT, plan_layout, plan_seats
+from selfplay_cli.play.training_games import SelfPlayGames
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.policies.spaces import box_of_shape
 

@@ -180,7 +180,7 @@ def test_the_binomial_of_a_match_is_scipys_at_every_rate_and_length():
     200 rates between, matches of 1 to 2,000 results."""
     from scipy.stats import binom
 
-    from selfplay_cli.stats.predict import _binomial
+    from selfplay_cli.stats.belief import _binomial
 
     p = np.concatenate([[0.0, 1.0, 1e-9, 1 - 1e-9], np.random.default_rng(0).uniform(size=200)])
     for n in (1, 8, 200, 2000):

@@ -13,7 +13,7 @@ from selfplay_cli.algos.ppo import PPOConfig
 from selfplay_cli.cli import main
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
-from selfplay_cli.play.training_games import OPPONENT
+from selfplay_cli.play.seat_plan import OPPONENT
 from selfplay_cli.policies.snapshot_policy import load_policy
 from selfplay_cli.train.config import TrainConfig
 from selfplay_cli.train.loop import Trainer

@@ -298,7 +298,7 @@ def _learners_of(env: str, flags: dict) -> list[str]:
     """The learners (so the snapshot suffixes) of `marl train ENV` with ``flags``, from the game's own training
     defaults as `marl train` applies them."""
     from selfplay_cli.envs import get_env
-    from selfplay_cli.train.config import learner_names
+    from selfplay_cli.train.learners import learner_names
     from selfplay_cli.train.settings import new_settings
 
     spec = get_env(env)

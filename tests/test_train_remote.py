@@ -399,8 +399,8 @@ def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
 def test_a_moment_played_again_queues_none_of_its_matchups_twice(rated_league):
     """A moment's worker that died after queueing its matchups: the moment's next worker finds them queued (or
     stored) and queues nothing twice; a matchup spec a worker cannot play is refused, in one line."""
-    from selfplay_cli.evaluation.gauntlet import plan_moment
     from selfplay_cli.evaluation.gauntlet_jobs import _config, check_matchup_spec, queue_matchups
+    from selfplay_cli.evaluation.gauntlet_plan import plan_moment
     from selfplay_cli.evaluation.job_spec import BadSpec
 
     league, snap = rated_league

@@ -17,7 +17,7 @@ from pettingzoo import ParallelEnv
 
 from selfplay_cli.envs import get_env
 from selfplay_cli.errors import MarlError
-from selfplay_cli.play.training_games import OPPONENT, parse_seats, plan_layout, plan_seats
+from selfplay_cli.play.seat_plan import OPPONENT, parse_seats, plan_layout, plan_seats
 
 ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:  # the suite's games are tests.games.* (and this module's own, below)

@@ -86,7 +86,7 @@ class PPOConfig:
                 raise ValueError(f"{name} must be at least 1")
         if not (0 < self.gamma <= 1 and 0 <= self.gae_lambda <= 1 and self.lr > 0 and self.clip_coef > 0):
             raise ValueError("gamma, gae_lambda, lr or clip_coef out of range")
-        if not self.reward_scale > 0:  # (NaN fails too; the CLI bounds it further, train/config.py's RANGES)
+        if not self.reward_scale > 0:  # (NaN fails too; the CLI bounds it further, train/bounds.py's RANGES)
             raise ValueError(f"reward_scale must be a positive number, not {self.reward_scale}")
 
     def to_dict(self) -> dict[str, Any]:

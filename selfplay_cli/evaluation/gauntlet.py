@@ -1,28 +1,17 @@
 """The gauntlet every new snapshot of a training run plays, so that every snapshot is rated, and rated well.
 
-When a run takes its snapshots (one per learner), each new snapshot meets
-
-* its own predecessor (the learner's previous snapshot): did this learner improve?
-* the other learners' new snapshots (taken at the same moment): the two paddles against each other;
-* the run's best snapshot so far (by fitted rating), a few older snapshots spread over the run: progress
-  against the whole history, and the links that let the ladder separate players that never met;
-* every scripted player of the game: fixed anchors (at the run's first moment the scripted players also meet each
-  other, where no gauntlet of the league has had them meet yet).
+What a snapshot moment plays (its predecessor, the other learners' new snapshots, the run's best so far, older
+snapshots, the scripted players) is chosen from the run's history alone (:mod:`.gauntlet_plan`); this module plays
+those matchups and stores them.
 
 Every matchup is played in rounds on shared seeds, as its game's kind asks (:mod:`selfplay_cli.play.schedule`):
 seat-swapped pairs of a two-sides game (each seed once with either player on each side, so the serve luck and the
 seat cancel within a pair), one episode of each player on each seed of a cooperative game (compared by team
 return), every rotation of the seating of a free-for-all game. In a cooperative game the per-seat snapshots of one
 moment (a run with one network per lander) are one player, a crew: they fly together, each on its own seat, and a
-comparison counts for every member (:func:`crews_of`). A "pair" below is one such round. All matchups of
+comparison counts for every member (:func:`~.gauntlet_plan.crews_of`). A "pair" below is one such round. All matchups of
 one snapshot moment are played together, in one batched call of :func:`selfplay_cli.play.play` (or, on a league's
 workers, each matchup as a job of its own: :func:`open_matchups`, :mod:`.gauntlet_jobs`).
-
-In a game whose seats hold different roles (:mod:`.roles`) a snapshot meets only players it can be seated against:
-a new ``adversary`` snapshot of a game of one adversary against one agent meets the run's ``agent`` snapshots (the
-other learner's new one, the best of that side, older ones) and the scripted players, each on its own side; its
-predecessor, of its own role, it cannot meet. The run's best is then taken per side (:attr:`History.sided`: such
-a game is rated per side).
 
 Cheap where the result is clear: a matchup whose result is already clear from history (the new snapshot's lineage,
 its predecessor and theirs, met the same opponent at least ``2 * pairs`` times and won or lost clearly, by the rule
@@ -43,28 +32,18 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from ..envs import EnvSpec, get_env
 from ..errors import MarlError
-from ..league.game_table import GameTable
 from ..league.store import League, PlayerRow
-from ..league.variants import variant_key
 from ..play import Game, play
 from ..play.schedule import CannotMeet, round_of
 from ..players.load import env_options_of, load_player, mix_seed
-from ..players.snapshots import run_options
 from ..policies import Policy
-from ..ratings.pairs import design_effect
-from ..results import COOPERATIVE, GameResult, Rules, points_between
-from ..stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry, pair_matrices
+from ..results import GameResult, Rules, points_between
+from ..stats.belief import record_prediction
 from ..stats.elo import normal_quantile
-from ..stats.intervals import laplace_intervals
-from ..stats.predict import PairModel, record_prediction
-from .roles import RoleBook, cannot_meet_message, policy_roles
-
-ALL_OLDER = 1_000_000_000
-"""``older`` that takes every earlier snapshot of the run (``marl train --opponents nash``: its payoff matrix whole)."""
+from .gauntlet_plan import History, Moment, plan_moment, record_between
+from .roles import cannot_meet_message, policy_roles
 
 
 @dataclass(frozen=True)
@@ -143,7 +122,7 @@ class Matchup:
 @functools.lru_cache(maxsize=4096)  # (a few ms each; a run's matchups repeat the same records: 8-0, 16-0, ...)
 def prediction_width(wins: int, draws: int, losses: int, games: int = 200) -> float:
     """How wide (score points, 0 to 1) the 95% interval of a ``games``-game match's score is, predicted from this
-    record alone (:func:`~selfplay_cli.stats.predict.record_prediction`: the pair's expected score under a uniform
+    record alone (:func:`~selfplay_cli.stats.belief.record_prediction`: the pair's expected score under a uniform
     prior updated by the record, then the luck of the match): 8-0 is 0.34 wide, 16-0 0.20, 5-3 0.58."""
     return record_prediction(wins, draws, losses, games).width
 
@@ -153,46 +132,6 @@ def clear(wins: int, losses: int, z: float) -> bool:
     (the likelihood of superiority beyond ``Phi(z)``)."""
     decisive = wins + losses
     return decisive > 0 and abs(wins - losses) >= z * math.sqrt(decisive)
-
-
-@dataclass(frozen=True)
-class History:
-    """All that a snapshot moment's gauntlet may know: the run's snapshots taken before the moment (oldest first),
-    the game's scripted players, and the games of the run's earlier gauntlets between them.
-
-    Nothing else reaches the gauntlet's choices (its opponents, the run's best so far, the matchups whose result
-    is already clear), so what it plays depends on the run's seed and the order of its snapshots alone: not on a
-    worker that fell behind while later snapshots were taken, not on a user's matches or other runs filed
-    meanwhile."""
-
-    snapshots: list[PlayerRow]
-    bots: list[PlayerRow]
-    table: GameTable
-    variant: str = ""  # the game's variant the run plays (its snapshots' options): its games are filed there
-    sided: bool = False  # a two-sides game whose sides differ: ratings are fitted per side (GameTable.by_side)
-
-
-def run_history(league: League, new: Sequence[PlayerRow], *, including: bool = False) -> History:
-    """The :class:`History` of the moment whose snapshots are ``new`` (all of one run and game): what came before
-    it, or with ``including`` what stands once its gauntlet is played (its own snapshots too)."""
-    env, run = new[0].env, new[0].run
-    # ids grow in registration order: the moment's own are its newest
-    last = max(p.id for p in new) if including else min(p.id for p in new) - 1
-    snapshots = [p for p in league.roster.players(env=env, kind="snapshot") if p.run == run and p.id <= last
-                 and p.unusable is None]  # (a row that cannot be read is never played: said once)
-    bots = league.roster.players(env=env, kind="bot")
-    gauntlets = [mid for mid, params in league.ledger.match_params(env, kind="eval").items() if params.get("gauntlet")]
-    variant = variant_key(env, run_options(league, run or ""))  # the options the run plays: its ladder
-    table = league.ledger.games(env=env, players=[p.id for p in snapshots + bots], variant=variant, pooled=False)
-    return History(snapshots, bots, table.select(np.isin(table.match_id, gauntlets)), variant,
-                   sided=Rules.of(get_env(env)).sides_differ)
-
-
-def record_between(table: GameTable, a: int, b: int) -> tuple[int, int, int]:
-    """A's wins, draws and losses against B in ``table``."""
-    both = ((table.player_a == a) & (table.player_b == b)) | ((table.player_a == b) & (table.player_b == a))
-    pts = np.where(table.player_a[both] == a, table.score_a[both], 1.0 - table.score_a[both])
-    return int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))
 
 
 def _clear_history(league: League, history: History, m: Matchup, z: float, enough: int) -> float | None:
@@ -208,49 +147,6 @@ def _clear_history(league: League, history: History, m: Matchup, z: float, enoug
     if games < enough or not clear(wins, losses, z):
         return None
     return (wins + 0.5 * draws) / games
-
-
-def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2,
-                     best: PlayerRow | Sequence[PlayerRow] | None = None, history: History | None = None,
-                     meets: Callable[[PlayerRow, PlayerRow], bool] | None = None,
-                     ) -> list[tuple[PlayerRow, PlayerRow]]:
-    """The matchups of a snapshot moment: ``(new snapshot, opponent)``, each unordered pair once.
-
-    ``new`` are the snapshots just taken (one per learner, all of one run and game); ``best`` the run's best
-    snapshot before them (by fitted rating), if known, or the best of each side of a game rated per side. Opponents
-    come from the moment's :class:`History` (the run's snapshots taken before it, the scripted players). Older
-    snapshots are chosen evenly spread over the run's history (oldest first), skipping the ones already met.
-    ``meets(a, b)``: whether two players can play each other (a game whose seats hold different roles,
-    :class:`~selfplay_cli.evaluation.roles.RoleBook`); a snapshot's opponents are chosen among those it meets.
-    """
-    if not new:
-        return []
-    history = history or run_history(league, new)
-    by_id = {p.id: p for p in history.snapshots}
-    bests = [best] if isinstance(best, PlayerRow) else list(best or [])
-    can = meets or (lambda a, b: True)
-    pairs: list[tuple[PlayerRow, PlayerRow]] = []
-    seen: set[frozenset[int]] = set()
-
-    def add(a: PlayerRow, b: PlayerRow | None) -> None:
-        if b is None or a.id == b.id or frozenset((a.id, b.id)) in seen or not can(a, b):
-            return
-        seen.add(frozenset((a.id, b.id)))
-        pairs.append((a, b))
-
-    for s in new:
-        chosen: list[PlayerRow | None] = [by_id.get(s.parent_id) if s.parent_id is not None else None]
-        chosen += [o for o in new if o.id != s.id]
-        chosen += [b for b in bests if b.id in by_id and can(s, b)][:1]
-        taken = {c.id for c in chosen if c is not None}
-        rest = [p for p in history.snapshots if p.id not in taken and can(s, p)]
-        if older and rest:
-            picks = np.unique(np.linspace(0, len(rest) - 1, num=min(older, len(rest))).round().astype(int))
-            chosen += [rest[i] for i in picks.tolist()]
-        chosen += history.bots
-        for opp in chosen:
-            add(s, opp)
-    return pairs
 
 
 def play_gauntlet(
@@ -272,11 +168,11 @@ def play_gauntlet(
 
     ``policies`` may hold already loaded players by player id (scripted players are loaded afresh otherwise);
     seeds start at ``first_seed``, a disjoint range per matchup. ``on_games(n)`` is told of finished games.
-    ``crews`` (cooperative games): the per-seat members a player flies with (:func:`crews_of`), by player id; a
-    player without one flies every seat itself. ``history``: the moment's :class:`History`, whose games say which
-    matchups are already clear (without one, none is); ``expects``: what a plan of the matchups found instead
-    (:func:`open_matchups`: a matchup played as a job of its own). ``label``: a flag set in the matches' parameters
-    besides ``gauntlet`` (``playoff``).
+    ``crews`` (cooperative games): the per-seat members a player flies with (:func:`~.gauntlet_plan.crews_of`), by
+    player id; a player without one flies every seat itself. ``history``: the moment's
+    :class:`~.gauntlet_plan.History`, whose games say which matchups are already clear (without one, none is);
+    ``expects``: what a plan of the matchups found instead (:func:`open_matchups`: a matchup played as a job of its
+    own). ``label``: a flag set in the matches' parameters besides ``gauntlet`` (``playoff``).
 
     ``key``: the unit of work these matchups are (a run's gauntlet of one moment, a round of its playoff), where it
     may be played twice (its process killed, then the run resumed; a rating worker replaced): each matchup is
@@ -427,131 +323,11 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
     m.game_ids += ids
 
 
-@dataclass(frozen=True)
-class HistoryFit:
-    """The history's players fitted from its games: Bradley-Terry under the ladder's prior, anchored at the game's
-    anchor bot where it played, and its pairs as the ladder judges them (:class:`~selfplay_cli.stats.predict.
-    PairModel`: the ratings' difference, its uncertainty, the pairs' spread and their own games)."""
-
-    index: dict[int, int]  # player id -> position in the arrays
-    ratings: np.ndarray
-    flags: list[str | None]
-    pairs: PairModel
-
-    def rating(self, pid: int) -> float:
-        return float(self.ratings[self.index[pid]])
-
-    def linked(self, pid: int) -> bool:
-        """Whether the player's rating is an estimate linked to the anchor."""
-        return pid in self.index and self.flags[self.index[pid]] is None
-
-    def separated(self, top: int, other: int, confidence: float) -> bool:
-        """Whether ``top`` is above ``other`` beyond doubt: the ``confidence`` interval of their difference lies above
-        0, as the ladder would say it."""
-        return bool(self.above([top, other], confidence)[0, 1])
-
-    def doubt(self, ids: Sequence[int]) -> np.ndarray:
-        """``[a, b]``: the chance player ``ids[a]`` is not above ``ids[b]`` (all linked players; 1 on the diagonal)."""
-        out = self.pairs.below([self.index[i] for i in ids])
-        np.fill_diagonal(out, 1.0)
-        return out
-
-    def above(self, ids: Sequence[int], confidence: float) -> np.ndarray:
-        """``[a, b]``: player ``ids[a]`` is above ``ids[b]`` beyond doubt (all linked players)."""
-        return self.doubt(ids) < 0.5 * (1.0 - confidence)
-
-
-def fit_history(history: History, anchor: str = "random") -> HistoryFit | None:
-    """The :class:`HistoryFit` of the history's games (None without games). In a game rated per side
-    (:attr:`History.sided`) each player is fitted as the side it played (:meth:`GameTable.by_side`: a scripted
-    player is one player a side); a snapshot keeps its id, so its rating and its differences with the snapshots of
-    its side read as ever, and only those compare."""
-    table = history.table
-    if not len(table):
-        return None
-    sides = None
-    if history.sided:
-        table, sides = table.by_side()
-    ids, a, b = table.indexed()
-    index = {int(pid): i for i, pid in enumerate(ids.tolist())}
-    anchor_ids = {p.id for p in history.bots if p.name == anchor}
-    anchors = [i for key, i in index.items() if (sides[key][0] if sides else key) in anchor_ids]
-    k = anchors[0] if anchors else 0
-    fit = fit_bradley_terry(a, b, table.score_a, ids.size, anchor=k, prior_games=DEFAULT_PRIOR)
-    _, _, diff_sd = laplace_intervals(a, b, ids.size, fit.ratings, k, 0.95, DEFAULT_PRIOR)
-    points, games = pair_matrices(a, b, table.score_a, ids.size)
-    pairs = PairModel(fit.ratings, diff_sd, [f is None for f in fit.flags], points, games, DEFAULT_PRIOR, anchor=k,
-                      deff=design_effect(table))
-    return HistoryFit(index, fit.ratings, list(fit.flags), pairs)
-
-
-def best_snapshot(history: History, anchor: str = "random",
-                  among: Callable[[PlayerRow], bool] | None = None) -> PlayerRow | None:
-    """The highest-rated snapshot of the moment's history (of those ``among`` keeps: the snapshots of one side of
-    a game rated per side), fitted from the run's earlier gauntlets alone (its :func:`fit_history`); players the games
-    do not link to the ``anchor`` bot count only when none is linked. Ties go to the older snapshot."""
-    fit = fit_history(history, anchor)
-    rated = [p for p in history.snapshots if fit is not None and p.id in fit.index and (among is None or among(p))]
-    if not rated:
-        return None
-    linked = [p for p in rated if fit.linked(p.id)] or rated
-    return max(linked, key=lambda p: (fit.rating(p.id), -p.id))
-
-
-@dataclass(frozen=True)
-class Moment:
-    """What one snapshot moment's gauntlet plays (:func:`plan_moment`): its pairs (a cooperative game's crews by
-    their first member), the crews by that member's id, the moment's :class:`History` and the unit's key."""
-
-    pairs: list[tuple[PlayerRow, PlayerRow]]
-    crews: dict[int, tuple[PlayerRow, ...]]
-    history: History
-    key: str
-
-
-def plan_moment(league: League, snapshot_ids: Sequence[int], older: int) -> Moment | None:
-    """The gauntlet of one snapshot moment (``older``: earlier snapshots it meets besides the predecessor and the
-    best), chosen from the moment's :class:`History` alone, so planned again it is the same: the run's best so
-    far, the opponents, the pairs (those whose players, or copies of them, already met in another gauntlet left
-    out). None without snapshots."""
-    new = [league.roster.get_player(int(i)) for i in snapshot_ids]
-    if not new:
-        return None
-    history = run_history(league, new)
-    anchor = get_env(new[0].env).anchor
-    book = RoleBook(league, new[0].env)
-    if book.differ and book.rules.kind != COOPERATIVE:  # the best of each role the moment's snapshots can meet
-        bests = [best_snapshot(history, anchor, among=lambda p, s=s: book.meets(s, p)) for s in new]
-        best: PlayerRow | list[PlayerRow] | None = [b for b in bests if b is not None]
-    else:
-        best = best_snapshot(history, anchor)
-    # a cooperative game's per-seat snapshots fly as crews (below), each member on its own seat: paired as crews
-    meets = book.meets if book.differ and book.rules.kind != COOPERATIVE else None
-    pairs = choose_opponents(league, new, older=older, best=best, history=history, meets=meets)
-    crews = crews_of(league, [p for pair in pairs for p in pair])
-    if crews:  # a cooperative game's per-lander snapshots fly as their moment's team: one matchup per two teams
-        lead = {pid: crew[0] for pid, crew in crews.items()}
-        unique: dict[frozenset[int], tuple[PlayerRow, PlayerRow]] = {}
-        for a, b in pairs:
-            a, b = lead.get(a.id, a), lead.get(b.id, b)
-            if a.id != b.id:
-                unique.setdefault(frozenset((a.id, b.id)), (a, b))
-        pairs = list(unique.values())
-    if not history.snapshots:  # the run's first moment: its scripted players meet each other once, so what the ladder
-        # says of them rests on their own games too (a league's earlier gauntlets may have played them already)
-        pairs += [(x, y) for k, x in enumerate(history.bots) for y in history.bots[k + 1:]
-                  if meets is None or meets(x, y)]
-    key = f"gauntlet/{min(p.id for p in new)}"
-    mine = {match_id for match_id, _ in league.ledger.keyed_matches(f"{key}/").values()}  # (this unit's, played before)
-    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant, ignore=mine)]
-    return Moment(pairs, {m.id: crew for crew in crews.values() for m in crew[:1]}, history, key)
-
-
 def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: int, config: GauntletConfig,
                    device: str = "cpu", on_games: Callable[[int], None] | None = None,
                    moment: Moment | None = None) -> list[Matchup]:
-    """The whole gauntlet of one snapshot moment (:func:`plan_moment`, or ``moment`` where the caller planned it
-    already), played.
+    """The whole gauntlet of one snapshot moment (:func:`~.gauntlet_plan.plan_moment`, or ``moment`` where the caller
+    planned it already), played.
 
     Idempotent: the gauntlet is one unit of work keyed by the moment (``gauntlet/<its first snapshot id>``,
     :func:`play_gauntlet`'s ``key``): played again (cut short by a kill, then run again on resume; its matchups
@@ -591,41 +367,9 @@ def _matchups(pairs: Sequence[tuple[PlayerRow, PlayerRow]], first_seed: int, cfg
     return matchups, [None if key is None else f"{key}/{m.first_seed}/{m.a.id}/{m.b.id}" for m in matchups]
 
 
-def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[PlayerRow, ...]]:
-    """Cooperative games: the team each per-seat learner's snapshot flies with, its moment's members in seat order
-    (``s6M-lander_0``, ``s6M-lander_1``: :func:`~selfplay_cli.ratings.names.teammates`), by player id; snapshots of
-    one shared network, bots and the players of other games are not in it. A team flies together, as the run
-    trained it: its members alone would each fly every lander, seats it never learned."""
-    from ..ratings.names import teammates
-
-    if not rows:
-        return {}
-    spec = get_env(rows[0].env)
-    if spec.kind != COOPERATIVE:
-        return {}
-    out: dict[int, tuple[PlayerRow, ...]] = {}
-    for row in rows:
-        if row.kind != "snapshot" or row.id in out:
-            continue
-        team = teammates(league, row, spec.agents)
-        if team is not None and len({m.id for m in team}) > 1:
-            for m in team:
-                out[m.id] = tuple(team)
-    return out
-
-
 def _seat_crew(crew: tuple[PlayerRow, ...], n_seats: int) -> tuple[PlayerRow, ...]:
     """A crew on a game of ``n_seats`` seats (options may change them), as :func:`~.lineup.refit` seats a
     team: extra seats copy members chosen at random (a fixed draw), fewer seats keep the first members."""
     from .lineup import Lineup, refit
 
     return refit(Lineup(crew[0].env, crew, 0), n_seats, seed=0).players
-
-
-def _gauntlet_games(league: League, a: PlayerRow, b: PlayerRow, variant: str = "",
-                    ignore: set[int] | frozenset[int] = frozenset()) -> bool:
-    """Whether the ledger holds gauntlet games between ``a`` and ``b``, or copies of them (in ``variant``), in
-    matches other than ``ignore``."""
-    table = league.ledger.games(a.env, players=[a.id, b.id], variant=variant)
-    return any(league.ledger.match_info(int(m))[1].get("gauntlet") for m in np.unique(table.match_id).tolist()
-               if int(m) not in ignore)

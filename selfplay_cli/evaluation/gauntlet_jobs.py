@@ -16,16 +16,16 @@ What a gauntlet chooses (the run's best so far, which matchups are already clear
 gauntlets, so a run's jobs are queued in a chain (each waits for the one before it), played in the order the
 snapshots were taken, as the training process plays them.
 
-A moment's matchups, once chosen, are independent of each other. So where other workers take the run's jobs, the
-worker that leased a moment plans it (:func:`~selfplay_cli.evaluation.gauntlet.plan_moment`) and queues each matchup not
-in the ledger yet as a job of its own (kind ``matchup``, in the run's batch, not chained: whoever is free takes
-it), plays those nobody has taken and waits for the rest (:func:`~selfplay_cli.evaluation.jobs.see_through`), then ends
-the moment (its playoff, for the final one); the next moment's job waits for it, so for all of them. A matchup's
-job plays it as the whole moment's call would (its seeds, its expectation from the moment's history, stored whole
-under the moment's key), so a moment replanned after its worker died finds the matchups stored or queued and queues
-none twice. Where no other worker takes the batch, the moment plays whole in one batch (faster on one machine).
-Matchups played apart sample their moves in batches of their own, so their games are other draws than the whole
-moment's of the same seeds; which matchups are played, on which seeds and how many games, is the same.
+A moment's matchups, once chosen, are independent of each other. So where other workers take the run's jobs, the worker
+that leased a moment plans it (:func:`~selfplay_cli.evaluation.gauntlet_plan.plan_moment`) and queues each matchup not
+in the ledger yet as a job of its own (kind ``matchup``, in the run's batch, not chained: whoever is free takes it),
+plays those nobody has taken and waits for the rest (:func:`~selfplay_cli.evaluation.jobs.see_through`), then ends the
+moment (its playoff, for the final one); the next moment's job waits for it, so for all of them. A matchup's job plays
+it as the whole moment's call would (its seeds, its expectation from the moment's history, stored whole under the
+moment's key), so a moment replanned after its worker died finds the matchups stored or queued and queues none twice.
+Where no other worker takes the batch, the moment plays whole in one batch (faster on one machine). Matchups played
+apart sample their moves in batches of their own, so their games are other draws than the whole moment's of the same
+seeds; which matchups are played, on which seeds and how many games, is the same.
 """
 
 from __future__ import annotations
@@ -42,16 +42,8 @@ from ..league.store import League
 from ..players.snapshots import share_snapshots
 from ..results import Rules
 from . import job_spec
-from .gauntlet import (
-    ALL_OLDER,
-    GauntletConfig,
-    Moment,
-    crews_of,
-    open_matchups,
-    plan_moment,
-    play_gauntlet,
-    rate_snapshots,
-)
+from .gauntlet import GauntletConfig, open_matchups, play_gauntlet, rate_snapshots
+from .gauntlet_plan import ALL_OLDER, Moment, crews_of, plan_moment
 from .played import JobLost, Played, See
 
 __all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "MATCHUP", "MAX_EVAL_GAMES", "MAX_MOMENT", "MAX_OLDER",

@@ -40,7 +40,8 @@ from ..league.store import League, PlayerRow
 from ..play.schedule import round_size
 from ..results import COOPERATIVE, Rules
 from ..stats.ranks import claims_order
-from .gauntlet import GauntletConfig, History, crews_of, fit_history, play_gauntlet, record_between, run_history
+from .gauntlet import GauntletConfig, play_gauntlet
+from .gauntlet_plan import History, crews_of, fit_history, record_between, run_history
 from .roles import RoleBook
 
 __all__ = ["PlayoffConfig", "playoff"]

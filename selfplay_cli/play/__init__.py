@@ -5,7 +5,8 @@
   plays every game of it to its end, and returns one result per game, with its actions for a replay
   (:mod:`.replay`) and every state to a recording's hook on request.
 * :class:`~.training_games.SelfPlayGames` steps training's games, which never stop: learners hold fixed slots, a
-  game that ends restarts at once, and each step hands every learner the transitions of its slots.
+  game that ends restarts at once, and each step hands every learner the transitions of its slots; which learner
+  holds which slot is :mod:`.seat_plan`'s.
 
 Both end a game at its declared length and refuse a number that is not finite (:mod:`.limits`), and make results by
 one function (:func:`~selfplay_cli.results.game_results`)."""

@@ -18,9 +18,10 @@ import numpy as np
 import numpy.typing as npt
 
 from selfplay_cli.league.store import League, LeagueError
+from selfplay_cli.stats.belief import Belief, ScorePrediction
 from selfplay_cli.stats.bradley_terry import DEFAULT_PRIOR, fit_bradley_terry, pair_matrices
 from selfplay_cli.stats.intervals import laplace_intervals
-from selfplay_cli.stats.predict import Belief, PairModel, ScorePrediction, Spread
+from selfplay_cli.stats.predict import PairModel, Spread
 
 __all__ = ["Forecaster"]
 

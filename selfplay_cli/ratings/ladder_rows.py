@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
 
+from selfplay_cli.stats.belief import Belief
 from selfplay_cli.stats.elo import score_to_elo
-from selfplay_cli.stats.predict import Belief
 
 __all__ = ["MATCH_GAMES", "BotRecord", "LadderRow", "Margin"]
 

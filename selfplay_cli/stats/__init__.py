@@ -2,4 +2,4 @@
 statistics (:mod:`.match`), the GSPRT (:mod:`.sprt`), Bradley-Terry fits under BayesElo's prior
 (:mod:`.bradley_terry`), their intervals and ranks (:mod:`.intervals`), the Nash equilibrium of a meta-game
 (:mod:`.nash`), significant 3-cycles (:mod:`.cycles`) and what a ladder predicts of a match not yet played
-(:mod:`.predict`)."""
+(:mod:`.predict`, over one pair's belief and the match it predicts: :mod:`.belief`)."""

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -19,18 +18,11 @@ from ..errors import MarlError
 from ..evaluation.executors import EVAL_MODES
 from ..league.store import League
 from ..play.frames import check_frame_stack
-from ..play.training_games import (
-    SHARING,
-    SeatPlan,
-    league_layout,
-    learner_spaces,
-    parse_seats,
-    plan_layout,
-    plan_seats,
-)
+from ..play.seat_plan import SHARING, SeatPlan, league_layout, learner_spaces, parse_seats, plan_layout, plan_seats
 from ..policies.joint import joint_spaces
 from ..policies.network import Arch, resolve_device
 from ..policies.snapshot_format import expected_tensors
+from .bounds import check_games, check_memory, check_ranges
 from .curriculum import Curriculum, Schedule, parse_schedule
 from .league_roles import LeagueConfig
 from .matchmaking import MatchmakerConfig
@@ -38,63 +30,9 @@ from .matchmaking import MatchmakerConfig
 ALGOS = tuple(LEARNERS)  # the registered learners (selfplay_cli.algos.LEARNERS)
 DICT_SETTINGS = ("env_options", "curriculum", "snapshot_meta", "init_plan")  # tables checked by the game (or their
 # owner), not by the type of a field
-ON_POLICY = ("ppo", "mappo", "poca")  # PPO and the learners built on it: one rollout an update, PPO's settings
 EXECUTORS = ("local", "ray")
 """Where a run's training games are stepped (``--executor``): this process, or Ray actors
 (:mod:`selfplay_cli.train.ray_rollouts`)."""
-
-
-@dataclass(frozen=True)
-class Range:
-    """Where a number setting must lie: from ``low`` (excluded when ``open_low``) to ``high``."""
-
-    low: float
-    high: float
-    open_low: bool = False
-
-    def holds(self, value: float) -> bool:
-        return (value > self.low if self.open_low else value >= self.low) and value <= self.high
-
-    def describe(self) -> str:
-        low = f"more than {self.low:g}" if self.open_low else f"at least {self.low:g}"
-        return f"{low} and at most {self.high:g}"
-
-
-RANGES: dict[str, Range] = {
-    "minutes": Range(1e-3, 1e6),  # 0.06 s to ~2 years: 1e-300 minutes is no budget at all
-    **{f"{algo}.lr": Range(0.0, 1.0, open_low=True) for algo in ("ppo", "dqn", "sac", "mappo", "poca")},
-    **{f"{algo}.clip_coef": Range(0.0, 1.0, open_low=True) for algo in ON_POLICY},  # a ratio clipped to [1-c, 1+c]
-    **{f"{algo}.ent_coef": Range(0.0, 1e3) for algo in ON_POLICY},
-    **{f"{algo}.vf_coef": Range(0.0, 1e3) for algo in ON_POLICY},
-    **{f"{algo}.max_grad_norm": Range(0.0, 1e6, open_low=True) for algo in ON_POLICY},
-    "dqn.max_grad_norm": Range(0.0, 1e6),  # 0: no clipping
-    **{f"{algo}.reward_scale": Range(0.0, 1e6, open_low=True) for algo in ON_POLICY},
-    **{f"{algo}.replay_ratio": Range(0.0, 64.0, open_low=True) for algo in ("dqn", "sac")},  # updates a transition
-    **{f"{algo}.n_step": Range(1, 1_000) for algo in ("dqn", "sac")},
-    "sac.alpha": Range(0.0, 1e3, open_low=True),
-    "sac.target_entropy": Range(-1e6, 1e6),
-}
-"""The ranges of the number settings that their types and the learners' own checks leave open (a learning rate of
-1e300 overflows float32 at the first update; 1e-300 minutes divides by zero; a replay ratio of 1e300 never ends an
-update), checked in one pass by :func:`check_ranges` before anything is built. Past these bounds nothing is meant."""
-
-
-def check_ranges(cfg: Any) -> None:
-    """Refuse the first setting of :data:`RANGES` that lies outside its range (None: not set, nothing to check),
-    and a replay batch larger than its buffer (a 1e12 batch is drawn as 1e12 indices)."""
-    for path, bound in RANGES.items():
-        value: Any = cfg
-        for part in path.split("."):
-            value = getattr(value, part)
-        if value is not None and not bound.holds(value):
-            section, _, key = path.rpartition(".")
-            name = f"[{section}] {key}" if section else f"--{key.replace('_', '-')}"
-            raise MarlError(f"{name} must be {bound.describe()}, not {value:g}")
-    for algo in ("dqn", "sac"):
-        section = getattr(cfg, algo)
-        if section.batch_size > section.buffer_size:
-            raise MarlError(f"[{algo}] batch_size must be at most buffer_size ({section.buffer_size:,}), not "
-                            f"{section.batch_size:,}")
 
 
 @dataclass
@@ -270,7 +208,7 @@ class TrainConfig:
         curriculum = Curriculum(self.curriculum, spec.name, spec.live_options)
         if curriculum:
             curriculum.check(core)
-        _check_games(self, seat_spaces)
+        check_games(self, seat_spaces)
         layout = self.layout(plan)
         roles = spec.seat_roles(game)
         if self.opponents.mode == "nash" and len(set(roles)) > 1:  # (a meta-game per pair of roles: not yet)
@@ -295,8 +233,8 @@ class TrainConfig:
         if self.teacher.player:
             check_teacher(self.algo, self.sharing)
         seen = stacked_space(spaces[0].observation, self.frame_stack)
-        _check_memory(self, tuple(seen.shape), [int((layout == i).sum()) for i in range(len(spaces))],
-                      np.dtype(seen.dtype).itemsize)
+        check_memory(self, tuple(seen.shape), [int((layout == i).sum()) for i in range(len(spaces))],
+                     np.dtype(seen.dtype).itemsize)
 
     @property
     def eval_inline(self) -> bool:
@@ -315,8 +253,8 @@ class TrainConfig:
         return seat_plan_of(self.game(), self.agents, self.sharing, self.seats)
 
     def layout(self, plan: SeatPlan) -> np.ndarray:
-        """The learner of every (seat, game) slot, -1 for an opponent's (:func:`~selfplay_cli.play.training_games.
-        plan_layout`; a league's: :func:`~selfplay_cli.play.training_games.league_layout`)."""
+        """The learner of every (seat, game) slot, -1 for an opponent's (:func:`~selfplay_cli.play.seat_plan.
+        plan_layout`; a league's: :func:`~selfplay_cli.play.seat_plan.league_layout`)."""
         if self.league is not None:
             return league_layout(plan, self.games, len(self.league.roles()))
         return plan_layout(plan, self.games, self.agents, self.league_games)
@@ -458,28 +396,6 @@ def fups_without_partners(spec: EnvSpec, agents: int, sharing: str, seats: str) 
     return sharing == "fups" and agents == 1 and not seats and spec.kind != "cooperative"
 
 
-def learner_names(agents: tuple[str, ...], home: tuple[int, ...], sharing: str) -> list[str]:
-    """Each learner's name: with one network per learner, the seat (agent) it holds first (``left``, ``right``);
-    with one network for all, ``learner``."""
-    n = max(home) + 1
-    if sharing == "fups" or n == 1:
-        return ["learner"]
-    return [agents[home.index(i)] for i in range(n)]
-
-
-def run_learners(cfg: TrainConfig) -> tuple[list[str], list[SeatSpace]]:
-    """The run's learners as the trainer builds them: each one's name (its snapshots end in it) and the seat space
-    it learns (before its frame stack: :func:`learner_setup`)."""
-    spec = cfg.game()
-    game = spec.config(**cfg.env_options)
-    plan = cfg.seat_plan()
-    layout = cfg.layout(plan)
-    names = cfg.league.names() if cfg.league is not None else learner_names(spec.agents, plan.home, cfg.sharing)
-    roles = spec.seat_roles(game)
-    spaces = learner_spaces(spec, spec.seat_spaces(game), layout, roles if len(set(roles)) > 1 else None)
-    return names, list(spaces)
-
-
 def seat_plan_of(spec: EnvSpec, agents: int, sharing: str, seats: str) -> SeatPlan:
     """Which learner holds which seat of ``spec`` (as :meth:`TrainConfig.seat_plan`, from the plain settings)."""
     return plan_seats(spec, agents, sharing, parse_seats(seats, spec.n_seats) if seats else None)
@@ -513,49 +429,6 @@ def learner_setup(cfg: TrainConfig, space: SeatSpace) -> tuple[SeatSpace, Any]:
     section = getattr(cfg, cfg.algo)
     seat = SeatSpace(stacked_space(space.observation, cfg.frame_stack), space.action, space.mask)
     return seat, replace(section, arch=section.arch.for_obs(space.observation))
-
-
-def _machine_memory() -> int | None:
-    """Bytes of physical memory, or None where the system does not say."""
-    try:
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (AttributeError, ValueError, OSError):
-        return None
-
-
-def _check_games(cfg: TrainConfig, seat_spaces: Any) -> None:
-    """Refuse, before the seats are laid out, more games at once than this machine holds (``games = 1e9`` in a
-    config file): each step every seat's observation of every game is read, gathered, stored and kept as the final
-    one (~4 float32 copies), beside the game's own state."""
-    need = cfg.games * sum(16 * math.prod(s.observation.shape) + 64 for s in seat_spaces)
-    have = _machine_memory()
-    if have is not None and need > 0.8 * have:
-        raise MarlError(f"{cfg.games:,} games at once would take {need / 2**30:,.1f} GB of observations alone; this "
-                        f"machine has {have / 2**30:,.1f} GB: use fewer --games")
-
-
-def _check_memory(cfg: TrainConfig, obs_shape: tuple[int, ...], slots: list[int], itemsize: int = 4) -> None:
-    """Refuse, before anything is built, a run whose learners' buffers of observations would not fit in this
-    machine's memory (e.g. pong's 400x800 RGB frames in 256 games: ~125 GB of PPO rollout), the teacher's labelled
-    states included. ``itemsize``: the bytes of one number of an observation as the learners keep it (float32's 4,
-    an image's 1)."""
-    per_obs = itemsize * math.prod(obs_shape)
-    if cfg.algo in ON_POLICY:
-        steps = getattr(cfg, cfg.algo).rollout_steps
-        need = sum(per_obs * steps * n for n in slots)
-        what = f"{cfg.algo.upper()}'s rollouts ({steps} steps of {sum(slots):,} seats)"
-    else:
-        buffer = cfg.dqn.buffer_size if cfg.algo == "dqn" else cfg.sac.buffer_size
-        need = len(slots) * 2 * per_obs * buffer
-        what = f"{cfg.algo.upper()}'s replay buffers ({buffer:,} transitions each)"
-    if cfg.teacher.player:  # each learner keeps its teacher's labelled states (observation and action: ~2 of them)
-        need += len(slots) * 2 * per_obs * cfg.teacher.states
-        what += f" and the teacher's labelled states ({cfg.teacher.states:,} each)"
-    have = _machine_memory()
-    if have is not None and need > 0.8 * have:
-        raise MarlError(f"{what} of {'x'.join(map(str, obs_shape))} observations would take {need / 2**30:,.1f} GB; "
-                        f"this machine has {have / 2**30:,.1f} GB: use fewer --games, a shorter rollout or buffer, or "
-                        "smaller observations")
 
 
 def tensorboard_writer(log_dir: Path | None) -> Any:

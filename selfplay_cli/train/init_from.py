@@ -37,7 +37,8 @@ from ..league.variants import variant_key
 from ..policies.resize import describe_resize, resize_members
 from ..policies.snapshot_format import expected_tensors, fit_problems
 from ..policies.spaces import describe_space
-from .config import TrainConfig, learner_setup, run_learners
+from .config import TrainConfig, learner_setup
+from .learners import run_learners
 
 __all__ = ["load_init", "plan_init"]
 

@@ -3,12 +3,12 @@
 A run with ``--league alphastar`` trains one learner per role: ``main`` main agents, ``main_exploiters`` main
 exploiters and ``league_exploiters`` league exploiters (AlphaStar's 1, 1, 2 by default), each with its own network,
 optimiser, buffer and seed, each playing its own share of the run's games in one seat against opponents its role's
-rule draws. Everything here works on plain data (player ids, learner indices, a :class:`~.matchmaking.WinRates` book),
+rule draws. Everything here works on plain data (player ids, learner indices, a :class:`~.win_rates.WinRates` book),
 so it is testable without a database, like :mod:`.matchmaking`.
 
 The rules are those of AlphaStar's published pseudocode (Vinyals et al. 2019, the ``multiagent.py`` of its
 supplementary material; DI-star re-implements the same). *Past players* are every snapshot of the run, of any role
-(AlphaStar's ``Historical``); a learner's win rate ``p`` against an opponent is its :class:`~.matchmaking.WinRates`
+(AlphaStar's ``Historical``); a learner's win rate ``p`` against an opponent is its :class:`~.win_rates.WinRates`
 figure (decayed by ``[opponents] decay``, 0.99 a game of the pair as AlphaStar's ``Payoff``, with marl's prior of
 ``[opponents] prior`` games at 50% where AlphaStar's unseen pair is 0.5 and its seen one has no prior). PFSP draws a
 candidate with probability proportional to ``f(p)``: ``squared`` (1 - p)^2, ``variance`` p(1 - p), ``linear_capped``
@@ -55,7 +55,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import MarlError
-from .matchmaking import WinRates
+from .win_rates import WinRates
 
 ROLES = ("main", "main_exploiter", "league_exploiter")
 """A league learner's role, as its snapshots' rows carry it in ``meta["league_role"]``."""
@@ -65,7 +65,7 @@ LEAGUE_MODES = ("alphastar",)
 
 LIVE = -2
 """Opponent ids from ``LIVE`` down are learners as they are now: ``LIVE - j`` is learner ``j`` (never a player id of
-the league, nor :data:`~.matchmaking.LATEST_LEARNER`)."""
+the league, nor :data:`~.win_rates.LATEST_LEARNER`)."""
 
 WEIGHTINGS = {
     "squared": lambda x: (1.0 - x) ** 2,

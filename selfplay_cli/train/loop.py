@@ -26,47 +26,45 @@ import copy
 import json
 import time
 from collections.abc import Callable, Iterator
-from pathlib import Path
 from typing import Any, TextIO
 
 import numpy as np
 import torch
 
-from ..algos import get_learner
-from ..algos.joint import JointLearner
-from ..envs.team import team_spec
 from ..errors import MarlError, NonFiniteError
 from ..evaluation.executors import GauntletJob, JobDone, RatingExecutor, open_executor
-from ..evaluation.gauntlet import ALL_OLDER
-from ..league.game_table import KIND_CODES
-from ..league.store import League, PlayerRow
+from ..evaluation.gauntlet_plan import ALL_OLDER
+from ..league.store import League
 from ..league.variants import variant_key
-from ..play.training_games import OPPONENT, SelfPlayGames, learner_roles, learner_spaces
+from ..play.seat_plan import OPPONENT, learner_roles, learner_spaces
+from ..play.training_games import SelfPlayGames
 from ..policies.bots import league_bots
 from ..policies.network import resolve_device
 from ..ratings.ladder import DEFAULT_BOOTSTRAP
-from ..ratings.ladder_rows import LadderRow
-from ..results import COOPERATIVE, GameResult
+from ..results import GameResult
 from ..signals import clear_stop, deadline, signals_held, stoppable
-from .config import TrainConfig, learner_names, learner_setup, tensorboard_writer
+from .config import TrainConfig, tensorboard_writer
 from .curriculum import Curriculum
 from .league_roles import LeagueRoles
+from .learners import learner_names, make_learners
 from .lock import claim, write_lock
 from .opponents import Opponents, fixed_opponents
 from .progress import Heartbeat, SnapshotRecord, Standing, TrainReport
 from .ray_rollouts import OFF_POLICY_FRAGMENT, RayRollouts
 from .rollouts import Rollouts, load_teacher
+from .run_ratings import RunRatings
 from .shards import ShardSetup, plan_shards
-from .state import Job, RunState, SavedAs, SnapshotMoments
+from .state import Job, RunState, SnapshotMoments
 from .team import LearnerTeam
 
 METRICS_STEPS = 8192  # game steps between metrics lines at least (PPO's rollouts are longer: a line an update)
 
 
 class Trainer:
-    """Runs one training run against one league (see the module docstring). It composes the run's state and
-    snapshot moments (:attr:`moments`), its opponents (:attr:`opponents`), its rollouts (:attr:`rollouts`) and,
-    while training, the rating worker (:attr:`evaluator`); it keeps the budget, the clock and the metrics."""
+    """Runs one training run against one league (see the module docstring). It composes the run's learners
+    (:mod:`.learners`), state and snapshot moments (:attr:`moments`), its opponents (:attr:`opponents`), its rollouts
+    (:attr:`rollouts`), what the ledger says of its ratings (:attr:`ratings`) and, while training, the rating worker
+    (:attr:`evaluator`); it keeps the budget, the clock and the metrics."""
 
     def __init__(self, league: League, cfg: TrainConfig,
                  on_progress: Callable[[dict[str, Any]], None] | None = None,
@@ -96,7 +94,7 @@ class Trainer:
         self.spaces = learner_spaces(spec, spec.seat_spaces(game_cfg), layout, seat_roles)
         learned = learner_roles(layout, seat_roles)  # the role each learner learns (None: one role)
         torch.manual_seed(cfg.seed)
-        self.learners, saved = self._learners(layout, learned)
+        self.learners, saved = make_learners(cfg, spec, self.spaces, self.device, layout, learned)
         self.roles: LeagueRoles | None = None  # a league's roles (--league alphastar), each learner's first state
         first = None
         if cfg.league is not None:
@@ -139,7 +137,7 @@ class Trainer:
                                        device=self.device, roles=self.roles, first=first)
         self.evaluator: RatingExecutor | None = None  # set while training
         self.eval_seconds = 0.0  # time the gauntlets of this process took (beside training, unless inline)
-        self._rating_games0 = 0  # the run's rating games in the ledger when this session began (rating_games())
+        self._rating_games0 = 0  # the run's rating games in the ledger when this session began (ratings.rating_games())
         self.eval_events = 0  # gauntlets finished in this process
         self._t0 = 0.0  # when this process began training (its clock)
         self._start = 0.0  # when the run would have begun had it trained in this process alone (its clock)
@@ -151,25 +149,7 @@ class Trainer:
         self._next_steps: int | None = None
         self._updated_step = 0  # the step of the learners' last update (--restart-at-snapshot: its schedule)
         self.records: list[SnapshotRecord] = []  # the newest snapshots as the ledger rates them
-
-    def _learners(self, layout: np.ndarray, roles: list[str | None]) -> tuple[list[Any], SavedAs]:
-        """The run's learners, and what their snapshots say of them: one agent over the team's joint observation
-        and action (``--sharing sa``), or one learner per name, each seeded by its index."""
-        cfg, spec = self.cfg, self.spec
-        learner_cls, algo_cfg = get_learner(cfg.algo), getattr(cfg, cfg.algo)
-        if cfg.sharing == "sa":
-            sa = JointLearner(learner_cls, self.spaces[0], spec.n_seats, cfg.games, algo_cfg, seed=cfg.seed,
-                              device=self.device)
-            return [sa], SavedAs([sa.joint_seat], roles, {"seats": spec.n_seats, "base": sa.base})
-        setups = [learner_setup(cfg, space) for space in self.spaces]
-        team: Callable[[int], dict[str, Any]] = lambda i: {}  # noqa: E731
-        if getattr(learner_cls, "centralised", False):  # a critic of the whole team: what it reads of the team
-            game_cfg = spec.config(**cfg.env_options)
-            seat_spaces = [learner_setup(cfg, s)[0] for s in spec.seat_spaces(game_cfg)]
-            team = lambda i: {"team": team_spec(spec, game_cfg, seat_spaces, layout, i)}  # noqa: E731
-        learners = [learner_cls(seat, int((layout == i).sum()), section, seed=cfg.seed + i, device=self.device,
-                                **team(i)) for i, (seat, section) in enumerate(setups)]
-        return learners, SavedAs(self.spaces, roles, None)
+        self.ratings = RunRatings(league, cfg, spec, self.variant, self.bot_ids, self.run_dir)  # (read from the ledger)
 
     @property
     def games(self) -> SelfPlayGames | None:
@@ -289,37 +269,8 @@ class Trainer:
             self.state.jobs = [j for j in self.state.jobs if j[0] != names]
             self.eval_seconds += d.seconds
             self.eval_events += 1
-            self.records = self._records([self.league.roster.get_player(i) for i in d.job.snapshot_ids])
+            self.records = self.ratings.records([self.league.roster.get_player(i) for i in d.job.snapshot_ids])
             self._tell({"event": "snapshot", "records": self.records, "standing": self.standing()})
-
-    def _ladder(self, bootstrap: int = 0) -> list[LadderRow]:
-        """The ladder of the run's game and variant as the ledger has it now (empty without rating games)."""
-        from ..ratings.ladder import ladder
-
-        if not self.cfg.eval_games:
-            return []
-        return ladder(self.league, self.spec.name, bootstrap=bootstrap, variant=self.variant)
-
-    def _records(self, new: list[PlayerRow], rows: list[LadderRow] | None = None) -> list[SnapshotRecord]:
-        """Each new snapshot's record against the scripted players and its fitted rating, from the ledger (its row
-        of ``rows``, a ladder fitted now, or of a quick fit)."""
-        from ..ratings.pairs import head_to_head
-
-        rated = {r.player_id: r for r in (self._ladder() if rows is None else rows)}
-        out = []
-        for p in new:
-            vs, points = {}, {}
-            for bot, bot_id in self.bot_ids.items():
-                h = head_to_head(self.league, p.id, bot_id, variant=self.variant)
-                if h["games"]:
-                    vs[bot] = (h["wins"], h["draws"], h["losses"])
-                    if any(x not in (0.0, 0.5, 1.0) for r in h["rounds"] for x in r):  # (played for stakes)
-                        points[bot] = h["score"] * h["results"]
-            r = rated.get(p.id)
-            out.append(SnapshotRecord(p.full_name, p.meta.get("learner", ""), p.step, vs,
-                                      r.elo if r else None, r.ci_low if r else None, r.ci_high if r else None,
-                                      "comparisons" if self.spec.kind == COOPERATIVE else "games", points))
-        return out
 
     # -- one process per run ---------------------------------------------------------------------------------
     def _lock(self) -> None:
@@ -393,7 +344,7 @@ class Trainer:
         self._deadline = start + cfg.minutes * 60 if cfg.minutes is not None else None
         self._steps0 = state.steps
         # (before the gauntlets it owes: a killed session's finished one is played again, storing nothing new)
-        self._rating_games0 = self.rating_games()
+        self._rating_games0 = self.ratings.rating_games()
         with self._heartbeat():
             return self._session(start, elapsed0)
 
@@ -426,11 +377,11 @@ class Trainer:
         self._check_heart()
         # the final snapshots and the best as the ledger has them now, as `marl league ladder` shows them (its default
         # intervals: one claim, one figure)
-        final = self._ladder(DEFAULT_BOOTSTRAP)
-        self.records = self._records([self.league.roster.get_player(i) for i in state.latest], final)
-        plot = self._plot()
+        final = self.ratings.ladder(DEFAULT_BOOTSTRAP)
+        self.records = self.ratings.records([self.league.roster.get_player(i) for i in state.latest], final)
+        plot = self.ratings.plot()
         session = self.clock() - t0
-        rating_games = self.rating_games()
+        rating_games = self.ratings.rating_games()
         return TrainReport(cfg.run, state.steps, state.episodes, seconds=elapsed0 + session,
                            eval_games=rating_games, snapshots=state.snapshots, finals=list(self.records),
                            sessions=state.resumes + 1, session_steps=state.steps - self._steps0,
@@ -438,7 +389,7 @@ class Trainer:
                            session_eval_games=rating_games - self._rating_games0,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
                            rating_left=len(state.jobs), nash=self._nash(), rating=bool(cfg.eval_games),
-                           same_weights=self._same_weights(), **self._best(final))
+                           same_weights=self.ratings.same_weights(), **self.ratings.best(final))
 
     def _start_from(self) -> None:
         """``--init-from``: each learner starts from its snapshot of the run's ``init_plan`` (which is then its first
@@ -530,47 +481,6 @@ class Trainer:
         return NonFiniteError(f"learner {self.names[e.learner]}: {e}; training stopped at step {step:,} (the game's "
                               "numbers were finite: a smaller lr or reward_scale may help)")
 
-    def rating_games(self) -> int:
-        """Games the run's gauntlets have stored in the ledger, every session's: the ledger, not a count kept in
-        the run state, because a gauntlet that finished after the last snapshot moment of a killed session (or was
-        cut short in it: its finished matchups are stored, and not played again on resume) is in the ledger only.
-        A game counts once, a cooperative comparison as its two episodes."""
-        if not self.cfg.eval_games:
-            return 0
-        run = self.cfg.run
-        ids = [p.id for p in self.league.roster.players(env=self.spec.name, kind="snapshot", include_removed=True)
-               if p.run == run]
-        table = self.league.ledger.games(self.spec.name, players=ids, any_seat=True, variant=self.variant, pooled=False)
-        gauntlets = []
-        for match_id in np.unique(table.match_id).tolist():
-            kind, params = self.league.ledger.match_info(match_id)
-            if kind == "eval" and params.get("gauntlet"):
-                gauntlets.append(match_id)
-        mine = table.select(np.isin(table.match_id, gauntlets))
-        coop = mine.kind == KIND_CODES[COOPERATIVE]
-        played = int(np.unique(mine.game_id[~coop]).size + 2 * np.unique(mine.game_id[coop]).size)
-        if ids:  # and the games its first moment had the scripted players play each other (keyed under it)
-            bots = {p.full_name for p in self.league.roster.players(env=self.spec.name,
-                                                                    kind="bot")}  # (as the match names)
-            for _, params in self.league.ledger.keyed_matches(f"gauntlet/{min(ids)}/").values():
-                if params.get("a") in bots and params.get("b") in bots:
-                    played += sum(int(x) for x in params.get("record", [0, 0, 0])[:3])
-        return played
-
-    def _same_weights(self) -> dict[str, str]:
-        """The run's snapshots whose weights a snapshot of another run holds (the same command and seed run again),
-        by full name -> the other's full name: rated there, they need no rating games of their own."""
-        if not self.cfg.eval_games:
-            return {}
-        same = self.league.ledger.same_weights(self.spec.name)
-        out = {}
-        for p in self.league.roster.players(env=self.spec.name, kind="snapshot", include_removed=True):
-            if p.run == self.cfg.run and p.id in same:
-                other = self.league.roster.get_player(same[p.id])
-                if other.run != self.cfg.run:
-                    out[p.full_name] = other.full_name
-        return out
-
     def standing(self) -> Standing:
         """Where the run stands now (see :class:`Standing`); meaningful once training has begun."""
         cfg = self.cfg
@@ -605,27 +515,6 @@ class Trainer:
         if self._trained is not None:
             return self._trained
         return max(self.clock() - self._t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0), 0.0)
-
-    def _best(self, rows: list[LadderRow]) -> dict[str, Any]:
-        """The report's ``best``: the run's best snapshot in the ladder ``rows`` (its margin over the run's next, or
-        the snapshots it is tied with), and ``side_bests``: in a game rated per side, the best of each side. None of
-        them without rating games."""
-        if not self.cfg.eval_games:
-            return {}
-        bests = [r for r in rows if r.best and r.run == self.cfg.run]
-        return {"best": bests[0] if bests else None, "side_bests": [r for r in bests if r.side is not None]}
-
-    def _plot(self) -> Path | str | None:
-        """The run's rating curves as ``runs/<run>/ratings.png`` (as ``marl league plot --run`` draws them); None
-        without rating games. A plot that cannot be written does not fail a finished run: the reason is returned."""
-        from ..report.plots import write_run_plot
-
-        if not self.cfg.eval_games:
-            return None
-        try:
-            return write_run_plot(self.league, self.cfg.run, self.run_dir / "ratings.png")
-        except (MarlError, OSError) as e:
-            return f"no plot written ({e})"
 
     def _waiting(self) -> None:
         if self.on_progress:

@@ -1,7 +1,7 @@
 """A run's opponents: who sits in the opponent seats of its training games, and what their games teach PFSP.
 
 The :class:`~.matchmaking.Matchmaker` draws an opponent id for each opponent slot of a game starting (a scripted
-player, one of the run's snapshots, or :data:`~.matchmaking.LATEST_LEARNER`); :class:`Opponents` turns the ids into
+player, one of the run's snapshots, or :data:`~.win_rates.LATEST_LEARNER`); :class:`Opponents` turns the ids into
 policies (the snapshots loaded once, then kept), keeps a slot's opponent until the next swap with ``--swap-every``,
 keeps the matchmaker's pool the run's snapshots, and reads each finished game into the win-rate book and the ledger.
 In a league (``--league alphastar``) each learner's role draws its opponents instead (:mod:`.league_roles`), and a
@@ -29,7 +29,8 @@ from ..ratings.meta_nash import RunNash, run_nash
 from ..results import GameResult
 from .config import TrainConfig
 from .league_roles import LeagueRoles, Past, live, live_learner
-from .matchmaking import LATEST_LEARNER, Matchmaker, WinRates
+from .matchmaking import Matchmaker
+from .win_rates import LATEST_LEARNER, WinRates
 
 POLICY_CACHE = 32
 """Opponent snapshots kept loaded, the most recently drawn (a run's pool is its last ``--window`` snapshots): memory

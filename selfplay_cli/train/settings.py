@@ -19,7 +19,8 @@ from typing import Any
 
 from ..errors import MarlError
 from ..league.store import League, shown
-from .config import ON_POLICY, TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
+from .bounds import ON_POLICY
+from .config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
 from .matchmaking import parse_bots
 
 ALGO_SECTIONS = ("ppo", "dqn", "sac", "mappo", "poca")

@@ -25,10 +25,11 @@ from typing import Any
 
 import numpy as np
 
-from ..play.training_games import OPPONENT, SelfPlayGames
+from ..play.seat_plan import OPPONENT
+from ..play.training_games import SelfPlayGames
 from ..results import GameResult
-from .matchmaking import LATEST_LEARNER
 from .opponents import PolicyCache
+from .win_rates import LATEST_LEARNER
 
 
 @dataclass(frozen=True)
