@@ -91,7 +91,7 @@ def descendants(root: int) -> list[Proc]:
 
 def ray_keeper(p: Proc, pid: int) -> bool:
     """Whether ``p`` is the keeper of Ray started by process ``pid`` (``python -c KEEPER pid ...`` of
-    :mod:`selfplay_cli.train.ray_support`, in a session of its own)."""
+    :mod:`selfplay_cli.ray_support`, in a session of its own)."""
     a = p.argv
     return len(a) > 3 and a[1] == "-c" and "select.select" in a[2] and a[3] == str(pid)
 

@@ -332,8 +332,9 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     Idempotent: the gauntlet is one unit of work keyed by the moment (``gauntlet/<its first snapshot id>``,
     :func:`play_gauntlet`'s ``key``): played again (cut short by a kill, then run again on resume; its matchups
     played as jobs of their own, :func:`open_matchups`), it stores what is missing and nothing twice, with the same
-    choices. A pair whose players, or copies of them (the same weights, :meth:`League.same_weights`: another run
-    with the same seed), already met in another gauntlet is left out.
+    choices. A pair whose players, or copies of them (the same weights,
+    :meth:`~selfplay_cli.league.ledger.Ledger.same_weights`: another run with the same seed), already met in another
+    gauntlet is left out.
     """
     moment = moment or plan_moment(league, snapshot_ids, config.older)
     if moment is None:

@@ -144,12 +144,13 @@ def play_leased(league: League, worker_id: int, job: JobRow, *, beat: float = BE
                 parallel: int = 1024, on_games: Callable[[int], None] | None = None,
                 base_backoff: float | None = None, retry: Callable[[Callable[[], Any]], Any] = lambda fn: fn()
                 ) -> Outcome:
-    """Play a job this worker leased while its heart beats, then store it (:meth:`League.finish_job`), or put it back
-    as failed with a short line saying what failed (:func:`error_line`), whatever the error (a recursion or memory
-    error too): tried again after a backoff, dead after its tries. A spec that cannot be played (:func:`check_job`)
-    makes the job dead at once, with ``bad job spec: ...``. ``retry`` runs each write (a worker tries again while the
-    database is away, so games played are not played again). A :class:`KeyboardInterrupt` (Ctrl-C, SIGTERM) and any
-    other ``BaseException`` propagate: the caller gives the job back."""
+    """Play a job this worker leased while its heart beats, then store it
+    (:meth:`~selfplay_cli.league.queue.Queue.finish_job`), or put it back as failed with a short line saying what failed
+    (:func:`error_line`), whatever the error (a recursion or memory error too): tried again after a backoff, dead after
+    its tries. A spec that cannot be played (:func:`check_job`) makes the job dead at once, with ``bad job spec: ...``.
+    ``retry`` runs each write (a worker tries again while the database is away, so games played are not played again). A
+    :class:`KeyboardInterrupt` (Ctrl-C, SIGTERM) and any other ``BaseException`` propagate: the caller gives the job
+    back."""
     from ..errors import MarlIOError
     from ..files import cache_home
 

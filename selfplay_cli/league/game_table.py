@@ -23,7 +23,7 @@ KIND_CODES = {TWO_SIDES: 0, COOPERATIVE: 1, FREE_FOR_ALL: 2}
 
 @dataclass(frozen=True)
 class GameRow:
-    """One stored game with everything needed to replay it: :meth:`League.game`.
+    """One stored game with everything needed to replay it: :meth:`~selfplay_cli.league.ledger.Ledger.game`.
 
     ``players`` are player ids per seat; ``match_params`` are the parameters of the match that played it (for
     rated and training matches, ``env_options``: the game options it was played under); ``actions`` the encoded

@@ -63,9 +63,10 @@ def blob_cache_file(sha: str) -> Path:
 
 def cached_blob(league: League, sha: str, name: str) -> Path:
     """The blob ``sha`` as a file of this machine's cache: the cached file when it hashes to ``sha``, else fetched
-    from the league (:meth:`League.blob_bytes`, which refuses bytes that do not hash to it, or more of them than a
-    snapshot file may hold) and written through a temporary name. The cache's folders are made and written only
-    inside the cache (:func:`~selfplay_cli.files.folder_inside`). ``name`` (the snapshot) is for messages."""
+    from the league (:meth:`~selfplay_cli.league.blobs.Blobs.blob_bytes`, which refuses bytes that do not hash to it, or
+    more of them than a snapshot file may hold) and written through a temporary name. The cache's folders are made and
+    written only inside the cache (:func:`~selfplay_cli.files.folder_inside`). ``name`` (the snapshot) is for
+    messages."""
     from ..policies.snapshot_format import MAX_FILE_BYTES
 
     path = blob_cache_file(sha)
@@ -84,7 +85,7 @@ def cached_blob(league: League, sha: str, name: str) -> Path:
 def check_legacy_file(row: PlayerRow, path: Path) -> str:
     """Refuse (:class:`SnapshotError`) a file that is not the snapshot of a row written before ``sha256`` meant the
     whole file (see :func:`check_file`), else return the sha256 of the bytes checked: what
-    :meth:`League.ensure_blobs` needs to store such a row's blob."""
+    :meth:`~selfplay_cli.league.blobs.Blobs.ensure_blobs` needs to store such a row's blob."""
     from ..policies.snapshot_reader import read_snapshot
 
     snap = read_snapshot(path, expect_env=row.env)

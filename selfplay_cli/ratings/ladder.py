@@ -9,7 +9,7 @@ Nothing here is stored: every ladder is refitted from the games, so it always ag
   ``prior`` virtual draws (default :data:`~selfplay_cli.stats.bradley_terry.DEFAULT_PRIOR` = 2, as BayesElo;
   ``prior=0`` is the plain maximum-likelihood fit), a confidence interval per player and ranks.
 * :func:`ladder` (this module) fits the pairwise results of one env of the league
-  (:meth:`~selfplay_cli.league.store.League.games`: a two-sides game, a cooperative comparison of two episodes on one
+  (:meth:`~selfplay_cli.league.ledger.Ledger.games`: a two-sides game, a cooperative comparison of two episodes on one
   seed, each two players of a free-for-all game), and adds what the league knows: each snapshot's run, the best
   snapshot of each run, every player's record against the env's scripted players, and in cooperative games its mean
   team return.
@@ -243,7 +243,7 @@ def ladder(
 
 def shown_exploitability(meta: dict[str, Any]) -> dict[str, Any] | None:
     """The exploitability a player's row shows, from its ``meta["exploitability"]`` (filed by
-    :meth:`~selfplay_cli.league.store.League.set_exploitability`): the exact figure where there is one (it says how
+    :meth:`~selfplay_cli.league.roster.Roster.set_exploitability`): the exact figure where there is one (it says how
     beatable the player is), else the lower bound (a trained best response's return: the player is at least that
     beatable), as filed with its ``kind``; None where nothing was measured."""
     book = meta.get("exploitability") or {}

@@ -1,7 +1,7 @@
 """Two players at a time: their record from the ledger (with game pairs), the games a tournament still needs, and
 the records and payoffs of every pair of a set of players (the score matrix, the Nash meta-game).
 
-All read the ledger's pairwise results (:meth:`~selfplay_cli.league.store.League.games`), so they work for every
+All read the ledger's pairwise results (:meth:`~selfplay_cli.league.ledger.Ledger.games`), so they work for every
 kind of game: a two-sides game is one result, a cooperative comparison (two episodes on one seed) one, a
 free-for-all game one per two players in it.
 """

@@ -198,8 +198,8 @@ def load_win_rates(league: League, env: str, learner_ids: Iterable[int], decay: 
     """The win-rate book of ``learner_ids`` replayed from the league ledger of ``env`` in the run's ``variant`` (for
     a resumed run).
 
-    Uses :meth:`League.games` (2-seat games between different players, in game-id order) restricted to games
-    in which a learner sat, then :meth:`WinRates.from_ledger`.
+    Uses :meth:`~selfplay_cli.league.ledger.Ledger.games` (2-seat games between different players, in game-id order)
+    restricted to games in which a learner sat, then :meth:`WinRates.from_ledger`.
     """
     ids = [int(x) for x in learner_ids]
     table = league.ledger.games(env, players=ids, any_seat=True, rated=False, variant=variant, pooled=False)
