@@ -55,15 +55,21 @@ _BEFORE = pytest.StashKey[set]()
 # told from the folders of another run on the same machine at the same time.
 _SESSION = os.environ.setdefault("MARL_TEST_SESSION", str(os.getpid()))
 _LEFT_BEHIND = f"marl-pg-{_SESSION}-"
+# Ray keeps each session's logs and sockets in ``$RAY_TMPDIR/ray`` (the temporary folder by default) after it ends,
+# by design: the suite's Ray sessions (its own and its marl processes', which inherit this) go to one folder of its
+# own, removed when the run ends (pytest_sessionfinish). A short path: Ray's sockets live in it.
+_RAY_TMP = Path(tempfile.gettempdir()) / f"marl-ray-{_SESSION}"
+os.environ.setdefault("RAY_TMPDIR", str(_RAY_TMP))
 
 
 def _pg_folders() -> set[str]:
     return {p.name for p in Path(tempfile.gettempdir()).glob(f"{_LEFT_BEHIND}*")}
 
 
-def _pg_processes(folders: set[str]) -> list[str]:
-    """Live processes whose command line names one of ``folders`` (a PostgreSQL server of the suite), as ``pid
-    command`` (the command cut to 120 characters for the report; the match is on the whole line)."""
+def _processes_naming(folders: set[str]) -> list[str]:
+    """Live processes whose command line names one of ``folders`` (a PostgreSQL server of the suite, or a Ray
+    process of its Ray folder), as ``pid command`` (the command cut to 120 characters for the report; the match is
+    on the whole line)."""
     return [f"{p.pid} {p.cmdline[:120]}" for p in procs.processes()
             if not p.zombie and any(f in p.cmdline for f in folders)]
 
@@ -74,11 +80,21 @@ def pytest_sessionstart(session):
 
 def pytest_sessionfinish(session, exitstatus):
     """After the whole run (in the process that ran it, or that handed it to -n workers, once they are gone): no
-    PostgreSQL server the suite started runs on, and none of their folders is left; the run fails where one is."""
+    PostgreSQL server or Ray process the suite started runs on, and none of their folders is left (the Ray folder,
+    whose sessions all ended, is removed here); the run fails where one is."""
     if hasattr(session.config, "workerinput"):  # (an -n worker: its own servers are checked by its controller)
         return
     new = _pg_folders() - session.config.stash.get(_BEFORE, set())
-    left = _pg_processes(new) if sys.platform.startswith("linux") else []
+    ray_tmp = {str(_RAY_TMP)} if os.environ.get("RAY_TMPDIR") == str(_RAY_TMP) and _RAY_TMP.exists() else set()
+    left = _processes_naming(new | ray_tmp) if sys.platform.startswith("linux") else []
+    deadline = time.monotonic() + 10.0  # (a Ray process told to end by its session's shutdown may take a moment)
+    while left and ray_tmp and time.monotonic() < deadline:
+        time.sleep(0.2)
+        left = _processes_naming(new | ray_tmp)
+    if ray_tmp and not left:  # (Ray's folder of sessions that all ended: nothing of it is needed)
+        shutil.rmtree(_RAY_TMP, ignore_errors=True)
+        ray_tmp = {str(_RAY_TMP)} if _RAY_TMP.exists() else set()
+    new |= {Path(f).name for f in ray_tmp}
     if new or left:
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
         reporter = session.config.pluginmanager.get_plugin("terminalreporter")
