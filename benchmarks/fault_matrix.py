@@ -2176,4 +2176,7 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from results_file import recorded
+
+    with recorded():
+        sys.exit(main())

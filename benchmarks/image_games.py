@@ -174,4 +174,7 @@ def team_returns(home: Path, game_ids: list[int]) -> dict[str, tuple[float, floa
 
 
 if __name__ == "__main__":
-    main()
+    from results_file import recorded
+
+    with recorded():
+        main()

@@ -176,4 +176,7 @@ def _plot(results: dict, path: Path) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from results_file import recorded
+
+    with recorded():
+        main()

@@ -227,4 +227,7 @@ def runner_part(n_games: int) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from results_file import recorded
+
+    with recorded():
+        main()

@@ -130,4 +130,7 @@ def project(r: dict) -> str:
 
 
 if __name__ == "__main__":
-    main()
+    from results_file import recorded
+
+    with recorded():
+        main()

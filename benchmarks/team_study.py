@@ -103,4 +103,11 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from results_file import recorded
+
+    from itertools import takewhile
+
+    after = sys.argv[sys.argv.index("--parts") + 1:] if "--parts" in sys.argv else []
+    parts = list(takewhile(lambda a: not a.startswith("-"), after))  # (a study of some parts: a file of its own)
+    with recorded("_".join(["team_study", *parts])):
+        main()

@@ -172,15 +172,34 @@ FIGURES: dict[str, tuple[str, Any]] = {
     "team_study_pursuit": ("docs/team-study-pursuit.json", _team_study("docs/team-study-pursuit.json")),
     "team_study_lander": ("docs/team-study-lander.json", _team_study("docs/team-study-lander.json")),
 }
-"""Each block of figures a docs page may quote: the benchmark output it is rendered from, and how."""
+"""The blocks of figures a docs page may quote that are rendered as tables: the benchmark output each is rendered from,
+and how (any other block quotes what a benchmark printed, from ``benchmarks/results/NAME.json``)."""
+
+
+def _took(seconds: float) -> str:
+    return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} minutes"
+
+
+def _printed(source: str) -> Any:
+    """A benchmark's results file (``benchmarks/results_file.py`` writes it) as what the script printed, under a line
+    saying the command, when, on what machine, at what load and on what code it ran."""
+
+    def render(r: dict[str, Any]) -> str:
+        load = f"load {r['load_start'][0]:.1f} at its start, {r['load_end'][0]:.1f} at its end"
+        code = f", code {r['commit']}" if r.get("commit") else ""
+        return (f"From `{source}`: `{r['command']}`, run {r['date']} on {r['machine']} ({load}{code}; "
+                f"{_took(r['seconds'])}):\n\n```text\n" + "\n".join(r["printed"]) + "\n```\n")
+
+    return render
 
 
 def figures(name: str, root: Any) -> str:
-    """The figures block ``name`` (:data:`FIGURES`), rendered from its output file under the repository ``root``."""
+    """The figures block ``name``, rendered from its output file under the repository ``root``: a block of
+    :data:`FIGURES`, or else what ``benchmarks/results/NAME.json`` says a benchmark printed."""
     import json
     from pathlib import Path
 
-    source, make = FIGURES[name]
+    source, make = FIGURES.get(name) or (f"benchmarks/results/{name}.json", _printed(f"benchmarks/results/{name}.json"))
     return make(json.loads((Path(root) / source).read_text()))
 
 

@@ -4,6 +4,9 @@ CLI itself says."""
 
 from __future__ import annotations
 
+import datetime
+import json
+import os
 import re
 import shutil
 import subprocess
@@ -55,7 +58,34 @@ def test_figures_quoted_in_the_docs_are_their_benchmarks_output():
         assert len(blocks) == text.count("<!-- figures:") == text.count("<!-- /figures -->"), \
             f"{page}: a figures block not closed (or not opened) escapes its check"
         assert with_figures(text, ROOT) == text, f"{page}: regenerate: python -m selfplay_cli.reference --write"
-    assert quoted == set(FIGURES)
+    assert set(FIGURES) <= quoted
+    for name in quoted - set(FIGURES):  # what a benchmark printed, with when, where and on what code it ran
+        r = json.loads((ROOT / "benchmarks" / "results" / f"{name}.json").read_text())
+        assert r["printed"] and r["command"].startswith("python benchmarks/"), name
+        assert datetime.date.fromisoformat(r["date"]) and "cores" in r["machine"] and len(r["load_start"]) == 3, name
+
+
+def test_a_benchmark_run_leaves_its_figures_in_a_file_only_when_it_ends_well(tmp_path, monkeypatch, capsys):
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    try:
+        import results_file
+    finally:
+        sys.path.remove(str(ROOT / "benchmarks"))
+    monkeypatch.setattr(results_file, "RESULTS", tmp_path)
+    monkeypatch.setattr(sys, "argv", ["benchmarks/speed.py", "--rounds", "3"])
+    with results_file.recorded():
+        print("pong view: 41,000 steps/s")
+        print("core: 120,000 steps/s")
+    assert capsys.readouterr().out == "pong view: 41,000 steps/s\ncore: 120,000 steps/s\n"  # (the terminal's too)
+    r = json.loads((tmp_path / "speed.json").read_text())
+    assert r["printed"] == ["pong view: 41,000 steps/s", "core: 120,000 steps/s"]
+    assert r["command"] == "python benchmarks/speed.py --rounds 3" and r["benchmark"] == "speed"
+    assert f"{os.cpu_count()} cores" in r["machine"] and r["started"].startswith(r["date"])
+    with pytest.raises(RuntimeError), results_file.recorded("speed"):
+        print("half a run")
+        raise RuntimeError("stopped")
+    assert json.loads((tmp_path / "speed.json").read_text())["printed"] == r["printed"]  # the good run's stays
+    assert [p.name for p in tmp_path.iterdir()] == ["speed.json"]  # (no temporary file left)
 
 
 def test_the_sites_home_is_the_readme():
