@@ -103,9 +103,9 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    from results_file import recorded
-
     from itertools import takewhile
+
+    from results_file import recorded
 
     after = sys.argv[sys.argv.index("--parts") + 1:] if "--parts" in sys.argv else []
     parts = list(takewhile(lambda a: not a.startswith("-"), after))  # (a study of some parts: a file of its own)
