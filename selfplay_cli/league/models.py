@@ -178,7 +178,7 @@ class Player(Base):
     path: Mapped[str | None] = mapped_column(Text)
     sha256: Mapped[str | None] = mapped_column(String(64))
     """The sha256 of the snapshot's whole file (header with its metadata, and the weights): the file a player
-    stands for. Every load of the player checks its file against it (``players.files.check_file``), so a file
+    stands for. Every load of the player checks its file against it (``players.files.read_row_snapshot``), so a file
     replaced or edited after registration is refused. Leagues written before marl settled this hold the weights'
     checksum (``meta["weights_sha256"]``) here for trained snapshots; those rows are checked by that checksum and the
     file's run, name and step instead. None for bots."""

@@ -1,8 +1,8 @@
 """Where this machine reads a league snapshot's file from, and whether it is the file its row registered.
 
 A row's ``sha256`` is the sha256 of its whole file (:attr:`selfplay_cli.league.models.Player.sha256`), and every
-load of a league player checks it (:func:`check_file`), so a file copied over another, or edited, never plays under
-the row's name.
+load of a league player checks it (:func:`read_row_snapshot`), so a file copied over another, or edited, never plays
+under the row's name.
 
 Where a snapshot is read from (:func:`snapshot_path`): its file in the league home where the league has a home and
 the file is there (where a row's file lies is :meth:`League.snapshot_file`'s to say); otherwise (a database opened
@@ -25,9 +25,10 @@ from ..league.blobs import check_sha
 from ..league.store import SNAPSHOTS, League, PlayerRow, check_existing_name, check_name
 
 if TYPE_CHECKING:
-    from ..policies.snapshot_reader import Snapshot
+    from ..policies.snapshot_reader import Registered, Snapshot
 
-__all__ = ["blob_cache_file", "cached_blob", "check_file", "check_legacy_file", "snapshot_path", "snapshot_relpath"]
+__all__ = ["blob_cache_file", "cached_blob", "check_legacy_file", "read_row_snapshot", "registered", "snapshot_path",
+           "snapshot_relpath"]
 
 
 def snapshot_relpath(run: str, name: str) -> str:
@@ -43,7 +44,7 @@ def snapshot_path(league: League, row: PlayerRow) -> Path:
     """The file this machine reads the snapshot ``row`` from: its file in the league home when the league has a home
     and the file is there (checked to stay inside the home, :meth:`League.snapshot_file`), else the snapshot's blob
     from the league in this machine's cache (:func:`cached_blob`). Whether the file is the one the row registered is
-    for the reader to check (:func:`check_file`); a file in the home that is not is refused, never replaced."""
+    for the reader to check (:func:`read_row_snapshot`); a file in the home that is not is refused, never replaced."""
     home_file = None
     if league.home is not None:
         home_file = league.snapshot_file(row)
@@ -82,35 +83,28 @@ def cached_blob(league: League, sha: str, name: str) -> Path:
     return path
 
 
+def registered(row: PlayerRow) -> Registered:
+    """What ``row`` registered its snapshot file as, for the reader to hold the file to."""
+    from ..policies.snapshot_reader import Registered
+
+    return Registered(row.full_name, row.sha256, row.run, row.name, row.step)
+
+
+def read_row_snapshot(league: League, row: PlayerRow) -> tuple[Snapshot, Path]:
+    """The snapshot ``row`` stands for, and the file it was read from (:func:`snapshot_path`): validated in full
+    (:func:`~selfplay_cli.policies.snapshot_reader.read_snapshot`) and the file the row registered, else refused in
+    one :class:`SnapshotError` naming the file."""
+    from ..policies.snapshot_reader import read_snapshot
+
+    expected = registered(row)
+    path = snapshot_path(league, row)
+    return read_snapshot(path, expect_env=row.env, registered=expected), path
+
+
 def check_legacy_file(row: PlayerRow, path: Path) -> str:
     """Refuse (:class:`SnapshotError`) a file that is not the snapshot of a row written before ``sha256`` meant the
-    whole file (see :func:`check_file`), else return the sha256 of the bytes checked: what
+    whole file, else return the sha256 of the bytes checked: what
     :meth:`~selfplay_cli.league.blobs.Blobs.ensure_blobs` needs to store such a row's blob."""
     from ..policies.snapshot_reader import read_snapshot
 
-    snap = read_snapshot(path, expect_env=row.env)
-    check_file(row, snap, path)
-    return snap.sha256
-
-
-def check_file(row: PlayerRow, snap: Snapshot, path: Path) -> None:
-    """Refuse a snapshot file that is not the one ``row`` registered (:class:`SnapshotError` naming the file).
-
-    The file's sha256 must be the row's. A row written before ``sha256`` meant the whole file holds the weights'
-    checksum instead (trained snapshots of older leagues): then the weights (already verified against that checksum)
-    and the file's own run, name and step must be the row's.
-    """
-    from ..policies.network import SnapshotError
-
-    if row.sha256 and snap.sha256 == row.sha256:
-        return
-    meta = snap.meta
-    if (row.sha256 and row.sha256 == meta.weights_sha256 and meta.run == row.run and meta.name == row.name
-            and meta.step == row.step):
-        return
-    is_of = f"{meta.id} at step {meta.step:,}" if meta.name else "another snapshot"
-    raise SnapshotError(
-        f"{path}: this file is not the snapshot {row.full_name} the league registered (sha256 {snap.sha256[:12]}, "
-        f"registered {str(row.sha256 or '')[:12] or 'none'}; the file holds {is_of}): it was replaced or changed "
-        "since; put the original back, or import this file under a name of its own with marl checkpoint import"
-    )
+    return read_snapshot(path, expect_env=row.env, registered=registered(row)).sha256

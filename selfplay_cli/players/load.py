@@ -58,7 +58,7 @@ def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: boo
     machine, or without a home), the snapshot's blob fetched from the league into the local cache
     (:func:`~selfplay_cli.players.files.snapshot_path`). It is validated in full before anything is built from it
     (:func:`~selfplay_cli.policies.snapshot_reader.read_snapshot`) and must be the file the row registered
-    (:func:`~selfplay_cli.players.files.check_file`): a file copied over it, or edited, is refused with an error
+    (:func:`~selfplay_cli.players.files.read_row_snapshot`): a file copied over it, or edited, is refused with an error
     naming it, so no game is ever played or stored under the wrong identity. A row whose ``meta`` cannot be read
     (:attr:`~selfplay_cli.league.roster.PlayerRow.unusable`) is refused in one line."""
     if row.unusable is not None:
@@ -66,15 +66,12 @@ def load_player(league: League, row: PlayerRow, device: str = "cpu", greedy: boo
     if row.is_bot:
         return ScriptedPolicy(row.env, row.name, seed=seed)
     from ..policies.snapshot_policy import policy_of  # torch is imported only when a network is needed
-    from ..policies.snapshot_reader import read_snapshot
-    from .files import check_file, snapshot_path
+    from .files import read_row_snapshot
 
     _inference_threads(device)
     if row.removed:
         raise MarlError(f"{row.full_name} was removed from the league; its games stay in the ledger")
-    path = snapshot_path(league, row)
-    snap = read_snapshot(path, expect_env=row.env)
-    check_file(row, snap, path)
+    snap, path = read_row_snapshot(league, row)
     return policy_of(snap, path, id=row.full_name, device=device,
                      greedy=plays_greedy(row) if greedy is None else greedy, seed=seed)
 

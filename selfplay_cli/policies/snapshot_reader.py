@@ -322,15 +322,49 @@ class Snapshot:
     sha256: str
 
 
-def read_snapshot(path: str | os.PathLike[str], expect_env: str | None = None) -> Snapshot:
+@dataclass(frozen=True)
+class Registered:
+    """What a league's row says its snapshot file is (:func:`selfplay_cli.players.files.registered`), in plain values:
+    the reader holds a file to it without knowing leagues. ``sha256`` is the whole file's; a row written before it
+    meant the whole file holds the weights' checksum there instead, and then the file's own run, name and step must
+    be the row's."""
+
+    full_name: str
+    sha256: str | None
+    run: str
+    name: str
+    step: int
+
+
+def _check_registered(path: Any, file_sha: str, meta: SnapshotMeta, row: Registered) -> None:
+    """Refuse a snapshot file that is not the one ``row`` registered (:class:`SnapshotError` naming the file)."""
+    if row.sha256 and file_sha == row.sha256:
+        return
+    if (row.sha256 and row.sha256 == meta.weights_sha256 and meta.run == row.run and meta.name == row.name
+            and meta.step == row.step):
+        return  # (an older row: the weights are checked against that checksum before the file is used)
+    is_of = f"{meta.id} at step {meta.step:,}" if meta.name else "another snapshot"
+    raise SnapshotError(
+        f"{path}: this file is not the snapshot {row.full_name} the league registered (sha256 {file_sha[:12]}, "
+        f"registered {str(row.sha256 or '')[:12] or 'none'}; the file holds {is_of}): it was replaced or changed "
+        "since; put the original back, or import this file under a name of its own with marl checkpoint import"
+    )
+
+
+def read_snapshot(path: str | os.PathLike[str], expect_env: str | None = None,
+                  registered: Registered | None = None) -> Snapshot:
     """Read one snapshot file, checking everything before building anything from it: the file's size, its header,
     format and version, metadata, the declared tensors against the network the metadata describes (names, dtypes,
     shapes, byte ranges, :data:`~selfplay_cli.policies.snapshot_format.LIMITS`), the game (and ``expect_env``) and
     its spaces, then the weights' checksum and their values (every one finite; a Gaussian head's log-std within
-    bounds).
+    bounds). Where a league's row is given (``registered``), the file must be the one it registered, checked as soon
+    as its metadata is read: a file copied over it, or edited, is refused naming it.
     The file is read once: the weights, the checksum and the file's hash all come from the same bytes."""
     data, header, start = _read_whole(path)
     meta = _meta_of(path, header)
+    file_sha = hashlib.sha256(data).hexdigest()
+    if registered is not None:  # (a file that is not the row's is refused first, whatever else it holds)
+        _check_registered(path, file_sha, meta, registered)
     _check_layout(path, header, meta)
     _check_env(path, meta, expect_env)
     if not meta.weights_sha256:
@@ -347,7 +381,7 @@ def read_snapshot(path: str | os.PathLike[str], expect_env: str | None = None) -
     if weights_sha256(tensors) != meta.weights_sha256:
         raise SnapshotError(f"{path}: weights do not match their checksum (file corrupt?)")
     check_values(path, arrays)
-    return Snapshot(tensors=tensors, meta=meta, sha256=hashlib.sha256(data).hexdigest())
+    return Snapshot(tensors=tensors, meta=meta, sha256=file_sha)
 
 
 def load_snapshot(

@@ -100,15 +100,12 @@ def _source(league: League, cfg: TrainConfig) -> tuple[str, list[PlayerRow]]:
 def _read(league: League, row: PlayerRow) -> Any:
     """The snapshot file of ``row``, validated in full (the hostile-file reader) and checked to be the one its row
     registered."""
-    from ..players.files import check_file, snapshot_path
-    from ..policies.snapshot_reader import read_snapshot
+    from ..players.files import read_row_snapshot
 
     if row.removed:
         raise MarlError(f"--init-from: {row.full_name} was removed from the league")
     try:
-        path = snapshot_path(league, row)
-        snap = read_snapshot(path, expect_env=row.env)
-        check_file(row, snap, path)
+        snap, _ = read_row_snapshot(league, row)
     except MarlError as e:
         raise MarlError(f"--init-from: {e}") from None
     return snap
