@@ -55,6 +55,7 @@ from selfplay_cli.envs.tennis.config import (
 )
 from selfplay_cli.envs.tennis.core import TennisCore, mirrored
 from selfplay_cli.envs.tennis.physics import game_won, server_of
+from selfplay_cli.envs.tennis.scalar import ScalarTennis
 from selfplay_cli.envs.tennis.view import TennisParallelEnv
 from selfplay_cli.play import Game, play
 from selfplay_cli.policies import ScriptedPolicy
@@ -795,6 +796,136 @@ def test_view_is_the_cores_game():
         assert [rew[a] for a in env.possible_agents] == r[:, 0].tolist()
     assert info["player_0"]["score"] == tuple(int(s) for s in c.score[:, 0])
     assert info["player_1"]["score"] == tuple(int(s) for s in c.score[::-1, 0])
+
+
+def _lockstep(game: ScalarTennis, core: TennisCore, rule, steps: int, rng, random_play: bool) -> None:
+    """Play ``game`` and the one-game ``core`` side by side (the bot, with a random stroke now and then, or random
+    actions beyond [-1, 1] too): the same observations, rewards and state at every step, bit for bit; a game that
+    ends starts again with a new seed in both."""
+    discrete = core.config.discrete
+    for _ in range(steps):
+        obs = core.observe()
+        assert np.array_equal(game.observe().view(np.uint32), obs[:, 0].view(np.uint32))
+        if random_play:
+            acts = rng.integers(0, 3, (2, 1, 3)) if discrete else rng.uniform(-1.3, 1.3, (2, 1, 3)).astype(np.float32)
+        else:
+            acts = np.stack([rule(obs[0]), rule(obs[1])])
+            if rng.random() < 0.1:
+                acts[rng.integers(2)] = rng.integers(0, 3, 3) if discrete else rng.uniform(-1, 1, 3)
+        rewards = game.step(acts[0, 0].tolist(), acts[1, 0].tolist())
+        assert list(rewards) == core.step(acts)[:, 0].tolist()
+        state, want = game.get_state(), core.get_state()
+        for name, value in want.items():
+            assert value.dtype == state[name].dtype and np.array_equal(value, state[name]), name
+        if core.over[0]:
+            seed = int(rng.integers(2**40))
+            core.reset([0], [seed])
+            game.reset(seed)
+
+
+@pytest.mark.parametrize("options", [
+    {},
+    {"serve_mode": "mixed", "hit_reward": 0.3, "return_reward": 0.5, "bat_scale": 3.0},
+    {"drag": 0.0, "magnus": 2.0, "points_to_win": 3, "max_steps": 400, "toss_jitter": 0.0, "serve_time": 0.3},
+])
+def test_the_views_game_in_python_floats_is_the_cores_bit_for_bit(options):
+    """The view plays one game in Python floats (:class:`ScalarTennis`, several times faster than a batch of one): it
+    is the core's game, every observation, reward and number of the state, in rallies, faults, serves running out of
+    time, games won and cut by the time limit, with the live options changed between steps."""
+    config = TennisConfig(**options)
+    rng = np.random.default_rng(len(options))
+    seed = int(rng.integers(100))
+    core, game = core_of(seeds=(seed,), **options), ScalarTennis(config)
+    game.reset(seed)
+    rule = serve_bot_for(config)
+    _lockstep(game, core, rule, 400, rng, random_play=False)
+    _lockstep(game, core, rule, 150, rng, random_play=True)
+    core.set_options(hit_reward=0.125, return_reward=0.25, point_reward=3.0, bat_scale=2.0)
+    game.set_options(hit_reward=0.125, return_reward=0.25, point_reward=3.0, bat_scale=2.0)
+    _lockstep(game, core, rule, 400, rng, random_play=False)
+
+
+@pytest.mark.parametrize("options", [{}, {"serve_bounce": True, "hit_reward": 0.2, "return_reward": 0.3},
+                                     {"discrete": True, "bat_scale": 2.5}])
+def test_the_views_game_follows_the_core_through_every_rule(options):
+    """Games in Python floats set in rallies of every kind (a ball anywhere, at any speed and spin, whoever hit it,
+    landed or not, bats anywhere in their boxes, scores near the end of a game) and played on beside the core's
+    (random strokes, the bot, standing still): the same observations, rewards and states, bit for bit, while the
+    points end for every reason."""
+    n, rng = 128, np.random.default_rng(11)
+    c = core_of(seeds=tuple(range(n)), **options)
+    state = c.get_state()
+    rally = rng.random(n) < 0.8  # the others: tossing
+    k = int(rally.sum())
+    state["ball"][:, rally] = [rng.uniform(-2.5, 2.5, k), rng.uniform(-0.05, 1.2, k), rng.uniform(-12, 12, k),
+                               rng.uniform(-5, 5, k), rng.uniform(-600, 600, k)]
+    state["tossing"][rally] = False
+    state["hitter"][rally] = rng.integers(0, 2, k)
+    state["landed"][rally] = rng.random(k) < 0.5
+    state["serve_shot"][rally] = rng.random(k) < 0.5
+    state["serve_bounced"][rally] = rng.random(k) < 0.5
+    state["since_hit"][rally] = np.where(rng.random(k) < 0.3, rng.uniform(0.0, 0.05, k), 1e9)
+    ego = rng.uniform(-2.87, -0.05, (2, n))
+    state["bat"][0] = ego * np.array([[1.0], [-1.0]])
+    state["bat"][1] = rng.uniform(-0.4, 1.6, (2, n))
+    state["bat"][4] = rng.uniform(-1.5, 1.5, (2, n))
+    state["score"] = rng.integers(8, 12, (2, n)).astype(np.float64)
+    c.set_state(state)
+    games = []
+    for g in range(n):
+        games.append(ScalarTennis(c.config))
+        games[-1].set_state(c.get_state([g]))
+    rule = serve_bot_for(c.config)
+    how = rng.integers(0, 3, n)  # random strokes, the bot, standing still
+    reasons = set()
+    for _ in range(40):
+        obs = c.observe()
+        if c.config.discrete:
+            acts = np.where(how[:, None] == 2, 1, rng.integers(0, 3, (2, n, 3)))
+        else:
+            acts = np.where(how[:, None] == 2, 0.0, rng.uniform(-1.2, 1.2, (2, n, 3))).astype(np.float32)
+        acts[:, how == 1] = [rule(obs[0, how == 1]), rule(obs[1, how == 1])]
+        before = c.score.sum(axis=0)
+        rewards = c.step(acts)
+        reasons |= {REASON_NAMES[r] for r in c.reason[c.score.sum(axis=0) != before]}
+        for g, game in enumerate(games):
+            assert np.array_equal(game.observe().view(np.uint32), obs[:, g].view(np.uint32)), g
+            assert list(game.step(acts[0, g].tolist(), acts[1, g].tolist())) == rewards[:, g].tolist(), g
+            mine, want = game.get_state(), c.get_state([g])
+            assert all(np.array_equal(mine[name], value) for name, value in want.items()), g
+        done = np.flatnonzero(c.over)
+        c.reset(done, done + 1000)
+        for g in done:
+            games[g].reset(int(g) + 1000)
+    assert reasons >= {"net", "out", "own_half", "double_bounce", "volley", "missed_serve", "not_returned"}, reasons
+    assert "serve_no_bounce" in reasons or not options.get("serve_bounce")
+
+
+def test_the_views_game_takes_up_a_cores_game_and_the_view_hands_it_back():
+    """A core's game put into the view's (``set_state``) goes on as in the core; the view's ``core`` is a copy of its
+    game (stepping it leaves the view's game as it was); the view's state round-trips."""
+    c = core_of(seeds=(3, 4))
+    rule = serve_bot_for(c.config)
+    for _ in range(140):
+        c.step(bot_actions(c, rule))
+    game = ScalarTennis(c.config)
+    game.set_state(c.get_state([1]))
+    one = TennisCore(1, c.config)
+    one.set_state(c.get_state([1]))
+    _lockstep(game, one, rule, 300, np.random.default_rng(0), random_play=False)
+    env = TennisParallelEnv()
+    env.reset(seed=5)
+    for _ in range(60):
+        obs, *_ = env.step({a: env.action_space(a).sample() for a in env.agents})
+    copy = env.core
+    assert np.array_equal(copy.observe()[:, 0], np.stack([obs[a] for a in env.possible_agents]))
+    copy.step(np.ones((2, 1, 3)))
+    assert np.array_equal(env.state(), obs["player_0"]), "stepping the copy leaves the view's game"
+    saved = env.get_state()
+    after = env.step({a: np.full(3, 0.5, dtype=np.float32) for a in env.agents})
+    env.set_state(saved)
+    again = env.step({a: np.full(3, 0.5, dtype=np.float32) for a in env.agents})
+    assert all(np.array_equal(after[0][a], again[0][a]) for a in env.possible_agents) and after[1] == again[1]
 
 
 @pytest.mark.slow

@@ -3,8 +3,10 @@
 
 ``config`` the constants, the options (:class:`~.config.TennisConfig`), the seats and their spaces; ``physics`` the
 ball's flight and contacts and the scoring rules, shared by the core and the scripted player, who plans with them;
-``core`` the batched core (N games in numpy arrays); ``view`` the PettingZoo view; ``render`` the offscreen renderer;
-``bots`` the scripted player.
+``core`` the batched core (N games in numpy arrays); ``scalar`` one game in Python floats, the core's numbers bit for
+bit (the view plays it: numpy's overhead per operation makes a batch of one slow); ``view`` the PettingZoo view;
+``render`` the offscreen renderer; ``bots`` the scripted player (on arrays, or a few observations one at a time in
+Python floats: the same actions).
 
 The world (SI units; x along the table, y up; seat 0 plays from the -x end, seat 1 from the +x end)
     Table 2.74 m long, surface at y = 0, x from -1.37 to +1.37; net at x = 0, 0.1525 m high; floor at y = -0.76.

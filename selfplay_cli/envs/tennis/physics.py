@@ -1,5 +1,6 @@
 """The ball's physics and the scoring rules shared by the core and the scripted player, who plans with them (numpy
-arrays of any shape, float64); see :mod:`selfplay_cli.envs.tennis` for the model."""
+arrays of any shape, float64; the contact and numpy's clip, maximum and minimum also for one ball in Python floats,
+the same numbers); see :mod:`selfplay_cli.envs.tennis` for the model."""
 
 from __future__ import annotations
 
@@ -46,3 +47,39 @@ def server_of(first: np.ndarray, points: np.ndarray, points_to_win: int) -> np.n
 def game_won(score_a: np.ndarray, score_b: np.ndarray, points_to_win: int) -> np.ndarray:
     """Whether a has won: at least ``points_to_win`` points and 2 more than b."""
     return (score_a >= points_to_win) & (score_a - score_b >= 2)
+
+
+def contact_one(vx: float, vy: float, w: float, nx: float, ny: float, cvx: float, cvy: float, e: float,
+                mu: float) -> tuple[float, float, float]:
+    """:func:`contact` of one ball in Python floats, the same operations in the same order (the same numbers, bit
+    for bit: :func:`clip_one` is numpy's clip)."""
+    tx, ty = -ny, nx
+    rx, ry = vx - cvx, vy - cvy
+    vn = rx * nx + ry * ny
+    vt = rx * tx + ry * ty
+    slip = vt - BALL_R * w
+    jn = -(1.0 + e) * vn
+    cap = mu * abs(jn)
+    jt = clip_one(-STICK * slip, -cap, cap)
+    w2 = clip_one(w - SPIN_GAIN * jt, -MAX_SPIN, MAX_SPIN)
+    return vx + jn * nx + jt * tx, vy + jn * ny + jt * ty, w2
+
+
+def clip_one(x: float, low: float, high: float) -> float:
+    """numpy's ``clip`` of one float: ``min(max(x, low), high)`` with its rules for NaN (kept, from either side)."""
+    if x == x:
+        if not x > low:
+            x = low
+        if x == x and not x < high:
+            x = high
+    return x
+
+
+def max_one(a: float, b: float) -> float:
+    """numpy's ``maximum`` of two floats (a NaN wins)."""
+    return a if a >= b or a != a else b
+
+
+def min_one(a: float, b: float) -> float:
+    """numpy's ``minimum`` of two floats (a NaN wins)."""
+    return a if a <= b or a != a else b
