@@ -4,8 +4,9 @@
 their spaces, the game seeds (``reset(seed=s)`` plays game ``s``; later resets without a seed draw game seeds from a
 generator seeded by ``s``), the offscreen renderer. :class:`OneGameView` is the ``ParallelEnv``: every seat acts at
 each step, a seat leaves ``agents`` on the step it ends, and every seat still playing is truncated when the game is.
-:class:`CoreGame` plays the game as one game of its batched core (the lander's and tennis's views); pong's view plays
-a scalar copy of its core's rules instead (faster for one game) and gives the same hooks itself.
+:class:`CoreGame` plays the game as one game of its batched core (the lander's view); pong's and tennis's views play
+a scalar copy of their core's rules instead (faster for one game: the same game, step for step) and give the same
+hooks themselves.
 
 A game's view sets ``game_name`` (in messages), ``metadata`` and ``renderer`` (a class whose ``draw(scene, 0)``
 returns an RGB array), calls :meth:`OneGame._setup` from its ``__init__`` and provides the hooks: ``_start(seed)``
