@@ -110,6 +110,20 @@ def test_quiet_prints_no_progress_line_and_json_keeps_stdout_for_the_json(tmp_pa
     assert progress and all("steps/s); games: " in ln for ln in progress)
     code, out, err = run(capsys, *args, "--quiet")
     assert code == 0 and err == "" and out.startswith("run pong-2: ")
+    assert "budget of" not in out  # (a budget of steps ends at an update's end, as it always does)
+
+
+def test_a_minutes_budget_says_how_it_ended_training(tmp_path, capsys):
+    args = ["train", "pong", "--minutes", "0.02", "--games", "16", "--env-option", "points_to_win=1",
+            "--eval-games", "0", "--home", str(tmp_path / "h")]
+    code, out, err = run(capsys, *args, "--json")
+    assert code == 0, err
+    end = json.loads(out)["budget_end"]
+    assert end["seconds"] == 1.2 and end["last_update"] in ("cut", "not begun", "whole") and end["overrun_seconds"] >= 0
+    assert (end["unlearned_steps"] > 0) == (end["last_update"] == "not begun")
+    assert bool(end["cut"]) == (end["last_update"] == "cut")
+    code, out, err = run(capsys, *args, "--quiet")
+    assert code == 0 and re.search(r"^  budget of 1.2 s: training ended \d+\.\d s past it, ", out, re.M), out
 
 
 def _screen(text: str) -> list[str]:
@@ -389,6 +403,65 @@ def test_a_minutes_budget_ends_within_one_minibatch_or_step_of_its_deadline(tmp_
     report, _ = _slow_run(tmp_path, monkeypatch, step=step, minibatch=minibatch)
     assert 60.0 <= report.train_seconds <= 60.0 + most, report.train_seconds
     assert report.steps > 0 and report.snapshots == ["s/s0", f"s/s{report.steps}"]
+    end = report.budget_end
+    if minibatch:
+        # one step of the 4 games takes 1 s: the first rollout (16 steps) ends at 16 s, its update's 16 minibatches
+        # of 5 s each are asked before each whether the time is up: after 9 of them (61 s) it is
+        assert (end.update, list(end.cut.values()), end.overrun, end.unlearned) == ("cut", [(9, 16)], 1.0, 0)
+        assert end.describe() == ("budget of 60 s: training ended 1.0 s past it, its last update cut after 9 of 16 "
+                                  "gradient steps")
+    else:  # steps of 20 s: 3 of them (12 game steps) by 60 s, the rollout of 16 far from full
+        assert (end.update, end.cut, end.overrun, end.unlearned) == ("not begun", {}, 0.0, 12)
+        assert end.describe() == ("budget of 60 s: training ended 0.0 s past it, an update not begun: the 12 game "
+                                  "steps played since the last one are not learned from")
+
+
+def test_a_minutes_budget_cuts_an_off_policy_update_after_the_gradient_step_under_way():
+    """DQN's and SAC's updates (many gradient steps where the replay ratio is high, or a Ray run's fragment) end at
+    the gradient step under way when the time is up, at least one made; the steps not made stay due."""
+    import numpy as np
+    from gymnasium import spaces
+
+    from selfplay_cli.algos.dqn import DQNConfig, DQNLearner
+    from selfplay_cli.algos.sac import SACConfig, SACLearner
+    from selfplay_cli.envs import SeatSpace
+    from selfplay_cli.signals import deadline
+    from tests.games.slow import Clock
+
+    clock = Clock()
+    seat = SeatSpace(spaces.Box(-1.0, 1.0, (3,), np.float32), spaces.Discrete(2))
+    dqn = DQNLearner(seat, 4, DQNConfig(learning_starts=8, batch_size=4, n_step=1), seed=0)
+    obs = np.zeros((4, 3), np.float32)
+    for _ in range(4):
+        dqn.act(obs)
+        dqn.record(np.ones(4, np.float32), np.zeros(4, np.float32))
+    real_step = dqn.opt.step
+    dqn.opt.step = lambda *a, **k: (clock.advance(1.0), real_step(*a, **k))[1]  # each gradient update: 1 s
+    dqn.credit = 10.25
+    with deadline(clock() + 3.5, clock):
+        dqn.update(obs)
+    # asked before each update: 0 s, 1, 2, 3 go on; 4 s is past 3.5
+    assert (dqn.grad_steps, dqn.cut, dqn.credit) == (4, (4, 10), 6.25)
+    dqn.credit = 2.0
+    with deadline(clock() - 1.0, clock):  # past already: one update all the same
+        dqn.update(obs)
+    assert (dqn.grad_steps, dqn.cut) == (5, (1, 2))
+    dqn.credit = 2.0
+    dqn.update(obs)  # no budget: whole
+    assert (dqn.grad_steps, dqn.cut) == (7, None)
+
+    sac_seat = SeatSpace(spaces.Box(-1.0, 1.0, (3,), np.float32), spaces.Box(-1.0, 1.0, (2,), np.float32))
+    sac = SACLearner(sac_seat, 4, SACConfig(batch_size=8, learning_starts=8), seed=0)
+    rng = np.random.default_rng(0)
+    sac.buffer.add(rng.normal(size=(32, 3)).astype(np.float32), rng.uniform(-1, 1, (32, 2)).astype(np.float32),
+                   rng.normal(size=32).astype(np.float32), rng.normal(size=(32, 3)).astype(np.float32),
+                   np.zeros(32, np.float32), 0.99)
+    real_gradient_step = sac._gradient_step
+    sac._gradient_step = lambda *a: (clock.advance(1.0), real_gradient_step(*a))[1]
+    sac.credit = 10.0
+    with deadline(clock() + 2.5, clock):
+        sac.update()
+    assert (sac.grad_steps, sac.cut, sac.credit) == (3, (3, 10), 7.0)
 
 
 def test_progress_is_told_while_a_long_update_runs_and_a_log_line_comes_on_time(tmp_path, monkeypatch):

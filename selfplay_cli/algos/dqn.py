@@ -63,7 +63,7 @@ from ..envs import SeatSpace
 from ..policies.heads import MASKED
 from ..policies.network import Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead, uniform_allowed
-from ..signals import stop_requested
+from ..signals import past_deadline, stop_requested
 from .base import Share, action_head, as_bool, check_steps, fix_mask, learner_args, share_draw
 from .optim import FlatAdam, flatten
 from .replay import NStepChains, ReplayBuffer, store_decisions
@@ -183,6 +183,8 @@ class DQNLearner:
         self.transitions = 0  # collected so far (drives epsilon)
         self.grad_steps = 0  # gradient updates so far (drives the target updates)
         self.updates = 0  # update() calls that made at least one gradient update
+        self.cut: tuple[int, int] | None = None  # the last update, when a --minutes budget cut it: (gradient updates
+        # done, due)
         self.credit = 0.0  # gradient updates due but not yet made (replay_ratio per transition)
         # The step in flight: obs, actions and mask from act(), rewards, dones and truncations from record().
         self._obs: np.ndarray | None = None
@@ -447,7 +449,9 @@ class DQNLearner:
             loss_fn = nn.functional.smooth_l1_loss if cfg.loss == "huber" else nn.functional.mse_loss
             rows = []  # per gradient step: its loss, mean Q and gradient norm
             for i in range(k):
-                if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
+                # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away; the run's time is up (a
+                # --minutes budget): the gradient updates done so far, at least one, are the update
+                if stop_requested() or (rows and past_deadline()):
                     break
                 y = self.td_target(rewards[i], dones[i], next_o[i], discounts[i],
                                    None if next_masks is None else next_masks[i])
@@ -461,6 +465,8 @@ class DQNLearner:
                 if self.grad_steps % cfg.target_period == 0:
                     self._sync_target()
                 rows.append(torch.stack((loss.detach(), q.detach().mean(), grad_norm)))
+            self.cut = (len(rows), k) if len(rows) < k and not stop_requested() else None
+            self.credit += k - len(rows)  # (the updates a budget cut stay due: a resumed run makes them)
             k = len(rows)  # fewer when stopped
             if k:
                 figures = torch.stack(rows)

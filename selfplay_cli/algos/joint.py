@@ -97,6 +97,11 @@ class JointLearner:
                 extra["final_obs"] = regroup(final_obs, self.n)
         return self.inner.record(team, done.astype(np.float32), **extra)
 
+    @property
+    def cut(self) -> tuple[int, int] | None:
+        """The last update, when a ``--minutes`` budget cut it: (gradient steps done, due)."""
+        return self.inner.cut
+
     def update(self, next_obs: np.ndarray, progress: float = 0.0, final_obs: np.ndarray | None = None) -> dict:
         return self.inner.update(regroup(next_obs, self.n), progress,
                                  final_obs=None if final_obs is None else regroup(final_obs, self.n))

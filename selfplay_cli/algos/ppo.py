@@ -148,6 +148,8 @@ class PPOLearner:
                     if self.device.type == "cpu" else None)
         self.t = 0
         self.updates = 0
+        self.cut: tuple[int, int] | None = None  # the last update, when a --minutes budget cut it: (minibatches done,
+        # planned)
         # Kickstarting (algos/kickstart.py): the teacher's labelled states and the imitation term's weight
         self.imitation: Imitation | None = None
         self.imitation_capacity = 300_000
@@ -497,6 +499,8 @@ class PPOLearner:
                     break
                 rows.append(self._minibatch_step(batch, order[start:start + mb], teaching))
         count, per_epoch = len(rows), -(-n // mb)
+        planned = (cfg.update_epochs if n else 0) * per_epoch
+        self.cut = (count, planned) if 0 < count < planned and not stop_requested() else None
         figures = torch.stack(rows) if rows else torch.zeros((0, len(STEP_FIGURES)), device=self.device)
         check_steps(figures, STEP_FIGURES, lambda r: f"update {self.updates + 1:,} (epoch {r // per_epoch + 1}, "
                                                      f"minibatch {r % per_epoch + 1})")

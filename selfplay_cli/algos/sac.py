@@ -67,7 +67,7 @@ from ..errors import MarlError
 from ..policies.heads import HeadMath, squashed_sample, to_numpy_actions
 from ..policies.network import ACTIVATION_FNS, Arch, MLPNet, NetworkPolicy, build_network
 from ..policies.spaces import ActionHead, describe_space
-from ..signals import stop_requested
+from ..signals import past_deadline, stop_requested
 from .base import Share, action_head, as_bool, check_steps, learner_args, padded, share_draw, unpadded
 from .kickstart import Imitation
 from .optim import FlatAdam, flatten
@@ -215,6 +215,8 @@ class SACLearner:
         self.transitions = 0  # decisions collected so far (drives the random warm-up)
         self.grad_steps = 0
         self.updates = 0  # update() calls that made at least one gradient step
+        self.cut: tuple[int, int] | None = None  # the last update, when a --minutes budget cut it: (gradient steps
+        # done, due)
         self.credit = 0.0  # gradient steps due but not yet made (replay_ratio per transition)
         # The step in flight (act -> record) and each slot's decision waiting for its s' (see _step).
         self._obs: np.ndarray | None = None
@@ -415,9 +417,13 @@ class SACLearner:
                 for key in ("obs", "actions", "rewards", "next_obs", "dones", "discounts"))
             steps = []
             for i in range(k):
-                if stop_requested():  # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away
+                # the process is stopping (SIGTERM, Ctrl-C): this update is thrown away; the run's time is up (a
+                # --minutes budget): the gradient steps done so far, at least one, are the update
+                if stop_requested() or (steps and past_deadline()):
                     break
                 steps.append(self._gradient_step(obs[i], actions[i], rewards[i], next_o[i], dones[i], discounts[i]))
+            self.cut = (len(steps), k) if len(steps) < k and not stop_requested() else None
+            self.credit += k - len(steps)  # (the steps a budget cut stay due: a resumed run makes them)
             k = len(steps)  # fewer when stopped
             if k:
                 figures = torch.stack(steps)

@@ -254,6 +254,8 @@ def train(
     console.print(describe_run(report, cfg.eval, _actors(cfg)), markup=False, highlight=False)
     if cfg.init_plan:
         console.print("  " + describe_init(cfg.init_plan), markup=False, highlight=False)
+    if report.budget_end is not None:
+        console.print("  " + report.budget_end.describe(), markup=False, highlight=False)
     for rec in report.finals:
         console.print("  " + describe_record(rec, pending=bool(report.rating_left)), markup=False)
     if report.rating_left:

@@ -40,6 +40,7 @@ def report_json(report: TrainReport, eval: str = "local", actors: int = 0) -> di
             "rating": eval, "rating_batch": run_batch(report.run) if eval in QUEUED else None,
             "rating_jobs_left": report.rating_left,
             "executor": "ray" if actors else "local", "actors": actors,
+            "budget_end": None if report.budget_end is None else report.budget_end.to_json(),
             **({"nash": report.nash} if report.nash is not None else {}),
             "best": (None if report.rating_left  # not decided before the final gauntlet and the playoff are in
                      else [_best_json(r) for r in report.side_bests] if report.side_bests  # a game rated per side

@@ -49,7 +49,7 @@ from .league_roles import LeagueRoles
 from .learners import learner_names, make_learners
 from .lock import claim, write_lock
 from .opponents import Opponents, fixed_opponents
-from .progress import Heartbeat, SnapshotRecord, Standing, TrainReport
+from .progress import BudgetEnd, Heartbeat, SnapshotRecord, Standing, TrainReport
 from .ray_rollouts import OFF_POLICY_FRAGMENT, RayRollouts
 from .rollouts import Rollouts, load_teacher
 from .run_ratings import RunRatings
@@ -148,6 +148,7 @@ class Trainer:
         self._next_episodes: int | None = None  # the episodes and steps the next snapshot moment is due at
         self._next_steps: int | None = None
         self._updated_step = 0  # the step of the learners' last update (--restart-at-snapshot: its schedule)
+        self._budget_end: BudgetEnd | None = None  # --minutes: how the budget ended training
         self.records: list[SnapshotRecord] = []  # the newest snapshots as the ledger rates them
         self.ratings = RunRatings(league, cfg, spec, self.variant, self.bot_ids, self.run_dir)  # (read from the ledger)
 
@@ -365,6 +366,10 @@ class Trainer:
         with open(self.run_dir / "metrics.jsonl", "a", buffering=1) as metrics:
             with deadline(self._deadline, self.clock):  # (an update under way at it ends at its next minibatch)
                 self._play(start, metrics, board)
+            if self._deadline is not None:
+                self._budget_end = BudgetEnd.of(cfg.minutes * 60, self.clock() - self._deadline,
+                                                dict(zip(self.names, self.learners, strict=True)),
+                                                state.steps - max(self._updated_step, self._steps0))
             state.elapsed = self.clock() - start
             self._trained = self._train_seconds()
             self._check_heart()
@@ -389,7 +394,8 @@ class Trainer:
                            session_eval_games=rating_games - self._rating_games0,
                            eval_seconds=self.eval_seconds, wait_seconds=waited, plot=plot,
                            rating_left=len(state.jobs), nash=self._nash(), rating=bool(cfg.eval_games),
-                           same_weights=self.ratings.same_weights(), **self.ratings.best(final))
+                           budget_end=self._budget_end, same_weights=self.ratings.same_weights(),
+                           **self.ratings.best(final))
 
     def _start_from(self) -> None:
         """``--init-from``: each learner starts from its snapshot of the run's ``init_plan`` (which is then its first

@@ -82,6 +82,45 @@ class Standing:
     ended: bool = False  # training has ended (what remains is the wait for the last rating games)
 
 
+@dataclass(frozen=True)
+class BudgetEnd:
+    """How a ``--minutes`` budget ended training: ``overrun`` seconds past it (the update or step under way when the
+    time ran out), and the update it fell in: ``"cut"`` (an update under way ended early: each cut learner's gradient
+    steps done and due, at least one done), ``"not begun"`` (``unlearned`` game steps played since the last update,
+    a rollout not full yet: not learned from), or ``"whole"`` (it fell at an update's end)."""
+
+    seconds: float  # the budget
+    overrun: float  # training ended this long after it
+    update: str  # "cut", "not begun" or "whole"
+    cut: dict[str, tuple[int, int]] = field(default_factory=dict)  # learner -> (gradient steps done, due)
+    unlearned: int = 0  # game steps played since the learners' last update
+
+    @classmethod
+    def of(cls, seconds: float, overrun: float, learners: dict[str, Any], unlearned: int) -> BudgetEnd:
+        """From the learners (name -> learner) as training left them: each says whether its last update was cut
+        (``cut``: done and due, None when whole)."""
+        cut = {name: tuple(c) for name, c in ((n, getattr(lr, "cut", None)) for n, lr in learners.items()) if c}
+        update = "cut" if cut else "not begun" if unlearned > 0 else "whole"
+        return cls(seconds, max(overrun, 0.0), update, cut, 0 if cut else max(unlearned, 0))
+
+    def describe(self) -> str:
+        """``budget of 60 s: training ended 0.4 s past it, its last update cut after 3 of 80 gradient steps``."""
+        head = f"budget of {self.seconds:g} s: training ended {self.overrun:.1f} s past it, "
+        if self.update == "cut":
+            each = "; ".join(f"{d:,} of {n:,} gradient steps" + (f" ({name})" if len(self.cut) > 1 else "")
+                             for name, (d, n) in self.cut.items())
+            return head + f"its last update cut after {each}"
+        if self.update == "not begun":
+            return head + (f"an update not begun: the {self.unlearned:,} game steps played since the last one are "
+                           "not learned from")
+        return head + "at an update's end"
+
+    def to_json(self) -> dict[str, Any]:
+        return {"seconds": self.seconds, "overrun_seconds": round(self.overrun, 2), "last_update": self.update,
+                "cut": {name: {"done": d, "due": n} for name, (d, n) in self.cut.items()},
+                "unlearned_steps": self.unlearned}
+
+
 @dataclass
 class TrainReport:
     """What a finished run says of itself: the whole run (every session of a resumed run), and this session's part
@@ -111,6 +150,7 @@ class TrainReport:
     rating_left: int = 0  # gauntlets not played yet (--eval remote --no-wait: the league's workers play them
     # later); while any is left the ratings above are not the run's last, and its best is not decided
     rating: bool = True  # the run plays rating games (False: --eval-games 0)
+    budget_end: BudgetEnd | None = None  # --minutes: how the budget ended training (None: a budget of steps)
     same_weights: dict[str, str] = field(default_factory=dict)  # the run's snapshots whose weights another run's
     # snapshot holds too (a repeated command and seed): name -> the other's name; one set of weights is one player,
     # rated once, so such a snapshot's gauntlet finds its games already played
