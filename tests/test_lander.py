@@ -414,3 +414,36 @@ def test_renderer_draws_even_frames_of_each_lander():
     for colour in PALETTE[:3]:
         assert (frame == colour).all(axis=2).sum() > 50, f"lander colour {colour} is drawn"
     assert math.isfinite(float(frame.mean()))
+
+
+@pytest.mark.parametrize("cls", [LanderParallelEnv, LanderAECEnv])
+def test_a_copied_lander_view_is_the_same_game_made_afresh_and_a_game_under_way_is_not_copied(cls):
+    """SuperSuit's and RLlib's vector wrappers deep-copy (or pickle) the env they are given: Box2D's world cannot be
+    copied, so a copy is the same game made afresh from its options, playing the same games for the same seeds."""
+    import copy
+    import pickle
+
+    env = cls(landers=3, continuous=True, gravity=-8.0, render_mode="rgb_array")
+    twins = [copy.deepcopy(env), pickle.loads(pickle.dumps(env))]
+    assert all(type(t) is cls and t.config == env.config and t.render_mode == "rgb_array" for t in twins)
+
+    def trace(e) -> list[float]:
+        e.reset(seed=7)
+        got, rng = [], np.random.default_rng(0)
+        for _ in range(40):
+            if cls is LanderParallelEnv:
+                if not e.agents:
+                    break
+                _, rewards, _, _, _ = e.step({a: rng.uniform(-1, 1, 2).astype(np.float32) for a in e.agents})
+                got += [rewards[a] for a in sorted(rewards)]
+            else:
+                agent = e.agent_selection
+                done = e.terminations[agent] or e.truncations[agent]
+                e.step(None if done else rng.uniform(-1, 1, 2).astype(np.float32))
+                got.append(e.rewards.get(agent, 0.0))
+        return got
+
+    first = trace(env)
+    assert len(first) > 20 and all(trace(t) == first for t in twins)
+    with pytest.raises(TypeError, match="a lander view with a game under way cannot be copied"):
+        copy.deepcopy(env)  # (the traced game is still under way)
