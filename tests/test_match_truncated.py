@@ -31,6 +31,7 @@ def test_a_pong_match_whose_every_game_was_cut_says_so_in_its_headline(capsys, h
     assert "truncated games" not in out  # said once, at the top
     data = run_json(capsys, *args)
     assert (data["truncated_games"], data["step_limit"], data["draws"], data["points_for"]) == (4, 60, 4, 0)
+    assert data["game_steps"] == 4 * 60  # every game to its limit
 
 
 def test_mostly_truncated_goes_in_the_headline_a_few_in_a_line_below(capsys, home):

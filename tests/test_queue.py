@@ -56,6 +56,7 @@ def test_a_match_cut_into_jobs_plays_the_seeds_of_the_whole_match(league):
     with league.session(readonly=True) as s:
         keys = sorted(s.execute(select(Match.work_key).where(Match.work_key.like("job:%"))).scalars())
         seeds = sorted(s.execute(select(Game.seed)).scalars())
+        lengths = sum(s.execute(select(Game.length)).scalars())
     assert keys == sorted(f"job:{i}" for i in ids)
     assert seeds == sorted(list(range(100, 120)) * 2)
     merged = combine(jobs)
@@ -70,6 +71,7 @@ def test_a_match_cut_into_jobs_plays_the_seeds_of_the_whole_match(league):
     local = run_match(ScriptedPolicy("pong", "cpu", seed=0), ScriptedPolicy("pong", "random", seed=0), games=40,
                       first_seed=100, env_options=SHORT)
     assert local.round_points != [] and len(local.round_points) == len(merged.round_points)
+    assert merged.game_steps == lengths > 40  # the jobs' steps, summed from their rows: the games' stored lengths
 
 
 class _Clock:

@@ -120,7 +120,7 @@ def summary(report: MatchReport) -> dict[str, Any]:
             "points_against": report.points_against, "truncated": report.truncated, "paired": report.paired,
             "kind": report.kind, "a": report.a, "b": report.b, "variant": report.variant,
             "round_points": report.round_points, "seconds": round(report.seconds, 3),
-            "step_limit": report.step_limit, "tie_tolerance": report.tie_tolerance}
+            "step_limit": report.step_limit, "tie_tolerance": report.tie_tolerance, "game_steps": report.game_steps}
 
 
 def combine(jobs: Sequence[JobRow], *, confidence: float = 0.95) -> MatchReport | None:
@@ -142,9 +142,15 @@ def combine(jobs: Sequence[JobRow], *, confidence: float = 0.95) -> MatchReport 
                        draws=total["draws"], losses=total["losses"], points_for=_number(pf), points_against=_number(pa),
                        pentanomial=penta, stats=stats, seconds=sum(float(p.result["seconds"]) for p in parts),  # type: ignore[index]
                        match_id=None, first_seed=int(parts[0].spec.get("match_seed", parts[0].spec["first_seed"])),
-                       truncated=total["truncated"], kind=r0["kind"], variant=r0.get("variant", ""), paired=paired,
+                       truncated=total["truncated"], game_steps=sum(_count(p.result.get("game_steps")) for p in parts),  # type: ignore[union-attr]
+                       kind=r0["kind"], variant=r0.get("variant", ""), paired=paired,
                        round_points=rounds, step_limit=_whole(r0.get("step_limit")),
                        tie_tolerance=_tolerance(r0.get("tie_tolerance")))
+
+
+def _count(x: Any) -> int:
+    """A job row's count of game steps: a whole number >= 0, else 0 (an older row has none)."""
+    return x if isinstance(x, int) and not isinstance(x, bool) and x >= 0 else 0
 
 
 def _whole(x: Any) -> int | None:

@@ -92,6 +92,7 @@ class MatchReport:
     first_seed: int
     sprt: dict[str, Any] | None = None
     truncated: int = 0
+    game_steps: int = 0  # steps of every game played, summed (one step of one game, all its seats acting)
     results: list[GameResult] = field(default_factory=list, repr=False)
     game_ids: list[int] = field(default_factory=list, repr=False)  # ledger ids of the stored games, in order
     interrupted: bool = False  # stopped by Ctrl-C: the whole rounds finished by then
@@ -147,6 +148,8 @@ class MatchReport:
             "confidence": s.confidence, "bounded": s.bounded, "los": round(s.los, 4),
             "pentanomial": list(self.pentanomial), "truncated_games": self.truncated, "step_limit": self.step_limit,
             "seconds": round(self.seconds, 3), "games_per_second": round(self.games_per_second, 1),
+            "game_steps": self.game_steps,
+            "game_steps_per_second": round(self.game_steps / self.seconds) if self.seconds > 0 else None,
             "match_id": self.match_id, "first_seed": self.first_seed, "sprt": self.sprt,
             "game_ids": self.game_ids, "interrupted": self.interrupted, "kind": self.kind,
             "variant": variant_options(self.variant),
@@ -442,6 +445,7 @@ def _report(env: str, rules: Rules, paired: bool, a_name: str, a_key: Any, b: Po
         points_against=_number(sum(r.score_of(b.id) for r in kept)),
         pentanomial=penta, stats=points_stats(round_points, paired, confidence),
         seconds=seconds, match_id=match_id, first_seed=first_seed, truncated=sum(r.truncated for r in kept),
+        game_steps=sum(r.length for r in kept),
         results=kept, game_ids=game_ids, kind=rules.kind, paired=paired, round_points=round_points,
         tie_tolerance=rules.tie_tolerance,
     )
