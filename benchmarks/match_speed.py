@@ -1,0 +1,133 @@
+"""Where a rated match's time goes, and what a run waits for its rating games at its end.
+
+1. A league of pong snapshots as the issue measured them: ``marl train pong --agents 2 --steps 1000000
+   --eval-games 0`` (one core), then ``marl match RUN/s1M-left RUN/s1M-right --games 1000 --no-store --json`` on one
+   core (``taskset``, torch at one thread), its wall time from start to exit (start-up included) and the game steps it
+   played (its JSON). In the same run, on the same core: the batched core stepping 1,000 games (the match's games at
+   once) with pre-drawn actions, game steps/s (the anchor), and so the time stepping the match's games takes; and the
+   two networks alone, batched as a match runs them (:class:`~selfplay_cli.policies.bank.NetworkBank`), on the same
+   rows for the same steps: the floor no match of these two networks goes below on this CPU.
+   Target (the issue "speed where users feel it"): stepping at least 40% of the match's wall time.
+2. ``marl train pong --agents 2 --minutes 0.5 --json`` (both cores, as a user runs it): training seconds, rating
+   games, and the wait for the last ones once training ended. Target: the wait at most 10% of the training time.
+
+Run: python benchmarks/match_speed.py [--games 1000] [--cpu 0] [--no-train-wait]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ONE_THREAD = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "SDL_VIDEODRIVER": "dummy"}
+
+
+def marl(home: Path, *args: str, cpu: int | None = None) -> tuple[str, float]:
+    """``marl ARGS`` in the league ``home`` (on core ``cpu``): its stdout and wall seconds."""
+    pin = ["taskset", "-c", str(cpu)] if cpu is not None else []
+    env = {**os.environ, **(ONE_THREAD if cpu is not None else {"SDL_VIDEODRIVER": "dummy"}), "MARL_HOME": str(home)}
+    began = time.perf_counter()
+    out = subprocess.run([*pin, sys.executable, "-m", "selfplay_cli", *args], env=env, capture_output=True, text=True)
+    took = time.perf_counter() - began
+    if out.returncode != 0:
+        raise SystemExit(f"marl {' '.join(args)} failed ({out.returncode}): {out.stderr.strip()[-2000:]}")
+    return out.stdout, took
+
+
+def core_rate(games: int, seconds: float) -> float:
+    """Game steps/s of pong's batched core stepping ``games`` games with pre-drawn actions (games reset as they end)."""
+    from selfplay_cli.envs import get_env
+
+    core = get_env("pong").core(games)
+    acts = [np.random.default_rng(i).integers(0, 3, (2, games)) for i in range(64)]
+    next_seed, steps, began = games, 0, time.perf_counter()
+    while time.perf_counter() - began < seconds:
+        for i in range(32):
+            core.step(acts[i & 63])
+            done = core.terminated | core.truncated
+            if done.any():
+                slots = np.flatnonzero(done)
+                core.reset(slots, np.arange(next_seed, next_seed + slots.size))
+                next_seed += slots.size
+        steps += 32
+    return steps * games / (time.perf_counter() - began)
+
+
+def network_floor(home: Path, names: list[str], games: int, steps: int) -> float:
+    """Seconds the two snapshots' networks take, batched as a match runs them, to act ``steps`` times for ``games``
+    rows each (observations drawn once; the forward and the sampling, nothing else)."""
+    import torch
+
+    from selfplay_cli.league.store import League
+    from selfplay_cli.players import load_player
+    from selfplay_cli.policies.bank import NetworkBank
+    from selfplay_cli.ratings.names import resolve
+
+    torch.set_num_threads(1)
+    with League.open(home) as league:
+        policies = [load_player(league, resolve(league, n, "pong")) for n in names]
+    bank = NetworkBank(policies, seed=0)
+    obs = [np.random.default_rng(k).normal(size=(games, bank.obs_dim)).astype(np.float32) for k in range(2)]
+    bank.act(obs)
+    began = time.perf_counter()
+    for _ in range(steps):
+        bank.act(obs)
+    return time.perf_counter() - began
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--games", type=int, default=1000)
+    ap.add_argument("--cpu", type=int, default=0, help="the core the match and its anchors run on")
+    ap.add_argument("--no-train-wait", action="store_true", help="skip part 2")
+    args = ap.parse_args()
+    os.sched_setaffinity(0, {args.cpu})
+    with tempfile.TemporaryDirectory() as tmp:
+        home = Path(tmp) / "league"
+        marl(home, "train", "pong", "--agents", "2", "--steps", "1000000", "--eval-games", "0", "--run", "p6",
+             "--quiet", cpu=args.cpu)
+        names = ["p6/s1M-left", "p6/s1M-right"]
+        load = os.getloadavg()[0]
+        out, wall = marl(home, "match", *names, "--games", str(args.games), "--no-store", "--json", cpu=args.cpu)
+        m = json.loads(out)
+        rate = core_rate(args.games, 5.0)
+        stepping = m["game_steps"] / rate
+        per_step = m["game_steps"] / args.games  # the match's steps of all its games at once (they start together)
+        floor = network_floor(home, names, args.games, int(round(per_step)))
+        print(f"marl match {names[0]} {names[1]} --games {args.games:,} (one core, load {load:.2f}): {wall:.1f} s "
+              f"wall ({m['seconds']:.1f} s playing), {m['game_steps']:,} game steps, {m['truncated_games']:,} games "
+              "cut at the step limit")
+        print(f"  anchor: the batched core, {args.games:,} games at once: {rate:,.0f} game steps/s, so "
+              f"{stepping:.1f} s to step the match's games")
+        print(f"  the two networks alone, batched, the same rows and steps: {floor:.1f} s (the floor: "
+              f"stepping could be at most {100 * stepping / (stepping + floor):.0f}% of a match of these networks)")
+        share = stepping / wall
+        print(f"match stepping share: {100 * share:.1f}% of the wall time (target >= 40%: "
+              f"{'met' if share >= 0.4 else 'not met'})")
+        if args.no_train_wait:
+            return
+        os.sched_setaffinity(0, set(range(os.cpu_count() or 1)))
+        load = os.getloadavg()[0]
+        out, wall = marl(home, "train", "pong", "--agents", "2", "--minutes", "0.5", "--run", "wait", "--json")
+        r = json.loads(out)
+        wait, train = r["rating_wait_seconds"], r["session_train_seconds"]
+        print(f"marl train pong --agents 2 --minutes 0.5 (both cores, load {load:.2f}): {wall:.0f} s wall, "
+              f"{train:.1f} s training, {r['rating_games']:,} rating games ({r['rating_seconds']:.0f} s), "
+              f"{wait:.1f} s waited for them at the end")
+        print(f"end-of-run wait: {100 * wait / train:.0f}% of the training time (target <= 10%: "
+              f"{'met' if wait <= 0.1 * train else 'not met'})")
+
+
+if __name__ == "__main__":
+    from results_file import recorded
+
+    with recorded():
+        main()
