@@ -8,7 +8,11 @@ is trained beside it and lives only in the learner's state (what a resumed run r
     [the game's global state, or, where the game has none, every seat's observation side by side (an absent seat's
      zeros); which seats are in the game; the agent's seat, one-hot]
 
-(MAPPO's "agent-specific global state": one critic serves every seat, told whose value it gives). Everything else is
+(MAPPO's "agent-specific global state": one critic serves every seat, told whose value it gives), with hidden layers
+of 64 and 64 (``critic_hidden``). Its first release had 128 and 128: a minibatch step then took about twice PPO's
+(the lander, 4,096 rows: 24 ms against 11) and MAPPO 1.5-2x PPO's wall time per game step; 64 wide, the size of
+PPO's own network, its steps take about PPO's time (the same function of its input as before, of a smaller network:
+the one change to the critic; ``benchmarks/team_critics.py``). Everything else is
 PPO's (:mod:`.ppo`): the rollout, GAE(lambda) over each seat's own decisions and ends, the clipped objective, the
 value loss, the optimiser (Adam over the actor's and the critic's parameters together, their joint gradient norm
 clipped). The critic's values of a rollout are taken at the update, in one batch, from the inputs kept each step
@@ -42,7 +46,8 @@ from .ppo import PPOConfig, PPOLearner
 class MAPPOConfig(PPOConfig):
     """PPO's settings (:class:`~.ppo.PPOConfig`), the actor without a value head, and the critic's layers."""
 
-    critic_hidden: tuple[int, ...] = (128, 128)  # the centralised critic's hidden layers (its activation: the actor's)
+    critic_hidden: tuple[int, ...] = (64, 64)  # the centralised critic's hidden layers (its activation: the actor's;
+    # 128 and 128 until the lander measured a critic of that size at 1.5-2x PPO's wall time per game step)
     arch: Arch = field(default_factory=lambda: Arch(hidden=(64, 64), activation="relu", value_head=False))
 
     def __post_init__(self) -> None:
