@@ -29,9 +29,9 @@ steps 89% of its time):
 * the critic is 48 wide (``critic_hidden = (48, 48)``: its tokens and its head's layer; 128 and 128 before): the one
   change to what it computes. The rest below (the same maths) took POCA from 11.5 to 2.8 times PPO's wall time
   per game step at 64 wide; 48 wide it is 2.4 (``benchmarks/team_critics.py``; the issue's target 2.5). The
-  lander's 30-minute final snapshot flew 238.3 a lander at 64 wide (3.0M steps on a busy machine; 239.6 at 128 wide
-  and 1.5M steps); 48 wide has not been flown for 30 minutes yet: ``critic_hidden = [64, 64]`` under ``[poca]``
-  restores the 64-wide critic;
+  lander's 30-minute final snapshot (``benchmarks/team_study.py --parts critics``) flew 243.7 a lander over 50
+  fresh games at 48 wide (6.7M steps), 238.3 at 64 wide (3.0M steps on a busy machine), 239.6 at 128 wide (1.5M
+  steps); ``critic_hidden = [64, 64]`` under ``[poca]`` in a run's config gives the 64-wide critic;
 * once per game step, not once per seat: the seats of a game a learner drives (``--sharing fups``: all of them)
   share the step's team view, so V(s_t) and G_t are computed once for the game and every seat's Q_i beside them
   (slots whose team rows over the whole rollout are byte for byte the same are one game: the same inputs, the same
