@@ -75,14 +75,15 @@ def seed_generator(seed: int) -> np.random.Generator:
 
 
 class _Contacts(Box2D.b2ContactListener):
-    """Box2D's contact callbacks for one world, written into the core's arrays.
+    """Box2D's contact callbacks for one world, written into the core's arrays (or the one-game lists of
+    :class:`~.scalar.ScalarLander`): ``crashed[k]``, ``legs[k][leg]``.
 
     A body's ``userData`` is ``3 * k + part`` (part 0 the lander body, 1 and 2 its legs) for lander ``k``, None for
     the moon. A lander body touching anything crashes it; a leg touching the moon counts as a ground contact (a
     count, so a leg on two terrain edges at once stays in contact until it leaves both; with ``flag``, gymnasium's
     flag, set by any contact beginning and cleared by any ending)."""
 
-    def __init__(self, crashed: np.ndarray, legs: np.ndarray, flag: bool = False) -> None:
+    def __init__(self, crashed: Any, legs: Any, flag: bool = False) -> None:
         super().__init__()
         self.crashed, self.legs, self.flag = crashed, legs, flag
 
@@ -93,9 +94,9 @@ class _Contacts(Box2D.b2ContactListener):
                 self.crashed[k] = True
         elif other is None:
             if self.flag:
-                self.legs[k, part - 1] = delta > 0
+                self.legs[k][part - 1] = int(delta > 0)
             else:
-                self.legs[k, part - 1] += delta
+                self.legs[k][part - 1] += delta
 
     def BeginContact(self, contact: Any) -> None:  # noqa: N802 (Box2D's name)
         a, b = contact.fixtureA.body.userData, contact.fixtureB.body.userData
@@ -115,7 +116,7 @@ class _Contacts(Box2D.b2ContactListener):
 class LanderWorld:
     """One game's Box2D world: the moon, the landers (body, two legs each) and the game's generator."""
 
-    def __init__(self, cfg: LanderConfig, seed: int, ks: list[int], crashed: np.ndarray, legs: np.ndarray) -> None:
+    def __init__(self, cfg: LanderConfig, seed: int, ks: list[int], crashed: Any, legs: Any) -> None:
         self.rng = rng = seed_generator(seed)
         self.world = world = Box2D.b2World(gravity=(0, cfg.gravity))
         self.listener = _Contacts(crashed, legs, cfg.gym_leg_contact)
