@@ -20,6 +20,7 @@ from typing import Any
 
 import Box2D
 import numpy as np
+from Box2D import _Box2D
 from Box2D.b2 import edgeShape, fixtureDef, polygonShape, revoluteJointDef
 
 from ..contract import IllegalActionError, reset_slots
@@ -67,6 +68,19 @@ _MAIN_Y = MAIN_ENGINE_Y_LOCATION / SCALE
 _LOW64, _HIGH64 = OBS_LOW.astype(np.float64), OBS_HIGH.astype(np.float64)
 _LOW64[6:] = 0.0  # +0.0: a leg off the ground reads 0, not -0
 _POLY = [(x / SCALE, y / SCALE) for x, y in LANDER_POLY]
+
+# Box2D's accessors called directly: the functions behind ``body.position``, ``.linearVelocity``, ``.angle``,
+# ``.angularVelocity``, ``.awake`` and a vector's ``.x`` and ``.y``, without the properties' Python wrappers (reading a
+# lander back costs a third less)
+_POSITION, _VELOCITY = _Box2D.b2Body___GetPosition, _Box2D.b2Body___GetLinearVelocity
+_ANGLE, _SPIN, _AWAKE = _Box2D.b2Body___GetAngle, _Box2D.b2Body___GetAngularVelocity, _Box2D.b2Body___IsAwake
+_X, _Y = _Box2D.b2Vec2_x_get, _Box2D.b2Vec2_y_get
+
+# A lander's fixtures (gymnasium's), defined once: Box2D copies a definition and its shape into each body it makes
+_BODY_SHAPE, _LEG_SHAPE = polygonShape(vertices=_POLY), polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE))
+_BODY_FIXTURE = fixtureDef(shape=_BODY_SHAPE, density=5.0, friction=0.1, categoryBits=BODY_BITS, maskBits=_COLLIDE,
+                           restitution=0.0)
+_LEG_FIXTURE = fixtureDef(shape=_LEG_SHAPE, density=1.0, restitution=0.0, categoryBits=LEG_BITS, maskBits=_COLLIDE)
 
 
 def seed_generator(seed: int) -> np.random.Generator:
@@ -130,17 +144,17 @@ class LanderWorld:
         smooth_y = [0.33 * (height[i - 1] + height[i + 0] + height[i + 1]) for i in range(CHUNKS)]
         self.moon = world.CreateStaticBody(shapes=edgeShape(vertices=[(0, 0), (W, 0)]))
         self.terrain = [(chunk_x[i], smooth_y[i]) for i in range(CHUNKS)]
-        for i in range(CHUNKS - 1):
-            self.moon.CreateEdgeFixture(vertices=[self.terrain[i], self.terrain[i + 1]], density=0, friction=0.1)
+        edge = edgeShape()
+        ground = fixtureDef(shape=edge, density=0, friction=0.1)
+        for i in range(CHUNKS - 1):  # (gymnasium's CreateEdgeFixture, its keywords set once)
+            edge.vertices = [self.terrain[i], self.terrain[i + 1]]
+            self.moon.CreateFixture(ground)
         # The landers, spread across the top; each pushed by its own random force
         n = len(ks)
         self.bodies, self.legs = [], []
         starts = [((i + 1) / (n + 1) * W, VIEWPORT_H / SCALE) for i in range(n)]
         for (x, y), k in zip(starts, ks, strict=True):
-            body = world.CreateDynamicBody(
-                position=(x, y), angle=0.0,
-                fixtures=fixtureDef(shape=polygonShape(vertices=_POLY), density=5.0, friction=0.1,
-                                    categoryBits=BODY_BITS, maskBits=_COLLIDE, restitution=0.0))
+            body = world.CreateDynamicBody(position=(x, y), angle=0.0, fixtures=_BODY_FIXTURE)
             body.userData = 3 * k
             body.ApplyForceToCenter((rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM),
                                      rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM)), True)
@@ -151,10 +165,8 @@ class LanderWorld:
         for body, k, (x, y) in zip(self.bodies, ks, starts, strict=True):
             pair = []
             for j, i in enumerate((-1, +1)):
-                leg = world.CreateDynamicBody(
-                    position=(x - i * LEG_AWAY / SCALE, y), angle=i * 0.05,
-                    fixtures=fixtureDef(shape=polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE)), density=1.0,
-                                        restitution=0.0, categoryBits=LEG_BITS, maskBits=_COLLIDE))
+                leg = world.CreateDynamicBody(position=(x - i * LEG_AWAY / SCALE, y), angle=i * 0.05,
+                                              fixtures=_LEG_FIXTURE)
                 leg.userData = 3 * k + 1 + j
                 rjd = revoluteJointDef(bodyA=body, bodyB=leg, localAnchorA=(0, 0),
                                        localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE), enableMotor=True,
@@ -373,8 +385,8 @@ class LanderCore:
         ext = vals.extend
         for k in ks.tolist():
             b = bodies[k]
-            p, v = b.position, b.linearVelocity
-            ext((p.x, p.y, v.x, v.y, b.angle, b.angularVelocity, b.awake))
+            p, v = _POSITION(b), _VELOCITY(b)
+            ext((_X(p), _Y(p), _X(v), _Y(v), _ANGLE(b), _SPIN(b), _AWAKE(b)))
         r = np.array(vals).reshape(-1, 7)
         seat, game = np.divmod(ks, n)
         self._pos[0, seat, game] = r[:, 0]

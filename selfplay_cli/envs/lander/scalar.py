@@ -41,7 +41,25 @@ from .config import (
     SIDE_ENGINE_POWER,
     LanderConfig,
 )
-from .core import _HIGH64, _LOW64, _MAIN_Y, _POS_ITERS, _TIME_STEP, _VEL_ITERS, _X_HALF, _Y_HALF, _Y_ZERO, LanderWorld
+from .core import (
+    _ANGLE,
+    _AWAKE,
+    _HIGH64,
+    _LOW64,
+    _MAIN_Y,
+    _POS_ITERS,
+    _POSITION,
+    _SPIN,
+    _TIME_STEP,
+    _VEL_ITERS,
+    _VELOCITY,
+    _X,
+    _X_HALF,
+    _Y,
+    _Y_HALF,
+    _Y_ZERO,
+    LanderWorld,
+)
 
 _LOW, _HIGH = _LOW64.tolist()[:6], _HIGH64.tolist()[:6]  # the legs (0 or 1) are inside their bounds
 _sin, _cos, _tanh, _sqrt, _PI = math.sin, math.cos, math.tanh, math.sqrt, math.pi
@@ -173,14 +191,14 @@ class ScalarLander:
             if not alive[i]:
                 continue
             b = bodies[i]
-            p, v = b.position, b.linearVelocity
-            x, y, angle = p.x, p.y, b.angle
+            p, v = _POSITION(b), _VELOCITY(b)
+            x, y, angle = _X(p), _Y(p), _ANGLE(b)
             pos[i] = (x, y, angle)
             s0 = (x - _X_HALF) / _X_HALF
             s1 = (y - _Y_ZERO) / _Y_HALF
-            s2 = v.x * _X_HALF / FPS
-            s3 = v.y * _Y_HALF / FPS
-            s5 = 20.0 * b.angularVelocity / FPS
+            s2 = _X(v) * _X_HALF / FPS
+            s3 = _Y(v) * _Y_HALF / FPS
+            s5 = 20.0 * _SPIN(b) / FPS
             leg0, leg1 = legs[i]
             s6, s7 = (1.0 if leg0 > 0 else 0.0), (1.0 if leg1 > 0 else 0.0)
             row = state[i] = [s0, s1, s2, s3, angle, s5, s6, s7]
@@ -195,7 +213,7 @@ class ScalarLander:
             if first:  # gymnasium's reset step: it sets the shaping, its reward is not given
                 continue
             crash = crashed[i] or abs(s0) >= 1.0
-            rest = not b.awake
+            rest = not _AWAKE(b)
             if crash:
                 rew = -100.0
             if rest:

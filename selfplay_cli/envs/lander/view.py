@@ -1,8 +1,8 @@
 """The lander game's PettingZoo views: a ``ParallelEnv`` (all landers act at every physics step, the game marl
 trains and rates) and an ``AECEnv`` (the sequential version: one lander acts, the world steps, the next lander acts).
 Both play one game with :class:`~selfplay_cli.envs.lander.scalar.ScalarLander` (the batched core's rules in plain
-Python floats around the same Box2D world: the core's game for the same seed, step for step and bit for bit, about
-three times faster than a batch of one).
+Python floats around the same Box2D world: the core's game for the same seed, step for step and bit for bit; 3 to 6
+times faster than a batch of one, fewer landers gaining more: benchmarks/lander_env_speed.py).
 
 In the AEC view a lander acts once every N physics steps (N landers), so with gymnasium's engines gravity wins
 from 3 landers on: the game cannot be solved. The view therefore sets ``engine_scale`` to N unless told otherwise:
