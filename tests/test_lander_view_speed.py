@@ -3,7 +3,7 @@ Box2D world, several times faster than a batch of one): it must be the core's ga
 (the oracle) beside it and compares everything bit for bit: observations, rewards, scores, endings, truncations,
 infos, the global state and the rendered frames, for discrete and continuous actions, 1 to 4 landers, wind and
 turbulence, other gravities, gymnasium's leg flag, scaled engines, time limits and landers ending at different
-times."""
+times. And the worlds, made faster from definitions made once, are those gymnasium's keyword calls make."""
 
 from __future__ import annotations
 
@@ -232,3 +232,82 @@ def test_the_views_frames_are_the_cores_frames():
         core.step(core_actions(config, given, index))
     assert np.array_equal(env.render(), renderer.draw(core, 0))
     assert frames > 10 and flames > 5 and core.result[:, 0].tolist() == [LANDED, OUT, CRASHED]
+
+
+def gymnasiums_landers(world, cfg: LanderConfig, rng: np.random.Generator, n: int) -> list:
+    """Landers made as gymnasium makes its one (keyword calls, a definition each), n of them as the core places
+    them: the reference for :class:`LanderWorld`'s definitions made once and reused."""
+    from Box2D.b2 import fixtureDef, polygonShape, revoluteJointDef
+
+    from selfplay_cli.envs.lander.config import (
+        INITIAL_RANDOM,
+        LEG_AWAY,
+        LEG_DOWN,
+        LEG_H,
+        LEG_SPRING_TORQUE,
+        LEG_W,
+        SCALE,
+    )
+    from selfplay_cli.envs.lander.core import _COLLIDE, _POLY, BODY_BITS, LEG_BITS, H, W
+
+    parts = []
+    starts = [((i + 1) / (n + 1) * W, H) for i in range(n)]
+    for x, y in starts:
+        body = world.CreateDynamicBody(position=(x, y), angle=0.0, fixtures=fixtureDef(
+            shape=polygonShape(vertices=_POLY), density=5.0, friction=0.1, categoryBits=BODY_BITS, maskBits=_COLLIDE,
+            restitution=0.0))
+        body.ApplyForceToCenter((rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM),
+                                 rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM)), True)
+        parts.append(body)
+    if cfg.enable_wind:
+        rng.integers(-9999, 9999, 2)
+    for body, (x, y) in zip(list(parts), starts, strict=True):
+        for i in (-1, +1):
+            leg = world.CreateDynamicBody(position=(x - i * LEG_AWAY / SCALE, y), angle=i * 0.05, fixtures=fixtureDef(
+                shape=polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE)), density=1.0, restitution=0.0,
+                categoryBits=LEG_BITS, maskBits=_COLLIDE))
+            rjd = revoluteJointDef(bodyA=body, bodyB=leg, localAnchorA=(0, 0),
+                                   localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE), enableMotor=True,
+                                   enableLimit=True, maxMotorTorque=LEG_SPRING_TORQUE, motorSpeed=+0.3 * i)
+            rjd.lowerAngle, rjd.upperAngle = (0.9 - 0.5, 0.9) if i == -1 else (-0.9, -0.9 + 0.5)
+            world.CreateJoint(rjd)
+            parts.append(leg)
+    return parts
+
+
+@pytest.mark.parametrize("landers", [1, 3, 8])
+def test_a_world_made_from_reused_definitions_is_the_world_of_gymnasiums_keywords(landers):
+    """The core's worlds (and so the views' games) are made from fixture, body and joint definitions made once and
+    reused (a world is made in half the time): the bodies, fixtures and joints are those gymnasium's keyword calls
+    make, and 300 steps of both worlds (landers falling onto the moon, legs on their springs) are the same, bit for
+    bit."""
+    import Box2D
+
+    from selfplay_cli.envs.lander.core import _POS_ITERS, _TIME_STEP, _VEL_ITERS, LanderWorld
+
+    cfg = LanderConfig(landers=landers, enable_wind=True)
+    made = LanderWorld(cfg, 12, list(range(landers)), [False] * landers, [[0, 0] for _ in range(landers)])
+    rng = np.random.default_rng(12)
+    rng.uniform(0, 1, 12)  # the terrain's draws
+    ref = Box2D.b2World(gravity=(0, cfg.gravity))
+    ref.CreateStaticBody()  # (the moon, without its edges: the landers fall freely and meet each other)
+    made.world.DestroyBody(made.moon)
+    theirs = gymnasiums_landers(ref, cfg, rng, landers)
+    mine = made.bodies + [leg for pair in made.legs for leg in pair]
+    def joint(j) -> tuple:
+        return (j.GetReferenceAngle(), tuple(j.GetLocalAnchorA()), tuple(j.GetLocalAnchorB()), j.lowerLimit,
+                j.upperLimit, j.motorSpeed, j.GetMaxMotorTorque(), j.limitEnabled, j.motorEnabled,
+                j.bodyA.mass, j.bodyB.mass)
+
+    assert [joint(j) for j in made.world.joints] == [joint(j) for j in ref.joints]
+    for _ in range(300):
+        made.world.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
+        ref.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
+        assert [(*b.position, b.angle, *b.linearVelocity, b.angularVelocity) for b in mine] == \
+            [(*b.position, b.angle, *b.linearVelocity, b.angularVelocity) for b in theirs]
+    for a, b in zip(mine, theirs, strict=True):
+        fa, fb = a.fixtures[0], b.fixtures[0]
+        assert (fa.density, fa.friction, fa.restitution, fa.filterData.categoryBits, fa.filterData.maskBits,
+                fa.shape.vertices, a.mass, a.inertia) == (fb.density, fb.friction, fb.restitution,
+                                                          fb.filterData.categoryBits, fb.filterData.maskBits,
+                                                          fb.shape.vertices, b.mass, b.inertia)

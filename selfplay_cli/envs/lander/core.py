@@ -21,7 +21,7 @@ from typing import Any
 import Box2D
 import numpy as np
 from Box2D import _Box2D
-from Box2D.b2 import edgeShape, fixtureDef, polygonShape, revoluteJointDef
+from Box2D.b2 import bodyDef, dynamicBody, edgeShape, fixtureDef, polygonShape, revoluteJointDef
 
 from ..contract import IllegalActionError, reset_slots
 from .config import (
@@ -149,12 +149,23 @@ class LanderWorld:
         for i in range(CHUNKS - 1):  # (gymnasium's CreateEdgeFixture, its keywords set once)
             edge.vertices = [self.terrain[i], self.terrain[i + 1]]
             self.moon.CreateFixture(ground)
-        # The landers, spread across the top; each pushed by its own random force
+        # The landers, spread across the top; each pushed by its own random force. (gymnasium's CreateDynamicBody and
+        # joint keywords, set once per world in definitions that Box2D copies.)
         n = len(ks)
         self.bodies, self.legs = [], []
         starts = [((i + 1) / (n + 1) * W, VIEWPORT_H / SCALE) for i in range(n)]
+        body_def = bodyDef(type=dynamicBody, angle=0.0, fixtures=_BODY_FIXTURE)
+        leg_def = bodyDef(type=dynamicBody, fixtures=_LEG_FIXTURE)
+        joint_defs = []
+        for i in (-1, +1):
+            rjd = revoluteJointDef(localAnchorA=(0, 0), localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE),
+                                   enableMotor=True, enableLimit=True, maxMotorTorque=LEG_SPRING_TORQUE,
+                                   motorSpeed=+0.3 * i)
+            rjd.lowerAngle, rjd.upperAngle = (0.9 - 0.5, 0.9) if i == -1 else (-0.9, -0.9 + 0.5)
+            joint_defs.append(rjd)
         for (x, y), k in zip(starts, ks, strict=True):
-            body = world.CreateDynamicBody(position=(x, y), angle=0.0, fixtures=_BODY_FIXTURE)
+            body_def.position = (x, y)
+            body = world.CreateBody(body_def)
             body.userData = 3 * k
             body.ApplyForceToCenter((rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM),
                                      rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM)), True)
@@ -164,14 +175,12 @@ class LanderWorld:
             self.wind_idx, self.torque_idx = [wind_idx] * n, [torque_idx] * n
         for body, k, (x, y) in zip(self.bodies, ks, starts, strict=True):
             pair = []
-            for j, i in enumerate((-1, +1)):
-                leg = world.CreateDynamicBody(position=(x - i * LEG_AWAY / SCALE, y), angle=i * 0.05,
-                                              fixtures=_LEG_FIXTURE)
+            for j, (i, rjd) in enumerate(zip((-1, +1), joint_defs, strict=True)):
+                leg_def.position, leg_def.angle = (x - i * LEG_AWAY / SCALE, y), i * 0.05
+                leg = world.CreateBody(leg_def)
                 leg.userData = 3 * k + 1 + j
-                rjd = revoluteJointDef(bodyA=body, bodyB=leg, localAnchorA=(0, 0),
-                                       localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE), enableMotor=True,
-                                       enableLimit=True, maxMotorTorque=LEG_SPRING_TORQUE, motorSpeed=+0.3 * i)
-                rjd.lowerAngle, rjd.upperAngle = (0.9 - 0.5, 0.9) if i == -1 else (-0.9, -0.9 + 0.5)
+                rjd.bodyA, rjd.bodyB = body, leg
+                rjd.referenceAngle = leg.angle - body.angle  # (as revoluteJointDef(bodyA=, bodyB=) sets it)
                 world.CreateJoint(rjd)
                 pair.append(leg)
             self.legs.append(pair)
