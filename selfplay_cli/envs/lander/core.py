@@ -235,6 +235,7 @@ class LanderCore:
         self.side_power = np.zeros((L, n))
         self.side_dir = np.zeros((L, n))
         self.worlds: list[LanderWorld | None] = [None] * n
+        self._draws: list[Any] = [None] * n  # per game: its generator's ``random`` and the game's row of _disp
         self._bodies: list[Any] = [None] * (L * n)
         self._zero = np.zeros((L, n))
         self.reset(np.arange(n), np.arange(n))
@@ -255,6 +256,7 @@ class LanderCore:
                 old.close()
             w = LanderWorld(self.config, seed, ks, self._crashed, self._legs)
             self.worlds[game] = w
+            self._draws[game] = (w.rng.random, self._disp[game])
             for seat, body in enumerate(w.bodies):
                 self._bodies[seat * n + game] = body
                 x, y = body.position
@@ -357,11 +359,11 @@ class LanderCore:
     def _fire(self, games: list[int], main: np.ndarray, side: np.ndarray, direction: np.ndarray) -> None:
         """Draw this step's dispersion of every lander of the running ``games`` and apply the impulses of the engines
         that fire (main and side powers ``(L, n)``), as gymnasium does."""
-        bodies, worlds = self._bodies, self.worlds
-        disp = self._disp
+        bodies, draws = self._bodies, self._draws
         for g in games:  # 2 draws per lander, in lander order: gymnasium's two per step for one lander
-            worlds[g].rng.random(out=disp[g])
-        d = (disp * 2.0 - 1.0) / SCALE
+            draw, out = draws[g]
+            draw(out=out)
+        d = (self._disp * 2.0 - 1.0) / SCALE
         d0, d1 = d[..., 0].T, d[..., 1].T  # (L, n)
         tip0, tip1 = np.sin(self._angle), np.cos(self._angle)
         side0, side1 = -tip1, tip0
