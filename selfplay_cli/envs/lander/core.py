@@ -69,12 +69,13 @@ _LOW64, _HIGH64 = OBS_LOW.astype(np.float64), OBS_HIGH.astype(np.float64)
 _LOW64[6:] = 0.0  # +0.0: a leg off the ground reads 0, not -0
 _POLY = [(x / SCALE, y / SCALE) for x, y in LANDER_POLY]
 
-# Box2D's accessors called directly: the functions behind ``body.position``, ``.linearVelocity``, ``.angle``,
-# ``.angularVelocity``, ``.awake`` and a vector's ``.x`` and ``.y``, without the properties' Python wrappers (reading a
-# lander back costs a third less)
+# Box2D's functions called directly: those behind ``body.position``, ``.linearVelocity``, ``.angle``,
+# ``.angularVelocity``, ``.awake``, a vector's ``.x`` and ``.y`` and ``body.ApplyLinearImpulse``, without the Python
+# wrappers of the properties and methods (reading a lander back costs a third less)
 _POSITION, _VELOCITY = _Box2D.b2Body___GetPosition, _Box2D.b2Body___GetLinearVelocity
 _ANGLE, _SPIN, _AWAKE = _Box2D.b2Body___GetAngle, _Box2D.b2Body___GetAngularVelocity, _Box2D.b2Body___IsAwake
 _X, _Y = _Box2D.b2Vec2_x_get, _Box2D.b2Vec2_y_get
+_IMPULSE = _Box2D.b2Body_ApplyLinearImpulse
 
 # A lander's fixtures (gymnasium's), defined once: Box2D copies a definition and its shape into each body it makes
 _BODY_SHAPE, _LEG_SHAPE = polygonShape(vertices=_POLY), polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE))
@@ -236,6 +237,7 @@ class LanderCore:
         self.side_dir = np.zeros((L, n))
         self.worlds: list[LanderWorld | None] = [None] * n
         self._draws: list[Any] = [None] * n  # per game: its generator's ``random`` and the game's row of _disp
+        self._stepper: list[Any] = [None] * n  # per game: its world's ``Step``
         self._bodies: list[Any] = [None] * (L * n)
         self._zero = np.zeros((L, n))
         self.reset(np.arange(n), np.arange(n))
@@ -257,6 +259,7 @@ class LanderCore:
             w = LanderWorld(self.config, seed, ks, self._crashed, self._legs)
             self.worlds[game] = w
             self._draws[game] = (w.rng.random, self._disp[game])
+            self._stepper[game] = w.world.Step
             for seat, body in enumerate(w.bodies):
                 self._bodies[seat * n + game] = body
                 x, y = body.position
@@ -328,8 +331,9 @@ class LanderCore:
         self._fire(games, main, side, direction)
         if self.config.enable_wind:
             self._wind(live)
+        stepper = self._stepper
         for g in games:
-            self.worlds[g].world.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
+            stepper[g](_TIME_STEP, _VEL_ITERS, _POS_ITERS)
         ks, seat, game, s, awake = self._read_back(live)
         shaping = (-100 * np.sqrt(s[:, 0] * s[:, 0] + s[:, 1] * s[:, 1])
                    - 100 * np.sqrt(s[:, 2] * s[:, 2] + s[:, 3] * s[:, 3])
@@ -375,7 +379,7 @@ class LanderCore:
             oy = -tip1 * t - side1 * d1
             args = np.stack([-ox * MAIN_ENGINE_POWER * main, -oy * MAIN_ENGINE_POWER * main, x + ox, y + oy])
             for k, (fx, fy, px, py) in zip(fire.tolist(), args.reshape(4, -1)[:, fire].T.tolist(), strict=True):
-                bodies[k].ApplyLinearImpulse((fx, fy), (px, py), True)
+                _IMPULSE(bodies[k], (fx, fy), (px, py), True)
         fire_side = np.flatnonzero(side.ravel())
         if fire_side.size:  # side engines (gymnasium's 17 px lever, not SIDE_ENGINE_HEIGHT, kept as it is)
             u = 3 * d1 + direction * SIDE_ENGINE_AWAY / SCALE
@@ -385,7 +389,7 @@ class LanderCore:
                              x + ox - tip0 * 17 / SCALE, y + oy + tip1 * SIDE_ENGINE_HEIGHT / SCALE])
             for k, (fx, fy, px, py) in zip(fire_side.tolist(), args.reshape(4, -1)[:, fire_side].T.tolist(),
                                            strict=True):
-                bodies[k].ApplyLinearImpulse((fx, fy), (px, py), True)
+                _IMPULSE(bodies[k], (fx, fy), (px, py), True)
 
     def _read_back(self, live: np.ndarray) -> tuple[np.ndarray, ...]:
         """Read the ``live`` landers back from Box2D after the step: their flat indices, seats and games, gymnasium's

@@ -45,6 +45,7 @@ from .core import (
     _ANGLE,
     _AWAKE,
     _HIGH64,
+    _IMPULSE,
     _LOW64,
     _MAIN_Y,
     _POS_ITERS,
@@ -172,15 +173,13 @@ class ScalarLander:
                 t = _MAIN_Y + 2 * d0
                 ox = tip0 * t + side0 * d1
                 oy = -tip1 * t - side1 * d1
-                bodies[i].ApplyLinearImpulse((-ox * MAIN_ENGINE_POWER * m, -oy * MAIN_ENGINE_POWER * m),
-                                             (x + ox, y + oy), True)
+                _IMPULSE(bodies[i], (-ox * MAIN_ENGINE_POWER * m, -oy * MAIN_ENGINE_POWER * m), (x + ox, y + oy), True)
             if s:  # side engines (gymnasium's 17 px lever, as the core's)
                 u = 3 * d1 + direction[i] * SIDE_ENGINE_AWAY / SCALE
                 ox = tip0 * d0 + side0 * u
                 oy = -tip1 * d0 - side1 * u
-                bodies[i].ApplyLinearImpulse((-ox * SIDE_ENGINE_POWER * s, -oy * SIDE_ENGINE_POWER * s),
-                                             (x + ox - tip0 * 17 / SCALE, y + oy + tip1 * SIDE_ENGINE_HEIGHT / SCALE),
-                                             True)
+                _IMPULSE(bodies[i], (-ox * SIDE_ENGINE_POWER * s, -oy * SIDE_ENGINE_POWER * s),
+                         (x + ox - tip0 * 17 / SCALE, y + oy + tip1 * SIDE_ENGINE_HEIGHT / SCALE), True)
         if self.config.enable_wind:
             self._wind()
         w.world.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
