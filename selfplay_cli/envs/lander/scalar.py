@@ -12,8 +12,9 @@ makes that hold:
   step, flying or not; the impulses in seat order, a lander's main engine before its side engine; the wind; the
   step; the read back);
 - every value is an IEEE double computed with the same operations in the same order as the core's float64 arrays
-  (a sum or a product is the same number in Python); the engines' sin and cos are ``math``'s, gymnasium's (the
-  C library's, which numpy's float64 ``sin`` and ``cos`` call too); the wind is the core's ``math`` code;
+  (a sum or a product is the same number in Python); the engines' sin and cos are numpy's own, called on the
+  number, as the core's (with AVX-512 numpy's may differ from ``math``'s in the last bit: numpy issue 23523); the
+  wind is the core's ``math`` code;
 - options enter the arithmetic as the core's expressions make them (``engine_scale`` multiplies float64 arrays
   there: ``float()`` of it here; the wind's powers multiply Python floats there as here);
 - observations are built as the core builds them (float64, clipped to the bounds, then float32), rewards are the
@@ -63,7 +64,8 @@ from .core import (
 )
 
 _LOW, _HIGH = _LOW64.tolist()[:6], _HIGH64.tolist()[:6]  # the legs (0 or 1) are inside their bounds
-_sin, _cos, _tanh, _sqrt, _PI = math.sin, math.cos, math.tanh, math.sqrt, math.pi
+_np_sin, _np_cos = np.sin, np.cos
+_sin, _tanh, _sqrt, _PI = math.sin, math.tanh, math.sqrt, math.pi
 
 
 class ScalarLander:
@@ -166,7 +168,7 @@ class ScalarLander:
             if not (m or s):
                 continue
             x, y, angle = pos[i]
-            tip0, tip1 = _sin(angle), _cos(angle)
+            tip0, tip1 = float(_np_sin(angle)), float(_np_cos(angle))
             side0, side1 = -tip1, tip0
             d0, d1 = d[2 * i], d[2 * i + 1]
             if m:  # main engine: gymnasium's impulse, 4 px below the centre, +-2 for randomness
