@@ -4,13 +4,25 @@
    and 8 landers, games played by the heuristic (its time included) and reset as they end.
 2. The heuristic's mean return per lander with 1, 2, 3 and 4 landers in the parallel view and in the AEC view
    (engines scaled by the number of landers, as the AEC view does by default).
+3. The targets (issue 51), each a line ``name: value (target ...)`` with its anchor beside it, measured in the same
+   run: gymnasium's ``LunarLander-v3`` (``gym.make``, as its users make it), random actions, reset as it ends. The
+   things compared are run alternately, ``--rounds`` times, and the medians of their ratios are shown (the machine
+   may be shared: run it on one core, ``taskset -c 1``).
 
-    .venv/bin/python benchmarks/lander_env_speed.py [--games 16] [--seconds 3] [--episodes 10]
+   ``lander view / gymnasium per lander step, N landers``: the parallel view's game steps/s times N over
+   gymnasium's steps/s (one lander each), random actions (drawn ahead for both), games reset as they end.
+   ``lander core at 64 games / gymnasium per lander step, 2 landers``: the batched core's game steps/s at 64 games
+   times 2 over gymnasium's, random actions drawn ahead, ``observe()`` every step, games reset as they end.
+
+    .venv/bin/python benchmarks/lander_env_speed.py [--games 16] [--seconds 3] [--episodes 10] [--rounds 5]
+        [--targets-only]
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import statistics
 import time
 
 import numpy as np
@@ -35,6 +47,79 @@ def core_speed(landers: int, games: int, seconds: float) -> float:
             core.reset(done, np.arange(next_seed, next_seed + done.size))
             next_seed += done.size
     return steps / (time.perf_counter() - start)
+
+
+def gym_speed(seconds: float) -> float:
+    """gymnasium's ``LunarLander-v3`` steps per second under random actions (drawn ahead), reset as it ends."""
+    import gymnasium as gym
+
+    env = gym.make("LunarLander-v3")
+    actions = np.random.default_rng(0).integers(0, 4, 4096).tolist()
+    env.reset(seed=0)
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        _, _, term, trunc, _ = env.step(actions[steps % 4096])
+        steps += 1
+        if term or trunc:
+            env.reset()
+    return steps / (time.perf_counter() - start)
+
+
+def view_speed(landers: int, seconds: float) -> float:
+    """The parallel view's game steps per second under random actions (drawn ahead), reset as its games end."""
+    env = LanderParallelEnv(landers=landers)
+    actions = np.random.default_rng(1).integers(0, 4, (4096, landers)).tolist()
+    seats = list(enumerate(env.possible_agents))
+    env.reset(seed=0)
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        if not env.agents:
+            env.reset()
+        row = actions[steps % 4096]
+        env.step({a: row[i] for i, a in seats if a in env.agents})
+        steps += 1
+    return steps / (time.perf_counter() - start)
+
+
+def core_random_speed(landers: int, games: int, seconds: float) -> float:
+    """Game steps per second of the batched core under random actions (drawn ahead, ``observe()`` every step),
+    games reset as they end."""
+    core = LanderCore(games, LanderConfig(landers=landers))
+    actions = np.random.default_rng(2).integers(0, 4, (64, landers, games))
+    next_seed, steps, i = games, 0, 0
+    start = time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        core.observe()
+        core.step(actions[i % 64])
+        i += 1
+        steps += games
+        done = np.flatnonzero(core.over)
+        if done.size:
+            core.reset(done, np.arange(next_seed, next_seed + done.size))
+            next_seed += done.size
+    return steps / (time.perf_counter() - start)
+
+
+def targets(rounds: int, seconds: float) -> None:
+    """The issue's targets, each beside its anchor (gymnasium's rate in the same rounds), alternating what is
+    compared; medians of ``rounds`` rounds."""
+    view_landers = (1, 2, 4)
+    gym, core, views = [], [], {n: [] for n in view_landers}
+    for _ in range(rounds):
+        gym.append(gym_speed(seconds))
+        for n in view_landers:
+            views[n].append(view_speed(n, seconds))
+        core.append(core_random_speed(2, 64, seconds))
+    med = statistics.median
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"\ntargets (medians of {rounds} rounds, alternated; random actions; load average {load})")
+    for n in view_landers:
+        ratio = med(v * n / g for v, g in zip(views[n], gym, strict=True))
+        print(f"lander view / gymnasium per lander step, {n} lander{'s' if n > 1 else ''}: {ratio:.2f}x (target >= "
+              f"1.0x); view {med(views[n]):,.0f} game steps/s, gymnasium {med(gym):,.0f} steps/s")
+    ratio = med(c * 2 / g for c, g in zip(core, gym, strict=True))
+    print(f"lander core at 64 games / gymnasium per lander step, 2 landers: {ratio:.2f}x (target >= 2.0x); core "
+          f"{med(core):,.0f} game steps/s, gymnasium {med(gym):,.0f} steps/s")
 
 
 def parallel_heuristic(landers: int, episodes: int) -> float:
@@ -66,7 +151,12 @@ def main() -> None:
     ap.add_argument("--games", type=int, default=16, help="games in the batched core")
     ap.add_argument("--seconds", type=float, default=3.0, help="seconds of play per lander count")
     ap.add_argument("--episodes", type=int, default=10, help="heuristic episodes per lander count and view")
+    ap.add_argument("--rounds", type=int, default=5, help="rounds of the alternated target measurements")
+    ap.add_argument("--targets-only", action="store_true", help="only the target lines")
     args = ap.parse_args()
+    if args.targets_only:
+        targets(args.rounds, min(args.seconds, 1.0))
+        return
     print(f"batched core, {args.games} games, heuristic play, games reset as they end")
     print(f"{'landers':>8} {'game steps/s':>13} {'lander steps/s':>15}")
     for landers in (1, 2, 4, 8):
@@ -77,6 +167,7 @@ def main() -> None:
     for landers in (1, 2, 3, 4):
         print(f"{landers:>8} {parallel_heuristic(landers, args.episodes):>9.1f} "
               f"{aec_heuristic(landers, args.episodes):>9.1f}")
+    targets(args.rounds, min(args.seconds, 1.0))
 
 
 if __name__ == "__main__":

@@ -2,8 +2,9 @@
 declaration (:data:`LANDER`) and its modules.
 
 ``config`` gymnasium's constants, the options (:class:`~.config.LanderConfig`), the seats and their spaces; ``core``
-the batched core (one Box2D world per game, N games stepped at once); ``view`` the PettingZoo views (parallel and
-AEC); ``render`` the offscreen renderer; ``bots`` the scripted player's rules.
+the batched core (one Box2D world per game, N games stepped at once); ``scalar`` one game of the core in Python
+floats (the views' game); ``view`` the PettingZoo views (parallel and AEC); ``render`` the offscreen renderer;
+``bots`` the scripted player's rules.
 
 Rules, per game:
 

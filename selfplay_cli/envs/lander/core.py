@@ -20,7 +20,8 @@ from typing import Any
 
 import Box2D
 import numpy as np
-from Box2D.b2 import edgeShape, fixtureDef, polygonShape, revoluteJointDef
+from Box2D import _Box2D
+from Box2D.b2 import bodyDef, dynamicBody, edgeShape, fixtureDef, polygonShape, revoluteJointDef
 
 from ..contract import IllegalActionError, reset_slots
 from .config import (
@@ -68,6 +69,20 @@ _LOW64, _HIGH64 = OBS_LOW.astype(np.float64), OBS_HIGH.astype(np.float64)
 _LOW64[6:] = 0.0  # +0.0: a leg off the ground reads 0, not -0
 _POLY = [(x / SCALE, y / SCALE) for x, y in LANDER_POLY]
 
+# Box2D's functions called directly: those behind ``body.position``, ``.linearVelocity``, ``.angle``,
+# ``.angularVelocity``, ``.awake``, a vector's ``.x`` and ``.y`` and ``body.ApplyLinearImpulse``, without the Python
+# wrappers of the properties and methods (reading a lander back costs a third less)
+_POSITION, _VELOCITY = _Box2D.b2Body___GetPosition, _Box2D.b2Body___GetLinearVelocity
+_ANGLE, _SPIN, _AWAKE = _Box2D.b2Body___GetAngle, _Box2D.b2Body___GetAngularVelocity, _Box2D.b2Body___IsAwake
+_X, _Y = _Box2D.b2Vec2_x_get, _Box2D.b2Vec2_y_get
+_IMPULSE = _Box2D.b2Body_ApplyLinearImpulse
+
+# A lander's fixtures (gymnasium's), defined once: Box2D copies a definition and its shape into each body it makes
+_BODY_SHAPE, _LEG_SHAPE = polygonShape(vertices=_POLY), polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE))
+_BODY_FIXTURE = fixtureDef(shape=_BODY_SHAPE, density=5.0, friction=0.1, categoryBits=BODY_BITS, maskBits=_COLLIDE,
+                           restitution=0.0)
+_LEG_FIXTURE = fixtureDef(shape=_LEG_SHAPE, density=1.0, restitution=0.0, categoryBits=LEG_BITS, maskBits=_COLLIDE)
+
 
 def seed_generator(seed: int) -> np.random.Generator:
     """A game's generator: ``default_rng(seed)`` (gymnasium's seeding); a negative seed wraps to 64 bits."""
@@ -75,14 +90,15 @@ def seed_generator(seed: int) -> np.random.Generator:
 
 
 class _Contacts(Box2D.b2ContactListener):
-    """Box2D's contact callbacks for one world, written into the core's arrays.
+    """Box2D's contact callbacks for one world, written into the core's arrays (or the one-game lists of
+    :class:`~.scalar.ScalarLander`): ``crashed[k]``, ``legs[k][leg]``.
 
     A body's ``userData`` is ``3 * k + part`` (part 0 the lander body, 1 and 2 its legs) for lander ``k``, None for
     the moon. A lander body touching anything crashes it; a leg touching the moon counts as a ground contact (a
     count, so a leg on two terrain edges at once stays in contact until it leaves both; with ``flag``, gymnasium's
     flag, set by any contact beginning and cleared by any ending)."""
 
-    def __init__(self, crashed: np.ndarray, legs: np.ndarray, flag: bool = False) -> None:
+    def __init__(self, crashed: Any, legs: Any, flag: bool = False) -> None:
         super().__init__()
         self.crashed, self.legs, self.flag = crashed, legs, flag
 
@@ -93,9 +109,9 @@ class _Contacts(Box2D.b2ContactListener):
                 self.crashed[k] = True
         elif other is None:
             if self.flag:
-                self.legs[k, part - 1] = delta > 0
+                self.legs[k][part - 1] = int(delta > 0)
             else:
-                self.legs[k, part - 1] += delta
+                self.legs[k][part - 1] += delta
 
     def BeginContact(self, contact: Any) -> None:  # noqa: N802 (Box2D's name)
         a, b = contact.fixtureA.body.userData, contact.fixtureB.body.userData
@@ -115,7 +131,7 @@ class _Contacts(Box2D.b2ContactListener):
 class LanderWorld:
     """One game's Box2D world: the moon, the landers (body, two legs each) and the game's generator."""
 
-    def __init__(self, cfg: LanderConfig, seed: int, ks: list[int], crashed: np.ndarray, legs: np.ndarray) -> None:
+    def __init__(self, cfg: LanderConfig, seed: int, ks: list[int], crashed: Any, legs: Any) -> None:
         self.rng = rng = seed_generator(seed)
         self.world = world = Box2D.b2World(gravity=(0, cfg.gravity))
         self.listener = _Contacts(crashed, legs, cfg.gym_leg_contact)
@@ -129,17 +145,28 @@ class LanderWorld:
         smooth_y = [0.33 * (height[i - 1] + height[i + 0] + height[i + 1]) for i in range(CHUNKS)]
         self.moon = world.CreateStaticBody(shapes=edgeShape(vertices=[(0, 0), (W, 0)]))
         self.terrain = [(chunk_x[i], smooth_y[i]) for i in range(CHUNKS)]
-        for i in range(CHUNKS - 1):
-            self.moon.CreateEdgeFixture(vertices=[self.terrain[i], self.terrain[i + 1]], density=0, friction=0.1)
-        # The landers, spread across the top; each pushed by its own random force
+        edge = edgeShape()
+        ground = fixtureDef(shape=edge, density=0, friction=0.1)
+        for i in range(CHUNKS - 1):  # (gymnasium's CreateEdgeFixture, its keywords set once)
+            edge.vertices = [self.terrain[i], self.terrain[i + 1]]
+            self.moon.CreateFixture(ground)
+        # The landers, spread across the top; each pushed by its own random force. (gymnasium's CreateDynamicBody and
+        # joint keywords, set once per world in definitions that Box2D copies.)
         n = len(ks)
         self.bodies, self.legs = [], []
         starts = [((i + 1) / (n + 1) * W, VIEWPORT_H / SCALE) for i in range(n)]
+        body_def = bodyDef(type=dynamicBody, angle=0.0, fixtures=_BODY_FIXTURE)
+        leg_def = bodyDef(type=dynamicBody, fixtures=_LEG_FIXTURE)
+        joint_defs = []
+        for i in (-1, +1):
+            rjd = revoluteJointDef(localAnchorA=(0, 0), localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE),
+                                   enableMotor=True, enableLimit=True, maxMotorTorque=LEG_SPRING_TORQUE,
+                                   motorSpeed=+0.3 * i)
+            rjd.lowerAngle, rjd.upperAngle = (0.9 - 0.5, 0.9) if i == -1 else (-0.9, -0.9 + 0.5)
+            joint_defs.append(rjd)
         for (x, y), k in zip(starts, ks, strict=True):
-            body = world.CreateDynamicBody(
-                position=(x, y), angle=0.0,
-                fixtures=fixtureDef(shape=polygonShape(vertices=_POLY), density=5.0, friction=0.1,
-                                    categoryBits=BODY_BITS, maskBits=_COLLIDE, restitution=0.0))
+            body_def.position = (x, y)
+            body = world.CreateBody(body_def)
             body.userData = 3 * k
             body.ApplyForceToCenter((rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM),
                                      rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM)), True)
@@ -149,16 +176,12 @@ class LanderWorld:
             self.wind_idx, self.torque_idx = [wind_idx] * n, [torque_idx] * n
         for body, k, (x, y) in zip(self.bodies, ks, starts, strict=True):
             pair = []
-            for j, i in enumerate((-1, +1)):
-                leg = world.CreateDynamicBody(
-                    position=(x - i * LEG_AWAY / SCALE, y), angle=i * 0.05,
-                    fixtures=fixtureDef(shape=polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE)), density=1.0,
-                                        restitution=0.0, categoryBits=LEG_BITS, maskBits=_COLLIDE))
+            for j, (i, rjd) in enumerate(zip((-1, +1), joint_defs, strict=True)):
+                leg_def.position, leg_def.angle = (x - i * LEG_AWAY / SCALE, y), i * 0.05
+                leg = world.CreateBody(leg_def)
                 leg.userData = 3 * k + 1 + j
-                rjd = revoluteJointDef(bodyA=body, bodyB=leg, localAnchorA=(0, 0),
-                                       localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE), enableMotor=True,
-                                       enableLimit=True, maxMotorTorque=LEG_SPRING_TORQUE, motorSpeed=+0.3 * i)
-                rjd.lowerAngle, rjd.upperAngle = (0.9 - 0.5, 0.9) if i == -1 else (-0.9, -0.9 + 0.5)
+                rjd.bodyA, rjd.bodyB = body, leg
+                rjd.referenceAngle = leg.angle - body.angle  # (as revoluteJointDef(bodyA=, bodyB=) sets it)
                 world.CreateJoint(rjd)
                 pair.append(leg)
             self.legs.append(pair)
@@ -213,6 +236,8 @@ class LanderCore:
         self.side_power = np.zeros((L, n))
         self.side_dir = np.zeros((L, n))
         self.worlds: list[LanderWorld | None] = [None] * n
+        self._draws: list[Any] = [None] * n  # per game: its generator's ``random`` and the game's row of _disp
+        self._stepper: list[Any] = [None] * n  # per game: its world's ``Step``
         self._bodies: list[Any] = [None] * (L * n)
         self._zero = np.zeros((L, n))
         self.reset(np.arange(n), np.arange(n))
@@ -233,6 +258,8 @@ class LanderCore:
                 old.close()
             w = LanderWorld(self.config, seed, ks, self._crashed, self._legs)
             self.worlds[game] = w
+            self._draws[game] = (w.rng.random, self._disp[game])
+            self._stepper[game] = w.world.Step
             for seat, body in enumerate(w.bodies):
                 self._bodies[seat * n + game] = body
                 x, y = body.position
@@ -304,8 +331,9 @@ class LanderCore:
         self._fire(games, main, side, direction)
         if self.config.enable_wind:
             self._wind(live)
+        stepper = self._stepper
         for g in games:
-            self.worlds[g].world.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
+            stepper[g](_TIME_STEP, _VEL_ITERS, _POS_ITERS)
         ks, seat, game, s, awake = self._read_back(live)
         shaping = (-100 * np.sqrt(s[:, 0] * s[:, 0] + s[:, 1] * s[:, 1])
                    - 100 * np.sqrt(s[:, 2] * s[:, 2] + s[:, 3] * s[:, 3])
@@ -335,11 +363,11 @@ class LanderCore:
     def _fire(self, games: list[int], main: np.ndarray, side: np.ndarray, direction: np.ndarray) -> None:
         """Draw this step's dispersion of every lander of the running ``games`` and apply the impulses of the engines
         that fire (main and side powers ``(L, n)``), as gymnasium does."""
-        bodies, worlds = self._bodies, self.worlds
-        disp = self._disp
+        bodies, draws = self._bodies, self._draws
         for g in games:  # 2 draws per lander, in lander order: gymnasium's two per step for one lander
-            worlds[g].rng.random(out=disp[g])
-        d = (disp * 2.0 - 1.0) / SCALE
+            draw, out = draws[g]
+            draw(out=out)
+        d = (self._disp * 2.0 - 1.0) / SCALE
         d0, d1 = d[..., 0].T, d[..., 1].T  # (L, n)
         tip0, tip1 = np.sin(self._angle), np.cos(self._angle)
         side0, side1 = -tip1, tip0
@@ -351,7 +379,7 @@ class LanderCore:
             oy = -tip1 * t - side1 * d1
             args = np.stack([-ox * MAIN_ENGINE_POWER * main, -oy * MAIN_ENGINE_POWER * main, x + ox, y + oy])
             for k, (fx, fy, px, py) in zip(fire.tolist(), args.reshape(4, -1)[:, fire].T.tolist(), strict=True):
-                bodies[k].ApplyLinearImpulse((fx, fy), (px, py), True)
+                _IMPULSE(bodies[k], (fx, fy), (px, py), True)
         fire_side = np.flatnonzero(side.ravel())
         if fire_side.size:  # side engines (gymnasium's 17 px lever, not SIDE_ENGINE_HEIGHT, kept as it is)
             u = 3 * d1 + direction * SIDE_ENGINE_AWAY / SCALE
@@ -361,7 +389,7 @@ class LanderCore:
                              x + ox - tip0 * 17 / SCALE, y + oy + tip1 * SIDE_ENGINE_HEIGHT / SCALE])
             for k, (fx, fy, px, py) in zip(fire_side.tolist(), args.reshape(4, -1)[:, fire_side].T.tolist(),
                                            strict=True):
-                bodies[k].ApplyLinearImpulse((fx, fy), (px, py), True)
+                _IMPULSE(bodies[k], (fx, fy), (px, py), True)
 
     def _read_back(self, live: np.ndarray) -> tuple[np.ndarray, ...]:
         """Read the ``live`` landers back from Box2D after the step: their flat indices, seats and games, gymnasium's
@@ -372,8 +400,8 @@ class LanderCore:
         ext = vals.extend
         for k in ks.tolist():
             b = bodies[k]
-            p, v = b.position, b.linearVelocity
-            ext((p.x, p.y, v.x, v.y, b.angle, b.angularVelocity, b.awake))
+            p, v = _POSITION(b), _VELOCITY(b)
+            ext((_X(p), _Y(p), _X(v), _Y(v), _ANGLE(b), _SPIN(b), _AWAKE(b)))
         r = np.array(vals).reshape(-1, 7)
         seat, game = np.divmod(ks, n)
         self._pos[0, seat, game] = r[:, 0]
