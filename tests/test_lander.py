@@ -447,3 +447,23 @@ def test_a_copied_lander_view_is_the_same_game_made_afresh_and_a_game_under_way_
     assert len(first) > 20 and all(trace(t) == first for t in twins)
     with pytest.raises(TypeError, match="a lander view with a game under way cannot be copied"):
         copy.deepcopy(env)  # (the traced game is still under way)
+
+
+def test_options_given_as_numpy_numbers_play_the_game_of_the_same_python_numbers():
+    """A config built from numpy's numbers (a YAML or a sweep hands them over) holds Python's: Box2D's calls take
+    only those (a np.float32 wind crashed the first step), and the game is the one of the same values."""
+    given = dict(enable_wind=np.bool_(True), wind_power=np.float32(12.5), turbulence_power=np.float64(1.25),
+                 landers=np.int64(2), gravity=np.float32(-9.5))
+    config = make_config(**given)
+    assert all(type(getattr(config, k)) is type(v.item()) for k, v in given.items())
+
+    def trace(options) -> list[float]:
+        env = LanderParallelEnv(**options)
+        env.reset(seed=3)
+        out = []
+        for _ in range(60):
+            _, rewards, _, _, _ = env.step({a: 2 for a in env.agents})
+            out += list(rewards.values())
+        return out
+
+    assert trace(given) == trace({k: v.item() for k, v in given.items()})

@@ -4,9 +4,8 @@
 their spaces, the game seeds (``reset(seed=s)`` plays game ``s``; later resets without a seed draw game seeds from a
 generator seeded by ``s``), the offscreen renderer. :class:`OneGameView` is the ``ParallelEnv``: every seat acts at
 each step, a seat leaves ``agents`` on the step it ends, and every seat still playing is truncated when the game is.
-:class:`CoreGame` plays the game as one game of its batched core (the lander's view); pong's and tennis's views play
-a scalar copy of their core's rules instead (faster for one game: the same game, step for step) and give the same
-hooks themselves.
+Each game's view plays its one game with a scalar copy of its batched core's rules (faster for one game: the same
+game, step for step, which its tests hold against the core) and gives the hooks below.
 
 A game's view sets ``game_name`` (in messages), ``metadata`` and ``renderer`` (a class whose ``draw(scene, 0)``
 returns an RGB array), calls :meth:`OneGame._setup` from its ``__init__`` and provides the hooks: ``_start(seed)``
@@ -134,41 +133,3 @@ class OneGameView(OneGame, ParallelEnv):
     @abstractmethod
     def _cut(self) -> bool:
         """A game's hook (see the module docstring)."""
-
-
-class CoreGame(OneGame):
-    """The hooks for a game played as one game of its batched core (``self.core``, made by :meth:`_setup_core`).
-
-    A seat's action goes through ``_action(agent, action)`` (checked, as the core takes it); a seat not given one, or
-    no longer playing, acts with the ``noop`` of :meth:`_setup_core`. A seat ends with its game (``_ended``), unless
-    the game says otherwise."""
-
-    def _setup_core(self, core: Any, noop: np.ndarray) -> None:
-        self.core = core
-        self._noop = noop
-
-    @abstractmethod
-    def _action(self, agent: str, action: Any) -> Any:
-        """A game's hook (see the module docstring)."""
-
-    def _start(self, seed: int) -> None:
-        self.core.reset([0], [seed])
-
-    def _play(self, actions: dict[str, Any]) -> np.ndarray:
-        buf = self._noop.copy()
-        for agent in self.agents:
-            if agent in actions:
-                buf[self._index[agent], 0] = self._action(agent, actions[agent])
-        return self.core.step(buf)[:, 0]
-
-    def _observe(self) -> np.ndarray:
-        return self.core.observe()[:, 0]
-
-    def _ended(self, seat: int) -> bool:
-        return bool(self.core.terminated[0])
-
-    def _cut(self) -> bool:
-        return bool(self.core.truncated[0])
-
-    def _scene(self) -> Any:
-        return self.core

@@ -69,6 +69,8 @@ class LanderConfig:
             if kind is float and (isinstance(value, bool) or not isinstance(value, (int, float, np.floating))
                                   or not math.isfinite(value)):
                 raise ValueError(f"lander option {f.name} wants a finite number, not {value!r}")
+            if kind is not None:  # numpy's numbers as Python's: Box2D's calls take only those (a np.float32 wind
+                object.__setattr__(self, f.name, kind(value))  # crashed in ApplyForceToCenter)
         if not 1 <= self.landers <= MAX_LANDERS:
             raise ValueError(f"landers must lie between 1 and {MAX_LANDERS}, not {self.landers}")
         if not -12.0 < self.gravity < 0.0:
@@ -79,6 +81,7 @@ class LanderConfig:
             raise ValueError("wind_power and turbulence_power must not be negative")
         if not 0.0 < self.engine_scale <= 2 * MAX_LANDERS:
             raise ValueError(f"engine_scale must lie in (0, {2 * MAX_LANDERS}], not {self.engine_scale}")
+
 
 def make_config(**options: Any) -> LanderConfig:
     """A config from keyword options, with a clear error for an unknown option."""
