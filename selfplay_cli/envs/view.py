@@ -133,3 +133,21 @@ class OneGameView(OneGame, ParallelEnv):
     @abstractmethod
     def _cut(self) -> bool:
         """A game's hook (see the module docstring)."""
+
+
+class SavedState:
+    """``get_state`` / ``set_state`` for a view whose one game (``self.game``) can give and take its exact state
+    (pong's and tennis's scalar games): the game's state, the seats still playing and the game's seed."""
+
+    game: Any
+    agents: list[str]
+    game_seed: int | None
+
+    def get_state(self) -> dict[str, Any]:
+        """Exact state of the game (its own format), the seats still playing and the game's seed."""
+        return {"core": self.game.get_state(), "agents": list(self.agents), "game_seed": self.game_seed}
+
+    def set_state(self, state: dict[str, Any]) -> None:
+        self.game.set_state(state["core"])
+        self.agents = list(state["agents"])
+        self.game_seed = state["game_seed"]

@@ -9,14 +9,14 @@ from typing import Any
 
 import numpy as np
 
-from ..view import OneGameView
+from ..view import OneGameView, SavedState
 from .config import AGENTS, action_space, make_config, observation_space
 from .core import PongCore
 from .render import PongRenderer
 from .scalar import ScalarPong
 
 
-class PongParallelEnv(OneGameView):
+class PongParallelEnv(SavedState, OneGameView):
     """Two-player Pong with agents ``left`` and ``right``; see :mod:`selfplay_cli.envs.pong` for the rules.
 
     ``reset(seed=s)`` makes the game reproducible; later resets without a seed draw fresh game seeds from a
@@ -79,12 +79,3 @@ class PongParallelEnv(OneGameView):
     def state(self) -> np.ndarray:
         """The global state: the left seat's latest observation frame (world-complete)."""
         return self.game.latest()
-
-    def get_state(self) -> dict[str, Any]:
-        """Exact state of the game (physics, score, RNG counters and observation history)."""
-        return {"core": self.game.get_state(), "agents": list(self.agents), "game_seed": self.game_seed}
-
-    def set_state(self, state: dict[str, Any]) -> None:
-        self.game.set_state(state["core"])
-        self.agents = list(state["agents"])
-        self.game_seed = state["game_seed"]

@@ -8,14 +8,14 @@ from typing import Any
 
 import numpy as np
 
-from ..view import OneGameView
+from ..view import OneGameView, SavedState
 from .config import AGENTS, FPS, REASON_NAMES, SURFACE_NAMES, TennisConfig, action_space, make_config, observation_space
 from .core import TennisCore
 from .render import TennisRenderer
 from .scalar import ScalarTennis
 
 
-class TennisParallelEnv(OneGameView):
+class TennisParallelEnv(SavedState, OneGameView):
     """Two table-tennis players, ``player_0`` (the -x end) and ``player_1``; see :mod:`selfplay_cli.envs.tennis`.
 
     Both act at every step (50 a second). Rewards are each seat's: the point rewards (zero-sum) and the hit
@@ -85,12 +85,3 @@ class TennisParallelEnv(OneGameView):
     def state(self) -> np.ndarray:
         """The global state: player_0's observation (it sees the whole world)."""
         return self.game.observe()[0]
-
-    def get_state(self) -> dict[str, Any]:
-        """Exact state of the game (the core's format for one game), the seats still playing and the game's seed."""
-        return {"core": self.game.get_state(), "agents": list(self.agents), "game_seed": self.game_seed}
-
-    def set_state(self, state: dict[str, Any]) -> None:
-        self.game.set_state(state["core"])
-        self.agents = list(state["agents"])
-        self.game_seed = state["game_seed"]
