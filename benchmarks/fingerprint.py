@@ -28,7 +28,8 @@ from pathlib import Path
 VOLATILE = {"seconds", "steps_per_second", "rating_seconds", "rating_wait_seconds", "created", "created_at",
             "path", "home", "db", "wall_seconds", "elapsed", "games_per_second", "file", "video", "at", "when",
             "training_seconds", "started", "ended", "time", "plot", "session_seconds", "session_train_seconds",
-            "game_steps_per_second", "overrun_seconds", "sha256"}  # a file's sha256 covers its clock time; the snapshots are hashed without it
+            "game_steps_per_second", "overrun_seconds",
+            "sha256"}  # a file's sha256 covers its clock time; the snapshots are hashed without it
 
 RUNS = {
     "pong-ppo": ["pong", "--agents", "2", "--steps", "40000", "--games", "16", "--snapshot-steps", "10000"],

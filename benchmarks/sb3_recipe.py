@@ -26,6 +26,7 @@ import argparse
 import json
 import math
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -191,9 +192,9 @@ def main() -> None:
           flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         rounds = [round_of(r, args.minutes, Path(tmp)) for r in range(args.rounds)]
-        ratios = sorted(x["ratio"] for x in rounds)
+        ratios = [x["ratio"] for x in rounds]
         print(f"speed: marl / SB3 + SuperSuit game steps/s, median of {len(ratios)} rounds: "
-              f"{ratios[len(ratios) // 2]:.1f}x (rounds {', '.join(f'{x:.1f}' for x in ratios)})")
+              f"{statistics.median(ratios):.1f}x (rounds {', '.join(f'{x:.1f}' for x in ratios)})")
         print(f"final policies, mean return per lander over the same {args.games} fresh games (seeds "
               f"{FIRST_SEED:,}-{FIRST_SEED + args.games - 1:,}), 95% intervals:")
         for r, x in enumerate(rounds):
