@@ -51,6 +51,7 @@ def train_sb3(out: Path, minutes: float, seed: int) -> None:
     import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.callbacks import BaseCallback
+    from stable_baselines3.common.logger import configure
     from stable_baselines3.common.utils import set_random_seed
 
     torch.set_num_threads(1)
@@ -68,6 +69,7 @@ def train_sb3(out: Path, minutes: float, seed: int) -> None:
     set_random_seed(seed)  # (PPO(seed=...) would seed the vector env, which SuperSuit's ConcatVecEnv refuses)
     venv.venv.reset(seed=seed)  # the games' seeds (SuperSuit's SB3 wrapper's own reset(seed) calls the same seed())
     model = PPO("MlpPolicy", venv, device="cpu", verbose=0)
+    model.set_logger(configure(str(out.with_suffix(".log")), []))  # (its default folder is left in the temp folder)
     began = time.monotonic()
     model.learn(total_timesteps=10**12, callback=Until(began + 60 * minutes))
     took = time.monotonic() - began
