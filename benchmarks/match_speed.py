@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from env_throughput import batched_core  # (pong's core with pre-drawn actions, games reset as they end)
 
 ONE_THREAD = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "SDL_VIDEODRIVER": "dummy"}
 
@@ -40,25 +41,6 @@ def marl(home: Path, *args: str, cpu: int | None = None) -> tuple[str, float]:
     if out.returncode != 0:
         raise SystemExit(f"marl {' '.join(args)} failed ({out.returncode}): {out.stderr.strip()[-2000:]}")
     return out.stdout, took
-
-
-def core_rate(games: int, seconds: float) -> float:
-    """Game steps/s of pong's batched core stepping ``games`` games with pre-drawn actions (games reset as they end)."""
-    from selfplay_cli.envs import get_env
-
-    core = get_env("pong").core(games)
-    acts = [np.random.default_rng(i).integers(0, 3, (2, games)) for i in range(64)]
-    next_seed, steps, began = games, 0, time.perf_counter()
-    while time.perf_counter() - began < seconds:
-        for i in range(32):
-            core.step(acts[i & 63])
-            done = core.terminated | core.truncated
-            if done.any():
-                slots = np.flatnonzero(done)
-                core.reset(slots, np.arange(next_seed, next_seed + slots.size))
-                next_seed += slots.size
-        steps += 32
-    return steps * games / (time.perf_counter() - began)
 
 
 def network_floor(home: Path, names: list[str], games: int, steps: int) -> float:
@@ -98,7 +80,7 @@ def main() -> None:
         load = os.getloadavg()[0]
         out, wall = marl(home, "match", *names, "--games", str(args.games), "--no-store", "--json", cpu=args.cpu)
         m = json.loads(out)
-        rate = core_rate(args.games, 5.0)
+        rate = batched_core(args.games, 5.0, observe=False)
         stepping = m["game_steps"] / rate
         per_step = m["game_steps"] / args.games  # the match's steps of all its games at once (they start together)
         floor = network_floor(home, names, args.games, int(round(per_step)))

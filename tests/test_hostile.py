@@ -277,6 +277,9 @@ def test_swapped_snapshot_file_is_refused_and_nothing_is_played(tmp_path, capsys
     league.close()
     err = one_line_error(*run(capsys, "match", "r/s1M-left", "cpu", "--games", "2", "--home", str(home))[::2])
     assert str(s1) in err and "not the snapshot r/s1M-left" in err
+    out = tmp_path / "exported.safetensors"  # nor is it exported under the row's name
+    err = one_line_error(*run(capsys, "checkpoint", "export", "r/s1M-left", str(out), "--home", str(home))[::2])
+    assert str(s1) in err and "not the snapshot r/s1M-left" in err and not out.exists()
     with League.open(home, readonly=True) as lg:
         assert lg.ledger.count_games() == 8  # make_league's, no more
     assert sqlite3.connect(home / "league.db").execute("select count(*) from matches").fetchone() == (1,)

@@ -412,8 +412,8 @@ def test_a_minutes_budget_ends_within_one_minibatch_or_step_of_its_deadline(tmp_
                                   "gradient steps")
     else:  # steps of 20 s: 3 of them (12 game steps) by 60 s, the rollout of 16 far from full
         assert (end.update, end.cut, end.overrun, end.unlearned) == ("not begun", {}, 0.0, 12)
-        assert end.describe() == ("budget of 60 s: training ended 0.0 s past it, an update not begun: the 12 game "
-                                  "steps played since the last one are not learned from")
+        assert end.describe() == ("budget of 60 s: training ended 0.0 s past it, an update not begun: the last 12 "
+                                  "game steps played (since the last update, or the start) are not learned from")
 
 
 def test_a_minutes_budget_cuts_an_off_policy_update_after_the_gradient_step_under_way():

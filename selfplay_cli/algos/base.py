@@ -56,6 +56,7 @@ class Learner(Protocol):
     config_class: ClassVar[type]  # its hyperparameter dataclass
     net: MLPNet  # the network it trains (saved as snapshots)
     n_slots: int
+    cut: tuple[int, int] | None  # its last update, when a --minutes budget cut it: (gradient steps done, due)
 
     @staticmethod
     def check_seat(seat: SeatSpace) -> ActionHead:

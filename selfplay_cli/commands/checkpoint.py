@@ -204,7 +204,7 @@ def _runs(needs) -> str:
 def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination file (.safetensors).")],
            env: EnvOpt = None, home: HomeOpt = None, db: DbOpt = None) -> None:
     """Write a snapshot as one portable file (weights and metadata) that `marl checkpoint import` registers."""
-    from ..players.files import read_row_snapshot
+    from ..players.files import registered, snapshot_path
     from ..policies.snapshot_reader import export_snapshot
     from ..ratings.names import resolve
 
@@ -213,9 +213,8 @@ def export(name: NameArg, out: Annotated[Path, typer.Argument(help="Destination 
         p = resolve(league, name, check_env(env))
         if p.is_bot:
             raise MarlError(f"{p.full_name} is a scripted player: there is no file to export")
-        _, path = read_row_snapshot(league, p)  # (the home's file, or the league's copy where this machine has
-        # none; never a file that is not the row's)
-        export_snapshot(path, out, expect_env=p.env)
+        # the home's file, or the league's copy where this machine has none; never a file that is not the row's
+        export_snapshot(snapshot_path(league, p), out, expect_env=p.env, registered=registered(p))
     finally:
         league.close()
     console.print(f"exported {p.full_name} to {out}", markup=False)

@@ -385,10 +385,10 @@ def read_snapshot(path: str | os.PathLike[str], expect_env: str | None = None,
 
 
 def load_snapshot(
-    path: str | os.PathLike[str], expect_env: str | None = None
+    path: str | os.PathLike[str], expect_env: str | None = None, registered: Registered | None = None
 ) -> tuple[dict[str, torch.Tensor], SnapshotMeta]:
     """Weights (CPU tensors) and metadata, fully validated (:func:`read_snapshot`)."""
-    snap = read_snapshot(path, expect_env=expect_env)
+    snap = read_snapshot(path, expect_env=expect_env, registered=registered)
     return snap.tensors, snap.meta
 
 # --------------------------------------------------------------------------------------------------------------
@@ -396,11 +396,12 @@ def load_snapshot(
 
 
 def export_snapshot(src: str | os.PathLike[str], dst: str | os.PathLike[str], expect_env: str | None = None,
-                    **overrides: Any) -> SnapshotMeta:
-    """Validate ``src`` (playing ``expect_env``, as :func:`read_snapshot`) and write it as one portable file at
-    ``dst`` (atomically), with optional metadata overrides (``run=``, ``name=``, ``parent=``, ...). If ``dst`` is
-    an existing directory the file keeps its name. ``weights_sha256`` cannot be overridden (it is recomputed)."""
-    tensors, meta = load_snapshot(src, expect_env=expect_env)
+                    registered: Registered | None = None, **overrides: Any) -> SnapshotMeta:
+    """Validate ``src`` (playing ``expect_env``, and the file a league's row ``registered`` where given, as
+    :func:`read_snapshot`) and write it as one portable file at ``dst`` (atomically), with optional metadata
+    overrides (``run=``, ``name=``, ``parent=``, ...). If ``dst`` is an existing directory the file keeps its name.
+    ``weights_sha256`` cannot be overridden (it is recomputed)."""
+    tensors, meta = load_snapshot(src, expect_env=expect_env, registered=registered)
     names = {f.name for f in dataclasses.fields(SnapshotMeta)} - {"weights_sha256"}
     unknown = sorted(set(overrides) - names)
     if unknown:

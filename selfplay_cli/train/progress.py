@@ -85,23 +85,25 @@ class Standing:
 @dataclass(frozen=True)
 class BudgetEnd:
     """How a ``--minutes`` budget ended training: ``overrun`` seconds past it (the update or step under way when the
-    time ran out), and the update it fell in: ``"cut"`` (an update under way ended early: each cut learner's gradient
-    steps done and due, at least one done), ``"not begun"`` (``unlearned`` game steps played since the last update,
-    a rollout not full yet: not learned from), or ``"whole"`` (it fell at an update's end)."""
+    time ran out), and the update it fell in (:attr:`update`): ``"cut"`` (an update under way ended early: each cut
+    learner's gradient steps done and due, at least one done), ``"not begun"`` (``unlearned`` game steps played
+    since the last update, a rollout not full yet: not learned from), or ``"whole"`` (it fell at an update's end)."""
 
     seconds: float  # the budget
     overrun: float  # training ended this long after it
-    update: str  # "cut", "not begun" or "whole"
     cut: dict[str, tuple[int, int]] = field(default_factory=dict)  # learner -> (gradient steps done, due)
-    unlearned: int = 0  # game steps played since the learners' last update
+    unlearned: int = 0  # game steps played since the learners' last update (0 when one was cut)
 
     @classmethod
     def of(cls, seconds: float, overrun: float, learners: dict[str, Any], unlearned: int) -> BudgetEnd:
         """From the learners (name -> learner) as training left them: each says whether its last update was cut
-        (``cut``: done and due, None when whole)."""
-        cut = {name: tuple(c) for name, c in ((n, getattr(lr, "cut", None)) for n, lr in learners.items()) if c}
-        update = "cut" if cut else "not begun" if unlearned > 0 else "whole"
-        return cls(seconds, max(overrun, 0.0), update, cut, 0 if cut else max(unlearned, 0))
+        (its ``cut``: done and due, None when whole)."""
+        cut = {name: tuple(learner.cut) for name, learner in learners.items() if learner.cut}
+        return cls(seconds, max(overrun, 0.0), cut, 0 if cut else max(unlearned, 0))
+
+    @property
+    def update(self) -> str:
+        return "cut" if self.cut else "not begun" if self.unlearned else "whole"
 
     def describe(self) -> str:
         """``budget of 60 s: training ended 0.4 s past it, its last update cut after 3 of 80 gradient steps``."""
@@ -111,8 +113,8 @@ class BudgetEnd:
                              for name, (d, n) in self.cut.items())
             return head + f"its last update cut after {each}"
         if self.update == "not begun":
-            return head + (f"an update not begun: the {self.unlearned:,} game steps played since the last one are "
-                           "not learned from")
+            return head + (f"an update not begun: the last {self.unlearned:,} game steps played (since the last "
+                           "update, or the start) are not learned from")
         return head + "at an update's end"
 
     def to_json(self) -> dict[str, Any]:
