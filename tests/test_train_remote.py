@@ -137,6 +137,28 @@ def test_no_wait_leaves_the_gauntlets_to_workers_and_the_ladder_fills_in_later(d
 
 
 @pytest.mark.slow
+def test_local_no_wait_ends_with_training_and_leaves_the_rest_to_workers(tmp_path, capsys, local_record):
+    """The default rating worker with --no-wait: the run ends as its training does, the worker stopped in the middle
+    of whatever it played; the gauntlets it had not finished are on the league's queue, in order, and a worker that
+    comes later plays them: the ledger ends with the very games the run would have waited for (a matchup stored
+    before the stop counts once)."""
+    home = tmp_path / "home"
+    code, out, err = run(capsys, *RUN, "--no-wait", "--home", str(home), "--json")
+    assert code == 0, err
+    data = json.loads(out)
+    left = data["rating_jobs_left"]
+    assert left >= 1 and data["best"] is None  # the final gauntlet, submitted as training ended, is among them
+    assert data["rating"] == "local" and data["rating_batch"] == BATCH
+    with League.open(home) as league:
+        jobs = league.queue.jobs(batch=BATCH)
+        assert [j.state for j in jobs] == ["queued"] * left
+        assert jobs[-1].spec["snapshots"] == ["r/s4.1k-left", "r/s4.1k-right"] and jobs[-1].spec["playoff"] == 4
+        report = run_worker(league, WorkerOptions(until_empty=True, poll=0.05, name="later"))
+        assert (report.done, report.failed) == (left, 0)
+        assert _record(league) == local_record
+
+
+@pytest.mark.slow
 def test_no_wait_says_the_ratings_are_still_coming(tmp_path, capsys):
     home = tmp_path / "home"
     code, out, err = run(capsys, *RUN, "--eval", "remote", "--no-wait", "--home", str(home))
@@ -231,8 +253,7 @@ def test_a_cancelled_gauntlet_leaves_its_snapshots_unrated_in_one_line(rated_lea
 # -- the option -------------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize(("args", "needle"), [
     (["--eval", "cloud"], "--eval must be one of local, inline, remote, ray, not 'cloud'"),
-    (["--no-wait"], "--no-wait is for --eval remote"),
-    (["--eval", "inline", "--no-wait"], "--no-wait is for --eval remote"),
+    (["--eval", "inline", "--no-wait"], "--no-wait is for --eval local or remote"),
     (["--eval", "remote", "--eval-inline"], "--eval-inline is --eval inline: it cannot go with --eval remote"),
 ])
 def test_bad_eval_options_are_one_line_and_start_nothing(args, needle, home, capsys):
@@ -287,11 +308,11 @@ def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
     from selfplay_cli.train.settings import resumed_config
 
     with League.open(tmp_path / "h") as league:
-        for name, mode in (("a", "remote"), ("b", "local")):
+        for name, mode in (("a", "remote"), ("b", "inline")):
             league.roster.create_run(name, "pong", TrainConfig(env="pong", run=name, eval=mode).to_dict(), algo="ppo")
         assert resumed_config(league, "a", None, {"resume", "eval_wait"}, wait=False).eval_wait is False
         assert resumed_config(league, "a", None, {"resume"}).eval_wait is True
-        with pytest.raises(MarlError, match="--no-wait is for --eval remote"):
+        with pytest.raises(MarlError, match="--no-wait is for --eval local or remote"):
             resumed_config(league, "b", None, {"resume", "eval_wait"}, wait=False)
         with pytest.raises(MarlError, match="--eval cannot change it"):
             resumed_config(league, "a", None, {"resume", "eval"})

@@ -37,7 +37,7 @@ def report_json(report: TrainReport, eval: str = "local", actors: int = 0) -> di
             "session_train_seconds": round(report.train_seconds, 1),
             "session_rating_games": report.session_eval_games, "steps_per_second": round(report.steps_per_second),
             "rating_seconds": round(report.eval_seconds, 1), "rating_wait_seconds": round(report.wait_seconds, 1),
-            "rating": eval, "rating_batch": run_batch(report.run) if eval in QUEUED else None,
+            "rating": eval, "rating_batch": run_batch(report.run) if eval in QUEUED or report.rating_left else None,
             "rating_jobs_left": report.rating_left,
             "executor": "ray" if actors else "local", "actors": actors,
             "budget_end": None if report.budget_end is None else report.budget_end.to_json(),
@@ -117,7 +117,8 @@ def still_coming(report: TrainReport) -> list[str]:
     ratings are still coming, and where to see them arrive."""
     n = report.rating_left
     return [f"ratings still coming: {n} gauntlet{'s' * (n > 1)} of this run (the final one with its playoff, which "
-            "names the run's best) wait in the league's queue for its workers (marl worker)",
+            "names the run's best) wait in the league's queue for its workers (marl worker --until-empty plays them "
+            "on this machine)",
             f"  progress: marl queue --batch {run_batch(report.run)}; the final ratings and the best, once they are "
             f"played: marl league ladder --run {report.run}"]
 

@@ -85,7 +85,8 @@ class TrainConfig:
     eval: str = "local"  # who plays the gauntlets: local (a worker process beside training), inline (the training
     # process, paused), remote (the league's workers, from its work queue: marl worker, on any machine), ray (queue
     # workers on Ray actors started for the run)
-    eval_wait: bool = True  # --eval remote: the run's end waits for its gauntlets (False: leaves them to the workers)
+    eval_wait: bool = True  # the run's end waits for its gauntlets (False, --eval local or remote: leaves those not
+    # played yet on the league's queue, to its workers)
     eval_actors: int = 1  # --eval ray: queue workers on Ray actors playing the run's gauntlets
     executor: str = "local"  # where the training games are stepped: local (this process) or ray (Ray actors)
     actors: int = 2  # --executor ray: rollout actors, each stepping a share of the games
@@ -162,10 +163,11 @@ class TrainConfig:
             raise MarlError(f"--eval-actors must be at least 1, not {self.eval_actors}")
         if self.eval_actors != 1 and self.eval != "ray":
             raise MarlError(f"--eval-actors is for --eval ray (queue workers on Ray actors), not --eval {self.eval}")
-        if not self.eval_wait and self.eval != "remote":
-            who = "its Ray actors, which end with it, play" if self.eval == "ray" else "the run's own process plays"
-            raise MarlError(f"--no-wait is for --eval remote (the league's workers play what the run leaves); with "
-                            f"--eval {self.eval} {who} every gauntlet")
+        if not self.eval_wait and self.eval not in ("local", "remote"):
+            who = "its Ray actors, which end with it, play" if self.eval == "ray" else "the training process plays"
+            raise MarlError(f"--no-wait is for --eval local or remote (the run ends with its training and leaves the "
+                            f"gauntlets not played yet to the league's workers, marl worker); with --eval "
+                            f"{self.eval} {who} every gauntlet")
         if self.snapshot_every < 0 or self.snapshot_steps < 0 or not (self.snapshot_every or self.snapshot_steps):
             raise MarlError("--snapshot-every (episodes) or --snapshot-steps must be positive")
         if self.algo not in ALGOS:

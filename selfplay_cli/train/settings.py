@@ -325,7 +325,7 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
     if device != "auto":
         cfg.device = device
     if wait is not None and wait != cfg.eval_wait:
-        cfg = replace(cfg, eval_wait=wait)  # (checked: --no-wait is for a run rated by the league's workers)
+        cfg = replace(cfg, eval_wait=wait)  # (checked: --no-wait is for --eval local or remote)
     if executor:
         cfg = replace(cfg, **{k: v for k, v in executor.items() if k in EXECUTOR_OPTIONS})  # (checked again)
     return cfg

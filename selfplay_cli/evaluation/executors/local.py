@@ -135,9 +135,11 @@ class Evaluator:
 
     def __init__(self, league: Any, device: str, background: bool = True,
                  on_worker: Callable[[int], None] | None = None, note: Callable[[str], None] | None = None,
-                 stall_seconds: float | None = None, clock: Callable[[], float] = time.monotonic) -> None:
+                 stall_seconds: float | None = None, clock: Callable[[], float] = time.monotonic, *,
+                 run: str = "", wait: bool = True) -> None:
         self._clock = clock
         self.league, self.device, self.background = league, device, background
+        self.run, self.wait_for = run, wait
         self.pending: list[GauntletJob] = []
         self.games_played = 0  # games the worker reported since the last poll
         self.queued = False
@@ -206,7 +208,15 @@ class Evaluator:
         return self._finish()
 
     def wait(self, on_wait: Any = None) -> list[JobDone]:
-        """Block until every submitted job is done; ``on_wait()`` is called about every second meanwhile."""
+        """Block until every submitted job is done; ``on_wait()`` is called about every second meanwhile. With
+        ``wait=False`` (``--no-wait``): the jobs done by now; the worker stops, and the rest are left to the
+        league's workers (:meth:`_leave`)."""
+        if self.background and not self.wait_for:
+            self._drain()
+            self._check()
+            done = self._finish()
+            self._leave()
+            return done
         if self.background:
             while len(self._done) < len(self.pending) and not any(d.error for d in self._done):
                 try:
@@ -216,6 +226,20 @@ class Evaluator:
                 if on_wait is not None:
                     on_wait()
         return self._finish()
+
+    def _leave(self) -> None:
+        """Stop the worker (a job in the middle is abandoned: its matchups stored so far count once) and put the
+        jobs it had not finished on the league's work queue, in order, as ``--eval remote`` queues them (the same
+        specs: a ``marl worker`` plays the same games, storing only what is missing)."""
+        if not self.pending:
+            return
+        from .queue_workers import RemoteEvaluator
+
+        self.close()
+        remote = RemoteEvaluator(self.league, self.run, self.device, wait=False, note=self._note)
+        for job in self.pending:
+            remote.submit(job)
+        self.queued = True
 
     def _drain(self) -> None:
         while True:
