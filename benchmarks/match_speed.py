@@ -10,6 +10,8 @@
    Target (the issue "speed where users feel it"): stepping at least 40% of the match's wall time.
 2. ``marl train pong --agents 2 --minutes 0.5 --json`` (both cores, as a user runs it): training seconds, rating
    games, and the wait for the last ones once training ended. Target: the wait at most 10% of the training time.
+   Then the same run with ``--no-wait`` (its gauntlets not finished when training ends left on the league's queue),
+   and ``marl worker --until-empty`` playing what it left: the wait it saves, and the games it leaves.
 
 Run: python benchmarks/match_speed.py [--games 1000] [--cpu 0] [--no-train-wait]
 """
@@ -106,6 +108,14 @@ def main() -> None:
               f"{wait:.1f} s waited for them at the end")
         print(f"end-of-run wait: {100 * wait / train:.0f}% of the training time (target <= 10%: "
               f"{'met' if wait <= 0.1 * train else 'not met'})")
+        out, wall = marl(home, "train", "pong", "--agents", "2", "--minutes", "0.5", "--run", "nowait", "--no-wait",
+                         "--json")
+        r = json.loads(out)
+        wait, train = r["rating_wait_seconds"], r["session_train_seconds"]
+        _, later = marl(home, "worker", "--until-empty")
+        print(f"the same with --no-wait: {wall:.0f} s wall, {train:.1f} s training, {wait:.1f} s waited "
+              f"({100 * wait / train:.0f}% of the training time), {r['rating_jobs_left']} gauntlets left on the "
+              f"league's queue; marl worker --until-empty played them in {later:.0f} s")
 
 
 if __name__ == "__main__":
