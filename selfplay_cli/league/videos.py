@@ -13,7 +13,7 @@ from datetime import datetime
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from sqlalchemy import select
+from sqlalchemy import inspect, select
 from sqlalchemy.orm import Session
 
 from selfplay_cli.league.bounded_json import unreadable
@@ -66,7 +66,12 @@ def _plain_parts(path: str) -> tuple[str, ...] | None:
 
 
 class Videos(Part):
-    """``league.videos``: the recordings registered in the league (see the module docstring)."""
+    """``league.videos``: the recordings registered in the league (see the module docstring). A league of an
+    earlier schema read without an upgrade (a command that only reads never upgrades) has no recordings."""
+
+    def held(self) -> bool:
+        """Whether the league has the table of recordings (schema revision 0005 or later)."""
+        return self._read(lambda s: inspect(s.connection()).has_table(Video.__tablename__))
 
     def folder(self) -> Path | None:
         """``<home>/videos`` (None for a league without a home)."""
@@ -110,11 +115,13 @@ class Videos(Part):
                 q = q.where(Video.env == env)
             return [_row(v) for v in s.scalars(q)]
 
-        rows = self._read(work)
+        rows = self._read(work) if self.held() else []
         return rows if player_id is None else [v for v in rows if player_id in v.players]
 
     def get(self, video_id: int) -> VideoRow | None:
         """The recording ``video_id``, or None."""
+        if not self.held():
+            return None
         return self._read(lambda s: (lambda v: None if v is None else _row(v))(s.get(Video, int(video_id))))
 
     def file(self, row: VideoRow) -> Path | None:

@@ -75,10 +75,12 @@ class Reader:
     def changes(self) -> tuple:
         """A tuple that changes whenever a game, match, player, tag or recording is added, or a player removed."""
 
+        videos = self.league.videos.held()
+
         def work(s: Any) -> tuple:
             return (s.scalar(select(func.max(Game.id))), s.scalar(select(func.max(Match.id))),
                     s.scalar(select(func.max(Player.id))), s.scalar(select(func.count()).where(Player.removed)),
-                    s.scalar(select(func.count(Tag.id))), s.scalar(select(func.max(Video.id))))
+                    s.scalar(select(func.count(Tag.id))), s.scalar(select(func.max(Video.id))) if videos else None)
 
         return self.league._read(work)
 
