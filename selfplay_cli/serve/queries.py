@@ -124,14 +124,12 @@ class Reader:
             raise NotFound(f"no game named {env!r} in this league")
         if env is None and not envs:
             raise NotFound("this league holds no players yet")
-        if env is None and len(envs) > 1:
-            env = next(iter(envs))
         if variant is None:
             try:
                 return default_variant(self.league, env, run)
             except LeagueError as e:
                 raise NotFound(str(e)) from None
-        assert env is not None
+        env = env if env is not None else next(iter(envs))
         if variant not in {v["key"] for v in envs[env]["variants"]}:
             raise NotFound(f"{env} has no rated games under the options {variant!r}")
         return env, variant
