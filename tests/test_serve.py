@@ -165,9 +165,9 @@ def test_the_server_cannot_write_and_leaves_the_league_file_as_it_was(league_hom
         client.get(url)
     reader = Reader(league_home, None)
     try:
-        with pytest.raises(Exception, match="readonly|read-only|attempt to write"):
-            with reader.league.engine.begin() as conn:
-                conn.exec_driver_sql("UPDATE players SET elo = 0")
+        with pytest.raises(Exception, match="readonly|read-only|attempt to write"), \
+                reader.league.engine.begin() as conn:
+            conn.exec_driver_sql("UPDATE players SET elo = 0")
         assert reader.league.read_only_connection
     finally:
         reader.close()

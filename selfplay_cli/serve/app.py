@@ -285,7 +285,8 @@ def create_app(reader: Reader, where: str) -> Starlette:
             except (HTTPException, NotFound, LeagueError, ValueError):
                 raise
             except Exception as e:
-                log.error("marl serve: %s on %s: %s", type(e).__name__, request.url.path, " ".join(str(e).split())[:300])
+                said = " ".join(str(e).split())[:300]
+                log.error("marl serve: %s on %s: %s", type(e).__name__, request.url.path, said)
                 return page("error.html", status=500, title="500", status_code=500,
                             detail="the page could not be made (the server's log says why)")
 
