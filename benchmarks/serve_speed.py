@@ -43,8 +43,9 @@ def build(home: Path) -> dict[str, int]:
             for k, (x, y) in enumerate(zip(a.tolist(), b.tolist(), strict=True)):
                 p = 1.0 / (1.0 + 10 ** ((strength[y] - strength[x]) / 400))
                 s = float(rng.random() < p)
-                games.append(GameResult(env="pong", players=(x, y), seed=m * PER_MATCH + k, scores=(21 * s, 21 * (1 - s)),
-                                        outcome=(s, 1 - s), length=100, truncated=False))
+                games.append(GameResult(env="pong", players=(x, y), seed=m * PER_MATCH + k,
+                                        scores=(21 * s, 21 * (1 - s)), outcome=(s, 1 - s), length=100,
+                                        truncated=False))
             params = {"sprt": {"elo0": 0.0, "elo1": 10.0, "alpha": 0.05, "beta": 0.05}} if m % 10 == 0 else {}
             lg.ledger.record_games(lg.ledger.create_match("pong", "match", params), games)
         return {"player": ids[-1], "other": ids[0]}
