@@ -29,6 +29,7 @@ from .commands import league as league_cmd
 from .commands import match as match_cmd
 from .commands import queue as queue_cmd
 from .commands import record as record_cmd
+from .commands import serve as serve_cmd
 from .commands import study as study_cmd
 from .commands import train as train_cmd
 from .commands import worker as worker_cmd
@@ -83,6 +84,7 @@ app.command("record")(record_cmd.record)
 app.add_typer(study_cmd.app, name="study", help="Multi-run studies: team size (train N, fly M, adapt vs afresh).")
 app.command("worker", help=worker_cmd.WORKER_HELP)(worker_cmd.worker)
 app.add_typer(queue_cmd.app, name="queue", help="The league's work queue: batches, jobs, workers; cancel jobs.")
+app.command("serve")(serve_cmd.serve)
 
 
 # ---------------------------------------------------------------------------------------------------------------

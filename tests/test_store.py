@@ -91,21 +91,21 @@ def _snap(lg: League, name: str, run: str | None = "r1", env: str = ENV, **kw: o
 
 
 LEAGUE_TABLES = {"meta", "runs", "players", "tags", "matches", "games", "game_seats", "blobs", "workers", "jobs",
-                 "seed_ranges", "alembic_version"}
+                 "seed_ranges", "videos", "alembic_version"}
 
 
 def test_a_new_league_is_at_the_newest_revision(db_url: str) -> None:
     with League(db_url) as lg:
-        assert lg.schema_revision() == migrations.head() == "0004"
+        assert lg.schema_revision() == migrations.head() == "0005"
     engine = create_engine(db_url)
     with engine.connect() as conn:
         assert set(inspect(conn).get_table_names()) == LEAGUE_TABLES
     engine.dispose()
-    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0004",)]
+    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0005",)]
     # meta.schema_version stays above what a release from before Alembic reads (2): such a release refuses the league
     assert _sql(db_url, "SELECT value FROM meta WHERE key = 'schema_version'") == [("3",)]
     with League(db_url) as lg2:  # re-opening an existing league keeps it
-        assert lg2.schema_revision() == "0004"
+        assert lg2.schema_revision() == "0005"
 
 
 def _schema(url: str) -> dict[str, object]:
@@ -138,7 +138,7 @@ def test_the_revisions_make_the_schema_create_all_makes(db_url: str, pg_url: str
     League(other).close()  # create_all, stamped
     engine = create_engine(db_url)
     with engine.begin() as conn:
-        assert migrations.upgrade(conn, None) == ["0002", "0003", "0004"]
+        assert migrations.upgrade(conn, None) == ["0002", "0003", "0004", "0005"]
     with engine.connect() as conn:
         assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
     engine.dispose()
@@ -146,7 +146,7 @@ def test_the_revisions_make_the_schema_create_all_makes(db_url: str, pg_url: str
     assert "uq_players_env_name_no_run" in str(migrated["players"]) and "run_id IS NULL" in str(migrated["players"])
     assert "uq_matches_work_key" in str(migrated["matches"])
     assert migrated == created
-    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0004",)]
+    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0005",)]
 
 
 def test_the_revisions_marl_knows_are_the_versions_folder() -> None:
@@ -168,7 +168,8 @@ def test_opening_an_up_to_date_league_does_not_import_alembic(tmp_path: Path) ->
 def _make_legacy(url: str, version: int) -> None:
     """Turn the league at ``url`` into one the last release before Alembic wrote: no queue tables, no Alembic table,
     ``meta.schema_version`` = ``version`` (1: no work keys either; 3: a development build's, with the queue tables)."""
-    _sql(url, "DROP TABLE seed_ranges")  # (no release before Alembic had it)
+    _sql(url, "DROP TABLE videos")  # (no release before Alembic had these)
+    _sql(url, "DROP TABLE seed_ranges")
     for table in ("jobs", "workers", "blobs", "alembic_version")[(3 if version == 3 else 0):]:
         _sql(url, f"DROP TABLE {table}")
     if version == 1:
@@ -192,14 +193,14 @@ def test_a_league_of_the_previous_release_is_upgraded_in_place_once(db_url: str,
         assert {p.id: (p.elo, p.games) for p in lg.roster.players()} == before and lg.ledger.count_games() == 2
     assert notes == [] and ("alembic_version",) not in _tables(db_url)
     with League(db_url, note=notes.append) as lg:  # a command that writes upgrades it, and says so once
-        assert lg.schema_revision() == "0004"
+        assert lg.schema_revision() == "0005"
         assert {p.id: (p.elo, p.games) for p in lg.roster.players()} == before and lg.ledger.count_games() == 2
         lg.ledger.create_match_with_games(ENV, "eval", {}, [_game(a, b, 1.0, 3)], key="k")  # what the upgrade brought
         assert set(lg.ledger.keyed_matches("k")) == {"k"} and lg.ledger.count_games() == 3
     where = str(tmp_path / "league.db") if db_url.startswith("sqlite") else make_url(db_url).render_as_string()
-    brought = {1: "match work keys; snapshot blobs, work queue; seed ranges",
-               2: "snapshot blobs, work queue; seed ranges", 3: "seed ranges"}[legacy]
-    assert notes == [f"marl: upgraded league database {where} from schema {legacy} to 0004 ({brought})"]
+    brought = {1: "match work keys; snapshot blobs, work queue; seed ranges; videos",
+               2: "snapshot blobs, work queue; seed ranges; videos", 3: "seed ranges; videos"}[legacy]
+    assert notes == [f"marl: upgraded league database {where} from schema {legacy} to 0005 ({brought})"]
     with League(db_url, note=notes.append):
         pass
     assert len(notes) == 1
@@ -215,13 +216,14 @@ def test_a_league_of_revision_0003_gets_its_seed_ranges(db_url: str, pg_url: str
     with League(db_url) as lg:
         lg.roster.ensure_bots(ENV, ["a", "b"])
         lg.queue.enqueue("b1", [NewJob("games", ENV, {"x": 1})])
+    _sql(db_url, "DROP TABLE videos")
     _sql(db_url, "DROP TABLE seed_ranges")
     _sql(db_url, "UPDATE alembic_version SET version_num = '0003'")
     notes: list[str] = []
     with League(db_url, note=notes.append) as lg:
-        assert lg.schema_revision() == "0004" and [j.batch for j in lg.queue.jobs()] == ["b1"]
+        assert lg.schema_revision() == "0005" and [j.batch for j in lg.queue.jobs()] == ["b1"]
     where = str(tmp_path / "league.db") if db_url.startswith("sqlite") else make_url(db_url).render_as_string()
-    assert notes == [f"marl: upgraded league database {where} from schema 0003 to 0004 (seed ranges)"]
+    assert notes == [f"marl: upgraded league database {where} from schema 0003 to 0005 (seed ranges; videos)"]
     other = pg_url if db_url.startswith("postgresql") else f"sqlite:///{tmp_path / 'new.db'}"
     League(other).close()
     assert _schema(db_url) == _schema(other)
@@ -250,12 +252,12 @@ def test_the_league_file_of_the_previous_release_upgrades(tmp_path: Path, capsys
              "--home", str(home), "--json")
     code, out, err = run(capsys, *match)
     assert code == 0 and json.loads(out)["games"] == 2, err
-    assert err == (f"marl: upgraded league database {(home / 'league.db').resolve()} from schema 1 to 0004 "
-                   "(match work keys; snapshot blobs, work queue; seed ranges)\n")
+    assert err == (f"marl: upgraded league database {(home / 'league.db').resolve()} from schema 1 to 0005 "
+                   "(match work keys; snapshot blobs, work queue; seed ranges; videos)\n")
     code, out, err = run(capsys, *match)
     assert code == 0 and err == ""  # once
     with League.open(home, readonly=True) as lg:
-        assert lg.schema_revision() == "0004" and lg.ledger.count_games("pong") == 12 + 4  # 12 pong games before
+        assert lg.schema_revision() == "0005" and lg.ledger.count_games("pong") == 12 + 4  # 12 pong games before
     engine = create_engine(f"sqlite:///{home / 'league.db'}")
     with engine.connect() as conn:
         assert compare_metadata(MigrationContext.configure(conn), Base.metadata) == []
@@ -322,7 +324,7 @@ def test_two_processes_opening_a_new_or_old_league_at_once(db_url: str, tmp_path
     notes = [json.loads(o.read_text()) for o in outs]
     assert not any(n.startswith("error") for said in notes for n in said), notes
     assert sum(len(said) for said in notes) == (1 if old else 0), notes
-    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0004",)]
+    assert _sql(db_url, "SELECT version_num FROM alembic_version") == [("0005",)]
     assert _sql(db_url, "SELECT count(*) FROM meta WHERE key = 'schema_version'") == [(1,)]
     assert set(_tables(db_url)) == {(t,) for t in LEAGUE_TABLES}
 

@@ -151,30 +151,19 @@ def parse_env_options(env: str, items: list[str] | None) -> dict:
 def shown_variant(league: League, env: str | None, env_option: list[str] | None,
                   run: str | None = None) -> tuple[str, str]:
     """The game and the variant (its key) a command that reads ratings shows: the one ``--env-option`` asks for (over
-    the game's defaults); without, the run's own (``--run``: the options its snapshots were made for); else the
-    variant the game's newest run with rated games played (``marl train tennis`` plays ``serve_mode=mixed``: its
-    ladder is what a user asks for first), else the default one where it has games, else the one with the most. The
-    game is ``env``, the run's, or the league's only one."""
+    the game's defaults); without, :func:`~selfplay_cli.ratings.shown.default_variant` (the run's own, else the one
+    the game's newest run with rated games played, else the default, else the one with the most games)."""
     from ..league.variants import variant_key
-    from ..players.snapshots import run_options
     from ..ratings.ladder import pick_env
+    from ..ratings.shown import default_variant
 
-    if run is not None:
-        info = league.roster.get_run(run)
-        env = env or (info.env if info is not None else None)
-    env = pick_env(league, env)
     if env_option:
+        if run is not None:
+            info = league.roster.get_run(run)
+            env = env or (info.env if info is not None else None)
+        env = pick_env(league, env)
         return env, variant_key(env, parse_env_options(env, env_option))
-    if run is not None and league.roster.get_run(run) is not None:
-        return env, variant_key(env, run_options(league, run))
-    played = league.ledger.variants(env)
-    if len(played) <= 1:
-        return env, next(iter(played), "")
-    for r in reversed(league.roster.list_runs(env)):
-        key = variant_key(env, run_options(league, r.name))
-        if played.get(key):
-            return env, key
-    return env, "" if played.get("") else max(played, key=lambda k: (played[k], k))
+    return default_variant(league, env, run)
 
 
 def resolve_players(league: League, names: list[str], env: str | None, teams: bool = False,

@@ -8,7 +8,7 @@ from typing import Annotated, Any
 import typer
 
 from ..errors import MarlError
-from ..league.job_rows import JOB_STATES, SCAVENGE_SECONDS, JobRow, WorkerRow
+from ..league.job_rows import JOB_STATES, JobRow, WorkerRow
 from ..league.models import utcnow
 from ._common import DbOpt, HomeOpt, JsonOpt, open_league
 from ._output import console, print_json
@@ -96,7 +96,7 @@ def _ago(t: datetime | None, now: datetime) -> str:
 
 
 def _status(w: WorkerRow, now: datetime) -> str:
-    return "stopped" if w.stopped_at is not None else "alive" if w.alive(SCAVENGE_SECONDS, now) else "silent"
+    return w.status(now)
 
 
 def _table(title: str, header: list[str], rows: list[list[Any]]) -> None:

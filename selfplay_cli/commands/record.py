@@ -150,7 +150,7 @@ def record(
             job = play_job(league, ups, games, seed, max_steps, max_rallies, device, out, fmt, stop_label, options)
     finally:
         league.close()
-    _write(job, settings, default_cap, progress_enabled(quiet), json_out)
+    _write(job, settings, default_cap, progress_enabled(quiet), json_out, (home, db))
 
 
 def _refuse_with_game(*, games: int, seed: int, env_option: list[str] | None, **flags: Any) -> None:
@@ -162,8 +162,11 @@ def _refuse_with_game(*, games: int, seed: int, env_option: list[str] | None, **
         raise MarlError(f"--game replays a stored game as it was played: {', '.join(given)} {verb} not apply")
 
 
-def _write(job: RecordJob, settings: VideoSettings, default_cap: bool, show: bool, json_out: bool) -> None:
-    """Make the job's videos, one progress bar each, printing a line per video (or their JSON at the end)."""
+def _write(job: RecordJob, settings: VideoSettings, default_cap: bool, show: bool, json_out: bool,
+           where: tuple[Any, Any] = (None, None)) -> None:
+    """Make the job's videos, one progress bar each, printing a line per video (or their JSON at the end); each one
+    written under the league home's videos folder is registered in the league (``where``: its home and URL) as
+    soon as it is written (what ``marl serve`` plays)."""
     from ..record import check_writable
 
     for path in job.paths:
@@ -173,7 +176,8 @@ def _write(job: RecordJob, settings: VideoSettings, default_cap: bool, show: boo
         for i, path in enumerate(job.paths):
             with progress_bar(path.name, job.frames(i, settings), "frames", show) as tick:
                 rec = job.run(i, path, settings, tick)
-            done.append({**rec.to_json(), **job.extra})
+            video_id = _register(job, i, rec, where)
+            done.append({**rec.to_json(), **job.extra} | ({"video_id": video_id} if video_id is not None else {}))
             if not json_out:
                 console.print(_line(rec, default_cap), markup=False)
     except KeyboardInterrupt:
@@ -183,3 +187,23 @@ def _write(job: RecordJob, settings: VideoSettings, default_cap: bool, show: boo
         print_json(done)
 
 
+
+
+def _register(job: RecordJob, i: int, rec: Recording, where: tuple[Any, Any]) -> int | None:
+    """Register video ``i`` in the league when it lies under the home's videos folder; its row id, else None."""
+    if i >= len(job.shows):
+        return None
+    home, db = where
+    league = open_league(home, db)
+    try:
+        if league.videos.relative(rec.path) is None:
+            return None
+        shows = job.shows[i]
+        r = rec.result
+        meta = {"names": list(r.players), "scores": [float(x) for x in r.scores], "fps": rec.settings.fps,
+                "seconds": round(rec.video_seconds, 2), "ended": rec.ended}
+        row = league.videos.register(env=r.env, path=rec.path, fmt=rec.settings.fmt, players=shows["players"],
+                                     seed=shows["seed"], length=r.length, game_id=shows["game_id"], meta=meta)
+        return None if row is None else row.id
+    finally:
+        league.close()

@@ -118,7 +118,7 @@ class Database:
 
     def __init__(self, url: str | URL, *, home: str | Path | None = None, elo_k: float = 16.0,
                  busy_timeout: float = 30.0, readonly: bool = False, reconnect_for: float = _RECONNECT_FOR,
-                 note: Callable[[str], None] | None = None) -> None:
+                 note: Callable[[str], None] | None = None, read_only_connection: bool = False) -> None:
         """Open (creating if new) the league at ``url``; with ``readonly`` open an existing one for reading only.
 
         A read-only league creates nothing (no folder, no database, no tables) and writes nothing: every method
@@ -126,6 +126,9 @@ class Database:
         ``query_only`` (so that, as the last connection, it tidies WAL files away like any other), falls back to
         ``mode=ro`` where the file or its folder cannot be written, and to ``immutable=1`` on read-only media where
         SQLite cannot even make its shared-memory file (no writer can be at work there then).
+        ``read_only_connection`` (with ``readonly``; ``marl serve``): the connection itself cannot write, whatever is
+        run through it: SQLite opens the file with ``mode=ro`` from the start, PostgreSQL's sessions start with
+        ``default_transaction_read_only=on``.
 
         A league that a command that writes opens is brought to the newest schema first (one line through ``note``
         says so); a league written by a newer marl is refused.
@@ -143,7 +146,8 @@ class Database:
         self.db_path: Path | None = sqlite_file(self.url)
         self.is_sqlite = self.url.get_backend_name() == "sqlite"
         self.is_postgres = self.url.get_backend_name() == "postgresql"
-        self.readonly = bool(readonly)
+        self.readonly = bool(readonly or read_only_connection)
+        self.read_only_connection = bool(read_only_connection)
         self.reconnect_for = float(reconnect_for)
         self.reconnects = 0
         self._lost_said = False  # "unreachable" said for the loss under way (once, whatever the threads)
@@ -167,6 +171,8 @@ class Database:
             except OSError as exc:
                 raise LeagueIOError(f"cannot create {self.db_path.parent}: {exc.strerror or exc}") from exc
         modes = ["rw", "ro", "ro&immutable=1"] if self.readonly and self.db_path is not None else [None]
+        if self.read_only_connection and self.db_path is not None:
+            modes = modes[1:]
         for i, mode in enumerate(modes):
             try:
                 self._connect(mode)
@@ -211,8 +217,10 @@ class Database:
                                                     json_deserializer=bounded_json.raw,
                                                     connect_args={"check_same_thread": False})
             else:  # a connection the server dropped (restarted) is found out before use, not by the unit of work
+                connect_args = ({"options": "-c default_transaction_read_only=on"}
+                                if self.is_postgres and self.read_only_connection else {})
                 self.engine = create_engine(engine_url, pool_pre_ping=not self.is_sqlite,
-                                            json_deserializer=bounded_json.raw)
+                                            json_deserializer=bounded_json.raw, connect_args=connect_args)
         except (NoSuchModuleError, ImportError) as exc:
             extra = ' (pip install "selfplay-cli[postgres]")' if self.is_postgres else ""
             raise LeagueError(f"cannot use database {self._where}: no driver{extra} ({exc})") from exc

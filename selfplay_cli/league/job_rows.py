@@ -126,6 +126,11 @@ class WorkerRow:
         now = now or utcnow()
         return self.stopped_at is None and (now - self.beat_at).total_seconds() <= within
 
+    def status(self, now: datetime | None = None) -> str:
+        """``stopped``, ``alive`` (its heart beat within :data:`SCAVENGE_SECONDS`) or ``silent`` (its job goes to
+        the next worker): what ``marl queue`` and ``marl serve`` say of it."""
+        return "stopped" if self.stopped_at is not None else "alive" if self.alive(SCAVENGE_SECONDS, now) else "silent"
+
     def to_json(self) -> dict[str, Any]:
         gps = self.games_per_second
         return {"id": self.id, "name": self.name, "host": self.host, "pid": self.pid,

@@ -28,6 +28,9 @@ Tables
   time (a queued job's, or a command's playing them itself), each the pair's ``seq``-th: ``(lo, hi, seq)`` is unique,
   so two commands that planned new games of one pair from the same look both write its next range and the database
   keeps one (schema revision 0004; :mod:`selfplay_cli.league.seeds`).
+* ``videos``: the recordings ``marl record`` made under the league home's ``videos/`` folder, each by its path there
+  (relative, checked again by every reader), the players it shows and the stored game it replays, if any (schema
+  revision 0005; :mod:`selfplay_cli.league.videos`): what ``marl serve`` plays, and nothing else.
 
 Every JSON column is a :class:`BoundedJSON`: read within a size of its own and a depth, a bad value one unusable row
 (:mod:`selfplay_cli.league.bounded_json`), never a failed command.
@@ -62,7 +65,7 @@ from sqlalchemy.types import TypeDecorator
 from selfplay_cli.league.bounded_json import read_column
 
 __all__ = ["Base", "Blob", "BoundedJSON", "Game", "GameSeat", "Job", "Match", "Meta", "Player", "Run", "SeedRange",
-           "Tag", "UTCDateTime", "Worker", "utcnow"]
+           "Tag", "UTCDateTime", "Video", "Worker", "utcnow"]
 
 
 def utcnow() -> datetime:
@@ -125,6 +128,8 @@ RESULT_BYTES = 1024 * 1024
 """A job's ``result`` (counts, and a games job's points round by round)."""
 SERVES_BYTES = 64 * 1024
 """A worker's ``serves`` (the batches it takes jobs from)."""
+VIDEO_BYTES = 64 * 1024
+"""A video's ``players`` (the ids of the players it shows, seat by seat) and its ``meta`` (names, scores, fps)."""
 
 
 class Base(DeclarativeBase):
@@ -353,4 +358,23 @@ class SeedRange(Base):
     owner: Mapped[str] = mapped_column(String(200))
     """The batch of the range's job, or the command playing the range itself (``marl@host:pid``)."""
     job_id: Mapped[int | None] = mapped_column(ForeignKey("jobs.id"), index=True)
+    created_at: Mapped[datetime] = mapped_column(default=utcnow)
+
+
+class Video(Base):
+    """A recording ``marl record`` made inside the league home: ``path`` is relative to ``<home>/videos`` (``/``
+    between its parts), ``players`` the ids of the players seat by seat, ``game_id`` the stored game it replays (None
+    for a new game, played on ``seed``), ``meta`` what the recording says of itself (names, scores, fps, seconds)."""
+
+    __tablename__ = "videos"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True)
+    env: Mapped[str] = mapped_column(String(100), index=True)
+    path: Mapped[str] = mapped_column(Text)
+    format: Mapped[str] = mapped_column(String(8))
+    players: Mapped[list[int]] = mapped_column(BoundedJSON(VIDEO_BYTES, kind=list), default=list)
+    game_id: Mapped[int | None] = mapped_column(ForeignKey("games.id"))
+    seed: Mapped[int] = mapped_column(BigInteger, default=0)
+    length: Mapped[int] = mapped_column(Integer, default=0)
+    meta: Mapped[dict[str, Any]] = mapped_column(BoundedJSON(VIDEO_BYTES), default=dict)
     created_at: Mapped[datetime] = mapped_column(default=utcnow)

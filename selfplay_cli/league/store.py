@@ -23,7 +23,8 @@ player row is a cache updated in the same transaction as the games it counts, an
 * ``league.blobs`` (:mod:`selfplay_cli.league.blobs`): the snapshot files' bytes by their sha256, so that a machine
   that has only the database can play any snapshot;
 * ``league.queue`` (:mod:`selfplay_cli.league.queue`): the work queue's jobs, leases and workers (their records,
-  the queue's timings and limits: :mod:`selfplay_cli.league.job_rows`).
+  the queue's timings and limits: :mod:`selfplay_cli.league.job_rows`);
+* ``league.videos`` (:mod:`selfplay_cli.league.videos`): the recordings made under the league home.
 
 Objects returned to callers are frozen dataclasses (:class:`RunRow`, :class:`PlayerRow`, :class:`GameTable`,
 :class:`GameRow`), never ORM instances, so nothing lazy-loads after a session has closed. A :class:`League` must not
@@ -58,6 +59,7 @@ from selfplay_cli.league.roster import (
     check_name,
 )
 from selfplay_cli.league.seeds import Seeds
+from selfplay_cli.league.videos import Videos
 from selfplay_cli.results import GameResult
 
 __all__ = [
@@ -99,6 +101,7 @@ class League(Database):
         seeds: the seed ranges each pair of players has played or taken (:class:`~selfplay_cli.league.seeds.Seeds`).
         blobs: the snapshot files' bytes by their sha256 (:class:`~selfplay_cli.league.blobs.Blobs`).
         queue: the work queue's jobs and workers (:class:`~selfplay_cli.league.queue.Queue`).
+        videos: the recordings made under the league home (:class:`~selfplay_cli.league.videos.Videos`).
     """
 
     def __init__(self, url: str | URL, **options: Any) -> None:
@@ -109,3 +112,4 @@ class League(Database):
         self.ledger = Ledger(self, self.seeds)
         self.blobs = Blobs(self)
         self.queue = Queue(self, self.ledger, self.seeds)
+        self.videos = Videos(self)

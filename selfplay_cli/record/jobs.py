@@ -28,6 +28,9 @@ class RecordJob:
     run: Callable[[int, Path, VideoSettings, Tick], Recording]
     frames: Callable[[int, VideoSettings], int | None]
     extra: dict[str, Any] = field(default_factory=dict)  # added to every video's JSON
+    shows: list[dict[str, Any]] = field(default_factory=list)
+    """Per video: the ``players`` it shows (their ids, seat by seat), its ``seed`` and the ``game_id`` it replays
+    (None: a new game): what the league registers of it (:meth:`~selfplay_cli.league.videos.Videos.register`)."""
 
 
 def video_format(fmt: str | None, out: Path | None) -> str:
@@ -122,7 +125,8 @@ def replay_job(league: Any, game_id: int, out: Path | None, fmt: str) -> RecordJ
                              heading=f"replay of game {row.id}")
 
     return RecordJob(targets(out, league.home, [stem], fmt), run, lambda i, s: row.length + 1 + s.hold_frames,
-                {"game_id": row.id, "match_id": row.match_id})
+                     {"game_id": row.id, "match_id": row.match_id},
+                     [{"players": list(row.players), "seed": row.seed, "game_id": row.id}])
 
 
 def play_job(league: Any, ups: list[Any], games: int, seed: int, max_steps: int | None, max_rallies: int | None,
@@ -171,4 +175,6 @@ def play_job(league: Any, ups: list[Any], games: int, seed: int, max_steps: int 
         return min(caps) + 1 + settings.hold_frames if caps else None
 
     stems = [lu.file_stem(seed + i) for lu in ups for i in range(games)]
-    return RecordJob(targets(out, league.home, stems, fmt), run, frames)
+    shows = [{"players": [p.id for p in lu.players], "seed": seed + i, "game_id": None} for lu in ups
+             for i in range(games)]
+    return RecordJob(targets(out, league.home, stems, fmt), run, frames, shows=shows)

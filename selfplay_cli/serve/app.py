@@ -1,0 +1,335 @@
+"""The web app of ``marl serve``: Starlette routes that read the league through :class:`~.queries.Reader` and render
+Jinja2 templates (autoescape on for every template, so every name, tag, note and error a row holds shows as text).
+
+Pages: ``/`` the games and runs; ``/ladder``; ``/matrix``; ``/curves``; ``/player/{id}``; ``/matches``; ``/queue``;
+``/replays``, ``/replay/{id}`` and the file itself at ``/video/{id}`` (only a file the league registered, inside its
+videos folder: :meth:`~selfplay_cli.league.videos.Videos.file`); ``/health``. Sorting and filtering are query
+parameters read on the server; a bad one is a 400 page, something the league does not hold a 404 page, and nothing
+is ever a traceback."""
+
+from __future__ import annotations
+
+import logging
+import math
+from pathlib import Path
+from typing import Any
+from urllib.parse import urlencode
+
+from jinja2 import Environment, PackageLoader
+from starlette.applications import Starlette
+from starlette.exceptions import HTTPException
+from starlette.middleware import Middleware
+from starlette.requests import Request
+from starlette.responses import FileResponse, HTMLResponse, PlainTextResponse, Response
+from starlette.routing import Mount, Route
+from starlette.staticfiles import StaticFiles
+
+from selfplay_cli.league.job_rows import JOB_STATES
+from selfplay_cli.league.ledger import MATCH_KINDS
+from selfplay_cli.league.store import LeagueError
+from selfplay_cli.league.variants import describe_variant
+from selfplay_cli.ratings.pairs import PAYOFFS
+from selfplay_cli.serve.charts import heat, line_chart
+from selfplay_cli.serve.queries import NotFound, Reader
+
+__all__ = ["create_app"]
+
+log = logging.getLogger("marl.serve")
+
+LADDER_SORTS = {"rank": lambda r: (r["rank"], -r["elo"]), "elo": lambda r: r["elo"], "games": lambda r: r["games"],
+                "score": lambda r: r["score"], "policy": lambda r: r["policy"], "step": lambda r: r["step"] or -1,
+                "interval": lambda r: r["ci_high"] - r["ci_low"], "run": lambda r: r["run"] or ""}
+PAGE = 50
+MAX_TEXT = 200
+SECURITY_HEADERS = {
+    "Content-Security-Policy": "default-src 'self'; script-src 'none'; style-src 'self' 'unsafe-inline'; "
+                               "img-src 'self' data:; media-src 'self'; object-src 'none'; base-uri 'none'; "
+                               "form-action 'self'; frame-ancestors 'none'",
+    "X-Content-Type-Options": "nosniff",
+    "Referrer-Policy": "no-referrer",
+}
+
+
+class BadRequest(HTTPException):
+    def __init__(self, detail: str) -> None:
+        super().__init__(400, detail)
+
+
+def _text(request: Request, name: str) -> str | None:
+    value = request.query_params.get(name)
+    if value is None or value == "":
+        return None
+    if len(value) > MAX_TEXT or not value.isprintable():
+        raise BadRequest(f"{name}: at most {MAX_TEXT} printable characters")
+    return value
+
+
+def _int(request: Request, name: str, default: int | None, lo: int, hi: int) -> int | None:
+    raw = request.query_params.get(name)
+    if raw is None or raw == "":
+        return default
+    try:
+        value = int(raw)
+    except ValueError:
+        raise BadRequest(f"{name} must be a whole number, not {raw[:40]!r}") from None
+    if not lo <= value <= hi:
+        raise BadRequest(f"{name} must be between {lo} and {hi}, not {value}")
+    return value
+
+
+def _choice(request: Request, name: str, default: str | None, choices: Any) -> str | None:
+    value = _text(request, name)
+    if value is None:
+        return default
+    if value not in choices:
+        raise BadRequest(f"{name} must be one of {', '.join(sorted(choices))}, not {value!r}")
+    return value
+
+
+def _qs(**params: Any) -> str:
+    """A query string of the params that are set (the templates' links)."""
+    return urlencode({k: v for k, v in params.items() if v is not None and v != ""})
+
+
+def _pct(x: float | None) -> str:
+    return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{100 * x:.1f}%"
+
+
+def create_app(reader: Reader, where: str) -> Starlette:
+    """The app over ``reader``; ``where`` names the league in every page's footer."""
+    env = Environment(loader=PackageLoader("selfplay_cli.serve", "templates"), autoescape=True,
+                      trim_blocks=True, lstrip_blocks=True)
+    env.globals.update(qs=_qs, pct=_pct, describe_variant=describe_variant, where=where, heat=heat)
+
+    def page(name: str, status: int = 200, **context: Any) -> HTMLResponse:
+        return HTMLResponse(env.get_template(name).render(**context), status_code=status)
+
+    def game_params(request: Request) -> tuple[str, str]:
+        return reader.check_game(_text(request, "env"), request.query_params.get("variant"), _text(request, "run"))
+
+    def home(request: Request) -> Response:
+        return page("home.html", title="games", games=reader.games())
+
+    def ladder_page(request: Request) -> Response:
+        env_name, variant = reader.check_game(_text(request, "env"), request.query_params.get("variant"))
+        run = _text(request, "run")
+        if run is not None and reader.league.roster.get_run(run) is None:
+            raise NotFound(f"no run named {run!r} in this league")
+        sort = _choice(request, "sort", "rank", LADDER_SORTS)
+        order = _choice(request, "order", None, ("asc", "desc"))
+        kind = _choice(request, "kind", None, ("bot", "snapshot"))
+        q = _text(request, "q")
+        lad = reader.ladder(env_name, variant)
+        records = [r for r in lad.records if (run is None or r["run"] == run or r["kind"] == "bot")
+                   and (kind is None or r["kind"] == kind) and (q is None or q.lower() in r["policy"].lower())]
+        descending = order == "desc" if order else sort in ("elo", "games", "score", "step")
+        records = sorted(records, key=LADDER_SORTS[sort], reverse=descending)  # (stable: rank order within ties)
+        runs = sorted({r["run"] for r in lad.records if r["run"]})
+        games = {g["env"]: g for g in reader.games()}
+        return page("ladder.html", title=f"ladder: {env_name}", env=env_name, variant=variant, records=records,
+                    verdicts=lad.verdicts, runs=runs, run=run, sort=sort, order="desc" if descending else "asc",
+                    kind=kind, q=q, games=games, total=len(lad.records),
+                    ids={r.policy: r.player_id for r in lad.rows},
+                    bots=[v.bot for v in lad.rows[0].vs] if lad.rows else [])
+
+    def matrix_page(request: Request) -> Response:
+        env_name, variant = game_params(request)
+        top = _int(request, "top", 10, 2, 100)
+        min_games = _int(request, "min_games", 8, 1, 10_000_000)
+        payoff = _choice(request, "payoff", "points", PAYOFFS)
+        run = _text(request, "run")
+        report = reader.matrix(env_name, variant, top, run, min_games, payoff)
+        data = report.to_json()
+        n = report.n
+        cells = [[None if i == j else {"text": report.cell(i, j)[0] if report.measured[i, j] else None,
+                                       "place": report.cell(i, j)[1] if report.measured[i, j] else None,
+                                       "games": int(report.games[i, j])} for j in range(n)] for i in range(n)]
+        weights = {m["policy"]: m["weight"] for m in (data["nash"] or {}).get("mixture", [])}
+        return page("matrix.html", title=f"matrix: {env_name}", env=env_name, variant=variant, data=data,
+                    cells=cells, weights=weights, top=top, min_games=min_games, payoff=payoff, run=run)
+
+    def curves_page(request: Request) -> Response:
+        run = _text(request, "run")
+        runs = reader.league.roster.list_runs()
+        if run is None:
+            if not runs:
+                raise NotFound("this league has no training runs yet")
+            run = runs[-1].name
+        curves = reader.curves(run)
+        env_name, variant = reader.check_game(None, None, run)
+        elo = line_chart([(c.learner, [(p.step, p.elo, p.ci_low, p.ci_high, f"{p.policy}: {p.elo:.1f} "
+                                        f"[{p.ci_low:.1f}, {p.ci_high:.1f}]") for p in c.points])
+                          for c in curves.curves], [(b.name, b.elo) for b in curves.bots], "training step", "Elo")
+        rows = {r["policy"]: r for r in reader.ladder(env_name, variant).records}
+        exploit = [(c.learner, [(p.step, float(rows[p.policy]["exploitability"]["value"]), None, None,
+                                 f"{p.policy}: {rows[p.policy]['exploitability']['value']:.4g}")
+                                for p in c.points if (rows.get(p.policy) or {}).get("exploitability")])
+                   for c in curves.curves]
+        exploit = [s for s in exploit if s[1]]
+        chart_x = line_chart(exploit, [], "training step", "exploitability", log=True) if exploit else None
+        # lineage: each snapshot of the run and the one it grew from
+        players = [p for p in reader.league.roster.players(env=env_name, kind="snapshot", include_removed=True)
+                   if p.run == run]
+        by_id = {p.id: p for p in reader.league.roster.players(env=env_name, include_removed=True)}
+        lineage = [(p, by_id.get(p.parent_id) if p.parent_id is not None else None) for p in players]
+        return page("curves.html", title=f"curves: {run}", run=run, runs=runs, curves=curves.to_json(), elo=elo,
+                    exploit=chart_x, lineage=lineage, rows=rows, env=env_name, variant=variant)
+
+    def player_page(request: Request) -> Response:
+        pid = _path_int(request, "player_id")
+        player = reader.player(pid)
+        variant = request.query_params.get("variant")
+        env_name, variant = reader.check_game(player.env, variant)
+        lad = reader.ladder(env_name, variant)
+        record = next((r for r in lad.records if r["policy"] == player.full_name), None)
+        vs = _int(request, "vs", None, 1, 2**62)
+        games = _int(request, "games", 200, 1, 10_000_000)
+        prediction = error = None
+        if vs is not None:
+            other = reader.player(vs)
+            if other.env != player.env:
+                raise BadRequest(f"{other.full_name} plays {other.env}, not {player.env}")
+            try:
+                prediction = reader.predict(env_name, variant, player, other, games)
+            except LeagueError as e:
+                error = str(e)
+        up, down = reader.lineage(player)
+        return page("player.html", title=player.full_name, player=player, record=record, env=env_name,
+                    variant=variant, opponents=reader.opponents(player, variant), up=up, down=down,
+                    prediction=prediction, error=error, vs=vs, games=games,
+                    others=[r for r in lad.records if r["policy"] != player.full_name],
+                    ids={r.policy: r.player_id for r in lad.rows},
+                    videos=reader.league.videos.list(player_id=player.id))
+
+    def matches_page(request: Request) -> Response:
+        env_name = _text(request, "env")
+        if env_name is not None:
+            reader.check_game(env_name, "")
+        kind = _choice(request, "kind", None, MATCH_KINDS)
+        page_no = _int(request, "page", 1, 1, 1_000_000)
+        sprt_only = _choice(request, "sprt", None, ("1",)) == "1"
+        matches = reader.matches(env_name, kind)
+        if sprt_only:
+            matches = [m for m in matches if isinstance(m["params"].get("sprt"), dict)]
+        shown = matches[(page_no - 1) * PAGE: page_no * PAGE]
+        envs = {m["id"]: m["params"].get("env") for m in shown}
+        names = {p.id: p.full_name for p in reader.league.roster.players(include_removed=True)}
+        for m in shown:
+            the_env = envs.get(m["id"]) or env_name
+            m["sprt_record"] = reader.sprt_record(the_env, m) if the_env else None
+        return page("matches.html", title="matches", matches=shown, total=len(matches), page=page_no, per=PAGE,
+                    kind=kind, env=env_name, kinds=MATCH_KINDS, names=names, sprt=sprt_only)
+
+    def queue_page(request: Request) -> Response:
+        batch = _text(request, "batch")
+        states = request.query_params.getlist("state")
+        for s in states:
+            if s not in JOB_STATES:
+                raise BadRequest(f"state must be one of {', '.join(JOB_STATES)}, not {s[:40]!r}")
+        last = _int(request, "last", 20, 0, 10_000)
+        data = reader.queue(batch, states or None, last)
+        return page("queue.html", title="queue", data=data, batch=batch, states=states, last=last,
+                    job_states=JOB_STATES)
+
+    def replays_page(request: Request) -> Response:
+        names = {p.id: p.full_name for p in reader.league.roster.players(include_removed=True)}
+        return page("replays.html", title="replays", videos=reader.league.videos.list(), names=names)
+
+    def replay_page(request: Request) -> Response:
+        row = _video(request)
+        names = {p.id: p.full_name for p in reader.league.roster.players(include_removed=True)}
+        return page("replay.html", title=f"replay {row.id}", video=row, names=names,
+                    playable=reader.league.videos.file(row) is not None)
+
+    def video_file(request: Request) -> Response:
+        row = _video(request)
+        path = reader.league.videos.file(row)
+        if path is None:
+            raise NotFound(f"recording {row.id}'s file is not in the league's videos folder")
+        media = "video/mp4" if path.suffix.lower() == ".mp4" else "image/gif" if path.suffix.lower() == ".gif" \
+            else "application/octet-stream"
+        return FileResponse(path, media_type=media)
+
+    def _video(request: Request) -> Any:
+        vid = _path_int(request, "video_id")
+        row = reader.league.videos.get(vid)
+        if row is None:
+            raise NotFound(f"no recording with id {vid}")
+        return row
+
+    def health(request: Request) -> Response:
+        return PlainTextResponse("ok")
+
+    async def http_error(request: Request, exc: Exception) -> Response:
+        status = getattr(exc, "status_code", 500)
+        detail = getattr(exc, "detail", "") or ""
+        return page("error.html", status=status, title=f"{status}", status_code=status, detail=detail)
+
+    async def not_found(request: Request, exc: Exception) -> Response:
+        return page("error.html", status=404, title="404", status_code=404, detail=str(exc))
+
+    async def bad_value(request: Request, exc: Exception) -> Response:
+        return page("error.html", status=400, title="400", status_code=400, detail=str(exc))
+
+    async def crashed(request: Request, exc: Exception) -> Response:
+        log.error("marl serve: %s on %s: %s", type(exc).__name__, request.url.path, exc)
+        return page("error.html", status=500, title="500", status_code=500,
+                    detail="the page could not be made (the server's log says why)")
+
+    def guarded(endpoint: Any) -> Any:
+        """The endpoint, with what nobody foresaw as a 500 page and one line in the server's log (no traceback)."""
+
+        def run(request: Request) -> Response:
+            try:
+                return endpoint(request)
+            except (HTTPException, NotFound, LeagueError, ValueError):
+                raise
+            except Exception as e:
+                said = " ".join(str(e).split())[:300]
+                log.error("marl serve: %s on %s: %s", type(e).__name__, request.url.path, said)
+                return page("error.html", status=500, title="500", status_code=500,
+                            detail="the page could not be made (the server's log says why)")
+
+        return run
+
+    static = Path(__file__).parent / "static"
+    routes = [Route(path, guarded(fn)) for path, fn in (
+        ("/", home), ("/ladder", ladder_page), ("/matrix", matrix_page), ("/curves", curves_page),
+        ("/player/{player_id}", player_page), ("/matches", matches_page), ("/queue", queue_page),
+        ("/replays", replays_page), ("/replay/{video_id}", replay_page), ("/video/{video_id}", video_file),
+        ("/health", health))] + [
+        Mount("/static", app=StaticFiles(directory=static), name="static"),
+    ]
+    handlers = {HTTPException: http_error, NotFound: not_found, LeagueError: not_found, ValueError: bad_value,
+                Exception: crashed}
+    return Starlette(routes=routes, exception_handlers=handlers,  # type: ignore[arg-type]
+                     middleware=[Middleware(_SecurityHeaders)])
+
+
+class _SecurityHeaders:
+    """ASGI middleware: every response carries :data:`SECURITY_HEADERS` (no script runs, nothing is framed)."""
+
+    def __init__(self, app: Any) -> None:
+        self.app = app
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def sending(message: Any) -> None:
+            if message["type"] == "http.response.start":
+                have = {k.lower() for k, _ in message.get("headers", [])}
+                extra = [(k.lower().encode(), v.encode()) for k, v in SECURITY_HEADERS.items()
+                         if k.lower().encode() not in have]
+                message = {**message, "headers": [*message.get("headers", []), *extra]}
+            await send(message)
+
+        await self.app(scope, receive, sending)
+
+
+def _path_int(request: Request, name: str) -> int:
+    raw = request.path_params[name]
+    if not raw.isdigit() or len(raw) > 18:
+        raise HTTPException(404, f"no such page: {name} must be a whole number")
+    return int(raw)

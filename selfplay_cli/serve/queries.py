@@ -1,0 +1,261 @@
+"""What the pages of ``marl serve`` show, read through the library the CLI reads through: the ladder
+(:func:`~selfplay_cli.ratings.ladder.ladder`, its rows' own JSON, as ``marl league ladder --json``), the matrix
+(:func:`~selfplay_cli.report.matrix.build_matrix`, as ``marl league matrix``), a run's curves
+(:func:`~selfplay_cli.report.plots.run_curves`), a prediction (:class:`~selfplay_cli.ratings.forecast.Forecaster`, as
+``marl league predict``), the queue (``league.queue``, as ``marl queue``) and the recordings (``league.videos``).
+
+A :class:`Reader` holds one league opened read-only (the connection itself cannot write) and keeps each fitted
+ladder, matrix and forecaster until the league changes (:meth:`Reader.changes`: a new game, player, match or video)
+or :data:`FRESH_SECONDS` pass (a filed exploitability changes no count): a page of a large league is a lookup, not a
+fit, and never a stale one for long."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+from sqlalchemy import func, select
+
+from selfplay_cli.league.job_rows import JOB_STATES
+from selfplay_cli.league.ledger import MATCH_KINDS
+from selfplay_cli.league.models import Game, Match, Player, Tag, Video, utcnow
+from selfplay_cli.league.store import League, LeagueError, PlayerRow
+from selfplay_cli.league.variants import describe_variant, variant_options
+from selfplay_cli.ratings.forecast import Forecaster
+from selfplay_cli.ratings.ladder import ladder
+from selfplay_cli.ratings.ladder_rows import LadderRow
+from selfplay_cli.ratings.shown import default_variant
+from selfplay_cli.ratings.verdicts import verdict_lines
+from selfplay_cli.report.matrix import MatrixReport, build_matrix
+from selfplay_cli.report.plots import RunCurves, run_curves
+from selfplay_cli.stats.sprt import SPRT, round_counts
+
+__all__ = ["FRESH_SECONDS", "NotFound", "Reader"]
+
+FRESH_SECONDS = 30.0
+"""A fitted ladder (matrix, forecaster) is refitted at the latest this long after its fit, changed league or not."""
+
+T = TypeVar("T")
+
+
+class NotFound(LookupError):
+    """A page of something the league does not hold (a game, run, player, recording): a 404 saying which."""
+
+
+@dataclass(frozen=True)
+class Ladder:
+    """A fitted ladder as the page shows it: its rows, their JSON (``marl league ladder --json``'s very records)
+    and the lines under it."""
+
+    env: str
+    variant: str
+    rows: list[LadderRow]
+    records: list[dict[str, Any]]
+    verdicts: list[str]
+
+
+class Reader:
+    """One league, read-only, with its fits kept while it does not change (see the module docstring)."""
+
+    def __init__(self, home: Path | None, url: str | None) -> None:
+        self.league = League.open(home=home, url=url, readonly=True, read_only_connection=True)
+        self._cache: dict[tuple, tuple[tuple, float, Any]] = {}
+        self._lock = threading.Lock()
+
+    def close(self) -> None:
+        self.league.close()
+
+    # ------------------------------------------------------------------ the cache
+
+    def changes(self) -> tuple:
+        """A tuple that changes whenever a game, match, player, tag or recording is added, or a player removed."""
+
+        videos = self.league.videos.held()
+
+        def work(s: Any) -> tuple:
+            return (s.scalar(select(func.max(Game.id))), s.scalar(select(func.max(Match.id))),
+                    s.scalar(select(func.max(Player.id))), s.scalar(select(func.count()).where(Player.removed)),
+                    s.scalar(select(func.count(Tag.id))), s.scalar(select(func.max(Video.id))) if videos else None)
+
+        return self.league._read(work)
+
+    def _kept(self, key: tuple, make: Callable[[], T]) -> T:
+        now = time.monotonic()
+        changes = self.changes()
+        with self._lock:
+            hit = self._cache.get(key)
+            if hit is not None and hit[0] == changes and now - hit[1] < FRESH_SECONDS:
+                return hit[2]
+            value = make()
+            self._cache[key] = (changes, now, value)
+            return value
+
+    # ------------------------------------------------------------------ games, runs, players
+
+    def games(self) -> list[dict[str, Any]]:
+        """Every game of the league with its variants (key, options text, rated games) and runs."""
+        envs = sorted({p.env for p in self.league.roster.players(include_removed=True)})
+        runs = self.league.roster.list_runs()
+        out = []
+        for env in envs:
+            variants = self.league.ledger.variants(env)
+            out.append({"env": env, "variants": [{"key": k, "text": describe_variant(k), "games": n}
+                                                 for k, n in sorted(variants.items())],
+                        "runs": [r for r in runs if r.env == env]})
+        return out
+
+    def check_game(self, env: str | None, variant: str | None, run: str | None = None) -> tuple[str, str]:
+        """The game and variant a page shows: those asked for, checked against the league (NotFound where it holds
+        no such game, variant or run), else the one the CLI shows by default."""
+        envs = {g["env"]: g for g in self.games()}
+        if run is not None:
+            info = self.league.roster.get_run(run)
+            if info is None:
+                raise NotFound(f"no run named {run!r} in this league")
+            if env is not None and info.env != env:
+                raise NotFound(f"run {run!r} plays {info.env}, not {env!r}")
+            env = info.env
+        if env is not None and env not in envs:
+            raise NotFound(f"no game named {env!r} in this league")
+        if env is None and not envs:
+            raise NotFound("this league holds no players yet")
+        if variant is None:
+            try:
+                return default_variant(self.league, env, run)
+            except LeagueError as e:
+                raise NotFound(str(e)) from None
+        env = env if env is not None else next(iter(envs))
+        if variant not in {v["key"] for v in envs[env]["variants"]}:
+            raise NotFound(f"{env} has no rated games under the options {variant!r}")
+        return env, variant
+
+    def player(self, player_id: int) -> PlayerRow:
+        try:
+            return self.league.roster.get_player(player_id)
+        except LeagueError:
+            raise NotFound(f"no player with id {player_id}") from None
+
+    # ------------------------------------------------------------------ ratings
+
+    def ladder(self, env: str, variant: str) -> Ladder:
+        """The ladder ``marl league ladder --env ENV [--env-option ...] --json`` prints (its defaults: the game's
+        anchor, BayesElo's prior, 200 bootstrap replicates, 95%)."""
+
+        def make() -> Ladder:
+            rows = ladder(self.league, env, variant=variant)
+            options = variant_options(variant)
+            return Ladder(env, variant, rows, [r.to_json() | {"variant": options} for r in rows], verdict_lines(rows))
+
+        return self._kept(("ladder", env, variant), make)
+
+    def matrix(self, env: str, variant: str, top: int, run: str | None, min_games: int, payoff: str) -> MatrixReport:
+        """The matrix ``marl league matrix`` prints."""
+        return self._kept(("matrix", env, variant, top, run, min_games, payoff),
+                          lambda: build_matrix(self.league, env, top=top, run=run, min_games=min_games,
+                                               variant=variant, payoff=payoff))
+
+    def curves(self, run: str) -> RunCurves:
+        """A run's curves (``marl league plot --run RUN --json``), from the cached ladder of its own variant."""
+        env, variant = self.check_game(None, None, run)
+        rows = self.ladder(env, variant).rows
+        return self._kept(("curves", run, variant), lambda: run_curves(self.league, run, rows=rows))
+
+    def forecaster(self, env: str, variant: str) -> Forecaster:
+        return self._kept(("forecast", env, variant), lambda: Forecaster.of_league(self.league, env, variant=variant))
+
+    def predict(self, env: str, variant: str, a: PlayerRow, b: PlayerRow, games: int = 200,
+                confidence: float = 0.95) -> dict[str, Any]:
+        """``marl league predict A B --json``'s record (LeagueError where the ladder cannot predict the pair)."""
+        forecast = self.forecaster(env, variant)
+        pair = forecast.belief(a.full_name, b.full_name)
+        p = pair.predict(games, confidence)
+        low, high = pair.interval(confidence)
+        met_points, met = forecast.met(a.full_name, b.full_name)
+        return {"a": a.full_name, "b": b.full_name, **p.to_json(), "elo_low": round(low, 1),
+                "elo_high": round(high, 1), "spread": round(forecast.spread, 1), "met": met,
+                "met_score": round(met_points / met, 4) if met else None}
+
+    def opponents(self, player: PlayerRow, variant: str) -> list[dict[str, Any]]:
+        """The player's rated results by opponent in ``variant``: games, W-D-L and score, most games first."""
+        table = self.league.ledger.games(env=player.env, players=[player.id], any_seat=True, variant=variant)
+        same = self.league.ledger.same_weights(player.env)
+        me = same.get(player.id, player.id)
+        mine_a = table.player_a == me
+        other = np.where(mine_a, table.player_b, table.player_a)
+        pts = np.where(mine_a, table.score_a, 1.0 - table.score_a)
+        names = {p.id: p for p in self.league.roster.players(env=player.env, include_removed=True)}
+        out = []
+        for opp in np.unique(other).tolist():
+            mask = other == opp
+            p = pts[mask]
+            row = names.get(int(opp))
+            out.append({"id": int(opp), "policy": row.full_name if row else f"#{opp}", "results": int(mask.sum()),
+                        "wins": int((p > 0.5).sum()), "draws": int((p == 0.5).sum()), "losses": int((p < 0.5).sum()),
+                        "score": round(float(p.mean()), 4)})
+        return sorted(out, key=lambda r: (-r["results"], r["policy"]))
+
+    def lineage(self, player: PlayerRow) -> tuple[list[PlayerRow], list[PlayerRow]]:
+        """The player's ancestors (parent first, at most 100) and its children."""
+        everyone = {p.id: p for p in self.league.roster.players(env=player.env, include_removed=True)}
+        up, seen, pid = [], {player.id}, player.parent_id
+        while pid is not None and pid in everyone and pid not in seen and len(up) < 100:
+            seen.add(pid)
+            up.append(everyone[pid])
+            pid = everyone[pid].parent_id
+        return up, [p for p in everyone.values() if p.parent_id == player.id]
+
+    # ------------------------------------------------------------------ matches, queue, videos
+
+    def matches(self, env: str | None, kind: str | None) -> list[dict[str, Any]]:
+        """The matches (newest first) with their parameters and, where one ran, their SPRT and its record."""
+        out = []
+        for k in MATCH_KINDS if kind is None else (kind,):
+            for mid, params in self.league.ledger.match_params(env=env, kind=k).items():
+                out.append({"id": mid, "kind": k, "params": params})
+        return sorted(out, key=lambda m: -m["id"])
+
+    def sprt_record(self, env: str, match: dict[str, Any]) -> dict[str, Any] | None:
+        """A match's SPRT (its settings as stored) and the LLR of its stored games, paired by seed as the match
+        played them (:func:`~selfplay_cli.stats.sprt.round_counts`); None for a match without an SPRT."""
+        params = match["params"]
+        settings = params.get("sprt")
+        if not isinstance(settings, dict):
+            return None
+        try:
+            test = SPRT(**{k: settings[k] for k in ("elo0", "elo1", "alpha", "beta") if k in settings})
+        except (TypeError, ValueError):
+            return None
+        table = self.league.ledger.games(env=env, variant=None)
+        mask = table.match_id == match["id"]
+        b = params.get("b")
+        a_side = np.where(table.player_b[mask] == b, True, table.player_a[mask] != b)
+        pts = np.where(a_side, table.score_a[mask], 1.0 - table.score_a[mask])
+        rounds: dict[int, list[float]] = {}
+        for seed, p in zip(table.seed[mask].tolist(), pts.tolist(), strict=True):
+            rounds.setdefault(int(seed), []).append(float(p))
+        paired = bool(rounds) and all(len(r) == 2 for r in rounds.values())
+        counts, model = round_counts(list(rounds.values()), paired)
+        llr = test.llr(counts, model=model) if sum(counts) else 0.0
+        return {"elo0": test.elo0, "elo1": test.elo1, "alpha": test.alpha, "beta": test.beta, "llr": round(llr, 4),
+                "lower": round(test.lower, 4), "upper": round(test.upper, 4), "decision": test.decide(llr),
+                "counts": counts, "model": model}
+
+    def queue(self, batch: str | None, states: list[str] | None, last: int) -> dict[str, Any]:
+        """``marl queue --json``'s record (``--batch``, ``--state``, ``--last``)."""
+        for s in states or []:
+            if s not in JOB_STATES:
+                raise ValueError(f"a job's state is one of {', '.join(JOB_STATES)}, not {s!r}")
+        batches = self.league.queue.batches()
+        if batch is not None and batch not in dict(batches):
+            raise NotFound(f"no batch {batch!r} in the queue")
+        workers = self.league.queue.workers()
+        jobs = self.league.queue.jobs(batch=batch, states=states, limit=last)
+        now = utcnow()
+        return {"batches": [{"batch": b, **counts} for b, counts in batches],
+                "workers": [{**w.to_json(), "status": w.status(now)} for w in workers],
+                "jobs": [j.to_json() for j in jobs]}
