@@ -23,7 +23,7 @@ CASES = [
     pytest.param("pong", {"rules": "seed", "points_to_win": 2, "frame_stack": 4, "r_for_hit": 0.1}, id="pong-seed-2"),
     pytest.param("lander", {}, id="lander"),
     pytest.param("lander", {"landers": 3, "continuous": True, "enable_wind": True}, id="lander-3-continuous-wind"),
-    pytest.param("tennis", {}, id="tennis"),
+    pytest.param("tennis", {}, marks=pytest.mark.slow, id="tennis"),  # (a random game: ~1,250 steps)
     pytest.param("tennis", {"discrete": True, "points_to_win": 2, "serve_bounce": True, "hit_reward": 0.1},
                  id="tennis-discrete-2"),
 ]
