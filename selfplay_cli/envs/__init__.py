@@ -16,6 +16,8 @@
 - :mod:`.view`: the one-game PettingZoo view the built-in games share; :mod:`.rng`: their counter-based randomness;
   :mod:`.canvas`: the offscreen surface their renderers draw on.
 - :mod:`.adapters`: users' games as `marl` games (:mod:`.adapters.pettingzoo`).
+- :mod:`.pong_v0`, :mod:`.lander_v0`, :mod:`.tennis_v0`: the built-in games offered the way PettingZoo offers its
+  own (``parallel_env``, ``env``, ``raw_env``, ``metadata``; :mod:`.zoo`), for other libraries' learners.
 
 marl's game loops (``selfplay_cli.play``) step every game, built in or adapted, through its batched core.
 """

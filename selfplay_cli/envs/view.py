@@ -12,10 +12,19 @@ returns an RGB array), calls :meth:`OneGame._setup` from its ``__init__`` and pr
 (begin a game), ``_info(seat)``, ``_scene()`` (what the renderer draws), and for :class:`OneGameView`
 ``_play(actions)`` (one step: each seat's reward), ``_observe()`` (each seat's observation), ``_ended(seat)`` and
 ``_cut()`` (the game was truncated on this step).
+
+A view is copied (``copy.deepcopy``, ``pickle``, ``cloudpickle``: SuperSuit's vector envs copy the env they are given
+once per game and send it to their worker processes; RLlib's env runners do the like) as what made it and where its
+game stands (:meth:`OneGame.__reduce__`): a view never reset is the same game made afresh from its options and render
+mode, with randomness of its own (copies of it play different games, as views made alike do); a reset view's copy
+also holds its game seed and its seed generator, and the game itself: exactly (:class:`SavedState`, a game that gives
+and takes its state) or, for a game that cannot (Box2D's world), rebuilt from its seed while it has not been stepped
+since ``reset``, and refused with one clear error once it has.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from typing import Any, ClassVar
@@ -85,6 +94,46 @@ class OneGame(ABC):
     def close(self) -> None:
         self._renderer = None
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """A copy: the view made afresh from its options and render mode, then put where this one's game stands (see
+        the module docstring). Raises ``TypeError`` for a game under way that cannot give its state."""
+        options = {f.name: getattr(self.config, f.name) for f in dataclasses.fields(self.config) if f.init}
+        return (_remade, (type(self), self.render_mode, options, self._copied_state()))
+
+    def _copied_state(self) -> dict[str, Any] | None:
+        if self.game_seed is None:  # never reset: the copy draws its games from randomness of its own
+            return None
+        return {"game_seed": self.game_seed, "seeds": self._seeds.bit_generator.state, "agents": list(self.agents),
+                "game": self._game_state()}
+
+    def _game_state(self) -> Any:
+        """The game's state for a copy (``None``: rebuilt from its seed). A game that cannot give its state is copied
+        at its start (:meth:`_at_start`) or once over (the copy is ready for ``reset``), never under way."""
+        if self.agents and not self._at_start():
+            raise TypeError(f"a {self.game_name} view cannot be copied (pickled) with a game under way: its game "
+                            "cannot give its state. Copy it before reset() or right after one, or make a new view")
+        return None
+
+    def _at_start(self) -> bool:
+        """Whether the game has not been stepped since ``reset`` (a game without a saved state overrides it)."""
+        return False
+
+    def _restore(self, state: dict[str, Any]) -> None:
+        """Put a copy where the original's game stood (:meth:`__reduce__`)."""
+        self.reset(seed=state["game_seed"])
+        if state["game"] is not None:
+            self.game.set_state(state["game"])
+        self.agents = list(state["agents"])
+        self._seeds.bit_generator.state = state["seeds"]
+
+
+def _remade(cls: type, render_mode: str | None, options: dict[str, Any], state: dict[str, Any] | None) -> OneGame:
+    """A view's copy (:meth:`OneGame.__reduce__`)."""
+    view = cls(render_mode=render_mode, **options)
+    if state is not None:
+        view._restore(state)
+    return view
+
 
 class OneGameView(OneGame, ParallelEnv):
     """One game as a PettingZoo ``ParallelEnv`` (see the module docstring for what a game provides)."""
@@ -137,7 +186,8 @@ class OneGameView(OneGame, ParallelEnv):
 
 class SavedState:
     """``get_state`` / ``set_state`` for a view whose one game (``self.game``) can give and take its exact state
-    (pong's and tennis's scalar games): the game's state, the seats still playing and the game's seed."""
+    (pong's and tennis's scalar games): the game's state, the seats still playing and the game's seed. Such a view
+    is copied with its game exactly where it stands, under way or not."""
 
     game: Any
     agents: list[str]
@@ -151,3 +201,6 @@ class SavedState:
         self.game.set_state(state["core"])
         self.agents = list(state["agents"])
         self.game_seed = state["game_seed"]
+
+    def _game_state(self) -> Any:
+        return self.game.get_state()

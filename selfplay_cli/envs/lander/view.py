@@ -12,7 +12,6 @@ parallel game.
 
 from __future__ import annotations
 
-import dataclasses
 from types import SimpleNamespace
 from typing import Any
 
@@ -84,20 +83,8 @@ class _LanderGame(OneGame):
     def _scene(self) -> SimpleNamespace:
         return self.core
 
-    def __reduce__(self) -> tuple[Any, ...]:
-        """A copy (``copy.deepcopy``, pickle: SuperSuit's and RLlib's vector wrappers copy the env they are given,
-        or send it to their worker processes) is the same game made afresh, from its options and render mode: Box2D's
-        world cannot be copied, so a view copied with a game under way is refused (copy it before ``reset``)."""
-        if self.agents:
-            raise TypeError(f"a {self.game_name} view with a game under way cannot be copied (Box2D's world cannot "
-                            "be): copy it before reset(), or make a new one")
-        options = {f.name: getattr(self.config, f.name) for f in dataclasses.fields(self.config)}
-        return (_remade, (type(self), self.render_mode, options))
-
-
-def _remade(cls: type, render_mode: str | None, options: dict[str, Any]) -> Any:
-    """A lander view made afresh (a copy's :meth:`_LanderGame.__reduce__`)."""
-    return cls(render_mode=render_mode, **options)
+    def _at_start(self) -> bool:
+        return self.game.steps == 0  # (Box2D's world cannot be copied: a copy is rebuilt from the game's seed)
 
 
 class LanderParallelEnv(_LanderGame, OneGameView):
