@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from selfplay_cli.envs.rng import GOLDEN, mix64, to_unit
-from selfplay_cli.envs.tennis import bots
+from selfplay_cli.envs.tennis import bots, flight, flight_one
 from selfplay_cli.envs.tennis.bots import plan_launch, serve_bot_rule_for
 from selfplay_cli.envs.tennis.config import (
     ANGLE_MAX,
@@ -531,17 +531,17 @@ def test_the_planners_flights_are_the_same_numbers(monkeypatch):
     for kd, km in ((K_DRAG, K_MAGNUS), (0.0, 3 * K_MAGNUS)):
         for full in (False, True):
             want = old_fly_to_landing(x, y, vx, vy, w, kd, km, full=full)
-            assert all(np.array_equal(a, b) for a, b in zip(bots._fly_to_landing(x, y, vx, vy, w, kd, km, full=full),
+            assert all(np.array_equal(a, b) for a, b in zip(flight._fly_to_landing(x, y, vx, vy, w, kd, km, full=full),
                                                             want, strict=True))
             with monkeypatch.context() as m:
-                m.setattr(bots, "_FLIGHT_CHUNK", 97)
-                got = bots._fly_to_landing(x.reshape(7, 100), y.reshape(7, 100), vx.reshape(7, 100),
+                m.setattr(flight, "_FLIGHT_CHUNK", 97)
+                got = flight._fly_to_landing(x.reshape(7, 100), y.reshape(7, 100), vx.reshape(7, 100),
                                            vy.reshape(7, 100), w.reshape(7, 100), kd, km, full=full)
             assert all(np.array_equal(a.reshape(-1), b) for a, b in zip(got, want, strict=True))
         # broadcast against a grid, as the bounce serve's planner does
         gx, gy = np.meshgrid(np.linspace(1, 7, 5), np.linspace(-5, 1, 5))
         args = (x[:9, None], y[:9, None], gx.reshape(1, -1), gy.reshape(1, -1), w[:9, None], kd, km)
-        assert all(np.array_equal(a, b) for a, b in zip(bots._fly_to_landing(*args, full=True),
+        assert all(np.array_equal(a, b) for a, b in zip(flight._fly_to_landing(*args, full=True),
                                                         old_fly_to_landing(*args, full=True), strict=True))
         for k in (n, 5, 1):  # arrays, and one at a time
             args = (x[:k], y[:k], w[:k], rng.uniform(0.1, 1.3, k), rng.uniform(0.17, 0.6, k), kd, km)
@@ -549,16 +549,16 @@ def test_the_planners_flights_are_the_same_numbers(monkeypatch):
         # one ball at a time in Python floats
         k = 200
         want = old_fly_to_landing(x[:k], y[:k], vx[:k], vy[:k], w[:k], kd, km, full=True)
-        got = [bots._fly_one(*v, kd, km, full=True) for v in _rows(x[:k], y[:k], vx[:k], vy[:k], w[:k])]
+        got = [flight_one._fly_one(*v, kd, km, full=True) for v in _rows(x[:k], y[:k], vx[:k], vy[:k], w[:k])]
         assert all(np.array_equal(np.array([g[i] for g in got]), want[i]) for i in range(5))
         land, over = rng.uniform(0.1, 1.3, k), rng.uniform(0.17, 0.6, k)
         want = old_plan_launch(x[:k], y[:k], w[:k], land, over, kd, km)
-        got = [bots._plan_launch_one(*v, kd, km) for v in _rows(x[:k], y[:k], w[:k], land, over)]
+        got = [flight_one._plan_launch_one(*v, kd, km) for v in _rows(x[:k], y[:k], w[:k], land, over)]
         assert all(np.array_equal(np.array([g[i] for g in got]), want[i]) for i in range(2))
         ins = [rng.uniform(-9.0, 9.0, k) for _ in range(4)] + [rng.uniform(-300.0, 300.0, k) for _ in range(2)]
         vin_x, vin_y, vout_x, vout_y, w_in, w_out = ins
         want = old_solve_stroke(vin_x, vin_y, w_in, vout_x, vout_y, w_out)
-        got = [bots._solve_stroke_one(*v) for v in _rows(vin_x, vin_y, w_in, vout_x, vout_y, w_out)]
+        got = [flight_one._solve_stroke_one(*v) for v in _rows(vin_x, vin_y, w_in, vout_x, vout_y, w_out)]
         assert all(np.array_equal(np.array([g[i] for g in got]), want[i]) for i in range(4))
     # incoming balls: from the other half or mine, bounced or not, some bounce serves coming over
     x = rng.uniform(-2.4, 2.6, n)
@@ -566,11 +566,11 @@ def test_the_planners_flights_are_the_same_numbers(monkeypatch):
     bounced = rng.random(n) < 0.3
     for kd, km in ((K_DRAG, K_MAGNUS), (0.5 * K_DRAG, 0.0)):
         want = old_predict_contact(x, y, vx, vy, w, bounced, kd, km)
-        got = bots._predict_contact(x, y, vx, vy, w, bounced, kd, km)
+        got = flight._predict_contact(x, y, vx, vy, w, bounced, kd, km)
         assert want[0].any() and not want[0].all()
         assert all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
         for i, v in enumerate(_rows(x, y, vx, vy, w, bounced)):
-            one = bots._predict_contact_one(*v, kd, km)
+            one = flight_one._predict_contact_one(*v, kd, km)
             assert (one is not None) == want[0][i]
             assert one is None or one == tuple(a[i] for a in want[1:])
 
@@ -580,7 +580,7 @@ def test_one_observation_is_planned_in_python_floats(monkeypatch):
     def arrays(*args, **kwargs):
         raise AssertionError("planned on arrays")
 
-    monkeypatch.setattr(bots, "_integrate", arrays)
+    monkeypatch.setattr(flight, "_integrate", arrays)
     obs = observations("mixed", False)
     rule = serve_bot_rule_for("mixed")
     for i in range(0, 120, 3):
