@@ -103,7 +103,7 @@ def serve(
                               "read the whole league (names, ratings, games, replays)", markup=False,
                               highlight=False)
         app = create_app(reader, str(where))
-        config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off")
+        config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="on")
         uvicorn.Server(config).run(sockets=[sock])
     finally:
         sock.close()
