@@ -177,7 +177,11 @@ class FitCache:
             return []
         self._looked = look
         players = (changes[2], changes[3], changes[4], self._meta[1])  # (a new, removed or tagged player; meta)
-        counts = {(g["env"], v["key"]): v["games"] for g in self.reader.games() for v in g["variants"] if v["games"]}
+        games = self.reader.games()
+        for run in (r for g in games for r in g["runs"]):  # (a run's variant, for its curves page, read here)
+            with contextlib.suppress(Exception):
+                self.reader.run_variant(run.name)
+        counts = {(g["env"], v["key"]): v["games"] for g in games for v in g["variants"] if v["games"]}
         todo = [(key, n, (n, players)) for key, n in counts.items() if self._stamps.get(key) != (n, players)]
         todo.sort(key=lambda t: (t[0] not in unfitted, t[0]))
         return todo

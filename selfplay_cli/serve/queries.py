@@ -125,8 +125,9 @@ class Reader:
 
     def run_variant(self, run: str) -> str:
         """The variant (key) of a run's snapshots, as :func:`~selfplay_cli.ratings.shown.default_variant` finds it,
-        kept until the league changes (it may read each snapshot's file header)."""
-        changes = self.changes()
+        kept until a player is added or removed (it may read each snapshot's file header; the background fits warm
+        it)."""
+        changes = self.changes()[2:4]
         if self._run_variants[0] != changes:
             self._run_variants = (changes, {})
         known = self._run_variants[1]
