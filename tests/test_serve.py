@@ -59,6 +59,7 @@ def league_home(tmp_path: Path) -> Path:
 def client(league_home: Path):
     reader = Reader(league_home, None)
     with TestClient(create_app(reader, str(league_home)), raise_server_exceptions=False) as c:
+        assert c.app.state.fits.wait(120), "the background fit did not finish in time"  # (a deadline, polled)
         yield c
     reader.close()
 

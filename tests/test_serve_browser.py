@@ -6,6 +6,7 @@ instead, as docs/images/serve/ was made)."""
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -23,16 +24,20 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 
 def _wait_for(url: str, proc: subprocess.Popen, deadline: float) -> None:
+    """Poll the health page until it says the background fits are done (its first fit and nothing running)."""
     while time.monotonic() < deadline:
         if proc.poll() is not None:
             raise AssertionError(f"marl serve ended with {proc.returncode}: {proc.stderr.read()}")
         try:
             with urllib.request.urlopen(url, timeout=1) as r:
-                if r.status == 200:
+                health = json.loads(r.read())
+                assert not health["errors"], health["errors"]
+                if r.status == 200 and health["fitted"] and health["fitting"] is None:
                     return
         except OSError:
-            time.sleep(0.05)  # (polling the health page until its deadline)
-    raise AssertionError(f"marl serve did not answer {url} in time")
+            pass
+        time.sleep(0.05)  # (polling the health page until its deadline)
+    raise AssertionError(f"marl serve's fits were not done at {url} in time")
 
 
 @pytest.fixture
@@ -47,7 +52,7 @@ def served(tmp_path: Path):
         line = proc.stdout.readline()
         assert line.startswith("marl serve: http://127.0.0.1:"), (line, proc.stderr.read() if proc.poll() else "")
         base = line.split()[2].rstrip("/")
-        _wait_for(base + "/health", proc, time.monotonic() + 60)
+        _wait_for(base + "/health", proc, time.monotonic() + 120)
         yield home, base
     finally:
         proc.send_signal(signal.SIGTERM)

@@ -64,8 +64,10 @@ def serve(
     the recorded replays.
 
     The league is opened read-only (SQLite with mode=ro, PostgreSQL with default_transaction_read_only): the server
-    never writes. It listens on 127.0.0.1 (this machine) unless --host says otherwise. Ctrl-C stops it. Needs the
-    serve extra: pip install -e ".[serve]"."""
+    never writes. The ratings are fitted in one background thread when the server starts and whenever the league
+    changes: a page shows the latest finished fit and says when it was made (before the first, a notice that reloads
+    itself), so no page waits for a fit. It listens on 127.0.0.1 (this machine) unless --host says otherwise. Ctrl-C
+    stops it. Needs the serve extra: pip install -e ".[serve]"."""
     try:
         import jinja2  # noqa: F401
         import starlette  # noqa: F401
@@ -103,7 +105,7 @@ def serve(
                               "read the whole league (names, ratings, games, replays)", markup=False,
                               highlight=False)
         app = create_app(reader, str(where))
-        config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off")
+        config = uvicorn.Config(app, log_level="warning", access_log=False, lifespan="on")
         uvicorn.Server(config).run(sockets=[sock])
     finally:
         sock.close()

@@ -31,6 +31,7 @@ import numpy.typing as npt
 from ..league.store import League, LeagueError
 from ..league.variants import value_text, variant_options
 from ..ratings.ladder import ladder
+from ..ratings.ladder_rows import LadderRow
 from ..ratings.pairs import PAYOFFS, pair_payoffs, pair_records
 from ..stats.cycles import DEFAULT_ALPHA, Cycle, EdgeTests, significant_three_cycles
 from ..stats.nash import NashResult, measured_subgame, symmetric_nash
@@ -189,6 +190,7 @@ def build_matrix(
     alpha: float = DEFAULT_ALPHA,
     variant: str = "",
     payoff: str = "points",
+    rows: list[LadderRow] | None = None,
 ) -> MatrixReport:
     """The score matrix of the ``top`` best-rated players of ``env`` (default: the ledger's only env), from the
     games of one ``variant`` (its key; the default variant unless given).
@@ -199,6 +201,8 @@ def build_matrix(
     ``run``: only that run's snapshots and the env's scripted players take part. Ratings come from
     :func:`~selfplay_cli.ratings.ladder.ladder` (its defaults, normal-approximation intervals); the players are
     ordered by fitted Elo, best first. See the module docstring for the Nash mixture and the cycles.
+
+    ``rows``: that ladder (``bootstrap=0``, of ``env`` and ``variant``) fitted already (``marl serve`` keeps it).
 
     Raises:
         LeagueError: ``top < 2``, ``min_games < 1``, unknown run, an env without rated games, fewer than two
@@ -218,7 +222,8 @@ def build_matrix(
         if env is not None and env != info.env:
             raise LeagueError(f"run '{run}' trains {info.env}, not {env}")
         env = info.env
-    rows = ladder(league, env, bootstrap=0, variant=variant)
+    if rows is None:
+        rows = ladder(league, env, bootstrap=0, variant=variant)
     if not rows:
         raise LeagueError(f"no rated games in {env} yet: play some first (marl match / marl league tournament)")
     pool = {p.id: p for p in league.roster.players(include_removed=True) if p.id in {r.player_id for r in rows}}

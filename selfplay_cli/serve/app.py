@@ -3,14 +3,20 @@ Jinja2 templates (autoescape on for every template, so every name, tag, note and
 
 Pages: ``/`` the games and runs; ``/ladder``; ``/matrix``; ``/curves``; ``/player/{id}``; ``/matches``; ``/queue``;
 ``/replays``, ``/replay/{id}`` and the file itself at ``/video/{id}`` (only a file the league registered, inside its
-videos folder: :meth:`~selfplay_cli.league.videos.Videos.file`); ``/health``. Sorting and filtering are query
-parameters read on the server; a bad one is a 400 page, something the league does not hold a 404 page, and nothing
-is ever a traceback."""
+videos folder: :meth:`~selfplay_cli.league.videos.Videos.file`); ``/health`` (JSON: the fits done, running, failed).
+Sorting and filtering are query parameters read on the server; a bad one is a 400 page, something the league does not
+hold a 404 page, and nothing is ever a traceback.
+
+No request fits: the ladder, matrix, curves and player pages show what :class:`~.fits.FitCache` fitted in its
+background thread (started and stopped with the app), and say when; before the first fit of a game and variant is
+done they are a notice that reloads itself."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import time
 from pathlib import Path
 from typing import Any
 from urllib.parse import urlencode
@@ -20,7 +26,7 @@ from starlette.applications import Starlette
 from starlette.exceptions import HTTPException
 from starlette.middleware import Middleware
 from starlette.requests import Request
-from starlette.responses import FileResponse, HTMLResponse, PlainTextResponse, Response
+from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
@@ -30,6 +36,7 @@ from selfplay_cli.league.store import LeagueError
 from selfplay_cli.league.variants import describe_variant
 from selfplay_cli.ratings.pairs import PAYOFFS
 from selfplay_cli.serve.charts import heat, line_chart
+from selfplay_cli.serve.fits import FitCache, KeyState, one_line
 from selfplay_cli.serve.queries import NotFound, Reader
 
 __all__ = ["create_app"]
@@ -40,6 +47,8 @@ LADDER_SORTS = {"rank": lambda r: (r["rank"], -r["elo"]), "elo": lambda r: r["el
                 "score": lambda r: r["score"], "policy": lambda r: r["policy"], "step": lambda r: r["step"] or -1,
                 "interval": lambda r: r["ci_high"] - r["ci_low"], "run": lambda r: r["run"] or ""}
 PAGE = 50
+STOP_SECONDS = 10.0
+"""How long the app's shutdown waits for a fit in progress (a daemon thread: the process's end ends it)."""
 MAX_TEXT = 200
 SECURITY_HEADERS = {
     "Content-Security-Policy": "default-src 'self'; script-src 'none'; style-src 'self' 'unsafe-inline'; "
@@ -95,14 +104,41 @@ def _pct(x: float | None) -> str:
     return "" if x is None or (isinstance(x, float) and not math.isfinite(x)) else f"{100 * x:.1f}%"
 
 
-def create_app(reader: Reader, where: str) -> Starlette:
-    """The app over ``reader``; ``where`` names the league in every page's footer."""
+def _fit_note(state: KeyState) -> dict[str, Any] | None:
+    """What a page says of its fit: when it was made, of how many games, a refit running, the latest error."""
+    f = state.fitted
+    if f is None:
+        return None
+    running = None if state.running_since is None else {
+        "games": state.running_games, "ago": round(time.monotonic() - state.running_since)}
+    return {"at": time.strftime("%H:%M:%S", time.localtime(f.fitted_at)), "games": f.games, "seconds": f.seconds,
+            "running": running, "error": state.error}
+
+
+def create_app(reader: Reader, where: str, fits: FitCache | None = None) -> Starlette:
+    """The app over ``reader``; ``where`` names the league in every page's footer; ``fits``: its background fits
+    (by default a :class:`~.fits.FitCache` of ``reader``), started when the app starts and stopped when it stops."""
+    fits = fits if fits is not None else FitCache(reader)
     env = Environment(loader=PackageLoader("selfplay_cli.serve", "templates"), autoescape=True,
                       trim_blocks=True, lstrip_blocks=True)
     env.globals.update(qs=_qs, pct=_pct, describe_variant=describe_variant, where=where, heat=heat)
 
     def page(name: str, status: int = 200, **context: Any) -> HTMLResponse:
         return HTMLResponse(env.get_template(name).render(**context), status_code=status)
+
+    def games_of(state: KeyState, env_name: str, variant: str) -> int:
+        """The games a fit of ``env_name`` in ``variant`` takes in: the running one's, else the league's now."""
+        if state.running_games is not None:
+            return state.running_games
+        return next((v["games"] for g in reader.games() if g["env"] == env_name for v in g["variants"]
+                     if v["key"] == variant), 0)
+
+    def notice(state: KeyState, env_name: str, variant: str, heading: str) -> Response:
+        """The page of a game and variant whose first fit is not done (running, queued) or failed."""
+        games = games_of(state, env_name, variant)
+        since = None if state.running_since is None else round(time.monotonic() - state.running_since)
+        return page("fitting.html", title=heading, heading=heading, env=env_name, variant=variant, games=games,
+                    since=since, error=state.error, refresh=None if state.error else 3)
 
     def game_params(request: Request) -> tuple[str, str]:
         return reader.check_game(_text(request, "env"), request.query_params.get("variant"), _text(request, "run"))
@@ -119,7 +155,10 @@ def create_app(reader: Reader, where: str) -> Starlette:
         order = _choice(request, "order", None, ("asc", "desc"))
         kind = _choice(request, "kind", None, ("bot", "snapshot"))
         q = _text(request, "q")
-        lad = reader.ladder(env_name, variant)
+        state = fits.state(env_name, variant)
+        if state.fitted is None:
+            return notice(state, env_name, variant, f"ladder: {env_name}")
+        lad = state.fitted.ladder
         records = [r for r in lad.records if (run is None or r["run"] == run or r["kind"] == "bot")
                    and (kind is None or r["kind"] == kind) and (q is None or q.lower() in r["policy"].lower())]
         descending = order == "desc" if order else sort in ("elo", "games", "score", "step")
@@ -128,7 +167,7 @@ def create_app(reader: Reader, where: str) -> Starlette:
         games = {g["env"]: g for g in reader.games()}
         return page("ladder.html", title=f"ladder: {env_name}", env=env_name, variant=variant, records=records,
                     verdicts=lad.verdicts, runs=runs, run=run, sort=sort, order="desc" if descending else "asc",
-                    kind=kind, q=q, games=games, total=len(lad.records),
+                    kind=kind, q=q, games=games, total=len(lad.records), fit=_fit_note(state),
                     ids={r.policy: r.player_id for r in lad.rows},
                     bots=[v.bot for v in lad.rows[0].vs] if lad.rows else [])
 
@@ -138,7 +177,10 @@ def create_app(reader: Reader, where: str) -> Starlette:
         min_games = _int(request, "min_games", 8, 1, 10_000_000)
         payoff = _choice(request, "payoff", "points", PAYOFFS)
         run = _text(request, "run")
-        report = reader.matrix(env_name, variant, top, run, min_games, payoff)
+        state = fits.state(env_name, variant)
+        if state.fitted is None:
+            return notice(state, env_name, variant, f"matrix: {env_name}")
+        report = state.fitted.matrix(reader, top, run, min_games, payoff)
         data = report.to_json()
         n = report.n
         cells = [[None if i == j else {"text": report.cell(i, j)[0] if report.measured[i, j] else None,
@@ -146,7 +188,8 @@ def create_app(reader: Reader, where: str) -> Starlette:
                                        "games": int(report.games[i, j])} for j in range(n)] for i in range(n)]
         weights = {m["policy"]: m["weight"] for m in (data["nash"] or {}).get("mixture", [])}
         return page("matrix.html", title=f"matrix: {env_name}", env=env_name, variant=variant, data=data,
-                    cells=cells, weights=weights, top=top, min_games=min_games, payoff=payoff, run=run)
+                    cells=cells, weights=weights, top=top, min_games=min_games, payoff=payoff, run=run,
+                    fit=_fit_note(state))
 
     def curves_page(request: Request) -> Response:
         run = _text(request, "run")
@@ -155,12 +198,15 @@ def create_app(reader: Reader, where: str) -> Starlette:
             if not runs:
                 raise NotFound("this league has no training runs yet")
             run = runs[-1].name
-        curves = reader.curves(run)
         env_name, variant = reader.check_game(None, None, run)
+        state = fits.state(env_name, variant)
+        if state.fitted is None:
+            return notice(state, env_name, variant, f"curves: {run}")
+        curves = reader.curves(run, state.fitted.ladder.rows)
         elo = line_chart([(c.learner, [(p.step, p.elo, p.ci_low, p.ci_high, f"{p.policy}: {p.elo:.1f} "
                                         f"[{p.ci_low:.1f}, {p.ci_high:.1f}]") for p in c.points])
                           for c in curves.curves], [(b.name, b.elo) for b in curves.bots], "training step", "Elo")
-        rows = {r["policy"]: r for r in reader.ladder(env_name, variant).records}
+        rows = {r["policy"]: r for r in state.fitted.ladder.records}
         exploit = [(c.learner, [(p.step, float(rows[p.policy]["exploitability"]["value"]), None, None,
                                  f"{p.policy}: {rows[p.policy]['exploitability']['value']:.4g}")
                                 for p in c.points if (rows.get(p.policy) or {}).get("exploitability")])
@@ -173,33 +219,47 @@ def create_app(reader: Reader, where: str) -> Starlette:
         by_id = {p.id: p for p in reader.league.roster.players(env=env_name, include_removed=True)}
         lineage = [(p, by_id.get(p.parent_id) if p.parent_id is not None else None) for p in players]
         return page("curves.html", title=f"curves: {run}", run=run, runs=runs, curves=curves.to_json(), elo=elo,
-                    exploit=chart_x, lineage=lineage, rows=rows, env=env_name, variant=variant)
+                    exploit=chart_x, lineage=lineage, rows=rows, env=env_name, variant=variant,
+                    fit=_fit_note(state))
 
     def player_page(request: Request) -> Response:
         pid = _path_int(request, "player_id")
         player = reader.player(pid)
         variant = request.query_params.get("variant")
         env_name, variant = reader.check_game(player.env, variant)
-        lad = reader.ladder(env_name, variant)
-        record = next((r for r in lad.records if r["policy"] == player.full_name), None)
         vs = _int(request, "vs", None, 1, 2**62)
         games = _int(request, "games", 200, 1, 10_000_000)
+        state = fits.state(env_name, variant)
+        fitted = state.fitted
+        records = fitted.ladder.records if fitted else []
+        record = next((r for r in records if r["policy"] == player.full_name), None)
         prediction = error = None
         if vs is not None:
             other = reader.player(vs)
             if other.env != player.env:
                 raise BadRequest(f"{other.full_name} plays {other.env}, not {player.env}")
-            try:
-                prediction = reader.predict(env_name, variant, player, other, games)
-            except LeagueError as e:
-                error = str(e)
+            if fitted is not None and fitted.forecaster is None:
+                error = fitted.forecast_error
+            elif fitted is not None:
+                try:
+                    prediction = reader.predict(env_name, variant, player, other, games, forecast=fitted.forecaster)
+                except LeagueError as e:
+                    error = str(e)
         up, down = reader.lineage(player)
+        try:
+            opponents, games_error = reader.opponents(player, variant), None
+        except (ValueError, LeagueError) as e:  # (a corrupt row of the ledger: said, the rest of the page shown)
+            opponents, games_error = [], one_line(e)
         return page("player.html", title=player.full_name, player=player, record=record, env=env_name,
-                    variant=variant, opponents=reader.opponents(player, variant), up=up, down=down,
+                    variant=variant, opponents=opponents, games_error=games_error, up=up, down=down,
                     prediction=prediction, error=error, vs=vs, games=games,
-                    others=[r for r in lad.records if r["policy"] != player.full_name],
-                    ids={r.policy: r.player_id for r in lad.rows},
-                    videos=reader.league.videos.list(player_id=player.id))
+                    others=[r for r in records if r["policy"] != player.full_name],
+                    ids={r.policy: r.player_id for r in fitted.ladder.rows} if fitted else {},
+                    videos=reader.league.videos.list(player_id=player.id), fit=_fit_note(state),
+                    fitting=state if fitted is None else None,
+                    fitting_games=games_of(state, env_name, variant) if fitted is None else None,
+                    refresh=3 if fitted is None and not state.error else None,
+                    since=None if state.running_since is None else round(time.monotonic() - state.running_since))
 
     def matches_page(request: Request) -> Response:
         env_name = _text(request, "env")
@@ -258,7 +318,7 @@ def create_app(reader: Reader, where: str) -> Starlette:
         return row
 
     def health(request: Request) -> Response:
-        return PlainTextResponse("ok")
+        return JSONResponse(fits.health())
 
     async def http_error(request: Request, exc: Exception) -> Response:
         status = getattr(exc, "status_code", 500)
@@ -302,8 +362,19 @@ def create_app(reader: Reader, where: str) -> Starlette:
     ]
     handlers = {HTTPException: http_error, NotFound: not_found, LeagueError: not_found, ValueError: bad_value,
                 Exception: crashed}
-    return Starlette(routes=routes, exception_handlers=handlers,  # type: ignore[arg-type]
-                     middleware=[Middleware(_SecurityHeaders)])
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: Starlette) -> Any:
+        fits.start()
+        try:
+            yield
+        finally:
+            fits.stop(STOP_SECONDS)
+
+    app = Starlette(routes=routes, exception_handlers=handlers,  # type: ignore[arg-type]
+                    middleware=[Middleware(_SecurityHeaders)], lifespan=lifespan)
+    app.state.fits = fits
+    return app
 
 
 class _SecurityHeaders:

@@ -4,19 +4,15 @@
 (:func:`~selfplay_cli.report.plots.run_curves`), a prediction (:class:`~selfplay_cli.ratings.forecast.Forecaster`, as
 ``marl league predict``), the queue (``league.queue``, as ``marl queue``) and the recordings (``league.videos``).
 
-A :class:`Reader` holds one league opened read-only (the connection itself cannot write) and keeps each fitted
-ladder, matrix and forecaster until the league changes (:meth:`Reader.changes`: a new game, player, match or video)
-or :data:`FRESH_SECONDS` pass (a filed exploitability changes no count): a page of a large league is a lookup, not a
-fit, and never a stale one for long."""
+A :class:`Reader` holds one league opened read-only (the connection itself cannot write). Its ladder, matrix and
+forecaster fit on every call: the pages never call them, they read what :class:`~selfplay_cli.serve.fits.FitCache`
+fitted in its background thread (a fit of a large league takes far longer than a page may)."""
 
 from __future__ import annotations
 
-import threading
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import numpy as np
 from sqlalchemy import func, select
@@ -35,12 +31,7 @@ from selfplay_cli.report.matrix import MatrixReport, build_matrix
 from selfplay_cli.report.plots import RunCurves, run_curves
 from selfplay_cli.stats.sprt import SPRT, round_counts
 
-__all__ = ["FRESH_SECONDS", "NotFound", "Reader"]
-
-FRESH_SECONDS = 30.0
-"""A fitted ladder (matrix, forecaster) is refitted at the latest this long after its fit, changed league or not."""
-
-T = TypeVar("T")
+__all__ = ["Ladder", "NotFound", "Reader"]
 
 
 class NotFound(LookupError):
@@ -60,20 +51,18 @@ class Ladder:
 
 
 class Reader:
-    """One league, read-only, with its fits kept while it does not change (see the module docstring)."""
+    """One league, read-only (see the module docstring)."""
 
     def __init__(self, home: Path | None, url: str | None) -> None:
         self.league = League.open(home=home, url=url, readonly=True, read_only_connection=True)
-        self._cache: dict[tuple, tuple[tuple, float, Any]] = {}
-        self._lock = threading.Lock()
+        self._run_variants: tuple[tuple, dict[str, str]] = ((), {})
 
     def close(self) -> None:
         self.league.close()
 
-    # ------------------------------------------------------------------ the cache
-
     def changes(self) -> tuple:
-        """A tuple that changes whenever a game, match, player, tag or recording is added, or a player removed."""
+        """A tuple that changes whenever a game, match, player, tag or recording is added, or a player removed (a few
+        indexed maxima and counts: cheap at any size)."""
 
         videos = self.league.videos.held()
 
@@ -84,16 +73,11 @@ class Reader:
 
         return self.league._read(work)
 
-    def _kept(self, key: tuple, make: Callable[[], T]) -> T:
-        now = time.monotonic()
-        changes = self.changes()
-        with self._lock:
-            hit = self._cache.get(key)
-            if hit is not None and hit[0] == changes and now - hit[1] < FRESH_SECONDS:
-                return hit[2]
-            value = make()
-            self._cache[key] = (changes, now, value)
-            return value
+    def players_meta(self) -> int:
+        """A hash of every player's meta (a filed exploitability, a league role: what a ladder shows and no count
+        says)."""
+        return hash(tuple((p.id, repr(sorted(p.meta.items(), key=lambda kv: kv[0])))
+                          for p in self.league.roster.players(include_removed=True)))
 
     # ------------------------------------------------------------------ games, runs, players
 
@@ -125,6 +109,11 @@ class Reader:
         if env is None and not envs:
             raise NotFound("this league holds no players yet")
         if variant is None:
+            if run is not None:
+                return env, self.run_variant(run)  # type: ignore[return-value]
+            rated = [g["env"] for g in envs.values() if any(v["games"] for v in g["variants"])]
+            if env is None and len(rated) == 1:
+                env = rated[0]  # (the ledger's only game, as pick_env finds it, without reading the whole ledger)
             try:
                 return default_variant(self.league, env, run)
             except LeagueError as e:
@@ -133,6 +122,18 @@ class Reader:
         if variant not in {v["key"] for v in envs[env]["variants"]}:
             raise NotFound(f"{env} has no rated games under the options {variant!r}")
         return env, variant
+
+    def run_variant(self, run: str) -> str:
+        """The variant (key) of a run's snapshots, as :func:`~selfplay_cli.ratings.shown.default_variant` finds it,
+        kept until a player is added or removed (it may read each snapshot's file header; the background fits warm
+        it)."""
+        changes = self.changes()[2:4]
+        if self._run_variants[0] != changes:
+            self._run_variants = (changes, {})
+        known = self._run_variants[1]
+        if run not in known:
+            known[run] = default_variant(self.league, None, run)[1]
+        return known[run]
 
     def player(self, player_id: int) -> PlayerRow:
         try:
@@ -146,32 +147,31 @@ class Reader:
         """The ladder ``marl league ladder --env ENV [--env-option ...] --json`` prints (its defaults: the game's
         anchor, BayesElo's prior, 200 bootstrap replicates, 95%)."""
 
-        def make() -> Ladder:
-            rows = ladder(self.league, env, variant=variant)
-            options = variant_options(variant)
-            return Ladder(env, variant, rows, [r.to_json() | {"variant": options} for r in rows], verdict_lines(rows))
+        rows = ladder(self.league, env, variant=variant)
+        options = variant_options(variant)
+        return Ladder(env, variant, rows, [r.to_json() | {"variant": options} for r in rows], verdict_lines(rows))
 
-        return self._kept(("ladder", env, variant), make)
+    def matrix(self, env: str, variant: str, top: int, run: str | None, min_games: int, payoff: str,
+               rows: list[LadderRow] | None = None) -> MatrixReport:
+        """The matrix ``marl league matrix`` prints; ``rows``: its ladder (``bootstrap=0``) fitted already."""
+        return build_matrix(self.league, env, top=top, run=run, min_games=min_games, variant=variant, payoff=payoff,
+                            rows=rows)
 
-    def matrix(self, env: str, variant: str, top: int, run: str | None, min_games: int, payoff: str) -> MatrixReport:
-        """The matrix ``marl league matrix`` prints."""
-        return self._kept(("matrix", env, variant, top, run, min_games, payoff),
-                          lambda: build_matrix(self.league, env, top=top, run=run, min_games=min_games,
-                                               variant=variant, payoff=payoff))
-
-    def curves(self, run: str) -> RunCurves:
-        """A run's curves (``marl league plot --run RUN --json``), from the cached ladder of its own variant."""
-        env, variant = self.check_game(None, None, run)
-        rows = self.ladder(env, variant).rows
-        return self._kept(("curves", run, variant), lambda: run_curves(self.league, run, rows=rows))
+    def curves(self, run: str, rows: list[LadderRow]) -> RunCurves:
+        """A run's curves (``marl league plot --run RUN --json``) from the ladder of its own variant (``rows``)."""
+        return run_curves(self.league, run, rows=rows)
 
     def forecaster(self, env: str, variant: str) -> Forecaster:
-        return self._kept(("forecast", env, variant), lambda: Forecaster.of_league(self.league, env, variant=variant))
+        """``marl league predict``'s fitted population, its spread measured."""
+        fitted = Forecaster.of_league(self.league, env, variant=variant)
+        _ = fitted.spread  # (measured once here, not by the first page that predicts)
+        return fitted
 
     def predict(self, env: str, variant: str, a: PlayerRow, b: PlayerRow, games: int = 200,
-                confidence: float = 0.95) -> dict[str, Any]:
-        """``marl league predict A B --json``'s record (LeagueError where the ladder cannot predict the pair)."""
-        forecast = self.forecaster(env, variant)
+                confidence: float = 0.95, forecast: Forecaster | None = None) -> dict[str, Any]:
+        """``marl league predict A B --json``'s record (LeagueError where the ladder cannot predict the pair);
+        ``forecast``: the forecaster fitted already."""
+        forecast = forecast if forecast is not None else Forecaster.of_league(self.league, env, variant=variant)
         pair = forecast.belief(a.full_name, b.full_name)
         p = pair.predict(games, confidence)
         low, high = pair.interval(confidence)
@@ -230,9 +230,11 @@ class Reader:
             test = SPRT(**{k: settings[k] for k in ("elo0", "elo1", "alpha", "beta") if k in settings})
         except (TypeError, ValueError):
             return None
-        table = self.league.ledger.games(env=env, variant=None)
-        mask = table.match_id == match["id"]
         b = params.get("b")
+        # (every game of a match has its B in a seat: those of B are read by the seats' player index)
+        table = self.league.ledger.games(env=env, variant=None, players=[b] if isinstance(b, int) else None,
+                                         any_seat=True)
+        mask = table.match_id == match["id"]
         a_side = np.where(table.player_b[mask] == b, True, table.player_a[mask] != b)
         pts = np.where(a_side, table.score_a[mask], 1.0 - table.score_a[mask])
         rounds: dict[int, list[float]] = {}
