@@ -180,26 +180,31 @@ def _took(seconds: float) -> str:
     return f"{seconds:.0f} s" if seconds < 120 else f"{seconds / 60:.0f} minutes"
 
 
-def _printed(source: str) -> Any:
+def _printed(source: str, top: bool = False) -> Any:
     """A benchmark's results file (``benchmarks/results_file.py`` writes it) as what the script printed, under a line
-    saying the command, when, on what machine, at what load and on what code it ran."""
+    saying the command, when, on what machine, at what load and on what code it ran; ``top``: its unindented lines
+    alone (a benchmark's summary, without the tables it printed under each line)."""
 
     def render(r: dict[str, Any]) -> str:
         load = f"load {r['load_start'][0]:.1f} at its start, {r['load_end'][0]:.1f} at its end"
         code = f", code {r['commit']}" if r.get("commit") else ""
+        lines = [x for x in r["printed"] if x.strip() and not x[0].isspace()] if top else r["printed"]
         return (f"From `{source}`: `{r['command']}`, run {r['date']} on {r['machine']} ({load}{code}; "
-                f"{_took(r['seconds'])}):\n\n```text\n" + "\n".join(r["printed"]) + "\n```\n")
+                f"{_took(r['seconds'])}):\n\n```text\n" + "\n".join(lines) + "\n```\n")
 
     return render
 
 
 def figures(name: str, root: Any) -> str:
     """The figures block ``name``, rendered from its output file under the repository ``root``: a block of
-    :data:`FIGURES`, or else what ``benchmarks/results/NAME.json`` says a benchmark printed."""
+    :data:`FIGURES`, or else what ``benchmarks/results/NAME.json`` says a benchmark printed (``NAME/top``: its
+    unindented lines alone)."""
     import json
     from pathlib import Path
 
-    source, make = FIGURES.get(name) or (f"benchmarks/results/{name}.json", _printed(f"benchmarks/results/{name}.json"))
+    name, _, view = name.partition("/")
+    source = f"benchmarks/results/{name}.json"
+    source, make = FIGURES.get(name) or (source, _printed(source, top=view == "top"))
     return make(json.loads((Path(root) / source).read_text()))
 
 
@@ -209,7 +214,7 @@ def with_figures(page: str, root: Any) -> str:
     def block(m: re.Match[str]) -> str:
         return f"<!-- figures:{m.group(1)} -->\n{figures(m.group(1), root)}<!-- /figures -->"
 
-    return re.sub(r"<!-- figures:(\w+) -->\n.*?<!-- /figures -->", block, page, flags=re.S)
+    return re.sub(r"<!-- figures:(\w+(?:/top)?) -->\n.*?<!-- /figures -->", block, page, flags=re.S)
 
 
 if __name__ == "__main__":

@@ -53,8 +53,8 @@ def test_figures_quoted_in_the_docs_are_their_benchmarks_output():
     quoted = set()
     for page in (ROOT / "docs").rglob("*.md"):
         text = page.read_text()
-        quoted |= set(re.findall(r"<!-- figures:(\w+) -->", text))
-        blocks = re.findall(r"<!-- figures:\w+ -->\n.*?<!-- /figures -->", text, flags=re.S)
+        quoted |= set(re.findall(r"<!-- figures:(\w+)(?:/top)? -->", text))
+        blocks = re.findall(r"<!-- figures:\w+(?:/top)? -->\n.*?<!-- /figures -->", text, flags=re.S)
         assert len(blocks) == text.count("<!-- figures:") == text.count("<!-- /figures -->"), \
             f"{page}: a figures block not closed (or not opened) escapes its check"
         assert with_figures(text, ROOT) == text, f"{page}: regenerate: python -m selfplay_cli.reference --write"
