@@ -69,6 +69,7 @@ def test_every_page_loads_and_shows_the_cli_ladder(client: TestClient, league_ho
         r = client.get(url)
         assert r.status_code == 200, (url, r.text[:500])
         assert "script-src 'none'" in r.headers["content-security-policy"]
+    assert '<td class="num">48</td>' in client.get("/matches").text  # the games the ledger holds of the one match
     cli = run_json(capsys, "league", "ladder", "--home", str(league_home), "--env", "pong")
     page = client.get("/ladder").text
     for row in cli:  # each row's Elo, interval, games and record as the CLI's JSON gives them
@@ -203,3 +204,34 @@ def test_marl_help_imports_no_web_library() -> None:
            "print(sorted(m for m in ('starlette', 'uvicorn', 'jinja2', 'torch') if m in sys.modules))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stderr
+
+
+def test_a_match_with_an_sprt_shows_its_llr_and_decision_from_its_stored_games(league_home: Path) -> None:
+    """A match stored as `marl match --sprt` stores it (its players by name, its SPRT's settings): the matches page,
+    unfiltered, shows its games and the LLR of those games, paired by seed, as the SPRT computes it; A won every game
+    of 12 seat-swapped pairs against H0 = 0 / H1 = 100 Elo, so the test has accepted H1."""
+    from selfplay_cli.results import GameResult
+    from selfplay_cli.stats.sprt import SPRT, round_counts
+
+    settings = {"elo0": 0.0, "elo1": 100.0, "alpha": 0.05, "beta": 0.05}
+    with League.open(league_home) as lg:
+        ids = {p.name: p.id for p in lg.roster.players("pong")}
+        games = [GameResult(env="pong", players=(ids["a"], ids["b"]) if k % 2 == 0 else (ids["b"], ids["a"]),
+                            seed=k // 2, scores=(21.0, 0.0) if k % 2 == 0 else (0.0, 21.0),
+                            outcome=(1.0, 0.0) if k % 2 == 0 else (0.0, 1.0), length=100, truncated=False)
+                 for k in range(24)]
+        mid = lg.ledger.create_match("pong", "match", {"a": "a", "b": "b", "games": 100, "sprt": settings})
+        lg.ledger.record_games(mid, games)
+    counts, model = round_counts([[1.0, 1.0]] * 12, True)
+    test = SPRT(**settings)
+    llr = test.llr(counts, model=model)
+    assert test.decide(llr) == "H1"
+    reader = Reader(league_home, None)
+    try:
+        with TestClient(create_app(reader, str(league_home))) as client:
+            page = client.get("/matches").text
+    finally:
+        reader.close()
+    row = page[page.index(f'<td class="num">{mid}</td>'):]
+    row = row[:row.index("</tr>")]
+    assert '<td class="num">24</td>' in row and f"LLR {llr:.2f}" in row and "<b>H1</b>" in row

@@ -272,11 +272,12 @@ def create_app(reader: Reader, where: str, fits: FitCache | None = None) -> Star
         if sprt_only:
             matches = [m for m in matches if isinstance(m["params"].get("sprt"), dict)]
         shown = matches[(page_no - 1) * PAGE: page_no * PAGE]
-        envs = {m["id"]: m["params"].get("env") for m in shown}
         names = {p.id: p.full_name for p in reader.league.roster.players(include_removed=True)}
+        ids = {name: pid for pid, name in names.items()}
+        rows = reader.match_rows([m["id"] for m in shown])
         for m in shown:
-            the_env = envs.get(m["id"]) or env_name
-            m["sprt_record"] = reader.sprt_record(the_env, m) if the_env else None
+            the_env, m["stored"] = rows.get(m["id"], (env_name, 0))
+            m["sprt_record"] = reader.sprt_record(the_env, m, ids) if the_env else None
         return page("matches.html", title="matches", matches=shown, total=len(matches), page=page_no, per=PAGE,
                     kind=kind, env=env_name, kinds=MATCH_KINDS, names=names, sprt=sprt_only)
 

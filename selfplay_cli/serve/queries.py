@@ -219,7 +219,17 @@ class Reader:
                 out.append({"id": mid, "kind": k, "params": params})
         return sorted(out, key=lambda m: -m["id"])
 
-    def sprt_record(self, env: str, match: dict[str, Any]) -> dict[str, Any] | None:
+    def match_rows(self, ids: list[int]) -> dict[int, tuple[str, int]]:
+        """Each of the matches ``ids``: its game and how many games the ledger holds of it (one grouped query)."""
+
+        def work(s: Any) -> dict[int, tuple[str, int]]:
+            q = (select(Match.id, Match.env, func.count(Game.id)).outerjoin(Game, Game.match_id == Match.id)
+                 .where(Match.id.in_(ids)).group_by(Match.id, Match.env))
+            return {int(m): (str(env), int(n)) for m, env, n in s.execute(q).all()}
+
+        return self.league._read(work) if ids else {}
+
+    def sprt_record(self, env: str, match: dict[str, Any], ids: dict[str, int]) -> dict[str, Any] | None:
         """A match's SPRT (its settings as stored) and the LLR of its stored games, paired by seed as the match
         played them (:func:`~selfplay_cli.stats.sprt.round_counts`); None for a match without an SPRT."""
         params = match["params"]
@@ -231,9 +241,11 @@ class Reader:
         except (TypeError, ValueError):
             return None
         b = params.get("b")
+        b = ids.get(b) if isinstance(b, str) else b  # (a match names its players; ``ids``: full name -> id)
+        if not isinstance(b, int):
+            return None
         # (every game of a match has its B in a seat: those of B are read by the seats' player index)
-        table = self.league.ledger.games(env=env, variant=None, players=[b] if isinstance(b, int) else None,
-                                         any_seat=True)
+        table = self.league.ledger.games(env=env, variant=None, players=[b], any_seat=True)
         mask = table.match_id == match["id"]
         a_side = np.where(table.player_b[mask] == b, True, table.player_a[mask] != b)
         pts = np.where(a_side, table.score_a[mask], 1.0 - table.score_a[mask])
