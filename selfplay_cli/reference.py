@@ -224,7 +224,10 @@ if __name__ == "__main__":
     if sys.argv[1:] == ["--write"]:
         try:
             Path("docs/reference/cli.md").write_text(render())
-            Path("docs/index.md").write_text(home_page(Path("README.md").read_text()))
+            readme = Path("README.md").read_text()
+            if "<!-- figures:" in readme:
+                Path("README.md").write_text(readme := with_figures(readme, "."))
+            Path("docs/index.md").write_text(home_page(readme))
             for page in Path("docs").rglob("*.md"):
                 text = page.read_text()
                 if "<!-- figures:" in text:

@@ -235,3 +235,30 @@ def test_a_match_with_an_sprt_shows_its_llr_and_decision_from_its_stored_games(l
     row = page[page.index(f'<td class="num">{mid}</td>'):]
     row = row[:row.index("</tr>")]
     assert '<td class="num">24</td>' in row and f"LLR {llr:.2f}" in row and "<b>H1</b>" in row
+
+
+def test_a_league_on_postgresql_is_served_read_only(pg_url: str, tmp_path: Path, capsys) -> None:
+    """The same pages over a league on PostgreSQL: the ladder is the CLI's (its records, through the URL), and the
+    server's connection refuses a write (``default_transaction_read_only``), so no page can change the league."""
+    home = tmp_path / "h"
+    with League(pg_url, home=home) as lg:
+        lg.roster.ensure_bots("pong", ["a", "b", "c"])
+        ids = {p.name: p.id for p in lg.roster.players("pong")}
+        record_plan(lg, ids, [("a", "b", 12, 4), ("b", "c", 10, 6), ("a", "c", 14, 2)])
+    reader = Reader(home, pg_url)
+    try:
+        with TestClient(create_app(reader, str(home))) as client:
+            assert client.app.state.fits.wait(120), "the background fit did not finish in time"
+            for url in ("/", "/ladder", "/matrix", "/matches", "/queue", "/player/1", "/player/1?vs=2"):
+                assert client.get(url).status_code == 200, url
+            page = client.get("/ladder").text
+        cli = run_json(capsys, "league", "ladder", "--db", pg_url, "--home", str(home), "--env", "pong")
+        assert reader.ladder("pong", "").records == cli
+        for row in cli:
+            assert f"{row['elo']:.1f}" in page and f"{row['wins']}-{row['draws']}-{row['losses']}" in page
+        with pytest.raises(Exception, match="read-only transaction"), reader.league.engine.begin() as conn:
+            conn.exec_driver_sql("UPDATE players SET name = 'x'")
+    finally:
+        reader.close()
+    with League(pg_url, home=home) as lg:
+        assert sorted(p.name for p in lg.roster.players("pong")) == ["a", "b", "c"]
