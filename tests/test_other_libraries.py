@@ -60,6 +60,8 @@ def test_each_game_is_a_pettingzoo_module_with_its_factories_and_metadata(game):
     raw = module.raw_env(render_mode="rgb_array", **options)
     raw.reset(seed=0)
     assert raw.render().ndim == 3
+    for factory in (module.parallel_env, module.raw_env, module.env):  # found by name, as PettingZoo's own are
+        assert pickle.loads(pickle.dumps(factory)) is factory
 
 
 @pytest.mark.parametrize(("game", "option", "value", "says"), [

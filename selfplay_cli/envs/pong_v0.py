@@ -7,26 +7,7 @@ docs' games page), a bad one refused in one ``ValueError``. See :mod:`selfplay_c
 
 from __future__ import annotations
 
-from typing import Any
-
-from pettingzoo import AECEnv
-
 from .pong.view import PongParallelEnv
-from .zoo import aec_of, module_metadata, wrapped
+from .zoo import factories
 
-metadata = module_metadata(PongParallelEnv)
-
-
-def parallel_env(render_mode: str | None = None, **options: Any) -> PongParallelEnv:
-    """The game's PettingZoo ``ParallelEnv`` (render mode ``None`` or ``"rgb_array"``)."""
-    return PongParallelEnv(render_mode=render_mode, **options)
-
-
-def raw_env(render_mode: str | None = None, **options: Any) -> AECEnv:
-    """The same game through PettingZoo's AEC API (``parallel_to_aec``)."""
-    return aec_of(parallel_env(render_mode, **options))
-
-
-def env(render_mode: str | None = None, **options: Any) -> AECEnv:
-    """``raw_env`` behind PettingZoo's order check, as PettingZoo's own ``env()`` factories give."""
-    return wrapped(raw_env(render_mode, **options))
+metadata, parallel_env, raw_env, env = factories(PongParallelEnv, __name__)

@@ -7,26 +7,7 @@ the docs' games page), a bad one refused in one ``ValueError``. See :mod:`selfpl
 
 from __future__ import annotations
 
-from typing import Any
-
-from pettingzoo import AECEnv
-
 from .tennis.view import TennisParallelEnv
-from .zoo import aec_of, module_metadata, wrapped
+from .zoo import factories
 
-metadata = module_metadata(TennisParallelEnv)
-
-
-def parallel_env(render_mode: str | None = None, **options: Any) -> TennisParallelEnv:
-    """The game's PettingZoo ``ParallelEnv`` (render mode ``None`` or ``"rgb_array"``)."""
-    return TennisParallelEnv(render_mode=render_mode, **options)
-
-
-def raw_env(render_mode: str | None = None, **options: Any) -> AECEnv:
-    """The same game through PettingZoo's AEC API (``parallel_to_aec``)."""
-    return aec_of(parallel_env(render_mode, **options))
-
-
-def env(render_mode: str | None = None, **options: Any) -> AECEnv:
-    """``raw_env`` behind PettingZoo's order check, as PettingZoo's own ``env()`` factories give."""
-    return wrapped(raw_env(render_mode, **options))
+metadata, parallel_env, raw_env, env = factories(TennisParallelEnv, __name__)

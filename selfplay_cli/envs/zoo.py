@@ -26,19 +26,27 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from pettingzoo.utils.wrappers import BaseParallelWrapper, OrderEnforcingWrapper
 
 
-def aec_of(parallel: ParallelEnv) -> AECEnv:
-    """A parallel game through PettingZoo's AEC API (``raw_env``): the same game, one seat acting at a time."""
-    return parallel_to_aec(parallel)
+def factories(view: type, module: str) -> tuple[dict[str, Any], Any, Any, Any]:
+    """A game module's ``metadata`` (its view's: name, render modes, frames a second, ``is_parallelizable``) and its
+    three factories, ``parallel_env``, ``raw_env`` and ``env``, for the one-game view class ``view``, named as the
+    module ``module``'s own functions (so that pickle finds them by name, as it finds PettingZoo's)."""
 
+    def parallel_env(render_mode: str | None = None, **options: Any) -> ParallelEnv:
+        """The game's PettingZoo ``ParallelEnv`` (render mode ``None`` or ``"rgb_array"``)."""
+        return view(render_mode=render_mode, **options)
 
-def wrapped(raw: AECEnv) -> AECEnv:
-    """``env()`` of a game: its ``raw_env`` behind PettingZoo's order check (reset before step, and so on)."""
-    return OrderEnforcingWrapper(raw)
+    def raw_env(render_mode: str | None = None, **options: Any) -> AECEnv:
+        """The same game through PettingZoo's AEC API (``parallel_to_aec``: one seat acting at a time)."""
+        return parallel_to_aec(parallel_env(render_mode, **options))
 
+    def env(render_mode: str | None = None, **options: Any) -> AECEnv:
+        """``raw_env`` behind PettingZoo's order check (reset before step, and so on), as PettingZoo's own ``env()``
+        factories give."""
+        return OrderEnforcingWrapper(raw_env(render_mode, **options))
 
-def module_metadata(view: type) -> dict[str, Any]:
-    """A game module's ``metadata``: its view's (name, render modes, frames a second, ``is_parallelizable``)."""
-    return dict(view.metadata)
+    for f in (parallel_env, raw_env, env):
+        f.__module__, f.__qualname__ = module, f.__name__
+    return dict(view.metadata), parallel_env, raw_env, env
 
 
 class black_death(BaseParallelWrapper):  # (named as SuperSuit names its wrapper)
