@@ -262,3 +262,52 @@ def test_a_league_on_postgresql_is_served_read_only(pg_url: str, tmp_path: Path,
         reader.close()
     with League(pg_url, home=home) as lg:
         assert sorted(p.name for p in lg.roster.players("pong")) == ["a", "b", "c"]
+
+
+def test_a_runs_exploitability_curve_shows_what_was_filed_and_a_hostile_value_is_left_out(tmp_path: Path) -> None:
+    """A run whose snapshots have exploitabilities filed (as marl exploit files them) gets their curve on its page,
+    each point's figure as filed; a value another member wrote straight into a row (not a number) is one point left
+    out, never a failed page."""
+    home = tmp_path / "h"
+    with League.open(home) as lg:
+        lg.roster.ensure_bots("pong", ["random"])
+        rows = lg.roster.add_snapshots([dict(env="pong", run="r", name=f"s{k}", path=f"snapshots/r/s{k}.safetensors",
+                                             sha256=f"{k + 1:064x}", step=1000 * k, algo="ppo") for k in range(3)],
+                                       run_config={})
+        ids = {p.name: p.id for p in lg.roster.players("pong")}
+        record_plan(lg, ids, [("s0", "random", 5, 3), ("s1", "random", 6, 2), ("s2", "random", 7, 1),
+                              ("s1", "s0", 5, 3), ("s2", "s1", 5, 3)])
+        lg.roster.set_exploitability(rows[0].id, {"kind": "exact", "value": 0.4583})
+        lg.roster.set_exploitability(rows[1].id, {"kind": "exact", "value": 0.1234})
+        lg.roster.set_exploitability(rows[2].id, {"kind": "exact", "value": 0.0567})
+    con = sqlite3.connect(home / "league.db")
+    meta = json.dumps({"exploitability": {"exact": {"kind": "exact", "value": "lots"}}})
+    con.execute("UPDATE players SET meta = ? WHERE id = ?", (meta, rows[2].id))
+    con.commit()
+    con.close()
+    reader = Reader(home, None)
+    try:
+        with TestClient(create_app(reader, str(home))) as client:
+            assert client.app.state.fits.wait(120), "the background fit did not finish in time"
+            r = client.get("/curves?run=r")
+    finally:
+        reader.close()
+    assert r.status_code == 200 and "exploit-chart" in r.text
+    assert "r/s0: 0.4583" in r.text and "r/s1: 0.1234" in r.text and "lots" not in r.text
+
+
+def test_a_filed_exploitability_that_is_not_a_number_is_no_figure() -> None:
+    """What the ladder (CLI and pages) shows of a row's exploitability: as filed where it is a finite number, nothing
+    where another member wrote something else, and a lower bound's interval only where both ends are numbers."""
+    from selfplay_cli.ratings.ladder import shown_exploitability
+
+    good = {"kind": "lower_bound", "value": 0.2, "low": 0.1, "high": 0.3}
+    assert shown_exploitability({"exploitability": {"lower_bound": good}}) == good
+    assert shown_exploitability({"exploitability": {"exact": {"value": 0.05}, "lower_bound": good}}) == \
+        {"value": 0.05, "kind": "exact"}
+    for bad in ("lots", None, float("nan"), float("inf"), True, [1]):
+        assert shown_exploitability({"exploitability": {"exact": {"value": bad}}}) is None
+    assert shown_exploitability({"exploitability": {"exact": {"value": "x"}, "lower_bound": good}}) == good
+    assert shown_exploitability({"exploitability": "x"}) is None and shown_exploitability({}) is None
+    assert shown_exploitability({"exploitability": {"lower_bound": {**good, "low": "<b>"}}}) == \
+        {"kind": "lower_bound", "value": 0.2, "high": 0.3}

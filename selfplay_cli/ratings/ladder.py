@@ -27,6 +27,7 @@ the ladder says who is best, by how much, and when it cannot tell.
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from dataclasses import replace
 from typing import Any
@@ -245,13 +246,20 @@ def shown_exploitability(meta: dict[str, Any]) -> dict[str, Any] | None:
     """The exploitability a player's row shows, from its ``meta["exploitability"]`` (filed by
     :meth:`~selfplay_cli.league.roster.Roster.set_exploitability`): the exact figure where there is one (it says how
     beatable the player is), else the lower bound (a trained best response's return: the player is at least that
-    beatable), as filed with its ``kind``; None where nothing was measured."""
+    beatable), as filed with its ``kind``; None where nothing was measured (or what is filed is not a number)."""
     book = meta.get("exploitability") or {}
+    if not isinstance(book, dict):
+        return None
     for kind in ("exact", "lower_bound"):
         record = book.get(kind)
-        if isinstance(record, dict):
-            return {**record, "kind": kind}
+        # (a row is another member's input: a figure that is not a finite number is no figure)
+        if isinstance(record, dict) and _number(record.get("value")):
+            return {**{k: v for k, v in record.items() if k not in ("low", "high") or _number(v)}, "kind": kind}
     return None
+
+
+def _number(x: Any) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def _with_league_marks(rows: list[LadderRow], players: dict[int, PlayerRow]) -> list[LadderRow]:
