@@ -35,7 +35,7 @@ def main() -> None:
             raise SystemExit(f"marl {' '.join(command)} failed ({out.returncode}): {out.stderr.strip()[-2000:]}")
         print(f"$ marl {' '.join(command)}    # {wall:.0f} s of wall time, start-up included")
         for line in out.stdout.splitlines():
-            print(line.replace(str(home.parent) + os.sep, ""))  # (the league's folder as a user's ./league)
+            print(line.replace(str(home), "league"))  # (the league's folder as a user's default, ./league)
 
 
 if __name__ == "__main__":
