@@ -62,8 +62,11 @@ _RAY_TMP = Path(tempfile.gettempdir()) / f"marl-ray-{_SESSION}"
 os.environ.setdefault("RAY_TMPDIR", str(_RAY_TMP))
 
 
-def _pg_folders() -> set[str]:
-    return {p.name for p in Path(tempfile.gettempdir()).glob(f"{_LEFT_BEHIND}*")}
+def _suite_folders() -> set[str]:
+    """The suite's PostgreSQL folders, and Stable-Baselines3's logger folders (``SB3-<time>``, made in the temporary
+    folder unless ``SB3_LOGDIR`` says where: a test that trains through SB3 points it at its own folder)."""
+    tmp = Path(tempfile.gettempdir())
+    return {p.name for p in tmp.glob(f"{_LEFT_BEHIND}*")} | {p.name for p in tmp.glob("SB3-*")}
 
 
 def _processes_naming(folders: set[str]) -> list[str]:
@@ -75,7 +78,7 @@ def _processes_naming(folders: set[str]) -> list[str]:
 
 
 def pytest_sessionstart(session):
-    session.config.stash[_BEFORE] = _pg_folders()
+    session.config.stash[_BEFORE] = _suite_folders()
 
 
 def pytest_sessionfinish(session, exitstatus):
@@ -84,7 +87,7 @@ def pytest_sessionfinish(session, exitstatus):
     whose sessions all ended, is removed here); the run fails where one is."""
     if hasattr(session.config, "workerinput"):  # (an -n worker: its own servers are checked by its controller)
         return
-    new = _pg_folders() - session.config.stash.get(_BEFORE, set())
+    new = _suite_folders() - session.config.stash.get(_BEFORE, set())
     ray_tmp = {str(_RAY_TMP)} if os.environ.get("RAY_TMPDIR") == str(_RAY_TMP) and _RAY_TMP.exists() else set()
     left = _processes_naming(new | ray_tmp) if sys.platform.startswith("linux") else []
     deadline = time.monotonic() + 10.0  # (a Ray process told to end by its session's shutdown may take a moment)

@@ -198,7 +198,8 @@ def test_supersuits_recipe_with_worker_processes_plays_the_games_played_here(gam
 
 
 @pytest.mark.parametrize("game", MODULES)
-def test_stable_baselines3_ppo_learns_through_the_recipe(game):
+def test_stable_baselines3_ppo_learns_through_the_recipe(game, tmp_path, monkeypatch):
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path))  # (SB3's logger makes a folder, by default in the system's /tmp)
     import supersuit as ss
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import set_random_seed
