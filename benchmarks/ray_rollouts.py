@@ -23,6 +23,7 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -67,6 +68,7 @@ def one(game: str, executor: str, actors: int, steps: int) -> dict:
                    update_ms=1000 * report.train_seconds / fragments, moving_ms=1000 * moving / fragments,
                    actor_ms=1000 * rollouts.actor_seconds / fragments)
     league.close()
+    shutil.rmtree(home, ignore_errors=True)  # (the run's league: nothing of it is kept)
     return out
 
 
