@@ -34,8 +34,8 @@ def _wait_for(url: str, proc: subprocess.Popen, deadline: float) -> None:
                 assert not health["errors"], health["errors"]
                 if r.status == 200 and health["fitted"] and health["fitting"] is None:
                     return
-        except OSError:
-            pass
+        except OSError:  # not listening yet: asked again until the deadline
+            health = None
         time.sleep(0.05)  # (polling the health page until its deadline)
     raise AssertionError(f"marl serve's fits were not done at {url} in time")
 

@@ -115,26 +115,8 @@ def head_to_head(league: League, a_id: int, b_id: int, variant: str = "") -> dic
         raise LeagueError(f"players {a_id} and {b_id} hold the same weights: one player, no record against itself")
     table = league.ledger.games(players=[a_id, b_id], variant=variant,
                                 pooled=same)  # (filed under each one's first name)
-    first_side = table.player_a == same.get(a_id, a_id)
-    pts = np.where(first_side, table.score_a, 1.0 - table.score_a)
+    pts, rounds, penta, pairs = rounds_of(table, same.get(a_id, a_id))
     wins, draws, losses = int(np.sum(pts > 0.5)), int(np.sum(pts == 0.5)), int(np.sum(pts < 0.5))
-    groups: dict[tuple[int, int], tuple[list[float], list[float]]] = defaultdict(lambda: ([], []))
-    two_sides = table.kind == KIND_CODES[TWO_SIDES]
-    for m, sd, first, p, paired in zip(table.match_id.tolist(), table.seed.tolist(), first_side.tolist(),
-                                       pts.tolist(), two_sides.tolist(), strict=True):
-        if paired:
-            groups[(m, sd)][0 if first else 1].append(p)
-    penta = [0, 0, 0, 0, 0]
-    pairs = 0
-    rounds: list[list[float]] = []
-    for as_first, as_second in groups.values():
-        for p1, p2 in zip(as_first, as_second, strict=False):
-            penta[min(max(int(round(2 * (p1 + p2))), 0), 4)] += 1
-            pairs += 1
-            rounds.append([p1, p2])
-        k = min(len(as_first), len(as_second))
-        rounds += [[p] for p in as_first[k:] + as_second[k:]]
-    rounds += [[p] for p, paired in zip(pts.tolist(), two_sides.tolist(), strict=True) if not paired]
     n = len(table)
     return {
         "a_id": a_id,
@@ -182,6 +164,33 @@ def design_effect(table: GameTable) -> float:
     rho = (within / pairs_in_rounds) / (var / len(table))
     m = float(np.sum(size * size) / np.sum(size))  # the mean round size a result sits in
     return 1.0 + (m - 1.0) * min(max(rho, 0.0), 0.99)
+
+
+def rounds_of(table: GameTable, a: int) -> tuple[np.ndarray, list[list[float]], list[int], int]:
+    """Player ``a``'s results in ``table`` (every row one of its pairwise results): its points in each, then its
+    rounds as :func:`head_to_head` counts them (game pairs of a two-sides game: within one match, the games of one
+    seed with ``a`` on the first side and on the second, matched in game-id order; every other result a round of its
+    own), their pentanomial counts and the number of pairs. ``(points, rounds, pentanomial, pairs)``."""
+    first_side = table.player_a == a
+    pts = np.where(first_side, table.score_a, 1.0 - table.score_a)
+    groups: dict[tuple[int, int], tuple[list[float], list[float]]] = defaultdict(lambda: ([], []))
+    two_sides = table.kind == KIND_CODES[TWO_SIDES]
+    for m, sd, first, p, paired in zip(table.match_id.tolist(), table.seed.tolist(), first_side.tolist(),
+                                       pts.tolist(), two_sides.tolist(), strict=True):
+        if paired:
+            groups[(m, sd)][0 if first else 1].append(p)
+    penta = [0, 0, 0, 0, 0]
+    pairs = 0
+    rounds: list[list[float]] = []
+    for as_first, as_second in groups.values():
+        for p1, p2 in zip(as_first, as_second, strict=False):
+            penta[min(max(int(round(2 * (p1 + p2))), 0), 4)] += 1
+            pairs += 1
+            rounds.append([p1, p2])
+        k = min(len(as_first), len(as_second))
+        rounds += [[p] for p in as_first[k:] + as_second[k:]]
+    rounds += [[p] for p, paired in zip(pts.tolist(), two_sides.tolist(), strict=True) if not paired]
+    return pts, rounds, penta, pairs
 
 
 def pair_records(table: GameTable, ids: list[int]) -> tuple[npt.NDArray[np.int64], ...]:

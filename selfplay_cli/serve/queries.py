@@ -25,6 +25,7 @@ from selfplay_cli.league.variants import describe_variant, variant_options
 from selfplay_cli.ratings.forecast import Forecaster
 from selfplay_cli.ratings.ladder import ladder
 from selfplay_cli.ratings.ladder_rows import LadderRow
+from selfplay_cli.ratings.pairs import rounds_of
 from selfplay_cli.ratings.shown import default_variant
 from selfplay_cli.ratings.verdicts import verdict_lines
 from selfplay_cli.report.matrix import MatrixReport, build_matrix
@@ -230,8 +231,9 @@ class Reader:
         return self.league._read(work) if ids else {}
 
     def sprt_record(self, env: str, match: dict[str, Any], ids: dict[str, int]) -> dict[str, Any] | None:
-        """A match's SPRT (its settings as stored) and the LLR of its stored games, paired by seed as the match
-        played them (:func:`~selfplay_cli.stats.sprt.round_counts`); None for a match without an SPRT."""
+        """A match's SPRT (its settings as stored) and the LLR of its stored games, in rounds as a head-to-head record
+        pairs them (:func:`~selfplay_cli.ratings.pairs.rounds_of`, :func:`~selfplay_cli.stats.sprt.round_counts`);
+        None for a match without an SPRT."""
         params = match["params"]
         settings = params.get("sprt")
         if not isinstance(settings, dict):
@@ -240,20 +242,13 @@ class Reader:
             test = SPRT(**{k: settings[k] for k in ("elo0", "elo1", "alpha", "beta") if k in settings})
         except (TypeError, ValueError):
             return None
-        b = params.get("b")
-        b = ids.get(b) if isinstance(b, str) else b  # (a match names its players; ``ids``: full name -> id)
-        if not isinstance(b, int):
+        a, b = (ids.get(x) if isinstance(x, str) else x for x in (params.get("a"), params.get("b")))
+        if not isinstance(a, int) or not isinstance(b, int):  # (a match names its players; ``ids``: name -> id)
             return None
-        # (every game of a match has its B in a seat: those of B are read by the seats' player index)
-        table = self.league.ledger.games(env=env, variant=None, players=[b], any_seat=True)
-        mask = table.match_id == match["id"]
-        a_side = np.where(table.player_b[mask] == b, True, table.player_a[mask] != b)
-        pts = np.where(a_side, table.score_a[mask], 1.0 - table.score_a[mask])
-        rounds: dict[int, list[float]] = {}
-        for seed, p in zip(table.seed[mask].tolist(), pts.tolist(), strict=True):
-            rounds.setdefault(int(seed), []).append(float(p))
-        paired = bool(rounds) and all(len(r) == 2 for r in rounds.values())
-        counts, model = round_counts(list(rounds.values()), paired)
+        # (a match's games are between its two players, under the names they played as)
+        table = self.league.ledger.games(env=env, variant=None, players=[a, b], pooled=False)
+        _, rounds, _, _ = rounds_of(table.select(table.match_id == match["id"]), a)
+        counts, model = round_counts(rounds, bool(rounds) and all(len(r) == 2 for r in rounds))
         llr = test.llr(counts, model=model) if sum(counts) else 0.0
         return {"elo0": test.elo0, "elo1": test.elo1, "alpha": test.alpha, "beta": test.beta, "llr": round(llr, 4),
                 "lower": round(test.lower, 4), "upper": round(test.upper, 4), "decision": test.decide(llr),
