@@ -41,6 +41,10 @@ class _Tee(io.TextIOBase):
     def isatty(self) -> bool:
         return self.out.isatty()
 
+    def reconfigure(self, **options) -> None:
+        """As the stream's own (a benchmark asking for line buffering gets it on the terminal or file it writes)."""
+        self.out.reconfigure(**options)
+
 
 def machine() -> str:
     """This machine in a line: cores, CPU model, memory, system (no host name: the file is committed)."""
