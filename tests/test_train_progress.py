@@ -517,13 +517,14 @@ def test_while_the_last_gauntlets_are_played_the_eta_says_how_many_are_left(monk
                "queue": None, "standing": standing(progress=1.0, steps=1000, ended=True, remaining=None)}
     with TrainProgress(cfg, bar=True, lines=True, clock=clock) as progress:
         progress.update(waiting)
-        assert progress.progress.tasks[0].fields["eta"] == "waiting for its rating games: 1 gauntlet left"
+        assert progress.progress.tasks[0].fields["eta"] == ("waiting for its rating games: 1 gauntlet left (Ctrl-C: "
+                                                            "queue them)")
     plain = TrainProgress(cfg, bar=False, lines=True, clock=clock)
     clock.t += 31
     plain.update({**waiting, "snapshots": ["r/s1k", "r/s2k"], "gauntlets": 2})
     assert buf.getvalue().splitlines()[-1] == (
         "r: training done (1,000 steps); waiting for its rating games: 2 gauntlets left (s1k, s2k), 19 played in "
-        "this session so far; 0:00:31 elapsed")
+        "this session so far; 0:00:31 elapsed; Ctrl-C leaves them to the league's queue")
 
 
 @pytest.mark.slow

@@ -159,6 +159,41 @@ def test_local_no_wait_ends_with_training_and_leaves_the_rest_to_workers(tmp_pat
 
 
 @pytest.mark.slow
+def test_ctrl_c_in_the_final_wait_leaves_the_rest_to_workers_and_keeps_the_run(tmp_path, capsys, local_record,
+                                                                               monkeypatch):
+    """Ctrl-C once training is over stops the wait, not the run: it ends as a --no-wait run does (exit 0, its
+    training finished and kept, the gauntlets not played on the league's queue, said so), and a worker that comes
+    later plays them: the very games the run would have waited for. (A real SIGINT to this process, sent from the
+    wait's first progress call.)"""
+    from selfplay_cli.train.loop import Trainer
+
+    waiting = Trainer._waiting
+    sent = []
+
+    def ctrl_c(self):
+        if not sent:
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGINT)
+        waiting(self)
+
+    monkeypatch.setattr(Trainer, "_waiting", ctrl_c)
+    home = tmp_path / "home"
+    code, out, err = run(capsys, *RUN, "--home", str(home), "--json")
+    assert sent and code == 0, err
+    data = json.loads(out)
+    left = data["rating_jobs_left"]
+    assert left >= 1 and data["best"] is None and data["rating_batch"] == BATCH
+    with League.open(home) as league:
+        assert league.roster.get_run("r").status == "finished"
+        jobs = league.queue.jobs(batch=BATCH)
+        assert [j.state for j in jobs] == ["queued"] * left
+        assert jobs[-1].spec["snapshots"] == ["r/s4.1k-left", "r/s4.1k-right"]
+        report = run_worker(league, WorkerOptions(until_empty=True, poll=0.05, name="later"))
+        assert (report.done, report.failed) == (left, 0)
+        assert _record(league) == local_record
+
+
+@pytest.mark.slow
 def test_no_wait_says_the_ratings_are_still_coming(tmp_path, capsys):
     home = tmp_path / "home"
     code, out, err = run(capsys, *RUN, "--eval", "remote", "--no-wait", "--home", str(home))

@@ -95,11 +95,11 @@ def train(
                                              "gauntlets; they stop when the run ends).")] = 1,
     eval_inline: Annotated[bool, typer.Option("--eval-inline", help="Same as --eval inline.")] = False,
     eval_wait: Annotated[bool, typer.Option("--wait/--no-wait", help="The run's end waits for its rating games "
-                                            "(showing how many are left), or, with --no-wait (--eval local or "
-                                            "remote), ends "
-                                            "with its training and leaves the gauntlets not played yet on the "
-                                            "league's queue for marl worker (marl queue shows them; the ladder "
-                                            "fills in as they are played).")] = True,
+                                            "(showing how many are left; Ctrl-C then stops the wait, not the run), "
+                                            "or, with --no-wait (--eval local or remote), ends with its training and "
+                                            "leaves the gauntlets not played yet on the league's queue for marl "
+                                            "worker (marl queue shows them; the ladder fills in as they are "
+                                            "played).")] = True,
     eval_playoff: Annotated[int, typer.Option("--eval-playoff", min=0, max=100_000, help="After the final "
                                               "gauntlet the run's best candidates meet, up to this many games a "
                                               "pair, until the best is separated (0: no playoff).")] = 100,

@@ -257,12 +257,13 @@ class TrainProgress:
             info = f"{event['games']} games played" if queued is None else describe_queue(queued, event["games"])
             left = event["gauntlets"] if queued is None else queued.left
             waiting = f"waiting for its rating games: {left} gauntlet{'s' * (left != 1)} left"
-            self.progress.update(self.task, description=f"rating {names}", eta=waiting, info=info)
+            self.progress.update(self.task, description=f"rating {names}", eta=f"{waiting} (Ctrl-C: queue them)",
+                                 info=info)
             if self._due(None):
                 where = (f"{waiting} ({names}), {event['games']:,} played in this session so far" if queued is None
                          else f"rating {names} ({info})")  # (the queue's standing counts the gauntlets left)
                 self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); {where}; "
-                            f"{self._elapsed()} elapsed")
+                            f"{self._elapsed()} elapsed; Ctrl-C leaves them to the league's queue")
         elif kind == "note":  # something the run met and went on from (a rollout actor restarted)
             self._print(f"{self.cfg.run}: {event['line']}")
         elif kind == "snapshot":

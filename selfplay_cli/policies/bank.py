@@ -146,7 +146,9 @@ class NetworkBank:
             a = self._multi(out, mask, len(obs), most)
         else:
             a = self._gaussian(out, len(obs), most)
-        return [to_numpy_actions(self.head, a[k, : rows[k]]) for k in range(len(obs))]
+        every = to_numpy_actions(self.head, a.reshape(len(obs) * most, *a.shape[2:]))  # one copy off the tensor
+        every = every.reshape(len(obs), most, *every.shape[1:])
+        return [every[k, : rows[k]] for k in range(len(obs))]
 
     def _categorical(self, out: torch.Tensor, p: int, most: int) -> torch.Tensor:
         """Discrete: ``out`` (P, A, M) -> actions (P, M)."""

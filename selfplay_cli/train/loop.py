@@ -377,7 +377,7 @@ class Trainer:
         if board is not None:
             board.close()
         t1 = self.clock()
-        self._collect(self.evaluator.wait(on_wait=self._waiting))
+        self._collect(self._final_wait())
         waited = self.clock() - t1
         self._check_heart()
         # the final snapshots and the best as the ledger has them now, as `marl league ladder` shows them (its default
@@ -521,6 +521,19 @@ class Trainer:
         if self._trained is not None:
             return self._trained
         return max(self.clock() - self._t0 - (self.eval_seconds if self.cfg.eval_inline else 0.0), 0.0)
+
+    def _final_wait(self) -> list[JobDone]:
+        """Wait for the last gauntlets. Ctrl-C meanwhile stops the wait, not the run: training is over and kept, and
+        the gauntlets not played go on the league's queue as ``--no-wait`` leaves them (where they cannot, inline, the
+        Ctrl-C stops the run as anywhere else)."""
+        try:
+            return self.evaluator.wait(on_wait=self._waiting)
+        except KeyboardInterrupt:
+            with signals_held():  # (a second Ctrl-C while the jobs are handed over waits for them)
+                done = self.evaluator.leave()
+            if done is None:
+                raise
+            return done
 
     def _waiting(self) -> None:
         if self.on_progress:

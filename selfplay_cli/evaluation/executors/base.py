@@ -86,6 +86,11 @@ class RatingExecutor(Protocol):
         ``on_wait()`` about every second meanwhile."""
         ...
 
+    def leave(self) -> list[JobDone] | None:
+        """Stop waiting (Ctrl-C during the run's final wait): the jobs done by now, the rest left on the league's
+        queue for ``marl worker`` as ``--no-wait`` leaves them; None where they cannot be left (played inline)."""
+        ...
+
     def queue_standing(self) -> QueueStanding | None:
         """Where the run's gauntlets stand in the league's queue (None: they are not in the queue)."""
         ...

@@ -214,9 +214,7 @@ class Evaluator:
         if self.background and not self.wait_for:
             self._drain()
             self._check()
-            done = self._finish()
-            self._leave()
-            return done
+            return self.leave()
         if self.background:
             while len(self._done) < len(self.pending) and not any(d.error for d in self._done):
                 try:
@@ -226,6 +224,16 @@ class Evaluator:
                 if on_wait is not None:
                     on_wait()
         return self._finish()
+
+    def leave(self) -> list[JobDone] | None:
+        """The jobs done by now; the worker stops and the rest go on the league's queue (:meth:`_leave`). None
+        inline: every job was played as it was submitted, so there is nothing to leave."""
+        if not self.background:
+            return None
+        self._drain()
+        done = self._finish()
+        self._leave()
+        return done
 
     def _leave(self) -> None:
         """Stop the worker (a job in the middle is abandoned: its matchups stored so far count once) and put the

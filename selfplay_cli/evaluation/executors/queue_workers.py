@@ -129,6 +129,11 @@ class RemoteEvaluator:
             done += finished
         return done
 
+    def leave(self) -> list[JobDone]:
+        """The jobs done by now; the rest stay in the league's queue, where they already are (one this process was
+        playing itself went back to it as the Ctrl-C stopped the play: :func:`~..jobs.see_through`)."""
+        return self.poll()
+
     def _held(self) -> bool:
         """A worker holds one of the run's jobs now, its heart beating on it (a silent one's lease lapses)."""
         from ...league.models import utcnow
