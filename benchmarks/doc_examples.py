@@ -45,15 +45,18 @@ class Shell:
         self.env = dict(os.environ, MARL_HOME=str(home), COLUMNS="120", SDL_VIDEODRIVER="dummy",
                         PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
 
-    def __call__(self, *args: str, note: str = "", show: bool = True, env: dict | None = None) -> tuple[str, float]:
-        """Run ``marl ARGS``; print the command (with ``note``, and its wall time) and its output; return both."""
+    def __call__(self, *args: str, note: str = "", show: bool = True, env: dict | None = None,
+                 refused: bool = False) -> tuple[str, float]:
+        """Run ``marl ARGS``; print the command (with ``note``, and its wall time) and its output; return both.
+        ``refused``: the command must be refused (exit 2), and its one line on stderr is what it printed."""
         began = time.perf_counter()
         out = subprocess.run([sys.executable, "-m", "selfplay_cli", *args], env={**self.env, **(env or {})},
                              capture_output=True, text=True, cwd=ROOT)
         took = time.perf_counter() - began
-        if out.returncode not in (0, 1):  # 1: a gate's FAIL, still an answer
-            raise SystemExit(f"marl {' '.join(args)} failed ({out.returncode}): {out.stderr.strip()[-2000:]}")
-        text = out.stdout.replace(str(self.home), "league")
+        if out.returncode not in ((2,) if refused else (0, 1)):  # 1: a gate's FAIL, still an answer
+            raise SystemExit(f"marl {' '.join(args)} exited {out.returncode}: {out.stderr.strip()[-2000:]}")
+        text = (f"{out.stderr.strip()}\n(exit {out.returncode})" if refused else out.stdout).replace(str(self.home),
+                                                                                                   "league")
         shown = " ".join(args).replace(str(self.home), "league")
         print(f"$ marl {shown}    # {took:.0f} s{f'; {note}' if note else ''}")
         if show:
@@ -97,7 +100,7 @@ def simple_push(sh: Shell) -> None:
     text, _ = sh("train", game, "--agents", "2", "--minutes", "1")
     final = next(w for line in text.splitlines() for w in line.split() if w.endswith("-agent_0:") and "/s0-" not in w)
     sh("match", final.rstrip(":"), "random", "--games", "200", env={"MARL_GAMES": game})
-    sh("match", final.rstrip(":"), "simple_push_v3-1/s0-agent_0", env={"MARL_GAMES": game},
+    sh("match", final.rstrip(":"), "simple_push_v3-1/s0-agent_0", env={"MARL_GAMES": game}, refused=True,
        note="refused: two agents cannot meet")
 
 

@@ -166,10 +166,10 @@ def bot_games(games: int, steps: int, mode: str = "fixed") -> tuple[float, Tenni
     return games * steps / (time.perf_counter() - start), core
 
 
-def serves_in(mode: str, games: int = 32, steps: int = 1500) -> tuple[int, int]:
+def serves_in(mode: str, games: int = 32, steps: int = 1500, bounce: bool = False) -> tuple[int, int]:
     """The serve-bot on seat 0 against a receiver standing still: its serves (those decided: not still in the air
-    when the run stops), and those that landed legally."""
-    core = TennisCore(games, TennisConfig(serve_mode=mode))
+    when the run stops), and those that landed legally (``bounce``: table tennis's serve, ``serve_bounce=true``)."""
+    core = TennisCore(games, TennisConfig(serve_mode=mode, serve_bounce=bounce))
     core.reset(np.arange(games), np.arange(1000, 1000 + games))
     rule = serve_bot_for(core.config)
     served = landed = 0
@@ -215,6 +215,10 @@ def main() -> None:
     print("\nserve-bot's serves against a receiver standing still (32 games x 1500 steps)")
     for mode in ("fixed", "velocity", "spin"):
         served, landed = serves_in(mode)
+        print(f"{mode:>9}: {landed}/{served} landed legally ({landed / max(served, 1):.1%})")
+    print("the same with table tennis's serve (serve_bounce=true: on the server's own half first)")
+    for mode in ("fixed", "velocity", "spin"):
+        served, landed = serves_in(mode, bounce=True)
         print(f"{mode:>9}: {landed}/{served} landed legally ({landed / max(served, 1):.1%})")
     targets(args.rounds, min(args.seconds, 1.0))
 

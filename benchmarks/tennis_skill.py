@@ -194,10 +194,10 @@ def main() -> None:
             share = back_all / max(landed_all, 1)
             c = self_play(home, final, rules=rules)
             hits = (c["serves"] + c["returns"]) / max(c["points"], 1)
-            print(f"    self-play: {hits:.2f} hits per point (serve included) over {c['points']} points of "
-                  f"{c['games']} games: {c['missed']} tosses missed, {c['cut']} rallies cut by the 2-minute time "
-                  f"limit (counted as points), {c['serves']} serves struck, {c['serves_in']} landed legally; "
-                  f"{c['returns']} returns, {c['returns_in']} landed legally")
+            print(f"    self-play: {hits:.2f} hits per point (serve included) over {c['points']} points "
+                  f"({c['games']} games finished): {c['missed']} tosses missed, {c['cut']} rallies cut by the "
+                  f"2-minute time limit (counted as points), {c['serves']} serves struck, {c['serves_in']} landed "
+                  f"legally; {c['returns']} returns, {c['returns_in']} landed legally")
             ok = share >= 0.5 and hits >= 4 and args.minutes <= 30
             verdicts.append(f"{algo}: returns {share:.1%} of randomized serves (>= 50%), rallies "
                             f"{hits:.2f} hits (>= 4) within {args.minutes:g} min: {'PASS' if ok else 'FAIL'}")
