@@ -158,17 +158,12 @@ def test_local_no_wait_ends_with_training_and_leaves_the_rest_to_workers(tmp_pat
         assert _record(league) == local_record
 
 
-@pytest.mark.slow
-def test_ctrl_c_in_the_final_wait_leaves_the_rest_to_workers_and_keeps_the_run(tmp_path, capsys, local_record,
-                                                                               monkeypatch):
-    """Ctrl-C once training is over stops the wait, not the run: it ends as a --no-wait run does (exit 0, its
-    training finished and kept, the gauntlets not played on the league's queue, said so), and a worker that comes
-    later plays them: the very games the run would have waited for. (A real SIGINT to this process, sent from the
-    wait's first progress call.)"""
+def _ctrl_c_in_the_wait(monkeypatch) -> list:
+    """Trainer's wait, patched to send this process a real SIGINT at its first progress call; what it sent."""
     from selfplay_cli.train.loop import Trainer
 
     waiting = Trainer._waiting
-    sent = []
+    sent: list = []
 
     def ctrl_c(self):
         if not sent:
@@ -177,6 +172,17 @@ def test_ctrl_c_in_the_final_wait_leaves_the_rest_to_workers_and_keeps_the_run(t
         waiting(self)
 
     monkeypatch.setattr(Trainer, "_waiting", ctrl_c)
+    return sent
+
+
+@pytest.mark.slow
+def test_ctrl_c_in_the_final_wait_leaves_the_rest_to_workers_and_keeps_the_run(tmp_path, capsys, local_record,
+                                                                               monkeypatch):
+    """Ctrl-C once training is over stops the wait, not the run: it ends as a --no-wait run does (exit 0, its
+    training finished and kept, the gauntlets not played on the league's queue, said so), and a worker that comes
+    later plays them: the very games the run would have waited for. (A real SIGINT to this process, sent from the
+    wait's first progress call.)"""
+    sent = _ctrl_c_in_the_wait(monkeypatch)
     home = tmp_path / "home"
     code, out, err = run(capsys, *RUN, "--home", str(home), "--json")
     assert sent and code == 0, err
@@ -188,6 +194,27 @@ def test_ctrl_c_in_the_final_wait_leaves_the_rest_to_workers_and_keeps_the_run(t
         jobs = league.queue.jobs(batch=BATCH)
         assert [j.state for j in jobs] == ["queued"] * left
         assert jobs[-1].spec["snapshots"] == ["r/s4.1k-left", "r/s4.1k-right"]
+        report = run_worker(league, WorkerOptions(until_empty=True, poll=0.05, name="later"))
+        assert (report.done, report.failed) == (left, 0)
+        assert _record(league) == local_record
+
+
+@pytest.mark.slow
+def test_ctrl_c_while_the_run_plays_its_queued_gauntlets_gives_the_job_back(tmp_path, capsys, local_record,
+                                                                           monkeypatch):
+    """--eval remote with no worker attached: the run plays its queued gauntlets itself at its end; Ctrl-C there
+    gives the job in play back to the queue at once and the run ends as with --no-wait; a worker that comes later
+    plays what is left, and the ledger ends with the local worker's games."""
+    sent = _ctrl_c_in_the_wait(monkeypatch)
+    home = tmp_path / "home"
+    data = _train_json(capsys, f"sqlite:///{home / 'league.db'}", home)
+    assert sent
+    left = data["rating_jobs_left"]
+    assert left >= 1 and data["best"] is None and data["rating"] == "remote"
+    with League.open(home) as league:
+        assert league.roster.get_run("r").status == "finished"
+        jobs = league.queue.jobs(batch=BATCH)
+        assert [j.state for j in jobs][-left:] == ["queued"] * left  # (none left leased to the run's process)
         report = run_worker(league, WorkerOptions(until_empty=True, poll=0.05, name="later"))
         assert (report.done, report.failed) == (left, 0)
         assert _record(league) == local_record
