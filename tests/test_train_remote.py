@@ -158,8 +158,11 @@ def test_local_no_wait_ends_with_training_and_leaves_the_rest_to_workers(tmp_pat
         assert _record(league) == local_record
 
 
-def _ctrl_c_in_the_wait(monkeypatch) -> list:
-    """Trainer's wait, patched to send this process a real SIGINT at its first progress call; what it sent."""
+@pytest.fixture
+def ctrl_c_in_the_wait(monkeypatch):
+    """Trainer's wait, patched to send this process a real SIGINT at its first progress call; what it sent. Ctrl-C
+    raises KeyboardInterrupt meanwhile, as in a terminal (a shell's background job, as CI may run the suite, starts
+    with SIGINT ignored, and Python then leaves it so)."""
     from selfplay_cli.train.loop import Trainer
 
     waiting = Trainer._waiting
@@ -172,18 +175,20 @@ def _ctrl_c_in_the_wait(monkeypatch) -> list:
         waiting(self)
 
     monkeypatch.setattr(Trainer, "_waiting", ctrl_c)
-    return sent
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield sent
+    signal.signal(signal.SIGINT, previous)
 
 
 @pytest.mark.slow
 def test_ctrl_c_in_the_final_wait_leaves_the_rest_to_workers_and_keeps_the_run(tmp_path, capsys, local_record,
-                                                                               monkeypatch):
+                                                                               ctrl_c_in_the_wait):
     """Ctrl-C once training is over stops the wait, not the run: it ends as a --no-wait run does (exit 0, its
     training finished and kept, the gauntlets not played on the league's queue, said so), and a worker that comes
     later plays them: the very games the run would have waited for. (A real SIGINT to this process, sent from the
     wait's first progress call. The worker process plays on meanwhile: on a busy machine it may have every game in
     by then, and the run then ends as one that waited. The --eval remote test below interrupts before any.)"""
-    sent = _ctrl_c_in_the_wait(monkeypatch)
+    sent = ctrl_c_in_the_wait
     home = tmp_path / "home"
     code, out, err = run(capsys, *RUN, "--home", str(home), "--json")
     assert sent and code == 0, err
@@ -203,12 +208,12 @@ def test_ctrl_c_in_the_final_wait_leaves_the_rest_to_workers_and_keeps_the_run(t
 
 @pytest.mark.slow
 def test_ctrl_c_while_the_run_plays_its_queued_gauntlets_gives_the_job_back(tmp_path, capsys, local_record,
-                                                                           monkeypatch):
+                                                                           ctrl_c_in_the_wait):
     """--eval remote with no worker attached: the run plays its queued gauntlets itself at its end; Ctrl-C there
     (at its first look at the batch, before it plays any) gives the job in play back to the queue at once and the
     run ends as with --no-wait; a worker that comes later plays them, and the ledger ends with the local worker's
     games."""
-    sent = _ctrl_c_in_the_wait(monkeypatch)
+    sent = ctrl_c_in_the_wait
     home = tmp_path / "home"
     data = _train_json(capsys, f"sqlite:///{home / 'league.db'}", home)
     assert sent
