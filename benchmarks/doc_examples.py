@@ -10,6 +10,11 @@ Parts (one a run; each writes ``benchmarks/results/example_PART.json``):
 ``kuhn_br``
     exploit.md's trained best response: the same Kuhn learner, then ``marl exploit`` trains 200,000 steps against
     it (``--config`` a file holding ``games = 16``) and plays it 2,000 games; its exact figure beside it.
+``kuhn_plot``
+    league.md's exploitability curve: a Kuhn poker learner with a snapshot every 5,000 steps, one snapshot's exact
+    figure filed by ``marl exploit``, then ``marl league plot --exploitability`` (the rest computed and filed), its
+    PNG, and the ladder showing the figures; last, from the two commands' JSON, each snapshot's fitted Elo beside its
+    exact exploitability, and whether the snapshot rated highest is the least exploitable.
 ``connect_four``
     your-own-game.md's first example: PettingZoo's connect four, 2M moves, then 200 games against ``random``.
 ``simple_push``
@@ -85,6 +90,33 @@ def kuhn_br(sh: Shell) -> None:
     sh("exploit", "kuhn_poker-1/s40k", "--steps", "200000", "--config", str(config), "--games", "2000")
 
 
+def kuhn_plot(sh: Shell) -> None:
+    import json
+
+    sh("train", "openspiel:kuhn_poker", "--agents", "1", "--bots", "random=1", "--steps", "20000", "--snapshot-steps",
+       "5000", "--games", "16")
+    sh("exploit", "kuhn_poker-1/s20k", "--exact", note="one snapshot's figure, filed")
+    text, _ = sh("league", "plot", "--run", "kuhn_poker-1", "--exploitability", show=False,
+                 note="every snapshot's, the rest computed (its Elo chart left out here)")
+    print(text[text.index("exact exploitability"):].rstrip())
+    sh("league", "plot", "--run", "kuhn_poker-1", "--exploitability", "--out", str(sh.home / "kuhn.png"))
+    sh("league", "ladder", "--run", "kuhn_poker-1")
+    ladder, _ = sh("league", "ladder", "--run", "kuhn_poker-1", "--json", show=False)
+    plot, _ = sh("league", "plot", "--run", "kuhn_poker-1", "--exploitability", "--json", show=False)
+    elo = {r["policy"]: r["elo"] for r in json.loads(ladder)}
+    figures = sorted(json.loads(plot)["exploitability"], key=lambda r: r["step"])
+    print("snapshot by snapshot (from the two commands' JSON):")
+    for r in figures:
+        print(f"  {r['policy']:<18} step {r['step']:>6,}  Elo {elo[r['policy']]:6.0f}  exact exploitability "
+              f"{r['exploitability']:.4f}")
+    top = max(figures, key=lambda r: elo[r["policy"]])
+    least = min(figures, key=lambda r: r["exploitability"])
+    same = "is" if top is least else "is not"
+    print(f"the snapshot rated highest ({top['policy']}, Elo {elo[top['policy']]:.0f}, exploitability "
+          f"{top['exploitability']:.4f}) {same} the least exploitable ({least['policy']}, "
+          f"{least['exploitability']:.4f})")
+
+
 def connect_four(sh: Shell) -> None:
     game = "pettingzoo.classic.connect_four_v3"
     sh("train", game, "--sharing", "fups", "--league-games", "0.5", "--bots", "random=0.5", "--steps", "2000000")
@@ -122,7 +154,8 @@ def gif(sh: Shell) -> None:
           "tic-tac-toe, its own 2 moves a second")
 
 
-PARTS = {"kuhn": kuhn, "kuhn_br": kuhn_br, "connect_four": connect_four, "simple_push": simple_push, "gif": gif}
+PARTS = {"kuhn": kuhn, "kuhn_br": kuhn_br, "kuhn_plot": kuhn_plot, "connect_four": connect_four,
+         "simple_push": simple_push, "gif": gif}
 
 
 def main(part: str) -> None:
