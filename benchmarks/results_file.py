@@ -61,12 +61,14 @@ def machine() -> str:
 
 
 def commit() -> str:
-    """The commit measured (short), ``+changes`` when the work tree differs from it; "" outside a git checkout."""
+    """The commit measured (short), ``+changes`` when the code in the work tree differs from it (the package's or the
+    benchmarks'; not the results files, which a run rewrites); "" outside a git checkout."""
     try:
         head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
                               timeout=10).stdout.strip()
         dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", "selfplay_cli",
-                                "benchmarks"], cwd=ROOT, capture_output=True, text=True, timeout=10).stdout.strip()
+                                "benchmarks", ":!benchmarks/results"], cwd=ROOT, capture_output=True, text=True,
+                               timeout=10).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return ""
     return f"{head}+changes" if head and dirty else head
