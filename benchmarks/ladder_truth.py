@@ -29,7 +29,10 @@ free-for-all). Targets per game: at least 90% of the 95% predictions held; media
 30 points where the pair met and 45 where it did not; at least 90% of margins held.
 
 Run: python benchmarks/ladder_truth.py [--games pong tennis ...] [--keep DIR] [--checks 200] [--max-pairs N]
-     [--budget GAME=ARGS] [--simulated 20] [--out results.json]
+     [--budget GAME=ARGS] [--simulated 20]
+
+Writes ``benchmarks/results/ladder_truth.json``: what it printed, when, where and on what code, with the table and
+every checked pair as data (the league page renders its table, the misses and the targets from them).
 """
 
 from __future__ import annotations
@@ -335,7 +338,7 @@ def simulated(rng: np.random.Generator, tau: float, games: int, moments: int = 7
     return out
 
 
-def main() -> None:
+def main(data: dict) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--games", nargs="*", default=list(GAMES), choices=list(GAMES))
     ap.add_argument("--checks", type=int, default=200,
@@ -346,7 +349,6 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--keep", type=Path, help="folder of the runs' leagues (kept; a finished run is reused)")
     ap.add_argument("--simulated", type=int, default=20, help="simulated leagues per spread")
-    ap.add_argument("--out", type=Path, help="write every checked pair and the table as JSON")
     args = ap.parse_args()
     rng = np.random.default_rng(0)
     budgets = dict(b.split("=", 1) for b in args.budget)
@@ -383,10 +385,11 @@ def main() -> None:
         wn = f"{t['width_new']:.0f} ({t['open_new']})" if t["width_new"] is not None else "-"
         print(f"| {t['label']} | {t['pairs']} | {t['held']} | {wm} | {wn} | {t['printed_margins']} "
               f"({t['printed_expected']}) | {t['order']} | {t['row_margins']} ({t['rows_expected']}) |")
-    if args.out:
-        args.out.write_text(json.dumps({"date": time.strftime("%Y-%m-%d"), "machine": platform.node(),
-                                        "table": table, "pairs": real}, indent=1))
+    data.update(table=table, pairs=real)
 
 
 if __name__ == "__main__":
-    main()
+    from results_file import recorded
+
+    with recorded() as figures:
+        main(figures)

@@ -79,15 +79,17 @@ def _load() -> list[float]:
 
 
 @contextlib.contextmanager
-def recorded(name: str | None = None) -> Iterator[None]:
+def recorded(name: str | None = None) -> Iterator[dict]:
     """Run a benchmark's body, its printing kept; on a good end, write ``benchmarks/results/NAME.json`` (NAME: the
-    script's own name unless given)."""
+    script's own name unless given). The body gets a dict: what it puts there is written too (a benchmark's figures
+    as data, for a page that renders them as a table)."""
     name = name or Path(sys.argv[0]).stem
     started, load_start = datetime.datetime.now().astimezone(), _load()
     tee = _Tee(sys.stdout)
     sys.stdout = tee
+    data: dict = {}
     try:
-        yield
+        yield data
     except SystemExit as e:
         if e.code not in (None, 0):
             raise
@@ -104,6 +106,7 @@ def recorded(name: str | None = None) -> Iterator[None]:
         "load_end": _load(),
         "commit": commit(),
         "printed": tee.kept.getvalue().splitlines(),
+        **data,
     })
 
 

@@ -73,12 +73,14 @@ def test_a_benchmark_run_leaves_its_figures_in_a_file_only_when_it_ends_well(tmp
         sys.path.remove(str(ROOT / "benchmarks"))
     monkeypatch.setattr(results_file, "RESULTS", tmp_path)
     monkeypatch.setattr(sys, "argv", ["benchmarks/speed.py", "--rounds", "3"])
-    with results_file.recorded():
+    with results_file.recorded() as data:
         print("pong view: 41,000 steps/s")
         print("core: 120,000 steps/s")
+        data["table"] = [{"label": "pong", "steps_per_second": 41000}]  # figures as data, for a page's table
     assert capsys.readouterr().out == "pong view: 41,000 steps/s\ncore: 120,000 steps/s\n"  # (the terminal's too)
     r = json.loads((tmp_path / "speed.json").read_text())
     assert r["printed"] == ["pong view: 41,000 steps/s", "core: 120,000 steps/s"]
+    assert r["table"] == [{"label": "pong", "steps_per_second": 41000}]
     assert r["command"] == "python benchmarks/speed.py --rounds 3" and r["benchmark"] == "speed"
     assert f"{os.cpu_count()} cores" in r["machine"] and r["started"].startswith(r["date"])
     with pytest.raises(RuntimeError), results_file.recorded("speed"):
@@ -86,6 +88,41 @@ def test_a_benchmark_run_leaves_its_figures_in_a_file_only_when_it_ends_well(tmp
         raise RuntimeError("stopped")
     assert json.loads((tmp_path / "speed.json").read_text())["printed"] == r["printed"]  # the good run's stays
     assert [p.name for p in tmp_path.iterdir()] == ["speed.json"]  # (no temporary file left)
+
+
+def test_the_ladder_truth_page_says_each_miss_and_which_game_falls_short_of_a_target():
+    """The league page's account of ladder_truth.json: a game below a target is named with the figure that falls
+    short, every missed prediction of a claimed pair is listed (a row-only pair's is not: nobody reads it), and a
+    margin printed in two places (the ladder's top is the run's best) is listed once."""
+    from selfplay_cli.reference import _ladder_truth
+
+    margin = {"elo": 9.3, "low": -52.8, "high": 72.3, "match_low": -70.4, "match_high": 88.7, "held": True,
+              "held_expected": False}
+    pair = {"game": "lander", "met": 100, "results": 100, "measured_elo": -63.2, "held": True, "kinds": ["margin"],
+            "a": "lander-1/s5M", "b": "lander-1/s4M", "predicted": 0.51, "low": 0.4, "high": 0.62, "measured": 0.41,
+            "margins": [{**margin, "where": "top"}, {**margin, "where": "best"}, {**margin, "where": "row"}]}
+    miss = {**pair, "game": "pong", "a": "pong-1/s5M-left", "b": "cpu", "kinds": ["order"], "met": 0, "results": 200,
+            "predicted": 0.863, "low": 0.532, "high": 0.99, "measured": 1.0, "held": False, "margins": []}
+    unread = {**miss, "a": "pong-1/s1M-left", "kinds": ["row"]}
+    row = {"pairs": 1, "held": "1/1 = 100.0%", "held_share": 1.0, "open_met": 1, "width_met": 22.0, "open_new": 0,
+           "width_new": None, "printed_margins": "2/2 = 100.0%", "order": "-", "row_margins": "1/1 = 100.0%"}
+    data = {"command": "python benchmarks/ladder_truth.py", "date": "2026-11-30", "machine": "2 cores",
+            "load_start": [1.0, 1.0, 1.0], "load_end": [1.2, 1.0, 1.0], "commit": "abc1234", "seconds": 5400.0,
+            "table": [{**row, "label": "lander"}, {**row, "label": "pong", "held": "9/11 = 81.8%", "held_share": 0.818,
+                                                    "width_met": 31.5}],
+            "pairs": [pair, miss, unread]}
+    text = _ladder_truth(data)
+    assert text.startswith("From `benchmarks/results/ladder_truth.json`: `python benchmarks/ladder_truth.py`, run "
+                           "2026-11-30 on 2 cores (load 1.0 at its start, 1.2 at its end, code abc1234; 90 minutes)")
+    assert ("Held on lander. Missed on pong (predictions held 9/11 = 81.8%; open predictions of pairs that met 32 "
+            "points wide).") in text
+    assert ("- pong: `pong-1/s5M-left` against `cpu` predicted 86.3% [53.2, 99.0] (they had never met); measured "
+            "100.0% over 200 results") in text
+    assert "s1M-left" not in text
+    assert text.count("lander-1/s5M") == 1
+    assert ("`lander-1/s5M` over `lander-1/s4M` +9 [-53, +72] (the ladder's top over the next and the run's best over "
+            "its next best; 200 games would measure -70 to +89); measured -63: inside the range, outside the "
+            "interval") in text
 
 
 def test_the_sites_home_is_the_readme():
