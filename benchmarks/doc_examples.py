@@ -15,6 +15,16 @@ Parts (one a run; each writes ``benchmarks/results/example_PART.json``):
     figure filed by ``marl exploit``, then ``marl league plot --exploitability`` (the rest computed and filed), its
     PNG, and the ladder showing the figures; last, from the two commands' JSON, each snapshot's fitted Elo beside its
     exact exploitability, and whether the snapshot rated highest is the least exploitable.
+``kuhn_league``
+    train.md's AlphaStar league on Kuhn poker: ``kuhn-league.toml`` (the page's ``[league]`` table) and the run, then
+    the snapshot moments of each learner and the run's best, from the ladder's JSON.
+``kuhn_nash``
+    train.md's Nash opponents (PSRO) on Kuhn poker, run twice in two leagues: the second run's summary and whether
+    the two ended with the same episodes and the same Nash mixture (a fixed seed repeats exactly).
+``pong``
+    the default run the pages quote (``marl train pong --agents 2``, its progress lines without a terminal: section
+    ``train``); ``marl league predict`` and a 200-game ``marl match`` as league.md shows them (``predict``); and a
+    fresh 200-game match of the run's best and the snapshot its summary names next to it, not stored (``best``).
 ``connect_four``
     your-own-game.md's first example: PettingZoo's connect four, 2M moves, then 200 games against ``random``.
 ``simple_push``
@@ -43,30 +53,42 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 class Shell:
-    """``marl`` commands in one league home, each echoed as ``$ marl ...`` before what it printed."""
+    """``marl`` commands in one league home, each echoed as ``$ marl ...`` before what it printed. Lines said while
+    ``section`` names one are kept in ``sections`` too (the part of an example a page quotes)."""
 
-    def __init__(self, home: Path) -> None:
+    def __init__(self, home: Path, sections: dict[str, list[str]] | None = None) -> None:
         self.home = home
         self.env = dict(os.environ, MARL_HOME=str(home), COLUMNS="120", SDL_VIDEODRIVER="dummy",
                         PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+        self.sections = {} if sections is None else sections
+        self.section = ""
+
+    def say(self, text: str) -> None:
+        """Print ``text``, and keep its lines in the current section."""
+        for line in text.splitlines():
+            print(line.rstrip())
+            if self.section:
+                self.sections.setdefault(self.section, []).append(line.rstrip())
 
     def __call__(self, *args: str, note: str = "", show: bool = True, env: dict | None = None,
-                 refused: bool = False) -> tuple[str, float]:
+                 refused: bool = False, stderr: bool = False) -> tuple[str, float]:
         """Run ``marl ARGS``; print the command (with ``note``, and its wall time) and its output; return both.
-        ``refused``: the command must be refused (exit 2), and its one line on stderr is what it printed."""
+        ``refused``: the command must be refused (exit 2), and its one line on stderr is what it printed;
+        ``stderr``: its lines on stderr (a run's progress lines, without a terminal) are printed before its output."""
         began = time.perf_counter()
         out = subprocess.run([sys.executable, "-m", "selfplay_cli", *args], env={**self.env, **(env or {})},
                              capture_output=True, text=True, cwd=ROOT)
         took = time.perf_counter() - began
         if out.returncode not in ((2,) if refused else (0, 1)):  # 1: a gate's FAIL, still an answer
             raise SystemExit(f"marl {' '.join(args)} exited {out.returncode}: {out.stderr.strip()[-2000:]}")
-        text = (f"{out.stderr.strip()}\n(exit {out.returncode})" if refused else out.stdout).replace(str(self.home),
-                                                                                                   "league")
+        text = f"{out.stderr.strip()}\n(exit {out.returncode})" if refused else out.stdout
+        if stderr:
+            text = out.stderr + text
+        text = text.replace(str(self.home), "league")
         shown = " ".join(args).replace(str(self.home), "league")
-        print(f"$ marl {shown}    # {took:.0f} s{f'; {note}' if note else ''}")
+        self.say(f"$ marl {shown}    # {took:.0f} s{f'; {note}' if note else ''}")
         if show:
-            for line in text.splitlines():
-                print(line.rstrip())
+            self.say(text)
         return text, took
 
 
@@ -85,8 +107,8 @@ def kuhn_br(sh: Shell) -> None:
     sh("exploit", "kuhn_poker-1/s40k", "--exact")
     config = sh.home / "br.toml"
     config.write_text("games = 16\n")
-    print("$ cat league/br.toml")
-    print(config.read_text().rstrip())
+    sh.say("$ cat league/br.toml")
+    sh.say(config.read_text().rstrip())
     sh("exploit", "kuhn_poker-1/s40k", "--steps", "200000", "--config", str(config), "--games", "2000")
 
 
@@ -98,23 +120,91 @@ def kuhn_plot(sh: Shell) -> None:
     sh("exploit", "kuhn_poker-1/s20k", "--exact", note="one snapshot's figure, filed")
     text, _ = sh("league", "plot", "--run", "kuhn_poker-1", "--exploitability", show=False,
                  note="every snapshot's, the rest computed (its Elo chart left out here)")
-    print(text[text.index("exact exploitability"):].rstrip())
+    sh.say(text[text.index("exact exploitability"):].rstrip())
     sh("league", "plot", "--run", "kuhn_poker-1", "--exploitability", "--out", str(sh.home / "kuhn.png"))
     sh("league", "ladder", "--run", "kuhn_poker-1")
     ladder, _ = sh("league", "ladder", "--run", "kuhn_poker-1", "--json", show=False)
     plot, _ = sh("league", "plot", "--run", "kuhn_poker-1", "--exploitability", "--json", show=False)
     elo = {r["policy"]: r["elo"] for r in json.loads(ladder)}
     figures = sorted(json.loads(plot)["exploitability"], key=lambda r: r["step"])
-    print("snapshot by snapshot (from the two commands' JSON):")
+    sh.say("snapshot by snapshot (from the two commands' JSON):")
     for r in figures:
-        print(f"  {r['policy']:<18} step {r['step']:>6,}  Elo {elo[r['policy']]:6.0f}  exact exploitability "
+        sh.say(f"  {r['policy']:<18} step {r['step']:>6,}  Elo {elo[r['policy']]:6.0f}  exact exploitability "
               f"{r['exploitability']:.4f}")
     top = max(figures, key=lambda r: elo[r["policy"]])
     least = min(figures, key=lambda r: r["exploitability"])
     same = "is" if top is least else "is not"
-    print(f"the snapshot rated highest ({top['policy']}, Elo {elo[top['policy']]:.0f}, exploitability "
+    sh.say(f"the snapshot rated highest ({top['policy']}, Elo {elo[top['policy']]:.0f}, exploitability "
           f"{top['exploitability']:.4f}) {same} the least exploitable ({least['policy']}, "
           f"{least['exploitability']:.4f})")
+
+
+LEAGUE_TOML = """\
+[league]              # AlphaStar's defaults, but for the two step limits
+main = 1
+main_exploiters = 1
+league_exploiters = 2
+pfsp = 0.5            # main agents: share of PFSP games; verification = 0.15; the rest self-play
+selfplay_rate = 0.3   # verify_exploiters = 0.3, verify_forgetting = 0.7, exploiter_rate = 0.1
+snapshot_rate = 0.7
+min_steps = 10_000    # a learner's own game steps between snapshots: at least...
+max_steps = 20_000    # ...and at most
+league_exploiter_reset = 0.25
+"""
+
+
+def kuhn_league(sh: Shell) -> None:
+    import json
+
+    config = sh.home / "kuhn-league.toml"
+    config.parent.mkdir(parents=True, exist_ok=True)
+    config.write_text(LEAGUE_TOML)
+    sh.say("$ cat league/kuhn-league.toml")
+    sh.say(LEAGUE_TOML.rstrip())
+    sh("train", "openspiel:kuhn_poker", "--league", "alphastar", "--config", str(config), "--steps", "160000",
+       "--games", "64")
+    ladder, _ = sh("league", "ladder", "--run", "kuhn_poker-1", "--json", show=False)
+    rows = [r for r in json.loads(ladder) if r["kind"] == "snapshot"]
+    roles: dict[str, list[str]] = {}
+    for r in sorted(rows, key=lambda r: int(r["step"])):
+        roles.setdefault(r["policy"].rsplit("-", 1)[-1], []).append(r["policy"].split("/")[1].rsplit("-", 1)[0])
+    sh.say("snapshot moments by learner (from the ladder's JSON):")
+    for role, steps in roles.items():
+        sh.say(f"  {role}: {', '.join(steps)}")
+    best = next(r for r in rows if r.get("best"))
+    sh.say(f"the run's best: {best['policy']} (Elo {best['elo']:.0f}, rank {best['rank']})")
+
+
+def kuhn_nash(sh: Shell) -> None:
+    import re
+
+    args = ("train", "openspiel:kuhn_poker", "--agents", "1", "--opponents", "nash", "--nash-payoff", "score",
+            "--latest-ratio", "0", "--steps", "100000", "--snapshot-steps", "20000")
+    first, _ = Shell(sh.home.parent / "first")(*args, show=False, note="a first run, in a league of its own")
+    second, _ = sh(*args, note="the same command again, in another league")
+
+    def said(text: str) -> tuple[str, str]:
+        mixture = next((line.split(";")[0].strip() for line in text.splitlines() if "Nash mixture" in line), "-")
+        return re.search(r"([\d,]+) episodes", text).group(1), mixture
+
+    (episodes, mixture), again = said(first), said(second)
+    sh.say(f"the two runs: {episodes} and {again[0]} episodes; {mixture} and {again[1]}: "
+          f"{'the same' if (episodes, mixture) == again else 'not the same'}")
+
+
+def pong(sh: Shell) -> None:
+    import re
+
+    sh.section = "train"
+    text, _ = sh("train", "pong", "--agents", "2", stderr=True, note="the default run; no terminal: plain lines")
+    sh.section = "predict"
+    sh("league", "predict", "pong-1/s6M-left", "pong-1/s2M-left")
+    sh("match", "pong-1/s6M-left", "pong-1/s6M-right", "--games", "200")
+    sh.section = "best"
+    line = next(x for x in text.splitlines() if x.lstrip().startswith("best of pong-1:"))
+    best, other = re.search(r"best of pong-1: (\S+) .*? over (\S+) \(", line).groups()
+    sh.say(f"the run's summary: {line.strip()}")
+    sh("match", best, other, "--games", "200", "--no-store", note="a fresh match of the two, not stored")
 
 
 def connect_four(sh: Shell) -> None:
@@ -154,14 +244,18 @@ def gif(sh: Shell) -> None:
           "tic-tac-toe, its own 2 moves a second")
 
 
-PARTS = {"kuhn": kuhn, "kuhn_br": kuhn_br, "kuhn_plot": kuhn_plot, "connect_four": connect_four,
+PARTS = {"kuhn": kuhn, "kuhn_br": kuhn_br, "kuhn_plot": kuhn_plot, "kuhn_league": kuhn_league, "kuhn_nash": kuhn_nash,
+         "pong": pong, "connect_four": connect_four,
          "simple_push": simple_push, "gif": gif}
 
 
-def main(part: str) -> None:
+def main(part: str, data: dict) -> None:
     sys.stdout.reconfigure(line_buffering=True)
+    sections: dict[str, list[str]] = {}
     with tempfile.TemporaryDirectory(prefix="marl-doc-example-") as tmp:
-        PARTS[part](Shell(Path(tmp) / "league"))
+        PARTS[part](Shell(Path(tmp) / "league", sections))
+    if sections:
+        data["sections"] = sections
 
 
 if __name__ == "__main__":
@@ -170,5 +264,5 @@ if __name__ == "__main__":
     part = ap.parse_args().part
     from results_file import recorded
 
-    with recorded(f"example_{part}"):
-        main(part)
+    with recorded(f"example_{part}") as figures:
+        main(part, figures)

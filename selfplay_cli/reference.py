@@ -253,13 +253,18 @@ def _stamp(source: str, r: dict[str, Any]) -> str:
             f"{_took(r['seconds'])})")
 
 
-def _printed(source: str, top: bool = False) -> Any:
+def _printed(source: str, view: str = "") -> Any:
     """A benchmark's results file (``benchmarks/results_file.py`` writes it) as what the script printed, under a line
-    saying the command, when, on what machine, at what load and on what code it ran; ``top``: its unindented lines
-    alone (a benchmark's summary, without the tables it printed under each line)."""
+    saying the command, when, on what machine, at what load and on what code it ran. ``view``: ``top``, its
+    unindented lines alone (a benchmark's summary, without the tables it printed under each line); another name, the
+    lines of the script's section of that name (``sections`` in the file: the part of a worked example a page
+    quotes)."""
 
     def render(r: dict[str, Any]) -> str:
-        lines = [x for x in r["printed"] if x.strip() and not x[0].isspace()] if top else r["printed"]
+        if view == "top":
+            lines = [x for x in r["printed"] if x.strip() and not x[0].isspace()]
+        else:
+            lines = r["sections"][view] if view else r["printed"]
         return f"{_stamp(source, r)}:\n\n```text\n" + "\n".join(lines) + "\n```\n"
 
     return render
@@ -268,13 +273,13 @@ def _printed(source: str, top: bool = False) -> Any:
 def figures(name: str, root: Any) -> str:
     """The figures block ``name``, rendered from its output file under the repository ``root``: a block of
     :data:`FIGURES`, or else what ``benchmarks/results/NAME.json`` says a benchmark printed (``NAME/top``: its
-    unindented lines alone)."""
+    unindented lines alone; ``NAME/SECTION``: one section of it)."""
     import json
     from pathlib import Path
 
     name, _, view = name.partition("/")
     source = f"benchmarks/results/{name}.json"
-    source, make = FIGURES.get(name) or (source, _printed(source, top=view == "top"))
+    source, make = FIGURES.get(name) or (source, _printed(source, view))
     return make(json.loads((Path(root) / source).read_text()))
 
 
@@ -284,7 +289,7 @@ def with_figures(page: str, root: Any) -> str:
     def block(m: re.Match[str]) -> str:
         return f"<!-- figures:{m.group(1)} -->\n{figures(m.group(1), root)}<!-- /figures -->"
 
-    return re.sub(r"<!-- figures:(\w+(?:/top)?) -->\n.*?<!-- /figures -->", block, page, flags=re.S)
+    return re.sub(r"<!-- figures:(\w+(?:/\w+)?) -->\n.*?<!-- /figures -->", block, page, flags=re.S)
 
 
 if __name__ == "__main__":

@@ -53,8 +53,8 @@ def test_figures_quoted_in_the_docs_are_their_benchmarks_output():
     quoted = set()
     for page in (ROOT / "docs").rglob("*.md"):
         text = page.read_text()
-        quoted |= set(re.findall(r"<!-- figures:(\w+)(?:/top)? -->", text))
-        blocks = re.findall(r"<!-- figures:\w+(?:/top)? -->\n.*?<!-- /figures -->", text, flags=re.S)
+        quoted |= set(re.findall(r"<!-- figures:(\w+)(?:/\w+)? -->", text))
+        blocks = re.findall(r"<!-- figures:\w+(?:/\w+)? -->\n.*?<!-- /figures -->", text, flags=re.S)
         assert len(blocks) == text.count("<!-- figures:") == text.count("<!-- /figures -->"), \
             f"{page}: a figures block not closed (or not opened) escapes its check"
         assert with_figures(text, ROOT) == text, f"{page}: regenerate: python -m selfplay_cli.reference --write"
@@ -88,6 +88,24 @@ def test_a_benchmark_run_leaves_its_figures_in_a_file_only_when_it_ends_well(tmp
         raise RuntimeError("stopped")
     assert json.loads((tmp_path / "speed.json").read_text())["printed"] == r["printed"]  # the good run's stays
     assert [p.name for p in tmp_path.iterdir()] == ["speed.json"]  # (no temporary file left)
+
+
+def test_a_page_quotes_a_worked_examples_section_or_its_summary_lines_alone(tmp_path):
+    from selfplay_cli.reference import figures
+
+    (tmp_path / "benchmarks" / "results").mkdir(parents=True)
+    run = {"command": "python benchmarks/doc_examples.py pong", "date": "2026-11-30", "machine": "2 cores",
+           "load_start": [0.5, 0, 0], "load_end": [1.5, 0, 0], "commit": "abc1234", "seconds": 30.0,
+           "printed": ["$ marl train pong", "run pong-1: 6,000,128 game steps", "  pong-1/s6M-left: Elo 2161",
+                       "$ marl league predict a b", "a against b: 50.1%"],
+           "sections": {"predict": ["$ marl league predict a b", "a against b: 50.1%"]}}
+    (tmp_path / "benchmarks" / "results" / "example_pong.json").write_text(json.dumps(run))
+    stamp = ("From `benchmarks/results/example_pong.json`: `python benchmarks/doc_examples.py pong`, run 2026-11-30 on "
+             "2 cores (load 0.5 at its start, 1.5 at its end, code abc1234; 30 s):\n\n```text\n")
+    assert figures("example_pong/predict", tmp_path) == stamp + "$ marl league predict a b\na against b: 50.1%\n```\n"
+    assert figures("example_pong/top", tmp_path) == stamp + "\n".join(
+        x for x in run["printed"] if not x.startswith(" ")) + "\n```\n"
+    assert figures("example_pong", tmp_path) == stamp + "\n".join(run["printed"]) + "\n```\n"
 
 
 def test_the_ladder_truth_page_says_each_miss_and_which_game_falls_short_of_a_target():
