@@ -184,12 +184,13 @@ def kuhn_nash(sh: Shell) -> None:
     second, _ = sh(*args, note="the same command again, in another league")
 
     def said(text: str) -> tuple[str, str]:
-        mixture = next((line.split(";")[0].strip() for line in text.splitlines() if "Nash mixture" in line), "-")
+        mixture = next((line.split(";")[0].split(": ", 1)[1] for line in text.splitlines() if "Nash mixture" in line),
+                       "-")
         return re.search(r"([\d,]+) episodes", text).group(1), mixture
 
     (episodes, mixture), again = said(first), said(second)
-    sh.say(f"the two runs: {episodes} and {again[0]} episodes; {mixture} and {again[1]}: "
-          f"{'the same' if (episodes, mixture) == again else 'not the same'}")
+    sh.say(f"the two runs: {episodes} and {again[0]} episodes, Nash mixtures {mixture} and {again[1]}: "
+           f"{'the same' if (episodes, mixture) == again else 'not the same'}")
 
 
 def pong(sh: Shell) -> None:
