@@ -25,6 +25,9 @@ Parts (one a run; each writes ``benchmarks/results/example_PART.json``):
     the default run the pages quote (``marl train pong --agents 2``, its progress lines without a terminal: section
     ``train``); ``marl league predict`` and a 200-game ``marl match`` as league.md shows them (``predict``); and a
     fresh 200-game match of the run's best and the snapshot its summary names next to it, not stored (``best``).
+``resume``
+    train.md's resumed run: ``marl train pong --agents 2 --run long --steps 2000000`` stopped by SIGTERM once past
+    its ``s1M`` moment (what it printed, its exit code), then ``marl train --resume long`` and its summary.
 ``connect_four``
     your-own-game.md's first example: PettingZoo's connect four, 2M moves, then 200 games against ``random``.
 ``simple_push``
@@ -208,6 +211,29 @@ def pong(sh: Shell) -> None:
     sh("match", best, other, "--games", "200", "--no-store", note="a fresh match of the two, not stored")
 
 
+def resume(sh: Shell) -> None:
+    import json
+    import signal
+
+    args = ["train", "pong", "--agents", "2", "--run", "long", "--steps", "2000000"]
+    metrics = sh.home / "runs" / "long" / "metrics.jsonl"
+    began = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], env=sh.env, cwd=ROOT,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    step = 0
+    while proc.poll() is None and step < 1_100_000:  # past the s1M moment (a snapshot every million steps)
+        time.sleep(0.5)
+        if metrics.exists():
+            lines = metrics.read_text().splitlines()
+            step = max((json.loads(x)["step"] for x in lines if x.endswith("}")), default=0)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate()
+    sh.say(f"$ marl {' '.join(args)}    # {time.perf_counter() - began:.0f} s; SIGTERM once past step {step:,}: "
+           f"exit {proc.returncode}")
+    sh.say((out + err).replace(str(sh.home), "league"))
+    sh("train", "--resume", "long")
+
+
 def connect_four(sh: Shell) -> None:
     game = "pettingzoo.classic.connect_four_v3"
     sh("train", game, "--sharing", "fups", "--league-games", "0.5", "--bots", "random=0.5", "--steps", "2000000")
@@ -246,7 +272,7 @@ def gif(sh: Shell) -> None:
 
 
 PARTS = {"kuhn": kuhn, "kuhn_br": kuhn_br, "kuhn_plot": kuhn_plot, "kuhn_league": kuhn_league, "kuhn_nash": kuhn_nash,
-         "pong": pong, "connect_four": connect_four,
+         "pong": pong, "resume": resume, "connect_four": connect_four,
          "simple_push": simple_push, "gif": gif}
 
 
