@@ -23,8 +23,9 @@ Parts (one a run; each writes ``benchmarks/results/example_PART.json``):
     the two ended with the same episodes and the same Nash mixture (a fixed seed repeats exactly).
 ``pong``
     the default run the pages quote (``marl train pong --agents 2``, its progress lines without a terminal: section
-    ``train``); ``marl league predict`` and a 200-game ``marl match`` as league.md shows them (``predict``); and a
-    fresh 200-game match of the run's best and the snapshot its summary names next to it, not stored (``best``).
+    ``train``); ``marl league predict`` and a 200-game ``marl match`` as league.md shows them (``predict``);
+    ``marl league plot`` piped (``plot``); and a fresh 200-game match of the run's best and the snapshot its summary
+    names next to it, not stored (``best``).
 ``resume``
     train.md's resumed run: ``marl train pong --agents 2 --run long --steps 2000000`` stopped by SIGTERM once past
     its ``s1M`` moment (what it printed, its exit code), then ``marl train --resume long`` and its summary.
@@ -204,6 +205,8 @@ def pong(sh: Shell) -> None:
     sh.section = "predict"
     sh("league", "predict", "pong-1/s6M-left", "pong-1/s2M-left")
     sh("match", "pong-1/s6M-left", "pong-1/s6M-right", "--games", "200")
+    sh.section = "plot"
+    sh("league", "plot", "--run", "pong-1")
     sh.section = "best"
     line = next(x for x in text.splitlines() if x.lstrip().startswith("best of pong-1:"))
     best, other = re.search(r"best of pong-1: (\S+) .*? over (\S+) \(", line).groups()
