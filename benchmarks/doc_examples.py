@@ -24,8 +24,13 @@ Parts (one a run; each writes ``benchmarks/results/example_PART.json``):
 ``pong``
     the default run the pages quote (``marl train pong --agents 2``, its progress lines without a terminal: section
     ``train``); ``marl league predict`` and a 200-game ``marl match`` as league.md shows them (``predict``);
-    ``marl league plot`` piped (``plot``); and a fresh 200-game match of the run's best and the snapshot its summary
-    names next to it, not stored (``best``).
+    ``marl league ladder --run pong-1`` (``ladder``); ``marl league plot`` piped (``plot``); and a fresh 200-game
+    match of the run's best and the snapshot its summary names next to it, not stored (``best``).
+``lander``
+    league.md's lander ladder: the lander's default FuPS run (``marl train lander --agents 2 --sharing fups``), then
+    ``marl league ladder --env lander``.
+``envs``
+    envs.md's listing: ``marl envs`` and ``marl envs tennis``.
 ``resume``
     train.md's resumed run: ``marl train pong --agents 2 --run long --steps 2000000`` stopped by SIGTERM once past
     its ``s1M`` moment (what it printed, its exit code), then ``marl train --resume long`` and its summary.
@@ -205,6 +210,8 @@ def pong(sh: Shell) -> None:
     sh.section = "predict"
     sh("league", "predict", "pong-1/s6M-left", "pong-1/s2M-left")
     sh("match", "pong-1/s6M-left", "pong-1/s6M-right", "--games", "200")
+    sh.section = "ladder"
+    sh("league", "ladder", "--run", "pong-1")
     sh.section = "plot"
     sh("league", "plot", "--run", "pong-1")
     sh.section = "best"
@@ -212,6 +219,16 @@ def pong(sh: Shell) -> None:
     best, other = re.search(r"best of pong-1: (\S+) .*? over (\S+) \(", line).groups()
     sh.say(f"the run's summary: {line.strip()}")
     sh("match", best, other, "--games", "200", "--no-store", note="a fresh match of the two, not stored")
+
+
+def lander(sh: Shell) -> None:
+    sh("train", "lander", "--agents", "2", "--sharing", "fups")
+    sh("league", "ladder", "--env", "lander")
+
+
+def envs(sh: Shell) -> None:
+    sh("envs")
+    sh("envs", "tennis")
 
 
 def resume(sh: Shell) -> None:
@@ -275,7 +292,7 @@ def gif(sh: Shell) -> None:
 
 
 PARTS = {"kuhn": kuhn, "kuhn_br": kuhn_br, "kuhn_plot": kuhn_plot, "kuhn_league": kuhn_league, "kuhn_nash": kuhn_nash,
-         "pong": pong, "resume": resume, "connect_four": connect_four,
+         "pong": pong, "lander": lander, "envs": envs, "resume": resume, "connect_four": connect_four,
          "simple_push": simple_push, "gif": gif}
 
 
