@@ -139,13 +139,13 @@ def kuhn_plot(sh: Shell) -> None:
     sh.say("snapshot by snapshot (from the two commands' JSON):")
     for r in figures:
         sh.say(f"  {r['policy']:<18} step {r['step']:>6,}  Elo {elo[r['policy']]:6.0f}  exact exploitability "
-              f"{r['exploitability']:.4f}")
+               f"{r['exploitability']:.4f}")
     top = max(figures, key=lambda r: elo[r["policy"]])
     least = min(figures, key=lambda r: r["exploitability"])
     same = "is" if top is least else "is not"
     sh.say(f"the snapshot rated highest ({top['policy']}, Elo {elo[top['policy']]:.0f}, exploitability "
-          f"{top['exploitability']:.4f}) {same} the least exploitable ({least['policy']}, "
-          f"{least['exploitability']:.4f})")
+           f"{top['exploitability']:.4f}) {same} the least exploitable ({least['policy']}, "
+           f"{least['exploitability']:.4f})")
 
 
 LEAGUE_TOML = """\
