@@ -7,6 +7,7 @@ import contextlib
 import itertools
 import os
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -186,6 +187,28 @@ def pg_server():
             if server.get_postmaster_info().is_running():
                 stop_postgres(server)
         shutil.rmtree(data, ignore_errors=True)
+
+
+@pytest.fixture
+def ctrl_c_in_the_wait(monkeypatch):
+    """Trainer's wait, patched to send this process a real SIGINT at its first progress call; what it sent. Ctrl-C
+    raises KeyboardInterrupt meanwhile, as in a terminal (a shell's background job, as CI may run the suite, starts
+    with SIGINT ignored, and Python then leaves it so)."""
+    from selfplay_cli.train.loop import Trainer
+
+    waiting = Trainer._waiting
+    sent: list = []
+
+    def ctrl_c(self):
+        if not sent:
+            sent.append(True)
+            os.kill(os.getpid(), signal.SIGINT)
+        waiting(self)
+
+    monkeypatch.setattr(Trainer, "_waiting", ctrl_c)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield sent
+    signal.signal(signal.SIGINT, previous)
 
 
 @pytest.fixture(scope="session")

@@ -137,6 +137,32 @@ def test_a_runs_ray_actors_hand_their_job_back_whenever_they_end(ray_local, rate
 
 
 @pytest.mark.slow
+def test_ctrl_c_in_the_final_wait_stops_the_actors_and_keeps_the_run(ray_local, tmp_path, capsys, ctrl_c_in_the_wait):
+    """--eval ray: Ctrl-C once training is over stops the wait, not the run. It ends as with --no-wait (exit 0, its
+    training finished and kept), its actor stopped and gone, each gauntlet done or back on the league's queue (none
+    left leased to the stopped actor); a worker that comes later plays the rest, and the ledger ends as an --eval
+    remote run's. (A real SIGINT to this process from the wait's first progress call: the actor may have played some
+    gauntlets by then, or none.)"""
+    code, out, err = run(capsys, *RUN, "--eval", "ray", "--home", str(tmp_path / "ray"))
+    assert ctrl_c_in_the_wait and code == 0, err
+    data = json.loads(out)
+    left = data["rating_jobs_left"]
+    assert data["rating"] == "ray" and 0 <= left <= 3 and (data["best"] is None) == (left > 0)
+    code, out, err = run(capsys, *RUN, "--eval", "remote", "--home", str(tmp_path / "remote"))
+    assert code == 0, err
+    with League.open(tmp_path / "ray") as league, League.open(tmp_path / "remote") as remote:
+        assert league.roster.get_run("r").status == "finished"
+        states = [j.state for j in league.queue.jobs(batch=run_batch("r"))]
+        assert len(states) == 3 and states.count("queued") == left and states.count("done") == 3 - left
+        for actor in league.queue.workers(taking=run_batch("r")):  # (one that had not joined the queue yet: none)
+            assert actor.name.startswith("ray@") and actor.stopped_at is not None and not actor.holding
+            assert _gone(actor.pid)
+        report = run_worker(league, WorkerOptions(until_empty=True, poll=0.05, name="later"))
+        assert (report.done, report.failed) == (left, 0)
+        assert _record(league) == _record(remote)
+
+
+@pytest.mark.slow
 def test_a_run_that_ends_before_its_actors_have_started_stops_them_at_once(ray_local, rated_league):
     """Ctrl-C as the run begins: its actor, still starting, is told to stop all the same and leaves as soon as it is
     up (a cancelled call once kept it waiting, and the run with it, until the kill after the stop time). The stop

@@ -158,28 +158,6 @@ def test_local_no_wait_ends_with_training_and_leaves_the_rest_to_workers(tmp_pat
         assert _record(league) == local_record
 
 
-@pytest.fixture
-def ctrl_c_in_the_wait(monkeypatch):
-    """Trainer's wait, patched to send this process a real SIGINT at its first progress call; what it sent. Ctrl-C
-    raises KeyboardInterrupt meanwhile, as in a terminal (a shell's background job, as CI may run the suite, starts
-    with SIGINT ignored, and Python then leaves it so)."""
-    from selfplay_cli.train.loop import Trainer
-
-    waiting = Trainer._waiting
-    sent: list = []
-
-    def ctrl_c(self):
-        if not sent:
-            sent.append(True)
-            os.kill(os.getpid(), signal.SIGINT)
-        waiting(self)
-
-    monkeypatch.setattr(Trainer, "_waiting", ctrl_c)
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
-    yield sent
-    signal.signal(signal.SIGINT, previous)
-
-
 @pytest.mark.slow
 def test_ctrl_c_in_the_final_wait_leaves_the_rest_to_workers_and_keeps_the_run(tmp_path, capsys, local_record,
                                                                                ctrl_c_in_the_wait):
