@@ -4,9 +4,10 @@ lander) and FuPS (one shared network), each trained by `marl train lander` for t
 Per mode it prints the mean return per lander of every snapshot against training steps and wall time (from the
 run's rating games and metrics), the mean return per lander over fresh games of the final snapshot and of the run's
 best (by fitted rating, as its ladder marks it), and the peak memory of the run's processes; then a FuPS policy
-trained with 2 landers flown with 1 to 4 landers, and the game's own steps/s. A PNG of mean return per lander
-against game steps and wall time goes to --png. Target (issue 36): each mode's final snapshot (not only its best)
-scores a mean return per lander of at least 200 within 30 minutes on 2 cores, measured on fresh games.
+trained with 2 landers flown with 1 to 4 landers (the game's own steps/s are ``lander_env_speed.py``'s). A PNG of
+mean return per lander against game steps and wall time goes to --png. Target (issue 36): each mode's final
+snapshot (not only its best) scores a mean return per lander of at least 200 within 30 minutes on 2 cores, measured
+on fresh games.
 
 Run: python benchmarks/lander_modes.py [--minutes 30] [--modes sa nops fups] [--algo ppo] [--png lander_modes.png]
 """
@@ -141,8 +142,6 @@ def main() -> None:
                   f"{args.games} games:")
             for m in (1, 2, 3, 4):
                 print(f"    M = {m}: {fly(home, snap, m, args.games):8.1f}")
-        print(subprocess.run([sys.executable, str(ROOT / "benchmarks" / "lander_env_speed.py")], capture_output=True,
-                             text=True).stdout)
         _plot(results, args.png)
         print(f"plot: {args.png}")
         for mode, f in results.items():
