@@ -263,8 +263,13 @@ def _printed(source: str, view: str = "") -> Any:
     def render(r: dict[str, Any]) -> str:
         if view == "top":
             lines = [x for x in r["printed"] if x.strip() and not x[0].isspace()]
+        elif view:
+            if view not in r.get("sections", {}):
+                raise ValueError(f"{source} has no section {view!r} (its sections: "
+                                 f"{', '.join(r.get('sections', {})) or 'none'})")
+            lines = r["sections"][view]
         else:
-            lines = r["sections"][view] if view else r["printed"]
+            lines = r["printed"]
         return f"{_stamp(source, r)}:\n\n```text\n" + "\n".join(lines) + "\n```\n"
 
     return render
@@ -309,5 +314,7 @@ if __name__ == "__main__":
                     page.write_text(with_figures(text, "."))
         except OSError as e:
             sys.exit(f"reference: {e.filename}: {e.strerror} (run it in the repository: it writes docs/)")
+        except ValueError as e:
+            sys.exit(f"reference: {e}")
     else:
         sys.stdout.write(render())

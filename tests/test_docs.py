@@ -106,6 +106,8 @@ def test_a_page_quotes_a_worked_examples_section_or_its_summary_lines_alone(tmp_
     assert figures("example_pong/top", tmp_path) == stamp + "\n".join(
         x for x in run["printed"] if not x.startswith(" ")) + "\n```\n"
     assert figures("example_pong", tmp_path) == stamp + "\n".join(run["printed"]) + "\n```\n"
+    with pytest.raises(ValueError, match="has no section 'plot' \\(its sections: predict\\)"):
+        figures("example_pong/plot", tmp_path)
 
 
 def test_the_ladder_truth_page_says_each_miss_and_which_game_falls_short_of_a_target():
