@@ -191,19 +191,20 @@ def pg_server():
 
 @pytest.fixture
 def ctrl_c_in_the_wait(monkeypatch):
-    """Trainer's wait, patched to send this process a real SIGINT at its first progress call; what it sent. Ctrl-C
-    raises KeyboardInterrupt meanwhile, as in a terminal (a shell's background job, as CI may run the suite, starts
-    with SIGINT ignored, and Python then leaves it so)."""
+    """Trainer's wait, patched to send this process a real SIGINT at its first progress call (where the executor
+    hands over the jobs done since its last look); what it sent. Ctrl-C raises KeyboardInterrupt meanwhile, as in a
+    terminal (a shell's background job, as CI may run the suite, starts with SIGINT ignored, and Python then leaves
+    it so)."""
     from selfplay_cli.train.loop import Trainer
 
     waiting = Trainer._waiting
     sent: list = []
 
-    def ctrl_c(self):
+    def ctrl_c(self, done):
         if not sent:
             sent.append(True)
             os.kill(os.getpid(), signal.SIGINT)
-        waiting(self)
+        waiting(self, done)
 
     monkeypatch.setattr(Trainer, "_waiting", ctrl_c)
     previous = signal.signal(signal.SIGINT, signal.default_int_handler)

@@ -100,6 +100,32 @@ def test_workers_play_a_runs_gauntlets_and_the_games_are_the_local_workers(db_ur
 
 
 @pytest.mark.slow
+def test_the_final_wait_reports_each_gauntlet_as_it_finishes(tmp_path):
+    """The run's three gauntlets, all owed at its end (no worker attached: the run plays them itself): each is
+    reported (its snapshot event) as it finishes, while the wait goes on for the rest, and the wait's progress names
+    only the snapshots still to be rated."""
+    from selfplay_cli.train.loop import Trainer
+
+    events: list[dict] = []
+    cfg = TrainConfig(env="pong", run="r", steps=4096, games=16, snapshot_steps=2048, eval_games=4, eval_playoff=4,
+                      seed=3, eval="remote", env_options={"points_to_win": 1})
+    with League.open(tmp_path / "home") as league:
+        league.roster.create_run("r", "pong", cfg.to_dict(), algo="ppo")
+        report = Trainer(league, cfg, on_progress=events.append).train()
+    assert report.rating_left == 0
+    waiting = [i for i, e in enumerate(events) if e["event"] == "evaluating"]
+    rated = [(i, tuple(r.name for r in e["records"])) for i, e in enumerate(events) if e["event"] == "snapshot"]
+    assert [names for _, names in rated] == [("r/s0-left", "r/s0-right"), ("r/s2.05k-left", "r/s2.05k-right"),
+                                             ("r/s4.1k-left", "r/s4.1k-right")]
+    assert waiting and waiting[0] < rated[0][0]  # training had ended with all three owed
+    assert [i for i, _ in rated[:2]] < [waiting[-1]] * 2  # the first two reported before the wait ended
+    for i in waiting:  # the wait names what is still owed, no snapshot already reported
+        done = {n for j, names in rated if j < i for n in names}
+        assert events[i]["snapshots"] and not done & set(events[i]["snapshots"])
+        assert events[i]["gauntlets"] == 3 - sum(j < i for j, _ in rated)
+
+
+@pytest.mark.slow
 def test_with_no_worker_attached_the_run_plays_its_gauntlets_itself(tmp_path, capsys, local_record):
     """No worker at all: the queued gauntlets are still played, by the run at its end (listed in the queue as the
     run's own process), with the same games."""
@@ -271,8 +297,10 @@ def test_the_wait_shows_which_worker_plays_and_a_dead_job_is_one_error(rated_lea
     seen: list[QueueStanding] = []
     finisher = threading.Timer(0.3, lambda: play_leased(league, wid, job))
     finisher.start()
-    (done,) = ev.wait(on_wait=lambda: seen.append(ev.queue_standing()))
+    handed: list = []  # the jobs the wait hands over as they finish, the rest returned at its end
+    rest = ev.wait(on_wait=lambda done: (handed.extend(done), seen.append(ev.queue_standing())))
     finisher.join()
+    (done,) = handed + rest
     # s0 against random and cpu (2 games each), and at the run's first moment the two bots against each other
     assert done.games == 6 and ev.pending == [] and ev.games_played == 0  # all of it played by the worker
     assert seen and seen[0].workers == ("w9",)
@@ -379,7 +407,10 @@ def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     ev.submit(GauntletJob((snap.id,), 0, 2, 0))
     seen: list[QueueStanding] = []
 
-    def looked() -> None:
+    handed: list = []
+
+    def looked(done: list) -> None:
+        handed.extend(done)
         league.queue.worker_beat(busy)
         seen.append(ev.queue_standing())
 
@@ -388,7 +419,7 @@ def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):
     waiting.start()
     waiting.join(timeout=60)
     assert out, "the run waited on for a worker that never took its gauntlet"
-    (done,) = out[0]
+    (done,) = handed + out[0]
     assert done.games == 6 and ev.games_played == 6  # s0 against each bot, and the bots against each other
     (job,) = league.queue.jobs(batch=run_batch("w"))
     assert job.state == "done" and job.worker.startswith("train@")

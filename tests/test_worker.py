@@ -181,6 +181,22 @@ def test_a_dead_worker_is_noticed_by_poll_and_replaced_and_its_job_done(rated_le
     assert _eval_games(league.db_path) == 6
 
 
+@pytest.mark.slow
+def test_the_wait_hands_over_each_job_as_it_finishes(rated_league):
+    """The final wait hands each finished job to ``on_wait`` at once, while the jobs after it are still owed (so
+    the run reports each gauntlet as it comes), in order, and each once: none again in the list returned."""
+    league, snap = rated_league
+    jobs = [GauntletJob((snap.id,), seed, 2, 0) for seed in (0, 100, 200)]
+    handed: list[tuple[GauntletJob, int]] = []  # each job handed over, and how many were still owed then
+    with Evaluator(league, "cpu", background=True) as ev:
+        for job in jobs:
+            ev.submit(job)
+        rest = ev.wait(on_wait=lambda done: handed.extend((d.job, ev.left) for d in done))
+        assert ev.left == 0 and ev.pending == []
+    assert rest == [] and [j for j, _ in handed] == jobs
+    assert [left for _, left in handed] == [2, 1, 0]
+
+
 def test_a_worker_that_keeps_dying_stops_the_run_as_an_internal_error(rated_league):
     league, snap = rated_league
     with Evaluator(league, "cpu", background=True, note=lambda line: None) as ev:

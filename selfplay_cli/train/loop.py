@@ -535,8 +535,12 @@ class Trainer:
                 raise
             return done
 
-    def _waiting(self) -> None:
-        if self.on_progress:
+    def _waiting(self, done: list[JobDone]) -> None:
+        """A look during a wait for gauntlets: those ``done`` since the last are reported at once (their rated lines
+        come as each finishes, not all at the end), then where the wait stands, while gauntlets are left. (The
+        executor holds a Ctrl-C meanwhile: handed over, the jobs are the run's to note, no longer its to leave.)"""
+        self._collect(done)
+        if self.on_progress and self.evaluator is not None and self.evaluator.left:
             self._tell(self._waiting_event())
 
     def _waiting_event(self) -> dict[str, Any]:

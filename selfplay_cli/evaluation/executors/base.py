@@ -81,9 +81,11 @@ class RatingExecutor(Protocol):
         """The jobs done since the last call, in the order they were submitted."""
         ...
 
-    def wait(self, on_wait: Callable[[], None] | None = None) -> list[JobDone]:
+    def wait(self, on_wait: Callable[[list[JobDone]], None] | None = None) -> list[JobDone]:
         """Block until every submitted job is done (or handed to others, where the executor may leave them);
-        ``on_wait()`` about every second meanwhile."""
+        ``on_wait(done)`` about every second meanwhile, with the jobs done since it was last called (in the order they
+        were submitted; often none), so each can be reported as it finishes. Each finished job is handed over once:
+        to ``on_wait``, or in the list returned (the rest)."""
         ...
 
     def leave(self) -> list[JobDone] | None:

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from ...errors import MarlError, MarlIOError
+from ...signals import signals_held
 from .base import GauntletJob, JobDone, RatingWorkerError
 
 STALL_SECONDS = 300.0  # a worker that has a job and reports no finished game for this long is stuck (a stopped
@@ -207,10 +208,11 @@ class Evaluator:
             self._check()
         return self._finish()
 
-    def wait(self, on_wait: Any = None) -> list[JobDone]:
-        """Block until every submitted job is done; ``on_wait()`` is called about every second meanwhile. With
-        ``wait=False`` (``--no-wait``): the jobs done by now; the worker stops, and the rest are left to the
-        league's workers (:meth:`_leave`)."""
+    def wait(self, on_wait: Callable[[list[JobDone]], None] | None = None) -> list[JobDone]:
+        """Block until every submitted job is done; ``on_wait(done)`` is called about every second meanwhile, with
+        the jobs finished since (:meth:`.base.RatingExecutor.wait`); the rest are returned. With ``wait=False``
+        (``--no-wait``): the jobs done by now; the worker stops, and the rest are left to the league's workers
+        (:meth:`_leave`)."""
         if self.background and not self.wait_for:
             self._drain()
             self._check()
@@ -222,7 +224,8 @@ class Evaluator:
                 except queue.Empty:
                     self._check()
                 if on_wait is not None:
-                    on_wait()
+                    with signals_held():  # (a Ctrl-C waits until the jobs taken from here are handed over)
+                        on_wait(self._finish())  # (a failed job raises its error here)
         return self._finish()
 
     def leave(self) -> list[JobDone] | None:

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ...errors import MarlError, MarlIOError
+from ...signals import signals_held
 from .base import GauntletJob, JobDone, QueueStanding, RatingWorkerError
 
 __all__ = ["UNTAKEN_SECONDS", "QueueStanding", "RemoteEvaluator", "run_batch"]
@@ -110,9 +111,10 @@ class RemoteEvaluator:
             del self._ids[d.job]
         return out
 
-    def wait(self, on_wait: Any = None) -> list[JobDone]:
+    def wait(self, on_wait: Callable[[list[JobDone]], None] | None = None) -> list[JobDone]:
         """Block until every submitted job is done (``wait``), playing them here while no worker is attached;
-        ``on_wait()`` is called about every second meanwhile. With ``wait=False``: the jobs done now."""
+        ``on_wait(done)`` is called about every second meanwhile, with the jobs finished since
+        (:meth:`.base.RatingExecutor.wait`); the rest are returned. With ``wait=False``: the jobs done now."""
         done = self.poll()
         taken = time.monotonic()  # when a worker last held or finished one of the run's jobs
         while self.wait_for and self.pending:
@@ -159,9 +161,9 @@ class RemoteEvaluator:
         (a worker that attaches meanwhile takes its share)."""
         from ..jobs import see_through
 
-        def played(n: int) -> None:
+        def played(n: int) -> None:  # (in the middle of a job: the queue is not read here, see _tick)
             self.games_played += n
-            self._tick(on_wait)
+            self._tick(on_wait, look=False)
 
         self.here = True
         try:
@@ -170,12 +172,15 @@ class RemoteEvaluator:
         finally:
             self.here = False
 
-    def _tick(self, on_wait: Any, force: bool = False) -> None:
-        """``on_wait()``, at most about once a second unless ``force``."""
+    def _tick(self, on_wait: Callable[[list[JobDone]], None] | None, force: bool = False, look: bool = True) -> None:
+        """``on_wait(done)``, at most about once a second unless ``force``, with the jobs the queue says are done since
+        the last look (:meth:`poll`; none when not to ``look``: in the middle of a job this process plays, where a
+        dead job's error raised would pass for that job's failure)."""
         now = time.monotonic()
         if on_wait is not None and (force or now - self._ticked >= 1.0):
             self._ticked = now
-            on_wait()
+            with signals_held():  # (a Ctrl-C waits until the jobs the poll took are handed over)
+                on_wait(self.poll() if look else [])
 
     def queue_standing(self) -> QueueStanding:
         """Where the run's owed gauntlets stand now (for the wait's display)."""

@@ -41,6 +41,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ...ray_support import RayConnection, check_local_actors, ray_module
+from .base import JobDone
 from .queue_workers import RemoteEvaluator
 
 __all__ = ["ACTOR_ROLE", "MAX_REPLACED", "RATING_ACTOR_CPUS", "START_SECONDS", "STOP_SECONDS", "RatingActor",
@@ -155,11 +156,11 @@ class RayEvaluator(RemoteEvaluator):
         self._names.append(actor.name.remote())
         self._loops.append(actor.work.remote())
 
-    def poll(self) -> list[Any]:
+    def poll(self) -> list[JobDone]:
         self._check_actors()
         return super().poll()
 
-    def wait(self, on_wait: Any = None) -> list[Any]:
+    def wait(self, on_wait: Callable[[list[JobDone]], None] | None = None) -> list[JobDone]:
         """:meth:`RemoteEvaluator.wait`, once the actors have joined the queue (so the run does not play its
         gauntlets itself merely because they were still starting); then the actors are stopped."""
         since = time.monotonic()
