@@ -103,6 +103,7 @@ def test_readme_shows_what_marl_envs_prints_and_claims_no_missing_feature_that_e
             assert shown and all(x == line for x in shown), (game, shown, line)
 
 
+@pytest.mark.slow
 def test_a_refused_command_leaves_no_league_behind(tmp_path, monkeypatch, capsys):
     """`marl match nosuch cpu` or `marl train --init-from ../../etc/passwd` in an empty folder is refused (exit 2)
     and creates no ./league; a command that plays creates it, and a later refused command leaves it, games and

@@ -104,6 +104,7 @@ def replay(game, seed: int, moves: list[tuple[int, int]], observe: bool = False,
     return st.returns()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["openspiel:kuhn_poker", "openspiel:leduc_poker", "openspiel:tic_tac_toe"])
 def test_returns_through_the_adapter_are_openspiels_own(name):
     game = pyspiel.load_game(name.partition(":")[2])

@@ -71,6 +71,7 @@ def _run_state(home: Path) -> tuple[str, list[str]]:
 # Training
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", ["observation", "reward"])
 def test_a_game_that_turns_nan_stops_training_in_one_line_and_nothing_after_it_is_saved(home, capsys, where):
     # each of the 16 game objects breaks after 300 of its steps: at step 16 x 300 = 4,800 of the run

@@ -278,6 +278,7 @@ def test_the_same_player_twice_says_what_happened(team_home, capsys):
 # Recordings: a length a person watches, and the reason a game ended
 
 
+@pytest.mark.slow
 def test_a_recording_stops_at_60_seconds_by_default_and_says_so(home, tmp_path, capsys):
     args = ["record", "--ckpt", "cpu", "--vs", "cpu", "--env", "pong", "--fps", "10", "--size", "64x32", "--hold",
             "0", "-q", "--out"]
@@ -426,6 +427,7 @@ def test_options_that_a_resumed_run_would_ignore_are_refused(home, capsys):
                    "cannot change it")
 
 
+@pytest.mark.slow
 def test_scripted_players_named_alone_find_their_game(home, capsys):
     """With several games registered, `marl match A B` of scripted players finds the one game that has them both;
     names several games share ask for --env in one line."""

@@ -362,6 +362,7 @@ def test_the_playoff_separates_the_best_and_stops_there(tmp_path, monkeypatch):
     league.close()
 
 
+@pytest.mark.slow
 def test_a_playoff_between_equals_stops_at_its_cap_and_the_ladder_says_tied(tmp_path, monkeypatch):
     import selfplay_cli.evaluation.gauntlet as gauntlet_mod
     from selfplay_cli.evaluation.playoff import PlayoffConfig, playoff

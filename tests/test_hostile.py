@@ -590,6 +590,7 @@ def _limited(limit: int) -> dict:
     return {"preexec_fn": preexec}
 
 
+@pytest.mark.slow
 def test_import_under_a_file_size_limit_leaves_nothing(tmp_path):
     home = tmp_path / "league"
     make_league(home).close()

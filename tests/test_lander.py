@@ -114,6 +114,7 @@ def test_one_lander_is_gymnasiums_lander_bit_for_bit_with_gymnasiums_leg_flag(se
     assert steps > 50, "the comparison covered a real flight"
 
 
+@pytest.mark.slow
 def test_one_lander_by_default_differs_from_gymnasium_only_in_the_leg_flag_gymnasium_drops():
     """With the same actions the physics is the same (the leg flag is no input to it): positions, velocities,
     angles are equal at every step; a leg gymnasium says touches touches here too; a reward differs only by the

@@ -123,6 +123,7 @@ def test_an_sa_agent_trains_plays_and_records_its_team(home, tmp_path, capsys):
     assert np.stack(list(iio.imiter(out))).shape[0] >= 50
 
 
+@pytest.mark.slow
 def test_a_team_of_per_lander_networks_flies_together_and_grows_by_copies(home, capsys):
     run_json(capsys, "train", "lander", "--agents", "2", "--sharing", "nops", "--steps", "4000", "--snapshot-steps",
              "4000", "--games", "8", "--eval-games", "0", "--run", "np")
@@ -171,6 +172,7 @@ def test_how_a_snapshot_plays_in_rated_games(env, algo, greedy):
     assert plays_greedy(row) is greedy
 
 
+@pytest.mark.slow
 def test_the_ladder_of_a_cooperative_game_shows_the_mean_return(home, capsys, monkeypatch):
     """A cooperative game's ladder has a mean return column (the team's mean return per game), as its JSON has."""
     code, out, err = run(capsys, "match", "heuristic", "random", "--env", "lander", "--games", "4")

@@ -95,6 +95,7 @@ def lockstep(config: LanderConfig, seed: int, rng: np.random.Generator) -> tuple
     return results, ended, cut
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("options", OPTIONS)
 def test_the_views_game_in_python_floats_is_the_cores_bit_for_bit(options):
     """Over many seeds with landers flown every way, the same game, number for number, through the endings the

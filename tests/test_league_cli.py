@@ -97,6 +97,7 @@ def test_name_errors_list_candidates_and_corrupt_files_are_refused(home, tmp_pat
     assert code == 2 and str(wrong) in err
 
 
+@pytest.mark.slow
 def test_match_plays_pairs_stores_games_and_reports(home, capsys):
     code, rep = run_json(capsys, "match", "cpu", "random", "--env", "pong", "--games", "20", "--seed", "5")
     assert code == 0
@@ -203,6 +204,7 @@ def seed_ladder(home: Path) -> dict[str, int]:
     return ids
 
 
+@pytest.mark.slow
 def test_ladder_prior_run_top_best_and_bot_columns(home, capsys):
     seed_ladder(home)
     code, rows = run_json(capsys, "league", "ladder", "--bootstrap", "0")

@@ -206,6 +206,7 @@ def test_rm_refuses_a_snapshot_whose_gauntlet_a_run_owes(stopped, capsys):
     assert not removed(home, "s0-right")
 
 
+@pytest.mark.slow
 def test_rm_refuses_a_stopped_runs_teacher(tmp_path, capsys, league_db):
     home = tmp_path / "home"
     make_league(home, run_name="t")

@@ -81,6 +81,7 @@ def test_team_specs_give_each_learner_its_slots_seats():
         MAPPOLearner(seats[0], 4, MAPPOConfig())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("algo", ["mappo", "poca"])
 def test_a_snapshot_is_the_actor_alone_and_plays_in_marl_match(home, capsys, algo):
     paths = train_team(capsys, home, DUET, algo, "nops", seed=1, run="r", steps=1_500)

@@ -286,6 +286,7 @@ def test_cli_matrix_table_json_and_png(home: Path, capsys, tmp_path: Path) -> No
     assert png.stat().st_size > 1000
 
 
+@pytest.mark.slow
 def test_cli_matrix_command_plays_the_missing_games(home: Path, capsys) -> None:
     with League.open(home=home) as lg:
         lg.roster.ensure_bots(ENV, ["random", "cpu"])

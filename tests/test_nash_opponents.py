@@ -265,6 +265,7 @@ def test_restart_at_snapshot_with_league_roles_is_one_line(tmp_path: Path, capsy
     assert "Traceback" not in err and not home.exists()
 
 
+@pytest.mark.slow
 def test_a_restarted_oracle_learns_at_the_full_rate_even_when_its_interval_is_shorter_than_a_rollout(
         tmp_path: Path, capsys) -> None:
     home = tmp_path / "league"

@@ -14,6 +14,7 @@ def _loss(net: torch.nn.Module, x: torch.Tensor, y: torch.Tensor) -> torch.Tenso
     return ((logits - y) ** 2).mean() + value.square().mean()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("max_norm", [0.0, 0.05])
 def test_flat_adam_matches_torch_adam(max_norm: float) -> None:
     arch = Arch(hidden=(16, 8), activation="tanh", value_head=True)

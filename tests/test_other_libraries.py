@@ -225,6 +225,7 @@ def test_stable_baselines3_ppo_learns_through_the_recipe(game, tmp_path, monkeyp
 # --- RLlib ------------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("game", "options"), CASES)
 def test_rllibs_parallel_wrapper_plays_the_game_played_here(game, options):
     """``ParallelPettingZooEnv(parallel_env(...))``: per-seat Dict spaces, reset/step in RLlib's API, episodes end

@@ -390,6 +390,7 @@ def test_cli_plot_out_and_json(home: Path, capsys, tmp_path: Path) -> None:
     assert data["prior"] == 2
 
 
+@pytest.mark.slow
 def test_cli_plot_prior_0_draws_and_names_the_bounds(home: Path, capsys, tmp_path: Path) -> None:
     with League.open(home=home) as lg:
         _bounded_run(lg)

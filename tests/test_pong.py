@@ -348,6 +348,7 @@ def snapshot(c, g):
                 t0=bool(c.touched[0, g]), t1=bool(c.touched[1, g]), s0=int(c.score[0, g]), s1=int(c.score[1, g]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("r_for_hit", [0.0, 0.25])
 def test_seed_rules_step_exactly_as_the_seed(r_for_hit):
     n = 64

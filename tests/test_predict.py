@@ -145,6 +145,7 @@ def test_a_player_without_games_is_one_line():
         f.predict("nobody", "p1", 200)
 
 
+@pytest.mark.slow
 def test_marl_league_predict_and_marl_match_say_what_the_ladder_expects(tmp_path, capsys):
     """`marl league predict` prints the forecaster's prediction (JSON: the same numbers); `marl match` reports the
     prediction made before its games and whether the games bore it out; an empty league is one line, exit 2."""

@@ -119,6 +119,7 @@ def test_game_id_replays_the_stored_game_exactly(home, tmp_path, capsys):
     assert len(mp4_frames(path)[0]) == stored.length + 1
 
 
+@pytest.mark.slow
 def test_a_gif_is_small_real_time_and_each_picture_once(home, tmp_path, capsys):
     """300 steps of pong at 60 fps: every third frame stored (20 a second, at the game's own pace), the held final
     frame stored once and shown for its second, one palette for the whole file, 640 pixels wide. Stored a frame per

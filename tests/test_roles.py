@@ -293,6 +293,7 @@ def test_best_is_per_side_where_the_sides_differ(chased, capsys):
     assert "hunter side: " in err and "runner side: " in err
 
 
+@pytest.mark.slow
 def test_a_cooperative_crew_of_different_seats_flies_each_member_on_its_own_seat(home, capsys):
     report = run_json(capsys, "train", "tests.games.chase:cooperative_env", "--agents", "2", "--steps", "1000",
                       "--snapshot-steps", "500", "--games", "8", "--eval-games", "2", "--eval-inline", "--run", "crew")

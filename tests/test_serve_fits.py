@@ -48,6 +48,7 @@ def _ladder_shown(page: str, cli: list[dict]) -> None:
         assert f"{row['wins']}-{row['draws']}-{row['losses']}" in page
 
 
+@pytest.mark.slow
 def test_pages_show_a_notice_while_the_first_fit_runs_then_its_figures(home: Path, capsys) -> None:
     started, release = threading.Event(), threading.Event()
 

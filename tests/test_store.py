@@ -716,6 +716,7 @@ def _count_games(url: str) -> int:
     return _sql(url, "SELECT count(*) FROM games")[0][0]
 
 
+@pytest.mark.slow
 def test_two_processes_write_concurrently(tmp_path: Path, db_url: str) -> None:
     url = db_url
     match_id, players = _setup_league(url)
@@ -752,6 +753,7 @@ def test_two_processes_write_concurrently(tmp_path: Path, db_url: str) -> None:
     assert results[0]["retries"] == results[1]["retries"] == 0
 
 
+@pytest.mark.slow
 def test_sigkill_mid_run_leaves_consistent_ledger(tmp_path: Path, db_url: str) -> None:
     if sys.platform == "win32":  # pragma: no cover
         pytest.skip("SIGKILL is POSIX")

@@ -140,6 +140,7 @@ def test_a_shared_network_trained_with_3_flies_any_size(home, capsys):
         assert r["kind"] == "cooperative" and r["variant"]["n_pursuers"] == m and "seating" not in r
 
 
+@pytest.mark.slow
 def test_the_kind_is_refused_where_the_game_declares_it_or_it_is_no_kind(home, capsys):
     code, _, err = run(capsys, "train", "pong", "--kind", "cooperative", "--steps", "10")
     assert code == 2 and "pong declares its kind itself (two-sides)" in err and err.count("\n") == 1, err

@@ -847,6 +847,7 @@ def test_the_views_game_in_python_floats_is_the_cores_bit_for_bit(options):
 
 @pytest.mark.parametrize("options", [{}, {"serve_bounce": True, "hit_reward": 0.2, "return_reward": 0.3},
                                      {"discrete": True, "bat_scale": 2.5}])
+@pytest.mark.slow
 def test_the_views_game_follows_the_core_through_every_rule(options):
     """Games in Python floats set in rallies of every kind (a ball anywhere, at any speed and spin, whoever hit it,
     landed or not, bats anywhere in their boxes, scores near the end of a game) and played on beside the core's
@@ -964,6 +965,7 @@ def test_renderer_draws_the_table_the_bats_and_the_ball():
     assert FLOOR_Y < 0 < NET_H
 
 
+@pytest.mark.slow
 def test_tennis_trains_with_its_own_defaults_and_flags_and_files_override_them(tmp_path, monkeypatch, capsys):
     """`marl train tennis` as typed: SAC against the serve bot's randomized serves, the seed's curricula and its
     practice reward (`marl envs tennis` prints them); a flag and a --config file override them."""

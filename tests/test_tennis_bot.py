@@ -501,6 +501,7 @@ def test_the_serve_bot_decides_as_before_in_each_serve_mode(mode, monkeypatch):
     compare(observations(mode, False), monkeypatch, mode=mode)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", ["fixed", "mixed"])
 def test_the_serve_bot_decides_as_before_with_the_bounce_serve(mode, monkeypatch):
     compare(observations(mode, True), monkeypatch, mode=mode, bounce=True)

@@ -164,6 +164,7 @@ def test_snapshots_by_steps_when_games_are_long(tmp_path):
     league.close()
 
 
+@pytest.mark.slow
 def test_a_run_repeats_exactly_with_learners_updating_in_threads(tmp_path, monkeypatch):
     """Two learners update side by side in threads; each draws only from its own generator, so the same seed gives
     bit-identical snapshots, and the same as updating one after the other."""
@@ -315,6 +316,7 @@ def test_dqn_and_the_seed000_preset_train_through_the_same_loop(tmp_path, capsys
     assert code == 2 and "--preset" in err
 
 
+@pytest.mark.slow
 def test_config_file_sets_every_section_and_typed_options_win(tmp_path, capsys):
     cfg_file = tmp_path / "run.toml"
     cfg_file.write_text('agents = 1\nsteps = 3000\ngames = 16\neval_games = 0\nsnapshot_every = 50\n'

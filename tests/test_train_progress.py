@@ -113,6 +113,7 @@ def test_quiet_prints_no_progress_line_and_json_keeps_stdout_for_the_json(tmp_pa
     assert "budget of" not in out  # (a budget of steps ends at an update's end, as it always does)
 
 
+@pytest.mark.slow
 def test_a_minutes_budget_says_how_it_ended_training(tmp_path, capsys):
     args = ["train", "pong", "--minutes", "0.02", "--games", "16", "--env-option", "points_to_win=1",
             "--eval-games", "0", "--home", str(tmp_path / "h")]

@@ -449,6 +449,7 @@ def _seeds(league: League, match_id: int) -> list[int]:
         return sorted(s.execute(select(Game.seed).where(Game.match_id == match_id)).scalars())
 
 
+@pytest.mark.slow
 def test_a_moments_matchups_go_to_whoever_is_free(rated_league, tmp_path):
     """Issue 49: with --eval remote a moment's gauntlet was one job: one worker played it while the others sat idle.
     Now the worker that leases a moment queues its matchups as jobs of their own when another worker of the batch is

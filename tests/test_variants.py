@@ -75,6 +75,7 @@ def test_a_users_pettingzoo_game_declares_its_defaults_and_how_it_is_drawn_split
 # Matches are filed with their variant; every reader takes one
 
 
+@pytest.mark.slow
 def test_a_match_under_an_option_is_rated_apart_from_the_default_ladder(home, capsys):
     rep = run_json(capsys, "match", "cpu", "random", "--env", "pong", "--env-option", "points_to_win=3",
                    "--games", "20", "-q")
@@ -115,6 +116,7 @@ def test_a_lander_match_with_more_landers_is_rated_apart(home, capsys):
     assert all(r["variant"] == {"landers": 4} for r in rows) and all(r["mean_return"] is not None for r in rows)
 
 
+@pytest.mark.slow
 def test_a_neutral_option_does_not_split_the_ladder(home, capsys):
     run_json(capsys, "match", "cpu", "random", "--env", "pong", "--games", "6", "-q")
     rep = run_json(capsys, "match", "cpu", "random", "--env", "pong", "--env-option", "frame_stack=4",
@@ -249,6 +251,7 @@ def test_a_league_written_before_variants_reads_per_variant(tmp_path, capsys):
         assert league.ledger.variants("pong") == {"": 6, TO_3: 8}
 
 
+@pytest.mark.slow
 def test_the_ladder_without_options_shows_the_games_the_newest_run_played(home, capsys):
     """`marl train tennis` plays serve_mode=mixed, not the game's default: the ladder a user gets without options is
     the variant the game's newest run played (a run of the default game after it brings the default back); with no
