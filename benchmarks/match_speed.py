@@ -10,6 +10,10 @@
    Target (the issue "speed where users feel it"): stepping at least 40% of the match's wall time.
 2. ``marl train pong --agents 2 --minutes 0.5 --json`` (both cores, as a user runs it): training seconds, rating
    games, and the wait for the last ones once training ended. Target: the wait at most 10% of the training time.
+   Where the rating games' time goes, read from the league the run wrote: their game steps beside the training's,
+   the share cut at the game's step limit, the gauntlets' and the playoff's games, steps and units. A gauntlet
+   matchup or a playoff round is a batch of games stepped together until its last game ends, so its wall time
+   follows its longest game, not its number of games: the rounds played one after another are the wait's floor.
    Then the same run with ``--no-wait`` (its gauntlets not finished when training ends left on the league's queue),
    and ``marl worker --until-empty`` playing what it left: the wait it saves, and the games it leaves.
 
@@ -25,6 +29,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from datetime import datetime
 from pathlib import Path
 
 import numpy as np
@@ -65,6 +70,53 @@ def network_floor(home: Path, names: list[str], games: int, steps: int) -> float
     for _ in range(steps):
         bank.act(obs)
     return time.perf_counter() - began
+
+
+def rating_account(db: Path, run: str) -> dict[str, dict[str, float]]:
+    """The rating games (kind ``eval``) of run ``run``'s snapshots (the bots' games among themselves left out) in the
+    SQLite league at ``db``, by what played them (``gauntlet`` or ``playoff``): games, game steps, games cut at the
+    step limit, units of work (a gauntlet's matchups; the playoff's rounds, each one batch) and, for the playoff,
+    the seconds from the run's last gauntlet matchup stored to its last round stored."""
+    import sqlite3
+
+    with sqlite3.connect(db) as conn:
+        rows = conn.execute(
+            "SELECT m.work_key, m.created_at, COUNT(g.id), SUM(g.length), SUM(g.truncated) FROM matches m "
+            "JOIN games g ON g.match_id = m.id WHERE m.kind = 'eval' AND m.id IN (SELECT g2.match_id FROM games g2 "
+            "JOIN game_seats s ON s.game_id = g2.id JOIN players p ON p.id = s.player_id "
+            "JOIN runs r ON r.id = p.run_id WHERE r.name = ?) GROUP BY m.id ORDER BY m.created_at", (run,)).fetchall()
+    out: dict[str, dict[str, float]] = {}
+    units: dict[str, set[str]] = {}
+    ends: dict[str, list[datetime]] = {}
+    for key, at, games, steps, truncated in rows:
+        what = "playoff" if (key or "").startswith("playoff/") else "gauntlet"
+        a = out.setdefault(what, {"games": 0, "steps": 0, "truncated": 0})
+        a["games"] += games
+        a["steps"] += steps
+        a["truncated"] += truncated
+        # (a playoff round's matchups are keyed playoff/<the run's final moment>/<the round's first seed>/...)
+        units.setdefault(what, set()).add("/".join(key.split("/")[:3]) if what == "playoff" else key or at)
+        ends.setdefault(what, []).append(datetime.fromisoformat(at))
+    for what, a in out.items():
+        a["units"] = len(units[what])
+    if "playoff" in out and "gauntlet" in out:
+        out["playoff"]["seconds"] = (max(ends["playoff"]) - max(ends["gauntlet"])).total_seconds()
+    return out
+
+
+def print_account(games: dict[str, dict[str, float]], train_steps: int) -> None:
+    steps = sum(a["steps"] for a in games.values())
+    total = sum(a["games"] for a in games.values())
+    cut = sum(a["truncated"] for a in games.values())
+    print(f"  the rating games of its snapshots: {total:,}, {steps / 1e6:.1f}M game steps ({steps / train_steps:.1f}x "
+          f"the training's {train_steps / 1e6:.1f}M); {cut / total:.0%} of them cut at the step limit")
+    for what, a in games.items():
+        unit = "rounds" if what == "playoff" else "matchups"
+        line = (f"    {what}: {a['games']:,} games, {a['steps'] / 1e6:.1f}M game steps ({a['steps'] / a['games']:,.0f} "
+                f"a game), {a['truncated'] / a['games']:.0%} cut at the step limit, {a['units']} {unit}")
+        if "seconds" in a:
+            line += f"; {a['seconds']:.0f} s after the last gauntlet matchup, {a['seconds'] / a['units']:.1f} s a round"
+        print(line)
 
 
 def main() -> None:
@@ -108,6 +160,7 @@ def main() -> None:
               f"{wait:.1f} s waited for them at the end")
         print(f"end-of-run wait: {100 * wait / train:.0f}% of the training time (target <= 10%: "
               f"{'met' if wait <= 0.1 * train else 'not met'})")
+        print_account(rating_account(home / "league.db", "wait"), r["steps"])
         out, wall = marl(home, "train", "pong", "--agents", "2", "--minutes", "0.5", "--run", "nowait", "--no-wait",
                          "--json")
         r = json.loads(out)

@@ -1,0 +1,105 @@
+"""What a team's critic buys on the suite's two credit-assignment games (``tests/games``), per algorithm and sharing.
+
+* The duet (``tests/games/duet.py``): a round pays only when both singers name their own targets, and each sees luck
+  of its own that moves the team's reward. Figure: the chance both are right (the final snapshots' policies, sampling
+  as they trained, averaged over targets and lucks).
+* The relay (``tests/games/relay.py``): the scout answers once and leaves; whether it was right is paid to the
+  runner at the game's end. Figure: the chance the scout answers its signal (0.5 is a guess).
+
+Each set-up: ``marl train GAME --algo ALGO --agents 2 --sharing SHARING --steps 10000 --games 32 --eval-games 0
+--seed S`` with 16-step rollouts (as ``tests/test_mappo.py`` and ``tests/test_poca.py`` train them), seeds 0-2; PPO
+FuPS on the duet also at 40,000 steps.
+
+Run: python benchmarks/critic_games.py [--seeds 0 1 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+DUET, RELAY = "tests.games.duet:parallel_env", "tests.games.relay:parallel_env"
+ROLLOUT = "[ppo]\nrollout_steps = 16\n[mappo]\nrollout_steps = 16\n[poca]\nrollout_steps = 16\n"
+SETUPS = [  # (game, algo, sharing, steps)
+    ("duet", "ppo", "fups", 10_000), ("duet", "ppo", "fups", 40_000), ("duet", "mappo", "fups", 10_000),
+    ("duet", "mappo", "nops", 10_000), ("duet", "poca", "fups", 10_000), ("duet", "poca", "nops", 10_000),
+    ("relay", "ppo", "fups", 10_000), ("relay", "ppo", "nops", 10_000), ("relay", "mappo", "fups", 10_000),
+    ("relay", "poca", "fups", 10_000), ("relay", "poca", "nops", 10_000),
+]
+
+
+def train(tmp: Path, game: str, algo: str, sharing: str, steps: int, seed: int) -> list[Path]:
+    """One run (a fresh league): the final snapshots' files, one per learner in seat order."""
+    home, config = tmp / f"{game}-{algo}-{sharing}-{steps}-{seed}", tmp / "rollout.toml"
+    config.write_text(ROLLOUT)
+    env = dict(os.environ, MARL_GAMES=f"{DUET},{RELAY}", PYTHONPATH=str(ROOT), MARL_HOME=str(home))
+    out = subprocess.run([sys.executable, "-m", "selfplay_cli", "train", DUET if game == "duet" else RELAY, "--algo",
+                          algo, "--agents", "2", "--sharing", sharing, "--steps", str(steps), "--games", "32",
+                          "--eval-games", "0", "--seed", str(seed), "--run", "r", "--config", str(config), "--json",
+                          "--quiet"], env=env, cwd=ROOT, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"marl train {game} --algo {algo} failed: {out.stderr.strip()[-2000:]}")
+    report = json.loads(out.stdout)
+    return [next((home / "snapshots" / "r").glob(f"{f['snapshot'].split('/')[-1]}.*")) for f in report["final"]]
+
+
+def right(path: Path, obs: np.ndarray, answers: np.ndarray) -> np.ndarray:
+    """The probability the snapshot's policy (sampling, as it trained) gives each of ``answers`` to ``obs``."""
+    from selfplay_cli.policies.snapshot_policy import load_policy
+
+    policy = load_policy(path, greedy=False)
+    with torch.no_grad():
+        logits, _ = policy.net(torch.as_tensor(obs))
+    return torch.softmax(logits, -1).numpy()[np.arange(len(obs)), answers]
+
+
+def duet_together(paths: list[Path], choices: int = 3) -> float:
+    """The chance both singers name their targets (one network for both seats with FuPS). A singer sees its target
+    (one-hot) and its luck (-1 or 1)."""
+    paths = paths * 2 if len(paths) == 1 else paths
+    obs = np.zeros((2 * choices, choices + 1), dtype=np.float32)
+    targets = np.repeat(np.arange(choices), 2)
+    obs[np.arange(2 * choices), targets] = 1.0
+    obs[:, -1] = np.tile([-1.0, 1.0], choices)
+    return float(np.prod([right(p, obs, targets).mean() for p in paths]))
+
+
+def scout_right(paths: list[Path], choices: int = 2) -> float:
+    """The chance the relay's scout (seat 0: its signal one-hot, then its seat flag) answers its signal."""
+    obs = np.zeros((choices, choices + 2), dtype=np.float32)
+    obs[np.arange(choices), np.arange(choices)] = 1.0
+    obs[:, -2] = 1.0
+    return float(right(paths[0], obs, np.arange(choices)).mean())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    args = ap.parse_args()
+    sys.path.insert(0, str(ROOT))
+    print(f"each: 2 agents, 32 games, 16-step rollouts, no rating games; seeds {', '.join(map(str, args.seeds))}")
+    print("| game | figure | algo | sharing | steps | " + " | ".join(f"seed {s}" for s in args.seeds) + " |")
+    print("|---|---|---|---|---|" + "---|" * len(args.seeds))
+    with tempfile.TemporaryDirectory(prefix="marl-critic-games-") as tmp:
+        for game, algo, sharing, steps in SETUPS:
+            measure = duet_together if game == "duet" else scout_right
+            figures = [measure(train(Path(tmp), game, algo, sharing, steps, s)) for s in args.seeds]
+            what = "both right" if game == "duet" else "scout right"
+            print(f"| {game} | {what} | {algo} | {sharing} | {steps:,} | "
+                  + " | ".join(f"{f:.3f}" for f in figures) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    from results_file import recorded
+
+    with recorded():
+        main()
