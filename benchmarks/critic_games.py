@@ -86,6 +86,10 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
+    from selfplay_cli.envs import admit
+
+    for game in (DUET, RELAY):  # (the suite's games, read here from the snapshots this script trained)
+        admit(game)
     print(f"each: 2 agents, 32 games, 16-step rollouts, no rating games; seeds {', '.join(map(str, args.seeds))}")
     print("| game | figure | algo | sharing | steps | " + " | ".join(f"seed {s}" for s in args.seeds) + " |")
     print("|---|---|---|---|---|" + "---|" * len(args.seeds))
