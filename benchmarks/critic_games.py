@@ -52,11 +52,12 @@ def train(tmp: Path, game: str, algo: str, sharing: str, steps: int, seed: int) 
     return [next((home / "snapshots" / "r").glob(f"{f['snapshot'].split('/')[-1]}.*")) for f in report["final"]]
 
 
-def right(path: Path, obs: np.ndarray, answers: np.ndarray) -> np.ndarray:
-    """The probability the snapshot's policy (sampling, as it trained) gives each of ``answers`` to ``obs``."""
+def right(path: Path, game: str, obs: np.ndarray, answers: np.ndarray) -> np.ndarray:
+    """The probability the snapshot of ``game`` (its policy sampling, as it trained) gives each of ``answers`` to
+    ``obs``."""
     from selfplay_cli.policies.snapshot_policy import load_policy
 
-    policy = load_policy(path, greedy=False)
+    policy = load_policy(path, greedy=False, expect_env=game)
     with torch.no_grad():
         logits, _ = policy.net(torch.as_tensor(obs))
     return torch.softmax(logits, -1).numpy()[np.arange(len(obs)), answers]
@@ -70,7 +71,7 @@ def duet_together(paths: list[Path], choices: int = 3) -> float:
     targets = np.repeat(np.arange(choices), 2)
     obs[np.arange(2 * choices), targets] = 1.0
     obs[:, -1] = np.tile([-1.0, 1.0], choices)
-    return float(np.prod([right(p, obs, targets).mean() for p in paths]))
+    return float(np.prod([right(p, DUET, obs, targets).mean() for p in paths]))
 
 
 def scout_right(paths: list[Path], choices: int = 2) -> float:
@@ -78,7 +79,7 @@ def scout_right(paths: list[Path], choices: int = 2) -> float:
     obs = np.zeros((choices, choices + 2), dtype=np.float32)
     obs[np.arange(choices), np.arange(choices)] = 1.0
     obs[:, -2] = 1.0
-    return float(right(paths[0], obs, np.arange(choices)).mean())
+    return float(right(paths[0], RELAY, obs, np.arange(choices)).mean())
 
 
 def main() -> None:
@@ -88,7 +89,7 @@ def main() -> None:
     sys.path.insert(0, str(ROOT))
     from selfplay_cli.envs import admit
 
-    for game in (DUET, RELAY):  # (the suite's games, read here from the snapshots this script trained)
+    for game in (DUET, RELAY):  # (the suite's games, named here: their snapshots are read as theirs)
         admit(game)
     print(f"each: 2 agents, 32 games, 16-step rollouts, no rating games; seeds {', '.join(map(str, args.seeds))}")
     print("| game | figure | algo | sharing | steps | " + " | ".join(f"seed {s}" for s in args.seeds) + " |")
