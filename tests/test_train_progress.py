@@ -526,6 +526,13 @@ def test_while_the_last_gauntlets_are_played_the_eta_says_how_many_are_left(monk
     assert buf.getvalue().splitlines()[-1] == (
         "r: training done (1,000 steps); waiting for its rating games: 2 gauntlets left (s1k, s2k), 19 played in "
         "this session so far; 0:00:31 elapsed; Ctrl-C leaves them to the league's queue")
+    # a gauntlet done meanwhile: its rated line, without the training's figures (they stand still by now)
+    rec = SnapshotRecord("r/s1k", "learner", 1000, {"random": (2, 0, 0)}, 1100.0, 900.0, 1300.0)
+    plain.update({"event": "snapshot", "records": [rec],
+                  "standing": standing(progress=1.0, steps=1000, ended=True, snapshots=3, rated=2)})
+    assert buf.getvalue().splitlines()[-1] == (
+        "r: training done (1,000 steps); snapshots: 3 taken, 2 rated; rated s1k (step 1,000): random 100% of 2, "
+        "Elo 1100 [900, 1300]; 0:00:31 elapsed")
 
 
 @pytest.mark.slow

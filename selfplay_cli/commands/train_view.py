@@ -272,7 +272,12 @@ class TrainProgress:
                 + ", ".join([f"{bot} {100 * r.score(bot):.0f}% of {sum(wdl)}" for bot, wdl in r.vs.items()]
                             + ([elo_text(r)] if r.elo is not None else []))
                 or "unrated" for r in event["records"])
-            self._print(self._where(standing, f"; rated {recs}"))
+            if standing.ended:  # (a gauntlet done in the final wait: the training figures stand still by now)
+                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); "
+                            f"{describe_snapshots(standing, bool(self.cfg.eval_games))}; rated {recs}; "
+                            f"{self._elapsed()} elapsed")
+            else:
+                self._print(self._where(standing, f"; rated {recs}"))
 
     def _due(self, share: float | None) -> bool:
         """Whether a plain line is due: no terminal, lines wanted, :data:`PLAIN_LINE_SECONDS` since the last line
