@@ -23,12 +23,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
-import torch
-
 ROOT = Path(__file__).resolve().parents[1]
-DUET, RELAY = "tests.games.duet:parallel_env", "tests.games.relay:parallel_env"
-ROLLOUT = "[ppo]\nrollout_steps = 16\n[mappo]\nrollout_steps = 16\n[poca]\nrollout_steps = 16\n"
+sys.path[:0] = [str(ROOT), str(ROOT / "tests")]  # the suite's games, and its measures of what they learned
+from team_helpers import DUET, RELAY, ROLLOUT, duet_together, relay_scout_right  # noqa: E402
+
 SETUPS = [  # (game, algo, sharing, steps)
     ("duet", "ppo", "fups", 10_000), ("duet", "ppo", "fups", 40_000), ("duet", "mappo", "fups", 10_000),
     ("duet", "mappo", "nops", 10_000), ("duet", "poca", "fups", 10_000), ("duet", "poca", "nops", 10_000),
@@ -52,51 +50,21 @@ def train(tmp: Path, game: str, algo: str, sharing: str, steps: int, seed: int) 
     return [next((home / "snapshots" / "r").glob(f"{f['snapshot'].split('/')[-1]}.*")) for f in report["final"]]
 
 
-def right(path: Path, game: str, obs: np.ndarray, answers: np.ndarray) -> np.ndarray:
-    """The probability the snapshot of ``game`` (its policy sampling, as it trained) gives each of ``answers`` to
-    ``obs``."""
-    from selfplay_cli.policies.snapshot_policy import load_policy
-
-    policy = load_policy(path, greedy=False, expect_env=game)
-    with torch.no_grad():
-        logits, _ = policy.net(torch.as_tensor(obs))
-    return torch.softmax(logits, -1).numpy()[np.arange(len(obs)), answers]
-
-
-def duet_together(paths: list[Path], choices: int = 3) -> float:
-    """The chance both singers name their targets (one network for both seats with FuPS). A singer sees its target
-    (one-hot) and its luck (-1 or 1)."""
-    paths = paths * 2 if len(paths) == 1 else paths
-    obs = np.zeros((2 * choices, choices + 1), dtype=np.float32)
-    targets = np.repeat(np.arange(choices), 2)
-    obs[np.arange(2 * choices), targets] = 1.0
-    obs[:, -1] = np.tile([-1.0, 1.0], choices)
-    return float(np.prod([right(p, DUET, obs, targets).mean() for p in paths]))
-
-
-def scout_right(paths: list[Path], choices: int = 2) -> float:
-    """The chance the relay's scout (seat 0: its signal one-hot, then its seat flag) answers its signal."""
-    obs = np.zeros((choices, choices + 2), dtype=np.float32)
-    obs[np.arange(choices), np.arange(choices)] = 1.0
-    obs[:, -2] = 1.0
-    return float(right(paths[0], RELAY, obs, np.arange(choices)).mean())
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     args = ap.parse_args()
-    sys.path.insert(0, str(ROOT))
-    from selfplay_cli.envs import admit
+    from selfplay_cli.envs import admit, get_env
 
-    for game in (DUET, RELAY):  # (the suite's games, named here: their snapshots are read as theirs)
+    for game in (DUET, RELAY):  # (named here and loaded: their snapshots are read as theirs)
         admit(game)
+        get_env(game)
     print(f"each: 2 agents, 32 games, 16-step rollouts, no rating games; seeds {', '.join(map(str, args.seeds))}")
     print("| game | figure | algo | sharing | steps | " + " | ".join(f"seed {s}" for s in args.seeds) + " |")
     print("|---|---|---|---|---|" + "---|" * len(args.seeds))
     with tempfile.TemporaryDirectory(prefix="marl-critic-games-") as tmp:
         for game, algo, sharing, steps in SETUPS:
-            measure = duet_together if game == "duet" else scout_right
+            measure = duet_together if game == "duet" else relay_scout_right
             figures = [measure(train(Path(tmp), game, algo, sharing, steps, s)) for s in args.seeds]
             what = "both right" if game == "duet" else "scout right"
             print(f"| {game} | {what} | {algo} | {sharing} | {steps:,} | "

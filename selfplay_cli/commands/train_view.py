@@ -262,8 +262,8 @@ class TrainProgress:
             if self._due(None):
                 where = (f"{waiting} ({names}), {event['games']:,} played in this session so far" if queued is None
                          else f"rating {names} ({info})")  # (the queue's standing counts the gauntlets left)
-                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); {where}; "
-                            f"{self._elapsed()} elapsed; Ctrl-C leaves them to the league's queue")
+                self._print(f"{self._done(standing)}; {where}; {self._elapsed()} elapsed; Ctrl-C leaves them to the "
+                            "league's queue")
         elif kind == "note":  # something the run met and went on from (a rollout actor restarted)
             self._print(f"{self.cfg.run}: {event['line']}")
         elif kind == "snapshot":
@@ -273,9 +273,8 @@ class TrainProgress:
                             + ([elo_text(r)] if r.elo is not None else []))
                 or "unrated" for r in event["records"])
             if standing.ended:  # (a gauntlet done in the final wait: the training figures stand still by now)
-                self._print(f"{self.cfg.run}: training done ({standing.steps:,} steps); "
-                            f"{describe_snapshots(standing, bool(self.cfg.eval_games))}; rated {recs}; "
-                            f"{self._elapsed()} elapsed")
+                self._print(f"{self._done(standing)}; {describe_snapshots(standing, bool(self.cfg.eval_games))}; "
+                            f"rated {recs}; {self._elapsed()} elapsed")
             else:
                 self._print(self._where(standing, f"; rated {recs}"))
 
@@ -285,6 +284,10 @@ class TrainProgress:
         if not self.progress.disable or not self.lines or self.clock() - self.last_line < PLAIN_LINE_SECONDS:
             return False
         return share is None or share - self.line_share >= PLAIN_LINE_SHARE
+
+    def _done(self, standing: Standing) -> str:
+        """``pong-1: training done (6,000,128 steps)``: how a line of the final wait begins."""
+        return f"{self.cfg.run}: training done ({standing.steps:,} steps)"
 
     def _elapsed(self) -> str:
         return _clock(self.clock() - self.start)
