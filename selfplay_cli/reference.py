@@ -12,6 +12,7 @@ benchmark are rendered from that benchmark's output file, with its date and mach
 from __future__ import annotations
 
 import inspect
+import itertools
 import re
 from typing import Any
 
@@ -226,9 +227,56 @@ def _team_study(source: str) -> Any:
             a_text = f"**{a_text}**" if _above(adapted, [fresh]) else a_text
             f_text = f"**{f_text}**" if _above(fresh, [adapted]) else f_text
             out.append(f"| {x['from']} -> {x['to']} | {a_text} | {f_text} | {reached} | {took} |")
-        return "\n".join(out) + "\n"
+        return "\n".join(out + ["", *_team_reading(r, rows, vs)]) + "\n"
 
     return render
+
+
+def _span(values: list[float], fmt: str = "{:.1f}") -> str:
+    lo, hi = fmt.format(min(values)), fmt.format(max(values))
+    return lo if lo == hi else f"{lo} to {hi}"
+
+
+def _team_reading(r: dict[str, Any], rows: dict[int, dict[int, Any]], vs: dict[int, Any]) -> list[str]:
+    """What the teams page reads in a study's tables, computed from its report (so the page types no figure): where
+    each team is above ``vs`` beyond doubt, its steepest fall from one flown size to the next, how the adapted runs
+    ended against the fresh ones, and what the runs cost."""
+    def pairs(xs: list[dict[str, Any]]) -> str:
+        return _names([f"{x['from']} -> {x['to']}" for x in xs]) if xs else "none"
+
+    out = ["Read from the tables (computed from the same report):", ""]
+    for n, cells in rows.items():
+        above = [m for m in r["eval"] if _above(cells.get(m), [vs.get(m)])]
+        means = [(m, cells[m]["mean"]) for m in r["eval"] if cells.get(m) and cells[m].get("mean") is not None]
+        falls = [(b[1] - a[1], a, b) for a, b in itertools.pairwise(means)]
+        fall = min(falls, default=None)
+        steepest = (f"; its steepest fall, {fall[1][1]:.1f} at {fall[1][0]} to {fall[2][1]:.1f} at {fall[2][0]}"
+                    if fall and fall[0] < 0 else "; it never falls from one size to the next")
+        where = f"flown with {_sizes(above)}" if above else "at no size flown"
+        best = max(means, key=lambda c: c[1])[0]
+        out.append(f"- trained with {n}: above `{r['vs']}` beyond doubt {where}; at its best flown with {best}"
+                   f"{steepest}")
+    adaptive = [x for x in r["adaptive"] if x["return"].get("mean") is not None
+                and x["fresh_return"].get("mean") is not None]
+    if adaptive:
+        gains = [x["return"]["mean"] - x["fresh_return"]["mean"] for x in adaptive]
+        out.append(f"- adapted minus fresh, the returns each reached: {_span(gains, '{:+.1f}')}; above beyond doubt: "
+                   f"{pairs([x for x in adaptive if _above(x['return'], [x['fresh_return']])])}; below beyond doubt: "
+                   f"{pairs([x for x in adaptive if _above(x['fresh_return'], [x['return']])])}; at the fresh run's "
+                   f"final return from its start (its parent flown at the new size): "
+                   f"{pairs([x for x in adaptive if x['steps_to_reach'] == 0])}")
+    runs = r.get("runs") or []
+    if runs:
+        def steps(n: float) -> str:
+            return f"{n / 1e6:.1f}M" if n >= 1e6 else f"{n / 1e3:.0f}k"
+
+        fresh = ", ".join(f"{x['size']}: {steps(x['steps'])}" for x in runs if x["from"] is None)
+        out.append(f"- each of the {len(runs)} runs: {_span([x['wall_seconds'] / 60 for x in runs])} min of wall "
+                   f"time, mean CPU {_span([x['mean_cpu'] for x in runs], '{:.2f}')} cores, "
+                   f"{_span([x['peak_mb'] for x in runs], '{:.0f}')} MB at its peak, "
+                   f"{steps(min(x['steps'] for x in runs))} to {steps(max(x['steps'] for x in runs))} game steps "
+                   f"(trained afresh, by size: {fresh})")
+    return out
 
 
 FIGURES: dict[str, tuple[str, Any]] = {

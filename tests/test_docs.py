@@ -110,6 +110,45 @@ def test_a_page_quotes_a_worked_examples_section_or_its_summary_lines_alone(tmp_
         figures("example_pong/plot", tmp_path)
 
 
+def test_the_teams_page_reads_its_tables_from_the_study_report():
+    """What the teams page says of a study's tables (where a team beats the scripted player beyond doubt, its
+    steepest fall, the adapted runs against the fresh ones, the runs' cost) is computed from the report, checked here
+    against a two-size study worked by hand."""
+    from selfplay_cli.reference import _team_study
+
+    def cell(mean: float, half: float = 1.0) -> dict:
+        return {"mean": mean, "low": mean - half, "high": mean + half}
+
+    bot = {1: cell(-5.0), 2: cell(-9.0), 3: cell(-20.0)}
+    trained = {(1, 1): 2.0, (1, 2): 1.5, (1, 3): -8.0, (2, 1): -4.5, (2, 2): 3.0, (2, 3): 4.0}
+    report = {"study": "s", "env": "g", "size_option": "n", "train": [1, 2], "eval": [1, 2, 3],
+              "budget": {"minutes": 5.0, "steps": None}, "sharing": "fups", "algo": None, "vs": "random",
+              "eval_games": 50,
+              "returns": [{"trained": n, "evaluated": m, **cell(v), "vs": {**bot[m]}} for (n, m), v in trained.items()],
+              "adaptive": [{"from": 1, "to": 2, "return": cell(6.5), "fresh_return": cell(3.0), "steps_to_reach": 0,
+                            "minutes_to_reach": 0.0, "reached_return": 1.5, "fresh_steps": 900_000,
+                            "fresh_minutes": 5.0},
+                           {"from": 2, "to": 1, "return": cell(1.0), "fresh_return": cell(2.0),
+                            "steps_to_reach": None, "fresh_steps": 1_500_000, "fresh_minutes": 5.0}],
+              "runs": [{"size": 1, "from": None, "steps": 1_500_000, "wall_seconds": 300.0, "mean_cpu": 0.98,
+                        "peak_mb": 700.4},
+                       {"size": 2, "from": None, "steps": 900_000, "wall_seconds": 318.0, "mean_cpu": 1.0,
+                        "peak_mb": 650.0}]}
+    text = _team_study("docs/s.json")(report)
+    reading = text[text.index("Read from the tables"):].splitlines()[2:]
+    assert reading == [
+        # 1 at 1: 2.0 [1, 3] above -5.0 [-6, -4]; at 3: -8.0 [-9, -7] above -20 [-21, -19]
+        "- trained with 1: above `random` beyond doubt flown with 1, 2 and 3; at its best flown with 1; its steepest "
+        "fall, 1.5 at 2 to -8.0 at 3",
+        # 2 at 1: -4.5 [-5.5, -3.5] overlaps -5.0 [-6, -4]
+        "- trained with 2: above `random` beyond doubt flown with 2 and 3; at its best flown with 3; it never falls "
+        "from one size to the next",
+        "- adapted minus fresh, the returns each reached: -1.0 to +3.5; above beyond doubt: 1 -> 2; below beyond "
+        "doubt: none; at the fresh run's final return from its start (its parent flown at the new size): 1 -> 2",
+        "- each of the 2 runs: 5.0 to 5.3 min of wall time, mean CPU 0.98 to 1.00 cores, 650 to 700 MB at its peak, "
+        "900k to 1.5M game steps (trained afresh, by size: 1: 1.5M, 2: 900k)"]
+
+
 def test_the_ladder_truth_page_says_each_miss_and_which_game_falls_short_of_a_target():
     """The league page's account of ladder_truth.json: a game below a target is named with the figure that falls
     short, every missed prediction of a claimed pair is listed (a row-only pair's is not: nobody reads it), and a
