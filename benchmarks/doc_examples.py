@@ -34,6 +34,11 @@ Parts (one a run; each writes ``benchmarks/results/example_PART.json``):
 ``resume``
     train.md's resumed run: ``marl train pong --agents 2 --run long --steps 2000000`` stopped by SIGTERM once past
     its ``s1M`` moment (what it printed, its exit code), then ``marl train --resume long`` and its summary.
+``checkpoint``
+    checkpoint.md's removals: a run stopped by SIGTERM once past its ``s250k`` moment (``--snapshot-steps 50000``),
+    then ``marl checkpoint rm`` of its first snapshot (refused while the run owes it its gauntlet: then removed
+    once the run is over), of its last (refused: the run resumes from it), the same with ``--force`` (the run
+    ended), and ``marl train --resume`` of it (refused): section ``rm``.
 ``connect_four``
     your-own-game.md's first example: PettingZoo's connect four, 2M moves, then 200 games against ``random``.
 ``simple_push``
@@ -231,17 +236,18 @@ def envs(sh: Shell) -> None:
     sh("envs", "tennis")
 
 
-def resume(sh: Shell) -> None:
+def _stopped(sh: Shell, args: list[str], run: str, past: int) -> None:
+    """``marl ARGS`` (a training run named ``run``) stopped by SIGTERM once its metrics are past step ``past``: its
+    command, wall time, the step it was signalled at and its exit code, then what it printed."""
     import json
     import signal
 
-    args = ["train", "pong", "--agents", "2", "--run", "long", "--steps", "2000000"]
-    metrics = sh.home / "runs" / "long" / "metrics.jsonl"
+    metrics = sh.home / "runs" / run / "metrics.jsonl"
     began = time.perf_counter()
     proc = subprocess.Popen([sys.executable, "-m", "selfplay_cli", *args], env=sh.env, cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     step = 0
-    while proc.poll() is None and step < 1_100_000:  # past the s1M moment (a snapshot every million steps)
+    while proc.poll() is None and step < past:
         time.sleep(0.5)
         if metrics.exists():
             lines = metrics.read_text().splitlines()
@@ -251,7 +257,35 @@ def resume(sh: Shell) -> None:
     sh.say(f"$ marl {' '.join(args)}    # {time.perf_counter() - began:.0f} s; SIGTERM once past step {step:,}: "
            f"exit {proc.returncode}")
     sh.say((out + err).replace(str(sh.home), "league"))
+
+
+def resume(sh: Shell) -> None:
+    _stopped(sh, ["train", "pong", "--agents", "2", "--run", "long", "--steps", "2000000"], "long",
+             1_100_000)  # past the s1M moment (a snapshot every million steps)
     sh("train", "--resume", "long")
+
+
+def checkpoint(sh: Shell) -> None:
+    import json
+
+    sh.section = "rm"
+    _stopped(sh, ["train", "pong", "--agents", "2", "--run", "long", "--steps", "1000000", "--snapshot-steps",
+                  "50000"], "long", 260_000)  # past its s250k moment
+    sh.section = ""
+    rows, _ = sh("checkpoint", "list", "--run", "long", "--json", show=False)
+    left = [r for r in json.loads(rows) if r["name"].endswith("-left")]
+    first, last = left[0]["policy"], left[-1]["policy"]
+    owed = not left[0]["games"]  # its rating gauntlet not played yet when the run stopped: the run needs it too
+    sh.section = "rm"
+    if owed:
+        sh("checkpoint", "rm", first, refused=True, note="refused: the run owes it its rating gauntlet")
+    else:
+        sh("checkpoint", "rm", first, note="an old snapshot, rated: its pool goes on without it")
+    sh("checkpoint", "rm", last, refused=True, note="refused: the run resumes from it")
+    sh("checkpoint", "rm", "--force", last)
+    sh("train", "--resume", "long", refused=True, note="refused, for good")
+    if owed:
+        sh("checkpoint", "rm", first, note="the run is over: nothing needs it now")
 
 
 def connect_four(sh: Shell) -> None:
@@ -292,8 +326,8 @@ def gif(sh: Shell) -> None:
 
 
 PARTS = {"kuhn": kuhn, "kuhn_br": kuhn_br, "kuhn_plot": kuhn_plot, "kuhn_league": kuhn_league, "kuhn_nash": kuhn_nash,
-         "pong": pong, "lander": lander, "envs": envs, "resume": resume, "connect_four": connect_four,
-         "simple_push": simple_push, "gif": gif}
+         "pong": pong, "lander": lander, "envs": envs, "resume": resume, "checkpoint": checkpoint,
+         "connect_four": connect_four, "simple_push": simple_push, "gif": gif}
 
 
 def main(part: str, data: dict) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import subprocess
 import sys
 from pathlib import Path
 
@@ -204,6 +205,46 @@ def test_rm_refuses_a_snapshot_whose_gauntlet_a_run_owes(stopped, capsys):
     err = one_line_error(*run(capsys, "checkpoint", "rm", "r/s0-right", "--home", str(home))[::2])
     assert "run 'r'" in err and "rating gauntlet" in err
     assert not removed(home, "s0-right")
+
+
+@pytest.mark.slow
+def test_a_run_states_names_are_read_without_torch_and_without_running_its_pickle(trained, tmp_path):
+    """`marl checkpoint rm` reads which snapshots a run needs from its state without importing torch: the plain
+    values come out as torch.load gives them (a tensor as None), and a class or function the pickle names is never
+    imported nor called."""
+    from selfplay_cli.train.state_file import plain_state
+
+    path = trained / "runs" / "r" / "state.pt"
+    plain, loaded = plain_state(path), torch.load(path, weights_only=True)
+    assert plain["version"] == loaded["version"] == STATE_VERSION
+    for key in ("latest", "snapshots", "jobs", "steps", "next_seed"):
+        assert plain[key] == loaded[key], key
+    assert plain["latest"] == ["r/s2k-left", "r/s2k-right"]
+    weights = loaded["learners"][0]["net"]  # a state dict: an OrderedDict of tensors
+    assert isinstance(next(iter(weights.values())), torch.Tensor)
+    assert list(plain["learners"][0]["net"]) == list(weights)
+    assert all(v is None for v in plain["learners"][0]["net"].values())
+    assert plain["learners"][0]["updates"] == loaded["learners"][0]["updates"]
+
+    class Planted:
+        def __reduce__(self):
+            return (os.system, (f"touch {tmp_path / 'ran'}",))
+
+    planted = tmp_path / "state.pt"
+    torch.save({"version": STATE_VERSION, "latest": Planted(), "jobs": []}, planted, pickle_protocol=2)
+    assert plain_state(planted) == {"version": STATE_VERSION, "latest": None, "jobs": []}
+    assert not (tmp_path / "ran").exists()
+
+
+@pytest.mark.slow
+def test_rm_of_a_needed_snapshot_is_refused_without_importing_torch(stopped):
+    code = ("import sys; from selfplay_cli.cli import main; "
+            f"code = main(['checkpoint', 'rm', 'r/s2k-left', '--home', {str(stopped)!r}]); "
+            "print(code, sorted(m for m in ('torch', 'scipy') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert out.stdout.strip() == "2 []", out.stdout + out.stderr[-500:]
+    assert "--resume continues from it" in out.stderr
 
 
 @pytest.mark.slow

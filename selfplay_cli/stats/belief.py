@@ -14,7 +14,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import gammaln, xlog1py, xlogy
 
 from .elo import NAT_TO_ELO
 
@@ -156,6 +155,8 @@ def _binomial(n: int, p: np.ndarray) -> np.ndarray:
     """``(levels, n + 1)``: the binomial pmf of ``n`` trials at each success rate of ``p`` (one row per level), from
     log-gamma in closed form (scipy's ``binom.pmf`` evaluates each cell apart: 2.4 ms for 121 x 201 against 0.3);
     a rate of 0 or 1 gives its certain count exactly."""
+    from scipy.special import gammaln, xlog1py, xlogy  # (here: a command that only names players needs no scipy)
+
     k = np.arange(n + 1, dtype=np.float64)
     log_choose = gammaln(n + 1.0) - gammaln(k + 1.0) - gammaln(n - k + 1.0)
     q = p[:, None]

@@ -41,7 +41,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.special import ndtr
 
 from .belief import NODES, Belief, cdf_at
 from .bradley_terry import _fit_matrices, prior_draws, reachable
@@ -335,6 +334,8 @@ class PairModel:
         s = self.out_sd[np.ix_(idx, idx)]
         taus, tw = self.spread.mixture
         scale = np.sqrt(s[:, :, None] ** 2 + taus[None, None, :] ** 2)
+        from scipy.special import ndtr  # (here: a command that only names players needs no scipy)
+
         with np.errstate(divide="ignore", invalid="ignore"):
             p = ndtr(np.where(scale > 0, -d[:, :, None] / np.where(scale > 0, scale, 1.0),
                               np.where(d[:, :, None] > 0, -np.inf, np.inf))) @ tw
@@ -368,6 +369,8 @@ def _clear_cut(diff: np.ndarray, sd: np.ndarray, spread: Spread, met_points: np.
     prior_var = sd[:, None] ** 2 + taus[None, :] ** 2
     var = 1.0 / (1.0 / prior_var + 1.0 / lik_var[:, None])
     mean = var * (diff[:, None] / prior_var + mode[:, None] / lik_var[:, None])
+    from scipy.special import ndtr
+
     p = ndtr(-mean / np.sqrt(var))
     clear = (p.max(axis=1) < 1e-4) | (p.min(axis=1) > 0.3)
     return clear, p @ tw

@@ -22,6 +22,7 @@ from typing import Any
 from ..errors import MarlError
 from ..league.store import League, LeagueError, PlayerRow, RunRow, RunStatus
 from .lock import live_trainer
+from .state_file import STATE_VERSION, plain_state
 
 ENDED = RunStatus.ENDED
 """The status of a run ended because a snapshot it needed was removed (``marl checkpoint rm --force``): final,
@@ -110,12 +111,8 @@ def _state_names(path: Path) -> tuple[list[str], list[str]] | None:
     is no state a resume could use (no file, unreadable, another version's)."""
     if not path.is_file():
         return None
-    import torch
-
-    from .state import STATE_VERSION
-
     try:
-        state: Any = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+        state: Any = plain_state(path)
         if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
             return None
         return [str(n) for n in state["latest"]], [str(n) for names, _, _ in state["jobs"] for n in names]

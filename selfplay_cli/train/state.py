@@ -26,8 +26,7 @@ from .config import TrainConfig
 from .league_roles import LeagueRoles
 from .opponents import Opponents
 from .rollouts import Rollouts
-
-STATE_VERSION = 3  # 2: flat-buffer optimiser state (FlatAdam); 3: snapshots by name, pending gauntlets
+from .state_file import STATE_VERSION
 
 Job = tuple[tuple[str, ...], int, bool]
 """A gauntlet asked for, not known to be done: the moment's snapshot names, its first seed, and whether it is the
