@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -150,3 +151,19 @@ def test_the_cli_imports_no_heavy_library_until_a_command_needs_it():
             "print(sorted(m for m in ('torch', 'scipy', 'scipy.stats', 'matplotlib') if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0 and out.stdout.strip() == "[]", out.stdout + out.stderr[-500:]
+
+
+@pytest.mark.slow
+def test_reading_the_ladder_imports_no_torch(tmp_path):
+    """`marl league ladder`, `marl league matrix` and `marl checkpoint list` read rows and fit ratings: no network is
+    built, so torch (1.3 s and more of a command's start) is not imported."""
+    home = str(tmp_path / "home")
+    env = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
+    played = subprocess.run([sys.executable, "-m", "selfplay_cli", "match", "random", "cpu", "--env", "pong", "--games",
+                             "2", "--home", home], capture_output=True, text=True, timeout=300, env=env)
+    assert played.returncode == 0, played.stderr[-500:]
+    for args in (["league", "ladder"], ["league", "matrix"], ["checkpoint", "list"]):
+        code = ("import sys; from selfplay_cli.cli import main; "
+                f"code = main({[*args, '--home', home]!r}); print(code, 'torch' in sys.modules)")
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
+        assert out.stdout.strip().splitlines()[-1] == "0 False", (args, out.stdout[-500:], out.stderr[-500:])

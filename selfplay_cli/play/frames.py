@@ -17,7 +17,7 @@ from gymnasium import spaces
 
 from ..envs.obs_spaces import image_layout, stacked_space
 from ..errors import MarlError
-from ..policies.snapshot_format import MAX_FRAME_STACK
+from ..policies.arch import MAX_FRAME_STACK
 
 __all__ = ["MAX_FRAME_STACK", "FrameStacks", "check_frame_stack", "stacked_space"]
 

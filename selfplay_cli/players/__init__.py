@@ -11,7 +11,19 @@ from .files import (
     snapshot_path,
     snapshot_relpath,
 )
-from .load import check_fits, env_options_of, load_player, mix_seed, plays_greedy
+
+_LOAD = ("check_fits", "env_options_of", "load_player", "mix_seed", "plays_greedy")
+
+
+def __getattr__(name: str) -> object:
+    """:mod:`.load`'s names, imported when first asked for: it brings the play loop and torch, which a command that
+    only reads snapshot rows (``marl league ladder``, ``marl checkpoint show``) never needs."""
+    if name in _LOAD:
+        from . import load
+
+        return getattr(load, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = ["blob_cache_file", "cached_blob", "check_fits", "check_legacy_file", "env_options_of", "load_player",
            "mix_seed", "plays_greedy", "read_row_snapshot", "registered", "snapshot_path", "snapshot_relpath"]

@@ -146,6 +146,7 @@ class Arch:
         return " ".join(parts)
 
 
+MAX_FRAME_STACK = 16  # observations a policy reads at once (a snapshot's frame_stack; selfplay_cli.play.frames)
 MAX_CONV_LAYERS = 16
 MAX_KERNEL = 32
 MAX_STRIDE = 16

@@ -39,7 +39,7 @@ from safetensors.torch import save as st_save
 from .. import files
 from ..envs.obs_spaces import stacked_space
 from ..typecheck import MAX_INT
-from .arch import Arch, SnapshotError, SnapshotWriteError, conv_shapes
+from .arch import MAX_FRAME_STACK, Arch, SnapshotError, SnapshotWriteError, conv_shapes
 from .joint import MAX_JOINT_ACTIONS
 from .spaces import ActionHead, SpaceError, canonical_space, space_from_dict
 
@@ -61,7 +61,6 @@ MAX_FILE_BYTES = 8 + MAX_HEADER + 4 * MAX_PARAMS
 # float32's normal range, and sampling (mean + std * eps) or a log-probability ((a - mean) / std) overflows. (A
 # squashed head's log-std is bounded by construction: heads.LOG_STD_MIN to LOG_STD_MAX from finite weights.)
 MAX_LOG_STD = 80.0
-MAX_FRAME_STACK = 16  # observations a policy reads at once (selfplay_cli.play.frames keeps the same bound)
 LIMITS = {"header_bytes": MAX_HEADER, "hidden_layers": MAX_LAYERS, "layer_width": MAX_WIDTH,
           "observation_axes": MAX_OBS_DIMS, "observation_size": MAX_OBS_SIZE, "actions": MAX_ACTIONS,
           "parameters": MAX_PARAMS, "file_bytes": MAX_FILE_BYTES, "log_std": MAX_LOG_STD}
