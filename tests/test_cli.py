@@ -154,15 +154,19 @@ def test_the_cli_imports_no_heavy_library_until_a_command_needs_it():
 
 
 @pytest.mark.slow
-def test_reading_the_ladder_imports_no_torch(tmp_path):
-    """`marl league ladder`, `marl league matrix` and `marl checkpoint list` read rows and fit ratings: no network is
-    built, so torch (1.3 s and more of a command's start) is not imported."""
+def test_reading_the_league_imports_no_torch(tmp_path):
+    """Commands that read rows, snapshot headers and ratings (`league ladder`, `league matrix`, `league predict`,
+    `checkpoint list`, `checkpoint show`) build no network, so they do not import torch (1.3 s and more of a
+    command's start)."""
     home = str(tmp_path / "home")
     env = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
-    played = subprocess.run([sys.executable, "-m", "selfplay_cli", "match", "random", "cpu", "--env", "pong", "--games",
-                             "2", "--home", home], capture_output=True, text=True, timeout=300, env=env)
-    assert played.returncode == 0, played.stderr[-500:]
-    for args in (["league", "ladder"], ["league", "matrix"], ["checkpoint", "list"]):
+    for args in (["train", "pong", "--agents", "2", "--steps", "2000", "--games", "4", "--eval-games", "0", "--run",
+                  "r", "--quiet"], ["match", "random", "cpu", "--env", "pong", "--games", "2"]):
+        done = subprocess.run([sys.executable, "-m", "selfplay_cli", *args, "--home", home], capture_output=True,
+                              text=True, timeout=300, env=env)
+        assert done.returncode == 0, done.stderr[-500:]
+    for args in (["league", "ladder"], ["league", "matrix"], ["league", "predict", "random", "cpu", "--env", "pong"],
+                 ["checkpoint", "list"], ["checkpoint", "show", "r/s2k-left"]):
         code = ("import sys; from selfplay_cli.cli import main; "
                 f"code = main({[*args, '--home', home]!r}); print(code, 'torch' in sys.modules)")
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)

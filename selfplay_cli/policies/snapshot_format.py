@@ -29,12 +29,10 @@ import struct
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
 from gymnasium import spaces
-from safetensors.torch import save as st_save
 
 from .. import files
 from ..envs.obs_spaces import stacked_space
@@ -42,6 +40,9 @@ from ..typecheck import MAX_INT
 from .arch import MAX_FRAME_STACK, Arch, SnapshotError, SnapshotWriteError, conv_shapes
 from .joint import MAX_JOINT_ACTIONS
 from .spaces import ActionHead, SpaceError, canonical_space, space_from_dict
+
+if TYPE_CHECKING:
+    import torch
 
 FORMAT = "marl-snapshot"
 FORMAT_VERSION = 2
@@ -227,6 +228,8 @@ class SnapshotMeta:
 def weights_sha256(tensors: dict[str, torch.Tensor]) -> str:
     """sha256 over the tensors in sorted-name order: for each, a length-prefixed JSON ``[name, dtype, shape]``
     then the length-prefixed raw (little-endian, C-order) bytes."""
+    import torch  # (here: reading a snapshot's metadata needs no torch)
+
     h = hashlib.sha256()
     for name in sorted(tensors):
         t = tensors[name].detach().to("cpu").contiguous()
@@ -404,6 +407,8 @@ def snapshot_roles(meta: SnapshotMeta, spec: Any) -> frozenset[str] | None:
 
 
 def _state_dict(net_or_state_dict: torch.nn.Module | dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    import torch
+
     sd = net_or_state_dict.state_dict() if isinstance(net_or_state_dict, torch.nn.Module) else net_or_state_dict
     # Cloned: CPU, contiguous and never sharing storage (safetensors refuses shared tensors).
     return {str(k): v.detach().to("cpu").contiguous().clone() for k, v in sd.items()}
@@ -420,6 +425,9 @@ def save_snapshot(
     a joint record in ``meta`` must agree with the action head (checked, so a saved file always loads). Returns
     ``meta`` with ``weights_sha256`` filled in.
     """
+    import torch
+    from safetensors.torch import save as st_save
+
     path = Path(path)
     tensors = _state_dict(net_or_state_dict)
     odd = sorted(k for k, v in tensors.items() if v.dtype != torch.float32)

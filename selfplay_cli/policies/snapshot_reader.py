@@ -23,16 +23,15 @@ import struct
 import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import torch
 
 from ..envs import EnvError, UnknownEnvError, get_env, known_env
 from ..envs.obs_spaces import stacked_space
 from ..errors import MarlError
+from .arch import Arch, SnapshotError
 from .joint import joint_spaces
-from .network import Arch, SnapshotError
 from .snapshot_format import (
     FORMAT,
     FORMAT_VERSION,
@@ -48,6 +47,9 @@ from .snapshot_format import (
     weights_sha256,
 )
 from .spaces import ActionHead, SpaceError
+
+if TYPE_CHECKING:
+    import torch
 
 _HEX64 = re.compile(r"[0-9a-f]{64}")
 
@@ -377,6 +379,8 @@ def read_snapshot(path: str | os.PathLike[str], expect_env: str | None = None,
         count = (end - begin) // 4
         array = np.frombuffer(data, dtype="<f4", count=count, offset=start + begin).astype(np.float32)
         arrays[name] = array.reshape(tuple(info["shape"]))
+    import torch  # (here: reading a snapshot's metadata needs no torch)
+
     tensors = {name: torch.from_numpy(a) for name, a in arrays.items()}
     if weights_sha256(tensors) != meta.weights_sha256:
         raise SnapshotError(f"{path}: weights do not match their checksum (file corrupt?)")
