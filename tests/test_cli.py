@@ -157,7 +157,7 @@ def test_the_cli_imports_no_heavy_library_until_a_command_needs_it():
 def test_reading_the_league_imports_no_torch(tmp_path):
     """Commands that read rows, snapshot headers and ratings (`league ladder`, `league matrix`, `league predict`,
     `checkpoint list`, `checkpoint show`) build no network, so they do not import torch (1.3 s and more of a
-    command's start)."""
+    command's start); nor does a `train --resume` that is refused (no such run, or one ended)."""
     home = str(tmp_path / "home")
     env = {**os.environ, "SDL_VIDEODRIVER": "dummy"}
     for args in (["train", "pong", "--agents", "2", "--steps", "2000", "--games", "4", "--eval-games", "0", "--run",
@@ -165,9 +165,12 @@ def test_reading_the_league_imports_no_torch(tmp_path):
         done = subprocess.run([sys.executable, "-m", "selfplay_cli", *args, "--home", home], capture_output=True,
                               text=True, timeout=300, env=env)
         assert done.returncode == 0, done.stderr[-500:]
-    for args in (["league", "ladder"], ["league", "matrix"], ["league", "predict", "random", "cpu", "--env", "pong"],
-                 ["checkpoint", "list"], ["checkpoint", "show", "r/s2k-left"]):
+    for args, exit_code in ((["league", "ladder"], 0), (["league", "matrix"], 0),
+                            (["league", "predict", "random", "cpu", "--env", "pong"], 0), (["checkpoint", "list"], 0),
+                            (["checkpoint", "show", "r/s2k-left"], 0),
+                            (["train", "--resume", "nope"], 2)):  # no such run: refused before the trainer's imports
         code = ("import sys; from selfplay_cli.cli import main; "
                 f"code = main({[*args, '--home', home]!r}); print(code, 'torch' in sys.modules)")
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, env=env)
-        assert out.stdout.strip().splitlines()[-1] == "0 False", (args, out.stdout[-500:], out.stderr[-500:])
+        assert out.stdout.strip().splitlines()[-1] == f"{exit_code} False", (args, out.stdout[-500:],
+                                                                             out.stderr[-500:])

@@ -204,8 +204,6 @@ def train(
     """Train agents by self-play (PPO, DQN or SAC); every snapshot joins the league and is rated in a gauntlet."""
     from ..league.store import check_name
     from ..ray_support import ray_for
-    from ..train.session import RunStopped, run_training
-    from ..train.settings import EXECUTOR_OPTIONS, new_settings, resumed_config, start_run
 
     for what, name in (("run name", run), ("run name", resume)):
         if name is not None:
@@ -214,6 +212,8 @@ def train(
              if getattr(ctx.get_parameter_source(name), "name", "") in ("COMMANDLINE", "ENVIRONMENT")}
     settings: dict[str, Any] = {}
     if resume is None:  # the whole configuration is checked before the league is opened (or created)
+        from ..train.settings import new_settings
+
         settings = new_settings(env, {name: ctx.params[name] for name in typed}, config=config, preset=preset,
                                 env_options=lambda game: parse_env_options(game, env_option))
     phase = "starting"  # where a Ctrl-C or SIGTERM outside the run's own training finds the command
@@ -224,12 +224,20 @@ def train(
             league = open_league(home, db)
             try:
                 if resume is not None:
+                    from ..train.needs import resumable
+
+                    resumable(league, resume, env)  # a run not there, or ended: said before the trainer's imports
+                    from ..train.settings import EXECUTOR_OPTIONS, resumed_config
+
                     cfg = resumed_config(league, resume, env, typed, device,
                                          wait=eval_wait if "eval_wait" in typed else None,
                                          executor={k: ctx.params[k] for k in EXECUTOR_OPTIONS if k in typed})
                     ray_here.enter_context(ray_for(cfg.to_dict()))
                 else:
+                    from ..train.settings import start_run
+
                     cfg = start_run(league, settings, run)
+                from ..train.session import RunStopped, run_training
                 reporter = TrainProgress(cfg, bar=progress_enabled(quiet or json_out), lines=not quiet)
                 with reporter, stop_on_sigterm():
                     try:

@@ -81,6 +81,22 @@ def needs_of(league: League, row: PlayerRow) -> list[Need]:
     return needs
 
 
+def resumable(league: League, name: str, env: str | None = None) -> RunRow:
+    """The run ``name`` that ``marl train --resume`` may continue (of game ``env`` where given), or one line saying
+    why not: no such run, a configuration that cannot be read, another game, or ended (:func:`check_resumable`).
+    Torch-free, so a refused resume is said before the trainer's imports."""
+    run = league.roster.get_run(name)
+    if run is None:
+        raise MarlError(f"no run named '{name}' to resume")
+    if run.unusable is not None:  # (said once above it on stderr too)
+        raise MarlError(f"run '{name}': its configuration in the league cannot be read ({run.unusable}): start a "
+                        "new run")
+    if env is not None and env != run.env:
+        raise MarlError(f"run '{name}' trains {run.env}, not {env}")
+    check_resumable(league, run)  # a run a removed snapshot has ended: one line saying which
+    return run
+
+
 def check_resumable(league: League, run: RunRow) -> None:
     """Refuse, in one line, the resume of a run that a removed snapshot has ended: one marked :data:`ENDED`, or one
     whose resume state names a snapshot removed since (by an older marl, which did not ask): that run is marked

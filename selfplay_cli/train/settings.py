@@ -292,7 +292,7 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
     have written): a game of your own is imported only when you name it again (``env``, the command's game argument,
     or ``MARL_GAMES``), never because the run's record names it (:mod:`selfplay_cli.envs.loading`)."""
     from ..envs.loading import GameNotAdmittedError, get_env
-    from .needs import check_resumable
+    from .needs import resumable
 
     ignored = sorted(set(typed) - RESUME_OPTIONS)
     if ignored:
@@ -300,15 +300,7 @@ def resumed_config(league: League, resume: str, env: str | None, typed: Collecti
         raise MarlError(f"--resume continues run '{resume}' under the configuration it was started with: "
                         f"{flags} cannot change it (only --device, --wait/--no-wait, --executor, --actors, "
                         "--ray-address, --fragment-steps, --quiet, --json, --home, --db apply)")
-    old = league.roster.get_run(resume)
-    if old is None:
-        raise MarlError(f"no run named '{resume}' to resume")
-    if old.unusable is not None:  # (said once above it on stderr too)
-        raise MarlError(f"run '{resume}': its configuration in the league cannot be read ({old.unusable}): start a "
-                        "new run")
-    if env is not None and env != old.env:
-        raise MarlError(f"run '{resume}' trains {old.env}, not {env}")
-    check_resumable(league, old)  # a run a removed snapshot has ended: one line saying which
+    old = resumable(league, resume, env)
     saved = old.config.get("env") if isinstance(old.config, dict) else old.env
     if saved != old.env:  # the game the saved configuration would load is the run's, or none
         raise MarlError(f"run '{resume}': its saved configuration names another game ({shown(saved)}) than the run "
