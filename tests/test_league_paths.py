@@ -237,6 +237,20 @@ def test_a_run_states_names_are_read_without_torch_and_without_running_its_pickl
 
 
 @pytest.mark.slow
+def test_a_state_the_plain_reader_cannot_read_is_read_by_torch_and_its_snapshot_stays_needed(stopped, capsys,
+                                                                                             monkeypatch):
+    import selfplay_cli.train.needs as needs
+
+    def cannot(path):
+        raise ValueError("a layout of another torch")
+
+    monkeypatch.setattr(needs, "plain_state", cannot)
+    err = one_line_error(*run(capsys, "checkpoint", "rm", "r/s2k-left", "--home", str(stopped))[::2])
+    assert "--resume continues from it" in err
+    assert not removed(stopped, "s2k-left")
+
+
+@pytest.mark.slow
 def test_rm_of_a_needed_snapshot_is_refused_without_importing_torch(stopped):
     code = ("import sys; from selfplay_cli.cli import main; "
             f"code = main(['checkpoint', 'rm', 'r/s2k-left', '--home', {str(stopped)!r}]); "

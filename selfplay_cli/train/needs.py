@@ -127,11 +127,20 @@ def _state_names(path: Path) -> tuple[list[str], list[str]] | None:
     is no state a resume could use (no file, unreadable, another version's)."""
     if not path.is_file():
         return None
-    try:
-        state: Any = plain_state(path)
+
+    def read(state: Any) -> tuple[list[str], list[str]] | None:
         if not isinstance(state, dict) or state.get("version") != STATE_VERSION:
             return None
         return [str(n) for n in state["latest"]], [str(n) for names, _, _ in state["jobs"] for n in names]
+
+    try:
+        return read(plain_state(path))
+    except Exception:  # a layout the plain reader does not know: torch reads it, so a needed snapshot stays needed
+        pass
+    try:
+        import torch
+
+        return read(torch.load(path, map_location="cpu", weights_only=True, mmap=True))
     except Exception:  # a torn or foreign file: resuming refuses it by itself
         return None
 
