@@ -77,8 +77,12 @@ def main() -> None:
         marl(home, "train", "pong", "--agents", "2", "--steps", "2000", "--games", "4", "--eval-games", "0", "--run",
              "r", "--quiet")
         marl(home, "match", "random", "cpu", "--env", "pong", "--games", "4")
-        print(f"each command {args.rounds} times, a fresh process each (median; CPU: user + system seconds)"
-              + (f"; before: {args.before}" if args.before else ""))
+        before = ""
+        if args.before:
+            head = subprocess.run(["git", "-C", str(args.before), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                  text=True).stdout.strip() or "?"
+            before = f"; before: {args.before} at commit {head}"
+        print(f"each command {args.rounds} times, a fresh process each (median; CPU: user + system seconds){before}")
         width = max(len(" ".join(c)) for c in COMMANDS) + 6
         head = f"  {'command':<{width}}" + "".join(f"{name + ' CPU s':>14}{name + ' wall s':>14}" for name in trees)
         print(head + "  exit  heavy libraries loaded")
