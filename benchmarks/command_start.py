@@ -79,9 +79,9 @@ def main() -> None:
         marl(home, "match", "random", "cpu", "--env", "pong", "--games", "4")
         before = ""
         if args.before:
-            head = subprocess.run(["git", "-C", str(args.before), "rev-parse", "--short", "HEAD"], capture_output=True,
-                                  text=True).stdout.strip() or "?"
-            before = f"; before: {args.before} at commit {head}"
+            commit = subprocess.run(["git", "-C", str(args.before), "rev-parse", "--short", "HEAD"],
+                                    capture_output=True, text=True).stdout.strip() or "?"
+            before = f"; before: {args.before} at commit {commit}"
         print(f"each command {args.rounds} times, a fresh process each (median; CPU: user + system seconds){before}")
         width = max(len(" ".join(c)) for c in COMMANDS) + 6
         head = f"  {'command':<{width}}" + "".join(f"{name + ' CPU s':>14}{name + ' wall s':>14}" for name in trees)

@@ -248,6 +248,8 @@ def _team_reading(r: dict[str, Any], rows: dict[int, dict[int, Any]], vs: dict[i
     for n, cells in rows.items():
         above = [m for m in r["eval"] if _above(cells.get(m), [vs.get(m)])]
         means = [(m, cells[m]["mean"]) for m in r["eval"] if cells.get(m) and cells[m].get("mean") is not None]
+        if not means:  # (a size whose team was flown nowhere: its row of the table is all "-")
+            continue
         falls = [(b[1] - a[1], a, b) for a, b in itertools.pairwise(means)]
         fall = min(falls, default=None)
         steepest = (f"; its steepest fall, {fall[1][1]:.1f} at {fall[1][0]} to {fall[2][1]:.1f} at {fall[2][0]}"

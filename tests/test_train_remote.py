@@ -381,17 +381,18 @@ def test_the_wait_at_the_end_says_how_many_gauntlets_are_left_and_who_plays_them
 def test_a_resumed_run_takes_wait_or_no_wait_for_its_session(tmp_path):
     """Whether this session's end waits for the workers is the session's to say (--wait/--no-wait with --resume);
     who rates the run is the run's configuration, kept."""
+    from selfplay_cli.train.needs import resumable
     from selfplay_cli.train.settings import resumed_config
 
     with League.open(tmp_path / "h") as league:
         for name, mode in (("a", "remote"), ("b", "inline")):
             league.roster.create_run(name, "pong", TrainConfig(env="pong", run=name, eval=mode).to_dict(), algo="ppo")
-        assert resumed_config(league, "a", None, {"resume", "eval_wait"}, wait=False).eval_wait is False
-        assert resumed_config(league, "a", None, {"resume"}).eval_wait is True
+        assert resumed_config(league, resumable(league, "a"), {"resume", "eval_wait"}, wait=False).eval_wait is False
+        assert resumed_config(league, resumable(league, "a"), {"resume"}).eval_wait is True
         with pytest.raises(MarlError, match="--no-wait is for --eval local or remote"):
-            resumed_config(league, "b", None, {"resume", "eval_wait"}, wait=False)
+            resumed_config(league, resumable(league, "b"), {"resume", "eval_wait"}, wait=False)
         with pytest.raises(MarlError, match="--eval cannot change it"):
-            resumed_config(league, "a", None, {"resume", "eval"})
+            resumed_config(league, resumable(league, "a"), {"resume", "eval"})
 
 
 def test_work_no_attached_worker_takes_is_played_by_the_run(rated_league):

@@ -226,10 +226,10 @@ def train(
                 if resume is not None:
                     from ..train.needs import resumable
 
-                    resumable(league, resume, env)  # a run not there, or ended: said before the trainer's imports
+                    old = resumable(league, resume, env)  # not there, or ended: said before the trainer's imports
                     from ..train.settings import EXECUTOR_OPTIONS, resumed_config
 
-                    cfg = resumed_config(league, resume, env, typed, device,
+                    cfg = resumed_config(league, old, typed, device,
                                          wait=eval_wait if "eval_wait" in typed else None,
                                          executor={k: ctx.params[k] for k in EXECUTOR_OPTIONS if k in typed})
                     ray_here.enter_context(ray_for(cfg.to_dict()))

@@ -133,16 +133,19 @@ def _state_names(path: Path) -> tuple[list[str], list[str]] | None:
             return None
         return [str(n) for n in state["latest"]], [str(n) for names, _, _ in state["jobs"] for n in names]
 
-    try:
-        return read(plain_state(path))
-    except Exception:  # a layout the plain reader does not know: torch reads it, so a needed snapshot stays needed
-        pass
-    try:
+    def with_torch(path: Path) -> Any:
         import torch
 
-        return read(torch.load(path, map_location="cpu", weights_only=True, mmap=True))
-    except Exception:  # a torn or foreign file: resuming refuses it by itself
-        return None
+        return torch.load(path, map_location="cpu", weights_only=True, mmap=True)
+
+    # The plain reader first (no torch); a layout it does not know is read by torch, so a needed snapshot stays
+    # needed. A file neither reads is torn or foreign: resuming refuses it by itself.
+    for reader in (plain_state, with_torch):
+        try:
+            return read(reader(path))
+        except Exception:
+            continue
+    return None
 
 
 def _state_need(league: League, run: RunRow, full_name: str) -> str | None:

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import MarlError
-from ..league.store import League, shown
+from ..league.store import League, RunRow, shown
 from .bounds import ON_POLICY
 from .config import TrainConfig, can_teach, fups_without_partners, save_run_config, seat_plan_of
 from .matchmaking import parse_bots
@@ -280,27 +280,25 @@ def start_run(league: League, settings: dict[str, Any], run: str | None) -> Trai
     return cfg
 
 
-def resumed_config(league: League, resume: str, env: str | None, typed: Collection[str],
-                   device: str = "auto", wait: bool | None = None,
-                   executor: Mapping[str, Any] | None = None) -> TrainConfig:
-    """The configuration a stopped or killed run was started with, to continue it (``--resume``): ``typed``, the
-    options the user typed, may not change it (only the device, whether this session's end ``wait``s for the
-    league's workers, ``executor``: the :data:`EXECUTOR_OPTIONS` typed, and what is not a setting); ``env``, when
-    given, must be the run's game.
+def resumed_config(league: League, old: RunRow, typed: Collection[str], device: str = "auto",
+                   wait: bool | None = None, executor: Mapping[str, Any] | None = None) -> TrainConfig:
+    """The configuration the stopped or killed run ``old`` was started with, to continue it (``--resume``; ``old``
+    as :func:`~.needs.resumable` found it: there, readable, of the game asked for, not ended): ``typed``, the options
+    the user typed, may not change it (only the device, whether this session's end ``wait``s for the league's
+    workers, ``executor``: the :data:`EXECUTOR_OPTIONS` typed, and what is not a setting).
 
     The run's game is read from the league (its row and saved configuration, which any member of a shared league may
     have written): a game of your own is imported only when you name it again (``env``, the command's game argument,
     or ``MARL_GAMES``), never because the run's record names it (:mod:`selfplay_cli.envs.loading`)."""
     from ..envs.loading import GameNotAdmittedError, get_env
-    from .needs import resumable
 
+    resume = old.name
     ignored = sorted(set(typed) - RESUME_OPTIONS)
     if ignored:
         flags = ", ".join("--" + name.replace("_", "-") for name in ignored)
         raise MarlError(f"--resume continues run '{resume}' under the configuration it was started with: "
                         f"{flags} cannot change it (only --device, --wait/--no-wait, --executor, --actors, "
                         "--ray-address, --fragment-steps, --quiet, --json, --home, --db apply)")
-    old = resumable(league, resume, env)
     saved = old.config.get("env") if isinstance(old.config, dict) else old.env
     if saved != old.env:  # the game the saved configuration would load is the run's, or none
         raise MarlError(f"run '{resume}': its saved configuration names another game ({shown(saved)}) than the run "
