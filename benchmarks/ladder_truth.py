@@ -29,7 +29,7 @@ free-for-all). Targets per game: at least 90% of the 95% predictions held; media
 30 points where the pair met and 45 where it did not; at least 90% of margins held.
 
 Run: python benchmarks/ladder_truth.py [--games pong tennis ...] [--keep DIR] [--checks 200] [--max-pairs N]
-     [--budget GAME=ARGS] [--simulated 20]
+     [--budget GAME=ARGS] [--simulated 20] [--parallel 1]
 
 Writes ``benchmarks/results/ladder_truth.json``: what it printed, when, where and on what code, with the table and
 every checked pair as data (the league page renders its table, the misses and the targets from them).
@@ -48,6 +48,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -103,7 +104,9 @@ def train(home: Path, args: list[str], seed: int) -> tuple[str, dict]:
     if out.returncode != 0:
         raise SystemExit(f"marl train {shlex.join(args)} failed ({out.returncode}): {out.stderr.strip()}")
     data = json.loads(out.stdout)
-    report.write_text(json.dumps(data))
+    tmp = report.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data))
+    tmp.replace(report)  # a run killed before this line is trained again, whole
     print(f"  marl train {shlex.join(args)}: run {data['run']} in {time.perf_counter() - t0:.0f} s, "
           f"{data['steps']:,} steps, {data['rating_games']} rating games", flush=True)
     return data["run"], data
@@ -175,9 +178,9 @@ def check_margin(where: str, m: Margin, sign: float, elo: float, bound: int) -> 
             "held": margin_held(m_lo, m_hi, elo, bound), "held_expected": margin_held(lo, hi, elo, bound)}
 
 
-def check_game(name: str, home: Path, args: list[str], games: int, max_pairs: int | None, seed: int,
+def check_game(name: str, home: Path, trained: Future, games: int, max_pairs: int | None,
                rng: np.random.Generator) -> list[dict]:
-    run, report = train(home, args, seed)
+    run, report = trained.result()
     records = []
     with League.open(home) as league:
         env = league.roster.get_run(run).env
@@ -349,25 +352,33 @@ def main(data: dict) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--keep", type=Path, help="folder of the runs' leagues (kept; a finished run is reused)")
     ap.add_argument("--simulated", type=int, default=20, help="simulated leagues per spread")
+    ap.add_argument("--parallel", type=int, default=1,
+                    help="games' runs trained at once (each a process; a game is checked once its run is done)")
     args = ap.parse_args()
     rng = np.random.default_rng(0)
     budgets = dict(b.split("=", 1) for b in args.budget)
     table, real = [], []
     print(f"ladder_truth: {time.strftime('%Y-%m-%d %H:%M')}, {platform.node()}, {os.cpu_count()} cores, "
           f"python {platform.python_version()}", flush=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        root = args.keep or Path(tmp)
+    if args.parallel < 1:
+        raise SystemExit(f"--parallel must be at least 1, not {args.parallel}")
+    commands = {}
+    for game in args.games:
+        cmd = list(GAMES[game])
+        admit(cmd[0])  # its game named here, for the ladder and the checking matches (a user's game: connect four)
+        if game in budgets:  # the budget flags replaced
+            for flag in ("--minutes", "--steps"):
+                if flag in cmd:
+                    k = cmd.index(flag)
+                    del cmd[k:k + 2]
+            cmd += shlex.split(budgets[game])
+        commands[game] = cmd
+    with tempfile.TemporaryDirectory() as tmp, ThreadPoolExecutor(args.parallel) as pool:
+        root = args.keep or Path(tmp)  # (each run is its own process: the pool's threads only wait on them)
+        runs = {game: pool.submit(train, root / game, cmd, args.seed) for game, cmd in commands.items()}
         for game in args.games:
-            cmd = list(GAMES[game])
-            admit(cmd[0])  # its game named here, for the ladder and the checking matches (a user's game: connect four)
-            if game in budgets:  # the budget flags replaced
-                for flag in ("--minutes", "--steps"):
-                    if flag in cmd:
-                        k = cmd.index(flag)
-                        del cmd[k:k + 2]
-                cmd += shlex.split(budgets[game])
             try:
-                records = check_game(game, root / game, cmd, args.checks, args.max_pairs, args.seed, rng)
+                records = check_game(game, root / game, runs[game], args.checks, args.max_pairs, rng)
             except LeagueError as e:
                 print(f"{game}: {e}", flush=True)
                 continue
