@@ -281,10 +281,31 @@ def _team_reading(r: dict[str, Any], rows: dict[int, dict[int, Any]], vs: dict[i
     return out
 
 
+def _other_libraries(r: dict[str, Any]) -> str:
+    """``benchmarks/other_libraries.py``'s table as printed, then what the games page reads in it (so the page types no
+    figure): how much faster the recipe runs in one process than with its worker processes, and how many more game
+    steps the bare view plays than the recipe in one process, over the games of the table."""
+    text = _printed("benchmarks/results/other_libraries.json")(r)
+    lines = r["printed"]
+    head = next(i for i, x in enumerate(lines) if x.startswith("game "))
+    rows = []
+    for line in lines[head + 1:]:
+        if not line.strip() or line.startswith("load average"):
+            break
+        workers, inproc, bare = (float(x.replace(",", "")) for x in line.split()[-4:-1])
+        rows.append((workers, inproc, bare))
+    faster = [inproc / workers for workers, inproc, _ in rows]
+    more = [bare / inproc for _, inproc, bare in rows]
+    return text + (f"\nRead from the table: in one process the recipe runs {_span(faster)} times as fast as with 2 "
+                   f"worker processes (in-process / 2 workers), and the bare view plays {_span(more)} times as many "
+                   f"game steps as the recipe in one process (bare view / in-process).\n")
+
+
 FIGURES: dict[str, tuple[str, Any]] = {
     "ladder_truth": ("benchmarks/results/ladder_truth.json", _ladder_truth),
     "team_study_pursuit": ("docs/team-study-pursuit.json", _team_study("docs/team-study-pursuit.json")),
     "team_study_lander": ("docs/team-study-lander.json", _team_study("docs/team-study-lander.json")),
+    "other_libraries": ("benchmarks/results/other_libraries.json", _other_libraries),
 }
 """The blocks of figures a docs page may quote that are rendered as tables: the benchmark output each is rendered from,
 and how (any other block quotes what a benchmark printed, from ``benchmarks/results/NAME.json``)."""

@@ -110,6 +110,24 @@ def test_a_page_quotes_a_worked_examples_section_or_its_summary_lines_alone(tmp_
         figures("example_pong/plot", tmp_path)
 
 
+def test_the_games_page_reads_the_recipes_table_from_its_run():
+    """The games page's reading of ``benchmarks/other_libraries.py``'s table (in one process against 2 workers; the
+    bare view against the recipe in one process) is computed from the printed rows, here two rows worked by hand."""
+    from selfplay_cli.reference import _other_libraries
+
+    run = {"command": "python benchmarks/other_libraries.py", "date": "2026-11-30", "machine": "m", "seconds": 10,
+           "load_start": [0.5], "load_end": [1.0], "commit": "abc1234",
+           "printed": ["SuperSuit recipe ..., 8 games",
+                       "game                 2 workers  in-process   bare view   2 workers / in-process",
+                       "pong                     1,000       4,000      30,000                    0.25x",
+                       "lander landers=4         2,000       2,200       3,520                    0.91x",
+                       "load average 1.0, 1.0, 1.0"]}
+    text = _other_libraries(run)
+    assert "pong                     1,000" in text  # the table as printed
+    assert ("in one process the recipe runs 1.1 to 4.0 times as fast as with 2 worker processes" in text)  # 2200/2000
+    assert "the bare view plays 1.6 to 7.5 times as many game steps" in text  # 3520/2200, 30000/4000
+
+
 def test_the_teams_page_reads_its_tables_from_the_study_report():
     """What the teams page says of a study's tables (where a team beats the scripted player beyond doubt, its
     steepest fall, the adapted runs against the fresh ones, the runs' cost) is computed from the report, checked here
