@@ -5,7 +5,7 @@ of torch's per-call overhead every step (tens of microseconds each, more than th
 few dozen rows). A :class:`NetworkBank` stacks the networks' layers into ``(P, in, out)`` tensors and runs each
 layer once for all of them with ``torch.baddbmm``, on a ``(P, M, in)`` batch padded to the largest player's rows.
 
-Sampling draws one uniform per row (and dimension) from the bank's own generator (inverse CDF of the softmax);
+Sampling draws one uniform per row (and dimension) from the bank's own stream (inverse CDF of the softmax);
 greedy players take the argmax. Masked actions are never chosen (their logits are -inf, so their share of the CDF is
 empty). A MultiDiscrete head is handled as its dimensions' logits laid out side by side in one padded tensor; a Box
 head gives each member's Gaussian means, played as they are (greedy) or as ``mean + std * eps`` with one standard
@@ -13,6 +13,12 @@ normal per row and dimension, clipped to the bounds; a squashed one (SAC's actor
 played as ``tanh(mean)`` or ``tanh(mean + std * eps)`` on the bounds. A match between the same players with the same
 schedule therefore replays the same actions. A bank computes tanh as ``2 sigmoid(2x) - 1`` (faster here): its scores
 equal a network's own to float rounding, not bit for bit.
+
+A bank of a Discrete head on the CPU acting on few rows (at most :data:`NUMPY_ROWS` with its padding: a gauntlet's
+or a match's last games, a playoff round) runs its forward and its sampling in numpy instead: there torch's fixed
+cost per call (some 25 calls a step) is most of the step, and numpy's is a fraction of it (measured by
+``benchmarks/match_speed.py``). The two paths compute the same functions, to float rounding; the uniforms come from
+the bank's one stream either way, so a match still replays the same actions for the same schedule.
 """
 
 from __future__ import annotations
@@ -33,6 +39,20 @@ def _tanh(x: torch.Tensor) -> torch.Tensor:
 
 
 _FAST = {"tanh": _tanh, "relu": torch.relu_}
+
+
+def _np_relu(x: np.ndarray) -> np.ndarray:
+    return np.maximum(x, 0.0, out=x)
+
+
+def _np_tanh(x: np.ndarray) -> np.ndarray:
+    return np.tanh(x, out=x)
+
+
+_NUMPY = {"tanh": _np_tanh, "relu": _np_relu}
+NUMPY_ROWS = 256
+"""The most rows (members x the largest member's rows) a CPU bank of a Discrete head acts on in numpy (more go
+through torch, whose batched matmul wins on many rows)."""
 
 
 def bank_key(policy: object) -> tuple | None:
@@ -88,13 +108,27 @@ class NetworkBank:
         self.greedy = torch.tensor([p.greedy for p in members], device=self.device)[:, None]
         self.any_greedy = bool(self.greedy.any())
         self.any_sampling = not bool(self.greedy.all())
-        self.generator = torch.Generator(device=self.device)
-        self.generator.manual_seed(int(seed) ^ (sum(int(p.seed) * 1_000_003 ** k for k, p in enumerate(members))
-                                                & 0x7FFF_FFFF_FFFF))
+        bank_seed = int(seed) ^ (sum(int(p.seed) * 1_000_003 ** k for k, p in enumerate(members)) & 0x7FFF_FFFF_FFFF)
+        self.generator = torch.Generator(device=self.device)  # a Box head's normals
+        self.generator.manual_seed(bank_seed)
+        self.uniforms = np.random.Generator(np.random.PCG64(bank_seed))  # a categorical head's uniforms
         self.obs_dim = nets[0].obs_dim
+        # The numpy copies of the weights for few rows (see the module docstring): (P, in, out) layers, the action
+        # head and the dueling state value as (P, H, A) and (P, 1, A).
+        self.np_layers = None
+        act = _NUMPY.get(nets[0].arch.activation)
+        if self.device.type == "cpu" and self.head.kind == "discrete" and act is not None:
+            self.np_activation = act
+            self.np_layers = [(w.numpy().copy(), b.numpy().copy()) for w, b in self.layers]
+            self.np_out = (np.ascontiguousarray(self.out_w.numpy().transpose(0, 2, 1)),
+                           np.ascontiguousarray(self.out_b.numpy().transpose(0, 2, 1)))
+            self.np_value = None if self.state_value is None else (
+                np.ascontiguousarray(self.state_value[0].numpy().transpose(0, 2, 1)),
+                np.ascontiguousarray(self.state_value[1].numpy().transpose(0, 2, 1)))
+            self.np_greedy = self.greedy.numpy()  # (P, 1)
 
-    def _masks(self, masks: Sequence[np.ndarray | None] | None, rows: list[int], most: int) -> torch.Tensor | None:
-        """The members' masks as one ``(P, A, M)`` bool tensor (padding and members without a mask: all allowed)."""
+    def _masks(self, masks: Sequence[np.ndarray | None] | None, rows: list[int], most: int) -> np.ndarray | None:
+        """The members' masks as one ``(P, M, A)`` bool array (padding and members without a mask: all allowed)."""
         if masks is None or all(m is None for m in masks):
             return None
         if self.head.kind == "box":
@@ -107,12 +141,8 @@ class NetworkBank:
                 out[k, : rows[k]] = m
         if self.head.kind == "discrete" and not out.any(axis=2).all():
             raise ValueError("the action mask allows no action in some rows")
-        t = torch.from_numpy(out)
-        if self.device.type != "cpu":
-            t = t.to(self.device)
-        return t.transpose(1, 2)
+        return out
 
-    @torch.inference_mode()
     def act(self, obs: Sequence[np.ndarray], masks: Sequence[np.ndarray | None] | None = None) -> list[np.ndarray]:
         """Actions of every member for its own observations (``obs[k]``: member k's rows, any count, maybe 0) and,
         optionally, its action masks (``masks[k]``: ``(rows, n_actions)`` bool, or None)."""
@@ -127,7 +157,23 @@ class NetworkBank:
             if rows[k]:
                 x[k, : rows[k]] = o.reshape(rows[k], -1)
             x[k, rows[k]:] = 0.0  # padding (never garbage: no NaN or denormal slows the arithmetic down)
-        mask = self._masks(masks, rows, most)
+        mask_np = self._masks(masks, rows, most)
+        if self.np_layers is not None and len(obs) * most <= NUMPY_ROWS:
+            a = self._numpy_categorical(x, mask_np)
+            return [a[k, : rows[k]] for k in range(len(obs))]
+        every = self._torch_act(x, mask_np)
+        return [every[k, : rows[k]] for k in range(len(obs))]
+
+    @torch.inference_mode()
+    def _torch_act(self, x: np.ndarray, mask_np: np.ndarray | None) -> np.ndarray:
+        """The members' actions ``(P, M, ...)`` for the padded observations ``x`` ``(P, M, in)``, through torch."""
+        p, most = x.shape[0], x.shape[1]
+        mask = None
+        if mask_np is not None:
+            mask = torch.from_numpy(mask_np)
+            if self.device.type != "cpu":
+                mask = mask.to(self.device)
+            mask = mask.transpose(1, 2)
         z = torch.from_numpy(x)
         if self.device.type != "cpu":
             z = z.to(self.device)
@@ -141,21 +187,52 @@ class NetworkBank:
             log_std = squashed_log_std(torch.baddbmm(self.log_std_head[1], self.log_std_head[0], zt))
             a = self._squashed(out, log_std)
         elif self.head.kind == "discrete":
-            a = self._categorical(out if mask is None else out.masked_fill(~mask, float("-inf")), len(obs), most)
+            a = self._categorical(out if mask is None else out.masked_fill(~mask, float("-inf")), p, most)
         elif self.head.kind == "multidiscrete":
-            a = self._multi(out, mask, len(obs), most)
+            a = self._multi(out, mask, p, most)
         else:
-            a = self._gaussian(out, len(obs), most)
-        every = to_numpy_actions(self.head, a.reshape(len(obs) * most, *a.shape[2:]))  # one copy off the tensor
-        every = every.reshape(len(obs), most, *every.shape[1:])
-        return [every[k, : rows[k]] for k in range(len(obs))]
+            a = self._gaussian(out, p, most)
+        every = to_numpy_actions(self.head, a.reshape(p * most, *a.shape[2:]))  # one copy off the tensor
+        return every.reshape(p, most, *every.shape[1:])
+
+    def _numpy_categorical(self, x: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+        """A Discrete head's actions ``(P, M)`` int64 for the padded observations ``x`` ``(P, M, in)`` and masks
+        ``(P, M, A)``, in numpy: the torch path's functions (tanh itself, not through the sigmoid), the bank's
+        uniforms."""
+        z = x
+        for w, b in self.np_layers:  # type: ignore[union-attr]
+            z = np.matmul(z, w)
+            z += b
+            z = self.np_activation(z)
+        out = np.matmul(z, self.np_out[0])
+        out += self.np_out[1]  # (P, M, A)
+        if self.np_value is not None:
+            value = np.matmul(z, self.np_value[0]) + self.np_value[1]
+            out += value - out.mean(axis=2, keepdims=True)
+        if mask is not None:
+            out[~mask] = -np.inf
+        p, most = x.shape[0], x.shape[1]
+        actions = out.argmax(axis=2) if self.any_greedy else None
+        if self.any_sampling:  # as _categorical: a = #{k : cumsum(e)_k <= u * sum(e)}
+            e = np.exp(out - out.max(axis=2, keepdims=True))
+            np.cumsum(e, axis=2, out=e)
+            u = self.uniforms.random((p, most, 1), dtype=np.float32)  # (the torch path's draws, in the same order)
+            sampled = (e <= u * e[:, :, -1:]).sum(axis=2)
+            np.minimum(sampled, self.n_actions - 1, out=sampled)
+            actions = sampled if actions is None else np.where(self.np_greedy, actions, sampled)
+        return actions.astype(np.int64, copy=False)  # type: ignore[union-attr]
+
+    def _uniforms(self, shape: tuple[int, ...]) -> torch.Tensor:
+        """Uniforms [0, 1) of ``shape`` from the bank's stream, as a tensor on its device."""
+        u = torch.from_numpy(self.uniforms.random(shape, dtype=np.float32))
+        return u if self.device.type == "cpu" else u.to(self.device)
 
     def _categorical(self, out: torch.Tensor, p: int, most: int) -> torch.Tensor:
         """Discrete: ``out`` (P, A, M) -> actions (P, M)."""
         actions = out.argmax(dim=1) if self.any_greedy else None
         if self.any_sampling:  # inverse CDF of the softmax, unnormalised: a = #{k : cumsum(e)_k <= u * sum(e)}
             e = (out - out.amax(dim=1, keepdim=True)).exp_().cumsum_(dim=1)
-            u = torch.rand((p, 1, most), generator=self.generator, device=self.device)
+            u = self._uniforms((p, 1, most))
             sampled = (e <= u * e[:, -1:, :]).sum(dim=1).clamp_(max=self.n_actions - 1)
             actions = sampled if actions is None else torch.where(self.greedy, actions, sampled)
         return actions  # type: ignore[return-value]
@@ -173,7 +250,7 @@ class NetworkBank:
         actions = cat.argmax(dim=1) if self.any_greedy else None
         if self.any_sampling:
             e = (cat - cat.amax(dim=1, keepdim=True)).exp_().cumsum_(dim=1)
-            u = torch.rand((p, 1, most * k), generator=self.generator, device=self.device)
+            u = self._uniforms((p, 1, most * k))
             sampled = (e <= u * e[:, -1:, :]).sum(dim=1).clamp_(max=w - 1)
             actions = sampled if actions is None else torch.where(greedy, actions, sampled)
         return actions.reshape(p, most, k)  # type: ignore[union-attr]

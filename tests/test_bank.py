@@ -1,0 +1,81 @@
+"""A bank of networks acts as each network alone would, on the torch path and on the numpy path it takes for few
+rows (``NUMPY_ROWS``), and both paths draw the same uniforms from the bank's generator."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from gymnasium import spaces
+
+from selfplay_cli.policies import bank as bank_module
+from selfplay_cli.policies.bank import NetworkBank
+from selfplay_cli.policies.network import Arch, NetworkPolicy, build_network
+
+
+def _members(arch: Arch, greedy: list[bool], n_actions: int = 5, obs: int = 7) -> list[NetworkPolicy]:
+    return [NetworkPolicy(build_network((obs,), spaces.Discrete(n_actions), arch, seed=10 + k), f"p{k}", "g",
+                          greedy=g, seed=k) for k, g in enumerate(greedy)]
+
+
+def _both_paths(members: list[NetworkPolicy], obs: list[np.ndarray], masks=None, monkeypatch=None, seed: int = 3):
+    """The bank's actions on the numpy path and on the torch path, from two banks of one seed."""
+    numpy_bank, torch_bank = NetworkBank(members, seed=seed), NetworkBank(members, seed=seed)
+    assert numpy_bank.np_layers is not None
+    a = numpy_bank.act(obs, masks)
+    monkeypatch.setattr(bank_module, "NUMPY_ROWS", 0)  # every batch through torch
+    b = torch_bank.act(obs, masks)
+    monkeypatch.setattr(bank_module, "NUMPY_ROWS", 256)
+    return a, b
+
+
+@pytest.mark.parametrize("arch", [Arch(hidden=(16, 16)), Arch(hidden=(16,), activation="relu"),
+                                  Arch(hidden=(16, 16), value_head=False, dueling=True)],
+                         ids=["tanh", "relu", "dueling"])
+def test_the_numpy_path_plays_what_the_networks_and_the_torch_path_play(arch, monkeypatch):
+    rng = np.random.default_rng(0)
+    obs = [rng.normal(size=(r, 7)).astype(np.float32) for r in (9, 0, 4)]
+    greedy = _members(arch, [True, True, True])
+    a, b = _both_paths(greedy, obs, monkeypatch=monkeypatch)
+    for k, m in enumerate(greedy):  # greedy: each network's own argmax, on either path
+        assert a[k].dtype == np.int64 and a[k].shape == b[k].shape == (len(obs[k]),)
+        if len(obs[k]):  # (a member without rows this step gets none)
+            assert np.array_equal(a[k], m.act(obs[k])) and np.array_equal(b[k], m.act(obs[k]))
+    sampling = _members(arch, [False, False, True])
+    a, b = _both_paths(sampling, obs, monkeypatch=monkeypatch)
+    for x, y in zip(a, b, strict=True):  # the same uniforms, the same inverse CDF: the same draws
+        assert np.array_equal(x, y)
+    assert np.array_equal(a[2], sampling[2].act(obs[2]))  # a greedy member among sampling ones
+
+
+def test_the_numpy_path_keeps_to_masks_and_samples_by_the_softmax(monkeypatch):
+    members = _members(Arch(hidden=(8,)), [False, False], n_actions=4, obs=3)
+    rng = np.random.default_rng(1)
+    obs = [rng.normal(size=(100, 3)).astype(np.float32), rng.normal(size=(50, 3)).astype(np.float32)]
+    masks = [np.tile([True, False, True, False], (100, 1)), None]
+    bank = NetworkBank(members, seed=5)
+    counts = np.zeros(4)
+    for _ in range(20):  # 2,000 draws of the first member on one row's logits
+        a = bank.act([np.repeat(obs[0][:1], 100, axis=0), obs[1]], masks)
+        assert set(np.unique(a[0])) <= {0, 2}  # never a masked action
+        counts += np.bincount(a[0], minlength=4)
+    logits = members[0].net(torch.from_numpy(obs[0][:1]))[0].detach().numpy()[0]
+    p = np.exp(logits[[0, 2]] - logits[[0, 2]].max())
+    p /= p.sum()
+    share = counts[0] / counts.sum()
+    assert abs(share - p[0]) < 4 * np.sqrt(p[0] * p[1] / counts.sum()) + 1e-9  # the softmax's share, within 4 sigma
+    a, b = _both_paths(members, obs, masks, monkeypatch=monkeypatch)
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+def test_many_rows_go_through_torch():
+    members = _members(Arch(hidden=(8,)), [True, True])
+    bank = NetworkBank(members)
+    obs = [np.zeros((200, 7), dtype=np.float32)] * 2  # 400 rows > NUMPY_ROWS
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("numpy path taken for many rows")
+
+    bank._numpy_categorical = refuse  # type: ignore[method-assign]
+    out = bank.act(obs)
+    assert [len(x) for x in out] == [200, 200]
