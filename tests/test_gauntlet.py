@@ -494,3 +494,33 @@ def test_a_matchup_plays_on_until_its_record_predicts_a_match_within_the_precisi
     assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16, precision=0.30) == 4  # 8-0: 0.34 wide, plays on
     assert Matchup(a, bot, 0, wins=16, pairs=8).more(1.645, 4, 16, precision=0.30) == 0  # 16-0: 0.20, settled
     assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16) == 0  # no precision: clear is enough
+
+
+def test_a_playoff_round_plays_all_its_pairs_in_one_batch_each_to_its_own_size(tmp_path, monkeypatch):
+    """Two rivals with different games left before the cap (20 and 6 of 24) play one round together, one batch
+    (a round waits for its longest game, so a second batch would double the wait), each to its own size and on
+    seeds of its own."""
+    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
+    from selfplay_cli.evaluation.playoff import PlayoffConfig, playoff
+
+    league = League.open(tmp_path / "league")
+    league.roster.ensure_bots("pong", ["random", "cpu"])
+    s0, s1, s2 = snapshot_rows(league, "r", 3, learners=("left",))
+    rnd = league.roster.find_players("random", "pong")[0]
+    _gauntlet_games(league, s2, s1, [1, 0, 1, 0])  # 4 games: 20 left
+    _gauntlet_games(league, s2, s0, [1, 0] * 9)  # 18 games: 6 left
+    for s, points in ((s0, [1, 0, 1, 0]), (s1, [1, 0, 1, 0]), (s2, [1, 1, 1, 0])):  # s2 the top, not separated
+        _gauntlet_games(league, s, rnd, points)
+    _stand_ins(monkeypatch, gauntlet_mod, league, {s0.id: "random", s1.id: "random", s2.id: "random"})
+    batches = []
+    real_play = gauntlet_mod.play
+    monkeypatch.setattr(gauntlet_mod, "play", lambda *a, **k: batches.append(len(a[2])) or real_play(*a, **k))
+    played = playoff(league, [s2.id], first_seed=1000,
+                     config=PlayoffConfig(max_games=24, round_games=10, max_rounds=1))
+    assert batches == [16] and played == 16  # 10 + 6 games, in one batch
+    assert head_to_head(league, s2.id, s1.id)["games"] == 4 + 10
+    assert head_to_head(league, s2.id, s0.id)["games"] == 18 + 6
+    playoff_matches = [m for m, p in league.ledger.match_params("pong").items() if p.get("playoff")]
+    firsts = sorted(league.ledger.match_info(m)[1]["first_seed"] for m in playoff_matches)
+    assert len(playoff_matches) == 2 and firsts[0] == 1000 and firsts[1] in (1003, 1005)  # seeds of its own each
+    league.close()

@@ -28,6 +28,7 @@ the longest game of the batch. A matchup's games are stored in the ledger togeth
 from __future__ import annotations
 
 import functools
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -163,6 +164,7 @@ def play_gauntlet(
     label: str | None = None,
     key: str | None = None,
     expects: Sequence[float | None] | None = None,
+    sizes: Sequence[int] | None = None,
 ) -> list[Matchup]:
     """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
 
@@ -172,7 +174,9 @@ def play_gauntlet(
     player id; a player without one flies every seat itself. ``history``: the moment's
     :class:`~.gauntlet_plan.History`, whose games say which matchups are already clear (without one, none is);
     ``expects``: what a plan of the matchups found instead (:func:`open_matchups`: a matchup played as a job of its
-    own). ``label``: a flag set in the matches' parameters besides ``gauntlet`` (``playoff``).
+    own). ``label``: a flag set in the matches' parameters besides ``gauntlet`` (``playoff``). ``sizes``: the pairs
+    each matchup plays, no more and no fewer (a playoff round, whose pairs have different numbers of games left),
+    instead of ``config``'s rule; each matchup's seeds then span its own size.
 
     ``key``: the unit of work these matchups are (a run's gauntlet of one moment, a round of its playoff), where it
     may be played twice (its process killed, then the run resumed; a rating worker replaced): each matchup is
@@ -195,23 +199,28 @@ def play_gauntlet(
                 raise MarlError(f"a gauntlet plays one game: {row.full_name} plays {row.env}, not {env}")
             if row.id not in loaded:
                 loaded[row.id] = load_player(league, row, device=device, seed=mix_seed(first_seed, row.id))
+    if sizes is not None and (len(sizes) != len(pairs) or min(sizes) < 1):
+        raise ValueError(f"sizes must give each of the {len(pairs)} matchups at least one pair, not {list(sizes)}")
     gauntlet = _Gauntlet(league, cfg, loaded, crews, label, spec)
-    matchups, keys = _matchups(pairs, first_seed, cfg, key)
+    matchups, keys = _matchups(pairs, first_seed, cfg, key, sizes)
     stored = league.ledger.keyed_matches(f"{key}/") if key is not None else {}
     if key is not None and all(k in stored for k in keys):  # done before: what the ledger holds of it
         for m, k in zip(matchups, keys, strict=True):
             m.match_id, params = stored[k]
             m.wins, m.draws, m.losses, m.pairs = (int(x) for x in params.get("record", (0, 0, 0, 0)))
         return matchups
-    gauntlet.plan(matchups, keys, stored)
+    gauntlet.plan(matchups, keys, stored, sizes)
     for k, m in enumerate(matchups):
+        if sizes is not None:
+            gauntlet.schedule_pairs(k, sizes[k])
+            continue
         m.expect = (expects[k] if expects is not None else
                     None if history is None else _clear_history(league, history, m, gauntlet.z, 2 * cfg.pairs))
         if cfg.bot_pairs and m.b.is_bot:  # the final's figures against the bots: in full, whatever the history
             gauntlet.schedule_pairs(k, max(cfg.pairs, cfg.bot_pairs))
         else:
             gauntlet.schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
-    most = 2 * max(cfg.max_pairs, cfg.bot_pairs) * len(matchups)
+    most = 2 * (sum(sizes) if sizes is not None else max(cfg.max_pairs, cfg.bot_pairs) * len(matchups))
     play(gauntlet.spec, gauntlet.roster, gauntlet.schedule, parallel=cfg.parallel, env_options=gauntlet.options,
          record_actions=True, on_result=lambda r: gauntlet.finished(r, on_games), slots=min(cfg.parallel, most))
     return matchups
@@ -255,9 +264,12 @@ class _Gauntlet:
             raise MarlError(cannot_meet_message(self.spec.name, self.rules, m.a.full_name, roles[index[m.a.id]],
                                                 m.b.full_name, roles[index[m.b.id]])) from None
 
-    def plan(self, matchups: list[Matchup], keys: list[str | None], stored: dict) -> None:
-        """The matchups to play, their keys and those already stored; the games in a round of each."""
+    def plan(self, matchups: list[Matchup], keys: list[str | None], stored: dict,
+             sizes: Sequence[int] | None = None) -> None:
+        """The matchups to play, their keys and those already stored; the games in a round of each; the pairs each
+        may reach (``sizes``, or the config's ``max_pairs``)."""
         self.matchups, self.keys, self.stored = matchups, keys, stored
+        self.max_pairs = list(sizes) if sizes is not None else [self.cfg.max_pairs] * len(matchups)
         self.per = [len(self.round_games(m, m.first_seed)) for m in matchups]  # seatings that fit
         self.in_flight = dict.fromkeys(range(len(matchups)), 0)  # games scheduled but not finished, per matchup
         self.pending: dict[int, list[GameResult]] = {k: [] for k in range(len(matchups))}
@@ -291,7 +303,7 @@ class _Gauntlet:
         if on_games:
             on_games(1)
         if self.in_flight[k] == 0:  # every game scheduled so far is in: go on while still open, else store them all
-            extra = m.more(self.z, self.cfg.pairs, self.cfg.max_pairs, self.cfg.precision)
+            extra = m.more(self.z, min(self.cfg.pairs, self.max_pairs[k]), self.max_pairs[k], self.cfg.precision)
             key = self.keys[k]
             if extra:
                 self.schedule_pairs(k, extra)
@@ -360,11 +372,12 @@ def open_matchups(league: League, moment: Moment, *, first_seed: int, config: Ga
 
 
 def _matchups(pairs: Sequence[tuple[PlayerRow, PlayerRow]], first_seed: int, cfg: GauntletConfig,
-              key: str | None) -> tuple[list[Matchup], list[str | None]]:
-    """The matchups of ``pairs``, each with its own range of seeds (one per round it may reach), and their keys
-    under ``key`` (``<key>/<first seed>/<a>/<b>``)."""
-    span = max(cfg.max_pairs, cfg.bot_pairs)  # seeds reserved per matchup: one per round
-    matchups = [Matchup(a, b, first_seed + k * span) for k, (a, b) in enumerate(pairs)]
+              key: str | None, sizes: Sequence[int] | None = None) -> tuple[list[Matchup], list[str | None]]:
+    """The matchups of ``pairs``, each with its own range of seeds (one per round it may reach: ``sizes[k]``, or the
+    config's most), and their keys under ``key`` (``<key>/<first seed>/<a>/<b>``)."""
+    spans = list(sizes) if sizes is not None else [max(cfg.max_pairs, cfg.bot_pairs)] * len(pairs)
+    starts = list(itertools.accumulate(spans[:-1], initial=first_seed))[: len(spans)]  # (none for no pairs)
+    matchups = [Matchup(a, b, start) for (a, b), start in zip(pairs, starts, strict=True)]
     return matchups, [None if key is None else f"{key}/{m.first_seed}/{m.a.id}/{m.b.id}" for m in matchups]
 
 

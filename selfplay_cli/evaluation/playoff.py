@@ -11,8 +11,8 @@ well reverse it. So after the run's final gauntlet, the playoff:
    separated from (the confidence interval of their difference, as the ladder judges the pair, covers 0), the closest
    ``rivals`` of them;
 3. plays the top against each rival one round of ``round_games`` games (seat-swapped pairs, or the game kind's
-   rounds), and goes back to 1, until the top is separated from every snapshot of the run, or every pair of
-   top and rival has ``max_games`` games between them.
+   rounds), all of the round's pairs in one batch, and goes back to 1, until the top is separated from every
+   snapshot of the run, or every pair of top and rival has ``max_games`` games between them.
 
 Each round is a unit of work keyed by the run's final moment and the round's first seed: a playoff played again
 (its worker killed, the run resumed) skips the rounds it stored, and plays the one it was cut in again from the
@@ -52,7 +52,8 @@ class PlayoffConfig:
     """How far the playoff goes (games are counted between the top and one rival)."""
 
     max_games: int = 100  # results a pair of top and rival may reach (games; a cooperative game's comparisons)
-    round_games: int = 20  # results a pair adds in one round
+    round_games: int = 50  # results a pair adds in one round (a round lasts its longest game whatever its games:
+    # in pong between two top snapshots nearly every game runs to the step limit, so few big rounds wait least)
     rivals: int = 3  # rivals at most in a round, the closest to the top first
     confidence: float = 0.95  # the level at which the best must be separated
     max_rounds: int = 20  # a bound on the rounds whatever the top does (it may change between rounds)
@@ -92,7 +93,7 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
         if len(players) < 2:
             return played
         players.sort(key=lambda p: (-fit.rating(p.id), p.id))
-        by_rounds: dict[int, dict[frozenset[int], tuple]] = {}  # the pairs by the rounds each plays now
+        now: dict[frozenset[int], tuple[PlayerRow, PlayerRow, int]] = {}  # this round's pairs, with their rounds
         for group in _comparable(book, players, history.sided):
             sure = fit.above([p.id for p in group], cfg.confidence)  # as the ladder orders them (claims_order)
             order, _, _ = claims_order(sure, [fit.rating(p.id) for p in group])
@@ -109,17 +110,17 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
                 taken += 1
                 n = max(1, min(cfg.round_games, left) // per_round)
                 for a, b in pairs:
-                    by_rounds.setdefault(n, {}).setdefault(frozenset((a.id, b.id)), (a, b))
-        if not by_rounds:
+                    now.setdefault(frozenset((a.id, b.id)), (a, b, n))
+        if not now:
             return played
-        for n, unique in sorted(by_rounds.items()):
-            pairs = list(unique.values())
-            matchups = play_gauntlet(league, pairs, first_seed=seed,
-                                     config=GauntletConfig(pairs=n, clear_pairs=n, max_pairs=n, older=0),
-                                     device=device, on_games=on_games, label="playoff", key=f"{key}/{seed}",
-                                     crews={m.id: crew for crew in crews.values() for m in crew[:1]})
-            played += sum(m.games for m in matchups)
-            seed += n * len(pairs)
+        # One batch for the whole round: its wall time is its longest game's, whatever the games in it.
+        unique = list(now.values())
+        matchups = play_gauntlet(league, [(a, b) for a, b, _ in unique], first_seed=seed,
+                                 config=GauntletConfig(older=0), device=device, on_games=on_games, label="playoff",
+                                 key=f"{key}/{seed}", crews={m.id: crew for crew in crews.values() for m in crew[:1]},
+                                 sizes=[n for _, _, n in unique])
+        played += sum(m.games for m in matchups)
+        seed += sum(n for _, _, n in unique)
     return played
 
 
