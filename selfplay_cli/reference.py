@@ -79,12 +79,7 @@ def home_page(readme: str) -> str:
 def _ladder_truth(data: dict[str, Any]) -> str:
     """``benchmarks/results/ladder_truth.json`` as the league page quotes it: the table, then per game whether it holds
     the targets, then every claim a reader meets that missed (from the checked pairs)."""
-    source = "benchmarks/results/ladder_truth.json"
-    if data.get("command"):
-        head = f"{_stamp(source, data)}; every checked pair is in the file.\n\n"
-    else:  # a file written before benchmarks/results_file.py stamped it (the merge of three runs, said in `how`)
-        head = (f"Measured {data['date']} on `{data['machine']}` ({data.get('how', '')}); every checked pair in "
-                f"`{source}`.\n\n")
+    head = f"{_stamp('benchmarks/results/ladder_truth.json', data)}; every checked pair is in the file.\n\n"
     head += ("| game | pairs checked | 95% predictions held | open, met: median width (pairs) | open, never met | "
              "printed margins held: the 200-game range (the expected-difference interval) | order claims held | "
              "row margins (JSON) held: range (interval) |\n|---|---|---|---|---|---|---|---|\n")
