@@ -468,7 +468,9 @@ def test_a_matchup_plays_on_until_its_record_predicts_a_match_within_the_precisi
     score anywhere above ``0.025 ** (1 / 9)``), 16-0 [80%, 100%], 5-3 [29%, 87%]. Draws narrow it: 16-16-0 is
     narrower than 24-0-8 of the same mean, and 8 draws of 8 do not predict a certain 50%. A matchup at 5-3
     doubles its pairs (4 to 8) while the width is above the precision, and stops at its cap; a matchup with a
-    scripted player too (8-0 against a bot plays on; 16-0 stops); without a precision, it stops once clear."""
+    scripted player too (8-0 against a bot plays on; 16-0 stops); without a precision, it stops once clear. With a
+    precision it doubles at once as often as its record, scaled up, would still be too wide (each stop on the way
+    would cost a game's length of waiting)."""
     from types import SimpleNamespace
 
     from scipy.stats import betabinom
@@ -485,12 +487,14 @@ def test_a_matchup_plays_on_until_its_record_predicts_a_match_within_the_precisi
 
     a, b, bot = (SimpleNamespace(id=i, is_bot=i == 3) for i in (1, 2, 3))
     open_pair = Matchup(a, b, 0, wins=5, draws=0, losses=3, pairs=4)
-    assert open_pair.more(1.645, 4, 16, precision=0.30) == 4  # doubles
+    assert open_pair.more(1.645, 4, 16, precision=0.30) == 12  # 10-6 would be 0.45 wide, 20-12 0.35: to its cap
+    assert Matchup(a, b, 0, wins=7, losses=1, pairs=4).more(1.645, 4, 64, precision=0.30) == 12  # 28-4 is enough
+    assert Matchup(a, b, 0, wins=7, losses=1, pairs=4).more(1.645, 4, 64, precision=0.40) == 4  # 14-2 is enough
     assert Matchup(a, b, 0, wins=5, draws=0, losses=3, pairs=16).more(1.645, 4, 16, precision=0.30) == 0  # capped
     assert Matchup(a, b, 0, wins=48, draws=0, losses=16, pairs=32).more(1.645, 4, 64, precision=0.30) == 0
     assert open_pair.more(1.645, 4, 16) == 4 and Matchup(a, b, 0, wins=8, pairs=4).more(1.645, 4, 16) == 0
     assert Matchup(a, b, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.70) == 0  # 0.58 is enough
-    assert Matchup(a, bot, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.30) == 4  # a bot: open
+    assert Matchup(a, bot, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.30) == 12  # a bot: open
     assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16, precision=0.30) == 4  # 8-0: 0.34 wide, plays on
     assert Matchup(a, bot, 0, wins=16, pairs=8).more(1.645, 4, 16, precision=0.30) == 0  # 16-0: 0.20, settled
     assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16) == 0  # no precision: clear is enough

@@ -107,7 +107,9 @@ class Matchup:
         matchup doubles its pairs up to ``max_pairs`` while its result is open; with ``precision``, while its record
         cannot yet predict a 200-game match of the two to within ``precision`` score points
         (:func:`prediction_width`), whoever plays: what the ladder says of a scripted player and a snapshot, or of
-        two scripted players, rests on their games as much as what it says of two snapshots."""
+        two scripted players, rests on their games as much as what it says of two snapshots. With ``precision`` it
+        doubles as often as its record, scaled to the larger number of games, would still be too wide, at once:
+        5-3 after 4 pairs goes to 16 pairs (10-6 is 0.45 wide, 20-12 0.35), 8-0 to 8 (16-0 is 0.20)."""
         if self.expect is not None:
             agrees = (self.score - 0.5) * (self.expect - 0.5) > 0
             return 0 if agrees else max(pairs - self.pairs, 0)
@@ -117,7 +119,14 @@ class Matchup:
             settled = clear(self.wins, self.losses, z)
         if self.pairs >= max_pairs or settled:
             return 0
-        return min(2 * self.pairs, max_pairs) - self.pairs
+        target = min(2 * self.pairs, max_pairs)
+        if precision:  # straight to the doubling its record, as it stands, would need (each stop on the way costs a
+            # whole game's length of waiting): the record scaled to the target's games, up to the cap
+            record = (self.wins, self.draws, self.losses)
+            scale = 1 / max(self.pairs, 1)
+            while target < max_pairs and prediction_width(*(round(x * target * scale) for x in record)) > precision:
+                target = min(2 * target, max_pairs)
+        return target - self.pairs
 
 
 @functools.lru_cache(maxsize=4096)  # (a few ms each; a run's matchups repeat the same records: 8-0, 16-0, ...)
