@@ -69,13 +69,15 @@ def test_the_numpy_path_keeps_to_masks_and_samples_by_the_softmax(monkeypatch):
 
 
 def test_many_rows_go_through_torch():
-    members = _members(Arch(hidden=(8,)), [True, True])
-    bank = NetworkBank(members)
-    obs = [np.zeros((200, 7), dtype=np.float32)] * 2  # 400 rows > NUMPY_ROWS
-
+    """More rows than NUMPY_ROWS, or more a member than numpy's BLAS multiplies on one thread (it would start a
+    thread per core and take the trainer's), go through torch."""
     def refuse(*args, **kwargs):
-        raise AssertionError("numpy path taken for many rows")
+        raise AssertionError("numpy path taken")
 
+    bank = NetworkBank(_members(Arch(hidden=(8,)), [True, True]))
     bank._numpy_categorical = refuse  # type: ignore[method-assign]
-    out = bank.act(obs)
-    assert [len(x) for x in out] == [200, 200]
+    assert [len(x) for x in bank.act([np.zeros((200, 7), dtype=np.float32)] * 2)] == [200, 200]  # 400 > 256
+    wide = NetworkBank(_members(Arch(hidden=(256, 256)), [True]))
+    assert wide.np_rows == 262_144 // (256 * 256) == 4
+    wide._numpy_categorical = refuse  # type: ignore[method-assign]
+    assert len(wide.act([np.zeros((5, 7), dtype=np.float32)])[0]) == 5  # 5 x 256 x 256 > 262,144

@@ -14,8 +14,9 @@ played as ``tanh(mean)`` or ``tanh(mean + std * eps)`` on the bounds. A match be
 schedule therefore replays the same actions. A bank computes tanh as ``2 sigmoid(2x) - 1`` (faster here): its scores
 equal a network's own to float rounding, not bit for bit.
 
-A bank of a Discrete head on the CPU acting on few rows (at most :data:`NUMPY_ROWS` with its padding: a gauntlet's
-or a match's last games, a playoff round) runs its forward and its sampling in numpy instead: there torch's fixed
+A bank of a Discrete head on the CPU acting on few rows (at most :data:`NUMPY_ROWS` with its padding, and few
+enough a member that numpy's BLAS stays on one thread: :data:`SINGLE_THREAD_MNK`; a gauntlet's or a match's last
+games) runs its forward and its sampling in numpy instead: there torch's fixed
 cost per call (some 25 calls a step) is most of the step, and numpy's is a fraction of it (measured by
 ``benchmarks/match_speed.py``). The two paths compute the same functions, to float rounding; the uniforms come from
 the bank's one stream either way, so a match still replays the same actions for the same schedule.
@@ -53,6 +54,10 @@ _NUMPY = {"tanh": _np_tanh, "relu": _np_relu}
 NUMPY_ROWS = 256
 """The most rows (members x the largest member's rows) a CPU bank of a Discrete head acts on in numpy (more go
 through torch, whose batched matmul wins on many rows)."""
+SINGLE_THREAD_MNK = 262_144
+"""numpy's OpenBLAS multiplies on one thread while rows x in x out of a product is at most this (its
+``GEMM_MULTITHREAD_THRESHOLD`` of 4 x 65,536); above it, it starts a thread per core, which beside training takes the
+trainer's core. A member's rows in numpy stay under it."""
 
 
 def bank_key(policy: object) -> tuple | None:
@@ -126,6 +131,8 @@ class NetworkBank:
                 np.ascontiguousarray(self.state_value[0].numpy().transpose(0, 2, 1)),
                 np.ascontiguousarray(self.state_value[1].numpy().transpose(0, 2, 1)))
             self.np_greedy = self.greedy.numpy()  # (P, 1)
+            widest = max(w.shape[1] * w.shape[2] for w, _ in self.np_layers)
+            self.np_rows = SINGLE_THREAD_MNK // max(widest, self.np_out[0].shape[1] * self.np_out[0].shape[2])
 
     def _masks(self, masks: Sequence[np.ndarray | None] | None, rows: list[int], most: int) -> np.ndarray | None:
         """The members' masks as one ``(P, M, A)`` bool array (padding and members without a mask: all allowed)."""
@@ -158,7 +165,7 @@ class NetworkBank:
                 x[k, : rows[k]] = o.reshape(rows[k], -1)
             x[k, rows[k]:] = 0.0  # padding (never garbage: no NaN or denormal slows the arithmetic down)
         mask_np = self._masks(masks, rows, most)
-        if self.np_layers is not None and len(obs) * most <= NUMPY_ROWS:
+        if self.np_layers is not None and len(obs) * most <= NUMPY_ROWS and most <= self.np_rows:
             a = self._numpy_categorical(x, mask_np)
             return [a[k, : rows[k]] for k in range(len(obs))]
         every = self._torch_act(x, mask_np)
