@@ -109,7 +109,7 @@ class Matchup:
         (:func:`prediction_width`), whoever plays: what the ladder says of a scripted player and a snapshot, or of
         two scripted players, rests on their games as much as what it says of two snapshots. With ``precision`` it
         doubles as often as its record, scaled to the larger number of games, would still be too wide, at once:
-        5-3 after 4 pairs goes to 16 pairs (10-6 is 0.45 wide, 20-12 0.35), 8-0 to 8 (16-0 is 0.20)."""
+        5-3 after 4 pairs goes to its cap of 16 pairs (10-6 is 0.45 wide, 20-12 0.35), 8-0 to 8 (16-0 is 0.20)."""
         if self.expect is not None:
             agrees = (self.score - 0.5) * (self.expect - 0.5) > 0
             return 0 if agrees else max(pairs - self.pairs, 0)
