@@ -282,7 +282,9 @@ def _other_libraries(r: dict[str, Any]) -> str:
     steps the bare view plays than the recipe in one process, over the games of the table."""
     text = _printed("benchmarks/results/other_libraries.json")(r)
     lines = r["printed"]
-    head = next(i for i, x in enumerate(lines) if x.startswith("game "))
+    head = next((i for i, x in enumerate(lines) if x.startswith("game ")), None)
+    if head is None:
+        raise ValueError("benchmarks/results/other_libraries.json printed no table (no line starting 'game ')")
     rows = []
     for line in lines[head + 1:]:
         if not line.strip() or line.startswith("load average"):

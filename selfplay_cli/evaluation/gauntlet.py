@@ -385,8 +385,8 @@ def _matchups(pairs: Sequence[tuple[PlayerRow, PlayerRow]], first_seed: int, cfg
     """The matchups of ``pairs``, each with its own range of seeds (one per round it may reach: ``sizes[k]``, or the
     config's most), and their keys under ``key`` (``<key>/<first seed>/<a>/<b>``)."""
     spans = list(sizes) if sizes is not None else [max(cfg.max_pairs, cfg.bot_pairs)] * len(pairs)
-    starts = list(itertools.accumulate(spans[:-1], initial=first_seed))[: len(spans)]  # (none for no pairs)
-    matchups = [Matchup(a, b, start) for (a, b), start in zip(pairs, starts, strict=True)]
+    starts = itertools.accumulate(spans, initial=first_seed)  # (one more than the pairs: where the last range ends)
+    matchups = [Matchup(a, b, start) for (a, b), start in zip(pairs, starts, strict=False)]
     return matchups, [None if key is None else f"{key}/{m.first_seed}/{m.a.id}/{m.b.id}" for m in matchups]
 
 
