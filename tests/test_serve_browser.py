@@ -101,8 +101,15 @@ def test_every_page_in_a_real_browser(served, tmp_path: Path, capsys) -> None:
             page.locator("#replays a.replay").first.click()  # player -> its replay
             video = page.locator("video#video")
             video.wait_for()
-            page.wait_for_function("document.querySelector('video').readyState >= 1", timeout=20_000)
-            duration = page.evaluate("document.querySelector('video').duration")
+            # The page's CSP (script-src 'none') refuses the string eval that wait_for_function polls with, so the
+            # video's own event is awaited: one call, which resolves on loadedmetadata (or at once if it came first).
+            duration = page.evaluate("""() => new Promise((resolve, reject) => {
+                const v = document.querySelector('video');
+                if (v.readyState >= 1) { resolve(v.duration); return; }
+                v.addEventListener('loadedmetadata', () => resolve(v.duration), {once: true});
+                v.addEventListener('error', () => reject(new Error('the video did not load')), {once: true});
+                setTimeout(() => reject(new Error('no loadedmetadata in 20 s')), 20000);
+            })""")
             assert duration > 0
             page.screenshot(path=str(shots / "replay.png"))
             assert errors == []
