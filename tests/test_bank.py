@@ -21,11 +21,11 @@ def _members(arch: Arch, greedy: list[bool], n_actions: int = 5, obs: int = 7) -
 def _both_paths(members: list[NetworkPolicy], obs: list[np.ndarray], masks=None, monkeypatch=None, seed: int = 3):
     """The bank's actions on the numpy path and on the torch path, from two banks of one seed."""
     numpy_bank, torch_bank = NetworkBank(members, seed=seed), NetworkBank(members, seed=seed)
-    assert numpy_bank.np_layers is not None
+    assert numpy_bank.numpy
     a = numpy_bank.act(obs, masks)
     monkeypatch.setattr(bank_module, "NUMPY_ROWS", 0)  # every batch through torch
     b = torch_bank.act(obs, masks)
-    monkeypatch.setattr(bank_module, "NUMPY_ROWS", 256)
+    monkeypatch.undo()
     return a, b
 
 
@@ -76,8 +76,36 @@ def test_many_rows_go_through_torch():
 
     bank = NetworkBank(_members(Arch(hidden=(8,)), [True, True]))
     bank._numpy_categorical = refuse  # type: ignore[method-assign]
-    assert [len(x) for x in bank.act([np.zeros((200, 7), dtype=np.float32)] * 2)] == [200, 200]  # 400 > 256
+    assert [len(x) for x in bank.act([np.zeros((200, 7), dtype=np.float32)] * 2)] == [200, 200]  # 400 > 384
     wide = NetworkBank(_members(Arch(hidden=(256, 256)), [True]))
     assert wide.np_rows == 262_144 // (256 * 256) == 4
     wide._numpy_categorical = refuse  # type: ignore[method-assign]
     assert len(wide.act([np.zeros((5, 7), dtype=np.float32)])[0]) == 5  # 5 x 256 x 256 > 262,144
+
+
+def test_a_member_with_many_rows_fills_several_slots_and_plays_what_padding_plays(monkeypatch):
+    """A gauntlet's new snapshot with many rows beside opponents with few: slots of the few's size (not every member
+    padded to the most rows), a member without rows in none; the same actions as the padded batch, on either path
+    (the uniforms are drawn per row, whatever the layout)."""
+    arch = Arch(hidden=(16, 16))
+    rows = (56, 16, 0, 5)
+    rng = np.random.default_rng(2)
+    obs = [rng.normal(size=(r, 7)).astype(np.float32) for r in rows]
+    lay = NetworkBank(_members(arch, [False] * 4)).layout(rows)
+    # widths 56, 16 and 5 cost 3 x (56 + 16), 6 x (16 + 16) and 17 x (5 + 16) rows (SLOT_ROWS = 16 a slot)
+    assert (lay.width, lay.slots, lay.starts) == (16, (0, 0, 0, 0, 1, 3), (0, 64, 80, 80))
+    for greedy in ([False, False, True, False], [True] * 4):
+        members = _members(arch, greedy)
+        slotted = NetworkBank(members, seed=4).act(obs)
+        monkeypatch.setattr(bank_module, "SLOT_ROWS", 10**6)  # one slot a member, padded to 56 rows
+        padded_bank = NetworkBank(members, seed=4)
+        assert padded_bank.layout(rows).width == 56
+        padded = padded_bank.act(obs)
+        monkeypatch.setattr(bank_module, "NUMPY_ROWS", 0)
+        through_torch = NetworkBank(members, seed=4).act(obs)
+        monkeypatch.undo()
+        for k, m in enumerate(members):
+            assert slotted[k].shape == (rows[k],)
+            assert np.array_equal(slotted[k], padded[k]) and np.array_equal(slotted[k], through_torch[k])
+            if m.greedy and rows[k]:
+                assert np.array_equal(slotted[k], m.act(obs[k]))
