@@ -88,17 +88,6 @@ pong's 64x64 networks): :meth:`NetworkBank.layout` splits members into slots onl
 
 
 @dataclass(frozen=True)
-class Layout:
-    """How one step's rows sit in a bank's batch: ``slots`` (the member each of ``V`` slots of ``width`` rows holds;
-    a member with many rows fills several slots, one after the other, one without rows none) and ``starts``, where
-    each member's rows begin in the batch's ``V * width`` rows (they run on from there, the padding after them)."""
-
-    slots: tuple[int, ...]
-    width: int
-    starts: tuple[int, ...]
-
-
-@dataclass(frozen=True)
 class _Stack:
     """The members' weights in the order of a layout's slots: ``(V, in, out)`` layers, the action head as ``(V, A, H)``
     (the log-std head and the dueling state value alike), Box stds ``(V, d, 1)``, who plays greedy ``(V, 1)``; and
@@ -146,6 +135,21 @@ class _Stack:
                       heads(self.state_value), self.greedy.numpy())
 
 
+@dataclass(frozen=True)
+class Layout:
+    """How one step's rows sit in a bank's batch: ``slots`` (the member each of ``V`` slots of ``width`` rows holds;
+    a member with many rows fills several slots, one after the other, one without rows none) and ``starts``, where
+    each member's rows begin in the batch's ``V * width`` rows (they run on from there, the padding after them)."""
+
+    slots: tuple[int, ...]
+    width: int
+    starts: tuple[int, ...]
+    bounds: tuple[int, ...]  # where each member's rows begin, the rows end to end (and where they end)
+    dense: bool  # no padding: the rows end to end are the batch's rows
+    stack: _Stack  # the members' weights, slot by slot
+    numpy: bool  # acted on in numpy (see the module docstring)
+
+
 class NetworkBank:
     """The policies ``members`` (one :func:`bank_key`) as one batched network."""
 
@@ -178,6 +182,9 @@ class NetworkBank:
             greedy = torch.tensor([p.greedy for p in members], device=self.device)[:, None]
             self.stack = _Stack(layers, stacked([n.action_head for n in nets]), state_value, log_std_head, std, greedy)
         self.members = len(members)
+        # the uniforms a row draws (a categorical head where a member samples): their shape
+        self.draws = (self.head.action_shape if self.head.kind in ("discrete", "multidiscrete")
+                      and self.stack.any_sampling else None)
         bank_seed = int(seed) ^ (sum(int(p.seed) * 1_000_003 ** k for k, p in enumerate(members)) & 0x7FFF_FFFF_FFFF)
         self.generator = torch.Generator(device=self.device)  # a Box head's normals
         self.generator.manual_seed(bank_seed)
@@ -218,9 +225,12 @@ class NetworkBank:
         for k, r in enumerate(key):
             starts.append(len(slots) * width)
             slots += [k] * -(-r // width)
+        bounds = tuple(int(b) for b in np.cumsum([0, *key]))
         if len(self._layouts) >= 256:  # (a long gauntlet passes through many; the recent ones recur)
             self._layouts.clear()
-        got = self._layouts[key] = Layout(tuple(slots), width, tuple(starts))
+        numpy = self.numpy and len(slots) * width <= NUMPY_ROWS and width <= self.np_rows
+        got = self._layouts[key] = Layout(tuple(slots), width, tuple(starts), bounds, bounds[-1] == len(slots) * width,
+                                          self._stack_for(tuple(slots)), numpy)
         return got
 
     def _stack_for(self, slots: tuple[int, ...]) -> _Stack:
@@ -232,11 +242,15 @@ class NetworkBank:
             got = self._stacks[slots] = self.stack.take(slots, self.numpy)
         return got
 
-    def _spread(self, parts: Sequence[np.ndarray | None], rows: list[int], lay: Layout, fill: float | bool,
-                dtype: type, shape: tuple[int, ...]) -> np.ndarray:
+    @staticmethod
+    def _spread(parts: Sequence[np.ndarray | None], rows: list[int], lay: Layout, fill: bool, dtype: type,
+                shape: tuple[int, ...]) -> np.ndarray:
         """Each member's per-row values (``parts[k]``: ``(rows[k], *shape)``; None: ``fill``) in the layout's slots
-        ``(V, width, *shape)`` (padding: ``fill``)."""
-        out = np.full((len(lay.slots) * lay.width, *shape), fill, dtype=dtype)
+        ``(V, width, *shape)`` (padding: ``fill``, zeros or ones)."""
+        if lay.dense and all(p is not None for p in parts):  # the rows end to end, as they are
+            flat = np.concatenate([p.reshape(r, *shape) for p, r in zip(parts, rows, strict=True) if r])
+            return flat.astype(dtype, copy=False).reshape(len(lay.slots), lay.width, *shape)
+        out = (np.zeros if not fill else np.ones)((len(lay.slots) * lay.width, *shape), dtype=dtype)
         for k, (part, r) in enumerate(zip(parts, rows, strict=True)):
             if r and part is not None:
                 out[lay.starts[k] : lay.starts[k] + r] = part.reshape(r, *shape)
@@ -264,23 +278,21 @@ class NetworkBank:
             shape = self.head.action_shape
             dtype = np.float32 if self.head.kind == "box" else np.int64
             return [np.zeros((0, *shape), dtype=dtype) for _ in obs]
-        lay = self.layout(rows)
+        lay = self._layouts.get(tuple(rows)) or self.layout(rows)
         # padding is zeros (never garbage: no NaN or denormal slows the arithmetic down)
-        x = self._spread(obs, rows, lay, 0.0, np.float32, (self.obs_dim,))
+        x = self._spread(obs, rows, lay, False, np.float32, (self.obs_dim,))
         mask = self._masks(masks, rows, lay)
         u = None  # a categorical head's uniforms: one per row (and dimension), drawn for the rows end to end, so the
         # draws do not depend on the layout or the path
-        if self.head.kind in ("discrete", "multidiscrete") and self.stack.any_sampling:
-            shape = self.head.action_shape
-            drawn = self.uniforms.random((n, *shape), dtype=np.float32)
-            bounds = np.cumsum([0, *rows])
-            u = self._spread([drawn[bounds[k] : bounds[k + 1]] for k in range(len(rows))], rows, lay, 0.0,
-                             np.float32, shape)
-        stack = self._stack_for(lay.slots)
-        if self.numpy and len(lay.slots) * lay.width <= NUMPY_ROWS and lay.width <= self.np_rows:
-            every = self._numpy_categorical(x, mask, u, stack)
-        else:
-            every = self._torch_act(x, mask, u, stack)
+        if self.draws is not None:
+            drawn = self.uniforms.random((n, *self.draws), dtype=np.float32)
+            if lay.dense:
+                u = drawn.reshape(len(lay.slots), lay.width, *self.draws)
+            else:
+                b = lay.bounds
+                u = self._spread([drawn[b[k] : b[k + 1]] for k in range(len(rows))], rows, lay, False, np.float32,
+                                 self.draws)
+        every = (self._numpy_categorical if lay.numpy else self._torch_act)(x, mask, u, lay.stack)
         flat = every.reshape(len(lay.slots) * lay.width, *every.shape[2:])
         return [flat[lay.starts[k] : lay.starts[k] + r] for k, r in enumerate(rows)]
 
