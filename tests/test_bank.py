@@ -109,3 +109,31 @@ def test_a_member_with_many_rows_fills_several_slots_and_plays_what_padding_play
             assert np.array_equal(slotted[k], padded[k]) and np.array_equal(slotted[k], through_torch[k])
             if m.greedy and rows[k]:
                 assert np.array_equal(slotted[k], m.act(obs[k]))
+
+
+def test_a_lone_network_against_a_scripted_player_acts_through_a_bank_of_its_own():
+    """A snapshot against a bot (``marl match A cpu``, a gate against the bots) gets the bank's numpy path: the
+    played actions follow its softmax, and the same match replays them."""
+    from selfplay_cli.play.matches import Game, _acting_groups, play
+    from selfplay_cli.play.replay import decode_actions, seat_actions
+    from selfplay_cli.policies.bots import ScriptedPolicy
+
+    def fixed(seed: int) -> NetworkPolicy:  # logits [0, 1, -1] whatever it sees
+        net = build_network((8, 6), 3, Arch(hidden=(4,)), seed=0)
+        with torch.no_grad():
+            net.action_head.weight.zero_()
+            net.action_head.bias.copy_(torch.tensor([0.0, 1.0, -1.0]))
+        return NetworkPolicy(net, "fixed", "pong", greedy=False, seed=seed)
+
+    bot = ScriptedPolicy("pong", "cpu", seed=0)
+    groups = _acting_groups([fixed(1), bot])
+    assert isinstance(groups[0][1], NetworkBank) and groups[1][1] is None
+    games = [Game(seed=s, seats=(0, 1) if s % 2 == 0 else (1, 0)) for s in range(4)]
+    opts = {"max_steps": 500}
+    first = play("pong", [fixed(1), bot], games, env_options=opts, record_actions=True)
+    again = play("pong", [fixed(1), bot], games, env_options=opts, record_actions=True)
+    assert [r.actions for r in first] == [r.actions for r in again]
+    played = np.concatenate([seat_actions(decode_actions(r.actions, 2))[g.seats.index(0)]
+                             for r, g in zip(first, games, strict=True)])
+    share = np.bincount(played, minlength=3) / len(played)
+    np.testing.assert_allclose(share, torch.softmax(torch.tensor([0.0, 1.0, -1.0]), 0).numpy(), atol=0.03)
