@@ -381,6 +381,13 @@ def test_greedy_is_argmax():
     np.testing.assert_array_equal(actions, logits.argmax(1).numpy())
 
 
+def test_a_network_acts_on_no_rows():
+    policy = NetworkPolicy(make_net(), "x", "pong")
+    for rows in (0, 3):
+        actions = policy.act(np.zeros((rows, *OBS_SHAPE), np.float32))
+        assert actions.shape == (rows,) and actions.dtype == np.int64
+
+
 def test_sampling_reproducible_and_follows_softmax():
     logits = [0.0, 1.0, -1.0]
     obs = np.zeros((20_000, *OBS_SHAPE), np.float32)

@@ -117,7 +117,7 @@ class MLPNet(nn.Module):
         input: a cnn's images scaled to [0, 1] (here, not before: frames travel as uint8) and encoded."""
         if x.dim() == 1:
             x = x.unsqueeze(0)
-        x = x.reshape(x.shape[0], -1)
+        x = x.flatten(1)  # (0 rows keep their width: reshape(0, -1) cannot tell it)
         if x.shape[1] != self.obs_dim:
             raise ValueError(f"observations have {x.shape[1]} features per row; this network takes {self.obs_dim}")
         if self.encoder is None:
