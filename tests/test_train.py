@@ -486,3 +486,20 @@ def test_the_gauntlets_precision_is_a_setting_each_job_carries(tmp_path, capsys)
         assert code == 2 and capsys.readouterr().err.count("\n") == 1
     assert _spec(GauntletJob((1,), 0, 8, 2, precision=0.2))["precision"] == 0.2
     assert GauntletJob((1,), 0, 8, 2).precision == 0.0
+
+
+def test_the_final_moment_plays_every_pair_a_matchup_may_reach_at_once(tmp_path):
+    """A moment's matchup starts at --eval-games and plays on while open (to 4 times its pairs, with a precision);
+    the final moment's, which the run waits for, plays them all at once: going on from its first pairs would wait
+    a whole game's length more. Its bots play their full --eval-games x 8."""
+    from selfplay_cli.evaluation.gauntlet_jobs import _config
+
+    with League.open(tmp_path / "h") as league:
+        league.roster.ensure_bots("pong", ["cpu"])
+        (bot,) = league.roster.players("pong")
+        spec = {"snapshot_ids": [bot.id], "games": 8, "older": 2, "precision": 0.3}
+        moment, final = _config(league, spec), _config(league, {**spec, "full": True})
+        exact = _config(league, {**spec, "full": True, "precision": 0.0})
+    assert (moment.pairs, moment.clear_pairs, moment.max_pairs, moment.bot_pairs) == (4, 1, 16, 0)
+    assert (final.pairs, final.clear_pairs, final.max_pairs, final.bot_pairs) == (16, 16, 16, 32)
+    assert (exact.pairs, exact.max_pairs) == (4, 4)

@@ -116,7 +116,12 @@ def _config(league: League, spec: dict[str, Any]) -> GauntletConfig:
     # (a payoff matrix's cell of 2 games would weigh as much as one of 400 in its Nash mixture: none cut short)
     whole = full or bool(spec.get("whole", False))
     precision = float(spec.get("precision", 0.0))  # (a job queued before it: eval_games exactly)
-    return GauntletConfig(pairs=n, clear_pairs=n if whole else 1, max_pairs=PRECISE_PAIRS * n if precision else n,
+    most = PRECISE_PAIRS * n if precision else n
+    # The final moment is waited for: its matchups play all the pairs they may reach at once. Going on from its first
+    # pairs would wait a whole game's length more (the longest of the batch: pong's trained players rally to the step
+    # limit) for each matchup still open.
+    first = most if full else n
+    return GauntletConfig(pairs=first, clear_pairs=first if whole else 1, max_pairs=most,
                           older=max(older, FINAL_OLDER) if full else older,
                           bot_pairs=max(n, FINAL_BOT_GAMES * games // per) if full else 0, precision=precision)
 
