@@ -17,7 +17,7 @@ from rich.console import Console
 import selfplay_cli.commands.train_view as train_view
 import selfplay_cli.train.progress as train_progress
 from selfplay_cli.algos.ppo import PPOConfig, PPOLearner
-from selfplay_cli.commands.train_view import TrainProgress, describe_games, describe_run
+from selfplay_cli.commands.train_view import TrainProgress, describe_games, describe_record, describe_run
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
 from selfplay_cli.train.config import TrainConfig
@@ -269,6 +269,22 @@ def test_a_repeated_run_says_its_snapshots_are_another_runs_weights_not_that_it_
     line = describe_run(second, "inline")
     assert "; 0 rating games (none needed: its snapshots are the same weights as run a's, already rated" in line
     assert "waited for" not in line
+    for rec in second.finals:  # each final's line says whose games its figures are
+        assert rec.same_as == second.same_weights[rec.name]
+        said = f"{rec.name} (the same weights as {rec.same_as}: one player, its games): "
+        assert describe_record(rec).startswith(said)
+        assert rec.to_json()["same_weights_as"] == rec.same_as
+    assert all(rec.to_json()["same_weights_as"] is None for rec in first.finals if not rec.same_as)
+
+
+def test_a_snapshot_that_holds_an_earlier_ones_weights_says_whose_games_its_figures_are():
+    """A budget that ends before the next update leaves the last snapshot a copy of the one before it (the lander at
+    30,016 steps: s30k holds s10k's weights, taken at 16,384): one player, so its line shows that player's games."""
+    rec = SnapshotRecord("l/s30k-lander_0", "lander_0", 30_016, {"heuristic": (0, 0, 1)}, 270.0, -278.0, 819.0,
+                         unit="comparisons", same_as="l/s10k-lander_0")
+    assert describe_record(rec) == ("l/s30k-lander_0 (the same weights as l/s10k-lander_0: one player, its games): "
+                                    "Elo 270 [-278, 819]; vs heuristic 0% [0%, 79%] of 1 comparisons")
+    assert describe_record(SnapshotRecord("l/s10k", "x", 1, {})) == "l/s10k: not rated (--eval-games 0)"
 
 
 def _zero(**kw) -> TrainReport:
@@ -547,3 +563,28 @@ def test_once_training_has_ended_no_time_left_is_claimed(tmp_path):
         Trainer(league, cfg, on_progress=events.append).train()
     ended = [e["standing"] for e in events if e["standing"].ended]
     assert ended and all(s.remaining is None for s in ended)
+
+
+@pytest.mark.slow
+def test_a_final_snapshot_that_holds_its_predecessors_weights_meets_no_one_and_says_whose_games_it_shows(
+        tmp_path, capsys):
+    """The lander's first update comes at 16,384 steps, so with snapshots every 10,000 steps and a 30,000-step
+    budget the final snapshot (step 30,016) holds s10k's weights (taken at 16,384). One set of weights is one
+    player: the final gauntlet does not pit it against its original, the playoff does not take it for a rival, the
+    run's best is not "not separated" from it, and its summary line says whose games its figures are."""
+    from sqlalchemy import select
+
+    from selfplay_cli.league.models import Match
+
+    home = tmp_path / "h"
+    code, out, err = run(capsys, "train", "lander", "--agents", "2", "--steps", "30000", "--snapshot-steps", "10000",
+                         "--eval-games", "4", "--home", str(home))
+    assert code == 0, err
+    for k in (0, 1):
+        assert (f"lander-1/s30k-lander_{k} (the same weights as lander-1/s10k-lander_{k}: one player, its games): "
+                in out)
+    (best,) = [line for line in out.splitlines() if line.strip().startswith("best of lander-1:")]
+    assert "s30k" not in best and "not separated" not in best
+    with League.open(home) as league, league.session(readonly=True) as s:
+        params = [json.dumps(p) for (p,) in s.execute(select(Match.params))]
+    assert params and not any("s30k" in p for p in params)  # no match of it: its games are s10k's

@@ -132,7 +132,8 @@ def describe_record(rec: Any, pending: bool = False) -> str:
     """``pong-1/ep37-left: Elo 2301 [2220, 2388]; vs random 100% [89%, 100%] of 32 games, vs cpu 94% [...] of 32
     games``: every figure measured on that snapshot (its stored games and its fitted rating), each score with its
     95% interval and what was counted (a cooperative game's results are comparisons). ``pending``: its gauntlet is
-    still queued (``--no-wait``), so the figures, if any, are not its last."""
+    still queued (``--no-wait``), so the figures, if any, are not its last. A snapshot that holds an earlier one's
+    weights says so: its figures are that player's."""
     parts = [elo_text(rec)] if rec.elo is not None else []
 
     def score(bot: str) -> str:
@@ -142,9 +143,10 @@ def describe_record(rec: Any, pending: bool = False) -> str:
     vs = ", ".join(f"vs {bot} {score(bot)}" for bot in rec.vs)
     if vs:
         parts.append(vs)
+    name = rec.name + (f" (the same weights as {rec.same_as}: one player, its games)" if rec.same_as else "")
     if pending:
-        return f"{rec.name}: " + ("; ".join(parts) + " so far" if parts else "not rated yet (its gauntlet is queued)")
-    return f"{rec.name}: " + ("; ".join(parts) if parts else "not rated (--eval-games 0)")
+        return f"{name}: " + ("; ".join(parts) + " so far" if parts else "not rated yet (its gauntlet is queued)")
+    return f"{name}: " + ("; ".join(parts) if parts else "not rated (--eval-games 0)")
 
 
 def describe_queue(q: Any, games: int) -> str:

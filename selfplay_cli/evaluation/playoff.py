@@ -81,6 +81,9 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
     book = RoleBook(league, final[0].env)
     played, seed = 0, first_seed
     key = f"playoff/{min(p.id for p in final)}"  # a round's unit of work: f"{key}/{its first seed}"
+    # one set of weights is one player: a final snapshot that holds an earlier one's weights (a budget that ended
+    # before the next update) is that player, never its rival
+    same = league.ledger.same_weights(final[0].env)
     for _ in range(cfg.max_rounds):
         history = _before(league, run_history(league, final, including=True), key, seed)
         fit = fit_history(history, anchor)
@@ -88,8 +91,12 @@ def playoff(league: League, final_ids: Sequence[int], *, first_seed: int, config
             return played
         crews = crews_of(league, history.snapshots)
         lead = {pid: crew[0] for pid, crew in crews.items()}  # a team of per-seat snapshots plays as one
-        players = list({lead.get(p.id, p).id: lead.get(p.id, p) for p in history.snapshots
-                        if not p.removed and fit.linked(p.id)}.values())
+        by_weights: dict[int, PlayerRow] = {}
+        for p in history.snapshots:
+            if not p.removed and fit.linked(p.id):
+                q = lead.get(p.id, p)
+                by_weights.setdefault(same.get(q.id, q.id), q)
+        players = list(by_weights.values())
         if len(players) < 2:
             return played
         players.sort(key=lambda p: (-fit.rating(p.id), p.id))

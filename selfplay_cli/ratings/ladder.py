@@ -152,19 +152,26 @@ def _mark_best(rows: list[LadderRow], removed: set[int], fitted: Fitted, teams: 
     ``disconnected`` or ``unrated`` rating only counts when no snapshot of the run has a comparable one). The best
     carries its margin over the run's next best and the run's snapshots it is not separated from. Neither counts
     another name of the best's own weights, nor, where ``teams`` (a cooperative game, whose per-seat snapshots of
-    one moment fly as one team), the best's teammates: the best is not compared with itself."""
+    one moment fly as one team), the best's teammates or their copies: the best is not compared with itself."""
     by_run: dict[str, list[LadderRow]] = defaultdict(list)
     for r in rows:  # in the ladder's order: the first comparable one of a run is its best
         if r.kind == "snapshot" and r.run is not None and r.player_id not in removed:
             by_run[r.run].append(r)
     index = {name: i for i, name in enumerate(fitted.names)}
+    by_name = {r.policy: r for r in rows}
+
+    def moment(r: LadderRow) -> int:
+        """The step of the weights' first name (a copy's teammates are its original's)."""
+        first = by_name.get(r.copy_of) if r.copy_of else None
+        return (first or r).step
+
     marked: dict[str, LadderRow] = {}
     for members in by_run.values():
         comparable = [r for r in members if not order_group(r.flag)] or members
         best = comparable[0]
         i = index[best.copy_of or best.policy]
         rest = [r for r in comparable[1:] if index[r.copy_of or r.policy] != i
-                and not (teams and r.step == best.step)]
+                and not (teams and moment(r) == moment(best))]
         margin = replace(fitted.margin(i, index[rest[0].copy_of or rest[0].policy]), over=rest[0].policy) \
             if rest else None
         sure = fitted.above([i] + [index[r.copy_of or r.policy] for r in rest]) if rest else np.zeros((1, 1), bool)

@@ -32,6 +32,8 @@ class SnapshotRecord:
     unit: str = "games"  # what a result against a bot is: a game, or a cooperative game's comparison of two
     points: dict[str, float] = field(default_factory=dict)  # its points against each bot, where results are worth
     # more than a win, a draw or a loss (a game played for stakes: poker's chips); else from the record
+    same_as: str = ""  # the snapshot whose weights it holds (taken before it, in this run or another): one player,
+    # whose games and rating these are (a budget that ends before the next update leaves the last snapshot a copy)
 
     def score(self, bot: str) -> float:
         """Its mean points against ``bot`` (a draw half a point; a hand of poker what its chips are worth)."""
@@ -51,6 +53,7 @@ class SnapshotRecord:
 
     def to_json(self) -> dict[str, Any]:
         return {"snapshot": self.name, "learner": self.learner, "step": self.step,
+                "same_weights_as": self.same_as or None,
                 "elo": None if self.elo is None else round(self.elo, 1),
                 "ci_low": None if self.ci_low is None else round(self.ci_low, 1),
                 "ci_high": None if self.ci_high is None else round(self.ci_high, 1),

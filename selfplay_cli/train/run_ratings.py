@@ -85,6 +85,7 @@ class RunRatings:
         from ..ratings.pairs import head_to_head
 
         rated = {r.player_id: r for r in (self.ladder() if rows is None else rows)}
+        same = self.league.ledger.same_weights(self.spec.name)
         out = []
         for p in new:
             vs, points = {}, {}
@@ -97,7 +98,9 @@ class RunRatings:
             r = rated.get(p.id)
             out.append(SnapshotRecord(p.full_name, p.meta.get("learner", ""), p.step, vs,
                                       r.elo if r else None, r.ci_low if r else None, r.ci_high if r else None,
-                                      "comparisons" if self.spec.kind == COOPERATIVE else "games", points))
+                                      "comparisons" if self.spec.kind == COOPERATIVE else "games", points,
+                                      self.league.roster.get_player(same[p.id]).full_name
+                                      if same.get(p.id, p.id) != p.id else ""))
         return out
 
     def best(self, rows: list[LadderRow]) -> dict[str, Any]:
