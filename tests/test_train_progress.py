@@ -566,12 +566,12 @@ def test_once_training_has_ended_no_time_left_is_claimed(tmp_path):
 
 
 @pytest.mark.slow
-def test_a_final_snapshot_that_holds_its_predecessors_weights_meets_no_one_and_says_whose_games_it_shows(
+def test_a_final_snapshot_that_holds_its_predecessors_weights_is_no_rival_and_says_whose_games_it_shows(
         tmp_path, capsys):
     """The lander's first update comes at 16,384 steps, so with snapshots every 10,000 steps and a 30,000-step
     budget the final snapshot (step 30,016) holds s10k's weights (taken at 16,384). One set of weights is one
-    player: the final gauntlet does not pit it against its original, the playoff does not take it for a rival, the
-    run's best is not "not separated" from it, and its summary line says whose games its figures are."""
+    player: the playoff does not take it for a rival, the run's best is not "not separated" from it, and its
+    summary line says whose games its figures are."""
     from sqlalchemy import select
 
     from selfplay_cli.league.models import Match
@@ -586,5 +586,6 @@ def test_a_final_snapshot_that_holds_its_predecessors_weights_meets_no_one_and_s
     (best,) = [line for line in out.splitlines() if line.strip().startswith("best of lander-1:")]
     assert "s30k" not in best and "not separated" not in best
     with League.open(home) as league, league.session(readonly=True) as s:
-        params = [json.dumps(p) for (p,) in s.execute(select(Match.params))]
-    assert params and not any("s30k" in p for p in params)  # no match of it: its games are s10k's
+        params = [p for (p,) in s.execute(select(Match.params))]
+    playoff = [json.dumps(p) for p in params if p.get("playoff")]
+    assert playoff and not any("s30k" in p for p in playoff)  # never s10k's rival: the same player

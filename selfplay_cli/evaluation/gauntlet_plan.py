@@ -243,10 +243,7 @@ def plan_moment(league: League, snapshot_ids: Sequence[int], older: int) -> Mome
                   if meets is None or meets(x, y)]
     key = f"gauntlet/{min(p.id for p in new)}"
     mine = {match_id for match_id, _ in league.ledger.keyed_matches(f"{key}/").values()}  # (this unit's, played before)
-    same = league.ledger.same_weights(new[0].env)  # a snapshot that holds another's weights is that player: never
-    # its opponent (a budget that ended before the next update leaves the last snapshot its predecessor's copy)
-    pairs = [(a, b) for a, b in pairs if same.get(a.id, a.id) != same.get(b.id, b.id)
-             and not _gauntlet_games(league, a, b, history.variant, ignore=mine)]
+    pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant, ignore=mine)]
     return Moment(pairs, {m.id: crew for crew in crews.values() for m in crew[:1]}, history, key)
 
 
