@@ -14,6 +14,9 @@
    the share cut at the game's step limit, the gauntlets' and the playoff's games, steps and units. A gauntlet
    matchup or a playoff round is a batch of games stepped together until its last game ends, so its wall time
    follows its longest game, not its number of games: the rounds played one after another are the wait's floor.
+   The final moment's games (its gauntlet and the playoff), which every run plays once its training ended, priced
+   at part 1's rates: the match's own (every game at once, one core) and the core's and the networks' alone. That
+   is the least the wait can be with those games, however they are scheduled.
    Then the same run with ``--no-wait`` (its gauntlets not finished when training ends left on the league's queue),
    and ``marl worker --until-empty`` playing what it left: the wait it saves, and the games it leaves.
 
@@ -99,12 +102,21 @@ def rating_account(db: Path, run: str) -> dict[str, dict[str, float]]:
         ends.setdefault(what, []).append(datetime.fromisoformat(at))
     for what, a in out.items():
         a["units"] = len(units[what])
+    # the final moment (the run's last gauntlet, keyed by its first snapshot's id, the largest) and its playoff: the
+    # games a run always plays after its training ended, whatever it played beside training
+    moments = [int(key.split("/")[1]) for key, *_ in rows if (key or "").startswith("gauntlet/")]
+    if moments:
+        last = f"/{max(moments)}/"
+        final = [r for r in rows if (r[0] or "").startswith(("gauntlet" + last, "playoff" + last))]
+        out["final"] = {"games": sum(r[2] for r in final), "steps": sum(r[3] for r in final),
+                        "truncated": sum(r[4] for r in final), "units": len(final)}
     if "playoff" in out and "gauntlet" in out:
         out["playoff"]["seconds"] = (max(ends["playoff"]) - max(ends["gauntlet"])).total_seconds()
     return out
 
 
 def print_account(games: dict[str, dict[str, float]], train_steps: int) -> None:
+    games = {what: a for what, a in games.items() if what != "final"}
     steps = sum(a["steps"] for a in games.values())
     total = sum(a["games"] for a in games.values())
     cut = sum(a["truncated"] for a in games.values())
@@ -160,7 +172,19 @@ def main() -> None:
               f"{wait:.1f} s waited for them at the end")
         print(f"end-of-run wait: {100 * wait / train:.0f}% of the training time (target <= 10%: "
               f"{'met' if wait <= 0.1 * train else 'not met'})")
-        print_account(rating_account(home / "league.db", "wait"), r["steps"])
+        account = rating_account(home / "league.db", "wait")
+        print_account(account, r["steps"])
+        final = account.get("final")
+        if final:  # what the games the final moment must play cost at the best rate measured above
+            best = m["game_steps"] / m["seconds"]  # the 1,000-game match's own rate: every game at once, one core
+            floor_rate = 1 / (1 / rate + 1 / (m["game_steps"] / floor))  # the core and the networks alone
+            at_best, at_floor = final["steps"] / best, final["steps"] / floor_rate
+            print(f"  the final moment (its gauntlet and playoff, played once training ended): {final['games']:,} "
+                  f"games, {final['steps'] / 1e6:.1f}M game steps, {final['truncated'] / final['games']:.0%} cut at "
+                  f"the step limit; at the match's rate above ({best:,.0f} game steps/s, one core) they take "
+                  f"{at_best:.1f} s ({100 * at_best / train:.0f}% of the training time), at the core's and the "
+                  f"networks' rate alone ({floor_rate:,.0f} game steps/s) {at_floor:.1f} s "
+                  f"({100 * at_floor / train:.0f}%), on both cores at best half of that")
         out, wall = marl(home, "train", "pong", "--agents", "2", "--minutes", "0.5", "--run", "nowait", "--no-wait",
                          "--json")
         r = json.loads(out)
