@@ -6,15 +6,19 @@
    (engines scaled by the number of landers, as the AEC view does by default).
 3. The targets (issue 51), each a line ``name: value (target ...)`` with its anchor beside it, measured in the same
    run: gymnasium's ``LunarLander-v3`` (``gym.make``, as its users make it), random actions, reset as it ends. The
-   things compared are run alternately, ``--rounds`` times, and the medians of their ratios are shown (the machine
-   may be shared: run it on one core, ``taskset -c 1``).
+   things compared take turns, ``--slices`` turns of ``--slice-seconds`` each, each keeping its games between turns,
+   so both sides of a ratio are measured over the same stretch of the machine's time (a shared machine's speed
+   drifts over seconds: gymnasium's own rate has moved between 13,000 and 24,000 steps/s within minutes here); each
+   ratio is from the summed steps and seconds, with the range of the turns' own ratios beside it (run it on one core,
+   ``taskset -c 1``).
 
    ``lander view / gymnasium per lander step, N landers``: the parallel view's game steps/s times N over
    gymnasium's steps/s (one lander each), random actions (drawn ahead for both), games reset as they end.
    ``lander core at 64 games / gymnasium per lander step, 2 landers``: the batched core's game steps/s at 64 games
    times 2 over gymnasium's, random actions drawn ahead, ``observe()`` every step, games reset as they end.
 
-    .venv/bin/python benchmarks/lander_env_speed.py [--games 16] [--seconds 3] [--episodes 10] [--rounds 5]
+    .venv/bin/python benchmarks/lander_env_speed.py [--games 16] [--seconds 3] [--episodes 10] [--slices 40]
+        [--slice-seconds 0.25]
         [--targets-only]
 """
 
@@ -22,8 +26,8 @@ from __future__ import annotations
 
 import argparse
 import os
-import statistics
 import time
+from collections.abc import Generator
 
 import numpy as np
 
@@ -31,6 +35,8 @@ from selfplay_cli.envs.lander.bots import heuristic_rule
 from selfplay_cli.envs.lander.config import LanderConfig
 from selfplay_cli.envs.lander.core import LanderCore
 from selfplay_cli.envs.lander.view import LanderAECEnv, LanderParallelEnv
+
+VIEW_LANDERS = (1, 2, 4)
 
 
 def core_speed(landers: int, games: int, seconds: float) -> float:
@@ -49,77 +55,105 @@ def core_speed(landers: int, games: int, seconds: float) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def gym_speed(seconds: float) -> float:
-    """gymnasium's ``LunarLander-v3`` steps per second under random actions (drawn ahead), reset as it ends."""
+def gym_runner() -> Generator[tuple[int, float], float, None]:
+    """gymnasium's ``LunarLander-v3`` under random actions (drawn ahead), reset as it ends: sent a number of seconds,
+    it plays that long and yields the steps it played and the seconds they took (its game goes on between slices)."""
     import gymnasium as gym
 
     env = gym.make("LunarLander-v3")
     actions = np.random.default_rng(0).integers(0, 4, 4096).tolist()
     env.reset(seed=0)
-    steps, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        _, _, term, trunc, _ = env.step(actions[steps % 4096])
-        steps += 1
-        if term or trunc:
-            env.reset()
-    return steps / (time.perf_counter() - start)
+    total = 0
+    seconds = yield (0, 0.0)
+    while True:
+        steps, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            _, _, term, trunc, _ = env.step(actions[total % 4096])
+            steps += 1
+            total += 1
+            if term or trunc:
+                env.reset()
+        seconds = yield steps, time.perf_counter() - start
 
 
-def view_speed(landers: int, seconds: float) -> float:
-    """The parallel view's game steps per second under random actions (drawn ahead), reset as its games end."""
+def view_runner(landers: int) -> Generator[tuple[int, float], float, None]:
+    """The parallel view under random actions (drawn ahead), reset as its games end; game steps per slice, as
+    :func:`gym_runner`."""
     env = LanderParallelEnv(landers=landers)
     actions = np.random.default_rng(1).integers(0, 4, (4096, landers)).tolist()
     seats = list(enumerate(env.possible_agents))
     env.reset(seed=0)
-    steps, start = 0, time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        if not env.agents:
-            env.reset()
-        row = actions[steps % 4096]
-        env.step({a: row[i] for i, a in seats if a in env.agents})
-        steps += 1
-    return steps / (time.perf_counter() - start)
+    total = 0
+    seconds = yield (0, 0.0)
+    while True:
+        steps, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            if not env.agents:
+                env.reset()
+            row = actions[total % 4096]
+            env.step({a: row[i] for i, a in seats if a in env.agents})
+            steps += 1
+            total += 1
+        seconds = yield steps, time.perf_counter() - start
 
 
-def core_random_speed(landers: int, games: int, seconds: float) -> float:
-    """Game steps per second of the batched core under random actions (drawn ahead, ``observe()`` every step),
-    games reset as they end."""
+def core_runner(landers: int, games: int) -> Generator[tuple[int, float], float, None]:
+    """The batched core under random actions (drawn ahead), ``observe()`` every step, games reset as they end; game
+    steps per slice (every slot steps a game each step), as :func:`gym_runner`."""
     core = LanderCore(games, LanderConfig(landers=landers))
     actions = np.random.default_rng(2).integers(0, 4, (64, landers, games))
-    next_seed, steps, i = games, 0, 0
-    start = time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        core.observe()
-        core.step(actions[i % 64])
-        i += 1
-        steps += games
-        done = np.flatnonzero(core.over)
-        if done.size:
-            core.reset(done, np.arange(next_seed, next_seed + done.size))
-            next_seed += done.size
-    return steps / (time.perf_counter() - start)
+    next_seed, i = games, 0
+    seconds = yield (0, 0.0)
+    while True:
+        steps, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            core.observe()
+            core.step(actions[i % 64])
+            i += 1
+            steps += games
+            done = np.flatnonzero(core.over)
+            if done.size:
+                core.reset(done, np.arange(next_seed, next_seed + done.size))
+                next_seed += done.size
+        seconds = yield steps, time.perf_counter() - start
 
 
-def targets(rounds: int, seconds: float) -> None:
-    """The issue's targets, each beside its anchor (gymnasium's rate in the same rounds), alternating what is
-    compared; medians of ``rounds`` rounds."""
-    view_landers = (1, 2, 4)
-    gym, core, views = [], [], {n: [] for n in view_landers}
-    for _ in range(rounds):
-        gym.append(gym_speed(seconds))
-        for n in view_landers:
-            views[n].append(view_speed(n, seconds))
-        core.append(core_random_speed(2, 64, seconds))
-    med = statistics.median
+def targets(slices: int, seconds: float) -> None:
+    """The issue's targets, each beside its anchor (gymnasium's rate, measured in the same slices). Every runner
+    keeps its games between slices; the runners take turns, ``slices`` slices of ``seconds`` each, the order
+    rotating from slice to slice, so each ratio compares the two over the same stretch of the machine's time (a
+    shared machine's speed drifts over seconds). A ratio is the summed steps over the summed seconds of each;
+    beside it the range of the slices' own ratios."""
+    runners: dict[str, Generator[tuple[int, float], float, None]] = {
+        "gym": gym_runner(), **{f"view{n}": view_runner(n) for n in VIEW_LANDERS}, "core": core_runner(2, 64)}
+    for r in runners.values():
+        next(r)  # (built, its first game reset: outside the timed slices)
+    names = list(runners)
+    steps = dict.fromkeys(names, 0)
+    took = dict.fromkeys(names, 0.0)
+    per_slice: dict[str, list[float]] = {name: [] for name in names}
+    for k in range(slices):
+        for name in names[k % len(names):] + names[: k % len(names)]:
+            n, t = runners[name].send(seconds)
+            steps[name] += n
+            took[name] += t
+            per_slice[name].append(n / t)
+    rate = {name: steps[name] / took[name] for name in names}
     load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
-    print(f"\ntargets (medians of {rounds} rounds, alternated; random actions; load average {load})")
-    for n in view_landers:
-        ratio = med(v * n / g for v, g in zip(views[n], gym, strict=True))
+    print(f"\ntargets ({slices} slices of {seconds:g} s each, taking turns; random actions; load average {load})")
+
+    def spread(name: str, seats: int) -> str:
+        ratios = [x * seats / g for x, g in zip(per_slice[name], per_slice["gym"], strict=True)]
+        return f"slices {min(ratios):.2f}x to {max(ratios):.2f}x"
+
+    for n in VIEW_LANDERS:
+        ratio = rate[f"view{n}"] * n / rate["gym"]
         print(f"lander view / gymnasium per lander step, {n} lander{'s' if n > 1 else ''}: {ratio:.2f}x (target >= "
-              f"1.0x); view {med(views[n]):,.0f} game steps/s, gymnasium {med(gym):,.0f} steps/s")
-    ratio = med(c * 2 / g for c, g in zip(core, gym, strict=True))
+              f"1.0x); view {rate[f'view{n}']:,.0f} game steps/s, gymnasium {rate['gym']:,.0f} steps/s; "
+              f"{spread(f'view{n}', n)}")
+    ratio = rate["core"] * 2 / rate["gym"]
     print(f"lander core at 64 games / gymnasium per lander step, 2 landers: {ratio:.2f}x (target >= 2.0x); core "
-          f"{med(core):,.0f} game steps/s, gymnasium {med(gym):,.0f} steps/s")
+          f"{rate['core']:,.0f} game steps/s, gymnasium {rate['gym']:,.0f} steps/s; {spread('core', 2)}")
 
 
 def parallel_heuristic(landers: int, episodes: int) -> float:
@@ -151,11 +185,12 @@ def main() -> None:
     ap.add_argument("--games", type=int, default=16, help="games in the batched core")
     ap.add_argument("--seconds", type=float, default=3.0, help="seconds of play per lander count")
     ap.add_argument("--episodes", type=int, default=10, help="heuristic episodes per lander count and view")
-    ap.add_argument("--rounds", type=int, default=5, help="rounds of the alternated target measurements")
+    ap.add_argument("--slices", type=int, default=40, help="turns each target's runner takes")
+    ap.add_argument("--slice-seconds", type=float, default=0.25, help="seconds of one turn")
     ap.add_argument("--targets-only", action="store_true", help="only the target lines")
     args = ap.parse_args()
     if args.targets_only:
-        targets(args.rounds, min(args.seconds, 1.0))
+        targets(args.slices, args.slice_seconds)
         return
     print(f"batched core, {args.games} games, heuristic play, games reset as they end")
     print(f"{'landers':>8} {'game steps/s':>13} {'lander steps/s':>15}")
@@ -167,7 +202,7 @@ def main() -> None:
     for landers in (1, 2, 3, 4):
         print(f"{landers:>8} {parallel_heuristic(landers, args.episodes):>9.1f} "
               f"{aec_heuristic(landers, args.episodes):>9.1f}")
-    targets(args.rounds, min(args.seconds, 1.0))
+    targets(args.slices, args.slice_seconds)
 
 
 if __name__ == "__main__":
