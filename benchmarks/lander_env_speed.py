@@ -30,6 +30,7 @@ import time
 from collections.abc import Generator
 
 import numpy as np
+from core_runs import core_runner
 
 from selfplay_cli.envs.lander.bots import heuristic_rule
 from selfplay_cli.envs.lander.config import LanderConfig
@@ -97,27 +98,6 @@ def view_runner(landers: int) -> Generator[tuple[int, float], float, None]:
         seconds = yield steps, time.perf_counter() - start
 
 
-def core_runner(landers: int, games: int) -> Generator[tuple[int, float], float, None]:
-    """The batched core under random actions (drawn ahead), ``observe()`` every step, games reset as they end; game
-    steps per slice (every slot steps a game each step), as :func:`gym_runner`."""
-    core = LanderCore(games, LanderConfig(landers=landers))
-    actions = np.random.default_rng(2).integers(0, 4, (64, landers, games))
-    next_seed, i = games, 0
-    seconds = yield (0, 0.0)
-    while True:
-        steps, start = 0, time.perf_counter()
-        while time.perf_counter() - start < seconds:
-            core.observe()
-            core.step(actions[i % 64])
-            i += 1
-            steps += games
-            done = np.flatnonzero(core.over)
-            if done.size:
-                core.reset(done, np.arange(next_seed, next_seed + done.size))
-                next_seed += done.size
-        seconds = yield steps, time.perf_counter() - start
-
-
 def targets(slices: int, seconds: float) -> None:
     """The issue's targets, each beside its anchor (gymnasium's rate, measured in the same slices). Every runner
     keeps its games between slices; the runners take turns, ``slices`` slices of ``seconds`` each, the order
@@ -125,7 +105,8 @@ def targets(slices: int, seconds: float) -> None:
     shared machine's speed drifts over seconds). A ratio is the summed steps over the summed seconds of each;
     beside it the range of the slices' own ratios."""
     runners: dict[str, Generator[tuple[int, float], float, None]] = {
-        "gym": gym_runner(), **{f"view{n}": view_runner(n) for n in VIEW_LANDERS}, "core": core_runner(2, 64)}
+        "gym": gym_runner(), **{f"view{n}": view_runner(n) for n in VIEW_LANDERS}, "core": core_runner(
+        LanderCore(64, LanderConfig(landers=2)), np.random.default_rng(2).integers(0, 4, (64, 2, 64)))}
     for r in runners.values():
         next(r)  # (built, its first game reset: outside the timed slices)
     names = list(runners)

@@ -27,6 +27,7 @@ import statistics
 import time
 
 import numpy as np
+from core_runs import core_rate
 
 from selfplay_cli.envs.tennis.bots import serve_bot_for
 from selfplay_cli.envs.tennis.config import TennisConfig
@@ -36,20 +37,8 @@ from selfplay_cli.envs.tennis.view import TennisParallelEnv
 
 def core_speed(games: int, seconds: float) -> float:
     """Game steps per second of the batched core under random actions (drawn ahead, observe() every step)."""
-    core = TennisCore(games)
     actions = np.random.default_rng(0).uniform(-1, 1, (64, 2, games, 3)).astype(np.float32)
-    next_seed, steps, i = games, 0, 0
-    start = time.perf_counter()
-    while time.perf_counter() - start < seconds:
-        core.observe()
-        core.step(actions[i % 64])
-        i += 1
-        steps += games
-        done = np.flatnonzero(core.over)
-        if done.size:
-            core.reset(done, np.arange(next_seed, next_seed + done.size))
-            next_seed += done.size
-    return steps / (time.perf_counter() - start)
+    return core_rate(TennisCore(games), actions, seconds)
 
 
 def view_speed(seconds: float) -> float:
