@@ -196,15 +196,60 @@ def test_another_landers_legs_on_a_body_crash_that_body_only():
     assert c.result[:, 0].tolist() == [CRASHED, FLYING], "lander 1's leg hit lander 0's body"
 
 
-def test_a_crashed_lander_is_a_wreck_that_touches_no_lander_again():
+def test_a_crashed_lander_is_a_wreck_that_stays_where_it_crashed_and_touches_no_lander_again():
     c = floating()
     (x0, _), (x1, _) = c.worlds[0].bodies[0].position, c.worlds[0].bodies[1].position
     move(c, 0, 0.0, -3.0, v=(0.0, -0.05))
-    move(c, 1, x0 - x1, -3.0 + 1.6, v=(0.0, -3.0))
+    move(c, 1, x0 - x1, -3.0 + 1.6, v=(0.0, -3.0))  # lander 1 comes down where lander 0 crashes
+    wreck = None
     while c.alive[:, 0].any():
         c.step(NOOPS)
-    for part in (c.worlds[0].bodies[0], *c.worlds[0].legs[0]):
-        assert part.fixtures[0].filterData.maskBits == 0x0001, "a wreck collides with the moon only"
+        if c.result[0, 0] == CRASHED and wreck is None:
+            parts = (c.worlds[0].bodies[0], *c.worlds[0].legs[0])
+            wreck = [(tuple(p.position), p.angle) for p in parts]
+    assert wreck is not None
+    assert all(not p.active for p in parts), "a wreck is out of the simulation"
+    assert [(tuple(p.position), p.angle) for p in parts] == wreck, "it stays where it crashed"
+
+
+def _falling_wreck(world, i: int) -> None:
+    """The rule before wrecks left the simulation: a crashed lander's parts fell on, colliding with the moon only
+    (here a lost one falls on too, outside the moon: nothing is left out that could reach another lander)."""
+    for part in (world.bodies[i], *world.legs[i]):
+        fixture = part.fixtures[0]
+        f = fixture.filterData
+        f.maskBits = 0x0001
+        fixture.filterData = f
+
+
+@pytest.mark.parametrize("landers", [2, 3])
+def test_a_wreck_changes_nothing_for_the_landers_still_in_play(landers, monkeypatch):
+    """Taking a wreck out of the simulation is exact: with the heuristic flying one lander and random actions the
+    others (so wrecks and landings both happen, often in one game), every step's rewards, states, results and ends
+    are the same to the bit as with the wrecks left to fall on, colliding with the moon only."""
+    import selfplay_cli.envs.lander.core as core_mod
+
+    def play(retire: object) -> list[tuple[np.ndarray, ...]]:
+        monkeypatch.setattr(core_mod.LanderWorld, "retire", retire)
+        c = core_of(landers, tuple(range(500, 516)))
+        rng = np.random.default_rng(3)
+        out = []
+        while not c.over.all():
+            a = rng.integers(0, 4, (landers, c.n))
+            a[0] = heuristic_rule(c.observe()[0])
+            live = c.alive & ~c.over
+            r = c.step(a)
+            out.append((np.where(live, r, 0), np.where(c.alive[..., None], c.state, 0), c.result.copy(),
+                        c.over.copy(), c.score.copy()))
+        return out
+
+    frozen = play(core_mod.LanderWorld.retire)
+    fell = play(_falling_wreck)
+    assert len(frozen) == len(fell)
+    for a, b in zip(frozen, fell, strict=True):
+        assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    results = frozen[-1][2]
+    assert (results == CRASHED).any() and (results == LANDED).any()  # both kinds of end were played
 
 
 # ---------------------------------------------------------------------------------------------------------------

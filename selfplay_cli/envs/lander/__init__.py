@@ -28,7 +28,7 @@ Rules, per game:
   throttle); a crash or leaving the screen sideways (``|x| >= 1``) makes the step's reward -100, coming to rest
   (the body asleep) +100.
 * Each lander ends on its own (crash, out of bounds, at rest) and from then on does not act and earns nothing; a
-  crashed lander is a wreck that falls to the moon and touches no lander again, a lost one leaves the world, a
+  crashed lander is a wreck that stays where it crashed and touches no lander again, a lost one leaves the world, a
   landed one stays on the ground for the others to avoid. The game ends when every lander has ended (terminated)
   or after ``max_steps`` steps (truncated). All seats are one team: the team's return is the sum of the landers'
   returns.

@@ -231,7 +231,7 @@ class ScalarLander:
             code = LANDED if rest else OUT if abs(x) >= 1.0 else CRASHED
             self.result[i] = code
             if code != LANDED:
-                w.retire(i, code == OUT)
+                w.retire(i)
         return self._f32.unpack(self._f32.pack(*reward))
 
     def _wind(self) -> None:
