@@ -27,10 +27,9 @@ from __future__ import annotations
 import argparse
 import os
 import time
-from collections.abc import Generator
 
 import numpy as np
-from core_runs import core_runner
+from core_runs import Runner, core_runner, sliced
 
 from selfplay_cli.envs.lander.bots import heuristic_rule
 from selfplay_cli.envs.lander.config import LanderConfig
@@ -56,46 +55,42 @@ def core_speed(landers: int, games: int, seconds: float) -> float:
     return steps / (time.perf_counter() - start)
 
 
-def gym_runner() -> Generator[tuple[int, float], float, None]:
-    """gymnasium's ``LunarLander-v3`` under random actions (drawn ahead), reset as it ends: sent a number of seconds,
-    it plays that long and yields the steps it played and the seconds they took (its game goes on between slices)."""
+def gym_runner() -> Runner:
+    """gymnasium's ``LunarLander-v3`` under random actions (drawn ahead), reset as it ends, :func:`sliced`."""
     import gymnasium as gym
 
     env = gym.make("LunarLander-v3")
     actions = np.random.default_rng(0).integers(0, 4, 4096).tolist()
     env.reset(seed=0)
-    total = 0
-    seconds = yield (0, 0.0)
-    while True:
-        steps, start = 0, time.perf_counter()
-        while time.perf_counter() - start < seconds:
-            _, _, term, trunc, _ = env.step(actions[total % 4096])
-            steps += 1
-            total += 1
-            if term or trunc:
-                env.reset()
-        seconds = yield steps, time.perf_counter() - start
+    total = [0]
+
+    def step() -> int:
+        _, _, term, trunc, _ = env.step(actions[total[0] % 4096])
+        total[0] += 1
+        if term or trunc:
+            env.reset()
+        return 1
+
+    return sliced(step)
 
 
-def view_runner(landers: int) -> Generator[tuple[int, float], float, None]:
-    """The parallel view under random actions (drawn ahead), reset as its games end; game steps per slice, as
-    :func:`gym_runner`."""
+def view_runner(landers: int) -> Runner:
+    """The parallel view under random actions (drawn ahead), reset as its games end, :func:`sliced` (game steps)."""
     env = LanderParallelEnv(landers=landers)
     actions = np.random.default_rng(1).integers(0, 4, (4096, landers)).tolist()
     seats = list(enumerate(env.possible_agents))
     env.reset(seed=0)
-    total = 0
-    seconds = yield (0, 0.0)
-    while True:
-        steps, start = 0, time.perf_counter()
-        while time.perf_counter() - start < seconds:
-            if not env.agents:
-                env.reset()
-            row = actions[total % 4096]
-            env.step({a: row[i] for i, a in seats if a in env.agents})
-            steps += 1
-            total += 1
-        seconds = yield steps, time.perf_counter() - start
+    total = [0]
+
+    def step() -> int:
+        if not env.agents:
+            env.reset()
+        row = actions[total[0] % 4096]
+        env.step({a: row[i] for i, a in seats if a in env.agents})
+        total[0] += 1
+        return 1
+
+    return sliced(step)
 
 
 def targets(slices: int, seconds: float) -> None:
@@ -104,7 +99,7 @@ def targets(slices: int, seconds: float) -> None:
     rotating from slice to slice, so each ratio compares the two over the same stretch of the machine's time (a
     shared machine's speed drifts over seconds). A ratio is the summed steps over the summed seconds of each;
     beside it the range of the slices' own ratios."""
-    runners: dict[str, Generator[tuple[int, float], float, None]] = {
+    runners: dict[str, Runner] = {
         "gym": gym_runner(), **{f"view{n}": view_runner(n) for n in VIEW_LANDERS}, "core": core_runner(
         LanderCore(64, LanderConfig(landers=2)), np.random.default_rng(2).integers(0, 4, (64, 2, 64)))}
     for r in runners.values():

@@ -75,11 +75,12 @@ def network_floor(home: Path, names: list[str], games: int, steps: int) -> float
     return time.perf_counter() - began
 
 
-def rating_account(db: Path, run: str) -> dict[str, dict[str, float]]:
+def rating_account(db: Path, run: str) -> tuple[dict[str, dict[str, float]], dict[str, float] | None]:
     """The rating games (kind ``eval``) of run ``run``'s snapshots (the bots' games among themselves left out) in the
     SQLite league at ``db``, by what played them (``gauntlet`` or ``playoff``): games, game steps, games cut at the
     step limit, units of work (a gauntlet's matchups; the playoff's rounds, each one batch) and, for the playoff,
-    the seconds from the run's last gauntlet matchup stored to its last round stored."""
+    the seconds from the run's last gauntlet matchup stored to its last round stored. Beside them the same figures
+    of the final moment alone (its gauntlet and playoff; None without gauntlets)."""
     import sqlite3
 
     with sqlite3.connect(db) as conn:
@@ -105,18 +106,18 @@ def rating_account(db: Path, run: str) -> dict[str, dict[str, float]]:
     # the final moment (the run's last gauntlet, keyed by its first snapshot's id, the largest) and its playoff: the
     # games a run always plays after its training ended, whatever it played beside training
     moments = [int(key.split("/")[1]) for key, *_ in rows if (key or "").startswith("gauntlet/")]
+    final = None
     if moments:
         last = f"/{max(moments)}/"
-        final = [r for r in rows if (r[0] or "").startswith(("gauntlet" + last, "playoff" + last))]
-        out["final"] = {"games": sum(r[2] for r in final), "steps": sum(r[3] for r in final),
-                        "truncated": sum(r[4] for r in final), "units": len(final)}
+        its = [r for r in rows if (r[0] or "").startswith(("gauntlet" + last, "playoff" + last))]
+        final = {"games": sum(r[2] for r in its), "steps": sum(r[3] for r in its),
+                 "truncated": sum(r[4] for r in its), "units": len(its)}
     if "playoff" in out and "gauntlet" in out:
         out["playoff"]["seconds"] = (max(ends["playoff"]) - max(ends["gauntlet"])).total_seconds()
-    return out
+    return out, final
 
 
 def print_account(games: dict[str, dict[str, float]], train_steps: int) -> None:
-    games = {what: a for what, a in games.items() if what != "final"}
     steps = sum(a["steps"] for a in games.values())
     total = sum(a["games"] for a in games.values())
     cut = sum(a["truncated"] for a in games.values())
@@ -172,9 +173,8 @@ def main() -> None:
               f"{wait:.1f} s waited for them at the end")
         print(f"end-of-run wait: {100 * wait / train:.0f}% of the training time (target <= 10%: "
               f"{'met' if wait <= 0.1 * train else 'not met'})")
-        account = rating_account(home / "league.db", "wait")
+        account, final = rating_account(home / "league.db", "wait")
         print_account(account, r["steps"])
-        final = account.get("final")
         if final:  # what the games the final moment must play cost at the best rate measured above
             best = m["game_steps"] / m["seconds"]  # the 1,000-game match's own rate: every game at once, one core
             floor_rate = 1 / (1 / rate + 1 / (m["game_steps"] / floor))  # the core and the networks alone

@@ -55,10 +55,10 @@ def _acting_groups(policies: Sequence[Policy]) -> list[tuple[list[int], Any]]:
     any other alone."""
     if not any(getattr(p, "kind", "") == "snapshot" for p in policies):
         return [([i], None) for i in range(len(policies))]
-    from ..policies.bank import NetworkBank, bank_groups, bank_key  # torch, only when networks play
+    from ..policies.bank import NetworkBank, bank_groups  # torch, only when networks play
 
-    return [(members, NetworkBank([policies[i] for i in members])  # type: ignore[misc]
-             if bank_key(policies[members[0]]) is not None else None) for members in bank_groups(policies)]
+    return [(members, NetworkBank([policies[i] for i in members]) if key is not None else None)  # type: ignore[misc]
+            for key, members in bank_groups(policies)]
 
 
 @dataclass

@@ -73,12 +73,13 @@ def bank_key(policy: object) -> tuple | None:
             net.arch.squash)
 
 
-def bank_groups(policies: Sequence[object]) -> list[list[int]]:
-    """The policies' indices grouped by :func:`bank_key`; policies without a key (bots) stay alone."""
-    groups: dict[object, list[int]] = {}
+def bank_groups(policies: Sequence[object]) -> list[tuple[object | None, list[int]]]:
+    """The policies' indices grouped by :func:`bank_key`, each group with its key; policies without a key (bots) stay
+    alone, under None."""
+    groups: dict[object, tuple[object | None, list[int]]] = {}
     for i, p in enumerate(policies):
         key = bank_key(p)
-        groups.setdefault(("alone", i) if key is None else key, []).append(i)
+        groups.setdefault(("alone", i) if key is None else key, (key, []))[1].append(i)
     return list(groups.values())
 
 

@@ -85,7 +85,6 @@ class RunRatings:
         from ..ratings.pairs import head_to_head
 
         rated = {r.player_id: r for r in (self.ladder() if rows is None else rows)}
-        same = self.league.ledger.same_weights(self.spec.name)
         out = []
         for p in new:
             vs, points = {}, {}
@@ -99,8 +98,7 @@ class RunRatings:
             out.append(SnapshotRecord(p.full_name, p.meta.get("learner", ""), p.step, vs,
                                       r.elo if r else None, r.ci_low if r else None, r.ci_high if r else None,
                                       "comparisons" if self.spec.kind == COOPERATIVE else "games", points,
-                                      self.league.roster.get_player(same[p.id]).full_name
-                                      if same.get(p.id, p.id) != p.id else ""))
+                                      (r.copy_of or "") if r else ""))  # (the ladder's row of a copy names its player)
         return out
 
     def best(self, rows: list[LadderRow]) -> dict[str, Any]:
