@@ -21,7 +21,7 @@ from typing import Any
 import Box2D
 import numpy as np
 from Box2D import _Box2D
-from Box2D.b2 import bodyDef, dynamicBody, edgeShape, fixtureDef, polygonShape, revoluteJointDef
+from Box2D.b2 import bodyDef, dynamicBody, edgeShape, fixtureDef, polygonShape, revoluteJointDef, staticBody
 
 from ..contract import IllegalActionError, reset_slots
 from .config import (
@@ -59,6 +59,7 @@ from .config import (
 BODY_BITS, LEG_BITS = 0x0010, 0x0020
 _COLLIDE = 0x0001 | BODY_BITS | LEG_BITS
 _TIME_STEP, _VEL_ITERS, _POS_ITERS = 1.0 / FPS, 6 * 30, 2 * 30
+_BLOCK = 32  # steps of dispersion a game draws at a time
 
 # gymnasium's observation constants, kept as its expressions evaluate them
 _X_HALF = VIEWPORT_W / SCALE / 2
@@ -69,34 +70,58 @@ _LOW64, _HIGH64 = OBS_LOW.astype(np.float64), OBS_HIGH.astype(np.float64)
 _LOW64[6:] = 0.0  # +0.0: a leg off the ground reads 0, not -0
 _POLY = [(x / SCALE, y / SCALE) for x, y in LANDER_POLY]
 
-# Box2D's functions called directly: those behind ``body.position``, ``.linearVelocity``, ``.angle``,
-# ``.angularVelocity``, ``.awake``, a vector's ``.x`` and ``.y`` and ``body.ApplyLinearImpulse``, without the Python
-# wrappers of the properties and methods (reading a lander back costs a third less)
+# Box2D's functions called directly, without pybox2d's Python wrappers of them (properties, methods that take a
+# definition apart and check it again each time): reading a lander back costs a third less, and a world is made in
+# half the time
 _POSITION, _VELOCITY = _Box2D.b2Body___GetPosition, _Box2D.b2Body___GetLinearVelocity
 _ANGLE, _SPIN, _AWAKE = _Box2D.b2Body___GetAngle, _Box2D.b2Body___GetAngularVelocity, _Box2D.b2Body___IsAwake
 _X, _Y = _Box2D.b2Vec2_x_get, _Box2D.b2Vec2_y_get
-_IMPULSE = _Box2D.b2Body_ApplyLinearImpulse
+_IMPULSE, _FORCE = _Box2D.b2Body_ApplyLinearImpulse, _Box2D.b2Body_ApplyForceToCenter
+_CREATE_BODY, _CREATE_JOINT = _Box2D.b2World___CreateBody, _Box2D.b2World___CreateJoint
+_CREATE_FIXTURE, _SET_ACTIVE = _Box2D.b2Body___CreateFixture, _Box2D.b2Body___SetActive
+_SET_DATA, _DATA = _Box2D.b2Fixture___SetUserData, _Box2D.b2Fixture___GetUserData
+_FIXTURE_A, _FIXTURE_B = _Box2D.b2Contact___GetFixtureA, _Box2D.b2Contact___GetFixtureB
+_EDGE_V1, _EDGE_V2 = _Box2D.b2EdgeShape_vertex1_set, _Box2D.b2EdgeShape_vertex2_set
 
-# A lander's fixtures (gymnasium's), defined once: Box2D copies a definition and its shape into each body it makes
+# A world's definitions (gymnasium's keywords), made once: Box2D copies a definition and its shape into what it makes.
+# The moon: a static body with the floor's edge (pybox2d's default fixture for ``shapes=``) and one edge fixture per
+# terrain chunk (the edge's vertices set as ``edgeShape.vertices`` sets two). A lander: a dynamic body and two legs,
+# one fixture each, the legs joined to the body by revolute joints.
+_MOON = bodyDef(type=staticBody)
+_FLOOR = fixtureDef(shape=edgeShape(vertices=[(0, 0), (W, 0)]))
+_EDGE = edgeShape(vertices=[(0, 0), (1, 0)])
+_GROUND = fixtureDef(shape=_EDGE, density=0, friction=0.1)
+_LANDER, _LEG = bodyDef(type=dynamicBody, angle=0.0), bodyDef(type=dynamicBody)
 _BODY_SHAPE, _LEG_SHAPE = polygonShape(vertices=_POLY), polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE))
 _BODY_FIXTURE = fixtureDef(shape=_BODY_SHAPE, density=5.0, friction=0.1, categoryBits=BODY_BITS, maskBits=_COLLIDE,
                            restitution=0.0)
 _LEG_FIXTURE = fixtureDef(shape=_LEG_SHAPE, density=1.0, restitution=0.0, categoryBits=LEG_BITS, maskBits=_COLLIDE)
 
 
+def _leg_joint(i: int) -> Any:
+    """The joint of the leg on side ``i`` (-1 left, +1 right); its bodies are set when it is used."""
+    rjd = revoluteJointDef(localAnchorA=(0, 0), localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE),
+                           enableMotor=True, enableLimit=True, maxMotorTorque=LEG_SPRING_TORQUE, motorSpeed=+0.3 * i)
+    rjd.lowerAngle, rjd.upperAngle = (0.9 - 0.5, 0.9) if i == -1 else (-0.9, -0.9 + 0.5)
+    return rjd
+
+
+_LEG_JOINTS = [_leg_joint(-1), _leg_joint(+1)]
+
+
 def seed_generator(seed: int) -> np.random.Generator:
     """A game's generator: ``default_rng(seed)`` (gymnasium's seeding); a negative seed wraps to 64 bits."""
-    return np.random.default_rng(int(seed) % (1 << 64))
+    return np.random.Generator(np.random.PCG64(int(seed) % (1 << 64)))  # (default_rng's, without its checks)
 
 
 class _Contacts(Box2D.b2ContactListener):
     """Box2D's contact callbacks for one world, written into the core's arrays (or the one-game lists of
     :class:`~.scalar.ScalarLander`): ``crashed[k]``, ``legs[k][leg]``.
 
-    A body's ``userData`` is ``3 * k + part`` (part 0 the lander body, 1 and 2 its legs) for lander ``k``, None for
-    the moon. A lander body touching anything crashes it; a leg touching the moon counts as a ground contact (a
-    count, so a leg on two terrain edges at once stays in contact until it leaves both; with ``flag``, gymnasium's
-    flag, set by any contact beginning and cleared by any ending)."""
+    A lander's fixtures' ``userData`` is ``3 * k + part`` (part 0 the lander body, 1 and 2 its legs) for lander ``k``,
+    None for the moon's. A lander body touching anything crashes it; a leg touching the moon counts as a ground
+    contact (a count, so a leg on two terrain edges at once stays in contact until it leaves both; with ``flag``,
+    gymnasium's flag, set by any contact beginning and cleared by any ending)."""
 
     def __init__(self, crashed: Any, legs: Any, flag: bool = False) -> None:
         super().__init__()
@@ -114,14 +139,14 @@ class _Contacts(Box2D.b2ContactListener):
                 self.legs[k][part - 1] += delta
 
     def BeginContact(self, contact: Any) -> None:  # noqa: N802 (Box2D's name)
-        a, b = contact.fixtureA.body.userData, contact.fixtureB.body.userData
+        a, b = _DATA(_FIXTURE_A(contact)), _DATA(_FIXTURE_B(contact))
         if a is not None:
             self._touch(a, b, 1)
         if b is not None:
             self._touch(b, a, 1)
 
     def EndContact(self, contact: Any) -> None:  # noqa: N802
-        a, b = contact.fixtureA.body.userData, contact.fixtureB.body.userData
+        a, b = _DATA(_FIXTURE_A(contact)), _DATA(_FIXTURE_B(contact))
         if a is not None and b is None:
             self._touch(a, b, -1)
         elif b is not None and a is None:
@@ -136,55 +161,47 @@ class LanderWorld:
         self.world = world = Box2D.b2World(gravity=(0, cfg.gravity))
         self.listener = _Contacts(crashed, legs, cfg.gym_leg_contact)
         world.contactListener = self.listener
-        # The moon: gymnasium's terrain
-        height = rng.uniform(0, H / 2, size=(CHUNKS + 1,))
+        # The moon: gymnasium's terrain (its numpy arithmetic in Python floats: the same doubles)
+        height = rng.uniform(0, H / 2, size=(CHUNKS + 1,)).tolist()
         chunk_x = [W / (CHUNKS - 1) * i for i in range(CHUNKS)]
         self.helipad_x1, self.helipad_x2 = chunk_x[CHUNKS // 2 - 1], chunk_x[CHUNKS // 2 + 1]
         self.helipad_y = HELIPAD_Y
-        height[CHUNKS // 2 - 2 : CHUNKS // 2 + 3] = HELIPAD_Y
+        height[CHUNKS // 2 - 2 : CHUNKS // 2 + 3] = [HELIPAD_Y] * 5
         smooth_y = [0.33 * (height[i - 1] + height[i + 0] + height[i + 1]) for i in range(CHUNKS)]
-        self.moon = world.CreateStaticBody(shapes=edgeShape(vertices=[(0, 0), (W, 0)]))
-        self.terrain = [(chunk_x[i], smooth_y[i]) for i in range(CHUNKS)]
-        edge = edgeShape()
-        ground = fixtureDef(shape=edge, density=0, friction=0.1)
-        for i in range(CHUNKS - 1):  # (gymnasium's CreateEdgeFixture, its keywords set once)
-            edge.vertices = [self.terrain[i], self.terrain[i + 1]]
-            self.moon.CreateFixture(ground)
-        # The landers, spread across the top; each pushed by its own random force. (gymnasium's CreateDynamicBody and
-        # joint keywords, set once per world in definitions that Box2D copies.)
+        self.moon = moon = _CREATE_BODY(world, _MOON)
+        _CREATE_FIXTURE(moon, _FLOOR)
+        self.terrain = terrain = list(zip(chunk_x, smooth_y, strict=True))
+        edge, ground = _EDGE, _GROUND
+        for i in range(CHUNKS - 1):  # (gymnasium's CreateEdgeFixture)
+            _EDGE_V1(edge, terrain[i])
+            _EDGE_V2(edge, terrain[i + 1])
+            _CREATE_FIXTURE(moon, ground)
+        # The landers, spread across the top; each pushed by its own random force
         n = len(ks)
-        self.bodies, self.legs = [], []
+        self.bodies, self.legs = bodies, pairs = [], []
         starts = [((i + 1) / (n + 1) * W, VIEWPORT_H / SCALE) for i in range(n)]
-        body_def = bodyDef(type=dynamicBody, angle=0.0, fixtures=_BODY_FIXTURE)
-        leg_def = bodyDef(type=dynamicBody, fixtures=_LEG_FIXTURE)
-        joint_defs = []
-        for i in (-1, +1):
-            rjd = revoluteJointDef(localAnchorA=(0, 0), localAnchorB=(i * LEG_AWAY / SCALE, LEG_DOWN / SCALE),
-                                   enableMotor=True, enableLimit=True, maxMotorTorque=LEG_SPRING_TORQUE,
-                                   motorSpeed=+0.3 * i)
-            rjd.lowerAngle, rjd.upperAngle = (0.9 - 0.5, 0.9) if i == -1 else (-0.9, -0.9 + 0.5)
-            joint_defs.append(rjd)
-        for (x, y), k in zip(starts, ks, strict=True):
+        body_def, leg_def = _LANDER, _LEG
+        force = rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM, size=2 * n).tolist()  # (x, y) per lander, drawn in turn
+        for i, ((x, y), k) in enumerate(zip(starts, ks, strict=True)):
             body_def.position = (x, y)
-            body = world.CreateBody(body_def)
-            body.userData = 3 * k
-            body.ApplyForceToCenter((rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM),
-                                     rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM)), True)
-            self.bodies.append(body)
+            body = _CREATE_BODY(world, body_def)
+            _SET_DATA(_CREATE_FIXTURE(body, _BODY_FIXTURE), 3 * k)
+            _FORCE(body, (force[2 * i], force[2 * i + 1]), True)
+            bodies.append(body)
         if cfg.enable_wind:  # gymnasium's wind phases; each lander keeps its own count of windy steps
             wind_idx, torque_idx = int(rng.integers(-9999, 9999)), int(rng.integers(-9999, 9999))
             self.wind_idx, self.torque_idx = [wind_idx] * n, [torque_idx] * n
-        for body, k, (x, y) in zip(self.bodies, ks, starts, strict=True):
+        for body, k, (x, y) in zip(bodies, ks, starts, strict=True):
             pair = []
-            for j, (i, rjd) in enumerate(zip((-1, +1), joint_defs, strict=True)):
+            for j, (i, rjd) in enumerate(zip((-1, +1), _LEG_JOINTS, strict=True)):
                 leg_def.position, leg_def.angle = (x - i * LEG_AWAY / SCALE, y), i * 0.05
-                leg = world.CreateBody(leg_def)
-                leg.userData = 3 * k + 1 + j
+                leg = _CREATE_BODY(world, leg_def)
+                _SET_DATA(_CREATE_FIXTURE(leg, _LEG_FIXTURE), 3 * k + 1 + j)
                 rjd.bodyA, rjd.bodyB = body, leg
-                rjd.referenceAngle = leg.angle - body.angle  # (as revoluteJointDef(bodyA=, bodyB=) sets it)
-                world.CreateJoint(rjd)
+                rjd.referenceAngle = i * 0.05  # (the leg's angle less the body's, as revoluteJointDef(bodyA=) sets it)
+                _CREATE_JOINT(world, rjd)
                 pair.append(leg)
-            self.legs.append(pair)
+            pairs.append(pair)
 
     def retire(self, i: int) -> None:
         """Lander i has crashed or is lost (out of bounds): its body and legs leave the simulation. A crashed lander's
@@ -192,7 +209,7 @@ class LanderWorld:
         a lander still in play), so the game of the others is the same to the bit as with a wreck left to fall on
         (tested), and a world with a wreck steps as fast as one without."""
         for part in (self.bodies[i], *self.legs[i]):
-            part.active = False
+            _SET_ACTIVE(part, False)
 
     def close(self) -> None:
         self.world.contactListener = None  # nothing calls back into the core while the world is torn down
@@ -227,14 +244,21 @@ class LanderCore:
         self._angle = np.zeros((L, n))
         self._crashed = np.zeros(L * n, dtype=bool)  # written by the contact listeners
         self._legs = np.zeros((L * n, 2), dtype=np.int32)
-        self._disp = np.zeros((n, L, 2))  # this step's uniform draws, per game in draw order
+        # per game: its next _BLOCK steps' dispersion draws, in draw order (and a spare row, read by the games that
+        # stand still with an empty block, whose draws nobody uses)
+        self._block = np.zeros((n, _BLOCK + 1, L, 2))
+        self._at = np.full(n, _BLOCK)  # per game: the row of its block this step takes (_BLOCK: draw a new block)
+        self._ar = np.arange(n)
         self.main_power = np.zeros((L, n))  # the engines' powers of the last step (for the renderer)
         self.side_power = np.zeros((L, n))
         self.side_dir = np.zeros((L, n))
         self.worlds: list[LanderWorld | None] = [None] * n
-        self._draws: list[Any] = [None] * n  # per game: its generator's ``random`` and the game's row of _disp
+        self._random: list[Any] = [None] * n  # per game: its generator's ``random``
         self._stepper: list[Any] = [None] * n  # per game: its world's ``Step``
         self._bodies: list[Any] = [None] * (L * n)
+        # per lander: its body, and Box2D's position and velocity vectors of it (references into the body, which
+        # follow it: read without asking the body for them again each step)
+        self._readers: list[Any] = [None] * (L * n)
         self._zero = np.zeros((L, n))
         self.reset(np.arange(n), np.arange(n))
 
@@ -254,21 +278,23 @@ class LanderCore:
                 old.close()
             w = LanderWorld(self.config, seed, ks, self._crashed, self._legs)
             self.worlds[game] = w
-            self._draws[game] = (w.rng.random, self._disp[game])
+            self._random[game] = w.rng.random
             self._stepper[game] = w.world.Step
             for seat, body in enumerate(w.bodies):
+                p = _POSITION(body)
                 self._bodies[seat * n + game] = body
-                x, y = body.position
-                self._pos[0, seat, game], self._pos[1, seat, game] = x, y
-                self._angle[seat, game] = body.angle
+                self._readers[seat * n + game] = (body, p, _VELOCITY(body))
+                self._pos[0, seat, game], self._pos[1, seat, game] = _X(p), _Y(p)
+                self._angle[seat, game] = _ANGLE(body)
         self.score[:, g] = 0.0
         self.steps[g] = 0
         self.terminated[g] = self.truncated[g] = self.over[g] = False
         self.result[:, g] = FLYING
+        self._at[g] = _BLOCK
         live = np.zeros((L, n), dtype=bool)
         live[:, g] = True
         self.alive[:, g] = True
-        self._advance(live, g.tolist(), self._zero, self._zero, self._zero, first=True)
+        self._advance(live, live[0], g.tolist(), self._zero, self._zero, self._zero, first=True)
 
     # ----------------------------------------------------------------------------------------------------
     def _powers(self, actions: Any, live: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -292,7 +318,10 @@ class LanderCore:
             a = np.asarray(actions)
             if a.shape != (L, n):
                 a = a.reshape(L, n)
-            bad = ((a < 0) | (a > 3) | (a != np.floor(a))) & live
+            bad = (a < 0) | (a > 3)
+            if a.dtype.kind not in "iub":
+                bad |= a != np.floor(a)
+            bad &= live
             if bad.any():
                 seat, game = np.argwhere(bad)[0]
                 raise IllegalActionError(seat, game, a[seat, game].item(), "outside Discrete(4)")
@@ -310,9 +339,9 @@ class LanderCore:
         live = self.alive & running
         main, side, direction = self._powers(actions, live)
         games = np.flatnonzero(running).tolist()
-        reward = self._advance(live, games, main, side, direction)
+        reward = self._advance(live, running, games, main, side, direction)
         self.score += reward
-        self.steps[running] += 1
+        self.steps += running
         ended = running & ~self.alive.any(axis=0)
         self.terminated[:] = ended
         np.greater_equal(self.steps, self.config.max_steps, out=self.truncated)
@@ -320,11 +349,12 @@ class LanderCore:
         self.over |= self.terminated | self.truncated
         return reward.astype(np.float32)
 
-    def _advance(self, live: np.ndarray, games: list[int], main: np.ndarray, side: np.ndarray,
+    def _advance(self, live: np.ndarray, running: np.ndarray, games: list[int], main: np.ndarray, side: np.ndarray,
                  direction: np.ndarray, first: bool = False) -> np.ndarray:
-        """Fire the engines of the ``live`` landers, step the worlds ``games``, read the landers back, and score
-        them (gymnasium's step, for all at once). Returns the rewards ``(L, n)`` (zero where not live)."""
-        self._fire(games, main, side, direction)
+        """Fire the engines of the ``live`` landers, step the ``running`` games (``(n,)``; ``games``, their indices),
+        read the landers back, and score them (gymnasium's step, for all at once). Returns the rewards ``(L, n)``
+        (zero where not live)."""
+        self._fire(running, main, side, direction)
         if self.config.enable_wind:
             self._wind(live)
         stepper = self._stepper
@@ -356,19 +386,29 @@ class LanderCore:
             self._end(seat[done], game[done], rest[done], s[done, 0])
         return reward
 
-    def _fire(self, games: list[int], main: np.ndarray, side: np.ndarray, direction: np.ndarray) -> None:
-        """Draw this step's dispersion of every lander of the running ``games`` and apply the impulses of the engines
-        that fire (main and side powers ``(L, n)``), as gymnasium does."""
-        bodies, draws = self._bodies, self._draws
-        for g in games:  # 2 draws per lander, in lander order: gymnasium's two per step for one lander
-            draw, out = draws[g]
-            draw(out=out)
-        d = (self._disp * 2.0 - 1.0) / SCALE
+    def _fire(self, running: np.ndarray, main: np.ndarray, side: np.ndarray, direction: np.ndarray) -> None:
+        """Take this step's dispersion of every lander of the ``running`` games and apply the impulses of the engines
+        that fire (main and side powers ``(L, n)``), as gymnasium does. A game draws its dispersion _BLOCK steps at a
+        time (its generator's stream is the same whether drawn 2 values or 2 * L * _BLOCK at a time, and it draws
+        nothing else once the game is made): per step 2 draws per lander, in lander order, gymnasium's two per step
+        for one lander."""
+        at, block = self._at, self._block
+        empty = running & (at >= _BLOCK)
+        if empty.any():
+            for g in np.flatnonzero(empty).tolist():
+                self._random[g](out=block[g, :_BLOCK])
+            at[empty] = 0
+        disp = block[self._ar, at]  # (n, L, 2)
+        at += running
+        fire, fire_side = np.flatnonzero(main.ravel()), np.flatnonzero(side.ravel())
+        if not (fire.size or fire_side.size):
+            return
+        bodies = self._bodies
+        d = (disp * 2.0 - 1.0) / SCALE
         d0, d1 = d[..., 0].T, d[..., 1].T  # (L, n)
         tip0, tip1 = np.sin(self._angle), np.cos(self._angle)
         side0, side1 = -tip1, tip0
         x, y = self._pos
-        fire = np.flatnonzero(main.ravel())
         if fire.size:  # main engine: gymnasium's impulse, 4 px below the centre, +-2 for randomness
             t = _MAIN_Y + 2 * d0
             ox = tip0 * t + side0 * d1
@@ -376,7 +416,6 @@ class LanderCore:
             args = np.stack([-ox * MAIN_ENGINE_POWER * main, -oy * MAIN_ENGINE_POWER * main, x + ox, y + oy])
             for k, (fx, fy, px, py) in zip(fire.tolist(), args.reshape(4, -1)[:, fire].T.tolist(), strict=True):
                 _IMPULSE(bodies[k], (fx, fy), (px, py), True)
-        fire_side = np.flatnonzero(side.ravel())
         if fire_side.size:  # side engines (gymnasium's 17 px lever, not SIDE_ENGINE_HEIGHT, kept as it is)
             u = 3 * d1 + direction * SIDE_ENGINE_AWAY / SCALE
             ox = tip0 * d0 + side0 * u
@@ -390,14 +429,14 @@ class LanderCore:
     def _read_back(self, live: np.ndarray) -> tuple[np.ndarray, ...]:
         """Read the ``live`` landers back from Box2D after the step: their flat indices, seats and games, gymnasium's
         state ``(k, 8)`` of each (also written to :attr:`state`), and whether each body is awake."""
-        n, bodies = self.n, self._bodies
+        n, readers = self.n, self._readers
         ks = np.flatnonzero(live.ravel())
         vals: list[float] = []
         ext = vals.extend
+        x_, y_, angle_, spin_, awake_ = _X, _Y, _ANGLE, _SPIN, _AWAKE
         for k in ks.tolist():
-            b = bodies[k]
-            p, v = _POSITION(b), _VELOCITY(b)
-            ext((_X(p), _Y(p), _X(v), _Y(v), _ANGLE(b), _SPIN(b), _AWAKE(b)))
+            b, p, v = readers[k]
+            ext((x_(p), y_(p), x_(v), y_(v), angle_(b), spin_(b), awake_(b)))
         r = np.array(vals).reshape(-1, 7)
         seat, game = np.divmod(ks, n)
         self._pos[0, seat, game] = r[:, 0]

@@ -81,7 +81,7 @@ class ScalarLander:
 
     __slots__ = ("config", "n_seats", "continuous", "world", "score", "steps", "terminated", "truncated", "over",
                  "alive", "result", "state", "main_power", "side_power", "side_dir", "_rows", "_shaping", "_pos",
-                 "_crashed", "_legs", "_scale", "_f32")
+                 "_crashed", "_legs", "_scale", "_f32", "_vectors")
 
     def __init__(self, config: LanderConfig | None = None) -> None:
         self.config = cfg = config or LanderConfig()
@@ -101,10 +101,11 @@ class ScalarLander:
         self._crashed = [False] * L  # written by the world's contact listener
         self._legs = [[0, 0] for _ in range(L)]
         self.world = w = LanderWorld(self.config, seed, list(range(L)), self._crashed, self._legs)
-        self._pos = []
-        for body in w.bodies:
-            x, y = body.position
-            self._pos.append((x, y, body.angle))
+        self._pos, self._vectors = [], []
+        for body in w.bodies:  # (Box2D's position and velocity of each body: references that follow it, as the core's)
+            p = _POSITION(body)
+            self._pos.append((_X(p), _Y(p), _ANGLE(body)))
+            self._vectors.append((p, _VELOCITY(body)))
         self.score = [0.0] * L
         self.steps = 0
         self.terminated = self.truncated = self.over = False
@@ -187,12 +188,13 @@ class ScalarLander:
         w.world.Step(_TIME_STEP, _VEL_ITERS, _POS_ITERS)
         reward = [0.0] * L
         done = []
-        crashed, legs, state, rows, prev = self._crashed, self._legs, self.state, self._rows, self._shaping
+        crashed, legs, state, rows, prev, vectors = (self._crashed, self._legs, self.state, self._rows, self._shaping,
+                                                     self._vectors)
         for i in range(L):
             if not alive[i]:
                 continue
             b = bodies[i]
-            p, v = _POSITION(b), _VELOCITY(b)
+            p, v = vectors[i]
             x, y, angle = _X(p), _Y(p), _ANGLE(b)
             pos[i] = (x, y, angle)
             s0 = (x - _X_HALF) / _X_HALF
