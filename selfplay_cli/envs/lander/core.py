@@ -16,6 +16,7 @@ lander (drawn for every lander, flying or not).
 from __future__ import annotations
 
 import math
+from math import sqrt as _sqrt
 from typing import Any
 
 import Box2D
@@ -107,6 +108,23 @@ def _leg_joint(i: int) -> Any:
 
 
 _LEG_JOINTS = [_leg_joint(-1), _leg_joint(+1)]
+
+
+def read_lander(body: Any, position: Any, velocity: Any, legs: Any) -> tuple[float, float, list[float], float]:
+    """One lander read back from Box2D after a step (its body, position and velocity vectors, its legs' ground
+    contacts), in Python floats: its x and y, gymnasium's state (8 values, unclipped) and its shaping. The same
+    doubles as the core's arrays: the same IEEE operations in the same order (math's sqrt, like numpy's, is correctly
+    rounded)."""
+    x, y, angle = _X(position), _Y(position), _ANGLE(body)
+    s0 = (x - _X_HALF) / _X_HALF
+    s1 = (y - _Y_ZERO) / _Y_HALF
+    s2 = _X(velocity) * _X_HALF / FPS
+    s3 = _Y(velocity) * _Y_HALF / FPS
+    s5 = 20.0 * _SPIN(body) / FPS
+    s6, s7 = (1.0 if legs[0] > 0 else 0.0), (1.0 if legs[1] > 0 else 0.0)
+    shaping = (-100 * _sqrt(s0 * s0 + s1 * s1) - 100 * _sqrt(s2 * s2 + s3 * s3) - 100 * abs(angle)
+               + 10 * s6 + 10 * s7)
+    return x, y, [s0, s1, s2, s3, angle, s5, s6, s7], shaping
 
 
 def seed_generator(seed: int) -> np.random.Generator:
@@ -290,11 +308,31 @@ class LanderCore:
         self.steps[g] = 0
         self.terminated[g] = self.truncated[g] = self.over[g] = False
         self.result[:, g] = FLYING
-        self._at[g] = _BLOCK
-        live = np.zeros((L, n), dtype=bool)
-        live[:, g] = True
         self.alive[:, g] = True
-        self._advance(live, live[0], g.tolist(), self._zero, self._zero, self._zero, first=True)
+        self.main_power[:, g] = self.side_power[:, g] = 0.0
+        self._opening_step(g.tolist())
+
+    def _opening_step(self, games: list[int]) -> None:
+        """gymnasium's reset step (a no-op) for the new ``games``: each draws its dispersion (its first block, of
+        which this step takes the first row; no engine fires), feels the wind, steps, and its landers are read back
+        (in Python floats, :func:`read_lander`: a few new games cost less than the core's arrays), setting their
+        state and shaping; its reward is not given."""
+        n, block, stepper, readers, legs = self.n, self._block, self._stepper, self._readers, self._legs
+        for g in games:
+            self._random[g](out=block[g, :_BLOCK])
+            self._at[g] = 1
+        if self.config.enable_wind:
+            live = np.zeros((self.n_seats, n), dtype=bool)
+            live[:, games] = True
+            self._wind(live)
+        for g in games:
+            stepper[g](_TIME_STEP, _VEL_ITERS, _POS_ITERS)
+            for seat in range(self.n_seats):
+                k = seat * n + g
+                x, y, row, shaping = read_lander(*readers[k], legs[k])
+                self._pos[0, seat, g], self._pos[1, seat, g], self._angle[seat, g] = x, y, row[4]
+                self.state[seat, g] = row
+                self._shaping[seat, g] = shaping
 
     # ----------------------------------------------------------------------------------------------------
     def _powers(self, actions: Any, live: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -350,7 +388,7 @@ class LanderCore:
         return reward.astype(np.float32)
 
     def _advance(self, live: np.ndarray, running: np.ndarray, games: list[int], main: np.ndarray, side: np.ndarray,
-                 direction: np.ndarray, first: bool = False) -> np.ndarray:
+                 direction: np.ndarray) -> np.ndarray:
         """Fire the engines of the ``live`` landers, step the ``running`` games (``(n,)``; ``games``, their indices),
         read the landers back, and score them (gymnasium's step, for all at once). Returns the rewards ``(L, n)``
         (zero where not live)."""
@@ -370,9 +408,6 @@ class LanderCore:
         rew -= sp * 0.03
         self._shaping[seat, game] = shaping
         reward = np.zeros_like(self._zero)
-        if first:  # gymnasium's reset step: it sets the shaping, its reward is not given
-            self.main_power[:, games] = self.side_power[:, games] = 0.0
-            return reward
         self.main_power[:] = main
         self.side_power[:] = side
         self.side_dir[:] = direction

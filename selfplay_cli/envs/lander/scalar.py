@@ -32,7 +32,6 @@ import numpy as np
 from .config import (
     CRASHED,
     FLYING,
-    FPS,
     LANDED,
     MAIN_ENGINE_POWER,
     OUT,
@@ -51,21 +50,18 @@ from .core import (
     _MAIN_Y,
     _POS_ITERS,
     _POSITION,
-    _SPIN,
     _TIME_STEP,
     _VEL_ITERS,
     _VELOCITY,
     _X,
-    _X_HALF,
     _Y,
-    _Y_HALF,
-    _Y_ZERO,
     LanderWorld,
+    read_lander,
 )
 
 _LOW, _HIGH = _LOW64.tolist()[:6], _HIGH64.tolist()[:6]  # the legs (0 or 1) are inside their bounds
 _np_sin, _np_cos = np.sin, np.cos
-_sin, _tanh, _sqrt, _PI = math.sin, math.tanh, math.sqrt, math.pi
+_sin, _tanh, _PI = math.sin, math.tanh, math.pi
 
 
 class ScalarLander:
@@ -194,21 +190,12 @@ class ScalarLander:
             if not alive[i]:
                 continue
             b = bodies[i]
-            p, v = vectors[i]
-            x, y, angle = _X(p), _Y(p), _ANGLE(b)
-            pos[i] = (x, y, angle)
-            s0 = (x - _X_HALF) / _X_HALF
-            s1 = (y - _Y_ZERO) / _Y_HALF
-            s2 = _X(v) * _X_HALF / FPS
-            s3 = _Y(v) * _Y_HALF / FPS
-            s5 = 20.0 * _SPIN(b) / FPS
-            leg0, leg1 = legs[i]
-            s6, s7 = (1.0 if leg0 > 0 else 0.0), (1.0 if leg1 > 0 else 0.0)
-            row = state[i] = [s0, s1, s2, s3, angle, s5, s6, s7]
+            x, y, row, shaping = read_lander(b, *vectors[i], legs[i])
+            pos[i] = (x, y, row[4])
+            state[i] = row
             rows[i] = [lo if z < lo else hi if z > hi else z
-                       for z, lo, hi in zip(row[:6], _LOW, _HIGH, strict=True)] + [s6, s7]
-            shaping = (-100 * _sqrt(s0 * s0 + s1 * s1) - 100 * _sqrt(s2 * s2 + s3 * s3) - 100 * abs(angle)
-                       + 10 * s6 + 10 * s7)
+                       for z, lo, hi in zip(row[:6], _LOW, _HIGH, strict=True)] + row[6:]
+            s0 = row[0]
             rew = shaping - prev[i]
             rew -= main[i] * 0.30
             rew -= side[i] * 0.03
