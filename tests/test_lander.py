@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 
 import gymnasium as gym
 import numpy as np
@@ -14,6 +15,7 @@ from gymnasium.envs.box2d.lunar_lander import heuristic as gym_heuristic
 from pettingzoo.test import api_test, parallel_api_test
 
 from selfplay_cli.envs.lander import LANDER
+from selfplay_cli.envs.lander import core as lander_core
 from selfplay_cli.envs.lander.bots import heuristic_continuous_rule, heuristic_rule
 from selfplay_cli.envs.lander.config import (
     CRASHED,
@@ -24,7 +26,7 @@ from selfplay_cli.envs.lander.config import (
     LanderConfig,
     make_config,
 )
-from selfplay_cli.envs.lander.core import LanderCore
+from selfplay_cli.envs.lander.core import LanderCore, LanderWorld
 from selfplay_cli.envs.lander.view import LanderAECEnv, LanderParallelEnv
 from selfplay_cli.play import Game, play
 from selfplay_cli.policies import ScriptedPolicy
@@ -178,7 +180,8 @@ def test_legs_touching_legs_do_not_crash_and_are_no_ground_contact():
     for _ in range(50):
         c.step(NOOPS)
         assert (c.observe()[:, 0, 6:] == 0).all(), "a leg on a leg is no ground contact"
-        legs_met += any(ce.contact.touching and 3 * 1 + 2 in (ce.contact.fixtureA.userData, ce.contact.fixtureB.userData)
+        legs_met += any(ce.contact.touching and 3 * 1 + 2 in (ce.contact.fixtureA.userData,
+                                                              ce.contact.fixtureB.userData)
                         for ce in w.legs[0][0].contacts)
     assert legs_met >= 1, "lander 0's right leg pressed on lander 1's left leg"
     assert c.result[:, 0].tolist() == [FLYING, FLYING], "legs on legs are no crash"
@@ -221,6 +224,44 @@ def _falling_wreck(world, i: int) -> None:
         f = fixture.filterData
         f.maskBits = 0x0001
         fixture.filterData = f
+
+
+def _world_made(seed: int) -> list:
+    """What a 3-lander world is made of: its terrain's edges, each body's position and angle, each joint's bodies."""
+    w = LanderWorld(LanderConfig(landers=3), seed, [0, 1, 2], np.zeros(3, dtype=bool), np.zeros((3, 2), np.int32))
+    parts = [*w.bodies, *(leg for pair in w.legs for leg in pair)]
+    made = [tuple(map(tuple, f.shape.vertices)) for f in w.moon.fixtures]
+    made += [(tuple(p.position), p.angle) for p in parts]
+    made += [(tuple(j.bodyA.position), tuple(j.bodyB.position), j.angle) for j in w.world.joints]
+    w.close()
+    return made
+
+
+def test_worlds_made_in_two_threads_at_once_are_the_worlds_made_alone(monkeypatch):
+    """A world is made from definitions kept between worlds (positions, vertices, a joint's bodies set anew for each
+    body): two threads making worlds in lockstep (each body made only once the other thread has set its own
+    definition too) make the same worlds as one thread alone."""
+    alone = {seed: _world_made(seed) for seed in range(40)}
+    together: dict[int, list] = {}
+    lockstep = threading.Barrier(2, timeout=10)
+    create_body = lander_core._CREATE_BODY
+
+    def in_lockstep(world, definition):
+        lockstep.wait()
+        return create_body(world, definition)
+
+    monkeypatch.setattr(lander_core, "_CREATE_BODY", in_lockstep)
+
+    def make(seeds: range) -> None:
+        for seed in seeds:
+            together[seed] = _world_made(seed)
+
+    threads = [threading.Thread(target=make, args=(range(k, 40, 2),)) for k in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert together == alone
 
 
 @pytest.mark.parametrize("landers", [2, 3])

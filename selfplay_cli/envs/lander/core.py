@@ -16,6 +16,7 @@ lander (drawn for every lander, flying or not).
 from __future__ import annotations
 
 import math
+import threading
 from math import sqrt as _sqrt
 from typing import Any
 
@@ -87,12 +88,10 @@ _EDGE_V1, _EDGE_V2 = _Box2D.b2EdgeShape_vertex1_set, _Box2D.b2EdgeShape_vertex2_
 # A world's definitions (gymnasium's keywords), made once: Box2D copies a definition and its shape into what it makes.
 # The moon: a static body with the floor's edge (pybox2d's default fixture for ``shapes=``) and one edge fixture per
 # terrain chunk (the edge's vertices set as ``edgeShape.vertices`` sets two). A lander: a dynamic body and two legs,
-# one fixture each, the legs joined to the body by revolute joints.
+# one fixture each, the legs joined to the body by revolute joints. Those set anew for each body are each thread's
+# own (:class:`_Definitions`): worlds made in two threads at once take nothing from each other.
 _MOON = bodyDef(type=staticBody)
 _FLOOR = fixtureDef(shape=edgeShape(vertices=[(0, 0), (W, 0)]))
-_EDGE = edgeShape(vertices=[(0, 0), (1, 0)])
-_GROUND = fixtureDef(shape=_EDGE, density=0, friction=0.1)
-_LANDER, _LEG = bodyDef(type=dynamicBody, angle=0.0), bodyDef(type=dynamicBody)
 _BODY_SHAPE, _LEG_SHAPE = polygonShape(vertices=_POLY), polygonShape(box=(LEG_W / SCALE, LEG_H / SCALE))
 _BODY_FIXTURE = fixtureDef(shape=_BODY_SHAPE, density=5.0, friction=0.1, categoryBits=BODY_BITS, maskBits=_COLLIDE,
                            restitution=0.0)
@@ -107,7 +106,18 @@ def _leg_joint(i: int) -> Any:
     return rjd
 
 
-_LEG_JOINTS = [_leg_joint(-1), _leg_joint(+1)]
+class _Definitions(threading.local):
+    """The definitions a world's making sets anew for each body it makes (positions, a terrain edge's vertices, a
+    joint's bodies), one set per thread."""
+
+    def __init__(self) -> None:
+        self.edge = edgeShape(vertices=[(0, 0), (1, 0)])
+        self.ground = fixtureDef(shape=self.edge, density=0, friction=0.1)
+        self.lander, self.leg = bodyDef(type=dynamicBody, angle=0.0), bodyDef(type=dynamicBody)
+        self.joints = [_leg_joint(-1), _leg_joint(+1)]
+
+
+_DEFINITIONS = _Definitions()
 
 
 def read_lander(body: Any, position: Any, velocity: Any, legs: Any) -> tuple[float, float, list[float], float]:
@@ -189,7 +199,8 @@ class LanderWorld:
         self.moon = moon = _CREATE_BODY(world, _MOON)
         _CREATE_FIXTURE(moon, _FLOOR)
         self.terrain = terrain = list(zip(chunk_x, smooth_y, strict=True))
-        edge, ground = _EDGE, _GROUND
+        defs = _DEFINITIONS
+        edge, ground = defs.edge, defs.ground
         for i in range(CHUNKS - 1):  # (gymnasium's CreateEdgeFixture)
             _EDGE_V1(edge, terrain[i])
             _EDGE_V2(edge, terrain[i + 1])
@@ -198,7 +209,7 @@ class LanderWorld:
         n = len(ks)
         self.bodies, self.legs = bodies, pairs = [], []
         starts = [((i + 1) / (n + 1) * W, VIEWPORT_H / SCALE) for i in range(n)]
-        body_def, leg_def = _LANDER, _LEG
+        body_def, leg_def = defs.lander, defs.leg
         force = rng.uniform(-INITIAL_RANDOM, INITIAL_RANDOM, size=2 * n).tolist()  # (x, y) per lander, drawn in turn
         for i, ((x, y), k) in enumerate(zip(starts, ks, strict=True)):
             body_def.position = (x, y)
@@ -211,7 +222,7 @@ class LanderWorld:
             self.wind_idx, self.torque_idx = [wind_idx] * n, [torque_idx] * n
         for body, k, (x, y) in zip(bodies, ks, starts, strict=True):
             pair = []
-            for j, (i, rjd) in enumerate(zip((-1, +1), _LEG_JOINTS, strict=True)):
+            for j, (i, rjd) in enumerate(zip((-1, +1), defs.joints, strict=True)):
                 leg_def.position, leg_def.angle = (x - i * LEG_AWAY / SCALE, y), i * 0.05
                 leg = _CREATE_BODY(world, leg_def)
                 _SET_DATA(_CREATE_FIXTURE(leg, _LEG_FIXTURE), 3 * k + 1 + j)
