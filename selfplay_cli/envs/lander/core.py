@@ -3,14 +3,15 @@
 Everything that is not a call into Box2D is done once per step for all landers of all games with numpy (actions to
 engine powers, dispersion to impulses, positions to observations and rewards, endings); what is left in Python is
 one loop over the landers that fire (one impulse call each), one ``Step`` per running world and one loop reading
-each flying lander's position, velocity, angle, spin and sleep. The arithmetic is gymnasium's, operation for
-operation, so a one-lander game is gymnasium's ``LunarLander-v3`` game for the same seed.
+each flying lander's position, velocity, angle, spin and sleep. New games take gymnasium's opening step in Python
+floats (:func:`read_lander`), game by game. The arithmetic is gymnasium's, operation for operation, so a one-lander
+game is gymnasium's ``LunarLander-v3`` game for the same seed.
 
 Layout: seats (landers) lead, games follow: a lander is ``(seat, game)``, flat index ``k = seat * n + game``.
 Randomness: each game has its own ``numpy.random.Generator`` seeded by the game's seed (as gymnasium seeds its
 own), so a game plays the same alone or in a batch. Draws per game, in gymnasium's order: the terrain (12), each
 lander's initial force (2 each), the wind's phases (2, with wind), then at every step 2 dispersion values per
-lander (drawn for every lander, flying or not).
+lander (drawn for every lander, flying or not; taken from blocks of 32 steps' draws, the same stream).
 """
 
 from __future__ import annotations
