@@ -10,11 +10,10 @@ import numpy as np
 import pytest
 from cli_helpers import run
 
-from selfplay_cli.evaluation.gauntlet import GauntletConfig, clear, play_gauntlet
+from selfplay_cli.evaluation.gauntlet import GauntletConfig, play_gauntlet
 from selfplay_cli.evaluation.gauntlet_plan import best_snapshot, choose_opponents, run_history
 from selfplay_cli.league.store import League
 from selfplay_cli.league.variants import variant_key
-from selfplay_cli.play import Game, play
 from selfplay_cli.policies import ScriptedPolicy
 from selfplay_cli.ratings.ladder import ladder
 from selfplay_cli.ratings.pairs import head_to_head
@@ -100,22 +99,26 @@ def test_a_moments_gauntlet_knows_only_what_came_before_it(tmp_path):
     league.close()
 
 
-def test_clear_rule():
-    assert clear(4, 0, 1.645) and not clear(3, 1, 1.645) and not clear(0, 0, 1.645) and clear(0, 9, 1.645)
-
-
 @pytest.mark.slow
-def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_path, monkeypatch):
+def test_gauntlet_games_come_in_seat_swapped_pairs_all_at_once_whatever_the_history(tmp_path, monkeypatch):
     """Scripted players stand in for the snapshots (same league rows, no files): every matchup is stored in pairs,
-    each seed once with either player on the left; a matchup the predecessor already won clearly plays one pair."""
+    each seed once with either player on the left, and plays all its pairs, in one call of the runner: even one the
+    predecessor already won 8-0 (no history cuts a matchup short, nor makes it wait on its first games)."""
     import selfplay_cli.evaluation.gauntlet as gauntlet_mod
 
+    calls = []
+    real_play = gauntlet_mod.play
+
+    def counting_play(*args, **kwargs):
+        calls.append(len(args[2]))
+        return real_play(*args, **kwargs)
+
+    monkeypatch.setattr(gauntlet_mod, "play", counting_play)
     league = League.open(tmp_path / "league")
     league.roster.ensure_bots("pong", ["random", "cpu"])
     rows = snapshot_rows(league, "r", 2, learners=("left",))
     old, new = rows
     bots = {p.name: p for p in league.roster.players("pong", kind="bot")}
-    # the predecessor beat random 8-0 in its gauntlet, so random is clear; cpu is not
     mid = league.ledger.create_match("pong", "eval", {"gauntlet": True})
     league.ledger.record_games(mid, [GameResult("pong", (old.id, bots["random"].id), seed=i, scores=(1, 0),
                                                 outcome=(1.0, 0.0), length=10, truncated=False) for i in range(8)])
@@ -128,9 +131,8 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
 
     monkeypatch.setattr(gauntlet_mod, "load_player", fake_load)
     pairs = [(new, old), (new, bots["random"]), (new, bots["cpu"])]
-    cfg = GauntletConfig(pairs=2, clear_pairs=1, max_pairs=2)
-    ms = play_gauntlet(league, pairs, first_seed=500, config=cfg, policies=None, history=run_history(league, [new]))
-    assert [m.pairs for m in ms] == [2, 1, 2]
+    ms = play_gauntlet(league, pairs, first_seed=500, config=GauntletConfig(pairs=2), policies=None)
+    assert [m.pairs for m in ms] == [2, 2, 2] and calls == [12]  # 3 matchups x 2 pairs x 2 seatings, one batch
     table = league.ledger.games("pong")
     for m in ms:
         sub = table.select(np.isin(table.match_id, [m.match_id]))
@@ -140,61 +142,8 @@ def test_gauntlet_games_come_in_seat_swapped_pairs_and_fewer_where_clear(tmp_pat
             seeds[s].append(a)
         assert all(sorted(v) == sorted([m.a.id, m.b.id]) for v in seeds.values())  # each seed, both seatings
         h = head_to_head(league, m.a.id, m.b.id)
-        assert h["pairs"] >= m.pairs and (m.wins, m.draws, m.losses) == (
-            h["wins"] - (8 if m.b.name == "random" and m.a.id == old.id else 0), h["draws"], h["losses"])
+        assert h["pairs"] >= m.pairs and (m.wins, m.draws, m.losses) == (h["wins"], h["draws"], h["losses"])
     league.close()
-
-
-@pytest.mark.slow
-def test_open_matchups_go_on_in_the_same_batch(tmp_path, monkeypatch):
-    """With max_pairs above pairs, a matchup whose result is still open gets more pairs, played in the same call of
-    the runner (the schedule grows while it plays); a clear one stops."""
-    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
-
-    calls = []
-    real_play = gauntlet_mod.play
-
-    def counting_play(*args, **kwargs):
-        calls.append(1)
-        return real_play(*args, **kwargs)
-
-    monkeypatch.setattr(gauntlet_mod, "play", counting_play)
-    league = League.open(tmp_path / "league")
-    league.roster.ensure_bots("pong", ["random", "cpu"])
-    bots = {p.name: p for p in league.roster.players("pong", kind="bot")}
-    (snap,) = snapshot_rows(league, "r", 1, learners=("left",))
-
-    def fake_load(lg, row, device="cpu", greedy=None, seed=0):
-        p = ScriptedPolicy("pong", "random" if row.id == snap.id else row.name, seed=seed)
-        p.id = row.full_name
-        return p
-
-    monkeypatch.setattr(gauntlet_mod, "load_player", fake_load)
-    ms = play_gauntlet(league, [(snap, bots["random"]), (snap, bots["cpu"])], first_seed=0,
-                       config=GauntletConfig(pairs=2, clear_pairs=1, max_pairs=8))
-    vs_random, vs_cpu = ms
-    assert len(calls) == 1
-    assert vs_cpu.pairs == 2 and vs_cpu.losses == 4  # random against cpu: lost 4-0, clear after the first batch
-    assert vs_random.pairs > 2 or clear(vs_random.wins, vs_random.losses, 1.645)  # random vs random: usually open
-    assert len(league.ledger.games("pong")) == sum(m.games for m in ms)
-    league.close()
-
-
-def test_play_takes_games_appended_while_it_plays():
-    """The runner plays games that on_result appends to the schedule, in free slots of the same batch."""
-    spec_policies = [ScriptedPolicy("pong", "cpu"), ScriptedPolicy("pong", "cpu")]  # deterministic players
-    spec_policies[1].id = "cpu2"
-    schedule = [Game(1, (0, 1))]
-
-    def more(r):
-        if len(schedule) < 5:
-            schedule.extend([Game(10 + len(schedule), (1, 0)), Game(20 + len(schedule), (0, 1))])
-
-    results = play("pong", spec_policies, schedule, env_options={"points_to_win": 2}, on_result=more, slots=8)
-    assert len(results) == len(schedule) == 5 and [r.index for r in results] == list(range(5))
-    alone = play("pong", spec_policies, schedule[3:4], env_options={"points_to_win": 2})
-    assert (results[3].scores, results[3].length) == (alone[0].scores, alone[0].length)  # same game either way
-    assert results[3].players == ("cpu2", "cpu") and results[4].players == ("cpu", "cpu2")
 
 
 @pytest.mark.slow
@@ -264,31 +213,6 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
             assert int(low) <= int(high)
         assert len(re.findall(r"of 32 games", line)) == 2, line
     assert any(ln.strip().startswith("best of pong-1: ") for ln in out.splitlines()), out
-
-
-def test_a_clear_history_that_no_longer_holds_gets_the_full_pairs(tmp_path, monkeypatch):
-    """The predecessor lost 0-8 to random; the new snapshot (cpu standing in) wins its first pair, against that
-    history: the matchup goes on to the full number of pairs, in the same call of the runner."""
-    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
-
-    league = League.open(tmp_path / "league")
-    league.roster.ensure_bots("pong", ["random", "cpu"])
-    old, new = snapshot_rows(league, "r", 2, learners=("left",))
-    rnd = league.roster.find_players("random", "pong")[0]
-    mid = league.ledger.create_match("pong", "eval", {"gauntlet": True})
-    league.ledger.record_games(mid, [GameResult("pong", (rnd.id, old.id), seed=i, scores=(1, 0), outcome=(1.0, 0.0),
-                                                length=10, truncated=False) for i in range(8)])
-
-    def fake_load(lg, row, device="cpu", greedy=None, seed=0):
-        p = ScriptedPolicy("pong", "cpu" if row.id == new.id else row.name, seed=seed)
-        p.id = row.full_name
-        return p
-
-    monkeypatch.setattr(gauntlet_mod, "load_player", fake_load)
-    (m,) = play_gauntlet(league, [(new, rnd)], first_seed=0, config=GauntletConfig(pairs=3, clear_pairs=1, max_pairs=3),
-                         history=run_history(league, [new]))
-    assert m.expect == 0.0 and m.pairs == 3 and m.wins == 6, (m.pairs, m.wins)
-    league.close()
 
 
 @pytest.mark.slow
@@ -387,19 +311,17 @@ def test_a_playoff_between_equals_stops_at_its_cap_and_the_ladder_says_tied(tmp_
 
 @pytest.mark.slow
 def test_a_final_gauntlet_plays_the_bots_in_full_whatever_the_history(tmp_path, monkeypatch):
-    """A run reports its final snapshots' scores against the bots: those matchups get ``bot_pairs`` even where the
-    predecessor's record made them clear; the others keep the usual pairs."""
+    """A run reports its final snapshots' scores against the bots: those matchups get ``bot_pairs``; the others keep
+    the usual pairs, each on a seed range of its own."""
     import selfplay_cli.evaluation.gauntlet as gauntlet_mod
 
     league = League.open(tmp_path / "league")
     league.roster.ensure_bots("pong", ["random", "cpu"])
     old, new = snapshot_rows(league, "r", 2, learners=("left",))
     bots = {p.name: p for p in league.roster.players("pong", kind="bot")}
-    _gauntlet_games(league, old, bots["random"], [1] * 8)  # clear: a non-final gauntlet would play 1 pair
     _stand_ins(monkeypatch, gauntlet_mod, league, {old.id: "cpu", new.id: "cpu"})
     pairs = [(new, old), (new, bots["random"]), (new, bots["cpu"])]
-    cfg = GauntletConfig(pairs=2, clear_pairs=2, max_pairs=2, bot_pairs=16)
-    ms = play_gauntlet(league, pairs, first_seed=0, config=cfg, history=run_history(league, [new]))
+    ms = play_gauntlet(league, pairs, first_seed=0, config=GauntletConfig(pairs=2, bot_pairs=16))
     assert [m.games for m in ms] == [4, 32, 32]
     assert len({s for s in league.ledger.games("pong").seed.tolist()}) >= 16 + 16 + 2  # disjoint seed ranges
     league.close()
@@ -462,42 +384,40 @@ def test_the_rating_games_repeat_with_the_seed_whatever_the_timing(tmp_path, cap
     assert worker["best"] == inline["best"]
 
 
-def test_a_matchup_plays_on_until_its_record_predicts_a_match_within_the_precision():
+def test_a_matchup_plays_the_games_an_even_record_needs_for_the_precision():
     """The width of a record's prediction against scipy's beta-binomial (the pair's score under a uniform prior,
     ``Beta(1 + W, 1 + L)``, then a 200-game match): 8-0 predicts [66%, 100%] (0.34 wide: ``Beta(9, 1)`` leaves the
     score anywhere above ``0.025 ** (1 / 9)``), 16-0 [80%, 100%], 5-3 [29%, 87%]. Draws narrow it: 16-16-0 is
-    narrower than 24-0-8 of the same mean, and 8 draws of 8 do not predict a certain 50%. A matchup at 5-3
-    doubles its pairs (4 to 8) while the width is above the precision, and stops at its cap; a matchup with a
-    scripted player too (8-0 against a bot plays on; 16-0 stops); without a precision, it stops once clear. With a
-    precision it doubles at once as often as its record, scaled up, would still be too wide (each stop on the way
-    would cost a game's length of waiting)."""
-    from types import SimpleNamespace
-
+    narrower than 24-0-8 of the same mean, and 8 draws of 8 do not predict a certain 50%. An even record is the
+    widest, so a matchup plays (all at once) the rounds with which an even record would be narrow enough: at least
+    --eval-games', at most 4 times as many; the cap at 0.3 (16-16 is 0.36 wide, 32-32 0.27); --eval-games exactly
+    without a precision."""
     from scipy.stats import betabinom
 
-    from selfplay_cli.evaluation.gauntlet import Matchup, prediction_width
+    from selfplay_cli.evaluation.gauntlet_jobs import PRECISE_PAIRS, precise_pairs
+    from selfplay_cli.stats.belief import record_prediction
+
+    def width(w, d, lost):
+        return record_prediction(w, d, lost, 200).width
 
     for w, lost in ((8, 0), (16, 0), (5, 3), (14, 2), (48, 16)):
         exact = betabinom(200, 1 + w, 1 + lost)
-        assert prediction_width(w, 0, lost) == pytest.approx((exact.ppf(0.975) - exact.ppf(0.025)) / 200, abs=0.006)
-    assert prediction_width(8, 0, 0) == pytest.approx(1.0 - 0.66, abs=0.006)
-    assert prediction_width(16, 0, 0) == pytest.approx(0.20, abs=0.006)
-    assert prediction_width(16, 16, 0) < prediction_width(24, 0, 8) - 0.05  # the same mean, without draws
-    assert 0.2 < prediction_width(0, 8, 0) < prediction_width(4, 0, 4)  # all draws: narrower, not certain
+        assert width(w, 0, lost) == pytest.approx((exact.ppf(0.975) - exact.ppf(0.025)) / 200, abs=0.006)
+    assert width(8, 0, 0) == pytest.approx(1.0 - 0.66, abs=0.006)
+    assert width(16, 0, 0) == pytest.approx(0.20, abs=0.006)
+    assert width(16, 16, 0) < width(24, 0, 8) - 0.05  # the same mean, without draws
+    assert 0.2 < width(0, 8, 0) < width(4, 0, 4)  # all draws: narrower, not certain
+    assert width(16, 0, 16) == pytest.approx(0.36, abs=0.006) and width(32, 0, 32) == pytest.approx(0.27, abs=0.006)
 
-    a, b, bot = (SimpleNamespace(id=i, is_bot=i == 3) for i in (1, 2, 3))
-    open_pair = Matchup(a, b, 0, wins=5, draws=0, losses=3, pairs=4)
-    assert open_pair.more(1.645, 4, 16, precision=0.30) == 12  # 10-6 would be 0.45 wide, 20-12 0.35: to its cap
-    assert Matchup(a, b, 0, wins=7, losses=1, pairs=4).more(1.645, 4, 64, precision=0.30) == 12  # 28-4 is enough
-    assert Matchup(a, b, 0, wins=7, losses=1, pairs=4).more(1.645, 4, 64, precision=0.40) == 4  # 14-2 is enough
-    assert Matchup(a, b, 0, wins=5, draws=0, losses=3, pairs=16).more(1.645, 4, 16, precision=0.30) == 0  # capped
-    assert Matchup(a, b, 0, wins=48, draws=0, losses=16, pairs=32).more(1.645, 4, 64, precision=0.30) == 0
-    assert open_pair.more(1.645, 4, 16) == 4 and Matchup(a, b, 0, wins=8, pairs=4).more(1.645, 4, 16) == 0
-    assert Matchup(a, b, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.70) == 0  # 0.58 is enough
-    assert Matchup(a, bot, 0, wins=5, losses=3, pairs=4).more(1.645, 4, 16, precision=0.30) == 12  # a bot: open
-    assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16, precision=0.30) == 4  # 8-0: 0.34 wide, plays on
-    assert Matchup(a, bot, 0, wins=16, pairs=8).more(1.645, 4, 16, precision=0.30) == 0  # 16-0: 0.20, settled
-    assert Matchup(a, bot, 0, wins=8, pairs=4).more(1.645, 4, 16) == 0  # no precision: clear is enough
+    assert PRECISE_PAIRS == 4
+    assert precise_pairs(4, 2, 0.0) == 4  # no precision: --eval-games exactly
+    assert precise_pairs(4, 2, 0.30) == 16  # 32 games (16-16) are still 0.36 wide: the cap
+    assert precise_pairs(4, 2, 0.35) == 16 and precise_pairs(4, 2, 0.37) == 15  # 15-15 is 0.37 wide
+    even = [(k, width(k, 0, k)) for k in range(4, 17)]  # (a pair is 2 games: k-k after k pairs)
+    assert precise_pairs(4, 2, 0.46) == min(k for k, wd in even if wd <= 0.46) < 16
+    assert precise_pairs(4, 2, 0.70) == 4  # 4-4 is 0.59 wide: --eval-games is enough
+    assert precise_pairs(8, 1, 0.46) == min(g for g in range(8, 33) if width(g // 2, g % 2, g // 2) <= 0.46)
+    assert precise_pairs(1, 2, 0.30) == 4 and precise_pairs(1, 1, 0.99) == 1
 
 
 def test_a_playoff_round_plays_all_its_pairs_in_one_batch_each_to_its_own_size(tmp_path, monkeypatch):

@@ -488,10 +488,10 @@ def test_the_gauntlets_precision_is_a_setting_each_job_carries(tmp_path, capsys)
     assert GauntletJob((1,), 0, 8, 2).precision == 0.0
 
 
-def test_the_final_moment_plays_every_pair_a_matchup_may_reach_at_once(tmp_path):
-    """A moment's matchup starts at --eval-games and plays on while open (to 4 times its pairs, with a precision);
-    the final moment's, which the run waits for, plays them all at once: going on from its first pairs would wait
-    a whole game's length more. Its bots play their full --eval-games x 8."""
+def test_every_moment_plays_the_pairs_its_precision_asks_for(tmp_path):
+    """Every moment's matchups play the pairs the precision asks for (at 0.3, 4 times --eval-games' pairs), all at
+    once; the final's bots play --eval-games x 8; without a precision (--opponents nash: a payoff matrix's cells),
+    --eval-games exactly."""
     from selfplay_cli.evaluation.gauntlet_jobs import _config
 
     with League.open(tmp_path / "h") as league:
@@ -500,6 +500,6 @@ def test_the_final_moment_plays_every_pair_a_matchup_may_reach_at_once(tmp_path)
         spec = {"snapshot_ids": [bot.id], "games": 8, "older": 2, "precision": 0.3}
         moment, final = _config(league, spec), _config(league, {**spec, "full": True})
         exact = _config(league, {**spec, "full": True, "precision": 0.0})
-    assert (moment.pairs, moment.clear_pairs, moment.max_pairs, moment.bot_pairs) == (4, 1, 16, 0)
-    assert (final.pairs, final.clear_pairs, final.max_pairs, final.bot_pairs) == (16, 16, 16, 32)
-    assert (exact.pairs, exact.max_pairs) == (4, 4)
+    assert (moment.pairs, moment.bot_pairs, moment.older) == (16, 0, 2)
+    assert (final.pairs, final.bot_pairs, final.older) == (16, 32, 24)
+    assert (exact.pairs, exact.bot_pairs) == (4, 32)

@@ -521,7 +521,7 @@ def test_a_moment_played_again_queues_none_of_its_matchups_twice(rated_league):
     assert sorted(queued()) == sorted(i for i in ids if i != one.id)  # stored: not again
     spec = dict(one.spec)
     check_matchup_spec(spec)
-    for key, bad, needle in (("expect", 1.5, "expect must be a number from 0 up to"),
+    for key, bad, needle in (("precision", 1.5, "precision must be a number from 0 up to"),
                              ("a", "evilmod:env", "a must be a whole number"),
                              ("snapshot_ids", [], "snapshot_ids must be a list of 1 to")):
         with pytest.raises(BadSpec, match=needle):

@@ -80,8 +80,8 @@ def train(
     eval_games: Annotated[int, typer.Option("--eval-games", min=0, max=10_000, help="Games a new snapshot plays "
                                             "against each opponent of its gauntlet (its predecessor, the other "
                                             "learners, the run's best, older snapshots, the scripted players), in "
-                                            "seat-swapped pairs; 2 where its predecessor's result was already "
-                                            "clear. 0: no rating games.")] = 8,
+                                            "seat-swapped pairs (more for --eval-precision). 0: no rating "
+                                            "games.")] = 8,
     eval_older: Annotated[int, typer.Option("--eval-older", min=0, max=1_000, help="Older snapshots of the run in "
                                             "each gauntlet, besides the predecessor and the best.")] = 2,
     eval: Annotated[str, typer.Option("--eval", metavar="local|inline|remote|ray", help="Who plays the rating "
@@ -104,11 +104,11 @@ def train(
                                               "gauntlet the run's best candidates meet, up to this many games a "
                                               "pair, until the best is separated (0: no playoff).")] = 100,
     eval_precision: Annotated[float, typer.Option("--eval-precision", min=0.0, max=0.99, help="A gauntlet matchup (of "
-                                                  "snapshots or scripted players) plays on (up to 4 x --eval-games) "
-                                                  "until its record predicts a 200-game match of the two within this "
-                                                  "share of the "
-                                                  "score (0.3: 30 points), so the ladder's claims about the pair rest "
-                                                  "on its games; 0: --eval-games exactly.")] = 0.3,
+                                                  "snapshots or scripted players) plays, all at once, the games an "
+                                                  "even record needs to predict a 200-game match of the two within "
+                                                  "this share of the score (0.3: 30 points), up to 4 x --eval-games, "
+                                                  "so the ladder's claims about the pair rest on its games; 0: "
+                                                  "--eval-games exactly.")] = 0.3,
     executor: Annotated[str, typer.Option("--executor", metavar="local|ray", help="Where the training games are "
                                           "stepped: local, this process; ray, Ray actors (--actors), on this "
                                           "machine's cores or a cluster (--ray-address); the learners update here. "

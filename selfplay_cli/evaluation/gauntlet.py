@@ -13,23 +13,17 @@ comparison counts for every member (:func:`~.gauntlet_plan.crews_of`). A "pair" 
 one snapshot moment are played together, in one batched call of :func:`selfplay_cli.play.play` (or, on a league's
 workers, each matchup as a job of its own: :func:`open_matchups`, :mod:`.gauntlet_jobs`).
 
-Cheap where the result is clear: a matchup whose result is already clear from history (the new snapshot's lineage,
-its predecessor and theirs, met the same opponent at least ``2 * pairs`` times and won or lost clearly, by the rule
-below) plays ``clear_pairs`` pairs, and ``pairs`` after all if they go against that history (the snapshot has
-changed: where games are worth playing); any other matchup plays ``pairs`` pairs. With ``max_pairs`` above ``pairs``,
-a matchup whose games are all in goes on (doubling its pairs, up to ``max_pairs``) while its result is still open,
-i.e. while ``|W - L| < z * sqrt(W + L)`` with ``z`` the one-sided normal quantile of ``clear`` (0.95: 4-0 is clear,
-3-1 is not). Each such wait for a matchup's games costs up to a game's length, so the training loop leaves it off.
-The extra pairs join the running batch as soon as their matchup asks for them, so a short matchup never waits for
-the longest game of the batch. A matchup's games are stored in the ledger together once it is settled (kind
-``eval``, one match per matchup, one transaction), so a matchup is in the ledger whole or not at all.
+Every matchup plays all its rounds at once (``pairs``, ``bot_pairs`` against a scripted player, or the ``sizes``
+a playoff round gives), in one batch with the moment's other matchups: nothing waits on a matchup's first games to
+decide whether it plays on. Each such wait would cost the length of the batch's longest game (pong's trained players
+rally to the step limit, 18,000 steps), and a moment's chain of them cost more than all its games played at once
+(docs/benchmarks.md). A matchup's games are stored in the ledger together once they are all in (kind ``eval``, one
+match per matchup, one transaction), so a matchup is in the ledger whole or not at all.
 """
 
 from __future__ import annotations
 
-import functools
 import itertools
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -41,9 +35,7 @@ from ..play.schedule import CannotMeet, round_of
 from ..players.load import env_options_of, load_player, mix_seed
 from ..policies import Policy
 from ..results import GameResult, Rules, points_between
-from ..stats.belief import record_prediction
-from ..stats.elo import normal_quantile
-from .gauntlet_plan import History, Moment, plan_moment, record_between
+from .gauntlet_plan import Moment, plan_moment
 from .roles import cannot_meet_message, policy_roles
 
 
@@ -51,29 +43,17 @@ from .roles import cannot_meet_message, policy_roles
 class GauntletConfig:
     """How much a new snapshot plays (the defaults keep evaluation well below the training time)."""
 
-    pairs: int = 4  # rounds (seat-swapped pairs of a two-sides game) of a matchup at first
-    clear_pairs: int = 1  # ... of a matchup whose result is clear from the predecessor's games
-    max_pairs: int = 4  # pairs a matchup may reach while its result is open (= pairs: never more, no waiting on
-    # a matchup's first games; with long games each such wait costs a whole game's length)
+    pairs: int = 4  # rounds (seat-swapped pairs of a two-sides game) of every matchup
     older: int = 2  # older snapshots of the run besides the predecessor and the best
-    bot_pairs: int = 0  # pairs against each scripted player, if more than ``pairs`` (a run's final snapshots:
+    bot_pairs: int = 0  # rounds against each scripted player, if more than ``pairs`` (a run's final snapshots:
     # their figures against the bots are what the run reports)
-    clear: float = 0.95  # a matchup is settled once the likelihood of superiority leaves [1 - clear, clear]
     parallel: int = 1024  # games at once
-    precision: float = 0.0  # a matchup plays on (doubling, up to max_pairs) while its own record cannot predict a
-    # 200-game match of the two to within this many score points (0: it stops once clear): the ladder's claims
-    # about a pair rest on the pair's games
 
     def __post_init__(self) -> None:
-        if not 1 <= self.clear_pairs <= self.pairs <= self.max_pairs:
-            raise MarlError(f"gauntlet pairs must satisfy 1 <= clear_pairs <= pairs <= max_pairs, not "
-                            f"{self.clear_pairs} / {self.pairs} / {self.max_pairs}")
+        if self.pairs < 1:
+            raise MarlError(f"a gauntlet matchup plays at least one pair, not {self.pairs}")
         if self.older < 0:
             raise MarlError(f"older snapshots must not be negative, not {self.older}")
-        if not 0.5 < self.clear < 1.0:
-            raise MarlError(f"clear must lie in (0.5, 1), not {self.clear}")
-        if not 0.0 <= self.precision < 1.0:
-            raise MarlError(f"precision must lie in [0, 1), not {self.precision}")
 
 
 @dataclass
@@ -87,7 +67,6 @@ class Matchup:
     draws: int = 0
     losses: int = 0
     pairs: int = 0
-    expect: float | None = None  # the predecessor's clear score against the same opponent, if there is one
     match_id: int | None = None
     game_ids: list[int] = field(default_factory=list)
 
@@ -98,65 +77,6 @@ class Matchup:
     @property
     def score(self) -> float:
         return (self.wins + 0.5 * self.draws) / self.games if self.games else 0.5
-
-    def more(self, z: float, pairs: int, max_pairs: int, precision: float = 0.0) -> int:
-        """Pairs to add now that every game so far is in (0: settled).
-
-        A matchup started small on a clear history goes on to ``pairs`` at once when its games go against that
-        history (the snapshot changed: exactly where games are worth playing), and stops when they agree. Any other
-        matchup doubles its pairs up to ``max_pairs`` while its result is open; with ``precision``, while its record
-        cannot yet predict a 200-game match of the two to within ``precision`` score points
-        (:func:`prediction_width`), whoever plays: what the ladder says of a scripted player and a snapshot, or of
-        two scripted players, rests on their games as much as what it says of two snapshots. With ``precision`` it
-        doubles as often as its record, scaled to the larger number of games, would still be too wide, at once:
-        5-3 after 4 pairs goes to its cap of 16 pairs (10-6 is 0.45 wide, 20-12 0.35), 8-0 to 8 (16-0 is 0.20)."""
-        if self.expect is not None:
-            agrees = (self.score - 0.5) * (self.expect - 0.5) > 0
-            return 0 if agrees else max(pairs - self.pairs, 0)
-        if precision:
-            settled = prediction_width(self.wins, self.draws, self.losses) <= precision
-        else:
-            settled = clear(self.wins, self.losses, z)
-        if self.pairs >= max_pairs or settled:
-            return 0
-        target = min(2 * self.pairs, max_pairs)
-        if precision:  # straight to the doubling its record, as it stands, would need (each stop on the way costs a
-            # whole game's length of waiting): the record scaled to the target's games, up to the cap
-            record = (self.wins, self.draws, self.losses)
-            scale = 1 / max(self.pairs, 1)
-            while target < max_pairs and prediction_width(*(round(x * target * scale) for x in record)) > precision:
-                target = min(2 * target, max_pairs)
-        return target - self.pairs
-
-
-@functools.lru_cache(maxsize=4096)  # (a few ms each; a run's matchups repeat the same records: 8-0, 16-0, ...)
-def prediction_width(wins: int, draws: int, losses: int, games: int = 200) -> float:
-    """How wide (score points, 0 to 1) the 95% interval of a ``games``-game match's score is, predicted from this
-    record alone (:func:`~selfplay_cli.stats.belief.record_prediction`: the pair's expected score under a uniform
-    prior updated by the record, then the luck of the match): 8-0 is 0.34 wide, 16-0 0.20, 5-3 0.58."""
-    return record_prediction(wins, draws, losses, games).width
-
-
-def clear(wins: int, losses: int, z: float) -> bool:
-    """A result is clear once the decisive games lean one way by ``z`` standard deviations: ``|W - L| >= z sqrt(W + L)``
-    (the likelihood of superiority beyond ``Phi(z)``)."""
-    decisive = wins + losses
-    return decisive > 0 and abs(wins - losses) >= z * math.sqrt(decisive)
-
-
-def _clear_history(league: League, history: History, m: Matchup, z: float, enough: int) -> float | None:
-    """The score against the same opponent of the new snapshot's lineage (its predecessor, then theirs, as far back
-    as it takes to count ``enough`` games) in the run's earlier gauntlets, if that record is clear; else None."""
-    wins = draws = losses = 0
-    pid = m.a.parent_id
-    while pid is not None and pid != m.b.id and wins + draws + losses < enough:
-        w, d, lo = record_between(history.table, pid, m.b.id)
-        wins, draws, losses = wins + w, draws + d, losses + lo
-        pid = league.roster.get_player(pid).parent_id
-    games = wins + draws + losses
-    if games < enough or not clear(wins, losses, z):
-        return None
-    return (wins + 0.5 * draws) / games
 
 
 def play_gauntlet(
@@ -169,10 +89,8 @@ def play_gauntlet(
     policies: dict[int, Policy] | None = None,
     on_games: Callable[[int], None] | None = None,
     crews: dict[int, tuple[PlayerRow, ...]] | None = None,
-    history: History | None = None,
     label: str | None = None,
     key: str | None = None,
-    expects: Sequence[float | None] | None = None,
     sizes: Sequence[int] | None = None,
 ) -> list[Matchup]:
     """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
@@ -180,12 +98,9 @@ def play_gauntlet(
     ``policies`` may hold already loaded players by player id (scripted players are loaded afresh otherwise);
     seeds start at ``first_seed``, a disjoint range per matchup. ``on_games(n)`` is told of finished games.
     ``crews`` (cooperative games): the per-seat members a player flies with (:func:`~.gauntlet_plan.crews_of`), by
-    player id; a player without one flies every seat itself. ``history``: the moment's
-    :class:`~.gauntlet_plan.History`, whose games say which matchups are already clear (without one, none is);
-    ``expects``: what a plan of the matchups found instead (:func:`open_matchups`: a matchup played as a job of its
-    own). ``label``: a flag set in the matches' parameters besides ``gauntlet`` (``playoff``). ``sizes``: the pairs
-    each matchup plays, no more and no fewer (a playoff round, whose pairs have different numbers of games left),
-    instead of ``config``'s rule; each matchup's seeds then span its own size.
+    player id; a player without one flies every seat itself. ``label``: a flag set in the matches' parameters besides
+    ``gauntlet`` (``playoff``). ``sizes``: the pairs each matchup plays (a playoff round, whose pairs have different
+    numbers of games left), instead of ``config``'s; each matchup's seeds then span its own size.
 
     ``key``: the unit of work these matchups are (a run's gauntlet of one moment, a round of its playoff), where it
     may be played twice (its process killed, then the run resumed; a rating worker replaced): each matchup is
@@ -218,26 +133,17 @@ def play_gauntlet(
             m.match_id, params = stored[k]
             m.wins, m.draws, m.losses, m.pairs = (int(x) for x in params.get("record", (0, 0, 0, 0)))
         return matchups
-    gauntlet.plan(matchups, keys, stored, sizes)
-    for k, m in enumerate(matchups):
-        if sizes is not None:
-            gauntlet.schedule_pairs(k, sizes[k])
-            continue
-        m.expect = (expects[k] if expects is not None else
-                    None if history is None else _clear_history(league, history, m, gauntlet.z, 2 * cfg.pairs))
-        if cfg.bot_pairs and m.b.is_bot:  # the final's figures against the bots: in full, whatever the history
-            gauntlet.schedule_pairs(k, max(cfg.pairs, cfg.bot_pairs))
-        else:
-            gauntlet.schedule_pairs(k, cfg.pairs if m.expect is None else cfg.clear_pairs)
-    most = 2 * (sum(sizes) if sizes is not None else max(cfg.max_pairs, cfg.bot_pairs) * len(matchups))
+    gauntlet.plan(matchups, keys, stored)
+    for k, size in enumerate(_sizes(matchups, cfg, sizes)):
+        gauntlet.schedule_pairs(k, size)
     play(gauntlet.spec, gauntlet.roster, gauntlet.schedule, parallel=cfg.parallel, env_options=gauntlet.options,
-         record_actions=True, on_result=lambda r: gauntlet.finished(r, on_games), slots=min(cfg.parallel, most))
+         record_actions=True, on_result=lambda r: gauntlet.finished(r, on_games))
     return matchups
 
 
 class _Gauntlet:
-    """One call of :func:`play_gauntlet` with its players loaded: the roster they play as, the schedule as it grows
-    (a matchup still open gets more rounds as its last ones come in) and what is still to come of each matchup."""
+    """One call of :func:`play_gauntlet` with its players loaded: the roster they play as, the schedule and what is
+    still to come of each matchup."""
 
     def __init__(self, league: League, cfg: GauntletConfig, loaded: dict[int, Policy],
                  crews: dict[int, tuple[PlayerRow, ...]], label: str | None, spec: EnvSpec) -> None:
@@ -250,7 +156,6 @@ class _Gauntlet:
         self.rules = rules = Rules.of(spec)
         self.seated = {pid: _seat_crew(crew, rules.n_seats) for pid, crew in crews.items()}
         self.roles = {i: policy_roles(p, spec) for i, p in enumerate(self.roster)}  # who may sit where (None: any)
-        self.z = normal_quantile(cfg.clear)
         self.schedule: list[Game] = []
         self.owner: list[tuple[int, int]] = []  # per game: its matchup's index and its round
         self.rounds: dict[tuple[int, int], list[GameResult]] = {}  # the finished games of rounds still incomplete
@@ -273,12 +178,9 @@ class _Gauntlet:
             raise MarlError(cannot_meet_message(self.spec.name, self.rules, m.a.full_name, roles[index[m.a.id]],
                                                 m.b.full_name, roles[index[m.b.id]])) from None
 
-    def plan(self, matchups: list[Matchup], keys: list[str | None], stored: dict,
-             sizes: Sequence[int] | None = None) -> None:
-        """The matchups to play, their keys and those already stored; the games in a round of each; the pairs each
-        may reach (``sizes``, or the config's ``max_pairs``)."""
+    def plan(self, matchups: list[Matchup], keys: list[str | None], stored: dict) -> None:
+        """The matchups to play, their keys and those already stored; the games in a round of each."""
         self.matchups, self.keys, self.stored = matchups, keys, stored
-        self.max_pairs = list(sizes) if sizes is not None else [self.cfg.max_pairs] * len(matchups)
         self.per = [len(self.round_games(m, m.first_seed)) for m in matchups]  # seatings that fit
         self.in_flight = dict.fromkeys(range(len(matchups)), 0)  # games scheduled but not finished, per matchup
         self.pending: dict[int, list[GameResult]] = {k: [] for k in range(len(matchups))}
@@ -294,8 +196,7 @@ class _Gauntlet:
         self.in_flight[k] += self.per[k] * n
 
     def finished(self, r: GameResult, on_games: Callable[[int], None] | None) -> None:
-        """A game is in: count its round once whole; once a matchup's scheduled games are all in, give it more
-        rounds while it is still open, else store it."""
+        """A game is in: count its round once whole; once a matchup's games are all in, store them."""
         k, p = self.owner[r.index]
         m = self.matchups[k]
         got = self.rounds.setdefault((k, p), [])
@@ -311,12 +212,9 @@ class _Gauntlet:
         self.in_flight[k] -= 1
         if on_games:
             on_games(1)
-        if self.in_flight[k] == 0:  # every game scheduled so far is in: go on while still open, else store them all
-            extra = m.more(self.z, min(self.cfg.pairs, self.max_pairs[k]), self.max_pairs[k], self.cfg.precision)
+        if self.in_flight[k] == 0:  # every game of the matchup is in: store them all
             key = self.keys[k]
-            if extra:
-                self.schedule_pairs(k, extra)
-            elif key not in self.stored:
+            if key not in self.stored:
                 _store(self.league, m, self.pending[k], self.loaded, self.options, self.crews, self.label, key)
                 self.pending[k] = []
             else:  # stored the first time round: these are the same games
@@ -361,33 +259,34 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     if moment is None:
         return []
     return play_gauntlet(league, moment.pairs, first_seed=first_seed, config=config, device=device,
-                         on_games=on_games, crews=moment.crews, history=moment.history, key=moment.key)
+                         on_games=on_games, crews=moment.crews, key=moment.key)
 
 
 def open_matchups(league: League, moment: Moment, *, first_seed: int, config: GauntletConfig) -> list[Matchup]:
-    """The matchups of a planned moment not in the ledger yet, each with its seeds and its expectation
-    (:attr:`Matchup.expect`) as :func:`play_gauntlet` would give them: what a matchup played on its own
-    (``play_gauntlet([(a, b)], first_seed=m.first_seed, expects=[m.expect], key=moment.key)``) plays, with the
-    same seeds and under the same key as the whole moment's call."""
+    """The matchups of a planned moment not in the ledger yet, each with its seeds as :func:`play_gauntlet` would
+    give them: what a matchup played on its own (``play_gauntlet([(a, b)], first_seed=m.first_seed,
+    key=moment.key)``) plays, with the same seeds and under the same key as the whole moment's call."""
     matchups, keys = _matchups(moment.pairs, first_seed, config, moment.key)
     stored = league.ledger.keyed_matches(f"{moment.key}/")
-    z = normal_quantile(config.clear)
-    out = []
-    for m, k in zip(matchups, keys, strict=True):
-        if k not in stored:
-            m.expect = _clear_history(league, moment.history, m, z, 2 * config.pairs)
-            out.append(m)
-    return out
+    return [m for m, k in zip(matchups, keys, strict=True) if k not in stored]
 
 
 def _matchups(pairs: Sequence[tuple[PlayerRow, PlayerRow]], first_seed: int, cfg: GauntletConfig,
               key: str | None, sizes: Sequence[int] | None = None) -> tuple[list[Matchup], list[str | None]]:
-    """The matchups of ``pairs``, each with its own range of seeds (one per round it may reach: ``sizes[k]``, or the
-    config's most), and their keys under ``key`` (``<key>/<first seed>/<a>/<b>``)."""
-    spans = list(sizes) if sizes is not None else [max(cfg.max_pairs, cfg.bot_pairs)] * len(pairs)
+    """The matchups of ``pairs``, each with its own range of seeds (one per round: ``sizes[k]``, or the most any
+    matchup of ``cfg`` plays), and their keys under ``key`` (``<key>/<first seed>/<a>/<b>``)."""
+    spans = list(sizes) if sizes is not None else [max(cfg.pairs, cfg.bot_pairs)] * len(pairs)
     starts = itertools.accumulate(spans, initial=first_seed)  # (one more than the pairs: where the last range ends)
     matchups = [Matchup(a, b, start) for (a, b), start in zip(pairs, starts, strict=False)]
     return matchups, [None if key is None else f"{key}/{m.first_seed}/{m.a.id}/{m.b.id}" for m in matchups]
+
+
+def _sizes(matchups: Sequence[Matchup], cfg: GauntletConfig, sizes: Sequence[int] | None) -> list[int]:
+    """The rounds each matchup plays: ``sizes``, else ``cfg.pairs``, or ``cfg.bot_pairs`` where more against a
+    scripted player (the final's figures against the bots)."""
+    if sizes is not None:
+        return list(sizes)
+    return [max(cfg.pairs, cfg.bot_pairs) if m.b.is_bot else cfg.pairs for m in matchups]
 
 
 def _seat_crew(crew: tuple[PlayerRow, ...], n_seats: int) -> tuple[PlayerRow, ...]:

@@ -12,7 +12,7 @@ makes the same choices. So a job finished twice, or played again after its worke
 :class:`~selfplay_cli.evaluation.played.Played` carries no games of its own (the queue only marks it done), and a
 summary (games, seconds, the snapshots it rated).
 
-What a gauntlet chooses (the run's best so far, which matchups are already clear) comes from the run's earlier
+What a gauntlet chooses (the run's best so far, the older snapshots it has not met) comes from the run's earlier
 gauntlets, so a run's jobs are queued in a chain (each waits for the one before it), played in the order the
 snapshots were taken, as the training process plays them.
 
@@ -21,8 +21,8 @@ that leased a moment plans it (:func:`~selfplay_cli.evaluation.gauntlet_plan.pla
 in the ledger yet as a job of its own (kind ``matchup``, in the run's batch, not chained: whoever is free takes it),
 plays those nobody has taken and waits for the rest (:func:`~selfplay_cli.evaluation.jobs.see_through`), then ends the
 moment (its playoff, for the final one); the next moment's job waits for it, so for all of them. A matchup's job plays
-it as the whole moment's call would (its seeds, its expectation from the moment's history, stored whole under the
-moment's key), so a moment replanned after its worker died finds the matchups stored or queued and queues none twice.
+it as the whole moment's call would (its seeds and its games, stored whole under the moment's key), so a moment
+replanned after its worker died finds the matchups stored or queued and queues none twice.
 Where no other worker takes the batch, the moment plays whole in one batch (faster on one machine). Matchups played
 apart sample their moves in batches of their own, so their games are other draws than the whole moment's of the same
 seeds; which matchups are played, on which seeds and how many games, is the same.
@@ -30,7 +30,6 @@ seeds; which matchups are played, on which seeds and how many games, is the same
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -41,6 +40,7 @@ from ..league.job_rows import JobRow, NewJob
 from ..league.store import League
 from ..players.snapshots import share_snapshots
 from ..results import Rules
+from ..stats.belief import record_prediction
 from . import job_spec
 from .gauntlet import GauntletConfig, open_matchups, play_gauntlet, rate_snapshots
 from .gauntlet_plan import ALL_OLDER, Moment, crews_of, plan_moment
@@ -48,16 +48,16 @@ from .played import JobLost, Played, See
 
 __all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "MATCHUP", "MAX_EVAL_GAMES", "MAX_MOMENT", "MAX_OLDER",
            "MAX_PLAYOFF", "PLAYOFF_SEEDS", "PRECISE_PAIRS", "check_matchup_spec", "check_spec", "gauntlet_job",
-           "play", "play_gauntlet_spec", "play_matchup", "queue_matchups"]
+           "play", "play_gauntlet_spec", "play_matchup", "precise_pairs", "queue_matchups"]
 
 GAUNTLET = "gauntlet"
 MATCHUP = "matchup"  # one matchup of a moment's gauntlet, queued by the worker that plays the moment
 FINAL_BOT_GAMES = 8  # a run's final snapshots play this many times --eval-games against each scripted player (64
 # at the default 8): the run's summary reports their scores against the bots, and each score's interval (within
 # about 28 points for a 200-game match at 50%)
-PRECISE_PAIRS = 4  # with a precision (marl train --eval-precision), a matchup (bots too) plays on, up to this
-# many times its pairs, until its record predicts a 200-game match of the two that closely: the ladder's claims about
-# a pair rest on its games
+PRECISE_PAIRS = 4  # with a precision (marl train --eval-precision), a matchup (bots too) plays up to this many
+# times its pairs: as many as an even record needs to predict a 200-game match of the two that closely (the ladder's
+# claims about a pair rest on its games), all at once
 FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapshots (all of a default run's), spread
 # over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
 # rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
@@ -87,21 +87,20 @@ def _check_moment(spec: dict[str, Any]) -> None:
     job_spec.whole(spec, "games", 0, MAX_EVAL_GAMES)
     job_spec.whole(spec, "older", 0, MAX_OLDER)
     job_spec.flag(spec, "full")
-    job_spec.flag(spec, "whole")
+    job_spec.flag(spec, "whole", required=False)  # (a job queued by a marl before every matchup played whole)
     job_spec.number(spec, "precision", 0.0, 1.0, required=False)
     job_spec.tries(spec)
 
 
 def gauntlet_job(league: League, snapshot_ids: Sequence[int], *, first_seed: int, games: int, older: int,
-                 full: bool = False, playoff: int = 0, whole: bool = False, precision: float = 0.0) -> NewJob:
+                 full: bool = False, playoff: int = 0, precision: float = 0.0) -> NewJob:
     """The queue's job of one moment's gauntlet (``full``: the final moment's, with a ``playoff`` of up to that many
-    games a pair; ``whole``: every matchup plays all its games, none cut short by a clear history, as the cells of a
-    payoff matrix need). The snapshots' bytes are put in the league where it keeps them, so a worker on another
-    machine can fetch them."""
+    games a pair). The snapshots' bytes are put in the league where it keeps them, so a worker on another machine
+    can fetch them."""
     rows = [league.roster.get_player(int(i)) for i in snapshot_ids]
     spec = {"snapshot_ids": [int(i) for i in snapshot_ids], "first_seed": int(first_seed), "games": int(games),
-            "older": int(older), "full": bool(full), "playoff": int(playoff), "whole": bool(whole),
-            "precision": float(precision), "snapshots": [r.full_name for r in rows]}
+            "older": int(older), "full": bool(full), "playoff": int(playoff), "precision": float(precision),
+            "snapshots": [r.full_name for r in rows]}
     check_spec(spec)  # (what a worker would refuse is refused here, before anything is queued)
     share_snapshots(league, rows)
     return NewJob(kind=GAUNTLET, env=rows[0].env, spec=spec)
@@ -113,17 +112,29 @@ def _config(league: League, spec: dict[str, Any]) -> GauntletConfig:
     # games in a round of two players: a seat-swapped pair, or one game where each plays only its own side
     per = 1 if Rules.of(get_env(league.roster.get_player(int(spec["snapshot_ids"][0])).env)).sides_differ else 2
     n = max(games // per, 1)
-    # (a payoff matrix's cell of 2 games would weigh as much as one of 400 in its Nash mixture: none cut short)
-    whole = full or bool(spec.get("whole", False))
-    precision = float(spec.get("precision", 0.0))  # (a job queued before it: eval_games exactly)
-    most = PRECISE_PAIRS * n if precision else n
-    # The final moment is waited for: its matchups play all the pairs they may reach at once. Going on from its first
-    # pairs would wait a whole game's length more (the longest of the batch: pong's trained players rally to the step
-    # limit) for each matchup still open.
-    first = most if full else n
-    return GauntletConfig(pairs=first, clear_pairs=first if whole else 1, max_pairs=most,
-                          older=max(older, FINAL_OLDER) if full else older,
-                          bot_pairs=max(n, FINAL_BOT_GAMES * games // per) if full else 0, precision=precision)
+    pairs = precise_pairs(n, per, float(spec.get("precision", 0.0)))  # (a job queued before it: eval_games exactly)
+    return GauntletConfig(pairs=pairs, older=max(older, FINAL_OLDER) if full else older,
+                          bot_pairs=max(pairs, FINAL_BOT_GAMES * games // per) if full else 0)
+
+
+def precise_pairs(pairs: int, per: int, precision: float) -> int:
+    """The rounds a matchup plays (of ``per`` games each; ``pairs`` at least, from ``--eval-games``) for
+    ``precision``: the fewest with which an even record would predict a 200-game match of the two within
+    ``precision`` score points (:func:`~selfplay_cli.stats.belief.record_prediction`), at most :data:`PRECISE_PAIRS`
+    times ``pairs`` (0: ``pairs`` exactly). An even record is the widest: one that leans one way is narrower with as
+    many games. At 0.3 that is the cap for every game: an even record of 64 games still predicts 0.27 wide, of 32
+    games 0.36.
+
+    All of them are played at once, not added while the record is open: each addition would wait for the longest
+    game of the batch (pong's trained players rally to the step limit), and a moment's chain of them took longer
+    than its games played at once (docs/benchmarks.md)."""
+    if not precision:
+        return pairs
+    for k in range(pairs, PRECISE_PAIRS * pairs):
+        games = k * per
+        if record_prediction(games // 2, games % 2, games // 2, 200).width <= precision:
+            return k
+    return PRECISE_PAIRS * pairs
 
 
 def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "cpu",
@@ -206,7 +217,7 @@ def queue_matchups(league: League, job: JobRow, moment: Moment, cfg: GauntletCon
     todo = open_matchups(league, moment, first_seed=int(spec["first_seed"]), config=cfg)
     if not todo:
         return []
-    base = {k: spec[k] for k in ("snapshot_ids", "games", "older", "full", "whole", "precision") if k in spec}
+    base = {k: spec[k] for k in ("snapshot_ids", "games", "older", "full", "precision") if k in spec}
     queued = {(j.spec.get("a"), j.spec.get("b"), j.spec.get("first_seed")): j.id
               for j in league.queue.jobs(batch=job.batch) if j.kind == MATCHUP and j.state not in ("dead", "cancelled")
               and j.spec.get("snapshot_ids") == spec["snapshot_ids"]}
@@ -217,37 +228,33 @@ def queue_matchups(league: League, job: JobRow, moment: Moment, cfg: GauntletCon
             ids.append(known)
         else:
             new.append(NewJob(kind=MATCHUP, env=m.a.env, spec={
-                **base, "a": m.a.id, "b": m.b.id, "first_seed": m.first_seed, "expect": m.expect,
+                **base, "a": m.a.id, "b": m.b.id, "first_seed": m.first_seed,
                 "snapshots": [m.a.full_name, m.b.full_name]}))
     return ids + (league.queue.enqueue(job.batch, new) if new else [])
 
 
 def check_matchup_spec(spec: dict[str, Any]) -> None:
     """Refuse (:class:`~selfplay_cli.evaluation.job_spec.BadSpec`) a ``matchup`` spec a worker cannot play as it stands:
-    its moment's gauntlet fields (:func:`check_spec`'s), the two players, the matchup's first seed and what the
-    moment's history expects of it (a score, or null)."""
+    its moment's gauntlet fields (:func:`check_spec`'s), the two players and the matchup's first seed."""
     _check_moment(spec)
     job_spec.whole(spec, "a", 1, job_spec.MAX_PLAYER_ID)
     job_spec.whole(spec, "b", 1, job_spec.MAX_PLAYER_ID)
     job_spec.whole(spec, "first_seed", 0, job_spec.MAX_SEED)
-    job_spec.number(spec, "expect", 0.0, math.nextafter(1.0, 2.0), required=False)
     job_spec.names(spec, "snapshots", 2, required=False)
 
 
 def play_matchup(league: League, job: JobRow, *, device: str, parallel: int,
                  on_games: Callable[[int], None] | None, see: See | None = None) -> Played:
     """A ``matchup`` job: one matchup of a moment's gauntlet, played and stored as the whole moment's call would
-    (:func:`~selfplay_cli.evaluation.gauntlet.open_matchups`): its seeds, its expectation, under the moment's key (so
-    once, whoever plays it)."""
+    (:func:`~selfplay_cli.evaluation.gauntlet.open_matchups`): its seeds, its games, under the moment's key (so once,
+    whoever plays it)."""
     del parallel, see
     spec = job.spec
     t0 = time.perf_counter()
     a, b = league.roster.get_player(int(spec["a"])), league.roster.get_player(int(spec["b"]))
     crews = {crew[0].id: crew for crew in crews_of(league, [a, b]).values()}
-    expect = spec.get("expect")
     (m,) = play_gauntlet(league, [(a, b)], first_seed=int(spec["first_seed"]), config=_config(league, spec),
-                         device=device, on_games=on_games, crews=crews, key=f"gauntlet/{min(spec['snapshot_ids'])}",
-                         expects=[None if expect is None else float(expect)])
+                         device=device, on_games=on_games, crews=crews, key=f"gauntlet/{min(spec['snapshot_ids'])}")
     seconds = time.perf_counter() - t0
     return Played(games=[], match_kind="eval", params={}, seconds=seconds, played=m.games,
                   result={"games": m.games, "seconds": round(seconds, 3), "snapshots": spec.get("snapshots", [])})

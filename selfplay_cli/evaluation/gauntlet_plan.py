@@ -49,10 +49,9 @@ class History:
     """All that a snapshot moment's gauntlet may know: the run's snapshots taken before the moment (oldest first),
     the game's scripted players, and the games of the run's earlier gauntlets between them.
 
-    Nothing else reaches the gauntlet's choices (its opponents, the run's best so far, the matchups whose result
-    is already clear), so what it plays depends on the run's seed and the order of its snapshots alone: not on a
-    worker that fell behind while later snapshots were taken, not on a user's matches or other runs filed
-    meanwhile."""
+    Nothing else reaches the gauntlet's choices (its opponents, the run's best so far), so what it plays depends on
+    the run's seed and the order of its snapshots alone: not on a worker that fell behind while later snapshots were
+    taken, not on a user's matches or other runs filed meanwhile."""
 
     snapshots: list[PlayerRow]
     bots: list[PlayerRow]
@@ -201,11 +200,10 @@ def best_snapshot(history: History, anchor: str = "random",
 @dataclass(frozen=True)
 class Moment:
     """What one snapshot moment's gauntlet plays (:func:`plan_moment`): its pairs (a cooperative game's crews by
-    their first member), the crews by that member's id, the moment's :class:`History` and the unit's key."""
+    their first member), the crews by that member's id and the unit's key."""
 
     pairs: list[tuple[PlayerRow, PlayerRow]]
     crews: dict[int, tuple[PlayerRow, ...]]
-    history: History
     key: str
 
 
@@ -244,7 +242,7 @@ def plan_moment(league: League, snapshot_ids: Sequence[int], older: int) -> Mome
     key = f"gauntlet/{min(p.id for p in new)}"
     mine = {match_id for match_id, _ in league.ledger.keyed_matches(f"{key}/").values()}  # (this unit's, played before)
     pairs = [(a, b) for a, b in pairs if not _gauntlet_games(league, a, b, history.variant, ignore=mine)]
-    return Moment(pairs, {m.id: crew for crew in crews.values() for m in crew[:1]}, history, key)
+    return Moment(pairs, {m.id: crew for crew in crews.values() for m in crew[:1]}, key)
 
 
 def crews_of(league: League, rows: Sequence[PlayerRow]) -> dict[int, tuple[PlayerRow, ...]]:

@@ -98,14 +98,8 @@ def play(
     record_actions: bool = False,
     on_frame: FrameHook | None = None,
     stop_when: StopRule | None = None,
-    slots: int | None = None,
 ) -> list[GameResult]:
     """Play ``games`` with up to ``parallel`` of them at once; returns results in schedule order.
-
-    ``games`` may grow while it is played: games that ``on_result`` appends to the list are played too, in the
-    same batch (a sequential evaluation decides from finished games whether more are needed, without waiting for
-    the slowest game of a round); ``slots`` (at most ``parallel``) sets how many games run at once when the
-    schedule is expected to grow past its first length.
 
     Each step, every policy acts once on the batch of all (game, seat) positions it holds among the seats that act
     now (the core's ``to_act()``; every seat of a running game where the core does not say), given those positions'
@@ -127,7 +121,7 @@ def play(
     spec = (get_env(env) if isinstance(env, str) else env).for_options(**(env_options or {}))
     if not games:
         return []
-    batch = _Batch(spec, policies, games, parallel, env_options or {}, slots, record_actions, on_frame)
+    batch = _Batch(spec, policies, games, parallel, env_options or {}, record_actions, on_frame)
     return batch.run(on_result, on_step, stop_when)
 
 
@@ -136,7 +130,7 @@ class _Batch:
     positions each policy acts on (worked out again only when games end or start, or the seats to act change)."""
 
     def __init__(self, spec: EnvSpec, policies: Sequence[Policy], games: Sequence[Game], parallel: int,
-                 options: dict[str, Any], slots: int | None, record_actions: bool, on_frame: FrameHook | None) -> None:
+                 options: dict[str, Any], record_actions: bool, on_frame: FrameHook | None) -> None:
         self.spec, self.policies, self.games, self.on_frame = spec, policies, games, on_frame
         self.n_seats = n_seats = len(spec.agents)
         self.rules = Rules.of(spec)
@@ -145,7 +139,7 @@ class _Batch:
         self.seen: set[tuple[int, int]] = set()
         for g in games:
             self.check(g)
-        self.n = n = min(parallel, max(len(games), slots or 0))
+        self.n = n = min(parallel, len(games))
         for p in policies:  # scripted players act as these options make the game (the lander's continuous engines)
             if callable(getattr(p, "configure", None)):
                 p.configure(options)  # type: ignore[attr-defined]
@@ -241,7 +235,7 @@ class _Batch:
 
     def run(self, on_result: Callable[[GameResult], None] | None, on_step: Callable[[int], None] | None,
             stop_when: StopRule | None) -> list[GameResult]:
-        """Step until every game of the schedule (as it grows) has ended; the results in schedule order."""
+        """Step until every game of the schedule has ended; the results in schedule order."""
         self.positions(np.asarray(self.to_act(), dtype=bool) if self.to_act is not None else None)
         while self.playing:
             self.act()

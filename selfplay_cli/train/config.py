@@ -80,7 +80,7 @@ class TrainConfig:
     tensorboard: bool = False  # also write the metrics for TensorBoard (runs/<run>/tensorboard)
     swap_every: int = 0  # game steps a game slot keeps its drawn opponent (ML-Agents' swap_steps); 0: every game
     league_games: float = 0.0  # all seats learning: share of games one learner plays a league opponent instead
-    eval_games: int = 8  # games a new snapshot plays against each gauntlet opponent (2 where already clear)
+    eval_games: int = 8  # games a new snapshot plays against each gauntlet opponent (more for eval_precision)
     eval_older: int = 2  # older snapshots of the run in each gauntlet, besides the predecessor and the best
     eval: str = "local"  # who plays the gauntlets: local (a worker process beside training), inline (the training
     # process, paused), remote (the league's workers, from its work queue: marl worker, on any machine), ray (queue
@@ -95,8 +95,8 @@ class TrainConfig:
     # rollout, always; SAC and DQN: 0 means 16)
     frame_stack: int = 1  # observations each learner reads at once: its seat's last K (images on the channel axis)
     eval_playoff: int = 100  # after the final gauntlet the run's best candidates meet, up to this many games a pair
-    eval_precision: float = 0.3  # a gauntlet matchup (snapshots or bots) plays on (up to 4 x eval_games) until its
-    # record predicts a 200-game match of the two within this many score points (0: eval_games exactly), bots too
+    eval_precision: float = 0.3  # a gauntlet matchup (snapshots or bots) plays the games an even record needs to
+    # predict a 200-game match of the two within this many score points (up to 4 x eval_games; 0: eval_games)
     opponents: MatchmakerConfig = field(default_factory=MatchmakerConfig)
     env_options: dict[str, Any] = field(default_factory=dict)
     curriculum: dict[str, Any] = field(default_factory=dict)  # live game options against progress (curriculum.py)

@@ -260,7 +260,7 @@ class Trainer:
         nash = self.cfg.opponents.mode == "nash"
         older = ALL_OLDER if nash else self.cfg.eval_older
         return GauntletJob(ids, first_seed, self.cfg.eval_games, older, full=full,
-                           playoff=self.cfg.eval_playoff if full else 0, whole=nash,
+                           playoff=self.cfg.eval_playoff if full else 0,
                            precision=0.0 if nash else self.cfg.eval_precision)
 
     def _collect(self, done: list[JobDone]) -> None:

@@ -25,11 +25,10 @@ class GauntletJob:
     first_seed: int
     games: int  # games per opponent (seat-swapped pairs, or single games where each plays only its own side)
     older: int
-    full: bool = False  # every opponent gets ``games``, even where the lineage's result is already clear
+    full: bool = False  # the run's final moment: it meets every earlier snapshot (up to 24) and plays the bots longer
     playoff: int = 0  # after the gauntlet, the run's best candidates meet, up to this many games a pair (the final)
-    whole: bool = False  # every matchup plays all its ``games`` (cells of a payoff matrix: --opponents nash)
-    precision: float = 0.0  # a matchup (bots too) plays on until its record predicts a 200-game match within
-    # this many score points (up to 4 times ``games``; 0: ``games`` exactly)
+    precision: float = 0.0  # a matchup (bots too) plays the games an even record needs to predict a 200-game match
+    # within this many score points (up to 4 times ``games``; 0: ``games`` exactly)
 
 
 @dataclass(frozen=True)

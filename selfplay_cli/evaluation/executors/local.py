@@ -62,8 +62,7 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
 
 def _spec(job: GauntletJob) -> dict[str, Any]:
     return {"snapshot_ids": list(job.snapshot_ids), "first_seed": job.first_seed, "games": job.games,
-            "older": job.older, "full": job.full, "playoff": job.playoff,
-            "whole": job.whole, "precision": job.precision}
+            "older": job.older, "full": job.full, "playoff": job.playoff, "precision": job.precision}
 
 
 def die_with_parent(parent: int) -> None:

@@ -83,8 +83,7 @@ class RemoteEvaluator:
         else:
             after = self._last if self._last is not None else (mine[-1].id if mine else None)
             new = gauntlet_job(self.league, job.snapshot_ids, first_seed=job.first_seed, games=job.games,
-                               older=job.older, full=job.full, playoff=job.playoff, whole=job.whole,
-                               precision=job.precision)
+                               older=job.older, full=job.full, playoff=job.playoff, precision=job.precision)
             (jid,) = self.league.queue.enqueue(self.batch, [new], chain=True, after=after)
         self._ids[job], self._last = jid, jid
         self.pending.append(job)
