@@ -365,79 +365,23 @@ def _rating_games(home):
 
 
 @pytest.mark.slow
-def test_the_rating_games_repeat_with_the_seed_whatever_the_timing(tmp_path, capsys, monkeypatch):
+def test_the_rating_games_repeat_with_the_seed_whatever_the_timing(tmp_path, capsys):
     """The same command and seed in two homes, once with the gauntlets in a worker beside training (which may fall
-    behind; the final moment's second part played by the trainer beside the worker's first) and once inline (never
-    behind; the parts in turn): the same weights, and the very same rating games, playoff included.
+    behind) and once inline (never behind): the same weights, and the very same rating games, playoff included.
     (This is also the check that one command with one seed stores the same gauntlet games twice over, which
     test_worker.py ran on two more runs of its own.)"""
-    import selfplay_cli.evaluation.executors.local as local
-
-    here = []  # the parts of the jobs this process played (None: a whole job)
-    real = local.run_job
-
-    def recorded(league, job, device, on_games=None):
-        here.append((job.full, job.part))
-        return real(league, job, device, on_games=on_games)
-
-    monkeypatch.setattr(local, "run_job", recorded)
     base = ["train", "pong", "--agents", "2", "--steps", "4096", "--games", "16", "--env-option", "points_to_win=1",
             "--snapshot-steps", "2048", "--eval-games", "4", "--seed", "3", "--json"]
     code, out, err = run(capsys, *base, "--home", str(tmp_path / "worker"))
     assert code == 0, err
     worker = json.loads(out)
-    assert here == [(True, 1), (True, None)]  # the final's second part here, then its playoff; the rest the worker's
-    here.clear()
     code, out, err = run(capsys, *base, "--eval-inline", "--home", str(tmp_path / "inline"))
     assert code == 0, err
     inline = json.loads(out)
-    assert here[-1] == (True, None) and all(part is None for _, part in here)
     games = _rating_games(tmp_path / "worker")
     assert games and games == _rating_games(tmp_path / "inline")
     assert worker["rating_games"] == inline["rating_games"] and worker["final"] == inline["final"]
     assert worker["best"] == inline["best"]
-
-
-def test_a_moments_parts_are_fixed_by_its_plan_and_together_are_the_whole_moment(tmp_path, monkeypatch):
-    """A final moment's matchups fall into two parts of about equal games (the bots' longer matchups spread first),
-    fixed by the plan alone; each part is one batch, on the seeds and under the keys the matchups have in the whole
-    moment, and its two parts store the very games one call playing them in turn stores."""
-    from types import SimpleNamespace
-
-    import selfplay_cli.evaluation.gauntlet as gauntlet_mod
-    from selfplay_cli.evaluation.gauntlet import moment_parts, rate_snapshots
-
-    a, b, bot = SimpleNamespace(is_bot=False), SimpleNamespace(is_bot=False), SimpleNamespace(is_bot=True)
-    cfg = GauntletConfig(pairs=4, bot_pairs=16, parts=2)
-    assert moment_parts([(a, b), (a, bot), (a, b), (a, bot), (a, b)], cfg) == [[0, 1, 4], [2, 3]]  # 24 and 20 rounds
-    assert moment_parts([(a, b)], cfg) == [[0]] and moment_parts([(a, b)] * 3, GauntletConfig()) == [[0, 1, 2]]
-
-    calls = []
-    real_play = gauntlet_mod.play
-
-    def counting_play(*args, **kwargs):
-        calls.append(len(args[2]))
-        return real_play(*args, **kwargs)
-
-    monkeypatch.setattr(gauntlet_mod, "play", counting_play)
-    records = []
-    for home, parts in (("whole", [None]), ("apart", [1, 0])):
-        league = League.open(tmp_path / home)
-        league.roster.ensure_bots("pong", ["random", "cpu"])
-        old, new = snapshot_rows(league, "r", 2, learners=("left",))
-        _stand_ins(monkeypatch, gauntlet_mod, league, {old.id: "cpu", new.id: "cpu"})
-        cfg = GauntletConfig(pairs=2, bot_pairs=4, parts=2)
-        calls.clear()
-        played = [m for part in parts for m in rate_snapshots(league, [new.id], first_seed=7, config=cfg, part=part)]
-        assert len(calls) == 2  # two batches either way
-        assert rate_snapshots(league, [new.id], first_seed=7, config=cfg) and len(calls) == 2  # stored: none again
-        t = league.ledger.games("pong")
-        records.append((sorted((m.a.name, m.b.name, m.first_seed, m.games) for m in played),
-                        sorted(zip(t.seed.tolist(), t.score_a.tolist(), t.length.tolist(), strict=True)),
-                        sorted(league.ledger.keyed_matches("gauntlet/"))))
-        league.close()
-    assert records[0] == records[1]
-    assert [g for _, _, _, g in records[0][0]].count(8) == 2  # the bots' matchups: 4 pairs of 2 games
 
 
 def test_a_matchup_plays_the_games_an_even_record_needs_for_the_precision():

@@ -48,15 +48,12 @@ class GauntletConfig:
     bot_pairs: int = 0  # rounds against each scripted player, if more than ``pairs`` (a run's final snapshots:
     # their figures against the bots are what the run reports)
     parallel: int = 1024  # games at once
-    parts: int = 1  # batches a moment's matchups are played in (:func:`rate_snapshots`): the final's two, one a core
 
     def __post_init__(self) -> None:
         if self.pairs < 1:
             raise MarlError(f"a gauntlet matchup plays at least one pair, not {self.pairs}")
         if self.older < 0:
             raise MarlError(f"older snapshots must not be negative, not {self.older}")
-        if self.parts < 1:
-            raise MarlError(f"a moment is played in one part at least, not {self.parts}")
 
 
 @dataclass
@@ -95,7 +92,6 @@ def play_gauntlet(
     label: str | None = None,
     key: str | None = None,
     sizes: Sequence[int] | None = None,
-    select: Sequence[int] | None = None,
 ) -> list[Matchup]:
     """Play and store the matchups ``pairs`` (see the module docstring); returns each matchup's record.
 
@@ -104,9 +100,7 @@ def play_gauntlet(
     ``crews`` (cooperative games): the per-seat members a player flies with (:func:`~.gauntlet_plan.crews_of`), by
     player id; a player without one flies every seat itself. ``label``: a flag set in the matches' parameters besides
     ``gauntlet`` (``playoff``). ``sizes``: the pairs each matchup plays (a playoff round, whose pairs have different
-    numbers of games left), instead of ``config``'s; each matchup's seeds then span its own size. ``select``: the
-    indices of the matchups of ``pairs`` to play and return, on the seeds and keys they have among all of them (a
-    part of a moment, :func:`rate_snapshots`); default all.
+    numbers of games left), instead of ``config``'s; each matchup's seeds then span its own size.
 
     ``key``: the unit of work these matchups are (a run's gauntlet of one moment, a round of its playoff), where it
     may be played twice (its process killed, then the run resumed; a rating worker replaced): each matchup is
@@ -119,32 +113,28 @@ def play_gauntlet(
     cfg = config or GauntletConfig()
     if not pairs:
         return []
+    env = pairs[0][0].env
+    spec = get_env(env)
+    crews = dict(crews or {})
+    loaded: dict[int, Policy] = dict(policies or {})
+    for a, b in pairs:
+        for row in (a, b, *crews.get(a.id, ()), *crews.get(b.id, ())):
+            if row.env != env:
+                raise MarlError(f"a gauntlet plays one game: {row.full_name} plays {row.env}, not {env}")
+            if row.id not in loaded:
+                loaded[row.id] = load_player(league, row, device=device, seed=mix_seed(first_seed, row.id))
     if sizes is not None and (len(sizes) != len(pairs) or min(sizes) < 1):
         raise ValueError(f"sizes must give each of the {len(pairs)} matchups at least one pair, not {list(sizes)}")
+    gauntlet = _Gauntlet(league, cfg, loaded, crews, label, spec)
     matchups, keys = _matchups(pairs, first_seed, cfg, key, sizes)
-    sizes = _sizes(matchups, cfg, sizes)
-    if select is not None:
-        matchups, keys, sizes = ([x[k] for k in select] for x in (matchups, keys, sizes))
-        if not matchups:
-            return []
     stored = league.ledger.keyed_matches(f"{key}/") if key is not None else {}
     if key is not None and all(k in stored for k in keys):  # done before: what the ledger holds of it
         for m, k in zip(matchups, keys, strict=True):
             m.match_id, params = stored[k]
             m.wins, m.draws, m.losses, m.pairs = (int(x) for x in params.get("record", (0, 0, 0, 0)))
         return matchups
-    env = pairs[0][0].env
-    crews = dict(crews or {})
-    loaded: dict[int, Policy] = dict(policies or {})
-    for m in matchups:
-        for row in (m.a, m.b, *crews.get(m.a.id, ()), *crews.get(m.b.id, ())):
-            if row.env != env:
-                raise MarlError(f"a gauntlet plays one game: {row.full_name} plays {row.env}, not {env}")
-            if row.id not in loaded:
-                loaded[row.id] = load_player(league, row, device=device, seed=mix_seed(first_seed, row.id))
-    gauntlet = _Gauntlet(league, cfg, loaded, crews, label, get_env(env))
     gauntlet.plan(matchups, keys, stored)
-    for k, size in enumerate(sizes):
+    for k, size in enumerate(_sizes(matchups, cfg, sizes)):
         gauntlet.schedule_pairs(k, size)
     play(gauntlet.spec, gauntlet.roster, gauntlet.schedule, parallel=cfg.parallel, env_options=gauntlet.options,
          record_actions=True, on_result=lambda r: gauntlet.finished(r, on_games))
@@ -254,14 +244,9 @@ def _store(league: League, m: Matchup, results: list[GameResult], loaded: dict[i
 
 def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: int, config: GauntletConfig,
                    device: str = "cpu", on_games: Callable[[int], None] | None = None,
-                   moment: Moment | None = None, part: int | None = None) -> list[Matchup]:
+                   moment: Moment | None = None) -> list[Matchup]:
     """The whole gauntlet of one snapshot moment (:func:`~.gauntlet_plan.plan_moment`, or ``moment`` where the caller
-    planned it already), played; or, with ``part``, only that part of it.
-
-    A moment is played in ``config.parts`` parts (:func:`moment_parts`), each one batch of its matchups, one after
-    the other. The parts are fixed by the plan alone, so two processes may play two parts at once (the final moment
-    of a run, which the run waits for: the rating worker one part, the idle trainer the other) and store the very
-    games one process playing the parts in turn stores.
+    planned it already), played.
 
     Idempotent: the gauntlet is one unit of work keyed by the moment (``gauntlet/<its first snapshot id>``,
     :func:`play_gauntlet`'s ``key``): played again (cut short by a kill, then run again on resume; its matchups
@@ -273,27 +258,8 @@ def rate_snapshots(league: League, snapshot_ids: Sequence[int], *, first_seed: i
     moment = moment or plan_moment(league, snapshot_ids, config.older)
     if moment is None:
         return []
-    parts = moment_parts(moment.pairs, config)
-    out: list[Matchup] = []
-    for k in range(len(parts)) if part is None else [part] if part < len(parts) else []:
-        out += play_gauntlet(league, moment.pairs, first_seed=first_seed, config=config, device=device,
-                             on_games=on_games, crews=moment.crews, key=moment.key,
-                             select=parts[k] if len(parts) > 1 else None)
-    return out
-
-
-def moment_parts(pairs: Sequence[tuple[PlayerRow, PlayerRow]], config: GauntletConfig) -> list[list[int]]:
-    """The moment's matchups (indices of ``pairs``) in ``config.parts`` parts of about equal games: the largest
-    matchups first, each to the part with the fewest rounds so far (the first such part on a tie)."""
-    n = max(1, min(config.parts, len(pairs)))
-    rounds = [max(config.pairs, config.bot_pairs) if b.is_bot else config.pairs for _, b in pairs]
-    parts: list[list[int]] = [[] for _ in range(n)]
-    load = [0] * n
-    for k in sorted(range(len(pairs)), key=lambda k: (-rounds[k], k)):
-        j = min(range(n), key=lambda j: (load[j], j))
-        parts[j].append(k)
-        load[j] += rounds[k]
-    return [sorted(p) for p in parts]
+    return play_gauntlet(league, moment.pairs, first_seed=first_seed, config=config, device=device,
+                         on_games=on_games, crews=moment.crews, key=moment.key)
 
 
 def open_matchups(league: League, moment: Moment, *, first_seed: int, config: GauntletConfig) -> list[Matchup]:

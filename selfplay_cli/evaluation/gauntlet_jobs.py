@@ -46,9 +46,9 @@ from .gauntlet import GauntletConfig, open_matchups, play_gauntlet, rate_snapsho
 from .gauntlet_plan import ALL_OLDER, Moment, crews_of, plan_moment
 from .played import JobLost, Played, See
 
-__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "FINAL_PARTS", "GAUNTLET", "MATCHUP", "MAX_EVAL_GAMES", "MAX_MOMENT",
-           "MAX_OLDER", "MAX_PLAYOFF", "PLAYOFF_SEEDS", "PRECISE_PAIRS", "check_matchup_spec", "check_spec",
-           "gauntlet_job", "play", "play_gauntlet_spec", "play_matchup", "precise_pairs", "queue_matchups"]
+__all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "MATCHUP", "MAX_EVAL_GAMES", "MAX_MOMENT", "MAX_OLDER",
+           "MAX_PLAYOFF", "PLAYOFF_SEEDS", "PRECISE_PAIRS", "check_matchup_spec", "check_spec", "gauntlet_job",
+           "play", "play_gauntlet_spec", "play_matchup", "precise_pairs", "queue_matchups"]
 
 GAUNTLET = "gauntlet"
 MATCHUP = "matchup"  # one matchup of a moment's gauntlet, queued by the worker that plays the moment
@@ -61,8 +61,6 @@ PRECISE_PAIRS = 4  # with a precision (marl train --eval-precision), a matchup (
 FINAL_OLDER = 24  # a run's final snapshots meet this many of its earlier snapshots (all of a default run's), spread
 # over the run: is the final stronger than the whole history, and where does it lose what it had (self-play's
 # rock-paper-scissors shows between snapshots far apart, which the ratings alone do not predict)
-FINAL_PARTS = 2  # a run's final moment is played in this many batches (:func:`~.gauntlet.moment_parts`): the run
-# waits for it, and on one machine its rating worker plays one part while the trainer, done, plays the other
 PLAYOFF_SEEDS = 5_000  # a final job's playoff seeds start this far above its gauntlet's (which take a few dozen)
 # A gauntlet job's counts at most: marl train's own limits (--eval-games, --eval-playoff), the snapshots of one
 # moment (one per learner); older snapshots met: a run's own (ALL_OLDER, all of them, for --opponents nash), so no
@@ -81,7 +79,6 @@ def check_spec(spec: dict[str, Any]) -> None:
     job_spec.whole(spec, "first_seed", 0, job_spec.MAX_SEED)
     job_spec.whole(spec, "playoff", 0, MAX_PLAYOFF, required=False)
     job_spec.names(spec, "snapshots", MAX_MOMENT, required=False)
-    job_spec.whole(spec, "part", 0, FINAL_PARTS - 1, required=False)
 
 
 def _check_moment(spec: dict[str, Any]) -> None:
@@ -117,8 +114,7 @@ def _config(league: League, spec: dict[str, Any]) -> GauntletConfig:
     n = max(games // per, 1)
     pairs = precise_pairs(n, per, float(spec.get("precision", 0.0)))  # (a job queued before it: eval_games exactly)
     return GauntletConfig(pairs=pairs, older=max(older, FINAL_OLDER) if full else older,
-                          bot_pairs=max(pairs, FINAL_BOT_GAMES * games // per) if full else 0,
-                          parts=FINAL_PARTS if full else 1)
+                          bot_pairs=max(pairs, FINAL_BOT_GAMES * games // per) if full else 0)
 
 
 def precise_pairs(pairs: int, per: int, precision: float) -> int:
@@ -146,19 +142,16 @@ def play_gauntlet_spec(league: League, spec: dict[str, Any], *, device: str = "c
                        ) -> tuple[int, float]:
     """Play one moment's gauntlet (and, for the final one, the playoff) as ``spec`` says (:func:`gauntlet_job`'s
     fields), storing its games; the games played and the seconds they took (its matchups stored before, by jobs of
-    their own, count with their games, played nothing here). ``moment``: its plan, where the caller made it. A
-    spec with a ``part`` plays only that part of the moment (:func:`~.gauntlet.rate_snapshots`), no playoff: the
-    rest of the moment is played by whoever plays it without."""
+    their own, count with their games, played nothing here). ``moment``: its plan, where the caller made it."""
     from .playoff import PlayoffConfig, playoff
 
     ids = [int(i) for i in spec["snapshot_ids"]]
     first_seed = int(spec["first_seed"])
     t0 = time.perf_counter()
-    part = spec.get("part")
     matchups = rate_snapshots(league, ids, first_seed=first_seed, config=_config(league, spec), device=device,
-                              on_games=on_games, moment=moment, part=None if part is None else int(part))
+                              on_games=on_games, moment=moment)
     played = sum(m.games for m in matchups)
-    if int(spec.get("playoff", 0)) and part is None:
+    if int(spec.get("playoff", 0)):
         played += playoff(league, ids, first_seed=first_seed + PLAYOFF_SEEDS,
                           config=PlayoffConfig(max_games=int(spec["playoff"])), device=device, on_games=on_games)
     return played, time.perf_counter() - t0
@@ -170,7 +163,7 @@ def play(league: League, job: JobRow, *, device: str, parallel: int,
     other workers take the job's batch, its matchups go to them first (:func:`_share`, through ``see``)."""
     del parallel  # a gauntlet plays all its matchups in one batch of its own size
     moment = None
-    if see is not None and "part" not in job.spec and _helpers(league, job):
+    if see is not None and _helpers(league, job):
         cfg = _config(league, job.spec)
         moment = plan_moment(league, [int(i) for i in job.spec["snapshot_ids"]], cfg.older)
         if moment is not None:

@@ -29,7 +29,6 @@ class GauntletJob:
     playoff: int = 0  # after the gauntlet, the run's best candidates meet, up to this many games a pair (the final)
     precision: float = 0.0  # a matchup (bots too) plays the games an even record needs to predict a 200-game match
     # within this many score points (up to 4 times ``games``; 0: ``games`` exactly)
-    part: int | None = None  # only this part of the moment (of a final moment's two), no playoff; None: all of it
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
-import dataclasses
 import multiprocessing as mp
 import os
 import queue
@@ -62,17 +61,8 @@ def run_job(league: Any, job: GauntletJob, device: str, on_games: Any = None) ->
 
 
 def _spec(job: GauntletJob) -> dict[str, Any]:
-    spec = {"snapshot_ids": list(job.snapshot_ids), "first_seed": job.first_seed, "games": job.games,
+    return {"snapshot_ids": list(job.snapshot_ids), "first_seed": job.first_seed, "games": job.games,
             "older": job.older, "full": job.full, "playoff": job.playoff, "precision": job.precision}
-    return spec if job.part is None else {**spec, "part": job.part}
-
-
-def _worker_part(job: GauntletJob) -> GauntletJob:
-    """What the worker process plays of ``job``: all of it, or of the run's final moment its first part (the
-    trainer, done training and waiting, plays the other part and then the playoff: :meth:`Evaluator.wait`)."""
-    from ..gauntlet_jobs import FINAL_PARTS
-
-    return dataclasses.replace(job, part=0) if job.full and FINAL_PARTS > 1 else job
 
 
 def die_with_parent(parent: int) -> None:
@@ -160,7 +150,6 @@ class Evaluator:
         self._done: list[JobDone] = []
         self._proc: Any = None
         self._failures = 0  # workers lost since a job last finished
-        self._parts: dict[GauntletJob, JobDone] = {}  # the worker's parts of final moments, done (by the whole job)
         self._progress = self._clock()  # when the worker last reported a game or a job
         if background:
             self._start()
@@ -179,7 +168,7 @@ class Evaluator:
         self._proc.start()
         self._progress = self._clock()
         for job in self.pending:
-            self._jobs.put(_worker_part(job))
+            self._jobs.put(job)
         if self._on_worker is not None:
             self._on_worker(self._proc.pid)
 
@@ -198,7 +187,7 @@ class Evaluator:
             self._progress = self._clock()  # an idle worker was not stalled: the clock starts with its work
         self.pending.append(job)
         if self.background:
-            self._jobs.put(_worker_part(job))
+            self._jobs.put(job)
         else:
             self._done.append(run_job(self.league, job, self.device, on_games=self._count))
 
@@ -222,64 +211,21 @@ class Evaluator:
         """Block until every submitted job is done; ``on_wait(done)`` is called about every second meanwhile, with
         the jobs finished since (:meth:`.base.RatingExecutor.wait`); the rest are returned. With ``wait=False``
         (``--no-wait``): the jobs done by now; the worker stops, and the rest are left to the league's workers
-        (:meth:`_leave`).
-
-        Both cores play the run's final moment: once the worker has played every job before it, this process (done
-        training) plays the moment's second part beside the worker's first, then, both in, the playoff. The parts
-        are fixed by the moment's plan (:func:`~selfplay_cli.evaluation.gauntlet.moment_parts`), so the games are
-        those one process playing the parts in turn stores (``--eval inline``, a queue worker)."""
+        (:meth:`_leave`)."""
         if self.background and not self.wait_for:
             self._drain()
             self._check()
             return self.leave()
         if self.background:
             while len(self._done) < len(self.pending) and not any(d.error for d in self._done):
-                final = self._final_due()
-                if final is not None:
-                    self._play_final(final, on_wait)
-                    continue
-                self._look(on_wait)
+                try:
+                    self._take(self._results.get(timeout=1.0))
+                except queue.Empty:
+                    self._check()
+                if on_wait is not None:
+                    with signals_held():  # (a Ctrl-C waits until the jobs taken from here are handed over)
+                        on_wait(self._finish())  # (a failed job raises its error here)
         return self._finish()
-
-    def _look(self, on_wait: Callable[[list[JobDone]], None] | None) -> None:
-        """Take what the worker said within a second (or look after it), and tell ``on_wait``."""
-        try:
-            self._take(self._results.get(timeout=1.0))
-        except queue.Empty:
-            self._check()
-        if on_wait is not None:
-            with signals_held():  # (a Ctrl-C waits until the jobs taken from here are handed over)
-                on_wait(self._finish())  # (a failed job raises its error here)
-
-    def _final_due(self) -> GauntletJob | None:
-        """A final moment whose first part the worker plays, due here: every job before it done."""
-        done = {d.job for d in self._done}
-        for k, job in enumerate(self.pending):
-            if _worker_part(job).part is not None and job not in done:
-                return job if all(j in done for j in self.pending[:k]) else None
-        return None
-
-    def _play_final(self, job: GauntletJob, on_wait: Callable[[list[JobDone]], None] | None) -> None:
-        """The final moment ``job``: its second part here, beside the worker's first; then, once the worker's is
-        in, the rest here (the playoff; the parts' matchups are in the ledger)."""
-        t0 = time.perf_counter()
-        last = [t0]
-
-        def counted(n: int) -> None:  # (the progress display goes on while this process plays)
-            self._count(n)
-            if on_wait is not None and time.perf_counter() - last[0] >= 1.0:
-                last[0] = time.perf_counter()
-                self._drain()
-                with signals_held():
-                    on_wait(self._finish())
-
-        run_job(self.league, dataclasses.replace(job, part=1), self.device, on_games=counted)
-        while job not in self._parts and not any(d.error for d in self._done):
-            self._look(on_wait)
-        if any(d.error for d in self._done):
-            return
-        rest = run_job(self.league, job, self.device, on_games=counted)
-        self._done.append(JobDone(job, time.perf_counter() - t0, rest.games))
 
     def leave(self) -> list[JobDone] | None:
         """The jobs done by now; the worker stops and the rest go on the league's queue (:meth:`_leave`). None
@@ -347,11 +293,7 @@ class Evaluator:
             self.games_played += int(item[1])
         else:
             self._failures = 0
-            whole = next((j for j in self.pending if _worker_part(j) == item.job), item.job)
-            if item.job.part is not None and item.error is None:  # the worker's part of a final moment
-                self._parts[whole] = item
-            else:
-                self._done.append(dataclasses.replace(item, job=whole))
+            self._done.append(item)
 
     def _finish(self) -> list[JobDone]:
         out, self._done = self._done, []
