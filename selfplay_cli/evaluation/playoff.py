@@ -11,9 +11,8 @@ well reverse it. So after the run's final gauntlet, the playoff:
    separated from (the confidence interval of their difference, as the ladder judges the pair, covers 0), the closest
    ``rivals`` of them;
 3. plays the top against each rival one round of ``round_games`` games (seat-swapped pairs, or the game kind's
-   rounds; at the default ``max_games`` all the games the pair may reach), all of the round's pairs in one batch,
-   and goes back to 1, until the top is separated from every snapshot of the run, or every pair of top and rival has
-   ``max_games`` games between them.
+   rounds), all of the round's pairs in one batch, and goes back to 1, until the top is separated from every
+   snapshot of the run, or every pair of top and rival has ``max_games`` games between them.
 
 Each round is a unit of work keyed by the run's final moment and the round's first seed: a playoff played again
 (its worker killed, the run resumed) skips the rounds it stored, and plays the one it was cut in again from the
@@ -53,9 +52,8 @@ class PlayoffConfig:
     """How far the playoff goes (games are counted between the top and one rival)."""
 
     max_games: int = 100  # results a pair of top and rival may reach (games; a cooperative game's comparisons)
-    round_games: int = 100  # results a pair adds in one round, at most (a round lasts its longest game whatever its
-    # games: in pong between two top snapshots nearly every game runs to the step limit, so few big rounds wait
-    # least; at the default max_games a pair plays all its games in its first round)
+    round_games: int = 50  # results a pair adds in one round (a round lasts its longest game whatever its games:
+    # in pong between two top snapshots nearly every game runs to the step limit, so few big rounds wait least)
     rivals: int = 3  # rivals at most in a round, the closest to the top first
     confidence: float = 0.95  # the level at which the best must be separated
     max_rounds: int = 20  # a bound on the rounds whatever the top does (it may change between rounds)
