@@ -122,8 +122,8 @@ def precise_pairs(pairs: int, per: int, precision: float) -> int:
     ``precision``: the fewest with which an even record would predict a 200-game match of the two within
     ``precision`` score points (:func:`~selfplay_cli.stats.belief.record_prediction`), at most :data:`PRECISE_PAIRS`
     times ``pairs`` (0: ``pairs`` exactly). An even record is the widest: one that leans one way is narrower with as
-    many games. At 0.3 that is the cap for every game: an even record of 64 games still predicts 0.27 wide, of 32
-    games 0.36.
+    many games. At the defaults (0.3, ``--eval-games`` 8) that is the cap, 32 games, for every game: an even record
+    of 32 games still predicts 0.36 wide (of 64, 0.27).
 
     All of them are played at once, not added while the record is open: each addition would wait for the longest
     game of the batch (pong's trained players rally to the step limit), and a moment's chain of them took longer
