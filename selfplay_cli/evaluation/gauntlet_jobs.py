@@ -30,6 +30,7 @@ seeds; which matchups are played, on which seeds and how many games, is the same
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -117,6 +118,7 @@ def _config(league: League, spec: dict[str, Any]) -> GauntletConfig:
                           bot_pairs=max(pairs, FINAL_BOT_GAMES * games // per) if full else 0)
 
 
+@functools.lru_cache(maxsize=256)  # (about 1 ms a width: a run asks the same few settings for every moment and matchup)
 def precise_pairs(pairs: int, per: int, precision: float) -> int:
     """The rounds a matchup plays (of ``per`` games each; ``pairs`` at least, from ``--eval-games``) for
     ``precision``: the fewest with which an even record would predict a 200-game match of the two within
