@@ -363,7 +363,7 @@ class NetworkBank:
 
     def _categorical(self, out: torch.Tensor, u: torch.Tensor | None, stack: _Stack) -> torch.Tensor:
         """Discrete: ``out`` (V, A, M) and uniforms ``u`` (V, 1, M) -> actions (V, M)."""
-        actions = out.argmax(dim=1) if stack.any_greedy else None
+        actions = out.max(dim=1).indices if stack.any_greedy else None  # (argmax over dim 1: ~10x slower)
         if stack.any_sampling:  # inverse CDF of the softmax, unnormalised: a = #{k : cumsum(e)_k <= u * sum(e)}
             e = (out - out.amax(dim=1, keepdim=True)).exp_().cumsum_(dim=1)
             sampled = (e <= u * e[:, -1:, :]).sum(dim=1).clamp_(max=self.n_actions - 1)
@@ -382,7 +382,7 @@ class NetworkBank:
         k, w = logits.shape[1], logits.shape[2]
         cat = logits.reshape(p, most * k, w).transpose(1, 2)  # (P, W, M*k): the Discrete layout
         greedy = stack.greedy
-        actions = cat.argmax(dim=1) if stack.any_greedy else None
+        actions = cat.max(dim=1).indices if stack.any_greedy else None
         if stack.any_sampling:
             e = (cat - cat.amax(dim=1, keepdim=True)).exp_().cumsum_(dim=1)
             sampled = (e <= u * e[:, -1:, :]).sum(dim=1).clamp_(max=w - 1)
