@@ -315,8 +315,9 @@ class NetworkBank:
         out = torch.baddbmm(stack.out[1], stack.out[0], zt)  # (V, A, M)
         if stack.state_value is not None:
             out = torch.baddbmm(stack.state_value[1], stack.state_value[0], zt) + out - out.mean(dim=1, keepdim=True)
-        if stack.log_std_head is not None:
-            log_std = squashed_log_std(torch.baddbmm(stack.log_std_head[1], stack.log_std_head[0], zt))
+        if stack.log_std_head is not None:  # (its log-stds only where a member samples: SAC plays its mean)
+            log_std = (squashed_log_std(torch.baddbmm(stack.log_std_head[1], stack.log_std_head[0], zt))
+                       if stack.any_sampling else None)
             a = self._squashed(out, log_std, stack)
         elif self.head.kind == "discrete":
             a = self._categorical(out if mask is None else out.masked_fill(~mask, float("-inf")), u, stack)
@@ -391,11 +392,12 @@ class NetworkBank:
         a = a.transpose(1, 2)
         return torch.maximum(torch.minimum(a, self.math.high), self.math.low)
 
-    def _squashed(self, out: torch.Tensor, log_std: torch.Tensor, stack: _Stack) -> torch.Tensor:
+    def _squashed(self, out: torch.Tensor, log_std: torch.Tensor | None, stack: _Stack) -> torch.Tensor:
         """Box, squashed: the means and log-stds ``(V, d, M)`` -> ``tanh(u)`` on the bounds ``(V, M, d)``."""
         u = out
         if stack.any_sampling:
-            sampled = out + log_std.exp() * torch.randn(out.shape, generator=self.generator, device=self.device)
+            sampled = out + log_std.exp() * torch.randn(out.shape, generator=self.generator,  # type: ignore[union-attr]
+                                                          device=self.device)
             u = sampled if not stack.any_greedy else torch.where(stack.greedy[:, :, None], out, sampled)
         y = torch.tanh(u).transpose(1, 2)
         a = self.math.low + (y + 1.0) * (0.5 * (self.math.high - self.math.low))
