@@ -215,6 +215,39 @@ def test_every_snapshot_rated_and_the_summary_is_the_ledger(tmp_path, capsys):
     assert any(ln.strip().startswith("best of pong-1: ") for ln in out.splitlines()), out
 
 
+def test_a_final_moment_meeting_every_earlier_snapshot_stands_alone(tmp_path):
+    """A moment whose snapshots meet every earlier snapshot they may meet (a run's final, up to 24 of them) chooses
+    nothing from the run's games: no best so far, every earlier snapshot once in the run's order, then the bots; so
+    its plan is the same whatever its earlier gauntlets said, and it may be played before they are all in. One
+    snapshot fewer than it could meet and it needs the best so far again."""
+    from selfplay_cli.evaluation.gauntlet_plan import plan_moment, stands_alone
+
+    league = League.open(tmp_path / "league")
+    league.roster.ensure_bots("pong", ["random", "cpu"])
+    rows = snapshot_rows(league, "r", 4)
+    by = {r.name: r for r in rows}
+    final = [by["ep3-left"].id, by["ep3-right"].id]
+    # each meets its partner and predecessor, and the 5 other earlier snapshots
+    assert stands_alone(league, final, 5) and stands_alone(league, final, 24)
+    assert not stands_alone(league, final, 4)
+    assert stands_alone(league, [by["ep1-left"].id, by["ep1-right"].id], 1)  # (ep0 of the other side only)
+    before = plan_moment(league, final, 24)
+    met = [b.name for a, b in before.pairs if a.name == "ep3-left"]
+    assert met == ["ep2-left", "ep3-right", "ep0-left", "ep0-right", "ep1-left", "ep1-right", "ep2-right",
+                   "random", "cpu"]
+    _gauntlet_games(league, by["ep1-right"], by["ep0-left"], [1] * 12)  # the earlier gauntlets come in: a best
+    _gauntlet_games(league, by["ep2-left"], by["ep1-right"], [1] * 12)
+    assert best_snapshot(run_history(league, [by["ep3-left"]])).name == "ep2-left"
+    after = plan_moment(league, final, 24)
+    assert [(a.id, b.id) for a, b in after.pairs] == [(a.id, b.id) for a, b in before.pairs]
+    # with fewer older opponents than there are earlier snapshots, the best so far is chosen: right after the
+    # predecessor (ep3-right met ep3-left in the left one's list)
+    fewer = plan_moment(league, final, 2)
+    assert [b.name for a, b in fewer.pairs if a.name == "ep3-right"][:2] == ["ep2-right", "ep2-left"]
+    assert len([b for a, b in fewer.pairs if a.name == "ep3-right"]) == 2 + 2 + 2  # pred, best, 2 older, 2 bots
+    league.close()
+
+
 @pytest.mark.slow
 def test_a_failing_gauntlet_in_the_worker_comes_back_as_one_error(tmp_path):
     """The rating worker reports a job's failure (here: a snapshot id the league does not have) instead of dying

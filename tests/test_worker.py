@@ -257,6 +257,91 @@ def test_an_idle_worker_given_work_is_not_taken_for_stalled(rated_league):
         assert ev.restarts == 0 and notes == []
 
 
+# -- 5. the final gauntlet, on the trainer's idle core beside the worker's backlog -------------------------
+def _three_moments(home: Path, tmp_path: Path) -> tuple[League, list[GauntletJob]]:
+    """A league with three one-snapshot moments of run w (small untrained networks) and the scripted players; the
+    jobs of their gauntlets, the last the run's final (a playoff of up to 8 games a pair)."""
+    from selfplay_cli.policies.network import Arch, build_network
+    from selfplay_cli.policies.snapshot_format import SnapshotMeta, save_snapshot
+
+    arch = Arch(hidden=(16,))
+    for k in range(3):
+        meta = SnapshotMeta(env="pong", obs_shape=(8, 6), n_actions=3, arch=arch, run="w", name=f"s{k}",
+                            algo="ppo", step=k, env_options={"points_to_win": 1})
+        save_snapshot(tmp_path / f"s{k}.safetensors", build_network((8, 6), 3, arch, seed=k + 1), meta)
+        assert main(["checkpoint", "import", str(tmp_path / f"s{k}.safetensors"), "--home", str(home)]) == 0
+    league = League.open(home)
+    league.roster.ensure_bots("pong", ["random", "cpu"])
+    ids = [p.id for p in league.roster.players("pong", kind="snapshot")]
+    return league, [GauntletJob((ids[0],), 0, 2, 1), GauntletJob((ids[1],), 100, 2, 1),
+                    GauntletJob((ids[2],), 200, 2, 1, full=True, playoff=8)]
+
+
+def _games_of(db: Path) -> list[tuple]:
+    """Every stored game by its match's work key, seed, players and points (comparable across leagues)."""
+    con = sqlite3.connect(db)
+    rows = con.execute("select m.work_key, g.seed, g.length, group_concat(p.name || ':' || s.points, ' ') from games g "
+                       "join matches m on m.id = g.match_id join game_seats s on s.game_id = g.id join players p on "
+                       "p.id = s.player_id group by g.id order by m.work_key, g.seed").fetchall()
+    con.close()
+    return rows
+
+
+@pytest.mark.slow
+def test_the_final_gauntlet_is_played_beside_the_backlog_and_is_the_same_games(tmp_path):
+    """Submitted while the worker still owes two moments, the final gauntlet (it meets every earlier snapshot, so it
+    chooses nothing from their games) starts at once in a helper process; the final job is handed to the worker
+    after it, finds its gauntlet stored and plays the playoff. Every game, playoff included, is the one a run whose
+    gauntlets are played inline, one after the other, stores; the jobs come back in order, the final counting the
+    gauntlet's games."""
+    league, jobs = _three_moments(tmp_path / "h", tmp_path)
+    with Evaluator(league, "cpu", background=True) as ev:
+        for job in jobs[:2]:
+            ev.submit(job)
+        ev.submit(jobs[2])
+        assert ev._helper is not None and ev._helper.is_alive()  # at once, beside the backlog
+        done = ev.wait()
+        assert ev._helper is None and ev.left == 0
+    assert [d.job for d in done] == jobs
+    league.close()
+    inline, inline_jobs = _three_moments(tmp_path / "i", tmp_path)
+    with Evaluator(inline, "cpu", background=False) as ev:
+        for job in inline_jobs:
+            ev.submit(job)
+        alone = ev.wait()
+        assert ev._helper is None  # (inline: every job as it comes)
+    inline.close()
+    assert [d.games for d in done] == [d.games for d in alone] and done[2].games > done[1].games
+    games = _games_of(tmp_path / "h" / "league.db")
+    assert games == _games_of(tmp_path / "i" / "league.db")
+    assert any(k.startswith("gauntlet/3/") for k, *_ in games)  # (the final moment's, by its snapshot's id)
+
+
+@pytest.mark.slow
+def test_a_helper_that_dies_leaves_its_gauntlet_to_the_worker(tmp_path):
+    """The helper killed as it starts: the trainer says so in one line, the worker plays the final gauntlet after
+    the backlog (what the helper stored counts once), then the playoff: the same games as an undisturbed run."""
+    league, jobs = _three_moments(tmp_path / "h", tmp_path)
+    notes: list[str] = []
+    with Evaluator(league, "cpu", background=True, note=notes.append) as ev:
+        for job in jobs:
+            ev.submit(job)
+        helper = ev._helper.pid
+        os.kill(helper, signal.SIGKILL)
+        done = ev.wait()
+        assert ev.restarts == 0
+    league.close()
+    assert [d.job for d in done] == jobs
+    assert len(notes) == 1 and f"helper (process {helper}) ended unexpectedly (killed by SIGKILL)" in notes[0]
+    other, other_jobs = _three_moments(tmp_path / "o", tmp_path)
+    with Evaluator(other, "cpu", background=True) as ev:
+        for job in other_jobs:
+            ev.submit(job)
+        ev.wait()
+    other.close()
+    assert _games_of(tmp_path / "h" / "league.db") == _games_of(tmp_path / "o" / "league.db")
+
+
 # -- 3. no game is ever counted twice -------------------------------------------------------------------------
 def _gauntlet_record(home: Path, seeds: range) -> dict[tuple[str, str], list[tuple]]:
     """The gauntlet games whose matchup starts in ``seeds``: per (a, b) of the matchup, each game's seed and its

@@ -44,12 +44,12 @@ from ..results import Rules
 from ..stats.belief import record_prediction
 from . import job_spec
 from .gauntlet import GauntletConfig, open_matchups, play_gauntlet, rate_snapshots
-from .gauntlet_plan import ALL_OLDER, Moment, crews_of, plan_moment
+from .gauntlet_plan import ALL_OLDER, Moment, crews_of, plan_moment, stands_alone
 from .played import JobLost, Played, See
 
 __all__ = ["FINAL_BOT_GAMES", "FINAL_OLDER", "GAUNTLET", "MATCHUP", "MAX_EVAL_GAMES", "MAX_MOMENT", "MAX_OLDER",
            "MAX_PLAYOFF", "PLAYOFF_SEEDS", "PRECISE_PAIRS", "check_matchup_spec", "check_spec", "gauntlet_job",
-           "play", "play_gauntlet_spec", "play_matchup", "precise_pairs", "queue_matchups"]
+           "play", "play_gauntlet_spec", "play_matchup", "precise_pairs", "queue_matchups", "stands_alone_spec"]
 
 GAUNTLET = "gauntlet"
 MATCHUP = "matchup"  # one matchup of a moment's gauntlet, queued by the worker that plays the moment
@@ -116,6 +116,13 @@ def _config(league: League, spec: dict[str, Any]) -> GauntletConfig:
     pairs = precise_pairs(n, per, float(spec.get("precision", 0.0)))  # (a job queued before it: eval_games exactly)
     return GauntletConfig(pairs=pairs, older=max(older, FINAL_OLDER) if full else older,
                           bot_pairs=max(pairs, FINAL_BOT_GAMES * games // per) if full else 0)
+
+
+def stands_alone_spec(league: League, spec: dict[str, Any]) -> bool:
+    """Whether the moment's gauntlet ``spec`` asks for chooses nothing from the run's earlier gauntlets
+    (:func:`~.gauntlet_plan.stands_alone`: a run's final moment, which meets every earlier snapshot): it may then be
+    played before the jobs ahead of it are done, the same games."""
+    return stands_alone(league, [int(i) for i in spec["snapshot_ids"]], _config(league, spec).older)
 
 
 @functools.lru_cache(maxsize=256)  # (about 1 ms a width: a run asks the same few settings for every moment and matchup)

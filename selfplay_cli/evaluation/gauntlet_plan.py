@@ -92,7 +92,9 @@ def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2,
     ``new`` are the snapshots just taken (one per learner, all of one run and game); ``best`` the run's best
     snapshot before them (by fitted rating), if known, or the best of each side of a game rated per side. Opponents
     come from the moment's :class:`History` (the run's snapshots taken before it, the scripted players). Older
-    snapshots are chosen evenly spread over the run's history (oldest first), skipping the ones already met.
+    snapshots are chosen evenly spread over the run's history (oldest first), skipping the ones already met; where
+    ``older`` takes every earlier snapshot a new one may meet, it meets them all in the run's order and ``best`` (one
+    of them) is not used (:func:`stands_alone`).
     ``meets(a, b)``: whether two players can play each other (a game whose seats hold different roles,
     :class:`~selfplay_cli.evaluation.roles.RoleBook`); a snapshot's opponents are chosen among those it meets.
     """
@@ -114,16 +116,46 @@ def choose_opponents(league: League, new: Sequence[PlayerRow], older: int = 2,
     for s in new:
         chosen: list[PlayerRow | None] = [by_id.get(s.parent_id) if s.parent_id is not None else None]
         chosen += [o for o in new if o.id != s.id]
-        chosen += [b for b in bests if b.id in by_id and can(s, b)][:1]
-        taken = {c.id for c in chosen if c is not None}
-        rest = [p for p in history.snapshots if p.id not in taken and can(s, p)]
-        if older and rest:
-            picks = np.unique(np.linspace(0, len(rest) - 1, num=min(older, len(rest))).round().astype(int))
-            chosen += [rest[i] for i in picks.tolist()]
+        pool = _earlier(history.snapshots, new, s, can)
+        if older >= len(pool):  # every earlier snapshot, the best among them: in the run's order, chosen by nothing
+            chosen += pool
+        else:
+            chosen += [b for b in bests if b.id in by_id and can(s, b)][:1]
+            taken = {c.id for c in chosen if c is not None}
+            rest = [p for p in pool if p.id not in taken]
+            if older and rest:
+                picks = np.unique(np.linspace(0, len(rest) - 1, num=min(older, len(rest))).round().astype(int))
+                chosen += [rest[i] for i in picks.tolist()]
         chosen += history.bots
         for opp in chosen:
             add(s, opp)
     return pairs
+
+
+def _earlier(snapshots: Sequence[PlayerRow], new: Sequence[PlayerRow], s: PlayerRow,
+             can: Callable[[PlayerRow, PlayerRow], bool]) -> list[PlayerRow]:
+    """The run's earlier ``snapshots`` that new snapshot ``s`` may meet besides its predecessor (oldest first): those
+    its moment's older opponents (and the run's best) are chosen from."""
+    mine = {o.id for o in new}
+    return [p for p in snapshots if p.id != s.parent_id and p.id not in mine and can(s, p)]
+
+
+def stands_alone(league: League, snapshot_ids: Sequence[int], older: int) -> bool:
+    """Whether the gauntlet of the moment whose snapshots are ``snapshot_ids`` (``older``: as :func:`plan_moment`
+    takes it) chooses nothing from the run's earlier gauntlets: each of its snapshots meets every earlier snapshot it
+    may meet (a run's final moment, :data:`~.gauntlet_jobs.FINAL_OLDER`, while the run has no more), so no best so far
+    is picked. Its plan is then the same before the moments ahead of it are played as after them, and it may be
+    played beside them."""
+    new = [league.roster.get_player(int(i)) for i in snapshot_ids]
+    if not new:
+        return True
+    env, run = new[0].env, new[0].run
+    first = min(p.id for p in new)
+    snapshots = [p for p in league.roster.players(env=env, kind="snapshot") if p.run == run and p.id < first
+                 and p.unusable is None]
+    book = RoleBook(league, env)
+    can = book.meets if book.differ and book.rules.kind != COOPERATIVE else (lambda a, b: True)
+    return all(older >= len(_earlier(snapshots, new, s, can)) for s in new)
 
 
 @dataclass(frozen=True)
@@ -218,13 +250,15 @@ def plan_moment(league: League, snapshot_ids: Sequence[int], older: int) -> Mome
     history = run_history(league, new)
     anchor = get_env(new[0].env).anchor
     book = RoleBook(league, new[0].env)
-    if book.differ and book.rules.kind != COOPERATIVE:  # the best of each role the moment's snapshots can meet
-        bests = [best_snapshot(history, anchor, among=lambda p, s=s: book.meets(s, p)) for s in new]
-        best: PlayerRow | list[PlayerRow] | None = [b for b in bests if b is not None]
-    else:
-        best = best_snapshot(history, anchor)
     # a cooperative game's per-seat snapshots fly as crews (below), each member on its own seat: paired as crews
     meets = book.meets if book.differ and book.rules.kind != COOPERATIVE else None
+    best: PlayerRow | list[PlayerRow] | None = None
+    if any(older < len(_earlier(history.snapshots, new, s, meets or (lambda a, b: True))) for s in new):
+        if meets is not None:  # the best of each role the moment's snapshots can meet
+            bests = [best_snapshot(history, anchor, among=lambda p, s=s: book.meets(s, p)) for s in new]
+            best = [b for b in bests if b is not None]
+        else:
+            best = best_snapshot(history, anchor)
     pairs = choose_opponents(league, new, older=older, best=best, history=history, meets=meets)
     crews = crews_of(league, [p for pair in pairs for p in pair])
     if crews:  # a cooperative game's per-lander snapshots fly as their moment's team: one matchup per two teams

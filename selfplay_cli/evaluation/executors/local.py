@@ -8,6 +8,15 @@ exactly as an inline evaluation would. The worker writes the ledger itself (SQLi
 the trainer only learns which jobs are done, and waits for the last one before it reports. The last job also plays
 the run's playoff (:mod:`selfplay_cli.evaluation.playoff`): its best candidates meet until the best is separated.
 
+Training ends with the worker behind (a moment's rating games take longer than a moment of training), and the
+trainer's core idle. So where the final moment's gauntlet stands alone (it meets every earlier snapshot and picks no
+best so far: :func:`~selfplay_cli.evaluation.gauntlet_plan.stands_alone`, a run with up to 24 earlier snapshots), a
+second process, the helper, plays it on that core at once, beside the worker's backlog; the final job is held back
+and handed to the worker once the helper is done, and finds its gauntlet stored (the same games: one batch, the
+same seeds, in either process) and plays the playoff, after the moments ahead of it, as before. A helper that dies
+hands the job to the worker as it stands (it plays what is missing); one that fails fails the run, as the worker's
+job would.
+
 ``background=False`` plays each gauntlet in the calling process instead, when it is submitted (the same games).
 :mod:`.queue_workers` (``marl train --eval remote``) puts them on the league's work queue instead, for ``marl worker``
 processes on any machine, and plays them itself at the run's end if no worker takes them (the same games again: one
@@ -36,6 +45,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -149,6 +159,11 @@ class Evaluator:
         self._note = note or (lambda line: print(line, file=sys.stderr, flush=True))
         self._done: list[JobDone] = []
         self._proc: Any = None
+        self._helper: Any = None  # the process playing the final gauntlet beside the worker's backlog
+        self._helper_job: GauntletJob | None = None  # what it plays (the final job without its playoff)
+        self._helper_jobs: Any = None  # its queue of jobs
+        self._held: list[GauntletJob] = []  # jobs kept from the worker until the helper is done, in order
+        self._extra: dict[GauntletJob, float] = {}  # a held job's seconds already spent by the helper
         self._failures = 0  # workers lost since a job last finished
         self._progress = self._clock()  # when the worker last reported a game or a job
         if background:
@@ -168,7 +183,8 @@ class Evaluator:
         self._proc.start()
         self._progress = self._clock()
         for job in self.pending:
-            self._jobs.put(job)
+            if job not in self._held:
+                self._jobs.put(job)
         if self._on_worker is not None:
             self._on_worker(self._proc.pid)
 
@@ -187,12 +203,70 @@ class Evaluator:
             self._progress = self._clock()  # an idle worker was not stalled: the clock starts with its work
         self.pending.append(job)
         if self.background:
-            self._jobs.put(job)
+            if self._held or self._ahead(job):
+                self._held.append(job)
+            else:
+                self._jobs.put(job)
         else:
             self._done.append(run_job(self.league, job, self.device, on_games=self._count))
 
     def _count(self, n: int) -> None:
         self.games_played += n
+
+    def _ahead(self, job: GauntletJob) -> bool:
+        """Start the helper on ``job``'s gauntlet if it is the run's final one, jobs are still ahead of it and it stands
+        alone (see the module docstring); whether it did."""
+        from ..gauntlet_jobs import stands_alone_spec
+
+        if not (job.full and self.wait_for and self.left > 1 and self._helper is None
+                and stands_alone_spec(self.league, _spec(job))):
+            return False
+        from ...envs.loading import admitted
+
+        ctx = mp.get_context("spawn")
+        jobs = ctx.Queue()
+        home = None if self.league.home is None else str(Path(self.league.home))
+        self._helper = ctx.Process(target=_worker, name="marl-rating-final",
+                                   args=(self.league.url.render_as_string(hide_password=False), home, self.device,
+                                         jobs, self._results, os.getpid(), admitted()), daemon=True)
+        self._helper.start()
+        self._helper_job = replace(job, playoff=0)
+        jobs.put(self._helper_job)
+        jobs.put(None)  # (it leaves once the gauntlet is played)
+        self._helper_jobs = jobs  # (kept until it is done: a queue dropped here is gone before the child reads it)
+        return True
+
+    def _release(self, seconds: float = 0.0) -> None:
+        """The helper is done (or gone): the held jobs go to the worker, in order; the final one's count includes
+        the helper's ``seconds``."""
+        helper, self._helper, self._helper_job = self._helper, None, None
+        if helper is not None:
+            helper.join(timeout=5)
+            if helper.is_alive():
+                helper.kill()
+                helper.join(timeout=5)
+            self._close_helper_jobs()
+        if self._held:
+            self._extra[self._held[0]] = seconds
+        for job in self._held:
+            self._jobs.put(job)
+        self._held = []
+
+    def _close_helper_jobs(self) -> None:
+        self._helper_jobs.cancel_join_thread()
+        self._helper_jobs.close()
+        self._helper_jobs = None
+
+    def _stop_helper(self) -> None:
+        """End the helper now (the worker is replaced, or the run stops): its gauntlet goes to the worker with the
+        other held jobs (it stores what is missing)."""
+        if self._helper is not None:
+            if self._helper.is_alive():
+                self._helper.kill()
+            self._helper.join(timeout=5)
+            self._helper, self._helper_job = None, None
+            self._close_helper_jobs()
+        self._held = []  # (a new worker is handed every pending job; :meth:`close` hands none)
 
     def queue_standing(self) -> None:
         """Nothing of a local worker's is in the league's queue (see :meth:`.remote.RemoteEvaluator.queue_standing`).
@@ -265,6 +339,12 @@ class Evaluator:
         while it had a job; raise :class:`RatingWorkerError` once :data:`MAX_RESTARTS` workers in a row were lost."""
         if any(d.error for d in self._done):
             return  # a job failed: its error, not a restart
+        if self._helper is not None and not self._helper.is_alive():
+            self._drain()  # (what it said before it left: its gauntlet done)
+            if self._helper is not None:  # it died without finishing: the worker plays what is missing
+                self._note(f"the final gauntlet's helper (process {self._helper.pid}) ended unexpectedly "
+                           f"({_exit(self._helper.exitcode)}); the rating worker plays what it left")
+                self._release()
         if self._proc.is_alive():
             waited = self._clock() - self._progress
             if not self.pending or waited < self.stall_seconds:
@@ -283,6 +363,7 @@ class Evaluator:
             raise RatingWorkerError(f"{why}; it was replaced {MAX_RESTARTS} times and lost each time, so the run "
                                     f"stops (continue it with marl train --resume once the cause is gone)")
         self._note(f"{why}; its unfinished gauntlet is played again, and the games it stored count once")
+        self._stop_helper()  # (it reports on the queues replaced here: the new worker plays its gauntlet too)
         self._discard_queues()
         self.restarts += 1
         self._start()
@@ -291,8 +372,12 @@ class Evaluator:
         self._progress = self._clock()
         if isinstance(item, tuple):
             self.games_played += int(item[1])
+        elif self._helper_job is not None and item.job == self._helper_job and item.error is None:
+            self._release(item.seconds)  # the final gauntlet is stored: its job goes to the worker (the playoff)
         else:
             self._failures = 0
+            if item.job in self._extra:
+                item = replace(item, seconds=item.seconds + self._extra.pop(item.job))
             self._done.append(item)
 
     def _finish(self) -> list[JobDone]:
@@ -305,7 +390,8 @@ class Evaluator:
                 if d.error_kind == "internal":
                     raise RatingWorkerError(message)
                 raise MarlError(message)
-            self.pending.remove(d.job)
+            if d.job in self.pending:  # (the helper's failed job is not one of them: its error was raised above)
+                self.pending.remove(d.job)
         return out
 
     def _discard_queues(self) -> None:
@@ -316,6 +402,7 @@ class Evaluator:
     def close(self) -> None:
         """Stop the worker: at once when it is in the middle of a job (the job is abandoned; its stored matchups
         count once when it is played again on resume), else after it has read the stop."""
+        self._stop_helper()
         if self._proc is not None:
             if self._proc.is_alive():
                 if self.pending:
